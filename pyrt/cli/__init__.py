@@ -1,0 +1,58 @@
+"""The ``pyrt`` command: one sub-command per job.
+
+Each sub-command lives in its own module with ``add_parser(subparsers)``
+and ``run(args) -> int``; errors that are the user's (a bad file, a bad
+option) end with one line on stderr and a non-zero exit, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from pyrt import __version__
+from pyrt.cli import demo, overruns
+from pyrt.errors import PyrtError
+
+__all__ = ["main"]
+
+_COMMANDS = [demo, overruns]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``pyrt`` and all its sub-commands."""
+    parser = argparse.ArgumentParser(
+        prog="pyrt",
+        description=(
+            "pyrt: an embedded-style control runtime. A periodic tick drives an "
+            "8031-style ready queue of self-scheduling tasks, with overrun "
+            "detection and per-task timing."
+        ),
+    )
+    parser.add_argument("--version", action="version", version=f"pyrt {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for module in _COMMANDS:
+        module.add_parser(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``pyrt`` command; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 2
+    try:
+        return int(args.run(args) or 0)
+    except PyrtError as exc:
+        print(f"pyrt {args.command}: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"pyrt {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

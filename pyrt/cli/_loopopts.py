@@ -1,0 +1,115 @@
+"""Loop options shared by every sub-command that runs a loop."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable
+
+from pyrt import __version__
+from pyrt.errors import ConfigError
+from pyrt.scheduler import Loop, SimClock, TimingLog, WallClock
+from pyrt.scheduler import rt as _rt
+
+__all__ = ["add_loop_options", "make_loop", "parse_speed"]
+
+
+def parse_speed(text: str) -> float | None:
+    """``--speed`` value: ``max`` (None: virtual time, as fast as it goes) or a factor > 0."""
+    if text.strip().lower() == "max":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"speed must be a number > 0 or 'max', got {text!r}"
+        ) from None
+    if not value > 0 or value != value or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"speed must be a number > 0 or 'max', got {text!r}")
+    return value
+
+
+def _tick_us(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"tick must be a whole number of µs, got {text!r}") from None
+    if not 50 <= value <= 1_000_000:
+        raise argparse.ArgumentTypeError(f"tick must be 50..1000000 µs, got {value}")
+    return value
+
+
+def add_loop_options(parser: argparse.ArgumentParser, default_speed: str = "1") -> None:
+    """Add --speed, --tick-us, --timing-log and the real-time knobs."""
+    g = parser.add_argument_group("loop")
+    g.add_argument(
+        "--speed",
+        type=parse_speed,
+        default=parse_speed(default_speed),
+        metavar="1|N|max",
+        help=(
+            "1 = real time (default %s); N = N times faster than real time; max = "
+            "virtual time, as fast as the CPU goes (scripts, tests)" % default_speed
+        ),
+    )
+    g.add_argument(
+        "--tick-us", type=_tick_us, default=1000, metavar="US", help="base tick in µs (default 1000)"
+    )
+    g.add_argument(
+        "--timing-log",
+        metavar="FILE",
+        help="write JSON Lines timing records (overruns, per-task summaries); read with 'pyrt overruns'",
+    )
+    g.add_argument(
+        "--max-overruns",
+        type=int,
+        metavar="N",
+        help="fault every robot after N consecutive overruns (default: never)",
+    )
+    g.add_argument(
+        "--timer-slack", action="store_true", help="set timer slack to 1 ns (prctl PR_SET_TIMERSLACK)"
+    )
+    g.add_argument(
+        "--fifo", type=int, metavar="PRIO", help="run under SCHED_FIFO at PRIO (needs CAP_SYS_NICE)"
+    )
+    g.add_argument("--mlock", action="store_true", help="lock memory (mlockall; needs RLIMIT_MEMLOCK)")
+
+
+def apply_rt_options(args: argparse.Namespace, say: Callable[[str], None]) -> None:
+    """Apply the real-time knobs the user asked for; say what happened to each."""
+    for wanted, fn in (
+        (args.timer_slack, lambda: _rt.set_timer_slack(1)),
+        (args.fifo is not None, lambda: _rt.set_fifo(args.fifo)),
+        (args.mlock, _rt.lock_memory),
+    ):
+        if wanted:
+            try:
+                say(fn())
+            except (OSError, ValueError) as exc:
+                say(f"warning: {exc.args[-1] if exc.args else exc}")
+
+
+def make_loop(
+    args: argparse.Namespace, warn: Callable[[str], None] | None = None
+) -> Loop:
+    """A loop configured from the options of :func:`add_loop_options`."""
+    if args.max_overruns is not None and args.max_overruns < 1:
+        raise ConfigError(f"--max-overruns must be >= 1, got {args.max_overruns}")
+    clock = SimClock() if args.speed is None else WallClock(speed=args.speed)
+    log = None
+    if args.timing_log:
+        try:
+            log = TimingLog(args.timing_log, version=__version__)
+        except OSError as exc:
+            raise ConfigError(f"cannot write timing log: {exc.strerror}", args.timing_log) from None
+    if warn is None:
+        def warn(msg: str) -> None:
+            print(msg, file=sys.stderr)
+    return Loop(
+        clock,
+        period_ns=args.tick_us * 1000,
+        timing=True,
+        timing_log=log,
+        max_consecutive_overruns=args.max_overruns,
+        warn=warn,
+    )

@@ -1,0 +1,167 @@
+"""``pyrt overruns FILE``: what a timing log says about the loop's timing.
+
+Prints a per-task table (calls, mean, p99 and max in µs, and the overruns
+attributed to the task: those in which it ran longest) and the worst
+overruns with their tick and the tasks run in them.  ``--json`` prints the
+same as one JSON object; ``--plot PNG`` draws per-task histograms and an
+overrun timeline (needs matplotlib: pip install 'pyrt[plot]').
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Any
+
+from pyrt.errors import ConfigError
+from pyrt.scheduler.stats import bin_edges
+from pyrt.scheduler.timinglog import TimingReport, read_timing_log
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "overruns",
+        help="report per-task timing and the worst overruns from a --timing-log file",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("file", help="timing log (JSON Lines) written with --timing-log")
+    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    p.add_argument("--plot", metavar="PNG", help="also draw histograms and a timeline to PNG")
+    p.add_argument("--worst", type=int, default=10, metavar="N", help="overruns to list (default 10)")
+    p.set_defaults(run=run)
+
+
+def report_dict(rep: TimingReport, worst: int) -> dict[str, Any]:
+    """The report as plain data (what ``--json`` prints)."""
+    s = rep.summary or {}
+    return {
+        "file": rep.path,
+        "period_ns": rep.period_ns,
+        "clock": rep.header.get("clock", ""),
+        "ticks": s.get("ticks", 0),
+        "overruns": len(rep.overruns),
+        "missed": sum(int(r.get("missed", 0)) for r in rep.overruns),
+        "lateness": s.get("lateness", {}),
+        "tasks": {
+            name: {
+                "calls": t.calls,
+                "mean_us": round(t.mean_ns / 1e3, 3),
+                "p99_us": round(t.p99_ns / 1e3, 3),
+                "max_us": round(t.max_ns / 1e3, 3),
+                "overruns": t.overruns,
+                "in_overruns": t.present,
+            }
+            for name, t in rep.tasks.items()
+        },
+        "worst": [
+            {
+                "tick": r["tick"],
+                "deadline_ns": r["deadline_ns"],
+                "lateness_us": round(r["lateness_ns"] / 1e3, 3),
+                "overrun_us": round(r["overrun_ns"] / 1e3, 3),
+                "missed": r.get("missed", 0),
+                "tasks": r["tasks"],
+            }
+            for r in rep.worst(worst)
+        ],
+    }
+
+
+def format_report(rep: TimingReport, worst: int) -> str:
+    """The report as the text table ``pyrt overruns`` prints."""
+    d = report_dict(rep, worst)
+    lines = [
+        f"{rep.path}: tick {d['period_ns'] / 1e3:g} µs, clock {d['clock']}, "
+        f"{d['ticks']} ticks, {d['overruns']} overruns, {d['missed']} deadlines missed"
+    ]
+    if rep.summary is None:
+        lines.append("(no summary record: the log ends before the first summary)")
+    late = d["lateness"]
+    if late and late.get("count"):
+        lines.append(
+            f"lateness µs: median {late['p50_ns'] / 1e3:.2f}  p99 {late['p99_ns'] / 1e3:.2f}  "
+            f"p99.9 {late['p999_ns'] / 1e3:.2f}  max {late['max_ns'] / 1e3:.2f}"
+        )
+    lines.append("")
+    lines.append(
+        f"{'task':<14}{'calls':>10}{'mean µs':>11}{'p99 µs':>11}{'max µs':>11}{'overruns':>10}"
+    )
+    for name, t in sorted(d["tasks"].items()):
+        lines.append(
+            f"{name:<14}{t['calls']:>10}{t['mean_us']:>11.2f}{t['p99_us']:>11.2f}"
+            f"{t['max_us']:>11.2f}{t['overruns']:>10}"
+        )
+    if d["worst"]:
+        lines.append("")
+        lines.append(f"worst {len(d['worst'])} overruns:")
+        lines.append(f"{'tick':>10}{'time s':>12}{'late µs':>10}{'over µs':>10}{'missed':>8}  tasks (µs)")
+        for r in d["worst"]:
+            tasks = ", ".join(f"{n} {ns / 1e3:.1f}" for n, ns in r["tasks"]) or "-"
+            lines.append(
+                f"{r['tick']:>10}{r['deadline_ns'] / 1e9:>12.6f}{r['lateness_us']:>10.1f}"
+                f"{r['overrun_us']:>10.1f}{r['missed']:>8}  {tasks}"
+            )
+    return "\n".join(lines)
+
+
+def plot_report(rep: TimingReport, png: str) -> None:
+    """Per-task execution-time histograms and the overrun timeline, to PNG."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        raise ConfigError(
+            "--plot needs matplotlib, which is not installed: pip install 'pyrt[plot]'"
+        ) from None
+    tasks = (rep.summary or {}).get("tasks", {})
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 7))
+    for name, t in sorted(tasks.items()):
+        hist = t.get("hist", [])
+        if not hist:
+            continue
+        xs = [bin_edges(b)[0] / 1e3 for b, _ in hist]
+        ys = [c for _, c in hist]
+        ax1.step(xs, ys, where="post", label=name)
+    ax1.set_xscale("log")
+    ax1.set_yscale("log")
+    ax1.set_xlabel("execution time (µs)")
+    ax1.set_ylabel("calls")
+    ax1.set_title("per-task execution time")
+    if tasks:
+        ax1.legend(fontsize="small")
+    if rep.overruns:
+        ax2.plot(
+            [r["deadline_ns"] / 1e9 for r in rep.overruns],
+            [r["overrun_ns"] / 1e3 for r in rep.overruns],
+            "r.",
+        )
+    ax2.set_xlabel("loop time (s)")
+    ax2.set_ylabel("overrun past next deadline (µs)")
+    ax2.set_title(f"{len(rep.overruns)} overruns")
+    fig.tight_layout()
+    try:
+        fig.savefig(png, dpi=100)
+    except OSError as exc:
+        raise ConfigError(f"cannot write plot: {exc.strerror}", png) from None
+    finally:
+        plt.close(fig)
+
+
+def run(args: argparse.Namespace) -> int:
+    rep = read_timing_log(args.file)
+    if args.worst < 0:
+        raise ConfigError(f"--worst must be >= 0, got {args.worst}")
+    if args.json:
+        json.dump(report_dict(rep, args.worst), sys.stdout, indent=2)
+        sys.stdout.write("\n")
+    else:
+        sys.stdout.write(format_report(rep, args.worst) + "\n")
+    if args.plot:
+        plot_report(rep, args.plot)
+        if not args.json:
+            sys.stdout.write(f"plot written to {args.plot}\n")
+    return 0

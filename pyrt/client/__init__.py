@@ -1,0 +1,1 @@
+"""A blocking client of the pyrt TCP server, for scripts and tests."""

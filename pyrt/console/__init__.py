@@ -1,0 +1,1 @@
+"""Interactive consoles: line editing and history on a terminal, plain lines from a pipe."""

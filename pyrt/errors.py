@@ -1,0 +1,102 @@
+"""The exceptions pyrt raises.
+
+One root, :class:`PyrtError`, which is never raised itself; a handful of
+subclasses that say what kind of thing went wrong; and
+:class:`PyrtInternalError` for the case where pyrt itself is at fault.
+Messages say what was wrong and what was expected.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+__all__ = [
+    "CommandError",
+    "ConfigError",
+    "Fault",
+    "FaultError",
+    "MailboxTimeout",
+    "NativeError",
+    "PyrtError",
+    "PyrtInternalError",
+    "QueueFullError",
+]
+
+
+class PyrtError(Exception):
+    """Root of every exception pyrt raises on purpose.  Never raised itself."""
+
+
+class ConfigError(PyrtError):
+    """A configuration or database file is wrong; names the file and line.
+
+    ``str(err)`` reads ``FILE:LINE: message`` (or ``FILE: message`` when the
+    line is unknown) so an editor can jump to the place.
+    """
+
+    def __init__(self, message: str, file: str | None = None, line: int | None = None):
+        self.message = message
+        self.file = file
+        self.line = line
+        super().__init__(self._format())
+
+    def _format(self) -> str:
+        if self.file is None:
+            return self.message
+        if self.line is None:
+            return f"{self.file}: {self.message}"
+        return f"{self.file}:{self.line}: {self.message}"
+
+
+class CommandError(PyrtError):
+    """A command was malformed or refused; nothing was changed."""
+
+
+class QueueFullError(PyrtError):
+    """A bounded queue (the ready queue, the motion queue) had no free slot."""
+
+
+class MailboxTimeout(PyrtError):
+    """The control loop did not take a mailbox command within its timeout."""
+
+
+class NativeError(PyrtError):
+    """A C kernel refused its input or could not produce an answer."""
+
+
+@dataclass(frozen=True)
+class Fault:
+    """What the control loop recorded when it stopped a robot.
+
+    ``time_ns`` is the loop clock's time, ``tick`` the tick index, ``source``
+    the task or check that failed, ``cause`` one line saying why, and
+    ``traceback`` the formatted traceback when an exception was the cause.
+    """
+
+    robot: str
+    cause: str
+    source: str = ""
+    tick: int = -1
+    time_ns: int = 0
+    traceback: str = ""
+    details: dict = field(default_factory=dict, compare=False)
+
+    def __str__(self) -> str:
+        where = f" in {self.source}" if self.source else ""
+        return f"{self.robot}: fault{where} at tick {self.tick} ({self.time_ns / 1e9:.6f} s): {self.cause}"
+
+
+class FaultError(PyrtError):
+    """A robot was stopped by its control loop; carries the :class:`Fault`.
+
+    Raised to the application at its next call into the loop, exactly once
+    per fault.  The robot refuses motion until the fault is acknowledged.
+    """
+
+    def __init__(self, fault: Fault):
+        self.fault = fault
+        super().__init__(str(fault))
+
+
+class PyrtInternalError(PyrtError):
+    """pyrt broke one of its own invariants: this is a bug, please report it."""

@@ -1,0 +1,49 @@
+"""The C kernels, through cffi: the only module that touches ``ffi``/``lib``.
+
+Arguments are validated here, before C sees them; every C status code
+becomes a :class:`~pyrt.errors.NativeError` (or a subclass) here, so nothing
+above this module ever sees a raw return code or a cdata object.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pyrt._native import ffi, lib
+from pyrt.errors import NativeError
+
+__all__ = ["excess128", "excess128_many", "from_excess128"]
+
+OK = lib.PYRT_OK
+
+
+def excess128(value: int) -> int:
+    """Signed drive value to an excess-128 DAC byte, saturating at 00 and FF."""
+    if not isinstance(value, (int, np.integer)):
+        raise TypeError(f"drive value must be an integer, got {type(value).__name__}")
+    v = int(value)
+    v = max(-(2**31), min(2**31 - 1, v))
+    return lib.pyrt_excess128(v)
+
+
+def from_excess128(byte: int) -> int:
+    """Excess-128 DAC byte (00..FF) to the signed drive value (-128..127)."""
+    if not 0 <= byte <= 0xFF:
+        raise ValueError(f"DAC byte must be 00..FF, got {byte!r}")
+    return lib.pyrt_from_excess128(byte)
+
+
+def excess128_many(values) -> np.ndarray:
+    """Vectorised :func:`excess128`: int32 values to a uint8 array of DAC bytes."""
+    arr = np.ascontiguousarray(values, dtype=np.int32)
+    if arr.ndim != 1:
+        raise ValueError(f"expected a 1-D array of drive values, got shape {arr.shape}")
+    out = np.empty(arr.shape[0], dtype=np.uint8)
+    rc = lib.pyrt_excess128_many(
+        ffi.cast("const int32_t *", ffi.from_buffer(arr)),
+        ffi.cast("uint8_t *", ffi.from_buffer(out)),
+        arr.shape[0],
+    )
+    if rc != OK:
+        raise NativeError(f"pyrt_excess128_many failed with status {rc}")
+    return out

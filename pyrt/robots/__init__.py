@@ -1,0 +1,1 @@
+"""Level 4+: the gripper controller and the manipulator's Axis, AV and PolyAxis."""

@@ -1,0 +1,24 @@
+"""Clocks, the ready queue, the tick loop and its timing: no robot knowledge."""
+
+from pyrt.scheduler.clock import Clock, SimClock, WallClock
+from pyrt.scheduler.loop import Job, Loop
+from pyrt.scheduler.readyqueue import ByteImage, ReadyQueue, Routine
+from pyrt.scheduler.stats import Distribution, LoopStatistics, TaskStatistics
+from pyrt.scheduler.timinglog import TimingLog, TimingReport, read_timing_log
+
+__all__ = [
+    "ByteImage",
+    "Clock",
+    "Distribution",
+    "Job",
+    "Loop",
+    "LoopStatistics",
+    "ReadyQueue",
+    "Routine",
+    "SimClock",
+    "TaskStatistics",
+    "TimingLog",
+    "TimingReport",
+    "WallClock",
+    "read_timing_log",
+]

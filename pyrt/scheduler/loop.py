@@ -1,0 +1,454 @@
+"""The tick loop: deadlines, lateness, overruns, handlers and foreground jobs.
+
+One tick: wait for the deadline; record lateness; call each handler with the
+tick's time (the plant, then each robot's clock interrupt, then the mailbox
+and foreground jobs: whatever was attached, in attachment order); record the
+work time.  An **overrun** is a tick whose work ends after the next deadline.
+Deadlines that have already passed are counted as missed and skipped, never
+run back to back.
+
+On a :class:`~pyrt.scheduler.clock.SimClock` nothing of this costs real time
+and no tick can overrun; the same code runs deterministically in the caller's
+thread.  Timing statistics are optional and cost nothing when off.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import deque
+from collections.abc import Callable, Generator
+from time import perf_counter_ns
+from typing import Any
+
+from pyrt.errors import Fault, FaultError, PyrtError
+from pyrt.scheduler.clock import Clock, SimClock
+from pyrt.scheduler.readyqueue import ReadyQueue
+from pyrt.scheduler.stats import (
+    NBINS,
+    Accumulator,
+    LoopStatistics,
+    TaskStatistics,
+)
+
+__all__ = ["Job", "Loop"]
+
+Handler = Callable[[int], None]
+
+
+class Job:
+    """A foreground job: a generator stepped once per tick by the loop.
+
+    This is where command sequences run that the 8031 ran in its main
+    program between interrupts (``init``, ``fullopen``): they ``yield`` to
+    let time pass (``yield from queue.wait(n)``) and end by returning a value.
+    """
+
+    __slots__ = ("_gen", "done", "error", "name", "result")
+
+    def __init__(self, name: str, gen: Generator[Any, None, Any]):
+        self.name = name
+        self._gen = gen
+        self.done = False
+        self.result: Any = None
+        self.error: BaseException | None = None
+
+    def step(self) -> bool:
+        """Advance one step; return True once the job has finished."""
+        try:
+            next(self._gen)
+        except StopIteration as stop:
+            self.result = stop.value
+            self.done = True
+        except Exception as exc:
+            self.error = exc
+            self.done = True
+        return self.done
+
+    def cancel(self) -> None:
+        """Stop the job where it is (its ``finally`` blocks run)."""
+        if not self.done:
+            self._gen.close()
+            self.done = True
+
+    def value(self) -> Any:
+        """The job's return value; re-raises what the job raised."""
+        if not self.done:
+            raise PyrtError(f"job {self.name} has not finished")
+        if self.error is not None:
+            raise self.error
+        return self.result
+
+
+class Loop:
+    """A periodic tick loop.
+
+    ``clock`` is a :class:`SimClock` or :class:`WallClock`; ``period_ns`` the
+    tick (1 ms by default).  ``timing`` turns on per-tick lateness/work and
+    per-task execution statistics.  ``max_consecutive_overruns`` (OROCOS's
+    maxOverRun): that many overruns in a row fault every attached robot.
+    ``warn`` receives at most one overrun summary line per second of loop
+    time; the full detail goes to ``timing_log``.
+    """
+
+    def __init__(
+        self,
+        clock: Clock | None = None,
+        period_ns: int = 1_000_000,
+        *,
+        timing: bool = True,
+        timing_log: Any = None,
+        max_consecutive_overruns: int | None = None,
+        warn: Callable[[str], None] | None = None,
+        summary_interval_ns: int = 1_000_000_000,
+    ):
+        if period_ns <= 0:
+            raise ValueError(f"tick period must be positive, got {period_ns} ns")
+        if max_consecutive_overruns is not None and max_consecutive_overruns < 1:
+            raise ValueError("max_consecutive_overruns must be >= 1 or None")
+        self.clock: Clock = clock if clock is not None else SimClock()
+        self.period_ns = int(period_ns)
+        self.timing = timing
+        self.timing_log = timing_log
+        self.max_consecutive_overruns = max_consecutive_overruns
+        self.warn = warn
+        self.summary_interval_ns = int(summary_interval_ns)
+
+        self._handlers: list[Handler] = []
+        self._handler_names: list[str] = []
+        self.queues: list[ReadyQueue] = []
+        self._jobs: deque[Job] = deque()
+        self._jobs_attached = False
+        self._faults: deque[Fault] = deque()
+        self._fault_lock = threading.Lock()
+        self._stop = threading.Event()
+        self.running = False
+
+        self.tick_index = 0
+        self.now_ns = self.clock.now_ns()
+        self._deadline = self.now_ns + self.period_ns
+        self.overruns = 0
+        self.missed = 0
+        self.consecutive_overruns = 0
+        self._lateness = Accumulator("lateness")
+        self._work = Accumulator("work")
+        self._next_summary = self.now_ns + self.summary_interval_ns
+        self._warn_pending = 0
+        self._warn_worst: tuple[int, int, str] | None = None
+        self._last_warn_ns: int | None = None
+        self._log_started = False
+
+    # -- composition ---------------------------------------------------------
+
+    def attach(self, handler: ReadyQueue | Handler, name: str | None = None) -> None:
+        """Call ``handler(now_ns)`` every tick, after those attached before it.
+
+        A :class:`ReadyQueue` is attached by its clock handler; its faults are
+        reported to this loop and its routines timed when timing is on.
+        """
+        if self.running:
+            raise PyrtError("attach handlers before the loop runs")
+        if isinstance(handler, ReadyQueue):
+            handler.fault_sink = self._report_fault
+            handler.tick_source = lambda: self.tick_index
+            handler.enable_timing(self.timing)
+            self.queues.append(handler)
+            self._handlers.append(handler.tick)
+            self._handler_names.append(name or f"queue:{handler.name}")
+        else:
+            self._handlers.append(handler)
+            self._handler_names.append(name or getattr(handler, "__name__", "handler"))
+
+    def spawn(self, name: str, gen: Generator[Any, None, Any]) -> Job:
+        """Run ``gen`` as a foreground job, one step per tick after the handlers."""
+        job = Job(name, gen)
+        self._jobs.append(job)
+        if not self._jobs_attached:
+            self._handlers.append(self._step_jobs)
+            self._handler_names.append("jobs")
+            self._jobs_attached = True
+        return job
+
+    def _step_jobs(self, now_ns: int) -> None:
+        jobs = self._jobs
+        for _ in range(len(jobs)):
+            job = jobs.popleft()
+            if not job.step():
+                jobs.append(job)
+
+    @property
+    def jobs(self) -> list[Job]:
+        """Foreground jobs that have not finished."""
+        return list(self._jobs)
+
+    # -- faults --------------------------------------------------------------
+
+    def _report_fault(self, fault: Fault) -> None:
+        with self._fault_lock:
+            self._faults.append(fault)
+
+    def take_fault(self) -> Fault | None:
+        """The oldest fault not yet reported, removed from the pending list."""
+        with self._fault_lock:
+            return self._faults.popleft() if self._faults else None
+
+    def raise_pending(self) -> None:
+        """Raise :class:`FaultError` for the oldest unreported fault (each once)."""
+        fault = self.take_fault()
+        if fault is not None:
+            raise FaultError(fault)
+
+    def fault_all(self, cause: str, source: str = "loop") -> None:
+        """Trip every attached robot (their reflex actions run now)."""
+        for q in self.queues:
+            q.now_ns = self.now_ns
+            q.trip(cause, source=source)
+
+    # -- running -------------------------------------------------------------
+
+    def stop(self) -> None:
+        """Ask the loop to return after the current tick (thread-safe)."""
+        self._stop.set()
+
+    def run(
+        self,
+        ticks: int | None = None,
+        *,
+        until: Callable[[], bool] | None = None,
+        duration_ns: int | None = None,
+    ) -> int:
+        """Run ticks until ``ticks`` have run, ``until()`` is true after a tick,
+        ``duration_ns`` of loop time has passed, or :meth:`stop` is called.
+        With none of these it runs until stopped.  Returns the ticks run."""
+        if self.running:
+            raise PyrtError("the loop is already running")
+        if ticks is not None and ticks < 0:
+            raise ValueError(f"ticks must be >= 0, got {ticks}")
+        self._stop.clear()
+        end_ns = self.now_ns + duration_ns if duration_ns is not None else None
+        self.running = True
+        try:
+            self._start_log()
+            if self.clock.virtual and until is None and end_ns is None and ticks is not None:
+                return self._run_sim_counted(ticks)
+            return self._run_general(ticks, until, end_ns)
+        finally:
+            self.running = False
+            if self.timing_log is not None:
+                self.timing_log.flush()
+
+    def run_until(self, predicate: Callable[[], bool], max_ticks: int) -> bool:
+        """Run until ``predicate()`` holds (checked after each tick) or
+        ``max_ticks`` ticks have run; return whether the predicate held."""
+        if predicate():
+            return True
+        self.run(max_ticks, until=predicate)
+        return predicate()
+
+    def _run_sim_counted(self, ticks: int) -> int:
+        """The fast path: virtual clock, a fixed number of ticks."""
+        clock = self.clock
+        handlers = self._handlers
+        period = self.period_ns
+        deadline = self._deadline
+        stop = self._stop
+        n = 0
+        summary_at = self._next_summary if self.timing_log is not None else None
+        while n < ticks:
+            clock.wait_until(deadline)
+            self.now_ns = deadline
+            for h in handlers:
+                h(deadline)
+            self.tick_index += 1
+            n += 1
+            deadline += period
+            self._deadline = deadline
+            if summary_at is not None and deadline > summary_at:
+                self._summary(deadline - period)
+                summary_at = self._next_summary
+            if stop.is_set():
+                break
+        return n
+
+    def _run_general(
+        self, ticks: int | None, until: Callable[[], bool] | None, end_ns: int | None
+    ) -> int:
+        clock = self.clock
+        virtual = clock.virtual
+        handlers = self._handlers
+        period = self.period_ns
+        stop = self._stop
+        timing = self.timing
+        late_acc = self._lateness
+        work_acc = self._work
+        n = 0
+        while ticks is None or n < ticks:
+            deadline = self._deadline
+            clock.wait_until(deadline)
+            start = deadline if virtual else clock.now_ns()
+            self.now_ns = start
+            if timing:
+                for q in self.queues:
+                    if q.ran:
+                        q.ran.clear()
+            for h in handlers:
+                h(start)
+            self.tick_index += 1
+            n += 1
+            nxt = deadline + period
+            if virtual:
+                self._deadline = nxt
+            else:
+                end = clock.now_ns()
+                if timing:
+                    late = start - deadline
+                    _record(late_acc, late)
+                    _record(work_acc, end - start)
+                if end > nxt:
+                    skipped = (end - nxt + period - 1) // period
+                    self._overrun(deadline, start, end, skipped)
+                    nxt += skipped * period
+                else:
+                    self.consecutive_overruns = 0
+                self._deadline = nxt
+            if start >= self._next_summary:
+                self._summary(start)
+            if stop.is_set():
+                break
+            if until is not None and until():
+                break
+            if end_ns is not None and self._deadline > end_ns:
+                break
+        return n
+
+    # -- overruns ------------------------------------------------------------
+
+    def _overrun(self, deadline: int, start: int, end: int, skipped: int) -> None:
+        self.overruns += 1
+        self.missed += skipped
+        self.consecutive_overruns += 1
+        tasks: list[tuple[str, int]] = []
+        for q in self.queues:
+            if q.ran:
+                tasks.extend(q.ran)
+        culprit = max(tasks, key=lambda t: t[1])[0] if tasks else ""
+        if culprit:
+            for q in self.queues:
+                for acc in q.accumulators():
+                    if acc.name == culprit:
+                        acc.overruns += 1
+        lateness = end - deadline - self.period_ns
+        if self.timing_log is not None:
+            self.timing_log.overrun(
+                tick=self.tick_index - 1,
+                deadline_ns=deadline,
+                start_ns=start,
+                end_ns=end,
+                lateness_ns=start - deadline,
+                overrun_ns=lateness,
+                missed=skipped,
+                tasks=tasks,
+            )
+        self._warn_pending += 1
+        if self._warn_worst is None or lateness > self._warn_worst[0]:
+            self._warn_worst = (lateness, self.tick_index - 1, culprit)
+        if self._last_warn_ns is None or start - self._last_warn_ns >= 1_000_000_000:
+            self._flush_warning(start)
+        limit = self.max_consecutive_overruns
+        if limit is not None and self.consecutive_overruns >= limit:
+            self.fault_all(
+                f"{self.consecutive_overruns} consecutive overruns "
+                f"(limit {limit}, tick {self.period_ns / 1e3:g} µs)",
+                source="loop",
+            )
+            self.consecutive_overruns = 0
+
+    def _flush_warning(self, now: int) -> None:
+        if not self._warn_pending or self._warn_worst is None:
+            return
+        worst, tick, culprit = self._warn_worst
+        if self.warn is not None:
+            who = f", longest task {culprit}" if culprit else ""
+            self.warn(
+                f"overrun: {self._warn_pending} tick(s) overran; worst by "
+                f"{worst / 1e3:.1f} µs at tick {tick}{who} ({self.missed} deadlines missed so far)"
+            )
+        self._warn_pending = 0
+        self._warn_worst = None
+        self._last_warn_ns = now
+
+    def _summary(self, now: int) -> None:
+        self._next_summary = now + self.summary_interval_ns
+        if self._last_warn_ns is not None and now - self._last_warn_ns >= 1_000_000_000:
+            self._flush_warning(now)
+        if self.timing_log is not None:
+            self.timing_log.summary(now, self.statistics())
+
+    def _start_log(self) -> None:
+        if self.timing_log is not None and not self._log_started:
+            names = [r.name for q in self.queues for r in q.routines]
+            self.timing_log.header(
+                period_ns=self.period_ns,
+                clock=type(self.clock).__name__,
+                tasks=names,
+                handlers=list(self._handler_names),
+            )
+            self._log_started = True
+
+    def close(self) -> None:
+        """Write a final summary and close the timing log, if there is one."""
+        if self.timing_log is not None:
+            self._start_log()
+            self.timing_log.summary(self.now_ns, self.statistics())
+            self.timing_log.close()
+            self.timing_log = None
+
+    # -- statistics ----------------------------------------------------------
+
+    def statistics(self) -> LoopStatistics:
+        """A frozen snapshot of lateness, work time and per-task timing."""
+        tasks: dict[str, TaskStatistics] = {}
+        for q in self.queues:
+            for acc in q.accumulators():
+                dist = acc.distribution()
+                tasks[acc.name] = TaskStatistics(
+                    name=acc.name,
+                    calls=acc.calls,
+                    mean_ns=dist.mean_ns,
+                    max_ns=acc.max,
+                    p99_ns=dist.p99_ns,
+                    overruns=acc.overruns,
+                    distribution=dist,
+                )
+        return LoopStatistics(
+            period_ns=self.period_ns,
+            ticks=self.tick_index,
+            overruns=self.overruns,
+            missed=self.missed,
+            consecutive_overruns=self.consecutive_overruns,
+            lateness=self._lateness.distribution(),
+            work=self._work.distribution(),
+            tasks=tasks,
+        )
+
+    def reset_statistics(self) -> None:
+        """Forget timing recorded so far (LinuxCNC's tmax reset); counts too."""
+        self._lateness.reset()
+        self._work.reset()
+        for q in self.queues:
+            for acc in q.accumulators():
+                acc.reset()
+        self.overruns = self.missed = self.consecutive_overruns = 0
+
+
+def _record(acc: Accumulator, d: int) -> None:
+    acc.calls += 1
+    acc.total += d
+    if d > acc.max:
+        acc.max = d
+    if d < 8:
+        acc.hist[d if d > 0 else 0] += 1
+    else:
+        bl = d.bit_length()
+        i = (bl << 2) - 8 + ((d >> (bl - 3)) & 3)
+        acc.hist[i if i < NBINS else NBINS - 1] += 1
+

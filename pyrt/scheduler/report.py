@@ -1,0 +1,31 @@
+"""Plain-text tables of timing statistics (the consoles' ``stats``, ``pyrt demo``)."""
+
+from __future__ import annotations
+
+from pyrt.scheduler.stats import LoopStatistics
+
+__all__ = ["format_statistics"]
+
+
+def _us(ns: float) -> str:
+    return f"{ns / 1e3:10.2f}"
+
+
+def format_statistics(stats: LoopStatistics) -> str:
+    """A table: tick summary, lateness, then calls/mean/p99/max/overruns per task."""
+    lines = [
+        f"tick {stats.period_ns / 1e3:g} µs: {stats.ticks} ticks, {stats.overruns} overruns, "
+        f"{stats.missed} deadlines missed"
+    ]
+    late = stats.lateness
+    if late.count:
+        lines.append(
+            f"lateness µs: median {late.p50_ns / 1e3:.2f}  p99 {late.p99_ns / 1e3:.2f}  "
+            f"p99.9 {late.p999_ns / 1e3:.2f}  max {late.max_ns / 1e3:.2f}"
+        )
+    lines.append(f"{'task':<12}{'calls':>10}{'mean µs':>10}{'p99 µs':>10}{'max µs':>10}{'overruns':>10}")
+    for name, t in sorted(stats.tasks.items()):
+        lines.append(
+            f"{name:<12}{t.calls:>10}{_us(t.mean_ns)}{_us(t.p99_ns)}{_us(t.max_ns)}{t.overruns:>10}"
+        )
+    return "\n".join(lines)

@@ -1,0 +1,238 @@
+"""The timing log: JSON Lines written by the loop, read back by ``pyrt overruns``.
+
+Records, one JSON object per line, each with a ``type``:
+
+* ``header``: format version, pyrt version, tick period, clock, task names;
+* ``overrun``: tick index, deadline, start, end, lateness (start - deadline),
+  overrun (end - next deadline), deadlines missed, and the tasks run in that
+  tick with their durations (``[[name, ns], ...]``);
+* ``summary``: cumulative counts since the start: ticks, overruns, missed,
+  lateness and work distributions, and per task calls, mean, max, p99 and
+  the sparse log-spaced histogram (``[[bin, count], ...]``; see
+  :mod:`pyrt.scheduler.stats` for the bins).
+
+All times are integers in nanoseconds of the loop's clock.  The writer
+buffers in memory and writes at each summary (once a second of loop time),
+so a tick never waits on the disk for long.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from typing import IO, Any
+
+from pyrt.errors import ConfigError
+from pyrt.scheduler.stats import Distribution, LoopStatistics
+
+__all__ = ["FORMAT", "TimingLog", "TimingReport", "read_timing_log"]
+
+FORMAT = "pyrt-timing/1"
+
+
+def _dist_json(d: Distribution) -> dict[str, Any]:
+    return {
+        "count": d.count,
+        "total_ns": d.total_ns,
+        "mean_ns": round(d.mean_ns, 1),
+        "max_ns": d.max_ns,
+        "p50_ns": d.p50_ns,
+        "p99_ns": d.p99_ns,
+        "p999_ns": d.p999_ns,
+        "hist": [list(p) for p in d.hist],
+    }
+
+
+class TimingLog:
+    """Writes the timing log to ``path`` (or an open text stream)."""
+
+    def __init__(self, path: str | IO[str], version: str = ""):
+        if isinstance(path, str):
+            self._fh: IO[str] = open(path, "w", encoding="utf-8")  # noqa: SIM115
+            self._owned = True
+        else:
+            self._fh = path
+            self._owned = False
+        self.path = path if isinstance(path, str) else getattr(path, "name", "<stream>")
+        self.version = version
+        self._buf: list[str] = []
+
+    def _emit(self, record: dict[str, Any]) -> None:
+        self._buf.append(json.dumps(record, separators=(",", ":")))
+
+    def header(self, *, period_ns: int, clock: str, tasks: list[str], handlers: list[str]) -> None:
+        """Write the header record (once, before anything else)."""
+        self._emit(
+            {
+                "type": "header",
+                "format": FORMAT,
+                "version": self.version,
+                "period_ns": period_ns,
+                "clock": clock,
+                "tasks": tasks,
+                "handlers": handlers,
+                "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            }
+        )
+        self.flush()
+
+    def overrun(self, **fields: Any) -> None:
+        """Record one overrun (fields as listed in the module docstring)."""
+        fields["tasks"] = [[n, d] for n, d in fields["tasks"]]
+        self._emit({"type": "overrun", **fields})
+
+    def summary(self, now_ns: int, stats: LoopStatistics) -> None:
+        """Record cumulative statistics and write everything buffered."""
+        self._emit(
+            {
+                "type": "summary",
+                "time_ns": now_ns,
+                "ticks": stats.ticks,
+                "overruns": stats.overruns,
+                "missed": stats.missed,
+                "lateness": _dist_json(stats.lateness),
+                "work": _dist_json(stats.work),
+                "tasks": {
+                    name: {
+                        "calls": t.calls,
+                        "mean_ns": round(t.mean_ns, 1),
+                        "max_ns": t.max_ns,
+                        "p99_ns": t.p99_ns,
+                        "overruns": t.overruns,
+                        "hist": [list(p) for p in t.distribution.hist],
+                    }
+                    for name, t in stats.tasks.items()
+                },
+            }
+        )
+        self.flush()
+
+    def flush(self) -> None:
+        """Write buffered records to the file."""
+        if self._buf:
+            self._fh.write("\n".join(self._buf) + "\n")
+            self._buf.clear()
+        self._fh.flush()
+
+    def close(self) -> None:
+        """Flush and close (a stream passed in is flushed, not closed)."""
+        self.flush()
+        if self._owned:
+            self._fh.close()
+
+
+@dataclass
+class TaskReport:
+    """What the log says about one task."""
+
+    name: str
+    calls: int = 0
+    mean_ns: float = 0.0
+    p99_ns: int = 0
+    max_ns: int = 0
+    #: Overruns in which this task ran longest.
+    overruns: int = 0
+    #: Overruns in which this task ran at all.
+    present: int = 0
+
+
+@dataclass
+class TimingReport:
+    """A timing log, read back and checked."""
+
+    path: str
+    header: dict[str, Any]
+    summary: dict[str, Any] | None
+    overruns: list[dict[str, Any]] = field(default_factory=list)
+    tasks: dict[str, TaskReport] = field(default_factory=dict)
+
+    @property
+    def period_ns(self) -> int:
+        return int(self.header["period_ns"])
+
+    def worst(self, n: int = 10) -> list[dict[str, Any]]:
+        """The ``n`` overruns that ended furthest past their next deadline."""
+        return sorted(self.overruns, key=lambda r: r["overrun_ns"], reverse=True)[:n]
+
+
+_OVERRUN_KEYS = ("tick", "deadline_ns", "start_ns", "end_ns", "lateness_ns", "overrun_ns", "tasks")
+
+
+def read_timing_log(path: str) -> TimingReport:
+    """Read and check a timing log; raise :class:`ConfigError` naming the
+    file and line for a missing, empty, truncated or malformed file."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            text = fh.read()
+    except FileNotFoundError:
+        raise ConfigError("no such file", path) from None
+    except IsADirectoryError:
+        raise ConfigError("is a directory, not a timing log", path) from None
+    except UnicodeDecodeError:
+        raise ConfigError("not a timing log (not UTF-8 text)", path) from None
+    except OSError as exc:
+        raise ConfigError(f"cannot read: {exc.strerror}", path) from None
+    if not text.strip():
+        raise ConfigError("empty file: no timing records", path)
+    lines = text.split("\n")
+    if lines[-1] != "":
+        raise ConfigError(
+            "truncated: the last record has no end of line (was the writer killed?)",
+            path,
+            len(lines),
+        )
+    header: dict[str, Any] | None = None
+    summary: dict[str, Any] | None = None
+    overruns: list[dict[str, Any]] = []
+    for lineno, line in enumerate(lines[:-1], start=1):
+        if not line.strip():
+            continue
+        try:
+            rec = json.loads(line)
+        except json.JSONDecodeError as exc:
+            raise ConfigError(f"not a JSON record ({exc.msg})", path, lineno) from None
+        if not isinstance(rec, dict) or "type" not in rec:
+            raise ConfigError("not a timing record (no 'type' field)", path, lineno)
+        kind = rec["type"]
+        if header is None:
+            if kind != "header" or rec.get("format") != FORMAT:
+                raise ConfigError(
+                    f"not a pyrt timing log: first record must be a {FORMAT} header", path, lineno
+                )
+            if not isinstance(rec.get("period_ns"), int) or rec["period_ns"] <= 0:
+                raise ConfigError("header has no valid period_ns", path, lineno)
+            header = rec
+        elif kind == "overrun":
+            missing = [k for k in _OVERRUN_KEYS if k not in rec]
+            if missing:
+                raise ConfigError(f"overrun record lacks {', '.join(missing)}", path, lineno)
+            overruns.append(rec)
+        elif kind == "summary":
+            if not isinstance(rec.get("tasks"), dict):
+                raise ConfigError("summary record has no task table", path, lineno)
+            summary = rec
+        elif kind == "header":
+            raise ConfigError("second header record", path, lineno)
+        else:
+            raise ConfigError(f"unknown record type {kind!r}", path, lineno)
+    assert header is not None
+    report = TimingReport(path=path, header=header, summary=summary, overruns=overruns)
+    for name in header.get("tasks", []):
+        report.tasks[name] = TaskReport(name)
+    if summary is not None:
+        for name, t in summary["tasks"].items():
+            tr = report.tasks.setdefault(name, TaskReport(name))
+            tr.calls = int(t.get("calls", 0))
+            tr.mean_ns = float(t.get("mean_ns", 0.0))
+            tr.p99_ns = int(t.get("p99_ns", 0))
+            tr.max_ns = int(t.get("max_ns", 0))
+    for rec in overruns:
+        tasks = rec["tasks"]
+        if not tasks:
+            continue
+        for name, _ in tasks:
+            report.tasks.setdefault(name, TaskReport(name)).present += 1
+        culprit = max(tasks, key=lambda t: t[1])[0]
+        report.tasks[culprit].overruns += 1
+    return report

@@ -1,0 +1,1 @@
+"""The software oscilloscope: channels sampled into a ring buffer, triggers, export."""

@@ -1,0 +1,1 @@
+"""The DAQ link: a TCP line-protocol command and status server."""

@@ -1,0 +1,1 @@
+"""The physics behind the simulated boards: reads actuator registers, writes sensor registers; fault injection."""

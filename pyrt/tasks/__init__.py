@@ -1,0 +1,1 @@
+"""Self-scheduling tasks built over the robots: database write-back, server poll, scope sampler."""
