@@ -1,8 +1,9 @@
 """cffi build script for pyrt._native (API, out-of-line mode).
 
-The cdef mirrors csrc/pyrt_native.h; constants are declared with ``...`` so
-the compiler supplies their values.  setup.py names this module in
-``cffi_modules``; pyrt/native.py is the only importer of the result.
+The cdef mirrors the headers in csrc/ (pyrt_native.h first, then the others
+in name order); constants are declared with ``...`` so the compiler supplies
+their values.  Every csrc/*.c is compiled in.  setup.py names this module in
+``cffi_modules``; the pyrt.native package is the only importer of the result.
 """
 
 from __future__ import annotations
@@ -13,7 +14,9 @@ import re
 from cffi import FFI
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-HEADER = os.path.join(HERE, "pyrt_native.h")
+HEADERS = ["pyrt_native.h"] + sorted(
+    name for name in os.listdir(HERE) if name.endswith(".h") and name != "pyrt_native.h"
+)
 SOURCES = sorted(
     os.path.join("csrc", name) for name in os.listdir(HERE) if name.endswith(".c")
 )
@@ -42,12 +45,13 @@ def _cdef_from_header(text: str) -> str:
 
 
 ffibuilder = FFI()
-with open(HEADER, encoding="utf-8") as fh:
-    ffibuilder.cdef(_cdef_from_header(fh.read()))
+for _name in HEADERS:
+    with open(os.path.join(HERE, _name), encoding="utf-8") as fh:
+        ffibuilder.cdef(_cdef_from_header(fh.read()))
 
 ffibuilder.set_source(
     "pyrt._native",
-    '#include "pyrt_native.h"',
+    "\n".join(f'#include "{name}"' for name in HEADERS),
     sources=SOURCES,
     include_dirs=["csrc"],
     extra_compile_args=os.environ.get(

@@ -1,15 +1,10 @@
-"""The C kernels, through cffi: the only module that touches ``ffi``/``lib``.
-
-Arguments are validated here, before C sees them; every C status code
-becomes a :class:`~pyrt.errors.NativeError` (or a subclass) here, so nothing
-above this module ever sees a raw return code or a cdata object.
-"""
+"""Excess-128 conversions of the gripper DAC (csrc/convert.c)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from pyrt._native import ffi, lib
+from pyrt.native._lib import ffi, lib
 from pyrt.errors import NativeError
 
 __all__ = ["excess128", "excess128_many", "from_excess128"]
