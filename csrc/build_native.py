@@ -14,12 +14,11 @@ import re
 from cffi import FFI
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-HEADERS = ["pyrt_native.h"] + sorted(
-    name for name in os.listdir(HERE) if name.endswith(".h") and name != "pyrt_native.h"
-)
-SOURCES = sorted(
-    os.path.join("csrc", name) for name in os.listdir(HERE) if name.endswith(".c")
-)
+HEADERS = [
+    "pyrt_native.h",
+    *sorted(name for name in os.listdir(HERE) if name.endswith(".h") and name != "pyrt_native.h"),
+]
+SOURCES = sorted(os.path.join("csrc", name) for name in os.listdir(HERE) if name.endswith(".c"))
 
 
 def _cdef_from_header(text: str) -> str:

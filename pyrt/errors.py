@@ -83,7 +83,8 @@ class Fault:
 
     def __str__(self) -> str:
         where = f" in {self.source}" if self.source else ""
-        return f"{self.robot}: fault{where} at tick {self.tick} ({self.time_ns / 1e9:.6f} s): {self.cause}"
+        when = f"tick {self.tick} ({self.time_ns / 1e9:.6f} s)"
+        return f"{self.robot}: fault{where} at {when}: {self.cause}"
 
 
 class FaultError(PyrtError):

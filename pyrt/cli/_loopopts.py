@@ -33,7 +33,9 @@ def _tick_us(text: str) -> int:
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"tick must be a whole number of µs, got {text!r}") from None
+        raise argparse.ArgumentTypeError(
+            f"tick must be a whole number of µs, got {text!r}"
+        ) from None
     if not 50 <= value <= 1_000_000:
         raise argparse.ArgumentTypeError(f"tick must be 50..1000000 µs, got {value}")
     return value
@@ -48,17 +50,24 @@ def add_loop_options(parser: argparse.ArgumentParser, default_speed: str = "1") 
         default=parse_speed(default_speed),
         metavar="1|N|max",
         help=(
-            "1 = real time (default %s); N = N times faster than real time; max = "
-            "virtual time, as fast as the CPU goes (scripts, tests)" % default_speed
+            f"1 = real time (default {default_speed}); N = N times faster than real time; max = "
+            "virtual time, as fast as the CPU goes (scripts, tests)"
         ),
     )
     g.add_argument(
-        "--tick-us", type=_tick_us, default=1000, metavar="US", help="base tick in µs (default 1000)"
+        "--tick-us",
+        type=_tick_us,
+        default=1000,
+        metavar="US",
+        help="base tick in µs (default 1000)",
     )
     g.add_argument(
         "--timing-log",
         metavar="FILE",
-        help="write JSON Lines timing records (overruns, per-task summaries); read with 'pyrt overruns'",
+        help=(
+            "write JSON Lines timing records (overruns, per-task summaries); "
+            "read with 'pyrt overruns'"
+        ),
     )
     g.add_argument(
         "--max-overruns",
@@ -67,12 +76,16 @@ def add_loop_options(parser: argparse.ArgumentParser, default_speed: str = "1") 
         help="fault every robot after N consecutive overruns (default: never)",
     )
     g.add_argument(
-        "--timer-slack", action="store_true", help="set timer slack to 1 ns (prctl PR_SET_TIMERSLACK)"
+        "--timer-slack",
+        action="store_true",
+        help="set timer slack to 1 ns (prctl PR_SET_TIMERSLACK)",
     )
     g.add_argument(
         "--fifo", type=int, metavar="PRIO", help="run under SCHED_FIFO at PRIO (needs CAP_SYS_NICE)"
     )
-    g.add_argument("--mlock", action="store_true", help="lock memory (mlockall; needs RLIMIT_MEMLOCK)")
+    g.add_argument(
+        "--mlock", action="store_true", help="lock memory (mlockall; needs RLIMIT_MEMLOCK)"
+    )
 
 
 def apply_rt_options(args: argparse.Namespace, say: Callable[[str], None]) -> None:
@@ -89,9 +102,7 @@ def apply_rt_options(args: argparse.Namespace, say: Callable[[str], None]) -> No
                 say(f"warning: {exc.args[-1] if exc.args else exc}")
 
 
-def make_loop(
-    args: argparse.Namespace, warn: Callable[[str], None] | None = None
-) -> Loop:
+def make_loop(args: argparse.Namespace, warn: Callable[[str], None] | None = None) -> Loop:
     """A loop configured from the options of :func:`add_loop_options`."""
     if args.max_overruns is not None and args.max_overruns < 1:
         raise ConfigError(f"--max-overruns must be >= 1, got {args.max_overruns}")
@@ -103,8 +114,10 @@ def make_loop(
         except OSError as exc:
             raise ConfigError(f"cannot write timing log: {exc.strerror}", args.timing_log) from None
     if warn is None:
+
         def warn(msg: str) -> None:
             print(msg, file=sys.stderr)
+
     return Loop(
         clock,
         period_ns=args.tick_us * 1000,

@@ -12,8 +12,8 @@ import argparse
 import sys
 import time
 
-from pyrt.errors import ConfigError
 from pyrt.cli._loopopts import add_loop_options, apply_rt_options, make_loop
+from pyrt.errors import ConfigError
 from pyrt.scheduler import ReadyQueue
 from pyrt.scheduler.report import format_statistics
 
@@ -30,11 +30,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--seconds", type=float, default=2.0, help="loop time to run (default 2)")
     p.add_argument(
-        "--divisor", type=lambda s: int(s, 16), default=0x04, metavar="HEX",
+        "--divisor",
+        type=lambda s: int(s, 16),
+        default=0x04,
+        metavar="HEX",
         help="SYSCLKPD: check the queue every N-th tick (hex, default 04)",
     )
     p.add_argument(
-        "--slow-us", type=float, default=0.0, metavar="US",
+        "--slow-us",
+        type=float,
+        default=0.0,
+        metavar="US",
         help="make SENSORS busy-wait this long on every call (shows overruns)",
     )
     add_loop_options(p)
@@ -60,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
                 end = time.perf_counter_ns() + slow_ns
                 while time.perf_counter_ns() < end:
                     pass
+
         return body
 
     for address, name, period in _ROUTINES:

@@ -29,7 +29,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("file", help="timing log (JSON Lines) written with --timing-log")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.add_argument("--plot", metavar="PNG", help="also draw histograms and a timeline to PNG")
-    p.add_argument("--worst", type=int, default=10, metavar="N", help="overruns to list (default 10)")
+    p.add_argument(
+        "--worst", type=int, default=10, metavar="N", help="overruns to list (default 10)"
+    )
     p.set_defaults(run=run)
 
 
@@ -96,7 +98,9 @@ def format_report(rep: TimingReport, worst: int) -> str:
     if d["worst"]:
         lines.append("")
         lines.append(f"worst {len(d['worst'])} overruns:")
-        lines.append(f"{'tick':>10}{'time s':>12}{'late µs':>10}{'over µs':>10}{'missed':>8}  tasks (µs)")
+        lines.append(
+            f"{'tick':>10}{'time s':>12}{'late µs':>10}{'over µs':>10}{'missed':>8}  tasks (µs)"
+        )
         for r in d["worst"]:
             tasks = ", ".join(f"{n} {ns / 1e3:.1f}" for n, ns in r["tasks"]) or "-"
             lines.append(

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from pyrt.native._lib import ffi, lib
 from pyrt.errors import NativeError
+from pyrt.native._lib import ffi, lib
 
 __all__ = ["excess128", "excess128_many", "from_excess128"]
 

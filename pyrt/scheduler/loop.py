@@ -17,7 +17,6 @@ from __future__ import annotations
 import threading
 from collections import deque
 from collections.abc import Callable, Generator
-from time import perf_counter_ns
 from typing import Any
 
 from pyrt.errors import Fault, FaultError, PyrtError
@@ -119,6 +118,8 @@ class Loop:
         self._jobs: deque[Job] = deque()
         self._jobs_attached = False
         self._faults: deque[Fault] = deque()
+        #: Called (in the loop thread) with each fault as it is recorded.
+        self.fault_listeners: list[Callable[[Fault], None]] = []
         self._fault_lock = threading.Lock()
         self._stop = threading.Event()
         self.running = False
@@ -185,6 +186,12 @@ class Loop:
     def _report_fault(self, fault: Fault) -> None:
         with self._fault_lock:
             self._faults.append(fault)
+        for listener in self.fault_listeners:
+            listener(fault)
+
+    def has_fault(self) -> bool:
+        """True while a fault waits to be reported."""
+        return bool(self._faults)
 
     def take_fault(self) -> Fault | None:
         """The oldest fault not yet reported, removed from the pending list."""
@@ -451,4 +458,3 @@ def _record(acc: Accumulator, d: int) -> None:
         bl = d.bit_length()
         i = (bl << 2) - 8 + ((d >> (bl - 3)) & 3)
         acc.hist[i if i < NBINS else NBINS - 1] += 1
-

@@ -147,9 +147,7 @@ class ReadyQueue:
         if not 1 <= address <= 0xFFFF:
             raise ValueError(f"routine address must be 0001..FFFF, got {address:#x}")
         if address in self._routines:
-            raise ValueError(
-                f"address {address:04X} already holds {self._routines[address].name}"
-            )
+            raise ValueError(f"address {address:04X} already holds {self._routines[address].name}")
         key = name.upper()
         if key in self._by_name:
             raise ValueError(f"a routine named {name!r} is already registered")
@@ -182,10 +180,7 @@ class ReadyQueue:
 
     def routine(self, task: int | str) -> Routine:
         """The registered routine with address or name ``task``."""
-        if isinstance(task, str):
-            r = self._by_name.get(task.upper())
-        else:
-            r = self._routines.get(task)
+        r = self._by_name.get(task.upper()) if isinstance(task, str) else self._routines.get(task)
         if r is None:
             raise KeyError(f"no routine {task!r} on ready queue {self.name}")
         return r

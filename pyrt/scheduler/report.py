@@ -23,7 +23,9 @@ def format_statistics(stats: LoopStatistics) -> str:
             f"lateness µs: median {late.p50_ns / 1e3:.2f}  p99 {late.p99_ns / 1e3:.2f}  "
             f"p99.9 {late.p999_ns / 1e3:.2f}  max {late.max_ns / 1e3:.2f}"
         )
-    lines.append(f"{'task':<12}{'calls':>10}{'mean µs':>10}{'p99 µs':>10}{'max µs':>10}{'overruns':>10}")
+    lines.append(
+        f"{'task':<12}{'calls':>10}{'mean µs':>10}{'p99 µs':>10}{'max µs':>10}{'overruns':>10}"
+    )
     for name, t in sorted(stats.tasks.items()):
         lines.append(
             f"{name:<12}{t.calls:>10}{_us(t.mean_ns)}{_us(t.p99_ns)}{_us(t.max_ns)}{t.overruns:>10}"
