@@ -1,0 +1,145 @@
+"""Simulated back ends of the board interfaces: plain register files.
+
+A driver uses them exactly as it would the real cards (through the
+:class:`~pyrt.boards.tio10.TIO10` and
+:class:`~pyrt.boards.dataconcentrator.DataConcentrator` interfaces).  The
+physics in :mod:`pyrt.sim` sits on the other side of the registers: it reads
+what the driver wrote (periods, arm state, PIA ports) and writes what the
+sensors would (pulse counters, encoder counters, ADC codes, the RTC) through
+the ``plant_*`` methods, which no driver calls.
+"""
+
+from __future__ import annotations
+
+from pyrt.boards.dataconcentrator import (
+    ADC_MAX,
+    COUNTER_BITS,
+    DataConcentrator,
+    check_adc_channel,
+    check_counter_address,
+)
+from pyrt.boards.tio10 import (
+    CHANNELS,
+    CLOCK_HZ,
+    MAX_PERIOD,
+    MIN_PERIOD,
+    PIA_PORTS,
+    PULSE_COUNTER_MODULUS,
+    RTC_MODULUS,
+    TIO10,
+    check_channel,
+    check_port,
+)
+
+__all__ = ["SimDataConcentrator", "SimTIO10"]
+
+_COUNTER_MASK = (1 << COUNTER_BITS) - 1
+
+
+class SimTIO10(TIO10):
+    """A TIO10 whose registers are Python integers.
+
+    ``writes`` counts register writes (periods, arm/disarm, ports): a test can
+    check that a refused command touched nothing.
+    """
+
+    def __init__(self) -> None:
+        self._period = dict.fromkeys(CHANNELS, 0)
+        self._armed = dict.fromkeys(CHANNELS, False)
+        self._pulses = dict.fromkeys(CHANNELS, 0)
+        self._ports = dict.fromkeys(PIA_PORTS, 0)
+        self._rtc = 0
+        self.writes = 0
+
+    # -- driver side ---------------------------------------------------------
+
+    def load_period(self, channel: int, ticks: int) -> None:
+        check_channel(channel)
+        if isinstance(ticks, bool) or not isinstance(ticks, int):
+            raise ValueError(f"period must be an integer tick count, got {ticks!r}")
+        if not MIN_PERIOD <= ticks <= MAX_PERIOD:
+            raise ValueError(
+                f"period {ticks} out of the 16-bit load register's range "
+                f"{MIN_PERIOD}..{MAX_PERIOD} ticks"
+            )
+        self._period[channel] = ticks
+        self.writes += 1
+
+    def period(self, channel: int) -> int:
+        return self._period[check_channel(channel, allow_rtc=True)]
+
+    def arm(self, channel: int) -> None:
+        check_channel(channel)
+        if self._period[channel] < MIN_PERIOD:
+            raise ValueError(f"channel {channel} has no period loaded; load it before arming")
+        self._armed[channel] = True
+        self.writes += 1
+
+    def disarm(self, channel: int) -> None:
+        check_channel(channel)
+        self._armed[channel] = False
+        self.writes += 1
+
+    def armed(self, channel: int) -> bool:
+        return self._armed[check_channel(channel, allow_rtc=True)]
+
+    def pulses(self, channel: int) -> int:
+        return self._pulses[check_channel(channel, allow_rtc=True)]
+
+    def write_port(self, port: int, value: int) -> None:
+        check_port(port)
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 0xFF:
+            raise ValueError(f"PIA port value must be 0..255, got {value!r}")
+        self._ports[port] = value
+        self.writes += 1
+
+    def read_port(self, port: int) -> int:
+        return self._ports[check_port(port)]
+
+    def rtc_ticks(self) -> int:
+        return self._rtc
+
+    # -- plant side ----------------------------------------------------------
+
+    def plant_channel(self, channel: int) -> tuple[int, bool]:
+        """(period, armed) of a channel, for the physics."""
+        return self._period[channel], self._armed[channel]
+
+    def plant_add_pulses(self, channel: int, n: int) -> None:
+        """Count ``n`` output pulses on ``channel`` (the counter wraps at 16 bits)."""
+        self._pulses[channel] = (self._pulses[channel] + n) % PULSE_COUNTER_MODULUS
+
+    def plant_set_time(self, now_ns: int) -> None:
+        """Set the real-time clock from the loop time."""
+        self._rtc = (now_ns * CLOCK_HZ // 1_000_000_000) % RTC_MODULUS
+
+
+class SimDataConcentrator(DataConcentrator):
+    """A dataConcentrator whose counters and ADCs are Python integers."""
+
+    def __init__(self) -> None:
+        self._counters: dict[int, int] = {}
+        self._adc: dict[int, int] = {}
+        self.writes = 0
+
+    # -- driver side ---------------------------------------------------------
+
+    def read_counter(self, address: int) -> int:
+        return self._counters.get(check_counter_address(address), 0)
+
+    def clear_counter(self, address: int) -> None:
+        self._counters[check_counter_address(address)] = 0
+        self.writes += 1
+
+    def read_adc(self, channel: int) -> int:
+        return self._adc.get(check_adc_channel(channel), 0)
+
+    # -- plant side ----------------------------------------------------------
+
+    def plant_add_counts(self, address: int, n: int) -> None:
+        """Count ``n`` encoder counts (signed) at ``address``; 24-bit wrap."""
+        self._counters[address] = (self._counters.get(address, 0) + n) & _COUNTER_MASK
+
+    def plant_set_adc(self, channel: int, code: int) -> None:
+        """Latch a conversion, clamped to the converter's 0..4095."""
+        self._adc[channel] = 0 if code < 0 else (ADC_MAX if code > ADC_MAX else int(code))
