@@ -53,6 +53,8 @@ class Job:
 
     def step(self) -> bool:
         """Advance one step; return True once the job has finished."""
+        if self.done:
+            return True
         try:
             next(self._gen)
         except StopIteration as stop:
@@ -151,6 +153,7 @@ class Loop:
         if isinstance(handler, ReadyQueue):
             handler.fault_sink = self._report_fault
             handler.tick_source = lambda: self.tick_index
+            handler.timer = self.clock.timer
             handler.enable_timing(self.timing)
             self.queues.append(handler)
             self._handlers.append(handler.tick)

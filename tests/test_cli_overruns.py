@@ -1,0 +1,121 @@
+"""`pyrt overruns` and `pyrt demo`: reading timing logs back, and clear one-line errors."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+from _clocks import MS, WorkClock
+
+from pyrt.cli import main
+from pyrt.scheduler import Loop, ReadyQueue, TimingLog
+
+
+def write_log(path, ticks=100, slow_every=4) -> None:
+    clock = WorkClock()
+    loop = Loop(clock, period_ns=MS, timing_log=TimingLog(str(path), version="test"))
+    queue = ReadyQueue(divisor=1)
+    n = [0]
+
+    def task():
+        n[0] += 1
+        clock.work(2 * MS if n[0] % slow_every == 0 else 1000)
+
+    queue.add_periodic(0x10, "JAWMOVE", task, 1)
+    queue.add_periodic(0x20, "SENSE", lambda: clock.work(500), 2)
+    queue.schedule(0x10, 1)
+    queue.schedule(0x20, 2)
+    loop.attach(queue)
+    loop.run(ticks)
+    loop.close()
+
+
+def test_overruns_reads_a_log_the_loop_wrote(tmp_path, capsys):
+    """The table shows per-task calls and the overruns attributed to the slow task."""
+    path = tmp_path / "timing.jsonl"
+    write_log(path)
+    assert main(["overruns", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "25 overruns" in out
+    row = next(line for line in out.splitlines() if line.startswith("JAWMOVE"))
+    assert row.split()[1] == "100" and row.split()[-1] == "25"
+    assert "worst 10 overruns:" in out
+
+
+def test_overruns_json_output(tmp_path, capsys):
+    """--json prints one object with the same counts."""
+    path = tmp_path / "timing.jsonl"
+    write_log(path, ticks=40, slow_every=10)
+    assert main(["overruns", str(path), "--json", "--worst", "2"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["overruns"] == 4 and data["tasks"]["JAWMOVE"]["overruns"] == 4
+    assert data["tasks"]["JAWMOVE"]["calls"] == 40 and len(data["worst"]) == 2
+
+
+def test_overruns_plot_writes_a_png(tmp_path, capsys):
+    """--plot writes a PNG (matplotlib is an optional extra)."""
+    pytest.importorskip("matplotlib")
+    path = tmp_path / "timing.jsonl"
+    write_log(path)
+    png = tmp_path / "t.png"
+    assert main(["overruns", str(path), "--plot", str(png)]) == 0
+    assert png.read_bytes()[:4] == b"\x89PNG"
+
+
+BAD_LOGS = [
+    ("missing", None, "no such file"),
+    ("empty", "", "empty file"),
+    ("truncated", '{"type":"header","format":"pyrt-timing/1","period_ns":1000000}\n{"type":"ov', "truncated"),
+    ("not json", "hello world\n", "not a JSON record"),
+    ("no header", '{"type":"summary","tasks":{}}\n', "first record must be"),
+    ("bad overrun", '{"type":"header","format":"pyrt-timing/1","period_ns":1}\n{"type":"overrun"}\n',
+     "lacks"),
+]
+
+
+@pytest.mark.parametrize(("label", "content", "message"), BAD_LOGS, ids=[b[0] for b in BAD_LOGS])
+def test_overruns_bad_file_is_one_clear_line(tmp_path, label, content, message):
+    """A missing, empty, truncated or non-JSON log exits non-zero with one line and no traceback."""
+    path = tmp_path / "log.jsonl"
+    if content is not None:
+        path.write_text(content)
+    proc = subprocess.run(
+        [sys.executable, "-m", "pyrt", "overruns", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 1
+    assert proc.stdout == ""
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0] and "Traceback" not in proc.stderr
+
+
+def test_help_lists_the_commands(capsys):
+    """pyrt --help tells the truth: it lists the sub-commands."""
+    with pytest.raises(SystemExit) as exit_:
+        main(["--help"])
+    assert exit_.value.code == 0
+    out = capsys.readouterr().out
+    assert "demo" in out and "overruns" in out
+
+
+def test_demo_runs_on_virtual_time_and_writes_a_readable_log(tmp_path, capsys):
+    """pyrt demo --speed max runs 002's three routines; its log reads back with pyrt overruns."""
+    log = tmp_path / "demo.jsonl"
+    assert main(["demo", "--speed", "max", "--seconds", "0.48", "--timing-log", str(log)]) == 0
+    out = capsys.readouterr().out
+    # 480 ticks at divisor 04 = 120 checks: WATCHJAW 120, SENSORS 12, MVJAWS 10.
+    rows = {line.split()[0]: line.split()[1] for line in out.splitlines() if line[:1].isupper()}
+    assert rows["WATCHJAW"] == "120" and rows["SENSORS"] == "12" and rows["MVJAWS"] == "10"
+    assert main(["overruns", str(log)]) == 0
+
+
+def test_demo_refuses_bad_options(capsys):
+    """Bad option values give a usage error, not a traceback."""
+    with pytest.raises(SystemExit) as exit_:
+        main(["demo", "--speed", "fast"])
+    assert exit_.value.code == 2
+    assert "speed must be" in capsys.readouterr().err

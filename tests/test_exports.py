@@ -1,0 +1,38 @@
+"""Public names: each package's __all__ is sorted and every name in it exists."""
+
+from __future__ import annotations
+
+import importlib
+
+import pytest
+
+import pyrt
+from pyrt.errors import PyrtError
+
+PACKAGES = ["pyrt", "pyrt.errors", "pyrt.scheduler", "pyrt.native", "pyrt.units"]
+
+
+@pytest.mark.parametrize("name", PACKAGES)
+def test_all_is_sorted_and_complete(name):
+    """__all__ is sorted and lists only names the module really has."""
+    module = importlib.import_module(name)
+    exported = list(module.__all__)
+    assert exported == sorted(exported)
+    for attr in exported:
+        assert hasattr(module, attr), f"{name}.{attr} is in __all__ but missing"
+
+
+def test_every_pyrt_error_derives_from_the_root():
+    """Every exception pyrt exports derives from PyrtError, which is never raised itself."""
+    for attr in pyrt.__all__:
+        obj = getattr(pyrt, attr)
+        if isinstance(obj, type) and issubclass(obj, BaseException):
+            assert issubclass(obj, PyrtError)
+
+
+def test_config_error_names_file_and_line():
+    """ConfigError renders as FILE:LINE: message."""
+    from pyrt.errors import ConfigError
+
+    assert str(ConfigError("bad unit 'furlong'", "AXIS.dat", 7)) == "AXIS.dat:7: bad unit 'furlong'"
+    assert str(ConfigError("missing", "AV.dat")) == "AV.dat: missing"

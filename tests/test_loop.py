@@ -1,0 +1,234 @@
+"""The tick loop: virtual time, overrun detection, skipped deadlines, statistics and the timing log."""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import json
+
+import pytest
+from _clocks import MS, WorkClock
+from hypothesis import given
+from hypothesis import strategies as st
+
+from pyrt.errors import PyrtError
+from pyrt.scheduler import Loop, ReadyQueue, SimClock, TimingLog, WallClock, read_timing_log
+from pyrt.scheduler.stats import Accumulator, bin_edges, bin_index
+
+
+def work_loop(slow_every: int = 0, slow_ns: int = 0, **kw) -> tuple[Loop, WorkClock, ReadyQueue]:
+    clock = WorkClock()
+    loop = Loop(clock, period_ns=MS, **kw)
+    queue = ReadyQueue(divisor=1, name="r")
+    calls = [0]
+
+    def task():
+        calls[0] += 1
+        clock.work(slow_ns if slow_every and calls[0] % slow_every == 0 else 10_000)
+
+    queue.add_periodic(0x10, "TASK", task, 1)
+    queue.schedule(0x10, 1)
+    loop.attach(queue)
+    return loop, clock, queue
+
+
+def test_simclock_advances_exactly_one_period_per_tick():
+    """On a SimClock, n ticks move virtual time by exactly n periods and handlers see each tick's time."""
+    loop = Loop(SimClock(), period_ns=250_000)
+    seen = []
+    loop.attach(seen.append)
+    loop.run(4)
+    assert seen == [250_000, 500_000, 750_000, 1_000_000]
+    assert loop.now_ns == 1_000_000 and loop.tick_index == 4
+
+
+def test_handlers_run_in_attach_order():
+    """Handlers run every tick in the order they were attached (plant, queue, mailbox)."""
+    loop = Loop(SimClock())
+    order = []
+    loop.attach(lambda now: order.append("plant"))
+    loop.attach(lambda now: order.append("control"))
+    loop.run(2)
+    assert order == ["plant", "control", "plant", "control"]
+
+
+def test_run_stops_on_duration_and_predicate():
+    """run(duration_ns=...) and run_until stop where asked, on virtual time."""
+    loop = Loop(SimClock())
+    assert loop.run(duration_ns=10 * MS) == 10
+    assert loop.run_until(lambda: loop.tick_index >= 25, max_ticks=100)
+    assert loop.tick_index == 25
+    assert not loop.run_until(lambda: False, max_ticks=5)
+    assert loop.tick_index == 30
+
+
+def test_overrun_is_detected_and_missed_deadlines_are_skipped():
+    """A tick whose work ends 3 periods late is one overrun; the passed deadlines are skipped, not burst."""
+    loop, _, _ = work_loop(slow_every=5, slow_ns=3 * MS)
+    loop.run(20)
+    stats = loop.statistics()
+    assert stats.overruns == 4
+    # Work ends exactly on the third deadline after its own: the two passed
+    # deadlines in between are missed and skipped; the third is kept.
+    assert stats.missed == 4 * 2
+    assert stats.tasks["TASK"].overruns == 4
+    loop.run(1)
+    assert loop.now_ns == (21 + 8) * MS
+
+
+def test_no_overrun_when_work_fits_in_the_tick():
+    """Work that ends before the next deadline is not an overrun."""
+    loop, _, _ = work_loop(slow_every=2, slow_ns=MS - 1)
+    loop.run(10)
+    assert loop.statistics().overruns == 0
+
+
+def test_consecutive_overrun_limit_faults_every_robot():
+    """max_consecutive_overruns: that many overruns in a row trip every queue (OROCOS maxOverRun)."""
+    loop, _, queue = work_loop(slow_every=1, slow_ns=2 * MS, max_consecutive_overruns=3)
+    reflex = []
+    queue.reflex = reflex.append
+    loop.run(10)
+    assert len(reflex) == 1
+    fault = loop.take_fault()
+    assert fault is not None and "3 consecutive overruns" in fault.cause
+    assert queue.fault is not None
+
+
+def test_overrun_warnings_are_rate_limited_to_one_line_per_second():
+    """Many overruns within a second produce one warning line, then a summary per second."""
+    lines: list[str] = []
+    loop, _, _ = work_loop(slow_every=2, slow_ns=2 * MS, warn=lines.append)
+    loop.run(600)  # about 1.8 s of loop time, 300 overruns
+    assert loop.statistics().overruns == 300
+    assert 1 <= len(lines) <= 3
+    assert all(line.startswith("overrun:") for line in lines)
+    assert "TASK" in lines[0]
+
+
+def test_statistics_are_frozen_and_resettable():
+    """statistics() returns a frozen snapshot; reset_statistics() starts counting afresh."""
+    loop, _, _ = work_loop()
+    loop.run(50)
+    stats = loop.statistics()
+    assert stats.tasks["TASK"].calls == 50
+    assert stats.tasks["TASK"].mean_ns > 0
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        stats.ticks = 0  # type: ignore[misc]
+    loop.reset_statistics()
+    assert loop.statistics().tasks["TASK"].calls == 0
+    assert stats.tasks["TASK"].calls == 50
+
+
+def test_timing_off_records_nothing():
+    """With timing off, no task statistics are kept at all."""
+    loop = Loop(SimClock(), timing=False)
+    queue = ReadyQueue(divisor=1)
+    queue.add_periodic(0x10, "T", lambda: None, 1)
+    queue.schedule(0x10, 1)
+    loop.attach(queue)
+    loop.run(10)
+    assert loop.statistics().tasks == {}
+    assert queue.ran is None
+
+
+def test_timing_log_records_overruns_and_reads_back():
+    """The loop's timing log holds a header, one record per overrun and summaries; it reads back."""
+    buf = io.StringIO()
+    loop, _, _ = work_loop(slow_every=10, slow_ns=3 * MS, timing_log=TimingLog(buf, version="t"))
+    loop.run(2500)
+    loop.close()
+    records = [json.loads(line) for line in buf.getvalue().splitlines()]
+    assert records[0]["type"] == "header" and records[0]["period_ns"] == MS
+    assert records[0]["tasks"] == ["WAIT", "TASK"]
+    overruns = [r for r in records if r["type"] == "overrun"]
+    assert len(overruns) == 250
+    first = overruns[0]
+    assert first["tick"] == 9 and first["missed"] == 2
+    assert first["tasks"] == [["TASK", 3 * MS]]
+    assert first["end_ns"] - first["start_ns"] == 3 * MS
+    summaries = [r for r in records if r["type"] == "summary"]
+    assert len(summaries) >= 2 and summaries[-1]["tasks"]["TASK"]["calls"] == 2500
+
+
+def test_timing_log_file_read_back_counts(tmp_path):
+    """read_timing_log attributes overruns to the task that ran longest."""
+    path = tmp_path / "t.jsonl"
+    loop, _, _ = work_loop(slow_every=4, slow_ns=2 * MS, timing_log=TimingLog(str(path)))
+    loop.run(100)
+    loop.close()
+    rep = read_timing_log(str(path))
+    assert len(rep.overruns) == 25
+    assert rep.tasks["TASK"].overruns == 25 and rep.tasks["TASK"].calls == 100
+    assert rep.worst(3)[0]["overrun_ns"] >= rep.worst(3)[-1]["overrun_ns"]
+
+
+@pytest.mark.wallclock
+def test_slow_task_on_wallclock_produces_an_overrun_record_naming_it():
+    """A task that busy-waits three periods on the wall clock is logged as an overrun naming it."""
+    buf = io.StringIO()
+    loop = Loop(WallClock(), period_ns=MS, timing_log=TimingLog(buf))
+    queue = ReadyQueue(divisor=1)
+    import time
+
+    calls = [0]
+
+    def slow():
+        calls[0] += 1
+        if calls[0] == 5:
+            end = time.perf_counter_ns() + 3 * MS
+            while time.perf_counter_ns() < end:
+                pass
+
+    queue.add_periodic(0x10, "SLOWPOKE", slow, 1)
+    queue.schedule(0x10, 1)
+    loop.attach(queue)
+    loop.run(20)
+    loop.close()
+    overruns = [json.loads(x) for x in buf.getvalue().splitlines() if '"overrun"' in x]
+    named = [r for r in overruns if any(n == "SLOWPOKE" and d >= 3 * MS for n, d in r["tasks"])]
+    assert len(named) == 1 and named[0]["missed"] >= 2
+    assert loop.statistics().missed >= 2
+
+
+def test_wallclock_rejects_bad_speed():
+    """A non-positive speed is refused."""
+    with pytest.raises(ValueError, match="speed"):
+        WallClock(speed=0)
+
+
+def test_loop_refuses_reentry_and_bad_arguments():
+    """The loop refuses a non-positive period, negative ticks and attaching while running."""
+    with pytest.raises(ValueError):
+        Loop(SimClock(), period_ns=0)
+    loop = Loop(SimClock())
+    with pytest.raises(ValueError):
+        loop.run(-1)
+
+    def attach_inside(now):
+        loop.attach(lambda n: None)
+
+    loop.attach(attach_inside)
+    loop.attach(lambda now: None)
+    with pytest.raises(PyrtError):
+        loop.run(1)
+
+
+@given(st.integers(min_value=0, max_value=2**40))
+def test_histogram_bins_hold_their_values(d):
+    """Every duration falls in the bin whose edges enclose it."""
+    low, high = bin_edges(bin_index(d))
+    assert low <= d < high
+
+
+@given(st.lists(st.integers(min_value=0, max_value=10**9), min_size=1, max_size=200))
+def test_percentiles_bound_the_data(values):
+    """p50/p99 from the histogram are upper bounds within one bin (25%) of the exact quantiles."""
+    acc = Accumulator()
+    for v in values:
+        acc.add(v)
+    dist = acc.distribution()
+    ordered = sorted(values)
+    exact99 = ordered[max(0, -(-len(ordered) * 99 // 100) - 1)]
+    assert dist.max_ns == ordered[-1] and dist.count == len(values)
+    assert exact99 <= dist.p99_ns <= max(exact99 * 1.25 + 1, exact99 + 1)
