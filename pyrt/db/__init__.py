@@ -1,1 +1,59 @@
-"""Object databases: the .dat format of the SNO manipulator (VERSION1.00, TYPE: name ... END;), read and written back atomically."""
+"""Object databases: the .dat format of the SNO manipulator, read and written back atomically.
+
+Files start with ``VERSION1.00``; entries are ``TYPE: name`` ... ``END;`` with
+``KEY: value // comment`` lines.
+
+``load_station(directory)`` reads POLYAXIS.dat, AXIS.dat, MOTOR.dat,
+ENCODER.dat, LOADCELL.dat and AV.dat into typed, frozen records (base units
+cm, kg, cm3, N) with every cross reference resolved; ``Station.write_back``
+rewrites values in place, atomically, keeping every other byte.
+``station_directory``/``copy_station`` give the packaged stations
+(``prototype``, ``sno``).
+"""
+
+from pyrt.db._atomic import atomic_write
+from pyrt.db._schema import FILES, VERSIONS
+from pyrt.db._stations import STATIONS, copy_station, station_directory
+from pyrt.db.records import (
+    AVRecord,
+    AxisRecord,
+    EncoderRecord,
+    LoadcellRecord,
+    Location,
+    MotorRecord,
+    PolyAxisRecord,
+    Vector,
+)
+from pyrt.db.station import (
+    TYPES,
+    ObjectRef,
+    Station,
+    UnknownNameError,
+    load_station,
+    parse_file,
+    parse_records,
+)
+
+__all__ = [
+    "FILES",
+    "STATIONS",
+    "TYPES",
+    "VERSIONS",
+    "AVRecord",
+    "AxisRecord",
+    "EncoderRecord",
+    "LoadcellRecord",
+    "Location",
+    "MotorRecord",
+    "ObjectRef",
+    "PolyAxisRecord",
+    "Station",
+    "UnknownNameError",
+    "Vector",
+    "atomic_write",
+    "copy_station",
+    "load_station",
+    "parse_file",
+    "parse_records",
+    "station_directory",
+]

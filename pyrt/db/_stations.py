@@ -1,0 +1,52 @@
+"""The stations packaged with pyrt, and copying one into a working directory.
+
+Write-back edits files in place, so a run never points it at the installed
+package: :func:`copy_station` copies a packaged station's ``.dat`` files to
+a working directory first.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from importlib import resources
+from pathlib import Path
+
+from pyrt.db._atomic import atomic_write
+from pyrt.db._schema import FILES
+from pyrt.errors import ConfigError
+
+__all__ = ["STATIONS", "copy_station", "station_directory"]
+
+#: The packaged stations.
+STATIONS = ("prototype", "sno")
+
+
+def station_directory(name: str) -> Path:
+    """The installed directory of packaged station ``name`` (read-only use)."""
+    key = name.lower()
+    if key not in STATIONS:
+        raise ConfigError(f"no packaged station {name!r}; expected one of {', '.join(STATIONS)}")
+    root = resources.files("pyrt.db") / "stations" / key
+    return Path(os.fspath(root))
+
+
+def copy_station(name: str, dest_dir: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
+    """Copy packaged station ``name``'s database files into ``dest_dir``.
+
+    ``dest_dir`` is created if needed.  Existing database files there are
+    kept (a working copy carries the last written positions) unless
+    ``overwrite``; returns ``dest_dir``.  Each file is written atomically.
+    """
+    src = station_directory(name)
+    dest = Path(dest_dir)
+    dest.mkdir(parents=True, exist_ok=True)
+    if dest.resolve() == src.resolve():
+        raise ConfigError("refusing to copy a packaged station onto itself", str(dest))
+    for filename in FILES.values():
+        target = dest / filename
+        if target.exists() and not overwrite:
+            continue
+        atomic_write(target, (src / filename).read_bytes())
+        shutil.copymode(src / filename, target)
+    return dest

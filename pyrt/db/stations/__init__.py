@@ -1,0 +1,1 @@
+"""Packaged stations: one directory of .dat files per station (prototype, sno)."""
