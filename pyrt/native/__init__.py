@@ -7,5 +7,6 @@ private module per C source file; this ``__init__`` re-exports their API.
 """
 
 from pyrt.native._convert import excess128, excess128_many, from_excess128
+from pyrt.native._statics import StaticsSolver
 
-__all__ = ["excess128", "excess128_many", "from_excess128"]
+__all__ = ["StaticsSolver", "excess128", "excess128_many", "from_excess128"]
