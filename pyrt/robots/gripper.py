@@ -1,0 +1,599 @@
+"""The parallel-jaw gripper controller of 002 on the pyrt scheduler.
+
+The 8031's on-chip RAM image *is* the controller's state: the ready queue
+lives in it (T at 2F, Q at 35, SYSCLKCNT/SYSCLKPD at 41/42), the three
+self-scheduling routines read their periods from it (43-45) and keep their
+variables in it (Appendix A), so whatever the monitor shows is the real
+state and whatever it changes takes effect.  The routines are registered at
+their EPROM addresses of Appendix B, so Q holds 04C2, 0473 and 0541.
+
+Everything here runs in the loop's thread: the routines from the ready
+queue, the encoder interrupt handlers from the board, the main-program
+sequences (``init``/``fullopen``, the ``C`` calibration) as foreground jobs,
+and the command entry points when a console calls them through the runner.
+
+Safety (002's central fix, kept and extended): drive current is never left
+applied without movement.  ``fullopen`` aborts when the jaws stop before
+the limit bit; a commanded move ends STOPCNT bumps after the stopped bit; a
+jog held against a stop is cut off the same way; and a stall watchdog,
+independent of the RAM (which the monitor can change), trips the robot when
+current has been applied for :attr:`GripperController.stall_limit_ns`
+without one encoder count.  A fault's reflex action nulls the DAC and clears
+the drive bit in the same tick.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Generator
+from dataclasses import dataclass
+
+from pyrt.boards.gripper import (
+    DAC,
+    DAC_NULL,
+    LED_HI,
+    LED_LO,
+    P8155_CMD,
+    P8155_PA,
+    P8155_PB,
+    P8155_PC,
+)
+from pyrt.boards.i8031 import (
+    COMMAND_CNT,
+    DOJOG,
+    DRVON,
+    ENCODER_CNT,
+    ERROR_CNT,
+    FLAGS,
+    I8031,
+    JSPEED,
+    LIMIT,
+    MVJAWSPD,
+    MXNJSPD,
+    MXPJSPD,
+    OLD_ENC,
+    OTHER,
+    PROX,
+    RAM_SIZE,
+    RATE,
+    SEMA,
+    SENSORPD,
+    SP_RESET,
+    STOPCNT,
+    STOPPED,
+    SYSCLKCNT,
+    SYSCLKPD,
+    VECTOR_EXT0,
+    VECTOR_EXT1,
+    WTCHJWSPD,
+    Q,
+    T,
+)
+from pyrt.errors import CommandError, Fault
+from pyrt.native import excess128
+from pyrt.scheduler import ByteImage, Job, Loop, ReadyQueue
+
+__all__ = [
+    "ADDR_MVJAWS",
+    "ADDR_SENSORS",
+    "ADDR_SYSCLK",
+    "ADDR_WATCHJAW",
+    "GripperController",
+    "JobResult",
+]
+
+# Appendix B: EPROM addresses of the self-scheduling routines and the clock handler.
+ADDR_SYSCLK = 0x0295
+ADDR_MVJAWS = 0x04C2
+ADDR_SENSORS = 0x0473
+ADDR_WATCHJAW = 0x0541
+
+# Appendix B schedule values, loaded into RAM at power-up.
+DEFAULT_SYSCLKPD = 0x04
+DEFAULT_MVJAWSPD = 0x0C
+DEFAULT_SENSORPD = 0x0A
+DEFAULT_WTCHJWSPD = 0x01
+#: 002: "a speed value of 7F is used" with the original worm/sector gears.
+DEFAULT_JSPEED = 0x7F
+#: Bumps after the stopped bit before a commanded move ends.  002 gives no
+#: number ("a positive value"); 4 MVJAWS periods are about 0.2 s at the
+#: defaults: long enough to finish a move that stopped just short.
+STOPBUMPS = 0x04
+#: 2C.5 (unused in 002): a jog held against a stop was cut off; the jog
+#: switch is ignored until it is released.  pyrt's addition, so that a held
+#: switch cannot keep current on a stalled motor.
+JOGSTALL = 5
+#: 8155 command: ports A, B and C all input, timer stopped.
+MODE_8155 = 0x00
+#: Queue checks fullopen and the calibration give the motor to get going
+#: before they believe the stopped bit (002: a stale stopped bit at the
+#: start aborts the initialization; a large WTCHJWSPD still does, as 002 says).
+START_GRACE = 4
+#: Upper bound on any foreground drive, in queue checks (60 s at the defaults).
+MAX_DRIVE_CHECKS = 15000
+#: SP while the command loop runs (main called it) and inside the monitor.
+SP_CMDLOOP = SP_RESET + 2
+SP_MONITOR = SP_RESET + 4
+
+_MASK_STOPPED = 1 << STOPPED
+_MASK_DRVON = 1 << DRVON
+_MASK_DOJOG = 1 << DOJOG
+_MASK_JOGSTALL = 1 << JOGSTALL
+_MASK_LIMIT = 1 << LIMIT
+
+
+@dataclass(frozen=True)
+class JobResult:
+    """How a main-program sequence ended: ``ok``, a message, and a value if any."""
+
+    ok: bool
+    message: str
+    value: int | None = None
+
+
+class GripperController:
+    """The 002 controller program over an :class:`~pyrt.boards.i8031.I8031`.
+
+    ``cpu`` must have the gripper board mapped in its external data space
+    (:class:`~pyrt.boards.gripper.SimGripperBoard` or a real one).  Call
+    :meth:`attach` to put the ready queue and the stall watchdog on a loop
+    (after the plant), then :meth:`power_up`, then :meth:`start_init`.
+    """
+
+    def __init__(self, cpu: I8031, name: str = "gripper", stall_limit_ns: int = 1_000_000_000):
+        self.cpu = cpu
+        self.ram = cpu.ram
+        self.stall_limit_ns = int(stall_limit_ns)
+        self.queue = ReadyQueue(
+            capacity=6,
+            divisor=DEFAULT_SYSCLKPD,
+            image=ByteImage(self.ram, T, Q, SYSCLKCNT, SYSCLKPD, sema=(FLAGS, SEMA)),
+            name=name,
+        )
+        ram = self.ram
+        self.queue.add_periodic(ADDR_MVJAWS, "MVJAWS", self.mvjaws, lambda: ram[MVJAWSPD])
+        self.queue.add_periodic(ADDR_SENSORS, "SENSORS", self.sensors, lambda: ram[SENSORPD])
+        self.queue.add_periodic(ADDR_WATCHJAW, "WATCHJAW", self.watchjaw, lambda: ram[WTCHJWSPD])
+        self.queue.reflex = self.reflex
+        cpu.set_vector(VECTOR_EXT0, self.encoder_up)
+        cpu.set_vector(VECTOR_EXT1, self.encoder_down)
+        #: The foreground job (init, calibration) in progress, if any.
+        self.job: Job | None = None
+        self._loop: Loop | None = None
+        self._dac = DAC_NULL
+        self._pulses = 0
+        self._wd_pulses = 0
+        self._wd_since = 0
+        #: Why the last commanded move or jog ended, for the console's ``wait``.
+        self.last_stop = ""
+
+    # -- wiring ------------------------------------------------------------------
+
+    def attach(self, loop: Loop) -> None:
+        """Attach the clock interrupt (ready queue) and the stall watchdog to ``loop``."""
+        self._loop = loop
+        loop.attach(self.queue, name="SYSCLK")
+        loop.attach(self.watchdog, name="stall watchdog")
+
+    def power_up(self) -> None:
+        """What the main program does first: null the drive, reset SP, load
+        the schedule values and RAM variables, start the three routines."""
+        ram = self.ram
+        self.drive(DAC_NULL)
+        self.cpu.sp = SP_CMDLOOP
+        ram[SYSCLKPD] = DEFAULT_SYSCLKPD
+        ram[MVJAWSPD] = DEFAULT_MVJAWSPD
+        ram[SENSORPD] = DEFAULT_SENSORPD
+        ram[WTCHJWSPD] = DEFAULT_WTCHJWSPD
+        ram[FLAGS] = 0
+        ram[PROX] = ram[OTHER] = 0xFF
+        self._set_speed(DEFAULT_JSPEED)
+        self._zero_counts()
+        ram[STOPCNT] = 0
+        q = self.queue
+        q.fault = None
+        q.interrupts_enabled = True
+        q.clear()
+        q.schedule(ADDR_MVJAWS, ram[MVJAWSPD])
+        q.schedule(ADDR_SENSORS, ram[SENSORPD])
+        q.schedule(ADDR_WATCHJAW, ram[WTCHJWSPD])
+
+    # -- registers -----------------------------------------------------------------
+
+    def drive(self, byte: int) -> None:
+        """Write the DAC (excess-128 current byte) and remember it."""
+        self._dac = byte
+        self.cpu.movx_write(DAC, byte)
+
+    @property
+    def dac(self) -> int:
+        """The last byte written to the DAC (latched by the hardware)."""
+        return self._dac
+
+    def word(self, addr: int) -> int:
+        """RAM word at ``addr`` (little-endian), 0000-FFFF."""
+        ram = self.ram
+        return ram[addr] | (ram[addr + 1] << 8)
+
+    def _sword(self, addr: int) -> int:
+        ram = self.ram
+        w = ram[addr] | (ram[addr + 1] << 8)
+        return w - 0x10000 if w & 0x8000 else w
+
+    def _set_word(self, addr: int, value: int) -> None:
+        ram = self.ram
+        ram[addr] = value & 0xFF
+        ram[addr + 1] = (value >> 8) & 0xFF
+
+    def _zero_counts(self) -> None:
+        for addr in (ENCODER_CNT, COMMAND_CNT, OLD_ENC, RATE):
+            self._set_word(addr, 0)
+        self._set_word(ERROR_CNT, 0x0080)
+
+    def _set_speed(self, speed: int) -> None:
+        ram = self.ram
+        ram[JSPEED] = speed
+        ram[MXPJSPD] = 0x80 + speed
+        ram[MXNJSPD] = 0x80 - speed
+
+    # -- interrupt handlers (HHMVJAWS.51) ----------------------------------------
+
+    def encoder_up(self) -> None:
+        """External request 0: one encoder count up."""
+        ram = self.ram
+        w = (ram[ENCODER_CNT] | (ram[ENCODER_CNT + 1] << 8)) + 1
+        ram[ENCODER_CNT] = w & 0xFF
+        ram[ENCODER_CNT + 1] = (w >> 8) & 0xFF
+        self._pulses += 1
+
+    def encoder_down(self) -> None:
+        """External request 1: one encoder count down."""
+        ram = self.ram
+        w = (ram[ENCODER_CNT] | (ram[ENCODER_CNT + 1] << 8)) - 1
+        ram[ENCODER_CNT] = w & 0xFF
+        ram[ENCODER_CNT + 1] = (w >> 8) & 0xFF
+        self._pulses += 1
+
+    # -- the self-scheduling routines ------------------------------------------------
+
+    def sensors(self) -> None:
+        """SENSORS (0473): read the 8155 ports into 2D/2E, show them on the LEDs."""
+        ram = self.ram
+        cpu = self.cpu
+        ram[PROX] = cpu.movx_read(P8155_PA)
+        ram[OTHER] = cpu.movx_read(P8155_PB)
+        cpu.movx_write(LED_LO, ram[PROX])
+        cpu.movx_write(LED_HI, ram[OTHER])
+
+    def watchjaw(self) -> None:
+        """WATCHJAW (0541): stopped bit, RATE, ERROR_CNT (excess-128), OLD_ENC."""
+        ram = self.ram
+        enc = ram[ENCODER_CNT] | (ram[ENCODER_CNT + 1] << 8)
+        rate = (enc - (ram[OLD_ENC] | (ram[OLD_ENC + 1] << 8))) & 0xFFFF
+        ram[RATE] = rate & 0xFF
+        ram[RATE + 1] = rate >> 8
+        if rate:
+            ram[FLAGS] &= ~_MASK_STOPPED & 0xFF
+        else:
+            ram[FLAGS] |= _MASK_STOPPED
+        err = (enc - (ram[COMMAND_CNT] | (ram[COMMAND_CNT + 1] << 8)) + 0x80) & 0xFFFF
+        ram[ERROR_CNT] = err & 0xFF
+        ram[ERROR_CNT + 1] = err >> 8
+        ram[OLD_ENC] = enc & 0xFF
+        ram[OLD_ENC + 1] = enc >> 8
+
+    def mvjaws(self) -> None:
+        """MVJAWS (04C2): a jog first; else, with the drive bit, current =
+        target - actual within the speed limits, ending STOPCNT bumps after
+        the stopped bit; else null the current of a finished jog."""
+        ram = self.ram
+        flags = ram[FLAGS]
+        pc = self.cpu.movx_read(P8155_PC)
+        jog_open = not pc & 0x01
+        jog_close = not pc & 0x02
+        if jog_open != jog_close and self.job is None:
+            self._jog(flags, jog_open)
+            return
+        if flags & _MASK_JOGSTALL:
+            flags &= ~_MASK_JOGSTALL & 0xFF  # switch released: jogging allowed again
+            ram[FLAGS] = flags
+        if flags & _MASK_DRVON:
+            err = self._sword(COMMAND_CNT) - self._sword(ENCODER_CNT)
+            byte = excess128(err)
+            if byte > ram[MXPJSPD]:
+                byte = ram[MXPJSPD]
+            elif byte < ram[MXNJSPD]:
+                byte = ram[MXNJSPD]
+            self.drive(byte)
+            if flags & _MASK_STOPPED:
+                n = ram[STOPCNT]
+                if n > 1:
+                    ram[STOPCNT] = n - 1
+                else:
+                    ram[STOPCNT] = 0
+                    self.drive(DAC_NULL)
+                    ram[FLAGS] = flags & ~_MASK_DRVON & 0xFF
+                    self.last_stop = "stopped"
+            return
+        if flags & _MASK_DOJOG:
+            self.drive(DAC_NULL)
+            ram[FLAGS] = flags & ~_MASK_DOJOG & 0xFF
+            self._set_word(COMMAND_CNT, self.word(ENCODER_CNT))
+            self.last_stop = "jog ended"
+
+    def _jog(self, flags: int, open_: bool) -> None:
+        ram = self.ram
+        if flags & _MASK_JOGSTALL:
+            return
+        if not flags & _MASK_DOJOG:
+            ram[STOPCNT] = STOPBUMPS
+        if flags & _MASK_DRVON:
+            self.last_stop = "jog took over"
+        flags = (flags | _MASK_DOJOG) & ~_MASK_DRVON & 0xFF
+        # 002: during a jog the target follows the jaws, so that the jaw
+        # movement routine does not drive them back to the old target.
+        self._set_word(COMMAND_CNT, self.word(ENCODER_CNT))
+        self.drive(ram[MXPJSPD] if open_ else ram[MXNJSPD])
+        if flags & _MASK_STOPPED:
+            n = ram[STOPCNT]
+            if n > 1:
+                ram[STOPCNT] = n - 1
+            else:
+                ram[STOPCNT] = 0
+                self.drive(DAC_NULL)
+                flags = (flags | _MASK_JOGSTALL) & ~_MASK_DOJOG & 0xFF
+                self.last_stop = "jog stalled (against a stop?): release the switch"
+        ram[FLAGS] = flags
+
+    # -- safety ----------------------------------------------------------------------
+
+    def reflex(self, fault: Fault) -> None:
+        """The reflex action of a fault: null the current, clear drive and jog,
+        abandon the foreground job.  Runs in the tick that found the fault."""
+        self.drive(DAC_NULL)
+        self.ram[FLAGS] &= ~(_MASK_DRVON | _MASK_DOJOG) & 0xFF
+        self.last_stop = f"fault: {fault.cause}"
+        if self.job is not None:
+            self.job.cancel()
+            self.job = None
+
+    def watchdog(self, now_ns: int) -> None:
+        """Every tick: trip the robot when current has been applied for
+        ``stall_limit_ns`` without a single encoder count."""
+        if self._dac == DAC_NULL or self._pulses != self._wd_pulses:
+            self._wd_pulses = self._pulses
+            self._wd_since = now_ns
+            return
+        if now_ns - self._wd_since > self.stall_limit_ns:
+            self._wd_since = now_ns
+            q = self.queue
+            q.now_ns = now_ns
+            if q.fault is None:
+                q.trip(
+                    f"drive current {self._dac - 0x80:+d} applied for "
+                    f"{self.stall_limit_ns / 1e9:g} s without jaw movement",
+                    source="stall watchdog",
+                )
+            else:
+                self.reflex(q.fault)
+
+    # -- main-program sequences (foreground jobs) ------------------------------------
+
+    def start_init(self) -> Job:
+        """Start ``I``: init + fullopen, as a foreground job (result: :class:`JobResult`)."""
+        return self._spawn("init", self._init_job())
+
+    def start_calibration(self) -> Job:
+        """Start ``C``: init, close until stopped, read the count, init again."""
+        return self._spawn("calibrate", self._calibrate_job())
+
+    def _spawn(self, name: str, gen: Generator[None, None, JobResult]) -> Job:
+        if self._loop is None:
+            raise CommandError("controller is not attached to a loop")
+        if self.job is not None and not self.job.done:
+            raise CommandError(f"busy: {self.job.name} in progress")
+        if self.queue.fault is not None:
+            raise CommandError(f"robot stopped by a fault: {self.queue.fault.cause}")
+        self.job = self._loop.spawn(name, self._run_job(gen))
+        return self.job
+
+    def _run_job(self, gen: Generator[None, None, JobResult]) -> Generator[None, None, JobResult]:
+        try:
+            result = yield from gen
+        except Exception as exc:
+            # a job that fails (a full ready queue, say) is a fault of the robot
+            self.job = None
+            self.queue.trip(f"{type(exc).__name__}: {exc}", source="main program")
+            return JobResult(False, f"{type(exc).__name__}: {exc}")
+        finally:
+            self.drive(DAC_NULL)  # a sequence never leaves current behind it
+        self.job = None
+        return result
+
+    def _wait(self, n: int) -> Generator[None, None, None]:
+        if not self.queue.interrupts_enabled:
+            raise CommandError("clock interrupt is off (monitor I): the queue is frozen")
+        yield from self.queue.wait(n & 0xFF)
+
+    def _init_job(self) -> Generator[None, None, JobResult]:
+        result = yield from self._init()
+        return result
+
+    def _init(self) -> Generator[None, None, JobResult]:
+        """HHINIT: init (8155, sensor bits, encoder variables), then fullopen."""
+        ram = self.ram
+        self.drive(DAC_NULL)
+        ram[FLAGS] &= ~(_MASK_DRVON | _MASK_DOJOG | _MASK_JOGSTALL) & 0xFF
+        self.cpu.movx_write(P8155_CMD, MODE_8155)
+        ram[PROX] = ram[OTHER] = 0xFF
+        self._zero_counts()
+        ram[STOPCNT] = 0
+        # wait for the 8155 to reset and for SENSORS to read the ports once
+        yield from self._wait(ram[SENSORPD] + 1)
+        return (yield from self._fullopen())
+
+    def _limit(self) -> bool:
+        return not self.ram[OTHER] & _MASK_LIMIT
+
+    def _stopped(self) -> bool:
+        return bool(self.ram[FLAGS] & _MASK_STOPPED)
+
+    def _fullopen(self) -> Generator[None, None, JobResult]:
+        """Drive the jaws wide open until the limit bit; abort if they stop first."""
+        ram = self.ram
+        if not self._limit():
+            self.drive(ram[MXPJSPD])
+            yield from self._wait(START_GRACE)
+            for _ in range(MAX_DRIVE_CHECKS):
+                yield from self._wait(1)
+                if self._limit():
+                    break
+                if self._stopped():
+                    self.drive(DAC_NULL)
+                    # the limit bit may be up to one SENSORS period old: look again
+                    yield from self._wait(ram[SENSORPD] + 1)
+                    if self._limit():
+                        break
+                    return JobResult(
+                        False,
+                        "INIT FAILED: jaws stopped before the limit sensor fired "
+                        f"(encoder {self.word(ENCODER_CNT):04X}); current nulled",
+                    )
+            else:
+                self.drive(DAC_NULL)
+                return JobResult(False, "INIT FAILED: limit sensor not reached in time")
+        self.drive(DAC_NULL)
+        yield from self._settle()
+        self._zero_counts()
+        self.last_stop = "init"
+        return JobResult(True, "jaws wide open (limit sensor on), encoder 0000", 0)
+
+    def _settle(self) -> Generator[None, None, None]:
+        for _ in range(MAX_DRIVE_CHECKS):
+            yield from self._wait(1)
+            if self._stopped():
+                return
+
+    def _calibrate_job(self) -> Generator[None, None, JobResult]:
+        first = yield from self._init()
+        if not first.ok:
+            return first
+        ram = self.ram
+        self.drive(ram[MXNJSPD])
+        yield from self._wait(START_GRACE)
+        for _ in range(MAX_DRIVE_CHECKS):
+            yield from self._wait(1)
+            if self._stopped():
+                break
+        self.drive(DAC_NULL)
+        yield from self._settle()
+        closed = self.word(ENCODER_CNT)
+        again = yield from self._init()
+        if not again.ok:
+            return JobResult(False, again.message, closed)
+        return JobResult(True, f"{closed:04X}", closed)
+
+    # -- commands (called in the loop thread) -------------------------------------
+
+    @property
+    def busy(self) -> bool:
+        """A foreground job (init, calibration) is running."""
+        return self.job is not None and not self.job.done
+
+    @property
+    def moving(self) -> bool:
+        """A commanded move or a jog is in progress (drive or dojog bit)."""
+        return bool(self.ram[FLAGS] & (_MASK_DRVON | _MASK_DOJOG))
+
+    def move(self, target: int) -> None:
+        """``P``: store the target and set the drive bit (target -8000..0000)."""
+        if not -0x8000 <= target <= 0:
+            raise CommandError(
+                f"target {target:+X} refused: encoder counts are 0000 (wide open) or negative"
+            )
+        if self.busy:
+            raise CommandError(f"busy: {self.job.name} in progress")  # type: ignore[union-attr]
+        if self.queue.fault is not None:
+            raise CommandError(f"robot stopped by a fault: {self.queue.fault.cause}")
+        ram = self.ram
+        self._set_word(COMMAND_CNT, target)
+        ram[STOPCNT] = STOPBUMPS
+        ram[FLAGS] = (ram[FLAGS] & ~_MASK_DOJOG | _MASK_DRVON) & 0xFF
+        self.last_stop = ""
+
+    def set_speed(self, speed: int) -> None:
+        """``X``: the maximum jaw speed (01..7F), as JSPEED, MXPJSPD, MXNJSPD."""
+        if not 1 <= speed <= 0x7F:
+            raise CommandError(f"speed {speed:X} refused: it must be 01..7F")
+        self._set_speed(speed)
+
+    def target(self) -> int:
+        """``T``: COMMAND_CNT."""
+        return self.word(COMMAND_CNT)
+
+    def position(self) -> int:
+        """``W``: ENCODER_CNT."""
+        return self.word(ENCODER_CNT)
+
+    def error(self) -> int:
+        """``E``: ERROR_CNT (excess-128 word)."""
+        return self.word(ERROR_CNT)
+
+    def sensor_word(self) -> int:
+        """``S``: the sensor word, 2E high byte, 2D low byte."""
+        return self.word(PROX)
+
+    # -- monitor (called in the loop thread) -------------------------------------
+
+    def peek(self, addr: int) -> int:
+        """Monitor ``D``: the RAM byte at ``addr`` (00-7F)."""
+        if not 0 <= addr < RAM_SIZE:
+            raise CommandError(f"address {addr:X} is outside the on-chip RAM (00-7F)")
+        return self.ram[addr]
+
+    def poke(self, addr: int, value: int) -> int:
+        """Monitor ``C``: store ``value`` at ``addr``; return what is stored there."""
+        if not 0 <= addr < RAM_SIZE:
+            raise CommandError(f"address {addr:X} is outside the on-chip RAM (00-7F)")
+        if not 0 <= value <= 0xFF:
+            raise CommandError(f"value {value:X} is not a byte (00-FF)")
+        self.ram[addr] = value
+        return self.ram[addr]
+
+    def toggle_clock(self) -> bool:
+        """Monitor ``I``: toggle the clock/timer interrupt; return whether it is on."""
+        q = self.queue
+        q.interrupts_enabled = not q.interrupts_enabled
+        return q.interrupts_enabled
+
+    @property
+    def clock_enabled(self) -> bool:
+        """The clock/timer interrupt is on (the ready queue runs)."""
+        return self.queue.interrupts_enabled
+
+    def led_test(self, pattern: int) -> int:
+        """Monitor ``L``: store the word at 2D/2E, show it on the LEDs; return RAM 2D."""
+        if not 0 <= pattern <= 0xFFFF:
+            raise CommandError(f"bit pattern {pattern:X} is not a word (0000-FFFF)")
+        ram = self.ram
+        ram[PROX] = pattern & 0xFF
+        ram[OTHER] = pattern >> 8
+        self.cpu.movx_write(LED_LO, ram[PROX])
+        self.cpu.movx_write(LED_HI, ram[OTHER])
+        return ram[PROX]
+
+    def enter_monitor(self) -> int:
+        """The command loop calls the monitor; return SP (the monitor's first address)."""
+        self.cpu.sp = SP_MONITOR
+        return self.cpu.sp
+
+    def leave_monitor(self) -> None:
+        """The monitor returns to the command loop."""
+        self.cpu.sp = SP_CMDLOOP
+
+    def stack_pointer(self) -> int:
+        """Monitor ``S``: SP."""
+        return self.cpu.sp
+
+    def acknowledge(self) -> None:
+        """Clear a fault: the routines are restarted, nothing moves."""
+        self.queue.acknowledge(restart=True)
