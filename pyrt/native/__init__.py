@@ -7,6 +7,59 @@ private module per C source file; this ``__init__`` re-exports their API.
 """
 
 from pyrt.native._convert import excess128, excess128_many, from_excess128
-from pyrt.native._statics import StaticsSolver
+from pyrt.native._errors import (
+    DegenerateGeometryError,
+    NativeInputError,
+    NoConvergenceError,
+    NonFiniteError,
+    SingularError,
+    SolverError,
+    Status,
+)
+from pyrt.native._findpos import (
+    MAX_ROPES,
+    PositionFinder,
+    PositionResult,
+    RopeSegments,
+    find_position,
+    freeze_mask,
+    rope_lengths,
+    rope_segments,
+)
+from pyrt.native._fuzzy import (
+    FUZZY_RULES,
+    MAX_AXES,
+    REFERENCE_POLL_S,
+    FuzzyBatch,
+    FuzzyInput,
+    FuzzyParams,
+    fuzzy_step,
+)
 
-__all__ = ["StaticsSolver", "excess128", "excess128_many", "from_excess128"]
+__all__ = [
+    "FUZZY_RULES",
+    "MAX_AXES",
+    "MAX_ROPES",
+    "REFERENCE_POLL_S",
+    "DegenerateGeometryError",
+    "FuzzyBatch",
+    "FuzzyInput",
+    "FuzzyParams",
+    "NativeInputError",
+    "NoConvergenceError",
+    "NonFiniteError",
+    "PositionFinder",
+    "PositionResult",
+    "RopeSegments",
+    "SingularError",
+    "SolverError",
+    "Status",
+    "excess128",
+    "excess128_many",
+    "find_position",
+    "freeze_mask",
+    "from_excess128",
+    "fuzzy_step",
+    "rope_lengths",
+    "rope_segments",
+]

@@ -1,0 +1,320 @@
+"""The fuzzy Axis controller of 000, section 6 (csrc/fuzzy.c).
+
+Ten rules turn each axis's state into a change of motor velocity per poll;
+fuzzy AND is the product, NOT is ``1 - x``, and the output is the sum of
+premise truth x velocity change over the rules (see ``csrc/fuzzy.h`` for the
+rule table).  Positive velocity pays rope out; errors are actual - desired.
+
+Inputs are one row per axis with the columns of :class:`FuzzyInput`; outputs
+are ``dv`` (N,) cm/s and ``rules`` (N, 10), each rule's contribution, named
+by :data:`FUZZY_RULES` (the document's a0rules.dat columns).
+
+:func:`fuzzy_step` converts its arguments explicitly; :class:`FuzzyBatch`,
+the form for the control poll, owns its input and output arrays so that a
+poll only writes numbers into ``batch.inputs`` and calls ``batch.step()``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from pyrt.native._arrays import F64, as_f64
+from pyrt.native._errors import NativeInputError, Status, raise_for_status
+from pyrt.native._lib import ffi, lib
+
+__all__ = [
+    "FUZZY_RULES",
+    "MAX_AXES",
+    "REFERENCE_POLL_S",
+    "FuzzyBatch",
+    "FuzzyInput",
+    "FuzzyParams",
+    "fuzzy_step",
+]
+
+MAX_AXES: int = lib.PYRT_FUZZY_MAX_AXES
+NINPUTS: int = lib.PYRT_FUZZY_NINPUTS
+NRULES: int = lib.PYRT_FUZZY_NRULES
+
+#: The poll period (s) the default velocity changes are tuned for.
+REFERENCE_POLL_S = 0.05
+
+
+class FuzzyInput(enum.IntEnum):
+    """Column of the per-axis input row (values from ``csrc/fuzzy.h``)."""
+
+    TENSION = lib.PYRT_FUZZY_IN_TENSION                        # N
+    DESIRED_TENSION = lib.PYRT_FUZZY_IN_DESIRED_TENSION        # N
+    FREE = lib.PYRT_FUZZY_IN_FREE                              # truth 0..1
+    LENGTH_ERROR = lib.PYRT_FUZZY_IN_LENGTH_ERROR              # cm, actual - desired
+    VELOCITY = lib.PYRT_FUZZY_IN_VELOCITY                      # cm/s, + pays out
+    LENGTH_ERROR_RATE = lib.PYRT_FUZZY_IN_LENGTH_ERROR_RATE    # cm/s
+    TENSION_ERROR_RATE = lib.PYRT_FUZZY_IN_TENSION_ERROR_RATE  # N/s
+    LAST_DV = lib.PYRT_FUZZY_IN_LAST_DV                        # cm/s
+    NEAR_END = lib.PYRT_FUZZY_IN_NEAR_END                      # truth 0..1
+    TENSION_LOW = lib.PYRT_FUZZY_IN_TENSION_LOW                # N
+    TENSION_HIGH = lib.PYRT_FUZZY_IN_TENSION_HIGH              # N
+
+
+#: Names of the ten rule outputs, in column order.
+FUZZY_RULES: tuple[str, ...] = (
+    "tension_low",
+    "tension_high",
+    "length_short",
+    "length_long",
+    "rel_tension_low",
+    "rel_tension_high",
+    "velocity_high",
+    "length_error_rate_high",
+    "tension_error_rate_high",
+    "dv_high",
+)
+
+# Velocity-change fields that are "per poll" and scale with the poll period.
+_PER_POLL = ("dv_zero", "dv_full", "dv_tension", "dv_length", "dv_rel_tension",
+             "dv_velocity", "dv_len_rate", "dv_t_rate")
+
+
+@dataclass(frozen=True)
+class FuzzyParams:
+    """Breakpoints and velocity changes of the ten rules for one axis.
+
+    Figure 3 of 000 (the fuzzy sets) did not survive; these are pyrt's sets.
+    Shoulders: a set is 0 at its ``*_zero`` point and 1 at its ``*_full``
+    point, linear between.  Velocity changes are magnitudes in cm/s **per
+    poll**, tuned for a :data:`REFERENCE_POLL_S` (50 ms) poll on the
+    prototype (5.3 kg source, ropes of 10-60 N, motors 0.07-7.0 cm/s,
+    DV_LIMIT 0.5 cm/s per poll applied by the Motor, off-side ropes at 10 N);
+    :meth:`for_poll_period` rescales them for another poll.  The field order
+    and defaults equal ``pyrt_fuzzy_params`` / ``pyrt_fuzzy_default_params``
+    in ``csrc/fuzzy.c`` (a test holds them equal).
+    """
+
+    #: LowT is 1 at or below tension_low + 1 N ... (rules 0, 1: the guards)
+    low_t_full: float = 1.0
+    #: ... and 0 at tension_low + 5 N: silent at the 10 N off-side target
+    #: with a bound of a few newtons, fully on before LOW_TENSION_STOP.
+    low_t_zero: float = 5.0
+    #: HighT is 0 at tension_high - 15 N (a quarter of the 60 N working
+    #: range below the bound) ...
+    high_t_zero: float = 15.0
+    #: ... and 1 at tension_high - 2 N.
+    high_t_full: float = 2.0
+    #: Short/Long (rules 2, 3) on the corrected length error: linear from 0
+    #: (no dead band, so the velocity integrator cannot drift inside one) ...
+    len_zero: float = 0.0
+    #: ... to full at 1 cm.
+    len_full: float = 1.0
+    #: RelLow/RelHigh (rules 4, 5) on tension - desired: a 0.5 N dead band
+    #: for loadcell noise and offset ...
+    rel_zero: float = 0.5
+    #: ... full at 5 N.
+    rel_full: float = 5.0
+    #: Fraction of the relative-tension rules removed when near the end
+    #: (the document relaxes them only partially).
+    near_end_relax: float = 0.75
+    #: HighV (rule 6): a soft speed limit from 5 cm/s ...
+    vel_zero: float = 5.0
+    #: ... to the motor's 7.0 cm/s cruise maximum.
+    vel_full: float = 7.0
+    #: HighELV (rule 7), |d(length error)/dt|: linear from 0 ...
+    len_rate_zero: float = 0.0
+    #: ... to the hare's 2.0 cm/s top speed.
+    len_rate_full: float = 2.0
+    #: HighETV (rule 8), |d(tension error)/dt|: linear from 0 ...
+    t_rate_zero: float = 0.0
+    #: ... to 40 N/s (a 40 N/cm rope moving at 1 cm/s).
+    t_rate_full: float = 40.0
+    #: HighDV (rule 9), |last dv|: from 0.1 cm/s per poll ...
+    dv_zero: float = 0.1
+    #: ... to DV_LIMIT, 0.5 cm/s per poll.
+    dv_full: float = 0.5
+    #: Rules 0/1: the document's "increase tension = -0.4 cm/s".
+    dv_tension: float = 0.4
+    #: Rules 2/3: 2 cm/s^2 per cm of error at 50 ms: omega 1.4 rad/s.
+    dv_length: float = 0.1
+    #: Rules 4/5: 0.04 cm/s per poll per N, beating the length rules on any
+    #: rope stiffer than 4 N/cm, so an off-side rope acts as an idler.
+    dv_rel_tension: float = 0.2
+    #: Rule 6: pull back a run-away velocity.
+    dv_velocity: float = 0.3
+    #: Rule 7: 2 zeta omega = 0.25 / (2 cm/s * 50 ms) = 2.5/s, zeta 0.9.
+    dv_len_rate: float = 0.25
+    #: Rule 8: damps two ropes trading tension (the document's oscillation).
+    dv_t_rate: float = 0.25
+    #: Rule 9: fraction of the last dv taken back when it was high.
+    dv_damping: float = 0.5
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
+                raise NativeInputError(f"FuzzyParams.{f.name}: expected a number, got {value!r}")
+            object.__setattr__(self, f.name, float(value))
+        c = ffi.new("pyrt_fuzzy_params *", dataclasses.asdict(self))
+        rc = lib.pyrt_fuzzy_check_params(c)
+        if rc != Status.OK:
+            raise_for_status(rc, f"FuzzyParams: inconsistent breakpoints or changes ({self})")
+        object.__setattr__(self, "_c", c)
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, object], base: FuzzyParams | None = None
+                     ) -> FuzzyParams:
+        """Parameters from *base* (default: the defaults) with *values* overriding.
+
+        Keys are field names, case-insensitive (``DV_LENGTH`` or
+        ``dv_length``); values are numbers or numeric strings.  An unknown key
+        or a bad value raises :class:`NativeInputError` naming it.
+        """
+        names = {f.name for f in dataclasses.fields(cls)}
+        changes: dict[str, float] = {}
+        for key, raw in values.items():
+            name = str(key).strip().lower()
+            if name not in names:
+                raise NativeInputError(f"unknown fuzzy parameter {key!r}")
+            try:
+                changes[name] = float(raw)  # type: ignore[arg-type]
+            except (TypeError, ValueError):
+                raise NativeInputError(f"fuzzy parameter {key!r}: not a number: {raw!r}") from None
+        return dataclasses.replace(base if base is not None else cls(), **changes)
+
+    def replace(self, **overrides: float) -> FuzzyParams:
+        """A copy with some fields changed (validated like the constructor)."""
+        return self.from_mapping(overrides, base=self)
+
+    def for_poll_period(self, seconds: float) -> FuzzyParams:
+        """These parameters rescaled for an axis poll of *seconds*.
+
+        The per-poll velocity changes (and the dv breakpoints) scale with the
+        period so that accelerations stay what they are at 50 ms.
+        """
+        if not (isinstance(seconds, (int, float)) and 0.0 < seconds < float("inf")):
+            raise NativeInputError(f"poll period must be a positive number of seconds, got {seconds!r}")
+        k = seconds / REFERENCE_POLL_S
+        return dataclasses.replace(self, **{n: getattr(self, n) * k for n in _PER_POLL})
+
+
+def _params_array(params, n: int):
+    """(cdata array, count) for one shared FuzzyParams or one per axis."""
+    if isinstance(params, FuzzyParams):
+        return params._c, 1
+    if not isinstance(params, Sequence) or len(params) != n:
+        raise NativeInputError(
+            f"params: expected one FuzzyParams or a sequence of {n}, got {params!r}"
+        )
+    arr = ffi.new("pyrt_fuzzy_params[]", n)
+    for i, p in enumerate(params):
+        if not isinstance(p, FuzzyParams):
+            raise NativeInputError(f"params[{i}]: expected FuzzyParams, got {type(p).__name__}")
+        arr[i] = p._c[0]
+    return arr, n
+
+
+def _explain(rc: int, what: str, inputs: np.ndarray) -> None:
+    if rc == Status.EINVAL:
+        free = inputs[:, FuzzyInput.FREE]
+        near = inputs[:, FuzzyInput.NEAR_END]
+        lo, hi = inputs[:, FuzzyInput.TENSION_LOW], inputs[:, FuzzyInput.TENSION_HIGH]
+        for i in range(inputs.shape[0]):
+            if not 0.0 <= free[i] <= 1.0:
+                raise_for_status(rc, f"{what}: axis {i}: FREE must be a truth value 0..1")
+            if not 0.0 <= near[i] <= 1.0:
+                raise_for_status(rc, f"{what}: axis {i}: NEAR_END must be a truth value 0..1")
+            if not lo[i] < hi[i]:
+                raise_for_status(rc, f"{what}: axis {i}: TENSION_LOW must be < TENSION_HIGH")
+    if rc == Status.ENONFINITE:
+        bad = np.argwhere(~np.isfinite(inputs))
+        if bad.size:
+            i, j = bad[0]
+            raise_for_status(rc, f"{what}: axis {i} {FuzzyInput(j).name}")
+    raise_for_status(rc, what)
+
+
+def fuzzy_step(params, inputs) -> tuple[np.ndarray, np.ndarray]:
+    """Evaluate the ten rules for every axis (row) of *inputs*.
+
+    *params* is one :class:`FuzzyParams` for every axis or a sequence with one
+    per axis; *inputs* is array-like (N, 11) (or one row of 11), converted to
+    float64.  Returns ``(dv, rules)`` with shapes (N,) and (N, 10).
+    """
+    x = as_f64("inputs", inputs, (None, NINPUTS) if np.ndim(inputs) == 2 else (NINPUTS,))
+    x = x.reshape(-1, NINPUTS)
+    n = x.shape[0]
+    if not 1 <= n <= MAX_AXES:
+        raise NativeInputError(f"inputs: expected 1 to {MAX_AXES} axes, got {n}")
+    c, count = _params_array(params, n)
+    dv = np.empty(n, F64)
+    rules = np.empty((n, NRULES), F64)
+    rc = lib.pyrt_fuzzy_step(
+        n, c, count,
+        ffi.cast("double *", ffi.from_buffer(x)),
+        ffi.cast("double *", ffi.from_buffer(dv)),
+        ffi.cast("double *", ffi.from_buffer(rules)),
+    )
+    if rc != Status.OK:
+        _explain(rc, f"fuzzy_step ({n} axes)", x)
+    return dv, rules
+
+
+class FuzzyBatch:
+    """All axes of a PolyAxis, prepared for one C call per poll.
+
+    ``batch.inputs`` is an (N, 11) float64 array owned by the batch: the poll
+    writes its numbers into it (index columns with :class:`FuzzyInput`) and
+    calls :meth:`step`, which returns ``batch.dv``; ``batch.rules`` holds the
+    ten rule outputs per axis.  Both outputs are read-only views overwritten
+    by every successful step; a refused step raises and changes neither.
+    """
+
+    def __init__(self, params_per_axis, n_axes: int):
+        if isinstance(n_axes, bool) or not isinstance(n_axes, (int, np.integer)):
+            raise NativeInputError(f"n_axes: expected an integer, got {n_axes!r}")
+        if not 1 <= n_axes <= MAX_AXES:
+            raise NativeInputError(f"n_axes: expected 1 to {MAX_AXES}, got {n_axes}")
+        n = int(n_axes)
+        self.n = n
+        self._params = ffi.new("pyrt_fuzzy_params[]", n)
+        if isinstance(params_per_axis, FuzzyParams):
+            params_per_axis = [params_per_axis] * n
+        c, _ = _params_array(params_per_axis, n)
+        for i in range(n):
+            self._params[i] = c[i]
+        self.params: list[FuzzyParams] = list(params_per_axis)
+        self._inputs = np.zeros((n, NINPUTS), F64)
+        self._dv = np.zeros(n, F64)
+        self._rules = np.zeros((n, NRULES), F64)
+        self._bufs = [ffi.from_buffer(a) for a in (self._inputs, self._dv, self._rules)]
+        self._in, self._out_dv, self._out_rules = (
+            ffi.cast("double *", b) for b in self._bufs
+        )
+        self._step = lib.pyrt_fuzzy_step
+        self.dv = self._dv.view()
+        self.dv.flags.writeable = False
+        self.rules = self._rules.view()
+        self.rules.flags.writeable = False
+
+    @property
+    def inputs(self) -> np.ndarray:
+        """The bound (N, 11) input array; write into it, do not rebind it."""
+        return self._inputs
+
+    def set_params(self, axis: int, params: FuzzyParams) -> None:
+        """Replace the parameters of one axis (e.g. from the AXIS database)."""
+        if not -self.n <= axis < self.n:
+            raise NativeInputError(f"axis {axis} out of range for {self.n} axes")
+        if not isinstance(params, FuzzyParams):
+            raise NativeInputError(f"expected FuzzyParams, got {type(params).__name__}")
+        self._params[axis] = params._c[0]
+        self.params[axis] = params
+
+    def step(self) -> np.ndarray:
+        """Evaluate every axis from :attr:`inputs`; returns :attr:`dv`."""
+        rc = self._step(self.n, self._params, self.n, self._in, self._out_dv, self._out_rules)
+        if rc:
+            _explain(rc, f"FuzzyBatch.step ({self.n} axes)", self._inputs)
+        return self.dv
