@@ -35,6 +35,7 @@ from pyrt.native._fuzzy import (
     FuzzyParams,
     fuzzy_step,
 )
+from pyrt.native._statics import StaticsSolver
 
 __all__ = [
     "FUZZY_RULES",
@@ -53,6 +54,7 @@ __all__ = [
     "RopeSegments",
     "SingularError",
     "SolverError",
+    "StaticsSolver",
     "Status",
     "excess128",
     "excess128_many",

@@ -194,7 +194,9 @@ class FuzzyParams:
         period so that accelerations stay what they are at 50 ms.
         """
         if not (isinstance(seconds, (int, float)) and 0.0 < seconds < float("inf")):
-            raise NativeInputError(f"poll period must be a positive number of seconds, got {seconds!r}")
+            raise NativeInputError(
+                f"poll period must be a positive number of seconds, got {seconds!r}"
+            )
         k = seconds / REFERENCE_POLL_S
         return dataclasses.replace(self, **{n: getattr(self, n) * k for n in _PER_POLL})
 
