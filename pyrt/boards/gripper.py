@@ -116,8 +116,10 @@ class SimGripperBoard:
         else:
             return
         if h is not None:
-            for _ in range(counts):
+            h()
+            while counts > 1:
                 h()
+                counts -= 1
 
     def set_jog(self, open_: bool, close: bool) -> None:
         """Jog switch position (both at once reads as both pins low)."""

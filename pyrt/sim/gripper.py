@@ -95,6 +95,8 @@ class JawPlant:
         self._touch = 0.0
         self.faults: set[str] = set()
         self.stuck: dict[str, int] = {}
+        self._jam = False
+        self._encoder_dead = False
         self._jog_until: int | None = None
         self._jog: str = "off"
         self._last: int | None = None
@@ -135,12 +137,17 @@ class JawPlant:
                 raise ValueError("a stuck port needs a value 00..FF")
             self.stuck[port] = value
         self.faults.add(fault)
-        self._dirty = True
+        self._flags()
 
     def clear_faults(self) -> None:
         """Remove every injected fault."""
         self.faults.clear()
         self.stuck.clear()
+        self._flags()
+
+    def _flags(self) -> None:
+        self._jam = "jam" in self.faults
+        self._encoder_dead = "encoder" in self.faults
         self._dirty = True
 
     def jog(self, direction: str, duration_ns: int | None = None) -> None:
@@ -190,8 +197,7 @@ class JawPlant:
             return
         p = self.p
         x = self.x
-        if "jam" in self.faults:
-            v_target = 0.0
+        if self._jam:
             v = 0.0
         else:
             a = (u if u > 0 else -u) - p.deadband
@@ -232,9 +238,11 @@ class JawPlant:
         d = enc - self._enc
         if d:
             self._enc = enc
-            if "encoder" not in self.faults:
+            if not self._encoder_dead:
                 self.board.encoder(d)
-        self._sense()
+            self._sense()
+        elif self._dirty:
+            self._sense()
 
     def _sense(self) -> None:
         """Write the sensor port levels for the present position (active low)."""
