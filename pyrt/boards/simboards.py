@@ -29,6 +29,7 @@ from pyrt.boards.tio10 import (
     TIO10,
     check_channel,
     check_port,
+    source_hz,
 )
 
 __all__ = ["SimDataConcentrator", "SimTIO10"]
@@ -44,6 +45,7 @@ class SimTIO10(TIO10):
     """
 
     def __init__(self) -> None:
+        self._source = dict.fromkeys(CHANNELS, 1)
         self._period = dict.fromkeys(CHANNELS, 0)
         self._armed = dict.fromkeys(CHANNELS, False)
         self._pulses = dict.fromkeys(CHANNELS, 0)
@@ -52,6 +54,15 @@ class SimTIO10(TIO10):
         self.writes = 0
 
     # -- driver side ---------------------------------------------------------
+
+    def select_source(self, channel: int, source: int) -> None:
+        check_channel(channel)
+        source_hz(source)
+        self._source[channel] = source
+        self.writes += 1
+
+    def source(self, channel: int) -> int:
+        return self._source[check_channel(channel, allow_rtc=True)]
 
     def load_period(self, channel: int, ticks: int) -> None:
         check_channel(channel)
@@ -102,8 +113,11 @@ class SimTIO10(TIO10):
     # -- plant side ----------------------------------------------------------
 
     def plant_channel(self, channel: int) -> tuple[int, bool]:
-        """(period, armed) of a channel, for the physics."""
-        return self._period[channel], self._armed[channel]
+        """(period in 5 MHz ticks, armed) of a channel, for the physics."""
+        return (
+            self._period[channel] * 10 ** (self._source[channel] - 1),
+            self._armed[channel],
+        )
 
     def plant_add_pulses(self, channel: int, n: int) -> None:
         """Count ``n`` output pulses on ``channel`` (the counter wraps at 16 bits)."""

@@ -1,11 +1,14 @@
 """The National Instruments TIO10 timing card, at register level (000, section 11.3).
 
 Two AM9513 timer/counter chips of five channels each give ten clock channels,
-numbered 1 to 10 (chip A: 1-5, chip B: 6-10).  A stepper motor takes one
-half-step per output pulse of its channel, so the channel's count-down
-*period* register (in ticks of the card's 5 MHz clock) sets the step rate.
-Channels 4 and 5 of chip A are cascaded into the real-time clock
-(000, section 14) and cannot drive a motor.
+numbered 0 to 9 as MOTOR.dat numbers them (chip A: 0-4, chip B: 5-9).  A
+stepper motor takes one half-step per output pulse of its channel, so the
+channel's count-down *period* register sets the step rate.  Each channel
+counts one of the AM9513 frequency-scaler sources F1..F5, the card's 5 MHz
+clock divided by 1, 10, 100, 1000 or 10000 (:meth:`TIO10.select_source`);
+the period is a 16-bit count of that source.  Channels 4 and 5 are cascaded
+into the real-time clock counting the 5 MHz clock (000, section 14) and
+cannot drive a motor.
 
 Two MC6821 PIAs give four 8-bit output ports; their bits carry each motor's
 direction and all-windings-off (AWO) lines.  Which bit belongs to which
@@ -23,23 +26,29 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 
 __all__ = [
+    "AWO_BITS",
     "CHANNELS",
     "CLOCK_HZ",
+    "DIR_BITS",
     "MAX_PERIOD",
     "MIN_PERIOD",
     "PIA_PORTS",
     "PULSE_COUNTER_MODULUS",
     "RTC_CHANNELS",
     "RTC_MODULUS",
+    "SOURCES",
     "TIO10",
     "check_channel",
     "check_port",
+    "source_hz",
 ]
 
 #: The card's time base (000, section 4: "the tio10's 5 MHz clock").
 CLOCK_HZ = 5_000_000
 #: Clock channels on the card: two AM9513s of five channels each.
-CHANNELS = tuple(range(1, 11))
+CHANNELS = tuple(range(10))
+#: Frequency-scaler sources F1..F5: 5 MHz / 10**(source - 1).
+SOURCES = (1, 2, 3, 4, 5)
 #: Cascaded into the 32-bit real-time clock; refused for anything else.
 RTC_CHANNELS = (4, 5)
 #: The AM9513 load register is 16 bits; a period of 1 is not a square wave.
@@ -53,19 +62,35 @@ RTC_MODULUS = 1 << 32
 PIA_PORTS = (0, 1, 2, 3)
 
 
+#: Motor wiring of the PIA bits (000, section 8: ``dirBit[]`` and ``awoBit[]``):
+#: clock channel -> (port, bit).  Direction on PIA 0 port A (1 = pay rope
+#: out), all-windings-off on PIA 0 port B (1 = windings off).  Rewiring the
+#: outputs means changing these tables, as in the document.
+_MOTOR_CHANNELS = tuple(c for c in CHANNELS if c not in RTC_CHANNELS)
+DIR_BITS = {c: (0, b) for b, c in enumerate(_MOTOR_CHANNELS)}
+AWO_BITS = {c: (1, b) for b, c in enumerate(_MOTOR_CHANNELS)}
+
+
 def check_channel(channel: int, *, allow_rtc: bool = False) -> int:
     """Return ``channel`` if it names a clock channel usable for output.
 
-    Raises :class:`ValueError` for anything that is not 1..10, and for the
+    Raises :class:`ValueError` for anything that is not 0..9, and for the
     real-time-clock channels 4 and 5 unless ``allow_rtc``.
     """
     if isinstance(channel, bool) or not isinstance(channel, int) or channel not in CHANNELS:
-        raise ValueError(f"TIO10 clock channel must be an integer 1..10, got {channel!r}")
+        raise ValueError(f"TIO10 clock channel must be an integer 0..9, got {channel!r}")
     if not allow_rtc and channel in RTC_CHANNELS:
         raise ValueError(
             f"TIO10 channel {channel} is reserved for the real-time clock (channels 4 and 5)"
         )
     return channel
+
+
+def source_hz(source: int) -> int:
+    """The frequency of AM9513 source F``source`` (1..5) in Hz."""
+    if isinstance(source, bool) or not isinstance(source, int) or source not in SOURCES:
+        raise ValueError(f"AM9513 source must be F1..F5 (1..5), got {source!r}")
+    return CLOCK_HZ // 10 ** (source - 1)
 
 
 def check_port(port: int) -> int:
@@ -78,8 +103,9 @@ def check_port(port: int) -> int:
 class TIO10(ABC):
     """Register interface of one TIO10 card.
 
-    Clock channels: :meth:`load_period` writes a channel's load (period)
-    register and :meth:`arm` starts it counting; :meth:`disarm` stops its
+    Clock channels: :meth:`select_source` picks the source the channel
+    counts (F1..F5, power-up F1), :meth:`load_period` writes its load
+    (period) register and :meth:`arm` starts it counting; :meth:`disarm` stops its
     output.  :meth:`pulses` reads the channel's 16-bit output-pulse counter
     (wraps modulo 2**16).  PIA: :meth:`write_port` / :meth:`read_port`.
     Real-time clock: :meth:`rtc_ticks` (5 MHz ticks, modulo 2**32).
@@ -88,8 +114,16 @@ class TIO10(ABC):
     clock_hz: int = CLOCK_HZ
 
     @abstractmethod
+    def select_source(self, channel: int, source: int) -> None:
+        """Make the channel count source F``source`` (1..5)."""
+
+    @abstractmethod
+    def source(self, channel: int) -> int:
+        """The source (1..5) the channel counts."""
+
+    @abstractmethod
     def load_period(self, channel: int, ticks: int) -> None:
-        """Write ``ticks`` (MIN_PERIOD..MAX_PERIOD) to the channel's load register."""
+        """Write ``ticks`` (MIN_PERIOD..MAX_PERIOD source counts) to the load register."""
 
     @abstractmethod
     def period(self, channel: int) -> int:
