@@ -2,12 +2,13 @@
 
 from pyrt.scheduler.clock import Clock, SimClock, WallClock
 from pyrt.scheduler.loop import Job, Loop
-from pyrt.scheduler.readyqueue import ByteImage, ReadyQueue, Routine
+from pyrt.scheduler.readyqueue import ByteImage, ByteRef, ReadyQueue, Routine
 from pyrt.scheduler.stats import Distribution, LoopStatistics, TaskStatistics
 from pyrt.scheduler.timinglog import TimingLog, TimingReport, read_timing_log
 
 __all__ = [
     "ByteImage",
+    "ByteRef",
     "Clock",
     "Distribution",
     "Job",

@@ -124,6 +124,7 @@ class Loop:
         self.fault_listeners: list[Callable[[Fault], None]] = []
         self._fault_lock = threading.Lock()
         self._stop = threading.Event()
+        self._stopping = False
         self.running = False
 
         self.tick_index = 0
@@ -217,6 +218,7 @@ class Loop:
 
     def stop(self) -> None:
         """Ask the loop to return after the current tick (thread-safe)."""
+        self._stopping = True
         self._stop.set()
 
     def run(
@@ -234,6 +236,7 @@ class Loop:
         if ticks is not None and ticks < 0:
             raise ValueError(f"ticks must be >= 0, got {ticks}")
         self._stop.clear()
+        self._stopping = False
         end_ns = self.now_ns + duration_ns if duration_ns is not None else None
         self.running = True
         try:
@@ -261,22 +264,29 @@ class Loop:
         period = self.period_ns
         deadline = self._deadline
         stop = self._stop
-        n = 0
+        plain = type(clock) is SimClock
         summary_at = self._next_summary if self.timing_log is not None else None
-        while n < ticks:
-            clock.wait_until(deadline)
-            self.now_ns = deadline
-            for h in handlers:
-                h(deadline)
-            self.tick_index += 1
-            n += 1
-            deadline += period
+        n = 0
+        try:
+            while n < ticks:
+                if plain:
+                    clock._now = deadline
+                else:
+                    clock.wait_until(deadline)
+                self.now_ns = deadline
+                for h in handlers:
+                    h(deadline)
+                self.tick_index += 1
+                n += 1
+                deadline += period
+                self._deadline = deadline
+                if summary_at is not None and deadline > summary_at:
+                    self._summary(deadline - period)
+                    summary_at = self._next_summary
+                if self._stopping and stop.is_set():
+                    break
+        finally:
             self._deadline = deadline
-            if summary_at is not None and deadline > summary_at:
-                self._summary(deadline - period)
-                summary_at = self._next_summary
-            if stop.is_set():
-                break
         return n
 
     def _run_general(
@@ -296,10 +306,6 @@ class Loop:
             clock.wait_until(deadline)
             start = deadline if virtual else clock.now_ns()
             self.now_ns = start
-            if timing:
-                for q in self.queues:
-                    if q.ran:
-                        q.ran.clear()
             for h in handlers:
                 h(start)
             self.tick_index += 1
@@ -337,15 +343,15 @@ class Loop:
         self.missed += skipped
         self.consecutive_overruns += 1
         tasks: list[tuple[str, int]] = []
+        culprit_q = None
         for q in self.queues:
-            if q.ran:
-                tasks.extend(q.ran)
+            for entry in q.tasks_in_tick(start):
+                if not tasks or entry[1] > max(tasks, key=lambda t: t[1])[1]:
+                    culprit_q = q
+                tasks.append(entry)
         culprit = max(tasks, key=lambda t: t[1])[0] if tasks else ""
-        if culprit:
-            for q in self.queues:
-                for acc in q.accumulators():
-                    if acc.name == culprit:
-                        acc.overruns += 1
+        if culprit_q is not None:
+            culprit_q.count_overrun(culprit)
         lateness = end - deadline - self.period_ns
         if self.timing_log is not None:
             self.timing_log.overrun(

@@ -30,13 +30,18 @@ from collections.abc import Callable, Generator
 from dataclasses import dataclass
 from time import perf_counter_ns
 
+import numpy as np
+
 from pyrt.errors import Fault, QueueFullError
 from pyrt.scheduler.stats import NBINS, Accumulator
 
-__all__ = ["ByteImage", "ReadyQueue", "Routine"]
+__all__ = ["ByteImage", "ByteRef", "ReadyQueue", "Routine"]
 
 #: Address of the built-in routine that ends a :meth:`ReadyQueue.wait`.
 WAIT_ADDRESS = 0x0001
+
+#: Timing samples kept before they are folded into the accumulators.
+_FOLD_AT = 2048
 
 
 @dataclass
@@ -62,6 +67,17 @@ class ByteImage:
         q = capacity
         cnt = 3 * capacity
         return cls(bytearray(3 * capacity + 3), t, q, cnt, cnt + 1, (cnt + 2, 0))
+
+
+@dataclass(frozen=True)
+class ByteRef:
+    """A period variable held in one byte of a byte image (``mem[address]``)."""
+
+    mem: bytearray
+    address: int
+
+    def __call__(self) -> int:
+        return self.mem[self.address]
 
 
 @dataclass
@@ -118,15 +134,15 @@ class ReadyQueue:
             self._q16 = memoryview(self._mem)[self._q : self._q + 2 * capacity].cast("H")
         else:  # pragma: no cover - no big-endian machine to test on
             self._q16 = _LittleEndianWords(self._mem, self._q, capacity)
+        self._slot_range = range(capacity)
         self._routines: dict[int, Routine] = {}
         self._by_name: dict[str, Routine] = {}
-        self._stats: dict[int, Accumulator] | None = None
-        #: (name, duration_ns) of the routines run in the current tick, when timing.
-        self.ran: list[tuple[str, int]] | None = None
-        #: False while the clock interrupt is disabled (monitor ``I``): queue frozen.
-        self.interrupts_enabled = True
-        #: The fault that stopped this queue, or None while it runs.
-        self.fault: Fault | None = None
+        self._fns: dict[int, Callable[[], None]] = {}
+        self.enable_timing(False)
+        self._interrupts = True
+        self._fault: Fault | None = None
+        # True while the clock handler does anything: interrupts on, no fault.
+        self._active = True
         #: Called with the fault, in the same tick, before it is reported.
         self.reflex: Callable[[Fault], None] | None = None
         #: Where faults are reported (the loop sets this when the queue is attached).
@@ -142,6 +158,28 @@ class ReadyQueue:
         self._mem[self._cnt] = divisor
         self.register(WAIT_ADDRESS, "WAIT", self._wait_done)
 
+    # -- state -------------------------------------------------------------
+
+    @property
+    def interrupts_enabled(self) -> bool:
+        """False while the clock interrupt is disabled (monitor ``I``): queue frozen."""
+        return self._interrupts
+
+    @interrupts_enabled.setter
+    def interrupts_enabled(self, on: bool) -> None:
+        self._interrupts = bool(on)
+        self._active = self._interrupts and self._fault is None
+
+    @property
+    def fault(self) -> Fault | None:
+        """The fault that stopped this queue, or None while it runs."""
+        return self._fault
+
+    @fault.setter
+    def fault(self, fault: Fault | None) -> None:
+        self._fault = fault
+        self._active = self._interrupts and fault is None
+
     # -- configuration -----------------------------------------------------
 
     def register(self, address: int, name: str, fn: Callable[[], None]) -> Routine:
@@ -155,6 +193,7 @@ class ReadyQueue:
             raise ValueError(f"a routine named {name!r} is already registered")
         routine = Routine(address, name, fn)
         self._routines[address] = routine
+        self._fns[address] = fn
         self._by_name[key] = routine
         if self._stats is not None:
             self._stats[address] = Accumulator(name)
@@ -165,16 +204,62 @@ class ReadyQueue:
         address: int,
         name: str,
         fn: Callable[[], None],
-        period: int | Callable[[], int],
+        period: int | ByteRef | Callable[[], int],
     ) -> Routine:
         """Register a self-scheduling routine: it runs ``fn`` and then reschedules
-        itself with the value ``period`` gives at that moment (read it from a
-        RAM byte to make the period changeable at run time)."""
-        period_fn = period if callable(period) else (lambda p=int(period): p)
+        itself with the period it reads at that moment.  ``period`` is a
+        constant, a :class:`ByteRef` to a RAM byte (the gripper's 43/44/45:
+        changeable at run time, and the fastest form), or any zero-argument
+        callable returning 0..255."""
+        mem, q16, t, slots = self._mem, self._q16, self._t, self._slot_range
+        put = self._put
+        # Three specialisations of the same routine, chosen once: this is the
+        # hot path.  The slot search is ReadyQueue._put, inlined.
+        if isinstance(period, ByteRef):
+            pmem, paddr = period.mem, period.address
+            period_fn = period
 
-        def self_scheduling() -> None:
-            fn()
-            self.schedule(address, period_fn())
+            def self_scheduling() -> None:
+                fn()
+                n = pmem[paddr]
+                for i in slots:
+                    if not q16[i]:
+                        mem[t + i] = n
+                        q16[i] = address
+                        return
+                put(address, n)  # raises QueueFullError
+
+        elif callable(period):
+            period_fn = period
+
+            def self_scheduling() -> None:
+                fn()
+                n = period_fn()
+                if not 0 <= n <= 255:
+                    raise ValueError(f"period of {name} must be 00..FF, got {n!r}")
+                for i in slots:
+                    if not q16[i]:
+                        mem[t + i] = n
+                        q16[i] = address
+                        return
+                put(address, n)
+
+        else:
+            n_const = int(period)
+            if not 0 <= n_const <= 255:
+                raise ValueError(f"period of {name} must be 00..FF, got {period!r}")
+
+            def period_fn() -> int:
+                return n_const
+
+            def self_scheduling() -> None:
+                fn()
+                for i in slots:
+                    if not q16[i]:
+                        mem[t + i] = n_const
+                        q16[i] = address
+                        return
+                put(address, n_const)
 
         routine = self.register(address, name, self_scheduling)
         routine.period = period_fn
@@ -221,15 +306,19 @@ class ReadyQueue:
         routine = self.routine(task)
         if not 0 <= n <= 255:
             raise ValueError(f"schedule value for {routine.name} must be 00..FF, got {n}")
+        return self._put(routine.address, n)
+
+    def _put(self, address: int, n: int) -> int:
+        """Schedule a known routine address with a checked byte ``n`` (the hot path)."""
         q16 = self._q16
-        for i in range(self.capacity):
-            if q16[i] == 0:
+        for i in self._slot_range:
+            if not q16[i]:
                 self._mem[self._t + i] = n
-                q16[i] = routine.address
+                q16[i] = address
                 return i
+        name = self._routines[address].name if address in self._routines else f"{address:04X}"
         raise QueueFullError(
-            f"ready queue of {self.name} full ({self.capacity} slots): "
-            f"cannot schedule {routine.name}"
+            f"ready queue of {self.name} full ({self.capacity} slots): cannot schedule {name}"
         )
 
     def slots(self) -> list[tuple[int, int] | None]:
@@ -266,17 +355,56 @@ class ReadyQueue:
     # -- timing ------------------------------------------------------------
 
     def enable_timing(self, on: bool = True) -> None:
-        """Measure each routine's execution time (off: no cost at all)."""
+        """Measure each routine's execution time (off: no cost at all).
+
+        While a check runs, each routine's address and duration are appended
+        to two flat lists; :meth:`fold_timing` folds them into the per-routine
+        accumulators with numpy, in bulk, so the per-dispatch cost is one
+        timer read and two appends.
+        """
         if on:
             self._stats = {a: Accumulator(r.name) for a, r in self._routines.items()}
-            self.ran = []
+            self._run_addr: list[int] | None = []
+            self._run_dur: list[int] | None = []
         else:
             self._stats = None
-            self.ran = None
+            self._run_addr = self._run_dur = None
+        self._tick_start = 0
+        self._checked_at = -1
+
+    def fold_timing(self) -> None:
+        """Fold the recorded samples into the accumulators (call from the loop thread)."""
+        addrs, durs = self._run_addr, self._run_dur
+        if not durs or self._stats is None:
+            return
+        fold_samples(self._stats, addrs, durs)
+        addrs.clear()
+        durs.clear()
+        self._tick_start = 0
 
     def accumulators(self) -> list[Accumulator]:
-        """The live timing accumulators (empty when timing is off)."""
-        return list(self._stats.values()) if self._stats is not None else []
+        """The timing accumulators, folded up to now (empty when timing is off)."""
+        if self._stats is None:
+            return []
+        self.fold_timing()
+        return list(self._stats.values())
+
+    def count_overrun(self, name: str) -> None:
+        """Attribute one overrun to the routine called ``name``."""
+        routine = self._by_name.get(name.upper())
+        if self._stats is not None and routine is not None:
+            self._stats[routine.address].overruns += 1
+
+    def tasks_in_tick(self, now_ns: int) -> list[tuple[str, int]]:
+        """``(name, duration_ns)`` of the routines run in the tick at ``now_ns``."""
+        if self._run_dur is None or self._checked_at != now_ns:
+            return []
+        start = self._tick_start
+        names = self._routines
+        return [
+            (names[a].name if a in names else f"{a:04X}", d)
+            for a, d in zip(self._run_addr[start:], self._run_dur[start:], strict=True)
+        ]
 
     # -- faults ------------------------------------------------------------
 
@@ -331,7 +459,7 @@ class ReadyQueue:
 
     def tick(self, now_ns: int) -> None:
         """The clock interrupt: every SYSCLKPD-th call, check the queue."""
-        if not self.interrupts_enabled or self.fault is not None:
+        if not self._active:
             return
         mem = self._mem
         c = (mem[self._cnt] - 1) & 0xFF
@@ -347,55 +475,78 @@ class ReadyQueue:
         q16 = self._q16
         t = self._t
         ready = []
-        for i in range(self.capacity):
-            a = q16[i]
+        for i, a in enumerate(q16.tolist()):
             if a:
-                v = (mem[t + i] - 1) & 0xFF
+                v = mem[t + i] - 1
                 if v:
-                    mem[t + i] = v
+                    mem[t + i] = v & 0xFF
                 else:
                     q16[i] = 0
                     ready.append(a)
         if not ready:
             return
-        routines = self._routines
-        stats = self._stats
-        name = "?"
+        fns = self._fns
+        a = 0
         try:
-            if stats is None:
+            if self._stats is None:
                 for a in ready:
-                    r = routines.get(a)
-                    if r is None:
-                        name = f"{a:04X}"
-                        raise LookupError(f"no routine at address {a:04X} (corrupted Q?)")
-                    name = r.name
-                    r.fn()
+                    fns[a]()
             else:
-                ran = self.ran
+                durs = self._run_dur
+                if len(durs) >= _FOLD_AT:
+                    self.fold_timing()
+                add_a = self._run_addr.append
+                add_d = durs.append
+                self._tick_start = len(durs)
+                self._checked_at = self.now_ns
                 timer = self.timer
+                t0 = timer()
                 for a in ready:
-                    r = routines.get(a)
-                    if r is None:
-                        name = f"{a:04X}"
-                        raise LookupError(f"no routine at address {a:04X} (corrupted Q?)")
-                    name = r.name
-                    t0 = timer()
-                    r.fn()
-                    d = timer() - t0
-                    acc = stats[a]
-                    acc.calls += 1
-                    acc.total += d
-                    if d > acc.max:
-                        acc.max = d
-                    if d < 8:
-                        acc.hist[d if d > 0 else 0] += 1
-                    else:
-                        bl = d.bit_length()
-                        i = (bl << 2) - 8 + ((d >> (bl - 3)) & 3)
-                        acc.hist[i if i < NBINS else NBINS - 1] += 1
-                    ran.append((r.name, d))
+                    fns[a]()
+                    t1 = timer()
+                    add_a(a)
+                    add_d(t1 - t0)
+                    t0 = t1
         except Exception as exc:
-            self.trip(f"{type(exc).__name__}: {exc}", source=name, tb=_tb.format_exc())
+            r = self._routines.get(a)
+            if r is None:
+                cause = f"no routine at address {a:04X} (corrupted Q?)"
+                self.trip(cause, source=f"{a:04X}")
+            else:
+                self.trip(f"{type(exc).__name__}: {exc}", source=r.name, tb=_tb.format_exc())
+
+
+def fold_samples(stats: dict[int, Accumulator], addrs: list[int], durs: list[int]) -> None:
+    """Add samples (routine address, duration ns) to the accumulators, in bulk."""
+    a = np.asarray(addrs, dtype=np.int64)
+    d = np.asarray(durs, dtype=np.int64)
+    np.maximum(d, 0, out=d)
+    bins = _bin_indices(d)
+    for addr in np.unique(a).tolist():
+        acc = stats.get(addr)
+        if acc is None:
+            continue
+        mask = a == addr
+        dd = d[mask]
+        acc.calls += int(dd.size)
+        acc.total += int(dd.sum())
+        m = int(dd.max())
+        if m > acc.max:
+            acc.max = m
+        counts = np.bincount(bins[mask], minlength=NBINS)
+        hist = acc.hist
+        for i in np.flatnonzero(counts).tolist():
+            hist[i] += int(counts[i])
+
+
+def _bin_indices(d: np.ndarray) -> np.ndarray:
+    """Vectorised :func:`pyrt.scheduler.stats.bin_index` for non-negative int64 durations."""
+    _, bl = np.frexp(d.astype(np.float64))  # bit length, exact below 2**53
+    bl = bl.astype(np.int64)
+    shift = np.maximum(bl - 3, 0)
+    idx = (bl << 2) - 8 + ((d >> shift) & 3)
+    idx = np.where(d < 8, d, idx)
+    return np.minimum(idx, NBINS - 1)
 
 
 class _LittleEndianWords:  # pragma: no cover - big-endian hosts only

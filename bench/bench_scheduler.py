@@ -1,0 +1,138 @@
+"""Scheduler benchmarks: tick and dispatch cost on SimClock, side by side with
+simpy and asyncio; WallClock lateness at 1 kHz and 100 Hz.
+
+Run: ``python -m pytest bench/bench_scheduler.py --benchmark-only``.
+The lateness benchmarks take 5 s each and report their figures in
+``extra_info`` (shown with ``--benchmark-columns`` or ``--benchmark-json``)
+and on stdout (``-s``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+
+import pytest
+
+from pyrt.scheduler import Loop, ReadyQueue, SimClock, WallClock
+
+TICKS = 20_000
+
+
+def make_loop(ntasks: int, *, timing: bool = True, divisor: int = 1, period: int = 1) -> Loop:
+    loop = Loop(SimClock(), timing=timing)
+    queue = ReadyQueue(capacity=6, divisor=divisor)
+    for i in range(ntasks):
+        queue.add_periodic(0x100 + i, f"T{i}", lambda: None, period)
+        queue.schedule(0x100 + i, period)
+    loop.attach(queue)
+    return loop
+
+
+@pytest.mark.benchmark(group="idle tick")
+@pytest.mark.parametrize("timing", [True, False], ids=["timing-on", "timing-off"])
+def test_idle_tick(benchmark, timing):
+    """Cost of one tick when the queue is not checked (divisor FF), per tick."""
+    loop = make_loop(6, timing=timing, divisor=0xFF)
+    benchmark.extra_info["unit"] = f"per {TICKS} ticks"
+    benchmark(loop.run, TICKS)
+
+
+@pytest.mark.benchmark(group="dispatch")
+@pytest.mark.parametrize("ntasks", [4, 6])
+@pytest.mark.parametrize("timing", [True, False], ids=["timing-on", "timing-off"])
+def test_pyrt_dispatch(benchmark, ntasks, timing):
+    """Every tick checks the queue and dispatches each period-1 task: cost per TICKS*ntasks dispatches."""
+    loop = make_loop(ntasks, timing=timing)
+    benchmark.extra_info["dispatches"] = TICKS * ntasks
+    benchmark(loop.run, TICKS)
+
+
+@pytest.mark.benchmark(group="dispatch")
+def test_bare_counter_loop(benchmark):
+    """Reference: a bare Python counter loop over 6 tasks, TICKS ticks."""
+    counters = [1] * 6
+    fns = [lambda: None] * 6
+
+    def run():
+        for _ in range(TICKS):
+            for i in range(6):
+                c = counters[i] - 1
+                if c == 0:
+                    fns[i]()
+                    counters[i] = 1
+                else:
+                    counters[i] = c
+
+    benchmark.extra_info["dispatches"] = TICKS * 6
+    benchmark(run)
+
+
+@pytest.mark.benchmark(group="dispatch")
+def test_simpy_dispatch(benchmark):
+    """Reference: simpy with 6 processes each waking every time unit (TICKS*6 dispatches)."""
+    simpy = pytest.importorskip("simpy")
+
+    def run():
+        env = simpy.Environment()
+
+        def proc(env):
+            while True:
+                yield env.timeout(1)
+
+        for _ in range(6):
+            env.process(proc(env))
+        env.run(until=TICKS)
+
+    benchmark.extra_info["dispatches"] = TICKS * 6
+    benchmark(run)
+
+
+@pytest.mark.benchmark(group="dispatch")
+def test_asyncio_dispatch(benchmark):
+    """Reference: asyncio with 6 tasks each yielding TICKS times (TICKS*6 dispatches)."""
+
+    async def main():
+        async def proc():
+            for _ in range(TICKS):
+                await asyncio.sleep(0)
+
+        await asyncio.gather(*[proc() for _ in range(6)])
+
+    benchmark.extra_info["dispatches"] = TICKS * 6
+    benchmark(lambda: asyncio.run(main()))
+
+
+def _lateness(period_ns: int, seconds: float) -> dict[str, float]:
+    loop = Loop(WallClock(), period_ns=period_ns)
+    queue = ReadyQueue(divisor=4)
+    for i, p in enumerate((0x0C, 0x0A, 0x01)):
+        queue.add_periodic(0x100 + i, f"T{i}", lambda: None, p)
+        queue.schedule(0x100 + i, p)
+    loop.attach(queue)
+    loop.run(duration_ns=int(seconds * 1e9))
+    st = loop.statistics()
+    late = st.lateness
+    return {
+        "ticks": st.ticks,
+        "overruns": st.overruns,
+        "missed": st.missed,
+        "median_us": late.p50_ns / 1e3,
+        "p99_us": late.p99_ns / 1e3,
+        "p999_us": late.p999_ns / 1e3,
+        "max_us": late.max_ns / 1e3,
+    }
+
+
+@pytest.mark.benchmark(group="wallclock lateness")
+@pytest.mark.parametrize("hz", [1000, 100])
+def test_wallclock_lateness(benchmark, hz):
+    """Lateness of WallClock ticks (sleep to absolute deadline, spin the last 200 µs), 5 s."""
+    import resource
+
+    r0 = resource.getrusage(resource.RUSAGE_SELF)
+    result = benchmark.pedantic(_lateness, args=(1_000_000_000 // hz, 5.0), rounds=1, iterations=1)
+    r1 = resource.getrusage(resource.RUSAGE_SELF)
+    cpu = (r1.ru_utime + r1.ru_stime) - (r0.ru_utime + r0.ru_stime)
+    result["cpu_fraction"] = round(cpu / 5.0, 3)
+    benchmark.extra_info.update(result)
+    print(f"\n{hz} Hz: {result}")
