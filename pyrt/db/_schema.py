@@ -28,8 +28,15 @@ from pyrt.db.records import (
 from pyrt.errors import ConfigError
 from pyrt.units import NUMBER_PATTERN, UnitError, factor, parse_number, parse_quantity
 
-__all__ = ["FILES", "SCHEMAS", "VERSIONS", "FieldSpec", "Schema", "build_record",
-           "format_value"]
+__all__ = [
+    "FILES",
+    "SCHEMAS",
+    "VERSIONS",
+    "FieldSpec",
+    "Schema",
+    "build_record",
+    "format_value",
+]
 
 #: Object type -> database file name.
 FILES = {

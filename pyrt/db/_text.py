@@ -100,6 +100,10 @@ def parse_text(text: str, file: str, type_: str, version: str) -> DatFile:
     first, _ = _content(lines[0])
     first = first.lstrip("\ufeff").strip()
     if first.upper() != f"VERSION{version}":
+        if first.upper().startswith("VERSION") and first[7:8].isspace():
+            raise ConfigError(
+                f"expected 'VERSION{version}' (the string VERSION then the number, no "
+                f"spaces), got {_show(first)}", file, 1)
         if first.upper().startswith("VERSION"):
             raise ConfigError(
                 f"{type_} files of {first!r} are not read by pyrt: expected 'VERSION{version}' "
@@ -162,5 +166,5 @@ def parse_text(text: str, file: str, type_: str, version: str) -> DatFile:
     if current is not None:
         raise ConfigError(
             f"expected 'END;' to close {type_} entry {current.name!r} (line {current.line}) "
-            "before the end of the file", file, len(lines))
+            "before the end of the file", file, current.line)
     return DatFile(file, type_, lines, entries)

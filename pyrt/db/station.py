@@ -204,6 +204,12 @@ class Station:
         names.extend(v.name for v in self.records("AV"))
         return names
 
+    def writable(self, type_: str, key: str) -> bool:
+        """Whether ``TYPE KEY`` is a value pyrt writes back."""
+        schema = SCHEMAS.get(type_.upper())
+        spec = schema.spec(key) if schema is not None else None
+        return spec is not None and spec.writable
+
     def path(self, type_: str) -> Path:
         """The file holding ``type_`` entries."""
         return self.directory / FILES[type_.upper()]

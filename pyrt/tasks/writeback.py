@@ -1,0 +1,317 @@
+"""Database write-back: the values a restart needs, written while the robot runs.
+
+000 keeps the state of the manipulator in its object databases:
+
+* Axis ``LENGTH`` and PolyAxis ``POSITION``: every 1 s while moving, every
+  10 s while stationary (sections 5 and 6);
+* Encoder ``ZEROLENGTH``: once a second while the length changes, not at all
+  otherwise.  The value is the encoder's *current* (unstretched) length: the
+  counter is reset to zero at start-up, so the length now is the zero length
+  of the next start (section 9);
+* Loadcell ``SLOPE``/``OFFSET``: once, after a calibration (section 10).
+
+:class:`WriteBack` is generic: it knows the station database and a set of
+value sources (callables returning the current value, and whether the
+object moves), never the robot.  Call :meth:`WriteBack.poll` with the loop
+time (attach it to a :class:`~pyrt.scheduler.Loop` as a handler), or put
+:meth:`WriteBack.attach` on a ready queue as a self-scheduling routine.
+
+Where the file is written: ``poll`` only compares due times and hands the
+changed values to a writer.  :class:`ThreadWriter` (the default) writes on
+a background thread: the tick never waits for a disk (an atomic rewrite
+costs an fsync of the file and of its directory, milliseconds on a real
+disk, which would overrun a 1 ms tick).  It coalesces pending values (the
+latest value of each key wins), so the pending set is bounded by the
+number of written keys, and a failed write is raised at the next
+``poll``, where the ready queue turns it into a fault.  :class:`SyncWriter`
+writes in the caller: deterministic, for SimClock runs and tests.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import deque
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+from pyrt.db import Station
+from pyrt.errors import ConfigError, QueueFullError
+from pyrt.scheduler import Clock, ReadyQueue, Routine
+
+__all__ = [
+    "MOVING_PERIOD_NS",
+    "STATIONARY_PERIOD_NS",
+    "ZEROLENGTH_PERIOD_NS",
+    "SyncWriter",
+    "ThreadWriter",
+    "Watch",
+    "WriteBack",
+    "Writer",
+]
+
+#: 000: written once per second while moving ...
+MOVING_PERIOD_NS = 1_000_000_000
+#: ... and once every ten seconds while stationary.
+STATIONARY_PERIOD_NS = 10_000_000_000
+#: ZEROLENGTH: once per second while the length changes.
+ZEROLENGTH_PERIOD_NS = 1_000_000_000
+
+Key = tuple[str, str, str]
+
+
+class Writer(Protocol):
+    """Where a batch of ``{(TYPE, name, KEY): value}`` goes."""
+
+    def submit(self, changes: Mapping[Key, Any]) -> None: ...
+
+    def flush(self, timeout: float | None = None) -> None: ...
+
+    def close(self) -> None: ...
+
+
+class SyncWriter:
+    """Writes each batch at once, in the caller (deterministic)."""
+
+    def __init__(self, station: Station):
+        self.station = station
+        self.batches = 0
+
+    def submit(self, changes: Mapping[Key, Any]) -> None:
+        self.station.write_back(changes)
+        self.batches += 1
+
+    def flush(self, timeout: float | None = None) -> None:
+        """Nothing is ever pending."""
+
+    def close(self) -> None:
+        """Nothing to stop."""
+
+
+class ThreadWriter:
+    """Writes batches on a background thread; ``submit`` never waits for a disk.
+
+    Pending values are coalesced by key (the latest wins), so at most
+    ``max_pending`` distinct keys wait; more raises QueueFullError.  A write
+    that fails is raised (as ConfigError) at the next ``submit`` or
+    ``flush``.
+    """
+
+    def __init__(self, station: Station, max_pending: int = 256, name: str = "pyrt-writeback"):
+        self.station = station
+        self.max_pending = max_pending
+        self.batches = 0
+        self._cond = threading.Condition()
+        self._pending: dict[Key, Any] = {}
+        self._busy = False
+        self._closed = False
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._thread.start()
+
+    def _raise_error(self) -> None:
+        error, self._error = self._error, None
+        if error is not None:
+            raise ConfigError(f"database write-back failed: {error}") from error
+
+    def submit(self, changes: Mapping[Key, Any]) -> None:
+        with self._cond:
+            self._raise_error()
+            if self._closed:
+                raise ConfigError("database write-back is closed")
+            fresh = [k for k in changes if k not in self._pending]
+            if len(self._pending) + len(fresh) > self.max_pending:
+                raise QueueFullError(
+                    f"database write-back: more than {self.max_pending} values pending")
+            self._pending.update(changes)
+            self._cond.notify()
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while not self._pending and not self._closed:
+                    self._cond.wait()
+                if not self._pending:
+                    return
+                batch, self._pending = self._pending, {}
+                self._busy = True
+            try:
+                self.station.write_back(batch)
+            except Exception as e:  # reported at the next submit/flush
+                with self._cond:
+                    self._error = e
+            finally:
+                with self._cond:
+                    self._busy = False
+                    self.batches += 1
+                    self._cond.notify_all()
+
+    def flush(self, timeout: float | None = None) -> None:
+        """Wait until every submitted value is on disk (or ``timeout`` s pass)."""
+        with self._cond:
+            self._cond.wait_for(lambda: not self._pending and not self._busy, timeout)
+            self._raise_error()
+
+    def close(self) -> None:
+        """Write what is pending, then stop the thread."""
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
+        self._thread.join()
+        with self._cond:
+            self._raise_error()
+
+
+@dataclass
+class Watch:
+    """One database value kept up to date from a source.
+
+    ``read()`` returns ``(value, moving)``.  At each due time the value is
+    handed to the writer if it differs from the last one written (an
+    unchanged value costs no write); the next due time is
+    ``moving_period_ns`` or ``stationary_period_ns`` later.
+    """
+
+    type: str
+    name: str
+    key: str
+    read: Callable[[], tuple[Any, bool]]
+    moving_period_ns: int
+    stationary_period_ns: int
+    last: Any = None
+    due_ns: int | None = None
+    writes: int = 0
+
+    @property
+    def target(self) -> Key:
+        return (self.type, self.name, self.key)
+
+
+class WriteBack:
+    """Keeps the station's LENGTH, POSITION and ZEROLENGTH values current.
+
+    Register sources with :meth:`watch_length`, :meth:`watch_position`,
+    :meth:`watch_zerolength` (or :meth:`watch` for anything writable), then
+    call :meth:`poll` with the loop time.  The first poll evaluates every
+    watch; values equal to the file's are not written.
+    """
+
+    def __init__(self, station: Station, writer: Writer | None = None, *,
+                 moving_period_ns: int = MOVING_PERIOD_NS,
+                 stationary_period_ns: int = STATIONARY_PERIOD_NS,
+                 zerolength_period_ns: int = ZEROLENGTH_PERIOD_NS,
+                 history: int = 256):
+        if min(moving_period_ns, stationary_period_ns, zerolength_period_ns) <= 0:
+            raise ValueError("write-back periods must be positive")
+        self.station = station
+        self.writer: Writer = writer if writer is not None else ThreadWriter(station)
+        self.moving_period_ns = moving_period_ns
+        self.stationary_period_ns = stationary_period_ns
+        self.zerolength_period_ns = zerolength_period_ns
+        self.watches: list[Watch] = []
+        #: (now_ns, TYPE, name, KEY, value) of the latest submissions
+        self.history: deque[tuple[int, str, str, str, Any]] = deque(maxlen=history)
+        self._next_due = 0
+
+    # -- sources -------------------------------------------------------------
+
+    def watch(self, type_: str, name: str, key: str, read: Callable[[], tuple[Any, bool]],
+              moving_period_ns: int, stationary_period_ns: int) -> Watch:
+        """Keep ``TYPE name KEY`` current from ``read() -> (value, moving)``."""
+        record = self.station.record(type_, name)  # UnknownNameError if absent
+        t, k = type_.upper(), key.upper()
+        if not self.station.writable(t, k):
+            raise ValueError(f"{t} {k} is not a written-back key")
+        if any(w.target == (t, record.name, k) for w in self.watches):
+            raise ValueError(f"{t} {record.name} {k} is already watched")
+        w = Watch(t, record.name, k, read, moving_period_ns, stationary_period_ns,
+                  last=getattr(record, k.lower()))
+        self.watches.append(w)
+        self._next_due = 0
+        return w
+
+    def watch_length(self, axis: str, read: Callable[[], tuple[float, bool]]) -> Watch:
+        """Axis LENGTH (cm): every 1 s moving, every 10 s stationary."""
+        return self.watch("AXIS", axis, "LENGTH", read, self.moving_period_ns,
+                          self.stationary_period_ns)
+
+    def watch_position(self, polyaxis: str,
+                       read: Callable[[], tuple[tuple[float, float, float], bool]]) -> Watch:
+        """PolyAxis POSITION (cm): every 1 s moving, every 10 s stationary."""
+        return self.watch("POLYAXIS", polyaxis, "POSITION", read, self.moving_period_ns,
+                          self.stationary_period_ns)
+
+    def watch_zerolength(self, encoder: str, current_length: Callable[[], float]) -> Watch:
+        """Encoder ZEROLENGTH := the encoder's current length, once a second while
+        it changes and never otherwise (the counter restarts at zero, so the
+        current length is the next start's zero length)."""
+
+        def read() -> tuple[float, bool]:
+            value = current_length()
+            return value, value != w.last
+
+        w = self.watch("ENCODER", encoder, "ZEROLENGTH", read, self.zerolength_period_ns,
+                       self.zerolength_period_ns)
+        return w
+
+    # -- the task ------------------------------------------------------------
+
+    def poll(self, now_ns: int) -> int:
+        """Hand every due, changed value to the writer; returns how many."""
+        if now_ns < self._next_due:
+            return 0
+        batch: dict[Key, Any] = {}
+        next_due: int | None = None
+        for w in self.watches:
+            if w.due_ns is None or now_ns >= w.due_ns:
+                value, moving = w.read()
+                value = _plain(value)
+                if value != w.last:
+                    batch[w.target] = value
+                    w.last = value
+                    w.writes += 1
+                    self.history.append((now_ns, w.type, w.name, w.key, value))
+                w.due_ns = now_ns + (w.moving_period_ns if moving else w.stationary_period_ns)
+            if next_due is None or w.due_ns < next_due:
+                next_due = w.due_ns
+        self._next_due = next_due if next_due is not None else now_ns + self.moving_period_ns
+        if batch:
+            self.writer.submit(batch)
+        return len(batch)
+
+    def loadcell_calibrated(self, loadcell: str, slope: float, offset: float,
+                            date: str | None = None, now_ns: int = 0) -> None:
+        """Write a calibration's SLOPE and OFFSET (and DATE if given) once."""
+        record = self.station.loadcell(loadcell)
+        batch: dict[Key, Any] = {("LOADCELL", record.name, "SLOPE"): slope,
+                                 ("LOADCELL", record.name, "OFFSET"): offset}
+        if date is not None:
+            batch[("LOADCELL", record.name, "DATE")] = date
+        for (t, n, k), v in batch.items():
+            self.history.append((now_ns, t, n, k, v))
+        self.writer.submit(batch)
+
+    def attach(self, queue: ReadyQueue, address: int, clock: Clock,
+               period: int | Callable[[], int], name: str = "WRITEBACK") -> Routine:
+        """Run as a self-scheduling routine on ``queue`` every ``period``
+        queue checks, reading the time from ``clock``; scheduled at once."""
+        routine = queue.add_periodic(address, name, lambda: self.poll(clock.now_ns()), period)
+        queue.schedule(address, period() if callable(period) else int(period))
+        return routine
+
+    def flush(self, timeout: float | None = None) -> None:
+        """Wait until everything handed to the writer is on disk."""
+        self.writer.flush(timeout)
+
+    def close(self) -> None:
+        """Write what is pending and stop the writer."""
+        self.writer.close()
+
+
+def _plain(value: Any) -> Any:
+    """Floats and tuples of floats (a numpy vector compares element-wise)."""
+    if isinstance(value, str):
+        return value
+    if hasattr(value, "__len__"):
+        return tuple(float(x) for x in value)
+    return float(value)
