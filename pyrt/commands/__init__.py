@@ -1,1 +1,6 @@
 """Command interpreters of the robots (the gripper's CMD: and monitor, the manipulator's object commands)."""
+
+from pyrt.commands.gripper import GripperShell, parse_hex, parse_target
+from pyrt.commands.shell import CommandShell
+
+__all__ = ["CommandShell", "GripperShell", "parse_hex", "parse_target"]

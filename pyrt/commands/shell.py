@@ -1,0 +1,72 @@
+"""The base of pyrt's command interpreters (CPython ``cmd.Cmd`` style).
+
+One ``do_<name>(arg)`` method per command, whose docstring is its help; all
+output goes through ``self.stdout``; the interpreter never reads input
+itself, so the same object serves a terminal, a piped script, a test with
+StringIO or a network connection.  :meth:`CommandShell.onecmd` runs one
+line and returns True when the session should end.
+"""
+
+from __future__ import annotations
+
+import inspect
+from typing import TextIO
+
+__all__ = ["CommandShell"]
+
+
+class CommandShell:
+    """Dispatch lines to ``do_<name>`` handlers found on ``self`` (case-insensitive)."""
+
+    #: The prompt shown before each line.
+    prompt = "> "
+
+    def __init__(self, stdout: TextIO):
+        self.stdout = stdout
+
+    # -- output -----------------------------------------------------------------
+
+    def say(self, text: str = "") -> None:
+        """Write ``text`` and a newline to the session's stdout."""
+        self.stdout.write(text + "\n")
+
+    def error(self, text: str) -> None:
+        """Report a refused or malformed command: one line, nothing changed."""
+        self.say(f"error: {text}")
+
+    # -- dispatch ---------------------------------------------------------------
+
+    def handler(self, name: str, owner: object | None = None):
+        """The bound ``do_<name>`` of ``owner`` (default ``self``), or None."""
+        if not name.isidentifier():
+            return None
+        return getattr(owner if owner is not None else self, "do_" + name.lower(), None)
+
+    def onecmd(self, line: str) -> bool:
+        """Run one line; return True when the session should end."""
+        line = line.strip()
+        if not line:
+            return False
+        name, _, arg = line.partition(" ")
+        fn = self.handler(name)
+        if fn is None:
+            self.error(f"unknown command {name!r} (type help)")
+            return False
+        return bool(fn(arg.strip()))
+
+    def commands(self, owner: object | None = None) -> list[tuple[str, str]]:
+        """``(name, first line of help)`` of every ``do_`` handler of ``owner``."""
+        owner = owner if owner is not None else self
+        out = []
+        for attr in sorted(dir(owner)):
+            if attr.startswith("do_"):
+                doc = inspect.getdoc(getattr(owner, attr)) or ""
+                out.append((attr[3:], doc.splitlines()[0] if doc else ""))
+        return out
+
+    def help_text(self, name: str, owner: object | None = None) -> str | None:
+        """The full help of command ``name`` on ``owner``, or None if there is none."""
+        fn = self.handler(name, owner)
+        if fn is None:
+            return None
+        return inspect.getdoc(fn) or ""

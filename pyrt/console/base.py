@@ -1,0 +1,161 @@
+"""A line console for any pyrt command interpreter (the gripper's, the manipulator's).
+
+On a terminal: history and arrow-key line editing with prompt_toolkit, and
+messages from the control loop (faults, readloop lines) printed above the
+line being typed, never through it (``patch_stdout``).  Without
+prompt_toolkit, ``input()`` with readline when it is there; loop messages
+are then printed before each prompt.
+
+When stdin is not a terminal, plain lines: the same commands run as a
+script, each prompt is printed with the line echoed after it (as the 8031
+echoed every character it read), and the console ends at end of input.
+
+The interpreter is any object with ``prompt`` and ``onecmd(line) -> bool``
+(True ends the session) writing to its ``stdout`` attribute; ``messages``
+drains the loop's asynchronous lines (``Runner.messages``).
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+from collections.abc import Callable
+from typing import Protocol, TextIO
+
+__all__ = ["Console", "Interpreter"]
+
+#: How often the terminal console looks for loop messages, seconds.
+POLL_S = 0.1
+
+
+class Interpreter(Protocol):
+    """What a console drives."""
+
+    stdout: TextIO
+
+    @property
+    def prompt(self) -> str: ...
+
+    def onecmd(self, line: str) -> bool: ...
+
+
+class Console:
+    """Read lines, run them through ``shell``, print the loop's messages."""
+
+    def __init__(
+        self,
+        shell: Interpreter,
+        stdin: TextIO | None = None,
+        stdout: TextIO | None = None,
+        messages: Callable[[], list[str]] | None = None,
+        history_file: str | None = None,
+    ):
+        self.shell = shell
+        self.stdin = stdin if stdin is not None else sys.stdin
+        self.stdout = stdout if stdout is not None else sys.stdout
+        self.messages = messages if messages is not None else (lambda: [])
+        self.history_file = history_file
+
+    def interactive(self) -> bool:
+        """True when both ends are a terminal (line editing and history)."""
+        try:
+            return bool(self.stdin.isatty() and self.stdout.isatty())
+        except (AttributeError, ValueError):
+            return False
+
+    def run(self) -> int:
+        """Run until ``quit`` or end of input; return the exit status (0)."""
+        if self.interactive():
+            try:
+                import prompt_toolkit  # noqa: F401
+            except ImportError:
+                return self._run_input()
+            return self._run_prompt_toolkit()
+        return self._run_lines()
+
+    # -- output of the loop ------------------------------------------------------
+
+    def flush_messages(self, out: TextIO | None = None) -> None:
+        """Print the loop's pending messages, one per line."""
+        out = out if out is not None else self.stdout
+        lines = self.messages()
+        if lines:
+            out.write("".join(line + "\n" for line in lines))
+            out.flush()
+
+    # -- a pipe or a file: a script ----------------------------------------------
+
+    def _run_lines(self) -> int:
+        out = self.stdout
+        while True:
+            self.flush_messages()
+            out.write(self.shell.prompt)
+            out.flush()
+            line = self.stdin.readline()
+            if not line:
+                out.write("\n")
+                break
+            out.write(line if line.endswith("\n") else line + "\n")
+            if self.shell.onecmd(line.rstrip("\r\n")):
+                break
+        self.flush_messages()
+        out.flush()
+        return 0
+
+    # -- a terminal ----------------------------------------------------------------
+
+    def _run_prompt_toolkit(self) -> int:
+        from prompt_toolkit import PromptSession
+        from prompt_toolkit.history import FileHistory, InMemoryHistory
+        from prompt_toolkit.patch_stdout import patch_stdout
+
+        history = FileHistory(self.history_file) if self.history_file else InMemoryHistory()
+        session: PromptSession[str] = PromptSession(history=history)
+        stop = threading.Event()
+        saved = self.shell.stdout
+        with patch_stdout(raw=True):
+            proxy = sys.stdout
+            self.shell.stdout = proxy
+
+            def pump() -> None:
+                while not stop.wait(POLL_S):
+                    self.flush_messages(proxy)
+
+            thread = threading.Thread(target=pump, name="console-messages", daemon=True)
+            thread.start()
+            try:
+                while True:
+                    try:
+                        line = session.prompt(self.shell.prompt)
+                    except KeyboardInterrupt:
+                        continue
+                    except EOFError:
+                        break
+                    if self.shell.onecmd(line):
+                        break
+            finally:
+                stop.set()
+                thread.join(1.0)
+                self.flush_messages(proxy)
+                self.shell.stdout = saved
+        return 0
+
+    def _run_input(self) -> int:
+        try:
+            import readline  # noqa: F401  (line editing and history for input())
+        except ImportError:  # pragma: no cover - platform without readline
+            pass
+        while True:
+            self.flush_messages()
+            try:
+                line = input(self.shell.prompt)
+            except KeyboardInterrupt:
+                self.stdout.write("\n")
+                continue
+            except EOFError:
+                self.stdout.write("\n")
+                break
+            if self.shell.onecmd(line):
+                break
+        self.flush_messages()
+        return 0
