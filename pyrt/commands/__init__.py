@@ -1,4 +1,7 @@
-"""Command interpreters of the robots (the gripper's CMD: and monitor, the manipulator's object commands)."""
+"""Command interpreters of the robots.
+
+The gripper's CMD: level and monitor, the manipulator's object commands.
+"""
 
 from pyrt.commands.gripper import GripperShell, parse_hex, parse_target
 from pyrt.commands.shell import CommandShell

@@ -357,7 +357,7 @@ class GripperShell(CommandShell):
         self.runner.call(self.ctl.leave_monitor)
         self.level = self.top
         if not self.runner.call(lambda: self.ctl.clock_enabled):
-            self.say("note: the clock interrupt is still OFF (ready queue frozen): M, I turns it on")
+            self.say("note: the clock interrupt is still OFF (ready queue frozen); M then I: on")
 
     # -- the words ----------------------------------------------------------------
 
@@ -375,9 +375,10 @@ class GripperShell(CommandShell):
         title = "monitor commands (prompt *)" if self.in_monitor else "commands (prompt CMD:)"
         self.say(title + ":")
         for name, line in self.commands(self.level):
-            self.say(f"  {line}" if line[:1].upper() == name.upper() else f"  {name.upper()}  {line}")
+            same = line[:1].upper() == name.upper()
+            self.say(f"  {line}" if same else f"  {name.upper()}  {line}")
         self.say("words:")
-        for name, line in self.commands():
+        for _name, line in self.commands():
             self.say(f"  {line}")
         self.say("numbers are hexadecimal; lower case is accepted; 'help X' explains X")
 
@@ -407,9 +408,9 @@ class GripperShell(CommandShell):
         self.say(format_statistics(self.runner.call(loop.statistics)))
 
     def do_sim(self, arg: str) -> None:
-        """sim [object MM|none | jog open|close|off [SECONDS] | fault NAME | fault port 2D|2E XX | fault none]
+        """sim [object MM|none] [jog open|close|off [S]] [fault NAME|none]: the simulation.
 
-        The simulated world: with no argument, its state.  'object' puts an
+        With no argument, the simulated world's state.  'object' puts an
         object MM wide between the jaws; 'jog' holds the front-panel jog
         switch; 'fault' injects limit (sensor dead), jam (motor), encoder
         (dead), port 2D|2E XX (sensor port stuck at XX), or none (clear)."""

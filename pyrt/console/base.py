@@ -17,6 +17,7 @@ drains the loop's asynchronous lines (``Runner.messages``).
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import threading
 from collections.abc import Callable
@@ -141,10 +142,8 @@ class Console:
         return 0
 
     def _run_input(self) -> int:
-        try:
-            import readline  # noqa: F401  (line editing and history for input())
-        except ImportError:  # pragma: no cover - platform without readline
-            pass
+        with contextlib.suppress(ImportError):  # line editing and history for input()
+            import readline  # noqa: F401
         while True:
             self.flush_messages()
             try:
