@@ -12,12 +12,12 @@ import sys
 from collections.abc import Sequence
 
 from pyrt import __version__
-from pyrt.cli import demo, overruns
+from pyrt.cli import demo, gripper, overruns
 from pyrt.errors import PyrtError
 
 __all__ = ["main"]
 
-_COMMANDS = [demo, overruns]
+_COMMANDS = [demo, gripper, overruns]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,121 @@
+"""``pyrt gripper``: the 002 parallel-jaw gripper controller on simulated jaws.
+
+At start the controller does what the 8031 does at power-up: it loads its
+RAM variables, starts its three self-scheduling routines and runs I (drive
+the jaws wide open, zero the encoder), then prompts ``CMD: ``.  The
+commands are the report's (C E I M P S T W X; the monitor's C D I L N Q S),
+hexadecimal, lower case accepted; type ``help``.  Pipe a file in to run it
+as a script; with ``--speed max`` time advances only while commands run,
+``wait`` or ``sleep``, so a script's output is the same on every run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import sys
+import time
+
+from pyrt.boards.gripper import DAC_NULL, SimGripperBoard
+from pyrt.boards.i8031 import I8031
+from pyrt.cli._loopopts import add_loop_options, apply_rt_options, make_loop
+from pyrt.commands.gripper import GripperShell
+from pyrt.console import Console
+from pyrt.errors import ConfigError, PyrtError
+from pyrt.robots.gripper import GripperController
+from pyrt.scheduler.runner import Runner
+from pyrt.sim.gripper import FAULTS, JawParameters, JawPlant
+
+__all__ = ["add_parser", "run"]
+
+
+def _counts(text: str) -> int:
+    """A start position: hex counts, two's complement (F400) or negative (-0C00)."""
+    t = text.strip()
+    try:
+        value = -int(t[1:], 16) if t.startswith("-") else int(t, 16)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected hex encoder counts, got {text!r}") from None
+    if value > 0x7FFF:
+        value -= 0x10000
+    if not -0x2A00 <= value <= 0:
+        raise argparse.ArgumentTypeError("start position must be 0000 (wide open) .. D600 (closed)")
+    return value
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "gripper",
+        help="run the 002 parallel-jaw gripper controller (CMD: and monitor) on simulated jaws",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    g = p.add_argument_group("simulation")
+    g.add_argument(
+        "--object", type=float, metavar="MM",
+        help=f"an object this wide between the jaws (0 < MM < {JawParameters().open_mm:g})",
+    )
+    g.add_argument(
+        "--start", type=_counts, default=-0x0C00, metavar="HEX",
+        help="jaw position at power-up, encoder counts from wide open (default F400)",
+    )
+    g.add_argument(
+        "--fault", action="append", default=[], choices=[f for f in FAULTS if f != "port"],
+        help="inject a fault from the start: limit (sensor dead), jam (motor), encoder (dead)",
+    )
+    g.add_argument("--no-init", action="store_true", help="do not run I at power-up")
+    g.add_argument("--history", metavar="FILE", help="keep the command history in FILE")
+    add_loop_options(p, default_speed="1")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    out = sys.stdout
+    cpu = I8031()
+    board = SimGripperBoard(cpu)
+    try:
+        plant = JawPlant(board, start=args.start)
+        plant.set_object(args.object)
+        for fault in args.fault:
+            plant.inject(fault)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+    apply_rt_options(args, lambda m: print(m, file=out))
+    posted: list[Runner] = []
+
+    def warn(line: str) -> None:
+        if posted:
+            posted[0].post(line)
+
+    loop = make_loop(args, warn=warn)
+    ctl = GripperController(cpu)
+    loop.attach(plant.step, name="jaws")
+    ctl.attach(loop)
+    ctl.power_up()
+    runner = Runner(loop)
+    posted.append(runner)
+    shell = GripperShell(runner, ctl, out, plant=plant)
+    console = Console(shell, sys.stdin, out, messages=runner.messages, history_file=args.history)
+    speed = "max (simulated time)" if args.speed is None else f"{args.speed:g}x real time"
+    print(
+        f"pyrt gripper: 002 parallel-jaw controller, simulated jaws; tick {args.tick_us} µs, "
+        f"speed {speed}; type help",
+        file=out,
+    )
+    status = 0
+    wall0 = time.perf_counter()
+    runner.start()
+    try:
+        if not args.no_init:
+            shell.onecmd("I")
+        status = console.run()
+    finally:
+        with contextlib.suppress(PyrtError):
+            runner.call(ctl.drive, DAC_NULL)
+        runner.stop()
+        loop.close()
+    if args.timing_log:
+        wall = time.perf_counter() - wall0
+        print(f"timing log written to {args.timing_log} ({loop.tick_index} ticks, {wall:.2f} s)",
+              file=out)
+    return status
