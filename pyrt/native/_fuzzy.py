@@ -92,7 +92,10 @@ class FuzzyParams:
     DV_LIMIT 0.5 cm/s per poll applied by the Motor, off-side ropes at 10 N);
     :meth:`for_poll_period` rescales them for another poll.  The field order
     and defaults equal ``pyrt_fuzzy_params`` / ``pyrt_fuzzy_default_params``
-    in ``csrc/fuzzy.c`` (a test holds them equal).
+    in ``csrc/fuzzy.c`` (a test holds them equal), where the reasoning for
+    each is written out.  Checked in closed loop on the prototype statics
+    (rope compliance 5e-6 to 1e-4 per N, 0.5 N loadcell noise, 20 and 50 ms
+    polls): feasible targets end within 0.1 cm with tensions of 8-58 N.
     """
 
     #: LowT is 1 at or below tension_low + 1 N ... (rules 0, 1: the guards)
@@ -143,7 +146,8 @@ class FuzzyParams:
     dv_rel_tension: float = 0.2
     #: Rule 6: pull back a run-away velocity.
     dv_velocity: float = 0.3
-    #: Rule 7: 2 zeta omega = 0.25 / (2 cm/s * 50 ms) = 2.5/s, zeta 0.9.
+    #: Rule 7: 2 zeta omega = 0.25 / (2 cm/s * 50 ms) = 2.5/s, zeta 0.9;
+    #: large errors close at 0.1 / 0.125 = 0.8 cm/s.
     dv_len_rate: float = 0.25
     #: Rule 8: damps two ropes trading tension (the document's oscillation).
     dv_t_rate: float = 0.25
