@@ -291,11 +291,18 @@ class WriteBack:
             self.history.append((now_ns, t, n, k, v))
         self.writer.submit(batch)
 
-    def attach(self, queue: ReadyQueue, address: int, clock: Clock,
-               period: int | Callable[[], int], name: str = "WRITEBACK") -> Routine:
-        """Run as a self-scheduling routine on ``queue`` every ``period``
-        queue checks, reading the time from ``clock``; scheduled at once."""
-        routine = queue.add_periodic(address, name, lambda: self.poll(clock.now_ns()), period)
+    def attach(self, queue: ReadyQueue, address: int, period: int | Callable[[], int],
+               clock: Clock | None = None, name: str = "WRITEBACK") -> Routine:
+        """Run as a self-scheduling routine on ``queue`` every ``period`` queue
+        checks (scheduled at once).  The time is the queue's tick time, or
+        ``clock``'s when given."""
+        if clock is not None:
+            def run() -> None:
+                self.poll(clock.now_ns())
+        else:
+            def run() -> None:
+                self.poll(queue.now_ns)
+        routine = queue.add_periodic(address, name, run, period)
         queue.schedule(address, period() if callable(period) else int(period))
         return routine
 
