@@ -1,0 +1,77 @@
+"""A simulated gripper on a SimClock loop, shared by the gripper tests."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from pyrt.boards.gripper import DAC_NULL, SimGripperBoard
+from pyrt.boards.i8031 import I8031
+from pyrt.robots.gripper import GripperController, JobResult
+from pyrt.scheduler import Loop, SimClock
+from pyrt.sim.gripper import JawPlant
+
+MS = 1_000_000
+
+
+@dataclass
+class StallMonitor:
+    """Loop handler: the longest time current was applied while the jaws did not move."""
+
+    board: SimGripperBoard
+    plant: JawPlant
+    worst_ns: int = 0
+    _since: int | None = None
+    _pos: int = field(default=0)
+
+    def __call__(self, now_ns: int) -> None:
+        pos = int(self.plant.x // 1)
+        if self.board.dac == DAC_NULL or pos != self._pos:
+            self._since = None
+            self._pos = pos
+            return
+        if self._since is None:
+            self._since = now_ns
+        self.worst_ns = max(self.worst_ns, now_ns - self._since)
+
+
+@dataclass
+class Rig:
+    cpu: I8031
+    board: SimGripperBoard
+    plant: JawPlant
+    ctl: GripperController
+    loop: Loop
+    stall: StallMonitor
+
+    def run_job(self, job, max_s: float = 60.0) -> JobResult:
+        assert self.loop.run_until(lambda: job.done, int(max_s * 1000)), f"{job.name} hung"
+        return job.value()
+
+    def init(self) -> JobResult:
+        result = self.run_job(self.ctl.start_init())
+        assert result.ok, result.message
+        return result
+
+    def move(self, target: int, max_s: float = 30.0) -> int:
+        self.ctl.move(target)
+        assert self.loop.run_until(lambda: not self.ctl.moving, int(max_s * 1000))
+        return signed(self.ctl.position())
+
+
+def signed(word: int) -> int:
+    return word - 0x10000 if word & 0x8000 else word
+
+
+def make_rig(*, runner: bool = False, **plant_kw) -> Rig:
+    """Plant, controller (ready queue + watchdog), stall monitor: in that order."""
+    cpu = I8031()
+    board = SimGripperBoard(cpu)
+    plant = JawPlant(board, **plant_kw)
+    ctl = GripperController(cpu)
+    loop = Loop(SimClock())
+    loop.attach(plant.step, name="jaws")
+    ctl.attach(loop)
+    stall = StallMonitor(board, plant)
+    loop.attach(stall, name="stall monitor")
+    ctl.power_up()
+    return Rig(cpu, board, plant, ctl, loop, stall)
