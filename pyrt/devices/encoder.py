@@ -1,0 +1,116 @@
+"""The rope-length shaft encoder (000, section 9, Tables 7 and 8).
+
+``length = ZEROLENGTH + SLOPE * count``: the total unstretched rope length,
+dead length included.  The counter is reset when the Encoder is built (the
+document's constructor does so), which is why the database keeps the
+*current* length as the next ZEROLENGTH: :meth:`Encoder.poll` offers it to
+a write-back callback once a second while the length changes.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import TextIO
+
+from pyrt.boards.dataconcentrator import DataConcentrator, DigitalChannel
+from pyrt.devices._args import parse_number
+from pyrt.errors import CommandError, ConfigError
+
+__all__ = ["ZEROLENGTH_WRITE_PERIOD", "Encoder"]
+
+#: 000, section 9: ZEROLENGTH is updated once per second while changing.
+ZEROLENGTH_WRITE_PERIOD = 1.0
+
+
+class Encoder:
+    """One encoder (see the module text).  ``slope``: cm per count."""
+
+    def __init__(
+        self,
+        name: str,
+        channel: DigitalChannel,
+        slope: float,
+        zero_length: float,
+        *,
+        stdout: TextIO | None = None,
+        write_back: Callable[[float], None] | None = None,
+    ):
+        if not (isinstance(slope, (int, float)) and math.isfinite(slope) and slope != 0):
+            raise ConfigError(f"encoder {name}: SLOPE must be a non-zero number, got {slope!r}")
+        if not (isinstance(zero_length, (int, float)) and math.isfinite(zero_length)):
+            raise ConfigError(f"encoder {name}: ZEROLENGTH must be a number, got {zero_length!r}")
+        self.name = name
+        self.channel = channel
+        self.slope = float(slope)
+        self.zero_length = float(zero_length)
+        self.stdout = stdout
+        self.write_back = write_back
+        self.looping = False
+        self._written = self.zero_length
+        self._last_write: float | None = None
+        channel.reset()
+
+    @classmethod
+    def from_record(cls, record, board: DataConcentrator, name: str | None = None,
+                    **kw) -> Encoder:
+        """An Encoder from a :class:`pyrt.db.EncoderRecord`."""
+        return cls(name or record.name, DigitalChannel(board, record.address), record.slope,
+                   record.zerolength, **kw)
+
+    def count(self) -> int:
+        return self.channel.count()
+
+    def length(self) -> float:
+        """Total unstretched rope length (cm), dead length included."""
+        return self.zero_length + self.slope * self.channel.count()
+
+    # -- commands (Table 8) ------------------------------------------------------
+
+    def reset(self) -> None:
+        """``reset``: clear the counter (the length then reads ZEROLENGTH)."""
+        self.channel.reset()
+
+    def read(self) -> float:
+        """``read``: the length, also written to stdout."""
+        v = self.length()
+        self._say(f"{self.name}: {v:.3f} cm")
+        return v
+
+    def readloop(self) -> None:
+        """``readloop``: write the length at every poll."""
+        self.looping = True
+
+    def stoploop(self) -> None:
+        """``stoploop``: stop the read loop."""
+        self.looping = False
+
+    def setZeroLength(self, length: float | str) -> float:
+        """``setZeroLength [len]``: the length when the counter reads zero."""
+        v = parse_number(length, f"{self.name} setZeroLength", "length in cm")
+        if v < 0:
+            raise CommandError(f"{self.name} setZeroLength: length must be >= 0 cm, got {v}")
+        self.zero_length = v
+        return v
+
+    set_zero_length = setZeroLength
+
+    # -- polling -----------------------------------------------------------------
+
+    def poll(self, now_s: float) -> None:
+        """Read loop output; ZEROLENGTH write-back once a second while changing."""
+        if self.looping:
+            self.read()
+        if self.write_back is None:
+            return
+        if self._last_write is not None and now_s - self._last_write < ZEROLENGTH_WRITE_PERIOD:
+            return
+        v = self.length()
+        if v != self._written:
+            self.write_back(v)
+            self._written = v
+            self._last_write = now_s
+
+    def _say(self, text: str) -> None:
+        if self.stdout is not None:
+            self.stdout.write(text + "\n")

@@ -1,0 +1,147 @@
+"""The rope-tension loadcell (000, section 10, Table 9).
+
+``N = SLOPE * adc + OFFSET``.  Calibration: ``calibrate`` enters calibration
+mode; each ``point [load]`` records the ADC code with a known load hung on
+the rope; ``calibrate`` again fits SLOPE and OFFSET by least squares to two
+or more points, leaves calibration mode and hands the fit to the
+write-back callback (the database keeps it).  A load is newtons, or a
+quantity with a force unit (``10 lb``) or a mass unit (``2 kg``, the hung
+mass, weighed with standard gravity).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import TextIO
+
+from pyrt.boards.dataconcentrator import AnalogChannel, DataConcentrator
+from pyrt.devices._args import parse_number
+from pyrt.errors import CommandError, ConfigError
+from pyrt.units import UnitError, factor, split_quantity
+
+__all__ = ["STANDARD_GRAVITY", "Loadcell", "parse_load"]
+
+STANDARD_GRAVITY = 9.80665
+
+
+def parse_load(value: float | str, command: str) -> float:
+    """A calibration load in newtons from a number or ``"2 kg"``/``"10 lb"``/``"20 N"``."""
+    if isinstance(value, str):
+        try:
+            v, unit = split_quantity(value)
+        except UnitError as exc:
+            raise CommandError(f"{command}: expected a load such as 20 N or 2 kg, "
+                               f"got {value!r}") from exc
+        if unit is None:
+            n = v
+        else:
+            try:
+                n = v * factor(unit, "force")
+            except UnitError:
+                try:
+                    n = v * factor(unit, "mass") * STANDARD_GRAVITY
+                except UnitError as exc:
+                    raise CommandError(
+                        f"{command}: unknown load unit {unit!r}; give newtons, lb or a mass "
+                        "such as kg") from exc
+    else:
+        n = parse_number(value, command, "load in N")
+    if not math.isfinite(n) or n < 0:
+        raise CommandError(f"{command}: load must be a finite number >= 0 N, got {value!r}")
+    return n
+
+
+class Loadcell:
+    """One loadcell (see the module text)."""
+
+    def __init__(
+        self,
+        name: str,
+        channel: AnalogChannel,
+        slope: float,
+        offset: float,
+        *,
+        maxload: float = 0.0,
+        stdout: TextIO | None = None,
+        write_back: Callable[[float, float], None] | None = None,
+    ):
+        for label, v in (("SLOPE", slope), ("OFFSET", offset)):
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ConfigError(f"loadcell {name}: {label} must be a number, got {v!r}")
+        self.name = name
+        self.channel = channel
+        self.slope = float(slope)
+        self.offset = float(offset)
+        self.maxload = float(maxload)
+        self.stdout = stdout
+        self.write_back = write_back
+        self.calibrating = False
+        self.points: list[tuple[int, float]] = []
+
+    @classmethod
+    def from_record(cls, record, board: DataConcentrator, name: str | None = None,
+                    **kw) -> Loadcell:
+        """A Loadcell from a :class:`pyrt.db.LoadcellRecord`."""
+        return cls(name or record.name, AnalogChannel(board, record.channel), record.slope,
+                   record.offset, maxload=record.maxload, **kw)
+
+    def adc(self) -> int:
+        return self.channel.code()
+
+    def tension(self) -> float:
+        """The rope tension in newtons."""
+        return self.slope * self.channel.code() + self.offset
+
+    # -- calibration ---------------------------------------------------------------
+
+    def calibrate(self) -> tuple[float, float] | None:
+        """Toggle calibration mode; leaving it fits and returns (slope, offset).
+
+        Fewer than two points (or points that all share one ADC code) is a
+        CommandError, and calibration mode stays on so points can be added.
+        """
+        if not self.calibrating:
+            self.calibrating = True
+            self.points = []
+            self._say(f"{self.name}: calibration mode: hang known loads and give 'point LOAD'")
+            return None
+        pts = self.points
+        if len(pts) < 2:
+            raise CommandError(
+                f"{self.name} calibrate: need at least two calibration points, have {len(pts)}"
+            )
+        n = len(pts)
+        mx = sum(c for c, _ in pts) / n
+        my = sum(f for _, f in pts) / n
+        sxx = sum((c - mx) ** 2 for c, _ in pts)
+        if sxx == 0:
+            raise CommandError(
+                f"{self.name} calibrate: every point reads ADC code {pts[0][0]}; "
+                "hang different loads"
+            )
+        sxy = sum((c - mx) * (f - my) for c, f in pts)
+        slope = sxy / sxx
+        offset = my - slope * mx
+        self.slope, self.offset = slope, offset
+        self.calibrating = False
+        self.points = []
+        self._say(f"{self.name}: SLOPE {slope:.10g} OFFSET {offset:.10g}")
+        if self.write_back is not None:
+            self.write_back(slope, offset)
+        return slope, offset
+
+    def point(self, load: float | str) -> tuple[int, float]:
+        """``point [load]``: record the ADC code with ``load`` hung on the rope."""
+        if not self.calibrating:
+            raise CommandError(f"{self.name} point: not in calibration mode; "
+                               "give 'calibrate' first")
+        n = parse_load(load, f"{self.name} point")
+        code = self.channel.code()
+        self.points.append((code, n))
+        self._say(f"{self.name}: point {len(self.points)}: ADC {code} = {n:.4g} N")
+        return code, n
+
+    def _say(self, text: str) -> None:
+        if self.stdout is not None:
+            self.stdout.write(text + "\n")

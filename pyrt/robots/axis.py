@@ -1,0 +1,368 @@
+"""One rope of the manipulator: Motor, Encoder and Loadcell together (000, section 6).
+
+Lengths: :meth:`Axis.getLength` is the rope from the top pulley to its end,
+corrected for stretch; the encoder gives the total unstretched length from
+the spindle (dead length included) and the rope stretches in proportion to
+tension and length (STRETCH, strain per newton), so
+
+    getLength = encoder length * (1 + STRETCH * tension) - DEADLENGTH.
+
+Standalone control (``STEP_MODE``, Table 4 commands ``up``, ``down``,
+``to``): each poll recalculates the steps left to the wanted length and
+hands them to the Motor; within :data:`END_ZONE` (1 cm) of the end it stops
+recalculating and lets the Motor finish the move.
+
+PolyAxis control (``VELOCITY_MODE``) is driven from above:
+:meth:`Axis.polyActivate` puts the Motor in velocity mode on standby, sets
+the expected length, refuses keyboard commands and clears the length and
+tension histories the fuzzy rules differentiate; the PolyAxis then sets
+:attr:`Axis.error_length` / :attr:`Axis.error_tension` and the velocity
+(:meth:`Axis.set_velocity`) each poll.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import TextIO
+
+from pyrt.boards.dataconcentrator import DataConcentrator
+from pyrt.boards.tio10 import TIO10
+from pyrt.devices._args import parse_number
+from pyrt.devices.encoder import Encoder
+from pyrt.devices.loadcell import Loadcell
+from pyrt.devices.motor import STEP_MODE, VELOCITY_MODE, Motor
+from pyrt.errors import CommandError, ConfigError
+from pyrt.robots.av import AV
+
+__all__ = [
+    "COMMANDS",
+    "END_ZONE",
+    "HISTORY",
+    "LENGTH_WRITE_MOVING",
+    "LENGTH_WRITE_STATIONARY",
+    "POLYAXIS",
+    "STANDALONE",
+    "Axis",
+    "AxisSample",
+]
+
+#: 000, section 6: within 1 cm of the end the Motor finishes on its own.
+END_ZONE = 1.0
+#: 000, section 6: LENGTH is rewritten every second moving, every ten stationary.
+LENGTH_WRITE_MOVING = 1.0
+LENGTH_WRITE_STATIONARY = 10.0
+#: Samples kept for the damping rules' rates of change.
+HISTORY = 16
+
+STANDALONE = "standalone"
+POLYAXIS = "polyaxis"
+
+#: Table 4: command -> number of arguments.
+COMMANDS: dict[str, int] = {
+    "up": 1, "down": 1, "to": 1, "calibrate": 0, "point": 1, "maxspeed": 1, "zero": 0,
+    "stop": 0,
+}
+
+
+@dataclass(frozen=True)
+class AxisSample:
+    """One poll's state, kept for the fuzzy rules' rates of change."""
+
+    time: float
+    length: float
+    tension: float
+    error_length: float
+    error_tension: float
+    velocity: float
+
+
+class Axis:
+    """One rope (see the module text).
+
+    ``top`` and ``offset`` are global / carriage co-ordinates; ``bottom`` is in
+    vessel co-ordinates and is carried to global through ``av.vtog`` (when an
+    AV is given) before anything uses it.  ``persist(key, value)`` receives
+    the LENGTH write-back.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        motor: Motor,
+        encoder: Encoder,
+        loadcell: Loadcell,
+        *,
+        dead_length: float,
+        top: Sequence[float],
+        offset: Sequence[float] = (0.0, 0.0, 0.0),
+        bottom: Sequence[float] | None = None,
+        av: AV | None = None,
+        stretch: float = 2.0e-5,
+        stdout: TextIO | None = None,
+        persist: Callable[[str, float], None] | None = None,
+    ):
+        if not (math.isfinite(dead_length) and dead_length >= 0):
+            raise ConfigError(f"axis {name}: DEADLENGTH must be >= 0 cm, got {dead_length!r}")
+        if not (math.isfinite(stretch) and stretch >= 0):
+            raise ConfigError(f"axis {name}: STRETCH must be >= 0 per N, got {stretch!r}")
+        self.name = name
+        self.motor = motor
+        self.encoder = encoder
+        self.loadcell = loadcell
+        self.dead_length = float(dead_length)
+        self.stretch = float(stretch)
+        self.av = av
+        self.top = tuple(float(c) for c in top)
+        self.offset = tuple(float(c) for c in offset)
+        self.bottom_vessel = None if bottom is None else tuple(float(c) for c in bottom)
+        self.stdout = stdout
+        self.persist = persist
+
+        self.mode = STANDALONE
+        self.target: float | None = None
+        # PolyAxis hooks (the fuzzy rules' inputs)
+        self.expected_length: float | None = None
+        self.error_length = 0.0
+        self.error_tension = 0.0
+        self.history: deque[AxisSample] = deque(maxlen=HISTORY)
+
+        self._last_write: float | None = None
+        self._written: float | None = None
+        self._moving_since_write = False
+
+    @classmethod
+    def from_records(cls, name: str, record, station, tio10: TIO10, dc: DataConcentrator,
+                     *, av: AV | None = None, stdout: TextIO | None = None,
+                     persist: Callable[[str, str, str, float], None] | None = None) -> Axis:
+        """An Axis and its devices from a :class:`pyrt.db.AxisRecord` and its
+        :class:`pyrt.db.Station`.  Sub-objects are named ``<name>Motor``,
+        ``<name>Encoder``, ``<name>Loadcell`` (000, section 6).  ``persist(type,
+        db name, key, value)`` receives every write-back (LENGTH, ZEROLENGTH,
+        SLOPE/OFFSET)."""
+        mrec = station.motor_of(record)
+        erec = station.encoder_of(record)
+        lrec = station.loadcell_of(record)
+
+        def put(type_: str, db_name: str, key: str) -> Callable[[float], None] | None:
+            if persist is None:
+                return None
+            return lambda v: persist(type_, db_name, key, v)
+
+        def put_cal(slope: float, offset: float) -> None:
+            if persist is not None:
+                persist("LOADCELL", lrec.name, "SLOPE", slope)
+                persist("LOADCELL", lrec.name, "OFFSET", offset)
+
+        motor = Motor.from_record(mrec, tio10, name=f"{name}Motor", stdout=stdout)
+        encoder = Encoder.from_record(erec, dc, name=f"{name}Encoder", stdout=stdout,
+                                      write_back=put("ENCODER", erec.name, "ZEROLENGTH"))
+        loadcell = Loadcell.from_record(lrec, dc, name=f"{name}Loadcell", stdout=stdout,
+                                        write_back=put_cal if persist is not None else None)
+        length_put = put("AXIS", record.name, "LENGTH")
+        return cls(
+            name, motor, encoder, loadcell,
+            dead_length=record.deadlength, top=record.top, offset=record.offset,
+            bottom=record.bottom, av=av, stretch=record.stretch, stdout=stdout,
+            persist=None if length_put is None else (lambda _k, v: length_put(v)),
+        )
+
+    # -- geometry --------------------------------------------------------------------
+
+    @property
+    def central(self) -> bool:
+        return self.bottom_vessel is None
+
+    @property
+    def bottom(self) -> tuple[float, float, float] | None:
+        """The bottom attachment in global co-ordinates (through the AV's pose)."""
+        if self.bottom_vessel is None:
+            return None
+        if self.av is None:
+            return self.bottom_vessel
+        return self.av.vtog(self.bottom_vessel)
+
+    # -- measurements ------------------------------------------------------------------
+
+    def tension(self) -> float:
+        return self.loadcell.tension()
+
+    def getLength(self) -> float:
+        """Rope length from the top pulley to its end, stretch corrected (cm)."""
+        t = self.loadcell.tension()
+        if t < 0.0:
+            t = 0.0
+        return self.encoder.length() * (1.0 + self.stretch * t) - self.dead_length
+
+    get_length = getLength
+
+    @property
+    def moving(self) -> bool:
+        return self.motor.running
+
+    # -- Table 4 commands ------------------------------------------------------------------
+
+    def command(self, name: str, *args: str) -> object:
+        """Run Table 4 command ``name`` with its arguments (CommandError if malformed)."""
+        key = name.lower()
+        if key not in COMMANDS:
+            raise CommandError(f"{self.name}: unknown command {name!r}; "
+                               f"expected one of {', '.join(COMMANDS)}")
+        if len(args) != COMMANDS[key]:
+            raise CommandError(f"{self.name} {key}: takes {COMMANDS[key]} argument(s), "
+                               f"got {len(args)}")
+        return getattr(self, key)(*args)
+
+    def _standalone(self, command: str) -> None:
+        if self.mode != STANDALONE:
+            raise CommandError(f"{self.name} {command}: the axis is under PolyAxis control; "
+                               "stop it first")
+
+    def _distance(self, value: float | str, command: str) -> float:
+        d = parse_number(value, f"{self.name} {command}", "distance in cm")
+        if d < 0:
+            raise CommandError(f"{self.name} {command}: distance must be >= 0 cm, got {d}; "
+                               f"use {'down' if command == 'up' else 'up'} for the other way")
+        return d
+
+    def up(self, dist: float | str) -> float:
+        """``up [dist]``: shorten the rope by ``dist`` cm (the source goes up)."""
+        d = self._distance(dist, "up")
+        self._standalone("up")
+        return self._go(self.getLength() - d, "up")
+
+    def down(self, dist: float | str) -> float:
+        """``down [dist]``: lengthen the rope by ``dist`` cm."""
+        d = self._distance(dist, "down")
+        self._standalone("down")
+        return self._go(self.getLength() + d, "down")
+
+    def to(self, length: float | str) -> float:
+        """``to [len]``: change the rope length to ``len`` cm."""
+        v = parse_number(length, f"{self.name} to", "length in cm")
+        if v <= 0:
+            raise CommandError(f"{self.name} to: length must be > 0 cm, got {v}")
+        self._standalone("to")
+        return self._go(v, "to")
+
+    def _go(self, target: float, command: str) -> float:
+        if target <= 0:
+            raise CommandError(f"{self.name} {command}: that would leave the rope at "
+                               f"{target:.3f} cm; lengths must stay > 0")
+        err = target - self.getLength()
+        steps = round(err * self.motor.steps_per_cm)
+        m = self.motor
+        if m.mode == STEP_MODE and m.running and steps != 0 and (steps > 0) != (m.direction > 0):
+            raise CommandError(f"{self.name} {command}: the motor is moving the other way; "
+                               "stop it first (STEP_MODE never reverses)")
+        self.target = target
+        if m.mode == STEP_MODE and m.running and steps != 0:
+            m.set_desired_steps(m.steps_taken + abs(steps))
+        else:
+            m.move(steps)
+        return target
+
+    def calibrate(self) -> tuple[float, float] | None:
+        """``calibrate``: toggle loadcell calibration mode (leaving it fits)."""
+        self._standalone("calibrate")
+        return self.loadcell.calibrate()
+
+    def point(self, load: float | str) -> tuple[int, float]:
+        """``point [load]``: a loadcell calibration point with ``load`` hung."""
+        self._standalone("point")
+        return self.loadcell.point(load)
+
+    def maxspeed(self, speed: float | str) -> float:
+        """``maxspeed [speed]``: the motor's maximum speed (cm/s)."""
+        self._standalone("maxspeed")
+        return self.motor.maxspeed(speed)
+
+    def zero(self) -> None:
+        """``zero``: reset the encoder counter."""
+        self._standalone("zero")
+        self.encoder.reset()
+
+    def stop(self) -> None:
+        """``stop``: stop the motor (windings off); accepted in any mode."""
+        self.motor.stop()
+        self.target = None
+
+    # -- PolyAxis hooks ---------------------------------------------------------------
+
+    def polyActivate(self, expected_length: float) -> None:
+        """Hand the axis to PolyAxis control: Motor in VELOCITY_MODE on standby,
+        commands refused, histories cleared (000, section 5)."""
+        if not math.isfinite(expected_length):
+            raise CommandError(f"{self.name}: expected length must be finite")
+        self.target = None
+        self.motor.velocity_mode()
+        self.mode = POLYAXIS
+        self.expected_length = float(expected_length)
+        self.error_length = 0.0
+        self.error_tension = 0.0
+        self.history.clear()
+
+    def polyDeactivate(self) -> None:
+        """Stop the motor and return the axis to standalone control."""
+        self.motor.stop()
+        self.motor.mode = STEP_MODE
+        self.mode = STANDALONE
+        self.expected_length = None
+
+    def set_errors(self, error_length: float, error_tension: float) -> None:
+        """PolyAxis's errors for this axis (actual - desired; cm and N)."""
+        self.error_length = float(error_length)
+        self.error_tension = float(error_tension)
+
+    def set_velocity(self, v: float) -> None:
+        """Desired motor velocity (cm/s, positive pays out); VELOCITY_MODE only."""
+        if self.motor.mode != VELOCITY_MODE:
+            raise CommandError(f"{self.name}: set_velocity needs PolyAxis control")
+        self.motor.set_desired_velocity(v)
+
+    def change_velocity(self, dv: float) -> None:
+        if self.motor.mode != VELOCITY_MODE:
+            raise CommandError(f"{self.name}: change_velocity needs PolyAxis control")
+        self.motor.change_desired_velocity(dv)
+
+    # -- polling -------------------------------------------------------------------------
+
+    def poll(self, now_s: float) -> None:
+        """One poll: control, then the Motor, then the Encoder and write-back."""
+        length = self.getLength()
+        m = self.motor
+        if self.mode == STANDALONE and self.target is not None and m.running:
+            err = self.target - length
+            if abs(err) > END_ZONE:
+                if (err > 0) == (m.direction > 0):
+                    m.set_desired_steps(m.steps_taken + round(abs(err) * m.steps_per_cm))
+                else:
+                    m.set_desired_steps(m.steps_taken)
+        elif self.mode == POLYAXIS:
+            self.history.append(AxisSample(now_s, length, self.loadcell.tension(),
+                                           self.error_length, self.error_tension, m.velocity))
+        m.poll()
+        if self.mode == STANDALONE and self.target is not None and not m.running:
+            self.target = None
+        self.encoder.poll(now_s)
+        self._write_back(now_s, length)
+
+    def _write_back(self, now_s: float, length: float) -> None:
+        if self.persist is None:
+            return
+        moving = self.motor.running
+        self._moving_since_write |= moving
+        period = LENGTH_WRITE_MOVING if self._moving_since_write else LENGTH_WRITE_STATIONARY
+        if self._last_write is not None and now_s - self._last_write < period:
+            return
+        self._last_write = now_s
+        self._moving_since_write = moving
+        if length != self._written:
+            self._written = length
+            self.persist("LENGTH", length)
+
+    def describe(self) -> str:
+        return (f"{self.name}: length {self.getLength():.3f} cm tension {self.tension():.2f} N "
+                f"{self.mode} {self.motor.describe()}")
