@@ -35,6 +35,7 @@ from pyrt.native._fuzzy import (
     FuzzyParams,
     fuzzy_step,
 )
+from pyrt.native._readyq import QueueChecker
 from pyrt.native._statics import StaticsSolver
 
 __all__ = [
@@ -51,6 +52,7 @@ __all__ = [
     "NonFiniteError",
     "PositionFinder",
     "PositionResult",
+    "QueueChecker",
     "RopeSegments",
     "SingularError",
     "SolverError",

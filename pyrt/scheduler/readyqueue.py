@@ -33,6 +33,7 @@ from time import perf_counter_ns
 import numpy as np
 
 from pyrt.errors import Fault, QueueFullError
+from pyrt.native import QueueChecker
 from pyrt.scheduler.stats import NBINS, Accumulator
 
 __all__ = ["ByteImage", "ByteRef", "ReadyQueue", "Routine"]
@@ -135,6 +136,9 @@ class ReadyQueue:
         else:  # pragma: no cover - no big-endian machine to test on
             self._q16 = _LittleEndianWords(self._mem, self._q, capacity)
         self._slot_range = range(capacity)
+        if not isinstance(self._mem, bytearray):
+            raise TypeError(f"the byte image must be a bytearray, got {type(self._mem).__name__}")
+        self._walk = QueueChecker(self._mem, self._t, self._q, capacity).check
         self._routines: dict[int, Routine] = {}
         self._by_name: dict[str, Routine] = {}
         self._fns: dict[int, Callable[[], None]] = {}
@@ -471,18 +475,7 @@ class ReadyQueue:
         self._check()
 
     def _check(self) -> None:
-        mem = self._mem
-        q16 = self._q16
-        t = self._t
-        ready = []
-        for i, a in enumerate(q16.tolist()):
-            if a:
-                v = mem[t + i] - 1
-                if v:
-                    mem[t + i] = v & 0xFF
-                else:
-                    q16[i] = 0
-                    ready.append(a)
+        ready = self._walk()  # csrc/readyq.c: decrement, free, collect
         if not ready:
             return
         fns = self._fns

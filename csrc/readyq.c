@@ -1,0 +1,41 @@
+/* The 8031 ready-queue check over a byte image; see readyq.h. */
+#include "pyrt_native.h"
+#include "readyq.h"
+
+#include <stddef.h>
+
+int pyrt_rq_check(pyrt_rq *rq)
+{
+    int32_t i, n = 0;
+    uint8_t *mem;
+    uint16_t *ready;
+    int32_t mem_len, t_addr, q_addr, capacity;
+    if (rq == NULL || rq->mem == NULL || rq->ready == NULL)
+        return PYRT_EINVAL;
+    mem = rq->mem;
+    ready = rq->ready;
+    mem_len = rq->mem_len;
+    t_addr = rq->t_addr;
+    q_addr = rq->q_addr;
+    capacity = rq->capacity;
+    rq->n_ready = 0;
+    if (capacity < 1 || capacity > 255 || t_addr < 0 || q_addr < 0 ||
+        t_addr > mem_len - capacity || q_addr > mem_len - 2 * capacity)
+        return PYRT_EINVAL;
+    for (i = 0; i < capacity; i++) {
+        uint8_t *q = mem + q_addr + 2 * i;
+        uint16_t address = (uint16_t)(q[0] | (q[1] << 8));
+        uint8_t v;
+        if (address == 0)
+            continue;
+        v = (uint8_t)(mem[t_addr + i] - 1u);
+        mem[t_addr + i] = v;
+        if (v == 0) {
+            q[0] = 0;
+            q[1] = 0;
+            ready[n++] = address;
+        }
+    }
+    rq->n_ready = n;
+    return PYRT_OK;
+}

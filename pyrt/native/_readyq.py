@@ -1,0 +1,48 @@
+"""The ready-queue check in C (csrc/readyq.c), bound once to a byte image."""
+
+from __future__ import annotations
+
+from pyrt.errors import NativeError
+from pyrt.native._lib import ffi, lib
+
+__all__ = ["QueueChecker"]
+
+
+class QueueChecker:
+    """A prepared ready-queue check over ``mem`` (a bytearray, held for life).
+
+    :meth:`check` decrements every occupied slot's schedule byte, frees the
+    slots that reach zero and returns their routine addresses in slot order
+    (exactly the pure-Python walk it replaces; see csrc/readyq.h).
+    """
+
+    __slots__ = ("_buf", "_check", "_ready", "_rq", "_unpack", "capacity")
+
+    def __init__(self, mem: bytearray, t_addr: int, q_addr: int, capacity: int):
+        if not isinstance(mem, bytearray):
+            raise TypeError(f"the byte image must be a bytearray, got {type(mem).__name__}")
+        if not 1 <= capacity <= 255:
+            raise ValueError(f"ready queue capacity must be 1..255, got {capacity}")
+        if t_addr < 0 or t_addr + capacity > len(mem) or q_addr < 0 or q_addr + 2 * capacity > len(mem):
+            raise ValueError("T or Q lies outside the byte image")
+        self.capacity = capacity
+        self._ready = ffi.new("uint16_t[]", capacity)
+        self._buf = ffi.from_buffer("uint8_t[]", mem, require_writable=True)
+        rq = ffi.new("pyrt_rq *")
+        rq.mem = self._buf
+        rq.mem_len = len(mem)
+        rq.t_addr = t_addr
+        rq.q_addr = q_addr
+        rq.capacity = capacity
+        rq.ready = self._ready
+        self._rq = rq
+        self._check = lib.pyrt_rq_check
+        self._unpack = ffi.unpack
+
+    def check(self) -> list[int]:
+        """One queue check; the addresses of the routines now ready."""
+        rq = self._rq
+        if self._check(rq):  # pragma: no cover - arguments checked above
+            raise NativeError("pyrt_rq_check refused its arguments")
+        n = rq.n_ready
+        return self._unpack(self._ready, n) if n else []

@@ -1,0 +1,19 @@
+"""Pure-Python reference of csrc/readyq.c: one 8031 ready-queue check over a byte image."""
+
+from __future__ import annotations
+
+
+def check(mem: bytearray, t_addr: int, q_addr: int, capacity: int) -> list[int]:
+    """Decrement each occupied slot's T byte (mod 256, DJNZ); free and return those reaching 0."""
+    ready = []
+    for i in range(capacity):
+        lo, hi = mem[q_addr + 2 * i], mem[q_addr + 2 * i + 1]
+        address = lo | (hi << 8)
+        if not address:
+            continue
+        v = (mem[t_addr + i] - 1) & 0xFF
+        mem[t_addr + i] = v
+        if v == 0:
+            mem[q_addr + 2 * i] = mem[q_addr + 2 * i + 1] = 0
+            ready.append(address)
+    return ready
