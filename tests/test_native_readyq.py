@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import pytest
+from _ref_readyq import check as ref_check
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from _ref_readyq import check as ref_check
 from pyrt.native import QueueChecker
 
 

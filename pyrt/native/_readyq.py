@@ -23,7 +23,8 @@ class QueueChecker:
             raise TypeError(f"the byte image must be a bytearray, got {type(mem).__name__}")
         if not 1 <= capacity <= 255:
             raise ValueError(f"ready queue capacity must be 1..255, got {capacity}")
-        if t_addr < 0 or t_addr + capacity > len(mem) or q_addr < 0 or q_addr + 2 * capacity > len(mem):
+        size = len(mem)
+        if t_addr < 0 or t_addr + capacity > size or q_addr < 0 or q_addr + 2 * capacity > size:
             raise ValueError("T or Q lies outside the byte image")
         self.capacity = capacity
         self._ready = ffi.new("uint16_t[]", capacity)
