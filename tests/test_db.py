@@ -23,6 +23,7 @@ from pyrt.db import (
     PolyAxisRecord,
     UnknownNameError,
     copy_station,
+    default_working_directory,
     load_station,
     parse_file,
     parse_records,
@@ -577,3 +578,83 @@ def test_polyaxis_record_defaults_are_documented() -> None:
                 "OFFSIDE_TENSION", "HARE_SPEED", "HARE_RAMP", "STUCK_TIME",
                 "FIND_TOLERANCE", "D2O_DENSITY"):
         assert key in doc
+
+
+def test_stale_temp_files_removed_at_load(tmp_path: Path) -> None:
+    """Leftovers of a killed write-back are removed at load once they are stale; fresh ones stay."""
+    d = _station(tmp_path)
+    stale = d / ".AXIS.dat.abc123.tmp"
+    fresh = d / ".AXIS.dat.def456.tmp"
+    stale.write_text("half a file")
+    fresh.write_text("a write in progress")
+    old = time.time() - 3600
+    os.utime(stale, (old, old))
+    load_station(d)
+    assert not stale.exists()
+    assert fresh.exists()
+
+
+def test_default_working_directory(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """The working copy lives under PYRT_HOME, else the XDG state directory."""
+    monkeypatch.setenv("PYRT_HOME", str(tmp_path / "home"))
+    assert default_working_directory("SNO") == tmp_path / "home" / "stations" / "sno"
+    monkeypatch.delenv("PYRT_HOME")
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
+    assert default_working_directory("prototype") == \
+        tmp_path / "state" / "pyrt" / "stations" / "prototype"
+    with pytest.raises(ConfigError):
+        default_working_directory("elsewhere")
+
+
+_PROTO_AXIS = (station_directory("prototype") / "AXIS.dat").read_text()
+
+
+@settings(max_examples=300, deadline=None)
+@given(edits=st.lists(st.tuples(st.integers(0, len(_PROTO_AXIS)), st.integers(0, 8),
+                                st.text(max_size=8)), min_size=1, max_size=4))
+def test_mutated_file_raises_only_config_error(edits: list[tuple[int, int, str]]) -> None:
+    """A shipped file with random bytes cut and inserted parses or raises ConfigError."""
+    text = _PROTO_AXIS
+    for pos, cut, insert in edits:
+        text = text[:pos] + insert + text[pos + cut:]
+    try:
+        dat, _ = parse_records(text, "AXIS.dat", "AXIS")
+    except ConfigError as e:
+        assert e.line is not None and 1 <= e.line <= max(1, text.count("\n") + 1)
+        return
+    assert dat.text() == text
+
+
+_VALUES = st.floats(min_value=-1e4, max_value=1e4, allow_nan=False)
+
+
+@settings(max_examples=60, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(length=st.floats(min_value=0, max_value=1e5, allow_nan=False),
+       position=st.tuples(_VALUES, _VALUES, _VALUES),
+       mass=st.floats(min_value=1e-3, max_value=1e3, allow_nan=False))
+def test_write_back_property(tmp_path: Path, length: float,
+                             position: tuple[float, float, float], mass: float) -> None:
+    """Any writable value is written in place: only its line changes, and it
+    reads back equal within the decimals the file carries."""
+    d = tmp_path / f"p{abs(hash((length, position, mass)))}"
+    copy_station("prototype", d, overwrite=True)
+    before = {f: (d / f).read_text() for f in ("AXIS.dat", "POLYAXIS.dat")}
+    s = load_station(d)
+    s.write_back({("AXIS", "axis1", "LENGTH"): length,
+                  ("POLYAXIS", "prototype", "POSITION"): position,
+                  ("POLYAXIS", "prototype", "SOURCE_MASS"): mass})
+    r = load_station(d)
+    assert r.axis("axis1").length == pytest.approx(length, abs=1e-12 + 1e-13 * length)
+    for got, want in zip(r.polyaxis().position, position, strict=True):
+        assert got == pytest.approx(want, abs=1e-6)
+    assert r.polyaxis().source_mass == pytest.approx(mass, abs=1e-6)
+    assert r.polyaxis() == s.polyaxis() and r.axis("axis1") == s.axis("axis1")
+    for f, old in before.items():
+        changed = [(a, b) for a, b in zip(old.split("\n"), (d / f).read_text().split("\n"),
+                                           strict=True) if a != b]
+        for a, b in changed:
+            assert a.split(":")[0] == b.split(":")[0]
+            assert a.partition("//")[2] == b.partition("//")[2]
+        keys = {a.split(":")[0] for a, _ in changed}
+        assert keys <= {"LENGTH", "POSITION", "SOURCE_MASS"}

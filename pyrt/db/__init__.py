@@ -13,7 +13,12 @@ rewrites values in place, atomically, keeping every other byte.
 
 from pyrt.db._atomic import atomic_write
 from pyrt.db._schema import FILES, VERSIONS
-from pyrt.db._stations import STATIONS, copy_station, station_directory
+from pyrt.db._stations import (
+    STATIONS,
+    copy_station,
+    default_working_directory,
+    station_directory,
+)
 from pyrt.db.records import (
     AVRecord,
     AxisRecord,
@@ -52,6 +57,7 @@ __all__ = [
     "Vector",
     "atomic_write",
     "copy_station",
+    "default_working_directory",
     "load_station",
     "parse_file",
     "parse_records",

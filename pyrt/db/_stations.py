@@ -31,6 +31,23 @@ def station_directory(name: str) -> Path:
     return Path(os.fspath(root))
 
 
+def default_working_directory(name: str) -> Path:
+    """Where a run keeps its working copy of packaged station ``name``.
+
+    ``$PYRT_HOME/stations/<name>`` if ``PYRT_HOME`` is set, else
+    ``$XDG_STATE_HOME/pyrt/stations/<name>`` (``~/.local/state`` when
+    ``XDG_STATE_HOME`` is unset).  Nothing is created here.
+    """
+    key = name.lower()
+    if key not in STATIONS:
+        raise ConfigError(f"no packaged station {name!r}; expected one of {', '.join(STATIONS)}")
+    home = os.environ.get("PYRT_HOME")
+    if home:
+        return Path(home) / "stations" / key
+    state = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
+    return Path(state) / "pyrt" / "stations" / key
+
+
 def copy_station(name: str, dest_dir: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
     """Copy packaged station ``name``'s database files into ``dest_dir``.
 

@@ -13,8 +13,10 @@ each file is replaced atomically.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import threading
+import time
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -314,12 +316,28 @@ def load_station(directory: str | Path) -> Station:
     if not directory.is_dir():
         raise ConfigError("expected a station directory holding "
                           f"{', '.join(FILES.values())}", str(directory))
+    _remove_stale_temp_files(directory)
     files: dict[str, DatFile] = {}
     records: dict[str, dict[str, Any]] = {}
     for t in TYPES:
         files[t], records[t] = parse_file(directory / FILES[t], t)
     _resolve(files, records)
     return Station(directory, files, records)
+
+
+#: A temp file older than this is a crashed write's leftover (a write takes
+#: milliseconds); younger ones may belong to a writer still running.
+STALE_TEMP_S = 60.0
+
+
+def _remove_stale_temp_files(directory: Path) -> None:
+    """Delete ``.NAME.dat.*.tmp`` files that a killed write-back left behind."""
+    now = time.time()
+    for filename in FILES.values():
+        for tmp in directory.glob(f".{filename}.*.tmp"):
+            with contextlib.suppress(OSError):
+                if now - tmp.stat().st_mtime > STALE_TEMP_S:
+                    tmp.unlink()
 
 
 def _field_lines(dat: DatFile, name: str, key: str) -> list[int]:
