@@ -205,6 +205,13 @@ class FuzzyParams:
         return dataclasses.replace(self, **{n: getattr(self, n) * k for n in _PER_POLL})
 
 
+def c_default_params() -> dict[str, float]:
+    """The defaults as ``pyrt_fuzzy_default_params`` sets them (field -> value)."""
+    c = ffi.new("pyrt_fuzzy_params *")
+    raise_for_status(lib.pyrt_fuzzy_default_params(c), "pyrt_fuzzy_default_params")
+    return {name: getattr(c, name) for name, _ in ffi.typeof("pyrt_fuzzy_params").fields}
+
+
 def _params_array(params, n: int):
     """(cdata array, count) for one shared FuzzyParams or one per axis."""
     if isinstance(params, FuzzyParams):
