@@ -209,3 +209,18 @@ def test_thread_writer_bounds_pending_keys(station: Station) -> None:
             writer.submit(big)
     finally:
         writer.close()
+
+
+def test_refused_value_raises_from_poll_and_is_retried(station: Station) -> None:
+    """A value the database refuses raises from poll (the queue would fault)
+    and is offered again when next due, once it is valid."""
+    src = {"length": -1.0}
+    wb = WriteBack(station, SyncWriter(station))
+    wb.watch_length("axis0", lambda: (src["length"], True))
+    with pytest.raises(ConfigError, match=">= 0"):
+        wb.poll(0)
+    assert not wb.history
+    src["length"] = 250.0
+    assert wb.poll(500 * MS) == 0  # not due yet
+    assert wb.poll(1 * S) == 1
+    assert load_station(station.directory).axis("axis0").length == 250.0

@@ -261,6 +261,7 @@ class WriteBack:
         if now_ns < self._next_due:
             return 0
         batch: dict[Key, Any] = {}
+        changed: list[tuple[Watch, Any]] = []
         next_due: int | None = None
         for w in self.watches:
             if w.due_ns is None or now_ns >= w.due_ns:
@@ -268,15 +269,18 @@ class WriteBack:
                 value = _plain(value)
                 if value != w.last:
                     batch[w.target] = value
-                    w.last = value
-                    w.writes += 1
-                    self.history.append((now_ns, w.type, w.name, w.key, value))
+                    changed.append((w, value))
                 w.due_ns = now_ns + (w.moving_period_ns if moving else w.stationary_period_ns)
             if next_due is None or w.due_ns < next_due:
                 next_due = w.due_ns
         self._next_due = next_due if next_due is not None else now_ns + self.moving_period_ns
         if batch:
+            # a refused batch raises here and leaves ``last`` alone: retried when next due
             self.writer.submit(batch)
+            for w, value in changed:
+                w.last = value
+                w.writes += 1
+                self.history.append((now_ns, w.type, w.name, w.key, value))
         return len(batch)
 
     def loadcell_calibrated(self, loadcell: str, slope: float, offset: float,
