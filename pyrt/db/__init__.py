@@ -11,7 +11,6 @@ rewrites values in place, atomically, keeping every other byte.
 (``prototype``, ``sno``).
 """
 
-from pyrt.db._atomic import atomic_write
 from pyrt.db._schema import FILES, VERSIONS
 from pyrt.db._stations import (
     STATIONS,
@@ -38,6 +37,7 @@ from pyrt.db.station import (
     parse_file,
     parse_records,
 )
+from pyrt.fileio import atomic_write
 
 __all__ = [
     "FILES",

@@ -12,9 +12,9 @@ import shutil
 from importlib import resources
 from pathlib import Path
 
-from pyrt.db._atomic import atomic_write
 from pyrt.db._schema import FILES
 from pyrt.errors import ConfigError
+from pyrt.fileio import atomic_write
 
 __all__ = ["STATIONS", "copy_station", "station_directory"]
 

@@ -22,7 +22,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from pyrt.db._atomic import atomic_write
 from pyrt.db._schema import FILES, SCHEMAS, VERSIONS, build_record, format_value
 from pyrt.db._text import ENCODING, ERRORS, DatFile, parse_text
 from pyrt.db.records import (
@@ -34,6 +33,7 @@ from pyrt.db.records import (
     PolyAxisRecord,
 )
 from pyrt.errors import ConfigError, PyrtError
+from pyrt.fileio import atomic_write
 
 __all__ = [
     "TYPES",

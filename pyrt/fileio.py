@@ -1,4 +1,8 @@
-"""Atomic file replacement: a crash at any moment leaves the old file or the new one."""
+"""Atomic file replacement: a crash at any moment leaves the old file or the new one.
+
+Used by every writer of files a user relies on: the object databases, scope
+exports, logs written as a whole.
+"""
 
 from __future__ import annotations
 
