@@ -1,0 +1,251 @@
+"""The C kernels under AddressSanitizer and UBSan (run with ``pytest -m sanitize``).
+
+The extension is rebuilt from csrc/ into a temporary directory with
+``-fsanitize=address,undefined`` (build_native.py reads PYRT_CFLAGS and
+PYRT_LDFLAGS), then a driver runs in a subprocess with libasan preloaded:
+it loads that build as ``pyrt._native`` and calls every findpos, fuzzy and
+convert entry point, good input and bad (including the NULL pointers and
+sizes the Python layer never lets through).  Any sanitizer report aborts
+the driver (``-fno-sanitize-recover=all``), so the test asserts a clean exit;
+a deliberate overflow against the same build shows the sanitizer is live.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.sanitize
+
+ROOT = Path(__file__).resolve().parent.parent
+CFLAGS = "-std=c99 -O1 -g -fsanitize=address,undefined -fno-omit-frame-pointer " \
+         "-fno-sanitize-recover=all"
+LDFLAGS = "-fsanitize=address,undefined"
+
+BUILD = textwrap.dedent(
+    """
+    import runpy, sys
+    ns = runpy.run_path("csrc/build_native.py")
+    print(ns["ffibuilder"].compile(tmpdir=".", verbose=False))
+    """
+)
+
+DRIVER = textwrap.dedent(
+    """
+    import importlib.util, math, sys
+    spec = importlib.util.spec_from_file_location("pyrt._native", sys.argv[1])
+    native = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(native)
+    sys.modules["pyrt._native"] = native
+
+    import numpy as np
+    import pyrt.native as nat
+    from pyrt.errors import NativeError
+
+    ffi, lib = native.ffi, native.lib
+    NAN = math.nan
+
+    def refused(fn, *args, **kw):
+        try:
+            fn(*args, **kw)
+        except NativeError:
+            return
+        raise AssertionError(f"{fn.__name__} accepted bad input")
+
+    # ---- findpos through the Python API
+    tops = np.array([[0, 5, 389.0], [50, 0, 391], [-50, 0, 391], [0, 50, 391], [0, -50, 391]])
+    bots = np.array([[NAN] * 3, [317, 0, 89.53], [-317, 0, 89.53], [0, 317, 89.53],
+                     [0, -317, 89.53]])
+    rng = np.random.default_rng(0)
+    for n in (1, 3, 5):
+        t, b = tops[:n], bots[:n]
+        freeze = (1, 1, 0) if n == 1 else None
+        for _ in range(50):
+            x = rng.uniform(-200, 200, 3)
+            if n == 3:
+                x[1] = 0.0
+            L = nat.rope_lengths(x, t, b)
+            nat.rope_segments(x, t, b, offsets=rng.normal(size=(n, 3)))
+            start = x + (0, 0, 10.0) if n == 1 else x + rng.uniform(-10, 10, 3) * (1, n != 3, 1)
+            r = nat.find_position(t, b, L + rng.normal(0, 0.1, n), start, freeze=freeze)
+            assert np.isfinite(r.position).all()
+        nat.freeze_mask(b)
+    f = nat.PositionFinder(tops, bots)
+    x = np.array([10.0, -20.0, 100.0])
+    for k in range(100):
+        f.set_top(k % 5, tops[k % 5] + rng.normal(0, 0.5, 3))
+        f.solve(nat.rope_lengths(x + 0.1 * k, f.tops, bots), x if k == 0 else None)
+    bad_len = np.full(5, 600.0)
+    bad_len[1] = NAN
+    refused(f.solve, bad_len)
+    refused(nat.find_position, tops[:2], bots[:2], [500.0, 600.0], x, freeze=(0, 0, 0))
+    refused(nat.find_position, tops, bots, np.full(5, 600.0), x, max_iter=1)
+    refused(nat.rope_lengths, tops[1], tops, bots)
+    refused(nat.find_position, tops, bots, np.full(5, 600.0), bots[1])
+    b2 = bots.copy()
+    b2[2, 0] = NAN
+    refused(nat.rope_lengths, x, tops, b2)
+    b2[2, 0] = math.inf
+    refused(nat.rope_lengths, x, tops, b2)
+
+    # ---- findpos straight into C: what the Python layer never passes
+    buf = ffi.new("double[]", 3 * 17)
+    out = ffi.new("double[]", 17)
+    fz = ffi.new("int32_t[3]")
+    assert lib.pyrt_findpos_solve(ffi.NULL) == lib.PYRT_EINVAL
+    p = ffi.new("pyrt_findpos_problem *")
+    for n in (0, -1, 17):
+        p.n = n
+        assert lib.pyrt_findpos_solve(p) == lib.PYRT_EINVAL
+        assert lib.pyrt_findpos_freeze_mask(n, buf, fz) == lib.PYRT_EINVAL
+        assert lib.pyrt_rope_lengths(n, buf, buf, ffi.NULL, buf, out, ffi.NULL, ffi.NULL,
+                                     ffi.NULL, ffi.NULL) == lib.PYRT_EINVAL
+    p.n = 1
+    assert lib.pyrt_findpos_solve(p) == lib.PYRT_EINVAL          # NULL arrays
+    assert lib.pyrt_findpos_freeze_mask(1, ffi.NULL, fz) == lib.PYRT_EINVAL
+    assert lib.pyrt_findpos_freeze_mask(1, buf, ffi.NULL) == lib.PYRT_EINVAL
+    assert lib.pyrt_rope_lengths(1, buf, buf, ffi.NULL, ffi.NULL, out, ffi.NULL, ffi.NULL,
+                                 ffi.NULL, ffi.NULL) == lib.PYRT_EINVAL
+    p.tops = p.bottoms = p.lengths = p.position = p.residuals = buf
+    p.tol, p.max_iter = 0.0, 10
+    assert lib.pyrt_findpos_solve(p) == lib.PYRT_EINVAL
+    p.tol, p.max_iter = 0.1, 0
+    assert lib.pyrt_findpos_solve(p) == lib.PYRT_EINVAL
+    p.max_iter = 10
+    p.freeze = (1, 1, 1)
+    assert lib.pyrt_findpos_solve(p) == lib.PYRT_EINVAL
+    p.freeze = (0, 0, 0)
+    assert lib.pyrt_findpos_solve(p) == lib.PYRT_EDEGENERATE     # source on its own pulley
+
+    # ---- fuzzy through the Python API
+    params = [nat.FuzzyParams(), nat.FuzzyParams().for_poll_period(0.02)]
+    for n in (1, 5, 16):
+        rows = np.column_stack([
+            rng.uniform(0, 120, n), rng.uniform(0, 60, n), rng.uniform(0, 1, n),
+            rng.uniform(-5, 5, n), rng.uniform(-8, 8, n), rng.uniform(-3, 3, n),
+            rng.uniform(-50, 50, n), rng.uniform(-1, 1, n), rng.uniform(0, 1, n),
+            np.full(n, 3.0), np.full(n, 100.0),
+        ])
+        nat.fuzzy_step(params[0], rows)
+        nat.fuzzy_step([params[k % 2] for k in range(n)], rows)
+        batch = nat.FuzzyBatch(params[1], n)
+        batch.inputs[:] = rows
+        for _ in range(20):
+            batch.step()
+        batch.inputs[0, nat.FuzzyInput.TENSION] = NAN
+        refused(batch.step)
+        batch.inputs[0, nat.FuzzyInput.TENSION] = 10.0
+        batch.inputs[0, nat.FuzzyInput.FREE] = 2.0
+        refused(batch.step)
+    refused(nat.FuzzyParams, len_full=0.0)
+    refused(nat.FuzzyParams, dv_damping=NAN)
+
+    # ---- fuzzy straight into C
+    fp = ffi.new("pyrt_fuzzy_params[]", 17)
+    for i in range(17):
+        assert lib.pyrt_fuzzy_default_params(fp + i) == lib.PYRT_OK
+    assert lib.pyrt_fuzzy_default_params(ffi.NULL) == lib.PYRT_EINVAL
+    assert lib.pyrt_fuzzy_check_params(ffi.NULL) == lib.PYRT_EINVAL
+    inp = ffi.new("double[]", 17 * lib.PYRT_FUZZY_NINPUTS)
+    dv = ffi.new("double[]", 17)
+    rules = ffi.new("double[]", 17 * lib.PYRT_FUZZY_NRULES)
+    for i in range(17):
+        inp[i * lib.PYRT_FUZZY_NINPUTS + lib.PYRT_FUZZY_IN_TENSION_HIGH] = 100.0
+    for n in (0, -3, 17):
+        assert lib.pyrt_fuzzy_step(n, fp, 1, inp, dv, rules) == lib.PYRT_EINVAL
+    assert lib.pyrt_fuzzy_step(16, fp, 16, inp, dv, rules) == lib.PYRT_OK
+    assert lib.pyrt_fuzzy_step(16, fp, 16, inp, dv, ffi.NULL) == lib.PYRT_OK
+    assert lib.pyrt_fuzzy_step(16, fp, 2, inp, dv, rules) == lib.PYRT_EINVAL
+    assert lib.pyrt_fuzzy_step(2, ffi.NULL, 1, inp, dv, rules) == lib.PYRT_EINVAL
+    assert lib.pyrt_fuzzy_step(2, fp, 1, ffi.NULL, dv, rules) == lib.PYRT_EINVAL
+    assert lib.pyrt_fuzzy_step(2, fp, 1, inp, ffi.NULL, rules) == lib.PYRT_EINVAL
+    fp[0].len_full = -1.0
+    assert lib.pyrt_fuzzy_step(1, fp, 1, inp, dv, rules) == lib.PYRT_EINVAL
+    fp[0].len_full = math.inf
+    assert lib.pyrt_fuzzy_step(1, fp, 1, inp, dv, rules) == lib.PYRT_ENONFINITE
+
+    # ---- convert
+    assert nat.excess128_many(list(range(-300, 300))).shape == (600,)
+    assert [nat.from_excess128(nat.excess128(v)) for v in range(-128, 128)] == list(
+        range(-128, 128))
+    assert lib.pyrt_excess128_many(ffi.NULL, ffi.NULL, 3) == lib.PYRT_EINVAL
+    assert lib.pyrt_excess128_many(ffi.NULL, ffi.NULL, -1) == lib.PYRT_EINVAL
+    print("SANITIZE-DRIVER-OK")
+    """
+)
+
+
+CANARY = textwrap.dedent(
+    """
+    import importlib.util, sys
+    spec = importlib.util.spec_from_file_location("pyrt._native", sys.argv[1])
+    native = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(native)
+    ffi, lib = native.ffi, native.lib
+    # Deliberately read and write past two-element buffers.
+    lib.pyrt_excess128_many(ffi.new("int32_t[]", 2), ffi.new("uint8_t[]", 2), 4096)
+    print("CANARY-NOT-CAUGHT")
+    """
+)
+
+
+def _libasan() -> str | None:
+    gcc = shutil.which("gcc")
+    if gcc is None:
+        return None
+    path = subprocess.run([gcc, "-print-file-name=libasan.so"], capture_output=True, text=True,
+                          check=False).stdout.strip()
+    return path if os.path.isabs(path) and os.path.exists(path) else None
+
+
+def test_kernels_are_clean_under_asan_and_ubsan(tmp_path):
+    """Every C entry point, on good and bad input, runs with no ASan or UBSan report."""
+    libasan = _libasan()
+    if libasan is None:
+        pytest.skip("gcc with libasan is not available")
+    env = dict(os.environ, PYRT_CFLAGS=CFLAGS, PYRT_LDFLAGS=LDFLAGS)
+    # A private copy of csrc/: the sanitized objects never land in the tree.
+    shutil.copytree(ROOT / "csrc", tmp_path / "csrc",
+                    ignore=shutil.ignore_patterns("*.o", "*.so", "__pycache__"))
+    build = subprocess.run(
+        [sys.executable, "-c", BUILD], cwd=tmp_path, env=env,
+        capture_output=True, text=True, timeout=300, check=False,
+    )
+    assert build.returncode == 0, build.stdout + build.stderr
+    built = list(tmp_path.rglob("_native*.so"))
+    assert len(built) == 1, build.stdout
+    driver = tmp_path / "driver.py"
+    driver.write_text(DRIVER)
+    run_env = dict(
+        os.environ,
+        LD_PRELOAD=libasan,
+        ASAN_OPTIONS="detect_leaks=0:abort_on_error=0:halt_on_error=1",
+        UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1",
+        PYTHONPATH=str(ROOT),
+    )
+    run = subprocess.run(
+        [sys.executable, str(driver), str(built[0])], cwd=tmp_path, env=run_env,
+        capture_output=True, text=True, timeout=300, check=False,
+    )
+    report = run.stdout + run.stderr
+    assert run.returncode == 0, report
+    assert "SANITIZE-DRIVER-OK" in run.stdout, report
+    assert "ERROR: AddressSanitizer" not in report, report
+    assert "runtime error" not in report, report
+
+    # The harness itself is live: a deliberate overflow in the same build is caught.
+    canary = tmp_path / "canary.py"
+    canary.write_text(CANARY)
+    caught = subprocess.run(
+        [sys.executable, str(canary), str(built[0])], cwd=tmp_path, env=run_env,
+        capture_output=True, text=True, timeout=300, check=False,
+    )
+    assert caught.returncode != 0
+    assert "CANARY-NOT-CAUGHT" not in caught.stdout
+    assert "AddressSanitizer" in caught.stderr, caught.stderr
