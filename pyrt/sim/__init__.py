@@ -1,1 +1,4 @@
-"""The physics behind the simulated boards: reads actuator registers, writes sensor registers; fault injection."""
+"""The physics behind the simulated boards.
+
+Reads actuator registers, writes sensor registers; fault injection.
+"""

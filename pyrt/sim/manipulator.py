@@ -263,10 +263,10 @@ class ManipulatorPlant:
     def settle_payouts(self, position: Sequence[float], side_tension: float = 10.0) -> list[float]:
         """Payouts that hold the source in equilibrium at ``position``.
 
-        Tensions are the least-squares closest to ``side_tension`` on side
-        ropes and the whole weight on central ropes that balance the net
-        weight exactly; a tension that would come out below 1 N is held at
-        1 N.
+        Tensions balance the net weight exactly and stay as close as they
+        can to ``side_tension`` on the side ropes (a weighted least change,
+        the central ropes taking up the difference first); a tension that
+        would come out below 1 N is held at 1 N.
         """
         x = np.asarray(position, float)
         g, _, _ = self.solver.evaluate(x)
@@ -284,7 +284,10 @@ class ManipulatorPlant:
         b = np.array([0.0, 0.0, w])
         central = np.array([r.bottom is None for r in self.rig.ropes])
         pref = np.where(central, w / max(1, central.sum()), side_tension)
-        t = pref + np.linalg.pinv(a) @ (b - a @ pref)
+        # weighted least change: central ropes take up the difference first
+        winv = np.where(central, 1.0, 0.01)
+        aw = a * winv
+        t = pref + aw.T @ np.linalg.pinv(aw @ a.T) @ (b - a @ pref)
         t = np.maximum(t, 1.0)
         return [
             (r.dead + gi) / (1.0 + r.stretch * ti)
