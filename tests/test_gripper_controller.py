@@ -95,8 +95,8 @@ def test_sensors_with_an_object_between_the_jaws():
     rig.init()
     rig.loop.run(100)
     word = rig.ctl.sensor_word()
-    assert word & 0x0100 == 0  # limit on (bit 8 is 0)
-    assert word & 0x0400 == 0  # crossfire on
+    assert word & 0x0400 == 0  # limit on (2E.2, bit 10, is 0)
+    assert word & 0x0100 == 0  # crossfire on (2E.0, bit 8)
     assert word & 0x0011 == 0x0011  # proximity off far away
     touch = rig.plant.p.counts_at_opening(30.0)
     rig.move(int(touch) + 200)  # just short of the object

@@ -169,8 +169,12 @@ class CommandLevel(_Level):
     def do_s(self, arg: str) -> None:
         """S: the sensor word as 16 bits (2E then 2D); a 0 is a sensor that is ON.
 
-        Bit 10 crossfire, 9 overload, 8 limit; 7..4 right jaw -X +X +Z -Ya;
+        Bit 10 limit, 9 overload, 8 crossfire; 7..4 right jaw -X +X +Z -Ya;
         3..0 left jaw -X +X +Z +Ya; bits 15..11 unused."""
+        # The bits are RAM 2E (high byte) and 2D, as Appendix A lays them out
+        # (2E.0 crossfire, 2E.1 overload, 2E.2 limit; the L command's table
+        # agrees).  002's S table lists bits 10..8 the other way round and puts
+        # the word at "2E and 2F": both slips; 2F is the ready queue's T.
         self.no_argument("S", arg)
         self.say(f"{self.call(self.ctl.sensor_word):016b}")
 
