@@ -1,0 +1,84 @@
+"""The line console: piped scripts, echo and prompts, end of input, loop messages."""
+
+from __future__ import annotations
+
+import io
+
+from pyrt.console import Console
+
+
+class Echo:
+    """A tiny interpreter: prints the line upper-cased; 'mode' switches the prompt."""
+
+    def __init__(self, stdout):
+        self.stdout = stdout
+        self.prompt = "A> "
+        self.seen: list[str] = []
+
+    def onecmd(self, line: str) -> bool:
+        self.seen.append(line)
+        if line == "quit":
+            return True
+        if line == "mode":
+            self.prompt = "B> "
+        self.stdout.write(line.upper() + "\n")
+        return False
+
+
+def test_piped_script_prints_prompts_and_echoes_lines():
+    """Each prompt is printed with the line echoed after it, then the output."""
+    out = io.StringIO()
+    shell = Echo(out)
+    assert Console(shell, io.StringIO("one\nmode\ntwo\n"), out).run() == 0
+    assert out.getvalue() == "A> one\nONE\nA> mode\nMODE\nB> two\nTWO\nB> \n"
+
+
+def test_end_of_input_without_newline():
+    """The last line runs even without a newline; the console ends at end of input."""
+    out = io.StringIO()
+    shell = Echo(out)
+    Console(shell, io.StringIO("last"), out).run()
+    assert shell.seen == ["last"]
+
+
+def test_quit_stops_reading():
+    """Lines after quit are not run."""
+    out = io.StringIO()
+    shell = Echo(out)
+    Console(shell, io.StringIO("a\nquit\nb\n"), out).run()
+    assert shell.seen == ["a", "quit"]
+
+
+def test_loop_messages_are_printed_before_the_next_prompt():
+    """Messages drained from the loop appear on their own lines before the prompt."""
+    out = io.StringIO()
+    shell = Echo(out)
+    pending = [["FAULT gripper: test"], [], []]
+    Console(shell, io.StringIO("x\n"), out, messages=lambda: pending.pop(0) if pending else []).run()
+    assert out.getvalue().splitlines()[0] == "FAULT gripper: test"
+    assert out.getvalue().splitlines()[1] == "A> x"
+
+
+def test_not_interactive_on_stringio():
+    """StringIO is not a terminal: plain line mode."""
+    assert not Console(Echo(io.StringIO()), io.StringIO(), io.StringIO()).interactive()
+
+
+def test_input_fallback_without_prompt_toolkit(monkeypatch):
+    """The input() fallback runs lines until EOF and prints messages before each prompt."""
+    out = io.StringIO()
+    shell = Echo(out)
+    feed = iter(["a", "b"])
+    prompts: list[str] = []
+
+    def fake_input(prompt: str) -> str:
+        prompts.append(prompt)
+        try:
+            return next(feed)
+        except StopIteration:
+            raise EOFError from None
+
+    monkeypatch.setattr("builtins.input", fake_input)
+    console = Console(shell, io.StringIO(), out, messages=lambda: [])
+    assert console._run_input() == 0
+    assert shell.seen == ["a", "b"] and prompts == ["A> "] * 3
