@@ -143,10 +143,12 @@ def test_default_rules(changes, expected):
     assert dv[0] == pytest.approx(want.sum(), abs=1e-15)
 
 
-def test_rule_names_match_columns():
-    """FUZZY_RULES names the ten output columns; FuzzyInput names the eleven inputs."""
-    assert len(nat.FUZZY_RULES) == 10 == len(set(nat.FUZZY_RULES))
+def test_rule_and_input_columns():
+    """FuzzyRule names the ten output columns and FuzzyInput the eleven input columns."""
+    assert [r.value for r in nat.FuzzyRule] == list(range(10))
     assert [c.value for c in FI] == list(range(11))
+    assert nat.FuzzyBatch.MAX_AXES == 16 == nat.PositionFinder.MAX_ROPES
+    assert nat.FuzzyParams.REFERENCE_POLL_S == 0.05
 
 
 def test_defaults_equal_c_defaults():

@@ -17,7 +17,6 @@ from pyrt.native._errors import (
     Status,
 )
 from pyrt.native._findpos import (
-    MAX_ROPES,
     PositionFinder,
     PositionResult,
     RopeSegments,
@@ -26,27 +25,16 @@ from pyrt.native._findpos import (
     rope_lengths,
     rope_segments,
 )
-from pyrt.native._fuzzy import (
-    FUZZY_RULES,
-    MAX_AXES,
-    REFERENCE_POLL_S,
-    FuzzyBatch,
-    FuzzyInput,
-    FuzzyParams,
-    fuzzy_step,
-)
+from pyrt.native._fuzzy import FuzzyBatch, FuzzyInput, FuzzyParams, FuzzyRule, fuzzy_step
 from pyrt.native._readyq import QueueChecker
 from pyrt.native._statics import StaticsSolver
 
 __all__ = [
-    "FUZZY_RULES",
-    "MAX_AXES",
-    "MAX_ROPES",
-    "REFERENCE_POLL_S",
     "DegenerateGeometryError",
     "FuzzyBatch",
     "FuzzyInput",
     "FuzzyParams",
+    "FuzzyRule",
     "NativeInputError",
     "NoConvergenceError",
     "NonFiniteError",

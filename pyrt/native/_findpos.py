@@ -25,7 +25,7 @@ path, so that path does no conversion.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import ClassVar, NamedTuple
 
 import numpy as np
 
@@ -34,7 +34,6 @@ from pyrt.native._errors import NativeInputError, Status, raise_for_status
 from pyrt.native._lib import ffi, lib
 
 __all__ = [
-    "MAX_ROPES",
     "PositionFinder",
     "PositionResult",
     "RopeSegments",
@@ -255,6 +254,9 @@ class PositionFinder:
     solve; a failed solve raises and leaves them as they were (apart from
     :attr:`position` taking an explicitly given start).
     """
+
+    #: Ropes per problem (csrc/findpos.h PYRT_FINDPOS_MAX_ROPES).
+    MAX_ROPES: ClassVar[int] = MAX_ROPES
 
     def __init__(self, tops, bottoms, offsets=None, freeze=None, tol: float = 0.1,
                  max_iter: int = 50):

@@ -6,8 +6,8 @@ premise truth x velocity change over the rules (see ``csrc/fuzzy.h`` for the
 rule table).  Positive velocity pays rope out; errors are actual - desired.
 
 Inputs are one row per axis with the columns of :class:`FuzzyInput`; outputs
-are ``dv`` (N,) cm/s and ``rules`` (N, 10), each rule's contribution, named
-by :data:`FUZZY_RULES` (the document's a0rules.dat columns).
+are ``dv`` (N,) cm/s and ``rules`` (N, 10), each rule's contribution, in the
+column order of :class:`FuzzyRule` (the document's a0rules.dat columns).
 
 :func:`fuzzy_step` converts its arguments explicitly; :class:`FuzzyBatch`,
 the form for the control poll, owns its input and output arrays so that a
@@ -20,6 +20,7 @@ import dataclasses
 import enum
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -27,15 +28,7 @@ from pyrt.native._arrays import F64, as_f64
 from pyrt.native._errors import NativeInputError, Status, raise_for_status
 from pyrt.native._lib import ffi, lib
 
-__all__ = [
-    "FUZZY_RULES",
-    "MAX_AXES",
-    "REFERENCE_POLL_S",
-    "FuzzyBatch",
-    "FuzzyInput",
-    "FuzzyParams",
-    "fuzzy_step",
-]
+__all__ = ["FuzzyBatch", "FuzzyInput", "FuzzyParams", "FuzzyRule", "fuzzy_step"]
 
 MAX_AXES: int = lib.PYRT_FUZZY_MAX_AXES
 NINPUTS: int = lib.PYRT_FUZZY_NINPUTS
@@ -61,19 +54,23 @@ class FuzzyInput(enum.IntEnum):
     TENSION_HIGH = lib.PYRT_FUZZY_IN_TENSION_HIGH              # N
 
 
-#: Names of the ten rule outputs, in column order.
-FUZZY_RULES: tuple[str, ...] = (
-    "tension_low",
-    "tension_high",
-    "length_short",
-    "length_long",
-    "rel_tension_low",
-    "rel_tension_high",
-    "velocity_high",
-    "length_error_rate_high",
-    "tension_error_rate_high",
-    "dv_high",
-)
+class FuzzyRule(enum.IntEnum):
+    """Column of the rule outputs: the ten rules of 000 section 6, in its order."""
+
+    TENSION_LOW = 0               # if tension is low then increase tension
+    TENSION_HIGH = 1              # if tension is high then decrease tension
+    LENGTH_SHORT = 2              # if corrected length is short then increase length
+    LENGTH_LONG = 3               # if corrected length is long then decrease length
+    REL_TENSION_LOW = 4           # if not near end and relative tension is low ...
+    REL_TENSION_HIGH = 5          # if not near end and relative tension is high ...
+    VELOCITY_HIGH = 6             # if velocity is high then decrease velocity
+    LENGTH_ERROR_RATE_HIGH = 7    # if errorLengthVelocity is high then decrease it
+    TENSION_ERROR_RATE_HIGH = 8   # if errorTensionVelocity is high then decrease it
+    DV_HIGH = 9                   # if dv is high then decrease dv
+
+
+if len(FuzzyRule) != NRULES:  # pragma: no cover - a build out of step with this module
+    raise ImportError(f"csrc/fuzzy.h has {NRULES} rules, pyrt.native knows {len(FuzzyRule)}")
 
 # Velocity-change fields that are "per poll" and scale with the poll period.
 _PER_POLL = ("dv_zero", "dv_full", "dv_tension", "dv_length", "dv_rel_tension",
@@ -97,6 +94,9 @@ class FuzzyParams:
     (rope compliance 5e-6 to 1e-4 per N, 0.5 N loadcell noise, 20 and 50 ms
     polls): feasible targets end within 0.1 cm with tensions of 8-58 N.
     """
+
+    #: The poll period (s) the per-poll defaults are tuned for.
+    REFERENCE_POLL_S: ClassVar[float] = REFERENCE_POLL_S
 
     #: LowT is 1 at or below tension_low + 1 N ... (rules 0, 1: the guards)
     low_t_full: float = 1.0
@@ -283,6 +283,9 @@ class FuzzyBatch:
     ten rule outputs per axis.  Both outputs are read-only views overwritten
     by every successful step; a refused step raises and changes neither.
     """
+
+    #: Axes per batch (csrc/fuzzy.h PYRT_FUZZY_MAX_AXES).
+    MAX_AXES: ClassVar[int] = MAX_AXES
 
     def __init__(self, params_per_axis, n_axes: int):
         if isinstance(n_axes, bool) or not isinstance(n_axes, (int, np.integer)):
