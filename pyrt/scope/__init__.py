@@ -1,1 +1,18 @@
-"""The software oscilloscope: channels sampled into a ring buffer, triggers, export."""
+"""The software oscilloscope: channels sampled into a ring buffer, triggers, export, spew."""
+
+from pyrt.scope.export import plot_frame, save_frame
+from pyrt.scope.scope import MODES, Frame, Scope, Trigger
+from pyrt.scope.sources import Source, compile_sources
+from pyrt.scope.spew import Spew
+
+__all__ = [
+    "MODES",
+    "Frame",
+    "Scope",
+    "Source",
+    "Spew",
+    "Trigger",
+    "compile_sources",
+    "plot_frame",
+    "save_frame",
+]

@@ -1,0 +1,78 @@
+"""Scope frames to CSV, .npz and PNG (files written atomically)."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+
+from pyrt.errors import CommandError
+from pyrt.fileio import atomic_write
+from pyrt.scope.scope import Frame
+
+__all__ = ["plot_frame", "save_frame"]
+
+
+def save_frame(frame: Frame, path: str | Path) -> Path:
+    """Write ``frame`` as CSV (``.csv``: a header naming the columns, time in
+    seconds first) or numpy ``.npz`` (arrays ``t_ns``, ``data``, ``channels``)."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".csv":
+        buf = io.StringIO()
+        header = ",".join(["t_s", *frame.channels])
+        table = np.column_stack([frame.t_ns / 1e9, frame.data])
+        np.savetxt(buf, table, delimiter=",", header=header, comments="", fmt="%.9g")
+        data = buf.getvalue().encode("utf-8")
+    elif suffix == ".npz":
+        buf = io.BytesIO()
+        np.savez(
+            buf,
+            t_ns=frame.t_ns,
+            data=frame.data,
+            channels=np.array(frame.channels),
+            trigger_index=np.array(-1 if frame.trigger_index is None else frame.trigger_index),
+        )
+        data = buf.getvalue()
+    else:
+        raise CommandError(f"scope save: use a .csv or .npz file name, got {path.name!r}")
+    try:
+        atomic_write(path, data)
+    except OSError as exc:
+        raise CommandError(f"scope save: cannot write {path}: {exc.strerror}") from None
+    return path
+
+
+def plot_frame(frame: Frame, path: str | Path) -> Path:
+    """Draw ``frame`` to a PNG, one trace per channel (needs matplotlib)."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        raise CommandError(
+            "scope plot needs matplotlib, which is not installed: pip install 'pyrt[plot]'"
+        ) from None
+    path = Path(path)
+    t = (frame.t_ns - frame.t_ns[0]) / 1e9 if frame.t_ns.size else frame.t_ns
+    n = len(frame.channels)
+    fig, axes = plt.subplots(n, 1, figsize=(9, 1.8 + 1.6 * n), sharex=True, squeeze=False)
+    for k, name in enumerate(frame.channels):
+        ax = axes[k][0]
+        ax.plot(t, frame.data[:, k], lw=1)
+        ax.set_ylabel(name)
+        if frame.trigger_index is not None and frame.t_ns.size:
+            ax.axvline(t[frame.trigger_index], color="r", lw=0.8, ls="--")
+    axes[-1][0].set_xlabel("time (s)")
+    fig.suptitle(f"pyrt scope ({frame.mode}, {frame.t_ns.size} samples)")
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100)
+    plt.close(fig)
+    try:
+        atomic_write(path, buf.getvalue())
+    except OSError as exc:
+        raise CommandError(f"scope plot: cannot write {path}: {exc.strerror}") from None
+    return path

@@ -1,0 +1,203 @@
+"""The software oscilloscope: sources, triggers with pre/post samples, modes, export, spew."""
+
+from __future__ import annotations
+
+import csv
+import itertools
+
+import numpy as np
+import pytest
+
+from pyrt.errors import CommandError
+from pyrt.scheduler import Loop, SimClock
+from pyrt.scope import Scope, Source, Spew, compile_sources, plot_frame, save_frame
+
+
+class Signal:
+    """A synthetic plant: a ramp that counts ticks, and a square wave."""
+
+    def __init__(self):
+        self.n = 0
+        self.ramp = 0.0
+        self.square = 0.0
+
+    def step(self, now_ns: int) -> None:
+        self.n += 1
+        self.ramp = float(self.n)
+        self.square = 1.0 if (self.n // 50) % 2 else 0.0
+
+
+def rig(capacity=100, every=1):
+    loop = Loop(SimClock())
+    sig = Signal()
+    scope = Scope(capacity=capacity, every=every)
+    loop.attach(sig.step)
+    loop.attach(scope.sample)
+    scope.add("ramp", Source.attr(sig, "ramp"))
+    scope.add("square", Source.attr(sig, "square"))
+    return loop, sig, scope
+
+
+def test_compiled_sources_read_attributes_items_words_and_calls():
+    """One compiled getter reads an attribute, an item, a signed RAM word and a call."""
+    class Obj:
+        x = 2.5
+
+    ram = bytearray(128)
+    ram[0x4A], ram[0x4B] = 0x7A, 0xE4  # E47A = -1B86
+    read = compile_sources([
+        Source.attr(Obj(), "x"), Source.item([7, 8, 9], 1),
+        Source.word(ram, 0x4A, signed=True), Source.word(ram, 0x4A), Source.call(lambda: 4),
+    ])
+    assert read() == (2.5, 8, -0x1B86, 0xE47A, 4)
+
+
+def test_bad_sources_are_refused():
+    """Unknown attributes, bad names, out-of-range words and indices are refused when the channel is made."""
+    with pytest.raises(ValueError):
+        Source.attr(object(), "nope")
+    with pytest.raises(ValueError):
+        Source.attr(object(), "__class__; import os")
+    with pytest.raises(ValueError):
+        Source.word(bytearray(128), 0x7F)
+    with pytest.raises(ValueError):
+        Source.item([1], 3)
+
+
+def test_rising_trigger_captures_the_right_pre_and_post_samples():
+    """A rising trigger at level 0.5 on the square wave: 10% pre-trigger, the edge at index 10."""
+    loop, _sig, scope = rig(capacity=100)
+    scope.set_trigger("square", 0.5, "rising", pre=0.1)
+    scope.run("single")
+    loop.run(400)
+    frame = scope.read()
+    assert frame is not None and frame.trigger_index == 10
+    ramp = frame.column("ramp")
+    # The square wave first rises at tick 50; the frame holds ticks 40..139.
+    assert ramp[0] == 40 and ramp[10] == 50 and ramp[-1] == 139
+    assert frame.column("square")[9] == 0.0 and frame.column("square")[10] == 1.0
+    assert np.all(np.diff(frame.t_ns) == 1_000_000)
+    assert scope.state == "done" and scope.frames == 1
+
+
+def test_falling_trigger_and_normal_mode_rearms():
+    """Normal mode captures a frame at each falling edge and keeps the latest."""
+    loop, _, scope = rig(capacity=60)
+    scope.set_trigger("square", 0.5, "falling", pre=0.5)
+    scope.run("normal")
+    loop.run(1000)
+    frame = scope.read()
+    # Falling edges at ticks 100, 200, ... 1000; the one at 1000 is still capturing.
+    assert scope.frames == 9 and scope.state == "triggered"
+    assert frame.trigger_index == 30 and frame.column("ramp")[frame.trigger_index] == 900
+    assert frame.column("square")[frame.trigger_index - 1] == 1.0
+
+
+def test_trigger_needs_full_pre_trigger_history():
+    """An edge before the pre-trigger part has filled is ignored; the next one triggers."""
+    loop, _, scope = rig(capacity=100)
+    scope.set_trigger("square", 0.5, "rising", pre=0.9)  # needs 90 samples first
+    scope.run("single")
+    loop.run(400)
+    frame = scope.read()
+    assert frame.column("ramp")[frame.trigger_index] == 150
+
+
+def test_auto_mode_captures_without_a_trigger():
+    """Auto mode with no trigger event captures one frame per frame length anyway."""
+    loop, _, scope = rig(capacity=100)
+    scope.run("auto")
+    loop.run(250)
+    frame = scope.read()
+    # The forced frame is the latest 100 samples when the wait runs out; the
+    # check is made as samples are folded in (every 64), so the frame's end
+    # is the latest folded sample.
+    assert scope.frames == 2 and frame.trigger_index is None
+    ramp = frame.column("ramp")
+    assert ramp.size == 100 and np.all(np.diff(ramp) == 1) and ramp[-1] == 250
+
+
+def test_roll_mode_keeps_the_latest_samples():
+    """Roll mode: the read-out is the latest capacity samples, oldest first."""
+    loop, _, scope = rig(capacity=100, every=2)
+    scope.run("roll")
+    loop.run(1000)
+    frame = scope.read()
+    assert frame.data.shape == (100, 2)
+    assert frame.column("ramp")[-1] == 1000 and frame.column("ramp")[0] == 802
+
+
+def test_sixteen_channels_and_sixteen_thousand_samples():
+    """The scope holds at least 16 channels of 16,000 samples."""
+    loop = Loop(SimClock())
+    sig = Signal()
+    loop.attach(sig.step)
+    scope = Scope()
+    loop.attach(scope.sample)
+    for k in range(16):
+        scope.add(f"c{k}", Source.attr(sig, "ramp"))
+    scope.run("roll")
+    loop.run(16_100)
+    frame = scope.read()
+    assert frame.data.shape == (16_000, 16) and frame.data[-1, 15] == 16_100
+    with pytest.raises(CommandError):
+        scope.add("c16", Source.attr(sig, "ramp"))
+
+
+def test_bad_scope_commands_are_refused():
+    """Unknown modes, missing triggers, duplicate channels and bad pre fractions give CommandError."""
+    _, sig, scope = rig()
+    with pytest.raises(CommandError, match="needs a trigger"):
+        scope.run("normal")
+    with pytest.raises(CommandError):
+        scope.run("sideways")
+    with pytest.raises(CommandError):
+        scope.add("ramp", Source.attr(sig, "ramp"))
+    with pytest.raises(CommandError):
+        scope.set_trigger("nope", 1.0)
+    with pytest.raises(CommandError):
+        scope.set_trigger("ramp", 1.0, pre=1.5)
+    with pytest.raises(CommandError):
+        scope.set_trigger("ramp", 1.0, edge="sideways")
+    assert Scope().read() is None
+
+
+def test_export_csv_and_npz(tmp_path):
+    """A frame saves as CSV with a header naming the columns, and as .npz; other suffixes are refused."""
+    loop, _, scope = rig(capacity=50)
+    scope.run("roll")
+    loop.run(60)
+    frame = scope.read()
+    path = save_frame(frame, tmp_path / "f.csv")
+    rows = list(csv.reader(path.open()))
+    assert rows[0] == ["t_s", "ramp", "square"] and len(rows) == 51
+    assert float(rows[1][1]) == 11.0 and float(rows[1][0]) == pytest.approx(0.011)
+    npz = np.load(save_frame(frame, tmp_path / "f.npz"))
+    assert list(npz["channels"]) == ["ramp", "square"] and npz["data"].shape == (50, 2)
+    with pytest.raises(CommandError, match=r"\.csv or \.npz"):
+        save_frame(frame, tmp_path / "f.txt")
+
+
+def test_plot_writes_a_png(tmp_path):
+    """scope plot draws the frame to PNG."""
+    pytest.importorskip("matplotlib")
+    loop, _, scope = rig(capacity=50)
+    scope.set_trigger("square", 0.5)
+    scope.run("single")
+    loop.run(200)
+    path = plot_frame(scope.read(), tmp_path / "f.png")
+    assert path.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_spew_hands_values_at_a_fixed_rate():
+    """Spew calls its subscriber every 1/hz of loop time, never in bursts."""
+    loop = Loop(SimClock())
+    sig = Signal()
+    loop.attach(sig.step)
+    got = []
+    spew = Spew(["ramp"], [Source.attr(sig, "ramp")], 100.0, lambda t, v: got.append((t, v)))
+    loop.attach(spew)
+    loop.run(1000)
+    assert len(got) == 100
+    assert all(b[0] - a[0] == 10_000_000 for a, b in itertools.pairwise(got))
+    assert got[0][1] == (1.0,)
