@@ -65,6 +65,7 @@ class SimGripperBoard:
 
     def __init__(self, cpu: I8031):
         self.cpu = cpu
+        self._vectors = cpu.vectors
         #: Latched DAC byte: the motor is driven with it until it is overwritten.
         self.dac = DAC_NULL
         #: Input levels of the 8155 ports (1 = high = sensor off / switch open).
@@ -109,9 +110,9 @@ class SimGripperBoard:
     def encoder(self, counts: int) -> None:
         """The worm turned ``counts`` encoder steps: one interrupt per step."""
         if counts > 0:
-            h = self.cpu.handler(VECTOR_EXT0)
+            h = self._vectors.get(VECTOR_EXT0)
         elif counts < 0:
-            h = self.cpu.handler(VECTOR_EXT1)
+            h = self._vectors.get(VECTOR_EXT1)
             counts = -counts
         else:
             return

@@ -127,12 +127,13 @@ class I8031:
     :meth:`movx_write`, as the program's MOVX instructions reach them.
     """
 
-    __slots__ = ("_vectors", "_xread", "_xwrite", "ram", "sp")
+    __slots__ = ("_xread", "_xwrite", "ram", "sp", "vectors")
 
     def __init__(self) -> None:
         self.ram = bytearray(RAM_SIZE)
         self.sp = SP_RESET
-        self._vectors: dict[int, Callable[[], None]] = {}
+        #: The interrupt vector table: vector address -> handler (see :meth:`set_vector`).
+        self.vectors: dict[int, Callable[[], None]] = {}
         self._xread: dict[int, Reader] = {}
         self._xwrite: dict[int, Writer] = {}
 
@@ -184,15 +185,15 @@ class I8031:
         """Install ``handler`` at an interrupt vector (VECTOR_*)."""
         if vector not in (VECTOR_EXT0, VECTOR_TIMER0, VECTOR_EXT1, VECTOR_SERIAL):
             raise ValueError(f"{vector:04X} is not an 8031 interrupt vector")
-        self._vectors[vector] = handler
+        self.vectors[vector] = handler
 
     def handler(self, vector: int) -> Callable[[], None] | None:
         """The handler installed at ``vector``, if any."""
-        return self._vectors.get(vector)
+        return self.vectors.get(vector)
 
     def interrupt(self, vector: int) -> None:
         """Raise an interrupt: run the handler at ``vector`` (none installed: ignored)."""
-        h = self._vectors.get(vector)
+        h = self.vectors.get(vector)
         if h is not None:
             h()
 

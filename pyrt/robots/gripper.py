@@ -24,8 +24,10 @@ the drive bit in the same tick.
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Generator
 from dataclasses import dataclass
+from typing import Any
 
 from pyrt.boards.gripper import (
     DAC,
@@ -108,12 +110,14 @@ MODE_8155 = 0x00
 #: before they believe the stopped bit (002: a stale stopped bit at the
 #: start aborts the initialization; a large WTCHJWSPD still does, as 002 says).
 START_GRACE = 4
+START_GRACE_NS = 16_000_000
 #: Upper bound on any foreground drive, in queue checks (60 s at the defaults).
 MAX_DRIVE_CHECKS = 15000
 #: SP while the command loop runs (main called it) and inside the monitor.
 SP_CMDLOOP = SP_RESET + 2
 SP_MONITOR = SP_RESET + 4
 
+_ENC16 = ENCODER_CNT // 2
 _MASK_STOPPED = 1 << STOPPED
 _MASK_DRVON = 1 << DRVON
 _MASK_DOJOG = 1 << DOJOG
@@ -142,6 +146,10 @@ class GripperController:
     def __init__(self, cpu: I8031, name: str = "gripper", stall_limit_ns: int = 1_000_000_000):
         self.cpu = cpu
         self.ram = cpu.ram
+        # the RAM's even-addressed words, for the encoder interrupt handlers
+        self._w16: Any = (
+            memoryview(self.ram).cast("H") if sys.byteorder == "little" else _Words(self.ram)
+        )
         self.stall_limit_ns = int(stall_limit_ns)
         self.queue = ReadyQueue(
             capacity=6,
@@ -239,18 +247,14 @@ class GripperController:
 
     def encoder_up(self) -> None:
         """External request 0: one encoder count up."""
-        ram = self.ram
-        w = (ram[ENCODER_CNT] | (ram[ENCODER_CNT + 1] << 8)) + 1
-        ram[ENCODER_CNT] = w & 0xFF
-        ram[ENCODER_CNT + 1] = (w >> 8) & 0xFF
+        w = self._w16
+        w[_ENC16] = (w[_ENC16] + 1) & 0xFFFF
         self._pulses += 1
 
     def encoder_down(self) -> None:
         """External request 1: one encoder count down."""
-        ram = self.ram
-        w = (ram[ENCODER_CNT] | (ram[ENCODER_CNT + 1] << 8)) - 1
-        ram[ENCODER_CNT] = w & 0xFF
-        ram[ENCODER_CNT + 1] = (w >> 8) & 0xFF
+        w = self._w16
+        w[_ENC16] = (w[_ENC16] - 1) & 0xFFFF
         self._pulses += 1
 
     # -- the self-scheduling routines ------------------------------------------------
@@ -431,6 +435,15 @@ class GripperController:
         yield from self._wait(ram[SENSORPD] + 1)
         return (yield from self._fullopen())
 
+    def _grace(self) -> int:
+        """START_GRACE queue checks, but never less than START_GRACE_NS of loop time
+        (a faster tick than 1 ms would otherwise end the grace before the motor
+        is up to speed)."""
+        per_check = self._loop.period_ns * (self.ram[SYSCLKPD] or 256) if self._loop else 0
+        if per_check <= 0:
+            return START_GRACE
+        return min(255, max(START_GRACE, -(-START_GRACE_NS // per_check)))
+
     def _limit(self) -> bool:
         return not self.ram[OTHER] & _MASK_LIMIT
 
@@ -442,7 +455,7 @@ class GripperController:
         ram = self.ram
         if not self._limit():
             self.drive(ram[MXPJSPD])
-            yield from self._wait(START_GRACE)
+            yield from self._wait(self._grace())
             for _ in range(MAX_DRIVE_CHECKS):
                 yield from self._wait(1)
                 if self._limit():
@@ -479,7 +492,7 @@ class GripperController:
             return first
         ram = self.ram
         self.drive(ram[MXNJSPD])
-        yield from self._wait(START_GRACE)
+        yield from self._wait(self._grace())
         for _ in range(MAX_DRIVE_CHECKS):
             yield from self._wait(1)
             if self._stopped():
@@ -597,3 +610,17 @@ class GripperController:
     def acknowledge(self) -> None:
         """Clear a fault: the routines are restarted, nothing moves."""
         self.queue.acknowledge(restart=True)
+
+
+class _Words:  # pragma: no cover - big-endian hosts only
+    """The RAM as little-endian words (index = address / 2) on a big-endian host."""
+
+    def __init__(self, ram: bytearray):
+        self._ram = ram
+
+    def __getitem__(self, i: int) -> int:
+        return self._ram[2 * i] | (self._ram[2 * i + 1] << 8)
+
+    def __setitem__(self, i: int, v: int) -> None:
+        self._ram[2 * i] = v & 0xFF
+        self._ram[2 * i + 1] = (v >> 8) & 0xFF

@@ -92,7 +92,16 @@ class JawPlant:
         self.v = 0.0
         self._enc = int(self.x // 1)
         self.object_mm: float | None = None
-        self._touch = 0.0
+        self._touch = float("-inf")
+        p = self.p
+        self._k = (
+            p.deadband, p.gain, p.tau, p.k_open, p.closed, p.k_closed, p.k_object,
+            p.max_open_overtravel, -p.closed - p.max_closed_overtravel,
+        )
+        #: Below this position the limit sensor cannot fire.
+        self._quiet_below = -p.limit_band - 2.0
+        #: True while the ports last read all-off with no object and nothing stuck.
+        self._quiet = False
         self.faults: set[str] = set()
         self.stuck: dict[str, int] = {}
         self._jam = False
@@ -123,6 +132,8 @@ class JawPlant:
                     f"{self.p.opening_mm(self.x):.1f} mm"
                 )
             self._touch = touch
+        else:
+            self._touch = float("-inf")
         self.object_mm = width_mm
         self._dirty = True
 
@@ -195,42 +206,39 @@ class JawPlant:
         dt = (now_ns - last) * 1e-9
         if dt <= 0.0:
             return
-        p = self.p
+        deadband, gain, tau, k_open, closed, k_closed, k_object, x_max, x_min = self._k
         x = self.x
         if self._jam:
             v = 0.0
         else:
-            a = (u if u > 0 else -u) - p.deadband
+            a = (u if u > 0 else -u) - deadband
             if a <= 0:
                 drive = 0.0
             else:
                 drive = float(a)
                 if u > 0:
                     if x > 0.0:
-                        drive -= p.k_open * x
+                        drive -= k_open * x
                 else:
-                    resist = 0.0
-                    if x < -p.closed:
-                        resist += p.k_closed * (-p.closed - x)
-                    if self.object_mm is not None and x < self._touch:
-                        resist += p.k_object * (self._touch - x)
-                    drive -= resist
+                    if x < -closed:
+                        drive -= k_closed * (-closed - x)
+                    if x < self._touch:  # -inf without an object
+                        drive -= k_object * (self._touch - x)
                 if drive < 0.0:
                     drive = 0.0  # a worm drive is not back-driven
                 if u < 0:
                     drive = -drive
-            v_target = p.gain * drive
-            k = dt / p.tau
+            v_target = gain * drive
+            k = dt / tau
             v += (v_target - v) * (k if k < 1.0 else 1.0)
             if -0.5 < v < 0.5 and v_target == 0.0:
                 v = 0.0
         x += v * dt
-        if x > p.max_open_overtravel:
-            x = p.max_open_overtravel
+        if x > x_max:
+            x = x_max
             v = 0.0
-        lo = -p.closed - p.max_closed_overtravel
-        if x < lo:
-            x = lo
+        elif x < x_min:
+            x = x_min
             v = 0.0
         self.x = x
         self.v = v
@@ -240,7 +248,10 @@ class JawPlant:
             self._enc = enc
             if not self._encoder_dead:
                 self.board.encoder(d)
-            self._sense()
+            # far from the limit band with nothing else to sense, the ports
+            # read all-off: write them only when that may have changed
+            if x >= self._quiet_below or self._dirty or not self._quiet:
+                self._sense()
         elif self._dirty:
             self._sense()
 
@@ -268,6 +279,9 @@ class JawPlant:
             other = self.stuck.get("2E", other)
         self.board.pa = prox & 0xFF
         self.board.pb = other & 0xFF
+        self._quiet = (
+            prox == 0xFF and other == 0xFF and self.object_mm is None and not self.stuck
+        )
 
     def status(self) -> str:
         """One line: position, opening, velocity, current, object, jog, faults."""

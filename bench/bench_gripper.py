@@ -1,0 +1,87 @@
+"""Gripper benchmarks: the whole `pyrt gripper --speed max` stack, idle and during P moves.
+
+Run: ``python -m pytest bench/bench_gripper.py --benchmark-only -s``.
+Each benchmark reports, in ``extra_info`` and on stdout, the simulated
+seconds per wall second (target: at least 200x real time at the 1 ms tick)
+and the wall-clock µs per tick.  The stack is the one the CLI builds: the
+jaw plant, the controller (ready queue in RAM + stall watchdog) and the
+runner's mailbox, on a SimClock.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from pyrt.boards.gripper import SimGripperBoard
+from pyrt.boards.i8031 import I8031
+from pyrt.robots.gripper import GripperController
+from pyrt.scheduler import Loop, SimClock
+from pyrt.scheduler.runner import Runner
+from pyrt.sim.gripper import JawPlant
+
+TARGET_RATIO = 200.0
+
+
+def make_stack(tick_us: int = 1000):
+    cpu = I8031()
+    board = SimGripperBoard(cpu)
+    plant = JawPlant(board)
+    loop = Loop(SimClock(), period_ns=tick_us * 1000, timing=True)
+    ctl = GripperController(cpu)
+    loop.attach(plant.step, name="jaws")
+    ctl.attach(loop)
+    ctl.power_up()
+    runner = Runner(loop)
+    runner.start()
+    job = runner.call(ctl.start_init)
+    assert runner.wait_until(lambda: job.done, 60.0) and job.value().ok
+    return runner, ctl, loop
+
+
+def report(benchmark, sim_s: float, ticks: int, label: str) -> None:
+    """Ratios from the best round (the machine is shared: the best is the code's
+    own cost) and from the mean."""
+    best, mean = benchmark.stats.stats.min, benchmark.stats.stats.mean
+    ratio, ratio_mean = sim_s / best, sim_s / mean
+    us_tick = best / ticks * 1e6
+    benchmark.extra_info.update(
+        sim_s_per_wall_s=round(ratio, 1),
+        sim_s_per_wall_s_mean=round(ratio_mean, 1),
+        us_per_tick=round(us_tick, 3),
+        target_ratio=TARGET_RATIO,
+    )
+    print(
+        f"\n{label}: {ratio:.0f}x real time best, {ratio_mean:.0f}x mean "
+        f"({us_tick:.2f} µs per tick; target {TARGET_RATIO:g}x)"
+    )
+
+
+@pytest.mark.benchmark(group="gripper")
+@pytest.mark.parametrize("tick_us", [1000, 250])
+def test_gripper_idle(benchmark, tick_us):
+    """Idle gripper (three routines, plant at rest): 5 s of simulated time per round."""
+    runner, _ctl, _loop = make_stack(tick_us)
+    seconds = 5.0
+    benchmark.pedantic(runner.sleep, args=(seconds,), rounds=7, iterations=1)
+    report(benchmark, seconds, int(seconds * 1e6 / tick_us), f"idle, tick {tick_us} µs")
+    runner.stop()
+
+
+@pytest.mark.benchmark(group="gripper")
+def test_gripper_p_move(benchmark):
+    """A P move closed (D600) and back open: simulated time of both moves per round."""
+    runner, ctl, loop = make_stack()
+    sim = {"ns": 0, "ticks": 0}
+
+    def moves() -> None:
+        t0, k0 = loop.now_ns, loop.tick_index
+        for target in (-0x2A00, 0):
+            runner.call(ctl.move, target)
+            assert runner.wait_until(lambda: not ctl.moving, 60.0)
+        sim["ns"] += loop.now_ns - t0
+        sim["ticks"] += loop.tick_index - k0
+
+    rounds = 5
+    benchmark.pedantic(moves, rounds=rounds, iterations=1)
+    report(benchmark, sim["ns"] / rounds / 1e9, sim["ticks"] // rounds, "P D600 and back")
+    runner.stop()
