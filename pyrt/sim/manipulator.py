@@ -185,6 +185,7 @@ class _RopeState:
     loadcell: str = "ok"  # ok | dead | stuck
     stuck_code: int = 0
     intact: bool = True
+    first: bool = True
     dir_bit: tuple[int, int] = (0, 0)
     awo_bit: tuple[int, int] = (1, 0)
     steps: int = field(default=0)
@@ -213,6 +214,9 @@ class ManipulatorPlant:
         self.dc = dc
         self.imp = imperfections if imperfections is not None else Imperfections()
         self._rng = random.Random(self.imp.seed)
+        self._np_rng = np.random.default_rng(self.imp.seed)
+        self._noise_block: list[float] = []
+        self._noise_i = 0
         for r in rig.ropes:
             check_channel(r.channel)
         n = len(rig.ropes)
@@ -354,10 +358,21 @@ class ManipulatorPlant:
                 dc.plant_add_counts(st.rig.encoder_address, whole - st.counted)
                 st.counted = whole
 
+    def _noise(self) -> float:
+        """The next standard-normal sample (drawn in seeded blocks: cheap per call)."""
+        i = self._noise_i
+        if i >= len(self._noise_block):
+            self._noise_block = self._np_rng.standard_normal(4096).tolist()
+            i = 0
+        self._noise_i = i + 1
+        return self._noise_block[i]
+
     def _write_sensors(self) -> None:
         dc = self.dc
         imp = self.imp
-        rng = self._rng
+        sigma = imp.loadcell_noise
+        simple = imp.bias_resistor
+        nl4 = 4.0 * imp.loadcell_nonlinearity
         tensions = self.solver.tensions()
         for st, t in zip(self.ropes, tensions, strict=True):
             r = st.rig
@@ -366,13 +381,26 @@ class ManipulatorPlant:
             elif st.loadcell == "stuck":
                 code = st.stuck_code
             else:
-                load = loadcell_response(t, r.loadcell_maxload, imp) + st.zero_error
-                if imp.loadcell_noise:
-                    load += rng.gauss(0.0, imp.loadcell_noise)
+                if simple:
+                    m = r.loadcell_maxload
+                    f = t / m if m > 0 else 0.0
+                    f = 0.0 if f < 0.0 else (1.0 if f > 1.0 else f)
+                    load = t + nl4 * m * f * (1.0 - f)
+                else:
+                    load = loadcell_response(t, r.loadcell_maxload, imp)
+                load += st.zero_error
+                if sigma:
+                    load += sigma * self._noise()
                 code = round((load - r.loadcell_offset) / r.loadcell_slope)
                 code = 0 if code < 0 else (ADC_MAX if code > ADC_MAX else code)
-            st.stuck_code = code
-            dc.plant_set_adc(r.adc_channel, code)
+            if code != st.stuck_code or st.first:
+                st.first = False
+                st.stuck_code = code
+                dc.plant_set_adc(r.adc_channel, code)
+
+    def invalidate(self) -> None:
+        """Solve the statics again at the next step even if no rope moved."""
+        self._dirty = True
 
     # -- truth -------------------------------------------------------------------
 
