@@ -181,3 +181,12 @@ def test_help_lists_each_level(session):
     assert session("help P")[0].startswith("error:")  # P is not a monitor letter
     session("Q")
     assert session("help P")[0].startswith("P target")
+
+
+def test_wait_with_the_clock_off_says_so(session):
+    """P with the clock interrupt off: wait explains instead of waiting in vain."""
+    session("M", "I", "Q")
+    lines = session("P -100", "wait")
+    assert lines[-1].startswith("the clock interrupt is OFF")
+    session("M", "I", "Q")
+    assert session("wait")[0].startswith("stopped")

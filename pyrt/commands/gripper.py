@@ -392,8 +392,12 @@ class GripperShell(CommandShell):
         if arg.strip():
             timeout = _parse_seconds(arg, "wait")
         ctl = self.ctl
-        if not self.runner.call(lambda: ctl.moving or ctl.busy):
+        active, clock = self.runner.call(lambda: (ctl.moving or ctl.busy, ctl.clock_enabled))
+        if not active:
             self.say("nothing to wait for: jaws idle")
+            return
+        if not clock:
+            self.say("the clock interrupt is OFF (monitor I): the move cannot end; M, I: on")
             return
         if not self.runner.wait_until(lambda: not (ctl.moving or ctl.busy), timeout):
             self.say(f"still moving after {timeout:g} s")
