@@ -344,6 +344,15 @@ def test_buoyancy_only_when_submerged(proto):
     assert p_dry.weight == pytest.approx(MASS * GRAVITY)
 
 
+def test_station_source_is_buoyant_below_the_neck():
+    """By default the vessel is full to the neck ring: the SNO source (1000 cm3) is buoyed."""
+    sno = load_station(station_directory("sno"))
+    plant, _, _ = _plant(sno)
+    assert plant.rig.liquid_level == pytest.approx(595.8)
+    assert plant.weight == pytest.approx((sno.polyaxis().source_mass - 1.10) * GRAVITY)
+    assert sum(plant.tensions()) > 0
+
+
 def test_five_rope_station_settles(proto):
     """The full-scale station's source hangs at its database position with taut ropes."""
     sno = load_station(station_directory("sno"))

@@ -112,7 +112,7 @@ def rig_from_station(
     *,
     vessel_position: Sequence[float] | None = None,
     vessel_orientation: Sequence[float] | None = None,
-    liquid_level: float | None = None,
+    liquid_level: float | str | None = "neck",
     position: Sequence[float] | None = None,
 ) -> ManipulatorRig:
     """The world described by a :class:`pyrt.db.Station`'s records.
@@ -122,6 +122,10 @@ def rig_from_station(
     Bottom attachments and the neck ring are carried with the vessel
     (000, section 20).  The source starts at the POLYAXIS POSITION unless
     ``position`` is given.
+
+    ``liquid_level``: the z of the D2O surface; the default ``"neck"`` fills
+    the vessel up to the neck ring (000, Table 1: a source in air is given
+    volume 0, so a source with a volume is in the D2O); ``None``: no liquid.
     """
     pa = station.polyaxis(polyaxis)
     av = station.av_of(pa)
@@ -158,6 +162,10 @@ def rig_from_station(
     ring = (vtog(av.neck_ring_static_position), tuple(float(a) for a in axis),
             av.neck_ring_radius)
     centre = vtog((0.0, 0.0, 0.0))
+    if liquid_level == "neck":
+        liquid_level = ring[0][2]
+    elif isinstance(liquid_level, str):
+        raise ValueError(f"liquid_level must be a z in cm, None or 'neck', got {liquid_level!r}")
     return ManipulatorRig(
         ropes=tuple(ropes),
         mass=pa.source_mass,
