@@ -11,7 +11,7 @@ from pyrt.db import load_station, station_directory
 from pyrt.devices.motor import STANDBY, VELOCITY_MODE
 from pyrt.errors import CommandError
 from pyrt.robots.av import AV
-from pyrt.robots.axis import POLYAXIS, Axis
+from pyrt.robots.axis import POLYAXIS, Axis, TrackingError
 from pyrt.scheduler import Loop, SimClock
 from pyrt.sim.manipulator import ManipulatorPlant, rig_from_station
 from pyrt.sim.sensors import Imperfections
@@ -221,3 +221,18 @@ def test_bottom_goes_through_vtog(station):
     ax = Axis.from_records("axis1", rec, station, tio, dc, av=av)
     assert ax.bottom == pytest.approx((317.0, 0.0, 99.53))
     assert ax.motor.name == "axis1Motor" and ax.encoder.name == "axis1Encoder"
+
+
+@pytest.mark.parametrize("fault", ["stall", "slip"])
+def test_stall_or_slip_stops_the_axis(station, fault):
+    """When the encoder stops following the motor the axis stops it and raises TrackingError."""
+    r = Rig(station)
+    if fault == "stall":
+        r.plant.inject_stall(0)
+    else:
+        r.plant.inject_slip(0)
+    r.axis.down(10)
+    with pytest.raises(TrackingError, match="stall or encoder slip"):
+        r.loop.run(60_000)
+    assert not r.tio.armed(r.axis.motor.channel)
+    assert r.tio.bit(*_awo(r.axis))

@@ -34,7 +34,7 @@ from pyrt.devices._args import parse_number
 from pyrt.devices.encoder import Encoder
 from pyrt.devices.loadcell import Loadcell
 from pyrt.devices.motor import STEP_MODE, VELOCITY_MODE, Motor
-from pyrt.errors import CommandError, ConfigError
+from pyrt.errors import CommandError, ConfigError, PyrtError
 from pyrt.robots.av import AV
 
 __all__ = [
@@ -45,8 +45,11 @@ __all__ = [
     "LENGTH_WRITE_STATIONARY",
     "POLYAXIS",
     "STANDALONE",
+    "TRACKING_CHECK",
+    "TRACKING_MIN_FRACTION",
     "Axis",
     "AxisSample",
+    "TrackingError",
 ]
 
 #: 000, section 6: within 1 cm of the end the Motor finishes on its own.
@@ -57,6 +60,12 @@ LENGTH_WRITE_STATIONARY = 10.0
 #: Samples kept for the damping rules' rates of change.
 HISTORY = 16
 
+#: Every TRACKING_CHECK cm of motor travel the encoder must have seen at least
+#: TRACKING_MIN_FRACTION of it, in the same sense; otherwise the motor has
+#: stalled or the encoder shaft slips (000, section 3) and the axis stops.
+TRACKING_CHECK = 2.0
+TRACKING_MIN_FRACTION = 0.5
+
 STANDALONE = "standalone"
 POLYAXIS = "polyaxis"
 
@@ -65,6 +74,14 @@ COMMANDS: dict[str, int] = {
     "up": 1, "down": 1, "to": 1, "calibrate": 0, "point": 1, "maxspeed": 1, "zero": 0,
     "stop": 0,
 }
+
+
+class TrackingError(PyrtError):
+    """The encoder does not follow the motor: a stalled motor or a slipping encoder.
+
+    Raised from :meth:`Axis.poll` after the motor has been stopped, so the
+    control loop turns it into a fault (every motor of the robot stopped).
+    """
 
 
 @dataclass(frozen=True)
@@ -132,6 +149,7 @@ class Axis:
         self._last_write: float | None = None
         self._written: float | None = None
         self._moving_since_write = False
+        self._track_reset()
 
     @classmethod
     def from_records(cls, name: str, record, station, tio10: TIO10, dc: DataConcentrator,
@@ -283,6 +301,7 @@ class Axis:
         """``zero``: reset the encoder counter."""
         self._standalone("zero")
         self.encoder.reset()
+        self._track_reset()
 
     def stop(self) -> None:
         """``stop``: stop the motor (windings off); accepted in any mode."""
@@ -344,10 +363,32 @@ class Axis:
             self.history.append(AxisSample(now_s, length, self.loadcell.tension(),
                                            self.error_length, self.error_tension, m.velocity))
         m.poll()
+        self._track()
         if self.mode == STANDALONE and self.target is not None and not m.running:
             self.target = None
         self.encoder.poll(now_s)
         self._write_back(now_s, length)
+
+    def _track_reset(self) -> None:
+        self._track_steps = self.motor.position_steps
+        self._track_count = self.encoder.count()
+
+    def _track(self) -> None:
+        m = self.motor
+        moved = (m.position_steps - self._track_steps) / m.steps_per_cm
+        if abs(moved) < TRACKING_CHECK:
+            return
+        count = self.encoder.count()
+        seen = (count - self._track_count) * self.encoder.slope
+        self._track_steps = m.position_steps
+        self._track_count = count
+        if seen * moved <= 0 or abs(seen) < TRACKING_MIN_FRACTION * abs(moved):
+            m.stop()
+            self.target = None
+            raise TrackingError(
+                f"{self.name}: the motor moved {moved:+.2f} cm but the encoder saw "
+                f"{seen:+.2f} cm: motor stall or encoder slip; motor stopped"
+            )
 
     def _write_back(self, now_s: float, length: float) -> None:
         if self.persist is None:
