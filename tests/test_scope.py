@@ -201,3 +201,16 @@ def test_spew_hands_values_at_a_fixed_rate():
     assert len(got) == 100
     assert all(b[0] - a[0] == 10_000_000 for a, b in itertools.pairwise(got))
     assert got[0][1] == (1.0,)
+
+
+def test_a_channel_that_stops_reading_as_a_number_stops_the_scope_not_the_loop():
+    """If a channel's value turns into something that is not a number, the scope stops with a reason."""
+    loop, sig, scope = rig(capacity=100)
+    sig.extra = 1.0
+    scope.add("extra", Source.attr(sig, "extra"))
+    scope.run("roll")
+    loop.run(10)
+    sig.extra = None
+    loop.run(10)
+    assert scope.state == "stopped" and "sampling stopped" in scope.status()
+    assert scope.read().data.shape == (10, 3)

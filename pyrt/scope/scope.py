@@ -20,14 +20,13 @@ other method is for the application, through the runner's mailbox.
 
 from __future__ import annotations
 
-import array
-from collections.abc import Callable
+import struct
 from dataclasses import dataclass
 
 import numpy as np
 
 from pyrt.errors import CommandError
-from pyrt.scope.sources import Source, compile_sources
+from pyrt.scope.sources import Source, compile_sampler, compile_sources
 
 __all__ = ["Frame", "Scope", "Trigger"]
 
@@ -88,7 +87,7 @@ class Scope:
         self.every = every
         self._names: list[str] = []
         self._sources: list[Source] = []
-        self._read: Callable[[], tuple] = compile_sources([])
+        self.error: str | None = None
         self.trigger: Trigger | None = None
         self.mode = "normal"
         self.state = "stopped"
@@ -129,7 +128,6 @@ class Scope:
             raise CommandError(f"channel {name!r} does not read as a number: {exc}") from None
         self._names.append(name)
         self._sources.append(source)
-        self._read = getter
         self._restart()
 
     def remove(self, name: str) -> None:
@@ -139,7 +137,6 @@ class Scope:
         i = self._names.index(name)
         del self._names[i]
         del self._sources[i]
-        self._read = compile_sources(self._sources)
         if self.trigger is not None and self.trigger.channel == name:
             self.trigger = None
         self._restart()
@@ -171,6 +168,7 @@ class Scope:
         if self.mode in ("normal", "single") and self.trigger is None:
             raise CommandError(f"{self.mode} mode needs a trigger: 'scope trigger CH LEVEL'")
         self._reset_buffers()
+        self.error = None
         self.state = "rolling" if self.mode == "roll" else "armed"
 
     def single(self) -> None:
@@ -190,13 +188,17 @@ class Scope:
             self.state = "rolling" if self.mode == "roll" else "armed"
 
     def _reset_buffers(self) -> None:
-        n = max(1, len(getattr(self, "_names", [])))
+        n = max(1, len(self._names))
         size = self.capacity + _STAGE
         self._ring = np.zeros((size, n), dtype=np.float64)
         self._ring_t = np.zeros(size, dtype=np.int64)
         self._g = 0  # samples taken since the buffers were reset
-        self._stage = array.array("d")
-        self._stage_t = array.array("q")
+        nch = len(self._sources)
+        packer = struct.Struct("<q" + "d" * nch)
+        self._row = packer.size
+        self._dtype = np.dtype([("t", "<i8"), ("v", "<f8", (nch,))])
+        self._stage = bytearray(packer.size * _STAGE)
+        self._sampler = compile_sampler(self._sources, packer.pack_into)
         self._staged = 0
         self._arm_g = 0
         self._trig_g: int | None = None
@@ -205,16 +207,30 @@ class Scope:
 
     # -- the loop side -------------------------------------------------------
 
+    @property
+    def state(self) -> str:
+        """stopped, armed, triggered, done (single frame captured) or rolling."""
+        return self._state
+
+    @state.setter
+    def state(self, value: str) -> None:
+        self._state = value
+        self._acquiring = value not in ("stopped", "done")
+
     def sample(self, now_ns: int) -> None:
         """Loop handler: take a sample every ``every`` ticks while acquiring."""
-        if self.state == "stopped" or self.state == "done":
+        if not self._acquiring:
             return
         self._countdown -= 1
         if self._countdown:
             return
         self._countdown = self._every
-        self._stage.extend(self._read())
-        self._stage_t.append(now_ns)
+        try:
+            self._sampler(self._stage, self._staged * self._row, now_ns)
+        except Exception as exc:  # a channel stopped reading as a number
+            self.error = f"sampling stopped: {type(exc).__name__}: {exc}"
+            self.state = "stopped"
+            return
         self._staged += 1
         if self._staged >= _STAGE:
             self._flush()
@@ -224,18 +240,21 @@ class Scope:
         if not n:
             return
         nch = len(self._names)
-        block = np.frombuffer(self._stage, dtype=np.float64).reshape(n, nch)
-        tblock = np.frombuffer(self._stage_t, dtype=np.int64)
+        rec = np.frombuffer(self._stage, dtype=self._dtype, count=n)
+        block = rec["v"].reshape(n, nch)
+        tblock = rec["t"]
         size = self._ring.shape[0]
         g0 = self._g
-        pos = (g0 + np.arange(n)) % size
-        self._ring[pos, :nch] = block
-        self._ring_t[pos] = tblock
+        start = g0 % size
+        first = min(n, size - start)  # the stage never exceeds the ring's margin
+        self._ring[start : start + first, :nch] = block[:first]
+        self._ring_t[start : start + first] = tblock[:first]
+        if first < n:
+            self._ring[: n - first, :nch] = block[first:]
+            self._ring_t[: n - first] = tblock[first:]
         self._g = g0 + n
         if self.state in ("armed", "triggered"):
             self._scan(block, g0)
-        self._stage = array.array("d")
-        self._stage_t = array.array("q")
         self._staged = 0
 
     def _scan(self, block: np.ndarray, g0: int) -> None:
@@ -331,8 +350,9 @@ class Scope:
         if self.trigger is not None:
             t = self.trigger
             trig = f"{t.channel} {t.edge} {t.level:g} pre {t.pre:g}"
-        return (
+        line = (
             f"scope {self.state} ({self.mode}), every {self.every} tick(s), "
             f"{self.capacity} samples, channels: {', '.join(self._names) or '-'}; "
             f"trigger: {trig}; frames: {self.frames}"
         )
+        return line + (f"; {self.error}" if self.error else "")

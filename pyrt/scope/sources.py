@@ -14,7 +14,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["Source", "compile_sources"]
+__all__ = ["Source", "compile_sampler", "compile_sources"]
 
 
 @dataclass(frozen=True)
@@ -85,3 +85,20 @@ def compile_sources(sources: Sequence[Source]) -> Callable[[], tuple]:
     # The code is built only from validated identifiers and integers.
     exec(compile(code, "<pyrt scope sources>", "exec"), namespace)
     return namespace["read"]
+
+
+def compile_sampler(sources: Sequence[Source], pack_into: Callable[..., None]) -> Callable:
+    """One function ``sample(buf, offset, now_ns)`` that packs the time and every
+    source's value straight into ``buf`` with ``pack_into`` (a ``struct.Struct``
+    method for ``"<q" + "d" * len(sources)``): one C call, no tuple built."""
+    params = "".join(f", o{i}=o{i}" for i in range(len(sources)))
+    values = "".join(f", {_expr(i, s)}" for i, s in enumerate(sources))
+    code = (
+        f"def sample(buf, offset, now_ns, pack_into=pack_into{params}):\n"
+        f"    pack_into(buf, offset, now_ns{values})\n"
+    )
+    namespace: dict[str, Any] = {f"o{i}": s.obj for i, s in enumerate(sources)}
+    namespace["pack_into"] = pack_into
+    # The code is built only from validated identifiers and integers.
+    exec(compile(code, "<pyrt scope sampler>", "exec"), namespace)
+    return namespace["sample"]
