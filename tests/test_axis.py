@@ -155,6 +155,13 @@ def test_polyaxis_hooks(station):
     assert len(ax.history) == 16
     assert ax.history[-1].error_length == 0.5
     assert ax.motor.velocity == -1.0
+    assert ax.error_rates() == (0.0, 0.0)  # errors held constant
+    ax.set_errors(1.5, -2.0)
+    r.loop.run(1)
+    rate_l, rate_t = ax.error_rates()
+    assert rate_l == pytest.approx(1.0 / 0.015)
+    assert rate_t == 0.0
+    assert ax.last_dv() == 0.0
     ax.stop()
     assert not r.tio.armed(ax.motor.channel)
     ax.polyDeactivate()

@@ -341,6 +341,23 @@ class Axis:
             raise CommandError(f"{self.name}: set_velocity needs PolyAxis control")
         self.motor.set_desired_velocity(v)
 
+    def error_rates(self) -> tuple[float, float]:
+        """(errorLengthVelocity cm/s, errorTensionVelocity N/s) over the kept history:
+        the damping rules' inputs (0 until two samples a poll apart exist)."""
+        h = self.history
+        if len(h) < 2:
+            return 0.0, 0.0
+        a, b = h[0], h[-1]
+        dt = b.time - a.time
+        if dt <= 0:
+            return 0.0, 0.0
+        return (b.error_length - a.error_length) / dt, (b.error_tension - a.error_tension) / dt
+
+    def last_dv(self) -> float:
+        """The velocity change of the last poll (cm/s): the ``dv`` rule's input."""
+        h = self.history
+        return h[-1].velocity - h[-2].velocity if len(h) >= 2 else 0.0
+
     def change_velocity(self, dv: float) -> None:
         if self.motor.mode != VELOCITY_MODE:
             raise CommandError(f"{self.name}: change_velocity needs PolyAxis control")
