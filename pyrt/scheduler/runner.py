@@ -172,17 +172,25 @@ class Runner:
     # -- the mailbox (application side) --------------------------------------
 
     def call(
-        self, fn: Callable[..., Any], *args: Any, timeout_s: float = 1.0, name: str = ""
+        self,
+        fn: Callable[..., Any],
+        *args: Any,
+        timeout_s: float = 1.0,
+        name: str = "",
+        take_fault: bool = True,
     ) -> Any:
         """Run ``fn(*args)`` in the loop at its next tick and return the result.
 
         A pending fault is raised first, as :class:`FaultError`, and the
         command is not sent.  :class:`MailboxTimeout` if the loop does not
         take the command within ``timeout_s`` (of loop time on a SimClock).
-        Exceptions raised by ``fn`` propagate to the caller.
+        Exceptions raised by ``fn`` propagate to the caller.  An observer
+        that must not consume the application's fault report (a read-only
+        network client) passes ``take_fault=False``: a pending fault is then
+        left for the next caller that takes it.
         """
         return self._submit(
-            _Request(name or getattr(fn, "__name__", "command"), fn, args), timeout_s
+            _Request(name or getattr(fn, "__name__", "command"), fn, args), timeout_s, take_fault
         )
 
     def poll(self, timeout_s: float = 1.0) -> None:
@@ -207,8 +215,9 @@ class Runner:
             raise MailboxTimeout(f"{name} did not finish within {timeout_s:g} s")
         return job.value()
 
-    def _submit(self, req: _Request, timeout_s: float) -> Any:
-        self._raise_fault()
+    def _submit(self, req: _Request, timeout_s: float, take_fault: bool = True) -> Any:
+        if take_fault:
+            self._raise_fault()
         if self.crashed is not None:
             raise PyrtInternalError(f"the control loop has stopped: {self.crashed!r}")
         with self._lock:
