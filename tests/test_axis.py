@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from pyrt.boards.simboards import SimDataConcentrator, SimTIO10
 from pyrt.db import load_station, station_directory
@@ -243,3 +246,34 @@ def test_stall_or_slip_stops_the_axis(station, fault):
         r.loop.run(60_000)
     assert not r.tio.armed(r.axis.motor.channel)
     assert r.tio.bit(*_awo(r.axis))
+
+
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(text=st.text(max_size=12))
+def test_any_up_argument_is_a_distance_or_refused(station, text):
+    """Whatever text `up` is given, it is a finite distance >= 0 or a CommandError that
+    touches no register."""
+    r = _shared_rig(station)
+    r.axis.stop()
+    writes = r.tio.writes
+    try:
+        value = float(text)
+    except ValueError:
+        value = None
+    try:
+        r.axis.up(text)
+    except CommandError:
+        assert r.tio.writes == writes
+        assert not r.tio.armed(r.axis.motor.channel)
+        return
+    assert value is not None and math.isfinite(value) and value >= 0
+
+
+_RIGS: dict[int, Rig] = {}
+
+
+def _shared_rig(station) -> Rig:
+    rig = _RIGS.get(id(station))
+    if rig is None:
+        rig = _RIGS[id(station)] = Rig(station)
+    return rig
