@@ -28,6 +28,9 @@ from pyrt.sim.gripper import FAULTS, JawParameters, JawPlant
 
 __all__ = ["add_parser", "run"]
 
+#: Wall-clock seconds between overrun reports on the console.
+WARN_EVERY_S = 10.0
+
 
 def _counts(text: str) -> int:
     """A start position: hex counts, two's complement (F400) or negative (-0C00)."""
@@ -82,10 +85,21 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(str(exc)) from None
     apply_rt_options(args, lambda m: print(m, file=out))
     posted: list[Runner] = []
+    quiet = {"until": 0.0, "held": 0}
 
     def warn(line: str) -> None:
-        if posted:
-            posted[0].post(line)
+        # overrun summaries go to the console at most every WARN_EVERY_S of
+        # wall time, so that an operator is told without being flooded
+        now = time.monotonic()
+        if not posted:
+            return
+        if now < quiet["until"]:
+            quiet["held"] += 1
+            return
+        held = quiet["held"]
+        quiet.update(until=now + WARN_EVERY_S, held=0)
+        more = f" (+{held} earlier reports held back; 'stats' has the totals)" if held else ""
+        posted[0].post(line + more)
 
     loop = make_loop(args, warn=warn)
     ctl = GripperController(cpu)
