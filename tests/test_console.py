@@ -82,3 +82,27 @@ def test_input_fallback_without_prompt_toolkit(monkeypatch):
     console = Console(shell, io.StringIO(), out, messages=lambda: [])
     assert console._run_input() == 0
     assert shell.seen == ["a", "b"] and prompts == ["A> "] * 3
+
+
+def test_ctrl_c_on_a_terminal_abandons_the_command_only(monkeypatch):
+    """KeyboardInterrupt inside a command prints 'interrupted' and the session goes on."""
+    out = io.StringIO()
+
+    class Slow(Echo):
+        def onecmd(self, line):
+            if line == "wait":
+                raise KeyboardInterrupt
+            return super().onecmd(line)
+
+    shell = Slow(out)
+    feed = iter(["wait", "after"])
+
+    def fake_input(prompt):
+        try:
+            return next(feed)
+        except StopIteration:
+            raise EOFError from None
+
+    monkeypatch.setattr("builtins.input", fake_input)
+    Console(shell, io.StringIO(), out)._run_input()
+    assert "interrupted" in out.getvalue() and shell.seen == ["after"]

@@ -132,7 +132,7 @@ class Console:
                         continue
                     except EOFError:
                         break
-                    if self.shell.onecmd(line):
+                    if self._onecmd_interruptible(line, proxy):
                         break
             finally:
                 stop.set()
@@ -154,7 +154,15 @@ class Console:
             except EOFError:
                 self.stdout.write("\n")
                 break
-            if self.shell.onecmd(line):
+            if self._onecmd_interruptible(line, self.stdout):
                 break
         self.flush_messages()
         return 0
+
+    def _onecmd_interruptible(self, line: str, out: TextIO) -> bool:
+        """Run a line; Ctrl-C abandons the command (a wait, say) and keeps the session."""
+        try:
+            return self.shell.onecmd(line)
+        except KeyboardInterrupt:
+            out.write("interrupted\n")
+            return False
