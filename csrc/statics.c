@@ -45,12 +45,13 @@ static void add_outer(double *h, const double *a, const double *b, double w)
 }
 
 /*
- * The top segment from the carriage pulley q up to the top pulley t, over
- * the neck ring when the straight line would pass outside it.  Writes the
- * segment length, the unit vector from q toward where the rope leaves q,
- * and (h != NULL) adds d2(len)/dq2 to h.
+ * A rope segment from the carriage pulley q to its far end t (the top pulley
+ * or the bottom attachment), over the neck ring when the two ends lie on
+ * opposite sides of the ring plane and the straight line would cross it
+ * outside the ring.  Writes the segment length, the unit vector from q
+ * toward where the rope leaves q, and (h != NULL) adds d2(len)/dq2 to h.
  */
-static int top_segment(const double *ring, const double *t, const double *q,
+static int segment(const double *ring, const double *t, const double *q,
                        double *len, double *u, double *h, int32_t *wrap)
 {
     double d[3];
@@ -69,7 +70,7 @@ static int top_segment(const double *ring, const double *t, const double *q,
         }
         ht = dot3(tc, ax);
         hq = dot3(qc, ax);
-        if (ht > 0.0 && hq < 0.0) {
+        if ((ht > 0.0 && hq < 0.0) || (ht < 0.0 && hq > 0.0)) {
             double s = ht / (ht - hq);
             double r[3], rr;
             double xr;
@@ -188,7 +189,7 @@ static int rope_geometry(const pyrt_statics_problem *p, int32_t i, const double 
     for (k = 0; k < 3; ++k) {
         q[k] = x[k] + (p->offsets != NULL ? p->offsets[3 * i + k] : 0.0);
     }
-    st = top_segment(p->ring, t, q, &lt, ut, hg, wrap);
+    st = segment(p->ring, t, q, &lt, ut, hg, wrap);
     if (st != PYRT_OK) {
         return st;
     }
@@ -197,22 +198,17 @@ static int rope_geometry(const pyrt_statics_problem *p, int32_t i, const double 
         grad[k] = -ut[k];
     }
     if (!isnan(b[0])) {
-        double d[3], db;
+        double ub[3], lb;
+        int32_t wrap_b = 0;
+        st = segment(p->ring, b, q, &lb, ub, hg, &wrap_b);
+        if (st != PYRT_OK) {
+            return st;
+        }
+        *g += lb;
         for (k = 0; k < 3; ++k) {
-            d[k] = b[k] - q[k];
+            grad[k] -= ub[k];
         }
-        db = norm3(d);
-        if (db < MIN_SEGMENT) {
-            return PYRT_EDEGENERATE;
-        }
-        *g += db;
-        for (k = 0; k < 3; ++k) {
-            d[k] /= db;
-            grad[k] -= d[k];
-        }
-        if (hg != NULL) {
-            add_projector(hg, d, 1.0 / db);
-        }
+        *wrap = *wrap || wrap_b;
     }
     return PYRT_OK;
 }

@@ -18,11 +18,12 @@
  *
  *     tension_i = max(0, dead_i + g_i(x) - u_i) / (compliance_i * u_i)
  *
- * so a slack rope carries nothing and never pushes.  When the straight top
- * segment would cross the neck-ring plane outside the ring it bears on the
- * ring instead: frictionless, so the rope takes the shortest path over the
- * ring rim and lies in a plane through a ring radius (000, section 5,
- * neckIntersection()).
+ * so a slack rope carries nothing and never pushes.  When a straight
+ * segment (top pulley to carriage, or carriage to bottom attachment with the
+ * source up in the neck) would cross the neck-ring plane outside the ring it
+ * bears on the ring instead: frictionless, so the rope takes the shortest
+ * path over the ring rim and lies in a plane through a ring radius (000,
+ * section 5, neckIntersection()).
  *
  * The equilibrium minimises the potential energy
  *
@@ -64,7 +65,7 @@
  *   max_iter    iteration limit, >= 1
  *   position    3: the warm start on entry, the equilibrium on exit
  *   tension     n out: rope tensions at the equilibrium
- *   wrapped     n out: 1 when the rope bears on the neck ring
+ *   wrapped     n out: 1 when the rope (either segment) bears on the neck ring
  *   iterations  out: Newton steps taken
  *   residual    out: magnitude of the net force on the source (N), the
  *               floor's reaction excluded

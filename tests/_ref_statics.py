@@ -34,13 +34,14 @@ def _cross(a, b):
 
 
 def top_path(top: Vec, q: Vec, ring) -> tuple[float, Vec, bool]:
-    """Length of the top segment, the point it leaves q toward, whether it wraps."""
+    """Length of a segment from q to its far end ``top``, the point it leaves q toward,
+    whether it wraps over the ring."""
     if ring is not None:
         centre, axis, radius = ring
         axis = _unit(axis)
         ht = _dot(_sub(top, centre), axis)
         hq = _dot(_sub(q, centre), axis)
-        if ht > 0 > hq:
+        if ht > 0 > hq or hq > 0 > ht:
             s = ht / (ht - hq)
             x = tuple(top[k] + s * (q[k] - top[k]) for k in range(3))
             r = _sub(x, centre)
@@ -79,10 +80,11 @@ def rope(top, bottom, offset, x, ring):
     pull = _unit(_sub(leave, q))
     g = lt
     if bottom is not None:
-        d = _sub(bottom, q)
-        g += _norm(d)
-        ub = _unit(d)
+        lb, leave_b, wrapped_b = top_path(bottom, q, ring)
+        g += lb
+        ub = _unit(_sub(leave_b, q))
         pull = tuple(pull[k] + ub[k] for k in range(3))
+        wrapped = wrapped or wrapped_b
     return g, pull, wrapped
 
 
