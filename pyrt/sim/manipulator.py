@@ -8,9 +8,11 @@ before the control tasks) advances by the time that really passed:
 1. every armed motor channel issues pulses at its period (the channel's
    pulse counter counts them); a motor whose windings are on takes a
    half-step per pulse in its direction bit's sense, paying rope out or in;
-2. when any payed-out length changed, the source carriage's static
-   equilibrium is solved again (:class:`pyrt.native.StaticsSolver`, warm
-   started; about a microsecond for five ropes);
+2. when any payed-out length changed (or a rope broke), the source
+   carriage's static equilibrium is solved again
+   (:class:`pyrt.native.StaticsSolver`, warm started from the last one; a
+   few microseconds for five ropes).  Nothing else moves the equilibrium,
+   so a step in which no rope moved keeps the last solution exactly;
 3. the encoders count the rope that passed them and the loadcells' ADCs
    convert the rope tensions, with the imperfections of
    :class:`~pyrt.sim.sensors.Imperfections`.
