@@ -64,11 +64,13 @@ static double toward(const double *p, const double *q, double *u)
 {
     double d0 = q[0] - p[0], d1 = q[1] - p[1], d2 = q[2] - p[2];
     double len = sqrt(d0 * d0 + d1 * d1 + d2 * d2);
+    double inv;
     if (!(len >= MIN_SEGMENT_CM))
         return -1.0;
-    u[0] = d0 / len;
-    u[1] = d1 / len;
-    u[2] = d2 / len;
+    inv = 1.0 / len;
+    u[0] = d0 * inv;
+    u[1] = d1 * inv;
+    u[2] = d2 * inv;
     return len;
 }
 
@@ -181,6 +183,75 @@ int pyrt_findpos_freeze_mask(int32_t n, const double *bottoms, int32_t *freeze)
     return PYRT_OK;
 }
 
+/*
+ * One linearisation at x (Eq. 2 with the directions held fixed): the normal
+ * matrix m (upper triangle: m00 m01 m02 m11 m12 m22) and g = sum a_i r_i,
+ * where r_i = measured - predicted and a_i = ut_i + ub_i is the derivative
+ * of r_i with respect to x, so that r(x + d) = r(x) + a . d.
+ */
+static int linearise(const pyrt_findpos_problem *p, const double *x, double m[6], double g[3])
+{
+    double m00 = 0.0, m01 = 0.0, m02 = 0.0, m11 = 0.0, m12 = 0.0, m22 = 0.0;
+    double g0 = 0.0, g1 = 0.0, g2 = 0.0;
+    int32_t i;
+    for (i = 0; i < p->n; i++) {
+        double a[3], pred, r;
+        int rc = rope_at(p->tops + 3 * i, p->bottoms + 3 * i,
+                         p->offsets != NULL ? p->offsets + 3 * i : NULL, x, &pred, a);
+        if (rc != PYRT_OK)
+            return rc;
+        r = p->lengths[i] - pred;
+        g0 += a[0] * r;
+        g1 += a[1] * r;
+        g2 += a[2] * r;
+        m00 += a[0] * a[0];
+        m01 += a[0] * a[1];
+        m02 += a[0] * a[2];
+        m11 += a[1] * a[1];
+        m12 += a[1] * a[2];
+        m22 += a[2] * a[2];
+    }
+    m[0] = m00; m[1] = m01; m[2] = m02; m[3] = m11; m[4] = m12; m[5] = m22;
+    g[0] = g0; g[1] = g1; g[2] = g2;
+    return PYRT_OK;
+}
+
+/* Distance from p to q, or a negative number below MIN_SEGMENT_CM. */
+static double distance(const double *p, const double *q)
+{
+    double d0 = q[0] - p[0], d1 = q[1] - p[1], d2 = q[2] - p[2];
+    double len = sqrt(d0 * d0 + d1 * d1 + d2 * d2);
+    return len >= MIN_SEGMENT_CM ? len : -1.0;
+}
+
+/* Residuals (measured - predicted) at x and their sum of squares. */
+static int residuals_at(const pyrt_findpos_problem *p, const double *x, double *res, double *ss)
+{
+    double sum = 0.0;
+    int32_t i;
+    for (i = 0; i < p->n; i++) {
+        const double *b = p->bottoms + 3 * i;
+        double c[3], lt, lb = 0.0;
+        c[0] = x[0];
+        c[1] = x[1];
+        c[2] = x[2];
+        if (p->offsets != NULL) {
+            c[0] += p->offsets[3 * i];
+            c[1] += p->offsets[3 * i + 1];
+            c[2] += p->offsets[3 * i + 2];
+        }
+        lt = distance(c, p->tops + 3 * i);
+        if (!isnan(b[0]))
+            lb = distance(c, b);
+        if (lt < 0.0 || lb < 0.0)
+            return PYRT_EDEGENERATE;
+        res[i] = p->lengths[i] - (lt + lb);
+        sum += res[i] * res[i];
+    }
+    *ss = sum;
+    return PYRT_OK;
+}
+
 int pyrt_findpos_solve(pyrt_findpos_problem *p)
 {
     double x[3], res[PYRT_FINDPOS_MAX_ROPES];
@@ -207,24 +278,13 @@ int pyrt_findpos_solve(pyrt_findpos_problem *p)
     x[1] = p->position[1];
     x[2] = p->position[2];
     for (it = 1; it <= p->max_iter; it++) {
-        double m[3][3] = {{0.0, 0.0, 0.0}, {0.0, 0.0, 0.0}, {0.0, 0.0, 0.0}};
-        double g[3] = {0.0, 0.0, 0.0}, d[3];
-        double step2;
-        for (i = 0; i < n; i++) {
-            double a[3], pred, r;
-            int j, k;
-            rc = rope_at(p->tops + 3 * i, p->bottoms + 3 * i,
-                         p->offsets != NULL ? p->offsets + 3 * i : NULL, x, &pred, a);
-            if (rc != PYRT_OK)
-                return rc;
-            /* r(x + d) = r(x) + a . d with the directions held fixed (Eq. 2). */
-            r = p->lengths[i] - pred;
-            for (j = 0; j < 3; j++) {
-                g[j] += a[j] * r;
-                for (k = 0; k < 3; k++)
-                    m[j][k] += a[j] * a[k];
-            }
-        }
+        double mu[6], m[3][3], g[3], d[3];
+        rc = linearise(p, x, mu, g);
+        if (rc != PYRT_OK)
+            return rc;
+        m[0][0] = mu[0]; m[0][1] = mu[1]; m[0][2] = mu[2];
+        m[1][0] = mu[1]; m[1][1] = mu[3]; m[1][2] = mu[4];
+        m[2][0] = mu[2]; m[2][1] = mu[4]; m[2][2] = mu[5];
         rc = solve_normal(m, g, p->freeze, d);
         if (rc != PYRT_OK)
             return rc;
@@ -233,22 +293,15 @@ int pyrt_findpos_solve(pyrt_findpos_problem *p)
         x[2] += d[2];
         if (!all_finite(x, 3))
             return PYRT_ENOCONVERGE;
-        step2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-        if (step2 < p->tol * p->tol)
+        if (d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < p->tol * p->tol)
             break;
     }
     if (it > p->max_iter)
         return PYRT_ENOCONVERGE;
 
-    for (i = 0; i < n; i++) {
-        double a[3], pred;
-        rc = rope_at(p->tops + 3 * i, p->bottoms + 3 * i,
-                     p->offsets != NULL ? p->offsets + 3 * i : NULL, x, &pred, a);
-        if (rc != PYRT_OK)
-            return rc;
-        res[i] = p->lengths[i] - pred;
-        ss += res[i] * res[i];
-    }
+    rc = residuals_at(p, x, res, &ss);
+    if (rc != PYRT_OK)
+        return rc;
     for (i = 0; i < n; i++)
         p->residuals[i] = res[i];
     p->position[0] = x[0];

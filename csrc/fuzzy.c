@@ -237,3 +237,10 @@ int pyrt_fuzzy_step(int32_t n, const pyrt_fuzzy_params *params, int32_t nparams,
     }
     return PYRT_OK;
 }
+
+int pyrt_fuzzy_run(const pyrt_fuzzy_batch *b)
+{
+    if (b == NULL)
+        return PYRT_EINVAL;
+    return pyrt_fuzzy_step(b->n, b->params, b->nparams, b->inputs, b->dv, b->rules);
+}

@@ -133,4 +133,20 @@ int pyrt_fuzzy_check_params(const pyrt_fuzzy_params *p);
 int pyrt_fuzzy_step(int32_t n, const pyrt_fuzzy_params *params, int32_t nparams,
                     const double *inputs, double *dv, double *rules);
 
+/*
+ * A prepared batch: the arguments of pyrt_fuzzy_step bound once, so that a
+ * control poll makes one call with one argument.  Pointers are borrowed.
+ */
+typedef struct {
+    int32_t n;
+    const pyrt_fuzzy_params *params;
+    int32_t nparams;
+    const double *inputs;
+    double *dv;
+    double *rules;
+} pyrt_fuzzy_batch;
+
+/* pyrt_fuzzy_step on the bound arguments; PYRT_EINVAL for NULL. */
+int pyrt_fuzzy_run(const pyrt_fuzzy_batch *b);
+
 #endif /* PYRT_FUZZY_H */

@@ -151,6 +151,7 @@ DRIVER = textwrap.dedent(
     for i in range(17):
         assert lib.pyrt_fuzzy_default_params(fp + i) == lib.PYRT_OK
     assert lib.pyrt_fuzzy_default_params(ffi.NULL) == lib.PYRT_EINVAL
+    assert lib.pyrt_fuzzy_run(ffi.NULL) == lib.PYRT_EINVAL
     assert lib.pyrt_fuzzy_check_params(ffi.NULL) == lib.PYRT_EINVAL
     inp = ffi.new("double[]", 17 * lib.PYRT_FUZZY_NINPUTS)
     dv = ffi.new("double[]", 17)

@@ -45,6 +45,9 @@ __all__ = [
 
 MAX_ROPES: int = lib.PYRT_FINDPOS_MAX_ROPES
 _NROWS = (None, 3)
+_NDARRAY = np.ndarray
+_SHAPE3 = (3,)
+_STRIDE = (8,)
 
 
 @dataclass(frozen=True)
@@ -284,9 +287,6 @@ class PositionFinder:
         p.max_iter = max_iter
         self._p = p
         self._solve = lib.pyrt_findpos_solve
-        self._lengths_nbytes = 8 * n
-        self._lengths_buf = self._bufs[3]
-        self._position_buf = self._bufs[4]
         self._len_shape = (n,)
         self._solved = False
         self.n = n
@@ -339,15 +339,15 @@ class PositionFinder:
         needs one).  Raises like :func:`find_position`.
         """
         if lengths is not None:
-            if (lengths.__class__ is not np.ndarray or lengths.dtype is not F64
-                    or lengths.shape != self._len_shape or not lengths.flags.c_contiguous):
+            if (lengths.__class__ is not _NDARRAY or lengths.dtype is not F64
+                    or lengths.shape != self._len_shape or lengths.strides != _STRIDE):
                 require_f64("lengths", lengths, self._len_shape)
-            ffi.memmove(self._lengths_buf, lengths, self._lengths_nbytes)
+            self._lengths[:] = lengths
         if start is not None:
-            if (start.__class__ is not np.ndarray or start.dtype is not F64
-                    or start.shape != (3,) or not start.flags.c_contiguous):
-                require_f64("start", start, (3,))
-            ffi.memmove(self._position_buf, start, 24)
+            if (start.__class__ is not _NDARRAY or start.dtype is not F64
+                    or start.shape != _SHAPE3 or start.strides != _STRIDE):
+                require_f64("start", start, _SHAPE3)
+            self._position[:] = start
         elif not self._solved:
             raise NativeInputError("solve: the first solve needs a start position")
         rc = self._solve(self._p)

@@ -305,10 +305,13 @@ class FuzzyBatch:
         self._dv = np.zeros(n, F64)
         self._rules = np.zeros((n, NRULES), F64)
         self._bufs = [ffi.from_buffer(a) for a in (self._inputs, self._dv, self._rules)]
-        self._in, self._out_dv, self._out_rules = (
-            ffi.cast("double *", b) for b in self._bufs
-        )
-        self._step = lib.pyrt_fuzzy_step
+        b = ffi.new("pyrt_fuzzy_batch *")
+        b.n = n
+        b.params = self._params
+        b.inputs, b.dv, b.rules = (ffi.cast("double *", buf) for buf in self._bufs)
+        self._b = b
+        self._share_params()
+        self._run = lib.pyrt_fuzzy_run
         self.dv = self._dv.view()
         self.dv.flags.writeable = False
         self.rules = self._rules.view()
@@ -327,10 +330,16 @@ class FuzzyBatch:
             raise NativeInputError(f"expected FuzzyParams, got {type(params).__name__}")
         self._params[axis] = params._c[0]
         self.params[axis] = params
+        self._share_params()
+
+    def _share_params(self) -> None:
+        # One parameter set checked once per step when every axis has the same.
+        first = self.params[0]
+        self._b.nparams = 1 if all(p == first for p in self.params) else self.n
 
     def step(self) -> np.ndarray:
         """Evaluate every axis from :attr:`inputs`; returns :attr:`dv`."""
-        rc = self._step(self.n, self._params, self.n, self._in, self._out_dv, self._out_rules)
+        rc = self._run(self._b)
         if rc:
             _explain(rc, f"FuzzyBatch.step ({self.n} axes)", self._inputs)
         return self.dv

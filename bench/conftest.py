@@ -1,0 +1,73 @@
+"""Benchmark helpers: the tests/ references on the path, and a ratio summary.
+
+Benchmarks that call the ``record`` fixture after timing have their mean
+time kept under a key; at the end of the run the native-kernel figures are
+printed per call and per axis, with their ratios against the comparators
+and the targets (``-s`` not needed: it goes to the terminal summary).
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+
+_MEANS: dict[str, float] = {}
+
+
+@pytest.fixture
+def record():
+    """record(benchmark): keep its mean time (s) under a key made of its extra_info
+    (``fuzzy<axes>/<impl>`` or ``findpos/<ropes>/<impl>``)."""
+
+    def keep(benchmark) -> None:
+        stats = getattr(benchmark, "stats", None)
+        if stats is None:
+            return
+        info = benchmark.extra_info
+        key = (f"fuzzy{info['axes']}/{info['impl']}" if "axes" in info
+               else f"findpos/{info['ropes']}/{info['impl']}")
+        _MEANS[key] = stats.stats.mean
+
+    return keep
+
+
+def _us(key: str) -> str:
+    return f"{_MEANS[key] * 1e6:10.3f} us" if key in _MEANS else "   (not run)"
+
+
+def _ratio(slow: str, fast: str) -> str:
+    if slow in _MEANS and fast in _MEANS:
+        return f"{_MEANS[slow] / _MEANS[fast]:10.0f}x"
+    return "     (n/a)"
+
+
+def pytest_terminal_summary(terminalreporter):
+    if not any(k.startswith(("fuzzy", "findpos")) for k in _MEANS):
+        return
+    w = terminalreporter.write_line
+    w("")
+    w("native kernels: mean per call (per axis for 5 axes) and ratios")
+    for n in (1, 5):
+        c = f"fuzzy{n}/c-batch"
+        per_axis = f"  ({_MEANS[c] / n * 1e6:.3f} us per axis)" if c in _MEANS else ""
+        w(f"  fuzzy {n} axis  C batch {_us(c)}{per_axis}; one-shot {_us(f'fuzzy{n}/c-oneshot')}")
+        w(f"      python {_us(f'fuzzy{n}/python')} = {_ratio(f'fuzzy{n}/python', c)} C;"
+          f"  scikit-fuzzy {_us(f'fuzzy{n}/skfuzzy')} = {_ratio(f'fuzzy{n}/skfuzzy', c)} C")
+    if "fuzzy5/c-batch" in _MEANS:
+        ok = _MEANS["fuzzy5/c-batch"] < 0.6e-6
+        w(f"  target: 5 axes in one call < 0.6 us: {'met' if ok else 'NOT met'};"
+          f" >= 1000x scikit-fuzzy")
+    for ropes in ("3 ropes", "5 ropes"):
+        c = f"findpos/{ropes}/c-prepared"
+        w(f"  findpos {ropes}  C prepared {_us(c)}; one-shot {_us(f'findpos/{ropes}/c-oneshot')}")
+        for other in ("numpy", "least_squares-lm-jac", "least_squares-lm"):
+            key = f"findpos/{ropes}/{other}"
+            w(f"      {other:22s} {_us(key)} = {_ratio(key, c)} C prepared")
+    if "findpos/5 ropes/c-prepared" in _MEANS:
+        ok = _MEANS["findpos/5 ropes/c-prepared"] < 1.5e-6
+        w(f"  target: prepared 5-rope solve < 1.5 us: {'met' if ok else 'NOT met'};"
+          f" >= 100x least_squares")
