@@ -10,6 +10,7 @@ from _gripper_rig import make_rig
 from pyrt.commands.gripper import GripperShell, parse_hex, parse_target
 from pyrt.errors import CommandError
 from pyrt.scheduler.runner import Runner
+from pyrt.scope import Scope
 
 TARGETS = [
     ("-1B86", -0x1B86), ("E47A", -0x1B86), ("e47a", -0x1B86), (" -1b86 ", -0x1B86),
@@ -43,9 +44,11 @@ def test_parse_hex_ranges():
 @pytest.fixture
 def session():
     rig = make_rig()
+    scope = Scope(capacity=4000)
+    rig.loop.attach(scope.sample, name="scope")
     runner = Runner(rig.loop)
     out = io.StringIO()
-    shell = GripperShell(runner, rig.ctl, out, plant=rig.plant)
+    shell = GripperShell(runner, rig.ctl, out, plant=rig.plant, scope=scope)
     runner.start()
     shell.onecmd("I")
 
@@ -190,3 +193,16 @@ def test_wait_with_the_clock_off_says_so(session):
     assert lines[-1].startswith("the clock interrupt is OFF")
     session("M", "I", "Q")
     assert session("wait")[0].startswith("stopped")
+
+
+def test_scope_records_the_gripper_variables(session):
+    """scope add encoder dac, run roll, P: the frame shows the encoder going down."""
+    assert session("scope add encoder dac jaws.x ram:2C")[0].endswith("encoder, dac, jaws.x, ram:2C")
+    session("scope run roll", "P -400", "wait")
+    lines = session("scope show 2000")
+    assert lines[0] == "t_s encoder dac jaws.x ram:2C"
+    enc = [float(line.split()[1]) for line in lines[1:]]
+    dac = [float(line.split()[2]) for line in lines[1:]]
+    assert enc[0] > enc[-1] and -0x400 - 16 <= enc[-1] <= -0x400 + 16
+    assert min(dac) < 0x80 and dac[-1] == 0x80
+    assert session("scope add nothing")[0].startswith("error: no channel")

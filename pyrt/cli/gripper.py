@@ -24,6 +24,7 @@ from pyrt.console import Console
 from pyrt.errors import ConfigError, PyrtError
 from pyrt.robots.gripper import GripperController
 from pyrt.scheduler.runner import Runner
+from pyrt.scope import Scope
 from pyrt.sim.gripper import FAULTS, JawParameters, JawPlant
 
 __all__ = ["add_parser", "run"]
@@ -105,10 +106,12 @@ def run(args: argparse.Namespace) -> int:
     ctl = GripperController(cpu)
     loop.attach(plant.step, name="jaws")
     ctl.attach(loop)
+    scope = Scope()
+    loop.attach(scope.sample, name="scope")
     ctl.power_up()
     runner = Runner(loop)
     posted.append(runner)
-    shell = GripperShell(runner, ctl, out, plant=plant)
+    shell = GripperShell(runner, ctl, out, plant=plant, scope=scope)
     console = Console(shell, sys.stdin, out, messages=runner.messages, history_file=args.history)
     speed = "max (simulated time)" if args.speed is None else f"{args.speed:g}x real time"
     print(

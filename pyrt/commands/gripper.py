@@ -19,11 +19,13 @@ import re
 from collections.abc import Callable
 from typing import Any, Protocol, TextIO
 
+from pyrt.commands.scope import ScopeCommand
 from pyrt.commands.shell import CommandShell
 from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
 from pyrt.scheduler.report import format_statistics
+from pyrt.scope import Scope, Source
 
-__all__ = ["GripperShell", "parse_hex", "parse_target"]
+__all__ = ["GripperShell", "gripper_channels", "parse_hex", "parse_target"]
 
 #: Loop-time limits of the blocking commands, seconds.
 INIT_TIMEOUT_S = 120.0
@@ -88,6 +90,34 @@ def parse_target(text: str) -> int:
             "(wide open) down to about D600 (closed): nothing moved"
         )
     return value
+
+
+def gripper_channels(controller: Any, plant: Any = None) -> dict[str, Source]:
+    """The scope channels of the gripper: RAM variables by their Appendix A
+    names (words signed where 002 treats them so), the DAC, and the
+    simulated jaws when there is a plant.  Any RAM byte is ``ram:XX``."""
+    ram = controller.ram
+    channels = {
+        "encoder": Source.word(ram, 0x4A, signed=True),
+        "target": Source.word(ram, 0x4C, signed=True),
+        "error": Source.word(ram, 0x46),
+        "rate": Source.word(ram, 0x48, signed=True),
+        "old_enc": Source.word(ram, 0x4E, signed=True),
+        "flags": Source.item(ram, 0x2C),
+        "sensors": Source.word(ram, 0x2D),
+        "stopcnt": Source.item(ram, 0x50),
+        "dac": Source.call(lambda: controller.dac),
+    }
+    if plant is not None:
+        channels.update(
+            {
+                "jaws.x": Source.attr(plant, "x"),
+                "jaws.v": Source.attr(plant, "v"),
+                "jaws.squeeze": Source.attr(plant, "squeeze"),
+                "jaws.dac": Source.attr(plant.board, "dac"),
+            }
+        )
+    return channels
 
 
 def _signed(word: int) -> int:
@@ -263,11 +293,24 @@ class GripperShell(CommandShell):
     hardware).
     """
 
-    def __init__(self, runner: Runner, controller: Any, stdout: TextIO, plant: Any = None):
+    def __init__(
+        self,
+        runner: Runner,
+        controller: Any,
+        stdout: TextIO,
+        plant: Any = None,
+        scope: Scope | None = None,
+    ):
         super().__init__(stdout)
         self.runner = runner
         self.ctl = controller
         self.plant = plant
+        self.channels = gripper_channels(controller, plant)
+        self._scope = (
+            ScopeCommand(runner, scope, self._channel, lambda: sorted(self.channels), stdout)
+            if scope is not None
+            else None
+        )
         self.top = CommandLevel(self)
         self.monitor = MonitorLevel(self)
         self.level: _Level = self.top
@@ -464,6 +507,26 @@ class GripperShell(CommandShell):
                 raise CommandError(str(exc)) from None
 
         self.runner.call(apply)
+
+    def do_scope(self, arg: str) -> None:
+        """scope [add CH.. | trigger CH LEVEL | run | single | stop | show | save F | plot F]
+
+        The software oscilloscope over the gripper's variables: encoder,
+        target, error, rate, flags, sensors, stopcnt, dac, jaws.x, jaws.v,
+        jaws.squeeze, or any RAM byte as ram:XX.  'scope' alone: its state."""
+        if self._scope is None:
+            raise CommandError("no scope on this console")
+        self._scope.stdout = self.stdout
+        self._scope(arg)
+
+    def _channel(self, name: str) -> Source:
+        key = name.lower()
+        if key in self.channels:
+            return self.channels[key]
+        if key.startswith("ram:"):
+            addr = parse_hex(key[4:], "RAM address", 0x7F)
+            return Source.item(self.ctl.ram, addr)
+        raise CommandError(f"no channel {name!r}; scope list shows them")
 
     def do_quit(self, arg: str) -> bool:
         """quit: null the drive current and leave."""
