@@ -4,8 +4,8 @@ Run: ``python -m pytest bench/bench_gripper.py --benchmark-only -s``.
 Each benchmark reports, in ``extra_info`` and on stdout, the simulated
 seconds per wall second (target: at least 200x real time at the 1 ms tick)
 and the wall-clock µs per tick.  The stack is the one the CLI builds: the
-jaw plant, the controller (ready queue in RAM + stall watchdog) and the
-runner's mailbox, on a SimClock.
+jaw plant, the controller (ready queue in RAM + stall watchdog), a stopped
+scope and the runner's mailbox, on a SimClock.
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from pyrt.boards.i8031 import I8031
 from pyrt.robots.gripper import GripperController
 from pyrt.scheduler import Loop, SimClock
 from pyrt.scheduler.runner import Runner
+from pyrt.scope import Scope
 from pyrt.sim.gripper import JawPlant
 
 TARGET_RATIO = 200.0
@@ -30,6 +31,7 @@ def make_stack(tick_us: int = 1000):
     ctl = GripperController(cpu)
     loop.attach(plant.step, name="jaws")
     ctl.attach(loop)
+    loop.attach(Scope().sample, name="scope")  # as the CLI: a scope, stopped
     ctl.power_up()
     runner = Runner(loop)
     runner.start()

@@ -72,7 +72,7 @@ from pyrt.boards.i8031 import (
 )
 from pyrt.errors import CommandError, Fault
 from pyrt.native import excess128
-from pyrt.scheduler import ByteImage, Job, Loop, ReadyQueue
+from pyrt.scheduler import ByteImage, ByteRef, Job, Loop, ReadyQueue
 
 __all__ = [
     "ADDR_MVJAWS",
@@ -158,9 +158,12 @@ class GripperController:
             name=name,
         )
         ram = self.ram
-        self.queue.add_periodic(ADDR_MVJAWS, "MVJAWS", self.mvjaws, lambda: ram[MVJAWSPD])
-        self.queue.add_periodic(ADDR_SENSORS, "SENSORS", self.sensors, lambda: ram[SENSORPD])
-        self.queue.add_periodic(ADDR_WATCHJAW, "WATCHJAW", self.watchjaw, lambda: ram[WTCHJWSPD])
+        # the periods are read from RAM at every reschedule (monitor C 43 .. takes effect)
+        self.queue.add_periodic(ADDR_MVJAWS, "MVJAWS", self.mvjaws, ByteRef(ram, MVJAWSPD))
+        self.queue.add_periodic(ADDR_SENSORS, "SENSORS", self.sensors, ByteRef(ram, SENSORPD))
+        self.queue.add_periodic(
+            ADDR_WATCHJAW, "WATCHJAW", self.watchjaw, ByteRef(ram, WTCHJWSPD)
+        )
         self.queue.reflex = self.reflex
         cpu.set_vector(VECTOR_EXT0, self.encoder_up)
         cpu.set_vector(VECTOR_EXT1, self.encoder_down)
