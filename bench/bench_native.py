@@ -18,6 +18,7 @@ A comparator whose package is missing is skipped, not failed.
 from __future__ import annotations
 
 import importlib.util
+import itertools
 
 import _ref_findpos as geo
 import _ref_fuzzy as ref
@@ -231,6 +232,22 @@ def test_findpos_c_prepared(benchmark, ropes, record):
     finder = nat.PositionFinder(tops, bottoms)
     benchmark.extra_info.update(ropes=ropes, impl="c-prepared")
     benchmark(finder.solve, lengths, start)
+    record(benchmark)
+    benchmark.extra_info["iterations"] = finder.iterations
+
+
+@pytest.mark.benchmark(group="findpos")
+@pytest.mark.parametrize("ropes", ROPES)
+def test_findpos_c_poll(benchmark, ropes, record):
+    """Prepared PositionFinder.solve(lengths) from the last solution, as a control poll
+    does: the lengths alternate between two positions about 1.5 cm apart."""
+    tops, bottoms, lengths, start, _ = PROBLEMS[ropes]
+    finder = nat.PositionFinder(tops, bottoms)
+    finder.solve(lengths, start)
+    moved = nat.rope_lengths(2.0 * finder.position - start, tops, bottoms)
+    nxt = itertools.cycle([moved, lengths]).__next__
+    benchmark.extra_info.update(ropes=ropes, impl="c-poll")
+    benchmark(lambda: finder.solve(nxt()))
     record(benchmark)
     benchmark.extra_info["iterations"] = finder.iterations
 

@@ -183,6 +183,17 @@ def test_bad_parameters_are_refused(values):
         nat.FuzzyParams.from_mapping(values)
 
 
+def test_params_copy_and_pickle_by_value():
+    """FuzzyParams survive copy and pickle with equal values and a working C struct."""
+    import copy
+    import pickle
+
+    p = nat.FuzzyParams(dv_length=0.15)
+    for q in (copy.copy(p), copy.deepcopy(p), pickle.loads(pickle.dumps(p))):
+        assert q == p
+        np.testing.assert_array_equal(nat.fuzzy_step(q, [QUIET])[0], nat.fuzzy_step(p, [QUIET])[0])
+
+
 def test_constructor_refuses_non_numbers():
     """FuzzyParams refuses strings and booleans for its fields."""
     with pytest.raises(nat.NativeInputError):

@@ -166,6 +166,10 @@ class FuzzyParams:
             raise_for_status(rc, f"FuzzyParams: inconsistent breakpoints or changes ({self})")
         object.__setattr__(self, "_c", c)
 
+    def __reduce__(self):
+        # Pickle and copy by value; the bound C struct is rebuilt on load.
+        return (self.__class__, dataclasses.astuple(self))
+
     @classmethod
     def from_mapping(cls, values: Mapping[str, object], base: FuzzyParams | None = None
                      ) -> FuzzyParams:
