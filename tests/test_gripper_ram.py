@@ -82,3 +82,27 @@ def test_sysclkpd_in_ram_sets_the_check_rate():
     calls_pd1 = {a.name: a.calls for a in rig.ctl.queue.accumulators()}["WATCHJAW"] - calls_pd4
     assert 95 <= calls_pd4 <= 101
     assert 390 <= calls_pd1 <= 401
+
+
+def test_ports_reset_high_and_are_checked():
+    """P0-P3 latch FF after reset; P4 and non-bytes are refused."""
+    cpu = I8031()
+    assert [cpu.port_read(n) for n in range(4)] == [0xFF] * 4
+    cpu.port_write(1, 0x5A)
+    assert cpu.port_read(1) == 0x5A
+    with pytest.raises(ValueError):
+        cpu.port_write(4, 0)
+    with pytest.raises(ValueError):
+        cpu.port_write(1, 0x100)
+
+
+def test_interrupt_vectors():
+    """Handlers run from their vectors; a non-vector address is refused."""
+    cpu = I8031()
+    hits = []
+    cpu.set_vector(i8031.VECTOR_EXT0, lambda: hits.append("up"))
+    cpu.interrupt(i8031.VECTOR_EXT0)
+    cpu.interrupt(i8031.VECTOR_EXT1)  # nothing installed: ignored
+    assert hits == ["up"]
+    with pytest.raises(ValueError):
+        cpu.set_vector(0x0005, lambda: None)

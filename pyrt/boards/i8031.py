@@ -127,11 +127,15 @@ class I8031:
     :meth:`movx_write`, as the program's MOVX instructions reach them.
     """
 
-    __slots__ = ("_xread", "_xwrite", "ram", "sp", "vectors")
+    __slots__ = ("_xread", "_xwrite", "ports", "ram", "sp", "vectors")
 
     def __init__(self) -> None:
         self.ram = bytearray(RAM_SIZE)
         self.sp = SP_RESET
+        #: Port latches P0-P3 (all FF after reset).  On the controller's CPU
+        #: board P0/P2 carry the external bus (MOVX), P3.0/P3.1 the serial
+        #: port and P3.2/P3.3 the encoder's INT0/INT1; P1 is not used.
+        self.ports = bytearray(b"\xff\xff\xff\xff")
         #: The interrupt vector table: vector address -> handler (see :meth:`set_vector`).
         self.vectors: dict[int, Callable[[], None]] = {}
         self._xread: dict[int, Reader] = {}
@@ -178,6 +182,22 @@ class I8031:
             self.ram[addr] |= 1 << bit
         else:
             self.ram[addr] &= ~(1 << bit) & 0xFF
+
+    # -- ports -------------------------------------------------------------------
+
+    def port_read(self, n: int) -> int:
+        """MOV A,Pn: the latch of port ``n`` (0-3)."""
+        if not 0 <= n <= 3:
+            raise ValueError(f"the 8031 has ports P0-P3, not P{n}")
+        return self.ports[n]
+
+    def port_write(self, n: int, value: int) -> None:
+        """MOV Pn,A: set the latch of port ``n`` (0-3) to ``value`` (00-FF)."""
+        if not 0 <= n <= 3:
+            raise ValueError(f"the 8031 has ports P0-P3, not P{n}")
+        if not 0 <= value <= 0xFF:
+            raise ValueError(f"port value must be 00..FF, got {value:#x}")
+        self.ports[n] = value
 
     # -- interrupts --------------------------------------------------------------
 
