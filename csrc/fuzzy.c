@@ -56,8 +56,8 @@ int pyrt_fuzzy_default_params(pyrt_fuzzy_params *p)
      * loop and the velocity integrator cannot drift inside a dead band.
      * With the 50 ms poll, 0.1 cm/s per poll at 1 cm is an acceleration of
      * 2 cm/s^2 per cm of error: omega = sqrt(0.1 / (1 cm * 0.05 s)) =
-     * 1.4 rad/s, a 4.4 s natural period -- slow beside the 2 cm/s hare on
-     * its 20 cm ramps (ramp acceleration 0.1 cm/s^2 gives a 0.05 cm lag).
+     * 1.4 rad/s, a 4.4 s natural period; the hare's 20 cm ramps to
+     * 2 cm/s ask for 0.1 cm/s^2, which this loop follows 0.05 cm behind.
      */
     p->len_zero = 0.0;
     p->len_full = 1.0;
@@ -77,10 +77,11 @@ int pyrt_fuzzy_default_params(pyrt_fuzzy_params *p)
      * Relative tension (rules 4, 5) for a rope with a target (the off-side
      * rope at 10 N): a 0.5 N dead band for loadcell noise and offset (the
      * document found tension errors stopping the source near the end), full
-     * at 5 N.  0.2 cm/s per poll at 5 N beats the length rules for any
-     * rope stiffer than 4 N/cm of paid-out length (0.2/5 N against 0.1/1
-     * cm), which every tensioned rope is, so the off-side rope behaves as
-     * an idler as the document intends.  Near the end 75 % of the rule is
+     * at 5 N.  0.2 cm/s per poll at 5 N (0.04 per N) beats the length rules
+     * (0.1 per cm) for any rope stiffer than 2.5 N/cm of paid-out length,
+     * which every tensioned rope is (a 1000 cm rope of compliance 1e-4 per
+     * N is 10 N/cm), so the off-side rope behaves as an idler as the
+     * document intends.  Near the end 75 % of the rule is
      * relaxed ("only partially relaxed").
      */
     p->rel_zero = 0.5;

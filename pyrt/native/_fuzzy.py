@@ -141,8 +141,8 @@ class FuzzyParams:
     dv_tension: float = 0.4
     #: Rules 2/3: 2 cm/s^2 per cm of error at 50 ms: omega 1.4 rad/s.
     dv_length: float = 0.1
-    #: Rules 4/5: 0.04 cm/s per poll per N, beating the length rules on any
-    #: rope stiffer than 4 N/cm, so an off-side rope acts as an idler.
+    #: Rules 4/5: 0.04 cm/s per poll per N, beating the length rules (0.1 per
+    #: cm) on any rope stiffer than 2.5 N/cm, so an off-side rope is an idler.
     dv_rel_tension: float = 0.2
     #: Rule 6: pull back a run-away velocity.
     dv_velocity: float = 0.3
