@@ -23,7 +23,9 @@
  * source up in the neck) would cross the neck-ring plane outside the ring it
  * bears on the ring instead: frictionless, so the rope takes the shortest
  * path over the ring rim and lies in a plane through a ring radius (000,
- * section 5, neckIntersection()).
+ * section 5, neckIntersection()).  The carriage itself cannot pass through
+ * the ring's rim; the rope length jumps there, at positions no source can
+ * reach.
  *
  * The equilibrium minimises the potential energy
  *
