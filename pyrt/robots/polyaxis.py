@@ -1,0 +1,798 @@
+"""Co-ordinated control of the ropes: the PolyAxis of 000, section 5.
+
+Every control poll (:meth:`PolyAxis.poll`, the polyaxis-poll task):
+
+1. each Axis's tension and stretch-corrected length are read;
+2. ropes that bear on the neck ring get their contact point as effective top
+   (the finder sees the rope from there, its measured length less the piece
+   above the contact), and ``findPositionL`` runs through the prepared C
+   solver (:class:`pyrt.native.PositionFinder`, freeze mask from the bottom
+   attachments): position and distErr (the RMS length residual);
+3. the residual net force on the source is the sum of the measured tensions
+   along the ropes plus the net weight (buoyancy in D2O when submerged);
+4. during a move the hare advances (:mod:`pyrt.robots.paths`), the error
+   signals are set (``errorSignal``: length errors against the hare on every
+   rope, off-side ropes driven toward OFFSIDE_TENSION, the others free; or
+   ``errorSignalAll``: every rope driven toward the equilibrium tensions),
+   the ten fuzzy rules run for every Axis in one batched C call
+   (:class:`pyrt.native.FuzzyBatch`), each Motor gets its new desired
+   velocity and applies DV_LIMIT and the speed limits in its poll;
+5. the five stop conditions (:mod:`pyrt.robots.stops`) are checked.
+
+Any stop stops every motor of the manipulator (windings off) and hands the
+axes back to standalone control.  The safety stops (tension, net force) are
+also faults: ``on_fault`` (the ready queue's ``trip``) is called, the
+reflex runs, and the manipulator stays stopped until acknowledged.
+
+The corrected length of 000 is the measured length less the rope's length
+residual, so that errors of the position estimate do not appear as error
+terms; errors are actual - desired.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Generator, Sequence
+from pathlib import Path
+from typing import TextIO
+
+import numpy as np
+
+from pyrt.devices._args import parse_number
+from pyrt.devices.motor import STEP_MODE
+from pyrt.errors import CommandError, ConfigError, NativeError
+from pyrt.native import FuzzyBatch, FuzzyInput, FuzzyParams, PositionFinder
+from pyrt.robots._neck import ring_contact
+from pyrt.robots.av import AV
+from pyrt.robots.axis import POLYAXIS, Axis
+from pyrt.robots.paths import VIA_BELOW, Hare, plan_segments
+from pyrt.robots.stops import SAFETY_STOPS, StopCheck, StopReason, StopRecord
+
+__all__ = [
+    "COMMANDS",
+    "GRAVITY",
+    "MIN_TOP_SEGMENT",
+    "NEAR_END_CM",
+    "PATTERN_PAUSE_S",
+    "PolyAxis",
+    "parse_pattern",
+]
+
+GRAVITY = 9.80665
+#: NEAR_END truth falls from 1 at the endpoint to 0 at this distance (cm).
+NEAR_END_CM = 10.0
+#: A target closer than this to a top pulley (cm) is refused.
+MIN_TOP_SEGMENT = 5.0
+#: 000, section 5: the pattern pauses "about 10 seconds" at each endpoint.
+PATTERN_PAUSE_S = 10.0
+
+#: Table 2: command -> allowed argument counts.
+COMMANDS: dict[str, tuple[int, ...]] = {
+    "to": (3, 4), "tensionfind": (0,), "tensions": (0,), "netforce": (0, 3),
+    "pattern": (1,), "stop": (0,), "tensionstop": (0,), "errorsignalall": (0,),
+}
+
+Vec = tuple[float, float, float]
+_FI = FuzzyInput
+
+
+def _dist(a: Sequence[float], b: Sequence[float]) -> float:
+    return math.sqrt((a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2 + (a[2] - b[2]) ** 2)
+
+
+def parse_pattern(path: str | Path) -> tuple[Path, list[Vec]]:
+    """A pattern file: first line the log file (relative to the pattern file),
+    then one endpoint ``x y z`` per line (blank lines and ``//`` comments skipped)."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CommandError(f"pattern: cannot read {str(p)!r}: {exc}") from None
+    lines = [(n, ln.split("//", 1)[0].strip()) for n, ln in enumerate(text.splitlines(), 1)]
+    lines = [(n, ln) for n, ln in lines if ln]
+    if not lines:
+        raise CommandError(f"pattern {p}: empty; the first line names the log file")
+    log = Path(lines[0][1])
+    if not log.is_absolute():
+        log = p.parent / log
+    points: list[Vec] = []
+    for n, ln in lines[1:]:
+        parts = ln.replace(",", " ").split()
+        if len(parts) != 3:
+            raise CommandError(f"pattern {p}:{n}: expected an endpoint 'x y z', got {ln!r}")
+        try:
+            v = tuple(float(c) for c in parts)
+        except ValueError:
+            raise CommandError(f"pattern {p}:{n}: not numbers: {ln!r}") from None
+        if not all(math.isfinite(c) for c in v):
+            raise CommandError(f"pattern {p}:{n}: endpoint must be finite: {ln!r}")
+        points.append(v)  # type: ignore[arg-type]
+    if not points:
+        raise CommandError(f"pattern {p}: no endpoints after the log file line")
+    return log, points
+
+
+class PolyAxis:
+    """The co-ordinated manipulator (see the module text).
+
+    ``axes`` are the :class:`Axis` objects in database order (the central rope
+    has no bottom attachment); lengths cm, forces N, masses kg, volumes cm3,
+    times s.  ``poll_s`` is the control poll period the fuzzy rules are
+    scaled to.  ``liquid_level``: z of the D2O surface (None: in air).
+    """
+
+    def __init__(
+        self,
+        name: str,
+        axes: Sequence[Axis],
+        av: AV,
+        *,
+        source_mass: float,
+        source_volume: float,
+        position: Sequence[float],
+        end_error: float = 1.0,
+        low_tension: float = 2.0,
+        max_tension: float = 200.0,
+        net_forcelimit: float = 25.0,
+        offside_tension: float = 10.0,
+        hare_speed: float = 2.0,
+        hare_ramp: float = 20.0,
+        stuck_time: float = 10.0,
+        find_tolerance: float = 0.1,
+        d2o_density: float = 1.10,
+        liquid_level: float | None = None,
+        poll_s: float = 0.05,
+        fuzzy: Sequence[FuzzyParams] | None = None,
+        stdout: TextIO | None = None,
+    ):
+        if not axes:
+            raise ConfigError(f"polyaxis {name}: no axes")
+        if not (poll_s > 0 and math.isfinite(poll_s)):
+            raise ConfigError(f"polyaxis {name}: poll period must be > 0 s, got {poll_s!r}")
+        self.name = name
+        self.axes = list(axes)
+        self.n = len(self.axes)
+        self.av = av
+        self.source_mass = float(source_mass)
+        self.source_volume = float(source_volume)
+        self.end_error = float(end_error)
+        self.low_tension = float(low_tension)
+        self.max_tension = float(max_tension)
+        self.net_forcelimit = float(net_forcelimit)
+        self.offside_tension = float(offside_tension)
+        self.hare_speed = float(hare_speed)
+        self.hare_ramp = float(hare_ramp)
+        self.stuck_time = float(stuck_time)
+        self.find_tolerance = float(find_tolerance)
+        self.d2o_density = float(d2o_density)
+        self.liquid_level = liquid_level
+        self.poll_s = float(poll_s)
+        self.stdout = stdout
+
+        # geometry (global co-ordinates: bottoms carried through av.vtog)
+        self.tops: list[Vec] = [a.top for a in self.axes]  # type: ignore[misc]
+        self.bottoms: list[Vec | None] = [a.bottom for a in self.axes]
+        self.offsets: list[Vec] = [a.offset for a in self.axes]  # type: ignore[misc]
+        self.ring = av.neck_ring()
+        centre = av.vtog((0.0, 0.0, 0.0))
+        self.axis_point: Vec = centre
+        self.via: Vec = tuple(  # type: ignore[assignment]
+            av.neck_ring_position[k] - VIA_BELOW * av.neck_axis[k] for k in range(3))
+        nan = math.nan
+        bott = np.array([(nan, nan, nan) if b is None else b for b in self.bottoms], float)
+        try:
+            self.finder = PositionFinder(np.array(self.tops, float), bott,
+                                         np.array(self.offsets, float), tol=self.find_tolerance)
+        except NativeError as exc:
+            raise ConfigError(f"polyaxis {name}: {exc}") from None
+        self._wrapped = [False] * self.n
+        self._side = [b is not None for b in self.bottoms]
+        # "far side of the central axis": the bottom's horizontal direction
+        self._bdir: list[tuple[float, float] | None] = []
+        for b in self.bottoms:
+            if b is None:
+                self._bdir.append(None)
+            else:
+                self._bdir.append((b[0] - centre[0], b[1] - centre[1]))
+
+        params = list(fuzzy) if fuzzy is not None else [
+            FuzzyParams().for_poll_period(self.poll_s)] * self.n
+        if len(params) != self.n:
+            raise ConfigError(f"polyaxis {name}: {len(params)} fuzzy parameter sets "
+                              f"for {self.n} axes")
+        self.batch = FuzzyBatch(params, self.n)
+        inp = self.batch.inputs
+        inp[:, _FI.TENSION_LOW] = self.low_tension
+        inp[:, _FI.TENSION_HIGH] = self.max_tension
+
+        # state
+        self.position: Vec = tuple(float(c) for c in position)  # type: ignore[assignment]
+        self._start_given = False
+        self.dist_err = 0.0
+        self.tensions = [0.0] * self.n
+        self.lengths = [0.0] * self.n
+        self.net_force: Vec = (0.0, 0.0, 0.0)
+        self.net_force_magnitude = 0.0
+        self.desired_tensions = [0.0] * self.n
+        self.error_lengths = [0.0] * self.n
+        self.error_tensions = [0.0] * self.n
+        self.free = [1.0] * self.n
+        self.active = False
+        self.hare: Hare | None = None
+        self.hare_position: Vec | None = None
+        self.endpoint: Vec | None = None
+        self.stops: StopCheck | None = None
+        self.tension_stop = True
+        self.signal_all = False
+        self.last_stop: StopRecord | None = None
+        self.moves = 0
+        self.polls = 0
+        self.now_s = 0.0
+        self._last_poll_s: float | None = None
+        self._prev_e: list[float] | None = None
+        self._prev_te: list[float] | None = None
+        #: Called with (cause, source) for a safety stop: the ready queue's trip.
+        self.on_fault: Callable[[str, str], object] | None = None
+        #: Called with (StopRecord) after every stop.
+        self.on_stop: list[Callable[[StopRecord], None]] = []
+        #: Where the state log goes (one line at a time), or None.
+        self.log: Callable[[str], None] | None = None
+        self.debug = False
+        self._debug_next = 0.0
+
+    @classmethod
+    def from_record(cls, record, axes: Sequence[Axis], av: AV, **kw) -> PolyAxis:
+        """A PolyAxis from a :class:`pyrt.db.PolyAxisRecord`."""
+        return cls(
+            record.name, axes, av,
+            source_mass=record.source_mass, source_volume=record.source_volume,
+            position=record.position, end_error=record.end_error,
+            low_tension=record.low_tension, max_tension=record.max_tension,
+            net_forcelimit=record.net_forcelimit, offside_tension=record.offside_tension,
+            hare_speed=record.hare_speed, hare_ramp=record.hare_ramp,
+            stuck_time=record.stuck_time, find_tolerance=record.find_tolerance,
+            d2o_density=record.d2o_density, **kw,
+        )
+
+    # -- physics of the source -----------------------------------------------------
+
+    def weight(self, z: float) -> float:
+        """Net downward force on the source at height ``z`` (N)."""
+        m = self.source_mass
+        if self.source_volume > 0 and self.liquid_level is not None and z < self.liquid_level:
+            m -= self.d2o_density * 1e-3 * self.source_volume
+        return m * GRAVITY
+
+    def rope_geometry(self, i: int, x: Sequence[float]
+                      ) -> tuple[float, Vec | None, Vec, Vec | None]:
+        """(length beyond the top pulley, ring contact or None, unit pull toward the
+        top, unit pull toward the bottom or None) of rope ``i`` for the source at ``x``."""
+        o = self.offsets[i]
+        q = (x[0] + o[0], x[1] + o[1], x[2] + o[2])
+        t = self.tops[i]
+        c = ring_contact(self.ring, t, q)
+        head = 0.0
+        if c is not None:
+            head = _dist(t, c)
+            t = c
+        d = (t[0] - q[0], t[1] - q[1], t[2] - q[2])
+        lt = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) or 1e-12
+        ut = (d[0] / lt, d[1] / lt, d[2] / lt)
+        b = self.bottoms[i]
+        if b is None:
+            return head + lt, c, ut, None
+        e = (b[0] - q[0], b[1] - q[1], b[2] - q[2])
+        lb = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]) or 1e-12
+        return head + lt + lb, c, ut, (e[0] / lb, e[1] / lb, e[2] / lb)
+
+    def force_directions(self, x: Sequence[float]) -> list[Vec]:
+        """Per rope, the force on the source per newton of tension at ``x``."""
+        out = []
+        for i in range(self.n):
+            _, _, ut, ub = self.rope_geometry(i, x)
+            out.append(ut if ub is None else (ut[0] + ub[0], ut[1] + ub[1], ut[2] + ub[2]))
+        return out
+
+    def net_force_at(self, x: Sequence[float], tensions: Sequence[float]) -> Vec:
+        """Residual force on the source at ``x`` with ``tensions`` (N)."""
+        f = [0.0, 0.0, -self.weight(x[2])]
+        for a, t in zip(self.force_directions(x), tensions, strict=True):
+            f[0] += t * a[0]
+            f[1] += t * a[1]
+            f[2] += t * a[2]
+        return (f[0], f[1], f[2])
+
+    def off_side(self, x: Sequence[float]) -> list[bool]:
+        """Side ropes whose bottom attachment is on the far side of the central
+        axis from ``x`` (or level with it)."""
+        hx, hy = x[0] - self.axis_point[0], x[1] - self.axis_point[1]
+        return [bd is not None and bd[0] * hx + bd[1] * hy <= 0.0 for bd in self._bdir]
+
+    def equilibrium_tensions(self, x: Sequence[float]) -> tuple[list[float], float]:
+        """Tensions that hold the source at ``x``: off-side ropes at
+        OFFSIDE_TENSION, the others by least squares; and the force left over (N)."""
+        a = np.array(self.force_directions(x), float).T  # 3 x n
+        off = self.off_side(x)
+        t = np.array([self.offside_tension if o else 0.0 for o in off])
+        rhs = np.array([0.0, 0.0, self.weight(x[2])]) - a @ t
+        free = [i for i in range(self.n) if not off[i]]
+        if free:
+            sol = np.linalg.lstsq(a[:, free], rhs, rcond=None)[0]
+            t[free] = sol
+        resid = a @ t - np.array([0.0, 0.0, self.weight(x[2])])
+        return [float(v) for v in t], float(np.linalg.norm(resid))
+
+    # -- containment ----------------------------------------------------------------
+
+    def _vessel_frame(self, x: Sequence[float]) -> tuple[float, float]:
+        """(radial distance from the neck axis, height above the neck ring), cm."""
+        v = self.av.gtov(x)
+        c = self.av.neck_ring_static_position
+        return math.hypot(v[0] - c[0], v[1] - c[1]), v[2] - c[2]
+
+    def in_neck(self, x: Sequence[float]) -> bool:
+        """In the neck for path planning: inside the neck radius, at or above the
+        turn point just below the ring."""
+        r, h = self._vessel_frame(x)
+        return r <= self.av.neck_radius and h >= -VIA_BELOW
+
+    def refusal(self, x: Sequence[float]) -> str | None:
+        """Why the source may not be at ``x``, or None.
+
+        Allowed: inside the vessel sphere, or inside the neck (within
+        NECK_RADIUS of its axis, up to NECK_LENGTH above the ring).  The
+        column under the ring inside the neck radius counts as neck: in the
+        prototype (Table 5) the ring is 44 cm above the top of the 3.20 m
+        sphere and the source must pass there to reach the neck; in the full
+        vessel that column lies inside the sphere anyway.
+        """
+        if self.av.in_vessel(x):
+            return None
+        r, h = self._vessel_frame(x)
+        v = self.av.gtov(x)
+        if v[2] >= 0.0 and h <= self.av.neck_length:
+            if r <= self.av.neck_radius:
+                return None
+            if h >= 0.0:
+                return (f"outside the neck's allowed radius ({r:.2f} cm from the neck axis, "
+                        f"NECK_RADIUS {self.av.neck_radius:g} cm)")
+        return "outside the vessel"
+
+    # -- commands (Table 2) ----------------------------------------------------------
+
+    def command(self, name: str, *args: str) -> object:
+        """Run Table 2 command ``name``; CommandError if malformed or refused."""
+        key = name.lower()
+        if key not in COMMANDS:
+            raise CommandError(f"{self.name}: unknown command {name!r}; expected one of "
+                               "to, tensionFind, tensions, netForce, pattern, stop, "
+                               "tensionStop, errorSignalAll")
+        if len(args) not in COMMANDS[key]:
+            counts = " or ".join(str(c) for c in COMMANDS[key])
+            raise CommandError(f"{self.name} {name}: takes {counts} argument(s), got {len(args)}")
+        return getattr(self, "cmd_" + key)(*args)
+
+    def _point(self, args: Sequence[str], what: str) -> Vec:
+        return tuple(parse_number(a, f"{self.name} {what}", f"{c} in cm")  # type: ignore[return-value]
+                     for a, c in zip(args, "xyz", strict=True))
+
+    def cmd_to(self, x: str, y: str, z: str, mode: str = "") -> str:
+        """``to x y z [blend]``: move there (refused with the reason, nothing moved)."""
+        m = mode.lower()
+        if m not in ("", "blend", "stop"):
+            raise CommandError(f"{self.name} to: the fourth word may be 'blend' or 'stop', "
+                               f"got {mode!r}")
+        target = self._point((x, y, z), "to")
+        self.to(target, blend=(m == "blend"))
+        assert self.hare is not None
+        n = len(self.hare.segments)
+        how = " blended" if self.hare.blend else ""
+        total = sum(s.length for s in self.hare.segments)
+        return (f"{self.name}: to ({target[0]:g}, {target[1]:g}, {target[2]:g}): "
+                f"{n}{how} segment{'s' if n > 1 else ''}, {total:.1f} cm")
+
+    def cmd_tensionfind(self) -> str:
+        """``tensionFind``: the position that balances the measured tensions."""
+        x = self.tension_find()
+        return f"{self.name}: position from tensions ({x[0]:.2f}, {x[1]:.2f}, {x[2]:.2f})"
+
+    def cmd_tensions(self) -> str:
+        """``tensions``: desired tensions at the current position."""
+        t, resid = self.equilibrium_tensions(self.position)
+        parts = " ".join(f"{a.name} {v:.2f} N" for a, v in zip(self.axes, t, strict=True))
+        return f"{self.name}: desired tensions {parts} (unbalanced {resid:.2f} N)"
+
+    def cmd_netforce(self, *args: str) -> str:
+        """``netForce [x y z]``: net force magnitude there (default: here)."""
+        x = self._point(args, "netForce") if args else self.position
+        f = self.net_force_at(x, self.tensions)
+        mag = math.sqrt(f[0] ** 2 + f[1] ** 2 + f[2] ** 2)
+        return (f"{self.name}: net force {mag:.2f} N ({f[0]:.2f}, {f[1]:.2f}, {f[2]:.2f}) at "
+                f"({x[0]:.2f}, {x[1]:.2f}, {x[2]:.2f})")
+
+    def cmd_pattern(self, path: str) -> str:
+        """``pattern FILE``: parsed here; the station runs it as a job."""
+        raise CommandError(f"{self.name} pattern: run patterns from the console "
+                           f"(pattern {path})")
+
+    def cmd_stop(self) -> str:
+        """``stop``: stop all motors."""
+        self.stop()
+        return f"{self.name}: stopped"
+
+    def cmd_tensionstop(self) -> str:
+        """``tensionStop``: toggle the tension stop conditions."""
+        self.tension_stop = not self.tension_stop
+        if self.stops is not None:
+            self.stops.tension_stops = self.tension_stop
+        return f"{self.name}: tension stops {'on' if self.tension_stop else 'OFF'}"
+
+    def cmd_errorsignalall(self) -> str:
+        """``errorSignalAll``: toggle driving every rope toward its equilibrium tension."""
+        self.signal_all = not self.signal_all
+        return (f"{self.name}: error signals "
+                f"{'on every rope (errorSignalAll)' if self.signal_all else 'off-side only'}")
+
+    # -- moving ----------------------------------------------------------------------
+
+    def check_target(self, target: Sequence[float]) -> None:
+        """Refuse (CommandError with the reason) a target that cannot be reached."""
+        tgt = tuple(float(c) for c in target)
+        if len(tgt) != 3 or not all(math.isfinite(c) for c in tgt):
+            raise CommandError(f"{self.name} to: target must be three finite numbers")
+        why = self.refusal(tgt)
+        if why is not None:
+            raise CommandError(f"{self.name} to: refused: ({tgt[0]:g}, {tgt[1]:g}, {tgt[2]:g}) "
+                               f"is {why}; nothing moved")
+        for i, a in enumerate(self.axes):
+            o = self.offsets[i]
+            q = (tgt[0] + o[0], tgt[1] + o[1], tgt[2] + o[2])
+            if _dist(q, self.tops[i]) < MIN_TOP_SEGMENT:
+                raise CommandError(f"{self.name} to: refused: the carriage would be within "
+                                   f"{MIN_TOP_SEGMENT:g} cm of {a.name}'s top pulley; "
+                                   "nothing moved")
+        t, resid = self.equilibrium_tensions(tgt)
+        problems = []
+        for a, v in zip(self.axes, t, strict=True):
+            if v < self.low_tension:
+                problems.append(f"{a.name} would need {v:.1f} N (LOW_TENSION "
+                                f"{self.low_tension:g} N)")
+            elif v > self.max_tension:
+                problems.append(f"{a.name} would need {v:.1f} N (MAX_TENSION "
+                                f"{self.max_tension:g} N)")
+        if resid > self.net_forcelimit:
+            problems.append(f"{resid:.1f} N could not be balanced (NET_FORCELIMIT "
+                            f"{self.net_forcelimit:g} N)")
+        if problems:
+            raise CommandError(f"{self.name} to: refused: ({tgt[0]:g}, {tgt[1]:g}, {tgt[2]:g}) "
+                               "cannot be held within the tension bounds: "
+                               + "; ".join(problems) + "; nothing moved")
+
+    def to(self, target: Sequence[float], *, blend: bool = False) -> Hare:
+        """Start a move to ``target`` (global cm) after the checks; re-arms the
+        tension stops.  Every Axis goes to PolyAxis control (polyActivate)."""
+        self.check_target(target)
+        tgt: Vec = tuple(float(c) for c in target)  # type: ignore[assignment]
+        start = self.position
+        segs = plan_segments(start, tgt, self.in_neck, self.via)
+        hare = Hare(segs, self.hare_speed, self.hare_ramp, blend=blend)
+        for p in hare.sample():
+            why = self.refusal(p)
+            if why is not None and _dist(p, start) > 2.0 * self.end_error:
+                raise CommandError(
+                    f"{self.name} to: refused: the path passes ({p[0]:.1f}, {p[1]:.1f}, "
+                    f"{p[2]:.1f}), {why}; nothing moved")
+        # accepted: hand every axis to PolyAxis control
+        for a, length in zip(self.axes, self.lengths, strict=True):
+            if a.mode != POLYAXIS:
+                a.polyActivate(length if self.polls else a.getLength())
+        self.hare = hare
+        self.hare_position = hare.position
+        self.endpoint = tgt
+        self.tension_stop = True
+        self.stops = StopCheck(start, tgt, end_error=self.end_error,
+                               find_tolerance=self.find_tolerance, stuck_time=self.stuck_time,
+                               low_tension=self.low_tension, max_tension=self.max_tension,
+                               net_force_limit=self.net_forcelimit, tension_stops=True)
+        self._prev_e = None
+        self._prev_te = None
+        self.batch.inputs[:, _FI.LAST_DV] = 0.0
+        self.active = True
+        self.moves += 1
+        self._log(f"TO {self.now_s:.3f} {tgt[0]:.4f} {tgt[1]:.4f} {tgt[2]:.4f} "
+                  f"{len(segs)} {int(hare.blend)}")
+        return hare
+
+    def stop(self) -> None:
+        """The ``stop`` command: every motor stopped, the move ended."""
+        self.halt(StopReason.STOP, "stop command")
+
+    def stop_motors(self) -> None:
+        """Every motor off (windings off) and every axis back to standalone."""
+        for a in self.axes:
+            a.motor.stop()
+            if a.mode == POLYAXIS:
+                a.polyDeactivate()
+            a.target = None
+            a.motor.mode = STEP_MODE
+
+    def halt(self, reason: StopReason, detail: str) -> StopRecord:
+        """End the move: stop every motor, record and report why."""
+        was_active = self.active
+        self.active = False
+        self.stop_motors()
+        rec = StopRecord(reason, detail, self.position, self.now_s, self.endpoint)
+        if was_active or reason in (StopReason.STOP, StopReason.FAULT):
+            self.last_stop = rec
+            self._log(f"STOP {self.now_s:.3f} {reason.value} {detail}")
+            for fn in self.on_stop:
+                fn(rec)
+        if reason in SAFETY_STOPS and self.on_fault is not None:
+            self.on_fault(f"{reason.value}: {detail}", self.name)
+        return rec
+
+    def reflex(self, fault) -> None:
+        """The manipulator's reflex action: every motor stopped, the move ended."""
+        if self.active:
+            self.halt(StopReason.FAULT, str(getattr(fault, "cause", fault)))
+        else:
+            self.stop_motors()
+
+    @property
+    def moving(self) -> bool:
+        """A move is in progress."""
+        return self.active
+
+    # -- the control poll ------------------------------------------------------------
+
+    def measure(self) -> None:
+        """Read every Axis and find the source position (steps 1-3 of the poll)."""
+        axes = self.axes
+        tens = self.tensions
+        lens = self.lengths
+        for i, a in enumerate(axes):
+            t = a.loadcell.tension()
+            tens[i] = t
+            lens[i] = a.encoder.length() * (1.0 + a.stretch * (t if t > 0.0 else 0.0)) \
+                - a.dead_length
+        finder = self.finder
+        lf = finder.lengths
+        tops = finder.tops
+        x = self.position
+        ring = self.ring
+        wrapped = self._wrapped
+        for i in range(self.n):
+            o = self.offsets[i]
+            t0 = self.tops[i]
+            c = ring_contact(ring, t0, (x[0] + o[0], x[1] + o[1], x[2] + o[2]))
+            if c is None:
+                if wrapped[i]:
+                    tops[i] = t0
+                    wrapped[i] = False
+                lf[i] = lens[i]
+            else:
+                tops[i] = c
+                wrapped[i] = True
+                lf[i] = lens[i] - _dist(t0, c)
+        if self._start_given:
+            pos = finder.solve()
+        else:
+            pos = finder.solve(None, np.array(x, float))
+            self._start_given = True
+        self.position = (float(pos[0]), float(pos[1]), float(pos[2]))
+        self.dist_err = finder.rms
+        f = self._net_force_effective(tens)
+        self.net_force = f
+        self.net_force_magnitude = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
+
+    def _net_force_effective(self, tens: Sequence[float]) -> Vec:
+        """Net force at the new estimate with this poll's effective tops (the
+        ring contacts found for the previous estimate, 50 ms old)."""
+        x = self.position
+        tops = self.finder.tops
+        fx, fy, fz = 0.0, 0.0, -self.weight(x[2])
+        sqrt = math.sqrt
+        for i in range(self.n):
+            o = self.offsets[i]
+            qx, qy, qz = x[0] + o[0], x[1] + o[1], x[2] + o[2]
+            tt = tops[i]
+            dx, dy, dz = float(tt[0]) - qx, float(tt[1]) - qy, float(tt[2]) - qz
+            k = tens[i] / (sqrt(dx * dx + dy * dy + dz * dz) or 1e-12)
+            fx += k * dx
+            fy += k * dy
+            fz += k * dz
+            b = self.bottoms[i]
+            if b is not None:
+                dx, dy, dz = b[0] - qx, b[1] - qy, b[2] - qz
+                k = tens[i] / (sqrt(dx * dx + dy * dy + dz * dz) or 1e-12)
+                fx += k * dx
+                fy += k * dy
+                fz += k * dz
+        return (fx, fy, fz)
+
+    def poll(self, now_s: float) -> None:
+        """One control poll (see the module text)."""
+        self.now_s = now_s
+        last = self._last_poll_s
+        dt = self.poll_s if last is None else max(0.0, now_s - last)
+        self._last_poll_s = now_s
+        self.polls += 1
+        try:
+            self.measure()
+        except NativeError as exc:
+            if self.active:
+                self.halt(StopReason.FAULT, f"position finder failed: {exc}")
+                if self.on_fault is not None:
+                    self.on_fault(f"position finder failed: {exc}", self.name)
+            raise
+        if self.active:
+            self._drive(now_s, dt)
+        for a in self.axes:
+            if a.mode == POLYAXIS:
+                a.encoder.poll(now_s)
+        if self.debug and now_s >= self._debug_next and self.stdout is not None:
+            self._debug_next = now_s + 1.0
+            self.stdout.write(self.status_line() + "\n")
+
+    def _settled_at_turn(self) -> bool:
+        return _dist(self.position, self.via) <= max(self.find_tolerance, self.end_error)
+
+    def error_signal(self, hare: Sequence[float]) -> None:
+        """``errorSignal``: length errors on every rope; off-side ropes driven
+        toward OFFSIDE_TENSION, the others free (``errorSignalAll``: every rope
+        toward the equilibrium tensions at the hare)."""
+        res = self.finder.residuals
+        if self.signal_all:
+            want, _ = self.equilibrium_tensions(hare)
+            for i in range(self.n):
+                self.desired_tensions[i] = want[i]
+                self.free[i] = 0.0
+        else:
+            off = self.off_side(self.position)
+            for i in range(self.n):
+                if off[i]:
+                    self.desired_tensions[i] = self.offside_tension
+                    self.free[i] = 0.0
+                else:
+                    self.desired_tensions[i] = 0.0
+                    self.free[i] = 1.0
+        for i in range(self.n):
+            desired_len = self.rope_geometry(i, hare)[0]
+            self.error_lengths[i] = (self.lengths[i] - float(res[i])) - desired_len
+            self.error_tensions[i] = (0.0 if self.free[i] else
+                                      self.tensions[i] - self.desired_tensions[i])
+
+    def _drive(self, now_s: float, dt: float) -> None:
+        hare = self.hare
+        assert hare is not None and self.stops is not None
+        hp = hare.advance(dt, self._settled_at_turn)
+        self.hare_position = hp
+        self.error_signal(hp)
+        e, te = self.error_lengths, self.error_tensions
+        inp = self.batch.inputs
+        pe, pte = self._prev_e, self._prev_te
+        near = 1.0 - _dist(self.position, hare.end) / NEAR_END_CM
+        near = 0.0 if near < 0.0 else near
+        rate_dt = dt if dt > 0 else self.poll_s
+        for i, a in enumerate(self.axes):
+            row = inp[i]
+            row[_FI.TENSION] = self.tensions[i]
+            row[_FI.DESIRED_TENSION] = self.desired_tensions[i]
+            row[_FI.FREE] = self.free[i]
+            row[_FI.LENGTH_ERROR] = e[i]
+            row[_FI.VELOCITY] = a.motor.velocity
+            row[_FI.LENGTH_ERROR_RATE] = 0.0 if pe is None else (e[i] - pe[i]) / rate_dt
+            row[_FI.TENSION_ERROR_RATE] = 0.0 if pte is None else (te[i] - pte[i]) / rate_dt
+            row[_FI.NEAR_END] = near
+        self._prev_e = list(e)
+        self._prev_te = list(te)
+        dv = self.batch.step()
+        dvs = dv.tolist()
+        inp[:, _FI.LAST_DV] = dv
+        for i, a in enumerate(self.axes):
+            m = a.motor
+            base = m.velocity if m.running else m.desired_velocity
+            m.set_desired_velocity(base + dvs[i])
+            m.poll()
+        if self.log is not None:
+            self._log_state(now_s, dvs)
+        hit = self.stops.check(now_s, self.position, self.dist_err, self.tensions,
+                               self.net_force_magnitude, [a.name for a in self.axes])
+        if hit is not None:
+            self.halt(*hit)
+
+    # -- tension find --------------------------------------------------------------------
+
+    def tension_find(self, iterations: int = 30) -> Vec:
+        """``tensionFind``: the position where the measured tensions balance the
+        weight (Gauss-Newton from the current estimate, in the free directions)."""
+        x = np.array(self.position, float)
+        free = [k for k in range(3) if not self.finder.freeze[k]]
+        for _ in range(iterations):
+            f0 = np.array(self.net_force_at(x, self.tensions))
+            jac = np.zeros((3, 3))
+            for k in free:
+                dx = np.zeros(3)
+                dx[k] = 0.01
+                jac[:, k] = (np.array(self.net_force_at(x + dx, self.tensions)) - f0) / 0.01
+            step = np.zeros(3)
+            step[free] = np.linalg.lstsq(jac[:, free], -f0, rcond=None)[0]
+            n = float(np.linalg.norm(step))
+            if n > 20.0:
+                step *= 20.0 / n
+            x = x + step
+            if n < 1e-3:
+                break
+        return (float(x[0]), float(x[1]), float(x[2]))
+
+    # -- patterns ------------------------------------------------------------------------
+
+    def pattern(self, points: Sequence[Vec], log_path: Path | str,
+                time_s: Callable[[], float], pause_s: float = PATTERN_PAUSE_S
+                ) -> Generator[None, None, list[StopRecord | str]]:
+        """A foreground job: move to each endpoint, pause, go on; the log file
+        records where each move stopped and why.  Returns the records."""
+        path = Path(log_path)
+        results: list[StopRecord | str] = []
+
+        def write(line: str) -> None:
+            with open(path, "a", encoding="utf-8") as fh:
+                fh.write(line + "\n")
+                fh.flush()
+
+        write(f"# pattern of {len(points)} endpoints, {self.name}")
+        for k, p in enumerate(points, 1):
+            try:
+                self.to(p)
+            except CommandError as exc:
+                write(f"{k} {p[0]:g} {p[1]:g} {p[2]:g} REFUSED {exc}")
+                results.append(f"REFUSED {exc}")
+                continue
+            while self.active:
+                yield
+            rec = self.last_stop
+            x = self.position
+            write(f"{k} {p[0]:g} {p[1]:g} {p[2]:g} {rec.reason.value if rec else 'STOP'} "
+                  f"at {x[0]:.3f} {x[1]:.3f} {x[2]:.3f} t={time_s():.2f} "
+                  f"{rec.detail if rec else ''}")
+            results.append(rec if rec is not None else "STOP")
+            if rec is not None and rec.reason not in (StopReason.ENDPOINT_STOP,
+                                                      StopReason.STUCK_STOP):
+                write(f"# pattern abandoned after endpoint {k}: {rec.reason.value}")
+                return results
+            until = time_s() + pause_s
+            while time_s() < until:
+                yield
+        write("# pattern complete")
+        return results
+
+    # -- logging and status --------------------------------------------------------------
+
+    def _log(self, line: str) -> None:
+        if self.log is not None:
+            self.log(line)
+
+    def _log_state(self, now_s: float, dvs: Sequence[float]) -> None:
+        log = self.log
+        assert log is not None
+        x = self.position
+        h = self.hare_position or x
+        log(f"P {now_s:.3f} {x[0]:.4f} {x[1]:.4f} {x[2]:.4f} {self.dist_err:.4f} "
+            f"{h[0]:.4f} {h[1]:.4f} {h[2]:.4f} {self.net_force_magnitude:.3f}")
+        rules = self.batch.rules
+        for i, a in enumerate(self.axes):
+            log(f"S {now_s:.3f} {i} {self.lengths[i]:.4f} {self.tensions[i]:.3f} "
+                f"{self.error_lengths[i]:.4f} {self.error_tensions[i]:.3f} "
+                f"{a.motor.velocity:.4f} {dvs[i]:.4f} {self.desired_tensions[i]:.2f} "
+                f"{self.free[i]:.0f}")
+            log(f"R {now_s:.3f} {i} " + " ".join(f"{v:.5f}" for v in rules[i].tolist()))
+
+    def status_line(self) -> str:
+        """Source position, distErr, residual net force, tensions and time."""
+        x = self.position
+        t = " ".join(f"{v:.1f}" for v in self.tensions)
+        state = "moving" if self.active else (self.last_stop.reason.value
+                                              if self.last_stop else "idle")
+        return (f"t={self.now_s:9.2f} s  pos ({x[0]:8.2f} {x[1]:8.2f} {x[2]:8.2f}) cm  "
+                f"distErr {self.dist_err:.3f} cm  net {self.net_force_magnitude:6.2f} N  "
+                f"T [{t}] N  {state}")
