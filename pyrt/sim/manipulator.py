@@ -335,6 +335,9 @@ class ManipulatorPlant:
                 solver.set_payouts(self._solved_payouts)
             else:
                 self._solved_payouts = [st.payout for st in self.ropes]
+                # a long swing (a rope broke, a rope went slack) may need more
+                # iterations than one step allows: carry on at the next step
+                self._dirty = not self.converged
             self.solves += 1
         self._write_sensors()
 
