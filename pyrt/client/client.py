@@ -1,0 +1,235 @@
+"""A blocking client of pyrt's DAQ server (the line protocol of ``pyrt.server``).
+
+::
+
+    from pyrt.client import Client
+
+    with Client.connect("127.0.0.1:5050") as c:
+        c.auth(token)                   # ServerError("auth"|"busy") when refused
+        c.command("P E47A")             # reply lines (text after OK), or ServerError
+        print(c.command("W"))           # ['E47A']
+        print(c.status().fields)        # {'position': -7046, 'target': -7046, ...}
+        for s in c.subscribe(50):       # Status every 20 ms, faults as they happen
+            ...
+
+A reply is ``OK-`` continuation lines and a last ``OK`` or ``ERR <code>``
+line; ``STATUS`` lines (subscription samples, pushed faults) can come
+between replies and are kept for :meth:`Client.statuses`.
+"""
+
+from __future__ import annotations
+
+import socket
+import time
+from collections import deque
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+
+from pyrt.errors import PyrtError
+
+__all__ = ["Client", "Reply", "ServerError", "Status", "parse_address", "parse_status"]
+
+#: Longest line the client accepts from a server.
+MAX_REPLY_LINE = 1 << 20
+
+
+class ServerError(PyrtError):
+    """The server answered ``ERR <code> <text>`` (``lines``: output before it)."""
+
+    def __init__(self, code: str, text: str = "", lines: list[str] | None = None):
+        self.code = code
+        self.text = text
+        self.lines = list(lines or [])
+        super().__init__(f"ERR {code}" + (f" {text}" if text else ""))
+
+
+@dataclass(frozen=True)
+class Reply:
+    """One reply: ``ok``; ``lines`` (the text of every line); ``code`` when it failed."""
+
+    ok: bool
+    lines: list[str]
+    code: str = ""
+    text: str = ""
+
+
+@dataclass(frozen=True)
+class Status:
+    """A ``STATUS`` line: a sample (``fields``, ``time_s``) or a pushed fault."""
+
+    raw: str
+    time_s: float | None = None
+    fields: dict = field(default_factory=dict)
+    fault: str | None = None
+
+
+def _value(text: str) -> int | float | str:
+    """A field's value: an integer (decimal or 0x hex), a float, or the text."""
+    for parse in (int, lambda t: int(t, 0), float):
+        try:
+            return parse(text)
+        except ValueError:
+            pass
+    return text
+
+
+def parse_status(line: str) -> Status:
+    """Parse ``STATUS t=... key=value ...`` or ``STATUS FAULT <text>``."""
+    body = line[len("STATUS"):].strip()
+    if body.startswith("FAULT"):
+        return Status(raw=line, fault=body[len("FAULT"):].strip())
+    fields: dict = {}
+    for item in body.split():
+        key, sep, val = item.partition("=")
+        if sep:
+            fields[key] = _value(val)
+    t = fields.pop("t", None)
+    return Status(raw=line, time_s=float(t) if isinstance(t, (int, float)) else None,
+                  fields=fields)
+
+
+def parse_address(text: str, default_host: str = "127.0.0.1") -> tuple[str, int]:
+    """``[HOST:]PORT`` (``[::1]:PORT`` for IPv6) to ``(host, port)``; ValueError when bad."""
+    t = text.strip()
+    host = default_host
+    if t.startswith("["):
+        end = t.find("]")
+        if end < 0 or t[end + 1 : end + 2] != ":":
+            raise ValueError(f"expected [HOST]:PORT, got {text!r}")
+        host, t = t[1:end], t[end + 2 :]
+    elif ":" in t:
+        host, _, t = t.rpartition(":")
+        host = host or default_host
+    if not t.isdigit() or not 0 < int(t) <= 65535:
+        raise ValueError(f"port must be 1..65535, got {text!r}")
+    return host, int(t)
+
+
+class Client:
+    """A connection to a pyrt server; ``timeout_s`` bounds every wait for a reply."""
+
+    def __init__(self, host: str, port: int, timeout_s: float = 10.0):
+        self.timeout_s = timeout_s
+        self._sock = socket.create_connection((host, port), timeout=timeout_s)
+        self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self._buf = bytearray()
+        self._statuses: deque[Status] = deque()
+        self.closed = False
+        greeting = self._read_reply()
+        if not greeting.ok:
+            self.close()
+            raise ServerError(greeting.code, greeting.text, greeting.lines)
+        #: The server's greeting (robot, version, whether AUTH is possible).
+        self.greeting = greeting.lines[-1] if greeting.lines else ""
+
+    @classmethod
+    def connect(cls, address: str, timeout_s: float = 10.0) -> Client:
+        """Connect to ``[HOST:]PORT``."""
+        host, port = parse_address(address)
+        return cls(host, port, timeout_s)
+
+    def __enter__(self) -> Client:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Close the connection (the server forgets privilege and subscription)."""
+        if not self.closed:
+            self.closed = True
+            self._sock.close()
+
+    # -- lines ---------------------------------------------------------------------
+
+    def _readline(self, timeout_s: float | None = None) -> str:
+        deadline = time.monotonic() + (self.timeout_s if timeout_s is None else timeout_s)
+        while True:
+            i = self._buf.find(b"\n")
+            if i >= 0:
+                raw = bytes(self._buf[:i])
+                del self._buf[: i + 1]
+                return raw.decode("utf-8", errors="replace").rstrip("\r")
+            if len(self._buf) > MAX_REPLY_LINE:
+                raise ServerError("protocol", "reply line too long")
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise TimeoutError("no reply from the server")
+            self._sock.settimeout(remaining)
+            try:
+                data = self._sock.recv(65536)
+            except TimeoutError:
+                raise TimeoutError("no reply from the server") from None
+            if not data:
+                raise ConnectionError("the server closed the connection")
+            self._buf += data
+
+    def send_line(self, line: str) -> None:
+        """Send one request line (no line end in it)."""
+        if "\n" in line or "\r" in line:
+            raise ValueError("a request is one line")
+        self._sock.sendall(line.encode("utf-8") + b"\n")
+
+    def _read_reply(self) -> Reply:
+        lines: list[str] = []
+        while True:
+            line = self._readline()
+            if line.startswith("STATUS"):
+                self._statuses.append(parse_status(line))
+            elif line.startswith("OK-"):
+                lines.append(line[3:])
+            elif line == "OK" or line.startswith("OK "):
+                if line != "OK":
+                    lines.append(line[3:])
+                return Reply(True, lines)
+            elif line.startswith("ERR"):
+                _, _, rest = line.partition(" ")
+                code, _, text = rest.partition(" ")
+                return Reply(False, lines, code, text)
+            else:
+                raise ServerError("protocol", f"unexpected line {line[:80]!r}")
+
+    # -- requests ------------------------------------------------------------------
+
+    def request(self, line: str) -> Reply:
+        """Send ``line``; its :class:`Reply` whether it succeeded or not."""
+        self.send_line(line)
+        return self._read_reply()
+
+    def command(self, line: str) -> list[str]:
+        """Send ``line``; the reply's lines, or :class:`ServerError` for ``ERR``."""
+        reply = self.request(line)
+        if not reply.ok:
+            raise ServerError(reply.code, reply.text, reply.lines)
+        return reply.lines
+
+    def auth(self, token: str) -> None:
+        """Become the privileged client (ServerError ``auth`` or ``busy`` if refused)."""
+        self.command(f"AUTH {token}")
+
+    def status(self) -> Status:
+        """The latest status sample (the ``STATUS`` request)."""
+        lines = self.command("STATUS")
+        return parse_status("STATUS " + (lines[-1] if lines else ""))
+
+    def subscribe(self, hz: float, timeout_s: float | None = None) -> Iterator[Status]:
+        """Subscribe at ``hz``; an iterator of :class:`Status` (see :meth:`statuses`)."""
+        self.command(f"SUBSCRIBE {hz:g}")
+        return self.statuses(timeout_s)
+
+    def unsubscribe(self) -> None:
+        """Stop the subscription (samples already sent are still read)."""
+        self.command("UNSUBSCRIBE")
+
+    def statuses(self, timeout_s: float | None = None) -> Iterator[Status]:
+        """``STATUS`` lines as they come; ends when none comes within ``timeout_s``
+        (default: the client's timeout) or the server closes."""
+        while True:
+            while self._statuses:
+                yield self._statuses.popleft()
+            try:
+                line = self._readline(timeout_s)
+            except (TimeoutError, ConnectionError):
+                return
+            if line.startswith("STATUS"):
+                yield parse_status(line)

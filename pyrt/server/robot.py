@@ -1,0 +1,93 @@
+"""What the server needs of a robot, and the read-only view of the runner.
+
+A robot plugs into the server through a :class:`ServedRobot`: its status
+(the sources the loop reads, how a STATUS line shows them), a command shell
+per connection, the classification of its commands into read-only and
+privileged, and the action that stops every motor.  The gripper's is
+:class:`pyrt.server.gripper.GripperService`; the manipulator's
+:class:`pyrt.server.manipulator.ManipulatorService`.
+
+An unprivileged connection's shell gets an :class:`ObserverRunner` instead
+of the runner: its mailbox calls leave a pending fault for the operator
+(they neither consume nor acknowledge it), and it refuses everything that
+would move time or the robot (waits, sleeps, jobs, motion records), a
+second line of defence behind the command classification.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any, Protocol, TextIO
+
+from pyrt.errors import CommandError
+from pyrt.scope import Source
+
+__all__ = ["ObserverRunner", "ServedRobot", "Shell"]
+
+
+class Shell(Protocol):
+    """A console command interpreter (``pyrt.commands.CommandShell`` style)."""
+
+    stdout: TextIO
+
+    def onecmd(self, line: str) -> bool: ...
+
+    def error(self, text: str) -> None: ...
+
+
+class ServedRobot(Protocol):
+    """A robot as the server sees it."""
+
+    #: The robot's name (``gripper``, ``prototype``), shown in STATUS lines.
+    name: str
+    #: Names of the status fields, in the order of :meth:`status_sources`.
+    status_names: Sequence[str]
+
+    def status_sources(self) -> list[Source]:
+        """Where the loop reads each status field (sampled in the loop thread)."""
+        ...
+
+    def format_status(self, values: Sequence[Any]) -> str:
+        """The ``key=value`` fields of a STATUS line for one sample."""
+        ...
+
+    def make_shell(self, runner: Any, stdout: TextIO) -> Shell:
+        """A fresh command shell for one connection, talking through ``runner``."""
+        ...
+
+    def is_read_only(self, line: str) -> bool:
+        """True when ``line`` only reads (served without privilege)."""
+        ...
+
+    def stop_all(self) -> None:
+        """Stop every motor now (called in the loop thread)."""
+        ...
+
+    def release(self, shell: Shell) -> None:
+        """A privileged connection has ended: undo what only its session meant
+        (leave a monitor level ...); called in a server thread."""
+        ...
+
+
+class ObserverRunner:
+    """The runner as an unprivileged client may use it: reads only."""
+
+    def __init__(self, runner: Any):
+        self._runner = runner
+        self.loop = runner.loop
+        self.virtual = runner.virtual
+
+    def call(
+        self, fn: Callable[..., Any], *args: Any, timeout_s: float = 1.0, name: str = ""
+    ) -> Any:
+        """A mailbox call that leaves a pending fault for the operator."""
+        return self._runner.call(fn, *args, timeout_s=timeout_s, name=name, take_fault=False)
+
+    def poll(self, timeout_s: float = 1.0) -> None:
+        """A no-op round trip that does not take the operator's fault."""
+        self.call(lambda: None, timeout_s=timeout_s, name="poll")
+
+    def _refuse(self, *args: Any, **kwargs: Any) -> Any:
+        raise CommandError("denied: not a read-only command (AUTH first)")
+
+    wait_until = sleep = spawn = run_job = submit_motion = _refuse
