@@ -11,11 +11,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
 from pyrt.boards.dataconcentrator import DataConcentrator, DigitalChannel
 from pyrt.devices._args import parse_number
 from pyrt.errors import CommandError, ConfigError
+
+if TYPE_CHECKING:
+    from pyrt.db import EncoderRecord
 
 __all__ = ["ZEROLENGTH_WRITE_PERIOD", "Encoder"]
 
@@ -52,7 +55,7 @@ class Encoder:
         channel.reset()
 
     @classmethod
-    def from_record(cls, record, board: DataConcentrator, name: str | None = None,
+    def from_record(cls, record: EncoderRecord, board: DataConcentrator, name: str | None = None,
                     **kw) -> Encoder:
         """An Encoder from a :class:`pyrt.db.EncoderRecord`."""
         return cls(name or record.name, DigitalChannel(board, record.address), record.slope,

@@ -13,12 +13,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
 from pyrt.boards.dataconcentrator import AnalogChannel, DataConcentrator
 from pyrt.devices._args import parse_number
 from pyrt.errors import CommandError, ConfigError
 from pyrt.units import UnitError, factor, split_quantity
+
+if TYPE_CHECKING:
+    from pyrt.db import LoadcellRecord
 
 __all__ = ["STANDARD_GRAVITY", "Loadcell", "parse_load"]
 
@@ -80,7 +83,7 @@ class Loadcell:
         self.points: list[tuple[int, float]] = []
 
     @classmethod
-    def from_record(cls, record, board: DataConcentrator, name: str | None = None,
+    def from_record(cls, record: LoadcellRecord, board: DataConcentrator, name: str | None = None,
                     **kw) -> Loadcell:
         """A Loadcell from a :class:`pyrt.db.LoadcellRecord`."""
         return cls(name or record.name, AnalogChannel(board, record.channel), record.slope,

@@ -28,7 +28,7 @@ left applied without movement.
 from __future__ import annotations
 
 import math
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
 from pyrt.boards.tio10 import (
     AWO_BITS,
@@ -42,6 +42,9 @@ from pyrt.boards.tio10 import (
 )
 from pyrt.devices._args import parse_number
 from pyrt.errors import CommandError, ConfigError
+
+if TYPE_CHECKING:
+    from pyrt.db import MotorRecord
 
 __all__ = [
     "MAX_CRUISE_SPEED",
@@ -148,7 +151,7 @@ class Motor:
         self._last_pulses = tio10.pulses(channel)
 
     @classmethod
-    def from_record(cls, record, tio10: TIO10, name: str | None = None,
+    def from_record(cls, record: MotorRecord, tio10: TIO10, name: str | None = None,
                     stdout: TextIO | None = None) -> Motor:
         """A Motor from a :class:`pyrt.db.MotorRecord`."""
         return cls(

@@ -20,8 +20,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from pyrt.errors import ConfigError
+
+if TYPE_CHECKING:
+    from pyrt.db import AVRecord
 
 __all__ = ["AV", "Vec"]
 
@@ -80,7 +84,7 @@ class AV:
         self.set_pose(position, orientation)
 
     @classmethod
-    def from_record(cls, record) -> AV:
+    def from_record(cls, record: AVRecord) -> AV:
         """An AV from a :class:`pyrt.db.AVRecord`."""
         return cls(record.name, record.neck_ring_static_position, record.neck_ring_radius,
                    record.neck_radius, record.neck_length, record.vessel_radius,

@@ -26,7 +26,7 @@ import math
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
 from pyrt.boards.dataconcentrator import DataConcentrator
 from pyrt.boards.tio10 import TIO10
@@ -36,6 +36,9 @@ from pyrt.devices.loadcell import Loadcell
 from pyrt.devices.motor import STEP_MODE, VELOCITY_MODE, Motor
 from pyrt.errors import CommandError, ConfigError, PyrtError
 from pyrt.robots.av import AV
+
+if TYPE_CHECKING:
+    from pyrt.db import AxisRecord, Station
 
 __all__ = [
     "COMMANDS",
@@ -152,9 +155,18 @@ class Axis:
         self._track_reset()
 
     @classmethod
-    def from_records(cls, name: str, record, station, tio10: TIO10, dc: DataConcentrator,
-                     *, av: AV | None = None, stdout: TextIO | None = None,
-                     persist: Callable[[str, str, str, float], None] | None = None) -> Axis:
+    def from_records(
+        cls,
+        name: str,
+        record: AxisRecord,
+        station: Station,
+        tio10: TIO10,
+        dc: DataConcentrator,
+        *,
+        av: AV | None = None,
+        stdout: TextIO | None = None,
+        persist: Callable[[str, str, str, float], None] | None = None,
+    ) -> Axis:
         """An Axis and its devices from a :class:`pyrt.db.AxisRecord` and its
         :class:`pyrt.db.Station`.  Sub-objects are named ``<name>Motor``,
         ``<name>Encoder``, ``<name>Loadcell`` (000, section 6).  ``persist(type,

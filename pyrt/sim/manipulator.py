@@ -28,6 +28,7 @@ import math
 import random
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -37,6 +38,9 @@ from pyrt.boards.tio10 import AWO_BITS, CLOCK_HZ, DIR_BITS, check_channel
 from pyrt.errors import NativeError
 from pyrt.native import StaticsSolver
 from pyrt.sim.sensors import Imperfections, loadcell_response
+
+if TYPE_CHECKING:
+    from pyrt.db import Station
 
 __all__ = [
     "D2O_DENSITY",
@@ -109,7 +113,7 @@ def rotation_xyz(angles_deg: Sequence[float]) -> np.ndarray:
 
 
 def rig_from_station(
-    station,
+    station: Station,
     polyaxis: str | None = None,
     *,
     vessel_position: Sequence[float] | None = None,
