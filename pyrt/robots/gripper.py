@@ -165,13 +165,16 @@ class GripperController:
             ADDR_WATCHJAW, "WATCHJAW", self.watchjaw, ByteRef(ram, WTCHJWSPD)
         )
         self.queue.reflex = self.reflex
-        cpu.set_vector(VECTOR_EXT0, self.encoder_up)
-        cpu.set_vector(VECTOR_EXT1, self.encoder_down)
+        #: Encoder interrupts seen (a one-element list: the handlers' counter).
+        self._pulse_cell = [0]
+        self._isr_up = self._make_isr(+1)
+        self._isr_down = self._make_isr(-1)
+        cpu.set_vector(VECTOR_EXT0, self._isr_up)
+        cpu.set_vector(VECTOR_EXT1, self._isr_down)
         #: The foreground job (init, calibration) in progress, if any.
         self.job: Job | None = None
         self._loop: Loop | None = None
         self._dac = DAC_NULL
-        self._pulses = 0
         self._wd_pulses = 0
         self._wd_since = 0
         #: Why the last commanded move or jog ended, for the console's ``wait``.
@@ -250,15 +253,24 @@ class GripperController:
 
     def encoder_up(self) -> None:
         """External request 0: one encoder count up."""
-        w = self._w16
-        w[_ENC16] = (w[_ENC16] + 1) & 0xFFFF
-        self._pulses += 1
+        self._isr_up()
 
     def encoder_down(self) -> None:
         """External request 1: one encoder count down."""
+        self._isr_down()
+
+    def _make_isr(self, delta: int):
+        """The handler installed at the vector: the same work as
+        :meth:`encoder_up`/:meth:`encoder_down` with every name bound local
+        (it runs once per encoder count, several times a tick)."""
         w = self._w16
-        w[_ENC16] = (w[_ENC16] - 1) & 0xFFFF
-        self._pulses += 1
+        pulses = self._pulse_cell
+
+        def isr() -> None:
+            w[_ENC16] = (w[_ENC16] + delta) & 0xFFFF
+            pulses[0] += 1
+
+        return isr
 
     # -- the self-scheduling routines ------------------------------------------------
 
@@ -366,8 +378,9 @@ class GripperController:
     def watchdog(self, now_ns: int) -> None:
         """Every tick: trip the robot when current has been applied for
         ``stall_limit_ns`` without a single encoder count."""
-        if self._dac == DAC_NULL or self._pulses != self._wd_pulses:
-            self._wd_pulses = self._pulses
+        pulses = self._pulse_cell[0]
+        if self._dac == DAC_NULL or pulses != self._wd_pulses:
+            self._wd_pulses = pulses
             self._wd_since = now_ns
             return
         if now_ns - self._wd_since > self.stall_limit_ns:
