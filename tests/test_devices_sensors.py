@@ -149,3 +149,33 @@ def test_point_outside_calibration_mode_is_an_error():
     lc, _ = _loadcell()
     with pytest.raises(CommandError, match="calibration mode"):
         lc.point(10)
+
+
+def test_keyboard_commands_by_name():
+    """Encoder, Loadcell and Motor commands run by name; unknown names and wrong argument
+    counts are CommandErrors."""
+    from pyrt.boards.simboards import SimTIO10
+    from pyrt.devices.motor import Motor
+
+    enc, dc = _encoder()
+    dc.plant_add_counts(168, 4)
+    enc.command("reset")
+    assert enc.count() == 0
+    assert enc.command("SETZEROLENGTH", "12.5") == 12.5
+    enc.command("readloop")
+    assert enc.looping
+    with pytest.raises(CommandError, match="unknown command"):
+        enc.command("rewind")
+    with pytest.raises(CommandError, match="takes 1 argument"):
+        enc.command("setZeroLength")
+    lc, dc = _loadcell()
+    lc.command("calibrate")
+    dc.plant_set_adc(3, 700)
+    lc.command("calibrationPoint", "0")
+    dc.plant_set_adc(3, 900)
+    lc.command("point", "100")
+    assert lc.command("calibrate") == pytest.approx((0.5, -350.0))
+    m = Motor("axis0Motor", SimTIO10(), 7, 0.5, 7.0)
+    assert m.command("maxspeed", "3") == 3.0
+    with pytest.raises(CommandError):
+        m.command("maxspeed", "3", "4")

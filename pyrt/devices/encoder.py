@@ -14,7 +14,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, TextIO
 
 from pyrt.boards.dataconcentrator import DataConcentrator, DigitalChannel
-from pyrt.devices._args import parse_number
+from pyrt.devices._args import dispatch, parse_number
 from pyrt.errors import CommandError, ConfigError
 
 if TYPE_CHECKING:
@@ -97,6 +97,16 @@ class Encoder:
         return v
 
     set_zero_length = setZeroLength
+
+    #: Table 8.
+    COMMANDS = {
+        "reset": ("reset", 0), "read": ("read", 0), "readloop": ("readloop", 0),
+        "stoploop": ("stoploop", 0), "setZeroLength": ("setZeroLength", 1),
+    }
+
+    def command(self, name: str, *args: str) -> object:
+        """Run a Table 8 command; CommandError if malformed."""
+        return dispatch(self, self.name, self.COMMANDS, name, args)
 
     # -- polling -----------------------------------------------------------------
 

@@ -16,7 +16,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, TextIO
 
 from pyrt.boards.dataconcentrator import AnalogChannel, DataConcentrator
-from pyrt.devices._args import parse_number
+from pyrt.devices._args import dispatch, parse_number
 from pyrt.errors import CommandError, ConfigError
 from pyrt.units import UnitError, factor, split_quantity
 
@@ -144,6 +144,17 @@ class Loadcell:
         self.points.append((code, n))
         self._say(f"{self.name}: point {len(self.points)}: ADC {code} = {n:.4g} N")
         return code, n
+
+    #: Section 10: ``calibrate`` toggles calibration mode, ``calibrationPoint``
+    #: (``point`` in Table 4) enters a point.
+    COMMANDS = {
+        "calibrate": ("calibrate", 0), "point": ("point", 1),
+        "calibrationPoint": ("point", 1),
+    }
+
+    def command(self, name: str, *args: str) -> object:
+        """Run a calibration command; CommandError if malformed."""
+        return dispatch(self, self.name, self.COMMANDS, name, args)
 
     def _say(self, text: str) -> None:
         if self.stdout is not None:

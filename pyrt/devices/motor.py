@@ -40,7 +40,7 @@ from pyrt.boards.tio10 import (
     TIO10,
     source_hz,
 )
-from pyrt.devices._args import parse_number
+from pyrt.devices._args import dispatch, parse_number
 from pyrt.errors import CommandError, ConfigError
 
 if TYPE_CHECKING:
@@ -326,6 +326,13 @@ class Motor:
         self.state = ON
         self.velocity = v_new
         self._drive(1 if v_new > 0 else -1, self.period_for(v_new))
+
+    #: 000, section 8: the only keyboard command of a Motor.
+    COMMANDS = {"maxspeed": ("maxspeed", 1)}
+
+    def command(self, name: str, *args: str) -> object:
+        """Run a keyboard command (``maxspeed [speed]``); CommandError if malformed."""
+        return dispatch(self, self.name, self.COMMANDS, name, args)
 
     def describe(self) -> str:
         return (f"{self.name}: {self.mode} {self.state_name} channel {self.channel} "
