@@ -206,3 +206,12 @@ def test_scope_records_the_gripper_variables(session):
     assert enc[0] > enc[-1] and -0x400 - 16 <= enc[-1] <= -0x400 + 16
     assert min(dac) < 0x80 and dac[-1] == 0x80
     assert session("scope add nothing")[0].startswith("error: no channel")
+
+
+def test_i_with_the_clock_off_is_refused_not_a_fault(session):
+    """I while the clock interrupt is off: one error line, no fault, nothing moves."""
+    session("M", "I", "Q")
+    lines = session("I")
+    assert lines == ["error: init needs the clock interrupt, which is off (monitor I): "
+                     "M, I turns it on"]
+    assert session.rig.loop.take_fault() is None and session.rig.board.dac == 0x80

@@ -413,6 +413,10 @@ class GripperController:
             raise CommandError(f"busy: {self.job.name} in progress")
         if self.queue.fault is not None:
             raise CommandError(f"robot stopped by a fault: {self.queue.fault.cause}")
+        if not self.queue.interrupts_enabled:
+            raise CommandError(
+                f"{name} needs the clock interrupt, which is off (monitor I): M, I turns it on"
+            )
         self.job = self._loop.spawn(name, self._run_job(gen))
         return self.job
 
