@@ -333,7 +333,8 @@ class GripperShell(CommandShell):
         line = line.strip()
         if not line:
             return False
-        word, _, rest = line.partition(" ")
+        parts = line.split(None, 1)
+        word, rest = parts[0], parts[1] if len(parts) > 1 else ""
         try:
             fn = self.handler(word) if len(word) > 1 else None
             if fn is not None:
@@ -361,13 +362,18 @@ class GripperShell(CommandShell):
 
     def _fault(self, exc: FaultError) -> None:
         self.say(f"FAULT: {exc.fault.cause} (in {exc.fault.source or 'the controller'})")
-        for _ in range(8):
+        for _ in range(8):  # each pending fault is raised once; acknowledge after the last
             try:
                 self.runner.call(self.ctl.acknowledge)
-                break
-            except FaultError:
+            except FaultError as again:
+                self.say(f"FAULT: {again.fault.cause} (in {again.fault.source})")
                 continue
-        self.say("fault acknowledged: drive current off, routines restarted; command not run")
+            except PyrtError as other:
+                self.error(f"could not acknowledge the fault: {other}")
+                return
+            break
+        self.say("fault acknowledged: drive current off, routines restarted; "
+                 "the command was not completed")
 
     # -- blocking main-program sequences ------------------------------------------
 
