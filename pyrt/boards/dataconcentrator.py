@@ -35,6 +35,8 @@ ADC_CHANNELS = range(16)
 
 def check_counter_address(address: int) -> int:
     """Return ``address`` if it is a counter address on the chain (0..255)."""
+    if type(address) is int and 0 <= address <= 255:
+        return address
     if (
         isinstance(address, bool)
         or not isinstance(address, int)
@@ -46,6 +48,8 @@ def check_counter_address(address: int) -> int:
 
 def check_adc_channel(channel: int) -> int:
     """Return ``channel`` if it is an ADC channel (0..15)."""
+    if type(channel) is int and 0 <= channel <= 15:
+        return channel
     if isinstance(channel, bool) or not isinstance(channel, int) or channel not in ADC_CHANNELS:
         raise ValueError(f"dataConcentrator ADC channel must be 0..15, got {channel!r}")
     return channel

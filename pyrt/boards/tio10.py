@@ -67,6 +67,7 @@ PIA_PORTS = (0, 1, 2, 3)
 #: out), all-windings-off on PIA 0 port B (1 = windings off).  Rewiring the
 #: outputs means changing these tables, as in the document.
 _MOTOR_CHANNELS = tuple(c for c in CHANNELS if c not in RTC_CHANNELS)
+_OUTPUT_CHANNELS = frozenset(_MOTOR_CHANNELS)
 DIR_BITS = {c: (0, b) for b, c in enumerate(_MOTOR_CHANNELS)}
 AWO_BITS = {c: (1, b) for b, c in enumerate(_MOTOR_CHANNELS)}
 
@@ -77,6 +78,9 @@ def check_channel(channel: int, *, allow_rtc: bool = False) -> int:
     Raises :class:`ValueError` for anything that is not 0..9, and for the
     real-time-clock channels 4 and 5 unless ``allow_rtc``.
     """
+    if type(channel) is int and (channel in _OUTPUT_CHANNELS
+                                 or (allow_rtc and channel in RTC_CHANNELS)):
+        return channel  # the fast path of every register access
     if isinstance(channel, bool) or not isinstance(channel, int) or channel not in CHANNELS:
         raise ValueError(f"TIO10 clock channel must be an integer 0..9, got {channel!r}")
     if not allow_rtc and channel in RTC_CHANNELS:
