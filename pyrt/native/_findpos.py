@@ -290,9 +290,7 @@ class PositionFinder:
         self._len_shape = (n,)
         self._solved = False
         self.n = n
-        self.freeze = flags
-        self.tol = tol
-        self.max_iter = max_iter
+        self._freeze = flags
         self.position = self._position.view()
         self.position.flags.writeable = False
         self.residuals = self._residuals.view()
@@ -311,6 +309,21 @@ class PositionFinder:
     def lengths(self) -> np.ndarray:
         """The bound (N,) measured-length buffer that :meth:`solve` reads, cm."""
         return self._lengths
+
+    @property
+    def freeze(self) -> tuple[int, int, int]:
+        """The freeze flags (x, y, z) bound at construction."""
+        return self._freeze
+
+    @property
+    def tol(self) -> float:
+        """Step tolerance, cm."""
+        return self._p.tol
+
+    @property
+    def max_iter(self) -> int:
+        """Iteration limit."""
+        return self._p.max_iter
 
     @property
     def rms(self) -> float:
