@@ -1,0 +1,108 @@
+"""``pyrt forcemap``: the force each rope puts on the source over a grid (000's -forceMap).
+
+For every grid position the source may occupy (in the vessel or the neck),
+the tensions that hold it there as the controller would (off-side ropes at
+OFFSIDE_TENSION, the others balancing the net weight) and each rope's force
+vector on the source.  One file per rope, ``axis0.map`` ..., each with a
+header naming the columns and their units.  The grid covers the vertical
+plane through the first side rope's attachment (000's maps were for the
+planar prototype), or the box given with ``--y``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import tempfile
+from pathlib import Path
+
+from pyrt.db import STATIONS, copy_station
+from pyrt.errors import ConfigError
+from pyrt.fileio import atomic_write
+from pyrt.station.manipulator import ManipulatorStation
+
+__all__ = ["COLUMNS", "add_parser", "force_map", "run"]
+
+COLUMNS = ("x_cm", "y_cm", "z_cm", "tension_N", "fx_N", "fy_N", "fz_N")
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("forcemap", help="write per-rope force maps over a grid (axis0.map ...)",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--station", choices=STATIONS, default="prototype")
+    p.add_argument("--db", metavar="DIR", help="station database (read only)")
+    p.add_argument("--out", metavar="DIR", default=".", help="where to write (default .)")
+    p.add_argument("--step", type=float, metavar="CM", help="grid step (default: 1/20 of the "
+                   "vessel radius)")
+    p.add_argument("--y", type=float, default=0.0, metavar="CM",
+                   help="y of the grid plane (default 0)")
+    p.set_defaults(run=run)
+
+
+def force_map(station: ManipulatorStation, step: float, y: float = 0.0
+              ) -> list[list[tuple[float, ...]]]:
+    """Rows ``(x, y, z, tension, fx, fy, fz)`` per rope over the grid."""
+    pa = station.polyaxis
+    av = station.av
+    c = av.vtog((0.0, 0.0, 0.0))
+    r = av.vessel_radius
+    top = av.neck_ring_position[2] + av.neck_length
+    rows: list[list[tuple[float, ...]]] = [[] for _ in pa.axes]
+    nx = math.floor(r / step)
+    nz_lo = math.floor(r / step)
+    nz_hi = math.floor((top - c[2]) / step)
+    for i in range(-nx, nx + 1):
+        for k in range(-nz_lo, nz_hi + 1):
+            x = (c[0] + i * step, y, c[2] + k * step)
+            if pa.refusal(x) is not None:
+                continue
+            try:
+                dirs = pa.force_directions(x)
+            except (ValueError, ZeroDivisionError):
+                continue
+            tensions, _ = pa.equilibrium_tensions(x)
+            for j, (t, d) in enumerate(zip(tensions, dirs, strict=True)):
+                rows[j].append((x[0], x[1], x[2], t, t * d[0], t * d[1], t * d[2]))
+    return rows
+
+
+def run(args: argparse.Namespace) -> int:
+    with tempfile.TemporaryDirectory(prefix="pyrt-forcemap-") as tmp:
+        src = Path(args.db) if args.db else copy_station(args.station, tmp)
+        if args.db:  # never write back into the given database
+            src = copy_tree(src, Path(tmp))
+        station = ManipulatorStation(src)
+        step = args.step if args.step is not None else station.av.vessel_radius / 20.0
+        if not (step > 0 and math.isfinite(step)):
+            raise ConfigError(f"--step must be a positive number of cm, got {args.step}")
+        rows = force_map(station, step, args.y)
+        out = Path(args.out)
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise ConfigError(f"cannot create {out}: {exc.strerror}") from None
+        for axis, table in zip(station.axes, rows, strict=True):
+            text = [f"# force map of {axis.name}, station {station.polyaxis.name}: the force "
+                    f"the rope puts on the source, grid step {step:g} cm, plane y = {args.y:g} cm",
+                    "# tensions: off-side ropes at OFFSIDE_TENSION, the others balancing the "
+                    "net weight",
+                    "# " + " ".join(COLUMNS)]
+            text.extend(" ".join(f"{v:.4f}" for v in row) for row in table)
+            target = out / f"{axis.name}.map"
+            atomic_write(target, ("\n".join(text) + "\n").encode())
+            print(f"{target}: {len(table)} positions", file=sys.stdout)
+        station.writeback.close()
+    return 0
+
+
+def copy_tree(src: Path, dest: Path) -> Path:
+    """Copy a station directory's database files into ``dest``."""
+    from pyrt.db import FILES
+
+    for name in FILES.values():
+        f = src / name
+        if not f.exists():
+            raise ConfigError(f"no {name} in {src}", str(src))
+        (dest / name).write_bytes(f.read_bytes())
+    return dest
