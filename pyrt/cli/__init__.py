@@ -12,12 +12,12 @@ import sys
 from collections.abc import Sequence
 
 from pyrt import __version__
-from pyrt.cli import demo, gripper, overruns
+from pyrt.cli import demo, forcemap, gripper, logsort, manipulator, overruns
 from pyrt.errors import PyrtError
 
 __all__ = ["main"]
 
-_COMMANDS = [demo, gripper, overruns]
+_COMMANDS = [demo, gripper, overruns, manipulator, logsort, forcemap]
 
 
 def build_parser() -> argparse.ArgumentParser:
