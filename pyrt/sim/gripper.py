@@ -31,6 +31,7 @@ sensor port reads a stuck value).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from math import floor as _floor
 
 from pyrt.boards.gripper import SimGripperBoard
 
@@ -90,14 +91,16 @@ class JawPlant:
         self.x = float(start)
         #: Velocity, counts per second.
         self.v = 0.0
-        self._enc = int(self.x // 1)
+        self._enc = _floor(self.x)
         self.object_mm: float | None = None
         self._touch = float("-inf")
         p = self.p
         self._k = (
-            p.deadband, p.gain, p.tau, p.k_open, p.closed, p.k_closed, p.k_object,
+            p.deadband, p.gain, p.k_open, p.closed, p.k_closed, p.k_object,
             p.max_open_overtravel, -p.closed - p.max_closed_overtravel,
         )
+        self._dt_ns = 0
+        self._blend = 1.0
         #: Below this position the limit sensor cannot fire.
         self._quiet_below = -p.limit_band - 2.0
         #: True while the ports last read all-off with no object and nothing stuck.
@@ -203,10 +206,14 @@ class JawPlant:
             if self._dirty:
                 self._sense()
             return
-        dt = (now_ns - last) * 1e-9
-        if dt <= 0.0:
+        dt_ns = now_ns - last
+        if dt_ns <= 0:
             return
-        deadband, gain, tau, k_open, closed, k_closed, k_object, x_max, x_min = self._k
+        if dt_ns != self._dt_ns:  # the lag's blend factor, recomputed when dt changes
+            self._dt_ns = dt_ns
+            self._blend = min(1.0, dt_ns * 1e-9 / self.p.tau)
+        dt = dt_ns * 1e-9
+        deadband, gain, k_open, closed, k_closed, k_object, x_max, x_min = self._k
         x = self.x
         if self._jam:
             v = 0.0
@@ -229,8 +236,7 @@ class JawPlant:
                 if u < 0:
                     drive = -drive
             v_target = gain * drive
-            k = dt / tau
-            v += (v_target - v) * (k if k < 1.0 else 1.0)
+            v += (v_target - v) * self._blend
             if -0.5 < v < 0.5 and v_target == 0.0:
                 v = 0.0
         x += v * dt
@@ -242,7 +248,7 @@ class JawPlant:
             v = 0.0
         self.x = x
         self.v = v
-        enc = int(x // 1)
+        enc = _floor(x)
         d = enc - self._enc
         if d:
             self._enc = enc
