@@ -279,6 +279,9 @@ def test_batch_refuses_bad_construction_and_params():
     batch.inputs[:] = [_row(length_error=2.0)] * 3
     batch.set_params(1, nat.FuzzyParams(dv_length=0.2))
     np.testing.assert_allclose(batch.step(), [-0.1, -0.2, -0.1])
+    assert batch.params[1].dv_length == 0.2 and batch.params[0] == nat.FuzzyParams()
+    batch.set_params(1, nat.FuzzyParams())
+    np.testing.assert_allclose(batch.step(), [-0.1, -0.1, -0.1])
     with pytest.raises(nat.NativeInputError):
         batch.set_params(3, nat.FuzzyParams())
     with pytest.raises(ValueError):

@@ -304,7 +304,7 @@ class FuzzyBatch:
         c, _ = _params_array(params_per_axis, n)
         for i in range(n):
             self._params[i] = c[i]
-        self.params: list[FuzzyParams] = list(params_per_axis)
+        self._axis_params: list[FuzzyParams] = list(params_per_axis)
         self._inputs = np.zeros((n, NINPUTS), F64)
         self._dv = np.zeros(n, F64)
         self._rules = np.zeros((n, NRULES), F64)
@@ -322,6 +322,11 @@ class FuzzyBatch:
         self.rules.flags.writeable = False
 
     @property
+    def params(self) -> tuple[FuzzyParams, ...]:
+        """The parameters of each axis (change them with :meth:`set_params`)."""
+        return tuple(self._axis_params)
+
+    @property
     def inputs(self) -> np.ndarray:
         """The bound (N, 11) input array; write into it, do not rebind it."""
         return self._inputs
@@ -333,13 +338,13 @@ class FuzzyBatch:
         if not isinstance(params, FuzzyParams):
             raise NativeInputError(f"expected FuzzyParams, got {type(params).__name__}")
         self._params[axis] = params._c[0]
-        self.params[axis] = params
+        self._axis_params[axis] = params
         self._share_params()
 
     def _share_params(self) -> None:
         # One parameter set checked once per step when every axis has the same.
-        first = self.params[0]
-        self._b.nparams = 1 if all(p == first for p in self.params) else self.n
+        first = self._axis_params[0]
+        self._b.nparams = 1 if all(p == first for p in self._axis_params) else self.n
 
     def step(self) -> np.ndarray:
         """Evaluate every axis from :attr:`inputs`; returns :attr:`dv`."""
