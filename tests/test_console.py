@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import importlib
 import io
+
+import pytest
 
 from pyrt.console import Console
 
@@ -106,3 +109,12 @@ def test_ctrl_c_on_a_terminal_abandons_the_command_only(monkeypatch):
     monkeypatch.setattr("builtins.input", fake_input)
     Console(shell, io.StringIO(), out)._run_input()
     assert "interrupted" in out.getvalue() and shell.seen == ["after"]
+
+
+@pytest.mark.parametrize("name", ["pyrt.console", "pyrt.commands"])
+def test_exports_sorted_and_present(name):
+    """The console and commands packages export a sorted __all__ of names they have."""
+    module = importlib.import_module(name)
+    assert list(module.__all__) == sorted(module.__all__)
+    for attr in module.__all__:
+        assert hasattr(module, attr)
