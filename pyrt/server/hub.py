@@ -62,6 +62,8 @@ class StatusHub:
         #: ``("sample", key, time_ns, values)`` and ``("fault", None, time_ns, fault)``.
         self.events: deque[tuple[str, Any, int, Any]] = deque(maxlen=EVENT_CAPACITY)
         self._spews: tuple[tuple[Any, Spew], ...] = ()
+        #: The latest fault the loop recorded (None before the first).
+        self.last_fault: Fault | None = None
 
     # -- the loop side -------------------------------------------------------------
 
@@ -77,6 +79,7 @@ class StatusHub:
 
     def on_fault(self, fault: Fault) -> None:
         """Fault listener (loop thread): push the fault to the subscribers."""
+        self.last_fault = fault
         self.events.append(("fault", None, fault.time_ns, fault))
 
     # -- the server side -----------------------------------------------------------

@@ -60,7 +60,7 @@ from pyrt.server.hub import StatusHub
 from pyrt.server.protocol import MAX_LINE, format_error, format_reply, split_verb
 from pyrt.server.robot import ObserverRunner, ServedRobot
 
-__all__ = ["Server", "is_loopback"]
+__all__ = ["Server", "is_loopback", "run_shell"]
 
 log = logging.getLogger("pyrt.server")
 
@@ -81,6 +81,28 @@ _VERBS = frozenset({"AUTH", "QUIT", "STATUS", "SUBSCRIBE", "UNSUBSCRIBE"})
 
 def _denied(line: str) -> str:
     return format_error("denied", f"{line.strip()[:60]!r} changes the robot: AUTH first")
+
+
+def run_shell(shell: Any, line: str, extra: list[str] | None = None) -> tuple[str, bool]:
+    """Run ``line`` in a console ``shell``, its output captured; the framed reply
+    and whether the shell asked to end the session.
+
+    What the shell reports through ``error()`` makes the reply ``ERR command``;
+    a ``FAULT`` line (the robot stopped, the command was not run) ``ERR fault``.
+    """
+    out = io.StringIO()
+    errors: list[str] = []
+    shell.stdout = out
+    shell.error = errors.append
+    end = bool(shell.onecmd(line))
+    lines = out.getvalue().splitlines() + list(extra or [])
+    if errors:
+        return format_error("command", "; ".join(errors), lines), end
+    faults = [i for i, text in enumerate(lines) if text.startswith("FAULT")]
+    if faults:
+        first = lines.pop(faults[0])
+        return format_error("fault", first.partition(" ")[2], lines), end
+    return format_reply(lines), end
 
 
 def is_loopback(host: str) -> bool:
@@ -277,6 +299,11 @@ class Server:
     def clients(self) -> int:
         """Connections open now."""
         return len(self._conns)
+
+    @property
+    def has_token(self) -> bool:
+        """A token is configured (a client can become privileged)."""
+        return self._token is not None
 
     @property
     def privileged_client(self) -> str | None:
@@ -720,24 +747,11 @@ class Server:
         if verb != "HELP" and not (conn.privileged or self.robot.is_read_only(line)):
             self.counters["denied"] += 1
             return _denied(line)
-        shell = self._shell(conn)
-        out = io.StringIO()
-        errors: list[str] = []
-        shell.stdout = out
-        shell.error = errors.append
-        end = shell.onecmd(line)
-        lines = out.getvalue().splitlines()
-        if verb == "HELP" and not rest:
-            lines += self._help_lines(conn)
+        extra = self._help_lines(conn) if verb == "HELP" and not rest else []
+        reply, end = run_shell(self._shell(conn), line, extra)
         if end:
             self._close_after_flush(conn)
-        if errors:
-            return format_error("command", "; ".join(errors), lines)
-        faults = [i for i, text in enumerate(lines) if text.startswith("FAULT")]
-        if faults:
-            first = lines.pop(faults[0])
-            return format_error("fault", first.partition(" ")[2], lines)
-        return format_reply(lines)
+        return reply
 
     def _shell(self, conn: _Conn) -> Any:
         if conn.shell is None or conn.shell_privileged != conn.privileged:

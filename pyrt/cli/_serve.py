@@ -1,0 +1,165 @@
+"""``--serve``, ``--token-file``, ``--headless``, ``--epics``: the DAQ link of a robot command.
+
+Shared by ``pyrt gripper`` and ``pyrt manipulator``::
+
+    service = prepare_service(args, runner, robot)   # before runner.start()
+    runner.start()
+    service.start(say)
+    status = service.run_headless() if args.headless else console.run()
+    service.close()
+
+The token is read from ``--token-file`` (its first line) or the
+``PYRT_TOKEN`` environment variable.  Without a token nobody is privileged
+(the server only reports), and serving on anything but a loopback address
+is refused.  ``--headless`` runs without a console: a service that logs to
+stderr and, on SIGTERM or SIGINT, stops every motor and exits 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import os
+import signal
+import sys
+import threading
+from collections.abc import Callable
+from typing import Any
+
+from pyrt.client import parse_address
+from pyrt.errors import ConfigError, PyrtError
+from pyrt.server import ServedRobot, Server
+
+__all__ = ["Service", "add_serve_options", "prepare_service", "read_token"]
+
+log = logging.getLogger("pyrt.service")
+
+#: Longest token accepted (it is one line of the file).
+MAX_TOKEN = 256
+
+
+def add_serve_options(parser: argparse.ArgumentParser) -> None:
+    """Add the DAQ link options to a robot command's parser."""
+    g = parser.add_argument_group("DAQ link")
+    g.add_argument("--serve", metavar="[HOST:]PORT",
+                   help="serve the line protocol on HOST:PORT (default host 127.0.0.1)")
+    g.add_argument("--token-file", metavar="FILE",
+                   help="privilege token (first line of FILE; default: $PYRT_TOKEN)")
+    g.add_argument("--headless", action="store_true",
+                   help="no console: a service logging to stderr; SIGTERM/SIGINT stop every "
+                        "motor and exit")
+    g.add_argument("--epics", metavar="PREFIX",
+                   help="also serve status (and a command PV when a token is set) over EPICS "
+                        "Channel Access with this PV prefix (needs pyrt[epics])")
+
+
+def read_token(token_file: str | None) -> str | None:
+    """The token from ``token_file`` (first line) or ``$PYRT_TOKEN``; None if neither."""
+    if token_file:
+        try:
+            with open(token_file, encoding="utf-8") as f:
+                token = f.readline(MAX_TOKEN + 2).strip()
+        except OSError as exc:
+            raise ConfigError(f"cannot read the token: {exc.strerror}", token_file) from None
+        except UnicodeDecodeError:
+            raise ConfigError("the token file is not UTF-8 text", token_file) from None
+        if not token:
+            raise ConfigError("the token file's first line is empty", token_file)
+    else:
+        token = os.environ.get("PYRT_TOKEN", "").strip()
+        if not token:
+            return None
+    if len(token) > MAX_TOKEN or any(c.isspace() for c in token):
+        raise ConfigError(f"a token is one word of at most {MAX_TOKEN} characters")
+    return token
+
+
+class Service:
+    """The server (and the EPICS IOC) of one robot, and the headless wait."""
+
+    def __init__(
+        self, runner: Any, robot: ServedRobot, server: Server, epics: Any = None,
+        serve: bool = True,
+    ):
+        self.serve = serve
+        self.runner = runner
+        self.robot = robot
+        self.server = server
+        self.epics = epics
+        self._stop = threading.Event()
+
+    def start(self, say: Callable[[str], None]) -> None:
+        """Start listening; say where."""
+        if self.serve:
+            host, port = self.server.start()
+            who = ("AUTH with the token to command" if self.server.has_token
+                   else "no token: status only")
+            say(f"serving {self.robot.name} on {host}:{port} ({who})")
+        if self.epics is not None:
+            self.epics.start()
+            say(f"EPICS Channel Access: PVs {self.epics.prefix}* ({self.epics.summary})")
+
+    def run_headless(self) -> int:
+        """Serve until SIGTERM or SIGINT; then stop every motor; exit status 0."""
+
+        def on_signal(signum: int, frame: Any) -> None:
+            log.info("%s: stopping", signal.Signals(signum).name)
+            self._stop.set()
+
+        old = {s: signal.signal(s, on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
+        try:
+            while not self._stop.wait(0.5):
+                if self.runner.crashed is not None:
+                    log.error("the control loop has stopped: %r", self.runner.crashed)
+                    return 1
+        finally:
+            for s, handler in old.items():
+                signal.signal(s, handler)
+        self.stop_motors()
+        return 0
+
+    def stop_motors(self) -> None:
+        """Stop every motor through the mailbox (a pending fault does not prevent it)."""
+        for _ in range(4):
+            try:
+                self.runner.call(self.robot.stop_all, name="stop every motor", take_fault=False)
+                log.info("every motor stopped")
+                return
+            except PyrtError as exc:
+                log.warning("stopping the motors: %s", exc)
+
+    def close(self) -> None:
+        """Stop the IOC and the server."""
+        if self.epics is not None:
+            with contextlib.suppress(Exception):
+                self.epics.close()
+        self.server.close()
+
+
+def prepare_service(args: argparse.Namespace, runner: Any, robot: ServedRobot) -> Service | None:
+    """The service the options ask for (None without ``--serve``/``--epics``);
+    call it before ``runner.start()``: it attaches its handler to the loop."""
+    if args.headless and not (args.serve or args.epics):
+        raise ConfigError("--headless needs --serve [HOST:]PORT or --epics PREFIX")
+    if not (args.serve or args.epics):
+        if args.token_file:
+            raise ConfigError("--token-file needs --serve or --epics")
+        return None
+    if args.headless:
+        logging.basicConfig(stream=sys.stderr, level=logging.INFO,
+                            format="%(asctime)s %(name)s: %(message)s")
+    token = read_token(args.token_file)
+    host, port = "127.0.0.1", 0
+    if args.serve:
+        try:
+            host, port = parse_address(args.serve)
+        except ValueError as exc:
+            raise ConfigError(f"--serve: {exc}") from None
+    server = Server(runner, robot, host, port, token=token)
+    epics = None
+    if args.epics:
+        from pyrt.server.epics import EpicsService
+
+        epics = EpicsService(runner, robot, server, args.epics, token=token)
+    return Service(runner, robot, server, epics, serve=bool(args.serve))

@@ -1,0 +1,71 @@
+"""``pyrt send HOST:PORT COMMAND...``: one command to a pyrt server, from the shell.
+
+The words after the address are sent as one request line; the reply's lines
+are printed (without the ``OK`` framing).  An ``ERR`` reply is printed on
+stderr and the exit status is 1.  With a token (``--token-file F`` or the
+``PYRT_TOKEN`` environment variable) the command is sent after ``AUTH``.
+``SUBSCRIBE HZ`` prints ``STATUS`` lines until ``--count`` of them have
+come, the server closes, or Ctrl-C.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from pyrt.cli._serve import read_token
+from pyrt.client import Client, ServerError, parse_address
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "send",
+        help="send one command to a pyrt server (pyrt gripper|manipulator --serve)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("address", metavar="[HOST:]PORT", help="the server (default host 127.0.0.1)")
+    p.add_argument("words", nargs="+", metavar="COMMAND", help="the command line to send")
+    p.add_argument("--token-file", metavar="FILE",
+                   help="AUTH with the token in FILE first (default: $PYRT_TOKEN if set)")
+    p.add_argument("--count", type=int, metavar="N",
+                   help="SUBSCRIBE: stop after N STATUS lines")
+    p.add_argument("--timeout", type=float, default=30.0, metavar="S",
+                   help="seconds to wait for a reply (default 30)")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        host, port = parse_address(args.address)
+    except ValueError as exc:
+        print(f"pyrt send: {exc}", file=sys.stderr)
+        return 2
+    line = " ".join(args.words)
+    token = read_token(args.token_file)
+    out = sys.stdout
+    try:
+        with Client(host, port, timeout_s=args.timeout) as client:
+            if token is not None:
+                client.auth(token)
+            if line.split()[0].upper() == "SUBSCRIBE":
+                client.command(line)
+                for n, status in enumerate(client.statuses(args.timeout), 1):
+                    print(status.raw, file=out, flush=True)
+                    if args.count is not None and n >= args.count:
+                        break
+                return 0
+            for text in client.command(line):
+                print(text, file=out)
+    except ServerError as exc:
+        for text in exc.lines:
+            print(text, file=out)
+        print(f"pyrt send: {exc}", file=sys.stderr)
+        return 1
+    except (OSError, TimeoutError) as exc:
+        print(f"pyrt send: {host}:{port}: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
