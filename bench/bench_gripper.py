@@ -87,3 +87,32 @@ def test_gripper_p_move(benchmark):
     benchmark.pedantic(moves, rounds=rounds, iterations=1)
     report(benchmark, sim["ns"] / rounds / 1e9, sim["ticks"] // rounds, "P D600 and back")
     runner.stop()
+
+
+@pytest.mark.benchmark(group="gripper")
+def test_gripper_p_move_bare_loop(benchmark):
+    """The same moves on the bare loop (plant + controller, no runner, no scope):
+    the controller's and the simulation's own cost."""
+    cpu = I8031()
+    board = SimGripperBoard(cpu)
+    plant = JawPlant(board)
+    loop = Loop(SimClock(), timing=True)
+    ctl = GripperController(cpu)
+    loop.attach(plant.step, name="jaws")
+    ctl.attach(loop)
+    ctl.power_up()
+    job = ctl.start_init()
+    assert loop.run_until(lambda: job.done, 60_000) and job.value().ok
+    sim = {"ns": 0, "ticks": 0}
+
+    def moves() -> None:
+        t0, k0 = loop.now_ns, loop.tick_index
+        for target in (-0x2A00, 0):
+            ctl.move(target)
+            assert loop.run_until(lambda: not ctl.moving, 60_000)
+        sim["ns"] += loop.now_ns - t0
+        sim["ticks"] += loop.tick_index - k0
+
+    rounds = 5
+    benchmark.pedantic(moves, rounds=rounds, iterations=1)
+    report(benchmark, sim["ns"] / rounds / 1e9, sim["ticks"] // rounds, "P D600 and back, bare loop")
