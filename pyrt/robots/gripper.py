@@ -400,7 +400,7 @@ class GripperController:
 
     def start_init(self) -> Job:
         """Start ``I``: init + fullopen, as a foreground job (result: :class:`JobResult`)."""
-        return self._spawn("init", self._init_job())
+        return self._spawn("init", self._init())
 
     def start_calibration(self) -> Job:
         """Start ``C``: init, close until stopped, read the count, init again."""
@@ -437,10 +437,6 @@ class GripperController:
         if not self.queue.interrupts_enabled:
             raise CommandError("clock interrupt is off (monitor I): the queue is frozen")
         yield from self.queue.wait(n & 0xFF)
-
-    def _init_job(self) -> Generator[None, None, JobResult]:
-        result = yield from self._init()
-        return result
 
     def _init(self) -> Generator[None, None, JobResult]:
         """HHINIT: init (8155, sensor bits, encoder variables), then fullopen."""
