@@ -215,3 +215,19 @@ def test_i_with_the_clock_off_is_refused_not_a_fault(session):
     assert lines == ["error: init needs the clock interrupt, which is off (monitor I): "
                      "M, I turns it on"]
     assert session.rig.loop.take_fault() is None and session.rig.board.dac == 0x80
+
+
+def test_c_with_a_jammed_motor_enters_the_monitor(session):
+    """C: the first init fails on a jammed motor, the message is printed, prompt '* '."""
+    session("P -800", "wait", "sim fault jam")
+    lines = session("C")
+    assert lines[-1].startswith("INIT FAILED")
+    assert session.shell.prompt == "* " and session.rig.board.dac == 0x80
+
+
+def test_jog_through_sim_keeps_target_with_position(session):
+    """sim jog close 0.5: the jaws close, T follows W, the current ends null."""
+    lines = session("sim jog close 0.5", "sleep 1", "W", "T")
+    w, t = (int(x, 16) - 0x10000 for x in lines)
+    assert w < -200 and abs(w - t) < 60
+    assert session.rig.board.dac == 0x80

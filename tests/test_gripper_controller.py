@@ -173,3 +173,13 @@ def test_p_during_init_is_refused():
     with pytest.raises(CommandError, match="busy"):
         rig.ctl.move(-0x100)
     assert rig.run_job(job).ok
+
+
+@pytest.mark.parametrize("speed", [0x7F, 0x33, 0x20])
+def test_p_within_16_counts_at_slower_speeds(speed):
+    """With X 33 (high-ratio worm) or slower, P still ends within 16 counts."""
+    rig = make_rig()
+    rig.init()
+    rig.ctl.set_speed(speed)
+    for target in (-0x0900, -0x0300, -0x1200):
+        assert abs(rig.move(target, max_s=60) - target) <= 16
