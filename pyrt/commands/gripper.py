@@ -17,13 +17,17 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable
-from typing import Any, Protocol, TextIO
+from typing import TYPE_CHECKING, Any, Protocol, TextIO
 
 from pyrt.commands.scope import ScopeCommand
 from pyrt.commands.shell import CommandShell
 from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
 from pyrt.scheduler.report import format_statistics
 from pyrt.scope import Scope, Source
+
+if TYPE_CHECKING:
+    from pyrt.robots.gripper import GripperController
+    from pyrt.sim.gripper import JawPlant
 
 __all__ = ["GripperShell", "gripper_channels", "parse_hex", "parse_target"]
 
@@ -92,7 +96,9 @@ def parse_target(text: str) -> int:
     return value
 
 
-def gripper_channels(controller: Any, plant: Any = None) -> dict[str, Source]:
+def gripper_channels(
+    controller: GripperController, plant: JawPlant | None = None
+) -> dict[str, Source]:
     """The scope channels of the gripper: RAM variables by their Appendix A
     names (words signed where 002 treats them so), the DAC, and the
     simulated jaws when there is a plant.  Any RAM byte is ``ram:XX``."""
@@ -296,9 +302,9 @@ class GripperShell(CommandShell):
     def __init__(
         self,
         runner: Runner,
-        controller: Any,
+        controller: GripperController,
         stdout: TextIO,
-        plant: Any = None,
+        plant: JawPlant | None = None,
         scope: Scope | None = None,
     ):
         super().__init__(stdout)
