@@ -309,6 +309,8 @@ class GripperController:
         pc = self.cpu.movx_read(P8155_PC)
         jog_open = not pc & 0x01
         jog_close = not pc & 0x02
+        # A jog is ignored while init or the calibration drives the motor:
+        # 002 keeps MVJAWS out of their way (drive bit clear); a jog would fight them.
         if jog_open != jog_close and self.job is None:
             self._jog(flags, jog_open)
             return
