@@ -8,7 +8,8 @@
 #include <stddef.h>
 
 #define MIN_SEGMENT_CM (PYRT_FINDPOS_MIN_SEGMENT_UM * 1.0e-4)
-/* A pivot below this fraction of the largest diagonal term is singular. */
+/* A normal matrix whose determinant is below this fraction of the product
+ * of its diagonal terms is singular. */
 #define SINGULAR_RATIO 1.0e-12
 
 static int all_finite(const double *v, int32_t count)
@@ -112,52 +113,54 @@ static int rope_at(const double *top, const double *bottom, const double *offset
 }
 
 /*
- * Solve m d = -g for the unfrozen components by Cholesky (m is symmetric
- * positive semi-definite); frozen components of d are zero.
+ * Solve m d = -g for the unfrozen components (m symmetric positive
+ * semi-definite); frozen components of d are zero.  The reduced system
+ * (1x1, 2x2 or 3x3) is solved in closed form with one division.  It is
+ * singular when its determinant is below SINGULAR_RATIO times the product
+ * of its diagonal (by Hadamard's inequality that ratio lies in 0..1 and
+ * measures how close the rope directions are to not spanning).
  */
-static int solve_normal(double m[3][3], const double g[3], const int32_t freeze[3], double d[3])
+static int solve_normal(const double m[3][3], const double g[3], const int32_t freeze[3],
+                        double d[3])
 {
-    double l[3][3] = {{0.0, 0.0, 0.0}, {0.0, 0.0, 0.0}, {0.0, 0.0, 0.0}};
-    double y[3] = {0.0, 0.0, 0.0};
-    double scale = 0.0;
     int idx[3];
-    int k = 0, i, j, r;
+    int k = 0, i;
 
     for (i = 0; i < 3; i++) {
         d[i] = 0.0;
-        if (!freeze[i]) {
+        if (!freeze[i])
             idx[k++] = i;
-            if (m[i][i] > scale)
-                scale = m[i][i];
-        }
     }
-    if (k == 0 || !(scale > 0.0))
+    if (k == 1) {
+        double a = m[idx[0]][idx[0]];
+        if (!(a > 0.0))
+            return PYRT_ESINGULAR;
+        d[idx[0]] = -g[idx[0]] / a;
+    } else if (k == 2) {
+        int p = idx[0], q = idx[1];
+        double a = m[p][p], b = m[p][q], c = m[q][q];
+        double det = a * c - b * b, inv;
+        if (!(det > SINGULAR_RATIO * a * c) || !(a > 0.0 && c > 0.0))
+            return PYRT_ESINGULAR;
+        inv = 1.0 / det;
+        d[p] = -(c * g[p] - b * g[q]) * inv;
+        d[q] = -(a * g[q] - b * g[p]) * inv;
+    } else if (k == 3) {
+        double c00 = m[1][1] * m[2][2] - m[1][2] * m[1][2];
+        double c01 = m[0][2] * m[1][2] - m[0][1] * m[2][2];
+        double c02 = m[0][1] * m[1][2] - m[0][2] * m[1][1];
+        double c11 = m[0][0] * m[2][2] - m[0][2] * m[0][2];
+        double c12 = m[0][1] * m[0][2] - m[0][0] * m[1][2];
+        double c22 = m[0][0] * m[1][1] - m[0][1] * m[0][1];
+        double det = m[0][0] * c00 + m[0][1] * c01 + m[0][2] * c02, inv;
+        if (!(det > SINGULAR_RATIO * m[0][0] * m[1][1] * m[2][2]))
+            return PYRT_ESINGULAR;
+        inv = 1.0 / det;
+        d[0] = -(c00 * g[0] + c01 * g[1] + c02 * g[2]) * inv;
+        d[1] = -(c01 * g[0] + c11 * g[1] + c12 * g[2]) * inv;
+        d[2] = -(c02 * g[0] + c12 * g[1] + c22 * g[2]) * inv;
+    } else {
         return PYRT_ESINGULAR;
-    for (i = 0; i < k; i++) {
-        for (j = 0; j <= i; j++) {
-            double s = m[idx[i]][idx[j]];
-            for (r = 0; r < j; r++)
-                s -= l[i][r] * l[j][r];
-            if (i == j) {
-                if (!(s > SINGULAR_RATIO * scale))
-                    return PYRT_ESINGULAR;
-                l[i][i] = sqrt(s);
-            } else {
-                l[i][j] = s / l[j][j];
-            }
-        }
-    }
-    for (i = 0; i < k; i++) {          /* L y = -g */
-        double s = -g[idx[i]];
-        for (r = 0; r < i; r++)
-            s -= l[i][r] * y[r];
-        y[i] = s / l[i][i];
-    }
-    for (i = k - 1; i >= 0; i--) {     /* L^T d = y */
-        double s = y[i];
-        for (r = i + 1; r < k; r++)
-            s -= l[r][i] * d[idx[r]];
-        d[idx[i]] = s / l[i][i];
     }
     return PYRT_OK;
 }
