@@ -50,6 +50,8 @@ DRIVER = textwrap.dedent(
 
     ffi, lib = native.ffi, native.lib
     NAN = math.nan
+    import pyrt.native._lib as bound
+    assert bound.lib is lib, "pyrt.native is not using the sanitized build"
 
     def refused(fn, *args, **kw):
         try:
