@@ -106,20 +106,29 @@ def test_noise_free_solution_within_0_01_cm(data, geometry):
     data=st.data(),
     geometry=st.sampled_from(sorted(GEOMETRIES)),
     seed=st.integers(0, 2**32 - 1),
+    with_offsets=st.booleans(),
 )
-def test_equals_reference(data, geometry, seed):
-    """C and the numpy reference agree on position, residuals and iteration count (noisy lengths)."""
+def test_equals_reference(data, geometry, seed, with_offsets):
+    """C and the numpy reference agree on position, residuals and iterations (noise, offsets)."""
     tops, bottoms, planar = GEOMETRIES[geometry]
     truth = data.draw(_inside(planar))
     start = truth + data.draw(_offset(planar))
-    noise = np.random.default_rng(seed).normal(0.0, 0.1, len(tops))
-    lengths = nat.rope_lengths(truth, tops, bottoms) + noise
-    c = nat.find_position(tops, bottoms, lengths, start)
-    x, rms, res, it = ref.find_position(tops, bottoms, lengths, start)
+    rng = np.random.default_rng(seed)
+    offsets = None
+    if with_offsets:
+        offsets = rng.uniform(-8.0, 8.0, (len(tops), 3))
+        offsets[0] = 0.0                      # the central rope has no carriage pulley offset
+        if planar:
+            offsets[:, 1] = 0.0
+    lengths = nat.rope_lengths(truth, tops, bottoms, offsets) + rng.normal(0.0, 0.1, len(tops))
+    c = nat.find_position(tops, bottoms, lengths, start, offsets=offsets)
+    x, rms, res, it = ref.find_position(tops, bottoms, lengths, start, offsets=offsets)
     np.testing.assert_allclose(c.position, x, rtol=0, atol=1e-9)
     np.testing.assert_allclose(c.residuals, res, rtol=0, atol=1e-9)
     assert c.rms == pytest.approx(rms, abs=1e-9)
     assert c.iterations == it
+    np.testing.assert_allclose(nat.rope_lengths(truth, tops, bottoms, offsets),
+                               ref.rope_lengths(truth, tops, bottoms, offsets), rtol=0, atol=1e-9)
 
 
 @pytest.mark.parametrize("geometry", sorted(GEOMETRIES))
