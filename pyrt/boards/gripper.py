@@ -19,6 +19,11 @@ address   register    meaning
 
 The encoder is not a register: each count raises external interrupt 0
 (worm turning towards larger counts, jaws opening) or 1 (smaller counts).
+
+Bit meanings follow Appendix A (2D.0 left jaw +Ya ... 2D.7 right jaw -X;
+2E.0 crossfire, 2E.1 overload, 2E.2 limit).  002's LED test table swaps
+the jaws of the 2D bits (it calls 2D.7 "-X, left jaw") and gives FDFE for
+overload where FDFF is meant; the memory map is taken as the reference.
 """
 
 from __future__ import annotations
