@@ -317,7 +317,7 @@ def _closed_loop(target, poll=0.05, t_end=250.0, compliance=2e-5, t_low=3.0):
     plant.solve()
     finder = nat.PositionFinder(tops, bottoms)
     finder.solve(nat.rope_lengths(plant.position, tops, bottoms), np.array(plant.position))
-    batch = nat.FuzzyBatch(nat.FuzzyParams(), 3)
+    batch = nat.FuzzyBatch(nat.FuzzyParams().for_poll_period(poll), 3)
     inp = batch.inputs
     inp[:, FI.TENSION_LOW], inp[:, FI.TENSION_HIGH] = t_low, 100.0
     v = np.zeros(3)
@@ -365,6 +365,15 @@ def test_default_rules_bring_the_prototype_source_to_target(target):
     err, lowest, highest = _closed_loop(target)
     assert err < 0.1
     assert lowest > 8.0 and highest < 60.0
+
+
+@pytest.mark.parametrize(("poll", "compliance"), [(0.02, 2e-5), (0.05, 5e-6), (0.05, 1e-4)],
+                         ids=["20ms-poll", "stiff-rope", "soft-rope"])
+def test_default_rules_are_robust(poll, compliance):
+    """The defaults (rescaled for the poll) still end within 0.1 cm on other polls and ropes."""
+    err, lowest, highest = _closed_loop((-250.0, 0.0, 100.0), poll=poll, compliance=compliance)
+    assert err < 0.1
+    assert lowest > 7.0 and highest < 60.0
 
 
 def test_guards_hold_off_a_target_that_needs_a_slack_rope():
