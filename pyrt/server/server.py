@@ -448,9 +448,12 @@ class Server:
         if not verb:
             self._reply(conn, format_reply([]))
             return
-        if verb != "HELP" and not (conn.privileged or self.robot.is_read_only(line)):
+        # Behind queued requests (an AUTH among them, perhaps) the worker decides.
+        if conn.pending == 0 and verb != "HELP" and not (
+            conn.privileged or self.robot.is_read_only(line)
+        ):
             self.counters["denied"] += 1
-            self._reply(conn, _denied(line))
+            self._output(conn, _denied(line))
             return
         self._enqueue(conn, line)
 

@@ -1,0 +1,356 @@
+"""The DAQ server on real loopback sockets, the gripper on a SimClock."""
+
+from __future__ import annotations
+
+import io
+import itertools
+import socket
+import struct
+import time
+
+import pytest
+from _gripper_rig import make_rig
+from _server_rig import TOKEN, read_lines, read_until_closed, served
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from pyrt.client import ServerError
+from pyrt.errors import ConfigError
+from pyrt.scheduler.runner import Runner
+from pyrt.server import GripperService, ObserverRunner, Server, format_error, format_reply
+from pyrt.server.protocol import split_verb
+
+
+def _signed(word: str) -> int:
+    v = int(word, 16)
+    return v - 0x10000 if v & 0x8000 else v
+
+
+# -- a full move ------------------------------------------------------------------------
+
+
+def test_full_move_commanded_by_a_client_and_reported_to_a_subscriber():
+    """I and P E47A from the privileged client move the jaws; a subscriber sees the whole move and its end."""
+    with served() as sv:
+        sub = sv.client()
+        sub.command("SUBSCRIBE 50")
+        op = sv.operator()
+        assert op.command("I") == ["jaws wide open (limit sensor on), encoder 0000"]
+        assert op.command("P E47A") == []
+        (line,) = op.command("wait")
+        assert line.startswith("stopped: position")
+        assert abs(_signed(op.command("W")[0]) + 0x1B86) <= 16
+        samples = list(sub.statuses(1.0))
+        moving = [s for s in samples if s.fields.get("moving") == 1]
+        assert len(moving) > 20
+        positions = [s.fields["position"] for s in moving if s.fields["target"] == -0x1B86]
+        closing = positions[: positions.index(min(positions)) + 1]
+        assert closing == sorted(closing, reverse=True)  # closing all the way, then settling
+        assert closing[0] > -0x100 and abs(closing[-1] + 0x1B86) <= 32
+        times = [s.time_s for s in samples]
+        assert times == sorted(times)
+        assert all(b - a == pytest.approx(0.02, abs=1e-3) for a, b in itertools.pairwise(times))
+        final = sv.client().status()
+        assert final.fields["moving"] == 0 and final.fields["fault"] == 0
+        assert abs(final.fields["position"] + 0x1B86) <= 16
+        assert sv.still_and_null()
+
+
+def test_status_request_answers_from_the_snapshot():
+    """STATUS answers one OK line with the loop time and every status field."""
+    with served() as sv:
+        c = sv.client()
+        reply = c.request("status")
+        assert reply.ok and len(reply.lines) == 1
+        fields = dict(kv.split("=") for kv in reply.lines[0].split())
+        assert set(fields) == {"t", "position", "target", "moving", "busy", "sensors", "fault"}
+        assert c.request("STATUS now").code == "syntax"
+
+
+# -- privilege --------------------------------------------------------------------------
+
+READ_ONLY = ["W", "w", "T", "E", "S", "help", "help P", "stats", "sim", "STATUS", ""]
+PRIVILEGED = ["P E47A", "p-1b86", "X 33", "I", "C", "M", "wait", "sleep 1", "sim object 20",
+              "sim fault jam", "scope add ram:4A", "scope save /tmp/x.csv"]
+
+
+def test_read_only_commands_are_served_without_auth():
+    """Without AUTH the reads (W T E S help stats sim STATUS) answer OK."""
+    with served() as sv:
+        c = sv.client()
+        for line in READ_ONLY:
+            reply = c.request(line)
+            assert reply.ok, (line, reply)
+        assert c.command("W") == ["0000"]
+
+
+@pytest.mark.parametrize("token", [None, "wrong", TOKEN[:-1], TOKEN + "x", TOKEN.upper()])
+def test_commands_that_change_the_robot_are_denied_without_the_token(token):
+    """Without AUTH, or after a wrong token, every command that changes anything is ERR denied and nothing moves."""
+    with served() as sv:
+        c = sv.client()
+        if token is not None:
+            with pytest.raises(ServerError) as exc:
+                c.auth(token)
+            assert exc.value.code == "auth"
+        before = sv.runner.call(lambda: bytes(sv.rig.cpu.ram))
+        for line in PRIVILEGED:
+            reply = c.request(line)
+            assert (reply.ok, reply.code) == (False, "denied"), line
+        sv.runner.sleep(0.5)
+        assert sv.still_and_null()
+        after = sv.runner.call(lambda: bytes(sv.rig.cpu.ram))
+        assert after[0x4C:0x4E] == before[0x4C:0x4E]  # COMMAND_CNT untouched
+        assert sv.server.counters["denied"] == len(PRIVILEGED)
+
+
+def test_three_wrong_tokens_close_the_connection():
+    """The third wrong AUTH is answered and the connection closed."""
+    with served() as sv:
+        s = sv.raw()
+        s.sendall(b"AUTH a\nAUTH b\nAUTH c\nW\n")
+        text = read_until_closed(s)
+        assert text.splitlines() == ["ERR auth wrong token", "ERR auth wrong token",
+                                     "ERR auth wrong token; too many failures, closing"]
+
+
+def test_no_token_configured_means_nobody_is_privileged():
+    """A server without a token only reports: AUTH fails, commands are denied."""
+    with served(token=None) as sv:
+        c = sv.client()
+        assert "status only" in c.greeting
+        assert c.request("AUTH anything").code == "auth"
+        assert c.request("P E47A").code == "denied"
+        assert c.command("W") == ["0000"]
+
+
+def test_a_second_privileged_client_is_refused_not_demoted():
+    """While one client is privileged a second AUTH gets ERR busy; after the first leaves it succeeds."""
+    with served() as sv:
+        first = sv.operator()
+        second = sv.client()
+        with pytest.raises(ServerError) as exc:
+            second.auth(TOKEN)
+        assert exc.value.code == "busy"
+        assert second.request("P E47A").code == "denied"
+        assert first.command("X 33") == []  # the first keeps its privilege
+        assert first.request("AUTH " + TOKEN).lines == ["already privileged"]
+        first.close()
+        deadline = time.monotonic() + 5
+        while sv.server.privileged_client is not None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        second.auth(TOKEN)
+        assert second.command("T") == ["0000"]
+
+
+def test_serving_beyond_loopback_without_a_token_is_refused():
+    """A non-loopback address without a token is a ConfigError at start-up; with a token it is allowed."""
+    rig = make_rig()
+    runner = Runner(rig.loop)
+    robot = GripperService(rig.ctl, rig.plant)
+    for host in ("0.0.0.0", "", "::", "192.0.2.1"):
+        with pytest.raises(ConfigError, match="without a token"):
+            Server(runner, robot, host, 0)
+    Server(runner, robot, "0.0.0.0", 0, token="t")  # allowed (not started)
+    with pytest.raises(ConfigError):
+        Server(runner, robot, "127.0.0.1", 0, token="")
+
+
+def test_faults_are_pushed_to_subscribers_and_left_for_the_operator():
+    """A corrupted ready queue trips the robot: subscribers get STATUS FAULT, readers never consume it, the operator's next command reports it."""
+    with served() as sv:
+        sub = sv.client()
+        sub.command("SUBSCRIBE 100")
+        reader = sv.client()
+        op = sv.operator()
+        op.command("M")
+        assert op.command("C 35 00") == ["35 00"]  # Q slot 0 now names no routine
+        for _ in range(200):  # let the queue walk, without taking the fault
+            sv.runner.call(lambda: None, take_fault=False)
+        assert sv.rig.ctl.queue.fault is not None
+        faults = [s for s in sub.statuses(0.5) if s.fault]
+        assert len(faults) == 1 and faults[0].fault.startswith("gripper: fault")
+        assert reader.command("W") == ["0000"]  # a read neither takes nor acknowledges it
+        assert reader.status().fields["fault"] == 1
+        reply = op.request("Q")
+        assert (reply.ok, reply.code) == (False, "fault")
+        assert reply.lines[-1].startswith("fault acknowledged")
+        op.command("Q")
+        assert reader.status().fields["fault"] == 0  # acknowledged by the operator's shell
+        assert sv.still_and_null()
+
+
+# -- robustness ---------------------------------------------------------------------------
+
+
+def test_over_long_line_gets_too_long_and_is_closed():
+    """A line over the limit gets ERR too-long and the connection closes; others are served."""
+    with served(max_line=64) as sv:
+        other = sv.client()
+        s = sv.raw()
+        s.sendall(b"W" * 65 + b"\n")
+        assert read_until_closed(s).startswith("ERR too-long")
+        s2 = sv.raw()
+        s2.sendall(b"P" * 500)  # no line end at all
+        assert read_until_closed(s2).startswith("ERR too-long")
+        assert other.command("W") == ["0000"]
+        assert sv.server.counters["too_long"] == 2
+
+
+def test_invalid_utf8_gets_an_error_line_and_the_connection_stays():
+    """Invalid UTF-8 is answered ERR utf8 and ignored; the next request is served."""
+    with served() as sv:
+        s = sv.raw()
+        s.sendall(b"\xff\xfe W\nW\n")
+        lines = read_lines(s, 2)
+        assert lines[0].startswith("ERR utf8") and lines[1] == "OK 0000"
+
+
+def test_half_lines_and_abrupt_disconnects_run_nothing():
+    """A half line left by a disconnect is never run; resets leave the server serving and no motor moving."""
+    with served() as sv:
+        op = sv.operator()
+        op.send_line("X 33")  # privileged, complete
+        assert op._read_reply().ok
+        op._sock.sendall(b"P E47A")  # half a line, then gone
+        op._sock.close()
+        for _ in range(5):  # abrupt resets in the middle of requests
+            s = sv.raw()
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+            s.sendall(b"STATUS\nW\nT\nsta")
+            s.close()
+        c = sv.client()
+        sv.runner.sleep(0.5)
+        assert c.command("T") == ["0000"]
+        assert sv.still_and_null()
+        c.auth(TOKEN)  # the privilege was released with the vanished operator
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.binary(max_size=80), min_size=1, max_size=6))
+def test_garbage_never_moves_a_motor_and_every_reply_is_framed(chunks):
+    """Random bytes from an unprivileged client: every reply line is OK/ERR framed, nothing moves, others are served."""
+    with served(max_line=64) as sv:
+        s = sv.raw()
+        data = b"\n".join(chunks) + b"\n"
+        s.sendall(data)
+        s.shutdown(socket.SHUT_WR)
+        text = read_until_closed(s)
+        for line in text.splitlines():
+            assert line == "OK" or line.startswith(("OK ", "OK-", "ERR ")), line
+        assert sv.still_and_null()
+        assert sv.client().command("T") == ["0000"]
+
+
+def test_requests_are_answered_in_order_when_pipelined():
+    """Requests sent in one packet are answered in the order sent, server verbs included."""
+    with served() as sv:
+        s = sv.raw()
+        s.sendall(b"W\nSTATUS\nT\nAUTH " + TOKEN.encode() + b"\nX 33\nSTATUS\nQUIT\n")
+        lines = read_until_closed(s).splitlines()
+        assert lines[0] == "OK 0000"
+        assert lines[1].startswith("OK t=")
+        assert lines[2] == "OK 0000"
+        assert lines[3].startswith("OK privileged")
+        assert lines[4] == "OK"
+        assert lines[5].startswith("OK t=")
+        assert lines[6] == "OK bye"
+
+
+def test_slow_reader_is_dropped_and_nobody_else_stalls():
+    """A subscriber that never reads is dropped when its output buffer is full; the operator and the loop go on."""
+    with served(max_output=8192) as sv:
+        slow = socket.socket()
+        slow.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        slow.connect((sv.host, sv.port))
+        slow.sendall(b"SUBSCRIBE 1000\n")
+        op = sv.operator()
+        for _ in range(40):
+            op.command("sleep 1")
+            if sv.server.counters["dropped_slow"]:
+                break
+        assert sv.server.counters["dropped_slow"] == 1
+        assert sv.server.hub.subscribers == 0
+        assert op.command("W") == ["0000"]
+
+
+def test_idle_clients_are_closed_but_subscribers_are_not():
+    """A client with no request for the idle timeout gets ERR idle and is closed; a subscriber stays."""
+    with served(idle_timeout_s=0.3) as sv:
+        sub = sv.client()
+        sub.command("SUBSCRIBE 1")
+        s = sv.raw()
+        assert read_until_closed(s, 5.0).startswith("ERR idle")
+        assert sub.command("W") == ["0000"]
+
+
+def test_clients_beyond_the_limit_are_refused():
+    """The client after max_clients gets ERR full and is closed; the others are served."""
+    with served(max_clients=2) as sv:
+        a, b = sv.client(), sv.client()
+        with pytest.raises(ServerError) as exc:
+            sv.client()
+        assert exc.value.code == "full"
+        assert a.command("W") == b.command("W") == ["0000"]
+        assert sv.server.counters["refused_full"] == 1
+
+
+def test_quit_and_unsubscribe():
+    """QUIT answers OK bye and closes; UNSUBSCRIBE stops the samples."""
+    with served() as sv:
+        c = sv.client()
+        c.command("SUBSCRIBE 100")
+        assert c.command("UNSUBSCRIBE") == ["unsubscribed"]
+        assert c.command("UNSUBSCRIBE") == ["not subscribed"]
+        assert sv.server.hub.subscribers == 0
+        for bad in ("SUBSCRIBE", "SUBSCRIBE 0", "SUBSCRIBE -5", "SUBSCRIBE nan", "SUBSCRIBE 1e9"):
+            assert c.request(bad).code == "syntax", bad
+        assert c.command("QUIT") == ["bye"]
+        with pytest.raises(ConnectionError):
+            c.command("W")
+
+
+# -- the pieces -----------------------------------------------------------------------------
+
+
+def test_reply_framing():
+    """Replies: OK- continuation lines, a last OK line; errors end ERR code; control characters are blanked."""
+    assert format_reply([]) == "OK\n"
+    assert format_reply(["a", "b"]) == "OK-a\nOK b\n"
+    assert format_reply(["x\ry"]) == "OK x y\n"
+    assert format_error("denied", "no", ["out"]) == "OK-out\nERR denied no\n"
+    with pytest.raises(ValueError):
+        format_error("nonsense")
+    assert split_verb("  subscribe   10 ") == ("SUBSCRIBE", "10")
+
+
+LINES = st.text(alphabet="PpXxIiCcMmEeSsTtWwQqDdLlNn hlpwaitsimfuljo0123456789ABCDEF-", max_size=12)
+
+
+@settings(max_examples=150, deadline=None)
+@given(LINES)
+def test_read_only_classification_never_changes_the_robot(line):
+    """Any line the gripper classifies read-only, run by an unprivileged shell, leaves the RAM, the DAC and the fault state alone."""
+    rig = _CLASSIFY_RIG
+    robot = GripperService(rig.ctl, rig.plant)
+    if not robot.is_read_only(line):
+        return
+    runner = _CLASSIFY_RUNNER
+    before = bytes(rig.cpu.ram), rig.board.dac, rig.ctl.queue.fault, rig.cpu.sp
+    shell = robot.make_shell(ObserverRunner(runner), io.StringIO())
+    shell.onecmd(line)
+    ram = bytes(rig.cpu.ram)
+    # What moves on its own: FLAGS' status bits, the sensor image, the clock
+    # counter and the ready queue's T/Q (the routines reschedule themselves).
+    autonomous = {0x2C, 0x2D, 0x2E, 0x41, *range(0x2F, 0x41)}
+    changed = {i for i in range(len(ram)) if ram[i] != before[0][i]} - autonomous
+    assert not changed, (line, sorted(changed))
+    drive_bits = 0x08 | 0x10  # DRVON, DOJOG
+    assert ram[0x2C] & drive_bits == before[0][0x2C] & drive_bits == 0
+    assert rig.board.dac == before[1] and rig.ctl.queue.fault is before[2]
+    assert rig.cpu.sp == before[3] and rig.ctl.clock_enabled
+
+
+_CLASSIFY_RIG = make_rig()
+_CLASSIFY_RUNNER = Runner(_CLASSIFY_RIG.loop)
+_CLASSIFY_RUNNER.start()
