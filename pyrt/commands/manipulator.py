@@ -59,7 +59,7 @@ OBJECT_COMMANDS: dict[str, dict[str, tuple[str, tuple[int, ...], str]]] = {
         "down": ("down", (1,), "down DIST: move down DIST cm"),
         "to": ("to", (1,), "to LEN: change length to LEN cm"),
         "calibrate": ("calibrate", (0,), "calibrate: toggle loadcell calibration mode"),
-        "point": ("point", (1,), "point LOAD: enter a loadcell calibration point"),
+        "point": ("point", (1, 2), "point LOAD: enter a loadcell calibration point"),
         "maxspeed": ("maxspeed", (1,), "maxspeed SPEED: set maximum motor speed in cm/s"),
         "zero": ("zero", (0,), "zero: reset encoder counter"),
         "stop": ("stop", (0,), "stop: stop the motor"),
@@ -78,7 +78,7 @@ OBJECT_COMMANDS: dict[str, dict[str, tuple[str, tuple[int, ...], str]]] = {
     "loadcell": {
         "calibrate": ("calibrate", (0,), "calibrate: toggle calibration mode (leaving it "
                       "fits SLOPE and OFFSET and writes them back)"),
-        "point": ("point", (1,), "point LOAD: a calibration point with LOAD (N, lb or kg) "
+        "point": ("point", (1, 2), "point LOAD: a calibration point with LOAD (N, lb or kg) "
                   "hung on the rope"),
     },
     "av": {
@@ -189,6 +189,8 @@ class ManipulatorShell(CommandShell):
                      f"{av.neck_ring_radius:g} cm, neck radius {av.neck_radius:g} cm, length "
                      f"{av.neck_length:g} cm; pose {av.position} {av.orientation}")
             return
+        if method == "point":
+            args = [" ".join(args)]  # a load may carry its unit: point 5 kg
         fn: Callable[..., Any] = getattr(obj, method)
         result = self.runner.call(fn, *args)
         self._report(obj, kind, method, result)

@@ -225,6 +225,8 @@ class PolyAxis:
         self.tension_stop = True
         self.signal_all = False
         self.last_stop: StopRecord | None = None
+        #: Why the last poll could not find the position (None: it could).
+        self.position_error: str | None = None
         self.moves = 0
         self.polls = 0
         self.now_s = 0.0
@@ -440,6 +442,9 @@ class PolyAxis:
         tgt = tuple(float(c) for c in target)
         if len(tgt) != 3 or not all(math.isfinite(c) for c in tgt):
             raise CommandError(f"{self.name} to: target must be three finite numbers")
+        if self.position_error is not None:
+            raise CommandError(f"{self.name} to: refused: the source position is unknown "
+                               f"({self.position_error}); nothing moved")
         why = self.refusal(tgt)
         if why is not None:
             raise CommandError(f"{self.name} to: refused: ({tgt[0]:g}, {tgt[1]:g}, {tgt[2]:g}) "
@@ -620,11 +625,16 @@ class PolyAxis:
         try:
             self.measure()
         except NativeError as exc:
+            # The lengths no longer fix a position (a rope set to nonsense by
+            # hand, a broken encoder): keep the last position, refuse moves;
+            # during a move it is a fault of the whole manipulator.
+            self.position_error = f"position finder failed: {exc}"
             if self.active:
-                self.halt(StopReason.FAULT, f"position finder failed: {exc}")
+                self.halt(StopReason.FAULT, self.position_error)
                 if self.on_fault is not None:
-                    self.on_fault(f"position finder failed: {exc}", self.name)
-            raise
+                    self.on_fault(self.position_error, self.name)
+            return
+        self.position_error = None
         if self.active:
             self._drive(now_s, dt)
         for a in self.axes:
@@ -793,6 +803,8 @@ class PolyAxis:
         t = " ".join(f"{v:.1f}" for v in self.tensions)
         state = "moving" if self.active else (self.last_stop.reason.value
                                               if self.last_stop else "idle")
+        if self.position_error is not None:
+            state += f"  POSITION UNKNOWN: {self.position_error}"
         return (f"t={self.now_s:9.2f} s  pos ({x[0]:8.2f} {x[1]:8.2f} {x[2]:8.2f}) cm  "
                 f"distErr {self.dist_err:.3f} cm  net {self.net_force_magnitude:6.2f} N  "
                 f"T [{t}] N  {state}")

@@ -1,0 +1,207 @@
+"""The pyrt manipulator console: object commands, words, faults, piped scripts, grammar properties."""
+
+from __future__ import annotations
+
+import io
+import os
+import subprocess
+import sys
+
+import pytest
+from _manipulator_rig import make_station
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from pyrt.commands.manipulator import OBJECT_COMMANDS, ManipulatorShell
+from pyrt.console import Console
+from pyrt.db import load_station
+
+
+@pytest.fixture
+def shell(tmp_path):
+    station, runner = make_station(tmp_path)
+    out = io.StringIO()
+    sh = ManipulatorShell(runner, station, out)
+    yield sh, station, runner, out
+    station.close()
+
+
+def run_lines(sh, runner, lines: list[str]) -> str:
+    """Feed lines through the console as a piped script; its transcript."""
+    out = sh.stdout
+    start = out.tell()
+    Console(sh, io.StringIO("".join(ln + "\n" for ln in lines)), out,
+            messages=runner.messages).run()
+    return out.getvalue()[start:]
+
+
+def test_object_commands_are_case_insensitive(shell):
+    """'PROTOTYPE Tensions' and 'prototype tensions' are the same command."""
+    sh, _, runner, _ = shell
+    text = run_lines(sh, runner, ["PROTOTYPE Tensions", "prototype tensions"])
+    lines = [ln for ln in text.splitlines() if "desired tensions" in ln]
+    assert len(lines) == 2 and lines[0] == lines[1]
+
+
+def test_move_and_wait_reports_the_stop(shell):
+    """'prototype to' starts a move; 'wait' prints the stop reason and where."""
+    sh, station, runner, _ = shell
+    text = run_lines(sh, runner, ["prototype to 30 0 120", "wait", "status"])
+    assert "1 segment" in text
+    assert "ENDPOINT_STOP: within" in text
+    assert "pos (" in text and "distErr" in text and "net" in text and "T [" in text
+    assert not station.motors_running()
+
+
+def test_sub_object_commands(shell):
+    """Compound names reach the devices: axis0Encoder read, axis0Motor maxspeed, axis1 up."""
+    sh, station, runner, _ = shell
+    text = run_lines(sh, runner, ["axis0Encoder read", "axis0Motor maxspeed 3", "axis1 up 2",
+                                  "wait", "axis0Loadcell calibrate", "axis0Loadcell point 5 kg",
+                                  "axis0Loadcell calibrate"])
+    assert "axis0Encoder: " in text and " cm" in text
+    assert "axis0Motor: maximum speed 3 cm/s" in text
+    assert "axis1: moving to length" in text and "axis1: move ended at length" in text
+    assert "calibration mode" in text and "point 1" in text
+    assert "need at least two calibration points" in text
+    assert station.axes[0].motor.cruise_speed == 3.0
+
+
+def test_help_lists_objects_and_their_commands(shell):
+    """'help' names every object; 'help axis0' lists Table 4; 'help prototype' Table 2."""
+    sh, _, runner, _ = shell
+    text = run_lines(sh, runner, ["help", "help axis0", "help prototype", "help axis2Encoder"])
+    for name in ("prototype", "axis0Motor", "axis2Loadcell", "PROTOVESSEL"):
+        assert name in text
+    for cmd in ("up DIST", "calibrate", "tensionFind", "netForce", "pattern FILE",
+                "setZeroLength"):
+        assert cmd in text
+
+
+def test_refusals_print_one_error_and_move_nothing(shell):
+    """Bad objects, commands, arguments and unreachable targets: one error line each."""
+    sh, station, runner, _ = shell
+    bad = ["frob", "axis9 up 3", "axis0 fly", "axis0 up", "axis0 up -3", "axis0 up x",
+           "prototype to 1 2", "prototype to 0 0 1000", "prototype to nan 0 0",
+           "axis0Motor maxspeed 99", "prototype to 60 0 380", "sim fault axis7 dead"]
+    text = run_lines(sh, runner, bad)
+    assert text.count("error:") == len(bad)
+    assert "outside the vessel" in text and "allowed radius" in text
+    assert not station.motors_running() and not station.polyaxis.active
+
+
+def test_fault_then_ack(shell):
+    """A dead loadcell mid-move: 'wait' shows the tension stop; motion refused until 'ack'."""
+    sh, station, runner, _ = shell
+    text = run_lines(sh, runner, ["prototype to 60 0 140", "sleep 10", "sim fault axis2 dead",
+                                  "wait", "prototype to 0 0 100", "ack", "sim fault axis2 none",
+                                  "prototype to 0 0 110", "prototype stop"])
+    assert "FAULT: LOW_TENSION_STOP: axis2 tension" in text
+    assert "give 'ack' first; nothing moved" in text
+    assert "fault acknowledged" in text
+    assert "prototype: stopped" in text
+    assert not station.motors_running()
+
+
+def test_log_toggle_and_debug(shell, tmp_path):
+    """'log FILE' records S/R lines each poll of a move; 'log' again closes it; 'debug' toggles."""
+    sh, _, runner, _ = shell
+    path = tmp_path / "m.log"
+    text = run_lines(sh, runner, [f"log {path}", "prototype to 10 0 100", "wait", "log",
+                                  "debug", "sleep 2", "debug"])
+    assert f"logging on: {path}" in text and "logging off" in text
+    assert "debugging on" in text and "debugging off" in text
+    assert text.count("t=") >= 2  # status lines while debugging
+    body = path.read_text().splitlines()
+    assert sum(ln.startswith("S ") for ln in body) > 30
+    assert sum(ln.startswith("R ") for ln in body) > 30
+
+
+def test_pattern_from_the_console(shell, tmp_path):
+    """'prototype pattern FILE' runs the pattern; 'wait' waits for all of it."""
+    sh, _, runner, _ = shell
+    pat = tmp_path / "p.pat"
+    pat.write_text("p.log\n0 0 105\n8 0 105\n")
+    text = run_lines(sh, runner, [f"prototype pattern {pat}", "wait"])
+    assert "pattern finished: 2 endpoints" in text
+    assert (tmp_path / "p.log").read_text().count("ENDPOINT_STOP") == 2
+
+
+def test_stats_and_sim(shell):
+    """'stats' shows the routines' timing; 'sim' the true position."""
+    sh, _, runner, _ = shell
+    text = run_lines(sh, runner, ["sleep 1", "stats", "sim"])
+    assert "POLYAXIS" in text and "AXES" in text
+    assert "true position" in text
+
+
+def test_quit_stops_every_motor(shell):
+    """'quit' stops all motors, then ends the session."""
+    sh, station, runner, _ = shell
+    text = run_lines(sh, runner, ["prototype to 40 0 130", "sleep 10", "quit", "status"])
+    assert "pos (" not in text.split("quit")[-1]
+    assert not station.motors_running() and not station.polyaxis.active
+
+
+def test_piped_cli_transcript(tmp_path):
+    """'pyrt manipulator --speed max' without --db copies the station, runs a script, writes back."""
+    env = dict(os.environ, PYRT_HOME=str(tmp_path))
+    script = "status\nprototype to 20 0 110\nwait\nquit\n"
+    proc = subprocess.run([sys.executable, "-m", "pyrt", "manipulator", "--speed", "max"],
+                          input=script, capture_output=True, text=True, env=env, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    work = tmp_path / "stations" / "prototype"
+    assert f"working copy of the prototype station in {work}" in proc.stdout
+    assert "ENDPOINT_STOP" in proc.stdout
+    pos = load_station(work).polyaxis().position
+    assert abs(pos[0] - 20.0) < 1.0 and abs(pos[2] - 110.0) < 1.0
+
+
+# -- properties -----------------------------------------------------------------------
+
+_OBJECTS = ["prototype", "axis0", "axis1", "axis2", "axis0Motor", "axis1Encoder",
+            "axis2Loadcell", "protovessel", "nothing"]
+_WORDS = sorted({c for t in OBJECT_COMMANDS.values() for c in t} | {"fly", "", "tO"})
+_NUMBERS = st.one_of(st.floats(allow_nan=True, allow_infinity=True).map(repr),
+                     st.integers(-10**6, 10**6).map(str), st.sampled_from(["x", "1e999", "-0",
+                                                                             "3 kg", "0x10"]))
+_TOPLEVEL = ["help", "status", "stats", "sim", "ack", "debug", "sim fault axis1 dead",
+             "sim fault 9 slip 2", "sim fault axis0 none"]
+
+
+def _case(s: str, flips: list[bool]) -> str:
+    return "".join(c.upper() if f else c.lower() for c, f in zip(s, flips + [False] * len(s),
+                                                                  strict=False))
+
+
+_LINE = st.one_of(
+    st.tuples(st.sampled_from(_OBJECTS), st.sampled_from(_WORDS),
+              st.lists(_NUMBERS, max_size=5), st.lists(st.booleans(), max_size=12)).map(
+        lambda t: " ".join([_case(t[0], t[3]), _case(t[1], t[3][::-1]), *t[2]])),
+    st.sampled_from(_TOPLEVEL),
+    st.binary(max_size=40).map(lambda b: b.decode("utf-8", errors="replace")),
+    st.text(max_size=30),
+)
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(line=_LINE)
+def test_grammar_never_crashes_and_refusals_move_nothing(tmp_path_factory, line):
+    """Any line on a fresh station: no exception escapes; after a refused command no motor moves."""
+    words = line.split()
+    if words and words[0].lower() in ("sleep", "wait", "log", "quit"):
+        return
+    station, runner = make_station(tmp_path_factory.mktemp("prop"))
+    try:
+        sh = ManipulatorShell(runner, station, io.StringIO())
+        writes = station.tio10.writes
+        sh.onecmd(line)
+        runner.sleep(0.05)
+        out = sh.stdout.getvalue()
+        if "error:" in out:
+            assert not station.motors_running()
+            assert not station.polyaxis.active
+            if "nothing moved" in out:
+                assert station.tio10.writes == writes
+    finally:
+        station.close()
