@@ -355,12 +355,12 @@ class PositionFinder:
             if (lengths.__class__ is not _NDARRAY or lengths.dtype is not F64
                     or lengths.shape != self._len_shape or lengths.strides != _STRIDE):
                 require_f64("lengths", lengths, self._len_shape)
-            self._lengths[:] = lengths
+            self._lengths[...] = lengths
         if start is not None:
             if (start.__class__ is not _NDARRAY or start.dtype is not F64
                     or start.shape != _SHAPE3 or start.strides != _STRIDE):
                 require_f64("start", start, _SHAPE3)
-            self._position[:] = start
+            self._position[...] = start
         elif not self._solved:
             raise NativeInputError("solve: the first solve needs a start position")
         rc = self._solve(self._p)
