@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from typing import ClassVar, NamedTuple
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pyrt.native._arrays import F64, as_f64, require_f64
 from pyrt.native._errors import NativeInputError, Status, raise_for_status
@@ -143,7 +144,7 @@ def _check_solver_options(tol: float, max_iter: int) -> tuple[float, int]:
     return tol, int(max_iter)
 
 
-def freeze_mask(bottoms) -> tuple[int, int, int]:
+def freeze_mask(bottoms: ArrayLike) -> tuple[int, int, int]:
     """The document's freeze vector for these bottom attachments: 1 for a
     direction whose side-rope bottoms sum (absolute values) to under 1 cm."""
     b = as_f64("bottoms", bottoms, _NROWS)
@@ -158,12 +159,12 @@ def freeze_mask(bottoms) -> tuple[int, int, int]:
 
 
 def find_position(
-    tops,
-    bottoms,
-    lengths,
-    start,
-    offsets=None,
-    freeze=None,
+    tops: ArrayLike,
+    bottoms: ArrayLike,
+    lengths: ArrayLike,
+    start: ArrayLike,
+    offsets: ArrayLike | None = None,
+    freeze: ArrayLike | None = None,
     tol: float = 0.1,
     max_iter: int = 50,
 ) -> PositionResult:
@@ -202,7 +203,8 @@ def find_position(
     return PositionResult(x, float(p.rms), res, int(p.iterations))
 
 
-def rope_segments(position, tops, bottoms, offsets=None) -> RopeSegments:
+def rope_segments(position: ArrayLike, tops: ArrayLike, bottoms: ArrayLike,
+                  offsets: ArrayLike | None = None) -> RopeSegments:
     """Forward geometry: segment lengths and directions for a source position."""
     t, b, o = _geometry(tops, bottoms, offsets)
     n = t.shape[0]
@@ -220,7 +222,8 @@ def rope_segments(position, tops, bottoms, offsets=None) -> RopeSegments:
     return out
 
 
-def rope_lengths(position, tops, bottoms, offsets=None) -> np.ndarray:
+def rope_lengths(position: ArrayLike, tops: ArrayLike, bottoms: ArrayLike,
+                 offsets: ArrayLike | None = None) -> np.ndarray:
     """Predicted rope lengths (N,) in cm for a source at *position* (Eq. 1)."""
     t, b, o = _geometry(tops, bottoms, offsets)
     n = t.shape[0]
@@ -261,8 +264,8 @@ class PositionFinder:
     #: Ropes per problem (csrc/findpos.h PYRT_FINDPOS_MAX_ROPES).
     MAX_ROPES: ClassVar[int] = MAX_ROPES
 
-    def __init__(self, tops, bottoms, offsets=None, freeze=None, tol: float = 0.1,
-                 max_iter: int = 50):
+    def __init__(self, tops: ArrayLike, bottoms: ArrayLike, offsets: ArrayLike | None = None,
+                 freeze: ArrayLike | None = None, tol: float = 0.1, max_iter: int = 50):
         t, b, o = _geometry(tops, bottoms, offsets)
         n = t.shape[0]
         flags = _freeze_flags(freeze, b)
@@ -335,7 +338,7 @@ class PositionFinder:
         """Linear solves of the last successful solve."""
         return self._p.iterations
 
-    def set_top(self, i: int, point) -> None:
+    def set_top(self, i: int, point: ArrayLike) -> None:
         """Move the top point of rope *i* (e.g. to its neck-ring contact point)."""
         if not -self.n <= i < self.n:
             raise NativeInputError(f"rope index {i} out of range for {self.n} ropes")

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pyrt.native._arrays import F64, as_f64
 from pyrt.native._errors import NativeInputError, Status, raise_for_status
@@ -252,7 +253,8 @@ def _explain(rc: int, what: str, inputs: np.ndarray) -> None:
     raise_for_status(rc, what)
 
 
-def fuzzy_step(params, inputs) -> tuple[np.ndarray, np.ndarray]:
+def fuzzy_step(params: FuzzyParams | Sequence[FuzzyParams], inputs: ArrayLike
+               ) -> tuple[np.ndarray, np.ndarray]:
     """Evaluate the ten rules for every axis (row) of *inputs*.
 
     *params* is one :class:`FuzzyParams` for every axis or a sequence with one
@@ -291,7 +293,7 @@ class FuzzyBatch:
     #: Axes per batch (csrc/fuzzy.h PYRT_FUZZY_MAX_AXES).
     MAX_AXES: ClassVar[int] = MAX_AXES
 
-    def __init__(self, params_per_axis, n_axes: int):
+    def __init__(self, params_per_axis: FuzzyParams | Sequence[FuzzyParams], n_axes: int):
         if isinstance(n_axes, bool) or not isinstance(n_axes, (int, np.integer)):
             raise NativeInputError(f"n_axes: expected an integer, got {n_axes!r}")
         if not 1 <= n_axes <= MAX_AXES:
