@@ -48,7 +48,7 @@ def sort_log(logfile: str | Path) -> tuple[dict[int, list[list[str]]], dict[int,
         parts = line.split()
         if not parts or parts[0] not in ("S", "R"):
             continue
-        want = len(STATE_COLUMNS) + 1 if parts[0] == "S" else len(RULE_COLUMNS) + 1
+        want = len(STATE_COLUMNS) + 2 if parts[0] == "S" else len(RULE_COLUMNS) + 2
         if len(parts) != want:
             raise ConfigError(f"expected {want} fields on a {parts[0]} line, got {len(parts)}",
                               str(path), n)

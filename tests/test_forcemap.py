@@ -1,0 +1,47 @@
+"""pyrt forcemap: per-rope force maps over a grid, with a header naming columns and units."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pyrt.cli import main
+from pyrt.cli.forcemap import COLUMNS
+from pyrt.sim.manipulator import GRAVITY
+
+
+@pytest.mark.parametrize(("station", "ropes", "step"), [("prototype", 3, "40"),
+                                                        ("sno", 5, "100")])
+def test_force_maps_balance_the_weight(tmp_path, capsys, station, ropes, step):
+    """One map per rope; at every position the rope forces sum to the net weight."""
+    assert main(["forcemap", "--station", station, "--out", str(tmp_path), "--step", step]) == 0
+    maps = []
+    for i in range(ropes):
+        lines = (tmp_path / f"axis{i}.map").read_text().splitlines()
+        assert lines[2] == "# " + " ".join(COLUMNS)
+        assert all(c.endswith(("_cm", "_N")) for c in COLUMNS)
+        maps.append(np.loadtxt(lines[3:]))
+    assert all(m.shape == maps[0].shape for m in maps) and len(maps[0]) > 10
+    total = sum(m[:, 4:7] for m in maps)
+    z = maps[0][:, 2]
+    buoyant = 1.10 * 1.0 if station == "sno" else 0.0  # 1 l in D2O below the neck ring
+    weight = (5.3357 - np.where(z < 595.8, buoyant, 0.0)) * GRAVITY
+    # the free ropes balance the net weight at every grid position (in the rope
+    # plane: the prototype's central pulley is 5 cm out of it, Table 3)
+    assert np.abs(total[:, 0]).max() < 0.6
+    if station == "sno":
+        assert np.abs(total[:, 1]).max() < 0.5
+    assert np.abs(total[:, 2] - weight).max() < 0.5
+    for m in maps:
+        assert np.all(np.isfinite(m))
+    # a tension-free rope puts no force on the source
+    assert all(np.allclose(m[m[:, 3] == 0.0, 4:7], 0.0) for m in maps)
+    assert np.all(maps[0][:, 1] == 0.0)
+    assert f"axis{ropes - 1}.map" in capsys.readouterr().out
+
+
+def test_bad_step_refused(tmp_path, capsys):
+    """A step that is not a positive length: one error line, exit 1, nothing written."""
+    assert main(["forcemap", "--out", str(tmp_path), "--step", "-5"]) == 1
+    assert "--step" in capsys.readouterr().err
+    assert not list(tmp_path.glob("*.map"))

@@ -1,0 +1,62 @@
+"""pyrt logsort: a manipulator log split into a<N>state.dat / a<N>rules.dat, plots to PNG."""
+
+from __future__ import annotations
+
+import pytest
+from _manipulator_rig import make_station, move
+
+from pyrt.cli import main
+from pyrt.cli.logsort import RULE_COLUMNS, STATE_COLUMNS, sort_log
+
+
+@pytest.fixture(scope="module")
+def logfile(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("logsort")
+    station, runner = make_station(tmp)
+    path = station.start_log(tmp / "run.log")
+    move(station, runner, (10.0, 0.0, 105.0))
+    station.stop_log()
+    station.close()
+    return path
+
+
+def test_split_per_axis(logfile, tmp_path, capsys):
+    """Each axis gets a state and a rules file with a column header and one row per poll."""
+    assert main(["logsort", str(logfile), "--out", str(tmp_path)]) == 0
+    polls = sum(1 for ln in logfile.read_text().splitlines() if ln.startswith("P "))
+    for axis in range(3):
+        state = (tmp_path / f"a{axis}state.dat").read_text().splitlines()
+        rules = (tmp_path / f"a{axis}rules.dat").read_text().splitlines()
+        assert state[1] == "# " + " ".join(STATE_COLUMNS)
+        assert rules[1] == "# " + " ".join(RULE_COLUMNS)
+        assert len(state) - 2 == polls and len(rules) - 2 == polls
+        assert len(state[2].split()) == len(STATE_COLUMNS)
+        assert len(rules[2].split()) == len(RULE_COLUMNS)
+    assert "a2rules.dat" in capsys.readouterr().out
+
+
+def test_rows_keep_the_logged_values(logfile):
+    """The split rows are the log's S and R lines without the axis column, in order."""
+    states, rules = sort_log(logfile)
+    s_lines = [ln.split() for ln in logfile.read_text().splitlines() if ln.startswith("S 1 ")
+               or (ln.startswith("S ") and ln.split()[2] == "1")]
+    assert states[1][0] == [s_lines[0][1], *s_lines[0][3:]]
+    assert set(rules) == {0, 1, 2}
+
+
+def test_plot_writes_png(logfile, tmp_path):
+    """--plot draws one PNG per axis."""
+    assert main(["logsort", str(logfile), "--out", str(tmp_path), "--plot"]) == 0
+    for axis in range(3):
+        data = (tmp_path / f"a{axis}.png").read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize("text", ["", "hello\n", "S 1.0 0 1 2\n", "S 1.0 x 1 2 3 4 5 6 7 8 9\n"])
+def test_bad_logs_are_refused(tmp_path, capsys, text):
+    """A file that is not a manipulator log: one error line naming the file, exit 1."""
+    p = tmp_path / "bad.log"
+    p.write_text(text)
+    assert main(["logsort", str(p), "--out", str(tmp_path / "out")]) == 1
+    assert "bad.log" in capsys.readouterr().err
+    assert not (tmp_path / "out" / "a0state.dat").exists()
