@@ -1,0 +1,77 @@
+"""Manipulator control benchmarks: one full control poll, and a whole move's real-time ratio.
+
+Run: ``python -m pytest bench/bench_manipulator.py --benchmark-only -s``.
+
+* ``poll``: one :meth:`PolyAxis.poll` during a move (tensions and lengths
+  through the device objects, ring contacts, the prepared position finder,
+  error signals, one batched fuzzy call, every Motor's velocity and poll,
+  the stop conditions), for the 3-rope prototype and the 5-rope station;
+  the physics is not stepped.  Target: under 30 µs for 5 ropes.
+* ``move``: a complete ``to`` on ``--speed max`` (plant, ready queue,
+  write-back, mailbox, all on a SimClock loop) at the manipulator's default
+  5 ms tick and at a 1 ms tick; simulated seconds per wall second.
+  Target: at least 20x real time.
+"""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+from _manipulator_rig import make_station
+
+POLL_TARGET_US = 30.0
+REALTIME_TARGET = 20.0
+MOVES = {"prototype": (60.0, 0.0, 140.0), "sno": (80.0, 60.0, 100.0)}
+
+
+@pytest.mark.benchmark(group="manipulator-control-poll")
+@pytest.mark.parametrize("name", ["prototype", "sno"])
+def test_control_poll(benchmark, tmp_path, name):
+    """One control poll during a move, physics excluded (µs)."""
+    station, runner = make_station(tmp_path, name)
+    pa = station.polyaxis
+    runner.call(pa.to, MOVES[name])
+    runner.sleep(20.0)
+    assert pa.active
+    clock = [station.loop.now_ns * 1e-9]
+
+    def poll():
+        clock[0] += pa.poll_s
+        pa.poll(clock[0])
+
+    benchmark.pedantic(poll, rounds=2000, iterations=1, warmup_rounds=50)
+    us = benchmark.stats.stats.median * 1e6
+    benchmark.extra_info.update(ropes=pa.n, median_us=round(us, 1), target_us=POLL_TARGET_US,
+                                ratio_to_target=round(us / POLL_TARGET_US, 2))
+    print(f"\n{name}: control poll {us:.1f} µs for {pa.n} ropes "
+          f"(target {POLL_TARGET_US:g} µs: {us / POLL_TARGET_US:.2f}x the target)")
+    station.close()
+
+
+@pytest.mark.benchmark(group="manipulator-move")
+@pytest.mark.parametrize("tick_ms", [5, 1])
+@pytest.mark.parametrize("name", ["prototype", "sno"])
+def test_complete_move(benchmark, tmp_path_factory, name, tick_ms):
+    """A complete 'to' on --speed max: simulated seconds per wall second."""
+    ratios = []
+
+    def run():
+        station, runner = make_station(tmp_path_factory.mktemp(name), name,
+                                       tick_ns=tick_ms * 1_000_000)
+        t0_sim = station.loop.now_ns
+        w0 = time.perf_counter()
+        runner.call(station.polyaxis.to, MOVES[name])
+        assert runner.wait_until(lambda: not station.polyaxis.active, 600.0)
+        wall = time.perf_counter() - w0
+        sim = (station.loop.now_ns - t0_sim) * 1e-9
+        ratios.append(sim / wall)
+        assert station.polyaxis.last_stop.reason.value == "ENDPOINT_STOP"
+        station.close()
+
+    benchmark.pedantic(run, rounds=2, iterations=1)
+    ratio = sorted(ratios)[len(ratios) // 2]
+    benchmark.extra_info.update(tick_ms=tick_ms, realtime_ratio=round(ratio, 1),
+                                target=REALTIME_TARGET)
+    print(f"\n{name}: a complete move at a {tick_ms} ms tick runs {ratio:.1f}x real time "
+          f"(target {REALTIME_TARGET:g}x: {ratio / REALTIME_TARGET:.2f}x the target)")
