@@ -163,13 +163,20 @@ def test_dead_limit_i_enters_the_monitor(session):
     assert session.rig.board.dac == 0x80
 
 
-def test_fault_is_reported_once_and_acknowledged(session):
-    """A fault comes back at the next command, is acknowledged, and commands work again."""
+def test_fault_is_reported_once_and_motion_refused_until_ack(session):
+    """A fault comes back once at the next command; moves are refused until ack, then work again."""
     session.runner.call(lambda: session.rig.ctl.queue.trip("test trip", source="test"))
     lines = session("W")
     assert lines[0].startswith("FAULT: test trip")
-    assert "acknowledged" in lines[1]
-    assert session("W") == ["0000"]
+    assert "type ack" in lines[1]
+    assert session("W") == ["0000"]  # reported once; reading still works
+    lines = session("P -0100")
+    assert lines[0].startswith("error:") and "ack" in lines[0]
+    assert session.rig.board.dac == 0x80 and session("T") == ["0000"]
+    assert session("ack")[0].startswith("fault acknowledged (test trip)")
+    assert session("ack") == ["no fault to acknowledge"]
+    session("P -0100", "wait")
+    assert abs(int(session("W")[0], 16) - 0xFF00) <= 16
 
 
 def test_help_lists_each_level(session):

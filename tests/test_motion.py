@@ -59,16 +59,38 @@ def test_registered_motion_runs_queued_records_in_order():
 
 
 def test_unknown_type_and_bad_parameters_are_refused():
-    """An unknown motion type or a start() refusal is a CommandError; the robot does not move."""
+    """An unknown motion type or a start() refusal ends the record as refused; the robot does not move."""
     register_motion_type("ramp", Ramp, replace=True)
     robot = {"pos": 0.0}
     records = [MotionRecord("warp", {}), MotionRecord("ramp", {"target": 500})]
-    executor = MotionExecutor(robot, lambda: records.pop(0) if records else None)
-    with pytest.raises(CommandError, match="unknown motion type 'warp'"):
-        executor.poll(0)
-    with pytest.raises(CommandError, match="outside"):
-        executor.poll(0)
+    done = []
+    executor = MotionExecutor(robot, lambda: records.pop(0) if records else None, done.append)
+    executor.poll(0)
+    executor.poll(1)
+    assert [m.stop_reason for m in done] == [
+        "refused: unknown motion type 'warp'; known: " + ", ".join(motion_type_names()),
+        "refused: target 500.0 outside -100..100",
+    ]
     assert robot["pos"] == 0.0 and not executor.busy
+
+
+def test_an_error_while_stepping_trips_the_robot_not_the_loop():
+    """An exception in step() ends the motion and goes to on_error (the robot's fault), never to the loop."""
+
+    class Broken(Ramp):
+        def step(self, now_ns):
+            raise ZeroDivisionError("encoder lost")
+
+    register_motion_type("broken", Broken, replace=True)
+    records = [MotionRecord("broken", {"target": 5})]
+    errors, done = [], []
+    executor = MotionExecutor(
+        {"pos": 0.0}, lambda: records.pop(0) if records else None, done.append,
+        lambda cause, m: errors.append(cause),
+    )
+    executor.poll(0)
+    assert errors == ["ZeroDivisionError: encoder lost"]
+    assert done[0].stop_reason == "failed: ZeroDivisionError: encoder lost" and not executor.busy
 
 
 def test_abort_stops_the_current_motion():

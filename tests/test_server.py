@@ -174,9 +174,11 @@ def test_faults_are_pushed_to_subscribers_and_left_for_the_operator():
         assert reader.status().fields["fault"] == 1
         reply = op.request("Q")
         assert (reply.ok, reply.code) == (False, "fault")
-        assert reply.lines[-1].startswith("fault acknowledged")
+        assert "type ack" in reply.lines[-1]
         op.command("Q")
-        assert reader.status().fields["fault"] == 0  # acknowledged by the operator's shell
+        assert reader.status().fields["fault"] == 1  # the robot stays stopped until ack
+        assert op.command("ack")[0].startswith("fault acknowledged")
+        assert reader.status().fields["fault"] == 0
         assert sv.still_and_null()
 
 

@@ -12,20 +12,15 @@ as a script; with ``--speed max`` time advances only while commands run,
 from __future__ import annotations
 
 import argparse
-import contextlib
 import sys
 import time
 
-from pyrt.boards.gripper import DAC_NULL, SimGripperBoard
-from pyrt.boards.i8031 import I8031
 from pyrt.cli._loopopts import add_loop_options, apply_rt_options, make_loop
 from pyrt.commands.gripper import GripperShell
 from pyrt.console import Console
-from pyrt.errors import ConfigError, PyrtError
-from pyrt.robots.gripper import GripperController
 from pyrt.scheduler.runner import Runner
-from pyrt.scope import Scope
-from pyrt.sim.gripper import FAULTS, JawParameters, JawPlant
+from pyrt.sim.gripper import FAULTS, JawParameters
+from pyrt.station.gripper import build_gripper
 
 __all__ = ["add_parser", "run"]
 
@@ -75,15 +70,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     out = sys.stdout
-    cpu = I8031()
-    board = SimGripperBoard(cpu)
-    try:
-        plant = JawPlant(board, start=args.start)
-        plant.set_object(args.object)
-        for fault in args.fault:
-            plant.inject(fault)
-    except ValueError as exc:
-        raise ConfigError(str(exc)) from None
     apply_rt_options(args, lambda m: print(m, file=out))
     posted: list[Runner] = []
     quiet = {"until": 0.0, "held": 0}
@@ -103,15 +89,13 @@ def run(args: argparse.Namespace) -> int:
         posted[0].post(line + more)
 
     loop = make_loop(args, warn=warn)
-    ctl = GripperController(cpu)
-    loop.attach(plant.step, name="jaws")
-    ctl.attach(loop)
-    scope = Scope()
-    loop.attach(scope.sample, name="scope")
-    ctl.power_up()
-    runner = Runner(loop)
+    station = build_gripper(loop, start=args.start, object_mm=args.object, faults=args.fault)
+    runner = station.runner
     posted.append(runner)
-    shell = GripperShell(runner, ctl, out, plant=plant, scope=scope)
+    shell = GripperShell(
+        runner, station.controller, out, plant=station.plant, scope=station.scope,
+        executor=station.executor,
+    )
     console = Console(shell, sys.stdin, out, messages=runner.messages, history_file=args.history)
     speed = "max (simulated time)" if args.speed is None else f"{args.speed:g}x real time"
     print(
@@ -127,10 +111,7 @@ def run(args: argparse.Namespace) -> int:
             shell.onecmd("I")
         status = console.run()
     finally:
-        with contextlib.suppress(PyrtError):
-            runner.call(ctl.drive, DAC_NULL)
-        runner.stop()
-        loop.close()
+        station.shutdown()
     if args.timing_log:
         wall = time.perf_counter() - wall0
         print(f"timing log written to {args.timing_log} ({loop.tick_index} ticks, {wall:.2f} s)",

@@ -22,6 +22,8 @@ from typing import TYPE_CHECKING, Any, Protocol, TextIO
 from pyrt.commands.scope import ScopeCommand
 from pyrt.commands.shell import CommandShell
 from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
+from pyrt.robots.gripper import GripperMove
+from pyrt.scheduler.motion import MotionExecutor, MotionRecord
 from pyrt.scheduler.report import format_statistics
 from pyrt.scope import Scope, Source
 
@@ -198,9 +200,15 @@ class CommandLevel(_Level):
 
         P E47A and P-1B86 are the same move; 0000 is wide open, about D600
         closed.  A positive target is refused and nothing moves.  P returns
-        at once; 'wait' waits for the move to end."""
+        at once; 'wait' waits for the move to end.  Moves go on the motion
+        queue: a P given while the jaws move runs when that move has ended."""
         target = parse_target(arg)
-        self.call(self.ctl.move, target)
+        executor = self.shell.executor
+        if executor is None:
+            self.call(self.ctl.move, target)
+            return
+        self.call(self.ctl.check_can_move)
+        self.shell.runner.submit_motion(MotionRecord(GripperMove.name, {"target": target}))
 
     def do_s(self, arg: str) -> None:
         """S: the sensor word as 16 bits (2E then 2D); a 0 is a sensor that is ON.
@@ -306,11 +314,14 @@ class GripperShell(CommandShell):
         stdout: TextIO,
         plant: JawPlant | None = None,
         scope: Scope | None = None,
+        executor: MotionExecutor | None = None,
     ):
         super().__init__(stdout)
         self.runner = runner
         self.ctl = controller
         self.plant = plant
+        #: Runs queued P moves (None: P sets the target directly, as the 8031 did).
+        self.executor = executor
         self.channels = gripper_channels(controller, plant)
         self._scope = (
             ScopeCommand(runner, scope, self._channel, lambda: sorted(self.channels), stdout)
@@ -368,18 +379,17 @@ class GripperShell(CommandShell):
 
     def _fault(self, exc: FaultError) -> None:
         self.say(f"FAULT: {exc.fault.cause} (in {exc.fault.source or 'the controller'})")
-        for _ in range(8):  # each pending fault is raised once; acknowledge after the last
+        for _ in range(8):  # each pending fault is raised once: show them all
             try:
-                self.runner.call(self.ctl.acknowledge)
+                self.runner.poll()
             except FaultError as again:
                 self.say(f"FAULT: {again.fault.cause} (in {again.fault.source})")
                 continue
-            except PyrtError as other:
-                self.error(f"could not acknowledge the fault: {other}")
-                return
+            except PyrtError:
+                pass
             break
-        self.say("fault acknowledged: drive current off, routines restarted; "
-                 "the command was not completed")
+        self.say("the command was not run; drive current is off and the jaws refuse to move "
+                 "until you type ack")
 
     # -- blocking main-program sequences ------------------------------------------
 
@@ -447,19 +457,36 @@ class GripperShell(CommandShell):
         if arg.strip():
             timeout = _parse_seconds(arg, "wait")
         ctl = self.ctl
-        active, clock = self.runner.call(lambda: (ctl.moving or ctl.busy, ctl.clock_enabled))
-        if not active:
+        executor, motion = self.executor, self.runner.motion
+
+        def active() -> bool:
+            queued = executor is not None and (executor.busy or len(motion) > 0)
+            return ctl.moving or ctl.busy or queued
+
+        busy, clock = self.runner.call(lambda: (active(), ctl.clock_enabled))
+        if not busy:
             self.say("nothing to wait for: jaws idle")
             return
         if not clock:
             self.say("the clock interrupt is OFF (monitor I): the move cannot end; M, I: on")
             return
-        if not self.runner.wait_until(lambda: not (ctl.moving or ctl.busy), timeout):
+        if not self.runner.wait_until(lambda: not active(), timeout):
             self.say(f"still moving after {timeout:g} s")
             return
         why, pos, tgt = self.runner.call(lambda: (ctl.last_stop, ctl.position(), ctl.target()))
         err = _signed(pos) - _signed(tgt)
         self.say(f"{why or 'ended'}: position {pos:04X}, target {tgt:04X}, error {err:+d}")
+
+    def do_ack(self, arg: str) -> None:
+        """ack: acknowledge a fault: the routines restart, the jaws may move again."""
+        if arg.strip():
+            raise CommandError("ack takes no argument")
+        fault = self.runner.call(lambda: self.ctl.queue.fault)
+        if fault is None:
+            self.say("no fault to acknowledge")
+            return
+        self.runner.call(self.ctl.acknowledge)
+        self.say(f"fault acknowledged ({fault.cause}); routines restarted, nothing moved")
 
     def do_sleep(self, arg: str) -> None:
         """sleep SECONDS: let the controller run that long (loop time)."""

@@ -73,6 +73,7 @@ from pyrt.boards.i8031 import (
 from pyrt.errors import CommandError, Fault
 from pyrt.native import excess128
 from pyrt.scheduler import ByteImage, ByteRef, Job, Loop, ReadyQueue
+from pyrt.scheduler.motion import MotionRecord, MotionType, register_motion_type
 
 __all__ = [
     "ADDR_MVJAWS",
@@ -541,15 +542,21 @@ class GripperController:
             raise CommandError(
                 f"target {target:+X} refused: encoder counts are 0000 (wide open) or negative"
             )
-        if self.busy:
-            raise CommandError(f"busy: {self.job.name} in progress")  # type: ignore[union-attr]
-        if self.queue.fault is not None:
-            raise CommandError(f"robot stopped by a fault: {self.queue.fault.cause}")
+        self.check_can_move()
         ram = self.ram
         self._set_word(COMMAND_CNT, target)
         ram[STOPCNT] = STOPBUMPS
         ram[FLAGS] = (ram[FLAGS] & ~_MASK_DOJOG | _MASK_DRVON) & 0xFF
         self.last_stop = ""
+
+    def check_can_move(self) -> None:
+        """Raise CommandError unless a move may start now (no job, no fault)."""
+        if self.busy:
+            raise CommandError(f"busy: {self.job.name} in progress")  # type: ignore[union-attr]
+        if self.queue.fault is not None:
+            raise CommandError(
+                f"robot stopped by a fault ({self.queue.fault.cause}): type ack to acknowledge"
+            )
 
     def set_speed(self, speed: int) -> None:
         """``X``: the maximum jaw speed (01..7F), as JSPEED, MXPJSPD, MXNJSPD."""
@@ -642,3 +649,24 @@ class _Words:  # pragma: no cover - big-endian hosts only
     def __setitem__(self, i: int, v: int) -> None:
         self._ram[2 * i] = v & 0xFF
         self._ram[2 * i + 1] = (v >> 8) & 0xFF
+
+
+class GripperMove(MotionType):
+    """The ``P`` move as a motion type: set the target and the drive bit,
+    done when MVJAWS clears the drive bit (STOPCNT bumps after the stopped
+    bit).  Its record is ``MotionRecord("gripper_move", {"target": counts})``
+    with ``counts`` in -8000..0000."""
+
+    name = "gripper_move"
+
+    def start(self, robot: Any, record: MotionRecord, now_ns: int) -> None:
+        self.robot = robot
+        self.target = int(record.params["target"])
+        robot.move(self.target)  # refuses positive targets, a busy or faulted robot
+
+    def step(self, now_ns: int) -> None:
+        if not self.robot.moving:
+            self.stop(self.robot.last_stop or "stopped")
+
+
+register_motion_type(GripperMove.name, GripperMove, replace=True)

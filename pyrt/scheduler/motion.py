@@ -125,11 +125,19 @@ def motion_type_names() -> list[str]:
     return sorted(_registry)
 
 
+class _Refused(MotionType):
+    """Stands for a record that could not even be started (unknown type)."""
+
+
 class MotionExecutor:
     """Steps queued motions one at a time for one robot (a loop handler).
 
     ``take`` returns the next record or None (the runner's ``MotionQueue.get``);
     ``on_done(motion)`` is told when a motion finishes, with its stop reason.
+    A record that cannot start (unknown type, ``start`` refusing it) ends at
+    once with ``stop_reason`` ``"refused: ..."``; an exception in ``step`` is
+    passed to ``on_error(cause, motion)`` (the robot trips: a fault, with its
+    reflex action) and ends the motion.  The loop itself never sees either.
     """
 
     def __init__(
@@ -137,12 +145,16 @@ class MotionExecutor:
         robot: Any,
         take: Callable[[], MotionRecord | None],
         on_done: Callable[[MotionType], None] | None = None,
+        on_error: Callable[[str, MotionType], None] | None = None,
     ):
         self.robot = robot
         self._take = take
         self._on_done = on_done
+        self._on_error = on_error
         self.current: MotionType | None = None
         self.last: MotionType | None = None
+        #: The record of the current (or last) motion.
+        self.record: MotionRecord | None = None
 
     @property
     def busy(self) -> bool:
@@ -155,16 +167,33 @@ class MotionExecutor:
             record = self._take()
             if record is None:
                 return
-            motion = get_motion_type(record.type)()
+            self.record = record
+            try:
+                motion = get_motion_type(record.type)()
+            except CommandError as exc:
+                refused = _Refused()
+                refused.stop(f"refused: {exc}")
+                self._finish(refused)
+                return
             self.current = motion
             try:
                 motion.start(self.robot, record, now_ns)
-            except Exception:
-                self.current = None
-                raise
+            except Exception as exc:
+                motion.stop(f"refused: {exc}")
+                self._finish(motion)
+                return
         motion = self.current
         if not motion.done:
-            motion.step(now_ns)
+            try:
+                motion.step(now_ns)
+            except Exception as exc:
+                cause = f"{type(exc).__name__}: {exc}"
+                motion.stop(f"failed: {cause}")
+                self._finish(motion)
+                if self._on_error is None:
+                    raise
+                self._on_error(cause, motion)
+                return
         if motion.done:
             self._finish(motion)
 

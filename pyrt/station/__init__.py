@@ -1,1 +1,1 @@
-"""Assembling a runnable station: databases, boards, physics, devices, robots and tasks on one loop."""
+"""Assembling a runnable station: boards, physics, devices, robots and tasks on one loop."""
