@@ -27,10 +27,6 @@ Ring = tuple[Vec, Vec, float]
 _ITERATIONS = 12
 
 
-def _dot(a: Vec, b: Vec) -> float:
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
 def ring_contact(ring: Ring | None, t: Vec, q: Vec) -> Vec | None:
     """The rim point the rope ``t -> q`` bears on, or None if it runs free."""
     if ring is None:
@@ -38,25 +34,28 @@ def ring_contact(ring: Ring | None, t: Vec, q: Vec) -> Vec | None:
     cen, ax, rad = ring
     if rad <= 0.0:
         return None
-    tc = (t[0] - cen[0], t[1] - cen[1], t[2] - cen[2])
-    qc = (q[0] - cen[0], q[1] - cen[1], q[2] - cen[2])
-    ht = _dot(tc, ax)
-    hq = _dot(qc, ax)
-    if not (ht > 0.0 and hq < 0.0):
-        return None
-    s = ht / (ht - hq)
-    r = [tc[k] + s * (qc[k] - tc[k]) for k in range(3)]
-    xr = r[0] * ax[0] + r[1] * ax[1] + r[2] * ax[2]
-    r = [r[k] - xr * ax[k] for k in range(3)]
-    rr = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
-    if rr <= rad:
-        return None
-    e1x, e1y, e1z = r[0] / rr, r[1] / rr, r[2] / rr
     ax0, ax1, ax2 = ax
-    e2x, e2y, e2z = ax1 * e1z - ax2 * e1y, ax2 * e1x - ax0 * e1z, ax0 * e1y - ax1 * e1x
     cx0, cy0, cz0 = cen
     tx, ty, tz = t
     qx, qy, qz = q
+    tcx, tcy, tcz = tx - cx0, ty - cy0, tz - cz0
+    ht = tcx * ax0 + tcy * ax1 + tcz * ax2
+    if ht <= 0.0:
+        return None
+    qcx, qcy, qcz = qx - cx0, qy - cy0, qz - cz0
+    hq = qcx * ax0 + qcy * ax1 + qcz * ax2
+    if hq >= 0.0:
+        return None
+    s = ht / (ht - hq)
+    rx, ry, rz = tcx + s * (qcx - tcx), tcy + s * (qcy - tcy), tcz + s * (qcz - tcz)
+    xr = rx * ax0 + ry * ax1 + rz * ax2
+    rx, ry, rz = rx - xr * ax0, ry - xr * ax1, rz - xr * ax2
+    rr2 = rx * rx + ry * ry + rz * rz
+    if rr2 <= rad * rad:
+        return None
+    rr = math.sqrt(rr2)
+    e1x, e1y, e1z = rx / rr, ry / rr, rz / rr
+    e2x, e2y, e2z = ax1 * e1z - ax2 * e1y, ax2 * e1x - ax0 * e1z, ax0 * e1y - ax1 * e1x
     phi = 0.0
     sqrt, cos, sin = math.sqrt, math.cos, math.sin
     for _ in range(_ITERATIONS):

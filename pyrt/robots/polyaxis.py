@@ -204,6 +204,12 @@ class PolyAxis:
         inp = self.batch.inputs
         inp[:, _FI.TENSION_LOW] = self.low_tension
         inp[:, _FI.TENSION_HIGH] = self.max_tension
+        if not (_FI.TENSION == 0 and _FI.NEAR_END == 8 and _FI.TENSION_LOW == 9):
+            raise ConfigError("csrc/fuzzy.h input columns moved; update PolyAxis._drive")
+        #: The per-poll columns TENSION .. NEAR_END of the batch's input array.
+        self._rows = inp[:, :9]
+        self._last_dv = [0.0] * self.n
+        self._motors = [a.motor for a in self.axes]
 
         # state
         self.position: Vec = tuple(float(c) for c in position)  # type: ignore[assignment]
@@ -501,7 +507,7 @@ class PolyAxis:
                                net_force_limit=self.net_forcelimit, tension_stops=True)
         self._prev_e = None
         self._prev_te = None
-        self.batch.inputs[:, _FI.LAST_DV] = 0.0
+        self._last_dv = [0.0] * self.n
         self.active = True
         self.moves += 1
         self._log(f"TO {self.now_s:.3f} {tgt[0]:.4f} {tgt[1]:.4f} {tgt[2]:.4f} "
@@ -666,11 +672,32 @@ class PolyAxis:
                 else:
                     self.desired_tensions[i] = 0.0
                     self.free[i] = 1.0
+        res_l = res.tolist()
+        length_at = self.length_at
         for i in range(self.n):
-            desired_len = self.rope_geometry(i, hare)[0]
-            self.error_lengths[i] = (self.lengths[i] - float(res[i])) - desired_len
+            self.error_lengths[i] = (self.lengths[i] - res_l[i]) - length_at(i, hare)
             self.error_tensions[i] = (0.0 if self.free[i] else
                                       self.tensions[i] - self.desired_tensions[i])
+
+    def length_at(self, i: int, x: Sequence[float]) -> float:
+        """Rope ``i``'s length beyond its top pulley with the source at ``x`` (cm),
+        over the neck ring where it bears on it (the poll's fast form of
+        :meth:`rope_geometry`)."""
+        o = self.offsets[i]
+        qx, qy, qz = x[0] + o[0], x[1] + o[1], x[2] + o[2]
+        t = self.tops[i]
+        head = 0.0
+        c = ring_contact(self.ring, t, (qx, qy, qz))
+        if c is not None:
+            head = math.sqrt((t[0] - c[0]) ** 2 + (t[1] - c[1]) ** 2 + (t[2] - c[2]) ** 2)
+            t = c
+        dx, dy, dz = t[0] - qx, t[1] - qy, t[2] - qz
+        length = head + math.sqrt(dx * dx + dy * dy + dz * dz)
+        b = self.bottoms[i]
+        if b is not None:
+            dx, dy, dz = b[0] - qx, b[1] - qy, b[2] - qz
+            length += math.sqrt(dx * dx + dy * dy + dz * dz)
+        return length
 
     def _drive(self, now_s: float, dt: float) -> None:
         hare = self.hare
@@ -679,30 +706,25 @@ class PolyAxis:
         self.hare_position = hp
         self.error_signal(hp)
         e, te = self.error_lengths, self.error_tensions
-        inp = self.batch.inputs
         pe, pte = self._prev_e, self._prev_te
         near = 1.0 - _dist(self.position, hare.end) / NEAR_END_CM
         near = 0.0 if near < 0.0 else near
-        rate_dt = dt if dt > 0 else self.poll_s
-        for i, a in enumerate(self.axes):
-            row = inp[i]
-            row[_FI.TENSION] = self.tensions[i]
-            row[_FI.DESIRED_TENSION] = self.desired_tensions[i]
-            row[_FI.FREE] = self.free[i]
-            row[_FI.LENGTH_ERROR] = e[i]
-            row[_FI.VELOCITY] = a.motor.velocity
-            row[_FI.LENGTH_ERROR_RATE] = 0.0 if pe is None else (e[i] - pe[i]) / rate_dt
-            row[_FI.TENSION_ERROR_RATE] = 0.0 if pte is None else (te[i] - pte[i]) / rate_dt
-            row[_FI.NEAR_END] = near
-        self._prev_e = list(e)
-        self._prev_te = list(te)
-        dv = self.batch.step()
-        dvs = dv.tolist()
-        inp[:, _FI.LAST_DV] = dv
-        for i, a in enumerate(self.axes):
-            m = a.motor
-            base = m.velocity if m.running else m.desired_velocity
-            m.set_desired_velocity(base + dvs[i])
+        k = 1.0 / (dt if dt > 0 else self.poll_s)
+        tens, want, free, last = self.tensions, self.desired_tensions, self.free, self._last_dv
+        motors = self._motors
+        # columns TENSION .. NEAR_END of csrc/fuzzy.h, one row per axis, in one copy
+        self._rows[:] = [
+            (tens[i], want[i], free[i], e[i], motors[i].velocity,
+             0.0 if pe is None else (e[i] - pe[i]) * k,
+             0.0 if pte is None else (te[i] - pte[i]) * k, last[i], near)
+            for i in range(self.n)
+        ]
+        self._prev_e = e.copy()
+        self._prev_te = te.copy()
+        dvs = self.batch.step().tolist()
+        self._last_dv = dvs
+        for m, dv in zip(motors, dvs, strict=True):
+            m.set_desired_velocity((m.velocity if m.running else m.desired_velocity) + dv)
             m.poll()
         if self.log is not None:
             self._log_state(now_s, dvs)

@@ -1,1 +1,11 @@
-"""Assembling a runnable station: boards, physics, devices, robots and tasks on one loop."""
+"""Assembling a runnable station: databases, boards, physics, devices, robots, tasks, loop."""
+
+from pyrt.station.manipulator import (
+    AXIS_POLL_S,
+    POLL_S,
+    TICK_NS,
+    ManipulatorStation,
+    MessageSink,
+)
+
+__all__ = ["AXIS_POLL_S", "POLL_S", "TICK_NS", "ManipulatorStation", "MessageSink"]

@@ -1,0 +1,78 @@
+"""The manipulator station: scope channels, Table 2 queries, errorSignalAll, blended neck moves."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from _manipulator_rig import make_station, move
+
+from pyrt.robots.stops import StopReason
+from pyrt.scope import compile_sources
+
+
+@pytest.fixture
+def proto(tmp_path):
+    station, runner = make_station(tmp_path)
+    yield station, runner
+    station.close()
+
+
+def test_scope_channels_resolve(proto):
+    """resolve_channel gives live sources for the robot, axes and devices (case-insensitive)."""
+    station, runner = proto
+    names = ["prototype.x", "PROTOTYPE.z", "prototype.distErr", "prototype.netForce",
+             "axis0.tension", "axis1.length", "Axis2.errorLength", "axis0Motor.velocity",
+             "axis1Encoder.length", "axis2Loadcell.tension", "axis0.velocity"]
+    read = compile_sources([station.resolve_channel(n) for n in names])
+    values = runner.call(read)
+    pa = station.polyaxis
+    assert values[0] == pa.position[0] and values[1] == pa.position[2]
+    assert values[4] == pa.tensions[0] and values[5] == pa.lengths[1]
+    assert values[8] == pytest.approx(station.axes[1].encoder.length())
+    for bad in ["prototype", "axis9.tension", "axis0.colour", "axis0Motor.tension", ".x"]:
+        with pytest.raises(ValueError):
+            station.resolve_channel(bad)
+
+
+def test_table2_queries(proto):
+    """tensions, netForce [x y z] and tensionFind answer from the current state."""
+    station, runner = proto
+    pa = station.polyaxis
+    text = runner.call(pa.command, "tensions")
+    assert text.startswith("prototype: desired tensions axis0 ")
+    assert "axis1 10.00 N" in text  # the off-side rope (the source is at x < 0)
+    here = runner.call(pa.command, "netForce")
+    assert float(here.split("net force ")[1].split()[0]) < 5.0
+    far = runner.call(pa.command, "netForce", "100", "0", "100")
+    assert float(far.split("net force ")[1].split()[0]) > 10.0
+    found = runner.call(pa.tension_find)
+    assert math.dist(found, pa.position) < 10.0
+    assert "position from tensions" in runner.call(pa.command, "tensionFind")
+
+
+def test_error_signal_all_moves_too(proto):
+    """With errorSignalAll every rope is driven toward its equilibrium tension; the move ends."""
+    station, runner = proto
+    pa = station.polyaxis
+    assert "every rope" in runner.call(pa.command, "errorSignalAll")
+    stop = move(station, runner, (20.0, 0.0, 110.0))
+    assert stop.reason is StopReason.ENDPOINT_STOP
+    assert pa.free == [0.0, 0.0, 0.0]
+
+
+def test_blended_neck_move(proto):
+    """'to x y z blend' into the neck keeps moving through the turn (Paul's transition)."""
+    station, runner = proto
+    pa = station.polyaxis
+    move(station, runner, (60.0, 0.0, 250.0))
+    text = runner.call(pa.command, "to", "5.7", "0", "370", "blend")
+    assert "2 blended segments" in text
+    hare = pa.hare
+    waited = []
+    runner.wait_until(lambda: (waited.append(hare.at_turn), not pa.active)[1], 600.0)
+    assert not any(waited)
+    corner = pa.via
+    assert min(math.dist(p, corner) for p in hare.sample(0.5)) > 0.3  # the corner is cut
+    assert pa.last_stop.reason is StopReason.ENDPOINT_STOP
+    assert math.dist(pa.position, (5.7, 0.0, 370.0)) <= 1.0
