@@ -42,7 +42,7 @@ from pyrt.devices._args import parse_number
 from pyrt.devices.motor import STEP_MODE
 from pyrt.errors import CommandError, ConfigError, NativeError
 from pyrt.native import FuzzyBatch, FuzzyInput, FuzzyParams, PositionFinder
-from pyrt.robots._neck import ring_contact
+from pyrt.robots._neck import NeckRing, ring_contact
 from pyrt.robots.av import AV
 from pyrt.robots.axis import POLYAXIS, Axis
 from pyrt.robots.paths import VIA_BELOW, Hare, plan_segments
@@ -174,6 +174,10 @@ class PolyAxis:
         self.bottoms: list[Vec | None] = [a.bottom for a in self.axes]
         self.offsets: list[Vec] = [a.offset for a in self.axes]  # type: ignore[misc]
         self.ring = av.neck_ring()
+        self._ring = NeckRing(*self.ring)
+        #: Last rim angle per rope: at the estimate (measure) and at the hare.
+        self._phi: list[float | None] = [None] * len(self.axes)
+        self._phi_hare: list[float | None] = [None] * len(self.axes)
         centre = av.vtog((0.0, 0.0, 0.0))
         self.axis_point: Vec = centre
         self.via: Vec = tuple(  # type: ignore[assignment]
@@ -570,12 +574,18 @@ class PolyAxis:
         lf = finder.lengths
         tops = finder.tops
         x = self.position
-        ring = self.ring
+        contact = self._ring.contact
+        phis = self._phi
         wrapped = self._wrapped
         for i in range(self.n):
             o = self.offsets[i]
             t0 = self.tops[i]
-            c = ring_contact(ring, t0, (x[0] + o[0], x[1] + o[1], x[2] + o[2]))
+            found = contact(t0, (x[0] + o[0], x[1] + o[1], x[2] + o[2]), phis[i])
+            if found is None:
+                phis[i] = None
+                c = None
+            else:
+                c, phis[i] = found
             if c is None:
                 if wrapped[i]:
                     tops[i] = t0
@@ -674,12 +684,14 @@ class PolyAxis:
                     self.free[i] = 1.0
         res_l = res.tolist()
         length_at = self.length_at
+        phis = self._phi_hare
         for i in range(self.n):
-            self.error_lengths[i] = (self.lengths[i] - res_l[i]) - length_at(i, hare)
+            self.error_lengths[i] = (self.lengths[i] - res_l[i]) - length_at(i, hare, phis)
             self.error_tensions[i] = (0.0 if self.free[i] else
                                       self.tensions[i] - self.desired_tensions[i])
 
-    def length_at(self, i: int, x: Sequence[float]) -> float:
+    def length_at(self, i: int, x: Sequence[float],
+                  hints: list[float | None] | None = None) -> float:
         """Rope ``i``'s length beyond its top pulley with the source at ``x`` (cm),
         over the neck ring where it bears on it (the poll's fast form of
         :meth:`rope_geometry`)."""
@@ -687,7 +699,12 @@ class PolyAxis:
         qx, qy, qz = x[0] + o[0], x[1] + o[1], x[2] + o[2]
         t = self.tops[i]
         head = 0.0
-        c = ring_contact(self.ring, t, (qx, qy, qz))
+        found = self._ring.contact(t, (qx, qy, qz), None if hints is None else hints[i])
+        c = None
+        if found is not None:
+            c = found[0]
+        if hints is not None:
+            hints[i] = None if found is None else found[1]
         if c is not None:
             head = math.sqrt((t[0] - c[0]) ** 2 + (t[1] - c[1]) ** 2 + (t[2] - c[2]) ** 2)
             t = c
