@@ -170,3 +170,19 @@ def test_concurrent_callers_lose_or_duplicate_no_command():
     assert sorted(seen) == [(k, i) for k in range(4) for i in range(150)]
     for k in range(4):
         assert [i for kk, i in seen if kk == k] == list(range(150))
+
+
+def test_statistics_are_built_outside_the_loop_and_lose_no_sample():
+    """runner.statistics(): the loop only hands its samples over; every dispatch is counted once."""
+    runner, queue = sim_runner()
+    queue.add_periodic(0x30, "WORK", lambda: None, 1)
+    runner.call(queue.schedule, 0x30, 1)
+    runner.sleep(3.0)  # more than one fold's worth of samples
+    first = runner.statistics().tasks["WORK"].calls
+    ticks = runner.loop.tick_index
+    assert ticks - 2 <= first <= ticks
+    runner.sleep(0.5)
+    second = runner.statistics().tasks["WORK"].calls
+    assert runner.loop.tick_index - 2 <= second <= runner.loop.tick_index
+    runner.stop()
+    assert runner.loop.statistics().tasks["WORK"].calls == runner.loop.tick_index - 1

@@ -494,8 +494,7 @@ class GripperShell(CommandShell):
 
     def do_stats(self, arg: str) -> None:
         """stats: per-task timing of the loop (calls, mean, p99, max, overruns)."""
-        loop = self.runner.loop
-        self.say(format_statistics(self.runner.call(loop.statistics)))
+        self.say(format_statistics(self.runner.statistics()))
 
     def do_sim(self, arg: str) -> None:
         """sim [object MM|none] [jog open|close|off [S]] [fault NAME|none]: the simulation.

@@ -396,8 +396,17 @@ class Loop:
         self._next_summary = now + self.summary_interval_ns
         if self._last_warn_ns is not None and now - self._last_warn_ns >= 1_000_000_000:
             self._flush_warning(now)
-        if self.timing_log is not None:
-            self.timing_log.summary(now, self.statistics())
+        log = self.timing_log
+        if log is not None:
+            # Hand the raw samples over (O(1)); fold, build and write elsewhere.
+            taken = [(q, q.take_samples()) for q in self.queues]
+
+            def write_summary() -> None:
+                for q, (addrs, durs) in taken:
+                    q.fold_into_accumulators(addrs, durs)
+                log.summary(now, self.statistics(fold=False))
+
+            log.defer(write_summary)
 
     def _start_log(self) -> None:
         if self.timing_log is not None and not self._log_started:
@@ -414,17 +423,23 @@ class Loop:
         """Write a final summary and close the timing log, if there is one."""
         if self.timing_log is not None:
             self._start_log()
-            self.timing_log.summary(self.now_ns, self.statistics())
-            self.timing_log.close()
-            self.timing_log = None
+            log, self.timing_log = self.timing_log, None
+            log.drain()  # the deferred summaries first, then the final one
+            log.summary(self.now_ns, self.statistics())
+            log.close()
 
     # -- statistics ----------------------------------------------------------
 
-    def statistics(self) -> LoopStatistics:
-        """A frozen snapshot of lateness, work time and per-task timing."""
+    def statistics(self, fold: bool = True) -> LoopStatistics:
+        """A frozen snapshot of lateness, work time and per-task timing.
+
+        With ``fold`` (call it in the loop thread, or with the loop stopped)
+        the samples recorded since the last fold are included; a runner builds
+        the snapshot outside the loop thread instead
+        (:meth:`~pyrt.scheduler.runner.Runner.statistics`)."""
         tasks: dict[str, TaskStatistics] = {}
         for q in self.queues:
-            for acc in q.accumulators():
+            for acc in q.accumulators(fold=fold):
                 dist = acc.distribution()
                 tasks[acc.name] = TaskStatistics(
                     name=acc.name,

@@ -25,6 +25,7 @@ itself) is first decremented at the *next* check and never runs twice in one.
 from __future__ import annotations
 
 import sys
+import threading
 import traceback as _tb
 from collections.abc import Callable, Generator
 from dataclasses import dataclass
@@ -142,6 +143,7 @@ class ReadyQueue:
         self._routines: dict[int, Routine] = {}
         self._by_name: dict[str, Routine] = {}
         self._fns: dict[int, Callable[[], None]] = {}
+        self._fold_lock = threading.Lock()
         self.enable_timing(False)
         self._interrupts = True
         self._fault: Fault | None = None
@@ -376,21 +378,38 @@ class ReadyQueue:
         self._tick_start = 0
         self._checked_at = -1
 
-    def fold_timing(self) -> None:
-        """Fold the recorded samples into the accumulators (call from the loop thread)."""
+    def take_samples(self, keep_tick: bool = False) -> tuple[list[int], list[int]]:
+        """Hand over the samples recorded so far and start new lists (loop
+        thread), so that folding them can happen in another thread
+        (:meth:`fold_into_accumulators`).  With ``keep_tick`` (taken in the
+        middle of a tick) the current tick's entries stay for its overrun record."""
         addrs, durs = self._run_addr, self._run_dur
-        if not durs or self._stats is None:
-            return
-        fold_samples(self._stats, addrs, durs)
-        addrs.clear()
-        durs.clear()
+        if not durs:
+            return [], []
+        keep = keep_tick and self._checked_at == self.now_ns
+        start = self._tick_start if keep else len(durs)
+        self._run_addr, self._run_dur = addrs[start:], durs[start:]
         self._tick_start = 0
+        return addrs[:start], durs[:start]
 
-    def accumulators(self) -> list[Accumulator]:
-        """The timing accumulators, folded up to now (empty when timing is off)."""
+    def fold_into_accumulators(self, addrs: list[int], durs: list[int]) -> None:
+        """Fold samples taken with :meth:`take_samples` (any thread)."""
+        if durs and self._stats is not None:
+            with self._fold_lock:
+                fold_samples(self._stats, addrs, durs)
+
+    def fold_timing(self) -> None:
+        """Fold every recorded sample into the accumulators (the loop thread)."""
+        if self._stats is not None and self._run_dur:
+            self.fold_into_accumulators(*self.take_samples())
+
+    def accumulators(self, fold: bool = True) -> list[Accumulator]:
+        """The timing accumulators (empty when timing is off); with ``fold``,
+        first fold what was recorded (do that in the loop thread only)."""
         if self._stats is None:
             return []
-        self.fold_timing()
+        if fold:
+            self.fold_timing()
         return list(self._stats.values())
 
     def count_overrun(self, name: str) -> None:
@@ -488,6 +507,7 @@ class ReadyQueue:
                 durs = self._run_dur
                 if len(durs) >= _FOLD_AT:
                     self.fold_timing()
+                    durs = self._run_dur
                 add_a = self._run_addr.append
                 add_d = durs.append
                 self._tick_start = len(durs)

@@ -39,6 +39,7 @@ from pyrt.errors import (
     QueueFullError,
 )
 from pyrt.scheduler.loop import Job, Loop
+from pyrt.scheduler.stats import LoopStatistics
 
 __all__ = ["MotionQueue", "Runner"]
 
@@ -263,6 +264,19 @@ class Runner:
         fault = self.loop.take_fault()
         if fault is not None:
             raise FaultError(fault)
+
+    def statistics(self, timeout_s: float = 1.0) -> LoopStatistics:
+        """The loop's timing statistics, built outside the loop thread: the
+        loop only hands over its raw samples (O(1)), so looking does not
+        cause an overrun."""
+        taken = self.call(
+            lambda: [(q, q.take_samples(keep_tick=True)) for q in self.loop.queues],
+            timeout_s=timeout_s,
+            name="stats",
+        )
+        for q, (addrs, durs) in taken:
+            q.fold_into_accumulators(addrs, durs)
+        return self.loop.statistics(fold=False)
 
     # -- waiting -----------------------------------------------------------
 

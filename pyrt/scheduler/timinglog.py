@@ -11,15 +11,19 @@ Records, one JSON object per line, each with a ``type``:
   the sparse log-spaced histogram (``[[bin, count], ...]``; see
   :mod:`pyrt.scheduler.stats` for the bins).
 
-All times are integers in nanoseconds of the loop's clock.  The writer
-buffers in memory and writes at each summary (once a second of loop time),
-so a tick never waits on the disk for long.
+All times are integers in nanoseconds of the loop's clock.  Overrun
+records are buffered in memory; summaries are built and everything is
+written by a background thread (:meth:`TimingLog.defer`), so a tick never
+waits on the disk or on the statistics.
 """
 
 from __future__ import annotations
 
 import json
+import queue
+import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import IO, Any
 
@@ -57,9 +61,33 @@ class TimingLog:
         self.path = path if isinstance(path, str) else getattr(path, "name", "<stream>")
         self.version = version
         self._buf: list[str] = []
+        self._lock = threading.Lock()
+        self._jobs: queue.SimpleQueue[Callable[[], None] | None] = queue.SimpleQueue()
+        self._worker: threading.Thread | None = None
+        self.error: BaseException | None = None
 
     def _emit(self, record: dict[str, Any]) -> None:
-        self._buf.append(json.dumps(record, separators=(",", ":")))
+        line = json.dumps(record, separators=(",", ":"))
+        with self._lock:
+            self._buf.append(line)
+
+    def defer(self, job: Callable[[], None]) -> None:
+        """Run ``job`` (build a summary, write) in the log's background thread."""
+        if self._worker is None:
+            self._worker = threading.Thread(target=self._work, name="pyrt-timing-log", daemon=True)
+            self._worker.start()
+        self._jobs.put(job)
+
+    def _work(self) -> None:
+        while True:
+            job = self._jobs.get()
+            if job is None:
+                return
+            try:
+                job()
+            except BaseException as exc:  # keep the first error; the log is best effort
+                if self.error is None:
+                    self.error = exc
 
     def header(self, *, period_ns: int, clock: str, tasks: list[str], handlers: list[str]) -> None:
         """Write the header record (once, before anything else)."""
@@ -110,13 +138,22 @@ class TimingLog:
 
     def flush(self) -> None:
         """Write buffered records to the file."""
-        if self._buf:
-            self._fh.write("\n".join(self._buf) + "\n")
-            self._buf.clear()
-        self._fh.flush()
+        with self._lock:
+            lines, self._buf = self._buf, []
+            if lines:
+                self._fh.write("\n".join(lines) + "\n")
+            self._fh.flush()
+
+    def drain(self) -> None:
+        """Wait for the deferred work (summaries) to be done."""
+        if self._worker is not None:
+            self._jobs.put(None)
+            self._worker.join()
+            self._worker = None
 
     def close(self) -> None:
-        """Flush and close (a stream passed in is flushed, not closed)."""
+        """Finish deferred work, flush and close (a stream passed in is flushed, not closed)."""
+        self.drain()
         self.flush()
         if self._owned:
             self._fh.close()
