@@ -77,3 +77,15 @@ def test_vector_form_refuses_2d():
     """The vector form takes a 1-D array only."""
     with pytest.raises(ValueError):
         excess128_many([[1, 2], [3, 4]])
+
+
+def test_vector_form_saturates_beyond_32_bits():
+    """Drive values beyond the int32 range saturate at 00/FF instead of wrapping."""
+    out = excess128_many(np.array([2**40, -(2**40), 2**31, -(2**31) - 1], dtype=np.int64))
+    assert out.tolist() == [0xFF, 0x00, 0xFF, 0x00]
+
+
+def test_vector_form_refuses_floats():
+    """A float array is refused rather than truncated."""
+    with pytest.raises(TypeError):
+        excess128_many(np.array([1.5]))

@@ -29,10 +29,15 @@ def from_excess128(byte: int) -> int:
 
 
 def excess128_many(values) -> np.ndarray:
-    """Vectorised :func:`excess128`: int32 values to a uint8 array of DAC bytes."""
-    arr = np.ascontiguousarray(values, dtype=np.int32)
+    """Vectorised :func:`excess128`: integer drive values to a uint8 array of DAC bytes."""
+    arr = np.asarray(values)
     if arr.ndim != 1:
         raise ValueError(f"expected a 1-D array of drive values, got shape {arr.shape}")
+    if arr.size and not np.issubdtype(arr.dtype, np.integer):
+        raise TypeError(f"drive values must be integers, got dtype {arr.dtype}")
+    # Clip to the int32 range before narrowing, so huge values saturate
+    # instead of wrapping; the C function saturates the rest.
+    arr = np.ascontiguousarray(np.clip(arr, -(2**31), 2**31 - 1), dtype=np.int32)
     out = np.empty(arr.shape[0], dtype=np.uint8)
     rc = lib.pyrt_excess128_many(
         ffi.cast("const int32_t *", ffi.from_buffer(arr)),
