@@ -205,3 +205,22 @@ def test_grammar_never_crashes_and_refusals_move_nothing(tmp_path_factory, line)
                 assert station.tio10.writes == writes
     finally:
         station.close()
+
+
+def test_nonsense_length_is_a_fault_not_a_crash(shell):
+    """A zero length set by hand cannot be written back: one fault, the session goes on."""
+    sh, station, runner, _ = shell
+    text = run_lines(sh, runner, ["axis1Encoder setZeroLength 0", "sleep 12", "status",
+                                  "ack", "axis1Encoder setZeroLength 1067", "sleep 12",
+                                  "status"])
+    assert text.count("database write-back refused") >= 1
+    assert "FAULT" in text and "fault acknowledged" in text
+    assert not station.motors_running()
+    assert text.rstrip().splitlines()[-2].startswith("t=")
+
+
+def test_stops_are_reported_as_they_happen(shell):
+    """A move that ends while nobody waits is reported at the next prompt."""
+    sh, _, runner, _ = shell
+    text = run_lines(sh, runner, ["prototype to 5 0 100", "sleep 40", "status"])
+    assert "prototype stopped: ENDPOINT_STOP" in text

@@ -35,7 +35,7 @@ from typing import Any, TextIO
 
 from pyrt.boards.simboards import SimDataConcentrator, SimTIO10
 from pyrt.db import Station, load_station
-from pyrt.errors import CommandError, ConfigError
+from pyrt.errors import CommandError, ConfigError, NativeError, PyrtError
 from pyrt.native import FuzzyParams, NativeInputError
 from pyrt.robots.av import AV
 from pyrt.robots.axis import Axis
@@ -188,7 +188,8 @@ class ManipulatorStation:
         self.writeback.watch_position(pa_rec.name, lambda: (pa.position, pa.active))
         self.loop.attach(self.plant.step, name="plant")
         self.loop.attach(self.queue, name=f"queue:{pa.name}")
-        self.loop.attach(self.writeback.poll, name="writeback")
+        self._writeback_failure: str | None = None
+        self.loop.attach(self._write_back, name="writeback")
 
         self.objects: dict[str, object] = {pa.name: pa, self.av.name.lower(): self.av}
         for a in self.axes:
@@ -198,8 +199,31 @@ class ManipulatorStation:
         self._log_file: TextIO | None = None
         self.stops: list[StopRecord] = []
         pa.on_stop.append(self.stops.append)
+        pa.on_stop.append(self._report_stop)
+        try:  # the first status line shows real tensions and lengths
+            pa.measure()
+        except NativeError as exc:
+            pa.position_error = f"position finder failed: {exc}"
+
+    def _report_stop(self, rec: StopRecord) -> None:
+        """Every stop is reported as it happens (asynchronous output)."""
+        self.stdout.write(f"{self.polyaxis.name} stopped: {rec}\n")
 
     # -- faults ----------------------------------------------------------------------
+
+    def _write_back(self, now_ns: int) -> None:
+        """Loop handler: the database write-back; a refused value (a length set
+        to nonsense by hand) is a fault of the manipulator, reported once."""
+        try:
+            self.writeback.poll(now_ns)
+        except PyrtError as exc:
+            cause = f"database write-back refused: {exc}"
+            if cause != self._writeback_failure:
+                self._writeback_failure = cause
+                self.queue.now_ns = now_ns
+                self.queue.trip(cause, source="WRITEBACK")
+        else:
+            self._writeback_failure = None
 
     def _trip(self, cause: str, source: str) -> None:
         self.queue.trip(cause, source=source)
@@ -344,6 +368,8 @@ class ManipulatorStation:
         self.stop_all()
         try:
             self.writeback.poll(self.loop.now_ns + 10**12)
+        except PyrtError as exc:  # the file keeps its last good value
+            self.stdout.write(f"database write-back refused at shutdown: {exc}\n")
         finally:
             self.writeback.close()
             self.stop_log()
