@@ -224,3 +224,25 @@ def test_stops_are_reported_as_they_happen(shell):
     sh, _, runner, _ = shell
     text = run_lines(sh, runner, ["prototype to 5 0 100", "sleep 40", "status"])
     assert "prototype stopped: ENDPOINT_STOP" in text
+
+
+def test_terminal_session_with_history(tmp_path):
+    """On a terminal: prompt, an object command, the up arrow recalls it, quit exits cleanly."""
+    pexpect = pytest.importorskip("pexpect")
+    env = dict(os.environ, PROMPT_TOOLKIT_NO_CPR="1", TERM="xterm", PYRT_HOME=str(tmp_path))
+    child = pexpect.spawn(sys.executable, ["-m", "pyrt", "manipulator", "--speed", "max"],
+                          encoding="utf-8", timeout=30, dimensions=(24, 160), env=env)
+    try:
+        child.expect("prototype>")
+        child.sendline("prototype tensions")
+        child.expect("desired tensions axis0")
+        child.expect("prototype>")
+        child.send("\x1b[A")  # up arrow: the last command again
+        child.send("\r")
+        child.expect("desired tensions axis0")
+        child.expect("prototype>")
+        child.sendline("quit")
+        child.expect(pexpect.EOF)
+    finally:
+        child.close()
+    assert child.exitstatus == 0
