@@ -17,7 +17,7 @@ def make_station(tmp: Path, name: str = "prototype", **kw) -> tuple[ManipulatorS
     """A working copy of packaged station ``name`` in ``tmp``, built and started."""
     directory = copy_station(name, tmp / name)
     station = ManipulatorStation(directory, tick_ns=kw.pop("tick_ns", TICK_NS), **kw)
-    runner = Runner(station.loop)
+    runner = Runner(station.loop, motion_queue=station.motion)
     station.messages.connect(runner.post)
     runner.start()
     runner.sleep(0.2)

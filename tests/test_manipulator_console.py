@@ -47,9 +47,31 @@ def test_move_and_wait_reports_the_stop(shell):
     """'prototype to' starts a move; 'wait' prints the stop reason and where."""
     sh, station, runner, _ = shell
     text = run_lines(sh, runner, ["prototype to 30 0 120", "wait", "status"])
-    assert "1 segment" in text
+    assert "prototype: to (30, 0, 120)\n" in text
     assert "ENDPOINT_STOP: within" in text
     assert "pos (" in text and "distErr" in text and "net" in text and "T [" in text
+    assert not station.motors_running()
+
+
+def test_moves_queue_on_the_motion_queue(shell):
+    """A second 'to' waits on the motion queue and runs when the first ends; 'wait' waits for both."""
+    sh, station, runner, _ = shell
+    text = run_lines(sh, runner, ["prototype to 10 0 100", "prototype to 20 0 110",
+                                  "prototype to 0 0 100", "wait"])
+    assert "prototype: to (20, 0, 110) queued (2 waiting)" in text
+    assert text.count("prototype stopped: ENDPOINT_STOP") == 3
+    assert len(station.motion) == 0 and not station.polyaxis.active
+    x, _, z = station.polyaxis.position
+    assert abs(x) < 1.0 and abs(z - 100.0) < 1.0
+
+
+def test_stop_drops_queued_moves(shell):
+    """'prototype stop' ends the move and empties the motion queue."""
+    sh, station, runner, _ = shell
+    text = run_lines(sh, runner, ["prototype to 30 0 100", "prototype to 0 0 120", "sleep 5",
+                                  "prototype stop", "sleep 2", "status"])
+    assert "1 queued move(s) dropped" in text
+    assert len(station.motion) == 0 and not station.polyaxis.active
     assert not station.motors_running()
 
 

@@ -75,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     loop = make_loop(args, warn=warn)
     imp = Imperfections.ideal() if args.ideal_sensors else None
     station = ManipulatorStation(directory, loop=loop, imperfections=imp)
-    runner = Runner(loop)
+    runner = Runner(loop, motion_queue=station.motion)
     posted.append(runner)
     station.messages.connect(runner.post)
     shell = ManipulatorShell(runner, station, out)

@@ -29,7 +29,7 @@ from pyrt.commands.gripper import Runner
 from pyrt.commands.shell import CommandShell
 from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
 from pyrt.robots.axis import Axis
-from pyrt.robots.polyaxis import PolyAxis
+from pyrt.robots.polyaxis import MoveRecord, PolyAxis
 from pyrt.scheduler.report import format_statistics
 
 __all__ = ["OBJECT_COMMANDS", "ManipulatorShell"]
@@ -180,6 +180,9 @@ class ManipulatorShell(CommandShell):
             if key == "pattern":
                 self.start_pattern(args[0])
                 return
+            if key == "to":
+                self.queue_move(args)
+                return
             self.say(str(self.runner.call(self.pa.command, key, *args)))
             return
         if kind == "av":
@@ -210,6 +213,24 @@ class ManipulatorShell(CommandShell):
         elif kind == "encoder" and method == "setZeroLength":
             self.say(f"{name}: zero length {result:.3f} cm")
         # read, calibrate and point print through the device itself
+
+    def queue_move(self, args: list[str]) -> None:
+        """``to x y z [blend]``: checked now (a refusal moves nothing), then put on
+        the motion queue as a record; it starts when the move before it ends."""
+        pa = self.pa
+        mode = args[3].lower() if len(args) == 4 else ""
+        if mode not in ("", "blend", "stop"):
+            raise CommandError(f"{pa.name} to: the fourth word may be 'blend' or 'stop', "
+                               f"got {args[3]!r}")
+        target = pa.parse_point(args[:3], "to")
+        self.runner.call(pa.check_target, target)
+        waiting = self.runner.call(lambda: pa.active or len(self.station.motion) > 0)
+        n = self.runner.submit_motion(MoveRecord(target, blend=mode == "blend"))
+        x, y, z = target
+        if waiting:
+            self.say(f"{pa.name}: to ({x:g}, {y:g}, {z:g}) queued ({n} waiting)")
+        else:
+            self.say(f"{pa.name}: to ({x:g}, {y:g}, {z:g})")
 
     def start_pattern(self, path: str) -> None:
         """``pattern FILE``: read the file here, run the pattern as a loop job."""
@@ -260,7 +281,7 @@ class ManipulatorShell(CommandShell):
 
         def busy() -> bool:
             job = self.pattern_job
-            return (pa.active or (job is not None and not job.done)
+            return (st.busy() or (job is not None and not job.done)
                     or any(a.mode == "standalone" and a.motor.running for a in st.axes))
 
         axis_moves = self.runner.call(

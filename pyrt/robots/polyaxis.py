@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Generator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
 
@@ -54,6 +55,7 @@ __all__ = [
     "MIN_TOP_SEGMENT",
     "NEAR_END_CM",
     "PATTERN_PAUSE_S",
+    "MoveRecord",
     "PolyAxis",
     "parse_pattern",
 ]
@@ -78,6 +80,14 @@ _FI = FuzzyInput
 
 def _dist(a: Sequence[float], b: Sequence[float]) -> float:
     return math.sqrt((a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2 + (a[2] - b[2]) ** 2)
+
+
+@dataclass(frozen=True)
+class MoveRecord:
+    """One queued ``to`` (001's motion record, copied whole onto the motion queue)."""
+
+    target: tuple[float, float, float]
+    blend: bool = False
 
 
 def parse_pattern(path: str | Path) -> tuple[Path, list[Vec]]:
@@ -247,6 +257,9 @@ class PolyAxis:
         self.on_fault: Callable[[str, str], object] | None = None
         #: Called with (StopRecord) after every stop.
         self.on_stop: list[Callable[[StopRecord], None]] = []
+        #: The motion queue of MoveRecords (set by the station), emptied by
+        #: :meth:`next_move` between moves and cleared by any abnormal stop.
+        self.motion: object | None = None
         #: Where the state log goes (one line at a time), or None.
         self.log: Callable[[str], None] | None = None
         self.debug = False
@@ -384,7 +397,8 @@ class PolyAxis:
             raise CommandError(f"{self.name} {name}: takes {counts} argument(s), got {len(args)}")
         return getattr(self, "cmd_" + key)(*args)
 
-    def _point(self, args: Sequence[str], what: str) -> Vec:
+    def parse_point(self, args: Sequence[str], what: str) -> Vec:
+        """Three words as a point (cm); CommandError naming the bad one."""
         return tuple(parse_number(a, f"{self.name} {what}", f"{c} in cm")  # type: ignore[return-value]
                      for a, c in zip(args, "xyz", strict=True))
 
@@ -394,7 +408,7 @@ class PolyAxis:
         if m not in ("", "blend", "stop"):
             raise CommandError(f"{self.name} to: the fourth word may be 'blend' or 'stop', "
                                f"got {mode!r}")
-        target = self._point((x, y, z), "to")
+        target = self.parse_point((x, y, z), "to")
         self.to(target, blend=(m == "blend"))
         assert self.hare is not None
         n = len(self.hare.segments)
@@ -416,7 +430,7 @@ class PolyAxis:
 
     def cmd_netforce(self, *args: str) -> str:
         """``netForce [x y z]``: net force magnitude there (default: here)."""
-        x = self._point(args, "netForce") if args else self.position
+        x = self.parse_point(args, "netForce") if args else self.position
         f = self.net_force_at(x, self.tensions)
         mag = math.sqrt(f[0] ** 2 + f[1] ** 2 + f[2] ** 2)
         return (f"{self.name}: net force {mag:.2f} N ({f[0]:.2f}, {f[1]:.2f}, {f[2]:.2f}) at "
@@ -542,6 +556,10 @@ class PolyAxis:
             self._log(f"STOP {self.now_s:.3f} {reason.value} {detail}")
             for fn in self.on_stop:
                 fn(rec)
+        if reason in SAFETY_STOPS or reason in (StopReason.STOP, StopReason.FAULT):
+            dropped = self.motion.clear() if self.motion is not None else 0  # type: ignore[attr-defined]
+            if dropped and self.stdout is not None:
+                self.stdout.write(f"{self.name}: {dropped} queued move(s) dropped\n")
         if reason in SAFETY_STOPS and self.on_fault is not None:
             self.on_fault(f"{reason.value}: {detail}", self.name)
         return rec
@@ -552,6 +570,22 @@ class PolyAxis:
             self.halt(StopReason.FAULT, str(getattr(fault, "cause", fault)))
         else:
             self.stop_motors()
+
+    def next_move(self) -> bool:
+        """Between moves, start the next queued MoveRecord; True if one started.
+        A record refused now (the world changed since it was checked) is
+        reported and dropped."""
+        q = self.motion
+        if self.active or q is None or not len(q):  # type: ignore[arg-type]
+            return False
+        rec = q.get()  # type: ignore[attr-defined]
+        try:
+            self.to(rec.target, blend=rec.blend)
+        except CommandError as exc:
+            if self.stdout is not None:
+                self.stdout.write(f"queued move dropped: {exc}\n")
+            return False
+        return True
 
     @property
     def moving(self) -> bool:

@@ -4,25 +4,30 @@
 the simulated TIO10 and dataConcentrator, the physics behind them
 (:class:`pyrt.sim.manipulator.ManipulatorPlant`), the Motor/Encoder/Loadcell
 of every rope, the Axes, the AV and the PolyAxis, puts the polyaxis-poll
-and axis-poll routines on the manipulator's ready queue, and attaches, in
-this order, the plant, the ready queue and the database write-back to the
+and axis-poll routines on the manipulator's ready queue, owns the motion
+queue that ``to`` records go on (give it to the
+:class:`~pyrt.scheduler.runner.Runner`), and attaches, in this order, the
+plant, the ready queue and the database write-back to the
 :class:`~pyrt.scheduler.Loop`.
 
-Numbers: the base tick is 1 ms (the physics steps every tick: motors take
-at most 280 half-steps a second at 7 cm/s, so a step never spans more than
-a fraction of a tick's travel); the control poll is 50 ms, the period the
-fuzzy rules are tuned for (000 polled faster, at LOOP_TIME 1e-4 s, and
-says the rules were developed for a longer poll and that a ten times
-slower poll would lose nothing); DV_LIMIT is per control poll.  The
-standalone axis poll is 10 ms (STEP_MODE ramps change the period per step;
-10 ms keeps a 7 cm/s ramp within a few steps of the document's).  On
-``--speed max`` a 100 s move costs about 1.5 s of CPU.
+Numbers.  The control poll is 50 ms, the period the fuzzy rules are tuned
+for (000 polled at LOOP_TIME 1e-4 s and says the rules were developed for
+a longer poll and that ten times slower would lose nothing); DV_LIMIT (0.5
+cm/s) is per control poll, so a motor accelerates at most 10 cm/s2.  The
+standalone axis poll is 10 ms (STEP_MODE ramps shorten the period per
+step).  The physics steps every base tick: 1 ms by default here; ``pyrt
+manipulator`` and the tests use 5 ms, where a motor at its 7.0 cm/s limit
+makes 1.4 half-steps a tick (the encoders count 0.24 cm, 10 half-steps), so
+nothing the control sees changes, and ``--speed max`` runs a move 50-130
+times faster than real time instead of 35-60 (bench/bench_manipulator.py).
 
 The simulated world starts with the source at the database POSITION, held
 as the controller leaves it at the end of a move (off-side ropes at
 OFFSIDE_TENSION, the others balancing the weight); the encoders' zero
 lengths are set to the world's rope lengths (as ``setZeroLength`` would be
 after surveying the source in), and ZEROLENGTH write-back keeps them.
+``FUZZY_<NAME>`` keys of an AXIS entry override that axis's fuzzy
+parameters as used at the 50 ms poll.
 """
 
 from __future__ import annotations
@@ -42,6 +47,7 @@ from pyrt.robots.axis import Axis
 from pyrt.robots.polyaxis import PolyAxis, parse_pattern
 from pyrt.robots.stops import StopRecord
 from pyrt.scheduler import Loop, ReadyQueue, SimClock
+from pyrt.scheduler.runner import MotionQueue
 from pyrt.scope import Source
 from pyrt.sim.manipulator import ManipulatorPlant, rig_from_station
 from pyrt.sim.sensors import Imperfections
@@ -166,6 +172,10 @@ class ManipulatorStation:
             a.encoder.reset()
             a.encoder.zero_length = p
 
+        # The motion queue the mailbox fills (Runner(loop, motion_queue=...)).
+        self.motion = MotionQueue(capacity=16)
+        pa.motion = self.motion
+
         # Level 4+: the ready queue and its tasks; write-back.
         self.queue = ReadyQueue(capacity=4, divisor=1, name=pa.name)
         self.queue.reflex = pa.reflex
@@ -242,12 +252,17 @@ class ManipulatorStation:
         return "fault acknowledged; motors stopped, control polls running"
 
     def stop_all(self) -> None:
-        """Every motor stopped, windings off (``quit``, the reflex, ``stop``)."""
+        """Every motor stopped, windings off, queued moves dropped (``quit``)."""
+        self.motion.clear()
         pa = self.polyaxis
         if pa.active:
             pa.stop()
         else:
             pa.stop_motors()
+
+    def busy(self) -> bool:
+        """A move runs or waits on the motion queue."""
+        return self.polyaxis.active or len(self.motion) > 0
 
     def motors_running(self) -> list[str]:
         """Names of the motors that are stepping or have windings on."""

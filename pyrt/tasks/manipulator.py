@@ -1,7 +1,9 @@
 """The manipulator's self-scheduling tasks: polyaxis-poll and axis-poll.
 
-* ``POLYAXIS`` (polyaxis-poll): :meth:`pyrt.robots.polyaxis.PolyAxis.poll`,
-  the whole co-ordinated control poll (sensors, position finder, error
+* ``POLYAXIS`` (polyaxis-poll): between moves, the next record of the
+  motion queue is started (:meth:`pyrt.robots.polyaxis.PolyAxis.next_move`);
+  then :meth:`pyrt.robots.polyaxis.PolyAxis.poll`, the whole co-ordinated
+  control poll (sensors, position finder, error
   signals, one batched fuzzy call, the motors of every axis under PolyAxis
   control, the stop conditions);
 * ``AXES`` (axis-poll): :meth:`pyrt.robots.axis.Axis.poll` for every axis
@@ -34,6 +36,8 @@ def attach_manipulator(queue: ReadyQueue, polyaxis: PolyAxis, *, poll_checks: in
     axes = polyaxis.axes
 
     def polyaxis_poll() -> None:
+        if polyaxis.motion is not None and not polyaxis.active:
+            polyaxis.next_move()
         polyaxis.poll(queue.now_ns * 1e-9)
 
     def axis_poll() -> None:
