@@ -199,7 +199,9 @@ class PolyAxis:
                                          np.array(self.offsets, float), tol=self.find_tolerance)
         except NativeError as exc:
             raise ConfigError(f"polyaxis {name}: {exc}") from None
-        self._wrapped = [False] * self.n
+        #: Effective top per rope: its top pulley, or where it bears on the ring.
+        self._eff_tops: list[Vec] = list(self.tops)
+        self._names = [a.name for a in self.axes]
         self._side = [b is not None for b in self.bottoms]
         # "far side of the central axis": the bottom's horizontal direction
         self._bdir: list[tuple[float, float] | None] = []
@@ -605,36 +607,37 @@ class PolyAxis:
             lens[i] = a.encoder.length() * (1.0 + a.stretch * (t if t > 0.0 else 0.0)) \
                 - a.dead_length
         finder = self.finder
-        lf = finder.lengths
-        tops = finder.tops
         x = self.position
         contact = self._ring.contact
         phis = self._phi
-        wrapped = self._wrapped
+        eff = self._eff_tops
+        lf = list(lens)
+        moved = False
         for i in range(self.n):
             o = self.offsets[i]
             t0 = self.tops[i]
             found = contact(t0, (x[0] + o[0], x[1] + o[1], x[2] + o[2]), phis[i])
             if found is None:
                 phis[i] = None
-                c = None
+                if eff[i] is not t0:
+                    eff[i] = t0
+                    moved = True
             else:
                 c, phis[i] = found
-            if c is None:
-                if wrapped[i]:
-                    tops[i] = t0
-                    wrapped[i] = False
-                lf[i] = lens[i]
-            else:
-                tops[i] = c
-                wrapped[i] = True
-                lf[i] = lens[i] - _dist(t0, c)
+                eff[i] = c
+                moved = True
+                lf[i] -= math.sqrt((t0[0] - c[0]) ** 2 + (t0[1] - c[1]) ** 2
+                                   + (t0[2] - c[2]) ** 2)
+        if moved:
+            finder.tops[:] = eff
+        finder.lengths[:] = lf
         if self._start_given:
             pos = finder.solve()
         else:
             pos = finder.solve(None, np.array(x, float))
             self._start_given = True
-        self.position = (float(pos[0]), float(pos[1]), float(pos[2]))
+        px, py, pz = pos.tolist()
+        self.position = (px, py, pz)
         self.dist_err = finder.rms
         f = self._net_force_effective(tens)
         self.net_force = f
@@ -644,14 +647,14 @@ class PolyAxis:
         """Net force at the new estimate with this poll's effective tops (the
         ring contacts found for the previous estimate, 50 ms old)."""
         x = self.position
-        tops = self.finder.tops
+        tops = self._eff_tops
         fx, fy, fz = 0.0, 0.0, -self.weight(x[2])
         sqrt = math.sqrt
         for i in range(self.n):
             o = self.offsets[i]
             qx, qy, qz = x[0] + o[0], x[1] + o[1], x[2] + o[2]
             tt = tops[i]
-            dx, dy, dz = float(tt[0]) - qx, float(tt[1]) - qy, float(tt[2]) - qz
+            dx, dy, dz = tt[0] - qx, tt[1] - qy, tt[2] - qz
             k = tens[i] / (sqrt(dx * dx + dy * dy + dz * dz) or 1e-12)
             fx += k * dx
             fy += k * dy
@@ -780,7 +783,7 @@ class PolyAxis:
         if self.log is not None:
             self._log_state(now_s, dvs)
         hit = self.stops.check(now_s, self.position, self.dist_err, self.tensions,
-                               self.net_force_magnitude, [a.name for a in self.axes])
+                               self.net_force_magnitude, self._names)
         if hit is not None:
             self.halt(*hit)
 
