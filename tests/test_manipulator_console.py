@@ -75,6 +75,20 @@ def test_stop_drops_queued_moves(shell):
     assert not station.motors_running()
 
 
+def test_axis_commands_during_a_move(shell):
+    """Under PolyAxis control device commands are refused (reads allowed); 'axisN stop' stops all."""
+    sh, station, runner, _ = shell
+    text = run_lines(sh, runner, ["prototype to 40 0 130", "sleep 5", "axis1 up 3",
+                                  "axis1Encoder reset", "axis1Motor maxspeed 2",
+                                  "axis1Encoder read", "axis1 stop", "wait"])
+    assert text.count("error:") == 3
+    assert "under prototype control" in text
+    assert "axis1Encoder: " in text
+    assert "the prototype move is stopped with it" in text
+    assert "STOP: axis1 stop command" in text
+    assert not station.motors_running() and not station.polyaxis.active
+
+
 def test_sub_object_commands(shell):
     """Compound names reach the devices: axis0Encoder read, axis0Motor maxspeed, axis1 up."""
     sh, station, runner, _ = shell

@@ -28,8 +28,9 @@ from typing import Any, TextIO
 from pyrt.commands.gripper import Runner
 from pyrt.commands.shell import CommandShell
 from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
-from pyrt.robots.axis import Axis
+from pyrt.robots.axis import POLYAXIS, Axis
 from pyrt.robots.polyaxis import MoveRecord, PolyAxis
+from pyrt.robots.stops import StopReason
 from pyrt.scheduler.report import format_statistics
 
 __all__ = ["OBJECT_COMMANDS", "ManipulatorShell"]
@@ -86,6 +87,9 @@ OBJECT_COMMANDS: dict[str, dict[str, tuple[str, tuple[int, ...], str]]] = {
                  "other command)"),
     },
 }
+
+#: Device commands accepted while their axis is under PolyAxis control.
+_READ_ONLY = {"read", "readloop", "stoploop"}
 
 #: Commands that start motion (refused while a fault is not acknowledged).
 _MOTION = {("polyaxis", "to"), ("polyaxis", "pattern"), ("axis", "up"), ("axis", "down"),
@@ -158,6 +162,13 @@ class ManipulatorShell(CommandShell):
                 return "loadcell"
         return "av"
 
+    def owner(self, device: object) -> Axis:
+        """The Axis a Motor, Encoder or Loadcell belongs to."""
+        for a in self.station.axes:
+            if device in (a.motor, a.encoder, a.loadcell):
+                return a
+        raise CommandError(f"{getattr(device, 'name', device)} belongs to no axis")
+
     def object_command(self, obj: Any, words: list[str]) -> None:
         """``OBJECT COMMAND ARGS...`` (Hardware::doCommand)."""
         kind = self.kind(obj)
@@ -176,6 +187,17 @@ class ManipulatorShell(CommandShell):
                                f"{' or '.join(map(str, counts))} argument(s), got {len(args)}")
         if (kind, key) in _MOTION:
             self.runner.call(self.station.check_ready, f"{obj.name} {method}")
+        if kind == "axis" and key == "stop" and self.runner.call(lambda: self.pa.active):
+            # one joint stopped stops the whole manipulator
+            self.runner.call(self.pa.halt, StopReason.STOP, f"{obj.name} stop command")
+            self.say(f"{obj.name}: stopped; the {self.pa.name} move is stopped with it")
+            return
+        if kind in ("motor", "encoder", "loadcell") and key not in _READ_ONLY:
+            owner = self.owner(obj)
+            if self.runner.call(lambda: owner.mode == POLYAXIS):
+                raise CommandError(f"{obj.name} {method}: {owner.name} is under {self.pa.name} "
+                                   "control (000: polyActivate turns off its commands); "
+                                   "stop the move first")
         if kind == "polyaxis":
             if key == "pattern":
                 self.start_pattern(args[0])
