@@ -193,6 +193,18 @@ def test_piped_cli_transcript(tmp_path):
     assert abs(pos[0] - 20.0) < 1.0 and abs(pos[2] - 110.0) < 1.0
 
 
+def test_wall_clock_run(tmp_path):
+    """On a wall clock (--speed 50) the loop runs in its own thread; a script still completes."""
+    env = dict(os.environ, PYRT_HOME=str(tmp_path))
+    script = "prototype to 5 0 100\nwait 120\nquit\n"
+    proc = subprocess.run([sys.executable, "-m", "pyrt", "manipulator", "--speed", "50"],
+                          input=script, capture_output=True, text=True, env=env, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "ENDPOINT_STOP" in proc.stdout
+    pos = load_station(tmp_path / "stations" / "prototype").polyaxis().position
+    assert abs(pos[0] - 5.0) < 1.0
+
+
 # -- properties -----------------------------------------------------------------------
 
 _OBJECTS = ["prototype", "axis0", "axis1", "axis2", "axis0Motor", "axis1Encoder",
