@@ -42,7 +42,7 @@ import numpy as np
 from pyrt.devices._args import parse_number
 from pyrt.devices.motor import STEP_MODE
 from pyrt.errors import CommandError, ConfigError, NativeError
-from pyrt.native import FuzzyBatch, FuzzyInput, FuzzyParams, PositionFinder
+from pyrt.native import FuzzyBatch, FuzzyInput, FuzzyParams, PositionFinder, StaticsSolver
 from pyrt.robots._neck import NeckRing, ring_contact
 from pyrt.robots.av import AV
 from pyrt.robots.axis import POLYAXIS, Axis
@@ -185,9 +185,8 @@ class PolyAxis:
         self.offsets: list[Vec] = [a.offset for a in self.axes]  # type: ignore[misc]
         self.ring = av.neck_ring()
         self._ring = NeckRing(*self.ring)
-        #: Last rim angle per rope: at the estimate (measure) and at the hare.
+        #: Last rim angle per rope at the estimate (the next search starts there).
         self._phi: list[float | None] = [None] * len(self.axes)
-        self._phi_hare: list[float | None] = [None] * len(self.axes)
         centre = av.vtog((0.0, 0.0, 0.0))
         self.axis_point: Vec = centre
         self.via: Vec = tuple(  # type: ignore[assignment]
@@ -199,10 +198,16 @@ class PolyAxis:
                                          np.array(self.offsets, float), tol=self.find_tolerance)
         except NativeError as exc:
             raise ConfigError(f"polyaxis {name}: {exc}") from None
+        # The statics kernel as a rope-geometry evaluator: every rope's length at
+        # the hare, over the ring where it bears on it, in one C call (its
+        # tensions and payouts are not used).
+        self._geometry = StaticsSolver(
+            self.tops, self.bottoms, self.offsets, [a.dead_length for a in self.axes],
+            [a.stretch for a in self.axes], [a.dead_length + 1000.0 for a in self.axes],
+            ring=self.ring)
         #: Effective top per rope: its top pulley, or where it bears on the ring.
         self._eff_tops: list[Vec] = list(self.tops)
         self._names = [a.name for a in self.axes]
-        self._side = [b is not None for b in self.bottoms]
         # "far side of the central axis": the bottom's horizontal direction
         self._bdir: list[tuple[float, float] | None] = []
         for b in self.bottoms:
@@ -720,10 +725,12 @@ class PolyAxis:
                     self.desired_tensions[i] = 0.0
                     self.free[i] = 1.0
         res_l = res.tolist()
-        length_at = self.length_at
-        phis = self._phi_hare
+        try:
+            want_len = self._geometry.evaluate(hare)[0]
+        except NativeError:  # a degenerate hare (on a pulley): the slow path says why
+            want_len = [self.length_at(i, hare) for i in range(self.n)]
         for i in range(self.n):
-            self.error_lengths[i] = (self.lengths[i] - res_l[i]) - length_at(i, hare, phis)
+            self.error_lengths[i] = (self.lengths[i] - res_l[i]) - want_len[i]
             self.error_tensions[i] = (0.0 if self.free[i] else
                                       self.tensions[i] - self.desired_tensions[i])
 
