@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 from _manipulator_rig import make_station, move
 
@@ -33,6 +34,28 @@ def test_scope_channels_resolve(proto):
     for bad in ["prototype", "axis9.tension", "axis0.colour", "axis0Motor.tension", ".x"]:
         with pytest.raises(ValueError):
             station.resolve_channel(bad)
+
+
+@pytest.mark.parametrize("name", ["prototype", "sno"])
+def test_rope_lengths_agree(tmp_path, name):
+    """The poll's C rope geometry equals the Python form (ring contact included) everywhere."""
+    station, _ = make_station(tmp_path, name)
+    pa = station.polyaxis
+    r = station.av.vessel_radius
+    rng = np.random.default_rng(1)
+    wrapped = 0
+    for _ in range(300):
+        x = tuple(rng.uniform(-r, r, 3))
+        if pa.refusal(x) is not None:
+            continue
+        fast = pa.lengths_at(x)
+        for i in range(pa.n):
+            length, contact, _, _ = pa.rope_geometry(i, x)
+            wrapped += contact is not None
+            assert fast[i] == pytest.approx(length, abs=1e-6)
+            assert pa.length_at(i, x) == pytest.approx(length, abs=1e-9)
+    assert wrapped > 0
+    station.close()
 
 
 def test_table2_queries(proto):

@@ -725,14 +725,19 @@ class PolyAxis:
                     self.desired_tensions[i] = 0.0
                     self.free[i] = 1.0
         res_l = res.tolist()
-        try:
-            want_len = self._geometry.evaluate(hare)[0]
-        except NativeError:  # a degenerate hare (on a pulley): the slow path says why
-            want_len = [self.length_at(i, hare) for i in range(self.n)]
+        want_len = self.lengths_at(hare)
         for i in range(self.n):
             self.error_lengths[i] = (self.lengths[i] - res_l[i]) - want_len[i]
             self.error_tensions[i] = (0.0 if self.free[i] else
                                       self.tensions[i] - self.desired_tensions[i])
+
+    def lengths_at(self, x: Sequence[float]) -> list[float]:
+        """Every rope's length beyond its top pulley with the source at ``x`` (cm),
+        over the neck ring where a rope bears on it: one C call."""
+        try:
+            return self._geometry.evaluate(x)[0]
+        except NativeError:  # degenerate (the carriage on a pulley): the Python form
+            return [self.length_at(i, x) for i in range(self.n)]
 
     def length_at(self, i: int, x: Sequence[float],
                   hints: list[float | None] | None = None) -> float:
