@@ -163,6 +163,19 @@ def test_pattern_from_the_console(shell, tmp_path):
     assert (tmp_path / "p.log").read_text().count("ENDPOINT_STOP") == 2
 
 
+def test_pattern_excludes_other_moves_and_stop_ends_it(shell, tmp_path):
+    """While a pattern runs 'to' is refused; 'prototype stop' ends the pattern; the log says so."""
+    sh, station, runner, _ = shell
+    pat = tmp_path / "q.pat"
+    pat.write_text("q.log\n30 0 120\n0 0 100\n")
+    text = run_lines(sh, runner, [f"prototype pattern {pat}", "sleep 5", "prototype to 0 0 110",
+                                  f"prototype pattern {pat}", "prototype stop", "wait"])
+    assert "a pattern is running" in text and "already running" in text
+    log = (tmp_path / "q.log").read_text()
+    assert " STOP at " in log and "pattern abandoned after endpoint 1: STOP" in log
+    assert not station.motors_running() and not station.busy()
+
+
 def test_stats_and_sim(shell):
     """'stats' shows the routines' timing; 'sim' the true position."""
     sh, _, runner, _ = shell
@@ -232,7 +245,8 @@ _LINE = st.one_of(
 )
 
 
-@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=int(os.environ.get("PYRT_GRAMMAR_EXAMPLES", "100")), deadline=None,
+          suppress_health_check=[HealthCheck.too_slow])
 @given(line=_LINE)
 def test_grammar_never_crashes_and_refusals_move_nothing(tmp_path_factory, line):
     """Any line on a fresh station: no exception escapes; after a refused command no motor moves."""

@@ -245,6 +245,10 @@ class ManipulatorShell(CommandShell):
             raise CommandError(f"{pa.name} to: the fourth word may be 'blend' or 'stop', "
                                f"got {args[3]!r}")
         target = pa.parse_point(args[:3], "to")
+        job = self.pattern_job
+        if job is not None and not job.done:
+            raise CommandError(f"{pa.name} to: a pattern is running ('{pa.name} stop' ends "
+                               "it); nothing moved")
         self.runner.call(pa.check_target, target)
         waiting = self.runner.call(lambda: pa.active or len(self.station.motion) > 0)
         n = self.runner.submit_motion(MoveRecord(target, blend=mode == "blend"))
@@ -259,6 +263,9 @@ class ManipulatorShell(CommandShell):
         job = self.pattern_job
         if job is not None and not job.done:
             raise CommandError(f"{self.pa.name} pattern: a pattern is already running")
+        if self.runner.call(self.station.busy):
+            raise CommandError(f"{self.pa.name} pattern: a move is running; wait for it or "
+                               "stop it first")
         gen = self.station.pattern_job(path)
         self.pattern_job = self.runner.spawn("pattern", gen)
         self.say(f"{self.pa.name}: pattern {path} started; log {self.station.pattern_log}")
