@@ -219,7 +219,7 @@ def sno_run(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("sno")
     station, runner = make_station(tmp, "sno")
     log = station.start_log(tmp / "sno.log")
-    targets = [(80.0, 60.0, 100.0), (-40.0, 50.0, 150.0)]
+    targets = [(80.0, 60.0, 100.0), (-40.0, 50.0, 150.0), (0.0, 0.0, 700.0)]
     stops = [move(station, runner, t) for t in targets]
     station.stop_log()
     yield station, runner, targets, stops, read_log(log)
@@ -227,12 +227,13 @@ def sno_run(tmp_path_factory):
 
 
 def test_sno_out_of_plane_moves_end_at_endpoint(sno_run):
-    """Out-of-plane targets on the 5-rope station end with ENDPOINT_STOP there."""
-    station, _, targets, stops, _ = sno_run
-    assert [s.reason for s in stops] == [StopReason.ENDPOINT_STOP] * 2
+    """Out-of-plane targets and the neck on the 5-rope station end with ENDPOINT_STOP there."""
+    station, _, targets, stops, log = sno_run
+    assert [s.reason for s in stops] == [StopReason.ENDPOINT_STOP] * 3
     for t, s in zip(targets, stops, strict=True):
         assert math.dist(s.position, t) <= 1.0
     assert math.dist(station.plant.position, targets[-1]) < 1.5
+    assert [int(p[5]) for p in log["TO"]] == [1, 1, 2]  # into the neck through the turn
 
 
 def test_sno_tensions_within_bounds(sno_run):
@@ -249,7 +250,8 @@ def test_sno_database_written_back(sno_run):
     station, _, _, _, _ = sno_run
     pos = load_station(station.directory).polyaxis().position
     assert math.dist(pos, station.polyaxis.position) < 0.5
-    assert abs(pos[1]) > 10.0
+    written = [v for _, t, _, k, v in station.writeback.history if k == "POSITION"]
+    assert any(abs(v[1]) > 10.0 for v in written)  # out of plane, written while moving
 
 
 def test_sno_refusals(tmp_path):
