@@ -225,14 +225,13 @@ def sno_run(tmp_path_factory):
         stops.append(move(station, runner, t))
         written.append(load_station(station.directory).polyaxis().position)
     station.stop_log()
-    station.written_positions = written
-    yield station, runner, targets, stops, read_log(log)
+    yield station, runner, targets, stops, read_log(log), written
     station.close()
 
 
 def test_sno_out_of_plane_moves_end_at_endpoint(sno_run):
     """Out-of-plane targets and the neck on the 5-rope station end with ENDPOINT_STOP there."""
-    station, _, targets, stops, log = sno_run
+    station, _, targets, stops, log, _ = sno_run
     assert [s.reason for s in stops] == [StopReason.ENDPOINT_STOP] * 3
     for t, s in zip(targets, stops, strict=True):
         assert math.dist(s.position, t) <= 1.0
@@ -242,7 +241,7 @@ def test_sno_out_of_plane_moves_end_at_endpoint(sno_run):
 
 def test_sno_tensions_within_bounds(sno_run):
     """No rope of the 5-rope station is logged out of its tension bounds."""
-    station, _, _, _, log = sno_run
+    station, _, _, _, log, _ = sno_run
     tensions = [float(p[4]) for p in log["S"]]
     assert {int(p[2]) for p in log["S"]} == {0, 1, 2, 3, 4}
     assert station.polyaxis.low_tension <= min(tensions)
@@ -251,10 +250,10 @@ def test_sno_tensions_within_bounds(sno_run):
 
 def test_sno_database_written_back(sno_run):
     """The full-scale station's POSITION follows the source out of plane."""
-    station, _, _, _, _ = sno_run
+    station, _, _, _, _, written = sno_run
     pos = load_station(station.directory).polyaxis().position
     assert math.dist(pos, station.polyaxis.position) < 0.5
-    first = station.written_positions[0]  # on disk right after the out-of-plane move
+    first = written[0]  # on disk right after the out-of-plane move
     assert math.dist(first, (80.0, 60.0, 100.0)) < 3.0
 
 
