@@ -572,11 +572,14 @@ class PolyAxis:
         return rec
 
     def reflex(self, fault) -> None:
-        """The manipulator's reflex action: every motor stopped, the move ended."""
+        """The manipulator's reflex action: every motor stopped, the move ended,
+        queued moves dropped."""
         if self.active:
             self.halt(StopReason.FAULT, str(getattr(fault, "cause", fault)))
         else:
             self.stop_motors()
+        if self.motion is not None:
+            self.motion.clear()  # type: ignore[attr-defined]
 
     def next_move(self) -> bool:
         """Between moves, start the next queued MoveRecord; True if one started.
