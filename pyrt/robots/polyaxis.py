@@ -48,6 +48,7 @@ from pyrt.robots.av import AV
 from pyrt.robots.axis import POLYAXIS, Axis
 from pyrt.robots.paths import VIA_BELOW, Hare, plan_segments
 from pyrt.robots.stops import SAFETY_STOPS, StopCheck, StopReason, StopRecord
+from pyrt.scheduler.runner import MotionQueue
 
 __all__ = [
     "COMMANDS",
@@ -266,7 +267,7 @@ class PolyAxis:
         self.on_stop: list[Callable[[StopRecord], None]] = []
         #: The motion queue of MoveRecords (set by the station), emptied by
         #: :meth:`next_move` between moves and cleared by any abnormal stop.
-        self.motion: object | None = None
+        self.motion: MotionQueue | None = None
         #: Where the state log goes (one line at a time), or None.
         self.log: Callable[[str], None] | None = None
         self.debug = False
@@ -564,7 +565,7 @@ class PolyAxis:
             for fn in self.on_stop:
                 fn(rec)
         if reason in SAFETY_STOPS or reason in (StopReason.STOP, StopReason.FAULT):
-            dropped = self.motion.clear() if self.motion is not None else 0  # type: ignore[attr-defined]
+            dropped = self.motion.clear() if self.motion is not None else 0
             if dropped and self.stdout is not None:
                 self.stdout.write(f"{self.name}: {dropped} queued move(s) dropped\n")
         if reason in SAFETY_STOPS and self.on_fault is not None:
@@ -579,16 +580,16 @@ class PolyAxis:
         else:
             self.stop_motors()
         if self.motion is not None:
-            self.motion.clear()  # type: ignore[attr-defined]
+            self.motion.clear()
 
     def next_move(self) -> bool:
         """Between moves, start the next queued MoveRecord; True if one started.
         A record refused now (the world changed since it was checked) is
         reported and dropped."""
         q = self.motion
-        if self.active or q is None or not len(q):  # type: ignore[arg-type]
+        if self.active or q is None or not len(q):
             return False
-        rec = q.get()  # type: ignore[attr-defined]
+        rec = q.get()
         try:
             self.to(rec.target, blend=rec.blend)
         except CommandError as exc:
