@@ -110,3 +110,86 @@ def _wall_rig() -> Rig:
     loop.attach(stall, name="stall monitor")
     ctl.power_up()
     return Rig(cpu, board, plant, ctl, loop, stall)
+
+
+# -- load: clients in processes of their own (the server's GIL stays the server's) ----------
+
+# The clients stand for a DAQ on another computer: they run at the lowest
+# priority, so that on a shared two-core machine what the loop feels is the
+# server's work, not the load generator's.
+_LOAD = r'''
+import json, os, selectors, socket, sys, time
+os.nice(19)
+host, port, n, seconds = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), float(sys.argv[4])
+line = sys.argv[5].encode() + b"\n"
+sel = selectors.DefaultSelector()
+for _ in range(n):
+    s = socket.create_connection((host, port))
+    s.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    greeting = b""
+    while not greeting.endswith(b"\n"):
+        greeting += s.recv(4096)
+    s.setblocking(False)
+    sel.register(s, selectors.EVENT_READ, [b""])
+sys.stdout.write("ready\n"); sys.stdout.flush()
+sys.stdin.readline()
+start = time.perf_counter()
+end = start + seconds
+for key in list(sel.get_map().values()):
+    key.fileobj.send(line)
+count = errors = 0
+while time.perf_counter() < end:
+    for key, _ in sel.select(0.05):
+        s, st = key.fileobj, key.data
+        try:
+            data = s.recv(65536)
+        except BlockingIOError:
+            continue
+        if not data:
+            errors += 1
+            sel.unregister(s)
+            continue
+        buf = st[0] + data
+        cut = buf.rfind(b"\n") + 1
+        lines = buf[:cut].split(b"\n")[:-1]
+        st[0] = buf[cut:]
+        count += len(lines)
+        errors += sum(1 for x in lines if not x.startswith(b"OK"))
+        if lines:
+            s.send(line * len(lines))
+print(json.dumps({"requests": count, "seconds": time.perf_counter() - start,
+                  "errors": errors}))
+'''
+
+
+def run_load(host: str, port: int, clients: int, seconds: float, line: str = "STATUS",
+             procs: int = 2, during=None) -> dict:
+    """``clients`` connections (spread over ``procs`` processes), each with one
+    request in flight for ``seconds``; ``during()`` runs while they do.
+    Returns requests, requests per second and errors."""
+    import json
+    import subprocess
+    import sys
+
+    per = [clients // procs + (1 if i < clients % procs else 0) for i in range(procs)]
+    children = [
+        subprocess.Popen([sys.executable, "-c", _LOAD, host, str(port), str(n), str(seconds),
+                          line], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        for n in per if n
+    ]
+    try:
+        for child in children:
+            assert child.stdout.readline().strip() == "ready"
+        for child in children:
+            child.stdin.write("go\n")
+            child.stdin.flush()
+        result = during() if during is not None else None
+        outs = [json.loads(child.communicate(timeout=seconds + 30)[0]) for child in children]
+    finally:
+        for child in children:
+            if child.poll() is None:
+                child.kill()
+    total = sum(o["requests"] for o in outs)
+    secs = max(o["seconds"] for o in outs)
+    return {"requests": total, "per_s": total / secs, "errors": sum(o["errors"] for o in outs),
+            "during": result}

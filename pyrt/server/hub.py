@@ -19,6 +19,7 @@ once per tick by the loop thread: a reference swap, no lock in the tick.
 
 from __future__ import annotations
 
+import time
 from collections import deque
 from collections.abc import Sequence
 from typing import Any
@@ -31,6 +32,8 @@ __all__ = ["StatusHub"]
 #: Events (samples and faults) waiting for the I/O thread; beyond this the
 #: oldest are dropped (the I/O thread has stalled for seconds).
 EVENT_CAPACITY = 65536
+
+_mono = time.monotonic_ns
 
 
 class StatusHub:
@@ -62,12 +65,16 @@ class StatusHub:
         #: ``("sample", key, time_ns, values)`` and ``("fault", None, time_ns, fault)``.
         self.events: deque[tuple[str, Any, int, Any]] = deque(maxlen=EVENT_CAPACITY)
         self._spews: tuple[tuple[Any, Spew], ...] = ()
+        #: ``time.monotonic_ns()`` when the loop last ran this handler: where
+        #: the server's threads read the loop's tick phase (to stand aside).
+        self.tick_wall_ns = 0
         #: The latest fault the loop recorded (None before the first).
         self.last_fault: Fault | None = None
 
     # -- the loop side -------------------------------------------------------------
 
     def __call__(self, now_ns: int) -> None:
+        self.tick_wall_ns = _mono()
         tick = self._tick
         self._tick = tick + 1
         self._count += 1

@@ -49,6 +49,7 @@ import math
 import os
 import selectors
 import socket
+import sys
 import threading
 import time
 from collections import deque
@@ -74,6 +75,34 @@ MAX_AUTH_FAILURES = 3
 LINGER_S = 1.0
 #: How often the I/O thread hands subscription samples on, seconds.
 PUMP_S = 0.005
+#: Requests per second the server serves at most (all clients together);
+#: beyond it the I/O thread pauses, so the network cannot take the CPU
+#: the loop needs.  Twice the DAQ target of 5,000 STATUS requests/s.
+MAX_RATE = 10_000
+#: The budget is kept per window of this many seconds.
+RATE_WINDOW_S = 0.01
+#: Niceness added to the server's threads (Linux: per thread), so that the
+#: loop thread wins the CPU when both want it.
+NICE = 5
+#: Real time: the server's threads pause from this long before the loop's
+#: next tick until the tick has run, so that the loop thread never waits
+#: for the interpreter lock at its deadline (the loop's spin is 200 µs).
+GUARD_NS = 450_000
+#: How long a standing-aside thread sleeps between looks at the loop.
+GUARD_POLL_S = 0.0001
+#: Longest the loop thread waits for the interpreter lock while a server
+#: thread holds it (``sys.setswitchinterval``; CPython's default is 5 ms,
+#: five ticks).  Set when the server starts, never raised.
+SWITCH_INTERVAL_S = 0.0005
+
+
+def _lower_priority(nice: int) -> None:
+    """Make the calling thread ``nice`` steps nicer (Linux; elsewhere nothing)."""
+    if nice <= 0 or not hasattr(os, "setpriority"):
+        return
+    with contextlib.suppress(OSError, AttributeError):
+        tid = threading.get_native_id()
+        os.setpriority(os.PRIO_PROCESS, tid, min(19, os.getpriority(os.PRIO_PROCESS, tid) + nice))
 
 
 _VERBS = frozenset({"AUTH", "QUIT", "STATUS", "SUBSCRIBE", "UNSUBSCRIBE"})
@@ -177,6 +206,9 @@ class Server:
         max_pending: int = MAX_PENDING,
         command_timeout_s: float = 5.0,
         snapshot_every: int = 1,
+        max_rate: float = MAX_RATE,
+        nice: int = NICE,
+        switch_interval_s: float | None = SWITCH_INTERVAL_S,
     ):
         if token is not None and not token:
             raise ConfigError("the token is empty")
@@ -202,12 +234,21 @@ class Server:
         self.max_output = max_output
         self.max_pending = max_pending
         self.command_timeout_s = command_timeout_s
+        self.max_rate = float(max_rate)
+        self.nice = int(nice)
+        self.switch_interval_s = switch_interval_s
         self.max_hz = 1e9 / runner.loop.period_ns
         self.hub = StatusHub(robot.status_names, robot.status_sources(),
                              snapshot_every=snapshot_every)
         runner.loop.attach(self.hub, name="server")
         runner.loop.fault_listeners.append(self.hub.on_fault)
         self.observer = ObserverRunner(runner)
+        clock = runner.loop.clock
+        #: The tick in wall-clock ns (None on a SimClock: nothing to stand aside for).
+        self._period_wall_ns: int | None = (
+            None if clock.virtual
+            else int(runner.loop.period_ns / float(getattr(clock, "speed", 1.0)))
+        )
         self.counters = {
             "accepted": 0, "refused_full": 0, "requests": 0, "status": 0, "denied": 0,
             "auth_failed": 0, "too_long": 0, "utf8": 0, "idle": 0, "dropped_slow": 0,
@@ -255,6 +296,8 @@ class Server:
         sel.register(self._wake_r, selectors.EVENT_READ, "wake")
         self._sel = sel
         self._stopping = False
+        if self.switch_interval_s is not None and sys.getswitchinterval() > self.switch_interval_s:
+            sys.setswitchinterval(self.switch_interval_s)
         self._thread = threading.Thread(target=self._io_main, name="pyrt-server-io", daemon=True)
         self._thread.start()
         log.info("serving %s on %s:%d", self.robot.name, *self.address)
@@ -318,16 +361,28 @@ class Server:
     # -- the I/O thread --------------------------------------------------------------
 
     def _io_main(self) -> None:
+        _lower_priority(self.nice)
         sel = self._sel
         assert sel is not None
         next_check = 0.0
+        budget = max(1, int(self.max_rate * RATE_WINDOW_S))
+        window_end = 0.0
+        served = 0
         while not self._stopping:
+            now = time.monotonic()
+            if now >= window_end:
+                window_end, served = now + RATE_WINDOW_S, self.counters["requests"]
+            elif self.counters["requests"] - served >= budget:
+                # Over the rate: let the loop (and everything else) have the CPU.
+                time.sleep(window_end - now)
+                continue
             busy = self.hub.subscribers or self.hub.events
             try:
                 events = sel.select(PUMP_S if busy else 0.25)
             except OSError:  # pragma: no cover - EINTR is retried by select
                 continue
             for key, mask in events:
+                self._stand_aside()
                 data = key.data
                 if data is None:
                     self._accept()
@@ -349,6 +404,29 @@ class Server:
                 self._check_timeouts(now)
         for conn in list(self._conns.values()):
             self._finish(conn)
+
+    def _stand_aside(self) -> None:
+        """Real time: if the loop's next tick is near, wait until it has run.
+
+        The loop thread must take the interpreter lock the moment its
+        deadline comes; a server thread in the middle of a request would make
+        it wait up to the switch interval.  Between requests the server looks
+        at the tick phase (the hub's stamp) and sleeps through the tick.
+        A loop that is not ticking (stopped, or far behind) is not waited for.
+        """
+        period = self._period_wall_ns
+        if period is None:
+            return
+        hub = self.hub
+        last = hub.tick_wall_ns
+        now = time.monotonic_ns()
+        due = last + period
+        if now < due - GUARD_NS or now > due + 2 * period:
+            return
+        limit = due + period
+        while hub.tick_wall_ns == last and now < limit:
+            time.sleep(GUARD_POLL_S)
+            now = time.monotonic_ns()
 
     def _accept(self) -> None:
         assert self._listener is not None
@@ -711,6 +789,7 @@ class Server:
     # -- the worker thread of a connection -------------------------------------------
 
     def _work(self, conn: _Conn) -> None:
+        _lower_priority(self.nice)
         while True:
             with conn.lock:
                 while not conn.requests and not conn.closed:
@@ -718,6 +797,7 @@ class Server:
                 if conn.closed:
                     break
                 ready, line = conn.requests.popleft()
+            self._stand_aside()
             if ready:
                 reply = line
             else:
