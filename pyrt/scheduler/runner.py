@@ -265,14 +265,15 @@ class Runner:
         if fault is not None:
             raise FaultError(fault)
 
-    def statistics(self, timeout_s: float = 1.0) -> LoopStatistics:
+    def statistics(self, timeout_s: float = 1.0, take_fault: bool = True) -> LoopStatistics:
         """The loop's timing statistics, built outside the loop thread: the
         loop only hands over its raw samples (O(1)), so looking does not
-        cause an overrun."""
+        cause an overrun.  ``take_fault`` as for :meth:`call`."""
         taken = self.call(
             lambda: [(q, q.take_samples(keep_tick=True)) for q in self.loop.queues],
             timeout_s=timeout_s,
             name="stats",
+            take_fault=take_fault,
         )
         for q, (addrs, durs) in taken:
             q.fold_into_accumulators(addrs, durs)
