@@ -20,12 +20,10 @@ and changes nothing.
 
 from __future__ import annotations
 
-import inspect
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, Protocol, TextIO
 
-from pyrt.commands.gripper import Runner
 from pyrt.commands.shell import CommandShell
 from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
 from pyrt.robots.axis import POLYAXIS, Axis
@@ -94,6 +92,22 @@ _READ_ONLY = {"read", "readloop", "stoploop"}
 #: Commands that start motion (refused while a fault is not acknowledged).
 _MOTION = {("polyaxis", "to"), ("polyaxis", "pattern"), ("axis", "up"), ("axis", "down"),
            ("axis", "to")}
+
+
+class Runner(Protocol):
+    """What the interpreter needs of :class:`pyrt.scheduler.runner.Runner`."""
+
+    loop: Any
+
+    def call(self, fn: Callable[..., Any], *args: Any, timeout_s: float = 1.0) -> Any: ...
+
+    def wait_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool: ...
+
+    def sleep(self, seconds: float) -> None: ...
+
+    def spawn(self, name: str, gen: Any, timeout_s: float = 1.0) -> Any: ...
+
+    def submit_motion(self, record: Any, timeout_s: float = 1.0) -> int: ...
 
 
 class ManipulatorShell(CommandShell):
@@ -424,14 +438,6 @@ class ManipulatorShell(CommandShell):
 
         self.runner.call(apply)
         self.say(f"sim: {what} on {rope}")
-
-    def commands(self, owner: object | None = None) -> list[tuple[str, str]]:
-        out = []
-        for attr in sorted(dir(self)):
-            if attr.startswith("do_"):
-                doc = inspect.getdoc(getattr(self, attr)) or ""
-                out.append((attr[3:], doc.splitlines()[0] if doc else ""))
-        return out
 
 
 def _toggle_debug(pa: PolyAxis) -> bool:
