@@ -269,13 +269,31 @@ def test_sno_refusals(tmp_path):
     station.close()
 
 
-def test_sno_dead_loadcell_stops_everything(tmp_path):
-    """A dead loadcell on the 5-rope station mid-move: LOW_TENSION_STOP, all motors off."""
+@pytest.mark.parametrize("fault", ["dead", "break"])
+def test_sno_failures_stop_everything(tmp_path, fault):
+    """A dead loadcell or a broken rope on the 5-rope station mid-move: LOW_TENSION_STOP,
+    every motor off."""
     station, runner = make_station(tmp_path, "sno")
     runner.call(station.polyaxis.to, (50.0, -40.0, 80.0))
     runner.sleep(10.0)
-    runner.call(station.plant.inject_loadcell_dead, 3)
-    with pytest.raises(FaultError, match="LOW_TENSION_STOP"):
+    inject = station.plant.inject_loadcell_dead if fault == "dead" else station.plant.break_rope
+    runner.call(inject, 3)
+    with pytest.raises(FaultError, match="LOW_TENSION_STOP: axis3"):
         runner.wait_until(lambda: not station.polyaxis.active, 30.0)
     assert _motors_still(station)
+    station.close()
+
+
+def test_sno_pattern_of_five_points(tmp_path):
+    """A five-point pattern out of the rope planes completes on the 5-rope station; the log
+    names each stop."""
+    station, runner = make_station(tmp_path, "sno")
+    points = [(10.0, 10.0, 20.0), (25.0, 10.0, 30.0), (25.0, 25.0, 40.0), (0.0, 20.0, 40.0),
+              (-10.0, 0.0, 20.0)]
+    job = runner.spawn("pattern", station.pattern_job(_pattern(tmp_path, points)))
+    assert runner.wait_until(lambda: job.done, 900.0)
+    assert [r.reason for r in job.value()] == [StopReason.ENDPOINT_STOP] * 5
+    lines = [ln for ln in (tmp_path / "five.log").read_text().splitlines()
+             if not ln.startswith("#")]
+    assert len(lines) == 5 and all(" ENDPOINT_STOP at " in ln for ln in lines)
     station.close()
