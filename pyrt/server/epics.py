@@ -223,8 +223,7 @@ class EpicsService:
 
     def _statistics(self) -> Any:
         try:
-            return self.runner.call(self.runner.loop.statistics, take_fault=False,
-                                    name="epics statistics")
+            return self.runner.statistics(take_fault=False)
         except Exception as exc:
             log.debug("statistics: %s", exc)
             return None

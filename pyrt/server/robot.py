@@ -83,6 +83,10 @@ class ObserverRunner:
         """A mailbox call that leaves a pending fault for the operator."""
         return self._runner.call(fn, *args, timeout_s=timeout_s, name=name, take_fault=False)
 
+    def statistics(self, timeout_s: float = 1.0) -> Any:
+        """The loop's timing statistics, leaving a pending fault for the operator."""
+        return self._runner.statistics(timeout_s, take_fault=False)
+
     def poll(self, timeout_s: float = 1.0) -> None:
         """A no-op round trip that does not take the operator's fault."""
         self.call(lambda: None, timeout_s=timeout_s, name="poll")
