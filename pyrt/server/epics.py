@@ -135,9 +135,9 @@ class EpicsService:
                     return await service._command(data)
 
             db[p + "CMD"] = CommandChannel(value="", max_length=CMD_LENGTH,
-                                           report_as_string=True, string_encoding="utf-8")
+                                           string_encoding="utf-8")
             db[p + "REPLY"] = ca.ChannelChar(value="", max_length=REPLY_LENGTH,
-                                             report_as_string=True, string_encoding="utf-8")
+                                             string_encoding="utf-8")
             db[p + "RESULT"] = ca.ChannelString(value="")
         return db
 
