@@ -75,3 +75,29 @@ def test_complete_move(benchmark, tmp_path_factory, name, tick_ms):
                                 target=REALTIME_TARGET)
     print(f"\n{name}: a complete move at a {tick_ms} ms tick runs {ratio:.1f}x real time "
           f"(target {REALTIME_TARGET:g}x: {ratio / REALTIME_TARGET:.2f}x the target)")
+
+
+@pytest.mark.benchmark(group="manipulator-control-poll")
+@pytest.mark.parametrize("name", ["prototype", "sno"])
+def test_control_poll_device_share(benchmark, tmp_path, name):
+    """The device part of a poll alone: every Loadcell and Encoder read, every Motor's
+    velocity set and polled (the floor under the control poll's Python, µs)."""
+    station, runner = make_station(tmp_path, name)
+    pa = station.polyaxis
+    runner.call(pa.to, MOVES[name])
+    runner.sleep(20.0)
+    axes = pa.axes
+
+    def devices():
+        for a in axes:
+            a.loadcell.tension()
+            a.encoder.length()
+            m = a.motor
+            m.set_desired_velocity(m.velocity)
+            m.poll()
+
+    benchmark.pedantic(devices, rounds=2000, iterations=1, warmup_rounds=50)
+    us = benchmark.stats.stats.median * 1e6
+    benchmark.extra_info.update(ropes=pa.n, median_us=round(us, 1))
+    print(f"\n{name}: device reads and motor polls alone {us:.1f} µs for {pa.n} ropes")
+    station.close()
