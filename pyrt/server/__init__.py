@@ -2,6 +2,7 @@
 
 from pyrt.server.gripper import GripperService
 from pyrt.server.hub import StatusHub
+from pyrt.server.manipulator import ManipulatorService
 from pyrt.server.protocol import ERROR_CODES, MAX_LINE, format_error, format_reply
 from pyrt.server.robot import ObserverRunner, ServedRobot
 from pyrt.server.server import Server, is_loopback
@@ -10,6 +11,7 @@ __all__ = [
     "ERROR_CODES",
     "MAX_LINE",
     "GripperService",
+    "ManipulatorService",
     "ObserverRunner",
     "ServedRobot",
     "Server",
