@@ -11,7 +11,8 @@ from pyrt.errors import PyrtError
 
 PACKAGES = [
     "pyrt", "pyrt.errors", "pyrt.scheduler", "pyrt.native", "pyrt.units", "pyrt.fileio",
-    "pyrt.db", "pyrt.scope", "pyrt.tasks",
+    "pyrt.db", "pyrt.scope", "pyrt.tasks", "pyrt.station", "pyrt.commands", "pyrt.console",
+    "pyrt.client", "pyrt.server", "pyrt.cli",
 ]
 
 
