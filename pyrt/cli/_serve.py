@@ -89,16 +89,22 @@ class Service:
         self.epics = epics
         self._stop = threading.Event()
 
-    def start(self, say: Callable[[str], None]) -> None:
-        """Start listening; say where."""
+    def start(self, say: Callable[[str], None] | None = None) -> None:
+        """Start listening; log where (and ``say`` it, for a console)."""
+
+        def tell(text: str) -> None:
+            log.info("%s", text)
+            if say is not None:
+                say(text)
+
         if self.serve:
             host, port = self.server.start()
             who = ("AUTH with the token to command" if self.server.has_token
                    else "no token: status only")
-            say(f"serving {self.robot.name} on {host}:{port} ({who})")
+            tell(f"serving {self.robot.name} on {host}:{port} ({who})")
         if self.epics is not None:
             self.epics.start()
-            say(f"EPICS Channel Access: PVs {self.epics.prefix}* ({self.epics.summary})")
+            tell(f"EPICS Channel Access: PVs {self.epics.prefix}* ({self.epics.summary})")
 
     def run_headless(self) -> int:
         """Serve until SIGTERM or SIGINT; then stop every motor; exit status 0."""

@@ -100,6 +100,7 @@ class EpicsService:
         self.period_s = period_s
         self.stats_period_s = stats_period_s
         self._shell: Any = None
+        self._shell_lock = threading.Lock()  # one command at a time, in order
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._task: asyncio.Task | None = None
@@ -249,11 +250,12 @@ class EpicsService:
         return line if token and hmac.compare_digest(token.encode("utf-8"), self._token) else ""
 
     def _run(self, line: str) -> str:
-        if self._shell is None:
-            self._shell = self.robot.make_shell(self.runner, io.StringIO())
-        try:
-            reply, _end = run_shell(self._shell, line)
-        except Exception as exc:
-            log.exception("EPICS command %r failed", line[:60])
-            reply = format_error("internal", f"{type(exc).__name__}: {exc}")
-        return reply
+        with self._shell_lock:
+            if self._shell is None:
+                self._shell = self.robot.make_shell(self.runner, io.StringIO())
+            try:
+                reply, _end = run_shell(self._shell, line)
+            except Exception as exc:
+                log.exception("EPICS command %r failed", line[:60])
+                reply = format_error("internal", f"{type(exc).__name__}: {exc}")
+            return reply
