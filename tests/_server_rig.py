@@ -7,24 +7,27 @@ import time
 from contextlib import contextmanager
 from dataclasses import dataclass
 
-from _gripper_rig import Rig, make_rig
-
 from pyrt.boards.gripper import DAC_NULL
 from pyrt.client import Client
-from pyrt.scheduler import Loop, WallClock
+from pyrt.scheduler import Loop, SimClock, WallClock
 from pyrt.scheduler.runner import Runner
 from pyrt.server import GripperService, Server
+from pyrt.station.gripper import GripperStation, build_gripper
 
 TOKEN = "s3cret-token"
 
 
 @dataclass
 class Served:
-    rig: Rig
+    rig: GripperStation
     runner: Runner
     server: Server
     host: str
     port: int
+
+    @property
+    def ctl(self):
+        return self.rig.controller
 
     def client(self, timeout_s: float = 10.0) -> Client:
         return Client(self.host, self.port, timeout_s=timeout_s)
@@ -42,8 +45,9 @@ class Served:
 
     def still_and_null(self) -> bool:
         """No motor moving: drive bit clear and the DAC at null."""
-        ctl = self.rig.ctl
-        return self.runner.call(lambda: not ctl.moving and self.rig.board.dac == DAC_NULL)
+        ctl = self.ctl
+        return self.runner.call(lambda: not ctl.moving and self.rig.board.dac == DAC_NULL,
+                                take_fault=False)
 
 
 def read_lines(sock: socket.socket, n: int, timeout_s: float = 10.0) -> list[str]:
@@ -76,40 +80,19 @@ def read_until_closed(sock: socket.socket, timeout_s: float = 10.0) -> str:
 
 @contextmanager
 def served(token: str | None = TOKEN, wall: bool = False, **server_kw):
-    """A gripper (SimClock unless ``wall``) served on an ephemeral loopback port."""
-    rig = _wall_rig() if wall else make_rig()
-    runner = Runner(rig.loop)
-    server = Server(runner, GripperService(rig.ctl, rig.plant), "127.0.0.1", 0, token=token,
+    """The gripper station (SimClock unless ``wall``) served on an ephemeral loopback port."""
+    station = build_gripper(Loop(WallClock() if wall else SimClock()))
+    runner = station.runner
+    server = Server(runner, GripperService.from_station(station), "127.0.0.1", 0, token=token,
                     **server_kw)
     runner.start()
     host, port = server.start()
     try:
         runner.poll()  # a first tick: the status snapshot exists
-        yield Served(rig, runner, server, host, port)
+        yield Served(station, runner, server, host, port)
     finally:
         server.close()
-        runner.stop()
-
-
-def _wall_rig() -> Rig:
-    from _gripper_rig import StallMonitor
-
-    from pyrt.boards.gripper import SimGripperBoard
-    from pyrt.boards.i8031 import I8031
-    from pyrt.robots.gripper import GripperController
-    from pyrt.sim.gripper import JawPlant
-
-    cpu = I8031()
-    board = SimGripperBoard(cpu)
-    plant = JawPlant(board)
-    ctl = GripperController(cpu)
-    loop = Loop(WallClock())
-    loop.attach(plant.step, name="jaws")
-    ctl.attach(loop)
-    stall = StallMonitor(board, plant)
-    loop.attach(stall, name="stall monitor")
-    ctl.power_up()
-    return Rig(cpu, board, plant, ctl, loop, stall)
+        station.shutdown()
 
 
 # -- load: clients in processes of their own (the server's GIL stays the server's) ----------

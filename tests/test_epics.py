@@ -60,7 +60,7 @@ def epics_served(token: str | None = TOKEN):
     from pyrt.server.epics import EpicsService
 
     with served(token=token) as sv:
-        robot = GripperService(sv.rig.ctl, sv.rig.plant)
+        robot = GripperService.from_station(sv.rig)
         ioc = EpicsService(sv.runner, robot, sv.server, PREFIX, token=token,
                            interfaces=["127.0.0.1"], period_s=0.02, stats_period_s=0.2)
         ioc.start()
@@ -133,7 +133,7 @@ def test_command_pv_needs_the_token_in_the_written_value(epics_env):
         _write("CMD", f"{TOKEN} W 1")
         assert _string("RESULT").startswith("ERR command")
         sv.runner.sleep(0.5)
-        assert sv.runner.call(sv.rig.ctl.target) == 0  # the wrong token's P never ran
+        assert sv.runner.call(sv.ctl.target) == 0  # the wrong token's P never ran
         assert sv.still_and_null()
 
 
@@ -153,4 +153,4 @@ def test_a_clear_message_when_caproto_is_missing(monkeypatch):
     monkeypatch.setitem(sys.modules, "caproto", None)
     assert not epics.caproto_available()
     with served() as sv, pytest.raises(ConfigError, match=r"pyrt\[epics\]"):
-        epics.EpicsService(sv.runner, GripperService(sv.rig.ctl), sv.server, PREFIX)
+        epics.EpicsService(sv.runner, GripperService(sv.ctl), sv.server, PREFIX)

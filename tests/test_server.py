@@ -167,7 +167,7 @@ def test_faults_are_pushed_to_subscribers_and_left_for_the_operator():
         assert op.command("C 35 00") == ["35 00"]  # Q slot 0 now names no routine
         for _ in range(200):  # let the queue walk, without taking the fault
             sv.runner.call(lambda: None, take_fault=False)
-        assert sv.rig.ctl.queue.fault is not None
+        assert sv.ctl.queue.fault is not None
         faults = [s for s in sub.statuses(0.5) if s.fault]
         assert len(faults) == 1 and faults[0].fault.startswith("gripper: fault")
         assert reader.command("W") == ["0000"]  # a read neither takes nor acknowledges it

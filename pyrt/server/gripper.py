@@ -21,21 +21,40 @@ from pyrt.scope import Source
 __all__ = ["GripperService"]
 
 _READ_LETTERS = frozenset("ESTW")
-_READ_WORDS = frozenset({"help", "stats"})
+_READ_WORDS = frozenset({"help", "stats"})  # and ack, wait ... need AUTH
 _READ_SCOPE = frozenset({"list", "status", "show"})
 
 
 class GripperService:
     """:class:`~pyrt.server.robot.ServedRobot` of a
     :class:`~pyrt.robots.gripper.GripperController` (``plant``: the
-    simulated jaws for the ``sim`` word, None on hardware)."""
+    simulated jaws for the ``sim`` word, None on hardware; ``scope`` and
+    ``executor``: the station's, as the console gets them).
+    :meth:`from_station` takes them from a
+    :class:`~pyrt.station.gripper.GripperStation`."""
 
     status_names = ("position", "target", "moving", "busy", "sensors", "fault")
 
-    def __init__(self, controller: Any, plant: Any = None, name: str = "gripper"):
+    def __init__(
+        self,
+        controller: Any,
+        plant: Any = None,
+        name: str = "gripper",
+        *,
+        scope: Any = None,
+        executor: Any = None,
+    ):
         self.ctl = controller
         self.plant = plant
         self.name = name
+        self.scope = scope
+        self.executor = executor
+
+    @classmethod
+    def from_station(cls, station: Any) -> GripperService:
+        """The service of a built gripper station."""
+        return cls(station.controller, station.plant, scope=station.scope,
+                   executor=station.executor)
 
     def status_sources(self) -> list[Source]:
         ctl = self.ctl
@@ -57,7 +76,8 @@ class GripperService:
         )
 
     def make_shell(self, runner: Any, stdout: TextIO) -> GripperShell:
-        return GripperShell(runner, self.ctl, stdout, plant=self.plant)
+        return GripperShell(runner, self.ctl, stdout, plant=self.plant, scope=self.scope,
+                            executor=self.executor)
 
     def is_read_only(self, line: str) -> bool:
         text = line.strip()
@@ -80,7 +100,9 @@ class GripperService:
     def stop_all(self) -> None:
         # The reflex action is exactly "every motor stopped": null the
         # current, clear drive and jog, abandon a running init.
-        self.ctl.reflex(Fault(robot=self.name, cause="stopped by the server", source="server"))
+        # (the station's reflex also ends the motion and drops queued moves).
+        self.ctl.queue.reflex(
+            Fault(robot=self.name, cause="every motor stopped", source="server"))
 
     def release(self, shell: Any) -> None:
         if getattr(shell, "in_monitor", False):
