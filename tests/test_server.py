@@ -356,3 +356,13 @@ def test_read_only_classification_never_changes_the_robot(line):
 _CLASSIFY_RIG = make_rig()
 _CLASSIFY_RUNNER = Runner(_CLASSIFY_RIG.loop)
 _CLASSIFY_RUNNER.start()
+
+
+def test_pipelined_requests_beyond_the_rate_budget_wait_and_are_all_answered():
+    """A client pipelining far more requests than the rate budget allows gets every reply, in order."""
+    with served(max_rate=2000) as sv:
+        s = sv.raw()
+        s.sendall(b"".join(b"STATUS\nT\n" for _ in range(300)))
+        lines = read_lines(s, 600, timeout_s=20.0)
+        assert len(lines) == 600
+        assert all(a.startswith("OK t=") and b == "OK 0000" for a, b in zip(lines[::2], lines[1::2], strict=True))

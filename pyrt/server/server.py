@@ -166,7 +166,8 @@ class _Conn:
         self.subscribed = 0.0
         self.auth_failures = 0
         self.last_active = time.monotonic()
-        self.paused = False
+        self.paused = False  # too many requests queued: read no more for now
+        self.backlogged = False  # over the server's rate: lines wait in inbuf
         self.writing = False
         self.dirty = False
         self.closing = False  # read nothing more; flush, then close
@@ -258,6 +259,9 @@ class Server:
         self._lock = threading.Lock()
         self._privileged: _Conn | None = None
         self._dirty: deque[_Conn] = deque()
+        self._backlog: list[_Conn] = []
+        self._budget = max(1, int(self.max_rate * RATE_WINDOW_S))
+        self._window_start = 0
         self._sel: selectors.BaseSelector | None = None
         self._listener: socket.socket | None = None
         self._wake_r = self._wake_w = -1
@@ -365,14 +369,19 @@ class Server:
         sel = self._sel
         assert sel is not None
         next_check = 0.0
-        budget = max(1, int(self.max_rate * RATE_WINDOW_S))
         window_end = 0.0
-        served = 0
         while not self._stopping:
             now = time.monotonic()
             if now >= window_end:
-                window_end, served = now + RATE_WINDOW_S, self.counters["requests"]
-            elif self.counters["requests"] - served >= budget:
+                window_end = now + RATE_WINDOW_S
+                self._window_start = self.counters["requests"]
+                backlog, self._backlog = self._backlog, []
+                for conn in backlog:
+                    conn.backlogged = False
+                    if not conn.closed:
+                        self._parse(conn)
+                        self._set_events(conn)
+            elif self._over_budget():
                 # Over the rate: let the loop (and everything else) have the CPU.
                 time.sleep(window_end - now)
                 continue
@@ -404,6 +413,9 @@ class Server:
                 self._check_timeouts(now)
         for conn in list(self._conns.values()):
             self._finish(conn)
+
+    def _over_budget(self) -> bool:
+        return self.counters["requests"] - self._window_start >= self._budget
 
     def _stand_aside(self) -> None:
         """Real time: if the loop's next tick is near, wait until it has run.
@@ -485,6 +497,12 @@ class Server:
     def _parse(self, conn: _Conn) -> None:
         buf = conn.inbuf
         while not conn.paused and not conn.closing:
+            if self._over_budget():
+                if not conn.backlogged:  # the rest waits for the next window
+                    conn.backlogged = True
+                    self._backlog.append(conn)
+                    self._set_events(conn)
+                return
             i = buf.find(b"\n")
             if i < 0:
                 if len(buf) > self.max_line:
@@ -497,6 +515,7 @@ class Server:
             if len(raw) > self.max_line:
                 self._too_long(conn)
                 return
+            self._stand_aside()
             self._request(conn, raw)
 
     def _too_long(self, conn: _Conn) -> None:
@@ -574,7 +593,7 @@ class Server:
                     conn.sock.shutdown(socket.SHUT_WR)
                 conn.linger_until = time.monotonic() + LINGER_S
         ev = 0
-        if not conn.eof and (conn.closing or not conn.paused):
+        if not conn.eof and (conn.closing or not (conn.paused or conn.backlogged)):
             ev |= selectors.EVENT_READ
         if conn.out:
             ev |= selectors.EVENT_WRITE
