@@ -115,7 +115,9 @@ class Service:
 
         old = {s: signal.signal(s, on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
         try:
-            while not self._stop.wait(0.5):
+            while not self._stop.wait(0.2):
+                for line in self.runner.messages():  # the loop's messages: to the log
+                    log.info("%s", line)
                 if self.runner.crashed is not None:
                     log.error("the control loop has stopped: %r", self.runner.crashed)
                     return 1
