@@ -28,6 +28,15 @@ Replies to one client come back in the order of its requests: while a
 connection has commands waiting in its worker, its server verbs queue
 behind them.
 
+Sharing one interpreter with a real-time loop: the loop thread must get the
+interpreter lock the moment its deadline comes.  So on a wall clock the
+server's threads *stand aside* between requests from just before each tick
+until the tick has run (they read the tick's phase from the hub), run at a
+lower OS priority, serve at most ``max_rate`` requests a second (pipelined
+lines beyond it wait in their buffer, reading pauses), and the interpreter's
+switch interval is cut to 0.5 ms, bounding what any wait for the lock can
+cost the loop.  ``bench/bench_server.py`` measures the effect.
+
 Robust by construction: request lines are bounded (:data:`MAX_LINE`; longer
 gets ``ERR too-long`` and the connection closes), as are the number of
 clients, each client's queued requests (reading pauses, TCP pushes back)
