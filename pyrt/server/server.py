@@ -313,7 +313,7 @@ class Server:
             sys.setswitchinterval(self.switch_interval_s)
         self._thread = threading.Thread(target=self._io_main, name="pyrt-server-io", daemon=True)
         self._thread.start()
-        log.info("serving %s on %s:%d", self.robot.name, *self.address)
+        log.debug("serving %s on %s:%d", self.robot.name, *self.address)
         return self.address
 
     def close(self, timeout_s: float = 2.0) -> None:
