@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 from _gripper_rig import MS, make_rig, signed
 
+from pyrt.boards.gripper import P8155_PA
 from pyrt.errors import CommandError
 
 #: 002's central fix, with pyrt's stall watchdog behind it.
@@ -71,11 +72,10 @@ def test_routine_raising_runs_the_reflex_in_the_same_tick():
     rig.loop.run(200)
     assert rig.board.dac != 0x80
 
-    def broken():
+    def unplugged():  # the 8155 port that SENSORS reads fails
         raise RuntimeError("sensor board unplugged")
 
-    rig.ctl.queue.routine("SENSORS").fn = broken
-    rig.ctl.queue._fns[0x0473] = broken  # the queue dispatches through its table
+    rig.cpu.map_xdata(P8155_PA, read=unplugged)
     tick = None
     for _ in range(200):
         rig.loop.run(1)

@@ -155,7 +155,7 @@ class Loop:
             handler.fault_sink = self._report_fault
             handler.tick_source = lambda: self.tick_index
             handler.timer = self.clock.timer
-            handler.enable_timing(self.timing)
+            handler.enable_timing(self.timing, track_ticks=not self.clock.virtual)
             self.queues.append(handler)
             self._handlers.append(handler.tick)
             self._handler_names.append(name or f"queue:{handler.name}")
@@ -402,8 +402,8 @@ class Loop:
             taken = [(q, q.take_samples()) for q in self.queues]
 
             def write_summary() -> None:
-                for q, (addrs, durs) in taken:
-                    q.fold_into_accumulators(addrs, durs)
+                for q, samples in taken:
+                    q.fold_into_accumulators(samples)
                 log.summary(now, self.statistics(fold=False))
 
             log.defer(write_summary)

@@ -142,7 +142,8 @@ class ReadyQueue:
         self._walk = QueueChecker(self._mem, self._t, self._q, capacity).check
         self._routines: dict[int, Routine] = {}
         self._by_name: dict[str, Routine] = {}
-        self._fns: dict[int, Callable[[], None]] = {}
+        # address -> (body, period byte image or None, period byte address)
+        self._dispatch: dict[int, tuple[Callable[[], None], bytearray | None, int]] = {}
         self._fold_lock = threading.Lock()
         self.enable_timing(False)
         self._interrupts = True
@@ -199,10 +200,11 @@ class ReadyQueue:
             raise ValueError(f"a routine named {name!r} is already registered")
         routine = Routine(address, name, fn)
         self._routines[address] = routine
-        self._fns[address] = fn
+        self._dispatch[address] = (fn, None, 0)
         self._by_name[key] = routine
-        if self._stats is not None:
+        if self._stats is not None and self._samples is not None:
             self._stats[address] = Accumulator(name)
+            self._samples[address] = []
         return routine
 
     def add_periodic(
@@ -217,58 +219,31 @@ class ReadyQueue:
         constant, a :class:`ByteRef` to a RAM byte (the gripper's 43/44/45:
         changeable at run time, and the fastest form), or any zero-argument
         callable returning 0..255."""
-        mem, q16, t, slots = self._mem, self._q16, self._t, self._slot_range
-        put = self._put
-        # Three specialisations of the same routine, chosen once: this is the
-        # hot path.  The slot search is ReadyQueue._put, inlined.
         if isinstance(period, ByteRef):
             pmem, paddr = period.mem, period.address
-            period_fn = period
-
-            def self_scheduling() -> None:
-                fn()
-                n = pmem[paddr]
-                for i in slots:
-                    if not q16[i]:
-                        mem[t + i] = n
-                        q16[i] = address
-                        return
-                put(address, n)  # raises QueueFullError
-
+            period_fn: Callable[[], int] = period
         elif callable(period):
             period_fn = period
-
-            def self_scheduling() -> None:
-                fn()
-                n = period_fn()
-                if not 0 <= n <= 255:
-                    raise ValueError(f"period of {name} must be 00..FF, got {n!r}")
-                for i in slots:
-                    if not q16[i]:
-                        mem[t + i] = n
-                        q16[i] = address
-                        return
-                put(address, n)
-
+            pmem, paddr = None, 0
         else:
-            n_const = int(period)
-            if not 0 <= n_const <= 255:
+            if not 0 <= int(period) <= 255:
                 raise ValueError(f"period of {name} must be 00..FF, got {period!r}")
+            pmem, paddr = bytearray([int(period)]), 0
+            period_fn = ByteRef(pmem, 0)
 
-            def period_fn() -> int:
-                return n_const
-
-            def self_scheduling() -> None:
-                fn()
-                for i in slots:
-                    if not q16[i]:
-                        mem[t + i] = n_const
-                        q16[i] = address
-                        return
-                put(address, n_const)
+        def self_scheduling() -> None:
+            fn()
+            n = period_fn()
+            if not 0 <= n <= 255:
+                raise ValueError(f"period of {name} must be 00..FF, got {n!r}")
+            self._put(address, n)
 
         routine = self.register(address, name, self_scheduling)
         routine.period = period_fn
+        if pmem is not None:
+            # The dispatcher runs the body and reschedules it itself, from the
+            # period byte: the same thing, one call less on the hot path.
+            self._dispatch[address] = (fn, pmem, paddr)
         return routine
 
     def routine(self, task: int | str) -> Routine:
@@ -360,48 +335,47 @@ class ReadyQueue:
 
     # -- timing ------------------------------------------------------------
 
-    def enable_timing(self, on: bool = True) -> None:
+    def enable_timing(self, on: bool = True, track_ticks: bool = True) -> None:
         """Measure each routine's execution time (off: no cost at all).
 
-        While a check runs, each routine's address and duration are appended
-        to two flat lists; :meth:`fold_timing` folds them into the per-routine
-        accumulators with numpy, in bulk, so the per-dispatch cost is one
-        timer read and two appends.
+        Each dispatch appends its duration to its routine's sample list (one
+        timer read, one append); every few thousand samples they are folded
+        into the accumulators with numpy, in bulk.  With ``track_ticks`` the
+        routines run in the current tick are also kept, for overrun records
+        (a loop on virtual time cannot overrun and turns it off).
         """
         if on:
             self._stats = {a: Accumulator(r.name) for a, r in self._routines.items()}
-            self._run_addr: list[int] | None = []
-            self._run_dur: list[int] | None = []
+            self._samples: dict[int, list[int]] | None = {a: [] for a in self._routines}
         else:
             self._stats = None
-            self._run_addr = self._run_dur = None
-        self._tick_start = 0
+            self._samples = None
+        self._track = on and track_ticks
+        self._pending = 0
+        self._tick_log: list[tuple[int, int]] = []
         self._checked_at = -1
 
-    def take_samples(self, keep_tick: bool = False) -> tuple[list[int], list[int]]:
+    def take_samples(self) -> dict[int, list[int]]:
         """Hand over the samples recorded so far and start new lists (loop
-        thread), so that folding them can happen in another thread
-        (:meth:`fold_into_accumulators`).  With ``keep_tick`` (taken in the
-        middle of a tick) the current tick's entries stay for its overrun record."""
-        addrs, durs = self._run_addr, self._run_dur
-        if not durs:
-            return [], []
-        keep = keep_tick and self._checked_at == self.now_ns
-        start = self._tick_start if keep else len(durs)
-        self._run_addr, self._run_dur = addrs[start:], durs[start:]
-        self._tick_start = 0
-        return addrs[:start], durs[:start]
+        thread, O(routines)), so that folding them can happen in another
+        thread (:meth:`fold_into_accumulators`)."""
+        taken = self._samples
+        if not taken or not self._pending:
+            return {}
+        self._samples = {a: [] for a in taken}
+        self._pending = 0
+        return taken
 
-    def fold_into_accumulators(self, addrs: list[int], durs: list[int]) -> None:
+    def fold_into_accumulators(self, samples: dict[int, list[int]]) -> None:
         """Fold samples taken with :meth:`take_samples` (any thread)."""
-        if durs and self._stats is not None:
+        if samples and self._stats is not None:
             with self._fold_lock:
-                fold_samples(self._stats, addrs, durs)
+                fold_samples(self._stats, samples)
 
     def fold_timing(self) -> None:
         """Fold every recorded sample into the accumulators (the loop thread)."""
-        if self._stats is not None and self._run_dur:
-            self.fold_into_accumulators(*self.take_samples())
+        if self._stats is not None and self._pending:
+            self.fold_into_accumulators(self.take_samples())
 
     def accumulators(self, fold: bool = True) -> list[Accumulator]:
         """The timing accumulators (empty when timing is off); with ``fold``,
@@ -420,14 +394,10 @@ class ReadyQueue:
 
     def tasks_in_tick(self, now_ns: int) -> list[tuple[str, int]]:
         """``(name, duration_ns)`` of the routines run in the tick at ``now_ns``."""
-        if self._run_dur is None or self._checked_at != now_ns:
+        if not self._track or self._checked_at != now_ns:
             return []
-        start = self._tick_start
         names = self._routines
-        return [
-            (names[a].name if a in names else f"{a:04X}", d)
-            for a, d in zip(self._run_addr[start:], self._run_dur[start:], strict=True)
-        ]
+        return [(names[a].name if a in names else f"{a:04X}", d) for a, d in self._tick_log]
 
     # -- faults ------------------------------------------------------------
 
@@ -497,28 +467,39 @@ class ReadyQueue:
         ready = self._walk()  # csrc/readyq.c: decrement, free, collect
         if not ready:
             return
-        fns = self._fns
+        table = self._dispatch
+        mem, q16, t, slots = self._mem, self._q16, self._t, self._slot_range
+        timer = self.timer if self._samples is not None else None
+        log: list[tuple[int, int]] | None = None
         a = 0
         try:
-            if self._stats is None:
-                for a in ready:
-                    fns[a]()
-            else:
-                durs = self._run_dur
-                if len(durs) >= _FOLD_AT:
+            if timer is not None:
+                if self._pending >= _FOLD_AT:
                     self.fold_timing()
-                    durs = self._run_dur
-                add_a = self._run_addr.append
-                add_d = durs.append
-                self._tick_start = len(durs)
-                self._checked_at = self.now_ns
-                timer = self.timer
+                samples = self._samples
+                if self._track:
+                    log = []
+                    self._tick_log = log
+                    self._checked_at = self.now_ns
+                self._pending += len(ready)
                 t0 = timer()
-                for a in ready:
-                    fns[a]()
+            for a in ready:
+                fn, pmem, paddr = table[a]
+                fn()
+                if pmem is not None:  # self-scheduling: again, with its period now
+                    n = pmem[paddr]
+                    for i in slots:
+                        if not q16[i]:
+                            mem[t + i] = n
+                            q16[i] = a
+                            break
+                    else:
+                        self._put(a, n)  # raises QueueFullError
+                if timer is not None:
                     t1 = timer()
-                    add_a(a)
-                    add_d(t1 - t0)
+                    samples[a].append(t1 - t0)
+                    if log is not None:
+                        log.append((a, t1 - t0))
                     t0 = t1
         except Exception as exc:
             r = self._routines.get(a)
@@ -529,24 +510,20 @@ class ReadyQueue:
                 self.trip(f"{type(exc).__name__}: {exc}", source=r.name, tb=_tb.format_exc())
 
 
-def fold_samples(stats: dict[int, Accumulator], addrs: list[int], durs: list[int]) -> None:
-    """Add samples (routine address, duration ns) to the accumulators, in bulk."""
-    a = np.asarray(addrs, dtype=np.int64)
-    d = np.asarray(durs, dtype=np.int64)
-    np.maximum(d, 0, out=d)
-    bins = _bin_indices(d)
-    for addr in np.unique(a).tolist():
+def fold_samples(stats: dict[int, Accumulator], samples: dict[int, list[int]]) -> None:
+    """Add each routine's duration samples (ns) to its accumulator, in bulk."""
+    for addr, durs in samples.items():
         acc = stats.get(addr)
-        if acc is None:
+        if acc is None or not durs:
             continue
-        mask = a == addr
-        dd = d[mask]
-        acc.calls += int(dd.size)
-        acc.total += int(dd.sum())
-        m = int(dd.max())
+        d = np.fromiter(durs, dtype=np.int64, count=len(durs))
+        np.maximum(d, 0, out=d)
+        acc.calls += d.size
+        acc.total += int(d.sum())
+        m = int(d.max())
         if m > acc.max:
             acc.max = m
-        counts = np.bincount(bins[mask], minlength=NBINS)
+        counts = np.bincount(_bin_indices(d), minlength=NBINS)
         hist = acc.hist
         for i in np.flatnonzero(counts).tolist():
             hist[i] += int(counts[i])

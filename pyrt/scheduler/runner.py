@@ -270,13 +270,13 @@ class Runner:
         loop only hands over its raw samples (O(1)), so looking does not
         cause an overrun.  ``take_fault`` as for :meth:`call`."""
         taken = self.call(
-            lambda: [(q, q.take_samples(keep_tick=True)) for q in self.loop.queues],
+            lambda: [(q, q.take_samples()) for q in self.loop.queues],
             timeout_s=timeout_s,
             name="stats",
             take_fault=take_fault,
         )
-        for q, (addrs, durs) in taken:
-            q.fold_into_accumulators(addrs, durs)
+        for q, samples in taken:
+            q.fold_into_accumulators(samples)
         return self.loop.statistics(fold=False)
 
     # -- waiting -----------------------------------------------------------
