@@ -19,6 +19,7 @@ import re
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Protocol, TextIO
 
+from pyrt.commands._motion import motion_type_lines, parse_motion
 from pyrt.commands.scope import ScopeCommand
 from pyrt.commands.shell import CommandShell
 from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
@@ -565,6 +566,23 @@ class GripperShell(CommandShell):
             addr = parse_hex(key[4:], "RAM address", 0x7F)
             return Source.item(self.ctl.ram, addr)
         raise CommandError(f"no channel {name!r}; scope list shows them")
+
+    def do_motion(self, arg: str) -> None:
+        """motion [TYPE key=value ...]: queue a motion of any registered type; alone: list them.
+
+        motion gripper_move target=-6022 is 'P -1786' (values are decimal
+        numbers where they parse as numbers)."""
+        record = parse_motion(arg)
+        if record is None:
+            self.say("motion types (motion TYPE key=value ...):")
+            for line in motion_type_lines():
+                self.say(line)
+            return
+        if self.executor is None:
+            raise CommandError("motion: this console runs no motion queue")
+        self.runner.call(self.ctl.check_can_move)
+        n = self.runner.submit_motion(record)  # type: ignore[attr-defined]
+        self.say(f"motion {record.type} queued ({n} waiting)")
 
     def do_quit(self, arg: str) -> bool:
         """quit: null the drive current and leave."""

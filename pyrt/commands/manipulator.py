@@ -11,7 +11,9 @@ the rest is that object's command and arguments, names case-insensitive::
 
 Top-level words (section 18 and pyrt's): ``quit`` (stop every motor, then
 exit), ``log [FILE]`` (toggle the state log), ``debug``, ``help [object]``,
-``wait``, ``sleep``, ``stats``, ``status``, ``sim``, ``ack``.
+``wait``, ``sleep``, ``stats``, ``status``, ``sim``, ``ack``, and ``motion
+TYPE [key=value ...]`` (any registered motion type, built-in or plug-in,
+queued as ``to`` is; ``motion`` alone lists them).
 
 Everything that reads or changes the robot runs in the loop's thread through
 the runner's mailbox; a bad or refused command prints one ``error:`` line
@@ -24,11 +26,14 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol, TextIO
 
+from pyrt.commands._motion import motion_type_lines, parse_motion
 from pyrt.commands.shell import CommandShell
 from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
 from pyrt.robots.axis import POLYAXIS, Axis
-from pyrt.robots.polyaxis import MoveRecord, PolyAxis
+from pyrt.robots.paths import hare_path_record
+from pyrt.robots.polyaxis import PolyAxis
 from pyrt.robots.stops import StopReason
+from pyrt.scheduler.motion import get_motion_type
 from pyrt.scheduler.report import format_statistics
 
 __all__ = ["OBJECT_COMMANDS", "ManipulatorShell"]
@@ -265,7 +270,7 @@ class ManipulatorShell(CommandShell):
                                "it); nothing moved")
         self.runner.call(pa.check_target, target)
         waiting = self.runner.call(lambda: pa.active or len(self.station.motion) > 0)
-        n = self.runner.submit_motion(MoveRecord(target, blend=mode == "blend"))
+        n = self.runner.submit_motion(hare_path_record(target, blend=mode == "blend"))
         x, y, z = target
         if waiting:
             self.say(f"{pa.name}: to ({x:g}, {y:g}, {z:g}) queued ({n} waiting)")
@@ -285,6 +290,35 @@ class ManipulatorShell(CommandShell):
         self.say(f"{self.pa.name}: pattern {path} started; log {self.station.pattern_log}")
 
     # -- the words ----------------------------------------------------------------
+
+    def do_motion(self, arg: str) -> None:
+        """motion [TYPE key=value ...]: queue a motion of any registered type; alone: list them.
+
+        Values are numbers where they parse as numbers (motion hare_path x=0
+        y=0 z=120 blend=0 is 'to 0 0 120').  A type with a check(robot,
+        params) class method is checked now (a refusal moves nothing); the
+        stop conditions apply to every motion."""
+        record = parse_motion(arg)
+        if record is None:
+            self.say("motion types (motion TYPE key=value ...):")
+            for line in motion_type_lines():
+                self.say(line)
+            return
+        pa = self.pa
+        self.runner.call(self.station.check_ready, f"motion {record.type}")
+        job = self.pattern_job
+        if job is not None and not job.done:
+            raise CommandError(f"motion {record.type}: a pattern is running ('{pa.name} stop' "
+                               "ends it); nothing moved")
+        check = getattr(get_motion_type(record.type), "check", None)
+        if callable(check):
+            self.runner.call(check, pa, record.params)
+        waiting = self.runner.call(lambda: pa.active or len(self.station.motion) > 0)
+        n = self.runner.submit_motion(record)
+        if waiting:
+            self.say(f"{pa.name}: motion {record.type} queued ({n} waiting)")
+        else:
+            self.say(f"{pa.name}: motion {record.type}")
 
     def do_help(self, arg: str) -> None:
         """help [object]: list the commands, or one object's commands."""

@@ -21,19 +21,30 @@ the last ``d`` cm before the corner and the first ``d`` after it the path is
 ``B + d1*s + (d2 - d1) * 2d * g(u)``, ``u = (s + d) / 2d``, with Paul's
 quartic ``g(u) = u**3 - u**4 / 2``: position, direction and curvature are
 continuous at both ends, and the hare keeps its speed through the turn.
+
+:class:`HarePath` is this path as pyrt's built-in manipulator motion type
+(``hare_path``, :mod:`pyrt.scheduler.motion`): ``to x y z [blend]`` queues
+``MotionRecord("hare_path", {"x": x, "y": y, "z": z, "blend": 0 or 1})``.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
+
+from pyrt.errors import CommandError
+from pyrt.scheduler.motion import MotionRecord, MotionType, register_motion_type
 
 __all__ = [
     "END_SNAP",
     "VIA_BELOW",
     "Hare",
+    "HarePath",
     "Segment",
+    "hare_path_record",
+    "path_target",
     "paul_blend",
     "paul_g",
     "plan_segments",
@@ -215,3 +226,72 @@ class Hare:
             n = max(1, math.ceil(seg.length / step))
             pts.extend(seg.at(seg.length * i / n) for i in range(n + 1))
         return pts
+
+
+def _coordinate(params: Mapping[str, Any], key: str) -> float:
+    if key not in params:
+        raise CommandError(f"hare_path: parameter {key!r} missing (x, y, z in cm)")
+    v = params[key]
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+        raise CommandError(f"hare_path: {key} must be a finite number of cm, got {v!r}")
+    return float(v)
+
+
+def path_target(params: Mapping[str, Any]) -> tuple[Vec, bool]:
+    """``(target, blend)`` of a ``hare_path`` record; CommandError if malformed."""
+    unknown = sorted(set(params) - {"x", "y", "z", "blend"})
+    if unknown:
+        raise CommandError(f"hare_path: unknown parameter(s) {', '.join(unknown)}; "
+                           "takes x, y, z and blend")
+    target = (_coordinate(params, "x"), _coordinate(params, "y"), _coordinate(params, "z"))
+    blend = params.get("blend", False)
+    if blend not in (0, 1):  # True, False, 0, 1, 0.0, 1.0
+        raise CommandError(f"hare_path: blend must be 0 or 1, got {blend!r}")
+    return target, bool(blend)
+
+
+def hare_path_record(target: Sequence[float], blend: bool = False) -> MotionRecord:
+    """The motion record of ``to x y z [blend]``."""
+    return MotionRecord(HarePath.name, {"x": float(target[0]), "y": float(target[1]),
+                                        "z": float(target[2]), "blend": int(bool(blend))})
+
+
+class HarePath(MotionType):
+    """The manipulator's straight-line move (``to``) as a motion type.
+
+    ``start`` plans the path from where the source is (one or two segments,
+    the neck turn, blended if asked) through the PolyAxis's checks, which
+    refuse a target or a path it may not take; ``step`` runs the hare on by
+    the poll's ``dt`` and sets ``robot.hare_position``, the point the error
+    signals chase.  The move never ends by itself: the PolyAxis's stop
+    conditions (ENDPOINT_STOP and the others) end it.
+    """
+
+    name = "hare_path"
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.hare: Hare | None = None
+        #: Where the move ends: ENDPOINT_STOP and STUCK_STOP measure from it.
+        self.endpoint: Vec | None = None
+
+    @classmethod
+    def check(cls, robot: Any, params: Mapping[str, Any]) -> None:
+        """Refuse now (CommandError) a record that could never start."""
+        target, _ = path_target(params)
+        robot.check_target(target)
+
+    def start(self, robot: Any, record: MotionRecord, now_ns: int) -> None:
+        target, blend = path_target(record.params)
+        self.robot = robot
+        self.hare = robot.plan_path(target, blend=blend)
+        self.endpoint = target
+
+    def step(self, now_ns: int) -> None:
+        robot = self.robot
+        hare = self.hare
+        assert hare is not None
+        robot.hare_position = hare.advance(robot.dt, robot.settled_at_turn)
+
+
+register_motion_type(HarePath.name, HarePath)

@@ -10,14 +10,29 @@ Every control poll (:meth:`PolyAxis.poll`, the polyaxis-poll task):
    attachments): position and distErr (the RMS length residual);
 3. the residual net force on the source is the sum of the measured tensions
    along the ropes plus the net weight (buoyancy in D2O when submerged);
-4. during a move the hare advances (:mod:`pyrt.robots.paths`), the error
+4. during a move the running motion (:mod:`pyrt.scheduler.motion`: the
+   built-in ``hare_path`` of :mod:`pyrt.robots.paths`, or any plug-in
+   motion type) is stepped by the PolyAxis's :class:`MotionExecutor`, which
+   takes the queued motion records in order; the motion sets the hare
+   (``hare_position``), the point the source is driven after; the error
    signals are set (``errorSignal``: length errors against the hare on every
    rope, off-side ropes driven toward OFFSIDE_TENSION, the others free; or
    ``errorSignalAll``: every rope driven toward the equilibrium tensions),
    the ten fuzzy rules run for every Axis in one batched C call
    (:class:`pyrt.native.FuzzyBatch`), each Motor gets its new desired
    velocity and applies DV_LIMIT and the speed limits in its poll;
-5. the five stop conditions (:mod:`pyrt.robots.stops`) are checked.
+5. the five stop conditions (:mod:`pyrt.robots.stops`) are checked, here
+   and not in the motion, so no motion type can bypass the safety stops.
+
+A motion type for the manipulator gets the PolyAxis as its robot.  It may
+read ``position``, ``dist_err``, ``tensions``, ``lengths``,
+``net_force``, ``now_s`` and ``dt`` (the time since the last poll, s), may
+call ``check_target``, and sets ``hare_position`` in each ``step``; an
+``endpoint`` attribute (None by default) arms ENDPOINT_STOP and STUCK_STOP.
+An exception in its ``step``, or a hare that is not a finite point inside
+the vessel or neck, is a fault of the manipulator (the reflex: every motor
+stopped, windings off, queued motions dropped); a motion that ends itself
+stops the motors with ``DONE`` and its reason.
 
 Any stop stops every motor of the manipulator (windings off) and hands the
 axes back to standalone control.  The safety stops (tension, net force) are
@@ -33,7 +48,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Generator, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
 
@@ -46,8 +60,9 @@ from pyrt.native import FuzzyBatch, FuzzyInput, FuzzyParams, PositionFinder, Sta
 from pyrt.robots._neck import NeckRing, ring_contact
 from pyrt.robots.av import AV
 from pyrt.robots.axis import POLYAXIS, Axis
-from pyrt.robots.paths import VIA_BELOW, Hare, plan_segments
+from pyrt.robots.paths import VIA_BELOW, Hare, HarePath, hare_path_record, plan_segments
 from pyrt.robots.stops import SAFETY_STOPS, StopCheck, StopReason, StopRecord
+from pyrt.scheduler.motion import MotionExecutor, MotionRecord, MotionType, get_motion_type
 from pyrt.scheduler.runner import MotionQueue
 
 __all__ = [
@@ -56,7 +71,6 @@ __all__ = [
     "MIN_TOP_SEGMENT",
     "NEAR_END_CM",
     "PATTERN_PAUSE_S",
-    "MoveRecord",
     "PolyAxis",
     "parse_pattern",
 ]
@@ -81,14 +95,6 @@ _FI = FuzzyInput
 
 def _dist(a: Sequence[float], b: Sequence[float]) -> float:
     return math.sqrt((a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2 + (a[2] - b[2]) ** 2)
-
-
-@dataclass(frozen=True)
-class MoveRecord:
-    """One queued ``to`` (001's motion record, copied whole onto the motion queue)."""
-
-    target: tuple[float, float, float]
-    blend: bool = False
 
 
 def parse_pattern(path: str | Path) -> tuple[Path, list[Vec]]:
@@ -265,9 +271,16 @@ class PolyAxis:
         self.on_fault: Callable[[str, str], object] | None = None
         #: Called with (StopRecord) after every stop.
         self.on_stop: list[Callable[[StopRecord], None]] = []
-        #: The motion queue of MoveRecords (set by the station), emptied by
-        #: :meth:`next_move` between moves and cleared by any abnormal stop.
+        #: The motion queue of MotionRecords (set by the station), emptied by
+        #: the executor between moves and cleared by any abnormal stop.
         self.motion: MotionQueue | None = None
+        #: Starts queued motion records one at a time and steps the running one.
+        self.executor = MotionExecutor(self, self._take_motion, self._motion_done,
+                                       self._motion_failed)
+        #: The motion driving the source now (None between moves).
+        self.running: MotionType | None = None
+        #: Seconds since the previous control poll (what a motion steps by).
+        self.dt = self.poll_s
         #: Where the state log goes (one line at a time), or None.
         self.log: Callable[[str], None] | None = None
         self.debug = False
@@ -505,9 +518,9 @@ class PolyAxis:
                                "cannot be held within the tension bounds: "
                                + "; ".join(problems) + "; nothing moved")
 
-    def to(self, target: Sequence[float], *, blend: bool = False) -> Hare:
-        """Start a move to ``target`` (global cm) after the checks; re-arms the
-        tension stops.  Every Axis goes to PolyAxis control (polyActivate)."""
+    def plan_path(self, target: Sequence[float], *, blend: bool = False) -> Hare:
+        """The hare for a move from here to ``target`` after every check
+        (CommandError with the reason if refused; nothing changes)."""
         self.check_target(target)
         tgt: Vec = tuple(float(c) for c in target)  # type: ignore[assignment]
         start = self.position
@@ -519,26 +532,95 @@ class PolyAxis:
                 raise CommandError(
                     f"{self.name} to: refused: the path passes ({p[0]:.1f}, {p[1]:.1f}, "
                     f"{p[2]:.1f}), {why}; nothing moved")
-        # accepted: hand every axis to PolyAxis control
+        return hare
+
+    def to(self, target: Sequence[float], *, blend: bool = False) -> Hare:
+        """Start a move to ``target`` (global cm) now, after the checks: the
+        ``hare_path`` motion; re-arms the tension stops.  Every Axis goes to
+        PolyAxis control (polyActivate)."""
+        motion = self.begin(hare_path_record(target, blend))
+        assert isinstance(motion, HarePath) and motion.hare is not None
+        return motion.hare
+
+    def begin(self, record: MotionRecord) -> MotionType:
+        """Start ``record`` now instead of queueing it (a running motion is
+        replaced, as a new ``to`` re-targets a move); CommandError if refused,
+        and then nothing changes."""
+        cls = get_motion_type(record.type)
+        motion = cls()
+        try:
+            motion.start(self, record, round(self.now_s * 1e9))
+        except CommandError:
+            raise
+        except Exception as exc:
+            raise CommandError(f"{self.name} {record.type}: refused: "
+                               f"{type(exc).__name__}: {exc}") from None
+        old, self.running = self.running, None
+        ex = self.executor
+        if old is not None and ex.current is old:
+            ex.abort(f"replaced by {record.type}")
+        ex.current = motion
+        ex.record = record
+        self.hare_position = None
+        self._engage(motion)
+        return motion
+
+    def _take_motion(self) -> MotionRecord | None:
+        q = self.motion
+        return None if q is None else q.get()
+
+    def _engage(self, motion: MotionType) -> None:
+        """A motion has started: every Axis under PolyAxis control, the stop
+        conditions armed (tension stops on again), the hare where the source is."""
         for a, length in zip(self.axes, self.lengths, strict=True):
             if a.mode != POLYAXIS:
                 a.polyActivate(length if self.polls else a.getLength())
-        self.hare = hare
-        self.hare_position = hare.position
+        endpoint = getattr(motion, "endpoint", None)
+        tgt: Vec | None = None if endpoint is None else tuple(  # type: ignore[assignment]
+            float(c) for c in endpoint)
+        hare = getattr(motion, "hare", None)
+        self.hare = hare if isinstance(hare, Hare) else None
+        if self.hare_position is None:  # not stepped yet: the hare starts at the source
+            self.hare_position = self.hare.position if self.hare is not None else self.position
         self.endpoint = tgt
         self.tension_stop = True
-        self.stops = StopCheck(start, tgt, end_error=self.end_error,
+        self.stops = StopCheck(self.position, tgt, end_error=self.end_error,
                                find_tolerance=self.find_tolerance, stuck_time=self.stuck_time,
                                low_tension=self.low_tension, max_tension=self.max_tension,
                                net_force_limit=self.net_forcelimit, tension_stops=True)
         self._prev_e = None
         self._prev_te = None
         self._last_dv = [0.0] * self.n
+        self.running = motion
         self.active = True
         self.moves += 1
-        self._log(f"TO {self.now_s:.3f} {tgt[0]:.4f} {tgt[1]:.4f} {tgt[2]:.4f} "
-                  f"{len(segs)} {int(hare.blend)}")
-        return hare
+        if self.hare is not None and tgt is not None:
+            self._log(f"TO {self.now_s:.3f} {tgt[0]:.4f} {tgt[1]:.4f} {tgt[2]:.4f} "
+                      f"{len(self.hare.segments)} {int(self.hare.blend)}")
+        else:
+            self._log(f"MOTION {self.now_s:.3f} {motion.name or type(motion).__name__}")
+
+    def _motion_done(self, motion: MotionType) -> None:
+        """The executor's on_done: a refused record is reported; a motion that
+        ended itself stops the manipulator (DONE)."""
+        reason = motion.stop_reason or ""
+        if motion is not self.running:
+            if reason.startswith("refused") and self.stdout is not None:
+                self.stdout.write(f"queued move dropped: {reason.removeprefix('refused: ')}\n")
+            return
+        self.running = None
+        if self.active and not reason.startswith("failed"):
+            self.halt(StopReason.DONE, reason or f"{motion.name} done")
+
+    def _motion_failed(self, cause: str, motion: MotionType) -> None:
+        """The executor's on_error: a motion raised; a fault of the manipulator."""
+        self._fault(f"motion {motion.name or type(motion).__name__} failed: {cause}")
+
+    def _fault(self, detail: str) -> None:
+        self.running = None
+        self.halt(StopReason.FAULT, detail)
+        if self.on_fault is not None:
+            self.on_fault(detail, self.name)
 
     def stop(self) -> None:
         """The ``stop`` command: every motor stopped, the move ended."""
@@ -557,6 +639,9 @@ class PolyAxis:
         """End the move: stop every motor, record and report why."""
         was_active = self.active
         self.active = False
+        running, self.running = self.running, None
+        if running is not None and self.executor.current is running:
+            self.executor.abort(f"{reason.value}: {detail}")
         self.stop_motors()
         rec = StopRecord(reason, detail, self.position, self.now_s, self.endpoint)
         if was_active or reason in (StopReason.STOP, StopReason.FAULT):
@@ -579,24 +664,9 @@ class PolyAxis:
             self.halt(StopReason.FAULT, str(getattr(fault, "cause", fault)))
         else:
             self.stop_motors()
+        self.executor.abort(f"fault: {getattr(fault, 'cause', fault)}")
         if self.motion is not None:
             self.motion.clear()
-
-    def next_move(self) -> bool:
-        """Between moves, start the next queued MoveRecord; True if one started.
-        A record refused now (the world changed since it was checked) is
-        reported and dropped."""
-        q = self.motion
-        if self.active or q is None or not len(q):
-            return False
-        rec = q.get()
-        try:
-            self.to(rec.target, blend=rec.blend)
-        except CommandError as exc:
-            if self.stdout is not None:
-                self.stdout.write(f"queued move dropped: {exc}\n")
-            return False
-        return True
 
     @property
     def moving(self) -> bool:
@@ -684,6 +754,7 @@ class PolyAxis:
         dt = self.poll_s if last is None else max(0.0, now_s - last)
         self._last_poll_s = now_s
         self.polls += 1
+        self.dt = dt
         try:
             self.measure()
         except NativeError as exc:
@@ -697,6 +768,19 @@ class PolyAxis:
                     self.on_fault(self.position_error, self.name)
             return
         self.position_error = None
+        ex = self.executor
+        if ex.current is not None or (self.motion is not None and len(self.motion)):
+            if ex.current is None:  # a new motion sets the hare in its first step
+                self.hare_position = None
+            ex.poll(round(now_s * 1e9))
+            m = ex.current
+            if m is not None and m is not self.running:
+                self._engage(m)
+            if self.active and self.running is not None and not isinstance(self.running,
+                                                                            HarePath):
+                why = self._hare_refusal(self.hare_position)
+                if why is not None:
+                    self._fault(f"motion {self.running.name} {why}")
         if self.active:
             self._drive(now_s, dt)
         for a in self.axes:
@@ -706,8 +790,23 @@ class PolyAxis:
             self._debug_next = now_s + 1.0
             self.stdout.write(self.status_line() + "\n")
 
-    def _settled_at_turn(self) -> bool:
+    def settled_at_turn(self) -> bool:
+        """The source has come to rest at the neck turn (the hare may go on)."""
         return _dist(self.position, self.via) <= max(self.find_tolerance, self.end_error)
+
+    def _hare_refusal(self, hp: object) -> str | None:
+        """Why a plug-in motion's hare may not be chased, or None."""
+        try:
+            x = tuple(float(c) for c in hp)  # type: ignore[attr-defined]
+        except (TypeError, ValueError):
+            return f"set the hare to {hp!r}, not a point"
+        if len(x) != 3 or not all(math.isfinite(c) for c in x):
+            return f"set the hare to {hp!r}, not a finite point"
+        why = self.refusal(x)
+        if why is not None:
+            return f"put the hare at ({x[0]:.1f}, {x[1]:.1f}, {x[2]:.1f}), {why}"
+        self.hare_position = x  # type: ignore[assignment]
+        return None
 
     def error_signal(self, hare: Sequence[float]) -> None:
         """``errorSignal``: length errors on every rope; off-side ropes driven
@@ -770,14 +869,15 @@ class PolyAxis:
         return length
 
     def _drive(self, now_s: float, dt: float) -> None:
-        hare = self.hare
-        assert hare is not None and self.stops is not None
-        hp = hare.advance(dt, self._settled_at_turn)
-        self.hare_position = hp
+        assert self.stops is not None
+        hp = self.hare_position
+        if hp is None:
+            hp = self.hare_position = self.position
         self.error_signal(hp)
         e, te = self.error_lengths, self.error_tensions
         pe, pte = self._prev_e, self._prev_te
-        near = 1.0 - _dist(self.position, hare.end) / NEAR_END_CM
+        end = self.endpoint
+        near = 0.0 if end is None else 1.0 - _dist(self.position, end) / NEAR_END_CM
         near = 0.0 if near < 0.0 else near
         k = 1.0 / (dt if dt > 0 else self.poll_s)
         tens, want, free, last = self.tensions, self.desired_tensions, self.free, self._last_dv

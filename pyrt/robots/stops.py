@@ -13,8 +13,13 @@
 The two tension stops can be switched off (``tensionStop`` toggles them;
 every ``to`` switches them on again).  The safety stops (tension and net
 force) are checked first: a move that ends at its endpoint with a rope out
-of bounds is a tension stop.  ``STOP`` is the operator's ``stop`` command
-and ``FAULT`` anything else that stopped the manipulator.
+of bounds is a tension stop.  ``STOP`` is the operator's ``stop`` command,
+``DONE`` a motion type that ended by itself (its reason in the detail) and
+``FAULT`` anything else that stopped the manipulator.
+
+Every motion is checked, built-in or plug-in: a motion without an endpoint
+(``endpoint=None``: a plug-in that ends by itself) has no ENDPOINT_STOP or
+STUCK_STOP, but the three safety stops always apply.
 
 "Closer" for STUCK_STOP means closer by more than :data:`STUCK_PROGRESS`
 (the position finder's resolution is far coarser than floating point).
@@ -48,6 +53,7 @@ class StopReason(enum.Enum):
     LOW_TENSION_STOP = "LOW_TENSION_STOP"
     HIGH_TENSION_STOP = "HIGH_TENSION_STOP"
     STOP = "STOP"
+    DONE = "DONE"
     FAULT = "FAULT"
 
 
@@ -75,11 +81,12 @@ class StopRecord:
 class StopCheck:
     """The five conditions for one move (see the module text)."""
 
-    def __init__(self, start: Sequence[float], endpoint: Sequence[float], *, end_error: float,
+    def __init__(self, start: Sequence[float], endpoint: Sequence[float] | None, *,
+                 end_error: float,
                  find_tolerance: float, stuck_time: float, low_tension: float,
                  max_tension: float, net_force_limit: float, tension_stops: bool = True):
         self.start = tuple(float(c) for c in start)
-        self.endpoint = tuple(float(c) for c in endpoint)
+        self.endpoint = None if endpoint is None else tuple(float(c) for c in endpoint)
         self.end_error = end_error
         self.find_tolerance = find_tolerance
         self.stuck_time = stuck_time
@@ -87,7 +94,7 @@ class StopCheck:
         self.max_tension = max_tension
         self.net_force_limit = net_force_limit
         self.tension_stops = tension_stops
-        self.total = _dist(self.start, self.endpoint)
+        self.total = math.inf if self.endpoint is None else _dist(self.start, self.endpoint)
         self.best = math.inf
         self.best_time: float | None = None
 
@@ -112,6 +119,8 @@ class StopCheck:
             return (StopReason.NET_FORCE_STOP,
                     f"net force {net_force:.2f} N above NET_FORCELIMIT "
                     f"{self.net_force_limit:g} N")
+        if self.endpoint is None:
+            return None
         d = _dist(position, self.endpoint)
         radius = self.endpoint_radius(dist_err)
         if d <= radius:

@@ -1,11 +1,13 @@
 """The manipulator's self-scheduling tasks: polyaxis-poll and axis-poll.
 
-* ``POLYAXIS`` (polyaxis-poll): between moves, the next record of the
-  motion queue is started (:meth:`pyrt.robots.polyaxis.PolyAxis.next_move`);
-  then :meth:`pyrt.robots.polyaxis.PolyAxis.poll`, the whole co-ordinated
-  control poll (sensors, position finder, error
+* ``POLYAXIS`` (polyaxis-poll): :meth:`pyrt.robots.polyaxis.PolyAxis.poll`,
+  the whole co-ordinated control poll (sensors, position finder; the
+  PolyAxis's motion executor starting the next queued motion record between
+  moves and stepping the running motion, which sets the hare; error
   signals, one batched fuzzy call, the motors of every axis under PolyAxis
-  control, the stop conditions);
+  control, the stop conditions).  An exception in a motion is a fault of
+  the manipulator (the executor hands it to the PolyAxis, which trips the
+  ready queue: the reflex stops every motor and drops the queue);
 * ``AXES`` (axis-poll): :meth:`pyrt.robots.axis.Axis.poll` for every axis
   under standalone control (STEP_MODE moves of ``axis1 up 5`` and the like,
   encoder read loops).
@@ -36,8 +38,6 @@ def attach_manipulator(queue: ReadyQueue, polyaxis: PolyAxis, *, poll_checks: in
     axes = polyaxis.axes
 
     def polyaxis_poll() -> None:
-        if polyaxis.motion is not None and not polyaxis.active:
-            polyaxis.next_move()
         polyaxis.poll(queue.now_ns * 1e-9)
 
     def axis_poll() -> None:

@@ -1,0 +1,282 @@
+"""Manipulator motions as motion types: hare_path, the 'motion' word, plug-in types and the stop conditions."""
+
+from __future__ import annotations
+
+import io
+import math
+import sys
+import textwrap
+
+import pytest
+from _manipulator_rig import make_station
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pyrt.commands._motion import parse_motion, parse_value
+from pyrt.commands.gripper import GripperShell
+from pyrt.commands.manipulator import ManipulatorShell
+from pyrt.errors import CommandError
+from pyrt.robots.paths import HarePath, path_target
+from pyrt.robots.stops import StopReason
+from pyrt.scheduler import Loop, SimClock
+from pyrt.scheduler import motion as motion_mod
+from pyrt.scheduler.motion import MotionRecord, MotionType, register_motion_type
+from pyrt.station.gripper import build_gripper
+
+#: A plug-in motion published by a test distribution: it reads a different
+#: sensor (a rope's loadcell tension) and moves the hare sideways until that
+#: tension has fallen to ``until`` newtons.
+SWAY = '''
+from pyrt.scheduler.motion import MotionType
+
+
+class Sway(MotionType):
+    """Moves the hare sideways until one rope's tension falls to a value."""
+
+    name = "sway"
+
+    def start(self, robot, record, now_ns):
+        p = record.params
+        self.pa = robot
+        self.rope = int(p["rope"])
+        self.until = float(p["until"])
+        self.speed = float(p.get("speed", 2.0))
+        if not 0 <= self.rope < robot.n:
+            raise ValueError(f"no rope {self.rope}")
+        self.hare = robot.position
+
+    def step(self, now_ns):
+        pa = self.pa
+        t = pa.tensions[self.rope]
+        if t <= self.until:
+            self.stop(f"{pa.axes[self.rope].name} eased to {t:.2f} N")
+            return
+        x, y, z = self.hare
+        self.hare = (x, y + self.speed * pa.dt, z)
+        pa.hare_position = self.hare
+'''
+
+
+@pytest.fixture
+def sway(tmp_path, monkeypatch):
+    """The 'sway' motion type, found only through its distribution's entry point."""
+    pkg = tmp_path / "plugins" / "labsway"
+    pkg.mkdir(parents=True)
+    (pkg / "__init__.py").write_text(textwrap.dedent(SWAY))
+    dist = tmp_path / "plugins" / "labsway-1.0.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: labsway\nVersion: 1.0\n")
+    (dist / "entry_points.txt").write_text("[pyrt.motion_types]\nsway = labsway:Sway\n")
+    monkeypatch.syspath_prepend(str(tmp_path / "plugins"))
+    monkeypatch.setattr(motion_mod, "_loaded_entry_points", False)
+    monkeypatch.delitem(motion_mod._registry, "sway", raising=False)
+    yield
+    motion_mod._registry.pop("sway", None)
+    sys.modules.pop("labsway", None)
+
+
+@pytest.fixture
+def shell(tmp_path):
+    station, runner = make_station(tmp_path)
+    out = io.StringIO()
+    sh = ManipulatorShell(runner, station, out)
+
+    def run(*lines: str) -> str:
+        start = out.tell()
+        for line in lines:
+            assert not sh.onecmd(line)
+        runner.sleep(0.0)
+        return out.getvalue()[start:]
+
+    yield run, station, runner
+    station.close()
+
+
+def test_to_runs_as_a_hare_path_record(shell):
+    """'to x y z' submits a hare_path record; the PolyAxis's executor runs it to ENDPOINT_STOP."""
+    run, station, _runner = shell
+    text = run("prototype to 20 0 110", "wait")
+    pa = station.polyaxis
+    assert pa.executor.record == MotionRecord("hare_path", {"x": 20.0, "y": 0.0, "z": 110.0,
+                                                           "blend": 0})
+    assert pa.executor.last.stop_reason.startswith("ENDPOINT_STOP: within")
+    assert "ENDPOINT_STOP" in text and not station.motors_running()
+
+
+def test_motion_word_runs_hare_path_like_to(shell):
+    """'motion hare_path x=.. y=.. z=..' is the same move as 'to'; a bad target is refused at once."""
+    run, station, runner = shell
+    text = run("motion hare_path x=-20 y=0 z=110", "wait")
+    assert "prototype: motion hare_path" in text and "ENDPOINT_STOP" in text
+    assert math.dist(station.polyaxis.position, (-20.0, 0.0, 110.0)) <= 1.0
+    moves = station.polyaxis.moves
+    text = run("motion hare_path x=1000 y=0 z=110", "motion hare_path x=0 z=110",
+               "motion hare_path x=0 y=0 z=110 speed=3", "motion hare_path x=0 y=0 z=nan",
+               "motion warp x=1", "motion hare_path 1 2 3")
+    errors = [ln for ln in text.splitlines() if ln.startswith("error:")]
+    assert len(errors) == 6
+    assert "outside the vessel" in errors[0] and "'y' missing" in errors[1]
+    assert "unknown parameter(s) speed" in errors[2] and "finite" in errors[3]
+    assert "unknown motion type 'warp'" in errors[4] and "key=value" in errors[5]
+    runner.sleep(0.5)
+    assert station.polyaxis.moves == moves and not station.motors_running()
+    assert len(station.motion) == 0
+
+
+def test_plugin_motion_is_listed_and_ends_with_its_reason(shell, sway):
+    """An entry-point motion type is listed by 'motion' and runs from the console to its own stop."""
+    run, station, _runner = shell
+    listing = run("motion")
+    assert "hare_path" in listing and "sway " in listing
+    assert "until one rope's tension falls" in listing
+    text = run("motion sway rope=1 until=8.5", "wait")
+    pa = station.polyaxis
+    assert pa.last_stop.reason is StopReason.DONE
+    assert pa.last_stop.detail.startswith("axis1 eased to")
+    assert "DONE: axis1 eased to" in text
+    assert pa.tensions[1] <= 8.5 and not station.motors_running()
+    assert station.fault is None and type(pa.executor.last).__module__ == "labsway"
+
+
+def test_plugin_motion_cannot_bypass_the_tension_stops(shell, sway):
+    """A plug-in motion driving a rope below LOW_TENSION is stopped by the PolyAxis: a fault, motors off."""
+    run, station, _runner = shell
+    pa = station.polyaxis
+    log = []
+    pa.on_stop.append(lambda rec: log.append(list(pa.tensions)))
+    text = run("motion sway rope=1 until=0.5", "prototype to 0 0 100", "wait")
+    assert pa.last_stop.reason is StopReason.LOW_TENSION_STOP
+    assert "FAULT: LOW_TENSION_STOP: axis1 tension" in text
+    assert min(log[0]) < pa.low_tension
+    assert not station.motors_running() and len(station.motion) == 0
+    assert pa.executor.last.stop_reason.startswith("LOW_TENSION_STOP")
+    text = run("motion sway rope=1 until=5")
+    assert "refused: the manipulator is stopped by a fault" in text
+    run("ack")
+    assert station.fault is None and not pa.active
+
+
+class _Raises(MotionType):
+    """Fails on its third step."""
+
+    name = "raises_test"
+
+    def start(self, robot, record, now_ns):
+        self.pa = robot
+        self.n = 0
+
+    def step(self, now_ns):
+        self.n += 1
+        if self.n == 3:
+            raise ZeroDivisionError("sensor gone")
+        self.pa.hare_position = self.pa.position
+
+
+class _Escapes(MotionType):
+    """Puts the hare outside the vessel."""
+
+    name = "escapes_test"
+
+    def start(self, robot, record, now_ns):
+        self.pa = robot
+
+    def step(self, now_ns):
+        self.pa.hare_position = (0.0, 0.0, -5000.0)
+
+
+@pytest.mark.parametrize(("cls", "cause"), [(_Raises, "ZeroDivisionError: sensor gone"),
+                                             (_Escapes, "outside the vessel")])
+def test_a_failing_motion_is_a_fault_with_the_reflex(shell, cls, cause):
+    """An exception in a motion's step, or a hare outside the vessel, trips the manipulator:
+    every motor stopped, the queue dropped, motion refused until ack."""
+    register_motion_type(cls.name, cls, replace=True)
+    run, station, _runner = shell
+    pa = station.polyaxis
+    text = run(f"motion {cls.name}", "prototype to 20 0 110", "wait")
+    assert f"FAULT: motion {cls.name}" in text and cause in text
+    assert pa.last_stop.reason is StopReason.FAULT
+    assert not station.motors_running() and len(station.motion) == 0 and not pa.active
+    assert all(a.mode == "standalone" for a in station.axes)
+    assert "refused" in run("prototype to 20 0 110")
+    run("ack")
+    assert "ENDPOINT_STOP" in run("prototype to 20 0 110", "wait")
+
+
+def test_queued_record_refused_at_start_is_dropped(shell):
+    """A queued record its type refuses when it comes to start is reported and moves nothing."""
+    run, station, runner = shell
+    pa = station.polyaxis
+    text = run("prototype to 10 0 100", "motion hare_path x=0 y=0 z=100 blend=1", "wait")
+    runner.messages()
+    runner.call(station.motion.put, MotionRecord("hare_path", {"x": 0, "y": 0, "z": 9000}))
+    runner.sleep(0.2)
+    assert "ENDPOINT_STOP" in text and not pa.active
+    assert any("queued move dropped: " in m and "outside the vessel" in m
+               for m in runner.messages())
+    assert pa.executor.last.stop_reason.startswith("refused: ")
+    assert not station.motors_running()
+
+
+def test_hare_path_parameters():
+    """path_target reads x, y, z and blend; anything else is refused."""
+    assert path_target({"x": 1, "y": 2.5, "z": -3}) == ((1.0, 2.5, -3.0), False)
+    assert path_target({"x": 1, "y": 2, "z": 3, "blend": 1}) == ((1.0, 2.0, 3.0), True)
+    for bad in [{"x": 1, "y": 2}, {"x": "a", "y": 2, "z": 3}, {"x": True, "y": 2, "z": 3},
+                {"x": 1, "y": 2, "z": 3, "blend": 2}, {"x": 1, "y": 2, "z": 3, "w": 0},
+                {"x": math.inf, "y": 2, "z": 3}]:
+        with pytest.raises(CommandError):
+            path_target(bad)
+    assert HarePath.name == "hare_path"
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.text(alphabet=st.characters(blacklist_categories=("Cs",)), max_size=40))
+def test_motion_line_parser_never_crashes(text):
+    """Any line is a record, None, or a CommandError; never another exception."""
+    try:
+        rec = parse_motion("hare_path " + text)
+    except CommandError:
+        return
+    assert rec is not None and rec.type == "hare_path"
+    assert all(k.isidentifier() for k in rec.params)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.one_of(st.integers(), st.floats(allow_nan=False, allow_infinity=False), st.text()))
+def test_values_parse_as_numbers_where_they_parse(value):
+    """Numbers come back as numbers (ints as ints); other words stay words."""
+    got = parse_value(str(value))
+    if isinstance(value, int):
+        assert got == value and isinstance(got, int)
+    elif isinstance(value, float):
+        assert got == value
+    elif not isinstance(got, str):
+        assert math.isfinite(got) and float(value) == got
+
+
+def test_gripper_console_motion_word():
+    """The gripper console lists the motion types and queues a gripper_move by name."""
+    gs = build_gripper(Loop(SimClock()))
+    out = io.StringIO()
+    sh = GripperShell(gs.runner, gs.controller, out, plant=gs.plant, scope=gs.scope,
+                      executor=gs.executor)
+    gs.runner.start()
+    try:
+        sh.onecmd("I")
+        gs.runner.messages()
+        out.seek(0)
+        out.truncate()
+        for line in ("motion", "motion gripper_move target=-4096", "wait", "T",
+                     "motion gripper_move", "motion nosuch"):
+            sh.onecmd(line)
+        lines = out.getvalue().splitlines()
+        assert any(ln.strip().startswith("gripper_move") for ln in lines)
+        assert "motion gripper_move queued (1 waiting)" in lines
+        assert "F000" in lines
+        assert gs.executor.last.stop_reason is not None
+        errors = [ln for ln in lines if ln.startswith("error:")]
+        assert len(errors) == 1 and "unknown motion type 'nosuch'" in errors[0]
+        gs.runner.sleep(0.05)
+        assert any(m.startswith("move refused: ") for m in gs.runner.messages())
+    finally:
+        gs.shutdown()
