@@ -5,7 +5,7 @@ from __future__ import annotations
 import io
 import math
 import sys
-import textwrap
+from pathlib import Path
 
 import pytest
 from _manipulator_rig import make_station
@@ -23,38 +23,17 @@ from pyrt.scheduler import motion as motion_mod
 from pyrt.scheduler.motion import MotionRecord, MotionType, register_motion_type
 from pyrt.station.gripper import build_gripper
 
-#: A plug-in motion published by a test distribution: it reads a different
-#: sensor (a rope's loadcell tension) and moves the hare sideways until that
-#: tension has fallen to ``until`` newtons.
-SWAY = '''
-from pyrt.scheduler.motion import MotionType
+#: A plug-in motion published by a test distribution: README's example (it
+#: reads a different sensor, a rope's loadcell tension, and moves the hare
+#: sideways until that tension has fallen to ``until`` newtons).
+README = Path(__file__).resolve().parent.parent / "README.md"
 
 
-class Sway(MotionType):
-    """Moves the hare sideways until one rope's tension falls to a value."""
-
-    name = "sway"
-
-    def start(self, robot, record, now_ns):
-        p = record.params
-        self.pa = robot
-        self.rope = int(p["rope"])
-        self.until = float(p["until"])
-        self.speed = float(p.get("speed", 2.0))
-        if not 0 <= self.rope < robot.n:
-            raise ValueError(f"no rope {self.rope}")
-        self.hare = robot.position
-
-    def step(self, now_ns):
-        pa = self.pa
-        t = pa.tensions[self.rope]
-        if t <= self.until:
-            self.stop(f"{pa.axes[self.rope].name} eased to {t:.2f} N")
-            return
-        x, y, z = self.hare
-        self.hare = (x, y + self.speed * pa.dt, z)
-        pa.hare_position = self.hare
-'''
+def readme_example() -> str:
+    """The python block of README's 'Writing a motion type' section."""
+    text = README.read_text(encoding="utf-8")
+    section = text.split("## Writing a motion type", 1)[1]
+    return section.split("```python\n", 1)[1].split("```", 1)[0]
 
 
 @pytest.fixture
@@ -62,7 +41,7 @@ def sway(tmp_path, monkeypatch):
     """The 'sway' motion type, found only through its distribution's entry point."""
     pkg = tmp_path / "plugins" / "labsway"
     pkg.mkdir(parents=True)
-    (pkg / "__init__.py").write_text(textwrap.dedent(SWAY))
+    (pkg / "__init__.py").write_text(readme_example())
     dist = tmp_path / "plugins" / "labsway-1.0.dist-info"
     dist.mkdir()
     (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: labsway\nVersion: 1.0\n")
