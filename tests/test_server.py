@@ -307,6 +307,12 @@ def test_quit_and_unsubscribe():
         assert sv.server.hub.subscribers == 0
         for bad in ("SUBSCRIBE", "SUBSCRIBE 0", "SUBSCRIBE -5", "SUBSCRIBE nan", "SUBSCRIBE 1e9"):
             assert c.request(bad).code == "syntax", bad
+        others = [sv.client() for _ in range(20)]
+        for o in others:
+            o.command("SUBSCRIBE 1000")  # 20,000 samples/s: the limit
+        assert c.request("SUBSCRIBE 1").code == "limit"
+        others[0].command("UNSUBSCRIBE")
+        c.command("SUBSCRIBE 1")
         assert c.command("QUIT") == ["bye"]
         with pytest.raises(ConnectionError):
             c.command("W")

@@ -44,6 +44,7 @@ ERROR_CODES = {
     "full": "too many clients; the connection is closed",
     "idle": "no request within the idle timeout; the connection is closed",
     "internal": "a bug in pyrt; the server goes on serving",
+    "limit": "a server limit was reached (the total subscription rate)",
     "syntax": "a malformed server verb (AUTH, SUBSCRIBE ...)",
     "timeout": "the control loop did not answer in time",
     "too-long": "a request line longer than the limit; the connection is closed",

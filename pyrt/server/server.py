@@ -88,6 +88,9 @@ PUMP_S = 0.005
 #: beyond it the I/O thread pauses, so the network cannot take the CPU
 #: the loop needs.  Twice the DAQ target of 5,000 STATUS requests/s.
 MAX_RATE = 10_000
+#: STATUS lines per second all subscriptions together may ask for: each
+#: sample is read in the loop thread, so their sum is bounded.
+MAX_SUBSCRIPTION_RATE = 20_000
 #: The budget is kept per window of this many seconds.
 RATE_WINDOW_S = 0.01
 #: Niceness added to the server's threads (Linux: per thread), so that the
@@ -217,6 +220,7 @@ class Server:
         command_timeout_s: float = 5.0,
         snapshot_every: int = 1,
         max_rate: float = MAX_RATE,
+        max_subscription_rate: float = MAX_SUBSCRIPTION_RATE,
         nice: int = NICE,
         switch_interval_s: float | None = SWITCH_INTERVAL_S,
     ):
@@ -245,6 +249,7 @@ class Server:
         self.max_pending = max_pending
         self.command_timeout_s = command_timeout_s
         self.max_rate = float(max_rate)
+        self.max_subscription_rate = float(max_subscription_rate)
         self.nice = int(nice)
         self.switch_interval_s = switch_interval_s
         self.max_hz = 1e9 / runner.loop.period_ns
@@ -647,8 +652,8 @@ class Server:
             if conn.closed:
                 continue
             if drop:
-                self.counters["dropped_slow"] += drop.startswith("slow")
                 self._drop(conn, drop)
+                self.counters["dropped_slow"] += drop.startswith("slow")
                 continue
             self._flush(conn)
             if resume and not conn.closed:
@@ -677,7 +682,9 @@ class Server:
         """Hand subscription samples and faults on to the subscribers."""
         fmt = self.robot.format_status
         conns = self._conns
-        for kind, key, t_ns, payload in self.hub.drain():
+        for n, (kind, key, t_ns, payload) in enumerate(self.hub.drain()):
+            if n & 63 == 63:
+                self._stand_aside()
             if kind == "sample":
                 conn = conns.get(key)
                 if conn is not None and conn.subscribed:
@@ -776,6 +783,11 @@ class Server:
             with self._lock:
                 if conn.closed:
                     return format_reply([])
+                others = sum(c.subscribed for c in list(self._conns.values()) if c is not conn)
+                if others + hz > self.max_subscription_rate:
+                    return format_error(
+                        "limit", f"subscriptions would total {others + hz:g} samples/s; "
+                        f"the server serves at most {self.max_subscription_rate:g}")
                 self.hub.subscribe(conn.id, hz)
                 conn.subscribed = hz
             return format_reply(
