@@ -34,7 +34,7 @@ server's threads *stand aside* between requests from just before each tick
 until the tick has run (they read the tick's phase from the hub), run at a
 lower OS priority, serve at most ``max_rate`` requests a second (pipelined
 lines beyond it wait in their buffer, reading pauses), and the interpreter's
-switch interval is cut to 0.5 ms, bounding what any wait for the lock can
+switch interval is cut to 0.2 ms, bounding what any wait for the lock can
 cost the loop.  ``bench/bench_server.py`` measures the effect.
 
 Robust by construction: request lines are bounded (:data:`MAX_LINE`; longer
@@ -105,7 +105,7 @@ GUARD_POLL_S = 0.0001
 #: Longest the loop thread waits for the interpreter lock while a server
 #: thread holds it (``sys.setswitchinterval``; CPython's default is 5 ms,
 #: five ticks).  Set when the server starts, never raised.
-SWITCH_INTERVAL_S = 0.0005
+SWITCH_INTERVAL_S = 0.0002
 
 
 def _lower_priority(nice: int) -> None:
