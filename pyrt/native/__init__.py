@@ -26,6 +26,7 @@ from pyrt.native._findpos import (
     rope_segments,
 )
 from pyrt.native._fuzzy import FuzzyBatch, FuzzyInput, FuzzyParams, FuzzyRule, fuzzy_step
+from pyrt.native._polyctl import PolyControl, ring_contact
 from pyrt.native._readyq import QueueChecker
 from pyrt.native._statics import StaticsSolver
 
@@ -38,6 +39,7 @@ __all__ = [
     "NativeInputError",
     "NoConvergenceError",
     "NonFiniteError",
+    "PolyControl",
     "PositionFinder",
     "PositionResult",
     "QueueChecker",
@@ -52,6 +54,7 @@ __all__ = [
     "freeze_mask",
     "from_excess128",
     "fuzzy_step",
+    "ring_contact",
     "rope_lengths",
     "rope_segments",
 ]

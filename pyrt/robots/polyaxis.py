@@ -56,7 +56,14 @@ import numpy as np
 from pyrt.devices._args import parse_number
 from pyrt.devices.motor import STEP_MODE
 from pyrt.errors import CommandError, ConfigError, NativeError
-from pyrt.native import FuzzyBatch, FuzzyInput, FuzzyParams, PositionFinder, StaticsSolver
+from pyrt.native import (
+    FuzzyBatch,
+    FuzzyInput,
+    FuzzyParams,
+    PolyControl,
+    PositionFinder,
+    StaticsSolver,
+)
 from pyrt.robots._neck import NeckRing, ring_contact
 from pyrt.robots.av import AV
 from pyrt.robots.axis import POLYAXIS, Axis
@@ -192,8 +199,6 @@ class PolyAxis:
         self.offsets: list[Vec] = [a.offset for a in self.axes]  # type: ignore[misc]
         self.ring = av.neck_ring()
         self._ring = NeckRing(*self.ring)
-        #: Last rim angle per rope at the estimate (the next search starts there).
-        self._phi: list[float | None] = [None] * len(self.axes)
         centre = av.vtog((0.0, 0.0, 0.0))
         self.axis_point: Vec = centre
         self.via: Vec = tuple(  # type: ignore[assignment]
@@ -212,8 +217,6 @@ class PolyAxis:
             self.tops, self.bottoms, self.offsets, [a.dead_length for a in self.axes],
             [a.stretch for a in self.axes], [a.dead_length + 1000.0 for a in self.axes],
             ring=self.ring)
-        #: Effective top per rope: its top pulley, or where it bears on the ring.
-        self._eff_tops: list[Vec] = list(self.tops)
         self._names = [a.name for a in self.axes]
         # "far side of the central axis": the bottom's horizontal direction
         self._bdir: list[tuple[float, float] | None] = []
@@ -232,16 +235,30 @@ class PolyAxis:
         inp = self.batch.inputs
         inp[:, _FI.TENSION_LOW] = self.low_tension
         inp[:, _FI.TENSION_HIGH] = self.max_tension
-        if not (_FI.TENSION == 0 and _FI.NEAR_END == 8 and _FI.TENSION_LOW == 9):
-            raise ConfigError("csrc/fuzzy.h input columns moved; update PolyAxis._drive")
-        #: The per-poll columns TENSION .. NEAR_END of the batch's input array.
-        self._rows = inp[:, :9]
-        self._last_dv = [0.0] * self.n
         self._motors = [a.motor for a in self.axes]
+        # The poll's numeric work in two C calls (pyrt.native.PolyControl):
+        # corrected lengths, ring contacts, the solve and the net force; then
+        # the error signals, fuzzy inputs and the batched fuzzy step.
+        rf = self._ring
+        ring = (*rf.centre, *rf.axis, *rf.e1, *rf.e2, rf.radius)
+        wet = (self.source_volume > 0 and liquid_level is not None)
+        try:
+            self._ctl = PolyControl(
+                self.finder, self.batch, tops=self.tops, bottoms=self.bottoms,
+                offsets=self.offsets, stretch=[a.stretch for a in self.axes],
+                dead=[a.dead_length for a in self.axes], ring=ring,
+                axis_point=centre[:2], weight_air=self.weight(math.inf),
+                weight_liquid=self.weight(-math.inf), liquid_level=liquid_level if wet else None,
+                offside_tension=self.offside_tension, near_end_cm=NEAR_END_CM,
+                position=position)
+        except NativeError as exc:
+            raise ConfigError(f"polyaxis {name}: {exc}") from None
+        self._read_tension = [a.loadcell.tension for a in self.axes]
+        self._read_length = [a.encoder.length for a in self.axes]
+        self._encoder_lengths = [0.0] * self.n
 
         # state
         self.position: Vec = tuple(float(c) for c in position)  # type: ignore[assignment]
-        self._start_given = False
         self.dist_err = 0.0
         self.tensions = [0.0] * self.n
         self.lengths = [0.0] * self.n
@@ -265,8 +282,6 @@ class PolyAxis:
         self.polls = 0
         self.now_s = 0.0
         self._last_poll_s: float | None = None
-        self._prev_e: list[float] | None = None
-        self._prev_te: list[float] | None = None
         #: Called with (cause, source) for a safety stop: the ready queue's trip.
         self.on_fault: Callable[[str, str], object] | None = None
         #: Called with (StopRecord) after every stop.
@@ -588,9 +603,7 @@ class PolyAxis:
                                find_tolerance=self.find_tolerance, stuck_time=self.stuck_time,
                                low_tension=self.low_tension, max_tension=self.max_tension,
                                net_force_limit=self.net_forcelimit, tension_stops=True)
-        self._prev_e = None
-        self._prev_te = None
-        self._last_dv = [0.0] * self.n
+        self._ctl.reset_rates()
         self.running = motion
         self.active = True
         self.moves += 1
@@ -676,76 +689,15 @@ class PolyAxis:
     # -- the control poll ------------------------------------------------------------
 
     def measure(self) -> None:
-        """Read every Axis and find the source position (steps 1-3 of the poll)."""
-        axes = self.axes
+        """Read every Axis and find the source position (steps 1-3 of the poll):
+        the loadcells and encoders here, the rest in one C call."""
         tens = self.tensions
-        lens = self.lengths
-        for i, a in enumerate(axes):
-            t = a.loadcell.tension()
-            tens[i] = t
-            lens[i] = a.encoder.length() * (1.0 + a.stretch * (t if t > 0.0 else 0.0)) \
-                - a.dead_length
-        finder = self.finder
-        x = self.position
-        contact = self._ring.contact
-        phis = self._phi
-        eff = self._eff_tops
-        lf = list(lens)
-        moved = False
-        for i in range(self.n):
-            o = self.offsets[i]
-            t0 = self.tops[i]
-            found = contact(t0, (x[0] + o[0], x[1] + o[1], x[2] + o[2]), phis[i])
-            if found is None:
-                phis[i] = None
-                if eff[i] is not t0:
-                    eff[i] = t0
-                    moved = True
-            else:
-                c, phis[i] = found
-                eff[i] = c
-                moved = True
-                lf[i] -= math.sqrt((t0[0] - c[0]) ** 2 + (t0[1] - c[1]) ** 2
-                                   + (t0[2] - c[2]) ** 2)
-        if moved:
-            finder.tops[:] = eff
-        finder.lengths[:] = lf
-        if self._start_given:
-            pos = finder.solve()
-        else:
-            pos = finder.solve(None, np.array(x, float))
-            self._start_given = True
-        px, py, pz = pos.tolist()
-        self.position = (px, py, pz)
-        self.dist_err = finder.rms
-        f = self._net_force_effective(tens)
-        self.net_force = f
-        self.net_force_magnitude = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
-
-    def _net_force_effective(self, tens: Sequence[float]) -> Vec:
-        """Net force at the new estimate with this poll's effective tops (the
-        ring contacts found for the previous estimate, 50 ms old)."""
-        x = self.position
-        tops = self._eff_tops
-        fx, fy, fz = 0.0, 0.0, -self.weight(x[2])
-        sqrt = math.sqrt
-        for i in range(self.n):
-            o = self.offsets[i]
-            qx, qy, qz = x[0] + o[0], x[1] + o[1], x[2] + o[2]
-            tt = tops[i]
-            dx, dy, dz = tt[0] - qx, tt[1] - qy, tt[2] - qz
-            k = tens[i] / (sqrt(dx * dx + dy * dy + dz * dz) or 1e-12)
-            fx += k * dx
-            fy += k * dy
-            fz += k * dz
-            b = self.bottoms[i]
-            if b is not None:
-                dx, dy, dz = b[0] - qx, b[1] - qy, b[2] - qz
-                k = tens[i] / (sqrt(dx * dx + dy * dy + dz * dz) or 1e-12)
-                fx += k * dx
-                fy += k * dy
-                fz += k * dz
-        return (fx, fy, fz)
+        tens[:] = [f() for f in self._read_tension]
+        raw = self._encoder_lengths
+        raw[:] = [f() for f in self._read_length]
+        x, y, z, self.dist_err, self.net_force, self.net_force_magnitude = self._ctl.measure(
+            tens, raw, self.lengths)
+        self.position = (x, y, z)
 
     def poll(self, now_s: float) -> None:
         """One control poll (see the module text)."""
@@ -869,37 +821,27 @@ class PolyAxis:
         return length
 
     def _drive(self, now_s: float, dt: float) -> None:
-        assert self.stops is not None
+        stops = self.stops
+        assert stops is not None
         hp = self.hare_position
         if hp is None:
             hp = self.hare_position = self.position
-        self.error_signal(hp)
-        e, te = self.error_lengths, self.error_tensions
-        pe, pte = self._prev_e, self._prev_te
-        end = self.endpoint
-        near = 0.0 if end is None else 1.0 - _dist(self.position, end) / NEAR_END_CM
-        near = 0.0 if near < 0.0 else near
-        k = 1.0 / (dt if dt > 0 else self.poll_s)
-        tens, want, free, last = self.tensions, self.desired_tensions, self.free, self._last_dv
         motors = self._motors
-        # columns TENSION .. NEAR_END of csrc/fuzzy.h, one row per axis, in one copy
-        self._rows[:] = [
-            (tens[i], want[i], free[i], e[i], motors[i].velocity,
-             0.0 if pe is None else (e[i] - pe[i]) * k,
-             0.0 if pte is None else (te[i] - pte[i]) * k, last[i], near)
-            for i in range(self.n)
-        ]
-        self._prev_e = e.copy()
-        self._prev_te = te.copy()
-        dvs = self.batch.step().tolist()
-        self._last_dv = dvs
+        if self.signal_all:
+            want, _ = self.equilibrium_tensions(hp)
+            self.desired_tensions[:] = want
+            self.free[:] = [0.0] * self.n
+        dvs = self._ctl.drive(
+            hp, [m.velocity for m in motors], self.endpoint,
+            1.0 / (dt if dt > 0 else self.poll_s), self.error_lengths, self.error_tensions,
+            self.desired_tensions, self.free, signal_all=self.signal_all)
         for m, dv in zip(motors, dvs, strict=True):
             m.set_desired_velocity((m.velocity if m.running else m.desired_velocity) + dv)
             m.poll()
         if self.log is not None:
             self._log_state(now_s, dvs)
-        hit = self.stops.check(now_s, self.position, self.dist_err, self.tensions,
-                               self.net_force_magnitude, self._names)
+        hit = stops.check(now_s, self.position, self.dist_err, self.tensions,
+                          self.net_force_magnitude, self._names)
         if hit is not None:
             self.halt(*hit)
 

@@ -1,0 +1,112 @@
+/*
+ * The PolyAxis control poll as two batch kernels (000, section 5).
+ *
+ * pyrt_polyctl_measure (steps 1-3 of the poll): every rope's stretch-
+ * corrected length from its encoder length and tension; where a rope bears
+ * on the neck ring at the current estimate, the rim contact becomes its
+ * effective top (Newton on the rim angle from last poll's angle) and the
+ * piece above the contact leaves the length the finder sees; the prepared
+ * position finder (findpos.h) is solved; the residual net force on the
+ * source at the new estimate (measured tensions along the ropes from the
+ * effective tops and to the bottoms, plus the net weight).
+ *
+ * pyrt_polyctl_drive (step 4, after the motion has set the hare): the error
+ * signals (off-side ropes toward offside_tension, the others free, unless
+ * the caller set desired_tension and is_free itself: errorSignalAll), each
+ * rope's length at the hare over the ring, the length and tension errors,
+ * their rates, the NEAR_END truth, the fuzzy input rows, and one batched
+ * fuzzy step (fuzzy.h) giving every axis's velocity change.
+ *
+ * The caller owns every array; nothing is allocated and nothing is global.
+ * Arrays are n doubles unless noted (n x 3 row-major for points).  A bottom
+ * row of NaN means the rope has no bottom attachment.  A rim angle of NaN
+ * means the rope ran free of the ring at the last poll.
+ */
+#ifndef PYRT_POLYCTL_H
+#define PYRT_POLYCTL_H
+
+#include "pyrt_native.h"
+#include "findpos.h"
+#include "fuzzy.h"
+
+/* Ropes per manipulator: 1 .. PYRT_POLYCTL_MAX_ROPES. */
+#define PYRT_POLYCTL_MAX_ROPES 16
+
+/* Newton steps on the rim angle at most (as pyrt/robots/_neck.py). */
+#define PYRT_POLYCTL_RING_ITER 12
+
+typedef struct {
+    int32_t n;
+    /* geometry, bound once */
+    const double *tops;         /* n x 3 top pulleys, cm */
+    const double *bottoms;      /* n x 3 bottom attachments; NaN rows: none */
+    const double *offsets;      /* n x 3 carriage offsets from the source */
+    const double *stretch;      /* per newton */
+    const double *dead;         /* dead lengths, cm */
+    double ring[13];            /* centre[3], unit axis[3], e1[3], e2[3], radius (<= 0: none) */
+    double axis_point[2];       /* (x, y) of the central axis: the off side */
+    double weight_air;          /* N: the source's weight */
+    double weight_liquid;       /* N: its net weight below liquid_level */
+    double liquid_level;        /* z of the liquid surface (-inf: in air) */
+    double offside_tension;     /* N */
+    double near_end_cm;         /* NEAR_END falls from 1 to 0 over this distance */
+    /* the prepared finder and fuzzy batch, and writable views of their inputs */
+    pyrt_findpos_problem *finder;
+    double *finder_tops;        /* n x 3: the finder's top points */
+    double *finder_lengths;     /* n: the lengths the finder solves for */
+    const pyrt_fuzzy_batch *fuzzy;
+    double *fuzzy_inputs;       /* n x PYRT_FUZZY_NINPUTS: the batch's input rows */
+    /* per-poll inputs */
+    double *tension;            /* measured tensions, N */
+    double *encoder_length;     /* encoder lengths (dead length included), cm */
+    double *velocity;           /* each motor's present velocity, cm/s */
+    double position[3];         /* the estimate (updated by measure) */
+    int32_t use_start;          /* 1: the solve starts from position (then cleared) */
+    double hare[3];             /* the point the source is driven after */
+    double endpoint[3];
+    int32_t has_endpoint;       /* 0: NEAR_END is 0 */
+    double rate_scale;          /* 1 / dt for the error rates, 1/s */
+    int32_t signal_all;         /* 1: desired_tension and is_free were set by the caller */
+    /* state carried between polls */
+    double *phi;                /* rim angle at the estimate per rope (NaN: free) */
+    double *hare_phi;           /* rim angle at the hare per rope (NaN: free) */
+    double *prev_error_length;
+    double *prev_error_tension;
+    int32_t have_prev;          /* 0: the error rates are 0 at this poll */
+    double *last_dv;            /* last poll's velocity changes, cm/s */
+    /* outputs */
+    double *length;             /* corrected length beyond the top pulley, cm */
+    double *desired_tension;    /* N */
+    double *is_free;            /* 1: free, 0: driven toward desired_tension */
+    double *error_length;       /* corrected length - length at the hare, cm */
+    double *error_tension;      /* tension - desired (0 when free), N */
+    double net_force[3];        /* N */
+    double net_force_magnitude; /* N */
+    double dist_err;            /* RMS length residual of the solve, cm */
+} pyrt_polyctl;
+
+/*
+ * Steps 1-3 (see above).  PYRT_EINVAL for a NULL pointer, n out of range
+ * or a finder of another size; PYRT_ENONFINITE for a NaN or infinite
+ * tension or encoder length; otherwise the finder's status (position and
+ * the outputs are left as they were when it fails).
+ */
+int pyrt_polyctl_measure(pyrt_polyctl *c);
+
+/*
+ * Step 4 (see above); the velocity changes are in the fuzzy batch's dv.
+ * PYRT_EINVAL / PYRT_ENONFINITE for bad input, else the fuzzy status.
+ */
+int pyrt_polyctl_drive(pyrt_polyctl *c);
+
+/*
+ * Where the rope from top t to carriage q bears on the ring (13 doubles as
+ * in pyrt_polyctl.ring), starting Newton from rim angle hint (NaN: from
+ * the radius through the straight line's crossing).  *bears is 1 with the
+ * rim point in contact[3] and its angle in *phi, or 0 (contact = t, *phi
+ * NaN) when the rope runs free.  PYRT_EINVAL for a NULL pointer.
+ */
+int pyrt_ring_contact(const double *ring, const double *t, const double *q, double hint,
+                      double *contact, double *phi, int32_t *bears);
+
+#endif /* PYRT_POLYCTL_H */
