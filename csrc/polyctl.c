@@ -124,7 +124,7 @@ static int check_common(const pyrt_polyctl *c)
     if (c->n < 1 || c->n > PYRT_POLYCTL_MAX_ROPES)
         return PYRT_EINVAL;
     if (c->tops == NULL || c->bottoms == NULL || c->offsets == NULL || c->tension == NULL
-        || c->length == NULL || c->phi == NULL)
+        || c->length == NULL || c->phi == NULL || c->position == NULL)
         return PYRT_EINVAL;
     return PYRT_OK;
 }
@@ -141,7 +141,7 @@ int pyrt_polyctl_measure(pyrt_polyctl *c)
     n = c->n;
     if (c->stretch == NULL || c->dead == NULL || c->encoder_length == NULL
         || c->finder == NULL || c->finder_tops == NULL || c->finder_lengths == NULL
-        || c->finder->n != n || c->finder->position == NULL)
+        || c->finder->n != n || c->finder->position == NULL || c->result == NULL)
         return PYRT_EINVAL;
     for (i = 0; i < n; i++)
         if (!isfinite(c->tension[i]) || !isfinite(c->encoder_length[i]))
@@ -182,7 +182,7 @@ int pyrt_polyctl_measure(pyrt_polyctl *c)
     c->position[0] = c->finder->position[0];
     c->position[1] = c->finder->position[1];
     c->position[2] = c->finder->position[2];
-    c->dist_err = c->finder->rms;
+    c->result[0] = c->finder->rms;
     /* the net force at the new estimate, along this poll's effective tops */
     x = c->position;
     fx = 0.0;
@@ -209,10 +209,10 @@ int pyrt_polyctl_measure(pyrt_polyctl *c)
             fz += k * dz;
         }
     }
-    c->net_force[0] = fx;
-    c->net_force[1] = fy;
-    c->net_force[2] = fz;
-    c->net_force_magnitude = sqrt(fx * fx + fy * fy + fz * fz);
+    c->result[1] = fx;
+    c->result[2] = fy;
+    c->result[3] = fz;
+    c->result[4] = sqrt(fx * fx + fy * fy + fz * fz);
     return PYRT_OK;
 }
 
@@ -231,7 +231,7 @@ int pyrt_polyctl_drive(pyrt_polyctl *c)
         || c->is_free == NULL || c->error_length == NULL || c->error_tension == NULL
         || c->finder == NULL || c->finder->residuals == NULL || c->finder->n != n
         || c->fuzzy == NULL || c->fuzzy->n != n || c->fuzzy->dv == NULL
-        || c->fuzzy_inputs == NULL)
+        || c->fuzzy_inputs == NULL || c->hare == NULL)
         return PYRT_EINVAL;
     for (i = 0; i < 3; i++)
         if (!isfinite(c->hare[i]) || (c->has_endpoint && !isfinite(c->endpoint[i])))

@@ -18,7 +18,9 @@
  * fuzzy step (fuzzy.h) giving every axis's velocity change.
  *
  * The caller owns every array; nothing is allocated and nothing is global.
- * Arrays are n doubles unless noted (n x 3 row-major for points).  A bottom
+ * Arrays are n doubles unless noted (n x 3 row-major for points).  The
+ * per-poll inputs and outputs are pointers so that a caller may lay them
+ * out in one block and exchange each call's data in one copy each way.  A bottom
  * row of NaN means the rope has no bottom attachment.  A rim angle of NaN
  * means the rope ran free of the ring at the last poll.
  */
@@ -60,9 +62,9 @@ typedef struct {
     double *tension;            /* measured tensions, N */
     double *encoder_length;     /* encoder lengths (dead length included), cm */
     double *velocity;           /* each motor's present velocity, cm/s */
-    double position[3];         /* the estimate (updated by measure) */
+    double *position;           /* 3: the estimate (measure's result) */
     int32_t use_start;          /* 1: the solve starts from position (then cleared) */
-    double hare[3];             /* the point the source is driven after */
+    double *hare;               /* 3: the point the source is driven after */
     double endpoint[3];
     int32_t has_endpoint;       /* 0: NEAR_END is 0 */
     double rate_scale;          /* 1 / dt for the error rates, 1/s */
@@ -73,16 +75,15 @@ typedef struct {
     double *prev_error_length;
     double *prev_error_tension;
     int32_t have_prev;          /* 0: the error rates are 0 at this poll */
-    double *last_dv;            /* last poll's velocity changes, cm/s */
+    double *last_dv;            /* last poll's velocity changes, cm/s (drive's result) */
     /* outputs */
     double *length;             /* corrected length beyond the top pulley, cm */
     double *desired_tension;    /* N */
     double *is_free;            /* 1: free, 0: driven toward desired_tension */
     double *error_length;       /* corrected length - length at the hare, cm */
     double *error_tension;      /* tension - desired (0 when free), N */
-    double net_force[3];        /* N */
-    double net_force_magnitude; /* N */
-    double dist_err;            /* RMS length residual of the solve, cm */
+    double *result;             /* 5: distErr (the solve's RMS residual, cm), the
+                                   net force x, y, z and its magnitude, N */
 } pyrt_polyctl;
 
 /*

@@ -127,39 +127,50 @@ class PolyControl:
         self._offsets = new("double[]", _points("offsets", offsets, n))
         self._stretch = new("double[]", _finite("stretch", stretch, n))
         self._dead = new("double[]", _finite("dead", dead, n))
-        (self._tension, self._enc, self._vel, self._len, self._want, self._free, self._el,
-         self._et, self._pel, self._pet, self._last) = (new("double[]", n) for _ in range(11))
         self._phi = new("double[]", [_NAN] * n)
         self._hare_phi = new("double[]", [_NAN] * n)
-        # writable views of the finder's and the batch's bound buffers
-        self._views = [ffi.from_buffer(a) for a in (finder.tops, finder.lengths, batch.inputs)]
-        self._dv_view = ffi.from_buffer(batch.dv)
-        self._dv = ffi.cast("double *", self._dv_view)
+        self._prev = new("double[]", 2 * n)
+        # Every per-poll input and output in one block, so that each call
+        # copies its inputs in with one slice assignment and its outputs out
+        # with one unpack:
+        #   measure: tension, encoder_length | length, position[3], result[5]
+        #   drive:   hare[3], velocity | desired, is_free, error_length,
+        #            error_tension, last_dv (= this poll's dv)
+        self._d = d = 3 * n + 8
+        io = self._io = new("double[]", d + 3 + 6 * n)
         c = new("pyrt_polyctl *")
         c.n = n
         c.tops, c.bottoms, c.offsets = self._tops, self._bottoms, self._offsets
         c.stretch, c.dead = self._stretch, self._dead
         c.ring = _ring_array(ring)
-        ap = _finite("axis_point", axis_point, 2)
-        c.axis_point = ap
+        c.axis_point = _finite("axis_point", axis_point, 2)
         c.weight_air = float(weight_air)
         c.weight_liquid = float(weight_liquid)
         c.liquid_level = -math.inf if liquid_level is None else float(liquid_level)
         c.offside_tension = float(offside_tension)
         c.near_end_cm = float(near_end_cm)
-        c.finder = finder._p  # the prepared problem: solved from C
+        # the finder's and the batch's bound buffers: solved and run from C
+        self._views = [ffi.from_buffer(a) for a in (finder.tops, finder.lengths, batch.inputs)]
+        c.finder = finder._p
         c.finder_tops, c.finder_lengths, c.fuzzy_inputs = (
             ffi.cast("double *", v) for v in self._views)
-        c.fuzzy = batch._b  # the bound batch: run from C
-        c.tension, c.encoder_length, c.velocity = self._tension, self._enc, self._vel
+        c.fuzzy = batch._b
+        c.tension, c.encoder_length, c.length = io, io + n, io + 2 * n
+        c.position, c.result = io + 3 * n, io + 3 * n + 3
+        c.hare, c.velocity = io + d, io + d + 3
+        c.desired_tension, c.is_free = io + d + 3 + n, io + d + 3 + 2 * n
+        c.error_length, c.error_tension = io + d + 3 + 3 * n, io + d + 3 + 4 * n
+        c.last_dv = io + d + 3 + 5 * n
         c.phi, c.hare_phi = self._phi, self._hare_phi
-        c.prev_error_length, c.prev_error_tension = self._pel, self._pet
-        c.last_dv = self._last
-        c.length, c.desired_tension, c.is_free = self._len, self._want, self._free
-        c.error_length, c.error_tension = self._el, self._et
-        c.position = _finite("position", position, 3)
+        c.prev_error_length, c.prev_error_tension = self._prev, self._prev + n
+        io[3 * n:3 * n + 3] = _finite("position", position, 3)
         c.use_start = 1
+        c.rate_scale = 0.0
+        self._rate = 0.0
+        self._signal_all = False
         self._c = c
+        self._measured = c.length   # length, position, result: n + 8 doubles
+        self._driven = c.desired_tension  # desired .. last_dv: 5 n doubles
         self._measure = lib.pyrt_polyctl_measure
         self._drive = lib.pyrt_polyctl_drive
         self._unpack = ffi.unpack
@@ -168,13 +179,24 @@ class PolyControl:
 
     def set_position(self, position: Sequence[float]) -> None:
         """Start the next solve from ``position`` (and find ring contacts there)."""
-        self._c.position = _finite("position", position, 3)
+        n = self.n
+        self._io[3 * n:3 * n + 3] = _finite("position", position, 3)
         self._c.use_start = 1
+
+    def set_endpoint(self, endpoint: Sequence[float] | None) -> None:
+        """The endpoint NEAR_END is measured from (None: NEAR_END is 0)."""
+        c = self._c
+        if endpoint is None:
+            c.has_endpoint = 0
+        else:
+            c.endpoint = _finite("endpoint", endpoint, 3)
+            c.has_endpoint = 1
 
     def reset_rates(self) -> None:
         """A new move: no error rates at its first poll, no last velocity change."""
+        n = self.n
         self._c.have_prev = 0
-        self._last[0:self.n] = [0.0] * self.n
+        self._io[self._d + 3 + 5 * n:self._d + 3 + 6 * n] = [0.0] * n
 
     @property
     def rim_angles(self) -> list[float | None]:
@@ -184,49 +206,47 @@ class PolyControl:
     # -- the two calls -------------------------------------------------------------
 
     def measure(self, tensions: list[float], encoder_lengths: list[float],
-                lengths: list[float]) -> tuple[float, float, float, float, Vec, float]:
+                lengths: list[float]) -> list[float]:
         """Steps 1-3: ``lengths`` (corrected, filled in place); returns
-        ``(x, y, z, dist_err, net_force, |net_force|)``.  NativeError when
-        the position cannot be found (nothing is changed then)."""
+        ``[x, y, z, dist_err, fx, fy, fz, |f|]``.  NativeError when the
+        position cannot be found (the lengths are still filled in; the
+        position is kept)."""
         n = self.n
-        self._tension[0:n] = tensions
-        self._enc[0:n] = encoder_lengths
-        c = self._c
-        rc = self._measure(c)
+        self._io[0:2 * n] = tensions + encoder_lengths
+        rc = self._measure(self._c)
+        out = self._unpack(self._measured, n + 8)
+        lengths[:] = out[:n]
         if rc:
             raise_for_status(rc, f"PolyControl.measure ({n} ropes)")
-        lengths[:] = self._unpack(self._len, n)
-        p, f = c.position, c.net_force
-        return p[0], p[1], p[2], c.dist_err, (f[0], f[1], f[2]), c.net_force_magnitude
+        return out[n:]
 
-    def drive(self, hare: Sequence[float], velocities: list[float], endpoint: Vec | None,
-              rate_scale: float, error_lengths: list[float], error_tensions: list[float],
+    def drive(self, hare: Sequence[float], velocities: list[float], rate_scale: float,
+              error_lengths: list[float], error_tensions: list[float],
               desired: list[float], free: list[float], *, signal_all: bool = False
               ) -> list[float]:
-        """Step 4: the error signals (filled in place; with ``signal_all``
-        ``desired`` and ``free`` are read instead), the fuzzy step; returns
-        every axis's velocity change (cm/s)."""
+        """Step 4 against the ``hare``: the error signals (filled in place; with
+        ``signal_all`` ``desired`` and ``free`` are read instead), the fuzzy
+        step with error rates scaled by ``rate_scale`` (1/dt); returns every
+        axis's velocity change (cm/s)."""
         n = self.n
         c = self._c
-        c.hare = hare
-        if endpoint is None:
-            c.has_endpoint = 0
-        else:
-            c.endpoint = endpoint
-            c.has_endpoint = 1
-        c.rate_scale = rate_scale
-        self._vel[0:n] = velocities
+        if rate_scale != self._rate:
+            c.rate_scale = self._rate = rate_scale
+        if signal_all is not self._signal_all:
+            self._signal_all = signal_all = bool(signal_all)
+            c.signal_all = signal_all
+        d = self._d
         if signal_all:
-            self._want[0:n] = desired
-            self._free[0:n] = free
-        c.signal_all = signal_all
+            self._io[d:d + 3 + 3 * n] = [*hare, *velocities, *desired, *free]
+        else:
+            self._io[d:d + 3 + n] = [*hare, *velocities]
         rc = self._drive(c)
         if rc:
             raise_for_status(rc, f"PolyControl.drive ({n} ropes)")
-        unpack = self._unpack
-        error_lengths[:] = unpack(self._el, n)
-        error_tensions[:] = unpack(self._et, n)
+        out = self._unpack(self._driven, 5 * n)
         if not signal_all:
-            desired[:] = unpack(self._want, n)
-            free[:] = unpack(self._free, n)
-        return unpack(self._dv, n)
+            desired[:] = out[:n]
+            free[:] = out[n:2 * n]
+        error_lengths[:] = out[2 * n:3 * n]
+        error_tensions[:] = out[3 * n:4 * n]
+        return out[4 * n:]

@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 from pyrt.errors import CommandError
@@ -73,8 +74,9 @@ class Segment:
     start: Vec
     end: Vec
 
-    @property
+    @cached_property
     def length(self) -> float:
+        """cm (computed once: the control poll asks every poll)."""
         return _norm(_sub(self.end, self.start))
 
     def at(self, s: float) -> Vec:
@@ -132,6 +134,7 @@ class Hare:
         self.waiting = False
         self.position: Vec = self.segments[0].start
         self._half = 0.0
+        self._total = sum(seg.length for seg in self.segments)
         if self.blend:
             a, b = self.segments
             la, lb = a.length, b.length
@@ -152,7 +155,7 @@ class Hare:
 
     def _span(self) -> float:
         if self.blend:
-            return self.segments[0].length + self.segments[1].length
+            return self._total
         return self.segments[self.index].length
 
     @property

@@ -604,6 +604,7 @@ class PolyAxis:
                                low_tension=self.low_tension, max_tension=self.max_tension,
                                net_force_limit=self.net_forcelimit, tension_stops=True)
         self._ctl.reset_rates()
+        self._ctl.set_endpoint(tgt)
         self.running = motion
         self.active = True
         self.moves += 1
@@ -695,9 +696,10 @@ class PolyAxis:
         tens[:] = [f() for f in self._read_tension]
         raw = self._encoder_lengths
         raw[:] = [f() for f in self._read_length]
-        x, y, z, self.dist_err, self.net_force, self.net_force_magnitude = self._ctl.measure(
+        x, y, z, self.dist_err, fx, fy, fz, self.net_force_magnitude = self._ctl.measure(
             tens, raw, self.lengths)
         self.position = (x, y, z)
+        self.net_force = (fx, fy, fz)
 
     def poll(self, now_s: float) -> None:
         """One control poll (see the module text)."""
@@ -832,8 +834,8 @@ class PolyAxis:
             self.desired_tensions[:] = want
             self.free[:] = [0.0] * self.n
         dvs = self._ctl.drive(
-            hp, [m.velocity for m in motors], self.endpoint,
-            1.0 / (dt if dt > 0 else self.poll_s), self.error_lengths, self.error_tensions,
+            hp, [m.velocity for m in motors], 1.0 / (dt if dt > 0 else self.poll_s),
+            self.error_lengths, self.error_tensions,
             self.desired_tensions, self.free, signal_all=self.signal_all)
         for m, dv in zip(motors, dvs, strict=True):
             m.set_desired_velocity((m.velocity if m.running else m.desired_velocity) + dv)

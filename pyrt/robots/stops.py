@@ -106,7 +106,8 @@ class StopCheck:
               tensions: Sequence[float], net_force: float,
               names: Sequence[str]) -> tuple[StopReason, str] | None:
         """The condition that holds now, safety first; None to go on."""
-        if self.tension_stops:
+        if self.tension_stops and (min(tensions) < self.low_tension
+                                   or max(tensions) > self.max_tension):
             for name, t in zip(names, tensions, strict=True):
                 if t < self.low_tension:
                     return (StopReason.LOW_TENSION_STOP,
