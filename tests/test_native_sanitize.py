@@ -3,8 +3,8 @@
 The extension is rebuilt from csrc/ into a temporary directory with
 ``-fsanitize=address,undefined`` (build_native.py reads PYRT_CFLAGS and
 PYRT_LDFLAGS), then a driver runs in a subprocess with libasan preloaded:
-it loads that build as ``pyrt._native`` and calls every findpos, fuzzy and
-convert entry point, good input and bad (including the NULL pointers and
+it loads that build as ``pyrt._native`` and calls every findpos, fuzzy,
+polyctl and convert entry point, good input and bad (including the NULL pointers and
 sizes the Python layer never lets through).  Any sanitizer report aborts
 the driver (``-fno-sanitize-recover=all``), so the test asserts a clean exit;
 a deliberate overflow against the same build shows the sanitizer is live.
@@ -172,6 +172,65 @@ DRIVER = textwrap.dedent(
     assert lib.pyrt_fuzzy_step(1, fp, 1, inp, dv, rules) == lib.PYRT_EINVAL
     fp[0].len_full = math.inf
     assert lib.pyrt_fuzzy_step(1, fp, 1, inp, dv, rules) == lib.PYRT_ENONFINITE
+
+    # ---- polyctl (the control poll) through the Python API
+    ring = (0.0, 0.0, 595.8, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 72.5)
+    ptops = [(0.0, 0.0, 1299.0), (60.0, 0.0, 1299.0), (-60.0, 0.0, 1299.0),
+             (0.0, 60.0, 1299.0), (0.0, -60.0, 1299.0)]
+    pbots = [None, (545.44, 0.0, -250.0), (-545.44, 0.0, -250.0), (0.0, 545.44, -250.0),
+             (0.0, -545.44, -250.0)]
+    pnan = np.array([(NAN,) * 3 if b is None else b for b in pbots])
+    for x in ((400.0, 0.0, 100.0), (0.0, 0.0, 100.0), (5.0, 3.0, 700.0)):
+        pf = nat.PositionFinder(np.array(ptops), pnan)
+        pb = nat.FuzzyBatch(nat.FuzzyParams(), 5)
+        pb.inputs[:, nat.FuzzyInput.TENSION_HIGH] = 200.0
+        ctl = nat.PolyControl(pf, pb, tops=ptops, bottoms=pbots, offsets=[(0.0,) * 3] * 5,
+                              stretch=[2e-5] * 5, dead=[50.0] * 5, ring=ring,
+                              axis_point=(0.0, 0.0), weight_air=52.3, weight_liquid=41.5,
+                              liquid_level=595.8, offside_tension=10.0, near_end_cm=10.0,
+                              position=x)
+        L = [0.0] * 5
+        ctl.set_endpoint((x[0], x[1], x[2] + 5.0))
+        for k in range(10):
+            tens = [20.0 + k, 10.0, 30.0, 15.0, 12.0]
+            enc = [600.0 + k * 0.1, 1100.0, 1100.0, 1100.0, 1100.0]
+            try:
+                ctl.measure(tens, enc, L)
+            except NativeError:
+                continue
+            el, et, want, free = [0.0] * 5, [0.0] * 5, [0.0] * 5, [1.0] * 5
+            ctl.drive((x[0], x[1], x[2] + k), [0.5] * 5, 20.0, el, et, want, free,
+                      signal_all=bool(k % 2))
+        ctl.set_endpoint(None)
+        ctl.reset_rates()
+        refused(ctl.measure, [NAN] * 5, [600.0] * 5, L)
+        refused(ctl.drive, (NAN, 0.0, 0.0), [0.0] * 5, 20.0, L, L[:], L[:], L[:])
+        nat.ring_contact(ring, ptops[1], (x[0] + 1.0, x[1], x[2]), 0.3)
+        nat.ring_contact(ring, ptops[1], x)
+
+    # ---- polyctl straight into C
+    c = ffi.new("pyrt_polyctl *")
+    assert lib.pyrt_polyctl_measure(ffi.NULL) == lib.PYRT_EINVAL
+    assert lib.pyrt_polyctl_drive(ffi.NULL) == lib.PYRT_EINVAL
+    for n in (0, -1, 17):
+        c.n = n
+        assert lib.pyrt_polyctl_measure(c) == lib.PYRT_EINVAL
+        assert lib.pyrt_polyctl_drive(c) == lib.PYRT_EINVAL
+    c.n = 1
+    assert lib.pyrt_polyctl_measure(c) == lib.PYRT_EINVAL     # NULL arrays
+    assert lib.pyrt_polyctl_drive(c) == lib.PYRT_EINVAL
+    pbuf = ffi.new("double[]", 64)
+    c.tops = c.bottoms = c.offsets = c.tension = c.length = c.phi = c.position = pbuf
+    c.stretch = c.dead = c.encoder_length = c.result = pbuf
+    assert lib.pyrt_polyctl_measure(c) == lib.PYRT_EINVAL     # no finder
+    fpp = ffi.new("pyrt_findpos_problem *")
+    fpp.n = 2
+    c.finder = fpp
+    c.finder_tops = c.finder_lengths = pbuf
+    assert lib.pyrt_polyctl_measure(c) == lib.PYRT_EINVAL     # a finder of another size
+    cp, phi, bears = ffi.new("double[3]"), ffi.new("double *"), ffi.new("int32_t *")
+    assert lib.pyrt_ring_contact(ffi.NULL, pbuf, pbuf, NAN, cp, phi, bears) == lib.PYRT_EINVAL
+    assert lib.pyrt_ring_contact(pbuf, pbuf, pbuf, NAN, ffi.NULL, phi, bears) == lib.PYRT_EINVAL
 
     # ---- convert
     assert nat.excess128_many(list(range(-300, 300))).shape == (600,)

@@ -1,0 +1,197 @@
+"""Pure-Python reference of csrc/polyctl.c: the PolyAxis control poll's numeric work.
+
+Operation for operation as the kernel (and as the Python PolyAxis poll it
+replaced): the neck-ring contact by Newton on the rim angle from the last
+poll's angle, the corrected lengths and effective tops, the position solve
+(tests/_ref_findpos.py), the net force, the error signals, the fuzzy input
+rows and the fuzzy step (tests/_ref_fuzzy.py).
+"""
+
+from __future__ import annotations
+
+import math
+
+import _ref_findpos as findpos
+import _ref_fuzzy as fuzzy
+import numpy as np
+
+Vec = tuple[float, float, float]
+ITERATIONS = 12
+
+
+def contact(ring, t, q, hint=None):
+    """(rim point, angle) where the rope t -> q bears on the ring, or None;
+    ``ring`` is (centre, axis, e1, e2, radius) as 13 numbers."""
+    cx0, cy0, cz0, ax0, ax1, ax2, e1x, e1y, e1z, e2x, e2y, e2z, rad = ring
+    if not rad > 0.0:
+        return None
+    tx, ty, tz = t
+    qx, qy, qz = q
+    tcx, tcy, tcz = tx - cx0, ty - cy0, tz - cz0
+    ht = tcx * ax0 + tcy * ax1 + tcz * ax2
+    if not ht > 0.0:
+        return None
+    qcx, qcy, qcz = qx - cx0, qy - cy0, qz - cz0
+    hq = qcx * ax0 + qcy * ax1 + qcz * ax2
+    if not hq < 0.0:
+        return None
+    s = ht / (ht - hq)
+    rx, ry, rz = tcx + s * (qcx - tcx), tcy + s * (qcy - tcy), tcz + s * (qcz - tcz)
+    xr = rx * ax0 + ry * ax1 + rz * ax2
+    rx, ry, rz = rx - xr * ax0, ry - xr * ax1, rz - xr * ax2
+    if rx * rx + ry * ry + rz * rz <= rad * rad:
+        return None
+    if hint is None:
+        phi = math.atan2(rx * e2x + ry * e2y + rz * e2z, rx * e1x + ry * e1y + rz * e1z)
+    else:
+        phi = hint
+    for _ in range(ITERATIONS):
+        cs, sn = math.cos(phi), math.sin(phi)
+        ux, uy, uz = cs * e1x + sn * e2x, cs * e1y + sn * e2y, cs * e1z + sn * e2z
+        px, py, pz = -sn * e1x + cs * e2x, -sn * e1y + cs * e2y, -sn * e1z + cs * e2z
+        cx, cy, cz = cx0 + rad * ux, cy0 + rad * uy, cz0 + rad * uz
+        a = (cx - tx, cy - ty, cz - tz)
+        b = (cx - qx, cy - qy, cz - qz)
+        da = math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+        db = math.sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2])
+        if da < 1e-9 or db < 1e-9:
+            break
+        pa = rad * (a[0] * px + a[1] * py + a[2] * pz) / da
+        pb = rad * (b[0] * px + b[1] * py + b[2] * pz) / db
+        f1 = pa + pb
+        f2 = (rad * rad - pa * pa) / da + (rad * rad - pb * pb) / db
+        f2 -= rad * (ux * (a[0] / da + b[0] / db) + uy * (a[1] / da + b[1] / db)
+                     + uz * (a[2] / da + b[2] / db))
+        step = -f1 / f2 if f2 > 0.0 else (-0.1 if f1 > 0.0 else 0.1)
+        step = min(0.5, max(-0.5, step))
+        phi += step
+        if abs(step) < 1e-10:
+            break
+    cs, sn = math.cos(phi), math.sin(phi)
+    return ((cx0 + rad * (cs * e1x + sn * e2x), cy0 + rad * (cs * e1y + sn * e2y),
+             cz0 + rad * (cs * e1z + sn * e2z)), phi)
+
+
+def _dist(a, b) -> float:
+    return math.sqrt((a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2 + (a[2] - b[2]) ** 2)
+
+
+def rope_length(ring, top, bottom, offset, x) -> float:
+    """A rope's length beyond its top pulley with the source at ``x`` (over the ring)."""
+    q = (x[0] + offset[0], x[1] + offset[1], x[2] + offset[2])
+    found = contact(ring, top, q)
+    head = 0.0
+    if found is not None:
+        head = _dist(top, found[0])
+        top = found[0]
+    length = head + _dist(top, q)
+    if bottom is not None:
+        length += _dist(bottom, q)
+    return length
+
+
+class RefPolyControl:
+    """The reference of :class:`pyrt.native.PolyControl` (same calls, same results)."""
+
+    def __init__(self, params, *, tops, bottoms, offsets, stretch, dead, ring, axis_point,
+                 weight_air, weight_liquid, liquid_level, offside_tension, near_end_cm,
+                 position, tol=0.1):
+        self.params = params
+        self.tops = [tuple(map(float, t)) for t in tops]
+        self.bottoms = [None if b is None else tuple(map(float, b)) for b in bottoms]
+        self.offsets = [tuple(map(float, o)) for o in offsets]
+        self.stretch, self.dead = list(stretch), list(dead)
+        self.ring = tuple(ring)
+        self.axis_point = tuple(axis_point)
+        self.weight_air, self.weight_liquid = weight_air, weight_liquid
+        self.liquid_level = -math.inf if liquid_level is None else liquid_level
+        self.offside_tension, self.near_end_cm = offside_tension, near_end_cm
+        self.position = tuple(position)
+        self.tol = tol
+        n = self.n = len(self.tops)
+        self.phi: list[float | None] = [None] * n
+        self.hare_phi: list[float | None] = [None] * n
+        self.prev: tuple[list[float], list[float]] | None = None
+        self.last_dv = [0.0] * n
+        self.endpoint: Vec | None = None
+        self.tensions = [0.0] * n
+        self.lengths = [0.0] * n
+        self.residuals = [0.0] * n
+        self.rules: list[list[float]] = []
+
+    def set_endpoint(self, endpoint):
+        self.endpoint = None if endpoint is None else tuple(endpoint)
+
+    def reset_rates(self):
+        self.prev = None
+        self.last_dv = [0.0] * self.n
+
+    def measure(self, tensions, encoder_lengths, lengths):
+        n = self.n
+        self.tensions = list(tensions)
+        lens = [encoder_lengths[i] * (1.0 + self.stretch[i] * (t if t > 0.0 else 0.0))
+                - self.dead[i] for i, t in enumerate(tensions)]
+        lengths[:] = lens
+        self.lengths = lens
+        x = self.position
+        eff, lf = [], list(lens)
+        for i in range(n):
+            o, t0 = self.offsets[i], self.tops[i]
+            found = contact(self.ring, t0, (x[0] + o[0], x[1] + o[1], x[2] + o[2]),
+                            self.phi[i])
+            if found is None:
+                self.phi[i] = None
+                eff.append(t0)
+            else:
+                c, self.phi[i] = found
+                eff.append(c)
+                lf[i] -= _dist(t0, c)
+        nan = math.nan
+        bott = np.array([(nan, nan, nan) if b is None else b for b in self.bottoms])
+        pos, rms, res, _ = findpos.find_position(np.array(eff), bott, np.array(lf),
+                                                 np.array(x), offsets=np.array(self.offsets),
+                                                 tol=self.tol)
+        self.position = x = tuple(float(c) for c in pos)
+        self.residuals = [float(r) for r in res]
+        w = self.weight_liquid if x[2] < self.liquid_level else self.weight_air
+        f = [0.0, 0.0, -w]
+        for i in range(n):
+            o = self.offsets[i]
+            q = (x[0] + o[0], x[1] + o[1], x[2] + o[2])
+            for end in (eff[i], self.bottoms[i]):
+                if end is None:
+                    continue
+                d = (end[0] - q[0], end[1] - q[1], end[2] - q[2])
+                k = tensions[i] / (math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) or 1e-12)
+                f = [f[0] + k * d[0], f[1] + k * d[1], f[2] + k * d[2]]
+        mag = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
+        return [x[0], x[1], x[2], float(rms), f[0], f[1], f[2], mag]
+
+    def drive(self, hare, velocities, rate_scale, error_lengths, error_tensions, desired,
+              free, *, signal_all=False):
+        n, x = self.n, self.position
+        if not signal_all:
+            hx, hy = x[0] - self.axis_point[0], x[1] - self.axis_point[1]
+            for i, b in enumerate(self.bottoms):
+                off = b is not None and ((b[0] - self.axis_point[0]) * hx
+                                         + (b[1] - self.axis_point[1]) * hy <= 0.0)
+                desired[i] = self.offside_tension if off else 0.0
+                free[i] = 0.0 if off else 1.0
+        for i in range(n):
+            want = rope_length(self.ring, self.tops[i], self.bottoms[i], self.offsets[i], hare)
+            error_lengths[i] = (self.lengths[i] - self.residuals[i]) - want
+            error_tensions[i] = 0.0 if free[i] else self.tensions[i] - desired[i]
+        near = 0.0
+        if self.endpoint is not None:
+            near = max(0.0, 1.0 - _dist(x, self.endpoint) / self.near_end_cm)
+        rows = []
+        for i in range(n):
+            e, te = error_lengths[i], error_tensions[i]
+            rows.append([self.tensions[i], desired[i], free[i], e, velocities[i],
+                         0.0 if self.prev is None else (e - self.prev[0][i]) * rate_scale,
+                         0.0 if self.prev is None else (te - self.prev[1][i]) * rate_scale,
+                         self.last_dv[i], near, self.params[i][1], self.params[i][2]])
+        self.prev = (list(error_lengths), list(error_tensions))
+        dvs, self.rules = fuzzy.fuzzy_step([p for p, _, _ in self.params], rows)
+        self.last_dv = list(dvs)
+        return list(dvs)
