@@ -133,6 +133,7 @@ class Hare:
         self.v = 0.0
         self.waiting = False
         self.position: Vec = self.segments[0].start
+        self._acc = self.speed * self.speed / (2.0 * self.ramp)
         self._half = 0.0
         self._total = sum(seg.length for seg in self.segments)
         if self.blend:
@@ -172,7 +173,7 @@ class Hare:
     @property
     def acceleration(self) -> float:
         """cm/s2: the top speed is reached over ``ramp`` cm."""
-        return self.speed * self.speed / (2.0 * self.ramp)
+        return self._acc
 
     def speed_at(self, s: float, span: float) -> float:
         """The profile's speed ``s`` cm along a segment of ``span`` cm."""
@@ -192,7 +193,7 @@ class Hare:
             else:
                 return self.position
         if self.s < span:
-            a = self.acceleration
+            a = self._acc
             # accelerate, but never faster than the ramp down allows
             v = min(self.speed, self.v + a * dt,
                     math.sqrt(2.0 * a * max(0.0, span - self.s)) + 0.5 * a * dt)

@@ -24,6 +24,12 @@ Every control poll (:meth:`PolyAxis.poll`, the polyaxis-poll task):
 5. the five stop conditions (:mod:`pyrt.robots.stops`) are checked, here
    and not in the motion, so no motion type can bypass the safety stops.
 
+The numeric work of steps 1-3 (after the device reads) and of step 4 (up to
+the motors) is two C calls per poll (:class:`pyrt.native.PolyControl`,
+csrc/polyctl.c, which calls the prepared finder and the fuzzy batch from
+C): Python reads the devices, steps the motion, sets the motors and checks
+the stops.
+
 A motion type for the manipulator gets the PolyAxis as its robot.  It may
 read ``position``, ``dist_err``, ``tensions``, ``lengths``,
 ``net_force``, ``now_s`` and ``dt`` (the time since the last poll, s), may
@@ -761,32 +767,6 @@ class PolyAxis:
             return f"put the hare at ({x[0]:.1f}, {x[1]:.1f}, {x[2]:.1f}), {why}"
         self.hare_position = x  # type: ignore[assignment]
         return None
-
-    def error_signal(self, hare: Sequence[float]) -> None:
-        """``errorSignal``: length errors on every rope; off-side ropes driven
-        toward OFFSIDE_TENSION, the others free (``errorSignalAll``: every rope
-        toward the equilibrium tensions at the hare)."""
-        res = self.finder.residuals
-        if self.signal_all:
-            want, _ = self.equilibrium_tensions(hare)
-            for i in range(self.n):
-                self.desired_tensions[i] = want[i]
-                self.free[i] = 0.0
-        else:
-            off = self.off_side(self.position)
-            for i in range(self.n):
-                if off[i]:
-                    self.desired_tensions[i] = self.offside_tension
-                    self.free[i] = 0.0
-                else:
-                    self.desired_tensions[i] = 0.0
-                    self.free[i] = 1.0
-        res_l = res.tolist()
-        want_len = self.lengths_at(hare)
-        for i in range(self.n):
-            self.error_lengths[i] = (self.lengths[i] - res_l[i]) - want_len[i]
-            self.error_tensions[i] = (0.0 if self.free[i] else
-                                      self.tensions[i] - self.desired_tensions[i])
 
     def lengths_at(self, x: Sequence[float]) -> list[float]:
         """Every rope's length beyond its top pulley with the source at ``x`` (cm),
