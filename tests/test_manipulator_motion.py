@@ -259,3 +259,29 @@ def test_gripper_console_motion_word():
         assert any(m.startswith("move refused: ") for m in gs.runner.messages())
     finally:
         gs.shutdown()
+
+
+class _BadEndpoint(MotionType):
+    """Declares an endpoint that is not a point."""
+
+    name = "badend_test"
+    endpoint = (0.0, math.nan, 100.0)
+
+    def step(self, now_ns):
+        pass
+
+
+def test_motion_with_a_bad_endpoint_is_dropped_unmoved(shell):
+    """A motion whose endpoint is not a finite point is refused when it starts: no fault, no motor."""
+    register_motion_type(_BadEndpoint.name, _BadEndpoint, replace=True)
+    run, station, runner = shell
+    runner.messages()
+    run("motion badend_test", "wait")
+    runner.sleep(0.2)
+    pa = station.polyaxis
+    assert any("queued move dropped" in m and "not a finite point" in m
+               for m in runner.messages())
+    assert station.fault is None and not pa.active and pa.moves == 0
+    assert not station.motors_running()
+    with pytest.raises(CommandError, match="not a finite point"):
+        runner.call(pa.begin, MotionRecord("badend_test"))

@@ -576,6 +576,7 @@ class PolyAxis:
         except Exception as exc:
             raise CommandError(f"{self.name} {record.type}: refused: "
                                f"{type(exc).__name__}: {exc}") from None
+        tgt = self._endpoint_of(motion)
         old, self.running = self.running, None
         ex = self.executor
         if old is not None and ex.current is old:
@@ -583,22 +584,34 @@ class PolyAxis:
         ex.current = motion
         ex.record = record
         self.hare_position = None
-        self._engage(motion)
+        self._engage(motion, tgt)
         return motion
 
     def _take_motion(self) -> MotionRecord | None:
         q = self.motion
         return None if q is None else q.get()
 
-    def _engage(self, motion: MotionType) -> None:
+    def _endpoint_of(self, motion: MotionType) -> Vec | None:
+        """The motion's ``endpoint`` (None: it has none); CommandError if it is
+        not a finite point."""
+        endpoint = getattr(motion, "endpoint", None)
+        if endpoint is None:
+            return None
+        try:
+            tgt = tuple(float(c) for c in endpoint)
+        except (TypeError, ValueError):
+            tgt = ()
+        if len(tgt) != 3 or not all(math.isfinite(c) for c in tgt):
+            raise CommandError(f"{self.name} {motion.name}: refused: its endpoint "
+                               f"{endpoint!r} is not a finite point; nothing moved")
+        return tgt  # type: ignore[return-value]
+
+    def _engage(self, motion: MotionType, tgt: Vec | None) -> None:
         """A motion has started: every Axis under PolyAxis control, the stop
         conditions armed (tension stops on again), the hare where the source is."""
         for a, length in zip(self.axes, self.lengths, strict=True):
             if a.mode != POLYAXIS:
                 a.polyActivate(length if self.polls else a.getLength())
-        endpoint = getattr(motion, "endpoint", None)
-        tgt: Vec | None = None if endpoint is None else tuple(  # type: ignore[assignment]
-            float(c) for c in endpoint)
         hare = getattr(motion, "hare", None)
         self.hare = hare if isinstance(hare, Hare) else None
         if self.hare_position is None:  # not stepped yet: the hare starts at the source
@@ -735,7 +748,10 @@ class PolyAxis:
             ex.poll(round(now_s * 1e9))
             m = ex.current
             if m is not None and m is not self.running:
-                self._engage(m)
+                try:
+                    self._engage(m, self._endpoint_of(m))
+                except CommandError as exc:  # nothing moved: dropped as a refusal
+                    ex.abort(f"refused: {exc}")
             if self.active and self.running is not None and not isinstance(self.running,
                                                                             HarePath):
                 why = self._hare_refusal(self.hare_position)
