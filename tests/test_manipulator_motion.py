@@ -285,3 +285,32 @@ def test_motion_with_a_bad_endpoint_is_dropped_unmoved(shell):
     assert not station.motors_running()
     with pytest.raises(CommandError, match="not a finite point"):
         runner.call(pa.begin, MotionRecord("badend_test"))
+
+
+_VALUES = st.one_of(st.sampled_from(["0", "1", "-0", "nan", "inf", "1e999", "x", "", "100",
+                                     "9000", "2.5"]),
+                    st.integers(-400, 400).map(str))
+_PARAMS = st.lists(st.tuples(st.sampled_from(["x", "y", "z", "blend", "speed", "1x", "X"]),
+                             _VALUES).map("=".join), max_size=5)
+
+
+@settings(max_examples=25, deadline=None)
+@given(kind=st.sampled_from(["hare_path", "HARE_PATH", "warp", "9", "gripper_move"]),
+       params=_PARAMS)
+def test_motion_word_refusals_move_nothing(tmp_path_factory, kind, params):
+    """Any 'motion' line: no exception escapes, and after a refusal no motor moves."""
+    station, runner = make_station(tmp_path_factory.mktemp("motion"))
+    try:
+        out = io.StringIO()
+        sh = ManipulatorShell(runner, station, out)
+        writes = station.tio10.writes
+        assert not sh.onecmd(" ".join(["motion", kind, *params]))
+        runner.sleep(0.05)
+        text = out.getvalue()
+        assert "internal error" not in text
+        if "error:" in text:
+            assert station.tio10.writes == writes
+            assert not station.motors_running() and not station.polyaxis.active
+            assert len(station.motion) == 0
+    finally:
+        station.close()
