@@ -18,6 +18,7 @@ Run: ``python -m pytest bench/bench_manipulator.py --benchmark-only -s``.
   25.9 µs (0.86x the target); a quiet run of this file gave 19.9 / 26.7 µs
   with the devices alone 8.0 / 12.4 µs, so about half of what is left is
   the device objects (``Motor.poll`` about 2 µs a motor).
+* ``kernels``: the two polyctl calls alone (the numeric share of a poll).
 * ``move``: a complete ``to`` on ``--speed max`` (plant, ready queue,
   write-back, mailbox, all on a SimClock loop) at the manipulator's default
   5 ms tick and at a 1 ms tick; simulated seconds per wall second.
@@ -115,4 +116,29 @@ def test_control_poll_device_share(benchmark, tmp_path, name):
     benchmark.extra_info.update(ropes=pa.n, median_us=round(us, 1), min_us=round(low, 1))
     print(f"\n{name}: device reads and motor polls alone {us:.1f} µs (min {low:.1f}) "
           f"for {pa.n} ropes")
+    station.close()
+
+
+@pytest.mark.benchmark(group="manipulator-control-poll")
+@pytest.mark.parametrize("name", ["prototype", "sno"])
+def test_control_poll_kernels(benchmark, tmp_path, name):
+    """The numeric share of a poll alone: the two polyctl C calls through their wrapper
+    (lengths, ring contacts, solve, net force; error signals, fuzzy), µs."""
+    station, runner = make_station(tmp_path, name)
+    pa = station.polyaxis
+    runner.call(pa.to, MOVES[name])
+    runner.sleep(20.0)
+    ctl = pa._ctl
+    tens, raw = list(pa.tensions), list(pa._encoder_lengths)
+    hare, vel = pa.hare_position, [a.motor.velocity for a in pa.axes]
+    lengths, el, et, want, free = ([0.0] * pa.n for _ in range(5))
+
+    def kernels():
+        ctl.measure(tens, raw, lengths)
+        ctl.drive(hare, vel, 20.0, el, et, want, free)
+
+    benchmark.pedantic(kernels, rounds=2000, iterations=1, warmup_rounds=50)
+    us = benchmark.stats.stats.median * 1e6
+    benchmark.extra_info.update(ropes=pa.n, median_us=round(us, 1))
+    print(f"\n{name}: the two polyctl calls alone {us:.1f} µs for {pa.n} ropes")
     station.close()
