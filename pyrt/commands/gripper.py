@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any, Protocol, TextIO
 
 from pyrt.commands._motion import motion_type_lines, parse_motion
 from pyrt.commands.scope import ScopeCommand
-from pyrt.commands.shell import CommandShell
+from pyrt.commands.shell import CommandShell, parse_number, parse_seconds
 from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
 from pyrt.robots.gripper import GripperMove
 from pyrt.scheduler.motion import MotionExecutor, MotionRecord
@@ -38,7 +38,6 @@ __all__ = ["GripperShell", "gripper_channels", "parse_hex", "parse_target"]
 INIT_TIMEOUT_S = 120.0
 CAL_TIMEOUT_S = 240.0
 WAIT_TIMEOUT_S = 120.0
-MAX_SLEEP_S = 3600.0
 
 _HEX = re.compile(r"[0-9A-Fa-f]+")
 _MIN_COUNT = -0x8000
@@ -456,7 +455,7 @@ class GripperShell(CommandShell):
         """wait [SECONDS]: wait until the current move, jog or init ends; say why it ended."""
         timeout = WAIT_TIMEOUT_S
         if arg.strip():
-            timeout = _parse_seconds(arg, "wait")
+            timeout = parse_seconds(arg, "wait")
         ctl = self.ctl
         executor, motion = self.executor, self.runner.motion
 
@@ -491,7 +490,7 @@ class GripperShell(CommandShell):
 
     def do_sleep(self, arg: str) -> None:
         """sleep SECONDS: let the controller run that long (loop time)."""
-        self.runner.sleep(_parse_seconds(arg, "sleep"))
+        self.runner.sleep(parse_seconds(arg, "sleep"))
 
     def do_stats(self, arg: str) -> None:
         """stats: per-task timing of the loop (calls, mean, p99, max, overruns)."""
@@ -516,14 +515,14 @@ class GripperShell(CommandShell):
         if what == "object":
             if len(rest) != 1:
                 raise CommandError("sim object MM (width in mm) or sim object none")
-            width = None if rest[0] == "none" else _parse_number(rest[0], "object width")
+            width = None if rest[0] == "none" else parse_number(rest[0], "object width")
             self._sim(plant.set_object, width)
         elif what == "jog":
             if not rest or rest[0] not in ("open", "close", "off") or len(rest) > 2:
                 raise CommandError("sim jog open|close|off [SECONDS]")
             dur = None
             if len(rest) == 2:
-                dur = int(_parse_seconds(rest[1], "jog") * 1e9)
+                dur = int(parse_seconds(rest[1], "jog") * 1e9)
             self._sim(plant.jog, rest[0], dur)
         elif what == "fault":
             if rest == ["none"]:
@@ -587,20 +586,3 @@ class GripperShell(CommandShell):
     def do_quit(self, arg: str) -> bool:
         """quit: null the drive current and leave."""
         return True
-
-
-def _parse_number(text: str, what: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise CommandError(f"{what} {text!r} is not a number") from None
-    if value != value or value in (float("inf"), float("-inf")):
-        raise CommandError(f"{what} {text!r} is not a number")
-    return value
-
-
-def _parse_seconds(text: str, what: str) -> float:
-    value = _parse_number(text.strip(), f"{what} time")
-    if not 0 <= value <= MAX_SLEEP_S:
-        raise CommandError(f"{what} time must be 0..{MAX_SLEEP_S:g} seconds")
-    return value

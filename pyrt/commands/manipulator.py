@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any, Protocol, TextIO
 
 from pyrt.commands._motion import motion_type_lines, parse_motion
-from pyrt.commands.shell import CommandShell
+from pyrt.commands.shell import CommandShell, parse_number, parse_seconds
 from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
 from pyrt.robots.axis import POLYAXIS, Axis
 from pyrt.robots.paths import hare_path_record
@@ -39,7 +39,6 @@ from pyrt.scheduler.report import format_statistics
 __all__ = ["OBJECT_COMMANDS", "ManipulatorShell"]
 
 WAIT_TIMEOUT_S = 3600.0
-MAX_SLEEP_S = 3600.0
 
 #: Per object kind: command (lower case) -> (method, allowed argument counts, help).
 OBJECT_COMMANDS: dict[str, dict[str, tuple[str, tuple[int, ...], str]]] = {
@@ -353,7 +352,7 @@ class ManipulatorShell(CommandShell):
 
     def do_wait(self, arg: str) -> None:
         """wait [SECONDS]: wait until the move (or pattern, or axis move) ends; say why."""
-        timeout = _seconds(arg, "wait") if arg.strip() else WAIT_TIMEOUT_S
+        timeout = parse_seconds(arg, "wait") if arg.strip() else WAIT_TIMEOUT_S
         st, pa = self.station, self.pa
 
         def busy() -> bool:
@@ -394,11 +393,11 @@ class ManipulatorShell(CommandShell):
 
     def do_sleep(self, arg: str) -> None:
         """sleep SECONDS: let the controller run that long (loop time)."""
-        self.runner.sleep(_seconds(arg, "sleep"))
+        self.runner.sleep(parse_seconds(arg, "sleep"))
 
     def do_stats(self, arg: str) -> None:
         """stats: per-task timing of the loop (calls, mean, p99, max, overruns)."""
-        self.say(format_statistics(self.runner.call(self.runner.loop.statistics)))
+        self.say(format_statistics(self.runner.statistics()))
 
     def do_status(self, arg: str) -> None:
         """status: source position, distErr, residual net force, tensions, time."""
@@ -460,7 +459,7 @@ class ManipulatorShell(CommandShell):
                                "break or none")
         args: list[Any] = [key]
         if what == "slip" and rest:
-            args.append(_number(rest[0], "slip fraction"))
+            args.append(parse_number(rest[0], "slip fraction"))
         elif rest:
             raise CommandError(f"sim fault {what}: takes no more arguments")
 
@@ -477,20 +476,3 @@ class ManipulatorShell(CommandShell):
 def _toggle_debug(pa: PolyAxis) -> bool:
     pa.debug = not pa.debug
     return pa.debug
-
-
-def _number(text: str, what: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise CommandError(f"{what} {text!r} is not a number") from None
-    if value != value or value in (float("inf"), float("-inf")):
-        raise CommandError(f"{what} {text!r} is not a number")
-    return value
-
-
-def _seconds(text: str, what: str) -> float:
-    value = _number(text.strip(), f"{what} time")
-    if not 0 <= value <= MAX_SLEEP_S:
-        raise CommandError(f"{what} time must be 0..{MAX_SLEEP_S:g} seconds")
-    return value

@@ -24,6 +24,7 @@ import shlex
 from collections.abc import Callable
 from typing import Any, TextIO
 
+from pyrt.commands.shell import parse_number
 from pyrt.errors import CommandError
 from pyrt.scope import MODES, Frame, Scope, Source, plot_frame, save_frame
 
@@ -94,7 +95,7 @@ class ScopeCommand:
             return
         if len(rest) < 2:
             raise CommandError("scope trigger: CH LEVEL [rising|falling] [pre FRACTION], or 'off'")
-        channel, level = rest[0], _number(rest[1], "trigger level")
+        channel, level = rest[0], parse_number(rest[1], "trigger level")
         edge, pre = "rising", 0.1
         i = 2
         while i < len(rest):
@@ -103,7 +104,7 @@ class ScopeCommand:
                 edge = word
                 i += 1
             elif word == "pre" and i + 1 < len(rest):
-                pre = _number(rest[i + 1], "pre-trigger fraction")
+                pre = parse_number(rest[i + 1], "pre-trigger fraction")
                 i += 2
             else:
                 raise CommandError(f"scope trigger: unexpected {rest[i]!r}")
@@ -160,13 +161,3 @@ class ScopeCommand:
             raise CommandError("scope plot: one .png file name")
         path = plot_frame(self._frame(), rest[0])
         self.say(f"plotted {path}")
-
-
-def _number(text: str, what: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise CommandError(f"{what} must be a number, got {text!r}") from None
-    if value != value or value in (float("inf"), float("-inf")):
-        raise CommandError(f"{what} must be finite, got {text!r}")
-    return value

@@ -12,7 +12,12 @@ from __future__ import annotations
 import inspect
 from typing import TextIO
 
-__all__ = ["CommandShell"]
+from pyrt.errors import CommandError
+
+__all__ = ["MAX_SLEEP_S", "CommandShell", "parse_number", "parse_seconds"]
+
+#: The longest wait or sleep a console accepts (one hour).
+MAX_SLEEP_S = 3600.0
 
 
 class CommandShell:
@@ -70,3 +75,22 @@ class CommandShell:
         if fn is None:
             return None
         return inspect.getdoc(fn) or ""
+
+
+def parse_number(text: str, what: str) -> float:
+    """A finite float, or CommandError naming ``what``."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise CommandError(f"{what} {text!r} is not a number") from None
+    if value != value or value in (float("inf"), float("-inf")):
+        raise CommandError(f"{what} {text!r} is not a number")
+    return value
+
+
+def parse_seconds(text: str, what: str) -> float:
+    """A time of 0..MAX_SLEEP_S seconds for ``wait``/``sleep``-like words."""
+    value = parse_number(text.strip(), f"{what} time")
+    if not 0 <= value <= MAX_SLEEP_S:
+        raise CommandError(f"{what} time must be 0..{MAX_SLEEP_S:g} seconds")
+    return value
