@@ -41,7 +41,9 @@ def _tick_us(text: str) -> int:
     return value
 
 
-def add_loop_options(parser: argparse.ArgumentParser, default_speed: str = "1") -> None:
+def add_loop_options(
+    parser: argparse.ArgumentParser, default_speed: str = "1", default_tick_us: int = 1000
+) -> None:
     """Add --speed, --tick-us, --timing-log and the real-time knobs."""
     g = parser.add_argument_group("loop")
     g.add_argument(
@@ -57,9 +59,9 @@ def add_loop_options(parser: argparse.ArgumentParser, default_speed: str = "1") 
     g.add_argument(
         "--tick-us",
         type=_tick_us,
-        default=1000,
+        default=default_tick_us,
         metavar="US",
-        help="base tick in µs (default 1000)",
+        help=f"base tick in µs (default {default_tick_us})",
     )
     g.add_argument(
         "--timing-log",

@@ -52,8 +52,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--ideal-sensors", action="store_true",
                    help="switch off encoder quantisation and loadcell noise/offsets")
     p.add_argument("--history", metavar="FILE", help="keep the command history in FILE")
-    add_loop_options(p, default_speed="1")
-    p.set_defaults(run=run, tick_us=DEFAULT_TICK_US)
+    add_loop_options(p, default_speed="1", default_tick_us=DEFAULT_TICK_US)
+    p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
