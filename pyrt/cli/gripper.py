@@ -16,9 +16,11 @@ import sys
 import time
 
 from pyrt.cli._loopopts import add_loop_options, apply_rt_options, make_loop
+from pyrt.cli._serve import add_serve_options, prepare_service
 from pyrt.commands.gripper import GripperShell
 from pyrt.console import Console
 from pyrt.scheduler.runner import Runner
+from pyrt.server import GripperService
 from pyrt.sim.gripper import FAULTS, JawParameters
 from pyrt.station.gripper import build_gripper
 
@@ -65,6 +67,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--no-init", action="store_true", help="do not run I at power-up")
     g.add_argument("--history", metavar="FILE", help="keep the command history in FILE")
     add_loop_options(p, default_speed="1")
+    add_serve_options(p)
     p.set_defaults(run=run)
 
 
@@ -92,6 +95,7 @@ def run(args: argparse.Namespace) -> int:
     station = build_gripper(loop, start=args.start, object_mm=args.object, faults=args.fault)
     runner = station.runner
     posted.append(runner)
+    service = prepare_service(args, runner, GripperService.from_station(station))
     shell = GripperShell(
         runner, station.controller, out, plant=station.plant, scope=station.scope,
         executor=station.executor,
@@ -107,10 +111,14 @@ def run(args: argparse.Namespace) -> int:
     wall0 = time.perf_counter()
     runner.start()
     try:
+        if service is not None:
+            service.start(None if args.headless else lambda m: print(m, file=out, flush=True))
         if not args.no_init:
             shell.onecmd("I")
-        status = console.run()
+        status = service.run_headless() if args.headless else console.run()
     finally:
+        if service is not None:
+            service.close()
         station.shutdown()
     if args.timing_log:
         wall = time.perf_counter() - wall0
