@@ -161,7 +161,7 @@ def prepare_service(args: argparse.Namespace, runner: Any, robot: ServedRobot) -
     host, port = "127.0.0.1", 0
     if args.serve:
         try:
-            host, port = parse_address(args.serve)
+            host, port = parse_address(args.serve, allow_zero=True)
         except ValueError as exc:
             raise ConfigError(f"--serve: {exc}") from None
     server = Server(runner, robot, host, port, token=token)

@@ -88,8 +88,11 @@ def parse_status(line: str) -> Status:
                   fields=fields)
 
 
-def parse_address(text: str, default_host: str = "127.0.0.1") -> tuple[str, int]:
-    """``[HOST:]PORT`` (``[::1]:PORT`` for IPv6) to ``(host, port)``; ValueError when bad."""
+def parse_address(
+    text: str, default_host: str = "127.0.0.1", allow_zero: bool = False
+) -> tuple[str, int]:
+    """``[HOST:]PORT`` (``[::1]:PORT`` for IPv6) to ``(host, port)``; ValueError when bad.
+    ``allow_zero``: port 0 (a server's "any free port") is accepted."""
     t = text.strip()
     host = default_host
     if t.startswith("["):
@@ -100,8 +103,9 @@ def parse_address(text: str, default_host: str = "127.0.0.1") -> tuple[str, int]
     elif ":" in t:
         host, _, t = t.rpartition(":")
         host = host or default_host
-    if not t.isdigit() or not 0 < int(t) <= 65535:
-        raise ValueError(f"port must be 1..65535, got {text!r}")
+    low = 0 if allow_zero else 1
+    if not t.isdigit() or not low <= int(t) <= 65535:
+        raise ValueError(f"port must be {low}..65535, got {text!r}")
     return host, int(t)
 
 
