@@ -25,11 +25,13 @@ import time
 from pathlib import Path
 
 from pyrt.cli._loopopts import add_loop_options, apply_rt_options, make_loop
+from pyrt.cli._serve import add_serve_options, prepare_service
 from pyrt.commands.manipulator import ManipulatorShell
 from pyrt.console import Console
 from pyrt.db import STATIONS, copy_station, default_working_directory
 from pyrt.errors import PyrtError
 from pyrt.scheduler.runner import Runner
+from pyrt.server import ManipulatorService
 from pyrt.sim.sensors import Imperfections
 from pyrt.station.manipulator import ManipulatorStation
 
@@ -53,6 +55,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="switch off encoder quantisation and loadcell noise/offsets")
     p.add_argument("--history", metavar="FILE", help="keep the command history in FILE")
     add_loop_options(p, default_speed="1", default_tick_us=DEFAULT_TICK_US)
+    add_serve_options(p)
     p.set_defaults(run=run)
 
 
@@ -78,6 +81,11 @@ def run(args: argparse.Namespace) -> int:
     runner = Runner(loop, motion_queue=station.motion)
     posted.append(runner)
     station.messages.connect(runner.post)
+    try:
+        service = prepare_service(args, runner, ManipulatorService(station))
+    except PyrtError:
+        station.close()
+        raise
     shell = ManipulatorShell(runner, station, out)
     console = Console(shell, sys.stdin, out, messages=runner.messages, history_file=args.history)
     speed = "max (simulated time)" if args.speed is None else f"{args.speed:g}x real time"
@@ -87,8 +95,12 @@ def run(args: argparse.Namespace) -> int:
     wall0 = time.perf_counter()
     runner.start()
     try:
-        status = console.run()
+        if service is not None:
+            service.start(None if args.headless else lambda m: print(m, file=out, flush=True))
+        status = service.run_headless() if args.headless else console.run()
     finally:
+        if service is not None:
+            service.close()
         with contextlib.suppress(PyrtError):
             runner.call(station.stop_all)
         runner.stop()
