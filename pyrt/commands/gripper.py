@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any, Protocol, TextIO
 from pyrt.commands._motion import motion_type_lines, parse_motion
 from pyrt.commands.scope import ScopeCommand
 from pyrt.commands.shell import CommandShell, parse_number, parse_seconds
-from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
+from pyrt.errors import CommandError, FaultError, PyrtError
 from pyrt.robots.gripper import GripperMove
 from pyrt.scheduler.motion import MotionExecutor, MotionRecord
 from pyrt.scheduler.report import format_statistics
@@ -347,29 +347,23 @@ class GripperShell(CommandShell):
 
     def onecmd(self, line: str) -> bool:
         """Run one line; True when the session should end (``quit``)."""
+        return self.guarded(self._dispatch, line)
+
+    def _dispatch(self, line: str) -> bool:
         line = line.strip()
         if not line:
             return False
         parts = line.split(None, 1)
         word, rest = parts[0], parts[1] if len(parts) > 1 else ""
-        try:
-            fn = self.handler(word) if len(word) > 1 else None
-            if fn is not None:
-                return bool(fn(rest.strip()))
-            letter = line[0]
-            level_fn = self.handler(letter, self.level) if letter.isalpha() else None
-            if level_fn is None:
-                self._unknown(line)
-                return False
-            level_fn(line[1:].strip())
-        except FaultError as exc:
-            self._fault(exc)
-        except MailboxTimeout as exc:
-            self.error(f"the control loop did not answer: {exc}")
-        except PyrtError as exc:
-            self.error(str(exc))
-        except Exception as exc:  # a bug must not end the operator's session
-            self.error(f"internal error: {type(exc).__name__}: {exc}")
+        fn = self.handler(word) if len(word) > 1 else None
+        if fn is not None:
+            return bool(fn(rest.strip()))
+        letter = line[0]
+        level_fn = self.handler(letter, self.level) if letter.isalpha() else None
+        if level_fn is None:
+            self._unknown(line)
+            return False
+        level_fn(line[1:].strip())
         return False
 
     def _unknown(self, line: str) -> None:
@@ -377,7 +371,7 @@ class GripperShell(CommandShell):
         where = "monitor command" if self.in_monitor else "command"
         self.error(f"unknown {where} {line.split()[0]!r} (letters: {letters}; words: type help)")
 
-    def _fault(self, exc: FaultError) -> None:
+    def fault(self, exc: FaultError) -> None:
         self.say(f"FAULT: {exc.fault.cause} (in {exc.fault.source or 'the controller'})")
         for _ in range(8):  # each pending fault is raised once: show them all
             try:

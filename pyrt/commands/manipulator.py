@@ -28,7 +28,7 @@ from typing import Any, Protocol, TextIO
 
 from pyrt.commands._motion import motion_type_lines, parse_motion
 from pyrt.commands.shell import CommandShell, parse_number, parse_seconds
-from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
+from pyrt.errors import CommandError, FaultError
 from pyrt.robots.axis import POLYAXIS, Axis
 from pyrt.robots.paths import hare_path_record
 from pyrt.robots.polyaxis import PolyAxis
@@ -136,31 +136,25 @@ class ManipulatorShell(CommandShell):
 
     def onecmd(self, line: str) -> bool:
         """Run one line; True when the session should end (``quit``)."""
-        try:
-            words = line.split()
-            if not words:
-                return False
-            word = words[0]
-            fn = self.handler(word)
-            if fn is not None:
-                return bool(fn(line.strip()[len(word):].strip()))
-            obj = self.station.objects.get(word.lower())
-            if obj is None:
-                self.error(f"unknown command or object {word!r}; objects: "
-                           f"{', '.join(self.station.names())}; type help")
-                return False
-            self.object_command(obj, words[1:])
-        except FaultError as exc:
-            self._fault(exc)
-        except MailboxTimeout as exc:
-            self.error(f"the control loop did not answer: {exc}")
-        except PyrtError as exc:
-            self.error(str(exc))
-        except Exception as exc:  # a bug must not end the operator's session
-            self.error(f"internal error: {type(exc).__name__}: {exc}")
+        return self.guarded(self._dispatch, line)
+
+    def _dispatch(self, line: str) -> bool:
+        words = line.split()
+        if not words:
+            return False
+        word = words[0]
+        fn = self.handler(word)
+        if fn is not None:
+            return bool(fn(line.strip()[len(word):].strip()))
+        obj = self.station.objects.get(word.lower())
+        if obj is None:
+            self.error(f"unknown command or object {word!r}; objects: "
+                       f"{', '.join(self.station.names())}; type help")
+            return False
+        self.object_command(obj, words[1:])
         return False
 
-    def _fault(self, exc: FaultError) -> None:
+    def fault(self, exc: FaultError) -> None:
         self.say(f"FAULT: {exc.fault.cause} (in {exc.fault.source or self.pa.name}); "
                  "every motor stopped; give 'ack' to acknowledge")
 
@@ -370,7 +364,7 @@ class ManipulatorShell(CommandShell):
         try:
             done = self.runner.wait_until(lambda: not busy(), timeout)
         except FaultError as exc:
-            self._fault(exc)
+            self.fault(exc)
             return
         if not done:
             self.say(f"still moving after {timeout:g} s")
@@ -410,7 +404,7 @@ class ManipulatorShell(CommandShell):
                 self.say(self.runner.call(self.station.acknowledge))
                 return
             except FaultError as exc:
-                self._fault(exc)
+                self.fault(exc)
 
     def do_debug(self, arg: str) -> None:
         """debug: toggle the debugging state (a status line every second)."""

@@ -10,9 +10,10 @@ line and returns True when the session should end.
 from __future__ import annotations
 
 import inspect
+from collections.abc import Callable
 from typing import TextIO
 
-from pyrt.errors import CommandError
+from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
 
 __all__ = ["MAX_SLEEP_S", "CommandShell", "parse_number", "parse_seconds"]
 
@@ -46,6 +47,26 @@ class CommandShell:
         if not name.isidentifier():
             return None
         return getattr(owner if owner is not None else self, "do_" + name.lower(), None)
+
+    def fault(self, exc: FaultError) -> None:
+        """Report a fault raised by the loop at this command (robots say more)."""
+        self.say(f"FAULT: {exc.fault.cause}; give 'ack' to acknowledge")
+
+    def guarded(self, dispatch: Callable[[str], bool], line: str) -> bool:
+        """Run ``dispatch(line)``, turning every failure into one line of
+        output: a fault, a loop that did not answer, a refused command, or a
+        bug (which must not end the operator's session)."""
+        try:
+            return bool(dispatch(line))
+        except FaultError as exc:
+            self.fault(exc)
+        except MailboxTimeout as exc:
+            self.error(f"the control loop did not answer: {exc}")
+        except PyrtError as exc:
+            self.error(str(exc))
+        except Exception as exc:
+            self.error(f"internal error: {type(exc).__name__}: {exc}")
+        return False
 
     def onecmd(self, line: str) -> bool:
         """Run one line; return True when the session should end."""
