@@ -9,37 +9,18 @@ out-of-range sizes the Python layer never lets through.
 
 from __future__ import annotations
 
-import os
-import shutil
-import subprocess
-import sys
 import textwrap
-from pathlib import Path
 
 import pytest
+from _sanitize import PRELUDE, assert_clean, run_under_asan
 
 pytestmark = pytest.mark.sanitize
 
-ROOT = Path(__file__).resolve().parent.parent
-CFLAGS = "-std=c99 -O1 -g -fsanitize=address,undefined -fno-omit-frame-pointer " \
-         "-fno-sanitize-recover=all"
-LDFLAGS = "-fsanitize=address,undefined"
 
-BUILD = textwrap.dedent(
-    """
-    import runpy
-    ns = runpy.run_path("csrc/build_native.py")
-    print(ns["ffibuilder"].compile(tmpdir=".", verbose=False))
-    """
-)
 
 DRIVER = textwrap.dedent(
     """
-    import importlib.util, math, random, sys
-    spec = importlib.util.spec_from_file_location("pyrt._native", sys.argv[1])
-    native = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(native)
-    sys.modules["pyrt._native"] = native
+    import math, random, sys
     from pyrt.native import StaticsSolver
     from pyrt.errors import NativeError
     ffi, lib = native.ffi, native.lib
@@ -87,37 +68,6 @@ DRIVER = textwrap.dedent(
 )
 
 
-def _libasan() -> str | None:
-    gcc = shutil.which("gcc")
-    if gcc is None:
-        return None
-    path = subprocess.run([gcc, "-print-file-name=libasan.so"], capture_output=True, text=True,
-                          check=False).stdout.strip()
-    return path if os.path.isabs(path) and os.path.exists(path) else None
-
-
 def test_statics_is_clean_under_asan_and_ubsan(tmp_path):
     """The statics kernel, on good and bad input, runs with no ASan or UBSan report."""
-    libasan = _libasan()
-    if libasan is None:
-        pytest.skip("gcc with libasan is not available")
-    env = dict(os.environ, PYRT_CFLAGS=CFLAGS, PYRT_LDFLAGS=LDFLAGS)
-    shutil.copytree(ROOT / "csrc", tmp_path / "csrc",
-                    ignore=shutil.ignore_patterns("*.o", "*.so", "__pycache__"))
-    build = subprocess.run([sys.executable, "-c", BUILD], cwd=tmp_path, env=env,
-                           capture_output=True, text=True, timeout=300, check=False)
-    assert build.returncode == 0, build.stdout + build.stderr
-    built = list(tmp_path.rglob("_native*.so"))
-    assert len(built) == 1, build.stdout
-    driver = tmp_path / "driver.py"
-    driver.write_text(DRIVER)
-    run_env = dict(os.environ, LD_PRELOAD=libasan,
-                   ASAN_OPTIONS="detect_leaks=0:abort_on_error=0:halt_on_error=1",
-                   UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1", PYTHONPATH=str(ROOT))
-    run = subprocess.run([sys.executable, str(driver), str(built[0])], cwd=tmp_path,
-                         env=run_env, capture_output=True, text=True, timeout=300, check=False)
-    report = run.stdout + run.stderr
-    assert run.returncode == 0, report
-    assert "SANITIZE-DRIVER-OK" in run.stdout, report
-    assert "ERROR: AddressSanitizer" not in report, report
-    assert "runtime error" not in report, report
+    assert_clean(run_under_asan(PRELUDE + DRIVER, tmp_path))
