@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 __all__ = [
+    "BoardError",
     "CommandError",
     "ConfigError",
     "Fault",
@@ -46,6 +47,20 @@ class ConfigError(PyrtError):
         if self.line is None:
             return f"{self.file}: {self.message}"
         return f"{self.file}:{self.line}: {self.message}"
+
+
+class BoardError(PyrtError):
+    """A board back end could not carry out a register access (connection
+    refused, reset or timed out; the board refused the request).
+
+    ``str(err)`` reads ``board URL: what happened`` so that the robot can be
+    faulted with it; ``url`` is the back end's URL.
+    """
+
+    def __init__(self, url: str, message: str):
+        self.url = url
+        self.message = message
+        super().__init__(f"board {url}: {message}")
 
 
 class CommandError(PyrtError):
