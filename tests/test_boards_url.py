@@ -1,0 +1,241 @@
+"""Board URLs and the back-end registry: parsing, built-in schemes, entry points, refusals."""
+
+from __future__ import annotations
+
+import importlib.metadata
+
+import pytest
+
+from pyrt.boards import (
+    DEFAULT_URL,
+    ENTRY_POINT_GROUP,
+    Boards,
+    BoardURL,
+    known_schemes,
+    open_boards,
+    parse_board_url,
+    register_backend,
+)
+from pyrt.boards import registry as registry_module
+from pyrt.boards.gripper import DAC, P8155_PB, GripperBoard, SimGripperBoard
+from pyrt.boards.i8031 import I8031
+from pyrt.boards.simboards import SimDataConcentrator, SimTIO10
+from pyrt.errors import ConfigError
+
+# -- a third party's back end, found through an entry point ---------------------------
+
+CALLS: list[tuple[BoardURL, str, dict]] = []
+
+
+def fake_factory(url: BoardURL, robot: str, **options) -> Boards:
+    """A back end of 'someone else': in-process boards, remembering how it was called."""
+    CALLS.append((url, robot, options))
+    if robot == "gripper":
+        cpu = options.get("cpu") or I8031()
+        return Boards(url.text, robot, in_process=True, gripper=SimGripperBoard(cpu), cpu=cpu,
+                      world="fake")
+    return Boards(url.text, robot, in_process=True, tio10=SimTIO10(), dc=SimDataConcentrator(),
+                  world="fake")
+
+
+def not_boards(url: BoardURL, robot: str, **options) -> object:
+    """A broken back end: returns something that is not Boards."""
+    return object()
+
+
+@pytest.fixture
+def entry_points(monkeypatch):
+    """Install entry points of the pyrt.boards group (name -> 'module:attr')."""
+
+    def install(table: dict[str, str]) -> None:
+        eps = [importlib.metadata.EntryPoint(name, value, ENTRY_POINT_GROUP)
+               for name, value in table.items()]
+
+        def fake(**kw):
+            assert kw == {"group": ENTRY_POINT_GROUP}
+            return importlib.metadata.EntryPoints(eps)
+
+        monkeypatch.setattr(importlib.metadata, "entry_points", fake)
+
+    CALLS.clear()
+    return install
+
+
+# -- parsing ----------------------------------------------------------------------------
+
+
+def test_sim_url_is_the_scheme_alone_and_the_default():
+    """'sim:' parses to scheme sim with no host, port, path or options; it is the default URL."""
+    u = parse_board_url("sim:")
+    assert (u.scheme, u.host, u.port, u.path, u.options) == ("sim", "", None, "", {})
+    assert DEFAULT_URL == "sim:"
+    assert parse_board_url("SIM:").scheme == "sim"
+
+
+@pytest.mark.parametrize(("url", "host", "port", "options"), [
+    ("tcp://127.0.0.1:5055", "127.0.0.1", 5055, {}),
+    ("tcp://localhost:1?timeout=0.5&max_age=0", "localhost", 1, {"timeout": "0.5", "max_age": "0"}),
+    ("TCP://[::1]:80/", "::1", 80, {}),
+])
+def test_tcp_url_gives_host_port_and_options(url, host, port, options):
+    """tcp://HOST:PORT?K=V parses host (IPv6 in brackets), port and the query's options."""
+    u = parse_board_url(url)
+    assert (u.scheme, u.host, u.port, u.options, u.text) == ("tcp", host, port, options, url)
+
+
+@pytest.mark.parametrize("url", [
+    "", " sim:", "sim: ", "5055", "127.0.0.1:5055:x", "tcp://h:99999",
+    "tcp://h:port", "tcp://h:1?timeout", "tcp://h:1?a=1&a=2", "tcp://h:1#frag", "tcp://u:p@h:1",
+    "t cp://h:1", "sim:\n",
+])
+def test_malformed_url_is_a_config_error_naming_it_and_the_known_schemes(url):
+    """A malformed URL raises ConfigError that names the URL and lists sim and tcp."""
+    with pytest.raises(ConfigError) as err:
+        open_boards(url, "gripper")
+    text = str(err.value)
+    assert repr(url) in text
+    assert "sim" in text and "tcp" in text
+
+
+def test_unknown_scheme_is_a_config_error_naming_the_url_and_the_known_schemes(entry_points):
+    """open_boards('serial:///dev/ttyS0') names the URL, the scheme and every known scheme."""
+    entry_points({})
+    with pytest.raises(ConfigError) as err:
+        open_boards("serial:///dev/ttyS0", "manipulator")
+    text = str(err.value)
+    assert "'serial:///dev/ttyS0'" in text and "'serial'" in text
+    assert "known schemes: sim, tcp" in text
+
+
+def test_board_url_that_is_not_text_is_refused():
+    """A URL that is not a string is a ConfigError, not a TypeError."""
+    with pytest.raises(ConfigError, match="must be text"):
+        parse_board_url(5055)  # type: ignore[arg-type]
+
+
+# -- sim: ------------------------------------------------------------------------------
+
+
+def test_sim_gripper_maps_a_sim_board_into_the_given_cpu():
+    """sim: for the gripper gives a SimGripperBoard mapped into the cpu passed; nothing to poll."""
+    cpu = I8031()
+    with open_boards("sim:", "gripper", cpu=cpu) as boards:
+        assert boards.in_process and boards.cpu is cpu and boards.robot == "gripper"
+        assert isinstance(boards.gripper, SimGripperBoard) and isinstance(boards.gripper, GripperBoard)
+        cpu.movx_write(DAC, 0x90)
+        assert boards.gripper.dac == 0x90 and boards.gripper.read(DAC) == 0x90
+        assert not boards.polls
+        boards.poll(0)  # nothing to do, no error
+    assert boards.closed
+
+
+def test_sim_manipulator_gives_a_sim_tio10_and_dataconcentrator():
+    """sim: (also by default) for the manipulator gives a SimTIO10 and a SimDataConcentrator."""
+    boards = open_boards(None, "manipulator")
+    assert boards.url == "sim:" and boards.in_process
+    assert isinstance(boards.tio10, SimTIO10) and isinstance(boards.dc, SimDataConcentrator)
+    assert boards.gripper is None
+    boards.close()
+    boards.close()  # idempotent
+
+
+def test_sim_gripper_without_a_cpu_makes_one():
+    """sim: for the gripper without cpu= makes a new 8031 and maps the board into it."""
+    boards = open_boards("sim:", "gripper")
+    assert isinstance(boards.cpu, I8031)
+    assert boards.cpu.movx_read(P8155_PB) == 0xFF
+
+
+@pytest.mark.parametrize("url", ["sim://host:1", "sim:/path", "sim:?speed=2"])
+def test_sim_refuses_a_host_a_path_or_options(url):
+    """sim: takes nothing after the colon: ConfigError naming the URL."""
+    with pytest.raises(ConfigError, match="sim:"):
+        open_boards(url, "gripper")
+
+
+def test_sim_refuses_an_unknown_keyword_option():
+    """A keyword option sim: does not take is refused by name."""
+    with pytest.raises(ConfigError, match="timeout"):
+        open_boards("sim:", "manipulator", timeout=1)
+
+
+def test_unknown_robot_is_refused():
+    """open_boards for a robot that is neither gripper nor manipulator is a ConfigError."""
+    with pytest.raises(ConfigError, match="gripper, manipulator"):
+        open_boards("sim:", "hexapod")
+
+
+def test_tcp_refuses_unknown_options_and_bad_seconds_before_connecting():
+    """tcp: names an unknown option, a bad timeout, a missing or zero port, without connecting."""
+    with pytest.raises(ConfigError, match="speed"):
+        open_boards("tcp://127.0.0.1:9?speed=2", "gripper")
+    with pytest.raises(ConfigError, match="timeout"):
+        open_boards("tcp://127.0.0.1:9?timeout=soon", "gripper")
+    with pytest.raises(ConfigError, match="timeout"):
+        open_boards("tcp://127.0.0.1:9", "gripper", timeout=0)
+    with pytest.raises(ConfigError, match="port"):
+        open_boards("tcp://127.0.0.1", "gripper")
+    with pytest.raises(ConfigError, match="host"):
+        open_boards("tcp://:5055", "gripper")
+    with pytest.raises(ConfigError, match="port"):
+        open_boards("tcp://127.0.0.1:0", "gripper")
+    with pytest.raises(ConfigError, match="path"):
+        open_boards("tcp://127.0.0.1:9/x", "gripper")
+
+
+# -- the registry ---------------------------------------------------------------------------
+
+
+def test_entry_point_back_end_is_found_by_scheme_with_its_options(entry_points):
+    """A scheme registered in the pyrt.boards entry-point group opens through open_boards; URL
+    options and keyword options (which win) reach the factory."""
+    entry_points({"fake": f"{__name__}:fake_factory"})
+    assert known_schemes() == ["fake", "sim", "tcp"]
+    boards = open_boards("FAKE://lab-rack:7?gain=2&mode=a", "manipulator", mode="b")
+    assert boards.world == "fake" and isinstance(boards.tio10, SimTIO10)
+    url, robot, options = CALLS[-1]
+    assert (url.scheme, url.host, url.port, robot) == ("fake", "lab-rack", 7, "manipulator")
+    assert options == {"gain": "2", "mode": "b"}
+
+
+def test_entry_point_that_cannot_be_loaded_is_a_config_error_naming_it(entry_points):
+    """An entry point whose module is missing is a ConfigError naming the scheme and the entry point."""
+    entry_points({"ghost": "no_such_module_anywhere:open"})
+    with pytest.raises(ConfigError) as err:
+        open_boards("ghost:", "gripper")
+    assert "'ghost'" in str(err.value) and "no_such_module_anywhere:open" in str(err.value)
+
+
+def test_factory_that_returns_no_boards_is_refused(entry_points):
+    """A factory that returns something other than Boards is a ConfigError naming the scheme."""
+    entry_points({"broken": f"{__name__}:not_boards"})
+    with pytest.raises(ConfigError, match="'broken' returned object, not Boards"):
+        open_boards("broken:", "gripper")
+
+
+def test_entry_point_cannot_replace_a_built_in_scheme(entry_points):
+    """An entry point named 'sim' does not replace the built-in sim: back end."""
+    entry_points({"sim": f"{__name__}:fake_factory"})
+    boards = open_boards("sim:", "manipulator")
+    assert boards.world == "sim" and not CALLS
+
+
+def test_register_backend_from_code(monkeypatch, entry_points):
+    """register_backend adds a scheme from code; a built-in scheme cannot be registered."""
+    entry_points({})
+    monkeypatch.setattr(registry_module, "_registered", {})
+    register_backend("Bench", fake_factory)
+    assert "bench" in known_schemes()
+    assert open_boards("bench:", "gripper").world == "fake"
+    with pytest.raises(ConfigError, match="built in"):
+        register_backend("tcp", fake_factory)
+    with pytest.raises(ConfigError, match="not a URL scheme"):
+        register_backend("9lives", fake_factory)
+
+
+def test_boards_must_hold_the_boards_of_their_robot():
+    """Boards for the gripper without a gripper board (or the manipulator without its cards) is refused."""
+    with pytest.raises(ConfigError, match="no gripper board"):
+        Boards("x:", "gripper", in_process=True)
+    with pytest.raises(ConfigError, match="TIO10"):
+        Boards("x:", "manipulator", in_process=True, tio10=SimTIO10())
