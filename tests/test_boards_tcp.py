@@ -1,0 +1,411 @@
+"""The tcp:// back end against a board-sim server in this process (loopback only): registers
+both ways, encoder interrupts at poll, the per-tick copy, refusals, bad input, failures."""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+
+import pytest
+
+from pyrt.boards import open_boards
+from pyrt.boards.gripper import (
+    DAC,
+    DAC_NULL,
+    LED_LO,
+    P8155_CMD,
+    P8155_PA,
+    P8155_PB,
+    REGISTERS,
+    GripperBoard,
+)
+from pyrt.boards.i8031 import ENCODER_CNT, I8031, LIMIT, OTHER, VECTOR_EXT0, VECTOR_EXT1
+from pyrt.boards.tcp import TcpDataConcentrator, TcpGripperBoard, TcpTIO10
+from pyrt.boards.tio10 import AWO_BITS, DIR_BITS
+from pyrt.boards.wire import MAX_LINE
+from pyrt.db import load_station, station_directory
+from pyrt.errors import BoardError, ConfigError
+from pyrt.robots.gripper import GripperController
+from pyrt.scheduler import Loop, WallClock
+from pyrt.sim.boardsim import BoardServer
+from pyrt.sim.sensors import Imperfections
+from pyrt.sim.world import GripperWorld, ManipulatorWorld
+
+#: prototype rope 0: motor channel 7, encoder address 168, loadcell ADC 3.
+CH, ENC, ADC = 7, 168, 3
+
+
+def _serve(world, **kw) -> BoardServer:
+    server = BoardServer(world, "127.0.0.1", 0, **{"watchdog_s": 30.0, **kw})
+    server.start()
+    return server
+
+
+@pytest.fixture
+def gripper_sim():
+    """A gripper board-sim, jaws near wide open, on a free loopback port."""
+    server = _serve(GripperWorld(start=-0x0100))
+    yield server
+    server.close()
+
+
+@pytest.fixture
+def manipulator_sim():
+    """A prototype-station board-sim with ideal sensors, on a free loopback port."""
+    world = ManipulatorWorld.from_station(load_station(station_directory("prototype")),
+                                          imperfections=Imperfections.ideal())
+    server = _serve(world)
+    yield server
+    server.close()
+
+
+def _info(link) -> dict[str, str]:
+    return dict(kv.split("=", 1) for kv in link.request("INFO"))
+
+
+def _until(predicate, seconds: float = 5.0) -> bool:
+    """Poll ``predicate`` until it holds or the deadline passes."""
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.01)
+    return predicate()
+
+
+class _Raw:
+    """A bare protocol client: send bytes, read one reply line."""
+
+    def __init__(self, server: BoardServer):
+        self.sock = socket.create_connection(("127.0.0.1", server.port), timeout=5)
+        self.file = self.sock.makefile("rb")
+        self.greeting = self.line()
+
+    def line(self) -> str:
+        return self.file.readline().decode("ascii").rstrip("\n")
+
+    def ask(self, data: bytes) -> str:
+        self.sock.sendall(data)
+        return self.line()
+
+    def close(self) -> None:
+        self.file.close()
+        self.sock.close()
+
+
+# -- the greeting and the wire --------------------------------------------------------------
+
+
+def test_greeting_names_protocol_kind_world_and_watchdog(gripper_sim):
+    """The server speaks first: OK pyrt-board-sim 1 gripper gripper 30000."""
+    raw = _Raw(gripper_sim)
+    try:
+        assert raw.greeting == "OK pyrt-board-sim 1 gripper gripper 30000"
+        assert raw.ask(b"QUIT\n") == "OK bye"
+        assert raw.file.readline() == b""  # the server closed the connection
+    finally:
+        raw.close()
+
+
+def test_bad_input_gets_error_replies_and_the_server_keeps_serving(gripper_sim):
+    """Garbage, unknown verbs, wrong arity, bad numbers, non-ASCII, over-long and empty lines,
+    refused values: each gets one ERR reply, nothing changes, and the next request is served."""
+    raw = _Raw(gripper_sim)
+    try:
+        cases = [
+            (b"\n", "ERR syntax empty request"),
+            (b"HELLO\n", "ERR syntax unknown request"),
+            (b"R\n", "ERR syntax R takes 1 arguments, got 0"),
+            (b"W 0x8000\n", "ERR syntax W takes 2"),
+            (b"R -1\n", "ERR syntax '-1' is not an unsigned number"),
+            (b"R 0x\n", "ERR syntax"),
+            (b"R 12ab\n", "ERR syntax"),
+            (b"R 0x8000 \xff\n", "ERR ascii"),
+            (b"\x00\x01\x02\n", "ERR syntax"),
+            (b"R 0x7FFF\n", "ERR range no gripper cage register"),
+            (b"W 0x0101 0\n", "ERR range 8155 PA (0101) is an input port"),
+            (b"W 0x8000 256\n", "ERR range register value must be 00..FF"),
+            (b"W 0x8000 99999999999999999999999\n", "ERR syntax"),
+            (b"X" * (MAX_LINE + 10) + b"\n", "ERR too-long"),
+            (b"SNAP 1\n", "ERR syntax SNAP takes 0"),
+        ]
+        for data, want in cases:
+            assert raw.ask(data).startswith(want), data[:40]
+        assert raw.ask(b"r 0x8000\r\n") == f"OK {DAC_NULL}"  # lower case and CR LF accepted
+        assert raw.ask(b"W 32768 0x90\n") == "OK"
+        assert raw.ask(b"R 0x8000\n") == "OK 144"
+        assert gripper_sim.errors == len(cases)
+    finally:
+        raw.close()
+
+
+def test_an_over_long_line_in_pieces_is_refused_once_and_its_tail_dropped(gripper_sim):
+    """A line longer than MAX_LINE sent in pieces gets one ERR too-long; what follows it is served."""
+    raw = _Raw(gripper_sim)
+    try:
+        raw.sock.sendall(b"R " + b"1" * MAX_LINE)
+        assert raw.line().startswith("ERR too-long")
+        raw.sock.sendall(b"1" * 100 + b"\nR 0x8000\n")
+        assert raw.line() == f"OK {DAC_NULL}"
+    finally:
+        raw.close()
+
+
+def test_a_second_controller_is_refused_busy(gripper_sim):
+    """While one controller is connected a second gets ERR busy (naming the first) and is closed."""
+    boards = open_boards(gripper_sim.url, "gripper")
+    try:
+        with pytest.raises(BoardError) as err:
+            open_boards(gripper_sim.url, "gripper")
+        assert gripper_sim.url in str(err.value) and "busy" in str(err.value)
+        assert gripper_sim.refused == 1
+        assert boards.gripper.read(DAC) == DAC_NULL  # the first is still served
+    finally:
+        boards.close()
+    with open_boards(gripper_sim.url, "gripper") as again:  # free again after QUIT
+        assert again.world == "gripper"
+
+
+def test_wrong_kind_of_board_is_a_config_error(gripper_sim):
+    """Opening a gripper board-sim as a manipulator is a ConfigError naming the URL and both kinds."""
+    with pytest.raises(ConfigError) as err:
+        open_boards(gripper_sim.url, "manipulator")
+    assert gripper_sim.url in str(err.value) and "serves a gripper" in str(err.value)
+
+
+# -- the gripper -------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("url", ["sim:", "tcp"])
+def test_gripper_board_interface_is_the_same_in_process_and_over_tcp(gripper_sim, url):
+    """SimGripperBoard and TcpGripperBoard read, write and refuse alike, through MOVX too."""
+    cpu = I8031()
+    boards = open_boards(gripper_sim.url if url == "tcp" else url, "gripper", cpu=cpu)
+    try:
+        board = boards.gripper
+        assert isinstance(board, GripperBoard)
+        assert isinstance(board, TcpGripperBoard) == (url == "tcp")
+        assert {a: board.read(a) for a in REGISTERS} == {
+            P8155_CMD: 0, P8155_PA: 0xFF, P8155_PB: 0xFF, 0x0103: 0xFF, LED_LO: 0xFF,
+            0x0201: 0xFF, DAC: DAC_NULL}
+        cpu.movx_write(LED_LO, 0x5A)
+        cpu.movx_write(P8155_PA, 0x00)  # an input port: ignored, as the 8155 does
+        assert cpu.movx_read(LED_LO) == 0x5A and board.read(LED_LO) == 0x5A
+        assert cpu.movx_read(P8155_PA) == 0xFF
+        with pytest.raises(ValueError, match="input port"):
+            board.write(P8155_PA, 0)
+        with pytest.raises(ValueError, match="no gripper cage register"):
+            board.read(0x1234)
+        with pytest.raises(ValueError, match="00..FF"):
+            board.write(DAC, 0x100)
+        assert board.pulse_counts() == (0, 0)
+    finally:
+        boards.close()
+
+
+def test_gripper_register_written_over_tcp_is_seen_by_the_plant_and_back(gripper_sim):
+    """A DAC write over TCP drives the jaws in the other world; the plant's limit sensor and
+    encoder pulses come back: PB shows the limit, poll raises EXT0 once per count."""
+    cpu = I8031()
+    hits = [0, 0]
+    cpu.set_vector(VECTOR_EXT0, lambda: hits.__setitem__(0, hits[0] + 1))
+    cpu.set_vector(VECTOR_EXT1, lambda: hits.__setitem__(1, hits[1] + 1))
+    with open_boards(gripper_sim.url, "gripper", cpu=cpu) as boards:
+        link = boards.gripper.link
+        assert cpu.movx_read(P8155_PB) & (1 << LIMIT)  # 0100 counts in: limit off
+        cpu.movx_write(DAC, 0xA0)  # open at +32
+        assert _info(link)["dac"] == "160"
+        assert _until(lambda: not cpu.movx_read(P8155_PB) & (1 << LIMIT))  # reached the stop
+        cpu.movx_write(DAC, DAC_NULL)
+        boards.poll(0)
+        info = _info(link)
+        assert info["current"] == "0"
+        assert hits == [int(info["up"]), int(info["down"])] == list(boards.gripper.pulse_counts())
+        assert hits[0] >= 0x100 - 20 and hits[1] == 0
+
+
+def test_poll_copy_serves_the_reads_of_a_tick_and_sees_its_own_writes(gripper_sim):
+    """After poll, reads within max_age make no round trip; a write goes out and is read back;
+    with max_age=0 every read goes to the board."""
+    with open_boards(gripper_sim.url, "gripper", max_age=60) as boards:
+        board = boards.gripper
+        link = board.link
+        boards.poll(0)
+        n = link.requests
+        assert [board.read(a) for a in REGISTERS] and link.requests == n
+        board.write(DAC, 0x81)
+        assert link.requests == n + 1 and board.read(DAC) == 0x81 and link.requests == n + 1
+    with open_boards(gripper_sim.url, "gripper", max_age=0) as boards:
+        link = boards.gripper.link
+        boards.poll(0)
+        n = link.requests
+        boards.gripper.read(P8155_PA)
+        assert link.requests == n + 1
+
+
+@pytest.mark.wallclock
+def test_gripper_controller_runs_init_over_tcp_unchanged(gripper_sim):
+    """The 002 controller, unchanged, runs I (fullopen to the limit, zero) on a wall-clock loop
+    through TcpGripperBoard, its encoder counts delivered by poll before the ready queue."""
+    cpu = I8031()
+    boards = open_boards(gripper_sim.url, "gripper", cpu=cpu)
+    try:
+        ctl = GripperController(cpu)
+        loop = Loop(WallClock(), period_ns=1_000_000)
+        loop.attach(boards.poll, name="board")
+        ctl.attach(loop)
+        ctl.power_up()
+        job = ctl.start_init()
+        loop.run(until=lambda: job.done, duration_ns=10_000_000_000)
+        assert job.done and job.value().ok, job.value()
+        assert not ctl.ram[OTHER] & (1 << LIMIT)  # the limit sensor, read over TCP
+        assert ctl.word(ENCODER_CNT) == 0
+        assert _info(boards.gripper.link)["dac"] == str(DAC_NULL)
+    finally:
+        boards.close()
+
+
+# -- the manipulator -----------------------------------------------------------------------------
+
+
+def test_manipulator_cards_over_tcp_read_back_and_refuse_like_the_sim(manipulator_sim):
+    """TcpTIO10/TcpDataConcentrator: writes read back, the world sees them; refusals are ValueError."""
+    with open_boards(manipulator_sim.url, "manipulator") as boards:
+        tio, dc = boards.tio10, boards.dc
+        assert isinstance(tio, TcpTIO10) and isinstance(dc, TcpDataConcentrator)
+        assert boards.world == "prototype"
+        world = manipulator_sim.world
+        tio.select_source(CH, 3)
+        tio.load_period(CH, 1234)
+        tio.write_port(2, 0xA5)
+        assert (tio.source(CH), tio.period(CH), tio.read_port(2)) == (3, 1234, 0xA5)
+        assert (world.tio10.source(CH), world.tio10.period(CH)) == (3, 1234)
+        assert tio.source(4) == 1 and tio.rtc_ticks() > 0
+        assert dc.read_adc(ADC) == world.dc.read_adc(ADC) > 0
+        with pytest.raises(ValueError, match="no period loaded"):  # refused by the board
+            tio.arm(0)
+        with pytest.raises(ValueError, match="real-time clock"):  # refused before sending
+            tio.arm(4)
+        with pytest.raises(ValueError, match="16-bit"):
+            tio.load_period(CH, 1)
+        with pytest.raises(ValueError, match="0..255"):
+            dc.read_counter(256)
+        assert not tio.armed(0)
+
+
+@pytest.mark.wallclock
+def test_manipulator_motor_driven_over_tcp_moves_the_world_and_counts_come_back(manipulator_sim):
+    """A motor armed over TCP pays rope out in the other world; pulses, encoder counts and the
+    loadcell come back, through one SNAP per poll."""
+    with open_boards(manipulator_sim.url, "manipulator") as boards:
+        tio, dc = boards.tio10, boards.dc
+        link = tio._b.link
+        before = float(_info(link)["payout0"])
+        dc.clear_counter(ENC)
+        tio.select_source(CH, 3)  # F3: 50 kHz
+        tio.load_period(CH, 100)  # 500 half-steps/s
+        tio.set_bit(*DIR_BITS[CH], True)  # pay out
+        tio.set_bit(*AWO_BITS[CH], False)  # windings on
+        tio.arm(CH)
+        assert _until(lambda: (boards.poll(0), dc.read_counter(ENC))[1] >= 5)
+        tio.disarm(CH)
+        tio.set_bit(*AWO_BITS[CH], True)
+        boards.poll(0)
+        n = link.requests
+        assert tio.pulses(CH) > 0 and not tio.armed(CH) and link.requests == n
+        assert float(_info(link)["payout0"]) > before
+
+
+# -- failures -------------------------------------------------------------------------------------
+
+
+def test_board_sim_gone_makes_the_next_access_raise_board_error_naming_the_url():
+    """When board-sim closes, the next access raises BoardError naming the URL, and so does every
+    later one, at once."""
+    server = _serve(GripperWorld())
+    boards = open_boards(server.url, "gripper", max_age=0)
+    url = server.url
+    server.close()
+    t0 = time.monotonic()
+    with pytest.raises(BoardError) as err:
+        boards.gripper.read(DAC)
+    assert time.monotonic() - t0 < 2.0
+    assert str(err.value).startswith(f"board {url}: R {DAC}: ") and err.value.url == url
+    with pytest.raises(BoardError, match="link is down"):
+        boards.poll(0)
+    boards.close()
+
+
+def test_connection_refused_is_a_board_error_naming_the_url():
+    """Opening a tcp:// URL where nothing listens raises BoardError naming it."""
+    probe = socket.create_server(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()
+    url = f"tcp://127.0.0.1:{port}"
+    with pytest.raises(BoardError) as err:
+        open_boards(url, "manipulator")
+    assert str(err.value).startswith(f"board {url}: cannot connect") and "refused" in str(err.value)
+
+
+def test_a_board_that_stops_answering_times_out_with_a_board_error():
+    """A board that greets and then never replies: the access fails after the timeout, naming the URL."""
+    listener = socket.create_server(("127.0.0.1", 0))
+    port = listener.getsockname()[1]
+    held: list[socket.socket] = []
+
+    def accept() -> None:
+        conn, _ = listener.accept()
+        conn.sendall(b"OK pyrt-board-sim 1 gripper mute 500\n")
+        held.append(conn)
+
+    t = threading.Thread(target=accept, daemon=True)
+    t.start()
+    url = f"tcp://127.0.0.1:{port}?timeout=0.1"
+    try:
+        boards = open_boards(url, "gripper", max_age=0)
+    except BoardError as exc:  # the first SNAP already times out: that is the case too
+        assert "no reply within 0.1 s" in str(exc)
+    else:  # pragma: no cover - the SNAP at open cannot be answered
+        boards.close()
+        raise AssertionError("a mute board was opened")
+    finally:
+        t.join(5)
+        for c in held:
+            c.close()
+        listener.close()
+
+
+def test_a_peer_that_is_not_board_sim_is_refused():
+    """A server that greets with something else is refused as not a pyrt board-sim."""
+    listener = socket.create_server(("127.0.0.1", 0))
+
+    def accept() -> None:
+        conn, _ = listener.accept()
+        conn.sendall(b"SSH-2.0-OpenSSH_9.6\r\n")
+        conn.close()
+
+    t = threading.Thread(target=accept, daemon=True)
+    t.start()
+    url = f"tcp://127.0.0.1:{listener.getsockname()[1]}"
+    try:
+        with pytest.raises(BoardError, match="not a pyrt board-sim"):
+            open_boards(url, "gripper")
+    finally:
+        t.join(5)
+        listener.close()
+
+
+@pytest.mark.wallclock
+def test_a_silent_controller_trips_the_watchdog_in_process():
+    """No register access for the watchdog time: the DAC goes to null while still connected."""
+    server = _serve(GripperWorld(), watchdog_s=0.1)
+    try:
+        with open_boards(server.url, "gripper") as boards:
+            boards.gripper.write(DAC, 0x70)
+            t0 = time.monotonic()
+            assert _until(lambda: server.watchdog_trips == 1, 2.0)
+            assert time.monotonic() - t0 < 1.0
+            assert boards.gripper.read(DAC) == DAC_NULL
+    finally:
+        server.close()
