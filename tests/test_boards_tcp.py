@@ -197,7 +197,7 @@ def test_gripper_board_interface_is_the_same_in_process_and_over_tcp(gripper_sim
             board.write(P8155_PA, 0)
         with pytest.raises(ValueError, match="no gripper cage register"):
             board.read(0x1234)
-        with pytest.raises(ValueError, match="00..FF"):
+        with pytest.raises(ValueError, match=r"00\.\.FF"):
             board.write(DAC, 0x100)
         assert board.pulse_counts() == (0, 0)
     finally:
@@ -289,7 +289,7 @@ def test_manipulator_cards_over_tcp_read_back_and_refuse_like_the_sim(manipulato
             tio.arm(4)
         with pytest.raises(ValueError, match="16-bit"):
             tio.load_period(CH, 1)
-        with pytest.raises(ValueError, match="0..255"):
+        with pytest.raises(ValueError, match=r"0\.\.255"):
             dc.read_counter(256)
         assert not tio.armed(0)
 

@@ -1,0 +1,230 @@
+"""``pyrt board-sim`` in a subprocess on 127.0.0.1: its first line, the watchdog when the
+controller dies or hangs, the controller's BoardError when board-sim dies, SIGTERM, options."""
+
+from __future__ import annotations
+
+import os
+import queue
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+
+from pyrt.boards import open_boards
+from pyrt.boards.gripper import DAC, DAC_NULL
+from pyrt.cli import main
+from pyrt.db import copy_station
+from pyrt.errors import BoardError
+
+pytestmark = pytest.mark.wallclock
+
+#: Generous: a loaded two-core machine may be slow to start a Python process.
+START_S = 60.0
+
+
+class _Proc:
+    """A child process whose stdout lines are collected, with their arrival times, by a thread."""
+
+    def __init__(self, args: list[str]):
+        self.proc = subprocess.Popen([sys.executable, *args], stdin=subprocess.DEVNULL,
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.lines: queue.Queue[tuple[float, str]] = queue.Queue()
+        self.seen: list[str] = []
+        threading.Thread(target=self._pump, daemon=True).start()
+
+    def _pump(self) -> None:
+        for line in self.proc.stdout:
+            self.lines.put((time.monotonic(), line.rstrip("\n")))
+        self.lines.put((time.monotonic(), ""))
+
+    def expect(self, pattern: str, seconds: float = START_S) -> tuple[float, re.Match]:
+        """The first line (from here on) matching ``pattern``, and when it came."""
+        deadline = time.monotonic() + seconds
+        while True:
+            try:
+                at, line = self.lines.get(timeout=max(0.01, deadline - time.monotonic()))
+            except queue.Empty:
+                line, at = None, 0.0
+            if line is not None:
+                self.seen.append(line)
+                m = re.search(pattern, line)
+                if m:
+                    return at, m
+            if (line == "" and self.proc.poll() is not None) or time.monotonic() > deadline:
+                self.kill()
+                raise AssertionError(f"no line matching {pattern!r}; got {self.seen}, "
+                                     f"stderr {self.proc.stderr.read()[-2000:]!r}")
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+        self.proc.wait(10)
+
+
+def _board_sim(world: str, *extra: str, watchdog: float = 1.0) -> tuple[_Proc, str]:
+    p = _Proc(["-m", "pyrt", "board-sim", world, "--listen", "127.0.0.1:0",
+               "--watchdog", str(watchdog), *extra])
+    _, m = p.expect(r"^pyrt board-sim: \w+ \w+ on (tcp://127\.0\.0\.1:\d+) ")
+    assert p.seen == [m.group(0) + p.seen[0][len(m.group(0)):]]  # it was the first line
+    return p, m.group(1)
+
+
+#: A controller that drives the outputs, prints 'driving', then keeps polling.
+CONTROLLER = """
+import sys, time
+from pyrt.boards import open_boards
+from pyrt.boards.gripper import DAC
+from pyrt.boards.tio10 import AWO_BITS, DIR_BITS
+b = open_boards(sys.argv[1], sys.argv[2])
+if sys.argv[2] == "gripper":
+    b.gripper.write(DAC, 0xC0)
+else:
+    tio = b.tio10
+    tio.select_source(7, 3)
+    tio.load_period(7, 5000)
+    tio.set_bit(*DIR_BITS[7], True)
+    tio.set_bit(*AWO_BITS[7], False)
+    tio.arm(7)
+print("driving", flush=True)
+while True:
+    b.poll(0)
+    time.sleep(0.01)
+"""
+
+
+def _robot(world: str) -> str:
+    return "gripper" if world == "gripper" else "manipulator"
+
+
+def _outputs(url: str, world: str, deadline_s: float) -> dict[str, str]:
+    """The world's INFO through a fresh connection (retrying while board-sim is busy)."""
+    deadline = time.monotonic() + deadline_s
+    while True:
+        try:
+            with open_boards(url, _robot(world), max_age=0) as b:
+                link = b.gripper.link if b.gripper is not None else b.tio10._b.link
+                return dict(kv.split("=", 1) for kv in link.request("INFO"))
+        except BoardError as exc:
+            if "busy" not in str(exc) or time.monotonic() > deadline:
+                raise
+            time.sleep(0.005)
+
+
+def _off(info: dict[str, str]) -> bool:
+    if "dac" in info:
+        return info["dac"] == str(DAC_NULL)
+    return info["armed"] == "none" and info["windings_off"] == "1"
+
+
+def _driving_controller(url: str, world: str) -> _Proc:
+    c = _Proc(["-c", CONTROLLER, url, _robot(world)])
+    c.expect("^driving$")
+    return c
+
+
+@pytest.mark.parametrize("world", ["gripper", "prototype"])
+def test_killed_controller_leaves_the_outputs_off_within_the_watchdog_time(world):
+    """SIGKILL of a controller that is driving: a fresh connection finds the outputs off
+    (DAC null; every channel disarmed, windings off) within the watchdog time (1 s)."""
+    sim, url = _board_sim(world, watchdog=1.0)
+    try:
+        ctl = _driving_controller(url, world)
+        ctl.proc.send_signal(signal.SIGKILL)
+        t_kill = time.monotonic()
+        ctl.kill()
+        info = _outputs(url, world, 1.0)
+        assert _off(info), info
+        assert time.monotonic() - t_kill < 1.0
+        sim.expect(r"^controller \S+ (disconnected|lost \(.*\)): outputs off$", 5.0)
+    finally:
+        sim.kill()
+
+
+@pytest.mark.parametrize("world", ["gripper", "prototype"])
+def test_hung_controller_trips_the_watchdog(world):
+    """SIGSTOP of a controller that is driving (connected, silent): board-sim turns the outputs
+    off after the watchdog time (0.3 s), not before, and they stay off."""
+    sim, url = _board_sim(world, watchdog=0.3)
+    ctl = _driving_controller(url, world)
+    try:
+        ctl.proc.send_signal(signal.SIGSTOP)
+        t_stop = time.monotonic()
+        at, m = sim.expect(r"watchdog: no register access for ([0-9.]+) s: outputs off", 10.0)
+        assert 0.3 <= float(m.group(1)) < 1.3
+        assert at - t_stop < 1.3
+        ctl.proc.send_signal(signal.SIGKILL)
+        ctl.kill()
+        info = _outputs(url, world, 5.0)
+        assert _off(info), info
+    finally:
+        ctl.kill()
+        sim.kill()
+
+
+def test_killed_board_sim_makes_the_next_access_raise_board_error_naming_the_url():
+    """SIGKILL of board-sim: the controller's next register access raises BoardError naming the
+    URL within a bounded time, and so does every later one."""
+    sim, url = _board_sim("gripper")
+    boards = open_boards(url, "gripper", max_age=0)
+    try:
+        boards.gripper.write(DAC, 0x90)
+        sim.kill()
+        t0 = time.monotonic()
+        with pytest.raises(BoardError) as err:
+            boards.poll(0)
+        assert time.monotonic() - t0 < 2.0
+        assert str(err.value).startswith(f"board {url}: SNAP: ")
+        with pytest.raises(BoardError, match=re.escape(url)):
+            boards.gripper.read(DAC)
+    finally:
+        boards.close()
+        sim.kill()
+
+
+def test_manipulator_world_is_the_stations_and_sigterm_ends_it_with_outputs_off(tmp_path):
+    """board-sim prototype --db DIR holds the world a controller on DIR expects (the same rope
+    payouts as the in-process station); SIGTERM exits 0 saying the outputs are off."""
+    from pyrt.station.manipulator import ManipulatorStation
+
+    db = copy_station("prototype", tmp_path / "db")
+    sim, url = _board_sim("prototype", "--db", str(db), "--ideal-sensors")
+    try:
+        info = _outputs(url, "prototype", 5.0)
+        local = ManipulatorStation(db, writer="sync").plant
+        for i in range(len(local.ropes)):
+            assert float(info[f"payout{i}"]) == pytest.approx(local.payout(i), abs=1e-4)
+        sim.proc.send_signal(signal.SIGTERM)
+        sim.expect(r"^pyrt board-sim: stopped, outputs off", 10.0)
+        assert sim.proc.wait(10) == 0
+    finally:
+        sim.kill()
+
+
+def test_help_tells_the_options_and_the_url():
+    """pyrt board-sim --help names the worlds, --listen, --watchdog, the tcp:// URL; pyrt --help lists it."""
+    env = {**os.environ, "COLUMNS": "100"}
+    out = subprocess.run([sys.executable, "-m", "pyrt", "board-sim", "--help"], env=env,
+                         capture_output=True, text=True, timeout=START_S).stdout
+    for word in ("{gripper,prototype,sno}", "--listen HOST:PORT", "--watchdog S", "tcp://HOST:PORT",
+                 "--db DIR", "--start HEX", "--object MM", "pyrt.boards.wire"):
+        assert word in out, word
+    top = subprocess.run([sys.executable, "-m", "pyrt", "--help"], env=env, capture_output=True,
+                         text=True, timeout=START_S).stdout
+    assert "board-sim" in top
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["board-sim", "gripper", "--db", "somewhere"], "--db: only for a manipulator world"),
+    (["board-sim", "sno", "--start", "F400"], "--start: only for the gripper world"),
+    (["board-sim", "gripper", "--object", "99"], "object width must be between 0 and 76 mm"),
+    (["board-sim", "prototype", "--db", "/nonexistent/db"], "/nonexistent/db"),
+])
+def test_bad_options_end_with_one_line(capsys, argv, message):
+    """Options of the other world, a bad object, a missing database: exit 1 with one line, no traceback."""
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err and err.count("\n") == 1
