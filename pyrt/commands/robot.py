@@ -177,7 +177,7 @@ class RobotShell(CommandShell):
             result = self._wait_job(result)
             if result is None:
                 return False
-        prefix = "" if comp is self.level else comp.name
+        prefix = "" if comp is self.level or rec.name == "show" else comp.name
         self._show(rec, result, prefix)
         return False
 
