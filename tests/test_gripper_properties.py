@@ -8,8 +8,7 @@ from _gripper_rig import MS, make_rig
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from pyrt.commands import RobotShell
-from pyrt.commands.gripper import parse_target
+from pyrt.commands.gripper import GripperShell, parse_target
 from pyrt.console import Console
 from pyrt.errors import CommandError
 from pyrt.scheduler.runner import Runner
@@ -45,9 +44,9 @@ LINES = st.lists(st.one_of(LETTER_LINE, MONITOR_POKE, WORD_LINE), max_size=10)
 
 def session():
     rig = make_rig()
-    runner = rig.runner
+    runner = Runner(rig.loop)
     out = io.StringIO()
-    shell = RobotShell(rig.station, out)
+    shell = GripperShell(runner, rig.ctl, out, plant=rig.plant)
     runner.start()
     shell.onecmd("I")
     return rig, runner, shell, out

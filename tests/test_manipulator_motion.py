@@ -13,7 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pyrt.commands._motion import parse_motion, parse_value
-from pyrt.commands import RobotShell
+from pyrt.commands.gripper import GripperShell
+from pyrt.commands.manipulator import ManipulatorShell
 from pyrt.errors import CommandError
 from pyrt.robots.paths import HarePath, path_target
 from pyrt.robots.stops import StopReason
@@ -57,7 +58,7 @@ def sway(tmp_path, monkeypatch):
 def shell(tmp_path):
     station, runner = make_station(tmp_path)
     out = io.StringIO()
-    sh = RobotShell(station, out)
+    sh = ManipulatorShell(runner, station, out)
 
     def run(*lines: str) -> str:
         start = out.tell()
@@ -236,7 +237,8 @@ def test_gripper_console_motion_word():
     """The gripper console lists the motion types and queues a gripper_move by name."""
     gs = build_gripper(Loop(SimClock()))
     out = io.StringIO()
-    sh = RobotShell(gs, out)
+    sh = GripperShell(gs.runner, gs.controller, out, plant=gs.plant, scope=gs.scope,
+                      executor=gs.executor)
     gs.runner.start()
     try:
         sh.onecmd("I")
@@ -300,7 +302,7 @@ def test_motion_word_refusals_move_nothing(tmp_path_factory, kind, params):
     station, runner = make_station(tmp_path_factory.mktemp("motion"))
     try:
         out = io.StringIO()
-        sh = RobotShell(station, out)
+        sh = ManipulatorShell(runner, station, out)
         writes = station.tio10.writes
         assert not sh.onecmd(" ".join(["motion", kind, *params]))
         runner.sleep(0.05)

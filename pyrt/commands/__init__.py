@@ -1,7 +1,9 @@
-"""Command interpreters: one :class:`RobotShell` for every station."""
+"""Command interpreters of the robots.
 
-from pyrt.commands.gripper import parse_hex, parse_target
-from pyrt.commands.robot import RobotShell
+The gripper's CMD: level and monitor, the manipulator's object commands.
+"""
+
+from pyrt.commands.gripper import GripperShell, parse_hex, parse_target
 from pyrt.commands.shell import CommandShell
 
-__all__ = ["CommandShell", "RobotShell", "parse_hex", "parse_target"]
+__all__ = ["CommandShell", "GripperShell", "parse_hex", "parse_target"]

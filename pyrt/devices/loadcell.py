@@ -16,8 +16,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, TextIO
 
 from pyrt.boards.dataconcentrator import AnalogChannel, DataConcentrator
-from pyrt.component import Arg, Component, Signal, command
-from pyrt.devices._args import parse_number
+from pyrt.devices._args import dispatch, parse_number
 from pyrt.errors import CommandError, ConfigError
 from pyrt.units import UnitError, factor, split_quantity
 
@@ -56,7 +55,7 @@ def parse_load(value: float | str, command: str) -> float:
     return n
 
 
-class Loadcell(Component):
+class Loadcell:
     """One loadcell (see the module text)."""
 
     def __init__(
@@ -99,19 +98,12 @@ class Loadcell(Component):
 
     # -- calibration ---------------------------------------------------------------
 
-    def signals(self) -> list[Signal]:
-        return [Signal("tension", "N", self.tension, "rope tension from the ADC")]
-
-    @command(name="calibrate", reply=lambda v: None)
     def calibrate(self) -> tuple[float, float] | None:
-        """calibrate: toggle calibration mode (leaving it fits SLOPE and OFFSET and writes them back).
-
-        Toggle calibration mode; leaving it fits and returns (slope, offset).
+        """Toggle calibration mode; leaving it fits and returns (slope, offset).
 
         Fewer than two points (or points that all share one ADC code) is a
         CommandError, and calibration mode stays on so points can be added.
         """
-        self.check_free("calibrate")
         if not self.calibrating:
             self.calibrating = True
             self.points = []
@@ -142,10 +134,8 @@ class Loadcell(Component):
             self.write_back(slope, offset)
         return slope, offset
 
-    @command(Arg("LOAD", str, rest=True), name="point", reply=lambda v: None)
     def point(self, load: float | str) -> tuple[int, float]:
-        """point LOAD: a calibration point with LOAD (N, lb or kg) hung on the rope."""
-        self.check_free("point")
+        """``point [load]``: record the ADC code with ``load`` hung on the rope."""
         if not self.calibrating:
             raise CommandError(f"{self.name} point: not in calibration mode; "
                                "give 'calibrate' first")
@@ -154,6 +144,17 @@ class Loadcell(Component):
         self.points.append((code, n))
         self._say(f"{self.name}: point {len(self.points)}: ADC {code} = {n:.4g} N")
         return code, n
+
+    #: Section 10: ``calibrate`` toggles calibration mode, ``calibrationPoint``
+    #: (``point`` in Table 4) enters a point.
+    COMMANDS = {
+        "calibrate": ("calibrate", 0), "point": ("point", 1),
+        "calibrationPoint": ("point", 1),
+    }
+
+    def command(self, name: str, *args: str) -> object:
+        """Run a calibration command; CommandError if malformed."""
+        return dispatch(self, self.name, self.COMMANDS, name, args)
 
     def _say(self, text: str) -> None:
         if self.stdout is not None:
