@@ -218,6 +218,7 @@ def test_gripper_register_written_over_tcp_is_seen_by_the_plant_and_back(gripper
         assert _info(link)["dac"] == "160"
         assert _until(lambda: not cpu.movx_read(P8155_PB) & (1 << LIMIT))  # reached the stop
         cpu.movx_write(DAC, DAC_NULL)
+        assert _until(lambda: float(_info(link)["v"]) == 0.0)  # the motor lag has run out
         boards.poll(0)
         info = _info(link)
         assert info["current"] == "0"

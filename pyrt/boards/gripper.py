@@ -217,6 +217,11 @@ class SimGripperBoard(GripperBoard):
     def pulse_counts(self) -> tuple[int, int]:
         return self._up, self._down
 
+    def register_file(self) -> list[int]:
+        """Every register at once, in :data:`REGISTERS` order (for a board server)."""
+        readers = self._readers
+        return [readers[a]() & 0xFF for a in REGISTERS]
+
     def _read_cmd(self) -> int:
         return self.cmd
 

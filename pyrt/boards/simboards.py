@@ -12,6 +12,7 @@ the ``plant_*`` methods, which no driver calls.
 from __future__ import annotations
 
 from pyrt.boards.dataconcentrator import (
+    ADC_CHANNELS,
     ADC_MAX,
     COUNTER_BITS,
     DataConcentrator,
@@ -110,6 +111,18 @@ class SimTIO10(TIO10):
     def rtc_ticks(self) -> int:
         return self._rtc
 
+    def register_file(self) -> list[int]:
+        """Every register at once, for a board server: the RTC, PIA ports
+        0-3, then per channel 0-9 the source, the period, armed (0/1) and
+        the pulse counter (the order of the wire protocol's ``SNAP``)."""
+        ports, src, per = self._ports, self._source, self._period
+        armed, pulses = self._armed, self._pulses
+        return [
+            self._rtc, *(ports[p] for p in PIA_PORTS),
+            *(src[c] for c in CHANNELS), *(per[c] for c in CHANNELS),
+            *(1 if armed[c] else 0 for c in CHANNELS), *(pulses[c] for c in CHANNELS),
+        ]
+
     # -- plant side ----------------------------------------------------------
 
     def plant_channel(self, channel: int) -> tuple[int, bool]:
@@ -147,6 +160,11 @@ class SimDataConcentrator(DataConcentrator):
 
     def read_adc(self, channel: int) -> int:
         return self._adc.get(check_adc_channel(channel), 0)
+
+    def adc_codes(self) -> list[int]:
+        """The latest conversion of every ADC channel, 0..15 (for a board server)."""
+        adc = self._adc
+        return [adc.get(c, 0) for c in ADC_CHANNELS]
 
     # -- plant side ----------------------------------------------------------
 

@@ -147,6 +147,20 @@ class TcpLink:
         """Send one request; the reply's values (strings).  BoardError if the
         link fails or the board answers with an error other than ``range``
         (ValueError: the board refused the value)."""
+        return self._exchange(line).decode("ascii").split()
+
+    def request_ints(self, line: str) -> list[int]:
+        """:meth:`request` for a reply of numbers: the values as integers."""
+        payload = self._exchange(line)
+        try:
+            return list(map(int, payload.split()))
+        except ValueError:
+            with self._lock:
+                self._fail(f"reply {payload[:60]!r} is not numbers", line)
+            raise  # pragma: no cover - _fail raises
+
+    def _exchange(self, line: str) -> bytes:
+        """One round trip; the payload of the ``OK`` reply."""
         data = line.encode("ascii") + b"\n"
         with self._lock:
             if self._down is not None:
@@ -159,8 +173,8 @@ class TcpLink:
             except (OSError, EOFError) as exc:
                 self._fail(_why(exc), line)
             self.requests += 1
-        if reply.startswith(b"OK"):
-            return reply[3:].decode("ascii").split()
+        if reply[:3] == b"OK " or reply == b"OK":
+            return reply[3:]
         text = reply.decode("ascii", "replace")
         if text.startswith("ERR range "):
             raise ValueError(text[len("ERR range "):])
@@ -236,10 +250,9 @@ class TcpGripperBoard(GripperBoard):
         self.map_xdata(cpu)
 
     def _snap(self) -> tuple[int, int]:
-        values = self.link.request("SNAP")
-        if len(values) != 2 + len(_SNAP_REGISTERS):
-            self.link._fail(f"SNAP answered {len(values)} values", "SNAP")
-        nums = [int(v) for v in values]
+        nums = self.link.request_ints("SNAP")
+        if len(nums) != 2 + len(_SNAP_REGISTERS):
+            self.link._fail(f"SNAP answered {len(nums)} values", "SNAP")
         self._values = dict(zip(_SNAP_REGISTERS, nums[2:], strict=True))
         self._fresh_until = time.monotonic_ns() + self.max_age_ns
         return nums[0], nums[1]
@@ -248,7 +261,7 @@ class TcpGripperBoard(GripperBoard):
         check_register(addr)
         if time.monotonic_ns() < self._fresh_until:
             return self._values[addr]
-        return int(self.link.request(f"R {addr}")[0])
+        return self.link.request_ints(f"R {addr}")[0]
 
     def write(self, addr: int, value: int) -> None:
         check_register(addr, write=True)
@@ -303,10 +316,9 @@ class TcpManipulatorBoards:
         """Read every input register in one round trip (the tick's copy)."""
         addrs = self._addresses
         req = "SNAP " + " ".join(map(str, addrs)) if addrs else "SNAP"
-        values = self.link.request(req)
-        if len(values) != _CNT + len(addrs):
-            self.link._fail(f"SNAP answered {len(values)} values", "SNAP")
-        snap = [int(v) for v in values]
+        snap = self.link.request_ints(req)
+        if len(snap) != _CNT + len(addrs):
+            self.link._fail(f"SNAP answered {len(snap)} values", "SNAP")
         self._counters = dict(zip(addrs, snap[_CNT:], strict=True))
         self._snap = snap
         self._fresh_until = time.monotonic_ns() + self.max_age_ns
@@ -318,7 +330,7 @@ class TcpManipulatorBoards:
     def _get(self, index: int, request: str) -> int:
         if time.monotonic_ns() < self._fresh_until:
             return self._snap[index]
-        return int(self.link.request(request)[0])
+        return self.link.request_ints(request)[0]
 
     def _put(self, index: int, value: int) -> None:
         if self._snap:
@@ -331,7 +343,7 @@ class TcpManipulatorBoards:
                 return raw
         if address not in self._addresses:
             self._addresses = (*self._addresses, address)
-        return int(self.link.request(f"CNT {address}")[0])
+        return self.link.request_ints(f"CNT {address}")[0]
 
     def _clear(self, address: int) -> None:
         self.link.request(f"CLR {address}")

@@ -173,7 +173,7 @@ def ok_line(*values: object) -> bytes:
     """An ``OK`` reply line carrying ``values``."""
     if not values:
         return b"OK\n"
-    return ("OK " + " ".join(str(v) for v in values) + "\n").encode("ascii")
+    return ("OK " + " ".join(map(str, values)) + "\n").encode("ascii")
 
 
 def error_line(code: str, text: str) -> bytes:

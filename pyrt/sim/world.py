@@ -24,10 +24,10 @@ from abc import ABC, abstractmethod
 from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING
 
-from pyrt.boards.gripper import DAC, DAC_NULL, REGISTERS, SimGripperBoard
+from pyrt.boards.gripper import DAC, DAC_NULL, SimGripperBoard
 from pyrt.boards.i8031 import I8031
 from pyrt.boards.simboards import SimDataConcentrator, SimTIO10
-from pyrt.boards.tio10 import AWO_BITS, CHANNELS, PIA_PORTS, RTC_CHANNELS
+from pyrt.boards.tio10 import AWO_BITS, CHANNELS, RTC_CHANNELS
 from pyrt.boards.wire import GRIPPER_VERBS, MANIPULATOR_VERBS, WireError, ok_line
 from pyrt.errors import ConfigError
 from pyrt.sim.gripper import JawParameters, JawPlant
@@ -40,7 +40,6 @@ if TYPE_CHECKING:
 __all__ = ["BoardWorld", "GripperWorld", "ManipulatorWorld"]
 
 _MOTOR_CHANNELS = tuple(c for c in CHANNELS if c not in RTC_CHANNELS)
-_ADC_CHANNELS = tuple(range(16))
 
 
 class BoardWorld(ABC):
@@ -117,7 +116,7 @@ class GripperWorld(BoardWorld):
             return b"OK\n"
         if verb == "SNAP":
             up, down = board.pulse_counts()
-            return ok_line(up, down, *(board.read(a) for a in REGISTERS))
+            return ok_line(up, down, *board.register_file())
         raise WireError("syntax", f"{verb} is not a gripper request")
 
     def outputs_off(self) -> None:
@@ -184,16 +183,8 @@ class ManipulatorWorld(BoardWorld):
         tio = self.tio10
         dc = self.dc
         if verb == "SNAP":
-            return ok_line(
-                tio.rtc_ticks(),
-                *(tio.read_port(p) for p in PIA_PORTS),
-                *(tio.source(c) for c in CHANNELS),
-                *(tio.period(c) for c in CHANNELS),
-                *(int(tio.armed(c)) for c in CHANNELS),
-                *(tio.pulses(c) for c in CHANNELS),
-                *(dc.read_adc(c) for c in _ADC_CHANNELS),
-                *(dc.read_counter(a) for a in args),
-            )
+            return ok_line(*tio.register_file(), *dc.adc_codes(),
+                           *(dc.read_counter(a) for a in args))
         if verb == "SRC":
             if len(args) == 1:
                 return ok_line(tio.source(args[0]))
