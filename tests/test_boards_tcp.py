@@ -399,7 +399,8 @@ def test_a_peer_that_is_not_board_sim_is_refused():
 
 @pytest.mark.wallclock
 def test_a_silent_controller_trips_the_watchdog_in_process():
-    """No register access for the watchdog time: the DAC goes to null while still connected."""
+    """No register access for the watchdog time: the DAC goes to null while still connected,
+    and the controller's next poll raises BoardError saying so (once)."""
     server = _serve(GripperWorld(), watchdog_s=0.1)
     try:
         with open_boards(server.url, "gripper") as boards:
@@ -407,6 +408,11 @@ def test_a_silent_controller_trips_the_watchdog_in_process():
             t0 = time.monotonic()
             assert _until(lambda: server.watchdog_trips == 1, 2.0)
             assert time.monotonic() - t0 < 1.0
+            with pytest.raises(BoardError) as err:  # the controller is told, once
+                boards.poll(0)
+            assert str(err.value) == (f"board {server.url}: the board's watchdog turned the "
+                                      "outputs off (no register access for 0.1 s)")
+            boards.poll(0)
             assert boards.gripper.read(DAC) == DAC_NULL
     finally:
         server.close()

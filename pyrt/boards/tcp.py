@@ -22,8 +22,11 @@ tick is the same).
 Failures.  A connection refused, reset or closed, or no reply within
 ``timeout`` seconds (default 0.25), raises :class:`~pyrt.errors.BoardError`
 naming the URL, and the link stays down: every later access raises it too,
-at once (board-sim has turned its outputs off by then; it never resumes a
-half-known state).  A value the board refuses raises ``ValueError``, as the
+at once (board-sim turns its outputs off when the connection drops; a link
+never resumes a half-known state).  When board-sim's watchdog has turned the outputs off
+while the link was up (the controller's loop stalled longer than the
+watchdog time), the next ``poll`` raises BoardError once, saying so; the
+link stays up.  A value the board refuses raises ``ValueError``, as the
 in-process boards do.
 """
 
@@ -106,6 +109,7 @@ class TcpLink:
         self._lock = threading.Lock()
         self._buf = b""
         self._down: str | None = None
+        self._trips: int | None = None
         #: Round trips made (requests answered).
         self.requests = 0
         try:
@@ -137,6 +141,14 @@ class TcpLink:
             self.watchdog_s = int(greeting[5]) / 1000.0
         except ValueError:
             self._fail(f"bad greeting {' '.join(greeting)[:80]!r}", "connect")
+
+    def check_trips(self, trips: int) -> None:
+        """Raise BoardError once when the board's watchdog count has grown
+        since the last look (the first look takes it as it is)."""
+        last, self._trips = self._trips, trips
+        if last is not None and trips > last:
+            raise BoardError(self.url, f"the board's watchdog turned the outputs off (no "
+                                       f"register access for {self.watchdog_s:g} s)")
 
     @property
     def down(self) -> str | None:
@@ -251,11 +263,12 @@ class TcpGripperBoard(GripperBoard):
 
     def _snap(self) -> tuple[int, int]:
         nums = self.link.request_ints("SNAP")
-        if len(nums) != 2 + len(_SNAP_REGISTERS):
+        if len(nums) != 3 + len(_SNAP_REGISTERS):
             self.link._fail(f"SNAP answered {len(nums)} values", "SNAP")
-        self._values = dict(zip(_SNAP_REGISTERS, nums[2:], strict=True))
+        self._values = dict(zip(_SNAP_REGISTERS, nums[3:], strict=True))
         self._fresh_until = time.monotonic_ns() + self.max_age_ns
-        return nums[0], nums[1]
+        self.link.check_trips(nums[0])
+        return nums[1], nums[2]
 
     def read(self, addr: int) -> int:
         check_register(addr)
@@ -322,6 +335,7 @@ class TcpManipulatorBoards:
         self._counters = dict(zip(addrs, snap[_CNT:], strict=True))
         self._snap = snap
         self._fresh_until = time.monotonic_ns() + self.max_age_ns
+        self.link.check_trips(snap[0])
 
     def fresh(self) -> bool:
         """Whether reads are answered from the tick's copy now."""

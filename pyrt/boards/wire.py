@@ -47,9 +47,11 @@ Gripper cage (addresses of :data:`pyrt.boards.gripper.REGISTERS`)::
 
     R ADDR            OK VALUE            read a register
     W ADDR VALUE      OK                  write one (not the input ports PA/PB/PC)
-    SNAP              OK UP DOWN CMD PA PB PC LEDLO LEDHI DAC
+    SNAP              OK TRIPS UP DOWN CMD PA PB PC LEDLO LEDHI DAC
 
-``UP``/``DOWN`` count the encoder pulses the board raised on external
+``TRIPS`` counts the watchdog's trips since board-sim started (both
+boards' ``SNAP`` begin with it: a controller that sees it grow learns that
+its outputs were turned off).  ``UP``/``DOWN`` count the encoder pulses the board raised on external
 interrupt 0 and 1 since it started, modulo 2**32; the controller's side
 fires the 8031 vectors for the difference since its last ``SNAP``.
 
@@ -67,7 +69,7 @@ counter addresses 0..255 and ADC channels 0..15::
     CNT A             OK RAW              24-bit up/down counter
     CLR A             OK                  clear it
     ADC C             OK CODE             latest 12-bit conversion
-    SNAP [A ...]      OK RTC PORT0..3 SRC0..9 PER0..9 ARMED0..9 PULSES0..9 ADC0..15 CNT(A)...
+    SNAP [A ...]      OK TRIPS RTC PORT0..3 SRC0..9 PER0..9 ARMED0..9 PULSES0..9 ADC0..15 CNT(A)...
 
 Watchdog.  Every request except ``INFO`` and ``QUIT`` is a register access.
 When none has come for the watchdog time, the board turns its outputs off,
@@ -115,11 +117,11 @@ MANIPULATOR_VERBS: dict[str, tuple[int, ...]] = {
 NOT_ACCESSES = frozenset(("INFO", "QUIT"))
 
 #: Fields of a gripper ``SNAP`` reply, in order.
-GRIPPER_SNAP = ("up", "down", "cmd", "pa", "pb", "pc", "led_lo", "led_hi", "dac")
+GRIPPER_SNAP = ("trips", "up", "down", "cmd", "pa", "pb", "pc", "led_lo", "led_hi", "dac")
 #: Fields of a manipulator ``SNAP`` reply before the counters: name -> (first index, count).
 MANIPULATOR_SNAP = {
-    "rtc": (0, 1), "port": (1, 4), "src": (5, 10), "per": (15, 10), "armed": (25, 10),
-    "pulses": (35, 10), "adc": (45, 16), "cnt": (61, 0),
+    "trips": (0, 1), "rtc": (1, 1), "port": (2, 4), "src": (6, 10), "per": (16, 10),
+    "armed": (26, 10), "pulses": (36, 10), "adc": (46, 16), "cnt": (62, 0),
 }
 
 

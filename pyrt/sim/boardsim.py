@@ -201,6 +201,7 @@ class BoardServer:
     def _watchdog(self, now: int) -> None:
         self._fed = False
         self.watchdog_trips += 1
+        self.world.trips += 1
         was_on = not self.world.outputs_are_off()
         self.world.outputs_off()
         if was_on:

@@ -55,6 +55,8 @@ class BoardWorld(ABC):
             raise ConfigError(f"world name must be one ASCII word, got {name!r}")
         #: The world's name (the greeting's NAME).
         self.name = name
+        #: Watchdog trips so far (the server counts them; every SNAP reports them).
+        self.trips = 0
 
     @abstractmethod
     def step(self, now_ns: int) -> None:
@@ -116,7 +118,7 @@ class GripperWorld(BoardWorld):
             return b"OK\n"
         if verb == "SNAP":
             up, down = board.pulse_counts()
-            return ok_line(up, down, *board.register_file())
+            return ok_line(self.trips, up, down, *board.register_file())
         raise WireError("syntax", f"{verb} is not a gripper request")
 
     def outputs_off(self) -> None:
@@ -183,7 +185,7 @@ class ManipulatorWorld(BoardWorld):
         tio = self.tio10
         dc = self.dc
         if verb == "SNAP":
-            return ok_line(*tio.register_file(), *dc.adc_codes(),
+            return ok_line(self.trips, *tio.register_file(), *dc.adc_codes(),
                            *(dc.read_counter(a) for a in args))
         if verb == "SRC":
             if len(args) == 1:
