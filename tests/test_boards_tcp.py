@@ -318,6 +318,17 @@ def test_manipulator_motor_driven_over_tcp_moves_the_world_and_counts_come_back(
         assert float(_info(link)["payout0"]) > before
 
 
+@pytest.mark.wallclock
+def test_the_world_steps_at_real_time(manipulator_sim):
+    """The world's clock (the TIO10's 5 MHz RTC, set by each step) advances with the wall clock."""
+    with open_boards(manipulator_sim.url, "manipulator", max_age=0) as boards:
+        tio = boards.tio10
+        t0, r0 = time.monotonic(), tio.rtc_ticks()
+        time.sleep(0.3)  # let real time pass (the thing measured)
+        t1, r1 = time.monotonic(), tio.rtc_ticks()
+        assert (r1 - r0) / 5e6 == pytest.approx(t1 - t0, abs=0.05)
+
+
 # -- failures -------------------------------------------------------------------------------------
 
 

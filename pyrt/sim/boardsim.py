@@ -125,8 +125,11 @@ class BoardServer:
 
     def _say(self, line: str) -> None:
         if self.stdout is not None:
-            self.stdout.write(line + "\n")
-            self.stdout.flush()
+            try:
+                self.stdout.write(line + "\n")
+                self.stdout.flush()
+            except (OSError, ValueError):  # a closed log must not stop the boards
+                self.stdout = None
 
     # -- running ------------------------------------------------------------------
 
