@@ -1,17 +1,19 @@
 /*
- * pyrt native kernels: the only C functions Python may call.
+ * pyrt native kernels: what every kernel shares.
  *
- * Plain C99.  No Python.h, no globals, no allocation: every function takes
- * explicit arrays and sizes and returns a status code (PYRT_OK on success).
- * build_native.py mirrors this header in its cdef; pyrt/native.py is the
- * only Python module that calls these functions.
+ * Plain C99.  No Python.h, no globals, no allocation: every entry point
+ * takes explicit arrays and sizes and returns one of the status codes below
+ * (PYRT_OK on success).  The public API is this header and the one header of
+ * each kernel (build_native.py generates the cffi cdef from exactly those);
+ * pyrt.native is the only Python package that calls it, and its _errors
+ * module the only place that turns a status code into an exception.
  */
 #ifndef PYRT_NATIVE_H
 #define PYRT_NATIVE_H
 
 #include <stdint.h>
 
-/* Status codes shared by every kernel. */
+/* Status codes returned by every entry point. */
 #define PYRT_OK            0
 #define PYRT_EINVAL        1   /* bad argument: size out of range, NULL pointer */
 #define PYRT_ENONFINITE    2   /* NaN or infinity in an input */
@@ -20,20 +22,11 @@
 #define PYRT_EDEGENERATE   5   /* zero-length segment or similar geometry */
 
 /*
- * Saturating conversion of a signed drive value to an excess-128 DAC byte
- * (002, "Features of the Gripper Controller Hardware": null current = 0x80,
- * full positive = 0xFF, full negative = 0x00).  Values beyond -128..127 are
- * clamped, never wrapped.
+ * A rope segment shorter than this (cm: one micrometre) has no direction:
+ * the carriage pulley is on a top pulley, a bottom attachment or the neck
+ * ring's rim.  The geometry kernels (findpos, neck, statics) answer
+ * PYRT_EDEGENERATE.
  */
-uint8_t pyrt_excess128(int32_t value);
-
-/* Inverse of pyrt_excess128: DAC byte to signed drive value (-128..127). */
-int32_t pyrt_from_excess128(uint8_t byte);
-
-/*
- * Saturating excess-128 conversion of n values at once; out[i] receives the
- * DAC byte for in[i].  Returns PYRT_EINVAL for a NULL pointer.
- */
-int pyrt_excess128_many(const int32_t *in, uint8_t *out, int32_t n);
+#define PYRT_MIN_SEGMENT_CM 1e-4
 
 #endif /* PYRT_NATIVE_H */

@@ -4,12 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from pyrt.errors import NativeError
+from pyrt.native._errors import raise_for_status
 from pyrt.native._lib import ffi, lib
 
 __all__ = ["excess128", "excess128_many", "from_excess128"]
-
-OK = lib.PYRT_OK
 
 
 def excess128(value: int) -> int:
@@ -18,14 +16,18 @@ def excess128(value: int) -> int:
         raise TypeError(f"drive value must be an integer, got {type(value).__name__}")
     v = int(value)
     v = max(-(2**31), min(2**31 - 1, v))
-    return lib.pyrt_excess128(v)
+    out = ffi.new("uint8_t *")
+    raise_for_status(lib.pyrt_excess128(v, out), "excess128")
+    return out[0]
 
 
 def from_excess128(byte: int) -> int:
     """Excess-128 DAC byte (00..FF) to the signed drive value (-128..127)."""
     if not 0 <= byte <= 0xFF:
         raise ValueError(f"DAC byte must be 00..FF, got {byte!r}")
-    return lib.pyrt_from_excess128(byte)
+    out = ffi.new("int32_t *")
+    raise_for_status(lib.pyrt_from_excess128(byte, out), "from_excess128")
+    return out[0]
 
 
 def excess128_many(values) -> np.ndarray:
@@ -40,10 +42,7 @@ def excess128_many(values) -> np.ndarray:
     arr = np.ascontiguousarray(np.clip(arr, -(2**31), 2**31 - 1), dtype=np.int32)
     out = np.empty(arr.shape[0], dtype=np.uint8)
     rc = lib.pyrt_excess128_many(
-        ffi.cast("const int32_t *", ffi.from_buffer(arr)),
-        ffi.cast("uint8_t *", ffi.from_buffer(out)),
-        arr.shape[0],
+        ffi.from_buffer("int32_t[]", arr), ffi.from_buffer("uint8_t[]", out), arr.shape[0]
     )
-    if rc != OK:
-        raise NativeError(f"pyrt_excess128_many failed with status {rc}")
+    raise_for_status(rc, f"excess128_many ({arr.shape[0]} values)")
     return out

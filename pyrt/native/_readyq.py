@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from pyrt.errors import NativeError
+from pyrt.native._errors import raise_for_status
 from pyrt.native._lib import ffi, lib
 
 __all__ = ["QueueChecker"]
@@ -29,21 +29,16 @@ class QueueChecker:
         self.capacity = capacity
         self._ready = ffi.new("uint16_t[]", capacity)
         self._buf = ffi.from_buffer("uint8_t[]", mem, require_writable=True)
-        rq = ffi.new("pyrt_rq *")
-        rq.mem = self._buf
-        rq.mem_len = len(mem)
-        rq.t_addr = t_addr
-        rq.q_addr = q_addr
-        rq.capacity = capacity
-        rq.ready = self._ready
-        self._rq = rq
+        self._rq = ffi.new("pyrt_rq *", {
+            "mem": self._buf, "mem_len": size, "t_addr": t_addr, "q_addr": q_addr,
+            "capacity": capacity, "ready": self._ready,
+        })
         self._check = lib.pyrt_rq_check
         self._unpack = ffi.unpack
 
     def check(self) -> list[int]:
         """One queue check; the addresses of the routines now ready."""
         rq = self._rq
-        if self._check(rq):  # pragma: no cover - arguments checked above
-            raise NativeError("pyrt_rq_check refused its arguments")
+        raise_for_status(self._check(rq), "QueueChecker.check")
         n = rq.n_ready
         return self._unpack(self._ready, n) if n else []
