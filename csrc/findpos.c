@@ -7,7 +7,6 @@
 #include <math.h>
 #include <stddef.h>
 
-#define MIN_SEGMENT_CM (PYRT_FINDPOS_MIN_SEGMENT_UM * 1.0e-4)
 /* A normal matrix whose determinant is below this fraction of the product
  * of its diagonal terms is singular. */
 #define SINGULAR_RATIO 1.0e-12
@@ -59,14 +58,14 @@ static int check_geometry(int32_t n, const double *tops, const double *bottoms,
 
 /*
  * Unit vector from point p toward point q; returns the distance, or a
- * negative number when the points are closer than MIN_SEGMENT_CM.
+ * negative number when the points are closer than PYRT_MIN_SEGMENT_CM.
  */
 static double toward(const double *p, const double *q, double *u)
 {
     double d0 = q[0] - p[0], d1 = q[1] - p[1], d2 = q[2] - p[2];
     double len = sqrt(d0 * d0 + d1 * d1 + d2 * d2);
     double inv;
-    if (!(len >= MIN_SEGMENT_CM))
+    if (!(len >= PYRT_MIN_SEGMENT_CM))
         return -1.0;
     inv = 1.0 / len;
     u[0] = d0 * inv;
@@ -219,12 +218,12 @@ static int linearise(const pyrt_findpos_problem *p, const double *x, double m[6]
     return PYRT_OK;
 }
 
-/* Distance from p to q, or a negative number below MIN_SEGMENT_CM. */
+/* Distance from p to q, or a negative number below PYRT_MIN_SEGMENT_CM. */
 static double distance(const double *p, const double *q)
 {
     double d0 = q[0] - p[0], d1 = q[1] - p[1], d2 = q[2] - p[2];
     double len = sqrt(d0 * d0 + d1 * d1 + d2 * d2);
-    return len >= MIN_SEGMENT_CM ? len : -1.0;
+    return len >= PYRT_MIN_SEGMENT_CM ? len : -1.0;
 }
 
 /* Residuals (measured - predicted) at x and their sum of squares. */

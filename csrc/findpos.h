@@ -35,11 +35,9 @@
  */
 #define PYRT_FINDPOS_FREEZE_CM 1
 
-/*
- * A top or bottom segment shorter than this many micrometres (the source at
- * a pulley) has no direction: PYRT_EDEGENERATE.
- */
-#define PYRT_FINDPOS_MIN_SEGMENT_UM 1
+/* Defaults of the solver: 000's 0.1 cm step tolerance, and an iteration limit. */
+#define PYRT_FINDPOS_DEFAULT_TOL 0.1
+#define PYRT_FINDPOS_DEFAULT_MAX_ITER 50
 
 /*
  * One position-finding problem.  Pointers are borrowed (the caller owns the
@@ -56,7 +54,7 @@
  *   lengths    n measured (stretch-corrected) rope lengths
  *   freeze     3 flags: nonzero holds that direction at its start value
  *   tol        stop when the step of an iteration is shorter than tol (cm;
- *              000 uses 0.1); must be finite and > 0
+ *              000 uses 0.1: PYRT_FINDPOS_DEFAULT_TOL); finite and > 0
  *   max_iter   iteration limit, >= 1
  *   position   3 doubles: the start on entry, the solution on exit
  *   residuals  n doubles: measured - predicted at the solution
@@ -92,7 +90,7 @@ typedef struct {
  * max_iter out of range, every direction frozen, a bottom row partly NaN);
  * PYRT_ENONFINITE (NaN or infinity in tops, offsets, lengths, start or a
  * bottom); PYRT_EDEGENERATE (a segment shorter than
- * PYRT_FINDPOS_MIN_SEGMENT_UM during the iteration); PYRT_ESINGULAR (the
+ * PYRT_MIN_SEGMENT_CM during the iteration); PYRT_ESINGULAR (the
  * ropes do not fix the unfrozen directions); PYRT_ENOCONVERGE (max_iter
  * reached, or the iteration ran away to a non-finite point).
  */
@@ -116,7 +114,7 @@ int pyrt_findpos_freeze_mask(int32_t n, const double *bottoms, int32_t *freeze);
  * not wanted; total (n) is required.
  *
  * PYRT_EINVAL, PYRT_ENONFINITE as above; PYRT_EDEGENERATE when a segment is
- * shorter than PYRT_FINDPOS_MIN_SEGMENT_UM (the source at a pulley).
+ * shorter than PYRT_MIN_SEGMENT_CM (the source at a pulley).
  */
 int pyrt_rope_lengths(int32_t n, const double *tops, const double *bottoms,
                       const double *offsets, const double *position,

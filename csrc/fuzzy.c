@@ -1,6 +1,6 @@
 /*
  * The ten fuzzy rules of the 000 Axis controller (VELOCITY_MODE).  See
- * fuzzy.h for the rule table; the defaults and their reasons are here.
+ * fuzzy.h for the rule table, the defaults and their reasons.
  */
 #include "fuzzy.h"
 
@@ -36,91 +36,30 @@ int pyrt_fuzzy_default_params(pyrt_fuzzy_params *p)
 {
     if (p == NULL)
         return PYRT_EINVAL;
-    /*
-     * Tension guards (rules 0, 1), offsets inward from the bounds.  LowT is
-     * full 1 N above the lower bound and gone 5 N above it, so with a bound
-     * of a few newtons it stays silent at the 10 N off-side target and
-     * takes over well before LOW_TENSION_STOP.  HighT starts 15 N below the
-     * upper bound (a quarter of the 60 N working range) and is full 2 N
-     * below it.  dv_tension 0.4 cm/s per poll is the document's "increase
-     * tension = -0.4 cm/s"; it is the strongest rule, below DV_LIMIT 0.5.
-     */
-    p->low_t_full = 1.0;
-    p->low_t_zero = 5.0;
-    p->high_t_zero = 15.0;
-    p->high_t_full = 2.0;
-    p->dv_tension = 0.4;
-    /*
-     * Length (rules 2, 3): linear from no error to 1 cm, no dead band, so
-     * that near the target the rules act as the proportional term of a PD
-     * loop and the velocity integrator cannot drift inside a dead band.
-     * With the 50 ms poll, 0.1 cm/s per poll at 1 cm is an acceleration of
-     * 2 cm/s^2 per cm of error: omega = sqrt(0.1 / (1 cm * 0.05 s)) =
-     * 1.4 rad/s, a 4.4 s natural period; the hare's 20 cm ramps to
-     * 2 cm/s ask for 0.1 cm/s^2, which this loop follows 0.05 cm behind.
-     */
-    p->len_zero = 0.0;
-    p->len_full = 1.0;
-    p->dv_length = 0.1;
-    /*
-     * Length-error rate damping (rule 7): linear up to 2 cm/s (the hare's
-     * top speed), 0.25 cm/s per poll at full: 0.25 / (2 * 0.05) = 2.5 /s =
-     * 2 zeta omega, zeta = 0.9 with the length rules above.  With the
-     * length rules saturated (errors over 1 cm) the two balance at a
-     * closing speed of 0.1 / 0.125 = 0.8 cm/s, so a large error is taken up
-     * steadily instead of with a lunge.
-     */
-    p->len_rate_zero = 0.0;
-    p->len_rate_full = 2.0;
-    p->dv_len_rate = 0.25;
-    /*
-     * Relative tension (rules 4, 5) for a rope with a target (the off-side
-     * rope at 10 N): a 0.5 N dead band for loadcell noise and offset (the
-     * document found tension errors stopping the source near the end), full
-     * at 5 N.  0.2 cm/s per poll at 5 N (0.04 per N) beats the length rules
-     * (0.1 per cm) for any rope stiffer than 2.5 N/cm of paid-out length,
-     * which every tensioned rope is (a 1000 cm rope of compliance 1e-4 per
-     * N is 10 N/cm), so the off-side rope behaves as an idler as the
-     * document intends.  Near the end 75 % of the rule is
-     * relaxed ("only partially relaxed").
-     */
-    p->rel_zero = 0.5;
-    p->rel_full = 5.0;
-    p->dv_rel_tension = 0.2;
-    p->near_end_relax = 0.75;
-    /*
-     * Tension-error rate damping (rule 8): stops two side ropes trading
-     * tension in an oscillation (the document's common scenario).  Full at
-     * 40 N/s (a rope of ~40 N/cm moving at 1 cm/s), 0.25 cm/s per poll:
-     * 0.25 / 40 / 0.05 = 0.125 cm/s^2 of velocity change per N/s.
-     *
-     * The whole set was checked in closed loop on the prototype statics
-     * (5.3 kg source, dead length 453 cm, rope compliance 5e-6 to 1e-4 per
-     * N, loadcell noise 0.5 N, 20 and 50 ms polls): every target the
-     * tension bounds allow ends within 0.1 cm in plane with the tensions
-     * between 8 and 58 N; a target that needs a rope below its bound is
-     * held off by the guards instead of being reached.
-     */
-    p->t_rate_zero = 0.0;
-    p->t_rate_full = 40.0;
-    p->dv_t_rate = 0.25;
-    /*
-     * Velocity high (rule 6): a soft speed limit between 5 cm/s and the
-     * motor's 7.0 cm/s cruise maximum; the hare never asks for more than
-     * 2 cm/s of source speed, so this only catches a run-away.
-     */
-    p->vel_zero = 5.0;
-    p->vel_full = 7.0;
-    p->dv_velocity = 0.3;
-    /*
-     * dv high (rule 9, the document's deltaDV(dv, ...)): above 0.1 cm/s per
-     * poll the next change is cut by up to half of the last one, full at
-     * DV_LIMIT 0.5, so bursts of velocity change (the ones that stall a
-     * stepper) are smoothed over several polls.
-     */
-    p->dv_zero = 0.1;
-    p->dv_full = 0.5;
-    p->dv_damping = 0.5;
+    p->low_t_full = PYRT_FUZZY_DEFAULT_LOW_T_FULL;
+    p->low_t_zero = PYRT_FUZZY_DEFAULT_LOW_T_ZERO;
+    p->high_t_zero = PYRT_FUZZY_DEFAULT_HIGH_T_ZERO;
+    p->high_t_full = PYRT_FUZZY_DEFAULT_HIGH_T_FULL;
+    p->len_zero = PYRT_FUZZY_DEFAULT_LEN_ZERO;
+    p->len_full = PYRT_FUZZY_DEFAULT_LEN_FULL;
+    p->rel_zero = PYRT_FUZZY_DEFAULT_REL_ZERO;
+    p->rel_full = PYRT_FUZZY_DEFAULT_REL_FULL;
+    p->near_end_relax = PYRT_FUZZY_DEFAULT_NEAR_END_RELAX;
+    p->vel_zero = PYRT_FUZZY_DEFAULT_VEL_ZERO;
+    p->vel_full = PYRT_FUZZY_DEFAULT_VEL_FULL;
+    p->len_rate_zero = PYRT_FUZZY_DEFAULT_LEN_RATE_ZERO;
+    p->len_rate_full = PYRT_FUZZY_DEFAULT_LEN_RATE_FULL;
+    p->t_rate_zero = PYRT_FUZZY_DEFAULT_T_RATE_ZERO;
+    p->t_rate_full = PYRT_FUZZY_DEFAULT_T_RATE_FULL;
+    p->dv_zero = PYRT_FUZZY_DEFAULT_DV_ZERO;
+    p->dv_full = PYRT_FUZZY_DEFAULT_DV_FULL;
+    p->dv_tension = PYRT_FUZZY_DEFAULT_DV_TENSION;
+    p->dv_length = PYRT_FUZZY_DEFAULT_DV_LENGTH;
+    p->dv_rel_tension = PYRT_FUZZY_DEFAULT_DV_REL_TENSION;
+    p->dv_velocity = PYRT_FUZZY_DEFAULT_DV_VELOCITY;
+    p->dv_len_rate = PYRT_FUZZY_DEFAULT_DV_LEN_RATE;
+    p->dv_t_rate = PYRT_FUZZY_DEFAULT_DV_T_RATE;
+    p->dv_damping = PYRT_FUZZY_DEFAULT_DV_DAMPING;
     return PYRT_OK;
 }
 

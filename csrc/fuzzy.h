@@ -11,11 +11,12 @@
  * Units: tension N, length cm, velocity and dv cm/s, tension rate N/s.
  * The velocity changes are per poll.  Figure 3 of the document (the fuzzy
  * sets) did not survive; the sets below are pyrt's design, every breakpoint
- * a field of pyrt_fuzzy_params.  Their defaults (pyrt_fuzzy_default_params)
- * and the reasoning for each are in fuzzy.c and in pyrt.native.FuzzyParams;
- * they assume a 50 ms axis poll and the prototype (5.3 kg source, ropes of
- * 10-60 N, motor speeds 0.07-7.0 cm/s, DV_LIMIT 0.5 cm/s per poll applied
- * by the Motor, off-side ropes driven toward 10 N).
+ * a field of pyrt_fuzzy_params.  Their defaults are the PYRT_FUZZY_DEFAULT_*
+ * constants below, each with its reasoning (pyrt_fuzzy_default_params fills
+ * a struct with them; pyrt.native.FuzzyParams reads them); they assume a
+ * PYRT_FUZZY_REFERENCE_POLL_S axis poll and the prototype (5.3 kg source,
+ * ropes of 10-60 N, motor speeds 0.07-7.0 cm/s, DV_LIMIT 0.5 cm/s per poll
+ * applied by the Motor, off-side ropes driven toward 10 N).
  *
  * Membership shapes: up(x, zero, full) is 0 for x <= zero, 1 for x >= full
  * and linear between (a shoulder); down(x, full, zero) is its mirror.
@@ -113,7 +114,101 @@ typedef struct {
     double dv_damping;
 } pyrt_fuzzy_params;
 
-/* Fill *p with the documented defaults.  PYRT_EINVAL for NULL. */
+/* The axis poll (s) the default per-poll velocity changes are tuned for. */
+#define PYRT_FUZZY_REFERENCE_POLL_S 0.05
+
+/*
+ * Tension guards (rules 0, 1), offsets inward from the bounds.  LowT is
+ * full 1 N above the lower bound and gone 5 N above it, so with a bound of
+ * a few newtons it stays silent at the 10 N off-side target and takes over
+ * well before LOW_TENSION_STOP.  HighT starts 15 N below the upper bound (a
+ * quarter of the 60 N working range) and is full 2 N below it.  dv_tension
+ * 0.4 cm/s per poll is the document's "increase tension = -0.4 cm/s"; it is
+ * the strongest rule, below DV_LIMIT 0.5.
+ */
+#define PYRT_FUZZY_DEFAULT_LOW_T_FULL 1.0
+#define PYRT_FUZZY_DEFAULT_LOW_T_ZERO 5.0
+#define PYRT_FUZZY_DEFAULT_HIGH_T_ZERO 15.0
+#define PYRT_FUZZY_DEFAULT_HIGH_T_FULL 2.0
+#define PYRT_FUZZY_DEFAULT_DV_TENSION 0.4
+
+/*
+ * Length (rules 2, 3): linear from no error to 1 cm, no dead band, so that
+ * near the target the rules act as the proportional term of a PD loop and
+ * the velocity integrator cannot drift inside a dead band.  With the 50 ms
+ * poll, 0.1 cm/s per poll at 1 cm is an acceleration of 2 cm/s^2 per cm of
+ * error: omega = sqrt(0.1 / (1 cm * 0.05 s)) = 1.4 rad/s, a 4.4 s natural
+ * period; the hare's 20 cm ramps to 2 cm/s ask for 0.1 cm/s^2, which this
+ * loop follows 0.05 cm behind.
+ */
+#define PYRT_FUZZY_DEFAULT_LEN_ZERO 0.0
+#define PYRT_FUZZY_DEFAULT_LEN_FULL 1.0
+#define PYRT_FUZZY_DEFAULT_DV_LENGTH 0.1
+
+/*
+ * Length-error rate damping (rule 7): linear up to 2 cm/s (the hare's top
+ * speed), 0.25 cm/s per poll at full: 0.25 / (2 * 0.05) = 2.5 /s =
+ * 2 zeta omega, zeta = 0.9 with the length rules above.  With the length
+ * rules saturated (errors over 1 cm) the two balance at a closing speed of
+ * 0.1 / 0.125 = 0.8 cm/s, so a large error is taken up steadily instead of
+ * with a lunge.
+ */
+#define PYRT_FUZZY_DEFAULT_LEN_RATE_ZERO 0.0
+#define PYRT_FUZZY_DEFAULT_LEN_RATE_FULL 2.0
+#define PYRT_FUZZY_DEFAULT_DV_LEN_RATE 0.25
+
+/*
+ * Relative tension (rules 4, 5) for a rope with a target (the off-side rope
+ * at 10 N): a 0.5 N dead band for loadcell noise and offset (the document
+ * found tension errors stopping the source near the end), full at 5 N.
+ * 0.2 cm/s per poll at 5 N (0.04 per N) beats the length rules (0.1 per cm)
+ * for any rope stiffer than 2.5 N/cm of paid-out length, which every
+ * tensioned rope is (a 1000 cm rope of compliance 1e-4 per N is 10 N/cm), so
+ * the off-side rope behaves as an idler as the document intends.  Near the
+ * end 75 % of the rule is relaxed ("only partially relaxed").
+ */
+#define PYRT_FUZZY_DEFAULT_REL_ZERO 0.5
+#define PYRT_FUZZY_DEFAULT_REL_FULL 5.0
+#define PYRT_FUZZY_DEFAULT_DV_REL_TENSION 0.2
+#define PYRT_FUZZY_DEFAULT_NEAR_END_RELAX 0.75
+
+/*
+ * Tension-error rate damping (rule 8): stops two side ropes trading tension
+ * in an oscillation (the document's common scenario).  Full at 40 N/s (a
+ * rope of ~40 N/cm moving at 1 cm/s), 0.25 cm/s per poll: 0.25 / 40 / 0.05 =
+ * 0.125 cm/s^2 of velocity change per N/s.
+ *
+ * The whole set was checked in closed loop on the prototype statics (5.3 kg
+ * source, dead length 453 cm, rope compliance 5e-6 to 1e-4 per N, loadcell
+ * noise 0.5 N, 20 and 50 ms polls): every target the tension bounds allow
+ * ends within 0.1 cm in plane with the tensions between 8 and 58 N; a
+ * target that needs a rope below its bound is held off by the guards
+ * instead of being reached.
+ */
+#define PYRT_FUZZY_DEFAULT_T_RATE_ZERO 0.0
+#define PYRT_FUZZY_DEFAULT_T_RATE_FULL 40.0
+#define PYRT_FUZZY_DEFAULT_DV_T_RATE 0.25
+
+/*
+ * Velocity high (rule 6): a soft speed limit between 5 cm/s and the motor's
+ * 7.0 cm/s cruise maximum; the hare never asks for more than 2 cm/s of
+ * source speed, so this only catches a run-away.
+ */
+#define PYRT_FUZZY_DEFAULT_VEL_ZERO 5.0
+#define PYRT_FUZZY_DEFAULT_VEL_FULL 7.0
+#define PYRT_FUZZY_DEFAULT_DV_VELOCITY 0.3
+
+/*
+ * dv high (rule 9, the document's deltaDV(dv, ...)): above 0.1 cm/s per poll
+ * the next change is cut by up to half of the last one, full at DV_LIMIT
+ * 0.5, so bursts of velocity change (the ones that stall a stepper) are
+ * smoothed over several polls.
+ */
+#define PYRT_FUZZY_DEFAULT_DV_ZERO 0.1
+#define PYRT_FUZZY_DEFAULT_DV_FULL 0.5
+#define PYRT_FUZZY_DEFAULT_DV_DAMPING 0.5
+
+/* Fill *p with the PYRT_FUZZY_DEFAULT_* values.  PYRT_EINVAL for NULL. */
 int pyrt_fuzzy_default_params(pyrt_fuzzy_params *p);
 
 /* PYRT_OK when *p is usable; PYRT_ENONFINITE or PYRT_EINVAL otherwise. */

@@ -3,9 +3,10 @@
 000, section 5: the source position is the one that minimises the sum of
 squared rope-length residuals (Eq. 1), found by iterating the linearised
 normal equations (Eq. 2) with the rope directions held fixed per iteration,
-until the step is below the tolerance (0.1 cm).  A direction along which the
-side ropes' bottom attachments sum to less than 1 cm (absolute values) is
-frozen at its start value (the document's *freeze* vector).
+until the step is below the tolerance (:data:`DEFAULT_TOL`, 000's 0.1 cm,
+from ``csrc/findpos.h``).  A direction along which the side ropes' bottom
+attachments sum to less than 1 cm (absolute values) is frozen at its start
+value (the document's *freeze* vector).
 
 Conventions (every function here):
 
@@ -24,14 +25,17 @@ path, so that path does no conversion.
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import ClassVar, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from pyrt.errors import NativeError
 from pyrt.native._arrays import F64, as_f64, require_f64
-from pyrt.native._errors import NativeInputError, Status, raise_for_status
+from pyrt.native._errors import NativeInputError, NonFiniteError, Status, raise_for_status
 from pyrt.native._lib import ffi, lib
 
 __all__ = [
@@ -45,6 +49,9 @@ __all__ = [
 ]
 
 MAX_ROPES: int = lib.PYRT_FINDPOS_MAX_ROPES
+#: The step tolerance (cm; 000's 0.1) and iteration limit by default.
+DEFAULT_TOL: float = lib.PYRT_FINDPOS_DEFAULT_TOL
+DEFAULT_MAX_ITER: int = lib.PYRT_FINDPOS_DEFAULT_MAX_ITER
 _NROWS = (None, 3)
 _NDARRAY = np.ndarray
 _SHAPE3 = (3,)
@@ -94,9 +101,10 @@ def _geometry(tops, bottoms, offsets) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return t, b, o
 
 
-def _explain(rc: int, what: str, **arrays: np.ndarray | None) -> None:
-    """Raise for *rc*, naming the array that holds NaN/infinity if that is why."""
-    if rc == Status.ENONFINITE:
+def _detail(arrays: Mapping[str, np.ndarray | None], exc: NativeError) -> str | None:
+    """The array that holds NaN/infinity, or the bottom rows that are partly
+    NaN, when that is why *exc* was raised."""
+    if isinstance(exc, NonFiniteError):
         for name, arr in arrays.items():
             if arr is None:
                 continue
@@ -104,16 +112,19 @@ def _explain(rc: int, what: str, **arrays: np.ndarray | None) -> None:
             if name == "bottoms":
                 bad &= ~np.isnan(arr).all(axis=1, keepdims=True)
             if bad.any():
-                raise_for_status(rc, f"{what}: {name} holds NaN or infinity")
-    if rc == Status.EINVAL and arrays.get("bottoms") is not None:
-        b = arrays["bottoms"]
-        partial = np.isnan(b).any(axis=1) & ~np.isnan(b).all(axis=1)
-        if partial.any():
-            rows = np.flatnonzero(partial).tolist()
-            raise_for_status(
-                rc, f"{what}: bottoms rows {rows} are partly NaN (a central rope is all NaN)"
-            )
-    raise_for_status(rc, what)
+                return f"{name} holds NaN or infinity"
+    elif isinstance(exc, NativeInputError):
+        b = arrays.get("bottoms")
+        if b is not None:
+            partial = np.isnan(b).any(axis=1) & ~np.isnan(b).all(axis=1)
+            if partial.any():
+                rows = np.flatnonzero(partial).tolist()
+                return f"bottoms rows {rows} are partly NaN (a central rope is all NaN)"
+    return None
+
+
+def _check(rc: int, what: str, arrays: Mapping[str, np.ndarray | None]) -> None:
+    raise_for_status(rc, what, functools.partial(_detail, arrays))
 
 
 def _freeze_flags(freeze, bottoms: np.ndarray) -> tuple[int, int, int]:
@@ -152,9 +163,7 @@ def freeze_mask(bottoms: ArrayLike) -> tuple[int, int, int]:
     if not 1 <= n <= MAX_ROPES:
         raise NativeInputError(f"bottoms: expected 1 to {MAX_ROPES} ropes, got {n}")
     out = ffi.new("int32_t[3]")
-    rc = lib.pyrt_findpos_freeze_mask(n, _ptr(b), out)
-    if rc != Status.OK:
-        _explain(rc, "freeze_mask", bottoms=b)
+    _check(lib.pyrt_findpos_freeze_mask(n, _ptr(b), out), "freeze_mask", {"bottoms": b})
     return (int(out[0]), int(out[1]), int(out[2]))
 
 
@@ -165,8 +174,8 @@ def find_position(
     start: ArrayLike,
     offsets: ArrayLike | None = None,
     freeze: ArrayLike | None = None,
-    tol: float = 0.1,
-    max_iter: int = 50,
+    tol: float = DEFAULT_TOL,
+    max_iter: int = DEFAULT_MAX_ITER,
 ) -> PositionResult:
     """Source position from measured rope lengths (000 ``findPositionL``).
 
@@ -194,12 +203,8 @@ def find_position(
     p.max_iter = max_iter
     p.position = _ptr(x)
     p.residuals = _ptr(res)
-    rc = lib.pyrt_findpos_solve(p)
-    if rc != Status.OK:
-        _explain(
-            rc, f"find_position ({n} ropes)",
-            tops=t, bottoms=b, offsets=o, lengths=lens, start=x,
-        )
+    _check(lib.pyrt_findpos_solve(p), f"find_position ({n} ropes)",
+           {"tops": t, "bottoms": b, "offsets": o, "lengths": lens, "start": x})
     return PositionResult(x, float(p.rms), res, int(p.iterations))
 
 
@@ -217,8 +222,8 @@ def rope_segments(position: ArrayLike, tops: ArrayLike, bottoms: ArrayLike,
         n, _ptr(t), _ptr(b), ffi.NULL if o is None else _ptr(o), _ptr(x),
         *(_ptr(a) for a in out),
     )
-    if rc != Status.OK:
-        _explain(rc, f"rope_lengths ({n} ropes)", tops=t, bottoms=b, offsets=o, position=x)
+    _check(rc, f"rope_lengths ({n} ropes)",
+           {"tops": t, "bottoms": b, "offsets": o, "position": x})
     return out
 
 
@@ -233,8 +238,8 @@ def rope_lengths(position: ArrayLike, tops: ArrayLike, bottoms: ArrayLike,
         n, _ptr(t), _ptr(b), ffi.NULL if o is None else _ptr(o), _ptr(x),
         _ptr(total), ffi.NULL, ffi.NULL, ffi.NULL, ffi.NULL,
     )
-    if rc != Status.OK:
-        _explain(rc, f"rope_lengths ({n} ropes)", tops=t, bottoms=b, offsets=o, position=x)
+    _check(rc, f"rope_lengths ({n} ropes)",
+           {"tops": t, "bottoms": b, "offsets": o, "position": x})
     return total
 
 
@@ -265,7 +270,8 @@ class PositionFinder:
     MAX_ROPES: ClassVar[int] = MAX_ROPES
 
     def __init__(self, tops: ArrayLike, bottoms: ArrayLike, offsets: ArrayLike | None = None,
-                 freeze: ArrayLike | None = None, tol: float = 0.1, max_iter: int = 50):
+                 freeze: ArrayLike | None = None, tol: float = DEFAULT_TOL,
+                 max_iter: int = DEFAULT_MAX_ITER):
         t, b, o = _geometry(tops, bottoms, offsets)
         n = t.shape[0]
         flags = _freeze_flags(freeze, b)
@@ -290,6 +296,10 @@ class PositionFinder:
         p.max_iter = max_iter
         self._p = p
         self._solve = lib.pyrt_findpos_solve
+        self._what = f"PositionFinder.solve ({n} ropes)"
+        self._detail = functools.partial(_detail, {
+            "tops": self._tops, "bottoms": self._bottoms, "lengths": self._lengths,
+            "start": self._position})
         self._len_shape = (n,)
         self._solved = False
         self.n = n
@@ -366,12 +376,6 @@ class PositionFinder:
             self._position[...] = start
         elif not self._solved:
             raise NativeInputError("solve: the first solve needs a start position")
-        rc = self._solve(self._p)
-        if rc:
-            _explain(
-                rc, f"PositionFinder.solve ({self.n} ropes)",
-                tops=self._tops, bottoms=self._bottoms, lengths=self._lengths,
-                start=self._position,
-            )
+        raise_for_status(self._solve(self._p), self._what, self._detail)
         self._solved = True
         return self.position

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import ClassVar
@@ -25,8 +26,9 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import ArrayLike
 
+from pyrt.errors import NativeError
 from pyrt.native._arrays import F64, as_f64
-from pyrt.native._errors import NativeInputError, Status, raise_for_status
+from pyrt.native._errors import NativeInputError, NonFiniteError, raise_for_status
 from pyrt.native._lib import ffi, lib
 
 __all__ = ["FuzzyBatch", "FuzzyInput", "FuzzyParams", "FuzzyRule", "fuzzy_step"]
@@ -36,7 +38,7 @@ NINPUTS: int = lib.PYRT_FUZZY_NINPUTS
 NRULES: int = lib.PYRT_FUZZY_NRULES
 
 #: The poll period (s) the default velocity changes are tuned for.
-REFERENCE_POLL_S = 0.05
+REFERENCE_POLL_S: float = lib.PYRT_FUZZY_REFERENCE_POLL_S
 
 
 class FuzzyInput(enum.IntEnum):
@@ -85,75 +87,61 @@ class FuzzyParams:
     Figure 3 of 000 (the fuzzy sets) did not survive; these are pyrt's sets.
     Shoulders: a set is 0 at its ``*_zero`` point and 1 at its ``*_full``
     point, linear between.  Velocity changes are magnitudes in cm/s **per
-    poll**, tuned for a :data:`REFERENCE_POLL_S` (50 ms) poll on the
-    prototype (5.3 kg source, ropes of 10-60 N, motors 0.07-7.0 cm/s,
-    DV_LIMIT 0.5 cm/s per poll applied by the Motor, off-side ropes at 10 N);
-    :meth:`for_poll_period` rescales them for another poll.  The field order
-    and defaults equal ``pyrt_fuzzy_params`` / ``pyrt_fuzzy_default_params``
-    in ``csrc/fuzzy.c`` (a test holds them equal), where the reasoning for
-    each is written out.  Checked in closed loop on the prototype statics
-    (rope compliance 5e-6 to 1e-4 per N, 0.5 N loadcell noise, 20 and 50 ms
-    polls): feasible targets end within 0.1 cm with tensions of 8-58 N.
+    poll**, tuned for a :data:`REFERENCE_POLL_S` poll on the prototype;
+    :meth:`for_poll_period` rescales them for another poll.  The field
+    order is ``pyrt_fuzzy_params``'s and every default is read from
+    ``csrc/fuzzy.h`` (``PYRT_FUZZY_DEFAULT_*``), where the numbers and the
+    reasoning for each, and the closed-loop check they passed, are written
+    out once.
     """
 
     #: The poll period (s) the per-poll defaults are tuned for.
     REFERENCE_POLL_S: ClassVar[float] = REFERENCE_POLL_S
 
-    #: LowT is 1 at or below tension_low + 1 N ... (rules 0, 1: the guards)
-    low_t_full: float = 1.0
-    #: ... and 0 at tension_low + 5 N: silent at the 10 N off-side target
-    #: with a bound of a few newtons, fully on before LOW_TENSION_STOP.
-    low_t_zero: float = 5.0
-    #: HighT is 0 at tension_high - 15 N (a quarter of the 60 N working
-    #: range below the bound) ...
-    high_t_zero: float = 15.0
-    #: ... and 1 at tension_high - 2 N.
-    high_t_full: float = 2.0
-    #: Short/Long (rules 2, 3) on the corrected length error: linear from 0
-    #: (no dead band, so the velocity integrator cannot drift inside one) ...
-    len_zero: float = 0.0
-    #: ... to full at 1 cm.
-    len_full: float = 1.0
-    #: RelLow/RelHigh (rules 4, 5) on tension - desired: a 0.5 N dead band
-    #: for loadcell noise and offset ...
-    rel_zero: float = 0.5
-    #: ... full at 5 N.
-    rel_full: float = 5.0
+    #: LowT (rules 0, 1: the guards) is 1 at or below tension_low + low_t_full ...
+    low_t_full: float = lib.PYRT_FUZZY_DEFAULT_LOW_T_FULL
+    #: ... and 0 at tension_low + low_t_zero.
+    low_t_zero: float = lib.PYRT_FUZZY_DEFAULT_LOW_T_ZERO
+    #: HighT is 0 at tension_high - high_t_zero ...
+    high_t_zero: float = lib.PYRT_FUZZY_DEFAULT_HIGH_T_ZERO
+    #: ... and 1 at tension_high - high_t_full.
+    high_t_full: float = lib.PYRT_FUZZY_DEFAULT_HIGH_T_FULL
+    #: Short/Long (rules 2, 3) on the corrected length error, cm.
+    len_zero: float = lib.PYRT_FUZZY_DEFAULT_LEN_ZERO
+    len_full: float = lib.PYRT_FUZZY_DEFAULT_LEN_FULL
+    #: RelLow/RelHigh (rules 4, 5) on tension - desired, N.
+    rel_zero: float = lib.PYRT_FUZZY_DEFAULT_REL_ZERO
+    rel_full: float = lib.PYRT_FUZZY_DEFAULT_REL_FULL
     #: Fraction of the relative-tension rules removed when near the end
     #: (the document relaxes them only partially).
-    near_end_relax: float = 0.75
-    #: HighV (rule 6): a soft speed limit from 5 cm/s ...
-    vel_zero: float = 5.0
-    #: ... to the motor's 7.0 cm/s cruise maximum.
-    vel_full: float = 7.0
-    #: HighELV (rule 7), |d(length error)/dt|: linear from 0 ...
-    len_rate_zero: float = 0.0
-    #: ... to the hare's 2.0 cm/s top speed.
-    len_rate_full: float = 2.0
-    #: HighETV (rule 8), |d(tension error)/dt|: linear from 0 ...
-    t_rate_zero: float = 0.0
-    #: ... to 40 N/s (a 40 N/cm rope moving at 1 cm/s).
-    t_rate_full: float = 40.0
-    #: HighDV (rule 9), |last dv|: from 0.1 cm/s per poll ...
-    dv_zero: float = 0.1
-    #: ... to DV_LIMIT, 0.5 cm/s per poll.
-    dv_full: float = 0.5
-    #: Rules 0/1: the document's "increase tension = -0.4 cm/s".
-    dv_tension: float = 0.4
-    #: Rules 2/3: 2 cm/s^2 per cm of error at 50 ms: omega 1.4 rad/s.
-    dv_length: float = 0.1
-    #: Rules 4/5: 0.04 cm/s per poll per N, beating the length rules (0.1 per
-    #: cm) on any rope stiffer than 2.5 N/cm, so an off-side rope is an idler.
-    dv_rel_tension: float = 0.2
+    near_end_relax: float = lib.PYRT_FUZZY_DEFAULT_NEAR_END_RELAX
+    #: HighV (rule 6): a soft speed limit, cm/s.
+    vel_zero: float = lib.PYRT_FUZZY_DEFAULT_VEL_ZERO
+    vel_full: float = lib.PYRT_FUZZY_DEFAULT_VEL_FULL
+    #: HighELV (rule 7), |d(length error)/dt|, cm/s.
+    len_rate_zero: float = lib.PYRT_FUZZY_DEFAULT_LEN_RATE_ZERO
+    len_rate_full: float = lib.PYRT_FUZZY_DEFAULT_LEN_RATE_FULL
+    #: HighETV (rule 8), |d(tension error)/dt|, N/s.
+    t_rate_zero: float = lib.PYRT_FUZZY_DEFAULT_T_RATE_ZERO
+    t_rate_full: float = lib.PYRT_FUZZY_DEFAULT_T_RATE_FULL
+    #: HighDV (rule 9), |last dv|, cm/s per poll.
+    dv_zero: float = lib.PYRT_FUZZY_DEFAULT_DV_ZERO
+    dv_full: float = lib.PYRT_FUZZY_DEFAULT_DV_FULL
+    #: Rules 0/1: the document's "increase tension".
+    dv_tension: float = lib.PYRT_FUZZY_DEFAULT_DV_TENSION
+    #: Rules 2/3: the proportional term of the length loop.
+    dv_length: float = lib.PYRT_FUZZY_DEFAULT_DV_LENGTH
+    #: Rules 4/5: stronger than the length rules on any tensioned rope, so an
+    #: off-side rope is an idler.
+    dv_rel_tension: float = lib.PYRT_FUZZY_DEFAULT_DV_REL_TENSION
     #: Rule 6: pull back a run-away velocity.
-    dv_velocity: float = 0.3
-    #: Rule 7: 2 zeta omega = 0.25 / (2 cm/s * 50 ms) = 2.5/s, zeta 0.9;
-    #: large errors close at 0.1 / 0.125 = 0.8 cm/s.
-    dv_len_rate: float = 0.25
+    dv_velocity: float = lib.PYRT_FUZZY_DEFAULT_DV_VELOCITY
+    #: Rule 7: the damping of the length loop.
+    dv_len_rate: float = lib.PYRT_FUZZY_DEFAULT_DV_LEN_RATE
     #: Rule 8: damps two ropes trading tension (the document's oscillation).
-    dv_t_rate: float = 0.25
+    dv_t_rate: float = lib.PYRT_FUZZY_DEFAULT_DV_T_RATE
     #: Rule 9: fraction of the last dv taken back when it was high.
-    dv_damping: float = 0.5
+    dv_damping: float = lib.PYRT_FUZZY_DEFAULT_DV_DAMPING
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -162,9 +150,8 @@ class FuzzyParams:
                 raise NativeInputError(f"FuzzyParams.{f.name}: expected a number, got {value!r}")
             object.__setattr__(self, f.name, float(value))
         c = ffi.new("pyrt_fuzzy_params *", dataclasses.asdict(self))
-        rc = lib.pyrt_fuzzy_check_params(c)
-        if rc != Status.OK:
-            raise_for_status(rc, f"FuzzyParams: inconsistent breakpoints or changes ({self})")
+        raise_for_status(lib.pyrt_fuzzy_check_params(c),
+                         f"FuzzyParams: inconsistent breakpoints or changes ({self})")
         object.__setattr__(self, "_c", c)
 
     def __reduce__(self):
@@ -233,24 +220,26 @@ def _params_array(params, n: int):
     return arr, n
 
 
-def _explain(rc: int, what: str, inputs: np.ndarray) -> None:
-    if rc == Status.EINVAL:
+def _detail(inputs: np.ndarray, exc: NativeError) -> str | None:
+    """The axis and input out of range or not finite, when that is why *exc*
+    was raised."""
+    if isinstance(exc, NonFiniteError):
+        bad = np.argwhere(~np.isfinite(inputs))
+        if bad.size:
+            i, j = bad[0]
+            return f"axis {i} {FuzzyInput(j).name}"
+    elif isinstance(exc, NativeInputError):
         free = inputs[:, FuzzyInput.FREE]
         near = inputs[:, FuzzyInput.NEAR_END]
         lo, hi = inputs[:, FuzzyInput.TENSION_LOW], inputs[:, FuzzyInput.TENSION_HIGH]
         for i in range(inputs.shape[0]):
             if not 0.0 <= free[i] <= 1.0:
-                raise_for_status(rc, f"{what}: axis {i}: FREE must be a truth value 0..1")
+                return f"axis {i}: FREE must be a truth value 0..1"
             if not 0.0 <= near[i] <= 1.0:
-                raise_for_status(rc, f"{what}: axis {i}: NEAR_END must be a truth value 0..1")
+                return f"axis {i}: NEAR_END must be a truth value 0..1"
             if not lo[i] < hi[i]:
-                raise_for_status(rc, f"{what}: axis {i}: TENSION_LOW must be < TENSION_HIGH")
-    if rc == Status.ENONFINITE:
-        bad = np.argwhere(~np.isfinite(inputs))
-        if bad.size:
-            i, j = bad[0]
-            raise_for_status(rc, f"{what}: axis {i} {FuzzyInput(j).name}")
-    raise_for_status(rc, what)
+                return f"axis {i}: TENSION_LOW must be < TENSION_HIGH"
+    return None
 
 
 def fuzzy_step(params: FuzzyParams | Sequence[FuzzyParams], inputs: ArrayLike
@@ -271,12 +260,10 @@ def fuzzy_step(params: FuzzyParams | Sequence[FuzzyParams], inputs: ArrayLike
     rules = np.empty((n, NRULES), F64)
     rc = lib.pyrt_fuzzy_step(
         n, c, count,
-        ffi.cast("double *", ffi.from_buffer(x)),
-        ffi.cast("double *", ffi.from_buffer(dv)),
-        ffi.cast("double *", ffi.from_buffer(rules)),
+        ffi.from_buffer("double[]", x), ffi.from_buffer("double[]", dv),
+        ffi.from_buffer("double[]", rules),
     )
-    if rc != Status.OK:
-        _explain(rc, f"fuzzy_step ({n} axes)", x)
+    raise_for_status(rc, f"fuzzy_step ({n} axes)", functools.partial(_detail, x))
     return dv, rules
 
 
@@ -310,14 +297,16 @@ class FuzzyBatch:
         self._inputs = np.zeros((n, NINPUTS), F64)
         self._dv = np.zeros(n, F64)
         self._rules = np.zeros((n, NRULES), F64)
-        self._bufs = [ffi.from_buffer(a) for a in (self._inputs, self._dv, self._rules)]
-        b = ffi.new("pyrt_fuzzy_batch *")
-        b.n = n
-        b.params = self._params
-        b.inputs, b.dv, b.rules = (ffi.cast("double *", buf) for buf in self._bufs)
-        self._b = b
+        self._bufs = [ffi.from_buffer("double[]", a)
+                      for a in (self._inputs, self._dv, self._rules)]
+        self._b = ffi.new("pyrt_fuzzy_batch *", {
+            "n": n, "params": self._params, "inputs": self._bufs[0], "dv": self._bufs[1],
+            "rules": self._bufs[2],
+        })
         self._share_params()
         self._run = lib.pyrt_fuzzy_run
+        self._what = f"FuzzyBatch.step ({n} axes)"
+        self._detail = functools.partial(_detail, self._inputs)
         self.dv = self._dv.view()
         self.dv.flags.writeable = False
         self.rules = self._rules.view()
@@ -350,7 +339,5 @@ class FuzzyBatch:
 
     def step(self) -> np.ndarray:
         """Evaluate every axis from :attr:`inputs`; returns :attr:`dv`."""
-        rc = self._run(self._b)
-        if rc:
-            _explain(rc, f"FuzzyBatch.step ({self.n} axes)", self._inputs)
+        raise_for_status(self._run(self._b), self._what, self._detail)
         return self.dv
