@@ -3,17 +3,17 @@
  *
  * pyrt_polyctl_measure (steps 1-3 of the poll): every rope's stretch-
  * corrected length from its encoder length and tension; where a rope bears
- * on the neck ring at the current estimate, the rim contact becomes its
- * effective top (Newton on the rim angle from last poll's angle) and the
- * piece above the contact leaves the length the finder sees; the prepared
- * position finder (findpos.h) is solved; the residual net force on the
- * source at the new estimate (measured tensions along the ropes from the
- * effective tops and to the bottoms, plus the net weight).
+ * on the neck ring at the current estimate (neck.h, Newton on the rim angle
+ * from last poll's angle), the rim contact becomes its effective top and
+ * the piece above the contact leaves the length the finder sees; the
+ * prepared position finder (findpos.h) is solved; the residual net force on
+ * the source at the new estimate (measured tensions along the ropes from
+ * the effective tops and to the bottoms, plus the net weight).
  *
  * pyrt_polyctl_drive (step 4, after the motion has set the hare): the error
  * signals (off-side ropes toward offside_tension, the others free, unless
  * the caller set desired_tension and is_free itself: errorSignalAll), each
- * rope's length at the hare over the ring, the length and tension errors,
+ * rope's length at the hare over the ring (neck.h), the length and tension errors,
  * their rates, the NEAR_END truth, the fuzzy input rows, and one batched
  * fuzzy step (fuzzy.h) giving every axis's velocity change.
  *
@@ -29,13 +29,19 @@
 
 #include "pyrt_native.h"
 #include "findpos.h"
+#include "neck.h"
 #include "fuzzy.h"
 
 /* Ropes per manipulator: 1 .. PYRT_POLYCTL_MAX_ROPES. */
 #define PYRT_POLYCTL_MAX_ROPES 16
 
-/* Newton steps on the rim angle at most (as pyrt/robots/_neck.py). */
-#define PYRT_POLYCTL_RING_ITER 12
+/*
+ * The segments the controller lets bear on the neck ring: the upper one
+ * only (the world, statics.h, lets the lower bear too; a known gap, kept
+ * until the finder learns an effective bottom).  measure can only model
+ * the upper segment: polyctl.c refuses to build with any other value.
+ */
+#define PYRT_POLYCTL_RING_SEGMENTS PYRT_NECK_UPPER
 
 typedef struct {
     int32_t n;
@@ -45,7 +51,7 @@ typedef struct {
     const double *offsets;      /* n x 3 carriage offsets from the source */
     const double *stretch;      /* per newton */
     const double *dead;         /* dead lengths, cm */
-    double ring[13];            /* centre[3], unit axis[3], e1[3], e2[3], radius (<= 0: none) */
+    pyrt_neck_ring ring;        /* pyrt_neck_init (radius <= 0: none) */
     double axis_point[2];       /* (x, y) of the central axis: the off side */
     double weight_air;          /* N: the source's weight */
     double weight_liquid;       /* N: its net weight below liquid_level */
@@ -87,27 +93,21 @@ typedef struct {
 } pyrt_polyctl;
 
 /*
- * Steps 1-3 (see above).  PYRT_EINVAL for a NULL pointer, n out of range
- * or a finder of another size; PYRT_ENONFINITE for a NaN or infinite
- * tension or encoder length; otherwise the finder's status (position and
- * the outputs are left as they were when it fails).
+ * Steps 1-3 (see above).  PYRT_EINVAL for a NULL pointer, n out of range,
+ * a ring pyrt_neck_check refuses or a finder of another size;
+ * PYRT_ENONFINITE for a NaN or infinite tension or encoder length;
+ * PYRT_EDEGENERATE when a rope's carriage pulley is on the rim; otherwise
+ * the finder's status (position and the outputs but length are left as
+ * they were when it fails).
  */
 int pyrt_polyctl_measure(pyrt_polyctl *c);
 
 /*
  * Step 4 (see above); the velocity changes are in the fuzzy batch's dv.
- * PYRT_EINVAL / PYRT_ENONFINITE for bad input, else the fuzzy status.
+ * PYRT_EINVAL / PYRT_ENONFINITE for bad input, PYRT_EDEGENERATE for a
+ * hare that puts a carriage pulley on a pulley, an attachment or the rim,
+ * else the fuzzy status.
  */
 int pyrt_polyctl_drive(pyrt_polyctl *c);
-
-/*
- * Where the rope from top t to carriage q bears on the ring (13 doubles as
- * in pyrt_polyctl.ring), starting Newton from rim angle hint (NaN: from
- * the radius through the straight line's crossing).  *bears is 1 with the
- * rim point in contact[3] and its angle in *phi, or 0 (contact = t, *phi
- * NaN) when the rope runs free.  PYRT_EINVAL for a NULL pointer.
- */
-int pyrt_ring_contact(const double *ring, const double *t, const double *q, double hint,
-                      double *contact, double *phi, int32_t *bears);
 
 #endif /* PYRT_POLYCTL_H */

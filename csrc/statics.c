@@ -7,11 +7,6 @@
 #include <math.h>
 #include <stddef.h>
 
-/* A segment shorter than this (cm) has no direction. */
-#define MIN_SEGMENT 1e-4
-/* Newton iterations for the rope's contact point on the neck ring. */
-#define RING_ITER 8
-
 static double dot3(const double *a, const double *b)
 {
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
@@ -45,132 +40,22 @@ static void add_outer(double *h, const double *a, const double *b, double w)
 }
 
 /*
- * A rope segment from the carriage pulley q to its far end t (the top pulley
- * or the bottom attachment), over the neck ring when the two ends lie on
- * opposite sides of the ring plane and the straight line would cross it
- * outside the ring.  Writes the segment length, the unit vector from q
- * toward where the rope leaves q, and (h != NULL) adds d2(len)/dq2 to h.
+ * h += d2(length)/dq2 of one segment (neck.h): the straight piece from the
+ * carriage pulley, and where the segment bears on the ring the envelope
+ * correction (the contact point moves with q).
  */
-static int segment(const double *ring, const double *t, const double *q,
-                       double *len, double *u, double *h, int32_t *wrap)
+static void add_segment_hessian(double *h, const pyrt_neck_segment *s)
 {
-    double d[3];
-    double dist;
     int k;
-
-    *wrap = 0;
-    if (ring[6] > 0.0) {
-        const double *cen = ring;
-        const double *ax = ring + 3;
-        double tc[3], qc[3];
-        double ht, hq;
+    add_projector(h, s->dir, 1.0 / s->tail);
+    if (s->bears && s->curvature > 1e-12) {
+        double v[3];
+        double uc = dot3(s->dir, s->tangent);
         for (k = 0; k < 3; ++k) {
-            tc[k] = t[k] - cen[k];
-            qc[k] = q[k] - cen[k];
+            v[k] = (s->tangent[k] - uc * s->dir[k]) / s->tail;
         }
-        ht = dot3(tc, ax);
-        hq = dot3(qc, ax);
-        if ((ht > 0.0 && hq < 0.0) || (ht < 0.0 && hq > 0.0)) {
-            double s = ht / (ht - hq);
-            double r[3], rr;
-            double xr;
-            for (k = 0; k < 3; ++k) {
-                r[k] = tc[k] + s * (qc[k] - tc[k]);
-            }
-            xr = dot3(r, ax);
-            for (k = 0; k < 3; ++k) {
-                r[k] -= xr * ax[k];
-            }
-            rr = norm3(r);
-            if (rr > ring[6]) {
-                /* Bears on the ring: shortest path t -> c(phi) -> q. */
-                const double rad = ring[6];
-                double e1[3], e2[3], c[3], cp[3], a[3], b[3], ua[3], ub[3];
-                double phi = 0.0, da = 0.0, db = 0.0, f2 = 0.0;
-                int it;
-                for (k = 0; k < 3; ++k) {
-                    e1[k] = r[k] / rr;
-                }
-                e2[0] = ax[1] * e1[2] - ax[2] * e1[1];
-                e2[1] = ax[2] * e1[0] - ax[0] * e1[2];
-                e2[2] = ax[0] * e1[1] - ax[1] * e1[0];
-                for (it = 0; it <= RING_ITER; ++it) {
-                    double cs = cos(phi), sn = sin(phi);
-                    double f1, pa, pb, step;
-                    for (k = 0; k < 3; ++k) {
-                        c[k] = cen[k] + rad * (cs * e1[k] + sn * e2[k]);
-                        cp[k] = rad * (-sn * e1[k] + cs * e2[k]);
-                        a[k] = c[k] - t[k];
-                        b[k] = c[k] - q[k];
-                    }
-                    da = norm3(a);
-                    db = norm3(b);
-                    if (da < MIN_SEGMENT || db < MIN_SEGMENT) {
-                        return PYRT_EDEGENERATE;
-                    }
-                    for (k = 0; k < 3; ++k) {
-                        ua[k] = a[k] / da;
-                        ub[k] = b[k] / db;
-                    }
-                    pa = dot3(ua, cp);
-                    pb = dot3(ub, cp);
-                    f1 = pa + pb;
-                    /* c'' = -(c - centre) */
-                    f2 = (rad * rad - pa * pa) / da + (rad * rad - pb * pb) / db;
-                    for (k = 0; k < 3; ++k) {
-                        f2 -= (c[k] - cen[k]) * (ua[k] + ub[k]);
-                    }
-                    if (it == RING_ITER) {
-                        break;
-                    }
-                    step = f2 > 0.0 ? -f1 / f2 : (f1 > 0.0 ? -0.1 : 0.1);
-                    if (step > 0.5) {
-                        step = 0.5;
-                    } else if (step < -0.5) {
-                        step = -0.5;
-                    }
-                    phi += step;
-                    if (fabs(step) < 1e-13) {
-                        /* one more pass recomputes everything at phi */
-                        it = RING_ITER - 1;
-                    }
-                }
-                *wrap = 1;
-                *len = da + db;
-                for (k = 0; k < 3; ++k) {
-                    u[k] = ub[k];
-                }
-                if (h != NULL) {
-                    add_projector(h, u, 1.0 / db);
-                    if (f2 > 1e-12) {
-                        /* envelope correction: the contact point moves with q */
-                        double v[3];
-                        double uc = dot3(u, cp);
-                        for (k = 0; k < 3; ++k) {
-                            v[k] = (cp[k] - uc * u[k]) / db;
-                        }
-                        add_outer(h, v, v, -1.0 / f2);
-                    }
-                }
-                return PYRT_OK;
-            }
-        }
+        add_outer(h, v, v, -1.0 / s->curvature);
     }
-    for (k = 0; k < 3; ++k) {
-        d[k] = t[k] - q[k];
-    }
-    dist = norm3(d);
-    if (dist < MIN_SEGMENT) {
-        return PYRT_EDEGENERATE;
-    }
-    *len = dist;
-    for (k = 0; k < 3; ++k) {
-        u[k] = d[k] / dist;
-    }
-    if (h != NULL) {
-        add_projector(h, u, 1.0 / dist);
-    }
-    return PYRT_OK;
 }
 
 /*
@@ -180,36 +65,30 @@ static int segment(const double *ring, const double *t, const double *q,
 static int rope_geometry(const pyrt_statics_problem *p, int32_t i, const double *x,
                          double *g, double *grad, double *hg, int32_t *wrap)
 {
-    const double *t = p->tops + 3 * i;
     const double *b = p->bottoms + 3 * i;
-    double q[3], ut[3];
-    double lt;
+    pyrt_neck_rope path;
+    double q[3];
     int k, st;
 
     for (k = 0; k < 3; ++k) {
         q[k] = x[k] + (p->offsets != NULL ? p->offsets[3 * i + k] : 0.0);
     }
-    st = segment(p->ring, t, q, &lt, ut, hg, wrap);
+    st = pyrt_neck_rope_path(&p->ring, PYRT_STATICS_RING_SEGMENTS, p->tops + 3 * i, b, q, NULL,
+                             &path);
     if (st != PYRT_OK) {
         return st;
     }
-    *g = lt;
+    *g = path.length;
     for (k = 0; k < 3; ++k) {
-        grad[k] = -ut[k];
+        grad[k] = -path.upper.dir[k] - path.lower.dir[k];
     }
-    if (!isnan(b[0])) {
-        double ub[3], lb;
-        int32_t wrap_b = 0;
-        st = segment(p->ring, b, q, &lb, ub, hg, &wrap_b);
-        if (st != PYRT_OK) {
-            return st;
+    if (hg != NULL) {
+        add_segment_hessian(hg, &path.upper);
+        if (!isnan(b[0])) {
+            add_segment_hessian(hg, &path.lower);
         }
-        *g += lb;
-        for (k = 0; k < 3; ++k) {
-            grad[k] -= ub[k];
-        }
-        *wrap = *wrap || wrap_b;
     }
+    *wrap = path.upper.bears || path.lower.bears;
     return PYRT_OK;
 }
 
@@ -308,7 +187,7 @@ static int chol_solve(const double *A, double mu, const double *b, double *x)
 static int validate(const pyrt_statics_problem *p)
 {
     int32_t i;
-    int k;
+    int k, st;
     if (p == NULL || p->tops == NULL || p->bottoms == NULL || p->payout == NULL ||
         p->dead == NULL || p->compliance == NULL || p->intact == NULL ||
         p->position == NULL || p->tension == NULL || p->wrapped == NULL) {
@@ -324,13 +203,9 @@ static int validate(const pyrt_statics_problem *p)
         !isfinite(p->floor_z)) {
         return PYRT_ENONFINITE;
     }
-    for (k = 0; k < 7; ++k) {
-        if (!isfinite(p->ring[k])) {
-            return PYRT_ENONFINITE;
-        }
-    }
-    if (p->ring[6] > 0.0 && fabs(norm3(p->ring + 3) - 1.0) > 1e-6) {
-        return PYRT_EINVAL;
+    st = pyrt_neck_check(&p->ring);
+    if (st != PYRT_OK) {
+        return st;
     }
     for (k = 0; k < 3; ++k) {
         if (!isfinite(p->position[k])) {

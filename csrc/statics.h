@@ -18,14 +18,13 @@
  *
  *     tension_i = max(0, dead_i + g_i(x) - u_i) / (compliance_i * u_i)
  *
- * so a slack rope carries nothing and never pushes.  When a straight
- * segment (top pulley to carriage, or carriage to bottom attachment with the
- * source up in the neck) would cross the neck-ring plane outside the ring it
- * bears on the ring instead: frictionless, so the rope takes the shortest
- * path over the ring rim and lies in a plane through a ring radius (000,
- * section 5, neckIntersection()).  The carriage itself cannot pass through
- * the ring's rim; the rope length jumps there, at positions no source can
- * reach.
+ * so a slack rope carries nothing and never pushes.  The rope's path over
+ * the neck ring is the one model of neck.h: a straight segment (top pulley
+ * to carriage, or carriage to bottom attachment with the source up in the
+ * neck) that would cross the neck-ring plane outside the ring bears on the
+ * ring instead, both segments of a rope may (PYRT_STATICS_RING_SEGMENTS).
+ * The carriage itself cannot pass through the ring's rim; the rope length
+ * jumps there, at positions no source can reach.
  *
  * The equilibrium minimises the potential energy
  *
@@ -42,9 +41,18 @@
 #define PYRT_STATICS_H
 
 #include "pyrt_native.h"
+#include "neck.h"
 
 /* Ropes per problem: 1 .. PYRT_STATICS_MAX_ROPES. */
 #define PYRT_STATICS_MAX_ROPES 16
+
+/* The world lets both segments of a rope bear on the neck ring. */
+#define PYRT_STATICS_RING_SEGMENTS (PYRT_NECK_UPPER | PYRT_NECK_LOWER)
+
+/* Defaults of the solver: step tolerance (cm), longest step (cm), iterations. */
+#define PYRT_STATICS_DEFAULT_TOL 1e-7
+#define PYRT_STATICS_DEFAULT_MAX_STEP 10.0
+#define PYRT_STATICS_DEFAULT_MAX_ITER 50
 
 /*
  * One statics problem.  Pointers are borrowed; the Python side binds them
@@ -58,8 +66,7 @@
  *   dead        n spindle-to-top-pulley lengths (>= 0)
  *   compliance  n strains per newton (> 0)
  *   intact      n flags: 0 = broken rope (carries nothing)
- *   ring        neck ring: centre x y z, unit axis x y z (out of the
- *               vessel), radius; radius <= 0 means no ring
+ *   ring        the neck ring (pyrt_neck_init; radius <= 0: no ring)
  *   weight      net downward force on the source, N (may be negative)
  *   floor_z     lowest z the source may take
  *   tol         stop when a step is shorter than tol (cm), > 0
@@ -85,7 +92,7 @@ typedef struct {
     const double *dead;
     const double *compliance;
     const int32_t *intact;
-    double ring[7];
+    pyrt_neck_ring ring;
     double weight;
     double floor_z;
     double tol;
@@ -101,7 +108,7 @@ typedef struct {
 /*
  * Solve for the static equilibrium.  Returns PYRT_OK; PYRT_EINVAL (NULL
  * pointer, n, tol, max_step, max_iter, payout, compliance or dead out of
- * range, a bottom row partly NaN, a ring axis not of unit length);
+ * range, a bottom row partly NaN, a ring pyrt_neck_check refuses);
  * PYRT_ENONFINITE; PYRT_EDEGENERATE (the carriage pulley on a top pulley or
  * bottom attachment); PYRT_ENOCONVERGE (max_iter reached).
  */

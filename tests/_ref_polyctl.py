@@ -1,10 +1,11 @@
 """Pure-Python reference of csrc/polyctl.c: the PolyAxis control poll's numeric work.
 
 Operation for operation as the kernel (and as the Python PolyAxis poll it
-replaced): the neck-ring contact by Newton on the rim angle from the last
-poll's angle, the corrected lengths and effective tops, the position solve
-(tests/_ref_findpos.py), the net force, the error signals, the fuzzy input
-rows and the fuzzy step (tests/_ref_fuzzy.py).
+replaced): the neck-ring contact of csrc/neck.c by Newton on the rim angle
+from the last poll's angle, with the one model's constants read from the
+C headers (``lib``); the corrected lengths and effective tops, the position
+solve (tests/_ref_findpos.py), the net force, the error signals, the fuzzy
+input rows and the fuzzy step (tests/_ref_fuzzy.py).
 """
 
 from __future__ import annotations
@@ -15,12 +16,28 @@ import _ref_findpos as findpos
 import _ref_fuzzy as fuzzy
 import numpy as np
 
+from pyrt.native._lib import lib
+
 Vec = tuple[float, float, float]
-ITERATIONS = 12
+
+#: The neck model's constants (csrc/neck.h, csrc/pyrt_native.h).
+ITERATIONS: int = lib.PYRT_NECK_MAX_ITER
+STEP_TOL: float = lib.PYRT_NECK_STEP_TOL
+MAX_STEP: float = lib.PYRT_NECK_MAX_STEP
+FALLBACK_STEP: float = lib.PYRT_NECK_FALLBACK_STEP
+MIN_SEGMENT: float = lib.PYRT_MIN_SEGMENT_CM
+UPPER: int = lib.PYRT_NECK_UPPER
+LOWER: int = lib.PYRT_NECK_LOWER
+#: The segments the controller lets bear on the ring (csrc/polyctl.h).
+CONTROLLER_SEGMENTS: int = lib.PYRT_POLYCTL_RING_SEGMENTS
+
+
+class Degenerate(RuntimeError):
+    """A piece of rope shorter than MIN_SEGMENT: the kernel's PYRT_EDEGENERATE."""
 
 
 def contact(ring, t, q, hint=None):
-    """(rim point, angle) where the rope t -> q bears on the ring, or None;
+    """(rim point, angle) where the segment q -> t bears on the ring, or None;
     ``ring`` is (centre, axis, e1, e2, radius) as 13 numbers."""
     cx0, cy0, cz0, ax0, ax1, ax2, e1x, e1y, e1z, e2x, e2y, e2z, rad = ring
     if not rad > 0.0:
@@ -29,11 +46,9 @@ def contact(ring, t, q, hint=None):
     qx, qy, qz = q
     tcx, tcy, tcz = tx - cx0, ty - cy0, tz - cz0
     ht = tcx * ax0 + tcy * ax1 + tcz * ax2
-    if not ht > 0.0:
-        return None
     qcx, qcy, qcz = qx - cx0, qy - cy0, qz - cz0
     hq = qcx * ax0 + qcy * ax1 + qcz * ax2
-    if not hq < 0.0:
+    if not (ht > 0.0 > hq or ht < 0.0 < hq):
         return None
     s = ht / (ht - hq)
     rx, ry, rz = tcx + s * (qcx - tcx), tcy + s * (qcy - tcy), tcz + s * (qcz - tcz)
@@ -45,48 +60,59 @@ def contact(ring, t, q, hint=None):
         phi = math.atan2(rx * e2x + ry * e2y + rz * e2z, rx * e1x + ry * e1y + rz * e1z)
     else:
         phi = hint
-    for _ in range(ITERATIONS):
+
+    def pieces(phi):
         cs, sn = math.cos(phi), math.sin(phi)
-        ux, uy, uz = cs * e1x + sn * e2x, cs * e1y + sn * e2y, cs * e1z + sn * e2z
-        px, py, pz = -sn * e1x + cs * e2x, -sn * e1y + cs * e2y, -sn * e1z + cs * e2z
-        cx, cy, cz = cx0 + rad * ux, cy0 + rad * uy, cz0 + rad * uz
-        a = (cx - tx, cy - ty, cz - tz)
-        b = (cx - qx, cy - qy, cz - qz)
+        u = (cs * e1x + sn * e2x, cs * e1y + sn * e2y, cs * e1z + sn * e2z)
+        p = (-sn * e1x + cs * e2x, -sn * e1y + cs * e2y, -sn * e1z + cs * e2z)
+        c = (cx0 + rad * u[0], cy0 + rad * u[1], cz0 + rad * u[2])
+        a = (c[0] - tx, c[1] - ty, c[2] - tz)
+        b = (c[0] - qx, c[1] - qy, c[2] - qz)
         da = math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
         db = math.sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2])
-        if da < 1e-9 or db < 1e-9:
-            break
-        pa = rad * (a[0] * px + a[1] * py + a[2] * pz) / da
-        pb = rad * (b[0] * px + b[1] * py + b[2] * pz) / db
+        if da < MIN_SEGMENT or db < MIN_SEGMENT:
+            raise Degenerate("the carriage on the rim")
+        return u, p, c, a, b, da, db
+
+    for _ in range(ITERATIONS):
+        u, p, _, a, b, da, db = pieces(phi)
+        pa = rad * (a[0] * p[0] + a[1] * p[1] + a[2] * p[2]) / da
+        pb = rad * (b[0] * p[0] + b[1] * p[1] + b[2] * p[2]) / db
         f1 = pa + pb
         f2 = (rad * rad - pa * pa) / da + (rad * rad - pb * pb) / db
-        f2 -= rad * (ux * (a[0] / da + b[0] / db) + uy * (a[1] / da + b[1] / db)
-                     + uz * (a[2] / da + b[2] / db))
-        step = -f1 / f2 if f2 > 0.0 else (-0.1 if f1 > 0.0 else 0.1)
-        step = min(0.5, max(-0.5, step))
+        f2 -= rad * (u[0] * (a[0] / da + b[0] / db) + u[1] * (a[1] / da + b[1] / db)
+                     + u[2] * (a[2] / da + b[2] / db))
+        step = -f1 / f2 if f2 > 0.0 else (-FALLBACK_STEP if f1 > 0.0 else FALLBACK_STEP)
+        step = min(MAX_STEP, max(-MAX_STEP, step))
         phi += step
-        if abs(step) < 1e-10:
+        if abs(step) < STEP_TOL:
             break
-    cs, sn = math.cos(phi), math.sin(phi)
-    return ((cx0 + rad * (cs * e1x + sn * e2x), cy0 + rad * (cs * e1y + sn * e2y),
-             cz0 + rad * (cs * e1z + sn * e2z)), phi)
+    return pieces(phi)[2], phi
 
 
 def _dist(a, b) -> float:
     return math.sqrt((a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2 + (a[2] - b[2]) ** 2)
 
 
-def rope_length(ring, top, bottom, offset, x) -> float:
-    """A rope's length beyond its top pulley with the source at ``x`` (over the ring)."""
-    q = (x[0] + offset[0], x[1] + offset[1], x[2] + offset[2])
-    found = contact(ring, top, q)
-    head = 0.0
+def _segment(ring, far, q, may_bear, hint=None):
+    """(length, rim angle or None) of the segment q -> far, over the ring if it may bear."""
+    found = contact(ring, far, q, hint) if may_bear else None
     if found is not None:
-        head = _dist(top, found[0])
-        top = found[0]
-    length = head + _dist(top, q)
+        c, phi = found
+        return _dist(far, c) + _dist(c, q), phi
+    d = _dist(far, q)
+    if d < MIN_SEGMENT:
+        raise Degenerate("the carriage on a pulley or an attachment")
+    return d, None
+
+
+def rope_length(ring, top, bottom, offset, x, segments=CONTROLLER_SEGMENTS) -> float:
+    """A rope's length beyond its top pulley with the source at ``x``, the segments
+    in the mask ``segments`` over the ring where they bear on it."""
+    q = (x[0] + offset[0], x[1] + offset[1], x[2] + offset[2])
+    length, _ = _segment(ring, top, q, segments & UPPER)
     if bottom is not None:
-        length += _dist(bottom, q)
+        length += _segment(ring, bottom, q, segments & LOWER)[0]
     return length
 
 
@@ -95,7 +121,7 @@ class RefPolyControl:
 
     def __init__(self, params, *, tops, bottoms, offsets, stretch, dead, ring, axis_point,
                  weight_air, weight_liquid, liquid_level, offside_tension, near_end_cm,
-                 position, tol=0.1):
+                 position, tol=lib.PYRT_FINDPOS_DEFAULT_TOL):
         self.params = params
         self.tops = [tuple(map(float, t)) for t in tops]
         self.bottoms = [None if b is None else tuple(map(float, b)) for b in bottoms]
@@ -137,9 +163,11 @@ class RefPolyControl:
         eff, lf = [], list(lens)
         for i in range(n):
             o, t0 = self.offsets[i], self.tops[i]
-            found = contact(self.ring, t0, (x[0] + o[0], x[1] + o[1], x[2] + o[2]),
-                            self.phi[i])
+            q = (x[0] + o[0], x[1] + o[1], x[2] + o[2])
+            found = contact(self.ring, t0, q, self.phi[i])
             if found is None:
+                if _dist(t0, q) < MIN_SEGMENT:
+                    raise Degenerate("the carriage on a top pulley")
                 self.phi[i] = None
                 eff.append(t0)
             else:

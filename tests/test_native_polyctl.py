@@ -6,19 +6,18 @@ import math
 
 import numpy as np
 import pytest
-from _ref_polyctl import RefPolyControl, contact, rope_length
+from _ref_polyctl import MIN_SEGMENT, Degenerate, RefPolyControl, contact, rope_length
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import pyrt.native as nat
 from pyrt.errors import NativeError
-from pyrt.robots._neck import NeckRing
 
 NAN = math.nan
 
 
 def _frame(centre, axis, radius):
-    r = NeckRing(centre, axis, radius)
+    r = nat.NeckRing(centre, axis, radius)
     return (*r.centre, *r.axis, *r.e1, *r.e2, r.radius)
 
 
@@ -135,8 +134,17 @@ def test_ring_contact_equals_reference(name, data):
     c = st.floats(-radius, radius)
     q = (data.draw(c), data.draw(c), data.draw(c))
     hint = data.draw(st.none() | st.floats(-4.0, 4.0))
-    got = nat.ring_contact(ring, top, q, hint)
-    want = contact(ring, top, q, hint)
+    neck = nat.NeckRing(ring[0:3], ring[3:6], ring[12])
+    assert (*neck.e1, *neck.e2) == tuple(ring[6:12])
+    try:
+        want = contact(ring, top, q, hint)
+        if want is None and math.dist(top, q) < MIN_SEGMENT:
+            raise Degenerate("a straight segment of no length")
+    except Degenerate:
+        with pytest.raises(nat.DegenerateGeometryError):
+            neck.contact(top, q, hint)
+        return
+    got = neck.contact(top, q, hint)
     assert (got is None) == (want is None)
     if got is not None:
         np.testing.assert_allclose(got[0], want[0], rtol=0, atol=1e-9)
@@ -154,8 +162,8 @@ def test_contacts_are_used():
 
 
 def test_bad_input_is_refused():
-    """Wrong sizes and non-finite numbers raise NativeError before C sees them; a NaN tension
-    from the devices is refused by C with nothing changed."""
+    """Wrong sizes, non-finite numbers and a ring that is not an orthonormal frame raise
+    NativeError at construction; a NaN tension from the devices is refused by C."""
     ctl, _, _ = _pair("prototype", (0.0, 0.0, 100.0))
     tops, bottoms, offsets, ring, _, _ = GEOMETRY["prototype"]
     finder = nat.PositionFinder(np.array(tops), np.array([(NAN,) * 3, bottoms[1], bottoms[2]]))
@@ -164,7 +172,10 @@ def test_bad_input_is_refused():
                 dead=[DEAD] * 3, ring=ring, axis_point=(0.0, 0.0), weight_air=1.0,
                 weight_liquid=1.0, liquid_level=None, offside_tension=10.0, near_end_cm=10.0,
                 position=(0.0, 0.0, 100.0))
+    skew = (*ring[:9], *ring[6:9], ring[12])   # e2 = e1: not a frame
+    assert nat.PolyControl(finder, batch, **dict(good, ring=None)).n == 3
     for key, bad in [("tops", tops[:2]), ("stretch", [NAN] * 3), ("ring", ring[:5]),
+                     ("ring", (*ring[:3], 0.0, 0.0, 2.0, *ring[6:])), ("ring", skew),
                      ("position", (0.0, NAN, 1.0)), ("near_end_cm", 0.0),
                      ("offsets", [(0.0, 0.0)] * 3), ("weight_air", math.inf)]:
         with pytest.raises(NativeError):

@@ -4,8 +4,8 @@ The extension is rebuilt from csrc/ into a temporary directory with
 ``-fsanitize=address,undefined`` (build_native.py reads PYRT_CFLAGS and
 PYRT_LDFLAGS), then a driver runs in a subprocess with libasan preloaded:
 it loads that build as ``pyrt._native`` and calls every findpos, fuzzy,
-polyctl and convert entry point, good input and bad (including the NULL pointers and
-sizes the Python layer never lets through).  Any sanitizer report aborts
+neck, polyctl, readyq and convert entry point, good input and bad
+(including the NULL pointers and sizes the Python layer never lets through).  Any sanitizer report aborts
 the driver (``-fno-sanitize-recover=all``), so the test asserts a clean exit;
 a deliberate overflow against the same build shows the sanitizer is live.
 """
@@ -186,8 +186,15 @@ DRIVER = textwrap.dedent(
         ctl.reset_rates()
         refused(ctl.measure, [NAN] * 5, [600.0] * 5, L)
         refused(ctl.drive, (NAN, 0.0, 0.0), [0.0] * 5, 20.0, L, L[:], L[:], L[:])
-        nat.ring_contact(ring, ptops[1], (x[0] + 1.0, x[1], x[2]), 0.3)
-        nat.ring_contact(ring, ptops[1], x)
+        neck = nat.NeckRing(ring[0:3], ring[3:6], ring[12])
+        neck.contact(ptops[1], (x[0] + 1.0, x[1], x[2]), 0.3)
+        neck.contact(ptops[1], x)
+        neck.contact(pbots[1], (x[0], x[1], 700.0))
+        for segments in range(4):
+            neck.rope_path(ptops[1], pbots[1], x, segments)
+            neck.rope_path(ptops[0], None, x, segments)
+        refused(neck.contact, ptops[1], (72.50001, 0.0, 595.79999))   # the carriage on the rim
+        refused(neck.rope_path, ptops[1], (NAN, 0.0, 0.0), x, 3)
 
     # ---- polyctl straight into C
     c = ffi.new("pyrt_polyctl *")
@@ -209,9 +216,37 @@ DRIVER = textwrap.dedent(
     c.finder = fpp
     c.finder_tops = c.finder_lengths = pbuf
     assert lib.pyrt_polyctl_measure(c) == lib.PYRT_EINVAL     # a finder of another size
-    cp, phi, bears = ffi.new("double[3]"), ffi.new("double *"), ffi.new("int32_t *")
-    assert lib.pyrt_ring_contact(ffi.NULL, pbuf, pbuf, NAN, cp, phi, bears) == lib.PYRT_EINVAL
-    assert lib.pyrt_ring_contact(pbuf, pbuf, pbuf, NAN, ffi.NULL, phi, bears) == lib.PYRT_EINVAL
+    c.ring.radius = NAN
+    assert lib.pyrt_polyctl_measure(c) == lib.PYRT_ENONFINITE   # a ring that is no ring
+
+    # ---- neck straight into C
+    nr = ffi.new("pyrt_neck_ring *")
+    seg = ffi.new("pyrt_neck_segment *")
+    rope = ffi.new("pyrt_neck_rope *")
+    three = ffi.new("double[3]", [1.0, 2.0, 3.0])
+    assert lib.pyrt_neck_init(ffi.NULL, three, three, 1.0) == lib.PYRT_EINVAL
+    assert lib.pyrt_neck_init(nr, ffi.NULL, three, 1.0) == lib.PYRT_EINVAL
+    assert lib.pyrt_neck_init(nr, three, ffi.NULL, 1.0) == lib.PYRT_EINVAL
+    assert lib.pyrt_neck_init(nr, three, ffi.new("double[3]"), 1.0) == lib.PYRT_EINVAL
+    assert lib.pyrt_neck_init(nr, three, three, math.inf) == lib.PYRT_ENONFINITE
+    assert lib.pyrt_neck_check(ffi.NULL) == lib.PYRT_EINVAL
+    assert lib.pyrt_neck_init(nr, three, three, 1.0) == lib.PYRT_OK
+    assert lib.pyrt_neck_check(nr) == lib.PYRT_OK
+    assert lib.pyrt_neck_contact(ffi.NULL, three, three, NAN, seg) == lib.PYRT_EINVAL
+    assert lib.pyrt_neck_contact(nr, ffi.NULL, three, NAN, seg) == lib.PYRT_EINVAL
+    assert lib.pyrt_neck_contact(nr, three, ffi.NULL, NAN, seg) == lib.PYRT_EINVAL
+    assert lib.pyrt_neck_contact(nr, three, three, NAN, ffi.NULL) == lib.PYRT_EINVAL
+    assert lib.pyrt_neck_contact(nr, three, three, math.inf, seg) == lib.PYRT_ENONFINITE
+    assert lib.pyrt_neck_contact(nr, three, three, NAN, seg) == lib.PYRT_EDEGENERATE
+    for k in range(5):
+        args = [nr, three, three, three, rope]
+        args[k] = ffi.NULL
+        assert lib.pyrt_neck_rope_path(args[0], 3, args[1], args[2], args[3], ffi.NULL,
+                                       args[4]) == lib.PYRT_EINVAL
+    inf2 = ffi.new("double[2]", [0.0, math.inf])
+    assert lib.pyrt_neck_rope_path(nr, 3, three, three, three, inf2, rope) == lib.PYRT_ENONFINITE
+    nr.e1 = (0.0, 0.0, 1.0)
+    assert lib.pyrt_neck_check(nr) == lib.PYRT_EINVAL
 
     # ---- convert
     assert nat.excess128_many(list(range(-300, 300))).shape == (600,)
@@ -219,6 +254,16 @@ DRIVER = textwrap.dedent(
         range(-128, 128))
     assert lib.pyrt_excess128_many(ffi.NULL, ffi.NULL, 3) == lib.PYRT_EINVAL
     assert lib.pyrt_excess128_many(ffi.NULL, ffi.NULL, -1) == lib.PYRT_EINVAL
+    assert lib.pyrt_excess128(5, ffi.NULL) == lib.PYRT_EINVAL
+    assert lib.pyrt_from_excess128(5, ffi.NULL) == lib.PYRT_EINVAL
+
+    # ---- readyq straight into C
+    rq = ffi.new("pyrt_rq *")
+    assert lib.pyrt_rq_check(ffi.NULL) == lib.PYRT_EINVAL
+    assert lib.pyrt_rq_check(rq) == lib.PYRT_EINVAL
+    rq.mem, rq.ready = ffi.new("uint8_t[]", 8), ffi.new("uint16_t[]", 4)
+    rq.mem_len, rq.capacity, rq.t_addr, rq.q_addr = 8, 4, 0, 2      # Q runs past the image
+    assert lib.pyrt_rq_check(rq) == lib.PYRT_EINVAL
     print("SANITIZE-DRIVER-OK")
     """
 )

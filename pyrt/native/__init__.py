@@ -1,9 +1,11 @@
 """The C kernels, through cffi: the only package that touches ``ffi``/``lib``.
 
 Arguments are validated here, before C sees them; every C status code
-becomes a :class:`~pyrt.errors.NativeError` (or a subclass) here, so nothing
-above this package ever sees a raw return code or a cdata object.  One
-private module per C source file; this ``__init__`` re-exports their API.
+becomes a :class:`~pyrt.errors.NativeError` (or a subclass) in one place
+(``_errors``), so nothing above this package ever sees a raw return code or
+a cdata object.  The kernels' default parameters are read from the C
+headers (``lib``), never written down twice.  One private module per C
+source file; this ``__init__`` re-exports their API.
 """
 
 from pyrt.native._convert import excess128, excess128_many, from_excess128
@@ -26,23 +28,30 @@ from pyrt.native._findpos import (
     rope_segments,
 )
 from pyrt.native._fuzzy import FuzzyBatch, FuzzyInput, FuzzyParams, FuzzyRule, fuzzy_step
-from pyrt.native._polyctl import PolyControl, ring_contact
+from pyrt.native._neck import LOWER as NECK_LOWER
+from pyrt.native._neck import UPPER as NECK_UPPER
+from pyrt.native._neck import NeckRing, RopePath, ring_contact
+from pyrt.native._polyctl import PolyControl
 from pyrt.native._readyq import QueueChecker
 from pyrt.native._statics import StaticsSolver
 
 __all__ = [
+    "NECK_LOWER",
+    "NECK_UPPER",
     "DegenerateGeometryError",
     "FuzzyBatch",
     "FuzzyInput",
     "FuzzyParams",
     "FuzzyRule",
     "NativeInputError",
+    "NeckRing",
     "NoConvergenceError",
     "NonFiniteError",
     "PolyControl",
     "PositionFinder",
     "PositionResult",
     "QueueChecker",
+    "RopePath",
     "RopeSegments",
     "SingularError",
     "SolverError",

@@ -6,27 +6,29 @@ once; every poll the caller hands in the sensor readings as plain lists and
 gets plain floats and lists back:
 
 * :meth:`PolyControl.measure`: corrected lengths, neck-ring contacts as
-  effective tops (Newton from last poll's rim angle), the position solve,
-  distErr and the residual net force;
+  effective tops (csrc/neck.h, Newton from last poll's rim angle), the
+  position solve, distErr and the residual net force;
 * :meth:`PolyControl.drive`: the error signals against the hare (off-side
   ropes toward OFFSIDE_TENSION, the others free, or tensions set by the
   caller for errorSignalAll), the fuzzy inputs and one batched fuzzy step.
 
-:func:`ring_contact` is the C rim-contact search for one rope.  Inputs are
-checked here; C status codes become :class:`~pyrt.errors.NativeError`.
+Inputs are checked here; C status codes become
+:class:`~pyrt.errors.NativeError`.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import ClassVar
 
 from pyrt.native._errors import NativeInputError, raise_for_status
 from pyrt.native._findpos import PositionFinder
 from pyrt.native._fuzzy import FuzzyBatch
 from pyrt.native._lib import ffi, lib
+from pyrt.native._neck import NeckRing
 
-__all__ = ["PolyControl", "ring_contact"]
+__all__ = ["PolyControl"]
 
 MAX_ROPES = lib.PYRT_POLYCTL_MAX_ROPES
 _NAN = math.nan
@@ -59,32 +61,38 @@ def _finite(name: str, values: Sequence[float], n: int) -> list[float]:
     return v
 
 
-def _ring_array(ring: Sequence[float] | None) -> list[float]:
+def _neck_ring(ring: NeckRing | Sequence[float] | None):
+    """The ``pyrt_neck_ring`` struct for *ring* (checked by C)."""
+    if isinstance(ring, NeckRing):
+        return ring._c
     if ring is None:
-        return [0.0] * 12 + [0.0]
+        return ffi.new("pyrt_neck_ring *", {"radius": 0.0})
     r = [float(c) for c in ring]
-    if len(r) != 13 or not all(math.isfinite(c) for c in r):
-        raise NativeInputError("PolyControl: ring must be 13 finite numbers "
+    if len(r) != 13:
+        raise NativeInputError("PolyControl: ring must be a NeckRing or 13 numbers "
                                "(centre, unit axis, e1, e2, radius)")
-    return r
+    c = ffi.new("pyrt_neck_ring *", {"centre": r[0:3], "axis": r[3:6], "e1": r[6:9],
+                                     "e2": r[9:12], "radius": r[12]})
+    raise_for_status(lib.pyrt_neck_check(c), "PolyControl: ring (an orthonormal frame)")
+    return c
 
 
-def ring_contact(ring: Sequence[float], top: Sequence[float], carriage: Sequence[float],
-                 hint: float | None = None) -> tuple[Vec, float] | None:
-    """``(rim point, rim angle)`` where the rope ``top -> carriage`` bears on the
-    ring (centre, unit axis, e1, e2, radius: 13 numbers), or None."""
-    r = ffi.new("double[13]", _ring_array(ring))
-    t = ffi.new("double[3]", [float(c) for c in top])
-    q = ffi.new("double[3]", [float(c) for c in carriage])
-    cp = ffi.new("double[3]")
-    phi = ffi.new("double *")
-    bears = ffi.new("int32_t *")
-    rc = lib.pyrt_ring_contact(r, t, q, _NAN if hint is None else float(hint), cp, phi, bears)
-    if rc:
-        raise_for_status(rc, "ring_contact")
-    if not bears[0]:
-        return None
-    return (cp[0], cp[1], cp[2]), phi[0]
+def _io_layout(n: int) -> tuple[dict[str, tuple[int, int]], int]:
+    """Where each per-poll array lies in the exchange block: name -> (offset,
+    size), and the block's size.  Each call's inputs are contiguous, and so
+    are its outputs, so that a call copies its inputs in with one slice
+    assignment and its outputs out with one unpack."""
+    sizes = [
+        ("tension", n), ("encoder_length", n),                          # measure: in
+        ("length", n), ("position", 3), ("result", 5),                  # measure: out
+        ("hare", 3), ("velocity", n), ("desired_tension", n), ("is_free", n),  # drive: in
+        ("error_length", n), ("error_tension", n), ("last_dv", n),      # drive: out
+    ]
+    layout, k = {}, 0
+    for name, size in sizes:
+        layout[name] = (k, size)
+        k += size
+    return layout, k
 
 
 class PolyControl:
@@ -92,17 +100,22 @@ class PolyControl:
 
     ``tops``, ``offsets``: per rope, points (cm); ``bottoms``: points or None
     (no bottom attachment); ``stretch`` per newton and ``dead`` lengths (cm);
-    ``ring``: 13 numbers (centre, unit axis pointing out of the vessel, two
-    unit vectors spanning the ring plane, interior radius) or None;
+    ``ring``: the neck ring, a :class:`~pyrt.native.NeckRing` or its frame
+    as 13 numbers (centre, unit axis pointing out of the vessel, two unit
+    vectors spanning the ring plane, interior radius), or None;
     ``axis_point``: (x, y) of the central axis; ``weight_air`` and
     ``weight_liquid`` (N) with ``liquid_level`` (z, None in air);
     ``position``: the start of the first solve.
     """
 
+    #: The segments of a rope the controller lets bear on the neck ring
+    #: (the upper one only: see ``csrc/polyctl.h``).
+    RING_SEGMENTS: ClassVar[int] = lib.PYRT_POLYCTL_RING_SEGMENTS
+
     def __init__(self, finder: PositionFinder, batch: FuzzyBatch, *,
                  tops: Sequence[Sequence[float]], bottoms: Sequence[Sequence[float] | None],
                  offsets: Sequence[Sequence[float]], stretch: Sequence[float],
-                 dead: Sequence[float], ring: Sequence[float] | None,
+                 dead: Sequence[float], ring: NeckRing | Sequence[float] | None,
                  axis_point: Sequence[float], weight_air: float, weight_liquid: float,
                  liquid_level: float | None, offside_tension: float, near_end_cm: float,
                  position: Sequence[float]):
@@ -129,48 +142,47 @@ class PolyControl:
         self._dead = new("double[]", _finite("dead", dead, n))
         self._phi = new("double[]", [_NAN] * n)
         self._hare_phi = new("double[]", [_NAN] * n)
-        self._prev = new("double[]", 2 * n)
-        # Every per-poll input and output in one block, so that each call
-        # copies its inputs in with one slice assignment and its outputs out
-        # with one unpack:
-        #   measure: tension, encoder_length | length, position[3], result[5]
-        #   drive:   hare[3], velocity | desired, is_free, error_length,
-        #            error_tension, last_dv (= this poll's dv)
-        self._d = d = 3 * n + 8
-        io = self._io = new("double[]", d + 3 + 6 * n)
-        c = new("pyrt_polyctl *")
-        c.n = n
-        c.tops, c.bottoms, c.offsets = self._tops, self._bottoms, self._offsets
-        c.stretch, c.dead = self._stretch, self._dead
-        c.ring = _ring_array(ring)
-        c.axis_point = _finite("axis_point", axis_point, 2)
-        c.weight_air = float(weight_air)
-        c.weight_liquid = float(weight_liquid)
-        c.liquid_level = -math.inf if liquid_level is None else float(liquid_level)
-        c.offside_tension = float(offside_tension)
-        c.near_end_cm = float(near_end_cm)
+        self._prev_error_length = new("double[]", n)
+        self._prev_error_tension = new("double[]", n)
         # the finder's and the batch's bound buffers: solved and run from C
-        self._views = [ffi.from_buffer(a) for a in (finder.tops, finder.lengths, batch.inputs)]
-        c.finder = finder._p
-        c.finder_tops, c.finder_lengths, c.fuzzy_inputs = (
-            ffi.cast("double *", v) for v in self._views)
-        c.fuzzy = batch._b
-        c.tension, c.encoder_length, c.length = io, io + n, io + 2 * n
-        c.position, c.result = io + 3 * n, io + 3 * n + 3
-        c.hare, c.velocity = io + d, io + d + 3
-        c.desired_tension, c.is_free = io + d + 3 + n, io + d + 3 + 2 * n
-        c.error_length, c.error_tension = io + d + 3 + 3 * n, io + d + 3 + 4 * n
-        c.last_dv = io + d + 3 + 5 * n
-        c.phi, c.hare_phi = self._phi, self._hare_phi
-        c.prev_error_length, c.prev_error_tension = self._prev, self._prev + n
-        io[3 * n:3 * n + 3] = _finite("position", position, 3)
-        c.use_start = 1
-        c.rate_scale = 0.0
+        self._views = [ffi.from_buffer("double[]", a)
+                       for a in (finder.tops, finder.lengths, batch.inputs)]
+        layout, size = _io_layout(n)
+        io = self._io = new("double[]", size)
+        self._c = new("pyrt_polyctl *", {
+            "n": n, "tops": self._tops, "bottoms": self._bottoms, "offsets": self._offsets,
+            "stretch": self._stretch, "dead": self._dead, "ring": _neck_ring(ring)[0],
+            "axis_point": _finite("axis_point", axis_point, 2),
+            "weight_air": float(weight_air), "weight_liquid": float(weight_liquid),
+            "liquid_level": -math.inf if liquid_level is None else float(liquid_level),
+            "offside_tension": float(offside_tension), "near_end_cm": float(near_end_cm),
+            "finder": finder._p, "finder_tops": self._views[0],
+            "finder_lengths": self._views[1], "fuzzy": batch._b,
+            "fuzzy_inputs": self._views[2], "phi": self._phi, "hare_phi": self._hare_phi,
+            "prev_error_length": self._prev_error_length,
+            "prev_error_tension": self._prev_error_tension, "use_start": 1,
+            **{name: ffi.addressof(io, offset) for name, (offset, _) in layout.items()},
+        })
+
+        def span(first: str, last: str) -> slice:
+            return slice(layout[first][0], layout[last][0] + layout[last][1])
+
+        def block(first: str, last: str) -> tuple[object, int]:
+            sl = span(first, last)
+            return ffi.addressof(io, sl.start), sl.stop - sl.start
+
+        self._position = span("position", "position")
+        self._measure_in = span("tension", "encoder_length")
+        self._measured = block("length", "result")
+        self._drive_in = span("hare", "velocity")
+        self._drive_in_all = span("hare", "is_free")      # with signal_all
+        self._driven = block("desired_tension", "last_dv")
+        self._last_dv = span("last_dv", "last_dv")
+        io[self._position] = _finite("position", position, 3)
         self._rate = 0.0
         self._signal_all = False
-        self._c = c
-        self._measured = c.length   # length, position, result: n + 8 doubles
-        self._driven = c.desired_tension  # desired .. last_dv: 5 n doubles
+        self._what_measure = f"PolyControl.measure ({n} ropes)"
+        self._what_drive = f"PolyControl.drive ({n} ropes)"
         self._measure = lib.pyrt_polyctl_measure
         self._drive = lib.pyrt_polyctl_drive
         self._unpack = ffi.unpack
@@ -179,8 +191,7 @@ class PolyControl:
 
     def set_position(self, position: Sequence[float]) -> None:
         """Start the next solve from ``position`` (and find ring contacts there)."""
-        n = self.n
-        self._io[3 * n:3 * n + 3] = _finite("position", position, 3)
+        self._io[self._position] = _finite("position", position, 3)
         self._c.use_start = 1
 
     def set_endpoint(self, endpoint: Sequence[float] | None) -> None:
@@ -194,9 +205,8 @@ class PolyControl:
 
     def reset_rates(self) -> None:
         """A new move: no error rates at its first poll, no last velocity change."""
-        n = self.n
         self._c.have_prev = 0
-        self._io[self._d + 3 + 5 * n:self._d + 3 + 6 * n] = [0.0] * n
+        self._io[self._last_dv] = [0.0] * self.n
 
     @property
     def rim_angles(self) -> list[float | None]:
@@ -212,12 +222,11 @@ class PolyControl:
         position cannot be found (the lengths are still filled in; the
         position is kept)."""
         n = self.n
-        self._io[0:2 * n] = tensions + encoder_lengths
+        self._io[self._measure_in] = tensions + encoder_lengths
         rc = self._measure(self._c)
-        out = self._unpack(self._measured, n + 8)
+        out = self._unpack(*self._measured)
         lengths[:] = out[:n]
-        if rc:
-            raise_for_status(rc, f"PolyControl.measure ({n} ropes)")
+        raise_for_status(rc, self._what_measure)
         return out[n:]
 
     def drive(self, hare: Sequence[float], velocities: list[float], rate_scale: float,
@@ -235,15 +244,12 @@ class PolyControl:
         if signal_all is not self._signal_all:
             self._signal_all = signal_all = bool(signal_all)
             c.signal_all = signal_all
-        d = self._d
         if signal_all:
-            self._io[d:d + 3 + 3 * n] = [*hare, *velocities, *desired, *free]
+            self._io[self._drive_in_all] = [*hare, *velocities, *desired, *free]
         else:
-            self._io[d:d + 3 + n] = [*hare, *velocities]
-        rc = self._drive(c)
-        if rc:
-            raise_for_status(rc, f"PolyControl.drive ({n} ropes)")
-        out = self._unpack(self._driven, 5 * n)
+            self._io[self._drive_in] = [*hare, *velocities]
+        raise_for_status(self._drive(c), self._what_drive)
+        out = self._unpack(*self._driven)
         if not signal_all:
             desired[:] = out[:n]
             free[:] = out[n:2 * n]

@@ -3,30 +3,26 @@
 :class:`StaticsSolver` binds one problem's arrays once (the C struct keeps
 pointers into memory this object owns); a caller stepping in time then only
 rewrites the payed-out lengths and calls :meth:`StaticsSolver.solve`, which
-warm-starts from the previous equilibrium.  Inputs are checked here; the C
-status codes become :class:`~pyrt.errors.NativeError`.
+warm-starts from the previous equilibrium.  Ropes bear on the neck ring by
+the one model of csrc/neck.h (:class:`~pyrt.native.NeckRing`), both
+segments of a rope (``PYRT_STATICS_RING_SEGMENTS``).  Inputs are checked
+here; the C status codes become :class:`~pyrt.errors.NativeError`.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import ClassVar
 
-from pyrt.errors import NativeError
+from pyrt.native._errors import converged, raise_for_status
 from pyrt.native._lib import ffi, lib
+from pyrt.native._neck import NeckRing, Ring
 
 __all__ = ["StaticsSolver"]
 
-OK = lib.PYRT_OK
-NOCONVERGE = lib.PYRT_ENOCONVERGE
-MAX_ROPES = lib.PYRT_STATICS_MAX_ROPES
-
-_MESSAGES = {
-    lib.PYRT_EINVAL: "invalid statics input (sizes, lengths, compliances or ring axis)",
-    lib.PYRT_ENONFINITE: "NaN or infinity in a statics input",
-    lib.PYRT_EDEGENERATE: "the carriage pulley is on a top pulley or bottom attachment",
-    lib.PYRT_ESINGULAR: "singular statics system",
-}
+MAX_ROPES: int = lib.PYRT_STATICS_MAX_ROPES
+_NO_RING = NeckRing((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0.0)
 
 
 def _point(p: Sequence[float], what: str) -> tuple[float, float, float]:
@@ -41,11 +37,17 @@ class StaticsSolver:
 
     ``tops``, ``offsets``: n points; ``bottoms``: n points or ``None`` for a
     central rope; ``dead``: spindle-to-top-pulley lengths (cm);
-    ``compliance``: strain per newton of each rope; ``ring``: ``(centre,
-    axis, radius)`` of the neck ring or ``None``; ``weight``: net downward
-    force on the source (N, gravity less buoyancy); ``floor_z``: the lowest
-    z the source can reach.  ``position``: the first warm start.
+    ``compliance``: strain per newton of each rope; ``ring``: the neck ring,
+    a :class:`~pyrt.native.NeckRing` or ``(centre, axis, radius)``, or
+    ``None``; ``weight``: net downward force on the source (N, gravity less
+    buoyancy); ``floor_z``: the lowest z the source can reach.
+    ``position``: the first warm start.  ``tol``, ``max_step`` (cm) and
+    ``max_iter`` default to ``csrc/statics.h``'s.
     """
+
+    #: The segments of a rope the world lets bear on the neck ring
+    #: (:data:`~pyrt.native.NECK_UPPER` | :data:`~pyrt.native.NECK_LOWER`).
+    RING_SEGMENTS: ClassVar[int] = lib.PYRT_STATICS_RING_SEGMENTS
 
     def __init__(
         self,
@@ -56,13 +58,13 @@ class StaticsSolver:
         compliance: Sequence[float],
         payout: Sequence[float],
         *,
-        ring: tuple[Sequence[float], Sequence[float], float] | None = None,
+        ring: NeckRing | Ring | None = None,
         weight: float = 0.0,
         floor_z: float = -1e9,
         position: Sequence[float] = (0.0, 0.0, 0.0),
-        tol: float = 1e-7,
-        max_step: float = 10.0,
-        max_iter: int = 50,
+        tol: float = lib.PYRT_STATICS_DEFAULT_TOL,
+        max_step: float = lib.PYRT_STATICS_DEFAULT_MAX_STEP,
+        max_iter: int = lib.PYRT_STATICS_DEFAULT_MAX_ITER,
     ):
         n = len(tops)
         if not 1 <= n <= MAX_ROPES:
@@ -92,41 +94,25 @@ class StaticsSolver:
         self._tension = ffi.new("double[]", n)
         self._wrapped = ffi.new("int32_t[]", n)
         self._g = ffi.new("double[]", n)
-        p = ffi.new("pyrt_statics_problem *")
-        p.n = n
-        p.tops = self._tops
-        p.bottoms = self._bottoms
-        p.offsets = self._offsets
-        p.payout = self._payout
-        p.dead = self._dead
-        p.compliance = self._compliance
-        p.intact = self._intact
-        p.position = self._position
-        p.tension = self._tension
-        p.wrapped = self._wrapped
-        p.tol = float(tol)
-        p.max_step = float(max_step)
-        p.max_iter = int(max_iter)
-        p.floor_z = float(floor_z)
-        p.weight = float(weight)
-        self._p = p
+        self._p = ffi.new("pyrt_statics_problem *", {
+            "n": n, "tops": self._tops, "bottoms": self._bottoms, "offsets": self._offsets,
+            "payout": self._payout, "dead": self._dead, "compliance": self._compliance,
+            "intact": self._intact, "position": self._position, "tension": self._tension,
+            "wrapped": self._wrapped, "tol": float(tol), "max_step": float(max_step),
+            "max_iter": int(max_iter), "floor_z": float(floor_z), "weight": float(weight),
+        })
+        self._what = f"StaticsSolver ({n} ropes)"
         self.set_ring(ring)
 
     # -- inputs --------------------------------------------------------------
 
-    def set_ring(self, ring: tuple[Sequence[float], Sequence[float], float] | None) -> None:
+    def set_ring(self, ring: NeckRing | Ring | None) -> None:
         """Set (or, with ``None``, remove) the neck ring the ropes may bear on."""
         if ring is None:
-            vals = [0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0]
-        else:
-            centre, axis, radius = ring
-            ax = _point(axis, "ring axis")
-            na = math.sqrt(sum(a * a for a in ax))
-            if not na > 0:
-                raise ValueError("ring axis must be a non-zero vector")
-            vals = [*_point(centre, "ring centre"), *(a / na for a in ax), float(radius)]
-        for k, v in enumerate(vals):
-            self._p.ring[k] = v
+            ring = _NO_RING
+        elif not isinstance(ring, NeckRing):
+            ring = NeckRing(*ring)
+        self._p.ring = ring._c[0]
 
     @property
     def weight(self) -> float:
@@ -168,20 +154,14 @@ class StaticsSolver:
     def solve(self) -> bool:
         """Move to the equilibrium; ``False`` if the iteration limit was hit
         (the position is then the best point reached; the next call continues)."""
-        rc = lib.pyrt_statics_solve(self._p)
-        if rc == OK:
-            return True
-        if rc == NOCONVERGE:
-            return False
-        raise NativeError(f"pyrt_statics_solve: {_MESSAGES.get(rc, f'status {rc}')}")
+        return converged(lib.pyrt_statics_solve(self._p), self._what)
 
     def evaluate(self, position: Sequence[float]) -> tuple[list[float], list[float], list[bool]]:
         """Rope geometry (cm beyond the top pulley), tensions and ring contact
         at ``position``, without solving."""
         pos = ffi.new("double[3]", list(_point(position, "position")))
         rc = lib.pyrt_statics_evaluate(self._p, pos, self._g, self._tension, self._wrapped)
-        if rc != OK:
-            raise NativeError(f"pyrt_statics_evaluate: {_MESSAGES.get(rc, f'status {rc}')}")
+        raise_for_status(rc, f"{self._what}.evaluate")
         n = self.n
         return (
             [self._g[i] for i in range(n)],
