@@ -11,6 +11,9 @@ for the ratio summary against the targets, printed at the end).
   prepared C ``PositionFinder``, one-shot ``find_position``, the numpy
   reference (tests/_ref_findpos.py) and ``scipy.optimize.least_squares``
   (method 'lm') with and without the analytic Jacobian.
+* neck: one rope's contact with the SNO neck ring (csrc/neck.c through
+  ``NeckRing.contact``, from the crossing and from last time's angle) and
+  the pure-Python reference of the same model (tests/_ref_polyctl.py).
 
 A comparator whose package is missing is skipped, not failed.
 """
@@ -22,6 +25,7 @@ import itertools
 
 import _ref_findpos as geo
 import _ref_fuzzy as ref
+import _ref_polyctl
 import numpy as np
 import pytest
 
@@ -303,3 +307,21 @@ def test_findpos_least_squares(benchmark, ropes, jacobian, record):
     c = nat.find_position(tops, bottoms, lengths, start).position
     # Equal accuracy: both land on the same least-squares minimum.
     assert np.allclose(full(sol.x), c, atol=1e-3)
+
+
+# ------------------------------------------------------------------------- neck
+
+NECK = nat.NeckRing((0.0, 0.0, 595.8), (0.0, 0.0, 1.0), 72.5)
+NECK_FRAME = (*NECK.centre, *NECK.axis, *NECK.e1, *NECK.e2, NECK.radius)
+NECK_TOP, NECK_CARRIAGE = (60.0, 0.0, 1299.0), (400.0, 30.0, 100.0)
+
+
+@pytest.mark.benchmark(group="neck contact")
+@pytest.mark.parametrize("impl", ["c", "c-hint", "python"])
+def test_neck_contact(benchmark, impl):
+    """One rope bearing on the ring: the rim point by Newton on the rim angle."""
+    phi = NECK.contact(NECK_TOP, NECK_CARRIAGE)[1]
+    if impl == "python":
+        benchmark(_ref_polyctl.contact, NECK_FRAME, NECK_TOP, NECK_CARRIAGE)
+    else:
+        benchmark(NECK.contact, NECK_TOP, NECK_CARRIAGE, phi if impl == "c-hint" else None)
