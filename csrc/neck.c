@@ -47,11 +47,12 @@ static void at_angle(const pyrt_neck_ring *ring, const double *f, const double *
 static void slope(const pyrt_neck_ring *ring, const rim_point *e, double *f1, double *f2)
 {
     const double rad = ring->radius;
-    double pa = dot3(e->a, e->cp) / e->da;
-    double pb = dot3(e->b, e->cp) / e->db;
+    double ia = 1.0 / e->da, ib = 1.0 / e->db;
+    double pa = dot3(e->a, e->cp) * ia;
+    double pb = dot3(e->b, e->cp) * ib;
     *f1 = pa + pb;
-    *f2 = (rad * rad - pa * pa) / e->da + (rad * rad - pb * pb) / e->db
-          - rad * (dot3(e->u, e->a) / e->da + dot3(e->u, e->b) / e->db);
+    *f2 = (rad * rad - pa * pa - rad * dot3(e->u, e->a)) * ia
+          + (rad * rad - pb * pb - rad * dot3(e->u, e->b)) * ib;
 }
 
 /*
@@ -102,7 +103,7 @@ static int over_rim(const pyrt_neck_ring *ring, const rim_point *e, double phi,
     if (e->da < PYRT_MIN_SEGMENT_CM || e->db < PYRT_MIN_SEGMENT_CM)
         return PYRT_EDEGENERATE;
     for (k = 0; k < 3; ++k)
-        out->dir[k] = e->b[k] / e->db;
+        out->dir[k] = e->b[k] * (1.0 / e->db);
     slope(ring, e, &f1, &f2);
     out->curvature = f2;
     return PYRT_OK;
@@ -157,8 +158,9 @@ static int segment(const pyrt_neck_ring *ring, const double *f, const double *q,
     }
     if (dist < PYRT_MIN_SEGMENT_CM)
         return PYRT_EDEGENERATE;
+    dist = 1.0 / dist;
     for (k = 0; k < 3; ++k)
-        out->dir[k] = d[k] / dist;
+        out->dir[k] = d[k] * dist;
     return PYRT_OK;
 }
 
