@@ -28,6 +28,7 @@ import signal
 import sys
 from pathlib import Path
 
+from pyrt.cli.gripper import _counts
 from pyrt.db import STATIONS, station_directory
 from pyrt.errors import ConfigError
 from pyrt.sim.boardsim import DEFAULT_WATCHDOG_S, BoardServer
@@ -76,20 +77,6 @@ def _step_us(text: str) -> int:
         raise argparse.ArgumentTypeError(f"expected whole µs, got {text!r}") from None
     if not 50 <= value <= 100_000:
         raise argparse.ArgumentTypeError(f"world step must be 50..100000 µs, got {value}")
-    return value
-
-
-def _counts(text: str) -> int:
-    """A jaw start position: hex counts, two's complement (F400) or negative (-0C00)."""
-    t = text.strip()
-    try:
-        value = -int(t[1:], 16) if t.startswith("-") else int(t, 16)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected hex encoder counts, got {text!r}") from None
-    if value > 0x7FFF:
-        value -= 0x10000
-    if not -0x2A00 <= value <= 0:
-        raise argparse.ArgumentTypeError("start position must be 0000 (wide open) .. D600 (closed)")
     return value
 
 
