@@ -4,11 +4,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from typing import Any
+
 from pyrt.boards.gripper import DAC_NULL, SimGripperBoard
 from pyrt.boards.i8031 import I8031
 from pyrt.robots.gripper import GripperController, JobResult
 from pyrt.scheduler import Loop, SimClock
 from pyrt.sim.gripper import JawPlant
+from pyrt.station.gripper import GripperStation
 
 MS = 1_000_000
 
@@ -42,6 +45,11 @@ class Rig:
     ctl: GripperController
     loop: Loop
     stall: StallMonitor
+    station: Any = None
+
+    @property
+    def runner(self):
+        return self.station.runner
 
     def run_job(self, job, max_s: float = 60.0) -> JobResult:
         assert self.loop.run_until(lambda: job.done, int(max_s * 1000)), f"{job.name} hung"
@@ -63,15 +71,13 @@ def signed(word: int) -> int:
 
 
 def make_rig(*, runner: bool = False, **plant_kw) -> Rig:
-    """Plant, controller (ready queue + watchdog), stall monitor: in that order."""
+    """A gripper station (plant, controller, motion, scope, mailbox) and a stall monitor."""
     cpu = I8031()
     board = SimGripperBoard(cpu)
     plant = JawPlant(board, **plant_kw)
-    ctl = GripperController(cpu)
     loop = Loop(SimClock())
-    loop.attach(plant.step, name="jaws")
-    ctl.attach(loop)
+    station = GripperStation(loop, cpu, board, plant)
+    ctl: GripperController = station.controller
     stall = StallMonitor(board, plant)
     loop.attach(stall, name="stall monitor")
-    ctl.power_up()
-    return Rig(cpu, board, plant, ctl, loop, stall)
+    return Rig(cpu, board, plant, ctl, loop, stall, station)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from pyrt.db import copy_station
-from pyrt.scheduler.runner import Runner
+from pyrt.scheduler.runner import Runner  # noqa: F401 - the rig's callers type with it
 from pyrt.station.manipulator import ManipulatorStation
 
 #: The tests' base tick: 5 ms (the physics at 200 Hz, the 50 ms control poll
@@ -17,9 +17,7 @@ def make_station(tmp: Path, name: str = "prototype", **kw) -> tuple[ManipulatorS
     """A working copy of packaged station ``name`` in ``tmp``, built and started."""
     directory = copy_station(name, tmp / name)
     station = ManipulatorStation(directory, tick_ns=kw.pop("tick_ns", TICK_NS), **kw)
-    runner = Runner(station.loop, motion_queue=station.motion)
-    station.messages.connect(runner.post)
-    runner.start()
+    runner = station.start()
     runner.sleep(0.2)
     return station, runner
 

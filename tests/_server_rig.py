@@ -11,7 +11,7 @@ from pyrt.boards.gripper import DAC_NULL
 from pyrt.client import Client
 from pyrt.scheduler import Loop, SimClock, WallClock
 from pyrt.scheduler.runner import Runner
-from pyrt.server import GripperService, Server
+from pyrt.server import ServedStation, Server
 from pyrt.station.gripper import GripperStation, build_gripper
 
 TOKEN = "s3cret-token"
@@ -83,7 +83,7 @@ def served(token: str | None = TOKEN, wall: bool = False, **server_kw):
     """The gripper station (SimClock unless ``wall``) served on an ephemeral loopback port."""
     station = build_gripper(Loop(WallClock() if wall else SimClock()))
     runner = station.runner
-    server = Server(runner, GripperService.from_station(station), "127.0.0.1", 0, token=token,
+    server = Server(runner, ServedStation(station), "127.0.0.1", 0, token=token,
                     **server_kw)
     runner.start()
     host, port = server.start()

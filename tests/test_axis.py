@@ -56,7 +56,7 @@ def test_up_5_changes_the_length_by_5_cm(station):
     slope = ax.encoder.slope
     l0, g0 = ax.getLength(), r.plant.lengths()[0]
     z0 = r.plant.position[2]
-    ax.command("up", "5")
+    ax.run_command("up", "5")
     assert ax.motor.running
     r.finish()
     r.loop.run(5)
@@ -99,7 +99,7 @@ def test_bad_arguments_move_nothing(station, command, args, match):
     r = Rig(station)
     writes = r.tio.writes
     with pytest.raises(CommandError, match=match):
-        r.axis.command(command, *args)
+        r.axis.run_command(command, *args)
     r.loop.run(100)
     assert r.tio.writes == writes
     assert not r.tio.armed(r.axis.motor.channel)

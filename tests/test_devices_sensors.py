@@ -159,23 +159,23 @@ def test_keyboard_commands_by_name():
 
     enc, dc = _encoder()
     dc.plant_add_counts(168, 4)
-    enc.command("reset")
+    enc.run_command("reset")
     assert enc.count() == 0
-    assert enc.command("SETZEROLENGTH", "12.5") == 12.5
-    enc.command("readloop")
+    assert enc.run_command("SETZEROLENGTH", "12.5") == 12.5
+    enc.run_command("readloop")
     assert enc.looping
     with pytest.raises(CommandError, match="unknown command"):
-        enc.command("rewind")
+        enc.run_command("rewind")
     with pytest.raises(CommandError, match="takes 1 argument"):
-        enc.command("setZeroLength")
+        enc.run_command("setZeroLength")
     lc, dc = _loadcell()
-    lc.command("calibrate")
+    lc.run_command("calibrate")
     dc.plant_set_adc(3, 700)
-    lc.command("calibrationPoint", "0")
+    lc.run_command("calibrationPoint", "0")
     dc.plant_set_adc(3, 900)
-    lc.command("point", "100")
-    assert lc.command("calibrate") == pytest.approx((0.5, -350.0))
+    lc.run_command("point", "100")
+    assert lc.run_command("calibrate") == pytest.approx((0.5, -350.0))
     m = Motor("axis0Motor", SimTIO10(), 7, 0.5, 7.0)
-    assert m.command("maxspeed", "3") == 3.0
+    assert m.run_command("maxspeed", "3") == 3.0
     with pytest.raises(CommandError):
-        m.command("maxspeed", "3", "4")
+        m.run_command("maxspeed", "3", "4")

@@ -16,7 +16,7 @@ import pytest
 from _server_rig import TOKEN, served
 
 from pyrt.errors import ConfigError
-from pyrt.server import GripperService
+from pyrt.server import ServedStation
 
 PREFIX = "PYRTTEST:"
 
@@ -60,7 +60,7 @@ def epics_served(token: str | None = TOKEN):
     from pyrt.server.epics import EpicsService
 
     with served(token=token) as sv:
-        robot = GripperService.from_station(sv.rig)
+        robot = ServedStation(sv.rig)
         ioc = EpicsService(sv.runner, robot, sv.server, PREFIX, token=token,
                            interfaces=["127.0.0.1"], period_s=0.02, stats_period_s=0.2)
         ioc.start()
@@ -153,4 +153,4 @@ def test_a_clear_message_when_caproto_is_missing(monkeypatch):
     monkeypatch.setitem(sys.modules, "caproto", None)
     assert not epics.caproto_available()
     with served() as sv, pytest.raises(ConfigError, match=r"pyrt\[epics\]"):
-        epics.EpicsService(sv.runner, GripperService(sv.ctl), sv.server, PREFIX)
+        epics.EpicsService(sv.runner, ServedStation(sv.rig), sv.server, PREFIX)

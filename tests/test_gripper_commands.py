@@ -7,7 +7,8 @@ import io
 import pytest
 from _gripper_rig import make_rig
 
-from pyrt.commands.gripper import GripperShell, parse_hex, parse_target
+from pyrt.commands import RobotShell
+from pyrt.commands.gripper import parse_hex, parse_target
 from pyrt.errors import CommandError
 from pyrt.scheduler.runner import Runner
 from pyrt.scope import Scope
@@ -44,11 +45,9 @@ def test_parse_hex_ranges():
 @pytest.fixture
 def session():
     rig = make_rig()
-    scope = Scope(capacity=4000)
-    rig.loop.attach(scope.sample, name="scope")
-    runner = Runner(rig.loop)
+    runner = rig.runner
     out = io.StringIO()
-    shell = GripperShell(runner, rig.ctl, out, plant=rig.plant, scope=scope)
+    shell = RobotShell(rig.station, out)
     runner.start()
     shell.onecmd("I")
 
@@ -165,7 +164,7 @@ def test_dead_limit_i_enters_the_monitor(session):
 
 def test_fault_is_reported_once_and_motion_refused_until_ack(session):
     """A fault comes back once at the next command; moves are refused until ack, then work again."""
-    session.runner.call(lambda: session.rig.ctl.queue.trip("test trip", source="test"))
+    session.runner.call(lambda: session.rig.station.trip("test trip", source="test"))
     lines = session("W")
     assert lines[0].startswith("FAULT: test trip")
     assert "type ack" in lines[1]

@@ -79,7 +79,7 @@ def test_routine_raising_runs_the_reflex_in_the_same_tick():
     tick = None
     for _ in range(200):
         rig.loop.run(1)
-        if rig.ctl.queue.fault is not None:
+        if rig.station.fault is not None:
             tick = rig.loop.tick_index
             break
     assert tick is not None
@@ -97,7 +97,7 @@ def test_corrupted_q_slot_faults_and_nulls():
     rig.ctl.poke(0x35, 0x12)  # Q slot 0 now holds an address with no routine
     rig.ctl.poke(0x36, 0x34)
     rig.loop.run(100)
-    assert rig.ctl.queue.fault is not None
+    assert rig.station.fault is not None
     assert rig.board.dac == 0x80 and not rig.ctl.moving
 
 
@@ -112,7 +112,7 @@ def test_full_queue_during_a_sequence_is_a_fault():
     job = rig.ctl.start_init()
     rig.loop.run(5)
     assert job.done and not job.value().ok
-    assert rig.ctl.queue.fault is not None and rig.board.dac == 0x80
+    assert rig.station.fault is not None and rig.board.dac == 0x80
 
 
 def test_watchdog_trips_when_the_queue_is_frozen_mid_move():
@@ -147,11 +147,11 @@ def test_acknowledge_restarts_the_routines_without_moving():
     """After a fault, acknowledge restarts the three routines; nothing moves until P."""
     rig = make_rig()
     rig.init()
-    rig.ctl.queue.trip("test fault", source="test")
+    rig.station.trip("test fault", source="test")
     assert rig.board.dac == 0x80
     with pytest.raises(CommandError):
         rig.ctl.move(-0x100)
-    rig.ctl.acknowledge()
+    rig.station.acknowledge()
     assert sorted(rig.ctl.queue.pending()) == ["MVJAWS", "SENSORS", "WATCHJAW"]
     rig.loop.run(500)
     assert rig.board.dac == 0x80

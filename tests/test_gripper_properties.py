@@ -8,7 +8,8 @@ from _gripper_rig import MS, make_rig
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from pyrt.commands.gripper import GripperShell, parse_target
+from pyrt.commands import RobotShell
+from pyrt.commands.gripper import parse_target
 from pyrt.console import Console
 from pyrt.errors import CommandError
 from pyrt.scheduler.runner import Runner
@@ -44,9 +45,9 @@ LINES = st.lists(st.one_of(LETTER_LINE, MONITOR_POKE, WORD_LINE), max_size=10)
 
 def session():
     rig = make_rig()
-    runner = Runner(rig.loop)
+    runner = rig.runner
     out = io.StringIO()
-    shell = GripperShell(runner, rig.ctl, out, plant=rig.plant)
+    shell = RobotShell(rig.station, out)
     runner.start()
     shell.onecmd("I")
     return rig, runner, shell, out

@@ -6,7 +6,7 @@ import io
 
 import pytest
 
-from pyrt.commands.gripper import GripperShell
+from pyrt.commands import RobotShell
 from pyrt.scheduler import Loop, SimClock
 from pyrt.station.gripper import build_gripper
 
@@ -15,9 +15,7 @@ from pyrt.station.gripper import build_gripper
 def station():
     st = build_gripper(Loop(SimClock()))
     out = io.StringIO()
-    shell = GripperShell(
-        st.runner, st.controller, out, plant=st.plant, scope=st.scope, executor=st.executor
-    )
+    shell = RobotShell(st, out)
     st.runner.start()
 
     def run(*lines: str) -> list[str]:
@@ -72,7 +70,7 @@ def test_fault_empties_the_motion_queue_and_needs_ack(station):
     assert ctl.moving and len(station.runner.motion) == 2
 
     def trip():
-        ctl.queue.trip("loadcell on fire", source="test")
+        station.trip("loadcell on fire", source="test")
         return station.board.dac, len(station.runner.motion), station.executor.busy
 
     assert station.runner.call(trip) == (0x80, 0, False)

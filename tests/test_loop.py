@@ -84,15 +84,15 @@ def test_no_overrun_when_work_fits_in_the_tick():
 
 
 def test_consecutive_overrun_limit_faults_every_robot():
-    """max_consecutive_overruns: that many overruns in a row trip every queue (OROCOS maxOverRun)."""
+    """max_consecutive_overruns: that many overruns in a row trip every robot (OROCOS maxOverRun): each station's trip, and a queue no station owns halts."""
     loop, _, queue = work_loop(slow_every=1, slow_ns=2 * MS, max_consecutive_overruns=3)
-    reflex = []
-    queue.reflex = reflex.append
+    trips = []
+    loop.trip_handlers.append(lambda cause, source: trips.append((loop.tick_index, cause)))
     loop.run(10)
-    assert len(reflex) == 1
+    assert len(trips) == 1 and "3 consecutive overruns" in trips[0][1]
     fault = loop.take_fault()
     assert fault is not None and "3 consecutive overruns" in fault.cause
-    assert queue.fault is not None
+    assert queue.halted
 
 
 def test_overrun_warnings_are_rate_limited_to_one_line_per_second():

@@ -13,8 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pyrt.commands._motion import parse_motion, parse_value
-from pyrt.commands.gripper import GripperShell
-from pyrt.commands.manipulator import ManipulatorShell
+from pyrt.commands import RobotShell
 from pyrt.errors import CommandError
 from pyrt.robots.paths import HarePath, path_target
 from pyrt.robots.stops import StopReason
@@ -58,7 +57,7 @@ def sway(tmp_path, monkeypatch):
 def shell(tmp_path):
     station, runner = make_station(tmp_path)
     out = io.StringIO()
-    sh = ManipulatorShell(runner, station, out)
+    sh = RobotShell(station, out)
 
     def run(*lines: str) -> str:
         start = out.tell()
@@ -239,8 +238,7 @@ def test_gripper_console_motion_word():
     """The gripper console lists the motion types and queues a gripper_move by name."""
     gs = build_gripper(Loop(SimClock()))
     out = io.StringIO()
-    sh = GripperShell(gs.runner, gs.controller, out, plant=gs.plant, scope=gs.scope,
-                      executor=gs.executor)
+    sh = RobotShell(gs, out)
     gs.runner.start()
     try:
         sh.onecmd("I")
@@ -304,7 +302,7 @@ def test_motion_word_refusals_move_nothing(tmp_path_factory, kind, params):
     station, runner = make_station(tmp_path_factory.mktemp("motion"))
     try:
         out = io.StringIO()
-        sh = ManipulatorShell(runner, station, out)
+        sh = RobotShell(station, out)
         writes = station.tio10.writes
         assert not sh.onecmd(" ".join(["motion", kind, *params]))
         runner.sleep(0.05)

@@ -171,10 +171,16 @@ def test_full_queue_refuses_outside_the_loop():
 
 
 def test_full_queue_inside_a_tick_is_a_fault_with_reflex():
-    """A routine that overfills the queue faults the robot: reflex in the same tick, FaultError once."""
+    """A routine that overfills the queue: the queue halts and tells its owner in the same tick; FaultError once."""
     loop, queue, _ = make(divisor=1, capacity=2)
     reflexes = []
-    queue.reflex = lambda fault: reflexes.append(loop.tick_index)
+    report = queue.on_error
+
+    def owner(cause, source, tb):
+        reflexes.append(loop.tick_index)
+        report(cause, source, tb)
+
+    queue.on_error = owner
     queue.register(0x20, "FILLER", lambda: None)
 
     def greedy():
@@ -184,7 +190,7 @@ def test_full_queue_inside_a_tick_is_a_fault_with_reflex():
     queue.register(0x10, "GREEDY", greedy)
     queue.schedule(0x10, 3)
     loop.run(10)
-    assert reflexes == [2]  # the third tick has index 2
+    assert reflexes == [2] and queue.halted  # the third tick has index 2
     with pytest.raises(FaultError) as err:
         loop.raise_pending()
     assert err.value.fault.source == "GREEDY" and "full" in err.value.fault.cause
@@ -215,7 +221,7 @@ def test_raising_routine_stops_only_its_robot():
     fault = loop.take_fault()
     assert fault is not None and fault.robot == "bad" and "ZeroDivisionError" in fault.cause
     assert "Traceback" in fault.traceback and fault.source == "CRASH"
-    bad.acknowledge()
+    bad.resume()
     loop.run(5)
     assert counts == {"bad": 8, "good": 15}
 

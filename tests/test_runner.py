@@ -69,8 +69,8 @@ def test_fault_is_reported_by_the_next_call_exactly_once():
     assert err.value.fault.source == "POLL"
     assert runner.call(lambda: "again") == "again"  # reported once only
     runner.sleep(0.01)
-    assert runs[0] == 2 and queue.fault is not None  # nothing dispatched while faulted
-    runner.call(queue.acknowledge)
+    assert runs[0] == 2 and queue.halted  # nothing dispatched while faulted
+    runner.call(queue.resume)
     runner.sleep(0.005)
     assert runs[0] > 2
     assert any("encoder lost" in m for m in runner.messages())
@@ -79,7 +79,7 @@ def test_fault_is_reported_by_the_next_call_exactly_once():
 def test_poll_raises_a_pending_fault():
     """poll() is a no-op round trip that raises a pending fault."""
     runner, queue = sim_runner()
-    runner.call(queue.trip, "limit switch", "check")
+    runner.call(runner.loop.fault_all, "limit switch", "check")
     with pytest.raises(FaultError, match="limit switch"):
         runner.poll()
     runner.poll()
@@ -120,7 +120,7 @@ def test_wait_until_and_sleep_advance_virtual_time():
 def test_wait_until_ends_with_the_fault():
     """A fault while waiting ends the wait with FaultError."""
     runner, queue = sim_runner()
-    queue.register(0x20, "TRIP", lambda: queue.trip("stall", "TRIP"))
+    queue.register(0x20, "TRIP", lambda: runner.loop.fault_all("stall", "TRIP"))
     runner.call(queue.schedule, 0x20, 5)
     with pytest.raises(FaultError, match="stall"):
         runner.wait_until(lambda: False, 10.0)

@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from pyrt.client import ServerError
 from pyrt.errors import ConfigError
 from pyrt.scheduler.runner import Runner
-from pyrt.server import GripperService, ObserverRunner, Server, format_error, format_reply
+from pyrt.server import ServedStation, ObserverRunner, Server, format_error, format_reply
 from pyrt.server.protocol import split_verb
 
 
@@ -146,8 +146,8 @@ def test_a_second_privileged_client_is_refused_not_demoted():
 def test_serving_beyond_loopback_without_a_token_is_refused():
     """A non-loopback address without a token is a ConfigError at start-up; with a token it is allowed."""
     rig = make_rig()
-    runner = Runner(rig.loop)
-    robot = GripperService(rig.ctl, rig.plant)
+    runner = rig.runner
+    robot = ServedStation(rig.station)
     for host in ("0.0.0.0", "", "::", "192.0.2.1"):
         with pytest.raises(ConfigError, match="without a token"):
             Server(runner, robot, host, 0)
@@ -167,7 +167,7 @@ def test_faults_are_pushed_to_subscribers_and_left_for_the_operator():
         assert op.command("C 35 00") == ["35 00"]  # Q slot 0 now names no routine
         for _ in range(200):  # let the queue walk, without taking the fault
             sv.runner.call(lambda: None, take_fault=False)
-        assert sv.ctl.queue.fault is not None
+        assert sv.rig.fault is not None
         faults = [s for s in sub.statuses(0.5) if s.fault]
         assert len(faults) == 1 and faults[0].fault.startswith("gripper: fault")
         assert reader.command("W") == ["0000"]  # a read neither takes nor acknowledges it
@@ -340,11 +340,11 @@ LINES = st.text(alphabet="PpXxIiCcMmEeSsTtWwQqDdLlNn hlpwaitsimfuljo0123456789AB
 def test_read_only_classification_never_changes_the_robot(line):
     """Any line the gripper classifies read-only, run by an unprivileged shell, leaves the RAM, the DAC and the fault state alone."""
     rig = _CLASSIFY_RIG
-    robot = GripperService(rig.ctl, rig.plant)
+    robot = ServedStation(rig.station)
     if not robot.is_read_only(line):
         return
     runner = _CLASSIFY_RUNNER
-    before = bytes(rig.cpu.ram), rig.board.dac, rig.ctl.queue.fault, rig.cpu.sp
+    before = bytes(rig.cpu.ram), rig.board.dac, rig.station.fault, rig.cpu.sp
     shell = robot.make_shell(ObserverRunner(runner), io.StringIO())
     shell.onecmd(line)
     ram = bytes(rig.cpu.ram)
@@ -355,12 +355,12 @@ def test_read_only_classification_never_changes_the_robot(line):
     assert not changed, (line, sorted(changed))
     drive_bits = 0x08 | 0x10  # DRVON, DOJOG
     assert ram[0x2C] & drive_bits == before[0][0x2C] & drive_bits == 0
-    assert rig.board.dac == before[1] and rig.ctl.queue.fault is before[2]
+    assert rig.board.dac == before[1] and rig.station.fault is before[2]
     assert rig.cpu.sp == before[3] and rig.ctl.clock_enabled
 
 
 _CLASSIFY_RIG = make_rig()
-_CLASSIFY_RUNNER = Runner(_CLASSIFY_RIG.loop)
+_CLASSIFY_RUNNER = _CLASSIFY_RIG.runner
 _CLASSIFY_RUNNER.start()
 
 

@@ -11,7 +11,7 @@ from pyrt.client import Client, ServerError
 from pyrt.db import copy_station
 from pyrt.scheduler.runner import Runner
 from pyrt.server import Server
-from pyrt.server.manipulator import ManipulatorService
+from pyrt.server import ServedStation
 from pyrt.station.manipulator import ManipulatorStation
 
 TOKEN = "rope-token"
@@ -21,9 +21,8 @@ TOKEN = "rope-token"
 def served_manipulator(tmp_path):
     station = ManipulatorStation(copy_station("prototype", tmp_path / "prototype"),
                                  tick_ns=5_000_000)
-    runner = Runner(station.loop, motion_queue=station.motion)
-    station.messages.connect(runner.post)
-    robot = ManipulatorService(station)
+    runner = station.runner
+    robot = ServedStation(station)
     server = Server(runner, robot, token=TOKEN)
     runner.start()
     host, port = server.start()
@@ -68,7 +67,7 @@ PRIVILEGED = ["prototype to 0 0 100", "prototype stop", "axis0 up 1", "axis0Moto
 def robot(tmp_path_factory):
     station = ManipulatorStation(copy_station("prototype", tmp_path_factory.mktemp("m") / "p"),
                                  tick_ns=5_000_000)
-    yield ManipulatorService(station)
+    yield ServedStation(station)
     station.close()
 
 

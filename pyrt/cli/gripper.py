@@ -17,10 +17,10 @@ import time
 
 from pyrt.cli._loopopts import add_loop_options, apply_rt_options, make_loop
 from pyrt.cli._serve import add_serve_options, prepare_service
-from pyrt.commands.gripper import GripperShell
+from pyrt.commands import RobotShell
 from pyrt.console import Console
 from pyrt.scheduler.runner import Runner
-from pyrt.server import GripperService
+from pyrt.server import ServedStation
 from pyrt.sim.gripper import FAULTS, JawParameters
 from pyrt.station.gripper import build_gripper
 
@@ -95,11 +95,8 @@ def run(args: argparse.Namespace) -> int:
     station = build_gripper(loop, start=args.start, object_mm=args.object, faults=args.fault)
     runner = station.runner
     posted.append(runner)
-    service = prepare_service(args, runner, GripperService.from_station(station))
-    shell = GripperShell(
-        runner, station.controller, out, plant=station.plant, scope=station.scope,
-        executor=station.executor,
-    )
+    service = prepare_service(args, runner, ServedStation(station))
+    shell = RobotShell(station, out)
     console = Console(shell, sys.stdin, out, messages=runner.messages, history_file=args.history)
     speed = "max (simulated time)" if args.speed is None else f"{args.speed:g}x real time"
     print(
@@ -109,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
     )
     status = 0
     wall0 = time.perf_counter()
-    runner.start()
+    station.start()
     try:
         if service is not None:
             service.start(None if args.headless else lambda m: print(m, file=out, flush=True))

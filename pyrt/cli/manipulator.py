@@ -19,19 +19,18 @@ time.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import sys
 import time
 from pathlib import Path
 
 from pyrt.cli._loopopts import add_loop_options, apply_rt_options, make_loop
 from pyrt.cli._serve import add_serve_options, prepare_service
-from pyrt.commands.manipulator import ManipulatorShell
+from pyrt.commands import RobotShell
 from pyrt.console import Console
 from pyrt.db import STATIONS, copy_station, default_working_directory
 from pyrt.errors import PyrtError
 from pyrt.scheduler.runner import Runner
-from pyrt.server import ManipulatorService
+from pyrt.server import ServedStation
 from pyrt.sim.sensors import Imperfections
 from pyrt.station.manipulator import ManipulatorStation
 
@@ -78,22 +77,21 @@ def run(args: argparse.Namespace) -> int:
     loop = make_loop(args, warn=warn)
     imp = Imperfections.ideal() if args.ideal_sensors else None
     station = ManipulatorStation(directory, loop=loop, imperfections=imp)
-    runner = Runner(loop, motion_queue=station.motion)
+    runner = station.runner
     posted.append(runner)
-    station.messages.connect(runner.post)
     try:
-        service = prepare_service(args, runner, ManipulatorService(station))
+        service = prepare_service(args, runner, ServedStation(station))
     except PyrtError:
         station.close()
         raise
-    shell = ManipulatorShell(runner, station, out)
+    shell = RobotShell(station, out)
     console = Console(shell, sys.stdin, out, messages=runner.messages, history_file=args.history)
     speed = "max (simulated time)" if args.speed is None else f"{args.speed:g}x real time"
     print(f"pyrt manipulator: {station.polyaxis.name}, {len(station.axes)} ropes, database "
           f"{directory}; tick {args.tick_us} µs, speed {speed}; type help", file=out)
     status = 0
     wall0 = time.perf_counter()
-    runner.start()
+    station.start()
     try:
         if service is not None:
             service.start(None if args.headless else lambda m: print(m, file=out, flush=True))
@@ -101,11 +99,7 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if service is not None:
             service.close()
-        with contextlib.suppress(PyrtError):
-            runner.call(station.stop_all)
-        runner.stop()
         station.close()
-        loop.close()
     if args.timing_log:
         wall = time.perf_counter() - wall0
         print(f"timing log written to {args.timing_log} ({loop.tick_index} ticks, {wall:.2f} s)",

@@ -1,9 +1,7 @@
-"""Command interpreters of the robots.
+"""Command interpreters: one :class:`RobotShell` for every station."""
 
-The gripper's CMD: level and monitor, the manipulator's object commands.
-"""
-
-from pyrt.commands.gripper import GripperShell, parse_hex, parse_target
+from pyrt.commands.gripper import parse_hex, parse_target
+from pyrt.commands.robot import RobotShell
 from pyrt.commands.shell import CommandShell
 
-__all__ = ["CommandShell", "GripperShell", "parse_hex", "parse_target"]
+__all__ = ["CommandShell", "RobotShell", "parse_hex", "parse_target"]

@@ -14,7 +14,8 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, TextIO
 
 from pyrt.boards.dataconcentrator import DataConcentrator, DigitalChannel
-from pyrt.devices._args import dispatch, parse_number
+from pyrt.component import Arg, Component, Signal, command
+from pyrt.devices._args import parse_number
 from pyrt.errors import CommandError, ConfigError
 
 if TYPE_CHECKING:
@@ -26,7 +27,7 @@ __all__ = ["ZEROLENGTH_WRITE_PERIOD", "Encoder"]
 ZEROLENGTH_WRITE_PERIOD = 1.0
 
 
-class Encoder:
+class Encoder(Component):
     """One encoder (see the module text).  ``slope``: cm per count."""
 
     def __init__(
@@ -70,26 +71,36 @@ class Encoder:
 
     # -- commands (Table 8) ------------------------------------------------------
 
+    def signals(self) -> list[Signal]:
+        return [Signal("length", "cm", self.length, "total unstretched rope length")]
+
+    @command(name="reset", reply=lambda _r: "reset")
     def reset(self) -> None:
-        """``reset``: clear the counter (the length then reads ZEROLENGTH)."""
+        """reset: clear the counter; the length then reads ZEROLENGTH."""
+        self.check_free("reset")
         self.channel.reset()
 
+    @command(name="read", reads_only=True, reply=lambda v: None)
     def read(self) -> float:
-        """``read``: the length, also written to stdout."""
+        """read: read and display the length (cm)."""
         v = self.length()
         self._say(f"{self.name}: {v:.3f} cm")
         return v
 
+    @command(name="readloop", reads_only=True, reply=lambda _r: "readloop")
     def readloop(self) -> None:
-        """``readloop``: write the length at every poll."""
+        """readloop: enter the read/display loop (the length at every poll)."""
         self.looping = True
 
+    @command(name="stoploop", reads_only=True, reply=lambda _r: "stoploop")
     def stoploop(self) -> None:
-        """``stoploop``: stop the read loop."""
+        """stoploop: quit the read/display loop."""
         self.looping = False
 
+    @command(Arg("LEN", str), name="setZeroLength", reply=lambda v: f"zero length {v:.3f} cm")
     def setZeroLength(self, length: float | str) -> float:
-        """``setZeroLength [len]``: the length when the counter reads zero."""
+        """setZeroLength LEN: set the length (cm) the counter reads at zero."""
+        self.check_free("setZeroLength")
         v = parse_number(length, f"{self.name} setZeroLength", "length in cm")
         if v < 0:
             raise CommandError(f"{self.name} setZeroLength: length must be >= 0 cm, got {v}")
@@ -97,16 +108,6 @@ class Encoder:
         return v
 
     set_zero_length = setZeroLength
-
-    #: Table 8.
-    COMMANDS = {
-        "reset": ("reset", 0), "read": ("read", 0), "readloop": ("readloop", 0),
-        "stoploop": ("stoploop", 0), "setZeroLength": ("setZeroLength", 1),
-    }
-
-    def command(self, name: str, *args: str) -> object:
-        """Run a Table 8 command; CommandError if malformed."""
-        return dispatch(self, self.name, self.COMMANDS, name, args)
 
     # -- polling -----------------------------------------------------------------
 

@@ -16,7 +16,8 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, TextIO
 
 from pyrt.boards.dataconcentrator import AnalogChannel, DataConcentrator
-from pyrt.devices._args import dispatch, parse_number
+from pyrt.component import Arg, Component, Signal, command
+from pyrt.devices._args import parse_number
 from pyrt.errors import CommandError, ConfigError
 from pyrt.units import UnitError, factor, split_quantity
 
@@ -55,7 +56,7 @@ def parse_load(value: float | str, command: str) -> float:
     return n
 
 
-class Loadcell:
+class Loadcell(Component):
     """One loadcell (see the module text)."""
 
     def __init__(
@@ -98,12 +99,19 @@ class Loadcell:
 
     # -- calibration ---------------------------------------------------------------
 
+    def signals(self) -> list[Signal]:
+        return [Signal("tension", "N", self.tension, "rope tension from the ADC")]
+
+    @command(name="calibrate", reply=lambda v: None)
     def calibrate(self) -> tuple[float, float] | None:
-        """Toggle calibration mode; leaving it fits and returns (slope, offset).
+        """calibrate: toggle calibration mode (leaving it fits SLOPE and OFFSET and writes them back).
+
+        Toggle calibration mode; leaving it fits and returns (slope, offset).
 
         Fewer than two points (or points that all share one ADC code) is a
         CommandError, and calibration mode stays on so points can be added.
         """
+        self.check_free("calibrate")
         if not self.calibrating:
             self.calibrating = True
             self.points = []
@@ -134,8 +142,10 @@ class Loadcell:
             self.write_back(slope, offset)
         return slope, offset
 
+    @command(Arg("LOAD", str, rest=True), name="point", reply=lambda v: None)
     def point(self, load: float | str) -> tuple[int, float]:
-        """``point [load]``: record the ADC code with ``load`` hung on the rope."""
+        """point LOAD: a calibration point with LOAD (N, lb or kg) hung on the rope."""
+        self.check_free("point")
         if not self.calibrating:
             raise CommandError(f"{self.name} point: not in calibration mode; "
                                "give 'calibrate' first")
@@ -144,17 +154,6 @@ class Loadcell:
         self.points.append((code, n))
         self._say(f"{self.name}: point {len(self.points)}: ADC {code} = {n:.4g} N")
         return code, n
-
-    #: Section 10: ``calibrate`` toggles calibration mode, ``calibrationPoint``
-    #: (``point`` in Table 4) enters a point.
-    COMMANDS = {
-        "calibrate": ("calibrate", 0), "point": ("point", 1),
-        "calibrationPoint": ("point", 1),
-    }
-
-    def command(self, name: str, *args: str) -> object:
-        """Run a calibration command; CommandError if malformed."""
-        return dispatch(self, self.name, self.COMMANDS, name, args)
 
     def _say(self, text: str) -> None:
         if self.stdout is not None:

@@ -40,7 +40,8 @@ from pyrt.boards.tio10 import (
     TIO10,
     source_hz,
 )
-from pyrt.devices._args import dispatch, parse_number
+from pyrt.component import Arg, Component, Signal, command
+from pyrt.devices._args import parse_number
 from pyrt.errors import CommandError, ConfigError
 
 if TYPE_CHECKING:
@@ -71,7 +72,7 @@ OFF, ON, STANDBY = 0, 1, 2
 _STATE_NAMES = {OFF: "off", ON: "on", STANDBY: "standby"}
 
 
-class Motor:
+class Motor(Component):
     """One stepping motor (see the module text).
 
     ``name`` is the name used in commands (``axis0Motor``); ``channel`` the
@@ -283,8 +284,23 @@ class Motor:
         self.desired_velocity = 0.0
         self.desired_steps = self.steps_taken
 
+    def signals(self) -> list[Signal]:
+        return [
+            Signal.attr("velocity", "cm/s", self, "velocity", "commanded velocity (velocity mode)"),
+            Signal.attr("desiredVelocity", "cm/s", self, "desired_velocity",
+                        "velocity the controller asks for"),
+            Signal("speed", "cm/s", self.speed, "present signed speed (0 when not stepping)"),
+            Signal("running", "bool", lambda: self.running, "the channel is stepping", "d"),
+        ]
+
+    def reflex(self) -> None:
+        """Channel stopped, windings off."""
+        self.stop()
+
+    @command(Arg("SPEED", str), name="maxspeed", reply=lambda v: f"maximum speed {v:g} cm/s")
     def maxspeed(self, speed: float | str) -> float:
-        """Command ``maxspeed [speed]``: set the cruise speed (cm/s)."""
+        """maxspeed SPEED: set the maximum (cruise) speed in cm/s."""
+        self.check_free("maxspeed")
         v = parse_number(speed, f"{self.name} maxspeed", "speed in cm/s")
         _check_speeds(self.name, self.start_speed, v, CommandError, what="maxspeed")
         self.cruise_speed = v
@@ -326,13 +342,6 @@ class Motor:
         self.state = ON
         self.velocity = v_new
         self._drive(1 if v_new > 0 else -1, self.period_for(v_new))
-
-    #: 000, section 8: the only keyboard command of a Motor.
-    COMMANDS = {"maxspeed": ("maxspeed", 1)}
-
-    def command(self, name: str, *args: str) -> object:
-        """Run a keyboard command (``maxspeed [speed]``); CommandError if malformed."""
-        return dispatch(self, self.name, self.COMMANDS, name, args)
 
     def describe(self) -> str:
         return (f"{self.name}: {self.mode} {self.state_name} channel {self.channel} "

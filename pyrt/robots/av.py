@@ -22,6 +22,7 @@ import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
+from pyrt.component import Component, command
 from pyrt.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -55,7 +56,7 @@ def _rotation(angles_deg: Vec) -> tuple[Vec, Vec, Vec]:
     )
 
 
-class AV:
+class AV(Component):
     """The acrylic vessel (see the module text); lengths in cm."""
 
     def __init__(
@@ -89,6 +90,14 @@ class AV:
         return cls(record.name, record.neck_ring_static_position, record.neck_ring_radius,
                    record.neck_radius, record.neck_length, record.vessel_radius,
                    position=record.position, orientation=record.orientation)
+
+    @command(name="show", reads_only=True)
+    def show(self) -> str:
+        """show: the vessel's geometry and pose (the AV takes no other command)."""
+        return (f"{self.name}: vessel radius {self.vessel_radius:g} cm, neck ring at "
+                f"{tuple(round(c, 2) for c in self.neck_ring_position)} radius "
+                f"{self.neck_ring_radius:g} cm, neck radius {self.neck_radius:g} cm, length "
+                f"{self.neck_length:g} cm; pose {self.position} {self.orientation}")
 
     # -- pose ------------------------------------------------------------------------
 

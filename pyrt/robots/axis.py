@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, TextIO
 
 from pyrt.boards.dataconcentrator import DataConcentrator
 from pyrt.boards.tio10 import TIO10
+from pyrt.component import Arg, Component, Signal, command
 from pyrt.devices._args import parse_number
 from pyrt.devices.encoder import Encoder
 from pyrt.devices.loadcell import Loadcell
@@ -41,7 +42,6 @@ if TYPE_CHECKING:
     from pyrt.db import AxisRecord, Station
 
 __all__ = [
-    "COMMANDS",
     "END_ZONE",
     "HISTORY",
     "LENGTH_WRITE_MOVING",
@@ -72,13 +72,6 @@ TRACKING_MIN_FRACTION = 0.5
 STANDALONE = "standalone"
 POLYAXIS = "polyaxis"
 
-#: Table 4: command -> number of arguments.
-COMMANDS: dict[str, int] = {
-    "up": 1, "down": 1, "to": 1, "calibrate": 0, "point": 1, "maxspeed": 1, "zero": 0,
-    "stop": 0,
-}
-
-
 class TrackingError(PyrtError):
     """The encoder does not follow the motor: a stalled motor or a slipping encoder.
 
@@ -99,7 +92,11 @@ class AxisSample:
     velocity: float
 
 
-class Axis:
+def _moving(length: float) -> str:
+    return f"moving to length {length:.3f} cm"
+
+
+class Axis(Component):
     """One rope (see the module text).
 
     ``top`` and ``offset`` are global / carriage co-ordinates; ``bottom`` is in
@@ -132,6 +129,10 @@ class Axis:
         self.motor = motor
         self.encoder = encoder
         self.loadcell = loadcell
+        #: The PolyAxis this axis belongs to (it sets this), for ``stop``.
+        self.group: object | None = None
+        for device in (motor, encoder, loadcell):
+            device.owner_busy = self._device_busy  # type: ignore[attr-defined]
         self.dead_length = float(dead_length)
         self.stretch = float(stretch)
         self.av = av
@@ -232,18 +233,32 @@ class Axis:
     def moving(self) -> bool:
         return self.motor.running
 
-    # -- Table 4 commands ------------------------------------------------------------------
+    # -- the component contract ----------------------------------------------------------
 
-    def command(self, name: str, *args: str) -> object:
-        """Run Table 4 command ``name`` with its arguments (CommandError if malformed)."""
-        key = name.lower()
-        if key not in COMMANDS:
-            raise CommandError(f"{self.name}: unknown command {name!r}; "
-                               f"expected one of {', '.join(COMMANDS)}")
-        if len(args) != COMMANDS[key]:
-            raise CommandError(f"{self.name} {key}: takes {COMMANDS[key]} argument(s), "
-                               f"got {len(args)}")
-        return getattr(self, key)(*args)
+    def children(self) -> list[Component]:
+        return [self.motor, self.encoder, self.loadcell]
+
+    def signals(self) -> list[Signal]:
+        return [
+            Signal("tension", "N", self.tension, "rope tension (loadcell)"),
+            Signal("length", "cm", self.getLength, "rope length, stretch corrected"),
+            Signal.attr("errorLength", "cm", self, "error_length", "fuzzy input: length error"),
+            Signal.attr("errorTension", "N", self, "error_tension",
+                        "fuzzy input: tension error"),
+            Signal.attr("velocity", "cm/s", self.motor, "velocity", "motor velocity"),
+        ]
+
+    def reflex(self) -> None:
+        """The axis's motor stops with its own reflex; the axis forgets its target."""
+        self.target = None
+
+    def _device_busy(self) -> str | None:
+        if self.mode == POLYAXIS:
+            return (f"{self.name} is under PolyAxis control (000: polyActivate turns off its "
+                    "commands); stop the move first")
+        return None
+
+    # -- Table 4 commands ------------------------------------------------------------------
 
     def _standalone(self, command: str) -> None:
         if self.mode != STANDALONE:
@@ -257,20 +272,23 @@ class Axis:
                                f"use {'down' if command == 'up' else 'up'} for the other way")
         return d
 
+    @command(Arg("DIST", str), name="up", moves=True, reply=_moving)
     def up(self, dist: float | str) -> float:
-        """``up [dist]``: shorten the rope by ``dist`` cm (the source goes up)."""
+        """up DIST: move up DIST cm (shorten the rope; the source goes up)."""
         d = self._distance(dist, "up")
         self._standalone("up")
         return self._go(self.getLength() - d, "up")
 
+    @command(Arg("DIST", str), name="down", moves=True, reply=_moving)
     def down(self, dist: float | str) -> float:
-        """``down [dist]``: lengthen the rope by ``dist`` cm."""
+        """down DIST: move down DIST cm (lengthen the rope)."""
         d = self._distance(dist, "down")
         self._standalone("down")
         return self._go(self.getLength() + d, "down")
 
+    @command(Arg("LEN", str), name="to", moves=True, reply=_moving)
     def to(self, length: float | str) -> float:
-        """``to [len]``: change the rope length to ``len`` cm."""
+        """to LEN: change the rope length to LEN cm."""
         v = parse_number(length, f"{self.name} to", "length in cm")
         if v <= 0:
             raise CommandError(f"{self.name} to: length must be > 0 cm, got {v}")
@@ -294,31 +312,48 @@ class Axis:
             m.move(steps)
         return target
 
+    @command(name="calibrate", reply=lambda v: None)
     def calibrate(self) -> tuple[float, float] | None:
-        """``calibrate``: toggle loadcell calibration mode (leaving it fits)."""
+        """calibrate: toggle loadcell calibration mode (leaving it fits)."""
         self._standalone("calibrate")
         return self.loadcell.calibrate()
 
+    @command(Arg("LOAD", str, rest=True), name="point", reply=lambda v: None)
     def point(self, load: float | str) -> tuple[int, float]:
-        """``point [load]``: a loadcell calibration point with ``load`` hung."""
+        """point LOAD: enter a loadcell calibration point (LOAD in N, lb or kg)."""
         self._standalone("point")
         return self.loadcell.point(load)
 
+    @command(Arg("SPEED", str), name="maxspeed", reply=lambda v: f"maximum speed {v:g} cm/s")
     def maxspeed(self, speed: float | str) -> float:
-        """``maxspeed [speed]``: the motor's maximum speed (cm/s)."""
+        """maxspeed SPEED: set the maximum motor speed in cm/s."""
         self._standalone("maxspeed")
         return self.motor.maxspeed(speed)
 
+    @command(name="zero", reply=lambda _v: "encoder counter reset")
     def zero(self) -> None:
-        """``zero``: reset the encoder counter."""
+        """zero: reset the encoder counter."""
         self._standalone("zero")
         self.encoder.reset()
         self._track_reset()
 
     def stop(self) -> None:
-        """``stop``: stop the motor (windings off); accepted in any mode."""
+        """Stop the motor (windings off); accepted in any mode."""
         self.motor.stop()
         self.target = None
+
+    @command(name="stop", anyone=True)
+    def cmd_stop(self) -> str:
+        """stop: stop the motor; during a PolyAxis move, the whole move stops with it."""
+        group = self.group
+        if group is not None and getattr(group, "active", False):
+            # one joint stopped stops the whole manipulator
+            from pyrt.robots.stops import StopReason
+
+            group.halt(StopReason.STOP, f"{self.name} stop command")  # type: ignore[attr-defined]
+            return f"stopped; the {group.name} move is stopped with it"  # type: ignore[attr-defined]
+        self.stop()
+        return "stopped"
 
     # -- PolyAxis hooks ---------------------------------------------------------------
 

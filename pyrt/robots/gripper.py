@@ -70,10 +70,13 @@ from pyrt.boards.i8031 import (
     Q,
     T,
 )
-from pyrt.errors import CommandError, Fault
+from pyrt.component import Component, Signal
+from pyrt.errors import CommandError
 from pyrt.native import excess128
+from pyrt.robots.gripper_commands import CommandLetters, GripperMonitor, parse_hex
 from pyrt.scheduler import ByteImage, ByteRef, Job, Loop, ReadyQueue
 from pyrt.scheduler.motion import MotionRecord, MotionType, register_motion_type
+from pyrt.scope import Source
 
 __all__ = [
     "ADDR_MVJAWS",
@@ -135,8 +138,13 @@ class JobResult:
     value: int | None = None
 
 
-class GripperController:
+class GripperController(Component, CommandLetters):
     """The 002 controller program over an :class:`~pyrt.boards.i8031.I8031`.
+
+    A :class:`~pyrt.component.Component`: its signals are the RAM variables
+    of Appendix A by name, its commands the ``CMD:`` letters, its child the
+    monitor, its reflex nulls the drive current and clears the drive and jog
+    bits.
 
     ``cpu`` must have the gripper board mapped in its external data space
     (:class:`~pyrt.boards.gripper.SimGripperBoard` or a real one).  Call
@@ -145,8 +153,10 @@ class GripperController:
     """
 
     def __init__(self, cpu: I8031, name: str = "gripper", stall_limit_ns: int = 1_000_000_000):
+        self.name = name
         self.cpu = cpu
         self.ram = cpu.ram
+        self.monitor = GripperMonitor(self)
         # the RAM's even-addressed words, for the encoder interrupt handlers
         self._w16: Any = (
             memoryview(self.ram).cast("H") if sys.byteorder == "little" else _Words(self.ram)
@@ -165,7 +175,6 @@ class GripperController:
         self.queue.add_periodic(
             ADDR_WATCHJAW, "WATCHJAW", self.watchjaw, ByteRef(ram, WTCHJWSPD)
         )
-        self.queue.reflex = self.reflex
         #: Encoder interrupts seen (a one-element list: the handlers' counter).
         self._pulse_cell = [0]
         self._isr_up = self._make_isr(+1)
@@ -205,9 +214,9 @@ class GripperController:
         self._zero_counts()
         ram[STOPCNT] = 0
         q = self.queue
-        q.fault = None
         q.interrupts_enabled = True
         q.clear()
+        q.resume(restart=False)
         q.schedule(ADDR_MVJAWS, ram[MVJAWSPD])
         q.schedule(ADDR_SENSORS, ram[SENSORPD])
         q.schedule(ADDR_WATCHJAW, ram[WTCHJWSPD])
@@ -368,12 +377,14 @@ class GripperController:
 
     # -- safety ----------------------------------------------------------------------
 
-    def reflex(self, fault: Fault) -> None:
-        """The reflex action of a fault: null the current, clear drive and jog,
-        abandon the foreground job.  Runs in the tick that found the fault."""
+    def reflex(self) -> None:
+        """The reflex action: null the current, clear drive and jog, abandon
+        the foreground job.  Runs in the tick that found the fault (or the stop)."""
         self.drive(DAC_NULL)
-        self.ram[FLAGS] &= ~(_MASK_DRVON | _MASK_DOJOG) & 0xFF
-        self.last_stop = f"fault: {fault.cause}"
+        ram = self.ram
+        if ram[FLAGS] & (_MASK_DRVON | _MASK_DOJOG):
+            self.last_stop = "stopped by the reflex (move abandoned)"
+        ram[FLAGS] &= ~(_MASK_DRVON | _MASK_DOJOG) & 0xFF
         if self.job is not None:
             self.job.cancel()
             self.job = None
@@ -388,16 +399,11 @@ class GripperController:
             return
         if now_ns - self._wd_since > self.stall_limit_ns:
             self._wd_since = now_ns
-            q = self.queue
-            q.now_ns = now_ns
-            if q.fault is None:
-                q.trip(
-                    f"drive current {self._dac - 0x80:+d} applied for "
-                    f"{self.stall_limit_ns / 1e9:g} s without jaw movement",
-                    source="stall watchdog",
-                )
-            else:
-                self.reflex(q.fault)
+            self.fail(
+                f"drive current {self._dac - 0x80:+d} applied for "
+                f"{self.stall_limit_ns / 1e9:g} s without jaw movement",
+                source="stall watchdog",
+            )
 
     # -- main-program sequences (foreground jobs) ------------------------------------
 
@@ -414,8 +420,6 @@ class GripperController:
             raise CommandError("controller is not attached to a loop")
         if self.job is not None and not self.job.done:
             raise CommandError(f"busy: {self.job.name} in progress")
-        if self.queue.fault is not None:
-            raise CommandError(f"robot stopped by a fault: {self.queue.fault.cause}")
         if not self.queue.interrupts_enabled:
             raise CommandError(
                 f"{name} needs the clock interrupt, which is off (monitor I): M, I turns it on"
@@ -429,7 +433,7 @@ class GripperController:
         except Exception as exc:
             # a job that fails (a full ready queue, say) is a fault of the robot
             self.job = None
-            self.queue.trip(f"{type(exc).__name__}: {exc}", source="main program")
+            self.fail(f"{type(exc).__name__}: {exc}", source="main program")
             return JobResult(False, f"{type(exc).__name__}: {exc}")
         finally:
             self.drive(DAC_NULL)  # a sequence never leaves current behind it
@@ -550,13 +554,10 @@ class GripperController:
         self.last_stop = ""
 
     def check_can_move(self) -> None:
-        """Raise CommandError unless a move may start now (no job, no fault)."""
+        """Raise CommandError unless a move may start now (no foreground job;
+        the station refuses every move while the robot is faulted)."""
         if self.busy:
             raise CommandError(f"busy: {self.job.name} in progress")  # type: ignore[union-attr]
-        if self.queue.fault is not None:
-            raise CommandError(
-                f"robot stopped by a fault ({self.queue.fault.cause}): type ack to acknowledge"
-            )
 
     def set_speed(self, speed: int) -> None:
         """``X``: the maximum jaw speed (01..7F), as JSPEED, MXPJSPD, MXNJSPD."""
@@ -632,9 +633,46 @@ class GripperController:
         """Monitor ``S``: SP."""
         return self.cpu.sp
 
-    def acknowledge(self) -> None:
-        """Clear a fault: the routines are restarted, nothing moves."""
-        self.queue.acknowledge(restart=True)
+    # -- the component contract ------------------------------------------------------
+
+    def children(self) -> list[Component]:
+        return [self.monitor]
+
+    def signals(self) -> list[Signal]:
+        """The RAM variables by their Appendix A names (words signed where
+        002 treats them so) and the DAC."""
+        ram = self.ram
+        return [
+            Signal("encoder", "counts", lambda: self._sword(ENCODER_CNT), "ENCODER_CNT (4A)",
+                   "d", Source.word(ram, ENCODER_CNT, signed=True)),
+            Signal("target", "counts", lambda: self._sword(COMMAND_CNT), "COMMAND_CNT (4C)",
+                   "d", Source.word(ram, COMMAND_CNT, signed=True)),
+            Signal("error", "counts+128", lambda: self.word(ERROR_CNT),
+                   "ERROR_CNT (46), excess-128", "04X", Source.word(ram, ERROR_CNT)),
+            Signal("rate", "counts/check", lambda: self._sword(RATE), "RATE (48)", "d",
+                   Source.word(ram, RATE, signed=True)),
+            Signal("old_enc", "counts", lambda: self._sword(OLD_ENC), "OLD_ENC (4E)", "d",
+                   Source.word(ram, OLD_ENC, signed=True)),
+            Signal("flags", "byte", lambda: ram[FLAGS], "FLAGS (2C)", "02X",
+                   Source.item(ram, FLAGS)),
+            Signal("sensors", "word", lambda: self.word(PROX), "sensor word (2E:2D)", "04X",
+                   Source.word(ram, PROX)),
+            Signal("stopcnt", "bumps", lambda: ram[STOPCNT], "STOPCNT (50)", "d",
+                   Source.item(ram, STOPCNT)),
+            Signal("dac", "byte", lambda: self._dac, "drive current, excess-128", "02X",
+                   Source.call(lambda: self._dac)),
+            Signal("moving", "bool", lambda: self.moving, "drive or jog bit set", "d"),
+            Signal("busy", "bool", lambda: self.busy, "init or calibration running", "d"),
+        ]
+
+    def signal(self, name: str) -> Signal | None:
+        """A signal by name, or any RAM byte as ``ram:XX``."""
+        key = name.lower()
+        if key.startswith("ram:"):
+            addr = parse_hex(key[4:], "RAM address", 0x7F)
+            return Signal(f"ram:{addr:02X}", "byte", lambda: self.ram[addr],
+                          f"RAM byte {addr:02X}", "02X", Source.item(self.ram, addr))
+        return super().signal(name)
 
 
 class _Words:  # pragma: no cover - big-endian hosts only

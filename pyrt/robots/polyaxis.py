@@ -59,6 +59,7 @@ from typing import TextIO
 
 import numpy as np
 
+from pyrt.component import Arg, Component, Signal, command, finite
 from pyrt.devices._args import parse_number
 from pyrt.devices.motor import STEP_MODE
 from pyrt.errors import CommandError, ConfigError, NativeError
@@ -75,11 +76,11 @@ from pyrt.robots.av import AV
 from pyrt.robots.axis import POLYAXIS, Axis
 from pyrt.robots.paths import VIA_BELOW, Hare, HarePath, hare_path_record, plan_segments
 from pyrt.robots.stops import SAFETY_STOPS, StopCheck, StopReason, StopRecord
+from pyrt.scheduler import Job
 from pyrt.scheduler.motion import MotionExecutor, MotionRecord, MotionType, get_motion_type
 from pyrt.scheduler.runner import MotionQueue
 
 __all__ = [
-    "COMMANDS",
     "GRAVITY",
     "MIN_TOP_SEGMENT",
     "NEAR_END_CM",
@@ -96,11 +97,8 @@ MIN_TOP_SEGMENT = 5.0
 #: 000, section 5: the pattern pauses "about 10 seconds" at each endpoint.
 PATTERN_PAUSE_S = 10.0
 
-#: Table 2: command -> allowed argument counts.
-COMMANDS: dict[str, tuple[int, ...]] = {
-    "to": (3, 4), "tensionfind": (0,), "tensions": (0,), "netforce": (0, 3),
-    "pattern": (1,), "stop": (0,), "tensionstop": (0,), "errorsignalall": (0,),
-}
+#: Longest pattern file read (bytes); a pattern is a few hundred endpoints.
+MAX_PATTERN_BYTES = 1 << 20
 
 Vec = tuple[float, float, float]
 _FI = FuzzyInput
@@ -110,11 +108,33 @@ def _dist(a: Sequence[float], b: Sequence[float]) -> float:
     return math.sqrt((a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2 + (a[2] - b[2]) ** 2)
 
 
+def _cm(axis: str) -> Callable[[str], float]:
+    return finite(f"{axis} in cm")
+
+
+def read_pattern(text: str) -> tuple[Path, list[Vec], str]:
+    """The grammar of ``pattern FILE``: the file read and checked on the
+    console's side (never in the loop thread); its log file made writable."""
+    log, points = parse_pattern(text)
+    try:
+        log.parent.mkdir(parents=True, exist_ok=True)
+        log.open("a", encoding="utf-8").close()
+    except OSError as exc:
+        raise CommandError(f"pattern: cannot write the log {str(log)!r}: "
+                           f"{exc.strerror}") from None
+    return log, points, text
+
+
 def parse_pattern(path: str | Path) -> tuple[Path, list[Vec]]:
     """A pattern file: first line the log file (relative to the pattern file),
     then one endpoint ``x y z`` per line (blank lines and ``//`` comments skipped)."""
     p = Path(path)
     try:
+        if not p.is_file():
+            raise CommandError(f"pattern: {str(p)!r} is not a regular file")
+        if p.stat().st_size > MAX_PATTERN_BYTES:
+            raise CommandError(f"pattern: {str(p)!r} is larger than "
+                               f"{MAX_PATTERN_BYTES // 1024} KiB")
         text = p.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise CommandError(f"pattern: cannot read {str(p)!r}: {exc}") from None
@@ -142,7 +162,7 @@ def parse_pattern(path: str | Path) -> tuple[Path, list[Vec]]:
     return log, points
 
 
-class PolyAxis:
+class PolyAxis(Component):
     """The co-ordinated manipulator (see the module text).
 
     ``axes`` are the :class:`Axis` objects in database order (the central rope
@@ -295,6 +315,13 @@ class PolyAxis:
         #: The motion queue of MotionRecords (set by the station), emptied by
         #: the executor between moves and cleared by any abnormal stop.
         self.motion: MotionQueue | None = None
+        #: The station's ``loop.spawn`` (patterns run as foreground jobs).
+        self.spawn: Callable[[str, Generator], Job] | None = None
+        #: The running (or last) pattern job and its log file.
+        self.pattern_job: Job | None = None
+        self.pattern_log: Path | None = None
+        for a in axes:
+            a.group = self
         #: Starts queued motion records one at a time and steps the running one.
         self.executor = MotionExecutor(self, self._take_motion, self._motion_done,
                                        self._motion_failed)
@@ -425,78 +452,126 @@ class PolyAxis:
                         f"NECK_RADIUS {self.av.neck_radius:g} cm)")
         return "outside the vessel"
 
-    # -- commands (Table 2) ----------------------------------------------------------
+    # -- the component contract ------------------------------------------------------------
 
-    def command(self, name: str, *args: str) -> object:
-        """Run Table 2 command ``name``; CommandError if malformed or refused."""
-        key = name.lower()
-        if key not in COMMANDS:
-            raise CommandError(f"{self.name}: unknown command {name!r}; expected one of "
-                               "to, tensionFind, tensions, netForce, pattern, stop, "
-                               "tensionStop, errorSignalAll")
-        if len(args) not in COMMANDS[key]:
-            counts = " or ".join(str(c) for c in COMMANDS[key])
-            raise CommandError(f"{self.name} {name}: takes {counts} argument(s), got {len(args)}")
-        return getattr(self, "cmd_" + key)(*args)
+    def children(self) -> list[Component]:
+        return [*self.axes, self.av]
+
+    def signals(self) -> list[Signal]:
+        pos = self.position
+        return [
+            Signal("x", "cm", lambda: self.position[0], "source position x (estimate)"),
+            Signal("y", "cm", lambda: self.position[1], "source position y (estimate)"),
+            Signal("z", "cm", lambda: self.position[2], "source position z (estimate)"),
+            Signal.attr("distErr", "cm", self, "dist_err",
+                        "rope-length residual of the position estimate"),
+            Signal.attr("netForce", "N", self, "net_force_magnitude",
+                        "residual net force on the source"),
+            Signal.attr("active", "bool", self, "active", "a move is running", "d"),
+        ] if pos is not None else []
+
+    def reflex(self) -> None:
+        """The manipulator's reflex: the move ended (a FAULT stop), every motor stopped."""
+        if self.active:
+            self.halt(StopReason.FAULT, "stopped by the reflex action")
+        else:
+            self.stop_motors()
+        self.executor.abort("stopped by the reflex action")
+        self.pattern_job_cancel()
+
+    # -- commands (Table 2) ----------------------------------------------------------
 
     def parse_point(self, args: Sequence[str], what: str) -> Vec:
         """Three words as a point (cm); CommandError naming the bad one."""
         return tuple(parse_number(a, f"{self.name} {what}", f"{c} in cm")  # type: ignore[return-value]
                      for a, c in zip(args, "xyz", strict=True))
 
-    def cmd_to(self, x: str, y: str, z: str, mode: str = "") -> str:
-        """``to x y z [blend]``: move there (refused with the reason, nothing moved)."""
-        m = mode.lower()
-        if m not in ("", "blend", "stop"):
-            raise CommandError(f"{self.name} to: the fourth word may be 'blend' or 'stop', "
-                               f"got {mode!r}")
-        target = self.parse_point((x, y, z), "to")
-        self.to(target, blend=(m == "blend"))
-        assert self.hare is not None
-        n = len(self.hare.segments)
-        how = " blended" if self.hare.blend else ""
-        total = sum(s.length for s in self.hare.segments)
-        return (f"{self.name}: to ({target[0]:g}, {target[1]:g}, {target[2]:g}): "
-                f"{n}{how} segment{'s' if n > 1 else ''}, {total:.1f} cm")
+    @command(Arg("x", _cm("x")), Arg("y", _cm("y")), Arg("z", _cm("z")),
+             Arg("blend", str.lower, optional=True, choices=("blend", "stop")),
+             name="to", moves=True)
+    def cmd_to(self, x: float, y: float, z: float, mode: str = "") -> str:
+        """to x y z [blend]: move the source to (x, y, z) cm; 'blend' joins the neck turn smoothly instead of stopping."""
+        job = self.pattern_job
+        if job is not None and not job.done:
+            raise CommandError(f"{self.name} to: a pattern is running ('{self.name} stop' ends "
+                               "it); nothing moved")
+        target = (x, y, z)
+        self.check_target(target)
+        waiting = self.active or (self.motion is not None and len(self.motion) > 0)
+        record = hare_path_record(target, blend=mode == "blend")
+        if self.motion is None:
+            self.begin(record)
+            return f"{self.name}: to ({x:g}, {y:g}, {z:g})"
+        self.motion.put(record)
+        if waiting:
+            return f"{self.name}: to ({x:g}, {y:g}, {z:g}) queued ({len(self.motion)} waiting)"
+        return f"{self.name}: to ({x:g}, {y:g}, {z:g})"
 
+    @command(name="tensionFind", reads_only=True)
     def cmd_tensionfind(self) -> str:
-        """``tensionFind``: the position that balances the measured tensions."""
+        """tensionFind: find and display the position from the tensions."""
         x = self.tension_find()
         return f"{self.name}: position from tensions ({x[0]:.2f}, {x[1]:.2f}, {x[2]:.2f})"
 
+    @command(name="tensions", reads_only=True)
     def cmd_tensions(self) -> str:
-        """``tensions``: desired tensions at the current position."""
+        """tensions: find and display the desired tensions."""
         t, resid = self.equilibrium_tensions(self.position)
         parts = " ".join(f"{a.name} {v:.2f} N" for a, v in zip(self.axes, t, strict=True))
         return f"{self.name}: desired tensions {parts} (unbalanced {resid:.2f} N)"
 
-    def cmd_netforce(self, *args: str) -> str:
-        """``netForce [x y z]``: net force magnitude there (default: here)."""
-        x = self.parse_point(args, "netForce") if args else self.position
+    @command(Arg("x", _cm("x"), optional=True), Arg("y", _cm("y"), optional=True),
+             Arg("z", _cm("z"), optional=True), name="netForce", reads_only=True)
+    def cmd_netforce(self, *args: float) -> str:
+        """netForce [x y z]: net force magnitude at (x, y, z) or at the current position."""
+        if len(args) not in (0, 3):
+            raise CommandError(f"{self.name} netForce: takes 0 or 3 arguments, got {len(args)}")
+        x = tuple(args) if args else self.position
         f = self.net_force_at(x, self.tensions)
         mag = math.sqrt(f[0] ** 2 + f[1] ** 2 + f[2] ** 2)
         return (f"{self.name}: net force {mag:.2f} N ({f[0]:.2f}, {f[1]:.2f}, {f[2]:.2f}) at "
                 f"({x[0]:.2f}, {x[1]:.2f}, {x[2]:.2f})")
 
-    def cmd_pattern(self, path: str) -> str:
-        """``pattern FILE``: parsed here; the station runs it as a job."""
-        raise CommandError(f"{self.name} pattern: run patterns from the console "
-                           f"(pattern {path})")
+    @command(Arg("FILE", read_pattern, rest=True), name="pattern", moves=True)
+    def cmd_pattern(self, pattern: tuple[Path, list[Vec], str]) -> str:
+        """pattern FILE: run through a pattern of endpoints (first line: the log file)."""
+        log, points, shown = pattern
+        job = self.pattern_job
+        if job is not None and not job.done:
+            raise CommandError(f"{self.name} pattern: a pattern is already running")
+        if self.active or (self.motion is not None and len(self.motion) > 0):
+            raise CommandError(f"{self.name} pattern: a move is running; wait for it or "
+                               "stop it first")
+        if self.spawn is None:
+            raise CommandError(f"{self.name} pattern: no loop to run it on")
+        self.pattern_log = log
+        self.pattern_job = self.spawn("pattern", self.pattern(points, log, lambda: self.now_s))
+        return f"{self.name}: pattern {shown} started; log {log}"
 
+    def pattern_job_cancel(self) -> None:
+        """End a running pattern (a stop or a fault does)."""
+        job = self.pattern_job
+        if job is not None and not job.done:
+            job.cancel()
+
+    @command(name="stop", anyone=True)
     def cmd_stop(self) -> str:
-        """``stop``: stop all motors."""
+        """stop: stop all motors."""
         self.stop()
+        self.pattern_job_cancel()
         return f"{self.name}: stopped"
 
+    @command(name="tensionStop")
     def cmd_tensionstop(self) -> str:
-        """``tensionStop``: toggle the tension stop conditions."""
+        """tensionStop: toggle stop-on-tension."""
         self.tension_stop = not self.tension_stop
         if self.stops is not None:
             self.stops.tension_stops = self.tension_stop
         return f"{self.name}: tension stops {'on' if self.tension_stop else 'OFF'}"
 
+    @command(name="errorSignalAll")
     def cmd_errorsignalall(self) -> str:
-        """``errorSignalAll``: toggle driving every rope toward its equilibrium tension."""
+        """errorSignalAll: toggle driving every rope toward its equilibrium tension."""
         self.signal_all = not self.signal_all
         return (f"{self.name}: error signals "
                 f"{'on every rope (errorSignalAll)' if self.signal_all else 'off-side only'}")
@@ -689,17 +764,6 @@ class PolyAxis:
         if reason in SAFETY_STOPS and self.on_fault is not None:
             self.on_fault(f"{reason.value}: {detail}", self.name)
         return rec
-
-    def reflex(self, fault) -> None:
-        """The manipulator's reflex action: every motor stopped, the move ended,
-        queued moves dropped."""
-        if self.active:
-            self.halt(StopReason.FAULT, str(getattr(fault, "cause", fault)))
-        else:
-            self.stop_motors()
-        self.executor.abort(f"fault: {getattr(fault, 'cause', fault)}")
-        if self.motion is not None:
-            self.motion.clear()
 
     @property
     def moving(self) -> bool:

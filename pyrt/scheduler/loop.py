@@ -122,6 +122,9 @@ class Loop:
         self._faults: deque[Fault] = deque()
         #: Called (in the loop thread) with each fault as it is recorded.
         self.fault_listeners: list[Callable[[Fault], None]] = []
+        #: ``trip(cause, source)`` of each station on this loop (see :meth:`fault_all`).
+        self.trip_handlers: list[Callable[[str, str], Any]] = []
+        self._bare_queues: list[ReadyQueue] = []
         self._fault_lock = threading.Lock()
         self._stop = threading.Event()
         self._stopping = False
@@ -152,8 +155,10 @@ class Loop:
         if self.running:
             raise PyrtError("attach handlers before the loop runs")
         if isinstance(handler, ReadyQueue):
-            handler.fault_sink = self._report_fault
-            handler.tick_source = lambda: self.tick_index
+            if handler.on_error is None:  # a queue no station owns: its faults are the loop's
+                self._bare_queues.append(handler)
+                handler.on_error = lambda cause, source, tb, q=handler: self.report_fault(
+                    self.make_fault(q.name, cause, source, tb))
             handler.timer = self.clock.timer
             handler.enable_timing(self.timing, track_ticks=not self.clock.virtual)
             self.queues.append(handler)
@@ -187,7 +192,14 @@ class Loop:
 
     # -- faults --------------------------------------------------------------
 
-    def _report_fault(self, fault: Fault) -> None:
+    def make_fault(self, robot: str, cause: str, source: str = "", tb: str = "") -> Fault:
+        """A fault record stamped with this tick and loop time."""
+        return Fault(robot=robot, cause=cause, source=source, tick=self.tick_index,
+                     time_ns=self.now_ns, traceback=tb)
+
+    def report_fault(self, fault: Fault) -> None:
+        """Queue ``fault`` for the application: the next mailbox call raises it
+        (each fault once), and the listeners hear of it now (loop thread)."""
         with self._fault_lock:
             self._faults.append(fault)
         for listener in self.fault_listeners:
@@ -209,10 +221,14 @@ class Loop:
             raise FaultError(fault)
 
     def fault_all(self, cause: str, source: str = "loop") -> None:
-        """Trip every attached robot (their reflex actions run now)."""
-        for q in self.queues:
-            q.now_ns = self.now_ns
-            q.trip(cause, source=source)
+        """Trip every robot on this loop (their reflex actions run now): the
+        owners in :attr:`trip_handlers`, and any ready queue no station owns."""
+        for trip in list(self.trip_handlers):
+            trip(cause, source)
+        for q in self._bare_queues:
+            if not q.halted:
+                q.halt()
+                self.report_fault(self.make_fault(q.name, cause, source))
 
     # -- running -------------------------------------------------------------
 

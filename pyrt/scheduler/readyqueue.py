@@ -33,7 +33,7 @@ from time import perf_counter_ns
 
 import numpy as np
 
-from pyrt.errors import Fault, QueueFullError
+from pyrt.errors import QueueFullError
 from pyrt.native import QueueChecker
 from pyrt.scheduler.stats import NBINS, Accumulator
 
@@ -147,19 +147,18 @@ class ReadyQueue:
         self._fold_lock = threading.Lock()
         self.enable_timing(False)
         self._interrupts = True
-        self._fault: Fault | None = None
-        # True while the clock handler does anything: interrupts on, no fault.
+        self._halted = False
+        # True while the clock handler does anything: interrupts on, not halted.
         self._active = True
-        #: Called with the fault, in the same tick, before it is reported.
-        self.reflex: Callable[[Fault], None] | None = None
-        #: Where faults are reported (the loop sets this when the queue is attached).
-        self.fault_sink: Callable[[Fault], None] | None = None
+        #: Called as ``on_error(cause, source, traceback)`` in the tick a routine
+        #: raised (or overfilled the queue); the queue is halted first.  The
+        #: station that owns the queue sets it (its fault state and reflex live
+        #: there, not here); the loop sets a default for a queue on its own.
+        self.on_error: Callable[[str, str, str], None] | None = None
         #: Loop time of the current tick, for routines that need the time.
         self.now_ns = 0
         #: Measures routine execution times (the loop sets its clock's timer).
         self.timer: Callable[[], int] = perf_counter_ns
-        #: Gives the loop's tick index for fault records (the loop sets it).
-        self.tick_source: Callable[[], int] = lambda: -1
         self.clear()
         self._mem[self._pd] = divisor
         self._mem[self._cnt] = divisor
@@ -175,17 +174,29 @@ class ReadyQueue:
     @interrupts_enabled.setter
     def interrupts_enabled(self, on: bool) -> None:
         self._interrupts = bool(on)
-        self._active = self._interrupts and self._fault is None
+        self._active = self._interrupts and not self._halted
 
     @property
-    def fault(self) -> Fault | None:
-        """The fault that stopped this queue, or None while it runs."""
-        return self._fault
+    def halted(self) -> bool:
+        """True while the queue is stopped by its owner (a fault): nothing is dispatched."""
+        return self._halted
 
-    @fault.setter
-    def fault(self, fault: Fault | None) -> None:
-        self._fault = fault
-        self._active = self._interrupts and fault is None
+    def halt(self) -> None:
+        """Stop dispatching until :meth:`resume` (the owner's fault state says why)."""
+        self._halted = True
+        self._active = False
+
+    def resume(self, restart: bool = True) -> None:
+        """Dispatch again.  With ``restart``, every self-scheduling routine that
+        is not on the queue is scheduled again with its current period (a
+        routine that raised dropped out of the queue)."""
+        self._halted = False
+        self._active = self._interrupts
+        if restart:
+            on_queue = {slot[1] for slot in self.slots() if slot is not None}
+            for r in self._routines.values():
+                if r.period is not None and r.address not in on_queue:
+                    self.schedule(r.address, r.period())
 
     # -- configuration -----------------------------------------------------
 
@@ -399,54 +410,13 @@ class ReadyQueue:
         names = self._routines
         return [(names[a].name if a in names else f"{a:04X}", d) for a, d in self._tick_log]
 
-    # -- faults ------------------------------------------------------------
+    # -- errors --------------------------------------------------------------
 
-    def trip(self, cause: str, source: str = "", tb: str = "") -> Fault:
-        """Stop this robot: record a fault, run the reflex action, report it.
-
-        Safety checks call this directly; an exception escaping a routine
-        ends here too.  The queue dispatches nothing until :meth:`acknowledge`.
-        """
-        fault = Fault(
-            robot=self.name,
-            cause=cause,
-            source=source,
-            tick=self.tick_source(),
-            time_ns=self.now_ns,
-            traceback=tb,
-        )
-        if self.fault is None:
-            self.fault = fault
-        reflex_error = ""
-        if self.reflex is not None:
-            try:
-                self.reflex(fault)
-            except Exception as exc:  # the reflex must not hide the fault
-                reflex_error = f"; reflex action failed: {exc!r}"
-        if reflex_error:
-            fault = Fault(
-                robot=fault.robot,
-                cause=fault.cause + reflex_error,
-                source=fault.source,
-                tick=fault.tick,
-                time_ns=fault.time_ns,
-                traceback=fault.traceback,
-            )
-            self.fault = fault
-        if self.fault_sink is not None:
-            self.fault_sink(fault)
-        return fault
-
-    def acknowledge(self, restart: bool = True) -> None:
-        """Clear the fault and resume dispatching.  With ``restart``, every
-        self-scheduling routine that is not on the queue is scheduled again
-        with its current period (the failed one dropped out when it raised)."""
-        self.fault = None
-        if restart:
-            on_queue = {slot[1] for slot in self.slots() if slot is not None}
-            for r in self._routines.values():
-                if r.period is not None and r.address not in on_queue:
-                    self.schedule(r.address, r.period())
+    def _error(self, cause: str, source: str, tb: str = "") -> None:
+        """A routine failed: halt, then tell the owner (in this tick)."""
+        self.halt()
+        if self.on_error is not None:
+            self.on_error(cause, source, tb)
 
     # -- the clock interrupt handler ---------------------------------------
 
@@ -505,9 +475,9 @@ class ReadyQueue:
             r = self._routines.get(a)
             if r is None:
                 cause = f"no routine at address {a:04X} (corrupted Q?)"
-                self.trip(cause, source=f"{a:04X}")
+                self._error(cause, f"{a:04X}")
             else:
-                self.trip(f"{type(exc).__name__}: {exc}", source=r.name, tb=_tb.format_exc())
+                self._error(f"{type(exc).__name__}: {exc}", r.name, _tb.format_exc())
 
 
 def fold_samples(stats: dict[int, Accumulator], samples: dict[int, list[int]]) -> None:

@@ -1,19 +1,17 @@
 """The DAQ link: a TCP line-protocol command and status server."""
 
-from pyrt.server.gripper import GripperService
 from pyrt.server.hub import StatusHub
-from pyrt.server.manipulator import ManipulatorService
 from pyrt.server.protocol import ERROR_CODES, MAX_LINE, format_error, format_reply
 from pyrt.server.robot import ObserverRunner, ServedRobot
 from pyrt.server.server import Server, is_loopback
+from pyrt.server.station import ServedStation
 
 __all__ = [
     "ERROR_CODES",
     "MAX_LINE",
-    "GripperService",
-    "ManipulatorService",
     "ObserverRunner",
     "ServedRobot",
+    "ServedStation",
     "Server",
     "StatusHub",
     "format_error",

@@ -129,20 +129,21 @@ def run_shell(shell: Any, line: str, extra: list[str] | None = None) -> tuple[st
     and whether the shell asked to end the session.
 
     What the shell reports through ``error()`` makes the reply ``ERR command``;
-    a ``FAULT`` line (the robot stopped, the command was not run) ``ERR fault``.
+    a fault it meets (a :class:`~pyrt.errors.FaultError`, handed to its
+    ``fault()``) ``ERR fault``, with what the command then said as the lines.
     """
     out = io.StringIO()
     errors: list[str] = []
+    faults: list[Any] = []
     shell.stdout = out
     shell.error = errors.append
+    shell.fault = faults.append
     end = bool(shell.onecmd(line))
     lines = out.getvalue().splitlines() + list(extra or [])
     if errors:
         return format_error("command", "; ".join(errors), lines), end
-    faults = [i for i, text in enumerate(lines) if text.startswith("FAULT")]
     if faults:
-        first = lines.pop(faults[0])
-        return format_error("fault", first.partition(" ")[2], lines), end
+        return format_error("fault", str(faults[0].fault), lines), end
     return format_reply(lines), end
 
 

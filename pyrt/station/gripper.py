@@ -1,51 +1,190 @@
-"""The gripper station: 8031, cage boards, simulated jaws, controller, scope,
-motion executor and runner on one loop, wired in the order a tick needs them.
+"""The gripper station: 8031, cage boards, simulated jaws, controller, motion
+executor and scope on one loop, wired in the order a tick needs them.
 
 Per tick: the jaws move (physics, dt = now - last), the clock interrupt
-walks the ready queue, the stall watchdog looks, the scope samples, the
-motion executor starts or follows a queued ``P`` move, and the mailbox is
-served.  A fault's reflex nulls the drive (the controller's own reflex),
-ends the current motion and drops every queued one, in the same tick.
+walks the ready queue, the stall watchdog looks, the motion executor starts
+or follows a queued ``P`` move, the scope samples, and the mailbox is
+served.  A fault's reflex (the station's) nulls the drive, ends the current
+motion and drops every queued one, in the same tick.
+
+The component tree: ``gripper`` (the controller: RAM signals, ``CMD:``
+letters) with its child ``monitor``; beside it ``sim``, the simulated
+jaws (their true state, ``sim object|jog|fault``).
 """
 
 from __future__ import annotations
 
-import contextlib
-from collections.abc import Iterable
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable
+from typing import Any
 
-from pyrt.boards.gripper import DAC_NULL, SimGripperBoard
-from pyrt.boards.i8031 import I8031
-from pyrt.errors import ConfigError, Fault, PyrtError
+from pyrt.boards.gripper import SimGripperBoard
+from pyrt.boards.i8031 import COMMAND_CNT, ENCODER_CNT, I8031
+from pyrt.component import Arg, Component, Signal, command, finite
+from pyrt.errors import CommandError, ConfigError
 from pyrt.robots.gripper import GripperController
+from pyrt.robots.gripper_commands import parse_hex
 from pyrt.scheduler import Loop
 from pyrt.scheduler.motion import MotionExecutor, MotionType
-from pyrt.scheduler.runner import Runner
-from pyrt.scope import Scope
 from pyrt.sim.gripper import JawPlant
+from pyrt.station.base import Station
 
-__all__ = ["GripperStation", "build_gripper"]
+__all__ = ["GripperSim", "GripperStation", "build_gripper"]
+
+#: Longest jog the ``sim jog`` word holds the switch for, seconds.
+MAX_JOG_S = 3600.0
 
 
-@dataclass
-class GripperStation:
+def _signed(word: int) -> int:
+    return word - 0x10000 if word & 0x8000 else word
+
+
+class GripperSim(Component):
+    """The simulated jaws as a component: the world's truth and its settings."""
+
+    name = "sim"
+
+    def __init__(self, plant: JawPlant):
+        self.plant = plant
+
+    def signals(self) -> list[Signal]:
+        p = self.plant
+        return [
+            Signal.attr("x", "counts", p, "x", "true jaw position"),
+            Signal.attr("v", "counts/s", p, "v", "true jaw speed"),
+            Signal.attr("squeeze", "force", p, "squeeze", "squeeze on the object"),
+            Signal.attr("dac", "byte", p.board, "dac", "DAC byte the motor sees", fmt="02X"),
+        ]
+
+    def _apply(self, fn: Callable[..., Any], *args: Any) -> None:
+        try:
+            fn(*args)
+        except ValueError as exc:
+            raise CommandError(str(exc)) from None
+
+    @command(name="show", reads_only=True)
+    def show(self) -> str:
+        """sim: the simulated world's state (where the jaws really are)."""
+        return f"{self.plant.status()}; LEDs {self.plant.board.leds:04X}"
+
+    @command(Arg("MM", lambda t: None if t.lower() == "none" else finite(
+        "object width", 0.0, 1e4)(t)), name="object")
+    def set_object(self, width: float | None) -> None:
+        """sim object MM|none: put an object MM wide between the jaws (none: take it away)."""
+        self._apply(self.plant.set_object, width)
+
+    @command(Arg("DIR", str.lower, choices=("open", "close", "off")),
+             Arg("S", finite("jog time", 0.0, MAX_JOG_S), optional=True), name="jog")
+    def jog(self, direction: str, seconds: float | None = None) -> None:
+        """sim jog open|close|off [S]: hold the front-panel jog switch (S seconds)."""
+        dur = None if seconds is None else int(seconds * 1e9)
+        self._apply(self.plant.jog, direction, dur)
+
+    @command(Arg("NAME", str.lower, choices=("limit", "jam", "encoder", "port", "none")),
+             Arg("PORT", str.upper, optional=True), Arg("XX", str, optional=True),
+             name="fault")
+    def fault(self, what: str, port: str | None = None, value: str | None = None) -> None:
+        """sim fault limit|jam|encoder|none, or sim fault port 2D|2E XX: inject a fault.
+
+        limit (sensor dead), jam (motor), encoder (dead), port (a sensor port
+        stuck at XX), none (clear them all)."""
+        if what == "none":
+            if port is not None:
+                raise CommandError("sim fault none takes no more arguments")
+            self._apply(self.plant.clear_faults)
+        elif what == "port":
+            if port is None or value is None:
+                raise CommandError("sim fault port 2D|2E XX")
+            self._apply(self.plant.inject, "port", parse_hex(value, "stuck port value", 0xFF),
+                        port)
+        else:
+            if port is not None:
+                raise CommandError(f"sim fault {what} takes no more arguments")
+            self._apply(self.plant.inject, what)
+
+
+class GripperStation(Station):
     """Everything ``pyrt gripper`` runs, built by :func:`build_gripper`."""
 
-    cpu: I8031
-    board: SimGripperBoard
-    plant: JawPlant
-    controller: GripperController
-    loop: Loop
-    scope: Scope
-    executor: MotionExecutor
-    runner: Runner
+    def __init__(self, loop: Loop, cpu: I8031, board: SimGripperBoard, plant: JawPlant | None):
+        super().__init__(loop)
+        self.cpu = cpu
+        self.board = board
+        self.plant = plant
+        ctl = GripperController(cpu)
+        self.name = ctl.name
+        self.controller = ctl
+        if plant is not None:
+            loop.attach(plant.step, name="jaws")
+        ctl.attach(loop)
+        ctl.motion = self.motion
+
+        def motion_done(motion: MotionType) -> None:
+            reason = motion.stop_reason or ""
+            if reason.startswith("refused") and self.runner is not None:
+                self.runner.post(f"move {reason}")
+
+        def motion_error(cause: str, motion: MotionType) -> None:
+            self.trip(cause, source="P move")
+
+        self.executor = MotionExecutor(ctl, self.motion.get, motion_done, motion_error)
+        loop.attach(self.executor.poll, name="motion")
+        extras = [GripperSim(plant)] if plant is not None else []
+        self.adopt(ctl, queues=[ctl.queue], executors=[self.executor], extras=extras)
+        ctl.power_up()
+
+    # -- what the shell's shared words ask ------------------------------------------------
+
+    def letter_level(self) -> GripperController:
+        return self.controller
+
+    def prompt(self, level: Component | None) -> str:
+        return "* " if level is self.controller.monitor else "CMD: "
+
+    def motion_robot(self) -> GripperController:
+        return self.controller
+
+    def busy(self) -> bool:
+        """A move, jog, init or calibration runs, or a move waits."""
+        ctl = self.controller
+        return ctl.moving or ctl.busy or super().busy()
+
+    def wait_refusal(self) -> str | None:
+        """Why ``wait`` cannot end (the clock interrupt is off), or None."""
+        if not self.controller.clock_enabled:
+            return "the clock interrupt is OFF (monitor I): the move cannot end; M, I: on"
+        return None
+
+    def idle_report(self) -> str:
+        """``wait`` with nothing to wait for."""
+        return "nothing to wait for: jaws idle"
+
+    def wait_report(self) -> str:
+        """Why the last move ended, where the jaws are, the error."""
+        ctl = self.controller
+        pos, tgt = ctl.position(), ctl.target()
+        err = _signed(pos) - _signed(tgt)
+        return f"{ctl.last_stop or 'ended'}: position {pos:04X}, target {tgt:04X}, error {err:+d}"
+
+    def status(self) -> str:
+        """Position, target, moving/busy, sensors, fault."""
+        ctl = self.controller
+        line = (f"position {ctl.word(ENCODER_CNT):04X} target {ctl.word(COMMAND_CNT):04X} "
+                f"moving {int(ctl.moving)} busy {int(ctl.busy)} sensors {ctl.sensor_word():04X}")
+        if self.fault is not None:
+            line += f"  FAULT: {self.fault.cause}"
+        return line
+
+    def status_fields(self) -> list[tuple[str, Signal, str]]:
+        """STATUS: position, target, moving, busy, sensors, fault."""
+        ctl = self.controller
+        sig = {s.name: s for s in ctl.signals()}
+        return [("position", sig["encoder"], "d"), ("target", sig["target"], "d"),
+                ("moving", sig["moving"], "d"), ("busy", sig["busy"], "d"),
+                ("sensors", sig["sensors"], "0x04X"), self.fault_field()]
 
     def shutdown(self) -> None:
         """Null the drive, stop the loop and close the timing log."""
-        with contextlib.suppress(PyrtError):
-            self.runner.call(self.controller.drive, DAC_NULL)
-        self.runner.stop()
-        self.loop.close()
+        self.close()
 
 
 def build_gripper(
@@ -56,7 +195,7 @@ def build_gripper(
     faults: Iterable[str] = (),
 ) -> GripperStation:
     """Wire a simulated gripper onto ``loop`` and power it up (not yet started:
-    call ``station.runner.start()``).  Bad simulation settings raise ConfigError."""
+    call ``station.start()``).  Bad simulation settings raise ConfigError."""
     cpu = I8031()
     board = SimGripperBoard(cpu)
     try:
@@ -66,32 +205,4 @@ def build_gripper(
             plant.inject(fault)
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
-    ctl = GripperController(cpu)
-    loop.attach(plant.step, name="jaws")
-    ctl.attach(loop)
-    scope = Scope()
-    loop.attach(scope.sample, name="scope")
-    runner_box: list[Runner] = []
-
-    def motion_done(motion: MotionType) -> None:
-        reason = motion.stop_reason or ""
-        if reason.startswith("refused") and runner_box:
-            runner_box[0].post(f"move {reason}")
-
-    def motion_error(cause: str, motion: MotionType) -> None:
-        ctl.queue.trip(cause, source="P move")
-
-    executor = MotionExecutor(ctl, lambda: runner_box[0].motion.get(), motion_done, motion_error)
-    loop.attach(executor.poll, name="motion")
-    runner = Runner(loop)
-    runner_box.append(runner)
-    own_reflex = ctl.reflex
-
-    def reflex(fault: Fault) -> None:
-        own_reflex(fault)
-        executor.abort(f"fault: {fault.cause}")
-        runner.motion.clear()
-
-    ctl.queue.reflex = reflex
-    ctl.power_up()
-    return GripperStation(cpu, board, plant, ctl, loop, scope, executor, runner)
+    return GripperStation(loop, cpu, board, plant)

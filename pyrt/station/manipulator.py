@@ -34,23 +34,24 @@ from __future__ import annotations
 
 import sys
 import threading
-from collections.abc import Callable, Generator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TextIO
 
 from pyrt.boards.simboards import SimDataConcentrator, SimTIO10
-from pyrt.db import Station, load_station
+from pyrt.component import Arg, Component, Signal, command, finite
+from pyrt.db import Station as StationDB
+from pyrt.db import load_station
 from pyrt.errors import CommandError, ConfigError, NativeError, PyrtError
 from pyrt.native import FuzzyParams, NativeInputError
 from pyrt.robots.av import AV
 from pyrt.robots.axis import Axis
-from pyrt.robots.polyaxis import PolyAxis, parse_pattern
+from pyrt.robots.polyaxis import PolyAxis
 from pyrt.robots.stops import StopRecord
 from pyrt.scheduler import Loop, ReadyQueue, SimClock
-from pyrt.scheduler.runner import MotionQueue
-from pyrt.scope import Source
 from pyrt.sim.manipulator import ManipulatorPlant, rig_from_station
 from pyrt.sim.sensors import Imperfections
+from pyrt.station.base import Station
 from pyrt.tasks import SyncWriter, ThreadWriter, WriteBack
 from pyrt.tasks.manipulator import attach_manipulator
 
@@ -63,6 +64,7 @@ __all__ = [
 ]
 
 TICK_NS = 1_000_000
+_SIM_FAULTS = ("slip", "dead", "stuck", "stall", "break", "none")
 POLL_S = 0.05
 AXIS_POLL_S = 0.01
 
@@ -99,7 +101,88 @@ class MessageSink:
             target(line)
 
 
-class ManipulatorStation:
+class ManipulatorSim(Component):
+    """The simulated world as a component: where the source really is, the
+    true tensions, and faults to inject (``sim``, ``sim fault ROPE ...``)."""
+
+    name = "sim"
+
+    def __init__(self, plant: ManipulatorPlant, axes: list[Axis]):
+        self.plant = plant
+        self.axes = axes
+
+    def signals(self) -> list[Signal]:
+        p = self.plant
+        out = [Signal(c, "cm", (lambda i=i: p.position[i]), f"true source position {c}")
+               for i, c in enumerate("xyz")]
+        out += [Signal(f"tension{i}", "N", (lambda i=i: p.tensions()[i]),
+                       f"true tension of {a.name}") for i, a in enumerate(self.axes)]
+        return out
+
+    @command(name="show", reads_only=True)
+    def show(self) -> str:
+        """sim: where the source really is and the true tensions."""
+        p = self.plant
+        pos, t, wrapped = p.position, p.tensions(), p.wrapped()
+        ring = [a.name for a, w in zip(self.axes, wrapped, strict=True) if w]
+        return (f"true position ({pos[0]:.2f}, {pos[1]:.2f}, {pos[2]:.2f}) cm; tensions "
+                + " ".join(f"{v:.2f}" for v in t) + " N"
+                + (f"; on the neck ring: {', '.join(ring)}" if ring else ""))
+
+    @command(Arg("ROPE", str), Arg("KIND", str.lower, choices=_SIM_FAULTS),
+             Arg("FRACTION", finite("slip fraction", 0.0, 1.0), optional=True), name="fault")
+    def fault(self, rope: str, what: str, fraction: float | None = None) -> str:
+        """sim fault ROPE slip [FRACTION]|dead|stuck|stall|break|none: inject a fault.
+
+        ROPE is an axis name (axis1) or index."""
+        p = self.plant
+        key: int | str = int(rope) if rope.isdigit() else rope
+        actions: dict[str, Callable[..., None]] = {
+            "slip": p.inject_slip, "dead": p.inject_loadcell_dead,
+            "stuck": p.inject_loadcell_stuck, "stall": p.inject_stall,
+            "break": p.break_rope, "none": p.clear_faults,
+        }
+        args: list[Any] = [key]
+        if fraction is not None:
+            if what != "slip":
+                raise CommandError(f"sim fault {what}: takes no more arguments")
+            args.append(fraction)
+        try:
+            actions[what](*args)
+        except ValueError as exc:
+            raise CommandError(str(exc)) from None
+        return f"sim: {what} on {rope}"
+
+
+class ManipulatorWords(Component):
+    """The manipulator's own top-level words (000 section 18): ``log``, ``debug``."""
+
+    name = "words"
+
+    def __init__(self, station: ManipulatorStation):
+        self.station = station
+
+    @command(Arg("FILE", str, optional=True, rest=True), name="log")
+    def log(self, path: str | None = None) -> str:
+        """log [FILE]: toggle logging of per-axis state and rule outputs every poll.
+
+        The default file is manipulator.log in the station directory; split
+        it with 'pyrt logsort FILE'."""
+        st = self.station
+        if st.polyaxis.log is not None:
+            return f"logging off; log written to {st.stop_log()}"
+        target = Path(path) if path else st.directory / "manipulator.log"
+        return f"logging on: {st.start_log(target)}"
+
+    @command(name="debug")
+    def debug(self) -> str:
+        """debug: toggle the debugging state (a status line every second)."""
+        pa = self.station.polyaxis
+        pa.debug = not pa.debug
+        return f"debugging {'on' if pa.debug else 'off'}"
+
+
+class ManipulatorStation(Station):
     """One manipulator on one loop (see the module text).
 
     ``directory``: the station database (written back while running);
@@ -125,8 +208,8 @@ class ManipulatorStation:
         stdout: TextIO | None = None,
     ):
         self.directory = Path(directory)
-        self.station: Station = load_station(self.directory)
-        self.loop = loop if loop is not None else Loop(SimClock(), period_ns=tick_ns)
+        self.station: StationDB = load_station(self.directory)
+        super().__init__(loop if loop is not None else Loop(SimClock(), period_ns=tick_ns))
         tick_s = self.loop.period_ns * 1e-9
         self.messages = MessageSink()
         self.stdout = stdout if stdout is not None else self.messages
@@ -156,6 +239,7 @@ class ManipulatorStation:
             liquid_level=liquid_level, stdout=self.stdout)
         self.polyaxis.name = pa_rec.name.lower()
         pa = self.polyaxis
+        self.name = pa.name
 
         # The world behind the boards, holding the source where the database says.
         pos = pa_rec.position
@@ -172,13 +256,12 @@ class ManipulatorStation:
             a.encoder.reset()
             a.encoder.zero_length = p
 
-        # The motion queue the mailbox fills (Runner(loop, motion_queue=...)).
-        self.motion = MotionQueue(capacity=16)
+        # The motion queue the mailbox fills (the station's runner takes it).
         pa.motion = self.motion
+        pa.spawn = self.loop.spawn
 
         # Level 4+: the ready queue and its tasks; write-back.
         self.queue = ReadyQueue(capacity=4, divisor=1, name=pa.name)
-        self.queue.reflex = pa.reflex
         pa.on_fault = self._trip
         attach_manipulator(self.queue, pa,
                            poll_checks=_checks(poll_s, tick_s, "control poll"),
@@ -201,10 +284,11 @@ class ManipulatorStation:
         self._writeback_failure: str | None = None
         self.loop.attach(self._write_back, name="writeback")
 
-        self.objects: dict[str, object] = {pa.name: pa, self.av.name.lower(): self.av}
-        for a in self.axes:
-            for obj in (a, a.motor, a.encoder, a.loadcell):
-                self.objects[obj.name.lower()] = obj
+        self.words = ManipulatorWords(self)
+        self.adopt(pa, queues=[self.queue], executors=[pa.executor],
+                   extras=[ManipulatorSim(self.plant, self.axes)])
+        assert self.runner is not None
+        self.messages.connect(self.runner.post)
         self.log_path: Path | None = None
         self._log_file: TextIO | None = None
         self.stops: list[StopRecord] = []
@@ -230,74 +314,75 @@ class ManipulatorStation:
             cause = f"database write-back refused: {exc}"
             if cause != self._writeback_failure:
                 self._writeback_failure = cause
-                self.queue.now_ns = now_ns
-                self.queue.trip(cause, source="WRITEBACK")
+                self.trip(cause, source="WRITEBACK")
         else:
             self._writeback_failure = None
 
     def _trip(self, cause: str, source: str) -> None:
-        self.queue.trip(cause, source=source)
+        self.trip(cause, source)
 
-    @property
-    def fault(self):
-        """The fault that stopped the manipulator, or None."""
-        return self.queue.fault
-
-    def acknowledge(self) -> str:
-        """Clear the fault; the routines start again (the motors stay stopped)."""
-        if self.queue.fault is None:
-            return "no fault to acknowledge"
-        self.polyaxis.stop_motors()
-        self.queue.acknowledge()
-        return "fault acknowledged; motors stopped, control polls running"
-
-    def stop_all(self) -> None:
-        """Every motor stopped, windings off, queued moves dropped (``quit``)."""
-        self.motion.clear()
+    def stop(self) -> str:
+        """The operator's stop: the move ended (a STOP), every motor stopped,
+        queued moves and a running pattern dropped."""
         pa = self.polyaxis
         if pa.active:
             pa.stop()
-        else:
-            pa.stop_motors()
+        pa.pattern_job_cancel()
+        return super().stop()
+
+    stop_all = stop
 
     def busy(self) -> bool:
-        """A move runs or waits on the motion queue."""
-        return self.polyaxis.active or len(self.motion) > 0
+        """A move runs or waits, a pattern runs, or an axis moves on its own."""
+        pa = self.polyaxis
+        job = pa.pattern_job
+        return (pa.active or super().busy() or (job is not None and not job.done)
+                or any(a.mode == "standalone" and a.motor.running for a in self.axes))
 
     def motors_running(self) -> list[str]:
         """Names of the motors that are stepping or have windings on."""
         return [a.motor.name for a in self.axes if a.motor.running]
 
-    # -- commands ----------------------------------------------------------------------
+    def motion_robot(self) -> PolyAxis:
+        return self.polyaxis
 
-    def lookup(self, name: str) -> object:
-        """The object called ``name`` (case-insensitive), or CommandError."""
-        obj = self.objects.get(name.lower())
-        if obj is None:
-            raise CommandError(f"no object named {name!r}; objects: {', '.join(self.names())}")
-        return obj
+    def check_motion(self, record: Any) -> None:
+        pa = self.polyaxis
+        job = pa.pattern_job
+        if job is not None and not job.done:
+            raise CommandError(f"motion {record.type}: a pattern is running ('{pa.name} stop' "
+                               "ends it); nothing moved")
 
-    def names(self) -> list[str]:
-        """Object names in the document's spelling (``axis0Motor``)."""
-        return [getattr(o, "name", k) for k, o in self.objects.items()]
+    def wait_refusal(self) -> str | None:
+        """``wait`` begins: remember the axes moving on their own, to report them."""
+        self._axis_moves = [a for a in self.axes
+                            if a.mode == "standalone" and a.motor.running]
+        return None
 
-    def check_ready(self, what: str) -> None:
-        """Refuse a motion command while a fault is not acknowledged."""
-        if self.queue.fault is not None:
-            raise CommandError(f"{what}: refused: the manipulator is stopped by a fault "
-                               f"({self.queue.fault.cause}); give 'ack' first; nothing moved")
+    def idle_report(self) -> str:
+        last = self.polyaxis.last_stop
+        return f"nothing to wait for; last stop: {last}" if last else "nothing to wait for"
 
-    def pattern_job(self, path: str | Path) -> Generator[None, None, list]:
-        """Read a pattern file (first line: log file) and return its job."""
-        log, points = parse_pattern(path)
-        try:
-            log.parent.mkdir(parents=True, exist_ok=True)
-            log.open("a", encoding="utf-8").close()
-        except OSError as exc:
-            raise CommandError(f"pattern: cannot write the log {str(log)!r}: "
-                               f"{exc.strerror}") from None
-        self.pattern_log = log
-        return self.polyaxis.pattern(points, log, lambda: self.loop.now_ns * 1e-9)
+    def wait_report(self) -> str:
+        """How the pattern, the axis moves or the PolyAxis move ended."""
+        pa = self.polyaxis
+        job = pa.pattern_job
+        lines = []
+        if job is not None and job.done:
+            pa.pattern_job = None
+            if job.error is not None:
+                lines.append(f"error: pattern failed: {job.error}")
+            else:
+                lines.append(f"pattern finished: {len(job.result or [])} endpoints; log "
+                             f"{pa.pattern_log}")
+        moved, self._axis_moves = getattr(self, "_axis_moves", []), []
+        if moved and not pa.active and not lines:
+            for a in moved:
+                lines.append(f"{a.name}: move ended at length {a.getLength():.3f} cm")
+            return "\n".join(lines)
+        last = pa.last_stop
+        lines.append(str(last) if last is not None else "ended")
+        return "\n".join(lines)
 
     # -- logging -------------------------------------------------------------------------
 
@@ -325,62 +410,30 @@ class ManipulatorStation:
             fh.close()
         return self.log_path if fh is not None else None
 
-    # -- scope channels --------------------------------------------------------------------
-
-    def resolve_channel(self, name: str) -> Source:
-        """A scope channel: ``prototype.x|y|z|distErr|netForce``,
-        ``axis0.tension|length|errorLength|errorTension|velocity``,
-        ``axis0Motor.velocity|desiredVelocity|speed``,
-        ``axis0Encoder.length``, ``axis0Loadcell.tension`` (case-insensitive)."""
-        obj_name, dot, field = name.strip().partition(".")
-        if not dot or not field:
-            raise ValueError(f"channel {name!r}: expected OBJECT.FIELD, e.g. axis0.tension")
-        obj = self.objects.get(obj_name.lower())
-        if obj is None:
-            raise ValueError(f"channel {name!r}: no object {obj_name!r}")
-        f = field.lower()
-        pa = self.polyaxis
-        if obj is pa:
-            table: dict[str, Callable[[], float]] = {
-                "x": lambda: pa.position[0], "y": lambda: pa.position[1],
-                "z": lambda: pa.position[2], "disterr": lambda: pa.dist_err,
-                "netforce": lambda: pa.net_force_magnitude,
-            }
-            if f in table:
-                return Source.call(table[f])
-        elif isinstance(obj, Axis):
-            i = self.axes.index(obj)
-            lists = {"tension": pa.tensions, "length": pa.lengths,
-                     "errorlength": pa.error_lengths, "errortension": pa.error_tensions}
-            if f in lists:
-                return Source.item(lists[f], i)
-            if f == "velocity":
-                return Source.attr(obj.motor, "velocity")
-        elif obj in [a.motor for a in self.axes]:
-            attrs = {"velocity": "velocity", "desiredvelocity": "desired_velocity"}
-            if f in attrs:
-                return Source.attr(obj, attrs[f])
-            if f == "speed":
-                return Source.call(obj.speed)  # type: ignore[attr-defined]
-        elif obj in [a.encoder for a in self.axes] and f == "length":
-            return Source.call(obj.length)  # type: ignore[attr-defined]
-        elif obj in [a.loadcell for a in self.axes] and f == "tension":
-            return Source.call(obj.tension)  # type: ignore[attr-defined]
-        raise ValueError(f"channel {name!r}: {getattr(obj, 'name', obj_name)} has no "
-                         f"channel {field!r}")
-
     # -- status and shutdown -------------------------------------------------------------
 
     def status(self) -> str:
         """The status line (position, distErr, residual force, tensions, time)."""
         line = self.polyaxis.status_line()
-        if self.queue.fault is not None:
-            line += f"  FAULT: {self.queue.fault.cause}"
+        if self.fault is not None:
+            line += f"  FAULT: {self.fault.cause}"
         return line
 
-    def close(self) -> None:
-        """Stop the motors, write pending database values, close the log."""
-        self.stop_all()
+    def status_fields(self) -> list[tuple[str, Signal, str]]:
+        """STATUS: x y z distErr netForce moving fault, then tension0 ... per rope."""
+        pa = self.polyaxis
+        sig = {s.name: s for s in pa.signals()}
+        fields = [("x", sig["x"], ".2f"), ("y", sig["y"], ".2f"), ("z", sig["z"], ".2f"),
+                  ("distErr", sig["distErr"], ".3f"), ("netForce", sig["netForce"], ".2f"),
+                  ("moving", Signal("moving", "bool", self.busy, "a move runs or waits", "d"),
+                   "d"), self.fault_field()]
+        fields += [(f"tension{i}", Signal(f"tension{i}", "N", (lambda i=i: pa.tensions[i]),
+                                          f"measured tension of {a.name}"), ".2f")
+                   for i, a in enumerate(self.axes)]
+        return fields
+
+    def write_back(self) -> None:
+        """Write pending database values, close the log (on the way out)."""
         try:
             self.writeback.poll(self.loop.now_ns + 10**12)
         except PyrtError as exc:  # the file keeps its last good value

@@ -1,0 +1,406 @@
+"""One command interpreter for every robot: :class:`RobotShell` over a station.
+
+A line is, in this order:
+
+1. a **word** shared by every robot (``help``, ``wait``, ``sleep``,
+   ``stats``, ``scope``, ``motion``, ``ack``, ``stop``, ``status``,
+   ``quit``) or one of the station's own words (the manipulator's ``log``
+   and ``debug``);
+2. ``OBJECT [VERB [ARGS]]``: a command record of a component of the
+   station's tree (``prototype to 0 0 50``, ``axis0Motor maxspeed 3``,
+   ``sim fault jam``); an object alone runs its ``show`` or lists its verbs;
+3. on a station with command **levels** (the gripper's ``CMD:`` and
+   monitor), a letter of the current level with its argument, with or
+   without a space (``P-1B86``).
+
+Every record's grammar is checked here; its handler runs in the loop's
+thread through **one** ``runner.call`` (the station checks the fault state
+and acts in the same tick).  A handler's :class:`~pyrt.component.Switch`
+changes the level; a returned loop :class:`~pyrt.scheduler.Job` is waited
+for.  A bad or refused command prints one ``error:`` line and changes
+nothing.  Help, completion and the server's privileges come from the same
+records (:meth:`RobotShell.resolve`, :meth:`RobotShell.completions`).
+"""
+
+from __future__ import annotations
+
+import shlex
+from collections.abc import Callable
+from typing import Any, TextIO
+
+from pyrt.commands._motion import motion_type_lines, parse_motion
+from pyrt.commands.scope import ScopeCommand
+from pyrt.commands.shell import CommandShell, parse_seconds
+from pyrt.component import Arg, Command, Component, Switch, command, records_of
+from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
+from pyrt.scheduler import Job
+from pyrt.scheduler.motion import get_motion_type
+from pyrt.scheduler.report import format_statistics
+
+__all__ = ["RobotShell"]
+
+#: Longest a command's foreground job (init, calibration, pattern) may run, loop seconds.
+JOB_TIMEOUT_S = 600.0
+#: ``wait`` without a time.
+WAIT_TIMEOUT_S = 3600.0
+
+_REST = Arg("ARGS", str, optional=True, rest=True)
+
+
+class RobotShell(CommandShell):
+    """The interpreter of one station (see the module text).
+
+    ``runner`` defaults to the station's; a read-only network client passes
+    an observer runner instead.
+    """
+
+    def __init__(self, station: Any, stdout: TextIO, runner: Any = None):
+        super().__init__(stdout)
+        self.station = station
+        self.runner = runner if runner is not None else station.runner
+        self.level: Component | None = getattr(station, "letter_level", lambda: None)()
+        self._scope = ScopeCommand(self.runner, station.scope, self._channel,
+                                   self._channel_names, stdout)
+
+    # -- prompt -----------------------------------------------------------------------
+
+    @property
+    def prompt(self) -> str:  # type: ignore[override]
+        return self.station.prompt(self.level)
+
+    @property
+    def in_monitor(self) -> bool:
+        """The shell is at a level other than the station's first (the gripper's monitor)."""
+        first = getattr(self.station, "letter_level", lambda: None)()
+        return self.level is not None and self.level is not first
+
+    # -- the records ------------------------------------------------------------------
+
+    def words(self) -> list[Command]:
+        """The shared words and the station's own words, as records."""
+        own = records_of(self, "")
+        extra = getattr(self.station, "words", None)
+        if extra is not None:
+            own += extra.commands()
+        return own
+
+    def word(self, name: str) -> Command | None:
+        """The word called ``name`` (case-insensitive), or None."""
+        key = name.lower()
+        for w in self.words():
+            if w.name.lower() == key:
+                return w
+        return None
+
+    def resolve(self, line: str) -> tuple[Component | None, Command, list[str], str]:
+        """``(component, record, argument words, argument text)`` of ``line``
+        (component None for a word); CommandError if it names nothing."""
+        text = line.strip()
+        words = text.split()
+        if not words:
+            raise CommandError("empty command")
+        first = words[0]
+        if len(first) > 1:
+            w = self.word(first)
+            if w is not None:
+                return None, w, words[1:], text[len(first):].strip()
+            comp = self.station.find(first)
+            if comp is not None:
+                return self._object(comp, words, text)
+        level = self.level
+        if level is not None and first[0].isalpha():
+            rec = level.find_command(first[0])
+            if rec is not None:
+                rest = text[1:].strip()
+                return level, rec, rest.split(), rest
+            letters = " ".join(c.name for c in level.commands())
+            where = "monitor command" if self.in_monitor else "command"
+            raise CommandError(f"unknown {where} {first[:40]!r} (letters: {letters}; "
+                               "words: type help)")
+        raise CommandError(f"unknown command or object {first[:40]!r}; objects: "
+                           f"{', '.join(self.station.names())}; type help")
+
+    def _object(self, comp: Component, words: list[str], text: str
+                ) -> tuple[Component, Command, list[str], str]:
+        if len(words) < 2:
+            show = comp.find_command("show")
+            if show is not None and not show.args:
+                return comp, show, [], ""
+            raise CommandError(f"{comp.name}: a command is needed; one of "
+                               f"{', '.join(c.name for c in comp.commands()) or 'none'}")
+        rec = comp.find_command(words[1])
+        if rec is None:
+            raise CommandError(f"{comp.name}: unknown command {words[1][:40]!r}; expected one "
+                               f"of {', '.join(c.name for c in comp.commands()) or 'none'}")
+        rest = text[len(words[0]):].strip()[len(words[1]):].strip()
+        return comp, rec, words[2:], rest
+
+    def reads_only(self, line: str) -> bool:
+        """True when ``line`` only reads (the server serves it without privilege)."""
+        try:
+            _comp, rec, words, _rest = self.resolve(line)
+        except CommandError:
+            return False
+        return rec.only_reads(words)
+
+    def anyone(self, line: str) -> bool:
+        """True when any client may give ``line`` (it reads, or it is the stop)."""
+        try:
+            _comp, rec, words, _rest = self.resolve(line)
+        except CommandError:
+            return False
+        return rec.anyone or rec.only_reads(words)
+
+    def completions(self) -> dict[str, Any]:
+        """The nested completion table: words, then objects and their verbs."""
+        table: dict[str, Any] = {w.name: None for w in self.words()}
+        for comp in self.station.components():
+            table[comp.name] = {c.name: None for c in comp.commands()} or None
+        return table
+
+    # -- dispatch ---------------------------------------------------------------------
+
+    def onecmd(self, line: str) -> bool:
+        """Run one line; True when the session should end (``quit``)."""
+        return self.guarded(self._dispatch, line)
+
+    def _dispatch(self, line: str) -> bool:
+        if not line.strip():
+            return False
+        comp, rec, words, rest = self.resolve(line)
+        args = rec.parse(words, rest)
+        if comp is None:
+            return bool(rec.handler(*args))
+        result = self.call(self.station.execute, comp, rec, args,
+                           name=f"{comp.name} {rec.name}")
+        if isinstance(result, Job):
+            result = self._wait_job(result)
+            if result is None:
+                return False
+        prefix = "" if comp is self.level or rec.name == "show" else comp.name
+        self._show(rec, result, prefix)
+        return False
+
+    def call(self, fn: Callable[..., Any], *args: Any, name: str = "") -> Any:
+        """One mailbox call; a fault reported by it is shown, then the command
+        runs (a read is answered, a move refused by the station)."""
+        try:
+            return self.runner.call(fn, *args, name=name)
+        except FaultError as exc:
+            self.fault(exc)
+        return self.runner.call(fn, *args, name=name)
+
+    def _wait_job(self, job: Job) -> Any:
+        if not self.runner.wait_until(lambda: job.done, JOB_TIMEOUT_S):
+            self.runner.call(job.cancel)
+            self.error(f"{job.name} did not finish within {JOB_TIMEOUT_S:g} s; stopped")
+            return None
+        if job.error is not None:
+            raise job.error
+        if job.result is None:
+            self.error(f"{job.name} was abandoned (fault or stop)")
+        return job.result
+
+    def _show(self, rec: Command, result: Any, prefix: str = "") -> None:
+        value = rec.reply(result) if rec.reply is not None else result
+        if isinstance(value, Switch):
+            for text in value.lines:
+                self.say(text)
+            level = self.station.component(value.level)
+            enter = getattr(level, "enter_level", None)
+            notes = self.runner.call(enter) if enter is not None else []
+            self.level = level
+            for text in notes or []:
+                self.say(text)
+            return
+        for text in _lines(value):
+            if prefix and not text.lower().startswith(prefix.lower() + ":"):
+                text = f"{prefix}: {text}"
+            self.say(text)
+
+    def fault(self, exc: FaultError) -> None:
+        f = exc.fault
+        self.say(f"FAULT: {f.cause} (in {f.source or self.station.name})")
+        self.say("every motor stopped; nothing moves until you type ack")
+
+    # -- channels of the scope --------------------------------------------------------
+
+    def _channel(self, name: str) -> Any:
+        return self.station.resolve_signal(name).scope_source()
+
+    def _channel_names(self) -> list[str]:
+        root = self.station.root
+        names = [s.name for s in root.signals()]
+        names += [n for n, _ in self.station.signals() if not n.startswith(root.name + ".")]
+        if root.signal("ram:00") is not None:
+            names.append("ram:XX")
+        return names
+
+    # -- the shared words -------------------------------------------------------------
+
+    @command(_REST, name="help", reads_only=True, console=True)
+    def do_help(self, arg: str = "") -> None:
+        """help [command|object]: list the commands, or explain one."""
+        topic = arg.strip()
+        if topic:
+            self._help_topic(topic)
+            return
+        level = self.level
+        if level is not None:
+            title = ("monitor commands (prompt *)" if self.in_monitor
+                     else f"commands (prompt {self.prompt.strip()})")
+            self.say(title + ":")
+            for rec in level.commands():
+                line = rec.summary
+                same = line[:1].upper() == rec.name.upper()
+                self.say(f"  {line}" if same else f"  {rec.name}  {line}")
+        self.say("objects (OBJECT COMMAND [ARGS], names case-insensitive):")
+        self.say("  " + " ".join(self.station.names()))
+        self.say("words:")
+        for w in self.words():
+            self.say(f"  {w.summary}")
+        if level is not None:
+            self.say("numbers are hexadecimal; lower case is accepted; 'help X' explains X")
+        else:
+            self.say("'help OBJECT' lists an object's commands, e.g. help "
+                     f"{self.station.names()[min(1, len(self.station.names()) - 1)]}")
+
+    def _help_topic(self, topic: str) -> None:
+        if len(topic) == 1 and self.level is not None:
+            rec = self.level.find_command(topic)
+            if rec is not None:
+                self.say(rec.help)
+                return
+        w = self.word(topic)
+        if w is not None:
+            self.say(w.help)
+            return
+        comp = self.station.find(topic)
+        if comp is not None:
+            self.say(f"{comp.name} commands:")
+            for rec in comp.commands():
+                self.say(f"  {rec.summary}")
+            sigs = comp.signals()
+            if sigs:
+                self.say("  signals: " + ", ".join(f"{s.name} ({s.units})" for s in sigs))
+            return
+        self.error(f"no help for {topic[:40]!r}")
+
+    @command(_REST, name="wait", console=True)
+    def do_wait(self, arg: str = "") -> None:
+        """wait [SECONDS]: wait until the current move (or job) ends; say why it ended."""
+        timeout = parse_seconds(arg, "wait") if arg.strip() else WAIT_TIMEOUT_S
+        st = self.station
+        busy, refusal = self.call(lambda: (st.busy(), st.wait_refusal()), name="wait")
+        if not busy:
+            self.say(self.runner.call(st.idle_report))
+            return
+        if refusal:
+            self.say(refusal)
+            return
+        try:
+            done = self.runner.wait_until(lambda: not st.busy(), timeout)
+        except FaultError as exc:
+            self.fault(exc)
+            return
+        if not done:
+            self.say(f"still moving after {timeout:g} s")
+            return
+        for text in self.runner.call(st.wait_report).splitlines():
+            self.say(text)
+
+    @command(Arg("SECONDS", str), name="sleep", console=True)
+    def do_sleep(self, arg: str) -> None:
+        """sleep SECONDS: let the controller run that long (loop time)."""
+        self.runner.sleep(parse_seconds(arg, "sleep"))
+
+    @command(name="stats", reads_only=True, console=True)
+    def do_stats(self) -> None:
+        """stats: per-task timing of the loop (calls, mean, p99, max, overruns)."""
+        self.say(format_statistics(self.runner.statistics()))
+
+    @command(_REST, name="scope", console=True,
+             reads_only_subcommands=("list", "status", "show"))
+    def do_scope(self, arg: str = "") -> None:
+        """scope [add CH.. | trigger CH LEVEL | run | single | stop | show | save F | plot F]
+
+        The software oscilloscope over any signal: OBJECT.SIGNAL (e.g.
+        prototype.x, axis0.tension, sim.x), or a signal of the robot by its
+        name alone (the gripper's encoder, dac ... and any RAM byte as
+        ram:XX).  'scope' alone: its state and the channels there are."""
+        self._scope.stdout = self.stdout
+        self._scope(arg)
+
+    @command(_REST, name="motion", moves=True, console=True)
+    def do_motion(self, arg: str = "") -> None:
+        """motion [TYPE key=value ...]: queue a motion of any registered type; alone: list them.
+
+        Values are numbers where they parse as numbers.  A type with a
+        check(robot, params) class method is checked before it is queued
+        (a refusal moves nothing)."""
+        record = parse_motion(arg)
+        if record is None:
+            self.say("motion types (motion TYPE key=value ...):")
+            for line in motion_type_lines():
+                self.say(line)
+            return
+        get_motion_type(record.type)
+        n, waiting = self.call(self.station.submit_motion, record, name="motion")
+        who = self.station.name
+        self.say(f"{who}: motion {record.type} queued ({n} waiting)" if waiting
+                 else f"{who}: motion {record.type}")
+
+    @command(name="ack", console=True)
+    def do_ack(self) -> None:
+        """ack: acknowledge a fault: every motor stays stopped, the routines restart."""
+        for _ in range(8):
+            try:
+                self.say(self.runner.call(self.station.acknowledge, name="ack"))
+                return
+            except FaultError as exc:
+                self.fault(exc)
+
+    @command(name="stop", console=True, anyone=True)
+    def do_stop(self) -> None:
+        """stop: stop every motor now, end the move, drop queued moves."""
+        self.say(self.runner.call(self.station.stop, name="stop", take_fault=False))
+
+    @command(Arg("OBJECT", str, optional=True), name="status", reads_only=True, console=True)
+    def do_status(self, name: str | None = None) -> None:
+        """status [OBJECT]: the robot's status line, or every signal of OBJECT with units."""
+        if name is None:
+            self.say(self.runner.call(self.station.status, name="status"))
+            return
+        comp = self.station.component(name)
+        values = self.runner.call(lambda: [(s, s.read()) for s in comp.signals()])
+        if not values:
+            self.say(f"{comp.name}: no signals")
+        for s, v in values:
+            self.say(f"{comp.name}.{s.name} = {s.format(v)}")
+
+    @command(name="quit", console=True)
+    def do_quit(self) -> bool:
+        """quit: stop every motor, then leave."""
+        try:
+            self.runner.call(self.station.stop, name="quit", take_fault=False)
+        except (MailboxTimeout, PyrtError) as exc:
+            self.error(f"could not stop the motors: {exc}")
+        return True
+
+
+def _lines(value: Any) -> list[str]:
+    if value is None:
+        return []
+    if isinstance(value, str):
+        return value.splitlines() or [""]
+    if isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value):
+        return list(value)
+    return [str(value)]
+
+
+def split_words(text: str) -> list[str]:
+    """Shell-like words (quotes group); CommandError on an unbalanced quote."""
+    try:
+        return shlex.split(text)
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None

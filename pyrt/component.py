@@ -1,0 +1,398 @@
+"""The one contract every controllable object of pyrt implements.
+
+A :class:`Component` is what LinuxCNC HAL calls a component and
+ros2_control a hardware interface plus its controller: a named object that
+declares, once,
+
+* its **signals**: named readable values with units (:class:`Signal`); the
+  scope, ``status``, the server's STATUS/SUBSCRIBE and EPICS all read this
+  one list;
+* its **commands**: one :class:`Command` record each (name, handler,
+  argument grammar, help from the handler's docstring, whether it reads only,
+  whether it moves, whether it is allowed while the robot is faulted); help,
+  completion and the server's privileges are derived from these records;
+* its **children** (an Axis has a Motor, an Encoder and a Loadcell);
+* its **reflex**: what "stop everything now" means for it (a Motor disarms
+  its channel and turns its windings off; the gripper nulls its drive
+  current).  The station runs every component's reflex in the tick that
+  found a fault, and on an operator ``stop``.
+
+Commands are methods marked with :func:`command`; the grammar parses and
+checks the words on the console's side, then the handler runs with the
+parsed values in the loop's thread, in one mailbox call.  A handler's
+return value is turned into reply lines by the record's ``reply`` (default:
+``str(value)`` unless None).
+
+A handler may also return a :class:`Switch` (the console changes its
+current command level, as the gripper's ``M`` enters the monitor) or a
+loop :class:`~pyrt.scheduler.Job` (the console waits for it, as ``I`` waits
+for the initialization).
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from pyrt.errors import CommandError
+from pyrt.scope import Source
+
+__all__ = [
+    "Arg",
+    "Command",
+    "Component",
+    "Signal",
+    "Switch",
+    "command",
+    "finite",
+    "records_of",
+    "walk",
+    "word",
+]
+
+
+# -- signals --------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Signal:
+    """A named readable value with units, read in the loop's thread.
+
+    ``read`` returns the value; ``source`` is the scope's fast path to the
+    same value (default: ``Source.call(read)``).  ``units`` is never empty:
+    ``cm``, ``N``, ``counts``, ``bool``, ``byte`` ...  ``fmt`` formats a
+    value for ``status`` (a format spec, as in ``format(value, fmt)``).
+    """
+
+    name: str
+    units: str
+    read: Callable[[], Any]
+    doc: str = ""
+    fmt: str = ".4g"
+    source: Source | None = None
+
+    @classmethod
+    def attr(cls, name: str, units: str, obj: Any, attr: str, doc: str = "",
+             fmt: str = ".4g") -> Signal:
+        """A signal that is an attribute of ``obj``."""
+        return cls(name, units, lambda: getattr(obj, attr), doc, fmt, Source.attr(obj, attr))
+
+    @classmethod
+    def item(cls, name: str, units: str, seq: Any, index: int, doc: str = "",
+             fmt: str = ".4g") -> Signal:
+        """A signal that is ``seq[index]`` (a list the loop updates in place)."""
+        return cls(name, units, lambda: seq[index], doc, fmt, Source.item(seq, index))
+
+    def scope_source(self) -> Source:
+        """Where the scope samples this signal."""
+        return self.source if self.source is not None else Source.call(self.read)
+
+    def format(self, value: Any) -> str:
+        """``value`` as ``status`` shows it, with its units."""
+        try:
+            text = format(value, self.fmt)
+        except (TypeError, ValueError):
+            text = str(value)
+        return f"{text} {self.units}"
+
+
+# -- command records ----------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Arg:
+    """One word of a command's grammar: ``parse(text)`` checks and converts it.
+
+    ``optional`` arguments may be left out (the handler's default is used);
+    ``rest`` takes the rest of the line as one text (a file name, a load
+    with its unit, a ``key=value`` list).
+    """
+
+    name: str
+    parse: Callable[[str], Any] = str
+    optional: bool = False
+    rest: bool = False
+    choices: tuple[str, ...] = ()
+
+    @property
+    def usage(self) -> str:
+        """The argument as help shows it."""
+        text = "|".join(self.choices) if self.choices else self.name
+        if self.rest:
+            text += " ..."
+        return f"[{text}]" if self.optional else text
+
+
+def finite(what: str, lo: float = -math.inf, hi: float = math.inf) -> Callable[[str], float]:
+    """A parser of a finite number in ``lo..hi`` (CommandError naming ``what``)."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise CommandError(f"{what} {text[:40]!r} is not a number") from None
+        if not math.isfinite(value):
+            raise CommandError(f"{what} {text[:40]!r} is not a finite number")
+        if not lo <= value <= hi:
+            raise CommandError(f"{what} {value:g} is out of range ({lo:g}..{hi:g})")
+        return value
+
+    parse.__name__ = f"finite_{what}"
+    return parse
+
+
+def word(*choices: str) -> Callable[[str], str]:
+    """A parser of one of ``choices`` (case-insensitive; returns the lower-case word)."""
+
+    def parse(text: str) -> str:
+        w = text.lower()
+        if w not in choices:
+            raise CommandError(f"expected {' or '.join(choices)}, got {text[:40]!r}")
+        return w
+
+    return parse
+
+
+@dataclass(frozen=True)
+class Command:
+    """One command of a component (see the module text)."""
+
+    name: str
+    handler: Callable[..., Any]
+    args: tuple[Arg, ...] = ()
+    help: str = ""
+    reads_only: bool = False
+    moves: bool = False
+    while_faulted: bool = True
+    #: Any client may give it, privileged or not (reads, and the operator stop).
+    anyone: bool = False
+    reply: Callable[[Any], Any] | None = None
+    #: Runs on the console's side (a shell word that waits or sleeps), not in the loop.
+    console: bool = False
+    owner: str = ""
+    #: For a word whose first argument is a sub-command: the sub-commands that only read.
+    reads_only_subcommands: frozenset[str] = frozenset()
+
+    def only_reads(self, words: Sequence[str]) -> bool:
+        """True when this command with ``words`` as its arguments only reads."""
+        if self.reads_only:
+            return True
+        if self.reads_only_subcommands:
+            return not words or words[0].lower() in self.reads_only_subcommands
+        return False
+
+    @property
+    def summary(self) -> str:
+        """The first line of the help."""
+        return self.help.splitlines()[0] if self.help else self.name
+
+    @property
+    def usage(self) -> str:
+        """``name ARG [ARG]``."""
+        return " ".join([self.name, *(a.usage for a in self.args)])
+
+    def parse(self, words: Sequence[str], rest_text: str = "") -> list[Any]:
+        """The arguments of ``words`` checked and converted (CommandError if not)."""
+        out: list[Any] = []
+        # a letter of 002 speaks for itself ("W takes no argument")
+        who = self.name if len(self.name) == 1 else f"{self.owner} {self.name}".strip()
+        required = sum(1 for a in self.args if not a.optional)
+        if self.args and self.args[-1].rest:
+            if not rest_text and words:
+                rest_text = " ".join(words)
+            fixed = list(self.args[:-1])
+            head = words[: len(fixed)]
+            if len(head) < sum(1 for a in fixed if not a.optional):
+                raise CommandError(f"{who}: usage: {self.usage}")
+            for a, w in zip(fixed, head, strict=False):
+                out.append(_parse_one(who, a, w))
+            tail = rest_text
+            for w in head:  # the rest of the line after the fixed words
+                tail = tail.lstrip()[len(w):]
+            tail = tail.strip()
+            last = self.args[-1]
+            if tail:
+                out.append(_parse_one(who, last, tail))
+            elif not last.optional:
+                raise CommandError(f"{who}: usage: {self.usage}")
+            return out
+        if not required <= len(words) <= len(self.args):
+            if not self.args:
+                raise CommandError(f"{who} takes no argument (got {' '.join(words)[:40]!r})")
+            n = (f"{required}" if required == len(self.args)
+                 else f"{required} to {len(self.args)}")
+            raise CommandError(f"{who}: takes {n} argument(s), got {len(words)}; "
+                               f"usage: {self.usage}")
+        for a, w in zip(self.args, words, strict=False):
+            out.append(_parse_one(who, a, w))
+        return out
+
+    def lines(self, result: Any) -> list[str]:
+        """The reply lines of a handler's result."""
+        value = self.reply(result) if self.reply is not None else result
+        if value is None:
+            return []
+        if isinstance(value, str):
+            return value.splitlines() or [""]
+        if isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value):
+            return list(value)
+        return [str(value)]
+
+
+def _parse_one(who: str, arg: Arg, text: str) -> Any:
+    if arg.choices and text.lower() not in arg.choices:
+        raise CommandError(f"{who}: {arg.name} must be {' or '.join(arg.choices)}, "
+                           f"got {text[:40]!r}")
+    try:
+        return arg.parse(text)
+    except CommandError:
+        raise  # the parsers name what they parse
+
+    except (TypeError, ValueError) as exc:
+        raise CommandError(f"{who}: {arg.name}: {exc}") from None
+
+
+_MARK = "__pyrt_command__"
+
+
+def command(
+    *args: Arg,
+    name: str | None = None,
+    reads_only: bool = False,
+    moves: bool = False,
+    while_faulted: bool | None = None,
+    anyone: bool | None = None,
+    reply: Callable[[Any], Any] | None = None,
+    console: bool = False,
+    reads_only_subcommands: Sequence[str] = (),
+) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """Mark a method as a command; its docstring is its help.
+
+    ``while_faulted`` defaults to "does not move"; ``anyone`` to
+    ``reads_only``.  The method keeps working as a plain method.
+    """
+
+    def mark(fn: Callable[..., Any]) -> Callable[..., Any]:
+        setattr(fn, _MARK, {
+            "name": name or fn.__name__, "args": tuple(args), "reads_only": reads_only,
+            "moves": moves, "while_faulted": (not moves) if while_faulted is None
+            else while_faulted, "anyone": reads_only if anyone is None else anyone,
+            "reply": reply, "console": console,
+            "subs": frozenset(w.lower() for w in reads_only_subcommands),
+        })
+        return fn
+
+    return mark
+
+
+def records_of(obj: Any, owner: str = "") -> list[Command]:
+    """The :class:`Command` records of the methods of ``obj`` marked with
+    :func:`command`, in the order the class defines them (base classes first)."""
+    seen: dict[str, Command] = {}
+    for klass in reversed(type(obj).__mro__):
+        for attr, fn in vars(klass).items():
+            spec = getattr(fn, _MARK, None)
+            if spec is None:
+                continue
+            bound = getattr(obj, attr)
+            doc = inspect.getdoc(fn) or ""
+            seen[spec["name"].lower()] = Command(
+                spec["name"], bound, spec["args"], doc, spec["reads_only"], spec["moves"],
+                spec["while_faulted"], spec["anyone"], spec["reply"], spec["console"], owner,
+                spec["subs"])
+    return list(seen.values())
+
+
+# -- components ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Switch:
+    """A handler's answer "the console's current level is now ``level``"."""
+
+    level: Any
+    lines: tuple[str, ...] = field(default=())
+
+
+class Component:
+    """The contract (see the module text).  Subclasses override what they have;
+    the defaults are "none" (no signals, no children, nothing to stop)."""
+
+    #: The name the console, the server and the scope address it by.
+    name: str = ""
+    #: The station's trip, set when a station adopts the component (see :meth:`fail`).
+    _trip: Callable[[str, str], Any] | None = None
+
+    def signals(self) -> list[Signal]:
+        """The component's signals."""
+        return []
+
+    def commands(self) -> list[Command]:
+        """The component's command records (its methods marked with :func:`command`)."""
+        return records_of(self, self.name)
+
+    def children(self) -> list[Component]:
+        """The components it is made of."""
+        return []
+
+    def reflex(self) -> None:
+        """Stop every actuator of this component now (loop thread; must not raise)."""
+
+    def fail(self, cause: str, source: str = "") -> None:
+        """Report a fault of the robot: the station records it and runs every
+        component's reflex in this tick.  Without a station it raises."""
+        trip = self._trip
+        if trip is None:
+            from pyrt.errors import Fault, FaultError
+
+            raise FaultError(Fault(robot=self.name, cause=cause, source=source or self.name))
+        trip(cause, source or self.name)
+
+    def signal(self, name: str) -> Signal | None:
+        """The signal called ``name`` (case-insensitive), or None."""
+        key = name.lower()
+        for s in self.signals():
+            if s.name.lower() == key:
+                return s
+        return None
+
+    def run_command(self, name: str, *words: str) -> Any:
+        """Run command ``name`` with ``words`` through its grammar (CommandError if
+        unknown or malformed), in the calling thread."""
+        rec = self.find_command(name)
+        if rec is None:
+            raise CommandError(f"{self.name}: unknown command {name[:40]!r}; expected one of "
+                               f"{', '.join(c.name for c in self.commands()) or 'none'}")
+        return rec.handler(*rec.parse(list(words), " ".join(words)))
+
+    def check_free(self, what: str) -> None:
+        """Refuse a command that changes this device while its owner drives it
+        (set ``owner_busy`` to a function returning the reason, or None)."""
+        busy = getattr(self, "owner_busy", None)
+        reason = busy() if busy is not None else None
+        if reason:
+            raise CommandError(f"{self.name} {what}: {reason}")
+
+    def find_command(self, name: str) -> Command | None:
+        """The command record called ``name`` (case-insensitive), or None."""
+        key = name.lower()
+        for c in self.commands():
+            if c.name.lower() == key:
+                return c
+        return None
+
+
+def walk(root: Component) -> Iterator[Component]:
+    """``root`` and every component below it, depth first, each once."""
+    seen: set[int] = set()
+    stack = [root]
+    while stack:
+        c = stack.pop()
+        if id(c) in seen:
+            continue
+        seen.add(id(c))
+        yield c
+        stack.extend(reversed(c.children()))

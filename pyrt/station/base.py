@@ -1,0 +1,311 @@
+"""A station: one loop, one component tree, one plant, one fault state.
+
+Both robots are a :class:`Station` plus a configuration
+(:mod:`pyrt.station.gripper`, :mod:`pyrt.station.manipulator`).  The station
+
+* owns the loop, the component tree (:mod:`pyrt.component`), the plant
+  behind the boards (``None`` on real hardware), the motion queue and the
+  runner (the mailbox the consoles and the server talk through);
+* holds the robot's **fault state**: :meth:`trip` records the first fault,
+  halts the robot's ready queues, runs **every** component's reflex in the
+  same tick (004: one joint's error stops the whole robot), ends the
+  running motion, drops queued ones and reports the fault once to the
+  application (the next mailbox call raises it as
+  :class:`~pyrt.errors.FaultError`); :meth:`acknowledge` clears it;
+* executes command records in the loop thread (:meth:`execute`): the check
+  (fault, moving while faulted) and the act in one mailbox call;
+* derives everything that lists signals or commands from the tree:
+  :meth:`components`, :meth:`signals`, :meth:`resolve_signal`;
+* starts and stops in one order (:meth:`start`, :meth:`close`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterable
+from typing import Any
+
+from pyrt.component import Command, Component, Signal, walk
+from pyrt.errors import CommandError, Fault, PyrtError
+from pyrt.scheduler import Loop, ReadyQueue
+from pyrt.scheduler.motion import MotionExecutor
+from pyrt.scheduler.runner import MotionQueue, Runner
+from pyrt.scope import Scope
+
+__all__ = ["Station"]
+
+
+class Station:
+    """See the module text.  A configuration builds its tree and calls
+    :meth:`adopt` last (after every loop handler is attached)."""
+
+    #: The robot's name (``gripper``, ``prototype``, ``sno``).
+    name: str = "robot"
+
+    def __init__(self, loop: Loop, *, motion_capacity: int = 16):
+        self.loop = loop
+        self.motion = MotionQueue(capacity=motion_capacity)
+        self.scope = Scope()
+        self.root: Component = Component()
+        self.extras: list[Component] = []
+        self.queues: list[ReadyQueue] = []
+        self.executors: list[MotionExecutor] = []
+        self.plant: Any = None
+        self.runner: Runner | None = None
+        self._fault: Fault | None = None
+        self._by_name: dict[str, Component] = {}
+        self._closed = False
+
+    # -- assembly -------------------------------------------------------------------
+
+    def adopt(self, root: Component, *, queues: Iterable[ReadyQueue] = (),
+              executors: Iterable[MotionExecutor] = (),
+              extras: Iterable[Component] = ()) -> Runner:
+        """Take ``root`` (and ``extras``, e.g. the simulation's component) as
+        the station's tree; own ``queues``' errors; attach the scope and the
+        mailbox to the loop (in that order, after the robot's handlers)."""
+        self.root = root
+        self.extras = list(extras)
+        self.queues = list(queues)
+        self.executors = list(executors)
+        self._by_name = {}
+        for top in [root, *self.extras]:
+            for c in walk(top):
+                key = c.name.lower()
+                if not key:
+                    raise PyrtError(f"a component of {self.name} has no name: {c!r}")
+                if key in self._by_name and self._by_name[key] is not c:
+                    raise PyrtError(f"two components of {self.name} are called {c.name!r}")
+                self._by_name[key] = c
+                c._trip = self.trip
+        for q in self.queues:
+            q.on_error = self._queue_error
+        self.loop.trip_handlers.append(self.trip)
+        self.loop.attach(self.scope.sample, name="scope")
+        self.runner = Runner(self.loop, motion_queue=self.motion)
+        return self.runner
+
+    # -- the tree -----------------------------------------------------------------
+
+    def components(self) -> list[Component]:
+        """Every component, the robot's tree first, each once."""
+        return list(self._by_name.values())
+
+    def component(self, name: str) -> Component:
+        """The component called ``name`` (case-insensitive), or CommandError."""
+        c = self._by_name.get(name.lower())
+        if c is None:
+            raise CommandError(f"no object named {name[:40]!r}; objects: "
+                               f"{', '.join(self.names())}")
+        return c
+
+    def find(self, name: str) -> Component | None:
+        """The component called ``name``, or None."""
+        return self._by_name.get(name.lower())
+
+    def names(self) -> list[str]:
+        """The components' names, in the tree's order."""
+        return [c.name for c in self._by_name.values()]
+
+    def signals(self) -> list[tuple[str, Signal]]:
+        """``(OBJECT.SIGNAL, signal)`` of every signal of every component."""
+        return [(f"{c.name}.{s.name}", s) for c in self.components() for s in c.signals()]
+
+    def resolve_signal(self, name: str) -> Signal:
+        """``OBJECT.SIGNAL``, or a bare ``SIGNAL`` of the root component; CommandError if none."""
+        text = name.strip()
+        obj, dot, field = text.partition(".")
+        if dot and field:
+            c = self.find(obj)
+            if c is None:
+                raise CommandError(f"no channel {text[:60]!r}: no object {obj[:40]!r}")
+            s = c.signal(field)
+            if s is None:
+                raise CommandError(f"no channel {text[:60]!r}: {c.name} has no signal "
+                                   f"{field[:40]!r}; it has "
+                                   f"{', '.join(x.name for x in c.signals()) or 'none'}")
+            return s
+        s = self.root.signal(text)
+        if s is None:
+            raise CommandError(f"no channel {text[:60]!r}; 'scope list' shows them")
+        return s
+
+    def all_commands(self) -> list[tuple[Component, Command]]:
+        """Every command record of every component."""
+        return [(c, r) for c in self.components() for r in c.commands()]
+
+    # -- faults (loop thread) ---------------------------------------------------------
+
+    @property
+    def fault(self) -> Fault | None:
+        """The fault that stopped the robot, or None."""
+        return self._fault
+
+    def trip(self, cause: str, source: str = "", tb: str = "") -> Fault:
+        """Stop the robot: record the fault, halt its queues, run every
+        component's reflex and end its motions, in this tick; report it once."""
+        fault = self.loop.make_fault(self.name, cause, source, tb)
+        first = self._fault is None
+        if first:
+            self._fault = fault
+        for q in self.queues:
+            q.halt()
+        failed = self.reflex(f"fault: {cause}")
+        if failed:
+            fault = self.loop.make_fault(self.name, f"{cause}; reflex action failed: {failed}",
+                                         source, tb)
+            if first:
+                self._fault = fault
+        self.loop.report_fault(fault)
+        return fault
+
+    def _queue_error(self, cause: str, source: str, tb: str) -> None:
+        self.trip(cause, source, tb)
+
+    def reflex(self, why: str = "stop") -> str:
+        """Every actuator stopped now: every component's reflex, the running
+        motions ended, queued ones dropped.  Returns the reflex errors ('' if none);
+        a failing reflex never keeps the others from running."""
+        errors = []
+        for c in reversed(self.components()):  # leaves (motors) first
+            try:
+                c.reflex()
+            except Exception as exc:
+                errors.append(f"{c.name}: {exc!r}")
+        for ex in self.executors:
+            with contextlib.suppress(Exception):
+                ex.abort(why)
+        self.motion.clear()
+        return "; ".join(errors)
+
+    def acknowledge(self) -> str:
+        """Clear the fault; the routines start again, nothing moves."""
+        if self._fault is None:
+            return "no fault to acknowledge"
+        cause = self._fault.cause
+        self.reflex("acknowledge")
+        self._fault = None
+        for q in self.queues:
+            q.resume(restart=True)
+        self.after_acknowledge()
+        return f"fault acknowledged ({cause}); every motor stopped, routines running"
+
+    def after_acknowledge(self) -> None:
+        """What a configuration does after a fault is cleared (nothing by default)."""
+
+    def stop(self) -> str:
+        """The operator's stop: every motor stopped, the move ended, queued
+        moves dropped (no fault)."""
+        failed = self.reflex("stop command")
+        return f"{self.name}: every motor stopped" + (f" ({failed})" if failed else "")
+
+    # -- commands (loop thread) -------------------------------------------------------
+
+    def execute(self, component: Component, record: Command, args: list[Any]) -> Any:
+        """Run ``record`` with checked ``args``: refused while faulted if it
+        moves (or is not allowed while faulted); one mailbox call checks and acts."""
+        if self._fault is not None and not record.while_faulted:
+            raise CommandError(
+                f"{component.name} {record.name}: refused: {self.name} is stopped by a fault "
+                f"({self._fault.cause}); give 'ack' first; nothing moved")
+        return record.handler(*args)
+
+    def submit_motion(self, record: Any) -> tuple[int, bool]:
+        """Check a motion record and put it on the motion queue (loop thread):
+        refused while faulted; a type's ``check(robot, params)`` runs first.
+        Returns (records waiting, whether a move was already running)."""
+        from pyrt.scheduler.motion import get_motion_type
+
+        if self._fault is not None:
+            raise CommandError(f"motion {record.type}: refused: {self.name} is stopped by a "
+                               f"fault ({self._fault.cause}); give 'ack' first; nothing moved")
+        self.check_motion(record)
+        check = getattr(get_motion_type(record.type), "check", None)
+        if callable(check):
+            check(self.motion_robot(), record.params)
+        waiting = self.busy()
+        self.motion.put(record)
+        return len(self.motion), waiting
+
+    def check_motion(self, record: Any) -> None:
+        """Configuration-specific refusals of a motion record (none by default)."""
+
+    def motion_robot(self) -> Any:
+        """The object motion types drive (the root component by default)."""
+        return self.root
+
+    # -- what the shell asks ------------------------------------------------------------
+
+    def letter_level(self) -> Component | None:
+        """The component whose commands are single letters at the prompt (the
+        gripper's ``CMD:``), or None: commands are ``OBJECT VERB``."""
+        return None
+
+    def prompt(self, level: Component | None) -> str:
+        """The console prompt at ``level``."""
+        return f"{self.name}> "
+
+    def wait_refusal(self) -> str | None:
+        """Why ``wait`` cannot end now, or None."""
+        return None
+
+    def idle_report(self) -> str:
+        """``wait`` with nothing to wait for."""
+        return "nothing to wait for"
+
+    def wait_report(self) -> str:
+        """Why the move ``wait`` waited for ended."""
+        return "ended"
+
+    # -- state ------------------------------------------------------------------------
+
+    def busy(self) -> bool:
+        """A move runs or waits (configurations say more)."""
+        return len(self.motion) > 0 or any(ex.busy for ex in self.executors)
+
+    def status(self) -> str:
+        """One status line (configurations say more): the root's signals."""
+        parts = [f"{s.name}={s.format(s.read())}" for s in self.root.signals()]
+        if self._fault is not None:
+            parts.append(f"FAULT: {self._fault.cause}")
+        return "  ".join(parts)
+
+    def status_fields(self) -> list[tuple[str, Signal, str]]:
+        """The server's STATUS fields ``(key, signal, format)``: the root's
+        signals and the fault flag (configurations choose their own)."""
+        return [*((s.name, s, s.fmt) for s in self.root.signals()), self.fault_field()]
+
+    def fault_field(self) -> tuple[str, Signal, str]:
+        """The ``fault`` STATUS field (1 while a fault is not acknowledged)."""
+        return ("fault", Signal("fault", "bool", lambda: self._fault is not None,
+                                "a fault stopped the robot", "d"), "d")
+
+    # -- life cycle -------------------------------------------------------------------
+
+    def start(self) -> Runner:
+        """Start the loop (its thread on a wall clock)."""
+        assert self.runner is not None, "adopt() the tree first"
+        self.runner.start()
+        return self.runner
+
+    def close(self) -> None:
+        """Every motor stopped, the loop stopped, files written back and closed.
+        Safe to call twice."""
+        if self._closed:
+            return
+        self._closed = True
+        runner = self.runner
+        if runner is not None and runner.running:
+            with contextlib.suppress(PyrtError):
+                runner.call(self.stop, take_fault=False, name="stop every motor")
+            runner.stop()
+        else:
+            with contextlib.suppress(Exception):
+                self.reflex("shutdown")
+        try:
+            self.write_back()
+        finally:
+            self.loop.close()
+
+    def write_back(self) -> None:
+        """Write databases back on the way out (configurations that have them)."""
