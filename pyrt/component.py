@@ -175,6 +175,13 @@ class Command:
     owner: str = ""
     #: For a word whose first argument is a sub-command: the sub-commands that only read.
     reads_only_subcommands: frozenset[str] = frozenset()
+    #: Other names it answers to (000's long names beside the short ones).
+    aliases: tuple[str, ...] = ()
+
+    def answers_to(self, name: str) -> bool:
+        """True when ``name`` (any case) is this command's name or an alias."""
+        key = name.lower()
+        return key == self.name.lower() or key in (a.lower() for a in self.aliases)
 
     def only_reads(self, words: Sequence[str]) -> bool:
         """True when this command with ``words`` as its arguments only reads."""
@@ -268,6 +275,7 @@ def command(
     reply: Callable[[Any], Any] | None = None,
     console: bool = False,
     reads_only_subcommands: Sequence[str] = (),
+    aliases: Sequence[str] = (),
 ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     """Mark a method as a command; its docstring is its help.
 
@@ -282,6 +290,7 @@ def command(
             else while_faulted, "anyone": reads_only if anyone is None else anyone,
             "reply": reply, "console": console,
             "subs": frozenset(w.lower() for w in reads_only_subcommands),
+            "aliases": tuple(aliases),
         })
         return fn
 
@@ -302,7 +311,7 @@ def records_of(obj: Any, owner: str = "") -> list[Command]:
             seen[spec["name"].lower()] = Command(
                 spec["name"], bound, spec["args"], doc, spec["reads_only"], spec["moves"],
                 spec["while_faulted"], spec["anyone"], spec["reply"], spec["console"], owner,
-                spec["subs"])
+                spec["subs"], spec["aliases"])
     return list(seen.values())
 
 
@@ -378,9 +387,8 @@ class Component:
 
     def find_command(self, name: str) -> Command | None:
         """The command record called ``name`` (case-insensitive), or None."""
-        key = name.lower()
         for c in self.commands():
-            if c.name.lower() == key:
+            if c.answers_to(name):
                 return c
         return None
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from pyrt.db import copy_station
-from pyrt.scheduler.runner import Runner  # noqa: F401 - the rig's callers type with it
+from pyrt.scheduler.runner import Runner
 from pyrt.station.manipulator import ManipulatorStation
 
 #: The tests' base tick: 5 ms (the physics at 200 Hz, the 50 ms control poll

@@ -91,7 +91,7 @@ def test_down_and_to(station):
     ("maxspeed", ("9",), "above the limit 7.0"),
     ("maxspeed", ("0.01",), "below the start speed"),
     ("up", (), "takes 1 argument"),
-    ("zero", ("1",), "takes 0 argument"),
+    ("zero", ("1",), "takes no argument"),
     ("jump", ("1",), "unknown command"),
 ])
 def test_bad_arguments_move_nothing(station, command, args, match):

@@ -10,8 +10,6 @@ from _gripper_rig import make_rig
 from pyrt.commands import RobotShell
 from pyrt.commands.gripper import parse_hex, parse_target
 from pyrt.errors import CommandError
-from pyrt.scheduler.runner import Runner
-from pyrt.scope import Scope
 
 TARGETS = [
     ("-1B86", -0x1B86), ("E47A", -0x1B86), ("e47a", -0x1B86), (" -1b86 ", -0x1B86),
@@ -203,10 +201,10 @@ def test_wait_with_the_clock_off_says_so(session):
 
 def test_scope_records_the_gripper_variables(session):
     """scope add encoder dac, run roll, P: the frame shows the encoder going down."""
-    assert session("scope add encoder dac jaws.x ram:2C")[0].endswith("encoder, dac, jaws.x, ram:2C")
+    assert session("scope add encoder dac sim.x ram:2C")[0].endswith("encoder, dac, sim.x, ram:2C")
     session("scope run roll", "P -400", "wait")
     lines = session("scope show 2000")
-    assert lines[0] == "t_s encoder dac jaws.x ram:2C"
+    assert lines[0] == "t_s encoder dac sim.x ram:2C"
     enc = [float(line.split()[1]) for line in lines[1:]]
     dac = [float(line.split()[2]) for line in lines[1:]]
     assert enc[0] > enc[-1] and -0x400 - 16 <= enc[-1] <= -0x400 + 16

@@ -149,8 +149,9 @@ def test_acknowledge_restarts_the_routines_without_moving():
     rig.init()
     rig.station.trip("test fault", source="test")
     assert rig.board.dac == 0x80
-    with pytest.raises(CommandError):
-        rig.ctl.move(-0x100)
+    p = rig.ctl.find_command("P")
+    with pytest.raises(CommandError, match="give 'ack' first"):
+        rig.station.execute(rig.ctl, p, p.parse(["-100"]))
     rig.station.acknowledge()
     assert sorted(rig.ctl.queue.pending()) == ["MVJAWS", "SENSORS", "WATCHJAW"]
     rig.loop.run(500)

@@ -12,7 +12,6 @@ from pyrt.commands import RobotShell
 from pyrt.commands.gripper import parse_target
 from pyrt.console import Console
 from pyrt.errors import CommandError
-from pyrt.scheduler.runner import Runner
 
 #: Current on a motor that does not move: never longer than the watchdog's limit.
 STALL_BOUND_NS = 1000 * MS + 2 * MS

@@ -47,7 +47,7 @@ def test_move_and_wait_reports_the_stop(shell):
     """'prototype to' starts a move; 'wait' prints the stop reason and where."""
     sh, station, runner, _ = shell
     text = run_lines(sh, runner, ["prototype to 30 0 120", "wait", "status"])
-    assert "prototype: to (30, 0, 120)\n" in text
+    assert "prototype: to (30, 0, 120): 1 segment, " in text
     assert "ENDPOINT_STOP: within" in text
     assert "pos (" in text and "distErr" in text and "net" in text and "T [" in text
     assert not station.motors_running()
@@ -58,7 +58,8 @@ def test_moves_queue_on_the_motion_queue(shell):
     sh, station, runner, _ = shell
     text = run_lines(sh, runner, ["prototype to 10 0 100", "prototype to 20 0 110",
                                   "prototype to 0 0 100", "wait"])
-    assert "prototype: to (20, 0, 110) queued (2 waiting)" in text
+    assert "prototype: to (20, 0, 110) queued (1 waiting)" in text
+    assert "prototype: to (0, 0, 100) queued (2 waiting)" in text
     assert text.count("prototype stopped: ENDPOINT_STOP") == 3
     assert len(station.motion) == 0 and not station.polyaxis.active
     x, _, z = station.polyaxis.position

@@ -12,8 +12,8 @@ from _manipulator_rig import make_station
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pyrt.commands._motion import parse_motion, parse_value
 from pyrt.commands import RobotShell
+from pyrt.commands._motion import parse_motion, parse_value
 from pyrt.errors import CommandError
 from pyrt.robots.paths import HarePath, path_target
 from pyrt.robots.stops import StopReason
@@ -85,7 +85,7 @@ def test_motion_word_runs_hare_path_like_to(shell):
     """'motion hare_path x=.. y=.. z=..' is the same move as 'to'; a bad target is refused at once."""
     run, station, runner = shell
     text = run("motion hare_path x=-20 y=0 z=110", "wait")
-    assert "prototype: motion hare_path" in text and "ENDPOINT_STOP" in text
+    assert "motion hare_path queued (1 waiting)" in text and "ENDPOINT_STOP" in text
     assert math.dist(station.polyaxis.position, (-20.0, 0.0, 110.0)) <= 1.0
     moves = station.polyaxis.moves
     text = run("motion hare_path x=1000 y=0 z=110", "motion hare_path x=0 z=110",
@@ -129,7 +129,7 @@ def test_plugin_motion_cannot_bypass_the_tension_stops(shell, sway):
     assert not station.motors_running() and len(station.motion) == 0
     assert pa.executor.last.stop_reason.startswith("LOW_TENSION_STOP")
     text = run("motion sway rope=1 until=5")
-    assert "refused: the manipulator is stopped by a fault" in text
+    assert "refused: prototype is stopped by a fault" in text
     run("ack")
     assert station.fault is None and not pa.active
 

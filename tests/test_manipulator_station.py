@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from _manipulator_rig import make_station, move
 
+from pyrt.errors import CommandError
 from pyrt.robots.stops import StopReason
 from pyrt.scope import compile_sources
 
@@ -20,20 +21,20 @@ def proto(tmp_path):
 
 
 def test_scope_channels_resolve(proto):
-    """resolve_channel gives live sources for the robot, axes and devices (case-insensitive)."""
+    """resolve_signal gives live sources for the robot, axes and devices (case-insensitive)."""
     station, runner = proto
     names = ["prototype.x", "PROTOTYPE.z", "prototype.distErr", "prototype.netForce",
              "axis0.tension", "axis1.length", "Axis2.errorLength", "axis0Motor.velocity",
              "axis1Encoder.length", "axis2Loadcell.tension", "axis0.velocity"]
-    read = compile_sources([station.resolve_channel(n) for n in names])
+    read = compile_sources([station.resolve_signal(n).scope_source() for n in names])
     values = runner.call(read)
     pa = station.polyaxis
     assert values[0] == pa.position[0] and values[1] == pa.position[2]
     assert values[4] == pa.tensions[0] and values[5] == pa.lengths[1]
     assert values[8] == pytest.approx(station.axes[1].encoder.length())
     for bad in ["prototype", "axis9.tension", "axis0.colour", "axis0Motor.tension", ".x"]:
-        with pytest.raises(ValueError):
-            station.resolve_channel(bad)
+        with pytest.raises(CommandError):
+            station.resolve_signal(bad)
 
 
 @pytest.mark.parametrize("name", ["prototype", "sno"])
@@ -62,23 +63,23 @@ def test_table2_queries(proto):
     """tensions, netForce [x y z] and tensionFind answer from the current state."""
     station, runner = proto
     pa = station.polyaxis
-    text = runner.call(pa.command, "tensions")
+    text = runner.call(pa.run_command, "tensions")
     assert text.startswith("prototype: desired tensions axis0 ")
     assert "axis1 10.00 N" in text  # the off-side rope (the source is at x < 0)
-    here = runner.call(pa.command, "netForce")
+    here = runner.call(pa.run_command, "netForce")
     assert float(here.split("net force ")[1].split()[0]) < 5.0
-    far = runner.call(pa.command, "netForce", "100", "0", "100")
+    far = runner.call(pa.run_command, "netForce", "100", "0", "100")
     assert float(far.split("net force ")[1].split()[0]) > 10.0
     found = runner.call(pa.tension_find)
     assert math.dist(found, pa.position) < 10.0
-    assert "position from tensions" in runner.call(pa.command, "tensionFind")
+    assert "position from tensions" in runner.call(pa.run_command, "tensionFind")
 
 
 def test_error_signal_all_moves_too(proto):
     """With errorSignalAll every rope is driven toward its equilibrium tension; the move ends."""
     station, runner = proto
     pa = station.polyaxis
-    assert "every rope" in runner.call(pa.command, "errorSignalAll")
+    assert "every rope" in runner.call(pa.run_command, "errorSignalAll")
     stop = move(station, runner, (20.0, 0.0, 110.0))
     assert stop.reason is StopReason.ENDPOINT_STOP
     assert pa.free == [0.0, 0.0, 0.0]
@@ -89,7 +90,7 @@ def test_blended_neck_move(proto):
     station, runner = proto
     pa = station.polyaxis
     move(station, runner, (60.0, 0.0, 250.0))
-    text = runner.call(pa.command, "to", "5.7", "0", "370", "blend")
+    text = runner.call(pa.run_command, "to", "5.7", "0", "370", "blend")
     assert "2 blended segments" in text
     hare = pa.hare
     waited = []

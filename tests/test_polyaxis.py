@@ -122,8 +122,9 @@ def test_sensor_and_rope_failures_stop_everything(tmp_path, fault, reason):
     assert _motors_still(station)
     runner.sleep(2.0)
     assert _motors_still(station)
-    with pytest.raises(CommandError):
-        runner.call(station.check_ready, "prototype to")
+    to = station.polyaxis.find_command("to")
+    with pytest.raises(CommandError, match="give 'ack' first"):
+        runner.call(station.execute, station.polyaxis, to, to.parse(["0", "0", "100"]))
     assert "acknowledged" in runner.call(station.acknowledge)
     station.close()
 
@@ -170,7 +171,7 @@ def test_stop_command_stops_every_motor(tmp_path):
     runner.call(station.polyaxis.to, (60.0, 0.0, 140.0))
     runner.sleep(10.0)
     assert station.motors_running()
-    runner.call(station.polyaxis.command, "stop")
+    runner.call(station.polyaxis.run_command, "stop")
     assert station.polyaxis.last_stop.reason is StopReason.STOP
     assert _motors_still(station)
     station.close()
@@ -180,12 +181,18 @@ def test_tension_stop_toggle_and_rearm(tmp_path):
     """tensionStop toggles the tension stops; 'to' switches them on again."""
     station, runner = make_station(tmp_path)
     pa = station.polyaxis
-    assert "OFF" in runner.call(pa.command, "tensionStop")
+    assert "OFF" in runner.call(pa.run_command, "tensionStop")
     assert not pa.tension_stop
     runner.call(pa.to, (10.0, 0.0, 110.0))
     assert pa.tension_stop and pa.stops.tension_stops
-    runner.call(pa.command, "stop")
+    runner.call(pa.run_command, "stop")
     station.close()
+
+
+def _start_pattern(station, runner, path):
+    pa = station.polyaxis
+    runner.call(pa.run_command, "pattern", str(path))
+    return pa.pattern_job
 
 
 def _pattern(tmp_path, points):
@@ -199,7 +206,7 @@ def test_pattern_of_five_points(tmp_path):
     station, runner = make_station(tmp_path)
     points = [(0.0, 0.0, 110.0), (15.0, 0.0, 110.0), (15.0, 0.0, 125.0), (0.0, 0.0, 125.0),
               (-10.0, 0.0, 100.0)]
-    job = runner.spawn("pattern", station.pattern_job(_pattern(tmp_path, points)))
+    job = _start_pattern(station, runner, _pattern(tmp_path, points))
     assert runner.wait_until(lambda: job.done, 600.0)
     results = job.value()
     assert [r.reason for r in results] == [StopReason.ENDPOINT_STOP] * 5
@@ -290,7 +297,7 @@ def test_sno_pattern_of_five_points(tmp_path):
     station, runner = make_station(tmp_path, "sno")
     points = [(10.0, 10.0, 20.0), (25.0, 10.0, 30.0), (25.0, 25.0, 40.0), (0.0, 20.0, 40.0),
               (-10.0, 0.0, 20.0)]
-    job = runner.spawn("pattern", station.pattern_job(_pattern(tmp_path, points)))
+    job = _start_pattern(station, runner, _pattern(tmp_path, points))
     assert runner.wait_until(lambda: job.done, 900.0)
     assert [r.reason for r in job.value()] == [StopReason.ENDPOINT_STOP] * 5
     lines = [ln for ln in (tmp_path / "five.log").read_text().splitlines()

@@ -78,7 +78,7 @@ def test_fault_is_reported_by_the_next_call_exactly_once():
 
 def test_poll_raises_a_pending_fault():
     """poll() is a no-op round trip that raises a pending fault."""
-    runner, queue = sim_runner()
+    runner, _queue = sim_runner()
     runner.call(runner.loop.fault_all, "limit switch", "check")
     with pytest.raises(FaultError, match="limit switch"):
         runner.poll()

@@ -9,9 +9,7 @@ import pytest
 
 from pyrt.client import Client, ServerError
 from pyrt.db import copy_station
-from pyrt.scheduler.runner import Runner
-from pyrt.server import Server
-from pyrt.server import ServedStation
+from pyrt.server import ServedStation, Server
 from pyrt.station.manipulator import ManipulatorStation
 
 TOKEN = "rope-token"
@@ -42,7 +40,8 @@ def test_full_move_commanded_by_a_client_and_reported_to_a_subscriber(tmp_path):
         sub.command("SUBSCRIBE 5")
         op = Client(host, port)
         op.auth(TOKEN)
-        assert op.command("prototype to 10 0 100") == ["prototype: to (10, 0, 100)"]
+        assert op.command("prototype to 10 0 100") == ["prototype: to (10, 0, 100): 1 segment, "
+                                                       "11.1 cm"]
         (ended,) = op.command("wait")
         assert ended.startswith("ENDPOINT_STOP")
         samples = list(itertools.islice(sub.statuses(0.5), 1000))
@@ -56,11 +55,14 @@ def test_full_move_commanded_by_a_client_and_reported_to_a_subscriber(tmp_path):
 
 
 READ_ONLY = ["status", "stats", "help", "help axis0", "sim", "prototype tensions",
-             "prototype netForce", "axis0Encoder read", "protovessel show", "axis0"]
-PRIVILEGED = ["prototype to 0 0 100", "prototype stop", "axis0 up 1", "axis0Motor maxspeed 3",
+             "prototype netForce", "axis0Encoder read", "protovessel show", "axis0",
+             "prototype tensionFind", "status axis0"]
+#: Not reads, but every client may give them: a stop is the DAQ's right (000).
+ANYONE = ["stop", "prototype stop", "axis0 stop"]
+PRIVILEGED = ["prototype to 0 0 100", "axis0 up 1", "axis0Motor maxspeed 3",
               "axis1Loadcell calibrate", "ack", "log", "debug", "wait", "sleep 1",
               "sim fault axis0 break", "prototype tensionStop", "axis0Encoder reset", "quit",
-              "prototype tensionFind", "nosuchobject read"]
+              "nosuchobject read"]
 
 
 @pytest.fixture(scope="module")
@@ -74,6 +76,12 @@ def robot(tmp_path_factory):
 @pytest.mark.parametrize("line", READ_ONLY)
 def test_manipulator_reads_are_read_only(robot, line):
     """Status, statistics, help, tensions, netForce, encoder reads and the AV's show are served without AUTH."""
+    assert robot.is_read_only(line)
+
+
+@pytest.mark.parametrize("line", ANYONE)
+def test_any_client_may_stop_the_manipulator(robot, line):
+    """Every stop is served without AUTH: any client can halt a move."""
     assert robot.is_read_only(line)
 
 

@@ -103,7 +103,11 @@ class RobotShell(CommandShell):
         if len(first) > 1:
             w = self.word(first)
             if w is not None:
-                return None, w, words[1:], text[len(first):].strip()
+                # the shell's own words run here; a station's words (the
+                # manipulator's log, debug) in the loop like any command
+                owner = getattr(self.station, "words", None)
+                mine = owner is None or owner.find_command(first) is None
+                return (None if mine else owner), w, words[1:], text[len(first):].strip()
             comp = self.station.find(first)
             if comp is not None:
                 return self._object(comp, words, text)
@@ -122,12 +126,13 @@ class RobotShell(CommandShell):
 
     def _object(self, comp: Component, words: list[str], text: str
                 ) -> tuple[Component, Command, list[str], str]:
-        if len(words) < 2:
+        if len(words) < 2:  # an object alone shows itself, or reads its signals
             show = comp.find_command("show")
             if show is not None and not show.args:
                 return comp, show, [], ""
-            raise CommandError(f"{comp.name}: a command is needed; one of "
-                               f"{', '.join(c.name for c in comp.commands()) or 'none'}")
+            status = self.word("status")
+            assert status is not None
+            return None, status, [comp.name], comp.name
         rec = comp.find_command(words[1])
         if rec is None:
             raise CommandError(f"{comp.name}: unknown command {words[1][:40]!r}; expected one "
@@ -177,7 +182,8 @@ class RobotShell(CommandShell):
             result = self._wait_job(result)
             if result is None:
                 return False
-        prefix = "" if comp is self.level or rec.name == "show" else comp.name
+        plain = comp is self.level or comp is getattr(self.station, "words", None)
+        prefix = "" if plain or rec.name == "show" else comp.name
         self._show(rec, result, prefix)
         return False
 
@@ -346,9 +352,8 @@ class RobotShell(CommandShell):
             return
         get_motion_type(record.type)
         n, waiting = self.call(self.station.submit_motion, record, name="motion")
-        who = self.station.name
-        self.say(f"{who}: motion {record.type} queued ({n} waiting)" if waiting
-                 else f"{who}: motion {record.type}")
+        self.say(f"motion {record.type} queued ({n} waiting)"
+                 + (" behind the running move" if waiting else ""))
 
     @command(name="ack", console=True)
     def do_ack(self) -> None:

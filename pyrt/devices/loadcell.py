@@ -104,9 +104,10 @@ class Loadcell(Component):
 
     @command(name="calibrate", reply=lambda v: None)
     def calibrate(self) -> tuple[float, float] | None:
-        """calibrate: toggle calibration mode (leaving it fits SLOPE and OFFSET and writes them back).
+        """calibrate: toggle calibration mode; leaving it fits SLOPE and OFFSET.
 
-        Toggle calibration mode; leaving it fits and returns (slope, offset).
+        Leaving calibration mode fits (slope, offset), writes them back to the
+        database and returns them.
 
         Fewer than two points (or points that all share one ADC code) is a
         CommandError, and calibration mode stays on so points can be added.
@@ -142,9 +143,11 @@ class Loadcell(Component):
             self.write_back(slope, offset)
         return slope, offset
 
-    @command(Arg("LOAD", str, rest=True), name="point", reply=lambda v: None)
+    @command(Arg("LOAD", str, rest=True), name="point", reply=lambda v: None,
+             aliases=("calibrationPoint",))
     def point(self, load: float | str) -> tuple[int, float]:
-        """point LOAD: a calibration point with LOAD (N, lb or kg) hung on the rope."""
+        """point LOAD: a calibration point with LOAD (N, lb or kg) hung on the rope
+        (000's "calibrationPoint")."""
         self.check_free("point")
         if not self.calibrating:
             raise CommandError(f"{self.name} point: not in calibration mode; "

@@ -131,6 +131,8 @@ class Axis(Component):
         self.loadcell = loadcell
         #: The PolyAxis this axis belongs to (it sets this), for ``stop``.
         self.group: object | None = None
+        #: The rope's index in its PolyAxis (set with ``group``).
+        self.group_index: int | None = None
         for device in (motor, encoder, loadcell):
             device.owner_busy = self._device_busy  # type: ignore[attr-defined]
         self.dead_length = float(dead_length)
@@ -238,10 +240,21 @@ class Axis(Component):
     def children(self) -> list[Component]:
         return [self.motor, self.encoder, self.loadcell]
 
+    def _polled(self, values: str, fresh: Callable[[], float]) -> Callable[[], float]:
+        """The value the controller acts on: the PolyAxis's last poll when the
+        axis is one of its ropes, else a fresh read of the device."""
+        group, i = self.group, self.group_index
+        if group is None or i is None:
+            return fresh
+        array = getattr(group, values)
+        return lambda: array[i]
+
     def signals(self) -> list[Signal]:
         return [
-            Signal("tension", "N", self.tension, "rope tension (loadcell)"),
-            Signal("length", "cm", self.getLength, "rope length, stretch corrected"),
+            Signal("tension", "N", self._polled("tensions", self.tension),
+                   "rope tension the controller acts on (loadcell)"),
+            Signal("length", "cm", self._polled("lengths", self.getLength),
+                   "rope length the controller acts on, stretch corrected"),
             Signal.attr("errorLength", "cm", self, "error_length", "fuzzy input: length error"),
             Signal.attr("errorTension", "N", self, "error_tension",
                         "fuzzy input: tension error"),
@@ -252,18 +265,21 @@ class Axis(Component):
         """The axis's motor stops with its own reflex; the axis forgets its target."""
         self.target = None
 
+    def _controller(self) -> str:
+        return getattr(self.group, "name", "PolyAxis")
+
     def _device_busy(self) -> str | None:
         if self.mode == POLYAXIS:
-            return (f"{self.name} is under PolyAxis control (000: polyActivate turns off its "
-                    "commands); stop the move first")
+            return (f"{self.name} is under {self._controller()} control (000: polyActivate "
+                    "turns off its commands); stop the move first")
         return None
 
     # -- Table 4 commands ------------------------------------------------------------------
 
     def _standalone(self, command: str) -> None:
         if self.mode != STANDALONE:
-            raise CommandError(f"{self.name} {command}: the axis is under PolyAxis control; "
-                               "stop it first")
+            raise CommandError(f"{self.name} {command}: the axis is under "
+                               f"{self._controller()} control; stop it first")
 
     def _distance(self, value: float | str, command: str) -> float:
         d = parse_number(value, f"{self.name} {command}", "distance in cm")

@@ -320,8 +320,9 @@ class PolyAxis(Component):
         #: The running (or last) pattern job and its log file.
         self.pattern_job: Job | None = None
         self.pattern_log: Path | None = None
-        for a in axes:
+        for i, a in enumerate(axes):
             a.group = self
+            a.group_index = i
         #: Starts queued motion records one at a time and steps the running one.
         self.executor = MotionExecutor(self, self._take_motion, self._motion_done,
                                        self._motion_failed)
@@ -490,22 +491,31 @@ class PolyAxis(Component):
              Arg("blend", str.lower, optional=True, choices=("blend", "stop")),
              name="to", moves=True)
     def cmd_to(self, x: float, y: float, z: float, mode: str = "") -> str:
-        """to x y z [blend]: move the source to (x, y, z) cm; 'blend' joins the neck turn smoothly instead of stopping."""
+        """to x y z [blend]: move the source to (x, y, z) cm.
+
+        'blend' joins the turn into the neck smoothly instead of stopping
+        at the corner; a move already running is followed, not replaced."""
         job = self.pattern_job
         if job is not None and not job.done:
             raise CommandError(f"{self.name} to: a pattern is running ('{self.name} stop' ends "
                                "it); nothing moved")
         target = (x, y, z)
-        self.check_target(target)
         waiting = self.active or (self.motion is not None and len(self.motion) > 0)
         record = hare_path_record(target, blend=mode == "blend")
-        if self.motion is None:
-            self.begin(record)
-            return f"{self.name}: to ({x:g}, {y:g}, {z:g})"
-        self.motion.put(record)
-        if waiting:
+        if waiting:  # it starts from wherever the move before it ends
+            self.check_target(target)
+            assert self.motion is not None
+            self.motion.put(record)
             return f"{self.name}: to ({x:g}, {y:g}, {z:g}) queued ({len(self.motion)} waiting)"
-        return f"{self.name}: to ({x:g}, {y:g}, {z:g})"
+        self.plan_path(target, blend=mode == "blend")  # refuses a blocked path too
+        self.begin(record)  # now, in this tick: a 'wait' that follows sees it running
+        hare = self.hare
+        assert hare is not None
+        n = len(hare.segments)
+        how = " blended" if hare.blend else ""
+        total = sum(seg.length for seg in hare.segments)
+        return (f"{self.name}: to ({x:g}, {y:g}, {z:g}): {n}{how} "
+                f"segment{'s' if n > 1 else ''}, {total:.1f} cm")
 
     @command(name="tensionFind", reads_only=True)
     def cmd_tensionfind(self) -> str:
@@ -946,29 +956,43 @@ class PolyAxis(Component):
                 fh.write(line + "\n")
                 fh.flush()
 
-        write(f"# pattern of {len(points)} endpoints, {self.name}")
-        for k, p in enumerate(points, 1):
-            try:
-                self.to(p)
-            except CommandError as exc:
-                write(f"{k} {p[0]:g} {p[1]:g} {p[2]:g} REFUSED {exc}")
-                results.append(f"REFUSED {exc}")
-                continue
-            while self.active:
-                yield
+        def ended(k: int, p: Vec) -> StopRecord | None:
             rec = self.last_stop
             x = self.position
             write(f"{k} {p[0]:g} {p[1]:g} {p[2]:g} {rec.reason.value if rec else 'STOP'} "
                   f"at {x[0]:.3f} {x[1]:.3f} {x[2]:.3f} t={time_s():.2f} "
                   f"{rec.detail if rec else ''}")
             results.append(rec if rec is not None else "STOP")
-            if rec is not None and rec.reason not in (StopReason.ENDPOINT_STOP,
-                                                      StopReason.STUCK_STOP):
-                write(f"# pattern abandoned after endpoint {k}: {rec.reason.value}")
-                return results
-            until = time_s() + pause_s
-            while time_s() < until:
-                yield
+            return rec
+
+        write(f"# pattern of {len(points)} endpoints, {self.name}")
+        k, moving = 0, False
+        try:
+            for k, p in enumerate(points, 1):
+                try:
+                    self.to(p)
+                except CommandError as exc:
+                    write(f"{k} {p[0]:g} {p[1]:g} {p[2]:g} REFUSED {exc}")
+                    results.append(f"REFUSED {exc}")
+                    continue
+                moving = True
+                while self.active:
+                    yield
+                moving = False
+                rec = ended(k, p)
+                if rec is not None and rec.reason not in (StopReason.ENDPOINT_STOP,
+                                                          StopReason.STUCK_STOP):
+                    write(f"# pattern abandoned after endpoint {k}: {rec.reason.value}")
+                    return results
+                until = time_s() + pause_s
+                while time_s() < until:
+                    yield
+        except GeneratorExit:
+            # a stop or a fault ended the pattern: the log says where and why
+            rec = ended(k, points[k - 1]) if moving else self.last_stop
+            why = rec.reason.value if rec is not None else "STOP"
+            write(f"# pattern abandoned after endpoint {k}: {why}")
+            raise
         write("# pattern complete")
         return results
 

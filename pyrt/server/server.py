@@ -143,7 +143,8 @@ def run_shell(shell: Any, line: str, extra: list[str] | None = None) -> tuple[st
     if errors:
         return format_error("command", "; ".join(errors), lines), end
     if faults:
-        return format_error("fault", str(faults[0].fault), lines), end
+        return format_error("fault", f"{faults[0].fault}; every motor stopped; nothing "
+                            "moves until you type ack", lines), end
     return format_reply(lines), end
 
 
