@@ -118,3 +118,33 @@ def test_exports_sorted_and_present(name):
     assert list(module.__all__) == sorted(module.__all__)
     for attr in module.__all__:
         assert hasattr(module, attr)
+
+
+def test_complete_walks_a_nested_table_case_insensitively():
+    """complete() offers the words after the typed ones, by prefix, any case."""
+    from pyrt.console.base import complete
+
+    loop: dict = {}
+    loop.update(a=loop, b=loop)
+    table = {"prototype": {"to": None, "tensions": None}, "scope": {"add": loop},
+             "quit": None}
+    assert complete(table, "") == ["prototype", "quit", "scope"]
+    assert complete(table, "PRO") == ["prototype"]
+    assert complete(table, "prototype t") == ["tensions", "to"]
+    assert complete(table, "prototype to ") == []
+    assert complete(table, "scope add a b ") == ["a", "b"]
+    assert complete(table, "nosuch x") == [] and complete(None, "") == []
+
+
+def test_prompt_toolkit_completer_replaces_the_partial_word():
+    """The terminal's completer completes from the shell's table and replaces the partial word."""
+    from prompt_toolkit.document import Document
+
+    class Shell(Echo):
+        def completions(self):
+            return {"prototype": {"tensionFind": None, "to": None}}
+
+    console = Console(Shell(io.StringIO()), io.StringIO(), io.StringIO())
+    found = list(console._completer().get_completions(Document("prototype te"), None))
+    assert [(c.text, c.start_position) for c in found] == [("tensionFind", -2)]
+    assert Console(Echo(io.StringIO()))._completer() is None

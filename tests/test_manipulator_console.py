@@ -312,3 +312,36 @@ def test_terminal_session_with_history(tmp_path):
     finally:
         child.close()
     assert child.exitstatus == 0
+
+
+def test_scope_captures_any_signal_by_object_name(shell):
+    """'scope add prototype.x axis0.tension' captures the move: x climbs toward the target."""
+    sh, _, runner, _ = shell
+    text = run_lines(sh, runner, ["scope add prototype.x axis0.tension", "scope run roll",
+                                  "prototype to 10 0 100", "sleep 20", "scope stop",
+                                  "scope show 4000"])
+    assert "scope channels: prototype.x, axis0.tension" in text
+    rows = text.split("t_s prototype.x axis0.tension\n", 1)[1].splitlines()
+    samples = [tuple(map(float, r.split())) for r in rows if r and r[0].isdigit()]
+    assert len(samples) > 500
+    xs = [x for _, x, _ in samples]
+    assert xs[-1] - xs[0] > 8.0 and all(t > 2.0 for _, _, t in samples)
+
+
+def test_completion_table_names_only_what_resolves(shell):
+    """Every object verb, help topic and scope channel the completer offers is accepted."""
+    from pyrt.console.base import complete
+
+    sh, station, _, _ = shell
+    table = sh.completions()
+    for obj, verbs in table.items():
+        for verb in verbs or {}:
+            if obj in ("help", "status", "motion", "scope"):
+                continue
+            comp, rec, _, _ = sh.resolve(f"{obj} {verb}")
+            assert (comp.name, rec.name) == (obj, verb)
+    for channel in complete(table, "scope add "):
+        station.resolve_signal(channel)
+    assert complete(table, "PROTOTYPE T") == ["tensionFind", "tensionStop", "tensions", "to"]
+    assert complete(table, "scope add prototype.x axis0.ten") == ["axis0.tension"]
+    assert "prototype" in complete(table, "help p") and complete(table, "nosuch ") == []

@@ -34,7 +34,7 @@ from pyrt.commands.shell import CommandShell, parse_seconds
 from pyrt.component import Arg, Command, Component, Switch, command, records_of
 from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
 from pyrt.scheduler import Job
-from pyrt.scheduler.motion import get_motion_type
+from pyrt.scheduler.motion import get_motion_type, motion_type_names
 from pyrt.scheduler.report import format_statistics
 
 __all__ = ["RobotShell"]
@@ -160,7 +160,20 @@ class RobotShell(CommandShell):
         """The nested completion table: words, then objects and their verbs."""
         table: dict[str, Any] = {w.name: None for w in self.words()}
         for comp in self.station.components():
+            if comp is getattr(self.station, "words", None):
+                continue  # its records are words, above
             table[comp.name] = {c.name: None for c in comp.commands()} or None
+        objects = {name: None for name in table if name not in ("help",)}
+        table["help"] = objects
+        table["status"] = {c.name: None for c in self.station.components()
+                           if c.signals()} or None
+        channels: dict[str, Any] = {}
+        names = self._channel_names() + [n for n, _ in self.station.signals()]
+        channels.update({name: channels for name in names if name != "ram:XX"})
+        subs: dict[str, Any] = {verb: None for verb in self._scope.verbs()}
+        subs.update(add=channels, trigger={name: None for name in channels})
+        table["scope"] = subs
+        table["motion"] = {name: None for name in motion_type_names()}
         return table
 
     # -- dispatch ---------------------------------------------------------------------

@@ -51,6 +51,10 @@ class ScopeCommand:
     def say(self, text: str) -> None:
         self.stdout.write(text + "\n")
 
+    def verbs(self) -> list[str]:
+        """The sub-commands, as the completion table offers them."""
+        return ["list", "status", *(n[4:] for n in dir(self) if n.startswith("_do_"))]
+
     def __call__(self, arg: str) -> None:
         """Run one ``scope`` command line (without the word ``scope``)."""
         try:

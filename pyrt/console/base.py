@@ -12,7 +12,10 @@ echoed every character it read), and the console ends at end of input.
 
 The interpreter is any object with ``prompt`` and ``onecmd(line) -> bool``
 (True ends the session) writing to its ``stdout`` attribute; ``messages``
-drains the loop's asynchronous lines (``Runner.messages``).
+drains the loop's asynchronous lines (``Runner.messages``).  When it also
+has ``completions()`` (the nested table of words, objects and their verbs
+that :class:`~pyrt.commands.RobotShell` derives from the command records),
+Tab completes from it, case-insensitively, on both line editors.
 """
 
 from __future__ import annotations
@@ -21,9 +24,9 @@ import contextlib
 import sys
 import threading
 from collections.abc import Callable
-from typing import Protocol, TextIO
+from typing import Any, Protocol, TextIO
 
-__all__ = ["Console", "Interpreter"]
+__all__ = ["Console", "Interpreter", "complete"]
 
 #: How often the terminal console looks for loop messages, seconds.
 POLL_S = 0.1
@@ -38,6 +41,25 @@ class Interpreter(Protocol):
     def prompt(self) -> str: ...
 
     def onecmd(self, line: str) -> bool: ...
+
+
+def complete(table: dict[str, Any] | None, line: str) -> list[str]:
+    """The words that may follow ``line`` (the text before the cursor) in the
+    nested completion ``table``: a dict of word -> its own table or None."""
+    words = line.split()
+    partial = "" if not words or line[-1:].isspace() else words.pop()
+    node = table
+    for w in words:
+        if not isinstance(node, dict):
+            return []
+        key = next((k for k in node if k.lower() == w.lower()), None)
+        if key is None:
+            return []
+        node = node[key]
+    if not isinstance(node, dict):
+        return []
+    p = partial.lower()
+    return sorted(k for k in node if k.lower().startswith(p))
 
 
 class Console:
@@ -111,7 +133,8 @@ class Console:
         from prompt_toolkit.patch_stdout import patch_stdout
 
         history = FileHistory(self.history_file) if self.history_file else InMemoryHistory()
-        session: PromptSession[str] = PromptSession(history=history)
+        session: PromptSession[str] = PromptSession(history=history,
+                                                    completer=self._completer())
         stop = threading.Event()
         saved = self.shell.stdout
         with patch_stdout(raw=True):
@@ -141,9 +164,40 @@ class Console:
                 self.shell.stdout = saved
         return 0
 
+    def _table(self) -> dict[str, Any] | None:
+        table = getattr(self.shell, "completions", None)
+        return table() if callable(table) else None
+
+    def _completer(self) -> Any:
+        """A prompt_toolkit completer over :func:`complete` (None without a table)."""
+        if self._table() is None:
+            return None
+        from prompt_toolkit.completion import Completer, Completion
+
+        console = self
+
+        class _Words(Completer):
+            def get_completions(self, document: Any, complete_event: Any) -> Any:
+                text = document.text_before_cursor
+                partial = "" if not text or text[-1].isspace() else text.split()[-1]
+                for word in complete(console._table(), text):
+                    yield Completion(word, start_position=-len(partial))
+
+        return _Words()
+
     def _run_input(self) -> int:
         with contextlib.suppress(ImportError):  # line editing and history for input()
-            import readline  # noqa: F401
+            import readline
+
+            if self._table() is not None:
+                def word(text: str, state: int) -> str | None:
+                    line = readline.get_line_buffer()[: readline.get_endidx()]
+                    found = complete(self._table(), line)
+                    return found[state] + " " if state < len(found) else None
+
+                readline.set_completer(word)
+                readline.set_completer_delims(" \t")
+                readline.parse_and_bind("tab: complete")
         while True:
             self.flush_messages()
             try:
