@@ -232,3 +232,16 @@ def test_percentiles_bound_the_data(values):
     exact99 = ordered[max(0, -(-len(ordered) * 99 // 100) - 1)]
     assert dist.max_ns == ordered[-1] and dist.count == len(values)
     assert exact99 <= dist.p99_ns <= max(exact99 * 1.25 + 1, exact99 + 1)
+
+
+@given(st.integers(min_value=1, max_value=2**40))
+def test_quantile_is_printed_as_a_two_figure_upper_bound(ns):
+    """A histogram quantile prints as ≤ two significant figures, never below the bin's edge."""
+    from pyrt.scheduler.stats import format_bound_us
+
+    text = format_bound_us(ns)
+    assert text.startswith("≤")
+    digits = text[1:].replace(".", "").lstrip("0")
+    assert len(digits.rstrip("0")) <= 2
+    assert ns / 1e3 <= float(text[1:]) <= ns / 1e3 * 1.1 + 1e-9
+    assert format_bound_us(ns, ns) == f"{ns / 1e3:.2f}"  # the exact maximum stays exact

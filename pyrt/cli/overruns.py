@@ -15,7 +15,7 @@ import sys
 from typing import Any
 
 from pyrt.errors import ConfigError
-from pyrt.scheduler.stats import bin_edges
+from pyrt.scheduler.stats import QUANTILE_NOTE, bin_edges, format_bound_us
 from pyrt.scheduler.timinglog import TimingReport, read_timing_log
 
 
@@ -82,9 +82,11 @@ def format_report(rep: TimingReport, worst: int) -> str:
         lines.append("(no summary record: the log ends before the first summary)")
     late = d["lateness"]
     if late and late.get("count"):
+        m = late["max_ns"]
         lines.append(
-            f"lateness µs: median {late['p50_ns'] / 1e3:.2f}  p99 {late['p99_ns'] / 1e3:.2f}  "
-            f"p99.9 {late['p999_ns'] / 1e3:.2f}  max {late['max_ns'] / 1e3:.2f}"
+            f"lateness µs: median {format_bound_us(late['p50_ns'], m)}  "
+            f"p99 {format_bound_us(late['p99_ns'], m)}  "
+            f"p99.9 {format_bound_us(late['p999_ns'], m)}  max {m / 1e3:.2f}"
         )
     lines.append("")
     lines.append(
@@ -92,9 +94,11 @@ def format_report(rep: TimingReport, worst: int) -> str:
     )
     for name, t in sorted(d["tasks"].items()):
         lines.append(
-            f"{name:<14}{t['calls']:>10}{t['mean_us']:>11.2f}{t['p99_us']:>11.2f}"
+            f"{name:<14}{t['calls']:>10}{t['mean_us']:>11.2f}"
+            f"{format_bound_us(round(t['p99_us'] * 1e3), round(t['max_us'] * 1e3)):>11}"
             f"{t['max_us']:>11.2f}{t['overruns']:>10}"
         )
+    lines.append(f"({QUANTILE_NOTE})")
     if d["worst"]:
         lines.append("")
         lines.append(f"worst {len(d['worst'])} overruns:")

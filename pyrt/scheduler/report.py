@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from pyrt.scheduler.stats import LoopStatistics
+from pyrt.scheduler.stats import QUANTILE_NOTE, LoopStatistics, format_bound_us
 
 __all__ = ["format_statistics"]
 
@@ -19,15 +19,19 @@ def format_statistics(stats: LoopStatistics) -> str:
     ]
     late = stats.lateness
     if late.count:
+        m = late.max_ns
         lines.append(
-            f"lateness µs: median {late.p50_ns / 1e3:.2f}  p99 {late.p99_ns / 1e3:.2f}  "
-            f"p99.9 {late.p999_ns / 1e3:.2f}  max {late.max_ns / 1e3:.2f}"
+            f"lateness µs: median {format_bound_us(late.p50_ns, m)}  "
+            f"p99 {format_bound_us(late.p99_ns, m)}  p99.9 {format_bound_us(late.p999_ns, m)}  "
+            f"max {m / 1e3:.2f}"
         )
     lines.append(
         f"{'task':<12}{'calls':>10}{'mean µs':>10}{'p99 µs':>10}{'max µs':>10}{'overruns':>10}"
     )
     for name, t in sorted(stats.tasks.items()):
         lines.append(
-            f"{name:<12}{t.calls:>10}{_us(t.mean_ns)}{_us(t.p99_ns)}{_us(t.max_ns)}{t.overruns:>10}"
+            f"{name:<12}{t.calls:>10}{_us(t.mean_ns)}{format_bound_us(t.p99_ns, t.max_ns):>10}"
+            f"{_us(t.max_ns)}{t.overruns:>10}"
         )
+    lines.append(f"({QUANTILE_NOTE})")
     return "\n".join(lines)

@@ -11,6 +11,7 @@ maximum.  Snapshots are plain frozen values (:class:`Distribution`,
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 __all__ = [
@@ -21,7 +22,13 @@ __all__ = [
     "TaskStatistics",
     "bin_edges",
     "bin_index",
+    "format_bound_us",
 ]
+
+#: How ``stats`` and ``pyrt overruns`` print a quantile read from the
+#: histogram: its bins are a quarter octave (up to 25 % wide), so a quantile
+#: is an upper bound good to two significant figures, printed as ``≤2.6k``.
+QUANTILE_NOTE = "quantiles are bin upper bounds (≤, 2 significant figures); max is exact"
 
 #: Number of histogram bins: up to 2**41 ns (about 36 minutes) per sample.
 NBINS = 160
@@ -79,6 +86,20 @@ class Accumulator:
     def distribution(self) -> Distribution:
         """A frozen snapshot of what has been recorded."""
         return Distribution.from_hist(self.calls, self.total, self.max, self.hist)
+
+
+def format_bound_us(ns: int, exact_ns: int | None = None) -> str:
+    """A histogram quantile ``ns`` in µs with the precision its bin supports:
+    two significant figures after ``≤`` (it is the bin's upper edge), or the
+    exact value when it equals ``exact_ns`` (the clamp to the true maximum)."""
+    us = ns / 1e3
+    if exact_ns is not None and ns == exact_ns:
+        return f"{us:.2f}"
+    if us == 0:
+        return "0"
+    step = 10.0 ** (math.floor(math.log10(us)) - 1)  # the second significant digit
+    up = math.ceil(round(us / step, 6)) * step  # rounded up: it stays an upper bound
+    return "≤" + (f"{up:.0f}" if up >= 10 else f"{up:.2g}")
 
 
 @dataclass(frozen=True)
