@@ -60,3 +60,22 @@ def test_bad_logs_are_refused(tmp_path, capsys, text):
     assert main(["logsort", str(p), "--out", str(tmp_path / "out")]) == 1
     assert "bad.log" in capsys.readouterr().err
     assert not (tmp_path / "out" / "a0state.dat").exists()
+
+
+def test_plot_without_matplotlib_writes_nothing_and_says_how(logfile, tmp_path, capsys,
+                                                             monkeypatch):
+    """--plot without matplotlib: the install hint, exit 1, and no file written at all."""
+    import builtins
+
+    real = builtins.__import__
+
+    def no_matplotlib(name, *args, **kwargs):
+        if name == "matplotlib" or name.startswith("matplotlib."):
+            raise ImportError(name)
+        return real(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_matplotlib)
+    out = tmp_path / "out"
+    assert main(["logsort", str(logfile), "--out", str(out), "--plot"]) == 1
+    assert "pip install 'pyrt[plot]'" in capsys.readouterr().err
+    assert not out.exists() or not any(out.iterdir())

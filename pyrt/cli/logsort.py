@@ -76,6 +76,12 @@ def run(args: argparse.Namespace) -> int:
     src = Path(args.logfile)
     out = Path(args.out) if args.out else src.parent
     states, rules = sort_log(src)
+    if args.plot:  # before anything is written: all of the output, or none of it
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError:
+            raise ConfigError("--plot needs matplotlib, which is not installed: "
+                              "pip install 'pyrt[plot]'") from None
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -112,17 +118,15 @@ def _plot(target: Path, axis: int, state: list[list[str]], rules: list[list[str]
         ax2.plot(s[:, 0], s[:, 3], label="length error")
     if rules:
         r = np.array(rules, float)
-        for k, rule in enumerate(FuzzyRule):
-            col = r[:, k + 1]
-            if np.any(col != 0):
-                ax3.plot(r[:, 0], col, label=rule.name.lower())
+        for k, rule in enumerate(FuzzyRule):  # all ten, silent ones too, each labelled
+            ax3.plot(r[:, 0], r[:, k + 1], label=rule.name.lower())
     ax1.set_ylabel("tension (N)")
     ax2.set_ylabel("length error (cm)")
     ax3.set_ylabel("rule output (cm/s)")
     ax3.set_xlabel("time (s)")
     for a in (ax1, ax2, ax3):
         if a.get_legend_handles_labels()[0]:
-            a.legend(fontsize="small", loc="upper right")
+            a.legend(fontsize="small", loc="upper right", ncol=2 if a is ax3 else 1)
     fig.suptitle(f"axis {axis}")
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=80)
