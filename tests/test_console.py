@@ -148,3 +148,21 @@ def test_prompt_toolkit_completer_replaces_the_partial_word():
     found = list(console._completer().get_completions(Document("prototype te"), None))
     assert [(c.text, c.start_position) for c in found] == [("tensionFind", -2)]
     assert Console(Echo(io.StringIO()))._completer() is None
+
+
+@pytest.mark.parametrize(("robot", "read"), [("gripper", "W"), ("manipulator", "status")])
+def test_a_byte_that_is_not_utf8_is_a_bad_command_not_a_crash(robot, read, tmp_path):
+    """'\\xff' on a strictly decoded stdin: one error line, the next command runs, exit 0."""
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, PYTHONIOENCODING="utf-8:strict", HOME=str(tmp_path))
+    done = subprocess.run([sys.executable, "-m", "pyrt", robot, "--speed", "max"],
+                          input=b"\xff\xfe bad\n" + read.encode() + b"\n", env=env,
+                          capture_output=True, timeout=120, cwd=tmp_path)
+    out = done.stdout.decode()
+    assert done.returncode == 0, done.stderr.decode()[-2000:]
+    assert "UnicodeDecodeError" not in done.stderr.decode()
+    assert "error: unknown command or object '\ufffd\ufffd'" in out
+    assert out.count("error:") == 1 and f" {read}\n" in out

@@ -75,6 +75,13 @@ class Console:
     ):
         self.shell = shell
         self.stdin = stdin if stdin is not None else sys.stdin
+        # A byte that is not UTF-8 (line noise, a binary file piped in) is a
+        # bad command like any other, not the end of the console: decode it
+        # as U+FFFD and let the command parser refuse it.
+        reconfigure = getattr(self.stdin, "reconfigure", None)
+        if callable(reconfigure):
+            with contextlib.suppress(ValueError, OSError, AttributeError):
+                reconfigure(errors="replace")
         self.stdout = stdout if stdout is not None else sys.stdout
         self.messages = messages if messages is not None else (lambda: [])
         self.history_file = history_file
