@@ -214,3 +214,37 @@ def test_a_channel_that_stops_reading_as_a_number_stops_the_scope_not_the_loop()
     loop.run(10)
     assert scope.state == "stopped" and "sampling stopped" in scope.status()
     assert scope.read().data.shape == (10, 3)
+
+
+def test_run_without_a_mode_or_trigger_chooses_auto():
+    """'scope run' alone on a fresh scope acquires (auto mode) instead of asking for a trigger."""
+    loop, _, scope = rig(capacity=100)
+    scope.run()
+    assert scope.mode == "auto" and scope.state == "armed"
+    loop.run(250)
+    assert scope.read().data.shape == (100, 2)
+
+
+@pytest.mark.parametrize("ticks", [1, 37, 99])
+def test_stop_before_the_first_frame_keeps_what_was_sampled(ticks):
+    """Auto mode stopped before a frame filled: the samples taken so far are the frame."""
+    loop, _, scope = rig(capacity=100)
+    scope.run("auto")
+    loop.run(ticks)
+    assert scope.read() is None
+    scope.stop()
+    frame = scope.read()
+    assert frame is not None and frame.data.shape == (ticks, 2)
+    assert list(frame.data[:, 0]) == [float(n) for n in range(1, ticks + 1)]
+
+
+def test_stop_after_a_trigger_keeps_the_partial_frame_with_its_trigger():
+    """Stopped after the trigger but before the post-trigger samples: the frame keeps the trigger."""
+    loop, _, scope = rig(capacity=100)
+    scope.set_trigger("square", 0.5, "rising", pre=0.2)
+    scope.run("normal")
+    loop.run(60)  # the square rises at tick 50; 80 post-trigger samples are not there yet
+    scope.stop()
+    frame = scope.read()
+    assert frame.trigger_index is not None
+    assert frame.data[frame.trigger_index, 1] == 1.0 and frame.data[frame.trigger_index - 1, 1] == 0.0

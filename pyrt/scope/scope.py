@@ -89,7 +89,9 @@ class Scope:
         self._sources: list[Source] = []
         self.error: str | None = None
         self.trigger: Trigger | None = None
-        self.mode = "normal"
+        # auto: a frame per trigger, or per frame length when none comes (the
+        # mode that shows something without setting up a trigger first)
+        self.mode = "auto"
         self.state = "stopped"
         self._frame: Frame | None = None
         self.frames = 0
@@ -176,8 +178,19 @@ class Scope:
         self.run("single")
 
     def stop(self) -> None:
-        """Stop acquiring; what was captured stays readable."""
+        """Stop acquiring; what was captured stays readable.  Stopped before
+        the first frame filled, the samples taken so far become the frame
+        (the trigger's, if one was seen), so a stop never loses what was seen."""
         self._flush()
+        if self._frame is None and self.state in ("armed", "triggered"):
+            if self.state == "triggered" and self._trig_g is not None:
+                pre = round(self.trigger.pre * self.capacity) if self.trigger else 0
+                first = max(self._trig_g - pre, self._g - self.capacity, 0)
+                self._complete(first, self._trig_g - first, self._g - first)
+            else:
+                first = max(self._arm_g, self._g - self.capacity)
+                if self._g > first:
+                    self._complete(first, None, self._g - first)
         self.state = "stopped"
 
     def _restart(self) -> None:
@@ -313,9 +326,10 @@ class Scope:
             hits = np.flatnonzero((prev > trig.level) & (cur <= trig.level))
         return int(hits[0]) + start if hits.size else None
 
-    def _complete(self, first_g: int, trigger_index: int | None) -> None:
+    def _complete(self, first_g: int, trigger_index: int | None,
+                  count: int | None = None) -> None:
         size = self._ring.shape[0]
-        pos = (first_g + np.arange(self.capacity)) % size
+        pos = (first_g + np.arange(self.capacity if count is None else count)) % size
         nch = len(self._names)
         self._frame = Frame(
             t_ns=self._ring_t[pos].copy(),
