@@ -253,6 +253,12 @@ class Loop:
             raise ValueError(f"ticks must be >= 0, got {ticks}")
         self._stop.clear()
         self._stopping = False
+        if not self.clock.virtual:
+            # Time while the loop was not running (building the station,
+            # between runs) is nobody's lateness: the first deadline is now.
+            now = self.clock.now_ns()
+            if self._deadline < now:
+                self._deadline = now
         end_ns = self.now_ns + duration_ns if duration_ns is not None else None
         self.running = True
         try:
@@ -399,10 +405,11 @@ class Loop:
             return
         worst, tick, culprit = self._warn_worst
         if self.warn is not None:
-            who = f", longest task {culprit}" if culprit else ""
+            # one short line (it shares the terminal with command output)
+            who = f" in {culprit}" if culprit else ""
             self.warn(
-                f"overrun: {self._warn_pending} tick(s) overran; worst by "
-                f"{worst / 1e3:.1f} µs at tick {tick}{who} ({self.missed} deadlines missed so far)"
+                f"overrun: {self._warn_pending} tick(s), worst {worst / 1e6:.2f} ms over at "
+                f"tick {tick}{who}; {self.missed} missed in all ('stats')"
             )
         self._warn_pending = 0
         self._warn_worst = None
