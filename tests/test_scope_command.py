@@ -61,6 +61,21 @@ def test_capture_and_show_through_the_runner(tmp_path):
     assert (tmp_path / "f.csv").read_text().splitlines()[0] == "t_s,plant.x,plant.n"
 
 
+def test_stop_then_save_writes_the_partial_frame_and_says_so(tmp_path):
+    """'scope run', stop before the frame fills, save: the samples taken, counted, in the file."""
+    cmd, runner, scope, out = make()
+    assert scope.mode == "auto"
+    cmd("add plant.x")
+    cmd("run")
+    runner.sleep(0.05)  # 50 of the 200 samples
+    cmd("stop")
+    cmd(f"save {tmp_path / 'p.csv'}")
+    said = out.getvalue().splitlines()[-1]
+    rows = (tmp_path / "p.csv").read_text().splitlines()[1:]
+    assert said.startswith(f"saved {len(rows)} samples of 1 channel(s) (a partial frame: of 200)")
+    assert 0 < len(rows) < 200
+
+
 def test_status_lists_available_channels():
     """`scope` alone prints the status and the channels the robot offers."""
     cmd, _, _, out = make()

@@ -157,8 +157,11 @@ class ScopeCommand:
     def _do_save(self, rest: list[str]) -> None:
         if len(rest) != 1:
             raise CommandError("scope save: one file name ending .csv or .npz")
-        path = save_frame(self._frame(), rest[0])
-        self.say(f"saved {path}")
+        frame = self._frame()
+        path = save_frame(frame, rest[0])
+        n = frame.data.shape[0]
+        whole = "" if n == self.scope.capacity else f" (a partial frame: of {self.scope.capacity})"
+        self.say(f"saved {n} samples of {len(frame.channels)} channel(s){whole} to {path}")
 
     def _do_plot(self, rest: list[str]) -> None:
         if len(rest) != 1:
