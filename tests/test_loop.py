@@ -258,3 +258,40 @@ def test_time_before_the_loop_runs_is_not_an_overrun():
     stats = loop.statistics()
     assert stats.overruns == 0 and stats.missed == 0 and lines == []
     assert stats.lateness.max_ns == 0
+
+
+class _FakeTime:
+    """time.monotonic_ns and time.sleep for WallClock: each sleep wakes ``error_ns`` late."""
+
+    def __init__(self, error_ns: int):
+        self.now = 10**9
+        self.error_ns = error_ns
+        self.spun = 0
+
+    def monotonic_ns(self) -> int:
+        self.spun += 1
+        self.now += 1_000  # every look at the clock costs a microsecond
+        return self.now
+
+    def sleep(self, s: float) -> None:
+        self.now += round(s * 1e9) + self.error_ns
+
+
+def test_adaptive_spin_window_follows_the_measured_wake_up_error(monkeypatch):
+    """Accurate sleeps shrink the spin window to error + margin; a preemption does not widen it."""
+    import pyrt.scheduler.clock as clock_mod
+
+    fake = _FakeTime(error_ns=5_000)
+    monkeypatch.setattr(clock_mod, "time", fake)
+    clock = WallClock()
+    for k in range(1, 1001):
+        clock.wait_until(k * MS)
+    assert clock.spin_window_ns <= 5_000 + WallClock.SPIN_MARGIN_NS + 2_000
+    fake.error_ns = 5 * MS  # a preemption: late past the whole window
+    clock.wait_until(1001 * MS)
+    assert clock.spin_window_ns <= 5_000 + WallClock.SPIN_MARGIN_NS + 2_000
+    fixed = WallClock(adaptive=False)
+    fake.error_ns = 5_000
+    for k in range(1002, 1100):
+        fixed.wait_until(k * MS)
+    assert fixed.spin_window_ns == 200_000

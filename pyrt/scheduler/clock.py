@@ -8,10 +8,13 @@ virtual time (:class:`SimClock`) or real time (:class:`WallClock`).
 
 from __future__ import annotations
 
+import ctypes
+import sys
+import threading
 import time
 from collections.abc import Callable
 
-__all__ = ["Clock", "SimClock", "WallClock"]
+__all__ = ["Clock", "SimClock", "WallClock", "set_timer_slack"]
 
 
 class Clock:
@@ -62,21 +65,46 @@ class SimClock(Clock):
 class WallClock(Clock):
     """Real time from ``time.monotonic_ns``, optionally scaled by ``speed``.
 
-    ``wait_until`` sleeps to an *absolute* deadline and spins the last
-    ``spin_ns`` (default 200 µs) so that the sleep's wake-up jitter does not
-    become lateness.  With ``speed`` N the loop's time runs N times faster
-    than the wall (``--speed N``): a 1 ms tick then lasts 1/N ms of real time.
+    ``wait_until`` sleeps to an *absolute* deadline, then spins the last
+    stretch so that the sleep's wake-up error does not become lateness.  The
+    spin window adapts to the wake-up error it measures (a decaying maximum
+    of how late the sleeps woke, plus ``SPIN_MARGIN_NS``, within
+    ``0..spin_ns``): short when the timer is accurate, so an idle loop costs
+    little CPU, and as long as the timer needs when it is not.  A fixed
+    window is ``adaptive=False`` (``spin_ns`` each tick, the old behaviour).
+
+    ``timer_slack_ns`` (Linux): the loop thread's timer slack
+    (``PR_SET_TIMERSLACK``; the kernel's default is 50 µs), set from the thread
+    that waits, the first time it waits.  1 makes sleeps wake within a few
+    µs, and the adaptive spin shrinks with it.
+
+    With ``speed`` N the loop's time runs N times faster than the wall
+    (``--speed N``): a 1 ms tick then lasts 1/N ms of real time.
     """
 
     virtual = False
 
-    def __init__(self, speed: float = 1.0, spin_ns: int = 200_000):
+    #: Added to the measured wake-up error to make the spin window.
+    SPIN_MARGIN_NS = 10_000
+    #: Each sleep, the remembered wake-up error decays by this factor (a
+    #: preemption's long wake-up is forgotten within a few hundred ticks).
+    DECAY = 0.99
+
+    def __init__(self, speed: float = 1.0, spin_ns: int = 200_000, *, adaptive: bool = True,
+                 timer_slack_ns: int | None = None):
         if not speed > 0:
             raise ValueError(f"speed must be positive, got {speed!r}")
         if spin_ns < 0:
             raise ValueError(f"spin_ns must be >= 0, got {spin_ns!r}")
+        if timer_slack_ns is not None and timer_slack_ns < 1:
+            raise ValueError(f"timer_slack_ns must be >= 1, got {timer_slack_ns!r}")
         self.speed = float(speed)
         self.spin_ns = int(spin_ns)
+        self.adaptive = adaptive
+        self.timer_slack_ns = timer_slack_ns
+        self._slack_set_in: int | None = None
+        #: The wake-up error the spin window covers now (ns; decaying maximum).
+        self.wake_error_ns = float(spin_ns)
         self._wall0 = time.monotonic_ns()
         self._scaled = self.speed != 1.0
 
@@ -91,11 +119,47 @@ class WallClock(Clock):
             return self._wall0 + int(deadline_ns / self.speed)
         return self._wall0 + deadline_ns
 
+    @property
+    def spin_window_ns(self) -> int:
+        """How long before a deadline the sleep ends and the spin begins."""
+        if not self.adaptive:
+            return self.spin_ns
+        return min(self.spin_ns, int(self.wake_error_ns) + self.SPIN_MARGIN_NS)
+
     def wait_until(self, deadline_ns: int) -> None:
+        if self.timer_slack_ns is not None and self._slack_set_in != threading.get_ident():
+            self._slack_set_in = threading.get_ident()
+            set_timer_slack(self.timer_slack_ns)
         target = self.wall_deadline(deadline_ns)
         mono = time.monotonic_ns
-        remaining = target - mono()
-        if remaining > self.spin_ns:
-            time.sleep((remaining - self.spin_ns) / 1e9)
+        spin = self.spin_window_ns
+        wake = target - spin
+        remaining = wake - mono()
+        if remaining > 0:
+            time.sleep(remaining / 1e9)
+            if self.adaptive:
+                error = mono() - wake
+                decayed = self.wake_error_ns * self.DECAY
+                # a wake-up later than the whole window is a preemption,
+                # which no spin can hide: it does not widen the window
+                if decayed < error <= self.spin_ns:
+                    self.wake_error_ns = error
+                else:
+                    self.wake_error_ns = decayed
         while mono() < target:
             pass
+
+
+def set_timer_slack(ns: int) -> bool:
+    """Set the calling thread's timer slack (Linux ``prctl(PR_SET_TIMERSLACK)``);
+    False where that is not available."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        return libc.prctl(_PR_SET_TIMERSLACK, ctypes.c_ulong(ns), 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
+
+
+_PR_SET_TIMERSLACK = 29
