@@ -166,3 +166,43 @@ def test_a_byte_that_is_not_utf8_is_a_bad_command_not_a_crash(robot, read, tmp_p
     assert "UnicodeDecodeError" not in done.stderr.decode()
     assert "error: unknown command or object '\ufffd\ufffd'" in out
     assert out.count("error:") == 1 and f" {read}\n" in out
+
+
+def test_status_line_is_never_written_to_a_pipe():
+    """Piped: the live status line is neither read nor written; the script runs as before."""
+    calls = []
+
+    def status():
+        calls.append(1)
+        return "STATUS-LINE"
+
+    out = io.StringIO()
+    Console(Echo(out), io.StringIO("a\nquit\n"), out, status=status).run()
+    assert "STATUS-LINE" not in out.getvalue() and calls == []
+    assert "A\n" in out.getvalue()
+
+
+def test_status_line_on_a_terminal_is_the_toolbar_and_survives_a_failing_read():
+    """On a terminal the status is prompt_toolkit's bottom toolbar; a read that raises says so in one line."""
+    from prompt_toolkit.application import create_app_session
+    from prompt_toolkit.input import create_pipe_input
+    from prompt_toolkit.output import DummyOutput
+
+    seen = []
+
+    def status():
+        seen.append(1)
+        if len(seen) > 1:
+            raise RuntimeError("loop gone")
+        return "pos 0000\ntarget F000"
+
+    out = io.StringIO()
+    shell = Echo(out)
+    console = Console(shell, stdout=out, status=status)
+    assert console._status_line() == " pos 0000  target F000"
+    assert console._status_line() == " status unavailable: RuntimeError: loop gone"
+    with create_pipe_input() as pipe, create_app_session(input=pipe, output=DummyOutput()):
+        pipe.send_text("hello\rquit\r")
+        assert console._run_prompt_toolkit() == 0
+    assert shell.seen == ["hello", "quit"]
+    assert len(seen) > 2  # the toolbar was drawn, and a failing read did not end the session

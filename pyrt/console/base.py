@@ -72,6 +72,8 @@ class Console:
         stdout: TextIO | None = None,
         messages: Callable[[], list[str]] | None = None,
         history_file: str | None = None,
+        status: Callable[[], str] | None = None,
+        status_period_s: float = 0.25,
     ):
         self.shell = shell
         self.stdin = stdin if stdin is not None else sys.stdin
@@ -85,6 +87,10 @@ class Console:
         self.stdout = stdout if stdout is not None else sys.stdout
         self.messages = messages if messages is not None else (lambda: [])
         self.history_file = history_file
+        #: The live status line (a terminal only: prompt_toolkit's bottom
+        #: toolbar, refreshed every ``status_period_s``); never written to a pipe.
+        self.status = status
+        self.status_period_s = status_period_s
 
     def interactive(self) -> bool:
         """True when both ends are a terminal (line editing and history)."""
@@ -140,8 +146,10 @@ class Console:
         from prompt_toolkit.patch_stdout import patch_stdout
 
         history = FileHistory(self.history_file) if self.history_file else InMemoryHistory()
-        session: PromptSession[str] = PromptSession(history=history,
-                                                    completer=self._completer())
+        session: PromptSession[str] = PromptSession(
+            history=history, completer=self._completer(),
+            bottom_toolbar=self._status_line if self.status is not None else None,
+            refresh_interval=self.status_period_s if self.status is not None else 0)
         stop = threading.Event()
         saved = self.shell.stdout
         with patch_stdout(raw=True):
@@ -170,6 +178,14 @@ class Console:
                 self.flush_messages(proxy)
                 self.shell.stdout = saved
         return 0
+
+    def _status_line(self) -> str:
+        """The status line's text; a status that cannot be read says why, in one line."""
+        assert self.status is not None
+        try:
+            return " " + self.status().replace("\n", "  ")
+        except Exception as exc:  # the toolbar must never take the console down
+            return f" status unavailable: {type(exc).__name__}: {exc}"[:200]
 
     def _table(self) -> dict[str, Any] | None:
         table = getattr(self.shell, "completions", None)
