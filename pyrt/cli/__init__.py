@@ -12,12 +12,22 @@ import sys
 from collections.abc import Sequence
 
 from pyrt import __version__
-from pyrt.cli import boardsim, demo, forcemap, gripper, logsort, manipulator, overruns, send
+from pyrt.cli import (
+    boardsim,
+    connect,
+    demo,
+    forcemap,
+    gripper,
+    logsort,
+    manipulator,
+    overruns,
+    send,
+)
 from pyrt.errors import PyrtError
 
 __all__ = ["main"]
 
-_COMMANDS = [demo, gripper, overruns, manipulator, logsort, forcemap, send, boardsim]
+_COMMANDS = [demo, gripper, overruns, manipulator, logsort, forcemap, send, connect, boardsim]
 
 
 def build_parser() -> argparse.ArgumentParser:

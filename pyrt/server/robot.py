@@ -78,9 +78,12 @@ class ObserverRunner:
         self.virtual = runner.virtual
 
     def call(
-        self, fn: Callable[..., Any], *args: Any, timeout_s: float = 1.0, name: str = ""
+        self, fn: Callable[..., Any], *args: Any, timeout_s: float = 1.0, name: str = "",
+        take_fault: bool = False,
     ) -> Any:
-        """A mailbox call that leaves a pending fault for the operator."""
+        """A mailbox call that leaves a pending fault for the operator (whatever
+        ``take_fault`` asks: only the operator's session takes it)."""
+        del take_fault
         return self._runner.call(fn, *args, timeout_s=timeout_s, name=name, take_fault=False)
 
     def statistics(self, timeout_s: float = 1.0) -> Any:

@@ -1,0 +1,183 @@
+"""``pyrt connect [HOST:]PORT``: an interactive console on a robot served with ``--serve``.
+
+Every line is sent to the server as a console command and its reply
+printed (``ERR`` replies as ``error: ...``).  Local words: ``auth`` asks for
+the token without echoing it (or takes ``--token-file`` / ``$PYRT_TOKEN`` at
+start), ``exit`` or end of input leaves (the robot keeps running: leaving a
+monitoring session stops nothing; type ``stop`` for that, which any client
+may).  On a terminal there is history, Tab completion from the server's own
+``help`` (its words, objects and their commands), and a live status line
+from a second connection subscribed at ``--hz``; piped, it runs the lines as
+a script and prints no status line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import getpass
+import sys
+import threading
+from typing import Any, TextIO
+
+from pyrt.cli._serve import read_token
+from pyrt.client import Client, ServerError, parse_address
+from pyrt.console import Console
+
+__all__ = ["RemoteShell", "add_parser", "run"]
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "connect",
+        help="an interactive console on a served robot (pyrt gripper|manipulator --serve)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("address", metavar="[HOST:]PORT", help="the server (default host 127.0.0.1)")
+    p.add_argument("--token-file", metavar="FILE",
+                   help="AUTH with the token in FILE at start (default: $PYRT_TOKEN if set)")
+    p.add_argument("--hz", type=float, default=4.0, metavar="HZ",
+                   help="status line refresh on a terminal (default 4; 0: no status line)")
+    p.add_argument("--timeout", type=float, default=600.0, metavar="S",
+                   help="seconds to wait for a reply (default 600: a 'wait' may be long)")
+    p.set_defaults(run=run)
+
+
+class RemoteShell:
+    """The console interpreter of a connection: lines go to the server."""
+
+    def __init__(self, client: Client, stdout: TextIO, name: str):
+        self.client = client
+        self.stdout = stdout
+        self.prompt = f"{name}> "
+        self._table: dict[str, Any] | None = None
+
+    def say(self, text: str) -> None:
+        self.stdout.write(text + "\n")
+
+    def onecmd(self, line: str) -> bool:
+        """Send one line; True when the session ends (``exit``, ``QUIT``, server gone)."""
+        text = line.strip()
+        if not text:
+            return False
+        word = text.split()[0].lower()
+        if word in ("exit", "quit") and len(text.split()) == 1:
+            return True  # leaving a remote session stops nothing
+        if word == "auth" and len(text.split()) == 1:
+            token = getpass.getpass("token: ")
+            text = f"AUTH {token}"
+        try:
+            reply = self.client.request(text)
+        except (OSError, TimeoutError, ServerError) as exc:
+            self.say(f"error: the connection failed: {exc}")
+            return True
+        for out in reply.lines:
+            self.say(out)
+        if not reply.ok:
+            self.say(f"error: {reply.code} {reply.text}".rstrip())
+        elif text.upper().startswith("AUTH "):
+            self.say("privileged: every command is accepted")
+        return False
+
+    def completions(self) -> dict[str, Any]:
+        """The completion table, from the server's ``help`` and ``help OBJECT`` (once)."""
+        if self._table is None:
+            self._table = self._read_table()
+        return self._table
+
+    def _read_table(self) -> dict[str, Any]:
+        table: dict[str, Any] = {"auth": None, "exit": None}
+        try:
+            lines = self.client.command("help")
+        except (OSError, TimeoutError, ServerError):
+            return table
+        objects: list[str] = []
+        section = ""
+        for line in lines:
+            if not line.startswith(" "):
+                section = line.split()[0].rstrip(":") if line.split() else ""
+                continue
+            if section == "objects":
+                objects.extend(line.split())
+            elif section == "words":
+                table[line.split()[0].rstrip(":")] = None
+        for obj in objects:
+            try:
+                verbs = self.client.command(f"help {obj}")
+            except (OSError, TimeoutError, ServerError):
+                verbs = []
+            table[obj] = {v: None for v in (_verb(obj, ln) for ln in verbs) if v} or None
+        table["help"] = {name: None for name in table if name not in ("auth", "exit")}
+        return table
+
+
+def _verb(obj: str, line: str) -> str | None:
+    """The command a line of ``help OBJECT`` describes (``  up DIST: ...`` is
+    ``up``; ``  sim object MM: ...`` is ``object``), or None."""
+    words = line.split()
+    if not line.startswith("  ") or not words or words[0] == "signals:":
+        return None
+    if words[0].rstrip(":").lower() == obj.lower():  # the usage repeats the object
+        if words[0].endswith(":") or len(words) < 2:
+            return None  # the object alone (its show)
+        return words[1].rstrip(":")
+    return words[0].rstrip(":")
+
+
+class _StatusWatch:
+    """A second connection subscribed to the status; the latest line for the toolbar."""
+
+    def __init__(self, host: str, port: int, hz: float):
+        self.line = "connecting ..."
+        self._client = Client(host, port, timeout_s=max(5.0, 3.0 / hz))
+        self._client.command(f"SUBSCRIBE {hz:g}")
+        self._thread = threading.Thread(target=self._read, name="pyrt-connect-status",
+                                         daemon=True)
+        self._thread.start()
+
+    def _read(self) -> None:
+        for status in self._client.statuses(None):
+            self.line = status.raw.removeprefix("STATUS ").strip()
+        self.line = "status: the server stopped sending"
+
+    def close(self) -> None:
+        self._client.close()
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        host, port = parse_address(args.address)
+    except ValueError as exc:
+        print(f"pyrt connect: {exc}", file=sys.stderr)
+        return 2
+    if args.hz < 0 or args.hz > 50:
+        print(f"pyrt connect: --hz must be 0..50, got {args.hz:g}", file=sys.stderr)
+        return 2
+    token = read_token(args.token_file)
+    try:
+        client = Client(host, port, timeout_s=args.timeout)
+    except (OSError, TimeoutError, ServerError) as exc:
+        print(f"pyrt connect: {host}:{port}: {exc}", file=sys.stderr)
+        return 1
+    watch: _StatusWatch | None = None
+    try:
+        words = client.greeting.split()  # "pyrt 0.1.0 gripper server; ..."
+        name = words[2] if len(words) > 2 and words[0] == "pyrt" else f"{host}:{port}"
+        shell = RemoteShell(client, sys.stdout, name)
+        print(f"connected to {host}:{port}: {client.greeting}; 'exit' leaves "
+              "(the robot keeps running), 'stop' stops it", flush=True)
+        if token is not None:
+            shell.onecmd(f"AUTH {token}")
+        console = Console(shell)
+        if console.interactive() and args.hz > 0:
+            try:
+                watch = _StatusWatch(host, port, args.hz)
+                console.status = lambda: watch.line if watch is not None else ""
+                console.status_period_s = min(1.0, 1.0 / args.hz)
+            except (OSError, TimeoutError, ServerError) as exc:
+                print(f"(no status line: {exc})", flush=True)
+        return console.run()
+    finally:
+        if watch is not None:
+            watch.close()
+        client.close()
