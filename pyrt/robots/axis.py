@@ -37,6 +37,7 @@ from pyrt.devices.loadcell import Loadcell
 from pyrt.devices.motor import STEP_MODE, VELOCITY_MODE, Motor
 from pyrt.errors import CommandError, ConfigError, PyrtError
 from pyrt.robots.av import AV
+from pyrt.tasks.axis_poll import POLYAXIS, STANDALONE
 
 if TYPE_CHECKING:
     from pyrt.db import AxisRecord, Station
@@ -69,8 +70,6 @@ HISTORY = 16
 TRACKING_CHECK = 2.0
 TRACKING_MIN_FRACTION = 0.5
 
-STANDALONE = "standalone"
-POLYAXIS = "polyaxis"
 
 class TrackingError(PyrtError):
     """The encoder does not follow the motor: a stalled motor or a slipping encoder.

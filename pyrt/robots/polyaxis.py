@@ -1,6 +1,7 @@
 """Co-ordinated control of the ropes: the PolyAxis of 000, section 5.
 
-Every control poll (:meth:`PolyAxis.poll`, the polyaxis-poll task):
+Every control poll (the polyaxis-poll task, :mod:`pyrt.tasks.polyaxis_poll`,
+which :meth:`PolyAxis.tasks` declares beside axis-poll):
 
 1. each Axis's tension and stretch-corrected length are read;
 2. ropes that bear on the neck ring get their contact point as effective top
@@ -54,6 +55,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Generator, Sequence
+from functools import partial
 from pathlib import Path
 from typing import TextIO
 
@@ -76,9 +78,10 @@ from pyrt.robots.av import AV
 from pyrt.robots.axis import POLYAXIS, Axis
 from pyrt.robots.paths import VIA_BELOW, Hare, HarePath, hare_path_record, plan_segments
 from pyrt.robots.stops import SAFETY_STOPS, StopCheck, StopReason, StopRecord
-from pyrt.scheduler import Job
+from pyrt.scheduler import Job, Task
 from pyrt.scheduler.motion import MotionExecutor, MotionRecord, MotionType, get_motion_type
 from pyrt.scheduler.runner import MotionQueue
+from pyrt.tasks import axis_poll, polyaxis_poll
 
 __all__ = [
     "GRAVITY",
@@ -307,7 +310,7 @@ class PolyAxis(Component):
         self.moves = 0
         self.polls = 0
         self.now_s = 0.0
-        self._last_poll_s: float | None = None
+        self.last_poll_s: float | None = None
         #: Called with (cause, source) for a safety stop: the ready queue's trip.
         self.on_fault: Callable[[str, str], object] | None = None
         #: Called with (StopRecord) after every stop.
@@ -333,7 +336,9 @@ class PolyAxis(Component):
         #: Where the state log goes (one line at a time), or None.
         self.log: Callable[[str], None] | None = None
         self.debug = False
-        self._debug_next = 0.0
+        self.debug_next = 0.0
+        #: (polyaxis-poll, axis-poll) periods in queue checks (set_task_periods).
+        self.task_periods: tuple[int, int] | None = None
 
     @classmethod
     def from_record(cls, record, axes: Sequence[Axis], av: AV, **kw) -> PolyAxis:
@@ -780,6 +785,31 @@ class PolyAxis(Component):
         """A move is in progress."""
         return self.active
 
+    # -- the tasks (pyrt.tasks: polyaxis_poll, axis_poll) ----------------------------
+
+    def set_task_periods(self, poll_checks: int, axis_poll_checks: int) -> None:
+        """The periods of polyaxis-poll and axis-poll in queue checks (1..255),
+        from the control and axis poll periods and the station's tick."""
+        for label, n in (("poll_checks", poll_checks), ("axis_poll_checks", axis_poll_checks)):
+            if not 1 <= n <= 255:
+                raise ValueError(f"{label} must be 1..255 queue checks, got {n}")
+        self.task_periods = (int(poll_checks), int(axis_poll_checks))
+
+    def tasks(self) -> list[Task]:
+        """POLYAXIS (polyaxis-poll, 0100) and AXES (axis-poll over the axes under
+        standalone control, 0101), each first run one period after it is
+        registered; the periods are :meth:`set_task_periods`'."""
+        if self.task_periods is None:
+            raise ConfigError(f"polyaxis {self.name}: the task periods are not set "
+                              "(set_task_periods)")
+        poll, axes = self.task_periods
+        return [
+            Task(polyaxis_poll.NAME, polyaxis_poll.ADDRESS,
+                 partial(polyaxis_poll.polyaxis_poll, self), poll, first=poll, timed=True),
+            Task(axis_poll.NAME, axis_poll.ADDRESS, partial(axis_poll.axis_poll, self.axes),
+                 axes, first=axes, timed=True),
+        ]
+
     # -- the control poll ------------------------------------------------------------
 
     def measure(self) -> None:
@@ -794,27 +824,19 @@ class PolyAxis(Component):
         self.position = (x, y, z)
         self.net_force = (fx, fy, fz)
 
-    def poll(self, now_s: float) -> None:
-        """One control poll (see the module text)."""
-        self.now_s = now_s
-        last = self._last_poll_s
-        dt = self.poll_s if last is None else max(0.0, now_s - last)
-        self._last_poll_s = now_s
-        self.polls += 1
-        self.dt = dt
-        try:
-            self.measure()
-        except NativeError as exc:
-            # The lengths no longer fix a position (a rope set to nonsense by
-            # hand, a broken encoder): keep the last position, refuse moves;
-            # during a move it is a fault of the whole manipulator.
-            self.position_error = f"position finder failed: {exc}"
-            if self.active:
-                self.halt(StopReason.FAULT, self.position_error)
-                if self.on_fault is not None:
-                    self.on_fault(self.position_error, self.name)
-            return
-        self.position_error = None
+    def position_lost(self, cause: str) -> None:
+        """The position finder failed (``cause``): keep the last position, refuse
+        moves; during a move it is a fault of the whole manipulator."""
+        self.position_error = cause
+        if self.active:
+            self.halt(StopReason.FAULT, cause)
+            if self.on_fault is not None:
+                self.on_fault(cause, self.name)
+
+    def step_motion(self, now_s: float) -> None:
+        """The motion executor's turn in the poll: start the next queued motion
+        record between moves, step the running one (it sets the hare), check
+        a plug-in motion's hare."""
         ex = self.executor
         if ex.current is not None or (self.motion is not None and len(self.motion)):
             if ex.current is None:  # a new motion sets the hare in its first step
@@ -831,14 +853,6 @@ class PolyAxis(Component):
                 why = self._hare_refusal(self.hare_position)
                 if why is not None:
                     self._fault(f"motion {self.running.name} {why}")
-        if self.active:
-            self._drive(now_s, dt)
-        for a in self.axes:
-            if a.mode == POLYAXIS:
-                a.encoder.poll(now_s)
-        if self.debug and now_s >= self._debug_next and self.stdout is not None:
-            self._debug_next = now_s + 1.0
-            self.stdout.write(self.status_line() + "\n")
 
     def settled_at_turn(self) -> bool:
         """The source has come to rest at the neck turn (the hare may go on)."""
@@ -892,7 +906,8 @@ class PolyAxis(Component):
             length += math.sqrt(dx * dx + dy * dy + dz * dz)
         return length
 
-    def _drive(self, now_s: float, dt: float) -> None:
+    def drive_motors(self, now_s: float, dt: float) -> None:
+        """During a move: error signals, the batched fuzzy step, every motor, the stops."""
         stops = self.stops
         assert stops is not None
         hp = self.hare_position
