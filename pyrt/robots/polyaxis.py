@@ -699,9 +699,9 @@ class PolyAxis(Component):
     def _engage(self, motion: MotionType, tgt: Vec | None) -> None:
         """A motion has started: every Axis under PolyAxis control, the stop
         conditions armed (tension stops on again), the hare where the source is."""
-        for a, length in zip(self.axes, self.lengths, strict=True):
+        for a in self.axes:
             if a.mode != POLYAXIS:
-                a.polyActivate(length if self.polls else a.getLength())
+                a.polyActivate()
         hare = getattr(motion, "hare", None)
         self.hare = hare if isinstance(hare, Hare) else None
         if self.hare_position is None:  # not stepped yet: the hare starts at the source
