@@ -77,6 +77,7 @@ from pyrt.robots._neck import NeckRing, ring_contact
 from pyrt.robots.av import AV
 from pyrt.robots.axis import POLYAXIS, Axis
 from pyrt.robots.paths import VIA_BELOW, Hare, HarePath, hare_path_record, plan_segments
+from pyrt.robots.pattern import log_writer, read_pattern, run_pattern
 from pyrt.robots.stops import SAFETY_STOPS, StopCheck, StopReason, StopRecord
 from pyrt.scheduler import Job, Task
 from pyrt.scheduler.motion import MotionExecutor, MotionRecord, MotionType, get_motion_type
@@ -87,9 +88,7 @@ __all__ = [
     "GRAVITY",
     "MIN_TOP_SEGMENT",
     "NEAR_END_CM",
-    "PATTERN_PAUSE_S",
     "PolyAxis",
-    "parse_pattern",
 ]
 
 GRAVITY = 9.80665
@@ -97,12 +96,6 @@ GRAVITY = 9.80665
 NEAR_END_CM = 10.0
 #: A target closer than this to a top pulley (cm) is refused.
 MIN_TOP_SEGMENT = 5.0
-#: 000, section 5: the pattern pauses "about 10 seconds" at each endpoint.
-PATTERN_PAUSE_S = 10.0
-
-#: Longest pattern file read (bytes); a pattern is a few hundred endpoints.
-MAX_PATTERN_BYTES = 1 << 20
-
 Vec = tuple[float, float, float]
 _FI = FuzzyInput
 
@@ -113,56 +106,6 @@ def _dist(a: Sequence[float], b: Sequence[float]) -> float:
 
 def _cm(axis: str) -> Callable[[str], float]:
     return finite(f"{axis} in cm")
-
-
-def read_pattern(text: str) -> tuple[Path, list[Vec], str]:
-    """The grammar of ``pattern FILE``: the file read and checked on the
-    console's side (never in the loop thread); its log file made writable."""
-    log, points = parse_pattern(text)
-    try:
-        log.parent.mkdir(parents=True, exist_ok=True)
-        log.open("a", encoding="utf-8").close()
-    except OSError as exc:
-        raise CommandError(f"pattern: cannot write the log {str(log)!r}: "
-                           f"{exc.strerror}") from None
-    return log, points, text
-
-
-def parse_pattern(path: str | Path) -> tuple[Path, list[Vec]]:
-    """A pattern file: first line the log file (relative to the pattern file),
-    then one endpoint ``x y z`` per line (blank lines and ``//`` comments skipped)."""
-    p = Path(path)
-    try:
-        if not p.is_file():
-            raise CommandError(f"pattern: {str(p)!r} is not a regular file")
-        if p.stat().st_size > MAX_PATTERN_BYTES:
-            raise CommandError(f"pattern: {str(p)!r} is larger than "
-                               f"{MAX_PATTERN_BYTES // 1024} KiB")
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CommandError(f"pattern: cannot read {str(p)!r}: {exc}") from None
-    lines = [(n, ln.split("//", 1)[0].strip()) for n, ln in enumerate(text.splitlines(), 1)]
-    lines = [(n, ln) for n, ln in lines if ln]
-    if not lines:
-        raise CommandError(f"pattern {p}: empty; the first line names the log file")
-    log = Path(lines[0][1])
-    if not log.is_absolute():
-        log = p.parent / log
-    points: list[Vec] = []
-    for n, ln in lines[1:]:
-        parts = ln.replace(",", " ").split()
-        if len(parts) != 3:
-            raise CommandError(f"pattern {p}:{n}: expected an endpoint 'x y z', got {ln!r}")
-        try:
-            v = tuple(float(c) for c in parts)
-        except ValueError:
-            raise CommandError(f"pattern {p}:{n}: not numbers: {ln!r}") from None
-        if not all(math.isfinite(c) for c in v):
-            raise CommandError(f"pattern {p}:{n}: endpoint must be finite: {ln!r}")
-        points.append(v)  # type: ignore[arg-type]
-    if not points:
-        raise CommandError(f"pattern {p}: no endpoints after the log file line")
-    return log, points
 
 
 class PolyAxis(Component):
@@ -323,6 +266,9 @@ class PolyAxis(Component):
         #: The running (or last) pattern job and its log file.
         self.pattern_job: Job | None = None
         self.pattern_log: Path | None = None
+        #: How the pattern log is written: ``"thread"`` (off the loop thread) or
+        #: ``"sync"`` (at once: deterministic, for simulated-clock runs).
+        self.pattern_writer = "thread"
         for i, a in enumerate(axes):
             a.group = self
             a.group_index = i
@@ -560,7 +506,9 @@ class PolyAxis(Component):
         if self.spawn is None:
             raise CommandError(f"{self.name} pattern: no loop to run it on")
         self.pattern_log = log
-        self.pattern_job = self.spawn("pattern", self.pattern(points, log, lambda: self.now_s))
+        kind = self.pattern_writer
+        self.pattern_job = self.spawn("pattern", run_pattern(
+            self, points, lambda: log_writer(log, kind), lambda: self.now_s))
         return f"{self.name}: pattern {shown} started; log {log}"
 
     def pattern_job_cancel(self) -> None:
@@ -955,61 +903,6 @@ class PolyAxis(Component):
             if n < 1e-3:
                 break
         return (float(x[0]), float(x[1]), float(x[2]))
-
-    # -- patterns ------------------------------------------------------------------------
-
-    def pattern(self, points: Sequence[Vec], log_path: Path | str,
-                time_s: Callable[[], float], pause_s: float = PATTERN_PAUSE_S
-                ) -> Generator[None, None, list[StopRecord | str]]:
-        """A foreground job: move to each endpoint, pause, go on; the log file
-        records where each move stopped and why.  Returns the records."""
-        path = Path(log_path)
-        results: list[StopRecord | str] = []
-
-        def write(line: str) -> None:
-            with open(path, "a", encoding="utf-8") as fh:
-                fh.write(line + "\n")
-                fh.flush()
-
-        def ended(k: int, p: Vec) -> StopRecord | None:
-            rec = self.last_stop
-            x = self.position
-            write(f"{k} {p[0]:g} {p[1]:g} {p[2]:g} {rec.reason.value if rec else 'STOP'} "
-                  f"at {x[0]:.3f} {x[1]:.3f} {x[2]:.3f} t={time_s():.2f} "
-                  f"{rec.detail if rec else ''}")
-            results.append(rec if rec is not None else "STOP")
-            return rec
-
-        write(f"# pattern of {len(points)} endpoints, {self.name}")
-        k, moving = 0, False
-        try:
-            for k, p in enumerate(points, 1):
-                try:
-                    self.to(p)
-                except CommandError as exc:
-                    write(f"{k} {p[0]:g} {p[1]:g} {p[2]:g} REFUSED {exc}")
-                    results.append(f"REFUSED {exc}")
-                    continue
-                moving = True
-                while self.active:
-                    yield
-                moving = False
-                rec = ended(k, p)
-                if rec is not None and rec.reason not in (StopReason.ENDPOINT_STOP,
-                                                          StopReason.STUCK_STOP):
-                    write(f"# pattern abandoned after endpoint {k}: {rec.reason.value}")
-                    return results
-                until = time_s() + pause_s
-                while time_s() < until:
-                    yield
-        except GeneratorExit:
-            # a stop or a fault ended the pattern: the log says where and why
-            rec = ended(k, points[k - 1]) if moving else self.last_stop
-            why = rec.reason.value if rec is not None else "STOP"
-            write(f"# pattern abandoned after endpoint {k}: {why}")
-            raise
-        write("# pattern complete")
-        return results
 
     # -- logging and status --------------------------------------------------------------
 

@@ -258,6 +258,7 @@ class ManipulatorStation(Station):
         # The motion queue the mailbox fills (the station's runner takes it).
         pa.motion = self.motion
         pa.spawn = self.loop.spawn
+        pa.pattern_writer = "sync" if self.loop.clock.virtual else "thread"  # the pattern log
 
         # Level 4+: the ready queue and its tasks; write-back.
         self.queue = ReadyQueue(capacity=4, divisor=1, name=pa.name)
