@@ -136,13 +136,14 @@ class GripperController(Component, CommandLetters):
 
     A :class:`~pyrt.component.Component`: its signals are the RAM variables
     of Appendix A by name, its commands the ``CMD:`` letters, its child the
-    monitor, its reflex nulls the drive current and clears the drive and jog
-    bits.
+    monitor, its tasks the three self-scheduling routines (:meth:`tasks`),
+    its reflex nulls the drive current and clears the drive and jog bits.
 
     ``cpu`` must have the gripper board mapped in its external data space
     (:class:`~pyrt.boards.gripper.SimGripperBoard` or a real one).  Call
-    :meth:`attach` to put the ready queue and the stall watchdog on a loop
-    (after the plant), then :meth:`power_up`, then :meth:`start_init`.
+    :meth:`attach` to put the ready queue (with the tasks) and the stall
+    watchdog on a loop (after the plant), then :meth:`power_up`, then
+    :meth:`start_init`.
     """
 
     def __init__(self, cpu: I8031, name: str = "gripper", stall_limit_ns: int = 1_000_000_000):

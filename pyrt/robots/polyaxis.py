@@ -46,6 +46,10 @@ axes back to standalone control.  The safety stops (tension, net force) are
 also faults: ``on_fault`` (the ready queue's ``trip``) is called, the
 reflex runs, and the manipulator stays stopped until acknowledged.
 
+Patterns (``pattern FILE``: endpoint after endpoint, with a log) run as a
+foreground job from :mod:`pyrt.robots.pattern`; the log is written through
+a writer, off the loop thread unless the clock is simulated.
+
 The corrected length of 000 is the measured length less the rope's length
 residual, so that errors of the position estimate do not appear as error
 terms; errors are actual - desired.
@@ -771,6 +775,11 @@ class PolyAxis(Component):
             tens, raw, self.lengths)
         self.position = (x, y, z)
         self.net_force = (fx, fy, fz)
+
+    def poll(self, now_s: float) -> None:
+        """One control poll at ``now_s`` seconds, by hand (the polyaxis-poll
+        routine's body, :func:`pyrt.tasks.polyaxis_poll.control_poll`)."""
+        polyaxis_poll.control_poll(self, now_s)
 
     def position_lost(self, cause: str) -> None:
         """The position finder failed (``cause``): keep the last position, refuse

@@ -29,7 +29,7 @@ from typing import Any, Protocol, TextIO
 from pyrt.errors import NativeError
 from pyrt.tasks.axis_poll import POLYAXIS
 
-__all__ = ["ADDRESS", "NAME", "PolledPolyAxis", "polyaxis_poll"]
+__all__ = ["ADDRESS", "NAME", "PolledPolyAxis", "control_poll", "polyaxis_poll"]
 
 #: The routine's address on the manipulator's ready queue, and its name there.
 ADDRESS = 0x0100
@@ -63,8 +63,12 @@ class PolledPolyAxis(Protocol):
 
 
 def polyaxis_poll(pa: PolledPolyAxis, now_ns: int) -> None:
-    """One control poll of ``pa`` at the tick time ``now_ns`` (see the module text)."""
-    now_s = now_ns * 1e-9
+    """The routine: one control poll of ``pa`` at the tick time ``now_ns``."""
+    control_poll(pa, now_ns * 1e-9)
+
+
+def control_poll(pa: PolledPolyAxis, now_s: float) -> None:
+    """One control poll of ``pa`` at ``now_s`` seconds (see the module text)."""
     pa.now_s = now_s
     last = pa.last_poll_s
     dt = pa.poll_s if last is None else max(0.0, now_s - last)
