@@ -100,6 +100,7 @@ GRAVITY = 9.80665
 NEAR_END_CM = 10.0
 #: A target closer than this to a top pulley (cm) is refused.
 MIN_TOP_SEGMENT = 5.0
+
 Vec = tuple[float, float, float]
 _FI = FuzzyInput
 
