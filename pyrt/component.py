@@ -12,6 +12,9 @@ declares, once,
   whether it moves, whether it is allowed while the robot is faulted); help,
   completion and the server's privileges are derived from these records;
 * its **children** (an Axis has a Motor, an Encoder and a Loadcell);
+* its **tasks**: the self-scheduling routines it runs on a ready queue
+  (:class:`pyrt.scheduler.Task` records: name, address, period, first run,
+  body); the station registers every component's tasks from the tree;
 * its **reflex**: what "stop everything now" means for it (a Motor disarms
   its channel and turns its windings off; the gripper nulls its drive
   current).  The station runs every component's reflex in the tick that
@@ -38,6 +41,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from pyrt.errors import CommandError
+from pyrt.scheduler.task import Task
 from pyrt.scope import Source
 
 __all__ = [
@@ -345,6 +349,10 @@ class Component:
 
     def children(self) -> list[Component]:
         """The components it is made of."""
+        return []
+
+    def tasks(self) -> list[Task]:
+        """The self-scheduling routines it runs on a ready queue (none by default)."""
         return []
 
     def reflex(self) -> None:

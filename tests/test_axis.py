@@ -144,27 +144,18 @@ def test_length_tracks_the_real_rope(station):
 
 
 def test_polyaxis_hooks(station):
-    """polyActivate: VELOCITY_MODE on standby, commands refused, stop still accepted."""
+    """polyActivate: VELOCITY_MODE on standby, commands refused, stop still accepted; polyDeactivate gives the axis back."""
     r = Rig(station)
     ax = r.axis
-    ax.polyActivate(ax.getLength())
+    ax.polyActivate()
     assert ax.mode == POLYAXIS
     assert ax.motor.mode == VELOCITY_MODE and ax.motor.state == STANDBY
     with pytest.raises(CommandError, match="PolyAxis"):
         ax.up(1)
-    ax.set_errors(0.5, -2.0)
-    ax.set_velocity(-1.0)
+    ax.motor.set_desired_velocity(-1.0)
     r.loop.run(50)
-    assert len(ax.history) == 16
-    assert ax.history[-1].error_length == 0.5
     assert ax.motor.velocity == -1.0
-    assert ax.error_rates() == (0.0, 0.0)  # errors held constant
-    ax.set_errors(1.5, -2.0)
-    r.loop.run(1)
-    rate_l, rate_t = ax.error_rates()
-    assert rate_l == pytest.approx(1.0 / 0.015)
-    assert rate_t == 0.0
-    assert ax.last_dv() == 0.0
+    assert ax.signal("errorLength").read() == 0.0  # no PolyAxis: no error signal
     ax.stop()
     assert not r.tio.armed(ax.motor.channel)
     ax.polyDeactivate()
@@ -201,24 +192,6 @@ def test_zero_resets_the_counter(station):
     assert r.axis.encoder.count() != 0
     r.axis.zero()
     assert r.axis.encoder.count() == 0
-
-
-def test_length_write_back_cadence(station):
-    """LENGTH is written every second while moving and every ten seconds when still."""
-    saved = []
-    r = Rig(station, persist=lambda t, n, k, v: saved.append((t, n, k, v)))
-    lengths = [s for s in saved if s[2] == "LENGTH"]
-    assert len(lengths) == 1  # the first poll
-    r.axis.down(4)
-    r.loop.run(3000)
-    moving = [s for s in saved if s[2] == "LENGTH"]
-    assert len(moving) >= 3
-    r.finish()
-    saved.clear()
-    r.loop.run(25_000)
-    still = [s for s in saved if s[2] == "LENGTH"]
-    assert len(still) <= 3  # at most one every 10 s (and only values that changed)
-    assert all(s[1] == "AXIS0" for s in still)
 
 
 def test_bottom_goes_through_vtog(station):

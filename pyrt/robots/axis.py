@@ -13,19 +13,20 @@ hands them to the Motor; within :data:`END_ZONE` (1 cm) of the end it stops
 recalculating and lets the Motor finish the move.
 
 PolyAxis control (``VELOCITY_MODE``) is driven from above:
-:meth:`Axis.polyActivate` puts the Motor in velocity mode on standby, sets
-the expected length, refuses keyboard commands and clears the length and
-tension histories the fuzzy rules differentiate; the PolyAxis then sets
-:attr:`Axis.error_length` / :attr:`Axis.error_tension` and the velocity
-(:meth:`Axis.set_velocity`) each poll.
+:meth:`Axis.polyActivate` puts the Motor in velocity mode on standby and
+refuses keyboard commands; the PolyAxis then computes the error signals
+and sets the Motor's velocity each poll (its rates of change are kept in
+the C controller, :class:`pyrt.native.PolyControl`), and polls the axis's
+encoder; axis-poll (:mod:`pyrt.tasks.axis_poll`) leaves the axis alone
+until :meth:`Axis.polyDeactivate` hands it back.
+
+LENGTH write-back is the station's (:class:`pyrt.tasks.WriteBack`).
 """
 
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, TextIO
 
 from pyrt.boards.dataconcentrator import DataConcentrator
@@ -34,34 +35,26 @@ from pyrt.component import Arg, Component, Signal, command
 from pyrt.devices._args import parse_number
 from pyrt.devices.encoder import Encoder
 from pyrt.devices.loadcell import Loadcell
-from pyrt.devices.motor import STEP_MODE, VELOCITY_MODE, Motor
+from pyrt.devices.motor import STEP_MODE, Motor
 from pyrt.errors import CommandError, ConfigError, PyrtError
 from pyrt.robots.av import AV
+from pyrt.tasks.axis_poll import POLYAXIS, STANDALONE
 
 if TYPE_CHECKING:
     from pyrt.db import AxisRecord, Station
 
 __all__ = [
     "END_ZONE",
-    "HISTORY",
-    "LENGTH_WRITE_MOVING",
-    "LENGTH_WRITE_STATIONARY",
     "POLYAXIS",
     "STANDALONE",
     "TRACKING_CHECK",
     "TRACKING_MIN_FRACTION",
     "Axis",
-    "AxisSample",
     "TrackingError",
 ]
 
 #: 000, section 6: within 1 cm of the end the Motor finishes on its own.
 END_ZONE = 1.0
-#: 000, section 6: LENGTH is rewritten every second moving, every ten stationary.
-LENGTH_WRITE_MOVING = 1.0
-LENGTH_WRITE_STATIONARY = 10.0
-#: Samples kept for the damping rules' rates of change.
-HISTORY = 16
 
 #: Every TRACKING_CHECK cm of motor travel the encoder must have seen at least
 #: TRACKING_MIN_FRACTION of it, in the same sense; otherwise the motor has
@@ -69,8 +62,6 @@ HISTORY = 16
 TRACKING_CHECK = 2.0
 TRACKING_MIN_FRACTION = 0.5
 
-STANDALONE = "standalone"
-POLYAXIS = "polyaxis"
 
 class TrackingError(PyrtError):
     """The encoder does not follow the motor: a stalled motor or a slipping encoder.
@@ -80,16 +71,8 @@ class TrackingError(PyrtError):
     """
 
 
-@dataclass(frozen=True)
-class AxisSample:
-    """One poll's state, kept for the fuzzy rules' rates of change."""
-
-    time: float
-    length: float
-    tension: float
-    error_length: float
-    error_tension: float
-    velocity: float
+def _zero() -> float:
+    return 0.0
 
 
 def _moving(length: float) -> str:
@@ -101,8 +84,7 @@ class Axis(Component):
 
     ``top`` and ``offset`` are global / carriage co-ordinates; ``bottom`` is in
     vessel co-ordinates and is carried to global through ``av.vtog`` (when an
-    AV is given) before anything uses it.  ``persist(key, value)`` receives
-    the LENGTH write-back.
+    AV is given) before anything uses it.
     """
 
     def __init__(
@@ -118,8 +100,6 @@ class Axis(Component):
         bottom: Sequence[float] | None = None,
         av: AV | None = None,
         stretch: float = 2.0e-5,
-        stdout: TextIO | None = None,
-        persist: Callable[[str, float], None] | None = None,
     ):
         if not (math.isfinite(dead_length) and dead_length >= 0):
             raise ConfigError(f"axis {name}: DEADLENGTH must be >= 0 cm, got {dead_length!r}")
@@ -141,20 +121,9 @@ class Axis(Component):
         self.top = tuple(float(c) for c in top)
         self.offset = tuple(float(c) for c in offset)
         self.bottom_vessel = None if bottom is None else tuple(float(c) for c in bottom)
-        self.stdout = stdout
-        self.persist = persist
 
         self.mode = STANDALONE
         self.target: float | None = None
-        # PolyAxis hooks (the fuzzy rules' inputs)
-        self.expected_length: float | None = None
-        self.error_length = 0.0
-        self.error_tension = 0.0
-        self.history: deque[AxisSample] = deque(maxlen=HISTORY)
-
-        self._last_write: float | None = None
-        self._written: float | None = None
-        self._moving_since_write = False
         self._track_reset()
 
     @classmethod
@@ -173,8 +142,8 @@ class Axis(Component):
         """An Axis and its devices from a :class:`pyrt.db.AxisRecord` and its
         :class:`pyrt.db.Station`.  Sub-objects are named ``<name>Motor``,
         ``<name>Encoder``, ``<name>Loadcell`` (000, section 6).  ``persist(type,
-        db name, key, value)`` receives every write-back (LENGTH, ZEROLENGTH,
-        SLOPE/OFFSET)."""
+        db name, key, value)`` receives the devices' write-back (ZEROLENGTH,
+        SLOPE/OFFSET); LENGTH is the station's (:class:`pyrt.tasks.WriteBack`)."""
         mrec = station.motor_of(record)
         erec = station.encoder_of(record)
         lrec = station.loadcell_of(record)
@@ -194,19 +163,13 @@ class Axis(Component):
                                       write_back=put("ENCODER", erec.name, "ZEROLENGTH"))
         loadcell = Loadcell.from_record(lrec, dc, name=f"{name}Loadcell", stdout=stdout,
                                         write_back=put_cal if persist is not None else None)
-        length_put = put("AXIS", record.name, "LENGTH")
         return cls(
             name, motor, encoder, loadcell,
             dead_length=record.deadlength, top=record.top, offset=record.offset,
-            bottom=record.bottom, av=av, stretch=record.stretch, stdout=stdout,
-            persist=None if length_put is None else (lambda _k, v: length_put(v)),
+            bottom=record.bottom, av=av, stretch=record.stretch,
         )
 
     # -- geometry --------------------------------------------------------------------
-
-    @property
-    def central(self) -> bool:
-        return self.bottom_vessel is None
 
     @property
     def bottom(self) -> tuple[float, float, float] | None:
@@ -229,12 +192,6 @@ class Axis(Component):
             t = 0.0
         return self.encoder.length() * (1.0 + self.stretch * t) - self.dead_length
 
-    get_length = getLength
-
-    @property
-    def moving(self) -> bool:
-        return self.motor.running
-
     # -- the component contract ----------------------------------------------------------
 
     def children(self) -> list[Component]:
@@ -255,9 +212,10 @@ class Axis(Component):
                    "rope tension the controller acts on (loadcell)"),
             Signal("length", "cm", self._polled("lengths", self.getLength),
                    "rope length the controller acts on, stretch corrected"),
-            Signal.attr("errorLength", "cm", self, "error_length", "fuzzy input: length error"),
-            Signal.attr("errorTension", "N", self, "error_tension",
-                        "fuzzy input: tension error"),
+            Signal("errorLength", "cm", self._polled("error_lengths", _zero),
+                   "fuzzy input: length error (PolyAxis control; 0 standalone)"),
+            Signal("errorTension", "N", self._polled("error_tensions", _zero),
+                   "fuzzy input: tension error (PolyAxis control; 0 standalone)"),
             Signal.attr("velocity", "cm/s", self.motor, "velocity", "motor velocity"),
         ]
 
@@ -373,63 +331,23 @@ class Axis(Component):
 
     # -- PolyAxis hooks ---------------------------------------------------------------
 
-    def polyActivate(self, expected_length: float) -> None:
+    def polyActivate(self) -> None:
         """Hand the axis to PolyAxis control: Motor in VELOCITY_MODE on standby,
-        commands refused, histories cleared (000, section 5)."""
-        if not math.isfinite(expected_length):
-            raise CommandError(f"{self.name}: expected length must be finite")
+        commands refused (000, section 5)."""
         self.target = None
         self.motor.velocity_mode()
         self.mode = POLYAXIS
-        self.expected_length = float(expected_length)
-        self.error_length = 0.0
-        self.error_tension = 0.0
-        self.history.clear()
 
     def polyDeactivate(self) -> None:
         """Stop the motor and return the axis to standalone control."""
         self.motor.stop()
         self.motor.mode = STEP_MODE
         self.mode = STANDALONE
-        self.expected_length = None
-
-    def set_errors(self, error_length: float, error_tension: float) -> None:
-        """PolyAxis's errors for this axis (actual - desired; cm and N)."""
-        self.error_length = float(error_length)
-        self.error_tension = float(error_tension)
-
-    def set_velocity(self, v: float) -> None:
-        """Desired motor velocity (cm/s, positive pays out); VELOCITY_MODE only."""
-        if self.motor.mode != VELOCITY_MODE:
-            raise CommandError(f"{self.name}: set_velocity needs PolyAxis control")
-        self.motor.set_desired_velocity(v)
-
-    def error_rates(self) -> tuple[float, float]:
-        """(errorLengthVelocity cm/s, errorTensionVelocity N/s) over the kept history:
-        the damping rules' inputs (0 until two samples a poll apart exist)."""
-        h = self.history
-        if len(h) < 2:
-            return 0.0, 0.0
-        a, b = h[0], h[-1]
-        dt = b.time - a.time
-        if dt <= 0:
-            return 0.0, 0.0
-        return (b.error_length - a.error_length) / dt, (b.error_tension - a.error_tension) / dt
-
-    def last_dv(self) -> float:
-        """The velocity change of the last poll (cm/s): the ``dv`` rule's input."""
-        h = self.history
-        return h[-1].velocity - h[-2].velocity if len(h) >= 2 else 0.0
-
-    def change_velocity(self, dv: float) -> None:
-        if self.motor.mode != VELOCITY_MODE:
-            raise CommandError(f"{self.name}: change_velocity needs PolyAxis control")
-        self.motor.change_desired_velocity(dv)
 
     # -- polling -------------------------------------------------------------------------
 
     def poll(self, now_s: float) -> None:
-        """One poll: control, then the Motor, then the Encoder and write-back."""
+        """One poll: standalone control, then the Motor, then the Encoder."""
         length = self.getLength()
         m = self.motor
         if self.mode == STANDALONE and self.target is not None and m.running:
@@ -439,15 +357,11 @@ class Axis(Component):
                     m.set_desired_steps(m.steps_taken + round(abs(err) * m.steps_per_cm))
                 else:
                     m.set_desired_steps(m.steps_taken)
-        elif self.mode == POLYAXIS:
-            self.history.append(AxisSample(now_s, length, self.loadcell.tension(),
-                                           self.error_length, self.error_tension, m.velocity))
         m.poll()
         self._track()
         if self.mode == STANDALONE and self.target is not None and not m.running:
             self.target = None
         self.encoder.poll(now_s)
-        self._write_back(now_s, length)
 
     def _track_reset(self) -> None:
         self._track_steps = self.motor.position_steps
@@ -469,21 +383,3 @@ class Axis(Component):
                 f"{self.name}: the motor moved {moved:+.2f} cm but the encoder saw "
                 f"{seen:+.2f} cm: motor stall or encoder slip; motor stopped"
             )
-
-    def _write_back(self, now_s: float, length: float) -> None:
-        if self.persist is None:
-            return
-        moving = self.motor.running
-        self._moving_since_write |= moving
-        period = LENGTH_WRITE_MOVING if self._moving_since_write else LENGTH_WRITE_STATIONARY
-        if self._last_write is not None and now_s - self._last_write < period:
-            return
-        self._last_write = now_s
-        self._moving_since_write = moving
-        if length != self._written:
-            self._written = length
-            self.persist("LENGTH", length)
-
-    def describe(self) -> str:
-        return (f"{self.name}: length {self.getLength():.3f} cm tension {self.tension():.2f} N "
-                f"{self.mode} {self.motor.describe()}")

@@ -4,8 +4,10 @@ The 8031's on-chip RAM image *is* the controller's state: the ready queue
 lives in it (T at 2F, Q at 35, SYSCLKCNT/SYSCLKPD at 41/42), the three
 self-scheduling routines read their periods from it (43-45) and keep their
 variables in it (Appendix A), so whatever the monitor shows is the real
-state and whatever it changes takes effect.  The routines are registered at
-their EPROM addresses of Appendix B, so Q holds 04C2, 0473 and 0541.
+state and whatever it changes takes effect.  The routines' bodies live in
+:mod:`pyrt.tasks` (``sensors``, ``jawmove``, ``jawwatch``); the controller
+declares them (:meth:`GripperController.tasks`) at their EPROM addresses of
+Appendix B, so Q holds 04C2, 0473 and 0541.
 
 Everything here runs in the loop's thread: the routines from the ready
 queue, the encoder interrupt handlers from the board, the main-program
@@ -27,6 +29,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Generator
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 from pyrt.boards.gripper import (
@@ -35,9 +38,6 @@ from pyrt.boards.gripper import (
     LED_HI,
     LED_LO,
     P8155_CMD,
-    P8155_PA,
-    P8155_PB,
-    P8155_PC,
 )
 from pyrt.boards.i8031 import (
     COMMAND_CNT,
@@ -72,11 +72,12 @@ from pyrt.boards.i8031 import (
 )
 from pyrt.component import Component, Signal
 from pyrt.errors import CommandError
-from pyrt.native import excess128
 from pyrt.robots.gripper_commands import CommandLetters, GripperMonitor, parse_hex
-from pyrt.scheduler import ByteImage, ByteRef, Job, Loop, ReadyQueue
+from pyrt.scheduler import ByteImage, ByteRef, Job, Loop, ReadyQueue, Task, install
 from pyrt.scheduler.motion import MotionRecord, MotionType, register_motion_type
 from pyrt.scope import Source
+from pyrt.tasks import jawmove, jawwatch, sensors
+from pyrt.tasks.jawmove import JOGSTALL, STOPBUMPS
 
 __all__ = [
     "ADDR_MVJAWS",
@@ -89,9 +90,9 @@ __all__ = [
 
 # Appendix B: EPROM addresses of the self-scheduling routines and the clock handler.
 ADDR_SYSCLK = 0x0295
-ADDR_MVJAWS = 0x04C2
-ADDR_SENSORS = 0x0473
-ADDR_WATCHJAW = 0x0541
+ADDR_MVJAWS = jawmove.ADDRESS  # 04C2
+ADDR_SENSORS = sensors.ADDRESS  # 0473
+ADDR_WATCHJAW = jawwatch.ADDRESS  # 0541
 
 # Appendix B schedule values, loaded into RAM at power-up.
 DEFAULT_SYSCLKPD = 0x04
@@ -100,14 +101,6 @@ DEFAULT_SENSORPD = 0x0A
 DEFAULT_WTCHJWSPD = 0x01
 #: 002: "a speed value of 7F is used" with the original worm/sector gears.
 DEFAULT_JSPEED = 0x7F
-#: Bumps after the stopped bit before a commanded move ends.  002 gives no
-#: number ("a positive value"); 4 MVJAWS periods are about 0.2 s at the
-#: defaults: long enough to finish a move that stopped just short.
-STOPBUMPS = 0x04
-#: 2C.5 (unused in 002): a jog held against a stop was cut off; the jog
-#: switch is ignored until it is released.  pyrt's addition, so that a held
-#: switch cannot keep current on a stalled motor.
-JOGSTALL = 5
 #: 8155 command: ports A, B and C all input, timer stopped.
 MODE_8155 = 0x00
 #: Queue checks fullopen and the calibration give the motor to get going
@@ -143,13 +136,14 @@ class GripperController(Component, CommandLetters):
 
     A :class:`~pyrt.component.Component`: its signals are the RAM variables
     of Appendix A by name, its commands the ``CMD:`` letters, its child the
-    monitor, its reflex nulls the drive current and clears the drive and jog
-    bits.
+    monitor, its tasks the three self-scheduling routines (:meth:`tasks`),
+    its reflex nulls the drive current and clears the drive and jog bits.
 
     ``cpu`` must have the gripper board mapped in its external data space
     (:class:`~pyrt.boards.gripper.SimGripperBoard` or a real one).  Call
-    :meth:`attach` to put the ready queue and the stall watchdog on a loop
-    (after the plant), then :meth:`power_up`, then :meth:`start_init`.
+    :meth:`attach` to put the ready queue (with the tasks) and the stall
+    watchdog on a loop (after the plant), then :meth:`power_up`, then
+    :meth:`start_init`.
     """
 
     def __init__(self, cpu: I8031, name: str = "gripper", stall_limit_ns: int = 1_000_000_000):
@@ -168,13 +162,6 @@ class GripperController(Component, CommandLetters):
             image=ByteImage(self.ram, T, Q, SYSCLKCNT, SYSCLKPD, sema=(FLAGS, SEMA)),
             name=name,
         )
-        ram = self.ram
-        # the periods are read from RAM at every reschedule (monitor C 43 .. takes effect)
-        self.queue.add_periodic(ADDR_MVJAWS, "MVJAWS", self.mvjaws, ByteRef(ram, MVJAWSPD))
-        self.queue.add_periodic(ADDR_SENSORS, "SENSORS", self.sensors, ByteRef(ram, SENSORPD))
-        self.queue.add_periodic(
-            ADDR_WATCHJAW, "WATCHJAW", self.watchjaw, ByteRef(ram, WTCHJWSPD)
-        )
         #: Encoder interrupts seen (a one-element list: the handlers' counter).
         self._pulse_cell = [0]
         self._isr_up = self._make_isr(+1)
@@ -192,8 +179,14 @@ class GripperController(Component, CommandLetters):
 
     # -- wiring ------------------------------------------------------------------
 
-    def attach(self, loop: Loop) -> None:
-        """Attach the clock interrupt (ready queue) and the stall watchdog to ``loop``."""
+    def attach(self, loop: Loop, *, register: bool = True) -> None:
+        """Attach the clock interrupt (ready queue) and the stall watchdog to ``loop``.
+
+        With ``register`` (a controller used on its own) its :meth:`tasks` go
+        on its ready queue too; a station registers them from its component
+        tree instead and passes ``register=False``."""
+        if register:
+            install(self.queue, self.tasks())
         self._loop = loop
         loop.attach(self.queue, name="SYSCLK")
         loop.attach(self.watchdog, name="stall watchdog")
@@ -282,98 +275,21 @@ class GripperController(Component, CommandLetters):
 
         return isr
 
-    # -- the self-scheduling routines ------------------------------------------------
+    # -- the self-scheduling routines (pyrt.tasks: sensors, jawmove, jawwatch) --------
 
-    def sensors(self) -> None:
-        """SENSORS (0473): read the 8155 ports into 2D/2E, show them on the LEDs."""
+    def tasks(self) -> list[Task]:
+        """MVJAWS, SENSORS and WATCHJAW at their Appendix B addresses, their
+        periods read from RAM 43/44/45 at every reschedule (monitor ``C 43 ..``
+        takes effect); :meth:`power_up` schedules them, as 002's main program."""
         ram = self.ram
-        cpu = self.cpu
-        ram[PROX] = cpu.movx_read(P8155_PA)
-        ram[OTHER] = cpu.movx_read(P8155_PB)
-        cpu.movx_write(LED_LO, ram[PROX])
-        cpu.movx_write(LED_HI, ram[OTHER])
-
-    def watchjaw(self) -> None:
-        """WATCHJAW (0541): stopped bit, RATE, ERROR_CNT (excess-128), OLD_ENC."""
-        ram = self.ram
-        enc = ram[ENCODER_CNT] | (ram[ENCODER_CNT + 1] << 8)
-        rate = (enc - (ram[OLD_ENC] | (ram[OLD_ENC + 1] << 8))) & 0xFFFF
-        ram[RATE] = rate & 0xFF
-        ram[RATE + 1] = rate >> 8
-        if rate:
-            ram[FLAGS] &= ~_MASK_STOPPED & 0xFF
-        else:
-            ram[FLAGS] |= _MASK_STOPPED
-        err = (enc - (ram[COMMAND_CNT] | (ram[COMMAND_CNT + 1] << 8)) + 0x80) & 0xFFFF
-        ram[ERROR_CNT] = err & 0xFF
-        ram[ERROR_CNT + 1] = err >> 8
-        ram[OLD_ENC] = enc & 0xFF
-        ram[OLD_ENC + 1] = enc >> 8
-
-    def mvjaws(self) -> None:
-        """MVJAWS (04C2): a jog first; else, with the drive bit, current =
-        target - actual within the speed limits, ending STOPCNT bumps after
-        the stopped bit; else null the current of a finished jog."""
-        ram = self.ram
-        flags = ram[FLAGS]
-        pc = self.cpu.movx_read(P8155_PC)
-        jog_open = not pc & 0x01
-        jog_close = not pc & 0x02
-        # A jog is ignored while init or the calibration drives the motor:
-        # 002 keeps MVJAWS out of their way (drive bit clear); a jog would fight them.
-        if jog_open != jog_close and self.job is None:
-            self._jog(flags, jog_open)
-            return
-        if flags & _MASK_JOGSTALL:
-            flags &= ~_MASK_JOGSTALL & 0xFF  # switch released: jogging allowed again
-            ram[FLAGS] = flags
-        if flags & _MASK_DRVON:
-            err = self._sword(COMMAND_CNT) - self._sword(ENCODER_CNT)
-            byte = excess128(err)
-            if byte > ram[MXPJSPD]:
-                byte = ram[MXPJSPD]
-            elif byte < ram[MXNJSPD]:
-                byte = ram[MXNJSPD]
-            self.drive(byte)
-            if flags & _MASK_STOPPED:
-                n = ram[STOPCNT]
-                if n > 1:
-                    ram[STOPCNT] = n - 1
-                else:
-                    ram[STOPCNT] = 0
-                    self.drive(DAC_NULL)
-                    ram[FLAGS] = flags & ~_MASK_DRVON & 0xFF
-                    self.last_stop = "stopped"
-            return
-        if flags & _MASK_DOJOG:
-            self.drive(DAC_NULL)
-            ram[FLAGS] = flags & ~_MASK_DOJOG & 0xFF
-            self._set_word(COMMAND_CNT, self.word(ENCODER_CNT))
-            self.last_stop = "jog ended"
-
-    def _jog(self, flags: int, open_: bool) -> None:
-        ram = self.ram
-        if flags & _MASK_JOGSTALL:
-            return
-        if not flags & _MASK_DOJOG:
-            ram[STOPCNT] = STOPBUMPS
-        if flags & _MASK_DRVON:
-            self.last_stop = "jog took over"
-        flags = (flags | _MASK_DOJOG) & ~_MASK_DRVON & 0xFF
-        # 002: during a jog the target follows the jaws, so that the jaw
-        # movement routine does not drive them back to the old target.
-        self._set_word(COMMAND_CNT, self.word(ENCODER_CNT))
-        self.drive(ram[MXPJSPD] if open_ else ram[MXNJSPD])
-        if flags & _MASK_STOPPED:
-            n = ram[STOPCNT]
-            if n > 1:
-                ram[STOPCNT] = n - 1
-            else:
-                ram[STOPCNT] = 0
-                self.drive(DAC_NULL)
-                flags = (flags | _MASK_JOGSTALL) & ~_MASK_DOJOG & 0xFF
-                self.last_stop = "jog stalled (against a stop?): release the switch"
-        ram[FLAGS] = flags
+        return [
+            Task(jawmove.NAME, ADDR_MVJAWS, partial(jawmove.mvjaws, self),
+                 ByteRef(ram, MVJAWSPD)),
+            Task(sensors.NAME, ADDR_SENSORS, partial(sensors.sensors, self),
+                 ByteRef(ram, SENSORPD)),
+            Task(jawwatch.NAME, ADDR_WATCHJAW, partial(jawwatch.watchjaw, self),
+                 ByteRef(ram, WTCHJWSPD)),
+        ]
 
     # -- safety ----------------------------------------------------------------------
 

@@ -1,6 +1,7 @@
 """Co-ordinated control of the ropes: the PolyAxis of 000, section 5.
 
-Every control poll (:meth:`PolyAxis.poll`, the polyaxis-poll task):
+Every control poll (the polyaxis-poll task, :mod:`pyrt.tasks.polyaxis_poll`,
+which :meth:`PolyAxis.tasks` declares beside axis-poll):
 
 1. each Axis's tension and stretch-corrected length are read;
 2. ropes that bear on the neck ring get their contact point as effective top
@@ -45,6 +46,10 @@ axes back to standalone control.  The safety stops (tension, net force) are
 also faults: ``on_fault`` (the ready queue's ``trip``) is called, the
 reflex runs, and the manipulator stays stopped until acknowledged.
 
+Patterns (``pattern FILE``: endpoint after endpoint, with a log) run as a
+foreground job from :mod:`pyrt.robots.pattern`; the log is written through
+a writer, off the loop thread unless the clock is simulated.
+
 The corrected length of 000 is the measured length less the rope's length
 residual, so that errors of the position estimate do not appear as error
 terms; errors are actual - desired.
@@ -54,6 +59,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Generator, Sequence
+from functools import partial
 from pathlib import Path
 from typing import TextIO
 
@@ -75,18 +81,18 @@ from pyrt.robots._neck import NeckRing, ring_contact
 from pyrt.robots.av import AV
 from pyrt.robots.axis import POLYAXIS, Axis
 from pyrt.robots.paths import VIA_BELOW, Hare, HarePath, hare_path_record, plan_segments
+from pyrt.robots.pattern import log_writer, read_pattern, run_pattern
 from pyrt.robots.stops import SAFETY_STOPS, StopCheck, StopReason, StopRecord
-from pyrt.scheduler import Job
+from pyrt.scheduler import Job, Task
 from pyrt.scheduler.motion import MotionExecutor, MotionRecord, MotionType, get_motion_type
 from pyrt.scheduler.runner import MotionQueue
+from pyrt.tasks import axis_poll, polyaxis_poll
 
 __all__ = [
     "GRAVITY",
     "MIN_TOP_SEGMENT",
     "NEAR_END_CM",
-    "PATTERN_PAUSE_S",
     "PolyAxis",
-    "parse_pattern",
 ]
 
 GRAVITY = 9.80665
@@ -94,11 +100,6 @@ GRAVITY = 9.80665
 NEAR_END_CM = 10.0
 #: A target closer than this to a top pulley (cm) is refused.
 MIN_TOP_SEGMENT = 5.0
-#: 000, section 5: the pattern pauses "about 10 seconds" at each endpoint.
-PATTERN_PAUSE_S = 10.0
-
-#: Longest pattern file read (bytes); a pattern is a few hundred endpoints.
-MAX_PATTERN_BYTES = 1 << 20
 
 Vec = tuple[float, float, float]
 _FI = FuzzyInput
@@ -110,56 +111,6 @@ def _dist(a: Sequence[float], b: Sequence[float]) -> float:
 
 def _cm(axis: str) -> Callable[[str], float]:
     return finite(f"{axis} in cm")
-
-
-def read_pattern(text: str) -> tuple[Path, list[Vec], str]:
-    """The grammar of ``pattern FILE``: the file read and checked on the
-    console's side (never in the loop thread); its log file made writable."""
-    log, points = parse_pattern(text)
-    try:
-        log.parent.mkdir(parents=True, exist_ok=True)
-        log.open("a", encoding="utf-8").close()
-    except OSError as exc:
-        raise CommandError(f"pattern: cannot write the log {str(log)!r}: "
-                           f"{exc.strerror}") from None
-    return log, points, text
-
-
-def parse_pattern(path: str | Path) -> tuple[Path, list[Vec]]:
-    """A pattern file: first line the log file (relative to the pattern file),
-    then one endpoint ``x y z`` per line (blank lines and ``//`` comments skipped)."""
-    p = Path(path)
-    try:
-        if not p.is_file():
-            raise CommandError(f"pattern: {str(p)!r} is not a regular file")
-        if p.stat().st_size > MAX_PATTERN_BYTES:
-            raise CommandError(f"pattern: {str(p)!r} is larger than "
-                               f"{MAX_PATTERN_BYTES // 1024} KiB")
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CommandError(f"pattern: cannot read {str(p)!r}: {exc}") from None
-    lines = [(n, ln.split("//", 1)[0].strip()) for n, ln in enumerate(text.splitlines(), 1)]
-    lines = [(n, ln) for n, ln in lines if ln]
-    if not lines:
-        raise CommandError(f"pattern {p}: empty; the first line names the log file")
-    log = Path(lines[0][1])
-    if not log.is_absolute():
-        log = p.parent / log
-    points: list[Vec] = []
-    for n, ln in lines[1:]:
-        parts = ln.replace(",", " ").split()
-        if len(parts) != 3:
-            raise CommandError(f"pattern {p}:{n}: expected an endpoint 'x y z', got {ln!r}")
-        try:
-            v = tuple(float(c) for c in parts)
-        except ValueError:
-            raise CommandError(f"pattern {p}:{n}: not numbers: {ln!r}") from None
-        if not all(math.isfinite(c) for c in v):
-            raise CommandError(f"pattern {p}:{n}: endpoint must be finite: {ln!r}")
-        points.append(v)  # type: ignore[arg-type]
-    if not points:
-        raise CommandError(f"pattern {p}: no endpoints after the log file line")
-    return log, points
 
 
 class PolyAxis(Component):
@@ -307,7 +258,7 @@ class PolyAxis(Component):
         self.moves = 0
         self.polls = 0
         self.now_s = 0.0
-        self._last_poll_s: float | None = None
+        self.last_poll_s: float | None = None
         #: Called with (cause, source) for a safety stop: the ready queue's trip.
         self.on_fault: Callable[[str, str], object] | None = None
         #: Called with (StopRecord) after every stop.
@@ -320,6 +271,9 @@ class PolyAxis(Component):
         #: The running (or last) pattern job and its log file.
         self.pattern_job: Job | None = None
         self.pattern_log: Path | None = None
+        #: How the pattern log is written: ``"thread"`` (off the loop thread) or
+        #: ``"sync"`` (at once: deterministic, for simulated-clock runs).
+        self.pattern_writer = "thread"
         for i, a in enumerate(axes):
             a.group = self
             a.group_index = i
@@ -333,7 +287,9 @@ class PolyAxis(Component):
         #: Where the state log goes (one line at a time), or None.
         self.log: Callable[[str], None] | None = None
         self.debug = False
-        self._debug_next = 0.0
+        self.debug_next = 0.0
+        #: (polyaxis-poll, axis-poll) periods in queue checks (set_task_periods).
+        self.task_periods: tuple[int, int] | None = None
 
     @classmethod
     def from_record(cls, record, axes: Sequence[Axis], av: AV, **kw) -> PolyAxis:
@@ -555,7 +511,9 @@ class PolyAxis(Component):
         if self.spawn is None:
             raise CommandError(f"{self.name} pattern: no loop to run it on")
         self.pattern_log = log
-        self.pattern_job = self.spawn("pattern", self.pattern(points, log, lambda: self.now_s))
+        kind = self.pattern_writer
+        self.pattern_job = self.spawn("pattern", run_pattern(
+            self, points, lambda: log_writer(log, kind), lambda: self.now_s))
         return f"{self.name}: pattern {shown} started; log {log}"
 
     def pattern_job_cancel(self) -> None:
@@ -694,9 +652,9 @@ class PolyAxis(Component):
     def _engage(self, motion: MotionType, tgt: Vec | None) -> None:
         """A motion has started: every Axis under PolyAxis control, the stop
         conditions armed (tension stops on again), the hare where the source is."""
-        for a, length in zip(self.axes, self.lengths, strict=True):
+        for a in self.axes:
             if a.mode != POLYAXIS:
-                a.polyActivate(length if self.polls else a.getLength())
+                a.polyActivate()
         hare = getattr(motion, "hare", None)
         self.hare = hare if isinstance(hare, Hare) else None
         if self.hare_position is None:  # not stepped yet: the hare starts at the source
@@ -780,6 +738,31 @@ class PolyAxis(Component):
         """A move is in progress."""
         return self.active
 
+    # -- the tasks (pyrt.tasks: polyaxis_poll, axis_poll) ----------------------------
+
+    def set_task_periods(self, poll_checks: int, axis_poll_checks: int) -> None:
+        """The periods of polyaxis-poll and axis-poll in queue checks (1..255),
+        from the control and axis poll periods and the station's tick."""
+        for label, n in (("poll_checks", poll_checks), ("axis_poll_checks", axis_poll_checks)):
+            if not 1 <= n <= 255:
+                raise ValueError(f"{label} must be 1..255 queue checks, got {n}")
+        self.task_periods = (int(poll_checks), int(axis_poll_checks))
+
+    def tasks(self) -> list[Task]:
+        """POLYAXIS (polyaxis-poll, 0100) and AXES (axis-poll over the axes under
+        standalone control, 0101), each first run one period after it is
+        registered; the periods are :meth:`set_task_periods`'."""
+        if self.task_periods is None:
+            raise ConfigError(f"polyaxis {self.name}: the task periods are not set "
+                              "(set_task_periods)")
+        poll, axes = self.task_periods
+        return [
+            Task(polyaxis_poll.NAME, polyaxis_poll.ADDRESS,
+                 partial(polyaxis_poll.polyaxis_poll, self), poll, first=poll, timed=True),
+            Task(axis_poll.NAME, axis_poll.ADDRESS, partial(axis_poll.axis_poll, self.axes),
+                 axes, first=axes, timed=True),
+        ]
+
     # -- the control poll ------------------------------------------------------------
 
     def measure(self) -> None:
@@ -795,26 +778,23 @@ class PolyAxis(Component):
         self.net_force = (fx, fy, fz)
 
     def poll(self, now_s: float) -> None:
-        """One control poll (see the module text)."""
-        self.now_s = now_s
-        last = self._last_poll_s
-        dt = self.poll_s if last is None else max(0.0, now_s - last)
-        self._last_poll_s = now_s
-        self.polls += 1
-        self.dt = dt
-        try:
-            self.measure()
-        except NativeError as exc:
-            # The lengths no longer fix a position (a rope set to nonsense by
-            # hand, a broken encoder): keep the last position, refuse moves;
-            # during a move it is a fault of the whole manipulator.
-            self.position_error = f"position finder failed: {exc}"
-            if self.active:
-                self.halt(StopReason.FAULT, self.position_error)
-                if self.on_fault is not None:
-                    self.on_fault(self.position_error, self.name)
-            return
-        self.position_error = None
+        """One control poll at ``now_s`` seconds, by hand (the polyaxis-poll
+        routine's body, :func:`pyrt.tasks.polyaxis_poll.control_poll`)."""
+        polyaxis_poll.control_poll(self, now_s)
+
+    def position_lost(self, cause: str) -> None:
+        """The position finder failed (``cause``): keep the last position, refuse
+        moves; during a move it is a fault of the whole manipulator."""
+        self.position_error = cause
+        if self.active:
+            self.halt(StopReason.FAULT, cause)
+            if self.on_fault is not None:
+                self.on_fault(cause, self.name)
+
+    def step_motion(self, now_s: float) -> None:
+        """The motion executor's turn in the poll: start the next queued motion
+        record between moves, step the running one (it sets the hare), check
+        a plug-in motion's hare."""
         ex = self.executor
         if ex.current is not None or (self.motion is not None and len(self.motion)):
             if ex.current is None:  # a new motion sets the hare in its first step
@@ -831,14 +811,6 @@ class PolyAxis(Component):
                 why = self._hare_refusal(self.hare_position)
                 if why is not None:
                     self._fault(f"motion {self.running.name} {why}")
-        if self.active:
-            self._drive(now_s, dt)
-        for a in self.axes:
-            if a.mode == POLYAXIS:
-                a.encoder.poll(now_s)
-        if self.debug and now_s >= self._debug_next and self.stdout is not None:
-            self._debug_next = now_s + 1.0
-            self.stdout.write(self.status_line() + "\n")
 
     def settled_at_turn(self) -> bool:
         """The source has come to rest at the neck turn (the hare may go on)."""
@@ -892,7 +864,8 @@ class PolyAxis(Component):
             length += math.sqrt(dx * dx + dy * dy + dz * dz)
         return length
 
-    def _drive(self, now_s: float, dt: float) -> None:
+    def drive_motors(self, now_s: float, dt: float) -> None:
+        """During a move: error signals, the batched fuzzy step, every motor, the stops."""
         stops = self.stops
         assert stops is not None
         hp = self.hare_position
@@ -940,61 +913,6 @@ class PolyAxis(Component):
             if n < 1e-3:
                 break
         return (float(x[0]), float(x[1]), float(x[2]))
-
-    # -- patterns ------------------------------------------------------------------------
-
-    def pattern(self, points: Sequence[Vec], log_path: Path | str,
-                time_s: Callable[[], float], pause_s: float = PATTERN_PAUSE_S
-                ) -> Generator[None, None, list[StopRecord | str]]:
-        """A foreground job: move to each endpoint, pause, go on; the log file
-        records where each move stopped and why.  Returns the records."""
-        path = Path(log_path)
-        results: list[StopRecord | str] = []
-
-        def write(line: str) -> None:
-            with open(path, "a", encoding="utf-8") as fh:
-                fh.write(line + "\n")
-                fh.flush()
-
-        def ended(k: int, p: Vec) -> StopRecord | None:
-            rec = self.last_stop
-            x = self.position
-            write(f"{k} {p[0]:g} {p[1]:g} {p[2]:g} {rec.reason.value if rec else 'STOP'} "
-                  f"at {x[0]:.3f} {x[1]:.3f} {x[2]:.3f} t={time_s():.2f} "
-                  f"{rec.detail if rec else ''}")
-            results.append(rec if rec is not None else "STOP")
-            return rec
-
-        write(f"# pattern of {len(points)} endpoints, {self.name}")
-        k, moving = 0, False
-        try:
-            for k, p in enumerate(points, 1):
-                try:
-                    self.to(p)
-                except CommandError as exc:
-                    write(f"{k} {p[0]:g} {p[1]:g} {p[2]:g} REFUSED {exc}")
-                    results.append(f"REFUSED {exc}")
-                    continue
-                moving = True
-                while self.active:
-                    yield
-                moving = False
-                rec = ended(k, p)
-                if rec is not None and rec.reason not in (StopReason.ENDPOINT_STOP,
-                                                          StopReason.STUCK_STOP):
-                    write(f"# pattern abandoned after endpoint {k}: {rec.reason.value}")
-                    return results
-                until = time_s() + pause_s
-                while time_s() < until:
-                    yield
-        except GeneratorExit:
-            # a stop or a fault ended the pattern: the log says where and why
-            rec = ended(k, points[k - 1]) if moving else self.last_stop
-            why = rec.reason.value if rec is not None else "STOP"
-            write(f"# pattern abandoned after endpoint {k}: {why}")
-            raise
-        write("# pattern complete")
-        return results
 
     # -- logging and status --------------------------------------------------------------
 

@@ -4,6 +4,7 @@ from pyrt.scheduler.clock import Clock, SimClock, WallClock
 from pyrt.scheduler.loop import Job, Loop
 from pyrt.scheduler.readyqueue import ByteImage, ByteRef, ReadyQueue, Routine
 from pyrt.scheduler.stats import Distribution, LoopStatistics, TaskStatistics
+from pyrt.scheduler.task import Task, install
 from pyrt.scheduler.timinglog import TimingLog, TimingReport, read_timing_log
 
 __all__ = [
@@ -17,9 +18,11 @@ __all__ = [
     "ReadyQueue",
     "Routine",
     "SimClock",
+    "Task",
     "TaskStatistics",
     "TimingLog",
     "TimingReport",
     "WallClock",
+    "install",
     "read_timing_log",
 ]

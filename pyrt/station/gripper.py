@@ -27,6 +27,7 @@ from pyrt.scheduler import Loop
 from pyrt.scheduler.motion import MotionExecutor, MotionType
 from pyrt.sim.gripper import JawPlant
 from pyrt.station.base import Station
+from pyrt.tasks import register_tasks
 
 __all__ = ["GripperSim", "GripperStation", "build_gripper"]
 
@@ -115,7 +116,8 @@ class GripperStation(Station):
         self.controller = ctl
         if plant is not None:
             loop.attach(plant.step, name="jaws")
-        ctl.attach(loop)
+        ctl.attach(loop, register=False)
+        register_tasks(ctl.queue, ctl)  # every task the tree declares
         ctl.motion = self.motion
 
         def motion_done(motion: MotionType) -> None:

@@ -52,8 +52,7 @@ from pyrt.scheduler import Loop, ReadyQueue, SimClock
 from pyrt.sim.manipulator import ManipulatorPlant, rig_from_station
 from pyrt.sim.sensors import Imperfections
 from pyrt.station.base import Station
-from pyrt.tasks import SyncWriter, ThreadWriter, WriteBack
-from pyrt.tasks.manipulator import attach_manipulator
+from pyrt.tasks import SyncWriter, ThreadWriter, WriteBack, register_tasks
 
 __all__ = [
     "AXIS_POLL_S",
@@ -259,13 +258,14 @@ class ManipulatorStation(Station):
         # The motion queue the mailbox fills (the station's runner takes it).
         pa.motion = self.motion
         pa.spawn = self.loop.spawn
+        pa.pattern_writer = "sync" if self.loop.clock.virtual else "thread"  # the pattern log
 
         # Level 4+: the ready queue and its tasks; write-back.
         self.queue = ReadyQueue(capacity=4, divisor=1, name=pa.name)
         pa.on_fault = self._trip
-        attach_manipulator(self.queue, pa,
-                           poll_checks=_checks(poll_s, tick_s, "control poll"),
-                           axis_poll_checks=_checks(axis_poll_s, tick_s, "axis poll"))
+        pa.set_task_periods(_checks(poll_s, tick_s, "control poll"),
+                            _checks(axis_poll_s, tick_s, "axis poll"))
+        register_tasks(self.queue, pa)  # every task the tree declares
         if writer is None:
             writer = "sync" if self.loop.clock.virtual else "thread"
         if writer == "sync":

@@ -24,7 +24,10 @@ disk, which would overrun a 1 ms tick).  It coalesces pending values (the
 latest value of each key wins), so the pending set is bounded by the
 number of written keys, and a failed write is raised at the next
 ``poll``, where the ready queue turns it into a fault.  :class:`SyncWriter`
-writes in the caller: deterministic, for SimClock runs and tests.
+writes in the caller: deterministic, for SimClock runs and tests.  Both
+write to any :class:`Sink` (``write_back(changes)``): the station database,
+or a log file that appends its lines in key order (a pattern's log,
+:mod:`pyrt.robots.pattern`).
 """
 
 from __future__ import annotations
@@ -60,31 +63,38 @@ ZEROLENGTH_PERIOD_NS = 1_000_000_000
 Key = tuple[str, str, str]
 
 
+class Sink(Protocol):
+    """Where a writer's batches end up: the station database
+    (:meth:`pyrt.db.Station.write_back`) or anything with the same method."""
+
+    def write_back(self, changes: Mapping[Any, Any]) -> Any: ...
+
+
 class Writer(Protocol):
     """Where a batch of ``{(TYPE, name, KEY): value}`` goes."""
 
-    def submit(self, changes: Mapping[Key, Any]) -> None: ...
+    def submit(self, changes: Mapping[Any, Any]) -> None: ...
 
     def flush(self, timeout: float | None = None) -> None: ...
 
-    def close(self) -> None: ...
+    def close(self, wait: bool = True) -> None: ...
 
 
 class SyncWriter:
     """Writes each batch at once, in the caller (deterministic)."""
 
-    def __init__(self, station: Station):
+    def __init__(self, station: Station | Sink):
         self.station = station
         self.batches = 0
 
-    def submit(self, changes: Mapping[Key, Any]) -> None:
+    def submit(self, changes: Mapping[Any, Any]) -> None:
         self.station.write_back(changes)
         self.batches += 1
 
     def flush(self, timeout: float | None = None) -> None:
         """Nothing is ever pending."""
 
-    def close(self) -> None:
+    def close(self, wait: bool = True) -> None:
         """Nothing to stop."""
 
 
@@ -94,15 +104,17 @@ class ThreadWriter:
     Pending values are coalesced by key (the latest wins), so at most
     ``max_pending`` distinct keys wait; more raises QueueFullError.  A write
     that fails is raised (as ConfigError) at the next ``submit`` or
-    ``flush``.
+    ``flush``.  ``what`` names the writer in its errors.
     """
 
-    def __init__(self, station: Station, max_pending: int = 256, name: str = "pyrt-writeback"):
+    def __init__(self, station: Station | Sink, max_pending: int = 256,
+                 name: str = "pyrt-writeback", what: str = "database write-back"):
         self.station = station
+        self.what = what
         self.max_pending = max_pending
         self.batches = 0
         self._cond = threading.Condition()
-        self._pending: dict[Key, Any] = {}
+        self._pending: dict[Any, Any] = {}
         self._busy = False
         self._closed = False
         self._error: BaseException | None = None
@@ -112,17 +124,17 @@ class ThreadWriter:
     def _raise_error(self) -> None:
         error, self._error = self._error, None
         if error is not None:
-            raise ConfigError(f"database write-back failed: {error}") from error
+            raise ConfigError(f"{self.what} failed: {error}") from error
 
-    def submit(self, changes: Mapping[Key, Any]) -> None:
+    def submit(self, changes: Mapping[Any, Any]) -> None:
         with self._cond:
             self._raise_error()
             if self._closed:
-                raise ConfigError("database write-back is closed")
+                raise ConfigError(f"{self.what} is closed")
             fresh = [k for k in changes if k not in self._pending]
             if len(self._pending) + len(fresh) > self.max_pending:
                 raise QueueFullError(
-                    f"database write-back: more than {self.max_pending} values pending")
+                    f"{self.what}: more than {self.max_pending} values pending")
             self._pending.update(changes)
             self._cond.notify()
 
@@ -152,11 +164,15 @@ class ThreadWriter:
             self._cond.wait_for(lambda: not self._pending and not self._busy, timeout)
             self._raise_error()
 
-    def close(self) -> None:
-        """Write what is pending, then stop the thread."""
+    def close(self, wait: bool = True) -> None:
+        """Write what is pending, then stop the thread.  Without ``wait`` (the
+        loop thread, which must not wait for a disk) the thread writes what is
+        pending and ends on its own; a failure then is not reported."""
         with self._cond:
             self._closed = True
             self._cond.notify_all()
+        if not wait:
+            return
         self._thread.join()
         with self._cond:
             self._raise_error()

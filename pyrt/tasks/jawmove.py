@@ -1,0 +1,133 @@
+"""MVJAWS (002, routine at 04C2): the jaw movement routine.
+
+Each run, in this order:
+
+* a jog switch held (port C bit 0 open, bit 1 close; one, not both) and no
+  foreground job (init, calibration) driving the motor: jog.  The target
+  follows the jaws, the current is the speed limit in the jog's sense, and a
+  jog held against a stop is cut off STOPCNT bumps after the stopped bit
+  (2C.JOGSTALL: ignored until the switch is released);
+* else, with the drive bit (2C.DRVON): current = COMMAND_CNT - ENCODER_CNT
+  in excess-128, clipped to MXNJSPD..MXPJSPD; STOPCNT bumps after the
+  stopped bit the move ends (current nulled, drive bit cleared);
+* else, after a jog (2C.DOJOG): the current is nulled and the target is
+  where the jaws are.
+"""
+
+from __future__ import annotations
+
+from pyrt.boards.gripper import DAC_NULL, P8155_PC
+from pyrt.boards.i8031 import (
+    COMMAND_CNT,
+    DOJOG,
+    DRVON,
+    ENCODER_CNT,
+    FLAGS,
+    MXNJSPD,
+    MXPJSPD,
+    STOPCNT,
+    STOPPED,
+)
+from pyrt.native import excess128
+from pyrt.tasks._i8031 import Controller8031
+
+__all__ = ["ADDRESS", "JOGSTALL", "NAME", "STOPBUMPS", "mvjaws"]
+
+#: Appendix B: the routine's EPROM address, and its name on the ready queue.
+ADDRESS = 0x04C2
+NAME = "MVJAWS"
+
+#: Bumps after the stopped bit before a commanded move ends.  002 gives no
+#: number ("a positive value"); 4 MVJAWS periods are about 0.2 s at the
+#: defaults: long enough to finish a move that stopped just short.
+STOPBUMPS = 0x04
+#: 2C.5 (unused in 002): a jog held against a stop was cut off; the jog
+#: switch is ignored until it is released.  pyrt's addition, so that a held
+#: switch cannot keep current on a stalled motor.
+JOGSTALL = 5
+
+_MASK_STOPPED = 1 << STOPPED
+_MASK_DRVON = 1 << DRVON
+_MASK_DOJOG = 1 << DOJOG
+_MASK_JOGSTALL = 1 << JOGSTALL
+
+
+def _word(ram: bytearray, addr: int) -> int:
+    return ram[addr] | (ram[addr + 1] << 8)
+
+
+def _sword(ram: bytearray, addr: int) -> int:
+    w = ram[addr] | (ram[addr + 1] << 8)
+    return w - 0x10000 if w & 0x8000 else w
+
+
+def _set_word(ram: bytearray, addr: int, value: int) -> None:
+    ram[addr] = value & 0xFF
+    ram[addr + 1] = (value >> 8) & 0xFF
+
+
+def mvjaws(ctl: Controller8031) -> None:
+    """MVJAWS (04C2): a jog first; else, with the drive bit, current =
+    target - actual within the speed limits, ending STOPCNT bumps after
+    the stopped bit; else null the current of a finished jog."""
+    ram = ctl.ram
+    flags = ram[FLAGS]
+    pc = ctl.cpu.movx_read(P8155_PC)
+    jog_open = not pc & 0x01
+    jog_close = not pc & 0x02
+    # A jog is ignored while init or the calibration drives the motor:
+    # 002 keeps MVJAWS out of their way (drive bit clear); a jog would fight them.
+    if jog_open != jog_close and ctl.job is None:
+        _jog(ctl, flags, jog_open)
+        return
+    if flags & _MASK_JOGSTALL:
+        flags &= ~_MASK_JOGSTALL & 0xFF  # switch released: jogging allowed again
+        ram[FLAGS] = flags
+    if flags & _MASK_DRVON:
+        err = _sword(ram, COMMAND_CNT) - _sword(ram, ENCODER_CNT)
+        byte = excess128(err)
+        if byte > ram[MXPJSPD]:
+            byte = ram[MXPJSPD]
+        elif byte < ram[MXNJSPD]:
+            byte = ram[MXNJSPD]
+        ctl.drive(byte)
+        if flags & _MASK_STOPPED:
+            n = ram[STOPCNT]
+            if n > 1:
+                ram[STOPCNT] = n - 1
+            else:
+                ram[STOPCNT] = 0
+                ctl.drive(DAC_NULL)
+                ram[FLAGS] = flags & ~_MASK_DRVON & 0xFF
+                ctl.last_stop = "stopped"
+        return
+    if flags & _MASK_DOJOG:
+        ctl.drive(DAC_NULL)
+        ram[FLAGS] = flags & ~_MASK_DOJOG & 0xFF
+        _set_word(ram, COMMAND_CNT, _word(ram, ENCODER_CNT))
+        ctl.last_stop = "jog ended"
+
+
+def _jog(ctl: Controller8031, flags: int, open_: bool) -> None:
+    ram = ctl.ram
+    if flags & _MASK_JOGSTALL:
+        return
+    if not flags & _MASK_DOJOG:
+        ram[STOPCNT] = STOPBUMPS
+    if flags & _MASK_DRVON:
+        ctl.last_stop = "jog took over"
+    flags = (flags | _MASK_DOJOG) & ~_MASK_DRVON & 0xFF
+    # 002: during a jog the target follows the jaws, so that the jaw
+    # movement routine does not drive them back to the old target.
+    _set_word(ram, COMMAND_CNT, _word(ram, ENCODER_CNT))
+    ctl.drive(ram[MXPJSPD] if open_ else ram[MXNJSPD])
+    if flags & _MASK_STOPPED:
+        n = ram[STOPCNT]
+        if n > 1:
+            ram[STOPCNT] = n - 1
+        else:
+            ram[STOPCNT] = 0
+            ctl.drive(DAC_NULL)
+            flags = (flags | _MASK_JOGSTALL) & ~_MASK_DOJOG & 0xFF
+            ctl.last_stop = "jog stalled (against a stop?): release the switch"
+    ram[FLAGS] = flags
