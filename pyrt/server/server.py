@@ -129,17 +129,25 @@ def run_shell(shell: Any, line: str, extra: list[str] | None = None) -> tuple[st
     and whether the shell asked to end the session.
 
     What the shell reports through ``error()`` makes the reply ``ERR command``;
-    a fault it meets (a :class:`~pyrt.errors.FaultError`, handed to its
+    a bug in pyrt (its ``internal_error()``) ``ERR internal``, the traceback
+    to the server's log; a fault it meets (a :class:`~pyrt.errors.FaultError`, handed to its
     ``fault()``) ``ERR fault``, with what the command then said as the lines.
     """
     out = io.StringIO()
     errors: list[str] = []
     faults: list[Any] = []
+    bugs: list[BaseException] = []
     shell.stdout = out
     shell.error = errors.append
     shell.fault = faults.append
+    shell.internal_error = bugs.append
     end = bool(shell.onecmd(line))
     lines = out.getvalue().splitlines() + list(extra or [])
+    if bugs:
+        exc = bugs[0]
+        log.error("a bug in pyrt running %r", line[:60], exc_info=exc)
+        return format_error("internal", f"{type(exc).__name__}: {exc} (a bug in pyrt; the "
+                            "server log has the traceback)", lines), end
     if errors:
         return format_error("command", "; ".join(errors), lines), end
     if faults:
