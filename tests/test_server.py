@@ -390,3 +390,23 @@ def test_a_bug_in_a_command_is_err_internal_and_the_connection_goes_on(monkeypat
         s.sendall(b"T\n")
         assert read_lines(s, 1) == ["OK 0000"]
         s.close()
+
+
+def test_reconnect_and_auth_after_a_privileged_client_left_is_never_busy(monkeypatch):
+    """A privileged client that ran a command and closed, then a new client's AUTH at once: OK (it waits for the old session's release), even when the release is slow."""
+    with served() as sv:
+        release = sv.server.robot.release
+
+        def slow_release(shell) -> None:
+            time.sleep(0.2)  # the old worker is still releasing when the next AUTH comes
+            release(shell)
+
+        monkeypatch.setattr(sv.server.robot, "release", slow_release)
+        for _ in range(3):
+            first = sv.operator()
+            assert first.command("X 33") == []
+            first.close()
+            nxt = sv.client()
+            nxt.auth(TOKEN)  # ERR busy here before the fix
+            assert nxt.command("T") == ["0000"]
+            nxt.close()

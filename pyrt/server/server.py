@@ -199,6 +199,9 @@ class _Conn:
         self.linger_until = 0.0
         self.drop: str | None = None  # close at once (slow reader ...)
         self.closed = False
+        #: Set once the connection holds no privilege any more (its worker has
+        #: released its session, or it never had one): an AUTH waits for it.
+        self.released = threading.Event()
 
     def __repr__(self) -> str:
         return f"client {self.id} {self.peer}"
@@ -561,9 +564,9 @@ class Server:
             return
         verb, rest = split_verb(line)
         if verb in _VERBS:
-            if conn.pending == 0:
+            if conn.pending == 0 and not (verb == "AUTH" and self._held_by_a_closing(conn)):
                 self._output(conn, self._verb(conn, verb, rest))
-            else:
+            else:  # in order behind its commands, or waiting for a release (worker)
                 self._enqueue(conn, line)
             return
         if not verb:
@@ -765,8 +768,10 @@ class Server:
         with self._lock:
             self.hub.unsubscribe(conn.id)
             conn.subscribed = 0.0
-            if self._privileged is conn and (conn.worker is None or conn.shell is None):
-                self._privileged = None
+            if conn.worker is None or conn.shell is None:  # no session to release
+                if self._privileged is conn:
+                    self._privileged = None
+                conn.released.set()
         log.info("%r closed", conn)
 
     # -- the server's verbs (I/O thread, or a worker when queued behind commands) ----
@@ -814,7 +819,20 @@ class Server:
             return format_reply(["bye"])
         return format_error("internal", f"no verb {verb!r}")  # pragma: no cover
 
+    def _held_by_a_closing(self, conn: _Conn) -> bool:
+        """The privilege is held by another connection that is closing (its
+        session not yet released): an AUTH of ``conn`` waits for it in ``conn``'s worker."""
+        holder = self._privileged
+        return holder is not None and holder is not conn and (holder.closing or holder.closed)
+
     def _auth(self, conn: _Conn, given: str) -> str:
+        holder = self._privileged
+        if (holder is not None and holder is not conn and (holder.closing or holder.closed)
+                and threading.current_thread() is not self._thread):
+            # A privileged client that has gone: its worker releases the
+            # session (leaves the monitor ...) and then the privilege.  Wait
+            # for that, so that "disconnect, reconnect, AUTH" never sees busy.
+            holder.released.wait(self.command_timeout_s)
         with self._lock:
             if conn.privileged:
                 return format_reply(["already privileged"])
@@ -872,6 +890,7 @@ class Server:
         with self._lock:
             if self._privileged is conn:
                 self._privileged = None
+        conn.released.set()
 
     def _execute(self, conn: _Conn, line: str) -> str:
         verb, rest = split_verb(line)
