@@ -42,7 +42,7 @@ from typing import Any
 
 from pyrt.errors import ConfigError
 from pyrt.server.protocol import format_error
-from pyrt.server.server import run_shell
+from pyrt.server.session import run_shell
 
 __all__ = ["FIXED_PVS", "EpicsService", "caproto_available"]
 
