@@ -36,7 +36,7 @@ from pyrt.boards.i8031 import COMMAND_CNT, FLAGS, STOPCNT
 from pyrt.boards.tio10 import AWO_BITS
 from pyrt.commands.robot import RobotShell
 from pyrt.component import Arg, Command, Component, walk
-from pyrt.errors import CommandError, PyrtError
+from pyrt.errors import CommandError, PyrtError, PyrtInternalError
 from pyrt.robots.gripper import _MASK_DRVON
 from pyrt.scheduler import Loop, SimClock
 from pyrt.server import ServedStation, Server
@@ -332,7 +332,7 @@ _FREE_TEXT = {"log"}
 
 
 @pytest.mark.parametrize("name", ROBOTS)
-@settings(max_examples=150, deadline=None,
+@settings(max_examples=300, deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(data=st.data())
 def test_garbage_arguments_give_a_command_error_and_move_nothing(name, tmp_path_factory,
@@ -342,7 +342,9 @@ def test_garbage_arguments_give_a_command_error_and_move_nothing(name, tmp_path_
     monkeypatch.chdir(_GARBAGE_DIRS[name])  # where a garbage 'log FILE' name lands
     records = _records(station)
     comp, rec = data.draw(st.sampled_from(records), label="record")
-    words = data.draw(_garbage, label="words")
+    arity = max(1, len(rec.args))  # as many nasty words as the grammar takes, or any garbage
+    words = data.draw(st.one_of(st.lists(st.sampled_from(_NASTY), min_size=arity,
+                                         max_size=arity), _garbage), label="words")
     if rec.console:  # a shell word: through the shell, which shows a CommandError as error:
         out = io.StringIO()
         err = io.StringIO()
@@ -361,6 +363,26 @@ def test_garbage_arguments_give_a_command_error_and_move_nothing(name, tmp_path_
             assert rec.name in _FREE_TEXT, f"{comp.name} {rec.name} {words!r} was accepted"
             if rec.name == "log":
                 runner.call(station.stop_log, take_fault=False)
+    assert _at_rest(station, runner) == []
+    assert station.fault is None
+
+
+def test_every_nasty_word_in_every_argument_gives_a_command_error(robot, tmp_path, monkeypatch):
+    """Every component record with each nasty word (nan, inf, 1e400 ...) as all its arguments: a CommandError, and nothing moves."""
+    station, runner = robot
+    monkeypatch.chdir(tmp_path)
+    accepted = []
+    for comp, rec in _records(station):
+        if rec.console or rec.name in _FREE_TEXT:
+            continue
+        for w in _NASTY:
+            words = [w] * max(1, len(rec.args))
+            try:
+                _run(station, runner, comp, rec, words)
+            except CommandError:
+                continue
+            accepted.append(f"{comp.name} {rec.name} {' '.join(words)}")
+    assert accepted == []
     assert _at_rest(station, runner) == []
     assert station.fault is None
 
@@ -491,5 +513,14 @@ def test_a_bug_is_an_internal_error_with_its_traceback_and_the_console_goes_on(m
         out.truncate()
         shell.onecmd("W")  # the console keeps running
         assert out.getvalue().strip() == "0000"
+
+        def invariant() -> str:
+            raise PyrtInternalError("ready queue image corrupt")
+
+        monkeypatch.setattr(station, "status", invariant)
+        out.seek(0)
+        out.truncate()
+        shell.onecmd("status")  # pyrt's own invariant broken: a bug as well
+        assert out.getvalue().startswith("internal error: PyrtInternalError: ready queue")
     finally:
         station.close()

@@ -46,10 +46,7 @@ def test_32_clients_read_status_while_a_move_runs():
 
 
 def test_loop_lateness_with_and_without_32_busy_clients():
-    """Tick lateness measured idle and under 32 busy clients in the same run stays within a generous bound; no reply is lost or wrong, nothing faults.
-
-    The throughput (STATUS/s) is a figure of the machine, not a behaviour:
-    bench/bench_server.py measures it (test_status_throughput_floor_32_clients)."""
+    """Tick lateness idle and under 32 busy clients stays within a generous bound; no reply is wrong or lost, nothing faults (STATUS/s: bench/bench_server.py)."""
     with served(wall=True) as sv:
         loop = sv.rig.loop
         stats = lambda: sv.runner.call(loop.statistics)  # noqa: E731

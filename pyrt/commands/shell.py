@@ -15,7 +15,7 @@ import traceback
 from collections.abc import Callable
 from typing import TextIO
 
-from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
+from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError, PyrtInternalError
 
 __all__ = ["MAX_SLEEP_S", "CommandShell", "parse_number", "parse_seconds"]
 
@@ -79,6 +79,8 @@ class CommandShell:
             self.fault(exc)
         except MailboxTimeout as exc:
             self.error(f"the control loop did not answer: {exc}")
+        except PyrtInternalError as exc:  # pyrt's own invariant broken: a bug too
+            self.internal_error(exc)
         except PyrtError as exc:
             self.error(str(exc))
         except Exception as exc:
