@@ -107,13 +107,13 @@ def test_status_pvs_follow_the_robot(epics_env):
     """POSITION, MOVING, FAULT, T and the tick statistics read through caproto follow a move commanded over TCP."""
     with epics_served() as (sv, ioc):
         assert ioc.summary.startswith(f"{len(ioc.pvdb)} PVs")
-        assert _read("POSITION")[0] == 0.0 and _read("FAULT")[0] == 0.0
+        assert _read("POSITION")[0] == 0 and _read("FAULT")[0] == b"no"  # FAULT: enum no/yes
         op = sv.operator()
         op.command("I")
         op.command("P E47A")
         op.command("wait")
         assert _until(lambda: abs(_read("POSITION")[0] + 0x1B86) <= 16)
-        assert _read("MOVING")[0] == 0.0
+        assert _read("MOVING")[0] == b"no"
         assert _read("TARGET")[0] == -0x1B86
         assert _read("T")[0] > 1.0
         assert _until(lambda: _read("TICKS")[0] > 1000)
@@ -141,7 +141,7 @@ def test_no_command_pv_without_a_token(epics_env):
     """Without a token only status PVs exist: CMD is not served."""
     with epics_served(token=None) as (_sv, ioc):
         assert f"{PREFIX}CMD" not in ioc.pvdb and "status only" in ioc.summary
-        assert _read("FAULT")[0] == 0.0
+        assert _read("FAULT")[0] == b"no"
         with pytest.raises(Exception, match=r"(?i)time"):
             _read("CMD", timeout=0.5)
 
@@ -154,3 +154,22 @@ def test_a_clear_message_when_caproto_is_missing(monkeypatch):
     assert not epics.caproto_available()
     with served() as sv, pytest.raises(ConfigError, match=r"pyrt\[epics\]"):
         epics.EpicsService(sv.runner, ServedStation(sv.rig), sv.server, PREFIX)
+
+
+def test_status_pvs_carry_the_signals_units_and_booleans_are_enums(epics_env):
+    """Each status PV is made from its signal record: counts as EGU of POSITION, MOVING and FAULT enum PVs with states no/yes."""
+    from caproto import ChannelType
+    from caproto.sync.client import read
+
+    with epics_served(token=None) as (sv, ioc):
+        pos = read(PREFIX + "POSITION", data_type=ChannelType.CTRL_LONG, timeout=2.0,
+                   repeater=False)
+        assert pos.metadata.units == b"counts"
+        for name in ("MOVING", "FAULT", "BUSY"):
+            ctrl = read(PREFIX + name, data_type=ChannelType.CTRL_ENUM, timeout=2.0,
+                        repeater=False)
+            assert list(ctrl.metadata.enum_strings) == [b"no", b"yes"], name
+        units = {name.upper(): sig.units for name, sig, _fmt in ServedStation(sv.rig).fields}
+        assert {k for k in ioc.pvdb if k.startswith(PREFIX)} >= {PREFIX + k for k in units}
+        sv.runner.call(sv.rig.trip, "epics test trip", "test")
+        assert _until(lambda: _read("FAULT")[0] == b"yes")

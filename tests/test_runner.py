@@ -186,3 +186,42 @@ def test_statistics_are_built_outside_the_loop_and_lose_no_sample():
     assert runner.loop.tick_index - 2 <= second <= runner.loop.tick_index
     runner.stop()
     assert runner.loop.statistics().tasks["WORK"].calls == runner.loop.tick_index - 1
+
+
+def test_a_raising_predicate_surfaces_to_the_waiter_on_simclock():
+    """wait_until on a SimClock: a predicate that raises ends the wait with that exception, not as done."""
+    runner, _ = sim_runner()
+    calls = [0]
+
+    def predicate() -> bool:
+        calls[0] += 1
+        if calls[0] > 3:
+            raise KeyError("bad predicate")
+        return False
+
+    with pytest.raises(KeyError, match="bad predicate"):
+        runner.wait_until(predicate, 1.0)
+    assert runner.call(lambda: "alive") == "alive"
+
+
+def test_a_raising_predicate_surfaces_to_the_waiter_on_a_wallclock_loop():
+    """wait_until against a running wall-clock loop: the predicate's exception reaches the waiting caller; the loop goes on."""
+    loop = Loop(WallClock())
+    runner = Runner(loop)
+    runner.start()
+    try:
+        calls = [0]
+
+        def predicate() -> bool:
+            calls[0] += 1
+            if calls[0] > 3:
+                raise ZeroDivisionError("bad predicate")
+            return False
+
+        with pytest.raises(ZeroDivisionError, match="bad predicate"):
+            runner.wait_until(predicate, 5.0)
+        assert not runner._waiters
+        assert runner.call(lambda: "alive", timeout_s=2.0) == "alive"
+        assert runner.wait_until(lambda: True, 2.0) is True
+    finally:
+        runner.stop()

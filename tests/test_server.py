@@ -371,3 +371,42 @@ def test_pipelined_requests_beyond_the_rate_budget_wait_and_are_all_answered():
         lines = read_lines(s, 600, timeout_s=20.0)
         assert len(lines) == 600
         assert all(a.startswith("OK t=") and b == "OK 0000" for a, b in zip(lines[::2], lines[1::2], strict=True))
+
+
+def test_a_bug_in_a_command_is_err_internal_and_the_connection_goes_on(monkeypatch, caplog):
+    """A bug raised by a console command comes back as ERR internal (not ERR command), the traceback goes to the server's log, and the connection keeps serving."""
+    with served() as sv:
+
+        def broken() -> str:
+            raise KeyError("no such register")
+
+        monkeypatch.setattr(sv.ctl, "position", broken)
+        s = sv.raw()
+        with caplog.at_level("ERROR", logger="pyrt.server"):
+            s.sendall(b"W\n")
+            (line,) = read_lines(s, 1)
+        assert line.startswith("ERR internal KeyError: 'no such register'"), line
+        assert any(r.exc_info and r.exc_info[0] is KeyError for r in caplog.records)
+        s.sendall(b"T\n")
+        assert read_lines(s, 1) == ["OK 0000"]
+        s.close()
+
+
+def test_reconnect_and_auth_after_a_privileged_client_left_is_never_busy(monkeypatch):
+    """A privileged client that ran a command and closed, then a new client's AUTH at once: OK (it waits for the old session's release), even when the release is slow."""
+    with served() as sv:
+        release = sv.server.robot.release
+
+        def slow_release(shell) -> None:
+            time.sleep(0.2)  # the old worker is still releasing when the next AUTH comes
+            release(shell)
+
+        monkeypatch.setattr(sv.server.robot, "release", slow_release)
+        for _ in range(3):
+            first = sv.operator()
+            assert first.command("X 33") == []
+            first.close()
+            nxt = sv.client()
+            nxt.auth(TOKEN)  # ERR busy here before the fix
+            assert nxt.command("T") == ["0000"]
+            nxt.close()

@@ -46,7 +46,7 @@ def test_32_clients_read_status_while_a_move_runs():
 
 
 def test_loop_lateness_with_and_without_32_busy_clients():
-    """Tick lateness measured idle and under 32 busy clients in the same run stays within a generous bound."""
+    """Tick lateness idle and under 32 busy clients stays within a generous bound; no reply is wrong or lost, nothing faults (STATUS/s: bench/bench_server.py)."""
     with served(wall=True) as sv:
         loop = sv.rig.loop
         stats = lambda: sv.runner.call(loop.statistics)  # noqa: E731
@@ -62,7 +62,8 @@ def test_loop_lateness_with_and_without_32_busy_clients():
             f"{busy.lateness.p99_ns / 1e3:.0f} µs, {busy.overruns} overruns in "
             f"{busy.lateness.count} ticks"
         )
-        assert load["errors"] == 0 and load["per_s"] > 1000
+        assert load["errors"] == 0 and load["requests"] > 0
+        assert sv.rig.fault is None
         assert busy.lateness.count > 1000
         assert busy.lateness.p99_ns < max(LATE_P99_BOUND_NS, 4 * idle.lateness.p99_ns)
         assert busy.overruns < busy.lateness.count // 10

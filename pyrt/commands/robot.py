@@ -157,12 +157,17 @@ class RobotShell(CommandShell):
         return rec.anyone or rec.only_reads(words)
 
     def completions(self) -> dict[str, Any]:
-        """The nested completion table: words, then objects and their verbs."""
+        """The nested completion table: words, then objects and their verbs
+        (each record's name and its aliases: every name the object answers to)."""
         table: dict[str, Any] = {w.name: None for w in self.words()}
         for comp in self.station.components():
             if comp is getattr(self.station, "words", None):
                 continue  # its records are words, above
-            table[comp.name] = {c.name: None for c in comp.commands()} or None
+            verbs: dict[str, Any] = {}
+            for c in comp.commands():
+                verbs[c.name] = None
+                verbs.update(dict.fromkeys(c.aliases))
+            table[comp.name] = verbs or None
         objects = {name: None for name in table if name not in ("help",)}
         table["help"] = objects
         table["status"] = {c.name: None for c in self.station.components()

@@ -10,10 +10,12 @@ line and returns True when the session should end.
 from __future__ import annotations
 
 import inspect
+import sys
+import traceback
 from collections.abc import Callable
 from typing import TextIO
 
-from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
+from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError, PyrtInternalError
 
 __all__ = ["MAX_SLEEP_S", "CommandShell", "parse_number", "parse_seconds"]
 
@@ -27,8 +29,10 @@ class CommandShell:
     #: The prompt shown before each line.
     prompt = "> "
 
-    def __init__(self, stdout: TextIO):
+    def __init__(self, stdout: TextIO, stderr: TextIO | None = None):
         self.stdout = stdout
+        #: Where the traceback of a bug in pyrt goes (None: ``sys.stderr`` at the time).
+        self.stderr = stderr
 
     # -- output -----------------------------------------------------------------
 
@@ -39,6 +43,18 @@ class CommandShell:
     def error(self, text: str) -> None:
         """Report a refused or malformed command: one line, nothing changed."""
         self.say(f"error: {text}")
+
+    def internal_error(self, exc: BaseException) -> None:
+        """Report a bug in pyrt (not the operator's mistake): one line on the
+        session's output, the traceback on its error stream."""
+        self.say(f"internal error: {type(exc).__name__}: {exc} "
+                 "(a bug in pyrt; please report it with this traceback)")
+        err = self.stderr if self.stderr is not None else sys.stderr
+        try:
+            err.write("".join(traceback.format_exception(exc)))
+            err.flush()
+        except (OSError, ValueError):  # a closed error stream must not end the session
+            pass
 
     # -- dispatch ---------------------------------------------------------------
 
@@ -54,18 +70,21 @@ class CommandShell:
 
     def guarded(self, dispatch: Callable[[str], bool], line: str) -> bool:
         """Run ``dispatch(line)``, turning every failure into one line of
-        output: a fault, a loop that did not answer, a refused command, or a
-        bug (which must not end the operator's session)."""
+        output: a fault, a loop that did not answer, a refused command
+        (``error: ...``), or a bug in pyrt (``internal error: ...`` with the
+        traceback on the error stream; it must not end the operator's session)."""
         try:
             return bool(dispatch(line))
         except FaultError as exc:
             self.fault(exc)
         except MailboxTimeout as exc:
             self.error(f"the control loop did not answer: {exc}")
+        except PyrtInternalError as exc:  # pyrt's own invariant broken: a bug too
+            self.internal_error(exc)
         except PyrtError as exc:
             self.error(str(exc))
         except Exception as exc:
-            self.error(f"internal error: {type(exc).__name__}: {exc}")
+            self.internal_error(exc)
         return False
 
     def onecmd(self, line: str) -> bool:

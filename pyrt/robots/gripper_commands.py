@@ -202,7 +202,7 @@ class GripperMonitor(Component):
         return addr, value
 
     @command(_hex_arg("addr", "address", 0x7F), _hex_arg("value", "value", 0xFF), name="C",
-             reply=_show)
+             moves=True, reply=_show)
     def cmd_change(self, addr: int, value: int) -> tuple[int, int]:
         """C addr value: store value (00-FF) at on-chip RAM addr (00-7F), show it."""
         return self._at(addr, self.ctl.poke(addr, value))

@@ -95,6 +95,18 @@ class _Request:
         self.event = threading.Event()
 
 
+class _Waiter:
+    """A ``wait_until`` in progress: its predicate, the event that ends the
+    wait, and the exception the predicate raised (handed to the waiter)."""
+
+    __slots__ = ("error", "event", "predicate")
+
+    def __init__(self, predicate: Callable[[], bool]):
+        self.predicate = predicate
+        self.event = threading.Event()
+        self.error: BaseException | None = None
+
+
 class Runner:
     """Owns a :class:`Loop` for the application: mailbox calls, waits, the loop thread.
 
@@ -119,7 +131,7 @@ class Runner:
         self._lock = threading.Lock()
         self._drive_lock = threading.Lock()
         self._driver: int | None = None
-        self._waiters: list[tuple[Callable[[], bool], threading.Event]] = []
+        self._waiters: list[_Waiter] = []
         self._messages: queue.SimpleQueue[str] = queue.SimpleQueue()
         self._thread: threading.Thread | None = None
         self._started = False
@@ -284,7 +296,8 @@ class Runner:
     def wait_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
         """Wait until ``predicate()`` holds, evaluated in the loop after each
         tick; False after ``timeout_s`` (loop time on a SimClock).  A fault
-        while waiting ends the wait with :class:`FaultError`."""
+        while waiting ends the wait with :class:`FaultError`; an exception
+        raised by ``predicate`` ends it with that exception (never as "done")."""
         if timeout_s < 0:
             raise ValueError(f"timeout must be >= 0, got {timeout_s}")
         self._raise_fault()
@@ -300,8 +313,8 @@ class Runner:
             self._drive(done, timeout_s)
             self._raise_fault()
             return held[0]
-        event = threading.Event()
-        entry = (predicate, event)
+        entry = _Waiter(predicate)
+        event = entry.event
         with self._lock:
             self._waiters.append(entry)
         try:
@@ -311,6 +324,8 @@ class Runner:
                     self._raise_fault()
                 if time.monotonic() >= deadline or not self.running:
                     return False
+            if entry.error is not None:
+                raise entry.error
             return True
         finally:
             with self._lock:
@@ -378,9 +393,12 @@ class Runner:
         if self._waiters:
             with self._lock:
                 waiters = list(self._waiters)
-            for predicate, event in waiters:
+            for w in waiters:
+                if w.event.is_set():
+                    continue
                 try:
-                    if predicate():
-                        event.set()
-                except Exception:
-                    event.set()
+                    if w.predicate():
+                        w.event.set()
+                except Exception as exc:  # the waiter raises it; the loop goes on
+                    w.error = exc
+                    w.event.set()

@@ -6,7 +6,11 @@ control loop) publishes, with PV names ``PREFIX`` + field:
 * ``T``: loop time of the latest status sample, seconds;
 * one PV per status field of the robot, upper case (the gripper's
   ``POSITION``, ``TARGET``, ``MOVING``, ``BUSY``, ``SENSORS``, ``FAULT``;
-  the manipulator's position and tensions), updated every ``period_s``;
+  the manipulator's position and tensions), updated every ``period_s``,
+  made from the field's signal record: its units are the PV's EGU, its
+  format the precision (an integer format makes an integer PV), and a
+  boolean signal (units ``bool``: ``MOVING``, ``FAULT``) is an enum PV
+  whose states are ``no`` and ``yes``;
 * ``FAULT_MSG``: the last fault pushed by the loop (40 characters);
 * ``TICKS``, ``OVERRUNS``, ``LATE_P99_US``, ``LATE_MAX_US``: tick statistics
   (through the runner's mailbox, once a second).
@@ -38,14 +42,50 @@ from typing import Any
 
 from pyrt.errors import ConfigError
 from pyrt.server.protocol import format_error
-from pyrt.server.server import run_shell
+from pyrt.server.session import run_shell
 
-__all__ = ["EpicsService", "caproto_available"]
+__all__ = ["FIXED_PVS", "EpicsService", "caproto_available"]
 
 log = logging.getLogger("pyrt.server.epics")
 
 CMD_LENGTH = 256
 REPLY_LENGTH = 4096
+
+#: The PVs beside the status fields (names after the prefix); with a token
+#: also ``CMD``, ``REPLY`` and ``RESULT``.
+FIXED_PVS = ("T", "FAULT_MSG", "TICKS", "OVERRUNS", "LATE_P99_US", "LATE_MAX_US")
+#: A boolean status field (units ``bool``) is an enum PV with these states.
+BOOL_STATES = ("no", "yes")
+
+
+def _precision(fmt: str) -> int:
+    """Decimals of a format spec (``.2f`` -> 2, ``.4g`` -> 4); 3 when it says none."""
+    spec = fmt.rsplit(".", 1)
+    if len(spec) == 2:
+        digits = "".join(c for c in spec[1] if c.isdigit())
+        if digits:
+            return int(digits)
+    return 3
+
+
+def _status_pv(ca: Any, units: str, fmt: str) -> tuple[str, Any]:
+    """The PV of one status field from its signal's units and format:
+    ``bool`` an enum (no/yes), an integer format (``d``, ``X``) an integer,
+    anything else a double with the units as EGU and the format's precision."""
+    if units == "bool":
+        return "bool", ca.ChannelEnum(value=BOOL_STATES[0], enum_strings=BOOL_STATES)
+    if fmt.endswith(("d", "X", "x")):
+        return "int", ca.ChannelInteger(value=0, units=units)
+    return "float", ca.ChannelDouble(value=0.0, precision=_precision(fmt), units=units)
+
+
+def _pv_value(kind: str, value: Any) -> Any:
+    """A status value as its PV takes it."""
+    if kind == "bool":
+        return BOOL_STATES[1] if value else BOOL_STATES[0]
+    if kind == "int":
+        return int(value)
+    return float(value)
 
 
 def caproto_available() -> bool:
@@ -119,10 +159,10 @@ class EpicsService:
         p = self.prefix
         db: dict[str, Any] = {p + "T": ca.ChannelDouble(value=0.0, precision=6, units="s")}
         self._fields = []
-        for name in self.robot.status_names:
-            pv = ca.ChannelDouble(value=0.0, precision=3)
+        for name, units, fmt in self._status_fields():
+            kind, pv = _status_pv(ca, units, fmt)
             db[p + name.upper()] = pv
-            self._fields.append(pv)
+            self._fields.append((kind, pv))
         db[p + "FAULT_MSG"] = ca.ChannelString(value="none")
         db[p + "TICKS"] = ca.ChannelInteger(value=0)
         db[p + "OVERRUNS"] = ca.ChannelInteger(value=0)
@@ -141,6 +181,15 @@ class EpicsService:
                                              string_encoding="utf-8")
             db[p + "RESULT"] = ca.ChannelString(value="")
         return db
+
+    def _status_fields(self) -> list[tuple[str, str, str]]:
+        """``(name, units, format)`` of each status field: from the station's
+        signal records (a :class:`~pyrt.server.station.ServedStation`'s
+        ``fields``), else the names alone (units unknown, 3 decimals)."""
+        fields = getattr(self.robot, "fields", None)
+        if fields is None:
+            return [(name, "", ".3f") for name in self.robot.status_names]
+        return [(name, sig.units, fmt) for name, sig, fmt in fields]
 
     # -- life cycle ----------------------------------------------------------------
 
@@ -202,9 +251,9 @@ class EpicsService:
             if values is not None and t_ns != last_t:
                 last_t = t_ns
                 await db[p + "T"].write(t_ns / 1e9)
-                for pv, value in zip(self._fields, values, strict=True):
-                    with contextlib.suppress(TypeError, ValueError):
-                        v = float(value)
+                for (kind, pv), value in zip(self._fields, values, strict=True):
+                    with contextlib.suppress(TypeError, ValueError, OverflowError):
+                        v = _pv_value(kind, value)
                         if v != pv.value:
                             await pv.write(v)
             fault = hub.last_fault

@@ -74,9 +74,14 @@ class GripperSim(Component):
         self._apply(self.plant.set_object, width)
 
     @command(Arg("DIR", str.lower, choices=("open", "close", "off")),
-             Arg("S", finite("jog time", 0.0, MAX_JOG_S), optional=True), name="jog")
+             Arg("S", finite("jog time", 0.0, MAX_JOG_S), optional=True), name="jog",
+             moves=True, while_faulted=True)
     def jog(self, direction: str, seconds: float | None = None) -> None:
-        """sim jog open|close|off [S]: hold the front-panel jog switch (S seconds)."""
+        """sim jog open|close|off [S]: hold the front-panel jog switch (S seconds).
+
+        It moves the jaws (MVJAWS drives them while the switch is held); it
+        is the world's hand on the switch, so 'sim jog off' is accepted
+        while the robot is faulted."""
         dur = None if seconds is None else int(seconds * 1e9)
         self._apply(self.plant.jog, direction, dur)
 

@@ -1,0 +1,270 @@
+"""What a connection asks (its requests, the server's verbs, the privilege)
+and the worker thread that runs its console commands in order.
+
+The cheap verbs (``STATUS``, ``AUTH``, ``SUBSCRIBE`` ...) are answered in
+the I/O thread unless commands of the same connection wait before them;
+console commands run in the connection's worker through a
+:class:`~pyrt.commands.CommandShell` of its own (:func:`run_shell` frames
+its output).  One connection at a time is privileged; a privileged client
+that leaves is released by its worker, and an ``AUTH`` meanwhile waits for
+that release instead of getting ``ERR busy``.
+"""
+
+from __future__ import annotations
+
+import hmac
+import io
+import logging
+import math
+import threading
+import time
+from typing import Any
+
+from pyrt.server.connection import Connection
+from pyrt.server.limits import MAX_AUTH_FAILURES, lower_priority
+from pyrt.server.protocol import format_error, format_reply, split_verb
+
+__all__ = ["SessionMixin", "run_shell"]
+
+log = logging.getLogger("pyrt.server")
+
+_VERBS = frozenset({"AUTH", "QUIT", "STATUS", "SUBSCRIBE", "UNSUBSCRIBE"})
+
+
+def _denied(line: str) -> str:
+    return format_error("denied", f"{line.strip()[:60]!r} changes the robot: AUTH first")
+
+
+def run_shell(shell: Any, line: str, extra: list[str] | None = None) -> tuple[str, bool]:
+    """Run ``line`` in a console ``shell``, its output captured; the framed reply
+    and whether the shell asked to end the session.
+
+    What the shell reports through ``error()`` makes the reply ``ERR command``;
+    a bug in pyrt (its ``internal_error()``) ``ERR internal``, the traceback
+    to the server's log; a fault it meets (a :class:`~pyrt.errors.FaultError`, handed to its
+    ``fault()``) ``ERR fault``, with what the command then said as the lines.
+    """
+    out = io.StringIO()
+    errors: list[str] = []
+    faults: list[Any] = []
+    bugs: list[BaseException] = []
+    shell.stdout = out
+    shell.error = errors.append
+    shell.fault = faults.append
+    shell.internal_error = bugs.append
+    end = bool(shell.onecmd(line))
+    lines = out.getvalue().splitlines() + list(extra or [])
+    if bugs:
+        exc = bugs[0]
+        log.error("a bug in pyrt running %r", line[:60], exc_info=exc)
+        return format_error("internal", f"{type(exc).__name__}: {exc} (a bug in pyrt; the "
+                            "server log has the traceback)", lines), end
+    if errors:
+        return format_error("command", "; ".join(errors), lines), end
+    if faults:
+        return format_error("fault", f"{faults[0].fault}; every motor stopped; nothing "
+                            "moves until you type ack", lines), end
+    return format_reply(lines), end
+
+
+
+class SessionMixin:
+    """The requests part of :class:`~pyrt.server.Server` (see the module text)."""
+
+    def _request(self, conn: Connection, raw: bytes) -> None:
+        self.counters["requests"] += 1
+        conn.last_active = time.monotonic()
+        try:
+            line = raw.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            self.counters["utf8"] += 1
+            self._reply(conn, format_error(
+                "utf8", f"invalid UTF-8 at byte {exc.start}; request ignored"))
+            return
+        verb, rest = split_verb(line)
+        if verb in _VERBS:
+            if conn.pending == 0 and not (verb == "AUTH" and self._held_by_a_closing(conn)):
+                self._output(conn, self._verb(conn, verb, rest))
+            else:  # in order behind its commands, or waiting for a release (worker)
+                self._enqueue(conn, line)
+            return
+        if not verb:
+            self._reply(conn, format_reply([]))
+            return
+        # Behind queued requests (an AUTH among them, perhaps) the worker decides.
+        if conn.pending == 0 and verb != "HELP" and not (
+            conn.privileged or self.robot.is_read_only(line)
+        ):
+            self.counters["denied"] += 1
+            self._output(conn, _denied(line))
+            return
+        self._enqueue(conn, line)
+
+    def _reply(self, conn: Connection, text: str) -> None:
+        """A reply produced in the I/O thread, kept in order behind queued commands."""
+        if conn.pending:
+            self._enqueue(conn, text, ready=True)
+        else:
+            self._output(conn, text)
+
+    def _enqueue(self, conn: Connection, line: str, ready: bool = False) -> None:
+        with conn.lock:
+            conn.requests.append((ready, line))
+            conn.pending += 1
+            if conn.pending >= self.max_pending:
+                conn.paused = True  # stop reading: TCP pushes back on the client
+            conn.cv.notify()
+        if conn.paused:
+            self._set_events(conn)
+        if conn.worker is None:
+            conn.worker = threading.Thread(
+                target=self._work, args=(conn,), name=f"pyrt-server-{conn.id}", daemon=True
+            )
+            conn.worker.start()
+
+
+    # -- the server's verbs (I/O thread, or a worker when queued behind commands) ----
+
+    def _verb(self, conn: Connection, verb: str, rest: str) -> str:
+        if verb == "STATUS":
+            if rest:
+                return format_error("syntax", "STATUS takes no argument")
+            self.counters["status"] += 1
+            t_ns, _tick, values = self.hub.snapshot
+            if values is None:
+                return format_error("timeout", "no status yet: the control loop has not run")
+            return format_reply([f"t={t_ns / 1e9:.6f} {self.robot.format_status(values)}"])
+        if verb == "AUTH":
+            return self._auth(conn, rest)
+        if verb == "SUBSCRIBE":
+            try:
+                hz = float(rest)
+            except ValueError:
+                hz = math.nan
+            if not 0 < hz <= self.max_hz:
+                return format_error(
+                    "syntax", f"SUBSCRIBE needs a rate 0 < hz <= {self.max_hz:g}, got {rest!r}")
+            with self._lock:
+                if conn.closed:
+                    return format_reply([])
+                others = sum(c.subscribed for c in list(self._conns.values()) if c is not conn)
+                if others + hz > self.max_subscription_rate:
+                    return format_error(
+                        "limit", f"subscriptions would total {others + hz:g} samples/s; "
+                        f"the server serves at most {self.max_subscription_rate:g}")
+                self.hub.subscribe(conn.id, hz)
+                conn.subscribed = hz
+            return format_reply(
+                [f"subscribed at {hz:g} Hz: t {' '.join(self.robot.status_names)}"])
+        if verb == "UNSUBSCRIBE":
+            if rest:
+                return format_error("syntax", "UNSUBSCRIBE takes no argument")
+            with self._lock:
+                had = self.hub.unsubscribe(conn.id)
+                conn.subscribed = 0.0
+            return format_reply(["unsubscribed" if had else "not subscribed"])
+        if verb == "QUIT":
+            self._close_after_flush(conn)
+            return format_reply(["bye"])
+        return format_error("internal", f"no verb {verb!r}")  # pragma: no cover
+
+    def _held_by_a_closing(self, conn: Connection) -> bool:
+        """The privilege is held by another connection that is closing (its
+        session not yet released): an AUTH of ``conn`` waits for it in ``conn``'s worker."""
+        holder = self._privileged
+        return holder is not None and holder is not conn and (holder.closing or holder.closed)
+
+    def _auth(self, conn: Connection, given: str) -> str:
+        holder = self._privileged
+        if (holder is not None and holder is not conn and (holder.closing or holder.closed)
+                and threading.current_thread() is not self._thread):
+            # A privileged client that has gone: its worker releases the
+            # session (leaves the monitor ...) and then the privilege.  Wait
+            # for that, so that "disconnect, reconnect, AUTH" never sees busy.
+            holder.released.wait(self.command_timeout_s)
+        with self._lock:
+            if conn.privileged:
+                return format_reply(["already privileged"])
+            if self._token is None:
+                self.counters["auth_failed"] += 1
+                return format_error("auth", "no token is configured: this server only reports")
+            if not given or not hmac.compare_digest(given.encode("utf-8"), self._token):
+                self.counters["auth_failed"] += 1
+                conn.auth_failures += 1
+                if conn.auth_failures >= MAX_AUTH_FAILURES:
+                    self._close_after_flush(conn)
+                    return format_error("auth", "wrong token; too many failures, closing")
+                return format_error("auth", "wrong token")
+            holder = self._privileged
+            if holder is not None and holder is not conn:
+                return format_error("busy", "another client is privileged (one at a time)")
+            self._privileged = conn
+            conn.privileged = True
+        log.info("%r is privileged", conn)
+        return format_reply(["privileged: every console command is accepted"])
+
+    # -- the worker thread of a connection -------------------------------------------
+
+    def _work(self, conn: Connection) -> None:
+        lower_priority(self.nice)
+        while True:
+            with conn.lock:
+                while not conn.requests and not conn.closed:
+                    conn.cv.wait()
+                if conn.closed:
+                    break
+                ready, line = conn.requests.popleft()
+            self._stand_aside()
+            if ready:
+                reply = line
+            else:
+                try:
+                    reply = self._execute(conn, line)
+                except Exception as exc:  # a bug must not end the service
+                    log.exception("%r: %s failed", conn, line[:60])
+                    reply = format_error("internal", f"{type(exc).__name__}: {exc}")
+            self._output(conn, reply)
+            with conn.lock:
+                conn.pending -= 1
+            if conn.paused or conn.closing:  # the I/O thread resumes reading, or closes
+                self._touch(conn)
+        self._release(conn)
+
+    def _release(self, conn: Connection) -> None:
+        if conn.privileged and conn.shell is not None and conn.shell_privileged:
+            try:
+                self.robot.release(conn.shell)
+            except Exception:
+                log.exception("%r: release failed", conn)
+        with self._lock:
+            if self._privileged is conn:
+                self._privileged = None
+        conn.released.set()
+
+    def _execute(self, conn: Connection, line: str) -> str:
+        verb, rest = split_verb(line)
+        if verb in _VERBS:
+            return self._verb(conn, verb, rest)
+        if verb != "HELP" and not (conn.privileged or self.robot.is_read_only(line)):
+            self.counters["denied"] += 1
+            return _denied(line)
+        extra = self._help_lines(conn) if verb == "HELP" and not rest else []
+        reply, end = run_shell(self._shell(conn), line, extra)
+        if end:
+            self._close_after_flush(conn)
+        return reply
+
+    def _shell(self, conn: Connection) -> Any:
+        if conn.shell is None or conn.shell_privileged != conn.privileged:
+            runner = self.runner if conn.privileged else self.observer
+            conn.shell = self.robot.make_shell(runner, io.StringIO())
+            conn.shell_privileged = conn.privileged
+        return conn.shell
+
+    def _help_lines(self, conn: Connection) -> list[str]:
+        lines = [
+            "server (any case): AUTH TOKEN | STATUS | SUBSCRIBE HZ | UNSUBSCRIBE | QUIT",
+        ]
+        if not conn.privileged:
+            lines.append("read-only until AUTH: commands that change the robot get ERR denied")
+        return lines
