@@ -7,11 +7,28 @@ import sys
 from collections.abc import Callable
 
 from pyrt import __version__
+from pyrt.boards import DEFAULT_URL
 from pyrt.errors import ConfigError
 from pyrt.scheduler import Loop, SimClock, TimingLog, WallClock
 from pyrt.scheduler import rt as _rt
 
-__all__ = ["add_loop_options", "make_loop", "parse_speed"]
+__all__ = ["add_boards_option", "add_loop_options", "make_loop", "parse_speed"]
+
+
+def add_boards_option(parser: argparse.ArgumentParser, world: str) -> None:
+    """Add ``--boards URL`` (the board back end; ``world``: what to give
+    ``pyrt board-sim`` for this robot)."""
+    parser.add_argument(
+        "--boards",
+        metavar="URL",
+        default=DEFAULT_URL,
+        help=(
+            f"where the robot's boards are: {DEFAULT_URL} (default) simulates them and the "
+            "world in this process; tcp://HOST:PORT drives the boards of a 'pyrt board-sim "
+            f"{world} --listen HOST:PORT' in another process (its world at real time: "
+            "only --speed 1, and the simulation's options are board-sim's)"
+        ),
+    )
 
 
 def parse_speed(text: str) -> float | None:
