@@ -7,12 +7,13 @@ import sys
 from collections.abc import Callable
 
 from pyrt import __version__
-from pyrt.boards import DEFAULT_URL
+from pyrt.boards import DEFAULT_URL, parse_board_url
+from pyrt.boards.registry import backend
 from pyrt.errors import ConfigError
 from pyrt.scheduler import Loop, SimClock, TimingLog, WallClock
 from pyrt.scheduler import rt as _rt
 
-__all__ = ["add_boards_option", "add_loop_options", "make_loop", "parse_speed"]
+__all__ = ["add_boards_option", "add_loop_options", "load_backend", "make_loop", "parse_speed"]
 
 
 def add_boards_option(parser: argparse.ArgumentParser, world: str) -> None:
@@ -105,6 +106,13 @@ def add_loop_options(
     g.add_argument(
         "--mlock", action="store_true", help="lock memory (mlockall; needs RLIMIT_MEMLOCK)"
     )
+
+
+def load_backend(url: str) -> None:
+    """Load the back end of the board URL ``url`` now (ConfigError for a
+    malformed URL or an unknown scheme), before the loop's clock starts, so
+    that importing it does not make the first ticks late."""
+    backend(parse_board_url(url).scheme, url)
 
 
 def apply_rt_options(args: argparse.Namespace, say: Callable[[str], None]) -> None:

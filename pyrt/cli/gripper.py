@@ -20,7 +20,13 @@ import argparse
 import sys
 import time
 
-from pyrt.cli._loopopts import add_boards_option, add_loop_options, apply_rt_options, make_loop
+from pyrt.cli._loopopts import (
+    add_boards_option,
+    add_loop_options,
+    apply_rt_options,
+    load_backend,
+    make_loop,
+)
 from pyrt.cli._serve import add_serve_options, prepare_service
 from pyrt.commands import RobotShell
 from pyrt.console import Console
@@ -98,6 +104,7 @@ def run(args: argparse.Namespace) -> int:
         more = f" (+{held} earlier reports held back; 'stats' has the totals)" if held else ""
         posted[0].post(line + more)
 
+    load_backend(args.boards)
     loop = make_loop(args, warn=warn)
     station = build_gripper(loop, boards=args.boards, start=args.start, object_mm=args.object,
                             faults=args.fault or ())

@@ -30,7 +30,13 @@ import sys
 import time
 from pathlib import Path
 
-from pyrt.cli._loopopts import add_boards_option, add_loop_options, apply_rt_options, make_loop
+from pyrt.cli._loopopts import (
+    add_boards_option,
+    add_loop_options,
+    apply_rt_options,
+    load_backend,
+    make_loop,
+)
 from pyrt.cli._serve import add_serve_options, prepare_service
 from pyrt.commands import RobotShell
 from pyrt.console import Console
@@ -84,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
         if posted:
             posted[0].post(line)
 
+    load_backend(args.boards)
     loop = make_loop(args, warn=warn)
     imp = Imperfections.ideal() if args.ideal_sensors else None
     station = ManipulatorStation(directory, loop=loop, imperfections=imp, boards=args.boards)
