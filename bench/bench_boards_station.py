@@ -9,8 +9,11 @@ loop in its own thread, commands through RobotShell and the mailbox), runs
 ``I`` and ``P-1B86`` with ``wait``, and reports per tick: the time the
 boards' poll takes (one ``SNAP`` round trip, the encoder interrupts it
 raises), the whole tick's work and lateness (p50/p99/max), and the
-overruns, against the 1 ms tick.  The machine is shared: read the tails as
-approximate.  ``bench_boards.py`` times single register round trips.
+overruns, against the 1 ms tick.  The same run on the in-process ``sim:``
+boards (no poll; the jaws' physics in the tick instead) is the baseline:
+what the machine does to a 1 ms loop without a second process.  The
+machine is shared: read the tails as approximate.  ``bench_boards.py``
+times single register round trips.
 """
 
 from __future__ import annotations
@@ -47,18 +50,20 @@ def gripper_url() -> Iterator[str]:
 
 
 def _quantile(samples: list[int], q: float) -> int:
-    s = sorted(samples)
+    s = sorted(samples) or [0]
     return s[min(len(s) - 1, int(q * len(s)))]
 
 
 @pytest.mark.benchmark(group="boards-station")
-def test_gripper_station_tick_budget_over_tcp(benchmark, gripper_url):
-    """I, P-1B86 and wait on the gripper station through tcp:// at 1 kHz: poll p50/p99 and the
-    tick's work, lateness and overruns."""
+@pytest.mark.parametrize("backend", ["tcp", "sim"])
+def test_gripper_station_tick_budget(benchmark, gripper_url, backend):
+    """I, P-1B86 and wait on the gripper station at 1 kHz, through tcp:// (or in process, the
+    baseline): poll p50/p99 and the tick's work, lateness and overruns."""
     result: dict[str, object] = {}
+    url = gripper_url if backend == "tcp" else "sim:"
 
     def run() -> None:
-        station = build_gripper(Loop(WallClock(), period_ns=TICK_NS), boards=gripper_url)
+        station = build_gripper(Loop(WallClock(), period_ns=TICK_NS), boards=url)
         polls: list[int] = []
         clock = time.perf_counter_ns
         poll = station.boards.poll
@@ -87,7 +92,7 @@ def test_gripper_station_tick_budget_over_tcp(benchmark, gripper_url):
 
     benchmark.pedantic(run, rounds=1, iterations=1)
     polls, stats = result["polls"], result["stats"]
-    p50, p99, pmax = _quantile(polls, 0.5), _quantile(polls, 0.99), max(polls)
+    p50, p99, pmax = _quantile(polls, 0.5), _quantile(polls, 0.99), max(polls, default=0)
     work, late = stats.work, stats.lateness
     benchmark.extra_info.update(
         ticks=stats.ticks, poll_p50_us=round(p50 / 1e3, 1), poll_p99_us=round(p99 / 1e3, 1),
@@ -95,7 +100,7 @@ def test_gripper_station_tick_budget_over_tcp(benchmark, gripper_url):
         work_p99_us=round(work.p99_ns / 1e3, 1), work_max_us=round(work.max_ns / 1e3, 1),
         late_p99_us=round(late.p99_ns / 1e3, 1), overruns=stats.overruns, missed=stats.missed,
     )
-    print(f"\ngripper station over tcp:// ({len(polls)} polls, {stats.ticks} ticks of 1 ms): "
+    print(f"\ngripper station on {url} ({len(polls)} polls, {stats.ticks} ticks of 1 ms): "
           f"poll p50 {p50 / 1e3:.1f} µs, p99 {p99 / 1e3:.1f} µs, max {pmax / 1e3:.0f} µs "
           f"({p50 / TICK_NS:.1%} / {p99 / TICK_NS:.1%} of the tick); tick work p50 <= "
           f"{work.p50_ns / 1e3:.0f} µs, p99 <= {work.p99_ns / 1e3:.0f} µs, max "
