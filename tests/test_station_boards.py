@@ -410,3 +410,40 @@ def test_watchdog_trips_before_the_loop_starts_are_not_a_fault():
     finally:
         station.close()
         server.close()
+
+
+def test_a_down_link_answers_only_what_the_drop_did(gripper_server):
+    """After the link fails, the outputs-off writes a reflex makes succeed without a round trip
+    (DAC null; disarm, windings off) and channels read disarmed; anything else raises BoardError."""
+    from pyrt.boards.gripper import DAC, LED_LO
+    from pyrt.boards.tio10 import AWO_BITS, DIR_BITS
+
+    with open_boards(gripper_server.url, "gripper", max_age=0) as b:
+        assert b.down is None and b.has_info
+        gripper_server.close()
+        with pytest.raises(BoardError):
+            b.poll(0)
+        assert b.down is not None
+        b.gripper.write(DAC, DAC_NULL)
+        for write in ((DAC, 0x90), (LED_LO, 0)):
+            with pytest.raises(BoardError, match="link is down"):
+                b.gripper.write(*write)
+    world = ManipulatorWorld.from_station(load_station(station_directory("prototype")))
+    server = BoardServer(world, "127.0.0.1", 0, watchdog_s=30.0)
+    server.start()
+    with open_boards(server.url, "manipulator") as b:
+        server.close()
+        with pytest.raises(BoardError):
+            b.poll(0)
+        tio = b.tio10
+        tio.disarm(7)
+        tio.set_bit(*AWO_BITS[7], True)
+        assert not tio.armed(7)
+        with pytest.raises(BoardError):
+            tio.set_bit(*DIR_BITS[7], True)
+        with pytest.raises(BoardError):
+            tio.arm(7)
+    with open_boards("sim:", "gripper") as b:  # in process: nothing to lose, nothing to tell
+        assert b.down is None and not b.has_info
+        with pytest.raises(ConfigError):
+            b.info()

@@ -48,9 +48,9 @@ def refuse_sim_options(boards: Boards, given: Iterable[str]) -> None:
     names = list(given)
     if boards.in_process or not names:
         return
-    raise ConfigError(f"board URL {boards.url!r}: the simulated world runs in the board-sim "
-                      f"process, not here: {', '.join(names)} cannot be set here (give "
-                      "them to 'pyrt board-sim' instead)")
+    raise ConfigError(f"board URL {boards.url!r}: the world behind these boards is not "
+                      f"simulated in this process: {', '.join(names)} cannot be set here "
+                      "(over tcp:// they are options of 'pyrt board-sim')")
 
 
 class BoardWorld(Component):
