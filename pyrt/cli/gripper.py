@@ -64,7 +64,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_boards_option(p, "gripper")
-    g = p.add_argument_group("simulation (in process only)")
+    g = p.add_argument_group("simulation (sim: boards only; board-sim takes the same options)")
     g.add_argument(
         "--object", type=float, metavar="MM",
         help=f"an object this wide between the jaws (0 < MM < {JawParameters().open_mm:g})",
@@ -77,8 +77,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--fault", action="append", choices=[f for f in FAULTS if f != "port"],
         help="inject a fault from the start: limit (sensor dead), jam (motor), encoder (dead)",
     )
-    g.add_argument("--no-init", action="store_true", help="do not run I at power-up")
-    g.add_argument("--history", metavar="FILE", help="keep the command history in FILE")
+    c = p.add_argument_group("console")
+    c.add_argument("--no-init", action="store_true", help="do not run I at power-up")
+    c.add_argument("--history", metavar="FILE", help="keep the command history in FILE")
     add_loop_options(p, default_speed="1")
     add_serve_options(p)
     p.set_defaults(run=run)
