@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from pyrt.boards import open_boards
 from pyrt.boards.gripper import DAC_NULL, SimGripperBoard
 from pyrt.boards.i8031 import I8031
 from pyrt.robots.gripper import GripperController, JobResult
@@ -71,11 +72,11 @@ def signed(word: int) -> int:
 
 def make_rig(*, runner: bool = False, **plant_kw) -> Rig:
     """A gripper station (plant, controller, motion, scope, mailbox) and a stall monitor."""
-    cpu = I8031()
-    board = SimGripperBoard(cpu)
+    boards = open_boards("sim:", "gripper")
+    cpu, board = boards.cpu, boards.gripper
     plant = JawPlant(board, **plant_kw)
     loop = Loop(SimClock())
-    station = GripperStation(loop, cpu, board, plant)
+    station = GripperStation(loop, boards, plant)
     ctl: GripperController = station.controller
     stall = StallMonitor(board, plant)
     loop.attach(stall, name="stall monitor")

@@ -127,6 +127,9 @@ class Boards:
         world: str = "",
         poll: Callable[[int], None] | None = None,
         close: Callable[[], None] | None = None,
+        down: Callable[[], str | None] | None = None,
+        info: Callable[[], dict[str, str]] | None = None,
+        resync: Callable[[], None] | None = None,
     ):
         if robot == "gripper" and (gripper is None or cpu is None):
             raise ConfigError(f"board URL {url!r}: the back end opened no gripper board")
@@ -142,6 +145,9 @@ class Boards:
         self.world = world
         self._poll = poll
         self._close = close
+        self._down = down
+        self._info = info
+        self._resync = resync
         self.closed = False
 
     def poll(self, now_ns: int) -> None:
@@ -155,6 +161,32 @@ class Boards:
     def polls(self) -> bool:
         """Whether :meth:`poll` does anything (attach it to the loop if so)."""
         return self._poll is not None
+
+    @property
+    def down(self) -> str | None:
+        """Why the boards cannot be reached any more (a link that failed stays
+        down), or None while they can."""
+        return self._down() if self._down is not None else None
+
+    @property
+    def has_info(self) -> bool:
+        """Whether :meth:`info` can tell the state of the world behind the boards."""
+        return self._info is not None
+
+    def info(self) -> dict[str, str]:
+        """The world's state as the back end tells it (board-sim's ``INFO``: not
+        a register access); ConfigError if this back end has none, BoardError
+        if it cannot be reached."""
+        if self._info is None:
+            raise ConfigError(f"board URL {self.url!r}: this back end tells nothing of the world")
+        return self._info()
+
+    def resync(self) -> None:
+        """The controller's loop starts now: what the boards' watchdog did
+        while nothing polled (the station was being built; nothing was
+        driven) is not news to the next :meth:`poll`."""
+        if self._resync is not None:
+            self._resync()
 
     def close(self) -> None:
         """Release the back end (idempotent)."""

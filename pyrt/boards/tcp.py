@@ -23,11 +23,15 @@ Failures.  A connection refused, reset or closed, or no reply within
 ``timeout`` seconds (default 0.25), raises :class:`~pyrt.errors.BoardError`
 naming the URL, and the link stays down: every later access raises it too,
 at once (board-sim turns its outputs off when the connection drops; a link
-never resumes a half-known state).  When board-sim's watchdog has turned the outputs off
-while the link was up (the controller's loop stalled longer than the
-watchdog time), the next ``poll`` raises BoardError once, saying so; the
-link stays up.  A value the board refuses raises ``ValueError``, as the
-in-process boards do.
+never resumes a half-known state).  Only what the drop itself did is still
+answered on a down link, without a round trip, so that a reflex action can
+finish: writing the DAC's null (80), disarming a TIO10 channel and setting
+its all-windings-off bit succeed, and a channel reads as disarmed.
+
+When board-sim's watchdog has turned the outputs off while the link was
+up (the controller's loop stalled longer than the watchdog time), the next
+``poll`` raises BoardError once, saying so; the link stays up.  A value
+the board refuses raises ``ValueError``, as the in-process boards do.
 """
 
 from __future__ import annotations
@@ -46,6 +50,8 @@ from pyrt.boards.dataconcentrator import (
     check_counter_address,
 )
 from pyrt.boards.gripper import (
+    DAC,
+    DAC_NULL,
     PULSE_MODULUS,
     REGISTERS,
     GripperBoard,
@@ -55,6 +61,7 @@ from pyrt.boards.gripper import (
 from pyrt.boards.i8031 import I8031
 from pyrt.boards.registry import Boards, BoardURL
 from pyrt.boards.tio10 import (
+    AWO_BITS,
     MAX_PERIOD,
     MIN_PERIOD,
     TIO10,
@@ -149,6 +156,15 @@ class TcpLink:
         if last is not None and trips > last:
             raise BoardError(self.url, f"the board's watchdog turned the outputs off (no "
                                        f"register access for {self.watchdog_s:g} s)")
+
+    def forget_trips(self) -> None:
+        """Take the board's watchdog count as it is at the next look (the
+        controller's loop starts: trips while nothing polled are not news)."""
+        self._trips = None
+
+    def info(self) -> dict[str, str]:
+        """The world's state (``INFO``, not a register access): KEY -> VALUE."""
+        return dict(kv.partition("=")[::2] for kv in self.request("INFO"))
 
     @property
     def down(self) -> str | None:
@@ -279,6 +295,9 @@ class TcpGripperBoard(GripperBoard):
     def write(self, addr: int, value: int) -> None:
         check_register(addr, write=True)
         check_byte(value)
+        if addr == DAC and value == DAC_NULL and self.link.down is not None:
+            self._values[addr] = value  # board-sim nulled it when the link dropped
+            return
         self.link.request(f"W {addr} {value}")
         self._values[addr] = value
 
@@ -307,6 +326,7 @@ _ARMED = MANIPULATOR_SNAP["armed"][0]
 _PULSES = MANIPULATOR_SNAP["pulses"][0]
 _ADC = MANIPULATOR_SNAP["adc"][0]
 _CNT = MANIPULATOR_SNAP["cnt"][0]
+_AWO = frozenset(AWO_BITS.values())
 
 
 class TcpManipulatorBoards:
@@ -411,12 +431,20 @@ class TcpTIO10(TIO10):
 
     def disarm(self, channel: int) -> None:
         check_channel(channel)
-        self._b.link.request(f"DISARM {channel}")
+        if self._b.link.down is None:  # else board-sim disarmed it when the link dropped
+            self._b.link.request(f"DISARM {channel}")
         self._b._put(_ARMED + channel, 0)
 
     def armed(self, channel: int) -> bool:
         check_channel(channel, allow_rtc=True)
+        if self._b.link.down is not None:
+            return False
         return bool(self._b._get(_ARMED + channel, f"ARMED {channel}"))
+
+    def set_bit(self, port: int, bit: int, value: bool) -> None:
+        if value and (port, bit) in _AWO and self._b.link.down is not None:
+            return  # board-sim set every all-windings-off bit when the link dropped
+        super().set_bit(port, bit, value)
 
     def pulses(self, channel: int) -> int:
         check_channel(channel, allow_rtc=True)
@@ -498,6 +526,9 @@ def open_tcp(
         link.close()
         raise ConfigError(f"board URL {url.text!r}: board-sim there serves a {link.kind} "
                           f"({link.world}), not a {robot}")
+    common: dict[str, Any] = dict(in_process=False, world=link.world, close=link.close,
+                                  down=lambda: link.down, info=link.info,
+                                  resync=link.forget_trips)
     if robot == "gripper":
         cpu = cpu if cpu is not None else I8031()
         try:
@@ -505,8 +536,6 @@ def open_tcp(
         except BaseException:
             link.close()
             raise
-        return Boards(url.text, robot, in_process=False, gripper=board, cpu=cpu,
-                      world=link.world, poll=board.poll, close=link.close)
+        return Boards(url.text, robot, gripper=board, cpu=cpu, poll=board.poll, **common)
     boards = TcpManipulatorBoards(link, max_age=age)
-    return Boards(url.text, robot, in_process=False, tio10=boards.tio10, dc=boards.dc,
-                  world=link.world, poll=boards.poll, close=link.close)
+    return Boards(url.text, robot, tio10=boards.tio10, dc=boards.dc, poll=boards.poll, **common)

@@ -7,11 +7,29 @@ import sys
 from collections.abc import Callable
 
 from pyrt import __version__
+from pyrt.boards import DEFAULT_URL, parse_board_url
+from pyrt.boards.registry import backend
 from pyrt.errors import ConfigError
 from pyrt.scheduler import Loop, SimClock, TimingLog, WallClock
 from pyrt.scheduler import rt as _rt
 
-__all__ = ["add_loop_options", "make_loop", "parse_speed"]
+__all__ = ["add_boards_option", "add_loop_options", "load_backend", "make_loop", "parse_speed"]
+
+
+def add_boards_option(parser: argparse.ArgumentParser, world: str) -> None:
+    """Add ``--boards URL`` (the board back end; ``world``: what to give
+    ``pyrt board-sim`` for this robot)."""
+    parser.add_argument(
+        "--boards",
+        metavar="URL",
+        default=DEFAULT_URL,
+        help=(
+            f"where the robot's boards are: {DEFAULT_URL} (default) simulates them and the "
+            "world in this process; tcp://HOST:PORT drives the boards of a 'pyrt board-sim "
+            f"{world} --listen HOST:PORT' in another process (its world at real time: "
+            "only --speed 1, and the simulation's options are board-sim's)"
+        ),
+    )
 
 
 def parse_speed(text: str) -> float | None:
@@ -88,6 +106,13 @@ def add_loop_options(
     g.add_argument(
         "--mlock", action="store_true", help="lock memory (mlockall; needs RLIMIT_MEMLOCK)"
     )
+
+
+def load_backend(url: str) -> None:
+    """Load the back end of the board URL ``url`` now (ConfigError for a
+    malformed URL or an unknown scheme), before the loop's clock starts, so
+    that importing it does not make the first ticks late."""
+    backend(parse_board_url(url).scheme, url)
 
 
 def apply_rt_options(args: argparse.Namespace, say: Callable[[str], None]) -> None:

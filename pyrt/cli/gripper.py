@@ -7,6 +7,11 @@ commands are the report's (C E I M P S T W X; the monitor's C D I L N Q S),
 hexadecimal, lower case accepted; type ``help``.  Pipe a file in to run it
 as a script; with ``--speed max`` time advances only while commands run,
 ``wait`` or ``sleep``, so a script's output is the same on every run.
+
+With ``--boards tcp://HOST:PORT`` the controller drives the boards of a
+``pyrt board-sim gripper`` in another process (start it first; its first
+line names the URL): the jaws move there at real time, so only ``--speed
+1`` is accepted and the simulation options are board-sim's.
 """
 
 from __future__ import annotations
@@ -15,7 +20,13 @@ import argparse
 import sys
 import time
 
-from pyrt.cli._loopopts import add_loop_options, apply_rt_options, make_loop
+from pyrt.cli._loopopts import (
+    add_boards_option,
+    add_loop_options,
+    apply_rt_options,
+    load_backend,
+    make_loop,
+)
 from pyrt.cli._serve import add_serve_options, prepare_service
 from pyrt.commands import RobotShell
 from pyrt.console import Console
@@ -47,25 +58,28 @@ def _counts(text: str) -> int:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "gripper",
-        help="run the 002 parallel-jaw gripper controller (CMD: and monitor) on simulated jaws",
+        help="run the 002 parallel-jaw gripper controller (CMD: and monitor) on simulated jaws "
+             "(or on pyrt board-sim's, --boards tcp://...)",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    g = p.add_argument_group("simulation")
+    add_boards_option(p, "gripper")
+    g = p.add_argument_group("simulation (sim: boards only; board-sim takes the same options)")
     g.add_argument(
         "--object", type=float, metavar="MM",
         help=f"an object this wide between the jaws (0 < MM < {JawParameters().open_mm:g})",
     )
     g.add_argument(
-        "--start", type=_counts, default=-0x0C00, metavar="HEX",
+        "--start", type=_counts, metavar="HEX",
         help="jaw position at power-up, encoder counts from wide open (default F400)",
     )
     g.add_argument(
-        "--fault", action="append", default=[], choices=[f for f in FAULTS if f != "port"],
+        "--fault", action="append", choices=[f for f in FAULTS if f != "port"],
         help="inject a fault from the start: limit (sensor dead), jam (motor), encoder (dead)",
     )
-    g.add_argument("--no-init", action="store_true", help="do not run I at power-up")
-    g.add_argument("--history", metavar="FILE", help="keep the command history in FILE")
+    c = p.add_argument_group("console")
+    c.add_argument("--no-init", action="store_true", help="do not run I at power-up")
+    c.add_argument("--history", metavar="FILE", help="keep the command history in FILE")
     add_loop_options(p, default_speed="1")
     add_serve_options(p)
     p.set_defaults(run=run)
@@ -91,16 +105,21 @@ def run(args: argparse.Namespace) -> int:
         more = f" (+{held} earlier reports held back; 'stats' has the totals)" if held else ""
         posted[0].post(line + more)
 
+    load_backend(args.boards)
     loop = make_loop(args, warn=warn)
-    station = build_gripper(loop, start=args.start, object_mm=args.object, faults=args.fault)
+    station = build_gripper(loop, boards=args.boards, start=args.start, object_mm=args.object,
+                            faults=args.fault or ())
+    station.close_report = lambda m: print(m, file=out, flush=True)
     runner = station.runner
     posted.append(runner)
     service = prepare_service(args, runner, ServedStation(station))
     shell = RobotShell(station, out)
     console = Console(shell, sys.stdin, out, messages=runner.messages, history_file=args.history)
     speed = "max (simulated time)" if args.speed is None else f"{args.speed:g}x real time"
+    jaws = ("simulated jaws" if station.plant is not None
+            else f"boards at {station.boards.url} ({station.boards.world})")
     print(
-        f"pyrt gripper: 002 parallel-jaw controller, simulated jaws; tick {args.tick_us} µs, "
+        f"pyrt gripper: 002 parallel-jaw controller, {jaws}; tick {args.tick_us} µs, "
         f"speed {speed}; type help",
         file=out,
     )

@@ -14,6 +14,13 @@ physics steps every tick (a motor at its 7.0 cm/s limit makes 1.4
 half-steps a tick), the control poll is 50 ms and the standalone axis poll
 10 ms, and ``--speed max`` then runs a move some 50 times faster than real
 time.
+
+With ``--boards tcp://HOST:PORT`` the controller drives the TIO10 and
+dataConcentrator of a ``pyrt board-sim prototype|sno`` in another process
+(give both the same ``--db DIR``; board-sim's first line names the URL):
+the world moves there at real time, so only ``--speed 1`` is accepted,
+``--ideal-sensors`` is board-sim's option, and its world must be this
+station's.
 """
 
 from __future__ import annotations
@@ -23,7 +30,13 @@ import sys
 import time
 from pathlib import Path
 
-from pyrt.cli._loopopts import add_loop_options, apply_rt_options, make_loop
+from pyrt.cli._loopopts import (
+    add_boards_option,
+    add_loop_options,
+    apply_rt_options,
+    load_backend,
+    make_loop,
+)
 from pyrt.cli._serve import add_serve_options, prepare_service
 from pyrt.commands import RobotShell
 from pyrt.console import Console
@@ -43,15 +56,18 @@ DEFAULT_TICK_US = 5000
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "manipulator",
-        help="run the 000 SNO source manipulator controller on a simulated world",
+        help="run the 000 SNO source manipulator controller on a simulated world "
+             "(or on pyrt board-sim's, --boards tcp://...)",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--db", metavar="DIR", help="station database directory (written back)")
     p.add_argument("--station", choices=STATIONS, default="prototype",
                    help="packaged station to copy when no --db is given (default prototype)")
+    add_boards_option(p, "prototype|sno")
     p.add_argument("--ideal-sensors", action="store_true",
-                   help="switch off encoder quantisation and loadcell noise/offsets")
+                   help="switch off encoder quantisation and loadcell noise/offsets "
+                        "(in-process world only)")
     p.add_argument("--history", metavar="FILE", help="keep the command history in FILE")
     add_loop_options(p, default_speed="1", default_tick_us=DEFAULT_TICK_US)
     add_serve_options(p)
@@ -74,9 +90,11 @@ def run(args: argparse.Namespace) -> int:
         if posted:
             posted[0].post(line)
 
+    load_backend(args.boards)
     loop = make_loop(args, warn=warn)
     imp = Imperfections.ideal() if args.ideal_sensors else None
-    station = ManipulatorStation(directory, loop=loop, imperfections=imp)
+    station = ManipulatorStation(directory, loop=loop, imperfections=imp, boards=args.boards)
+    station.close_report = lambda m: print(m, file=out, flush=True)
     runner = station.runner
     posted.append(runner)
     try:
@@ -87,8 +105,9 @@ def run(args: argparse.Namespace) -> int:
     shell = RobotShell(station, out)
     console = Console(shell, sys.stdin, out, messages=runner.messages, history_file=args.history)
     speed = "max (simulated time)" if args.speed is None else f"{args.speed:g}x real time"
+    where = "" if station.plant is not None else f", boards at {station.boards.url}"
     print(f"pyrt manipulator: {station.polyaxis.name}, {len(station.axes)} ropes, database "
-          f"{directory}; tick {args.tick_us} µs, speed {speed}; type help", file=out)
+          f"{directory}{where}; tick {args.tick_us} µs, speed {speed}; type help", file=out)
     status = 0
     wall0 = time.perf_counter()
     station.start()

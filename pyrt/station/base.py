@@ -16,23 +16,62 @@ Both robots are a :class:`Station` plus a configuration
   (fault, moving while faulted) and the act in one mailbox call;
 * derives everything that lists signals or commands from the tree:
   :meth:`components`, :meth:`signals`, :meth:`resolve_signal`;
+* owns the robot's **boards** (:func:`pyrt.boards.open_boards`, chosen by
+  URL) when a configuration gives them to :meth:`attach_boards`: their
+  ``poll`` runs first in every tick, a :class:`~pyrt.errors.BoardError`
+  there trips the robot (the message names the back end's URL), and
+  :meth:`close` closes them last;
 * starts and stops in one order (:meth:`start`, :meth:`close`).
 """
 
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import Any
 
-from pyrt.component import Command, Component, Signal, walk
-from pyrt.errors import CommandError, Fault, PyrtError
+from pyrt.boards import Boards
+from pyrt.component import Command, Component, Signal, command, walk
+from pyrt.errors import BoardError, CommandError, ConfigError, Fault, PyrtError
 from pyrt.scheduler import Loop, ReadyQueue
 from pyrt.scheduler.motion import MotionExecutor
 from pyrt.scheduler.runner import MotionQueue, Runner
 from pyrt.scope import Scope
 
-__all__ = ["Station"]
+__all__ = ["BoardWorld", "Station", "refuse_sim_options"]
+
+
+def refuse_sim_options(boards: Boards, given: Iterable[str]) -> None:
+    """ConfigError naming ``boards``' URL if any option in ``given`` (those
+    of the in-process simulation that were set) was set for boards whose
+    world runs elsewhere; nothing for in-process boards."""
+    names = list(given)
+    if boards.in_process or not names:
+        return
+    raise ConfigError(f"board URL {boards.url!r}: the world behind these boards is not "
+                      f"simulated in this process: {', '.join(names)} cannot be set here "
+                      "(over tcp:// they are options of 'pyrt board-sim')")
+
+
+class BoardWorld(Component):
+    """``sim`` for boards whose world runs elsewhere (``pyrt board-sim``):
+    its state as the back end tells it.  The world's settings and faults
+    are board-sim's options; nothing here changes it."""
+
+    name = "sim"
+
+    def __init__(self, boards: Boards):
+        self.boards = boards
+
+    @command(name="show", reads_only=True)
+    def show(self) -> str:
+        """sim: the simulated world's state as board-sim tells it (the world runs in that
+        process: set it up with pyrt board-sim's options)."""
+        try:
+            info = self.boards.info()
+        except BoardError as exc:
+            raise CommandError(str(exc)) from None
+        return f"board-sim at {self.boards.url}: " + " ".join(f"{k}={v}" for k, v in info.items())
 
 
 class Station:
@@ -51,12 +90,49 @@ class Station:
         self.queues: list[ReadyQueue] = []
         self.executors: list[MotionExecutor] = []
         self.plant: Any = None
+        self.boards: Boards | None = None
+        #: The first BoardError seen (a poll, a reflex, the stop at close), or None.
+        self.board_error: BoardError | None = None
+        #: Where :meth:`close` reports what it could not do (boards already
+        #: gone); default: the runner's messages.
+        self.close_report: Callable[[str], None] | None = None
         self.runner: Runner | None = None
         self._fault: Fault | None = None
         self._by_name: dict[str, Component] = {}
         self._closed = False
 
     # -- assembly -------------------------------------------------------------------
+
+    def attach_boards(self, boards: Boards) -> None:
+        """Own ``boards``: attach their per-tick poll to the loop now (call it
+        before the robot's handlers: the inputs of a tick come in first) if
+        the back end polls, and close them in :meth:`close`."""
+        if not boards.in_process:
+            clock = self.loop.clock
+            speed = getattr(clock, "speed", 1.0)
+            if clock.virtual or speed != 1.0:
+                what = "virtual time (--speed max)" if clock.virtual else f"--speed {speed:g}"
+                raise ConfigError(f"board URL {boards.url!r}: the boards and their world run "
+                                  f"in another process at real time: {what} is refused; run "
+                                  "at real time (--speed 1)")
+        self.boards = boards
+        if boards.polls:
+            self.loop.attach(self._poll_boards, name="boards")
+
+    def _poll_boards(self, now_ns: int) -> None:
+        """Loop handler: the boards' inputs for this tick.  A BoardError trips
+        the robot (once per fault: after ``ack`` the next failure trips again)."""
+        boards = self.boards
+        assert boards is not None
+        if self._fault is not None and boards.down is not None:
+            return  # stopped, and nothing to reach: the fault says why
+        try:
+            boards.poll(now_ns)
+        except BoardError as exc:
+            if self.board_error is None:
+                self.board_error = exc
+            if self._fault is None:
+                self.trip(str(exc), source="boards")
 
     def adopt(self, root: Component, *, queues: Iterable[ReadyQueue] = (),
               executors: Iterable[MotionExecutor] = (),
@@ -170,6 +246,10 @@ class Station:
         for c in reversed(self.components()):  # leaves (motors) first
             try:
                 c.reflex()
+            except BoardError as exc:
+                if self.board_error is None:
+                    self.board_error = exc
+                errors.append(f"{c.name}: {exc}")
             except Exception as exc:
                 errors.append(f"{c.name}: {exc!r}")
         for ex in self.executors:
@@ -285,19 +365,27 @@ class Station:
     def start(self) -> Runner:
         """Start the loop (its thread on a wall clock)."""
         assert self.runner is not None, "adopt() the tree first"
+        if self.boards is not None:
+            self.boards.resync()
         self.runner.start()
         return self.runner
 
     def close(self) -> None:
-        """Every motor stopped, the loop stopped, files written back and closed.
-        Safe to call twice."""
+        """Every motor stopped, the loop stopped, files written back and
+        closed, the boards closed.  Safe to call twice.  Boards that are
+        already gone do not make it raise: it says so once (:attr:`close_report`)."""
         if self._closed:
             return
         self._closed = True
         runner = self.runner
+        failed: BoardError | None = None
         if runner is not None and runner.running:
-            with contextlib.suppress(PyrtError):
+            try:
                 runner.call(self.stop, take_fault=False, name="stop every motor")
+            except BoardError as exc:
+                failed = exc
+            except PyrtError:
+                pass
             runner.stop()
         else:
             with contextlib.suppress(Exception):
@@ -305,7 +393,28 @@ class Station:
         try:
             self.write_back()
         finally:
-            self.loop.close()
+            try:
+                self.loop.close()
+            finally:
+                self._close_boards(failed)
+
+    def _close_boards(self, failed: BoardError | None) -> None:
+        boards = self.boards
+        if boards is None:
+            return
+        gone = boards.down
+        boards.close()
+        if gone is None and failed is None:
+            return
+        err = failed or self.board_error
+        why = str(err) if err is not None else f"board {boards.url}: {gone}"
+        line = (f"{self.name}: closed without its boards ({why}); the board turns its "
+                "outputs off when its link drops")
+        report = self.close_report
+        if report is None and self.runner is not None:
+            report = self.runner.post
+        if report is not None:
+            report(line)
 
     def write_back(self) -> None:
         """Write databases back on the way out (configurations that have them)."""

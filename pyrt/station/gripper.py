@@ -1,15 +1,25 @@
 """The gripper station: 8031, cage boards, simulated jaws, controller, motion
 executor and scope on one loop, wired in the order a tick needs them.
 
-Per tick: the jaws move (physics, dt = now - last), the clock interrupt
-walks the ready queue, the stall watchdog looks, the motion executor starts
-or follows a queued ``P`` move, the scope samples, and the mailbox is
-served.  A fault's reflex (the station's) nulls the drive, ends the current
-motion and drops every queued one, in the same tick.
+The boards come from a back end chosen by URL (:func:`pyrt.boards.open_boards`):
+``sim:`` (the default) puts the cage in this process with the simulated jaws
+(:class:`~pyrt.sim.gripper.JawPlant`) behind it; ``tcp://HOST:PORT`` reaches
+the cage of a ``pyrt board-sim gripper`` in another process, whose jaws move
+at real time there (so the loop must run at real time, and the jaws'
+settings are board-sim's options).
+
+Per tick: the boards' inputs come in (a back end that polls: one ``SNAP``
+over tcp, raising the encoder interrupts that arrived; a BoardError there
+faults the robot), or the jaws move (in-process physics, dt = now - last);
+the clock interrupt walks the ready queue, the stall watchdog looks, the
+motion executor starts or follows a queued ``P`` move, the scope samples,
+and the mailbox is served.  A fault's reflex (the station's) nulls the
+drive, ends the current motion and drops every queued one, in the same tick.
 
 The component tree: ``gripper`` (the controller: RAM signals, ``CMD:``
-letters) with its child ``monitor``; beside it ``sim``, the simulated
-jaws (their true state, ``sim object|jog|fault``).
+letters) with its child ``monitor``; beside it ``sim``: the simulated jaws
+in process (their true state, ``sim object|jog|fault``), or over tcp the
+world's state as board-sim tells it (``sim`` shows it; nothing else).
 """
 
 from __future__ import annotations
@@ -17,8 +27,8 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from typing import Any
 
-from pyrt.boards.gripper import SimGripperBoard
-from pyrt.boards.i8031 import COMMAND_CNT, ENCODER_CNT, I8031
+from pyrt.boards import Boards, open_boards
+from pyrt.boards.i8031 import COMMAND_CNT, ENCODER_CNT
 from pyrt.component import Arg, Component, Signal, command, finite
 from pyrt.errors import CommandError, ConfigError
 from pyrt.robots.gripper import GripperController
@@ -26,7 +36,7 @@ from pyrt.robots.gripper_commands import parse_hex
 from pyrt.scheduler import Loop
 from pyrt.scheduler.motion import MotionExecutor, MotionType
 from pyrt.sim.gripper import JawPlant
-from pyrt.station.base import Station
+from pyrt.station.base import BoardWorld, Station, refuse_sim_options
 from pyrt.tasks import register_tasks
 
 __all__ = ["GripperSim", "GripperStation", "build_gripper"]
@@ -109,12 +119,20 @@ class GripperSim(Component):
 
 
 class GripperStation(Station):
-    """Everything ``pyrt gripper`` runs, built by :func:`build_gripper`."""
+    """Everything ``pyrt gripper`` runs, built by :func:`build_gripper`.
 
-    def __init__(self, loop: Loop, cpu: I8031, board: SimGripperBoard, plant: JawPlant | None):
+    ``boards``: the gripper's (:func:`~pyrt.boards.open_boards`), owned and
+    closed by the station; ``plant``: the jaws behind in-process boards, or
+    None.  Boards whose world runs elsewhere refuse a loop that does not run
+    at real time (ConfigError).
+    """
+
+    def __init__(self, loop: Loop, boards: Boards, plant: JawPlant | None):
         super().__init__(loop)
-        self.cpu = cpu
-        self.board = board
+        assert boards.cpu is not None and boards.gripper is not None
+        self.attach_boards(boards)  # first in the tick: this tick's inputs
+        self.cpu = cpu = boards.cpu
+        self.board = boards.gripper
         self.plant = plant
         ctl = GripperController(cpu)
         self.name = ctl.name
@@ -135,7 +153,11 @@ class GripperStation(Station):
 
         self.executor = MotionExecutor(ctl, self.motion.get, motion_done, motion_error)
         loop.attach(self.executor.poll, name="motion")
-        extras = [GripperSim(plant)] if plant is not None else []
+        extras: list[Component] = []
+        if plant is not None:
+            extras.append(GripperSim(plant))
+        elif boards.has_info:
+            extras.append(BoardWorld(boards))
         self.adopt(ctl, queues=[ctl.queue], executors=[self.executor], extras=extras)
         ctl.power_up()
 
@@ -194,22 +216,46 @@ class GripperStation(Station):
         self.close()
 
 
+#: The jaws' start position when none is given, encoder counts.
+DEFAULT_START = -0x0C00
+
+
 def build_gripper(
     loop: Loop,
     *,
-    start: int = -0x0C00,
+    boards: str | None = None,
+    start: int | None = None,
     object_mm: float | None = None,
     faults: Iterable[str] = (),
 ) -> GripperStation:
-    """Wire a simulated gripper onto ``loop`` and power it up (not yet started:
-    call ``station.start()``).  Bad simulation settings raise ConfigError."""
-    cpu = I8031()
-    board = SimGripperBoard(cpu)
+    """Wire a gripper onto ``loop`` and power it up (not yet started: call
+    ``station.start()``).
+
+    ``boards``: the board URL (default ``sim:``, the cage in this process
+    with simulated jaws behind it; ``tcp://HOST:PORT``: ``pyrt board-sim
+    gripper``).  ``start``, ``object_mm`` and ``faults`` set up the
+    in-process jaws; with boards whose world runs elsewhere they are
+    refused, as is a loop not at real time.  Bad settings raise ConfigError;
+    boards that cannot be reached, BoardError.
+    """
+    faults = list(faults)
+    b = open_boards(boards, "gripper")
     try:
-        plant = JawPlant(board, start=start)
-        plant.set_object(object_mm)
-        for fault in faults:
-            plant.inject(fault)
-    except ValueError as exc:
-        raise ConfigError(str(exc)) from None
-    return GripperStation(loop, cpu, board, plant)
+        refuse_sim_options(b, [name for name, given in (
+            ("the jaw start position (--start)", start is not None),
+            ("an object (--object)", object_mm is not None),
+            ("faults (--fault)", bool(faults))) if given])
+        plant = None
+        if b.in_process:
+            assert b.gripper is not None
+            try:
+                plant = JawPlant(b.gripper, start=DEFAULT_START if start is None else start)
+                plant.set_object(object_mm)
+                for fault in faults:
+                    plant.inject(fault)
+            except ValueError as exc:
+                raise ConfigError(str(exc)) from None
+        return GripperStation(loop, b, plant)
+    except BaseException:
+        b.close()
+        raise

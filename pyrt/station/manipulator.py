@@ -28,6 +28,17 @@ lengths are set to the world's rope lengths (as ``setZeroLength`` would be
 after surveying the source in), and ZEROLENGTH write-back keeps them.
 ``FUZZY_<NAME>`` keys of an AXIS entry override that axis's fuzzy
 parameters as used at the 50 ms poll.
+
+Boards.  The TIO10 and dataConcentrator come from a back end chosen by URL
+(:func:`pyrt.boards.open_boards`, ``boards=``): ``sim:`` (the default)
+builds them in this process with the world above behind them;
+``tcp://HOST:PORT`` reaches those of a ``pyrt board-sim prototype|sno``
+in another process, whose world (built from the same database) moves at
+real time there.  Then the loop must run at real time, the world's
+settings (``imperfections``) are board-sim's, and the world it serves must
+be this station's (ConfigError otherwise).  The boards' inputs are read
+once before anything else reads them and then first in every tick; a
+BoardError there faults the manipulator, naming the URL.
 """
 
 from __future__ import annotations
@@ -38,11 +49,11 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TextIO
 
-from pyrt.boards.simboards import SimDataConcentrator, SimTIO10
+from pyrt.boards import Boards, open_boards
 from pyrt.component import Arg, Component, Signal, command, finite
 from pyrt.db import Station as StationDB
 from pyrt.db import load_station
-from pyrt.errors import CommandError, ConfigError, NativeError, PyrtError
+from pyrt.errors import BoardError, CommandError, ConfigError, NativeError, PyrtError
 from pyrt.native import FuzzyParams, NativeInputError
 from pyrt.robots.av import AV
 from pyrt.robots.axis import Axis
@@ -51,7 +62,7 @@ from pyrt.robots.stops import StopRecord
 from pyrt.scheduler import Loop, ReadyQueue, SimClock
 from pyrt.sim.manipulator import ManipulatorPlant, rig_from_station
 from pyrt.sim.sensors import Imperfections
-from pyrt.station.base import Station
+from pyrt.station.base import BoardWorld, Station, refuse_sim_options
 from pyrt.tasks import SyncWriter, ThreadWriter, WriteBack, register_tasks
 
 __all__ = [
@@ -190,7 +201,9 @@ class ManipulatorStation(Station):
     ``writer``: ``"sync"`` (SimClock default), ``"thread"`` (wall clock
     default) or a :class:`pyrt.tasks.Writer`; ``liquid_level``: z of the D2O
     surface for the world and the controller (default: the neck ring for a
-    source with volume, else in air).
+    source with volume, else in air); ``boards``: the board URL (default
+    ``sim:``; see the module text).  Boards that cannot be reached raise
+    BoardError; a world that is not this station's, ConfigError.
     """
 
     def __init__(
@@ -205,10 +218,21 @@ class ManipulatorStation(Station):
         writer: Any = None,
         liquid_level: float | None = None,
         stdout: TextIO | None = None,
+        boards: str | None = None,
     ):
         self.directory = Path(directory)
         self.station: StationDB = load_station(self.directory)
         super().__init__(loop if loop is not None else Loop(SimClock(), period_ns=tick_ns))
+        opened = open_boards(boards, "manipulator")
+        try:
+            self._build(opened, poll_s, axis_poll_s, imperfections, writer, liquid_level, stdout)
+        except BaseException:
+            opened.close()
+            raise
+
+    def _build(self, boards: Boards, poll_s: float, axis_poll_s: float,
+               imperfections: Imperfections | None, writer: Any, liquid_level: float | None,
+               stdout: TextIO | None) -> None:
         tick_s = self.loop.period_ns * 1e-9
         self.messages = MessageSink()
         self.stdout = stdout if stdout is not None else self.messages
@@ -219,9 +243,20 @@ class ManipulatorStation(Station):
             liquid_level = self.av.neck_ring_position[2]
         self.liquid_level = liquid_level
 
-        # Level 1: boards.  Level 3-4: devices and axes (encoders reset their counters).
-        self.tio10 = SimTIO10()
-        self.dc = SimDataConcentrator()
+        # Level 1: boards (their inputs read once before anything reads them).
+        refuse_sim_options(boards, ["sensor imperfections (--ideal-sensors)"]
+                           if imperfections is not None else [])
+        want = pa_rec.name.lower()
+        if not boards.in_process and boards.world.lower() != want:
+            raise ConfigError(f"board URL {boards.url!r} serves the {boards.world!r} world, not "
+                              f"this station's {want!r}: start 'pyrt board-sim {want}' with "
+                              f"the same --db")
+        self.attach_boards(boards)  # first in the tick: this tick's inputs
+        assert boards.tio10 is not None and boards.dc is not None
+        boards.poll(self.loop.now_ns)
+        self.tio10 = boards.tio10
+        self.dc = boards.dc
+        # Level 3-4: devices and axes (encoders reset their counters).
         self.axes: list[Axis] = []
         fuzzy: list[FuzzyParams] = []
         base = FuzzyParams().for_poll_period(poll_s)
@@ -249,8 +284,9 @@ class ManipulatorStation(Station):
             g = pa.rope_geometry(i, pos)[0]
             payouts.append((a.dead_length + g) / (1.0 + a.stretch * tensions[i]))
         self.rig = rig_from_station(st, liquid_level=liquid_level)
-        self.plant = ManipulatorPlant(self.rig, self.tio10, self.dc,
-                                      imperfections=imperfections, payouts=payouts)
+        if boards.in_process:  # else the world is board-sim's, built the same way
+            self.plant = ManipulatorPlant(self.rig, self.tio10, self.dc,
+                                          imperfections=imperfections, payouts=payouts)
         for a, p in zip(self.axes, payouts, strict=True):
             a.encoder.reset()
             a.encoder.zero_length = p
@@ -279,14 +315,19 @@ class ManipulatorStation(Station):
             a.loadcell.write_back = _calibration_writer(self.writeback, st.loadcell_of(rec).name,
                                                         self.loop)
         self.writeback.watch_position(pa_rec.name, lambda: (pa.position, pa.active))
-        self.loop.attach(self.plant.step, name="plant")
+        if self.plant is not None:
+            self.loop.attach(self.plant.step, name="plant")
         self.loop.attach(self.queue, name=f"queue:{pa.name}")
         self._writeback_failure: str | None = None
         self.loop.attach(self._write_back, name="writeback")
 
         self.words = ManipulatorWords(self)
-        self.adopt(pa, queues=[self.queue], executors=[pa.executor],
-                   extras=[ManipulatorSim(self.plant, self.axes)])
+        extras: list[Component] = []
+        if self.plant is not None:
+            extras.append(ManipulatorSim(self.plant, self.axes))
+        elif boards.has_info:
+            extras.append(BoardWorld(boards))
+        self.adopt(pa, queues=[self.queue], executors=[pa.executor], extras=extras)
         assert self.runner is not None
         self.messages.connect(self.runner.post)
         self.log_path: Path | None = None
@@ -294,6 +335,7 @@ class ManipulatorStation(Station):
         self.stops: list[StopRecord] = []
         pa.on_stop.append(self.stops.append)
         pa.on_stop.append(self._report_stop)
+        boards.poll(self.loop.now_ns)  # the encoders' counters now ride along
         try:  # the first status line shows real tensions and lengths
             pa.measure()
         except NativeError as exc:
@@ -307,7 +349,10 @@ class ManipulatorStation(Station):
 
     def _write_back(self, now_ns: int) -> None:
         """Loop handler: the database write-back; a refused value (a length set
-        to nonsense by hand) is a fault of the manipulator, reported once."""
+        to nonsense by hand) is a fault of the manipulator, reported once.
+        Nothing while the boards cannot be reached (that fault says why)."""
+        if self.boards is not None and self.boards.down is not None:
+            return
         try:
             self.writeback.poll(now_ns)
         except PyrtError as exc:
@@ -325,8 +370,11 @@ class ManipulatorStation(Station):
         """The operator's stop: the move ended (a STOP), every motor stopped,
         queued moves and a running pattern dropped."""
         pa = self.polyaxis
-        if pa.active:
-            pa.stop()
+        try:
+            if pa.active:
+                pa.stop()
+        except BoardError as exc:  # the motors are still stopped below
+            self.board_error = self.board_error or exc
         pa.pattern_job_cancel()
         return super().stop()
 
@@ -433,8 +481,11 @@ class ManipulatorStation(Station):
         return fields
 
     def write_back(self) -> None:
-        """Write pending database values, close the log (on the way out)."""
+        """Write pending database values, close the log (on the way out).
+        Boards that cannot be reached leave the values last written."""
         try:
+            if self.boards is not None and self.boards.down is not None:
+                return
             self.writeback.poll(self.loop.now_ns + 10**12)
         except PyrtError as exc:  # the file keeps its last good value
             self.stdout.write(f"database write-back refused at shutdown: {exc}\n")

@@ -1,0 +1,108 @@
+"""The gripper *station* at 1 kHz through the tcp:// back end (``--boards tcp://``).
+
+Run: ``python -m pytest bench/bench_boards_station.py --benchmark-only -s``.
+
+``pyrt board-sim gripper`` runs in a process of its own on 127.0.0.1; this
+process builds the station exactly as ``pyrt gripper --boards URL`` does
+(:func:`pyrt.station.gripper.build_gripper` on a 1 ms wall-clock loop, the
+loop in its own thread, commands through RobotShell and the mailbox), runs
+``I`` and ``P-1B86`` with ``wait``, and reports per tick: the time the
+boards' poll takes (one ``SNAP`` round trip, the encoder interrupts it
+raises), the whole tick's work and lateness (p50/p99/max), and the
+overruns, against the 1 ms tick.  The same run on the in-process ``sim:``
+boards (no poll; the jaws' physics in the tick instead) is the baseline:
+what the machine does to a 1 ms loop without a second process.  The
+machine is shared: read the tails as approximate.  ``bench_boards.py``
+times single register round trips.
+"""
+
+from __future__ import annotations
+
+import io
+import re
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+
+import pytest
+
+from pyrt.commands import RobotShell
+from pyrt.scheduler import Loop, WallClock
+from pyrt.station.gripper import build_gripper
+
+TICK_NS = 1_000_000
+
+
+@pytest.fixture(scope="module")
+def gripper_url() -> Iterator[str]:
+    """A gripper board-sim in a subprocess (watchdog 5 s)."""
+    proc = subprocess.Popen([sys.executable, "-m", "pyrt", "board-sim", "gripper", "--listen",
+                             "127.0.0.1:0", "--watchdog", "5"], stdin=subprocess.DEVNULL,
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        m = re.search(r" on (tcp://\S+) ", proc.stdout.readline())
+        assert m, "board-sim did not say where it serves"
+        yield m.group(1)
+    finally:
+        proc.kill()
+        proc.wait(10)
+
+
+def _quantile(samples: list[int], q: float) -> int:
+    s = sorted(samples) or [0]
+    return s[min(len(s) - 1, int(q * len(s)))]
+
+
+@pytest.mark.benchmark(group="boards-station")
+@pytest.mark.parametrize("backend", ["tcp", "sim"])
+def test_gripper_station_tick_budget(benchmark, gripper_url, backend):
+    """I, P-1B86 and wait on the gripper station at 1 kHz, through tcp:// (or in process, the
+    baseline): poll p50/p99 and the tick's work, lateness and overruns."""
+    result: dict[str, object] = {}
+    url = gripper_url if backend == "tcp" else "sim:"
+
+    def run() -> None:
+        station = build_gripper(Loop(WallClock(), period_ns=TICK_NS), boards=url)
+        polls: list[int] = []
+        clock = time.perf_counter_ns
+        poll = station.boards.poll
+
+        def timed(now_ns: int) -> None:
+            t = clock()
+            try:
+                poll(now_ns)
+            finally:
+                polls.append(clock() - t)
+
+        station.boards.poll = timed  # the station's handler calls boards.poll each tick
+        out = io.StringIO()
+        shell = RobotShell(station, out)
+        station.start()
+        try:
+            station.loop.reset_statistics()  # not the start-up tick
+            for line in ("I", "P-1B86", "wait"):
+                shell.onecmd(line)
+            stats = station.runner.statistics()
+        finally:
+            station.close()
+        assert "target E47A" in out.getvalue(), out.getvalue()
+        assert station.fault is None, station.fault
+        result.update(polls=polls, stats=stats)
+
+    benchmark.pedantic(run, rounds=1, iterations=1)
+    polls, stats = result["polls"], result["stats"]
+    p50, p99, pmax = _quantile(polls, 0.5), _quantile(polls, 0.99), max(polls, default=0)
+    work, late = stats.work, stats.lateness
+    benchmark.extra_info.update(
+        ticks=stats.ticks, poll_p50_us=round(p50 / 1e3, 1), poll_p99_us=round(p99 / 1e3, 1),
+        poll_max_us=round(pmax / 1e3, 1), work_p50_us=round(work.p50_ns / 1e3, 1),
+        work_p99_us=round(work.p99_ns / 1e3, 1), work_max_us=round(work.max_ns / 1e3, 1),
+        late_p99_us=round(late.p99_ns / 1e3, 1), overruns=stats.overruns, missed=stats.missed,
+    )
+    print(f"\ngripper station on {url} ({len(polls)} polls, {stats.ticks} ticks of 1 ms): "
+          f"poll p50 {p50 / 1e3:.1f} µs, p99 {p99 / 1e3:.1f} µs, max {pmax / 1e3:.0f} µs "
+          f"({p50 / TICK_NS:.1%} / {p99 / TICK_NS:.1%} of the tick); tick work p50 <= "
+          f"{work.p50_ns / 1e3:.0f} µs, p99 <= {work.p99_ns / 1e3:.0f} µs, max "
+          f"{work.max_ns / 1e3:.0f} µs; lateness p99 <= {late.p99_ns / 1e3:.0f} µs; overruns "
+          f"{stats.overruns} (missed deadlines {stats.missed})")
