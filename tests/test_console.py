@@ -206,3 +206,26 @@ def test_status_line_on_a_terminal_is_the_toolbar_and_survives_a_failing_read():
         assert console._run_prompt_toolkit() == 0
     assert shell.seen == ["hello", "quit"]
     assert len(seen) > 2  # the toolbar was drawn, and a failing read did not end the session
+
+
+def test_live_status_is_the_stations_status_at_real_time_only():
+    """The consoles' status line reads the station's status (at real time); none on simulated time."""
+    import argparse
+
+    from pyrt.cli._loopopts import live_status
+    from pyrt.errors import FaultError
+    from pyrt.scheduler import Loop, WallClock
+    from pyrt.station.gripper import build_gripper
+
+    assert live_status(None, None, argparse.Namespace(speed=None)) is None
+    station = build_gripper(Loop(WallClock()))
+    runner = station.start()
+    try:
+        line = live_status(runner, station, argparse.Namespace(speed=1.0))
+        assert line().startswith("position 0000 target 0000")
+        runner.call(station.trip, "test fault", "test", take_fault=False)
+        assert "FAULT" in line().upper()
+        with pytest.raises(FaultError):  # the line took nothing: the operator still gets it
+            runner.call(lambda: None)
+    finally:
+        station.close()

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Callable
+from typing import Any
 
 from pyrt import __version__
 from pyrt.boards import DEFAULT_URL, parse_board_url
@@ -153,3 +154,12 @@ def make_loop(args: argparse.Namespace, warn: Callable[[str], None] | None = Non
         max_consecutive_overruns=args.max_overruns,
         warn=warn,
     )
+
+
+def live_status(runner: Any, station: Any, args: argparse.Namespace) -> Callable[[], str] | None:
+    """The console's live status line at real time (the station's status line,
+    read without taking a fault the operator has not seen); None on simulated
+    time, where nothing changes between commands."""
+    if getattr(args, "speed", None) is None:
+        return None
+    return lambda: runner.call(station.status, name="status line", take_fault=False)

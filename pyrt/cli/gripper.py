@@ -24,6 +24,7 @@ from pyrt.cli._loopopts import (
     add_boards_option,
     add_loop_options,
     apply_rt_options,
+    live_status,
     load_backend,
     make_loop,
 )
@@ -114,7 +115,8 @@ def run(args: argparse.Namespace) -> int:
     posted.append(runner)
     service = prepare_service(args, runner, ServedStation(station))
     shell = RobotShell(station, out)
-    console = Console(shell, sys.stdin, out, messages=runner.messages, history_file=args.history)
+    console = Console(shell, sys.stdin, out, messages=runner.messages, history_file=args.history,
+                      status=live_status(runner, station, args))
     speed = "max (simulated time)" if args.speed is None else f"{args.speed:g}x real time"
     jaws = ("simulated jaws" if station.plant is not None
             else f"boards at {station.boards.url} ({station.boards.world})")

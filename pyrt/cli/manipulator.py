@@ -34,6 +34,7 @@ from pyrt.cli._loopopts import (
     add_boards_option,
     add_loop_options,
     apply_rt_options,
+    live_status,
     load_backend,
     make_loop,
 )
@@ -103,7 +104,8 @@ def run(args: argparse.Namespace) -> int:
         station.close()
         raise
     shell = RobotShell(station, out)
-    console = Console(shell, sys.stdin, out, messages=runner.messages, history_file=args.history)
+    console = Console(shell, sys.stdin, out, messages=runner.messages, history_file=args.history,
+                      status=live_status(runner, station, args))
     speed = "max (simulated time)" if args.speed is None else f"{args.speed:g}x real time"
     where = "" if station.plant is not None else f", boards at {station.boards.url}"
     print(f"pyrt manipulator: {station.polyaxis.name}, {len(station.axes)} ropes, database "
