@@ -345,3 +345,13 @@ def test_completion_table_names_only_what_resolves(shell):
     assert complete(table, "PROTOTYPE T") == ["tensionFind", "tensionStop", "tensions", "to"]
     assert complete(table, "scope add prototype.x axis0.ten") == ["axis0.tension"]
     assert "prototype" in complete(table, "help p") and complete(table, "nosuch ") == []
+
+
+def test_wait_prints_the_stop_reason_once_and_in_order(shell):
+    """'wait' says why the move ended exactly once; stops of earlier queued moves come first."""
+    sh, _, runner, _ = shell
+    text = run_lines(sh, runner, ["prototype to 10 0 100", "wait"])
+    assert text.count("ENDPOINT_STOP") == 1 and "prototype stopped: ENDPOINT_STOP" in text
+    text = run_lines(sh, runner, ["prototype to 0 0 100", "prototype to 5 0 100", "wait"])
+    stops = [ln for ln in text.splitlines() if "stopped: " in ln]
+    assert len(stops) == 2 and "(0.0" in stops[0] and "(5.0" in stops[1]

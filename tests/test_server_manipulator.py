@@ -43,7 +43,7 @@ def test_full_move_commanded_by_a_client_and_reported_to_a_subscriber(tmp_path):
         assert op.command("prototype to 10 0 100") == ["prototype: to (10, 0, 100): 1 segment, "
                                                        "11.1 cm"]
         (ended,) = op.command("wait")
-        assert ended.startswith("ENDPOINT_STOP")
+        assert ended.startswith("prototype stopped: ENDPOINT_STOP")
         samples = list(itertools.islice(sub.statuses(0.5), 1000))
         xs = [s.fields["x"] for s in samples if s.fields["moving"] == 1]
         assert len(xs) > 10 and xs[0] < 1.0 and xs[-1] > 8.0

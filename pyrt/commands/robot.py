@@ -24,6 +24,7 @@ records (:meth:`RobotShell.resolve`, :meth:`RobotShell.completions`).
 
 from __future__ import annotations
 
+import contextlib
 import shlex
 from collections.abc import Callable
 from typing import Any, TextIO
@@ -315,7 +316,7 @@ class RobotShell(CommandShell):
         """wait [SECONDS]: wait until the current move (or job) ends; say why it ended."""
         timeout = parse_seconds(arg, "wait") if arg.strip() else WAIT_TIMEOUT_S
         st = self.station
-        busy, refusal = self.call(lambda: (st.busy(), st.wait_refusal()), name="wait")
+        busy, refusal = self.call(st.begin_wait, name="wait")
         if not busy:
             self.say(self.runner.call(st.idle_report))
             return
@@ -323,14 +324,22 @@ class RobotShell(CommandShell):
             self.say(refusal)
             return
         try:
-            done = self.runner.wait_until(lambda: not st.busy(), timeout)
+            try:
+                done = self.runner.wait_until(lambda: not st.busy(), timeout)
+            finally:
+                with contextlib.suppress(PyrtError):
+                    self.runner.call(st.end_wait, name="wait", take_fault=False)
         except FaultError as exc:
             self.fault(exc)
             return
         if not done:
             self.say(f"still moving after {timeout:g} s")
             return
-        for text in self.runner.call(st.wait_report).splitlines():
+        report = self.runner.call(st.wait_report)
+        pending = getattr(self.runner, "messages", None)
+        for text in pending() if callable(pending) else []:
+            self.say(text)  # what happened during the wait comes first, in order
+        for text in report.splitlines():
             self.say(text)
 
     @command(Arg("SECONDS", str), name="sleep", console=True)

@@ -329,6 +329,22 @@ class Station:
         """Why ``wait`` cannot end now, or None."""
         return None
 
+    #: Consoles waiting (``wait``) for the move to end: the stop that ends it
+    #: is then reported by the wait, once, not also as an asynchronous line.
+    waiters: int = 0
+
+    def begin_wait(self) -> tuple[bool, str | None]:
+        """A ``wait`` begins (loop thread): (whether anything runs, why the
+        wait cannot end or None); while it runs, :attr:`waiters` counts it."""
+        busy, refusal = self.busy(), self.wait_refusal()
+        if busy and not refusal:
+            self.waiters += 1
+        return busy, refusal
+
+    def end_wait(self) -> None:
+        """The ``wait`` that :meth:`begin_wait` counted has ended."""
+        self.waiters = max(0, self.waiters - 1)
+
     def idle_report(self) -> str:
         """``wait`` with nothing to wait for."""
         return "nothing to wait for"

@@ -335,6 +335,7 @@ class ManipulatorStation(Station):
         self.stops: list[StopRecord] = []
         pa.on_stop.append(self.stops.append)
         pa.on_stop.append(self._report_stop)
+        self._unreported: StopRecord | None = None
         boards.poll(self.loop.now_ns)  # the encoders' counters now ride along
         try:  # the first status line shows real tensions and lengths
             pa.measure()
@@ -342,7 +343,12 @@ class ManipulatorStation(Station):
             pa.position_error = f"position finder failed: {exc}"
 
     def _report_stop(self, rec: StopRecord) -> None:
-        """Every stop is reported as it happens (asynchronous output)."""
+        """Every stop is reported as it happens (asynchronous output), except
+        the one that ends a console's ``wait``: the wait reports that one."""
+        job = self.polyaxis.pattern_job
+        if self.waiters and len(self.motion) == 0 and (job is None or job.done):
+            self._unreported = rec
+            return
         self.stdout.write(f"{self.polyaxis.name} stopped: {rec}\n")
 
     # -- faults ----------------------------------------------------------------------
@@ -428,8 +434,11 @@ class ManipulatorStation(Station):
             for a in moved:
                 lines.append(f"{a.name}: move ended at length {a.getLength():.3f} cm")
             return "\n".join(lines)
-        last = pa.last_stop
-        lines.append(str(last) if last is not None else "ended")
+        last, unreported, self._unreported = pa.last_stop, self._unreported, None
+        if last is None:
+            lines.append("ended")
+        elif unreported is last or not lines:  # said once: here, or above already
+            lines.append(f"{pa.name} stopped: {last}")
         return "\n".join(lines)
 
     # -- logging -------------------------------------------------------------------------
