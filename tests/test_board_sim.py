@@ -89,6 +89,7 @@ else:
     tio.set_bit(*DIR_BITS[7], True)
     tio.set_bit(*AWO_BITS[7], False)
     tio.arm(7)
+b.poll(0)  # the first look takes the watchdog's count: done before any test stops us
 print("driving", flush=True)
 while True:
     try:

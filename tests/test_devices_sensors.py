@@ -30,12 +30,12 @@ def test_encoder_resets_at_start_and_converts():
 
 
 def test_encoder_commands():
-    """reset clears the counter; setZeroLength sets the zero length; read writes the value."""
+    """reset clears the counter; setZeroLength sets the zero length; read replies the value."""
     out = io.StringIO()
     enc, dc = _encoder(stdout=out)
     dc.plant_add_counts(168, 10)
     assert enc.read() == pytest.approx(747.045410 + 2.392)
-    assert "749.437" in out.getvalue()
+    assert enc.find_command("read").lines(enc.read()) == ["749.437 cm"]
     enc.reset()
     assert enc.count() == 0
     assert enc.setZeroLength("500") == 500.0

@@ -99,7 +99,7 @@ def test_sub_object_commands(shell):
     assert "axis0Encoder: " in text and " cm" in text
     assert "axis0Motor: maximum speed 3 cm/s" in text
     assert "axis1: moving to length" in text and "axis1: move ended at length" in text
-    assert "calibration mode" in text and "point 1" in text
+    assert "axis0Loadcell: calibration mode" in text and "axis0Loadcell: point: ADC " in text
     assert "need at least two calibration points" in text
     assert station.axes[0].motor.cruise_speed == 3.0
 

@@ -103,3 +103,15 @@ def test_denied_without_the_token_and_nothing_moves(tmp_path):
         runner.sleep(1.0)
         assert not station.motors_running() and not station.busy()
         assert c.command("prototype tensions")[0].startswith("prototype: desired tensions")
+
+
+def test_device_reads_answer_with_their_values_over_the_network(tmp_path):
+    """An unprivileged 'axis0Encoder read', 'axis0' and 'prototype tensionFind' reply with values, not a bare OK."""
+    with served_manipulator(tmp_path) as (station, runner, _robot, host, port):
+        c = Client(host, port)
+        (line,) = c.command("axis0Encoder read")
+        assert line.startswith("axis0Encoder: ") and line.endswith(" cm")
+        length = runner.call(station.axes[0].encoder.length)
+        assert float(line.split()[1]) == pytest.approx(length, abs=1e-3)
+        assert "axis0.tension = " in "\n".join(c.command("axis0"))
+        assert c.command("prototype tensionFind")[0].startswith("prototype: position from tensions")

@@ -29,6 +29,7 @@ from pyrt.cli._loopopts import (
     make_loop,
 )
 from pyrt.cli._serve import add_serve_options, prepare_service
+from pyrt.cli._shutdown import run_until_shutdown
 from pyrt.commands import RobotShell
 from pyrt.console import Console
 from pyrt.scheduler.runner import Runner
@@ -125,19 +126,23 @@ def run(args: argparse.Namespace) -> int:
         f"speed {speed}; type help",
         file=out,
     )
-    status = 0
     wall0 = time.perf_counter()
     station.start()
-    try:
-        if service is not None:
-            service.start(None if args.headless else lambda m: print(m, file=out, flush=True))
-        if not args.no_init:
-            shell.onecmd("I")
-        status = service.run_headless() if args.headless else console.run()
-    finally:
-        if service is not None:
-            service.close()
-        station.shutdown()
+
+    def body() -> int:
+        try:
+            if service is not None:
+                service.start(None if args.headless else lambda m: print(m, file=out, flush=True))
+            if not args.no_init:
+                shell.onecmd("I")
+            return service.run_headless() if args.headless else console.run()
+        finally:
+            if service is not None:
+                service.close()
+
+    status = run_until_shutdown(station, body, lambda m: print(m, file=out, flush=True),
+                                lambda: "stopped" if args.headless else console.ended_by,
+                                "pyrt gripper")
     if args.timing_log:
         wall = time.perf_counter() - wall0
         print(f"timing log written to {args.timing_log} ({loop.tick_index} ticks, {wall:.2f} s)",

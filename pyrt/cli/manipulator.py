@@ -39,6 +39,7 @@ from pyrt.cli._loopopts import (
     make_loop,
 )
 from pyrt.cli._serve import add_serve_options, prepare_service
+from pyrt.cli._shutdown import run_until_shutdown
 from pyrt.commands import RobotShell
 from pyrt.console import Console
 from pyrt.db import STATIONS, copy_station, default_working_directory
@@ -110,17 +111,21 @@ def run(args: argparse.Namespace) -> int:
     where = "" if station.plant is not None else f", boards at {station.boards.url}"
     print(f"pyrt manipulator: {station.polyaxis.name}, {len(station.axes)} ropes, database "
           f"{directory}{where}; tick {args.tick_us} µs, speed {speed}; type help", file=out)
-    status = 0
     wall0 = time.perf_counter()
     station.start()
-    try:
-        if service is not None:
-            service.start(None if args.headless else lambda m: print(m, file=out, flush=True))
-        status = service.run_headless() if args.headless else console.run()
-    finally:
-        if service is not None:
-            service.close()
-        station.close()
+
+    def body() -> int:
+        try:
+            if service is not None:
+                service.start(None if args.headless else lambda m: print(m, file=out, flush=True))
+            return service.run_headless() if args.headless else console.run()
+        finally:
+            if service is not None:
+                service.close()
+
+    status = run_until_shutdown(station, body, lambda m: print(m, file=out, flush=True),
+                                lambda: "stopped" if args.headless else console.ended_by,
+                                "pyrt manipulator")
     if args.timing_log:
         wall = time.perf_counter() - wall0
         print(f"timing log written to {args.timing_log} ({loop.tick_index} ticks, {wall:.2f} s)",

@@ -91,6 +91,8 @@ class Console:
         #: toolbar, refreshed every ``status_period_s``); never written to a pipe.
         self.status = status
         self.status_period_s = status_period_s
+        #: How the last :meth:`run` ended: "quit" or "end of input".
+        self.ended_by = "quit"
 
     def interactive(self) -> bool:
         """True when both ends are a terminal (line editing and history)."""
@@ -130,6 +132,7 @@ class Console:
             line = self.stdin.readline()
             if not line:
                 out.write("\n")
+                self.ended_by = "end of input"
                 break
             out.write(line if line.endswith("\n") else line + "\n")
             if self.shell.onecmd(line.rstrip("\r\n")):
@@ -169,6 +172,7 @@ class Console:
                     except KeyboardInterrupt:
                         continue
                     except EOFError:
+                        self.ended_by = "end of input"
                         break
                     if self._onecmd_interruptible(line, proxy):
                         break
@@ -230,6 +234,7 @@ class Console:
                 continue
             except EOFError:
                 self.stdout.write("\n")
+                self.ended_by = "end of input"
                 break
             if self._onecmd_interruptible(line, self.stdout):
                 break

@@ -80,12 +80,10 @@ class Encoder(Component):
         self.check_free("reset")
         self.channel.reset()
 
-    @command(name="read", reads_only=True, reply=lambda v: None)
+    @command(name="read", reads_only=True, reply=lambda v: f"{v:.3f} cm")
     def read(self) -> float:
         """read: read and display the length (cm)."""
-        v = self.length()
-        self._say(f"{self.name}: {v:.3f} cm")
-        return v
+        return self.length()
 
     @command(name="readloop", reads_only=True, reply=lambda _r: "readloop")
     def readloop(self) -> None:
@@ -113,8 +111,8 @@ class Encoder(Component):
 
     def poll(self, now_s: float) -> None:
         """Read loop output; ZEROLENGTH write-back once a second while changing."""
-        if self.looping:
-            self.read()
+        if self.looping:  # the read/display loop: asynchronous output
+            self._say(f"{self.name}: {self.read():.3f} cm")
         if self.write_back is None:
             return
         if self._last_write is not None and now_s - self._last_write < ZEROLENGTH_WRITE_PERIOD:

@@ -102,7 +102,9 @@ class Loadcell(Component):
     def signals(self) -> list[Signal]:
         return [Signal("tension", "N", self.tension, "rope tension from the ADC")]
 
-    @command(name="calibrate", reply=lambda v: None)
+    @command(name="calibrate", reply=lambda v: (
+        "calibration mode: hang known loads and give 'point LOAD'" if v is None
+        else f"SLOPE {v[0]:.10g} OFFSET {v[1]:.10g}"))
     def calibrate(self) -> tuple[float, float] | None:
         """calibrate: toggle calibration mode; leaving it fits SLOPE and OFFSET.
 
@@ -116,7 +118,6 @@ class Loadcell(Component):
         if not self.calibrating:
             self.calibrating = True
             self.points = []
-            self._say(f"{self.name}: calibration mode: hang known loads and give 'point LOAD'")
             return None
         pts = self.points
         if len(pts) < 2:
@@ -138,13 +139,12 @@ class Loadcell(Component):
         self.slope, self.offset = slope, offset
         self.calibrating = False
         self.points = []
-        self._say(f"{self.name}: SLOPE {slope:.10g} OFFSET {offset:.10g}")
         if self.write_back is not None:
             self.write_back(slope, offset)
         return slope, offset
 
-    @command(Arg("LOAD", str, rest=True), name="point", reply=lambda v: None,
-             aliases=("calibrationPoint",))
+    @command(Arg("LOAD", str, rest=True), name="point",
+             reply=lambda v: f"point: ADC {v[0]} = {v[1]:.4g} N", aliases=("calibrationPoint",))
     def point(self, load: float | str) -> tuple[int, float]:
         """point LOAD: a calibration point with LOAD (N, lb or kg) hung on the rope
         (000's "calibrationPoint")."""
@@ -155,9 +155,4 @@ class Loadcell(Component):
         n = parse_load(load, f"{self.name} point")
         code = self.channel.code()
         self.points.append((code, n))
-        self._say(f"{self.name}: point {len(self.points)}: ADC {code} = {n:.4g} N")
         return code, n
-
-    def _say(self, text: str) -> None:
-        if self.stdout is not None:
-            self.stdout.write(text + "\n")

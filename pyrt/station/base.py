@@ -432,5 +432,10 @@ class Station:
         if report is not None:
             report(line)
 
+    def closing_note(self) -> str:
+        """What closing did beyond stopping the motors, for the one line said
+        on the way out ("; databases written back in DIR"), or ""."""
+        return ""
+
     def write_back(self) -> None:
         """Write databases back on the way out (configurations that have them)."""

@@ -489,6 +489,11 @@ class ManipulatorStation(Station):
                    for i, a in enumerate(self.axes)]
         return fields
 
+    def closing_note(self) -> str:
+        if self.boards is not None and self.boards.down is not None:
+            return f"; databases in {self.directory} keep the values last written"
+        return f"; databases written back in {self.directory}"
+
     def write_back(self) -> None:
         """Write pending database values, close the log (on the way out).
         Boards that cannot be reached leave the values last written."""

@@ -1,0 +1,87 @@
+"""The consoles' one way out: SIGTERM, SIGHUP, end of input and ``quit`` all
+end in the station's close (every motor stopped through the reflex,
+databases written back), said in one line, exit status 0.
+
+A first SIGTERM or SIGHUP ends the console (the signal handler raises
+:class:`Shutdown` in the main thread, where the console reads); a second
+within :data:`SECOND_SIGNAL_S` exits at once, after the reflex.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+__all__ = ["SECOND_SIGNAL_S", "Shutdown", "run_until_shutdown", "shutdown_signals"]
+
+#: A second SIGTERM within this many seconds exits at once (after the reflex).
+SECOND_SIGNAL_S = 2.0
+
+_SIGNALS = tuple(s for s in (getattr(signal, "SIGTERM", None), getattr(signal, "SIGHUP", None))
+                 if s is not None)
+
+
+class Shutdown(BaseException):
+    """Raised in the main thread by SIGTERM or SIGHUP; carries the signal's name."""
+
+    def __init__(self, why: str):
+        super().__init__(why)
+        self.why = why
+
+
+@contextlib.contextmanager
+def shutdown_signals(reflex: Callable[[], Any], say: Callable[[str], Any]) -> Iterator[None]:
+    """Within the block, SIGTERM and SIGHUP raise :class:`Shutdown` (the
+    console ends and the caller closes the station); a second one within
+    :data:`SECOND_SIGNAL_S` runs ``reflex`` and exits the process at once."""
+    first: dict[str, float] = {}
+
+    def on_signal(signum: int, frame: Any) -> None:
+        name = signal.Signals(signum).name
+        now = time.monotonic()
+        if first and now - first["at"] < SECOND_SIGNAL_S:
+            with contextlib.suppress(BaseException):
+                reflex()
+            say(f"{name} again: every motor stopped; exiting now")
+            os._exit(0)
+        first["at"] = now
+        raise Shutdown(name)
+
+    old = {s: signal.signal(s, on_signal) for s in _SIGNALS}
+    try:
+        yield
+    finally:
+        for s, handler in old.items():
+            signal.signal(s, handler)
+
+
+def _stop_now(station: Any) -> None:
+    """Every motor stopped: through the mailbox, or directly if the loop does not answer."""
+    try:
+        station.runner.call(station.stop, name="stop every motor", take_fault=False,
+                            timeout_s=0.5)
+    except BaseException:  # the loop is gone or stuck: the reflex, from here
+        station.reflex("shutdown")
+
+
+def run_until_shutdown(station: Any, body: Callable[[], int], say: Callable[[str], Any],
+                       why: Callable[[], str], what: str) -> int:
+    """Run ``body`` (the console or the headless service) until it returns or
+    SIGTERM/SIGHUP ends it; then close the station (every motor stopped,
+    databases written back) and say so in one line.  The exit status is
+    ``body``'s, 0 after a signal."""
+    reason = ""
+    status = 0
+    try:
+        with shutdown_signals(lambda: _stop_now(station), say):
+            status = body()
+    except Shutdown as exc:
+        reason = exc.why
+    finally:
+        station.close()
+    say(f"{what}: {reason or why()}: every motor stopped{station.closing_note()}")
+    return status

@@ -1,0 +1,65 @@
+"""The consoles' one way out, through a subprocess on real time: SIGTERM, SIGHUP, end of input."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+
+def _start(robot: str, tmp_path) -> subprocess.Popen:
+    env = dict(os.environ, HOME=str(tmp_path), PYTHONUNBUFFERED="1")
+    env.pop("PYRT_TOKEN", None)
+    return subprocess.Popen([sys.executable, "-m", "pyrt", robot, "--speed", "1"],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+
+
+def _read_until(proc: subprocess.Popen, text: str, timeout_s: float = 30.0) -> str:
+    seen = ""
+    deadline = time.monotonic() + timeout_s
+    while text not in seen:
+        assert time.monotonic() < deadline, f"no {text!r} in {seen!r}"
+        line = proc.stdout.readline()
+        assert line, f"ended before {text!r}: {seen!r}"
+        seen += line
+    return seen
+
+
+@pytest.mark.wallclock
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
+def test_a_signal_mid_move_stops_every_motor_says_so_and_exits_0(tmp_path, sig):
+    """SIGTERM or SIGHUP to an interactive gripper mid-move: one line saying the motors stopped, exit 0."""
+    proc = _start("gripper", tmp_path)
+    try:
+        _read_until(proc, "jaws wide open")  # I has run
+        proc.stdin.write("P-1B86\nT\n")
+        proc.stdin.flush()
+        _read_until(proc, "E47A")  # the target is set: the jaws are moving
+        proc.send_signal(sig)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    assert f"pyrt gripper: {signal.Signals(sig).name}: every motor stopped" in out
+    assert "Traceback" not in err
+
+
+@pytest.mark.wallclock
+def test_end_of_input_mid_move_on_the_manipulator_writes_back_and_says_so(tmp_path):
+    """Ctrl-D (end of input) mid-move: every motor stopped, databases written back, in one line, exit 0."""
+    proc = _start("manipulator", tmp_path)
+    try:
+        _read_until(proc, "type help")
+        proc.stdin.write("prototype to 10 0 60\n")
+        proc.stdin.flush()
+        _read_until(proc, "prototype: to (10, 0, 60)")
+        out, err = proc.communicate(timeout=30)  # closes stdin: end of input
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    assert "pyrt manipulator: end of input: every motor stopped; databases written back in " in out
