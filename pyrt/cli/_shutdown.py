@@ -68,20 +68,32 @@ def _stop_now(station: Any) -> None:
         station.reflex("shutdown")
 
 
-def run_until_shutdown(station: Any, body: Callable[[], int], say: Callable[[str], Any],
-                       why: Callable[[], str], what: str) -> int:
-    """Run ``body`` (the console or the headless service) until it returns or
-    SIGTERM/SIGHUP ends it; then close the station (every motor stopped,
-    databases written back) and say so in one line.  The exit status is
-    ``body``'s, 0 after a signal."""
+def run_until_shutdown(station: Any, console: Any, service: Any, *, headless: bool,
+                       say: Callable[[str], Any], what: str,
+                       first: Callable[[], Any] | None = None) -> int:
+    """Run the console (or, ``headless``, the service alone) until it ends or
+    SIGTERM/SIGHUP ends it; the service, if any, serves meanwhile; ``first``
+    runs before the console reads (the gripper's power-up ``I``).  Then close
+    the service and the station (every motor stopped, databases written
+    back) and say so in one line.  The exit status is the console's or the
+    service's, 0 after a signal."""
     reason = ""
     status = 0
     try:
         with shutdown_signals(lambda: _stop_now(station), say):
-            status = body()
+            try:
+                if service is not None:
+                    service.start(None if headless else say)
+                if first is not None:
+                    first()
+                status = service.run_headless() if headless else console.run()
+            finally:
+                if service is not None:
+                    service.close()
     except Shutdown as exc:
         reason = exc.why
     finally:
         station.close()
-    say(f"{what}: {reason or why()}: every motor stopped{station.closing_note()}")
+    why = reason or ("stopped" if headless else console.ended_by)
+    say(f"{what}: {why}: every motor stopped{station.closing_note()}")
     return status

@@ -129,20 +129,10 @@ def run(args: argparse.Namespace) -> int:
     wall0 = time.perf_counter()
     station.start()
 
-    def body() -> int:
-        try:
-            if service is not None:
-                service.start(None if args.headless else lambda m: print(m, file=out, flush=True))
-            if not args.no_init:
-                shell.onecmd("I")
-            return service.run_headless() if args.headless else console.run()
-        finally:
-            if service is not None:
-                service.close()
-
-    status = run_until_shutdown(station, body, lambda m: print(m, file=out, flush=True),
-                                lambda: "stopped" if args.headless else console.ended_by,
-                                "pyrt gripper")
+    status = run_until_shutdown(
+        station, console, service, headless=args.headless, what="pyrt gripper",
+        say=lambda m: print(m, file=out, flush=True),
+        first=None if args.no_init else lambda: shell.onecmd("I"))
     if args.timing_log:
         wall = time.perf_counter() - wall0
         print(f"timing log written to {args.timing_log} ({loop.tick_index} ticks, {wall:.2f} s)",

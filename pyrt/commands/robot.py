@@ -87,11 +87,7 @@ class RobotShell(CommandShell):
 
     def word(self, name: str) -> Command | None:
         """The word called ``name`` (case-insensitive), or None."""
-        key = name.lower()
-        for w in self.words():
-            if w.name.lower() == key:
-                return w
-        return None
+        return next((w for w in self.words() if w.answers_to(name)), None)
 
     def resolve(self, line: str) -> tuple[Component | None, Command, list[str], str]:
         """``(component, record, argument words, argument text)`` of ``line``
