@@ -229,3 +229,44 @@ def test_live_status_is_the_stations_status_at_real_time_only():
             runner.call(lambda: None)
     finally:
         station.close()
+
+
+def test_ctrl_c_stops_a_gripper_move_and_only_hints_when_idle(monkeypatch):
+    """Ctrl-C during 'wait' or at the prompt mid-move stops the jaws; idle at the prompt it only hints."""
+    from pyrt.commands import RobotShell
+    from pyrt.scheduler import Loop, SimClock
+    from pyrt.station.gripper import build_gripper
+
+    station = build_gripper(Loop(SimClock()))
+    runner = station.start()
+    out = io.StringIO()
+    shell = RobotShell(station, out)
+    try:
+        shell.onecmd("I")
+        feed = iter([KeyboardInterrupt, "P-1B86", KeyboardInterrupt, "P-1B86", "wait", "W"])
+        real = shell.onecmd
+
+        def onecmd(line):
+            if line == "wait":  # Ctrl-C while waiting for the move
+                runner.sleep(0.2)
+                raise KeyboardInterrupt
+            return real(line)
+
+        def fake_input(prompt):
+            try:
+                item = next(feed)
+            except StopIteration:
+                raise EOFError from None
+            if item is KeyboardInterrupt:
+                raise KeyboardInterrupt
+            return item
+
+        monkeypatch.setattr(shell, "onecmd", onecmd)
+        monkeypatch.setattr("builtins.input", fake_input)
+        Console(shell, io.StringIO(), out)._run_input()
+        text = out.getvalue()
+        assert "(Ctrl-C stops a move; nothing is moving" in text  # the first, idle
+        assert text.count("interrupted: ") == 2  # at the prompt mid-move, and in 'wait'
+        assert not runner.call(station.busy) and runner.call(lambda: station.board.dac) == 0x80
+    finally:
+        station.close()

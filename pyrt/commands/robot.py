@@ -406,6 +406,19 @@ class RobotShell(CommandShell):
         for s, v in values:
             self.say(f"{comp.name}.{s.name} = {s.format(v)}")
 
+    def interrupt(self, at_prompt: bool) -> str:
+        """Ctrl-C (the console calls it): a move that runs is stopped, every
+        motor with it; idle at the prompt, a hint and nothing else."""
+        st = self.station
+        try:
+            busy = self.runner.call(st.busy, name="interrupt", take_fault=False)
+            if busy or not at_prompt:
+                said = self.runner.call(st.stop, name="interrupt", take_fault=False)
+                return f"interrupted: {said}" if busy else "interrupted; nothing was moving"
+        except PyrtError as exc:
+            return f"interrupted; could not reach the robot: {exc}"
+        return "(Ctrl-C stops a move; nothing is moving: 'quit' or Ctrl-D leaves)"
+
     @command(name="quit", console=True)
     def do_quit(self) -> bool:
         """quit: stop every motor, then leave."""

@@ -170,6 +170,7 @@ class Console:
                     try:
                         line = session.prompt(self.shell.prompt)
                     except KeyboardInterrupt:
+                        self._interrupted(proxy, at_prompt=True)
                         continue
                     except EOFError:
                         self.ended_by = "end of input"
@@ -231,6 +232,7 @@ class Console:
                 line = input(self.shell.prompt)
             except KeyboardInterrupt:
                 self.stdout.write("\n")
+                self._interrupted(self.stdout, at_prompt=True)
                 continue
             except EOFError:
                 self.stdout.write("\n")
@@ -246,5 +248,21 @@ class Console:
         try:
             return self.shell.onecmd(line)
         except KeyboardInterrupt:
-            out.write("interrupted\n")
+            self._interrupted(out, at_prompt=False)
             return False
+
+    def _interrupted(self, out: TextIO, *, at_prompt: bool) -> None:
+        """Ctrl-C: the interpreter's ``interrupt(at_prompt)`` says what it did
+        (a robot shell stops a running move; idle at the prompt it only gives
+        a hint); without one, "interrupted" (a command was abandoned)."""
+        interrupt = getattr(self.shell, "interrupt", None)
+        if callable(interrupt):
+            try:
+                said = interrupt(at_prompt)
+            except KeyboardInterrupt:  # a second Ctrl-C while stopping: try once more
+                said = interrupt(at_prompt)
+        else:
+            said = None if at_prompt else "interrupted"
+        if said:
+            out.write(said + "\n")
+            out.flush()
