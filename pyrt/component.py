@@ -53,6 +53,7 @@ __all__ = [
     "command",
     "finite",
     "records_of",
+    "reply_lines",
     "walk",
     "word",
 ]
@@ -243,14 +244,19 @@ class Command:
 
     def lines(self, result: Any) -> list[str]:
         """The reply lines of a handler's result."""
-        value = self.reply(result) if self.reply is not None else result
-        if value is None:
-            return []
-        if isinstance(value, str):
-            return value.splitlines() or [""]
-        if isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value):
-            return list(value)
-        return [str(value)]
+        return reply_lines(self.reply(result) if self.reply is not None else result)
+
+
+def reply_lines(value: Any) -> list[str]:
+    """A reply as lines: None is none, a string its lines, strings as they
+    are, anything else its ``str``."""
+    if value is None:
+        return []
+    if isinstance(value, str):
+        return value.splitlines() or [""]
+    if isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value):
+        return list(value)
+    return [str(value)]
 
 
 def _parse_one(who: str, arg: Arg, text: str) -> Any:

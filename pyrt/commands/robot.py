@@ -32,7 +32,7 @@ from typing import Any, TextIO
 from pyrt.commands._motion import motion_type_lines, parse_motion
 from pyrt.commands.scope import ScopeCommand
 from pyrt.commands.shell import CommandShell, parse_seconds
-from pyrt.component import Arg, Command, Component, Switch, command, records_of
+from pyrt.component import Arg, Command, Component, Switch, command, records_of, reply_lines
 from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
 from pyrt.scheduler import Job
 from pyrt.scheduler.motion import get_motion_type, motion_type_names
@@ -234,7 +234,7 @@ class RobotShell(CommandShell):
             for text in notes or []:
                 self.say(text)
             return
-        for text in _lines(value):
+        for text in reply_lines(value):
             if prefix and not text.lower().startswith(prefix.lower() + ":"):
                 text = f"{prefix}: {text}"
             self.say(text)
@@ -427,16 +427,6 @@ class RobotShell(CommandShell):
         except (MailboxTimeout, PyrtError) as exc:
             self.error(f"could not stop the motors: {exc}")
         return True
-
-
-def _lines(value: Any) -> list[str]:
-    if value is None:
-        return []
-    if isinstance(value, str):
-        return value.splitlines() or [""]
-    if isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value):
-        return list(value)
-    return [str(value)]
 
 
 def split_words(text: str) -> list[str]:

@@ -11,7 +11,6 @@ maximum.  Snapshots are plain frozen values (:class:`Distribution`,
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 __all__ = [
@@ -97,8 +96,10 @@ def format_bound_us(ns: int, exact_ns: int | None = None) -> str:
         return f"{us:.2f}"
     if us == 0:
         return "0"
-    step = 10.0 ** (math.floor(math.log10(us)) - 1)  # the second significant digit
-    up = math.ceil(round(us / step, 6)) * step  # rounded up: it stays an upper bound
+    # rounded up at the second significant digit, in integer ns (no float
+    # rounding can take it below the bound)
+    step = 10 ** max(0, len(str(int(ns))) - 2)
+    up = -(-int(ns) // step) * step / 1e3
     return "≤" + (f"{up:.0f}" if up >= 10 else f"{up:.2g}")
 
 
