@@ -16,11 +16,8 @@ shared: read the tails as approximate.
 
 from __future__ import annotations
 
-import re
-import subprocess
-import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 
 import pytest
 
@@ -32,31 +29,6 @@ from pyrt.scheduler import Loop, WallClock
 ROUNDS = 3000
 SAMPLES = 3000
 TICK_NS = 1_000_000
-
-
-def _board_sim(world: str) -> Iterator[str]:
-    proc = subprocess.Popen([sys.executable, "-m", "pyrt", "board-sim", world, "--listen",
-                             "127.0.0.1:0", "--watchdog", "5"], stdin=subprocess.DEVNULL,
-                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-    try:
-        m = re.search(r" on (tcp://\S+) ", proc.stdout.readline())
-        assert m, "board-sim did not say where it serves"
-        yield m.group(1)
-    finally:
-        proc.kill()
-        proc.wait(10)
-
-
-@pytest.fixture(scope="module")
-def gripper_url() -> Iterator[str]:
-    """A gripper board-sim in a subprocess."""
-    yield from _board_sim("gripper")
-
-
-@pytest.fixture(scope="module")
-def manipulator_url() -> Iterator[str]:
-    """A prototype-station board-sim in a subprocess."""
-    yield from _board_sim("prototype")
 
 
 def _quantile(samples: list[float], q: float) -> float:

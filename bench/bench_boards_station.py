@@ -19,11 +19,7 @@ times single register round trips.
 from __future__ import annotations
 
 import io
-import re
-import subprocess
-import sys
 import time
-from collections.abc import Iterator
 
 import pytest
 
@@ -32,21 +28,6 @@ from pyrt.scheduler import Loop, WallClock
 from pyrt.station.gripper import build_gripper
 
 TICK_NS = 1_000_000
-
-
-@pytest.fixture(scope="module")
-def gripper_url() -> Iterator[str]:
-    """A gripper board-sim in a subprocess (watchdog 5 s)."""
-    proc = subprocess.Popen([sys.executable, "-m", "pyrt", "board-sim", "gripper", "--listen",
-                             "127.0.0.1:0", "--watchdog", "5"], stdin=subprocess.DEVNULL,
-                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-    try:
-        m = re.search(r" on (tcp://\S+) ", proc.stdout.readline())
-        assert m, "board-sim did not say where it serves"
-        yield m.group(1)
-    finally:
-        proc.kill()
-        proc.wait(10)
 
 
 def _quantile(samples: list[int], q: float) -> int:

@@ -8,12 +8,41 @@ and the targets (``-s`` not needed: it goes to the terminal summary).
 
 from __future__ import annotations
 
+import re
+import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+
+def board_sim(world: str) -> Iterator[str]:
+    """``pyrt board-sim WORLD`` in a subprocess (watchdog 5 s): yields its URL."""
+    proc = subprocess.Popen([sys.executable, "-m", "pyrt", "board-sim", world, "--listen",
+                             "127.0.0.1:0", "--watchdog", "5"], stdin=subprocess.DEVNULL,
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        m = re.search(r" on (tcp://\S+) ", proc.stdout.readline())
+        assert m, "board-sim did not say where it serves"
+        yield m.group(1)
+    finally:
+        proc.kill()
+        proc.wait(10)
+
+
+@pytest.fixture(scope="module")
+def gripper_url() -> Iterator[str]:
+    """A gripper board-sim in a subprocess."""
+    yield from board_sim("gripper")
+
+
+@pytest.fixture(scope="module")
+def manipulator_url() -> Iterator[str]:
+    """A prototype-station board-sim in a subprocess."""
+    yield from board_sim("prototype")
+
 
 _MEANS: dict[str, float] = {}  # medians: robust on a shared machine
 _MINS: dict[str, float] = {}

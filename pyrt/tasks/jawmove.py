@@ -91,15 +91,10 @@ def mvjaws(ctl: Controller8031) -> None:
         elif byte < ram[MXNJSPD]:
             byte = ram[MXNJSPD]
         ctl.drive(byte)
-        if flags & _MASK_STOPPED:
-            n = ram[STOPCNT]
-            if n > 1:
-                ram[STOPCNT] = n - 1
-            else:
-                ram[STOPCNT] = 0
-                ctl.drive(DAC_NULL)
-                ram[FLAGS] = flags & ~_MASK_DRVON & 0xFF
-                ctl.last_stop = "stopped"
+        if flags & _MASK_STOPPED and _last_bump(ram):
+            ctl.drive(DAC_NULL)
+            ram[FLAGS] = flags & ~_MASK_DRVON & 0xFF
+            ctl.last_stop = "stopped"
         return
     if flags & _MASK_DOJOG:
         ctl.drive(DAC_NULL)
@@ -121,13 +116,19 @@ def _jog(ctl: Controller8031, flags: int, open_: bool) -> None:
     # movement routine does not drive them back to the old target.
     _set_word(ram, COMMAND_CNT, _word(ram, ENCODER_CNT))
     ctl.drive(ram[MXPJSPD] if open_ else ram[MXNJSPD])
-    if flags & _MASK_STOPPED:
-        n = ram[STOPCNT]
-        if n > 1:
-            ram[STOPCNT] = n - 1
-        else:
-            ram[STOPCNT] = 0
-            ctl.drive(DAC_NULL)
-            flags = (flags | _MASK_JOGSTALL) & ~_MASK_DOJOG & 0xFF
-            ctl.last_stop = "jog stalled (against a stop?): release the switch"
+    if flags & _MASK_STOPPED and _last_bump(ram):
+        ctl.drive(DAC_NULL)
+        flags = (flags | _MASK_JOGSTALL) & ~_MASK_DOJOG & 0xFF
+        ctl.last_stop = "jog stalled (against a stop?): release the switch"
     ram[FLAGS] = flags
+
+
+def _last_bump(ram: bytearray) -> bool:
+    """WATCHJAW saw the jaws stopped: count STOPCNT down; True when it has run
+    out (the drive then gives up), as both of 002's stop checks do."""
+    n = ram[STOPCNT]
+    if n > 1:
+        ram[STOPCNT] = n - 1
+        return False
+    ram[STOPCNT] = 0
+    return True
