@@ -78,6 +78,24 @@ def read_until_closed(sock: socket.socket, timeout_s: float = 10.0) -> str:
     return buf.decode(errors="replace")
 
 
+def read_only_lines(station, shell) -> list[str]:
+    """A line for every read-only command record that needs no argument and
+    that the console resolves at its top level (derived from the records)."""
+    from pyrt.errors import CommandError
+
+    lines = []
+    for comp, rec in [(None, w) for w in shell.words()] + station.all_commands():
+        if not rec.reads_only or any(not a.optional for a in rec.args):
+            continue
+        line = rec.name if comp is None or comp is shell.level else f"{comp.name} {rec.name}"
+        try:
+            if shell.resolve(line)[1] == rec:
+                lines.append(line)
+        except CommandError:  # a level the console is not at (the monitor's letters)
+            continue
+    return lines
+
+
 @contextmanager
 def served(token: str | None = TOKEN, wall: bool = False, **server_kw):
     """The gripper station (SimClock unless ``wall``) served on an ephemeral loopback port."""

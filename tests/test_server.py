@@ -10,7 +10,7 @@ import time
 
 import pytest
 from _gripper_rig import make_rig
-from _server_rig import TOKEN, read_lines, read_until_closed, served
+from _server_rig import TOKEN, read_lines, read_only_lines, read_until_closed, served
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -285,15 +285,147 @@ def test_idle_clients_are_closed_but_subscribers_are_not():
         assert sub.command("W") == ["0000"]
 
 
-def test_clients_beyond_the_limit_are_refused():
-    """The client after max_clients gets ERR full and is closed; the others are served."""
-    with served(max_clients=2) as sv:
+def test_clients_beyond_the_limit_and_the_reserve_are_refused():
+    """With every slot held by a client that has asked something and the reserve taken, a newcomer gets ERR full; the others are served."""
+    with served(max_clients=2, reserved_slots=1) as sv:
         a, b = sv.client(), sv.client()
+        assert a.command("W") == b.command("W") == ["0000"]  # both asked: not evictable
+        spare = sv.client()
+        assert "reserved slot" in spare.greeting
+        assert spare.command("stop") == ["gripper: every motor stopped"]
         with pytest.raises(ServerError) as exc:
             sv.client()
         assert exc.value.code == "full"
         assert a.command("W") == b.command("W") == ["0000"]
         assert sv.server.counters["refused_full"] == 1
+
+
+# -- a server that cannot be starved -----------------------------------------------------
+
+
+def _silent(sv, n: int) -> list[socket.socket]:
+    """``n`` connections that send nothing (their greetings left unread)."""
+    return [socket.create_connection((sv.host, sv.port), timeout=10) for _ in range(n)]
+
+
+def _moving(sv) -> bool:
+    return sv.runner.call(lambda: sv.ctl.moving, take_fault=False)
+
+
+def test_200_silent_connections_do_not_lock_out_the_operator_or_a_stop():
+    """After 200 connections that send nothing, the operator's AUTH and move and an unprivileged stop are served."""
+    with served() as sv:
+        socks = _silent(sv, 200)
+        try:
+            op = sv.operator()  # ERR full here before: 64 slots held by silent clients
+            op.command("I")
+            assert op.command("P E47A") == []
+            sv.runner.sleep(0.1)
+            assert _moving(sv)
+            guest = sv.client()
+            assert guest.command("stop") == ["gripper: every motor stopped"]
+            assert not _moving(sv) and sv.still_and_null()
+            assert sv.server.counters["evicted"] >= 200 - 64
+            assert sv.server.clients <= sv.server.max_clients + sv.server.reserved_slots
+        finally:
+            for s in socks:
+                s.close()
+
+
+def test_when_every_slot_is_busy_a_reserved_slot_takes_auth_and_stop_only():
+    """Every slot held by a subscriber (never evicted): the operator AUTHs in a reserved slot and moves, another newcomer's stop halts it, anything else there is ERR full."""
+    with served(max_clients=3, reserved_slots=2) as sv:
+        subs = [sv.client() for _ in range(3)]
+        for c in subs:
+            c.command("SUBSCRIBE 1")
+        op = sv.operator()
+        assert "reserved slot" in op.greeting
+        op.command("I")
+        op.command("P E47A")
+        sv.runner.sleep(0.1)
+        assert _moving(sv)
+        reader = sv.client()
+        reply = reader.request("W")
+        assert (reply.code, "AUTH and stop only" in reply.text) == ("full", True)
+        stopper = sv.client()
+        assert stopper.command("stop") == ["gripper: every motor stopped"]
+        assert not _moving(sv) and sv.still_and_null()
+        assert op.command("T") == ["E47A"]  # the operator keeps its session
+
+
+def test_silent_and_unprivileged_connections_have_short_idle_bounds():
+    """A connection with no request is closed after the greeting bound, an unprivileged one after the guest bound, the operator's stays; the defaults are seconds, not minutes."""
+    assert Server.__init__.__kwdefaults__["greeting_timeout_s"] <= 10
+    assert Server.__init__.__kwdefaults__["guest_idle_s"] <= 60
+    with served(greeting_timeout_s=0.3, guest_idle_s=1.0) as sv:
+        op = sv.operator()
+        guest = sv.raw()
+        guest.sendall(b"W\n")
+        assert read_lines(guest, 1) == ["OK 0000"]
+        t0 = time.monotonic()
+        silent = sv.raw()
+        assert read_until_closed(silent, 5.0) == "ERR idle no request for 0.3 s; closing\n"
+        assert time.monotonic() - t0 < 1.0
+        assert read_until_closed(guest, 5.0).startswith("ERR idle unprivileged")
+        assert op.command("T") == ["0000"]  # 600 s for the operator
+        assert sv.server.counters["idle"] == 2
+
+
+def test_silent_connections_from_one_address_are_capped():
+    """Beyond max_fresh_per_address connections that sent nothing from one address, a newcomer is refused until one of them asks something; loopback is exempt by default."""
+    with served(max_fresh_per_address=3, exempt_loopback=False) as sv:
+        socks = [sv.raw() for _ in range(3)]
+        extra = socket.create_connection((sv.host, sv.port), timeout=10)
+        assert read_until_closed(extra).startswith(
+            "ERR full 3 connections from 127.0.0.1 have sent nothing yet")
+        socks[0].sendall(b"STATUS\n")
+        assert read_lines(socks[0], 1)[0].startswith("OK t=")
+        fourth = sv.raw()
+        fourth.sendall(b"W\n")
+        assert read_lines(fourth, 1) == ["OK 0000"]
+        assert sv.server.counters["refused_address"] == 1
+    with served(max_fresh_per_address=3) as sv:
+        socks = [sv.raw() for _ in range(10)]
+        for s in socks:
+            s.sendall(b"W\n")
+            assert read_lines(s, 1) == ["OK 0000"]
+
+
+@pytest.mark.parametrize("line", [b"W\x00", b"T\x1b[A", b"\x07", b"P\x7fE47A", "W\x85".encode(),
+                                  b"AUTH \x00" + TOKEN.encode()])
+def test_a_line_with_control_characters_is_refused_with_one_line(line):
+    """A line that is not text (control characters) gets one ERR text line, runs nothing, and the connection goes on."""
+    with served() as sv:
+        s = sv.raw()
+        s.sendall(line + b"\nW\n")
+        first, second = read_lines(s, 2)
+        assert first.startswith("ERR text control character"), first
+        assert second == "OK 0000"
+        assert sv.server.counters["text"] == 1 and sv.server.privileged_client is None
+
+
+def test_an_unprivileged_stop_halts_the_operators_move():
+    """A client without AUTH gives stop while the operator's move runs: every motor stops at once."""
+    with served() as sv:
+        op = sv.operator()
+        op.command("I")
+        op.command("P E47A")
+        sv.runner.sleep(0.2)
+        assert _moving(sv)
+        assert sv.client().command("stop") == ["gripper: every motor stopped"]
+        assert not _moving(sv) and sv.still_and_null()
+
+
+def test_every_read_only_gripper_command_returns_its_value_over_the_network():
+    """Each read-only command record (no argument) sent by an unprivileged client answers OK with at least one line (its value)."""
+    with served() as sv:
+        c = sv.client()
+        lines = read_only_lines(sv.rig, sv.server.robot.make_shell(sv.runner, io.StringIO()))
+        assert {"W", "T", "E", "S", "status", "stats"} <= set(lines)
+        for line in lines:
+            reply = c.request(line)
+            assert reply.ok and reply.lines and reply.lines[0], (line, reply)
+        assert c.command("W") == ["0000"]
 
 
 def test_quit_and_unsubscribe():

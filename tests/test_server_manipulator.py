@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import io
 import itertools
 from contextlib import contextmanager
 
 import pytest
+from _server_rig import read_only_lines
 
 from pyrt.client import Client, ServerError
 from pyrt.db import copy_station
@@ -115,3 +117,15 @@ def test_device_reads_answer_with_their_values_over_the_network(tmp_path):
         assert float(line.split()[1]) == pytest.approx(length, abs=1e-3)
         assert "axis0.tension = " in "\n".join(c.command("axis0"))
         assert c.command("prototype tensionFind")[0].startswith("prototype: position from tensions")
+
+
+def test_every_read_only_manipulator_command_returns_its_value_over_the_network(tmp_path):
+    """Each read-only command record (no argument) of every object, sent by an unprivileged client, answers OK with its value, not a bare OK."""
+    with served_manipulator(tmp_path) as (station, runner, robot, host, port):
+        c = Client(host, port)
+        lines = read_only_lines(station, robot.make_shell(runner, io.StringIO()))
+        assert {"status", "stats", "axis0Encoder read", "prototype tensions",
+                "prototype tensionFind", "sim show"} <= set(lines)
+        for line in lines:
+            reply = c.request(line)
+            assert reply.ok and reply.lines and reply.lines[0], (line, reply)

@@ -18,6 +18,13 @@ class Connection:
         self.id = cid
         self.sock = sock
         self.peer = peer
+        #: The peer's address (the per-address bound counts by it).
+        self.addr = str(peer[0]) if isinstance(peer, tuple) and peer else str(peer)
+        self.connected_at = time.monotonic()
+        #: No request yet (a complete line of text): the greeting bound applies.
+        self.fresh = True
+        #: In a reserved slot (the server was full): AUTH or a stop only.
+        self.reserve = False
         self.inbuf = bytearray()
         self.out = bytearray()
         self.lock = threading.Lock()

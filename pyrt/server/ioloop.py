@@ -16,15 +16,18 @@ import selectors
 import socket
 import threading
 import time
+from typing import Any
 
 from pyrt import __version__
 from pyrt.server.connection import Connection
 from pyrt.server.limits import (
+    EVICT_IDLE_S,
     GUARD_NS,
     GUARD_POLL_S,
     LINGER_S,
     PUMP_S,
     RATE_WINDOW_S,
+    address_is_loopback,
     lower_priority,
 )
 from pyrt.server.protocol import format_error, format_reply
@@ -130,18 +133,19 @@ class IOLoopMixin:
             except OSError as exc:  # out of descriptors: leave it in the backlog
                 log.warning("accept failed: %s", exc)
                 return
-            if len(self._conns) >= self.max_clients:
-                self.counters["refused_full"] += 1
+            reserve, refusal = self._admit(peer)
+            if reserve is None:
+                log.warning("refused %s: %s", peer, refusal)
                 with contextlib.suppress(OSError):
                     sock.setblocking(False)
-                    sock.send(format_error("full", f"{self.max_clients} clients already").encode())
+                    sock.send(format_error("full", refusal).encode())
                 sock.close()
-                log.warning("refused %s: %d clients already", peer, self.max_clients)
                 continue
             sock.setblocking(False)
             with contextlib.suppress(OSError):
                 sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             conn = Connection(self._next_id, sock, peer)
+            conn.reserve = reserve
             self._next_id += 1
             self._conns[conn.id] = conn
             self.counters["accepted"] += 1
@@ -149,11 +153,70 @@ class IOLoopMixin:
             self._sel.register(sock, selectors.EVENT_READ, conn)
             conn.events = selectors.EVENT_READ
             who = "AUTH to command" if self._token is not None else "no token: status only"
+            if reserve:
+                self.counters["reserve"] += 1
+                who = f"{self.max_clients} clients already: a reserved slot, AUTH or stop only"
             self._output(conn, format_reply(
                 [f"pyrt {__version__} {self.robot.name} server; {who}; HELP lists the commands"]
             ))
-            log.info("%r connected", conn)
+            log.info("%r connected%s", conn, " (reserved slot)" if reserve else "")
 
+    def _admit(self, peer: Any) -> tuple[bool | None, str]:
+        """Where a new connection from ``peer`` goes: a slot (False), a reserved
+        slot (True), or nowhere (None, and why)."""
+        addr = str(peer[0]) if isinstance(peer, tuple) and peer else str(peer)
+        conns = list(self._conns.values())
+        if not (self.exempt_loopback and address_is_loopback(addr)):
+            fresh = sum(1 for c in conns if c.fresh and not c.closing and c.addr == addr)
+            if fresh >= self.max_fresh_per_address:
+                self.counters["refused_address"] += 1
+                return None, (f"{fresh} connections from {addr} have sent nothing yet; "
+                              "send a request on one of them first")
+        regular = sum(1 for c in conns if not c.reserve and not c.closing)
+        if regular < self.max_clients:
+            return False, ""
+        victim = self._evictable(conns, reserve=False)
+        if victim is not None:
+            self._evict(victim)
+            return False, ""
+        if sum(1 for c in conns if c.reserve and not c.closing) < self.reserved_slots:
+            return True, ""
+        victim = self._evictable(conns, reserve=True)
+        if victim is not None:
+            self._evict(victim)
+            return True, ""
+        self.counters["refused_full"] += 1
+        return None, f"{self.max_clients} clients already and every reserved slot in use"
+
+    def _evictable(self, conns: list[Connection], reserve: bool) -> Connection | None:
+        """The connection a newcomer may replace: the oldest that has sent
+        nothing, else the unprivileged, unsubscribed one idle longest (at
+        least :data:`EVICT_IDLE_S`); never the privileged one, a subscriber,
+        or one with work in hand."""
+        mine = [c for c in conns if c.reserve == reserve and not c.closing and not c.closed
+                and not c.privileged and not c.subscribed and c.pending == 0]
+        fresh = [c for c in mine if c.fresh]
+        if fresh:
+            return min(fresh, key=lambda c: c.connected_at)
+        limit = time.monotonic() - EVICT_IDLE_S
+        idle = [c for c in mine if c.last_active <= limit]
+        return min(idle, key=lambda c: c.last_active) if idle else None
+
+    def _evict(self, conn: Connection) -> None:
+        """Close ``conn`` at once for a newcomer: one ``ERR full`` line, sent
+        if the socket takes it, no lingering (a flood must not hold descriptors)."""
+        self.counters["evicted"] += 1
+        why = ("sent nothing" if conn.fresh
+               else f"no request for {time.monotonic() - conn.last_active:.0f} s")
+        log.info("%r evicted: the server is full and it %s", conn, why)
+        text = format_error("full", f"{self.max_clients} clients already; this connection "
+                            f"{why}: closed for a newcomer")
+        with conn.lock:
+            data = bytes(conn.out) + text.encode()
+        with contextlib.suppress(OSError):
+            conn.sock.send(data)
+        self._end(conn)
+        self._finish(conn)
 
     def _set_events(self, conn: Connection) -> None:
         """Register the events ``conn`` needs now; close it when it is done (I/O thread)."""
@@ -270,10 +333,17 @@ class IOLoopMixin:
                 continue
             if conn.closing or conn.subscribed or conn.pending:
                 continue
-            if now - conn.last_active > self.idle_timeout_s:
+            if conn.fresh or conn.reserve:
+                bound, what = self.greeting_timeout_s, "no request"
+                since = conn.connected_at if conn.fresh else conn.last_active
+            elif conn.privileged:
+                bound, what, since = self.idle_timeout_s, "no request", conn.last_active
+            else:
+                bound, what = self.guest_idle_s, "unprivileged: no request"
+                since = conn.last_active
+            if now - since > bound:
                 self.counters["idle"] += 1
-                self._output(conn, format_error(
-                    "idle", f"no request for {self.idle_timeout_s:g} s; closing"))
+                self._output(conn, format_error("idle", f"{what} for {bound:g} s; closing"))
                 self._close_after_flush(conn)
 
     def _close_after_flush(self, conn: Connection) -> None:

@@ -13,14 +13,37 @@ import socket
 import threading
 
 __all__ = [
-    "GUARD_NS", "GUARD_POLL_S", "IDLE_TIMEOUT_S", "LINGER_S", "MAX_AUTH_FAILURES",
-    "MAX_CLIENTS", "MAX_OUTPUT", "MAX_PENDING", "MAX_RATE", "MAX_SUBSCRIPTION_RATE", "NICE",
-    "PUMP_S", "RATE_WINDOW_S", "SWITCH_INTERVAL_S", "is_loopback", "lower_priority",
+    "EVICT_IDLE_S", "GREETING_TIMEOUT_S", "GUARD_NS", "GUARD_POLL_S", "GUEST_IDLE_S",
+    "IDLE_TIMEOUT_S", "LINGER_S", "MAX_AUTH_FAILURES", "MAX_CLIENTS", "MAX_FRESH_PER_ADDRESS",
+    "MAX_OUTPUT", "MAX_PENDING", "MAX_RATE", "MAX_SUBSCRIPTION_RATE", "NICE", "PUMP_S",
+    "RATE_WINDOW_S", "RESERVED_SLOTS", "SWITCH_INTERVAL_S", "address_is_loopback",
+    "is_loopback", "lower_priority",
 ]
 
 #: Defaults of the bounds (all overridable per server).
 MAX_CLIENTS = 64
+#: The privileged client (the operator's session) is closed after this long
+#: without a request; nobody is kept longer.
 IDLE_TIMEOUT_S = 600.0
+#: An unprivileged client that is not subscribed is closed after this long
+#: without a request (a DAQ that polls less often reconnects).
+GUEST_IDLE_S = 30.0
+#: A connection that has sent no request (a complete line of text) this long
+#: after it connected is closed: a silent connection holds a slot seconds, not minutes.
+GREETING_TIMEOUT_S = 5.0
+#: Connections from one address that have sent no request yet, at most (a
+#: further one is refused).  Loopback is exempt: a client on the robot's own
+#: computer can stop the process anyway, and the local DAQ and test rigs open
+#: their connections together before their first request; a flood from there
+#: is met by eviction and the reserved slots.
+MAX_FRESH_PER_ADDRESS = 8
+#: When every slot is taken, a newcomer takes the slot of the oldest connection
+#: that has sent nothing, else of an unprivileged, unsubscribed one idle this long.
+EVICT_IDLE_S = 5.0
+#: Slots beyond ``max_clients`` for when no slot can be freed: a connection
+#: there may only ``AUTH`` (the operator always gets in) or give a stop
+#: (any client may); anything else gets ``ERR full``.
+RESERVED_SLOTS = 4
 MAX_OUTPUT = 256 * 1024
 MAX_PENDING = 32
 MAX_AUTH_FAILURES = 3
@@ -60,6 +83,16 @@ def lower_priority(nice: int) -> None:
         tid = threading.get_native_id()
         os.setpriority(os.PRIO_PROCESS, tid, min(19, os.getpriority(os.PRIO_PROCESS, tid) + nice))
 
+
+
+def address_is_loopback(addr: str) -> bool:
+    """True when the numeric address ``addr`` (a peer's) is a loopback address."""
+    try:
+        ip = ipaddress.ip_address(addr.split("%")[0])
+    except ValueError:
+        return False
+    mapped = getattr(ip, "ipv4_mapped", None)
+    return bool(ip.is_loopback or (mapped is not None and mapped.is_loopback))
 
 
 def is_loopback(host: str) -> bool:

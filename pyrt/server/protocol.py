@@ -41,13 +41,16 @@ ERROR_CODES = {
     "command": "the robot's console refused the command (nothing changed)",
     "denied": "the command changes the robot: AUTH first",
     "fault": "the robot was stopped by a fault; the command was not run",
-    "full": "too many clients; the connection is closed",
-    "idle": "no request within the idle timeout; the connection is closed",
+    "full": "no slot for this connection (too many clients, too many silent ones from "
+            "its address, or a reserved slot asked for more than AUTH or stop); it is closed",
+    "idle": "no request within the idle bound (5 s before the first request, 30 s "
+            "unprivileged, 10 min privileged); the connection is closed",
     "internal": "a bug in pyrt; the server goes on serving",
     "limit": "a server limit was reached (the total subscription rate)",
     "syntax": "a malformed server verb (AUTH, SUBSCRIBE ...)",
     "timeout": "the control loop did not answer in time",
     "too-long": "a request line longer than the limit; the connection is closed",
+    "text": "the request held control characters (not a line of text); it was ignored",
     "utf8": "the request was not valid UTF-8; it was ignored",
 }
 

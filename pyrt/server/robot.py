@@ -59,6 +59,10 @@ class ServedRobot(Protocol):
         """True when ``line`` only reads (served without privilege)."""
         ...
 
+    def is_stop(self, line: str) -> bool:
+        """True when ``line`` is a stop (any client may give it, even in a reserved slot)."""
+        ...
+
     def stop_all(self) -> None:
         """Stop every motor now (called in the loop thread)."""
         ...

@@ -41,10 +41,24 @@ Robust by construction: request lines are bounded (:data:`MAX_LINE`; longer
 gets ``ERR too-long`` and the connection closes), as are the number of
 clients, each client's queued requests (reading pauses, TCP pushes back)
 and each client's output (a reader that falls that far behind is dropped).
-A connection idle longer than the idle timeout is closed (a subscriber is
-never idle: it is reading).  Invalid UTF-8 gets ``ERR utf8``; a half line
-left when a peer disconnects is discarded, never run.  Nothing a client
-sends reaches a motor unless it is a complete, privileged command.
+A subscriber is never idle (it is reading); any other connection is closed
+when idle: the privileged one after ``idle_timeout_s`` (10 min), an
+unprivileged one after ``guest_idle_s`` (30 s), and one that has sent no
+request at all after ``greeting_timeout_s`` (5 s).  A line that is not text
+(invalid UTF-8: ``ERR utf8``; control characters: ``ERR text``) is refused
+with one line and ignored; a half line left when a peer disconnects is
+discarded, never run.  Nothing a client sends reaches a motor unless it is a
+complete, privileged command, or a stop.
+
+Nobody can starve the operator of a slot.  Connections from one address
+that have sent nothing are at most ``max_fresh_per_address`` (loopback
+exempt, see :data:`~pyrt.server.limits.MAX_FRESH_PER_ADDRESS`).  When the
+``max_clients`` slots are taken, a newcomer takes the slot of the oldest
+connection that has sent nothing (that one gets ``ERR full``), else of an
+unprivileged, unsubscribed client idle for ``EVICT_IDLE_S``; when none can
+be freed it gets one of ``reserved_slots`` more, where it may only ``AUTH``
+(the operator) or give a stop (anyone): so the operator and a stop always
+get in, however many silent or busy connections there are.
 
 The parts, one module each: :mod:`~pyrt.server.limits` (the bounds and the
 manners toward the loop), :mod:`~pyrt.server.connection` (a connection's
@@ -74,14 +88,18 @@ from pyrt.server.framing import FramingMixin
 from pyrt.server.hub import StatusHub
 from pyrt.server.ioloop import IOLoopMixin
 from pyrt.server.limits import (
+    GREETING_TIMEOUT_S,
+    GUEST_IDLE_S,
     IDLE_TIMEOUT_S,
     MAX_CLIENTS,
+    MAX_FRESH_PER_ADDRESS,
     MAX_OUTPUT,
     MAX_PENDING,
     MAX_RATE,
     MAX_SUBSCRIPTION_RATE,
     NICE,
     RATE_WINDOW_S,
+    RESERVED_SLOTS,
     SWITCH_INTERVAL_S,
     is_loopback,
 )
@@ -114,6 +132,11 @@ class Server(IOLoopMixin, FramingMixin, SessionMixin):
         token: str | None = None,
         max_clients: int = MAX_CLIENTS,
         idle_timeout_s: float = IDLE_TIMEOUT_S,
+        guest_idle_s: float = GUEST_IDLE_S,
+        greeting_timeout_s: float = GREETING_TIMEOUT_S,
+        max_fresh_per_address: int = MAX_FRESH_PER_ADDRESS,
+        reserved_slots: int = RESERVED_SLOTS,
+        exempt_loopback: bool = True,
         max_line: int = MAX_LINE,
         max_output: int = MAX_OUTPUT,
         max_pending: int = MAX_PENDING,
@@ -134,9 +157,16 @@ class Server(IOLoopMixin, FramingMixin, SessionMixin):
         if not 0 <= port <= 65535:
             raise ConfigError(f"port must be 0..65535, got {port}")
         for what, value in (("max_clients", max_clients), ("max_line", max_line),
-                            ("max_output", max_output), ("max_pending", max_pending)):
+                            ("max_output", max_output), ("max_pending", max_pending),
+                            ("max_fresh_per_address", max_fresh_per_address)):
             if value < 1:
                 raise ConfigError(f"{what} must be >= 1, got {value}")
+        if reserved_slots < 0:
+            raise ConfigError(f"reserved_slots must be >= 0, got {reserved_slots}")
+        for what, secs in (("idle_timeout_s", idle_timeout_s), ("guest_idle_s", guest_idle_s),
+                           ("greeting_timeout_s", greeting_timeout_s)):
+            if not secs > 0:
+                raise ConfigError(f"{what} must be > 0 s, got {secs}")
         self.runner = runner
         self.robot = robot
         self.host = host
@@ -144,6 +174,12 @@ class Server(IOLoopMixin, FramingMixin, SessionMixin):
         self._token = token.encode("utf-8") if token is not None else None
         self.max_clients = max_clients
         self.idle_timeout_s = float(idle_timeout_s)
+        # No connection waits longer than the privileged one may.
+        self.guest_idle_s = min(float(guest_idle_s), self.idle_timeout_s)
+        self.greeting_timeout_s = min(float(greeting_timeout_s), self.guest_idle_s)
+        self.max_fresh_per_address = int(max_fresh_per_address)
+        self.reserved_slots = int(reserved_slots)
+        self.exempt_loopback = bool(exempt_loopback)
         self.max_line = max_line
         self.max_output = max_output
         self.max_pending = max_pending
@@ -166,7 +202,8 @@ class Server(IOLoopMixin, FramingMixin, SessionMixin):
         )
         self.counters = {
             "accepted": 0, "refused_full": 0, "requests": 0, "status": 0, "denied": 0,
-            "auth_failed": 0, "too_long": 0, "utf8": 0, "idle": 0, "dropped_slow": 0,
+            "auth_failed": 0, "too_long": 0, "utf8": 0, "text": 0, "idle": 0,
+            "dropped_slow": 0, "evicted": 0, "reserve": 0, "refused_address": 0,
         }
         self._conns: dict[int, Connection] = {}
         self._next_id = 1

@@ -31,6 +31,14 @@ log = logging.getLogger("pyrt.server")
 _VERBS = frozenset({"AUTH", "QUIT", "STATUS", "SUBSCRIBE", "UNSUBSCRIBE"})
 
 
+def _control(line: str) -> int:
+    """Index of the first control character of ``line`` (tab allowed), or -1."""
+    for i, c in enumerate(line):
+        if (c < " " and c != "\t") or "\x7f" <= c <= "\x9f":
+            return i
+    return -1
+
+
 def _denied(line: str) -> str:
     return format_error("denied", f"{line.strip()[:60]!r} changes the robot: AUTH first")
 
@@ -73,7 +81,6 @@ class SessionMixin:
 
     def _request(self, conn: Connection, raw: bytes) -> None:
         self.counters["requests"] += 1
-        conn.last_active = time.monotonic()
         try:
             line = raw.decode("utf-8")
         except UnicodeDecodeError as exc:
@@ -81,7 +88,25 @@ class SessionMixin:
             self._reply(conn, format_error(
                 "utf8", f"invalid UTF-8 at byte {exc.start}; request ignored"))
             return
+        bad = _control(line)
+        if bad >= 0:
+            self.counters["text"] += 1
+            self._reply(conn, format_error(
+                "text", f"control character {ord(line[bad]):#04x} at character {bad}; "
+                "request ignored"))
+            return
         verb, rest = split_verb(line)
+        if verb:  # a request: the connection is no longer silent
+            conn.fresh = False
+            conn.last_active = time.monotonic()
+        if conn.reserve and not conn.privileged and verb not in ("AUTH", "QUIT") and not (
+                verb and self.robot.is_stop(line)):
+            self.counters["refused_full"] += 1
+            self._output(conn, format_error(
+                "full", f"{self.max_clients} clients already: this reserved slot serves "
+                "AUTH and stop only; closing"))
+            self._close_after_flush(conn)
+            return
         if verb in _VERBS:
             if conn.pending == 0 and not (verb == "AUTH" and self._held_by_a_closing(conn)):
                 self._output(conn, self._verb(conn, verb, rest))
@@ -266,5 +291,6 @@ class SessionMixin:
             "server (any case): AUTH TOKEN | STATUS | SUBSCRIBE HZ | UNSUBSCRIBE | QUIT",
         ]
         if not conn.privileged:
-            lines.append("read-only until AUTH: commands that change the robot get ERR denied")
+            lines.append("read-only until AUTH: commands that change the robot get ERR denied; "
+                         "stop is served to every client")
         return lines

@@ -14,6 +14,7 @@ from collections.abc import Sequence
 from typing import Any, TextIO
 
 from pyrt.commands.robot import RobotShell
+from pyrt.errors import CommandError
 from pyrt.scope import Source
 
 __all__ = ["ServedStation"]
@@ -49,6 +50,15 @@ class ServedStation:
         if not line.strip():
             return True
         return self._probe.anyone(line)
+
+    def is_stop(self, line: str) -> bool:
+        """True when ``line`` is a stop: a command any client may give that
+        does more than read (served even in a reserved slot)."""
+        try:
+            _comp, rec, words, _rest = self._probe.resolve(line)
+        except CommandError:
+            return False
+        return rec.anyone and not rec.only_reads(words)
 
     def stop_all(self) -> None:
         self.station.stop()
