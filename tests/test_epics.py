@@ -15,8 +15,10 @@ from contextlib import contextmanager
 import pytest
 from _server_rig import TOKEN, served
 
+from pyrt.db import copy_station
 from pyrt.errors import ConfigError
-from pyrt.server import ServedStation
+from pyrt.server import ServedStation, Server
+from pyrt.station.manipulator import ManipulatorStation
 
 PREFIX = "PYRTTEST:"
 
@@ -50,6 +52,7 @@ def epics_env(monkeypatch):
         "EPICS_CA_SERVER_PORT": str(port),
         "EPICS_CAS_SERVER_PORT": str(port),
         "EPICS_CA_REPEATER_PORT": str(repeater),
+        "EPICS_CAS_BEACON_PORT": str(repeater),
     }.items():
         monkeypatch.setenv(name, value)
     return port
@@ -60,14 +63,44 @@ def epics_served(token: str | None = TOKEN):
     from pyrt.server.epics import EpicsService
 
     with served(token=token) as sv:
-        robot = ServedStation(sv.rig)
-        ioc = EpicsService(sv.runner, robot, sv.server, PREFIX, token=token,
+        ioc = EpicsService(sv.runner, sv.server.robot, sv.server, PREFIX, token=token,
                            interfaces=["127.0.0.1"], period_s=0.02, stats_period_s=0.2)
         ioc.start()
         try:
             yield sv, ioc
         finally:
             ioc.close()
+
+
+@contextmanager
+def epics_manipulator(tmp_path, token: str | None = TOKEN):
+    """The prototype manipulator (SimClock, 5 ms tick) served over TCP and EPICS."""
+    from pyrt.server.epics import EpicsService
+
+    station = ManipulatorStation(copy_station("prototype", tmp_path / "prototype"),
+                                 tick_ns=5_000_000)
+    runner = station.runner
+    robot = ServedStation(station)
+    server = Server(runner, robot, token=token)
+    runner.start()
+    server.start()
+    ioc = EpicsService(runner, robot, server, PREFIX, token=token, interfaces=["127.0.0.1"],
+                       period_s=0.02, stats_period_s=0.2)
+    ioc.start()
+    runner.sleep(0.2)
+    try:
+        yield station, runner, ioc
+    finally:
+        ioc.close()
+        server.close()
+        runner.stop()
+        station.close()
+
+
+def _meta(name: str, data_type):
+    from caproto.sync.client import read
+
+    return read(PREFIX + name, data_type=data_type, timeout=2.0, repeater=False)
 
 
 def _read(name: str, timeout: float = 2.0):
@@ -86,6 +119,14 @@ def _text(name: str) -> str:
 
 def _string(name: str) -> str:
     return _read(name)[0].decode()
+
+
+def _alarm(name: str):
+    """``(status, severity)`` of a PV as the IOC computed them."""
+    from caproto import ChannelType
+
+    meta = _meta(name, ChannelType.STS_DOUBLE).metadata
+    return meta.status, meta.severity
 
 
 def _write(name: str, value: str) -> None:
@@ -124,23 +165,24 @@ def test_command_pv_needs_the_token_in_the_written_value(epics_env):
     """Writing 'TOKEN COMMAND' to CMD runs it and fills REPLY/RESULT; a wrong token runs nothing; CMD never shows the token."""
     with epics_served() as (sv, _ioc):
         _write("CMD", f"{TOKEN} X 33")
-        assert _string("RESULT") == "OK"
+        assert _text("RESULT") == "OK"
         _write("CMD", f"{TOKEN} T")
         assert _text("REPLY") == "OK 0000\n"
         assert TOKEN not in _text("CMD")
         _write("CMD", "wrong P E47A")
-        assert _string("RESULT").startswith("ERR auth")
+        assert _text("RESULT").startswith("ERR auth")
         _write("CMD", f"{TOKEN} W 1")
-        assert _string("RESULT").startswith("ERR command")
+        assert _text("RESULT").startswith("ERR command")
         sv.runner.sleep(0.5)
         assert sv.runner.call(sv.ctl.target) == 0  # the wrong token's P never ran
         assert sv.still_and_null()
 
 
 def test_no_command_pv_without_a_token(epics_env):
-    """Without a token only status PVs exist: CMD is not served."""
+    """Without a token there is no CMD or ACK (nobody is privileged); STOP is served all the same."""
     with epics_served(token=None) as (_sv, ioc):
-        assert f"{PREFIX}CMD" not in ioc.pvdb and "status only" in ioc.summary
+        assert f"{PREFIX}CMD" not in ioc.pvdb and f"{PREFIX}ACK" not in ioc.pvdb
+        assert "no token" in ioc.summary and f"{PREFIX}STOP" in ioc.pvdb
         assert _read("FAULT")[0] == b"no"
         with pytest.raises(Exception, match=r"(?i)time"):
             _read("CMD", timeout=0.5)
@@ -173,3 +215,147 @@ def test_status_pvs_carry_the_signals_units_and_booleans_are_enums(epics_env):
         assert {k for k in ioc.pvdb if k.startswith(PREFIX)} >= {PREFIX + k for k in units}
         sv.runner.call(sv.rig.trip, "epics test trip", "test")
         assert _until(lambda: _read("FAULT")[0] == b"yes")
+
+
+# -- an IOC made from the records ---------------------------------------------------------
+
+
+def test_manipulator_pvs_carry_units_precision_and_the_database_limits(epics_env, tmp_path):
+    """TENSION0, AXIS0:LENGTH, X and NETFORCE carry EGU and PREC from their signals, display and alarm limits from the database (LOW_TENSION 2 N, MAX_TENSION 200 N, NET_FORCELIMIT 25 N, the vessel's 320 cm radius)."""
+    from caproto import ChannelType
+
+    with epics_manipulator(tmp_path) as (station, _runner, _ioc):
+        pa = station.polyaxis
+        t = _meta("TENSION0", ChannelType.CTRL_DOUBLE).metadata
+        assert (t.units, t.precision) == (b"N", 2)
+        assert (t.lower_alarm_limit, t.upper_alarm_limit) == (pa.low_tension, pa.max_tension)
+        assert (t.lower_alarm_limit, t.upper_alarm_limit) == (2.0, 200.0)
+        assert t.lower_alarm_limit < t.lower_warning_limit < t.upper_warning_limit < 200.0
+        assert (t.lower_disp_limit, t.upper_disp_limit) == (0.0, 200.0)
+        length = _meta("AXIS0:LENGTH", ChannelType.CTRL_DOUBLE).metadata
+        assert length.units == b"cm" and length.upper_disp_limit > 300.0
+        x = _meta("X", ChannelType.CTRL_DOUBLE).metadata
+        assert (x.units, x.lower_disp_limit, x.upper_disp_limit) == (b"cm", -320.0, 320.0)
+        nf = _meta("NETFORCE", ChannelType.CTRL_DOUBLE).metadata
+        assert nf.upper_alarm_limit == pa.net_forcelimit == 25.0
+        speed = _meta("AXIS0MOTOR:SPEED", ChannelType.CTRL_DOUBLE).metadata
+        assert (speed.units, speed.upper_disp_limit) == (b"cm/s", 7.0)
+        running = _meta("AXIS0MOTOR:RUNNING", ChannelType.CTRL_ENUM).metadata
+        assert list(running.enum_strings) == [b"no", b"yes"]
+        state = _meta("STATE", ChannelType.CTRL_ENUM).metadata
+        assert list(state.enum_strings) == [b"idle", b"moving", b"fault"]
+
+
+def test_a_slack_rope_is_a_major_alarm_computed_by_the_ioc(epics_env, tmp_path):
+    """Tensions in range are NO_ALARM; a broken rope (below the 2 N low-tension stop) makes TENSION0 and AXIS0LOADCELL:TENSION LOLO / MAJOR."""
+    from caproto import AlarmSeverity, AlarmStatus
+
+    with epics_manipulator(tmp_path) as (station, runner, _ioc):
+        assert _until(lambda: _read("TENSION0")[0] > 2.0)
+        assert _alarm("TENSION0") == (AlarmStatus.NO_ALARM, AlarmSeverity.NO_ALARM)
+        runner.call(station.plant.break_rope, 0, take_fault=False)
+        runner.sleep(0.3)
+        tension = runner.call(lambda: station.polyaxis.tensions[0], take_fault=False)
+        assert tension < station.polyaxis.low_tension
+        assert _until(lambda: _read("TENSION0")[0] < 2.0)
+        assert _alarm("TENSION0") == (AlarmStatus.LOLO, AlarmSeverity.MAJOR_ALARM)
+        assert _until(lambda: _alarm("AXIS0LOADCELL:TENSION")[1] == AlarmSeverity.MAJOR_ALARM)
+        assert _alarm("TENSION1")[1] == AlarmSeverity.NO_ALARM
+
+
+def test_per_rope_state_and_target_pvs_follow_a_move(epics_env, tmp_path):
+    """During 'prototype to 10 0 100': STATE moving, TARGET_X 10, a motor RUNNING yes; after: STATE idle, STOP_REASON ENDPOINT_STOP, TARGET NaN, AXIS0:LENGTH and AXIS0ENCODER:LENGTH the ropes' lengths."""
+    import math
+
+    from pyrt.client import Client
+
+    with epics_manipulator(tmp_path) as (station, runner, ioc):
+        assert _until(lambda: math.isnan(_read("TARGET_X")[0]))
+        assert _read("STATE")[0] == b"idle"
+        op = Client(*ioc.server.address)
+        op.auth(TOKEN)
+        op.command("prototype to 10 0 100")
+        runner.sleep(1.0)
+        assert _until(lambda: _read("STATE")[0] == b"moving")
+        assert _read("TARGET_X")[0] == pytest.approx(10.0)
+        assert _read("TARGET_Z")[0] == pytest.approx(100.0)
+        assert _until(lambda: b"yes" in {_read(f"AXIS{i}MOTOR:RUNNING")[0] for i in range(3)})
+        (ended,) = op.command("wait")
+        runner.sleep(0.3)
+        assert ended.startswith("prototype stopped: ENDPOINT_STOP")
+        assert _until(lambda: _read("STATE")[0] == b"idle")
+        assert _until(lambda: _text("STOP_REASON").startswith("ENDPOINT_STOP"))
+        assert math.isnan(_read("TARGET_X")[0])
+        length = runner.call(station.axes[0].getLength)
+        assert _read("AXIS0:LENGTH")[0] == pytest.approx(length, abs=0.05)  # last poll vs now
+        enc = runner.call(station.axes[0].encoder.length)
+        assert _read("AXIS0ENCODER:LENGTH")[0] == pytest.approx(enc, abs=0.01)
+        assert {_read(f"AXIS{i}MOTOR:RUNNING")[0] for i in range(3)} == {b"no"}
+
+
+def test_stop_pv_without_a_token_stops_a_move(epics_env):
+    """Writing 'stop' to STOP (no token: a stop is for everyone) halts the operator's move at once; RESULT says so."""
+    with epics_served() as (sv, _ioc):
+        op = sv.operator()
+        op.command("I")
+        op.command("P E47A")
+        sv.runner.sleep(0.2)
+        assert sv.runner.call(lambda: sv.ctl.moving)
+        _write("STOP", "stop")
+        assert not sv.runner.call(lambda: sv.ctl.moving) and sv.still_and_null()
+        assert _text("RESULT") == "OK gripper: every motor stopped"
+        assert _read("STOP")[0] == b"idle"  # a button: back to idle
+        _write("STOP", "idle")  # nothing happens
+        assert op.command("T") == ["E47A"]
+
+
+def test_ack_pv_needs_the_token(epics_env):
+    """A fault stays until ACK is written with the token: a wrong token acknowledges nothing."""
+    with epics_served() as (sv, _ioc):
+        sv.runner.call(sv.rig.trip, "epics test trip", "test")
+        sv.runner.sleep(0.2)  # loop time for the 0.1 s sample of STATE
+        assert _until(lambda: _read("FAULT")[0] == b"yes")
+        assert _until(lambda: _read("STATE")[0] == b"fault")
+        _write("ACK", "wrong")
+        assert _text("RESULT").startswith("ERR auth")
+        assert sv.rig.fault is not None
+        _write("ACK", TOKEN)
+        assert _text("RESULT").startswith("OK fault acknowledged")
+        assert sv.rig.fault is None
+        sv.runner.sleep(0.2)
+        assert _until(lambda: _read("FAULT")[0] == b"no")
+        assert TOKEN not in _text("ACK")
+
+
+def test_a_200_character_fault_message_is_intact(epics_env):
+    """FAULT_MSG is a char waveform: a 200-character cause reads back whole, not cut at 39."""
+    cause = "rope axis1 " + "x" * 180 + " end of it"
+    assert len(cause) == 201
+    with epics_served() as (sv, _ioc):
+        sv.runner.call(sv.rig.trip, cause, "test")
+        assert _until(lambda: _text("FAULT_MSG") == cause)
+
+
+def test_value_pvs_are_read_only_to_channel_access_clients(epics_env):
+    """A client cannot write a value PV (POSITION, TARGET, MOVING): the IOC refuses and nothing changes."""
+    with epics_served() as (sv, _ioc):
+        for name, value in (("POSITION", 5), ("TARGET", -100), ("MOVING", "yes")):
+            with pytest.raises(Exception):  # noqa: B017 - caproto's refusal
+                _write(name, value)
+        assert _read("TARGET")[0] == 0 and sv.runner.call(sv.ctl.target) == 0
+        assert sv.still_and_null()
+
+
+def test_caproto_logs_at_warning_unless_verbose(epics_env, caplog):
+    """caproto's logger is at WARNING (no INFO line per client connect), at INFO with verbose."""
+    import logging
+
+    from pyrt.server.epics import EpicsService
+
+    with epics_served() as (sv, _ioc), caplog.at_level(logging.DEBUG, logger="pyrt"):
+        assert logging.getLogger("caproto").getEffectiveLevel() == logging.WARNING
+        _read("POSITION")
+        assert not [r for r in caplog.records if r.name.startswith("caproto")
+                    and r.levelno < logging.WARNING]
+        EpicsService(sv.runner, sv.server.robot, sv.server, "V:", verbose=True)
+        assert logging.getLogger("caproto").getEffectiveLevel() == logging.INFO

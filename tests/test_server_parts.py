@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import logging
 
 import pytest
 
@@ -110,3 +111,21 @@ def test_service_options_are_checked_before_anything_starts(monkeypatch):
     for argv in (["--headless"], ["--token-file", "x"], ["--serve", "host:port"]):
         with pytest.raises(ConfigError):
             prepare_service(_args(*argv), None, None)
+
+
+@pytest.mark.parametrize(("argv", "level"), [([], logging.WARNING), (["--verbose"], logging.INFO)])
+def test_epics_option_sets_caprotos_logger_by_verbose(monkeypatch, argv, level):
+    """--epics keeps caproto's per-connect INFO lines out of the log unless --verbose."""
+    pytest.importorskip("caproto")
+    from _gripper_rig import make_rig
+
+    from pyrt.server import ServedStation
+
+    monkeypatch.delenv("PYRT_TOKEN", raising=False)
+    logging.getLogger("caproto").setLevel(logging.NOTSET)
+    rig = make_rig()
+    service = prepare_service(_args("--epics", "T:", *argv), rig.runner,
+                              ServedStation(rig.station))
+    assert service is not None and service.epics is not None
+    assert logging.getLogger("caproto").getEffectiveLevel() == level
+    assert "T:STOP" in service.epics.pvdb

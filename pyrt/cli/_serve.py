@@ -50,8 +50,12 @@ def add_serve_options(parser: argparse.ArgumentParser) -> None:
                    help="no console: a service logging to stderr; SIGTERM/SIGINT stop every "
                         "motor and exit")
     g.add_argument("--epics", metavar="PREFIX",
-                   help="also serve status (and a command PV when a token is set) over EPICS "
-                        "Channel Access with this PV prefix (needs pyrt[epics])")
+                   help="also serve the robot over EPICS Channel Access with this PV prefix: "
+                        "status, every signal, STATE, STOP (anyone); CMD and ACK with the "
+                        "token (needs pyrt[epics])")
+    g.add_argument("--verbose", action="store_true",
+                   help="log caproto's INFO lines too (one per Channel Access client connect); "
+                        "default: its warnings only")
 
 
 def read_token(token_file: str | None) -> str | None:
@@ -169,5 +173,6 @@ def prepare_service(args: argparse.Namespace, runner: Any, robot: ServedRobot) -
     if args.epics:
         from pyrt.server.epics import EpicsService
 
-        epics = EpicsService(runner, robot, server, args.epics, token=token)
+        epics = EpicsService(runner, robot, server, args.epics, token=token,
+                             verbose=bool(getattr(args, "verbose", False)))
     return Service(runner, robot, server, epics, serve=bool(args.serve))

@@ -1,33 +1,54 @@
 """EPICS Channel Access for the DAQ (``--epics PREFIX``, extra ``pyrt[epics]``).
 
 A caproto server (its asyncio loop in a thread of its own, outside the
-control loop) publishes, with PV names ``PREFIX`` + field:
+control loop) serves the robot as an IOC would, every PV made from a
+component's signal record or the station's state, named ``PREFIX`` + field:
 
 * ``T``: loop time of the latest status sample, seconds;
-* one PV per status field of the robot, upper case (the gripper's
-  ``POSITION``, ``TARGET``, ``MOVING``, ``BUSY``, ``SENSORS``, ``FAULT``;
-  the manipulator's position and tensions), updated every ``period_s``,
-  made from the field's signal record: its units are the PV's EGU, its
-  format the precision (an integer format makes an integer PV), and a
-  boolean signal (units ``bool``: ``MOVING``, ``FAULT``) is an enum PV
-  whose states are ``no`` and ``yes``;
-* ``FAULT_MSG``: the last fault pushed by the loop (40 characters);
+* one PV per STATUS field, upper case (the gripper's ``POSITION``,
+  ``TARGET``, ``MOVING``, ``BUSY``, ``SENSORS``, ``FAULT``; the
+  manipulator's ``X Y Z DISTERR NETFORCE MOVING FAULT TENSION0`` ...),
+  updated every ``period_s`` from the server's status snapshot;
+* one PV per signal of every component, ``COMPONENT:SIGNAL`` upper case
+  (``AXIS0:LENGTH``, ``AXIS0:TENSION``, ``AXIS0ENCODER:LENGTH``,
+  ``AXIS0MOTOR:RUNNING``, ``AXIS0MOTOR:SPEED`` ... ``GRIPPER:ENCODER``),
+  read in the loop every 0.1 s while the IOC runs;
+* ``STATE`` (enum ``idle``/``moving``/``fault``), ``STOP_REASON`` (how the
+  last move ended), and for the manipulator ``TARGET_X/Y/Z``: the running
+  move's endpoint, NaN between moves.  Target PVs are read-backs: a move is
+  started only by a privileged command (``CMD`` with the token), never by
+  writing a PV any Channel Access client can reach;
+* ``FAULT_MSG``: the last fault, whole (a char waveform of 1024 bytes);
 * ``TICKS``, ``OVERRUNS``, ``LATE_P99_US``, ``LATE_MAX_US``: tick statistics
   (through the runner's mailbox, once a second).
 
-The values come from the server's status snapshot, exactly what a
-``STATUS`` request answers, so Channel Access adds nothing to the tick.
+**Made from the records.**  A signal's units are its PV's EGU and its format
+the precision (PREC; an integer format makes an integer PV); a boolean
+signal (units ``bool``: ``MOVING``, ``FAULT``, ``AXIS0MOTOR:RUNNING``) is an
+enum PV with the states ``no`` and ``yes``, as a ``bo``/``bi`` record.  The
+display range (HOPR/LOPR) and the alarm limits (HIHI/HIGH/LOW/LOLO) come
+from the station's database (:meth:`~pyrt.server.station.ServedStation.limits`:
+tension stops LOW_TENSION and MAX_TENSION, NET_FORCELIMIT, END_ERROR, the
+vessel's size, each rope's reach, CRUISE_SPEED), so alarm status and
+severity are computed by the IOC on every update: a rope at 0.7 N, below its
+2 N low-tension stop, is ``LOLO``/``MAJOR``.  Every value PV is read-only to
+Channel Access clients.
 
-**Commands.** Only when a token is configured there is ``CMD`` (a char
-waveform, 256 bytes, read and written as a string): writing
-``TOKEN COMMAND`` runs ``COMMAND`` as the console would and puts the reply
-(the line protocol's framed lines) in ``REPLY`` and its last line in
-``RESULT``.  Channel Access has no authentication of its own (host and user
-names are the client's say-so), so privilege is decided per write, by the
-token in the written value, compared in constant time; a write without the
-right token is refused (``RESULT`` says ``ERR auth``) and runs nothing.
-``CMD`` then reads back without the token.  Commands written over Channel
-Access run one at a time, in a console session of their own.
+**Writes.**  ``STOP`` (enum ``idle``/``stop``): writing ``stop`` (or 1)
+stops every motor, like ``stop`` on the line protocol; no token, a stop is
+for everyone.  Only when a token is configured: ``CMD`` (a char waveform,
+256 bytes) takes ``TOKEN COMMAND``, runs ``COMMAND`` as the console would
+and puts the reply (the line protocol's framed lines) in ``REPLY`` and its
+last line in ``RESULT``; ``ACK`` takes ``TOKEN`` and acknowledges a fault.
+Channel Access has no authentication of its own (host and user names are
+the client's say-so), so privilege is decided per write, by the token in the
+written value, compared in constant time; a write without the right token is
+refused (``RESULT`` says ``ERR auth``) and runs nothing.  ``CMD`` and ``ACK``
+read back without the token.  Commands written over Channel Access run one
+at a time, in a console session of their own.
+
+caproto logs every client's connection at INFO; its logger is set to
+WARNING unless ``verbose``.
 """
 
 from __future__ import annotations
@@ -37,11 +58,13 @@ import contextlib
 import hmac
 import io
 import logging
+import math
 import threading
 from typing import Any
 
-from pyrt.errors import ConfigError
-from pyrt.server.protocol import format_error
+from pyrt.errors import ConfigError, FaultError, PyrtError
+from pyrt.server.protocol import format_error, format_reply
+from pyrt.server.robot import ObserverRunner
 from pyrt.server.session import run_shell
 
 __all__ = ["FIXED_PVS", "EpicsService", "caproto_available"]
@@ -50,12 +73,17 @@ log = logging.getLogger("pyrt.server.epics")
 
 CMD_LENGTH = 256
 REPLY_LENGTH = 4096
+#: Long strings (FAULT_MSG, RESULT, STOP_REASON) are char waveforms this long.
+TEXT_LENGTH = 1024
 
-#: The PVs beside the status fields (names after the prefix); with a token
-#: also ``CMD``, ``REPLY`` and ``RESULT``.
-FIXED_PVS = ("T", "FAULT_MSG", "TICKS", "OVERRUNS", "LATE_P99_US", "LATE_MAX_US")
+#: The PVs beside the status and signal fields (names after the prefix);
+#: with a token also ``CMD``, ``REPLY``, ``ACK``.
+FIXED_PVS = ("T", "FAULT_MSG", "RESULT", "STOP", "TICKS", "OVERRUNS", "LATE_P99_US",
+             "LATE_MAX_US")
 #: A boolean status field (units ``bool``) is an enum PV with these states.
 BOOL_STATES = ("no", "yes")
+#: The states of ``STOP``.
+STOP_STATES = ("idle", "stop")
 
 
 def _precision(fmt: str) -> int:
@@ -68,21 +96,63 @@ def _precision(fmt: str) -> int:
     return 3
 
 
-def _status_pv(ca: Any, units: str, fmt: str) -> tuple[str, Any]:
-    """The PV of one status field from its signal's units and format:
-    ``bool`` an enum (no/yes), an integer format (``d``, ``X``) an integer,
-    anything else a double with the units as EGU and the format's precision."""
-    if units == "bool":
-        return "bool", ca.ChannelEnum(value=BOOL_STATES[0], enum_strings=BOOL_STATES)
+def _pv_name(name: str) -> str:
+    """``axis0Motor:running`` -> ``AXIS0MOTOR:RUNNING``; ``stopReason`` -> ``STOP_REASON``."""
+    if ":" in name:
+        return name.upper()
+    out = []
+    for i, c in enumerate(name):
+        if c.isupper() and i and name[i - 1].islower():
+            out.append("_")
+        out.append(c.upper())
+    return "".join(out)
+
+
+def _read_only(ca: Any, base: type) -> type:
+    """``base`` whose value Channel Access clients may read but not write."""
+    from caproto import AccessRights
+
+    class ReadOnly(base):  # type: ignore[misc, valid-type]
+        def check_access(self, hostname: str, username: str) -> Any:
+            return AccessRights.READ
+
+    ReadOnly.__name__ = f"ReadOnly{base.__name__}"
+    return ReadOnly
+
+
+def _value_pv(ca: Any, units: str, fmt: str, limits: Any = None, kind: str = "",
+              states: tuple[str, ...] = ()) -> tuple[str, Any]:
+    """The PV of one value from its record: ``text`` a char waveform, ``enum``
+    (or units ``bool``) an enum, an integer format an integer, anything else a
+    double with the units as EGU, the format's precision, and ``limits``
+    (display range and alarm limits) when given."""
+    if kind == "text":
+        return "text", _read_only(ca, ca.ChannelChar)(
+            value="", max_length=TEXT_LENGTH, string_encoding="utf-8")
+    if kind == "enum" or units == "bool":
+        names = states or BOOL_STATES
+        return "enum:" + "\t".join(names), _read_only(ca, ca.ChannelEnum)(
+            value=names[0], enum_strings=names)
     if fmt.endswith(("d", "X", "x")):
-        return "int", ca.ChannelInteger(value=0, units=units)
-    return "float", ca.ChannelDouble(value=0.0, precision=_precision(fmt), units=units)
+        return "int", _read_only(ca, ca.ChannelInteger)(value=0, units=units)
+    kw: dict[str, Any] = {}
+    if limits is not None:
+        kw = {"lower_disp_limit": limits.lopr, "upper_disp_limit": limits.hopr,
+              "lower_alarm_limit": limits.lolo, "upper_alarm_limit": limits.hihi,
+              "lower_warning_limit": limits.low, "upper_warning_limit": limits.high}
+    return "float", _read_only(ca, ca.ChannelDouble)(
+        value=0.0, precision=_precision(fmt), units=units, **kw)
 
 
 def _pv_value(kind: str, value: Any) -> Any:
-    """A status value as its PV takes it."""
-    if kind == "bool":
-        return BOOL_STATES[1] if value else BOOL_STATES[0]
+    """A value as its PV takes it."""
+    if kind == "text":
+        return str(value)[:TEXT_LENGTH - 1]
+    if kind.startswith("enum:"):
+        states = kind[5:].split("\t")
+        if isinstance(value, bool) or len(states) == 2:
+            return states[1] if value else states[0]
+        return states[int(value)]
     if kind == "int":
         return int(value)
     return float(value)
@@ -109,10 +179,11 @@ def _require_caproto() -> Any:
 
 
 class EpicsService:
-    """Serve ``server``'s status (and commands, with a token) as Channel Access PVs.
+    """Serve ``server``'s robot as Channel Access PVs (see the module text).
 
     ``interfaces``: the addresses to serve on (default: caproto's, from
     ``EPICS_CAS_INTF_ADDR_LIST``); ports follow ``EPICS_CA_SERVER_PORT``.
+    ``verbose``: keep caproto's INFO lines (one per client connect ...).
     """
 
     def __init__(
@@ -126,10 +197,12 @@ class EpicsService:
         interfaces: list[str] | None = None,
         period_s: float = 0.1,
         stats_period_s: float = 1.0,
+        verbose: bool = False,
     ):
         ca = _require_caproto()
         if not prefix or any(c.isspace() for c in prefix) or len(prefix) > 40:
             raise ConfigError(f"EPICS prefix must be 1..40 characters, no spaces: {prefix!r}")
+        logging.getLogger("caproto").setLevel(logging.INFO if verbose else logging.WARNING)
         self._ca = ca
         self.runner = runner
         self.robot = robot
@@ -140,6 +213,7 @@ class EpicsService:
         self.period_s = period_s
         self.stats_period_s = stats_period_s
         self._shell: Any = None
+        self._stop_shell: Any = None
         self._shell_lock = threading.Lock()  # one command at a time, in order
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -150,36 +224,59 @@ class EpicsService:
 
     @property
     def summary(self) -> str:
-        return f"{len(self.pvdb)} PVs, " + (
-            "command PV CMD (token in the written value)" if self._token else "status only"
-        )
+        return f"{len(self.pvdb)} PVs, STOP for everyone, " + (
+            "CMD and ACK with the token in the written value" if self._token
+            else "no token: no CMD or ACK")
 
     def _build(self) -> dict[str, Any]:
         ca = self._ca
         p = self.prefix
-        db: dict[str, Any] = {p + "T": ca.ChannelDouble(value=0.0, precision=6, units="s")}
-        self._fields = []
+        ro = lambda base: _read_only(ca, base)  # noqa: E731
+        db: dict[str, Any] = {p + "T": ro(ca.ChannelDouble)(value=0.0, precision=6, units="s")}
+        self._fields: list[tuple[str, Any]] = []
+        limits_of = getattr(self.robot, "limits", lambda name, units: None)
         for name, units, fmt in self._status_fields():
-            kind, pv = _status_pv(ca, units, fmt)
+            kind, pv = _value_pv(ca, units, fmt, limits_of(name, units))
             db[p + name.upper()] = pv
             self._fields.append((kind, pv))
-        db[p + "FAULT_MSG"] = ca.ChannelString(value="none")
-        db[p + "TICKS"] = ca.ChannelInteger(value=0)
-        db[p + "OVERRUNS"] = ca.ChannelInteger(value=0)
-        db[p + "LATE_P99_US"] = ca.ChannelDouble(value=0.0, precision=1, units="us")
-        db[p + "LATE_MAX_US"] = ca.ChannelDouble(value=0.0, precision=1, units="us")
+        self._extras: list[tuple[str, Any]] = []
+        for f in getattr(self.robot, "extra_fields", ()):
+            key = p + _pv_name(f.name)
+            if key in db:
+                continue
+            kind, pv = _value_pv(ca, f.units, f.fmt, f.limits, f.kind, f.states)
+            db[key] = pv
+            self._extras.append((kind, pv))
+        db[p + "FAULT_MSG"] = ro(ca.ChannelChar)(value="none", max_length=TEXT_LENGTH,
+                                                 string_encoding="utf-8")
+        db[p + "RESULT"] = ro(ca.ChannelChar)(value="", max_length=TEXT_LENGTH,
+                                              string_encoding="utf-8")
+        db[p + "TICKS"] = ro(ca.ChannelInteger)(value=0)
+        db[p + "OVERRUNS"] = ro(ca.ChannelInteger)(value=0)
+        db[p + "LATE_P99_US"] = ro(ca.ChannelDouble)(value=0.0, precision=1, units="us")
+        db[p + "LATE_MAX_US"] = ro(ca.ChannelDouble)(value=0.0, precision=1, units="us")
+        service = self
+
+        class StopChannel(ca.ChannelEnum):
+            async def verify_value(self, data: Any) -> Any:
+                return await service._stop(data)
+
+        db[p + "STOP"] = StopChannel(value=STOP_STATES[0], enum_strings=STOP_STATES)
         if self._token is not None:
-            service = self
 
             class CommandChannel(ca.ChannelChar):
                 async def verify_value(self, data: Any) -> Any:
                     return await service._command(data)
 
+            class AckChannel(ca.ChannelChar):
+                async def verify_value(self, data: Any) -> Any:
+                    return await service._ack(data)
+
             db[p + "CMD"] = CommandChannel(value="", max_length=CMD_LENGTH,
                                            string_encoding="utf-8")
-            db[p + "REPLY"] = ca.ChannelChar(value="", max_length=REPLY_LENGTH,
-                                             string_encoding="utf-8")
-            db[p + "RESULT"] = ca.ChannelString(value="")
+            db[p + "ACK"] = AckChannel(value="", max_length=CMD_LENGTH, string_encoding="utf-8")
+            db[p + "REPLY"] = ro(ca.ChannelChar)(value="", max_length=REPLY_LENGTH,
+                                                 string_encoding="utf-8")
         return db
 
     def _status_fields(self) -> list[tuple[str, str, str]]:
@@ -197,6 +294,7 @@ class EpicsService:
         """Start the Channel Access server thread; wait until it serves."""
         if self._thread is not None:
             return
+        self.server.hub.extras_wanted = bool(self._extras)
         self._thread = threading.Thread(target=self._main, name="pyrt-epics", daemon=True)
         self._thread.start()
         if not self._started.wait(timeout_s) or self.error is not None:
@@ -204,6 +302,7 @@ class EpicsService:
 
     def close(self, timeout_s: float = 3.0) -> None:
         """Stop the Channel Access server."""
+        self.server.hub.extras_wanted = False
         loop, task = self._loop, self._task
         if loop is not None and task is not None:
             with contextlib.suppress(RuntimeError):
@@ -243,7 +342,7 @@ class EpicsService:
         hub = self.server.hub
         p = self.prefix
         db = self.pvdb
-        last_t = None
+        last_t = last_extra = None
         shown = None
         next_stats = 0.0
         while True:
@@ -251,15 +350,15 @@ class EpicsService:
             if values is not None and t_ns != last_t:
                 last_t = t_ns
                 await db[p + "T"].write(t_ns / 1e9)
-                for (kind, pv), value in zip(self._fields, values, strict=True):
-                    with contextlib.suppress(TypeError, ValueError, OverflowError):
-                        v = _pv_value(kind, value)
-                        if v != pv.value:
-                            await pv.write(v)
+                await self._write_all(self._fields, values)
+            te_ns, extra = hub.extra_snapshot
+            if extra is not None and te_ns != last_extra:
+                last_extra = te_ns
+                await self._write_all(self._extras, extra)
             fault = hub.last_fault
             if fault is not None and fault is not shown:
                 shown = fault
-                await db[p + "FAULT_MSG"].write(str(fault.cause)[:39])
+                await db[p + "FAULT_MSG"].write(str(fault.cause)[:TEXT_LENGTH - 1])
             now = loop.time()
             if now >= next_stats:
                 next_stats = now + self.stats_period_s
@@ -271,6 +370,17 @@ class EpicsService:
                     await db[p + "LATE_MAX_US"].write(stats.lateness.max_ns / 1e3)
             await asyncio.sleep(self.period_s)
 
+    @staticmethod
+    async def _write_all(pvs: list[tuple[str, Any]], values: tuple) -> None:
+        """Write the values that changed; a write computes the PV's alarm."""
+        for (kind, pv), value in zip(pvs, values, strict=True):
+            with contextlib.suppress(TypeError, ValueError, OverflowError, IndexError):
+                v = _pv_value(kind, value)
+                old = pv.value
+                if v != old and not (isinstance(v, float) and math.isnan(v)
+                                     and isinstance(old, float) and math.isnan(old)):
+                    await pv.write(v)
+
     def _statistics(self) -> Any:
         try:
             return self.runner.statistics(take_fault=False)
@@ -278,25 +388,86 @@ class EpicsService:
             log.debug("statistics: %s", exc)
             return None
 
-    # -- commands ------------------------------------------------------------------
+    # -- writes --------------------------------------------------------------------
+
+    async def _result(self, reply: str) -> None:
+        p = self.prefix
+        if p + "REPLY" in self.pvdb:
+            await self.pvdb[p + "REPLY"].write(reply[-REPLY_LENGTH + 1:])
+        await self.pvdb[p + "RESULT"].write(
+            reply.rstrip("\n").rsplit("\n", 1)[-1][:TEXT_LENGTH - 1])
+
+    async def _stop(self, data: Any) -> str:
+        """A write to STOP: ``stop`` (1) stops every motor, for any client."""
+        value = data[0] if isinstance(data, (list, tuple)) and data else data
+        if isinstance(value, bytes):
+            value = value.decode("utf-8", "replace")
+        if value in (1, "1", STOP_STATES[1]):
+            loop = asyncio.get_running_loop()
+            await self._result(await loop.run_in_executor(None, self._run_stop))
+        return STOP_STATES[0]
+
+    def _run_stop(self) -> str:
+        with self._shell_lock:
+            if self._stop_shell is None:
+                self._stop_shell = self.robot.make_shell(ObserverRunner(self.runner),
+                                                         io.StringIO())
+            try:
+                return run_shell(self._stop_shell, "stop")[0]
+            except Exception as exc:
+                log.exception("EPICS stop failed")
+                return format_error("internal", f"{type(exc).__name__}: {exc}")
+
+    def _token_ok(self, token: str) -> bool:
+        assert self._token is not None
+        return bool(token) and hmac.compare_digest(token.encode("utf-8"), self._token)
+
+    @staticmethod
+    def _text(data: Any) -> str:
+        text = data if isinstance(data, str) else bytes(data).decode("utf-8", "replace")
+        return text.strip().strip("\0")
 
     async def _command(self, data: Any) -> str:
-        text = data if isinstance(data, str) else bytes(data).decode("utf-8", "replace")
-        text = text.strip().strip("\0")
-        token, _, line = text.partition(" ")
+        token, _, line = self._text(data).partition(" ")
         line = line.strip()
-        p = self.prefix
-        assert self._token is not None
-        if not hmac.compare_digest(token.encode("utf-8"), self._token):
+        if not self._token_ok(token):
             reply = format_error("auth", "wrong token in the written value; nothing was run")
         elif not line:
             reply = format_error("syntax", "write 'TOKEN COMMAND'")
         else:
             loop = asyncio.get_running_loop()
             reply = await loop.run_in_executor(None, self._run, line)
-        await self.pvdb[p + "REPLY"].write(reply[-REPLY_LENGTH + 1:])
-        await self.pvdb[p + "RESULT"].write(reply.rstrip("\n").rsplit("\n", 1)[-1][:39])
-        return line if token and hmac.compare_digest(token.encode("utf-8"), self._token) else ""
+        await self._result(reply)
+        return line if self._token_ok(token) else ""
+
+    async def _ack(self, data: Any) -> str:
+        """A write to ACK: ``TOKEN`` acknowledges the fault (the operator's act)."""
+        token = self._text(data).split(" ", 1)[0]
+        if not self._token_ok(token):
+            reply = format_error("auth", "wrong token in the written value; nothing was "
+                                 "acknowledged")
+        else:
+            loop = asyncio.get_running_loop()
+            reply = await loop.run_in_executor(None, self._run_ack)
+        await self._result(reply)
+        return ""
+
+    def _run_ack(self) -> str:
+        """Acknowledge the fault through the mailbox; the fault's report, which
+        the call meets first, is what is being acknowledged."""
+        station = getattr(self.robot, "station", None)
+        if station is None:
+            return self._run("ack")
+        with self._shell_lock:
+            for _ in range(8):
+                try:
+                    said = self.runner.call(station.acknowledge, name="ack")
+                except FaultError:
+                    continue
+                except PyrtError as exc:
+                    return format_error("command", str(exc))
+                return format_reply([said])
+        return format_error("fault", "the robot faulted again while acknowledging")
 
     def _run(self, line: str) -> str:
         with self._shell_lock:
@@ -308,3 +479,4 @@ class EpicsService:
                 log.exception("EPICS command %r failed", line[:60])
                 reply = format_error("internal", f"{type(exc).__name__}: {exc}")
             return reply
+

@@ -19,6 +19,7 @@ once per tick by the loop thread: a reference swap, no lock in the tick.
 
 from __future__ import annotations
 
+import math
 import time
 from collections import deque
 from collections.abc import Sequence
@@ -36,6 +37,13 @@ EVENT_CAPACITY = 65536
 _mono = time.monotonic_ns
 
 
+def _safe(source: Source) -> Any:
+    try:
+        return source.read()
+    except Exception:
+        return math.nan
+
+
 class StatusHub:
     """Loop handler: publish status snapshots, run the subscriptions' spews.
 
@@ -49,9 +57,12 @@ class StatusHub:
         sources: Sequence[Source],
         *,
         snapshot_every: int = 1,
+        extra_sources: Sequence[Source] = (),
+        extra_every: int = 100,
     ):
-        if snapshot_every < 1:
-            raise ValueError(f"snapshot_every must be >= 1, got {snapshot_every}")
+        if snapshot_every < 1 or extra_every < 1:
+            raise ValueError(f"snapshot_every and extra_every must be >= 1, got "
+                             f"{snapshot_every}, {extra_every}")
         if len(names) != len(sources):
             raise ValueError("one name per status source")
         self.names = tuple(names)
@@ -70,6 +81,15 @@ class StatusHub:
         self.tick_wall_ns = 0
         #: The latest fault the loop recorded (None before the first).
         self.last_fault: Fault | None = None
+        #: More values (EPICS's per-device PVs), read every ``extra_every``
+        #: ticks only while :attr:`extras_wanted` (a bool the server side sets).
+        self.extra_sources = tuple(extra_sources)
+        self._read_extra = compile_sources(self.extra_sources) if self.extra_sources else None
+        self.extra_every = int(extra_every)
+        self.extras_wanted = False
+        self._extra_count = 0
+        #: ``(time_ns, values)`` of the latest extra sample; values None before the first.
+        self.extra_snapshot: tuple[int, tuple | None] = (0, None)
 
     # -- the loop side -------------------------------------------------------------
 
@@ -83,6 +103,21 @@ class StatusHub:
             self.snapshot = (now_ns, tick, self._read())
         for _key, spew in self._spews:
             spew(now_ns)
+        if self.extras_wanted:
+            self._extra_count -= 1
+            if self._extra_count <= 0:
+                self._extra_count = self.extra_every
+                self.extra_snapshot = (now_ns, self._extras())
+
+    def _extras(self) -> tuple | None:
+        """Every extra value; one that cannot be read is NaN (the tick goes on)."""
+        read = self._read_extra
+        if read is None:
+            return ()
+        try:
+            return read()
+        except Exception:
+            return tuple(_safe(s) for s in self.extra_sources)
 
     def on_fault(self, fault: Fault) -> None:
         """Fault listener (loop thread): push the fault to the subscribers."""

@@ -111,6 +111,9 @@ __all__ = ["Server", "is_loopback", "run_shell"]
 
 log = logging.getLogger("pyrt.server")
 
+#: How often the extra values (EPICS's per-device PVs) are read, while served.
+EXTRA_PERIOD_NS = 100_000_000
+
 
 class Server(IOLoopMixin, FramingMixin, SessionMixin):
     """Serve ``robot`` through ``runner`` on ``host:port`` (port 0: any free port).
@@ -189,8 +192,11 @@ class Server(IOLoopMixin, FramingMixin, SessionMixin):
         self.nice = int(nice)
         self.switch_interval_s = switch_interval_s
         self.max_hz = 1e9 / runner.loop.period_ns
+        extras = getattr(robot, "extra_fields", ())
         self.hub = StatusHub(robot.status_names, robot.status_sources(),
-                             snapshot_every=snapshot_every)
+                             snapshot_every=snapshot_every,
+                             extra_sources=[f.source for f in extras],
+                             extra_every=max(1, round(EXTRA_PERIOD_NS / runner.loop.period_ns)))
         runner.loop.attach(self.hub, name="server")
         runner.loop.fault_listeners.append(self.hub.on_fault)
         self.observer = ObserverRunner(runner)
