@@ -101,3 +101,35 @@ def test_status_throughput_floor_32_clients(benchmark):
         print(f"\n32 clients: {load['per_s']:,.0f} STATUS/s (floor {FLOOR_PER_S:,.0f})")
         assert load["errors"] == 0
         assert load["per_s"] > FLOOR_PER_S
+
+
+#: What one read of every EPICS per-device value may cost the loop: far under
+#: a 1 ms tick (it happens once per 0.1 s, i.e. every 20th 5 ms tick).
+EXTRAS_BUDGET_US = 200.0
+
+
+@pytest.mark.benchmark(group="server-hub")
+@pytest.mark.parametrize("extras", [False, True], ids=["status-only", "epics-extras"])
+def test_hub_tick_cost_with_and_without_the_epics_values(benchmark, tmp_path, extras):
+    """The server's handler in the manipulator's tick: the STATUS snapshot alone, and with EPICS's per-device values read (every signal of every component, STATE, STOP_REASON, TARGET)."""
+    from pyrt.db import copy_station
+    from pyrt.server import ServedStation
+    from pyrt.server.hub import StatusHub
+    from pyrt.station.manipulator import ManipulatorStation
+
+    station = ManipulatorStation(copy_station("prototype", tmp_path / "p"), tick_ns=5_000_000)
+    try:
+        robot = ServedStation(station)
+        hub = StatusHub(robot.status_names, robot.status_sources(),
+                        extra_sources=[f.source for f in robot.extra_fields], extra_every=1)
+        hub.extras_wanted = extras
+        benchmark(hub, 0)
+        mean_us = benchmark.stats.stats.mean * 1e6
+        benchmark.extra_info.update(values=len(robot.extra_fields) if extras else 0,
+                                    mean_us=round(mean_us, 2))
+        print(f"\nhub tick {'with' if extras else 'without'} the {len(robot.extra_fields)} EPICS "
+              f"values: {mean_us:.1f} µs (budget for the read {EXTRAS_BUDGET_US:g} µs, once per "
+              "0.1 s)")
+        assert mean_us < EXTRAS_BUDGET_US
+    finally:
+        station.close()
