@@ -413,7 +413,7 @@ def _close_garbage_stations():
 
 
 def test_the_tables_derived_from_the_records_agree(robot):
-    """help lists exactly the records; the server's privilege is rec.anyone or only_reads; EPICS PVs are the status signals plus the statistics; completion is the words and every component's records."""
+    """help lists exactly the records; the server's privilege is rec.anyone or only_reads; EPICS PVs are the status signals, every component signal and the state, plus the fixed PVs; completion is the words and every component's records."""
     station, runner = robot
     out = io.StringIO()
     shell = RobotShell(station, out, runner=runner)
@@ -459,15 +459,20 @@ def test_the_tables_derived_from_the_records_agree(robot):
                 station, "words", None) else parts[2:]
             assert served.is_read_only(line) == (rec.anyone or rec.only_reads(rest)), line
 
-    # EPICS: the status fields' names, upper case, plus the fixed statistics PVs
+    # EPICS: the status fields' names, upper case, every component signal as
+    # OBJECT:SIGNAL, the station's state fields, plus the fixed PVs
     if caproto_available():
-        from pyrt.server.epics import EpicsService
+        from pyrt.server.epics import EpicsService, pv_name
 
         server = Server(runner, served, "127.0.0.1", 0)
         epics = EpicsService(runner, served, server, "T:")
         pvs = {name[len("T:"):] for name in epics.pvdb}
         fields = {k.upper() for k, _s, _f in station.status_fields()}
-        assert pvs == fields | set(FIXED_PVS)
+        signals = {f"{c.name}:{s.name}".upper() for c in station.components()
+                   for s in c.signals()}
+        extras = {pv_name(f.name) for f in served.extra_fields}
+        assert signals <= extras and {"STATE", "STOP_REASON"} <= extras
+        assert pvs == fields | extras | set(FIXED_PVS)
 
     # completion: exactly the words, and every component's records (with their aliases)
     # (a word's own table, e.g. help's topics or scope's channels, is nested under it)

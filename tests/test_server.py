@@ -334,7 +334,7 @@ def test_200_silent_connections_do_not_lock_out_the_operator_or_a_stop():
 
 def test_when_every_slot_is_busy_a_reserved_slot_takes_auth_and_stop_only():
     """Every slot held by a subscriber (never evicted): the operator AUTHs in a reserved slot and moves, another newcomer's stop halts it, anything else there is ERR full."""
-    with served(max_clients=3, reserved_slots=2) as sv:
+    with served(max_clients=3, reserved_slots=2, greeting_timeout_s=0.3) as sv:
         subs = [sv.client() for _ in range(3)]
         for c in subs:
             c.command("SUBSCRIBE 1")
@@ -348,8 +348,10 @@ def test_when_every_slot_is_busy_a_reserved_slot_takes_auth_and_stop_only():
         reply = reader.request("W")
         assert (reply.code, "AUTH and stop only" in reply.text) == ("full", True)
         stopper = sv.client()
+        assert stopper.command("") == []  # an empty line is no request: answered, not refused
         assert stopper.command("stop") == ["gripper: every motor stopped"]
         assert not _moving(sv) and sv.still_and_null()
+        time.sleep(0.6)  # beyond the reserved slot's 0.3 s bound: the operator's is 600 s
         assert op.command("T") == ["E47A"]  # the operator keeps its session
 
 

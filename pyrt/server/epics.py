@@ -67,7 +67,7 @@ from pyrt.server.protocol import format_error, format_reply
 from pyrt.server.robot import ObserverRunner
 from pyrt.server.session import run_shell
 
-__all__ = ["FIXED_PVS", "EpicsService", "caproto_available"]
+__all__ = ["FIXED_PVS", "EpicsService", "caproto_available", "pv_name"]
 
 log = logging.getLogger("pyrt.server.epics")
 
@@ -96,7 +96,7 @@ def _precision(fmt: str) -> int:
     return 3
 
 
-def _pv_name(name: str) -> str:
+def pv_name(name: str) -> str:
     """``axis0Motor:running`` -> ``AXIS0MOTOR:RUNNING``; ``stopReason`` -> ``STOP_REASON``."""
     if ":" in name:
         return name.upper()
@@ -241,7 +241,7 @@ class EpicsService:
             self._fields.append((kind, pv))
         self._extras: list[tuple[str, Any]] = []
         for f in getattr(self.robot, "extra_fields", ()):
-            key = p + _pv_name(f.name)
+            key = p + pv_name(f.name)
             if key in db:
                 continue
             kind, pv = _value_pv(ca, f.units, f.fmt, f.limits, f.kind, f.states)

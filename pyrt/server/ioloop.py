@@ -333,11 +333,11 @@ class IOLoopMixin:
                 continue
             if conn.closing or conn.subscribed or conn.pending:
                 continue
-            if conn.fresh or conn.reserve:
+            if conn.privileged:
+                bound, what, since = self.idle_timeout_s, "no request", conn.last_active
+            elif conn.fresh or conn.reserve:
                 bound, what = self.greeting_timeout_s, "no request"
                 since = conn.connected_at if conn.fresh else conn.last_active
-            elif conn.privileged:
-                bound, what, since = self.idle_timeout_s, "no request", conn.last_active
             else:
                 bound, what = self.guest_idle_s, "unprivileged: no request"
                 since = conn.last_active

@@ -99,8 +99,8 @@ class SessionMixin:
         if verb:  # a request: the connection is no longer silent
             conn.fresh = False
             conn.last_active = time.monotonic()
-        if conn.reserve and not conn.privileged and verb not in ("AUTH", "QUIT") and not (
-                verb and self.robot.is_stop(line)):
+        if (conn.reserve and not conn.privileged and verb and verb not in ("AUTH", "QUIT")
+                and not self.robot.is_stop(line)):
             self.counters["refused_full"] += 1
             self._output(conn, format_error(
                 "full", f"{self.max_clients} clients already: this reserved slot serves "
