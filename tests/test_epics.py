@@ -309,6 +309,18 @@ def test_stop_pv_without_a_token_stops_a_move(epics_env):
         assert op.command("T") == ["E47A"]
 
 
+def test_stop_pv_is_served_while_a_command_pv_holds_the_session(epics_env):
+    """A CMD that runs long (its session busy) never holds up a STOP: the stop has a session of its own."""
+    with epics_served() as (sv, ioc):
+        op = sv.operator()
+        op.command("I")
+        op.command("P E47A")
+        sv.runner.sleep(0.2)
+        with ioc._shell_lock:  # as a 'TOKEN wait' written to CMD would hold it
+            _write("STOP", "stop")
+            assert not sv.runner.call(lambda: sv.ctl.moving) and sv.still_and_null()
+
+
 def test_ack_pv_needs_the_token(epics_env):
     """A fault stays until ACK is written with the token: a wrong token acknowledges nothing."""
     with epics_served() as (sv, _ioc):

@@ -215,6 +215,9 @@ class EpicsService:
         self._shell: Any = None
         self._stop_shell: Any = None
         self._shell_lock = threading.Lock()  # one command at a time, in order
+        #: The stop has its own session and lock: a CMD that waits (``wait``)
+        #: never holds up a stop.
+        self._stop_lock = threading.Lock()
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._task: asyncio.Task | None = None
@@ -408,7 +411,7 @@ class EpicsService:
         return STOP_STATES[0]
 
     def _run_stop(self) -> str:
-        with self._shell_lock:
+        with self._stop_lock:
             if self._stop_shell is None:
                 self._stop_shell = self.robot.make_shell(ObserverRunner(self.runner),
                                                          io.StringIO())
