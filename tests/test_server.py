@@ -11,7 +11,7 @@ import time
 import pytest
 from _gripper_rig import make_rig
 from _server_rig import TOKEN, read_lines, read_only_lines, read_until_closed, served
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from pyrt.client import ServerError
@@ -404,6 +404,28 @@ def test_a_line_with_control_characters_is_refused_with_one_line(line):
         assert first.startswith("ERR text control character"), first
         assert second == "OK 0000"
         assert sv.server.counters["text"] == 1 and sv.server.privileged_client is None
+
+
+@pytest.fixture(scope="module")
+def shared_server():
+    """One served gripper for the property tests (a fresh connection per example)."""
+    with served() as sv:
+        yield sv
+
+
+@settings(max_examples=60, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(st.text(alphabet=st.characters(blacklist_characters="\n\r"), max_size=30))
+def test_a_line_is_refused_as_text_exactly_when_it_holds_a_control_character(shared_server,
+                                                                            line):
+    """Any line from an unprivileged client: ERR text if and only if it holds a control character (tab aside), one reply either way, and the next request is answered in step."""
+    assume(split_verb(line)[0] != "QUIT")
+    control = any((c < " " and c != "\t") or "\x7f" <= c <= "\x9f" for c in line)
+    with shared_server.client() as c:
+        reply = c.request(line)
+        assert (reply.code == "text") == control, (line, reply)
+        if reply.code != "auth":  # three wrong tokens would close it; one does not
+            assert c.command("T") == ["0000"]
 
 
 def test_an_unprivileged_stop_halts_the_operators_move():
