@@ -173,6 +173,8 @@ def test_command_pv_needs_the_token_in_the_written_value(epics_env):
         assert _text("RESULT").startswith("ERR auth")
         _write("CMD", f"{TOKEN} W 1")
         assert _text("RESULT").startswith("ERR command")
+        assert _text("RESULT") == _text("REPLY").splitlines()[-1]  # whole, not cut at 39
+        assert len(_text("RESULT")) > 39
         sv.runner.sleep(0.5)
         assert sv.runner.call(sv.ctl.target) == 0  # the wrong token's P never ran
         assert sv.still_and_null()
