@@ -44,7 +44,6 @@ from pyrt.commands import RobotShell
 from pyrt.console import Console
 from pyrt.db import STATIONS, copy_station, default_working_directory
 from pyrt.errors import PyrtError
-from pyrt.scheduler.runner import Runner
 from pyrt.server import ServedStation
 from pyrt.sim.sensors import Imperfections
 from pyrt.station.manipulator import ManipulatorStation
@@ -86,19 +85,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"pyrt manipulator: working copy of the {args.station} station in {directory}",
               file=out)
     apply_rt_options(args, lambda m: print(m, file=out))
-    posted: list[Runner] = []
-
-    def warn(line: str) -> None:
-        if posted:
-            posted[0].post(line)
-
     load_backend(args.boards)
-    loop = make_loop(args, warn=warn)
+    loop = make_loop(args)  # overrun lines: stderr, at most one a second
     imp = Imperfections.ideal() if args.ideal_sensors else None
     station = ManipulatorStation(directory, loop=loop, imperfections=imp, boards=args.boards)
     station.close_report = lambda m: print(m, file=out, flush=True)
     runner = station.runner
-    posted.append(runner)
     try:
         service = prepare_service(args, runner, ServedStation(station))
     except PyrtError:
