@@ -133,8 +133,8 @@ def histogram_steps(hist: list[list[int]]) -> tuple[list[int], list[int]]:
     return edges, [by_bin.get(b, 0) for b in range(lo, hi + 1)]
 
 
-def plot_report(rep: TimingReport, png: str) -> None:
-    """Per-task execution-time histograms and the overrun timeline, to PNG."""
+def _pyplot() -> Any:
+    """matplotlib's pyplot on the Agg back end, or ConfigError with the install hint."""
     try:
         import matplotlib
 
@@ -144,6 +144,26 @@ def plot_report(rep: TimingReport, png: str) -> None:
         raise ConfigError(
             "--plot needs matplotlib, which is not installed: pip install 'pyrt[plot]'"
         ) from None
+    return plt
+
+
+def plot_report(rep: TimingReport, png: str) -> None:
+    """Per-task execution-time histograms and the overrun timeline, to PNG."""
+    plt = _pyplot()
+    fig = report_figure(rep)
+    try:
+        fig.savefig(png, dpi=100)
+    except OSError as exc:
+        raise ConfigError(f"cannot write plot: {exc.strerror}", png) from None
+    finally:
+        plt.close(fig)
+
+
+def report_figure(rep: TimingReport) -> Any:
+    """The figure ``--plot`` draws (matplotlib must be there): per-task
+    execution-time histograms as closed bars, and the overrun timeline."""
+    import matplotlib.pyplot as plt
+
     tasks = (rep.summary or {}).get("tasks", {})
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 7))
     for name, t in sorted(tasks.items()):
@@ -168,18 +188,15 @@ def plot_report(rep: TimingReport, png: str) -> None:
     ax2.set_ylabel("overrun past next deadline (µs)")
     ax2.set_title(f"{len(rep.overruns)} overruns")
     fig.tight_layout()
-    try:
-        fig.savefig(png, dpi=100)
-    except OSError as exc:
-        raise ConfigError(f"cannot write plot: {exc.strerror}", png) from None
-    finally:
-        plt.close(fig)
+    return fig
 
 
 def run(args: argparse.Namespace) -> int:
     rep = read_timing_log(args.file)
     if args.worst < 0:
         raise ConfigError(f"--worst must be >= 0, got {args.worst}")
+    if args.plot:
+        _pyplot()  # before any output: the whole report, or one line
     if args.json:
         json.dump(report_dict(rep, args.worst), sys.stdout, indent=2)
         sys.stdout.write("\n")
