@@ -193,3 +193,43 @@ def test_overruns_reports_start_up_apart(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "50 ticks, 0 overruns, 0 deadlines missed" in out
     assert "start-up (not counted above): 1 tick(s) overran, worst 4.00 ms" in out
+
+
+@pytest.mark.wallclock
+def test_real_time_overrun_warnings_go_to_stderr_short_and_at_most_one_a_second(tmp_path):
+    """A real-time run that overruns on purpose: stdout has no overrun line; stderr has at most one a second, each within 80 columns."""
+    done = subprocess.run([sys.executable, "-m", "pyrt", "demo", "--seconds", "2.2",
+                           "--slow-us", "1500"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert "overrun:" not in done.stdout
+    lines = done.stderr.splitlines()
+    assert 1 <= len(lines) <= 3
+    assert all(ln.startswith("overrun: ") and len(ln) <= 80 and "see stats" in ln for ln in lines)
+
+
+def test_stderr_lines_never_block_the_caller(monkeypatch):
+    """The loop's warning hand-over returns at once even while stderr blocks; the line is written when it unblocks."""
+    import io
+    import threading
+
+    from pyrt.cli._loopopts import StderrLines
+
+    gate = threading.Event()
+
+    class Blocking(io.StringIO):
+        def write(self, s):
+            gate.wait(10)
+            return super().write(s)
+
+    err = Blocking()
+    monkeypatch.setattr(sys, "stderr", err)
+    lines = StderrLines()
+    done = threading.Event()
+    threading.Thread(target=lambda: (lines.put("overrun: 1 tick"), done.set())).start()
+    assert done.wait(5)  # put() returned while the writer is stuck in write()
+    gate.set()
+    for _ in range(500):
+        if "overrun: 1 tick" in err.getvalue():
+            break
+        threading.Event().wait(0.01)
+    assert err.getvalue() == "overrun: 1 tick\n"

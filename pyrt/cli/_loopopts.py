@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import queue
 import sys
+import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -152,6 +154,37 @@ def apply_rt_options(args: argparse.Namespace, say: Callable[[str], None]) -> No
                 say(f"warning: {exc.args[-1] if exc.args else exc}")
 
 
+class StderrLines:
+    """Lines for stderr, handed over by the loop thread and written by a
+    thread of their own: a stderr that blocks (a full pipe, a slow
+    terminal) never holds up a tick.  ``sys.stderr`` is looked up at each
+    write, so a console that redirects it (prompt_toolkit prints such lines
+    above the line being typed) gets them."""
+
+    def __init__(self) -> None:
+        self._lines: queue.SimpleQueue[str] = queue.SimpleQueue()
+        self._thread: threading.Thread | None = None
+        self._lock = threading.Lock()
+
+    def put(self, line: str) -> None:
+        """Queue ``line`` (any thread; never blocks)."""
+        self._lines.put(line)
+        if self._thread is None:
+            with self._lock:
+                if self._thread is None:
+                    self._thread = threading.Thread(target=self._write, name="pyrt-stderr",
+                                                    daemon=True)
+                    self._thread.start()
+
+    def _write(self) -> None:
+        while True:
+            line = self._lines.get()
+            try:
+                print(line, file=sys.stderr, flush=True)
+            except (OSError, ValueError):  # stderr closed: the lines have nowhere to go
+                return
+
+
 def make_loop(args: argparse.Namespace, warn: Callable[[str], None] | None = None) -> Loop:
     """A loop configured from the options of :func:`add_loop_options`."""
     if args.max_overruns is not None and args.max_overruns < 1:
@@ -165,10 +198,7 @@ def make_loop(args: argparse.Namespace, warn: Callable[[str], None] | None = Non
         except OSError as exc:
             raise ConfigError(f"cannot write timing log: {exc.strerror}", args.timing_log) from None
     if warn is None:
-
-        def warn(msg: str) -> None:
-            print(msg, file=sys.stderr)
-
+        warn = StderrLines().put
     return Loop(
         clock,
         period_ns=args.tick_us * 1000,
