@@ -8,8 +8,9 @@ loop's timing (``stats``: ticks, overruns, lateness, per-task times).
 On a terminal the screen is redrawn in place; Ctrl-C leaves (the robot
 keeps running: watching stops nothing).  When stdout is not a terminal,
 each refresh is printed as a block of plain lines (none of them empty)
-followed by an empty line; ``--once`` prints one block and exits, ``--count N`` stops after N.
-If the server goes away, the last line says so and the exit status is 1.
+followed by an empty line; ``--once`` prints one block and exits,
+``--count N`` stops after N.  If the server goes away, the last line says
+so and the exit status is 1.
 """
 
 from __future__ import annotations
