@@ -93,7 +93,8 @@ class Signal:
 
     def scope_source(self) -> Source:
         """Where the scope samples this signal."""
-        return self.source if self.source is not None else Source.call(self.read)
+        src = self.source if self.source is not None else Source.call(self.read)
+        return src.described(self.units, self.fmt)
 
     def format(self, value: Any) -> str:
         """``value`` as ``status`` shows it, with its units."""

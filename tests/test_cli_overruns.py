@@ -119,3 +119,117 @@ def test_demo_refuses_bad_options(capsys):
         main(["demo", "--speed", "fast"])
     assert exit_.value.code == 2
     assert "speed must be" in capsys.readouterr().err
+
+
+def test_overruns_histogram_bars_are_closed_from_the_first_to_the_last(tmp_path):
+    """Each task's histogram is drawn as contiguous bars whose first bar has its left edge (down to the baseline)."""
+    pytest.importorskip("matplotlib")
+    import matplotlib.pyplot as plt
+
+    from pyrt.cli.overruns import histogram_steps, report_figure
+    from pyrt.scheduler.stats import bin_edges
+    from pyrt.scheduler.timinglog import read_timing_log
+
+    edges, counts = histogram_steps([[40, 3], [42, 1], [60, 2]])
+    assert len(edges) == len(counts) + 1 == 22
+    assert edges[0] == bin_edges(40)[0] and edges[-1] == bin_edges(60)[1]
+    assert all(bin_edges(40 + k) == (edges[k], edges[k + 1]) for k in range(21))
+    assert counts[0] == 3 and counts[2] == 1 and counts[-1] == 2 and sum(counts) == 6
+    assert histogram_steps([]) == ([], [])
+
+    path = tmp_path / "timing.jsonl"
+    write_log(path)
+    rep = read_timing_log(str(path))
+    fig = report_figure(rep)
+    try:
+        hist_ax, timeline_ax = fig.axes
+        patches = {p.get_label(): p for p in hist_ax.patches}
+        assert set(patches) == {n for n, t in rep.summary["tasks"].items() if t["hist"]}
+        assert {"JAWMOVE", "SENSE"} <= set(patches)
+        for name, patch in patches.items():
+            values, xs, baseline = patch.get_data()
+            first = rep.summary["tasks"][name]["hist"][0]
+            assert baseline is not None and 0 < baseline < 1  # the bars close below one call
+            assert values[0] == first[1] and xs[0] == bin_edges(first[0])[0] / 1e3
+        assert hist_ax.get_xlabel() == "execution time (µs)" and hist_ax.get_ylabel() == "calls"
+        assert timeline_ax.get_xlabel() == "loop time (s)"
+        assert timeline_ax.get_ylabel() == "overrun past next deadline (µs)"
+    finally:
+        plt.close(fig)
+
+
+def test_overruns_plot_without_matplotlib_is_one_line_before_any_output(tmp_path):
+    """pyrt overruns --plot with matplotlib absent (a subprocess): only the install hint, exit 1, no PNG."""
+    path = tmp_path / "timing.jsonl"
+    write_log(path)
+    png = tmp_path / "t.png"
+    code = ("import sys; sys.modules['matplotlib'] = None\n"
+            f"from pyrt.cli import main; sys.exit(main(['overruns', {str(path)!r}, '--plot', "
+            f"{str(png)!r}]))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 1 and done.stdout == ""
+    assert done.stderr.splitlines() == [
+        "pyrt overruns: --plot needs matplotlib, which is not installed: pip install 'pyrt[plot]'"]
+    assert not png.exists()
+
+
+def test_overruns_reports_start_up_apart(tmp_path, capsys):
+    """A slow first tick is reported once as start-up, not among the overruns."""
+    clock = WorkClock()
+    path = tmp_path / "timing.jsonl"
+    loop = Loop(clock, period_ns=MS, timing_log=TimingLog(str(path), version="test"))
+    first = [True]
+
+    def cold(now):
+        if first[0]:
+            first[0] = False
+            clock.work(5 * MS)
+
+    loop.attach(cold)
+    loop.run(50)
+    loop.close()
+    assert main(["overruns", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "50 ticks, 0 overruns, 0 deadlines missed" in out
+    assert "start-up (not counted above): 1 tick(s) overran, worst 4.00 ms" in out
+
+
+@pytest.mark.wallclock
+def test_real_time_overrun_warnings_go_to_stderr_short_and_at_most_one_a_second(tmp_path):
+    """A real-time run that overruns on purpose: stdout has no overrun line; stderr has at most one a second, each within 80 columns."""
+    done = subprocess.run([sys.executable, "-m", "pyrt", "demo", "--seconds", "2.2",
+                           "--slow-us", "1500"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert "overrun:" not in done.stdout
+    lines = done.stderr.splitlines()
+    assert 1 <= len(lines) <= 3
+    assert all(ln.startswith("overrun: ") and len(ln) <= 80 and "see stats" in ln for ln in lines)
+
+
+def test_stderr_lines_never_block_the_caller(monkeypatch):
+    """The loop's warning hand-over returns at once even while stderr blocks; the line is written when it unblocks."""
+    import io
+    import threading
+
+    from pyrt.cli._loopopts import StderrLines
+
+    gate = threading.Event()
+
+    class Blocking(io.StringIO):
+        def write(self, s):
+            gate.wait(10)
+            return super().write(s)
+
+    err = Blocking()
+    monkeypatch.setattr(sys, "stderr", err)
+    lines = StderrLines()
+    done = threading.Event()
+    threading.Thread(target=lambda: (lines.put("overrun: 1 tick"), done.set())).start()
+    assert done.wait(5)  # put() returned while the writer is stuck in write()
+    gate.set()
+    for _ in range(500):
+        if "overrun: 1 tick" in err.getvalue():
+            break
+        threading.Event().wait(0.01)
+    assert err.getvalue() == "overrun: 1 tick\n"

@@ -658,3 +658,55 @@ def test_write_back_property(tmp_path: Path, length: float,
             assert a.partition("//")[2] == b.partition("//")[2]
         keys = {a.split(":")[0] for a, _ in changed}
         assert keys <= {"LENGTH", "POSITION", "SOURCE_MASS"}
+
+
+def test_working_directory_is_in_the_platforms_state_directory(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """Without PYRT_HOME the working copy is under platformdirs' user state directory for pyrt."""
+    import platformdirs
+
+    monkeypatch.delenv("PYRT_HOME", raising=False)
+    asked: list[str] = []
+
+    def state_dir(app: str, appauthor: object = None) -> str:
+        asked.append(app)
+        return str(tmp_path / "platform-state" / app)
+
+    monkeypatch.setattr(platformdirs, "user_state_dir", state_dir)
+    assert default_working_directory("sno") == tmp_path / "platform-state" / "pyrt" / "stations" / "sno"
+    assert asked == ["pyrt"]
+
+
+@pytest.mark.parametrize("make", ["missing", "empty"])
+def test_manipulator_db_without_a_database_says_how_to_seed_it(tmp_path: Path, make: str,
+                                                              capsys: pytest.CaptureFixture) -> None:
+    """--db DIR that is missing or empty: one line naming DIR and the --init-db line that seeds it; nothing created."""
+    from pyrt.cli import main
+
+    target = tmp_path / "db"
+    if make == "empty":
+        target.mkdir()
+    assert main(["manipulator", "--db", str(target), "--speed", "max"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and str(target) in err
+    assert f"seed it with 'pyrt manipulator --init-db {target} --station prototype|sno'" in err
+    assert target.exists() == (make == "empty") and not (target.exists() and any(target.iterdir()))
+
+
+def test_manipulator_init_db_seeds_the_directory_and_runs_on_it(tmp_path: Path) -> None:
+    """--init-db DIR --station sno copies the packaged station into DIR and runs the console on it."""
+    import subprocess
+    import sys
+
+    target = tmp_path / "new" / "db"
+    done = subprocess.run([sys.executable, "-m", "pyrt", "manipulator", "--init-db", str(target),
+                           "--station", "sno", "--speed", "max"], input="status\n",
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert f"{target} seeded from the packaged sno station" in done.stdout
+    assert f"database {target}" in done.stdout and "T [" in done.stdout
+    assert sorted(p.name for p in target.iterdir()) == sorted(FILES.values())
+    again = subprocess.run([sys.executable, "-m", "pyrt", "manipulator", "--db", str(target),
+                            "--init-db", str(target), "--speed", "max"], input="",
+                           capture_output=True, text=True, timeout=60)
+    assert again.returncode == 1 and "not both" in again.stderr

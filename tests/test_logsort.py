@@ -79,3 +79,58 @@ def test_plot_without_matplotlib_writes_nothing_and_says_how(logfile, tmp_path, 
     assert main(["logsort", str(logfile), "--out", str(out), "--plot"]) == 1
     assert "pip install 'pyrt[plot]'" in capsys.readouterr().err
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_plot_draws_desired_tension_only_where_the_rope_is_tension_controlled(logfile):
+    """The desired-tension line exists only where free is 0; elsewhere it is a gap, never a 0 N line."""
+    pytest.importorskip("matplotlib")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from pyrt.cli.logsort import axis_figure
+
+    states, rules = sort_log(logfile)
+    kinds = set()
+    for axis in sorted(states):
+        s = np.array(states[axis], float)
+        fig = axis_figure(axis, states[axis], rules[axis])
+        try:
+            tension_ax, error_ax, rules_ax = fig.axes
+            lines = {ln.get_label(): ln for ln in tension_ax.lines}
+            np.testing.assert_allclose(lines["measured tension"].get_ydata(), s[:, 2])
+            controlled = s[:, 8] == 0
+            if controlled.any():
+                kinds.add("controlled")
+                desired = np.asarray(lines["desired tension (tension-controlled)"].get_ydata())
+                assert np.all(np.isnan(desired[~controlled]))
+                np.testing.assert_allclose(desired[controlled], s[controlled, 7])
+            else:
+                kinds.add("free")
+                assert set(lines) == {"measured tension"}
+                assert "length-controlled throughout" in tension_ax.texts[0].get_text()
+            assert tension_ax.get_ylabel() == "tension (N)"
+            assert error_ax.get_ylabel() == "length error (cm)"
+            assert rules_ax.get_ylabel() == "rule output (cm/s)"
+            assert rules_ax.get_xlabel() == "loop time (s)"
+            legend = [t.get_text() for t in rules_ax.get_legend().get_texts()]
+            assert legend == [c.removesuffix("_cm_s") for c in RULE_COLUMNS[1:]]
+        finally:
+            plt.close(fig)
+    assert kinds == {"controlled", "free"}  # both cases drawn: a free rope and a mixed one
+
+
+def test_plot_without_matplotlib_in_a_fresh_interpreter(logfile, tmp_path):
+    """pyrt logsort --plot with matplotlib absent (a subprocess): one hint line on stderr, exit 1, nothing written."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "out"
+    code = ("import sys; sys.modules['matplotlib'] = None\n"
+            f"from pyrt.cli import main; sys.exit(main(['logsort', {str(logfile)!r}, '--out', "
+            f"{str(out)!r}, '--plot']))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 1 and done.stdout == ""
+    assert done.stderr.splitlines() == [
+        "pyrt logsort: --plot needs matplotlib, which is not installed: pip install 'pyrt[plot]'"]
+    assert not out.exists() or not any(out.iterdir())

@@ -5,6 +5,8 @@ from __future__ import annotations
 import dataclasses
 import io
 import json
+import sys
+import threading
 
 import pytest
 from _clocks import MS, WorkClock
@@ -13,6 +15,8 @@ from hypothesis import strategies as st
 
 from pyrt.errors import PyrtError
 from pyrt.scheduler import Loop, ReadyQueue, SimClock, TimingLog, WallClock, read_timing_log
+from pyrt.scheduler.loop import overrun_line
+from pyrt.scheduler.report import format_statistics
 from pyrt.scheduler.stats import Accumulator, bin_edges, bin_index
 
 
@@ -295,3 +299,121 @@ def test_adaptive_spin_window_follows_the_measured_wake_up_error(monkeypatch):
     for k in range(1002, 1100):
         fixed.wait_until(k * MS)
     assert fixed.spin_window_ns == 200_000
+
+
+def test_start_up_overruns_are_counted_apart_and_not_warned():
+    """A slow first tick (code running for the first time) is a start-up overrun: no warning, not in overruns."""
+    lines: list[str] = []
+    loop, clock, _ = work_loop(warn=lines.append)
+    first = [True]
+
+    def cold_start(now):
+        if first[0]:
+            first[0] = False
+            clock.work(8 * MS)
+
+    loop._handlers.insert(0, cold_start)
+    loop._handler_names.insert(0, "cold")
+    loop.run(2000)
+    stats = loop.statistics()
+    assert stats.overruns == 0 and stats.missed == 0 and lines == []
+    assert stats.startup_overruns == 1 and stats.startup_worst_ns == 7 * MS + 10_000  # the task ran 10 µs too
+    assert "start-up (not counted above): 1 tick(s) overran, worst 7.01 ms" in format_statistics(stats)
+
+
+def test_start_up_ends_at_the_first_tick_on_time():
+    """An overrun after the first on-time tick is a real overrun, even among the first ticks."""
+    loop, _, _ = work_loop(slow_every=2, slow_ns=2 * MS)
+    loop.run(4)
+    stats = loop.statistics()
+    assert stats.startup_overruns == 0 and stats.overruns == 2
+
+
+def test_a_loop_that_always_overruns_still_faults_after_start_up():
+    """Start-up is at most STARTUP_TICKS ticks: a loop overrunning from its first tick is still faulted by the limit."""
+    loop, _, queue = work_loop(slow_every=1, slow_ns=2 * MS, max_consecutive_overruns=2)
+    loop.run(Loop.STARTUP_TICKS + 2)
+    assert loop.statistics().startup_overruns == Loop.STARTUP_TICKS
+    assert queue.halted and loop.take_fault() is not None
+
+
+@given(count=st.integers(1, 10**9), worst=st.integers(0, 10**13), tick=st.integers(0, 10**12),
+       culprit=st.text(min_size=0, max_size=200))
+def test_overrun_line_fits_80_columns_and_keeps_the_count(count, worst, tick, culprit):
+    """The overrun warning is one line of at most 80 characters that starts with the count."""
+    line = overrun_line(count, worst, tick, culprit.replace("\n", " "))
+    assert len(line) <= 80 and "\n" not in line
+    assert line.startswith(f"overrun: {count} tick")
+
+
+def test_real_overrun_warnings_fit_80_columns():
+    """Warnings from a loop with a long task name are one line each, within 80 columns."""
+    lines: list[str] = []
+    clock = WorkClock()
+    loop = Loop(clock, period_ns=MS, warn=lines.append)
+    queue = ReadyQueue(divisor=1, name="r")
+    queue.add_periodic(0x10, "A_TASK_WITH_A_VERY_LONG_NAME" * 3, lambda: clock.work(3 * MS), 3)
+    queue.schedule(0x10, 1)
+    loop.attach(queue)
+    loop.run(3000)
+    assert lines and all(len(x) <= 80 for x in lines)
+    assert all(x.startswith("overrun: ") and "see stats" in x for x in lines)
+
+
+def _slack_of_this_thread() -> int:
+    import ctypes
+
+    return ctypes.CDLL(None).prctl(30, 0, 0, 0, 0)  # PR_GET_TIMERSLACK
+
+
+@pytest.mark.parametrize(("argv", "slack"), [([], None), (["--timer-slack"], 1),
+                                             (["--timer-slack", "5000"], 5000)])
+def test_timer_slack_option_reaches_the_wall_clock(argv, slack):
+    """--timer-slack NS (alone: 1 ns) is handed to the loop's WallClock; without it the kernel default stays."""
+    from pyrt.cli import build_parser
+    from pyrt.cli._loopopts import make_loop
+
+    args = build_parser().parse_args(["gripper", *argv])
+    assert args.timer_slack == slack
+    loop = make_loop(args)
+    assert isinstance(loop.clock, WallClock) and loop.clock.timer_slack_ns == slack
+
+
+@pytest.mark.parametrize("bad", ["0", "-5", "fast", "2000000000"])
+def test_timer_slack_option_refuses_bad_values(bad, capsys):
+    """A timer slack that is not 1..1e9 ns is refused with one line naming the option."""
+    from pyrt.cli import build_parser
+
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["manipulator", "--timer-slack", bad])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "--timer-slack" in err[-1] and "timer slack must be" in err[-1]
+
+
+@pytest.mark.wallclock
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="timer slack is Linux's")
+def test_wall_clock_sets_the_timer_slack_in_the_loop_thread():
+    """The loop thread itself runs with the asked timer slack (it is per thread), read back with PR_GET_TIMERSLACK."""
+    seen: list[int] = []
+    loop = Loop(WallClock(timer_slack_ns=7_000), period_ns=MS)
+    loop.attach(lambda now: seen.append(_slack_of_this_thread()))
+    thread = threading.Thread(target=loop.run, args=(3,))
+    thread.start()
+    thread.join(10)
+    assert seen == [7_000] * 3
+
+
+def test_timer_slack_elsewhere_than_linux_is_a_clear_warning(monkeypatch):
+    """Off Linux, --timer-slack says in one line that it is Linux only, and the loop still runs."""
+    import pyrt.scheduler.rt as rt
+    from pyrt.cli import build_parser
+    from pyrt.cli._loopopts import apply_rt_options, make_loop
+
+    monkeypatch.setattr(rt.sys, "platform", "darwin")
+    said: list[str] = []
+    args = build_parser().parse_args(["gripper", "--timer-slack", "--speed", "50"])
+    apply_rt_options(args, said.append)
+    assert said == ["warning: timer slack is Linux only (prctl PR_SET_TIMERSLACK); not set on darwin"]
+    loop = make_loop(args)
+    loop.attach(lambda now: None)
+    assert loop.run(2) == 2

@@ -108,3 +108,86 @@ def test_random_scope_lines_never_crash(line):
     cmd, _, _, _ = make()
     with contextlib.suppress(CommandError):
         cmd(line)
+
+
+# -- plots: the gripper's own signals, units and hex, time as in the CSV ---------------
+
+
+def _gripper_capture(tmp_path):
+    """A gripper station on virtual time: ram:4A (a RAM byte, hex) and encoder
+    (counts) captured while the jaws close, saved to CSV; the frame too."""
+    from pyrt.commands import RobotShell
+    from pyrt.station.gripper import build_gripper
+
+    station = build_gripper(Loop(SimClock()))
+    station.start()
+    out = io.StringIO()
+    shell = RobotShell(station, out)
+    for line in ("I", "wait", "sleep 1.4", "scope add ram:4A encoder", "scope run roll",
+                 "P-1B86", "sleep 0.5", "scope stop", f"scope save {tmp_path / 'f.csv'}"):
+        shell.onecmd(line)
+    frame = station.runner.call(station.scope.read)
+    return station, shell, out, frame
+
+
+def test_scope_plot_names_units_shows_hex_and_keeps_the_csvs_time(tmp_path):
+    """scope plot: each y axis names its units, the RAM byte's ticks are hex, the time axis starts where the CSV does."""
+    pytest.importorskip("matplotlib")
+    import numpy as np
+
+    from pyrt.scope.export import frame_figure
+
+    station, shell, out, frame = _gripper_capture(tmp_path)
+    try:
+        shell.onecmd(f"scope plot {tmp_path / 'f.png'}")
+        assert (tmp_path / "f.png").read_bytes()[:4] == b"\x89PNG"
+        assert "error" not in out.getvalue().lower()
+        fig = frame_figure(frame)
+        fig.canvas.draw()
+        ram, enc = fig.axes
+        assert ram.get_ylabel() == "ram:4A (byte, hex)"
+        assert enc.get_ylabel() == "encoder (counts)"
+        assert enc.get_xlabel() == "loop time (s)"
+        labels = [(t.get_position()[1], t.get_text()) for t in ram.get_yticklabels()]
+        assert len(labels) >= 2
+        assert all(text == format(round(v), "02X") for v, text in labels)
+        assert ram.yaxis.get_major_formatter()(0x4A, 0) == "4A"
+        assert enc.yaxis.get_major_formatter()(200, 0) != "C8"  # counts stay decimal
+        csv = np.loadtxt(tmp_path / "f.csv", delimiter=",", skiprows=1)
+        x = ram.lines[0].get_xdata()
+        assert csv[0, 0] > 1.0 and x[0] == pytest.approx(csv[0, 0], abs=1e-9)
+        assert x[-1] == pytest.approx(csv[-1, 0], abs=1e-9)
+    finally:
+        station.close()
+
+
+def test_a_channel_without_units_says_so_on_its_axis():
+    """A source with no units given is labelled so, never left bare."""
+    import numpy as np
+
+    from pyrt.scope import Frame
+    from pyrt.scope.export import axis_label
+
+    frame = Frame(np.arange(3), np.zeros((3, 2)), ("a", "b"), None, "roll",
+                  units=("N", ""), formats=(".4g", "04X"))
+    assert axis_label(frame, 0) == "a (N)"
+    assert axis_label(frame, 1) == "b (units not given, hex)"
+
+
+def test_scope_plot_without_matplotlib_is_one_line_and_writes_nothing(tmp_path):
+    """Without matplotlib, scope plot in a piped console prints the install hint, writes no file, and the console goes on."""
+    import subprocess
+    import sys
+
+    script = ("scope add ram:4A\nscope run roll\nsleep 0.2\n"
+              f"scope plot {tmp_path / 'f.png'}\nW\n")
+    code = ("import sys; sys.modules['matplotlib'] = None\n"
+            "from pyrt.cli import main; sys.exit(main(['gripper', '--speed', 'max']))")
+    done = subprocess.run([sys.executable, "-c", code], input=script, capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    hint = [ln for ln in done.stdout.splitlines() + done.stderr.splitlines() if "matplotlib" in ln]
+    assert len(hint) == 1 and "pip install 'pyrt[plot]'" in hint[0]
+    assert "Traceback" not in done.stderr
+    assert not (tmp_path / "f.png").exists()
+    assert "CMD: W\n" in done.stdout  # the next command still ran

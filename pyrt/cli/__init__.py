@@ -22,12 +22,14 @@ from pyrt.cli import (
     manipulator,
     overruns,
     send,
+    top,
 )
 from pyrt.errors import PyrtError
 
 __all__ = ["main"]
 
-_COMMANDS = [demo, gripper, overruns, manipulator, logsort, forcemap, send, connect, boardsim]
+_COMMANDS = [demo, gripper, overruns, manipulator, logsort, forcemap, send, connect, top,
+             boardsim]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import queue
 import sys
+import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -60,6 +62,18 @@ def _tick_us(text: str) -> int:
     return value
 
 
+def _slack_ns(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"timer slack must be a whole number of ns, got {text!r}"
+        ) from None
+    if not 1 <= value <= 1_000_000_000:
+        raise argparse.ArgumentTypeError(f"timer slack must be 1..1000000000 ns, got {value}")
+    return value
+
+
 def add_loop_options(
     parser: argparse.ArgumentParser, default_speed: str = "1", default_tick_us: int = 1000
 ) -> None:
@@ -98,8 +112,15 @@ def add_loop_options(
     )
     g.add_argument(
         "--timer-slack",
-        action="store_true",
-        help="set timer slack to 1 ns (prctl PR_SET_TIMERSLACK)",
+        type=_slack_ns,
+        nargs="?",
+        const=1,
+        metavar="NS",
+        help=(
+            "the loop thread's timer slack in ns (Linux prctl PR_SET_TIMERSLACK; the "
+            "kernel's default is 50000; NS left out: 1): sleeps wake closer to each "
+            "deadline, so the loop spins less before it"
+        ),
     )
     g.add_argument(
         "--fifo", type=int, metavar="PRIO", help="run under SCHED_FIFO at PRIO (needs CAP_SYS_NICE)"
@@ -118,8 +139,11 @@ def load_backend(url: str) -> None:
 
 def apply_rt_options(args: argparse.Namespace, say: Callable[[str], None]) -> None:
     """Apply the real-time knobs the user asked for; say what happened to each."""
+    slack = args.timer_slack
     for wanted, fn in (
-        (args.timer_slack, lambda: _rt.set_timer_slack(1)),
+        # set here too, so that every thread started from now on inherits it;
+        # the loop's clock sets it again in the loop thread (make_loop)
+        (slack is not None, lambda: _rt.set_timer_slack(slack)),
         (args.fifo is not None, lambda: _rt.set_fifo(args.fifo)),
         (args.mlock, _rt.lock_memory),
     ):
@@ -130,11 +154,43 @@ def apply_rt_options(args: argparse.Namespace, say: Callable[[str], None]) -> No
                 say(f"warning: {exc.args[-1] if exc.args else exc}")
 
 
+class StderrLines:
+    """Lines for stderr, handed over by the loop thread and written by a
+    thread of their own: a stderr that blocks (a full pipe, a slow
+    terminal) never holds up a tick.  ``sys.stderr`` is looked up at each
+    write, so a console that redirects it (prompt_toolkit prints such lines
+    above the line being typed) gets them."""
+
+    def __init__(self) -> None:
+        self._lines: queue.SimpleQueue[str] = queue.SimpleQueue()
+        self._thread: threading.Thread | None = None
+        self._lock = threading.Lock()
+
+    def put(self, line: str) -> None:
+        """Queue ``line`` (any thread; never blocks)."""
+        self._lines.put(line)
+        if self._thread is None:
+            with self._lock:
+                if self._thread is None:
+                    self._thread = threading.Thread(target=self._write, name="pyrt-stderr",
+                                                    daemon=True)
+                    self._thread.start()
+
+    def _write(self) -> None:
+        while True:
+            line = self._lines.get()
+            try:
+                print(line, file=sys.stderr, flush=True)
+            except (OSError, ValueError):  # stderr closed: the lines have nowhere to go
+                return
+
+
 def make_loop(args: argparse.Namespace, warn: Callable[[str], None] | None = None) -> Loop:
     """A loop configured from the options of :func:`add_loop_options`."""
     if args.max_overruns is not None and args.max_overruns < 1:
         raise ConfigError(f"--max-overruns must be >= 1, got {args.max_overruns}")
-    clock = SimClock() if args.speed is None else WallClock(speed=args.speed)
+    clock = (SimClock() if args.speed is None
+             else WallClock(speed=args.speed, timer_slack_ns=args.timer_slack))
     log = None
     if args.timing_log:
         try:
@@ -142,10 +198,7 @@ def make_loop(args: argparse.Namespace, warn: Callable[[str], None] | None = Non
         except OSError as exc:
             raise ConfigError(f"cannot write timing log: {exc.strerror}", args.timing_log) from None
     if warn is None:
-
-        def warn(msg: str) -> None:
-            print(msg, file=sys.stderr)
-
+        warn = StderrLines().put
     return Loop(
         clock,
         period_ns=args.tick_us * 1000,

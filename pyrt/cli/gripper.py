@@ -32,16 +32,11 @@ from pyrt.cli._serve import add_serve_options, prepare_service
 from pyrt.cli._shutdown import run_until_shutdown
 from pyrt.commands import RobotShell
 from pyrt.console import Console
-from pyrt.scheduler.runner import Runner
 from pyrt.server import ServedStation
 from pyrt.sim.gripper import FAULTS, JawParameters
 from pyrt.station.gripper import build_gripper
 
 __all__ = ["add_parser", "run"]
-
-#: Wall-clock seconds between overrun reports on the console.
-WARN_EVERY_S = 10.0
-
 
 def _counts(text: str) -> int:
     """A start position: hex counts, two's complement (F400) or negative (-0C00)."""
@@ -90,30 +85,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     out = sys.stdout
     apply_rt_options(args, lambda m: print(m, file=out))
-    posted: list[Runner] = []
-    quiet = {"until": 0.0, "held": 0}
-
-    def warn(line: str) -> None:
-        # overrun summaries go to the console at most every WARN_EVERY_S of
-        # wall time, so that an operator is told without being flooded
-        now = time.monotonic()
-        if not posted:
-            return
-        if now < quiet["until"]:
-            quiet["held"] += 1
-            return
-        held = quiet["held"]
-        quiet.update(until=now + WARN_EVERY_S, held=0)
-        more = f" (+{held} earlier reports held back; 'stats' has the totals)" if held else ""
-        posted[0].post(line + more)
-
     load_backend(args.boards)
-    loop = make_loop(args, warn=warn)
+    loop = make_loop(args)  # overrun lines: stderr, at most one a second
     station = build_gripper(loop, boards=args.boards, start=args.start, object_mm=args.object,
                             faults=args.fault or ())
     station.close_report = lambda m: print(m, file=out, flush=True)
     runner = station.runner
-    posted.append(runner)
     service = prepare_service(args, runner, ServedStation(station))
     shell = RobotShell(station, out)
     console = Console(shell, sys.stdin, out, messages=runner.messages, history_file=args.history,

@@ -4,8 +4,10 @@ The log (``log`` in ``pyrt manipulator``) holds, every control poll, one
 ``S`` line (state) and one ``R`` line (the ten rule outputs) per axis.
 ``logsort`` writes ``a<N>state.dat`` and ``a<N>rules.dat`` for each axis N,
 as the document's logsort.cpp did, each with a header naming the columns
-and units, and with ``--plot`` draws each axis's tension, length error and
-active rules over time to ``a<N>.png`` (the document used spreadsheets).
+and units, and with ``--plot`` draws to ``a<N>.png`` each axis's measured tension
+against its desired tension (drawn only while the rope is
+tension-controlled: a length-controlled rope has none), its length error
+and all ten rule outputs over time (the document used spreadsheets).
 """
 
 from __future__ import annotations
@@ -13,12 +15,13 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
 
 from pyrt.errors import ConfigError
 from pyrt.fileio import atomic_write
 from pyrt.native import FuzzyRule
 
-__all__ = ["RULE_COLUMNS", "STATE_COLUMNS", "add_parser", "run", "sort_log"]
+__all__ = ["RULE_COLUMNS", "STATE_COLUMNS", "add_parser", "axis_figure", "run", "sort_log"]
 
 STATE_COLUMNS = ("time_s", "length_cm", "tension_N", "error_length_cm", "error_tension_N",
                  "velocity_cm_s", "dv_cm_s", "desired_tension_N", "free")
@@ -108,14 +111,39 @@ def _plot(target: Path, axis: int, state: list[list[str]], rules: list[list[str]
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    fig = axis_figure(axis, state, rules)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=80)
+    plt.close(fig)
+    atomic_write(target, buf.getvalue())
+    return target
+
+
+def axis_figure(axis: int, state: list[list[str]], rules: list[list[str]]) -> Any:
+    """One axis's figure: measured tension against the desired tension, the
+    length error, and the ten rule outputs, each labelled (needs matplotlib).
+
+    The controller sets a desired tension only while it controls the rope's
+    tension (``free`` 0: the off-side ropes, or every rope with signal-all);
+    while the rope is length-controlled (``free`` 1) the logged 0 means "none",
+    so the desired line is drawn only where it is defined."""
+    import matplotlib.pyplot as plt
     import numpy as np
 
     fig, (ax1, ax2, ax3) = plt.subplots(3, 1, sharex=True, figsize=(9, 8))
     if state:
         s = np.array(state, float)
-        ax1.plot(s[:, 0], s[:, 2], label="tension")
-        ax1.plot(s[:, 0], s[:, 7], "--", label="desired")
-        ax2.plot(s[:, 0], s[:, 3], label="length error")
+        t = s[:, 0]
+        ax1.plot(t, s[:, 2], label="measured tension")
+        controlled = s[:, 8] == 0
+        if controlled.any():
+            ax1.plot(t, np.where(controlled, s[:, 7], np.nan), "--",
+                     label="desired tension (tension-controlled)")
+        else:
+            ax1.text(0.01, 0.04, "no desired tension: length-controlled throughout",
+                     transform=ax1.transAxes, fontsize="small")
+        ax2.plot(t, s[:, 3], label="length error")
     if rules:
         r = np.array(rules, float)
         for k, rule in enumerate(FuzzyRule):  # all ten, silent ones too, each labelled
@@ -123,13 +151,9 @@ def _plot(target: Path, axis: int, state: list[list[str]], rules: list[list[str]
     ax1.set_ylabel("tension (N)")
     ax2.set_ylabel("length error (cm)")
     ax3.set_ylabel("rule output (cm/s)")
-    ax3.set_xlabel("time (s)")
+    ax3.set_xlabel("loop time (s)")
     for a in (ax1, ax2, ax3):
         if a.get_legend_handles_labels()[0]:
             a.legend(fontsize="small", loc="upper right", ncol=2 if a is ax3 else 1)
     fig.suptitle(f"axis {axis}")
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=80)
-    plt.close(fig)
-    atomic_write(target, buf.getvalue())
-    return target
+    return fig

@@ -8,7 +8,8 @@ calibrate``; plus ``quit``, ``log``, ``debug``, ``help [object]``, ``wait``,
 
 Without ``--db DIR`` the packaged station (``--station``) is copied to a
 working directory first (existing files there are kept: they carry the last
-position), and the run says where; the database is written back while the
+position), and the run says where; ``--init-db DIR`` seeds DIR from it the
+same way and runs there; the database is written back while the
 manipulator runs.  The base tick defaults to 5 ms for this robot: the
 physics steps every tick (a motor at its 7.0 cm/s limit makes 1.4
 half-steps a tick), the control poll is 50 ms and the standalone axis poll
@@ -42,9 +43,8 @@ from pyrt.cli._serve import add_serve_options, prepare_service
 from pyrt.cli._shutdown import run_until_shutdown
 from pyrt.commands import RobotShell
 from pyrt.console import Console
-from pyrt.db import STATIONS, copy_station, default_working_directory
-from pyrt.errors import PyrtError
-from pyrt.scheduler.runner import Runner
+from pyrt.db import FILES, STATIONS, copy_station, default_working_directory
+from pyrt.errors import ConfigError, PyrtError
 from pyrt.server import ServedStation
 from pyrt.sim.sensors import Imperfections
 from pyrt.station.manipulator import ManipulatorStation
@@ -64,6 +64,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--db", metavar="DIR", help="station database directory (written back)")
+    p.add_argument("--init-db", metavar="DIR",
+                   help="seed DIR with the packaged station (--station; database files "
+                        "already there are kept), then run on it as --db DIR")
     p.add_argument("--station", choices=STATIONS, default="prototype",
                    help="packaged station to copy when no --db is given (default prototype)")
     add_boards_option(p, "prototype|sno")
@@ -78,27 +81,35 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     out = sys.stdout
-    if args.db:
+    if args.db and args.init_db:
+        raise ConfigError("give --db DIR (an existing database) or --init-db DIR (seed one), "
+                          "not both")
+    if args.init_db:
+        try:
+            directory = copy_station(args.station, args.init_db)
+        except OSError as exc:
+            raise ConfigError(f"cannot seed a station database there: {exc.strerror}",
+                              args.init_db) from None
+        print(f"pyrt manipulator: {directory} seeded from the packaged {args.station} station "
+              "(files already there kept)", file=out)
+    elif args.db:
         directory = Path(args.db)
+        if not (directory / FILES["POLYAXIS"]).is_file():
+            what = "no such directory" if not directory.is_dir() else "no station database"
+            raise ConfigError(f"{what}; seed it with 'pyrt manipulator --init-db {args.db} "
+                              f"--station {'|'.join(STATIONS)}'", args.db)
     else:
         directory = default_working_directory(args.station)
         copy_station(args.station, directory)
         print(f"pyrt manipulator: working copy of the {args.station} station in {directory}",
               file=out)
     apply_rt_options(args, lambda m: print(m, file=out))
-    posted: list[Runner] = []
-
-    def warn(line: str) -> None:
-        if posted:
-            posted[0].post(line)
-
     load_backend(args.boards)
-    loop = make_loop(args, warn=warn)
+    loop = make_loop(args)  # overrun lines: stderr, at most one a second
     imp = Imperfections.ideal() if args.ideal_sensors else None
     station = ManipulatorStation(directory, loop=loop, imperfections=imp, boards=args.boards)
     station.close_report = lambda m: print(m, file=out, flush=True)
     runner = station.runner
-    posted.append(runner)
     try:
         service = prepare_service(args, runner, ServedStation(station))
     except PyrtError:

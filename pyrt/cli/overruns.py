@@ -45,6 +45,8 @@ def report_dict(rep: TimingReport, worst: int) -> dict[str, Any]:
         "ticks": s.get("ticks", 0),
         "overruns": len(rep.overruns),
         "missed": sum(int(r.get("missed", 0)) for r in rep.overruns),
+        "startup_overruns": s.get("startup_overruns", 0),
+        "startup_worst_ns": s.get("startup_worst_ns", 0),
         "lateness": s.get("lateness", {}),
         "tasks": {
             name: {
@@ -80,6 +82,11 @@ def format_report(rep: TimingReport, worst: int) -> str:
     ]
     if rep.summary is None:
         lines.append("(no summary record: the log ends before the first summary)")
+    if d["startup_overruns"]:
+        lines.append(
+            f"start-up (not counted above): {d['startup_overruns']} tick(s) overran, "
+            f"worst {d['startup_worst_ns'] / 1e6:.2f} ms"
+        )
     late = d["lateness"]
     if late and late.get("count"):
         m = late["max_ns"]
@@ -114,8 +121,20 @@ def format_report(rep: TimingReport, worst: int) -> str:
     return "\n".join(lines)
 
 
-def plot_report(rep: TimingReport, png: str) -> None:
-    """Per-task execution-time histograms and the overrun timeline, to PNG."""
+def histogram_steps(hist: list[list[int]]) -> tuple[list[int], list[int]]:
+    """A sparse log-bin histogram (``[bin, count]`` pairs) as contiguous bars:
+    ``len(counts) + 1`` edges in ns from the first bin's low edge to the last
+    one's high edge, empty bins in between as 0."""
+    if not hist:
+        return [], []
+    by_bin = {int(b): int(c) for b, c in hist}
+    lo, hi = min(by_bin), max(by_bin)
+    edges = [bin_edges(b)[0] for b in range(lo, hi + 1)] + [bin_edges(hi)[1]]
+    return edges, [by_bin.get(b, 0) for b in range(lo, hi + 1)]
+
+
+def _pyplot() -> Any:
+    """matplotlib's pyplot on the Agg back end, or ConfigError with the install hint."""
     try:
         import matplotlib
 
@@ -125,15 +144,33 @@ def plot_report(rep: TimingReport, png: str) -> None:
         raise ConfigError(
             "--plot needs matplotlib, which is not installed: pip install 'pyrt[plot]'"
         ) from None
+    return plt
+
+
+def plot_report(rep: TimingReport, png: str) -> None:
+    """Per-task execution-time histograms and the overrun timeline, to PNG."""
+    plt = _pyplot()
+    fig = report_figure(rep)
+    try:
+        fig.savefig(png, dpi=100)
+    except OSError as exc:
+        raise ConfigError(f"cannot write plot: {exc.strerror}", png) from None
+    finally:
+        plt.close(fig)
+
+
+def report_figure(rep: TimingReport) -> Any:
+    """The figure ``--plot`` draws (matplotlib must be there): per-task
+    execution-time histograms as closed bars, and the overrun timeline."""
+    import matplotlib.pyplot as plt
+
     tasks = (rep.summary or {}).get("tasks", {})
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 7))
     for name, t in sorted(tasks.items()):
-        hist = t.get("hist", [])
-        if not hist:
-            continue
-        xs = [bin_edges(b)[0] / 1e3 for b, _ in hist]
-        ys = [c for _, c in hist]
-        ax1.step(xs, ys, where="post", label=name)
+        edges, counts = histogram_steps(t.get("hist", []))
+        if counts:
+            # closed outline: every bar, the first and last included, has both edges
+            ax1.stairs(counts, [e / 1e3 for e in edges], baseline=0.5, label=name)
     ax1.set_xscale("log")
     ax1.set_yscale("log")
     ax1.set_xlabel("execution time (µs)")
@@ -151,18 +188,15 @@ def plot_report(rep: TimingReport, png: str) -> None:
     ax2.set_ylabel("overrun past next deadline (µs)")
     ax2.set_title(f"{len(rep.overruns)} overruns")
     fig.tight_layout()
-    try:
-        fig.savefig(png, dpi=100)
-    except OSError as exc:
-        raise ConfigError(f"cannot write plot: {exc.strerror}", png) from None
-    finally:
-        plt.close(fig)
+    return fig
 
 
 def run(args: argparse.Namespace) -> int:
     rep = read_timing_log(args.file)
     if args.worst < 0:
         raise ConfigError(f"--worst must be >= 0, got {args.worst}")
+    if args.plot:
+        _pyplot()  # before any output: the whole report, or one line
     if args.json:
         json.dump(report_dict(rep, args.worst), sys.stdout, indent=2)
         sys.stdout.write("\n")

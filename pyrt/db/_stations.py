@@ -12,6 +12,8 @@ import shutil
 from importlib import resources
 from pathlib import Path
 
+import platformdirs
+
 from pyrt.db._schema import FILES
 from pyrt.errors import ConfigError
 from pyrt.fileio import atomic_write
@@ -35,8 +37,10 @@ def default_working_directory(name: str) -> Path:
     """Where a run keeps its working copy of packaged station ``name``.
 
     ``$PYRT_HOME/stations/<name>`` if ``PYRT_HOME`` is set, else
-    ``$XDG_STATE_HOME/pyrt/stations/<name>`` (``~/.local/state`` when
-    ``XDG_STATE_HOME`` is unset).  Nothing is created here.
+    ``stations/<name>`` in pyrt's user state directory as the platform
+    defines it (platformdirs: ``$XDG_STATE_HOME/pyrt``, by default
+    ``~/.local/state/pyrt``, on Linux; ``~/Library/Application Support/pyrt``
+    on macOS; ``%LOCALAPPDATA%\\pyrt`` on Windows).  Nothing is created here.
     """
     key = name.lower()
     if key not in STATIONS:
@@ -44,8 +48,7 @@ def default_working_directory(name: str) -> Path:
     home = os.environ.get("PYRT_HOME")
     if home:
         return Path(home) / "stations" / key
-    state = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
-    return Path(state) / "pyrt" / "stations" / key
+    return Path(platformdirs.user_state_dir("pyrt", appauthor=False)) / "stations" / key
 
 
 def copy_station(name: str, dest_dir: str | os.PathLike[str], *, overwrite: bool = False) -> Path:

@@ -8,13 +8,14 @@ virtual time (:class:`SimClock`) or real time (:class:`WallClock`).
 
 from __future__ import annotations
 
-import ctypes
-import sys
+import contextlib
 import threading
 import time
 from collections.abc import Callable
 
-__all__ = ["Clock", "SimClock", "WallClock", "set_timer_slack"]
+from pyrt.scheduler.rt import set_timer_slack
+
+__all__ = ["Clock", "SimClock", "WallClock"]
 
 
 class Clock:
@@ -129,7 +130,10 @@ class WallClock(Clock):
     def wait_until(self, deadline_ns: int) -> None:
         if self.timer_slack_ns is not None and self._slack_set_in != threading.get_ident():
             self._slack_set_in = threading.get_ident()
-            set_timer_slack(self.timer_slack_ns)
+            # where it cannot be set (not Linux) the option has said so at
+            # start-up; the loop runs on with the default slack
+            with contextlib.suppress(OSError):
+                set_timer_slack(self.timer_slack_ns)
         target = self.wall_deadline(deadline_ns)
         mono = time.monotonic_ns
         spin = self.spin_window_ns
@@ -149,17 +153,3 @@ class WallClock(Clock):
         while mono() < target:
             pass
 
-
-def set_timer_slack(ns: int) -> bool:
-    """Set the calling thread's timer slack (Linux ``prctl(PR_SET_TIMERSLACK)``);
-    False where that is not available."""
-    if not sys.platform.startswith("linux"):
-        return False
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        return libc.prctl(_PR_SET_TIMERSLACK, ctypes.c_ulong(ns), 0, 0, 0) == 0
-    except (OSError, AttributeError):
-        return False
-
-
-_PR_SET_TIMERSLACK = 29

@@ -29,7 +29,7 @@ from pyrt.scheduler.stats import (
     TaskStatistics,
 )
 
-__all__ = ["Job", "Loop"]
+__all__ = ["Job", "Loop", "overrun_line"]
 
 Handler = Callable[[int], None]
 
@@ -88,8 +88,21 @@ class Loop:
     per-task execution statistics.  ``max_consecutive_overruns`` (OROCOS's
     maxOverRun): that many overruns in a row fault every attached robot.
     ``warn`` receives at most one overrun summary line per second of loop
-    time; the full detail goes to ``timing_log``.
+    time (one line of at most :attr:`WARN_WIDTH` characters, with the count);
+    the full detail goes to ``timing_log`` and :meth:`statistics`.
+
+    **Start-up**: the first ticks a loop ever runs execute its code for the
+    first time (imports, caches, the first command); until the first tick
+    that ends on time, at most :attr:`STARTUP_TICKS` of them, their overruns
+    are counted apart (``startup_overruns``, ``startup_worst_ns``), not as
+    overruns: no warning, no timing-log record, no consecutive-overrun fault.
+    Their passed deadlines are skipped as always (not counted as missed).
     """
+
+    #: At most this many ticks at the start of a loop's life count as start-up.
+    STARTUP_TICKS = 3
+    #: An overrun warning line is never wider than this (a terminal's width).
+    WARN_WIDTH = 80
 
     def __init__(
         self,
@@ -136,6 +149,10 @@ class Loop:
         self.overruns = 0
         self.missed = 0
         self.consecutive_overruns = 0
+        #: Overruns of start-up ticks (not counted in ``overruns``), and the worst (ns over).
+        self.startup_overruns = 0
+        self.startup_worst_ns = 0
+        self._starting = True
         self._lateness = Accumulator("lateness")
         self._work = Accumulator("work")
         self._next_summary = self.now_ns + self.summary_interval_ns
@@ -343,10 +360,14 @@ class Loop:
                     _record(work_acc, end - start)
                 if end > nxt:
                     skipped = (end - nxt + period - 1) // period
-                    self._overrun(deadline, start, end, skipped)
+                    if self._starting and self.tick_index <= self.STARTUP_TICKS:
+                        self._startup_overrun(end - nxt)
+                    else:
+                        self._overrun(deadline, start, end, skipped)
                     nxt += skipped * period
                 else:
                     self.consecutive_overruns = 0
+                    self._starting = False
                 self._deadline = nxt
             if start >= self._next_summary:
                 self._summary(start)
@@ -360,7 +381,13 @@ class Loop:
 
     # -- overruns ------------------------------------------------------------
 
+    def _startup_overrun(self, over_ns: int) -> None:
+        self.startup_overruns += 1
+        if over_ns > self.startup_worst_ns:
+            self.startup_worst_ns = over_ns
+
     def _overrun(self, deadline: int, start: int, end: int, skipped: int) -> None:
+        self._starting = False
         self.overruns += 1
         self.missed += skipped
         self.consecutive_overruns += 1
@@ -405,12 +432,7 @@ class Loop:
             return
         worst, tick, culprit = self._warn_worst
         if self.warn is not None:
-            # one short line (it shares the terminal with command output)
-            who = f" in {culprit}" if culprit else ""
-            self.warn(
-                f"overrun: {self._warn_pending} tick(s), worst {worst / 1e6:.2f} ms over at "
-                f"tick {tick}{who}; {self.missed} missed in all ('stats')"
-            )
+            self.warn(overrun_line(self._warn_pending, worst, tick, culprit, self.WARN_WIDTH))
         self._warn_pending = 0
         self._warn_worst = None
         self._last_warn_ns = now
@@ -479,6 +501,8 @@ class Loop:
             overruns=self.overruns,
             missed=self.missed,
             consecutive_overruns=self.consecutive_overruns,
+            startup_overruns=self.startup_overruns,
+            startup_worst_ns=self.startup_worst_ns,
             lateness=self._lateness.distribution(),
             work=self._work.distribution(),
             tasks=tasks,
@@ -492,6 +516,23 @@ class Loop:
             for acc in q.accumulators():
                 acc.reset()
         self.overruns = self.missed = self.consecutive_overruns = 0
+        self.startup_overruns = self.startup_worst_ns = 0
+
+
+def overrun_line(count: int, worst_ns: int, tick: int, culprit: str = "", width: int = 80) -> str:
+    """The one-line overrun warning: how many ticks overran since the last
+    line, the worst (ms past its next deadline), where, and where to look;
+    never wider than ``width`` (the culprit's name is cut first)."""
+    ticks = "tick" if count == 1 else "ticks"
+    head = f"overrun: {count} {ticks}, worst {worst_ns / 1e6:.2f} ms over at tick {tick}"
+    tail = "; see stats"
+    if culprit:
+        room = width - len(head) - len(tail) - len(" in ")
+        if room >= 4:
+            name = culprit if len(culprit) <= room else culprit[: room - 1] + "…"
+            head += f" in {name}"
+    line = head + tail
+    return line if len(line) <= width else line[: width - 1] + "…"
 
 
 def _record(acc: Accumulator, d: int) -> None:

@@ -17,6 +17,11 @@ def format_statistics(stats: LoopStatistics) -> str:
         f"tick {stats.period_ns / 1e3:g} µs: {stats.ticks} ticks, {stats.overruns} overruns, "
         f"{stats.missed} deadlines missed"
     ]
+    if stats.startup_overruns:
+        lines.append(
+            f"start-up (not counted above): {stats.startup_overruns} tick(s) overran, "
+            f"worst {stats.startup_worst_ns / 1e6:.2f} ms"
+        )
     late = stats.lateness
     if late.count:
         m = late.max_ns

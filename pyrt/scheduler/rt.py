@@ -10,6 +10,7 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import os
+import sys
 
 __all__ = ["lock_memory", "set_fifo", "set_timer_slack"]
 
@@ -24,9 +25,15 @@ def _libc() -> ctypes.CDLL:
 
 
 def set_timer_slack(ns: int = 1) -> str:
-    """Set this thread's timer slack (prctl PR_SET_TIMERSLACK) to ``ns``."""
+    """Set this thread's timer slack (prctl PR_SET_TIMERSLACK) to ``ns``.
+
+    Threads started afterwards inherit it.  Elsewhere than on Linux it raises
+    :class:`OSError` saying so (there is no timer slack to set)."""
     if ns < 1:
         raise ValueError(f"timer slack must be >= 1 ns, got {ns}")
+    if not sys.platform.startswith("linux"):
+        raise OSError(0, f"timer slack is Linux only (prctl PR_SET_TIMERSLACK); "
+                         f"not set on {sys.platform}")
     rc = _libc().prctl(_PR_SET_TIMERSLACK, ctypes.c_ulong(ns), 0, 0, 0)
     if rc != 0:
         err = ctypes.get_errno()

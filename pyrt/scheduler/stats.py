@@ -179,3 +179,7 @@ class LoopStatistics:
     lateness: Distribution
     work: Distribution
     tasks: dict[str, TaskStatistics]
+    #: Start-up ticks that overran (not in ``overruns``; see ``Loop``), and
+    #: the worst of them in ns past the next deadline.
+    startup_overruns: int = 0
+    startup_worst_ns: int = 0

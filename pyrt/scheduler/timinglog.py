@@ -119,6 +119,8 @@ class TimingLog:
                 "ticks": stats.ticks,
                 "overruns": stats.overruns,
                 "missed": stats.missed,
+                "startup_overruns": stats.startup_overruns,
+                "startup_worst_ns": stats.startup_worst_ns,
                 "lateness": _dist_json(stats.lateness),
                 "work": _dist_json(stats.work),
                 "tasks": {

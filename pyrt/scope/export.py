@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -11,7 +12,7 @@ from pyrt.errors import CommandError
 from pyrt.fileio import atomic_write
 from pyrt.scope.scope import Frame
 
-__all__ = ["plot_frame", "save_frame"]
+__all__ = ["axis_label", "frame_figure", "is_hex", "plot_frame", "save_frame"]
 
 
 def save_frame(frame: Frame, path: str | Path) -> Path:
@@ -44,8 +45,26 @@ def save_frame(frame: Frame, path: str | Path) -> Path:
     return path
 
 
+def axis_label(frame: Frame, k: int) -> str:
+    """The y-axis label of channel ``k``: its name and units, and ``hex``
+    when the robot writes it in hexadecimal (the gripper's RAM)."""
+    units = frame.unit(k) or "units not given"
+    if is_hex(frame.format_of(k)):
+        units += ", hex"
+    return f"{frame.channels[k]} ({units})"
+
+
+def is_hex(fmt: str) -> bool:
+    """True for a format spec that writes an integer in hexadecimal (``02X``, ``x``)."""
+    return fmt[-1:] in ("X", "x")
+
+
 def plot_frame(frame: Frame, path: str | Path) -> Path:
-    """Draw ``frame`` to a PNG, one trace per channel (needs matplotlib)."""
+    """Draw ``frame`` to a PNG, one trace per channel (needs matplotlib).
+
+    Time is loop time in seconds, as in the CSV (:func:`save_frame`); every y
+    axis names its units; a channel the robot writes in hex (``fmt`` ``02X``)
+    has hex tick labels."""
     try:
         import matplotlib
 
@@ -56,18 +75,7 @@ def plot_frame(frame: Frame, path: str | Path) -> Path:
             "scope plot needs matplotlib, which is not installed: pip install 'pyrt[plot]'"
         ) from None
     path = Path(path)
-    t = (frame.t_ns - frame.t_ns[0]) / 1e9 if frame.t_ns.size else frame.t_ns
-    n = len(frame.channels)
-    fig, axes = plt.subplots(n, 1, figsize=(9, 1.8 + 1.6 * n), sharex=True, squeeze=False)
-    for k, name in enumerate(frame.channels):
-        ax = axes[k][0]
-        ax.plot(t, frame.data[:, k], lw=1)
-        ax.set_ylabel(name)
-        if frame.trigger_index is not None and frame.t_ns.size:
-            ax.axvline(t[frame.trigger_index], color="r", lw=0.8, ls="--")
-    axes[-1][0].set_xlabel("time (s)")
-    fig.suptitle(f"pyrt scope ({frame.mode}, {frame.t_ns.size} samples)")
-    fig.tight_layout()
+    fig = frame_figure(frame)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=100)
     plt.close(fig)
@@ -76,3 +84,29 @@ def plot_frame(frame: Frame, path: str | Path) -> Path:
     except OSError as exc:
         raise CommandError(f"scope plot: cannot write {path}: {exc.strerror}") from None
     return path
+
+
+def frame_figure(frame: Frame) -> Any:
+    """The matplotlib figure :func:`plot_frame` draws (matplotlib must be there)."""
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter, MaxNLocator
+
+    t = frame.t_ns / 1e9  # the CSV's t_s column: the two agree
+    n = len(frame.channels)
+    fig, axes = plt.subplots(n, 1, figsize=(9, 1.8 + 1.6 * n), sharex=True, squeeze=False)
+    for k in range(n):
+        ax = axes[k][0]
+        ax.plot(t, frame.data[:, k], lw=1)
+        ax.set_ylabel(axis_label(frame, k))
+        fmt = frame.format_of(k)
+        if is_hex(fmt):
+            ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+            ax.yaxis.set_major_formatter(
+                FuncFormatter(lambda v, _pos, f=fmt: format(round(v), f)))
+        if frame.trigger_index is not None and frame.t_ns.size:
+            ax.axvline(t[frame.trigger_index], color="r", lw=0.8, ls="--")
+    axes[-1][0].set_xlabel("loop time (s)")
+    axes[-1][0].ticklabel_format(axis="x", useOffset=False, style="plain")
+    fig.suptitle(f"pyrt scope ({frame.mode}, {frame.t_ns.size} samples)")
+    fig.tight_layout()
+    return fig

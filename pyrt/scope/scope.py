@@ -63,6 +63,17 @@ class Frame:
     #: Sample index of the trigger point within the frame; None for roll/auto-forced.
     trigger_index: int | None
     mode: str
+    #: Each channel's units and format spec (see :class:`Source`); "" where not known.
+    units: tuple[str, ...] = ()
+    formats: tuple[str, ...] = ()
+
+    def unit(self, k: int) -> str:
+        """Channel ``k``'s units ("" when not known)."""
+        return self.units[k] if k < len(self.units) else ""
+
+    def format_of(self, k: int) -> str:
+        """Channel ``k``'s format spec ("" when not known)."""
+        return self.formats[k] if k < len(self.formats) else ""
 
     def column(self, name: str) -> np.ndarray:
         """The samples of one channel."""
@@ -337,6 +348,8 @@ class Scope:
             channels=tuple(self._names),
             trigger_index=trigger_index,
             mode=self.mode,
+            units=tuple(src.units for src in self._sources),
+            formats=tuple(src.fmt for src in self._sources),
         )
         self.frames += 1
 
@@ -355,6 +368,8 @@ class Scope:
             return Frame(
                 self._ring_t[pos].copy(), self._ring[pos, :nch].copy(),
                 tuple(self._names), None, "roll",
+                units=tuple(src.units for src in self._sources),
+                formats=tuple(src.fmt for src in self._sources),
             )
         return self._frame
 

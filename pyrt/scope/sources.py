@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import keyword
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 __all__ = ["Source", "compile_sampler", "compile_sources"]
@@ -25,6 +25,14 @@ class Source:
     obj: Any
     key: Any = None
     signed: bool = False
+    #: What the value is measured in (``cm``, ``N``, ``byte`` ...), for plots; "" unknown.
+    units: str = ""
+    #: How the robot writes the value (a format spec: ``02X`` for a hex byte), for plots.
+    fmt: str = ""
+
+    def described(self, units: str, fmt: str = "") -> Source:
+        """The same source, with the units and format its plots show."""
+        return replace(self, units=units, fmt=fmt)
 
     @classmethod
     def attr(cls, obj: Any, name: str) -> Source:
