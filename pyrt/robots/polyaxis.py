@@ -4,9 +4,12 @@ Every control poll (the polyaxis-poll task, :mod:`pyrt.tasks.polyaxis_poll`,
 which :meth:`PolyAxis.tasks` declares beside axis-poll):
 
 1. each Axis's tension and stretch-corrected length are read;
-2. ropes that bear on the neck ring get their contact point as effective top
-   (the finder sees the rope from there, its measured length less the piece
-   above the contact), and ``findPositionL`` runs through the prepared C
+2. rope segments that bear on the neck ring get their contact point as
+   effective top (upper segment) or effective bottom (lower segment, with
+   the source up in the neck): the finder sees the rope from there, its
+   measured length less the piece beyond the contact.  The model is the
+   world's (csrc/neck.h, both segments; ``ring_segments`` names where a
+   controller deliberately knows less).  Then ``findPositionL`` runs through the prepared C
    solver (:class:`pyrt.native.PositionFinder`, freeze mask from the bottom
    attachments): position and distErr (the RMS length residual);
 3. the residual net force on the source is the sum of the measured tensions
@@ -77,7 +80,7 @@ from pyrt.native import (
     PositionFinder,
     StaticsSolver,
 )
-from pyrt.robots._neck import NeckRing, ring_contact
+from pyrt.robots._neck import NeckRing
 from pyrt.robots.av import AV
 from pyrt.robots.axis import POLYAXIS, Axis
 from pyrt.robots.paths import VIA_BELOW, Hare, HarePath, hare_path_record, plan_segments
@@ -145,6 +148,7 @@ class PolyAxis(Component):
         poll_s: float = 0.05,
         fuzzy: Sequence[FuzzyParams] | None = None,
         stdout: TextIO | None = None,
+        ring_segments: int | None = None,
     ):
         if not axes:
             raise ConfigError(f"polyaxis {name}: no axes")
@@ -176,6 +180,11 @@ class PolyAxis(Component):
         self.offsets: list[Vec] = [a.offset for a in self.axes]  # type: ignore[misc]
         self.ring = av.neck_ring()
         self._ring = NeckRing(*self.ring)
+        #: The rope segments the controller lets bear on the neck ring: by default
+        #: both, as the world does (one geometry in two roles); a smaller mask is
+        #: a controller that deliberately knows less (UPPER: lower segments straight).
+        self.ring_segments = (PolyControl.RING_SEGMENTS if ring_segments is None
+                              else int(ring_segments))
         centre = av.vtog((0.0, 0.0, 0.0))
         self.axis_point: Vec = centre
         self.via: Vec = tuple(  # type: ignore[assignment]
@@ -227,7 +236,7 @@ class PolyAxis(Component):
                 axis_point=centre[:2], weight_air=self.weight(math.inf),
                 weight_liquid=self.weight(-math.inf), liquid_level=liquid_level if wet else None,
                 offside_tension=self.offside_tension, near_end_cm=NEAR_END_CM,
-                position=position)
+                position=position, ring_segments=self.ring_segments)
         except NativeError as exc:
             raise ConfigError(f"polyaxis {name}: {exc}") from None
         self._read_tension = [a.loadcell.tension for a in self.axes]
@@ -316,25 +325,25 @@ class PolyAxis(Component):
 
     def rope_geometry(self, i: int, x: Sequence[float]
                       ) -> tuple[float, Vec | None, Vec, Vec | None]:
-        """(length beyond the top pulley, ring contact or None, unit pull toward the
-        top, unit pull toward the bottom or None) of rope ``i`` for the source at ``x``."""
+        """(length beyond the top pulley, upper segment's ring contact or None, unit
+        pull toward the top, unit pull toward the bottom or None) of rope ``i`` for
+        the source at ``x``: the one rope model (csrc/neck.h) with the segments the
+        controller lets bear on the ring (:attr:`ring_segments`)."""
         o = self.offsets[i]
         q = (x[0] + o[0], x[1] + o[1], x[2] + o[2])
-        t = self.tops[i]
-        c = ring_contact(self.ring, t, q)
-        head = 0.0
-        if c is not None:
-            head = _dist(t, c)
-            t = c
+        b = self.bottoms[i]
+        path = self._ring.rope_path(self.tops[i], b, q, self.ring_segments)
+        t = path.upper if path.upper is not None else self.tops[i]
         d = (t[0] - q[0], t[1] - q[1], t[2] - q[2])
         lt = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) or 1e-12
         ut = (d[0] / lt, d[1] / lt, d[2] / lt)
-        b = self.bottoms[i]
         if b is None:
-            return head + lt, c, ut, None
+            return path.length, path.upper, ut, None
+        if path.lower is not None:
+            b = path.lower
         e = (b[0] - q[0], b[1] - q[1], b[2] - q[2])
         lb = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]) or 1e-12
-        return head + lt + lb, c, ut, (e[0] / lb, e[1] / lb, e[2] / lb)
+        return path.length, path.upper, ut, (e[0] / lb, e[1] / lb, e[2] / lb)
 
     def force_directions(self, x: Sequence[float]) -> list[Vec]:
         """Per rope, the force on the source per newton of tension at ``x``."""
@@ -833,36 +842,19 @@ class PolyAxis(Component):
     def lengths_at(self, x: Sequence[float]) -> list[float]:
         """Every rope's length beyond its top pulley with the source at ``x`` (cm),
         over the neck ring where a rope bears on it: one C call."""
+        if self.ring_segments != StaticsSolver.RING_SEGMENTS:  # the controller knows less
+            return [self.length_at(i, x) for i in range(self.n)]
         try:
             return self._geometry.evaluate(x)[0]
         except NativeError:  # degenerate (the carriage on a pulley): the Python form
             return [self.length_at(i, x) for i in range(self.n)]
 
-    def length_at(self, i: int, x: Sequence[float],
-                  hints: list[float | None] | None = None) -> float:
+    def length_at(self, i: int, x: Sequence[float]) -> float:
         """Rope ``i``'s length beyond its top pulley with the source at ``x`` (cm),
-        over the neck ring where it bears on it (the poll's fast form of
-        :meth:`rope_geometry`)."""
+        over the neck ring where it bears on it (:meth:`rope_geometry`'s length)."""
         o = self.offsets[i]
-        qx, qy, qz = x[0] + o[0], x[1] + o[1], x[2] + o[2]
-        t = self.tops[i]
-        head = 0.0
-        found = self._ring.contact(t, (qx, qy, qz), None if hints is None else hints[i])
-        c = None
-        if found is not None:
-            c = found[0]
-        if hints is not None:
-            hints[i] = None if found is None else found[1]
-        if c is not None:
-            head = math.sqrt((t[0] - c[0]) ** 2 + (t[1] - c[1]) ** 2 + (t[2] - c[2]) ** 2)
-            t = c
-        dx, dy, dz = t[0] - qx, t[1] - qy, t[2] - qz
-        length = head + math.sqrt(dx * dx + dy * dy + dz * dz)
-        b = self.bottoms[i]
-        if b is not None:
-            dx, dy, dz = b[0] - qx, b[1] - qy, b[2] - qz
-            length += math.sqrt(dx * dx + dy * dy + dz * dz)
-        return length
+        q = (x[0] + o[0], x[1] + o[1], x[2] + o[2])
+        return self._ring.rope_path(self.tops[i], self.bottoms[i], q, self.ring_segments).length
 
     def drive_motors(self, now_s: float, dt: float) -> None:
         """During a move: error signals, the batched fuzzy step, every motor, the stops."""
