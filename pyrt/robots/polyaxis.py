@@ -111,7 +111,7 @@ SNAPSHOT_POLLS = 20
 #: Encoder counts an encoder may fall out of step with its motor since the
 #: reference (quantisation makes one) before, with distErr rising by more
 #: than FIND_TOLERANCE, its rope's length is taken to be wrong (slip, reset).
-SLIP_COUNTS = 3
+SLIP_COUNTS = 2
 
 Vec = tuple[float, float, float]
 _FI = FuzzyInput
