@@ -81,8 +81,8 @@ def test_a_top_pulley_out_of_the_plane_is_refused_at_start(tmp_path):
     directory = copy_station("prototype", tmp_path / "p")
     path = directory / "AXIS.dat"
     path.write_text(path.read_text().replace("TOP: 0. 0. 389.0", "TOP: 0. 5.0 389.0"))
-    with pytest.raises(ConfigError, match=r"axis0 top pulley is at y = 5 cm, out of the plane "
-                                          r"y = 0 cm"):
+    with pytest.raises(ConfigError, match=r"axis0 top pulley \(AXIS.dat TOP\) is at y = 5 cm, "
+                                          r"out of the plane y = 0 cm"):
         ManipulatorStation(directory)
 
 

@@ -337,15 +337,17 @@ class PolyAxis(Component):
             held = sum(b[k] for b in side) / len(side)
             self.plane[k] = held
             axis = "xyz"[k]
-            places = [(f"{a.name} top pulley", self.tops[i]) for i, a in enumerate(self.axes)]
-            places += [("the neck ring centre", self.ring[0]), ("POSITION", position)]
+            places = [(f"{a.name} top pulley (AXIS.dat TOP)", self.tops[i])
+                      for i, a in enumerate(self.axes)]
+            places += [("the neck ring centre (AV.dat)", self.ring[0]),
+                       ("the source (POLYAXIS.dat POSITION)", position)]
             for what, p in places:
                 if abs(float(p[k]) - held) > self.find_tolerance:
                     raise ConfigError(
                         f"polyaxis {name}: {what} is at {axis} = {float(p[k]):g} cm, out of the "
                         f"plane {axis} = {held:g} cm the position finder holds (every bottom "
                         f"attachment is there); the source would hang out of the plane the "
-                        f"controller can measure and move in")
+                        f"controller can measure and move in: put it in the plane")
 
     @classmethod
     def from_record(cls, record, axes: Sequence[Axis], av: AV, **kw) -> PolyAxis:
