@@ -199,3 +199,22 @@ def test_tension_margin_from_the_database(tmp_path):
     with pytest.raises(CommandError, match=r"TENSION_MARGIN 40 N\).*nothing moved"):
         runner.call(station.polyaxis.to, (0.0, 0.0, 100.0))
     station.close()
+
+
+def test_encoder_reset_loses_the_estimate(tmp_path):
+    """An encoder counter reset after a move (its length jumps back to ZEROLENGTH): a fault
+    naming the axis though nothing moves, and moves refused until the position is re-established."""
+    station, runner = station_at(tmp_path, "prototype", (0.0, 0.0, 100.0))
+    pa = station.polyaxis
+    assert _move(station, runner, (0.0, 0.0, 85.0)).reason is StopReason.ENDPOINT_STOP
+    runner.sleep(3.0)
+    runner.call(station.axes[0].encoder.reset)
+    cause = _fault_ends(station, runner, 5.0)
+    assert cause.startswith("axis0: position estimate lost")
+    assert "out of step with its motor" in cause and motors_still(station)
+    runner.call(station.acknowledge)
+    with pytest.raises(CommandError, match="not trusted"):
+        runner.call(pa.to, (0.0, 0.0, 100.0))
+    assert "from every rope but axis0" in runner.call(pa.run_command, "survey")
+    assert math.dist(pa.position, station.plant.position) <= TOLERANCE["prototype"]
+    station.close()
