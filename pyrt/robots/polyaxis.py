@@ -911,9 +911,10 @@ class PolyAxis(Component):
             i = max(range(self.n), key=lambda k: abs(res[k]))
             why = f"its length disagrees most ({res[i]:+.2f} cm)"
         self.suspect = i
-        detail = (f"{self.axes[i].name}: position estimate lost: {cause}; {why}; moves "
-                  "refused until 'survey' or 'setpos X Y Z'")
-        self.estimate_lost = detail
+        name = self.axes[i].name
+        self.estimate_lost = f"{name}: {cause}; {why}"
+        detail = (f"{name}: position estimate lost: {cause}; {why}; moves refused until "
+                  "'survey' or 'setpos X Y Z'")
         if self.active:
             self._fault(detail)
         elif self.on_fault is not None:
