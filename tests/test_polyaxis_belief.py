@@ -218,3 +218,16 @@ def test_encoder_reset_loses_the_estimate(tmp_path):
     assert "from every rope but axis0" in runner.call(pa.run_command, "survey")
     assert math.dist(pa.position, station.plant.position) <= TOLERANCE["prototype"]
     station.close()
+
+
+def test_a_path_through_unholdable_points_is_refused(tmp_path):
+    """From a start held within the tension bounds, a feasible target whose straight path
+    passes where a rope would go slack is refused before anything moves, saying where."""
+    station, runner = station_at(tmp_path, "prototype", (-280.0, 0.0, 100.0))
+    before = station.plant.position
+    with pytest.raises(CommandError, match=r"the path passes \(-2\d\d\.\d, 0\.0, \d+\.\d\), "
+                                           r"where axis0 would need .* \(LOW_TENSION 2 N\)"):
+        runner.call(station.polyaxis.to, (-60.0, 0.0, -200.0))
+    runner.sleep(1.0)
+    assert station.plant.position == pytest.approx(before, abs=1e-9) and motors_still(station)
+    station.close()

@@ -663,20 +663,42 @@ class PolyAxis(Component):
                                "or 'setpos X Y Z'; nothing moved")
 
     def plan_path(self, target: Sequence[float], *, blend: bool = False) -> Hare:
-        """The hare for a move from here to ``target`` after every check
-        (CommandError with the reason if refused; nothing changes)."""
+        """The hare for a move from here to ``target`` after every check: the
+        target's (:meth:`check_target`), then every point on the way inside the
+        vessel and, from a start held within the tension bounds, holdable within
+        them (CommandError with the reason if refused; nothing changes)."""
         self.check_target(target)
         tgt: Vec = tuple(float(c) for c in target)  # type: ignore[assignment]
         start = self.position
         segs = plan_segments(start, tgt, self.in_neck, self.via)
         hare = Hare(segs, self.hare_speed, self.hare_ramp, blend=blend)
+        # the tensions on the way are checked when they are within bounds here (a
+        # source held where they are not may always move out: the stops guard it)
+        held = self._tension_refusal(start) is None
         for p in hare.sample():
             why = self.refusal(p)
+            if why is None and held and _dist(p, start) > 2.0 * self.end_error:
+                why = self._tension_refusal(p)
             if why is not None and _dist(p, start) > 2.0 * self.end_error:
                 raise CommandError(
                     f"{self.name} to: refused: the path passes ({p[0]:.1f}, {p[1]:.1f}, "
                     f"{p[2]:.1f}), {why}; nothing moved")
         return hare
+
+    def _tension_refusal(self, x: Sequence[float]) -> str | None:
+        """Why the source cannot be held at ``x`` on the way (a tension that would
+        be out of LOW_TENSION .. MAX_TENSION, or a force left over beyond
+        NET_FORCELIMIT: the stops would end the move there), or None."""
+        t, resid = self.equilibrium_tensions(x)
+        for a, v in zip(self.axes, t, strict=True):
+            if v < self.low_tension:
+                return f"where {a.name} would need {v:.1f} N (LOW_TENSION {self.low_tension:g} N)"
+            if v > self.max_tension:
+                return f"where {a.name} would need {v:.1f} N (MAX_TENSION {self.max_tension:g} N)"
+        if resid > self.net_forcelimit:
+            return (f"where {resid:.1f} N could not be balanced (NET_FORCELIMIT "
+                    f"{self.net_forcelimit:g} N)")
+        return None
 
     def to(self, target: Sequence[float], *, blend: bool = False) -> Hare:
         """Start a move to ``target`` (global cm) now, after the checks: the
