@@ -49,6 +49,19 @@ axes back to standalone control.  The safety stops (tension, net force) are
 also faults: ``on_fault`` (the ready queue's ``trip``) is called, the
 reflex runs, and the manipulator stays stopped until acknowledged.
 
+Estimate integrity (beyond 000).  After every measure, moving or not, the
+estimate is checked (:meth:`PolyAxis.check_estimate`): distErr beyond
+DIST_ERR_LIMIT, or distErr rising while an encoder falls out of step with
+its motor (a slipping or reset encoder), is a fault naming the axis; from
+then every move is refused and nothing measured is written back until the
+position is re-established: ``survey`` (the position from every rope but
+the suspect one, as the redundant rope lets 000's finder do; that rope's
+encoder re-zeroed) or ``setpos X Y Z`` (the operator has seen the source;
+every encoder re-zeroed to agree).  Targets are refused before anything
+moves when outside the vessel, out of a planar station's plane, within
+TENSION_MARGIN of the tension bounds, or when the path passes points where
+the source could not be held.
+
 Patterns (``pattern FILE``: endpoint after endpoint, with a log) run as a
 foreground job from :mod:`pyrt.robots.pattern`; the log is written through
 a writer, off the loop thread unless the clock is simulated.
