@@ -18,6 +18,13 @@ Run: ``python -m pytest bench/bench_manipulator.py --benchmark-only -s``.
   25.9 µs (0.86x the target); a quiet run of this file gave 19.9 / 26.7 µs
   with the devices alone 8.0 / 12.4 µs, so about half of what is left is
   the device objects (``Motor.poll`` about 2 µs a motor).
+  Since the controller's neck model lets lower segments bear too (the
+  world's), and the poll checks the estimate (distErr, encoders against
+  motors): the two kernels measured the same with either segment mask
+  (5.7 µs for 5 ropes, alternating, same process) and the estimate check
+  costs 0.6-0.9 µs a poll; on the loaded VM (load average 4.4 on 2 cores)
+  a run gave 30.6 / 40.5 µs, with and without the check alternating
+  within noise of each other.
 * ``kernels``: the two polyctl calls alone (the numeric share of a poll).
 * ``move``: a complete ``to`` on ``--speed max`` (plant, ready queue,
   write-back, mailbox, all on a SimClock loop) at the manipulator's default

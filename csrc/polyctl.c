@@ -9,10 +9,6 @@
 #include <math.h>
 #include <stddef.h>
 
-#if PYRT_POLYCTL_RING_SEGMENTS != PYRT_NECK_UPPER
-#error "pyrt_polyctl_measure models only the upper segment on the neck ring"
-#endif
-
 static double dist3(const double *a, const double *b)
 {
     double dx = a[0] - b[0], dy = a[1] - b[1], dz = a[2] - b[2];
@@ -26,7 +22,9 @@ static int check_common(const pyrt_polyctl *c)
     if (c->n < 1 || c->n > PYRT_POLYCTL_MAX_ROPES)
         return PYRT_EINVAL;
     if (c->tops == NULL || c->bottoms == NULL || c->offsets == NULL || c->tension == NULL
-        || c->length == NULL || c->phi == NULL || c->position == NULL)
+        || c->length == NULL || c->phi == NULL || c->phi_lower == NULL || c->position == NULL)
+        return PYRT_EINVAL;
+    if ((c->ring_segments & ~(PYRT_NECK_UPPER | PYRT_NECK_LOWER)) != 0)
         return PYRT_EINVAL;
     return pyrt_neck_check(&c->ring);
 }
@@ -43,6 +41,7 @@ int pyrt_polyctl_measure(pyrt_polyctl *c)
     n = c->n;
     if (c->stretch == NULL || c->dead == NULL || c->encoder_length == NULL
         || c->finder == NULL || c->finder_tops == NULL || c->finder_lengths == NULL
+        || c->finder_bottoms == NULL
         || c->finder->n != n || c->finder->position == NULL || c->result == NULL)
         return PYRT_EINVAL;
     for (i = 0; i < n; i++)
@@ -55,20 +54,28 @@ int pyrt_polyctl_measure(pyrt_polyctl *c)
     }
     x = c->position;
     for (i = 0; i < n; i++) {
-        const double *t0 = c->tops + 3 * i, *o = c->offsets + 3 * i;
-        double q[3];
-        pyrt_neck_segment top;
+        const double *t0 = c->tops + 3 * i, *o = c->offsets + 3 * i, *b = c->bottoms + 3 * i;
+        double q[3], hint[2];
+        pyrt_neck_rope path;
         q[0] = x[0] + o[0];
         q[1] = x[1] + o[1];
         q[2] = x[2] + o[2];
-        rc = pyrt_neck_contact(&c->ring, t0, q, c->phi[i], &top);
+        hint[0] = c->phi[i];
+        hint[1] = c->phi_lower[i];
+        rc = pyrt_neck_rope_path(&c->ring, c->ring_segments, t0, b, q, hint, &path);
         if (rc != PYRT_OK)
             return rc;
-        c->phi[i] = top.phi;
-        c->finder_tops[3 * i] = top.point[0];
-        c->finder_tops[3 * i + 1] = top.point[1];
-        c->finder_tops[3 * i + 2] = top.point[2];
-        c->finder_lengths[i] = top.bears ? c->length[i] - top.head : c->length[i];
+        c->phi[i] = path.upper.bears ? path.upper.phi : NAN;
+        c->phi_lower[i] = path.lower.bears ? path.lower.phi : NAN;
+        c->finder_tops[3 * i] = path.upper.point[0];
+        c->finder_tops[3 * i + 1] = path.upper.point[1];
+        c->finder_tops[3 * i + 2] = path.upper.point[2];
+        if (!isnan(b[0])) {
+            c->finder_bottoms[3 * i] = path.lower.point[0];
+            c->finder_bottoms[3 * i + 1] = path.lower.point[1];
+            c->finder_bottoms[3 * i + 2] = path.lower.point[2];
+        }
+        c->finder_lengths[i] = c->length[i] - path.upper.head - path.lower.head;
     }
     if (c->use_start) {
         c->finder->position[0] = x[0];
@@ -83,14 +90,14 @@ int pyrt_polyctl_measure(pyrt_polyctl *c)
     c->position[1] = c->finder->position[1];
     c->position[2] = c->finder->position[2];
     c->result[0] = c->finder->rms;
-    /* the net force at the new estimate, along this poll's effective tops */
+    /* the net force at the new estimate, toward this poll's effective tops and bottoms */
     x = c->position;
     fx = 0.0;
     fy = 0.0;
     fz = -(x[2] < c->liquid_level ? c->weight_liquid : c->weight_air);
     for (i = 0; i < n; i++) {
         const double *o = c->offsets + 3 * i, *tt = c->finder_tops + 3 * i;
-        const double *b = c->bottoms + 3 * i;
+        const double *b = c->finder_bottoms + 3 * i;
         double qx = x[0] + o[0], qy = x[1] + o[1], qz = x[2] + o[2];
         double dx = tt[0] - qx, dy = tt[1] - qy, dz = tt[2] - qz;
         double d = sqrt(dx * dx + dy * dy + dz * dz);
@@ -126,7 +133,8 @@ int pyrt_polyctl_drive(pyrt_polyctl *c)
     if (rc != PYRT_OK)
         return rc;
     n = c->n;
-    if (c->velocity == NULL || c->hare_phi == NULL || c->prev_error_length == NULL
+    if (c->velocity == NULL || c->hare_phi == NULL || c->hare_phi_lower == NULL
+        || c->prev_error_length == NULL
         || c->prev_error_tension == NULL || c->last_dv == NULL || c->desired_tension == NULL
         || c->is_free == NULL || c->error_length == NULL || c->error_tension == NULL
         || c->finder == NULL || c->finder->residuals == NULL || c->finder->n != n
@@ -160,10 +168,12 @@ int pyrt_polyctl_drive(pyrt_polyctl *c)
         q[1] = c->hare[1] + o[1];
         q[2] = c->hare[2] + o[2];
         hint[0] = c->hare_phi[i];
-        rc = pyrt_neck_rope_path(&c->ring, PYRT_POLYCTL_RING_SEGMENTS, t, b, q, hint, &path);
+        hint[1] = c->hare_phi_lower[i];
+        rc = pyrt_neck_rope_path(&c->ring, c->ring_segments, t, b, q, hint, &path);
         if (rc != PYRT_OK)
             return rc;
-        c->hare_phi[i] = path.upper.phi;
+        c->hare_phi[i] = path.upper.bears ? path.upper.phi : NAN;
+        c->hare_phi_lower[i] = path.lower.bears ? path.lower.phi : NAN;
         want = path.length;
         c->error_length[i] = (c->length[i] - res[i]) - want;
         c->error_tension[i] = c->is_free[i] != 0.0 ? 0.0

@@ -2,13 +2,15 @@
  * The PolyAxis control poll as two batch kernels (000, section 5).
  *
  * pyrt_polyctl_measure (steps 1-3 of the poll): every rope's stretch-
- * corrected length from its encoder length and tension; where a rope bears
- * on the neck ring at the current estimate (neck.h, Newton on the rim angle
- * from last poll's angle), the rim contact becomes its effective top and
- * the piece above the contact leaves the length the finder sees; the
- * prepared position finder (findpos.h) is solved; the residual net force on
- * the source at the new estimate (measured tensions along the ropes from
- * the effective tops and to the bottoms, plus the net weight).
+ * corrected length from its encoder length and tension; where a segment of
+ * a rope bears on the neck ring at the current estimate (neck.h, Newton on
+ * the rim angle from last poll's angle; the segments in ring_segments),
+ * the rim contact becomes its effective top (upper segment) or effective
+ * bottom (lower segment) and the piece beyond the contact leaves the length
+ * the finder sees; the prepared position finder (findpos.h) is solved; the
+ * residual net force on the source at the new estimate (measured tensions
+ * along the ropes toward the effective tops and bottoms, plus the net
+ * weight).
  *
  * pyrt_polyctl_drive (step 4, after the motion has set the hare): the error
  * signals (off-side ropes toward offside_tension, the others free, unless
@@ -36,12 +38,12 @@
 #define PYRT_POLYCTL_MAX_ROPES 16
 
 /*
- * The segments the controller lets bear on the neck ring: the upper one
- * only (the world, statics.h, lets the lower bear too; a known gap, kept
- * until the finder learns an effective bottom).  measure can only model
- * the upper segment: polyctl.c refuses to build with any other value.
+ * The segments the controller lets bear on the neck ring by default: both,
+ * as the world does (statics.h PYRT_STATICS_RING_SEGMENTS), one geometry in
+ * two roles.  A controller that deliberately knows less sets ring_segments
+ * to a smaller mask (PYRT_NECK_UPPER: the lower segment always straight).
  */
-#define PYRT_POLYCTL_RING_SEGMENTS PYRT_NECK_UPPER
+#define PYRT_POLYCTL_RING_SEGMENTS (PYRT_NECK_UPPER | PYRT_NECK_LOWER)
 
 typedef struct {
     int32_t n;
@@ -52,6 +54,8 @@ typedef struct {
     const double *stretch;      /* per newton */
     const double *dead;         /* dead lengths, cm */
     pyrt_neck_ring ring;        /* pyrt_neck_init (radius <= 0: none) */
+    int32_t ring_segments;      /* the segments the controller lets bear on the
+                                   ring (a mask of PYRT_NECK_UPPER/LOWER) */
     double axis_point[2];       /* (x, y) of the central axis: the off side */
     double weight_air;          /* N: the source's weight */
     double weight_liquid;       /* N: its net weight below liquid_level */
@@ -61,6 +65,7 @@ typedef struct {
     /* the prepared finder and fuzzy batch, and writable views of their inputs */
     pyrt_findpos_problem *finder;
     double *finder_tops;        /* n x 3: the finder's top points */
+    double *finder_bottoms;     /* n x 3: the finder's bottom points (NaN rows kept) */
     double *finder_lengths;     /* n: the lengths the finder solves for */
     const pyrt_fuzzy_batch *fuzzy;
     double *fuzzy_inputs;       /* n x PYRT_FUZZY_NINPUTS: the batch's input rows */
@@ -76,8 +81,10 @@ typedef struct {
     double rate_scale;          /* 1 / dt for the error rates, 1/s */
     int32_t signal_all;         /* 1: desired_tension and is_free were set by the caller */
     /* state carried between polls */
-    double *phi;                /* rim angle at the estimate per rope (NaN: free) */
-    double *hare_phi;           /* rim angle at the hare per rope (NaN: free) */
+    double *phi;                /* upper segment's rim angle at the estimate (NaN: free) */
+    double *phi_lower;          /* lower segment's rim angle at the estimate (NaN: free) */
+    double *hare_phi;           /* upper segment's rim angle at the hare (NaN: free) */
+    double *hare_phi_lower;     /* lower segment's rim angle at the hare (NaN: free) */
     double *prev_error_length;
     double *prev_error_tension;
     int32_t have_prev;          /* 0: the error rates are 0 at this poll */

@@ -3,7 +3,7 @@
 Operation for operation as the kernel (and as the Python PolyAxis poll it
 replaced): the neck-ring contact of csrc/neck.c by Newton on the rim angle
 from the last poll's angle, with the one model's constants read from the
-C headers (``lib``); the corrected lengths and effective tops, the position
+C headers (``lib``); the corrected lengths and effective tops and bottoms, the position
 solve (tests/_ref_findpos.py), the net force, the error signals, the fuzzy
 input rows and the fuzzy step (tests/_ref_fuzzy.py).
 """
@@ -136,6 +136,7 @@ class RefPolyControl:
         self.tol = tol
         n = self.n = len(self.tops)
         self.phi: list[float | None] = [None] * n
+        self.phi_lower: list[float | None] = [None] * n
         self.hare_phi: list[float | None] = [None] * n
         self.prev: tuple[list[float], list[float]] | None = None
         self.last_dv = [0.0] * n
@@ -160,11 +161,11 @@ class RefPolyControl:
         lengths[:] = lens
         self.lengths = lens
         x = self.position
-        eff, lf = [], list(lens)
+        eff, effb, lf = [], [], list(lens)
         for i in range(n):
-            o, t0 = self.offsets[i], self.tops[i]
+            o, t0, b0 = self.offsets[i], self.tops[i], self.bottoms[i]
             q = (x[0] + o[0], x[1] + o[1], x[2] + o[2])
-            found = contact(self.ring, t0, q, self.phi[i])
+            found = contact(self.ring, t0, q, self.phi[i]) if CONTROLLER_SEGMENTS & UPPER else None
             if found is None:
                 if _dist(t0, q) < MIN_SEGMENT:
                     raise Degenerate("the carriage on a top pulley")
@@ -174,8 +175,22 @@ class RefPolyControl:
                 c, self.phi[i] = found
                 eff.append(c)
                 lf[i] -= _dist(t0, c)
+            if b0 is None:
+                effb.append(None)
+                continue
+            found = (contact(self.ring, b0, q, self.phi_lower[i])
+                     if CONTROLLER_SEGMENTS & LOWER else None)
+            if found is None:
+                if _dist(b0, q) < MIN_SEGMENT:
+                    raise Degenerate("the carriage on a bottom attachment")
+                self.phi_lower[i] = None
+                effb.append(b0)
+            else:
+                c, self.phi_lower[i] = found
+                effb.append(c)
+                lf[i] -= _dist(b0, c)
         nan = math.nan
-        bott = np.array([(nan, nan, nan) if b is None else b for b in self.bottoms])
+        bott = np.array([(nan, nan, nan) if b is None else b for b in effb])
         pos, rms, res, _ = findpos.find_position(np.array(eff), bott, np.array(lf),
                                                  np.array(x), offsets=np.array(self.offsets),
                                                  tol=self.tol)
@@ -186,7 +201,7 @@ class RefPolyControl:
         for i in range(n):
             o = self.offsets[i]
             q = (x[0] + o[0], x[1] + o[1], x[2] + o[2])
-            for end in (eff[i], self.bottoms[i]):
+            for end in (eff[i], effb[i]):
                 if end is None:
                     continue
                 d = (end[0] - q[0], end[1] - q[1], end[2] - q[2])

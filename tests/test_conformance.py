@@ -182,6 +182,7 @@ _SAMPLES: dict[str, list[list[str]]] = {
     "Loadcell.point": [["10 N"]],
     "Motor.maxspeed": [["3"]],
     "Encoder.setZeroLength": [["100"]],
+    "PolyAxis.setpos": [["0", "0", "1e5"]],
 }
 
 

@@ -114,7 +114,7 @@ def test_prototype_values_are_the_documents() -> None:
     assert a0 == s.axis("axis0") and a0.central and a0.bottom is None
     assert (a0.motor, a0.loadcell, a0.encoder) == ("motor0", "loadcell0", "encoder0")
     assert a0.length == pytest.approx(293.405273) and a0.deadlength == 453.0
-    assert a0.offset == (0.0, 0.0, 0.0) and a0.top == (0.0, 5.0, 389.0)
+    assert a0.offset == (0.0, 0.0, 0.0) and a0.top == (0.0, 0.0, 389.0)
     assert a1.length == pytest.approx(614.2491466) and a1.top == (50.0, 0.0, 391.0)
     assert a1.bottom == (317.0, 0.0, 89.53)
     # AXIS2 is AXIS1 mirrored in x = 0
@@ -210,8 +210,8 @@ def test_copy_station_keeps_existing_working_files(tmp_path: Path) -> None:
 def test_optional_keys_and_fuzzy_overrides(tmp_path: Path) -> None:
     """Optional keys override their defaults; FUZZY_<NAME> keys become a mapping."""
     d = _station(tmp_path)
-    _mutate(d, "AXIS.dat", "TOP: 0. 5.0 389.0 // top pulley position",
-            "TOP: 0. 5.0 389.0 // top pulley position\nFUZZY_Low_T: 4.5\nfuzzy_dv: -0.25\n"
+    _mutate(d, "AXIS.dat", "TOP: 0. 0. 389.0 // top pulley position",
+            "TOP: 0. 0. 389.0 // top pulley position\nFUZZY_Low_T: 4.5\nfuzzy_dv: -0.25\n"
             "STRETCH: 1e-5")
     _mutate(d, "POLYAXIS.dat", "END;", "MAX_TENSION: 40 lb\nHARE_SPEED: 0.02 m/s\nEND;")
     _mutate(d, "MOTOR.dat", "CRUISE_SPEED: 7.0\nEND;",
@@ -251,8 +251,8 @@ MALFORMED = [
     ("missing-version", "AXIS.dat", "VERSION1.00\n", "", None, "VERSION1.00"),
     ("wrong-version", "MOTOR.dat", "VERSION1.00", "VERSION2.00", None, "VERSION2.00"),
     ("version-with-space", "AV.dat", "VERSION1.00", "VERSION 1.00", None, "no spaces"),
-    ("missing-end-before-entry", "AXIS.dat", "TOP: 0. 5.0 389.0 // top pulley position\nEND;",
-     "TOP: 0. 5.0 389.0 // top pulley position", "AXIS: AXIS1", "expected 'END;'"),
+    ("missing-end-before-entry", "AXIS.dat", "TOP: 0. 0. 389.0 // top pulley position\nEND;",
+     "TOP: 0. 0. 389.0 // top pulley position", "AXIS: AXIS1", "expected 'END;'"),
     ("missing-end-at-eof", "AV.dat", "END;", "", "AV: PROTOVESSEL",
      "before the end of the file"),
     ("end-outside-entry", "MOTOR.dat", "MOTOR: motor1", "END;\nMOTOR: motor1", "END;#2",

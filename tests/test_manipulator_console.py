@@ -274,10 +274,12 @@ def test_grammar_never_crashes_and_refusals_move_nothing(tmp_path_factory, line)
 
 
 def test_nonsense_length_is_a_fault_not_a_crash(shell):
-    """A zero length set by hand cannot be written back: one fault, the session goes on."""
+    """A zero length set by hand cannot be written back: one fault, the session goes on;
+    the right zero length set again, the next status is a plain status line."""
     sh, station, runner, _ = shell
+    zero = runner.call(lambda: station.axes[1].encoder.zero_length)
     text = run_lines(sh, runner, ["axis1Encoder setZeroLength 0", "sleep 12", "status",
-                                  "ack", "axis1Encoder setZeroLength 1067", "sleep 12",
+                                  "ack", f"axis1Encoder setZeroLength {zero!r}", "sleep 12",
                                   "status"])
     assert text.count("database write-back refused") >= 1
     assert "FAULT" in text and "fault acknowledged" in text

@@ -12,6 +12,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 import pyrt.native as nat
+from pyrt.native._errors import NoConvergenceError
 
 NAN = math.nan
 SNO_RING = ((0.0, 0.0, 595.8), (0.0, 0.0, 1.0), 72.5)
@@ -196,3 +197,40 @@ def test_segments_are_a_parameter_of_the_one_model():
     straight = math.dist(top, up_in_neck) + math.dist(up_in_neck, bottom)
     assert lengths[0][0] == pytest.approx(straight, rel=1e-15)
     assert lengths[nat.NECK_LOWER][0] > straight
+
+
+@pytest.mark.parametrize("x", [(0.0, 0.0, 1250.0), (20.0, 0.0, 1200.0), (-30.0, 25.0, 900.0)])
+def test_controller_finds_the_source_where_lower_segments_bear(x):
+    """Up in the neck, with world lengths (lower segments on the ring), the controller's
+    measure finds the source there with distErr ~0; one told to let only the upper
+    segments bear (ring_segments, the named place it knows less) does not."""
+    ring = nat.NeckRing(*SNO_RING)
+    n = len(SNO_TOPS)
+    g, _, wrapped = _world(ring).evaluate(x)
+    assert any(wrapped)
+    found = {}
+    for segs in (nat.PolyControl.RING_SEGMENTS, nat.NECK_UPPER):
+        bott = np.array([(NAN,) * 3 if b is None else b for b in SNO_BOTTOMS])
+        finder = nat.PositionFinder(np.array(SNO_TOPS), bott, np.array(SNO_OFFSETS), tol=1e-6)
+        batch = nat.FuzzyBatch(nat.FuzzyParams(), n)
+        ctl = nat.PolyControl(finder, batch, tops=SNO_TOPS, bottoms=SNO_BOTTOMS,
+                              offsets=SNO_OFFSETS, stretch=[0.0] * n, dead=[0.0] * n,
+                              ring=ring, axis_point=(0.0, 0.0), weight_air=50.0,
+                              weight_liquid=40.0, liquid_level=None, offside_tension=10.0,
+                              near_end_cm=10.0, position=(x[0] + 2.0, x[1] - 1.0, x[2] + 3.0),
+                              ring_segments=segs)
+        try:
+            for _ in range(4):  # the contacts follow the estimate poll by poll
+                out = ctl.measure([20.0] * n, list(g), [0.0] * n)
+        except NoConvergenceError:  # the lengths fix no position in its model
+            out = [math.inf] * 4
+        found[segs] = (math.dist(out[:3], x), out[3], ctl.lower_rim_angles)
+    dist, dist_err, lower = found[nat.PolyControl.RING_SEGMENTS]
+    assert dist < 1e-3 and dist_err < 1e-3 and any(a is not None for a in lower)
+    dist, dist_err, lower = found[nat.NECK_UPPER]
+    assert dist > 1.0 and dist_err > 1.0 and all(a is None for a in lower)
+    with pytest.raises(nat.NativeInputError, match="ring_segments"):
+        nat.PolyControl(finder, batch, tops=SNO_TOPS, bottoms=SNO_BOTTOMS, offsets=SNO_OFFSETS,
+                        stretch=[0.0] * n, dead=[0.0] * n, ring=ring, axis_point=(0.0, 0.0),
+                        weight_air=50.0, weight_liquid=40.0, liquid_level=None,
+                        offside_tension=10.0, near_end_cm=10.0, position=x, ring_segments=4)

@@ -151,10 +151,12 @@ def test_stalled_motor_past_half_way_stops(tmp_path):
     ((400.0, 0.0, 0.0), "outside the vessel"),
     ((60.0, 0.0, 380.0), "neck's allowed radius"),
     ((-250.0, 0.0, 150.0), "tension bounds"),
-    ((0.0, 5.0, 386.0), "top pulley"),
+    ((0.0, 0.0, 386.0), "top pulley"),
+    ((0.0, 5.0, 300.0), "out of the manipulator's plane"),
 ])
 def test_unreachable_target_refused_without_motion(tmp_path, target, why):
-    """A target outside the vessel/neck or needing tensions out of bounds is refused; nothing moves."""
+    """A target outside the vessel/neck, out of the plane or needing tensions out of bounds is
+    refused; nothing moves."""
     station, runner = make_station(tmp_path)
     writes = station.tio10.writes
     with pytest.raises(CommandError, match=why):

@@ -130,10 +130,12 @@ OK_T = [30.0, 10.0, 20.0]
 @pytest.mark.parametrize(("dist_err", "distance", "stops"), [
     (0.05, 0.09, True), (0.05, 0.11, False),   # never tighter than 0.1 cm
     (0.5, 0.45, True), (0.5, 0.55, False),     # distErr when it is the lesser
-    (3.0, 0.95, True), (3.0, 1.05, False),     # END_ERROR when it is the lesser
+    (0.99, 0.95, True), (0.99, 1.05, False),   # END_ERROR ... (here distErr) the lesser
+    (3.0, 0.95, False), (1.01, 0.05, False),   # distErr beyond END_ERROR: never an endpoint
 ])
 def test_endpoint_condition(dist_err, distance, stops):
-    """ENDPOINT_STOP within the lesser of END_ERROR and distErr, never under 0.1 cm."""
+    """ENDPOINT_STOP within the lesser of END_ERROR and distErr, never under 0.1 cm, and only
+    with distErr within END_ERROR (the station's tolerance)."""
     c = _check()
     hit = c.check(0.0, (100.0 - distance, 0.0, 0.0), dist_err, OK_T, 1.0, NAMES)
     assert (hit is not None and hit[0] is StopReason.ENDPOINT_STOP) == stops

@@ -179,6 +179,8 @@ SCHEMAS: dict[str, Schema] = {
         FieldSpec("STUCK_TIME", "time", required=False, default=10.0, check=_positive),
         FieldSpec("FIND_TOLERANCE", "length", required=False, default=0.1, check=_positive),
         FieldSpec("D2O_DENSITY", "density", required=False, default=1.10, check=_positive),
+        FieldSpec("DIST_ERR_LIMIT", "length", required=False, default=0.5, check=_positive),
+        FieldSpec("TENSION_MARGIN", "force", required=False, default=5.0, check=_nonnegative),
     ), check=_polyaxis_check),
     "AXIS": Schema("AXIS", AxisRecord, (
         FieldSpec("MOTOR", "name"),

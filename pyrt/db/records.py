@@ -70,7 +70,8 @@ class PolyAxisRecord:
     change them:
 
     * ``END_ERROR`` 1.0 cm: ENDPOINT_STOP radius (the lesser of it and the RMS
-      length residual, never below ``FIND_TOLERANCE``).
+      length residual, never below ``FIND_TOLERANCE``) and the station's
+      endpoint tolerance: ENDPOINT_STOP also needs distErr within it.
     * ``LOW_TENSION`` 2.0 N: LOW_TENSION_STOP (well under the 10 N off-side
       idler tension, so only a rope going slack trips it).
     * ``MAX_TENSION`` 200.0 N: HIGH_TENSION_STOP (under the 50 lb = 222 N
@@ -83,6 +84,11 @@ class PolyAxisRecord:
     * ``FIND_TOLERANCE`` 0.1 cm: position finder convergence and the
       tightest endpoint condition.
     * ``D2O_DENSITY`` 1.10 g/cm3: buoyancy of a submerged source.
+    * ``DIST_ERR_LIMIT`` 0.5 cm (not in 000): distErr above this (about twice
+      the most seen in fault-free moves) is a fault naming the axis; moves
+      are then refused until the position is re-established.
+    * ``TENSION_MARGIN`` 5.0 N (not in 000): a target is refused unless the
+      tensions that hold it lie this far inside LOW_TENSION .. MAX_TENSION.
     * ``AV``: the AV.dat entry; may be left out when AV.dat holds one entry.
     """
 
@@ -102,6 +108,8 @@ class PolyAxisRecord:
     stuck_time: float = 10.0
     find_tolerance: float = 0.1
     d2o_density: float = 1.10
+    dist_err_limit: float = 0.5
+    tension_margin: float = 5.0
     where: Location = field(default=_NOWHERE, compare=False, repr=False)
 
 

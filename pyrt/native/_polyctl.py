@@ -6,8 +6,8 @@ once; every poll the caller hands in the sensor readings as plain lists and
 gets plain floats and lists back:
 
 * :meth:`PolyControl.measure`: corrected lengths, neck-ring contacts as
-  effective tops (csrc/neck.h, Newton from last poll's rim angle), the
-  position solve, distErr and the residual net force;
+  effective tops and bottoms (csrc/neck.h, Newton from last poll's rim
+  angles), the position solve, distErr and the residual net force;
 * :meth:`PolyControl.drive`: the error signals against the hare (off-side
   ropes toward OFFSIDE_TENSION, the others free, or tensions set by the
   caller for errorSignalAll), the fuzzy inputs and one batched fuzzy step.
@@ -108,8 +108,10 @@ class PolyControl:
     ``position``: the start of the first solve.
     """
 
-    #: The segments of a rope the controller lets bear on the neck ring
-    #: (the upper one only: see ``csrc/polyctl.h``).
+    #: The segments of a rope the controller lets bear on the neck ring by
+    #: default: both, as the world does (``csrc/polyctl.h``).  The
+    #: ``ring_segments`` argument is the named place where a controller
+    #: deliberately knows less (``UPPER`` alone: lower segments straight).
     RING_SEGMENTS: ClassVar[int] = lib.PYRT_POLYCTL_RING_SEGMENTS
 
     def __init__(self, finder: PositionFinder, batch: FuzzyBatch, *,
@@ -118,7 +120,7 @@ class PolyControl:
                  dead: Sequence[float], ring: NeckRing | Sequence[float] | None,
                  axis_point: Sequence[float], weight_air: float, weight_liquid: float,
                  liquid_level: float | None, offside_tension: float, near_end_cm: float,
-                 position: Sequence[float]):
+                 position: Sequence[float], ring_segments: int | None = None):
         n = finder.n
         if not 1 <= n <= MAX_ROPES:
             raise NativeInputError(f"PolyControl: {n} ropes; 1..{MAX_ROPES} allowed")
@@ -129,6 +131,11 @@ class PolyControl:
         for name, v in scalars.items():
             if not math.isfinite(float(v)):
                 raise NativeInputError(f"PolyControl: {name} must be finite, got {v!r}")
+        segs = self.RING_SEGMENTS if ring_segments is None else int(ring_segments)
+        if segs & ~(lib.PYRT_NECK_UPPER | lib.PYRT_NECK_LOWER):
+            raise NativeInputError(f"PolyControl: ring_segments must be a mask of UPPER and "
+                                   f"LOWER, got {ring_segments!r}")
+        self.ring_segments = segs
         if not float(near_end_cm) > 0:
             raise NativeInputError(f"PolyControl: near_end_cm must be > 0, got {near_end_cm!r}")
         self.n = n
@@ -141,24 +148,30 @@ class PolyControl:
         self._stretch = new("double[]", _finite("stretch", stretch, n))
         self._dead = new("double[]", _finite("dead", dead, n))
         self._phi = new("double[]", [_NAN] * n)
+        self._phi_lower = new("double[]", [_NAN] * n)
         self._hare_phi = new("double[]", [_NAN] * n)
+        self._hare_phi_lower = new("double[]", [_NAN] * n)
         self._prev_error_length = new("double[]", n)
         self._prev_error_tension = new("double[]", n)
         # the finder's and the batch's bound buffers: solved and run from C
         self._views = [ffi.from_buffer("double[]", a)
-                       for a in (finder.tops, finder.lengths, batch.inputs)]
+                       for a in (finder.tops, finder.lengths, batch.inputs,
+                                 finder._bottoms)]
         layout, size = _io_layout(n)
         io = self._io = new("double[]", size)
         self._c = new("pyrt_polyctl *", {
             "n": n, "tops": self._tops, "bottoms": self._bottoms, "offsets": self._offsets,
             "stretch": self._stretch, "dead": self._dead, "ring": _neck_ring(ring)[0],
+            "ring_segments": segs,
             "axis_point": _finite("axis_point", axis_point, 2),
             "weight_air": float(weight_air), "weight_liquid": float(weight_liquid),
             "liquid_level": -math.inf if liquid_level is None else float(liquid_level),
             "offside_tension": float(offside_tension), "near_end_cm": float(near_end_cm),
             "finder": finder._p, "finder_tops": self._views[0],
-            "finder_lengths": self._views[1], "fuzzy": batch._b,
-            "fuzzy_inputs": self._views[2], "phi": self._phi, "hare_phi": self._hare_phi,
+            "finder_lengths": self._views[1], "finder_bottoms": self._views[3],
+            "fuzzy": batch._b,
+            "fuzzy_inputs": self._views[2], "phi": self._phi, "phi_lower": self._phi_lower,
+            "hare_phi": self._hare_phi, "hare_phi_lower": self._hare_phi_lower,
             "prev_error_length": self._prev_error_length,
             "prev_error_tension": self._prev_error_tension, "use_start": 1,
             **{name: ffi.addressof(io, offset) for name, (offset, _) in layout.items()},
@@ -210,8 +223,15 @@ class PolyControl:
 
     @property
     def rim_angles(self) -> list[float | None]:
-        """Per rope, the rim angle it bore on the ring at the last measure (None: free)."""
+        """Per rope, the rim angle its upper segment bore on the ring at the last
+        measure (None: free)."""
         return [None if v != v else v for v in self._unpack(self._phi, self.n)]
+
+    @property
+    def lower_rim_angles(self) -> list[float | None]:
+        """Per rope, the rim angle its lower segment bore on the ring at the last
+        measure (None: free, or no bottom attachment)."""
+        return [None if v != v else v for v in self._unpack(self._phi_lower, self.n)]
 
     # -- the two calls -------------------------------------------------------------
 

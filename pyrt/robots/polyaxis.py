@@ -4,9 +4,12 @@ Every control poll (the polyaxis-poll task, :mod:`pyrt.tasks.polyaxis_poll`,
 which :meth:`PolyAxis.tasks` declares beside axis-poll):
 
 1. each Axis's tension and stretch-corrected length are read;
-2. ropes that bear on the neck ring get their contact point as effective top
-   (the finder sees the rope from there, its measured length less the piece
-   above the contact), and ``findPositionL`` runs through the prepared C
+2. rope segments that bear on the neck ring get their contact point as
+   effective top (upper segment) or effective bottom (lower segment, with
+   the source up in the neck): the finder sees the rope from there, its
+   measured length less the piece beyond the contact.  The model is the
+   world's (csrc/neck.h, both segments; ``ring_segments`` names where a
+   controller deliberately knows less).  Then ``findPositionL`` runs through the prepared C
    solver (:class:`pyrt.native.PositionFinder`, freeze mask from the bottom
    attachments): position and distErr (the RMS length residual);
 3. the residual net force on the source is the sum of the measured tensions
@@ -46,6 +49,19 @@ axes back to standalone control.  The safety stops (tension, net force) are
 also faults: ``on_fault`` (the ready queue's ``trip``) is called, the
 reflex runs, and the manipulator stays stopped until acknowledged.
 
+Estimate integrity (beyond 000).  After every measure, moving or not, the
+estimate is checked (:meth:`PolyAxis.check_estimate`): distErr beyond
+DIST_ERR_LIMIT, or distErr rising while an encoder falls out of step with
+its motor (a slipping or reset encoder), is a fault naming the axis; from
+then every move is refused and nothing measured is written back until the
+position is re-established: ``survey`` (the position from every rope but
+the suspect one, as the redundant rope lets 000's finder do; that rope's
+encoder re-zeroed) or ``setpos X Y Z`` (the operator has seen the source;
+every encoder re-zeroed to agree).  Targets are refused before anything
+moves when outside the vessel, out of a planar station's plane, within
+TENSION_MARGIN of the tension bounds, or when the path passes points where
+the source could not be held.
+
 Patterns (``pattern FILE``: endpoint after endpoint, with a log) run as a
 foreground job from :mod:`pyrt.robots.pattern`; the log is written through
 a writer, off the loop thread unless the clock is simulated.
@@ -77,7 +93,7 @@ from pyrt.native import (
     PositionFinder,
     StaticsSolver,
 )
-from pyrt.robots._neck import NeckRing, ring_contact
+from pyrt.robots._neck import NeckRing
 from pyrt.robots.av import AV
 from pyrt.robots.axis import POLYAXIS, Axis
 from pyrt.robots.paths import VIA_BELOW, Hare, HarePath, hare_path_record, plan_segments
@@ -92,6 +108,8 @@ __all__ = [
     "GRAVITY",
     "MIN_TOP_SEGMENT",
     "NEAR_END_CM",
+    "SLIP_COUNTS",
+    "SNAPSHOT_POLLS",
     "PolyAxis",
 ]
 
@@ -100,6 +118,13 @@ GRAVITY = 9.80665
 NEAR_END_CM = 10.0
 #: A target closer than this to a top pulley (cm) is refused.
 MIN_TOP_SEGMENT = 5.0
+#: Control polls between snapshots of a consistent estimate; the older of the
+#: last two is the reference of the slip check (so it covers 1-2 s at 50 ms).
+SNAPSHOT_POLLS = 20
+#: Encoder counts an encoder may fall out of step with its motor since the
+#: reference (quantisation makes one) before, with distErr rising by more
+#: than FIND_TOLERANCE, its rope's length is taken to be wrong (slip, reset).
+SLIP_COUNTS = 2
 
 Vec = tuple[float, float, float]
 _FI = FuzzyInput
@@ -140,11 +165,14 @@ class PolyAxis(Component):
         hare_ramp: float = 20.0,
         stuck_time: float = 10.0,
         find_tolerance: float = 0.1,
+        dist_err_limit: float = 0.5,
+        tension_margin: float = 5.0,
         d2o_density: float = 1.10,
         liquid_level: float | None = None,
         poll_s: float = 0.05,
         fuzzy: Sequence[FuzzyParams] | None = None,
         stdout: TextIO | None = None,
+        ring_segments: int | None = None,
     ):
         if not axes:
             raise ConfigError(f"polyaxis {name}: no axes")
@@ -165,6 +193,8 @@ class PolyAxis(Component):
         self.hare_ramp = float(hare_ramp)
         self.stuck_time = float(stuck_time)
         self.find_tolerance = float(find_tolerance)
+        self.dist_err_limit = float(dist_err_limit)
+        self.tension_margin = float(tension_margin)
         self.d2o_density = float(d2o_density)
         self.liquid_level = liquid_level
         self.poll_s = float(poll_s)
@@ -176,6 +206,11 @@ class PolyAxis(Component):
         self.offsets: list[Vec] = [a.offset for a in self.axes]  # type: ignore[misc]
         self.ring = av.neck_ring()
         self._ring = NeckRing(*self.ring)
+        #: The rope segments the controller lets bear on the neck ring: by default
+        #: both, as the world does (one geometry in two roles); a smaller mask is
+        #: a controller that deliberately knows less (UPPER: lower segments straight).
+        self.ring_segments = (PolyControl.RING_SEGMENTS if ring_segments is None
+                              else int(ring_segments))
         centre = av.vtog((0.0, 0.0, 0.0))
         self.axis_point: Vec = centre
         self.via: Vec = tuple(  # type: ignore[assignment]
@@ -187,6 +222,7 @@ class PolyAxis(Component):
                                          np.array(self.offsets, float), tol=self.find_tolerance)
         except NativeError as exc:
             raise ConfigError(f"polyaxis {name}: {exc}") from None
+        self._check_plane(name, position)
         # The statics kernel as a rope-geometry evaluator: every rope's length at
         # the hare, over the ring where it bears on it, in one C call (its
         # tensions and payouts are not used).
@@ -227,7 +263,7 @@ class PolyAxis(Component):
                 axis_point=centre[:2], weight_air=self.weight(math.inf),
                 weight_liquid=self.weight(-math.inf), liquid_level=liquid_level if wet else None,
                 offside_tension=self.offside_tension, near_end_cm=NEAR_END_CM,
-                position=position)
+                position=position, ring_segments=self.ring_segments)
         except NativeError as exc:
             raise ConfigError(f"polyaxis {name}: {exc}") from None
         self._read_tension = [a.loadcell.tension for a in self.axes]
@@ -255,6 +291,16 @@ class PolyAxis(Component):
         self.last_stop: StopRecord | None = None
         #: Why the last poll could not find the position (None: it could).
         self.position_error: str | None = None
+        #: Why the position estimate is not trusted (a slipping or reset encoder,
+        #: a rope whose length disagrees), or None; moves are refused until
+        #: ``survey`` or ``setpos`` re-establishes it.
+        self.estimate_lost: str | None = None
+        #: The axis the last estimate fault named (index), for ``survey``.
+        self.suspect: int | None = None
+        # snapshots (polls, distErr, encoder counts, motor steps) of a consistent
+        # estimate, the older one the reference of the slip check
+        self._snapshots: list[tuple[float, list[int], list[int]]] = []
+        self._snapshot_in = 0
         self.moves = 0
         self.polls = 0
         self.now_s = 0.0
@@ -291,6 +337,31 @@ class PolyAxis(Component):
         #: (polyaxis-poll, axis-poll) periods in queue checks (set_task_periods).
         self.task_periods: tuple[int, int] | None = None
 
+    def _check_plane(self, name: str, position: Sequence[float]) -> None:
+        """A planar manipulator (a direction the finder holds: 000's freeze mask)
+        must have every top pulley, the neck ring and the start position in the
+        held plane (the bottoms' mean there), within FIND_TOLERANCE: a pulley out
+        of it hangs the source where the controller can neither see nor move it."""
+        self.plane: dict[int, float] = {}
+        side = [b for b in self.bottoms if b is not None]
+        for k in range(3):
+            if not self.finder.freeze[k] or not side:
+                continue
+            held = sum(b[k] for b in side) / len(side)
+            self.plane[k] = held
+            axis = "xyz"[k]
+            places = [(f"{a.name} top pulley (AXIS.dat TOP)", self.tops[i])
+                      for i, a in enumerate(self.axes)]
+            places += [("the neck ring centre (AV.dat)", self.ring[0]),
+                       ("the source (POLYAXIS.dat POSITION)", position)]
+            for what, p in places:
+                if abs(float(p[k]) - held) > self.find_tolerance:
+                    raise ConfigError(
+                        f"polyaxis {name}: {what} is at {axis} = {float(p[k]):g} cm, out of the "
+                        f"plane {axis} = {held:g} cm the position finder holds (every bottom "
+                        f"attachment is there); the source would hang out of the plane the "
+                        f"controller can measure and move in: put it in the plane")
+
     @classmethod
     def from_record(cls, record, axes: Sequence[Axis], av: AV, **kw) -> PolyAxis:
         """A PolyAxis from a :class:`pyrt.db.PolyAxisRecord`."""
@@ -302,7 +373,8 @@ class PolyAxis(Component):
             net_forcelimit=record.net_forcelimit, offside_tension=record.offside_tension,
             hare_speed=record.hare_speed, hare_ramp=record.hare_ramp,
             stuck_time=record.stuck_time, find_tolerance=record.find_tolerance,
-            d2o_density=record.d2o_density, **kw,
+            d2o_density=record.d2o_density, dist_err_limit=record.dist_err_limit,
+            tension_margin=record.tension_margin, **kw,
         )
 
     # -- physics of the source -----------------------------------------------------
@@ -316,25 +388,25 @@ class PolyAxis(Component):
 
     def rope_geometry(self, i: int, x: Sequence[float]
                       ) -> tuple[float, Vec | None, Vec, Vec | None]:
-        """(length beyond the top pulley, ring contact or None, unit pull toward the
-        top, unit pull toward the bottom or None) of rope ``i`` for the source at ``x``."""
+        """(length beyond the top pulley, upper segment's ring contact or None, unit
+        pull toward the top, unit pull toward the bottom or None) of rope ``i`` for
+        the source at ``x``: the one rope model (csrc/neck.h) with the segments the
+        controller lets bear on the ring (:attr:`ring_segments`)."""
         o = self.offsets[i]
         q = (x[0] + o[0], x[1] + o[1], x[2] + o[2])
-        t = self.tops[i]
-        c = ring_contact(self.ring, t, q)
-        head = 0.0
-        if c is not None:
-            head = _dist(t, c)
-            t = c
+        b = self.bottoms[i]
+        path = self._ring.rope_path(self.tops[i], b, q, self.ring_segments)
+        t = path.upper if path.upper is not None else self.tops[i]
         d = (t[0] - q[0], t[1] - q[1], t[2] - q[2])
         lt = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) or 1e-12
         ut = (d[0] / lt, d[1] / lt, d[2] / lt)
-        b = self.bottoms[i]
         if b is None:
-            return head + lt, c, ut, None
+            return path.length, path.upper, ut, None
+        if path.lower is not None:
+            b = path.lower
         e = (b[0] - q[0], b[1] - q[1], b[2] - q[2])
         lb = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]) or 1e-12
-        return head + lt + lb, c, ut, (e[0] / lb, e[1] / lb, e[2] / lb)
+        return path.length, path.upper, ut, (e[0] / lb, e[1] / lb, e[2] / lb)
 
     def force_directions(self, x: Sequence[float]) -> list[Vec]:
         """Per rope, the force on the source per newton of tension at ``x``."""
@@ -408,6 +480,15 @@ class PolyAxis(Component):
                 return (f"outside the neck's allowed radius ({r:.2f} cm from the neck axis, "
                         f"NECK_RADIUS {self.av.neck_radius:g} cm)")
         return "outside the vessel"
+
+    def plane_refusal(self, x: Sequence[float]) -> str | None:
+        """Why ``x`` is out of a planar manipulator's plane (more than END_ERROR
+        from it in a held direction), or None."""
+        for k, held in self.plane.items():
+            if abs(float(x[k]) - held) > self.end_error:
+                return (f"out of the manipulator's plane ({'xyz'[k]} = {held:g} cm: every rope "
+                        f"lies in it, so the source cannot leave it)")
+        return None
 
     # -- the component contract ------------------------------------------------------------
 
@@ -510,6 +591,7 @@ class PolyAxis(Component):
                                "stop it first")
         if self.spawn is None:
             raise CommandError(f"{self.name} pattern: no loop to run it on")
+        self.refuse_if_lost("pattern")
         self.pattern_log = log
         kind = self.pattern_writer
         self.pattern_job = self.spawn("pattern", run_pattern(
@@ -554,7 +636,8 @@ class PolyAxis(Component):
         if self.position_error is not None:
             raise CommandError(f"{self.name} to: refused: the source position is unknown "
                                f"({self.position_error}); nothing moved")
-        why = self.refusal(tgt)
+        self.refuse_if_lost("to")
+        why = self.refusal(tgt) or self.plane_refusal(tgt)
         if why is not None:
             raise CommandError(f"{self.name} to: refused: ({tgt[0]:g}, {tgt[1]:g}, {tgt[2]:g}) "
                                f"is {why}; nothing moved")
@@ -567,13 +650,16 @@ class PolyAxis(Component):
                                    "nothing moved")
         t, resid = self.equilibrium_tensions(tgt)
         problems = []
+        lo = self.low_tension + self.tension_margin
+        hi = self.max_tension - self.tension_margin
+        margin = f", TENSION_MARGIN {self.tension_margin:g} N" if self.tension_margin else ""
         for a, v in zip(self.axes, t, strict=True):
-            if v < self.low_tension:
+            if v < lo:
                 problems.append(f"{a.name} would need {v:.1f} N (LOW_TENSION "
-                                f"{self.low_tension:g} N)")
-            elif v > self.max_tension:
+                                f"{self.low_tension:g} N{margin})")
+            elif v > hi:
                 problems.append(f"{a.name} would need {v:.1f} N (MAX_TENSION "
-                                f"{self.max_tension:g} N)")
+                                f"{self.max_tension:g} N{margin})")
         if resid > self.net_forcelimit:
             problems.append(f"{resid:.1f} N could not be balanced (NET_FORCELIMIT "
                             f"{self.net_forcelimit:g} N)")
@@ -582,21 +668,50 @@ class PolyAxis(Component):
                                "cannot be held within the tension bounds: "
                                + "; ".join(problems) + "; nothing moved")
 
+    def refuse_if_lost(self, word: str) -> None:
+        """CommandError while the position estimate is not trusted."""
+        if self.estimate_lost is not None:
+            raise CommandError(f"{self.name} {word}: refused: the position estimate is not "
+                               f"trusted ({self.estimate_lost}); re-establish it with 'survey' "
+                               "or 'setpos X Y Z'; nothing moved")
+
     def plan_path(self, target: Sequence[float], *, blend: bool = False) -> Hare:
-        """The hare for a move from here to ``target`` after every check
-        (CommandError with the reason if refused; nothing changes)."""
+        """The hare for a move from here to ``target`` after every check: the
+        target's (:meth:`check_target`), then every point on the way inside the
+        vessel and, from a start held within the tension bounds, holdable within
+        them (CommandError with the reason if refused; nothing changes)."""
         self.check_target(target)
         tgt: Vec = tuple(float(c) for c in target)  # type: ignore[assignment]
         start = self.position
         segs = plan_segments(start, tgt, self.in_neck, self.via)
         hare = Hare(segs, self.hare_speed, self.hare_ramp, blend=blend)
+        # the tensions on the way are checked when they are within bounds here (a
+        # source held where they are not may always move out: the stops guard it)
+        held = self._tension_refusal(start) is None
         for p in hare.sample():
             why = self.refusal(p)
+            if why is None and held and _dist(p, start) > 2.0 * self.end_error:
+                why = self._tension_refusal(p)
             if why is not None and _dist(p, start) > 2.0 * self.end_error:
                 raise CommandError(
                     f"{self.name} to: refused: the path passes ({p[0]:.1f}, {p[1]:.1f}, "
                     f"{p[2]:.1f}), {why}; nothing moved")
         return hare
+
+    def _tension_refusal(self, x: Sequence[float]) -> str | None:
+        """Why the source cannot be held at ``x`` on the way (a tension that would
+        be out of LOW_TENSION .. MAX_TENSION, or a force left over beyond
+        NET_FORCELIMIT: the stops would end the move there), or None."""
+        t, resid = self.equilibrium_tensions(x)
+        for a, v in zip(self.axes, t, strict=True):
+            if v < self.low_tension:
+                return f"where {a.name} would need {v:.1f} N (LOW_TENSION {self.low_tension:g} N)"
+            if v > self.max_tension:
+                return f"where {a.name} would need {v:.1f} N (MAX_TENSION {self.max_tension:g} N)"
+        if resid > self.net_forcelimit:
+            return (f"where {resid:.1f} N could not be balanced (NET_FORCELIMIT "
+                    f"{self.net_forcelimit:g} N)")
+        return None
 
     def to(self, target: Sequence[float], *, blend: bool = False) -> Hare:
         """Start a move to ``target`` (global cm) now, after the checks: the
@@ -610,6 +725,7 @@ class PolyAxis(Component):
         """Start ``record`` now instead of queueing it (a running motion is
         replaced, as a new ``to`` re-targets a move); CommandError if refused,
         and then nothing changes."""
+        self.refuse_if_lost(record.type)
         cls = get_motion_type(record.type)
         motion = cls()
         try:
@@ -651,7 +767,9 @@ class PolyAxis(Component):
 
     def _engage(self, motion: MotionType, tgt: Vec | None) -> None:
         """A motion has started: every Axis under PolyAxis control, the stop
-        conditions armed (tension stops on again), the hare where the source is."""
+        conditions armed (tension stops on again), the hare where the source is;
+        CommandError (nothing moved) while the estimate is not trusted."""
+        self.refuse_if_lost(motion.name or type(motion).__name__)
         for a in self.axes:
             if a.mode != POLYAXIS:
                 a.polyActivate()
@@ -791,6 +909,178 @@ class PolyAxis(Component):
             if self.on_fault is not None:
                 self.on_fault(cause, self.name)
 
+    # -- estimate integrity ---------------------------------------------------------------
+
+    def check_estimate(self) -> None:
+        """After every measure, moving or not: the estimate is lost (a fault of
+        the manipulator naming the axis) when distErr exceeds DIST_ERR_LIMIT, or
+        when it has risen by more than FIND_TOLERANCE since the reference while
+        an encoder has fallen SLIP_COUNTS counts out of step with its motor (an
+        encoder slipping on its rope, or reset).  Moves are refused from then
+        until ``survey`` or ``setpos`` re-establishes the position."""
+        if self.estimate_lost is not None:
+            return
+        de = self.dist_err
+        snaps = self._snapshots
+        disc: list[float] | None = None
+        if de > self.dist_err_limit:
+            cause = f"distErr {de:.3f} cm above DIST_ERR_LIMIT {self.dist_err_limit:g} cm"
+        elif snaps and de > snaps[0][0] + self.find_tolerance:
+            disc = self._disagreement()
+            i = max(range(self.n), key=lambda k: abs(disc[k]))  # type: ignore[index]
+            if abs(disc[i]) < SLIP_COUNTS * self.axes[i].encoder.slope:
+                self._snapshot(de)
+                return
+            cause = f"distErr rose from {snaps[0][0]:.3f} to {de:.3f} cm"
+        else:
+            self._snapshot(de)
+            return
+        if disc is None:
+            disc = self._disagreement() if snaps else [0.0] * self.n
+        i = max(range(self.n), key=lambda k: abs(disc[k]))  # type: ignore[index]
+        if abs(disc[i]) >= SLIP_COUNTS * self.axes[i].encoder.slope:
+            why = (f"its encoder is {disc[i]:+.2f} cm out of step with its motor "
+                   "(encoder slip or reset)")
+        else:
+            res = [float(r) for r in self.finder.residuals]
+            i = max(range(self.n), key=lambda k: abs(res[k]))
+            why = f"its length disagrees most ({res[i]:+.2f} cm)"
+        self.suspect = i
+        name = self.axes[i].name
+        self.estimate_lost = f"{name}: {cause}; {why}"
+        detail = (f"{name}: position estimate lost: {cause}; {why}; moves refused until "
+                  "'survey' or 'setpos X Y Z'")
+        if self.active:
+            self._fault(detail)
+        elif self.on_fault is not None:
+            self.on_fault(detail, self.name)
+        else:
+            self.stop_motors()
+
+    def _snapshot(self, de: float) -> None:
+        """Every SNAPSHOT_POLLS polls of a consistent estimate: distErr, encoder
+        counts and motor steps (the last two kept)."""
+        self._snapshot_in -= 1
+        if self._snapshot_in > 0 and self._snapshots:
+            return
+        self._snapshot_in = SNAPSHOT_POLLS
+        snap = (de, [a.encoder.count() for a in self.axes],
+                [a.motor.position_steps for a in self.axes])
+        self._snapshots.append(snap)
+        if len(self._snapshots) > 2:
+            del self._snapshots[0]
+
+    def _disagreement(self) -> list[float]:
+        """Per axis, rope the encoder saw less the rope the motor moved since the
+        reference snapshot (cm)."""
+        _, counts, steps = self._snapshots[0]
+        return [(a.encoder.count() - c) * a.encoder.slope
+                - (a.motor.position_steps - s) / a.motor.steps_per_cm
+                for a, c, s in zip(self.axes, counts, steps, strict=True)]
+
+    def establish(self, x: Sequence[float]) -> list[float]:
+        """The source is at ``x``: every encoder re-zeroed so that its corrected
+        length is the rope's length there (at the measured tension), the finder
+        restarted from ``x``, the estimate trusted again.  Returns each encoder's
+        change of zero length (cm)."""
+        p: Vec = (float(x[0]), float(x[1]), float(x[2]))
+        changes = []
+        for i, a in enumerate(self.axes):
+            g = self.length_at(i, p)
+            t = max(self.tensions[i], 0.0)
+            want = (g + a.dead_length) / (1.0 + a.stretch * t)
+            enc = a.encoder
+            new = want - enc.slope * enc.count()
+            changes.append(new - enc.zero_length)
+            enc.zero_length = new
+        self._ctl.set_position(p)
+        self.position = p
+        self.estimate_lost = None
+        self.suspect = None
+        self.position_error = None
+        self._snapshots.clear()
+        self._snapshot_in = 0
+        self.measure()
+        return changes
+
+    def _refuse_reestablish(self, word: str) -> None:
+        if self.active or any(a.motor.running for a in self.axes):
+            raise CommandError(f"{self.name} {word}: a motor is moving; stop it first; "
+                               "nothing changed")
+
+    @command(Arg("x", _cm("x")), Arg("y", _cm("y")), Arg("z", _cm("z")), name="setpos")
+    def cmd_setpos(self, x: float, y: float, z: float) -> str:
+        """setpos X Y Z: the source is at (X, Y, Z) cm (the operator has seen it):
+        every encoder is re-zeroed to agree and moves are allowed again."""
+        self._refuse_reestablish("setpos")
+        p = (x, y, z)
+        why = self.refusal(p) or self.plane_refusal(p)
+        if why is not None:
+            raise CommandError(f"{self.name} setpos: ({x:g}, {y:g}, {z:g}) is {why}; "
+                               "nothing changed")
+        changes = self.establish(p)
+        moved = ", ".join(f"{a.name} {c:+.2f}" for a, c in zip(self.axes, changes, strict=True))
+        return (f"{self.name}: position set to ({x:g}, {y:g}, {z:g}); encoders re-zeroed "
+                f"({moved} cm); distErr {self.dist_err:.3f} cm; moves allowed")
+
+    @command(name="survey")
+    def cmd_survey(self) -> str:
+        """survey: re-establish the position from the redundant ropes: the
+        position from every rope but the one the last estimate fault named (or
+        the one whose length disagrees most), that rope's encoder re-zeroed."""
+        self._refuse_reestablish("survey")
+        if self.suspect is not None:
+            bad = self.suspect
+        else:
+            res = [float(r) for r in self.finder.residuals]
+            bad = max(range(self.n), key=lambda k: abs(res[k]))
+        others = [k for k in range(self.n) if k != bad]
+        free = [k for k in range(3) if not self.finder.freeze[k]]
+        name = self.axes[bad].name
+        if len(others) < len(free):
+            raise CommandError(f"{self.name} survey: without {name} {len(others)} ropes cannot "
+                               f"fix {len(free)} directions; use 'setpos X Y Z'; nothing changed")
+        x, rms = self._solve_without(bad, free)
+        why = self.refusal(x) or self.plane_refusal(x)
+        if rms > self.dist_err_limit or why is not None or not all(map(math.isfinite, x)):
+            raise CommandError(
+                f"{self.name} survey: the ropes but {name} do not agree on a position "
+                f"(residual {rms:.3f} cm{'; ' + why if why else ''}); use 'setpos X Y Z'; "
+                "nothing changed")
+        change = self.establish(x)[bad]
+        return (f"{self.name}: survey: position ({x[0]:.2f}, {x[1]:.2f}, {x[2]:.2f}) from every "
+                f"rope but {name} (residual {rms:.3f} cm); {name}'s encoder re-zeroed by "
+                f"{change:+.2f} cm; distErr {self.dist_err:.3f} cm; moves allowed")
+
+    def _solve_without(self, bad: int, free: list[int]) -> tuple[Vec, float]:
+        """Gauss-Newton from the estimate on every rope's corrected length but
+        ``bad``'s, in the free directions: (position, RMS residual cm)."""
+        others = [k for k in range(self.n) if k != bad]
+        meas = np.array([self.lengths[k] for k in others], float)
+        x = np.array(self.position, float)
+
+        def resid(p: np.ndarray) -> np.ndarray:
+            return meas - np.array([self.length_at(k, p) for k in others], float)
+
+        r = resid(x)
+        for _ in range(50):
+            jac = np.zeros((len(others), len(free)))
+            for j, k in enumerate(free):
+                dx = np.zeros(3)
+                dx[k] = 0.01
+                jac[:, j] = (resid(x + dx) - r) / 0.01
+            step = np.zeros(3)
+            step[free] = np.linalg.lstsq(jac, -r, rcond=None)[0]
+            norm = float(np.linalg.norm(step))
+            if norm > 20.0:
+                step *= 20.0 / norm
+            x = x + step
+            r = resid(x)
+            if norm < 1e-4:
+                break
+        rms = float(np.sqrt(np.mean(r * r))) if len(r) else 0.0
+        return (float(x[0]), float(x[1]), float(x[2])), rms
+
     def step_motion(self, now_s: float) -> None:
         """The motion executor's turn in the poll: start the next queued motion
         record between moves, step the running one (it sets the hare), check
@@ -833,36 +1123,19 @@ class PolyAxis(Component):
     def lengths_at(self, x: Sequence[float]) -> list[float]:
         """Every rope's length beyond its top pulley with the source at ``x`` (cm),
         over the neck ring where a rope bears on it: one C call."""
+        if self.ring_segments != StaticsSolver.RING_SEGMENTS:  # the controller knows less
+            return [self.length_at(i, x) for i in range(self.n)]
         try:
             return self._geometry.evaluate(x)[0]
         except NativeError:  # degenerate (the carriage on a pulley): the Python form
             return [self.length_at(i, x) for i in range(self.n)]
 
-    def length_at(self, i: int, x: Sequence[float],
-                  hints: list[float | None] | None = None) -> float:
+    def length_at(self, i: int, x: Sequence[float]) -> float:
         """Rope ``i``'s length beyond its top pulley with the source at ``x`` (cm),
-        over the neck ring where it bears on it (the poll's fast form of
-        :meth:`rope_geometry`)."""
+        over the neck ring where it bears on it (:meth:`rope_geometry`'s length)."""
         o = self.offsets[i]
-        qx, qy, qz = x[0] + o[0], x[1] + o[1], x[2] + o[2]
-        t = self.tops[i]
-        head = 0.0
-        found = self._ring.contact(t, (qx, qy, qz), None if hints is None else hints[i])
-        c = None
-        if found is not None:
-            c = found[0]
-        if hints is not None:
-            hints[i] = None if found is None else found[1]
-        if c is not None:
-            head = math.sqrt((t[0] - c[0]) ** 2 + (t[1] - c[1]) ** 2 + (t[2] - c[2]) ** 2)
-            t = c
-        dx, dy, dz = t[0] - qx, t[1] - qy, t[2] - qz
-        length = head + math.sqrt(dx * dx + dy * dy + dz * dz)
-        b = self.bottoms[i]
-        if b is not None:
-            dx, dy, dz = b[0] - qx, b[1] - qy, b[2] - qz
-            length += math.sqrt(dx * dx + dy * dy + dz * dz)
-        return length
+        q = (x[0] + o[0], x[1] + o[1], x[2] + o[2])
+        return self._ring.rope_path(self.tops[i], self.bottoms[i], q, self.ring_segments).length
 
     def drive_motors(self, now_s: float, dt: float) -> None:
         """During a move: error signals, the batched fuzzy step, every motor, the stops."""
@@ -943,6 +1216,8 @@ class PolyAxis(Component):
                                               if self.last_stop else "idle")
         if self.position_error is not None:
             state += f"  POSITION UNKNOWN: {self.position_error}"
+        elif self.estimate_lost is not None:
+            state += "  POSITION NOT TRUSTED ('survey' or 'setpos X Y Z')"
         return (f"t={self.now_s:9.2f} s  pos ({x[0]:8.2f} {x[1]:8.2f} {x[2]:8.2f}) cm  "
                 f"distErr {self.dist_err:.3f} cm  net {self.net_force_magnitude:6.2f} N  "
                 f"T [{t}] N  {state}")

@@ -2,7 +2,10 @@
 
 * ``ENDPOINT_STOP``: the source is within the lesser of END_ERROR and
   distErr (the RMS length residual) of the endpoint, but the condition is
-  never tighter than FIND_TOLERANCE (0.1 cm);
+  never tighter than FIND_TOLERANCE (0.1 cm); and (beyond 000) distErr
+  itself is within END_ERROR, the station's endpoint tolerance, so that an
+  estimate whose rope lengths disagree never claims the endpoint.  The
+  limit the message prints is END_ERROR;
 * ``STUCK_STOP``: the source is more than half way to the endpoint and has
   not got any closer for STUCK_TIME (10 s);
 * ``NET_FORCE_STOP``: the residual net force on the source exceeds
@@ -124,9 +127,10 @@ class StopCheck:
             return None
         d = _dist(position, self.endpoint)
         radius = self.endpoint_radius(dist_err)
-        if d <= radius:
+        if d <= radius and dist_err <= self.end_error:
             return (StopReason.ENDPOINT_STOP,
-                    f"within {d:.3f} cm of the endpoint (limit {radius:.3f} cm)")
+                    f"within {d:.3f} cm of the endpoint (limit {self.end_error:g} cm; "
+                    f"distErr {dist_err:.3f} cm)")
         if self.best_time is None or d < self.best - STUCK_PROGRESS:
             self.best = d
             self.best_time = now_s

@@ -309,12 +309,18 @@ class ManipulatorStation(Station):
         elif writer == "thread":
             writer = ThreadWriter(st)
         self.writeback = WriteBack(st, writer)
+        # While the position estimate is not trusted (a slipping or reset
+        # encoder) nothing measured is written back: each watch reads its last
+        # written value until 'survey' or 'setpos' re-establishes the position.
         for a, rec in zip(self.axes, st.axes_of(pa_rec), strict=True):
-            self.writeback.watch_length(rec.name, _length_reader(a))
-            self.writeback.watch_zerolength(st.encoder_of(rec).name, a.encoder.length)
+            read, box = _trusted(pa, _length_reader(a), lambda w: (w.last, False))
+            box.append(self.writeback.watch_length(rec.name, read))
+            zread, zbox = _trusted(pa, a.encoder.length, lambda w: w.last)
+            zbox.append(self.writeback.watch_zerolength(st.encoder_of(rec).name, zread))
             a.loadcell.write_back = _calibration_writer(self.writeback, st.loadcell_of(rec).name,
                                                         self.loop)
-        self.writeback.watch_position(pa_rec.name, lambda: (pa.position, pa.active))
+        pread, pbox = _trusted(pa, lambda: (pa.position, pa.active), lambda w: (w.last, False))
+        pbox.append(self.writeback.watch_position(pa_rec.name, pread))
         if self.plant is not None:
             self.loop.attach(self.plant.step, name="plant")
         self.loop.attach(self.queue, name=f"queue:{pa.name}")
@@ -514,6 +520,19 @@ def _checks(period_s: float, tick_s: float, what: str) -> int:
         raise ConfigError(f"{what} of {period_s:g} s is {n} ticks of {tick_s * 1e3:g} ms; "
                           "it must be 1..255 ticks")
     return n
+
+
+def _trusted(pa: PolyAxis, read: Callable[[], Any], held: Callable[[Any], Any]
+             ) -> tuple[Callable[[], Any], list[Any]]:
+    """``read`` while the estimate is trusted, else ``held(watch)`` (the value last
+    written: nothing is written); the watch goes in the returned list."""
+    box: list[Any] = []
+
+    def value() -> Any:
+        if pa.estimate_lost is not None and box and box[0].last is not None:
+            return held(box[0])
+        return read()
+    return value, box
 
 
 def _length_reader(axis: Axis) -> Callable[[], tuple[float, bool]]:

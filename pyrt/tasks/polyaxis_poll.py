@@ -8,6 +8,9 @@ One run, in this order (the steps are the PolyAxis's, the sequence is here):
    nonsense by hand, a broken encoder) keeps the last position and refuses
    moves; during a move it is a fault of the whole manipulator
    (``position_lost``), and the poll ends there;
+   ``check_estimate()``: distErr beyond DIST_ERR_LIMIT, or rising while an
+   encoder falls out of step with its motor, loses the estimate (a fault
+   naming the axis; moves refused until it is re-established), moving or not;
 3. ``step_motion(now_s)``: the motion executor starts the next queued
    motion record between moves and steps the running one, which sets the
    hare (a plug-in motion's hare is checked);
@@ -55,6 +58,8 @@ class PolledPolyAxis(Protocol):
 
     def position_lost(self, cause: str) -> None: ...
 
+    def check_estimate(self) -> None: ...
+
     def step_motion(self, now_s: float) -> None: ...
 
     def drive_motors(self, now_s: float, dt: float) -> None: ...
@@ -81,6 +86,7 @@ def control_poll(pa: PolledPolyAxis, now_s: float) -> None:
         pa.position_lost(f"position finder failed: {exc}")
         return
     pa.position_error = None
+    pa.check_estimate()
     pa.step_motion(now_s)
     if pa.active:
         pa.drive_motors(now_s, dt)
