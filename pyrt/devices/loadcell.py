@@ -143,7 +143,13 @@ class Loadcell(Component):
             self.write_back(slope, offset)
         return slope, offset
 
-    @command(Arg("LOAD", str, rest=True), name="point",
+    @property
+    def load_range(self) -> tuple[float, float | None]:
+        """Calibration loads (N): up to MAXLOAD when the database gives one."""
+        return (0.0, self.maxload if self.maxload > 0 else None)
+
+    @command(Arg("LOAD", lambda t: parse_load(t, "point"), rest=True, lo=0.0, units="N",
+                 bounds="load_range", what="up to the loadcell's MAXLOAD"), name="point",
              reply=lambda v: f"point: ADC {v[0]} = {v[1]:.4g} N", aliases=("calibrationPoint",))
     def point(self, load: float | str) -> tuple[int, float]:
         """point LOAD: a calibration point with LOAD (N, lb or kg) hung on the rope
@@ -153,6 +159,10 @@ class Loadcell(Component):
             raise CommandError(f"{self.name} point: not in calibration mode; "
                                "give 'calibrate' first")
         n = parse_load(load, f"{self.name} point")
+        hi = self.load_range[1]
+        if hi is not None and n > hi:
+            raise CommandError(f"{self.name} point: LOAD {n:.4g} N is out of range: "
+                               f"0..{hi:.4g} N (the loadcell's MAXLOAD); nothing recorded")
         code = self.channel.code()
         self.points.append((code, n))
         return code, n

@@ -43,6 +43,7 @@ BoardError there faults the manipulator, naming the URL.
 
 from __future__ import annotations
 
+import math
 import sys
 import threading
 from collections.abc import Callable
@@ -74,6 +75,9 @@ __all__ = [
 ]
 
 TICK_NS = 1_000_000
+#: Slack allowed beyond the rope lengths sampled over the vessel and the neck
+#: (cm): the sample grid is coarse, and the database geometry is a survey's.
+ROPE_RANGE_MARGIN = 5.0
 _SIM_FAULTS = ("slip", "dead", "stuck", "stall", "break", "none")
 POLL_S = 0.05
 AXIS_POLL_S = 0.01
@@ -290,6 +294,11 @@ class ManipulatorStation(Station):
         for a, p in zip(self.axes, payouts, strict=True):
             a.encoder.reset()
             a.encoder.zero_length = p
+        # Every move of every kind is held to the ropes' physical length
+        # ranges and the tension limits (tensionStop), in axis-poll.
+        for a, r in zip(self.axes, rope_ranges(pa), strict=True):
+            a.set_supervision(r, (pa.low_tension, pa.max_tension),
+                              lambda: pa.tension_stop)
 
         # The motion queue the mailbox fills (the station's runner takes it).
         pa.motion = self.motion
@@ -506,6 +515,45 @@ class ManipulatorStation(Station):
         finally:
             self.writeback.close()
             self.stop_log()
+
+
+def rope_ranges(pa: PolyAxis, cells: int = 12) -> list[tuple[float, float]]:
+    """Every rope's physical length range (cm): the least and greatest length
+    with the source anywhere it may be (the vessel sphere and the neck,
+    :meth:`PolyAxis.refusal`), sampled on a grid of ``cells`` per vessel
+    diameter and over the sphere's surface, widened by ROPE_RANGE_MARGIN."""
+    av = pa.av
+    r = av.vessel_radius
+    ring = av.neck_ring_static_position
+    pts: list[tuple[float, float, float]] = []
+    step = 2.0 * r / cells
+    grid = [-r + k * step for k in range(cells + 1)]
+    pts += [(x, y, z) for x in grid for y in grid for z in grid]
+    for i in range(13):  # the sphere's surface
+        th = math.pi * i / 12
+        for j in range(24):
+            ph = 2.0 * math.pi * j / 24
+            pts.append((0.999 * r * math.sin(th) * math.cos(ph),
+                        0.999 * r * math.sin(th) * math.sin(ph), 0.999 * r * math.cos(th)))
+    nr = av.neck_radius
+    for h in (0.0, 0.5 * av.neck_length, av.neck_length):  # the neck, up to its top
+        for dx, dy in ((0.0, 0.0), (nr, 0.0), (-nr, 0.0), (0.0, nr), (0.0, -nr)):
+            pts.append((ring[0] + 0.999 * dx, ring[1] + 0.999 * dy, ring[2] + h))
+    lo = [math.inf] * pa.n
+    hi = [0.0] * pa.n
+    for v in pts:
+        x = av.vtog(v)
+        if pa.refusal(x) is not None:
+            continue
+        try:
+            lengths = pa.lengths_at(x)
+        except NativeError:  # a sample on a pulley, an attachment or the ring's rim
+            continue
+        for i, length in enumerate(lengths):
+            lo[i] = min(lo[i], length)
+            hi[i] = max(hi[i], length)
+    return [(round(max(0.0, a - ROPE_RANGE_MARGIN), 1), round(b + ROPE_RANGE_MARGIN, 1))
+            for a, b in zip(lo, hi, strict=True)]
 
 
 def _checks(period_s: float, tick_s: float, what: str) -> int:
