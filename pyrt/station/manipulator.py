@@ -365,8 +365,12 @@ class ManipulatorStation(Station):
     def _write_back(self, now_ns: int) -> None:
         """Loop handler: the database write-back; a refused value (a length set
         to nonsense by hand) is a fault of the manipulator, reported once.
-        Nothing while the boards cannot be reached (that fault says why)."""
+        Nothing while the boards cannot be reached (that fault says why), and
+        nothing while the manipulator is faulted: what a dead loadcell or a
+        slipping encoder measured is never written (after ``ack`` it resumes)."""
         if self.boards is not None and self.boards.down is not None:
+            return
+        if self.fault is not None:  # nothing measured while faulted is written back
             return
         try:
             self.writeback.poll(now_ns)
@@ -499,6 +503,9 @@ class ManipulatorStation(Station):
         return fields
 
     def closing_note(self) -> str:
+        if self.fault is not None:
+            return (f"; databases in {self.directory} keep the values last written before "
+                    "the fault")
         if self.boards is not None and self.boards.down is not None:
             return f"; databases in {self.directory} keep the values last written"
         return f"; databases written back in {self.directory}"
@@ -508,6 +515,8 @@ class ManipulatorStation(Station):
         Boards that cannot be reached leave the values last written."""
         try:
             if self.boards is not None and self.boards.down is not None:
+                return
+            if self.fault is not None:  # measured while faulted: not written
                 return
             self.writeback.poll(self.loop.now_ns + 10**12)
         except PyrtError as exc:  # the file keeps its last good value
