@@ -19,7 +19,7 @@ from pyrt.errors import FaultError
 
 #: (fault kind, rope, the named stop or fault it must end in)
 POLY_CASES = [
-    ("dead", "axis1", "LOADCELL_FAULT: axis1Loadcell reads ADC code 0"),
+    ("dead", "axis1", "LOW_TENSION_STOP: axis1 tension"),
     ("stuck", "axis1", "LOADCELL_FAULT: axis1Loadcell has read ADC code"),
     ("stall", "axis1", "TRACKING_FAULT: axis1: the motor moved"),
     ("break", "axis2", "LOW_TENSION_STOP: axis"),
@@ -86,6 +86,7 @@ def test_fault_during_polyaxis_move(tmp_path, kind, rope, named):
         at, written = _inject_and_finish(station, runner, kind, rope)
         fault = station.fault
         assert named in fault.cause, fault.cause
+        assert named in str(station.polyaxis.last_stop)
         assert not station.motors_running() and not station.polyaxis.active
         _check_source(station, kind, *at)
         assert _db_values(station.directory) == written

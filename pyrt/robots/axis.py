@@ -444,7 +444,8 @@ class Axis(Component):
         standalone control).  In order:
 
         * the loadcell: an ADC code at either end of its range (dead,
-          disconnected, saturated), or one that has not changed for
+          disconnected, saturated; in a PolyAxis move the tension stops see
+          that first), or one that has not changed for
           :data:`LOADCELL_STUCK_S` while this rope's motor runs (stuck);
         * the rope's physical length range, when the motor drives it further out;
         * under PolyAxis control, the encoder must follow the motor (stall or
@@ -459,7 +460,7 @@ class Axis(Component):
         poly = self.mode == POLYAXIS and group is not None and i is not None
         lc = self.loadcell
         code = lc.channel.code()
-        if code <= 0 or code >= ADC_MAX:
+        if not poly and (code <= 0 or code >= ADC_MAX):  # (a PolyAxis move: its tension stops)
             return (f"LOADCELL_FAULT: {lc.name} reads ADC code {code}, the end of its "
                     "range (dead, disconnected or saturated)")
         since = self._adc_since
@@ -498,6 +499,16 @@ class Axis(Component):
                 return (f"HIGH_TENSION_STOP: {self.name} tension {tension:.2f} N above "
                         f"MAX_TENSION {lim[1]:g} N during an axis move")
         return None
+
+    def fail(self, cause: str, source: str = "") -> None:
+        """A fault of the robot found on this rope; during a PolyAxis move the
+        move ends first with a FAULT stop that says why (``last_stop``)."""
+        group = self.group
+        if self.mode == POLYAXIS and group is not None and getattr(group, "active", False):
+            from pyrt.robots.stops import StopReason
+
+            group.halt(StopReason.FAULT, cause)  # type: ignore[attr-defined]
+        super().fail(cause, source)
 
     def _length_at(self, tension: float) -> float:
         t = tension if tension > 0.0 else 0.0
