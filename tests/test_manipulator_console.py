@@ -133,7 +133,7 @@ def test_fault_then_ack(shell):
     text = run_lines(sh, runner, ["prototype to 60 0 140", "sleep 10", "sim fault axis2 dead",
                                   "wait", "prototype to 0 0 100", "ack", "sim fault axis2 none",
                                   "prototype to 0 0 110", "prototype stop"])
-    assert "FAULT: LOADCELL_FAULT: axis2Loadcell reads ADC code 0" in text
+    assert "FAULT: LOW_TENSION_STOP: axis2 tension" in text
     assert "give 'ack' first; nothing moved" in text
     assert "fault acknowledged" in text
     assert "prototype: stopped" in text
@@ -356,3 +356,15 @@ def test_wait_prints_the_stop_reason_once_and_in_order(shell):
     text = run_lines(sh, runner, ["prototype to 0 0 100", "prototype to 5 0 100", "wait"])
     stops = [ln for ln in text.splitlines() if "stopped: " in ln]
     assert len(stops) == 2 and "(0.0" in stops[0] and "(5.0" in stops[1]
+
+
+def test_pattern_from_a_device_or_a_huge_file_is_refused(shell, tmp_path):
+    """'prototype pattern /dev/zero' and a pattern over 1 MiB: one error each, read no further."""
+    sh, station, runner, _ = shell
+    big = tmp_path / "big.pat"
+    big.write_bytes(b"log.txt\n" + b"0 0 100\n" * (1 << 17))
+    text = run_lines(sh, runner, ["prototype pattern /dev/zero", f"prototype pattern {big}"])
+    assert "error: pattern: '/dev/zero': not a regular file" in text
+    assert "more than the 1048576 bytes allowed" in text
+    assert text.count("error:") == 2
+    assert not station.motors_running()

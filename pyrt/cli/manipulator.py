@@ -9,9 +9,11 @@ calibrate``; plus ``quit``, ``log``, ``debug``, ``help [object]``, ``wait``,
 Without ``--db DIR`` the packaged station (``--station``) is copied to a
 working directory first (existing files there are kept: they carry the last
 position), and the run says where; the database is written back while the
-manipulator runs.  The base tick defaults to 5 ms for this robot: the
-physics steps every tick (a motor at its 7.0 cm/s limit makes 1.4
-half-steps a tick), the control poll is 50 ms and the standalone axis poll
+manipulator runs. One process at a time may run on a database directory (a
+second is refused, naming the first one's pid); ``--station`` with ``--db``
+names the station the database must hold. The base tick defaults to 5 ms for
+this robot: the physics steps every tick (a motor at its 7.0 cm/s limit makes
+1.4 half-steps a tick), the control poll is 50 ms and the standalone axis poll
 10 ms, and ``--speed max`` then runs a move some 50 times faster than real
 time.
 
@@ -64,8 +66,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--db", metavar="DIR", help="station database directory (written back)")
-    p.add_argument("--station", choices=STATIONS, default="prototype",
-                   help="packaged station to copy when no --db is given (default prototype)")
+    p.add_argument("--station", choices=STATIONS, default=None,
+                   help="packaged station to copy when no --db is given (default prototype); "
+                        "with --db, the station the database must hold")
     add_boards_option(p, "prototype|sno")
     p.add_argument("--ideal-sensors", action="store_true",
                    help="switch off encoder quantisation and loadcell noise/offsets "
@@ -81,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
     if args.db:
         directory = Path(args.db)
     else:
+        args.station = args.station or "prototype"
         directory = default_working_directory(args.station)
         copy_station(args.station, directory)
         print(f"pyrt manipulator: working copy of the {args.station} station in {directory}",
@@ -95,7 +99,8 @@ def run(args: argparse.Namespace) -> int:
     load_backend(args.boards)
     loop = make_loop(args, warn=warn)
     imp = Imperfections.ideal() if args.ideal_sensors else None
-    station = ManipulatorStation(directory, loop=loop, imperfections=imp, boards=args.boards)
+    station = ManipulatorStation(directory, loop=loop, imperfections=imp, boards=args.boards,
+                                 expect=args.station)
     station.close_report = lambda m: print(m, file=out, flush=True)
     runner = station.runner
     posted.append(runner)

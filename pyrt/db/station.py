@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import os
+import stat
 import threading
 import time
 from collections.abc import Iterable, Mapping
@@ -36,6 +38,7 @@ from pyrt.errors import ConfigError, PyrtError
 from pyrt.fileio import atomic_write
 
 __all__ = [
+    "MAX_DB_BYTES",
     "TYPES",
     "ObjectRef",
     "Station",
@@ -43,6 +46,7 @@ __all__ = [
     "load_station",
     "parse_file",
     "parse_records",
+    "read_regular_file",
 ]
 
 #: The object types of a station, in the order their files are read.
@@ -81,6 +85,39 @@ def parse_records(text: str, file: str, type_: str) -> tuple[DatFile, dict[str, 
     return dat, records
 
 
+#: Longest database file read (bytes): a station's files are a few kB.
+MAX_DB_BYTES = 1 << 20
+
+
+def read_regular_file(path: str | Path, limit: int) -> bytes:
+    """The bytes of ``path``, which must be a regular file of at most ``limit``
+    bytes (ConfigError naming the file if not).  Never blocks on a FIFO or a
+    device and never reads more than ``limit + 1`` bytes (a file that grows
+    while it is read is refused too)."""
+    p = str(path)
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0)
+    fd = os.open(p, flags)
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise ConfigError("not a regular file", p)
+        if st.st_size > limit:
+            raise ConfigError(f"{st.st_size} bytes, more than the {limit} bytes allowed", p)
+        chunks: list[bytes] = []
+        got = 0
+        while got <= limit:
+            chunk = os.read(fd, limit + 1 - got)
+            if not chunk:
+                break
+            chunks.append(chunk)
+            got += len(chunk)
+        if got > limit:
+            raise ConfigError(f"grew past the {limit} bytes allowed while read", p)
+        return b"".join(chunks)
+    finally:
+        os.close(fd)
+
+
 def parse_file(path: str | Path, type_: str | None = None) -> tuple[DatFile, dict[str, Any]]:
     """Read one database file (type from the file name unless given)."""
     path = Path(path)
@@ -91,7 +128,7 @@ def parse_file(path: str | Path, type_: str | None = None) -> tuple[DatFile, dic
                               f"{', '.join(FILES.values())}", str(path))
         type_ = stem
     try:
-        data = path.read_bytes()
+        data = read_regular_file(path, MAX_DB_BYTES)
     except FileNotFoundError:
         raise ConfigError(f"missing database file: expected {path.name} holding the "
                           f"{type_.upper()} entries", str(path)) from None

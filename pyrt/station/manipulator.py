@@ -52,8 +52,8 @@ from typing import Any, TextIO
 
 from pyrt.boards import Boards, open_boards
 from pyrt.component import Arg, Component, Signal, command, finite
+from pyrt.db import DirectoryLock, load_station, lock_directory
 from pyrt.db import Station as StationDB
-from pyrt.db import load_station
 from pyrt.errors import BoardError, CommandError, ConfigError, NativeError, PyrtError
 from pyrt.native import FuzzyParams, NativeInputError
 from pyrt.robots.av import AV
@@ -208,6 +208,14 @@ class ManipulatorStation(Station):
     source with volume, else in air); ``boards``: the board URL (default
     ``sim:``; see the module text).  Boards that cannot be reached raise
     BoardError; a world that is not this station's, ConfigError.
+
+    The station directory is locked for this process while the station
+    lives (:func:`pyrt.db.lock_directory`: another process gets a
+    ConfigError naming the holder's pid; ``lock=False`` for a station that
+    is only read, as board-sim's); ``expect`` names the station the
+    caller wants (``--station``): a database of another is a ConfigError.
+    A database POSITION where the source may not be (outside the vessel and
+    the neck) is a ConfigError naming the file and line.
     """
 
     def __init__(
@@ -223,16 +231,39 @@ class ManipulatorStation(Station):
         liquid_level: float | None = None,
         stdout: TextIO | None = None,
         boards: str | None = None,
+        expect: str | None = None,
+        lock: bool = True,
     ):
         self.directory = Path(directory)
-        self.station: StationDB = load_station(self.directory)
-        super().__init__(loop if loop is not None else Loop(SimClock(), period_ns=tick_ns))
-        opened = open_boards(boards, "manipulator")
+        # one process per directory (board-sim only reads it: lock=False)
+        self._lock = lock_directory(self.directory) if lock else DirectoryLock(self.directory, None)
+        try:
+            self.station: StationDB = load_station(self.directory)
+            pa_rec = self.station.polyaxis()
+            if expect is not None and pa_rec.name.lower() != expect.lower():
+                raise ConfigError(f"the database holds the {pa_rec.name.lower()!r} station, "
+                                  f"not {expect.lower()!r}; give the matching --station or "
+                                  "another --db", pa_rec.where.file, pa_rec.where.line)
+            super().__init__(loop if loop is not None else Loop(SimClock(), period_ns=tick_ns))
+            opened = open_boards(boards, "manipulator")
+        except BaseException:
+            self._lock.release()
+            raise
         try:
             self._build(opened, poll_s, axis_poll_s, imperfections, writer, liquid_level, stdout)
         except BaseException:
-            opened.close()
+            try:
+                opened.close()
+            finally:
+                self._lock.release()
             raise
+
+    def close(self) -> None:
+        """As :meth:`Station.close`, then the station directory is unlocked."""
+        try:
+            super().close()
+        finally:
+            self._lock.release()
 
     def _build(self, boards: Boards, poll_s: float, axis_poll_s: float,
                imperfections: Imperfections | None, writer: Any, liquid_level: float | None,
@@ -281,6 +312,10 @@ class ManipulatorStation(Station):
 
         # The world behind the boards, holding the source where the database says.
         pos = pa_rec.position
+        why = pa.refusal(pos)
+        if why is not None:
+            raise pa_rec.where.error("POSITION", f"POLYAXIS {pa_rec.name}: POSITION "
+                                     f"({pos[0]:g}, {pos[1]:g}, {pos[2]:g}) cm is {why}")
         tensions, _ = pa.equilibrium_tensions(pos)
         tensions = [max(t, pa.low_tension + 1.0) for t in tensions]
         payouts = []
