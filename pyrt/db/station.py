@@ -309,6 +309,7 @@ class Station:
         file = str(self.path(t))
         entries = {e.name.lower(): e for e in dat.entries}
         lines = list(dat.lines)
+        inserts: list[tuple[int, str, Any]] = []
         for (lname, key), value in values.items():
             entry = entries.get(lname)
             if entry is None:
@@ -319,6 +320,9 @@ class Station:
                 raise ConfigError(f"{t} {key} is not written back; writable keys: {writable}",
                                   file, entry.line)
             raw = next((f for f in entry.fields if f.key == key), None)
+            if raw is None and not spec.required and spec.kind == "text" and entry.end_line:
+                inserts.append((entry.end_line, key, value))  # a new line before END;
+                continue
             if raw is None:
                 raise ConfigError(f"{t} entry {entry.name!r} has no {key}: line to rewrite",
                                   file, entry.line)
@@ -329,6 +333,15 @@ class Station:
                                   raw.line) from None
             line = lines[raw.line - 1]
             lines[raw.line - 1] = line[: raw.start] + new + line[raw.end:]
+        for end_line, key, value in sorted(inserts, key=lambda i: i[0], reverse=True):
+            try:  # an optional key the entry did not have yet, in the file's line ending
+                new = format_value(schema.spec(key), "", value)  # type: ignore[arg-type]
+            except ValueError as e:
+                raise ConfigError(f"cannot write {key} = {value!r}: {e}", file,
+                                  end_line) from None
+            end = lines[end_line - 1]
+            eol = end[len(end.rstrip("\r\n")):] or "\n"
+            lines.insert(end_line - 1, f"{key}: {new}{eol}")
         text = "".join(lines)
         if text == dat.text():
             return None

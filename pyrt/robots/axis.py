@@ -356,13 +356,16 @@ class Axis(Component):
             m.move(steps)
         return target
 
-    @command(name="calibrate", reply=lambda v: None)
+    @command(name="calibrate", reply=lambda v: (
+        "loadcell calibration mode: hang known loads and give 'point LOAD'" if v is None
+        else f"loadcell SLOPE {v[0]:.10g} OFFSET {v[1]:.10g}"))
     def calibrate(self) -> tuple[float, float] | None:
         """calibrate: toggle loadcell calibration mode (leaving it fits)."""
         self._standalone("calibrate")
         return self.loadcell.calibrate()
 
-    @command(Arg("LOAD", str, rest=True), name="point", reply=lambda v: None)
+    @command(Arg("LOAD", str, rest=True), name="point",
+             reply=lambda v: f"loadcell point: ADC {v[0]} = {v[1]:.4g} N")
     def point(self, load: float | str) -> tuple[int, float]:
         """point LOAD: enter a loadcell calibration point (LOAD in N, lb or kg)."""
         self._standalone("point")

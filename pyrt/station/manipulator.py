@@ -78,6 +78,9 @@ TICK_NS = 1_000_000
 #: Slack allowed beyond the rope lengths sampled over the vessel and the neck
 #: (cm): the sample grid is coarse, and the database geometry is a survey's.
 ROPE_RANGE_MARGIN = 5.0
+#: The heaviest calibration load ``sim load`` hangs (N): 000's loadcells are
+#: 50 lb (222 N) cells; twice that covers an overload test.
+MAX_HUNG_LOAD_N = 500.0
 _SIM_FAULTS = ("slip", "dead", "stuck", "stall", "break", "none")
 POLL_S = 0.05
 AXIS_POLL_S = 0.01
@@ -166,6 +169,33 @@ class ManipulatorSim(Component):
         except ValueError as exc:
             raise CommandError(str(exc)) from None
         return f"sim: {what} on {rope}"
+
+    @command(Arg("ROPE", str),
+             Arg("NEWTONS", str, lo=0.0, hi=MAX_HUNG_LOAD_N, units="N", what="a hung load"),
+             name="load")
+    def load(self, rope: str, newtons: float | str) -> str:
+        """sim load ROPE NEWTONS: hang a known load on the rope's loadcell (calibration).
+
+        The loadcell then reads that load (with its offset, non-linearity and
+        noise) instead of the source's tension, as on the rig where masses
+        hang on the rope; 'sim unload ROPE' takes it off.  Give the loadcell's
+        'point' command the same load.  ROPE is an axis name or index."""
+        n = float(newtons)
+        self._rope_call(self.plant.hang_load, rope, n)
+        return f"sim: {n:g} N hangs on {rope}'s loadcell"
+
+    @command(Arg("ROPE", str), name="unload")
+    def unload(self, rope: str) -> str:
+        """sim unload ROPE: take the calibration load off the rope's loadcell."""
+        self._rope_call(self.plant.hang_load, rope, None)
+        return f"sim: {rope}'s loadcell carries the rope again"
+
+    def _rope_call(self, fn: Callable[..., None], rope: str, *args: Any) -> None:
+        key: int | str = int(rope) if rope.isdigit() else rope
+        try:
+            fn(key, *args)
+        except ValueError as exc:
+            raise CommandError(str(exc)) from None
 
 
 class ManipulatorWords(Component):
@@ -357,7 +387,7 @@ class ManipulatorStation(Station):
             self.writeback.watch_length(rec.name, _length_reader(a))
             self.writeback.watch_zerolength(st.encoder_of(rec).name, a.encoder.length)
             a.loadcell.write_back = _calibration_writer(self.writeback, st.loadcell_of(rec).name,
-                                                        self.loop)
+                                                        self.loop, a.loadcell)
         self.writeback.watch_position(pa_rec.name, lambda: (pa.position, pa.active))
         if self.plant is not None:
             self.loop.attach(self.plant.step, name="plant")
@@ -614,10 +644,12 @@ def _length_reader(axis: Axis) -> Callable[[], tuple[float, bool]]:
     return read
 
 
-def _calibration_writer(wb: WriteBack, loadcell: str, loop: Loop
+def _calibration_writer(wb: WriteBack, loadcell: str, loop: Loop, device: Any
                         ) -> Callable[[float, float], None]:
     def write(slope: float, offset: float) -> None:
-        wb.loadcell_calibrated(loadcell, slope, offset, now_ns=loop.now_ns)
+        wb.loadcell_calibrated(loadcell, slope, offset, now_ns=loop.now_ns,
+                               date=device.date or None,
+                               points=device.calibration_points or None)
     return write
 
 
