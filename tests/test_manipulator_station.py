@@ -149,3 +149,27 @@ def test_position_outside_the_vessel_names_file_and_line(tmp_path):
     with pytest.raises(ConfigError, match=rf"POLYAXIS\.dat:{n + 1}: .*POSITION \(0, 0, 1000\) "
                                           "cm is outside the vessel"):
         ManipulatorStation(d)
+
+
+def test_startup_reconciles_the_database_with_the_encoders(tmp_path):
+    """Start-up says what it did with ZEROLENGTH and LENGTH: the packaged values (000's
+    numbers) are set from POSITION and named; after a run they are kept as written."""
+    from pyrt.db import load_station
+    from pyrt.station.manipulator import ManipulatorStation
+
+    station, runner = make_station(tmp_path)
+    notes = station.startup_notes
+    assert any(n.startswith("axis1Encoder ZEROLENGTH 1067.249 cm is -2.459 cm") for n in notes)
+    assert any(n.startswith("AXIS AXIS2 LENGTH 613.783 cm") for n in notes)
+    move(station, runner, (0.0, 0.0, 80.0))
+    station.close()
+    db = load_station(station.directory)
+    again = ManipulatorStation(station.directory, tick_ns=5_000_000)
+    try:
+        assert again.startup_notes == ["encoders and lengths agree with POSITION (ZEROLENGTH "
+                                       "and LENGTH kept)"]
+        pa = db.polyaxis()
+        for a, rec in zip(again.axes, db.axes_of(pa), strict=True):
+            assert a.encoder.zero_length == db.encoder_of(rec).zerolength
+    finally:
+        again.close()

@@ -23,9 +23,13 @@ times faster than real time instead of 35-60 (bench/bench_manipulator.py).
 
 The simulated world starts with the source at the database POSITION, held
 as the controller leaves it at the end of a move (off-side ropes at
-OFFSIDE_TENSION, the others balancing the weight); the encoders' zero
-lengths are set to the world's rope lengths (as ``setZeroLength`` would be
-after surveying the source in), and ZEROLENGTH write-back keeps them.
+OFFSIDE_TENSION, the others balancing the weight).  The encoders start
+from the database ZEROLENGTH, reconciled with the ropes at POSITION: within
+RECONCILE_COUNTS counts it is kept, further off it is set from POSITION (as
+``setZeroLength`` would be after surveying the source in), and an AXIS
+LENGTH that disagrees is noted; each start-up says what it did
+(``startup_notes``, and a ``start-up:`` line on the console).  ZEROLENGTH
+write-back keeps the encoders' lengths.
 ``FUZZY_<NAME>`` keys of an AXIS entry override that axis's fuzzy
 parameters as used at the 50 ms poll.
 
@@ -81,6 +85,9 @@ ROPE_RANGE_MARGIN = 5.0
 #: The heaviest calibration load ``sim load`` hangs (N): 000's loadcells are
 #: 50 lb (222 N) cells; twice that covers an overload test.
 MAX_HUNG_LOAD_N = 500.0
+#: Start-up: an encoder whose database ZEROLENGTH is within this many counts of
+#: the rope with the source at POSITION keeps it (see ``_reconcile``).
+RECONCILE_COUNTS = 1.5
 _SIM_FAULTS = ("slip", "dead", "stuck", "stall", "break", "none")
 POLL_S = 0.05
 AXIS_POLL_S = 0.01
@@ -356,9 +363,7 @@ class ManipulatorStation(Station):
         if boards.in_process:  # else the world is board-sim's, built the same way
             self.plant = ManipulatorPlant(self.rig, self.tio10, self.dc,
                                           imperfections=imperfections, payouts=payouts)
-        for a, p in zip(self.axes, payouts, strict=True):
-            a.encoder.reset()
-            a.encoder.zero_length = p
+        self.startup_notes = self._reconcile(pa_rec, payouts)
         # Every move of every kind is held to the ropes' physical length
         # ranges and the tension limits (tensionStop), in axis-poll.
         for a, r in zip(self.axes, rope_ranges(pa), strict=True):
@@ -415,6 +420,38 @@ class ManipulatorStation(Station):
             pa.measure()
         except NativeError as exc:
             pa.position_error = f"position finder failed: {exc}"
+
+    def _reconcile(self, pa_rec: Any, payouts: list[float]) -> list[str]:
+        """Start-up: the encoders' ZEROLENGTH and the axes' LENGTH from the
+        database, checked against the ropes with the source at POSITION.
+
+        An encoder within RECONCILE_COUNTS counts of its rope keeps its
+        database ZEROLENGTH (the counter was reset: the length now is the
+        zero length, 000 section 9); one further off is set from POSITION (the
+        entry 000 says must be right before a start) and the note says by
+        how much.  An AXIS LENGTH that disagrees is noted (write-back rewrites
+        it).  The notes are written to the console and kept here."""
+        st = self.station
+        notes: list[str] = []
+        for a, p, rec in zip(self.axes, payouts, st.axes_of(pa_rec), strict=True):
+            a.encoder.reset()
+            db_zero = a.encoder.zero_length
+            tol = RECONCILE_COUNTS * abs(a.encoder.slope)
+            if abs(db_zero - p) > tol:
+                a.encoder.zero_length = p
+                notes.append(f"{a.encoder.name} ZEROLENGTH {db_zero:.3f} cm is "
+                             f"{db_zero - p:+.3f} cm from the rope with the source at POSITION; "
+                             f"set to {p:.3f} cm")
+            geometric = self.polyaxis.rope_geometry(self.axes.index(a), pa_rec.position)[0]
+            if abs(rec.length - geometric) > tol:
+                notes.append(f"AXIS {rec.name} LENGTH {rec.length:.3f} cm is "
+                             f"{rec.length - geometric:+.3f} cm from the rope at POSITION "
+                             f"({geometric:.3f} cm); write-back rewrites it")
+        if not notes:
+            notes.append("encoders and lengths agree with POSITION (ZEROLENGTH and LENGTH kept)")
+        for n in notes:
+            self.stdout.write(f"start-up: {n}\n")
+        return notes
 
     def _report_stop(self, rec: StopRecord) -> None:
         """Every stop is reported as it happens (asynchronous output), except
