@@ -114,6 +114,8 @@ def run(args: argparse.Namespace) -> int:
                       status=live_status(runner, station, args))
     speed = "max (simulated time)" if args.speed is None else f"{args.speed:g}x real time"
     where = "" if station.plant is not None else f", boards at {station.boards.url}"
+    for note in station.startup_notes:  # what start-up did with ZEROLENGTH and LENGTH
+        print(f"start-up: {note}", file=out)
     print(f"pyrt manipulator: {station.polyaxis.name}, {len(station.axes)} ropes, database "
           f"{directory}{where}; tick {args.tick_us} µs, speed {speed}; type help", file=out)
     wall0 = time.perf_counter()

@@ -28,7 +28,7 @@ from the database ZEROLENGTH, reconciled with the ropes at POSITION: within
 RECONCILE_COUNTS counts it is kept, further off it is set from POSITION (as
 ``setZeroLength`` would be after surveying the source in), and an AXIS
 LENGTH that disagrees is noted; each start-up says what it did
-(``startup_notes``, and a ``start-up:`` line on the console).  ZEROLENGTH
+(``startup_notes``; ``pyrt manipulator`` prints them as ``start-up:`` lines).  ZEROLENGTH
 write-back keeps the encoders' lengths.
 ``FUZZY_<NAME>`` keys of an AXIS entry override that axis's fuzzy
 parameters as used at the 50 ms poll.
@@ -430,7 +430,8 @@ class ManipulatorStation(Station):
         zero length, 000 section 9); one further off is set from POSITION (the
         entry 000 says must be right before a start) and the note says by
         how much.  An AXIS LENGTH that disagrees is noted (write-back rewrites
-        it).  The notes are written to the console and kept here."""
+        it).  Returns the notes (``startup_notes``; ``pyrt manipulator``
+        prints them before its prompt)."""
         st = self.station
         notes: list[str] = []
         for a, p, rec in zip(self.axes, payouts, st.axes_of(pa_rec), strict=True):
@@ -449,8 +450,6 @@ class ManipulatorStation(Station):
                              f"({geometric:.3f} cm); write-back rewrites it")
         if not notes:
             notes.append("encoders and lengths agree with POSITION (ZEROLENGTH and LENGTH kept)")
-        for n in notes:
-            self.stdout.write(f"start-up: {n}\n")
         return notes
 
     def _report_stop(self, rec: StopRecord) -> None:
