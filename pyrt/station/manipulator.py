@@ -154,7 +154,8 @@ class ManipulatorSim(Component):
                 + (f"; on the neck ring: {', '.join(ring)}" if ring else ""))
 
     @command(Arg("ROPE", str), Arg("KIND", str.lower, choices=_SIM_FAULTS),
-             Arg("FRACTION", finite("slip fraction", 0.0, 1.0), optional=True), name="fault")
+             Arg("FRACTION", finite("slip fraction", 0.0, 1.0), optional=True, lo=0.0, hi=1.0,
+                 what="the share of the rope the encoder misses"), name="fault")
     def fault(self, rope: str, what: str, fraction: float | None = None) -> str:
         """sim fault ROPE slip [FRACTION]|dead|stuck|stall|break|none: inject a fault.
 
