@@ -210,3 +210,25 @@ def test_length_range_is_enforced_in_the_loop(tmp_path):
         assert not station.motors_running()
     finally:
         station.close()
+
+
+def test_stuck_loadcell_needs_many_reads_not_just_time(tmp_path):
+    """Two reads of one code 0.6 s apart (late ticks on a loaded machine) are not a stuck
+    loadcell; fifty-one reads over half a second are."""
+    station, runner = make_station(tmp_path)
+    try:
+        ax = station.axes[1]
+        runner.call(ax.run_command, "up", "1")
+
+        def sparse():
+            return [ax.supervise(100.0, True), ax.supervise(100.6, True)]
+
+        def dense():
+            return [ax.supervise(200.0 + k * 0.01, True) for k in range(52)]
+
+        assert runner.call(sparse) == [None, None]
+        out = runner.call(dense)
+        assert out[:50] == [None] * 50
+        assert out[-1].startswith("LOADCELL_FAULT: axis1Loadcell has read ADC code")
+    finally:
+        station.close()

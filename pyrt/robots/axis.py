@@ -68,6 +68,7 @@ TRACKING_MIN_FRACTION = 0.5
 #: resistor keeps the amplifiers in their linear, noisy range) moves it by a
 #: code every few polls.  Half a second is 50 axis polls.
 LOADCELL_STUCK_S = 0.5
+LOADCELL_STUCK_READS = 50
 #: Supervision calls further apart than this belong to different moves.
 _SUPERVISION_GAP_S = 0.1
 
@@ -148,6 +149,7 @@ class Axis(Component):
         self._adc_last = -1
         self._adc_since: float | None = None
         self._adc_seen = 0.0
+        self._adc_same = 0
 
     @classmethod
     def from_records(
@@ -471,8 +473,12 @@ class Axis(Component):
                 or now_s - self._adc_seen > _SUPERVISION_GAP_S):  # a new move: a new clock
             self._adc_last = code
             since = self._adc_since = now_s
+            self._adc_same = 0
         self._adc_seen = now_s
-        if now_s - since >= LOADCELL_STUCK_S:
+        self._adc_same += 1
+        # both: half a second, and as many reads as half a second of axis polls
+        # (late ticks on a loaded machine must not make two reads look stuck)
+        if now_s - since >= LOADCELL_STUCK_S and self._adc_same > LOADCELL_STUCK_READS:
             return (f"LOADCELL_FAULT: {lc.name} has read ADC code {code} for "
                     f"{now_s - since:.1f} s while {m.name} runs (stuck)")
         if poly:
