@@ -27,7 +27,7 @@ POLY_CASES = [
 AXIS_CASES = [
     ("dead", "axis1", "LOADCELL_FAULT: axis1Loadcell reads ADC code 0"),
     ("stuck", "axis1", "LOADCELL_FAULT: axis1Loadcell has read ADC code"),
-    ("stall", "axis1", "the motor moved"),
+    ("stall", "axis1", "TRACKING_FAULT: axis1: the motor moved"),
     ("break", "axis1", "LOW_TENSION_STOP: axis"),
 ]
 

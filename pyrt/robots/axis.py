@@ -532,7 +532,7 @@ class Axis(Component):
         if why is not None:
             self.motor.stop()
             self.target = None
-            raise TrackingError(f"{why}; motor stopped")
+            raise TrackingError(f"TRACKING_FAULT: {why}; motor stopped")
 
     def _track_check(self) -> str | None:
         """Every TRACKING_CHECK cm of motor travel: why the encoder does not
