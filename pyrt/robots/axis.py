@@ -34,7 +34,7 @@ from pyrt.boards.tio10 import TIO10
 from pyrt.component import Arg, Component, Signal, command
 from pyrt.devices._args import parse_number
 from pyrt.devices.encoder import Encoder
-from pyrt.devices.loadcell import Loadcell
+from pyrt.devices.loadcell import Loadcell, parse_load
 from pyrt.devices.motor import MAX_CRUISE_SPEED, MIN_START_SPEED, STEP_MODE, Motor
 from pyrt.errors import CommandError, ConfigError, PyrtError
 from pyrt.robots.av import AV
@@ -366,7 +366,13 @@ class Axis(Component):
         self._standalone("calibrate")
         return self.loadcell.calibrate()
 
-    @command(Arg("LOAD", str, rest=True), name="point",
+    @property
+    def load_range(self) -> tuple[float, float | None]:
+        """Calibration loads (N): the loadcell's."""
+        return self.loadcell.load_range
+
+    @command(Arg("LOAD", lambda t: parse_load(t, "point"), rest=True, lo=0.0, units="N",
+                 bounds="load_range", what="up to the loadcell's MAXLOAD"), name="point",
              reply=lambda v: f"loadcell point: ADC {v[0]} = {v[1]:.4g} N")
     def point(self, load: float | str) -> tuple[int, float]:
         """point LOAD: enter a loadcell calibration point (LOAD in N, lb or kg)."""
