@@ -37,12 +37,14 @@ from __future__ import annotations
 import inspect
 import math
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from pyrt.errors import CommandError
 from pyrt.scheduler.task import Task
 from pyrt.scope import Source
+from pyrt.units import UnitError
+from pyrt.units import parse_number as _parse_number
 
 __all__ = [
     "Arg",
@@ -115,6 +117,14 @@ class Arg:
     ``optional`` arguments may be left out (the handler's default is used);
     ``rest`` takes the rest of the line as one text (a file name, a load
     with its unit, a ``key=value`` list).
+
+    A numeric argument states its physical range: ``lo``/``hi`` (either may
+    be None: unbounded that side) in ``units``; the value is checked against
+    it before the handler runs, and help, the server and EPICS show it
+    (:attr:`range_text`).  A range that depends on the object (a rope's
+    length range) is named by ``bounds``: the attribute of the command's
+    owner holding ``(lo, hi)``, read when the records are made
+    (:func:`records_of`).
     """
 
     name: str
@@ -122,6 +132,12 @@ class Arg:
     optional: bool = False
     rest: bool = False
     choices: tuple[str, ...] = ()
+    lo: float | None = None
+    hi: float | None = None
+    units: str = ""
+    bounds: str = ""
+    #: What the range is (shown after it in help and in the refusal).
+    what: str = ""
 
     @property
     def usage(self) -> str:
@@ -130,6 +146,41 @@ class Arg:
         if self.rest:
             text += " ..."
         return f"[{text}]" if self.optional else text
+
+    @property
+    def ranged(self) -> bool:
+        """True when the argument has a lower or an upper bound."""
+        return self.lo is not None or self.hi is not None
+
+    @property
+    def range_text(self) -> str:
+        """``"LEN 150..700 cm"`` (``"DIST >= 0 cm"`` when one-sided); "" without a range."""
+        if not self.ranged:
+            return ""
+        u = f" {self.units}" if self.units else ""
+        if self.lo is not None and self.hi is not None:
+            text = f"{self.name} {self.lo:g}..{self.hi:g}{u}"
+        elif self.lo is not None:
+            text = f"{self.name} >= {self.lo:g}{u}"
+        else:
+            text = f"{self.name} <= {self.hi:g}{u}"
+        return f"{text} ({self.what})" if self.what else text
+
+    def check(self, who: str, value: Any) -> Any:
+        """``value`` if it is a finite number inside the range (CommandError naming
+        the range if not); values of arguments without a range pass unchanged."""
+        if not self.ranged:
+            return value
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            raise CommandError(f"{who}: {self.name} must be a number "
+                               f"({self.range_text}), got {str(value)[:40]!r}") from None
+        if (not math.isfinite(v) or (self.lo is not None and v < self.lo)
+                or (self.hi is not None and v > self.hi)):
+            raise CommandError(f"{who}: {self.name} {v:g} is out of range: {self.range_text}; "
+                               "nothing changed")
+        return value
 
 
 def finite(what: str, lo: float = -math.inf, hi: float = math.inf) -> Callable[[str], float]:
@@ -199,13 +250,20 @@ class Command:
 
     @property
     def summary(self) -> str:
-        """The first line of the help."""
-        return self.help.splitlines()[0] if self.help else self.name
+        """The first line of the help, with the ranges of the numeric arguments."""
+        line = self.help.splitlines()[0] if self.help else self.name
+        ranges = self.ranges
+        return f"{line.rstrip('.')} [{'; '.join(ranges)}]" if ranges else line
 
     @property
     def usage(self) -> str:
         """``name ARG [ARG]``."""
         return " ".join([self.name, *(a.usage for a in self.args)])
+
+    @property
+    def ranges(self) -> list[str]:
+        """The ranges of the numeric arguments (``"LEN 150..700 cm"``)."""
+        return [a.range_text for a in self.args if a.ranged]
 
     def parse(self, words: Sequence[str], rest_text: str = "") -> list[Any]:
         """The arguments of ``words`` checked and converted (CommandError if not)."""
@@ -264,13 +322,21 @@ def _parse_one(who: str, arg: Arg, text: str) -> Any:
     if arg.choices and text.lower() not in arg.choices:
         raise CommandError(f"{who}: {arg.name} must be {' or '.join(arg.choices)}, "
                            f"got {text[:40]!r}")
+    if arg.ranged and arg.parse is str:  # a number checked here, handed on as text
+        try:
+            _parse_number(text)
+        except (UnitError, ValueError):
+            raise CommandError(f"{who}: {arg.name} must be a number ({arg.range_text}), "
+                               f"got {text[:40]!r}") from None
+        return arg.check(who, text)
     try:
-        return arg.parse(text)
+        value = arg.parse(text)
     except CommandError:
         raise  # the parsers name what they parse
 
     except (TypeError, ValueError) as exc:
         raise CommandError(f"{who}: {arg.name}: {exc}") from None
+    return arg.check(who, value)
 
 
 _MARK = "__pyrt_command__"
@@ -319,11 +385,23 @@ def records_of(obj: Any, owner: str = "") -> list[Command]:
                 continue
             bound = getattr(obj, attr)
             doc = inspect.getdoc(fn) or ""
+            args = tuple(_bind_range(a, obj) for a in spec["args"])
+            ranges = [a.range_text for a in args if a.ranged]
+            if ranges:
+                doc += ("\n" if doc else "") + "Range: " + "; ".join(ranges) + "."
             seen[spec["name"].lower()] = Command(
-                spec["name"], bound, spec["args"], doc, spec["reads_only"], spec["moves"],
+                spec["name"], bound, args, doc, spec["reads_only"], spec["moves"],
                 spec["while_faulted"], spec["anyone"], spec["reply"], spec["console"], owner,
                 spec["subs"], spec["aliases"])
     return list(seen.values())
+
+
+def _bind_range(arg: Arg, obj: Any) -> Arg:
+    """``arg`` with the range its owner holds now (``bounds``), else as it is."""
+    if not arg.bounds:
+        return arg
+    lo, hi = getattr(obj, arg.bounds, (None, None)) or (None, None)
+    return replace(arg, lo=lo, hi=hi)
 
 
 # -- components ---------------------------------------------------------------------

@@ -82,14 +82,14 @@ def test_down_and_to(station):
 
 
 @pytest.mark.parametrize("command,args,match", [
-    ("up", ("-5",), "distance must be >= 0"),
-    ("down", ("five",), "expected a distance"),
-    ("up", ("nan",), "expected"),
+    ("up", ("-5",), r"DIST -5 is out of range: DIST >= 0 cm"),
+    ("down", ("five",), "DIST must be a number"),
+    ("up", ("nan",), "DIST must be a number"),
     ("to", ("0",), "length must be > 0"),
-    ("to", ("1e400",), "expected"),
+    ("to", ("1e400",), "LEN must be a number"),
     ("up", ("5000",), "lengths must stay > 0"),
-    ("maxspeed", ("9",), "above the limit 7.0"),
-    ("maxspeed", ("0.01",), "below the start speed"),
+    ("maxspeed", ("9",), r"SPEED 9 is out of range: SPEED 0.07..7 cm/s"),
+    ("maxspeed", ("0.01",), r"SPEED 0.01 is out of range"),
     ("up", (), "takes 1 argument"),
     ("zero", ("1",), "takes no argument"),
     ("jump", ("1",), "unknown command"),

@@ -177,6 +177,8 @@ _SAMPLES: dict[str, list[list[str]]] = {
     "GripperSim.jog": [["close", "0.5"]],
     "GripperSim.fault": [["none"]],
     "ManipulatorSim.fault": [["0", "none"]],
+    "ManipulatorSim.load": [["0", "10"]],
+    "ManipulatorSim.unload": [["0"]],
     "Axis.point": [["10 N"]],
     "Axis.maxspeed": [["3"]],
     "Loadcell.point": [["10 N"]],

@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 
 from pyrt.db import (
     FILES,
+    MAX_DB_BYTES,
     STATIONS,
     TYPES,
     AxisRecord,
@@ -25,8 +26,10 @@ from pyrt.db import (
     copy_station,
     default_working_directory,
     load_station,
+    lock_directory,
     parse_file,
     parse_records,
+    read_regular_file,
     station_directory,
 )
 from pyrt.db import __all__ as db_all
@@ -710,3 +713,59 @@ def test_manipulator_init_db_seeds_the_directory_and_runs_on_it(tmp_path: Path) 
                             "--init-db", str(target), "--speed", "max"], input="",
                            capture_output=True, text=True, timeout=60)
     assert again.returncode == 1 and "not both" in again.stderr
+
+
+# -- bounded reads and the directory lock ------------------------------------------
+
+
+def test_device_and_fifo_are_not_read(tmp_path: Path) -> None:
+    """/dev/zero and a FIFO are refused at once as not regular files (nothing read)."""
+    with pytest.raises(ConfigError, match="not a regular file"):
+        read_regular_file("/dev/zero", 1024)
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    with pytest.raises(ConfigError, match="not a regular file"):
+        read_regular_file(fifo, 1024)
+
+
+def test_oversized_file_is_refused(tmp_path: Path) -> None:
+    """A file over the bound is refused naming its size; one at the bound is read whole."""
+    f = tmp_path / "big"
+    f.write_bytes(b"x" * 1025)
+    with pytest.raises(ConfigError, match="1025 bytes, more than the 1024 bytes allowed"):
+        read_regular_file(f, 1024)
+    f.write_bytes(b"y" * 1024)
+    assert read_regular_file(f, 1024) == b"y" * 1024
+
+
+def test_database_file_that_is_a_device_is_a_config_error(tmp_path: Path) -> None:
+    """AXIS.dat linked to /dev/zero: a one-line ConfigError naming the file, no hang."""
+    d = copy_station("prototype", tmp_path / "p")
+    (d / "AXIS.dat").unlink()
+    (d / "AXIS.dat").symlink_to("/dev/zero")
+    with pytest.raises(ConfigError, match=r"AXIS\.dat: not a regular file"):
+        load_station(d)
+    assert MAX_DB_BYTES == 1 << 20
+
+
+def test_directory_lock_names_the_holder(tmp_path: Path) -> None:
+    """A second lock on a station directory, from another process, names the holder's pid;
+    released, the directory can be locked again."""
+    d = copy_station("prototype", tmp_path / "p")
+    code = ("import sys; from pyrt.db import lock_directory; l = lock_directory(sys.argv[1]); "
+            "print('locked', flush=True); sys.stdin.readline()")
+    child = subprocess.Popen([sys.executable, "-c", code, str(d)], stdin=subprocess.PIPE,
+                             stdout=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout.readline().strip() == "locked"
+        with pytest.raises(ConfigError, match=f"in use by process {child.pid} "):
+            lock_directory(d)
+    finally:
+        child.communicate("\n", timeout=30)
+    lock = lock_directory(d)
+    assert lock.held
+    with pytest.raises(ConfigError, match=f"in use by process {os.getpid()} "):
+        lock_directory(d)
+    lock.release()
+    lock.release()
+    lock_directory(d).release()

@@ -46,3 +46,20 @@ def test_bad_step_refused(tmp_path, capsys):
     assert main(["forcemap", "--out", str(tmp_path), "--step", "-5"]) == 1
     assert "--step" in capsys.readouterr().err
     assert not list(tmp_path.glob("*.map"))
+
+
+@pytest.mark.parametrize("args,match", [
+    (["--y", "nan"], "--y must be a finite number of cm, got nan"),
+    (["--y", "1e9"], "--y 1e+09 cm misses the vessel"),
+    (["--step", "1e-9"], "grid cells, more than 250000"),
+    (["--step", "inf"], "--step must be a positive finite number"),
+    (["--step", "nan"], "--step must be a positive finite number"),
+])
+def test_bad_grid_is_one_line_error(tmp_path, capsys, args, match):
+    """NaN planes, planes off the vessel, too fine or infinite steps: one error line, exit 1,
+    no traceback, nothing written."""
+    assert main(["forcemap", "--out", str(tmp_path), *args]) == 1
+    err = capsys.readouterr().err
+    assert match in err and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
+    assert not list(tmp_path.glob("*.map"))

@@ -93,7 +93,7 @@ def test_axis_commands_during_a_move(shell):
 def test_sub_object_commands(shell):
     """Compound names reach the devices: axis0Encoder read, axis0Motor maxspeed, axis1 up."""
     sh, station, runner, _ = shell
-    text = run_lines(sh, runner, ["axis0Encoder read", "axis0Motor maxspeed 3", "axis1 up 2",
+    text = run_lines(sh, runner, ["axis0Encoder read", "axis0Motor maxspeed 3", "axis1 up 0.5",
                                   "wait", "axis0Loadcell calibrate", "axis0Loadcell point 5 kg",
                                   "axis0Loadcell calibrate"])
     assert "axis0Encoder: " in text and " cm" in text
@@ -273,17 +273,16 @@ def test_grammar_never_crashes_and_refusals_move_nothing(tmp_path_factory, line)
         station.close()
 
 
-def test_nonsense_length_is_a_fault_not_a_crash(shell):
-    """A zero length set by hand cannot be written back: one fault, the session goes on;
-    the right zero length set again, the next status is a plain status line."""
+def test_nonsense_length_is_refused_and_nothing_written(shell):
+    """A zero length set by hand is outside the rope's range: one error, nothing written."""
     sh, station, runner, _ = shell
-    zero = runner.call(lambda: station.axes[1].encoder.zero_length)
-    text = run_lines(sh, runner, ["axis1Encoder setZeroLength 0", "sleep 12", "status",
-                                  "ack", f"axis1Encoder setZeroLength {zero!r}", "sleep 12",
-                                  "status"])
-    assert text.count("database write-back refused") >= 1
-    assert "FAULT" in text and "fault acknowledged" in text
-    assert not station.motors_running()
+    enc = station.directory / "ENCODER.dat"
+    before = enc.read_text()
+    text = run_lines(sh, runner, ["axis1Encoder setZeroLength 0", "sleep 12", "status"])
+    assert text.count("error:") == 1
+    assert "LEN 0 is out of range: LEN " in text and "nothing changed" in text
+    assert "FAULT" not in text and station.fault is None
+    assert enc.read_text() == before
     assert text.rstrip().splitlines()[-2].startswith("t=")
 
 
@@ -357,3 +356,15 @@ def test_wait_prints_the_stop_reason_once_and_in_order(shell):
     text = run_lines(sh, runner, ["prototype to 0 0 100", "prototype to 5 0 100", "wait"])
     stops = [ln for ln in text.splitlines() if "stopped: " in ln]
     assert len(stops) == 2 and "(0.0" in stops[0] and "(5.0" in stops[1]
+
+
+def test_pattern_from_a_device_or_a_huge_file_is_refused(shell, tmp_path):
+    """'prototype pattern /dev/zero' and a pattern over 1 MiB: one error each, read no further."""
+    sh, station, runner, _ = shell
+    big = tmp_path / "big.pat"
+    big.write_bytes(b"log.txt\n" + b"0 0 100\n" * (1 << 17))
+    text = run_lines(sh, runner, ["prototype pattern /dev/zero", f"prototype pattern {big}"])
+    assert "error: pattern: '/dev/zero': not a regular file" in text
+    assert "more than the 1048576 bytes allowed" in text
+    assert text.count("error:") == 2
+    assert not station.motors_running()

@@ -103,3 +103,76 @@ def test_blended_neck_move(proto):
     assert min(math.dist(p, corner) for p in hare.sample(0.5)) > 0.3  # the corner is cut
     assert pa.last_stop.reason is StopReason.ENDPOINT_STOP
     assert math.dist(pa.position, (5.7, 0.0, 370.0)) <= 1.0
+
+
+# -- the database directory: one process, the right station, a sane POSITION ---------
+
+
+def test_second_station_on_one_directory_is_refused(tmp_path):
+    """Two stations on one database directory: the second is refused naming the pid;
+    after the first closes the directory opens again."""
+    import os
+
+    from pyrt.errors import ConfigError
+    from pyrt.station.manipulator import ManipulatorStation
+
+    station, _ = make_station(tmp_path)
+    try:
+        with pytest.raises(ConfigError, match=f"in use by process {os.getpid()} "):
+            ManipulatorStation(station.directory)
+    finally:
+        station.close()
+    ManipulatorStation(station.directory).close()
+
+
+def test_station_database_mismatch_is_an_error(tmp_path):
+    """--station sno with a prototype database: a ConfigError naming both; nothing locked."""
+    from pyrt.db import copy_station
+    from pyrt.errors import ConfigError
+    from pyrt.station.manipulator import ManipulatorStation
+
+    d = copy_station("prototype", tmp_path / "p")
+    with pytest.raises(ConfigError, match="holds the 'prototype' station, not 'sno'"):
+        ManipulatorStation(d, expect="sno")
+    ManipulatorStation(d, expect="prototype").close()
+
+
+def test_position_outside_the_vessel_names_file_and_line(tmp_path):
+    """A database POSITION outside the vessel: ConfigError at POLYAXIS.dat's POSITION line."""
+    from pyrt.db import copy_station
+    from pyrt.errors import ConfigError
+    from pyrt.station.manipulator import ManipulatorStation
+
+    d = copy_station("prototype", tmp_path / "p")
+    f = d / "POLYAXIS.dat"
+    lines = f.read_text().splitlines(keepends=True)
+    n = next(i for i, ln in enumerate(lines) if ln.startswith("POSITION:"))
+    lines[n] = "POSITION: 0. 0. 1000. // by hand\n"
+    f.write_text("".join(lines))
+    with pytest.raises(ConfigError, match=rf"POLYAXIS\.dat:{n + 1}: .*POSITION \(0, 0, 1000\) "
+                                          "cm is outside the vessel"):
+        ManipulatorStation(d)
+
+
+def test_startup_reconciles_the_database_with_the_encoders(tmp_path):
+    """Start-up says what it did with ZEROLENGTH and LENGTH: the packaged values (000's
+    numbers) are set from POSITION and named; after a run they are kept as written."""
+    from pyrt.db import load_station
+    from pyrt.station.manipulator import ManipulatorStation
+
+    station, runner = make_station(tmp_path)
+    notes = station.startup_notes
+    assert any(n.startswith("axis1Encoder ZEROLENGTH 1067.249 cm is -2.459 cm") for n in notes)
+    assert any(n.startswith("AXIS AXIS2 LENGTH 613.783 cm") for n in notes)
+    move(station, runner, (0.0, 0.0, 80.0))
+    station.close()
+    db = load_station(station.directory)
+    again = ManipulatorStation(station.directory, tick_ns=5_000_000)
+    try:
+        assert again.startup_notes == ["encoders and lengths agree with POSITION (ZEROLENGTH "
+                                       "and LENGTH kept)"]
+        pa = db.polyaxis()
+        for a, rec in zip(again.axes, db.axes_of(pa), strict=True):
+            assert a.encoder.zero_length == db.encoder_of(rec).zerolength
+    finally:
+        again.close()

@@ -6,6 +6,7 @@ import subprocess
 import sys
 import threading
 import time
+import types
 
 import pytest
 from _gripper_rig import make_rig
@@ -248,6 +249,7 @@ def test_axis_poll_skips_axes_under_polyaxis_control():
         def __init__(self, mode: str):
             self.mode = mode
             self.polled: list[float] = []
+            self.motor = types.SimpleNamespace(running=False)  # at rest: nothing to supervise
 
         def poll(self, now_s: float) -> None:
             self.polled.append(now_s)

@@ -132,7 +132,7 @@ def _world(args: argparse.Namespace) -> BoardWorld:
     # The world's rope payouts come from the controller's own equilibrium at
     # the database POSITION (as the in-process station sets the encoders'
     # zero lengths), so build that station here and serve its world.
-    station = ManipulatorStation(directory, writer="sync", imperfections=imp)
+    station = ManipulatorStation(directory, writer="sync", imperfections=imp, lock=False)
     return ManipulatorWorld(station.plant, station.polyaxis.name)
 
 

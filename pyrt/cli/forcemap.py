@@ -22,9 +22,11 @@ from pyrt.errors import ConfigError
 from pyrt.fileio import atomic_write
 from pyrt.station.manipulator import ManipulatorStation
 
-__all__ = ["COLUMNS", "add_parser", "force_map", "run"]
+__all__ = ["COLUMNS", "MAX_CELLS", "add_parser", "force_map", "grid_size", "run"]
 
 COLUMNS = ("x_cm", "y_cm", "z_cm", "tension_N", "fx_N", "fy_N", "fz_N")
+#: The most grid cells one map may have (a 1 cm grid over the prototype is ~110 000).
+MAX_CELLS = 250_000
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -34,24 +36,53 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--db", metavar="DIR", help="station database (read only)")
     p.add_argument("--out", metavar="DIR", default=".", help="where to write (default .)")
     p.add_argument("--step", type=float, metavar="CM", help="grid step (default: 1/20 of the "
-                   "vessel radius)")
+                   f"vessel radius; at most {MAX_CELLS} grid cells)")
     p.add_argument("--y", type=float, default=0.0, metavar="CM",
-                   help="y of the grid plane (default 0)")
+                   help="y of the grid plane, inside the vessel (default 0)")
     p.set_defaults(run=run)
 
 
-def force_map(station: ManipulatorStation, step: float, y: float = 0.0
-              ) -> list[list[tuple[float, ...]]]:
-    """Rows ``(x, y, z, tension, fx, fy, fz)`` per rope over the grid."""
-    pa = station.polyaxis
+def grid_size(station: ManipulatorStation, step: float) -> tuple[int, int, int]:
+    """``(nx, nz_lo, nz_hi)`` of the grid with ``step`` (cm): x from -nx to nx
+    steps, z from -nz_lo to nz_hi steps about the vessel centre."""
     av = station.av
     c = av.vtog((0.0, 0.0, 0.0))
     r = av.vessel_radius
     top = av.neck_ring_position[2] + av.neck_length
+    return math.floor(r / step), math.floor(r / step), math.floor((top - c[2]) / step)
+
+
+def check_grid(station: ManipulatorStation, step: float, y: float) -> None:
+    """ConfigError (one line) unless ``step`` is a positive finite number of cm
+    giving at most MAX_CELLS cells and ``y`` a finite plane inside the vessel."""
+    if not (math.isfinite(step) and step > 0):
+        raise ConfigError(f"--step must be a positive finite number of cm, got {step!r}")
+    if not math.isfinite(y):
+        raise ConfigError(f"--y must be a finite number of cm, got {y!r}")
+    av = station.av
+    c = av.vtog((0.0, 0.0, 0.0))
+    r = av.vessel_radius
+    if abs(y - c[1]) >= r:
+        raise ConfigError(f"--y {y:g} cm misses the vessel: the plane must be within "
+                          f"{c[1] - r:g}..{c[1] + r:g} cm")
+    nx, lo, hi = grid_size(station, step)
+    cells = (2 * nx + 1) * (lo + hi + 1)
+    if cells > MAX_CELLS:
+        raise ConfigError(f"--step {step:g} cm makes {cells} grid cells, more than {MAX_CELLS}; "
+                          f"give --step {math.ceil(step * math.sqrt(cells / MAX_CELLS)):g} or "
+                          "more")
+
+
+def force_map(station: ManipulatorStation, step: float, y: float = 0.0
+              ) -> list[list[tuple[float, ...]]]:
+    """Rows ``(x, y, z, tension, fx, fy, fz)`` per rope over the grid
+    (ConfigError for a grid :func:`check_grid` refuses)."""
+    check_grid(station, step, y)
+    pa = station.polyaxis
+    av = station.av
+    c = av.vtog((0.0, 0.0, 0.0))
     rows: list[list[tuple[float, ...]]] = [[] for _ in pa.axes]
-    nx = math.floor(r / step)
-    nz_lo = math.floor(r / step)
-    nz_hi = math.floor((top - c[2]) / step)
+    nx, nz_lo, nz_hi = grid_size(station, step)
     for i in range(-nx, nx + 1):
         for k in range(-nz_lo, nz_hi + 1):
             x = (c[0] + i * step, y, c[2] + k * step)
@@ -73,36 +104,39 @@ def run(args: argparse.Namespace) -> int:
         if args.db:  # never write back into the given database
             src = copy_tree(src, Path(tmp))
         station = ManipulatorStation(src)
-        step = args.step if args.step is not None else station.av.vessel_radius / 20.0
-        if not (step > 0 and math.isfinite(step)):
-            raise ConfigError(f"--step must be a positive number of cm, got {args.step}")
-        rows = force_map(station, step, args.y)
-        out = Path(args.out)
         try:
-            out.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise ConfigError(f"cannot create {out}: {exc.strerror}") from None
-        for axis, table in zip(station.axes, rows, strict=True):
-            text = [f"# force map of {axis.name}, station {station.polyaxis.name}: the force "
-                    f"the rope puts on the source, grid step {step:g} cm, plane y = {args.y:g} cm",
-                    "# tensions: off-side ropes at OFFSIDE_TENSION, the others balancing the "
-                    "net weight",
-                    "# " + " ".join(COLUMNS)]
-            text.extend(" ".join(f"{v:.4f}" for v in row) for row in table)
-            target = out / f"{axis.name}.map"
-            atomic_write(target, ("\n".join(text) + "\n").encode())
-            print(f"{target}: {len(table)} positions", file=sys.stdout)
-        station.writeback.close()
+            step = args.step if args.step is not None else station.av.vessel_radius / 20.0
+            _write_maps(station, step, args.y, Path(args.out))
+        finally:
+            station.close()
     return 0
+
+
+def _write_maps(station: ManipulatorStation, step: float, y: float, out: Path) -> None:
+    rows = force_map(station, step, y)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"cannot create {out}: {exc.strerror}") from None
+    for axis, table in zip(station.axes, rows, strict=True):
+        text = [f"# force map of {axis.name}, station {station.polyaxis.name}: the force "
+                f"the rope puts on the source, grid step {step:g} cm, plane y = {y:g} cm",
+                "# tensions: off-side ropes at OFFSIDE_TENSION, the others balancing the "
+                "net weight",
+                "# " + " ".join(COLUMNS)]
+        text.extend(" ".join(f"{v:.4f}" for v in row) for row in table)
+        target = out / f"{axis.name}.map"
+        atomic_write(target, ("\n".join(text) + "\n").encode())
+        print(f"{target}: {len(table)} positions", file=sys.stdout)
 
 
 def copy_tree(src: Path, dest: Path) -> Path:
     """Copy a station directory's database files into ``dest``."""
-    from pyrt.db import FILES
+    from pyrt.db import FILES, MAX_DB_BYTES, read_regular_file
 
     for name in FILES.values():
         f = src / name
         if not f.exists():
             raise ConfigError(f"no {name} in {src}", str(src))
-        (dest / name).write_bytes(f.read_bytes())
+        (dest / name).write_bytes(read_regular_file(f, MAX_DB_BYTES))
     return dest

@@ -10,9 +10,11 @@ Without ``--db DIR`` the packaged station (``--station``) is copied to a
 working directory first (existing files there are kept: they carry the last
 position), and the run says where; ``--init-db DIR`` seeds DIR from it the
 same way and runs there; the database is written back while the
-manipulator runs.  The base tick defaults to 5 ms for this robot: the
-physics steps every tick (a motor at its 7.0 cm/s limit makes 1.4
-half-steps a tick), the control poll is 50 ms and the standalone axis poll
+manipulator runs. One process at a time may run on a database directory (a
+second is refused, naming the first one's pid); ``--station`` with ``--db``
+names the station the database must hold. The base tick defaults to 5 ms for
+this robot: the physics steps every tick (a motor at its 7.0 cm/s limit makes
+1.4 half-steps a tick), the control poll is 50 ms and the standalone axis poll
 10 ms, and ``--speed max`` then runs a move some 50 times faster than real
 time.
 
@@ -67,8 +69,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--init-db", metavar="DIR",
                    help="seed DIR with the packaged station (--station; database files "
                         "already there are kept), then run on it as --db DIR")
-    p.add_argument("--station", choices=STATIONS, default="prototype",
-                   help="packaged station to copy when no --db is given (default prototype)")
+    p.add_argument("--station", choices=STATIONS, default=None,
+                   help="packaged station to copy when no --db is given (default prototype); "
+                        "with --db, the station the database must hold")
     add_boards_option(p, "prototype|sno")
     p.add_argument("--ideal-sensors", action="store_true",
                    help="switch off encoder quantisation and loadcell noise/offsets "
@@ -85,6 +88,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("give --db DIR (an existing database) or --init-db DIR (seed one), "
                           "not both")
     if args.init_db:
+        args.station = args.station or "prototype"
         try:
             directory = copy_station(args.station, args.init_db)
         except OSError as exc:
@@ -99,6 +103,7 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError(f"{what}; seed it with 'pyrt manipulator --init-db {args.db} "
                               f"--station {'|'.join(STATIONS)}'", args.db)
     else:
+        args.station = args.station or "prototype"
         directory = default_working_directory(args.station)
         copy_station(args.station, directory)
         print(f"pyrt manipulator: working copy of the {args.station} station in {directory}",
@@ -107,7 +112,8 @@ def run(args: argparse.Namespace) -> int:
     load_backend(args.boards)
     loop = make_loop(args)  # overrun lines: stderr, at most one a second
     imp = Imperfections.ideal() if args.ideal_sensors else None
-    station = ManipulatorStation(directory, loop=loop, imperfections=imp, boards=args.boards)
+    station = ManipulatorStation(directory, loop=loop, imperfections=imp, boards=args.boards,
+                                 expect=args.station)
     station.close_report = lambda m: print(m, file=out, flush=True)
     runner = station.runner
     try:
@@ -120,6 +126,8 @@ def run(args: argparse.Namespace) -> int:
                       status=live_status(runner, station, args))
     speed = "max (simulated time)" if args.speed is None else f"{args.speed:g}x real time"
     where = "" if station.plant is not None else f", boards at {station.boards.url}"
+    for note in station.startup_notes:  # what start-up did with ZEROLENGTH and LENGTH
+        print(f"start-up: {note}", file=out)
     print(f"pyrt manipulator: {station.polyaxis.name}, {len(station.axes)} ropes, database "
           f"{directory}{where}; tick {args.tick_us} µs, speed {speed}; type help", file=out)
     wall0 = time.perf_counter()

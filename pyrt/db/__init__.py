@@ -11,6 +11,7 @@ rewrites values in place, atomically, keeping every other byte.
 (``prototype``, ``sno``).
 """
 
+from pyrt.db._lock import DirectoryLock, lock_directory
 from pyrt.db._schema import FILES, VERSIONS
 from pyrt.db._stations import (
     STATIONS,
@@ -29,6 +30,7 @@ from pyrt.db.records import (
     Vector,
 )
 from pyrt.db.station import (
+    MAX_DB_BYTES,
     TYPES,
     ObjectRef,
     Station,
@@ -36,16 +38,19 @@ from pyrt.db.station import (
     load_station,
     parse_file,
     parse_records,
+    read_regular_file,
 )
 from pyrt.fileio import atomic_write
 
 __all__ = [
     "FILES",
+    "MAX_DB_BYTES",
     "STATIONS",
     "TYPES",
     "VERSIONS",
     "AVRecord",
     "AxisRecord",
+    "DirectoryLock",
     "EncoderRecord",
     "LoadcellRecord",
     "Location",
@@ -59,7 +64,9 @@ __all__ = [
     "copy_station",
     "default_working_directory",
     "load_station",
+    "lock_directory",
     "parse_file",
     "parse_records",
+    "read_regular_file",
     "station_directory",
 ]

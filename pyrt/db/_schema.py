@@ -213,6 +213,9 @@ SCHEMAS: dict[str, Schema] = {
         FieldSpec("OFFSET", "number", writable=True),
         FieldSpec("CHANNEL", "int", check=_nonnegative),
         FieldSpec("DATE", "text", writable=True),
+        # 000's calibrationPoint: the points of the last calibration, "ADC N; ..."
+        FieldSpec("CALIBRATIONPOINT", "text", required=False, default="", writable=True,
+                  field_name="calibration_points"),
     )),
     "AV": Schema("AV", AVRecord, (
         FieldSpec("NECK_RING_STATIC_POSITION", "vector"),

@@ -199,8 +199,9 @@ class EncoderRecord:
 class LoadcellRecord:
     """LOADCELL.dat (Table 9): ``N = slope * adc + offset`` on ADC ``channel``.
 
-    ``maxload`` in N (the table writes ``50 lb``).  SLOPE and OFFSET are
-    rewritten after a calibration.
+    ``maxload`` in N (the table writes ``50 lb``).  SLOPE, OFFSET, DATE and
+    CALIBRATIONPOINT (``calibration_points``: the last calibration's points,
+    ``"ADC N; ADC N; ..."``, optional) are rewritten after a calibration.
     """
 
     name: str
@@ -209,6 +210,7 @@ class LoadcellRecord:
     offset: float
     channel: int
     date: str
+    calibration_points: str = ""
     where: Location = field(default=_NOWHERE, compare=False, repr=False)
 
 

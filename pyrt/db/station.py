@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import os
+import stat
 import threading
 import time
 from collections.abc import Iterable, Mapping
@@ -36,6 +38,7 @@ from pyrt.errors import ConfigError, PyrtError
 from pyrt.fileio import atomic_write
 
 __all__ = [
+    "MAX_DB_BYTES",
     "TYPES",
     "ObjectRef",
     "Station",
@@ -43,6 +46,7 @@ __all__ = [
     "load_station",
     "parse_file",
     "parse_records",
+    "read_regular_file",
 ]
 
 #: The object types of a station, in the order their files are read.
@@ -81,6 +85,39 @@ def parse_records(text: str, file: str, type_: str) -> tuple[DatFile, dict[str, 
     return dat, records
 
 
+#: Longest database file read (bytes): a station's files are a few kB.
+MAX_DB_BYTES = 1 << 20
+
+
+def read_regular_file(path: str | Path, limit: int) -> bytes:
+    """The bytes of ``path``, which must be a regular file of at most ``limit``
+    bytes (ConfigError naming the file if not).  Never blocks on a FIFO or a
+    device and never reads more than ``limit + 1`` bytes (a file that grows
+    while it is read is refused too)."""
+    p = str(path)
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0)
+    fd = os.open(p, flags)
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise ConfigError("not a regular file", p)
+        if st.st_size > limit:
+            raise ConfigError(f"{st.st_size} bytes, more than the {limit} bytes allowed", p)
+        chunks: list[bytes] = []
+        got = 0
+        while got <= limit:
+            chunk = os.read(fd, limit + 1 - got)
+            if not chunk:
+                break
+            chunks.append(chunk)
+            got += len(chunk)
+        if got > limit:
+            raise ConfigError(f"grew past the {limit} bytes allowed while read", p)
+        return b"".join(chunks)
+    finally:
+        os.close(fd)
+
+
 def parse_file(path: str | Path, type_: str | None = None) -> tuple[DatFile, dict[str, Any]]:
     """Read one database file (type from the file name unless given)."""
     path = Path(path)
@@ -91,7 +128,7 @@ def parse_file(path: str | Path, type_: str | None = None) -> tuple[DatFile, dic
                               f"{', '.join(FILES.values())}", str(path))
         type_ = stem
     try:
-        data = path.read_bytes()
+        data = read_regular_file(path, MAX_DB_BYTES)
     except FileNotFoundError:
         raise ConfigError(f"missing database file: expected {path.name} holding the "
                           f"{type_.upper()} entries", str(path)) from None
@@ -272,6 +309,7 @@ class Station:
         file = str(self.path(t))
         entries = {e.name.lower(): e for e in dat.entries}
         lines = list(dat.lines)
+        inserts: list[tuple[int, str, Any]] = []
         for (lname, key), value in values.items():
             entry = entries.get(lname)
             if entry is None:
@@ -282,6 +320,9 @@ class Station:
                 raise ConfigError(f"{t} {key} is not written back; writable keys: {writable}",
                                   file, entry.line)
             raw = next((f for f in entry.fields if f.key == key), None)
+            if raw is None and not spec.required and spec.kind == "text" and entry.end_line:
+                inserts.append((entry.end_line, key, value))  # a new line before END;
+                continue
             if raw is None:
                 raise ConfigError(f"{t} entry {entry.name!r} has no {key}: line to rewrite",
                                   file, entry.line)
@@ -292,6 +333,15 @@ class Station:
                                   raw.line) from None
             line = lines[raw.line - 1]
             lines[raw.line - 1] = line[: raw.start] + new + line[raw.end:]
+        for end_line, key, value in sorted(inserts, key=lambda i: i[0], reverse=True):
+            try:  # an optional key the entry did not have yet, in the file's line ending
+                new = format_value(schema.spec(key), "", value)  # type: ignore[arg-type]
+            except ValueError as e:
+                raise ConfigError(f"cannot write {key} = {value!r}: {e}", file,
+                                  end_line) from None
+            end = lines[end_line - 1]
+            eol = end[len(end.rstrip("\r\n")):] or "\n"
+            lines.insert(end_line - 1, f"{key}: {new}{eol}")
         text = "".join(lines)
         if text == dat.text():
             return None

@@ -51,6 +51,9 @@ class Encoder(Component):
         self.stdout = stdout
         self.write_back = write_back
         self.looping = False
+        #: The range of the total rope length (cm) ``setZeroLength`` may give
+        #: (set from the rope's physical range by its Axis); None: >= 0 only.
+        self.length_range: tuple[float, float] | None = None
         self._written = self.zero_length
         self._last_write: float | None = None
         channel.reset()
@@ -95,13 +98,28 @@ class Encoder(Component):
         """stoploop: quit the read/display loop."""
         self.looping = False
 
-    @command(Arg("LEN", str), name="setZeroLength", reply=lambda v: f"zero length {v:.3f} cm")
+    @property
+    def zero_length_range(self) -> tuple[float, float | None]:
+        """The ZEROLENGTH values that put the present length inside the rope's range."""
+        r = self.length_range
+        if r is None:
+            return (0.0, None)
+        here = self.slope * self.channel.count()
+        return (round(max(0.0, r[0] - here), 3), round(r[1] - here, 3))
+
+    @command(Arg("LEN", str, lo=0.0, units="cm", bounds="zero_length_range",
+                 what="the rope's length range, dead length included"),
+             name="setZeroLength", reply=lambda v: f"zero length {v:.3f} cm")
     def setZeroLength(self, length: float | str) -> float:
         """setZeroLength LEN: set the length (cm) the counter reads at zero."""
         self.check_free("setZeroLength")
         v = parse_number(length, f"{self.name} setZeroLength", "length in cm")
-        if v < 0:
-            raise CommandError(f"{self.name} setZeroLength: length must be >= 0 cm, got {v}")
+        lo, hi = self.zero_length_range
+        if v < lo or (hi is not None and v > hi):
+            span = f"{lo:g}..{hi:g}" if hi is not None else f">= {lo:g}"
+            raise CommandError(f"{self.name} setZeroLength: LEN {v:g} cm is out of range: "
+                               f"{span} cm (the rope's length range, dead length included); "
+                               "nothing changed")
         self.zero_length = v
         return v
 

@@ -4,7 +4,9 @@
 mode; each ``point [load]`` records the ADC code with a known load hung on
 the rope; ``calibrate`` again fits SLOPE and OFFSET by least squares to two
 or more points, leaves calibration mode and hands the fit to the
-write-back callback (the database keeps it).  A load is newtons, or a
+write-back callback (the database keeps it, with the DATE and the points,
+CALIBRATIONPOINT).  A fit no loadcell could give (a negative gain, zero load
+outside the ADC's range, points off the line) is refused.  A load is newtons, or a
 quantity with a force unit (``10 lb``) or a mass unit (``2 kg``, the hung
 mass, weighed with standard gravity).
 """
@@ -12,10 +14,11 @@ mass, weighed with standard gravity).
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, TextIO
 
-from pyrt.boards.dataconcentrator import AnalogChannel, DataConcentrator
+from pyrt.boards.dataconcentrator import ADC_MAX, AnalogChannel, DataConcentrator
 from pyrt.component import Arg, Component, Signal, command
 from pyrt.devices._args import parse_number
 from pyrt.errors import CommandError, ConfigError
@@ -24,9 +27,16 @@ from pyrt.units import UnitError, factor, split_quantity
 if TYPE_CHECKING:
     from pyrt.db import LoadcellRecord
 
-__all__ = ["STANDARD_GRAVITY", "Loadcell", "parse_load"]
+__all__ = ["CAL_RESIDUAL_FRACTION", "CAL_RESIDUAL_N", "STANDARD_GRAVITY", "Loadcell",
+           "parse_load"]
 
 STANDARD_GRAVITY = 9.80665
+#: A calibration whose points scatter about the fitted line by more than the
+#: larger of these (RMS) is refused: 000 finds the loadcells "quite linear"
+#: (the bias resistor adds 0.7 % non-linearity), so a worse fit means a wrong
+#: load was entered or the load was not hanging free.
+CAL_RESIDUAL_N = 1.0
+CAL_RESIDUAL_FRACTION = 0.02
 
 
 def parse_load(value: float | str, command: str) -> float:
@@ -81,7 +91,16 @@ class Loadcell(Component):
         self.stdout = stdout
         self.write_back = write_back
         self.calibrating = False
+        #: While calibrating: the rope tension read just before calibration
+        #: began.  The rope is off the loadcell then, carrying the known loads,
+        #: so the controller (stretch correction, tension supervision) goes on
+        #: with the tension the rope last had, not the calibration loads.
+        self.held: float | None = None
         self.points: list[tuple[int, float]] = []
+        #: The last calibration: its date (DD-MM-YYYY, the form of 000's DATE
+        #: field) and its points as written to CALIBRATIONPOINT.
+        self.date = ""
+        self.calibration_points = ""
 
     @classmethod
     def from_record(cls, record: LoadcellRecord, board: DataConcentrator, name: str | None = None,
@@ -93,8 +112,15 @@ class Loadcell(Component):
     def adc(self) -> int:
         return self.channel.code()
 
+    def measured(self) -> float:
+        """What the loadcell reads now, in newtons (through SLOPE and OFFSET)."""
+        return self.slope * self.channel.code() + self.offset
+
     def tension(self) -> float:
-        """The rope tension in newtons."""
+        """The rope tension in newtons: the reading, or while calibrating the
+        tension held from before calibration began (see :attr:`held`)."""
+        if self.held is not None:
+            return self.held
         return self.slope * self.channel.code() + self.offset
 
     # -- calibration ---------------------------------------------------------------
@@ -116,6 +142,7 @@ class Loadcell(Component):
         """
         self.check_free("calibrate")
         if not self.calibrating:
+            self.held = self.measured()
             self.calibrating = True
             self.points = []
             return None
@@ -136,14 +163,47 @@ class Loadcell(Component):
         sxy = sum((c - mx) * (f - my) for c, f in pts)
         slope = sxy / sxx
         offset = my - slope * mx
+        why = self._implausible(slope, offset, pts)
+        if why is not None:
+            self.points = []
+            raise CommandError(f"{self.name} calibrate: refused, {why}; SLOPE and OFFSET "
+                               "unchanged, points cleared (still in calibration mode)")
         self.slope, self.offset = slope, offset
         self.calibrating = False
+        self.held = None
         self.points = []
+        self.date = time.strftime("%d-%m-%Y")
+        self.calibration_points = "; ".join(f"{c} {f:.3f}" for c, f in pts)
         if self.write_back is not None:
             self.write_back(slope, offset)
         return slope, offset
 
-    @command(Arg("LOAD", str, rest=True), name="point",
+    @staticmethod
+    def _implausible(slope: float, offset: float, pts: list[tuple[int, float]]) -> str | None:
+        """Why a fit cannot be a loadcell's, or None: the gain must be positive
+        (more load, a higher code), zero load must fall inside the ADC's range,
+        and the points must lie on the line (CAL_RESIDUAL_N / _FRACTION)."""
+        if not (math.isfinite(slope) and math.isfinite(offset)) or slope <= 0:
+            return (f"the fitted gain {slope:.4g} N per code is not positive (the ADC code "
+                    "must rise with the load)")
+        zero = -offset / slope
+        if not 0 <= zero <= ADC_MAX:
+            return (f"zero load would read ADC code {zero:.0f}, outside the ADC's 0..{ADC_MAX} "
+                    f"(OFFSET {offset:.4g} N)")
+        rms = math.sqrt(sum((slope * c + offset - f) ** 2 for c, f in pts) / len(pts))
+        loads = [f for _, f in pts]
+        limit = max(CAL_RESIDUAL_N, CAL_RESIDUAL_FRACTION * (max(loads) - min(loads)))
+        if rms > limit:
+            return f"the points scatter {rms:.3g} N RMS about the fit (limit {limit:.3g} N)"
+        return None
+
+    @property
+    def load_range(self) -> tuple[float, float | None]:
+        """Calibration loads (N): up to MAXLOAD when the database gives one."""
+        return (0.0, self.maxload if self.maxload > 0 else None)
+
+    @command(Arg("LOAD", lambda t: parse_load(t, "point"), rest=True, lo=0.0, units="N",
+                 bounds="load_range", what="up to the loadcell's MAXLOAD"), name="point",
              reply=lambda v: f"point: ADC {v[0]} = {v[1]:.4g} N", aliases=("calibrationPoint",))
     def point(self, load: float | str) -> tuple[int, float]:
         """point LOAD: a calibration point with LOAD (N, lb or kg) hung on the rope
@@ -153,6 +213,10 @@ class Loadcell(Component):
             raise CommandError(f"{self.name} point: not in calibration mode; "
                                "give 'calibrate' first")
         n = parse_load(load, f"{self.name} point")
+        hi = self.load_range[1]
+        if hi is not None and n > hi:
+            raise CommandError(f"{self.name} point: LOAD {n:.4g} N is out of range: "
+                               f"0..{hi:.4g} N (the loadcell's MAXLOAD); nothing recorded")
         code = self.channel.code()
         self.points.append((code, n))
         return code, n

@@ -297,7 +297,9 @@ class Motor(Component):
         """Channel stopped, windings off."""
         self.stop()
 
-    @command(Arg("SPEED", str), name="maxspeed", reply=lambda v: f"maximum speed {v:g} cm/s")
+    @command(Arg("SPEED", str, lo=MIN_START_SPEED, hi=MAX_CRUISE_SPEED, units="cm/s",
+                 what="000's motor speeds"), name="maxspeed",
+             reply=lambda v: f"maximum speed {v:g} cm/s")
     def maxspeed(self, speed: float | str) -> float:
         """maxspeed SPEED: set the maximum (cruise) speed in cm/s."""
         self.check_free("maxspeed")

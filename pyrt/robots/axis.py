@@ -29,13 +29,13 @@ import math
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, TextIO
 
-from pyrt.boards.dataconcentrator import DataConcentrator
+from pyrt.boards.dataconcentrator import ADC_MAX, DataConcentrator
 from pyrt.boards.tio10 import TIO10
 from pyrt.component import Arg, Component, Signal, command
 from pyrt.devices._args import parse_number
 from pyrt.devices.encoder import Encoder
-from pyrt.devices.loadcell import Loadcell
-from pyrt.devices.motor import STEP_MODE, Motor
+from pyrt.devices.loadcell import Loadcell, parse_load
+from pyrt.devices.motor import MAX_CRUISE_SPEED, MIN_START_SPEED, STEP_MODE, Motor
 from pyrt.errors import CommandError, ConfigError, PyrtError
 from pyrt.robots.av import AV
 from pyrt.tasks.axis_poll import POLYAXIS, STANDALONE
@@ -45,6 +45,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "END_ZONE",
+    "LOADCELL_STUCK_S",
     "POLYAXIS",
     "STANDALONE",
     "TRACKING_CHECK",
@@ -62,6 +63,15 @@ END_ZONE = 1.0
 TRACKING_CHECK = 2.0
 TRACKING_MIN_FRACTION = 0.5
 
+#: A loadcell whose ADC code has not changed for this long while a motor runs
+#: is stuck: the conversion noise of a live one (000, section 10: the bias
+#: resistor keeps the amplifiers in their linear, noisy range) moves it by a
+#: code every few polls.  Half a second is 50 axis polls.
+LOADCELL_STUCK_S = 0.5
+LOADCELL_STUCK_READS = 50
+#: Supervision calls further apart than this belong to different moves.
+_SUPERVISION_GAP_S = 0.1
+
 
 class TrackingError(PyrtError):
     """The encoder does not follow the motor: a stalled motor or a slipping encoder.
@@ -73,6 +83,10 @@ class TrackingError(PyrtError):
 
 def _zero() -> float:
     return 0.0
+
+
+def _true() -> bool:
+    return True
 
 
 def _moving(length: float) -> str:
@@ -124,7 +138,18 @@ class Axis(Component):
 
         self.mode = STANDALONE
         self.target: float | None = None
+        #: The rope's physical length range (cm), set by the station from the
+        #: geometry (:meth:`set_supervision`); None: lengths > 0 only.
+        self.length_range: tuple[float, float] | None = None
+        #: Tension limits (N) and whether they apply now (``tensionStop``), set
+        #: by the station; None: unsupervised (an Axis on its own, in tests).
+        self.tension_limits: tuple[float, float] | None = None
+        self.tension_stops: Callable[[], bool] = _true
         self._track_reset()
+        self._adc_last = -1
+        self._adc_since: float | None = None
+        self._adc_seen = 0.0
+        self._adc_same = 0
 
     @classmethod
     def from_records(
@@ -238,29 +263,74 @@ class Axis(Component):
         if self.mode != STANDALONE:
             raise CommandError(f"{self.name} {command}: the axis is under "
                                f"{self._controller()} control; stop it first")
+        if self.loadcell.calibrating:
+            raise CommandError(f"{self.name} {command}: refused: {self.loadcell.name} is in "
+                               f"calibration mode; finish with '{self.loadcell.name} calibrate'")
 
     def _distance(self, value: float | str, command: str) -> float:
         d = parse_number(value, f"{self.name} {command}", "distance in cm")
         if d < 0:
             raise CommandError(f"{self.name} {command}: distance must be >= 0 cm, got {d}; "
                                f"use {'down' if command == 'up' else 'up'} for the other way")
+        hi = self.travel_range[1]
+        if hi is not None and d > hi:
+            raise CommandError(f"{self.name} {command}: DIST {d:g} cm is out of range: "
+                               f"DIST 0..{hi:g} cm (the rope's length range); nothing moved")
         return d
 
-    @command(Arg("DIST", str), name="up", moves=True, reply=_moving)
+    @property
+    def travel_range(self) -> tuple[float, float | None]:
+        """The range of an ``up``/``down`` distance (cm): up to the span of the
+        rope's length range."""
+        r = self.length_range
+        return (0.0, None) if r is None else (0.0, round(r[1] - r[0], 1))
+
+    @property
+    def target_range(self) -> tuple[float, float | None]:
+        """The range of a ``to`` length (cm): the rope's length range."""
+        r = self.length_range
+        return (0.0, None) if r is None else r
+
+    def set_supervision(self, length_range: tuple[float, float],
+                        tension_limits: tuple[float, float],
+                        tension_stops: Callable[[], bool] = _true) -> None:
+        """The limits every move of this rope is held to (see :meth:`supervise`):
+        its physical length range (cm), LOW_TENSION and MAX_TENSION (N), and
+        whether the tension limits apply now (the PolyAxis's ``tensionStop``)."""
+        lo, hi = (float(v) for v in length_range)
+        tl, th = (float(v) for v in tension_limits)
+        if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo < hi):
+            raise ConfigError(f"axis {self.name}: length range must be 0 <= lo < hi cm, "
+                              f"got {length_range!r}")
+        if not (math.isfinite(tl) and math.isfinite(th) and tl < th):
+            raise ConfigError(f"axis {self.name}: tension limits must be low < high N, "
+                              f"got {tension_limits!r}")
+        self.length_range = (lo, hi)
+        self.encoder.length_range = (lo + self.dead_length, hi + self.dead_length)
+        self.tension_limits = (tl, th)
+        self.tension_stops = tension_stops
+
+    @command(Arg("DIST", str, lo=0.0, units="cm", bounds="travel_range",
+                 what="the span of the rope's length range"),
+             name="up", moves=True, reply=_moving)
     def up(self, dist: float | str) -> float:
         """up DIST: move up DIST cm (shorten the rope; the source goes up)."""
         d = self._distance(dist, "up")
         self._standalone("up")
         return self._go(self.getLength() - d, "up")
 
-    @command(Arg("DIST", str), name="down", moves=True, reply=_moving)
+    @command(Arg("DIST", str, lo=0.0, units="cm", bounds="travel_range",
+                 what="the span of the rope's length range"),
+             name="down", moves=True, reply=_moving)
     def down(self, dist: float | str) -> float:
         """down DIST: move down DIST cm (lengthen the rope)."""
         d = self._distance(dist, "down")
         self._standalone("down")
         return self._go(self.getLength() + d, "down")
 
-    @command(Arg("LEN", str), name="to", moves=True, reply=_moving)
+    @command(Arg("LEN", str, lo=0.0, units="cm", bounds="target_range",
+                 what="the rope's physical length range"),
+             name="to", moves=True, reply=_moving)
     def to(self, length: float | str) -> float:
         """to LEN: change the rope length to LEN cm."""
         v = parse_number(length, f"{self.name} to", "length in cm")
@@ -273,6 +343,11 @@ class Axis(Component):
         if target <= 0:
             raise CommandError(f"{self.name} {command}: that would leave the rope at "
                                f"{target:.3f} cm; lengths must stay > 0")
+        r = self.length_range
+        if r is not None and not r[0] <= target <= r[1]:
+            raise CommandError(f"{self.name} {command}: that would take the rope to "
+                               f"{target:.3f} cm, outside its physical length range "
+                               f"{r[0]:g}..{r[1]:g} cm; nothing moved")
         err = target - self.getLength()
         steps = round(err * self.motor.steps_per_cm)
         m = self.motor
@@ -286,19 +361,30 @@ class Axis(Component):
             m.move(steps)
         return target
 
-    @command(name="calibrate", reply=lambda v: None)
+    @command(name="calibrate", reply=lambda v: (
+        "loadcell calibration mode: hang known loads and give 'point LOAD'" if v is None
+        else f"loadcell SLOPE {v[0]:.10g} OFFSET {v[1]:.10g}"))
     def calibrate(self) -> tuple[float, float] | None:
         """calibrate: toggle loadcell calibration mode (leaving it fits)."""
         self._standalone("calibrate")
         return self.loadcell.calibrate()
 
-    @command(Arg("LOAD", str, rest=True), name="point", reply=lambda v: None)
+    @property
+    def load_range(self) -> tuple[float, float | None]:
+        """Calibration loads (N): the loadcell's."""
+        return self.loadcell.load_range
+
+    @command(Arg("LOAD", lambda t: parse_load(t, "point"), rest=True, lo=0.0, units="N",
+                 bounds="load_range", what="up to the loadcell's MAXLOAD"), name="point",
+             reply=lambda v: f"loadcell point: ADC {v[0]} = {v[1]:.4g} N")
     def point(self, load: float | str) -> tuple[int, float]:
         """point LOAD: enter a loadcell calibration point (LOAD in N, lb or kg)."""
         self._standalone("point")
         return self.loadcell.point(load)
 
-    @command(Arg("SPEED", str), name="maxspeed", reply=lambda v: f"maximum speed {v:g} cm/s")
+    @command(Arg("SPEED", str, lo=MIN_START_SPEED, hi=MAX_CRUISE_SPEED, units="cm/s",
+                 what="000's motor speeds"), name="maxspeed",
+             reply=lambda v: f"maximum speed {v:g} cm/s")
     def maxspeed(self, speed: float | str) -> float:
         """maxspeed SPEED: set the maximum motor speed in cm/s."""
         self._standalone("maxspeed")
@@ -337,6 +423,7 @@ class Axis(Component):
         self.target = None
         self.motor.velocity_mode()
         self.mode = POLYAXIS
+        self._track_reset()
 
     def polyDeactivate(self) -> None:
         """Stop the motor and return the axis to standalone control."""
@@ -363,23 +450,111 @@ class Axis(Component):
             self.target = None
         self.encoder.poll(now_s)
 
+    # -- supervision (every move of every kind; pyrt.tasks.axis_poll) ----------------
+
+    def supervise(self, now_s: float, standalone_move: bool) -> str | None:
+        """Why every motor must stop now, or None; called every axis poll while
+        any motor of the manipulator runs (``standalone_move``: one runs under
+        standalone control).  In order:
+
+        * the loadcell: an ADC code at either end of its range (dead,
+          disconnected, saturated; in a PolyAxis move the tension stops see
+          that first), or one that has not changed for
+          :data:`LOADCELL_STUCK_S` while this rope's motor runs (stuck);
+        * the rope's physical length range, when the motor drives it further out;
+        * under PolyAxis control, the encoder must follow the motor (stall or
+          slip, as :meth:`poll` checks standalone moves);
+        * during a standalone move, with ``tensionStop`` on: every rope's
+          tension within LOW_TENSION..MAX_TENSION, unless this rope's own motor
+          is moving it back inside (a PolyAxis move has its own tension stops).
+        """
+        m = self.motor
+        running = m.running
+        group, i = self.group, self.group_index
+        poly = self.mode == POLYAXIS and group is not None and i is not None
+        lc = self.loadcell
+        code = lc.channel.code()
+        if not poly and (code <= 0 or code >= ADC_MAX):  # (a PolyAxis move: its tension stops)
+            return (f"LOADCELL_FAULT: {lc.name} reads ADC code {code}, the end of its "
+                    "range (dead, disconnected or saturated)")
+        since = self._adc_since
+        if (code != self._adc_last or not running or since is None
+                or now_s - self._adc_seen > _SUPERVISION_GAP_S):  # a new move: a new clock
+            self._adc_last = code
+            since = self._adc_since = now_s
+            self._adc_same = 0
+        self._adc_seen = now_s
+        self._adc_same += 1
+        # both: half a second, and as many reads as half a second of axis polls
+        # (late ticks on a loaded machine must not make two reads look stuck)
+        if now_s - since >= LOADCELL_STUCK_S and self._adc_same > LOADCELL_STUCK_READS:
+            return (f"LOADCELL_FAULT: {lc.name} has read ADC code {code} for "
+                    f"{now_s - since:.1f} s while {m.name} runs (stuck)")
+        if poly:
+            length = group.lengths[i]  # type: ignore[attr-defined]
+            tension = group.tensions[i]  # type: ignore[attr-defined]
+            lengthening = m.velocity > 0
+        else:
+            tension = lc.tension()
+            length = self._length_at(tension)
+            lengthening = m.direction > 0
+        r = self.length_range
+        if running and r is not None and ((lengthening and length > r[1])
+                                          or (not lengthening and length < r[0])):
+            return (f"LENGTH_RANGE_STOP: {self.name} length {length:.2f} cm is outside its "
+                    f"physical range {r[0]:g}..{r[1]:g} cm and {m.name} drives it further")
+        if poly and running:
+            why = self._track_check()
+            if why is not None:
+                return f"TRACKING_FAULT: {why}"
+        lim = self.tension_limits
+        if standalone_move and lim is not None and self.tension_stops():
+            own = running and not poly
+            if tension < lim[0] and not (own and not lengthening):
+                return (f"LOW_TENSION_STOP: {self.name} tension {tension:.2f} N below "
+                        f"LOW_TENSION {lim[0]:g} N during an axis move")
+            if tension > lim[1] and not (own and lengthening):
+                return (f"HIGH_TENSION_STOP: {self.name} tension {tension:.2f} N above "
+                        f"MAX_TENSION {lim[1]:g} N during an axis move")
+        return None
+
+    def fail(self, cause: str, source: str = "") -> None:
+        """A fault of the robot found on this rope; during a PolyAxis move the
+        move ends first with a FAULT stop that says why (``last_stop``)."""
+        group = self.group
+        if self.mode == POLYAXIS and group is not None and getattr(group, "active", False):
+            from pyrt.robots.stops import StopReason
+
+            group.halt(StopReason.FAULT, cause)  # type: ignore[attr-defined]
+        super().fail(cause, source)
+
+    def _length_at(self, tension: float) -> float:
+        t = tension if tension > 0.0 else 0.0
+        return self.encoder.length() * (1.0 + self.stretch * t) - self.dead_length
+
     def _track_reset(self) -> None:
         self._track_steps = self.motor.position_steps
         self._track_count = self.encoder.count()
 
     def _track(self) -> None:
+        why = self._track_check()
+        if why is not None:
+            self.motor.stop()
+            self.target = None
+            raise TrackingError(f"TRACKING_FAULT: {why}; motor stopped")
+
+    def _track_check(self) -> str | None:
+        """Every TRACKING_CHECK cm of motor travel: why the encoder does not
+        follow the motor, or None."""
         m = self.motor
         moved = (m.position_steps - self._track_steps) / m.steps_per_cm
         if abs(moved) < TRACKING_CHECK:
-            return
+            return None
         count = self.encoder.count()
         seen = (count - self._track_count) * self.encoder.slope
         self._track_steps = m.position_steps
         self._track_count = count
         if seen * moved <= 0 or abs(seen) < TRACKING_MIN_FRACTION * abs(moved):
-            m.stop()
-            self.target = None
-            raise TrackingError(
-                f"{self.name}: the motor moved {moved:+.2f} cm but the encoder saw "
-                f"{seen:+.2f} cm: motor stall or encoder slip; motor stopped"
-            )
+            return (f"{self.name}: the motor moved {moved:+.2f} cm but the encoder saw "
+                    f"{seen:+.2f} cm: motor stall or encoder slip")
+        return None

@@ -24,7 +24,8 @@ from collections.abc import Callable, Generator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
-from pyrt.errors import CommandError
+from pyrt.db import read_regular_file
+from pyrt.errors import CommandError, ConfigError
 from pyrt.robots.stops import StopReason, StopRecord
 from pyrt.tasks.writeback import SyncWriter, ThreadWriter, Writer
 
@@ -66,14 +67,13 @@ def parse_pattern(path: str | Path) -> tuple[Path, list[Vec]]:
     """A pattern file: first line the log file (relative to the pattern file),
     then one endpoint ``x y z`` per line (blank lines and ``//`` comments skipped)."""
     p = Path(path)
-    try:
-        if not p.is_file():
-            raise CommandError(f"pattern: {str(p)!r} is not a regular file")
-        if p.stat().st_size > MAX_PATTERN_BYTES:
-            raise CommandError(f"pattern: {str(p)!r} is larger than "
-                               f"{MAX_PATTERN_BYTES // 1024} KiB")
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
+    try:  # a regular file of bounded size: never /dev/zero, a FIFO or a growing log
+        text = read_regular_file(p, MAX_PATTERN_BYTES).decode("utf-8")
+    except ConfigError as exc:
+        raise CommandError(f"pattern: {str(p)!r}: {exc.message}") from None
+    except OSError as exc:
+        raise CommandError(f"pattern: cannot read {str(p)!r}: {exc.strerror}") from None
+    except UnicodeDecodeError as exc:
         raise CommandError(f"pattern: cannot read {str(p)!r}: {exc}") from None
     lines = [(n, ln.split("//", 1)[0].strip()) for n, ln in enumerate(text.splitlines(), 1)]
     lines = [(n, ln) for n, ln in lines if ln]

@@ -669,7 +669,13 @@ class PolyAxis(Component):
                                + "; ".join(problems) + "; nothing moved")
 
     def refuse_if_lost(self, word: str) -> None:
-        """CommandError while the position estimate is not trusted."""
+        """CommandError while the position estimate is not trusted, or while a
+        rope's loadcell is being calibrated (the rope is off it then)."""
+        cal = [a.loadcell.name for a in self.axes if a.loadcell.calibrating]
+        if cal:
+            raise CommandError(f"{self.name} {word}: refused: {', '.join(cal)} in calibration "
+                               f"mode (its rope carries the calibration loads); finish with "
+                               f"'{cal[0]} calibrate'; nothing moved")
         if self.estimate_lost is not None:
             raise CommandError(f"{self.name} {word}: refused: the position estimate is not "
                                f"trusted ({self.estimate_lost}); re-establish it with 'survey' "

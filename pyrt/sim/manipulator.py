@@ -203,6 +203,8 @@ class _RopeState:
     dir_bit: tuple[int, int] = (0, 0)
     awo_bit: tuple[int, int] = (1, 0)
     steps: int = field(default=0)
+    #: A known load hung on the loadcell for calibration (N), or None.
+    load: float | None = None
 
 
 class ManipulatorPlant:
@@ -393,6 +395,8 @@ class ManipulatorPlant:
         tensions = self.solver.tensions()
         for st, t in zip(self.ropes, tensions, strict=True):
             r = st.rig
+            if st.load is not None:  # the calibration load, not the source, pulls on it
+                t = st.load
             if st.loadcell == "dead":
                 code = 0
             elif st.loadcell == "stuck":
@@ -486,6 +490,14 @@ class ManipulatorPlant:
         self.ropes[i].intact = False
         self.solver.set_intact(i, False)
         self._dirty = True
+
+    def hang_load(self, rope: int | str, newtons: float | None) -> None:
+        """Calibration as on the rig: a known load of ``newtons`` hangs on the
+        rope's loadcell (its response, offset error and noise as for any load)
+        instead of the source's tension; None takes it off."""
+        if newtons is not None and not (math.isfinite(newtons) and newtons >= 0):
+            raise ValueError(f"a hung load must be a finite number of N >= 0, got {newtons!r}")
+        self.ropes[self.index(rope)].load = None if newtons is None else float(newtons)
 
     def clear_faults(self, rope: int | str) -> None:
         """Undo slip, stall and loadcell faults (a broken rope stays broken)."""

@@ -23,9 +23,13 @@ times faster than real time instead of 35-60 (bench/bench_manipulator.py).
 
 The simulated world starts with the source at the database POSITION, held
 as the controller leaves it at the end of a move (off-side ropes at
-OFFSIDE_TENSION, the others balancing the weight); the encoders' zero
-lengths are set to the world's rope lengths (as ``setZeroLength`` would be
-after surveying the source in), and ZEROLENGTH write-back keeps them.
+OFFSIDE_TENSION, the others balancing the weight).  The encoders start
+from the database ZEROLENGTH, reconciled with the ropes at POSITION: within
+RECONCILE_COUNTS counts it is kept, further off it is set from POSITION (as
+``setZeroLength`` would be after surveying the source in), and an AXIS
+LENGTH that disagrees is noted; each start-up says what it did
+(``startup_notes``; ``pyrt manipulator`` prints them as ``start-up:`` lines).  ZEROLENGTH
+write-back keeps the encoders' lengths.
 ``FUZZY_<NAME>`` keys of an AXIS entry override that axis's fuzzy
 parameters as used at the 50 ms poll.
 
@@ -43,6 +47,7 @@ BoardError there faults the manipulator, naming the URL.
 
 from __future__ import annotations
 
+import math
 import sys
 import threading
 from collections.abc import Callable
@@ -51,8 +56,8 @@ from typing import Any, TextIO
 
 from pyrt.boards import Boards, open_boards
 from pyrt.component import Arg, Component, Signal, command, finite
+from pyrt.db import DirectoryLock, load_station, lock_directory
 from pyrt.db import Station as StationDB
-from pyrt.db import load_station
 from pyrt.errors import BoardError, CommandError, ConfigError, NativeError, PyrtError
 from pyrt.native import FuzzyParams, NativeInputError
 from pyrt.robots.av import AV
@@ -74,6 +79,15 @@ __all__ = [
 ]
 
 TICK_NS = 1_000_000
+#: Slack allowed beyond the rope lengths sampled over the vessel and the neck
+#: (cm): the sample grid is coarse, and the database geometry is a survey's.
+ROPE_RANGE_MARGIN = 5.0
+#: The heaviest calibration load ``sim load`` hangs (N): 000's loadcells are
+#: 50 lb (222 N) cells; twice that covers an overload test.
+MAX_HUNG_LOAD_N = 500.0
+#: Start-up: an encoder whose database ZEROLENGTH is within this many counts of
+#: the rope with the source at POSITION keeps it (see ``_reconcile``).
+RECONCILE_COUNTS = 1.5
 _SIM_FAULTS = ("slip", "dead", "stuck", "stall", "break", "none")
 POLL_S = 0.05
 AXIS_POLL_S = 0.01
@@ -140,7 +154,8 @@ class ManipulatorSim(Component):
                 + (f"; on the neck ring: {', '.join(ring)}" if ring else ""))
 
     @command(Arg("ROPE", str), Arg("KIND", str.lower, choices=_SIM_FAULTS),
-             Arg("FRACTION", finite("slip fraction", 0.0, 1.0), optional=True), name="fault")
+             Arg("FRACTION", finite("slip fraction", 0.0, 1.0), optional=True, lo=0.0, hi=1.0,
+                 what="the share of the rope the encoder misses"), name="fault")
     def fault(self, rope: str, what: str, fraction: float | None = None) -> str:
         """sim fault ROPE slip [FRACTION]|dead|stuck|stall|break|none: inject a fault.
 
@@ -162,6 +177,33 @@ class ManipulatorSim(Component):
         except ValueError as exc:
             raise CommandError(str(exc)) from None
         return f"sim: {what} on {rope}"
+
+    @command(Arg("ROPE", str),
+             Arg("NEWTONS", str, lo=0.0, hi=MAX_HUNG_LOAD_N, units="N", what="a hung load"),
+             name="load")
+    def load(self, rope: str, newtons: float | str) -> str:
+        """sim load ROPE NEWTONS: hang a known load on the rope's loadcell (calibration).
+
+        The loadcell then reads that load (with its offset, non-linearity and
+        noise) instead of the source's tension, as on the rig where masses
+        hang on the rope; 'sim unload ROPE' takes it off.  Give the loadcell's
+        'point' command the same load.  ROPE is an axis name or index."""
+        n = float(newtons)
+        self._rope_call(self.plant.hang_load, rope, n)
+        return f"sim: {n:g} N hangs on {rope}'s loadcell"
+
+    @command(Arg("ROPE", str), name="unload")
+    def unload(self, rope: str) -> str:
+        """sim unload ROPE: take the calibration load off the rope's loadcell."""
+        self._rope_call(self.plant.hang_load, rope, None)
+        return f"sim: {rope}'s loadcell carries the rope again"
+
+    def _rope_call(self, fn: Callable[..., None], rope: str, *args: Any) -> None:
+        key: int | str = int(rope) if rope.isdigit() else rope
+        try:
+            fn(key, *args)
+        except ValueError as exc:
+            raise CommandError(str(exc)) from None
 
 
 class ManipulatorWords(Component):
@@ -204,6 +246,14 @@ class ManipulatorStation(Station):
     source with volume, else in air); ``boards``: the board URL (default
     ``sim:``; see the module text).  Boards that cannot be reached raise
     BoardError; a world that is not this station's, ConfigError.
+
+    The station directory is locked for this process while the station
+    lives (:func:`pyrt.db.lock_directory`: another process gets a
+    ConfigError naming the holder's pid; ``lock=False`` for a station that
+    is only read, as board-sim's); ``expect`` names the station the
+    caller wants (``--station``): a database of another is a ConfigError.
+    A database POSITION where the source may not be (outside the vessel and
+    the neck) is a ConfigError naming the file and line.
     """
 
     def __init__(
@@ -219,16 +269,39 @@ class ManipulatorStation(Station):
         liquid_level: float | None = None,
         stdout: TextIO | None = None,
         boards: str | None = None,
+        expect: str | None = None,
+        lock: bool = True,
     ):
         self.directory = Path(directory)
-        self.station: StationDB = load_station(self.directory)
-        super().__init__(loop if loop is not None else Loop(SimClock(), period_ns=tick_ns))
-        opened = open_boards(boards, "manipulator")
+        # one process per directory (board-sim only reads it: lock=False)
+        self._lock = lock_directory(self.directory) if lock else DirectoryLock(self.directory, None)
+        try:
+            self.station: StationDB = load_station(self.directory)
+            pa_rec = self.station.polyaxis()
+            if expect is not None and pa_rec.name.lower() != expect.lower():
+                raise ConfigError(f"the database holds the {pa_rec.name.lower()!r} station, "
+                                  f"not {expect.lower()!r}; give the matching --station or "
+                                  "another --db", pa_rec.where.file, pa_rec.where.line)
+            super().__init__(loop if loop is not None else Loop(SimClock(), period_ns=tick_ns))
+            opened = open_boards(boards, "manipulator")
+        except BaseException:
+            self._lock.release()
+            raise
         try:
             self._build(opened, poll_s, axis_poll_s, imperfections, writer, liquid_level, stdout)
         except BaseException:
-            opened.close()
+            try:
+                opened.close()
+            finally:
+                self._lock.release()
             raise
+
+    def close(self) -> None:
+        """As :meth:`Station.close`, then the station directory is unlocked."""
+        try:
+            super().close()
+        finally:
+            self._lock.release()
 
     def _build(self, boards: Boards, poll_s: float, axis_poll_s: float,
                imperfections: Imperfections | None, writer: Any, liquid_level: float | None,
@@ -277,6 +350,10 @@ class ManipulatorStation(Station):
 
         # The world behind the boards, holding the source where the database says.
         pos = pa_rec.position
+        why = pa.refusal(pos)
+        if why is not None:
+            raise pa_rec.where.error("POSITION", f"POLYAXIS {pa_rec.name}: POSITION "
+                                     f"({pos[0]:g}, {pos[1]:g}, {pos[2]:g}) cm is {why}")
         tensions, _ = pa.equilibrium_tensions(pos)
         tensions = [max(t, pa.low_tension + 1.0) for t in tensions]
         payouts = []
@@ -287,9 +364,12 @@ class ManipulatorStation(Station):
         if boards.in_process:  # else the world is board-sim's, built the same way
             self.plant = ManipulatorPlant(self.rig, self.tio10, self.dc,
                                           imperfections=imperfections, payouts=payouts)
-        for a, p in zip(self.axes, payouts, strict=True):
-            a.encoder.reset()
-            a.encoder.zero_length = p
+        self.startup_notes = self._reconcile(pa_rec, payouts)
+        # Every move of every kind is held to the ropes' physical length
+        # ranges and the tension limits (tensionStop), in axis-poll.
+        for a, r in zip(self.axes, rope_ranges(pa), strict=True):
+            a.set_supervision(r, (pa.low_tension, pa.max_tension),
+                              lambda: pa.tension_stop)
 
         # The motion queue the mailbox fills (the station's runner takes it).
         pa.motion = self.motion
@@ -318,7 +398,7 @@ class ManipulatorStation(Station):
             zread, zbox = _trusted(pa, a.encoder.length, lambda w: w.last)
             zbox.append(self.writeback.watch_zerolength(st.encoder_of(rec).name, zread))
             a.loadcell.write_back = _calibration_writer(self.writeback, st.loadcell_of(rec).name,
-                                                        self.loop)
+                                                        self.loop, a.loadcell)
         pread, pbox = _trusted(pa, lambda: (pa.position, pa.active), lambda w: (w.last, False))
         pbox.append(self.writeback.watch_position(pa_rec.name, pread))
         if self.plant is not None:
@@ -348,6 +428,37 @@ class ManipulatorStation(Station):
         except NativeError as exc:
             pa.position_error = f"position finder failed: {exc}"
 
+    def _reconcile(self, pa_rec: Any, payouts: list[float]) -> list[str]:
+        """Start-up: the encoders' ZEROLENGTH and the axes' LENGTH from the
+        database, checked against the ropes with the source at POSITION.
+
+        An encoder within RECONCILE_COUNTS counts of its rope keeps its
+        database ZEROLENGTH (the counter was reset: the length now is the
+        zero length, 000 section 9); one further off is set from POSITION (the
+        entry 000 says must be right before a start) and the note says by
+        how much.  An AXIS LENGTH that disagrees is noted (write-back rewrites
+        it).  Returns the notes (``startup_notes``; ``pyrt manipulator``
+        prints them before its prompt)."""
+        st = self.station
+        notes: list[str] = []
+        for a, p, rec in zip(self.axes, payouts, st.axes_of(pa_rec), strict=True):
+            a.encoder.reset()
+            db_zero = a.encoder.zero_length
+            tol = RECONCILE_COUNTS * abs(a.encoder.slope)
+            if abs(db_zero - p) > tol:
+                a.encoder.zero_length = p
+                notes.append(f"{a.encoder.name} ZEROLENGTH {db_zero:.3f} cm is "
+                             f"{db_zero - p:+.3f} cm from the rope with the source at POSITION; "
+                             f"set to {p:.3f} cm")
+            geometric = self.polyaxis.rope_geometry(self.axes.index(a), pa_rec.position)[0]
+            if abs(rec.length - geometric) > tol:
+                notes.append(f"AXIS {rec.name} LENGTH {rec.length:.3f} cm is "
+                             f"{rec.length - geometric:+.3f} cm from the rope at POSITION "
+                             f"({geometric:.3f} cm); write-back rewrites it")
+        if not notes:
+            notes.append("encoders and lengths agree with POSITION (ZEROLENGTH and LENGTH kept)")
+        return notes
+
     def _report_stop(self, rec: StopRecord) -> None:
         """Every stop is reported as it happens (asynchronous output), except
         the one that ends a console's ``wait``: the wait reports that one."""
@@ -362,8 +473,12 @@ class ManipulatorStation(Station):
     def _write_back(self, now_ns: int) -> None:
         """Loop handler: the database write-back; a refused value (a length set
         to nonsense by hand) is a fault of the manipulator, reported once.
-        Nothing while the boards cannot be reached (that fault says why)."""
+        Nothing while the boards cannot be reached (that fault says why), and
+        nothing while the manipulator is faulted: what a dead loadcell or a
+        slipping encoder measured is never written (after ``ack`` it resumes)."""
         if self.boards is not None and self.boards.down is not None:
+            return
+        if self.fault is not None:  # nothing measured while faulted is written back
             return
         try:
             self.writeback.poll(now_ns)
@@ -496,6 +611,9 @@ class ManipulatorStation(Station):
         return fields
 
     def closing_note(self) -> str:
+        if self.fault is not None:
+            return (f"; databases in {self.directory} keep the values last written before "
+                    "the fault")
         if self.boards is not None and self.boards.down is not None:
             return f"; databases in {self.directory} keep the values last written"
         return f"; databases written back in {self.directory}"
@@ -506,12 +624,53 @@ class ManipulatorStation(Station):
         try:
             if self.boards is not None and self.boards.down is not None:
                 return
+            if self.fault is not None:  # measured while faulted: not written
+                return
             self.writeback.poll(self.loop.now_ns + 10**12)
         except PyrtError as exc:  # the file keeps its last good value
             self.stdout.write(f"database write-back refused at shutdown: {exc}\n")
         finally:
             self.writeback.close()
             self.stop_log()
+
+
+def rope_ranges(pa: PolyAxis, cells: int = 12) -> list[tuple[float, float]]:
+    """Every rope's physical length range (cm): the least and greatest length
+    with the source anywhere it may be (the vessel sphere and the neck,
+    :meth:`PolyAxis.refusal`), sampled on a grid of ``cells`` per vessel
+    diameter and over the sphere's surface, widened by ROPE_RANGE_MARGIN."""
+    av = pa.av
+    r = av.vessel_radius
+    ring = av.neck_ring_static_position
+    pts: list[tuple[float, float, float]] = []
+    step = 2.0 * r / cells
+    grid = [-r + k * step for k in range(cells + 1)]
+    pts += [(x, y, z) for x in grid for y in grid for z in grid]
+    for i in range(13):  # the sphere's surface
+        th = math.pi * i / 12
+        for j in range(24):
+            ph = 2.0 * math.pi * j / 24
+            pts.append((0.999 * r * math.sin(th) * math.cos(ph),
+                        0.999 * r * math.sin(th) * math.sin(ph), 0.999 * r * math.cos(th)))
+    nr = av.neck_radius
+    for h in (0.0, 0.5 * av.neck_length, av.neck_length):  # the neck, up to its top
+        for dx, dy in ((0.0, 0.0), (nr, 0.0), (-nr, 0.0), (0.0, nr), (0.0, -nr)):
+            pts.append((ring[0] + 0.999 * dx, ring[1] + 0.999 * dy, ring[2] + h))
+    lo = [math.inf] * pa.n
+    hi = [0.0] * pa.n
+    for v in pts:
+        x = av.vtog(v)
+        if pa.refusal(x) is not None:
+            continue
+        try:
+            lengths = pa.lengths_at(x)
+        except NativeError:  # a sample on a pulley, an attachment or the ring's rim
+            continue
+        for i, length in enumerate(lengths):
+            lo[i] = min(lo[i], length)
+            hi[i] = max(hi[i], length)
+    return [(round(max(0.0, a - ROPE_RANGE_MARGIN), 1), round(b + ROPE_RANGE_MARGIN, 1))
+            for a, b in zip(lo, hi, strict=True)]
 
 
 def _checks(period_s: float, tick_s: float, what: str) -> int:
@@ -541,10 +700,12 @@ def _length_reader(axis: Axis) -> Callable[[], tuple[float, bool]]:
     return read
 
 
-def _calibration_writer(wb: WriteBack, loadcell: str, loop: Loop
+def _calibration_writer(wb: WriteBack, loadcell: str, loop: Loop, device: Any
                         ) -> Callable[[float, float], None]:
     def write(slope: float, offset: float) -> None:
-        wb.loadcell_calibrated(loadcell, slope, offset, now_ns=loop.now_ns)
+        wb.loadcell_calibrated(loadcell, slope, offset, now_ns=loop.now_ns,
+                               date=device.date or None,
+                               points=device.calibration_points or None)
     return write
 
 

@@ -300,13 +300,17 @@ class WriteBack:
         return len(batch)
 
     def loadcell_calibrated(self, loadcell: str, slope: float, offset: float,
-                            date: str | None = None, now_ns: int = 0) -> None:
-        """Write a calibration's SLOPE and OFFSET (and DATE if given) once."""
+                            date: str | None = None, now_ns: int = 0,
+                            points: str | None = None) -> None:
+        """Write a calibration's SLOPE and OFFSET (and DATE and CALIBRATIONPOINT,
+        the points it was fitted to, if given) once, in one batch."""
         record = self.station.loadcell(loadcell)
         batch: dict[Key, Any] = {("LOADCELL", record.name, "SLOPE"): slope,
                                  ("LOADCELL", record.name, "OFFSET"): offset}
         if date is not None:
             batch[("LOADCELL", record.name, "DATE")] = date
+        if points is not None:
+            batch[("LOADCELL", record.name, "CALIBRATIONPOINT")] = points
         for (t, n, k), v in batch.items():
             self.history.append((now_ns, t, n, k, v))
         self.writer.submit(batch)

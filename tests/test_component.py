@@ -1,0 +1,79 @@
+"""The Arg grammar's ranges: checked before a handler runs, shown in help."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pyrt.component import Arg, Component, command, finite
+from pyrt.errors import CommandError
+
+
+class Rope(Component):
+    """A component with a fixed and an object-held range."""
+
+    name = "rope"
+
+    def __init__(self) -> None:
+        self.span = (10.0, 20.0)
+        self.got: list[object] = []
+
+    @command(Arg("LEN", str, lo=0.0, units="cm", bounds="span", what="the rope"), name="to")
+    def to(self, length: str) -> None:
+        """to LEN: go to LEN."""
+        self.got.append(length)
+
+    @command(Arg("V", finite("speed"), lo=0.07, hi=7.0, units="cm/s"), name="speed")
+    def speed(self, v: float) -> None:
+        """speed V: set the speed."""
+        self.got.append(v)
+
+    @command(Arg("NAME", str), name="plain")
+    def plain(self, name: str) -> None:
+        """plain NAME: no range."""
+        self.got.append(name)
+
+
+def test_range_is_in_help_and_read_from_the_object():
+    """The summary shows each range; a 'bounds' range is read when the records are made."""
+    r = Rope()
+    assert r.find_command("to").summary == "to LEN: go to LEN [LEN 10..20 cm (the rope)]"
+    assert "Range: V 0.07..7 cm/s." in r.find_command("speed").help
+    r.span = (1.0, 2.0)
+    assert r.find_command("to").args[0].range_text == "LEN 1..2 cm (the rope)"
+    assert r.find_command("plain").summary == "plain NAME: no range."
+
+
+@pytest.mark.parametrize("words,match", [
+    (["to", "1e300"], r"rope to: LEN 1e\+300 is out of range: LEN 10..20 cm \(the rope\)"),
+    (["to", "1e400"], "LEN must be a number"),
+    (["to", "nan"], "LEN must be a number"),
+    (["to", "9.99"], "out of range"),
+    (["speed", "8"], r"V 8 is out of range: V 0.07..7 cm/s"),
+])
+def test_out_of_range_never_reaches_the_handler(words, match):
+    """A value outside its range (or not a finite number) is a CommandError naming the
+    range; the handler never runs."""
+    r = Rope()
+    with pytest.raises(CommandError, match=match):
+        r.run_command(*words)
+    assert r.got == []
+
+
+@settings(max_examples=200, derandomize=True, deadline=None)
+@given(text=st.one_of(st.text(max_size=12),
+                      st.floats(allow_nan=True, allow_infinity=True).map(repr)))
+def test_any_text_is_accepted_in_range_or_refused_cleanly(text):
+    """Any word given for a ranged argument is either a finite number inside the range
+    (handed on) or a CommandError; nothing else escapes."""
+    r = Rope()
+    try:
+        r.run_command("to", text)
+    except CommandError:
+        assert r.got == []
+        return
+    v = float(r.got[0])  # type: ignore[arg-type]
+    assert math.isfinite(v) and 10.0 <= v <= 20.0
