@@ -98,7 +98,7 @@ def test_whole_command_set_transcript(monkeypatch, capsys):
     assert nxt("T") == ["0000"]
     assert nxt("E") == ["0080"]
     assert nxt("P-1B86") == []
-    assert nxt("wait")[0].startswith("stopped: position")
+    assert nxt("wait")[0].startswith("at target: position")
     assert abs(hexword(nxt("W")[0]) + 0x1B86) <= 16
     assert nxt("T") == ["E47A"]
     e = nxt("E")[0]
@@ -126,11 +126,12 @@ def test_whole_command_set_transcript(monkeypatch, capsys):
     assert s[15 - 8] == "0" and s[15 - 9] == "0"  # squeezed: overload on
     assert s[15 - 10] == "1"  # limit off: the jaws are nearly closed
     assert s[15 - 0] == "0" and s[15 - 4] == "0"  # inner proximity sensors on
-    assert nxt("X 33") == []
+    assert nxt("X 33") == [
+        "speed 7F -> 33: JSPEED 33, MXPJSPD B3, MXNJSPD 4D (up to 860 counts/s)"]
     assert nxt("T") == ["D600"]
     assert nxt("M") == []
     assert nxt("D 43") == ["43 0C"]
-    assert nxt("C 43 20") == ["43 20"]
+    assert nxt("C 43 20")[0] == "43 20"  # with a warning: MVJAWS 128 ms may oscillate
     assert nxt("N") == ["44 0A"]
     assert nxt("S") == ["SP 57"]
     assert nxt("I") == ["clock interrupt OFF (ready queue frozen)"]

@@ -17,6 +17,7 @@ line names the URL): the jaws move there at real time, so only ``--speed
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import time
 
@@ -73,7 +74,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     g.add_argument(
         "--start", type=_counts, metavar="HEX",
-        help="jaw position at power-up, encoder counts from wide open (default F400)",
+        help="jaw position at power-up, encoder counts from wide open: F400 or -0C00 "
+             "(the default)",
     )
     g.add_argument(
         "--fault", action="append", choices=[f for f in FAULTS if f != "port"],
@@ -84,6 +86,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--history", metavar="FILE", help="keep the command history in FILE")
     add_loop_options(p, default_speed="1")
     add_serve_options(p)
+    # "--start -0C00": argparse takes a word that starts with "-" for an
+    # option unless it looks like a negative number; hexadecimal counts are
+    # numbers here (no option of this command looks like one).
+    p._negative_number_matcher = re.compile(r"^-[0-9A-Fa-f]+$|^-\d*\.\d+$")
     p.set_defaults(run=run)
 
 
@@ -116,7 +122,7 @@ def run(args: argparse.Namespace) -> int:
     posted.append(runner)
     service = prepare_service(args, runner, ServedStation(station))
     shell = RobotShell(station, out)
-    console = Console(shell, sys.stdin, out, messages=runner.messages, history_file=args.history,
+    console = Console(shell, sys.stdin, out, messages=shell.messages, history_file=args.history,
                       status=live_status(runner, station, args))
     speed = "max (simulated time)" if args.speed is None else f"{args.speed:g}x real time"
     jaws = ("simulated jaws" if station.plant is not None

@@ -72,7 +72,7 @@ from pyrt.boards.i8031 import (
 )
 from pyrt.component import Component, Signal
 from pyrt.errors import CommandError
-from pyrt.robots.gripper_commands import CommandLetters, GripperMonitor, parse_hex
+from pyrt.robots.gripper_commands import CommandLetters, GripperMonitor, parse_hex, parse_target
 from pyrt.scheduler import ByteImage, ByteRef, Job, Loop, ReadyQueue, Task, install
 from pyrt.scheduler.motion import MotionRecord, MotionType, register_motion_type
 from pyrt.scope import Source
@@ -376,7 +376,7 @@ class GripperController(Component, CommandLetters):
                     f"MVJAWS drives {sched.move_ns / 1e6:g} ms at a time with an error up to "
                     f"{sched.watch_ns / 1e6:g} ms old")
         return (f"MVJAWS drives {sched.move_ns / 1e6:g} ms at a time (SYSCLKPD "
-                f"{sched.sysclkpd:02X} × MVJAWSPD {sched.mvjawspd:02X} × "
+                f"{sched.sysclkpd:02X} x MVJAWSPD {sched.mvjawspd:02X} x "
                 f"{sched.tick_ns / 1e3:g} µs tick): too long for jaws that move "
                 f"{gain:g} counts/s per current unit")
 
@@ -692,11 +692,43 @@ class GripperController(Component, CommandLetters):
         if self.busy:
             raise CommandError(f"busy: {self.job.name} in progress")  # type: ignore[union-attr]
 
-    def set_speed(self, speed: int) -> None:
-        """``X``: the maximum jaw speed (01..7F), as JSPEED, MXPJSPD, MXNJSPD."""
+    def set_speed(self, speed: int) -> str:
+        """``X``: the maximum jaw speed (01..7F), as JSPEED, MXPJSPD, MXNJSPD;
+        returns what it changed."""
         if not 1 <= speed <= 0x7F:
-            raise CommandError(f"speed {speed:X} refused: it must be 01..7F")
+            raise CommandError(f"speed {speed:02X} is out of range (01..7F)")
+        ram = self.ram
+        old = ram[JSPEED]
         self._set_speed(speed)
+        line = (f"speed {old:02X} -> {speed:02X}: JSPEED {speed:02X}, MXPJSPD {ram[MXPJSPD]:02X}, "
+                f"MXNJSPD {ram[MXNJSPD]:02X} (up to {self.calibration.speed(speed):.0f} counts/s)")
+        if speed <= self.calibration.deadband:
+            line += (f"; warning: at or below the worm's friction ({self.calibration.deadband:02X})"
+                     ": the jaws will not move")
+        return line
+
+    def replaces_target(self) -> bool:
+        """A commanded move runs (drive bit on, no jog): a new P changes its target."""
+        return bool(self.ram[FLAGS] & _MASK_DRVON) and not self.busy
+
+    def schedule_warning(self, addr: int, value: int) -> str | None:
+        """Monitor ``C``: CommandError if ``value`` at schedule variable
+        ``addr`` cannot be served; the predicted oscillation, if any, else None."""
+        refusal = self.schedule_refusal(addr, value)
+        if refusal:
+            raise CommandError(f"C {addr:02X} {value:02X} refused: {refusal}; nothing changed")
+        if addr not in SCHEDULE_NAMES:
+            return None
+        s = self.schedule()
+        values = {SYSCLKPD: s.sysclkpd, MVJAWSPD: s.mvjawspd, SENSORPD: s.sensorpd,
+                  WTCHJWSPD: s.wtchjwspd}
+        values[addr] = value
+        new = Schedule(s.tick_ns, values[SYSCLKPD], values[MVJAWSPD], values[SENSORPD],
+                       values[WTCHJWSPD])
+        why = self.oscillation_reason(new)
+        if why is None:
+            return None
+        return f"moves may oscillate: {why}; the supervision stops a move that does"
 
     def target(self) -> int:
         """``T``: COMMAND_CNT."""
@@ -829,17 +861,45 @@ class _Words:  # pragma: no cover - big-endian hosts only
 
 
 class GripperMove(MotionType):
-    """The ``P`` move as a motion type: set the target and the drive bit,
-    done when MVJAWS clears the drive bit (STOPCNT bumps after the stopped
-    bit).  Its record is ``MotionRecord("gripper_move", {"target": counts})``
-    with ``counts`` in -8000..0000."""
+    """The P move: motion gripper_move target=COUNTS (-8000..0, decimal, or hex as P takes it).
+
+    It sets the target and the drive bit and is done when MVJAWS clears the
+    drive bit (STOPCNT bumps after the stopped bit).  Its record is
+    ``MotionRecord("gripper_move", {"target": counts})``; :meth:`check`
+    refuses a malformed record when it is queued."""
 
     name = "gripper_move"
 
+    @classmethod
+    def target_of(cls, params: Any) -> int:
+        """The record's target in counts, or CommandError saying what is wrong."""
+        extra = sorted(set(params) - {"target"})
+        if extra:
+            raise CommandError(f"gripper_move: unknown parameter {extra[0][:40]!r}; "
+                               "it takes target=COUNTS (-8000..0000)")
+        if "target" not in params:
+            raise CommandError("gripper_move: target=COUNTS missing (-8000..0000)")
+        value = params["target"]
+        if isinstance(value, (bool, float)):
+            raise CommandError(f"gripper_move: target {str(value)[:40]!r} is not a whole "
+                               "number of counts (-8000..0000)")
+        if isinstance(value, int):
+            if not -0x8000 <= value <= 0:
+                raise CommandError(f"gripper_move: target {value} is out of range "
+                                   "(-32768..0 counts, 0 wide open)")
+            return value
+        return parse_target(str(value))
+
+    @classmethod
+    def check(cls, robot: Any, params: Any) -> None:
+        """Refuse now (CommandError) a record that could never start."""
+        cls.target_of(params)
+        robot.check_can_move()
+
     def start(self, robot: Any, record: MotionRecord, now_ns: int) -> None:
         self.robot = robot
-        self.target = int(record.params["target"])
-        robot.move(self.target)  # refuses positive targets, a busy or faulted robot
+        self.target = self.target_of(record.params)
+        robot.move(self.target)  # refuses a busy or faulted robot
 
     def step(self, now_ns: int) -> None:
         if not self.robot.moving:
