@@ -146,7 +146,8 @@ def test_whole_command_set_transcript(monkeypatch, capsys):
     assert len(c) == 1 and re.fullmatch(r"[0-9A-F]{4}", c[0])
     assert -0x2A00 - 300 < hexword(c[0]) < -0x2A00 + 50  # about D600, a little more
     assert nxt("W") == ["0000"]
-    assert nxt("quit") == ["pyrt gripper: quit: every motor stopped"]
+    assert nxt("quit") == ["pyrt gripper: quit: every motor stopped; jaws at 0000 (76.0 mm), "
+                           "drive current +0"]
 
 
 def mvjaws_calls(lines: list[str]) -> int:
@@ -188,7 +189,8 @@ def test_dead_limit_at_power_up_lands_in_the_monitor(monkeypatch, capsys):
 def test_end_of_input_ends_the_program(monkeypatch, capsys):
     """A script without quit ends at end of input with status 0, saying the motors stopped."""
     out = run_cli(["gripper", "--speed", "max", "--no-init"], "W\n", monkeypatch, capsys)
-    assert out.rstrip().endswith("CMD: \npyrt gripper: end of input: every motor stopped")
+    assert out.rstrip().endswith("CMD: \npyrt gripper: end of input: every motor stopped; "
+                                 "jaws at 0000 (76.0 mm), drive current +0")
 
 
 def test_bad_options_are_one_line_errors(monkeypatch, capsys):

@@ -509,8 +509,14 @@ class GripperController(Component, CommandLetters):
             self.job = None
 
     def watchdog(self, now_ns: int) -> None:
-        """Every tick: trip the robot when current has been applied for
-        ``stall_limit_ns`` without a single encoder count."""
+        """Every tick: trip the robot when current has been applied longer
+        than the stall bound (:meth:`stall_bound_ns`) without a single
+        encoder count, or when a supervised move has outlived its settle
+        bound (whatever the schedule: MVJAWS may run seldom, or not at all)."""
+        sup = self.supervisor
+        if sup.active and now_ns > sup.deadline_ns:
+            sup.expired(self._sword(ERROR_CNT) - 0x80)
+            return
         pulses = self._pulse_cell[0]
         if self._dac == DAC_NULL or pulses != self._wd_pulses:
             self._wd_pulses = pulses
@@ -764,8 +770,16 @@ class GripperController(Component, CommandLetters):
         return self.ram[addr]
 
     def toggle_clock(self) -> bool:
-        """Monitor ``I``: toggle the clock/timer interrupt; return whether it is on."""
+        """Monitor ``I``: toggle the clock/timer interrupt; return whether it is on.
+
+        Turning it off freezes MVJAWS with its current latched in the DAC;
+        pyrt ends a running move or jog first (current nulled, drive bit
+        clear), so the jaws do not run on into a stop."""
         q = self.queue
+        if q.interrupts_enabled and self.moving:
+            self.drive(DAC_NULL)
+            self.ram[FLAGS] &= ~(_MASK_DRVON | _MASK_DOJOG) & 0xFF
+            self.move_ended("clock interrupt turned off (monitor I): move ended, current nulled")
         q.interrupts_enabled = not q.interrupts_enabled
         return q.interrupts_enabled
 

@@ -265,11 +265,17 @@ class GripperMonitor(Component):
         """D addr: show the on-chip RAM byte at addr (00-7F)."""
         return self._at(addr, self.ctl.peek(addr))
 
-    @command(name="I", reply=lambda on: "clock interrupt ON" if on
-             else "clock interrupt OFF (ready queue frozen)")
-    def cmd_interrupt(self) -> bool:
-        """I: toggle the clock/timer interrupt (off: ready queue frozen, sensors not read)."""
-        return self.ctl.toggle_clock()
+    @command(name="I")
+    def cmd_interrupt(self) -> str:
+        """I: toggle the clock/timer interrupt (off: ready queue frozen, sensors not read).
+
+        A move running when it goes off is ended first (current nulled)."""
+        was_moving = self.ctl.moving
+        if self.ctl.toggle_clock():
+            return "clock interrupt ON"
+        if was_moving:
+            return "clock interrupt OFF (ready queue frozen); the move was ended, current nulled"
+        return "clock interrupt OFF (ready queue frozen)"
 
     @command(_hex_arg("pattern", "bit pattern", 0xFFFF), name="L", reply=_show)
     def cmd_leds(self, pattern: int) -> tuple[int, int]:

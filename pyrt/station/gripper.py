@@ -230,6 +230,13 @@ class GripperStation(Station):
             line += f"  FAULT: {self.fault.cause}"
         return line
 
+    def closing_note(self) -> str:
+        """Where the jaws were left and the drive current, for the line said on the way out."""
+        ctl = self.controller
+        pos = ctl.position()
+        return (f"; jaws at {pos:04X} ({ctl.calibration.mm(_signed(pos)):.1f} mm), "
+                f"drive current {ctl.dac - 0x80:+d}")
+
     def motion_types(self) -> list[str]:
         """The motion types this robot runs."""
         return [GripperMove.name]
