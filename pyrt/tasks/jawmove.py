@@ -38,7 +38,7 @@ from pyrt.boards.i8031 import (
 from pyrt.native import excess128
 from pyrt.tasks._i8031 import Controller8031
 
-__all__ = ["ADDRESS", "JOGSTALL", "NAME", "STOPBUMPS", "MoveSupervisor", "mvjaws"]
+__all__ = ["ADDRESS", "BAND", "JOGSTALL", "NAME", "STOPBUMPS", "MoveSupervisor", "mvjaws"]
 
 #: Appendix B: the routine's EPROM address, and its name on the ready queue.
 ADDRESS = 0x04C2
@@ -52,6 +52,11 @@ STOPBUMPS = 0x04
 #: switch is ignored until it is released.  pyrt's addition, so that a held
 #: switch cannot keep current on a stalled motor.
 JOGSTALL = 5
+
+#: Errors within this many counts of the target are "at the target" for the
+#: supervision: no half-cycle of an oscillation (the deadband and STOPCNT's
+#: last bumps leave up to about 16).
+BAND = 24
 
 _MASK_STOPPED = 1 << STOPPED
 _MASK_DRVON = 1 << DRVON
@@ -79,15 +84,13 @@ class MoveSupervisor:
     """
 
     __slots__ = ("active", "clock", "deadline_ns", "flips", "on_oscillation", "on_timeout",
-                 "peak", "peaks", "side", "tolerance")
+                 "peak", "peaks", "side")
 
-    def __init__(self, clock: Any, on_oscillation: Any, on_timeout: Any, tolerance: int = 24):
+    def __init__(self, clock: Any, on_oscillation: Any, on_timeout: Any):
         #: Anything with ``now_ns`` (the loop).
         self.clock = clock
         self.on_oscillation = on_oscillation
         self.on_timeout = on_timeout
-        #: Errors within this many counts of zero are "at the target": no half-cycle.
-        self.tolerance = tolerance
         self.active = False
         self.deadline_ns = 0
         self.side = 0
@@ -108,8 +111,9 @@ class MoveSupervisor:
         """The move ended (settled, stopped, abandoned)."""
         self.active = False
 
-    def flip(self, side: int) -> None:
-        """The error crossed the target band to ``side`` (+1 past it, -1 short of it)."""
+    def flip(self, side: int, magnitude: int) -> None:
+        """The error crossed the target band to ``side`` (+1 past it, -1 short
+        of it); ``magnitude`` is its size there, the new half-cycle's first peak."""
         if self.side:
             self.flips += 1
             self.peaks.append(self.peak)
@@ -121,7 +125,7 @@ class MoveSupervisor:
                 self.on_oscillation(max(peaks[-3:]), self.flips)
                 return
         self.side = side
-        self.peak = 0
+        self.peak = magnitude
 
     def expired(self, error: int) -> None:
         """The settle deadline passed with the drive bit still on."""
@@ -164,20 +168,18 @@ def mvjaws(ctl: Controller8031) -> None:
             return
         sup = ctl.supervisor
         if sup.active:
-            # pyrt's supervision: the half-cycle peaks of the error, the deadline
-            tol = sup.tolerance
-            if err > tol:
+            # pyrt's supervision: the half-cycle peaks of the error (its
+            # settle deadline is the controller's watchdog's, every tick)
+            if err > BAND:
                 if sup.side != 1:
-                    sup.flip(1)
-                if err > sup.peak:
+                    sup.flip(1, err)
+                elif err > sup.peak:
                     sup.peak = err
-            elif err < -tol:
+            elif err < -BAND:
                 if sup.side != -1:
-                    sup.flip(-1)
-                if -err > sup.peak:
+                    sup.flip(-1, -err)
+                elif -err > sup.peak:
                     sup.peak = -err
-            if sup.clock.now_ns > sup.deadline_ns and sup.active:
-                sup.expired(err)
         return
     if flags & _MASK_DOJOG:
         ctl.drive(DAC_NULL)
