@@ -47,7 +47,7 @@ def supervised_move(station, ctl, loop, target: int) -> tuple[int, int]:
 REPRODUCTIONS = [
     pytest.param({SYSCLKPD: 0x0C}, id="SYSCLKPD 0C"),
     pytest.param({MVJAWSPD: 0x30}, id="MVJAWSPD 30"),
-    pytest.param({WTCHJWSPD: 0x10}, id="WTCHJWSPD 10"),
+    pytest.param({WTCHJWSPD: 0x18}, id="WTCHJWSPD 18"),
 ]
 
 
@@ -72,18 +72,32 @@ def test_reproductions_settle_or_trip_within_the_bound(pokes):
 
 
 def test_large_wtchjwspd_oscillation_is_caught_as_such():
-    """WTCHJWSPD 10: MVJAWS drives with WATCHJAW's stale error; the oscillation trips a fault naming it."""
+    """WTCHJWSPD 18: MVJAWS drives with WATCHJAW's stale error; the oscillation trips a fault naming it."""
     rig = make_rig()
     rig.init()
-    rig.ctl.poke(WTCHJWSPD, 0x10)
+    rig.ctl.poke(WTCHJWSPD, 0x18)
     taken, bound = supervised_move(rig.station, rig.ctl, rig.loop, TARGET)
     fault = rig.station.fault
     assert fault is not None, "the stale error did not make the jaws oscillate"
     assert fault.cause.startswith("P move oscillating about the target: error ±")
     assert "sign changes without decay" in fault.cause
-    assert "WTCHJWSPD 10 > MVJAWSPD 0C" in fault.cause
+    assert "WTCHJWSPD 18 ≫ MVJAWSPD 0C" in fault.cause
     assert taken < bound  # caught by the sign changes, before the settle bound
     assert rig.board.dac == 0x80 and rig.plant.current == 0
+
+
+def test_a_stale_stopped_bit_ends_the_move_short_and_wait_says_why():
+    """WTCHJWSPD 40 ≫ MVJAWSPD 02: the stopped bit lies (002) and ends the move; wait says so."""
+    rig = make_rig()
+    rig.init()
+    rig.ctl.poke(WTCHJWSPD, 0x40)
+    rig.ctl.poke(MVJAWSPD, 0x02)
+    taken, bound = supervised_move(rig.station, rig.ctl, rig.loop, TARGET)
+    assert rig.station.fault is None and taken < bound and rig.board.dac == 0x80
+    report = rig.station.wait_report()
+    short = signed(rig.ctl.position()) - TARGET
+    assert report.startswith(f"stopped short of the target by {short} counts (the stopped bit "
+                             "ended the move (STOPCNT ran out); WTCHJWSPD 40 ≫ MVJAWSPD 02")
 
 
 def test_a_move_that_does_not_settle_names_the_bound_and_the_schedule():
@@ -133,7 +147,7 @@ def test_schedule_the_controller_cannot_serve_is_refused_with_the_reason():
         station.execute(ctl.monitor, c, c.parse(["42", "01"]))
     assert "nothing changed" in str(exc.value)
     assert ctl.ram[SYSCLKPD] == before
-    with pytest.raises(CommandError, match="schedule values are 01..FF"):
+    with pytest.raises(CommandError, match=r"schedule values are 01\.\.FF"):
         station.execute(ctl.monitor, c, c.parse(["43", "00"]))
 
 

@@ -77,7 +77,7 @@ from pyrt.scheduler import ByteImage, ByteRef, Job, Loop, ReadyQueue, Task, inst
 from pyrt.scheduler.motion import MotionRecord, MotionType, register_motion_type
 from pyrt.scope import Source
 from pyrt.tasks import jawmove, jawwatch, sensors
-from pyrt.tasks.jawmove import JOGSTALL, STOPBUMPS, MoveSupervisor
+from pyrt.tasks.jawmove import BAND, JOGSTALL, STOPBUMPS, MoveSupervisor
 
 __all__ = [
     "ADDR_MVJAWS",
@@ -412,7 +412,19 @@ class GripperController(Component, CommandLetters):
                   f"{self._reason()}", source="P move")
 
     def move_ended(self, why: str) -> None:
-        """MVJAWS (or a jog) ended the commanded move: say why, stop supervising."""
+        """MVJAWS (or a jog) ended the commanded move: say why, stop supervising.
+
+        A move STOPCNT ended away from its target says that the stopped bit
+        ended it, and why the schedule may have made the bit lie."""
+        if why == "stopped":
+            err = self._sword(ENCODER_CNT) - self._sword(COMMAND_CNT)
+            if abs(err) > BAND:
+                sched = self.schedule()
+                why = "the stopped bit ended the move (STOPCNT ran out)"
+                if sched.watch_ns >= 2 * sched.move_ns:
+                    why += (f"; WTCHJWSPD {sched.wtchjwspd:02X} ≫ MVJAWSPD "
+                            f"{sched.mvjawspd:02X}: the bit is up to "
+                            f"{sched.watch_ns / 1e6:g} ms old")
         self.last_stop = why
         self.supervisor.disarm()
 
