@@ -252,8 +252,9 @@ def test_start_accepts_a_negative_hex_count(monkeypatch, capsys):
 
 
 @pytest.mark.wallclock
-def test_sigterm_to_a_real_time_gripper_stops_the_jaws_and_exits_0(tmp_path):
-    """SIGTERM mid-move to `pyrt gripper` at real time: jaws stopped, drive current +0, exit 0."""
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_sigterm_to_a_real_time_gripper_stops_the_jaws_and_exits_0(tmp_path, sig):
+    """SIGTERM (or SIGINT) mid-move to `pyrt gripper` at real time: jaws stopped, drive current +0, exit 0."""
     env = dict(os.environ, HOME=str(tmp_path), PYTHONUNBUFFERED="1")
     proc = subprocess.Popen([sys.executable, "-m", "pyrt", "gripper", "--speed", "1"],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -268,12 +269,12 @@ def test_sigterm_to_a_real_time_gripper_stops_the_jaws_and_exits_0(tmp_path):
             line = proc.stdout.readline()
             assert line, seen
             seen += line
-        proc.send_signal(signal.SIGTERM)
+        proc.send_signal(sig)
         out, err = proc.communicate(timeout=30)
     finally:
         proc.kill()
     assert proc.returncode == 0, err
     last = out.strip().splitlines()[-1]
-    assert "pyrt gripper: SIGTERM: every motor stopped; jaws at " in last
+    assert f"pyrt gripper: {signal.Signals(sig).name}: every motor stopped; jaws at " in last
     assert last.endswith("drive current +0")
     assert "Traceback" not in err

@@ -4,7 +4,13 @@ At start the controller does what the 8031 does at power-up: it loads its
 RAM variables, starts its three self-scheduling routines and runs I (drive
 the jaws wide open, zero the encoder), then prompts ``CMD: ``.  The
 commands are the report's (C E I M P S T W X; the monitor's C D I L N Q S),
-hexadecimal, lower case accepted; type ``help``.  Pipe a file in to run it
+hexadecimal, lower case accepted; type ``help``.  Every P move is
+supervised (settle and stall bounds from the distance, the speed and the
+schedule in RAM; oscillation about the target): a move that fails them is
+a fault, the drive nulled at once.  ``stop``, Ctrl-C, SIGTERM and SIGHUP
+stop the jaws and say where they are; ``wait`` says whether the move
+ended at the target, short of it (and why) or in a fault.  Power-up scales
+002's schedule values to ``--tick-us``.  Pipe a file in to run it
 as a script; with ``--speed max`` time advances only while commands run,
 ``wait`` or ``sleep``, so a script's output is the same on every run.
 
@@ -135,10 +141,18 @@ def run(args: argparse.Namespace) -> int:
     wall0 = time.perf_counter()
     station.start()
 
-    status = run_until_shutdown(
-        station, console, service, headless=args.headless, what="pyrt gripper",
-        say=lambda m: print(m, file=out, flush=True),
-        first=None if args.no_init else lambda: shell.onecmd("I"))
+    try:
+        status = run_until_shutdown(
+            station, console, service, headless=args.headless, what="pyrt gripper",
+            say=lambda m: print(m, file=out, flush=True),
+            first=None if args.no_init else lambda: shell.onecmd("I"))
+    except KeyboardInterrupt:
+        # SIGINT where no terminal console takes Ctrl-C (a pipe, --headless):
+        # the station was closed on the way out (every motor stopped); say so
+        station.close()
+        print(f"pyrt gripper: SIGINT: every motor stopped{station.closing_note()}", file=out,
+              flush=True)
+        status = 0
     if args.timing_log:
         wall = time.perf_counter() - wall0
         print(f"timing log written to {args.timing_log} ({loop.tick_index} ticks, {wall:.2f} s)",

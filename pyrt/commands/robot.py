@@ -360,7 +360,7 @@ class RobotShell(CommandShell):
                 with contextlib.suppress(PyrtError):
                     self.runner.call(st.end_wait, name="wait", take_fault=False)
         except FaultError as exc:
-            self.fault(exc, prefix="fault")
+            self.fault(exc, prefix=getattr(st, "wait_fault_prefix", "FAULT"))
             return
         if not done:
             self.say(f"still moving after {timeout:g} s")

@@ -17,11 +17,22 @@ and the command entry points when a console calls them through the runner.
 Safety (002's central fix, kept and extended): drive current is never left
 applied without movement.  ``fullopen`` aborts when the jaws stop before
 the limit bit; a commanded move ends STOPCNT bumps after the stopped bit; a
-jog held against a stop is cut off the same way; and a stall watchdog,
-independent of the RAM (which the monitor can change), trips the robot when
-current has been applied for :attr:`GripperController.stall_limit_ns`
-without one encoder count.  A fault's reflex action nulls the DAC and clears
-the drive bit in the same tick.
+jog held against a stop is cut off the same way; and pyrt supervises
+every commanded move, independently of the RAM (which the monitor can
+change): a settle bound from the distance, the speed limit and the schedule
+(:meth:`GripperController.settle_bound_ns`), oscillation about the target
+seen as sign changes of the error without decay (MVJAWS feeds a
+:class:`~pyrt.tasks.jawmove.MoveSupervisor`), and a stall watchdog that
+trips when current has been applied longer than the stall bound
+(:meth:`GripperController.stall_bound_ns`, at most
+:attr:`GripperController.stall_limit_ns`) without one encoder count.  A
+fault's reflex action nulls the DAC and clears the drive bit in the same
+tick.
+
+The schedule values in RAM are 002's to tune: monitor ``C`` refuses one the
+controller cannot serve (WATCHJAW faster than two encoder counts at the
+speed limit, or 00) and warns when the supervision predicts oscillation
+(:meth:`GripperController.oscillation_reason`).
 """
 
 from __future__ import annotations
@@ -272,6 +283,8 @@ class GripperController(Component, CommandLetters):
         self.supervisor = MoveSupervisor(_NoClock(), self._oscillating, self._not_settled)
         #: The settle bound of the running move, seconds (for its fault message).
         self.settle_bound_s = 0.0
+        #: Where the last commanded move started, counts (its direction, for ``wait``).
+        self.move_from = 0
 
     # -- wiring ------------------------------------------------------------------
 
@@ -340,8 +353,9 @@ class GripperController(Component, CommandLetters):
         """Why storing ``value`` at schedule variable ``addr`` cannot be served, or None.
 
         WATCHJAW must see the jaws move: a period shorter than the time of
-        two encoder counts at the speed limit leaves the stopped bit on
-        while they move (an I fails; a move ends where it stands)."""
+        two encoder counts at full speed (X 7F, what I drives at) leaves the
+        stopped bit on while they move (an I fails; a move ends where it
+        stands)."""
         if addr not in SCHEDULE_NAMES:
             return None
         if value == 0:
@@ -353,13 +367,12 @@ class GripperController(Component, CommandLetters):
         ram[addr] = value
         sched = Schedule(self.schedule().tick_ns, ram[SYSCLKPD], ram[MVJAWSPD], ram[SENSORPD],
                          ram[WTCHJWSPD])
-        v = self.calibration.speed(self.ram[JSPEED])
-        need = 2e9 / v
+        need = 2e9 / self.calibration.speed(0x7F)
         if sched.watch_ns < need:
             return (f"{SCHEDULE_NAMES[addr]} {value:02X} would run WATCHJAW every "
-                    f"{sched.watch_ns / 1e3:g} µs, less than two encoder counts at the speed "
-                    f"limit ({need / 1e3:.0f} µs at X {self.ram[JSPEED]:02X}): the stopped bit "
-                    "would be on while the jaws move")
+                    f"{sched.watch_ns / 1e3:g} µs, less than two encoder counts at full speed "
+                    f"({need / 1e3:.0f} µs at X 7F): the stopped bit would be on while the "
+                    "jaws move")
         return None
 
     def oscillation_reason(self, sched: Schedule | None = None) -> str | None:
@@ -688,6 +701,7 @@ class GripperController(Component, CommandLetters):
             )
         self.check_can_move()
         ram = self.ram
+        self.move_from = self._sword(ENCODER_CNT)
         self._set_word(COMMAND_CNT, target)
         # pyrt: P also stores the error the new target makes and clears the
         # stopped bit.  Both are WATCHJAW's to keep, but until its next run
@@ -723,6 +737,9 @@ class GripperController(Component, CommandLetters):
         if speed <= self.calibration.deadband:
             line += (f"; warning: at or below the worm's friction ({self.calibration.deadband:02X})"
                      ": the jaws will not move")
+        elif self.schedule().watch_ns * self.calibration.speed(speed) < 2e9:
+            line += (f"; warning: WATCHJAW (every {self.schedule().watch_ns / 1e6:g} ms) sees "
+                     "less than two counts at this speed: the stopped bit may end moves short")
         return line
 
     def replaces_target(self) -> bool:

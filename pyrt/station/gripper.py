@@ -28,6 +28,7 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 from pyrt.boards import Boards, open_boards
+from pyrt.boards.i8031 import COMMAND_CNT, ENCODER_CNT
 from pyrt.component import Arg, Component, Signal, command, finite
 from pyrt.errors import CommandError, ConfigError
 from pyrt.robots.gripper import GripperController, GripperMove, JawCalibration
@@ -193,10 +194,13 @@ class GripperStation(Station):
         """``wait`` with nothing to wait for."""
         return "nothing to wait for: jaws idle"
 
+    #: How ``wait`` opens the line of a fault that ended the move ("fault: ...").
+    wait_fault_prefix = "fault"
+
     def where(self) -> str:
         """Where the jaws are: position, opening, target, error."""
         ctl = self.controller
-        pos, tgt = ctl.position(), ctl.target()
+        pos, tgt = ctl.word(ENCODER_CNT), ctl.word(COMMAND_CNT)
         err = _signed(pos) - _signed(tgt)
         mm = ctl.calibration.mm
         return (f"position {pos:04X} ({mm(_signed(pos)):.1f} mm), target {tgt:04X} "
@@ -205,13 +209,14 @@ class GripperStation(Station):
     def wait_report(self) -> str:
         """How the move ended: at target, stopped short (and why), or the fault."""
         ctl = self.controller
-        err = _signed(ctl.position()) - _signed(ctl.target())
+        err = _signed(ctl.word(ENCODER_CNT)) - _signed(ctl.word(COMMAND_CNT))
         if self.fault is not None:
             return f"fault: {self.fault.cause}; {self.where()}"
         why = ctl.last_stop or "ended"
         if abs(err) <= AT_TARGET_COUNTS:
             return f"at target: {self.where()}"
-        side = "short of" if (err > 0) == (_signed(ctl.target()) < 0) else "past"
+        travel = _signed(ctl.word(COMMAND_CNT)) - ctl.move_from  # the move's direction
+        side = "past" if err * travel > 0 else "short of"
         return f"stopped {side} the target by {abs(err)} counts ({why}): {self.where()}"
 
     def stop(self) -> str:
@@ -233,7 +238,7 @@ class GripperStation(Station):
     def closing_note(self) -> str:
         """Where the jaws were left and the drive current, for the line said on the way out."""
         ctl = self.controller
-        pos = ctl.position()
+        pos = ctl.word(ENCODER_CNT)
         return (f"; jaws at {pos:04X} ({ctl.calibration.mm(_signed(pos)):.1f} mm), "
                 f"drive current {ctl.dac - 0x80:+d}")
 
