@@ -181,7 +181,7 @@ def test_supervisor_flags_three_undamped_half_cycles_and_not_a_decaying_approach
 SCHEDULE = st.integers(1, 0xFF)
 
 
-@settings(max_examples=30, deadline=None, derandomize=True,
+@settings(max_examples=20, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow])
 @given(tick_us=st.sampled_from([50, 100, 250, 1000, 2000, 5000, 10000]),
        sysclkpd=SCHEDULE, mvjawspd=SCHEDULE, sensorpd=SCHEDULE, wtchjwspd=SCHEDULE,

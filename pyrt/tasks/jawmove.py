@@ -78,9 +78,11 @@ class MoveSupervisor:
     the monitor can change).  The controller arms it when a move starts
     (:meth:`arm`); MVJAWS feeds it the error it drives with, at the cost of
     a few comparisons per run: the half-cycle peak of the error on each
-    side, and the settle deadline.  A sign change of the error calls
-    :meth:`flip` (rare), the deadline :meth:`expired`; both go back to the
-    controller (``on_oscillation``, ``on_timeout``), which trips the robot.
+    side of the target band (:data:`BAND`).  A sign change of the error
+    calls :meth:`flip` (rare); the controller's watchdog calls
+    :meth:`expired` when the settle deadline passes (every tick, whatever
+    the schedule); both go back to the controller (``on_oscillation``,
+    ``on_timeout``), which trips the robot.
     """
 
     __slots__ = ("active", "clock", "deadline_ns", "flips", "on_oscillation", "on_timeout",
