@@ -116,3 +116,44 @@ def test_gripper_p_move_bare_loop(benchmark):
     rounds = 5
     benchmark.pedantic(moves, rounds=rounds, iterations=1)
     report(benchmark, sim["ns"] / rounds / 1e9, sim["ticks"] // rounds, "P D600 and back, bare loop")
+
+
+#: The supervision's budget per MVJAWS run, µs.
+SUPERVISION_TARGET_US = 0.2
+
+
+@pytest.mark.benchmark(group="gripper-supervision")
+def test_supervision_cost_per_jaw_move_call(benchmark):
+    """MVJAWS mid-move with the move's supervision armed, and the same run disarmed:
+    the difference is what the supervision costs per jaw-move call (target < 0.2 µs)."""
+    import time
+
+    from pyrt.boards.i8031 import ERROR_CNT
+    from pyrt.tasks.jawmove import mvjaws
+
+    _runner, ctl, _loop = make_stack()
+    ctl.move(-0x1000)  # drive bit on, supervisor armed with a deadline seconds away
+    sup = ctl.supervisor
+    n = 2_000
+
+    def calls(active: bool) -> float:
+        ctl.ram[ERROR_CNT], ctl.ram[ERROR_CNT + 1] = 0x80, 0x10  # +4096: far from the target
+        sup.active = active
+        sup.side = 1  # mid-move: no sign change, the common path
+        t0 = time.perf_counter()
+        for _ in range(n):
+            mvjaws(ctl)
+        return (time.perf_counter() - t0) / n * 1e6
+
+    armed = bare = float("inf")
+    for _ in range(100):  # interleaved, so that the machine's load falls on both alike
+        armed = min(armed, calls(True))
+        bare = min(bare, calls(False))
+    sup.active = True
+    benchmark.pedantic(mvjaws, args=(ctl,), rounds=2000, iterations=10)
+    cost = armed - bare
+    benchmark.extra_info.update(mvjaws_us=round(bare, 3), mvjaws_supervised_us=round(armed, 3),
+                                supervision_us=round(cost, 3), target_us=SUPERVISION_TARGET_US)
+    print(f"\nMVJAWS {bare:.3f} µs per call bare, {armed:.3f} µs supervised: supervision "
+          f"{cost:.3f} µs per jaw-move call (target < {SUPERVISION_TARGET_US} µs)")
+    _runner.stop()

@@ -222,7 +222,7 @@ def test_live_status_is_the_stations_status_at_real_time_only():
     runner = station.start()
     try:
         line = live_status(runner, station, argparse.Namespace(speed=1.0))
-        assert line().startswith("position 0000 target 0000")
+        assert line().startswith("position 0000 (76.0 mm), target 0000 (76.0 mm)")
         runner.call(station.trip, "test fault", "test", take_fault=False)
         assert "FAULT" in line().upper()
         with pytest.raises(FaultError):  # the line took nothing: the operator still gets it

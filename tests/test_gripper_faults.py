@@ -115,18 +115,35 @@ def test_full_queue_during_a_sequence_is_a_fault():
     assert rig.station.fault is not None and rig.board.dac == 0x80
 
 
-def test_watchdog_trips_when_the_queue_is_frozen_mid_move():
-    """Clock interrupt off during a move (monitor I): the watchdog nulls the stalled motor."""
+def test_clock_off_mid_move_ends_the_move_with_current_nulled():
+    """Clock interrupt off during a move (monitor I): the move ends in that call, current nulled."""
     rig = make_rig()
     rig.init()
     rig.ctl.move(-0x0400)
     rig.loop.run(300)
-    rig.ctl.toggle_clock()  # MVJAWS frozen with current latched: the jaws run to the stop
+    assert rig.board.dac != 0x80
+    rig.ctl.toggle_clock()  # MVJAWS frozen: it could not end the move any more
+    assert rig.board.dac == 0x80 and not rig.ctl.moving
+    rig.stall.worst_ns = 0
+    assert "clock interrupt turned off" in rig.ctl.last_stop
+    rig.loop.run(3000)
+    assert rig.board.dac == 0x80 and rig.stall.worst_ns == 0
+    assert rig.loop.take_fault() is None
+
+
+def test_watchdog_trips_when_the_queue_is_frozen_under_a_latched_current():
+    """The queue frozen behind the controller's back with current latched: a bound trips, current nulled."""
+    rig = make_rig()
+    rig.init()
+    rig.ctl.move(-0x0400)
+    rig.loop.run(300)
+    rig.ctl.queue.interrupts_enabled = False  # not through the monitor: nothing ends the move
     rig.loop.run(15000)
     assert rig.board.dac == 0x80
-    assert rig.stall.worst_ns <= STALL_BOUND_NS
+    assert rig.stall.worst_ns <= rig.ctl.stall_bound_ns() + 2 * MS
     fault = rig.loop.take_fault()
-    assert fault is not None and fault.source == "stall watchdog"
+    # the move's settle bound (checked every tick) or the stall bound, whichever first
+    assert fault is not None and fault.source in ("P move", "stall watchdog")
 
 
 def test_watchdog_trips_when_mvjaws_is_removed_from_q():

@@ -36,21 +36,34 @@ def counts(word: str) -> int:
     return value - 0x10000 if value & 0x8000 else value
 
 
-def test_p_moves_queue_and_run_in_order(station):
-    """Two P commands in a row: the second starts when the first has ended; wait waits for both."""
-    station.run("P -1000", "P -0400")
+def test_p_during_a_move_replaces_its_target(station):
+    """002: a P given while the jaws move changes the target of that move; wait says at target."""
+    station.run("P -1000")
+    station.runner.sleep(0.2)
+    assert station.controller.moving
+    station.run("P -0400")
+    assert len(station.runner.motion) == 0  # nothing queued behind: the move took it
+    lines = station.run("wait")
+    assert lines[0].startswith("at target: position")
+    assert abs(counts(station.run("W")[0]) + 0x0400) <= 16
+    assert counts(station.run("T")[0]) == -0x0400
+    assert station.executor.last.stop_reason == "stopped"
+
+
+def test_queued_motion_records_run_in_order(station):
+    """motion gripper_move records queue behind the running move; wait waits for all of them."""
+    station.run("P -1000", "motion gripper_move target=-1024")
     assert len(station.runner.motion) + station.executor.busy >= 1
     lines = station.run("wait")
-    assert lines[0].startswith("stopped")
+    assert lines[0].startswith("at target")
     assert abs(counts(station.run("W")[0]) + 0x0400) <= 16
-    assert station.executor.last.stop_reason == "stopped"
     assert station.executor.last.target == -0x0400
 
 
 def test_full_motion_queue_refuses(station):
     """More P moves than the motion queue holds: the extra one is refused with a clear error."""
     cap = station.runner.motion.capacity
-    lines = station.run(*[f"P -{0x100 + k:04X}" for k in range(cap + 2)])
+    lines = station.run(*[f"motion gripper_move target=-{0x100 + k}" for k in range(cap + 2)])
     assert any("motion queue full" in line for line in lines)
 
 
@@ -65,7 +78,8 @@ def test_jammed_motor_ends_each_queued_move_without_current(station):
 def test_fault_empties_the_motion_queue_and_needs_ack(station):
     """A fault mid-move: drive nulled and queued moves dropped in the same tick; P refused until ack."""
     ctl = station.controller
-    station.run("P -1000", "P -0800", "P -0400")
+    station.run("P -1000", "motion gripper_move target=-2048",
+                "motion gripper_move target=-1024")
     station.runner.sleep(0.2)
     assert ctl.moving and len(station.runner.motion) == 2
 

@@ -98,7 +98,7 @@ def test_whole_command_set_transcript(monkeypatch, capsys):
     assert nxt("T") == ["0000"]
     assert nxt("E") == ["0080"]
     assert nxt("P-1B86") == []
-    assert nxt("wait")[0].startswith("stopped: position")
+    assert nxt("wait")[0].startswith("at target: position")
     assert abs(hexword(nxt("W")[0]) + 0x1B86) <= 16
     assert nxt("T") == ["E47A"]
     e = nxt("E")[0]
@@ -126,11 +126,12 @@ def test_whole_command_set_transcript(monkeypatch, capsys):
     assert s[15 - 8] == "0" and s[15 - 9] == "0"  # squeezed: overload on
     assert s[15 - 10] == "1"  # limit off: the jaws are nearly closed
     assert s[15 - 0] == "0" and s[15 - 4] == "0"  # inner proximity sensors on
-    assert nxt("X 33") == []
+    assert nxt("X 33") == [
+        "speed 7F -> 33: JSPEED 33, MXPJSPD B3, MXNJSPD 4D (up to 860 counts/s)"]
     assert nxt("T") == ["D600"]
     assert nxt("M") == []
     assert nxt("D 43") == ["43 0C"]
-    assert nxt("C 43 20") == ["43 20"]
+    assert nxt("C 43 20")[0] == "43 20"  # with a warning: MVJAWS 128 ms may oscillate
     assert nxt("N") == ["44 0A"]
     assert nxt("S") == ["SP 57"]
     assert nxt("I") == ["clock interrupt OFF (ready queue frozen)"]
@@ -145,7 +146,8 @@ def test_whole_command_set_transcript(monkeypatch, capsys):
     assert len(c) == 1 and re.fullmatch(r"[0-9A-F]{4}", c[0])
     assert -0x2A00 - 300 < hexword(c[0]) < -0x2A00 + 50  # about D600, a little more
     assert nxt("W") == ["0000"]
-    assert nxt("quit") == ["pyrt gripper: quit: every motor stopped"]
+    assert nxt("quit") == ["pyrt gripper: quit: every motor stopped; jaws at 0000 (76.0 mm), "
+                           "drive current +0"]
 
 
 def mvjaws_calls(lines: list[str]) -> int:
@@ -187,7 +189,8 @@ def test_dead_limit_at_power_up_lands_in_the_monitor(monkeypatch, capsys):
 def test_end_of_input_ends_the_program(monkeypatch, capsys):
     """A script without quit ends at end of input with status 0, saying the motors stopped."""
     out = run_cli(["gripper", "--speed", "max", "--no-init"], "W\n", monkeypatch, capsys)
-    assert out.rstrip().endswith("CMD: \npyrt gripper: end of input: every motor stopped")
+    assert out.rstrip().endswith("CMD: \npyrt gripper: end of input: every motor stopped; "
+                                 "jaws at 0000 (76.0 mm), drive current +0")
 
 
 def test_bad_options_are_one_line_errors(monkeypatch, capsys):

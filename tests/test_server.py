@@ -37,7 +37,7 @@ def test_full_move_commanded_by_a_client_and_reported_to_a_subscriber():
         assert op.command("I") == ["jaws wide open (limit sensor on), encoder 0000"]
         assert op.command("P E47A") == []
         (line,) = op.command("wait")
-        assert line.startswith("stopped: position")
+        assert line.startswith("at target: position")
         assert abs(_signed(op.command("W")[0]) + 0x1B86) <= 16
         samples = list(sub.statuses(1.0))
         moving = [s for s in samples if s.fields.get("moving") == 1]
@@ -132,7 +132,7 @@ def test_a_second_privileged_client_is_refused_not_demoted():
             second.auth(TOKEN)
         assert exc.value.code == "busy"
         assert second.request("P E47A").code == "denied"
-        assert first.command("X 33") == []  # the first keeps its privilege
+        assert first.command("X 33")[0].startswith("speed 7F -> 33")  # still privileged
         assert first.request("AUTH " + TOKEN).lines == ["already privileged"]
         first.close()
         deadline = time.monotonic() + 5
@@ -253,7 +253,7 @@ def test_requests_are_answered_in_order_when_pipelined():
         assert lines[1].startswith("OK t=")
         assert lines[2] == "OK 0000"
         assert lines[3].startswith("OK privileged")
-        assert lines[4] == "OK"
+        assert lines[4].startswith("OK speed 7F -> 33: JSPEED 33")
         assert lines[5].startswith("OK t=")
         assert lines[6] == "OK bye"
 
@@ -560,7 +560,7 @@ def test_reconnect_and_auth_after_a_privileged_client_left_is_never_busy(monkeyp
         monkeypatch.setattr(sv.server.robot, "release", slow_release)
         for _ in range(3):
             first = sv.operator()
-            assert first.command("X 33") == []
+            assert first.command("X 33")[0].startswith("speed ")
             first.close()
             nxt = sv.client()
             nxt.auth(TOKEN)  # ERR busy here before the fix

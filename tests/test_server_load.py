@@ -34,7 +34,7 @@ def test_32_clients_read_status_while_a_move_runs():
         assert status["errors"] == reads["errors"] == 0
         assert status["requests"] > 1000 and reads["requests"] > 100
         (ended,) = status["during"]
-        assert ended.startswith("stopped: position")
+        assert ended.startswith("at target: position")
         assert abs(_signed(op.command("W")[0]) + 0x1B86) <= 16
         moving = []
         for sample in itertools.islice(sub.statuses(1.0), 400):  # a live stream: stop at the end

@@ -148,7 +148,8 @@ def test_gripper_init_move_and_wait_over_tcp_reach_the_target(gripper_sim):
             shell.onecmd(line)
         text = out.getvalue()
         assert "jaws wide open (limit sensor on), encoder 0000" in text, text
-        m = re.search(r"stopped: position ([0-9A-F]{4}), target E47A, error ([-+]\d+)", text)
+        m = re.search(r"at target: position ([0-9A-F]{4}) \([0-9.]+ mm\), target E47A "
+                      r"\([0-9.]+ mm\), error ([-+]\d+)", text)
         assert m, text
         assert abs(int(m.group(2))) <= 20
         world = station.boards.info()  # the other process's truth, not a register access

@@ -169,9 +169,13 @@ class FakeController:
         self.job = None
         self.last_stop = ""
         self.driven: list[int] = []
+        self.supervisor = jawmove.MoveSupervisor(None, None, None)
 
     def drive(self, byte: int) -> None:
         self.driven.append(byte)
+
+    def move_ended(self, why: str) -> None:
+        self.last_stop = why
 
     def set_word(self, addr: int, value: int) -> None:
         self.ram[addr] = value & 0xFF
@@ -181,18 +185,22 @@ class FakeController:
         return self.ram[addr] | (self.ram[addr + 1] << 8)
 
 
-def test_mvjaws_drives_the_difference_then_ends_stopcnt_bumps_after_the_stopped_bit():
-    """002: with the drive bit, current = target - actual (excess-128, clipped); after the stopped bit the counter runs down, then the current is nulled and the drive bit cleared."""
+def test_mvjaws_drives_the_ram_error_then_ends_stopcnt_bumps_after_the_stopped_bit():
+    """002: with the drive bit, current = -ERROR_CNT as WATCHJAW left it (excess-128, clipped); after the stopped bit the counter runs down, then the current is nulled and the drive bit cleared."""
     ctl = FakeController()
     ram = ctl.ram
     ram[MXPJSPD], ram[MXNJSPD] = 0x80 + 0x7F, 0x80 - 0x7F
     ctl.set_word(COMMAND_CNT, -0x10)
     ctl.set_word(ENCODER_CNT, -0x30)
+    ctl.set_word(ERROR_CNT, 0x80 - 0x20)  # WATCHJAW's error: 32 counts short
     ram[FLAGS] = 1 << DRVON
     ram[STOPCNT] = 2
     jawmove.mvjaws(ctl)
     assert ctl.driven == [0x80 + 0x20]  # 32 counts to go, opening: +32 in excess-128
-    ctl.set_word(ENCODER_CNT, -0x1000)  # far away: clipped at the speed limit
+    ctl.set_word(ENCODER_CNT, -0x1000)  # far away, but WATCHJAW has not run: same error
+    jawmove.mvjaws(ctl)
+    assert ctl.driven[-1] == 0x80 + 0x20
+    ctl.set_word(ERROR_CNT, (0x80 - 0x1000 + 0x10) & 0xFFFF)  # now it has: clipped
     jawmove.mvjaws(ctl)
     assert ctl.driven[-1] == 0xFF
     ram[FLAGS] |= 1 << STOPPED

@@ -4,7 +4,13 @@ At start the controller does what the 8031 does at power-up: it loads its
 RAM variables, starts its three self-scheduling routines and runs I (drive
 the jaws wide open, zero the encoder), then prompts ``CMD: ``.  The
 commands are the report's (C E I M P S T W X; the monitor's C D I L N Q S),
-hexadecimal, lower case accepted; type ``help``.  Pipe a file in to run it
+hexadecimal, lower case accepted; type ``help``.  Every P move is
+supervised (settle and stall bounds from the distance, the speed and the
+schedule in RAM; oscillation about the target): a move that fails them is
+a fault, the drive nulled at once.  ``stop``, Ctrl-C, SIGTERM and SIGHUP
+stop the jaws and say where they are; ``wait`` says whether the move
+ended at the target, short of it (and why) or in a fault.  Power-up scales
+002's schedule values to ``--tick-us``.  Pipe a file in to run it
 as a script; with ``--speed max`` time advances only while commands run,
 ``wait`` or ``sleep``, so a script's output is the same on every run.
 
@@ -17,6 +23,7 @@ line names the URL): the jaws move there at real time, so only ``--speed
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import time
 
@@ -68,7 +75,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     g.add_argument(
         "--start", type=_counts, metavar="HEX",
-        help="jaw position at power-up, encoder counts from wide open (default F400)",
+        help="jaw position at power-up, encoder counts from wide open: F400 or -0C00 "
+             "(the default)",
     )
     g.add_argument(
         "--fault", action="append", choices=[f for f in FAULTS if f != "port"],
@@ -79,6 +87,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--history", metavar="FILE", help="keep the command history in FILE")
     add_loop_options(p, default_speed="1")
     add_serve_options(p)
+    # "--start -0C00": argparse takes a word that starts with "-" for an
+    # option unless it looks like a negative number; hexadecimal counts are
+    # numbers here (no option of this command looks like one).
+    p._negative_number_matcher = re.compile(r"^-[0-9A-Fa-f]+$|^-\d*\.\d+$")
     p.set_defaults(run=run)
 
 
@@ -93,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
     runner = station.runner
     service = prepare_service(args, runner, ServedStation(station))
     shell = RobotShell(station, out)
-    console = Console(shell, sys.stdin, out, messages=runner.messages, history_file=args.history,
+    console = Console(shell, sys.stdin, out, messages=shell.messages, history_file=args.history,
                       status=live_status(runner, station, args))
     speed = "max (simulated time)" if args.speed is None else f"{args.speed:g}x real time"
     jaws = ("simulated jaws" if station.plant is not None
@@ -106,10 +118,18 @@ def run(args: argparse.Namespace) -> int:
     wall0 = time.perf_counter()
     station.start()
 
-    status = run_until_shutdown(
-        station, console, service, headless=args.headless, what="pyrt gripper",
-        say=lambda m: print(m, file=out, flush=True),
-        first=None if args.no_init else lambda: shell.onecmd("I"))
+    try:
+        status = run_until_shutdown(
+            station, console, service, headless=args.headless, what="pyrt gripper",
+            say=lambda m: print(m, file=out, flush=True),
+            first=None if args.no_init else lambda: shell.onecmd("I"))
+    except KeyboardInterrupt:
+        # SIGINT where no terminal console takes Ctrl-C (a pipe, --headless):
+        # the station was closed on the way out (every motor stopped); say so
+        station.close()
+        print(f"pyrt gripper: SIGINT: every motor stopped{station.closing_note()}", file=out,
+              flush=True)
+        status = 0
     if args.timing_log:
         wall = time.perf_counter() - wall0
         print(f"timing log written to {args.timing_log} ({loop.tick_index} ticks, {wall:.2f} s)",

@@ -51,10 +51,11 @@ def parse_motion(arg: str) -> MotionRecord | None:
     return MotionRecord(name.lower(), params)
 
 
-def motion_type_lines() -> list[str]:
-    """One line per registered motion type: its name and the first line of its help."""
+def motion_type_lines(names: list[str] | None = None) -> list[str]:
+    """One line per registered motion type (or per one of ``names``): its
+    name and the first line of its help."""
     lines = []
-    for name in motion_type_names():
+    for name in motion_type_names() if names is None else names:
         try:
             doc = inspect.getdoc(get_motion_type(name)) or ""
         except CommandError as exc:

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import shlex
+import threading
 from collections.abc import Callable
 from typing import Any, TextIO
 
@@ -62,6 +63,9 @@ class RobotShell(CommandShell):
         self.level: Component | None = getattr(station, "letter_level", lambda: None)()
         self._scope = ScopeCommand(self.runner, station.scope, self._channel,
                                    self._channel_names, stdout)
+        #: Faults already shown to the operator (their text), so each is shown once.
+        self._shown: set[str] = set()
+        self._shown_lock = threading.Lock()
 
     # -- prompt -----------------------------------------------------------------------
 
@@ -175,7 +179,9 @@ class RobotShell(CommandShell):
         subs: dict[str, Any] = {verb: None for verb in self._scope.verbs()}
         subs.update(add=channels, trigger={name: None for name in channels})
         table["scope"] = subs
-        table["motion"] = {name: None for name in motion_type_names()}
+        own = getattr(self.station, "motion_types", None)
+        table["motion"] = {name: None for name in (own() if callable(own)
+                                                   else motion_type_names())}
         return table
 
     # -- dispatch ---------------------------------------------------------------------
@@ -239,10 +245,38 @@ class RobotShell(CommandShell):
                 text = f"{prefix}: {text}"
             self.say(text)
 
-    def fault(self, exc: FaultError) -> None:
+    def fault(self, exc: FaultError, prefix: str = "FAULT") -> None:
+        """Show a fault the loop raised at a command, unless the console has
+        shown it already (:meth:`messages`): each fault once."""
         f = exc.fault
-        self.say(f"FAULT: {f.cause} (in {f.source or self.station.name})")
-        self.say("every motor stopped; nothing moves until you type ack")
+        with self._shown_lock:
+            if str(f) in self._shown:
+                return
+            self._shown.add(str(f))
+        self.say(f"{prefix}: {f.cause} (in {f.source or self.station.name})")
+        self.say("every motor stopped; reads still answer; nothing moves until you type ack")
+
+    def messages(self) -> list[str]:
+        """The loop's asynchronous lines for the console (give the console
+        this, not the runner's): a fault shown here is taken from the runner,
+        so the next command does not report it again; one the shell has
+        shown already is left out."""
+        out: list[str] = []
+        for line in self.runner.messages():
+            if line.startswith("FAULT "):
+                with self._shown_lock:
+                    if line[6:] in self._shown:
+                        continue
+                    self._shown.add(line[6:])
+                    take = getattr(getattr(self.runner, "loop", None), "take_fault", None)
+                    if callable(take):
+                        take()
+                out.append(line)
+                out.append("every motor stopped; reads still answer; nothing moves until you "
+                           "type ack")
+                continue
+            out.append(line)
+        return out
 
     # -- channels of the scope --------------------------------------------------------
 
@@ -326,7 +360,7 @@ class RobotShell(CommandShell):
                 with contextlib.suppress(PyrtError):
                     self.runner.call(st.end_wait, name="wait", take_fault=False)
         except FaultError as exc:
-            self.fault(exc)
+            self.fault(exc, prefix=getattr(st, "wait_fault_prefix", "FAULT"))
             return
         if not done:
             self.say(f"still moving after {timeout:g} s")
@@ -368,9 +402,11 @@ class RobotShell(CommandShell):
         check(robot, params) class method is checked before it is queued
         (a refusal moves nothing)."""
         record = parse_motion(arg)
+        own = getattr(self.station, "motion_types", None)
         if record is None:
             self.say("motion types (motion TYPE key=value ...):")
-            for line in motion_type_lines():
+            names = own() if callable(own) else None
+            for line in motion_type_lines(names):
                 self.say(line)
             return
         get_motion_type(record.type)
@@ -419,9 +455,17 @@ class RobotShell(CommandShell):
             return f"interrupted; could not reach the robot: {exc}"
         return "(Ctrl-C stops a move; nothing is moving: 'quit' or Ctrl-D leaves)"
 
-    @command(name="quit", console=True)
+    @command(name="clear", console=True, reads_only=True)
+    def do_clear(self) -> None:
+        """clear: clear the terminal screen (nothing on a pipe)."""
+        isatty = getattr(self.stdout, "isatty", None)
+        if callable(isatty) and isatty():
+            self.stdout.write("\033[H\033[2J")
+            self.stdout.flush()
+
+    @command(name="quit", console=True, aliases=("exit",))
     def do_quit(self) -> bool:
-        """quit: stop every motor, then leave."""
+        """quit (or exit): stop every motor, then leave."""
         try:
             self.runner.call(self.station.stop, name="quit", take_fault=False)
         except (MailboxTimeout, PyrtError) as exc:

@@ -17,11 +17,22 @@ and the command entry points when a console calls them through the runner.
 Safety (002's central fix, kept and extended): drive current is never left
 applied without movement.  ``fullopen`` aborts when the jaws stop before
 the limit bit; a commanded move ends STOPCNT bumps after the stopped bit; a
-jog held against a stop is cut off the same way; and a stall watchdog,
-independent of the RAM (which the monitor can change), trips the robot when
-current has been applied for :attr:`GripperController.stall_limit_ns`
-without one encoder count.  A fault's reflex action nulls the DAC and clears
-the drive bit in the same tick.
+jog held against a stop is cut off the same way; and pyrt supervises
+every commanded move, independently of the RAM (which the monitor can
+change): a settle bound from the distance, the speed limit and the schedule
+(:meth:`GripperController.settle_bound_ns`), oscillation about the target
+seen as sign changes of the error without decay (MVJAWS feeds a
+:class:`~pyrt.tasks.jawmove.MoveSupervisor`), and a stall watchdog that
+trips when current has been applied longer than the stall bound
+(:meth:`GripperController.stall_bound_ns`, at most
+:attr:`GripperController.stall_limit_ns`) without one encoder count.  A
+fault's reflex action nulls the DAC and clears the drive bit in the same
+tick.
+
+The schedule values in RAM are 002's to tune: monitor ``C`` refuses one the
+controller cannot serve (WATCHJAW faster than two encoder counts at the
+speed limit, or 00) and warns when the supervision predicts oscillation
+(:meth:`GripperController.oscillation_reason`).
 """
 
 from __future__ import annotations
@@ -72,12 +83,12 @@ from pyrt.boards.i8031 import (
 )
 from pyrt.component import Component, Signal
 from pyrt.errors import CommandError
-from pyrt.robots.gripper_commands import CommandLetters, GripperMonitor, parse_hex
+from pyrt.robots.gripper_commands import CommandLetters, GripperMonitor, parse_hex, parse_target
 from pyrt.scheduler import ByteImage, ByteRef, Job, Loop, ReadyQueue, Task, install
 from pyrt.scheduler.motion import MotionRecord, MotionType, register_motion_type
 from pyrt.scope import Source
 from pyrt.tasks import jawmove, jawwatch, sensors
-from pyrt.tasks.jawmove import JOGSTALL, STOPBUMPS
+from pyrt.tasks.jawmove import BAND, JOGSTALL, STOPBUMPS, MoveSupervisor
 
 __all__ = [
     "ADDR_MVJAWS",
@@ -85,7 +96,9 @@ __all__ = [
     "ADDR_SYSCLK",
     "ADDR_WATCHJAW",
     "GripperController",
+    "JawCalibration",
     "JobResult",
+    "Schedule",
 ]
 
 # Appendix B: EPROM addresses of the self-scheduling routines and the clock handler.
@@ -110,6 +123,8 @@ START_GRACE = 4
 START_GRACE_NS = 16_000_000
 #: Upper bound on any foreground drive, in queue checks (60 s at the defaults).
 MAX_DRIVE_CHECKS = 15000
+#: The stall watchdog looks at the schedule only after this long without a count.
+STALL_FLOOR_NS = 50_000_000
 #: SP while the command loop runs (main called it) and inside the monitor.
 SP_CMDLOOP = SP_RESET + 2
 SP_MONITOR = SP_RESET + 4
@@ -120,6 +135,91 @@ _MASK_DRVON = 1 << DRVON
 _MASK_DOJOG = 1 << DOJOG
 _MASK_JOGSTALL = 1 << JOGSTALL
 _MASK_LIMIT = 1 << LIMIT
+
+
+#: 002's routine periods at pyrt's 1 ms base tick (Appendix B: 04 checks x
+#: 0C, 0A, 01), kept at power-up whatever ``--tick-us`` is (see
+#: :meth:`GripperController.power_up_schedule`).
+CHECK_NS = 4_000_000
+SCHEDULE_NS = {MVJAWSPD: 48_000_000, SENSORPD: 40_000_000, WTCHJWSPD: 4_000_000}
+#: The schedule variables by RAM address, as the monitor names them.
+SCHEDULE_NAMES = {SYSCLKPD: "SYSCLKPD", MVJAWSPD: "MVJAWSPD", SENSORPD: "SENSORPD",
+                  WTCHJWSPD: "WTCHJWSPD"}
+#: MVJAWS drives with the error; with g = (counts/s per current unit) x the
+#: time a current rests on one error value (MVJAWS's period plus the error's
+#: age, up to WATCHJAW's), the sampled loop overshoots once g passes about 2
+#: (the simulated jaws: 1.04 at 002's defaults settles; 2.2 with WTCHJWSPD
+#: 10 and 3.9 with MVJAWSPD 30 oscillate; between, the deadband may or may
+#: not catch the jaws: a prediction, and the supervision is the guard).
+OSCILLATION_GAIN = 2.0
+#: Settle bound: travel at the speed limit times this, plus the end of the move.
+TRAVEL_MARGIN = 1.5
+SETTLE_EXTRA_NS = 500_000_000
+#: A move may hold current on jaws that do not move for STOPBUMPS MVJAWS runs
+#: after WATCHJAW sees them stopped; the stall bound adds this margin.
+STALL_EXTRA_NS = 100_000_000
+
+
+@dataclass(frozen=True)
+class JawCalibration:
+    """What the station knows of the mechanism: counts from wide open to
+    closed and the opening in mm there (for mm beside counts), and how fast
+    the worm turns (counts/s per current unit above a friction deadband),
+    for the supervision's bounds.  The defaults are the simulated jaws'."""
+
+    closed: int = 0x2A00
+    open_mm: float = 76.0
+    gain: float = 20.0
+    deadband: int = 8
+
+    def mm(self, counts: int) -> float:
+        """Jaw opening in mm at encoder ``counts`` (0 wide open, negative closing)."""
+        return self.open_mm * (1.0 + counts / self.closed)
+
+    def counts(self, mm: float) -> int:
+        """Encoder counts where the opening is ``mm``."""
+        return round(-(self.open_mm - mm) / self.open_mm * self.closed)
+
+    def speed(self, jspeed: int) -> float:
+        """Jaw speed (counts/s) at a current of ``jspeed`` units (at least 1 count/s)."""
+        return max(1.0, (jspeed - self.deadband) * self.gain)
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """The routines' periods as the RAM and the tick make them, in ns."""
+
+    tick_ns: int
+    sysclkpd: int
+    mvjawspd: int
+    sensorpd: int
+    wtchjwspd: int
+
+    @property
+    def check_ns(self) -> int:
+        """Between two checks of the ready queue."""
+        return self.tick_ns * (self.sysclkpd or 256)
+
+    @property
+    def move_ns(self) -> int:
+        """MVJAWS's period."""
+        return self.check_ns * (self.mvjawspd or 256)
+
+    @property
+    def watch_ns(self) -> int:
+        """WATCHJAW's period."""
+        return self.check_ns * (self.wtchjwspd or 256)
+
+    @property
+    def sensor_ns(self) -> int:
+        """SENSORS's period."""
+        return self.check_ns * (self.sensorpd or 256)
+
+    def text(self) -> str:
+        """The four variables as the monitor shows them."""
+        return (f"SYSCLKPD {self.sysclkpd:02X} MVJAWSPD {self.mvjawspd:02X} "
+                f"SENSORPD {self.sensorpd:02X} WTCHJWSPD {self.wtchjwspd:02X}, "
+                f"tick {self.tick_ns / 1e3:g} µs")
 
 
 @dataclass(frozen=True)
@@ -146,8 +246,11 @@ class GripperController(Component, CommandLetters):
     :meth:`start_init`.
     """
 
-    def __init__(self, cpu: I8031, name: str = "gripper", stall_limit_ns: int = 1_000_000_000):
+    def __init__(self, cpu: I8031, name: str = "gripper", stall_limit_ns: int = 1_000_000_000,
+                 calibration: JawCalibration | None = None):
         self.name = name
+        #: The mechanism's numbers (mm, speed) the bounds and the mm display use.
+        self.calibration = calibration if calibration is not None else JawCalibration()
         self.cpu = cpu
         self.ram = cpu.ram
         self.monitor = GripperMonitor(self)
@@ -176,6 +279,12 @@ class GripperController(Component, CommandLetters):
         self._wd_since = 0
         #: Why the last commanded move or jog ended, for the console's ``wait``.
         self.last_stop = ""
+        #: The running move's supervision (armed by :meth:`move`).
+        self.supervisor = MoveSupervisor(_NoClock(), self._oscillating, self._not_settled)
+        #: The settle bound of the running move, seconds (for its fault message).
+        self.settle_bound_s = 0.0
+        #: Where the last commanded move started, counts (its direction, for ``wait``).
+        self.move_from = 0
 
     # -- wiring ------------------------------------------------------------------
 
@@ -188,6 +297,7 @@ class GripperController(Component, CommandLetters):
         if register:
             install(self.queue, self.tasks())
         self._loop = loop
+        self.supervisor.clock = loop
         loop.attach(self.queue, name="SYSCLK")
         loop.attach(self.watchdog, name="stall watchdog")
 
@@ -197,10 +307,8 @@ class GripperController(Component, CommandLetters):
         ram = self.ram
         self.drive(DAC_NULL)
         self.cpu.sp = SP_CMDLOOP
-        ram[SYSCLKPD] = DEFAULT_SYSCLKPD
-        ram[MVJAWSPD] = DEFAULT_MVJAWSPD
-        ram[SENSORPD] = DEFAULT_SENSORPD
-        ram[WTCHJWSPD] = DEFAULT_WTCHJWSPD
+        for addr, value in self.power_up_schedule().items():
+            ram[addr] = value
         ram[FLAGS] = 0
         ram[PROX] = ram[OTHER] = 0xFF
         self._set_speed(DEFAULT_JSPEED)
@@ -213,6 +321,125 @@ class GripperController(Component, CommandLetters):
         q.schedule(ADDR_MVJAWS, ram[MVJAWSPD])
         q.schedule(ADDR_SENSORS, ram[SENSORPD])
         q.schedule(ADDR_WATCHJAW, ram[WTCHJWSPD])
+
+    def power_up_schedule(self) -> dict[int, int]:
+        """The schedule values power-up loads: Appendix B's (04, 0C, 0A, 01) at
+        a 1 ms tick.  At another ``--tick-us`` the 8031's timer would be
+        reprogrammed in EPROM; pyrt instead scales the values so that every
+        routine keeps 002's period as nearly as a byte allows (a 50 µs tick
+        with SYSCLKPD 04 would run WATCHJAW every 200 µs, less than one
+        encoder count at full speed: the stopped bit would be on while the
+        jaws move, and I would fail as 002 describes)."""
+        tick = self._loop.period_ns if self._loop is not None else 1_000_000
+        if tick == 1_000_000:
+            return {SYSCLKPD: DEFAULT_SYSCLKPD, MVJAWSPD: DEFAULT_MVJAWSPD,
+                    SENSORPD: DEFAULT_SENSORPD, WTCHJWSPD: DEFAULT_WTCHJWSPD}
+        div = min(0xFF, max(1, round(CHECK_NS / tick)))
+        check = tick * div
+        out = {SYSCLKPD: div}
+        for addr, period in SCHEDULE_NS.items():
+            out[addr] = min(0xFF, max(1, round(period / check)))
+        return out
+
+    # -- the schedule and the supervision -------------------------------------------
+
+    def schedule(self) -> Schedule:
+        """The routines' periods as the RAM and the loop's tick make them now."""
+        ram = self.ram
+        tick = self._loop.period_ns if self._loop is not None else 1_000_000
+        return Schedule(tick, ram[SYSCLKPD], ram[MVJAWSPD], ram[SENSORPD], ram[WTCHJWSPD])
+
+    def schedule_refusal(self, addr: int, value: int) -> str | None:
+        """Why storing ``value`` at schedule variable ``addr`` cannot be served, or None.
+
+        WATCHJAW must see the jaws move: a period shorter than the time of
+        two encoder counts at full speed (X 7F, what I drives at) leaves the
+        stopped bit on while they move (an I fails; a move ends where it
+        stands)."""
+        if addr not in SCHEDULE_NAMES:
+            return None
+        if value == 0:
+            return (f"{SCHEDULE_NAMES[addr]} 00 would stop the routine's clock "
+                    "(schedule values are 01..FF)")
+        if addr not in (SYSCLKPD, WTCHJWSPD):
+            return None
+        ram = bytearray(self.ram)
+        ram[addr] = value
+        sched = Schedule(self.schedule().tick_ns, ram[SYSCLKPD], ram[MVJAWSPD], ram[SENSORPD],
+                         ram[WTCHJWSPD])
+        need = 2e9 / self.calibration.speed(0x7F)
+        if sched.watch_ns < need:
+            return (f"{SCHEDULE_NAMES[addr]} {value:02X} would run WATCHJAW every "
+                    f"{sched.watch_ns / 1e3:g} µs, less than two encoder counts at full speed "
+                    f"({need / 1e3:.0f} µs at X 7F): the stopped bit would be on while the "
+                    "jaws move")
+        return None
+
+    def oscillation_reason(self, sched: Schedule | None = None) -> str | None:
+        """Why the supervision predicts that moves will oscillate on the
+        schedule ``sched`` (default: the RAM's now), or None."""
+        sched = sched if sched is not None else self.schedule()
+        gain = self.calibration.gain
+        held = sched.move_ns + sched.watch_ns
+        if gain * held / 1e9 <= OSCILLATION_GAIN:
+            return None
+        if sched.watch_ns > sched.move_ns:
+            rel = "≫" if sched.watch_ns >= 2 * sched.move_ns else ">"
+            return (f"WTCHJWSPD {sched.wtchjwspd:02X} {rel} MVJAWSPD {sched.mvjawspd:02X}: "
+                    f"MVJAWS drives {sched.move_ns / 1e6:g} ms at a time with an error up to "
+                    f"{sched.watch_ns / 1e6:g} ms old")
+        return (f"MVJAWS drives {sched.move_ns / 1e6:g} ms at a time (SYSCLKPD "
+                f"{sched.sysclkpd:02X} x MVJAWSPD {sched.mvjawspd:02X} x "
+                f"{sched.tick_ns / 1e3:g} µs tick): too long for jaws that move "
+                f"{gain:g} counts/s per current unit")
+
+    def settle_bound_ns(self, distance: int) -> int:
+        """How long a move of ``distance`` counts may take to end, on the
+        schedule and the speed limit in RAM now."""
+        sched = self.schedule()
+        v = self.calibration.speed(self.ram[JSPEED])
+        travel = abs(distance) / v * TRAVEL_MARGIN * 1e9
+        return int(travel + (STOPBUMPS + 4) * sched.move_ns + 4 * sched.watch_ns
+                   + SETTLE_EXTRA_NS)
+
+    def stall_bound_ns(self) -> int:
+        """How long current may be held on jaws that do not move, on the
+        schedule in RAM now (STOPCNT's bumps after WATCHJAW sees them stop),
+        never more than :attr:`stall_limit_ns`."""
+        sched = self.schedule()
+        bound = ((STOPBUMPS + 2) * sched.move_ns + 3 * sched.watch_ns + 3 * sched.check_ns
+                 + STALL_EXTRA_NS)
+        return min(bound, self.stall_limit_ns)
+
+    def _reason(self) -> str:
+        return self.oscillation_reason() or f"schedule {self.schedule().text()}"
+
+    def _oscillating(self, amplitude: int, flips: int) -> None:
+        self.fail(f"P move oscillating about the target: error ±{amplitude} counts, "
+                  f"{flips} sign changes without decay; {self._reason()}", source="P move")
+
+    def _not_settled(self, error: int, amplitude: int, flips: int) -> None:
+        what = (f"error oscillating ±{amplitude} counts" if flips >= 2
+                else f"error {error:+d} counts")
+        self.fail(f"P move did not settle within {self.settle_bound_s:.1f} s: {what}; "
+                  f"{self._reason()}", source="P move")
+
+    def move_ended(self, why: str) -> None:
+        """MVJAWS (or a jog) ended the commanded move: say why, stop supervising.
+
+        A move STOPCNT ended away from its target says that the stopped bit
+        ended it, and why the schedule may have made the bit lie."""
+        if why == "stopped":
+            err = self._sword(ENCODER_CNT) - self._sword(COMMAND_CNT)
+            if abs(err) > BAND:
+                sched = self.schedule()
+                why = "the stopped bit ended the move (STOPCNT ran out)"
+                if sched.watch_ns >= 2 * sched.move_ns:
+                    why += (f"; WTCHJWSPD {sched.wtchjwspd:02X} ≫ MVJAWSPD "
+                            f"{sched.mvjawspd:02X}: the bit is up to "
+                            f"{sched.watch_ns / 1e6:g} ms old")
+        self.last_stop = why
+        self.supervisor.disarm()
 
     # -- registers -----------------------------------------------------------------
 
@@ -297,6 +524,7 @@ class GripperController(Component, CommandLetters):
         """The reflex action: null the current, clear drive and jog, abandon
         the foreground job.  Runs in the tick that found the fault (or the stop)."""
         self.drive(DAC_NULL)
+        self.supervisor.disarm()
         ram = self.ram
         if ram[FLAGS] & (_MASK_DRVON | _MASK_DOJOG):
             self.last_stop = "stopped by the reflex (move abandoned)"
@@ -306,18 +534,27 @@ class GripperController(Component, CommandLetters):
             self.job = None
 
     def watchdog(self, now_ns: int) -> None:
-        """Every tick: trip the robot when current has been applied for
-        ``stall_limit_ns`` without a single encoder count."""
+        """Every tick: trip the robot when current has been applied longer
+        than the stall bound (:meth:`stall_bound_ns`) without a single
+        encoder count, or when a supervised move has outlived its settle
+        bound (whatever the schedule: MVJAWS may run seldom, or not at all)."""
+        sup = self.supervisor
+        if sup.active and now_ns > sup.deadline_ns:
+            sup.expired(self._sword(ERROR_CNT) - 0x80)
+            return
         pulses = self._pulse_cell[0]
         if self._dac == DAC_NULL or pulses != self._wd_pulses:
             self._wd_pulses = pulses
             self._wd_since = now_ns
             return
-        if now_ns - self._wd_since > self.stall_limit_ns:
+        held = now_ns - self._wd_since
+        if held > STALL_FLOOR_NS and held > self.stall_bound_ns():
             self._wd_since = now_ns
+            sched = self.schedule()
             self.fail(
-                f"drive current {self._dac - 0x80:+d} applied for "
-                f"{self.stall_limit_ns / 1e9:g} s without jaw movement",
+                f"drive current {self._dac - 0x80:+d} applied for {held / 1e9:.2f} s without "
+                f"jaw movement (stall bound {self.stall_bound_ns() / 1e9:.2f} s; MVJAWS every "
+                f"{sched.move_ns / 1e6:g} ms)",
                 source="stall watchdog",
             )
 
@@ -464,10 +701,22 @@ class GripperController(Component, CommandLetters):
             )
         self.check_can_move()
         ram = self.ram
+        self.move_from = self._sword(ENCODER_CNT)
         self._set_word(COMMAND_CNT, target)
+        # pyrt: P also stores the error the new target makes and clears the
+        # stopped bit.  Both are WATCHJAW's to keep, but until its next run
+        # they tell of the jaws before this move: with a large WTCHJWSPD,
+        # MVJAWS would drive towards the old target and count STOPCNT down
+        # on a stopped bit older than the move (002: it counts "after the
+        # stopped bit goes on"), ending the move where it stands.
+        self._set_word(ERROR_CNT, (self.word(ENCODER_CNT) - target + 0x80) & 0xFFFF)
         ram[STOPCNT] = STOPBUMPS
-        ram[FLAGS] = (ram[FLAGS] & ~_MASK_DOJOG | _MASK_DRVON) & 0xFF
+        ram[FLAGS] = (ram[FLAGS] & ~(_MASK_DOJOG | _MASK_STOPPED) | _MASK_DRVON) & 0xFF
         self.last_stop = ""
+        bound = self.settle_bound_ns(target - self._sword(ENCODER_CNT))
+        self.settle_bound_s = bound / 1e9
+        now = self._loop.now_ns if self._loop is not None else 0
+        self.supervisor.arm(now + bound)
 
     def check_can_move(self) -> None:
         """Raise CommandError unless a move may start now (no foreground job;
@@ -475,11 +724,46 @@ class GripperController(Component, CommandLetters):
         if self.busy:
             raise CommandError(f"busy: {self.job.name} in progress")  # type: ignore[union-attr]
 
-    def set_speed(self, speed: int) -> None:
-        """``X``: the maximum jaw speed (01..7F), as JSPEED, MXPJSPD, MXNJSPD."""
+    def set_speed(self, speed: int) -> str:
+        """``X``: the maximum jaw speed (01..7F), as JSPEED, MXPJSPD, MXNJSPD;
+        returns what it changed."""
         if not 1 <= speed <= 0x7F:
-            raise CommandError(f"speed {speed:X} refused: it must be 01..7F")
+            raise CommandError(f"speed {speed:02X} is out of range (01..7F)")
+        ram = self.ram
+        old = ram[JSPEED]
         self._set_speed(speed)
+        line = (f"speed {old:02X} -> {speed:02X}: JSPEED {speed:02X}, MXPJSPD {ram[MXPJSPD]:02X}, "
+                f"MXNJSPD {ram[MXNJSPD]:02X} (up to {self.calibration.speed(speed):.0f} counts/s)")
+        if speed <= self.calibration.deadband:
+            line += (f"; warning: at or below the worm's friction ({self.calibration.deadband:02X})"
+                     ": the jaws will not move")
+        elif self.schedule().watch_ns * self.calibration.speed(speed) < 2e9:
+            line += (f"; warning: WATCHJAW (every {self.schedule().watch_ns / 1e6:g} ms) sees "
+                     "less than two counts at this speed: the stopped bit may end moves short")
+        return line
+
+    def replaces_target(self) -> bool:
+        """A commanded move runs (drive bit on, no jog): a new P changes its target."""
+        return bool(self.ram[FLAGS] & _MASK_DRVON) and not self.busy
+
+    def schedule_warning(self, addr: int, value: int) -> str | None:
+        """Monitor ``C``: CommandError if ``value`` at schedule variable
+        ``addr`` cannot be served; the predicted oscillation, if any, else None."""
+        refusal = self.schedule_refusal(addr, value)
+        if refusal:
+            raise CommandError(f"C {addr:02X} {value:02X} refused: {refusal}; nothing changed")
+        if addr not in SCHEDULE_NAMES:
+            return None
+        s = self.schedule()
+        values = {SYSCLKPD: s.sysclkpd, MVJAWSPD: s.mvjawspd, SENSORPD: s.sensorpd,
+                  WTCHJWSPD: s.wtchjwspd}
+        values[addr] = value
+        new = Schedule(s.tick_ns, values[SYSCLKPD], values[MVJAWSPD], values[SENSORPD],
+                       values[WTCHJWSPD])
+        why = self.oscillation_reason(new)
+        if why is None:
+            return None
+        return f"moves may oscillate: {why}; the supervision stops a move that does"
 
     def target(self) -> int:
         """``T``: COMMAND_CNT."""
@@ -515,8 +799,16 @@ class GripperController(Component, CommandLetters):
         return self.ram[addr]
 
     def toggle_clock(self) -> bool:
-        """Monitor ``I``: toggle the clock/timer interrupt; return whether it is on."""
+        """Monitor ``I``: toggle the clock/timer interrupt; return whether it is on.
+
+        Turning it off freezes MVJAWS with its current latched in the DAC;
+        pyrt ends a running move or jog first (current nulled, drive bit
+        clear), so the jaws do not run on into a stop."""
         q = self.queue
+        if q.interrupts_enabled and self.moving:
+            self.drive(DAC_NULL)
+            self.ram[FLAGS] &= ~(_MASK_DRVON | _MASK_DOJOG) & 0xFF
+            self.move_ended("clock interrupt turned off (monitor I): move ended, current nulled")
         q.interrupts_enabled = not q.interrupts_enabled
         return q.interrupts_enabled
 
@@ -591,6 +883,12 @@ class GripperController(Component, CommandLetters):
         return super().signal(name)
 
 
+class _NoClock:
+    """The supervision's clock before the controller is attached to a loop."""
+
+    now_ns = 0
+
+
 class _Words:  # pragma: no cover - big-endian hosts only
     """The RAM as little-endian words (index = address / 2) on a big-endian host."""
 
@@ -606,17 +904,45 @@ class _Words:  # pragma: no cover - big-endian hosts only
 
 
 class GripperMove(MotionType):
-    """The ``P`` move as a motion type: set the target and the drive bit,
-    done when MVJAWS clears the drive bit (STOPCNT bumps after the stopped
-    bit).  Its record is ``MotionRecord("gripper_move", {"target": counts})``
-    with ``counts`` in -8000..0000."""
+    """The P move: motion gripper_move target=COUNTS (-8000..0, decimal, or hex as P takes it).
+
+    It sets the target and the drive bit and is done when MVJAWS clears the
+    drive bit (STOPCNT bumps after the stopped bit).  Its record is
+    ``MotionRecord("gripper_move", {"target": counts})``; :meth:`check`
+    refuses a malformed record when it is queued."""
 
     name = "gripper_move"
 
+    @classmethod
+    def target_of(cls, params: Any) -> int:
+        """The record's target in counts, or CommandError saying what is wrong."""
+        extra = sorted(set(params) - {"target"})
+        if extra:
+            raise CommandError(f"gripper_move: unknown parameter {extra[0][:40]!r}; "
+                               "it takes target=COUNTS (-8000..0000)")
+        if "target" not in params:
+            raise CommandError("gripper_move: target=COUNTS missing (-8000..0000)")
+        value = params["target"]
+        if isinstance(value, (bool, float)):
+            raise CommandError(f"gripper_move: target {str(value)[:40]!r} is not a whole "
+                               "number of counts (-8000..0000)")
+        if isinstance(value, int):
+            if not -0x8000 <= value <= 0:
+                raise CommandError(f"gripper_move: target {value} is out of range "
+                                   "(-32768..0 counts, 0 wide open)")
+            return value
+        return parse_target(str(value))
+
+    @classmethod
+    def check(cls, robot: Any, params: Any) -> None:
+        """Refuse now (CommandError) a record that could never start."""
+        cls.target_of(params)
+        robot.check_can_move()
+
     def start(self, robot: Any, record: MotionRecord, now_ns: int) -> None:
         self.robot = robot
-        self.target = int(record.params["target"])
-        robot.move(self.target)  # refuses positive targets, a busy or faulted robot
+        self.target = self.target_of(record.params)
+        robot.move(self.target)  # refuses a busy or faulted robot
 
     def step(self, now_ns: int) -> None:
         if not self.robot.moving:

@@ -17,22 +17,42 @@ from pyrt.component import Arg, Component, Signal, Switch, command
 from pyrt.errors import CommandError
 from pyrt.scheduler.motion import MotionRecord
 
-__all__ = ["CommandLetters", "GripperMonitor", "parse_hex", "parse_target"]
+__all__ = ["CommandLetters", "GripperMonitor", "parse_hex", "parse_position", "parse_target",
+           "sensor_names"]
+
+#: The sensor word's bits by name (Appendix A: 2E high byte, 2D low byte).
+SENSOR_BITS = (
+    (10, "limit"), (9, "overload"), (8, "crossfire"),
+    (7, "right -X"), (6, "right +X"), (5, "right +Z"), (4, "right -Ya"),
+    (3, "left -X"), (2, "left +X"), (1, "left +Z"), (0, "left +Ya"),
+)
+
+
+def sensor_names(word: int) -> str:
+    """The sensors that are ON in ``word`` (bit 0 = ON), by name."""
+    on = [name for bit, name in SENSOR_BITS if not word >> bit & 1]
+    return ", ".join(on) if on else "none"
 
 _HEX = re.compile(r"[0-9A-Fa-f]+")
 
 
-def parse_hex(text: str, what: str, maximum: int) -> int:
-    """A hexadecimal number 0..``maximum``; CommandError naming ``what`` otherwise."""
+def parse_hex(text: str, what: str, maximum: int, minimum: int = 0) -> int:
+    """A hexadecimal number ``minimum``..``maximum``; CommandError naming
+    ``what`` and the range otherwise (quoting at most 40 characters)."""
     t = text.strip()
+    width = 4 if maximum > 0xFF else 2
+    span = f"{minimum:0{width}X}..{maximum:0{width}X}"
     if not t:
-        raise CommandError(f"{what} missing (hexadecimal)")
+        raise CommandError(f"{what} missing (hexadecimal, {span})")
     if not _HEX.fullmatch(t):
-        raise CommandError(f"{what} {t[:40]!r} is not a hexadecimal number")
+        raise CommandError(f"{what} {t[:40]!r} is not a hexadecimal number ({span})")
     value = int(t, 16)
-    if value > maximum:
-        raise CommandError(f"{what} {t[:40].upper()} is out of range (00..{maximum:X})")
+    if not minimum <= value <= maximum:
+        raise CommandError(f"{what} {t[:40].upper()} is out of range ({span})")
     return value
+
+
+_MM = re.compile(r"([0-9]+(?:\.[0-9]*)?|\.[0-9]+)\s*mm", re.IGNORECASE)
 
 
 def parse_target(text: str) -> int:
@@ -43,7 +63,7 @@ def parse_target(text: str) -> int:
     """
     t = text.strip()
     if not t:
-        raise CommandError("P needs a target, e.g. P E47A or P -1B86")
+        raise CommandError("P needs a target, e.g. P E47A, P -1B86 or P 42.5mm")
     sign = ""
     if t[0] in "+-":
         sign, t = t[0], t[1:].strip()
@@ -59,10 +79,23 @@ def parse_target(text: str) -> int:
     value = magnitude - 0x10000 if magnitude & 0x8000 else magnitude
     if value > 0:
         raise CommandError(
-            f"target {t.upper()} refused: it is positive; encoder counts run from 0000 "
+            f"target {t[:40].upper()} refused: it is positive; encoder counts run from 0000 "
             "(wide open) down to about D600 (closed): nothing moved"
         )
     return value
+
+
+def parse_position(text: str, calibration: Any) -> int:
+    """A ``P`` target as :func:`parse_target` takes it, or an opening in
+    millimetres (``42.5mm``) converted with the station's ``calibration``."""
+    t = text.strip()
+    m = _MM.fullmatch(t)
+    if m is None:
+        return parse_target(t)
+    mm = float(m.group(1))
+    if not 0.0 <= mm <= calibration.open_mm:
+        raise CommandError(f"target {t[:40]} is out of range (0..{calibration.open_mm:g} mm)")
+    return calibration.counts(mm)
 
 
 def _hex_arg(name: str, what: str, maximum: int) -> Arg:
@@ -125,23 +158,32 @@ class CommandLetters:
         """M: enter the interactive monitor (prompt "* "; Q returns)."""
         return Switch("monitor")
 
-    @command(Arg("target", parse_target, rest=True), name="P", moves=True)
-    def cmd_position(self, target: int) -> None:
-        """P target: move to a target encoder count (hex, two's complement or negative).
+    @command(Arg("target", str, rest=True), name="P", moves=True)
+    def cmd_position(self, text: str) -> str | None:
+        """P target: move to a target encoder count (hex, two's complement or negative) or mm.
 
         P E47A and P-1B86 are the same move; 0000 is wide open, about D600
-        closed.  A positive target is refused and nothing moves.  P returns
-        at once; 'wait' waits for the move to end.  Moves go on the motion
-        queue: a P given while the jaws move runs when that move has ended."""
-        if self.motion is None:
+        closed; P 42.5mm moves to a 42.5 mm opening (the station's
+        calibration).  A positive target is refused and nothing moves.  P
+        returns at once; 'wait' waits for the move to end.  A P given while
+        the jaws move replaces the target of that move (as 002's P does); 'stop'
+        ends it.  Every move is supervised: one that does not settle within
+        its bound (from the distance, the speed X and the schedule in RAM),
+        oscillates about the target or stalls is a gripper fault."""
+        target = parse_position(text, self.calibration)  # type: ignore[attr-defined]
+        if self.motion is None or self.replaces_target():  # type: ignore[attr-defined]
             self.move(target)  # type: ignore[attr-defined]
-            return
+            return None
         self.check_can_move()  # type: ignore[attr-defined]
         self.motion.put(MotionRecord("gripper_move", {"target": target}))
+        return None
 
-    @command(name="S", reads_only=True, reply=lambda w: f"{w:016b}")
+    @command(name="S", reads_only=True,
+             reply=lambda w: [f"{w:016b}", f"on: {sensor_names(w)}"])
     def cmd_sensors(self) -> int:
-        """S: the sensor word as 16 bits (2E then 2D); a 0 is a sensor that is ON.
+        """S: the sensor word as 16 bits (2E then 2D), then the sensors that are ON by name.
+
+        A 0 bit is a sensor that is ON.
 
         Bit 10 limit, 9 overload, 8 crossfire; 7..4 right jaw -X +X +Z -Ya;
         3..0 left jaw -X +X +Z +Ya; bits 15..11 unused."""
@@ -161,10 +203,12 @@ class CommandLetters:
         """W: the current position (encoder counts)."""
         return self.position()  # type: ignore[attr-defined]
 
-    @command(_hex_arg("speed", "speed", 0xFF), name="X")
-    def cmd_speed(self, speed: int) -> None:
-        """X speed: maximum jaw speed, 01..7F (7F original gears; 33 high-ratio worm)."""
-        self.set_speed(speed)  # type: ignore[attr-defined]
+    @command(Arg("speed", lambda t: parse_hex(t, "speed", 0x7F, 1)), name="X")
+    def cmd_speed(self, speed: int) -> str:
+        """X speed: maximum jaw speed, 01..7F (7F original gears; 33 high-ratio worm).
+
+        Says what it changed: JSPEED (51), MXPJSPD (52) and MXNJSPD (53)."""
+        return self.set_speed(speed)  # type: ignore[attr-defined]
 
     def enter_level(self) -> list[str]:
         """Back at ``CMD:`` from the monitor; a reminder if the clock is still off."""
@@ -202,21 +246,36 @@ class GripperMonitor(Component):
         return addr, value
 
     @command(_hex_arg("addr", "address", 0x7F), _hex_arg("value", "value", 0xFF), name="C",
-             moves=True, reply=_show)
-    def cmd_change(self, addr: int, value: int) -> tuple[int, int]:
-        """C addr value: store value (00-FF) at on-chip RAM addr (00-7F), show it."""
-        return self._at(addr, self.ctl.poke(addr, value))
+             moves=True)
+    def cmd_change(self, addr: int, value: int) -> list[str]:
+        """C addr value: store value (00-FF) at on-chip RAM addr (00-7F), show it.
+
+        A schedule variable (42 SYSCLKPD, 43 MVJAWSPD, 44 SENSORPD, 45
+        WTCHJWSPD) the controller cannot serve is refused with the reason;
+        one the supervision predicts will make moves oscillate is stored
+        with a warning."""
+        warning = self.ctl.schedule_warning(addr, value)
+        lines = [_show(self._at(addr, self.ctl.poke(addr, value)))]
+        if warning:
+            lines.append(f"warning: {warning}")
+        return lines
 
     @command(_hex_arg("addr", "address", 0x7F), name="D", reads_only=True, reply=_show)
     def cmd_display(self, addr: int) -> tuple[int, int]:
         """D addr: show the on-chip RAM byte at addr (00-7F)."""
         return self._at(addr, self.ctl.peek(addr))
 
-    @command(name="I", reply=lambda on: "clock interrupt ON" if on
-             else "clock interrupt OFF (ready queue frozen)")
-    def cmd_interrupt(self) -> bool:
-        """I: toggle the clock/timer interrupt (off: ready queue frozen, sensors not read)."""
-        return self.ctl.toggle_clock()
+    @command(name="I")
+    def cmd_interrupt(self) -> str:
+        """I: toggle the clock/timer interrupt (off: ready queue frozen, sensors not read).
+
+        A move running when it goes off is ended first (current nulled)."""
+        was_moving = self.ctl.moving
+        if self.ctl.toggle_clock():
+            return "clock interrupt ON"
+        if was_moving:
+            return "clock interrupt OFF (ready queue frozen); the move was ended, current nulled"
+        return "clock interrupt OFF (ready queue frozen)"
 
     @command(_hex_arg("pattern", "bit pattern", 0xFFFF), name="L", reply=_show)
     def cmd_leds(self, pattern: int) -> tuple[int, int]:

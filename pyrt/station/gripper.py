@@ -31,7 +31,7 @@ from pyrt.boards import Boards, open_boards
 from pyrt.boards.i8031 import COMMAND_CNT, ENCODER_CNT
 from pyrt.component import Arg, Component, Signal, command, finite
 from pyrt.errors import CommandError, ConfigError
-from pyrt.robots.gripper import GripperController
+from pyrt.robots.gripper import GripperController, GripperMove, JawCalibration
 from pyrt.robots.gripper_commands import parse_hex
 from pyrt.scheduler import Loop
 from pyrt.scheduler.motion import MotionExecutor, MotionType
@@ -41,6 +41,9 @@ from pyrt.tasks import register_tasks
 
 __all__ = ["GripperSim", "GripperStation", "build_gripper"]
 
+#: ``wait`` says "at target" within this many counts (the deadband and the
+#: last bumps leave a few counts; the tests of 002's moves allow 16).
+AT_TARGET_COUNTS = 16
 #: Longest jog the ``sim jog`` word holds the switch for, seconds.
 MAX_JOG_S = 3600.0
 
@@ -134,7 +137,11 @@ class GripperStation(Station):
         self.cpu = cpu = boards.cpu
         self.board = boards.gripper
         self.plant = plant
-        ctl = GripperController(cpu)
+        cal = JawCalibration()
+        if plant is not None:  # the simulated mechanism's own numbers
+            p = plant.p
+            cal = JawCalibration(p.closed, p.open_mm, p.gain, p.deadband)
+        ctl = GripperController(cpu, calibration=cal)
         self.name = ctl.name
         self.controller = ctl
         if plant is not None:
@@ -187,21 +194,63 @@ class GripperStation(Station):
         """``wait`` with nothing to wait for."""
         return "nothing to wait for: jaws idle"
 
-    def wait_report(self) -> str:
-        """Why the last move ended, where the jaws are, the error."""
+    #: How ``wait`` opens the line of a fault that ended the move ("fault: ...").
+    wait_fault_prefix = "fault"
+
+    def where(self) -> str:
+        """Where the jaws are: position, opening, target, error."""
         ctl = self.controller
-        pos, tgt = ctl.position(), ctl.target()
+        pos, tgt = ctl.word(ENCODER_CNT), ctl.word(COMMAND_CNT)
         err = _signed(pos) - _signed(tgt)
-        return f"{ctl.last_stop or 'ended'}: position {pos:04X}, target {tgt:04X}, error {err:+d}"
+        mm = ctl.calibration.mm
+        return (f"position {pos:04X} ({mm(_signed(pos)):.1f} mm), target {tgt:04X} "
+                f"({mm(_signed(tgt)):.1f} mm), error {err:+d}")
+
+    def wait_report(self) -> str:
+        """How the move ended: at target, stopped short (and why), or the fault."""
+        ctl = self.controller
+        err = _signed(ctl.word(ENCODER_CNT)) - _signed(ctl.word(COMMAND_CNT))
+        if self.fault is not None:
+            return f"fault: {self.fault.cause}; {self.where()}"
+        why = ctl.last_stop or "ended"
+        if abs(err) <= AT_TARGET_COUNTS:
+            return f"at target: {self.where()}"
+        travel = _signed(ctl.word(COMMAND_CNT)) - ctl.move_from  # the move's direction
+        side = "past" if err * travel > 0 else "short of"
+        return f"stopped {side} the target by {abs(err)} counts ({why}): {self.where()}"
+
+    def stop(self) -> str:
+        """The operator's stop, and where it left the jaws."""
+        said = super().stop()
+        self.controller.move_ended("stop command")
+        return f"{said}; {self.where()}"
 
     def status(self) -> str:
-        """Position, target, moving/busy, sensors, fault."""
+        """One line: position, target, error, state, drive current (and the fault)."""
         ctl = self.controller
-        line = (f"position {ctl.word(ENCODER_CNT):04X} target {ctl.word(COMMAND_CNT):04X} "
-                f"moving {int(ctl.moving)} busy {int(ctl.busy)} sensors {ctl.sensor_word():04X}")
+        state = ("fault" if self.fault is not None else ctl.job.name if ctl.busy
+                 else "moving" if ctl.moving else "idle")
+        line = f"{self.where()}, {state}, drive {ctl.dac - 0x80:+d}"
         if self.fault is not None:
             line += f"  FAULT: {self.fault.cause}"
         return line
+
+    def closing_note(self) -> str:
+        """Where the jaws were left and the drive current, for the line said on the way out."""
+        ctl = self.controller
+        pos = ctl.word(ENCODER_CNT)
+        return (f"; jaws at {pos:04X} ({ctl.calibration.mm(_signed(pos)):.1f} mm), "
+                f"drive current {ctl.dac - 0x80:+d}")
+
+    def motion_types(self) -> list[str]:
+        """The motion types this robot runs."""
+        return [GripperMove.name]
+
+    def check_motion(self, record: Any) -> None:
+        """Only the gripper's own motion type."""
+        if record.type != GripperMove.name:
+            raise CommandError(f"motion {record.type[:40]}: not a motion type of the gripper "
+                               f"(it has {', '.join(self.motion_types())}); nothing queued")
 
     def status_fields(self) -> list[tuple[str, Signal, str]]:
         """STATUS: position, target, moving, busy, sensors, fault."""
