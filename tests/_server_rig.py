@@ -87,6 +87,8 @@ def read_only_lines(station, shell) -> list[str]:
     for comp, rec in [(None, w) for w in shell.words()] + station.all_commands():
         if not rec.reads_only or any(not a.optional for a in rec.args):
             continue
+        if rec.name == "clear":  # clears the terminal: it has no value to return
+            continue
         line = rec.name if comp is None or comp is shell.level else f"{comp.name} {rec.name}"
         try:
             if shell.resolve(line)[1] == rec:

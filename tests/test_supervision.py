@@ -11,11 +11,14 @@ import re
 
 import pytest
 from _manipulator_rig import make_station
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
 from pyrt.commands.robot import RobotShell
 from pyrt.console import Console
 from pyrt.db import load_station
-from pyrt.errors import FaultError
+from pyrt.errors import FaultError, NativeError
+from pyrt.robots.polyaxis import MIN_TOP_SEGMENT
 
 #: (fault kind, rope, the named stop or fault it must end in)
 POLY_CASES = [
@@ -141,7 +144,7 @@ def test_numbers_outside_their_range_are_refused(tmp_path):
         assert text.count("error:") == len(UNBOUNDED) + 1  # + too few calibration points
         assert text.count("is out of range: ") == len(UNBOUNDED)
         assert "internal error" not in text and "moving to length" not in text
-        assert "LEN 2.8..713.7 cm (the rope's physical length range)" in text
+        assert "LEN 0..713.7 cm (the rope's physical length range)" in text
         assert station.tio10.writes == writes
         assert not station.motors_running()
         runner.sleep(12.0)  # write-back runs (stationary period): nothing absurd in it
@@ -159,8 +162,8 @@ def test_help_shows_the_ranges(tmp_path):
     station, runner = make_station(tmp_path)
     try:
         text = _run(station, runner, ["help axis0", "help axis0Encoder", "help axis0Motor"])
-        assert "to LEN: change the rope length to LEN cm [LEN 2.8..713.7 cm" in text
-        assert "[DIST 0..710.9 cm" in text and "[SPEED 0.07..7 cm/s" in text
+        assert "to LEN: change the rope length to LEN cm [LEN 0..713.7 cm" in text
+        assert "[DIST 0..713.7 cm" in text and "[SPEED 0.07..7 cm/s" in text
         assert "setZeroLength LEN: set the length (cm) the counter reads at zero [LEN " in text
     finally:
         station.close()
@@ -214,7 +217,8 @@ def test_length_range_is_enforced_in_the_loop(tmp_path):
 
 def test_stuck_loadcell_needs_many_reads_not_just_time(tmp_path):
     """Two reads of one code 0.6 s apart (late ticks on a loaded machine) are not a stuck
-    loadcell; fifty-one reads over half a second are."""
+    loadcell; fifty-one reads over half a second are, once the motor has moved a centimetre
+    of rope (a slow creep with a noise-free loadcell is not)."""
     station, runner = make_station(tmp_path)
     try:
         ax = station.axes[1]
@@ -223,12 +227,57 @@ def test_stuck_loadcell_needs_many_reads_not_just_time(tmp_path):
         def sparse():
             return [ax.supervise(100.0, True), ax.supervise(100.6, True)]
 
-        def dense():
-            return [ax.supervise(200.0 + k * 0.01, True) for k in range(52)]
+        def dense(t0, creep_steps):
+            out = []
+            for k in range(52):
+                ax.motor.position_steps -= creep_steps
+                out.append(ax.supervise(t0 + k * 0.01, True))
+            return out
 
         assert runner.call(sparse) == [None, None]
-        out = runner.call(dense)
+        steps = ax.motor.steps_per_cm
+        assert runner.call(dense, 200.0, 0) == [None] * 52  # a creep: the code may stay
+        out = runner.call(dense, 300.0, int(steps / 40) + 1)  # 1 cm in 40 reads
         assert out[:50] == [None] * 50
         assert out[-1].startswith("LOADCELL_FAULT: axis1Loadcell has read ADC code")
+        assert "cm of rope (stuck)" in out[-1]
     finally:
         station.close()
+
+
+@pytest.fixture(scope="module", params=["prototype", "sno"])
+def ranged_station(request, tmp_path_factory):
+    station, _runner = make_station(tmp_path_factory.mktemp(request.param), request.param)
+    yield request.param, station
+    station.close()
+
+
+@settings(max_examples=300, derandomize=True, deadline=None)
+@given(u=st.floats(-1.0, 1.0), w=st.floats(-1.0, 1.0), h=st.floats(0.0, 1.05),
+       in_neck=st.booleans())
+def test_every_accepted_target_is_inside_every_ropes_length_range(ranged_station, u, w, h,
+                                                                   in_neck):
+    """Any point a move may go to (the vessel and the whole neck, as 'to' allows) has
+    every rope within its length range, so the range never stops a move PolyAxis accepted."""
+    name, station = ranged_station
+    pa, av = station.polyaxis, station.polyaxis.av
+    planar = name == "prototype"
+    if in_neck:
+        ring = av.neck_ring_static_position
+        v = (ring[0] + u * av.neck_radius, ring[1] + (0.0 if planar else w * av.neck_radius),
+             ring[2] + h * av.neck_length)
+    else:
+        r = av.vessel_radius
+        v = (u * r, 0.0 if planar else w * r, (2.0 * h / 1.05 - 1.0) * r)
+    x = av.vtog(v)
+    assume(pa.refusal(x) is None)
+    # 'to' also keeps the carriage MIN_TOP_SEGMENT from every top pulley.
+    assume(all(math.dist((x[0] + o[0], x[1] + o[1], x[2] + o[2]), top) >= MIN_TOP_SEGMENT
+               for top, o in zip(pa.tops, pa.offsets, strict=True)))
+    try:
+        lengths = pa.lengths_at(x)
+    except NativeError:  # exactly on a pulley, an attachment or the ring's rim
+        assume(False)
+    for a, length in zip(station.axes, lengths, strict=True):
+        lo, hi = a.length_range
+        assert lo <= length <= hi, (a.name, x, length, (lo, hi))

@@ -112,8 +112,17 @@ def run(args: argparse.Namespace) -> int:
     load_backend(args.boards)
     loop = make_loop(args)  # overrun lines: stderr, at most one a second
     imp = Imperfections.ideal() if args.ideal_sensors else None
-    station = ManipulatorStation(directory, loop=loop, imperfections=imp, boards=args.boards,
-                                 expect=args.station)
+    try:
+        station = ManipulatorStation(directory, loop=loop, imperfections=imp,
+                                     boards=args.boards, expect=args.station)
+    except ConfigError as exc:
+        if args.db or args.init_db:
+            raise
+        # The working copy keeps what earlier runs wrote, and may predate a
+        # change to the packaged station: say how to start afresh.
+        raise ConfigError(f"{exc.message}; this working copy may come from an earlier pyrt: "
+                          f"move {directory} aside to start again from the packaged "
+                          f"{args.station} station", exc.file, exc.line) from None
     station.close_report = lambda m: print(m, file=out, flush=True)
     runner = station.runner
     try:

@@ -69,6 +69,11 @@ TRACKING_MIN_FRACTION = 0.5
 #: code every few polls.  Half a second is 50 axis polls.
 LOADCELL_STUCK_S = 0.5
 LOADCELL_STUCK_READS = 50
+#: ... and while the motor has moved at least this much rope (cm): a taut
+#: rope's tension changes by tens of newtons per centimetre (STRETCH 2e-5/N),
+#: hundreds of codes, so an unchanged code then is a stuck loadcell, even
+#: one without conversion noise (``--ideal-sensors``) or on a slow creep.
+LOADCELL_STUCK_ROPE_CM = 1.0
 #: Supervision calls further apart than this belong to different moves.
 _SUPERVISION_GAP_S = 0.1
 
@@ -150,6 +155,7 @@ class Axis(Component):
         self._adc_since: float | None = None
         self._adc_seen = 0.0
         self._adc_same = 0
+        self._adc_steps = 0
 
     @classmethod
     def from_records(
@@ -263,9 +269,6 @@ class Axis(Component):
         if self.mode != STANDALONE:
             raise CommandError(f"{self.name} {command}: the axis is under "
                                f"{self._controller()} control; stop it first")
-        if self.loadcell.calibrating:
-            raise CommandError(f"{self.name} {command}: refused: {self.loadcell.name} is in "
-                               f"calibration mode; finish with '{self.loadcell.name} calibrate'")
 
     def _distance(self, value: float | str, command: str) -> float:
         d = parse_number(value, f"{self.name} {command}", "distance in cm")
@@ -460,7 +463,8 @@ class Axis(Component):
         * the loadcell: an ADC code at either end of its range (dead,
           disconnected, saturated; in a PolyAxis move the tension stops see
           that first), or one that has not changed for
-          :data:`LOADCELL_STUCK_S` while this rope's motor runs (stuck);
+          :data:`LOADCELL_STUCK_S` while this rope's motor runs and has moved
+          :data:`LOADCELL_STUCK_ROPE_CM` of rope (stuck);
         * the rope's physical length range, when the motor drives it further out;
         * under PolyAxis control, the encoder must follow the motor (stall or
           slip, as :meth:`poll` checks standalone moves);
@@ -483,13 +487,18 @@ class Axis(Component):
             self._adc_last = code
             since = self._adc_since = now_s
             self._adc_same = 0
+            self._adc_steps = m.position_steps
         self._adc_seen = now_s
         self._adc_same += 1
         # both: half a second, and as many reads as half a second of axis polls
         # (late ticks on a loaded machine must not make two reads look stuck)
-        if now_s - since >= LOADCELL_STUCK_S and self._adc_same > LOADCELL_STUCK_READS:
+        if (now_s - since >= LOADCELL_STUCK_S and self._adc_same > LOADCELL_STUCK_READS
+                and abs(m.position_steps - self._adc_steps)
+                >= LOADCELL_STUCK_ROPE_CM * m.steps_per_cm):
             return (f"LOADCELL_FAULT: {lc.name} has read ADC code {code} for "
-                    f"{now_s - since:.1f} s while {m.name} runs (stuck)")
+                    f"{now_s - since:.1f} s while {m.name} moved "
+                    f"{abs(m.position_steps - self._adc_steps) / m.steps_per_cm:.1f} cm of rope "
+                    "(stuck)")
         if poly:
             length = group.lengths[i]  # type: ignore[attr-defined]
             tension = group.tensions[i]  # type: ignore[attr-defined]

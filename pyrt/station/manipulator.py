@@ -62,7 +62,7 @@ from pyrt.errors import BoardError, CommandError, ConfigError, NativeError, Pyrt
 from pyrt.native import FuzzyParams, NativeInputError
 from pyrt.robots.av import AV
 from pyrt.robots.axis import Axis
-from pyrt.robots.polyaxis import PolyAxis
+from pyrt.robots.polyaxis import MIN_TOP_SEGMENT, PolyAxis
 from pyrt.robots.stops import StopRecord
 from pyrt.scheduler import Loop, ReadyQueue, SimClock
 from pyrt.sim.manipulator import ManipulatorPlant, rig_from_station
@@ -653,13 +653,25 @@ def rope_ranges(pa: PolyAxis, cells: int = 12) -> list[tuple[float, float]]:
             pts.append((0.999 * r * math.sin(th) * math.cos(ph),
                         0.999 * r * math.sin(th) * math.sin(ph), 0.999 * r * math.cos(th)))
     nr = av.neck_radius
-    for h in (0.0, 0.5 * av.neck_length, av.neck_length):  # the neck, up to its top
+    # The neck, up to its top, finely: the highest point a move may reach there
+    # sets the central ropes' shortest length, so it must be sampled, not
+    # bracketed (the margin is for rounding, not for a missed region).
+    for h in (av.neck_length * k / 32 for k in range(33)):
         for dx, dy in ((0.0, 0.0), (nr, 0.0), (-nr, 0.0), (0.0, nr), (0.0, -nr)):
             pts.append((ring[0] + 0.999 * dx, ring[1] + 0.999 * dy, ring[2] + h))
+    gpts = [av.vtog(v) for v in pts]
+    # Where a top pulley is within reach (the central ropes up the neck), a
+    # rope is shortest with the carriage MIN_TOP_SEGMENT from its pulley, the
+    # closest 'to' allows: sample that sphere too.
+    dirs = [(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1) if a or b or c]
+    for top, off in zip(pa.tops, pa.offsets, strict=True):
+        for d in dirs:
+            k = 1.001 * MIN_TOP_SEGMENT / math.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
+            gpts.append((top[0] - off[0] + k * d[0], top[1] - off[1] + k * d[1],
+                         top[2] - off[2] + k * d[2]))
     lo = [math.inf] * pa.n
     hi = [0.0] * pa.n
-    for v in pts:
-        x = av.vtog(v)
+    for x in gpts:
         if pa.refusal(x) is not None:
             continue
         try:
