@@ -368,3 +368,21 @@ def test_pattern_from_a_device_or_a_huge_file_is_refused(shell, tmp_path):
     assert "more than the 1048576 bytes allowed" in text
     assert text.count("error:") == 2
     assert not station.motors_running()
+
+
+def test_a_fault_during_wait_is_shown_once_and_the_closing_line_says_what_was_kept(tmp_path):
+    """pyrt manipulator: a slip during a move is printed once by wait (not again by the
+    message pump); after ack, the closing line says POSITION, LENGTH and ZEROLENGTH kept
+    their last trusted values."""
+
+    script = "prototype to 0 0 40\nsleep 5\nsim fault 0 slip 1.0\nwait\nstatus\nack\n"
+    done = subprocess.run([sys.executable, "-m", "pyrt", "manipulator", "--speed", "max",
+                           "--init-db", str(tmp_path / "db")], input=script,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    out = done.stdout
+    assert out.count("position estimate lost") == 3  # wait, status, ack: once each
+    assert out.count("nothing moves until you type ack") == 1
+    assert out.rstrip().splitlines()[-1].endswith(
+        "except POSITION, LENGTH and ZEROLENGTH (the position estimate is not trusted: they "
+        "keep the values last written before it was lost)")

@@ -131,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
         station.close()
         raise
     shell = RobotShell(station, out)
-    console = Console(shell, sys.stdin, out, messages=runner.messages, history_file=args.history,
+    console = Console(shell, sys.stdin, out, messages=shell.messages, history_file=args.history,
                       status=live_status(runner, station, args))
     speed = "max (simulated time)" if args.speed is None else f"{args.speed:g}x real time"
     where = "" if station.plant is not None else f", boards at {station.boards.url}"

@@ -366,8 +366,8 @@ class RobotShell(CommandShell):
             self.say(f"still moving after {timeout:g} s")
             return
         report = self.runner.call(st.wait_report)
-        pending = getattr(self.runner, "messages", None)
-        for text in pending() if callable(pending) else []:
+        pending = self.messages if callable(getattr(self.runner, "messages", None)) else list
+        for text in pending():
             self.say(text)  # what happened during the wait comes first, in order
         for text in report.splitlines():
             self.say(text)

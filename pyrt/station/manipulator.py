@@ -616,6 +616,10 @@ class ManipulatorStation(Station):
                     "the fault")
         if self.boards is not None and self.boards.down is not None:
             return f"; databases in {self.directory} keep the values last written"
+        if self.polyaxis.estimate_lost is not None:
+            return (f"; databases written back in {self.directory}, except POSITION, LENGTH "
+                    "and ZEROLENGTH (the position estimate is not trusted: they keep the "
+                    "values last written before it was lost)")
         return f"; databases written back in {self.directory}"
 
     def write_back(self) -> None:
