@@ -169,6 +169,9 @@ def test_slip_during_an_axis_move_is_a_named_fault(tmp_path):
     runner.call(station.acknowledge)
     with pytest.raises(CommandError, match="not trusted"):
         runner.call(pa.to, (0.0, 0.0, 100.0))
+    for ax in station.axes:  # single-rope moves too: their lengths are not trusted either
+        with pytest.raises(CommandError, match=r"not trusted.*'prototype survey'"):
+            runner.call(ax.run_command, "down", "1")
     with pytest.raises(CommandError, match="outside the vessel; nothing changed"):
         runner.call(pa.run_command, "setpos", "0", "0", "5000")
     runner.call(station.plant.clear_faults, "axis1")

@@ -343,6 +343,12 @@ class Axis(Component):
         return self._go(v, "to")
 
     def _go(self, target: float, command: str) -> float:
+        lost = getattr(self.group, "estimate_lost", None)
+        if lost is not None:  # an encoder that slipped or was reset: lengths not trusted
+            raise CommandError(f"{self.name} {command}: refused: the position estimate is not "
+                               f"trusted ({lost}); re-establish it with "
+                               f"'{self._controller()} survey' or "
+                               f"'{self._controller()} setpos X Y Z' first; nothing moved")
         if target <= 0:
             raise CommandError(f"{self.name} {command}: that would leave the rope at "
                                f"{target:.3f} cm; lengths must stay > 0")
