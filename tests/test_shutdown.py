@@ -141,3 +141,21 @@ def test_sigterm_to_the_manipulator_console_writes_back_and_says_so(tmp_path):
         proc.kill()
     assert proc.returncode == 0, err
     assert "pyrt manipulator: SIGTERM: every motor stopped; databases written back in " in out
+
+
+@pytest.mark.wallclock
+def test_ctrl_c_to_a_piped_script_stops_every_motor_and_says_so(tmp_path):
+    """SIGINT to a gripper running a piped script mid-move: the run ends with every motor stopped, said in one line, status 130."""
+    proc = _start("gripper", tmp_path)
+    try:
+        _read_until(proc, "jaws wide open")
+        proc.stdin.write("P-1B86\nT\n")
+        proc.stdin.flush()
+        _read_until(proc, "E47A")
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, (out, err)
+    assert "pyrt gripper: SIGINT: every motor stopped" in out
+    assert "Traceback" not in err

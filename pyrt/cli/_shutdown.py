@@ -95,7 +95,8 @@ def run_until_shutdown(station: Any, console: Any, service: Any, *, headless: bo
     runs before the console reads (the gripper's power-up ``I``).  Then close
     the service and the station (every motor stopped, databases written
     back) and say so in one line.  The exit status is the console's or the
-    service's, 0 after a signal."""
+    service's, 0 after SIGTERM or SIGHUP, 130 after a Ctrl-C that no console
+    caught (a piped script)."""
     reason = ""
     status = 0
     # --headless has no console to type Ctrl-C at: SIGINT ends it like SIGTERM.
@@ -109,6 +110,10 @@ def run_until_shutdown(station: Any, console: Any, service: Any, *, headless: bo
             status = service.run_headless() if headless else console.run()
         except Shutdown as exc:
             reason = exc.why
+        except KeyboardInterrupt:
+            # Ctrl-C where no console catches it (a piped script, the power-up
+            # I): the run ends as at end of input, with the shell's status
+            reason, status = "SIGINT", 130
         finally:
             guard.raising = False  # from here on a first signal lets the close finish
             try:
