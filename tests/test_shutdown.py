@@ -16,7 +16,15 @@ def _start(robot: str, tmp_path) -> subprocess.Popen:
     env.pop("PYRT_TOKEN", None)
     return subprocess.Popen([sys.executable, "-m", "pyrt", robot, "--speed", "1"],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+                            stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path,
+                            preexec_fn=_sigint_default)
+
+
+def _sigint_default() -> None:
+    """In the child: SIGINT back to its default action.  A suite started in the
+    background by a non-interactive shell runs with SIGINT ignored, which the
+    child would inherit (Python then installs no KeyboardInterrupt handler)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def _read_until(proc: subprocess.Popen, text: str, timeout_s: float = 30.0) -> str:
