@@ -1,7 +1,5 @@
 """``python -m pyrt`` runs the ``pyrt`` command."""
 
-import sys
+from pyrt.cli import entry
 
-from pyrt.cli import main
-
-sys.exit(main())
+entry()

@@ -67,3 +67,55 @@ def test_pyrt_connect_runs_a_piped_script_against_a_served_robot(tmp_path):
         assert "gripper> status\n" in out and " position=" in out and "error:" not in out
         assert "gripper> stop\ngripper: every motor stopped" in out
         assert Client(sv.host, sv.port).status().fields["fault"] == 0
+
+
+def _answer_cpr(child, pexpect, seconds: float) -> str:
+    """Read a terminal session for ``seconds``, answering prompt_toolkit's cursor-position requests as a terminal does."""
+    import time
+
+    seen = []
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        i = child.expect(["\x1b\\[6n", pexpect.TIMEOUT, pexpect.EOF], timeout=0.2)
+        seen.append(child.before)
+        if i == 0:
+            child.send("\x1b[1;1R")
+        elif i == 2:
+            break
+    return "".join(seen)
+
+
+def test_pyrt_connect_on_a_terminal_asks_for_the_token_without_echo_and_shows_live_status(tmp_path):
+    """On a terminal: 'auth' prompts for the token without echoing it, privilege is said once, a move runs, the status line shows it live."""
+    import pytest
+
+    pexpect = pytest.importorskip("pexpect")
+    from _server_rig import TOKEN
+
+    with served(wall=True) as sv:
+        env = {k: v for k, v in os.environ.items() if k != "PYRT_TOKEN"}
+        env.update(TERM="xterm", HOME=str(tmp_path))
+        child = pexpect.spawn(sys.executable, ["-m", "pyrt", "connect", f"{sv.host}:{sv.port}",
+                                               "--hz", "10"], encoding="utf-8", timeout=30,
+                              dimensions=(24, 120), env=env, cwd=str(tmp_path))
+        try:
+            seen = _answer_cpr(child, pexpect, 3.0)
+            child.sendline("auth")
+            child.expect_exact("token: ")
+            child.sendline(TOKEN)
+            seen += _answer_cpr(child, pexpect, 1.5)
+            child.sendline("P-1B86")
+            seen += _answer_cpr(child, pexpect, 1.5)
+            child.sendline("stop")
+            seen += _answer_cpr(child, pexpect, 1.0)
+            child.sendeof()
+            child.expect(pexpect.EOF)
+            seen += child.before
+        finally:
+            child.close()
+        assert child.exitstatus == 0
+        assert TOKEN not in seen  # never echoed
+        assert seen.count("privileged: every") == 1
+        assert "target=-7046" in seen and "moving=1" in seen  # the live status line, unasked
+        assert "gripper: every motor stopped" in seen
+        assert sv.still_and_null()

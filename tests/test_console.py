@@ -270,3 +270,24 @@ def test_ctrl_c_stops_a_gripper_move_and_only_hints_when_idle(monkeypatch):
         assert not runner.call(station.busy) and runner.call(lambda: station.board.dac) == 0x80
     finally:
         station.close()
+
+
+def test_gripper_console_completes_words_objects_verbs_and_scope_channels():
+    """The gripper console's Tab candidates for a few prefixes: words, object verbs (the report's letters), scope channels."""
+    from pyrt.commands.robot import RobotShell
+    from pyrt.console.base import complete
+    from pyrt.scheduler import Loop, SimClock
+    from pyrt.station.gripper import build_gripper
+
+    station = build_gripper(Loop(SimClock(), period_ns=1_000_000))
+    try:
+        table = RobotShell(station, io.StringIO()).completions()
+        assert complete(table, "st") == ["stats", "status", "stop"]
+        assert complete(table, "gripper ") == ["C", "E", "I", "M", "P", "S", "T", "W", "X"]
+        assert complete(table, "monitor ") == ["C", "D", "I", "L", "N", "Q", "S"]
+        assert complete(table, "scope a") == ["add"]
+        channels = complete(table, "scope add gripper.")
+        assert "gripper.encoder" in channels and "gripper.dac" in channels
+        assert complete(table, "sim f") == ["fault"]
+    finally:
+        station.close()

@@ -63,7 +63,22 @@ def test_status_request_answers_from_the_snapshot():
         assert reply.ok and len(reply.lines) == 1
         fields = dict(kv.split("=") for kv in reply.lines[0].split())
         assert set(fields) == {"t", "position", "target", "moving", "busy", "sensors", "fault"}
-        assert c.request("STATUS now").code == "syntax"
+        assert c.request("STATUS now").code == "command"  # the console's 'status now': no such object
+
+
+def test_status_of_an_object_and_unknown_commands_answer_a_reader_as_the_console_would():
+    """Without AUTH, 'STATUS gripper' lists the object's signals (a read); an unknown command is ERR command, not ERR denied."""
+    with served() as sv:
+        c = sv.client()
+        lines = c.command("STATUS gripper")
+        assert "gripper.moving = 0 bool" in lines and "gripper.dac = 80 byte" in lines
+        assert c.command("status gripper") == lines
+        reply = c.request("gripper fly")
+        assert reply.code == "command" and "fly" in reply.text
+        reply = c.request("foo bar")
+        assert reply.code == "command" and "unknown command 'foo'" in reply.text
+        assert c.request("P E47A").code == "denied"  # a known command that moves
+        assert sv.still_and_null()
 
 
 # -- privilege --------------------------------------------------------------------------

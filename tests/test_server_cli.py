@@ -95,3 +95,23 @@ def test_refused_start_ups(args, message):
     assert proc.returncode == 1
     assert message in proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+def test_send_subscribe_into_a_reader_that_leaves_ends_quietly(tmp_path):
+    """pyrt send PORT SUBSCRIBE 50 | head -1: when the reader closes the pipe, send ends with status 0 and no error naming the server."""
+    from _server_rig import served
+
+    with served(wall=True) as sv:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "pyrt", "send", f"{sv.host}:{sv.port}", "SUBSCRIBE", "50"],
+            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+            text=True, cwd=tmp_path)
+        try:
+            assert proc.stdout.readline().startswith("STATUS t=")
+            proc.stdout.close()  # the reader leaves, as head does
+            err = proc.stderr.read()
+            proc.wait(timeout=30)
+        finally:
+            proc.kill()
+    assert proc.returncode == 0, err
+    assert err == ""

@@ -16,7 +16,15 @@ def _start(robot: str, tmp_path) -> subprocess.Popen:
     env.pop("PYRT_TOKEN", None)
     return subprocess.Popen([sys.executable, "-m", "pyrt", robot, "--speed", "1"],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+                            stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path,
+                            preexec_fn=_sigint_default)
+
+
+def _sigint_default() -> None:
+    """In the child: SIGINT back to its default action.  A suite started in the
+    background by a non-interactive shell runs with SIGINT ignored, which the
+    child would inherit (Python then installs no KeyboardInterrupt handler)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def _read_until(proc: subprocess.Popen, text: str, timeout_s: float = 30.0) -> str:
@@ -63,3 +71,99 @@ def test_end_of_input_mid_move_on_the_manipulator_writes_back_and_says_so(tmp_pa
         proc.kill()
     assert proc.returncode == 0, err
     assert "pyrt manipulator: end of input: every motor stopped; databases written back in " in out
+
+
+def _start_served(args: list[str], tmp_path) -> tuple[subprocess.Popen, str]:
+    """Start ``pyrt ARGS`` with stdin a pipe; read stderr until the server says where it is."""
+    env = dict(os.environ, HOME=str(tmp_path), PYTHONUNBUFFERED="1")
+    env.pop("PYRT_TOKEN", None)
+    proc = subprocess.Popen([sys.executable, "-m", "pyrt", *args, "--speed", "1"],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+    seen = ""
+    deadline = time.monotonic() + 30
+    while "serving" not in seen:
+        assert time.monotonic() < deadline, seen
+        line = proc.stderr.readline() if "--headless" in args else proc.stdout.readline()
+        assert line, f"ended before serving: {seen!r}"
+        seen += line
+    return proc, seen
+
+
+@pytest.mark.wallclock
+@pytest.mark.parametrize("how", ["gripper console", "gripper --headless", "manipulator --serve"])
+def test_a_second_sigterm_at_once_still_exits_0_with_every_motor_stopped(tmp_path, how):
+    """Two SIGTERMs 10 ms apart mid-move (console, --headless, console with --serve): exit 0, never killed by the second, motors said stopped."""
+    if how == "gripper console":
+        proc = _start("gripper", tmp_path)
+        _read_until(proc, "jaws wide open")
+        proc.stdin.write("P-1B86\nT\n")
+        proc.stdin.flush()
+        _read_until(proc, "E47A")
+    elif how == "gripper --headless":
+        proc, _ = _start_served(["gripper", "--serve", "127.0.0.1:0", "--headless"], tmp_path)
+    else:
+        proc, _ = _start_served(["manipulator", "--serve", "127.0.0.1:0"], tmp_path)
+        proc.stdin.write("prototype to 10 0 60\n")
+        proc.stdin.flush()
+        _read_until(proc, "prototype: to (10, 0, 60)")
+    try:
+        proc.send_signal(signal.SIGTERM)
+        time.sleep(0.01)
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, (out, err)
+    assert "every motor stopped" in out, (out, err)
+    assert "Traceback" not in err
+
+
+@pytest.mark.wallclock
+def test_headless_ends_on_sighup_like_sigterm(tmp_path):
+    """--headless: SIGHUP (terminal closed) stops every motor, says so naming the signal, exits 0."""
+    sig = signal.SIGHUP
+    proc, _ = _start_served(["gripper", "--serve", "127.0.0.1:0", "--headless"], tmp_path)
+    try:
+        proc.send_signal(sig)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, (out, err)
+    assert f"pyrt gripper: {signal.Signals(sig).name}: every motor stopped" in out
+    assert "Traceback" not in err
+
+
+@pytest.mark.wallclock
+def test_sigterm_to_the_manipulator_console_writes_back_and_says_so(tmp_path):
+    """SIGTERM to an interactive manipulator mid-move: motors stopped and databases written back, in one line, exit 0."""
+    proc = _start("manipulator", tmp_path)
+    try:
+        _read_until(proc, "type help")
+        proc.stdin.write("prototype to 10 0 60\n")
+        proc.stdin.flush()
+        _read_until(proc, "prototype: to (10, 0, 60)")
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    assert "pyrt manipulator: SIGTERM: every motor stopped; databases written back in " in out
+
+
+@pytest.mark.wallclock
+def test_ctrl_c_to_a_piped_script_stops_every_motor_and_says_so(tmp_path):
+    """SIGINT to a gripper running a piped script mid-move: the run ends with every motor stopped, said in one line, status 130."""
+    proc = _start("gripper", tmp_path)
+    try:
+        _read_until(proc, "jaws wide open")
+        proc.stdin.write("P-1B86\nT\n")
+        proc.stdin.flush()
+        _read_until(proc, "E47A")
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, (out, err)
+    assert "pyrt gripper: SIGINT: every motor stopped" in out
+    assert "Traceback" not in err

@@ -67,7 +67,9 @@ def test_top_on_a_terminal_redraws_in_place_and_leaves_on_ctrl_c():
     with served(wall=True) as sv:
         child = pexpect.spawn(sys.executable, ["-m", "pyrt", "top", f"{sv.host}:{sv.port}",
                                                "--hz", "10"], encoding="utf-8", timeout=30,
-                              dimensions=(40, 100))
+                              dimensions=(40, 100),
+                              # SIGINT may be inherited ignored (a suite run in the background)
+                              preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
         try:
             child.expect_exact("\x1b[H\x1b[2J")
             child.expect(r"position +-?\d+")

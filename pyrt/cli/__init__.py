@@ -8,6 +8,7 @@ option) end with one line on stderr and a non-zero exit, never a traceback.
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from collections.abc import Sequence
 
@@ -26,7 +27,7 @@ from pyrt.cli import (
 )
 from pyrt.errors import PyrtError
 
-__all__ = ["main"]
+__all__ = ["entry", "main"]
 
 _COMMANDS = [demo, gripper, overruns, manipulator, logsort, forcemap, send, connect, top,
              boardsim]
@@ -66,5 +67,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
 
 
+def entry() -> None:
+    """The ``pyrt`` program (console script and ``python -m pyrt``): :func:`main`,
+    then the interpreter's exit with its status.  Whatever ran is closed by
+    then (a robot's motors stopped, its databases written back), and Python
+    puts the default signal actions back while it finalizes: a SIGTERM or
+    SIGHUP that comes late (the second of two sent together) is ignored from
+    here on, so the process ends with its status instead of being killed."""
+    status = main()
+    for name in ("SIGTERM", "SIGHUP"):
+        sig = getattr(signal, name, None)
+        if sig is not None:
+            signal.signal(sig, signal.SIG_IGN)
+    sys.exit(status)
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    entry()

@@ -12,7 +12,7 @@ The token is read from ``--token-file`` (its first line) or the
 ``PYRT_TOKEN`` environment variable.  Without a token nobody is privileged
 (the server only reports), and serving on anything but a loopback address
 is refused.  ``--headless`` runs without a console: a service that logs to
-stderr and, on SIGTERM or SIGINT, stops every motor and exits 0.
+stderr and, on SIGTERM, SIGHUP or SIGINT, stops every motor and exits 0.
 """
 
 from __future__ import annotations
@@ -21,7 +21,6 @@ import argparse
 import contextlib
 import logging
 import os
-import signal
 import sys
 import threading
 from collections.abc import Callable
@@ -47,8 +46,8 @@ def add_serve_options(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--token-file", metavar="FILE",
                    help="privilege token (first line of FILE; default: $PYRT_TOKEN)")
     g.add_argument("--headless", action="store_true",
-                   help="no console: a service logging to stderr; SIGTERM/SIGINT stop every "
-                        "motor and exit")
+                   help="no console: a service logging to stderr; SIGTERM/SIGHUP/SIGINT stop "
+                        "every motor and exit 0 (a second within 2 s: at once)")
     g.add_argument("--epics", metavar="PREFIX",
                    help="also serve the robot over EPICS Channel Access with this PV prefix: "
                         "status, every signal, STATE, STOP (anyone); CMD and ACK with the "
@@ -111,25 +110,21 @@ class Service:
             tell(f"EPICS Channel Access: PVs {self.epics.prefix}* ({self.epics.summary})")
 
     def run_headless(self) -> int:
-        """Serve until SIGTERM or SIGINT; then stop every motor; exit status 0."""
-
-        def on_signal(signum: int, frame: Any) -> None:
-            log.info("%s: stopping", signal.Signals(signum).name)
-            self._stop.set()
-
-        old = {s: signal.signal(s, on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
-        try:
-            while not self._stop.wait(0.2):
-                for line in self.runner.messages():  # the loop's messages: to the log
-                    log.info("%s", line)
-                if self.runner.crashed is not None:
-                    log.error("the control loop has stopped: %r", self.runner.crashed)
-                    return 1
-        finally:
-            for s, handler in old.items():
-                signal.signal(s, handler)
+        """Serve until :meth:`stop` is called or the caller's signal handler
+        raises (SIGTERM, SIGHUP, SIGINT: :func:`pyrt.cli._shutdown.run_until_shutdown`
+        closes the station); 1 if the control loop stops by itself, else 0."""
+        while not self._stop.wait(0.2):
+            for line in self.runner.messages():  # the loop's messages: to the log
+                log.info("%s", line)
+            if self.runner.crashed is not None:
+                log.error("the control loop has stopped: %r", self.runner.crashed)
+                return 1
         self.stop_motors()
         return 0
+
+    def stop(self) -> None:
+        """End :meth:`run_headless` (from another thread)."""
+        self._stop.set()
 
     def stop_motors(self) -> None:
         """Stop every motor through the mailbox (a pending fault does not prevent it)."""

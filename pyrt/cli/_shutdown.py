@@ -2,14 +2,16 @@
 end in the station's close (every motor stopped through the reflex,
 databases written back), said in one line, exit status 0.
 
-A first SIGTERM or SIGHUP ends the console (the signal handler raises
-:class:`Shutdown` in the main thread, where the console reads); a second
-within :data:`SECOND_SIGNAL_S` exits at once, after the reflex.
+A first SIGTERM or SIGHUP (and, ``--headless``, SIGINT) ends the console or
+the service (the signal handler raises :class:`Shutdown` in the main thread,
+where the console reads); a second within :data:`SECOND_SIGNAL_S` exits at
+once with status 0, after the reflex, even while the first is still closing.
 """
 
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import signal
 import time
@@ -33,27 +35,44 @@ class Shutdown(BaseException):
         self.why = why
 
 
-@contextlib.contextmanager
-def shutdown_signals(reflex: Callable[[], Any], say: Callable[[str], Any]) -> Iterator[None]:
-    """Within the block, SIGTERM and SIGHUP raise :class:`Shutdown` (the
-    console ends and the caller closes the station); a second one within
-    :data:`SECOND_SIGNAL_S` runs ``reflex`` and exits the process at once."""
-    first: dict[str, float] = {}
+class _Guard:
+    """The shutdown signals' handler: the first signal raises :class:`Shutdown`
+    (once, and only while :attr:`raising`); a second within
+    :data:`SECOND_SIGNAL_S` of the first runs the reflex and exits at once."""
 
-    def on_signal(signum: int, frame: Any) -> None:
+    def __init__(self, reflex: Callable[[], Any], say: Callable[[str], Any]):
+        self.reflex = reflex
+        self.say = say
+        self.first_at: float | None = None
+        self.raising = True
+
+    def __call__(self, signum: int, frame: Any) -> None:
         name = signal.Signals(signum).name
         now = time.monotonic()
-        if first and now - first["at"] < SECOND_SIGNAL_S:
+        if self.first_at is not None and now - self.first_at < SECOND_SIGNAL_S:
             with contextlib.suppress(BaseException):
-                reflex()
-            say(f"{name} again: every motor stopped; exiting now")
+                self.reflex()
+            with contextlib.suppress(BaseException):
+                self.say(f"{name} again: every motor stopped; exiting now")
             os._exit(0)
-        first["at"] = now
-        raise Shutdown(name)
+        self.first_at = now
+        if self.raising:
+            self.raising = False
+            raise Shutdown(name)
 
-    old = {s: signal.signal(s, on_signal) for s in _SIGNALS}
+
+@contextlib.contextmanager
+def shutdown_signals(reflex: Callable[[], Any], say: Callable[[str], Any],
+                     signals: tuple[int, ...] = _SIGNALS) -> Iterator[_Guard]:
+    """Within the block, the first SIGTERM or SIGHUP raises :class:`Shutdown`
+    (the console ends and the caller closes the station); a second one within
+    :data:`SECOND_SIGNAL_S` runs ``reflex`` and exits the process at once.
+    Set the guard's ``raising`` to False while closing: a first signal then
+    lets the close finish, and a second within the interval still cuts it short."""
+    guard = _Guard(reflex, say)
+    old = {s: signal.signal(s, guard) for s in signals}
     try:
-        yield
+        yield guard
     finally:
         for s, handler in old.items():
             signal.signal(s, handler)
@@ -76,24 +95,35 @@ def run_until_shutdown(station: Any, console: Any, service: Any, *, headless: bo
     runs before the console reads (the gripper's power-up ``I``).  Then close
     the service and the station (every motor stopped, databases written
     back) and say so in one line.  The exit status is the console's or the
-    service's, 0 after a signal."""
+    service's, 0 after SIGTERM or SIGHUP, 130 after a Ctrl-C that no console
+    caught (a piped script)."""
     reason = ""
     status = 0
-    try:
-        with shutdown_signals(lambda: _stop_now(station), say):
+    # --headless has no console to type Ctrl-C at: SIGINT ends it like SIGTERM.
+    signals = (*_SIGNALS, signal.SIGINT) if headless else _SIGNALS
+    with shutdown_signals(lambda: _stop_now(station), say, signals) as guard:
+        try:
+            if service is not None:
+                service.start(None if headless else say)
+            if first is not None:
+                first()
+            status = service.run_headless() if headless else console.run()
+        except Shutdown as exc:
+            reason = exc.why
+        except KeyboardInterrupt:
+            # Ctrl-C where no console catches it (a piped script, the power-up
+            # I): the run ends as at end of input, with the shell's status
+            reason, status = "SIGINT", 130
+        finally:
+            guard.raising = False  # from here on a first signal lets the close finish
             try:
                 if service is not None:
-                    service.start(None if headless else say)
-                if first is not None:
-                    first()
-                status = service.run_headless() if headless else console.run()
-            finally:
-                if service is not None:
                     service.close()
-    except Shutdown as exc:
-        reason = exc.why
-    finally:
-        station.close()
-    why = reason or ("stopped" if headless else console.ended_by)
-    say(f"{what}: {why}: every motor stopped{station.closing_note()}")
+            finally:
+                station.close()
+        why = reason or ("stopped" if headless else console.ended_by)
+        line = f"{what}: {why}: every motor stopped{station.closing_note()}"
+        say(line)
+        if headless:  # a service's record is its log
+            logging.getLogger("pyrt.service").info("%s", line)
     return status

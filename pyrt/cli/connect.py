@@ -75,8 +75,8 @@ class RemoteShell:
             self.say(out)
         if not reply.ok:
             self.say(f"error: {reply.code} {reply.text}".rstrip())
-        elif text.upper().startswith("AUTH "):
-            self.say("privileged: every command is accepted")
+        elif text.upper().startswith("AUTH ") and not reply.lines:
+            self.say("privileged: every command is accepted")  # the server said nothing
         return False
 
     def completions(self) -> dict[str, Any]:

@@ -32,7 +32,8 @@ MAX_CELLS = 250_000
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("forcemap", help="write per-rope force maps over a grid (axis0.map ...)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--station", choices=STATIONS, default="prototype")
+    p.add_argument("--station", choices=STATIONS, default="prototype",
+                   help="packaged station to map when no --db is given (default prototype)")
     p.add_argument("--db", metavar="DIR", help="station database (read only)")
     p.add_argument("--out", metavar="DIR", default=".", help="where to write (default .)")
     p.add_argument("--step", type=float, metavar="CM", help="grid step (default: 1/20 of the "

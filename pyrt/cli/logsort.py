@@ -32,7 +32,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("logsort", help="split a manipulator log into per-axis state and "
                        "rules files (a0state.dat, a0rules.dat)", description=__doc__,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("logfile", metavar="LOGFILE")
+    p.add_argument("logfile", metavar="LOGFILE",
+                   help="a state log written by the manipulator's 'log [FILE]' command")
     p.add_argument("--out", metavar="DIR", help="where to write (default: beside LOGFILE)")
     p.add_argument("--plot", action="store_true", help="also draw a<N>.png per axis")
     p.set_defaults(run=run)

@@ -11,7 +11,10 @@ come, the server closes, or Ctrl-C.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
 import sys
+from typing import TextIO
 
 from pyrt.cli._serve import read_token
 from pyrt.client import Client, ServerError, parse_address
@@ -37,6 +40,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
+class _ReaderGone(Exception):
+    """Whoever read our stdout has closed it (``| head``)."""
+
+
+def _emit(text: str | None, out: TextIO, flush: bool = False) -> None:
+    """Print ``text`` (None: only flush); :class:`_ReaderGone` if the reader has left."""
+    try:
+        if text is None:
+            out.flush()
+        else:
+            print(text, file=out, flush=flush)
+    except BrokenPipeError:
+        raise _ReaderGone from None
+
+
 def run(args: argparse.Namespace) -> int:
     try:
         host, port = parse_address(args.address)
@@ -53,12 +71,19 @@ def run(args: argparse.Namespace) -> int:
             if line.split()[0].upper() == "SUBSCRIBE":
                 client.command(line)
                 for n, status in enumerate(client.statuses(args.timeout), 1):
-                    print(status.raw, file=out, flush=True)
+                    _emit(status.raw, out, flush=True)
                     if args.count is not None and n >= args.count:
                         break
                 return 0
             for text in client.command(line):
-                print(text, file=out)
+                _emit(text, out)
+            _emit(None, out)
+    except _ReaderGone:
+        # `pyrt send ... SUBSCRIBE 10 | head -3`: the reader has what it wanted;
+        # end quietly (and keep the interpreter's last flush from complaining)
+        with contextlib.suppress(OSError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), out.fileno())
+        return 0
     except ServerError as exc:
         for text in exc.lines:
             print(text, file=out)
@@ -68,4 +93,3 @@ def run(args: argparse.Namespace) -> int:
         print(f"pyrt send: {host}:{port}: {exc}", file=sys.stderr)
         return 1
     return 0
-

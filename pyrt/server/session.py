@@ -43,6 +43,12 @@ def _denied(line: str) -> str:
     return format_error("denied", f"{line.strip()[:60]!r} changes the robot: AUTH first")
 
 
+def _server_verb(verb: str, rest: str) -> bool:
+    """True when the request is one of the server's own verbs; ``STATUS
+    OBJECT`` is the console's ``status OBJECT`` (an object's signals)."""
+    return verb in _VERBS and not (verb == "STATUS" and rest)
+
+
 def run_shell(shell: Any, line: str, extra: list[str] | None = None) -> tuple[str, bool]:
     """Run ``line`` in a console ``shell``, its output captured; the framed reply
     and whether the shell asked to end the session.
@@ -107,7 +113,7 @@ class SessionMixin:
                 "AUTH and stop only; closing"))
             self._close_after_flush(conn)
             return
-        if verb in _VERBS:
+        if _server_verb(verb, rest):
             if conn.pending == 0 and not (verb == "AUTH" and self._held_by_a_closing(conn)):
                 self._output(conn, self._verb(conn, verb, rest))
             else:  # in order behind its commands, or waiting for a release (worker)
@@ -120,8 +126,7 @@ class SessionMixin:
         if conn.pending == 0 and verb != "HELP" and not (
             conn.privileged or self.robot.is_read_only(line)
         ):
-            self.counters["denied"] += 1
-            self._output(conn, _denied(line))
+            self._output(conn, self._refusal(line))
             return
         self._enqueue(conn, line)
 
@@ -152,8 +157,6 @@ class SessionMixin:
 
     def _verb(self, conn: Connection, verb: str, rest: str) -> str:
         if verb == "STATUS":
-            if rest:
-                return format_error("syntax", "STATUS takes no argument")
             self.counters["status"] += 1
             t_ns, _tick, values = self.hub.snapshot
             if values is None:
@@ -268,16 +271,25 @@ class SessionMixin:
 
     def _execute(self, conn: Connection, line: str) -> str:
         verb, rest = split_verb(line)
-        if verb in _VERBS:
+        if _server_verb(verb, rest):
             return self._verb(conn, verb, rest)
         if verb != "HELP" and not (conn.privileged or self.robot.is_read_only(line)):
-            self.counters["denied"] += 1
-            return _denied(line)
+            return self._refusal(line)
         extra = self._help_lines(conn) if verb == "HELP" and not rest else []
         reply, end = run_shell(self._shell(conn), line, extra)
         if end:
             self._close_after_flush(conn)
         return reply
+
+    def _refusal(self, line: str) -> str:
+        """An unprivileged client's line that is not served: ``ERR command``
+        when it names no command (as the console would say), else ``ERR denied``."""
+        unknown = getattr(self.robot, "unknown", None)
+        why = unknown(line) if unknown is not None else None
+        if why:
+            return format_error("command", why)
+        self.counters["denied"] += 1
+        return _denied(line)
 
     def _shell(self, conn: Connection) -> Any:
         if conn.shell is None or conn.shell_privileged != conn.privileged:

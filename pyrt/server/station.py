@@ -95,6 +95,14 @@ class ServedStation:
             return True
         return self._probe.anyone(line)
 
+    def unknown(self, line: str) -> str | None:
+        """Why ``line`` names no command of this robot (the console's words), or None."""
+        try:
+            self._probe.resolve(line)
+        except CommandError as exc:
+            return str(exc)
+        return None
+
     def is_stop(self, line: str) -> bool:
         """True when ``line`` is a stop: a command any client may give that
         does more than read (served even in a reserved slot)."""
