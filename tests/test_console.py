@@ -291,3 +291,24 @@ def test_gripper_console_completes_words_objects_verbs_and_scope_channels():
         assert complete(table, "sim f") == ["fault"]
     finally:
         station.close()
+
+
+def test_a_huge_piped_line_is_refused_whole_and_echoed_short():
+    """100 KB on one line: refused with one error naming its length, echoed in at most ~200
+    characters, never given to the shell; the next line runs as usual."""
+    out = io.StringIO()
+    shell = Echo(out)
+    Console(shell, io.StringIO("P" + "x" * 100_000 + "\nnext\n"), out).run()
+    text = out.getvalue()
+    assert len(text) < 600
+    assert "error: a line of 100001 characters is refused (at most 4096); nothing done" in text
+    assert shell.seen == ["next"]
+
+
+def test_a_long_line_within_the_bound_runs_and_its_echo_is_clipped():
+    """A 1000-character line runs whole; its echo shows 200 characters and the length."""
+    out = io.StringIO()
+    shell = Echo(out)
+    Console(shell, io.StringIO("y" * 1000 + "\n"), out).run()
+    assert shell.seen == ["y" * 1000]
+    assert f"A> {'y' * 200}... (1000 characters)\n" in out.getvalue()

@@ -30,6 +30,19 @@ __all__ = ["Console", "Interpreter", "complete"]
 
 #: How often the terminal console looks for loop messages, seconds.
 POLL_S = 0.1
+#: The longest command line read from a script (characters); a longer one is
+#: refused whole, without being kept in memory.
+MAX_LINE = 4096
+#: How much of a line a script's echo shows (the rest is counted, not copied).
+ECHO_MAX = 200
+
+
+def _echo(line: str) -> str:
+    """A read line as the transcript shows it: at most ECHO_MAX characters."""
+    body = line.rstrip("\r\n")
+    if len(body) > ECHO_MAX:
+        body = f"{body[:ECHO_MAX]}... ({len(body)} characters)"
+    return body + "\n"
 
 
 class Interpreter(Protocol):
@@ -129,12 +142,23 @@ class Console:
             self.flush_messages()
             out.write(self.shell.prompt)
             out.flush()
-            line = self.stdin.readline()
+            line = self.stdin.readline(MAX_LINE + 1)
             if not line:
                 out.write("\n")
                 self.ended_by = "end of input"
                 break
-            out.write(line if line.endswith("\n") else line + "\n")
+            if len(line) > MAX_LINE and not line.endswith("\n"):
+                n = len(line)
+                while True:  # the rest of the line, read and dropped
+                    more = self.stdin.readline(65536)
+                    n += len(more.rstrip("\r\n"))
+                    if not more or more.endswith("\n"):
+                        break
+                out.write(f"{line[:ECHO_MAX]}... ({n} characters)\n")
+                out.write(f"error: a line of {n} characters is refused (at most {MAX_LINE}); "
+                          "nothing done\n")
+                continue
+            out.write(_echo(line))
             if self.shell.onecmd(line.rstrip("\r\n")):
                 break
         self.flush_messages()
