@@ -209,12 +209,13 @@ DRIVER = textwrap.dedent(
     assert lib.pyrt_polyctl_drive(c) == lib.PYRT_EINVAL
     pbuf = ffi.new("double[]", 64)
     c.tops = c.bottoms = c.offsets = c.tension = c.length = c.phi = c.position = pbuf
+    c.phi_lower = pbuf
     c.stretch = c.dead = c.encoder_length = c.result = pbuf
     assert lib.pyrt_polyctl_measure(c) == lib.PYRT_EINVAL     # no finder
     fpp = ffi.new("pyrt_findpos_problem *")
     fpp.n = 2
     c.finder = fpp
-    c.finder_tops = c.finder_lengths = pbuf
+    c.finder_tops = c.finder_lengths = c.finder_bottoms = pbuf
     assert lib.pyrt_polyctl_measure(c) == lib.PYRT_EINVAL     # a finder of another size
     c.ring.radius = NAN
     assert lib.pyrt_polyctl_measure(c) == lib.PYRT_ENONFINITE   # a ring that is no ring
