@@ -14,9 +14,7 @@ from __future__ import annotations
 import time
 
 import pytest
-from _truth_rig import TOLERANCE, Workspace, draw_case, run_case
-from hypothesis import HealthCheck, given, seed, settings
-from hypothesis import strategies as st
+from _truth_rig import TOLERANCE, Workspace, sample_moves
 
 SAMPLE = 60
 SEED = 1996
@@ -26,21 +24,9 @@ SEED = 1996
 def test_truth_large_sample(name, tmp_path_factory):
     """SAMPLE random feasible moves: the worst true error at ENDPOINT_STOP is within tolerance."""
     ws = Workspace(tmp_path_factory.mktemp(f"ws-{name}"), name)
-    results = []
     w0 = time.perf_counter()
-
-    @seed(SEED)
-    @settings(max_examples=SAMPLE, database=None, deadline=None,
-              suppress_health_check=list(HealthCheck))
-    @given(st.data())
-    def check(data):
-        region, start, target = data.draw(st.composite(lambda d: draw_case(d, ws))(),
-                                          label="case")
-        res = run_case(tmp_path_factory.mktemp(name), name, start, target)
-        results.append((region, res))
-
     try:
-        check()
+        results = sample_moves(ws, name, SAMPLE, SEED, tmp_path_factory)
     finally:
         ws.close()
     wall = time.perf_counter() - w0

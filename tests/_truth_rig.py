@@ -187,3 +187,25 @@ def run_case(tmp: Path, name: str, start, target) -> dict:
         return {"stop": rec.reason.value, "error": error, "wall": time.perf_counter() - w0}
     finally:
         station.close()
+
+
+def sample_moves(ws: Workspace, name: str, size: int, seed_value: int,
+                 tmp_path_factory) -> list[tuple[str, dict]]:
+    """``size`` random feasible moves on station ``name`` (hypothesis, seeded): for each,
+    its region and :func:`run_case`'s result."""
+    from hypothesis import HealthCheck, given, seed, settings
+    from hypothesis import strategies as st
+
+    results: list[tuple[str, dict]] = []
+
+    @seed(seed_value)
+    @settings(max_examples=size, database=None, deadline=None,
+              suppress_health_check=list(HealthCheck))
+    @given(st.data())
+    def check(data):
+        region, start, target = data.draw(st.composite(lambda d: draw_case(d, ws))(),
+                                          label="case")
+        results.append((region, run_case(tmp_path_factory.mktemp(name), name, start, target)))
+
+    check()
+    return results

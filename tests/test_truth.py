@@ -14,9 +14,7 @@ a larger sample is ``bench/bench_manipulator_truth.py``.
 from __future__ import annotations
 
 import pytest
-from _truth_rig import REGIONS, Workspace, draw_case, run_case
-from hypothesis import HealthCheck, given, seed, settings
-from hypothesis import strategies as st
+from _truth_rig import REGIONS, Workspace, sample_moves
 
 #: Moves per station in the default suite (each a fresh station on SimClock).
 SAMPLE = {"prototype": 16, "sno": 12}
@@ -35,20 +33,7 @@ def workspaces(tmp_path_factory):
 def test_endpoint_stop_is_where_the_source_is(name, workspaces, tmp_path_factory):
     """Random feasible moves on a packaged station: ENDPOINT_STOP only with the simulated
     source within the station's tolerance; any other ending names where the source is."""
-    ws = workspaces[name]
-    results = []
-
-    @seed(SEED)
-    @settings(max_examples=SAMPLE[name], database=None, deadline=None,
-              suppress_health_check=list(HealthCheck))
-    @given(st.data())
-    def check(data):
-        region, start, target = data.draw(st.composite(lambda d: draw_case(d, ws))(),
-                                          label="case")
-        res = run_case(tmp_path_factory.mktemp(name), name, start, target)
-        results.append((region, res))
-
-    check()
+    results = sample_moves(workspaces[name], name, SAMPLE[name], SEED, tmp_path_factory)
     assert len(results) == SAMPLE[name]
     assert {region for region, _ in results} == set(REGIONS)
     ended = [r for _, r in results if r["stop"] == "ENDPOINT_STOP"]
