@@ -50,28 +50,22 @@ def parse_speed(text: str) -> float | None:
     return value
 
 
-def _tick_us(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"tick must be a whole number of µs, got {text!r}"
-        ) from None
-    if not 50 <= value <= 1_000_000:
-        raise argparse.ArgumentTypeError(f"tick must be 50..1000000 µs, got {value}")
-    return value
+def _whole(what: str, unit: str, lo: int, hi: int) -> Callable[[str], int]:
+    """An argparse type: a whole number of ``unit`` in lo..hi, or one clear error."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"{what} must be a whole number of {unit}, got {text!r}") from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"{what} must be {lo}..{hi} {unit}, got {value}")
+        return value
+    return parse
 
 
-def _slack_ns(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"timer slack must be a whole number of ns, got {text!r}"
-        ) from None
-    if not 1 <= value <= 1_000_000_000:
-        raise argparse.ArgumentTypeError(f"timer slack must be 1..1000000000 ns, got {value}")
-    return value
+_tick_us = _whole("tick", "µs", 50, 1_000_000)
+_slack_ns = _whole("timer slack", "ns", 1, 1_000_000_000)
 
 
 def add_loop_options(
