@@ -273,7 +273,8 @@ def test_ctrl_c_stops_a_gripper_move_and_only_hints_when_idle(monkeypatch):
 
 
 def test_gripper_console_completes_words_objects_verbs_and_scope_channels():
-    """The gripper console's Tab candidates for a few prefixes: words, object verbs (the report's letters), scope channels."""
+    """The gripper console's Tab candidates for a few prefixes: words, the letters of the
+    prompt's level, object verbs (the report's letters), scope channels."""
     from pyrt.commands.robot import RobotShell
     from pyrt.console.base import complete
     from pyrt.scheduler import Loop, SimClock
@@ -284,6 +285,8 @@ def test_gripper_console_completes_words_objects_verbs_and_scope_channels():
         table = RobotShell(station, io.StringIO()).completions()
         assert complete(table, "st") == ["stats", "status", "stop"]
         assert complete(table, "gripper ") == ["C", "E", "I", "M", "P", "S", "T", "W", "X"]
+        assert complete(table, "P") == ["P"]  # the level's letters, typed bare at CMD:
+        assert complete(table, "w") == ["W", "wait"]
         assert complete(table, "monitor ") == ["C", "D", "I", "L", "N", "Q", "S"]
         assert complete(table, "scope a") == ["add"]
         channels = complete(table, "scope add gripper.")

@@ -161,6 +161,9 @@ class RobotShell(CommandShell):
         """The nested completion table: words, then objects and their verbs
         (each record's name and its aliases: every name the object answers to)."""
         table: dict[str, Any] = {w.name: None for w in self.words()}
+        if self.level is not None:  # the letters typed bare at this level's prompt
+            for c in self.level.commands():
+                table.setdefault(c.name, None)
         for comp in self.station.components():
             if comp is getattr(self.station, "words", None):
                 continue  # its records are words, above
