@@ -386,3 +386,20 @@ def test_a_fault_during_wait_is_shown_once_and_the_closing_line_says_what_was_ke
     assert out.rstrip().splitlines()[-1].endswith(
         "except POSITION, LENGTH and ZEROLENGTH (the position estimate is not trusted: they "
         "keep the values last written before it was lost)")
+
+
+def test_stop_says_where_the_source_stopped_and_the_world_agrees(shell):
+    """'stop' mid-move: every motor stopped, and the line gives the source's position, which
+    is the estimate and within the endpoint tolerance of the simulated source."""
+    import math
+    import re
+
+    sh, station, runner, _ = shell
+    text = run_lines(sh, runner, ["prototype to 0 0 60", "sleep 6", "stop"])
+    m = re.search(r"prototype: every motor stopped; source at \((\S+), (\S+), (\S+)\) cm\n", text)
+    assert m, text
+    said = tuple(float(v) for v in m.groups())
+    assert not station.motors_running()
+    assert math.dist(said, station.polyaxis.position) < 0.01
+    assert math.dist(said, station.plant.position) <= station.polyaxis.end_error
+    assert said[2] < 94.5  # it had moved down from 95.57 before the stop

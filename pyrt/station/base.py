@@ -275,9 +275,15 @@ class Station:
 
     def stop(self) -> str:
         """The operator's stop: every motor stopped, the move ended, queued
-        moves dropped (no fault)."""
+        moves dropped (no fault); the line says where the robot stopped."""
         failed = self.reflex("stop command")
-        return f"{self.name}: every motor stopped" + (f" ({failed})" if failed else "")
+        said = f"{self.name}: every motor stopped" + (f" ({failed})" if failed else "")
+        here = self.where()
+        return f"{said}; {here}" if here else said
+
+    def where(self) -> str:
+        """Where the robot is, in the operator's words ('' if it cannot say)."""
+        return ""
 
     # -- commands (loop thread) -------------------------------------------------------
 

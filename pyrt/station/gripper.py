@@ -223,7 +223,7 @@ class GripperStation(Station):
         """The operator's stop, and where it left the jaws."""
         said = super().stop()
         self.controller.move_ended("stop command")
-        return f"{said}; {self.where()}"
+        return said
 
     def status(self) -> str:
         """One line: position, target, error, state, drive current (and the fault)."""

@@ -507,6 +507,12 @@ class ManipulatorStation(Station):
 
     stop_all = stop
 
+    def where(self) -> str:
+        """The source's estimated position (and that it is not trusted, when lost)."""
+        x, y, z = self.polyaxis.position
+        lost = "; position estimate not trusted" if self.polyaxis.estimate_lost else ""
+        return f"source at ({x:.2f}, {y:.2f}, {z:.2f}) cm{lost}"
+
     def busy(self) -> bool:
         """A move runs or waits, a pattern runs, or an axis moves on its own."""
         pa = self.polyaxis
