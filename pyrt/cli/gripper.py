@@ -118,18 +118,10 @@ def run(args: argparse.Namespace) -> int:
     wall0 = time.perf_counter()
     station.start()
 
-    try:
-        status = run_until_shutdown(
-            station, console, service, headless=args.headless, what="pyrt gripper",
-            say=lambda m: print(m, file=out, flush=True),
-            first=None if args.no_init else lambda: shell.onecmd("I"))
-    except KeyboardInterrupt:
-        # SIGINT where no terminal console takes Ctrl-C (a pipe, --headless):
-        # the station was closed on the way out (every motor stopped); say so
-        station.close()
-        print(f"pyrt gripper: SIGINT: every motor stopped{station.closing_note()}", file=out,
-              flush=True)
-        status = 0
+    status = run_until_shutdown(
+        station, console, service, headless=args.headless, what="pyrt gripper",
+        say=lambda m: print(m, file=out, flush=True),
+        first=None if args.no_init else lambda: shell.onecmd("I"))
     if args.timing_log:
         wall = time.perf_counter() - wall0
         print(f"timing log written to {args.timing_log} ({loop.tick_index} ticks, {wall:.2f} s)",
