@@ -416,7 +416,7 @@ def _close_garbage_stations():
 
 
 def test_the_tables_derived_from_the_records_agree(robot):
-    """help lists exactly the records; the server's privilege is rec.anyone or only_reads; EPICS PVs are the status signals, every component signal and the state, plus the fixed PVs; completion is the words and every component's records."""
+    """help lists exactly the records; the server's privilege is rec.anyone or only_reads; EPICS PVs are the status signals, every component signal and the state, plus the fixed PVs; completion is the words, the prompt level's letters and every component's records."""
     station, runner = robot
     out = io.StringIO()
     shell = RobotShell(station, out, runner=runner)
@@ -481,7 +481,8 @@ def test_the_tables_derived_from_the_records_agree(robot):
     # (a word's own table, e.g. help's topics or scope's channels, is nested under it)
     table = shell.completions()
     objects = [c for c in station.components() if c is not getattr(station, "words", None)]
-    assert set(table) == {w.name for w in words} | {c.name for c in objects}
+    level = {r.name for r in shell.level.commands()} if shell.level is not None else set()
+    assert set(table) == {w.name for w in words} | {c.name for c in objects} | level
     for comp in objects:
         verbs = {}
         for r in comp.commands():
