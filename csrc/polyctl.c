@@ -29,6 +29,29 @@ static int check_common(const pyrt_polyctl *c)
     return pyrt_neck_check(&c->ring);
 }
 
+/* Rope i's path with the carriage at pos (+ its offset), its rim hints
+ * (phi, phi_lower) updated for the next poll: NAN where a segment is clear. */
+static int rope_at(const pyrt_polyctl *c, int32_t i, const double *pos, double *phi,
+                   double *phi_lower, pyrt_neck_rope *path)
+{
+    const double *o = c->offsets + 3 * i;
+    double q[3], hint[2];
+    int rc;
+
+    q[0] = pos[0] + o[0];
+    q[1] = pos[1] + o[1];
+    q[2] = pos[2] + o[2];
+    hint[0] = phi[i];
+    hint[1] = phi_lower[i];
+    rc = pyrt_neck_rope_path(&c->ring, c->ring_segments, c->tops + 3 * i, c->bottoms + 3 * i,
+                             q, hint, path);
+    if (rc != PYRT_OK)
+        return rc;
+    phi[i] = path->upper.bears ? path->upper.phi : NAN;
+    phi_lower[i] = path->lower.bears ? path->lower.phi : NAN;
+    return PYRT_OK;
+}
+
 int pyrt_polyctl_measure(pyrt_polyctl *c)
 {
     int32_t i, n;
@@ -54,19 +77,11 @@ int pyrt_polyctl_measure(pyrt_polyctl *c)
     }
     x = c->position;
     for (i = 0; i < n; i++) {
-        const double *t0 = c->tops + 3 * i, *o = c->offsets + 3 * i, *b = c->bottoms + 3 * i;
-        double q[3], hint[2];
+        const double *b = c->bottoms + 3 * i;
         pyrt_neck_rope path;
-        q[0] = x[0] + o[0];
-        q[1] = x[1] + o[1];
-        q[2] = x[2] + o[2];
-        hint[0] = c->phi[i];
-        hint[1] = c->phi_lower[i];
-        rc = pyrt_neck_rope_path(&c->ring, c->ring_segments, t0, b, q, hint, &path);
+        rc = rope_at(c, i, x, c->phi, c->phi_lower, &path);
         if (rc != PYRT_OK)
             return rc;
-        c->phi[i] = path.upper.bears ? path.upper.phi : NAN;
-        c->phi_lower[i] = path.lower.bears ? path.lower.phi : NAN;
         c->finder_tops[3 * i] = path.upper.point[0];
         c->finder_tops[3 * i + 1] = path.upper.point[1];
         c->finder_tops[3 * i + 2] = path.upper.point[2];
@@ -154,8 +169,8 @@ int pyrt_polyctl_drive(pyrt_polyctl *c)
     hx = x[0] - c->axis_point[0];
     hy = x[1] - c->axis_point[1];
     for (i = 0; i < n; i++) {
-        const double *t = c->tops + 3 * i, *o = c->offsets + 3 * i, *b = c->bottoms + 3 * i;
-        double q[3], hint[2] = {NAN, NAN}, want;
+        const double *b = c->bottoms + 3 * i;
+        double want;
         pyrt_neck_rope path;
         if (!c->signal_all) {
             /* off side: the bottom on the far side of the central axis (or level) */
@@ -164,16 +179,9 @@ int pyrt_polyctl_drive(pyrt_polyctl *c)
             c->desired_tension[i] = off ? c->offside_tension : 0.0;
             c->is_free[i] = off ? 0.0 : 1.0;
         }
-        q[0] = c->hare[0] + o[0];
-        q[1] = c->hare[1] + o[1];
-        q[2] = c->hare[2] + o[2];
-        hint[0] = c->hare_phi[i];
-        hint[1] = c->hare_phi_lower[i];
-        rc = pyrt_neck_rope_path(&c->ring, c->ring_segments, t, b, q, hint, &path);
+        rc = rope_at(c, i, c->hare, c->hare_phi, c->hare_phi_lower, &path);
         if (rc != PYRT_OK)
             return rc;
-        c->hare_phi[i] = path.upper.bears ? path.upper.phi : NAN;
-        c->hare_phi_lower[i] = path.lower.bears ? path.lower.phi : NAN;
         want = path.length;
         c->error_length[i] = (c->length[i] - res[i]) - want;
         c->error_tension[i] = c->is_free[i] != 0.0 ? 0.0
