@@ -28,6 +28,7 @@ import signal
 import sys
 from pathlib import Path
 
+from pyrt.cli._loopopts import _whole
 from pyrt.cli.gripper import _counts
 from pyrt.db import STATIONS, station_directory
 from pyrt.errors import ConfigError
@@ -70,14 +71,7 @@ def _positive_seconds(text: str) -> float:
     return value
 
 
-def _step_us(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected whole µs, got {text!r}") from None
-    if not 50 <= value <= 100_000:
-        raise argparse.ArgumentTypeError(f"world step must be 50..100000 µs, got {value}")
-    return value
+_step_us = _whole("world step", "µs", 50, 100_000)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
