@@ -29,13 +29,13 @@ import sys
 from pathlib import Path
 
 from pyrt.cli._loopopts import _whole
-from pyrt.cli.gripper import _counts
 from pyrt.db import STATIONS, station_directory
 from pyrt.errors import ConfigError
 from pyrt.sim.boardsim import DEFAULT_WATCHDOG_S, BoardServer
 from pyrt.sim.gripper import FAULTS, JawParameters
 from pyrt.sim.sensors import Imperfections
 from pyrt.sim.world import BoardWorld, GripperWorld, ManipulatorWorld
+from pyrt.station.gripper import counts_type as _counts
 from pyrt.station.manipulator import ManipulatorStation
 
 __all__ = ["add_parser", "run"]
