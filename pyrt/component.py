@@ -443,6 +443,11 @@ class Component:
     def reflex(self) -> None:
         """Stop every actuator of this component now (loop thread; must not raise)."""
 
+    def enter_level(self) -> list[str]:
+        """The console has made this component its command level (a handler
+        returned :class:`Switch`); the lines to say (loop thread).  None by default."""
+        return []
+
     def fail(self, cause: str, source: str = "") -> None:
         """Report a fault of the robot: the station records it and runs every
         component's reflex in this tick.  Without a station it raises."""

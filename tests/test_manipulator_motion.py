@@ -16,6 +16,7 @@ from pyrt.commands import RobotShell
 from pyrt.commands._motion import parse_motion, parse_value
 from pyrt.errors import CommandError
 from pyrt.robots.paths import HarePath, path_target
+from pyrt.robots.polyaxis import PolyAxis
 from pyrt.robots.stops import StopReason
 from pyrt.scheduler import Loop, SimClock
 from pyrt.scheduler import motion as motion_mod
@@ -95,7 +96,8 @@ def test_motion_word_runs_hare_path_like_to(shell):
     assert len(errors) == 6
     assert "outside the vessel" in errors[0] and "'y' missing" in errors[1]
     assert "unknown parameter(s) speed" in errors[2] and "finite" in errors[3]
-    assert "unknown motion type 'warp'" in errors[4] and "key=value" in errors[5]
+    assert "warp: not a motion type of prototype (it has hare_path)" in errors[4]
+    assert "key=value" in errors[5]
     runner.sleep(0.5)
     assert station.polyaxis.moves == moves and not station.motors_running()
     assert len(station.motion) == 0
@@ -138,6 +140,7 @@ class _Raises(MotionType):
     """Fails on its third step."""
 
     name = "raises_test"
+    drives = (PolyAxis,)
 
     def start(self, robot, record, now_ns):
         self.pa = robot
@@ -154,6 +157,7 @@ class _Escapes(MotionType):
     """Puts the hare outside the vessel."""
 
     name = "escapes_test"
+    drives = (PolyAxis,)
 
     def start(self, robot, record, now_ns):
         self.pa = robot
@@ -256,7 +260,7 @@ def test_gripper_console_motion_word():
         errors = [ln for ln in lines if ln.startswith("error:")]
         # a gripper_move without its target is refused when it is queued, not later
         assert len(errors) == 2 and "target=COUNTS missing" in errors[0]
-        assert "unknown motion type 'nosuch'" in errors[1]
+        assert "nosuch: not a motion type of gripper (it has gripper_move)" in errors[1]
         gs.runner.sleep(0.05)
         assert not any(m.startswith("move refused: ") for m in gs.runner.messages())
     finally:
@@ -267,6 +271,7 @@ class _BadEndpoint(MotionType):
     """Declares an endpoint that is not a point."""
 
     name = "badend_test"
+    drives = (PolyAxis,)
     endpoint = (0.0, math.nan, 100.0)
 
     def step(self, now_ns):
@@ -316,3 +321,12 @@ def test_motion_word_refusals_move_nothing(tmp_path_factory, kind, params):
             assert len(station.motion) == 0
     finally:
         station.close()
+
+
+def test_the_grippers_motion_type_is_neither_offered_nor_run_by_the_manipulator(shell):
+    """motion gripper_move in the manipulator is refused when queued (not an AttributeError later)."""
+    run, station, _runner = shell
+    assert "gripper_move" not in run("motion")
+    said = run("motion gripper_move target=-100")
+    assert said.startswith("error: motion gripper_move: not a motion type of prototype")
+    assert "internal error" not in said and not station.busy()

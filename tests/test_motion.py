@@ -132,6 +132,7 @@ def test_entry_point_motion_type_is_found_and_runs(tmp_path, monkeypatch):
 
         class Spiral(MotionType):
             name = "spiral"
+            drives = (dict,)
 
             def start(self, robot, record, now_ns):
                 self.robot = robot

@@ -2,17 +2,18 @@
 
 ``motion TYPE [key=value ...]`` puts ``MotionRecord(TYPE, {key: value})`` on
 the robot's motion queue (values are numbers where they parse as numbers,
-else words); ``motion`` alone lists the registered types, built-in and
-plug-in (the entry-point group ``pyrt.motion_types``).
+else words); ``motion`` alone lists the station's types (those that drive
+its robot, built-in and plug-in: :meth:`pyrt.station.base.Station.motion_types`).
 """
 
 from __future__ import annotations
 
 import inspect
 import math
+from collections.abc import Mapping
 
 from pyrt.errors import CommandError
-from pyrt.scheduler.motion import MotionRecord, get_motion_type, motion_type_names
+from pyrt.scheduler.motion import MotionRecord, MotionType
 
 __all__ = ["motion_type_lines", "parse_motion", "parse_value"]
 
@@ -32,14 +33,14 @@ def parse_value(text: str) -> int | float | str:
 
 def parse_motion(arg: str) -> MotionRecord | None:
     """``TYPE [key=value ...]`` as a record (None for an empty line);
-    CommandError for an unknown type or a malformed parameter."""
+    CommandError for a malformed name or parameter (whether the station
+    runs the type is the station's to say)."""
     words = arg.split()
     if not words:
         return None
     name, rest = words[0], words[1:]
     if not name.isidentifier():
         raise CommandError(f"motion: {name!r} is not a motion type name; 'motion' lists them")
-    get_motion_type(name)  # unknown: CommandError naming the known ones
     params: dict[str, int | float | str] = {}
     for w in rest:
         key, eq, value = w.partition("=")
@@ -51,14 +52,16 @@ def parse_motion(arg: str) -> MotionRecord | None:
     return MotionRecord(name.lower(), params)
 
 
-def motion_type_lines(names: list[str] | None = None) -> list[str]:
-    """One line per registered motion type (or per one of ``names``): its
-    name and the first line of its help."""
+def motion_type_lines(types: Mapping[str, type[MotionType]]) -> list[str]:
+    """One line per motion type of ``types``: its name and the first line of its help
+    (``  none`` when there is none)."""
     lines = []
-    for name in motion_type_names() if names is None else names:
-        try:
-            doc = inspect.getdoc(get_motion_type(name)) or ""
-        except CommandError as exc:
-            doc = str(exc)
-        lines.append(f"  {name:<16} {doc.splitlines()[0] if doc else ''}")
-    return lines
+    for name, cls in types.items():
+        doc = inspect.getdoc(cls) or ""
+        lines.append(f"  {name:<16} {_plain(doc.splitlines()[0]) if doc else ''}")
+    return lines or ["  none"]
+
+
+def _plain(text: str) -> str:
+    """reST inline literals as the console shows them (no double backticks)."""
+    return text.replace("``", "")

@@ -36,7 +36,6 @@ from pyrt.commands.shell import CommandShell, parse_seconds
 from pyrt.component import Arg, Command, Component, Switch, command, records_of, reply_lines
 from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
 from pyrt.scheduler import Job
-from pyrt.scheduler.motion import get_motion_type, motion_type_names
 from pyrt.scheduler.report import format_statistics
 
 __all__ = ["RobotShell"]
@@ -60,7 +59,7 @@ class RobotShell(CommandShell):
         super().__init__(stdout)
         self.station = station
         self.runner = runner if runner is not None else station.runner
-        self.level: Component | None = getattr(station, "letter_level", lambda: None)()
+        self.level: Component | None = station.letter_level()
         self._scope = ScopeCommand(self.runner, station.scope, self._channel,
                                    self._channel_names, stdout)
         #: Faults already shown to the operator (their text), so each is shown once.
@@ -76,7 +75,7 @@ class RobotShell(CommandShell):
     @property
     def in_monitor(self) -> bool:
         """The shell is at a level other than the station's first (the gripper's monitor)."""
-        first = getattr(self.station, "letter_level", lambda: None)()
+        first = self.station.letter_level()
         return self.level is not None and self.level is not first
 
     # -- the records ------------------------------------------------------------------
@@ -84,7 +83,7 @@ class RobotShell(CommandShell):
     def words(self) -> list[Command]:
         """The shared words and the station's own words, as records."""
         own = records_of(self, "")
-        extra = getattr(self.station, "words", None)
+        extra = self.station.words
         if extra is not None:
             own += extra.commands()
         return own
@@ -106,7 +105,7 @@ class RobotShell(CommandShell):
             if w is not None:
                 # the shell's own words run here; a station's words (the
                 # manipulator's log, debug) in the loop like any command
-                owner = getattr(self.station, "words", None)
+                owner = self.station.words
                 mine = owner is None or owner.find_command(first) is None
                 return (None if mine else owner), w, words[1:], text[len(first):].strip()
             comp = self.station.find(first)
@@ -165,7 +164,7 @@ class RobotShell(CommandShell):
             for c in self.level.commands():
                 table.setdefault(c.name, None)
         for comp in self.station.components():
-            if comp is getattr(self.station, "words", None):
+            if comp is self.station.words:
                 continue  # its records are words, above
             verbs: dict[str, Any] = {}
             for c in comp.commands():
@@ -182,9 +181,7 @@ class RobotShell(CommandShell):
         subs: dict[str, Any] = {verb: None for verb in self._scope.verbs()}
         subs.update(add=channels, trigger={name: None for name in channels})
         table["scope"] = subs
-        own = getattr(self.station, "motion_types", None)
-        table["motion"] = {name: None for name in (own() if callable(own)
-                                                   else motion_type_names())}
+        table["motion"] = dict.fromkeys(self.station.motion_types())
         return table
 
     # -- dispatch ---------------------------------------------------------------------
@@ -206,7 +203,7 @@ class RobotShell(CommandShell):
             result = self._wait_job(result)
             if result is None:
                 return False
-        plain = comp is self.level or comp is getattr(self.station, "words", None)
+        plain = comp is self.level or comp is self.station.words
         prefix = "" if plain or rec.name == "show" else comp.name
         self._show(rec, result, prefix)
         return False
@@ -237,8 +234,7 @@ class RobotShell(CommandShell):
             for text in value.lines:
                 self.say(text)
             level = self.station.component(value.level)
-            enter = getattr(level, "enter_level", None)
-            notes = self.runner.call(enter) if enter is not None else []
+            notes = self.runner.call(level.enter_level)
             self.level = level
             for text in notes or []:
                 self.say(text)
@@ -363,7 +359,7 @@ class RobotShell(CommandShell):
                 with contextlib.suppress(PyrtError):
                     self.runner.call(st.end_wait, name="wait", take_fault=False)
         except FaultError as exc:
-            self.fault(exc, prefix=getattr(st, "wait_fault_prefix", "FAULT"))
+            self.fault(exc, prefix=st.wait_fault_prefix)
             return
         if not done:
             self.say(f"still moving after {timeout:g} s")
@@ -405,14 +401,13 @@ class RobotShell(CommandShell):
         check(robot, params) class method is checked before it is queued
         (a refusal moves nothing)."""
         record = parse_motion(arg)
-        own = getattr(self.station, "motion_types", None)
+        types = self.station.motion_types()
         if record is None:
-            self.say("motion types (motion TYPE key=value ...):")
-            names = own() if callable(own) else None
-            for line in motion_type_lines(names):
+            self.say(f"motion types of {self.station.name} (motion TYPE key=value ...):")
+            for line in motion_type_lines(types):
                 self.say(line)
             return
-        get_motion_type(record.type)
+        self.station.motion_type(record.type)  # an unknown type: refused here, nothing queued
         n, waiting = self.call(self.station.submit_motion, record, name="motion")
         self.say(f"motion {record.type} queued ({n} waiting)"
                  + (" behind the running move" if waiting else ""))

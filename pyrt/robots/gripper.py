@@ -246,6 +246,9 @@ class GripperController(Component, CommandLetters):
     :meth:`start_init`.
     """
 
+    #: Back at ``CMD:`` from the monitor (the letters' own, not Component's default).
+    enter_level = CommandLetters.enter_level
+
     def __init__(self, cpu: I8031, name: str = "gripper", stall_limit_ns: int = 1_000_000_000,
                  calibration: JawCalibration | None = None):
         self.name = name
@@ -949,4 +952,5 @@ class GripperMove(MotionType):
             self.stop(self.robot.last_stop or "stopped")
 
 
+GripperMove.drives = (GripperController,)
 register_motion_type(GripperMove.name, GripperMove, replace=True)

@@ -1227,3 +1227,8 @@ class PolyAxis(Component):
         return (f"t={self.now_s:9.2f} s  pos ({x[0]:8.2f} {x[1]:8.2f} {x[2]:8.2f}) cm  "
                 f"distErr {self.dist_err:.3f} cm  net {self.net_force_magnitude:6.2f} N  "
                 f"T [{t}] N  {state}")
+
+
+# The straight-line move drives a PolyAxis (paths.py cannot name the class: it is
+# imported by this module).
+HarePath.drives = (PolyAxis,)

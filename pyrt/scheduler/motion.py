@@ -9,7 +9,10 @@ through the entry-point group ``pyrt.motion_types``::
     [project.entry-points."pyrt.motion_types"]
     spiral = "mylab.motions:Spiral"
 
-so a new one needs no edit to pyrt.  A :class:`MotionExecutor`, polled in
+so a new one needs no edit to pyrt.  A type says which robots it drives
+(:attr:`MotionType.drives`, or :meth:`MotionType.accepts`); a station offers
+the types that drive its robot (:func:`motion_types_for`) and no other, so
+one robot's ``motion`` never lists another's.  A :class:`MotionExecutor`, polled in
 the loop, takes records from the robot's bounded motion queue in order and
 steps one motion at a time.
 """
@@ -30,6 +33,7 @@ __all__ = [
     "MotionType",
     "get_motion_type",
     "motion_type_names",
+    "motion_types_for",
     "register_motion_type",
 ]
 
@@ -49,10 +53,23 @@ class MotionType:
     methods; they run in the loop thread, once per poll."""
 
     name: ClassVar[str] = ""
+    #: The robot classes this type drives (a station's motion robot is an
+    #: instance of one of them); empty: none, unless :meth:`accepts` says more.
+    drives: ClassVar[tuple[type, ...]] = ()
+
+    @classmethod
+    def accepts(cls, robot: Any) -> bool:
+        """Whether this type drives ``robot`` (default: it is one of :attr:`drives`)."""
+        return bool(cls.drives) and isinstance(robot, cls.drives)
 
     def __init__(self) -> None:
         self.done = False
         self.stop_reason: str | None = None
+
+    @classmethod
+    def check(cls, robot: Any, params: Mapping[str, Any]) -> None:
+        """Refuse now, when it is queued (CommandError), a record that could
+        never start on ``robot``; nothing by default."""
 
     def start(self, robot: Any, record: MotionRecord, now_ns: int) -> None:
         """Begin the motion (validate ``record.params``; raise CommandError to refuse)."""
@@ -123,6 +140,12 @@ def motion_type_names() -> list[str]:
     if not _loaded_entry_points:
         _load_entry_points()
     return sorted(_registry)
+
+
+def motion_types_for(robot: Any) -> dict[str, type[MotionType]]:
+    """Every registered type (built-in and plug-in) that drives ``robot``, by name, sorted."""
+    return {name: _registry[name] for name in motion_type_names()
+            if _registry[name].accepts(robot)}
 
 
 class _Refused(MotionType):

@@ -157,8 +157,7 @@ class ServedStation:
         return 1 if st.busy() else 0
 
     def _stop_reason(self) -> str:
-        last = getattr(self.station.root, "last_stop", None)
-        return str(last) if last else ""
+        return self.station.last_stop()
 
     def limits(self, name: str, units: str) -> Limits | None:
         """Display and alarm limits of the STATUS field ``name`` (None: none known)."""

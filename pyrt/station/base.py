@@ -34,7 +34,7 @@ from pyrt.boards import Boards
 from pyrt.component import Command, Component, Signal, command, walk
 from pyrt.errors import BoardError, CommandError, ConfigError, Fault, PyrtError
 from pyrt.scheduler import Loop, ReadyQueue
-from pyrt.scheduler.motion import MotionExecutor
+from pyrt.scheduler.motion import MotionExecutor, MotionType, motion_types_for
 from pyrt.scheduler.runner import MotionQueue, Runner
 from pyrt.scope import Scope
 
@@ -80,6 +80,12 @@ class Station:
 
     #: The robot's name (``gripper``, ``prototype``, ``sno``).
     name: str = "robot"
+    #: A component whose commands are console words of this station (the
+    #: manipulator's ``log`` and ``debug``), run in the loop like any command;
+    #: None: the shared words only.
+    words: Component | None = None
+    #: How ``wait`` opens the line of a fault that ended the move it waited for.
+    wait_fault_prefix: str = "FAULT"
 
     def __init__(self, loop: Loop, *, motion_capacity: int = 16):
         self.loop = loop
@@ -289,6 +295,11 @@ class Station:
         """Where the robot is, in the operator's words ('' if it cannot say)."""
         return ""
 
+    def last_stop(self) -> str:
+        """How the last move ended, in the operator's words ('' before any);
+        the server's and EPICS's ``stopReason``."""
+        return ""
+
     # -- commands (loop thread) -------------------------------------------------------
 
     def execute(self, component: Component, record: Command, args: list[Any]) -> Any:
@@ -304,18 +315,31 @@ class Station:
         """Check a motion record and put it on the motion queue (loop thread):
         refused while faulted; a type's ``check(robot, params)`` runs first.
         Returns (records waiting, whether a move was already running)."""
-        from pyrt.scheduler.motion import get_motion_type
-
         if self._fault is not None:
             raise CommandError(f"motion {record.type}: refused: {self.name} is stopped by a "
                                f"fault ({self._fault.cause}); give 'ack' first; nothing moved")
+        cls = self.motion_type(record.type)
         self.check_motion(record)
-        check = getattr(get_motion_type(record.type), "check", None)
-        if callable(check):
-            check(self.motion_robot(), record.params)
+        cls.check(self.motion_robot(), record.params)
         waiting = self.busy()
         self.motion.put(record)
         return len(self.motion), waiting
+
+    def motion_types(self) -> dict[str, type[MotionType]]:
+        """The motion types this station runs, by name: every registered type
+        (built-in and plug-in) that drives :meth:`motion_robot`.  ``motion``
+        lists these and queues no other."""
+        return motion_types_for(self.motion_robot())
+
+    def motion_type(self, name: str) -> type[MotionType]:
+        """The motion type ``name`` of this station; CommandError naming this
+        station's types if it runs none by that name."""
+        types = self.motion_types()
+        cls = types.get(name.lower())
+        if cls is None:
+            raise CommandError(f"motion {name[:40]}: not a motion type of {self.name} (it has "
+                               f"{', '.join(types) or 'none'}); nothing queued")
+        return cls
 
     def check_motion(self, record: Any) -> None:
         """Configuration-specific refusals of a motion record (none by default)."""

@@ -33,7 +33,7 @@ from pyrt.boards import Boards, open_boards
 from pyrt.boards.i8031 import COMMAND_CNT, ENCODER_CNT
 from pyrt.component import Arg, Component, Signal, command, finite
 from pyrt.errors import CommandError, ConfigError
-from pyrt.robots.gripper import GripperController, GripperMove, JawCalibration
+from pyrt.robots.gripper import GripperController, JawCalibration
 from pyrt.robots.gripper_commands import parse_hex
 from pyrt.scheduler import Loop
 from pyrt.scheduler.motion import MotionExecutor, MotionType
@@ -217,6 +217,10 @@ class GripperStation(Station):
         return (f"position {pos:04X} ({mm(_signed(pos)):.1f} mm), target {tgt:04X} "
                 f"({mm(_signed(tgt)):.1f} mm), error {err:+d}")
 
+    def last_stop(self) -> str:
+        """Why the last move or jog ended ('' before any)."""
+        return self.controller.last_stop
+
     def wait_report(self) -> str:
         """How the move ended: at target, stopped short (and why), or the fault."""
         ctl = self.controller
@@ -252,16 +256,6 @@ class GripperStation(Station):
         pos = ctl.word(ENCODER_CNT)
         return (f"; jaws at {pos:04X} ({ctl.calibration.mm(_signed(pos)):.1f} mm), "
                 f"drive current {ctl.dac - 0x80:+d}")
-
-    def motion_types(self) -> list[str]:
-        """The motion types this robot runs."""
-        return [GripperMove.name]
-
-    def check_motion(self, record: Any) -> None:
-        """Only the gripper's own motion type."""
-        if record.type != GripperMove.name:
-            raise CommandError(f"motion {record.type[:40]}: not a motion type of the gripper "
-                               f"(it has {', '.join(self.motion_types())}); nothing queued")
 
     def status_fields(self) -> list[tuple[str, Signal, str]]:
         """STATUS: position, target, moving, busy, sensors, fault."""

@@ -552,6 +552,11 @@ class ManipulatorStation(Station):
                             if a.mode == "standalone" and a.motor.running]
         return None
 
+    def last_stop(self) -> str:
+        """How the last PolyAxis move ended (its stop record), '' before any."""
+        last = self.polyaxis.last_stop
+        return str(last) if last else ""
+
     def idle_report(self) -> str:
         last = self.polyaxis.last_stop
         return f"nothing to wait for; last stop: {last}" if last else "nothing to wait for"
