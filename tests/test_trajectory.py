@@ -343,10 +343,10 @@ class ToyArm:
 DT_NS = 1_000_000  # 1 kHz
 
 
-def _run(motion: JointTrajectory, t_ns: int, until_ns: int) -> int:
+def _run(motion: JointTrajectory, t_ns: int, until_ns: int, dt_ns: int = DT_NS) -> int:
     while not motion.done and t_ns <= until_ns:
         motion.step(t_ns)
-        t_ns += DT_NS
+        t_ns += dt_ns
     return t_ns
 
 
@@ -466,3 +466,42 @@ def test_start_refuses_a_robot_with_bad_limits():
     with pytest.raises(CommandError, match="the robot's velocity and acceleration limits"):
         JointTrajectory().start(arm, joint_trajectory_record([0.5, 0.5]), 0)
     assert arm.commands == []
+
+
+target = st.lists(st.floats(-2.0, 2.0), min_size=2, max_size=2)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(target, min_size=1, max_size=3), st.lists(target, min_size=1, max_size=2),
+       st.floats(0.0, 1.2), st.one_of(st.none(), st.floats(0.2, 1.0)))
+def test_appending_at_any_time_keeps_the_executed_path_and_its_continuity(first, more, when, speed):
+    """Whenever a target is appended, every setpoint written is a sample of the final trajectory, and no step jumps more than the limits allow."""
+    arm = ToyArm()
+    motion = JointTrajectory()
+    motion.start(arm, joint_trajectory_record(*first), 0)
+    planned = motion.trajectory
+    assert planned is not None
+    dt = 4 * DT_NS  # 250 Hz keeps the example quick; the bounds scale with dt
+    t = _run(motion, 0, int(when * planned.duration * 1e9), dt)
+    if motion.done:
+        return
+    params = {"q": more} if speed is None else {"q": more, "speed": speed}
+    blended = motion.append(params)
+    t = _run(motion, t, 60 * 10**9, dt)
+    final = motion.trajectory
+    assert final is not None and motion.stop_reason == "endpoint"
+    assert arm.q == [float(x) for x in more[-1]]
+    if blended:  # one plan through every point, as if given at once
+        assert final.duration == plan([0.0, 0.0], first + more, [1.0, 2.0], [4.0, 8.0],
+                                      durations=None,
+                                      speeds=[None] * len(first) + [speed] * len(more)).duration
+    else:  # a rest at the last first target
+        assert len(final.points) == len(first) + len(more) + 2
+    for k, (q, qd) in enumerate(arm.commands):
+        want = final.sample(k * dt * 1e-9)
+        np.testing.assert_array_equal(q, want[0])
+        np.testing.assert_array_equal(qd, want[1])
+    assert np.all(_max_velocity_step(arm.commands) <= np.array([4.0, 8.0]) * dt * 1e-9 * (1 + 1e-9))
+    q = np.array([c[0] for c in arm.commands])
+    assert np.all(np.abs(np.diff(q, axis=0)) <= np.array([1.0, 2.0]) * dt * 1e-9 * (1 + 1e-9))
+    assert np.all(q >= -2.0) and np.all(q <= 2.0)

@@ -505,13 +505,14 @@ class _Group:
 
 
 class JointTrajectory(MotionType):
-    """Joint moves through via points, blended by Paul's transitions (001):
-    motion joint_trajectory q0=.. q1=.. [duration=S] [speed=F].
+    """Joint moves through via points, blended (001): q0=.. q1=.. [duration=S] [speed=F]
 
-    Drives a :class:`JointRobot`.  ``start`` reads the robot's joints and
-    limits and plans (:func:`plan`); each ``step(now_ns)`` writes the setpoint
-    at that time with ``command_joints(q, qd)`` (``setpoint`` holds ``(q, qd,
-    qdd)`` for a feed-forward); the motion is done at the end (stop reason
+    ``motion joint_trajectory q0=A q1=B`` moves to one point, ``q0=A,C
+    q1=B,D`` through two (:func:`joint_targets` gives every form).  Drives a
+    :class:`JointRobot`.  ``start`` reads the robot's joints and limits and
+    plans (:func:`plan`); each ``step(now_ns)`` writes the setpoint at that
+    time with ``command_joints(q, qd)`` (``setpoint`` holds ``(q, qd, qdd)``
+    for a feed-forward); the motion is done at the end (stop reason
     ``endpoint``).  :meth:`append` queues more via points while it runs.
     ``stop`` ends it at once and writes nothing: the robot holds or its
     reflex acts.
@@ -588,7 +589,8 @@ class JointTrajectory(MotionType):
         Paul's transition (the final deceleration has not begun at the last
         step), False when the robot comes to rest at the present last point
         and starts again from there.  CommandError if the parameters are bad
-        or the motion is not running; then nothing changes."""
+        or the motion is not running; then nothing changes.  Call it in the
+        loop thread (a mailbox command), like ``step``."""
         robot = self.robot
         if robot is None or self.done or self.trajectory is None:
             raise CommandError(f"{_NAME}: not running; queue a new motion record instead")
