@@ -24,22 +24,26 @@ world's state as board-sim tells it (``sim`` shows it; nothing else).
 
 from __future__ import annotations
 
+import argparse
+import re
 from collections.abc import Callable, Iterable
 from typing import Any
 
 from pyrt.boards import Boards, open_boards
 from pyrt.boards.i8031 import COMMAND_CNT, ENCODER_CNT
+from pyrt.boards.registers import BoardKind
 from pyrt.component import Arg, Component, Signal, command, finite
 from pyrt.errors import CommandError, ConfigError
 from pyrt.robots.gripper import GripperController, GripperMove, JawCalibration
 from pyrt.robots.gripper_commands import parse_hex
 from pyrt.scheduler import Loop
 from pyrt.scheduler.motion import MotionExecutor, MotionType
-from pyrt.sim.gripper import JawPlant
+from pyrt.sim.gripper import FAULTS, JawParameters, JawPlant
+from pyrt.sim.world import GRIPPER_BOARDS, GripperWorld, World, WorldFactory
 from pyrt.station.base import BoardWorld, Station, refuse_sim_options
 from pyrt.tasks import register_tasks
 
-__all__ = ["GripperSim", "GripperStation", "build_gripper"]
+__all__ = ["GripperSim", "GripperStation", "GripperWorlds", "build_gripper"]
 
 #: ``wait`` says "at target" within this many counts (the deadband and the
 #: last bumps leave a few counts; the tests of 002's moves allow 16).
@@ -132,10 +136,9 @@ class GripperStation(Station):
 
     def __init__(self, loop: Loop, boards: Boards, plant: JawPlant | None):
         super().__init__(loop)
-        assert boards.cpu is not None and boards.gripper is not None
         self.attach_boards(boards)  # first in the tick: this tick's inputs
-        self.cpu = cpu = boards.cpu
-        self.board = boards.gripper
+        self.board = boards["gripper"]
+        self.cpu = cpu = self.board.cpu
         self.plant = plant
         cal = JawCalibration()
         if plant is not None:  # the simulated mechanism's own numbers
@@ -288,7 +291,7 @@ def build_gripper(
     boards that cannot be reached, BoardError.
     """
     faults = list(faults)
-    b = open_boards(boards, "gripper")
+    b = open_boards(boards, "gripper", GRIPPER_BOARDS)
     try:
         refuse_sim_options(b, [name for name, given in (
             ("the jaw start position (--start)", start is not None),
@@ -296,9 +299,8 @@ def build_gripper(
             ("faults (--fault)", bool(faults))) if given])
         plant = None
         if b.in_process:
-            assert b.gripper is not None
             try:
-                plant = JawPlant(b.gripper, start=DEFAULT_START if start is None else start)
+                plant = JawPlant(b["gripper"], start=DEFAULT_START if start is None else start)
                 plant.set_object(object_mm)
                 for fault in faults:
                     plant.inject(fault)
@@ -308,3 +310,49 @@ def build_gripper(
     except BaseException:
         b.close()
         raise
+
+
+# -- the world of ``pyrt board-sim gripper`` ------------------------------------------------
+
+
+def _start_counts(text: str) -> int:
+    """A start position: hex counts, two's complement (F400) or negative (-0C00)."""
+    t = text.strip()
+    try:
+        value = -int(t[1:], 16) if t.startswith("-") else int(t, 16)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected hex encoder counts, got {text!r}") from None
+    if value > 0x7FFF:
+        value -= 0x10000
+    if not -0x2A00 <= value <= 0:
+        raise argparse.ArgumentTypeError("start position must be 0000 (wide open) .. D600 (closed)")
+    return value
+
+
+class GripperWorlds(WorldFactory):
+    """The gripper's boards and world for ``pyrt board-sim gripper``: the cage
+    (board ``gripper``) with the jaws behind it."""
+
+    name = "gripper"
+
+    def board_kinds(self) -> dict[str, BoardKind]:
+        return dict(GRIPPER_BOARDS)
+
+    def add_world_arguments(self, parser: argparse.ArgumentParser) -> None:
+        g = parser.add_argument_group("gripper world")
+        g.add_argument("--object", type=float, metavar="MM",
+                       help=f"an object this wide between the jaws "
+                            f"(0 < MM < {JawParameters().open_mm:g})")
+        g.add_argument("--start", type=_start_counts, metavar="HEX",
+                       help="jaw position at start, encoder counts from wide open "
+                            "(default F400)")
+        g.add_argument("--fault", action="append", choices=[f for f in FAULTS if f != "port"],
+                       help="inject a fault from the start: limit (sensor dead), jam (motor), "
+                            "encoder (dead)")
+        # "--start -0C00": hexadecimal counts are numbers here
+        parser._negative_number_matcher = re.compile(r"^-[0-9A-Fa-f]+$|^-\d*\.\d+$")
+
+    def world(self, boards: Boards, args: argparse.Namespace) -> World:
+        return GripperWorld(boards=boards, object_mm=getattr(args, "object", None),
+                            start=DEFAULT_START if getattr(args, "start", None) is None
+                            else args.start, faults=getattr(args, "fault", None) or ())

@@ -47,6 +47,7 @@ BoardError there faults the manipulator, naming the URL.
 
 from __future__ import annotations
 
+import argparse
 import math
 import sys
 import threading
@@ -55,8 +56,9 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from pyrt.boards import Boards, open_boards
+from pyrt.boards.registers import BoardKind
 from pyrt.component import Arg, Component, Signal, command, finite
-from pyrt.db import DirectoryLock, load_station, lock_directory
+from pyrt.db import STATIONS, DirectoryLock, load_station, lock_directory, station_directory
 from pyrt.db import Station as StationDB
 from pyrt.errors import BoardError, CommandError, ConfigError, NativeError, PyrtError
 from pyrt.native import FuzzyParams, NativeInputError
@@ -67,6 +69,7 @@ from pyrt.robots.stops import StopRecord
 from pyrt.scheduler import Loop, ReadyQueue, SimClock
 from pyrt.sim.manipulator import ManipulatorPlant, rig_from_station
 from pyrt.sim.sensors import Imperfections
+from pyrt.sim.world import MANIPULATOR_BOARDS, ManipulatorWorld, World, WorldFactory
 from pyrt.station.base import BoardWorld, Station, refuse_sim_options
 from pyrt.tasks import SyncWriter, ThreadWriter, WriteBack, register_tasks
 
@@ -75,6 +78,7 @@ __all__ = [
     "POLL_S",
     "TICK_NS",
     "ManipulatorStation",
+    "ManipulatorWorlds",
     "MessageSink",
 ]
 
@@ -283,7 +287,7 @@ class ManipulatorStation(Station):
                                   f"not {expect.lower()!r}; give the matching --station or "
                                   "another --db", pa_rec.where.file, pa_rec.where.line)
             super().__init__(loop if loop is not None else Loop(SimClock(), period_ns=tick_ns))
-            opened = open_boards(boards, "manipulator")
+            opened = open_boards(boards, pa_rec.name.lower(), MANIPULATOR_BOARDS)
         except BaseException:
             self._lock.release()
             raise
@@ -325,10 +329,9 @@ class ManipulatorStation(Station):
                               f"this station's {want!r}: start 'pyrt board-sim {want}' with "
                               f"the same --db")
         self.attach_boards(boards)  # first in the tick: this tick's inputs
-        assert boards.tio10 is not None and boards.dc is not None
         boards.poll(self.loop.now_ns)
-        self.tio10 = boards.tio10
-        self.dc = boards.dc
+        self.tio10 = boards["tio10"]
+        self.dc = boards["dc"]
         # Level 3-4: devices and axes (encoders reset their counters).
         self.axes: list[Axis] = []
         fuzzy: list[FuzzyParams] = []
@@ -733,3 +736,45 @@ def _calibration_writer(wb: WriteBack, loadcell: str, loop: Loop, device: Any
 
 def _stderr_sink(line: str) -> None:  # pragma: no cover - used without a console
     sys.stderr.write(line + "\n")
+
+
+# -- the world of ``pyrt board-sim manipulator`` ---------------------------------------------
+
+
+class ManipulatorWorlds(WorldFactory):
+    """A manipulator's boards and world for ``pyrt board-sim manipulator``: the
+    TIO10 (board ``tio10``) and dataConcentrator (board ``dc``) with the rope
+    world of a station database behind them, the source at its POSITION.
+
+    The world's rope payouts come from the controller's own equilibrium at
+    that POSITION (as the in-process station sets its encoders' zero
+    lengths), so the station is built here, reading the database only, and
+    its world is served (on boards of its own: those given are closed)."""
+
+    name = "manipulator"
+    world_aliases: dict[str, dict[str, Any]] = {
+        name: {"station": name} for name in STATIONS}
+
+    def board_kinds(self) -> dict[str, BoardKind]:
+        return dict(MANIPULATOR_BOARDS)
+
+    def add_world_arguments(self, parser: argparse.ArgumentParser) -> None:
+        g = parser.add_argument_group("manipulator world")
+        g.add_argument("--station", choices=STATIONS, default=None,
+                       help="packaged station to serve when no --db is given (default "
+                            "prototype); with --db, the station the database must hold")
+        g.add_argument("--db", metavar="DIR",
+                       help="station database to build the world from, read only "
+                            "(default: the packaged --station)")
+        g.add_argument("--ideal-sensors", action="store_true",
+                       help="switch off encoder quantisation and loadcell noise/offsets")
+
+    def world(self, boards: Boards, args: argparse.Namespace) -> World:
+        boards.close()
+        name = getattr(args, "station", None)
+        db = getattr(args, "db", None)
+        directory = Path(db) if db else station_directory(name or "prototype")
+        imp = Imperfections.ideal() if getattr(args, "ideal_sensors", False) else None
+        station = ManipulatorStation(directory, writer="sync", imperfections=imp, lock=False,
+                                     expect=name if db else None)
+        return ManipulatorWorld(station.plant, station.polyaxis.name)
