@@ -19,6 +19,7 @@ from pyrt.boards.gripper import DAC, DAC_NULL
 from pyrt.cli import main
 from pyrt.db import copy_station
 from pyrt.errors import BoardError
+from pyrt.sim.world import GRIPPER_BOARDS
 
 pytestmark = pytest.mark.wallclock
 
@@ -81,9 +82,9 @@ from pyrt.boards.gripper import DAC
 from pyrt.boards.tio10 import AWO_BITS, DIR_BITS
 b = open_boards(sys.argv[1], sys.argv[2])
 if sys.argv[2] == "gripper":
-    b.gripper.write(DAC, 0xC0)
+    b["gripper"].write(DAC, 0xC0)
 else:
-    tio = b.tio10
+    tio = b["tio10"]
     tio.select_source(7, 3)
     tio.load_period(7, 5000)
     tio.set_bit(*DIR_BITS[7], True)
@@ -110,7 +111,7 @@ def _outputs(url: str, world: str, deadline_s: float) -> dict[str, str]:
     while True:
         try:
             with open_boards(url, _robot(world), max_age=0) as b:
-                link = b.gripper.link if b.gripper is not None else b.tio10._b.link
+                link = b["gripper"].link if b["gripper"] is not None else b["tio10"]._b.link
                 return dict(kv.split("=", 1) for kv in link.request("INFO"))
         except BoardError as exc:
             if "busy" not in str(exc) or time.monotonic() > deadline:
@@ -176,9 +177,9 @@ def test_killed_board_sim_makes_the_next_access_raise_board_error_naming_the_url
     """SIGKILL of board-sim: the controller's next register access raises BoardError naming the
     URL within a bounded time, and so does every later one."""
     sim, url = _board_sim("gripper")
-    boards = open_boards(url, "gripper", max_age=0)
+    boards = open_boards(url, "gripper", GRIPPER_BOARDS, max_age=0)
     try:
-        boards.gripper.write(DAC, 0x90)
+        boards["gripper"].write(DAC, 0x90)
         sim.kill()
         t0 = time.monotonic()
         with pytest.raises(BoardError) as err:
@@ -186,7 +187,7 @@ def test_killed_board_sim_makes_the_next_access_raise_board_error_naming_the_url
         assert time.monotonic() - t0 < 2.0
         assert str(err.value).startswith(f"board {url}: SNAP: ")
         with pytest.raises(BoardError, match=re.escape(url)):
-            boards.gripper.read(DAC)
+            boards["gripper"].read(DAC)
     finally:
         boards.close()
         sim.kill()

@@ -24,7 +24,7 @@ from pyrt.db import copy_station, load_station, station_directory
 from pyrt.errors import BoardError, ConfigError
 from pyrt.scheduler import Loop, SimClock, WallClock
 from pyrt.sim.boardsim import BoardServer
-from pyrt.sim.world import GripperWorld, ManipulatorWorld
+from pyrt.sim.world import GRIPPER_BOARDS, MANIPULATOR_BOARDS, GripperWorld, ManipulatorWorld
 from pyrt.station.base import BoardWorld
 from pyrt.station.gripper import GripperStation, build_gripper
 from pyrt.station.manipulator import ManipulatorStation
@@ -419,24 +419,24 @@ def test_a_down_link_answers_only_what_the_drop_did(gripper_server):
     from pyrt.boards.gripper import DAC, LED_LO
     from pyrt.boards.tio10 import AWO_BITS, DIR_BITS
 
-    with open_boards(gripper_server.url, "gripper", max_age=0) as b:
+    with open_boards(gripper_server.url, "gripper", GRIPPER_BOARDS, max_age=0) as b:
         assert b.down is None and b.has_info
         gripper_server.close()
         with pytest.raises(BoardError):
             b.poll(0)
         assert b.down is not None
-        b.gripper.write(DAC, DAC_NULL)
+        b["gripper"].write(DAC, DAC_NULL)
         for write in ((DAC, 0x90), (LED_LO, 0)):
             with pytest.raises(BoardError, match="link is down"):
-                b.gripper.write(*write)
+                b["gripper"].write(*write)
     world = ManipulatorWorld.from_station(load_station(station_directory("prototype")))
     server = BoardServer(world, "127.0.0.1", 0, watchdog_s=30.0)
     server.start()
-    with open_boards(server.url, "manipulator") as b:
+    with open_boards(server.url, "prototype", MANIPULATOR_BOARDS) as b:
         server.close()
         with pytest.raises(BoardError):
             b.poll(0)
-        tio = b.tio10
+        tio = b["tio10"]
         tio.disarm(7)
         tio.set_bit(*AWO_BITS[7], True)
         assert not tio.armed(7)
@@ -444,7 +444,7 @@ def test_a_down_link_answers_only_what_the_drop_did(gripper_server):
             tio.set_bit(*DIR_BITS[7], True)
         with pytest.raises(BoardError):
             tio.arm(7)
-    with open_boards("sim:", "gripper") as b:  # in process: nothing to lose, nothing to tell
+    with open_boards("sim:", "gripper", GRIPPER_BOARDS) as b:  # in process: nothing to lose, nothing to tell
         assert b.down is None and not b.has_info
         with pytest.raises(ConfigError):
             b.info()

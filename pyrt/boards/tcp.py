@@ -20,10 +20,10 @@ One round trip per tick.  ``poll(now_ns)`` (attach it to the loop before
 the ready queue) reads every input register of the declared boards with
 one ``SNAP``; the input reads of that tick are answered from it (and a
 board with a ``poll(now_ns)`` of its own, the gripper cage, then raises
-the encoder interrupts that arrived).  A write goes to the board at once
-and is remembered, so a read of an output gives the value written without
-a round trip (the first read of an output not yet written goes to the
-board).  A copy older than ``max_age`` seconds (default 0.05) is not used:
+the encoder interrupts that arrived).  Every readable output is read once
+on opening (pipelined: one exchange), and again when the watchdog has
+turned the outputs off; a write goes to the board at once and is
+remembered, so a read of an output is answered without a round trip.  A copy older than ``max_age`` seconds (default 0.05) is not used:
 a read outside the ticks goes to the board; ``max_age=0`` sends every read
 to the board, outputs too.
 
@@ -175,6 +175,34 @@ class TcpLink:
                 self._fail(f"reply {payload[:60]!r} is not numbers", line)
             raise  # pragma: no cover - _fail raises
 
+    def pipeline(self, lines: list[str]) -> list[list[int]]:
+        """Send ``lines`` at once, then read their replies: the numbers of each
+        (BoardError if any is an error: used for reads that cannot be refused)."""
+        if not lines:
+            return []
+        data = "".join(f"{line}\n" for line in lines).encode("ascii")
+        with self._lock:
+            if self._down is not None:
+                raise BoardError(self.url, f"{lines[0]}: the link is down ({self._down})")
+            try:
+                self._sock.sendall(data)
+                replies = [self._readline() for _ in lines]
+            except (TimeoutError, BlockingIOError):
+                self._fail(f"no reply within {self.timeout:g} s", lines[0])
+            except (OSError, EOFError) as exc:
+                self._fail(_why(exc), lines[0])
+            self.requests += len(lines)
+        out: list[list[int]] = []
+        for line, reply in zip(lines, replies, strict=True):
+            try:
+                if reply[:2] != b"OK":
+                    raise ValueError
+                out.append(list(map(int, reply[2:].split())))
+            except ValueError:
+                with self._lock:
+                    self._fail(f"unexpected reply {reply[:60]!r}", line)
+        return out
+
     def _exchange(self, line: str) -> bytes:
         """One round trip; the payload of the ``OK`` reply."""
         data = line.encode("ascii") + b"\n"
@@ -307,13 +335,25 @@ class TcpRegisters:
         try:
             self.link.check_trips(nums[0])
         except BoardError:
-            self._outputs.clear()  # the watchdog turned them off: ask again
+            self.load_outputs()  # the watchdog turned them off: read them again
             raise
 
-    def forget(self) -> None:
-        """Forget the watchdog count and the outputs remembered (the loop starts)."""
-        self.link.forget_trips()
+    def load_outputs(self) -> None:
+        """Read every readable output in one pipelined exchange (on opening,
+        and after the watchdog turned them off)."""
         self._outputs.clear()
+        keys = [(board, reg.name, i) for board, kind in self.kinds.items()
+                for reg in kind.outputs() if reg.readback for i in range(reg.count)]
+        replies = self.link.pipeline([f"R {b} {n} {i}" for b, n, i in keys])
+        for key, values in zip(keys, replies, strict=True):
+            if len(values) != 1:
+                self.link._fail(f"R answered {len(values)} values", "R")
+            self._outputs[key] = values[0]
+
+    def forget(self) -> None:
+        """Forget the watchdog count and read the outputs again (the loop starts)."""
+        self.link.forget_trips()
+        self.load_outputs()
 
     # -- one register ------------------------------------------------------------------------
 
@@ -449,6 +489,7 @@ def open_tcp(
     client = TcpRegisters(link, kinds, max_age=age)
     try:
         client.poll(0)  # the first copy: what the boards hold as this controller comes
+        client.load_outputs()
         views = {name: TcpBoardRegisters(client, name) for name in kinds}
         boards = {name: kind.remote(views[name], **options_for(kind, mine))
                   for name, kind in kinds.items()}
