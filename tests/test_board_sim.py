@@ -15,11 +15,11 @@ import time
 import pytest
 
 from pyrt.boards import open_boards
-from pyrt.boards.gripper import DAC, DAC_NULL
+from pyrt.boards.gripper import DAC, DAC_NULL, P8155_PB
 from pyrt.cli import main
 from pyrt.db import copy_station
 from pyrt.errors import BoardError
-from pyrt.sim.world import GRIPPER_BOARDS
+from pyrt.sim.world import GRIPPER_BOARDS, MANIPULATOR_BOARDS
 
 pytestmark = pytest.mark.wallclock
 
@@ -80,7 +80,9 @@ import sys, time
 from pyrt.boards import open_boards
 from pyrt.boards.gripper import DAC
 from pyrt.boards.tio10 import AWO_BITS, DIR_BITS
-b = open_boards(sys.argv[1], sys.argv[2])
+from pyrt.sim.world import GRIPPER_BOARDS, MANIPULATOR_BOARDS
+kinds = GRIPPER_BOARDS if sys.argv[2] == "gripper" else MANIPULATOR_BOARDS
+b = open_boards(sys.argv[1], sys.argv[2], kinds)
 if sys.argv[2] == "gripper":
     b["gripper"].write(DAC, 0xC0)
 else:
@@ -110,9 +112,9 @@ def _outputs(url: str, world: str, deadline_s: float) -> dict[str, str]:
     deadline = time.monotonic() + deadline_s
     while True:
         try:
-            with open_boards(url, _robot(world), max_age=0) as b:
-                link = b["gripper"].link if b["gripper"] is not None else b["tio10"]._b.link
-                return dict(kv.split("=", 1) for kv in link.request("INFO"))
+            kinds = GRIPPER_BOARDS if world == "gripper" else MANIPULATOR_BOARDS
+            with open_boards(url, _robot(world), kinds, max_age=0) as b:
+                return b.info()
         except BoardError as exc:
             if "busy" not in str(exc) or time.monotonic() > deadline:
                 raise
@@ -187,7 +189,11 @@ def test_killed_board_sim_makes_the_next_access_raise_board_error_naming_the_url
         assert time.monotonic() - t0 < 2.0
         assert str(err.value).startswith(f"board {url}: SNAP: ")
         with pytest.raises(BoardError, match=re.escape(url)):
-            boards["gripper"].read(DAC)
+            boards["gripper"].read(P8155_PB)  # an input: nothing to answer it with
+        with pytest.raises(BoardError, match=re.escape(url)):
+            boards["gripper"].write(DAC, 0x90)  # driving again: refused
+        boards["gripper"].write(DAC, DAC_NULL)  # the reflex's null: what the drop did
+        assert boards["gripper"].read(DAC) == DAC_NULL
     finally:
         boards.close()
         sim.kill()
@@ -213,12 +219,23 @@ def test_manipulator_world_is_the_stations_and_sigterm_ends_it_with_outputs_off(
 
 
 def test_help_tells_the_options_and_the_url():
-    """pyrt board-sim --help names the worlds, --listen, --watchdog, the tcp:// URL; pyrt --help lists it."""
+    """pyrt board-sim --help names the stations, --listen, --watchdog, the tcp:// URL; with a
+    station's name it adds that world's options; pyrt --help lists board-sim."""
     env = {**os.environ, "COLUMNS": "100"}
-    out = subprocess.run([sys.executable, "-m", "pyrt", "board-sim", "--help"], env=env,
-                         capture_output=True, text=True, timeout=START_S).stdout
-    for word in ("{gripper,prototype,sno}", "--listen HOST:PORT", "--watchdog S", "tcp://HOST:PORT",
-                 "--db DIR", "--start HEX", "--object MM", "pyrt.boards.wire"):
+
+    def helps(*argv: str) -> str:
+        return subprocess.run([sys.executable, "-m", "pyrt", "board-sim", *argv], env=env,
+                              capture_output=True, text=True, timeout=START_S).stdout
+
+    out = helps("--help")
+    for word in ("stations: gripper, manipulator, prototype, sno", "--listen HOST:PORT",
+                 "--watchdog S", "tcp://HOST:PORT", "pyrt.boards.wire", "WorldFactory"):
+        assert word in out, word
+    out = helps("gripper", "--help")
+    for word in ("--listen HOST:PORT", "--start HEX", "--object MM", "--fault"):
+        assert word in out, word
+    out = helps("sno", "--help")
+    for word in ("--listen HOST:PORT", "--db DIR", "--station", "--ideal-sensors"):
         assert word in out, word
     top = subprocess.run([sys.executable, "-m", "pyrt", "--help"], env=env, capture_output=True,
                          text=True, timeout=START_S).stdout
@@ -226,8 +243,13 @@ def test_help_tells_the_options_and_the_url():
 
 
 @pytest.mark.parametrize(("argv", "message"), [
-    (["board-sim", "gripper", "--db", "somewhere"], "--db: only for a manipulator world"),
-    (["board-sim", "sno", "--start", "F400"], "--start: only for the gripper world"),
+    (["board-sim", "gripper", "--db", "somewhere"], "unrecognized arguments: --db somewhere"),
+    (["board-sim", "sno", "--start", "F400"], "unrecognized arguments: --start F400"),
+    (["board-sim", "hexapod"], "no station named 'hexapod' gives a world to serve; stations: "
+                               "gripper, manipulator, prototype, sno"),
+    (["board-sim"], "name the station whose world to serve"),
+    (["board-sim", "manipulator", "--station", "sno", "--db", "/nonexistent/db"],
+     "/nonexistent/db"),
     (["board-sim", "gripper", "--object", "99"], "object width must be between 0 and 76 mm"),
     (["board-sim", "prototype", "--db", "/nonexistent/db"], "/nonexistent/db"),
 ])

@@ -116,7 +116,8 @@ def _info(url: str, robot: str, seconds: float = 10.0) -> dict[str, str]:
     deadline = time.monotonic() + seconds
     while True:
         try:
-            with open_boards(url, robot, max_age=0) as b:
+            kinds = GRIPPER_BOARDS if robot == "gripper" else MANIPULATOR_BOARDS
+            with open_boards(url, robot, kinds, max_age=0) as b:
                 return b.info()
         except BoardError as exc:
             if "busy" not in str(exc) or time.monotonic() > deadline:
@@ -173,7 +174,7 @@ def test_killed_board_sim_faults_the_gripper_within_three_ticks_naming_the_url(g
     reports: list[str] = []
     station.close_report = reports.append
     ctl = station.controller
-    link = station.board.link
+    link = station.board.registers.link
     failed: list[int] = []
 
     def recording(fn):
@@ -249,7 +250,7 @@ def test_controller_that_closes_its_socket_without_a_stop_leaves_the_outputs_off
         shell.onecmd("I")
         shell.onecmd("P-1B86")
         assert _until(lambda: station.controller.dac != DAC_NULL, 10.0), out.getvalue()
-        station.board.link._sock.shutdown(2)  # the socket closes, nothing said
+        station.board.registers.link._sock.shutdown(2)  # the socket closes, nothing said
         t_cut = time.monotonic()
         info = _info(url, "gripper", 2.0)
         assert info["dac"] == str(DAC_NULL), info

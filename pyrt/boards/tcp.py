@@ -294,7 +294,9 @@ class TcpRegisters:
         self.kinds = dict(kinds)
         self.max_age_ns = int(max_age * 1e9)
         self._check_greeting()
-        self._snap_request = "SNAP " + " ".join(self.kinds)
+        # every board served, in its order: a plain SNAP; else name the boards declared
+        self._snap_request = ("SNAP" if list(link.boards) == list(self.kinds)
+                              else "SNAP " + " ".join(self.kinds))
         self._layout = [(board, reg.name, reg.count) for board, kind in self.kinds.items()
                         for reg in kind.inputs()]
         self._values = 1 + sum(count for _, _, count in self._layout)

@@ -248,8 +248,8 @@ def run(args: argparse.Namespace) -> int:
     server = BoardServer(world, host, port, watchdog_s=opts.watchdog,
                          step_ns=opts.step_us * 1000, stdout=out)
     boards = " ".join(f"{n}={k.name}" for n, k in world.kinds.items())
-    print(f"pyrt board-sim: {world.name} ({boards}) on {server.url} "
-          f"(watchdog {opts.watchdog:g} s, world step {opts.step_us} µs)", file=out, flush=True)
+    print(f"pyrt board-sim: {factory.name} {world.name} on {server.url} (boards {boards}; "
+          f"watchdog {opts.watchdog:g} s, world step {opts.step_us} µs)", file=out, flush=True)
     if not _loopback(server.host):
         print(f"pyrt board-sim: warning: serving on {server.host}: the protocol has no "
               "authentication; anyone who reaches the port drives the boards", file=out,
