@@ -23,9 +23,10 @@ board with a ``poll(now_ns)`` of its own, the gripper cage, then raises
 the encoder interrupts that arrived).  Every readable output is read once
 on opening (pipelined: one exchange), and again when the watchdog has
 turned the outputs off; a write goes to the board at once and is
-remembered, so a read of an output is answered without a round trip.  A copy older than ``max_age`` seconds (default 0.05) is not used:
-a read outside the ticks goes to the board; ``max_age=0`` sends every read
-to the board, outputs too.
+remembered, so a read of an output is answered without a round trip.  A
+copy older than ``max_age`` seconds (default 0.05) is not used: a read
+outside the ticks goes to the board; ``max_age=0`` sends every read to the
+board, outputs too.
 
 Failures.  A connection refused, reset or closed, or no reply within
 ``timeout`` seconds (default 0.25), raises :class:`~pyrt.errors.BoardError`
