@@ -3,9 +3,23 @@
 A periodic timer ticks an 8031-style ready queue of self-scheduling tasks;
 the numeric hot loops are C through cffi; Python handles commands, databases,
 consoles and the network link.  See README.md and the ``pyrt`` command.
+
+The public API for a station of one's own is importable from here (see
+docs/writing-a-robot.md)::
+
+    from pyrt import Arg, Component, Signal, Station, StationFactory, Task, command
+
+Names are imported when first used, so ``import pyrt`` stays cheap.
 """
 
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+from pyrt._version import __version__
 from pyrt.errors import (
+    BoardError,
     CommandError,
     ConfigError,
     Fault,
@@ -17,17 +31,90 @@ from pyrt.errors import (
     QueueFullError,
 )
 
-__version__ = "0.1.0"
+if TYPE_CHECKING:
+    from pyrt.boards import Boards, open_boards
+    from pyrt.cli._station import run_station
+    from pyrt.component import Arg, Command, Component, Signal, Switch, command, finite, word
+    from pyrt.scheduler import Job, Loop, ReadyQueue, SimClock, Task, WallClock
+    from pyrt.scheduler.motion import MotionExecutor, MotionRecord, MotionType
+    from pyrt.scope import Source
+    from pyrt.station.base import Station
+    from pyrt.station.factory import StationFactory
+
+#: Public name -> the module that defines it (imported on first use).
+_LAZY = {
+    "Arg": "pyrt.component",
+    "Boards": "pyrt.boards",
+    "Command": "pyrt.component",
+    "Component": "pyrt.component",
+    "Job": "pyrt.scheduler",
+    "Loop": "pyrt.scheduler",
+    "MotionExecutor": "pyrt.scheduler.motion",
+    "MotionRecord": "pyrt.scheduler.motion",
+    "MotionType": "pyrt.scheduler.motion",
+    "ReadyQueue": "pyrt.scheduler",
+    "Signal": "pyrt.component",
+    "SimClock": "pyrt.scheduler",
+    "Source": "pyrt.scope",
+    "Station": "pyrt.station.base",
+    "StationFactory": "pyrt.station.factory",
+    "Switch": "pyrt.component",
+    "Task": "pyrt.scheduler",
+    "WallClock": "pyrt.scheduler",
+    "command": "pyrt.component",
+    "finite": "pyrt.component",
+    "open_boards": "pyrt.boards",
+    "run_station": "pyrt.cli._station",
+    "word": "pyrt.component",
+}
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'pyrt' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
+
 
 __all__ = [
+    "Arg",
+    "BoardError",
+    "Boards",
+    "Command",
     "CommandError",
+    "Component",
     "ConfigError",
     "Fault",
     "FaultError",
+    "Job",
+    "Loop",
     "MailboxTimeout",
+    "MotionExecutor",
+    "MotionRecord",
+    "MotionType",
     "NativeError",
     "PyrtError",
     "PyrtInternalError",
     "QueueFullError",
+    "ReadyQueue",
+    "Signal",
+    "SimClock",
+    "Source",
+    "Station",
+    "StationFactory",
+    "Switch",
+    "Task",
+    "WallClock",
     "__version__",
+    "command",
+    "finite",
+    "open_boards",
+    "run_station",
+    "word",
 ]

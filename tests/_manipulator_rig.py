@@ -9,7 +9,7 @@ from pyrt.scheduler.runner import Runner
 from pyrt.station.manipulator import ManipulatorStation
 
 #: The tests' base tick: 5 ms (the physics at 200 Hz, the 50 ms control poll
-#: is 10 ticks); see pyrt/cli/manipulator.py for why this keeps the numbers.
+#: is 10 ticks); see pyrt/station/manipulator.py (ManipulatorFactory) for why this keeps the numbers.
 TICK_NS = 5_000_000
 
 

@@ -1,8 +1,12 @@
-"""The ``pyrt`` command: one sub-command per job.
+"""The ``pyrt`` command: one sub-command per job, and one per installed station.
 
-Each sub-command lives in its own module with ``add_parser(subparsers)``
-and ``run(args) -> int``; errors that are the user's (a bad file, a bad
-option) end with one line on stderr and a non-zero exit, never a traceback.
+Each tool lives in its own module with ``add_parser(subparsers)`` and
+``run(args) -> int``.  Stations are not named here: every station installed
+through the entry-point group ``pyrt.stations`` is a sub-command
+(``pyrt NAME``), and ``pyrt run MODULE:FACTORY`` runs one from any
+importable module (:mod:`pyrt.cli._station`).  Errors that are the user's (a
+bad file, a bad option) end with one line on stderr and a non-zero exit,
+never a traceback.
 """
 
 from __future__ import annotations
@@ -12,25 +16,28 @@ import signal
 import sys
 from collections.abc import Sequence
 
-from pyrt import __version__
+from pyrt._version import __version__
 from pyrt.cli import (
     boardsim,
     connect,
     demo,
     forcemap,
-    gripper,
     logsort,
-    manipulator,
     overruns,
+    run,
     send,
     top,
 )
-from pyrt.errors import PyrtError
+from pyrt.cli._station import add_station_parser
+from pyrt.errors import ConfigError, PyrtError
+from pyrt.station.factory import find_station, installed_stations
 
-__all__ = ["entry", "main"]
+__all__ = ["build_parser", "entry", "main"]
 
-_COMMANDS = [demo, gripper, overruns, manipulator, logsort, forcemap, send, connect, top,
-             boardsim]
+_COMMANDS = [demo, overruns, logsort, forcemap, send, connect, top, boardsim, run]
+#: The tools' names: an installed station cannot take one of them.
+_TOOLS = ("demo", "overruns", "logsort", "forcemap", "send", "connect", "top", "board-sim",
+          "run")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -45,6 +52,15 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"pyrt {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in installed_stations():
+        if name in _TOOLS:
+            continue  # a tool's name: reachable through 'pyrt run' only
+        try:
+            factory = find_station(name)
+        except ConfigError as exc:  # a broken installation must not break pyrt
+            sub.add_parser(name, help=f"(cannot be loaded: {exc})")
+            continue
+        add_station_parser(sub, factory)
     for module in _COMMANDS:
         module.add_parser(sub)
     return parser

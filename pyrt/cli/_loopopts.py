@@ -9,7 +9,7 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-from pyrt import __version__
+from pyrt._version import __version__
 from pyrt.boards import DEFAULT_URL, parse_board_url
 from pyrt.boards.registry import backend
 from pyrt.errors import ConfigError

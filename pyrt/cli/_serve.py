@@ -1,6 +1,6 @@
 """``--serve``, ``--token-file``, ``--headless``, ``--epics``: the DAQ link of a robot command.
 
-Shared by ``pyrt gripper`` and ``pyrt manipulator``::
+Shared by every station (``pyrt NAME``, ``pyrt run``)::
 
     service = prepare_service(args, runner, robot)   # before runner.start()
     runner.start()

@@ -92,7 +92,7 @@ def run_until_shutdown(station: Any, console: Any, service: Any, *, headless: bo
                        first: Callable[[], Any] | None = None) -> int:
     """Run the console (or, ``headless``, the service alone) until it ends or
     SIGTERM/SIGHUP ends it; the service, if any, serves meanwhile; ``first``
-    runs before the console reads (the gripper's power-up ``I``).  Then close
+    runs before the console reads (a station's start-up commands).  Then close
     the service and the station (every motor stopped, databases written
     back) and say so in one line.  The exit status is the console's or the
     service's, 0 after SIGTERM or SIGHUP, 130 after a Ctrl-C that no console

@@ -24,17 +24,15 @@ reads the database.  SIGTERM or SIGINT turn the outputs off and end it.
 The protocol has no authentication: serve on a loopback address unless the
 network is a closed one.
 
-A station of one's own gives its world through the methods of
-:class:`pyrt.sim.world.WorldFactory` on the factory it installs in the
-entry-point group ``pyrt.stations`` (``board_kinds``,
-``add_world_arguments``, ``world``).
+A station of one's own gives its world through the methods its
+StationFactory inherits from pyrt.sim.world.WorldFactory (board_kinds,
+add_world_arguments, world): install it in the entry-point group
+pyrt.stations, or name it as MODULE:FACTORY.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
-import importlib.metadata
 import ipaddress
 import signal
 import sys
@@ -45,78 +43,54 @@ from pyrt.cli._loopopts import _whole
 from pyrt.errors import ConfigError
 from pyrt.sim.boardsim import DEFAULT_WATCHDOG_S, BoardServer
 from pyrt.sim.world import World, WorldFactory
+from pyrt.station.factory import find_station, installed_stations, load_factory
 
 __all__ = ["add_parser", "find_world", "run", "worlds"]
 
-#: Entry-point group of installed stations (name -> factory); a factory with
-#: ``board_kinds`` (a :class:`~pyrt.sim.world.WorldFactory`) gives a world.
-STATIONS_GROUP = "pyrt.stations"
-#: The stations pyrt ships, for an installation whose entry points do not name them.
-_SHIPPED = {
-    "gripper": "pyrt.station.gripper:GripperWorlds",
-    "manipulator": "pyrt.station.manipulator:ManipulatorWorlds",
-}
+def _world_factory(name: str, factory: object) -> WorldFactory:
+    """``factory`` if it gives a world (board_kinds and world); ConfigError otherwise."""
+    kinds = getattr(factory, "board_kinds", None)
+    if not callable(kinds) or not callable(getattr(factory, "world", None)) or not kinds():
+        raise ConfigError(f"station {name!r} gives no world for board-sim (its factory "
+                          "declares no boards: see pyrt.sim.world.WorldFactory)")
+    return factory  # type: ignore[return-value]
 
 
-def _installed() -> dict[str, str]:
-    """Station name -> ``module:attr`` of every installed station."""
-    found = dict(_SHIPPED)
-    try:
-        for ep in importlib.metadata.entry_points(group=STATIONS_GROUP):
-            found.setdefault(ep.name.lower(), ep.value)
-    except Exception:  # a broken installation must not hide the shipped stations
-        pass
-    return dict(sorted(found.items()))
-
-
-def _load(name: str, spec: str) -> WorldFactory:
-    module, _, attr = spec.partition(":")
-    try:
-        obj: Any = importlib.import_module(module)
-        for part in attr.split("."):
-            obj = getattr(obj, part)
-    except Exception as exc:
-        raise ConfigError(f"station {name!r} ({spec}) cannot be loaded: "
-                          f"{type(exc).__name__}: {exc}") from None
-    if isinstance(obj, type):
-        obj = obj()
-    if not callable(getattr(obj, "board_kinds", None)) or not callable(getattr(obj, "world",
-                                                                               None)):
-        raise ConfigError(f"station {name!r} ({spec}) gives no world for board-sim (its factory "
-                          "has no board_kinds()/world(); see pyrt.sim.world.WorldFactory)")
-    if not getattr(obj, "name", ""):
-        obj.name = name
-    return obj  # type: ignore[no-any-return]
+def _factories() -> dict[str, WorldFactory]:
+    """Every installed station that gives a world, by name."""
+    out: dict[str, WorldFactory] = {}
+    for name in installed_stations():
+        try:
+            out[name] = _world_factory(name, find_station(name))
+        except ConfigError:
+            continue
+    return out
 
 
 def worlds() -> list[str]:
-    """The names board-sim serves: every installed station and the aliases they give."""
-    names = list(_installed())
-    for name, spec in _installed().items():
-        try:
-            names += list(getattr(_load(name, spec), "world_aliases", {}))
-        except ConfigError:
-            continue
+    """The names board-sim serves: every installed station with a world and the
+    names those worlds give (their ``world_aliases``)."""
+    names: list[str] = []
+    for name, factory in _factories().items():
+        names += [name, *getattr(factory, "world_aliases", {})]
     return names
 
 
 def find_world(name: str) -> tuple[WorldFactory, dict[str, Any]]:
-    """The factory of the station ``name`` serves and the option defaults an
-    alias sets; ConfigError naming the stations there are."""
+    """The factory whose world ``name`` is (an installed station, a name its
+    world gives, or ``MODULE:FACTORY``) and the option values it sets;
+    ConfigError naming the worlds there are."""
+    if ":" in name:
+        return _world_factory(name, load_factory(name)), {}
     key = name.lower()
-    installed = _installed()
-    if key in installed:
-        return _load(key, installed[key]), {}
-    for station, spec in installed.items():
-        try:
-            factory = _load(station, spec)
-        except ConfigError:
-            continue
+    if key in installed_stations():
+        return _world_factory(key, find_station(key)), {}
+    for factory in _factories().values():
         preset = getattr(factory, "world_aliases", {}).get(key)
         if preset is not None:
             return factory, dict(preset)
     raise ConfigError(f"no station named {name[:40]!r} gives a world to serve; stations: "
-                      f"{', '.join(worlds())}")
+                      f"{', '.join(worlds()) or 'none'}")
 
 
 def _listen(text: str) -> tuple[str, int]:
@@ -171,8 +145,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     _add_common(p)
     p.add_argument("world", metavar="NAME", nargs="?",
-                   help="the station whose world to serve: " + ", ".join(_installed())
-                        + " (or a name a station gives its world; --help lists them all)")
+                   help="the station whose world to serve (an installed station, a name a "
+                        "station gives its world, or MODULE:FACTORY; --help lists them)")
     p.add_argument("rest", nargs=argparse.REMAINDER, metavar="...",
                    help="board-sim's options (--listen, --watchdog, --step-us) and the "
                         "world's (pyrt board-sim NAME --help)")

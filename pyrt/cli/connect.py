@@ -29,7 +29,7 @@ __all__ = ["RemoteShell", "add_parser", "run"]
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "connect",
-        help="an interactive console on a served robot (pyrt gripper|manipulator --serve)",
+        help="an interactive console on a served robot (pyrt NAME --serve)",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -161,7 +161,7 @@ def run(args: argparse.Namespace) -> int:
         return 1
     watch: _StatusWatch | None = None
     try:
-        words = client.greeting.split()  # "pyrt 0.1.0 gripper server; ..."
+        words = client.greeting.split()  # "pyrt 0.1.0 NAME server; ..."
         name = words[2] if len(words) > 2 and words[0] == "pyrt" else f"{host}:{port}"
         shell = RemoteShell(client, sys.stdout, name)
         print(f"connected to {host}:{port}: {client.greeting}; 'exit' leaves "

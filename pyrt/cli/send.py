@@ -25,7 +25,7 @@ __all__ = ["add_parser", "run"]
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "send",
-        help="send one command to a pyrt server (pyrt gripper|manipulator --serve)",
+        help="send one command to a pyrt server (pyrt NAME --serve)",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

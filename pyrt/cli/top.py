@@ -92,7 +92,7 @@ class _Source:
     def __init__(self, host: str, port: int, timeout_s: float, with_stats: bool):
         self.client = Client(host, port, timeout_s=timeout_s)
         self.with_stats = with_stats
-        words = self.client.greeting.split()  # "pyrt 0.1.0 gripper server; ..."
+        words = self.client.greeting.split()  # "pyrt 0.1.0 NAME server; ..."
         robot = words[2] if len(words) > 2 and words[0] == "pyrt" else "robot"
         self.title = f"pyrt top: {robot} at {host}:{port}"
 

@@ -18,7 +18,7 @@ import threading
 import time
 from typing import Any
 
-from pyrt import __version__
+from pyrt._version import __version__
 from pyrt.server.connection import Connection
 from pyrt.server.limits import (
     EVICT_IDLE_S,

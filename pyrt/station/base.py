@@ -97,6 +97,10 @@ class Station:
         #: gone); default: the runner's messages.
         self.close_report: Callable[[str], None] | None = None
         self.runner: Runner | None = None
+        #: What building the station did that the operator should know, said
+        #: as ``start-up:`` lines before the console opens (the manipulator's
+        #: reconciled ZEROLENGTH and LENGTH); none by default.
+        self.startup_notes: list[str] = []
         self._fault: Fault | None = None
         self._by_name: dict[str, Component] = {}
         self._closed = False
@@ -383,6 +387,11 @@ class Station:
                                 "a fault stopped the robot", "d"), "d")
 
     # -- life cycle -------------------------------------------------------------------
+
+    def startup_commands(self) -> list[str]:
+        """Console lines run once the loop runs, before the operator types (the
+        gripper's power-up ``I``); none by default."""
+        return []
 
     def start(self) -> Runner:
         """Start the loop (its thread on a wall clock)."""

@@ -41,9 +41,12 @@ from pyrt.scheduler.motion import MotionExecutor, MotionType
 from pyrt.sim.gripper import FAULTS, JawParameters, JawPlant
 from pyrt.sim.world import GRIPPER_BOARDS, GripperWorld, World, WorldFactory
 from pyrt.station.base import BoardWorld, Station, refuse_sim_options
+from pyrt.station.factory import StationFactory
 from pyrt.tasks import register_tasks
 
-__all__ = ["GripperSim", "GripperStation", "GripperWorlds", "build_gripper"]
+__all__ = ["GRIPPER", "GripperFactory", "GripperSim", "GripperStation", "GripperWorlds",
+           "build_gripper",
+           "counts_type", "parse_counts"]
 
 #: ``wait`` says "at target" within this many counts (the deadband and the
 #: last bumps leave a few counts; the tests of 002's moves allow 16).
@@ -172,6 +175,13 @@ class GripperStation(Station):
         ctl.power_up()
 
     # -- what the shell's shared words ask ------------------------------------------------
+
+    #: Run I at power-up (002's main program does; ``--no-init`` does not).
+    power_up_init = True
+
+    def startup_commands(self) -> list[str]:
+        """002's power-up: I (drive the jaws wide open, zero the encoder)."""
+        return ["I"] if self.power_up_init else []
 
     def letter_level(self) -> GripperController:
         return self.controller
@@ -312,26 +322,56 @@ def build_gripper(
         raise
 
 
-# -- the world of ``pyrt board-sim gripper`` ------------------------------------------------
+# -- the factory: ``pyrt gripper`` ---------------------------------------------------------
 
 
-def _start_counts(text: str) -> int:
-    """A start position: hex counts, two's complement (F400) or negative (-0C00)."""
+def parse_counts(text: str) -> int:
+    """A jaw position in encoder counts from wide open: hex, two's complement
+    (F400) or negative (-0C00); ValueError naming the range if not."""
     t = text.strip()
     try:
         value = -int(t[1:], 16) if t.startswith("-") else int(t, 16)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected hex encoder counts, got {text!r}") from None
+        raise ValueError(f"expected hex encoder counts, got {text!r}") from None
     if value > 0x7FFF:
         value -= 0x10000
     if not -0x2A00 <= value <= 0:
-        raise argparse.ArgumentTypeError("start position must be 0000 (wide open) .. D600 (closed)")
+        raise ValueError("start position must be 0000 (wide open) .. D600 (closed)")
     return value
+
+
+def counts_type(text: str) -> int:
+    try:
+        return parse_counts(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def add_jaw_arguments(parser: argparse.ArgumentParser) -> None:
+    """The simulated jaws' options (``sim:`` here, and ``pyrt board-sim gripper``)."""
+    g = parser.add_argument_group("simulation (sim: boards only; board-sim takes the same options)")
+    g.add_argument(
+        "--object", type=float, metavar="MM",
+        help=f"an object this wide between the jaws (0 < MM < {JawParameters().open_mm:g})",
+    )
+    g.add_argument(
+        "--start", type=counts_type, metavar="HEX",
+        help="jaw position at power-up, encoder counts from wide open, in hex: F400 (the "
+             "default, two's complement) or -0C00 (the same, negative)",
+    )
+    g.add_argument(
+        "--fault", action="append", choices=[f for f in FAULTS if f != "port"],
+        help="inject a fault from the start: limit (sensor dead), jam (motor), encoder (dead)",
+    )
+    # "--start -0C00": argparse takes a word that starts with "-" for an
+    # option unless it looks like a negative number; hexadecimal counts are
+    # numbers here (no option of this command looks like one).
+    parser._negative_number_matcher = re.compile(r"^-[0-9A-Fa-f]+$|^-\d*\.\d+$")
 
 
 class GripperWorlds(WorldFactory):
     """The gripper's boards and world for ``pyrt board-sim gripper``: the cage
-    (board ``gripper``) with the jaws behind it."""
+    (board ``gripper``) with the jaws behind it (:class:`GripperFactory` has them)."""
 
     name = "gripper"
 
@@ -339,20 +379,63 @@ class GripperWorlds(WorldFactory):
         return dict(GRIPPER_BOARDS)
 
     def add_world_arguments(self, parser: argparse.ArgumentParser) -> None:
-        g = parser.add_argument_group("gripper world")
-        g.add_argument("--object", type=float, metavar="MM",
-                       help=f"an object this wide between the jaws "
-                            f"(0 < MM < {JawParameters().open_mm:g})")
-        g.add_argument("--start", type=_start_counts, metavar="HEX",
-                       help="jaw position at start, encoder counts from wide open "
-                            "(default F400)")
-        g.add_argument("--fault", action="append", choices=[f for f in FAULTS if f != "port"],
-                       help="inject a fault from the start: limit (sensor dead), jam (motor), "
-                            "encoder (dead)")
-        # "--start -0C00": hexadecimal counts are numbers here
-        parser._negative_number_matcher = re.compile(r"^-[0-9A-Fa-f]+$|^-\d*\.\d+$")
+        add_jaw_arguments(parser)
 
     def world(self, boards: Boards, args: argparse.Namespace) -> World:
+        start = getattr(args, "start", None)
         return GripperWorld(boards=boards, object_mm=getattr(args, "object", None),
-                            start=DEFAULT_START if getattr(args, "start", None) is None
-                            else args.start, faults=getattr(args, "fault", None) or ())
+                            start=DEFAULT_START if start is None else start,
+                            faults=getattr(args, "fault", None) or ())
+
+
+class GripperFactory(GripperWorlds, StationFactory):
+    """pyrt gripper: the 002 parallel-jaw gripper controller on simulated jaws.
+
+At start the controller does what the 8031 does at power-up: it loads its
+RAM variables, starts its three self-scheduling routines and runs I (drive
+the jaws wide open, zero the encoder), then prompts CMD:.  The commands
+are the report's (C E I M P S T W X; the monitor's C D I L N Q S),
+hexadecimal, lower case accepted; type help.  Every P move is supervised
+(settle and stall bounds from the distance, the speed and the schedule in
+RAM; oscillation about the target): a move that fails them is a fault, the
+drive nulled at once.  stop, Ctrl-C, SIGTERM and SIGHUP stop the jaws and
+say where they are; wait says whether the move ended at the target, short
+of it (and why) or in a fault.  Power-up scales 002's schedule values to
+--tick-us.  Pipe a file in to run it as a script; with --speed max time
+advances only while commands run, wait or sleep, so a script's output is
+the same on every run.
+
+With --boards tcp://HOST:PORT the controller drives the boards of a
+'pyrt board-sim gripper' in another process (start it first; its first
+line names the URL): the jaws move there at real time, so only --speed 1
+is accepted and the simulation options are board-sim's.
+"""
+
+    name = "gripper"
+    summary = ("run the 002 parallel-jaw gripper controller (CMD: and monitor) on simulated "
+               "jaws (or on pyrt board-sim's, --boards tcp://...)")
+    description = __doc__ or ""
+
+    def add_arguments(self, parser: argparse.ArgumentParser) -> None:
+        add_jaw_arguments(parser)
+        c = parser.add_argument_group("power-up")
+        c.add_argument("--no-init", action="store_true", help="do not run I at power-up")
+
+    def build(self, loop: Loop, args: argparse.Namespace) -> GripperStation:
+        station = build_gripper(loop, boards=args.boards, start=args.start,
+                                object_mm=args.object, faults=args.fault or ())
+        station.power_up_init = not args.no_init
+        return station
+
+    def banner(self, station: Station, args: argparse.Namespace) -> str:
+        speed = ("max (simulated time)" if args.speed is None
+                 else f"{args.speed:g}x real time")
+        boards = station.boards
+        jaws = ("simulated jaws" if station.plant is not None or boards is None
+                else f"boards at {boards.url} ({boards.world})")
+        return (f"pyrt gripper: 002 parallel-jaw controller, {jaws}; tick {args.tick_us} µs, "
+                f"speed {speed}; type help")
+
+
+#: ``pyrt gripper`` (registered in the entry-point group ``pyrt.stations``).
+GRIPPER = GripperFactory()

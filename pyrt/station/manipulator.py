@@ -58,7 +58,16 @@ from typing import Any, TextIO
 from pyrt.boards import Boards, open_boards
 from pyrt.boards.registers import BoardKind
 from pyrt.component import Arg, Component, Signal, command, finite
-from pyrt.db import STATIONS, DirectoryLock, load_station, lock_directory, station_directory
+from pyrt.db import (
+    FILES,
+    STATIONS,
+    DirectoryLock,
+    copy_station,
+    default_working_directory,
+    load_station,
+    lock_directory,
+    station_directory,
+)
 from pyrt.db import Station as StationDB
 from pyrt.errors import BoardError, CommandError, ConfigError, NativeError, PyrtError
 from pyrt.native import FuzzyParams, NativeInputError
@@ -71,12 +80,15 @@ from pyrt.sim.manipulator import ManipulatorPlant, rig_from_station
 from pyrt.sim.sensors import Imperfections
 from pyrt.sim.world import MANIPULATOR_BOARDS, ManipulatorWorld, World, WorldFactory
 from pyrt.station.base import BoardWorld, Station, refuse_sim_options
+from pyrt.station.factory import StationFactory
 from pyrt.tasks import SyncWriter, ThreadWriter, WriteBack, register_tasks
 
 __all__ = [
     "AXIS_POLL_S",
+    "MANIPULATOR",
     "POLL_S",
     "TICK_NS",
+    "ManipulatorFactory",
     "ManipulatorStation",
     "ManipulatorWorlds",
     "MessageSink",
@@ -738,13 +750,15 @@ def _stderr_sink(line: str) -> None:  # pragma: no cover - used without a consol
     sys.stderr.write(line + "\n")
 
 
-# -- the world of ``pyrt board-sim manipulator`` ---------------------------------------------
+# -- the factory: ``pyrt manipulator`` -----------------------------------------------------
 
 
 class ManipulatorWorlds(WorldFactory):
-    """A manipulator's boards and world for ``pyrt board-sim manipulator``: the
-    TIO10 (board ``tio10``) and dataConcentrator (board ``dc``) with the rope
-    world of a station database behind them, the source at its POSITION.
+    """A manipulator's boards and world for ``pyrt board-sim manipulator``
+    (:class:`ManipulatorFactory` has them): the TIO10 (board ``tio10``) and
+    dataConcentrator (board ``dc``) with the rope world of a station database
+    behind them, the source at its POSITION; ``board-sim prototype`` and
+    ``board-sim sno`` are ``board-sim manipulator --station`` that station.
 
     The world's rope payouts come from the controller's own equilibrium at
     that POSITION (as the in-process station sets its encoders' zero
@@ -778,3 +792,115 @@ class ManipulatorWorlds(WorldFactory):
         station = ManipulatorStation(directory, writer="sync", imperfections=imp, lock=False,
                                      expect=name if db else None)
         return ManipulatorWorld(station.plant, station.polyaxis.name)
+
+
+class ManipulatorFactory(ManipulatorWorlds, StationFactory):
+    """pyrt manipulator: the SNO source manipulator controller (000) on a simulated world.
+
+Commands are addressed to named objects, as the document's
+Hardware::doCommand: prototype to 0 0 150, axis1 up 5, axis0Motor
+maxspeed 3, axis0Encoder read, axis0Loadcell calibrate; plus the shared
+words (help [object], wait, sleep, stop, ack, status, stats, scope, motion,
+sim, clear, quit) and the manipulator's log and debug.  Type help.
+
+Without --db DIR the packaged station (--station) is copied to a
+working directory first (existing files there are kept: they carry the last
+position), and the run says where; --init-db DIR seeds DIR from it the
+same way and runs there; the database is written back while the
+manipulator runs. One process at a time may run on a database directory (a
+second is refused, naming the first one's pid); --station with --db names
+the station the database must hold. The base tick defaults to 5 ms for
+this robot: the physics steps every tick (a motor at its 7.0 cm/s limit makes
+1.4 half-steps a tick), the control poll is 50 ms and the standalone axis poll
+10 ms (so a tick is at most 10 ms), and --speed max then runs a move some 50
+times faster than real time.
+
+With --boards tcp://HOST:PORT the controller drives the TIO10 and
+dataConcentrator of a 'pyrt board-sim prototype|sno' in another process
+(give both the same --db DIR; board-sim's first line names the URL):
+the world moves there at real time, so only --speed 1 is accepted,
+--ideal-sensors is board-sim's option, and its world must be this
+station's.
+"""
+
+    name = "manipulator"
+    summary = ("run the 000 SNO source manipulator controller on a simulated world "
+               "(or on pyrt board-sim's, --boards tcp://...)")
+    description = __doc__ or ""
+    #: The base tick (see the description).
+    default_tick_us = 5000
+    #: The standalone axis poll runs every AXIS_POLL_S: a longer tick cannot run it.
+    max_tick_us = round(AXIS_POLL_S * 1e6)
+    max_tick_why = (f"the axis poll runs every {AXIS_POLL_S * 1e3:g} ms and the control poll "
+                    f"every {POLL_S * 1e3:g} ms")
+
+    def add_arguments(self, parser: argparse.ArgumentParser) -> None:
+        g = parser.add_argument_group("station database")
+        g.add_argument("--db", metavar="DIR", help="station database directory (written back)")
+        g.add_argument("--init-db", metavar="DIR",
+                       help="seed DIR with the packaged station (--station; database files "
+                            "already there are kept), then run on it as --db DIR")
+        g.add_argument("--station", choices=STATIONS, default=None,
+                       help="packaged station to copy when no --db is given (default "
+                            "prototype); with --db, the station the database must hold")
+        s = parser.add_argument_group("simulation (sim: boards only)")
+        s.add_argument("--ideal-sensors", action="store_true",
+                       help="switch off encoder quantisation and loadcell noise/offsets "
+                            "(in-process world only)")
+
+    def configure(self, args: argparse.Namespace, say: Callable[[str], None]) -> None:
+        """Find, seed or copy the station database; ``args.directory`` is where it is."""
+        if args.db and args.init_db:
+            raise ConfigError("give --db DIR (an existing database) or --init-db DIR (seed "
+                              "one), not both")
+        if args.init_db:
+            args.station = args.station or "prototype"
+            try:
+                directory = copy_station(args.station, args.init_db)
+            except OSError as exc:
+                raise ConfigError(f"cannot seed a station database there: {exc.strerror}",
+                                  args.init_db) from None
+            say(f"pyrt manipulator: {directory} seeded from the packaged {args.station} "
+                "station (files already there kept)")
+        elif args.db:
+            directory = Path(args.db)
+            if not (directory / FILES["POLYAXIS"]).is_file():
+                what = "no such directory" if not directory.is_dir() else "no station database"
+                raise ConfigError(f"{what}; seed it with 'pyrt manipulator --init-db {args.db} "
+                                  f"--station {'|'.join(STATIONS)}'", args.db)
+        else:
+            args.station = args.station or "prototype"
+            directory = default_working_directory(args.station)
+            copy_station(args.station, directory)
+            say(f"pyrt manipulator: working copy of the {args.station} station in {directory}")
+        args.directory = Path(directory)
+
+    def build(self, loop: Loop, args: argparse.Namespace) -> ManipulatorStation:
+        if getattr(args, "directory", None) is None:
+            self.configure(args, lambda _line: None)
+        imp = Imperfections.ideal() if args.ideal_sensors else None
+        try:
+            return ManipulatorStation(args.directory, loop=loop, imperfections=imp,
+                                      boards=args.boards, expect=args.station)
+        except ConfigError as exc:
+            if args.db or args.init_db:
+                raise
+            # The working copy keeps what earlier runs wrote, and may predate a
+            # change to the packaged station: say how to start afresh.
+            raise ConfigError(f"{exc.message}; this working copy may come from an earlier "
+                              f"pyrt: move {args.directory} aside to start again from the "
+                              f"packaged {args.station} station", exc.file, exc.line) from None
+
+    def banner(self, station: Station, args: argparse.Namespace) -> str:
+        assert isinstance(station, ManipulatorStation)
+        speed = ("max (simulated time)" if args.speed is None
+                 else f"{args.speed:g}x real time")
+        boards = station.boards
+        where = "" if station.plant is not None or boards is None else f", boards at {boards.url}"
+        return (f"pyrt manipulator: {station.polyaxis.name}, {len(station.axes)} ropes, "
+                f"database {args.directory}{where}; tick {args.tick_us} µs, speed {speed}; "
+                "type help")
+
+
+#: ``pyrt manipulator`` (registered in the entry-point group ``pyrt.stations``).
+MANIPULATOR = ManipulatorFactory()

@@ -1,0 +1,141 @@
+"""Running any station: ``pyrt NAME`` (installed), ``pyrt run MODULE:FACTORY``,
+and :func:`run_station` for a script of one's own.
+
+Every station gets the same options and the same life: the loop options,
+``--boards``, ``--serve``/``--epics``/``--headless``, ``--timing-log`` and
+``--history``; then the factory's own options
+(:meth:`~pyrt.station.factory.StationFactory.add_arguments`).  The run
+checks them (:meth:`~pyrt.station.factory.StationFactory.configure`),
+applies the real-time knobs, builds the loop and the station, serves it if
+asked, runs the station's start-up commands and its console (or, headless,
+the service alone) until ``quit``, end of input or a signal, and closes it:
+every motor stopped, databases written back, one line saying so.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Sequence
+
+from pyrt.cli._loopopts import (
+    add_boards_option,
+    add_loop_options,
+    apply_rt_options,
+    live_status,
+    load_backend,
+    make_loop,
+)
+from pyrt.cli._serve import add_serve_options, prepare_service
+from pyrt.cli._shutdown import run_until_shutdown
+from pyrt.commands import RobotShell
+from pyrt.console import Console
+from pyrt.errors import ConfigError, PyrtError
+from pyrt.server import ServedStation
+from pyrt.station.factory import StationFactory, as_factory
+
+__all__ = ["add_station_arguments", "add_station_parser", "run_factory", "run_station"]
+
+
+def add_station_arguments(parser: argparse.ArgumentParser, factory: StationFactory) -> None:
+    """Every station's options, then the factory's own, on ``parser``."""
+    add_boards_option(parser, factory.name or "NAME")
+    factory.add_arguments(parser)
+    c = parser.add_argument_group("console")
+    c.add_argument("--history", metavar="FILE", help="keep the command history in FILE")
+    add_loop_options(parser, default_speed=factory.default_speed,
+                     default_tick_us=factory.default_tick_us)
+    add_serve_options(parser)
+    parser.set_defaults(run=lambda args: run_factory(factory, args))
+
+
+def add_station_parser(sub: argparse._SubParsersAction, factory: StationFactory
+                       ) -> argparse.ArgumentParser:
+    """The sub-command ``pyrt NAME`` of an installed station."""
+    p = sub.add_parser(factory.name, help=factory.summary or f"run the {factory.name} station",
+                       description=factory.description or factory.summary,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_station_arguments(p, factory)
+    return p
+
+
+def station_parser(factory: StationFactory, prog: str) -> argparse.ArgumentParser:
+    """A parser of its own for ``factory`` (``pyrt run`` and :func:`run_station`)."""
+    p = argparse.ArgumentParser(prog=prog, description=factory.description or factory.summary,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_station_arguments(p, factory)
+    return p
+
+
+def _check_tick(factory: StationFactory, args: argparse.Namespace) -> None:
+    hi = factory.max_tick_us
+    if hi is not None and args.tick_us > hi:
+        why = f" ({factory.max_tick_why})" if factory.max_tick_why else ""
+        raise ConfigError(f"--tick-us {args.tick_us}: this station runs on ticks of at most "
+                          f"{hi} µs{why}")
+
+
+def run_factory(factory: StationFactory, args: argparse.Namespace) -> int:
+    """Run the station ``factory`` builds, with parsed ``args`` (see the module text);
+    returns the exit status."""
+    out = sys.stdout
+
+    def say(line: str) -> None:
+        print(line, file=out, flush=True)
+
+    what = f"pyrt {factory.name}".rstrip()
+    _check_tick(factory, args)
+    factory.configure(args, say)
+    apply_rt_options(args, say)
+    load_backend(args.boards)
+    loop = make_loop(args)  # overrun lines: stderr, at most one a second
+    station = factory.build(loop, args)
+    station.close_report = say
+    runner = station.runner
+    try:
+        service = prepare_service(args, runner, ServedStation(station))
+    except PyrtError:
+        station.close()
+        raise
+    shell = RobotShell(station, out)
+    console = Console(shell, sys.stdin, out, messages=shell.messages,
+                      history_file=args.history, status=live_status(runner, station, args))
+    for note in station.startup_notes:
+        say(f"start-up: {note}")
+    say(factory.banner(station, args))
+    wall0 = time.perf_counter()
+    station.start()
+    first = station.startup_commands()
+
+    def run_first() -> None:
+        for line in first:
+            shell.onecmd(line)
+
+    status = run_until_shutdown(station, console, service,
+                                headless=args.headless, what=what, say=say,
+                                first=run_first if first else None)
+    if args.timing_log:
+        wall = time.perf_counter() - wall0
+        say(f"timing log written to {args.timing_log} ({loop.tick_index} ticks, {wall:.2f} s)")
+    return status
+
+
+def run_station(factory: object, argv: Sequence[str] | None = None, *, prog: str = "") -> int:
+    """Run a station from a script of one's own: parse ``argv`` (default
+    ``sys.argv[1:]``) with every station option and the factory's own, run
+    it, and return the exit status (errors that are the user's: one line
+    on stderr, status 1).  ``factory`` is a StationFactory (instance or
+    class) or a function ``build(loop, args) -> Station``."""
+    fac = as_factory(factory)
+    name = prog or (f"pyrt {fac.name}" if fac.name else "pyrt")
+    parser = station_parser(fac, name)
+    args = parser.parse_args(list(argv) if argv is not None else None)
+    try:
+        return run_factory(fac, args)
+    except PyrtError as exc:
+        print(f"{name}: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"{name}: interrupted", file=sys.stderr)
+        return 130
