@@ -30,9 +30,10 @@ START_S = 60.0
 class _Proc:
     """A child process whose stdout lines are collected, with their arrival times, by a thread."""
 
-    def __init__(self, args: list[str]):
+    def __init__(self, args: list[str], env: dict[str, str] | None = None):
         self.proc = subprocess.Popen([sys.executable, *args], stdin=subprocess.DEVNULL,
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                     env=env)
         self.lines: queue.Queue[tuple[float, str]] = queue.Queue()
         self.seen: list[str] = []
         threading.Thread(target=self._pump, daemon=True).start()
@@ -66,9 +67,10 @@ class _Proc:
         self.proc.wait(10)
 
 
-def _board_sim(world: str, *extra: str, watchdog: float = 1.0) -> tuple[_Proc, str]:
+def _board_sim(world: str, *extra: str, watchdog: float = 1.0,
+               env: dict[str, str] | None = None) -> tuple[_Proc, str]:
     p = _Proc(["-m", "pyrt", "board-sim", world, "--listen", "127.0.0.1:0",
-               "--watchdog", str(watchdog), *extra])
+               "--watchdog", str(watchdog), *extra], env=env)
     _, m = p.expect(r"^pyrt board-sim: \w+ \w+ on (tcp://127\.0\.0\.1:\d+) ")
     assert p.seen == [m.group(0) + p.seen[0][len(m.group(0)):]]  # it was the first line
     return p, m.group(1)
@@ -258,3 +260,36 @@ def test_bad_options_end_with_one_line(capsys, argv, message):
     assert main(argv) == 1
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err and err.count("\n") == 1
+
+
+def test_a_station_of_ones_own_is_served_and_driven_over_tcp():
+    """pyrt board-sim MODULE:FACTORY serves a two-joint arm's servo board (a plain kind) with
+    its world's own option; a controller drives it over tcp:// and its counts come back; the
+    first line names the station and its boards; SIGTERM turns the outputs off."""
+    tests = os.path.dirname(os.path.abspath(__file__))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [tests, *filter(None, [os.environ.get("PYTHONPATH")])])}
+    sys.path.insert(0, tests)
+    try:
+        from test_boards_generic import ARM_BOARDS
+    finally:
+        sys.path.remove(tests)
+    sim, url = _board_sim("test_boards_generic:ArmStation", "--home", "1", env=env)
+    try:
+        assert "arm arm on " in sim.seen[0] and "(boards servo=arm-servo;" in sim.seen[0]
+        with open_boards(url, "arm", ARM_BOARDS, max_age=0) as b:
+            servo = b["servo"]
+            assert servo.read("home") == 1
+            servo.write("drive", 1000, 0)
+            servo.write("enable", 1)
+            deadline = time.monotonic() + 10
+            while servo.read("count", 0) < 50 and time.monotonic() < deadline:
+                b.poll(0)
+                time.sleep(0.005)
+            assert servo.read("count", 0) >= 50 and servo.read("count", 1) == 0
+        sim.expect(r"^controller \S+ said QUIT: outputs off$", 10.0)
+        sim.proc.send_signal(signal.SIGTERM)
+        sim.expect(r"^pyrt board-sim: stopped, outputs off", 10.0)
+        assert sim.proc.wait(10) == 0
+    finally:
+        sim.kill()

@@ -4,6 +4,8 @@ writes, SNAP, refusals, the watchdog turning the declared outputs off, the greet
 
 from __future__ import annotations
 
+import argparse
+import importlib.metadata
 import socket
 import threading
 import time
@@ -17,6 +19,7 @@ from pyrt.boards.tcp import TcpBoardRegisters
 from pyrt.errors import BoardError, ConfigError
 from pyrt.sim.boardsim import BoardServer
 from pyrt.sim.world import World, WorldFactory
+from pyrt.station.factory import ENTRY_POINT_GROUP, StationFactory
 
 SERVO = BoardKind("arm-servo", (
     Register("drive", count=2, width=16, signed=True, direction=OUTPUT, off=0),
@@ -55,6 +58,21 @@ class ArmWorlds(WorldFactory):
 
     def world(self, boards: Boards, args: object) -> World:
         return World("arm", boards, ArmPlant(boards["servo"]))
+
+
+class ArmStation(ArmWorlds, StationFactory):
+    """A station of one's own as it is installed: its factory gives board-sim its world, with
+    an option of the world's own."""
+
+    name = "arm"
+
+    def add_world_arguments(self, parser: argparse.ArgumentParser) -> None:
+        parser.add_argument("--home", type=int, choices=(0, 1), default=0,
+                            help="the home switch at start")
+
+    def world(self, boards: Boards, args: argparse.Namespace) -> World:
+        boards["servo"].set_input("home", args.home)
+        return super().world(boards, args)
 
 
 class Clock:
@@ -245,3 +263,26 @@ def test_a_station_may_open_fewer_boards_than_are_served():
             assert boards["servo"].read("count", 1) == 77 and "gripper" not in boards
     finally:
         server.close()
+
+
+def test_board_sim_finds_an_installed_stations_world_by_name(monkeypatch):
+    """An entry point in pyrt.stations makes a station's world one board-sim serves by name; a
+    station that declares no boards is refused, saying so; an unknown name lists the worlds."""
+    from pyrt.cli.boardsim import build_world, find_world, worlds
+
+    eps = [importlib.metadata.EntryPoint(n, v, ENTRY_POINT_GROUP) for n, v in (
+        ("arm", "test_boards_generic:ArmStation"), ("counter", "_tiny_station:CounterFactory"),
+        ("gripper", "pyrt.station.gripper:GRIPPER"))]
+    monkeypatch.setattr(importlib.metadata, "entry_points",
+                        lambda **kw: importlib.metadata.EntryPoints(eps))
+    assert worlds() == ["arm", "gripper"]
+    factory, preset = find_world("ARM")
+    assert isinstance(factory, ArmStation) and preset == {}
+    world = build_world(factory, argparse.Namespace(home=1))
+    assert world.name == "arm" and world.registers("servo").snapshot() == [0, 0, 1]
+    with pytest.raises(ConfigError, match="'counter' gives no world"):
+        find_world("counter")
+    with pytest.raises(ConfigError, match="stations: arm, gripper"):
+        find_world("hexapod")
+    factory, _ = find_world("test_boards_generic:ArmStation")  # MODULE:FACTORY too
+    assert factory.board_kinds() == ARM_BOARDS
