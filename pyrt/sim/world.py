@@ -196,13 +196,14 @@ class GripperWorld(World):
         self.board = boards["gripper"]
         self.cpu = self.board.cpu
         try:
-            self.plant = JawPlant(self.board, start=start, params=params)
-            self.plant.set_object(object_mm)
+            plant = JawPlant(self.board, start=start, params=params)
+            plant.set_object(object_mm)
             for fault in faults:
-                self.plant.inject(fault)
+                plant.inject(fault)
         except ValueError as exc:
             raise ConfigError(str(exc)) from None
-        super().__init__(name, boards, self.plant)
+        super().__init__(name, boards, plant)
+        self.plant: JawPlant = plant
 
     def info(self) -> dict[str, object]:
         p = self.plant
