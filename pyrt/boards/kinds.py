@@ -366,6 +366,8 @@ class DataConcentratorRegisters:
 
     def snapshot(self) -> list[int]:
         b = self.board
+        if isinstance(b, SimDataConcentrator):  # the register file at once
+            return [*b.counter_values(), *b.adc_codes()]
         return [*(b.read_counter(a) for a in COUNTER_ADDRESSES),
                 *(b.read_adc(c) for c in ADC_CHANNELS)]
 
