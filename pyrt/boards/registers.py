@@ -137,8 +137,8 @@ class Register:
 
     def fits(self, value: object) -> bool:
         """Whether ``value`` is an int this register holds."""
-        return (type(value) is int or (isinstance(value, int) and not isinstance(value, bool))) \
-            and self.low <= value <= self.high  # type: ignore[operator]
+        return (isinstance(value, int) and not isinstance(value, bool)
+                and self.low <= value <= self.high)
 
     def describe(self) -> str:
         """``name[count]``, width and signedness in words."""

@@ -401,8 +401,8 @@ class TcpRegisters:
         try:
             self.link.request(line)
         except ValueError:
-            for _b, n, i, _v in todo:  # some may stand: ask again
-                self._outputs.pop((_b, n, i), None)
+            for board, name, index, _ in todo:  # those before the refused one stand
+                self._outputs.pop((board, name, index), None)
             raise
         for r, (b, n, i, v) in zip(regs, todo, strict=True):
             if r.readback:
