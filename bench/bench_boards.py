@@ -25,6 +25,7 @@ from pyrt.boards import open_boards
 from pyrt.boards.gripper import DAC, LED_LO, P8155_PA
 from pyrt.robots.gripper import GripperController
 from pyrt.scheduler import Loop, WallClock
+from pyrt.sim.world import GRIPPER_BOARDS, MANIPULATOR_BOARDS
 
 ROUNDS = 3000
 SAMPLES = 3000
@@ -71,8 +72,8 @@ def _bench(benchmark, fn: Callable[[], object], label: str) -> None:
 @pytest.mark.parametrize("access", ["read PA", "write LED", "poll (SNAP)"])
 def test_gripper_register_round_trip(benchmark, gripper_url, access):
     """One gripper register access over tcp:// (read, write, or the per-tick SNAP)."""
-    with open_boards(gripper_url, "gripper", max_age=0) as boards:
-        board = boards.gripper
+    with open_boards(gripper_url, "gripper", GRIPPER_BOARDS, max_age=0) as boards:
+        board = boards["gripper"]
         fn = {
             "read PA": lambda: board.read(P8155_PA),
             "write LED": lambda: board.write(LED_LO, 0xFF),
@@ -85,8 +86,8 @@ def test_gripper_register_round_trip(benchmark, gripper_url, access):
 @pytest.mark.parametrize("access", ["pulses", "poll (SNAP, 3 counters)"])
 def test_manipulator_register_round_trip(benchmark, manipulator_url, access):
     """One manipulator register access over tcp:// (a TIO10 read, or the per-tick SNAP)."""
-    with open_boards(manipulator_url, "manipulator", max_age=0) as boards:
-        tio, dc = boards.tio10, boards.dc
+    with open_boards(manipulator_url, "prototype", MANIPULATOR_BOARDS, max_age=0) as boards:
+        tio, dc = boards["tio10"], boards["dc"]
         for address in (168, 169, 170):  # the prototype's encoders ride along in SNAP
             dc.read_counter(address)
         fn = {
@@ -103,7 +104,7 @@ def test_gripper_tick_budget_over_tcp(benchmark, gripper_url):
     result: dict[str, object] = {}
 
     def run() -> None:
-        with open_boards(gripper_url, "gripper") as boards:
+        with open_boards(gripper_url, "gripper", GRIPPER_BOARDS) as boards:
             polls: list[int] = []
             clock = time.perf_counter_ns
 
@@ -112,7 +113,7 @@ def test_gripper_tick_budget_over_tcp(benchmark, gripper_url):
                 boards.poll(now_ns)
                 polls.append(clock() - t)
 
-            ctl = GripperController(boards.cpu)
+            ctl = GripperController(boards["gripper"].cpu)
             loop = Loop(WallClock(), period_ns=TICK_NS)
             loop.attach(timed_poll, name="board")
             ctl.attach(loop)
@@ -123,7 +124,7 @@ def test_gripper_tick_budget_over_tcp(benchmark, gripper_url):
             ctl.move(-0x0800)
             loop.run(duration_ns=2_000_000_000)
             ctl.drive(0x80)
-            boards.gripper.write(DAC, 0x80)
+            boards["gripper"].write(DAC, 0x80)
             stats = loop.statistics()
             result.update(polls=polls, stats=stats)
 

@@ -32,18 +32,20 @@ from pyrt.errors import (
 )
 
 if TYPE_CHECKING:
-    from pyrt.boards import Boards, open_boards
+    from pyrt.boards import BoardKind, Boards, Register, RegisterBoard, open_boards
     from pyrt.cli._station import run_station
     from pyrt.component import Arg, Command, Component, Signal, Switch, command, finite, word
     from pyrt.scheduler import Job, Loop, ReadyQueue, SimClock, Task, WallClock
     from pyrt.scheduler.motion import MotionExecutor, MotionRecord, MotionType
     from pyrt.scope import Source
+    from pyrt.sim.world import World, WorldFactory
     from pyrt.station.base import Station
     from pyrt.station.factory import StationFactory
 
 #: Public name -> the module that defines it (imported on first use).
 _LAZY = {
     "Arg": "pyrt.component",
+    "BoardKind": "pyrt.boards",
     "Boards": "pyrt.boards",
     "Command": "pyrt.component",
     "Component": "pyrt.component",
@@ -53,6 +55,8 @@ _LAZY = {
     "MotionRecord": "pyrt.scheduler.motion",
     "MotionType": "pyrt.scheduler.motion",
     "ReadyQueue": "pyrt.scheduler",
+    "Register": "pyrt.boards",
+    "RegisterBoard": "pyrt.boards",
     "Signal": "pyrt.component",
     "SimClock": "pyrt.scheduler",
     "Source": "pyrt.scope",
@@ -61,6 +65,8 @@ _LAZY = {
     "Switch": "pyrt.component",
     "Task": "pyrt.scheduler",
     "WallClock": "pyrt.scheduler",
+    "World": "pyrt.sim.world",
+    "WorldFactory": "pyrt.sim.world",
     "command": "pyrt.component",
     "finite": "pyrt.component",
     "open_boards": "pyrt.boards",
@@ -85,6 +91,7 @@ def __dir__() -> list[str]:
 __all__ = [
     "Arg",
     "BoardError",
+    "BoardKind",
     "Boards",
     "Command",
     "CommandError",
@@ -103,6 +110,8 @@ __all__ = [
     "PyrtInternalError",
     "QueueFullError",
     "ReadyQueue",
+    "Register",
+    "RegisterBoard",
     "Signal",
     "SimClock",
     "Source",
@@ -111,6 +120,8 @@ __all__ = [
     "Switch",
     "Task",
     "WallClock",
+    "World",
+    "WorldFactory",
     "__version__",
     "command",
     "finite",

@@ -11,6 +11,7 @@ from pyrt.boards.i8031 import I8031
 from pyrt.robots.gripper import GripperController, JobResult
 from pyrt.scheduler import Loop, SimClock
 from pyrt.sim.gripper import JawPlant
+from pyrt.sim.world import GRIPPER_BOARDS
 from pyrt.station.gripper import GripperStation
 
 MS = 1_000_000
@@ -72,8 +73,8 @@ def signed(word: int) -> int:
 
 def make_rig(*, runner: bool = False, **plant_kw) -> Rig:
     """A gripper station (plant, controller, motion, scope, mailbox) and a stall monitor."""
-    boards = open_boards("sim:", "gripper")
-    cpu, board = boards.cpu, boards.gripper
+    boards = open_boards("sim:", "gripper", GRIPPER_BOARDS)
+    cpu, board = boards["gripper"].cpu, boards["gripper"]
     plant = JawPlant(board, **plant_kw)
     loop = Loop(SimClock())
     station = GripperStation(loop, boards, plant)

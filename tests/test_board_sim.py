@@ -15,10 +15,11 @@ import time
 import pytest
 
 from pyrt.boards import open_boards
-from pyrt.boards.gripper import DAC, DAC_NULL
+from pyrt.boards.gripper import DAC, DAC_NULL, P8155_PB
 from pyrt.cli import main
 from pyrt.db import copy_station
 from pyrt.errors import BoardError
+from pyrt.sim.world import GRIPPER_BOARDS, MANIPULATOR_BOARDS
 
 pytestmark = pytest.mark.wallclock
 
@@ -29,9 +30,10 @@ START_S = 60.0
 class _Proc:
     """A child process whose stdout lines are collected, with their arrival times, by a thread."""
 
-    def __init__(self, args: list[str]):
+    def __init__(self, args: list[str], env: dict[str, str] | None = None):
         self.proc = subprocess.Popen([sys.executable, *args], stdin=subprocess.DEVNULL,
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                     env=env)
         self.lines: queue.Queue[tuple[float, str]] = queue.Queue()
         self.seen: list[str] = []
         threading.Thread(target=self._pump, daemon=True).start()
@@ -65,9 +67,10 @@ class _Proc:
         self.proc.wait(10)
 
 
-def _board_sim(world: str, *extra: str, watchdog: float = 1.0) -> tuple[_Proc, str]:
+def _board_sim(world: str, *extra: str, watchdog: float = 1.0,
+               env: dict[str, str] | None = None) -> tuple[_Proc, str]:
     p = _Proc(["-m", "pyrt", "board-sim", world, "--listen", "127.0.0.1:0",
-               "--watchdog", str(watchdog), *extra])
+               "--watchdog", str(watchdog), *extra], env=env)
     _, m = p.expect(r"^pyrt board-sim: \w+ \w+ on (tcp://127\.0\.0\.1:\d+) ")
     assert p.seen == [m.group(0) + p.seen[0][len(m.group(0)):]]  # it was the first line
     return p, m.group(1)
@@ -79,11 +82,13 @@ import sys, time
 from pyrt.boards import open_boards
 from pyrt.boards.gripper import DAC
 from pyrt.boards.tio10 import AWO_BITS, DIR_BITS
-b = open_boards(sys.argv[1], sys.argv[2])
+from pyrt.sim.world import GRIPPER_BOARDS, MANIPULATOR_BOARDS
+kinds = GRIPPER_BOARDS if sys.argv[2] == "gripper" else MANIPULATOR_BOARDS
+b = open_boards(sys.argv[1], sys.argv[2], kinds)
 if sys.argv[2] == "gripper":
-    b.gripper.write(DAC, 0xC0)
+    b["gripper"].write(DAC, 0xC0)
 else:
-    tio = b.tio10
+    tio = b["tio10"]
     tio.select_source(7, 3)
     tio.load_period(7, 5000)
     tio.set_bit(*DIR_BITS[7], True)
@@ -109,9 +114,9 @@ def _outputs(url: str, world: str, deadline_s: float) -> dict[str, str]:
     deadline = time.monotonic() + deadline_s
     while True:
         try:
-            with open_boards(url, _robot(world), max_age=0) as b:
-                link = b.gripper.link if b.gripper is not None else b.tio10._b.link
-                return dict(kv.split("=", 1) for kv in link.request("INFO"))
+            kinds = GRIPPER_BOARDS if world == "gripper" else MANIPULATOR_BOARDS
+            with open_boards(url, _robot(world), kinds, max_age=0) as b:
+                return b.info()
         except BoardError as exc:
             if "busy" not in str(exc) or time.monotonic() > deadline:
                 raise
@@ -176,9 +181,9 @@ def test_killed_board_sim_makes_the_next_access_raise_board_error_naming_the_url
     """SIGKILL of board-sim: the controller's next register access raises BoardError naming the
     URL within a bounded time, and so does every later one."""
     sim, url = _board_sim("gripper")
-    boards = open_boards(url, "gripper", max_age=0)
+    boards = open_boards(url, "gripper", GRIPPER_BOARDS, max_age=0)
     try:
-        boards.gripper.write(DAC, 0x90)
+        boards["gripper"].write(DAC, 0x90)
         sim.kill()
         t0 = time.monotonic()
         with pytest.raises(BoardError) as err:
@@ -186,7 +191,11 @@ def test_killed_board_sim_makes_the_next_access_raise_board_error_naming_the_url
         assert time.monotonic() - t0 < 2.0
         assert str(err.value).startswith(f"board {url}: SNAP: ")
         with pytest.raises(BoardError, match=re.escape(url)):
-            boards.gripper.read(DAC)
+            boards["gripper"].read(P8155_PB)  # an input: nothing to answer it with
+        with pytest.raises(BoardError, match=re.escape(url)):
+            boards["gripper"].write(DAC, 0x90)  # driving again: refused
+        boards["gripper"].write(DAC, DAC_NULL)  # the reflex's null: what the drop did
+        assert boards["gripper"].read(DAC) == DAC_NULL
     finally:
         boards.close()
         sim.kill()
@@ -212,12 +221,23 @@ def test_manipulator_world_is_the_stations_and_sigterm_ends_it_with_outputs_off(
 
 
 def test_help_tells_the_options_and_the_url():
-    """pyrt board-sim --help names the worlds, --listen, --watchdog, the tcp:// URL; pyrt --help lists it."""
+    """pyrt board-sim --help names the stations, --listen, --watchdog, the tcp:// URL; with a
+    station's name it adds that world's options; pyrt --help lists board-sim."""
     env = {**os.environ, "COLUMNS": "100"}
-    out = subprocess.run([sys.executable, "-m", "pyrt", "board-sim", "--help"], env=env,
-                         capture_output=True, text=True, timeout=START_S).stdout
-    for word in ("{gripper,prototype,sno}", "--listen HOST:PORT", "--watchdog S", "tcp://HOST:PORT",
-                 "--db DIR", "--start HEX", "--object MM", "pyrt.boards.wire"):
+
+    def helps(*argv: str) -> str:
+        return subprocess.run([sys.executable, "-m", "pyrt", "board-sim", *argv], env=env,
+                              capture_output=True, text=True, timeout=START_S).stdout
+
+    out = helps("--help")
+    for word in ("stations: gripper, manipulator, prototype, sno", "--listen HOST:PORT",
+                 "--watchdog S", "tcp://HOST:PORT", "pyrt.boards.wire", "WorldFactory"):
+        assert word in out, word
+    out = helps("gripper", "--help")
+    for word in ("--listen HOST:PORT", "--start HEX", "--object MM", "--fault"):
+        assert word in out, word
+    out = helps("sno", "--help")
+    for word in ("--listen HOST:PORT", "--db DIR", "--station", "--ideal-sensors"):
         assert word in out, word
     top = subprocess.run([sys.executable, "-m", "pyrt", "--help"], env=env, capture_output=True,
                          text=True, timeout=START_S).stdout
@@ -225,8 +245,13 @@ def test_help_tells_the_options_and_the_url():
 
 
 @pytest.mark.parametrize(("argv", "message"), [
-    (["board-sim", "gripper", "--db", "somewhere"], "--db: only for a manipulator world"),
-    (["board-sim", "sno", "--start", "F400"], "--start: only for the gripper world"),
+    (["board-sim", "gripper", "--db", "somewhere"], "unrecognized arguments: --db somewhere"),
+    (["board-sim", "sno", "--start", "F400"], "unrecognized arguments: --start F400"),
+    (["board-sim", "hexapod"], "no station named 'hexapod' gives a world to serve; stations: "
+                               "gripper, manipulator, prototype, sno"),
+    (["board-sim"], "name the station whose world to serve"),
+    (["board-sim", "manipulator", "--station", "sno", "--db", "/nonexistent/db"],
+     "/nonexistent/db"),
     (["board-sim", "gripper", "--object", "99"], "object width must be between 0 and 76 mm"),
     (["board-sim", "prototype", "--db", "/nonexistent/db"], "/nonexistent/db"),
 ])
@@ -235,3 +260,36 @@ def test_bad_options_end_with_one_line(capsys, argv, message):
     assert main(argv) == 1
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err and err.count("\n") == 1
+
+
+def test_a_station_of_ones_own_is_served_and_driven_over_tcp():
+    """pyrt board-sim MODULE:FACTORY serves a two-joint arm's servo board (a plain kind) with
+    its world's own option; a controller drives it over tcp:// and its counts come back; the
+    first line names the station and its boards; SIGTERM turns the outputs off."""
+    tests = os.path.dirname(os.path.abspath(__file__))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [tests, *filter(None, [os.environ.get("PYTHONPATH")])])}
+    sys.path.insert(0, tests)
+    try:
+        from test_boards_generic import ARM_BOARDS
+    finally:
+        sys.path.remove(tests)
+    sim, url = _board_sim("test_boards_generic:ArmStation", "--home", "1", env=env)
+    try:
+        assert "arm arm on " in sim.seen[0] and "(boards servo=arm-servo;" in sim.seen[0]
+        with open_boards(url, "arm", ARM_BOARDS, max_age=0) as b:
+            servo = b["servo"]
+            assert servo.read("home") == 1
+            servo.write("drive", 1000, 0)
+            servo.write("enable", 1)
+            deadline = time.monotonic() + 10
+            while servo.read("count", 0) < 50 and time.monotonic() < deadline:
+                b.poll(0)
+                time.sleep(0.005)
+            assert servo.read("count", 0) >= 50 and servo.read("count", 1) == 0
+        sim.expect(r"^controller \S+ said QUIT: outputs off$", 10.0)
+        sim.proc.send_signal(signal.SIGTERM)
+        sim.expect(r"^pyrt board-sim: stopped, outputs off", 10.0)
+        assert sim.proc.wait(10) == 0
+    finally:
+        sim.kill()

@@ -21,6 +21,7 @@ from pyrt.boards.gripper import (
     GripperBoard,
 )
 from pyrt.boards.i8031 import ENCODER_CNT, I8031, LIMIT, OTHER, VECTOR_EXT0, VECTOR_EXT1
+from pyrt.boards.kinds import GRIPPER_CAGE
 from pyrt.boards.tcp import TcpDataConcentrator, TcpGripperBoard, TcpTIO10
 from pyrt.boards.tio10 import AWO_BITS, DIR_BITS
 from pyrt.boards.wire import MAX_LINE
@@ -30,7 +31,7 @@ from pyrt.robots.gripper import GripperController
 from pyrt.scheduler import Loop, WallClock
 from pyrt.sim.boardsim import BoardServer
 from pyrt.sim.sensors import Imperfections
-from pyrt.sim.world import GripperWorld, ManipulatorWorld
+from pyrt.sim.world import GRIPPER_BOARDS, MANIPULATOR_BOARDS, GripperWorld, ManipulatorWorld
 
 #: prototype rope 0: motor channel 7, encoder address 168, loadcell ADC 3.
 CH, ENC, ADC = 7, 168, 3
@@ -97,11 +98,11 @@ class _Raw:
 # -- the greeting and the wire --------------------------------------------------------------
 
 
-def test_greeting_names_protocol_kind_world_and_watchdog(gripper_sim):
-    """The server speaks first: OK pyrt-board-sim 1 gripper gripper 30000."""
+def test_greeting_names_protocol_station_watchdog_and_boards(gripper_sim):
+    """The server speaks first: OK pyrt-board-sim 2 gripper 30000 gripper=gripper-cage@FP."""
     raw = _Raw(gripper_sim)
     try:
-        assert raw.greeting == "OK pyrt-board-sim 1 gripper gripper 30000"
+        assert raw.greeting == f"OK pyrt-board-sim 2 gripper 30000 gripper={GRIPPER_CAGE.tag}"
         assert raw.ask(b"QUIT\n") == "OK bye"
         assert raw.file.readline() == b""  # the server closed the connection
     finally:
@@ -116,25 +117,37 @@ def test_bad_input_gets_error_replies_and_the_server_keeps_serving(gripper_sim):
         cases = [
             (b"\n", "ERR syntax empty request"),
             (b"HELLO\n", "ERR syntax unknown request"),
-            (b"R\n", "ERR syntax R takes 1 arguments, got 0"),
-            (b"W 0x8000\n", "ERR syntax W takes 2"),
-            (b"R -1\n", "ERR syntax '-1' is not an unsigned number"),
-            (b"R 0x\n", "ERR syntax"),
-            (b"R 12ab\n", "ERR syntax"),
-            (b"R 0x8000 \xff\n", "ERR ascii"),
+            (b"R\n", "ERR syntax R takes 2 or 3 arguments"),
+            (b"R gripper\n", "ERR syntax R takes 2 or 3 arguments"),
+            (b"W gripper dac\n", "ERR syntax W takes 3 or 4"),
+            (b"R gripper dac -1\n", "ERR range gripper: dac: index must be 0..0"),
+            (b"R gripper dac 0x\n", "ERR syntax"),
+            (b"R gripper dac 12ab\n", "ERR syntax"),
+            (b"R gripper dac \xff\n", "ERR ascii"),
             (b"\x00\x01\x02\n", "ERR syntax"),
-            (b"R 0x7FFF\n", "ERR range no gripper cage register"),
-            (b"W 0x0101 0\n", "ERR range 8155 PA (0101) is an input port"),
-            (b"W 0x8000 256\n", "ERR range register value must be 00..FF"),
-            (b"W 0x8000 99999999999999999999999\n", "ERR syntax"),
+            (b"R gripper adc\n", "ERR range gripper: a gripper-cage board has no register 'adc'"),
+            (b"R cage dac\n", "ERR range no board 'cage'; boards: gripper"),
+            (b"W gripper pa 0\n", "ERR range gripper: pa is an input"),
+            (b"W gripper dac 256\n", "ERR range gripper: dac: value must be an integer 0..255"),
+            (b"W gripper dac -1\n", "ERR range gripper: dac: value must be an integer 0..255"),
+            (b"W gripper dac 99999999999999999999999\n", "ERR syntax"),
+            (b"W gripper led_lo 1; R gripper dac\n", "ERR syntax only writes"),
+            (b"W gripper led_lo 1;\n", "ERR syntax only writes"),
             (b"X" * (MAX_LINE + 10) + b"\n", "ERR too-long"),
-            (b"SNAP 1\n", "ERR syntax SNAP takes 0"),
+            (b"SNAP 1\n", "ERR range no board '1'"),
+            (b"SNAP gripper gripper\n", "ERR syntax SNAP names a board twice"),
+            (b"INFO 1\n", "ERR syntax INFO takes no arguments"),
         ]
         for data, want in cases:
             assert raw.ask(data).startswith(want), data[:40]
-        assert raw.ask(b"r 0x8000\r\n") == f"OK {DAC_NULL}"  # lower case and CR LF accepted
-        assert raw.ask(b"W 32768 0x90\n") == "OK"
-        assert raw.ask(b"R 0x8000\n") == "OK 144"
+        assert raw.ask(b"r GRIPPER Dac\r\n") == f"OK {DAC_NULL}"  # any case, CR LF accepted
+        assert raw.ask(b"W gripper dac 0 0x90\n") == "OK"
+        assert raw.ask(b"R gripper dac\n") == "OK 144"
+        assert raw.ask(b"W gripper led_lo 0x5A; W gripper led_hi 0 0xA5\n") == "OK"
+        assert raw.ask(b"R gripper led_lo\nR gripper led_hi 0\n") == "OK 90"  # pipelined
+        assert raw.line() == "OK 165"
+        assert raw.ask(b"SNAP\n") == "OK 0 255 255 255 0 0"  # trips, pa pb pc, up down
+        assert raw.ask(b"snap gripper\n") == "OK 0 255 255 255 0 0"
         assert gripper_sim.errors == len(cases)
     finally:
         raw.close()
@@ -146,7 +159,7 @@ def test_an_over_long_line_in_pieces_is_refused_once_and_its_tail_dropped(grippe
     try:
         raw.sock.sendall(b"R " + b"1" * MAX_LINE)
         assert raw.line().startswith("ERR too-long")
-        raw.sock.sendall(b"1" * 100 + b"\nR 0x8000\n")
+        raw.sock.sendall(b"1" * 100 + b"\nR gripper dac\n")
         assert raw.line() == f"OK {DAC_NULL}"
     finally:
         raw.close()
@@ -154,24 +167,27 @@ def test_an_over_long_line_in_pieces_is_refused_once_and_its_tail_dropped(grippe
 
 def test_a_second_controller_is_refused_busy(gripper_sim):
     """While one controller is connected a second gets ERR busy (naming the first) and is closed."""
-    boards = open_boards(gripper_sim.url, "gripper")
+    boards = open_boards(gripper_sim.url, "gripper", GRIPPER_BOARDS)
     try:
         with pytest.raises(BoardError) as err:
-            open_boards(gripper_sim.url, "gripper")
+            open_boards(gripper_sim.url, "gripper", GRIPPER_BOARDS)
         assert gripper_sim.url in str(err.value) and "busy" in str(err.value)
         assert gripper_sim.refused == 1
-        assert boards.gripper.read(DAC) == DAC_NULL  # the first is still served
+        assert boards["gripper"].read(DAC) == DAC_NULL  # the first is still served
     finally:
         boards.close()
-    with open_boards(gripper_sim.url, "gripper") as again:  # free again after QUIT
+    with open_boards(gripper_sim.url, "gripper", GRIPPER_BOARDS) as again:  # free again after QUIT
         assert again.world == "gripper"
 
 
 def test_wrong_kind_of_board_is_a_config_error(gripper_sim):
-    """Opening a gripper board-sim as a manipulator is a ConfigError naming the URL and both kinds."""
+    """Opening a gripper board-sim as a manipulator is a ConfigError naming the URL, the station
+    served and the declared boards that are missing."""
     with pytest.raises(ConfigError) as err:
-        open_boards(gripper_sim.url, "manipulator")
-    assert gripper_sim.url in str(err.value) and "serves a gripper" in str(err.value)
+        open_boards(gripper_sim.url, "prototype", MANIPULATOR_BOARDS)
+    text = str(err.value)
+    assert gripper_sim.url in text and "serves the gripper station" in text
+    assert "missing: tio10 (tio10), dc (dataconcentrator)" in text
 
 
 # -- the gripper -------------------------------------------------------------------------------
@@ -181,9 +197,9 @@ def test_wrong_kind_of_board_is_a_config_error(gripper_sim):
 def test_gripper_board_interface_is_the_same_in_process_and_over_tcp(gripper_sim, url):
     """SimGripperBoard and TcpGripperBoard read, write and refuse alike, through MOVX too."""
     cpu = I8031()
-    boards = open_boards(gripper_sim.url if url == "tcp" else url, "gripper", cpu=cpu)
+    boards = open_boards(gripper_sim.url if url == "tcp" else url, "gripper", GRIPPER_BOARDS, cpu=cpu)
     try:
-        board = boards.gripper
+        board = boards["gripper"]
         assert isinstance(board, GripperBoard)
         assert isinstance(board, TcpGripperBoard) == (url == "tcp")
         assert {a: board.read(a) for a in REGISTERS} == {
@@ -211,8 +227,8 @@ def test_gripper_register_written_over_tcp_is_seen_by_the_plant_and_back(gripper
     hits = [0, 0]
     cpu.set_vector(VECTOR_EXT0, lambda: hits.__setitem__(0, hits[0] + 1))
     cpu.set_vector(VECTOR_EXT1, lambda: hits.__setitem__(1, hits[1] + 1))
-    with open_boards(gripper_sim.url, "gripper", cpu=cpu) as boards:
-        link = boards.gripper.link
+    with open_boards(gripper_sim.url, "gripper", GRIPPER_BOARDS, cpu=cpu) as boards:
+        link = boards["gripper"].registers.link
         assert cpu.movx_read(P8155_PB) & (1 << LIMIT)  # 0100 counts in: limit off
         cpu.movx_write(DAC, 0xA0)  # open at +32
         assert _info(link)["dac"] == "160"
@@ -222,26 +238,26 @@ def test_gripper_register_written_over_tcp_is_seen_by_the_plant_and_back(gripper
         boards.poll(0)
         info = _info(link)
         assert info["current"] == "0"
-        assert hits == [int(info["up"]), int(info["down"])] == list(boards.gripper.pulse_counts())
+        assert hits == [int(info["up"]), int(info["down"])] == list(boards["gripper"].pulse_counts())
         assert hits[0] >= 0x100 - 20 and hits[1] == 0
 
 
 def test_poll_copy_serves_the_reads_of_a_tick_and_sees_its_own_writes(gripper_sim):
     """After poll, reads within max_age make no round trip; a write goes out and is read back;
     with max_age=0 every read goes to the board."""
-    with open_boards(gripper_sim.url, "gripper", max_age=60) as boards:
-        board = boards.gripper
-        link = board.link
+    with open_boards(gripper_sim.url, "gripper", GRIPPER_BOARDS, max_age=60) as boards:
+        board = boards["gripper"]
+        link = board.registers.link
         boards.poll(0)
         n = link.requests
         assert [board.read(a) for a in REGISTERS] and link.requests == n
         board.write(DAC, 0x81)
         assert link.requests == n + 1 and board.read(DAC) == 0x81 and link.requests == n + 1
-    with open_boards(gripper_sim.url, "gripper", max_age=0) as boards:
-        link = boards.gripper.link
+    with open_boards(gripper_sim.url, "gripper", GRIPPER_BOARDS, max_age=0) as boards:
+        link = boards["gripper"].registers.link
         boards.poll(0)
         n = link.requests
-        boards.gripper.read(P8155_PA)
+        boards["gripper"].read(P8155_PA)
         assert link.requests == n + 1
 
 
@@ -250,7 +266,7 @@ def test_gripper_controller_runs_init_over_tcp_unchanged(gripper_sim):
     """The 002 controller, unchanged, runs I (fullopen to the limit, zero) on a wall-clock loop
     through TcpGripperBoard, its encoder counts delivered by poll before the ready queue."""
     cpu = I8031()
-    boards = open_boards(gripper_sim.url, "gripper", cpu=cpu)
+    boards = open_boards(gripper_sim.url, "gripper", GRIPPER_BOARDS, cpu=cpu)
     try:
         ctl = GripperController(cpu)
         loop = Loop(WallClock(), period_ns=1_000_000)
@@ -262,7 +278,7 @@ def test_gripper_controller_runs_init_over_tcp_unchanged(gripper_sim):
         assert job.done and job.value().ok, job.value()
         assert not ctl.ram[OTHER] & (1 << LIMIT)  # the limit sensor, read over TCP
         assert ctl.word(ENCODER_CNT) == 0
-        assert _info(boards.gripper.link)["dac"] == str(DAC_NULL)
+        assert _info(boards["gripper"].registers.link)["dac"] == str(DAC_NULL)
     finally:
         boards.close()
 
@@ -272,8 +288,8 @@ def test_gripper_controller_runs_init_over_tcp_unchanged(gripper_sim):
 
 def test_manipulator_cards_over_tcp_read_back_and_refuse_like_the_sim(manipulator_sim):
     """TcpTIO10/TcpDataConcentrator: writes read back, the world sees them; refusals are ValueError."""
-    with open_boards(manipulator_sim.url, "manipulator") as boards:
-        tio, dc = boards.tio10, boards.dc
+    with open_boards(manipulator_sim.url, "prototype", MANIPULATOR_BOARDS) as boards:
+        tio, dc = boards["tio10"], boards["dc"]
         assert isinstance(tio, TcpTIO10) and isinstance(dc, TcpDataConcentrator)
         assert boards.world == "prototype"
         world = manipulator_sim.world
@@ -299,9 +315,9 @@ def test_manipulator_cards_over_tcp_read_back_and_refuse_like_the_sim(manipulato
 def test_manipulator_motor_driven_over_tcp_moves_the_world_and_counts_come_back(manipulator_sim):
     """A motor armed over TCP pays rope out in the other world; pulses, encoder counts and the
     loadcell come back, through one SNAP per poll."""
-    with open_boards(manipulator_sim.url, "manipulator") as boards:
-        tio, dc = boards.tio10, boards.dc
-        link = tio._b.link
+    with open_boards(manipulator_sim.url, "prototype", MANIPULATOR_BOARDS) as boards:
+        tio, dc = boards["tio10"], boards["dc"]
+        link = tio.registers.link
         before = float(_info(link)["payout0"])
         dc.clear_counter(ENC)
         tio.select_source(CH, 3)  # F3: 50 kHz
@@ -321,8 +337,8 @@ def test_manipulator_motor_driven_over_tcp_moves_the_world_and_counts_come_back(
 @pytest.mark.wallclock
 def test_the_world_steps_at_real_time(manipulator_sim):
     """The world's clock (the TIO10's 5 MHz RTC, set by each step) advances with the wall clock."""
-    with open_boards(manipulator_sim.url, "manipulator", max_age=0) as boards:
-        tio = boards.tio10
+    with open_boards(manipulator_sim.url, "prototype", MANIPULATOR_BOARDS, max_age=0) as boards:
+        tio = boards["tio10"]
         t0, r0 = time.monotonic(), tio.rtc_ticks()
         last: list[tuple[float, int]] = []
 
@@ -343,14 +359,14 @@ def test_board_sim_gone_makes_the_next_access_raise_board_error_naming_the_url()
     """When board-sim closes, the next access raises BoardError naming the URL, and so does every
     later one, at once."""
     server = _serve(GripperWorld())
-    boards = open_boards(server.url, "gripper", max_age=0)
+    boards = open_boards(server.url, "gripper", GRIPPER_BOARDS, max_age=0)
     url = server.url
     server.close()
     t0 = time.monotonic()
     with pytest.raises(BoardError) as err:
-        boards.gripper.read(DAC)
+        boards["gripper"].read(DAC)
     assert time.monotonic() - t0 < 2.0
-    assert str(err.value).startswith(f"board {url}: R {DAC}: ") and err.value.url == url
+    assert str(err.value).startswith(f"board {url}: R gripper dac 0: ") and err.value.url == url
     with pytest.raises(BoardError, match="link is down"):
         boards.poll(0)
     boards.close()
@@ -363,7 +379,7 @@ def test_connection_refused_is_a_board_error_naming_the_url():
     probe.close()
     url = f"tcp://127.0.0.1:{port}"
     with pytest.raises(BoardError) as err:
-        open_boards(url, "manipulator")
+        open_boards(url, "prototype", MANIPULATOR_BOARDS)
     assert str(err.value).startswith(f"board {url}: cannot connect") and "refused" in str(err.value)
 
 
@@ -375,14 +391,14 @@ def test_a_board_that_stops_answering_times_out_with_a_board_error():
 
     def accept() -> None:
         conn, _ = listener.accept()
-        conn.sendall(b"OK pyrt-board-sim 1 gripper mute 500\n")
+        conn.sendall(f"OK pyrt-board-sim 2 mute 500 gripper={GRIPPER_CAGE.tag}\n".encode())
         held.append(conn)
 
     t = threading.Thread(target=accept, daemon=True)
     t.start()
     url = f"tcp://127.0.0.1:{port}?timeout=0.1"
     try:
-        boards = open_boards(url, "gripper", max_age=0)
+        boards = open_boards(url, "gripper", GRIPPER_BOARDS, max_age=0)
     except BoardError as exc:  # the first SNAP already times out: that is the case too
         assert "no reply within 0.1 s" in str(exc)
     else:  # pragma: no cover - the SNAP at open cannot be answered
@@ -409,7 +425,7 @@ def test_a_peer_that_is_not_board_sim_is_refused():
     url = f"tcp://127.0.0.1:{listener.getsockname()[1]}"
     try:
         with pytest.raises(BoardError, match="not a pyrt board-sim"):
-            open_boards(url, "gripper")
+            open_boards(url, "gripper", GRIPPER_BOARDS)
     finally:
         t.join(5)
         listener.close()
@@ -421,8 +437,8 @@ def test_a_silent_controller_trips_the_watchdog_in_process():
     and the controller's next poll raises BoardError saying so (once)."""
     server = _serve(GripperWorld(), watchdog_s=0.1)
     try:
-        with open_boards(server.url, "gripper") as boards:
-            boards.gripper.write(DAC, 0x70)
+        with open_boards(server.url, "gripper", GRIPPER_BOARDS) as boards:
+            boards["gripper"].write(DAC, 0x70)
             t0 = time.monotonic()
             assert _until(lambda: server.watchdog_trips == 1, 2.0)
             assert time.monotonic() - t0 < 1.0
@@ -431,6 +447,6 @@ def test_a_silent_controller_trips_the_watchdog_in_process():
             assert str(err.value) == (f"board {server.url}: the board's watchdog turned the "
                                       "outputs off (no register access for 0.1 s)")
             boards.poll(0)
-            assert boards.gripper.read(DAC) == DAC_NULL
+            assert boards["gripper"].read(DAC) == DAC_NULL
     finally:
         server.close()

@@ -19,26 +19,25 @@ from pyrt.boards import (
 from pyrt.boards import registry as registry_module
 from pyrt.boards.gripper import DAC, P8155_PB, GripperBoard, SimGripperBoard
 from pyrt.boards.i8031 import I8031
+from pyrt.boards.registers import OUTPUT, BoardKind, Register, RegisterBoard
 from pyrt.boards.simboards import SimDataConcentrator, SimTIO10
 from pyrt.errors import ConfigError
+from pyrt.sim.world import GRIPPER_BOARDS, MANIPULATOR_BOARDS
 
 # -- a third party's back end, found through an entry point ---------------------------
 
 CALLS: list[tuple[BoardURL, str, dict]] = []
 
 
-def fake_factory(url: BoardURL, robot: str, **options) -> Boards:
+def fake_factory(url: BoardURL, station: str, kinds: dict, **options) -> Boards:
     """A back end of 'someone else': in-process boards, remembering how it was called."""
-    CALLS.append((url, robot, options))
-    if robot == "gripper":
-        cpu = options.get("cpu") or I8031()
-        return Boards(url.text, robot, in_process=True, gripper=SimGripperBoard(cpu), cpu=cpu,
-                      world="fake")
-    return Boards(url.text, robot, in_process=True, tio10=SimTIO10(), dc=SimDataConcentrator(),
-                  world="fake")
+    CALLS.append((url, station, options))
+    boards = {name: kind.sim(**({"cpu": options["cpu"]} if "cpu" in options else {}))
+              for name, kind in kinds.items()}
+    return Boards(url.text, station, boards, kinds, in_process=True, world="fake")
 
 
-def not_boards(url: BoardURL, robot: str, **options) -> object:
+def not_boards(url: BoardURL, station: str, kinds: dict, **options) -> object:
     """A broken back end: returns something that is not Boards."""
     return object()
 
@@ -91,7 +90,7 @@ def test_tcp_url_gives_host_port_and_options(url, host, port, options):
 def test_malformed_url_is_a_config_error_naming_it_and_the_known_schemes(url):
     """A malformed URL raises ConfigError that names the URL and lists sim and tcp."""
     with pytest.raises(ConfigError) as err:
-        open_boards(url, "gripper")
+        open_boards(url, "gripper", GRIPPER_BOARDS)
     text = str(err.value)
     assert repr(url) in text
     assert "sim" in text and "tcp" in text
@@ -101,7 +100,7 @@ def test_unknown_scheme_is_a_config_error_naming_the_url_and_the_known_schemes(e
     """open_boards('serial:///dev/ttyS0') names the URL, the scheme and every known scheme."""
     entry_points({})
     with pytest.raises(ConfigError) as err:
-        open_boards("serial:///dev/ttyS0", "manipulator")
+        open_boards("serial:///dev/ttyS0", "prototype", MANIPULATOR_BOARDS)
     text = str(err.value)
     assert "'serial:///dev/ttyS0'" in text and "'serial'" in text
     assert "known schemes: sim, tcp" in text
@@ -119,11 +118,13 @@ def test_board_url_that_is_not_text_is_refused():
 def test_sim_gripper_maps_a_sim_board_into_the_given_cpu():
     """sim: for the gripper gives a SimGripperBoard mapped into the cpu passed; nothing to poll."""
     cpu = I8031()
-    with open_boards("sim:", "gripper", cpu=cpu) as boards:
-        assert boards.in_process and boards.cpu is cpu and boards.robot == "gripper"
-        assert isinstance(boards.gripper, SimGripperBoard) and isinstance(boards.gripper, GripperBoard)
+    with open_boards("sim:", "gripper", GRIPPER_BOARDS, cpu=cpu) as boards:
+        assert boards.in_process and boards["gripper"].cpu is cpu and boards.station == "gripper"
+        assert list(boards) == ["gripper"] and len(boards) == 1
+        assert isinstance(boards["gripper"], SimGripperBoard)
+        assert isinstance(boards["gripper"], GripperBoard)
         cpu.movx_write(DAC, 0x90)
-        assert boards.gripper.dac == 0x90 and boards.gripper.read(DAC) == 0x90
+        assert boards["gripper"].dac == 0x90 and boards["gripper"].read(DAC) == 0x90
         assert not boards.polls
         boards.poll(0)  # nothing to do, no error
     assert boards.closed
@@ -131,56 +132,66 @@ def test_sim_gripper_maps_a_sim_board_into_the_given_cpu():
 
 def test_sim_manipulator_gives_a_sim_tio10_and_dataconcentrator():
     """sim: (also by default) for the manipulator gives a SimTIO10 and a SimDataConcentrator."""
-    boards = open_boards(None, "manipulator")
+    boards = open_boards(None, "prototype", MANIPULATOR_BOARDS)
     assert boards.url == "sim:" and boards.in_process
-    assert isinstance(boards.tio10, SimTIO10) and isinstance(boards.dc, SimDataConcentrator)
-    assert boards.gripper is None
+    assert isinstance(boards["tio10"], SimTIO10) and isinstance(boards["dc"], SimDataConcentrator)
+    assert list(boards) == ["tio10", "dc"] and "gripper" not in boards
+    with pytest.raises(KeyError, match="tio10, dc"):
+        boards["gripper"]
     boards.close()
     boards.close()  # idempotent
 
 
 def test_sim_gripper_without_a_cpu_makes_one():
     """sim: for the gripper without cpu= makes a new 8031 and maps the board into it."""
-    boards = open_boards("sim:", "gripper")
-    assert isinstance(boards.cpu, I8031)
-    assert boards.cpu.movx_read(P8155_PB) == 0xFF
+    boards = open_boards("sim:", "gripper", GRIPPER_BOARDS)
+    assert isinstance(boards["gripper"].cpu, I8031)
+    assert boards["gripper"].cpu.movx_read(P8155_PB) == 0xFF
 
 
 @pytest.mark.parametrize("url", ["sim://host:1", "sim:/path", "sim:?speed=2"])
 def test_sim_refuses_a_host_a_path_or_options(url):
     """sim: takes nothing after the colon: ConfigError naming the URL."""
     with pytest.raises(ConfigError, match="sim:"):
-        open_boards(url, "gripper")
+        open_boards(url, "gripper", GRIPPER_BOARDS)
 
 
 def test_sim_refuses_an_unknown_keyword_option():
     """A keyword option sim: does not take is refused by name."""
     with pytest.raises(ConfigError, match="timeout"):
-        open_boards("sim:", "manipulator", timeout=1)
+        open_boards("sim:", "prototype", MANIPULATOR_BOARDS, timeout=1)
 
 
-def test_unknown_robot_is_refused():
-    """open_boards for a robot that is neither gripper nor manipulator is a ConfigError."""
-    with pytest.raises(ConfigError, match="gripper, manipulator"):
-        open_boards("sim:", "hexapod")
+def test_any_station_opens_its_declared_boards_and_a_bad_declaration_is_refused():
+    """open_boards knows no list of robots: a hexapod's own kind opens (a RegisterBoard in
+    process); a declaration that is not a mapping of names to kinds is a ConfigError."""
+    leg = BoardKind("hexapod-leg", (Register("angle", count=3, width=12, direction=OUTPUT),))
+    with open_boards("sim:", "hexapod", {"leg0": leg, "leg1": leg}) as boards:
+        assert isinstance(boards["leg1"], RegisterBoard) and boards["leg1"].kind is leg
+        assert boards["leg0"] is not boards["leg1"] and boards.registers("leg0") is boards["leg0"]
+    for bad in ({}, {"Leg": leg}, {"leg": "hexapod-leg"}, ["leg"]):
+        with pytest.raises(ConfigError):
+            open_boards("sim:", "hexapod", bad)
+    with pytest.raises(ConfigError, match="one ASCII word"):
+        open_boards("sim:", "hexa pod", {"leg": leg})
 
 
 def test_tcp_refuses_unknown_options_and_bad_seconds_before_connecting():
     """tcp: names an unknown option, a bad timeout, a missing or zero port, without connecting."""
     with pytest.raises(ConfigError, match="speed"):
-        open_boards("tcp://127.0.0.1:9?speed=2", "gripper")
+        open_boards("tcp://127.0.0.1:9?speed=2", "gripper", GRIPPER_BOARDS)
     with pytest.raises(ConfigError, match="timeout"):
-        open_boards("tcp://127.0.0.1:9?timeout=soon", "gripper")
+        open_boards("tcp://127.0.0.1:9?timeout=soon", "gripper", GRIPPER_BOARDS)
     with pytest.raises(ConfigError, match="timeout"):
-        open_boards("tcp://127.0.0.1:9", "gripper", timeout=0)
+        open_boards("tcp://127.0.0.1:9", "gripper", GRIPPER_BOARDS, timeout=0)
     with pytest.raises(ConfigError, match="port"):
-        open_boards("tcp://127.0.0.1", "gripper")
+        open_boards("tcp://127.0.0.1", "gripper", GRIPPER_BOARDS)
     with pytest.raises(ConfigError, match="host"):
-        open_boards("tcp://:5055", "gripper")
+        open_boards("tcp://:5055", "gripper", GRIPPER_BOARDS)
     with pytest.raises(ConfigError, match="port"):
-        open_boards("tcp://127.0.0.1:0", "gripper")
+        open_boards("tcp://127.0.0.1:0", "gripper", GRIPPER_BOARDS)
     with pytest.raises(ConfigError, match="path"):
-        open_boards("tcp://127.0.0.1:9/x", "gripper")
+        open_boards("tcp://127.0.0.1:9/x", "gripper", GRIPPER_BOARDS)
 
 
 # -- the registry ---------------------------------------------------------------------------
@@ -191,10 +202,10 @@ def test_entry_point_back_end_is_found_by_scheme_with_its_options(entry_points):
     options and keyword options (which win) reach the factory."""
     entry_points({"fake": f"{__name__}:fake_factory"})
     assert known_schemes() == ["fake", "sim", "tcp"]
-    boards = open_boards("FAKE://lab-rack:7?gain=2&mode=a", "manipulator", mode="b")
-    assert boards.world == "fake" and isinstance(boards.tio10, SimTIO10)
-    url, robot, options = CALLS[-1]
-    assert (url.scheme, url.host, url.port, robot) == ("fake", "lab-rack", 7, "manipulator")
+    boards = open_boards("FAKE://lab-rack:7?gain=2&mode=a", "prototype", MANIPULATOR_BOARDS, mode="b")
+    assert boards.world == "fake" and isinstance(boards["tio10"], SimTIO10)
+    url, station, options = CALLS[-1]
+    assert (url.scheme, url.host, url.port, station) == ("fake", "lab-rack", 7, "prototype")
     assert options == {"gain": "2", "mode": "b"}
 
 
@@ -202,7 +213,7 @@ def test_entry_point_that_cannot_be_loaded_is_a_config_error_naming_it(entry_poi
     """An entry point whose module is missing is a ConfigError naming the scheme and the entry point."""
     entry_points({"ghost": "no_such_module_anywhere:open"})
     with pytest.raises(ConfigError) as err:
-        open_boards("ghost:", "gripper")
+        open_boards("ghost:", "gripper", GRIPPER_BOARDS)
     assert "'ghost'" in str(err.value) and "no_such_module_anywhere:open" in str(err.value)
 
 
@@ -210,13 +221,13 @@ def test_factory_that_returns_no_boards_is_refused(entry_points):
     """A factory that returns something other than Boards is a ConfigError naming the scheme."""
     entry_points({"broken": f"{__name__}:not_boards"})
     with pytest.raises(ConfigError, match="'broken' returned object, not Boards"):
-        open_boards("broken:", "gripper")
+        open_boards("broken:", "gripper", GRIPPER_BOARDS)
 
 
 def test_entry_point_cannot_replace_a_built_in_scheme(entry_points):
     """An entry point named 'sim' does not replace the built-in sim: back end."""
     entry_points({"sim": f"{__name__}:fake_factory"})
-    boards = open_boards("sim:", "manipulator")
+    boards = open_boards("sim:", "prototype", MANIPULATOR_BOARDS)
     assert boards.world == "sim" and not CALLS
 
 
@@ -226,16 +237,17 @@ def test_register_backend_from_code(monkeypatch, entry_points):
     monkeypatch.setattr(registry_module, "_registered", {})
     register_backend("Bench", fake_factory)
     assert "bench" in known_schemes()
-    assert open_boards("bench:", "gripper").world == "fake"
+    assert open_boards("bench:", "gripper", GRIPPER_BOARDS).world == "fake"
     with pytest.raises(ConfigError, match="built in"):
         register_backend("tcp", fake_factory)
     with pytest.raises(ConfigError, match="not a URL scheme"):
         register_backend("9lives", fake_factory)
 
 
-def test_boards_must_hold_the_boards_of_their_robot():
-    """Boards for the gripper without a gripper board (or the manipulator without its cards) is refused."""
+def test_boards_must_hold_every_declared_board():
+    """Boards without a declared board (the gripper's cage, the manipulator's dataConcentrator)
+    is refused, naming the missing board."""
     with pytest.raises(ConfigError, match="no gripper board"):
-        Boards("x:", "gripper", in_process=True)
-    with pytest.raises(ConfigError, match="TIO10"):
-        Boards("x:", "manipulator", in_process=True, tio10=SimTIO10())
+        Boards("x:", "gripper", {}, GRIPPER_BOARDS, in_process=True)
+    with pytest.raises(ConfigError, match="no dc board"):
+        Boards("x:", "prototype", {"tio10": SimTIO10()}, MANIPULATOR_BOARDS, in_process=True)

@@ -14,6 +14,7 @@ from pyrt.errors import CommandError
 from pyrt.robots.gripper import Schedule
 from pyrt.scheduler import Loop, SimClock
 from pyrt.sim.gripper import JawPlant
+from pyrt.sim.world import GRIPPER_BOARDS
 from pyrt.station.gripper import AT_TARGET_COUNTS, GripperStation
 from pyrt.tasks import jawmove
 
@@ -22,8 +23,8 @@ TARGET = -0x1B86
 
 def station_rig(tick_us: int = 1000):
     """A gripper station on a SimClock with ``tick_us``, initialised."""
-    boards = open_boards("sim:", "gripper")
-    plant = JawPlant(boards.gripper)
+    boards = open_boards("sim:", "gripper", GRIPPER_BOARDS)
+    plant = JawPlant(boards["gripper"])
     loop = Loop(SimClock(), period_ns=tick_us * 1000)
     station = GripperStation(loop, boards, plant)
     ctl = station.controller

@@ -24,7 +24,7 @@ from pyrt.db import copy_station, load_station, station_directory
 from pyrt.errors import BoardError, ConfigError
 from pyrt.scheduler import Loop, SimClock, WallClock
 from pyrt.sim.boardsim import BoardServer
-from pyrt.sim.world import GripperWorld, ManipulatorWorld
+from pyrt.sim.world import GRIPPER_BOARDS, MANIPULATOR_BOARDS, GripperWorld, ManipulatorWorld
 from pyrt.station.base import BoardWorld
 from pyrt.station.gripper import GripperStation, build_gripper
 from pyrt.station.manipulator import ManipulatorStation
@@ -116,7 +116,8 @@ def _info(url: str, robot: str, seconds: float = 10.0) -> dict[str, str]:
     deadline = time.monotonic() + seconds
     while True:
         try:
-            with open_boards(url, robot, max_age=0) as b:
+            kinds = GRIPPER_BOARDS if robot == "gripper" else MANIPULATOR_BOARDS
+            with open_boards(url, robot, kinds, max_age=0) as b:
                 return b.info()
         except BoardError as exc:
             if "busy" not in str(exc) or time.monotonic() > deadline:
@@ -173,7 +174,7 @@ def test_killed_board_sim_faults_the_gripper_within_three_ticks_naming_the_url(g
     reports: list[str] = []
     station.close_report = reports.append
     ctl = station.controller
-    link = station.board.link
+    link = station.board.registers.link
     failed: list[int] = []
 
     def recording(fn):
@@ -249,7 +250,7 @@ def test_controller_that_closes_its_socket_without_a_stop_leaves_the_outputs_off
         shell.onecmd("I")
         shell.onecmd("P-1B86")
         assert _until(lambda: station.controller.dac != DAC_NULL, 10.0), out.getvalue()
-        station.board.link._sock.shutdown(2)  # the socket closes, nothing said
+        station.board.registers.link._sock.shutdown(2)  # the socket closes, nothing said
         t_cut = time.monotonic()
         info = _info(url, "gripper", 2.0)
         assert info["dac"] == str(DAC_NULL), info
@@ -419,24 +420,24 @@ def test_a_down_link_answers_only_what_the_drop_did(gripper_server):
     from pyrt.boards.gripper import DAC, LED_LO
     from pyrt.boards.tio10 import AWO_BITS, DIR_BITS
 
-    with open_boards(gripper_server.url, "gripper", max_age=0) as b:
+    with open_boards(gripper_server.url, "gripper", GRIPPER_BOARDS, max_age=0) as b:
         assert b.down is None and b.has_info
         gripper_server.close()
         with pytest.raises(BoardError):
             b.poll(0)
         assert b.down is not None
-        b.gripper.write(DAC, DAC_NULL)
+        b["gripper"].write(DAC, DAC_NULL)
         for write in ((DAC, 0x90), (LED_LO, 0)):
             with pytest.raises(BoardError, match="link is down"):
-                b.gripper.write(*write)
+                b["gripper"].write(*write)
     world = ManipulatorWorld.from_station(load_station(station_directory("prototype")))
     server = BoardServer(world, "127.0.0.1", 0, watchdog_s=30.0)
     server.start()
-    with open_boards(server.url, "manipulator") as b:
+    with open_boards(server.url, "prototype", MANIPULATOR_BOARDS) as b:
         server.close()
         with pytest.raises(BoardError):
             b.poll(0)
-        tio = b.tio10
+        tio = b["tio10"]
         tio.disarm(7)
         tio.set_bit(*AWO_BITS[7], True)
         assert not tio.armed(7)
@@ -444,7 +445,7 @@ def test_a_down_link_answers_only_what_the_drop_did(gripper_server):
             tio.set_bit(*DIR_BITS[7], True)
         with pytest.raises(BoardError):
             tio.arm(7)
-    with open_boards("sim:", "gripper") as b:  # in process: nothing to lose, nothing to tell
+    with open_boards("sim:", "gripper", GRIPPER_BOARDS) as b:  # in process: nothing to lose, nothing to tell
         assert b.down is None and not b.has_info
         with pytest.raises(ConfigError):
             b.info()

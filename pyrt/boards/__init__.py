@@ -1,12 +1,18 @@
 """Level 1: register-level boards, their interfaces and their back ends.
 
-8031 RAM image and ports, the gripper cage (:mod:`pyrt.boards.gripper`),
-the TIO10's counter and stepper channels, the dataConcentrator's counters
-and ADCs; the in-process simulated boards; and the back ends chosen by URL
-(:func:`open_boards`: ``sim:``, ``tcp://HOST:PORT``, or a scheme registered
-through the ``pyrt.boards`` entry points; see :mod:`pyrt.boards.registry`).
+Board kinds that declare their registers (:class:`BoardKind`,
+:class:`Register`; :mod:`pyrt.boards.registers`) and the generic
+in-process :class:`RegisterBoard`; the built-in kinds
+(:mod:`pyrt.boards.kinds`): the 8031 RAM image and ports with the gripper
+cage (:mod:`pyrt.boards.gripper`), the TIO10's counter and stepper channels,
+the dataConcentrator's counters and ADCs; the in-process simulated boards;
+and the back ends chosen by URL (:func:`open_boards`: ``sim:``,
+``tcp://HOST:PORT``, or a scheme registered through the ``pyrt.boards``
+entry points; see :mod:`pyrt.boards.registry`), which open the boards a
+station declares as a :class:`Boards` mapping.
 """
 
+from pyrt.boards.registers import INPUT, OUTPUT, BoardKind, Register, RegisterBoard
 from pyrt.boards.registry import (
     DEFAULT_URL,
     ENTRY_POINT_GROUP,
@@ -21,8 +27,13 @@ from pyrt.boards.registry import (
 __all__ = [
     "DEFAULT_URL",
     "ENTRY_POINT_GROUP",
+    "INPUT",
+    "OUTPUT",
+    "BoardKind",
     "BoardURL",
     "Boards",
+    "Register",
+    "RegisterBoard",
     "known_schemes",
     "open_boards",
     "parse_board_url",

@@ -1,35 +1,44 @@
 """Board back ends chosen by URL, as pySerial's ``serial_for_url`` chooses a port.
 
-A station asks for its robot's boards with one call and never names a back
-end class::
+A station declares its boards, a name for each and its kind
+(:class:`~pyrt.boards.registers.BoardKind`), and asks for them with one
+call, never naming a back end class::
 
-    boards = open_boards("sim:", "gripper", cpu=cpu)         # in process (the default)
-    boards = open_boards("tcp://127.0.0.1:5055", "manipulator", timeout=0.5)
+    boards = open_boards("sim:", "gripper", {"gripper": GRIPPER_CAGE}, cpu=cpu)
+    boards = open_boards("tcp://127.0.0.1:5055", "prototype",
+                         {"tio10": TIO10_KIND, "dc": DATACONCENTRATOR}, timeout=0.5)
+    boards = open_boards(url, "arm", {"servo": SERVO})   # a kind of one's own
 
-and gets a :class:`Boards`: the register-level board objects of that robot
-(``gripper`` mapped into ``cpu``, or ``tio10`` and ``dc``), ``poll(now_ns)``
-to attach to the loop before the ready queue, and ``close()``.
+and gets a :class:`Boards`: a mapping of those names to the board objects
+(``boards["tio10"]``), ``poll(now_ns)`` to attach to the loop before the
+ready queue, and ``close()``.  A built-in kind gives its typed board
+(:mod:`pyrt.boards.kinds`); a plain kind a
+:class:`~pyrt.boards.registers.RegisterBoard` in process, or a register
+view with the same ``read``/``write`` over ``tcp://``.
 
 Schemes built in:
 
-* ``sim:`` -- the in-process simulated boards
-  (:class:`~pyrt.boards.gripper.SimGripperBoard`,
-  :class:`~pyrt.boards.simboards.SimTIO10` and
-  :class:`~pyrt.boards.simboards.SimDataConcentrator`); ``in_process`` is
-  true and the caller puts the physics (:mod:`pyrt.sim`) behind them;
+* ``sim:`` -- every declared board built in this process
+  (:meth:`BoardKind.sim <pyrt.boards.registers.BoardKind.sim>`);
+  ``in_process`` is true and the caller puts the physics (:mod:`pyrt.sim`)
+  behind them;
 * ``tcp://HOST:PORT[?timeout=S&connect_timeout=S&max_age=S]`` -- the boards
   of ``pyrt board-sim`` in another process (:mod:`pyrt.boards.tcp`,
   protocol in :mod:`pyrt.boards.wire`).
 
-Options come from the URL's query and from keyword arguments (these win).
-Another back end registers its scheme without touching pyrt, through the
-entry-point group ``pyrt.boards`` (name: the scheme, value: the factory)::
+Options come from the URL's query and from keyword arguments (these win);
+an option that a declared kind takes (:attr:`BoardKind.options
+<pyrt.boards.registers.BoardKind.options>`, e.g. the gripper cage's
+``cpu``) goes to that kind's builder.  Another back end registers its
+scheme without touching pyrt, through the entry-point group
+``pyrt.boards`` (name: the scheme, value: the factory)::
 
     [project.entry-points."pyrt.boards"]
     mylab = "mylab.boards:open_mylab"
 
-A factory is called as ``factory(url: BoardURL, robot: str, **options)``
-and returns a :class:`Boards`; it raises :class:`~pyrt.errors.ConfigError`
+A factory is called as ``factory(url: BoardURL, station: str, kinds:
+dict[str, BoardKind], **options)`` and returns a :class:`Boards` holding a
+board for every declared name; it raises :class:`~pyrt.errors.ConfigError`
 for an option or URL it cannot use and :class:`~pyrt.errors.BoardError`
 when the boards cannot be reached.  :func:`register_backend` does the same
 from code.  A built-in scheme cannot be replaced.
@@ -40,22 +49,23 @@ from __future__ import annotations
 import importlib
 import importlib.metadata
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 from urllib.parse import parse_qsl, urlsplit
 
-from pyrt.boards.dataconcentrator import DataConcentrator
-from pyrt.boards.gripper import GripperBoard, SimGripperBoard
-from pyrt.boards.i8031 import I8031
-from pyrt.boards.simboards import SimDataConcentrator, SimTIO10
-from pyrt.boards.tio10 import TIO10
+from pyrt.boards.registers import (
+    BoardKind,
+    Registers,
+    check_kinds,
+    options_for,
+    split_options,
+)
 from pyrt.errors import ConfigError
 
 __all__ = [
     "DEFAULT_URL",
     "ENTRY_POINT_GROUP",
-    "ROBOTS",
     "BackendFactory",
     "BoardURL",
     "Boards",
@@ -71,8 +81,6 @@ __all__ = [
 DEFAULT_URL = "sim:"
 #: Entry-point group of third-party back ends (name: scheme, value: factory).
 ENTRY_POINT_GROUP = "pyrt.boards"
-#: The robots whose boards a back end opens.
-ROBOTS = ("gripper", "manipulator")
 
 _SCHEME = re.compile(r"[A-Za-z][A-Za-z0-9+.-]*")
 
@@ -99,49 +107,49 @@ class BoardURL:
 
 
 class BackendFactory(Protocol):
-    """Opens the boards of ``robot`` at ``url`` (see the module text)."""
+    """Opens the declared boards of ``station`` at ``url`` (see the module text)."""
 
-    def __call__(self, url: BoardURL, robot: str, **options: Any) -> Boards: ...
+    def __call__(self, url: BoardURL, station: str, kinds: dict[str, BoardKind],
+                 **options: Any) -> Boards: ...
 
 
-class Boards:
-    """The boards a back end opened for one robot.
+class Boards(Mapping[str, Any]):
+    """The boards a back end opened for one station: board name -> board.
 
-    ``gripper`` (with the ``cpu`` it is mapped into) for the gripper;
-    ``tio10`` and ``dc`` for the manipulator.  ``in_process``: the boards
-    are simulated in this process and the caller puts the world behind them
-    (``sim:``); otherwise the world is elsewhere.  ``world`` is what the
-    back end says it drives (board-sim's world name), or "".
+    ``kinds`` are the declared kinds by name; :meth:`registers` the register
+    view of a board (for a built-in kind's typed board, its kind's view).
+    ``in_process``: the boards are simulated in this process and the caller
+    puts the world behind them (``sim:``); otherwise the world is elsewhere.
+    ``world`` is what the back end says it drives (board-sim's station
+    name), or "".  ConfigError if a declared board is missing.
     """
 
     def __init__(
         self,
         url: str,
-        robot: str,
+        station: str,
+        boards: Mapping[str, Any],
+        kinds: Mapping[str, BoardKind],
         *,
         in_process: bool,
-        gripper: GripperBoard | None = None,
-        cpu: I8031 | None = None,
-        tio10: TIO10 | None = None,
-        dc: DataConcentrator | None = None,
         world: str = "",
+        views: Mapping[str, Registers] | None = None,
         poll: Callable[[int], None] | None = None,
         close: Callable[[], None] | None = None,
         down: Callable[[], str | None] | None = None,
         info: Callable[[], dict[str, str]] | None = None,
         resync: Callable[[], None] | None = None,
     ):
-        if robot == "gripper" and (gripper is None or cpu is None):
-            raise ConfigError(f"board URL {url!r}: the back end opened no gripper board")
-        if robot == "manipulator" and (tio10 is None or dc is None):
-            raise ConfigError(f"board URL {url!r}: the back end opened no TIO10/dataConcentrator")
+        missing = [name for name in kinds if name not in boards]
+        if missing:
+            raise ConfigError(f"board URL {url!r}: the back end opened no "
+                              f"{', '.join(missing)} board")
         self.url = url
-        self.robot = robot
+        self.station = station
+        self.kinds: dict[str, BoardKind] = dict(kinds)
+        self._boards: dict[str, Any] = {name: boards[name] for name in kinds}
+        self._views = dict(views) if views is not None else {}
         self.in_process = in_process
-        self.gripper = gripper
-        self.cpu = cpu
-        self.tio10 = tio10
-        self.dc = dc
         self.world = world
         self._poll = poll
         self._close = close
@@ -149,6 +157,30 @@ class Boards:
         self._info = info
         self._resync = resync
         self.closed = False
+
+    # -- the mapping -------------------------------------------------------------------
+
+    def __getitem__(self, name: str) -> Any:
+        try:
+            return self._boards[name]
+        except KeyError:
+            raise KeyError(f"{self.station} declared no board {name!r}; boards: "
+                           f"{', '.join(self._boards)}") from None
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._boards)
+
+    def __len__(self) -> int:
+        return len(self._boards)
+
+    def registers(self, name: str) -> Registers:
+        """The register view of board ``name`` (read/write by register name)."""
+        view = self._views.get(name)
+        if view is None:
+            view = self._views[name] = self.kinds[name].view(self[name])
+        return view
+
+    # -- the back end ------------------------------------------------------------------
 
     def poll(self, now_ns: int) -> None:
         """Per tick, before the ready queue: bring the inputs of this tick in
@@ -202,7 +234,7 @@ class Boards:
         self.close()
 
     def __repr__(self) -> str:
-        return f"<Boards {self.robot} at {self.url}>"
+        return f"<Boards {self.station} ({', '.join(self._boards)}) at {self.url}>"
 
 
 # -- URLs -----------------------------------------------------------------------------
@@ -306,22 +338,27 @@ def backend(scheme: str, url: str | None = None) -> BackendFactory:
     return factory
 
 
-def open_boards(url: str | None, robot: str, **options: Any) -> Boards:
-    """Open the boards of ``robot`` (``gripper`` or ``manipulator``) at ``url``.
+def open_boards(url: str | None, station: str, kinds: Mapping[str, BoardKind],
+                **options: Any) -> Boards:
+    """Open the boards that ``station`` declares in ``kinds`` (board name ->
+    :class:`~pyrt.boards.registers.BoardKind`) at ``url``.
 
     ``url`` None means :data:`DEFAULT_URL`.  Options: the URL's query, then
-    ``options`` (which win); for the gripper, ``cpu=`` the
-    :class:`~pyrt.boards.i8031.I8031` to map the board into (a new one if
-    not given).  Raises ConfigError for a malformed URL, an unknown scheme,
-    or an option the back end does not take, and BoardError when the boards
-    cannot be reached.
+    ``options`` (which win); an option a declared kind takes goes to its
+    builder (the gripper cage's ``cpu=``, the
+    :class:`~pyrt.boards.i8031.I8031` to map it into; a new one if not
+    given).  Raises ConfigError for a malformed URL, an unknown scheme, a
+    declaration that is not one, or an option the back end does not take,
+    and BoardError when the boards cannot be reached.
     """
-    if robot not in ROBOTS:
-        raise ConfigError(f"no boards for robot {robot!r}; robots: {', '.join(ROBOTS)}")
+    if not isinstance(station, str) or not station or not station.isascii() \
+            or any(c.isspace() for c in station):
+        raise ConfigError(f"a station's name is one ASCII word, got {station!r}")
+    checked = check_kinds(kinds)
     parsed = parse_board_url(url if url is not None else DEFAULT_URL)
     factory = backend(parsed.scheme, parsed.text)
     merged: dict[str, Any] = {**parsed.options, **options}
-    boards = factory(parsed, robot, **merged)
+    boards = factory(parsed, station, checked, **merged)
     if not isinstance(boards, Boards):
         raise ConfigError(f"board back end {parsed.scheme!r} returned {type(boards).__name__}, "
                           "not Boards")
@@ -331,16 +368,15 @@ def open_boards(url: str | None, robot: str, **options: Any) -> Boards:
 # -- sim: ------------------------------------------------------------------------------
 
 
-def open_sim(url: BoardURL, robot: str, *, cpu: I8031 | None = None, **options: Any) -> Boards:
-    """The ``sim:`` back end: register files in this process; the caller
-    attaches the physics.  It takes no host, path or option but ``cpu``."""
+def open_sim(url: BoardURL, station: str, kinds: dict[str, BoardKind], **options: Any) -> Boards:
+    """The ``sim:`` back end: every declared board built in this process
+    (:meth:`BoardKind.sim <pyrt.boards.registers.BoardKind.sim>`); the caller
+    attaches the physics.  It takes no host, path or option but those of
+    the declared kinds."""
     if url.host or url.port is not None or url.path:
         raise url.error("sim: takes no host, port or path; write it as sim:")
-    if options:
-        raise url.error(f"sim: takes no option {', '.join(sorted(options))}")
-    if robot == "gripper":
-        cpu = cpu if cpu is not None else I8031()
-        return Boards(url.text, robot, in_process=True, gripper=SimGripperBoard(cpu), cpu=cpu,
-                      world="sim")
-    return Boards(url.text, robot, in_process=True, tio10=SimTIO10(), dc=SimDataConcentrator(),
-                  world="sim")
+    mine, rest = split_options(kinds, options)
+    if rest:
+        raise url.error(f"sim: takes no option {', '.join(sorted(rest))}")
+    boards = {name: kind.sim(**options_for(kind, mine)) for name, kind in kinds.items()}
+    return Boards(url.text, station, boards, kinds, in_process=True, world="sim")

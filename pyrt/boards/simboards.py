@@ -161,6 +161,11 @@ class SimDataConcentrator(DataConcentrator):
     def read_adc(self, channel: int) -> int:
         return self._adc.get(check_adc_channel(channel), 0)
 
+    def counter_values(self) -> list[int]:
+        """Every counter, addresses 0..255 (for a board server)."""
+        counters = self._counters
+        return [counters.get(a, 0) for a in range(256)]
+
     def adc_codes(self) -> list[int]:
         """The latest conversion of every ADC channel, 0..15 (for a board server)."""
         adc = self._adc

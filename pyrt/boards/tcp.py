@@ -1,23 +1,32 @@
 """The ``tcp://HOST:PORT`` back end: the boards of ``pyrt board-sim`` in another process.
 
-Every register access is one request line and one reply line on a TCP
-connection (:mod:`pyrt.boards.wire`).  :class:`TcpGripperBoard` implements
-:class:`~pyrt.boards.gripper.GripperBoard` and maps itself into the 8031's
-external data space exactly as the simulated board does, so the controller
-program is the same; :class:`TcpTIO10` and :class:`TcpDataConcentrator`
-implement the manipulator's :class:`~pyrt.boards.tio10.TIO10` and
-:class:`~pyrt.boards.dataconcentrator.DataConcentrator`.
+Every register access is a read or write of a declared register, one
+request line and one reply line on a TCP connection (:mod:`pyrt.boards.wire`).
+:class:`TcpRegisters` is the client of one connection;
+:class:`TcpBoardRegisters` the register view of one of its boards (``read``,
+``write`` by register name, as :class:`~pyrt.boards.registers.RegisterBoard`
+has them).  A station gets, for each board it declares, what the board's
+kind makes of that view (:meth:`BoardKind.remote
+<pyrt.boards.registers.BoardKind.remote>`): the view itself for a plain
+kind, the typed interface for a built-in one (the gripper cage mapped into
+the 8031 exactly as the simulated board is, so the controller program is
+the same; the TIO10; the dataConcentrator; :mod:`pyrt.boards.kinds`).
+
+On connect the greeting names the station and its boards with their kinds:
+every board the station declares must be there with the same kind and
+fingerprint, else ConfigError names those missing or different.
 
 One round trip per tick.  ``poll(now_ns)`` (attach it to the loop before
-the ready queue) reads every input register with one ``SNAP``; the reads
-of that tick are answered from it, and a write goes to the board at once
-and updates the copy, so a read after a write sees the value written.  A
+the ready queue) reads every input register of the declared boards with
+one ``SNAP``; the input reads of that tick are answered from it (and a
+board with a ``poll(now_ns)`` of its own, the gripper cage, then raises
+the encoder interrupts that arrived).  Every readable output is read once
+on opening (pipelined: one exchange), and again when the watchdog has
+turned the outputs off; a write goes to the board at once and is
+remembered, so a read of an output is answered without a round trip.  A
 copy older than ``max_age`` seconds (default 0.05) is not used: a read
-outside the ticks goes to the board.  For the gripper the same ``SNAP``
-carries the encoder's pulse counters, and ``poll`` raises the 8031's
-external interrupts 0 and 1 once per pulse that arrived since the last
-poll (the in-process board raises them as the encoder turns; the count per
-tick is the same).
+outside the ticks goes to the board; ``max_age=0`` sends every read to the
+board, outputs too.
 
 Failures.  A connection refused, reset or closed, or no reply within
 ``timeout`` seconds (default 0.25), raises :class:`~pyrt.errors.BoardError`
@@ -25,13 +34,14 @@ naming the URL, and the link stays down: every later access raises it too,
 at once (board-sim turns its outputs off when the connection drops; a link
 never resumes a half-known state).  Only what the drop itself did is still
 answered on a down link, without a round trip, so that a reflex action can
-finish: writing the DAC's null (80), disarming a TIO10 channel and setting
-its all-windings-off bit succeed, and a channel reads as disarmed.
+finish: writing an output's declared ``off`` value succeeds, and an output
+that declares one reads as off.
 
 When board-sim's watchdog has turned the outputs off while the link was
 up (the controller's loop stalled longer than the watchdog time), the next
-``poll`` raises BoardError once, saying so; the link stays up.  A value
-the board refuses raises ``ValueError``, as the in-process boards do.
+``poll`` raises BoardError once, saying so, and forgets the outputs it
+remembered; the link stays up.  A value the board refuses raises
+``ValueError``, as the in-process boards do.
 """
 
 from __future__ import annotations
@@ -41,45 +51,24 @@ import socket
 import struct
 import threading
 import time
+from collections.abc import Iterable, Mapping
 from typing import Any
 
-from pyrt.boards.dataconcentrator import (
-    COUNTER_BITS,
-    DataConcentrator,
-    check_adc_channel,
-    check_counter_address,
-)
-from pyrt.boards.gripper import (
-    DAC,
-    DAC_NULL,
-    PULSE_MODULUS,
-    REGISTERS,
-    GripperBoard,
-    check_byte,
-    check_register,
-)
-from pyrt.boards.i8031 import I8031
+from pyrt.boards.kinds import RemoteDataConcentrator, RemoteGripperBoard, RemoteTIO10
+from pyrt.boards.registers import BoardKind, options_for, split_options
 from pyrt.boards.registry import Boards, BoardURL
-from pyrt.boards.tio10 import (
-    AWO_BITS,
-    MAX_PERIOD,
-    MIN_PERIOD,
-    TIO10,
-    check_channel,
-    check_port,
-    source_hz,
-)
-from pyrt.boards.wire import GREETING, MANIPULATOR_SNAP, MAX_LINE, VERSION
+from pyrt.boards.wire import MAX_LINE, WireError, parse_greeting
 from pyrt.errors import BoardError, ConfigError
 
 __all__ = [
     "DEFAULT_CONNECT_TIMEOUT_S",
     "DEFAULT_MAX_AGE_S",
     "DEFAULT_TIMEOUT_S",
+    "TcpBoardRegisters",
     "TcpDataConcentrator",
     "TcpGripperBoard",
     "TcpLink",
-    "TcpManipulatorBoards",
+    "TcpRegisters",
     "TcpTIO10",
     "open_tcp",
 ]
@@ -88,16 +77,17 @@ DEFAULT_TIMEOUT_S = 0.25
 DEFAULT_CONNECT_TIMEOUT_S = 2.0
 DEFAULT_MAX_AGE_S = 0.05
 
-_COUNTER_MASK = (1 << COUNTER_BITS) - 1
-#: The registers of a gripper SNAP reply, after the two pulse counts.
-_SNAP_REGISTERS = tuple(REGISTERS)
+#: The typed boards over tcp:// (the built-in kinds' remote adapters).
+TcpGripperBoard = RemoteGripperBoard
+TcpTIO10 = RemoteTIO10
+TcpDataConcentrator = RemoteDataConcentrator
 
 
 class TcpLink:
     """One connection to board-sim: a request line out, a reply line back.
 
     Thread-safe (one request at a time).  Reads the greeting on connect:
-    ``kind`` (gripper/manipulator), ``world`` (its name) and
+    ``station`` (whose world is served), ``boards`` (name -> kind tag) and
     ``watchdog_s``.  Failures raise BoardError naming ``url`` and leave the
     link down.
     """
@@ -139,15 +129,14 @@ class TcpLink:
             self._fail(f"no greeting: {_why(exc)}", "connect")
         if greeting[:1] == ["ERR"]:
             self._fail(" ".join(greeting[1:]) or "refused", "connect")
-        if len(greeting) < 6 or greeting[:2] != ["OK", GREETING] or greeting[2] != str(VERSION):
-            self._fail(f"not a pyrt board-sim (protocol {VERSION}): greeting "
-                       f"{' '.join(greeting)[:80]!r}", "connect")
-        self.kind = greeting[3]
-        self.world = greeting[4]
         try:
-            self.watchdog_s = int(greeting[5]) / 1000.0
-        except ValueError:
-            self._fail(f"bad greeting {' '.join(greeting)[:80]!r}", "connect")
+            hello = parse_greeting(" ".join(greeting))
+        except WireError as exc:
+            self._fail(exc.text, "connect")
+        #: The station whose world board-sim serves, and its boards: name -> kind tag.
+        self.station = hello.station
+        self.boards = hello.boards
+        self.watchdog_s = hello.watchdog_ms / 1000.0
 
     def check_trips(self, trips: int) -> None:
         """Raise BoardError once when the board's watchdog count has grown
@@ -186,6 +175,34 @@ class TcpLink:
             with self._lock:
                 self._fail(f"reply {payload[:60]!r} is not numbers", line)
             raise  # pragma: no cover - _fail raises
+
+    def pipeline(self, lines: list[str]) -> list[list[int]]:
+        """Send ``lines`` at once, then read their replies: the numbers of each
+        (BoardError if any is an error: used for reads that cannot be refused)."""
+        if not lines:
+            return []
+        data = "".join(f"{line}\n" for line in lines).encode("ascii")
+        with self._lock:
+            if self._down is not None:
+                raise BoardError(self.url, f"{lines[0]}: the link is down ({self._down})")
+            try:
+                self._sock.sendall(data)
+                replies = [self._readline() for _ in lines]
+            except (TimeoutError, BlockingIOError):
+                self._fail(f"no reply within {self.timeout:g} s", lines[0])
+            except (OSError, EOFError) as exc:
+                self._fail(_why(exc), lines[0])
+            self.requests += len(lines)
+        out: list[list[int]] = []
+        for line, reply in zip(lines, replies, strict=True):
+            try:
+                if reply[:2] != b"OK":
+                    raise ValueError
+                out.append(list(map(int, reply[2:].split())))
+            except ValueError:
+                with self._lock:
+                    self._fail(f"unexpected reply {reply[:60]!r}", line)
+        return out
 
     def _exchange(self, line: str) -> bytes:
         """One round trip; the payload of the ``OK`` reply."""
@@ -260,227 +277,175 @@ def _why(exc: BaseException) -> str:
     return getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
 
 
-# -- the gripper -----------------------------------------------------------------------
+# -- the registers of one connection ---------------------------------------------------------
 
 
-class TcpGripperBoard(GripperBoard):
-    """The gripper cage of a board-sim, mapped into ``cpu`` (see the module text)."""
+class TcpRegisters:
+    """The declared boards of one board-sim connection, by register (see the module text).
 
-    def __init__(self, link: TcpLink, cpu: I8031, *, max_age: float = DEFAULT_MAX_AGE_S):
+    ``kinds``: the station's boards (name -> kind), each checked against the
+    greeting.  :meth:`poll` takes the tick's copy of every input;
+    :meth:`read`, :meth:`write` and :meth:`write_many` reach one register.
+    """
+
+    def __init__(self, link: TcpLink, kinds: Mapping[str, BoardKind], *,
+                 max_age: float = DEFAULT_MAX_AGE_S):
         self.link = link
         self.url = link.url
-        self.cpu = cpu
+        self.kinds = dict(kinds)
         self.max_age_ns = int(max_age * 1e9)
-        self._values: dict[int, int] = {}
+        self._check_greeting()
+        # every board served, in its order: a plain SNAP; else name the boards declared
+        self._snap_request = ("SNAP" if list(link.boards) == list(self.kinds)
+                              else "SNAP " + " ".join(self.kinds))
+        self._layout = [(board, reg.name, reg.count) for board, kind in self.kinds.items()
+                        for reg in kind.inputs()]
+        self._values = 1 + sum(count for _, _, count in self._layout)
+        #: The tick's copy of the inputs: board -> register -> values.
+        self._image: dict[str, dict[str, list[int]]] = {b: {} for b in self.kinds}
+        #: Outputs as last written or read: (board, register, index) -> value.
+        self._outputs: dict[tuple[str, str, int], int] = {}
         self._fresh_until = 0
-        self._up, self._down = self._snap()  # pulses before we came are not ours
-        self._fresh_until = 0
-        self.map_xdata(cpu)
 
-    def _snap(self) -> tuple[int, int]:
-        nums = self.link.request_ints("SNAP")
-        if len(nums) != 3 + len(_SNAP_REGISTERS):
-            self.link._fail(f"SNAP answered {len(nums)} values", "SNAP")
-        self._values = dict(zip(_SNAP_REGISTERS, nums[3:], strict=True))
-        self._fresh_until = time.monotonic_ns() + self.max_age_ns
-        self.link.check_trips(nums[0])
-        return nums[1], nums[2]
+    def _check_greeting(self) -> None:
+        served = self.link.boards
+        missing = [f"{n} ({k.name})" for n, k in self.kinds.items() if n not in served]
+        different = [f"{n} (declared {k.tag}, served {served[n]})"
+                     for n, k in self.kinds.items() if n in served and served[n] != k.tag]
+        if missing or different:
+            self.link.close()
+            what = "; ".join(p for p in (
+                f"missing: {', '.join(missing)}" if missing else "",
+                f"different: {', '.join(different)}" if different else "") if p)
+            have = " ".join(f"{n}={t}" for n, t in served.items()) or "none"
+            raise ConfigError(f"board URL {self.url!r}: board-sim there serves the "
+                              f"{self.link.station} station (boards {have}), not the boards "
+                              f"declared here: {what}")
 
-    def read(self, addr: int) -> int:
-        check_register(addr)
-        if time.monotonic_ns() < self._fresh_until:
-            return self._values[addr]
-        return self.link.request_ints(f"R {addr}")[0]
-
-    def write(self, addr: int, value: int) -> None:
-        check_register(addr, write=True)
-        check_byte(value)
-        if addr == DAC and value == DAC_NULL and self.link.down is not None:
-            self._values[addr] = value  # board-sim nulled it when the link dropped
-            return
-        self.link.request(f"W {addr} {value}")
-        self._values[addr] = value
-
-    def pulse_counts(self) -> tuple[int, int]:
-        return self._up, self._down
-
-    def poll(self, now_ns: int) -> None:
-        up, down = self._snap()
-        n_up = (up - self._up) % PULSE_MODULUS
-        n_down = (down - self._down) % PULSE_MODULUS
-        self._up, self._down = up, down
-        if n_up or n_down:
-            self.deliver(self.cpu, n_up, n_down)
-
-    def close(self) -> None:
-        self.link.close()
-
-
-# -- the manipulator --------------------------------------------------------------------
-
-_RTC = MANIPULATOR_SNAP["rtc"][0]
-_PORT = MANIPULATOR_SNAP["port"][0]
-_SRC = MANIPULATOR_SNAP["src"][0]
-_PER = MANIPULATOR_SNAP["per"][0]
-_ARMED = MANIPULATOR_SNAP["armed"][0]
-_PULSES = MANIPULATOR_SNAP["pulses"][0]
-_ADC = MANIPULATOR_SNAP["adc"][0]
-_CNT = MANIPULATOR_SNAP["cnt"][0]
-_AWO = frozenset(AWO_BITS.values())
-
-
-class TcpManipulatorBoards:
-    """The TIO10 and dataConcentrator of a board-sim on one link, with the
-    per-tick copy of their inputs that :meth:`poll` takes."""
-
-    def __init__(self, link: TcpLink, *, max_age: float = DEFAULT_MAX_AGE_S):
-        self.link = link
-        self.url = link.url
-        self.max_age_ns = int(max_age * 1e9)
-        self._snap: list[int] = []
-        self._counters: dict[int, int] = {}
-        #: Counter addresses read so far: the next SNAP brings them along.
-        self._addresses: tuple[int, ...] = ()
-        self._fresh_until = 0
-        self.tio10 = TcpTIO10(self)
-        self.dc = TcpDataConcentrator(self)
+    # -- per tick ------------------------------------------------------------------------
 
     def poll(self, now_ns: int = 0) -> None:
-        """Read every input register in one round trip (the tick's copy)."""
-        addrs = self._addresses
-        req = "SNAP " + " ".join(map(str, addrs)) if addrs else "SNAP"
-        snap = self.link.request_ints(req)
-        if len(snap) != _CNT + len(addrs):
-            self.link._fail(f"SNAP answered {len(snap)} values", "SNAP")
-        self._counters = dict(zip(addrs, snap[_CNT:], strict=True))
-        self._snap = snap
+        """Read every declared input in one round trip (the tick's copy)."""
+        nums = self.link.request_ints(self._snap_request)
+        if len(nums) != self._values:
+            self.link._fail(f"SNAP answered {len(nums)} values, not {self._values}", "SNAP")
+        pos = 1
+        image = self._image
+        for board, reg, count in self._layout:
+            image[board][reg] = nums[pos:pos + count]
+            pos += count
         self._fresh_until = time.monotonic_ns() + self.max_age_ns
-        self.link.check_trips(snap[0])
+        try:
+            self.link.check_trips(nums[0])
+        except BoardError:
+            self.load_outputs()  # the watchdog turned them off: read them again
+            raise
 
-    def fresh(self) -> bool:
-        """Whether reads are answered from the tick's copy now."""
-        return time.monotonic_ns() < self._fresh_until
+    def load_outputs(self) -> None:
+        """Read every readable output in one pipelined exchange (on opening,
+        and after the watchdog turned them off)."""
+        self._outputs.clear()
+        keys = [(board, reg.name, i) for board, kind in self.kinds.items()
+                for reg in kind.outputs() if reg.readback for i in range(reg.count)]
+        replies = self.link.pipeline([f"R {b} {n} {i}" for b, n, i in keys])
+        for key, values in zip(keys, replies, strict=True):
+            if len(values) != 1:
+                self.link._fail(f"R answered {len(values)} values", "R")
+            self._outputs[key] = values[0]
 
-    def _get(self, index: int, request: str) -> int:
-        if time.monotonic_ns() < self._fresh_until:
-            return self._snap[index]
-        return self.link.request_ints(request)[0]
+    def forget(self) -> None:
+        """Forget the watchdog count and read the outputs again (the loop starts)."""
+        self.link.forget_trips()
+        self.load_outputs()
 
-    def _put(self, index: int, value: int) -> None:
-        if self._snap:
-            self._snap[index] = value
+    # -- one register ------------------------------------------------------------------------
 
-    def _counter(self, address: int) -> int:
-        if time.monotonic_ns() < self._fresh_until:
-            raw = self._counters.get(address)
-            if raw is not None:
-                return raw
-        if address not in self._addresses:
-            self._addresses = (*self._addresses, address)
-        return self.link.request_ints(f"CNT {address}")[0]
+    def read(self, board: str, name: str, index: int = 0) -> int:
+        """``board``'s register ``name[index]`` (see the module text)."""
+        reg = self.kinds[board].check_read(name, index)
+        if reg.is_input:
+            if time.monotonic_ns() < self._fresh_until:
+                return self._image[board][name][index]
+        else:
+            if self.link.down is not None:
+                off = reg.off_value(index)
+                if off is not None:
+                    return off  # board-sim turned it off when the link dropped
+            elif self.max_age_ns:
+                value = self._outputs.get((board, name, index))
+                if value is not None:
+                    return value
+        value = self.link.request_ints(f"R {board} {name} {index}")[0]
+        if not reg.is_input:
+            self._outputs[(board, name, index)] = value
+        return value
 
-    def _clear(self, address: int) -> None:
-        self.link.request(f"CLR {address}")
-        if address in self._counters:
-            self._counters[address] = 0
-        elif address not in self._addresses:
-            self._addresses = (*self._addresses, address)
+    def write(self, board: str, name: str, value: int, index: int = 0) -> None:
+        """Write ``board``'s output ``name[index]`` (one round trip)."""
+        self.write_many([(board, name, index, value)])
+
+    def write_many(self, writes: Iterable[tuple[str, str, int, int]]) -> None:
+        """Write several outputs, each ``(board, register, index, value)``, in one
+        round trip (checked here first: none is sent if one is refused)."""
+        todo = list(writes)
+        if not todo:
+            return
+        regs = [self.kinds[b].check_write(n, i, v) for b, n, i, v in todo]
+        if self.link.down is not None and all(
+                r.off_value(i) == v for r, (_, _, i, v) in zip(regs, todo, strict=True)):
+            for r, (b, n, i, v) in zip(regs, todo, strict=True):
+                if r.readback:
+                    self._outputs[(b, n, i)] = v
+            return  # board-sim turned them off when the link dropped
+        line = "; ".join(f"W {b} {n} {i} {v}" for b, n, i, v in todo)
+        try:
+            self.link.request(line)
+        except ValueError:
+            for board, name, index, _ in todo:  # those before the refused one stand
+                self._outputs.pop((board, name, index), None)
+            raise
+        for r, (b, n, i, v) in zip(regs, todo, strict=True):
+            if r.readback:
+                self._outputs[(b, n, i)] = v
+
+    def set_cached(self, board: str, name: str, value: int, index: int = 0) -> None:
+        """Set the tick's copy of an input (what a write made of it: a cleared counter)."""
+        values = self._image[board].get(name)
+        if values is not None and 0 <= index < len(values):
+            values[index] = value
 
     def close(self) -> None:
         """Close the link."""
         self.link.close()
 
 
-class TcpTIO10(TIO10):
-    """A board-sim's TIO10 (see the module text)."""
+class TcpBoardRegisters:
+    """One board of a :class:`TcpRegisters`: ``read(name, index=0)`` and
+    ``write(name, value, index=0)`` as a :class:`~pyrt.boards.registers.RegisterBoard`
+    has them."""
 
-    def __init__(self, boards: TcpManipulatorBoards):
-        self._b = boards
-        self.url = boards.url
+    def __init__(self, client: TcpRegisters, board: str):
+        self.client = client
+        self.board = board
+        self.kind = client.kinds[board]
+        self.url = client.url
+        self.link = client.link
 
-    def select_source(self, channel: int, source: int) -> None:
-        check_channel(channel)
-        source_hz(source)
-        self._b.link.request(f"SRC {channel} {source}")
-        self._b._put(_SRC + channel, source)
+    def read(self, name: str, index: int = 0) -> int:
+        return self.client.read(self.board, name, index)
 
-    def source(self, channel: int) -> int:
-        check_channel(channel, allow_rtc=True)
-        return self._b._get(_SRC + channel, f"SRC {channel}")
+    def write(self, name: str, value: int, index: int = 0) -> None:
+        self.client.write(self.board, name, value, index)
 
-    def load_period(self, channel: int, ticks: int) -> None:
-        check_channel(channel)
-        if isinstance(ticks, bool) or not isinstance(ticks, int):
-            raise ValueError(f"period must be an integer tick count, got {ticks!r}")
-        if not MIN_PERIOD <= ticks <= MAX_PERIOD:
-            raise ValueError(
-                f"period {ticks} out of the 16-bit load register's range "
-                f"{MIN_PERIOD}..{MAX_PERIOD} ticks"
-            )
-        self._b.link.request(f"PER {channel} {ticks}")
-        self._b._put(_PER + channel, ticks)
+    def snapshot(self) -> list[int]:
+        """Every input of this board, in declared order."""
+        return [self.read(reg.name, i) for reg in self.kind.inputs() for i in range(reg.count)]
 
-    def period(self, channel: int) -> int:
-        check_channel(channel, allow_rtc=True)
-        return self._b._get(_PER + channel, f"PER {channel}")
+    def set_cached(self, name: str, value: int, index: int = 0) -> None:
+        self.client.set_cached(self.board, name, value, index)
 
-    def arm(self, channel: int) -> None:
-        check_channel(channel)
-        self._b.link.request(f"ARM {channel}")
-        self._b._put(_ARMED + channel, 1)
-
-    def disarm(self, channel: int) -> None:
-        check_channel(channel)
-        if self._b.link.down is None:  # else board-sim disarmed it when the link dropped
-            self._b.link.request(f"DISARM {channel}")
-        self._b._put(_ARMED + channel, 0)
-
-    def armed(self, channel: int) -> bool:
-        check_channel(channel, allow_rtc=True)
-        if self._b.link.down is not None:
-            return False
-        return bool(self._b._get(_ARMED + channel, f"ARMED {channel}"))
-
-    def set_bit(self, port: int, bit: int, value: bool) -> None:
-        if value and (port, bit) in _AWO and self._b.link.down is not None:
-            return  # board-sim set every all-windings-off bit when the link dropped
-        super().set_bit(port, bit, value)
-
-    def pulses(self, channel: int) -> int:
-        check_channel(channel, allow_rtc=True)
-        return self._b._get(_PULSES + channel, f"PULSES {channel}")
-
-    def write_port(self, port: int, value: int) -> None:
-        check_port(port)
-        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 0xFF:
-            raise ValueError(f"PIA port value must be 0..255, got {value!r}")
-        self._b.link.request(f"PORT {port} {value}")
-        self._b._put(_PORT + port, value)
-
-    def read_port(self, port: int) -> int:
-        check_port(port)
-        return self._b._get(_PORT + port, f"PORT {port}")
-
-    def rtc_ticks(self) -> int:
-        return self._b._get(_RTC, "RTC")
-
-
-class TcpDataConcentrator(DataConcentrator):
-    """A board-sim's dataConcentrator (see the module text)."""
-
-    def __init__(self, boards: TcpManipulatorBoards):
-        self._b = boards
-        self.url = boards.url
-
-    def read_counter(self, address: int) -> int:
-        return self._b._counter(check_counter_address(address)) & _COUNTER_MASK
-
-    def clear_counter(self, address: int) -> None:
-        self._b._clear(check_counter_address(address))
-
-    def read_adc(self, channel: int) -> int:
-        check_adc_channel(channel)
-        return self._b._get(_ADC + channel, f"ADC {channel}")
+    def __repr__(self) -> str:
+        return f"<{self.kind.name} board {self.board!r} at {self.url}>"
 
 
 # -- the factory -------------------------------------------------------------------------
@@ -498,21 +463,23 @@ def _seconds(url: BoardURL, name: str, value: Any) -> float:
 
 def open_tcp(
     url: BoardURL,
-    robot: str,
+    station: str,
+    kinds: dict[str, BoardKind],
     *,
-    cpu: I8031 | None = None,
     timeout: Any = DEFAULT_TIMEOUT_S,
     connect_timeout: Any = DEFAULT_CONNECT_TIMEOUT_S,
     max_age: Any = DEFAULT_MAX_AGE_S,
     **options: Any,
 ) -> Boards:
-    """The ``tcp://HOST:PORT`` back end: connect to board-sim and open ``robot``'s boards.
+    """The ``tcp://HOST:PORT`` back end: connect to board-sim and open the declared boards.
 
     Options (seconds): ``timeout`` per access, ``connect_timeout``,
-    ``max_age`` of the per-tick copy (0: every read goes to the board).
+    ``max_age`` of the per-tick copy (0: every read goes to the board);
+    and those of the declared kinds (the gripper cage's ``cpu``).
     """
-    if options:
-        raise url.error(f"tcp: takes no option {', '.join(sorted(options))} "
+    mine, rest = split_options(kinds, options)
+    if rest:
+        raise url.error(f"tcp: takes no option {', '.join(sorted(rest))} "
                         "(it takes timeout, connect_timeout, max_age)")
     if not url.host or url.port is None or url.port == 0:
         raise url.error("tcp: needs a host and a port 1..65535: tcp://HOST:PORT")
@@ -522,20 +489,24 @@ def open_tcp(
     ct = _seconds(url, "connect_timeout", connect_timeout)
     age = _seconds(url, "max_age", max_age)
     link = TcpLink(url.text, url.host, url.port, timeout=t, connect_timeout=ct)
-    if link.kind != robot:
+    client = TcpRegisters(link, kinds, max_age=age)
+    try:
+        client.poll(0)  # the first copy: what the boards hold as this controller comes
+        client.load_outputs()
+        views = {name: TcpBoardRegisters(client, name) for name in kinds}
+        boards = {name: kind.remote(views[name], **options_for(kind, mine))
+                  for name, kind in kinds.items()}
+    except BaseException:
         link.close()
-        raise ConfigError(f"board URL {url.text!r}: board-sim there serves a {link.kind} "
-                          f"({link.world}), not a {robot}")
-    common: dict[str, Any] = dict(in_process=False, world=link.world, close=link.close,
-                                  down=lambda: link.down, info=link.info,
-                                  resync=link.forget_trips)
-    if robot == "gripper":
-        cpu = cpu if cpu is not None else I8031()
-        try:
-            board = TcpGripperBoard(link, cpu, max_age=age)
-        except BaseException:
-            link.close()
-            raise
-        return Boards(url.text, robot, gripper=board, cpu=cpu, poll=board.poll, **common)
-    boards = TcpManipulatorBoards(link, max_age=age)
-    return Boards(url.text, robot, tio10=boards.tio10, dc=boards.dc, poll=boards.poll, **common)
+        raise
+    pollers = [b.poll for b in boards.values()
+               if not isinstance(b, TcpBoardRegisters) and callable(getattr(b, "poll", None))]
+
+    def poll(now_ns: int) -> None:
+        client.poll(now_ns)
+        for p in pollers:
+            p(now_ns)
+
+    return Boards(url.text, station, boards, kinds, in_process=False, world=link.station,
+                  views=views, poll=poll, close=link.close, down=lambda: link.down,
+                  info=link.info, resync=client.forget)

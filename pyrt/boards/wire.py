@@ -1,128 +1,116 @@
-"""The board-sim wire protocol: register accesses as text lines over TCP (version 1).
+"""The board-sim wire protocol: declared register reads and writes as text lines (version 2).
 
-``pyrt board-sim`` serves a simulated board set (the gripper's cage, or a
-manipulator's TIO10 and dataConcentrator with the rope world behind them);
-:mod:`pyrt.boards.tcp` is the controller's side.  The protocol is small on
-purpose: one request line, one reply line, each register access as the
-board interfaces (:class:`~pyrt.boards.gripper.GripperBoard`,
-:class:`~pyrt.boards.tio10.TIO10`,
-:class:`~pyrt.boards.dataconcentrator.DataConcentrator`) have it, plus one
-``SNAP`` that reads every input of a tick in one round trip.
+``pyrt board-sim`` serves a station's simulated boards with the world
+behind them; :mod:`pyrt.boards.tcp` is the controller's side.  The protocol
+knows no robot: a station declares its boards, a name and a kind each, and
+a kind declares its registers (:mod:`pyrt.boards.registers`; the built-in
+kinds in :mod:`pyrt.boards.kinds`).  Every request is a read or a write of
+a declared register, plus one ``SNAP`` that reads every input of a tick in
+one round trip.
 
 Transport.  One TCP connection per controller.  ASCII lines ending in LF
 (CR LF accepted), at most :data:`MAX_LINE` bytes with the line end.  Every
-request line gets exactly one reply line, in order (a client may pipeline).
-Tokens are separated by spaces; verbs are case-insensitive.  Numbers are
-unsigned integers, decimal or ``0x`` hexadecimal in requests, always decimal
-in replies.
+request line gets exactly one reply line, in order (a client may pipeline
+requests without waiting for the replies).  Tokens are separated by
+spaces; verbs are case-insensitive, board and register names are lower
+case (upper case is taken as lower).  Numbers are integers, decimal or
+``0x`` hexadecimal, with a ``-`` for a negative value of a signed
+register; replies are always decimal.
 
 Greeting.  The server speaks first::
 
-    OK pyrt-board-sim 1 KIND NAME WATCHDOG_MS
+    OK pyrt-board-sim 2 STATION WATCHDOG_MS BOARD=KIND@FINGERPRINT ...
 
-``KIND`` is ``gripper`` or ``manipulator``, ``NAME`` the world (``gripper``,
-or the station's polyaxis name, e.g. ``prototype``), ``WATCHDOG_MS`` the
-watchdog time.  While another controller is connected the server answers
+``STATION`` names the station whose world is served (``gripper``,
+``prototype``, ``arm`` ...), ``WATCHDOG_MS`` the watchdog time, then one
+token per board in declared order: its name, its kind's name and the
+kind's fingerprint (eight hex digits over its register declarations,
+:attr:`~pyrt.boards.registers.BoardKind.fingerprint`).  The controller
+checks that every board it declares is there with the same kind and
+fingerprint, and refuses the boards naming those that are missing or
+different.  While another controller is connected the server answers
 ``ERR busy ...`` instead and closes the connection: one controller at a time.
 
 Replies.  ``OK [VALUE ...]`` or ``ERR CODE TEXT``, codes:
 
 * ``syntax``: not a request (unknown verb, wrong number of arguments, not a
   number, an empty line);
-* ``range``: the board refused the value (a channel, port or address that is
-  not there, a period out of range, arming a channel with no period): the
-  refusal an in-process board raises as ``ValueError``;
+* ``range``: the access is not one the boards have or take: no such board
+  or register, an index or value out of the register's declared range, a
+  write to an input, a read of a write-only register, or a value the board
+  refuses (a period too short, arming a channel with no period): what an
+  in-process board raises as ``ValueError``;
 * ``too-long``: the line exceeds :data:`MAX_LINE` (the rest up to the next
   line end is discarded); ``ascii``: the line is not ASCII;
 * ``internal``: the server failed (a bug; it keeps serving).
 
-An error reply changes nothing and leaves the connection usable.
+An error reply to a single access changes nothing and leaves the connection
+usable.
 
-Requests of every board::
+Requests::
 
-    INFO              OK KEY=VALUE ...    the world's state (not a register access)
-    QUIT              OK bye              then the server closes the connection
+    R BOARD REG [INDEX]            OK VALUE        read a register (INDEX 0 if not given)
+    W BOARD REG [INDEX] VALUE      OK              write an output
+    W ...; W ...; ...              OK              several writes, one reply
+    SNAP [BOARD ...]               OK TRIPS V ...  every input, in one round trip
+    INFO                           OK KEY=VALUE ...  the world's state (not a register access)
+    QUIT                           OK bye          then the server closes the connection
 
-Gripper cage (addresses of :data:`pyrt.boards.gripper.REGISTERS`)::
+Several writes on one line (separated by ``;``) are checked against the
+declarations first (none is made if one is malformed or out of range), then
+made in order; if the board refuses one, those before it stand, the rest
+are not made, and the reply is ``ERR range write K of N: TEXT``.
 
-    R ADDR            OK VALUE            read a register
-    W ADDR VALUE      OK                  write one (not the input ports PA/PB/PC)
-    SNAP              OK TRIPS UP DOWN CMD PA PB PC LEDLO LEDHI DAC
-
-``TRIPS`` counts the watchdog's trips since board-sim started (both
-boards' ``SNAP`` begin with it: a controller that sees it grow learns that
-its outputs were turned off).  ``UP``/``DOWN`` count the encoder pulses the board raised on external
-interrupt 0 and 1 since it started, modulo 2**32; the controller's side
-fires the 8031 vectors for the difference since its last ``SNAP``.
-
-Manipulator: TIO10 clock channels 0..9, PIA ports 0..3, dataConcentrator
-counter addresses 0..255 and ADC channels 0..15::
-
-    SRC CH [S]        OK S | OK           the channel's source F1..F5: read, or select
-    PER CH [T]        OK T | OK           its period (load) register: read, or load
-    ARM CH            OK                  start counting (a period must be loaded)
-    DISARM CH         OK
-    ARMED CH          OK 0|1
-    PULSES CH         OK N                output-pulse counter, modulo 2**16
-    PORT P [V]        OK V | OK           a PIA port: read back, or write
-    RTC               OK TICKS            5 MHz ticks, modulo 2**32
-    CNT A             OK RAW              24-bit up/down counter
-    CLR A             OK                  clear it
-    ADC C             OK CODE             latest 12-bit conversion
-    SNAP [A ...]      OK TRIPS RTC PORT0..3 SRC0..9 PER0..9 ARMED0..9 PULSES0..9 ADC0..15 CNT(A)...
+``SNAP`` answers the inputs of the boards named (every board, in declared
+order, if none is named), each board's input registers in its kind's
+declared order and an array index by index, after ``TRIPS``: the count of
+the watchdog's trips since board-sim started (a controller that sees it
+grow learns that its outputs were turned off).
 
 Watchdog.  Every request except ``INFO`` and ``QUIT`` is a register access.
-When none has come for the watchdog time, the board turns its outputs off,
-as a real motion board does: the gripper's DAC goes to null (80); every
-TIO10 motor channel is disarmed and every all-windings-off bit set.  The
-same happens at once when the controller's connection closes.  A later
-write drives the outputs again.
+When none has come for the watchdog time, the boards turn their outputs
+off, as a real motion board does: every output register that declares an
+``off`` value is written with it (the gripper's DAC to null 80; every TIO10
+motor channel disarmed and every all-windings-off bit set).  The same
+happens at once when the controller's connection closes.  A later write
+drives the outputs again.
 """
 
 from __future__ import annotations
 
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from pyrt.boards.registers import BoardKind
 from pyrt.errors import PyrtError
 
 __all__ = [
     "GREETING",
-    "GRIPPER_SNAP",
-    "GRIPPER_VERBS",
-    "MANIPULATOR_SNAP",
-    "MANIPULATOR_VERBS",
     "MAX_LINE",
     "NOT_ACCESSES",
+    "VERBS",
     "VERSION",
+    "Access",
+    "Greeting",
+    "Request",
     "WireError",
     "error_line",
+    "greeting_line",
     "ok_line",
+    "parse_greeting",
     "parse_request",
 ]
 
 #: The first token after ``OK`` in the greeting, and the protocol version.
 GREETING = "pyrt-board-sim"
-VERSION = 1
+VERSION = 2
 #: Longest line, line end included.
 MAX_LINE = 4096
-
-#: Verb -> the numbers of arguments it takes.
-GRIPPER_VERBS: dict[str, tuple[int, ...]] = {
-    "R": (1,), "W": (2,), "SNAP": (0,), "INFO": (0,), "QUIT": (0,),
-}
-MANIPULATOR_VERBS: dict[str, tuple[int, ...]] = {
-    "SRC": (1, 2), "PER": (1, 2), "ARM": (1,), "DISARM": (1,), "ARMED": (1,),
-    "PULSES": (1,), "PORT": (1, 2), "RTC": (0,), "CNT": (1,), "CLR": (1,), "ADC": (1,),
-    "SNAP": tuple(range(257)), "INFO": (0,), "QUIT": (0,),
-}
+#: The request verbs.
+VERBS = ("R", "W", "SNAP", "INFO", "QUIT")
 #: Requests that are not register accesses (they do not feed the watchdog).
 NOT_ACCESSES = frozenset(("INFO", "QUIT"))
-
-#: Fields of a gripper ``SNAP`` reply, in order.
-GRIPPER_SNAP = ("trips", "up", "down", "cmd", "pa", "pb", "pc", "led_lo", "led_hi", "dac")
-#: Fields of a manipulator ``SNAP`` reply before the counters: name -> (first index, count).
-MANIPULATOR_SNAP = {
-    "trips": (0, 1), "rtc": (1, 1), "port": (2, 4), "src": (6, 10), "per": (16, 10),
-    "armed": (26, 10), "pulses": (36, 10), "adc": (46, 16), "cnt": (62, 0),
-}
 
 
 class WireError(PyrtError):
@@ -134,41 +122,148 @@ class WireError(PyrtError):
         super().__init__(f"{code} {text}")
 
 
-_HEX = frozenset("0123456789abcdefABCDEF")
+@dataclass(frozen=True)
+class Access:
+    """One register access of a request: ``value`` is None for a read."""
+
+    board: str
+    register: str
+    index: int
+    value: int | None = None
+
+    def line(self) -> str:
+        """The access as a request (``R ...`` or ``W ...``)."""
+        if self.value is None:
+            return f"R {self.board} {self.register} {self.index}"
+        return f"W {self.board} {self.register} {self.index} {self.value}"
+
+
+@dataclass(frozen=True)
+class Request:
+    """A parsed request line: the verb, its accesses (``R``: one, ``W``:
+    one or more), or the boards a ``SNAP`` names."""
+
+    verb: str
+    accesses: tuple[Access, ...] = ()
+    boards: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Greeting:
+    """A parsed greeting: the station, the watchdog time, board name -> kind tag."""
+
+    station: str
+    watchdog_ms: int
+    boards: dict[str, str]
+
+
+_NUMBER = re.compile(r"-?(?:0[xX][0-9a-fA-F]{1,16}|[0-9]{1,20})")
+_WORD = re.compile(r"[a-z][a-z0-9_]{0,31}")
 
 
 def _number(token: str) -> int:
-    if token[:2].lower() == "0x":
-        digits = token[2:]
-        if digits and len(digits) <= 16 and _HEX.issuperset(digits):
-            return int(digits, 16)
-    elif token.isdigit() and len(token) <= 20:
-        return int(token)
-    raise WireError("syntax", f"{token!r} is not an unsigned number (decimal or 0x hex)")
+    if not _NUMBER.fullmatch(token):
+        raise WireError("syntax", f"{token[:24]!r} is not a number (decimal or 0x hex)")
+    neg = token.startswith("-")
+    digits = token[1:] if neg else token
+    value = int(digits[2:], 16) if digits[:2].lower() == "0x" else int(digits)
+    return -value if neg else value
 
 
-def parse_request(line: bytes, verbs: dict[str, tuple[int, ...]]) -> tuple[str, list[int]]:
-    """``(VERB, [numbers])`` of one request line (line end removed or not).
+def _kind(kinds: Mapping[str, BoardKind], token: str) -> tuple[str, BoardKind]:
+    name = token.lower()
+    kind = kinds.get(name) if _WORD.fullmatch(name) else None
+    if kind is None:
+        raise WireError("range", f"no board {token[:24]!r}; boards: {' '.join(kinds)}")
+    return name, kind
 
-    Raises :class:`WireError` (``ascii``, ``syntax``) for anything else.
+
+def _access(kinds: Mapping[str, BoardKind], verb: str, args: list[str]) -> Access:
+    write = verb == "W"
+    lo = 3 if write else 2
+    if not lo <= len(args) <= lo + 1:
+        form = "W BOARD REG [INDEX] VALUE" if write else "R BOARD REG [INDEX]"
+        raise WireError("syntax", f"{verb} takes {lo} or {lo + 1} arguments ({form}), "
+                                  f"got {len(args)}")
+    board, kind = _kind(kinds, args[0])
+    numbers = [_number(a) for a in args[2:]]
+    reg_name = args[1].lower()
+    index = numbers[0] if len(numbers) == (2 if write else 1) else 0
+    try:
+        if write:
+            reg = kind.check_write(reg_name, index, numbers[-1])
+        else:
+            reg = kind.check_read(reg_name, index)
+    except ValueError as exc:
+        raise WireError("range", f"{board}: {exc}") from None
+    return Access(board, reg.name, index, numbers[-1] if write else None)
+
+
+def parse_request(line: bytes, kinds: Mapping[str, BoardKind]) -> Request:
+    """The :class:`Request` of one line (line end removed or not), checked
+    against the served boards' ``kinds`` (board name -> kind).
+
+    Raises :class:`WireError` (``ascii``, ``syntax``, ``range``) for
+    anything else, and nothing else.
     """
     try:
         text = line.decode("ascii")
     except UnicodeDecodeError:
         raise WireError("ascii", "requests are ASCII text") from None
+    parts = text.split(";")
+    if len(parts) > 1:
+        accesses = []
+        for part in parts:
+            tokens = part.split()
+            if not tokens or tokens[0].upper() != "W":
+                raise WireError("syntax", "only writes (W ...) may share a line, "
+                                          "separated by ;")
+            accesses.append(_access(kinds, "W", tokens[1:]))
+        return Request("W", tuple(accesses))
     tokens = text.split()
     if not tokens:
         raise WireError("syntax", "empty request")
     verb = tokens[0].upper()
-    counts = verbs.get(verb)
-    if counts is None:
-        raise WireError("syntax", f"unknown request {tokens[0][:20]!r}; known: "
-                                  f"{' '.join(verbs)}")
     args = tokens[1:]
-    if len(args) not in counts:
-        want = " or ".join(str(c) for c in counts) if len(counts) < 4 else "any number of"
-        raise WireError("syntax", f"{verb} takes {want} arguments, got {len(args)}")
-    return verb, [_number(a) for a in args]
+    if verb in ("R", "W"):
+        return Request(verb, (_access(kinds, verb, args),))
+    if verb == "SNAP":
+        names = tuple(_kind(kinds, a)[0] for a in args)
+        if len(set(names)) != len(names):
+            raise WireError("syntax", "SNAP names a board twice")
+        return Request(verb, boards=names)
+    if verb in NOT_ACCESSES:
+        if args:
+            raise WireError("syntax", f"{verb} takes no arguments, got {len(args)}")
+        return Request(verb)
+    raise WireError("syntax", f"unknown request {tokens[0][:20]!r}; known: {' '.join(VERBS)}")
+
+
+def greeting_line(station: str, watchdog_ms: int, kinds: Mapping[str, BoardKind]) -> bytes:
+    """The server's greeting for ``station``'s boards (board name -> kind)."""
+    return ok_line(GREETING, VERSION, station, watchdog_ms,
+                   *(f"{name}={kind.tag}" for name, kind in kinds.items()))
+
+
+def parse_greeting(line: str) -> Greeting:
+    """The :class:`Greeting` of a greeting line; WireError ``syntax`` naming
+    what is wrong (not a board-sim, another version, malformed)."""
+    tokens = line.split()
+    shown = " ".join(tokens)[:80]
+    if tokens[:2] != ["OK", GREETING]:
+        raise WireError("syntax", f"not a pyrt board-sim: greeting {shown!r}")
+    if len(tokens) < 3 or tokens[2] != str(VERSION):
+        raise WireError("syntax", f"a pyrt board-sim of another protocol version (this "
+                                  f"controller speaks {VERSION}): greeting {shown!r}")
+    if len(tokens) < 5 or not tokens[4].isdigit():
+        raise WireError("syntax", f"malformed greeting {shown!r}")
+    boards: dict[str, str] = {}
+    for token in tokens[5:]:
+        name, eq, tag = token.partition("=")
+        if not eq or not _WORD.fullmatch(name) or "@" not in tag or name in boards:
+            raise WireError("syntax", f"malformed board {token[:40]!r} in greeting {shown!r}")
+        boards[name] = tag
+    return Greeting(tokens[3], int(tokens[4]), boards)
 
 
 def ok_line(*values: object) -> bytes:

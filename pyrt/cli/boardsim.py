@@ -1,16 +1,21 @@
-"""``pyrt board-sim``: a robot's simulated boards, served over TCP, their world at real time.
+"""``pyrt board-sim``: a station's simulated boards, served over TCP, their world at real time.
 
-Runs the boards of one robot with the physics behind them (``gripper``: the
-cage and the jaws; ``prototype`` or ``sno``: the TIO10 and dataConcentrator
-with the rope world of that station) and serves their registers on
-``--listen HOST:PORT`` for a controller in another process, which opens
-them with the board URL ``tcp://HOST:PORT``.  The first line printed says
-where (port 0 picks a free port).  The wire protocol is in the module text
-of pyrt.boards.wire.  One controller at a time.
+Runs the boards of one station with the physics behind them and serves
+their declared registers on ``--listen HOST:PORT`` for a controller in
+another process, which opens them with the board URL ``tcp://HOST:PORT``.
+NAME is an installed station that gives a world (``gripper``: the cage and
+the jaws; ``manipulator``: the TIO10 and dataConcentrator with the rope
+world of a station, ``--station prototype|sno`` or ``--db DIR``; the
+names ``prototype`` and ``sno`` are short for ``manipulator --station``
+that station).  ``pyrt board-sim NAME --help`` lists the world's own
+options.  The first line printed says where (port 0 picks a free port).
+The wire protocol is in the module text of pyrt.boards.wire.  One
+controller at a time.
 
 Watchdog: when no register access comes for ``--watchdog`` seconds, or the
-controller's connection closes, the outputs are turned off (gripper: DAC to
-null 80; manipulator: every motor channel disarmed, all windings off).
+controller's connection closes, the outputs are turned off: every output
+register that declares an off value gets it (gripper: DAC to null 80;
+manipulator: every motor channel disarmed, all windings off).
 
 The manipulator's world starts with the source at the database POSITION,
 held as the controller leaves it; give the controller the same ``--db DIR``
@@ -18,6 +23,11 @@ so that its encoders' zero lengths agree with the world.  board-sim only
 reads the database.  SIGTERM or SIGINT turn the outputs off and end it.
 The protocol has no authentication: serve on a loopback address unless the
 network is a closed one.
+
+A station of one's own gives its world through the methods its
+StationFactory inherits from pyrt.sim.world.WorldFactory (board_kinds,
+add_world_arguments, world): install it in the entry-point group
+pyrt.stations, or name it as MODULE:FACTORY.
 """
 
 from __future__ import annotations
@@ -26,21 +36,61 @@ import argparse
 import ipaddress
 import signal
 import sys
-from pathlib import Path
+from typing import Any, NoReturn
 
+from pyrt.boards.registry import open_boards
 from pyrt.cli._loopopts import _whole
-from pyrt.db import STATIONS, station_directory
 from pyrt.errors import ConfigError
 from pyrt.sim.boardsim import DEFAULT_WATCHDOG_S, BoardServer
-from pyrt.sim.gripper import FAULTS, JawParameters
-from pyrt.sim.sensors import Imperfections
-from pyrt.sim.world import BoardWorld, GripperWorld, ManipulatorWorld
-from pyrt.station.gripper import counts_type as _counts
-from pyrt.station.manipulator import ManipulatorStation
+from pyrt.sim.world import World, WorldFactory
+from pyrt.station.factory import find_station, installed_stations, load_factory
 
-__all__ = ["add_parser", "run"]
+__all__ = ["add_parser", "find_world", "run", "worlds"]
 
-WORLDS = ("gripper", *STATIONS)
+def _world_factory(name: str, factory: object) -> WorldFactory:
+    """``factory`` if it gives a world (board_kinds and world); ConfigError otherwise."""
+    kinds = getattr(factory, "board_kinds", None)
+    if not callable(kinds) or not callable(getattr(factory, "world", None)) or not kinds():
+        raise ConfigError(f"station {name!r} gives no world for board-sim (its factory "
+                          "declares no boards: see pyrt.sim.world.WorldFactory)")
+    return factory  # type: ignore[return-value]
+
+
+def _factories() -> dict[str, WorldFactory]:
+    """Every installed station that gives a world, by name."""
+    out: dict[str, WorldFactory] = {}
+    for name in installed_stations():
+        try:
+            out[name] = _world_factory(name, find_station(name))
+        except ConfigError:
+            continue
+    return out
+
+
+def worlds() -> list[str]:
+    """The names board-sim serves: every installed station with a world and the
+    names those worlds give (their ``world_aliases``)."""
+    names: list[str] = []
+    for name, factory in _factories().items():
+        names += [name, *getattr(factory, "world_aliases", {})]
+    return names
+
+
+def find_world(name: str) -> tuple[WorldFactory, dict[str, Any]]:
+    """The factory whose world ``name`` is (an installed station, a name its
+    world gives, or ``MODULE:FACTORY``) and the option values it sets;
+    ConfigError naming the worlds there are."""
+    if ":" in name:
+        return _world_factory(name, load_factory(name)), {}
+    key = name.lower()
+    if key in installed_stations():
+        return _world_factory(key, find_station(key)), {}
+    for factory in _factories().values():
+        preset = getattr(factory, "world_aliases", {}).get(key)
+        if preset is not None:
+            return factory, dict(preset)
+    raise ConfigError(f"no station named {name[:40]!r} gives a world to serve; stations: "
+                      f"{', '.join(worlds()) or 'none'}")
 
 
 def _listen(text: str) -> tuple[str, int]:
@@ -74,15 +124,7 @@ def _positive_seconds(text: str) -> float:
 _step_us = _whole("world step", "µs", 50, 100_000)
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "board-sim",
-        help="serve a robot's simulated boards over TCP (the tcp:// board back end)",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    p.add_argument("world", choices=WORLDS,
-                   help="gripper: the cage and jaws; prototype, sno: that station's manipulator")
+def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--listen", type=_listen, default=("127.0.0.1", 0), metavar="HOST:PORT",
                    help="address to serve on (default 127.0.0.1:0, any free port; "
                         "PORT alone means 127.0.0.1)")
@@ -91,43 +133,61 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                                      f"(default {DEFAULT_WATCHDOG_S:g})")
     p.add_argument("--step-us", type=_step_us, default=1000, metavar="US",
                    help="step the world every US µs of real time (default 1000)")
-    g = p.add_argument_group("gripper")
-    g.add_argument("--object", type=float, metavar="MM",
-                   help=f"an object this wide between the jaws "
-                        f"(0 < MM < {JawParameters().open_mm:g})")
-    g.add_argument("--start", type=_counts, metavar="HEX",
-                   help="jaw position at start, encoder counts from wide open (default F400)")
-    g.add_argument("--fault", action="append", choices=[f for f in FAULTS if f != "port"],
-                   help="inject a fault from the start: limit (sensor dead), jam (motor), "
-                        "encoder (dead)")
-    m = p.add_argument_group("manipulator")
-    m.add_argument("--db", metavar="DIR",
-                   help="station database to build the world from, read only "
-                        "(default: the packaged station named by WORLD)")
-    m.add_argument("--ideal-sensors", action="store_true",
-                   help="switch off encoder quantisation and loadcell noise/offsets")
-    p.set_defaults(run=run)
 
 
-def _world(args: argparse.Namespace) -> BoardWorld:
-    gripper_opts = [o for o, v in (("--object", args.object), ("--start", args.start),
-                                   ("--fault", args.fault)) if v is not None]
-    manip_opts = [o for o, v in (("--db", args.db), ("--ideal-sensors", args.ideal_sensors or None))
-                  if v is not None]
-    if args.world == "gripper":
-        if manip_opts:
-            raise ConfigError(f"{', '.join(manip_opts)}: only for a manipulator world")
-        return GripperWorld(start=-0x0C00 if args.start is None else args.start,
-                            object_mm=args.object, faults=args.fault or ())
-    if gripper_opts:
-        raise ConfigError(f"{', '.join(gripper_opts)}: only for the gripper world")
-    directory = Path(args.db) if args.db else station_directory(args.world)
-    imp = Imperfections.ideal() if args.ideal_sensors else None
-    # The world's rope payouts come from the controller's own equilibrium at
-    # the database POSITION (as the in-process station sets the encoders'
-    # zero lengths), so build that station here and serve its world.
-    station = ManipulatorStation(directory, writer="sync", imperfections=imp, lock=False)
-    return ManipulatorWorld(station.plant, station.polyaxis.name)
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "board-sim",
+        help="serve a station's simulated boards over TCP (the tcp:// board back end)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        add_help=False,
+    )
+    _add_common(p)
+    p.add_argument("world", metavar="NAME", nargs="?",
+                   help="the station whose world to serve (an installed station, a name a "
+                        "station gives its world, or MODULE:FACTORY; --help lists them)")
+    p.add_argument("rest", nargs=argparse.REMAINDER, metavar="...",
+                   help="board-sim's options (--listen, --watchdog, --step-us) and the "
+                        "world's (pyrt board-sim NAME --help)")
+    p.add_argument("-h", "--help", action="store_true", help="show this help (with NAME: "
+                                                             "the world's options too)")
+    p.set_defaults(run=run, board_sim_parser=p)
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line (ConfigError), not an exit."""
+
+    def error(self, message: str) -> NoReturn:
+        raise ConfigError(f"pyrt board-sim: {message}")
+
+
+def _world_parser(factory: WorldFactory, name: str) -> argparse.ArgumentParser:
+    p = _Parser(prog=f"pyrt board-sim {name}", description=(__doc__ or "").split("\n\n")[0],
+                formatter_class=argparse.RawDescriptionHelpFormatter)
+    _add_common(p)
+    factory.add_world_arguments(p)
+    return p
+
+
+def _parse(args: argparse.Namespace) -> tuple[WorldFactory, argparse.Namespace] | None:
+    """The world's factory and every option; None after printing help."""
+    if args.world is None:
+        if args.help:
+            args.board_sim_parser.print_help()
+            sys.stdout.write("\nstations: " + ", ".join(worlds()) + "\n")
+            return None
+        raise ConfigError("pyrt board-sim: name the station whose world to serve: "
+                          + ", ".join(worlds()))
+    factory, preset = find_world(args.world)
+    parser = _world_parser(factory, args.world)
+    # board-sim's own options given before NAME, then an alias's presets
+    parser.set_defaults(listen=args.listen, watchdog=args.watchdog, step_us=args.step_us,
+                        **preset)
+    rest = list(args.rest)
+    if args.help:
+        rest.append("--help")
+    return factory, parser.parse_args(rest)
 
 
 def _loopback(host: str) -> bool:
@@ -137,14 +197,33 @@ def _loopback(host: str) -> bool:
         return host == "localhost"
 
 
+def build_world(factory: WorldFactory, opts: argparse.Namespace) -> World:
+    """The world of ``factory``: its boards opened in process, the world behind them."""
+    boards = open_boards("sim:", factory.name, factory.board_kinds())
+    try:
+        world = factory.world(boards, opts)
+    except BaseException:
+        boards.close()
+        raise
+    if not isinstance(world, World):
+        raise ConfigError(f"station {factory.name!r}: world() returned "
+                          f"{type(world).__name__}, not a pyrt.sim.world.World")
+    return world
+
+
 def run(args: argparse.Namespace) -> int:
     out = sys.stdout
-    world = _world(args)
-    host, port = args.listen
-    server = BoardServer(world, host, port, watchdog_s=args.watchdog,
-                         step_ns=args.step_us * 1000, stdout=out)
-    print(f"pyrt board-sim: {world.kind} {world.name} on {server.url} "
-          f"(watchdog {args.watchdog:g} s, world step {args.step_us} µs)", file=out, flush=True)
+    parsed = _parse(args)
+    if parsed is None:
+        return 0
+    factory, opts = parsed
+    world = build_world(factory, opts)
+    host, port = opts.listen
+    server = BoardServer(world, host, port, watchdog_s=opts.watchdog,
+                         step_ns=opts.step_us * 1000, stdout=out)
+    boards = " ".join(f"{n}={k.name}" for n, k in world.kinds.items())
+    print(f"pyrt board-sim: {factory.name} {world.name} on {server.url} (boards {boards}; "
+          f"watchdog {opts.watchdog:g} s, world step {opts.step_us} µs)", file=out, flush=True)
     if not _loopback(server.host):
         print(f"pyrt board-sim: warning: serving on {server.host}: the protocol has no "
               "authentication; anyone who reaches the port drives the boards", file=out,

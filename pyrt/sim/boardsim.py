@@ -1,7 +1,8 @@
 """board-sim: simulated boards served over TCP, their world stepping at real time.
 
-:class:`BoardServer` serves one :class:`~pyrt.sim.world.BoardWorld` on a
-TCP address with the wire protocol of :mod:`pyrt.boards.wire`, so that a
+:class:`BoardServer` serves one :class:`~pyrt.sim.world.World` (any
+station's: its boards' declared registers) on a TCP address with the wire
+protocol of :mod:`pyrt.boards.wire`, so that a
 controller in another process reaches the boards through the ``tcp://``
 back end (:mod:`pyrt.boards.tcp`) exactly as it reaches the in-process
 ``sim:`` boards.
@@ -13,7 +14,7 @@ and keeps the watchdog.  One controller is served at a time: a second
 connection is answered ``ERR busy ...`` and closed.
 
 Watchdog: when no register access has come for ``watchdog_s`` the world's
-outputs are turned off (:meth:`~pyrt.sim.world.BoardWorld.outputs_off`);
+outputs are turned off (:meth:`~pyrt.sim.world.World.outputs_off`);
 so they are at once when the controller's connection closes, whether it
 said QUIT or its process died.  A bad request gets an error reply; nothing
 a client sends stops the server.
@@ -30,17 +31,17 @@ from collections.abc import Callable
 from typing import TextIO
 
 from pyrt.boards.wire import (
-    GREETING,
     MAX_LINE,
     NOT_ACCESSES,
-    VERSION,
+    Access,
     WireError,
     error_line,
+    greeting_line,
     ok_line,
     parse_request,
 )
 from pyrt.errors import ConfigError
-from pyrt.sim.world import BoardWorld
+from pyrt.sim.world import World
 
 __all__ = ["DEFAULT_STEP_NS", "DEFAULT_WATCHDOG_S", "BoardServer"]
 
@@ -74,7 +75,7 @@ class BoardServer:
 
     def __init__(
         self,
-        world: BoardWorld,
+        world: World,
         host: str = "127.0.0.1",
         port: int = 0,
         *,
@@ -88,6 +89,9 @@ class BoardServer:
         if not 50_000 <= step_ns <= 100_000_000:
             raise ConfigError(f"world step must be 50 µs..100 ms, got {step_ns} ns")
         self.world = world
+        #: The boards served (name -> kind) and their register views.
+        self.kinds = dict(world.kinds)
+        self._views = {name: world.registers(name) for name in self.kinds}
         self.watchdog_ns = int(watchdog_s * 1e9)
         self.step_ns = int(step_ns)
         self.stdout = stdout
@@ -236,8 +240,7 @@ class BoardServer:
         assert self._sel is not None
         self._sel.register(sock, selectors.EVENT_READ, client)
         self._say(f"controller {addr} connected")
-        client.out += ok_line(GREETING, VERSION, self.world.kind, self.world.name,
-                              self.watchdog_ns // 1_000_000)
+        client.out += greeting_line(self.world.name, self.watchdog_ns // 1_000_000, self.kinds)
         self._flush(client)
 
     def _drop(self, why: str) -> None:
@@ -296,11 +299,12 @@ class BoardServer:
     def _answer(self, client: _Client, line: bytes) -> bytes:
         world = self.world
         try:
-            verb, args = parse_request(line, world.verbs)
+            req = parse_request(line, self.kinds)
+            verb = req.verb
             if verb not in NOT_ACCESSES:
                 self._last_access = self.clock()
                 self._fed = True
-                return world.handle(verb, args)
+                return self._access(req.verb, req.accesses, req.boards)
             if verb == "INFO":
                 return ok_line(*(f"{k}={v}" for k, v in world.info().items()))
             client.quitting = True
@@ -312,6 +316,27 @@ class BoardServer:
         except Exception as exc:  # a bug in the world: answer it, keep serving
             self._say(f"internal error on {line[:60]!r}: {type(exc).__name__}: {exc}")
             return error_line("internal", f"{type(exc).__name__}: {exc}")
+
+    def _access(self, verb: str, accesses: tuple[Access, ...], boards: tuple[str, ...]) -> bytes:
+        views = self._views
+        if verb == "SNAP":
+            values: list[int] = [self.world.trips]
+            for name in boards or views:
+                values += views[name].snapshot()
+            return ok_line(*values)
+        if verb == "R":
+            a = accesses[0]
+            return ok_line(views[a.board].read(a.register, a.index))
+        n = len(accesses)
+        for k, a in enumerate(accesses, 1):
+            assert a.value is not None
+            try:
+                views[a.board].write(a.register, a.value, a.index)
+            except ValueError as exc:
+                if n == 1:
+                    raise
+                raise ValueError(f"write {k} of {n}: {exc}") from None
+        return b"OK\n"
 
     def _reply(self, client: _Client, line: bytes) -> None:
         self.requests += 1

@@ -1,90 +1,185 @@
-"""The simulated boards with their world behind them, as board-sim serves them.
+"""A station's simulated boards with the world behind them, as board-sim serves them.
 
-A :class:`BoardWorld` owns a robot's simulated boards and the plant that
-plays the world behind them, and answers the register requests of the wire
-protocol (:mod:`pyrt.boards.wire`) on the boards' driver side, exactly as
-a controller in the same process would reach them.  It knows nothing of
-sockets or time: :mod:`pyrt.sim.boardsim` serves it and steps it.
+A :class:`World` is a station's in-process boards (a
+:class:`~pyrt.boards.Boards` from ``sim:``) and the plant that plays the
+world behind them: ``step(now_ns)`` advances it, :meth:`World.outputs_off`
+is what the boards' watchdog does (every output register that declares an
+``off`` value is written with it), :meth:`World.info` tells its state.  It
+knows nothing of sockets or time: :mod:`pyrt.sim.boardsim` serves any world
+with the wire protocol of :mod:`pyrt.boards.wire`, answering every declared
+register's reads and writes against its boards, and steps it.
+
+A robot of one's own gives ``pyrt board-sim`` its world through a
+:class:`WorldFactory` (a station factory inherits it): the kinds of its
+boards, the world's command-line options, and the world behind in-process
+boards::
+
+    class ArmFactory(StationFactory):          # a WorldFactory too
+        name = "arm"
+
+        def board_kinds(self):
+            return {"servo": SERVO}
+
+        def add_world_arguments(self, parser):
+            parser.add_argument("--payload", type=float, default=0.0)
+
+        def world(self, boards, args):
+            return World("arm", boards, ArmPlant(boards["servo"], payload=args.payload))
+
+The built-in worlds are such worlds too:
 
 * :class:`GripperWorld`: an 8031's external data space with a
-  :class:`~pyrt.boards.gripper.SimGripperBoard` mapped into it and a
-  :class:`~pyrt.sim.gripper.JawPlant` behind it.  The encoder interrupts
-  have no handler here; the board counts them (``SNAP``'s UP/DOWN) and the
-  controller's side raises them.
-* :class:`ManipulatorWorld`: a :class:`~pyrt.boards.simboards.SimTIO10` and
-  :class:`~pyrt.boards.simboards.SimDataConcentrator` with a
-  :class:`~pyrt.sim.manipulator.ManipulatorPlant` behind them.
-
-:meth:`BoardWorld.outputs_off` is what the board's watchdog does.
+  :class:`~pyrt.boards.gripper.SimGripperBoard` mapped into it (board
+  ``gripper``) and a :class:`~pyrt.sim.gripper.JawPlant` behind it.  The
+  encoder interrupts have no handler here; the board counts them (its
+  ``up``/``down`` registers) and the controller's side raises them.
+* :class:`ManipulatorWorld`: a :class:`~pyrt.boards.simboards.SimTIO10`
+  (board ``tio10``) and :class:`~pyrt.boards.simboards.SimDataConcentrator`
+  (board ``dc``) with a :class:`~pyrt.sim.manipulator.ManipulatorPlant`
+  behind them.
 """
 
 from __future__ import annotations
 
-from abc import ABC, abstractmethod
+import argparse
 from collections.abc import Iterable, Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, Protocol
 
-from pyrt.boards.gripper import DAC, DAC_NULL, SimGripperBoard
-from pyrt.boards.i8031 import I8031
+from pyrt.boards.kinds import DATACONCENTRATOR, GRIPPER_CAGE, TIO10_KIND
+from pyrt.boards.registers import BoardKind, Registers
+from pyrt.boards.registers import outputs_are_off as _outputs_are_off
+from pyrt.boards.registers import outputs_off as _outputs_off
+from pyrt.boards.registry import Boards, open_boards
 from pyrt.boards.simboards import SimDataConcentrator, SimTIO10
 from pyrt.boards.tio10 import AWO_BITS, CHANNELS, RTC_CHANNELS
-from pyrt.boards.wire import GRIPPER_VERBS, MANIPULATOR_VERBS, WireError, ok_line
 from pyrt.errors import ConfigError
 from pyrt.sim.gripper import JawParameters, JawPlant
 from pyrt.sim.manipulator import ManipulatorPlant, rig_from_station
-from pyrt.sim.sensors import Imperfections
 
 if TYPE_CHECKING:
     from pyrt.db import Station
+    from pyrt.sim.sensors import Imperfections
 
-__all__ = ["BoardWorld", "GripperWorld", "ManipulatorWorld"]
+__all__ = [
+    "GRIPPER_BOARDS",
+    "MANIPULATOR_BOARDS",
+    "BoardWorld",
+    "GripperWorld",
+    "ManipulatorWorld",
+    "Plant",
+    "World",
+    "WorldFactory",
+]
 
 _MOTOR_CHANNELS = tuple(c for c in CHANNELS if c not in RTC_CHANNELS)
 
+#: The gripper station's boards: the cage, mapped into the 8031.
+GRIPPER_BOARDS: dict[str, BoardKind] = {"gripper": GRIPPER_CAGE}
+#: A manipulator station's boards: the TIO10 and the dataConcentrator.
+MANIPULATOR_BOARDS: dict[str, BoardKind] = {"tio10": TIO10_KIND, "dc": DATACONCENTRATOR}
 
-class BoardWorld(ABC):
-    """A robot's simulated boards and the world behind them (see the module text)."""
 
-    #: ``gripper`` or ``manipulator`` (the greeting's KIND).
-    kind: str
-    #: The request verbs this board answers, with their argument counts.
-    verbs: dict[str, tuple[int, ...]]
+class Plant(Protocol):
+    """The physics behind a world's boards: it reads their outputs and sets
+    their inputs each step (``info()``, if it has one, tells its state)."""
 
-    def __init__(self, name: str):
-        if not name or any(c.isspace() for c in name) or not name.isascii():
-            raise ConfigError(f"world name must be one ASCII word, got {name!r}")
-        #: The world's name (the greeting's NAME).
-        self.name = name
-        #: Watchdog trips so far (the server counts them; every SNAP reports them).
-        self.trips = 0
-
-    @abstractmethod
     def step(self, now_ns: int) -> None:
         """Advance the world to ``now_ns`` (dt = now - last)."""
 
-    @abstractmethod
-    def handle(self, verb: str, args: list[int]) -> bytes:
-        """The reply line to a register request (ValueError: the board refuses it)."""
 
-    @abstractmethod
+class World:
+    """A station's in-process boards and the plant behind them (see the module text).
+
+    ``name`` is the station whose world this is (the greeting's STATION);
+    ``boards`` in-process boards (``sim:``); ``plant`` what :meth:`step`
+    advances (None: the boards alone, their inputs set by whoever holds
+    them).  ConfigError for a name that is not one ASCII word or boards
+    that are not in process.
+    """
+
+    def __init__(self, name: str, boards: Boards, plant: Plant | None = None):
+        if not isinstance(name, str) or not name or any(c.isspace() for c in name) \
+                or not name.isascii():
+            raise ConfigError(f"world name must be one ASCII word, got {name!r}")
+        if not isinstance(boards, Boards) or not boards.in_process:
+            raise ConfigError(f"a world serves in-process boards (sim:), got {boards!r}")
+        #: The station's name (the greeting's STATION).
+        self.name = name
+        self.boards = boards
+        self.plant = plant
+        #: Watchdog trips so far (the server counts them; every SNAP reports them).
+        self.trips = 0
+
+    @property
+    def kinds(self) -> dict[str, BoardKind]:
+        """The boards served: name -> kind, in declared order."""
+        return self.boards.kinds
+
+    def registers(self, board: str) -> Registers:
+        """The register view of ``board`` (what the wire protocol reads and writes)."""
+        return self.boards.registers(board)
+
+    def step(self, now_ns: int) -> None:
+        """Advance the world to ``now_ns`` (dt = now - last): the plant's step."""
+        if self.plant is not None:
+            self.plant.step(now_ns)
+
     def outputs_off(self) -> None:
-        """Turn every output off, as the board's watchdog does."""
+        """Turn every output off, as the boards' watchdog does: each output
+        register's declared ``off`` value, board by board in declared order."""
+        for name, kind in self.kinds.items():
+            _outputs_off(kind, self.registers(name))
 
-    @abstractmethod
     def outputs_are_off(self) -> bool:
-        """Whether every output is off."""
+        """Whether every output that declares an ``off`` value holds it."""
+        return all(_outputs_are_off(kind, self.registers(name))
+                   for name, kind in self.kinds.items())
 
-    @abstractmethod
     def info(self) -> dict[str, object]:
-        """The world's state for ``INFO`` (one word per value)."""
+        """The world's state for ``INFO`` (one word per value): the plant's
+        ``info()`` if it has one, else nothing."""
+        info = getattr(self.plant, "info", None)
+        return dict(info()) if callable(info) else {}
 
 
-class GripperWorld(BoardWorld):
+#: The name this class had before worlds were generic.
+BoardWorld = World
+
+
+class WorldFactory:
+    """What ``pyrt board-sim NAME`` needs of a station to serve its world.
+
+    A station factory inherits it (or implements the three methods); the
+    defaults serve the declared boards with no plant behind them.
+    ``board-sim`` calls :meth:`add_world_arguments` on its parser, opens
+    :meth:`board_kinds` with ``sim:``, and serves :meth:`world` of them.
+    """
+
+    #: The station's name (``pyrt board-sim NAME``).
+    name: str = ""
+    #: Other names board-sim knows this world by, each with the option values
+    #: it sets (``{"sno": {"station": "sno"}}``: ``board-sim sno`` is
+    #: ``board-sim manipulator --station sno``).
+    world_aliases: dict[str, dict[str, Any]] = {}
+
+    def board_kinds(self) -> dict[str, BoardKind]:
+        """The station's boards: name -> kind (none by default: nothing to serve)."""
+        return {}
+
+    def add_world_arguments(self, parser: argparse.ArgumentParser) -> None:
+        """Add the world's options (a start position, an object, faults ...); none by default."""
+
+    def world(self, boards: Boards, args: argparse.Namespace) -> World:
+        """The world behind ``boards`` (this station's, opened in process);
+        default: the boards alone, no plant."""
+        return World(self.name or "station", boards)
+
+
+class GripperWorld(World):
     """The gripper cage and the jaws (``start``, ``object_mm``, ``faults`` as
-    :class:`~pyrt.sim.gripper.JawPlant` takes them; ConfigError if refused)."""
-
-    kind = "gripper"
-    verbs = GRIPPER_VERBS
+    :class:`~pyrt.sim.gripper.JawPlant` takes them; ConfigError if refused),
+    on ``boards`` (in-process, declared as :data:`GRIPPER_BOARDS`; new ones
+    if not given)."""
 
     def __init__(
         self,
@@ -94,38 +189,21 @@ class GripperWorld(BoardWorld):
         faults: Iterable[str] = (),
         params: JawParameters | None = None,
         name: str = "gripper",
+        boards: Boards | None = None,
     ):
-        super().__init__(name)
-        self.cpu = I8031()
-        self.board = SimGripperBoard(self.cpu)
+        if boards is None:
+            boards = open_boards("sim:", name, GRIPPER_BOARDS)
+        self.board = boards["gripper"]
+        self.cpu = self.board.cpu
         try:
-            self.plant = JawPlant(self.board, start=start, params=params)
-            self.plant.set_object(object_mm)
+            plant = JawPlant(self.board, start=start, params=params)
+            plant.set_object(object_mm)
             for fault in faults:
-                self.plant.inject(fault)
+                plant.inject(fault)
         except ValueError as exc:
             raise ConfigError(str(exc)) from None
-
-    def step(self, now_ns: int) -> None:
-        self.plant.step(now_ns)
-
-    def handle(self, verb: str, args: list[int]) -> bytes:
-        board = self.board
-        if verb == "R":
-            return ok_line(board.read(args[0]))
-        if verb == "W":
-            board.write(args[0], args[1])
-            return b"OK\n"
-        if verb == "SNAP":
-            up, down = board.pulse_counts()
-            return ok_line(self.trips, up, down, *board.register_file())
-        raise WireError("syntax", f"{verb} is not a gripper request")
-
-    def outputs_off(self) -> None:
-        self.board.write(DAC, DAC_NULL)
-
-    def outputs_are_off(self) -> bool:
-        return self.board.dac == DAC_NULL
+        super().__init__(name, boards, plant)
+        self.plant: JawPlant = plant
 
     def info(self) -> dict[str, object]:
         p = self.plant
@@ -139,21 +217,20 @@ class GripperWorld(BoardWorld):
         }
 
 
-class ManipulatorWorld(BoardWorld):
+class ManipulatorWorld(World):
     """A manipulator's TIO10 and dataConcentrator with the rope world behind them.
 
     ``plant`` is a :class:`~pyrt.sim.manipulator.ManipulatorPlant` over a
     SimTIO10 and SimDataConcentrator; at start every output is turned off.
     """
 
-    kind = "manipulator"
-    verbs = MANIPULATOR_VERBS
-
     def __init__(self, plant: ManipulatorPlant, name: str):
-        super().__init__(name)
-        self.plant = plant
         self.tio10: SimTIO10 = plant.tio10
         self.dc: SimDataConcentrator = plant.dc
+        boards = Boards("sim:", name, {"tio10": plant.tio10, "dc": plant.dc},
+                        MANIPULATOR_BOARDS, in_process=True, world="sim")
+        super().__init__(name, boards, plant)
+        self.plant: ManipulatorPlant = plant
         self.outputs_off()
 
     @classmethod
@@ -177,60 +254,6 @@ class ManipulatorWorld(BoardWorld):
         plant = ManipulatorPlant(rig, SimTIO10(), SimDataConcentrator(),
                                  imperfections=imperfections, payouts=payouts)
         return cls(plant, pa.name.lower())
-
-    def step(self, now_ns: int) -> None:
-        self.plant.step(now_ns)
-
-    def handle(self, verb: str, args: list[int]) -> bytes:
-        tio = self.tio10
-        dc = self.dc
-        if verb == "SNAP":
-            return ok_line(self.trips, *tio.register_file(), *dc.adc_codes(),
-                           *(dc.read_counter(a) for a in args))
-        if verb == "SRC":
-            if len(args) == 1:
-                return ok_line(tio.source(args[0]))
-            tio.select_source(args[0], args[1])
-        elif verb == "PER":
-            if len(args) == 1:
-                return ok_line(tio.period(args[0]))
-            tio.load_period(args[0], args[1])
-        elif verb == "ARM":
-            tio.arm(args[0])
-        elif verb == "DISARM":
-            tio.disarm(args[0])
-        elif verb == "ARMED":
-            return ok_line(int(tio.armed(args[0])))
-        elif verb == "PULSES":
-            return ok_line(tio.pulses(args[0]))
-        elif verb == "PORT":
-            if len(args) == 1:
-                return ok_line(tio.read_port(args[0]))
-            tio.write_port(args[0], args[1])
-        elif verb == "RTC":
-            return ok_line(tio.rtc_ticks())
-        elif verb == "CNT":
-            return ok_line(dc.read_counter(args[0]))
-        elif verb == "CLR":
-            dc.clear_counter(args[0])
-        elif verb == "ADC":
-            return ok_line(dc.read_adc(args[0]))
-        else:
-            raise WireError("syntax", f"{verb} is not a manipulator request")
-        return b"OK\n"
-
-    def outputs_off(self) -> None:
-        tio = self.tio10
-        for ch in _MOTOR_CHANNELS:
-            if tio.armed(ch):
-                tio.disarm(ch)
-        for port, bit in AWO_BITS.values():
-            tio.set_bit(port, bit, True)
-
-    def outputs_are_off(self) -> bool:
-        tio = self.tio10
-        return (not any(tio.armed(ch) for ch in _MOTOR_CHANNELS)
-                and all(tio.bit(port, bit) for port, bit in AWO_BITS.values()))
 
     def info(self) -> dict[str, object]:
         p = self.plant

@@ -31,6 +31,7 @@ from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING, Any
 
 from pyrt.errors import ConfigError
+from pyrt.sim.world import WorldFactory
 
 if TYPE_CHECKING:
     from pyrt.scheduler import Loop
@@ -51,9 +52,12 @@ ENTRY_POINT_GROUP = "pyrt.stations"
 _NAME = re.compile(r"^[a-z][a-z0-9_-]*$")
 
 
-class StationFactory:
+class StationFactory(WorldFactory):
     """Builds one kind of station (see the module text).  Subclasses set
-    :attr:`name` and override :meth:`build`; everything else has a default."""
+    :attr:`name` and override :meth:`build`; everything else has a default.
+    It is a :class:`~pyrt.sim.world.WorldFactory` too: ``board_kinds``,
+    ``add_world_arguments`` and ``world`` give ``pyrt board-sim NAME`` the
+    station's simulated world."""
 
     #: The sub-command (``pyrt NAME``) and the name ``pyrt board-sim`` knows it by.
     name: str = ""

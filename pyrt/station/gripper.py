@@ -31,6 +31,7 @@ from typing import Any
 
 from pyrt.boards import Boards, open_boards
 from pyrt.boards.i8031 import COMMAND_CNT, ENCODER_CNT
+from pyrt.boards.registers import BoardKind
 from pyrt.component import Arg, Component, Signal, command, finite
 from pyrt.errors import CommandError, ConfigError
 from pyrt.robots.gripper import GripperController, JawCalibration
@@ -38,11 +39,13 @@ from pyrt.robots.gripper_commands import parse_hex
 from pyrt.scheduler import Loop
 from pyrt.scheduler.motion import MotionExecutor, MotionType
 from pyrt.sim.gripper import FAULTS, JawParameters, JawPlant
+from pyrt.sim.world import GRIPPER_BOARDS, GripperWorld, World, WorldFactory
 from pyrt.station.base import BoardWorld, Station, refuse_sim_options
 from pyrt.station.factory import StationFactory
 from pyrt.tasks import register_tasks
 
-__all__ = ["GRIPPER", "GripperFactory", "GripperSim", "GripperStation", "build_gripper",
+__all__ = ["GRIPPER", "GripperFactory", "GripperSim", "GripperStation", "GripperWorlds",
+           "build_gripper",
            "counts_type", "parse_counts"]
 
 #: ``wait`` says "at target" within this many counts (the deadband and the
@@ -136,10 +139,9 @@ class GripperStation(Station):
 
     def __init__(self, loop: Loop, boards: Boards, plant: JawPlant | None):
         super().__init__(loop)
-        assert boards.cpu is not None and boards.gripper is not None
         self.attach_boards(boards)  # first in the tick: this tick's inputs
-        self.cpu = cpu = boards.cpu
-        self.board = boards.gripper
+        self.board = boards["gripper"]
+        self.cpu = cpu = self.board.cpu
         self.plant = plant
         cal = JawCalibration()
         if plant is not None:  # the simulated mechanism's own numbers
@@ -293,7 +295,7 @@ def build_gripper(
     boards that cannot be reached, BoardError.
     """
     faults = list(faults)
-    b = open_boards(boards, "gripper")
+    b = open_boards(boards, "gripper", GRIPPER_BOARDS)
     try:
         refuse_sim_options(b, [name for name, given in (
             ("the jaw start position (--start)", start is not None),
@@ -301,9 +303,8 @@ def build_gripper(
             ("faults (--fault)", bool(faults))) if given])
         plant = None
         if b.in_process:
-            assert b.gripper is not None
             try:
-                plant = JawPlant(b.gripper, start=DEFAULT_START if start is None else start)
+                plant = JawPlant(b["gripper"], start=DEFAULT_START if start is None else start)
                 plant.set_object(object_mm)
                 for fault in faults:
                     plant.inject(fault)
@@ -362,7 +363,26 @@ def add_jaw_arguments(parser: argparse.ArgumentParser) -> None:
     parser._negative_number_matcher = re.compile(r"^-[0-9A-Fa-f]+$|^-\d*\.\d+$")
 
 
-class GripperFactory(StationFactory):
+class GripperWorlds(WorldFactory):
+    """The gripper's boards and world for ``pyrt board-sim gripper``: the cage
+    (board ``gripper``) with the jaws behind it (:class:`GripperFactory` has them)."""
+
+    name = "gripper"
+
+    def board_kinds(self) -> dict[str, BoardKind]:
+        return dict(GRIPPER_BOARDS)
+
+    def add_world_arguments(self, parser: argparse.ArgumentParser) -> None:
+        add_jaw_arguments(parser)
+
+    def world(self, boards: Boards, args: argparse.Namespace) -> World:
+        start = getattr(args, "start", None)
+        return GripperWorld(boards=boards, object_mm=getattr(args, "object", None),
+                            start=DEFAULT_START if start is None else start,
+                            faults=getattr(args, "fault", None) or ())
+
+
+class GripperFactory(GripperWorlds, StationFactory):
     """pyrt gripper: the 002 parallel-jaw gripper controller on simulated jaws.
 
 At start the controller does what the 8031 does at power-up: it loads its

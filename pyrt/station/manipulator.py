@@ -56,6 +56,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from pyrt.boards import Boards, open_boards
+from pyrt.boards.registers import BoardKind
 from pyrt.component import Arg, Component, Signal, command, finite
 from pyrt.db import (
     FILES,
@@ -65,6 +66,7 @@ from pyrt.db import (
     default_working_directory,
     load_station,
     lock_directory,
+    station_directory,
 )
 from pyrt.db import Station as StationDB
 from pyrt.errors import BoardError, CommandError, ConfigError, NativeError, PyrtError
@@ -76,6 +78,7 @@ from pyrt.robots.stops import StopRecord
 from pyrt.scheduler import Loop, ReadyQueue, SimClock
 from pyrt.sim.manipulator import ManipulatorPlant, rig_from_station
 from pyrt.sim.sensors import Imperfections
+from pyrt.sim.world import MANIPULATOR_BOARDS, ManipulatorWorld, World, WorldFactory
 from pyrt.station.base import BoardWorld, Station, refuse_sim_options
 from pyrt.station.factory import StationFactory
 from pyrt.tasks import SyncWriter, ThreadWriter, WriteBack, register_tasks
@@ -87,6 +90,7 @@ __all__ = [
     "TICK_NS",
     "ManipulatorFactory",
     "ManipulatorStation",
+    "ManipulatorWorlds",
     "MessageSink",
 ]
 
@@ -295,7 +299,7 @@ class ManipulatorStation(Station):
                                   f"not {expect.lower()!r}; give the matching --station or "
                                   "another --db", pa_rec.where.file, pa_rec.where.line)
             super().__init__(loop if loop is not None else Loop(SimClock(), period_ns=tick_ns))
-            opened = open_boards(boards, "manipulator")
+            opened = open_boards(boards, pa_rec.name.lower(), MANIPULATOR_BOARDS)
         except BaseException:
             self._lock.release()
             raise
@@ -337,10 +341,9 @@ class ManipulatorStation(Station):
                               f"this station's {want!r}: start 'pyrt board-sim {want}' with "
                               f"the same --db")
         self.attach_boards(boards)  # first in the tick: this tick's inputs
-        assert boards.tio10 is not None and boards.dc is not None
         boards.poll(self.loop.now_ns)
-        self.tio10 = boards.tio10
-        self.dc = boards.dc
+        self.tio10 = boards["tio10"]
+        self.dc = boards["dc"]
         # Level 3-4: devices and axes (encoders reset their counters).
         self.axes: list[Axis] = []
         fuzzy: list[FuzzyParams] = []
@@ -755,7 +758,48 @@ def _stderr_sink(line: str) -> None:  # pragma: no cover - used without a consol
 # -- the factory: ``pyrt manipulator`` -----------------------------------------------------
 
 
-class ManipulatorFactory(StationFactory):
+class ManipulatorWorlds(WorldFactory):
+    """A manipulator's boards and world for ``pyrt board-sim manipulator``
+    (:class:`ManipulatorFactory` has them): the TIO10 (board ``tio10``) and
+    dataConcentrator (board ``dc``) with the rope world of a station database
+    behind them, the source at its POSITION; ``board-sim prototype`` and
+    ``board-sim sno`` are ``board-sim manipulator --station`` that station.
+
+    The world's rope payouts come from the controller's own equilibrium at
+    that POSITION (as the in-process station sets its encoders' zero
+    lengths), so the station is built here, reading the database only, and
+    its world is served (on boards of its own: those given are closed)."""
+
+    name = "manipulator"
+    world_aliases: dict[str, dict[str, Any]] = {
+        name: {"station": name} for name in STATIONS}
+
+    def board_kinds(self) -> dict[str, BoardKind]:
+        return dict(MANIPULATOR_BOARDS)
+
+    def add_world_arguments(self, parser: argparse.ArgumentParser) -> None:
+        g = parser.add_argument_group("manipulator world")
+        g.add_argument("--station", choices=STATIONS, default=None,
+                       help="packaged station to serve when no --db is given (default "
+                            "prototype); with --db, the station the database must hold")
+        g.add_argument("--db", metavar="DIR",
+                       help="station database to build the world from, read only "
+                            "(default: the packaged --station)")
+        g.add_argument("--ideal-sensors", action="store_true",
+                       help="switch off encoder quantisation and loadcell noise/offsets")
+
+    def world(self, boards: Boards, args: argparse.Namespace) -> World:
+        boards.close()
+        name = getattr(args, "station", None)
+        db = getattr(args, "db", None)
+        directory = Path(db) if db else station_directory(name or "prototype")
+        imp = Imperfections.ideal() if getattr(args, "ideal_sensors", False) else None
+        station = ManipulatorStation(directory, writer="sync", imperfections=imp, lock=False,
+                                     expect=name if db else None)
+        return ManipulatorWorld(station.plant, station.polyaxis.name)
+
+
+class ManipulatorFactory(ManipulatorWorlds, StationFactory):
     """pyrt manipulator: the SNO source manipulator controller (000) on a simulated world.
 
 Commands are addressed to named objects, as the document's
