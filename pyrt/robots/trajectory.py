@@ -518,6 +518,11 @@ class JointTrajectory(MotionType):
     reflex acts.
     """
 
+    @classmethod
+    def accepts(cls, robot: Any) -> bool:
+        """Any robot with joints (a :class:`JointRobot`) is driven by this type."""
+        return isinstance(robot, JointRobot)
+
     name = _NAME
 
     def __init__(self) -> None:
