@@ -28,14 +28,29 @@ def _pyrt(*argv: str, stdin: str = "", timeout: float = 120) -> subprocess.Compl
                           env=env, capture_output=True, text=True, timeout=timeout)
 
 
+def _docstrings(tree: ast.AST) -> set[int]:
+    """ids of the docstring nodes of a module and its classes and functions."""
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            body = node.body
+            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+                out.add(id(body[0].value))
+    return out
+
+
 def test_cli_names_no_robot():
-    """No module of pyrt.cli names a robot (the manipulator's forcemap and logsort aside)."""
+    """No code of pyrt.cli names a robot: no import, no string (the manipulator's forcemap
+    and logsort aside; docstrings may give examples)."""
     offenders = []
     for path in sorted(CLI.glob("*.py")):
-        if path.name in ROBOT_TOOLS or path.name == "boardsim.py":
+        if path.name in ROBOT_TOOLS:
             continue
         tree = ast.parse(path.read_text(encoding="utf-8"))
+        docs = _docstrings(tree)
         for node in ast.walk(tree):
+            if id(node) in docs:
+                continue
             texts = []
             if isinstance(node, ast.Constant) and isinstance(node.value, str):
                 texts.append(node.value)
