@@ -458,6 +458,11 @@ class Component:
             raise FaultError(Fault(robot=self.name, cause=cause, source=source or self.name))
         trip(cause, source or self.name)
 
+    @property
+    def adopted(self) -> bool:
+        """Whether a station has adopted this component (its :meth:`fail` trips it)."""
+        return self._trip is not None
+
     def signal(self, name: str) -> Signal | None:
         """The signal called ``name`` (case-insensitive), or None."""
         key = name.lower()

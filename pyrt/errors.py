@@ -95,6 +95,9 @@ class Fault:
     time_ns: int = 0
     traceback: str = ""
     details: dict = field(default_factory=dict, compare=False)
+    #: The fault event's number on its loop (1, 2, ...; 0: not published):
+    #: everything that shows faults shows each id once.
+    id: int = 0
 
     def __str__(self) -> str:
         where = f" in {self.source}" if self.source else ""

@@ -37,6 +37,7 @@ from pyrt.component import Arg, Command, Component, Switch, command, records_of,
 from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
 from pyrt.scheduler import Job
 from pyrt.scheduler.report import format_statistics
+from pyrt.scheduler.runner import FaultMessage
 
 __all__ = ["RobotShell"]
 
@@ -62,8 +63,8 @@ class RobotShell(CommandShell):
         self.level: Component | None = station.letter_level()
         self._scope = ScopeCommand(self.runner, station.scope, self._channel,
                                    self._channel_names, stdout)
-        #: Faults already shown to the operator (their text), so each is shown once.
-        self._shown: set[str] = set()
+        #: Fault events already shown to the operator (their ids), so each is shown once.
+        self._shown: set[int] = set()
         self._shown_lock = threading.Lock()
 
     # -- prompt -----------------------------------------------------------------------
@@ -249,9 +250,9 @@ class RobotShell(CommandShell):
         shown it already (:meth:`messages`): each fault once."""
         f = exc.fault
         with self._shown_lock:
-            if str(f) in self._shown:
+            if f.id in self._shown:
                 return
-            self._shown.add(str(f))
+            self._shown.add(f.id)
         self.say(f"{prefix}: {f.cause} (in {f.source or self.station.name})")
         self.say("every motor stopped; reads still answer; nothing moves until you type ack")
 
@@ -262,14 +263,12 @@ class RobotShell(CommandShell):
         shown already is left out."""
         out: list[str] = []
         for line in self.runner.messages():
-            if line.startswith("FAULT "):
+            if isinstance(line, FaultMessage):
                 with self._shown_lock:
-                    if line[6:] in self._shown:
+                    if line.fault.id in self._shown:
                         continue
-                    self._shown.add(line[6:])
-                    take = getattr(getattr(self.runner, "loop", None), "take_fault", None)
-                    if callable(take):
-                        take()
+                    self._shown.add(line.fault.id)
+                self.runner.take_fault(line.fault)
                 out.append(line)
                 out.append("every motor stopped; reads still answer; nothing moves until you "
                            "type ack")
@@ -365,8 +364,7 @@ class RobotShell(CommandShell):
             self.say(f"still moving after {timeout:g} s")
             return
         report = self.runner.call(st.wait_report)
-        pending = self.messages if callable(getattr(self.runner, "messages", None)) else list
-        for text in pending():
+        for text in self.messages():
             self.say(text)  # what happened during the wait comes first, in order
         for text in report.splitlines():
             self.say(text)

@@ -46,8 +46,9 @@ stops the motors with ``DONE`` and its reason.
 
 Any stop stops every motor of the manipulator (windings off) and hands the
 axes back to standalone control.  The safety stops (tension, net force) are
-also faults: ``on_fault`` (the ready queue's ``trip``) is called, the
-reflex runs, and the manipulator stays stopped until acknowledged.
+also faults, reported through :meth:`~pyrt.component.Component.fail` (the
+station's one fault path): the reflex runs, and the manipulator stays
+stopped until acknowledged.
 
 Estimate integrity (beyond 000).  After every measure, moving or not, the
 estimate is checked (:meth:`PolyAxis.check_estimate`): distErr beyond
@@ -306,7 +307,6 @@ class PolyAxis(Component):
         self.now_s = 0.0
         self.last_poll_s: float | None = None
         #: Called with (cause, source) for a safety stop: the ready queue's trip.
-        self.on_fault: Callable[[str, str], object] | None = None
         #: Called with (StopRecord) after every stop.
         self.on_stop: list[Callable[[StopRecord], None]] = []
         #: The motion queue of MotionRecords (set by the station), emptied by
@@ -819,8 +819,8 @@ class PolyAxis(Component):
     def _fault(self, detail: str) -> None:
         self.running = None
         self.halt(StopReason.FAULT, detail)
-        if self.on_fault is not None:
-            self.on_fault(detail, self.name)
+        if self.adopted:
+            self.fail(detail)
 
     def stop(self) -> None:
         """The ``stop`` command: every motor stopped, the move ended."""
@@ -853,8 +853,8 @@ class PolyAxis(Component):
             dropped = self.motion.clear() if self.motion is not None else 0
             if dropped and self.stdout is not None:
                 self.stdout.write(f"{self.name}: {dropped} queued move(s) dropped\n")
-        if reason in SAFETY_STOPS and self.on_fault is not None:
-            self.on_fault(f"{reason.value}: {detail}", self.name)
+        if reason in SAFETY_STOPS and self.adopted:
+            self.fail(f"{reason.value}: {detail}")
         return rec
 
     @property
@@ -912,8 +912,8 @@ class PolyAxis(Component):
         self.position_error = cause
         if self.active:
             self.halt(StopReason.FAULT, cause)
-            if self.on_fault is not None:
-                self.on_fault(cause, self.name)
+            if self.adopted:
+                self.fail(cause)
 
     # -- estimate integrity ---------------------------------------------------------------
 
@@ -958,8 +958,8 @@ class PolyAxis(Component):
                   "'survey' or 'setpos X Y Z'")
         if self.active:
             self._fault(detail)
-        elif self.on_fault is not None:
-            self.on_fault(detail, self.name)
+        elif self.adopted:
+            self.fail(detail)
         else:
             self.stop_motors()
 

@@ -133,6 +133,7 @@ class Loop:
         self._jobs: deque[Job] = deque()
         self._jobs_attached = False
         self._faults: deque[Fault] = deque()
+        self._fault_ids = 0
         #: Called (in the loop thread) with each fault as it is recorded.
         self.fault_listeners: list[Callable[[Fault], None]] = []
         #: ``trip(cause, source)`` of each station on this loop (see :meth:`fault_all`).
@@ -210,9 +211,10 @@ class Loop:
     # -- faults --------------------------------------------------------------
 
     def make_fault(self, robot: str, cause: str, source: str = "", tb: str = "") -> Fault:
-        """A fault record stamped with this tick and loop time."""
+        """A fault record stamped with this tick and loop time and the next event id."""
+        self._fault_ids += 1
         return Fault(robot=robot, cause=cause, source=source, tick=self.tick_index,
-                     time_ns=self.now_ns, traceback=tb)
+                     time_ns=self.now_ns, traceback=tb, id=self._fault_ids)
 
     def report_fault(self, fault: Fault) -> None:
         """Queue ``fault`` for the application: the next mailbox call raises it
@@ -226,10 +228,17 @@ class Loop:
         """True while a fault waits to be reported."""
         return bool(self._faults)
 
-    def take_fault(self) -> Fault | None:
-        """The oldest fault not yet reported, removed from the pending list."""
+    def take_fault(self, fault: Fault | None = None) -> Fault | None:
+        """The oldest fault not yet reported, removed from the pending list; or,
+        given ``fault`` (shown to the operator another way), that one removed."""
         with self._fault_lock:
-            return self._faults.popleft() if self._faults else None
+            if fault is None:
+                return self._faults.popleft() if self._faults else None
+            for pending in self._faults:
+                if pending is fault:
+                    self._faults.remove(pending)
+                    return pending
+            return None
 
     def raise_pending(self) -> None:
         """Raise :class:`FaultError` for the oldest unreported fault (each once)."""

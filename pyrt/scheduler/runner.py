@@ -41,7 +41,19 @@ from pyrt.errors import (
 from pyrt.scheduler.loop import Job, Loop
 from pyrt.scheduler.stats import LoopStatistics
 
-__all__ = ["MotionQueue", "Runner"]
+__all__ = ["FaultMessage", "MotionQueue", "Runner"]
+
+
+class FaultMessage(str):
+    """The asynchronous line of a fault event (``FAULT <fault>``), carrying the
+    :class:`~pyrt.errors.Fault` so that a reader can show each event once, by its id."""
+
+    fault: Fault
+
+    def __new__(cls, fault: Fault) -> FaultMessage:
+        line = super().__new__(cls, f"FAULT {fault}")
+        line.fault = fault
+        return line
 
 
 class MotionQueue:
@@ -272,6 +284,10 @@ class Runner:
             finally:
                 self._driver = None
 
+    def take_fault(self, fault: Fault) -> None:
+        """``fault`` has been shown to the operator: the next call does not raise it."""
+        self.loop.take_fault(fault)
+
     def _raise_fault(self) -> None:
         fault = self.loop.take_fault()
         if fault is not None:
@@ -365,7 +381,7 @@ class Runner:
                 return out
 
     def _on_fault(self, fault: Fault) -> None:
-        self.post(f"FAULT {fault}")
+        self.post(FaultMessage(fault))
 
     # -- the loop side ---------------------------------------------------------
 

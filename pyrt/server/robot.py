@@ -94,6 +94,13 @@ class ObserverRunner:
         """The loop's timing statistics, leaving a pending fault for the operator."""
         return self._runner.statistics(timeout_s, take_fault=False)
 
+    def messages(self) -> list[str]:
+        """The loop's asynchronous lines are the operator's: none here."""
+        return []
+
+    def take_fault(self, fault: Any) -> None:
+        """A fault is the operator's to take: nothing here."""
+
     def poll(self, timeout_s: float = 1.0) -> None:
         """A no-op round trip that does not take the operator's fault."""
         self.call(lambda: None, timeout_s=timeout_s, name="poll")

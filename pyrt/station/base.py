@@ -228,20 +228,24 @@ class Station:
         return self._fault
 
     def trip(self, cause: str, source: str = "", tb: str = "") -> Fault:
-        """Stop the robot: record the fault, halt its queues, run every
-        component's reflex and end its motions, in this tick; report it once."""
-        fault = self.loop.make_fault(self.name, cause, source, tb)
+        """The one fault path (every component's :meth:`~pyrt.component.Component.fail`,
+        a task that raised, a board that cannot be reached, a motion that
+        failed, the loop's consecutive overruns all come here): halt the
+        queues, run every component's reflex and end the motions, in this
+        tick.  The first fault is kept and published once, as one event with
+        an id (:attr:`~pyrt.errors.Fault.id`) that the shell, the server and
+        EPICS each show once; a later cause while the robot is stopped runs
+        the reflex again and is not news.  Returns the station's fault."""
         first = self._fault is None
-        if first:
-            self._fault = fault
         for q in self.queues:
             q.halt()
         failed = self.reflex(f"fault: {cause}")
+        if not first:
+            assert self._fault is not None
+            return self._fault
         if failed:
-            fault = self.loop.make_fault(self.name, f"{cause}; reflex action failed: {failed}",
-                                         source, tb)
-            if first:
-                self._fault = fault
+            cause = f"{cause}; reflex action failed: {failed}"
+        fault = self._fault = self.loop.make_fault(self.name, cause, source, tb)
         self.loop.report_fault(fault)
         return fault
 

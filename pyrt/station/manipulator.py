@@ -393,7 +393,6 @@ class ManipulatorStation(Station):
 
         # Level 4+: the ready queue and its tasks; write-back.
         self.queue = ReadyQueue(capacity=4, divisor=1, name=pa.name)
-        pa.on_fault = self._trip
         pa.set_task_periods(_checks(poll_s, tick_s, "control poll"),
                             _checks(axis_poll_s, tick_s, "axis poll"))
         register_tasks(self.queue, pa)  # every task the tree declares
@@ -504,9 +503,6 @@ class ManipulatorStation(Station):
                 self.trip(cause, source="WRITEBACK")
         else:
             self._writeback_failure = None
-
-    def _trip(self, cause: str, source: str) -> None:
-        self.trip(cause, source)
 
     def stop(self) -> str:
         """The operator's stop: the move ended (a STOP), every motor stopped,
