@@ -50,6 +50,7 @@ __all__ = [
     "Arg",
     "Command",
     "Component",
+    "Limits",
     "Signal",
     "Switch",
     "command",
@@ -63,6 +64,56 @@ __all__ = [
 
 # -- signals --------------------------------------------------------------------------
 
+_INF = math.inf
+
+
+@dataclass(frozen=True)
+class Limits:
+    """A value's display range and alarm levels, as EPICS has them: ``lopr``..
+    ``hopr`` (HOPR/LOPR), the major alarms ``lolo``/``hihi`` and the minor
+    ones ``low``/``high`` (HIHI/HIGH/LOW/LOLO).  An alarm level at +-inf is off."""
+
+    lopr: float
+    hopr: float
+    lolo: float = -_INF
+    low: float = -_INF
+    high: float = _INF
+    hihi: float = _INF
+
+    def __post_init__(self) -> None:
+        values = (self.lopr, self.hopr, self.lolo, self.low, self.high, self.hihi)
+        if any(math.isnan(v) for v in values) or not self.lopr <= self.hopr:
+            raise ValueError(f"display range {self.lopr:g}..{self.hopr:g} is not a range")
+        if not self.lolo <= self.low <= self.high <= self.hihi:
+            raise ValueError("alarm levels must be LOLO <= LOW <= HIGH <= HIHI, got "
+                             f"{self.lolo:g} {self.low:g} {self.high:g} {self.hihi:g}")
+
+    def alarm(self, value: float) -> str:
+        """``LOLO``, ``LOW``, ``HIGH`` or ``HIHI`` where ``value`` lies beyond a
+        level (the major alarm first), else ''."""
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            return ""
+        if v <= self.lolo and self.lolo > -_INF:
+            return "LOLO"
+        if v >= self.hihi and self.hihi < _INF:
+            return "HIHI"
+        if v <= self.low and self.low > -_INF:
+            return "LOW"
+        if v >= self.high and self.high < _INF:
+            return "HIGH"
+        return ""
+
+    @property
+    def text(self) -> str:
+        """``0..200`` and the alarm levels that are on (``LOLO 2, HIHI 200``)."""
+        levels = [f"{n} {v:g}" for n, v in (("LOLO", self.lolo), ("LOW", self.low),
+                                             ("HIGH", self.high), ("HIHI", self.hihi))
+                  if math.isfinite(v)]
+        rng = f"{self.lopr:g}..{self.hopr:g}"
+        return f"{rng}; {', '.join(levels)}" if levels else rng
+
 
 @dataclass(frozen=True)
 class Signal:
@@ -72,6 +123,8 @@ class Signal:
     same value (default: ``Source.call(read)``).  ``units`` is never empty:
     ``cm``, ``N``, ``counts``, ``bool``, ``byte`` ...  ``fmt`` formats a
     value for ``status`` (a format spec, as in ``format(value, fmt)``).
+    ``limits`` is its display range and alarm levels (:class:`Limits`), or
+    None: EPICS serves them as the PV's, ``status OBJECT`` shows them.
     """
 
     name: str
@@ -80,18 +133,24 @@ class Signal:
     doc: str = ""
     fmt: str = ".4g"
     source: Source | None = None
+    limits: Limits | None = None
 
     @classmethod
     def attr(cls, name: str, units: str, obj: Any, attr: str, doc: str = "",
-             fmt: str = ".4g") -> Signal:
+             fmt: str = ".4g", limits: Limits | None = None) -> Signal:
         """A signal that is an attribute of ``obj``."""
-        return cls(name, units, lambda: getattr(obj, attr), doc, fmt, Source.attr(obj, attr))
+        return cls(name, units, lambda: getattr(obj, attr), doc, fmt, Source.attr(obj, attr),
+                   limits)
 
     @classmethod
     def item(cls, name: str, units: str, seq: Any, index: int, doc: str = "",
-             fmt: str = ".4g") -> Signal:
+             fmt: str = ".4g", limits: Limits | None = None) -> Signal:
         """A signal that is ``seq[index]`` (a list the loop updates in place)."""
-        return cls(name, units, lambda: seq[index], doc, fmt, Source.item(seq, index))
+        return cls(name, units, lambda: seq[index], doc, fmt, Source.item(seq, index), limits)
+
+    def limited(self, limits: Limits | None) -> Signal:
+        """The same signal with ``limits``."""
+        return replace(self, limits=limits)
 
     def scope_source(self) -> Source:
         """Where the scope samples this signal."""

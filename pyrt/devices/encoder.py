@@ -14,7 +14,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, TextIO
 
 from pyrt.boards.dataconcentrator import DataConcentrator, DigitalChannel
-from pyrt.component import Arg, Component, Signal, command
+from pyrt.component import Arg, Component, Limits, Signal, command
 from pyrt.devices._args import parse_number
 from pyrt.errors import CommandError, ConfigError
 
@@ -75,7 +75,9 @@ class Encoder(Component):
     # -- commands (Table 8) ------------------------------------------------------
 
     def signals(self) -> list[Signal]:
-        return [Signal("length", "cm", self.length, "total unstretched rope length")]
+        r = self.length_range
+        return [Signal("length", "cm", self.length, "total unstretched rope length",
+                       limits=None if r is None else Limits(r[0], r[1]))]
 
     @command(name="reset", reply=lambda _r: "reset")
     def reset(self) -> None:

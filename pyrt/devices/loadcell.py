@@ -19,7 +19,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, TextIO
 
 from pyrt.boards.dataconcentrator import ADC_MAX, AnalogChannel, DataConcentrator
-from pyrt.component import Arg, Component, Signal, command
+from pyrt.component import Arg, Component, Limits, Signal, command
 from pyrt.devices._args import parse_number
 from pyrt.errors import CommandError, ConfigError
 from pyrt.units import UnitError, factor, split_quantity
@@ -90,6 +90,9 @@ class Loadcell(Component):
         self.maxload = float(maxload)
         self.stdout = stdout
         self.write_back = write_back
+        #: The tension's display range and alarm levels (the rope's tension
+        #: limits, given by the axis that reads this loadcell), or None.
+        self.limits: Limits | None = None
         self.calibrating = False
         #: While calibrating: the rope tension read just before calibration
         #: began.  The rope is off the loadcell then, carrying the known loads,
@@ -126,7 +129,8 @@ class Loadcell(Component):
     # -- calibration ---------------------------------------------------------------
 
     def signals(self) -> list[Signal]:
-        return [Signal("tension", "N", self.tension, "rope tension from the ADC")]
+        return [Signal("tension", "N", self.tension, "rope tension from the ADC",
+                       limits=self.limits)]
 
     @command(name="calibrate", reply=lambda v: (
         "calibration mode: hang known loads and give 'point LOAD'" if v is None

@@ -40,7 +40,7 @@ from pyrt.boards.tio10 import (
     TIO10,
     source_hz,
 )
-from pyrt.component import Arg, Component, Signal, command
+from pyrt.component import Arg, Component, Limits, Signal, command
 from pyrt.devices._args import parse_number
 from pyrt.errors import CommandError, ConfigError
 
@@ -284,12 +284,21 @@ class Motor(Component):
         self.desired_velocity = 0.0
         self.desired_steps = self.steps_taken
 
+    @property
+    def speed_limits(self) -> Limits:
+        """A velocity's display range: +-CRUISE_SPEED of MOTOR.dat."""
+        v = self.cruise_speed
+        return Limits(-v, v)
+
     def signals(self) -> list[Signal]:
+        lim = self.speed_limits
         return [
-            Signal.attr("velocity", "cm/s", self, "velocity", "commanded velocity (velocity mode)"),
+            Signal.attr("velocity", "cm/s", self, "velocity", "commanded velocity (velocity mode)",
+                        limits=lim),
             Signal.attr("desiredVelocity", "cm/s", self, "desired_velocity",
-                        "velocity the controller asks for"),
-            Signal("speed", "cm/s", self.speed, "present signed speed (0 when not stepping)"),
+                        "velocity the controller asks for", limits=lim),
+            Signal("speed", "cm/s", self.speed, "present signed speed (0 when not stepping)",
+                   limits=lim),
             Signal("running", "bool", lambda: self.running, "the channel is stepping", "d"),
         ]
 

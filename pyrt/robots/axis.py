@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, TextIO
 
 from pyrt.boards.dataconcentrator import ADC_MAX, DataConcentrator
 from pyrt.boards.tio10 import TIO10
-from pyrt.component import Arg, Component, Signal, command
+from pyrt.component import Arg, Component, Limits, Signal, command
 from pyrt.devices._args import parse_number
 from pyrt.devices.encoder import Encoder
 from pyrt.devices.loadcell import Loadcell, parse_load
@@ -84,6 +84,17 @@ class TrackingError(PyrtError):
     Raised from :meth:`Axis.poll` after the motor has been stopped, so the
     control loop turns it into a fault (every motor of the robot stopped).
     """
+
+
+def tension_alarms(limits: tuple[float, float] | None) -> Limits | None:
+    """A rope tension's display range and alarms from (LOW_TENSION, MAX_TENSION):
+    LOLO/HIHI are the stops (a MAJOR alarm); LOW/HIGH warn a little before them
+    (1.5 x LOW_TENSION and 90 % of MAX_TENSION: pyrt's choice, the documents
+    give only the stops).  None without limits."""
+    if limits is None:
+        return None
+    lo, hi = limits
+    return Limits(0.0, hi, lolo=lo, low=1.5 * lo, high=0.9 * hi, hihi=hi)
 
 
 def _zero() -> float:
@@ -238,16 +249,20 @@ class Axis(Component):
         return lambda: array[i]
 
     def signals(self) -> list[Signal]:
+        r = self.length_range
         return [
             Signal("tension", "N", self._polled("tensions", self.tension),
-                   "rope tension the controller acts on (loadcell)"),
+                   "rope tension the controller acts on (loadcell)",
+                   limits=tension_alarms(self.tension_limits)),
             Signal("length", "cm", self._polled("lengths", self.getLength),
-                   "rope length the controller acts on, stretch corrected"),
+                   "rope length the controller acts on, stretch corrected",
+                   limits=None if r is None else Limits(r[0], r[1])),
             Signal("errorLength", "cm", self._polled("error_lengths", _zero),
                    "fuzzy input: length error (PolyAxis control; 0 standalone)"),
             Signal("errorTension", "N", self._polled("error_tensions", _zero),
                    "fuzzy input: tension error (PolyAxis control; 0 standalone)"),
-            Signal.attr("velocity", "cm/s", self.motor, "velocity", "motor velocity"),
+            Signal.attr("velocity", "cm/s", self.motor, "velocity", "motor velocity",
+                        limits=self.motor.speed_limits),
         ]
 
     def reflex(self) -> None:
@@ -311,6 +326,7 @@ class Axis(Component):
         self.length_range = (lo, hi)
         self.encoder.length_range = (lo + self.dead_length, hi + self.dead_length)
         self.tension_limits = (tl, th)
+        self.loadcell.limits = tension_alarms(self.tension_limits)
         self.tension_stops = tension_stops
 
     @command(Arg("DIST", str, lo=0.0, units="cm", bounds="travel_range",

@@ -82,7 +82,7 @@ from typing import TextIO
 
 import numpy as np
 
-from pyrt.component import Arg, Component, Signal, command, finite
+from pyrt.component import Arg, Component, Limits, Signal, command, finite
 from pyrt.devices._args import parse_number
 from pyrt.devices.motor import STEP_MODE
 from pyrt.errors import CommandError, ConfigError, NativeError
@@ -495,16 +495,33 @@ class PolyAxis(Component):
     def children(self) -> list[Component]:
         return [*self.axes, self.av]
 
+    def position_limits(self, k: int) -> Limits:
+        """The display range of co-ordinate ``k`` (0, 1, 2: x, y, z) of a point
+        inside the vessel or its neck, cm."""
+        av = self.av
+        centre = av.vtog((0.0, 0.0, 0.0))
+        top = max(av.neck_ring_position[k] + av.neck_length * av.neck_axis[k],
+                  centre[k] + av.vessel_radius)
+        return Limits(centre[k] - av.vessel_radius, top)
+
     def signals(self) -> list[Signal]:
         pos = self.position
+        lim = self.net_forcelimit
         return [
-            Signal("x", "cm", lambda: self.position[0], "source position x (estimate)"),
-            Signal("y", "cm", lambda: self.position[1], "source position y (estimate)"),
-            Signal("z", "cm", lambda: self.position[2], "source position z (estimate)"),
+            Signal("x", "cm", lambda: self.position[0], "source position x (estimate)",
+                   limits=self.position_limits(0)),
+            Signal("y", "cm", lambda: self.position[1], "source position y (estimate)",
+                   limits=self.position_limits(1)),
+            Signal("z", "cm", lambda: self.position[2], "source position z (estimate)",
+                   limits=self.position_limits(2)),
+            # An estimate less consistent than END_ERROR cannot claim ENDPOINT: MINOR.
             Signal.attr("distErr", "cm", self, "dist_err",
-                        "rope-length residual of the position estimate"),
+                        "rope-length residual of the position estimate",
+                        limits=Limits(0.0, 4.0 * self.end_error, high=self.end_error)),
+            # NET_FORCELIMIT is the net-force stop (MAJOR); MINOR at 80 %.
             Signal.attr("netForce", "N", self, "net_force_magnitude",
-                        "residual net force on the source"),
+                        "residual net force on the source",
+                        limits=Limits(0.0, 2.0 * lim, high=0.8 * lim, hihi=lim)),
             Signal.attr("active", "bool", self, "active", "a move is running", "d"),
         ] if pos is not None else []
 

@@ -62,6 +62,7 @@ import math
 import threading
 from typing import Any
 
+from pyrt.component import Limits
 from pyrt.errors import ConfigError, FaultError, PyrtError
 from pyrt.server.protocol import format_error, format_reply
 from pyrt.server.robot import ObserverRunner
@@ -237,13 +238,12 @@ class EpicsService:
         ro = lambda base: _read_only(ca, base)  # noqa: E731
         db: dict[str, Any] = {p + "T": ro(ca.ChannelDouble)(value=0.0, precision=6, units="s")}
         self._fields: list[tuple[str, Any]] = []
-        limits_of = getattr(self.robot, "limits", lambda name, units: None)
-        for name, units, fmt in self._status_fields():
-            kind, pv = _value_pv(ca, units, fmt, limits_of(name, units))
+        for name, units, fmt, limits in self._status_fields():
+            kind, pv = _value_pv(ca, units, fmt, limits)
             db[p + name.upper()] = pv
             self._fields.append((kind, pv))
         self._extras: list[tuple[str, Any]] = []
-        for f in getattr(self.robot, "extra_fields", ()):
+        for f in self.robot.extra_fields:
             key = p + pv_name(f.name)
             if key in db:
                 continue
@@ -282,14 +282,11 @@ class EpicsService:
                                                  string_encoding="utf-8")
         return db
 
-    def _status_fields(self) -> list[tuple[str, str, str]]:
-        """``(name, units, format)`` of each status field: from the station's
-        signal records (a :class:`~pyrt.server.station.ServedStation`'s
-        ``fields``), else the names alone (units unknown, 3 decimals)."""
-        fields = getattr(self.robot, "fields", None)
-        if fields is None:
-            return [(name, "", ".3f") for name in self.robot.status_names]
-        return [(name, sig.units, fmt) for name, sig, fmt in fields]
+    def _status_fields(self) -> list[tuple[str, str, str, Limits | None]]:
+        """``(name, units, format, limits)`` of each status field, from the
+        station's signal records (a :class:`~pyrt.server.station.ServedStation`'s
+        ``fields``)."""
+        return [(name, sig.units, fmt, sig.limits) for name, sig, fmt in self.robot.fields]
 
     # -- life cycle ----------------------------------------------------------------
 
@@ -458,9 +455,7 @@ class EpicsService:
     def _run_ack(self) -> str:
         """Acknowledge the fault through the mailbox; the fault's report, which
         the call meets first, is what is being acknowledged."""
-        station = getattr(self.robot, "station", None)
-        if station is None:
-            return self._run("ack")
+        station = self.robot.station
         with self._shell_lock:
             for _ in range(8):
                 try:

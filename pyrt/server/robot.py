@@ -1,11 +1,12 @@
 """What the server needs of a robot, and the read-only view of the runner.
 
 A robot plugs into the server through a :class:`ServedRobot`: its status
-(the sources the loop reads, how a STATUS line shows them), a command shell
-per connection, the classification of its commands into read-only and
-privileged, and the action that stops every motor.  The gripper's is
-:class:`pyrt.server.gripper.GripperService`; the manipulator's
-:class:`pyrt.server.manipulator.ManipulatorService`.
+(the sources the loop reads, how a STATUS line shows them, the signals
+behind them with their units and limits), the values served beside them,
+a command shell per connection, the classification of its commands into
+read-only and privileged, and the action that stops every motor.  Every
+station is served through the one implementation,
+:class:`pyrt.server.station.ServedStation`.
 
 An unprivileged connection's shell gets an :class:`ObserverRunner` instead
 of the runner: its mailbox calls leave a pending fault for the operator
@@ -42,6 +43,12 @@ class ServedRobot(Protocol):
     name: str
     #: Names of the status fields, in the order of :meth:`status_sources`.
     status_names: Sequence[str]
+    #: The status fields ``(name, signal, format)``: units and limits for EPICS.
+    fields: Sequence[tuple[str, Any, str]]
+    #: Values served beside the status fields (EPICS PVs): ``PVField`` records.
+    extra_fields: Sequence[Any]
+    #: The station served (acknowledging its fault is its own act).
+    station: Any
 
     def status_sources(self) -> list[Source]:
         """Where the loop reads each status field (sampled in the loop thread)."""
@@ -61,6 +68,10 @@ class ServedRobot(Protocol):
 
     def is_stop(self, line: str) -> bool:
         """True when ``line`` is a stop (any client may give it, even in a reserved slot)."""
+        ...
+
+    def unknown(self, line: str) -> str | None:
+        """Why ``line`` names no command of this robot, or None."""
         ...
 
     def stop_all(self) -> None:

@@ -192,7 +192,7 @@ class Server(IOLoopMixin, FramingMixin, SessionMixin):
         self.nice = int(nice)
         self.switch_interval_s = switch_interval_s
         self.max_hz = 1e9 / runner.loop.period_ns
-        extras = getattr(robot, "extra_fields", ())
+        extras = robot.extra_fields
         self.hub = StatusHub(robot.status_names, robot.status_sources(),
                              snapshot_every=snapshot_every,
                              extra_sources=[f.source for f in extras],

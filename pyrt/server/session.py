@@ -284,8 +284,7 @@ class SessionMixin:
     def _refusal(self, line: str) -> str:
         """An unprivileged client's line that is not served: ``ERR command``
         when it names no command (as the console would say), else ``ERR denied``."""
-        unknown = getattr(self.robot, "unknown", None)
-        why = unknown(line) if unknown is not None else None
+        why = self.robot.unknown(line)
         if why:
             return format_error("command", why)
         self.counters["denied"] += 1

@@ -10,35 +10,20 @@ the stop).  No second table of commands exists here.
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, TextIO
 
 from pyrt.commands.robot import RobotShell
+from pyrt.component import Limits
 from pyrt.errors import CommandError
 from pyrt.scope import Source
 
-__all__ = ["Limits", "PVField", "ServedStation", "StationState"]
-
-INF = math.inf
+__all__ = ["Limits", "PVField", "ServedStation", "StationState"]  # Limits: pyrt.component's
 
 #: The states of the ``state`` field (an enum PV).
 StationState = ("idle", "moving", "fault")
-
-
-@dataclass(frozen=True)
-class Limits:
-    """Display range and alarm limits of a value (an EPICS PV's HOPR/LOPR,
-    HIHI/HIGH/LOW/LOLO).  An alarm limit at +-inf is off."""
-
-    lopr: float
-    hopr: float
-    lolo: float = -INF
-    low: float = -INF
-    high: float = INF
-    hihi: float = INF
 
 
 @dataclass(frozen=True)
@@ -131,23 +116,16 @@ class ServedStation:
             PVField("stopReason", "", "s", Source.call(self._stop_reason), "text",
                     doc="how the last move ended"),
         ]
-        pa = getattr(st, "polyaxis", None)
-        if pa is not None:
-            # Read-back of the running move's endpoint (NaN between moves);
-            # a move is started only through CMD with the token.
-            for k, c in enumerate("xyz"):
-                fields.append(PVField(
-                    f"target_{c}", "cm", ".2f",
-                    Source.call(lambda k=k: _coord(pa.endpoint if pa.active else None, k)),
-                    limits=self._limits(c, "cm"), doc=f"endpoint {c} of the move (NaN: none)"))
+        for sig in st.served_signals():
+            fields.append(PVField(sig.name, sig.units, sig.fmt, sig.scope_source(),
+                                  limits=sig.limits, doc=sig.doc))
         for comp in st.components():
             for sig in comp.signals():
                 name = f"{comp.name}:{sig.name}"
                 if not _PV_NAME.match(comp.name) or not _PV_NAME.match(sig.name):
                     continue
                 fields.append(PVField(name, sig.units, sig.fmt, sig.scope_source(),
-                                      limits=self._limits(sig.name, sig.units, comp),
-                                      doc=sig.doc))
+                                      limits=sig.limits, doc=sig.doc))
         return fields
 
     def _state(self) -> int:
@@ -158,61 +136,6 @@ class ServedStation:
 
     def _stop_reason(self) -> str:
         return self.station.last_stop()
-
-    def limits(self, name: str, units: str) -> Limits | None:
-        """Display and alarm limits of the STATUS field ``name`` (None: none known)."""
-        return self._limits(name, units)
-
-    def _limits(self, name: str, units: str, comp: Any = None) -> Limits | None:
-        """Limits from the station's database (the manipulator's tension
-        limits, net-force limit, END_ERROR, vessel and rope geometry, motor
-        speeds); None when the station gives none."""
-        pa = getattr(self.station, "polyaxis", None)
-        if pa is None:
-            return None
-        n = name.lower()
-        if units == "N" and n.startswith("tension"):
-            # LOLO/HIHI are the stops (LOW_TENSION 2 N, MAX_TENSION 200 N: a
-            # MAJOR alarm); LOW/HIGH warn a little before them (1.5 x LOW_TENSION,
-            # 90 % of MAX_TENSION: pyrt's choice, the documents give only the stops).
-            lo, hi = pa.low_tension, pa.max_tension
-            return Limits(0.0, hi, lolo=lo, low=1.5 * lo, high=0.9 * hi, hihi=hi)
-        if units == "N" and n == "netforce":
-            lim = pa.net_forcelimit  # NET_FORCELIMIT: the net-force stop (MAJOR); MINOR at 80 %
-            return Limits(0.0, 2.0 * lim, high=0.8 * lim, hihi=lim)
-        if units == "cm" and n == "disterr":
-            # An estimate less consistent than END_ERROR cannot claim ENDPOINT: MINOR.
-            return Limits(0.0, 4.0 * pa.end_error, high=pa.end_error)
-        av = pa.av
-        if units == "cm" and n in ("x", "y", "z"):
-            k = "xyz".index(n)
-            centre = av.vtog((0.0, 0.0, 0.0))
-            top = max(av.neck_ring_position[k] + av.neck_length * av.neck_axis[k],
-                      centre[k] + av.vessel_radius)
-            return Limits(centre[k] - av.vessel_radius, top)
-        if units == "cm" and n == "length":
-            axis = self._axis_of(pa, comp)
-            if axis is not None:
-                # A rope reaches at most from its top pulley to the far side of the vessel.
-                centre = av.vtog((0.0, 0.0, 0.0))
-                return Limits(0.0, math.dist(axis.top, centre) + av.vessel_radius)
-        if units == "cm/s":
-            axis = self._axis_of(pa, comp)
-            if axis is not None:
-                v = axis.motor.cruise_speed  # CRUISE_SPEED of MOTOR.dat
-                return Limits(-v, v)
-        return None
-
-    @staticmethod
-    def _axis_of(pa: Any, comp: Any) -> Any:
-        for axis in pa.axes:
-            if comp is axis or comp in (axis.motor, axis.encoder, axis.loadcell):
-                return axis
-        return None
-
-
-def _coord(point: Sequence[float] | None, k: int) -> float:
-    return math.nan if point is None else float(point[k])
 
 
 def _fmt(value: Any, fmt: str) -> str:

@@ -409,6 +409,11 @@ class Station:
         signals and the fault flag (configurations choose their own)."""
         return [*((s.name, s, s.fmt) for s in self.root.signals()), self.fault_field()]
 
+    def served_signals(self) -> list[Signal]:
+        """Values of the station itself served beside the status fields and
+        every component's signals (EPICS PVs by their names); none by default."""
+        return []
+
     def fault_field(self) -> tuple[str, Signal, str]:
         """The ``fault`` STATUS field (1 while a fault is not acknowledged)."""
         return ("fault", Signal("fault", "bool", lambda: self._fault is not None,

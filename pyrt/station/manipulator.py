@@ -72,7 +72,7 @@ from pyrt.db import Station as StationDB
 from pyrt.errors import BoardError, CommandError, ConfigError, NativeError, PyrtError
 from pyrt.native import FuzzyParams, NativeInputError
 from pyrt.robots.av import AV
-from pyrt.robots.axis import Axis
+from pyrt.robots.axis import Axis, tension_alarms
 from pyrt.robots.polyaxis import MIN_TOP_SEGMENT, PolyAxis
 from pyrt.robots.stops import StopRecord
 from pyrt.scheduler import Loop, ReadyQueue, SimClock
@@ -156,7 +156,8 @@ class ManipulatorSim(Component):
         out = [Signal(c, "cm", (lambda i=i: p.position[i]), f"true source position {c}")
                for i, c in enumerate("xyz")]
         out += [Signal(f"tension{i}", "N", (lambda i=i: p.tensions()[i]),
-                       f"true tension of {a.name}") for i, a in enumerate(self.axes)]
+                       f"true tension of {a.name}", limits=tension_alarms(a.tension_limits))
+                for i, a in enumerate(self.axes)]
         return out
 
     @command(name="show", reads_only=True)
@@ -628,9 +629,24 @@ class ManipulatorStation(Station):
                   ("moving", Signal("moving", "bool", self.busy, "a move runs or waits", "d"),
                    "d"), self.fault_field()]
         fields += [(f"tension{i}", Signal(f"tension{i}", "N", (lambda i=i: pa.tensions[i]),
-                                          f"measured tension of {a.name}"), ".2f")
+                                          f"measured tension of {a.name}",
+                                          limits=tension_alarms(a.tension_limits)), ".2f")
                    for i, a in enumerate(self.axes)]
         return fields
+
+    def served_signals(self) -> list[Signal]:
+        """The running move's endpoint (NaN between moves): read back only; a move
+        is started through CMD with the token."""
+        pa = self.polyaxis
+
+        def coord(k: int) -> float:
+            end = pa.endpoint if pa.active else None
+            return math.nan if end is None else float(end[k])
+
+        return [Signal(f"target_{c}", "cm", (lambda k=k: coord(k)),
+                       f"endpoint {c} of the move (NaN: none)", ".2f",
+                       limits=pa.position_limits(k))
+                for k, c in enumerate("xyz")]
 
     def closing_note(self) -> str:
         if self.fault is not None:
