@@ -34,14 +34,13 @@ itself) is first decremented at the *next* check and never runs twice in one.
 
 from __future__ import annotations
 
-import operator
 import sys
 import threading
 import traceback as _tb
 from collections.abc import Callable, Generator, MutableSequence
 from dataclasses import dataclass
-from functools import partial
 from time import perf_counter_ns
+from typing import Protocol
 
 import numpy as np
 
@@ -62,6 +61,21 @@ WIDE_MAX = 0xFFFFFFFF
 
 #: Most slots a queue can have (the C check's limit, and 002's byte count).
 MAX_CAPACITY = 255
+
+
+class _Words(Protocol):
+    """Indexable schedule variables or routine addresses (a byte image, a word view)."""
+
+    def __getitem__(self, i: int, /) -> int: ...
+
+    def __setitem__(self, i: int, v: int, /) -> None: ...
+
+
+def _cell_reader(cell: list[int]) -> Callable[[], int]:
+    def read() -> int:
+        return cell[0]
+
+    return read
 
 
 @dataclass
@@ -216,12 +230,13 @@ class ReadyQueue:
         self._pd = im.pd_addr
         self._sema_addr, sema_bit = im.sema
         self._sema_mask = 1 << sema_bit
+        self._q16: _Words
         if sys.byteorder == "little":
             self._q16 = memoryview(self._mem)[self._q : self._q + 2 * capacity].cast("H")
         else:  # pragma: no cover - no big-endian machine to test on
             self._q16 = _LittleEndianWords(self._mem, self._q, capacity)
         # T as indexable schedule variables: _tv[_t0 + slot]
-        self._tv: MutableSequence[int]
+        self._tv: _Words
         if not wide:
             self._tv, self._t0 = self._mem, self._t
         elif sys.byteorder == "little":
@@ -278,6 +293,11 @@ class ReadyQueue:
             for r in self._routines.values():
                 if r.period is not None and r.address not in on_queue:
                     self.schedule(r.address, r.period())
+
+    @property
+    def sized_to_routines(self) -> bool:
+        """True when the queue has one slot per registered routine (``capacity=None``)."""
+        return self._auto
 
     # -- configuration -----------------------------------------------------
 
@@ -348,8 +368,9 @@ class ReadyQueue:
             if not lo <= p <= hi:
                 raise ValueError(f"period of {name} must be {self._range_text()}, got {period!r}")
             if self.wide:
-                pmem, paddr = [p], 0
-                period_fn = partial(operator.getitem, pmem, 0)
+                cell = [p]
+                pmem, paddr = cell, 0
+                period_fn = _cell_reader(cell)
             else:
                 pmem, paddr = bytearray([p]), 0
                 period_fn = ByteRef(pmem, 0)
@@ -470,9 +491,11 @@ class ReadyQueue:
         routines run in the current tick are also kept, for overrun records
         (a loop on virtual time cannot overrun and turns it off).
         """
+        self._stats: dict[int, Accumulator] | None
+        self._samples: dict[int, list[int]] | None
         if on:
             self._stats = {a: Accumulator(r.name) for a, r in self._routines.items()}
-            self._samples: dict[int, list[int]] | None = {a: [] for a in self._routines}
+            self._samples = {a: [] for a in self._routines}
         else:
             self._stats = None
             self._samples = None
@@ -562,7 +585,7 @@ class ReadyQueue:
             if timer is not None:
                 if self._pending >= _FOLD_AT:
                     self.fold_timing()
-                samples = self._samples
+                samples = self._samples or {}
                 if self._track:
                     log = []
                     self._tick_log = log
