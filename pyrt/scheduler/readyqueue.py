@@ -623,19 +623,25 @@ def fold_samples(stats: dict[int, Accumulator], samples: dict[int, list[int]]) -
     """Add each routine's duration samples (ns) to its accumulator, in bulk."""
     for addr, durs in samples.items():
         acc = stats.get(addr)
-        if acc is None or not durs:
-            continue
-        d = np.fromiter(durs, dtype=np.int64, count=len(durs))
-        np.maximum(d, 0, out=d)
-        acc.calls += d.size
-        acc.total += int(d.sum())
-        m = int(d.max())
-        if m > acc.max:
-            acc.max = m
-        counts = np.bincount(_bin_indices(d), minlength=NBINS)
-        hist = acc.hist
-        for i in np.flatnonzero(counts).tolist():
-            hist[i] += int(counts[i])
+        if acc is not None:
+            fold_into(acc, durs)
+
+
+def fold_into(acc: Accumulator, durs: list[int]) -> None:
+    """Add duration samples (ns) to ``acc``, in bulk (negative ones count as 0)."""
+    if not durs:
+        return
+    d = np.fromiter(durs, dtype=np.int64, count=len(durs))
+    np.maximum(d, 0, out=d)
+    acc.calls += d.size
+    acc.total += int(d.sum())
+    m = int(d.max())
+    if m > acc.max:
+        acc.max = m
+    counts = np.bincount(_bin_indices(d), minlength=NBINS)
+    hist = acc.hist
+    for i in np.flatnonzero(counts).tolist():
+        hist[i] += int(counts[i])
 
 
 def _bin_indices(d: np.ndarray) -> np.ndarray:
