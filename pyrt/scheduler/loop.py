@@ -30,7 +30,7 @@ from typing import Any
 
 from pyrt.errors import Fault, FaultError, PyrtError
 from pyrt.scheduler.clock import Clock, SimClock
-from pyrt.scheduler.readyqueue import ReadyQueue, fold_into
+from pyrt.scheduler.readyqueue import ReadyQueue, fold_many
 from pyrt.scheduler.stats import (
     NBINS,
     Accumulator,
@@ -612,8 +612,7 @@ class Loop:
             q.fold_into_accumulators(samples)
         if taken.handlers:
             with self._entry_lock:
-                for e, durs in taken.handlers:
-                    fold_into(e.acc, durs)
+                fold_many([(e.acc, durs) for e, durs in taken.handlers])
 
     def statistics(self, fold: bool = True) -> LoopStatistics:
         """A frozen snapshot of lateness, work time and per-task timing: the

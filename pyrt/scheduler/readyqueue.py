@@ -39,6 +39,7 @@ import threading
 import traceback as _tb
 from collections.abc import Callable, Generator, MutableSequence
 from dataclasses import dataclass
+from itertools import chain
 from time import perf_counter_ns
 from typing import Protocol
 
@@ -621,27 +622,42 @@ class ReadyQueue:
 
 def fold_samples(stats: dict[int, Accumulator], samples: dict[int, list[int]]) -> None:
     """Add each routine's duration samples (ns) to its accumulator, in bulk."""
-    for addr, durs in samples.items():
-        acc = stats.get(addr)
-        if acc is not None:
-            fold_into(acc, durs)
+    fold_many([(stats[a], durs) for a, durs in samples.items() if a in stats])
 
 
 def fold_into(acc: Accumulator, durs: list[int]) -> None:
     """Add duration samples (ns) to ``acc``, in bulk (negative ones count as 0)."""
-    if not durs:
+    fold_many([(acc, durs)])
+
+
+def fold_many(pairs: list[tuple[Accumulator, list[int]]]) -> None:
+    """Add each list of duration samples (ns) to its accumulator: one numpy
+    pass over all of them (negative durations count as 0)."""
+    pairs = [(acc, durs) for acc, durs in pairs if durs]
+    if not pairs:
         return
-    d = np.fromiter(durs, dtype=np.int64, count=len(durs))
+    lengths = [len(durs) for _, durs in pairs]
+    total = sum(lengths)
+    d = np.fromiter(chain.from_iterable(durs for _, durs in pairs), dtype=np.int64, count=total)
     np.maximum(d, 0, out=d)
-    acc.calls += d.size
-    acc.total += int(d.sum())
-    m = int(d.max())
-    if m > acc.max:
-        acc.max = m
-    counts = np.bincount(_bin_indices(d), minlength=NBINS)
-    hist = acc.hist
-    for i in np.flatnonzero(counts).tolist():
-        hist[i] += int(counts[i])
+    k = len(pairs)
+    idx = _bin_indices(d)
+    if k > 1:
+        idx += np.repeat(np.arange(0, k * NBINS, NBINS, dtype=np.int64), lengths)
+    counts = np.bincount(idx, minlength=k * NBINS).reshape(k, NBINS)
+    starts = np.zeros(k, dtype=np.int64)
+    np.cumsum(lengths[:-1], out=starts[1:])
+    sums = np.add.reduceat(d, starts).tolist()
+    maxs = np.maximum.reduceat(d, starts).tolist()
+    for j, (acc, _) in enumerate(pairs):
+        acc.calls += lengths[j]
+        acc.total += int(sums[j])
+        if maxs[j] > acc.max:
+            acc.max = int(maxs[j])
+        row = counts[j]
+        hist = acc.hist
+        for i in np.flatnonzero(row).tolist():
+            hist[i] += int(row[i])
 
 
 def _bin_indices(d: np.ndarray) -> np.ndarray:
