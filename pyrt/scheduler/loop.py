@@ -232,7 +232,7 @@ class Loop:
             self._plan.append((handler.tick, self._sink.append))
             self._order.append(handler)
         else:
-            self._attach_timed(handler, name or getattr(handler, "__name__", "handler"))
+            self._attach_timed(handler, name or str(getattr(handler, "__name__", "handler")))
 
     def _attach_timed(self, handler: Handler, name: str) -> None:
         taken = {e.name for e in self._entries}

@@ -26,6 +26,9 @@ image (the gripper's monitor ``C`` command, say) changes what the queue does.
 
 Arithmetic is the 8031's: bytes decrement modulo 256 and are tested for zero
 after the decrement (DJNZ), so a schedule value or SYSCLKPD of 00 means 256.
+On a general queue ``T`` holds 32-bit little-endian words, decremented the
+same way modulo 2**32, and 0 is refused rather than read as 2**32;
+SYSCLKCNT and SYSCLKPD are bytes on both.
 
 Snapshot rule: routines found ready during one check run after the walk, so a
 routine scheduled while they run (a self-scheduling routine rescheduling
