@@ -9,6 +9,12 @@
  * (its Q word cleared, its T byte left 00) and its routine address is
  * appended to ready[] in slot order.  The routines themselves run in
  * Python, after the check.
+ *
+ * pyrt_rq_check_wide is the same check over a queue whose schedule
+ * variables are 32-bit words (T: capacity little-endian words at t_addr),
+ * decremented modulo 2**32 and tested for zero after the decrement: the
+ * ready queue of a station that has no 8031, whose periods do not fit a
+ * byte.  The layout of Q and the result are as above.
  */
 #ifndef PYRT_READYQ_H
 #define PYRT_READYQ_H
@@ -31,5 +37,11 @@ typedef struct {
  * pointer, capacity out of 1..255 or a T/Q range outside mem_len.
  */
 int pyrt_rq_check(pyrt_rq *rq);
+
+/*
+ * One check of a queue with 32-bit schedule words (T takes 4 * capacity
+ * bytes at t_addr).  Errors as pyrt_rq_check.
+ */
+int pyrt_rq_check_wide(pyrt_rq *rq);
 
 #endif /* PYRT_READYQ_H */

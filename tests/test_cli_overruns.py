@@ -44,6 +44,34 @@ def test_overruns_reads_a_log_the_loop_wrote(tmp_path, capsys):
     assert "worst 10 overruns:" in out
 
 
+def test_overruns_names_a_slow_board_poll(tmp_path, capsys):
+    """A loop handler (the board poll) that makes ticks overrun has a row of its own with those overruns."""
+    path = tmp_path / "timing.jsonl"
+    clock = WorkClock()
+    loop = Loop(clock, period_ns=MS, timing_log=TimingLog(str(path), version="test"))
+    queue = ReadyQueue(divisor=1)
+    queue.add_periodic(0x10, "SENSE", lambda: clock.work(500), 1)
+    queue.schedule(0x10, 1)
+    loop.attach(queue)
+    n = [0]
+
+    def poll(now: int) -> None:
+        n[0] += 1
+        clock.work(2 * MS if n[0] % 5 == 0 else 1000)
+
+    loop.attach(poll, name="boards")
+    loop.run(100)
+    loop.close()
+    assert main(["overruns", str(path), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["overruns"] == 20
+    assert data["tasks"]["boards"]["overruns"] == 20 and data["tasks"]["boards"]["calls"] == 100
+    assert data["tasks"]["SENSE"]["overruns"] == 0
+    assert main(["overruns", str(path)]) == 0
+    row = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("boards"))
+    assert row.split()[1] == "100" and row.split()[-1] == "20"
+
+
 def test_overruns_json_output(tmp_path, capsys):
     """--json prints one object with the same counts."""
     path = tmp_path / "timing.jsonl"

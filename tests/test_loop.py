@@ -417,3 +417,132 @@ def test_timer_slack_elsewhere_than_linux_is_a_clear_warning(monkeypatch):
     loop = make_loop(args)
     loop.attach(lambda now: None)
     assert loop.run(2) == 2
+
+
+# -- loop handlers as entries of their own ----------------------------------------------------
+
+
+def handler_loop(slow_every: int = 5, slow_ns: int = 3 * MS, **kw) -> tuple[Loop, WorkClock]:
+    """A queue with TASK (10 µs) and a board poll that takes ``slow_ns`` every ``slow_every``-th tick."""
+    loop, clock, _ = work_loop(**kw)
+    n = [0]
+
+    def poll(now: int) -> None:
+        n[0] += 1
+        clock.work(slow_ns if n[0] % slow_every == 0 else 2_000)
+
+    loop.attach(poll, name="boards")
+    loop.attach(lambda now: clock.work(500), name="scope")
+    return loop, clock
+
+
+def test_a_slow_board_poll_is_an_entry_of_its_own_with_the_overruns():
+    """Handlers are timed as entries (kind handler): calls, exact durations, and the overruns they caused."""
+    loop, _ = handler_loop()
+    loop.run(20)
+    stats = loop.statistics()
+    boards, scope, task = stats.tasks["boards"], stats.tasks["scope"], stats.tasks["TASK"]
+    assert (boards.kind, scope.kind, task.kind) == ("handler", "handler", "task")
+    assert boards.calls == 20 and scope.calls == 20
+    assert boards.max_ns == 3 * MS and scope.max_ns == 500 and scope.mean_ns == 500
+    assert stats.overruns == 4
+    assert boards.overruns == 4 and task.overruns == 0 and scope.overruns == 0
+
+
+def test_a_slow_handler_is_named_in_the_timing_log():
+    """Overrun records list the handlers with their durations; summaries carry them with their kind; read back, the overruns are the handler's."""
+    buf = io.StringIO()
+    loop, _ = handler_loop(timing_log=TimingLog(buf, version="t"))
+    loop.run(2500)
+    loop.close()
+    records = [json.loads(line) for line in buf.getvalue().splitlines()]
+    assert records[0]["tasks"] == ["WAIT", "TASK", "boards", "scope"]
+    overruns = [r for r in records if r["type"] == "overrun"]
+    assert len(overruns) == 500
+    assert overruns[0]["tasks"] == [["TASK", 10_000], ["boards", 3 * MS], ["scope", 500]]
+    summary = [r for r in records if r["type"] == "summary"][-1]
+    assert summary["tasks"]["boards"]["kind"] == "handler"
+    assert summary["tasks"]["boards"]["overruns"] == 500 and summary["tasks"]["boards"]["calls"] == 2500
+    assert summary["tasks"]["TASK"]["kind"] == "task" and summary["tasks"]["TASK"]["overruns"] == 0
+
+
+def test_read_back_timing_log_attributes_the_overruns_to_the_handler(tmp_path):
+    """read_timing_log finds the board poll as the culprit and knows it is a handler."""
+    path = tmp_path / "t.jsonl"
+    loop, _ = handler_loop(slow_every=4, timing_log=TimingLog(str(path)))
+    loop.run(100)
+    loop.close()
+    rep = read_timing_log(str(path))
+    assert rep.tasks["boards"].overruns == 25 and rep.tasks["boards"].kind == "handler"
+    assert rep.tasks["TASK"].overruns == 0 and rep.tasks["TASK"].kind == "task"
+
+
+def test_handler_entries_are_in_the_stats_table():
+    """format_statistics prints the routines under 'task' and the handlers under 'handler'."""
+    loop, _ = handler_loop()
+    loop.run(20)
+    lines = format_statistics(loop.statistics()).splitlines()
+    heads = [i for i, line in enumerate(lines) if line.split()[:2] in (["task", "calls"],
+                                                                      ["handler", "calls"])]
+    assert len(heads) == 2
+    task_rows = [line.split()[0] for line in lines[heads[0] + 1 : heads[1]]]
+    handler_rows = [line.split() for line in lines[heads[1] + 1 : -1]]
+    assert task_rows == ["TASK", "WAIT"]
+    assert [r[0] for r in handler_rows] == ["boards", "scope"]
+    assert handler_rows[0][1] == "20" and handler_rows[0][-1] == "4"
+
+
+def test_timing_off_times_no_handler():
+    """With timing off, handlers are not entries and nothing is recorded for them."""
+    loop = Loop(SimClock(), timing=False)
+    loop.attach(lambda now: None, name="boards")
+    loop.run(10)
+    assert loop.statistics().tasks == {}
+
+
+def test_handler_entry_names_are_unique():
+    """A second handler of one name gets '#2'; one named like a routine is shown as 'NAME (handler)'."""
+    loop, _, _ = work_loop()
+    loop.attach(lambda now: None, name="boards")
+    loop.attach(lambda now: None, name="boards")
+    loop.attach(lambda now: None, name="TASK")
+
+    def physics(now: int) -> None:
+        pass
+
+    loop.attach(physics)
+    loop.run(3)
+    stats = loop.statistics()
+    assert {"boards", "boards #2", "TASK (handler)", "physics"} <= set(stats.tasks)
+    assert stats.tasks["TASK"].kind == "task" and stats.tasks["TASK (handler)"].kind == "handler"
+
+
+def test_samples_taken_inside_a_tick_still_attribute_its_overrun():
+    """A handler that takes the samples (as the mailbox does for 'stats') does not hide an earlier slow handler's overrun."""
+    loop, _ = handler_loop(slow_every=2)
+    taken = []
+    loop.attach(lambda now: taken.append(loop.take_samples()), name="mailbox")
+    loop.run(20)
+    for t in taken:
+        loop.fold_samples(t)
+    stats = loop.statistics()  # the loop is stopped: fold what is left
+    assert stats.overruns == 10 and stats.tasks["boards"].overruns == 10
+    assert stats.tasks["boards"].calls == 20 and stats.tasks["mailbox"].calls == 20
+    assert stats.tasks["TASK"].calls == 20
+
+
+def test_jobs_and_the_loop_s_own_handlers_are_timed_on_simclock():
+    """On a SimClock handlers are timed too (CPU time), and foreground jobs appear as 'jobs'."""
+    loop = Loop(SimClock())
+    loop.attach(lambda now: None, name="boards")
+
+    def job():
+        for _ in range(3):
+            yield
+
+    loop.spawn("j", job())
+    loop.run(10)
+    stats = loop.statistics()
+    assert stats.tasks["boards"].calls == 10 and stats.tasks["jobs"].calls == 10
+    loop.reset_statistics()
+    assert loop.statistics().tasks["boards"].calls == 0

@@ -159,6 +159,7 @@ ONLY_RAW = {
     "pyrt_excess128_many": lambda: lib.pyrt_excess128_many(ffi.NULL, ffi.NULL, -1),
     "pyrt_fuzzy_default_params": lambda: lib.pyrt_fuzzy_default_params(ffi.NULL),
     "pyrt_rq_check": lambda: lib.pyrt_rq_check(ffi.NULL),
+    "pyrt_rq_check_wide": lambda: lib.pyrt_rq_check_wide(ffi.NULL),
 }
 
 

@@ -265,6 +265,15 @@ DRIVER = textwrap.dedent(
     rq.mem, rq.ready = ffi.new("uint8_t[]", 8), ffi.new("uint16_t[]", 4)
     rq.mem_len, rq.capacity, rq.t_addr, rq.q_addr = 8, 4, 0, 2      # Q runs past the image
     assert lib.pyrt_rq_check(rq) == lib.PYRT_EINVAL
+
+    # ---- readyq with 32-bit schedule words: through the wrapper, then straight into C
+    image = bytearray(4 * 3 + 2 * 3)
+    image[0:4] = (1).to_bytes(4, "little")
+    image[12:14] = bytes([0x34, 0x12])
+    assert nat.QueueChecker(image, 0, 12, 3, wide=True).check() == [0x1234]
+    assert lib.pyrt_rq_check_wide(ffi.NULL) == lib.PYRT_EINVAL
+    rq.mem_len, rq.capacity, rq.t_addr, rq.q_addr = 8, 1, 5, 0      # T runs past the image
+    assert lib.pyrt_rq_check_wide(rq) == lib.PYRT_EINVAL
     print("SANITIZE-DRIVER-OK")
     """
 )

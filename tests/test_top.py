@@ -68,6 +68,9 @@ def test_top_on_a_terminal_redraws_in_place_and_leaves_on_ctrl_c():
         child = pexpect.spawn(sys.executable, ["-m", "pyrt", "top", f"{sv.host}:{sv.port}",
                                                "--hz", "10"], encoding="utf-8", timeout=30,
                               dimensions=(40, 100),
+                              # the size top reads (shutil honours these first): the screen
+                              # holds the status, the whole stats table and the footer
+                              env={**os.environ, "LINES": "40", "COLUMNS": "100"},
                               # SIGINT may be inherited ignored (a suite run in the background)
                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
         try:

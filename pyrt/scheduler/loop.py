@@ -10,6 +10,15 @@ run back to back.
 On a :class:`~pyrt.scheduler.clock.SimClock` nothing of this costs real time
 and no tick can overrun; the same code runs deterministically in the caller's
 thread.  Timing statistics are optional and cost nothing when off.
+
+With timing on, every handler that is not a ready queue (board polls,
+physics, the motion executor, the scope, the mailbox, foreground jobs) is
+timed as an entry of its own, beside the queues' routines: the clock is read
+once between handlers (the end of one is the start of the next), each
+duration is appended to the handler's sample list, and the lists are folded
+into histograms in bulk, off the tick (:meth:`Loop.take_samples`).  An
+overrun is attributed to whichever entry, routine or handler, took longest
+in its tick.
 """
 
 from __future__ import annotations
@@ -21,7 +30,7 @@ from typing import Any
 
 from pyrt.errors import Fault, FaultError, PyrtError
 from pyrt.scheduler.clock import Clock, SimClock
-from pyrt.scheduler.readyqueue import ReadyQueue
+from pyrt.scheduler.readyqueue import ReadyQueue, fold_many
 from pyrt.scheduler.stats import (
     NBINS,
     Accumulator,
@@ -29,9 +38,34 @@ from pyrt.scheduler.stats import (
     TaskStatistics,
 )
 
-__all__ = ["Job", "Loop", "overrun_line"]
+__all__ = ["Job", "Loop", "TakenSamples", "overrun_line"]
 
 Handler = Callable[[int], None]
+
+
+class _HandlerTiming:
+    """The timing of one loop handler that is not a ready queue."""
+
+    __slots__ = ("acc", "last", "name", "samples")
+
+    def __init__(self, name: str):
+        self.name = name
+        #: Durations (ns) not yet folded; the loop appends one per tick.
+        self.samples: list[int] = []
+        self.acc = Accumulator(name)
+        #: The last duration handed over by a take (for an overrun in that tick).
+        self.last = 0
+
+
+class TakenSamples:
+    """Timing samples handed over by :meth:`Loop.take_samples`, to fold elsewhere."""
+
+    __slots__ = ("handlers", "queues")
+
+    def __init__(self, queues: list[tuple[ReadyQueue, dict[int, list[int]]]],
+                 handlers: list[tuple[_HandlerTiming, list[int]]]):
+        self.queues = queues
+        self.handlers = handlers
 
 
 class Job:
@@ -129,6 +163,17 @@ class Loop:
 
         self._handlers: list[Handler] = []
         self._handler_names: list[str] = []
+        # Timed ticks run this plan: (handler, record its duration).
+        self._plan: list[tuple[Handler, Callable[[int], None]]] = []
+        # What ran, in attach order: a ready queue or a handler's timing.
+        self._order: list[ReadyQueue | _HandlerTiming] = []
+        self._entries: list[_HandlerTiming] = []
+        # Where a queue's own stretch goes (its routines are timed by the queue).
+        self._sink: list[int] = []
+        self._entry_lock = threading.Lock()
+        self._taken_tick = -1
+        # Set per run(): handler durations are being recorded.
+        self._timing_handlers = False
         self.queues: list[ReadyQueue] = []
         self._jobs: deque[Job] = deque()
         self._jobs_attached = False
@@ -168,7 +213,10 @@ class Loop:
         """Call ``handler(now_ns)`` every tick, after those attached before it.
 
         A :class:`ReadyQueue` is attached by its clock handler; its faults are
-        reported to this loop and its routines timed when timing is on.
+        reported to this loop and its routines timed when timing is on.  Any
+        other handler is timed as an entry of its own, called ``name`` (by
+        default the function's name; a second handler of the same name gets
+        ``#2``).
         """
         if self.running:
             raise PyrtError("attach handlers before the loop runs")
@@ -182,17 +230,30 @@ class Loop:
             self.queues.append(handler)
             self._handlers.append(handler.tick)
             self._handler_names.append(name or f"queue:{handler.name}")
+            self._plan.append((handler.tick, self._sink.append))
+            self._order.append(handler)
         else:
-            self._handlers.append(handler)
-            self._handler_names.append(name or getattr(handler, "__name__", "handler"))
+            self._attach_timed(handler, name or str(getattr(handler, "__name__", "handler")))
+
+    def _attach_timed(self, handler: Handler, name: str) -> None:
+        taken = {e.name for e in self._entries}
+        key, n = name, 1
+        while key in taken:
+            n += 1
+            key = f"{name} #{n}"
+        entry = _HandlerTiming(key)
+        self._entries.append(entry)
+        self._order.append(entry)
+        self._plan.append((handler, entry.samples.append))
+        self._handlers.append(handler)
+        self._handler_names.append(name)
 
     def spawn(self, name: str, gen: Generator[Any, None, Any]) -> Job:
         """Run ``gen`` as a foreground job, one step per tick after the handlers."""
         job = Job(name, gen)
         self._jobs.append(job)
         if not self._jobs_attached:
-            self._handlers.append(self._step_jobs)
-            self._handler_names.append("jobs")
+            self._attach_timed(self._step_jobs, "jobs")
             self._jobs_attached = True
         return job
 
@@ -286,6 +347,7 @@ class Loop:
             if self._deadline < now:
                 self._deadline = now
         end_ns = self.now_ns + duration_ns if duration_ns is not None else None
+        self._timing_handlers = self.timing and bool(self._entries)
         self.running = True
         try:
             self._start_log()
@@ -309,21 +371,33 @@ class Loop:
         """The fast path: virtual clock, a fixed number of ticks."""
         clock = self.clock
         handlers = self._handlers
+        plan = self._plan if self._timing_handlers else None
+        timer = clock.timer
         period = self.period_ns
         deadline = self._deadline
         stop = self._stop
         plain = type(clock) is SimClock
-        summary_at = self._next_summary if self.timing_log is not None else None
+        # summaries (a timing log), or folding the handlers' samples, once a second
+        house = self.timing_log is not None or plan is not None
+        summary_at = self._next_summary if house else None
         n = 0
         try:
             while n < ticks:
                 if plain:
-                    clock._now = deadline
+                    clock._now = deadline  # type: ignore[attr-defined]
                 else:
                     clock.wait_until(deadline)
                 self.now_ns = deadline
-                for h in handlers:
-                    h(deadline)
+                if plan is None:
+                    for h in handlers:
+                        h(deadline)
+                else:
+                    t0 = timer()
+                    for h, record in plan:
+                        h(deadline)
+                        t1 = timer()
+                        record(t1 - t0)
+                        t0 = t1
                 self.tick_index += 1
                 n += 1
                 deadline += period
@@ -343,6 +417,8 @@ class Loop:
         clock = self.clock
         virtual = clock.virtual
         handlers = self._handlers
+        plan = self._plan if self._timing_handlers else None
+        timer = clock.timer
         period = self.period_ns
         stop = self._stop
         timing = self.timing
@@ -354,8 +430,16 @@ class Loop:
             clock.wait_until(deadline)
             start = deadline if virtual else clock.now_ns()
             self.now_ns = start
-            for h in handlers:
-                h(start)
+            if plan is None:
+                for h in handlers:
+                    h(start)
+            else:
+                t0 = timer()
+                for h, record in plan:
+                    h(start)
+                    t1 = timer()
+                    record(t1 - t0)
+                    t0 = t1
             self.tick_index += 1
             n += 1
             nxt = deadline + period
@@ -400,16 +484,33 @@ class Loop:
         self.overruns += 1
         self.missed += skipped
         self.consecutive_overruns += 1
+        # what ran in this tick, in order: routines of each queue, handlers
         tasks: list[tuple[str, int]] = []
-        culprit_q = None
-        for q in self.queues:
-            for entry in q.tasks_in_tick(start):
-                if not tasks or entry[1] > max(tasks, key=lambda t: t[1])[1]:
-                    culprit_q = q
-                tasks.append(entry)
-        culprit = max(tasks, key=lambda t: t[1])[0] if tasks else ""
-        if culprit_q is not None:
-            culprit_q.count_overrun(culprit)
+        owners: list[ReadyQueue | _HandlerTiming] = []
+        keys = self._entry_keys() if self._timing_handlers else {}
+        for item in self._order:
+            if isinstance(item, ReadyQueue):
+                ran = item.tasks_in_tick(start)
+                tasks.extend(ran)
+                owners.extend([item] * len(ran))
+            elif self._timing_handlers:
+                s = item.samples
+                if s:
+                    d = s[-1]
+                elif self._taken_tick == self.tick_index - 1:
+                    d = item.last  # the samples were taken during this tick
+                else:
+                    continue
+                tasks.append((keys[item.name], d))
+                owners.append(item)
+        culprit = ""
+        if tasks:
+            i = max(range(len(tasks)), key=lambda k: tasks[k][1])
+            culprit, owner = tasks[i][0], owners[i]
+            if isinstance(owner, ReadyQueue):
+                owner.count_overrun(culprit)
+            else:
+                owner.acc.overruns += 1
         lateness = end - deadline - self.period_ns
         if self.timing_log is not None:
             self.timing_log.overrun(
@@ -453,18 +554,21 @@ class Loop:
         log = self.timing_log
         if log is not None:
             # Hand the raw samples over (O(1)); fold, build and write elsewhere.
-            taken = [(q, q.take_samples()) for q in self.queues]
+            taken = self.take_samples()
 
             def write_summary() -> None:
-                for q, samples in taken:
-                    q.fold_into_accumulators(samples)
+                self.fold_samples(taken)
                 log.summary(now, self.statistics(fold=False))
 
             log.defer(write_summary)
+        elif self._entries:
+            self.fold_samples(TakenSamples([], self._take_handler_samples()))
 
     def _start_log(self) -> None:
         if self.timing_log is not None and not self._log_started:
             names = [r.name for q in self.queues for r in q.routines]
+            if self.timing:
+                names += list(self._entry_keys().values())
             self.timing_log.header(
                 period_ns=self.period_ns,
                 clock=type(self.clock).__name__,
@@ -484,8 +588,45 @@ class Loop:
 
     # -- statistics ----------------------------------------------------------
 
+    def _entry_keys(self) -> dict[str, str]:
+        """Each handler entry's name in the statistics: its own, or
+        ``NAME (handler)`` where a ready-queue routine has that name."""
+        routines = {r.name for q in self.queues for r in q.routines}
+        return {e.name: f"{e.name} (handler)" if e.name in routines else e.name
+                for e in self._entries}
+
+    def _take_handler_samples(self) -> list[tuple[_HandlerTiming, list[int]]]:
+        taken = []
+        for e in self._entries:
+            s = e.samples
+            if s:
+                e.last = s[-1]
+                taken.append((e, s[:]))
+                s.clear()  # the same list: the tick plan appends to it
+        self._sink.clear()
+        self._taken_tick = self.tick_index
+        return taken
+
+    def take_samples(self) -> TakenSamples:
+        """Hand over the timing samples recorded so far, of every queue and
+        handler (call it in the loop thread; O(queues + handlers) plus a copy
+        of the handlers' lists), to be folded by :meth:`fold_samples` in
+        any thread."""
+        return TakenSamples([(q, q.take_samples()) for q in self.queues],
+                            self._take_handler_samples())
+
+    def fold_samples(self, taken: TakenSamples) -> None:
+        """Fold samples handed over by :meth:`take_samples` (any thread)."""
+        for q, samples in taken.queues:
+            q.fold_into_accumulators(samples)
+        if taken.handlers:
+            with self._entry_lock:
+                fold_many([(e.acc, durs) for e, durs in taken.handlers])
+
     def statistics(self, fold: bool = True) -> LoopStatistics:
-        """A frozen snapshot of lateness, work time and per-task timing.
+        """A frozen snapshot of lateness, work time and per-task timing: the
+        ready queues' routines and, as entries of their own
+        (``kind="handler"``), the other handlers.
 
         With ``fold`` (call it in the loop thread, or with the loop stopped)
         the samples recorded since the last fold are included; a runner builds
@@ -494,16 +635,14 @@ class Loop:
         tasks: dict[str, TaskStatistics] = {}
         for q in self.queues:
             for acc in q.accumulators(fold=fold):
-                dist = acc.distribution()
-                tasks[acc.name] = TaskStatistics(
-                    name=acc.name,
-                    calls=acc.calls,
-                    mean_ns=dist.mean_ns,
-                    max_ns=acc.max,
-                    p99_ns=dist.p99_ns,
-                    overruns=acc.overruns,
-                    distribution=dist,
-                )
+                tasks[acc.name] = _task_statistics(acc.name, acc, "task")
+        if self.timing:
+            if fold:
+                self.fold_samples(TakenSamples([], self._take_handler_samples()))
+            keys = self._entry_keys()
+            with self._entry_lock:
+                for e in self._entries:
+                    tasks[keys[e.name]] = _task_statistics(keys[e.name], e.acc, "handler")
         return LoopStatistics(
             period_ns=self.period_ns,
             ticks=self.tick_index,
@@ -524,6 +663,11 @@ class Loop:
         for q in self.queues:
             for acc in q.accumulators():
                 acc.reset()
+        with self._entry_lock:
+            for e in self._entries:
+                e.samples.clear()
+                e.acc.reset()
+        self._sink.clear()
         self.overruns = self.missed = self.consecutive_overruns = 0
         self.startup_overruns = self.startup_worst_ns = 0
 
@@ -542,6 +686,13 @@ def overrun_line(count: int, worst_ns: int, tick: int, culprit: str = "", width:
             head += f" in {name}"
     line = head + tail
     return line if len(line) <= width else line[: width - 1] + "…"
+
+
+def _task_statistics(name: str, acc: Accumulator, kind: str) -> TaskStatistics:
+    dist = acc.distribution()
+    return TaskStatistics(name=name, calls=acc.calls, mean_ns=dist.mean_ns, max_ns=acc.max,
+                          p99_ns=dist.p99_ns, overruns=acc.overruns, distribution=dist,
+                          kind=kind)
 
 
 def _record(acc: Accumulator, d: int) -> None:

@@ -1,5 +1,15 @@
 """The 8031-style ready queue of self-scheduling routines (002, "The Ready Queue").
 
+What is 002's and what is general: the queue below is exactly 002's (byte
+schedule variables, DJNZ arithmetic, 16-bit routine addresses in a byte
+image, a fixed capacity, a full queue is a fault), and the gripper keeps it
+in its RAM image as 002 does.  A station that has no 8031 uses
+:meth:`ReadyQueue.general`: the same queue with 32-bit schedule variables in
+a private image (periods of any length up to 2**32 - 1 checks), sized to
+the routines registered on it, and routine addresses it assigns itself
+(:meth:`ReadyQueue.register` with ``address=None``).  The rules (snapshot,
+self-rescheduling, full queue is a fault, ``wait``) are the same for both.
+
 A periodic clock interrupt calls :meth:`ReadyQueue.tick`.  Every SYSCLKPD-th
 call it *checks the queue*: it decrements the schedule variable of each
 occupied slot and removes the routines whose variable reaches zero; when the
@@ -16,6 +26,9 @@ image (the gripper's monitor ``C`` command, say) changes what the queue does.
 
 Arithmetic is the 8031's: bytes decrement modulo 256 and are tested for zero
 after the decrement (DJNZ), so a schedule value or SYSCLKPD of 00 means 256.
+On a general queue ``T`` holds 32-bit little-endian words, decremented the
+same way modulo 2**32, and 0 is refused rather than read as 2**32;
+SYSCLKCNT and SYSCLKPD are bytes on both.
 
 Snapshot rule: routines found ready during one check run after the walk, so a
 routine scheduled while they run (a self-scheduling routine rescheduling
@@ -27,9 +40,11 @@ from __future__ import annotations
 import sys
 import threading
 import traceback as _tb
-from collections.abc import Callable, Generator
+from collections.abc import Callable, Generator, MutableSequence
 from dataclasses import dataclass
+from itertools import chain
 from time import perf_counter_ns
+from typing import Protocol
 
 import numpy as np
 
@@ -45,6 +60,27 @@ WAIT_ADDRESS = 0x0001
 #: Timing samples kept before they are folded into the accumulators.
 _FOLD_AT = 2048
 
+#: The largest schedule value of a queue with 32-bit schedule variables.
+WIDE_MAX = 0xFFFFFFFF
+
+#: Most slots a queue can have (the C check's limit, and 002's byte count).
+MAX_CAPACITY = 255
+
+
+class _Words(Protocol):
+    """Indexable schedule variables or routine addresses (a byte image, a word view)."""
+
+    def __getitem__(self, i: int, /) -> int: ...
+
+    def __setitem__(self, i: int, v: int, /) -> None: ...
+
+
+def _cell_reader(cell: list[int]) -> Callable[[], int]:
+    def read() -> int:
+        return cell[0]
+
+    return read
+
 
 @dataclass
 class ByteImage:
@@ -52,7 +88,9 @@ class ByteImage:
 
     ``mem`` is any mutable byte buffer (the gripper passes its 128-byte RAM);
     the other fields are offsets into it.  ``sema`` is the ``(address, bit)``
-    of the flag the wait routine sets.
+    of the flag the wait routine sets.  ``t_width`` is the size of one
+    schedule variable in T: 1 byte (002's 8031) or 4 (a 32-bit little-endian
+    word, :meth:`ReadyQueue.general`).
     """
 
     mem: bytearray
@@ -61,14 +99,17 @@ class ByteImage:
     cnt_addr: int
     pd_addr: int
     sema: tuple[int, int]
+    t_width: int = 1
 
     @classmethod
-    def private(cls, capacity: int) -> ByteImage:
-        """A private image: T, Q, SYSCLKCNT, SYSCLKPD and a flag byte, in that order."""
+    def private(cls, capacity: int, wide: bool = False) -> ByteImage:
+        """A private image: T, Q, SYSCLKCNT, SYSCLKPD and a flag byte, in that
+        order; with ``wide``, T holds 32-bit words."""
+        w = 4 if wide else 1
         t = 0
-        q = capacity
-        cnt = 3 * capacity
-        return cls(bytearray(3 * capacity + 3), t, q, cnt, cnt + 1, (cnt + 2, 0))
+        q = w * capacity
+        cnt = q + 2 * capacity
+        return cls(bytearray(cnt + 3), t, q, cnt, cnt + 1, (cnt + 2, 0), w)
 
 
 @dataclass(frozen=True)
@@ -94,56 +135,50 @@ class Routine:
 
 
 class ReadyQueue:
-    """A fixed-capacity ready queue driven by a periodic clock interrupt.
+    """A ready queue driven by a periodic clock interrupt.
 
-    ``capacity`` slots (the gripper's is 6); ``divisor`` is the initial
-    SYSCLKPD (the queue is checked every ``divisor``-th tick).  ``image``
-    places the state in an external byte image; by default the queue keeps a
-    private one.  ``name`` names the robot the queue belongs to in faults.
+    002's queue: ``capacity`` slots (the gripper's is 6) of byte schedule
+    variables; ``divisor`` is the initial SYSCLKPD (the queue is checked every
+    ``divisor``-th tick).  ``image`` places the state in an external byte
+    image; by default the queue keeps a private one.  ``name`` names the robot
+    the queue belongs to in faults.
+
+    General (no 8031): with ``wide`` the schedule variables are 32 bits
+    (1..2**32 - 1 checks; 0 is refused), and with ``capacity=None`` the queue
+    has one slot per registered routine, growing as routines are registered
+    (both need a private image).  :meth:`general` makes such a queue.
     """
 
     def __init__(
         self,
-        capacity: int = 6,
+        capacity: int | None = 6,
         divisor: int = 1,
         image: ByteImage | None = None,
         name: str = "robot",
+        *,
+        wide: bool = False,
     ):
-        if not 1 <= capacity <= 255:
-            raise ValueError(f"ready queue capacity must be 1..255, got {capacity}")
+        self._auto = capacity is None
+        if capacity is None:
+            if image is not None:
+                raise ValueError("a ready queue in an external byte image needs a capacity")
+            capacity = 1  # the WAIT routine's slot; grows with every routine registered
+        if not 1 <= capacity <= MAX_CAPACITY:
+            raise ValueError(f"ready queue capacity must be 1..{MAX_CAPACITY}, got {capacity}")
         if not 0 <= divisor <= 255:
             raise ValueError(f"clock divisor (SYSCLKPD) must be 0..255, got {divisor}")
+        if image is not None and wide and image.t_width != 4:
+            raise ValueError("a wide ready queue needs an image whose T holds 32-bit words "
+                             "(t_width=4)")
+        if image is not None and image.t_width not in (1, 4):
+            raise ValueError(f"T must hold 1- or 4-byte schedule variables, got {image.t_width}")
         self.name = name
-        self.capacity = capacity
-        self.image = image if image is not None else ByteImage.private(capacity)
-        im = self.image
-        for label, addr, size in (
-            ("T", im.t_addr, capacity),
-            ("Q", im.q_addr, 2 * capacity),
-            ("SYSCLKCNT", im.cnt_addr, 1),
-            ("SYSCLKPD", im.pd_addr, 1),
-        ):
-            if addr < 0 or addr + size > len(im.mem):
-                raise ValueError(f"{label} at {addr:#x} (+{size}) lies outside the byte image")
-        self._mem = im.mem
-        self._t = im.t_addr
-        self._q = im.q_addr
-        self._cnt = im.cnt_addr
-        self._pd = im.pd_addr
-        self._sema_addr, sema_bit = im.sema
-        self._sema_mask = 1 << sema_bit
-        if sys.byteorder == "little":
-            self._q16 = memoryview(self._mem)[self._q : self._q + 2 * capacity].cast("H")
-        else:  # pragma: no cover - no big-endian machine to test on
-            self._q16 = _LittleEndianWords(self._mem, self._q, capacity)
-        self._slot_range = range(capacity)
-        if not isinstance(self._mem, bytearray):
-            raise TypeError(f"the byte image must be a bytearray, got {type(self._mem).__name__}")
-        self._walk = QueueChecker(self._mem, self._t, self._q, capacity).check
+        self._bind(image if image is not None else ByteImage.private(capacity, wide), capacity)
         self._routines: dict[int, Routine] = {}
         self._by_name: dict[str, Routine] = {}
-        # address -> (body, period byte image or None, period byte address)
-        self._dispatch: dict[int, tuple[Callable[[], None], bytearray | None, int]] = {}
+        # address -> (body, period variable or None, its index)
+        self._dispatch: dict[
+            int, tuple[Callable[[], None], MutableSequence[int] | None, int]] = {}
         self._fold_lock = threading.Lock()
         self.enable_timing(False)
         self._interrupts = True
@@ -163,6 +198,71 @@ class ReadyQueue:
         self._mem[self._pd] = divisor
         self._mem[self._cnt] = divisor
         self.register(WAIT_ADDRESS, "WAIT", self._wait_done)
+
+    @classmethod
+    def general(cls, name: str = "robot", *, divisor: int = 1,
+                capacity: int | None = None) -> ReadyQueue:
+        """A queue for a station that has no 8031: 32-bit schedule variables
+        (a period is any number of checks from 1 to 2**32 - 1), checked every
+        tick by default (``divisor`` 1: a check is a tick), and one slot per
+        registered routine unless ``capacity`` is given."""
+        return cls(capacity, divisor, name=name, wide=True)
+
+    def _bind(self, im: ByteImage, capacity: int) -> None:
+        """Take ``im`` as the queue's image, with ``capacity`` slots."""
+        if not isinstance(im.mem, bytearray):
+            raise TypeError(f"the byte image must be a bytearray, got {type(im.mem).__name__}")
+        wide = im.t_width == 4
+        for label, addr, size in (
+            ("T", im.t_addr, im.t_width * capacity),
+            ("Q", im.q_addr, 2 * capacity),
+            ("SYSCLKCNT", im.cnt_addr, 1),
+            ("SYSCLKPD", im.pd_addr, 1),
+        ):
+            if addr < 0 or addr + size > len(im.mem):
+                raise ValueError(f"{label} at {addr:#x} (+{size}) lies outside the byte image")
+        self.image = im
+        self.capacity = capacity
+        #: True when the schedule variables are 32-bit words (:meth:`general`).
+        self.wide = wide
+        #: The schedule values a slot takes: 00..FF (00 = 256) or 1..2**32 - 1.
+        self.schedule_range = (1, WIDE_MAX) if wide else (0, 0xFF)
+        self._mem = im.mem
+        self._t = im.t_addr
+        self._q = im.q_addr
+        self._cnt = im.cnt_addr
+        self._pd = im.pd_addr
+        self._sema_addr, sema_bit = im.sema
+        self._sema_mask = 1 << sema_bit
+        self._q16: _Words
+        if sys.byteorder == "little":
+            self._q16 = memoryview(self._mem)[self._q : self._q + 2 * capacity].cast("H")
+        else:  # pragma: no cover - no big-endian machine to test on
+            self._q16 = _LittleEndianWords(self._mem, self._q, capacity)
+        # T as indexable schedule variables: _tv[_t0 + slot]
+        self._tv: _Words
+        if not wide:
+            self._tv, self._t0 = self._mem, self._t
+        elif sys.byteorder == "little":
+            self._tv = memoryview(self._mem)[self._t : self._t + 4 * capacity].cast("I")
+            self._t0 = 0
+        else:  # pragma: no cover - no big-endian machine to test on
+            self._tv, self._t0 = _LittleEndianWords(self._mem, self._t, capacity, 4), 0
+        self._slot_range = range(capacity)
+        self._walk = QueueChecker(self._mem, self._t, self._q, capacity, wide=wide).check
+
+    def _grow(self) -> None:
+        """One slot more (a queue sized to its routines), the state kept."""
+        if self.capacity >= MAX_CAPACITY:
+            raise ValueError(f"ready queue of {self.name} holds at most {MAX_CAPACITY} routines")
+        slots = self.slots()
+        old = self._mem
+        cnt, pd, sema = old[self._cnt], old[self._pd], old[self._sema_addr]
+        self._bind(ByteImage.private(self.capacity + 1, self.wide), self.capacity + 1)
+        for i, slot in enumerate(slots):
+            if slot is not None:
+                self._tv[self._t0 + i], self._q16[i] = slot
+        self._mem[self._cnt], self._mem[self._pd], self._mem[self._sema_addr] = cnt, pd, sema
 
     # -- state -------------------------------------------------------------
 
@@ -198,17 +298,30 @@ class ReadyQueue:
                 if r.period is not None and r.address not in on_queue:
                     self.schedule(r.address, r.period())
 
+    @property
+    def sized_to_routines(self) -> bool:
+        """True when the queue has one slot per registered routine (``capacity=None``)."""
+        return self._auto
+
     # -- configuration -----------------------------------------------------
 
-    def register(self, address: int, name: str, fn: Callable[[], None]) -> Routine:
-        """Make ``fn`` runnable from the queue at ``address`` (1..FFFF)."""
-        if not 1 <= address <= 0xFFFF:
-            raise ValueError(f"routine address must be 0001..FFFF, got {address:#x}")
-        if address in self._routines:
-            raise ValueError(f"address {address:04X} already holds {self._routines[address].name}")
+    def register(self, address: int | None, name: str, fn: Callable[[], None]) -> Routine:
+        """Make ``fn`` runnable from the queue at ``address`` (1..FFFF); with
+        None, at an address the queue assigns (:meth:`free_address`).  A queue
+        sized to its routines gets one slot more."""
+        if not isinstance(name, str) or not name.strip():
+            raise ValueError(f"a routine needs a name, got {name!r}")
         key = name.upper()
         if key in self._by_name:
             raise ValueError(f"a routine named {name!r} is already registered")
+        if address is None:
+            address = self.free_address()
+        elif not 1 <= address <= 0xFFFF:
+            raise ValueError(f"routine address of {name} must be 0001..FFFF, got {address:#x}")
+        if address in self._routines:
+            raise ValueError(f"address {address:04X} already holds {self._routines[address].name}")
+        if self._auto and len(self._routines) >= self.capacity:
+            self._grow()
         routine = Routine(address, name, fn)
         self._routines[address] = routine
         self._dispatch[address] = (fn, None, 0)
@@ -218,9 +331,24 @@ class ReadyQueue:
             self._samples[address] = []
         return routine
 
+    def free_address(self) -> int:
+        """The address the queue assigns to a routine registered without one:
+        the highest that no registered routine holds and no slot of Q shows,
+        counting down from FFFF (002's routines, low in its EPROM, keep theirs)."""
+        used = set(self._routines)
+        used.update(self._q16[i] for i in self._slot_range)
+        for address in range(0xFFFF, 0, -1):
+            if address not in used:
+                return address
+        raise ValueError(f"ready queue of {self.name}: no routine address is free")
+
+    def _range_text(self) -> str:
+        lo, hi = self.schedule_range
+        return f"{lo}..{hi} queue checks" if self.wide else "00..FF"
+
     def add_periodic(
         self,
-        address: int,
+        address: int | None,
         name: str,
         fn: Callable[[], None],
         period: int | ByteRef | Callable[[], int],
@@ -229,32 +357,41 @@ class ReadyQueue:
         itself with the period it reads at that moment.  ``period`` is a
         constant, a :class:`ByteRef` to a RAM byte (the gripper's 43/44/45:
         changeable at run time, and the fastest form), or any zero-argument
-        callable returning 0..255."""
-        if isinstance(period, ByteRef):
+        callable returning a schedule value (00..FF; on a :attr:`wide` queue
+        1..2**32 - 1).  ``address`` None: the queue assigns one."""
+        lo, hi = self.schedule_range
+        pmem: MutableSequence[int] | None
+        if isinstance(period, ByteRef) and not self.wide:
             pmem, paddr = period.mem, period.address
             period_fn: Callable[[], int] = period
         elif callable(period):
             period_fn = period
             pmem, paddr = None, 0
         else:
-            if not 0 <= int(period) <= 255:
-                raise ValueError(f"period of {name} must be 00..FF, got {period!r}")
-            pmem, paddr = bytearray([int(period)]), 0
-            period_fn = ByteRef(pmem, 0)
+            p = int(period)
+            if not lo <= p <= hi:
+                raise ValueError(f"period of {name} must be {self._range_text()}, got {period!r}")
+            if self.wide:
+                cell = [p]
+                pmem, paddr = cell, 0
+                period_fn = _cell_reader(cell)
+            else:
+                pmem, paddr = bytearray([p]), 0
+                period_fn = ByteRef(pmem, 0)
 
         def self_scheduling() -> None:
             fn()
             n = period_fn()
-            if not 0 <= n <= 255:
-                raise ValueError(f"period of {name} must be 00..FF, got {n!r}")
-            self._put(address, n)
+            if not lo <= n <= hi:
+                raise ValueError(f"period of {name} must be {self._range_text()}, got {n!r}")
+            self._put(routine.address, n)
 
         routine = self.register(address, name, self_scheduling)
         routine.period = period_fn
         if pmem is not None:
             # The dispatcher runs the body and reschedules it itself, from the
-            # period byte: the same thing, one call less on the hot path.
-            self._dispatch[address] = (fn, pmem, paddr)
+            # period variable: the same thing, one call less on the hot path.
+            self._dispatch[routine.address] = (fn, pmem, paddr)
         return routine
 
     def routine(self, task: int | str) -> Routine:
@@ -285,19 +422,22 @@ class ReadyQueue:
     def clear(self) -> None:
         """Empty every slot and reset SYSCLKCNT to SYSCLKPD."""
         for i in range(self.capacity):
-            self._mem[self._t + i] = 0
+            self._tv[self._t0 + i] = 0
             self._q16[i] = 0
         self._mem[self._cnt] = self._mem[self._pd]
 
     def schedule(self, task: int | str, n: int) -> int:
-        """Put ``task`` on the queue to run after ``n`` queue checks (1..255; 0 = 256).
+        """Put ``task`` on the queue to run after ``n`` queue checks (1..255; 0 = 256;
+        on a :attr:`wide` queue 1..2**32 - 1).
 
         Returns the slot used (the lowest free one).  A full queue raises
         :class:`QueueFullError`; inside the loop that is a fault of the robot.
         """
         routine = self.routine(task)
-        if not 0 <= n <= 255:
-            raise ValueError(f"schedule value for {routine.name} must be 00..FF, got {n}")
+        lo, hi = self.schedule_range
+        if not lo <= n <= hi:
+            raise ValueError(f"schedule value for {routine.name} must be {self._range_text()}, "
+                             f"got {n}")
         return self._put(routine.address, n)
 
     def _put(self, address: int, n: int) -> int:
@@ -305,7 +445,7 @@ class ReadyQueue:
         q16 = self._q16
         for i in self._slot_range:
             if not q16[i]:
-                self._mem[self._t + i] = n
+                self._tv[self._t0 + i] = n
                 q16[i] = address
                 return i
         name = self._routines[address].name if address in self._routines else f"{address:04X}"
@@ -318,7 +458,7 @@ class ReadyQueue:
         out: list[tuple[int, int] | None] = []
         for i in range(self.capacity):
             a = self._q16[i]
-            out.append((self._mem[self._t + i], a) if a else None)
+            out.append((self._tv[self._t0 + i], a) if a else None)
         return out
 
     def pending(self) -> list[str]:
@@ -355,9 +495,11 @@ class ReadyQueue:
         routines run in the current tick are also kept, for overrun records
         (a loop on virtual time cannot overrun and turns it off).
         """
+        self._stats: dict[int, Accumulator] | None
+        self._samples: dict[int, list[int]] | None
         if on:
             self._stats = {a: Accumulator(r.name) for a, r in self._routines.items()}
-            self._samples: dict[int, list[int]] | None = {a: [] for a in self._routines}
+            self._samples = {a: [] for a in self._routines}
         else:
             self._stats = None
             self._samples = None
@@ -438,7 +580,8 @@ class ReadyQueue:
         if not ready:
             return
         table = self._dispatch
-        mem, q16, t, slots = self._mem, self._q16, self._t, self._slot_range
+        # T as schedule variables: 002's bytes in the image, or 32-bit words
+        tv, q16, t, slots = self._tv, self._q16, self._t0, self._slot_range
         timer = self.timer if self._samples is not None else None
         log: list[tuple[int, int]] | None = None
         a = 0
@@ -446,7 +589,7 @@ class ReadyQueue:
             if timer is not None:
                 if self._pending >= _FOLD_AT:
                     self.fold_timing()
-                samples = self._samples
+                samples = self._samples or {}
                 if self._track:
                     log = []
                     self._tick_log = log
@@ -460,7 +603,7 @@ class ReadyQueue:
                     n = pmem[paddr]
                     for i in slots:
                         if not q16[i]:
-                            mem[t + i] = n
+                            tv[t + i] = n
                             q16[i] = a
                             break
                     else:
@@ -482,21 +625,42 @@ class ReadyQueue:
 
 def fold_samples(stats: dict[int, Accumulator], samples: dict[int, list[int]]) -> None:
     """Add each routine's duration samples (ns) to its accumulator, in bulk."""
-    for addr, durs in samples.items():
-        acc = stats.get(addr)
-        if acc is None or not durs:
-            continue
-        d = np.fromiter(durs, dtype=np.int64, count=len(durs))
-        np.maximum(d, 0, out=d)
-        acc.calls += d.size
-        acc.total += int(d.sum())
-        m = int(d.max())
-        if m > acc.max:
-            acc.max = m
-        counts = np.bincount(_bin_indices(d), minlength=NBINS)
+    fold_many([(stats[a], durs) for a, durs in samples.items() if a in stats])
+
+
+def fold_into(acc: Accumulator, durs: list[int]) -> None:
+    """Add duration samples (ns) to ``acc``, in bulk (negative ones count as 0)."""
+    fold_many([(acc, durs)])
+
+
+def fold_many(pairs: list[tuple[Accumulator, list[int]]]) -> None:
+    """Add each list of duration samples (ns) to its accumulator: one numpy
+    pass over all of them (negative durations count as 0)."""
+    pairs = [(acc, durs) for acc, durs in pairs if durs]
+    if not pairs:
+        return
+    lengths = [len(durs) for _, durs in pairs]
+    total = sum(lengths)
+    d = np.fromiter(chain.from_iterable(durs for _, durs in pairs), dtype=np.int64, count=total)
+    np.maximum(d, 0, out=d)
+    k = len(pairs)
+    idx = _bin_indices(d)
+    if k > 1:
+        idx += np.repeat(np.arange(0, k * NBINS, NBINS, dtype=np.int64), lengths)
+    counts = np.bincount(idx, minlength=k * NBINS).reshape(k, NBINS)
+    starts = np.zeros(k, dtype=np.int64)
+    np.cumsum(lengths[:-1], out=starts[1:])
+    sums = np.add.reduceat(d, starts).tolist()
+    maxs = np.maximum.reduceat(d, starts).tolist()
+    for j, (acc, _) in enumerate(pairs):
+        acc.calls += lengths[j]
+        acc.total += int(sums[j])
+        if maxs[j] > acc.max:
+            acc.max = int(maxs[j])
+        row = counts[j]
         hist = acc.hist
-        for i in np.flatnonzero(counts).tolist():
-            hist[i] += int(counts[i])
+        for i in np.flatnonzero(row).tolist():
+            hist[i] += int(row[i])
 
 
 def _bin_indices(d: np.ndarray) -> np.ndarray:
@@ -510,16 +674,15 @@ def _bin_indices(d: np.ndarray) -> np.ndarray:
 
 
 class _LittleEndianWords:  # pragma: no cover - big-endian hosts only
-    """Q as little-endian 16-bit words on a big-endian host."""
+    """Q (or a wide T) as little-endian words on a big-endian host."""
 
-    def __init__(self, mem: bytearray, base: int, n: int):
-        self._mem, self._base, self._n = mem, base, n
+    def __init__(self, mem: bytearray, base: int, n: int, size: int = 2):
+        self._mem, self._base, self._n, self._size = mem, base, n, size
 
     def __getitem__(self, i: int) -> int:
-        b = self._base + 2 * i
-        return self._mem[b] | (self._mem[b + 1] << 8)
+        b = self._base + self._size * i
+        return int.from_bytes(self._mem[b : b + self._size], "little")
 
     def __setitem__(self, i: int, v: int) -> None:
-        b = self._base + 2 * i
-        self._mem[b] = v & 0xFF
-        self._mem[b + 1] = (v >> 8) & 0xFF
+        b = self._base + self._size * i
+        self._mem[b : b + self._size] = v.to_bytes(self._size, "little")

@@ -12,7 +12,9 @@ def _us(ns: float) -> str:
 
 
 def format_statistics(stats: LoopStatistics) -> str:
-    """A table: tick summary, lateness, then calls/mean/p99/max/overruns per task."""
+    """A table: tick summary, lateness, then calls/mean/p99/max/overruns per
+    task (the ready queues' routines), then the same per loop handler (board
+    polls, physics, motion, scope, mailbox: ``kind="handler"``)."""
     lines = [
         f"tick {stats.period_ns / 1e3:g} µs: {stats.ticks} ticks, {stats.overruns} overruns, "
         f"{stats.missed} deadlines missed"
@@ -30,13 +32,19 @@ def format_statistics(stats: LoopStatistics) -> str:
             f"p99 {format_bound_us(late.p99_ns, m)}  p99.9 {format_bound_us(late.p999_ns, m)}  "
             f"max {m / 1e3:.2f}"
         )
-    lines.append(
-        f"{'task':<12}{'calls':>10}{'mean µs':>10}{'p99 µs':>10}{'max µs':>10}{'overruns':>10}"
-    )
-    for name, t in sorted(stats.tasks.items()):
+    width = max([12, *(len(name) + 1 for name in stats.tasks)])
+    for kind in ("task", "handler"):
+        rows = sorted((n, t) for n, t in stats.tasks.items() if t.kind == kind)
+        if kind == "handler" and not rows:
+            continue
         lines.append(
-            f"{name:<12}{t.calls:>10}{_us(t.mean_ns)}{format_bound_us(t.p99_ns, t.max_ns):>10}"
-            f"{_us(t.max_ns)}{t.overruns:>10}"
+            f"{kind:<{width}}{'calls':>10}{'mean µs':>10}{'p99 µs':>10}{'max µs':>10}"
+            f"{'overruns':>10}"
         )
+        for name, t in rows:
+            lines.append(
+                f"{name:<{width}}{t.calls:>10}{_us(t.mean_ns)}"
+                f"{format_bound_us(t.p99_ns, t.max_ns):>10}{_us(t.max_ns)}{t.overruns:>10}"
+            )
     lines.append(f"({QUANTILE_NOTE})")
     return "\n".join(lines)

@@ -298,13 +298,12 @@ class Runner:
         loop only hands over its raw samples (O(1)), so looking does not
         cause an overrun.  ``take_fault`` as for :meth:`call`."""
         taken = self.call(
-            lambda: [(q, q.take_samples()) for q in self.loop.queues],
+            self.loop.take_samples,
             timeout_s=timeout_s,
             name="stats",
             take_fault=take_fault,
         )
-        for q, samples in taken:
-            q.fold_into_accumulators(samples)
+        self.loop.fold_samples(taken)
         return self.loop.statistics(fold=False)
 
     # -- waiting -----------------------------------------------------------

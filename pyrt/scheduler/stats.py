@@ -165,6 +165,9 @@ class TaskStatistics:
     #: Overruns in which this task took the longest time of the tick.
     overruns: int
     distribution: Distribution = field(repr=False)
+    #: ``"task"``: a ready-queue routine; ``"handler"``: a loop handler that is
+    #: not a ready queue (board poll, physics, motion executor, scope, mailbox).
+    kind: str = "task"
 
 
 @dataclass(frozen=True)

@@ -2,14 +2,16 @@
 
 Records, one JSON object per line, each with a ``type``:
 
-* ``header``: format version, pyrt version, tick period, clock, task names;
+* ``header``: format version, pyrt version, tick period, clock, task names
+  (the ready queues' routines, then the timed loop handlers), handler names;
 * ``overrun``: tick index, deadline, start, end, lateness (start - deadline),
   overrun (end - next deadline), deadlines missed, and the tasks run in that
-  tick with their durations (``[[name, ns], ...]``);
+  tick with their durations (``[[name, ns], ...]``, in the order they ran:
+  routines and loop handlers such as ``boards`` alike);
 * ``summary``: cumulative counts since the start: ticks, overruns, missed,
-  lateness and work distributions, and per task calls, mean, max, p99 and
-  the sparse log-spaced histogram (``[[bin, count], ...]``; see
-  :mod:`pyrt.scheduler.stats` for the bins).
+  lateness and work distributions, and per task calls, mean, max, p99, kind
+  (``task`` or ``handler``) and the sparse log-spaced histogram
+  (``[[bin, count], ...]``; see :mod:`pyrt.scheduler.stats` for the bins).
 
 All times are integers in nanoseconds of the loop's clock.  Overrun
 records are buffered in memory; summaries are built and everything is
@@ -130,6 +132,7 @@ class TimingLog:
                         "max_ns": t.max_ns,
                         "p99_ns": t.p99_ns,
                         "overruns": t.overruns,
+                        "kind": t.kind,
                         "hist": [list(p) for p in t.distribution.hist],
                     }
                     for name, t in stats.tasks.items()
@@ -174,6 +177,8 @@ class TaskReport:
     overruns: int = 0
     #: Overruns in which this task ran at all.
     present: int = 0
+    #: ``"task"`` (a ready-queue routine) or ``"handler"`` (a loop handler).
+    kind: str = "task"
 
 
 @dataclass
@@ -257,8 +262,9 @@ def read_timing_log(path: str) -> TimingReport:
             raise ConfigError(f"unknown record type {kind!r}", path, lineno)
     assert header is not None
     report = TimingReport(path=path, header=header, summary=summary, overruns=overruns)
+    handlers = set(header.get("handlers", []))
     for name in header.get("tasks", []):
-        report.tasks[name] = TaskReport(name)
+        report.tasks[name] = TaskReport(name, kind="handler" if name in handlers else "task")
     if summary is not None:
         for name, t in summary["tasks"].items():
             tr = report.tasks.setdefault(name, TaskReport(name))
@@ -266,6 +272,7 @@ def read_timing_log(path: str) -> TimingReport:
             tr.mean_ns = float(t.get("mean_ns", 0.0))
             tr.p99_ns = int(t.get("p99_ns", 0))
             tr.max_ns = int(t.get("max_ns", 0))
+            tr.kind = str(t.get("kind", "task"))
     for rec in overruns:
         tasks = rec["tasks"]
         if not tasks:
