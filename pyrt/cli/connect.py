@@ -5,10 +5,15 @@ printed (``ERR`` replies as ``error: ...``).  Local words: ``auth`` asks for
 the token without echoing it (or takes ``--token-file`` / ``$PYRT_TOKEN`` at
 start), ``exit`` or end of input leaves (the robot keeps running: leaving a
 monitoring session stops nothing; type ``stop`` for that, which any client
-may).  On a terminal there is history, Tab completion from the server's own
-``help`` (its words, objects and their commands), and a live status line
-from a second connection subscribed at ``--hz``; piped, it runs the lines as
-a script and prints no status line.
+may).  Ctrl-C does what it does at a local console: a command that runs
+(a ``wait``) is abandoned and the robot stopped (``stop`` over a second
+connection), and a move is stopped at the prompt; the abandoned reply is
+dropped when it comes, so every reply answers its own line.  Piped, Ctrl-C
+stops the robot and ends the script (status 130).  On a terminal there is
+history, Tab completion from the server's own ``help`` (its words, objects
+and their commands), and a live status line from a second connection
+subscribed at ``--hz``; piped, it runs the lines as a script and prints no
+status line.
 """
 
 from __future__ import annotations
@@ -24,6 +29,9 @@ from pyrt.client import Client, ServerError, parse_address
 from pyrt.console import Console
 
 __all__ = ["RemoteShell", "add_parser", "run"]
+
+#: How long Ctrl-C's ``stop`` (over a second connection) may take, seconds.
+STOP_TIMEOUT_S = 5.0
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -78,6 +86,54 @@ class RemoteShell:
         elif text.upper().startswith("AUTH ") and not reply.lines:
             self.say("privileged: every command is accepted")  # the server said nothing
         return False
+
+    def interrupt(self, at_prompt: bool) -> str:
+        """Ctrl-C (the console calls it), as at a local console: a command that
+        runs (a ``wait``, say) is abandoned and every motor stopped; at the
+        prompt, a move that runs is stopped, and nothing else is done.
+
+        The ``stop`` goes over a second connection (any client may stop the
+        robot; this one's requests are served in order, behind the abandoned
+        one).  The abandoned reply comes later; the client reads and drops it
+        before the next request (:meth:`Client.settle`), so every reply shown
+        answers the line just typed."""
+        abandoned = list(self.client.owed)
+        if at_prompt and not abandoned:
+            moving = self._moving()
+            if moving is not True:
+                return ("(Ctrl-C stops a move; nothing is moving: 'exit' or Ctrl-D leaves, "
+                        "the robot keeps running)" if moving is False else
+                        "(Ctrl-C stops a move; the robot's status does not say whether it "
+                        "moves: type stop to stop it)")
+        said = self._stop()
+        if abandoned:
+            said += f"\n(the reply to {abandoned[-1][:40]!r} is dropped when it comes)"
+        return said
+
+    def _second(self) -> Client:
+        host, port = self.client.address
+        return Client(host, port, timeout_s=STOP_TIMEOUT_S)
+
+    def _moving(self) -> bool | None:
+        """Whether the robot moves, from its STATUS (None: not known)."""
+        try:
+            with self._second() as c:
+                fields = c.status().fields
+        except (OSError, TimeoutError, ServerError):
+            return None
+        flags = [fields[k] for k in ("moving", "busy") if k in fields]
+        return any(bool(v) for v in flags) if flags else None
+
+    def _stop(self) -> str:
+        """``stop`` over a second connection; what the robot said, or why not."""
+        try:
+            with self._second() as c:
+                reply = c.request("stop")
+        except (OSError, TimeoutError, ServerError) as exc:
+            return f"interrupted; could not reach the robot to stop it: {exc}; type stop"
+        if not reply.ok:
+            return f"interrupted; stop was refused: {reply.code} {reply.text}".rstrip()
+        return "interrupted: " + ("; ".join(reply.lines) or "stopped")
 
     def completions(self) -> dict[str, Any]:
         """The completion table, from the server's ``help`` and ``help OBJECT`` (once)."""
@@ -176,7 +232,11 @@ def run(args: argparse.Namespace) -> int:
                 console.status_period_s = min(1.0, 1.0 / args.hz)
             except (OSError, TimeoutError, ServerError) as exc:
                 print(f"(no status line: {exc})", flush=True)
-        return console.run()
+        try:
+            return console.run()
+        except KeyboardInterrupt:  # a piped script: Ctrl-C ends it, the robot stopped
+            print(f"pyrt connect: {shell.interrupt(False)}", flush=True)
+            return 130
     finally:
         if watch is not None:
             watch.close()
