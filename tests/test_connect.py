@@ -70,6 +70,28 @@ def test_pyrt_connect_runs_a_piped_script_against_a_served_robot(tmp_path):
         assert Client(sv.host, sv.port).status().fields["fault"] == 0
 
 
+def test_a_piped_auth_is_refused_and_never_takes_the_next_line_as_the_token(tmp_path):
+    """Piped: 'auth' alone is refused with one error line (no GetPassWarning) and the next script line runs as a command; 'auth TOKEN' is refused too and sends nothing."""
+    from _server_rig import TOKEN
+
+    with served(wall=True) as sv:
+        env = {k: v for k, v in os.environ.items() if k != "PYRT_TOKEN"}
+        done = subprocess.run(
+            [sys.executable, "-m", "pyrt", "connect", f"{sv.host}:{sv.port}"],
+            input=f"auth\nstatus\nauth {TOKEN}\nP-1B86\nexit\n", capture_output=True,
+            text=True, timeout=60, env=env, cwd=tmp_path)
+        assert done.returncode == 0, done.stderr
+        assert "GetPassWarning" not in done.stderr and done.stderr == ""
+        out = done.stdout
+        assert ("gripper> auth\nerror: auth asks for the token on a terminal, and this input "
+                "is not one") in out
+        assert "gripper> status\nt=" in out and " position=" in out  # the next line ran
+        assert "error: a token typed on a line is shown" in out
+        assert "privileged" not in out.replace("unprivileged", "")
+        assert "error: denied" in out  # the move was refused: no AUTH was sent
+        assert sv.still_and_null()
+
+
 def _answer_cpr(child, pexpect, seconds: float) -> str:
     """Read a terminal session for ``seconds``, answering prompt_toolkit's cursor-position requests as a terminal does."""
     import time

@@ -1,19 +1,23 @@
 """``pyrt connect [HOST:]PORT``: an interactive console on a robot served with ``--serve``.
 
 Every line is sent to the server as a console command and its reply
-printed (``ERR`` replies as ``error: ...``).  Local words: ``auth`` asks for
-the token without echoing it (or takes ``--token-file`` / ``$PYRT_TOKEN`` at
-start), ``exit`` or end of input leaves (the robot keeps running: leaving a
-monitoring session stops nothing; type ``stop`` for that, which any client
-may).  Ctrl-C does what it does at a local console: a command that runs
-(a ``wait``) is abandoned and the robot stopped (``stop`` over a second
+printed (``ERR`` replies as ``error: ...``).  Local words: ``auth`` asks
+for the token without echoing it, on a terminal only (piped, it is
+refused: give ``--token-file`` or ``$PYRT_TOKEN``, read at start; a token
+typed on a line is refused everywhere, as it would be shown); ``exit`` or
+end of input leaves (the robot keeps running: leaving a monitoring session
+stops nothing; type ``stop`` for that, which any client may).
+
+Ctrl-C does what it does at a local console: a command that runs (a
+``wait``) is abandoned and the robot stopped (``stop`` over a second
 connection), and a move is stopped at the prompt; the abandoned reply is
 dropped when it comes, so every reply answers its own line.  Piped, Ctrl-C
-stops the robot and ends the script (status 130).  On a terminal there is
-history, Tab completion from the server's own ``help`` (its words, objects
-and their commands), and a live status line from a second connection
-subscribed at ``--hz``; piped, it runs the lines as a script and prints no
-status line.
+stops the robot and ends the script (status 130).
+
+On a terminal there is history, Tab completion from the server's own
+``help`` (its words, objects and their commands), and a live status line
+from a second connection subscribed at ``--hz``; piped, it runs the lines
+as a script and prints no status line.
 """
 
 from __future__ import annotations
@@ -54,9 +58,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 class RemoteShell:
     """The console interpreter of a connection: lines go to the server."""
 
-    def __init__(self, client: Client, stdout: TextIO, name: str):
+    def __init__(self, client: Client, stdout: TextIO, name: str,
+                 stdin: TextIO | None = None):
         self.client = client
         self.stdout = stdout
+        #: Where ``auth`` would ask for the token (it asks only on a terminal).
+        self.stdin = stdin if stdin is not None else sys.stdin
         self.prompt = f"{name}> "
         self._table: dict[str, Any] | None = None
 
@@ -71,9 +78,32 @@ class RemoteShell:
         word = text.split()[0].lower()
         if word in ("exit", "quit") and len(text.split()) == 1:
             return True  # leaving a remote session stops nothing
-        if word == "auth" and len(text.split()) == 1:
-            token = getpass.getpass("token: ")
-            text = f"AUTH {token}"
+        if word == "auth":
+            if len(text.split()) > 1:
+                self.say("error: a token typed on a line is shown (on the screen, in a "
+                         "script's transcript); nothing sent: type 'auth' alone at a terminal, "
+                         "or start with --token-file FILE or $PYRT_TOKEN")
+                return False
+            if not self.terminal():
+                self.say("error: auth asks for the token on a terminal, and this input is "
+                         "not one (the next line is not taken as the token); start with "
+                         "--token-file FILE or $PYRT_TOKEN")
+                return False
+            return self.authenticate(getpass.getpass("token: "))
+        return self._send(text)
+
+    def terminal(self) -> bool:
+        """True when the token can be asked for without echo (stdin is a terminal)."""
+        try:
+            return bool(self.stdin.isatty())
+        except (AttributeError, ValueError):
+            return False
+
+    def authenticate(self, token: str) -> bool:
+        """Send ``AUTH token`` (the line is never shown); True when the session ends."""
+        return self._send(f"AUTH {token}", auth=True)
+
+    def _send(self, text: str, auth: bool = False) -> bool:
         try:
             reply = self.client.request(text)
         except (OSError, TimeoutError, ServerError) as exc:
@@ -83,7 +113,7 @@ class RemoteShell:
             self.say(out)
         if not reply.ok:
             self.say(f"error: {reply.code} {reply.text}".rstrip())
-        elif text.upper().startswith("AUTH ") and not reply.lines:
+        elif auth and not reply.lines:
             self.say("privileged: every command is accepted")  # the server said nothing
         return False
 
@@ -223,7 +253,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"connected to {host}:{port}: {client.greeting}; 'exit' leaves "
               "(the robot keeps running), 'stop' stops it", flush=True)
         if token is not None:
-            shell.onecmd(f"AUTH {token}")
+            shell.authenticate(token)
         console = Console(shell)
         if console.interactive() and args.hz > 0:
             try:
