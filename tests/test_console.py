@@ -157,7 +157,8 @@ def test_a_byte_that_is_not_utf8_is_a_bad_command_not_a_crash(robot, read, tmp_p
     import subprocess
     import sys
 
-    env = dict(os.environ, PYTHONIOENCODING="utf-8:strict", HOME=str(tmp_path))
+    env = dict(os.environ, PYTHONIOENCODING="utf-8:strict", HOME=str(tmp_path),
+               PYRT_HOME=str(tmp_path / "pyrt-home"))
     done = subprocess.run([sys.executable, "-m", "pyrt", robot, "--speed", "max"],
                           input=b"\xff\xfe bad\n" + read.encode() + b"\n", env=env,
                           capture_output=True, timeout=120, cwd=tmp_path)
