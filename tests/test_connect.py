@@ -44,6 +44,38 @@ def test_an_unprivileged_stop_halts_the_operators_move():
         assert sv.still_and_null()
 
 
+def test_ctrl_c_at_the_remote_prompt_stops_a_running_move_and_only_hints_when_idle():
+    """Ctrl-C at the prompt of pyrt connect: a hint while nothing moves; a running move is stopped (over a second connection), as at a local console."""
+    with served() as sv:
+        shell = RemoteShell(sv.client(), io.StringIO(), "gripper")
+        assert shell.interrupt(True).startswith("(Ctrl-C stops a move; nothing is moving")
+        op = sv.operator()
+        op.command("I")
+        op.command("P-1B86")
+        assert sv.runner.call(lambda: sv.rig.busy())
+        said = shell.interrupt(True)
+        assert said.startswith("interrupted: gripper: every motor stopped; position")
+        assert not sv.runner.call(lambda: sv.rig.busy())
+        assert sv.still_and_null()
+
+
+def test_a_line_after_an_interrupted_sleep_says_it_waits_for_it_and_answers_itself():
+    """After Ctrl-C abandons a remote 'sleep', the next line says the server first finishes it, then shows its own reply only."""
+    with served(wall=True) as sv:  # the sleep takes 2 s of wall time
+        out = io.StringIO()
+        client = sv.operator()
+        shell = RemoteShell(client, out, "gripper")
+        client.send_line("sleep 2")  # what request() had sent when Ctrl-C came
+        client.owed.append("sleep 2")
+        assert "is dropped when it comes" in shell.interrupt(False)
+        assert shell.onecmd("W") is False
+        lines = out.getvalue().splitlines()
+        assert lines[0] == ("(the server first finishes the interrupted 'sleep 2'; its reply "
+                            "will be dropped)")
+        assert lines[1:] == [f"{sv.runner.call(sv.ctl.position) & 0xFFFF:04X}"]
+        assert not client.owed and client.late[-1][0] == "sleep 2"
+
+
 def test_completion_comes_from_the_servers_own_help():
     """The completion table is the server's words, objects and their commands."""
     with served() as sv:

@@ -36,6 +36,9 @@ __all__ = ["RemoteShell", "add_parser", "run"]
 
 #: How long Ctrl-C's ``stop`` (over a second connection) may take, seconds.
 STOP_TIMEOUT_S = 5.0
+#: How long a line waits, silently, for the reply of an interrupted request
+#: before saying that the server is still serving it, seconds.
+SETTLE_GLANCE_S = 0.2
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -105,6 +108,12 @@ class RemoteShell:
 
     def _send(self, text: str, auth: bool = False) -> bool:
         try:
+            if self.client.owed:  # an interrupted request the server still serves
+                try:
+                    self.client.settle(SETTLE_GLANCE_S)
+                except TimeoutError:
+                    self.say(f"(the server first finishes the interrupted "
+                             f"{self.client.owed[0][:40]!r}; its reply will be dropped)")
             reply = self.client.request(text)
         except (OSError, TimeoutError, ServerError) as exc:
             self.say(f"error: the connection failed: {exc}")
