@@ -261,3 +261,22 @@ def test_stderr_lines_never_block_the_caller(monkeypatch):
             break
         threading.Event().wait(0.01)
     assert err.getvalue() == "overrun: 1 tick\n"
+
+
+@pytest.mark.parametrize("args", [["overruns", "LOG", "--json"], ["overruns", "LOG"],
+                                  ["--help"], ["overruns", "--help"]])
+def test_a_command_into_a_reader_that_has_gone_ends_quietly(tmp_path, args):
+    """'pyrt overruns F --json | head -c 400' (or --help) with head gone: status 0, nothing on stderr."""
+    import os
+
+    path = tmp_path / "timing.jsonl"
+    write_log(path)
+    r, w = os.pipe()
+    os.close(r)
+    try:
+        done = subprocess.run(
+            [sys.executable, "-m", "pyrt", *(str(path) if a == "LOG" else a for a in args)],
+            stdout=w, stderr=subprocess.PIPE, text=True, timeout=60)
+    finally:
+        os.close(w)
+    assert done.returncode == 0 and done.stderr == "", done.stderr

@@ -144,3 +144,72 @@ def test_client_connects_by_address_string():
         assert c.status().fields["fault"] == 0
         c.close()
         c.close()
+
+
+class _ScriptedServer:
+    """A one-connection line server on loopback whose replies the test releases."""
+
+    def __init__(self):
+        import socket
+        import threading
+
+        self._listen = socket.create_server(("127.0.0.1", 0))
+        self.port = self._listen.getsockname()[1]
+        self.conn = None
+        self._ready = threading.Event()
+        threading.Thread(target=self._accept, daemon=True).start()
+
+    def _accept(self):
+        self.conn, _ = self._listen.accept()
+        self.conn.sendall(b"OK pyrt test server\n")
+        self._ready.set()
+
+    def send(self, text: str) -> None:
+        assert self._ready.wait(10)
+        self.conn.sendall(text.encode())
+
+    def close(self):
+        if self.conn is not None:
+            self.conn.close()
+        self._listen.close()
+
+
+def test_a_reply_abandoned_by_a_timeout_is_dropped_before_the_next_request_is_answered():
+    """A request whose reply was not read is still owed: the next request gets its own reply, never the abandoned one."""
+    srv = _ScriptedServer()
+    try:
+        c = Client("127.0.0.1", srv.port, timeout_s=10)
+        c.timeout_s = 0.05  # the 'wait' answers late
+        srv.send("OK-moving\n")  # part of the reply comes before the timeout
+        with pytest.raises(TimeoutError):
+            c.request("wait")
+        assert list(c.owed) == ["wait"]
+        c.timeout_s = 10
+        srv.send("OK at target: E47A\nOK E479\nOK E47A\n")  # wait's rest, W's, T's
+        assert c.command("W") == ["E479"]
+        assert c.command("T") == ["E47A"]
+        assert not c.owed
+        assert [(line, r.lines) for line, r in c.late] == [
+            ("wait", ["moving", "at target: E47A"])]
+        c.close()
+    finally:
+        srv.close()
+
+
+def test_settle_reads_every_owed_reply_in_order():
+    """settle() reads the owed replies in the order the requests were sent, failures included."""
+    srv = _ScriptedServer()
+    try:
+        c = Client("127.0.0.1", srv.port, timeout_s=10)
+        c.send_line("a")
+        c.send_line("b")
+        c.owed.extend(["a", "b"])
+        srv.send("STATUS t=1 position=5\nOK one\nERR command no such thing\n")
+        done = c.settle()
+        assert [(line, r.ok, r.lines) for line, r in done] == [("a", True, ["one"]),
+                                                               ("b", False, [])]
+        assert done[1][1].code == "command" and not c.owed
+        assert next(c.statuses(0.05)).fields["position"] == 5
+        c.close()
+    finally:
+        srv.close()

@@ -7,6 +7,7 @@ import os
 import subprocess
 import sys
 
+import pytest
 from _server_rig import served
 
 from pyrt.cli.connect import RemoteShell
@@ -43,6 +44,38 @@ def test_an_unprivileged_stop_halts_the_operators_move():
         assert sv.still_and_null()
 
 
+def test_ctrl_c_at_the_remote_prompt_stops_a_running_move_and_only_hints_when_idle():
+    """Ctrl-C at the prompt of pyrt connect: a hint while nothing moves; a running move is stopped (over a second connection), as at a local console."""
+    with served() as sv:
+        shell = RemoteShell(sv.client(), io.StringIO(), "gripper")
+        assert shell.interrupt(True).startswith("(Ctrl-C stops a move; nothing is moving")
+        op = sv.operator()
+        op.command("I")
+        op.command("P-1B86")
+        assert sv.runner.call(lambda: sv.rig.busy())
+        said = shell.interrupt(True)
+        assert said.startswith("interrupted: gripper: every motor stopped; position")
+        assert not sv.runner.call(lambda: sv.rig.busy())
+        assert sv.still_and_null()
+
+
+def test_a_line_after_an_interrupted_sleep_says_it_waits_for_it_and_answers_itself():
+    """After Ctrl-C abandons a remote 'sleep', the next line says the server first finishes it, then shows its own reply only."""
+    with served(wall=True) as sv:  # the sleep takes 2 s of wall time
+        out = io.StringIO()
+        client = sv.operator()
+        shell = RemoteShell(client, out, "gripper")
+        client.send_line("sleep 2")  # what request() had sent when Ctrl-C came
+        client.owed.append("sleep 2")
+        assert "is dropped when it comes" in shell.interrupt(False)
+        assert shell.onecmd("W") is False
+        lines = out.getvalue().splitlines()
+        assert lines[0] == ("(the server first finishes the interrupted 'sleep 2'; its reply "
+                            "will be dropped)")
+        assert lines[1:] == [f"{sv.runner.call(sv.ctl.position) & 0xFFFF:04X}"]
+        assert not client.owed and client.late[-1][0] == "sleep 2"
+
+
 def test_completion_comes_from_the_servers_own_help():
     """The completion table is the server's words, objects and their commands."""
     with served() as sv:
@@ -69,6 +102,28 @@ def test_pyrt_connect_runs_a_piped_script_against_a_served_robot(tmp_path):
         assert Client(sv.host, sv.port).status().fields["fault"] == 0
 
 
+def test_a_piped_auth_is_refused_and_never_takes_the_next_line_as_the_token(tmp_path):
+    """Piped: 'auth' alone is refused with one error line (no GetPassWarning) and the next script line runs as a command; 'auth TOKEN' is refused too and sends nothing."""
+    from _server_rig import TOKEN
+
+    with served(wall=True) as sv:
+        env = {k: v for k, v in os.environ.items() if k != "PYRT_TOKEN"}
+        done = subprocess.run(
+            [sys.executable, "-m", "pyrt", "connect", f"{sv.host}:{sv.port}"],
+            input=f"auth\nstatus\nauth {TOKEN}\nP-1B86\nexit\n", capture_output=True,
+            text=True, timeout=60, env=env, cwd=tmp_path)
+        assert done.returncode == 0, done.stderr
+        assert "GetPassWarning" not in done.stderr and done.stderr == ""
+        out = done.stdout
+        assert ("gripper> auth\nerror: auth asks for the token on a terminal, and this input "
+                "is not one") in out
+        assert "gripper> status\nt=" in out and " position=" in out  # the next line ran
+        assert "error: a token typed on a line is shown" in out
+        assert "privileged" not in out.replace("unprivileged", "")
+        assert "error: denied" in out  # the move was refused: no AUTH was sent
+        assert sv.still_and_null()
+
+
 def _answer_cpr(child, pexpect, seconds: float) -> str:
     """Read a terminal session for ``seconds``, answering prompt_toolkit's cursor-position requests as a terminal does."""
     import time
@@ -87,8 +142,6 @@ def _answer_cpr(child, pexpect, seconds: float) -> str:
 
 def test_pyrt_connect_on_a_terminal_asks_for_the_token_without_echo_and_shows_live_status(tmp_path):
     """On a terminal: 'auth' prompts for the token without echoing it, privilege is said once, a move runs, the status line shows it live."""
-    import pytest
-
     pexpect = pytest.importorskip("pexpect")
     from _server_rig import TOKEN
 
@@ -119,3 +172,101 @@ def test_pyrt_connect_on_a_terminal_asks_for_the_token_without_echo_and_shows_li
         assert "target=-7046" in seen and "moving=1" in seen  # the live status line, unasked
         assert "gripper: every motor stopped" in seen
         assert sv.still_and_null()
+
+
+def _until(child, pexpect, done, seconds: float = 10.0) -> str:
+    """Read a terminal session (answering cursor-position requests) until ``done()`` or ``seconds``."""
+    import time
+
+    seen = []
+    end = time.monotonic() + seconds
+    while time.monotonic() < end and not done():
+        i = child.expect(["\x1b\\[6n", pexpect.TIMEOUT, pexpect.EOF], timeout=0.05)
+        seen.append(child.before)
+        if i == 0:
+            child.send("\x1b[1;1R")
+        elif i == 2:
+            break
+    return "".join(seen)
+
+
+@pytest.mark.wallclock
+def test_ctrl_c_to_a_piped_connect_during_a_wait_stops_the_robot_and_ends_130(tmp_path):
+    """SIGINT to a piped 'pyrt connect' during a remote wait: the jaws are stopped, said in one line, status 130."""
+    import signal
+    import time
+
+    from _server_rig import TOKEN
+
+    with served(wall=True) as sv:
+        (tmp_path / "token").write_text(TOKEN + "\n")
+        env = {k: v for k, v in os.environ.items() if k != "PYRT_TOKEN"}
+        env.update(HOME=str(tmp_path), PYTHONUNBUFFERED="1")
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "pyrt", "connect", f"{sv.host}:{sv.port}",
+             "--token-file", "token"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path,
+            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        busy = lambda: sv.runner.call(lambda: sv.rig.busy(), take_fault=False)  # noqa: E731
+        try:
+            proc.stdin.write("P D800\nwait\n")
+            proc.stdin.flush()
+            deadline = time.monotonic() + 20
+            while not busy():
+                assert time.monotonic() < deadline, "the move never started"
+                time.sleep(0.01)
+            time.sleep(0.3)  # the wait is at the server
+            assert busy(), "the move ended before SIGINT: the machine is too slow for this test"
+            proc.send_signal(signal.SIGINT)
+            out, err = proc.communicate(timeout=30)
+        finally:
+            proc.kill()
+        assert proc.returncode == 130, (out, err)
+        assert "pyrt connect: interrupted: gripper: every motor stopped; position" in out
+        assert "Traceback" not in err
+        assert sv.still_and_null()
+
+
+def test_ctrl_c_during_a_remote_wait_stops_the_move_and_every_later_reply_is_its_own(tmp_path):
+    """On a terminal: Ctrl-C during a remote 'wait' stops the jaws (saying so), and W, T and S then answer themselves, not the line before."""
+    pexpect = pytest.importorskip("pexpect")
+    from _server_rig import TOKEN
+
+    with served(wall=True) as sv:
+        (tmp_path / "token").write_text(TOKEN + "\n")
+        env = {k: v for k, v in os.environ.items() if k != "PYRT_TOKEN"}
+        env.update(TERM="xterm", HOME=str(tmp_path))
+        child = pexpect.spawn(sys.executable, ["-m", "pyrt", "connect", f"{sv.host}:{sv.port}",
+                                               "--token-file", "token", "--hz", "0"],
+                              encoding="utf-8", timeout=30, dimensions=(24, 120), env=env,
+                              cwd=str(tmp_path))
+        busy = lambda: sv.runner.call(lambda: sv.rig.busy(), take_fault=False)  # noqa: E731
+        try:
+            seen = _answer_cpr(child, pexpect, 2.0)
+            child.sendline("P D800")  # 7000 counts: about two seconds at 1x
+            seen += _until(child, pexpect, busy)
+            assert busy()
+            child.sendline("wait")
+            seen += _answer_cpr(child, pexpect, 0.3)
+            assert busy(), "the move ended before Ctrl-C: the machine is too slow for this test"
+            child.sendintr()
+            seen += _until(child, pexpect, lambda: not busy(), 5.0)
+            assert not busy()
+            seen += _answer_cpr(child, pexpect, 0.5)
+            replies = {}
+            for line in ("W", "T", "S"):
+                child.sendline(line)
+                replies[line] = _answer_cpr(child, pexpect, 1.0)
+            position = sv.runner.call(sv.ctl.position, take_fault=False)
+            child.sendeof()
+            child.expect(pexpect.EOF)
+        finally:
+            child.close()
+        assert child.exitstatus == 0
+        assert "interrupted: gripper: every motor stopped; position" in seen
+        assert "is dropped when it comes" in seen
+        assert sv.still_and_null()
+        assert f"{position & 0xFFFF:04X}" in replies["W"]  # where the jaws stopped
+        assert "at target" not in "".join(replies.values())  # the wait's reply is not shown
+        assert "E47A" not in replies["W"] and "D800" in replies["T"]
+        assert "D800" not in replies["S"] and "1111" in replies["S"]

@@ -157,7 +157,8 @@ def test_a_byte_that_is_not_utf8_is_a_bad_command_not_a_crash(robot, read, tmp_p
     import subprocess
     import sys
 
-    env = dict(os.environ, PYTHONIOENCODING="utf-8:strict", HOME=str(tmp_path))
+    env = dict(os.environ, PYTHONIOENCODING="utf-8:strict", HOME=str(tmp_path),
+               PYRT_HOME=str(tmp_path / "pyrt-home"))
     done = subprocess.run([sys.executable, "-m", "pyrt", robot, "--speed", "max"],
                           input=b"\xff\xfe bad\n" + read.encode() + b"\n", env=env,
                           capture_output=True, timeout=120, cwd=tmp_path)
@@ -315,3 +316,93 @@ def test_a_long_line_within_the_bound_runs_and_its_echo_is_clipped():
     Console(shell, io.StringIO("y" * 1000 + "\n"), out).run()
     assert shell.seen == ["y" * 1000]
     assert f"A> {'y' * 200}... (1000 characters)\n" in out.getvalue()
+
+
+class _GoneAfter(io.StringIO):
+    """An output whose reader goes away after ``n`` writes (EPIPE from then on)."""
+
+    def __init__(self, n: int):
+        super().__init__()
+        self.n = n
+
+    def write(self, text: str) -> int:
+        self.n -= 1
+        if self.n < 0:
+            raise BrokenPipeError(32, "Broken pipe")
+        return super().write(text)
+
+
+def test_a_reader_that_goes_away_ends_the_console_quietly_even_inside_a_command():
+    """EPIPE while a command writes is not the command's error: the console ends there, status 0, reader_gone set, no further line run."""
+
+    class Careful(Echo):
+        def onecmd(self, line: str) -> bool:
+            try:  # a shell that turns every Exception into a line of output
+                return super().onecmd(line)
+            except Exception as exc:  # pragma: no cover - the guard must not reach here
+                self.seen.append(f"caught {type(exc).__name__}")
+                return False
+
+    out = _GoneAfter(3)
+    shell = Careful(out)
+    console = Console(shell, io.StringIO("one\ntwo\nthree\n"), out)
+    assert console.run() == 0
+    assert console.reader_gone and console.ended_by == "output closed"
+    assert shell.seen == ["one"]  # 'A> ', 'one', 'ONE' written; the next prompt found it gone
+
+
+def _closed_reader_run(args: list[str], tmp_path, stdin: bytes = b""):
+    """Run ``python -m pyrt ARGS`` with stdout a pipe whose reader has already gone."""
+    import os
+    import subprocess
+    import sys
+
+    r, w = os.pipe()
+    os.close(r)
+    env = dict(os.environ, HOME=str(tmp_path), PYRT_HOME=str(tmp_path / "pyrt-home"))
+    env.pop("PYRT_TOKEN", None)
+    try:
+        done = subprocess.run([sys.executable, "-m", "pyrt", *args], input=stdin, stdout=w,
+                              stderr=subprocess.PIPE, env=env, timeout=120, cwd=tmp_path)
+    finally:
+        os.close(w)
+    return done.returncode, done.stderr.decode()
+
+
+@pytest.mark.parametrize("robot", ["gripper", "manipulator"])
+def test_a_robot_whose_reader_has_gone_before_it_starts_ends_quietly(robot, tmp_path):
+    """'pyrt ROBOT | head' with head already gone: no traceback, status 0."""
+    rc, err = _closed_reader_run([robot, "--speed", "max"], tmp_path, b"help\nquit\n")
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+    assert rc == 0, err
+
+
+@pytest.mark.parametrize(("robot", "ready"), [("gripper", "jaws wide open"),
+                                              ("manipulator", "pyrt manipulator: prototype")])
+def test_a_robot_whose_reader_goes_away_mid_script_stops_the_robot_and_ends_quietly(
+        robot, ready, tmp_path):
+    """'printf 'help\\nstats\\nquit' | pyrt ROBOT --speed max | head -2': the console ends at the first write after head left, every motor stopped (said on stderr), status 0, no traceback."""
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, HOME=str(tmp_path), PYRT_HOME=str(tmp_path / "pyrt-home"),
+               PYTHONUNBUFFERED="1")
+    env.pop("PYRT_TOKEN", None)
+    proc = subprocess.Popen([sys.executable, "-m", "pyrt", robot, "--speed", "max"],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, env=env, cwd=tmp_path)
+    try:
+        seen = b""
+        while ready.encode() not in seen:  # the robot runs: then the reader goes
+            line = proc.stdout.readline()
+            assert line, seen
+            seen += line
+        proc.stdout.close()
+        _, err = proc.communicate(b"help\nstats\nstatus\nquit\n", timeout=120)
+    finally:
+        proc.kill()
+    err = err.decode()
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+    assert proc.returncode == 0, err
+    assert f"pyrt {robot}: output closed: every motor stopped" in err

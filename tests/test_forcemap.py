@@ -18,9 +18,10 @@ def test_force_maps_balance_the_weight(tmp_path, capsys, station, ropes, step):
     maps = []
     for i in range(ropes):
         lines = (tmp_path / f"axis{i}.map").read_text().splitlines()
-        assert lines[2] == "# " + " ".join(COLUMNS)
-        assert all(c.endswith(("_cm", "_N")) for c in COLUMNS)
-        maps.append(np.loadtxt(lines[3:]))
+        head = [ln for ln in lines if ln.startswith("#")]
+        assert head[-1] == "# " + " ".join(COLUMNS) and lines[len(head) - 1] == head[-1]
+        assert all(c.endswith(("_cm", "_N")) for c in COLUMNS[:-1])  # then holdable, 0 or 1
+        maps.append(np.loadtxt(lines[len(head):]))
     assert all(m.shape == maps[0].shape for m in maps) and len(maps[0]) > 10
     total = sum(m[:, 4:7] for m in maps)
     z = maps[0][:, 2]
@@ -63,3 +64,37 @@ def test_bad_grid_is_one_line_error(tmp_path, capsys, args, match):
     assert match in err and "Traceback" not in err
     assert len(err.strip().splitlines()) == 1
     assert not list(tmp_path.glob("*.map"))
+
+
+def test_negative_tensions_are_explained_and_marked_not_holdable(tmp_path, capsys):
+    """A negative tension (a push no rope can give) is said in the header and the printed line, its position is marked holdable 0, and the controller refuses every position marked 0 as a target."""
+    from pyrt.cli.forcemap import force_map
+    from pyrt.db import copy_station
+    from pyrt.errors import CommandError
+    from pyrt.station.manipulator import ManipulatorStation
+
+    assert main(["forcemap", "--out", str(tmp_path), "--step", "40"]) == 0
+    printed = capsys.readouterr().out
+    lines = (tmp_path / "axis0.map").read_text().splitlines()
+    header = [ln for ln in lines if ln.startswith("#")]
+    table = np.loadtxt([ln for ln in lines if not ln.startswith("#")])
+    pushes = int(np.sum(table[:, 3] < 0))
+    assert pushes > 0
+    assert header[-1] == "# " + " ".join(COLUMNS) and COLUMNS[-1] == "holdable"
+    assert any("a negative tension_N is a push the rope would have to give, which no rope "
+               f"can: the source cannot be held there ({pushes} of {len(table)} positions"
+               in ln for ln in header)
+    assert f"axis0 would have to push (tension_N < 0) at {pushes}" in printed
+    assert set(np.unique(table[:, 7])) <= {0.0, 1.0}
+    assert np.all(table[table[:, 3] < 0, 7] == 0.0)  # a push is never holdable
+    assert np.any(table[:, 7] == 1.0)
+
+    station = ManipulatorStation(copy_station("prototype", tmp_path / "db"))
+    try:
+        rows = force_map(station, 40.0)
+        for row in rows[0]:
+            if row[7] == 0.0:
+                with pytest.raises(CommandError, match="refused"):
+                    station.polyaxis.check_target(row[:3])
+    finally:
+        station.close()

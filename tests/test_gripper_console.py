@@ -256,7 +256,8 @@ def test_start_accepts_a_negative_hex_count(monkeypatch, capsys):
 def test_sigterm_to_a_real_time_gripper_stops_the_jaws_and_exits_0(tmp_path, sig):
     """SIGTERM (or SIGINT) mid-move to `pyrt gripper` at real time: jaws stopped, drive current
     +0; exit 0 (SIGINT: 130, the status of an interrupted script)."""
-    env = dict(os.environ, HOME=str(tmp_path), PYTHONUNBUFFERED="1")
+    env = dict(os.environ, HOME=str(tmp_path), PYRT_HOME=str(tmp_path / "pyrt-home"),
+               PYTHONUNBUFFERED="1")
     proc = subprocess.Popen([sys.executable, "-m", "pyrt", "gripper", "--speed", "1"],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=env, cwd=tmp_path)

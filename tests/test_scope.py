@@ -248,3 +248,76 @@ def test_stop_after_a_trigger_keeps_the_partial_frame_with_its_trigger():
     frame = scope.read()
     assert frame.trigger_index is not None
     assert frame.data[frame.trigger_index, 1] == 1.0 and frame.data[frame.trigger_index - 1, 1] == 0.0
+
+
+def test_the_pre_trigger_fill_is_shown_and_a_single_armed_before_it_captures_the_next_event():
+    """Single, pre 0.9: the fill is shown as it grows; the rising edge at tick 50 (during the fill) is counted, not taken; the edge at 150 makes the frame."""
+    loop, _, scope = rig(capacity=100)
+    scope.set_trigger("square", 0.5, "rising", pre=0.9)  # 90 samples to fill
+    scope.run("single")
+    loop.run(36)
+    assert scope.pre_fill() == pytest.approx(0.4)
+    assert "armed (single), pre-trigger 40 % filled (the trigger arms when it is full)" \
+        in scope.status()
+    loop.run(64)  # tick 100: the fill is full; the edge at 50 came during it
+    assert scope.pre_fill() == 1.0 and "pre-trigger full" in scope.status()
+    assert scope.missed == 1 and scope.missed_t_ns == 50 * 1_000_000
+    assert "1 trigger event came while the pre-trigger part filled and was not taken" \
+        in scope.waiting()
+    loop.run(300)
+    frame = scope.read()
+    assert scope.state == "done" and scope.frames == 1
+    assert frame.column("ramp")[frame.trigger_index] == 150 and frame.trigger_index == 90
+    scope.run("single")  # arming again forgets what the last fill missed
+    assert scope.missed == 0 and scope.missed_note() == ""
+
+
+def test_normal_mode_counts_the_events_each_refill_misses():
+    """Normal mode fills again after each frame: the edges of each fill are counted, the first edge after it triggers."""
+    loop, _, scope = rig(capacity=200)
+    scope.set_trigger("square", 0.5, "rising", pre=0.9)  # 180 samples to fill; edges 100 apart
+    scope.run("normal")
+    loop.run(1000)
+    # the first fill (ticks 1..180) misses 50 and 150; the frame at 250 ends at 269,
+    # the refill (270..449) misses 350, and 450 is the first edge after it; and so on
+    assert scope.frames == 4 and scope.missed == 6 and scope.missed_t_ns == 950_000_000
+    frame = scope.read()
+    assert frame.column("square")[frame.trigger_index - 1] == 0.0
+    assert frame.column("square")[frame.trigger_index] == 1.0
+
+
+def test_record_length_is_bounded_by_count_and_memory():
+    """set_length takes 2..1,000,000 samples within the 64 MiB buffer bound; a refusal changes nothing."""
+    from pyrt.scope.scope import MAX_BUFFER_BYTES, buffer_bytes
+
+    loop, sig, scope = rig(capacity=100)
+    scope.set_length(500)
+    assert scope.capacity == 500
+    scope.run("roll")
+    loop.run(600)
+    assert scope.read().data.shape == (500, 2)
+    for bad in (1, 0, 1_000_001, 2.5, True):
+        with pytest.raises(CommandError, match="record length"):
+            scope.set_length(bad)
+    for k in range(14):
+        scope.add(f"c{k}", Source.attr(sig, "ramp"))
+    assert buffer_bytes(1_000_000, 16) > MAX_BUFFER_BYTES
+    with pytest.raises(CommandError, match="MiB"):
+        scope.set_length(1_000_000)
+    assert scope.capacity == 500
+
+
+def test_csv_header_carries_each_channels_units(tmp_path):
+    """The CSV header names each column with its units (encoder [counts]); a channel without units keeps its name alone."""
+    loop = Loop(SimClock())
+    sig = Signal()
+    loop.attach(sig.step)
+    scope = Scope(capacity=20)
+    loop.attach(scope.sample)
+    scope.add("encoder", Source.attr(sig, "ramp").described("counts"))
+    scope.add("square", Source.attr(sig, "square"))
+    scope.run("roll")
+    loop.run(30)
+    rows = list(csv.reader(save_frame(scope.read(), tmp_path / "f.csv").open()))
+    assert rows[0] == ["t_s", "encoder [counts]", "square"]
+    assert list(np.load(save_frame(scope.read(), tmp_path / "f.npz"))["units"]) == ["counts", ""]

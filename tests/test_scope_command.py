@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import re
 
 import pytest
 from hypothesis import given, settings
@@ -88,6 +89,7 @@ BAD = [
     "add", "add nope", "remove plant.x", "trigger plant.x", "trigger plant.x abc",
     "trigger plant.x 1 sideways", "every 0", "every x", "run warp", "single now",
     "show x", "save", "save a.txt", "frobnicate", "trigger 'unclosed",
+    "length", "length 1", "length x", "length 1000001", "help nope", "stop now",
 ]
 
 
@@ -95,10 +97,10 @@ BAD = [
 def test_bad_scope_lines_are_refused(line):
     """Malformed scope commands raise CommandError and leave the scope as it was."""
     cmd, _, scope, _ = make()
-    before = (scope.channels, scope.trigger, scope.state, scope.every)
+    before = (scope.channels, scope.trigger, scope.state, scope.every, scope.capacity)
     with pytest.raises(CommandError):
         cmd(line)
-    assert (scope.channels, scope.trigger, scope.state, scope.every) == before
+    assert (scope.channels, scope.trigger, scope.state, scope.every, scope.capacity) == before
 
 
 @settings(max_examples=150, deadline=None)
@@ -191,3 +193,84 @@ def test_scope_plot_without_matplotlib_is_one_line_and_writes_nothing(tmp_path):
     assert "Traceback" not in done.stderr
     assert not (tmp_path / "f.png").exists()
     assert "CMD: W\n" in done.stdout  # the next command still ran
+
+
+# -- the operator's first hour: a single trigger, the pre-trigger fill, what is said --------
+
+
+def _gripper_shell():
+    from pyrt.commands import RobotShell
+    from pyrt.station.gripper import build_gripper
+
+    station = build_gripper(Loop(SimClock()))
+    station.start()
+    out = io.StringIO()
+    shell = RobotShell(station, out)
+
+    def run(*lines: str) -> str:
+        out.seek(0)
+        out.truncate()
+        for line in lines:
+            shell.onecmd(line)
+        return out.getvalue()
+
+    run("I")
+    return station, run
+
+
+def test_a_single_trigger_never_misses_silently_and_captures_the_next_event(tmp_path):
+    """The issue's session: the crossing during the 3.2 s pre-trigger fill is said to be not taken, the advice fits single mode, and the next crossing after the fill makes the frame (CSV header with units)."""
+    station, run = _gripper_shell()
+    said = run("scope add encoder", "scope trigger encoder -3000 falling pre 0.2", "scope single")
+    assert "3200 samples (3.2 s) before it" in said
+    assert "armed (single), pre-trigger 0 % filled: the trigger arms when it is full" in said
+    said = run("P E47A", "wait", "sleep 13", "scope", "scope show")
+    assert "scope armed (single), pre-trigger full" in said and "frames: 0" in said
+    assert "1 trigger event came while the pre-trigger part filled and was not taken" in said
+    show = said.splitlines()[-1]
+    assert show.startswith("error: scope: nothing captured yet: armed (single), pre-trigger "
+                           "full: waiting for encoder falling through -3000")
+    assert "scope run, then let time pass" not in said
+    run("P 0000", "wait", "P E47A", "wait", "sleep 13")  # the next crossing, after the fill
+    assert station.runner.call(lambda: (station.scope.state, station.scope.frames)) == ("done", 1)
+    said = run(f"scope save {tmp_path / 'f.csv'}")
+    assert said.startswith("saved 16000 samples of 1 channel(s) to ")
+    rows = (tmp_path / "f.csv").read_text().splitlines()
+    assert rows[0] == "t_s,encoder [counts]"
+    levels = [float(r.split(",")[1]) for r in rows[3200:3202]]  # rows[0] is the header
+    assert levels[0] > -3000 >= levels[1]  # the trigger point is sample 3200
+
+
+def test_scope_run_stop_every_length_remove_and_trigger_off_say_what_they_did():
+    """Each scope change answers with what it did, in loop time where it can."""
+    _, run = _gripper_shell()
+    run("scope add encoder dac")
+    assert run("scope every 2") == ("sampling every 2 tick(s) (0.002 s); a frame of 16000 "
+                                    "samples (32 s)\n")
+    assert run("scope length 4000") == "record length 4000 samples (8 s)\n"
+    said = run("scope run roll")
+    assert said.startswith("scope roll: the latest samples, always; frames of 4000 samples (8 s)")
+    said = run("sleep 1", "scope stop")  # 1 s at every 2 ticks: 500 samples and the calls'
+    assert re.fullmatch(r"scope stopped \(it was rolling\); a partial frame of 50\d samples "
+                        r"is kept\n", said), said
+    assert run("scope trigger off") == "trigger off\n"
+    assert run("scope remove dac") == "removed dac; scope channels: encoder\n"
+    assert "scope stopped (roll)" in run("scope")
+
+
+def test_help_scope_documents_every_sub_command():
+    """'help scope' prints every sub-command (every, remove, trigger off, length ...), and 'scope help trigger' the trigger's help."""
+    from pyrt.commands.scope import SUBCOMMAND_HELP
+
+    _, run = _gripper_shell()
+    text = run("help scope")
+    for usage in ("scope every N", "scope remove CH", "scope trigger off", "scope length N",
+                  "scope trigger CH LEVEL [rising|falling] [pre FRACTION]", "scope single",
+                  "scope run [normal|auto|roll|single]", "scope stop", "scope help [SUB]",
+                  "arms the trigger only when it is full", "64 MiB"):
+        assert usage in " ".join(text.split()), usage
+    assert all(len(line) <= 100 for line in text.splitlines())
+    assert set(SUBCOMMAND_HELP) >= {"add", "remove", "trigger", "every", "length", "run",
+                                    "single", "stop", "show", "save", "plot"}
+    said = run("scope help trigger")
+    assert said.startswith("scope trigger CH LEVEL") and "scope trigger off" in said

@@ -12,7 +12,8 @@ import pytest
 
 
 def _start(robot: str, tmp_path) -> subprocess.Popen:
-    env = dict(os.environ, HOME=str(tmp_path), PYTHONUNBUFFERED="1")
+    env = dict(os.environ, HOME=str(tmp_path), PYRT_HOME=str(tmp_path / "pyrt-home"),
+               PYTHONUNBUFFERED="1")
     env.pop("PYRT_TOKEN", None)
     return subprocess.Popen([sys.executable, "-m", "pyrt", robot, "--speed", "1"],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE,
@@ -75,7 +76,8 @@ def test_end_of_input_mid_move_on_the_manipulator_writes_back_and_says_so(tmp_pa
 
 def _start_served(args: list[str], tmp_path) -> tuple[subprocess.Popen, str]:
     """Start ``pyrt ARGS`` with stdin a pipe; read stderr until the server says where it is."""
-    env = dict(os.environ, HOME=str(tmp_path), PYTHONUNBUFFERED="1")
+    env = dict(os.environ, HOME=str(tmp_path), PYRT_HOME=str(tmp_path / "pyrt-home"),
+               PYTHONUNBUFFERED="1")
     env.pop("PYRT_TOKEN", None)
     proc = subprocess.Popen([sys.executable, "-m", "pyrt", *args, "--speed", "1"],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE,

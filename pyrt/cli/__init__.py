@@ -29,6 +29,7 @@ from pyrt.cli import (
     top,
 )
 from pyrt.cli._station import add_station_parser
+from pyrt.console import ReaderGone, silence
 from pyrt.errors import ConfigError, PyrtError
 from pyrt.station.factory import find_station, installed_stations
 
@@ -89,8 +90,21 @@ def entry() -> None:
     then (a robot's motors stopped, its databases written back), and Python
     puts the default signal actions back while it finalizes: a SIGTERM or
     SIGHUP that comes late (the second of two sent together) is ignored from
-    here on, so the process ends with its status instead of being killed."""
-    status = main()
+    here on, so the process ends with its status instead of being killed.
+    A reader of stdout that has gone (``| head``) ends any command quietly,
+    status 0."""
+    status: int | str | None
+    try:
+        try:
+            status = main()
+        except SystemExit as exc:  # argparse: --help, --version, a usage error
+            status = exc.code
+        sys.stdout.flush()  # here, not in the interpreter's exit, where EPIPE would be loud
+    except (BrokenPipeError, ReaderGone):
+        # the reader of stdout has gone (`pyrt overruns F --json | head`): it has
+        # what it wanted; end quietly, as `pyrt send` does
+        silence(sys.stdout)
+        status = 0
     for name in ("SIGTERM", "SIGHUP"):
         sig = getattr(signal, name, None)
         if sig is not None:

@@ -14,9 +14,12 @@ import contextlib
 import logging
 import os
 import signal
+import sys
 import time
 from collections.abc import Callable, Iterator
 from typing import Any
+
+from pyrt.console import ReaderGone, silence
 
 __all__ = ["SECOND_SIGNAL_S", "Shutdown", "run_until_shutdown", "shutdown_signals"]
 
@@ -96,9 +99,11 @@ def run_until_shutdown(station: Any, console: Any, service: Any, *, headless: bo
     the service and the station (every motor stopped, databases written
     back) and say so in one line.  The exit status is the console's or the
     service's, 0 after SIGTERM or SIGHUP, 130 after a Ctrl-C that no console
-    caught (a piped script)."""
+    caught (a piped script); when the reader of stdout has gone (``| head``)
+    the run ends as at end of input, status 0, the closing line on stderr."""
     reason = ""
     status = 0
+    gone = False
     # --headless has no console to type Ctrl-C at: SIGINT ends it like SIGTERM.
     signals = (*_SIGNALS, signal.SIGINT) if headless else _SIGNALS
     with shutdown_signals(lambda: _stop_now(station), say, signals) as guard:
@@ -114,6 +119,9 @@ def run_until_shutdown(station: Any, console: Any, service: Any, *, headless: bo
             # Ctrl-C where no console catches it (a piped script, the power-up
             # I): the run ends as at end of input, with the shell's status
             reason, status = "SIGINT", 130
+        except ReaderGone:  # before the console read (the power-up I): as in the console
+            reason, gone = "output closed", True
+            silence(sys.stdout)
         finally:
             guard.raising = False  # from here on a first signal lets the close finish
             try:
@@ -123,7 +131,12 @@ def run_until_shutdown(station: Any, console: Any, service: Any, *, headless: bo
                 station.close()
         why = reason or ("stopped" if headless else console.ended_by)
         line = f"{what}: {why}: every motor stopped{station.closing_note()}"
-        say(line)
+        if gone or getattr(console, "reader_gone", False):
+            # the reader of stdout has gone: the closing line goes to stderr
+            with contextlib.suppress(OSError, ValueError):
+                print(line, file=sys.stderr, flush=True)
+        else:
+            say(line)
         if headless:  # a service's record is its log
             logging.getLogger("pyrt.service").info("%s", line)
     return status

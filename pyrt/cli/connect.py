@@ -1,14 +1,23 @@
 """``pyrt connect [HOST:]PORT``: an interactive console on a robot served with ``--serve``.
 
 Every line is sent to the server as a console command and its reply
-printed (``ERR`` replies as ``error: ...``).  Local words: ``auth`` asks for
-the token without echoing it (or takes ``--token-file`` / ``$PYRT_TOKEN`` at
-start), ``exit`` or end of input leaves (the robot keeps running: leaving a
-monitoring session stops nothing; type ``stop`` for that, which any client
-may).  On a terminal there is history, Tab completion from the server's own
+printed (``ERR`` replies as ``error: ...``).  Local words: ``auth`` asks
+for the token without echoing it, on a terminal only (piped, it is
+refused: give ``--token-file`` or ``$PYRT_TOKEN``, read at start; a token
+typed on a line is refused everywhere, as it would be shown); ``exit`` or
+end of input leaves (the robot keeps running: leaving a monitoring session
+stops nothing; type ``stop`` for that, which any client may).
+
+Ctrl-C does what it does at a local console: a command that runs (a
+``wait``) is abandoned and the robot stopped (``stop`` over a second
+connection), and a move is stopped at the prompt; the abandoned reply is
+dropped when it comes, so every reply answers its own line.  Piped, Ctrl-C
+stops the robot and ends the script (status 130).
+
+On a terminal there is history, Tab completion from the server's own
 ``help`` (its words, objects and their commands), and a live status line
-from a second connection subscribed at ``--hz``; piped, it runs the lines as
-a script and prints no status line.
+from a second connection subscribed at ``--hz``; piped, it runs the lines
+as a script and prints no status line.
 """
 
 from __future__ import annotations
@@ -24,6 +33,12 @@ from pyrt.client import Client, ServerError, parse_address
 from pyrt.console import Console
 
 __all__ = ["RemoteShell", "add_parser", "run"]
+
+#: How long Ctrl-C's ``stop`` (over a second connection) may take, seconds.
+STOP_TIMEOUT_S = 5.0
+#: How long a line waits, silently, for the reply of an interrupted request
+#: before saying that the server is still serving it, seconds.
+SETTLE_GLANCE_S = 0.2
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -46,9 +61,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 class RemoteShell:
     """The console interpreter of a connection: lines go to the server."""
 
-    def __init__(self, client: Client, stdout: TextIO, name: str):
+    def __init__(self, client: Client, stdout: TextIO, name: str,
+                 stdin: TextIO | None = None):
         self.client = client
         self.stdout = stdout
+        #: Where ``auth`` would ask for the token (it asks only on a terminal).
+        self.stdin = stdin if stdin is not None else sys.stdin
         self.prompt = f"{name}> "
         self._table: dict[str, Any] | None = None
 
@@ -63,10 +81,39 @@ class RemoteShell:
         word = text.split()[0].lower()
         if word in ("exit", "quit") and len(text.split()) == 1:
             return True  # leaving a remote session stops nothing
-        if word == "auth" and len(text.split()) == 1:
-            token = getpass.getpass("token: ")
-            text = f"AUTH {token}"
+        if word == "auth":
+            if len(text.split()) > 1:
+                self.say("error: a token typed on a line is shown (on the screen, in a "
+                         "script's transcript); nothing sent: type 'auth' alone at a terminal, "
+                         "or start with --token-file FILE or $PYRT_TOKEN")
+                return False
+            if not self.terminal():
+                self.say("error: auth asks for the token on a terminal, and this input is "
+                         "not one (the next line is not taken as the token); start with "
+                         "--token-file FILE or $PYRT_TOKEN")
+                return False
+            return self.authenticate(getpass.getpass("token: "))
+        return self._send(text)
+
+    def terminal(self) -> bool:
+        """True when the token can be asked for without echo (stdin is a terminal)."""
         try:
+            return bool(self.stdin.isatty())
+        except (AttributeError, ValueError):
+            return False
+
+    def authenticate(self, token: str) -> bool:
+        """Send ``AUTH token`` (the line is never shown); True when the session ends."""
+        return self._send(f"AUTH {token}", auth=True)
+
+    def _send(self, text: str, auth: bool = False) -> bool:
+        try:
+            if self.client.owed:  # an interrupted request the server still serves
+                try:
+                    self.client.settle(SETTLE_GLANCE_S)
+                except TimeoutError:
+                    self.say(f"(the server first finishes the interrupted "
+                             f"{self.client.owed[0][:40]!r}; its reply will be dropped)")
             reply = self.client.request(text)
         except (OSError, TimeoutError, ServerError) as exc:
             self.say(f"error: the connection failed: {exc}")
@@ -75,9 +122,57 @@ class RemoteShell:
             self.say(out)
         if not reply.ok:
             self.say(f"error: {reply.code} {reply.text}".rstrip())
-        elif text.upper().startswith("AUTH ") and not reply.lines:
+        elif auth and not reply.lines:
             self.say("privileged: every command is accepted")  # the server said nothing
         return False
+
+    def interrupt(self, at_prompt: bool) -> str:
+        """Ctrl-C (the console calls it), as at a local console: a command that
+        runs (a ``wait``, say) is abandoned and every motor stopped; at the
+        prompt, a move that runs is stopped, and nothing else is done.
+
+        The ``stop`` goes over a second connection (any client may stop the
+        robot; this one's requests are served in order, behind the abandoned
+        one).  The abandoned reply comes later; the client reads and drops it
+        before the next request (:meth:`Client.settle`), so every reply shown
+        answers the line just typed."""
+        abandoned = list(self.client.owed)
+        if at_prompt and not abandoned:
+            moving = self._moving()
+            if moving is not True:
+                return ("(Ctrl-C stops a move; nothing is moving: 'exit' or Ctrl-D leaves, "
+                        "the robot keeps running)" if moving is False else
+                        "(Ctrl-C stops a move; the robot's status does not say whether it "
+                        "moves: type stop to stop it)")
+        said = self._stop()
+        if abandoned:
+            said += f"\n(the reply to {abandoned[-1][:40]!r} is dropped when it comes)"
+        return said
+
+    def _second(self) -> Client:
+        host, port = self.client.address
+        return Client(host, port, timeout_s=STOP_TIMEOUT_S)
+
+    def _moving(self) -> bool | None:
+        """Whether the robot moves, from its STATUS (None: not known)."""
+        try:
+            with self._second() as c:
+                fields = c.status().fields
+        except (OSError, TimeoutError, ServerError):
+            return None
+        flags = [fields[k] for k in ("moving", "busy") if k in fields]
+        return any(bool(v) for v in flags) if flags else None
+
+    def _stop(self) -> str:
+        """``stop`` over a second connection; what the robot said, or why not."""
+        try:
+            with self._second() as c:
+                reply = c.request("stop")
+        except (OSError, TimeoutError, ServerError) as exc:
+            return f"interrupted; could not reach the robot to stop it: {exc}; type stop"
+        if not reply.ok:
+            return f"interrupted; stop was refused: {reply.code} {reply.text}".rstrip()
+        return "interrupted: " + ("; ".join(reply.lines) or "stopped")
 
     def completions(self) -> dict[str, Any]:
         """The completion table, from the server's ``help`` and ``help OBJECT`` (once)."""
@@ -167,7 +262,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"connected to {host}:{port}: {client.greeting}; 'exit' leaves "
               "(the robot keeps running), 'stop' stops it", flush=True)
         if token is not None:
-            shell.onecmd(f"AUTH {token}")
+            shell.authenticate(token)
         console = Console(shell)
         if console.interactive() and args.hz > 0:
             try:
@@ -176,7 +271,11 @@ def run(args: argparse.Namespace) -> int:
                 console.status_period_s = min(1.0, 1.0 / args.hz)
             except (OSError, TimeoutError, ServerError) as exc:
                 print(f"(no status line: {exc})", flush=True)
-        return console.run()
+        try:
+            return console.run()
+        except KeyboardInterrupt:  # a piped script: Ctrl-C ends it, the robot stopped
+            print(f"pyrt connect: {shell.interrupt(False)}", flush=True)
+            return 130
     finally:
         if watch is not None:
             watch.close()

@@ -7,6 +7,18 @@ vector on the source.  One file per rope, ``axis0.map`` ..., each with a
 header naming the columns and their units.  The grid covers the vertical
 plane through the first side rope's attachment (000's maps were for the
 planar prototype), or the box given with ``--y``.
+
+The free ropes' tensions are those that balance the weight exactly (least
+squares, without bounds), so a tension can come out negative: the rope
+would have to push on the source to hold it there, and no rope can push.
+At such a position the source cannot be held (with those off-side ropes
+at OFFSIDE_TENSION), and the controller refuses it as a target.  The maps
+keep these rows, as the balance asks them, and say so: a last column
+``holdable`` is 1 where every rope's tension is within
+LOW_TENSION..MAX_TENSION and at most NET_FORCELIMIT is left unbalanced
+(the controller can hold the source there), else 0; each file's header
+and the line printed for it count the positions where its rope would have
+to push.
 """
 
 from __future__ import annotations
@@ -24,7 +36,7 @@ from pyrt.station.manipulator import ManipulatorStation
 
 __all__ = ["COLUMNS", "MAX_CELLS", "add_parser", "force_map", "grid_size", "run"]
 
-COLUMNS = ("x_cm", "y_cm", "z_cm", "tension_N", "fx_N", "fy_N", "fz_N")
+COLUMNS = ("x_cm", "y_cm", "z_cm", "tension_N", "fx_N", "fy_N", "fz_N", "holdable")
 #: The most grid cells one map may have (a 1 cm grid over the prototype is ~110 000).
 MAX_CELLS = 250_000
 
@@ -76,8 +88,11 @@ def check_grid(station: ManipulatorStation, step: float, y: float) -> None:
 
 def force_map(station: ManipulatorStation, step: float, y: float = 0.0
               ) -> list[list[tuple[float, ...]]]:
-    """Rows ``(x, y, z, tension, fx, fy, fz)`` per rope over the grid
-    (ConfigError for a grid :func:`check_grid` refuses)."""
+    """Rows ``(x, y, z, tension, fx, fy, fz, holdable)`` per rope over the grid
+    (ConfigError for a grid :func:`check_grid` refuses).  A negative tension
+    is a push the rope cannot give; ``holdable`` is 1.0 where every tension is
+    within LOW_TENSION..MAX_TENSION and at most NET_FORCELIMIT is left over,
+    else 0.0 (see the module text)."""
     check_grid(station, step, y)
     pa = station.polyaxis
     av = station.av
@@ -93,9 +108,11 @@ def force_map(station: ManipulatorStation, step: float, y: float = 0.0
                 dirs = pa.force_directions(x)
             except (ValueError, ZeroDivisionError):
                 continue
-            tensions, _ = pa.equilibrium_tensions(x)
+            tensions, left = pa.equilibrium_tensions(x)
+            held = float(left <= pa.net_forcelimit and all(
+                pa.low_tension <= t <= pa.max_tension for t in tensions))
             for j, (t, d) in enumerate(zip(tensions, dirs, strict=True)):
-                rows[j].append((x[0], x[1], x[2], t, t * d[0], t * d[1], t * d[2]))
+                rows[j].append((x[0], x[1], x[2], t, t * d[0], t * d[1], t * d[2], held))
     return rows
 
 
@@ -119,16 +136,27 @@ def _write_maps(station: ManipulatorStation, step: float, y: float, out: Path) -
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise ConfigError(f"cannot create {out}: {exc.strerror}") from None
+    pa = station.polyaxis
     for axis, table in zip(station.axes, rows, strict=True):
-        text = [f"# force map of {axis.name}, station {station.polyaxis.name}: the force "
+        pushes = sum(1 for row in table if row[3] < 0.0)
+        held = sum(1 for row in table if row[7])
+        text = [f"# force map of {axis.name}, station {pa.name}: the force "
                 f"the rope puts on the source, grid step {step:g} cm, plane y = {y:g} cm",
-                "# tensions: off-side ropes at OFFSIDE_TENSION, the others balancing the "
-                "net weight",
+                f"# tensions: off-side ropes at OFFSIDE_TENSION ({pa.offside_tension:g} N), the "
+                "others balancing the net weight exactly, without bounds",
+                f"# a negative tension_N is a push the rope would have to give, which no rope "
+                f"can: the source cannot be held there ({pushes} of {len(table)} positions "
+                f"for {axis.name}); fx fy fz are tension_N times the rope's direction",
+                f"# holdable: 1 where every rope is within LOW_TENSION..MAX_TENSION "
+                f"({pa.low_tension:g}..{pa.max_tension:g} N) and at most NET_FORCELIMIT "
+                f"({pa.net_forcelimit:g} N) is left unbalanced, else 0 ({held} of "
+                f"{len(table)} positions are holdable)",
                 "# " + " ".join(COLUMNS)]
-        text.extend(" ".join(f"{v:.4f}" for v in row) for row in table)
+        text.extend(" ".join(f"{v:.4f}" for v in row[:7]) + f" {int(row[7])}" for row in table)
         target = out / f"{axis.name}.map"
         atomic_write(target, ("\n".join(text) + "\n").encode())
-        print(f"{target}: {len(table)} positions", file=sys.stdout)
+        print(f"{target}: {len(table)} positions, {held} holdable; {axis.name} would have to "
+              f"push (tension_N < 0) at {pushes}", file=sys.stdout)
 
 
 def copy_tree(src: Path, dest: Path) -> Path:

@@ -15,6 +15,12 @@
 A reply is ``OK-`` continuation lines and a last ``OK`` or ``ERR <code>``
 line; ``STATUS`` lines (subscription samples, pushed faults) can come
 between replies and are kept for :meth:`Client.statuses`.
+
+The server answers every request once, in the order they came.  A request
+whose reply was not read (a Ctrl-C or a timeout while waiting for it) is
+still owed: the client reads and sets aside every owed reply before it
+sends the next request, so a reply always answers its own request
+(:attr:`Client.owed`, :meth:`Client.settle`, :attr:`Client.late`).
 """
 
 from __future__ import annotations
@@ -31,6 +37,8 @@ __all__ = ["Client", "Reply", "ServerError", "Status", "parse_address", "parse_s
 
 #: Longest line the client accepts from a server.
 MAX_REPLY_LINE = 1 << 20
+#: How many replies to abandoned requests :attr:`Client.late` keeps.
+LATE_KEPT = 16
 
 
 class ServerError(PyrtError):
@@ -116,8 +124,16 @@ class Client:
         self.timeout_s = timeout_s
         self._sock = socket.create_connection((host, port), timeout=timeout_s)
         self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        #: The server's ``(host, port)``.
+        self.address = (host, port)
         self._buf = bytearray()
         self._statuses: deque[Status] = deque()
+        #: Lines of a reply read so far (kept across an interrupted read).
+        self._partial: list[str] = []
+        #: Requests sent whose replies are not read yet, oldest first.
+        self.owed: deque[str] = deque()
+        #: Replies read for abandoned requests, ``(request, Reply)``, the latest LATE_KEPT.
+        self.late: deque[tuple[str, Reply]] = deque(maxlen=LATE_KEPT)
         self.closed = False
         greeting = self._read_reply()
         if not greeting.ok:
@@ -174,31 +190,51 @@ class Client:
             raise ValueError("a request is one line")
         self._sock.sendall(line.encode("utf-8") + b"\n")
 
-    def _read_reply(self) -> Reply:
-        lines: list[str] = []
+    def _read_reply(self, timeout_s: float | None = None) -> Reply:
+        """The next reply.  Its lines are kept in ``_partial`` as they come, so
+        a read that is interrupted (Ctrl-C, a timeout) resumes where it stopped."""
+        lines = self._partial
         while True:
-            line = self._readline()
+            line = self._readline(timeout_s)
             if line.startswith("STATUS"):
                 self._statuses.append(parse_status(line))
-            elif line.startswith("OK-"):
+                continue
+            if line.startswith("OK-"):
                 lines.append(line[3:])
-            elif line == "OK" or line.startswith("OK "):
+                continue
+            self._partial = []
+            if line == "OK" or line.startswith("OK "):
                 if line != "OK":
                     lines.append(line[3:])
                 return Reply(True, lines)
-            elif line.startswith("ERR"):
+            if line.startswith("ERR"):
                 _, _, rest = line.partition(" ")
                 code, _, text = rest.partition(" ")
                 return Reply(False, lines, code, text)
-            else:
-                raise ServerError("protocol", f"unexpected line {line[:80]!r}")
+            raise ServerError("protocol", f"unexpected line {line[:80]!r}")
 
     # -- requests ------------------------------------------------------------------
 
+    def settle(self, timeout_s: float | None = None) -> list[tuple[str, Reply]]:
+        """Read the reply of every request still owed (see the module text);
+        each is also kept in :attr:`late`.  TimeoutError when one does not come
+        within ``timeout_s`` (default: the client's timeout); it stays owed."""
+        done: list[tuple[str, Reply]] = []
+        while self.owed:
+            reply = self._read_reply(timeout_s)
+            done.append((self.owed.popleft(), reply))
+            self.late.append(done[-1])
+        return done
+
     def request(self, line: str) -> Reply:
-        """Send ``line``; its :class:`Reply` whether it succeeded or not."""
+        """Send ``line``; its :class:`Reply` whether it succeeded or not.  Replies
+        still owed to earlier requests are read first (:meth:`settle`)."""
+        self.settle()
         self.send_line(line)
-        return self._read_reply()
+        self.owed.append(line)
+        reply = self._read_reply()
+        self.owed.popleft()
+        return reply
 
     def command(self, line: str) -> list[str]:
         """Send ``line``; the reply's lines, or :class:`ServerError` for ``ERR``."""
@@ -232,6 +268,9 @@ class Client:
             while self._statuses:
                 yield self._statuses.popleft()
             try:
+                if self.owed:  # a reply owed is read as a reply, not dropped as noise
+                    self.settle(timeout_s)
+                    continue
                 line = self._readline(timeout_s)
             except (TimeoutError, ConnectionError):
                 return

@@ -1,34 +1,74 @@
 """The ``scope`` command of both consoles (004's software oscilloscope).
 
-::
-
-    scope                          status, channels on the scope, channels available
-    scope add CH [CH ...]          add channels (names as the robot's resolver knows them)
-    scope remove CH                remove a channel
-    scope trigger CH LEVEL [rising|falling] [pre FRACTION]
-    scope trigger off              no trigger
-    scope every N                  sample every N ticks
-    scope run [normal|auto|roll]   start acquiring; scope single: one triggered frame
-    scope stop                     stop acquiring
-    scope show [N]                 print the last N samples of the latest frame
-    scope save FILE.csv|FILE.npz   export the latest frame
-    scope plot FILE.png            draw the latest frame (needs matplotlib)
-
-Every change to the scope runs in the loop thread through the runner; files
-are written outside it.
+Its help (:data:`SCOPE_HELP`, what ``help scope`` prints, and ``scope help
+SUB`` for one sub-command) is kept here, beside the sub-commands it
+describes.  Every change to the scope runs in the loop thread through the
+runner and says what it did; files are written outside the loop.
 """
 
 from __future__ import annotations
 
 import shlex
+import textwrap
 from collections.abc import Callable
 from typing import Any, TextIO
 
 from pyrt.commands.shell import parse_number
 from pyrt.errors import CommandError
-from pyrt.scope import MODES, Frame, Scope, Source, plot_frame, save_frame
+from pyrt.scope import (
+    MAX_BUFFER_BYTES,
+    MAX_LENGTH,
+    MODES,
+    Frame,
+    Scope,
+    Source,
+    plot_frame,
+    save_frame,
+)
 
-__all__ = ["ScopeCommand"]
+__all__ = ["SCOPE_HELP", "SUBCOMMAND_HELP", "ScopeCommand"]
+
+#: One entry per sub-command: its usage and what it does.
+SUBCOMMAND_HELP: dict[str, str] = {
+    "status": "scope (or scope status, scope list): the state (with the pre-trigger fill "
+              "while armed), the channels with their units, the trigger, the frames "
+              "captured, and the channels there are",
+    "add": "scope add CH [CH ...]: put channels on the scope (OBJECT.SIGNAL, or a signal "
+           "of the robot by its name alone); all are added or none; capture restarts",
+    "remove": "scope remove CH: take a channel off (and its trigger); capture restarts",
+    "trigger": "scope trigger CH LEVEL [rising|falling] [pre FRACTION]: trigger when CH "
+               "crosses LEVEL (default rising); FRACTION (0 <= f < 1, default 0.1) of the "
+               "frame is kept from before the trigger point.  As on halscope, an armed "
+               "scope first fills that pre-trigger part and arms the trigger only when it "
+               "is full ('scope' shows how full): an event during the fill is not taken, "
+               "and 'scope' says so.  scope trigger off: no trigger",
+    "every": "scope every N: take a sample every N ticks (1..1000000)",
+    "length": f"scope length N: the record length, N samples per channel "
+              f"(2..{MAX_LENGTH}, and the buffer, (N + 64) x (channels + 1) x 8 bytes, "
+              f"at most {MAX_BUFFER_BYTES // 2**20} MiB); capture restarts",
+    "run": "scope run [normal|auto|roll|single]: start acquiring (default: the mode last "
+           "used; auto on a fresh scope).  normal: a frame at each trigger; auto: also one "
+           "per frame length without a trigger; roll: always the latest samples",
+    "single": "scope single: arm for one triggered frame, then stop (needs a trigger)",
+    "stop": "scope stop: stop acquiring; what was sampled stays readable (a partial "
+            "frame if no frame was complete)",
+    "show": "scope show [N]: print the last N samples (default 10) of the latest frame",
+    "save": "scope save FILE.csv|FILE.npz: write the latest frame (the CSV header names "
+            "each column with its units: encoder [counts])",
+    "plot": "scope plot FILE.png: draw the latest frame (needs matplotlib)",
+    "help": "scope help [SUB]: this help, or one sub-command's",
+}
+
+#: ``help scope``: the word's usage, then every sub-command (lines of at most 96).
+SCOPE_HELP = "\n".join([
+    "scope [add|remove|trigger|every|length|run|single|stop|show|save|plot|help ...]",
+    "",
+    *textwrap.wrap("The software oscilloscope over any signal: OBJECT.SIGNAL (e.g. "
+                   "prototype.x, axis0.tension, sim.x), or a signal of the robot by its name "
+                   "alone (the gripper's encoder, dac ... and any RAM byte as ram:XX).", 96),
+    *(line for text in SUBCOMMAND_HELP.values()
+      for line in textwrap.wrap(text, 96, initial_indent="  ", subsequent_indent="      ")),
+])
 
 
 class ScopeCommand:
@@ -47,6 +87,8 @@ class ScopeCommand:
         self.resolve = resolve
         self.available = available
         self.stdout = stdout
+        if scope.tick_ns is None:  # so that sample counts can be said as loop time
+            scope.tick_ns = getattr(getattr(runner, "loop", None), "period_ns", None)
 
     def say(self, text: str) -> None:
         self.stdout.write(text + "\n")
@@ -69,9 +111,20 @@ class ScopeCommand:
         if handler is None:
             raise CommandError(
                 f"scope: unknown sub-command {words[0]!r}; one of add, remove, trigger, every, "
-                "run, single, stop, show, save, plot, list"
+                "length, run, single, stop, show, save, plot, list, help"
             )
         handler(rest)
+
+    def _do_help(self, rest: list[str]) -> None:
+        if not rest:
+            self.say(SCOPE_HELP)
+            return
+        sub = rest[0].lower()
+        sub = "status" if sub == "list" else sub
+        if len(rest) > 1 or sub not in SUBCOMMAND_HELP:
+            raise CommandError(f"scope help: no sub-command {' '.join(rest)[:40]!r}; one of "
+                               f"{', '.join(SUBCOMMAND_HELP)}")
+        self.say("\n".join(textwrap.wrap(SUBCOMMAND_HELP[sub], 96, subsequent_indent="    ")))
 
     def _call(self, fn: Callable[..., Any], *args: Any) -> Any:
         return self.runner.call(fn, *args, name=f"scope {getattr(fn, '__name__', '')}")
@@ -92,10 +145,13 @@ class ScopeCommand:
         if len(rest) != 1:
             raise CommandError("scope remove: name one channel")
         self._call(self.scope.remove, rest[0])
+        self.say(f"removed {rest[0]}; scope channels: "
+                 f"{', '.join(self._call(lambda: self.scope.channels)) or '-'}")
 
     def _do_trigger(self, rest: list[str]) -> None:
         if len(rest) == 1 and rest[0].lower() == "off":
             self._call(self.scope.clear_trigger)
+            self.say("trigger off" + self._after_change())
             return
         if len(rest) < 2:
             raise CommandError("scope trigger: CH LEVEL [rising|falling] [pre FRACTION], or 'off'")
@@ -113,6 +169,16 @@ class ScopeCommand:
             else:
                 raise CommandError(f"scope trigger: unexpected {rest[i]!r}")
         self._call(self.scope.set_trigger, channel, level, edge, pre)
+        sc = self.scope
+        pre_n = self._call(lambda: sc.pre_samples)
+        self.say(f"trigger: {self._call(sc.describe_trigger)}, {pre_n} samples"
+                 f"{self._call(sc.seconds, pre_n)} before it (pre {pre:g}); the trigger arms "
+                 "when that pre-trigger part has filled" + self._after_change())
+
+    def _after_change(self) -> str:
+        """What a change did to a running capture (it restarts)."""
+        state = self._call(lambda: self.scope.state)
+        return "" if state in ("stopped", "done") else f"; capture restarted ({state})"
 
     def _do_every(self, rest: list[str]) -> None:
         if len(rest) != 1 or not rest[0].isdigit():
@@ -123,24 +189,59 @@ class ScopeCommand:
             self.scope.every = n
 
         self._call(set_every)
+        cap = self._call(lambda: self.scope.capacity)
+        self.say(f"sampling every {n} tick(s){self._call(self.scope.seconds, 1, n)}; "
+                 f"a frame of {cap} samples{self._call(self.scope.seconds, cap, n)}")
+
+    def _do_length(self, rest: list[str]) -> None:
+        if len(rest) != 1 or not rest[0].isdigit():
+            raise CommandError(f"scope length: a whole number of samples, 2..{MAX_LENGTH}")
+        self._call(self.scope.set_length, int(rest[0]))
+        n = int(rest[0])
+        self.say(f"record length {n} samples{self._call(self.scope.seconds, n)}"
+                 + self._after_change())
 
     def _do_run(self, rest: list[str]) -> None:
         if len(rest) > 1 or (rest and rest[0].lower() not in MODES):
             raise CommandError(f"scope run: mode one of {', '.join(MODES)}")
         self._call(self.scope.run, rest[0].lower() if rest else None)
+        self._started()
 
     def _do_single(self, rest: list[str]) -> None:
         if rest:
             raise CommandError("scope single takes no arguments")
         self._call(self.scope.single)
+        self._started()
+
+    def _started(self) -> None:
+        """Say what a started scope does now."""
+        sc = self.scope
+        mode, cap = self._call(lambda: (sc.mode, sc.capacity))
+        what = "one frame, then stops" if mode == "single" else (
+            "the latest samples, always" if mode == "roll" else "a frame at each trigger"
+            + (", or one per frame length without one" if mode == "auto" else ""))
+        self.say(f"scope {mode}: {what}; frames of {cap} samples{self._call(sc.seconds, cap)}"
+                 f"; {self._call(sc.waiting)}")
 
     def _do_stop(self, rest: list[str]) -> None:
-        self._call(self.scope.stop)
+        if rest:
+            raise CommandError("scope stop takes no arguments")
+        sc = self.scope
+        was = self._call(lambda: sc.state)
+        self._call(sc.stop)
+        frame = self._call(sc.read)
+        if frame is None:
+            kept = "nothing was sampled"
+        else:
+            n = frame.data.shape[0]
+            kept = (f"the latest frame ({n} samples) is kept" if n == sc.capacity
+                    else f"a partial frame of {n} samples is kept")
+        self.say(f"scope stopped (it was {was}); {kept}")
 
     def _frame(self) -> Frame:
         frame = self._call(self.scope.read)
         if frame is None:
-            raise CommandError("scope: nothing captured yet (scope run, then let time pass)")
+            raise CommandError(f"scope: nothing captured yet: {self._call(self.scope.waiting)}")
         return frame
 
     def _do_show(self, rest: list[str]) -> None:

@@ -21,12 +21,13 @@ Tab completes from it, case-insensitively, on both line editors.
 from __future__ import annotations
 
 import contextlib
+import os
 import sys
 import threading
 from collections.abc import Callable
 from typing import Any, Protocol, TextIO
 
-__all__ = ["Console", "Interpreter", "complete"]
+__all__ = ["Console", "Interpreter", "ReaderGone", "complete", "silence"]
 
 #: How often the terminal console looks for loop messages, seconds.
 POLL_S = 0.1
@@ -43,6 +44,53 @@ def _echo(line: str) -> str:
     if len(body) > ECHO_MAX:
         body = f"{body[:ECHO_MAX]}... ({len(body)} characters)"
     return body + "\n"
+
+
+class ReaderGone(BaseException):
+    """Whoever read the console's output has gone (a closed pipe: ``| head``).
+
+    A BaseException, so that a command's own error handling (which turns
+    every Exception into one line of output) lets it through to the console."""
+
+
+def silence(stream: TextIO) -> None:
+    """Point ``stream``'s file descriptor at the null device: what is still
+    buffered for a reader that has gone, and whatever is written later
+    (closing lines, the interpreter's last flush), goes nowhere, quietly."""
+    with contextlib.suppress(OSError, ValueError, AttributeError):
+        fd = stream.fileno()
+        null = os.open(os.devnull, os.O_WRONLY)
+        try:
+            os.dup2(null, fd)
+        finally:
+            os.close(null)
+
+
+class _Output:
+    """A console's output stream: a reader that has gone (EPIPE) is
+    :class:`ReaderGone`, not an error of the command that was writing."""
+
+    def __init__(self, out: TextIO):
+        self._out = out
+
+    def write(self, text: str) -> int:
+        try:
+            return self._out.write(text)
+        except BrokenPipeError:
+            raise ReaderGone from None
+
+    def flush(self) -> None:
+        try:
+            self._out.flush()
+        except BrokenPipeError:
+            raise ReaderGone from None
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._out, name)
+
+
+def _guarded(out: TextIO) -> TextIO:
+    return out if isinstance(out, _Output) else _Output(out)  # type: ignore[return-value]
 
 
 class Interpreter(Protocol):
@@ -97,15 +145,22 @@ class Console:
         if callable(reconfigure):
             with contextlib.suppress(ValueError, OSError, AttributeError):
                 reconfigure(errors="replace")
-        self.stdout = stdout if stdout is not None else sys.stdout
+        out = stdout if stdout is not None else sys.stdout
+        # The interpreter writes where the console does: both through one
+        # guard, so that a reader that goes away ends the console quietly.
+        if getattr(shell, "stdout", None) is out:
+            shell.stdout = _guarded(out)
+        self.stdout = _guarded(out)
         self.messages = messages if messages is not None else (lambda: [])
         self.history_file = history_file
         #: The live status line (a terminal only: prompt_toolkit's bottom
         #: toolbar, refreshed every ``status_period_s``); never written to a pipe.
         self.status = status
         self.status_period_s = status_period_s
-        #: How the last :meth:`run` ended: "quit" or "end of input".
+        #: How the last :meth:`run` ended: "quit", "end of input" or "output closed".
         self.ended_by = "quit"
+        #: True when the run ended because the reader of its output went away.
+        self.reader_gone = False
 
     def interactive(self) -> bool:
         """True when both ends are a terminal (line editing and history)."""
@@ -115,14 +170,24 @@ class Console:
             return False
 
     def run(self) -> int:
-        """Run until ``quit`` or end of input; return the exit status (0)."""
-        if self.interactive():
-            try:
-                import prompt_toolkit  # noqa: F401
-            except ImportError:
-                return self._run_input()
-            return self._run_prompt_toolkit()
-        return self._run_lines()
+        """Run until ``quit`` or end of input; return the exit status (0).
+
+        When the reader of the output goes away (``| head``), the console
+        ends there, quietly (:attr:`reader_gone`; its output silenced), and
+        returns 0: the caller closes the robot as at end of input."""
+        try:
+            if self.interactive():
+                try:
+                    import prompt_toolkit  # noqa: F401
+                except ImportError:
+                    return self._run_input()
+                return self._run_prompt_toolkit()
+            return self._run_lines()
+        except ReaderGone:
+            self.ended_by = "output closed"
+            self.reader_gone = True
+            silence(self.stdout)
+            return 0
 
     # -- output of the loop ------------------------------------------------------
 

@@ -1,11 +1,13 @@
 """The software oscilloscope: channels sampled into a ring buffer, triggers, export, spew."""
 
 from pyrt.scope.export import plot_frame, save_frame
-from pyrt.scope.scope import MODES, Frame, Scope, Trigger
+from pyrt.scope.scope import MAX_BUFFER_BYTES, MAX_LENGTH, MODES, Frame, Scope, Trigger
 from pyrt.scope.sources import Source, compile_sources
 from pyrt.scope.spew import Spew
 
 __all__ = [
+    "MAX_BUFFER_BYTES",
+    "MAX_LENGTH",
     "MODES",
     "Frame",
     "Scope",

@@ -12,17 +12,18 @@ from pyrt.errors import CommandError
 from pyrt.fileio import atomic_write
 from pyrt.scope.scope import Frame
 
-__all__ = ["axis_label", "frame_figure", "is_hex", "plot_frame", "save_frame"]
+__all__ = ["axis_label", "column_title", "frame_figure", "is_hex", "plot_frame", "save_frame"]
 
 
 def save_frame(frame: Frame, path: str | Path) -> Path:
-    """Write ``frame`` as CSV (``.csv``: a header naming the columns, time in
-    seconds first) or numpy ``.npz`` (arrays ``t_ns``, ``data``, ``channels``)."""
+    """Write ``frame`` as CSV (``.csv``: a header naming the columns with their
+    units, ``encoder [counts]``, time in seconds first) or numpy ``.npz``
+    (arrays ``t_ns``, ``data``, ``channels``, ``units``)."""
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix == ".csv":
         buf = io.StringIO()
-        header = ",".join(["t_s", *frame.channels])
+        header = ",".join(["t_s", *(column_title(frame, k) for k in range(len(frame.channels)))])
         table = np.column_stack([frame.t_ns / 1e9, frame.data])
         np.savetxt(buf, table, delimiter=",", header=header, comments="", fmt="%.9g")
         data = buf.getvalue().encode("utf-8")
@@ -33,6 +34,7 @@ def save_frame(frame: Frame, path: str | Path) -> Path:
             t_ns=frame.t_ns,
             data=frame.data,
             channels=np.array(frame.channels),
+            units=np.array([frame.unit(k) for k in range(len(frame.channels))]),
             trigger_index=np.array(-1 if frame.trigger_index is None else frame.trigger_index),
         )
         data = buf.getvalue()
@@ -43,6 +45,13 @@ def save_frame(frame: Frame, path: str | Path) -> Path:
     except OSError as exc:
         raise CommandError(f"scope save: cannot write {path}: {exc.strerror}") from None
     return path
+
+
+def column_title(frame: Frame, k: int) -> str:
+    """Channel ``k``'s CSV column: its name and units (``encoder [counts]``);
+    the name alone when its units are not known."""
+    unit = frame.unit(k)
+    return f"{frame.channels[k]} [{unit}]" if unit else frame.channels[k]
 
 
 def axis_label(frame: Frame, k: int) -> str:

@@ -11,6 +11,14 @@ numpy ring buffer.  Modes, as on a bench scope:
 * ``roll``: no trigger; the read-out is always the latest ``capacity``
   samples, oldest first (what halscope never had).
 
+As on halscope, a triggered mode first fills the pre-trigger part of the
+frame (``pre`` of ``capacity`` samples) and arms the trigger only when it
+is full: :meth:`Scope.pre_fill` says how full it is, and a trigger event
+that comes during the fill is not taken but counted and kept
+(:attr:`Scope.missed`, :meth:`Scope.waiting`), so a scope never misses an
+event silently.  The record length (``capacity``) is set with
+:meth:`Scope.set_length`, within :data:`MAX_BUFFER_BYTES` of buffer.
+
 The per-sample path is one compiled getter call and two appends to staging
 arrays; every 64 samples the stage is copied into the ring and the trigger
 is searched with numpy, so sampling 8 channels costs well under a
@@ -28,10 +36,19 @@ import numpy as np
 from pyrt.errors import CommandError
 from pyrt.scope.sources import Source, compile_sampler, compile_sources
 
-__all__ = ["Frame", "Scope", "Trigger"]
+__all__ = ["MAX_BUFFER_BYTES", "MAX_LENGTH", "Frame", "Scope", "Trigger"]
 
 _STAGE = 64
 MODES = ("normal", "single", "auto", "roll")
+#: The longest record length, samples per channel.
+MAX_LENGTH = 1_000_000
+#: The most memory the sample buffer may take: (length + 64) x (channels + 1) x 8 bytes.
+MAX_BUFFER_BYTES = 64 * 2**20
+
+
+def buffer_bytes(length: int, channels: int) -> int:
+    """The bytes of the sample buffer of ``length`` samples of ``channels`` channels."""
+    return (length + _STAGE) * (max(1, channels) + 1) * 8
 
 
 @dataclass(frozen=True)
@@ -88,8 +105,8 @@ class Scope:
     ``capacity`` samples per channel, sampling every ``every`` ticks."""
 
     def __init__(self, capacity: int = 16_000, max_channels: int = 16, every: int = 1):
-        if capacity < 2:
-            raise ValueError(f"scope capacity must be >= 2 samples, got {capacity}")
+        if not 2 <= capacity <= MAX_LENGTH:
+            raise ValueError(f"scope capacity must be 2..{MAX_LENGTH} samples, got {capacity}")
         if not 1 <= max_channels <= 64:
             raise ValueError(f"max_channels must be 1..64, got {max_channels}")
         self.capacity = capacity
@@ -106,6 +123,15 @@ class Scope:
         self.state = "stopped"
         self._frame: Frame | None = None
         self.frames = 0
+        #: Trigger events that came while the pre-trigger part filled (not taken),
+        #: since the scope was last armed; :attr:`missed_t_ns` is the latest one's time.
+        self.missed = 0
+        self.missed_t_ns: int | None = None
+        #: Loop time between two samples, ns (measured once samples were taken).
+        self.sample_ns: int | None = None
+        #: The loop's tick, ns, when whoever runs the scope says it (for times
+        #: before a sample was taken).
+        self.tick_ns: int | None = None
         self._reset_buffers()
 
     # -- configuration (application side, with the scope stopped or not) -----
@@ -127,12 +153,31 @@ class Scope:
         """Channel names in column order."""
         return list(self._names)
 
+    def set_length(self, n: int) -> None:
+        """Set the record length (samples per channel); capture restarts.  At most
+        :data:`MAX_LENGTH`, and the buffer within :data:`MAX_BUFFER_BYTES`."""
+        if isinstance(n, bool) or not isinstance(n, int) or not 2 <= n <= MAX_LENGTH:
+            raise CommandError(f"record length must be 2..{MAX_LENGTH} samples, got {n!r}")
+        self._check_memory(n, len(self._names))
+        self.capacity = n
+        self._restart()
+
+    def _check_memory(self, length: int, channels: int) -> None:
+        need = buffer_bytes(length, channels)
+        if need > MAX_BUFFER_BYTES:
+            most = MAX_BUFFER_BYTES // ((max(1, channels) + 1) * 8) - _STAGE
+            raise CommandError(
+                f"{length} samples of {channels} channel(s) need {need / 2**20:.1f} MiB of "
+                f"buffer, more than the scope's {MAX_BUFFER_BYTES // 2**20} MiB: at most "
+                f"{most} samples with {channels} channel(s)")
+
     def add(self, name: str, source: Source) -> None:
         """Add a channel; capture restarts (the buffer's columns change)."""
         if name in self._names:
             raise CommandError(f"channel {name!r} is already on the scope")
         if len(self._names) >= self.max_channels:
             raise CommandError(f"the scope has {self.max_channels} channels already")
+        self._check_memory(self.capacity, len(self._names) + 1)
         getter = compile_sources([*self._sources, source])
         try:
             values = getter()
@@ -228,6 +273,8 @@ class Scope:
         self._trig_g: int | None = None
         self._prev: float | None = None
         self._countdown = self._every
+        self.missed = 0
+        self.missed_t_ns = None
 
     # -- the loop side -------------------------------------------------------
 
@@ -277,6 +324,8 @@ class Scope:
             self._ring[: n - first, :nch] = block[first:]
             self._ring_t[: n - first] = tblock[first:]
         self._g = g0 + n
+        if n >= 2:
+            self.sample_ns = int(tblock[-1] - tblock[0]) // (n - 1)
         if self.state in ("armed", "triggered"):
             self._scan(block, g0)
         self._staged = 0
@@ -293,6 +342,8 @@ class Scope:
         while True:
             if self.state == "armed":
                 start = max(j, self._arm_g + pre - g0)
+                if col is not None and start > max(j, 0):
+                    self._note_missed(col, max(j, self._arm_g - g0, 0), min(start, n), g0, trig)
                 hit = self._find_edge(col, start, trig) if col is not None else None
                 if hit is not None:
                     self._trig_g = g0 + hit
@@ -319,23 +370,33 @@ class Scope:
         if col is not None and n:
             self._prev = float(col[-1])
 
-    def _find_edge(self, col: np.ndarray, start: int, trig: Trigger) -> int | None:
-        n = col.shape[0]
-        if start >= n:
-            return None
+    def _note_missed(self, col: np.ndarray, lo: int, hi: int, g0: int, trig: Trigger) -> None:
+        """Count the trigger events in ``col[lo:hi]``, samples of the pre-trigger
+        fill (not taken), and keep the time of the latest."""
+        hits = self._edges(col, lo, hi, trig)
+        if hits.size:
+            self.missed += int(hits.size)
+            self.missed_t_ns = int(self._ring_t[(g0 + lo + int(hits[-1])) % self._ring.shape[0]])
+
+    def _edges(self, col: np.ndarray, start: int, end: int, trig: Trigger) -> np.ndarray:
+        """Indices (from ``start``) of the crossings of ``trig`` in ``col[start:end]``."""
         start = max(start, 0)
-        prev = np.empty(n - start)
-        prev[1:] = col[start:-1]
+        if start >= end:
+            return np.empty(0, dtype=np.intp)
+        prev = np.empty(end - start)
+        prev[1:] = col[start : end - 1]
         if start > 0:
             prev[0] = col[start - 1]
         else:
             prev[0] = self._prev if self._prev is not None else np.nan
-        cur = col[start:]
+        cur = col[start:end]
         if trig.edge == "rising":
-            hits = np.flatnonzero((prev < trig.level) & (cur >= trig.level))
-        else:
-            hits = np.flatnonzero((prev > trig.level) & (cur <= trig.level))
-        return int(hits[0]) + start if hits.size else None
+            return np.flatnonzero((prev < trig.level) & (cur >= trig.level))
+        return np.flatnonzero((prev > trig.level) & (cur <= trig.level))
+
+    def _find_edge(self, col: np.ndarray, start: int, trig: Trigger) -> int | None:
+        hits = self._edges(col, start, col.shape[0], trig)
+        return int(hits[0]) + max(start, 0) if hits.size else None
 
     def _complete(self, first_g: int, trigger_index: int | None,
                   count: int | None = None) -> None:
@@ -373,15 +434,100 @@ class Scope:
             )
         return self._frame
 
+    # -- what the scope is doing (application side) ------------------------
+
+    @property
+    def pre_samples(self) -> int:
+        """Samples of a frame before its trigger point (0 without a trigger)."""
+        return round(self.trigger.pre * self.capacity) if self.trigger is not None else 0
+
+    def pre_fill(self) -> float | None:
+        """How full the pre-trigger part is, 0..1, while the scope waits for a
+        trigger (armed in normal, single or auto mode with a trigger); None otherwise.
+        The trigger is armed only when it is full (1.0)."""
+        if self.state != "armed" or self.trigger is None:
+            return None
+        pre = self.pre_samples
+        if pre == 0:
+            return 1.0
+        taken = self._g + self._staged - self._arm_g
+        return min(1.0, max(0, taken) / pre)
+
+    def seconds(self, samples: int, every: int | None = None) -> str:
+        """``samples`` as loop time (" (3.2 s)") at ``every`` ticks a sample (default:
+        the scope's), or "" while neither the tick nor the sample interval is known."""
+        if every is None and self.sample_ns is not None:
+            dt = self.sample_ns
+        elif self.tick_ns is not None:
+            dt = self.tick_ns * (self.every if every is None else every)
+        else:
+            return ""
+        return f" ({samples * dt / 1e9:.4g} s)"
+
+    def describe_trigger(self) -> str:
+        """The trigger in words: ``encoder falling through -3000``."""
+        t = self.trigger
+        if t is None:
+            return "no trigger"
+        return f"{t.channel} {'rising' if t.edge == 'rising' else 'falling'} through {t.level:g}"
+
+    def missed_note(self) -> str:
+        """What came during the pre-trigger fill and was not taken ("" if nothing)."""
+        if not self.missed:
+            return ""
+        when = (f" (the last at t={self.missed_t_ns / 1e9:.3f} s)"
+                if self.missed_t_ns is not None else "")
+        many = "s" if self.missed > 1 else ""
+        return (f"{self.missed} trigger event{many} came while the pre-trigger part filled "
+                f"and {'were' if many else 'was'} not taken{when}")
+
+    def waiting(self) -> str:
+        """What the scope waits for, in one sentence (why no frame is there yet)."""
+        state, mode = self.state, self.mode
+        if state == "stopped" or (state == "done" and self._frame is None):
+            if mode in ("normal", "single"):
+                return (f"the scope is stopped ({mode}): 'scope single' or 'scope run' arms "
+                        "it; then make the trigger event happen")
+            return f"the scope is stopped ({mode}): 'scope run' starts it, then let time pass"
+        if state == "rolling":
+            return "rolling: samples are there as soon as time passes (wait, sleep)"
+        if state == "triggered":
+            left = max(0, (self._trig_g or 0) + self.capacity - self.pre_samples - self._g)
+            return (f"triggered ({mode}): the frame fills, {left} samples "
+                    f"more{self.seconds(left)}")
+        fill = self.pre_fill()
+        if self.trigger is None:
+            return "armed (auto, no trigger): a frame comes after one frame length"
+        note = self.missed_note()
+        note = f"; {note}" if note else ""
+        auto = ", or after one frame length without one" if mode == "auto" else ""
+        if fill is not None and fill < 1.0:
+            left = self.pre_samples - round(fill * self.pre_samples)
+            return (f"armed ({mode}), pre-trigger {fill * 100:.0f} % filled: the trigger arms "
+                    f"when it is full, in {left} samples{self.seconds(left)}; then it waits "
+                    f"for {self.describe_trigger()}{auto}{note}")
+        return (f"armed ({mode}), pre-trigger full: waiting for "
+                f"{self.describe_trigger()}{auto}{note}")
+
     def status(self) -> str:
-        """One line: mode, state, channels, trigger, frames captured."""
+        """One line: state (and the pre-trigger fill), mode, channels, trigger,
+        frames captured, and any trigger events the fill did not take."""
         trig = "none"
         if self.trigger is not None:
             t = self.trigger
             trig = f"{t.channel} {t.edge} {t.level:g} pre {t.pre:g}"
+        state = f"{self.state} ({self.mode})"
+        fill = self.pre_fill()
+        if fill is not None:
+            state += (f", pre-trigger {fill * 100:.0f} % filled (the trigger arms when it is "
+                      "full)" if fill < 1.0 else ", pre-trigger full")
+        chans = ", ".join(f"{n} [{s.units}]" if s.units else n
+                          for n, s in zip(self._names, self._sources, strict=True))
         line = (
-            f"scope {self.state} ({self.mode}), every {self.every} tick(s), "
-            f"{self.capacity} samples, channels: {', '.join(self._names) or '-'}; "
+            f"scope {state}, every {self.every} tick(s), "
+            f"{self.capacity} samples{self.seconds(self.capacity)}, channels: {chans or '-'}; "
             f"trigger: {trig}; frames: {self.frames}"
         )
+        note = self.missed_note()
+        line += f"; {note}" if note else ""
         return line + (f"; {self.error}" if self.error else "")

@@ -1,0 +1,66 @@
+"""The whole test run is sandboxed: pyrt's state (a manipulator's working copy of
+its station) goes to a temporary directory, never to the user's.
+
+For the run, ``PYRT_HOME`` and ``XDG_STATE_HOME`` point into a temporary
+directory (subprocesses inherit them); a test that needs a fresh working copy
+sets ``PYRT_HOME`` to its own ``tmp_path``.  The user's real state directories
+(pyrt's platformdirs state directory, and ``$PYRT_HOME`` if it was set) are
+listed before the run and after it: anything that appeared or changed there
+fails the run, naming the paths.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
+import platformdirs
+import pytest
+
+pytest_plugins = ["pytester"]
+
+
+def real_state_directories() -> list[Path]:
+    """Where pyrt would keep its state without the sandbox (read from the environment now)."""
+    dirs = [Path(platformdirs.user_state_dir("pyrt", appauthor=False))]
+    home = os.environ.get("PYRT_HOME")
+    if home:
+        dirs.append(Path(home))
+    return dirs
+
+
+def snapshot(dirs: list[Path]) -> dict[str, tuple[int, int] | None]:
+    """Every path under ``dirs`` (and the directories themselves): size and
+    modification time of files, None for directories."""
+    seen: dict[str, tuple[int, int] | None] = {}
+    for d in dirs:
+        if not d.exists():
+            continue
+        for p in [d, *d.rglob("*")]:
+            try:
+                st = p.lstat()
+            except OSError:
+                continue
+            seen[str(p)] = None if p.is_dir() else (st.st_size, st.st_mtime_ns)
+    return seen
+
+
+@pytest.fixture(scope="session", autouse=True)
+def pyrt_state_sandbox(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """PYRT_HOME and XDG_STATE_HOME in a temporary directory for the whole run;
+    the run fails if anything appears or changes in the real state directories."""
+    real = real_state_directories()
+    before = snapshot(real)
+    sandbox = tmp_path_factory.mktemp("pyrt-state")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("PYRT_HOME", str(sandbox / "pyrt-home"))
+        mp.setenv("XDG_STATE_HOME", str(sandbox / "xdg-state"))
+        yield sandbox
+    after = snapshot(real)
+    changed = sorted(p for p in before.keys() | after.keys() if before.get(p, 0) != after.get(p, 0))
+    if changed:
+        shown = ", ".join(changed[:5]) + (f" and {len(changed) - 5} more" if len(changed) > 5
+                                           else "")
+        pytest.fail(f"the test run wrote outside its sandbox, in the user's pyrt state "
+                    f"({', '.join(map(str, real))}): {shown}", pytrace=False)
