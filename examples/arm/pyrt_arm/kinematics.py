@@ -43,6 +43,7 @@ import numpy.typing as npt
 
 __all__ = [
     "GEOMETRY",
+    "LIMIT_TOL_DEG",
     "REACH_TOL_MM",
     "Elbow",
     "Geometry",
@@ -62,6 +63,12 @@ Elbow = Literal["up", "down"]
 #: How far (mm) a point may lie outside the annulus and still count as on its edge:
 #: fk of a stretched or folded arm lands there only to rounding.
 REACH_TOL_MM = 1e-9
+
+#: How far (deg) an inverse solution may lie beyond a joint limit and still count as on
+#: it (and be returned as the limit): fk of an arm at its limit comes back only to
+#: rounding, and near the stretched arm (a singularity) rounding of r moves the angles
+#: by up to a few 1e-6 deg.
+LIMIT_TOL_DEG = 1e-5
 
 
 class KinematicsError(ValueError):
@@ -184,14 +191,15 @@ def ik(x_mm: float, y_mm: float, elbow: Elbow = "up",
         sin_q1 = -sin_q1
     q1 = math.atan2(sin_q1, max(-1.0, min(1.0, cos_q1)))
     q0 = math.atan2(y_mm, x_mm) - math.atan2(l2 * sin_q1, l1 + l2 * math.cos(q1))
-    q0_deg, q1_deg = _wrap_deg(math.degrees(q0)), math.degrees(q1)
-    for name, value, (low, high) in (("q0", q0_deg, geometry.q0_limits_deg),
-                                     ("q1", q1_deg, geometry.q1_limits_deg)):
-        if not low <= value <= high:
+    solution = [_wrap_deg(math.degrees(q0)), math.degrees(q1)]
+    for j, (low, high) in enumerate(geometry.limits_deg):
+        value = solution[j]
+        if not low - LIMIT_TOL_DEG <= value <= high + LIMIT_TOL_DEG:
             raise JointLimitError(
                 f"point ({x_mm:.3f}, {y_mm:.3f}) mm with the elbow {elbow} needs "
-                f"{name} = {value:.3f} deg, outside its limits [{low:.3f}, {high:.3f}] deg")
-    return q0_deg, q1_deg
+                f"q{j} = {value:.3f} deg, outside its limits [{low:.3f}, {high:.3f}] deg")
+        solution[j] = min(max(value, low), high)
+    return solution[0], solution[1]
 
 
 def jacobian(q0_deg: float, q1_deg: float,

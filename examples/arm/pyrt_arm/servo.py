@@ -151,12 +151,12 @@ def _gains(name: str, inertia_kgm2: float, viscous: float, coulomb: float, hz: f
 
 
 #: The shoulder's servo: 12 Hz, damping 0.9 on 0.297 kg m^2 (kp 29.5 N m/deg,
-#: kd 0.78 N m/(deg/s)).
+#: kd 0.70 N m/(deg/s)).
 SHOULDER = _gains("q0", 0.297, SHOULDER_DRIVE.viscous_nm_s_per_rad, SHOULDER_DRIVE.coulomb_nm,
                   12.0, 0.9, SHOULDER_DRIVE.torque_per_drive_nm,
                   SHOULDER_DRIVE.counts_per_deg, GEOMETRY.q0_limits_deg)
 #: The elbow's servo: 12 Hz, damping 0.9 on 0.077 kg m^2 (kp 7.6 N m/deg,
-#: kd 0.20 N m/(deg/s)).
+#: kd 0.18 N m/(deg/s)).
 ELBOW = _gains("q1", 0.077, ELBOW_DRIVE.viscous_nm_s_per_rad, ELBOW_DRIVE.coulomb_nm,
                12.0, 0.9, ELBOW_DRIVE.torque_per_drive_nm,
                ELBOW_DRIVE.counts_per_deg, GEOMETRY.q1_limits_deg)
