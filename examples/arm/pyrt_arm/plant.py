@@ -9,6 +9,7 @@ inputs (plain lists, one entry per joint)
     ``amp_enable[j]``  the amplifier's enable; a disabled amplifier gives no current
 outputs
     :meth:`Plant.count` / :meth:`Plant.counts`  the incremental encoders' counters
+    :meth:`Plant.motor_powered`  the amplifiers' status: False while a motor's power is cut
 true state (for tests, the console's ``sim`` commands and truth checks)
     :attr:`Plant.q_deg`, :attr:`Plant.qd_deg_s`, :attr:`Plant.tip_mm`,
     :attr:`Plant.current_a`, :attr:`Plant.torque_nm`, :meth:`Plant.kinetic_energy_j`
@@ -426,6 +427,11 @@ class Plant:
         self._faults.motor_off[j] = bool(on)
         if on:
             self._current[j] = 0.0
+
+    def motor_powered(self, joint: int) -> bool:
+        """False while the power of ``joint``'s motor is cut (:meth:`motor_off`): what an
+        amplifier's status line reports, so a controller can see a joint lose power."""
+        return not self._faults.motor_off[_check_joint(joint)]
 
     def clear_faults(self) -> None:
         """Release every injected fault (a disconnected encoder counts on from its frozen

@@ -195,7 +195,7 @@ def test_a_disconnected_encoder_freezes_and_counts_on_from_there_when_reconnecte
 
 
 def test_motor_off_and_a_disabled_amplifier_give_no_torque():
-    """A motor cut off, or an amplifier disabled, passes no current whatever the drive: the joint does not move."""
+    """A motor cut off (its status shows it), or an amplifier disabled, passes no current whatever the drive: the joint does not move."""
     plant = Plant()
     plant.motor_off(0)
     plant.amp_enable[1] = False
@@ -204,7 +204,9 @@ def test_motor_off_and_a_disabled_amplifier_give_no_torque():
     assert plant.current_a == (0.0, 0.0)
     assert plant.q_deg == (0.0, 0.0)
     assert plant.active_faults() == ["q0 motor off"]
+    assert (plant.motor_powered(0), plant.motor_powered(1)) == (False, True)
     plant.clear_faults()
+    assert plant.motor_powered(0)
     plant.amp_enable[1] = True
     plant.step(0.01)
     assert plant.current_a[0] > 0.0 > plant.current_a[1]
@@ -285,7 +287,8 @@ def test_a_non_finite_drive_is_refused_and_changes_nothing():
 def test_an_unknown_joint_is_refused(joint):
     """Fault injection and encoder reads take joint 0 or 1 only."""
     plant = Plant()
-    for call in (plant.jam, plant.disconnect_encoder, plant.motor_off, plant.count):
+    for call in (plant.jam, plant.disconnect_encoder, plant.motor_off, plant.count,
+                 plant.motor_powered, plant.counts_per_deg):
         with pytest.raises(ValueError, match="joint must be 0"):
             call(joint)
     assert plant.active_faults() == []
