@@ -7,16 +7,12 @@ counter-clockwise, ``q0`` from the table's +x axis, ``q1`` from the line of link
     x = L1 cos(q0) + L2 cos(q0 + q1)
     y = L1 sin(q0) + L2 sin(q0 + q1)
 
-The geometry is 004's MRC II robot in miniature:
+The geometry is 004's MRC II robot in miniature (:data:`GEOMETRY`):
 
-=========  ==============  ==========================================================
-link 1     L1 = 300 mm     shoulder to elbow
-link 2     L2 = 250 mm     elbow to tip
-q0         -170 .. 170 deg the shoulder's software limits (a cable wrap stops it short
-                           of a full turn)
-q1         -150 .. 150 deg the elbow's software limits (link 2 folds back no further than
-                           30 deg from link 1)
-=========  ==============  ==========================================================
+* link 1, shoulder to elbow: L1 = 300 mm;
+* link 2, elbow to tip: L2 = 250 mm;
+* q0, the shoulder: -170 .. 170 deg (a cable wrap stops it short of a full turn);
+* q1, the elbow: -150 .. 150 deg (link 2 folds back no closer than 30 deg to link 1).
 
 The reachable annulus is ``|L1 - L2| <= r <= L1 + L2`` (50 .. 550 mm); within the
 elbow's limits the tip reaches ``r >= 150.3 mm``, so a point of the annulus closer
