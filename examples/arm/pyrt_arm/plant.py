@@ -269,39 +269,54 @@ class Plant:
         h = dt_s / n
         current = self._currents()
         self._current = current
-        tau = [current[j] * m.kt_nm_per_a * m.gear for j, m in enumerate(self.params.motors)]
-        for _ in range(n):
-            self._substep(h, tau)
-        self.time_s += dt_s
-
-    def _substep(self, h: float, tau: list[float]) -> None:
+        m0, m1 = self.params.motors
+        t0 = current[0] * m0.kt_nm_per_a * m0.gear
+        t1 = current[1] * m1.kt_nm_per_a * m1.gear
+        alpha, beta, delta, m11 = self._alpha, self._beta, self._delta, self._m11
+        b0, b1 = self._b
+        fc0, fc1 = self._fc
+        (lo0, hi0), (lo1, hi1) = self._stops
+        free = not (self._faults.jammed[0] or self._faults.jammed[1])
+        a11 = m11 + h * b1
         q0, q1 = self._q
         v0, v1 = self._qd
-        c = math.cos(q1)
-        hh = self._beta * math.sin(q1)
-        m00 = self._alpha + 2.0 * self._beta * c
-        m01 = self._delta + self._beta * c
-        m11 = self._m11
-        # Coriolis and centrifugal torques, explicit
-        c0 = -hh * (2.0 * v0 * v1 + v1 * v1)
-        c1 = hh * v0 * v0
-        # (M + h B) v+ = M v + h (tau - c) + h f,  f the Coulomb torques
-        a00 = m00 + h * self._b[0]
-        a11 = m11 + h * self._b[1]
-        r0 = m00 * v0 + m01 * v1 + h * (tau[0] - c0)
-        r1 = m01 * v0 + m11 * v1 + h * (tau[1] - c1)
-        v0n, v1n = self._solve_friction(h, a00, m01, a11, r0, r1, v0, v1)
-        q0 += h * v0n
-        q1 += h * v1n
-        (lo0, hi0), (lo1, hi1) = self._stops
-        if q0 <= lo0 or q0 >= hi0:
-            q0 = min(max(q0, lo0), hi0)
-            v0n = 0.0
-        if q1 <= lo1 or q1 >= hi1:
-            q1 = min(max(q1, lo1), hi1)
-            v1n = 0.0
+        cos, sin = math.cos, math.sin
+        for _ in range(n):
+            c = cos(q1)
+            hh = beta * sin(q1)
+            m00 = alpha + 2.0 * beta * c
+            m01 = delta + beta * c
+            a00 = m00 + h * b0
+            # (M + h B) v+ = M v + h (tau - c(q, v)) + h f, with the Coriolis and
+            # centrifugal torques c explicit and f the Coulomb torques
+            r0 = m00 * v0 + m01 * v1 + h * (t0 + hh * (2.0 * v0 * v1 + v1 * v1))
+            r1 = m01 * v0 + m11 * v1 + h * (t1 - hh * v0 * v0)
+            n0 = n1 = 0.0
+            solved = False
+            if free and v0 != 0.0 and v1 != 0.0:
+                # both sliding on: the common case, solved here
+                s0 = 1.0 if v0 > 0.0 else -1.0
+                s1 = 1.0 if v1 > 0.0 else -1.0
+                e0 = r0 - h * fc0 * s0
+                e1 = r1 - h * fc1 * s1
+                det = a00 * a11 - m01 * m01
+                n0 = (a11 * e0 - m01 * e1) / det
+                n1 = (a00 * e1 - m01 * e0) / det
+                solved = n0 * s0 >= 0.0 and n1 * s1 >= 0.0
+            if not solved:
+                n0, n1 = self._solve_friction(h, a00, m01, a11, r0, r1, v0, v1)
+            q0 += h * n0
+            q1 += h * n1
+            if q0 <= lo0 or q0 >= hi0:
+                q0 = min(max(q0, lo0), hi0)
+                n0 = 0.0
+            if q1 <= lo1 or q1 >= hi1:
+                q1 = min(max(q1, lo1), hi1)
+                n1 = 0.0
+            v0, v1 = n0, n1
         self._q = [q0, q1]
-        self._qd = [v0n, v1n]
+        self._qd = [v0, v1]
+        self.time_s += dt_s
 
     def _solve_friction(self, h: float, a00: float, a01: float, a11: float,
                         r0: float, r1: float, v0: float, v1: float) -> tuple[float, float]:
