@@ -202,8 +202,9 @@ class Plant:
     """The simulated arm (see the module docstring).
 
     ``q_deg`` and ``qd_deg_s`` give the starting position (within the end stops) and
-    velocity.  ``drive`` and ``amp_enable`` are the inputs, read at every internal
-    step; the amplifiers start enabled with zero drive.
+    velocity.  ``drive`` and ``amp_enable`` are the inputs, read at each :meth:`step`
+    and held over it (a zero-order hold, as a DAC holds its value between servo ticks);
+    the amplifiers start enabled with zero drive.
     """
 
     def __init__(self, params: PlantParams | None = None,
