@@ -7,7 +7,6 @@ import io
 import time
 
 import pytest
-from _server_rig import served
 from test_epics import PREFIX, _text, _until, epics_env, epics_served  # noqa: F401
 
 from pyrt.commands import RobotShell
