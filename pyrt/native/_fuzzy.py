@@ -21,7 +21,7 @@ import enum
 import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -142,6 +142,11 @@ class FuzzyParams:
     dv_t_rate: float = lib.PYRT_FUZZY_DEFAULT_DV_T_RATE
     #: Rule 9: fraction of the last dv taken back when it was high.
     dv_damping: float = lib.PYRT_FUZZY_DEFAULT_DV_DAMPING
+
+    if TYPE_CHECKING:
+        @property
+        def _c(self) -> Any:
+            """The ``pyrt_fuzzy_params *`` these values were checked in (set once built)."""
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
