@@ -26,12 +26,14 @@ are clean :data:`CHECKED` becomes the whole package:
 * pyrt/tasks/polyaxis_poll.py (its ``PolledPolyAxis.axes`` is a settable
   ``Sequence``: a read-only property would accept ``PolyAxis``'s list)
 
-mypy runs cold (a fresh cache in a temporary directory): about 6 s for the
-package, 2 s for the arm.
+mypy runs cold (a fresh cache in a temporary directory each time): about
+5 s for the package, 3 s for a user's strict script, 2 s for the arm, 12 s
+in all on a 2-core machine.
 """
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -66,12 +68,24 @@ CHECKED = (
 _ERROR = re.compile(r"^(?P<path>[^:\n]+\.pyi?):(?P<line>\d+): error: (?P<text>.*)$", re.M)
 
 
-def _mypy(*args: str, cwd: Path, cache: Path) -> subprocess.CompletedProcess[str]:
-    """``python -m mypy ARGS`` in ``cwd``; a crash or a missing mypy fails the test."""
+def _mypy(*args: str, cwd: Path, cache: Path, pyrt_path: bool = False
+          ) -> subprocess.CompletedProcess[str]:
+    """``python -m mypy ARGS`` in ``cwd``; a crash or a missing mypy fails the test.
+
+    ``pyrt_path``: find pyrt in this tree (an editable install's import hook
+    is invisible to mypy) and follow it silently, as a user's checker does
+    with an installed package: its types count, its own errors are not the
+    user's.
+    """
+    env = dict(os.environ)
+    extra: tuple[str, ...] = ()
+    if pyrt_path:
+        env["MYPYPATH"] = str(ROOT)
+        extra = ("--follow-imports", "silent")
     proc = subprocess.run(
         [sys.executable, "-m", "mypy", "--cache-dir", str(cache), "--no-color-output",
-         "--show-error-codes", *args],
-        cwd=cwd, capture_output=True, text=True, timeout=600,
+         "--show-error-codes", *extra, *args],
+        cwd=cwd, env=env, capture_output=True, text=True, timeout=600,
     )
     if "No module named mypy" in proc.stderr:
         pytest.fail("mypy is not installed: pip install -e '.[test]'")
@@ -112,6 +126,37 @@ def test_public_modules_are_checked_strictly_and_the_rest_at_default(tmp_path):
 def test_example_arm_passes_mypy_strict(tmp_path):
     """mypy --strict (the arm's own configuration) over examples/arm's pyrt_arm reports no error."""
     proc = _mypy("--config-file", str(ARM / "pyproject.toml"), "--strict", "-p", "pyrt_arm",
-                 cwd=ARM, cache=tmp_path / "cache")
+                 cwd=ARM, cache=tmp_path / "cache", pyrt_path=True)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "no issues found" in proc.stdout, proc.stdout
+
+
+USER_SCRIPT = """\
+from pyrt import Arg, Component, Signal, Station, StationFactory, Task, command, run_station
+from pyrt.errors import Fault
+
+reveal_type(Station)
+reveal_type(Component)
+reveal_type(Task)
+reveal_type(run_station)
+reveal_type(Fault)
+
+
+def exit_code(argv: list[str]) -> int:
+    return run_station(object(), argv)
+"""
+
+
+def test_a_strict_user_script_sees_the_public_api_typed(tmp_path):
+    """A user's module checked with mypy --strict imports the public API without error, and its names have real types, not Any."""
+    script = tmp_path / "mine.py"
+    script.write_text(USER_SCRIPT)
+    proc = _mypy("--strict", str(script), cwd=tmp_path, cache=tmp_path / "cache",
+                 pyrt_path=True)
+    assert _errors(proc.stdout) == [], proc.stdout
+    revealed = re.findall(r'Revealed type is "(.*)"', proc.stdout)
+    assert len(revealed) == 5, proc.stdout
+    assert "Any" not in revealed, proc.stdout
+    assert "pyrt.station.base.Station" in revealed[0]
+    assert revealed[4].endswith("-> pyrt.errors.Fault"), revealed[4]
+    assert "details: dict[str, Any]" in revealed[4], revealed[4]  # not a bare dict

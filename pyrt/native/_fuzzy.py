@@ -159,7 +159,7 @@ class FuzzyParams:
                          f"FuzzyParams: inconsistent breakpoints or changes ({self})")
         object.__setattr__(self, "_c", c)
 
-    def __reduce__(self):
+    def __reduce__(self) -> tuple[type[FuzzyParams], tuple[float, ...]]:
         # Pickle and copy by value; the bound C struct is rebuilt on load.
         return (self.__class__, dataclasses.astuple(self))
 
@@ -209,7 +209,7 @@ def c_default_params() -> dict[str, float]:
     return {name: getattr(c, name) for name, _ in ffi.typeof("pyrt_fuzzy_params").fields}
 
 
-def _params_array(params, n: int):
+def _params_array(params: object, n: int) -> tuple[Any, int]:
     """(cdata array, count) for one shared FuzzyParams or one per axis."""
     if isinstance(params, FuzzyParams):
         return params._c, 1
