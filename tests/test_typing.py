@@ -19,6 +19,7 @@ are clean :data:`CHECKED` becomes the whole package:
 * pyrt/robots/axis.py (``owner_busy`` on a device union, ``object | None``
   read without a check, a ``tuple[float, ...]`` returned as a point)
 * pyrt/robots/av.py (a ``tuple[float, ...]`` returned as a point)
+* pyrt/robots/paths.py (``tuple[float, ...]`` passed to ``paul_blend`` as points)
 * pyrt/station/manipulator.py (lambdas mypy cannot infer, a ``MessageSink``
   passed as ``TextIO``, a ``write`` returning int where None is declared)
 * pyrt/station/gripper.py (``ctl.job.name`` when ``job`` may be None)
