@@ -69,7 +69,7 @@ DEFAULT_START_DEG = (0.0, 90.0)
 def drive_counts(drive: float) -> int:
     """A drive of -1 .. 1 of full scale (clamped) as DAC counts."""
     d = max(-1.0, min(1.0, drive))
-    return int(round(d * DRIVE_FULL_SCALE))
+    return round(d * DRIVE_FULL_SCALE)
 
 
 class ArmPhysics:

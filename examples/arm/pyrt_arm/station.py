@@ -37,6 +37,8 @@ the arm's acceleration limits, then switches the amplifiers off.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import itertools
 import math
 from collections.abc import Sequence
 from typing import Any
@@ -387,7 +389,7 @@ class ArmController(Component):
                 return list(final[1]), [0.0, 0.0], [0.0, 0.0]
             return ([final[1][j] + final[2][j] * dt for j in (0, 1)], list(final[2]),
                     [0.0, 0.0])
-        for a, b in zip(knots, knots[1:], strict=False):
+        for a, b in itertools.pairwise(knots):
             if tau <= b[0]:
                 return _hermite(a, b, tau)
         return list(final[1]), [0.0, 0.0], [0.0, 0.0]  # not reached
@@ -452,7 +454,7 @@ class ArmController(Component):
         if self.state == "braking":
             raise CommandError("arm: braking to rest after a stop: wait, then move; "
                                "nothing moved")
-        n, waiting = self.station.submit_motion(joint_trajectory_record((q0, q1)))
+        _n, waiting = self.station.submit_motion(joint_trajectory_record((q0, q1)))
         to = f"q0 {q0:.3f} deg, q1 {q1:.3f} deg, tip ({x:.2f}, {y:.2f}) mm"
         self.target = (q0, q1)
         if waiting:
@@ -658,10 +660,8 @@ class ArmStation(Station):
         """Every motor off (not braked: the loop stops), then pyrt's close."""
         runner = self.runner
         if runner is not None and runner.running:
-            try:
+            with contextlib.suppress(PyrtError):
                 runner.call(self.reflex, "shutdown", take_fault=False, name="shutdown")
-            except PyrtError:
-                pass
         super().close()
 
 

@@ -11,6 +11,9 @@ import re
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from pyrt import CommandError, ConfigError, FaultError, Loop, SimClock
+from pyrt.commands.robot import RobotShell
+
 from pyrt_arm.boards import DRIVE_FULL_SCALE, SERVO
 from pyrt_arm.kinematics import GEOMETRY, JointLimitError, ik
 from pyrt_arm.station import (
@@ -20,9 +23,6 @@ from pyrt_arm.station import (
     ArmStation,
     build_arm,
 )
-
-from pyrt import CommandError, ConfigError, FaultError, Loop, SimClock
-from pyrt.commands.robot import RobotShell
 
 _TIP = re.compile(r"tip \((-?[\d.]+), (-?[\d.]+)\) mm")
 
@@ -145,7 +145,7 @@ def test_queued_moves_blend_without_stopping_at_the_corner(arm):
 
 def test_moves_given_one_after_the_other_stop_between(arm):
     """The same two moves with a wait between: the arm comes to rest at the corner (the blend test's counterpart)."""
-    station, runner, shell, out = arm
+    station, _runner, shell, out = arm
     _say(shell, out, "arm to 60 90")
     assert _say(shell, out, "wait").startswith("at target")
     assert "moving to" in _say(shell, out, "arm to 60 20")
@@ -252,7 +252,7 @@ def test_a_motor_without_power_is_a_fault(arm):
 
 def test_the_fault_is_shown_once(arm):
     """A following-error fault during a wait is shown once by the shell (its event id), not again by the commands after it."""
-    station, runner, shell, out = arm
+    _station, runner, shell, out = arm
     _say(shell, out, "arm to -90 0")
     runner.sleep(0.3)
     _say(shell, out, "sim fault jam q1")
