@@ -62,6 +62,9 @@ SERVO = BoardKind("arm-servo", (
 #: The arm station's boards: name -> kind.
 ARM_BOARDS: dict[str, BoardKind] = {"servo": SERVO}
 
+#: The world's longest internal integration step (s): one servo period (see the module text).
+WORLD_STEP_S = 1.0e-3
+
 #: Where the simulated arm starts (deg): the elbow bent a right angle.
 DEFAULT_START_DEG = (0.0, 90.0)
 
@@ -84,25 +87,35 @@ class ArmPhysics:
         self.board = board
         self.plant = plant
         self._last_ns: int | None = None
+        self._count = [board.read("count", j) for j in (0, 1)]
+        self._ok = [board.read("amp_ok", j) for j in (0, 1)]
         self._publish()
 
     def step(self, now_ns: int) -> None:
         """Advance the arm to ``now_ns`` (dt = now - last)."""
         board, plant = self.board, self.plant
         last, self._last_ns = self._last_ns, now_ns
-        for j in (0, 1):
-            plant.drive[j] = board.output("drive", j) / DRIVE_FULL_SCALE
-            plant.amp_enable[j] = board.output("enable", j) != 0
+        drive, enable = board.values("drive"), board.values("enable")
+        plant.drive[0] = drive[0] / DRIVE_FULL_SCALE
+        plant.drive[1] = drive[1] / DRIVE_FULL_SCALE
+        plant.amp_enable[0] = enable[0] != 0
+        plant.amp_enable[1] = enable[1] != 0
         if last is not None and now_ns > last:
             plant.step((now_ns - last) * 1e-9)
         self._publish()
 
     def _publish(self) -> None:
+        """The inputs from the plant (a register is written only when it changes)."""
         board, plant = self.board, self.plant
         for j in (0, 1):
-            board.set_input("count", plant.count(j), j)
-            on = plant.amp_enable[j] and plant.motor_powered(j)
-            board.set_input("amp_ok", 1 if on else 0, j)
+            count = plant.count(j)
+            if count != self._count[j]:
+                board.set_input("count", count, j)
+                self._count[j] = count
+            ok = 1 if plant.amp_enable[j] and plant.motor_powered(j) else 0
+            if ok != self._ok[j]:
+                board.set_input("amp_ok", ok, j)
+                self._ok[j] = ok
 
     def info(self) -> dict[str, object]:
         """The world's truth for ``sim show`` over tcp (board-sim's INFO)."""
@@ -115,11 +128,11 @@ class ArmPhysics:
 
 
 def arm_world(boards: Boards, start_deg: Sequence[float] = DEFAULT_START_DEG,
-              name: str = "arm") -> World:
+              name: str = "arm", max_step_s: float = WORLD_STEP_S) -> World:
     """The arm's world: the simulated arm at ``start_deg`` behind ``boards``
-    (in process, declared as :data:`ARM_BOARDS`).  ValueError for a start
-    beyond the end stops."""
+    (in process, declared as :data:`ARM_BOARDS`), integrating in internal steps of
+    at most ``max_step_s``.  ValueError for a start beyond the end stops."""
     board = boards["servo"]
-    plant = Plant(q_deg=(float(start_deg[0]), float(start_deg[1])))
+    plant = Plant(q_deg=(float(start_deg[0]), float(start_deg[1])), max_step_s=max_step_s)
     plant.amp_enable = [False] * len(JOINTS)
     return World(name, boards, ArmPhysics(board, plant))

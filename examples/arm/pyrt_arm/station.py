@@ -172,13 +172,15 @@ class Joint(Component):
         self.board.write("enable", 1, self.index)
         self.engaged = True
 
-    def update(self, q: float, qd: float, qdd: float, dt_s: float) -> str | None:
-        """One servo tick: read the counter, write the drive; the fault reason, or None."""
-        drive = drive_counts(self.servo.update(q, qd, self.count(), qdd, dt_s))
+    def update(self, q: float, qd: float, qdd: float, dt_s: float, count: int,
+               amp_ok: int) -> str | None:
+        """One servo tick on this tick's ``count`` and ``amp_ok`` inputs: write the drive;
+        the fault reason, or None."""
+        drive = drive_counts(self.servo.update(q, qd, count, qdd, dt_s))
         if drive != self.drive:
             self.board.write("drive", drive, self.index)
             self.drive = drive
-        if self.board.read("amp_ok", self.index):
+        if amp_ok:
             self._no_power = 0
         else:
             self._no_power += 1
@@ -237,6 +239,10 @@ class ArmController(Component):
         self.board = board
         self.joints = (Joint("shoulder", 0, board, SHOULDER), Joint("elbow", 1, board, ELBOW))
         self.period_ns = period_ns
+        # where each joint's count and amp_ok are in the board's snapshot of its inputs
+        layout = [(r.name, i) for r in board.kind.inputs() for i in range(r.count)]
+        self._inputs = [(layout.index(("count", j)), layout.index(("amp_ok", j)))
+                        for j in (0, 1)]
         #: The servo runs this far behind the trajectory's knots (one trajectory period).
         self.delay_ns = TRAJECTORY_PERIOD * period_ns
         #: How the last move ended ('' before any).
@@ -370,8 +376,10 @@ class ArmController(Component):
         tau = now_ns - self.delay_ns
         q, qd, qdd = self._setpoint(tau)
         self._sp_q, self._sp_qd = q, qd
+        inputs = self.board.snapshot()  # one read of every input: this tick's
         for j, jt in enumerate(self.joints):
-            reason = jt.update(q[j], qd[j], qdd[j], dt)
+            at_count, at_ok = self._inputs[j]
+            reason = jt.update(q[j], qd[j], qdd[j], dt, inputs[at_count], inputs[at_ok])
             if reason is not None:
                 self.fail(reason, jt.name)
                 return
