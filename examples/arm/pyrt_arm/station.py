@@ -69,7 +69,14 @@ from pyrt.robots.trajectory import JointTrajectory, joint_trajectory_record
 from pyrt.scheduler import install
 from pyrt.station.base import BoardWorld
 
-from pyrt_arm.boards import ARM_BOARDS, DEFAULT_START_DEG, ArmPhysics, arm_world, drive_counts
+from pyrt_arm.boards import (
+    ARM_BOARDS,
+    DEFAULT_START_DEG,
+    WORLD_STEP_S,
+    ArmPhysics,
+    arm_world,
+    drive_counts,
+)
 from pyrt_arm.kinematics import GEOMETRY, KinematicsError, elbow_of, fk, ik
 from pyrt_arm.plant import JOINTS, Plant
 from pyrt_arm.servo import ELBOW, FOLLOWING_ERROR_LIMIT_DEG, SHOULDER, JointServo, JointServoConfig
@@ -211,21 +218,16 @@ class Joint(Component):
 Knot = tuple[int, tuple[float, float], tuple[float, float]]
 
 
-def _hermite(a: Knot, b: Knot, t_ns: int) -> tuple[list[float], list[float], list[float]]:
-    """Position, velocity and acceleration at ``t_ns`` on the cubic Hermite between knots."""
+def _cubic(a: Knot, b: Knot) -> tuple[int, tuple[tuple[float, float, float, float], ...]]:
+    """The cubic Hermite from knot ``a`` to knot ``b``: its start time and, per joint, the
+    coefficients of ``q(u) = c0 + c1 u + c2 u**2 + c3 u**3`` (``u`` seconds from ``a``)."""
     h = (b[0] - a[0]) * 1e-9
-    s = (t_ns - a[0]) * 1e-9 / h
-    s2, s3 = s * s, s * s * s
-    q, qd, qdd = [], [], []
+    out = []
     for j in (0, 1):
-        qa, va, qb, vb = a[1][j], a[2][j], b[1][j], b[2][j]
-        q.append((2 * s3 - 3 * s2 + 1) * qa + (s3 - 2 * s2 + s) * h * va
-                 + (-2 * s3 + 3 * s2) * qb + (s3 - s2) * h * vb)
-        qd.append((6 * s2 - 6 * s) / h * qa + (3 * s2 - 4 * s + 1) * va
-                  + (6 * s - 6 * s2) / h * qb + (3 * s2 - 2 * s) * vb)
-        qdd.append((12 * s - 6) / (h * h) * qa + (6 * s - 4) / h * va
-                   + (6 - 12 * s) / (h * h) * qb + (6 * s - 2) / h * vb)
-    return q, qd, qdd
+        p0, m0, p1, m1 = a[1][j], a[2][j], b[1][j], b[2][j]
+        d = (p1 - p0) / h
+        out.append((p0, m0, (3.0 * d - 2.0 * m0 - m1) / h, (m0 + m1 - 2.0 * d) / (h * h)))
+    return a[0], tuple(out)
 
 
 class ArmController(Component):
@@ -251,6 +253,8 @@ class ArmController(Component):
         self.state = "idle"
         self.target: tuple[float, float] | None = None
         self._knots: list[Knot] = []
+        #: the knots' segment the servo is on: (start, end, per joint cubic coefficients)
+        self._segment: tuple[int, int, tuple[tuple[float, float, float, float], ...]] | None = None
         self._now_ns = 0
         self._last_servo_ns: int | None = None
         self._sp_q = [0.0, 0.0]
@@ -292,6 +296,7 @@ class ArmController(Component):
                 self.last_stop = "stopped: every motor off"
         finally:
             self._knots = []
+            self._segment = None
             self.state = "idle"
             self._last_servo_ns = None
             self._quiet_since = None
@@ -336,6 +341,7 @@ class ArmController(Component):
         knot = (self._now_ns, (float(q[0]), float(q[1])), (float(qd[0]), float(qd[1])))
         if self._knots and self._knots[-1][0] >= knot[0]:
             self._knots[-1] = knot
+            self._segment = None
         else:
             self._knots.append(knot)
         del self._knots[:-4]
@@ -346,6 +352,7 @@ class ArmController(Component):
         q = [jt.servo.position_deg for jt in self.joints]
         self._sp_q, self._sp_qd = list(q), [0.0, 0.0]
         self._knots = [(now_ns - self.delay_ns, (q[0], q[1]), (0.0, 0.0))]
+        self._segment = None
         self._last_servo_ns = None
         self._quiet_since = None
 
@@ -392,15 +399,24 @@ class ArmController(Component):
         if tau <= first[0]:
             return list(first[1]), [0.0, 0.0], [0.0, 0.0]
         if tau >= final[0]:
-            dt = (tau - final[0]) * 1e-9
             if final[2] == (0.0, 0.0):
                 return list(final[1]), [0.0, 0.0], [0.0, 0.0]
+            dt = (tau - final[0]) * 1e-9
             return ([final[1][j] + final[2][j] * dt for j in (0, 1)], list(final[2]),
                     [0.0, 0.0])
-        for a, b in itertools.pairwise(knots):
-            if tau <= b[0]:
-                return _hermite(a, b, tau)
-        return list(final[1]), [0.0, 0.0], [0.0, 0.0]  # not reached
+        seg = self._segment
+        if seg is None or not seg[0] < tau <= seg[1]:
+            for a, b in itertools.pairwise(knots):
+                if a[0] < tau <= b[0]:
+                    seg = self._segment = (a[0], b[0], _cubic(a, b)[1])
+                    break
+            else:  # pragma: no cover - the knots cover (first, final]
+                return list(final[1]), [0.0, 0.0], [0.0, 0.0]
+        u = (tau - seg[0]) * 1e-9
+        (a0, a1, a2, a3), (b0, b1, b2, b3) = seg[2]
+        return ([a0 + u * (a1 + u * (a2 + u * a3)), b0 + u * (b1 + u * (b2 + u * b3))],
+                [a1 + u * (2.0 * a2 + 3.0 * u * a3), b1 + u * (2.0 * b2 + 3.0 * u * b3)],
+                [2.0 * a2 + 6.0 * u * a3, 2.0 * b2 + 6.0 * u * b3])
 
     def motion_ended(self, reason: str) -> None:
         """The executor's motion ended (``reason``): the servo settles at the last knot."""
@@ -431,6 +447,7 @@ class ArmController(Component):
         self.last_stop = why
         self.state = "idle"
         self._knots = []
+        self._segment = None
         self._quiet_since = None
 
     def brake(self) -> None:
@@ -450,6 +467,7 @@ class ArmController(Component):
             end = (q[0] + 0.5 * qd[0] * t_stop, q[1] + 0.5 * qd[1] * t_stop)
             self._knots = [(tau, (q[0], q[1]), (qd[0], qd[1])),
                            (tau + stop_ns, end, (0.0, 0.0))]
+        self._segment = None
         self.state = "braking"
         self._stop_reason = "stopped (stop command)"
         self._quiet_since = None
@@ -674,12 +692,14 @@ class ArmStation(Station):
 
 
 def build_arm(loop: Loop, *, boards: str | None = None,
-              start: Sequence[float] | None = None) -> ArmStation:
+              start: Sequence[float] | None = None,
+              world_step_s: float = WORLD_STEP_S) -> ArmStation:
     """The arm on ``loop``, not yet started (call ``station.start()``).
 
     ``boards``: the board URL (default ``sim:``: the servo board in this
     process with the simulated arm behind it, starting at ``start`` degrees;
     ``tcp://HOST:PORT``: ``pyrt board-sim arm``, whose options set the arm).
+    ``world_step_s`` is the simulated arm's longest internal integration step.
     ConfigError for bad settings; BoardError if the boards cannot be reached.
     """
     b = open_boards(boards, "arm", ARM_BOARDS)
@@ -687,7 +707,8 @@ def build_arm(loop: Loop, *, boards: str | None = None,
         world = None
         if b.in_process:
             try:
-                world = arm_world(b, DEFAULT_START_DEG if start is None else start)
+                world = arm_world(b, DEFAULT_START_DEG if start is None else start,
+                                  max_step_s=world_step_s)
             except ValueError as exc:
                 raise ConfigError(str(exc)) from None
         elif start is not None:

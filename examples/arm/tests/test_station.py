@@ -21,6 +21,7 @@ from pyrt_arm.station import (
     TIP_TOLERANCE_MM,
     ArmController,
     ArmStation,
+    _cubic,
     build_arm,
 )
 
@@ -143,6 +144,32 @@ def test_queued_moves_blend_without_stopping_at_the_corner(arm):
     assert abs(q0 - 60) <= AT_TARGET_DEG and abs(q1 - 20) <= AT_TARGET_DEG
 
 
+def test_the_worlds_one_ms_integration_step_moves_the_arm_as_the_fine_step_does():
+    """The same blended moves with the world integrating in 1 ms steps (the station's) and in the plant's fine 0.2 ms steps: the true joints agree within one encoder count (1/569 deg) all along."""
+    traces = []
+    for step in (1e-3, 0.2e-3):
+        station = build_arm(Loop(SimClock()), world_step_s=step)
+        runner = station.start()
+        shell = RobotShell(station, io.StringIO(), runner=runner)
+        try:
+            for line in ("arm to 90 30", "arm xy 400 -100 down", "arm xy 200 300"):
+                shell.onecmd(line)
+            trace: list[tuple[float, float]] = []
+
+            def sample(station=station, trace=trace) -> bool:
+                trace.append(station.plant.q_deg)
+                return not station.busy()
+
+            assert runner.wait_until(sample, 30.0)
+            traces.append(trace)
+        finally:
+            station.close()
+    coarse, fine = traces
+    assert abs(len(coarse) - len(fine)) <= 5
+    diff = max(abs(c[j] - f[j]) for c, f in zip(coarse, fine, strict=False) for j in (0, 1))
+    assert diff < 1.0 / 568.9
+
+
 def test_moves_given_one_after_the_other_stop_between(arm):
     """The same two moves with a wait between: the arm comes to rest at the corner (the blend test's counterpart)."""
     station, _runner, shell, out = arm
@@ -189,6 +216,22 @@ def test_arm_xy_keeps_the_present_elbow_unless_told(arm):
     _say(shell, out, "arm xy 400 100 up")
     assert _say(shell, out, "wait").startswith("at target")
     assert runner.call(station.controller.angles)[1] < 0
+
+
+@settings(max_examples=50, derandomize=True, deadline=None)
+@given(k=st.lists(st.floats(-200.0, 200.0), min_size=8, max_size=8),
+       h_ms=st.integers(1, 50))
+def test_the_servo_cubic_meets_both_knots_position_and_velocity(k, h_ms):
+    """The cubic the servo interpolates between two setpoint knots starts and ends at their positions and velocities."""
+    a = (1_000_000, (k[0], k[1]), (k[2], k[3]))
+    b = (1_000_000 + h_ms * 1_000_000, (k[4], k[5]), (k[6], k[7]))
+    start, coeffs = _cubic(a, b)
+    h = h_ms * 1e-3
+    assert start == a[0]
+    for j, (c0, c1, c2, c3) in enumerate(coeffs):
+        assert (c0, c1) == (a[1][j], a[2][j])
+        assert c0 + h * (c1 + h * (c2 + h * c3)) == pytest.approx(b[1][j], abs=1e-9)
+        assert c1 + h * (2 * c2 + 3 * h * c3) == pytest.approx(b[2][j], abs=1e-9)
 
 
 # -- faults -----------------------------------------------------------------------------------
