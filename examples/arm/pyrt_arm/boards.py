@@ -21,12 +21,12 @@ an output at: no drive, amplifiers disabled.
 The world behind the board is :class:`ArmPhysics`: each ``step(now_ns)`` reads
 the outputs, advances the simulated arm (:class:`pyrt_arm.plant.Plant`) by
 ``dt = now - last`` and sets the inputs (a register only when it changes).  The
-world integrates in internal steps of one servo period (:data:`WORLD_STEP_S`, 1 ms)
-rather than the plant's default 0.2 ms: under the servo the true joints then move
-within 0.001 deg of where the fine step puts them (less than
-one encoder count; a test compares the two), at a fifth of the cost.  :func:`arm_world` makes the
-:class:`pyrt.World` of it, for ``sim:`` boards in process and for
-``pyrt board-sim arm`` alike.
+world integrates in internal steps of one servo period (:data:`WORLD_STEP_S`,
+1 ms) rather than the plant's default 0.2 ms: under the servo the true joints
+then stay within 0.001 deg of where the fine step puts them (less than one
+encoder count; a test compares the two), at a fifth of the cost.
+:func:`arm_world` makes the :class:`pyrt.World` of it, for ``sim:`` boards in
+process and for ``pyrt board-sim arm`` alike.
 """
 
 from __future__ import annotations
