@@ -321,9 +321,10 @@ class ArmController(Component):
     # -- JointRobot: what joint_trajectory drives -----------------------------------------
 
     def joint_positions(self) -> Sequence[float]:
-        """The present setpoint while the servo holds the arm, else the encoders' angles."""
-        if self.state != "idle":
-            return tuple(self._sp_q)
+        """Where the servo's setpoint is heading (its last knot) while the servo holds the
+        arm, else the encoders' angles."""
+        if self.state != "idle" and self._knots:
+            return self._knots[-1][1]
         return self.angles()
 
     def joint_limits(self) -> tuple[Sequence[float], Sequence[float]]:

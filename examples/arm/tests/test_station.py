@@ -180,6 +180,24 @@ def test_moves_given_one_after_the_other_stop_between(arm):
     assert _say(shell, out, "wait").startswith("at target")
 
 
+def test_a_move_given_while_the_arm_settles_goes_on_from_its_target(arm):
+    """A move given after the trajectory has ended but while the servo still settles starts from the last setpoint: the following error stays small and the arm ends at the new target."""
+    station, runner, shell, out = arm
+    _say(shell, out, "arm to 30 90")
+    assert runner.wait_until(lambda: not station.executor.busy, 10.0)
+    assert runner.call(lambda: station.controller.state) == "settling"
+    _say(shell, out, "arm to 60 60")
+    errors: list[float] = []
+
+    def sample() -> bool:
+        errors.extend(abs(jt.servo.error_deg) for jt in station.controller.joints if jt.engaged)
+        return not station.busy()
+
+    assert runner.wait_until(sample, 10.0)
+    assert max(errors) < 0.1
+    assert runner.call(station.last_stop) == "at target"
+
+
 def test_stop_brakes_the_arm_to_rest_then_switches_it_off(arm):
     """stop during a move: the arm brakes at its acceleration limits (far less travel than coasting), wait says 'stopped (stop command)', every output 0 after."""
     station, runner, shell, out = arm
