@@ -184,8 +184,8 @@ def test_a_move_given_while_the_arm_settles_goes_on_from_its_target(arm):
     """A move given after the trajectory has ended but while the servo still settles starts from the last setpoint: the following error stays small and the arm ends at the new target."""
     station, runner, shell, out = arm
     _say(shell, out, "arm to 30 90")
-    assert runner.wait_until(lambda: not station.executor.busy, 10.0)
-    assert runner.call(lambda: station.controller.state) == "settling"
+    assert runner.wait_until(lambda: station.controller.state == "settling", 10.0)
+    assert not runner.call(lambda: station.executor.busy)  # the trajectory has ended
     _say(shell, out, "arm to 60 60")
     errors: list[float] = []
 
