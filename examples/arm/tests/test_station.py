@@ -301,6 +301,16 @@ def test_a_joint_limit_fault_trips_every_drive_and_enable_off_in_the_same_tick(a
     assert runner.call(station.last_stop).startswith("fault: q0 at")
 
 
+def test_a_disconnected_encoder_is_a_following_error_fault(arm):
+    """sim fault encoder q0 during a move: q0's counter freezes, its following error grows past 1 deg and the station trips with every output off in that tick."""
+    station, runner, shell, out = arm
+    _say(shell, out, "arm to 60 90")
+    runner.sleep(0.3)
+    _say(shell, out, "sim fault encoder q0")
+    assert _fault_tick(station, runner) == {"drive": [0, 0], "enable": [0, 0]}
+    assert station.fault.cause.startswith("q0 following error")
+
+
 def test_a_motor_without_power_is_a_fault(arm):
     """sim fault motor q1 during a move: the amplifier's status goes to 0 and the station trips (or the following error does first)."""
     station, runner, shell, out = arm
