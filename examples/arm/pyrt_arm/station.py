@@ -51,6 +51,7 @@ from pyrt import (
     Component,
     ConfigError,
     Fault,
+    Limits,
     Loop,
     MotionExecutor,
     MotionType,
@@ -62,11 +63,10 @@ from pyrt import (
     Task,
     World,
     command,
+    install,
     open_boards,
 )
-from pyrt.component import Limits
 from pyrt.robots.trajectory import JointTrajectory, joint_trajectory_record
-from pyrt.scheduler import install
 from pyrt.station.base import BoardWorld
 
 from pyrt_arm.boards import (
