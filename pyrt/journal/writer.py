@@ -36,6 +36,7 @@ DEFAULT_QUEUE_TICKS = 4096
 _GAP = object()
 _NAMES = object()
 _DUMP = object()
+_FLUSH = object()
 
 
 class Journal:
@@ -110,6 +111,7 @@ class Journal:
         self._closed = False
         self._wake = threading.Event()
         self._room = threading.Event()
+        self._waiting = False
         self.lossless = lossless
         self._stop = False
         #: Gaps so far (as the loop thread knows them: a gap is listed when it ends).
@@ -167,12 +169,15 @@ class Journal:
         return True
 
     def _wait_for_room(self) -> None:
-        while self._put - self._taken >= self._capacity:
+        # wait until half the queue is free: one hand-over per half queue, not per tick
+        while self._put - self._taken > self._capacity // 2:
             if not self._thread.is_alive():
                 raise JournalError(f"journal {self.path}: the writer has stopped")
             self._room.clear()
+            self._waiting = True
             self._wake.set()
             self._room.wait(self.poll_s)
+        self._waiting = False
 
     def _end_gap(self) -> None:
         assert self._gap_first is not None
@@ -225,6 +230,17 @@ class Journal:
         self._queue.append((_DUMP, target, fut))
         self._wake.set()
         return fut
+
+    def flush(self, timeout: float | None = None) -> bool:
+        """Wait until every tick handed over so far is written (the block being
+        filled included); False if ``timeout`` seconds passed first.  Not for the
+        loop thread of a real-time run: it waits for the disk."""
+        if self._closed:
+            return True
+        done = threading.Event()
+        self._queue.append((_FLUSH, done))
+        self._wake.set()
+        return done.wait(timeout)
 
     def close(self) -> None:
         """Write what is pending, end the file, flush and fsync it, stop the thread.
@@ -325,6 +341,8 @@ class Journal:
             item = q.popleft()
             if item[0] is _DUMP:
                 item[2].set_exception(JournalError("journal: the writer failed"))
+            elif item[0] is _FLUSH:
+                item[1].set()
             else:
                 self._taken += 1
 
@@ -336,6 +354,7 @@ class Journal:
         clear = self._wake.clear
         sleep = time.sleep
         mono = time.monotonic_ns
+        yield_gil = not self.lossless
         while True:
             stopping = self._stop
             n = 0
@@ -354,6 +373,10 @@ class Journal:
                 elif head is _NAMES:
                     self._emit(frame(KIND_NAMES, names_payload(item[1], [item[2]])),
                                enc.last_time, enc.last_time, 0)
+                elif head is _FLUSH:
+                    self._flush_block()
+                    item[1].set()
+                    continue
                 elif head is _DUMP:
                     self._flush_block()
                     self._dump(item[1], item[2])
@@ -370,9 +393,14 @@ class Journal:
                 self._taken += 1
                 n += 1
                 if n & 7 == 0:
-                    self._room.set()
-                    sleep(0)  # let the loop thread have the interpreter
-            self._room.set()
+                    if self._waiting and self._put - self._taken <= self._capacity // 2:
+                        self._room.set()
+                    if yield_gil:
+                        # a real-time loop thread waking now gets the interpreter at
+                        # once (on virtual time this would only slow both threads)
+                        sleep(0)
+            if self._waiting:
+                self._room.set()
             if enc.count and (stopping or mono() - self._block_started > self.max_delay_ns):
                 self._flush_block()
             if stopping:
