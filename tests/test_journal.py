@@ -12,6 +12,7 @@ import sys
 import textwrap
 import threading
 import time
+from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -539,3 +540,22 @@ def test_journal_needs_somewhere_to_write():
     """A journal with neither a file nor a black box is refused."""
     with pytest.raises(JournalError, match="nothing to write"):
         Journal(header(), None)
+
+
+def test_journal_imports_nothing_above_the_scheduler_layer():
+    """pyrt.journal imports only the standard library, pyrt.errors, pyrt._version and itself."""
+    import ast
+
+    import pyrt.journal
+
+    allowed = ("pyrt.errors", "pyrt._version", "pyrt.journal")
+    offenders = []
+    for path in Path(pyrt.journal.__file__).parent.glob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                [node.module or ""] if isinstance(node, ast.ImportFrom) else []
+            for n in names:
+                top = n.split(".")[0]
+                if top not in sys.stdlib_module_names and not n.startswith(allowed):
+                    offenders.append(f"{path.name}: {n}")
+    assert offenders == []

@@ -116,6 +116,7 @@ class JournalReader:
                 raise JournalError(f"journal {self.path}: {exc.strerror or exc}") from None
         self.salvage = salvage
         self.size = len(data)
+        self._bytes = data
         self._data = memoryview(data)
         #: Where the file ends early, or None.
         self.ended_early: str | None = None
@@ -216,7 +217,7 @@ class JournalReader:
 
     def _resync(self, pos: int) -> int:
         """The offset of the next valid frame after ``pos``, or the file's size."""
-        data = bytes(self._data)
+        data = self._bytes
         start = pos + 1
         while True:
             nxt = data.find(MAGIC, start)

@@ -244,7 +244,9 @@ class Journal:
 
     def close(self) -> None:
         """Write what is pending, end the file, flush and fsync it, stop the thread.
-        Raises JournalError if the file could not be written in full."""
+        Call it after the last :meth:`record_tick` (in the loop thread, or once the
+        loop has stopped).  Raises JournalError if the file could not be written in
+        full or ticks were refused; the file holds what could be written."""
         if self._closed:
             return
         if self._gap_first is not None:
@@ -288,7 +290,7 @@ class Journal:
             while view:
                 n = fh.write(view)
                 if n is None:
-                    break
+                    raise OSError("the stream would block")
                 view = view[n:]
             flush = getattr(fh, "flush", None)
             if flush is not None:
