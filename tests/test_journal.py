@@ -559,3 +559,46 @@ def test_journal_imports_nothing_above_the_scheduler_layer():
                 if top not in sys.stdlib_module_names and not n.startswith(allowed):
                     offenders.append(f"{path.name}: {n}")
     assert offenders == []
+
+
+def test_a_block_is_written_within_its_delay_without_more_ticks():
+    """A block not yet full is written once max_delay_s has passed, so a slow or paused
+    loop loses at most that much on a kill."""
+
+    class Watched(io.RawIOBase):
+        def __init__(self):
+            self.data = bytearray()
+            self.block = threading.Event()
+
+        def writable(self):
+            return True
+
+        def write(self, b):
+            self.data += bytes(b)
+            if bytes(b)[4:5] in (b"T", b"Z"):
+                self.block.set()
+            return len(b)
+
+    sink = Watched()
+    j = Journal(header(), sink, max_delay_s=0.0, poll_s=0.005)
+    for r in run(3):
+        j.record_tick(*r)
+    assert sink.block.wait(30)
+    reader = JournalReader(bytes(sink.data))
+    assert [t.tick for t in reader.ticks()] == [0, 1, 2] and not reader.complete
+    j.close()
+
+
+def test_black_box_dump_after_close_and_without_a_box(tmp_path):
+    """The black box can still be dumped after close; a journal without one refuses."""
+    box = BlackBox()
+    j = Journal(header(), None, black_box=box, lossless=True)
+    for r in run(700):
+        j.record_tick(*r)
+    j.close()
+    assert j.dump_black_box(tmp_path / "after.pj").result(30) == 700
+    assert [t.tick for t in JournalReader(tmp_path / "after.pj").ticks()] == list(range(700))
+    plain = Journal(header(), io.BytesIO())
+    with pytest.raises(JournalError, match="no black box"):
+        plain.dump_black_box(tmp_path / "none.pj")
+    plain.close()
