@@ -602,3 +602,20 @@ def test_black_box_dump_after_close_and_without_a_box(tmp_path):
     with pytest.raises(JournalError, match="no black box"):
         plain.dump_black_box(tmp_path / "none.pj")
     plain.close()
+
+
+def test_a_refused_tick_changes_nothing_that_follows():
+    """A tick refused mid-encoding (a command that is not UTF-8) leaves the output and input
+    state as it was: the ticks after it read back exactly."""
+    buf = io.BytesIO()
+    j = Journal(header(), buf, lossless=True)
+    recs = run(40, seed=4)
+    for k, r in enumerate(recs):
+        if k == 20:
+            r = (*r[:4], [v + 5 for v in r[4]], ((0, 12345, 0), (1, -1, 1)),
+                 (("\ud800", "console"),), ())
+        j.record_tick(*r)
+    with pytest.raises(JournalError, match="1 tick"):
+        j.close()
+    accepted = [k != 20 for k in range(40)]
+    same(list(JournalReader(buf.getvalue())), expected(recs, accepted))

@@ -262,6 +262,10 @@ class Header:
             json.dumps(dict(self.metadata))
         except (TypeError, ValueError) as exc:
             raise bad(f"metadata must be a JSON object: {exc}") from None
+        try:
+            self.encode()
+        except UnicodeEncodeError as exc:
+            raise bad(f"a name is not encodable as UTF-8: {exc}") from None
 
     def encode(self) -> bytes:
         """The payload of this header's ``H`` frame."""
@@ -565,8 +569,9 @@ class BlockEncoder:
                     put_uvarint(out, i - last - 1)
                     put_svarint(out, inputs[i] - prev[i])
                     last = i
+        state = self.outputs
         if outputs:
-            state = self.outputs
+            state = state.copy()  # kept only once the whole record is encoded
             put_uvarint(out, len(outputs))
             for i, v, w in outputs:
                 put_uvarint(out, i)
@@ -584,6 +589,7 @@ class BlockEncoder:
                 put_str(out, name)
                 put_svarint(out, ident)
                 put_str(out, message)
+        self.outputs = state
         self.inputs = inputs
         self.deadline = deadline
         self.tick = tick
