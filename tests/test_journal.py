@@ -217,7 +217,7 @@ def test_round_trip_with_gaps(seed, stall_at, capacity):
     assert accepted[:capacity] == [True] * capacity and not accepted[capacity]
     reader = JournalReader(bytes(sink.data))
     assert reader.gaps == j.gaps
-    assert sum(g.count for g in j.gaps) == accepted.count(False) == j.dropped
+    assert sum(g.ticks for g in j.gaps) == accepted.count(False) == j.dropped
     same(list(reader), expected(recs, accepted, gaps=j.gaps))
 
 

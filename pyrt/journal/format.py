@@ -209,11 +209,11 @@ class Event(NamedTuple):
 
 class Gap(NamedTuple):
     """Ticks ``first``..``last`` (inclusive; ``last`` None: to the end) that are
-    not in the journal, ``count`` of them if known, and why."""
+    not in the journal, how many ticks ran in that stretch if known, and why."""
 
     first: int
     last: int | None
-    count: int | None
+    ticks: int | None
     cause: str
 
 
@@ -384,7 +384,7 @@ class _Cursor:
 
     __slots__ = ("buf", "end", "pos")
 
-    def __init__(self, buf: bytes, pos: int = 0):
+    def __init__(self, buf: bytes | memoryview, pos: int = 0):
         self.buf = buf
         self.pos = pos
         self.end = len(buf)
@@ -443,7 +443,7 @@ def frame(kind: bytes, payload: bytes) -> bytes:
 def gap_payload(gap: Gap) -> bytes:
     """The payload of a ``G`` frame."""
     out = bytearray(GAP.pack(gap.first, gap.first if gap.last is None else gap.last,
-                             gap.count or 0))
+                             gap.ticks or 0))
     put_str(out, gap.cause)
     return bytes(out)
 
@@ -617,13 +617,13 @@ class BlockEncoder:
         return result
 
 
-def decode_block(kind: bytes, payload: bytes, header: Header,
+def decode_block(kind: bytes, payload: bytes | memoryview, header: Header,
                  outputs_before: Sequence[int] | None = None,
                  inputs_before: tuple[int, ...] | None = None) -> list[Tick]:
     """The tick records of a ``T``/``Z`` payload.  ``inputs_before``: the inputs of the
     tick read just before (to tell which inputs a keyframe changed)."""
     first, last, _t0, _t1, count = BLOCK.unpack_from(payload, 0)
-    body: bytes = payload[BLOCK.size:]
+    body: bytes | memoryview = payload[BLOCK.size:]
     if kind == KIND_ZTICKS:
         try:
             body = zlib.decompress(body)

@@ -79,7 +79,7 @@ class Summary:
 
 class _Frame(NamedTuple):
     offset: int
-    index: int
+    number: int
     kind: bytes
     payload: memoryview
     first_tick: int
@@ -305,8 +305,8 @@ class JournalReader:
                 try:
                     ticks = decode_block(f.kind, f.payload, header, inputs_before=prev_inputs)
                 except JournalError as exc:
-                    raise JournalError(f"journal {self.path}: frame {f.index} at offset "
-                                       f"{f.offset}: {exc.message}", f.offset, f.index) from None
+                    raise JournalError(f"journal {self.path}: frame {f.number} at offset "
+                                       f"{f.offset}: {exc.message}", f.offset, f.number) from None
                 for t in ticks:
                     if from_tick is None or t.tick >= from_tick:
                         yield t

@@ -17,7 +17,7 @@ DEFAULT_SECONDS = 10.0
 DEFAULT_BUDGET = 8 << 20
 #: Bytes counted against the budget for each frame kept, beside its own bytes
 #: (the Python objects that hold it).
-FRAME_OVERHEAD = 160
+FRAME_OVERHEAD = 192
 
 
 class BlackBox:
