@@ -82,7 +82,8 @@ Frame kinds:
     u64   number of ticks not recorded
     str   cause
 
-    A run is not replayable past the first tick of its first gap.
+    A run is not replayable past the first tick of its first gap.  The block
+    after a gap begins anew (with a keyframe).
 
 ``E`` end (written by a clean close; a file without it ended early)::
 
@@ -125,7 +126,18 @@ bit    name        field(s)
 =====  ==========  ==========================================================
 
 The time of a record is its deadline plus its lateness; a keyframe gives it
-whole.  Values are integers of any size (registers are 1..32-bit integers).
+whole.  An output's ``old`` value is the keyframe's, updated by every write
+read since.  Values are integers of any size (registers are 1..32-bit
+integers); a run on virtual time has lateness, shift and missed 0, and a tick
+in which nothing changed costs one byte before compression.
+
+A black-box dump (:class:`pyrt.journal.BlackBox`) is a journal in this same
+format: a header (with the writer table as it stood at the dump), the frames
+the ring held (the first a block, hence a keyframe), an end frame.
+
+Size: blocks of 250 ticks compressed at zlib level 6 (the journal's defaults)
+hold a 1 kHz gripper moving (10 of 40 inputs changing every tick, 3 outputs
+written, wall-clock lateness) in about 0.7 MB per minute (bench/bench_journal.py).
 """
 
 from __future__ import annotations
