@@ -233,6 +233,29 @@ def test_seek_starts_mid_block():
     assert list(reader.seek(500)) == []
 
 
+def test_seek_into_a_gap_gives_the_gap_first():
+    """seek() to a tick the journal did not record gives the gap, then the ticks after it."""
+    sink = StalledSink()
+    j = Journal(header(), sink, queue_ticks=30, block_ticks=8)
+    recs = run(100, seed=8)
+    for r in recs[:60]:
+        j.record_tick(*r)
+    sink.release.set()
+    assert j.flush(30)
+    for k, r in enumerate(recs[60:]):
+        assert j.record_tick(*r)
+        if k % 20 == 19:
+            assert j.flush(30)
+    j.close()
+    assert j.gaps == [Gap(30, 59, 30, "the journal's writer fell behind")]
+    reader = JournalReader(bytes(sink.data))
+    for at in (30, 45, 59):
+        got = list(reader.seek(at))
+        assert got[0] == j.gaps[0] and [t.tick for t in got[1:]] == list(range(60, 100))
+    got = list(reader.seek(29))
+    assert got[0].tick == 29 and got[1] == j.gaps[0] and got[2].tick == 60
+
+
 def test_size_per_minute_of_a_moving_gripper():
     """A minute at 1 kHz with 10 changing inputs (of 40), 3 outputs written every tick and
     wall-clock lateness encodes to at most 1 MB with the default blocks."""

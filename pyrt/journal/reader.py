@@ -297,7 +297,7 @@ class JournalReader:
             if f.kind == KIND_GAP:
                 gap = _gap(f.payload)
                 prev_inputs = None
-                if from_tick is None or gap.first >= from_tick:
+                if from_tick is None or gap.last is None or gap.last >= from_tick:
                     yield gap
             elif f.kind in (KIND_TICKS, KIND_ZTICKS):
                 if from_tick is not None and f.last_tick < from_tick:
