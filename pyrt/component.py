@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import inspect
 import math
+import re
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -55,6 +56,8 @@ __all__ = [
     "Switch",
     "command",
     "finite",
+    "first_paragraph",
+    "plain_text",
     "records_of",
     "reply_lines",
     "walk",
@@ -293,6 +296,9 @@ class Command:
     reads_only_subcommands: frozenset[str] = frozenset()
     #: Other names it answers to (000's long names beside the short ones).
     aliases: tuple[str, ...] = ()
+    #: Ranges shown in help beside :attr:`ranges` that the grammar does not check
+    #: (an argument named like a signal of its owner: that signal's display range).
+    shown_ranges: tuple[str, ...] = ()
 
     def answers_to(self, name: str) -> bool:
         """True when ``name`` (any case) is this command's name or an alias."""
@@ -309,9 +315,10 @@ class Command:
 
     @property
     def summary(self) -> str:
-        """The first line of the help, with the ranges of the numeric arguments."""
-        line = self.help.splitlines()[0] if self.help else self.name
-        ranges = self.ranges
+        """The help's first paragraph as one line (a sentence is never cut at a
+        line end), with the ranges of the numeric arguments."""
+        line = first_paragraph(self.help) or self.name
+        ranges = [*self.ranges, *self.shown_ranges]
         return f"{line.rstrip('.')} [{'; '.join(ranges)}]" if ranges else line
 
     @property
@@ -363,6 +370,27 @@ class Command:
     def lines(self, result: Any) -> list[str]:
         """The reply lines of a handler's result."""
         return reply_lines(self.reply(result) if self.reply is not None else result)
+
+
+_ROLE = re.compile(r":[a-z]+(?::[a-z]+)?:`~?([^`]+)`")
+
+
+def plain_text(text: str) -> str:
+    """reST markup as a console or ``--help`` shows it: no double backticks,
+    roles (``:class:`~pyrt.X```) as their target's name."""
+    return _ROLE.sub(lambda m: m.group(1).rsplit(".", 1)[-1] if m.group(0).count("~")
+                     else m.group(1), text).replace("``", "")
+
+
+def first_paragraph(text: str) -> str:
+    """The first paragraph of ``text`` (up to its first blank line) as one line,
+    without reST markup; the range line records add ("Range: ...") is not part of it."""
+    lines: list[str] = []
+    for line in text.strip().splitlines():
+        if not line.strip() or line.startswith("Range: "):
+            break
+        lines.append(line.strip())
+    return plain_text(" ".join(lines))
 
 
 def reply_lines(value: Any) -> list[str]:
@@ -445,14 +473,36 @@ def records_of(obj: Any, owner: str = "") -> list[Command]:
             bound = getattr(obj, attr)
             doc = inspect.getdoc(fn) or ""
             args = tuple(_bind_range(a, obj) for a in spec["args"])
-            ranges = [a.range_text for a in args if a.ranged]
+            shown = tuple(_signal_range(a, obj, owner) for a in args if not a.ranged)
+            shown = tuple(t for t in shown if t)
+            ranges = [*(a.range_text for a in args if a.ranged), *shown]
             if ranges:
                 doc += ("\n" if doc else "") + "Range: " + "; ".join(ranges) + "."
             seen[spec["name"].lower()] = Command(
                 spec["name"], bound, args, doc, spec["reads_only"], spec["moves"],
                 spec["while_faulted"], spec["anyone"], spec["reply"], spec["console"], owner,
-                spec["subs"], spec["aliases"])
+                spec["subs"], spec["aliases"], shown)
     return list(seen.values())
+
+
+def _signal_range(arg: Arg, obj: Any, owner: str) -> str:
+    """The display range of ``obj``'s signal named like ``arg`` (a target ``x``
+    beside the position signal ``x``) as help shows it, or ''.  Shown, not
+    checked: the command's own checks say what is allowed inside it."""
+    if arg.choices or arg.rest or arg.parse is str:
+        return ""
+    signal = getattr(obj, "signal", None)
+    if not callable(signal):
+        return ""
+    try:
+        s = signal(arg.name)
+    except Exception:  # a component half built: no range to show
+        return ""
+    if not isinstance(s, Signal) or s.limits is None:
+        return ""
+    lim = s.limits
+    units = f" {s.units}" if s.units else ""
+    return f"{arg.name} {lim.lopr:g}..{lim.hopr:g}{units}"
 
 
 def _bind_range(arg: Arg, obj: Any) -> Arg:

@@ -19,6 +19,7 @@ import sys
 import time
 from collections.abc import Sequence
 
+from pyrt.cli._help import Parser
 from pyrt.cli._loopopts import (
     add_boards_option,
     add_loop_options,
@@ -62,7 +63,7 @@ def add_station_parser(sub: argparse._SubParsersAction, factory: StationFactory
 
 def station_parser(factory: StationFactory, prog: str) -> argparse.ArgumentParser:
     """A parser of its own for ``factory`` (``pyrt run`` and :func:`run_station`)."""
-    p = argparse.ArgumentParser(prog=prog, description=factory.description or factory.summary,
+    p = Parser(prog=prog, description=factory.description or factory.summary,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     add_station_arguments(p, factory)
     return p

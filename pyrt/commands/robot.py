@@ -319,6 +319,11 @@ class RobotShell(CommandShell):
                      f"{self.station.names()[min(1, len(self.station.names()) - 1)]}")
 
     def _help_topic(self, topic: str) -> None:
+        first, _, sub = topic.partition(" ")
+        sub = sub.strip()
+        if sub:
+            self._help_sub(first, sub)
+            return
         if len(topic) == 1 and self.level is not None:
             rec = self.level.find_command(topic)
             if rec is not None:
@@ -338,6 +343,27 @@ class RobotShell(CommandShell):
                 self.say("  signals: " + ", ".join(f"{s.name} ({s.units})" for s in sigs))
             return
         self.error(f"no help for {topic[:40]!r}")
+
+    def _help_sub(self, first: str, sub: str) -> None:
+        """``help OBJECT VERB`` (the verb's whole help) or ``help WORD SUB``
+        (a sub-command of a word: ``help scope trigger``)."""
+        comp = self.station.find(first)
+        if comp is not None:
+            rec = comp.find_command(sub.split()[0])
+            if rec is None:
+                raise CommandError(f"help {comp.name}: no command {sub[:40]!r}; it has "
+                                   f"{', '.join(c.name for c in comp.commands()) or 'none'}")
+            self.say(f"{comp.name} {rec.help}")
+            return
+        w = self.word(first)
+        if w is not None and w.name == "scope":
+            self._scope.stdout = self.stdout
+            self._scope(f"help {sub}")
+            return
+        if w is not None:
+            raise CommandError(f"help {w.name}: {w.name} has no sub-commands; 'help {w.name}' "
+                               "says what it takes")
+        self.error(f"no help for {first[:40]!r}")
 
     @command(_REST, name="wait", console=True)
     def do_wait(self, arg: str = "") -> None:

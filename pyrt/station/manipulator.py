@@ -817,8 +817,9 @@ class ManipulatorFactory(ManipulatorWorlds, StationFactory):
 Commands are addressed to named objects, as the document's
 Hardware::doCommand: prototype to 0 0 150, axis1 up 5, axis0Motor
 maxspeed 3, axis0Encoder read, axis0Loadcell calibrate; plus the shared
-words (help [object], wait, sleep, stop, ack, status, stats, scope, motion,
-sim, clear, quit) and the manipulator's log and debug.  Type help.
+words (help [object [verb]], wait, sleep, stop, ack, status, stats, scope,
+motion, clear, quit) and the manipulator's log and debug; sim is
+the simulated world's object.  Type help.
 
 Without --db DIR the packaged station (--station) is copied to a
 working directory first (existing files there are kept: they carry the last
@@ -916,7 +917,7 @@ station's.
         where = "" if station.plant is not None or boards is None else f", boards at {boards.url}"
         return (f"pyrt manipulator: {station.polyaxis.name}, {len(station.axes)} ropes, "
                 f"database {args.directory}{where}; tick {args.tick_us} µs, speed {speed}; "
-                "type help")
+                f"{self.next_step(args)}")
 
 
 #: ``pyrt manipulator`` (registered in the entry-point group ``pyrt.stations``).
