@@ -25,6 +25,7 @@ records (:meth:`RobotShell.resolve`, :meth:`RobotShell.completions`).
 from __future__ import annotations
 
 import contextlib
+import difflib
 import shlex
 import threading
 from collections.abc import Callable
@@ -114,6 +115,11 @@ class RobotShell(CommandShell):
                 return self._object(comp, words, text)
         level = self.level
         if level is not None and first[0].isalpha():
+            shown = self.prompt.strip().rstrip(":*").strip()
+            if shown and len(first) > 1 and first.rstrip(":").lower() == shown.lower():
+                letters = " ".join(c.name for c in level.commands())
+                raise CommandError(f"{first[:40]!r} is the prompt, not a command: type a "
+                                   f"letter after it ({letters}), or help")
             rec = level.find_command(first[0])
             if rec is not None:
                 rest = text[1:].strip()
@@ -122,7 +128,8 @@ class RobotShell(CommandShell):
             where = "monitor command" if self.in_monitor else "command"
             raise CommandError(f"unknown {where} {first[:40]!r} (letters: {letters}; "
                                "words: type help)")
-        raise CommandError(f"unknown command or object {first[:40]!r}; objects: "
+        raise CommandError(f"unknown command or object {first[:40]!r}"
+                           f"{self._did_you_mean(first)}; objects: "
                            f"{', '.join(self.station.names())}; type help")
 
     def _object(self, comp: Component, words: list[str], text: str
@@ -136,7 +143,9 @@ class RobotShell(CommandShell):
             return None, status, [comp.name], comp.name
         rec = comp.find_command(words[1])
         if rec is None:
-            raise CommandError(f"{comp.name}: unknown command {words[1][:40]!r}; expected one "
+            verbs = [n for c in comp.commands() for n in (c.name, *c.aliases)]
+            raise CommandError(f"{comp.name}: unknown command {words[1][:40]!r}"
+                               f"{_did_you_mean(words[1], verbs)}; expected one "
                                f"of {', '.join(c.name for c in comp.commands()) or 'none'}")
         rest = text[len(words[0]):].strip()[len(words[1]):].strip()
         return comp, rec, words[2:], rest
@@ -195,7 +204,14 @@ class RobotShell(CommandShell):
         if not line.strip():
             return False
         comp, rec, words, rest = self.resolve(line)
-        args = rec.parse(words, rest)
+        try:
+            args = rec.parse(words, rest)
+        except CommandError as exc:  # "wiat" at the gripper's prompt is W with "iat"
+            first = line.split()[0]
+            hint = self._did_you_mean(first) if comp is self.level and len(first) > 1 else ""
+            if hint:
+                raise CommandError(f"{exc}{hint}") from None
+            raise
         if comp is None:
             return bool(rec.handler(*args))
         result = self.call(self.station.execute, comp, rec, args,
@@ -342,7 +358,13 @@ class RobotShell(CommandShell):
             if sigs:
                 self.say("  signals: " + ", ".join(f"{s.name} ({s.units})" for s in sigs))
             return
-        self.error(f"no help for {topic[:40]!r}")
+        self.error(f"no help for {topic[:40]!r}{self._did_you_mean(topic)}")
+
+    def _did_you_mean(self, text: str) -> str:
+        """``" (did you mean 'wait'?)"`` for a near miss of a word or an object, or ''."""
+        names = [n for w in self.words() for n in (w.name, *w.aliases)]
+        names += self.station.names()
+        return _did_you_mean(text, names)
 
     def _help_sub(self, first: str, sub: str) -> None:
         """``help OBJECT VERB`` (the verb's whole help) or ``help WORD SUB``
@@ -363,7 +385,7 @@ class RobotShell(CommandShell):
         if w is not None:
             raise CommandError(f"help {w.name}: {w.name} has no sub-commands; 'help {w.name}' "
                                "says what it takes")
-        self.error(f"no help for {first[:40]!r}")
+        self.error(f"no help for {first[:40]!r}{self._did_you_mean(first)}")
 
     @command(_REST, name="wait", console=True)
     def do_wait(self, arg: str = "") -> None:
@@ -493,6 +515,15 @@ class RobotShell(CommandShell):
         except (MailboxTimeout, PyrtError) as exc:
             self.error(f"could not stop the motors: {exc}")
         return True
+
+
+def _did_you_mean(text: str, names: list[str]) -> str:
+    """``" (did you mean 'NAME'?)"`` for the names closest to ``text`` (difflib), or ''."""
+    by_key = {n.lower(): n for n in names}
+    near = difflib.get_close_matches(text.lower(), list(by_key), n=2, cutoff=0.7)
+    if not near:
+        return ""
+    return f" (did you mean {' or '.join(repr(by_key[k]) for k in near)}?)"
 
 
 def split_words(text: str) -> list[str]:

@@ -485,5 +485,11 @@ class Station:
         on the way out ("; databases written back in DIR"), or ""."""
         return ""
 
+    def closing_where(self) -> str:
+        """Where the robot was left, for the line said on the way out (SIGINT,
+        SIGTERM, end of input, quit): :meth:`where`, unless :meth:`closing_note`
+        says it already ('' then)."""
+        return self.where()
+
     def write_back(self) -> None:
         """Write databases back on the way out (configurations that have them)."""

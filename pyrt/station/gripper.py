@@ -252,6 +252,10 @@ class GripperStation(Station):
             line += f"  FAULT: {self.fault.cause}"
         return line
 
+    def closing_where(self) -> str:
+        """'' : the closing note says where the jaws are."""
+        return ""
+
     def closing_note(self) -> str:
         """Where the jaws were left and the drive current, for the line said on the way out."""
         ctl = self.controller
