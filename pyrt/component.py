@@ -52,6 +52,7 @@ __all__ = [
     "Command",
     "Component",
     "Limits",
+    "Param",
     "Signal",
     "Switch",
     "command",
@@ -167,6 +168,103 @@ class Signal:
         except (TypeError, ValueError):
             text = str(value)
         return f"{text} {self.units}"
+
+
+# -- parameters ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Param:
+    """A tunable value read and changed by name at run time (HAL's parameters,
+    halcmd's ``getp``/``setp``; the consoles' ``get``/``set``).
+
+    ``read`` returns the value; ``write(value)`` changes it (loop thread; it may
+    check more than the range and raise CommandError, changing nothing) and may
+    return a line to say; None: read only.  ``lo``/``hi`` is the range in
+    ``units`` (checked before ``write`` runs); ``integer`` values are whole,
+    ``hex`` ones (the gripper's RAM bytes) are read and shown in hexadecimal.
+    ``written_back``: the value is written to the station's database (it
+    survives a restart); ``safe_while_moving``: it may change while a move
+    runs (else ``set`` is refused then).
+    """
+
+    name: str
+    units: str
+    read: Callable[[], Any]
+    write: Callable[[Any], Any] | None = None
+    lo: float | None = None
+    hi: float | None = None
+    doc: str = ""
+    written_back: bool = False
+    safe_while_moving: bool = False
+    integer: bool = False
+    hex: bool = False
+
+    @property
+    def writable(self) -> bool:
+        """Whether ``set`` may change it."""
+        return self.write is not None
+
+    def text(self, value: Any) -> str:
+        """``value`` as ``get`` shows it (hex bytes as ``0C``)."""
+        if self.hex:
+            return f"{int(value):02X}"
+        if self.integer:
+            return f"{int(value):d}"
+        try:
+            return f"{float(value):.6g}"
+        except (TypeError, ValueError):
+            return str(value)
+
+    @property
+    def range_text(self) -> str:
+        """``0..1000 N`` (hex: ``01..7F``); '' without a range."""
+        if self.lo is None and self.hi is None:
+            return ""
+        u = f" {self.units}" if self.units else ""
+        lo = "" if self.lo is None else self.text(self.lo)
+        hi = "" if self.hi is None else self.text(self.hi)
+        if self.lo is not None and self.hi is not None:
+            return f"{lo}..{hi}{u}"
+        return f">= {lo}{u}" if self.lo is not None else f"<= {hi}{u}"
+
+    def parse(self, who: str, text: str) -> float | int:
+        """``text`` as a value of this parameter, checked against its range;
+        CommandError naming the range if not (nothing changed)."""
+        t = text.strip()
+        rng = f" ({self.range_text})" if self.range_text else ""
+        try:
+            if self.hex:
+                value: float | int = int(t, 16)
+            else:
+                value = float(t)
+                if self.integer:
+                    if not value.is_integer():
+                        raise ValueError(t)
+                    value = int(value)
+        except ValueError:
+            kind = "a hexadecimal number" if self.hex else (
+                "a whole number" if self.integer else "a number")
+            raise CommandError(f"{who}: {t[:40]!r} is not {kind}{rng}; nothing changed") from None
+        if not math.isfinite(value):
+            raise CommandError(f"{who}: {t[:40]!r} is not a finite number{rng}; nothing changed")
+        if (self.lo is not None and value < self.lo) or (self.hi is not None and value > self.hi):
+            raise CommandError(f"{who}: {self.text(value)} is out of range{rng}; nothing changed")
+        return value
+
+    def describe(self, owner: str, value: Any) -> str:
+        """One line of ``get``: name, value, units, range, whether it is written
+        back and when it may change."""
+        u = f" {self.units}" if self.units else ""
+        facts = [f"range {self.range_text}"] if self.range_text else []
+        if not self.writable:
+            facts.append("read only")
+        else:
+            facts.append("written back" if self.written_back else "not written back")
+            if not self.safe_while_moving:
+                facts.append("not while moving")
+        doc = f": {self.doc}" if self.doc else ""
+        return f"{owner}.{self.name} = {self.text(value)}{u} ({'; '.join(facts)}){doc}"
 
 
 # -- command records ----------------------------------------------------------------
@@ -543,6 +641,10 @@ class Component:
 
     def children(self) -> list[Component]:
         """The components it is made of."""
+        return []
+
+    def params(self) -> list[Param]:
+        """The component's run-time parameters (``get``/``set``); none by default."""
         return []
 
     def tasks(self) -> list[Task]:

@@ -4,7 +4,7 @@ A line is, in this order:
 
 1. a **word** shared by every robot (``help``, ``wait``, ``sleep``,
    ``stats``, ``scope``, ``motion``, ``ack``, ``stop``, ``status``,
-   ``quit``) or one of the station's own words (the manipulator's ``log``
+   ``get``, ``set``, ``quit``) or one of the station's own words (the manipulator's ``log``
    and ``debug``);
 2. ``OBJECT [VERB [ARGS]]``: a command record of a component of the
    station's tree (``prototype to 0 0 50``, ``axis0Motor maxspeed 3``,
@@ -498,6 +498,42 @@ class RobotShell(CommandShell):
         except PyrtError as exc:
             return f"interrupted; could not reach the robot: {exc}"
         return "(Ctrl-C stops a move; nothing is moving: 'quit' or Ctrl-D leaves)"
+
+    @command(Arg("NAME", str, optional=True), name="get", reads_only=True, console=True)
+    def do_get(self, name: str | None = None) -> None:
+        """get [OBJECT[.FIELD]]: a parameter with its units, range, whether it is written back.
+
+        get OBJECT lists the object's parameters; get alone, the objects that have any."""
+        st = self.station
+        if name is None:
+            have = self.runner.call(lambda: [(c.name, len(st.params_of(c)))
+                                             for c in st.components()], name="get")
+            listed = [f"{n} ({k})" for n, k in have if k]
+            self.say("parameters (get OBJECT lists them): " + (", ".join(listed) or "none"))
+            return
+        if "." not in name:
+            comp = st.component(name)
+            rows = self.runner.call(lambda: [p.describe(comp.name, p.read())
+                                             for p in st.params_of(comp)], name="get")
+            if not rows:
+                self.say(f"{comp.name}: no parameters")
+            for row in rows:
+                self.say(row)
+            return
+        comp, param = self.runner.call(st.param, name, name="get")
+        self.say(self.runner.call(lambda: param.describe(comp.name, param.read()), name="get"))
+
+    @command(Arg("NAME", str), Arg("VALUE", str), name="set", console=True)
+    def do_set(self, name: str, value: str) -> None:
+        """set OBJECT.FIELD VALUE: change a parameter at run time (get shows its range).
+
+        Out of range, read only, or while a move runs where changing it then
+        is unsafe: refused, nothing changed.  The line says whether the new
+        value is written back to the database."""
+        st = self.station
+        comp, param = self.runner.call(st.param, name, name="set")
+        v = param.parse(f"set {comp.name}.{param.name}", value)
+        self.say(self.call(st.set_param, comp, param, v, name=f"set {comp.name}.{param.name}"))
 
     @command(name="clear", console=True, reads_only=True)
     def do_clear(self) -> None:

@@ -248,6 +248,7 @@ class GripperController(Component, CommandLetters):
 
     #: Back at ``CMD:`` from the monitor (the letters' own, not Component's default).
     enter_level = CommandLetters.enter_level
+    params = CommandLetters.params
 
     def __init__(self, cpu: I8031, name: str = "gripper", stall_limit_ns: int = 1_000_000_000,
                  calibration: JawCalibration | None = None):

@@ -31,7 +31,7 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 from pyrt.boards import Boards
-from pyrt.component import Command, Component, Signal, command, walk
+from pyrt.component import Command, Component, Param, Signal, command, walk
 from pyrt.errors import BoardError, CommandError, ConfigError, Fault, PyrtError
 from pyrt.scheduler import Loop, ReadyQueue
 from pyrt.scheduler.motion import MotionExecutor, MotionType, motion_types_for
@@ -219,6 +219,48 @@ class Station:
     def all_commands(self) -> list[tuple[Component, Command]]:
         """Every command record of every component."""
         return [(c, r) for c in self.components() for r in c.commands()]
+
+    # -- parameters (get/set) ---------------------------------------------------------
+
+    def params_of(self, component: Component) -> list[Param]:
+        """The run-time parameters of ``component``: its own
+        (:meth:`Component.params`) and any the station adds for it (a
+        configuration's own tunables); ``get``/``set`` and the server read these."""
+        return list(component.params())
+
+    def param(self, name: str) -> tuple[Component, Param]:
+        """``OBJECT.FIELD`` as (component, parameter); CommandError naming what there is."""
+        obj, dot, field = name.strip().partition(".")
+        comp = self.component(obj)
+        params = self.params_of(comp)
+        if not dot or not field:
+            raise CommandError(f"{name[:60]!r}: give OBJECT.FIELD (get {comp.name} lists "
+                               "its parameters)")
+        key = field.lower()
+        for p in params:
+            if p.name.lower() == key:
+                return comp, p
+        raise CommandError(f"{comp.name} has no parameter {field[:40]!r}; it has "
+                           f"{', '.join(p.name for p in params) or 'none'}")
+
+    def set_param(self, component: Component, param: Param, value: Any) -> str:
+        """Change ``param`` of ``component`` to a checked ``value`` (loop thread):
+        refused if it is read only, or while a move runs when changing it then
+        is unsafe; the line says what changed and whether it is written back."""
+        who = f"set {component.name}.{param.name}"
+        if param.write is None:
+            raise CommandError(f"{who}: read only; nothing changed")
+        if not param.safe_while_moving and self.busy():
+            raise CommandError(f"{who}: refused while a move runs (changing it then is "
+                               "unsafe); stop or wait first; nothing changed")
+        old = param.read()
+        said = param.write(value)
+        new = param.read()
+        u = f" {param.units}" if param.units else ""
+        back = ("written back" if param.written_back
+                else "not written back: lost at exit")
+        line = f"{component.name}.{param.name} {param.text(old)} -> {param.text(new)}{u} ({back})"
+        return f"{line}; {said}" if isinstance(said, str) and said else line
 
     # -- faults (loop thread) ---------------------------------------------------------
 

@@ -57,7 +57,7 @@ from typing import Any, TextIO
 
 from pyrt.boards import Boards, open_boards
 from pyrt.boards.registers import BoardKind
-from pyrt.component import Arg, Component, Signal, command, finite
+from pyrt.component import Arg, Component, Param, Signal, command, finite
 from pyrt.db import (
     FILES,
     STATIONS,
@@ -79,6 +79,7 @@ from pyrt.scheduler import Loop, ReadyQueue, SimClock
 from pyrt.sim.manipulator import ManipulatorPlant, rig_from_station
 from pyrt.sim.sensors import Imperfections
 from pyrt.sim.world import MANIPULATOR_BOARDS, ManipulatorWorld, World, WorldFactory
+from pyrt.station._manip_params import axis_fuzzy_params, polyaxis_params
 from pyrt.station.base import BoardWorld, Station, refuse_sim_options
 from pyrt.station.factory import StationFactory
 from pyrt.tasks import SyncWriter, ThreadWriter, WriteBack, register_tasks
@@ -519,6 +520,17 @@ class ManipulatorStation(Station):
 
     stop_all = stop
 
+    def params_of(self, component: Component) -> list[Param]:
+        """A component's own parameters, and what the station holds for it: the
+        PolyAxis's MAX_TENSION and END_ERROR, each rope's fuzzy gains."""
+        out = super().params_of(component)
+        pa = self.polyaxis
+        if component is pa:
+            out += polyaxis_params(pa)
+        elif component in pa.axes:
+            out += axis_fuzzy_params(pa, pa.axes.index(component))
+        return out
+
     def where(self) -> str:
         """The source's estimated position (and that it is not trusted, when lost)."""
         x, y, z = self.polyaxis.position
@@ -818,7 +830,7 @@ Commands are addressed to named objects, as the document's
 Hardware::doCommand: prototype to 0 0 150, axis1 up 5, axis0Motor
 maxspeed 3, axis0Encoder read, axis0Loadcell calibrate; plus the shared
 words (help [object [verb]], wait, sleep, stop, ack, status, stats, scope,
-motion, clear, quit) and the manipulator's log and debug; sim is
+motion, get, set, clear, quit) and the manipulator's log and debug; sim is
 the simulated world's object.  Type help.
 
 Without --db DIR the packaged station (--station) is copied to a
