@@ -115,10 +115,15 @@ def test_headless_banner_does_not_say_type_help(tmp_path):
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     proc = subprocess.Popen([sys.executable, "-m", "pyrt", "gripper", "--speed", "max",
                              "--serve", "127.0.0.1:0", "--headless"],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
+                            cwd=tmp_path)
     try:
         assert proc.stdout is not None
-        first = proc.stdout.readline()
+        first = ""
+        while not first.startswith("pyrt gripper:"):
+            line = proc.stdout.readline()
+            assert line, first
+            first = line
     finally:
         proc.terminate()
         proc.wait(timeout=30)

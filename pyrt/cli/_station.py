@@ -99,6 +99,11 @@ def run_factory(factory: StationFactory, args: argparse.Namespace) -> int:
     except PyrtError:
         station.close()
         raise
+    if service is not None:  # commands come from elsewhere too: keep their trail
+        try:
+            say(f"audit log (remote commands): {station.open_audit_log()}")
+        except OSError as exc:
+            say(f"warning: no audit log: {exc}")
     shell = RobotShell(station, out)
     console = Console(shell, sys.stdin, out, messages=shell.messages,
                       history_file=args.history, status=live_status(runner, station, args))
@@ -113,9 +118,12 @@ def run_factory(factory: StationFactory, args: argparse.Namespace) -> int:
         for line in first:
             shell.onecmd(line)
 
-    status = run_until_shutdown(station, console, service,
-                                headless=args.headless, what=what, say=say,
-                                first=run_first if first else None)
+    try:
+        status = run_until_shutdown(station, console, service,
+                                    headless=args.headless, what=what, say=say,
+                                    first=run_first if first else None)
+    finally:
+        station.close_audit_log()
     if args.timing_log:
         wall = time.perf_counter() - wall0
         say(f"timing log written to {args.timing_log} ({loop.tick_index} ticks, {wall:.2f} s)")

@@ -57,9 +57,16 @@ class RobotShell(CommandShell):
     an observer runner instead.
     """
 
-    def __init__(self, station: Any, stdout: TextIO, runner: Any = None):
+    #: Words that pass time and change nothing (not audited).
+    _UNAUDITED = frozenset({"wait", "sleep", "help"})
+
+    def __init__(self, station: Any, stdout: TextIO, runner: Any = None, source: str = ""):
         super().__init__(stdout)
         self.station = station
+        #: Who types into this shell: '' for the station's own console; a DAQ
+        #: client or EPICS otherwise (each command of theirs that moves or
+        #: changes the robot is shown on the console: :meth:`Station.audit`).
+        self.source = source
         self.runner = runner if runner is not None else station.runner
         self.level: Component | None = station.letter_level()
         self._scope = ScopeCommand(self.runner, station.scope, self._channel,
@@ -212,6 +219,8 @@ class RobotShell(CommandShell):
             if hint:
                 raise CommandError(f"{exc}{hint}") from None
             raise
+        if self.source and not rec.only_reads(words) and rec.name not in self._UNAUDITED:
+            self.station.audit(self.source, line)
         if comp is None:
             return bool(rec.handler(*args))
         result = self.call(self.station.execute, comp, rec, args,
@@ -278,6 +287,9 @@ class RobotShell(CommandShell):
         so the next command does not report it again; one the shell has
         shown already is left out."""
         out: list[str] = []
+        take = getattr(self.station, "audit_lines", None)
+        if not self.source and take is not None:  # the console: what remote clients did
+            out += take()
         for line in self.runner.messages():
             if isinstance(line, FaultMessage):
                 with self._shown_lock:

@@ -27,7 +27,11 @@ Both robots are a :class:`Station` plus a configuration
 from __future__ import annotations
 
 import contextlib
+import logging
+import logging.handlers
+from collections import deque
 from collections.abc import Callable, Iterable
+from pathlib import Path
 from typing import Any
 
 from pyrt.boards import Boards
@@ -261,6 +265,67 @@ class Station:
                 else "not written back: lost at exit")
         line = f"{component.name}.{param.name} {param.text(old)} -> {param.text(new)}{u} ({back})"
         return f"{line}; {said}" if isinstance(said, str) and said else line
+
+    # -- the audit trail --------------------------------------------------------------
+
+    #: Largest size of the audit log before it is rotated, bytes; rotated copies kept.
+    audit_max_bytes: int = 1_000_000
+    audit_backups: int = 3
+
+    def audit(self, source: str, line: str) -> None:
+        """A command that moves or changes the robot came from ``source`` (a
+        DAQ client, EPICS CMD or STOP; any thread): one line for the operator's
+        console naming the source (:meth:`audit_lines`), and a timestamped line
+        in the audit log when one is open (:meth:`open_audit_log`)."""
+        text = f"{source}: {line.strip()[:200]}"
+        # Not the runner's messages: a remote shell's wait drains those, and
+        # the operator would never see the line.  The console's shell takes
+        # these (RobotShell.messages); a bounded queue when there is none.
+        pending = self.__dict__.setdefault("_audit_pending", deque(maxlen=1000))
+        pending.append(f"remote: {text}")
+        logger = getattr(self, "_audit_logger", None)
+        if logger is not None:
+            logger.info("%s", text)
+
+    def audit_lines(self) -> list[str]:
+        """Take the audit lines not yet shown on the console (any thread)."""
+        pending = self.__dict__.get("_audit_pending")
+        out: list[str] = []
+        while pending:
+            try:
+                out.append(pending.popleft())
+            except IndexError:
+                break
+        return out
+
+    def audit_log_path(self) -> Path:
+        """Where the audit log goes when the station is served: the working
+        directory by default (a station with databases puts it beside them)."""
+        return Path.cwd() / f"pyrt-{self.name}-audit.log"
+
+    def open_audit_log(self, path: str | Path | None = None) -> Path:
+        """Write the audit trail to ``path`` (default :meth:`audit_log_path`), rotated
+        by size (:attr:`audit_max_bytes`, :attr:`audit_backups` copies); the path."""
+        self.close_audit_log()
+        where = Path(path) if path is not None else self.audit_log_path()
+        handler = logging.handlers.RotatingFileHandler(
+            where, maxBytes=self.audit_max_bytes, backupCount=self.audit_backups,
+            encoding="utf-8", delay=True)  # the file appears with the first line
+        handler.setFormatter(logging.Formatter("%(asctime)s %(message)s"))
+        logger = logging.Logger(f"pyrt.audit.{self.name}")  # its own, not the root's tree
+        logger.addHandler(handler)
+        self._audit_logger: Any = logger
+        return where
+
+    def close_audit_log(self) -> None:
+        """Close the audit log, if one is open."""
+        logger = getattr(self, "_audit_logger", None)
+        if logger is None:
+            return
+        self._audit_logger = None
+        for h in list(logger.handlers):
+            logger.removeHandler(h)
+            h.close()
 
     # -- faults (loop thread) ---------------------------------------------------------
 

@@ -520,6 +520,10 @@ class ManipulatorStation(Station):
 
     stop_all = stop
 
+    def audit_log_path(self) -> Path:
+        """The audit log goes beside the databases."""
+        return Path(self.directory) / "audit.log"
+
     def params_of(self, component: Component) -> list[Param]:
         """A component's own parameters, and what the station holds for it: the
         PolyAxis's MAX_TENSION and END_ERROR, each rope's fuzzy gains."""
