@@ -129,6 +129,8 @@ class Signal:
     value for ``status`` (a format spec, as in ``format(value, fmt)``).
     ``limits`` is its display range and alarm levels (:class:`Limits`), or
     None: EPICS serves them as the PV's, ``status OBJECT`` shows them.
+    ``show`` is how a console shows a value in its robot's radix (the
+    gripper's counts: ``E47A (26.2 mm)``), or None: ``fmt`` and the units.
     """
 
     name: str
@@ -138,6 +140,7 @@ class Signal:
     fmt: str = ".4g"
     source: Source | None = None
     limits: Limits | None = None
+    show: Callable[[Any], str] | None = None
 
     @classmethod
     def attr(cls, name: str, units: str, obj: Any, attr: str, doc: str = "",
@@ -162,7 +165,12 @@ class Signal:
         return src.described(self.units, self.fmt)
 
     def format(self, value: Any) -> str:
-        """``value`` as ``status`` shows it, with its units."""
+        """``value`` as ``status`` shows it, with its units (or as :attr:`show` says)."""
+        if self.show is not None:
+            try:
+                return self.show(value)
+            except (TypeError, ValueError):
+                pass
         try:
             text = format(value, self.fmt)
         except (TypeError, ValueError):

@@ -70,7 +70,7 @@ class RobotShell(CommandShell):
         self.runner = runner if runner is not None else station.runner
         self.level: Component | None = station.letter_level()
         self._scope = ScopeCommand(self.runner, station.scope, self._channel,
-                                   self._channel_names, stdout)
+                                   self._channel_names, stdout, self._channel_show)
         #: Fault events already shown to the operator (their ids), so each is shown once.
         self._shown: set[int] = set()
         self._shown_lock = threading.Lock()
@@ -308,6 +308,10 @@ class RobotShell(CommandShell):
 
     def _channel(self, name: str) -> Any:
         return self.station.resolve_signal(name).scope_source()
+
+    def _channel_show(self, name: str) -> Callable[[Any], str] | None:
+        show = self.station.resolve_signal(name).show
+        return None if show is None else (lambda v: show(round(v)))
 
     def _channel_names(self) -> list[str]:
         root = self.station.root
