@@ -39,7 +39,7 @@ import math
 import re
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, TypeVar
 
 from pyrt.errors import CommandError
 from pyrt.scheduler.task import Task
@@ -533,6 +533,8 @@ def _parse_one(who: str, arg: Arg, text: str) -> Any:
 
 
 _MARK = "__pyrt_command__"
+#: A command handler, kept with its own signature by :func:`command`.
+_F = TypeVar("_F", bound=Callable[..., Any])
 
 
 def command(
@@ -546,14 +548,14 @@ def command(
     console: bool = False,
     reads_only_subcommands: Sequence[str] = (),
     aliases: Sequence[str] = (),
-) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+) -> Callable[[_F], _F]:
     """Mark a method as a command; its docstring is its help.
 
     ``while_faulted`` defaults to "does not move"; ``anyone`` to
     ``reads_only``.  The method keeps working as a plain method.
     """
 
-    def mark(fn: Callable[..., Any]) -> Callable[..., Any]:
+    def mark(fn: _F) -> _F:
         setattr(fn, _MARK, {
             "name": name or fn.__name__, "args": tuple(args), "reads_only": reads_only,
             "moves": moves, "while_faulted": (not moves) if while_faulted is None

@@ -9,6 +9,7 @@ Messages say what was wrong and what was expected.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 __all__ = [
     "BoardError",
@@ -94,7 +95,7 @@ class Fault:
     tick: int = -1
     time_ns: int = 0
     traceback: str = ""
-    details: dict = field(default_factory=dict, compare=False)
+    details: dict[str, Any] = field(default_factory=dict, compare=False)
     #: The fault event's number on its loop (1, 2, ...; 0: not published):
     #: everything that shows faults shows each id once.
     id: int = 0

@@ -1,4 +1,4 @@
-"""Hints that do not mislead: did you mean, the gripper's prompt typed, --fifo on --speed max, overrun lines, README's wait."""
+"""Hints that do not mislead: did you mean, the gripper's prompt typed, --fifo on --speed max, overrun lines, the DAQ transcript's wait."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from pyrt.scheduler import Loop, SimClock
 from pyrt.scheduler.loop import overrun_line
 from pyrt.station.gripper import build_gripper
 
-README = Path(__file__).resolve().parent.parent / "README.md"
+DAQ_DOC = Path(__file__).resolve().parent.parent / "docs" / "daq.md"
 
 
 @pytest.fixture(scope="module")
@@ -86,12 +86,12 @@ def test_overrun_line_never_says_zero_ms():
     assert "worst 1.50 ms over at tick 9" in overrun_line(1, 1_500_000, 9)
 
 
-def test_readme_transcript_shows_what_wait_answers(gripper):
-    """The README's DAQ transcript gives wait's answer in the form the gripper gives it now."""
+def test_daq_transcript_shows_what_wait_answers(gripper):
+    """The DAQ transcript (docs/daq.md) gives wait's answer in the form the gripper gives it now."""
     said = ask(gripper, "I", "P E47A", "wait")[-1]
     shape = re.sub(r"[0-9A-F]{4}", "HHHH", re.sub(r"-?\d+\.\d", "N.N", said))
     shape = re.sub(r"error [-+]?\d+", "error E", shape)
-    text = README.read_text(encoding="utf-8")
+    text = DAQ_DOC.read_text(encoding="utf-8")
     after_wait = text[text.index("C: wait\n"):]
     answer = next(ln[len("S: OK "):] for ln in after_wait.splitlines()
                   if ln.startswith("S: OK "))

@@ -24,6 +24,7 @@ from pyrt.cli import (
     forcemap,
     logsort,
     overruns,
+    reference,
     run,
     send,
     top,
@@ -36,10 +37,10 @@ from pyrt.station.factory import find_station, installed_stations
 
 __all__ = ["build_parser", "entry", "main"]
 
-_COMMANDS = [demo, overruns, logsort, forcemap, send, connect, top, boardsim, run]
+_COMMANDS = [demo, overruns, logsort, forcemap, send, connect, top, boardsim, run, reference]
 #: The tools' names: an installed station cannot take one of them.
 _TOOLS = ("demo", "overruns", "logsort", "forcemap", "send", "connect", "top", "board-sim",
-          "run")
+          "run", "reference")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -140,7 +140,7 @@ class RobotShell(CommandShell):
                            f"{', '.join(self.station.names())}; type help")
 
     def _object(self, comp: Component, words: list[str], text: str
-                ) -> tuple[Component, Command, list[str], str]:
+                ) -> tuple[Component | None, Command, list[str], str]:
         if len(words) < 2:  # an object alone shows itself, or reads its signals
             show = comp.find_command("show")
             if show is not None and not show.args:

@@ -23,6 +23,7 @@ from typing import Any
 from pyrt.server.connection import Connection
 from pyrt.server.limits import MAX_AUTH_FAILURES, lower_priority
 from pyrt.server.protocol import format_error, format_reply, split_verb
+from pyrt.server.state import ServerState
 
 __all__ = ["SessionMixin", "run_shell"]
 
@@ -82,7 +83,7 @@ def run_shell(shell: Any, line: str, extra: list[str] | None = None) -> tuple[st
 
 
 
-class SessionMixin:
+class SessionMixin(ServerState):
     """The requests part of :class:`~pyrt.server.Server` (see the module text)."""
 
     def _request(self, conn: Connection, raw: bytes) -> None:

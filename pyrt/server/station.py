@@ -10,6 +10,7 @@ the stop).  No second table of commands exists here.
 
 from __future__ import annotations
 
+import io
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -146,7 +147,9 @@ def _fmt(value: Any, fmt: str) -> str:
     return format(value, fmt)
 
 
-class _Null:
+class _Null(io.StringIO):
+    """A text stream that keeps nothing written to it."""
+
     def write(self, text: str) -> int:
         return len(text)
 

@@ -245,7 +245,8 @@ class GripperStation(Station):
     def status(self) -> str:
         """One line: position, target, error, state, drive current (and the fault)."""
         ctl = self.controller
-        state = ("fault" if self.fault is not None else ctl.job.name if ctl.busy
+        job = ctl.job
+        state = ("fault" if self.fault is not None else job.name if ctl.busy and job is not None
                  else "moving" if ctl.moving else "idle")
         line = f"{self.where()}, {state}, drive {ctl.dac - 0x80:+d}"
         if self.fault is not None:
