@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import inspect
 import math
+import re
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, TypeVar
@@ -51,10 +52,13 @@ __all__ = [
     "Command",
     "Component",
     "Limits",
+    "Param",
     "Signal",
     "Switch",
     "command",
     "finite",
+    "first_paragraph",
+    "plain_text",
     "records_of",
     "reply_lines",
     "walk",
@@ -125,6 +129,8 @@ class Signal:
     value for ``status`` (a format spec, as in ``format(value, fmt)``).
     ``limits`` is its display range and alarm levels (:class:`Limits`), or
     None: EPICS serves them as the PV's, ``status OBJECT`` shows them.
+    ``show`` is how a console shows a value in its robot's radix (the
+    gripper's counts: ``E47A (26.2 mm)``), or None: ``fmt`` and the units.
     """
 
     name: str
@@ -134,6 +140,7 @@ class Signal:
     fmt: str = ".4g"
     source: Source | None = None
     limits: Limits | None = None
+    show: Callable[[Any], str] | None = None
 
     @classmethod
     def attr(cls, name: str, units: str, obj: Any, attr: str, doc: str = "",
@@ -158,12 +165,114 @@ class Signal:
         return src.described(self.units, self.fmt)
 
     def format(self, value: Any) -> str:
-        """``value`` as ``status`` shows it, with its units."""
+        """``value`` as ``status`` shows it, with its units (or as :attr:`show` says)."""
+        if self.show is not None:
+            try:
+                return self.show(value)
+            except (TypeError, ValueError):
+                pass
         try:
             text = format(value, self.fmt)
         except (TypeError, ValueError):
             text = str(value)
         return f"{text} {self.units}"
+
+
+# -- parameters ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Param:
+    """A tunable value read and changed by name at run time (HAL's parameters,
+    halcmd's ``getp``/``setp``; the consoles' ``get``/``set``).
+
+    ``read`` returns the value; ``write(value)`` changes it (loop thread; it may
+    check more than the range and raise CommandError, changing nothing) and may
+    return a line to say; None: read only.  ``lo``/``hi`` is the range in
+    ``units`` (checked before ``write`` runs); ``integer`` values are whole,
+    ``hex`` ones (the gripper's RAM bytes) are read and shown in hexadecimal.
+    ``written_back``: the value is written to the station's database (it
+    survives a restart); ``safe_while_moving``: it may change while a move
+    runs (else ``set`` is refused then).
+    """
+
+    name: str
+    units: str
+    read: Callable[[], Any]
+    write: Callable[[Any], Any] | None = None
+    lo: float | None = None
+    hi: float | None = None
+    doc: str = ""
+    written_back: bool = False
+    safe_while_moving: bool = False
+    integer: bool = False
+    hex: bool = False
+
+    @property
+    def writable(self) -> bool:
+        """Whether ``set`` may change it."""
+        return self.write is not None
+
+    def text(self, value: Any) -> str:
+        """``value`` as ``get`` shows it (hex bytes as ``0C``)."""
+        if self.hex:
+            return f"{int(value):02X}"
+        if self.integer:
+            return f"{int(value):d}"
+        try:
+            return f"{float(value):.6g}"
+        except (TypeError, ValueError):
+            return str(value)
+
+    @property
+    def range_text(self) -> str:
+        """``0..1000 N`` (hex: ``01..7F``); '' without a range."""
+        if self.lo is None and self.hi is None:
+            return ""
+        u = f" {self.units}" if self.units else ""
+        lo = "" if self.lo is None else self.text(self.lo)
+        hi = "" if self.hi is None else self.text(self.hi)
+        if self.lo is not None and self.hi is not None:
+            return f"{lo}..{hi}{u}"
+        return f">= {lo}{u}" if self.lo is not None else f"<= {hi}{u}"
+
+    def parse(self, who: str, text: str) -> float | int:
+        """``text`` as a value of this parameter, checked against its range;
+        CommandError naming the range if not (nothing changed)."""
+        t = text.strip()
+        rng = f" ({self.range_text})" if self.range_text else ""
+        try:
+            if self.hex:
+                value: float | int = int(t, 16)
+            else:
+                value = float(t)
+                if self.integer:
+                    if not value.is_integer():
+                        raise ValueError(t)
+                    value = int(value)
+        except ValueError:
+            kind = "a hexadecimal number" if self.hex else (
+                "a whole number" if self.integer else "a number")
+            raise CommandError(f"{who}: {t[:40]!r} is not {kind}{rng}; nothing changed") from None
+        if not math.isfinite(value):
+            raise CommandError(f"{who}: {t[:40]!r} is not a finite number{rng}; nothing changed")
+        if (self.lo is not None and value < self.lo) or (self.hi is not None and value > self.hi):
+            raise CommandError(f"{who}: {self.text(value)} is out of range{rng}; nothing changed")
+        return value
+
+    def describe(self, owner: str, value: Any) -> str:
+        """One line of ``get``: name, value, units, range, whether it is written
+        back and when it may change."""
+        u = f" {self.units}" if self.units else ""
+        facts = [f"range {self.range_text}"] if self.range_text else []
+        if not self.writable:
+            facts.append("read only")
+        else:
+            facts.append("written back" if self.written_back else "not written back")
+            if not self.safe_while_moving:
+                facts.append("not while moving")
+        doc = f": {self.doc}" if self.doc else ""
+        return f"{owner}.{self.name} = {self.text(value)}{u} ({'; '.join(facts)}){doc}"
 
 
 # -- command records ----------------------------------------------------------------
@@ -293,6 +402,9 @@ class Command:
     reads_only_subcommands: frozenset[str] = frozenset()
     #: Other names it answers to (000's long names beside the short ones).
     aliases: tuple[str, ...] = ()
+    #: Ranges shown in help beside :attr:`ranges` that the grammar does not check
+    #: (an argument named like a signal of its owner: that signal's display range).
+    shown_ranges: tuple[str, ...] = ()
 
     def answers_to(self, name: str) -> bool:
         """True when ``name`` (any case) is this command's name or an alias."""
@@ -309,9 +421,10 @@ class Command:
 
     @property
     def summary(self) -> str:
-        """The first line of the help, with the ranges of the numeric arguments."""
-        line = self.help.splitlines()[0] if self.help else self.name
-        ranges = self.ranges
+        """The help's first paragraph as one line (a sentence is never cut at a
+        line end), with the ranges of the numeric arguments."""
+        line = first_paragraph(self.help) or self.name
+        ranges = [*self.ranges, *self.shown_ranges]
         return f"{line.rstrip('.')} [{'; '.join(ranges)}]" if ranges else line
 
     @property
@@ -363,6 +476,27 @@ class Command:
     def lines(self, result: Any) -> list[str]:
         """The reply lines of a handler's result."""
         return reply_lines(self.reply(result) if self.reply is not None else result)
+
+
+_ROLE = re.compile(r":[a-z]+(?::[a-z]+)?:`~?([^`]+)`")
+
+
+def plain_text(text: str) -> str:
+    """reST markup as a console or ``--help`` shows it: no double backticks,
+    roles (``:class:`~pyrt.X```) as their target's name."""
+    return _ROLE.sub(lambda m: m.group(1).rsplit(".", 1)[-1] if m.group(0).count("~")
+                     else m.group(1), text).replace("``", "")
+
+
+def first_paragraph(text: str) -> str:
+    """The first paragraph of ``text`` (up to its first blank line) as one line,
+    without reST markup; the range line records add ("Range: ...") is not part of it."""
+    lines: list[str] = []
+    for line in text.strip().splitlines():
+        if not line.strip() or line.startswith("Range: "):
+            break
+        lines.append(line.strip())
+    return plain_text(" ".join(lines))
 
 
 def reply_lines(value: Any) -> list[str]:
@@ -447,14 +581,36 @@ def records_of(obj: Any, owner: str = "") -> list[Command]:
             bound = getattr(obj, attr)
             doc = inspect.getdoc(fn) or ""
             args = tuple(_bind_range(a, obj) for a in spec["args"])
-            ranges = [a.range_text for a in args if a.ranged]
+            shown = tuple(_signal_range(a, obj, owner) for a in args if not a.ranged)
+            shown = tuple(t for t in shown if t)
+            ranges = [*(a.range_text for a in args if a.ranged), *shown]
             if ranges:
                 doc += ("\n" if doc else "") + "Range: " + "; ".join(ranges) + "."
             seen[spec["name"].lower()] = Command(
                 spec["name"], bound, args, doc, spec["reads_only"], spec["moves"],
                 spec["while_faulted"], spec["anyone"], spec["reply"], spec["console"], owner,
-                spec["subs"], spec["aliases"])
+                spec["subs"], spec["aliases"], shown)
     return list(seen.values())
+
+
+def _signal_range(arg: Arg, obj: Any, owner: str) -> str:
+    """The display range of ``obj``'s signal named like ``arg`` (a target ``x``
+    beside the position signal ``x``) as help shows it, or ''.  Shown, not
+    checked: the command's own checks say what is allowed inside it."""
+    if arg.choices or arg.rest or arg.parse is str:
+        return ""
+    signal = getattr(obj, "signal", None)
+    if not callable(signal):
+        return ""
+    try:
+        s = signal(arg.name)
+    except Exception:  # a component half built: no range to show
+        return ""
+    if not isinstance(s, Signal) or s.limits is None:
+        return ""
+    lim = s.limits
+    units = f" {s.units}" if s.units else ""
+    return f"{arg.name} {lim.lopr:g}..{lim.hopr:g}{units}"
 
 
 def _bind_range(arg: Arg, obj: Any) -> Arg:
@@ -495,6 +651,10 @@ class Component:
 
     def children(self) -> list[Component]:
         """The components it is made of."""
+        return []
+
+    def params(self) -> list[Param]:
+        """The component's run-time parameters (``get``/``set``); none by default."""
         return []
 
     def tasks(self) -> list[Task]:

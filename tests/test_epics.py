@@ -373,3 +373,20 @@ def test_caproto_logs_at_warning_unless_verbose(epics_env, caplog):
                     and r.levelno < logging.WARNING]
         EpicsService(sv.runner, sv.server.robot, sv.server, "V:", verbose=True)
         assert logging.getLogger("caproto").getEffectiveLevel() == logging.INFO
+
+
+def test_epics_writes_that_act_are_shown_on_the_console(epics_env):
+    """A CMD that changes the robot and a STOP are shown on the operator's console naming EPICS; a read is not."""
+    import io
+
+    from pyrt.commands import RobotShell
+
+    with epics_served() as (sv, _ioc):
+        console = RobotShell(sv.rig, io.StringIO())
+        console.messages()
+        _write("CMD", f"{TOKEN} X 33")
+        _write("CMD", f"{TOKEN} T")
+        _write("STOP", "stop")
+        assert _text("RESULT").startswith("OK gripper: every motor stopped")
+        audit = [m for m in console.messages() if m.startswith("remote: ")]
+    assert audit == ["remote: EPICS CMD: X 33", "remote: EPICS STOP: stop"]

@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, TextIO
 
 from pyrt.boards.dataconcentrator import ADC_MAX, DataConcentrator
 from pyrt.boards.tio10 import TIO10
-from pyrt.component import Arg, Component, Limits, Signal, command
+from pyrt.component import Arg, Component, Limits, Param, Signal, command
 from pyrt.devices._args import parse_number
 from pyrt.devices.encoder import Encoder
 from pyrt.devices.loadcell import Loadcell, parse_load
@@ -308,6 +308,19 @@ class Axis(Component):
         """The range of a ``to`` length (cm): the rope's length range."""
         r = self.length_range
         return (0.0, None) if r is None else r
+
+    def params(self) -> list[Param]:
+        """The limits every move of this rope is held to, read only (the PolyAxis
+        sets them: ``set POLYAXIS.MAX_TENSION``)."""
+        def limit(which: int, attr: str) -> Callable[[], float | None]:
+            return lambda: (getattr(self, attr) or (None, None))[which]
+
+        return [
+            Param("LENGTH_MIN", "cm", limit(0, "length_range"), doc="shortest rope length"),
+            Param("LENGTH_MAX", "cm", limit(1, "length_range"), doc="longest rope length"),
+            Param("LOW_TENSION", "N", limit(0, "tension_limits"), doc="lowest tension"),
+            Param("HIGH_TENSION", "N", limit(1, "tension_limits"), doc="highest tension"),
+        ]
 
     def set_supervision(self, length_range: tuple[float, float],
                         tension_limits: tuple[float, float],

@@ -13,7 +13,8 @@ from __future__ import annotations
 import re
 from typing import Any
 
-from pyrt.component import Arg, Component, Signal, Switch, command
+from pyrt.boards.i8031 import JSPEED, MVJAWSPD, SENSORPD, SYSCLKPD, WTCHJWSPD
+from pyrt.component import Arg, Component, Param, Signal, Switch, command
 from pyrt.errors import CommandError
 from pyrt.scheduler.motion import MotionRecord
 
@@ -209,6 +210,31 @@ class CommandLetters:
 
         Says what it changed: JSPEED (51), MXPJSPD (52) and MXNJSPD (53)."""
         return self.set_speed(speed)  # type: ignore[attr-defined]
+
+    def params(self) -> list[Param]:
+        """``speed`` (X) and the schedule bytes (monitor C 42..45), by name, with the
+        checks of X and of the monitor's C (a schedule the controller cannot serve
+        is refused; one predicted to oscillate is stored with the warning)."""
+        ram = self.ram  # type: ignore[attr-defined]
+
+        def byte(addr: int, name: str, units: str, doc: str) -> Param:
+            def write(value: int) -> str | None:
+                warning = self.schedule_warning(addr, value)  # type: ignore[attr-defined]
+                self.poke(addr, value)  # type: ignore[attr-defined]
+                return f"warning: {warning}" if warning else None
+
+            return Param(name, units, lambda: ram[addr], write, 1, 0xFF,
+                         f"RAM {addr:02X}: {doc}", integer=True, hex=True)
+
+        return [
+            Param("speed", "speed byte", lambda: ram[JSPEED], self.set_speed,  # type: ignore[attr-defined]
+                  1, 0x7F, "X: maximum jaw speed (7F original gears; 33 high-ratio worm)",
+                  integer=True, hex=True),
+            byte(SYSCLKPD, "SYSCLKPD", "ticks", "ticks per ready-queue clock period"),
+            byte(MVJAWSPD, "MVJAWSPD", "clock periods", "MVJAWS period"),
+            byte(SENSORPD, "SENSORPD", "clock periods", "SENSORS period"),
+            byte(WTCHJWSPD, "WTCHJWSPD", "clock periods", "WATCHJAW period"),
+        ]
 
     def enter_level(self) -> list[str]:
         """Back at ``CMD:`` from the monitor; a reminder if the clock is still off."""

@@ -677,7 +677,9 @@ def overrun_line(count: int, worst_ns: int, tick: int, culprit: str = "", width:
     line, the worst (ms past its next deadline), where, and where to look;
     never wider than ``width`` (the culprit's name is cut first)."""
     ticks = "tick" if count == 1 else "ticks"
-    head = f"overrun: {count} {ticks}, worst {worst_ns / 1e6:.2f} ms over at tick {tick}"
+    worst = (f"{worst_ns / 1e6:.2f} ms" if worst_ns >= 10_000
+             else f"{worst_ns / 1e3:.1f} µs")  # 0.00 ms would say nothing
+    head = f"overrun: {count} {ticks}, worst {worst} over at tick {tick}"
     tail = "; see stats"
     if culprit:
         room = width - len(head) - len(tail) - len(" in ")

@@ -414,7 +414,7 @@ class EpicsService:
         with self._stop_lock:
             if self._stop_shell is None:
                 self._stop_shell = self.robot.make_shell(ObserverRunner(self.runner),
-                                                         io.StringIO())
+                                                         io.StringIO(), source="EPICS STOP")
             try:
                 return run_shell(self._stop_shell, "stop")[0]
             except Exception as exc:
@@ -473,7 +473,8 @@ class EpicsService:
     def _run(self, line: str) -> str:
         with self._shell_lock:
             if self._shell is None:
-                self._shell = self.robot.make_shell(self.runner, io.StringIO())
+                self._shell = self.robot.make_shell(self.runner, io.StringIO(),
+                                                    source="EPICS CMD")
             try:
                 reply, _end = run_shell(self._shell, line)
             except Exception as exc:

@@ -75,8 +75,9 @@ class ServedRobot(Protocol):
         """The ``key=value`` fields of a STATUS line for one sample."""
         ...
 
-    def make_shell(self, runner: Any, stdout: TextIO) -> Shell:
-        """A fresh command shell for one connection, talking through ``runner``."""
+    def make_shell(self, runner: Any, stdout: TextIO, source: str = "remote") -> Shell:
+        """A fresh command shell for one connection (``source`` names it in the
+        audit trail), talking through ``runner``."""
         ...
 
     def is_read_only(self, line: str) -> bool:

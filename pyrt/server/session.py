@@ -294,7 +294,9 @@ class SessionMixin(ServerState):
     def _shell(self, conn: Connection) -> Any:
         if conn.shell is None or conn.shell_privileged != conn.privileged:
             runner = self.runner if conn.privileged else self.observer
-            conn.shell = self.robot.make_shell(runner, io.StringIO())
+            host, port = conn.peer[:2]
+            conn.shell = self.robot.make_shell(runner, io.StringIO(),
+                                               source=f"DAQ client {conn.id} {host}:{port}")
             conn.shell_privileged = conn.privileged
         return conn.shell
 

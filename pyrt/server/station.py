@@ -72,8 +72,8 @@ class ServedStation:
         return " ".join(f"{name}={_fmt(v, fmt)}"
                         for (name, _sig, fmt), v in zip(self.fields, values, strict=True))
 
-    def make_shell(self, runner: Any, stdout: TextIO) -> RobotShell:
-        return RobotShell(self.station, stdout, runner=runner)
+    def make_shell(self, runner: Any, stdout: TextIO, source: str = "remote") -> RobotShell:
+        return RobotShell(self.station, stdout, runner=runner, source=source)
 
     def is_read_only(self, line: str) -> bool:
         """True when ``line`` only reads, or any client may give it (the stop)."""

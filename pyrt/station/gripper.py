@@ -253,6 +253,10 @@ class GripperStation(Station):
             line += f"  FAULT: {self.fault.cause}"
         return line
 
+    def closing_where(self) -> str:
+        """'' : the closing note says where the jaws are."""
+        return ""
+
     def closing_note(self) -> str:
         """Where the jaws were left and the drive current, for the line said on the way out."""
         ctl = self.controller
@@ -351,8 +355,9 @@ def add_jaw_arguments(parser: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--start", type=counts_type, metavar="HEX",
-        help="jaw position at power-up, encoder counts from wide open, in hex: F400 (the "
-             "default, two's complement) or -0C00 (the same, negative)",
+        help="jaw position at power-up, encoder counts from wide open, in hex as the "
+             "console shows them (two's complement; a negative number is accepted too: "
+             f"-0C00 is F400); default {DEFAULT_START & 0xFFFF:04X}",
     )
     g.add_argument(
         "--fault", action="append", choices=[f for f in FAULTS if f != "port"],
@@ -429,7 +434,7 @@ is accepted and the simulation options are board-sim's.
         jaws = ("simulated jaws" if station.plant is not None or boards is None
                 else f"boards at {boards.url} ({boards.world})")
         return (f"pyrt gripper: 002 parallel-jaw controller, {jaws}; tick {args.tick_us} µs, "
-                f"speed {speed}; type help")
+                f"speed {speed}; {self.next_step(args)}")
 
 
 #: ``pyrt gripper`` (registered in the entry-point group ``pyrt.stations``).

@@ -57,7 +57,7 @@ from typing import Any, TextIO
 
 from pyrt.boards import Boards, open_boards
 from pyrt.boards.registers import BoardKind
-from pyrt.component import Arg, Component, Signal, command, finite
+from pyrt.component import Arg, Component, Param, Signal, command, finite
 from pyrt.db import (
     FILES,
     STATIONS,
@@ -79,6 +79,7 @@ from pyrt.scheduler import Loop, ReadyQueue, SimClock
 from pyrt.sim.manipulator import ManipulatorPlant, rig_from_station
 from pyrt.sim.sensors import Imperfections
 from pyrt.sim.world import MANIPULATOR_BOARDS, ManipulatorWorld, World, WorldFactory
+from pyrt.station._manip_params import axis_fuzzy_params, polyaxis_params
 from pyrt.station.base import BoardWorld, Station, refuse_sim_options
 from pyrt.station.factory import StationFactory
 from pyrt.tasks import SyncWriter, ThreadWriter, WriteBack, register_tasks
@@ -519,6 +520,21 @@ class ManipulatorStation(Station):
 
     stop_all = stop
 
+    def audit_log_path(self) -> Path:
+        """The audit log goes beside the databases."""
+        return Path(self.directory) / "audit.log"
+
+    def params_of(self, component: Component) -> list[Param]:
+        """A component's own parameters, and what the station holds for it: the
+        PolyAxis's MAX_TENSION and END_ERROR, each rope's fuzzy gains."""
+        out = super().params_of(component)
+        pa = self.polyaxis
+        if component is pa:
+            out += polyaxis_params(pa)
+        elif component in pa.axes:
+            out += axis_fuzzy_params(pa, pa.axes.index(component))
+        return out
+
     def where(self) -> str:
         """The source's estimated position (and that it is not trusted, when lost)."""
         x, y, z = self.polyaxis.position
@@ -817,8 +833,9 @@ class ManipulatorFactory(ManipulatorWorlds, StationFactory):
 Commands are addressed to named objects, as the document's
 Hardware::doCommand: prototype to 0 0 150, axis1 up 5, axis0Motor
 maxspeed 3, axis0Encoder read, axis0Loadcell calibrate; plus the shared
-words (help [object], wait, sleep, stop, ack, status, stats, scope, motion,
-sim, clear, quit) and the manipulator's log and debug.  Type help.
+words (help [object [verb]], wait, sleep, stop, ack, status, stats, scope,
+motion, get, set, clear, quit) and the manipulator's log and debug; sim is
+the simulated world's object.  Type help.
 
 Without --db DIR the packaged station (--station) is copied to a
 working directory first (existing files there are kept: they carry the last
@@ -916,7 +933,7 @@ station's.
         where = "" if station.plant is not None or boards is None else f", boards at {boards.url}"
         return (f"pyrt manipulator: {station.polyaxis.name}, {len(station.axes)} ropes, "
                 f"database {args.directory}{where}; tick {args.tick_us} µs, speed {speed}; "
-                "type help")
+                f"{self.next_step(args)}")
 
 
 #: ``pyrt manipulator`` (registered in the entry-point group ``pyrt.stations``).
