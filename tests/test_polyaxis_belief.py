@@ -59,7 +59,7 @@ def test_rope_lengths_in_the_neck_agree_with_the_world(tmp_path):
         g, _, wrapped = world.evaluate(x)
         assert any(wrapped)
         for i in range(pa.n):
-            assert pa.length_at(i, x) == pytest.approx(g[i], abs=1e-6)
+            assert pa.model.length_at(i, x) == pytest.approx(g[i], abs=1e-6)
     station.close()
 
 

@@ -270,12 +270,12 @@ def test_every_accepted_target_is_inside_every_ropes_length_range(ranged_station
         r = av.vessel_radius
         v = (u * r, 0.0 if planar else w * r, (2.0 * h / 1.05 - 1.0) * r)
     x = av.vtog(v)
-    assume(pa.refusal(x) is None)
+    assume(pa.model.refusal(x) is None)
     # 'to' also keeps the carriage MIN_TOP_SEGMENT from every top pulley.
     assume(all(math.dist((x[0] + o[0], x[1] + o[1], x[2] + o[2]), top) >= MIN_TOP_SEGMENT
                for top, o in zip(pa.tops, pa.offsets, strict=True)))
     try:
-        lengths = pa.lengths_at(x)
+        lengths = pa.model.lengths_at(x)
     except NativeError:  # exactly on a pulley, an attachment or the ring's rim
         assume(False)
     for a, length in zip(station.axes, lengths, strict=True):

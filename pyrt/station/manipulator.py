@@ -73,7 +73,8 @@ from pyrt.errors import BoardError, CommandError, ConfigError, NativeError, Pyrt
 from pyrt.native import FuzzyParams, NativeInputError
 from pyrt.robots.av import AV
 from pyrt.robots.axis import Axis, tension_alarms
-from pyrt.robots.polyaxis import MIN_TOP_SEGMENT, PolyAxis
+from pyrt.robots.polyaxis import PolyAxis
+from pyrt.robots.ropes import MIN_TOP_SEGMENT, RopeModel, payout
 from pyrt.robots.stops import StopRecord
 from pyrt.scheduler import Loop, ReadyQueue, SimClock
 from pyrt.sim.manipulator import ManipulatorPlant, rig_from_station
@@ -357,25 +358,33 @@ class ManipulatorStation(Station):
                 fuzzy.append(FuzzyParams.from_mapping(dict(rec.fuzzy), base=base))
             except NativeInputError as exc:
                 raise rec.where.error(None, f"AXIS {rec.name}: {exc}") from None
+        # Everything the PolyAxis works with is given here: the motion queue the
+        # mailbox fills (the station's runner takes it), the loop's spawn and
+        # the pattern log's writer, the stop listeners, the task periods.
+        self.stops: list[StopRecord] = []
+        self._unreported: StopRecord | None = None
         self.polyaxis = PolyAxis.from_record(
-            pa_rec, self.axes, self.av, poll_s=poll_s, fuzzy=fuzzy,
-            liquid_level=liquid_level, stdout=self.stdout)
-        self.polyaxis.name = pa_rec.name.lower()
+            pa_rec, self.axes, self.av, name=pa_rec.name.lower(), poll_s=poll_s, fuzzy=fuzzy,
+            liquid_level=liquid_level, stdout=self.stdout, motion=self.motion,
+            spawn=self.loop.spawn,
+            pattern_writer="sync" if self.loop.clock.virtual else "thread",
+            on_stop=(self.stops.append, self._report_stop),
+            task_periods=(_checks(poll_s, tick_s, "control poll"),
+                          _checks(axis_poll_s, tick_s, "axis poll")))
         pa = self.polyaxis
+        model = pa.model
         self.name = pa.name
 
         # The world behind the boards, holding the source where the database says.
         pos = pa_rec.position
-        why = pa.refusal(pos)
+        why = model.refusal(pos)
         if why is not None:
             raise pa_rec.where.error("POSITION", f"POLYAXIS {pa_rec.name}: POSITION "
                                      f"({pos[0]:g}, {pos[1]:g}, {pos[2]:g}) cm is {why}")
-        tensions, _ = pa.equilibrium_tensions(pos)
+        tensions, _ = model.equilibrium_tensions(pos)
         tensions = [max(t, pa.low_tension + 1.0) for t in tensions]
-        payouts = []
-        for i, a in enumerate(self.axes):
-            g = pa.rope_geometry(i, pos)[0]
-            payouts.append((a.dead_length + g) / (1.0 + a.stretch * tensions[i]))
+        payouts = [payout(model.length_at(i, pos), tensions[i], a.stretch, a.dead_length)
+                   for i, a in enumerate(self.axes)]
         self.rig = rig_from_station(st, liquid_level=liquid_level)
         if boards.in_process:  # else the world is board-sim's, built the same way
             self.plant = ManipulatorPlant(self.rig, self.tio10, self.dc,
@@ -383,19 +392,12 @@ class ManipulatorStation(Station):
         self.startup_notes = self._reconcile(pa_rec, payouts)
         # Every move of every kind is held to the ropes' physical length
         # ranges and the tension limits (tensionStop), in axis-poll.
-        for a, r in zip(self.axes, rope_ranges(pa), strict=True):
+        for a, r in zip(self.axes, rope_ranges(model), strict=True):
             a.set_supervision(r, (pa.low_tension, pa.max_tension),
                               lambda: pa.tension_stop)
 
-        # The motion queue the mailbox fills (the station's runner takes it).
-        pa.motion = self.motion
-        pa.spawn = self.loop.spawn
-        pa.pattern_writer = "sync" if self.loop.clock.virtual else "thread"  # the pattern log
-
         # Level 4+: the ready queue and its tasks; write-back.
         self.queue = ReadyQueue(capacity=4, divisor=1, name=pa.name)
-        pa.set_task_periods(_checks(poll_s, tick_s, "control poll"),
-                            _checks(axis_poll_s, tick_s, "axis poll"))
         register_tasks(self.queue, pa)  # every task the tree declares
         if writer is None:
             writer = "sync" if self.loop.clock.virtual else "thread"
@@ -433,15 +435,8 @@ class ManipulatorStation(Station):
         self.messages.connect(self.runner.post)
         self.log_path: Path | None = None
         self._log_file: TextIO | None = None
-        self.stops: list[StopRecord] = []
-        pa.on_stop.append(self.stops.append)
-        pa.on_stop.append(self._report_stop)
-        self._unreported: StopRecord | None = None
         boards.poll(self.loop.now_ns)  # the encoders' counters now ride along
-        try:  # the first status line shows real tensions and lengths
-            pa.measure()
-        except NativeError as exc:
-            pa.position_error = f"position finder failed: {exc}"
+        pa.measure()  # the first status line shows real tensions and lengths
 
     def _reconcile(self, pa_rec: Any, payouts: list[float]) -> list[str]:
         """Start-up: the encoders' ZEROLENGTH and the axes' LENGTH from the
@@ -465,7 +460,7 @@ class ManipulatorStation(Station):
                 notes.append(f"{a.encoder.name} ZEROLENGTH {db_zero:.3f} cm is "
                              f"{db_zero - p:+.3f} cm from the rope with the source at POSITION; "
                              f"set to {p:.3f} cm")
-            geometric = self.polyaxis.rope_geometry(self.axes.index(a), pa_rec.position)[0]
+            geometric = self.polyaxis.model.length_at(self.axes.index(a), pa_rec.position)
             if abs(rec.length - geometric) > tol:
                 notes.append(f"AXIS {rec.name} LENGTH {rec.length:.3f} cm is "
                              f"{rec.length - geometric:+.3f} cm from the rope at POSITION "
@@ -676,12 +671,12 @@ class ManipulatorStation(Station):
             self.stop_log()
 
 
-def rope_ranges(pa: PolyAxis, cells: int = 12) -> list[tuple[float, float]]:
+def rope_ranges(model: RopeModel, cells: int = 12) -> list[tuple[float, float]]:
     """Every rope's physical length range (cm): the least and greatest length
     with the source anywhere it may be (the vessel sphere and the neck,
-    :meth:`PolyAxis.refusal`), sampled on a grid of ``cells`` per vessel
+    :meth:`RopeModel.refusal`), sampled on a grid of ``cells`` per vessel
     diameter and over the sphere's surface, widened by ROPE_RANGE_MARGIN."""
-    av = pa.av
+    av = model.av
     r = av.vessel_radius
     ring = av.neck_ring_static_position
     pts: list[tuple[float, float, float]] = []
@@ -706,18 +701,18 @@ def rope_ranges(pa: PolyAxis, cells: int = 12) -> list[tuple[float, float]]:
     # rope is shortest with the carriage MIN_TOP_SEGMENT from its pulley, the
     # closest 'to' allows: sample that sphere too.
     dirs = [(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1) if a or b or c]
-    for top, off in zip(pa.tops, pa.offsets, strict=True):
+    for top, off in zip(model.tops, model.offsets, strict=True):
         for d in dirs:
             k = 1.001 * MIN_TOP_SEGMENT / math.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
             gpts.append((top[0] - off[0] + k * d[0], top[1] - off[1] + k * d[1],
                          top[2] - off[2] + k * d[2]))
-    lo = [math.inf] * pa.n
-    hi = [0.0] * pa.n
+    lo = [math.inf] * model.n
+    hi = [0.0] * model.n
     for x in gpts:
-        if pa.refusal(x) is not None:
+        if model.refusal(x) is not None:
             continue
         try:
-            lengths = pa.lengths_at(x)
+            lengths = model.lengths_at(x)
         except NativeError:  # a sample on a pulley, an attachment or the ring's rim
             continue
         for i, length in enumerate(lengths):
