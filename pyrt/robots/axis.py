@@ -38,6 +38,7 @@ from pyrt.devices.loadcell import Loadcell, parse_load
 from pyrt.devices.motor import MAX_CRUISE_SPEED, MIN_START_SPEED, STEP_MODE, Motor
 from pyrt.errors import CommandError, ConfigError, PyrtError
 from pyrt.robots.av import AV
+from pyrt.robots.ropes import corrected_length
 from pyrt.tasks.axis_poll import POLYAXIS, STANDALONE
 
 if TYPE_CHECKING:
@@ -229,10 +230,8 @@ class Axis(Component):
 
     def getLength(self) -> float:
         """Rope length from the top pulley to its end, stretch corrected (cm)."""
-        t = self.loadcell.tension()
-        if t < 0.0:
-            t = 0.0
-        return self.encoder.length() * (1.0 + self.stretch * t) - self.dead_length
+        return corrected_length(self.encoder.length(), self.loadcell.tension(), self.stretch,
+                                self.dead_length)
 
     # -- the component contract ----------------------------------------------------------
 
@@ -560,8 +559,7 @@ class Axis(Component):
         super().fail(cause, source)
 
     def _length_at(self, tension: float) -> float:
-        t = tension if tension > 0.0 else 0.0
-        return self.encoder.length() * (1.0 + self.stretch * t) - self.dead_length
+        return corrected_length(self.encoder.length(), tension, self.stretch, self.dead_length)
 
     def _track_reset(self) -> None:
         self._track_steps = self.motor.position_steps
