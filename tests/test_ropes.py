@@ -110,3 +110,34 @@ def test_the_model_is_stateless(sno):
     after = {k: v for k, v in vars(model).items() if k not in ("av", "neck", "_geometry")}
     assert after == before
     assert model.target_refusal((0.0, 0.0, 5000.0)) == "(0, 0, 5000) is outside the vessel"
+
+
+def test_a_limit_set_on_the_polyaxis_is_the_models(sno):
+    """A limit changed on the PolyAxis while running is the one the rope model's checks use."""
+    pa = sno.polyaxis
+    saved = pa.max_tension
+    try:
+        x = (0.0, 0.0, 0.0)
+        need = max(pa.model.equilibrium_tensions(x)[0])
+        assert pa.model.target_refusal(x) is None
+        pa.max_tension = need + pa.tension_margin - 1.0
+        assert pa.model.max_tension == pa.max_tension
+        assert "MAX_TENSION" in pa.model.target_refusal(x)
+    finally:
+        pa.max_tension = saved
+
+
+def test_every_default_has_one_home():
+    """PolyAxis's and Axis's keyword defaults are the database schema's."""
+    import inspect
+
+    from pyrt.db import defaults
+    from pyrt.robots.axis import Axis
+    from pyrt.robots.polyaxis import PolyAxis
+
+    schema = defaults("POLYAXIS")
+    params = inspect.signature(PolyAxis).parameters
+    shared = [k for k in schema if k in params and k != "av"]  # av: the AV object itself
+    assert len(shared) >= 12
+    assert all(params[k].default == schema[k] for k in shared)
+    assert inspect.signature(Axis).parameters["stretch"].default == defaults("AXIS")["stretch"]

@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, TextIO
 from pyrt.boards.dataconcentrator import ADC_MAX, DataConcentrator
 from pyrt.boards.tio10 import TIO10
 from pyrt.component import Arg, Component, Limits, Signal, command
+from pyrt.db import defaults
 from pyrt.devices._args import parse_number
 from pyrt.devices.encoder import Encoder
 from pyrt.devices.loadcell import Loadcell, parse_load
@@ -130,7 +131,7 @@ class Axis(Component):
         offset: Sequence[float] = (0.0, 0.0, 0.0),
         bottom: Sequence[float] | None = None,
         av: AV | None = None,
-        stretch: float = 2.0e-5,
+        stretch: float = defaults("AXIS")["stretch"],
     ):
         if not (math.isfinite(dead_length) and dead_length >= 0):
             raise ConfigError(f"axis {name}: DEADLENGTH must be >= 0 cm, got {dead_length!r}")

@@ -96,6 +96,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from pyrt.component import Arg, Component, Limits, Signal, command, finite
+from pyrt.db import defaults
 from pyrt.devices.motor import STEP_MODE
 from pyrt.errors import CommandError, ConfigError, NativeError
 from pyrt.native import (
@@ -126,6 +127,8 @@ __all__ = [
     "PolyAxis",
 ]
 
+#: POLYAXIS.dat's defaults (the schema is their one home).
+_DEFAULT = defaults("POLYAXIS")
 #: NEAR_END truth falls from 1 at the endpoint to 0 at this distance (cm).
 NEAR_END_CM = 10.0
 
@@ -141,6 +144,22 @@ def _cm(axis: str) -> Callable[[str], float]:
 def _point(p: Sequence[float] | None) -> Vec:
     assert p is not None
     return (float(p[0]), float(p[1]), float(p[2]))
+
+
+class _ModelLimit:
+    """A limit the rope model holds (its one home), read and set through the
+    PolyAxis: a value set while running is the one every check uses from then."""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    def __get__(self, pa: PolyAxis | None, owner: type | None = None) -> Any:
+        if pa is None:
+            return self
+        return getattr(pa.model, self.name)
+
+    def __set__(self, pa: PolyAxis, value: float) -> None:
+        setattr(pa.model, self.name, float(value))
 
 
 class PolyAxis(Component):
@@ -159,6 +178,13 @@ class PolyAxis(Component):
     ``task_periods``, the (polyaxis-poll, axis-poll) periods in queue checks.
     """
 
+    low_tension = _ModelLimit()
+    max_tension = _ModelLimit()
+    tension_margin = _ModelLimit()
+    net_forcelimit = _ModelLimit()
+    offside_tension = _ModelLimit()
+    end_error = _ModelLimit()
+
     def __init__(
         self,
         name: str,
@@ -168,18 +194,18 @@ class PolyAxis(Component):
         source_mass: float,
         source_volume: float,
         position: Sequence[float],
-        end_error: float = 1.0,
-        low_tension: float = 2.0,
-        max_tension: float = 200.0,
-        net_forcelimit: float = 25.0,
-        offside_tension: float = 10.0,
-        hare_speed: float = 2.0,
-        hare_ramp: float = 20.0,
-        stuck_time: float = 10.0,
-        find_tolerance: float = 0.1,
-        dist_err_limit: float = 0.5,
-        tension_margin: float = 5.0,
-        d2o_density: float = 1.10,
+        end_error: float = _DEFAULT["end_error"],
+        low_tension: float = _DEFAULT["low_tension"],
+        max_tension: float = _DEFAULT["max_tension"],
+        net_forcelimit: float = _DEFAULT["net_forcelimit"],
+        offside_tension: float = _DEFAULT["offside_tension"],
+        hare_speed: float = _DEFAULT["hare_speed"],
+        hare_ramp: float = _DEFAULT["hare_ramp"],
+        stuck_time: float = _DEFAULT["stuck_time"],
+        find_tolerance: float = _DEFAULT["find_tolerance"],
+        dist_err_limit: float = _DEFAULT["dist_err_limit"],
+        tension_margin: float = _DEFAULT["tension_margin"],
+        d2o_density: float = _DEFAULT["d2o_density"],
         liquid_level: float | None = None,
         poll_s: float = 0.05,
         fuzzy: Sequence[FuzzyParams] | None = None,
@@ -204,17 +230,11 @@ class PolyAxis(Component):
         self.av = av
         self.source_mass = float(source_mass)
         self.source_volume = float(source_volume)
-        self.end_error = float(end_error)
-        self.low_tension = float(low_tension)
-        self.max_tension = float(max_tension)
-        self.net_forcelimit = float(net_forcelimit)
-        self.offside_tension = float(offside_tension)
         self.hare_speed = float(hare_speed)
         self.hare_ramp = float(hare_ramp)
         self.stuck_time = float(stuck_time)
         self.find_tolerance = float(find_tolerance)
         self.dist_err_limit = float(dist_err_limit)
-        self.tension_margin = float(tension_margin)
         self.liquid_level = liquid_level
         self.poll_s = float(poll_s)
         self.stdout = stdout
@@ -244,9 +264,9 @@ class PolyAxis(Component):
             freeze=finder.freeze, ring_segments=self.ring_segments,
             source_mass=self.source_mass, source_volume=self.source_volume,
             d2o_density=d2o_density, liquid_level=liquid_level,
-            low_tension=self.low_tension, max_tension=self.max_tension,
-            tension_margin=self.tension_margin, net_forcelimit=self.net_forcelimit,
-            offside_tension=self.offside_tension, end_error=self.end_error)
+            low_tension=low_tension, max_tension=max_tension,
+            tension_margin=tension_margin, net_forcelimit=net_forcelimit,
+            offside_tension=offside_tension, end_error=end_error)
         model = self.model
         model.check_plane(name, position, self.find_tolerance)
         self.tops = model.tops
