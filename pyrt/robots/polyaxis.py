@@ -138,7 +138,7 @@ _PATTERN_WRITERS = ("thread", "sync")
 
 
 def _cm(axis: str) -> Callable[[str], float]:
-    return finite(f"{axis} in cm")
+    return finite(f"{axis} in cm", units="cm")
 
 
 def _point(p: Sequence[float] | None) -> Vec:
