@@ -154,7 +154,7 @@ def test_slip_during_an_axis_move_is_a_named_fault(tmp_path):
     # A side rope taken in while its encoder wheel slips completely.  (Taking in
     # the central rope slackens the side ropes, and a rope paid out past a
     # slipping encoder goes slack: either ends in LOW_TENSION_STOP first.)
-    runner.call(axis1.up, "10")
+    runner.call(axis1.cmd_up, "10")
     runner.sleep(1.0)
     assert axis1.motor.running
     at_fault = station.plant.position

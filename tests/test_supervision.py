@@ -178,7 +178,7 @@ def test_axis_move_that_slackens_a_rope_stops_named(tmp_path):
         assert "FAULT: LOW_TENSION_STOP: axis1 tension" in text
         assert not station.motors_running()
         assert min(station.plant.tensions()) > 0.5
-        assert station.axes[1].getLength() < 616.9 + 5.0 - 1.0  # stopped well short
+        assert station.axes[1].length() < 616.9 + 5.0 - 1.0  # stopped well short
     finally:
         station.close()
 
@@ -204,7 +204,7 @@ def test_length_range_is_enforced_in_the_loop(tmp_path):
     try:
         ax = station.axes[1]
         runner.call(ax.run_command, "up", "1")
-        here = ax.getLength()
+        here = ax.length()
         runner.call(ax.set_supervision, (here + 0.1, here + 500.0), ax.tension_limits)
         with contextlib.suppress(FaultError):
             runner.sleep(1.0)

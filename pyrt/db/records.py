@@ -126,7 +126,7 @@ class AxisRecord:
     attachment in vessel co-ordinates, ``None`` for the central rope.
 
     Optional: ``STRETCH`` (default 2.0e-5 per N): the rope's elastic strain
-    per newton of tension, used by ``getLength``'s stretch correction (000
+    per newton of tension, used by the stretch correction of 000's ``getLength`` (000
     keeps it in the code and gives no number; 2e-5/N is a braided rope that
     stretches 1 % at 500 N).  ``FUZZY_<NAME>: value`` keys override one
     fuzzy-controller parameter for this axis: ``fuzzy`` maps the lower-cased

@@ -92,7 +92,7 @@ class AV(Component):
                    position=record.position, orientation=record.orientation)
 
     @command(name="show", reads_only=True)
-    def show(self) -> str:
+    def cmd_show(self) -> str:
         """show: the vessel's geometry and pose (the AV takes no other command)."""
         return (f"{self.name}: vessel radius {self.vessel_radius:g} cm, neck ring at "
                 f"{tuple(round(c, 2) for c in self.neck_ring_position)} radius "

@@ -1,11 +1,13 @@
 """One rope of the manipulator: Motor, Encoder and Loadcell together (000, section 6).
 
-Lengths: :meth:`Axis.getLength` is the rope from the top pulley to its end,
+Lengths: :meth:`Axis.length` (000's ``getLength``) is the rope from the top pulley to its end,
 corrected for stretch; the encoder gives the total unstretched length from
 the spindle (dead length included) and the rope stretches in proportion to
 tension and length (STRETCH, strain per newton), so
 
-    getLength = encoder length * (1 + STRETCH * tension) - DEADLENGTH.
+    length = encoder length * (1 + STRETCH * tension) - DEADLENGTH
+
+(:func:`pyrt.robots.ropes.corrected_length`, the one stretch formula).
 
 Standalone control (``STEP_MODE``, Table 4 commands ``up``, ``down``,
 ``to``): each poll recalculates the steps left to the wanted length and
@@ -13,12 +15,12 @@ hands them to the Motor; within :data:`END_ZONE` (1 cm) of the end it stops
 recalculating and lets the Motor finish the move.
 
 PolyAxis control (``VELOCITY_MODE``) is driven from above:
-:meth:`Axis.polyActivate` puts the Motor in velocity mode on standby and
+:meth:`Axis.poly_activate` (000's ``polyActivate``) puts the Motor in velocity mode on standby and
 refuses keyboard commands; the PolyAxis then computes the error signals
 and sets the Motor's velocity each poll (its rates of change are kept in
 the C controller, :class:`pyrt.native.PolyControl`), and polls the axis's
 encoder; axis-poll (:mod:`pyrt.tasks.axis_poll`) leaves the axis alone
-until :meth:`Axis.polyDeactivate` hands it back.
+until :meth:`Axis.poly_deactivate` (``polyDeactivate``) hands it back.
 
 LENGTH write-back is the station's (:class:`pyrt.tasks.WriteBack`).
 """
@@ -229,7 +231,7 @@ class Axis(Component):
     def tension(self) -> float:
         return self.loadcell.tension()
 
-    def getLength(self) -> float:
+    def length(self) -> float:
         """Rope length from the top pulley to its end, stretch corrected (cm)."""
         return corrected_length(self.encoder.length(), self.loadcell.tension(), self.stretch,
                                 self.dead_length)
@@ -254,7 +256,7 @@ class Axis(Component):
             Signal("tension", "N", self._polled("tensions", self.tension),
                    "rope tension the controller acts on (loadcell)",
                    limits=tension_alarms(self.tension_limits)),
-            Signal("length", "cm", self._polled("lengths", self.getLength),
+            Signal("length", "cm", self._polled("lengths", self.length),
                    "rope length the controller acts on, stretch corrected",
                    limits=None if r is None else Limits(r[0], r[1])),
             Signal("errorLength", "cm", self._polled("error_lengths", _zero),
@@ -332,25 +334,25 @@ class Axis(Component):
     @command(Arg("DIST", str, lo=0.0, units="cm", bounds="travel_range",
                  what="the span of the rope's length range"),
              name="up", moves=True, reply=_moving)
-    def up(self, dist: float | str) -> float:
+    def cmd_up(self, dist: float | str) -> float:
         """up DIST: move up DIST cm (shorten the rope; the source goes up)."""
         d = self._distance(dist, "up")
         self._standalone("up")
-        return self._go(self.getLength() - d, "up")
+        return self._go(self.length() - d, "up")
 
     @command(Arg("DIST", str, lo=0.0, units="cm", bounds="travel_range",
                  what="the span of the rope's length range"),
              name="down", moves=True, reply=_moving)
-    def down(self, dist: float | str) -> float:
+    def cmd_down(self, dist: float | str) -> float:
         """down DIST: move down DIST cm (lengthen the rope)."""
         d = self._distance(dist, "down")
         self._standalone("down")
-        return self._go(self.getLength() + d, "down")
+        return self._go(self.length() + d, "down")
 
     @command(Arg("LEN", str, lo=0.0, units="cm", bounds="target_range",
                  what="the rope's physical length range"),
              name="to", moves=True, reply=_moving)
-    def to(self, length: float | str) -> float:
+    def cmd_to(self, length: float | str) -> float:
         """to LEN: change the rope length to LEN cm."""
         v = parse_number(length, f"{self.name} to", "length in cm")
         if v <= 0:
@@ -373,7 +375,7 @@ class Axis(Component):
             raise CommandError(f"{self.name} {command}: that would take the rope to "
                                f"{target:.3f} cm, outside its physical length range "
                                f"{r[0]:g}..{r[1]:g} cm; nothing moved")
-        err = target - self.getLength()
+        err = target - self.length()
         steps = round(err * self.motor.steps_per_cm)
         m = self.motor
         if m.mode == STEP_MODE and m.running and steps != 0 and (steps > 0) != (m.direction > 0):
@@ -389,7 +391,7 @@ class Axis(Component):
     @command(name="calibrate", reply=lambda v: (
         "loadcell calibration mode: hang known loads and give 'point LOAD'" if v is None
         else f"loadcell SLOPE {v[0]:.10g} OFFSET {v[1]:.10g}"))
-    def calibrate(self) -> tuple[float, float] | None:
+    def cmd_calibrate(self) -> tuple[float, float] | None:
         """calibrate: toggle loadcell calibration mode (leaving it fits)."""
         self._standalone("calibrate")
         return self.loadcell.calibrate()
@@ -402,7 +404,7 @@ class Axis(Component):
     @command(Arg("LOAD", lambda t: parse_load(t, "point"), rest=True, lo=0.0, units="N",
                  bounds="load_range", what="up to the loadcell's MAXLOAD"), name="point",
              reply=lambda v: f"loadcell point: ADC {v[0]} = {v[1]:.4g} N")
-    def point(self, load: float | str) -> tuple[int, float]:
+    def cmd_point(self, load: float | str) -> tuple[int, float]:
         """point LOAD: enter a loadcell calibration point (LOAD in N, lb or kg)."""
         self._standalone("point")
         return self.loadcell.point(load)
@@ -410,13 +412,13 @@ class Axis(Component):
     @command(Arg("SPEED", str, lo=MIN_START_SPEED, hi=MAX_CRUISE_SPEED, units="cm/s",
                  what="000's motor speeds"), name="maxspeed",
              reply=lambda v: f"maximum speed {v:g} cm/s")
-    def maxspeed(self, speed: float | str) -> float:
+    def cmd_maxspeed(self, speed: float | str) -> float:
         """maxspeed SPEED: set the maximum motor speed in cm/s."""
         self._standalone("maxspeed")
         return self.motor.maxspeed(speed)
 
     @command(name="zero", reply=lambda _v: "encoder counter reset")
-    def zero(self) -> None:
+    def cmd_zero(self) -> None:
         """zero: reset the encoder counter."""
         self._standalone("zero")
         self.encoder.reset()
@@ -442,7 +444,7 @@ class Axis(Component):
 
     # -- PolyAxis hooks ---------------------------------------------------------------
 
-    def polyActivate(self) -> None:
+    def poly_activate(self) -> None:
         """Hand the axis to PolyAxis control: Motor in VELOCITY_MODE on standby,
         commands refused (000, section 5)."""
         self.target = None
@@ -450,7 +452,7 @@ class Axis(Component):
         self.mode = POLYAXIS
         self._track_reset()
 
-    def polyDeactivate(self) -> None:
+    def poly_deactivate(self) -> None:
         """Stop the motor and return the axis to standalone control."""
         self.motor.stop()
         self.motor.mode = STEP_MODE
@@ -460,7 +462,7 @@ class Axis(Component):
 
     def poll(self, now_s: float) -> None:
         """One poll: standalone control, then the Motor, then the Encoder."""
-        length = self.getLength()
+        length = self.length()
         m = self.motor
         if self.mode == STANDALONE and self.target is not None and m.running:
             err = self.target - length

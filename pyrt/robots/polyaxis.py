@@ -507,7 +507,7 @@ class PolyAxis(Component):
                 f"segment{'s' if n > 1 else ''}, {total:.1f} cm")
 
     @command(name="tensionFind", reads_only=True)
-    def cmd_tensionfind(self) -> str:
+    def cmd_tension_find(self) -> str:
         """tensionFind: find and display the position from the tensions."""
         x = self.tension_find()
         return f"{self.name}: position from tensions ({x[0]:.2f}, {x[1]:.2f}, {x[2]:.2f})"
@@ -521,7 +521,7 @@ class PolyAxis(Component):
 
     @command(Arg("x", _cm("x"), optional=True), Arg("y", _cm("y"), optional=True),
              Arg("z", _cm("z"), optional=True), name="netForce", reads_only=True)
-    def cmd_netforce(self, *args: float) -> str:
+    def cmd_net_force(self, *args: float) -> str:
         """netForce [x y z]: net force magnitude at (x, y, z) or at the current position."""
         if len(args) not in (0, 3):
             raise CommandError(f"{self.name} netForce: takes 0 or 3 arguments, got {len(args)}")
@@ -564,7 +564,7 @@ class PolyAxis(Component):
         return f"{self.name}: stopped"
 
     @command(name="tensionStop")
-    def cmd_tensionstop(self) -> str:
+    def cmd_tension_stop(self) -> str:
         """tensionStop: toggle stop-on-tension."""
         self.tension_stop = not self.tension_stop
         if self.stops is not None:
@@ -572,7 +572,7 @@ class PolyAxis(Component):
         return f"{self.name}: tension stops {'on' if self.tension_stop else 'OFF'}"
 
     @command(name="errorSignalAll")
-    def cmd_errorsignalall(self) -> str:
+    def cmd_error_signal_all(self) -> str:
         """errorSignalAll: toggle driving every rope toward its equilibrium tension."""
         self.signal_all = not self.signal_all
         return (f"{self.name}: error signals "
@@ -634,7 +634,7 @@ class PolyAxis(Component):
     def to(self, target: Sequence[float], *, blend: bool = False) -> Hare:
         """Start a move to ``target`` (global cm) now, after the checks: the
         ``hare_path`` motion; re-arms the tension stops.  Every Axis goes to
-        PolyAxis control (polyActivate)."""
+        PolyAxis control (000's polyActivate)."""
         motion = self.begin(hare_path_record(target, blend))
         assert isinstance(motion, HarePath) and motion.hare is not None
         return motion.hare
@@ -690,7 +690,7 @@ class PolyAxis(Component):
         self.refuse_if_lost(motion.name or type(motion).__name__)
         for a in self.axes:
             if a.mode != POLYAXIS:
-                a.polyActivate()
+                a.poly_activate()
         hare = getattr(motion, "hare", None)
         self.hare = hare if isinstance(hare, Hare) else None
         if self.hare_position is None:  # not stepped yet: the hare starts at the source
@@ -743,7 +743,7 @@ class PolyAxis(Component):
         for a in self.axes:
             a.motor.stop()
             if a.mode == POLYAXIS:
-                a.polyDeactivate()
+                a.poly_deactivate()
             a.target = None
             a.motor.mode = STEP_MODE
 

@@ -162,7 +162,7 @@ class ManipulatorSim(Component):
         return out
 
     @command(name="show", reads_only=True)
-    def show(self) -> str:
+    def cmd_show(self) -> str:
         """sim: where the source really is and the true tensions."""
         p = self.plant
         pos, t, wrapped = p.position, p.tensions(), p.wrapped()
@@ -174,7 +174,7 @@ class ManipulatorSim(Component):
     @command(Arg("ROPE", str), Arg("KIND", str.lower, choices=_SIM_FAULTS),
              Arg("FRACTION", finite("slip fraction", 0.0, 1.0), optional=True, lo=0.0, hi=1.0,
                  what="the share of the rope the encoder misses"), name="fault")
-    def fault(self, rope: str, what: str, fraction: float | None = None) -> str:
+    def cmd_fault(self, rope: str, what: str, fraction: float | None = None) -> str:
         """sim fault ROPE slip [FRACTION]|dead|stuck|stall|break|none: inject a fault.
 
         ROPE is an axis name (axis1) or index."""
@@ -199,7 +199,7 @@ class ManipulatorSim(Component):
     @command(Arg("ROPE", str),
              Arg("NEWTONS", str, lo=0.0, hi=MAX_HUNG_LOAD_N, units="N", what="a hung load"),
              name="load")
-    def load(self, rope: str, newtons: float | str) -> str:
+    def cmd_load(self, rope: str, newtons: float | str) -> str:
         """sim load ROPE NEWTONS: hang a known load on the rope's loadcell (calibration).
 
         The loadcell then reads that load (with its offset, non-linearity and
@@ -211,7 +211,7 @@ class ManipulatorSim(Component):
         return f"sim: {n:g} N hangs on {rope}'s loadcell"
 
     @command(Arg("ROPE", str), name="unload")
-    def unload(self, rope: str) -> str:
+    def cmd_unload(self, rope: str) -> str:
         """sim unload ROPE: take the calibration load off the rope's loadcell."""
         self._rope_call(self.plant.hang_load, rope, None)
         return f"sim: {rope}'s loadcell carries the rope again"
@@ -233,7 +233,7 @@ class ManipulatorWords(Component):
         self.station = station
 
     @command(Arg("FILE", str, optional=True, rest=True), name="log")
-    def log(self, path: str | None = None) -> str:
+    def cmd_log(self, path: str | None = None) -> str:
         """log [FILE]: toggle logging of per-axis state and rule outputs every poll.
 
         The default file is manipulator.log in the station directory; split
@@ -245,7 +245,7 @@ class ManipulatorWords(Component):
         return f"logging on: {st.start_log(target)}"
 
     @command(name="debug")
-    def debug(self) -> str:
+    def cmd_debug(self) -> str:
         """debug: toggle the debugging state (a status line every second)."""
         pa = self.station.polyaxis
         pa.debug = not pa.debug
@@ -571,7 +571,7 @@ class ManipulatorStation(Station):
         moved, self._axis_moves = getattr(self, "_axis_moves", []), []
         if moved and not pa.active and not lines:
             for a in moved:
-                lines.append(f"{a.name}: move ended at length {a.getLength():.3f} cm")
+                lines.append(f"{a.name}: move ended at length {a.length():.3f} cm")
             return "\n".join(lines)
         last, unreported, self._unreported = pa.last_stop, self._unreported, None
         if last is None:
@@ -745,7 +745,7 @@ def _trusted(pa: PolyAxis, read: Callable[[], Any], held: Callable[[Any], Any]
 
 def _length_reader(axis: Axis) -> Callable[[], tuple[float, bool]]:
     def read() -> tuple[float, bool]:
-        return axis.getLength(), axis.motor.running
+        return axis.length(), axis.motor.running
     return read
 
 
