@@ -7,6 +7,7 @@ a new value into an existing value's text for write-back.
 
 from __future__ import annotations
 
+import builtins
 import difflib
 import math
 import re
@@ -96,7 +97,7 @@ class FieldSpec:
 @dataclass(frozen=True)
 class Schema:
     type: str
-    record: type
+    record: builtins.type[Any]  # (``type`` here is the field above)
     fields: tuple[FieldSpec, ...]
     #: prefix of free-form numeric keys kept as a mapping (AXIS: FUZZY_)
     mapping_prefix: str | None = None
@@ -341,9 +342,9 @@ def build_record(schema: Schema, entry: RawEntry, file: str) -> Any:
     where = _location(entry, file)
     record = schema.record(name=entry.name, where=where, **values)
     if schema.check is not None:
-        problem = schema.check(record)
-        if problem:
-            key, message = problem
+        failed = schema.check(record)
+        if failed:
+            key, message = failed
             raise where.error(key, message)
     return record
 

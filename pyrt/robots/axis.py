@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING, Any, Protocol, TextIO
 
 from pyrt.boards.dataconcentrator import ADC_MAX, DataConcentrator
 from pyrt.boards.tio10 import TIO10
@@ -55,6 +55,7 @@ __all__ = [
     "TRACKING_CHECK",
     "TRACKING_MIN_FRACTION",
     "Axis",
+    "RopeGroup",
     "TrackingError",
 ]
 
@@ -80,6 +81,27 @@ LOADCELL_STUCK_READS = 50
 LOADCELL_STUCK_ROPE_CM = 1.0
 #: Supervision calls further apart than this belong to different moves.
 _SUPERVISION_GAP_S = 0.1
+
+
+class RopeGroup(Protocol):
+    """What an Axis knows of the PolyAxis that drives it (its ``group``)."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def active(self) -> bool: ...
+
+    @property
+    def lengths(self) -> list[float]: ...
+
+    @property
+    def tensions(self) -> list[float]: ...
+
+    @property
+    def estimate_lost(self) -> str | None: ...
+
+    def halt(self, reason: Any, detail: str) -> Any: ...
 
 
 class TrackingError(PyrtError):
@@ -144,17 +166,18 @@ class Axis(Component):
         self.encoder = encoder
         self.loadcell = loadcell
         #: The PolyAxis this axis belongs to (it sets this), for ``stop``.
-        self.group: object | None = None
+        self.group: RopeGroup | None = None
         #: The rope's index in its PolyAxis (set with ``group``).
         self.group_index: int | None = None
         for device in (motor, encoder, loadcell):
-            device.owner_busy = self._device_busy  # type: ignore[attr-defined]
+            device.owner_busy = self._device_busy  # type: ignore[union-attr]
         self.dead_length = float(dead_length)
         self.stretch = float(stretch)
         self.av = av
         self.top = tuple(float(c) for c in top)
         self.offset = tuple(float(c) for c in offset)
-        self.bottom_vessel = None if bottom is None else tuple(float(c) for c in bottom)
+        self.bottom_vessel: tuple[float, float, float] | None = (
+            None if bottom is None else (float(bottom[0]), float(bottom[1]), float(bottom[2])))
 
         self.mode = STANDALONE
         self.target: float | None = None
@@ -437,8 +460,8 @@ class Axis(Component):
             # one joint stopped stops the whole manipulator
             from pyrt.robots.stops import StopReason
 
-            group.halt(StopReason.STOP, f"{self.name} stop command")  # type: ignore[attr-defined]
-            return f"stopped; the {group.name} move is stopped with it"  # type: ignore[attr-defined]
+            group.halt(StopReason.STOP, f"{self.name} stop command")
+            return f"stopped; the {group.name} move is stopped with it"
         self.stop()
         return "stopped"
 
@@ -524,8 +547,9 @@ class Axis(Component):
                     f"{abs(m.position_steps - self._adc_steps) / m.steps_per_cm:.1f} cm of rope "
                     "(stuck)")
         if poly:
-            length = group.lengths[i]  # type: ignore[attr-defined]
-            tension = group.tensions[i]  # type: ignore[attr-defined]
+            assert group is not None and i is not None
+            length = group.lengths[i]
+            tension = group.tensions[i]
             lengthening = m.velocity > 0
         else:
             tension = lc.tension()
@@ -558,7 +582,7 @@ class Axis(Component):
         if self.mode == POLYAXIS and group is not None and getattr(group, "active", False):
             from pyrt.robots.stops import StopReason
 
-            group.halt(StopReason.FAULT, cause)  # type: ignore[attr-defined]
+            group.halt(StopReason.FAULT, cause)
         super().fail(cause, source)
 
     def _length_at(self, tension: float) -> float:

@@ -350,7 +350,7 @@ class PolyAxis(Component):
         self.dt = self.poll_s
         #: Where the state log goes (one line at a time), or None: switched by
         #: the station's ``log`` command while running.
-        self.log: Callable[[str], None] | None = None
+        self.log: Callable[[str], object] | None = None
         self.debug = False
         self.debug_next = 0.0
         #: (polyaxis-poll, axis-poll) periods in queue checks (set_task_periods).

@@ -51,9 +51,10 @@ import argparse
 import math
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from functools import partial
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, TextIO, cast
 
 from pyrt.boards import Boards, open_boards
 from pyrt.boards.registers import BoardKind
@@ -110,6 +111,11 @@ POLL_S = 0.05
 AXIS_POLL_S = 0.01
 
 
+def _item_of(read: Callable[[], Sequence[float]], i: int) -> Callable[[], float]:
+    """A reader of item ``i`` of what ``read`` returns, read each time."""
+    return lambda: read()[i]
+
+
 class MessageSink:
     """A text stream for the loop side: whole lines go to ``target`` (the
     runner's ``post``), so device output never garbles the console."""
@@ -154,9 +160,9 @@ class ManipulatorSim(Component):
 
     def signals(self) -> list[Signal]:
         p = self.plant
-        out = [Signal(c, "cm", (lambda i=i: p.position[i]), f"true source position {c}")
+        out = [Signal(c, "cm", _item_of(lambda: p.position, i), f"true source position {c}")
                for i, c in enumerate("xyz")]
-        out += [Signal(f"tension{i}", "N", (lambda i=i: p.tensions()[i]),
+        out += [Signal(f"tension{i}", "N", _item_of(p.tensions, i),
                        f"true tension of {a.name}", limits=tension_alarms(a.tension_limits))
                 for i, a in enumerate(self.axes)]
         return out
@@ -326,7 +332,7 @@ class ManipulatorStation(Station):
                stdout: TextIO | None) -> None:
         tick_s = self.loop.period_ns * 1e-9
         self.messages = MessageSink()
-        self.stdout = stdout if stdout is not None else self.messages
+        self.stdout = stdout if stdout is not None else cast(TextIO, self.messages)
         st = self.station
         pa_rec = st.polyaxis()
         self.av = AV.from_record(st.av_of(pa_rec))
@@ -623,7 +629,7 @@ class ManipulatorStation(Station):
                   ("distErr", sig["distErr"], ".3f"), ("netForce", sig["netForce"], ".2f"),
                   ("moving", Signal("moving", "bool", self.busy, "a move runs or waits", "d"),
                    "d"), self.fault_field()]
-        fields += [(f"tension{i}", Signal(f"tension{i}", "N", (lambda i=i: pa.tensions[i]),
+        fields += [(f"tension{i}", Signal(f"tension{i}", "N", _item_of(lambda: pa.tensions, i),
                                           f"measured tension of {a.name}",
                                           limits=tension_alarms(a.tension_limits)), ".2f")
                    for i, a in enumerate(self.axes)]
@@ -638,7 +644,7 @@ class ManipulatorStation(Station):
             end = pa.endpoint if pa.active else None
             return math.nan if end is None else float(end[k])
 
-        return [Signal(f"target_{c}", "cm", (lambda k=k: coord(k)),
+        return [Signal(f"target_{c}", "cm", partial(coord, k),
                        f"endpoint {c} of the move (NaN: none)", ".2f",
                        limits=pa.position_limits(k))
                 for k, c in enumerate("xyz")]
