@@ -228,14 +228,11 @@ class PolyAxis(Component):
         self.axes = list(axes)
         self.n = len(self.axes)
         self.av = av
-        self.source_mass = float(source_mass)
-        self.source_volume = float(source_volume)
         self.hare_speed = float(hare_speed)
         self.hare_ramp = float(hare_ramp)
         self.stuck_time = float(stuck_time)
         self.find_tolerance = float(find_tolerance)
         self.dist_err_limit = float(dist_err_limit)
-        self.liquid_level = liquid_level
         self.poll_s = float(poll_s)
         self.stdout = stdout
 
@@ -262,7 +259,7 @@ class PolyAxis(Component):
             av, [a.name for a in self.axes], tops, bottoms, offsets,
             [a.dead_length for a in self.axes], [a.stretch for a in self.axes],
             freeze=finder.freeze, ring_segments=self.ring_segments,
-            source_mass=self.source_mass, source_volume=self.source_volume,
+            source_mass=source_mass, source_volume=source_volume,
             d2o_density=d2o_density, liquid_level=liquid_level,
             low_tension=low_tension, max_tension=max_tension,
             tension_margin=tension_margin, net_forcelimit=net_forcelimit,
@@ -290,7 +287,7 @@ class PolyAxis(Component):
         # the error signals, fuzzy inputs and the batched fuzzy step.
         rf = model.neck
         ring = (*rf.centre, *rf.axis, *rf.e1, *rf.e2, rf.radius)
-        wet = (self.source_volume > 0 and liquid_level is not None)
+        wet = (model.source_volume > 0 and liquid_level is not None)
         try:
             self._ctl = PolyControl(
                 finder, self.batch, tops=tops, bottoms=bottoms,
@@ -817,7 +814,10 @@ class PolyAxis(Component):
             self.position_lost(f"position finder failed: {exc}")
             return
         est.position_error = None
-        self.check_estimate()
+        if est.estimate_lost is None:  # the estimate's integrity, every poll
+            detail = est.check()
+            if detail is not None:
+                self._estimate_fault(detail)
         self.step_motion(now_s)
         if self.active:
             self.drive_motors(now_s, dt)
@@ -846,16 +846,11 @@ class PolyAxis(Component):
             if self.adopted:
                 self.fail(cause)
 
-    def check_estimate(self) -> None:
-        """After every measure, moving or not: an estimate the estimator finds
-        lost (:meth:`~pyrt.robots.estimator.PositionEstimator.check`) is a
-        fault of the manipulator naming the axis; moves are refused from then
+    def _estimate_fault(self, detail: str) -> None:
+        """The estimator found the estimate lost (checked after every measure,
+        moving or not: :meth:`~pyrt.robots.estimator.PositionEstimator.check`):
+        a fault of the manipulator naming the axis; moves are refused from then
         until ``survey`` or ``setpos`` re-establishes the position."""
-        if self.estimator.estimate_lost is not None:
-            return
-        detail = self.estimator.check()
-        if detail is None:
-            return
         if self.active:
             self._fault(detail)
         elif self.adopted:
@@ -926,9 +921,10 @@ class PolyAxis(Component):
         """During a move: error signals, the batched fuzzy step, every motor, the stops."""
         stops = self.stops
         assert stops is not None
+        est = self.estimator
         hp = self.hare_position
         if hp is None:
-            hp = self.hare_position = self.position
+            hp = self.hare_position = est.position
         motors = self._motors
         if self.signal_all:
             want, _ = self.model.equilibrium_tensions(hp)
@@ -943,8 +939,8 @@ class PolyAxis(Component):
             m.poll()
         if self.log is not None:
             self._log_state(now_s, dvs)
-        hit = stops.check(now_s, self.position, self.dist_err, self.tensions,
-                          self.net_force_magnitude, self._names)
+        hit = stops.check(now_s, est.position, est.dist_err, est.tensions,
+                          est.net_force_magnitude, self._names)
         if hit is not None:
             self.halt(*hit)
 
