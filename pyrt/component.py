@@ -44,8 +44,7 @@ from typing import Any, TypeVar
 from pyrt.errors import CommandError
 from pyrt.scheduler.task import Task
 from pyrt.scope import Source
-from pyrt.units import UnitError
-from pyrt.units import parse_number as _parse_number
+from pyrt.units import UnitError, parse_value, value_grammar
 
 __all__ = [
     "Arg",
@@ -245,12 +244,12 @@ class Param:
             if self.hex:
                 value: float | int = int(t, 16)
             else:
-                value = float(t)
+                value = parse_value(t, self.units)  # the one number-and-unit grammar
                 if self.integer:
                     if not value.is_integer():
                         raise ValueError(t)
                     value = int(value)
-        except ValueError:
+        except (UnitError, ValueError):
             kind = "a hexadecimal number" if self.hex else (
                 "a whole number" if self.integer else "a number")
             raise CommandError(f"{who}: {t[:40]!r} is not {kind}{rng}; nothing changed") from None
@@ -336,31 +335,39 @@ class Arg:
 
     def check(self, who: str, value: Any) -> Any:
         """``value`` if it is a finite number inside the range (CommandError naming
-        the range if not); values of arguments without a range pass unchanged."""
+        the range if not; a text is read by the one number grammar,
+        :func:`pyrt.units.parse_value`, in :attr:`units`); values of arguments
+        without a range pass unchanged."""
         if not self.ranged:
             return value
         try:
-            v = float(value)
+            if isinstance(value, str):
+                v = parse_value(value, self.units)
+            elif isinstance(value, bool):
+                raise TypeError(value)
+            else:
+                v = float(value)
         except (TypeError, ValueError):
-            raise CommandError(f"{who}: {self.name} must be a number "
+            raise CommandError(f"{who}: {self.name} must be {value_grammar(self.units)} "
                                f"({self.range_text}), got {str(value)[:40]!r}") from None
         if (not math.isfinite(v) or (self.lo is not None and v < self.lo)
                 or (self.hi is not None and v > self.hi)):
             raise CommandError(f"{who}: {self.name} {v:g} is out of range: {self.range_text}; "
                                "nothing changed")
-        return value
+        return v if isinstance(value, str) else value
 
 
-def finite(what: str, lo: float = -math.inf, hi: float = math.inf) -> Callable[[str], float]:
-    """A parser of a finite number in ``lo..hi`` (CommandError naming ``what``)."""
+def finite(what: str, lo: float = -math.inf, hi: float = math.inf,
+           units: str = "") -> Callable[[str], float]:
+    """A parser of a finite number in ``lo..hi`` ``units``, written as the one
+    number grammar takes it (:func:`pyrt.units.parse_value`: a unit of the same
+    quantity is converted); CommandError naming ``what`` and what it takes."""
 
     def parse(text: str) -> float:
         try:
-            value = float(text)
-        except ValueError:
-            raise CommandError(f"{what} {text[:40]!r} is not a number") from None
-        if not math.isfinite(value):
-            raise CommandError(f"{what} {text[:40]!r} is not a finite number")
+            value = parse_value(text, units)
+        except UnitError as exc:
+            raise CommandError(f"{what} {text[:40]!r} is not a number: {exc}") from None
         if not lo <= value <= hi:
             raise CommandError(f"{what} {value:g} is out of range ({lo:g}..{hi:g})")
         return value
@@ -515,12 +522,7 @@ def _parse_one(who: str, arg: Arg, text: str) -> Any:
     if arg.choices and text.lower() not in arg.choices:
         raise CommandError(f"{who}: {arg.name} must be {' or '.join(arg.choices)}, "
                            f"got {text[:40]!r}")
-    if arg.ranged and arg.parse is str:  # a number checked here, handed on as text
-        try:
-            _parse_number(text)
-        except (UnitError, ValueError):
-            raise CommandError(f"{who}: {arg.name} must be a number ({arg.range_text}), "
-                               f"got {text[:40]!r}") from None
+    if arg.ranged and arg.parse is str:  # a number in arg.units, converted here
         return arg.check(who, text)
     try:
         value = arg.parse(text)

@@ -288,7 +288,7 @@ def test_per_rope_state_and_target_pvs_follow_a_move(epics_env, tmp_path):
         assert _until(lambda: _read("STATE")[0] == b"idle")
         assert _until(lambda: _text("STOP_REASON").startswith("ENDPOINT_STOP"))
         assert math.isnan(_read("TARGET_X")[0])
-        length = runner.call(station.axes[0].getLength)
+        length = runner.call(station.axes[0].length)
         assert _read("AXIS0:LENGTH")[0] == pytest.approx(length, abs=0.05)  # last poll vs now
         enc = runner.call(station.axes[0].encoder.length)
         assert _read("AXIS0ENCODER:LENGTH")[0] == pytest.approx(enc, abs=0.01)

@@ -36,6 +36,7 @@ __all__ = [
     "FieldSpec",
     "Schema",
     "build_record",
+    "defaults",
     "format_value",
 ]
 
@@ -442,3 +443,10 @@ def _replace_numbers(text: str, matches: list[re.Match[str]], values: list[float
         pos = m.end(1)
     out.append(text[pos:])
     return "".join(out)
+
+
+def defaults(type_: str) -> dict[str, Any]:
+    """The default of every optional field of an entry of ``type_`` (``POLYAXIS``,
+    ``AXIS``, ...) by record field name: the one home of each default (records
+    get it from :func:`build_record`, constructors from here)."""
+    return {f.attr: f.default for f in SCHEMAS[type_].fields if not f.required}

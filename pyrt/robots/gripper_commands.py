@@ -17,6 +17,7 @@ from pyrt.boards.i8031 import JSPEED, MVJAWSPD, SENSORPD, SYSCLKPD, WTCHJWSPD
 from pyrt.component import Arg, Component, Param, Signal, Switch, command
 from pyrt.errors import CommandError
 from pyrt.scheduler.motion import MotionRecord
+from pyrt.units import NUMBER_PATTERN, UnitError, parse_value, units_of
 
 __all__ = ["CommandLetters", "GripperMonitor", "parse_hex", "parse_position", "parse_target",
            "sensor_names"]
@@ -53,7 +54,10 @@ def parse_hex(text: str, what: str, maximum: int, minimum: int = 0) -> int:
     return value
 
 
-_MM = re.compile(r"([0-9]+(?:\.[0-9]*)?|\.[0-9]+)\s*mm", re.IGNORECASE)
+#: An opening with its length unit (``42.5mm``, ``4.25cm``): the one number
+#: grammar's (:func:`pyrt.units.parse_value`); without a unit a target is hex.
+_OPENING = re.compile(rf"({NUMBER_PATTERN})\s*({'|'.join(units_of('length'))})",
+                      re.IGNORECASE)
 
 
 def parse_target(text: str) -> int:
@@ -87,13 +91,16 @@ def parse_target(text: str) -> int:
 
 
 def parse_position(text: str, calibration: Any) -> int:
-    """A ``P`` target as :func:`parse_target` takes it, or an opening in
-    millimetres (``42.5mm``) converted with the station's ``calibration``."""
+    """A ``P`` target as :func:`parse_target` takes it (hexadecimal, as 002
+    writes it), or an opening with its length unit (``42.5mm``, ``4.25cm``)
+    converted with the station's ``calibration``."""
     t = text.strip()
-    m = _MM.fullmatch(t)
-    if m is None:
+    if _OPENING.fullmatch(t) is None:
         return parse_target(t)
-    mm = float(m.group(1))
+    try:
+        mm = parse_value(t, "mm")
+    except UnitError as exc:
+        raise CommandError(f"target {t[:40]!r}: {exc}") from None
     if not 0.0 <= mm <= calibration.open_mm:
         raise CommandError(f"target {t[:40]} is out of range (0..{calibration.open_mm:g} mm)")
     return calibration.counts(mm)

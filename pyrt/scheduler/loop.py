@@ -32,10 +32,10 @@ from pyrt.errors import Fault, FaultError, PyrtError
 from pyrt.scheduler.clock import Clock, SimClock
 from pyrt.scheduler.readyqueue import ReadyQueue, fold_many
 from pyrt.scheduler.stats import (
-    NBINS,
     Accumulator,
     LoopStatistics,
     TaskStatistics,
+    bin_index,
 )
 
 __all__ = ["Job", "Loop", "TakenSamples", "overrun_line"]
@@ -702,9 +702,4 @@ def _record(acc: Accumulator, d: int) -> None:
     acc.total += d
     if d > acc.max:
         acc.max = d
-    if d < 8:
-        acc.hist[d if d > 0 else 0] += 1
-    else:
-        bl = d.bit_length()
-        i = (bl << 2) - 8 + ((d >> (bl - 3)) & 3)
-        acc.hist[i if i < NBINS else NBINS - 1] += 1
+    acc.hist[bin_index(d)] += 1
