@@ -22,14 +22,18 @@ overrun_ticks=N&overrun_limit=M&off_on_loss=0|1]``; ``map`` is a path, or
 ``builtin:manipulator``: those ``pyrt board-sim NAME --modbus`` serves).
 
 The client.  pymodbus's synchronous client (:class:`pymodbus.client.ModbusTcpClient`),
-chosen by measurement (``bench/bench_modbus.py``, loopback, one grouped read
-of the gripper's five inputs from ``board-sim --modbus``): the sync client
-answers in about 0.2 ms at p50 with a p99 near 0.4 ms, while the async
-client called from the loop thread (a coroutine handed to its event loop's
-thread and waited for) costs one more thread hand-off each way and its
-p99 is several times wider.  The control loop is synchronous: a blocking
-request on the loop thread is the shortest path.  The groups of a phase
-are sent one after another.
+chosen by measurement (``bench/bench_image.py``, ``test_modbus_exchange_cost``:
+one grouped read of the gripper's inputs, input registers 0..6 of unit 1,
+from ``pyrt board-sim gripper --modbus`` in another process on loopback,
+2000 reads each, on this two-core machine): the sync client took p50 80 µs
+(p99 2.7 ms); the async client called from a synchronous caller -- what
+the loop thread is: the coroutine handed to the client's event-loop
+thread, the caller waiting for the result -- took p50 195 µs (p99 3.2 ms),
+and even awaited inside its own event loop p50 122 µs (p99 4.3 ms).  The
+sync client is lower and steadier: it makes no thread hand-off, and the
+control loop is synchronous.  The tails are the server's (its world step
+and asyncio loop share the machine), not the client's.  The groups of a
+phase are sent one after another.
 
 pymodbus is an optional extra (``pip install 'pyrt[modbus]'``): it is
 imported when a ``modbus://`` URL is opened, and its absence is a
