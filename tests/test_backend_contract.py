@@ -119,8 +119,10 @@ def test_the_reflex_writes_at_once_and_a_dead_link_records_it_as_failed(rig):
     rig.boards.flush(0)
     rig.drop()
     if rig.scheme != "sim":
-        with pytest.raises(BoardError):
-            rig.boards.poll(0)
+        with pytest.raises(BoardError):  # a reply already in before the drop may be read
+            for _ in range(3):
+                rig.boards.poll(0)
+                rig.boards.flush(0)
         assert rig.boards.down is not None
     if rig.scheme == "modbus":
         with pytest.raises(BoardError, match="link is down") as err:

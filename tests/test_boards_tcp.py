@@ -259,11 +259,11 @@ def test_poll_copy_serves_the_reads_of_a_tick_and_sees_its_own_writes(gripper_si
         boards.flush(0)  # sent, its reply read with the next exchange
         boards.poll(0)
         assert link.requests == n + 2
-        board.write(DAC, 0x81)  # unchanged: nothing to send
+        board.write(DAC, 0x81)  # unchanged: nothing to send but the next SNAP
         boards.flush(0)
         assert link.requests == n + 2
-        board.write(DAC, 0x80)  # outside a tick: at once
-        assert link.requests == n + 3
+        board.write(DAC, 0x80)  # outside a tick: at once (the SNAP's reply read first)
+        assert link.requests == n + 4
     with open_boards(gripper_sim.url, "gripper", GRIPPER_BOARDS, max_age=0) as boards:
         link = boards["gripper"].registers.link
         n = link.requests

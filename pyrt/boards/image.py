@@ -227,15 +227,26 @@ class ImageBackend:
         self._timed(t0, "read")
 
     def write_phase(self, now_ns: int = 0) -> None:
-        """The tick's write phase: the changed outputs, one exchange."""
+        """The tick's write phase: the changed outputs, one exchange; then
+        :meth:`end_of_tick`."""
         self.in_tick = False
-        if not self._changed:
-            return
-        writes = [(b, n, i, v) for (b, n, i), v in self._changed.items()]
-        self._changed.clear()
-        t0 = time.monotonic_ns()
-        self.exchange_outputs(writes)
-        self._timed(t0, "write")
+        if self._changed:
+            writes = [(b, n, i, v) for (b, n, i), v in self._changed.items()]
+            self._changed.clear()
+            t0 = time.monotonic_ns()
+            self.exchange_outputs(writes)
+            self._timed(t0, "write")
+        self.end_of_tick()
+
+    def end_of_tick(self) -> None:
+        """After the write phase (nothing by default; ``tcp://`` sends the next
+        tick's input request here)."""
+
+    def resync(self) -> None:
+        """The station's loop starts: the writes made while it was being built go
+        out now (outside a tick from here on until the first read phase)."""
+        self.in_tick = False
+        self.write_now()
 
     def write_now(self) -> None:
         """Write the changed outputs at once (the reflex; see the module text)."""
@@ -327,7 +338,8 @@ class ImageBackend:
                 p(now_ns)
 
         return {"poll": poll, "flush": self.write_phase, "write_now": self.write_now,
-                "set_tick": self.set_tick, "close": self.close, "down": lambda: self.down}
+                "set_tick": self.set_tick, "close": self.close, "down": lambda: self.down,
+                "resync": self.resync}
 
 
 class ImageRegisters:

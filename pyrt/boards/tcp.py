@@ -19,10 +19,14 @@ fingerprint, else ConfigError names those missing or different.
 The process image (:mod:`pyrt.boards.image`, the back-end contract).  The
 read phase is one ``SNAP`` (every declared input); the write phase one
 ``W ...; W ...`` line of the outputs the tick changed, sent without
-waiting: its reply is read with the next tick's ``SNAP``, so a tick costs
-one request and one reply each way.  The reflex's writes wait for their
-reply.  Every readable output is read once on opening (pipelined: one
-exchange), and again when the watchdog has turned the outputs off.
+waiting, followed by the next tick's ``SNAP`` (``prefetch``, the
+default): both replies come back while the loop sleeps, and the next read
+phase only reads them -- one request and one reply each way per tick, and
+no round trip inside the tick.  A ``SNAP`` sent more than 1.5 ticks
+before its read phase (the loop stalled) is not used: that read phase
+asks again.  The reflex's writes wait for their reply.  Every readable
+output is read once on opening (pipelined: one exchange), and again when
+the watchdog has turned the outputs off.
 
 Failures.  A connection refused, reset or closed, or no reply within the
 timeout (derived from the tick, or ``timeout`` seconds), raises :class:`~pyrt.errors.BoardError`
@@ -46,6 +50,7 @@ import contextlib
 import socket
 import struct
 import threading
+import time
 from collections.abc import Mapping
 from typing import Any
 
@@ -246,6 +251,33 @@ class TcpLink:
                 refused = f"{line[:60]}: refused: {reply.decode('ascii', 'replace')[4:]}"
         return refused
 
+    def collect(self) -> bytes | None:
+        """The payload of the last request sent without waiting (the replies of
+        those before it are read first); None if none is outstanding.
+        BoardError as :meth:`request`, also for a refusal of an earlier one."""
+        refused = None
+        with self._lock:
+            if self._down is not None:
+                raise BoardError(self.url, f"the link is down ({self._down})")
+            if not self._outstanding:
+                return None
+            line = self._outstanding.pop()
+            try:
+                refused = self._read_outstanding()
+                reply = self._readline()
+            except (TimeoutError, BlockingIOError):
+                self._fail(f"no reply within {self.timeout:g} s", line)
+            except (OSError, EOFError) as exc:
+                self._fail(_why(exc), line)
+            self.requests += 1
+        if refused is not None:
+            raise BoardError(self.url, refused)
+        if reply[:3] == b"OK " or reply == b"OK":
+            return reply[3:]
+        with self._lock:
+            self._fail(f"unexpected reply {reply[:60]!r}", line)
+        raise AssertionError("unreachable")  # pragma: no cover
+
     def _exchange(self, line: str) -> bytes:
         """One round trip; the payload of the ``OK`` reply."""
         data = line.encode("ascii") + b"\n"
@@ -342,10 +374,14 @@ class TcpRegisters(ImageBackend):
     def __init__(self, link: TcpLink, kinds: Mapping[str, BoardKind], *,
                  max_age: float = DEFAULT_MAX_AGE_S, timeout: float | None = None,
                  overrun_ticks: int = DEFAULT_OVERRUN_TICKS,
-                 overrun_limit: int = DEFAULT_OVERRUN_LIMIT):
+                 overrun_limit: int = DEFAULT_OVERRUN_LIMIT, prefetch: bool = True):
         super().__init__(link.url, kinds, max_age=max_age, timeout=timeout,
                          overrun_ticks=overrun_ticks, overrun_limit=overrun_limit)
         self.link = link
+        #: Send the next tick's SNAP at the end of this one (see :meth:`end_of_tick`).
+        self.prefetch = prefetch
+        self._prefetch_sent = 0
+        self._stale_ns = 0
         self._check_greeting()
         # every board served, in its order: a plain SNAP; else name the boards declared
         self._snap_request = ("SNAP" if list(link.boards) == list(self.kinds)
@@ -368,8 +404,33 @@ class TcpRegisters(ImageBackend):
 
     # -- the exchanges ------------------------------------------------------------------------
 
+    def set_tick(self, period_s: float) -> None:
+        super().set_tick(period_s)
+        self._stale_ns = int(1.5 * period_s * 1e9)
+
+    def end_of_tick(self) -> None:
+        """Pipelining: send the next tick's ``SNAP`` now, behind the write line;
+        the next read phase reads its reply, which came while the loop slept.
+        A copy sent more than 1.5 ticks before (the loop stalled) is not used:
+        that read phase asks again."""
+        if self.prefetch and self.phased and not self._prefetch_sent \
+                and self.link.down is None:
+            self.link.send(self._snap_request)
+            self._prefetch_sent = time.monotonic_ns()
+
     def exchange_inputs(self) -> list[int]:
-        nums = self.link.request_ints(self._snap_request)
+        sent, self._prefetch_sent = self._prefetch_sent, 0
+        payload = self.link.collect() if sent else None
+        if payload is not None and time.monotonic_ns() - sent <= self._stale_ns:
+            try:
+                nums = list(map(int, payload.split()))
+            except ValueError:
+                self.link._fail(f"reply {payload[:60]!r} is not numbers", "SNAP")
+        else:
+            nums = self.link.request_ints(self._snap_request)
+        return self._inputs_of(nums)
+
+    def _inputs_of(self, nums: list[int]) -> list[int]:
         if len(nums) != self.input_count + 1:
             self.link._fail(f"SNAP answered {len(nums)} values, not {self.input_count + 1}",
                             "SNAP")
@@ -423,9 +484,14 @@ class TcpRegisters(ImageBackend):
         self.forget_outputs(self.read_outputs())
 
     def forget(self) -> None:
-        """Forget the watchdog count and read the outputs again (the loop starts)."""
+        """The loop starts: the writes made while the station was built go out,
+        the watchdog count is forgotten and the outputs read again."""
+        super().resync()
         self.link.forget_trips()
         self.load_outputs()
+
+    def resync(self) -> None:
+        self.forget()
 
 
 def _write_line(writes: list[Write]) -> str:
@@ -469,6 +535,7 @@ def open_tcp(
     max_age: Any = DEFAULT_MAX_AGE_S,
     overrun_ticks: Any = DEFAULT_OVERRUN_TICKS,
     overrun_limit: Any = DEFAULT_OVERRUN_LIMIT,
+    prefetch: Any = "1",
     **options: Any,
 ) -> Boards:
     """The ``tcp://HOST:PORT`` back end: connect to board-sim and open the declared boards.
@@ -477,14 +544,16 @@ def open_tcp(
     the one derived from the tick), ``connect_timeout``, ``max_age`` of the
     input copy outside the ticks (0: every read there reads the inputs),
     ``overrun_ticks`` (N) and ``overrun_limit`` (M) of the back-end contract
-    (:mod:`pyrt.boards.image`); and those of the declared kinds (the gripper
-    cage's ``cpu``).
+    (:mod:`pyrt.boards.image`), ``prefetch`` (1, the default: the next tick's
+    ``SNAP`` is sent at the end of the tick; 0: at the start of the read
+    phase, a whole round trip in the tick); and those of the declared kinds
+    (the gripper cage's ``cpu``).
     """
     mine, rest = split_options(kinds, options)
     if rest:
         raise url.error(f"tcp: takes no option {', '.join(sorted(rest))} "
                         "(it takes timeout, connect_timeout, max_age, overrun_ticks, "
-                        "overrun_limit)")
+                        "overrun_limit, prefetch)")
     if not url.host or url.port is None or url.port == 0:
         raise url.error("tcp: needs a host and a port 1..65535: tcp://HOST:PORT")
     if url.path not in ("", "/"):
@@ -494,10 +563,12 @@ def open_tcp(
     age = _seconds(url, "max_age", max_age)
     n = _ticks(url, "overrun_ticks", overrun_ticks)
     m = _ticks(url, "overrun_limit", overrun_limit)
+    if str(prefetch) not in ("0", "1", "True", "False"):
+        raise url.error(f"option prefetch must be 0 or 1, got {prefetch!r}")
     link = TcpLink(url.text, url.host, url.port, timeout=t or DEFAULT_TIMEOUT_S,
                    connect_timeout=ct)
     client = TcpRegisters(link, kinds, max_age=age, timeout=t, overrun_ticks=n,
-                          overrun_limit=m)
+                          overrun_limit=m, prefetch=str(prefetch) in ("1", "True"))
     try:
         client.open()  # the first copy: what the boards hold as this controller comes
         views = {name: ImageRegisters(client, name) for name in kinds}
@@ -509,5 +580,4 @@ def open_tcp(
     pollers = [b.poll for b in boards.values()
                if not isinstance(b, ImageRegisters) and callable(getattr(b, "poll", None))]
     return Boards(url.text, station, boards, kinds, in_process=False, world=link.station,
-                  views=views, info=link.info, resync=client.forget,
-                  **client.boards_hooks(pollers))
+                  views=views, info=link.info, **client.boards_hooks(pollers))
