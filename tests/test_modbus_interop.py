@@ -118,7 +118,7 @@ def test_pyrt_drives_a_plain_pymodbus_server_through_a_map(tmp_path):
     boards = open_boards(f"modbus://127.0.0.1:{port}?map={path}", "arm", {"servo": SERVO})
     try:
         view = boards.registers("servo")
-        boards.set_tick(0.001)
+        boards.set_tick(1.0)  # a long tick: the prefetched reads are never stale here
         world.write_registers(0, [0xFFFF, 0xFFFB, 0x0001, 0x1170], device_id=5)  # -5, 70000
         n = server.received
         boards.poll(0)

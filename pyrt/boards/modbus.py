@@ -8,7 +8,12 @@ is an :class:`~pyrt.boards.image.ImageBackend` (the back-end contract):
 * read phase: the inputs in the fewest contiguous requests the map allows
   (one for the shipped gripper map: read input registers 0..6);
 * write phase: the outputs the tick changed, grouped the same way (write
-  multiple registers / coils);
+  multiple registers / coils), each request waiting for its reply; then,
+  when the inputs are one request, the next tick's read is sent without
+  waiting (``prefetch=1``, the default) and the next read phase only reads
+  its reply, which came while the loop slept: no round trip is left inside
+  a tick that changes no output.  One transaction is in flight at a time
+  (many devices, and pymodbus's server, answer one at a time);
 * the reflex's writes go out at once; a device is not assumed to turn its
   outputs off when the link drops, so on a dead link they are recorded as
   failed (BoardError naming the URL) -- ``off_on_loss=1`` says the device
@@ -17,7 +22,7 @@ is an :class:`~pyrt.boards.image.ImageBackend` (the back-end contract):
   timeout (N x M ticks, at least 0.1 s) trips the station naming the URL.
 
 URL: ``modbus://HOST:PORT?map=FILE[&timeout=S&connect_timeout=S&max_age=S&
-overrun_ticks=N&overrun_limit=M&off_on_loss=0|1]``; ``map`` is a path, or
+overrun_ticks=N&overrun_limit=M&off_on_loss=0|1&prefetch=0|1]``; ``map`` is a path, or
 ``builtin:NAME`` for a map shipped with pyrt (``builtin:gripper``,
 ``builtin:manipulator``: those ``pyrt board-sim NAME --modbus`` serves).
 
@@ -45,6 +50,7 @@ from __future__ import annotations
 import contextlib
 import importlib.resources
 import logging
+import time
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -95,7 +101,8 @@ class ModbusRegisters(ImageBackend):
                  kinds: Mapping[str, BoardKind], *, connect_timeout: float,
                  max_age: float = DEFAULT_MAX_AGE_S, timeout: float | None = None,
                  overrun_ticks: int = DEFAULT_OVERRUN_TICKS,
-                 overrun_limit: int = DEFAULT_OVERRUN_LIMIT, off_on_loss: bool = False):
+                 overrun_limit: int = DEFAULT_OVERRUN_LIMIT, off_on_loss: bool = False,
+                 prefetch: bool = True):
         super().__init__(url, kinds, max_age=max_age, timeout=timeout,
                          overrun_ticks=overrun_ticks, overrun_limit=overrun_limit)
         self.off_on_loss = off_on_loss
@@ -109,6 +116,13 @@ class ModbusRegisters(ImageBackend):
             raise BoardError(url, "cannot connect: connection refused or timed out "
                                   "(is the Modbus server running there?)")
         self.client.comm_params.timeout_connect = self.timeout_s
+        self._pdus = _pdu_classes()
+        #: Pipelining (see the module text): requests sent without waiting, in order.
+        self.prefetch = prefetch
+        self._pending: list[tuple[str, str, Any]] = []
+        self._rx = b""
+        self._prefetch_sent = 0
+        self._stale_ns = 0
         order = {p.key: n for n, p in enumerate(
             p for b, k in self.kinds.items() for r in k.inputs() for p in
             (regmap.by_key[(b, r.name, i)] for i in range(r.count)))}
@@ -125,9 +139,61 @@ class ModbusRegisters(ImageBackend):
             self.client.close()
         raise BoardError(self.url, f"{what}: {why}")
 
+    # -- pipelined requests: pymodbus's framer, our own order --------------------------------
+
+    def _send_nowait(self, kind: str, what: str, pdu: Any) -> None:
+        if self._down is not None:
+            raise BoardError(self.url, f"{what}: the link is down ({self._down})")
+        pdu.transaction_id = self.client.transaction.getNextTID()
+        frame = self.client.transaction.framer.buildFrame(pdu)
+        try:
+            self.client.socket.settimeout(self.timeout_s)
+            self.client.socket.sendall(frame)
+        except (OSError, AttributeError) as exc:
+            self._fail(what, getattr(exc, "strerror", None) or "cannot send")
+        self._pending.append((kind, what, pdu))
+
+    def _receive(self, what: str, pdu: Any) -> Any:
+        framer = self.client.transaction.framer
+        sock = self.client.socket
+        while True:
+            used, reply = framer.handleFrame(self._rx, 0, 0)
+            self._rx = self._rx[used:]
+            if reply is not None:
+                if reply.transaction_id != pdu.transaction_id:
+                    self._fail(what, f"reply to transaction {reply.transaction_id}, "
+                                     f"not {pdu.transaction_id}")
+                return reply
+            try:
+                sock.settimeout(self.timeout_s)
+                data = sock.recv(4096)
+            except TimeoutError:
+                self._fail(what, "no reply within the timeout")
+            except OSError as exc:
+                self._fail(what, exc.strerror or str(exc))
+            if not data:
+                self._fail(what, "the Modbus server closed the connection")
+            self._rx += data
+
+    def _drain(self) -> list[tuple[str, str, Any]]:
+        """Read the replies of every request sent without waiting, in order:
+        (kind, what, reply); BoardError for an exception reply."""
+        out = []
+        while self._pending:
+            kind, what, pdu = self._pending.pop(0)
+            reply = self._receive(what, pdu)
+            if reply.isError():
+                self._pending.clear()
+                raise BoardError(self.url, f"{what}: the device answered {reply}")
+            out.append((kind, what, reply))
+        return out
+
     def _request(self, what: str, fn: Any, *args: Any, **kw: Any) -> Any:
         if self._down is not None:
             raise BoardError(self.url, f"{what}: the link is down ({self._down})")
+        if self._pending:
+            self._prefetch_sent = 0
+            self._drain()
         try:
             reply = fn(*args, **kw)
         except self._pdu_error as exc:
@@ -152,10 +218,33 @@ class ModbusRegisters(ImageBackend):
         return [int(b) for b in self._request(what, fn, g.address, count=g.count,
                                               device_id=g.unit).bits[:g.count]]
 
+    def set_tick(self, period_s: float) -> None:
+        super().set_tick(period_s)
+        self._stale_ns = int(1.5 * period_s * 1e9)
+
+    def end_of_tick(self) -> None:
+        """Pipelining: when the map reads the inputs in one request, send the next
+        tick's read now; the next read phase reads the reply that came while the
+        loop slept (not used if sent more than 1.5 ticks before: the loop
+        stalled).  At most one request is ever in flight: many devices, and
+        pymodbus's own server, answer one transaction per connection at a time."""
+        if self.prefetch and self.phased and not self._prefetch_sent and self._down is None \
+                and len(self._input_groups) == 1:
+            for g in self._input_groups:
+                self._send_nowait("read", _what("read", g), self._pdus[g.table](
+                    dev_id=g.unit, address=g.address, count=g.count))
+            self._prefetch_sent = time.monotonic_ns()
+
     def exchange_inputs(self) -> list[int]:
+        sent, self._prefetch_sent = self._prefetch_sent, 0
+        replies = [r for kind, _, r in self._drain() if kind == "read"] if self._pending else []
+        if sent and len(replies) == len(self._input_groups) \
+                and time.monotonic_ns() - sent <= self._stale_ns:
+            groups = [_values(g, r) for g, r in zip(self._input_groups, replies, strict=True)]
+        else:
+            groups = [self._read_group(g) for g in self._input_groups]
         out = [0] * self.input_count
-        for g, slots in zip(self._input_groups, self._slots, strict=True):
-            words = self._read_group(g)
+        for g, words, slots in zip(self._input_groups, groups, self._slots, strict=True):
             if len(words) < g.count:
                 self._fail("read", f"the device answered {len(words)} values, not {g.count}")
             for n, p, off in slots:
@@ -163,12 +252,14 @@ class ModbusRegisters(ImageBackend):
         return out
 
     def _write(self, writes: list[Write]) -> None:
+        """The writes, one request per contiguous group, each waiting for its reply
+        (one transaction in flight at a time)."""
         values = {(b, n, i): v for b, n, i, v in writes}
         for g in self.map.write_groups(values):
             words: list[int] = []
             for p in g.places:
                 words += p.encode(values[p.key])
-            what = f"write unit {g.unit} {g.table} {g.address}..{g.address + g.count - 1}"
+            what = _what("write", g)
             if g.table == HOLDING:
                 self._request(what, self.client.write_registers, g.address, words,
                               device_id=g.unit)
@@ -205,6 +296,29 @@ class ModbusRegisters(ImageBackend):
         return self._down
 
 
+def _what(verb: str, g: Group) -> str:
+    return f"{verb} unit {g.unit} {g.table} {g.address}..{g.address + g.count - 1}"
+
+
+def _values(g: Group, reply: Any) -> list[int]:
+    if g.table in (COIL, DISCRETE):
+        return [int(b) for b in reply.bits[:g.count]]
+    return list(reply.registers)
+
+
+def _pdu_classes() -> dict[str, Any]:
+    from pymodbus.pdu.bit_message import (
+        ReadCoilsRequest,
+        ReadDiscreteInputsRequest,
+    )
+    from pymodbus.pdu.register_message import (
+        ReadHoldingRegistersRequest,
+        ReadInputRegistersRequest,
+    )
+    return {COIL: ReadCoilsRequest, DISCRETE: ReadDiscreteInputsRequest,
+            INPUT_REG: ReadInputRegistersRequest, HOLDING: ReadHoldingRegistersRequest}
+
+
 def _exception_types() -> tuple[type[BaseException], ...]:
     from pymodbus.exceptions import ModbusException
     return (ModbusException,)
@@ -238,13 +352,13 @@ def open_modbus(url: BoardURL, station: str, kinds: dict[str, BoardKind], *,
                 connect_timeout: Any = DEFAULT_CONNECT_TIMEOUT_S,
                 max_age: Any = DEFAULT_MAX_AGE_S, overrun_ticks: Any = DEFAULT_OVERRUN_TICKS,
                 overrun_limit: Any = DEFAULT_OVERRUN_LIMIT, off_on_loss: Any = "0",
-                **options: Any) -> Boards:
+                prefetch: Any = "1", **options: Any) -> Boards:
     """The ``modbus://HOST:PORT?map=FILE`` back end (see the module text)."""
     mine, rest = split_options(kinds, options)
     if rest:
         raise url.error(f"modbus: takes no option {', '.join(sorted(rest))} (it takes map, "
                         "timeout, connect_timeout, max_age, overrun_ticks, overrun_limit, "
-                        "off_on_loss)")
+                        "off_on_loss, prefetch)")
     if not url.host or url.port is None or url.port == 0:
         raise url.error("modbus: needs a host and a port: modbus://HOST:PORT?map=FILE")
     if url.path not in ("", "/"):
@@ -260,11 +374,13 @@ def open_modbus(url: BoardURL, station: str, kinds: dict[str, BoardKind], *,
     age = _number(url, "max_age", max_age, 0, 3600)
     n = _number(url, "overrun_ticks", overrun_ticks, 1, 10_000, whole=True)
     m = _number(url, "overrun_limit", overrun_limit, 1, 10_000, whole=True)
-    if str(off_on_loss) not in ("0", "1", "True", "False"):
-        raise url.error(f"option off_on_loss must be 0 or 1, got {off_on_loss!r}")
+    for name, flag in (("off_on_loss", off_on_loss), ("prefetch", prefetch)):
+        if str(flag) not in ("0", "1", "True", "False"):
+            raise url.error(f"option {name} must be 0 or 1, got {flag!r}")
     client = ModbusRegisters(url.text, url.host, url.port, regmap, kinds, connect_timeout=ct,
                              max_age=age, timeout=t, overrun_ticks=n, overrun_limit=m,
-                             off_on_loss=str(off_on_loss) in ("1", "True"))
+                             off_on_loss=str(off_on_loss) in ("1", "True"),
+                             prefetch=str(prefetch) in ("1", "True"))
     try:
         client.open()
         views = {name: ImageRegisters(client, name) for name in kinds}
