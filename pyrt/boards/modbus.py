@@ -30,15 +30,26 @@ The client.  pymodbus's synchronous client (:class:`pymodbus.client.ModbusTcpCli
 chosen by measurement (``bench/bench_image.py``, ``test_modbus_exchange_cost``:
 one grouped read of the gripper's inputs, input registers 0..6 of unit 1,
 from ``pyrt board-sim gripper --modbus`` in another process on loopback,
-2000 reads each, on this two-core machine): the sync client took p50 80 µs
-(p99 2.7 ms); the async client called from a synchronous caller -- what
-the loop thread is: the coroutine handed to the client's event-loop
-thread, the caller waiting for the result -- took p50 195 µs (p99 3.2 ms),
-and even awaited inside its own event loop p50 122 µs (p99 4.3 ms).  The
-sync client is lower and steadier: it makes no thread hand-off, and the
-control loop is synchronous.  The tails are the server's (its world step
-and asyncio loop share the machine), not the client's.  The groups of a
-phase are sent one after another.
+2000 reads each, two runs on this shared two-core machine):
+
+==========================================  ===============  ===============
+client                                      p50              p99
+==========================================  ===============  ===============
+sync (``ModbusTcpClient``)                  80 / 146 µs      167 / 201 µs
+async, called from a synchronous caller     161 / 200 µs     296 / 610 µs
+async, awaited inside its own event loop    110 / 152 µs     211 / 209 µs
+==========================================  ===============  ===============
+
+The loop thread is a synchronous caller: with the async client it hands
+the coroutine to the client's event-loop thread and waits for the result,
+two thread hand-offs per request, which is what makes it slower and its
+tail wider.  The sync client is lower and steadier.  What remains is
+pymodbus's own cost per request (building and parsing the frame in
+Python, some 40-60 µs of the figures) and the server's (board-sim's
+asyncio loop shares the machine with its world), more than the loopback
+(a bare TCP round trip is some 20-30 µs here).  Pipelining (above) takes
+the read's wait out of the tick: what is left in ``io:read`` is parsing a
+reply that is already there.
 
 pymodbus is an optional extra (``pip install 'pyrt[modbus]'``): it is
 imported when a ``modbus://`` URL is opened, and its absence is a
