@@ -187,3 +187,34 @@ def test_close_is_idempotent_and_leaves_the_link_down(rig):
     assert rig.boards.closed
     if rig.scheme != "sim":
         assert rig.boards.down is not None
+
+
+@pytest.mark.parametrize("scheme", ["tcp", "modbus"])
+def test_a_station_runs_io_read_first_and_io_write_last_and_times_them(scheme):
+    """Station phase order: io:read is the first loop handler, io:write the last (after the
+    mailbox); both are timed as handlers of their own in the loop's statistics."""
+    from pyrt.scheduler import Loop, WallClock
+    from pyrt.station.gripper import build_gripper
+
+    world = GripperWorld(start=-0x100)
+    if scheme == "tcp":
+        server = BoardServer(world, "127.0.0.1", 0, watchdog_s=30.0)
+        server.start()
+        url = server.url
+    else:
+        server = ModbusBoardServer(world, load_map(builtin_map("gripper"), GRIPPER_BOARDS),
+                                   watchdog_s=30.0)
+        server.start()
+        url = f"{server.url}?map=builtin:gripper"
+    station = build_gripper(Loop(WallClock()), boards=url)
+    try:
+        names = station.loop._handler_names
+        assert names[0] == "io:read" and names[-1] == "io:write", names
+        assert names.index("mailbox") < names.index("io:write")
+        station.start()
+        station.runner.call(lambda: None, name="one tick")
+        stats = station.runner.statistics()
+        assert stats.tasks["io:read"].calls >= 1 and stats.tasks["io:write"].calls >= 1
+    finally:
+        station.close()
+        server.close()
