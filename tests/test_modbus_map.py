@@ -13,6 +13,7 @@ from pyrt.boards import open_boards
 from pyrt.boards.modbus import builtin_map
 from pyrt.boards.modbusmap import Place, load_map, parse_map
 from pyrt.boards.registers import OUTPUT, BoardKind, Register
+from pyrt.cli import main
 from pyrt.errors import ConfigError
 from pyrt.sim.world import GRIPPER_BOARDS, MANIPULATOR_BOARDS
 
@@ -143,3 +144,18 @@ def test_a_modbus_url_without_a_map_is_refused():
     """modbus://HOST:PORT alone: ConfigError asking for ?map=FILE."""
     with pytest.raises(ConfigError, match=r"needs a register map"):
         open_boards("modbus://127.0.0.1:1", "gripper", GRIPPER_BOARDS)
+
+
+def test_board_sim_refuses_a_bad_map_in_one_line_and_map_without_modbus(tmp_path, capsys):
+    """pyrt board-sim gripper --modbus with a map that places an unknown register: exit 1 and
+    one line FILE:LINE; --map without --modbus: exit 1 saying they go together."""
+    bad = tmp_path / "cage.toml"
+    text = builtin_map("gripper").read_text().replace("[gripper.pc]", "[gripper.pd]")
+    bad.write_text(text)
+    line = text.splitlines().index("[gripper.pd]          # 8155 PC: bit 0 jog OPEN, "
+                                   "bit 1 jog CLOSE, active low") + 1
+    assert main(["board-sim", "gripper", "--modbus", "127.0.0.1:0", "--map", str(bad)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{bad}:{line}: unknown register gripper.pd" in err[0], err
+    assert main(["board-sim", "gripper", "--map", str(bad)]) == 1
+    assert "--map goes with --modbus" in capsys.readouterr().err

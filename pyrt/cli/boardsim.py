@@ -12,6 +12,13 @@ options.  The first line printed says where (port 0 picks a free port).
 The wire protocol is in the module text of pyrt.boards.wire.  One
 controller at a time.
 
+With ``--modbus HOST:PORT`` the boards are served as a Modbus TCP server
+instead (pymodbus; pip install 'pyrt[modbus]'), their registers placed by
+the map shipped for the station (pyrt/boards/maps/NAME.toml) or by
+``--map FILE``; a controller opens them with the URL board-sim prints,
+``modbus://HOST:PORT?map=builtin:NAME``, and any Modbus tool can read them
+(docs/hardware.md has the gripper's table).
+
 Watchdog: when no register access comes for ``--watchdog`` seconds, or the
 controller's connection closes, the outputs are turned off: every output
 register that declares an off value gets it (gripper: DAC to null 80;
