@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import sys
 from pathlib import Path
 
@@ -159,3 +160,24 @@ def test_board_sim_refuses_a_bad_map_in_one_line_and_map_without_modbus(tmp_path
     assert len(err) == 1 and f"{bad}:{line}: unknown register gripper.pd" in err[0], err
     assert main(["board-sim", "gripper", "--map", str(bad)]) == 1
     assert "--map goes with --modbus" in capsys.readouterr().err
+
+
+@given(st.sets(st.integers(0, 400), min_size=1, max_size=60),
+       st.sampled_from(["holding", "coil"]))
+def test_groups_are_the_fewest_contiguous_runs_within_the_protocol_limits(addresses, table):
+    """Any placement: every place is in exactly one group, each group is one contiguous run
+    of one table within the request limit, and there are as many groups as the runs need."""
+    regs = [Register(f"r{a}", width=1, direction=OUTPUT) for a in sorted(addresses)]
+    kind = BoardKind("io", tuple(regs))
+    text = "".join(f'[b.r{a}]\ntable = "{table}"\naddress = {a}\n' for a in sorted(addresses))
+    m = parse_map(text, {"b": kind})
+    groups = m.write_groups([("b", r.name, 0) for r in regs])
+    placed = [p.address for g in groups for p in g.places]
+    assert sorted(placed) == sorted(addresses)
+    limit = 1968 if table == "coil" else 123
+    for g in groups:
+        assert [p.address for p in g.places] == list(range(g.address, g.address + g.count))
+        assert g.count <= limit and g.table == table
+    ordered = sorted(addresses)
+    runs = 1 + sum(1 for a, b in itertools.pairwise(ordered) if b != a + 1)
+    assert len(groups) == runs  # at most 60 places: no run reaches the limit
