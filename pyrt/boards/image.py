@@ -34,6 +34,8 @@ Phases of a tick (the station attaches them to its loop, :class:`pyrt.station.ba
 Outside the ticks (opening, a tool, a test), and until :meth:`set_tick`
 says that a station runs the phases, a write goes out at once; a read of
 an input outside a tick older than ``max_age`` reads the inputs again.
+Once the phases run, a read between ticks answers from the image of the
+last read phase (the loop keeps it fresh) and makes no I/O.
 On a link that is down every read and write raises BoardError naming the
 URL (but see the reflex).
 
@@ -277,7 +279,8 @@ class ImageBackend:
             raise BoardError(self.url, f"read {board}.{name}[{index}]: the link is down "
                                        f"({self.down})")
         if reg.is_input:
-            if not self.in_tick and time.monotonic_ns() >= self._fresh_until:
+            if not self.in_tick and not self.phased \
+                    and time.monotonic_ns() >= self._fresh_until:
                 self._take_inputs(self.exchange_inputs())
             return self._image[board][name][index]
         key = (board, name, index)

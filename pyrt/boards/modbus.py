@@ -61,6 +61,7 @@ from __future__ import annotations
 import contextlib
 import importlib.resources
 import logging
+import threading
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -134,6 +135,8 @@ class ModbusRegisters(ImageBackend):
         self._rx = b""
         self._prefetch_sent = 0
         self._stale_ns = 0
+        #: One exchange at a time (the loop thread's phases, a write from another thread).
+        self._lock = threading.RLock()
         order = {p.key: n for n, p in enumerate(
             p for b, k in self.kinds.items() for r in k.inputs() for p in
             (regmap.by_key[(b, r.name, i)] for i in range(r.count)))}
@@ -233,7 +236,7 @@ class ModbusRegisters(ImageBackend):
         super().set_tick(period_s)
         self._stale_ns = int(1.5 * period_s * 1e9)
 
-    def end_of_tick(self) -> None:
+    def _end_of_tick_unlocked(self) -> None:
         """Pipelining: when the map reads the inputs in one request, send the next
         tick's read now; the next read phase reads the reply that came while the
         loop slept (not used if sent more than 1.5 ticks before: the loop
@@ -246,7 +249,7 @@ class ModbusRegisters(ImageBackend):
                     dev_id=g.unit, address=g.address, count=g.count))
             self._prefetch_sent = time.monotonic_ns()
 
-    def exchange_inputs(self) -> list[int]:
+    def _exchange_inputs_unlocked(self) -> list[int]:
         sent, self._prefetch_sent = self._prefetch_sent, 0
         replies = [r for kind, _, r in self._drain() if kind == "read"] if self._pending else []
         if sent and len(replies) == len(self._input_groups) \
@@ -278,13 +281,13 @@ class ModbusRegisters(ImageBackend):
                 self._request(what, self.client.write_coils, g.address,
                               [bool(w) for w in words], device_id=g.unit)
 
-    def exchange_outputs(self, writes: list[Write]) -> None:
+    def _exchange_outputs_unlocked(self, writes: list[Write]) -> None:
         self._write(writes)
 
-    def exchange_outputs_now(self, writes: list[Write]) -> None:
+    def _exchange_outputs_now_unlocked(self, writes: list[Write]) -> None:
         self._write(writes)
 
-    def read_outputs(self) -> dict[tuple[str, str, int], int]:
+    def _read_outputs_unlocked(self) -> dict[tuple[str, str, int], int]:
         out: dict[tuple[str, str, int], int] = {}
         for g in self.map.output_groups():
             words = self._read_group(g)
@@ -292,6 +295,28 @@ class ModbusRegisters(ImageBackend):
                 off = p.address - g.address
                 out[p.key] = p.decode(words[off:off + p.size])
         return out
+
+    # -- the contract's exchanges, one at a time ----------------------------------------------
+
+    def end_of_tick(self) -> None:
+        with self._lock:
+            self._end_of_tick_unlocked()
+
+    def exchange_inputs(self) -> list[int]:
+        with self._lock:
+            return self._exchange_inputs_unlocked()
+
+    def exchange_outputs(self, writes: list[Write]) -> None:
+        with self._lock:
+            self._exchange_outputs_unlocked(writes)
+
+    def exchange_outputs_now(self, writes: list[Write]) -> None:
+        with self._lock:
+            self._exchange_outputs_now_unlocked(writes)
+
+    def read_outputs(self) -> dict[tuple[str, str, int], int]:
+        with self._lock:
+            return self._read_outputs_unlocked()
 
     def apply_timeout(self, seconds: float) -> None:
         self.client.comm_params.timeout_connect = seconds
