@@ -24,10 +24,12 @@ from pyrt.cli import (
     forcemap,
     logsort,
     overruns,
+    reference,
     run,
     send,
     top,
 )
+from pyrt.cli._help import Parser
 from pyrt.cli._station import add_station_parser
 from pyrt.console import ReaderGone, silence
 from pyrt.errors import ConfigError, PyrtError
@@ -35,15 +37,15 @@ from pyrt.station.factory import find_station, installed_stations
 
 __all__ = ["build_parser", "entry", "main"]
 
-_COMMANDS = [demo, overruns, logsort, forcemap, send, connect, top, boardsim, run]
+_COMMANDS = [demo, overruns, logsort, forcemap, send, connect, top, boardsim, run, reference]
 #: The tools' names: an installed station cannot take one of them.
 _TOOLS = ("demo", "overruns", "logsort", "forcemap", "send", "connect", "top", "board-sim",
-          "run")
+          "run", "reference")
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``pyrt`` and all its sub-commands."""
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="pyrt",
         description=(
             "pyrt: an embedded-style control runtime. A periodic tick drives an "

@@ -47,6 +47,7 @@ import threading
 from typing import Any, NoReturn
 
 from pyrt.boards.registry import open_boards
+from pyrt.cli._help import Parser
 from pyrt.cli._loopopts import _whole
 from pyrt.errors import ConfigError
 from pyrt.sim.boardsim import DEFAULT_WATCHDOG_S, BoardServer
@@ -169,7 +170,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run, board_sim_parser=p)
 
 
-class _Parser(argparse.ArgumentParser):
+class _Parser(Parser):
     """An argument parser whose errors are one line (ConfigError), not an exit."""
 
     def error(self, message: str) -> NoReturn:

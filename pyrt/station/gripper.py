@@ -248,12 +248,17 @@ class GripperStation(Station):
     def status(self) -> str:
         """One line: position, target, error, state, drive current (and the fault)."""
         ctl = self.controller
-        state = ("fault" if self.fault is not None else ctl.job.name if ctl.busy
+        job = ctl.job
+        state = ("fault" if self.fault is not None else job.name if ctl.busy and job is not None
                  else "moving" if ctl.moving else "idle")
         line = f"{self.where()}, {state}, drive {ctl.dac - 0x80:+d}"
         if self.fault is not None:
             line += f"  FAULT: {self.fault.cause}"
         return line
+
+    def closing_where(self) -> str:
+        """'' : the closing note says where the jaws are."""
+        return ""
 
     def closing_note(self) -> str:
         """Where the jaws were left and the drive current, for the line said on the way out."""
@@ -353,8 +358,9 @@ def add_jaw_arguments(parser: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--start", type=counts_type, metavar="HEX",
-        help="jaw position at power-up, encoder counts from wide open, in hex: F400 (the "
-             "default, two's complement) or -0C00 (the same, negative)",
+        help="jaw position at power-up, encoder counts from wide open, in hex as the "
+             "console shows them (two's complement; a negative number is accepted too: "
+             f"-0C00 is F400); default {DEFAULT_START & 0xFFFF:04X}",
     )
     g.add_argument(
         "--fault", action="append", choices=[f for f in FAULTS if f != "port"],
@@ -431,7 +437,7 @@ is accepted and the simulation options are board-sim's.
         jaws = ("simulated jaws" if station.plant is not None or boards is None
                 else f"boards at {boards.url}" + (f" ({boards.world})" if boards.world else ""))
         return (f"pyrt gripper: 002 parallel-jaw controller, {jaws}; tick {args.tick_us} µs, "
-                f"speed {speed}; type help")
+                f"speed {speed}; {self.next_step(args)}")
 
 
 #: ``pyrt gripper`` (registered in the entry-point group ``pyrt.stations``).
