@@ -306,7 +306,7 @@ def _places(reg: Register, board: str, spec: dict[str, Any], default_unit: int,
     if not reg.is_input and table not in _WRITABLE:
         raise bad(line_of("table"), f"{what} is an output: it needs a writable table "
                                     f"(coil or holding), not {table}")
-    address = spec.get("address")
+    address: Any = spec.get("address")
     if not _is_int(address) or not 0 <= address <= 0xFFFF:
         raise bad(line_of("address"), f"{what}: address must be 0..65535, got {address!r}")
     unit = spec.get("unit", default_unit)
