@@ -278,11 +278,17 @@ class Motor(Component):
     # -- common --------------------------------------------------------------------
 
     def stop(self) -> None:
-        """Stop now: channel stopped, windings off, state OFF."""
-        self._halt()
-        self.state = OFF
-        self.desired_velocity = 0.0
-        self.desired_steps = self.steps_taken
+        """Stop now: channel stopped, windings off, state OFF.  The motor's own
+        state is cleared whatever the board writes do (a dead link raises
+        BoardError after it)."""
+        try:
+            self._halt()
+        finally:
+            self._period = 0
+            self.velocity = 0.0
+            self.state = OFF
+            self.desired_velocity = 0.0
+            self.desired_steps = self.steps_taken
 
     @property
     def speed_limits(self) -> Limits:

@@ -526,16 +526,21 @@ class GripperController(Component, CommandLetters):
 
     def reflex(self) -> None:
         """The reflex action: null the current, clear drive and jog, abandon
-        the foreground job.  Runs in the tick that found the fault (or the stop)."""
-        self.drive(DAC_NULL)
-        self.supervisor.disarm()
-        ram = self.ram
-        if ram[FLAGS] & (_MASK_DRVON | _MASK_DOJOG):
-            self.last_stop = "stopped by the reflex (move abandoned)"
-        ram[FLAGS] &= ~(_MASK_DRVON | _MASK_DOJOG) & 0xFF
-        if self.job is not None:
-            self.job.cancel()
-            self.job = None
+        the foreground job.  Runs in the tick that found the fault (or the stop).
+        The controller's own state is cleared whatever the DAC write does (a
+        dead link raises BoardError after it)."""
+        try:
+            self.drive(DAC_NULL)
+        finally:
+            self._dac = DAC_NULL
+            self.supervisor.disarm()
+            ram = self.ram
+            if ram[FLAGS] & (_MASK_DRVON | _MASK_DOJOG):
+                self.last_stop = "stopped by the reflex (move abandoned)"
+            ram[FLAGS] &= ~(_MASK_DRVON | _MASK_DOJOG) & 0xFF
+            if self.job is not None:
+                self.job.cancel()
+                self.job = None
 
     def watchdog(self, now_ns: int) -> None:
         """Every tick: trip the robot when current has been applied longer

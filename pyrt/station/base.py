@@ -17,10 +17,23 @@ Both robots are a :class:`Station` plus a configuration
 * derives everything that lists signals or commands from the tree:
   :meth:`components`, :meth:`signals`, :meth:`resolve_signal`;
 * owns the robot's **boards** (:func:`pyrt.boards.open_boards`, chosen by
-  URL) when a configuration gives them to :meth:`attach_boards`: their
-  ``poll`` runs first in every tick, a :class:`~pyrt.errors.BoardError`
-  there trips the robot (the message names the back end's URL), and
-  :meth:`close` closes them last;
+  URL) when a configuration gives them to :meth:`attach_boards`, and runs
+  every tick in three phases (a process image, :mod:`pyrt.boards.image`):
+
+  1. ``io:read`` (the first loop handler): every input of every board read
+     into the image, one exchange per back end;
+  2. the tasks: the robot's handlers, its ready queues and motions, the
+     scope, the mailbox (consoles, server): reads and writes of board
+     registers go to the image and never block on I/O;
+  3. ``io:write`` (the last loop handler): the outputs the tick changed
+     written, one exchange per back end.
+
+  The reflex (:meth:`reflex`, run by :meth:`trip` and :meth:`stop`) writes
+  its outputs at once, not at the end of the tick.  Each phase is a named
+  loop handler, timed on its own in ``stats``.  A
+  :class:`~pyrt.errors.BoardError` in a phase trips the robot (the message
+  names the back end's URL); :meth:`close` closes the boards last.  The
+  in-process ``sim:`` boards have no I/O: they attach no phase;
 * starts and stops in one order (:meth:`start`, :meth:`close`).
 """
 
@@ -118,9 +131,11 @@ class Station:
     # -- assembly -------------------------------------------------------------------
 
     def attach_boards(self, boards: Boards) -> None:
-        """Own ``boards``: attach their per-tick poll to the loop now (call it
-        before the robot's handlers: the inputs of a tick come in first) if
-        the back end polls, and close them in :meth:`close`."""
+        """Own ``boards``: attach their read phase (``io:read``) to the loop now
+        (call it before the robot's handlers: the inputs of a tick come in
+        first) if the back end polls; :meth:`adopt` attaches the write phase
+        (``io:write``) last.  The back end derives its timeouts from the
+        loop's tick.  :meth:`close` closes them."""
         if not boards.in_process:
             clock = self.loop.clock
             speed = getattr(clock, "speed", 1.0)
@@ -130,12 +145,14 @@ class Station:
                                   f"in another process at real time: {what} is refused; run "
                                   "at real time (--speed 1)")
         self.boards = boards
+        boards.set_tick(self.loop.period_ns / 1e9)
         if boards.polls:
-            self.loop.attach(self._poll_boards, name="boards")
+            self.loop.attach(self._poll_boards, name="io:read")
 
     def _poll_boards(self, now_ns: int) -> None:
-        """Loop handler: the boards' inputs for this tick.  A BoardError trips
-        the robot (once per fault: after ``ack`` the next failure trips again)."""
+        """Loop handler ``io:read``: the boards' inputs for this tick.  A
+        BoardError trips the robot (once per fault: after ``ack`` the next
+        failure trips again)."""
         boards = self.boards
         assert boards is not None
         if self._fault is not None and boards.down is not None:
@@ -143,10 +160,24 @@ class Station:
         try:
             boards.poll(now_ns)
         except BoardError as exc:
-            if self.board_error is None:
-                self.board_error = exc
-            if self._fault is None:
-                self.trip(str(exc), source="boards")
+            self._board_failed(exc)
+
+    def _flush_boards(self, now_ns: int) -> None:
+        """Loop handler ``io:write`` (the last): the outputs this tick changed."""
+        boards = self.boards
+        assert boards is not None
+        if self._fault is not None and boards.down is not None:
+            return
+        try:
+            boards.flush(now_ns)
+        except BoardError as exc:
+            self._board_failed(exc)
+
+    def _board_failed(self, exc: BoardError) -> None:
+        if self.board_error is None:
+            self.board_error = exc
+        if self._fault is None:
+            self.trip(str(exc), source="boards")
 
     def adopt(self, root: Component, *, queues: Iterable[ReadyQueue] = (),
               executors: Iterable[MotionExecutor] = (),
@@ -173,6 +204,8 @@ class Station:
         self.loop.trip_handlers.append(self.trip)
         self.loop.attach(self.scope.sample, name="scope")
         self.runner = Runner(self.loop, motion_queue=self.motion)
+        if self.boards is not None and self.boards.flushes:
+            self.loop.attach(self._flush_boards, name="io:write")
         return self.runner
 
     # -- the tree -----------------------------------------------------------------
@@ -373,6 +406,13 @@ class Station:
                 errors.append(f"{c.name}: {exc}")
             except Exception as exc:
                 errors.append(f"{c.name}: {exc!r}")
+        if self.boards is not None:
+            try:  # the reflex's outputs go out now, not at the end of the tick
+                self.boards.write_now()
+            except BoardError as exc:
+                if self.board_error is None:
+                    self.board_error = exc
+                errors.append(f"boards: {exc}")
         for ex in self.executors:
             with contextlib.suppress(Exception):
                 ex.abort(why)

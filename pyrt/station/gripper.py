@@ -6,14 +6,17 @@ The boards come from a back end chosen by URL (:func:`pyrt.boards.open_boards`):
 (:class:`~pyrt.sim.gripper.JawPlant`) behind it; ``tcp://HOST:PORT`` reaches
 the cage of a ``pyrt board-sim gripper`` in another process, whose jaws move
 at real time there (so the loop must run at real time, and the jaws'
-settings are board-sim's options).
+settings are board-sim's options); ``modbus://HOST:PORT?map=builtin:gripper``
+the same over Modbus TCP (``pyrt board-sim gripper --modbus``, or a real
+I/O module with a map of its own: docs/hardware.md).
 
-Per tick: the boards' inputs come in (a back end that polls: one ``SNAP``
-over tcp, raising the encoder interrupts that arrived; a BoardError there
-faults the robot), or the jaws move (in-process physics, dt = now - last);
-the clock interrupt walks the ready queue, the stall watchdog looks, the
-motion executor starts or follows a queued ``P`` move, the scope samples,
-and the mailbox is served.  A fault's reflex (the station's) nulls the
+Per tick: the boards' inputs come into the process image (``io:read``, a
+back end with a link: one exchange, raising the encoder interrupts that
+arrived; a BoardError there faults the robot), or the jaws move (in-process
+physics, dt = now - last); the clock interrupt walks the ready queue, the
+stall watchdog looks, the motion executor starts or follows a queued ``P``
+move, the scope samples, the mailbox is served, and the outputs the tick
+changed are written (``io:write``).  A fault's reflex (the station's) nulls the
 drive, ends the current motion and drops every queued one, in the same tick.
 
 The component tree: ``gripper`` (the controller: RAM signals, ``CMD:``
@@ -432,7 +435,7 @@ is accepted and the simulation options are board-sim's.
                  else f"{args.speed:g}x real time")
         boards = station.boards
         jaws = ("simulated jaws" if station.plant is not None or boards is None
-                else f"boards at {boards.url} ({boards.world})")
+                else f"boards at {boards.url}" + (f" ({boards.world})" if boards.world else ""))
         return (f"pyrt gripper: 002 parallel-jaw controller, {jaws}; tick {args.tick_us} µs, "
                 f"speed {speed}; {self.next_step(args)}")
 

@@ -345,7 +345,7 @@ class ManipulatorStation(Station):
         refuse_sim_options(boards, ["sensor imperfections (--ideal-sensors)"]
                            if imperfections is not None else [])
         want = pa_rec.name.lower()
-        if not boards.in_process and boards.world.lower() != want:
+        if not boards.in_process and boards.world and boards.world.lower() != want:
             raise ConfigError(f"board URL {boards.url!r} serves the {boards.world!r} world, not "
                               f"this station's {want!r}: start 'pyrt board-sim {want}' with "
                               f"the same --db")
