@@ -336,6 +336,13 @@ class TcpLink:
             try:
                 self._sock.settimeout(0.05)
                 self._sock.sendall(b"QUIT\n")
+                # Read what is still owed (a prefetched SNAP's reply) up to board-sim's
+                # close: a socket closed with unread data resets the link instead of
+                # ending it, and board-sim would see a lost controller, not a QUIT.
+                self._sock.shutdown(socket.SHUT_WR)
+                deadline = time.monotonic() + 0.2
+                while time.monotonic() < deadline and self._sock.recv(65536):
+                    pass
             except OSError:
                 pass
             self._sock.close()
