@@ -56,13 +56,12 @@ from pyrt.station.factory import find_station, installed_stations, load_factory
 
 __all__ = ["add_parser", "find_world", "run", "worlds"]
 
-def _world_factory(name: str, factory: object) -> WorldFactory:
-    """``factory`` if it gives a world (board_kinds and world); ConfigError otherwise."""
-    kinds = getattr(factory, "board_kinds", None)
-    if not callable(kinds) or not callable(getattr(factory, "world", None)) or not kinds():
+def _world_factory(name: str, factory: WorldFactory) -> WorldFactory:
+    """``factory`` if it gives a world (it declares boards); ConfigError otherwise."""
+    if not factory.board_kinds():
         raise ConfigError(f"station {name!r} gives no world for board-sim (its factory "
                           "declares no boards: see pyrt.sim.world.WorldFactory)")
-    return factory  # type: ignore[return-value]
+    return factory
 
 
 def _factories() -> dict[str, WorldFactory]:
@@ -81,7 +80,7 @@ def worlds() -> list[str]:
     names those worlds give (their ``world_aliases``)."""
     names: list[str] = []
     for name, factory in _factories().items():
-        names += [name, *getattr(factory, "world_aliases", {})]
+        names += [name, *factory.world_aliases]
     return names
 
 
@@ -95,7 +94,7 @@ def find_world(name: str) -> tuple[WorldFactory, dict[str, Any]]:
     if key in installed_stations():
         return _world_factory(key, find_station(key)), {}
     for factory in _factories().values():
-        preset = getattr(factory, "world_aliases", {}).get(key)
+        preset = factory.world_aliases.get(key)
         if preset is not None:
             return factory, dict(preset)
     raise ConfigError(f"no station named {name[:40]!r} gives a world to serve; stations: "
