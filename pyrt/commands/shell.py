@@ -1,15 +1,15 @@
-"""The base of pyrt's command interpreters (CPython ``cmd.Cmd`` style).
+"""The base of pyrt's command interpreter: output and the one way a line fails.
 
-One ``do_<name>(arg)`` method per command, whose docstring is its help; all
-output goes through ``self.stdout``; the interpreter never reads input
+All output goes through ``self.stdout``; the interpreter never reads input
 itself, so the same object serves a terminal, a piped script, a test with
 StringIO or a network connection.  :meth:`CommandShell.onecmd` runs one
-line and returns True when the session should end.
+line and returns True when the session should end; :meth:`guarded` turns
+every failure into one line.  What a line means comes from the command
+records (:class:`~pyrt.commands.robot.RobotShell`), not from method names.
 """
 
 from __future__ import annotations
 
-import inspect
 import sys
 import traceback
 from collections.abc import Callable
@@ -25,7 +25,7 @@ MAX_SLEEP_S = 3600.0
 
 
 class CommandShell:
-    """Dispatch lines to ``do_<name>`` handlers found on ``self`` (case-insensitive)."""
+    """Output, errors and the guard around each line (see the module text)."""
 
     #: The prompt shown before each line.
     prompt = "> "
@@ -59,12 +59,6 @@ class CommandShell:
 
     # -- dispatch ---------------------------------------------------------------
 
-    def handler(self, name: str, owner: object | None = None):
-        """The bound ``do_<name>`` of ``owner`` (default ``self``), or None."""
-        if not name.isidentifier():
-            return None
-        return getattr(owner if owner is not None else self, "do_" + name.lower(), None)
-
     def fault(self, exc: FaultError) -> None:
         """Report a fault raised by the loop at this command (robots say more)."""
         self.say(f"FAULT: {exc.fault.cause}; give 'ack' to acknowledge")
@@ -89,33 +83,9 @@ class CommandShell:
         return False
 
     def onecmd(self, line: str) -> bool:
-        """Run one line; return True when the session should end."""
-        line = line.strip()
-        if not line:
-            return False
-        name, _, arg = line.partition(" ")
-        fn = self.handler(name)
-        if fn is None:
-            self.error(f"unknown command {name!r} (type help)")
-            return False
-        return bool(fn(arg.strip()))
-
-    def commands(self, owner: object | None = None) -> list[tuple[str, str]]:
-        """``(name, first line of help)`` of every ``do_`` handler of ``owner``."""
-        owner = owner if owner is not None else self
-        out = []
-        for attr in sorted(dir(owner)):
-            if attr.startswith("do_"):
-                doc = inspect.getdoc(getattr(owner, attr)) or ""
-                out.append((attr[3:], doc.splitlines()[0] if doc else ""))
-        return out
-
-    def help_text(self, name: str, owner: object | None = None) -> str | None:
-        """The full help of command ``name`` on ``owner``, or None if there is none."""
-        fn = self.handler(name, owner)
-        if fn is None:
-            return None
-        return inspect.getdoc(fn) or ""
+        """Run one line; return True when the session should end (the robot's
+        shell says how: :class:`~pyrt.commands.robot.RobotShell`)."""
+        raise NotImplementedError
 
 
 def parse_number(text: str, what: str) -> float:
