@@ -123,12 +123,12 @@ class GcWatch:
     def begin(self, control: bool) -> None:
         """A run starts: count collections; with ``control`` (real time), freeze
         the start-up heap and turn automatic collection off."""
+        if control and not self._controlling:
+            _take_control()  # its collection of start-up's garbage is not counted
+            self._controlling = True
         if not self._installed:
             gc.callbacks.append(self._callback)
             self._installed = True
-        if control and not self._controlling:
-            _take_control()
-            self._controlling = True
 
     def end(self) -> None:
         """The run ends: automatic collection as it was, no more counting."""
