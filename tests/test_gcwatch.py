@@ -124,6 +124,7 @@ def test_an_allocation_heavy_task_at_real_time_collects_in_idle_time():
     assert "gc idle" in format_statistics(st)
 
 
+@pytest.mark.wallclock
 def test_gc_control_off_leaves_the_collector_alone():
     """gc_control=False on a wall clock: automatic collection stays as it was."""
     seen = []

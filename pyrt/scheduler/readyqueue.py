@@ -152,6 +152,10 @@ class ReadyQueue:
     (1..2**32 - 1 checks; 0 is refused), and with ``capacity=None`` the queue
     has one slot per registered routine, growing as routines are registered
     (both need a private image).  :meth:`general` makes such a queue.
+
+    ``native`` (default True): the check and the dispatch run in C
+    (csrc/ext/dispatch.c); False runs them in Python (:meth:`_check_py`),
+    with the same semantics and statistics, slower.
     """
 
     def __init__(
