@@ -33,7 +33,6 @@ from __future__ import annotations
 import contextlib
 import gc
 import threading
-from collections import deque
 from collections.abc import Callable
 from time import perf_counter_ns
 from typing import Any
@@ -95,11 +94,14 @@ class GcWatch:
         self.acc = Accumulator(GC_ENTRY)
         #: Collections run by the loop in the idle part of a tick.
         self.idle_acc = Accumulator(GC_IDLE_ENTRY)
-        self.recent: deque[tuple[int, int]] = deque(maxlen=self.RECENT)
+        # (tick, pause) of the latest collections: the callback appends to
+        # _new (no lock: a collection can start inside any allocation, this
+        # object's own included); the loop thread moves them to _recent
+        self._new: list[tuple[int, int]] = []
+        self._recent: list[tuple[int, int]] = []
         self._idle = False
         self._t0 = 0
         self._controlling = False
-        self._lock = threading.Lock()
         self._installed = False
         #: Allocations (gc.get_count()[0]) at which an idle collection is due.
         self.threshold = max(1, gc.get_threshold()[0])
@@ -111,12 +113,14 @@ class GcWatch:
             self._t0 = self._timer()
             return
         d = self._timer() - self._t0
-        with self._lock:
-            if self._idle:
-                self.idle_acc.add(d)
-            else:
-                self.acc.add(d)
-                self.recent.append((self._tick(), d))
+        if self._idle:
+            self.idle_acc.add(d)
+        else:
+            self.acc.add(d)
+            new = self._new
+            new.append((self._tick(), d))
+            if len(new) > 2 * self.RECENT:
+                del new[: self.RECENT]
 
     # -- a run -----------------------------------------------------------------
 
@@ -169,9 +173,11 @@ class GcWatch:
     # -- attribution -----------------------------------------------------------
 
     def pauses_in(self, tick: int) -> list[int]:
-        """The pauses (ns) of the collections counted in tick ``tick``."""
-        with self._lock:
-            return [d for t, d in self.recent if t == tick]
+        """The pauses (ns) of the collections counted in tick ``tick`` (the loop thread)."""
+        new, self._new = self._new, []
+        if new:
+            self._recent = (self._recent + new)[-self.RECENT:]
+        return [d for t, d in self._recent if t == tick]
 
     def count_overrun(self) -> None:
         """Attribute one overrun to the collector."""
@@ -179,10 +185,10 @@ class GcWatch:
 
     def reset(self) -> None:
         """Forget what was counted."""
-        with self._lock:
-            self.acc.reset()
-            self.idle_acc.reset()
-            self.recent.clear()
+        self.acc.reset()
+        self.idle_acc.reset()
+        self._new = []
+        self._recent = []
 
 
 def attribute(tasks: list[tuple[str, int]], pauses: list[int]) -> list[tuple[str, int]]:

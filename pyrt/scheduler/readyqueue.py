@@ -62,8 +62,12 @@ __all__ = ["ByteImage", "ByteRef", "ReadyQueue", "Routine"]
 #: Address of the built-in routine that ends a :meth:`ReadyQueue.wait`.
 WAIT_ADDRESS = 0x0001
 
-#: Timing samples kept before they are folded into the accumulators.
+#: Timing samples kept before they are folded into the accumulators: at
+#: least this many, and this many per routine (a fold costs a few µs per
+#: routine, so a queue of many routines folds as rarely per routine as a
+#: small one and the cost per dispatch stays flat).
 _FOLD_AT = 2048
+_FOLD_PER_ROUTINE = 256
 
 #: The largest schedule value of a queue with 32-bit schedule variables.
 WIDE_MAX = 0xFFFFFFFF
@@ -344,6 +348,7 @@ class ReadyQueue:
             self._grow()
         routine = Routine(address, name, fn)
         self._routines[address] = routine
+        self._fold_at = max(_FOLD_AT, _FOLD_PER_ROUTINE * len(self._routines))
         self._dispatch[address] = (fn, None, 0)
         self._by_name[key] = routine
         if self._core is not None:
@@ -657,7 +662,7 @@ class ReadyQueue:
         except Exception as exc:
             self._failed(core.last, exc)
             return
-        if pending >= _FOLD_AT:
+        if pending >= self._fold_at:
             self.fold_timing()
 
     def _failed(self, a: int, exc: Exception) -> None:
@@ -682,7 +687,7 @@ class ReadyQueue:
         a = 0
         try:
             if timer is not None:
-                if self._pending >= _FOLD_AT:
+                if self._pending >= self._fold_at:
                     self.fold_timing()
                 samples = self._samples or {}
                 if self._track:
