@@ -136,7 +136,7 @@ def test_control_poll_kernels(benchmark, tmp_path, name):
     runner.call(pa.to, MOVES[name])
     runner.sleep(20.0)
     ctl = pa._ctl
-    tens, raw = list(pa.tensions), list(pa._encoder_lengths)
+    tens, raw = list(pa.tensions), list(pa.estimator.encoder_lengths)
     hare, vel = pa.hare_position, [a.motor.velocity for a in pa.axes]
     lengths, el, et, want, free = ([0.0] * pa.n for _ in range(5))
 

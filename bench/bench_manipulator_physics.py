@@ -101,7 +101,7 @@ def test_prototype_realtime_ratio(benchmark, moving):
     def run():
         if moving:
             axes[0].stop()
-            axes[0].down(30)
+            axes[0].cmd_down(30)
         loop.run(ticks)
 
     benchmark.pedantic(run, rounds=3, iterations=1, warmup_rounds=1)

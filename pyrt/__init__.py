@@ -34,8 +34,19 @@ from pyrt.errors import (
 if TYPE_CHECKING:
     from pyrt.boards import BoardKind, Boards, Register, RegisterBoard, open_boards
     from pyrt.cli._station import run_station
-    from pyrt.component import Arg, Command, Component, Signal, Switch, command, finite, word
-    from pyrt.scheduler import Job, Loop, ReadyQueue, SimClock, Task, WallClock
+    from pyrt.component import (
+        Arg,
+        Command,
+        Component,
+        Limits,
+        Signal,
+        Switch,
+        command,
+        finite,
+        word,
+    )
+    from pyrt.robots.trajectory import JointRobot, JointTrajectory
+    from pyrt.scheduler import Job, Loop, ReadyQueue, SimClock, Task, WallClock, install
     from pyrt.scheduler.motion import MotionExecutor, MotionRecord, MotionType
     from pyrt.scope import Source
     from pyrt.sim.world import World, WorldFactory
@@ -50,6 +61,9 @@ _LAZY = {
     "Command": "pyrt.component",
     "Component": "pyrt.component",
     "Job": "pyrt.scheduler",
+    "JointRobot": "pyrt.robots.trajectory",
+    "JointTrajectory": "pyrt.robots.trajectory",
+    "Limits": "pyrt.component",
     "Loop": "pyrt.scheduler",
     "MotionExecutor": "pyrt.scheduler.motion",
     "MotionRecord": "pyrt.scheduler.motion",
@@ -69,6 +83,7 @@ _LAZY = {
     "WorldFactory": "pyrt.sim.world",
     "command": "pyrt.component",
     "finite": "pyrt.component",
+    "install": "pyrt.scheduler",
     "open_boards": "pyrt.boards",
     "run_station": "pyrt.cli._station",
     "word": "pyrt.component",
@@ -100,6 +115,9 @@ __all__ = [
     "Fault",
     "FaultError",
     "Job",
+    "JointRobot",
+    "JointTrajectory",
+    "Limits",
     "Loop",
     "MailboxTimeout",
     "MotionExecutor",
@@ -125,6 +143,7 @@ __all__ = [
     "__version__",
     "command",
     "finite",
+    "install",
     "open_boards",
     "run_station",
     "word",

@@ -36,25 +36,28 @@ from __future__ import annotations
 
 import inspect
 import math
+import re
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, TypeVar
 
 from pyrt.errors import CommandError
 from pyrt.scheduler.task import Task
 from pyrt.scope import Source
-from pyrt.units import UnitError
-from pyrt.units import parse_number as _parse_number
+from pyrt.units import UnitError, parse_value, value_grammar
 
 __all__ = [
     "Arg",
     "Command",
     "Component",
     "Limits",
+    "Param",
     "Signal",
     "Switch",
     "command",
     "finite",
+    "first_paragraph",
+    "plain_text",
     "records_of",
     "reply_lines",
     "walk",
@@ -125,6 +128,8 @@ class Signal:
     value for ``status`` (a format spec, as in ``format(value, fmt)``).
     ``limits`` is its display range and alarm levels (:class:`Limits`), or
     None: EPICS serves them as the PV's, ``status OBJECT`` shows them.
+    ``show`` is how a console shows a value in its robot's radix (the
+    gripper's counts: ``E47A (26.2 mm)``), or None: ``fmt`` and the units.
     """
 
     name: str
@@ -134,6 +139,7 @@ class Signal:
     fmt: str = ".4g"
     source: Source | None = None
     limits: Limits | None = None
+    show: Callable[[Any], str] | None = None
 
     @classmethod
     def attr(cls, name: str, units: str, obj: Any, attr: str, doc: str = "",
@@ -158,12 +164,114 @@ class Signal:
         return src.described(self.units, self.fmt)
 
     def format(self, value: Any) -> str:
-        """``value`` as ``status`` shows it, with its units."""
+        """``value`` as ``status`` shows it, with its units (or as :attr:`show` says)."""
+        if self.show is not None:
+            try:
+                return self.show(value)
+            except (TypeError, ValueError):
+                pass
         try:
             text = format(value, self.fmt)
         except (TypeError, ValueError):
             text = str(value)
         return f"{text} {self.units}"
+
+
+# -- parameters ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Param:
+    """A tunable value read and changed by name at run time (HAL's parameters,
+    halcmd's ``getp``/``setp``; the consoles' ``get``/``set``).
+
+    ``read`` returns the value; ``write(value)`` changes it (loop thread; it may
+    check more than the range and raise CommandError, changing nothing) and may
+    return a line to say; None: read only.  ``lo``/``hi`` is the range in
+    ``units`` (checked before ``write`` runs); ``integer`` values are whole,
+    ``hex`` ones (the gripper's RAM bytes) are read and shown in hexadecimal.
+    ``written_back``: the value is written to the station's database (it
+    survives a restart); ``safe_while_moving``: it may change while a move
+    runs (else ``set`` is refused then).
+    """
+
+    name: str
+    units: str
+    read: Callable[[], Any]
+    write: Callable[[Any], Any] | None = None
+    lo: float | None = None
+    hi: float | None = None
+    doc: str = ""
+    written_back: bool = False
+    safe_while_moving: bool = False
+    integer: bool = False
+    hex: bool = False
+
+    @property
+    def writable(self) -> bool:
+        """Whether ``set`` may change it."""
+        return self.write is not None
+
+    def text(self, value: Any) -> str:
+        """``value`` as ``get`` shows it (hex bytes as ``0C``)."""
+        if self.hex:
+            return f"{int(value):02X}"
+        if self.integer:
+            return f"{int(value):d}"
+        try:
+            return f"{float(value):.6g}"
+        except (TypeError, ValueError):
+            return str(value)
+
+    @property
+    def range_text(self) -> str:
+        """``0..1000 N`` (hex: ``01..7F``); '' without a range."""
+        if self.lo is None and self.hi is None:
+            return ""
+        u = f" {self.units}" if self.units else ""
+        lo = "" if self.lo is None else self.text(self.lo)
+        hi = "" if self.hi is None else self.text(self.hi)
+        if self.lo is not None and self.hi is not None:
+            return f"{lo}..{hi}{u}"
+        return f">= {lo}{u}" if self.lo is not None else f"<= {hi}{u}"
+
+    def parse(self, who: str, text: str) -> float | int:
+        """``text`` as a value of this parameter, checked against its range;
+        CommandError naming the range if not (nothing changed)."""
+        t = text.strip()
+        rng = f" ({self.range_text})" if self.range_text else ""
+        try:
+            if self.hex:
+                value: float | int = int(t, 16)
+            else:
+                value = parse_value(t, self.units)  # the one number-and-unit grammar
+                if self.integer:
+                    if not value.is_integer():
+                        raise ValueError(t)
+                    value = int(value)
+        except (UnitError, ValueError):
+            kind = "a hexadecimal number" if self.hex else (
+                "a whole number" if self.integer else "a number")
+            raise CommandError(f"{who}: {t[:40]!r} is not {kind}{rng}; nothing changed") from None
+        if not math.isfinite(value):
+            raise CommandError(f"{who}: {t[:40]!r} is not a finite number{rng}; nothing changed")
+        if (self.lo is not None and value < self.lo) or (self.hi is not None and value > self.hi):
+            raise CommandError(f"{who}: {self.text(value)} is out of range{rng}; nothing changed")
+        return value
+
+    def describe(self, owner: str, value: Any) -> str:
+        """One line of ``get``: name, value, units, range, whether it is written
+        back and when it may change."""
+        u = f" {self.units}" if self.units else ""
+        facts = [f"range {self.range_text}"] if self.range_text else []
+        if not self.writable:
+            facts.append("read only")
+        else:
+            facts.append("written back" if self.written_back else "not written back")
+            if not self.safe_while_moving:
+                facts.append("not while moving")
+        doc = f": {self.doc}" if self.doc else ""
+        return f"{owner}.{self.name} = {self.text(value)}{u} ({'; '.join(facts)}){doc}"
 
 
 # -- command records ----------------------------------------------------------------
@@ -227,31 +335,39 @@ class Arg:
 
     def check(self, who: str, value: Any) -> Any:
         """``value`` if it is a finite number inside the range (CommandError naming
-        the range if not); values of arguments without a range pass unchanged."""
+        the range if not; a text is read by the one number grammar,
+        :func:`pyrt.units.parse_value`, in :attr:`units`); values of arguments
+        without a range pass unchanged."""
         if not self.ranged:
             return value
         try:
-            v = float(value)
+            if isinstance(value, str):
+                v = parse_value(value, self.units)
+            elif isinstance(value, bool):
+                raise TypeError(value)
+            else:
+                v = float(value)
         except (TypeError, ValueError):
-            raise CommandError(f"{who}: {self.name} must be a number "
+            raise CommandError(f"{who}: {self.name} must be {value_grammar(self.units)} "
                                f"({self.range_text}), got {str(value)[:40]!r}") from None
         if (not math.isfinite(v) or (self.lo is not None and v < self.lo)
                 or (self.hi is not None and v > self.hi)):
             raise CommandError(f"{who}: {self.name} {v:g} is out of range: {self.range_text}; "
                                "nothing changed")
-        return value
+        return v if isinstance(value, str) else value
 
 
-def finite(what: str, lo: float = -math.inf, hi: float = math.inf) -> Callable[[str], float]:
-    """A parser of a finite number in ``lo..hi`` (CommandError naming ``what``)."""
+def finite(what: str, lo: float = -math.inf, hi: float = math.inf,
+           units: str = "") -> Callable[[str], float]:
+    """A parser of a finite number in ``lo..hi`` ``units``, written as the one
+    number grammar takes it (:func:`pyrt.units.parse_value`: a unit of the same
+    quantity is converted); CommandError naming ``what`` and what it takes."""
 
     def parse(text: str) -> float:
         try:
-            value = float(text)
-        except ValueError:
-            raise CommandError(f"{what} {text[:40]!r} is not a number") from None
-        if not math.isfinite(value):
-            raise CommandError(f"{what} {text[:40]!r} is not a finite number")
+            value = parse_value(text, units)
+        except UnitError as exc:
+            raise CommandError(f"{what} {text[:40]!r} is not a number: {exc}") from None
         if not lo <= value <= hi:
             raise CommandError(f"{what} {value:g} is out of range ({lo:g}..{hi:g})")
         return value
@@ -293,6 +409,9 @@ class Command:
     reads_only_subcommands: frozenset[str] = frozenset()
     #: Other names it answers to (000's long names beside the short ones).
     aliases: tuple[str, ...] = ()
+    #: Ranges shown in help beside :attr:`ranges` that the grammar does not check
+    #: (an argument named like a signal of its owner: that signal's display range).
+    shown_ranges: tuple[str, ...] = ()
 
     def answers_to(self, name: str) -> bool:
         """True when ``name`` (any case) is this command's name or an alias."""
@@ -309,9 +428,10 @@ class Command:
 
     @property
     def summary(self) -> str:
-        """The first line of the help, with the ranges of the numeric arguments."""
-        line = self.help.splitlines()[0] if self.help else self.name
-        ranges = self.ranges
+        """The help's first paragraph as one line (a sentence is never cut at a
+        line end), with the ranges of the numeric arguments."""
+        line = first_paragraph(self.help) or self.name
+        ranges = [*self.ranges, *self.shown_ranges]
         return f"{line.rstrip('.')} [{'; '.join(ranges)}]" if ranges else line
 
     @property
@@ -365,6 +485,27 @@ class Command:
         return reply_lines(self.reply(result) if self.reply is not None else result)
 
 
+_ROLE = re.compile(r":[a-z]+(?::[a-z]+)?:`~?([^`]+)`")
+
+
+def plain_text(text: str) -> str:
+    """reST markup as a console or ``--help`` shows it: no double backticks,
+    roles (``:class:`~pyrt.X```) as their target's name."""
+    return _ROLE.sub(lambda m: m.group(1).rsplit(".", 1)[-1] if m.group(0).count("~")
+                     else m.group(1), text).replace("``", "")
+
+
+def first_paragraph(text: str) -> str:
+    """The first paragraph of ``text`` (up to its first blank line) as one line,
+    without reST markup; the range line records add ("Range: ...") is not part of it."""
+    lines: list[str] = []
+    for line in text.strip().splitlines():
+        if not line.strip() or line.startswith("Range: "):
+            break
+        lines.append(line.strip())
+    return plain_text(" ".join(lines))
+
+
 def reply_lines(value: Any) -> list[str]:
     """A reply as lines: None is none, a string its lines, strings as they
     are, anything else its ``str``."""
@@ -381,12 +522,7 @@ def _parse_one(who: str, arg: Arg, text: str) -> Any:
     if arg.choices and text.lower() not in arg.choices:
         raise CommandError(f"{who}: {arg.name} must be {' or '.join(arg.choices)}, "
                            f"got {text[:40]!r}")
-    if arg.ranged and arg.parse is str:  # a number checked here, handed on as text
-        try:
-            _parse_number(text)
-        except (UnitError, ValueError):
-            raise CommandError(f"{who}: {arg.name} must be a number ({arg.range_text}), "
-                               f"got {text[:40]!r}") from None
+    if arg.ranged and arg.parse is str:  # a number in arg.units, converted here
         return arg.check(who, text)
     try:
         value = arg.parse(text)
@@ -399,6 +535,8 @@ def _parse_one(who: str, arg: Arg, text: str) -> Any:
 
 
 _MARK = "__pyrt_command__"
+#: A command handler, kept with its own signature by :func:`command`.
+_F = TypeVar("_F", bound=Callable[..., Any])
 
 
 def command(
@@ -412,14 +550,14 @@ def command(
     console: bool = False,
     reads_only_subcommands: Sequence[str] = (),
     aliases: Sequence[str] = (),
-) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+) -> Callable[[_F], _F]:
     """Mark a method as a command; its docstring is its help.
 
     ``while_faulted`` defaults to "does not move"; ``anyone`` to
     ``reads_only``.  The method keeps working as a plain method.
     """
 
-    def mark(fn: Callable[..., Any]) -> Callable[..., Any]:
+    def mark(fn: _F) -> _F:
         setattr(fn, _MARK, {
             "name": name or fn.__name__, "args": tuple(args), "reads_only": reads_only,
             "moves": moves, "while_faulted": (not moves) if while_faulted is None
@@ -445,14 +583,36 @@ def records_of(obj: Any, owner: str = "") -> list[Command]:
             bound = getattr(obj, attr)
             doc = inspect.getdoc(fn) or ""
             args = tuple(_bind_range(a, obj) for a in spec["args"])
-            ranges = [a.range_text for a in args if a.ranged]
+            shown = tuple(_signal_range(a, obj, owner) for a in args if not a.ranged)
+            shown = tuple(t for t in shown if t)
+            ranges = [*(a.range_text for a in args if a.ranged), *shown]
             if ranges:
                 doc += ("\n" if doc else "") + "Range: " + "; ".join(ranges) + "."
             seen[spec["name"].lower()] = Command(
                 spec["name"], bound, args, doc, spec["reads_only"], spec["moves"],
                 spec["while_faulted"], spec["anyone"], spec["reply"], spec["console"], owner,
-                spec["subs"], spec["aliases"])
+                spec["subs"], spec["aliases"], shown)
     return list(seen.values())
+
+
+def _signal_range(arg: Arg, obj: Any, owner: str) -> str:
+    """The display range of ``obj``'s signal named like ``arg`` (a target ``x``
+    beside the position signal ``x``) as help shows it, or ''.  Shown, not
+    checked: the command's own checks say what is allowed inside it."""
+    if arg.choices or arg.rest or arg.parse is str:
+        return ""
+    signal = getattr(obj, "signal", None)
+    if not callable(signal):
+        return ""
+    try:
+        s = signal(arg.name)
+    except Exception:  # a component half built: no range to show
+        return ""
+    if not isinstance(s, Signal) or s.limits is None:
+        return ""
+    lim = s.limits
+    units = f" {s.units}" if s.units else ""
+    return f"{arg.name} {lim.lopr:g}..{lim.hopr:g}{units}"
 
 
 def _bind_range(arg: Arg, obj: Any) -> Arg:
@@ -493,6 +653,10 @@ class Component:
 
     def children(self) -> list[Component]:
         """The components it is made of."""
+        return []
+
+    def params(self) -> list[Param]:
+        """The component's run-time parameters (``get``/``set``); none by default."""
         return []
 
     def tasks(self) -> list[Task]:

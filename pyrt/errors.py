@@ -1,14 +1,39 @@
-"""The exceptions pyrt raises.
+"""The exceptions pyrt raises, and the rule for raising them.
 
 One root, :class:`PyrtError`, which is never raised itself; a handful of
 subclasses that say what kind of thing went wrong; and
 :class:`PyrtInternalError` for the case where pyrt itself is at fault.
 Messages say what was wrong and what was expected.
+
+The rule (one translation, at the boundary):
+
+* **Pure functions** (parsers of a value, unit conversion, the rope model,
+  formulas) know nothing of commands or files.  Bad input is a
+  ``ValueError`` (:class:`pyrt.units.UnitError` is one); a question whose
+  answer "no" is ordinary (may the source be here? may this target be
+  reached?) returns the reason as a string, or None.
+* **The command boundary** translates once: the argument grammar of the
+  command records (:class:`pyrt.component.Arg`, ``finite``; the one number
+  grammar, :func:`pyrt.units.parse_value`) turns a ``ValueError`` into a
+  :class:`CommandError` naming the command and the argument; a handler that
+  refuses raises :class:`CommandError` itself, with the pure function's
+  reason, and says that nothing changed.
+* **Configuration** (a database, a constructor's settings) is a
+  :class:`ConfigError` naming the file and line where there is one; a
+  constructor turns a kernel's :class:`NativeError` about its settings into
+  one.
+* **C kernels** raise :class:`NativeError`; a running robot's trouble is
+  never raised at the operator: it is a fault, reported through
+  :meth:`pyrt.component.Component.fail` (:class:`FaultError` at the
+  application's next call).
+* An exception that is none of these reaching the operator is a bug
+  (:class:`PyrtInternalError` when pyrt notices it itself).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 __all__ = [
     "BoardError",
@@ -94,7 +119,7 @@ class Fault:
     tick: int = -1
     time_ns: int = 0
     traceback: str = ""
-    details: dict = field(default_factory=dict, compare=False)
+    details: dict[str, Any] = field(default_factory=dict, compare=False)
     #: The fault event's number on its loop (1, 2, ...; 0: not published):
     #: everything that shows faults shows each id once.
     id: int = 0

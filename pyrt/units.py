@@ -10,6 +10,14 @@ Numbers are written the way the database files write them: an optional
 sign, digits with an optional decimal point (``0.``, ``.5``, ``95.569618``)
 and an optional exponent.  Python's extras (``nan``, ``inf``, ``1_000``,
 hexadecimal) are refused: a database value is a plain decimal number.
+
+The same grammar serves every numeric argument of every command (console,
+network and EPICS ``CMD`` alike): :func:`parse_value` takes a number with an
+optional unit of the argument's dimension (``50mm``, ``5 cm``, ``0.05m`` for
+a length in cm; ``1000N`` or ``50lbf`` for a force in N; ``500ms`` for a
+time in s) and converts it to the argument's unit, or refuses it naming the
+units it takes.  Underscores are refused everywhere: an operator's ``1_0``
+is more likely a slip than ten.
 """
 
 from __future__ import annotations
@@ -27,8 +35,11 @@ __all__ = [
     "factor",
     "parse_number",
     "parse_quantity",
+    "parse_value",
+    "quantity_of",
     "split_quantity",
     "units_of",
+    "value_grammar",
 ]
 
 
@@ -148,3 +159,53 @@ def parse_quantity(text: str, quantity: str, *, unit_required: bool = False) -> 
             f"got the bare number {text.strip()!r}"
         )
     return convert(value, unit, quantity)
+
+
+def quantity_of(unit: str) -> str | None:
+    """The quantity ``unit`` measures (``"cm"`` -> ``"length"``, ``"N"`` ->
+    ``"force"``), or None for a unit pyrt does not convert (``"counts"``)."""
+    u = unit.strip().lower()
+    for quantity, base in BASE.items():
+        if base.lower() == u:
+            return quantity
+    for quantity, table in _UNITS.items():
+        if u in table:
+            return quantity
+    return None
+
+
+def value_grammar(unit: str = "") -> str:
+    """What :func:`parse_value` takes for an argument in ``unit``, for messages:
+    ``"a number"`` or ``"a number with an optional length unit (cm, ft, ...)"``."""
+    quantity = quantity_of(unit) if unit else None
+    if quantity is None:
+        return f"a number (in {unit})" if unit else "a number"
+    return f"a number with an optional {quantity} unit ({', '.join(units_of(quantity))})"
+
+
+def parse_value(text: str, unit: str = "") -> float:
+    """One numeric argument in ``unit``: a finite decimal number (as
+    :func:`parse_number`), optionally followed, with or without a space, by a
+    unit of the same quantity (converted to ``unit``); without ``unit``, or with
+    one pyrt does not convert, a bare number (or, for the latter, the number
+    followed by ``unit`` itself).  UnitError naming what it takes otherwise."""
+    m = _QUANTITY.fullmatch(text)
+    quantity = quantity_of(unit) if unit else None
+    if m is None:
+        raise UnitError(f"expected {value_grammar(unit)}, got {text.strip()[:40]!r}")
+    value = float(m.group(1))
+    if not math.isfinite(value):
+        raise UnitError(f"expected a finite number, got {text.strip()[:40]!r}")
+    given = m.group(2)
+    if not given:
+        return value
+    if quantity is None or not given[0].isalpha():  # 1_0, 1.5.2: not a number and a unit
+        if unit and quantity is None and given.lower() == unit.strip().lower():
+            return value
+        raise UnitError(f"expected {value_grammar(unit)}, got {text.strip()[:40]!r}")
+    table = _UNITS[quantity]
+    f = table.get(given.lower())
+    if f is None:
+        raise UnitError(f"{given!r} is not a {quantity} unit: expected {value_grammar(unit)}, "
+                        f"got {text.strip()[:40]!r}")
+    return value * (f / table[unit.strip().lower()])

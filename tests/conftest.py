@@ -64,3 +64,14 @@ def pyrt_state_sandbox(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Pat
                                            else "")
         pytest.fail(f"the test run wrote outside its sandbox, in the user's pyrt state "
                     f"({', '.join(map(str, real))}): {shown}", pytrace=False)
+
+
+@pytest.fixture(autouse=True)
+def _motion_types_restored():
+    """A motion type a test registers is gone after it (the registry is process-wide)."""
+    from pyrt.scheduler import motion
+
+    before = dict(motion._registry)
+    yield
+    motion._registry.clear()
+    motion._registry.update(before)

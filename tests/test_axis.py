@@ -54,13 +54,13 @@ def test_up_5_changes_the_length_by_5_cm(station):
     r = Rig(station)
     ax = r.axis
     slope = ax.encoder.slope
-    l0, g0 = ax.getLength(), r.plant.lengths()[0]
+    l0, g0 = ax.length(), r.plant.lengths()[0]
     z0 = r.plant.position[2]
     ax.run_command("up", "5")
     assert ax.motor.running
     r.finish()
     r.loop.run(5)
-    assert ax.getLength() - l0 == pytest.approx(-5.0, abs=slope)
+    assert ax.length() - l0 == pytest.approx(-5.0, abs=slope)
     assert r.plant.lengths()[0] - g0 == pytest.approx(-5.0, abs=slope + 0.05)
     assert r.plant.position[2] - z0 == pytest.approx(5.0, abs=slope + 0.05)
     assert not r.tio.armed(ax.motor.channel)
@@ -72,13 +72,13 @@ def test_down_and_to(station):
     r = Rig(station)
     ax = r.axis
     slope = ax.encoder.slope
-    l0 = ax.getLength()
-    ax.down(2.5)
+    l0 = ax.length()
+    ax.cmd_down(2.5)
     r.finish()
-    assert ax.getLength() - l0 == pytest.approx(2.5, abs=slope)
-    ax.to(f"{l0 - 3.0}")
+    assert ax.length() - l0 == pytest.approx(2.5, abs=slope)
+    ax.cmd_to(f"{l0 - 3.0}")
     r.finish()
-    assert ax.getLength() == pytest.approx(l0 - 3.0, abs=slope)
+    assert ax.length() == pytest.approx(l0 - 3.0, abs=slope)
 
 
 @pytest.mark.parametrize("command,args,match", [
@@ -110,10 +110,10 @@ def test_step_mode_never_reverses(station):
     """While moving up, down is refused (STEP_MODE never reverses); stop then works."""
     r = Rig(station)
     ax = r.axis
-    ax.up(5)
+    ax.cmd_up(5)
     r.loop.run(200)
     with pytest.raises(CommandError, match="other way"):
-        ax.down(3)
+        ax.cmd_down(3)
     assert ax.motor.direction < 0
     ax.stop()
     assert not r.tio.armed(ax.motor.channel)
@@ -127,39 +127,39 @@ def _awo(ax):
 
 
 def test_get_length_corrects_for_stretch(station):
-    """getLength = encoder length * (1 + STRETCH * tension) - DEADLENGTH."""
+    """length = encoder length * (1 + STRETCH * tension) - DEADLENGTH."""
     r = Rig(station)
     ax = r.axis
     expect = ax.encoder.length() * (1 + ax.stretch * ax.tension()) - ax.dead_length
-    assert ax.getLength() == pytest.approx(expect)
+    assert ax.length() == pytest.approx(expect)
     assert ax.tension() > 40.0  # the central rope carries the source
-    assert ax.getLength() > ax.encoder.length() - ax.dead_length
+    assert ax.length() > ax.encoder.length() - ax.dead_length
 
 
 def test_length_tracks_the_real_rope(station):
-    """With the encoder zeroed on the true payout, getLength reads the geometric length."""
+    """With the encoder zeroed on the true payout, length reads the geometric length."""
     r = Rig(station, imp=Imperfections.ideal())
     r.axis.encoder.setZeroLength(r.plant.payout(0))
-    assert r.axis.getLength() == pytest.approx(r.plant.lengths()[0], abs=0.02)
+    assert r.axis.length() == pytest.approx(r.plant.lengths()[0], abs=0.02)
 
 
 def test_polyaxis_hooks(station):
-    """polyActivate: VELOCITY_MODE on standby, commands refused, stop still accepted; polyDeactivate gives the axis back."""
+    """poly_activate: VELOCITY_MODE on standby, commands refused, stop still accepted; poly_deactivate gives the axis back."""
     r = Rig(station)
     ax = r.axis
-    ax.polyActivate()
+    ax.poly_activate()
     assert ax.mode == POLYAXIS
     assert ax.motor.mode == VELOCITY_MODE and ax.motor.state == STANDBY
     with pytest.raises(CommandError, match="PolyAxis"):
-        ax.up(1)
+        ax.cmd_up(1)
     ax.motor.set_desired_velocity(-1.0)
     r.loop.run(50)
     assert ax.motor.velocity == -1.0
     assert ax.signal("errorLength").read() == 0.0  # no PolyAxis: no error signal
     ax.stop()
     assert not r.tio.armed(ax.motor.channel)
-    ax.polyDeactivate()
-    ax.up(0.5)
+    ax.poly_deactivate()
+    ax.cmd_up(0.5)
     assert ax.motor.running
 
 
@@ -169,16 +169,16 @@ def test_calibration_through_the_axis(station):
     r = Rig(station, imp=Imperfections.ideal(),
             persist=lambda *a: saved.append(a))
     ax = r.axis
-    ax.calibrate()
-    ax.point(f"{r.plant.tensions()[0]} N")
+    ax.cmd_calibrate()
+    ax.cmd_point(f"{r.plant.tensions()[0]} N")
     with pytest.raises(CommandError, match="at least two"):
-        ax.calibrate()
-    ax.up(3)  # the pendulum's tension does not change; hang a different load by hand
+        ax.cmd_calibrate()
+    ax.cmd_up(3)  # the pendulum's tension does not change; hang a different load by hand
     ax.stop()
     r.dc.plant_set_adc(ax.loadcell.channel.channel, 1000)
     r.plant.inject_loadcell_stuck(0)
-    ax.point("100 N")
-    slope, offset = ax.calibrate()
+    ax.cmd_point("100 N")
+    slope, offset = ax.cmd_calibrate()
     assert slope > 0
     assert ("LOADCELL", "loadcell0", "SLOPE", slope) in saved
     assert ("LOADCELL", "loadcell0", "OFFSET", offset) in saved
@@ -187,10 +187,10 @@ def test_calibration_through_the_axis(station):
 def test_zero_resets_the_counter(station):
     """zero clears the encoder counter."""
     r = Rig(station)
-    r.axis.down(1)
+    r.axis.cmd_down(1)
     r.finish()
     assert r.axis.encoder.count() != 0
-    r.axis.zero()
+    r.axis.cmd_zero()
     assert r.axis.encoder.count() == 0
 
 
@@ -214,7 +214,7 @@ def test_stall_or_slip_stops_the_axis(station, fault):
         r.plant.inject_stall(0)
     else:
         r.plant.inject_slip(0)
-    r.axis.down(10)
+    r.axis.cmd_down(10)
     with pytest.raises(TrackingError, match="stall or encoder slip"):
         r.loop.run(60_000)
     assert not r.tio.armed(r.axis.motor.channel)
@@ -234,7 +234,7 @@ def test_any_up_argument_is_a_distance_or_refused(station, text):
     except ValueError:
         value = None
     try:
-        r.axis.up(text)
+        r.axis.cmd_up(text)
     except CommandError:
         assert r.tio.writes == writes
         assert not r.tio.armed(r.axis.motor.channel)

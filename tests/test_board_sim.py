@@ -3,6 +3,7 @@ controller dies or hangs, the controller's BoardError when board-sim dies, SIGTE
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import queue
 import re
@@ -25,6 +26,10 @@ pytestmark = pytest.mark.wallclock
 
 #: Generous: a loaded two-core machine may be slow to start a Python process.
 START_S = 60.0
+
+#: The stations board-sim serves: the built-in ones, and the arm of examples/arm if installed.
+STATIONS = ", ".join(sorted(["gripper", "manipulator", "prototype", "sno"]
+                            + (["arm"] if importlib.util.find_spec("pyrt_arm") else [])))
 
 
 class _Proc:
@@ -230,7 +235,7 @@ def test_help_tells_the_options_and_the_url():
                               capture_output=True, text=True, timeout=START_S).stdout
 
     out = helps("--help")
-    for word in ("stations: gripper, manipulator, prototype, sno", "--listen HOST:PORT",
+    for word in (f"stations: {STATIONS}", "--listen HOST:PORT",
                  "--watchdog S", "tcp://HOST:PORT", "pyrt.boards.wire", "WorldFactory"):
         assert word in out, word
     out = helps("gripper", "--help")
@@ -248,7 +253,7 @@ def test_help_tells_the_options_and_the_url():
     (["board-sim", "gripper", "--db", "somewhere"], "unrecognized arguments: --db somewhere"),
     (["board-sim", "sno", "--start", "F400"], "unrecognized arguments: --start F400"),
     (["board-sim", "hexapod"], "no station named 'hexapod' gives a world to serve; stations: "
-                               "gripper, manipulator, prototype, sno"),
+                               + STATIONS),
     (["board-sim"], "name the station whose world to serve"),
     (["board-sim", "manipulator", "--station", "sno", "--db", "/nonexistent/db"],
      "/nonexistent/db"),

@@ -243,19 +243,29 @@ def test_gripper_register_written_over_tcp_is_seen_by_the_plant_and_back(gripper
 
 
 def test_poll_copy_serves_the_reads_of_a_tick_and_sees_its_own_writes(gripper_sim):
-    """After poll, reads within max_age make no round trip; a write goes out and is read back;
-    with max_age=0 every read goes to the board."""
+    """In a tick (poll .. flush) reads and writes make no round trip and a read sees the tick's
+    write; flush sends the changed outputs in one request; outside a tick a write goes out at
+    once, and with max_age=0 a read outside a tick reads the inputs again."""
     with open_boards(gripper_sim.url, "gripper", GRIPPER_BOARDS, max_age=60) as boards:
         board = boards["gripper"]
         link = board.registers.link
+        boards.set_tick(0.001)  # a station runs the phases
         boards.poll(0)
         n = link.requests
         assert [board.read(a) for a in REGISTERS] and link.requests == n
         board.write(DAC, 0x81)
-        assert link.requests == n + 1 and board.read(DAC) == 0x81 and link.requests == n + 1
+        board.write(LED_LO, 0x01)
+        assert link.requests == n and board.read(DAC) == 0x81 and link.requests == n
+        boards.flush(0)  # sent, its reply read with the next exchange
+        boards.poll(0)
+        assert link.requests == n + 2
+        board.write(DAC, 0x81)  # unchanged: nothing to send but the next SNAP
+        boards.flush(0)
+        assert link.requests == n + 2
+        board.write(DAC, 0x80)  # outside a tick: at once (the SNAP's reply read first)
+        assert link.requests == n + 4
     with open_boards(gripper_sim.url, "gripper", GRIPPER_BOARDS, max_age=0) as boards:
         link = boards["gripper"].registers.link
-        boards.poll(0)
         n = link.requests
         boards["gripper"].read(P8155_PA)
         assert link.requests == n + 1
@@ -264,7 +274,8 @@ def test_poll_copy_serves_the_reads_of_a_tick_and_sees_its_own_writes(gripper_si
 @pytest.mark.wallclock
 def test_gripper_controller_runs_init_over_tcp_unchanged(gripper_sim):
     """The 002 controller, unchanged, runs I (fullopen to the limit, zero) on a wall-clock loop
-    through TcpGripperBoard, its encoder counts delivered by poll before the ready queue."""
+    through TcpGripperBoard, its encoder counts delivered by poll before the ready queue and its
+    DAC writes sent by flush after it."""
     cpu = I8031()
     boards = open_boards(gripper_sim.url, "gripper", GRIPPER_BOARDS, cpu=cpu)
     try:
@@ -364,9 +375,9 @@ def test_board_sim_gone_makes_the_next_access_raise_board_error_naming_the_url()
     server.close()
     t0 = time.monotonic()
     with pytest.raises(BoardError) as err:
-        boards["gripper"].read(DAC)
+        boards["gripper"].read(P8155_PA)  # outside a tick, max_age=0: the inputs are read
     assert time.monotonic() - t0 < 2.0
-    assert str(err.value).startswith(f"board {url}: R gripper dac 0: ") and err.value.url == url
+    assert str(err.value).startswith(f"board {url}: SNAP: ") and err.value.url == url
     with pytest.raises(BoardError, match="link is down"):
         boards.poll(0)
     boards.close()

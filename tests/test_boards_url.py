@@ -103,7 +103,7 @@ def test_unknown_scheme_is_a_config_error_naming_the_url_and_the_known_schemes(e
         open_boards("serial:///dev/ttyS0", "prototype", MANIPULATOR_BOARDS)
     text = str(err.value)
     assert "'serial:///dev/ttyS0'" in text and "'serial'" in text
-    assert "known schemes: sim, tcp" in text
+    assert "known schemes: modbus, sim, tcp" in text
 
 
 def test_board_url_that_is_not_text_is_refused():
@@ -201,7 +201,7 @@ def test_entry_point_back_end_is_found_by_scheme_with_its_options(entry_points):
     """A scheme registered in the pyrt.boards entry-point group opens through open_boards; URL
     options and keyword options (which win) reach the factory."""
     entry_points({"fake": f"{__name__}:fake_factory"})
-    assert known_schemes() == ["fake", "sim", "tcp"]
+    assert known_schemes() == ["fake", "modbus", "sim", "tcp"]
     boards = open_boards("FAKE://lab-rack:7?gain=2&mode=a", "prototype", MANIPULATOR_BOARDS, mode="b")
     assert boards.world == "fake" and isinstance(boards["tio10"], SimTIO10)
     url, station, options = CALLS[-1]

@@ -20,7 +20,9 @@ while faulted, so that ``sim jog off`` can always release the switch.
 
 from __future__ import annotations
 
+import argparse
 import contextlib
+import importlib.util
 import io
 import math
 import numbers
@@ -43,10 +45,21 @@ from pyrt.server import ServedStation, Server
 from pyrt.server.epics import FIXED_PVS, caproto_available
 from pyrt.station.gripper import build_gripper
 
-ROBOTS = ["gripper", "prototype", "sno"]
+#: The arm of examples/arm (pip install ./examples/arm), built only from pyrt's public API.
+ARM_INSTALLED = importlib.util.find_spec("pyrt_arm") is not None
+ROBOTS = ["gripper", "prototype", "sno",
+          pytest.param("arm", marks=pytest.mark.skipif(
+              not ARM_INSTALLED, reason="pyrt_arm is not installed (pip install ./examples/arm)"))]
 
 
 def _build(name: str, tmp_path: Path):
+    if name == "arm":  # through its factory, as 'pyrt arm' builds it
+        from pyrt_arm.station import ARM
+
+        station = ARM.build(Loop(SimClock()), argparse.Namespace(boards=None, start=None))
+        runner = station.start()
+        runner.poll()
+        return station, runner
     if name == "gripper":
         station = build_gripper(Loop(SimClock()))
         runner = station.start()
@@ -89,6 +102,10 @@ def _driven(station) -> list[str]:
         if station.controller.moving:
             out.append(f"drive/jog bits in FLAGS {station.cpu.ram[FLAGS]:02X}")
         return out
+    if station.name == "arm":  # the servo board's outputs
+        board = station.board
+        return [f"{reg}[{j}] = {board.read(reg, j)}" for reg in ("drive", "enable")
+                for j in (0, 1) if board.read(reg, j) != 0]
     tio = station.tio10
     out = []
     for a in station.axes:
@@ -110,6 +127,12 @@ def _settings(station) -> tuple:
     """The robot's state a reading command must leave as it is (loop thread)."""
     if station.name == "gripper":
         return bytes(station.cpu.ram), station.board.dac, station.cpu.sp, len(station.motion)
+    if station.name == "arm":
+        board = station.board
+        regs = tuple(board.read(r.name, j) for r in board.kind.registers for j in range(r.count))
+        joints = tuple((jt.engaged, jt.drive, jt.servo.config) for jt in station.controller.joints)
+        return (regs, joints, station.controller.state, tuple(station.plant.active_faults()),
+                len(station.motion))
     regs = tuple(station.tio10.register_file())
     devs = tuple((a.motor.state, a.motor.mode, a.motor.cruise_speed, a.encoder.zero_length,
                   a.loadcell.slope, a.loadcell.offset, a.mode) for a in station.axes)
@@ -176,6 +199,7 @@ _SAMPLES: dict[str, list[list[str]]] = {
     "GripperSim.object": [["20"]],
     "GripperSim.jog": [["close", "0.5"]],
     "GripperSim.fault": [["none"]],
+    "ArmSim.fault": [["none"]],
     "ManipulatorSim.fault": [["0", "none"]],
     "ManipulatorSim.load": [["0", "10"]],
     "ManipulatorSim.unload": [["0"]],
@@ -316,6 +340,21 @@ def test_the_reflex_disarms_every_manipulator_motor_in_the_same_tick(tmp_path, n
         assert _trip_and_look(station, runner) == []
         runner.sleep(0.2)
         assert _at_rest(station, runner) == []
+    finally:
+        station.close()
+
+
+@pytest.mark.skipif(not ARM_INSTALLED, reason="pyrt_arm is not installed")
+def test_the_reflex_turns_every_arm_drive_and_amplifier_off_in_the_same_tick(tmp_path):
+    """Arm: an 'arm to' move running (amplifiers enabled, drives non-zero), a trip writes every drive and enable register 0 before any further tick."""
+    station, runner = _build("arm", tmp_path)
+    try:
+        runner.call(station.controller.run_command, "to", "60", "30")
+        assert runner.wait_until(lambda: len(_driven(station)) == 4, 5.0)
+        assert _trip_and_look(station, runner) == []
+        runner.sleep(0.2)
+        assert _at_rest(station, runner) == []
+        assert station.fault is not None
     finally:
         station.close()
 

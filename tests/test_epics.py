@@ -288,7 +288,7 @@ def test_per_rope_state_and_target_pvs_follow_a_move(epics_env, tmp_path):
         assert _until(lambda: _read("STATE")[0] == b"idle")
         assert _until(lambda: _text("STOP_REASON").startswith("ENDPOINT_STOP"))
         assert math.isnan(_read("TARGET_X")[0])
-        length = runner.call(station.axes[0].getLength)
+        length = runner.call(station.axes[0].length)
         assert _read("AXIS0:LENGTH")[0] == pytest.approx(length, abs=0.05)  # last poll vs now
         enc = runner.call(station.axes[0].encoder.length)
         assert _read("AXIS0ENCODER:LENGTH")[0] == pytest.approx(enc, abs=0.01)
@@ -373,3 +373,20 @@ def test_caproto_logs_at_warning_unless_verbose(epics_env, caplog):
                     and r.levelno < logging.WARNING]
         EpicsService(sv.runner, sv.server.robot, sv.server, "V:", verbose=True)
         assert logging.getLogger("caproto").getEffectiveLevel() == logging.INFO
+
+
+def test_epics_writes_that_act_are_shown_on_the_console(epics_env):
+    """A CMD that changes the robot and a STOP are shown on the operator's console naming EPICS; a read is not."""
+    import io
+
+    from pyrt.commands import RobotShell
+
+    with epics_served() as (sv, _ioc):
+        console = RobotShell(sv.rig, io.StringIO())
+        console.messages()
+        _write("CMD", f"{TOKEN} X 33")
+        _write("CMD", f"{TOKEN} T")
+        _write("STOP", "stop")
+        assert _text("RESULT").startswith("OK gripper: every motor stopped")
+        audit = [m for m in console.messages() if m.startswith("remote: ")]
+    assert audit == ["remote: EPICS CMD: X 33", "remote: EPICS STOP: stop"]

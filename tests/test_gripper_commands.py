@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import re
 
 import pytest
 from _gripper_rig import make_rig
@@ -206,8 +207,11 @@ def test_scope_records_the_gripper_variables(session):
     session("scope run roll", "P -400", "wait")
     lines = session("scope show 2000")
     assert lines[0] == "t_s encoder dac sim.x ram:2C"
-    enc = [float(line.split()[1]) for line in lines[1:]]
-    dac = [float(line.split()[2]) for line in lines[1:]]
+    # the encoder as the console shows counts (hex, mm beside it), then dac as a number
+    words = [line.split() for line in lines[1:]]
+    assert all(re.fullmatch(r"\(\d+\.\d", w[2]) and w[3] == "mm)" for w in words)
+    enc = [int(w[1], 16) - (0x10000 if int(w[1], 16) >= 0x8000 else 0) for w in words]
+    dac = [float(w[4]) for w in words]
     assert enc[0] > enc[-1] and -0x400 - 16 <= enc[-1] <= -0x400 + 16
     assert min(dac) < 0x80 and dac[-1] == 0x80
     assert session("scope add nothing")[0].startswith("error: no channel")

@@ -178,6 +178,17 @@ def test_p_in_millimetres_and_positions_beside_counts(session):
     assert s.run("P 80mm")[0] == "error: target 80mm is out of range (0..76 mm)"
 
 
+def test_p_takes_any_length_unit_beside_hexadecimal(session):
+    """P 4.25cm is P 42.5mm (the one number grammar); P E47A stays hexadecimal; P 1_0mm is refused."""
+    s = session
+    cal = s.ctl.calibration
+    s.run("P 4.25cm", "wait")
+    assert abs(cal.mm(s.ctl._sword(0x4A)) - 42.5) < 0.2
+    assert s.run("P 1_0mm")[0].startswith("error: target '1_0mm' is not a hexadecimal number")
+    s.run("P E47A", "wait")
+    assert s.ctl.target() == 0xE47A
+
+
 def test_s_decodes_the_sensor_byte_by_name(session):
     """S prints the 16 bits, then the sensors that are on by name."""
     s = session

@@ -403,3 +403,25 @@ def test_stop_says_where_the_source_stopped_and_the_world_agrees(shell):
     assert math.dist(said, station.polyaxis.position) < 0.01
     assert math.dist(said, station.plant.position) <= station.polyaxis.end_error
     assert said[2] < 94.5  # it had moved down from 95.57 before the stop
+
+
+def test_one_number_grammar_for_every_argument(shell):
+    """'to 0 0 50mm' is 5 cm; '1_0' is refused alike by 'axis0 up' and 'netForce'; a load takes '30N'."""
+    sh, station, runner, _ = shell
+    pa = station.polyaxis
+    text = run_lines(sh, runner, ["prototype netForce 0 0 1000mm", "prototype netForce 0 0 100"])
+    said = [ln for ln in text.splitlines() if "net force" in ln]
+    assert len(said) == 2 and said[0] == said[1]
+    text = run_lines(sh, runner, ["axis0 up 1_0", "prototype netForce 1_0 0 5_0",
+                                  "prototype to 0 0 5kg", "prototype to 0 0 1_000mm"])
+    errors = [ln for ln in text.splitlines() if ln.startswith("error")]
+    assert len(errors) == 4, text
+    assert all("optional length unit (cm, ft, in, inch, m, mm)" in e for e in errors), errors
+    assert not station.motors_running() and not pa.active
+    x0 = pa.position
+    text = run_lines(sh, runner, [f"prototype to {x0[0]:.3f} {x0[1]:.3f} {x0[2] * 10 - 5:.3f}mm",
+                                  "wait"])
+    assert "ENDPOINT_STOP" in text, text
+    assert abs(pa.position[2] - (x0[2] - 0.5)) < 1.0
+    text = run_lines(sh, runner, ["sim load axis0 30N", "sim unload axis0"])
+    assert "error" not in text, text

@@ -23,16 +23,16 @@ from pyrt.scheduler import motion as motion_mod
 from pyrt.scheduler.motion import MotionRecord, MotionType, register_motion_type
 from pyrt.station.gripper import build_gripper
 
-#: A plug-in motion published by a test distribution: README's example (it
+#: A plug-in motion published by a test distribution: the documented example (it
 #: reads a different sensor, a rope's loadcell tension, and moves the hare
 #: sideways until that tension has fallen to ``until`` newtons).
-README = Path(__file__).resolve().parent.parent / "README.md"
+GUIDE = Path(__file__).resolve().parent.parent / "docs" / "motion-types.md"
 
 
 def readme_example() -> str:
-    """The python block of README's 'Writing a motion type' section."""
-    text = README.read_text(encoding="utf-8")
-    section = text.split("## Writing a motion type", 1)[1]
+    """The python block of docs/motion-types.md ('Writing a motion type')."""
+    text = GUIDE.read_text(encoding="utf-8")
+    section = text.split("# Writing a motion type", 1)[1]
     return section.split("```python\n", 1)[1].split("```", 1)[0]
 
 

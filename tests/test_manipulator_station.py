@@ -47,14 +47,14 @@ def test_rope_lengths_agree(tmp_path, name):
     wrapped = 0
     for _ in range(300):
         x = tuple(rng.uniform(-r, r, 3))
-        if pa.refusal(x) is not None:
+        if pa.model.refusal(x) is not None:
             continue
-        fast = pa.lengths_at(x)
+        fast = pa.model.lengths_at(x)
         for i in range(pa.n):
-            length, contact, _, _ = pa.rope_geometry(i, x)
+            length, contact, _, _ = pa.model.rope_geometry(i, x)
             wrapped += contact is not None
             assert fast[i] == pytest.approx(length, abs=1e-6)
-            assert pa.length_at(i, x) == pytest.approx(length, abs=1e-9)
+            assert pa.model.length_at(i, x) == pytest.approx(length, abs=1e-9)
     assert wrapped > 0
     station.close()
 

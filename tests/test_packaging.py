@@ -54,6 +54,7 @@ def test_sdist_builds_a_wheel_that_installs_and_runs(tmp_path):
     with zipfile.ZipFile(wheel) as zf:
         inside = zf.namelist()
     assert "pyrt/py.typed" in inside and any(n.startswith("pyrt/_native") for n in inside)
+    assert {"pyrt/boards/maps/gripper.toml", "pyrt/boards/maps/manipulator.toml"} <= set(inside)
     assert any(n.endswith("licenses/LICENSE") for n in inside)
     site = tmp_path / "site"
     with zipfile.ZipFile(wheel) as zf:

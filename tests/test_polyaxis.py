@@ -91,7 +91,7 @@ def test_database_position_and_lengths_written_back(prototype_run):
     assert station.station.text("POLYAXIS") != before["POLYAXIS"]
     assert station.station.text("AXIS") != before["AXIS"]
     for rec, axis in zip(again.axes_of(), station.axes, strict=True):
-        assert rec.length == pytest.approx(axis.getLength(), abs=0.5)
+        assert rec.length == pytest.approx(axis.length(), abs=0.5)
         # the encoder counter restarts at zero: the current length is the next zero length
         enc = again.encoder_of(rec)
         assert enc.zerolength == pytest.approx(axis.encoder.length(), abs=1e-6)

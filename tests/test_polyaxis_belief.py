@@ -59,7 +59,7 @@ def test_rope_lengths_in_the_neck_agree_with_the_world(tmp_path):
         g, _, wrapped = world.evaluate(x)
         assert any(wrapped)
         for i in range(pa.n):
-            assert pa.length_at(i, x) == pytest.approx(g[i], abs=1e-6)
+            assert pa.model.length_at(i, x) == pytest.approx(g[i], abs=1e-6)
     station.close()
 
 
@@ -154,7 +154,7 @@ def test_slip_during_an_axis_move_is_a_named_fault(tmp_path):
     # A side rope taken in while its encoder wheel slips completely.  (Taking in
     # the central rope slackens the side ropes, and a rope paid out past a
     # slipping encoder goes slack: either ends in LOW_TENSION_STOP first.)
-    runner.call(axis1.up, "10")
+    runner.call(axis1.cmd_up, "10")
     runner.sleep(1.0)
     assert axis1.motor.running
     at_fault = station.plant.position

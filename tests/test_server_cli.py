@@ -19,11 +19,11 @@ pytestmark = pytest.mark.wallclock
 TOKEN = "cli-token"
 
 
-def _start(args: list[str], env: dict | None = None) -> tuple[subprocess.Popen, int]:
-    """Start ``pyrt ARGS`` and read stderr until it says where it serves."""
+def _start(args: list[str], env: dict | None = None, cwd=None) -> tuple[subprocess.Popen, int]:
+    """Start ``pyrt ARGS`` (in ``cwd``) and read stderr until it says where it serves."""
     proc = subprocess.Popen([sys.executable, "-m", "pyrt", *args], stdin=subprocess.DEVNULL,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, **(env or {})})
+                            env={**os.environ, **(env or {})}, cwd=cwd)
     deadline = time.monotonic() + 30
     while time.monotonic() < deadline:
         line = proc.stderr.readline()
@@ -48,7 +48,7 @@ def test_headless_gripper_serves_and_stops_every_motor_on_a_signal(tmp_path, sig
     token = tmp_path / "token"
     token.write_text(TOKEN + "\n")
     proc, port = _start(["gripper", "--serve", "127.0.0.1:0", "--headless", "--token-file",
-                         str(token), "--speed", "4"])
+                         str(token), "--speed", "4"], cwd=tmp_path)
     try:
         with Client("127.0.0.1", port) as c:
             assert "AUTH to command" in c.greeting
@@ -61,6 +61,9 @@ def test_headless_gripper_serves_and_stops_every_motor_on_a_signal(tmp_path, sig
         code, err = _stop(proc, sig)
     assert code == 0, err
     assert "every motor stopped" in err
+    # the audit trail of a headless service: its log in the working directory
+    assert re.search(r"DAQ client \d+ 127\.0\.0\.1:\d+: P E47A",
+                     (tmp_path / "pyrt-gripper-audit.log").read_text())
 
 
 def test_headless_manipulator_serves_status(tmp_path):

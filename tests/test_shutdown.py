@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -71,7 +72,8 @@ def test_end_of_input_mid_move_on_the_manipulator_writes_back_and_says_so(tmp_pa
     finally:
         proc.kill()
     assert proc.returncode == 0, err
-    assert "pyrt manipulator: end of input: every motor stopped; databases written back in " in out
+    assert re.search(r"pyrt manipulator: end of input: every motor stopped; source at "
+                     r"\(\S+, \S+, \S+\) cm; databases written back in ", out)
 
 
 def _start_served(args: list[str], tmp_path) -> tuple[subprocess.Popen, str]:
@@ -150,7 +152,8 @@ def test_sigterm_to_the_manipulator_console_writes_back_and_says_so(tmp_path):
     finally:
         proc.kill()
     assert proc.returncode == 0, err
-    assert "pyrt manipulator: SIGTERM: every motor stopped; databases written back in " in out
+    assert re.search(r"pyrt manipulator: SIGTERM: every motor stopped; source at "
+                     r"\(\S+, \S+, \S+\) cm; databases written back in ", out)
 
 
 @pytest.mark.wallclock
@@ -169,3 +172,21 @@ def test_ctrl_c_to_a_piped_script_stops_every_motor_and_says_so(tmp_path):
     assert proc.returncode == 130, (out, err)
     assert "pyrt gripper: SIGINT: every motor stopped" in out
     assert "Traceback" not in err
+
+
+@pytest.mark.wallclock
+def test_sigint_to_a_piped_manipulator_says_where_the_source_stopped(tmp_path):
+    """SIGINT to a piped manipulator mid-move: the closing line says where the source stopped, status 130."""
+    proc = _start("manipulator", tmp_path)
+    try:
+        _read_until(proc, "type help")
+        proc.stdin.write("prototype to 10 0 60\n")
+        proc.stdin.flush()
+        _read_until(proc, "prototype: to (10, 0, 60)")
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, err
+    assert re.search(r"pyrt manipulator: SIGINT: every motor stopped; source at "
+                     r"\(\S+, \S+, \S+\) cm; databases written back in ", out), out[-400:]

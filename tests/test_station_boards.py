@@ -178,9 +178,9 @@ def test_killed_board_sim_faults_the_gripper_within_three_ticks_naming_the_url(g
     failed: list[int] = []
 
     def recording(fn):
-        def access(line: str):
+        def access(*line: str):
             try:
-                return fn(line)
+                return fn(*line)
             except BoardError:
                 if not failed:
                     failed.append(station.loop.tick_index)
@@ -189,6 +189,8 @@ def test_killed_board_sim_faults_the_gripper_within_three_ticks_naming_the_url(g
 
     link.request = recording(link.request)
     link.request_ints = recording(link.request_ints)
+    link.collect = recording(link.collect)
+    link.send = recording(link.send)
     try:
         station.start()
         shell.onecmd("I")

@@ -178,7 +178,7 @@ def test_axis_move_that_slackens_a_rope_stops_named(tmp_path):
         assert "FAULT: LOW_TENSION_STOP: axis1 tension" in text
         assert not station.motors_running()
         assert min(station.plant.tensions()) > 0.5
-        assert station.axes[1].getLength() < 616.9 + 5.0 - 1.0  # stopped well short
+        assert station.axes[1].length() < 616.9 + 5.0 - 1.0  # stopped well short
     finally:
         station.close()
 
@@ -204,7 +204,7 @@ def test_length_range_is_enforced_in_the_loop(tmp_path):
     try:
         ax = station.axes[1]
         runner.call(ax.run_command, "up", "1")
-        here = ax.getLength()
+        here = ax.length()
         runner.call(ax.set_supervision, (here + 0.1, here + 500.0), ax.tension_limits)
         with contextlib.suppress(FaultError):
             runner.sleep(1.0)
@@ -270,12 +270,12 @@ def test_every_accepted_target_is_inside_every_ropes_length_range(ranged_station
         r = av.vessel_radius
         v = (u * r, 0.0 if planar else w * r, (2.0 * h / 1.05 - 1.0) * r)
     x = av.vtog(v)
-    assume(pa.refusal(x) is None)
+    assume(pa.model.refusal(x) is None)
     # 'to' also keeps the carriage MIN_TOP_SEGMENT from every top pulley.
     assume(all(math.dist((x[0] + o[0], x[1] + o[1], x[2] + o[2]), top) >= MIN_TOP_SEGMENT
                for top, o in zip(pa.tops, pa.offsets, strict=True)))
     try:
-        lengths = pa.lengths_at(x)
+        lengths = pa.model.lengths_at(x)
     except NativeError:  # exactly on a pulley, an attachment or the ring's rim
         assume(False)
     for a, length in zip(station.axes, lengths, strict=True):

@@ -318,6 +318,28 @@ def test_pattern_log_is_written_by_the_writer_thread(tmp_path):
     assert threads and threading.current_thread().name not in threads
 
 
+def test_the_polyaxis_is_constructed_whole_and_owns_its_poll(tmp_path):
+    """The station passes the PolyAxis everything at construction; polyaxis-poll only calls its poll."""
+    from pyrt.robots.polyaxis import PolyAxis
+    from pyrt.station.manipulator import ManipulatorStation
+
+    station = ManipulatorStation(copy_station("prototype", tmp_path / "p"), tick_ns=1_000_000)
+    try:
+        pa = station.polyaxis
+        assert pa.motion is station.motion and pa.spawn == station.loop.spawn
+        assert pa.pattern_writer == "sync" and pa.task_periods == (50, 10)
+        assert pa.on_stop == [station.stops.append, station._report_stop]
+        with pytest.raises(ConfigError, match="pattern writer"):
+            PolyAxis.from_record(station.station.polyaxis(), station.axes, station.av,
+                                 pattern_writer="later")
+        seen = []
+        pa.poll = seen.append  # the task hands the tick time to the controller's poll
+        pa.tasks()[0].fn(2_500_000_000)
+        assert seen == [2.5]
+    finally:
+        station.close()
+
+
 def test_pattern_log_writer_kinds_follow_the_clock(tmp_path):
     """The pattern log is written on a thread on a wall clock and at once on a simulated clock (deterministic)."""
     a, b = log_writer(tmp_path / "a.log", "thread"), log_writer(tmp_path / "b.log", "sync")

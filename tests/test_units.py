@@ -15,8 +15,11 @@ from pyrt.units import (
     factor,
     parse_number,
     parse_quantity,
+    parse_value,
+    quantity_of,
     split_quantity,
     units_of,
+    value_grammar,
 )
 
 
@@ -131,3 +134,73 @@ def test_junk_raises_only_unit_error(text: str, quantity: str) -> None:
     except UnitError:
         return
     assert math.isfinite(v)
+
+
+# -- the one number grammar of command arguments ------------------------------------------
+
+#: The units command arguments are given in (Arg.units), with their quantities.
+_ARG_UNITS = {"cm": "length", "mm": "length", "N": "force", "cm/s": "speed", "s": "time",
+              "kg": "mass"}
+
+
+@settings(max_examples=400, deadline=None)
+@given(value=st.floats(min_value=-1e12, max_value=1e12, allow_nan=False),
+       arg_unit=st.sampled_from(sorted(_ARG_UNITS)), data=st.data(),
+       space=st.sampled_from(["", " "]))
+def test_a_number_with_a_unit_of_the_arguments_quantity_converts(value, arg_unit, data, space):
+    """Any accepted unit of the argument's quantity converts to the argument's unit; a bare
+    number is in the argument's unit."""
+    quantity = _ARG_UNITS[arg_unit]
+    assert quantity_of(arg_unit) == quantity
+    unit = data.draw(st.sampled_from(units_of(quantity)))
+    want = value * factor(unit, quantity) / factor(arg_unit, quantity)
+    assert parse_value(f"{value!r}{space}{unit}", arg_unit) == pytest.approx(
+        want, rel=1e-12, abs=1e-300)
+    assert parse_value(repr(value), arg_unit) == value
+
+
+@settings(max_examples=200, deadline=None)
+@given(value=st.floats(min_value=-1e6, max_value=1e6, allow_nan=False),
+       arg_unit=st.sampled_from(sorted(_ARG_UNITS)), data=st.data())
+def test_a_unit_of_another_quantity_is_refused_naming_the_units(value, arg_unit, data):
+    """A unit of another quantity is refused, and the refusal lists the units the argument takes."""
+    quantity = _ARG_UNITS[arg_unit]
+    other = data.draw(st.sampled_from([u for q in BASE if q != quantity for u in units_of(q)
+                                       if u not in units_of(quantity)]))
+    with pytest.raises(UnitError) as err:
+        parse_value(f"{value!r}{other}", arg_unit)
+    assert ", ".join(units_of(quantity)) in str(err.value)
+
+
+@settings(max_examples=300, deadline=None)
+@given(left=st.integers(0, 999), right=st.integers(0, 999),
+       unit=st.sampled_from(["", "cm", "N", "s", "mm"]), arg_unit=st.sampled_from(["", "cm", "N"]))
+def test_underscores_are_refused_everywhere(left, right, unit, arg_unit):
+    """Python's digit grouping (1_0) is refused by every argument, with a unit or without."""
+    with pytest.raises(UnitError):
+        parse_value(f"{left}_{right}{unit}", arg_unit)
+
+
+@settings(max_examples=400, deadline=None)
+@given(text=st.text(max_size=20), arg_unit=st.sampled_from(["", "cm", "N", "cm/s", "counts"]))
+def test_any_text_is_a_finite_value_or_a_unit_error(text, arg_unit):
+    """Whatever the text, the grammar gives a finite number or raises UnitError (nothing else)."""
+    try:
+        v = parse_value(text, arg_unit)
+    except UnitError:
+        return
+    assert math.isfinite(v)
+
+
+def test_the_grammars_edges():
+    """Dimensionless takes a bare number only; a unit pyrt does not convert is taken as itself."""
+    assert parse_value("  -1.5e1 ") == -15.0
+    with pytest.raises(UnitError, match="expected a number, got"):
+        parse_value("5cm")
+    assert parse_value("7 counts", "counts") == 7.0
+    with pytest.raises(UnitError):
+        parse_value("7 cm", "counts")
+    for bad in ("nan", "inf", "1e400", "0x10", "", "cm", "5 k g"):
+        with pytest.raises(UnitError):
+            parse_value(bad, "cm")
+    assert value_grammar("N") == "a number with an optional force unit (kgf, kn, lb, lbf, lbs, n)"

@@ -315,18 +315,39 @@ class RegisterBoard:
                 (reg.off_value(i) or 0) if not reg.is_input else 0 for i in range(reg.count)]
         self._inputs = kind.inputs()
         self.writes = 0
+        # The fast path of every access (the servo rate): name -> (values, count,
+        # low, high) of the registers a side may write, and of those the
+        # controller may read; anything else takes the checked path and its errors.
+        self._writable = {r.name: (self._values[r.name], r.count, r.low, r.high)
+                          for r in kind.registers if not r.is_input}
+        self._settable = {r.name: (self._values[r.name], r.count, r.low, r.high)
+                          for r in kind.registers if r.is_input}
+        self._readable: dict[str, list[int]] = {}
+        for r in kind.registers:
+            try:
+                kind.check_read(r.name, 0)
+            except ValueError:
+                continue
+            self._readable[r.name] = self._values[r.name]
 
     # -- the controller's side ------------------------------------------------------------
 
     def read(self, name: str, index: int = 0) -> int:
         """The value of ``name[index]``."""
+        values = self._readable.get(name)
+        if values is not None and type(index) is int and 0 <= index < len(values):
+            return values[index]
         self.kind.check_read(name, index)
         return self._values[name][index]
 
     def write(self, name: str, value: int, index: int = 0) -> None:
         """Write ``value`` to the output ``name[index]``."""
-        self.kind.check_write(name, index, value)
-        self._values[name][index] = value
+        fast = self._writable.get(name)
+        if (fast is None or type(value) is not int or type(index) is not int
+                or not (0 <= index < fast[1] and fast[2] <= value <= fast[3])):
+            self.kind.check_write(name, index, value)
+            fast = self._writable[name]
+        fast[0][index] = value
         self.writes += 1
 
     def snapshot(self) -> list[int]:
@@ -341,6 +362,11 @@ class RegisterBoard:
     def set_input(self, name: str, value: int, index: int = 0) -> None:
         """The world sets the input ``name[index]`` (ValueError if it is not
         an input or the value does not fit)."""
+        fast = self._settable.get(name)
+        if (fast is not None and type(value) is int and type(index) is int
+                and 0 <= index < fast[1] and fast[2] <= value <= fast[3]):
+            fast[0][index] = value
+            return
         reg = self.kind.register(name)
         reg.check_index(index)
         if not reg.is_input:

@@ -10,8 +10,11 @@ call, never naming a back end class::
     boards = open_boards(url, "arm", {"servo": SERVO})   # a kind of one's own
 
 and gets a :class:`Boards`: a mapping of those names to the board objects
-(``boards["tio10"]``), ``poll(now_ns)`` to attach to the loop before the
-ready queue, and ``close()``.  A built-in kind gives its typed board
+(``boards["tio10"]``), ``poll(now_ns)`` (the read phase) to attach to the
+loop before the ready queue, ``flush(now_ns)`` (the write phase) to attach
+after everything else, ``write_now()`` for the reflex, and ``close()``
+(the phases and the back-end contract: :mod:`pyrt.boards.image`).  A
+built-in kind gives its typed board
 (:mod:`pyrt.boards.kinds`); a plain kind a
 :class:`~pyrt.boards.registers.RegisterBoard` in process, or a register
 view with the same ``read``/``write`` over ``tcp://``.
@@ -24,7 +27,9 @@ Schemes built in:
   behind them;
 * ``tcp://HOST:PORT[?timeout=S&connect_timeout=S&max_age=S]`` -- the boards
   of ``pyrt board-sim`` in another process (:mod:`pyrt.boards.tcp`,
-  protocol in :mod:`pyrt.boards.wire`).
+  protocol in :mod:`pyrt.boards.wire`);
+* ``modbus://HOST:PORT?map=FILE`` -- registers of Modbus TCP devices, placed
+  by a register map (:mod:`pyrt.boards.modbus`; needs ``pyrt[modbus]``).
 
 Options come from the URL's query and from keyword arguments (these win);
 an option that a declared kind takes (:attr:`BoardKind.options
@@ -139,6 +144,9 @@ class Boards(Mapping[str, Any]):
         down: Callable[[], str | None] | None = None,
         info: Callable[[], dict[str, str]] | None = None,
         resync: Callable[[], None] | None = None,
+        flush: Callable[[int], None] | None = None,
+        write_now: Callable[[], None] | None = None,
+        set_tick: Callable[[float], None] | None = None,
     ):
         missing = [name for name in kinds if name not in boards]
         if missing:
@@ -156,6 +164,9 @@ class Boards(Mapping[str, Any]):
         self._down = down
         self._info = info
         self._resync = resync
+        self._flush = flush
+        self._write_now = write_now
+        self._set_tick = set_tick
         self.closed = False
 
     # -- the mapping -------------------------------------------------------------------
@@ -188,6 +199,29 @@ class Boards(Mapping[str, Any]):
         Raises :class:`~pyrt.errors.BoardError` when the boards cannot be reached."""
         if self._poll is not None:
             self._poll(now_ns)
+
+    def flush(self, now_ns: int) -> None:
+        """Per tick, last (after the mailbox): write the outputs the tick
+        changed, one exchange per back end.  Raises
+        :class:`~pyrt.errors.BoardError` when the boards cannot be reached."""
+        if self._flush is not None:
+            self._flush(now_ns)
+
+    @property
+    def flushes(self) -> bool:
+        """Whether :meth:`flush` does anything (attach it to the loop, last, if so)."""
+        return self._flush is not None
+
+    def write_now(self) -> None:
+        """Write the outputs changed so far at once (after a reflex: not at the
+        end of the tick).  BoardError if the write failed (a link that is down)."""
+        if self._write_now is not None:
+            self._write_now()
+
+    def set_tick(self, period_s: float) -> None:
+        """The loop's tick period: the back end derives its timeouts from it."""
+        if self._set_tick is not None:
+            self._set_tick(period_s)
 
     @property
     def polls(self) -> bool:
@@ -278,7 +312,8 @@ def parse_board_url(url: str) -> BoardURL:
 # -- the registry ----------------------------------------------------------------------
 
 #: Built-in schemes -> "module:function" (imported when first used).
-_BUILTIN = {"sim": "pyrt.boards.registry:open_sim", "tcp": "pyrt.boards.tcp:open_tcp"}
+_BUILTIN = {"sim": "pyrt.boards.registry:open_sim", "tcp": "pyrt.boards.tcp:open_tcp",
+            "modbus": "pyrt.boards.modbus:open_modbus"}
 _registered: dict[str, BackendFactory] = {}
 
 

@@ -16,20 +16,20 @@ On connect the greeting names the station and its boards with their kinds:
 every board the station declares must be there with the same kind and
 fingerprint, else ConfigError names those missing or different.
 
-One round trip per tick.  ``poll(now_ns)`` (attach it to the loop before
-the ready queue) reads every input register of the declared boards with
-one ``SNAP``; the input reads of that tick are answered from it (and a
-board with a ``poll(now_ns)`` of its own, the gripper cage, then raises
-the encoder interrupts that arrived).  Every readable output is read once
-on opening (pipelined: one exchange), and again when the watchdog has
-turned the outputs off; a write goes to the board at once and is
-remembered, so a read of an output is answered without a round trip.  A
-copy older than ``max_age`` seconds (default 0.05) is not used: a read
-outside the ticks goes to the board; ``max_age=0`` sends every read to the
-board, outputs too.
+The process image (:mod:`pyrt.boards.image`, the back-end contract).  The
+read phase is one ``SNAP`` (every declared input); the write phase one
+``W ...; W ...`` line of the outputs the tick changed, sent without
+waiting, followed by the next tick's ``SNAP`` (``prefetch``, the
+default): both replies come back while the loop sleeps, and the next read
+phase only reads them -- one request and one reply each way per tick, and
+no round trip inside the tick.  A ``SNAP`` sent more than 1.5 ticks
+before its read phase (the loop stalled) is not used: that read phase
+asks again.  The reflex's writes wait for their reply.  Every readable
+output is read once on opening (pipelined: one exchange), and again when
+the watchdog has turned the outputs off.
 
-Failures.  A connection refused, reset or closed, or no reply within
-``timeout`` seconds (default 0.25), raises :class:`~pyrt.errors.BoardError`
+Failures.  A connection refused, reset or closed, or no reply within the
+timeout (derived from the tick, or ``timeout`` seconds), raises :class:`~pyrt.errors.BoardError`
 naming the URL, and the link stays down: every later access raises it too,
 at once (board-sim turns its outputs off when the connection drops; a link
 never resumes a half-known state).  Only what the drop itself did is still
@@ -51,9 +51,16 @@ import socket
 import struct
 import threading
 import time
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from typing import Any
 
+from pyrt.boards.image import (
+    DEFAULT_OVERRUN_LIMIT,
+    DEFAULT_OVERRUN_TICKS,
+    ImageBackend,
+    ImageRegisters,
+    Write,
+)
 from pyrt.boards.kinds import RemoteDataConcentrator, RemoteGripperBoard, RemoteTIO10
 from pyrt.boards.registers import BoardKind, options_for, split_options
 from pyrt.boards.registry import Boards, BoardURL
@@ -107,6 +114,8 @@ class TcpLink:
         self._buf = b""
         self._down: str | None = None
         self._trips: int | None = None
+        #: Requests sent whose replies are read with the next exchange (pipelined writes).
+        self._outstanding: list[str] = []
         #: Round trips made (requests answered).
         self.requests = 0
         try:
@@ -187,6 +196,7 @@ class TcpLink:
                 raise BoardError(self.url, f"{lines[0]}: the link is down ({self._down})")
             try:
                 self._sock.sendall(data)
+                self._read_outstanding()
                 replies = [self._readline() for _ in lines]
             except (TimeoutError, BlockingIOError):
                 self._fail(f"no reply within {self.timeout:g} s", lines[0])
@@ -204,20 +214,88 @@ class TcpLink:
                     self._fail(f"unexpected reply {reply[:60]!r}", line)
         return out
 
-    def _exchange(self, line: str) -> bytes:
-        """One round trip; the payload of the ``OK`` reply."""
-        data = line.encode("ascii") + b"\n"
+    def send(self, line: str) -> None:
+        """Send one request without waiting for its reply: the next exchange
+        reads it first (a refusal then raises BoardError there)."""
         with self._lock:
             if self._down is not None:
                 raise BoardError(self.url, f"{line}: the link is down ({self._down})")
             try:
-                self._sock.sendall(data)
+                self._sock.sendall(line.encode("ascii") + b"\n")
+            except (TimeoutError, BlockingIOError):
+                self._fail(f"cannot send within {self.timeout:g} s", line)
+            except OSError as exc:
+                self._fail(_why(exc), line)
+            self._outstanding.append(line)
+
+    def set_timeout(self, seconds: float) -> None:
+        """Use ``seconds`` as the receive and send timeout."""
+        self.timeout = seconds
+        if self._down is not None:
+            return
+        sec, usec = divmod(max(1, round(seconds * 1e6)), 1_000_000)
+        tv = struct.pack("ll", sec, usec)
+        with contextlib.suppress(OSError):
+            self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, tv)
+            self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO, tv)
+
+    def _read_outstanding(self) -> str | None:
+        """Read the replies of the requests sent without waiting (lock held);
+        the first refusal's text, or None."""
+        refused = None
+        while self._outstanding:
+            line = self._outstanding.pop(0)
+            reply = self._readline()
+            self.requests += 1
+            if reply[:2] != b"OK" and refused is None:
+                refused = f"{line[:60]}: refused: {reply.decode('ascii', 'replace')[4:]}"
+        return refused
+
+    def collect(self) -> bytes | None:
+        """The payload of the last request sent without waiting (the replies of
+        those before it are read first); None if none is outstanding.
+        BoardError as :meth:`request`, also for a refusal of an earlier one."""
+        refused = None
+        with self._lock:
+            if self._down is not None:
+                raise BoardError(self.url, f"the link is down ({self._down})")
+            if not self._outstanding:
+                return None
+            line = self._outstanding.pop()
+            try:
+                refused = self._read_outstanding()
                 reply = self._readline()
             except (TimeoutError, BlockingIOError):
                 self._fail(f"no reply within {self.timeout:g} s", line)
             except (OSError, EOFError) as exc:
                 self._fail(_why(exc), line)
             self.requests += 1
+        if refused is not None:
+            raise BoardError(self.url, refused)
+        if reply[:3] == b"OK " or reply == b"OK":
+            return reply[3:]
+        with self._lock:
+            self._fail(f"unexpected reply {reply[:60]!r}", line)
+        raise AssertionError("unreachable")  # pragma: no cover
+
+    def _exchange(self, line: str) -> bytes:
+        """One round trip; the payload of the ``OK`` reply."""
+        data = line.encode("ascii") + b"\n"
+        refused = None
+        with self._lock:
+            if self._down is not None:
+                raise BoardError(self.url, f"{line}: the link is down ({self._down})")
+            try:
+                self._sock.sendall(data)
+                refused = self._read_outstanding()
+                reply = self._readline()
+            except (TimeoutError, BlockingIOError):
+                self._fail(f"no reply within {self.timeout:g} s", line)
+            except (OSError, EOFError) as exc:
+                self._fail(_why(exc), line)
+            self.requests += 1
+        if refused is not None:
+            raise BoardError(self.url, refused)
         if reply[:3] == b"OK " or reply == b"OK":
             return reply[3:]
         text = reply.decode("ascii", "replace")
@@ -258,6 +336,13 @@ class TcpLink:
             try:
                 self._sock.settimeout(0.05)
                 self._sock.sendall(b"QUIT\n")
+                # Read what is still owed (a prefetched SNAP's reply) up to board-sim's
+                # close: a socket closed with unread data resets the link instead of
+                # ending it, and board-sim would see a lost controller, not a QUIT.
+                self._sock.shutdown(socket.SHUT_WR)
+                deadline = time.monotonic() + 0.2
+                while time.monotonic() < deadline and self._sock.recv(65536):
+                    pass
             except OSError:
                 pass
             self._sock.close()
@@ -280,32 +365,34 @@ def _why(exc: BaseException) -> str:
 # -- the registers of one connection ---------------------------------------------------------
 
 
-class TcpRegisters:
-    """The declared boards of one board-sim connection, by register (see the module text).
+class TcpRegisters(ImageBackend):
+    """The declared boards of one board-sim connection: the process image
+    (:class:`~pyrt.boards.image.ImageBackend`) over the wire protocol.
 
     ``kinds``: the station's boards (name -> kind), each checked against the
-    greeting.  :meth:`poll` takes the tick's copy of every input;
-    :meth:`read`, :meth:`write` and :meth:`write_many` reach one register.
+    greeting.  The read phase is one ``SNAP``; the write phase one ``W ...;
+    W ...`` line sent without waiting (its reply is read with the next
+    ``SNAP``: one request and one reply each way per tick); the reflex's
+    writes wait for their reply.
     """
 
+    off_on_loss = True  # board-sim turns the outputs off when the link drops
+
     def __init__(self, link: TcpLink, kinds: Mapping[str, BoardKind], *,
-                 max_age: float = DEFAULT_MAX_AGE_S):
+                 max_age: float = DEFAULT_MAX_AGE_S, timeout: float | None = None,
+                 overrun_ticks: int = DEFAULT_OVERRUN_TICKS,
+                 overrun_limit: int = DEFAULT_OVERRUN_LIMIT, prefetch: bool = True):
+        super().__init__(link.url, kinds, max_age=max_age, timeout=timeout,
+                         overrun_ticks=overrun_ticks, overrun_limit=overrun_limit)
         self.link = link
-        self.url = link.url
-        self.kinds = dict(kinds)
-        self.max_age_ns = int(max_age * 1e9)
+        #: Send the next tick's SNAP at the end of this one (see :meth:`end_of_tick`).
+        self.prefetch = prefetch
+        self._prefetch_sent = 0
+        self._stale_ns = 0
         self._check_greeting()
         # every board served, in its order: a plain SNAP; else name the boards declared
         self._snap_request = ("SNAP" if list(link.boards) == list(self.kinds)
                               else "SNAP " + " ".join(self.kinds))
-        self._layout = [(board, reg.name, reg.count) for board, kind in self.kinds.items()
-                        for reg in kind.inputs()]
-        self._values = 1 + sum(count for _, _, count in self._layout)
-        #: The tick's copy of the inputs: board -> register -> values.
-        self._image: dict[str, dict[str, list[int]]] = {b: {} for b in self.kinds}
-        #: Outputs as last written or read: (board, register, index) -> value.
-        self._outputs: dict[tuple[str, str, int], int] = {}
-        self._fresh_until = 0
 
     def _check_greeting(self) -> None:
         served = self.link.boards
@@ -322,130 +409,104 @@ class TcpRegisters:
                               f"{self.link.station} station (boards {have}), not the boards "
                               f"declared here: {what}")
 
-    # -- per tick ------------------------------------------------------------------------
+    # -- the exchanges ------------------------------------------------------------------------
 
-    def poll(self, now_ns: int = 0) -> None:
-        """Read every declared input in one round trip (the tick's copy)."""
-        nums = self.link.request_ints(self._snap_request)
-        if len(nums) != self._values:
-            self.link._fail(f"SNAP answered {len(nums)} values, not {self._values}", "SNAP")
-        pos = 1
-        image = self._image
-        for board, reg, count in self._layout:
-            image[board][reg] = nums[pos:pos + count]
-            pos += count
-        self._fresh_until = time.monotonic_ns() + self.max_age_ns
+    def set_tick(self, period_s: float) -> None:
+        super().set_tick(period_s)
+        self._stale_ns = int(1.5 * period_s * 1e9)
+
+    def end_of_tick(self) -> None:
+        """Pipelining: send the next tick's ``SNAP`` now, behind the write line;
+        the next read phase reads its reply, which came while the loop slept.
+        A copy sent more than 1.5 ticks before (the loop stalled) is not used:
+        that read phase asks again."""
+        if self.prefetch and self.phased and not self._prefetch_sent \
+                and self.link.down is None:
+            self.link.send(self._snap_request)
+            self._prefetch_sent = time.monotonic_ns()
+
+    def exchange_inputs(self) -> list[int]:
+        sent, self._prefetch_sent = self._prefetch_sent, 0
+        payload = self.link.collect() if sent else None
+        if payload is not None and time.monotonic_ns() - sent <= self._stale_ns:
+            try:
+                nums = list(map(int, payload.split()))
+            except ValueError:
+                self.link._fail(f"reply {payload[:60]!r} is not numbers", "SNAP")
+        else:
+            nums = self.link.request_ints(self._snap_request)
+        return self._inputs_of(nums)
+
+    def _inputs_of(self, nums: list[int]) -> list[int]:
+        if len(nums) != self.input_count + 1:
+            self.link._fail(f"SNAP answered {len(nums)} values, not {self.input_count + 1}",
+                            "SNAP")
         try:
             self.link.check_trips(nums[0])
         except BoardError:
-            self.load_outputs()  # the watchdog turned them off: read them again
+            self.forget_outputs(self.read_outputs())  # the watchdog turned them off
+            raise
+        return nums[1:]
+
+    def exchange_outputs(self, writes: list[Write]) -> None:
+        self.link.send(_write_line(writes))
+
+    def exchange_outputs_now(self, writes: list[Write]) -> None:
+        try:
+            self.link.request(_write_line(writes))
+        except ValueError:
+            for b, n, i, _ in writes:  # those before the refused one stand: read them again
+                self._outputs.pop((b, n, i), None)
             raise
 
-    def load_outputs(self) -> None:
-        """Read every readable output in one pipelined exchange (on opening,
-        and after the watchdog turned them off)."""
-        self._outputs.clear()
+    def read_outputs(self) -> dict[tuple[str, str, int], int]:
         keys = [(board, reg.name, i) for board, kind in self.kinds.items()
                 for reg in kind.outputs() if reg.readback for i in range(reg.count)]
         replies = self.link.pipeline([f"R {b} {n} {i}" for b, n, i in keys])
+        out: dict[tuple[str, str, int], int] = {}
         for key, values in zip(keys, replies, strict=True):
             if len(values) != 1:
                 self.link._fail(f"R answered {len(values)} values", "R")
-            self._outputs[key] = values[0]
+            out[key] = values[0]
+        return out
+
+    def apply_timeout(self, seconds: float) -> None:
+        self.link.set_timeout(seconds)
+
+    def close_link(self) -> None:
+        self.link.close()
+
+    @property
+    def down(self) -> str | None:
+        return self.link.down
+
+    # -- compatibility -----------------------------------------------------------------------
+
+    def poll(self, now_ns: int = 0) -> None:
+        """The read phase (:meth:`read_phase`)."""
+        self.read_phase(now_ns)
+
+    def load_outputs(self) -> None:
+        """Read every readable output again (one pipelined exchange)."""
+        self.forget_outputs(self.read_outputs())
 
     def forget(self) -> None:
-        """Forget the watchdog count and read the outputs again (the loop starts)."""
+        """The loop starts: the writes made while the station was built go out,
+        the watchdog count is forgotten and the outputs read again."""
+        super().resync()
         self.link.forget_trips()
         self.load_outputs()
 
-    # -- one register ------------------------------------------------------------------------
-
-    def read(self, board: str, name: str, index: int = 0) -> int:
-        """``board``'s register ``name[index]`` (see the module text)."""
-        reg = self.kinds[board].check_read(name, index)
-        if reg.is_input:
-            if time.monotonic_ns() < self._fresh_until:
-                return self._image[board][name][index]
-        else:
-            if self.link.down is not None:
-                off = reg.off_value(index)
-                if off is not None:
-                    return off  # board-sim turned it off when the link dropped
-            elif self.max_age_ns:
-                value = self._outputs.get((board, name, index))
-                if value is not None:
-                    return value
-        value = self.link.request_ints(f"R {board} {name} {index}")[0]
-        if not reg.is_input:
-            self._outputs[(board, name, index)] = value
-        return value
-
-    def write(self, board: str, name: str, value: int, index: int = 0) -> None:
-        """Write ``board``'s output ``name[index]`` (one round trip)."""
-        self.write_many([(board, name, index, value)])
-
-    def write_many(self, writes: Iterable[tuple[str, str, int, int]]) -> None:
-        """Write several outputs, each ``(board, register, index, value)``, in one
-        round trip (checked here first: none is sent if one is refused)."""
-        todo = list(writes)
-        if not todo:
-            return
-        regs = [self.kinds[b].check_write(n, i, v) for b, n, i, v in todo]
-        if self.link.down is not None and all(
-                r.off_value(i) == v for r, (_, _, i, v) in zip(regs, todo, strict=True)):
-            for r, (b, n, i, v) in zip(regs, todo, strict=True):
-                if r.readback:
-                    self._outputs[(b, n, i)] = v
-            return  # board-sim turned them off when the link dropped
-        line = "; ".join(f"W {b} {n} {i} {v}" for b, n, i, v in todo)
-        try:
-            self.link.request(line)
-        except ValueError:
-            for board, name, index, _ in todo:  # those before the refused one stand
-                self._outputs.pop((board, name, index), None)
-            raise
-        for r, (b, n, i, v) in zip(regs, todo, strict=True):
-            if r.readback:
-                self._outputs[(b, n, i)] = v
-
-    def set_cached(self, board: str, name: str, value: int, index: int = 0) -> None:
-        """Set the tick's copy of an input (what a write made of it: a cleared counter)."""
-        values = self._image[board].get(name)
-        if values is not None and 0 <= index < len(values):
-            values[index] = value
-
-    def close(self) -> None:
-        """Close the link."""
-        self.link.close()
+    def resync(self) -> None:
+        self.forget()
 
 
-class TcpBoardRegisters:
-    """One board of a :class:`TcpRegisters`: ``read(name, index=0)`` and
-    ``write(name, value, index=0)`` as a :class:`~pyrt.boards.registers.RegisterBoard`
-    has them."""
+def _write_line(writes: list[Write]) -> str:
+    return "; ".join(f"W {b} {n} {i} {v}" for b, n, i, v in writes)
 
-    def __init__(self, client: TcpRegisters, board: str):
-        self.client = client
-        self.board = board
-        self.kind = client.kinds[board]
-        self.url = client.url
-        self.link = client.link
 
-    def read(self, name: str, index: int = 0) -> int:
-        return self.client.read(self.board, name, index)
-
-    def write(self, name: str, value: int, index: int = 0) -> None:
-        self.client.write(self.board, name, value, index)
-
-    def snapshot(self) -> list[int]:
-        """Every input of this board, in declared order."""
-        return [self.read(reg.name, i) for reg in self.kind.inputs() for i in range(reg.count)]
-
-    def set_cached(self, name: str, value: int, index: int = 0) -> None:
-        self.client.set_cached(self.board, name, value, index)
-
-    def __repr__(self) -> str:
-        return f"<{self.kind.name} board {self.board!r} at {self.url}>"
+#: One board of a :class:`TcpRegisters` (the generic image view).
+TcpBoardRegisters = ImageRegisters
 
 
 # -- the factory -------------------------------------------------------------------------
@@ -461,52 +522,69 @@ def _seconds(url: BoardURL, name: str, value: Any) -> float:
     return s
 
 
+def _ticks(url: BoardURL, name: str, value: Any) -> int:
+    try:
+        n = int(value)
+    except (TypeError, ValueError):
+        raise url.error(f"option {name} must be a whole number, got {value!r}") from None
+    if not 1 <= n <= 10_000:
+        raise url.error(f"option {name} must be 1..10000, got {value!r}")
+    return n
+
+
 def open_tcp(
     url: BoardURL,
     station: str,
     kinds: dict[str, BoardKind],
     *,
-    timeout: Any = DEFAULT_TIMEOUT_S,
+    timeout: Any = None,
     connect_timeout: Any = DEFAULT_CONNECT_TIMEOUT_S,
     max_age: Any = DEFAULT_MAX_AGE_S,
+    overrun_ticks: Any = DEFAULT_OVERRUN_TICKS,
+    overrun_limit: Any = DEFAULT_OVERRUN_LIMIT,
+    prefetch: Any = "1",
     **options: Any,
 ) -> Boards:
     """The ``tcp://HOST:PORT`` back end: connect to board-sim and open the declared boards.
 
-    Options (seconds): ``timeout`` per access, ``connect_timeout``,
-    ``max_age`` of the per-tick copy (0: every read goes to the board);
-    and those of the declared kinds (the gripper cage's ``cpu``).
+    Options: ``timeout`` (seconds: a fixed hard timeout per exchange instead of
+    the one derived from the tick), ``connect_timeout``, ``max_age`` of the
+    input copy outside the ticks (0: every read there reads the inputs),
+    ``overrun_ticks`` (N) and ``overrun_limit`` (M) of the back-end contract
+    (:mod:`pyrt.boards.image`), ``prefetch`` (1, the default: the next tick's
+    ``SNAP`` is sent at the end of the tick; 0: at the start of the read
+    phase, a whole round trip in the tick); and those of the declared kinds
+    (the gripper cage's ``cpu``).
     """
     mine, rest = split_options(kinds, options)
     if rest:
         raise url.error(f"tcp: takes no option {', '.join(sorted(rest))} "
-                        "(it takes timeout, connect_timeout, max_age)")
+                        "(it takes timeout, connect_timeout, max_age, overrun_ticks, "
+                        "overrun_limit, prefetch)")
     if not url.host or url.port is None or url.port == 0:
         raise url.error("tcp: needs a host and a port 1..65535: tcp://HOST:PORT")
     if url.path not in ("", "/"):
         raise url.error("tcp: takes no path")
-    t = _seconds(url, "timeout", timeout)
+    t = _seconds(url, "timeout", timeout) if timeout is not None else None
     ct = _seconds(url, "connect_timeout", connect_timeout)
     age = _seconds(url, "max_age", max_age)
-    link = TcpLink(url.text, url.host, url.port, timeout=t, connect_timeout=ct)
-    client = TcpRegisters(link, kinds, max_age=age)
+    n = _ticks(url, "overrun_ticks", overrun_ticks)
+    m = _ticks(url, "overrun_limit", overrun_limit)
+    if str(prefetch) not in ("0", "1", "True", "False"):
+        raise url.error(f"option prefetch must be 0 or 1, got {prefetch!r}")
+    link = TcpLink(url.text, url.host, url.port, timeout=t or DEFAULT_TIMEOUT_S,
+                   connect_timeout=ct)
+    client = TcpRegisters(link, kinds, max_age=age, timeout=t, overrun_ticks=n,
+                          overrun_limit=m, prefetch=str(prefetch) in ("1", "True"))
     try:
-        client.poll(0)  # the first copy: what the boards hold as this controller comes
-        client.load_outputs()
-        views = {name: TcpBoardRegisters(client, name) for name in kinds}
+        client.open()  # the first copy: what the boards hold as this controller comes
+        views = {name: ImageRegisters(client, name) for name in kinds}
         boards = {name: kind.remote(views[name], **options_for(kind, mine))
                   for name, kind in kinds.items()}
     except BaseException:
         link.close()
         raise
     pollers = [b.poll for b in boards.values()
-               if not isinstance(b, TcpBoardRegisters) and callable(getattr(b, "poll", None))]
-
-    def poll(now_ns: int) -> None:
-        client.poll(now_ns)
-        for p in pollers:
-            p(now_ns)
-
+               if not isinstance(b, ImageRegisters) and callable(getattr(b, "poll", None))]
     return Boards(url.text, station, boards, kinds, in_process=False, world=link.station,
-                  views=views, poll=poll, close=link.close, down=lambda: link.down,
-                  info=link.info, resync=client.forget)
+                  views=views, info=link.info, **client.boards_hooks(pollers))

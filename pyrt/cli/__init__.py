@@ -29,6 +29,7 @@ from pyrt.cli import (
     send,
     top,
 )
+from pyrt.cli._help import Parser
 from pyrt.cli._station import add_station_parser
 from pyrt.console import ReaderGone, silence
 from pyrt.errors import ConfigError, PyrtError
@@ -44,7 +45,7 @@ _TOOLS = ("demo", "overruns", "logsort", "forcemap", "send", "connect", "top", "
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``pyrt`` and all its sub-commands."""
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="pyrt",
         description=(
             "pyrt: an embedded-style control runtime. A periodic tick drives an "

@@ -134,11 +134,16 @@ def load_backend(url: str) -> None:
 def apply_rt_options(args: argparse.Namespace, say: Callable[[str], None]) -> None:
     """Apply the real-time knobs the user asked for; say what happened to each."""
     slack = args.timer_slack
+    fifo = args.fifo
+    if fifo is not None and getattr(args, "speed", 1.0) is None:
+        say(f"--fifo {fifo} not applied: with --speed max the loop never sleeps, so a "
+            "real-time priority would only take the CPU from everything else")
+        fifo = None
     for wanted, fn in (
         # set here too, so that every thread started from now on inherits it;
         # the loop's clock sets it again in the loop thread (make_loop)
         (slack is not None, lambda: _rt.set_timer_slack(slack)),
-        (args.fifo is not None, lambda: _rt.set_fifo(args.fifo)),
+        (fifo is not None, lambda: _rt.set_fifo(fifo)),
         (args.mlock, _rt.lock_memory),
     ):
         if wanted:

@@ -19,6 +19,7 @@ import sys
 import time
 from collections.abc import Sequence
 
+from pyrt.cli._help import Parser
 from pyrt.cli._loopopts import (
     add_boards_option,
     add_loop_options,
@@ -62,7 +63,7 @@ def add_station_parser(sub: argparse._SubParsersAction, factory: StationFactory
 
 def station_parser(factory: StationFactory, prog: str) -> argparse.ArgumentParser:
     """A parser of its own for ``factory`` (``pyrt run`` and :func:`run_station`)."""
-    p = argparse.ArgumentParser(prog=prog, description=factory.description or factory.summary,
+    p = Parser(prog=prog, description=factory.description or factory.summary,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     add_station_arguments(p, factory)
     return p
@@ -98,6 +99,11 @@ def run_factory(factory: StationFactory, args: argparse.Namespace) -> int:
     except PyrtError:
         station.close()
         raise
+    if service is not None:  # commands come from elsewhere too: keep their trail
+        try:
+            say(f"audit log (remote commands): {station.open_audit_log()}")
+        except OSError as exc:
+            say(f"warning: no audit log: {exc}")
     shell = RobotShell(station, out)
     console = Console(shell, sys.stdin, out, messages=shell.messages,
                       history_file=args.history, status=live_status(runner, station, args))
@@ -112,9 +118,12 @@ def run_factory(factory: StationFactory, args: argparse.Namespace) -> int:
         for line in first:
             shell.onecmd(line)
 
-    status = run_until_shutdown(station, console, service,
-                                headless=args.headless, what=what, say=say,
-                                first=run_first if first else None)
+    try:
+        status = run_until_shutdown(station, console, service,
+                                    headless=args.headless, what=what, say=say,
+                                    first=run_first if first else None)
+    finally:
+        station.close_audit_log()
     if args.timing_log:
         wall = time.perf_counter() - wall0
         say(f"timing log written to {args.timing_log} ({loop.tick_index} ticks, {wall:.2f} s)")

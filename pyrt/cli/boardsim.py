@@ -12,6 +12,13 @@ options.  The first line printed says where (port 0 picks a free port).
 The wire protocol is in the module text of pyrt.boards.wire.  One
 controller at a time.
 
+With ``--modbus HOST:PORT`` the boards are served as a Modbus TCP server
+instead (pymodbus; pip install 'pyrt[modbus]'), their registers placed by
+the map shipped for the station (pyrt/boards/maps/NAME.toml) or by
+``--map FILE``; a controller opens them with the URL board-sim prints,
+``modbus://HOST:PORT?map=builtin:NAME``, and any Modbus tool can read them
+(docs/hardware.md has the gripper's table).
+
 Watchdog: when no register access comes for ``--watchdog`` seconds, or the
 controller's connection closes, the outputs are turned off: every output
 register that declares an off value gets it (gripper: DAC to null 80;
@@ -36,9 +43,11 @@ import argparse
 import ipaddress
 import signal
 import sys
+import threading
 from typing import Any, NoReturn
 
 from pyrt.boards.registry import open_boards
+from pyrt.cli._help import Parser
 from pyrt.cli._loopopts import _whole
 from pyrt.errors import ConfigError
 from pyrt.sim.boardsim import DEFAULT_WATCHDOG_S, BoardServer
@@ -133,6 +142,12 @@ def _add_common(p: argparse.ArgumentParser) -> None:
                                      f"(default {DEFAULT_WATCHDOG_S:g})")
     p.add_argument("--step-us", type=_step_us, default=1000, metavar="US",
                    help="step the world every US µs of real time (default 1000)")
+    p.add_argument("--modbus", type=_listen, default=None, metavar="HOST:PORT",
+                   help="serve the boards as a Modbus TCP server on HOST:PORT instead "
+                        "(controllers open modbus://HOST:PORT?map=...; needs pyrt[modbus])")
+    p.add_argument("--map", default=None, metavar="FILE",
+                   help="with --modbus: the register map (default: the one shipped for the "
+                        "station, pyrt/boards/maps/NAME.toml)")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -155,7 +170,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run, board_sim_parser=p)
 
 
-class _Parser(argparse.ArgumentParser):
+class _Parser(Parser):
     """An argument parser whose errors are one line (ConfigError), not an exit."""
 
     def error(self, message: str) -> NoReturn:
@@ -218,6 +233,10 @@ def run(args: argparse.Namespace) -> int:
         return 0
     factory, opts = parsed
     world = build_world(factory, opts)
+    if opts.modbus is not None:
+        return _run_modbus(factory, world, opts, out)
+    if opts.map is not None:
+        raise ConfigError("pyrt board-sim: --map goes with --modbus")
     host, port = opts.listen
     server = BoardServer(world, host, port, watchdog_s=opts.watchdog,
                          step_ns=opts.step_us * 1000, stdout=out)
@@ -235,6 +254,49 @@ def run(args: argparse.Namespace) -> int:
     old = {s: signal.signal(s, stop) for s in (signal.SIGTERM, signal.SIGINT)}
     try:
         server.serve_forever()
+    finally:
+        server.close()
+        for s, h in old.items():
+            signal.signal(s, h)
+    print(f"pyrt board-sim: stopped, outputs off ({server.requests} requests, "
+          f"{server.watchdog_trips} watchdog trips)", file=out, flush=True)
+    return 0
+
+
+def _run_modbus(factory: WorldFactory, world: World, opts: argparse.Namespace,
+                out: Any) -> int:
+    """Serve ``world`` over Modbus TCP (``--modbus``) until SIGTERM or SIGINT."""
+    from pyrt.boards.modbus import builtin_map
+    from pyrt.boards.modbusmap import load_map
+    from pyrt.sim.modbusserver import ModbusBoardServer
+
+    if opts.map is not None:
+        path, shown = opts.map, opts.map
+    else:
+        path, shown = builtin_map(factory.name), f"builtin:{factory.name}"
+    regmap = load_map(path, world.kinds)
+    host, port = opts.modbus
+    server = ModbusBoardServer(world, regmap, host, port, watchdog_s=opts.watchdog,
+                               step_ns=opts.step_us * 1000, stdout=out)
+    boards = " ".join(f"{n}={k.name}" for n, k in world.kinds.items())
+    server.start()
+    print(f"pyrt board-sim: {factory.name} {world.name} on {server.url}?map={shown} "
+          f"(Modbus TCP; boards {boards}; map {path}; watchdog {opts.watchdog:g} s, "
+          f"world step {opts.step_us} µs)", file=out, flush=True)
+    if not _loopback(server.host):
+        print(f"pyrt board-sim: warning: serving on {server.host}: Modbus has no "
+              "authentication; anyone who reaches the port drives the boards", file=out,
+              flush=True)
+    done = threading.Event()
+
+    def stop(signum: int, frame: object) -> None:
+        done.set()
+
+    old = {s: signal.signal(s, stop) for s in (signal.SIGTERM, signal.SIGINT)}
+    try:
+        while not done.wait(0.2):
+            if not server.alive:
+                break
     finally:
         server.close()
         for s, h in old.items():

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Callable
 
 from pyrt.cli._loopopts import add_loop_options, apply_rt_options, make_loop
 from pyrt.errors import ConfigError
@@ -59,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     counts = dict.fromkeys((name for _, name, _ in _ROUTINES), 0)
     slow_ns = int(args.slow_us * 1000)
 
-    def make(name: str):
+    def make(name: str) -> Callable[[], None]:
         def body() -> None:
             counts[name] += 1
             if slow_ns and name == "SENSORS":

@@ -69,8 +69,11 @@ def _cell(text: str) -> str:
 
 def _command_lines(rec: Command) -> list[str]:
     doc = rec.help.splitlines()
-    first = _cell(doc[0]) if doc else rec.name
-    rest = _cell(" ".join(doc[1:])) if len(doc) > 1 else ""
+    n = 0  # the first paragraph, whole (as help's summaries show it), then the rest
+    while n < len(doc) and doc[n].strip() and not doc[n].startswith("Range: "):
+        n += 1
+    first = _cell(" ".join(doc[:n])) or rec.name
+    rest = _cell(" ".join(doc[n:]))
     who = "anyone" if rec.anyone else "privileged"
     faulted = "" if rec.while_faulted else "; refused while faulted"
     aliases = f" (also {', '.join(rec.aliases)})" if rec.aliases else ""

@@ -4,7 +4,7 @@ A line is, in this order:
 
 1. a **word** shared by every robot (``help``, ``wait``, ``sleep``,
    ``stats``, ``scope``, ``motion``, ``ack``, ``stop``, ``status``,
-   ``quit``) or one of the station's own words (the manipulator's ``log``
+   ``get``, ``set``, ``quit``) or one of the station's own words (the manipulator's ``log``
    and ``debug``);
 2. ``OBJECT [VERB [ARGS]]``: a command record of a component of the
    station's tree (``prototype to 0 0 50``, ``axis0Motor maxspeed 3``,
@@ -25,6 +25,7 @@ records (:meth:`RobotShell.resolve`, :meth:`RobotShell.completions`).
 from __future__ import annotations
 
 import contextlib
+import difflib
 import shlex
 import threading
 from collections.abc import Callable
@@ -56,13 +57,20 @@ class RobotShell(CommandShell):
     an observer runner instead.
     """
 
-    def __init__(self, station: Any, stdout: TextIO, runner: Any = None):
+    #: Words that pass time and change nothing (not audited).
+    _UNAUDITED = frozenset({"wait", "sleep", "help"})
+
+    def __init__(self, station: Any, stdout: TextIO, runner: Any = None, source: str = ""):
         super().__init__(stdout)
         self.station = station
+        #: Who types into this shell: '' for the station's own console; a DAQ
+        #: client or EPICS otherwise (each command of theirs that moves or
+        #: changes the robot is shown on the console: :meth:`Station.audit`).
+        self.source = source
         self.runner = runner if runner is not None else station.runner
         self.level: Component | None = station.letter_level()
         self._scope = ScopeCommand(self.runner, station.scope, self._channel,
-                                   self._channel_names, stdout)
+                                   self._channel_names, stdout, self._channel_show)
         #: Fault events already shown to the operator (their ids), so each is shown once.
         self._shown: set[int] = set()
         self._shown_lock = threading.Lock()
@@ -114,6 +122,11 @@ class RobotShell(CommandShell):
                 return self._object(comp, words, text)
         level = self.level
         if level is not None and first[0].isalpha():
+            shown = self.prompt.strip().rstrip(":*").strip()
+            if shown and len(first) > 1 and first.rstrip(":").lower() == shown.lower():
+                letters = " ".join(c.name for c in level.commands())
+                raise CommandError(f"{first[:40]!r} is the prompt, not a command: type a "
+                                   f"letter after it ({letters}), or help")
             rec = level.find_command(first[0])
             if rec is not None:
                 rest = text[1:].strip()
@@ -122,11 +135,12 @@ class RobotShell(CommandShell):
             where = "monitor command" if self.in_monitor else "command"
             raise CommandError(f"unknown {where} {first[:40]!r} (letters: {letters}; "
                                "words: type help)")
-        raise CommandError(f"unknown command or object {first[:40]!r}; objects: "
+        raise CommandError(f"unknown command or object {first[:40]!r}"
+                           f"{self._did_you_mean(first)}; objects: "
                            f"{', '.join(self.station.names())}; type help")
 
     def _object(self, comp: Component, words: list[str], text: str
-                ) -> tuple[Component, Command, list[str], str]:
+                ) -> tuple[Component | None, Command, list[str], str]:
         if len(words) < 2:  # an object alone shows itself, or reads its signals
             show = comp.find_command("show")
             if show is not None and not show.args:
@@ -136,7 +150,9 @@ class RobotShell(CommandShell):
             return None, status, [comp.name], comp.name
         rec = comp.find_command(words[1])
         if rec is None:
-            raise CommandError(f"{comp.name}: unknown command {words[1][:40]!r}; expected one "
+            verbs = [n for c in comp.commands() for n in (c.name, *c.aliases)]
+            raise CommandError(f"{comp.name}: unknown command {words[1][:40]!r}"
+                               f"{_did_you_mean(words[1], verbs)}; expected one "
                                f"of {', '.join(c.name for c in comp.commands()) or 'none'}")
         rest = text[len(words[0]):].strip()[len(words[1]):].strip()
         return comp, rec, words[2:], rest
@@ -195,7 +211,16 @@ class RobotShell(CommandShell):
         if not line.strip():
             return False
         comp, rec, words, rest = self.resolve(line)
-        args = rec.parse(words, rest)
+        try:
+            args = rec.parse(words, rest)
+        except CommandError as exc:  # "wiat" at the gripper's prompt is W with "iat"
+            first = line.split()[0]
+            hint = self._did_you_mean(first) if comp is self.level and len(first) > 1 else ""
+            if hint:
+                raise CommandError(f"{exc}{hint}") from None
+            raise
+        if self.source and not rec.only_reads(words) and rec.name not in self._UNAUDITED:
+            self.station.audit(self.source, line)
         if comp is None:
             return bool(rec.handler(*args))
         result = self.call(self.station.execute, comp, rec, args,
@@ -262,6 +287,9 @@ class RobotShell(CommandShell):
         so the next command does not report it again; one the shell has
         shown already is left out."""
         out: list[str] = []
+        take = getattr(self.station, "audit_lines", None)
+        if not self.source and take is not None:  # the console: what remote clients did
+            out += take()
         for line in self.runner.messages():
             if isinstance(line, FaultMessage):
                 with self._shown_lock:
@@ -280,6 +308,10 @@ class RobotShell(CommandShell):
 
     def _channel(self, name: str) -> Any:
         return self.station.resolve_signal(name).scope_source()
+
+    def _channel_show(self, name: str) -> Callable[[Any], str] | None:
+        show = self.station.resolve_signal(name).show
+        return None if show is None else (lambda v: show(round(v)))
 
     def _channel_names(self) -> list[str]:
         root = self.station.root
@@ -319,6 +351,11 @@ class RobotShell(CommandShell):
                      f"{self.station.names()[min(1, len(self.station.names()) - 1)]}")
 
     def _help_topic(self, topic: str) -> None:
+        first, _, sub = topic.partition(" ")
+        sub = sub.strip()
+        if sub:
+            self._help_sub(first, sub)
+            return
         if len(topic) == 1 and self.level is not None:
             rec = self.level.find_command(topic)
             if rec is not None:
@@ -337,7 +374,34 @@ class RobotShell(CommandShell):
             if sigs:
                 self.say("  signals: " + ", ".join(f"{s.name} ({s.units})" for s in sigs))
             return
-        self.error(f"no help for {topic[:40]!r}")
+        self.error(f"no help for {topic[:40]!r}{self._did_you_mean(topic)}")
+
+    def _did_you_mean(self, text: str) -> str:
+        """``" (did you mean 'wait'?)"`` for a near miss of a word or an object, or ''."""
+        names = [n for w in self.words() for n in (w.name, *w.aliases)]
+        names += self.station.names()
+        return _did_you_mean(text, names)
+
+    def _help_sub(self, first: str, sub: str) -> None:
+        """``help OBJECT VERB`` (the verb's whole help) or ``help WORD SUB``
+        (a sub-command of a word: ``help scope trigger``)."""
+        comp = self.station.find(first)
+        if comp is not None:
+            rec = comp.find_command(sub.split()[0])
+            if rec is None:
+                raise CommandError(f"help {comp.name}: no command {sub[:40]!r}; it has "
+                                   f"{', '.join(c.name for c in comp.commands()) or 'none'}")
+            self.say(f"{comp.name} {rec.help}")
+            return
+        w = self.word(first)
+        if w is not None and w.name == "scope":
+            self._scope.stdout = self.stdout
+            self._scope(f"help {sub}")
+            return
+        if w is not None:
+            raise CommandError(f"help {w.name}: {w.name} has no sub-commands; 'help {w.name}' "
+                               "says what it takes")
+        self.error(f"no help for {first[:40]!r}{self._did_you_mean(first)}")
 
     @command(_REST, name="wait", console=True)
     def do_wait(self, arg: str = "") -> None:
@@ -451,6 +515,42 @@ class RobotShell(CommandShell):
             return f"interrupted; could not reach the robot: {exc}"
         return "(Ctrl-C stops a move; nothing is moving: 'quit' or Ctrl-D leaves)"
 
+    @command(Arg("NAME", str, optional=True), name="get", reads_only=True, console=True)
+    def do_get(self, name: str | None = None) -> None:
+        """get [OBJECT[.FIELD]]: a parameter with its units, range, whether it is written back.
+
+        get OBJECT lists the object's parameters; get alone, the objects that have any."""
+        st = self.station
+        if name is None:
+            have = self.runner.call(lambda: [(c.name, len(st.params_of(c)))
+                                             for c in st.components()], name="get")
+            listed = [f"{n} ({k})" for n, k in have if k]
+            self.say("parameters (get OBJECT lists them): " + (", ".join(listed) or "none"))
+            return
+        if "." not in name:
+            comp = st.component(name)
+            rows = self.runner.call(lambda: [p.describe(comp.name, p.read())
+                                             for p in st.params_of(comp)], name="get")
+            if not rows:
+                self.say(f"{comp.name}: no parameters")
+            for row in rows:
+                self.say(row)
+            return
+        comp, param = self.runner.call(st.param, name, name="get")
+        self.say(self.runner.call(lambda: param.describe(comp.name, param.read()), name="get"))
+
+    @command(Arg("NAME", str), Arg("VALUE", str), name="set", console=True)
+    def do_set(self, name: str, value: str) -> None:
+        """set OBJECT.FIELD VALUE: change a parameter at run time (get shows its range).
+
+        Out of range, read only, or while a move runs where changing it then
+        is unsafe: refused, nothing changed.  The line says whether the new
+        value is written back to the database."""
+        st = self.station
+        comp, param = self.runner.call(st.param, name, name="set")
+        v = param.parse(f"set {comp.name}.{param.name}", value)
+        self.say(self.call(st.set_param, comp, param, v, name=f"set {comp.name}.{param.name}"))
+
     @command(name="clear", console=True, reads_only=True)
     def do_clear(self) -> None:
         """clear: clear the terminal screen (nothing on a pipe)."""
@@ -467,6 +567,15 @@ class RobotShell(CommandShell):
         except (MailboxTimeout, PyrtError) as exc:
             self.error(f"could not stop the motors: {exc}")
         return True
+
+
+def _did_you_mean(text: str, names: list[str]) -> str:
+    """``" (did you mean 'NAME'?)"`` for the names closest to ``text`` (difflib), or ''."""
+    by_key = {n.lower(): n for n in names}
+    near = difflib.get_close_matches(text.lower(), list(by_key), n=2, cutoff=0.7)
+    if not near:
+        return ""
+    return f" (did you mean {' or '.join(repr(by_key[k]) for k in near)}?)"
 
 
 def split_words(text: str) -> list[str]:

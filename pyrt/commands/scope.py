@@ -81,8 +81,11 @@ class ScopeCommand:
         resolve: Callable[[str], Source],
         available: Callable[[], list[str]],
         stdout: TextIO,
+        display: Callable[[str], Callable[[Any], str] | None] | None = None,
     ):
         self.runner = runner
+        #: A channel's console format (``Signal.show``), or None: numbers as they are.
+        self.display = display
         self.scope = scope
         self.resolve = resolve
         self.available = available
@@ -251,9 +254,21 @@ class ScopeCommand:
                 raise CommandError("scope show: a number of samples")
             n = int(rest[0])
         frame = self._frame()
+        shows = [self._show_of(name) for name in frame.channels]
         self.say("t_s " + " ".join(frame.channels))
         for t, row in zip(frame.t_ns[-n:], frame.data[-n:], strict=True):
-            self.say(f"{t / 1e9:.6f} " + " ".join(f"{v:.6g}" for v in row))
+            self.say(f"{t / 1e9:.6f} " + " ".join(
+                show(v) if show is not None else f"{v:.6g}"
+                for show, v in zip(shows, row, strict=True)))
+
+    def _show_of(self, channel: str) -> Callable[[Any], str] | None:
+        """How the console shows a value of ``channel`` (its robot's radix), or None."""
+        if self.display is None:
+            return None
+        try:
+            return self.display(channel)
+        except CommandError:
+            return None
 
     def _do_save(self, rest: list[str]) -> None:
         if len(rest) != 1:

@@ -16,6 +16,7 @@ from collections.abc import Callable
 from typing import TextIO
 
 from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError, PyrtInternalError
+from pyrt.units import UnitError, parse_value
 
 __all__ = ["MAX_SLEEP_S", "CommandShell", "parse_number", "parse_seconds"]
 
@@ -118,14 +119,12 @@ class CommandShell:
 
 
 def parse_number(text: str, what: str) -> float:
-    """A finite float, or CommandError naming ``what``."""
+    """A finite number in the one grammar of arguments (:func:`pyrt.units.parse_value`),
+    or CommandError naming ``what``."""
     try:
-        value = float(text)
-    except ValueError:
+        return parse_value(text)
+    except UnitError:
         raise CommandError(f"{what} {text!r} is not a number") from None
-    if value != value or value in (float("inf"), float("-inf")):
-        raise CommandError(f"{what} {text!r} is not a number")
-    return value
 
 
 def parse_seconds(text: str, what: str) -> float:

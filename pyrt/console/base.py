@@ -27,6 +27,8 @@ import threading
 from collections.abc import Callable
 from typing import Any, Protocol, TextIO
 
+from pyrt.errors import ConfigError
+
 __all__ = ["Console", "Interpreter", "ReaderGone", "complete", "silence"]
 
 #: How often the terminal console looks for loop messages, seconds.
@@ -146,9 +148,12 @@ class Console:
             with contextlib.suppress(ValueError, OSError, AttributeError):
                 reconfigure(errors="replace")
         out = stdout if stdout is not None else sys.stdout
+        if out is None:  # no standard output at all (a windowed interpreter)
+            raise ConfigError("the console needs an output stream: sys.stdout is None")
         # The interpreter writes where the console does: both through one
         # guard, so that a reader that goes away ends the console quietly.
-        if getattr(shell, "stdout", None) is out:
+        shares = getattr(shell, "stdout", None) is out
+        if shares:
             shell.stdout = _guarded(out)
         self.stdout = _guarded(out)
         self.messages = messages if messages is not None else (lambda: [])

@@ -12,7 +12,7 @@ rewrites values in place, atomically, keeping every other byte.
 """
 
 from pyrt.db._lock import DirectoryLock, lock_directory
-from pyrt.db._schema import FILES, VERSIONS
+from pyrt.db._schema import FILES, VERSIONS, defaults
 from pyrt.db._stations import (
     STATIONS,
     copy_station,
@@ -63,6 +63,7 @@ __all__ = [
     "atomic_write",
     "copy_station",
     "default_working_directory",
+    "defaults",
     "load_station",
     "lock_directory",
     "parse_file",

@@ -7,6 +7,7 @@ a new value into an existing value's text for write-back.
 
 from __future__ import annotations
 
+import builtins
 import difflib
 import math
 import re
@@ -35,6 +36,7 @@ __all__ = [
     "FieldSpec",
     "Schema",
     "build_record",
+    "defaults",
     "format_value",
 ]
 
@@ -95,7 +97,7 @@ class FieldSpec:
 @dataclass(frozen=True)
 class Schema:
     type: str
-    record: type
+    record: builtins.type[Any]  # (``type`` here is the field above)
     fields: tuple[FieldSpec, ...]
     #: prefix of free-form numeric keys kept as a mapping (AXIS: FUZZY_)
     mapping_prefix: str | None = None
@@ -340,9 +342,9 @@ def build_record(schema: Schema, entry: RawEntry, file: str) -> Any:
     where = _location(entry, file)
     record = schema.record(name=entry.name, where=where, **values)
     if schema.check is not None:
-        problem = schema.check(record)
-        if problem:
-            key, message = problem
+        failed = schema.check(record)
+        if failed:
+            key, message = failed
             raise where.error(key, message)
     return record
 
@@ -441,3 +443,10 @@ def _replace_numbers(text: str, matches: list[re.Match[str]], values: list[float
         pos = m.end(1)
     out.append(text[pos:])
     return "".join(out)
+
+
+def defaults(type_: str) -> dict[str, Any]:
+    """The default of every optional field of an entry of ``type_`` (``POLYAXIS``,
+    ``AXIS``, ...) by record field name: the one home of each default (records
+    get it from :func:`build_record`, constructors from here)."""
+    return {f.attr: f.default for f in SCHEMAS[type_].fields if not f.required}

@@ -30,6 +30,9 @@ def station_directory(name: str) -> Path:
     if key not in STATIONS:
         raise ConfigError(f"no packaged station {name!r}; expected one of {', '.join(STATIONS)}")
     root = resources.files("pyrt.db") / "stations" / key
+    if not isinstance(root, os.PathLike):  # pyrt imported from a zip archive
+        raise ConfigError(f"packaged station {name!r} is not a directory ({root!r}): "
+                          "install pyrt as files (pip install, not a zip archive)")
     return Path(os.fspath(root))
 
 

@@ -7,8 +7,9 @@ later can still point at its line (``record.where.error("CHANNEL", ...)``).
 
 Keys of the document's tables are required.  A few constants that 000 keeps
 in the code (PolyAxis.h, Motor, Axis) but that a station must be able to
-change are optional keys with the defaults documented on each field; every
-default is listed in :data:`OPTIONAL_DEFAULTS`.
+change are optional keys with the defaults documented on each record; the
+schema (:mod:`pyrt.db._schema`) is the one home of every default
+(:func:`pyrt.db.defaults`): it fills them in, so a record has none of its own.
 """
 
 from __future__ import annotations
@@ -97,19 +98,19 @@ class PolyAxisRecord:
     position: Vector
     source_mass: float
     source_volume: float
-    av: str | None = None
-    end_error: float = 1.0
-    low_tension: float = 2.0
-    max_tension: float = 200.0
-    net_forcelimit: float = 25.0
-    offside_tension: float = 10.0
-    hare_speed: float = 2.0
-    hare_ramp: float = 20.0
-    stuck_time: float = 10.0
-    find_tolerance: float = 0.1
-    d2o_density: float = 1.10
-    dist_err_limit: float = 0.5
-    tension_margin: float = 5.0
+    av: str | None
+    end_error: float
+    low_tension: float
+    max_tension: float
+    net_forcelimit: float
+    offside_tension: float
+    hare_speed: float
+    hare_ramp: float
+    stuck_time: float
+    find_tolerance: float
+    d2o_density: float
+    dist_err_limit: float
+    tension_margin: float
     where: Location = field(default=_NOWHERE, compare=False, repr=False)
 
 
@@ -125,7 +126,7 @@ class AxisRecord:
     attachment in vessel co-ordinates, ``None`` for the central rope.
 
     Optional: ``STRETCH`` (default 2.0e-5 per N): the rope's elastic strain
-    per newton of tension, used by ``getLength``'s stretch correction (000
+    per newton of tension, used by the stretch correction of 000's ``getLength`` (000
     keeps it in the code and gives no number; 2e-5/N is a braided rope that
     stretches 1 % at 500 N).  ``FUZZY_<NAME>: value`` keys override one
     fuzzy-controller parameter for this axis: ``fuzzy`` maps the lower-cased
@@ -140,8 +141,8 @@ class AxisRecord:
     deadlength: float
     offset: Vector
     top: Vector
-    bottom: Vector | None = None
-    stretch: float = 2.0e-5
+    bottom: Vector | None
+    stretch: float
     fuzzy: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}),
                                        hash=False)
     where: Location = field(default=_NOWHERE, compare=False, repr=False)
@@ -170,9 +171,9 @@ class MotorRecord:
     channel: int
     start_speed: float
     cruise_speed: float
-    steps_per_cm: float = 40.0
-    dv_limit: float = 0.5
-    ramp_decrement: int = 10
+    steps_per_cm: float
+    dv_limit: float
+    ramp_decrement: int
     where: Location = field(default=_NOWHERE, compare=False, repr=False)
 
 
@@ -210,7 +211,7 @@ class LoadcellRecord:
     offset: float
     channel: int
     date: str
-    calibration_points: str = ""
+    calibration_points: str
     where: Location = field(default=_NOWHERE, compare=False, repr=False)
 
 
@@ -234,6 +235,6 @@ class AVRecord:
     neck_radius: float
     neck_length: float
     vessel_radius: float
-    position: Vector = (0.0, 0.0, 0.0)
-    orientation: Vector = (0.0, 0.0, 0.0)
+    position: Vector
+    orientation: Vector
     where: Location = field(default=_NOWHERE, compare=False, repr=False)

@@ -19,7 +19,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, TextIO
 
 from pyrt.boards.dataconcentrator import ADC_MAX, AnalogChannel, DataConcentrator
-from pyrt.component import Arg, Component, Limits, Signal, command
+from pyrt.component import Arg, Component, Limits, Param, Signal, command
 from pyrt.devices._args import parse_number
 from pyrt.errors import CommandError, ConfigError
 from pyrt.units import UnitError, factor, split_quantity
@@ -127,6 +127,31 @@ class Loadcell(Component):
         return self.slope * self.channel.code() + self.offset
 
     # -- calibration ---------------------------------------------------------------
+
+    def params(self) -> list[Param]:
+        """SLOPE and OFFSET, the calibration (written back to LOADCELL.dat, as a
+        calibration is, when the station gave a write-back)."""
+
+        def slope(v: float) -> None:
+            if v == 0:
+                raise CommandError(f"set {self.name}.SLOPE: 0 would read every load as "
+                                   "OFFSET; nothing changed")
+            self.slope = float(v)
+            if self.write_back is not None:
+                self.write_back(self.slope, self.offset)
+
+        def offset(v: float) -> None:
+            self.offset = float(v)
+            if self.write_back is not None:
+                self.write_back(self.slope, self.offset)
+
+        back = self.write_back is not None
+        return [
+            Param("SLOPE", "N/count", lambda: self.slope, slope, -100.0, 100.0,
+                  "newtons per ADC count", written_back=back),
+            Param("OFFSET", "N", lambda: self.offset, offset, -10_000.0, 10_000.0,
+                  "newtons at ADC code 0", written_back=back),
+        ]
 
     def signals(self) -> list[Signal]:
         return [Signal("tension", "N", self.tension, "rope tension from the ADC",

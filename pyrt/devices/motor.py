@@ -40,7 +40,7 @@ from pyrt.boards.tio10 import (
     TIO10,
     source_hz,
 )
-from pyrt.component import Arg, Component, Limits, Signal, command
+from pyrt.component import Arg, Component, Limits, Param, Signal, command
 from pyrt.devices._args import parse_number
 from pyrt.errors import CommandError, ConfigError
 
@@ -278,11 +278,17 @@ class Motor(Component):
     # -- common --------------------------------------------------------------------
 
     def stop(self) -> None:
-        """Stop now: channel stopped, windings off, state OFF."""
-        self._halt()
-        self.state = OFF
-        self.desired_velocity = 0.0
-        self.desired_steps = self.steps_taken
+        """Stop now: channel stopped, windings off, state OFF.  The motor's own
+        state is cleared whatever the board writes do (a dead link raises
+        BoardError after it)."""
+        try:
+            self._halt()
+        finally:
+            self._period = 0
+            self.velocity = 0.0
+            self.state = OFF
+            self.desired_velocity = 0.0
+            self.desired_steps = self.steps_taken
 
     @property
     def speed_limits(self) -> Limits:
@@ -300,6 +306,33 @@ class Motor(Component):
             Signal("speed", "cm/s", self.speed, "present signed speed (0 when not stepping)",
                    limits=lim),
             Signal("running", "bool", lambda: self.running, "the channel is stepping", "d"),
+        ]
+
+    def params(self) -> list[Param]:
+        """CRUISE_SPEED, START_SPEED and DV_LIMIT of MOTOR.dat (not written back),
+        with the checks of ``maxspeed`` and of the database."""
+
+        def cruise(v: float) -> None:
+            self.check_free("CRUISE_SPEED")
+            _check_speeds(self.name, self.start_speed, v, CommandError, what="CRUISE_SPEED")
+            self.cruise_speed = float(v)
+
+        def start(v: float) -> None:
+            self.check_free("START_SPEED")
+            _check_speeds(self.name, v, self.cruise_speed, CommandError, what="START_SPEED")
+            self.start_speed = float(v)
+
+        def dv(v: float) -> None:
+            self.check_free("DV_LIMIT")
+            self.dv_limit = float(v)
+
+        return [
+            Param("CRUISE_SPEED", "cm/s", lambda: self.cruise_speed, cruise, MIN_START_SPEED,
+                  MAX_CRUISE_SPEED, "the maximum speed (maxspeed)"),
+            Param("START_SPEED", "cm/s", lambda: self.start_speed, start, MIN_START_SPEED,
+                  MAX_CRUISE_SPEED, "the speed a step-mode move starts and ends at"),
+            Param("DV_LIMIT", "cm/s per poll", lambda: self.dv_limit, dv, 0.01, 5.0,
+                  "the largest velocity change of one control poll"),
         ]
 
     def reflex(self) -> None:

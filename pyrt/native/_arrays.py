@@ -17,7 +17,7 @@ __all__ = ["F64", "as_f64", "require_f64"]
 F64 = np.dtype(np.float64)
 
 
-def as_f64(name: str, value, shape: tuple[int | None, ...]) -> np.ndarray:
+def as_f64(name: str, value: object, shape: tuple[int | None, ...]) -> np.ndarray:
     """*value* as a C-contiguous float64 array of *shape* (``None`` = any size).
 
     Integers and floats of any width are converted; booleans, complex,
@@ -33,7 +33,7 @@ def as_f64(name: str, value, shape: tuple[int | None, ...]) -> np.ndarray:
     return np.ascontiguousarray(arr, dtype=F64)
 
 
-def require_f64(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
+def require_f64(name: str, value: object, shape: tuple[int, ...]) -> np.ndarray:
     """Refuse anything but a C-contiguous float64 ndarray of exactly *shape*."""
     if not isinstance(value, np.ndarray):
         raise NativeInputError(

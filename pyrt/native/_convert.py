@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 from pyrt.native._errors import raise_for_status
 from pyrt.native._lib import ffi, lib
@@ -30,7 +31,7 @@ def from_excess128(byte: int) -> int:
     return out[0]
 
 
-def excess128_many(values) -> np.ndarray:
+def excess128_many(values: npt.ArrayLike) -> np.ndarray:
     """Vectorised :func:`excess128`: integer drive values to a uint8 array of DAC bytes."""
     arr = np.asarray(values)
     if arr.ndim != 1:

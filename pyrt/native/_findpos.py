@@ -28,7 +28,7 @@ from __future__ import annotations
 import functools
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import ClassVar, NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -87,11 +87,12 @@ class RopeSegments(NamedTuple):
     bottom_dir: np.ndarray
 
 
-def _ptr(arr: np.ndarray):
+def _ptr(arr: np.ndarray) -> Any:
     return ffi.cast("double *", ffi.from_buffer(arr))
 
 
-def _geometry(tops, bottoms, offsets) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+def _geometry(tops: object, bottoms: object, offsets: object | None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     t = as_f64("tops", tops, _NROWS)
     n = t.shape[0]
     if not 1 <= n <= MAX_ROPES:
@@ -127,7 +128,7 @@ def _check(rc: int, what: str, arrays: Mapping[str, np.ndarray | None]) -> None:
     raise_for_status(rc, what, functools.partial(_detail, arrays))
 
 
-def _freeze_flags(freeze, bottoms: np.ndarray) -> tuple[int, int, int]:
+def _freeze_flags(freeze: object, bottoms: np.ndarray) -> tuple[int, int, int]:
     if freeze is None:
         return freeze_mask(bottoms)
     f = np.asarray(freeze)

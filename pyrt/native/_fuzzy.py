@@ -21,7 +21,7 @@ import enum
 import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -143,6 +143,11 @@ class FuzzyParams:
     #: Rule 9: fraction of the last dv taken back when it was high.
     dv_damping: float = lib.PYRT_FUZZY_DEFAULT_DV_DAMPING
 
+    if TYPE_CHECKING:
+        @property
+        def _c(self) -> Any:
+            """The ``pyrt_fuzzy_params *`` these values were checked in (set once built)."""
+
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
@@ -154,7 +159,7 @@ class FuzzyParams:
                          f"FuzzyParams: inconsistent breakpoints or changes ({self})")
         object.__setattr__(self, "_c", c)
 
-    def __reduce__(self):
+    def __reduce__(self) -> tuple[type[FuzzyParams], tuple[float, ...]]:
         # Pickle and copy by value; the bound C struct is rebuilt on load.
         return (self.__class__, dataclasses.astuple(self))
 
@@ -204,7 +209,7 @@ def c_default_params() -> dict[str, float]:
     return {name: getattr(c, name) for name, _ in ffi.typeof("pyrt_fuzzy_params").fields}
 
 
-def _params_array(params, n: int):
+def _params_array(params: object, n: int) -> tuple[Any, int]:
     """(cdata array, count) for one shared FuzzyParams or one per axis."""
     if isinstance(params, FuzzyParams):
         return params._c, 1

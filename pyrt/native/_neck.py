@@ -77,10 +77,10 @@ class NeckRing:
         raise_for_status(lib.pyrt_neck_init(c, _point("centre", centre), _point("axis", axis), r),
                          "NeckRing (a finite centre, a non-zero axis and a radius)")
         self._c = c
-        self.centre: Vec = tuple(c.centre)  # type: ignore[assignment]
-        self.axis: Vec = tuple(c.axis)  # type: ignore[assignment]
-        self.e1: Vec = tuple(c.e1)  # type: ignore[assignment]
-        self.e2: Vec = tuple(c.e2)  # type: ignore[assignment]
+        self.centre: Vec = tuple(c.centre)
+        self.axis: Vec = tuple(c.axis)
+        self.e1: Vec = tuple(c.e1)
+        self.e2: Vec = tuple(c.e2)
         self.radius: float = c.radius
 
     def __repr__(self) -> str:
@@ -113,8 +113,8 @@ class NeckRing:
         raise_for_status(rc, "NeckRing.rope_path")
         up, lo = out.upper, out.lower
         return RopePath(out.length,
-                        tuple(up.point) if up.bears else None,  # type: ignore[arg-type]
-                        tuple(lo.point) if lo.bears else None)  # type: ignore[arg-type]
+                        tuple(up.point) if up.bears else None,
+                        tuple(lo.point) if lo.bears else None)
 
 
 @functools.lru_cache(maxsize=16)

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import ClassVar
+from typing import Any, ClassVar
 
 from pyrt.native._errors import NativeInputError, raise_for_status
 from pyrt.native._findpos import PositionFinder
@@ -61,7 +61,7 @@ def _finite(name: str, values: Sequence[float], n: int) -> list[float]:
     return v
 
 
-def _neck_ring(ring: NeckRing | Sequence[float] | None):
+def _neck_ring(ring: NeckRing | Sequence[float] | None) -> Any:
     """The ``pyrt_neck_ring`` struct for *ring* (checked by C)."""
     if isinstance(ring, NeckRing):
         return ring._c

@@ -13,7 +13,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import ClassVar
+from typing import Any, ClassVar
+
+import numpy as np
+import numpy.typing as npt
 
 from pyrt.native._errors import converged, raise_for_status
 from pyrt.native._lib import ffi, lib
@@ -21,11 +24,14 @@ from pyrt.native._neck import NeckRing, Ring
 
 __all__ = ["StaticsSolver"]
 
+#: A point (x, y, z): a sequence of three numbers or a numpy array of three.
+Point = Sequence[float] | npt.NDArray[np.floating[Any]]
+
 MAX_ROPES: int = lib.PYRT_STATICS_MAX_ROPES
 _NO_RING = NeckRing((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0.0)
 
 
-def _point(p: Sequence[float], what: str) -> tuple[float, float, float]:
+def _point(p: Point, what: str) -> tuple[float, float, float]:
     if p is None or len(p) != 3:
         raise ValueError(f"{what} must be a point (x, y, z), got {p!r}")
     x, y, z = (float(v) for v in p)
@@ -144,7 +150,7 @@ class StaticsSolver:
         """A broken rope (``False``) carries no tension."""
         self._intact[i] = 1 if intact else 0
 
-    def set_position(self, position: Sequence[float]) -> None:
+    def set_position(self, position: Point) -> None:
         """Replace the warm start."""
         for k, v in enumerate(_point(position, "position")):
             self._position[k] = v
@@ -156,7 +162,7 @@ class StaticsSolver:
         (the position is then the best point reached; the next call continues)."""
         return converged(lib.pyrt_statics_solve(self._p), self._what)
 
-    def evaluate(self, position: Sequence[float]) -> tuple[list[float], list[float], list[bool]]:
+    def evaluate(self, position: Point) -> tuple[list[float], list[float], list[bool]]:
         """Rope geometry (cm beyond the top pulley), tensions and ring contact
         at ``position``, without solving."""
         pos = ffi.new("double[3]", list(_point(position, "position")))

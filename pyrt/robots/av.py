@@ -92,7 +92,7 @@ class AV(Component):
                    position=record.position, orientation=record.orientation)
 
     @command(name="show", reads_only=True)
-    def show(self) -> str:
+    def cmd_show(self) -> str:
         """show: the vessel's geometry and pose (the AV takes no other command)."""
         return (f"{self.name}: vessel radius {self.vessel_radius:g} cm, neck ring at "
                 f"{tuple(round(c, 2) for c in self.neck_ring_position)} radius "
@@ -132,7 +132,9 @@ class AV(Component):
         """A direction (not a point) from vessel to global co-ordinates."""
         v = _vec(d, "direction")
         r = self._r
-        return tuple(r[i][0] * v[0] + r[i][1] * v[1] + r[i][2] * v[2] for i in range(3))
+        return (r[0][0] * v[0] + r[0][1] * v[1] + r[0][2] * v[2],
+                r[1][0] * v[0] + r[1][1] * v[1] + r[1][2] * v[2],
+                r[2][0] * v[0] + r[2][1] * v[1] + r[2][2] * v[2])
 
     # -- neck ring -------------------------------------------------------------------
 

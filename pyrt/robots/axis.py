@@ -1,11 +1,13 @@
 """One rope of the manipulator: Motor, Encoder and Loadcell together (000, section 6).
 
-Lengths: :meth:`Axis.getLength` is the rope from the top pulley to its end,
+Lengths: :meth:`Axis.length` (000's ``getLength``) is the rope from the top pulley to its end,
 corrected for stretch; the encoder gives the total unstretched length from
 the spindle (dead length included) and the rope stretches in proportion to
 tension and length (STRETCH, strain per newton), so
 
-    getLength = encoder length * (1 + STRETCH * tension) - DEADLENGTH.
+    length = encoder length * (1 + STRETCH * tension) - DEADLENGTH
+
+(:func:`pyrt.robots.ropes.corrected_length`, the one stretch formula).
 
 Standalone control (``STEP_MODE``, Table 4 commands ``up``, ``down``,
 ``to``): each poll recalculates the steps left to the wanted length and
@@ -13,12 +15,12 @@ hands them to the Motor; within :data:`END_ZONE` (1 cm) of the end it stops
 recalculating and lets the Motor finish the move.
 
 PolyAxis control (``VELOCITY_MODE``) is driven from above:
-:meth:`Axis.polyActivate` puts the Motor in velocity mode on standby and
+:meth:`Axis.poly_activate` (000's ``polyActivate``) puts the Motor in velocity mode on standby and
 refuses keyboard commands; the PolyAxis then computes the error signals
 and sets the Motor's velocity each poll (its rates of change are kept in
 the C controller, :class:`pyrt.native.PolyControl`), and polls the axis's
 encoder; axis-poll (:mod:`pyrt.tasks.axis_poll`) leaves the axis alone
-until :meth:`Axis.polyDeactivate` hands it back.
+until :meth:`Axis.poly_deactivate` (``polyDeactivate``) hands it back.
 
 LENGTH write-back is the station's (:class:`pyrt.tasks.WriteBack`).
 """
@@ -27,17 +29,19 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING, Any, Protocol, TextIO
 
 from pyrt.boards.dataconcentrator import ADC_MAX, DataConcentrator
 from pyrt.boards.tio10 import TIO10
-from pyrt.component import Arg, Component, Limits, Signal, command
+from pyrt.component import Arg, Component, Limits, Param, Signal, command
+from pyrt.db import defaults
 from pyrt.devices._args import parse_number
 from pyrt.devices.encoder import Encoder
 from pyrt.devices.loadcell import Loadcell, parse_load
 from pyrt.devices.motor import MAX_CRUISE_SPEED, MIN_START_SPEED, STEP_MODE, Motor
 from pyrt.errors import CommandError, ConfigError, PyrtError
 from pyrt.robots.av import AV
+from pyrt.robots.ropes import corrected_length
 from pyrt.tasks.axis_poll import POLYAXIS, STANDALONE
 
 if TYPE_CHECKING:
@@ -51,6 +55,7 @@ __all__ = [
     "TRACKING_CHECK",
     "TRACKING_MIN_FRACTION",
     "Axis",
+    "RopeGroup",
     "TrackingError",
 ]
 
@@ -76,6 +81,27 @@ LOADCELL_STUCK_READS = 50
 LOADCELL_STUCK_ROPE_CM = 1.0
 #: Supervision calls further apart than this belong to different moves.
 _SUPERVISION_GAP_S = 0.1
+
+
+class RopeGroup(Protocol):
+    """What an Axis knows of the PolyAxis that drives it (its ``group``)."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def active(self) -> bool: ...
+
+    @property
+    def lengths(self) -> list[float]: ...
+
+    @property
+    def tensions(self) -> list[float]: ...
+
+    @property
+    def estimate_lost(self) -> str | None: ...
+
+    def halt(self, reason: Any, detail: str) -> Any: ...
 
 
 class TrackingError(PyrtError):
@@ -129,7 +155,7 @@ class Axis(Component):
         offset: Sequence[float] = (0.0, 0.0, 0.0),
         bottom: Sequence[float] | None = None,
         av: AV | None = None,
-        stretch: float = 2.0e-5,
+        stretch: float = defaults("AXIS")["stretch"],
     ):
         if not (math.isfinite(dead_length) and dead_length >= 0):
             raise ConfigError(f"axis {name}: DEADLENGTH must be >= 0 cm, got {dead_length!r}")
@@ -140,17 +166,18 @@ class Axis(Component):
         self.encoder = encoder
         self.loadcell = loadcell
         #: The PolyAxis this axis belongs to (it sets this), for ``stop``.
-        self.group: object | None = None
+        self.group: RopeGroup | None = None
         #: The rope's index in its PolyAxis (set with ``group``).
         self.group_index: int | None = None
         for device in (motor, encoder, loadcell):
-            device.owner_busy = self._device_busy  # type: ignore[attr-defined]
+            device.owner_busy = self._device_busy  # type: ignore[union-attr]
         self.dead_length = float(dead_length)
         self.stretch = float(stretch)
         self.av = av
         self.top = tuple(float(c) for c in top)
         self.offset = tuple(float(c) for c in offset)
-        self.bottom_vessel = None if bottom is None else tuple(float(c) for c in bottom)
+        self.bottom_vessel: tuple[float, float, float] | None = (
+            None if bottom is None else (float(bottom[0]), float(bottom[1]), float(bottom[2])))
 
         self.mode = STANDALONE
         self.target: float | None = None
@@ -227,12 +254,10 @@ class Axis(Component):
     def tension(self) -> float:
         return self.loadcell.tension()
 
-    def getLength(self) -> float:
+    def length(self) -> float:
         """Rope length from the top pulley to its end, stretch corrected (cm)."""
-        t = self.loadcell.tension()
-        if t < 0.0:
-            t = 0.0
-        return self.encoder.length() * (1.0 + self.stretch * t) - self.dead_length
+        return corrected_length(self.encoder.length(), self.loadcell.tension(), self.stretch,
+                                self.dead_length)
 
     # -- the component contract ----------------------------------------------------------
 
@@ -254,7 +279,7 @@ class Axis(Component):
             Signal("tension", "N", self._polled("tensions", self.tension),
                    "rope tension the controller acts on (loadcell)",
                    limits=tension_alarms(self.tension_limits)),
-            Signal("length", "cm", self._polled("lengths", self.getLength),
+            Signal("length", "cm", self._polled("lengths", self.length),
                    "rope length the controller acts on, stretch corrected",
                    limits=None if r is None else Limits(r[0], r[1])),
             Signal("errorLength", "cm", self._polled("error_lengths", _zero),
@@ -309,6 +334,19 @@ class Axis(Component):
         r = self.length_range
         return (0.0, None) if r is None else r
 
+    def params(self) -> list[Param]:
+        """The limits every move of this rope is held to, read only (the PolyAxis
+        sets them: ``set POLYAXIS.MAX_TENSION``)."""
+        def limit(which: int, attr: str) -> Callable[[], float | None]:
+            return lambda: (getattr(self, attr) or (None, None))[which]
+
+        return [
+            Param("LENGTH_MIN", "cm", limit(0, "length_range"), doc="shortest rope length"),
+            Param("LENGTH_MAX", "cm", limit(1, "length_range"), doc="longest rope length"),
+            Param("LOW_TENSION", "N", limit(0, "tension_limits"), doc="lowest tension"),
+            Param("HIGH_TENSION", "N", limit(1, "tension_limits"), doc="highest tension"),
+        ]
+
     def set_supervision(self, length_range: tuple[float, float],
                         tension_limits: tuple[float, float],
                         tension_stops: Callable[[], bool] = _true) -> None:
@@ -332,25 +370,25 @@ class Axis(Component):
     @command(Arg("DIST", str, lo=0.0, units="cm", bounds="travel_range",
                  what="the span of the rope's length range"),
              name="up", moves=True, reply=_moving)
-    def up(self, dist: float | str) -> float:
+    def cmd_up(self, dist: float | str) -> float:
         """up DIST: move up DIST cm (shorten the rope; the source goes up)."""
         d = self._distance(dist, "up")
         self._standalone("up")
-        return self._go(self.getLength() - d, "up")
+        return self._go(self.length() - d, "up")
 
     @command(Arg("DIST", str, lo=0.0, units="cm", bounds="travel_range",
                  what="the span of the rope's length range"),
              name="down", moves=True, reply=_moving)
-    def down(self, dist: float | str) -> float:
+    def cmd_down(self, dist: float | str) -> float:
         """down DIST: move down DIST cm (lengthen the rope)."""
         d = self._distance(dist, "down")
         self._standalone("down")
-        return self._go(self.getLength() + d, "down")
+        return self._go(self.length() + d, "down")
 
     @command(Arg("LEN", str, lo=0.0, units="cm", bounds="target_range",
                  what="the rope's physical length range"),
              name="to", moves=True, reply=_moving)
-    def to(self, length: float | str) -> float:
+    def cmd_to(self, length: float | str) -> float:
         """to LEN: change the rope length to LEN cm."""
         v = parse_number(length, f"{self.name} to", "length in cm")
         if v <= 0:
@@ -373,7 +411,7 @@ class Axis(Component):
             raise CommandError(f"{self.name} {command}: that would take the rope to "
                                f"{target:.3f} cm, outside its physical length range "
                                f"{r[0]:g}..{r[1]:g} cm; nothing moved")
-        err = target - self.getLength()
+        err = target - self.length()
         steps = round(err * self.motor.steps_per_cm)
         m = self.motor
         if m.mode == STEP_MODE and m.running and steps != 0 and (steps > 0) != (m.direction > 0):
@@ -389,7 +427,7 @@ class Axis(Component):
     @command(name="calibrate", reply=lambda v: (
         "loadcell calibration mode: hang known loads and give 'point LOAD'" if v is None
         else f"loadcell SLOPE {v[0]:.10g} OFFSET {v[1]:.10g}"))
-    def calibrate(self) -> tuple[float, float] | None:
+    def cmd_calibrate(self) -> tuple[float, float] | None:
         """calibrate: toggle loadcell calibration mode (leaving it fits)."""
         self._standalone("calibrate")
         return self.loadcell.calibrate()
@@ -402,7 +440,7 @@ class Axis(Component):
     @command(Arg("LOAD", lambda t: parse_load(t, "point"), rest=True, lo=0.0, units="N",
                  bounds="load_range", what="up to the loadcell's MAXLOAD"), name="point",
              reply=lambda v: f"loadcell point: ADC {v[0]} = {v[1]:.4g} N")
-    def point(self, load: float | str) -> tuple[int, float]:
+    def cmd_point(self, load: float | str) -> tuple[int, float]:
         """point LOAD: enter a loadcell calibration point (LOAD in N, lb or kg)."""
         self._standalone("point")
         return self.loadcell.point(load)
@@ -410,13 +448,13 @@ class Axis(Component):
     @command(Arg("SPEED", str, lo=MIN_START_SPEED, hi=MAX_CRUISE_SPEED, units="cm/s",
                  what="000's motor speeds"), name="maxspeed",
              reply=lambda v: f"maximum speed {v:g} cm/s")
-    def maxspeed(self, speed: float | str) -> float:
+    def cmd_maxspeed(self, speed: float | str) -> float:
         """maxspeed SPEED: set the maximum motor speed in cm/s."""
         self._standalone("maxspeed")
         return self.motor.maxspeed(speed)
 
     @command(name="zero", reply=lambda _v: "encoder counter reset")
-    def zero(self) -> None:
+    def cmd_zero(self) -> None:
         """zero: reset the encoder counter."""
         self._standalone("zero")
         self.encoder.reset()
@@ -435,14 +473,14 @@ class Axis(Component):
             # one joint stopped stops the whole manipulator
             from pyrt.robots.stops import StopReason
 
-            group.halt(StopReason.STOP, f"{self.name} stop command")  # type: ignore[attr-defined]
-            return f"stopped; the {group.name} move is stopped with it"  # type: ignore[attr-defined]
+            group.halt(StopReason.STOP, f"{self.name} stop command")
+            return f"stopped; the {group.name} move is stopped with it"
         self.stop()
         return "stopped"
 
     # -- PolyAxis hooks ---------------------------------------------------------------
 
-    def polyActivate(self) -> None:
+    def poly_activate(self) -> None:
         """Hand the axis to PolyAxis control: Motor in VELOCITY_MODE on standby,
         commands refused (000, section 5)."""
         self.target = None
@@ -450,7 +488,7 @@ class Axis(Component):
         self.mode = POLYAXIS
         self._track_reset()
 
-    def polyDeactivate(self) -> None:
+    def poly_deactivate(self) -> None:
         """Stop the motor and return the axis to standalone control."""
         self.motor.stop()
         self.motor.mode = STEP_MODE
@@ -460,7 +498,7 @@ class Axis(Component):
 
     def poll(self, now_s: float) -> None:
         """One poll: standalone control, then the Motor, then the Encoder."""
-        length = self.getLength()
+        length = self.length()
         m = self.motor
         if self.mode == STANDALONE and self.target is not None and m.running:
             err = self.target - length
@@ -522,8 +560,9 @@ class Axis(Component):
                     f"{abs(m.position_steps - self._adc_steps) / m.steps_per_cm:.1f} cm of rope "
                     "(stuck)")
         if poly:
-            length = group.lengths[i]  # type: ignore[attr-defined]
-            tension = group.tensions[i]  # type: ignore[attr-defined]
+            assert group is not None and i is not None
+            length = group.lengths[i]
+            tension = group.tensions[i]
             lengthening = m.velocity > 0
         else:
             tension = lc.tension()
@@ -556,12 +595,11 @@ class Axis(Component):
         if self.mode == POLYAXIS and group is not None and getattr(group, "active", False):
             from pyrt.robots.stops import StopReason
 
-            group.halt(StopReason.FAULT, cause)  # type: ignore[attr-defined]
+            group.halt(StopReason.FAULT, cause)
         super().fail(cause, source)
 
     def _length_at(self, tension: float) -> float:
-        t = tension if tension > 0.0 else 0.0
-        return self.encoder.length() * (1.0 + self.stretch * t) - self.dead_length
+        return corrected_length(self.encoder.length(), tension, self.stretch, self.dead_length)
 
     def _track_reset(self) -> None:
         self._track_steps = self.motor.position_steps

@@ -248,6 +248,7 @@ class GripperController(Component, CommandLetters):
 
     #: Back at ``CMD:`` from the monitor (the letters' own, not Component's default).
     enter_level = CommandLetters.enter_level
+    params = CommandLetters.params
 
     def __init__(self, cpu: I8031, name: str = "gripper", stall_limit_ns: int = 1_000_000_000,
                  calibration: JawCalibration | None = None):
@@ -525,16 +526,21 @@ class GripperController(Component, CommandLetters):
 
     def reflex(self) -> None:
         """The reflex action: null the current, clear drive and jog, abandon
-        the foreground job.  Runs in the tick that found the fault (or the stop)."""
-        self.drive(DAC_NULL)
-        self.supervisor.disarm()
-        ram = self.ram
-        if ram[FLAGS] & (_MASK_DRVON | _MASK_DOJOG):
-            self.last_stop = "stopped by the reflex (move abandoned)"
-        ram[FLAGS] &= ~(_MASK_DRVON | _MASK_DOJOG) & 0xFF
-        if self.job is not None:
-            self.job.cancel()
-            self.job = None
+        the foreground job.  Runs in the tick that found the fault (or the stop).
+        The controller's own state is cleared whatever the DAC write does (a
+        dead link raises BoardError after it)."""
+        try:
+            self.drive(DAC_NULL)
+        finally:
+            self._dac = DAC_NULL
+            self.supervisor.disarm()
+            ram = self.ram
+            if ram[FLAGS] & (_MASK_DRVON | _MASK_DOJOG):
+                self.last_stop = "stopped by the reflex (move abandoned)"
+            ram[FLAGS] &= ~(_MASK_DRVON | _MASK_DOJOG) & 0xFF
+            if self.job is not None:
+                self.job.cancel()
+                self.job = None
 
     def watchdog(self, now_ns: int) -> None:
         """Every tick: trip the robot when current has been applied longer
@@ -853,17 +859,18 @@ class GripperController(Component, CommandLetters):
         """The RAM variables by their Appendix A names (words signed where
         002 treats them so) and the DAC."""
         ram = self.ram
+        counts = self.counts_text
         return [
             Signal("encoder", "counts", lambda: self._sword(ENCODER_CNT), "ENCODER_CNT (4A)",
-                   "d", Source.word(ram, ENCODER_CNT, signed=True)),
+                   "d", Source.word(ram, ENCODER_CNT, signed=True), show=counts),
             Signal("target", "counts", lambda: self._sword(COMMAND_CNT), "COMMAND_CNT (4C)",
-                   "d", Source.word(ram, COMMAND_CNT, signed=True)),
+                   "d", Source.word(ram, COMMAND_CNT, signed=True), show=counts),
             Signal("error", "counts+128", lambda: self.word(ERROR_CNT),
                    "ERROR_CNT (46), excess-128", "04X", Source.word(ram, ERROR_CNT)),
             Signal("rate", "counts/check", lambda: self._sword(RATE), "RATE (48)", "d",
                    Source.word(ram, RATE, signed=True)),
             Signal("old_enc", "counts", lambda: self._sword(OLD_ENC), "OLD_ENC (4E)", "d",
-                   Source.word(ram, OLD_ENC, signed=True)),
+                   Source.word(ram, OLD_ENC, signed=True), show=counts),
             Signal("flags", "byte", lambda: ram[FLAGS], "FLAGS (2C)", "02X",
                    Source.item(ram, FLAGS)),
             Signal("sensors", "word", lambda: self.word(PROX), "sensor word (2E:2D)", "04X",
@@ -875,6 +882,12 @@ class GripperController(Component, CommandLetters):
             Signal("moving", "bool", lambda: self.moving, "drive or jog bit set", "d"),
             Signal("busy", "bool", lambda: self.busy, "init or calibration running", "d"),
         ]
+
+    def counts_text(self, counts: Any) -> str:
+        """A jaw position as every console view shows it: the hex word the
+        letters use, the opening in mm beside it (``E47A (26.2 mm)``)."""
+        c = int(counts)
+        return f"{c & 0xFFFF:04X} ({self.calibration.mm(c):.1f} mm)"
 
     def signal(self, name: str) -> Signal | None:
         """A signal by name, or any RAM byte as ``ram:XX``."""

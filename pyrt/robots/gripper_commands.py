@@ -13,9 +13,11 @@ from __future__ import annotations
 import re
 from typing import Any
 
-from pyrt.component import Arg, Component, Signal, Switch, command
+from pyrt.boards.i8031 import JSPEED, MVJAWSPD, SENSORPD, SYSCLKPD, WTCHJWSPD
+from pyrt.component import Arg, Component, Param, Signal, Switch, command
 from pyrt.errors import CommandError
 from pyrt.scheduler.motion import MotionRecord
+from pyrt.units import NUMBER_PATTERN, UnitError, parse_value, units_of
 
 __all__ = ["CommandLetters", "GripperMonitor", "parse_hex", "parse_position", "parse_target",
            "sensor_names"]
@@ -52,7 +54,10 @@ def parse_hex(text: str, what: str, maximum: int, minimum: int = 0) -> int:
     return value
 
 
-_MM = re.compile(r"([0-9]+(?:\.[0-9]*)?|\.[0-9]+)\s*mm", re.IGNORECASE)
+#: An opening with its length unit (``42.5mm``, ``4.25cm``): the one number
+#: grammar's (:func:`pyrt.units.parse_value`); without a unit a target is hex.
+_OPENING = re.compile(rf"({NUMBER_PATTERN})\s*({'|'.join(units_of('length'))})",
+                      re.IGNORECASE)
 
 
 def parse_target(text: str) -> int:
@@ -86,13 +91,16 @@ def parse_target(text: str) -> int:
 
 
 def parse_position(text: str, calibration: Any) -> int:
-    """A ``P`` target as :func:`parse_target` takes it, or an opening in
-    millimetres (``42.5mm``) converted with the station's ``calibration``."""
+    """A ``P`` target as :func:`parse_target` takes it (hexadecimal, as 002
+    writes it), or an opening with its length unit (``42.5mm``, ``4.25cm``)
+    converted with the station's ``calibration``."""
     t = text.strip()
-    m = _MM.fullmatch(t)
-    if m is None:
+    if _OPENING.fullmatch(t) is None:
         return parse_target(t)
-    mm = float(m.group(1))
+    try:
+        mm = parse_value(t, "mm")
+    except UnitError as exc:
+        raise CommandError(f"target {t[:40]!r}: {exc}") from None
     if not 0.0 <= mm <= calibration.open_mm:
         raise CommandError(f"target {t[:40]} is out of range (0..{calibration.open_mm:g} mm)")
     return calibration.counts(mm)
@@ -209,6 +217,31 @@ class CommandLetters:
 
         Says what it changed: JSPEED (51), MXPJSPD (52) and MXNJSPD (53)."""
         return self.set_speed(speed)  # type: ignore[attr-defined]
+
+    def params(self) -> list[Param]:
+        """``speed`` (X) and the schedule bytes (monitor C 42..45), by name, with the
+        checks of X and of the monitor's C (a schedule the controller cannot serve
+        is refused; one predicted to oscillate is stored with the warning)."""
+        ram = self.ram  # type: ignore[attr-defined]
+
+        def byte(addr: int, name: str, units: str, doc: str) -> Param:
+            def write(value: int) -> str | None:
+                warning = self.schedule_warning(addr, value)  # type: ignore[attr-defined]
+                self.poke(addr, value)  # type: ignore[attr-defined]
+                return f"warning: {warning}" if warning else None
+
+            return Param(name, units, lambda: ram[addr], write, 1, 0xFF,
+                         f"RAM {addr:02X}: {doc}", integer=True, hex=True)
+
+        return [
+            Param("speed", "speed byte", lambda: ram[JSPEED], self.set_speed,  # type: ignore[attr-defined]
+                  1, 0x7F, "X: maximum jaw speed (7F original gears; 33 high-ratio worm)",
+                  integer=True, hex=True),
+            byte(SYSCLKPD, "SYSCLKPD", "ticks", "ticks per ready-queue clock period"),
+            byte(MVJAWSPD, "MVJAWSPD", "clock periods", "MVJAWS period"),
+            byte(SENSORPD, "SENSORPD", "clock periods", "SENSORS period"),
+            byte(WTCHJWSPD, "WTCHJWSPD", "clock periods", "WATCHJAW period"),
+        ]
 
     def enter_level(self) -> list[str]:
         """Back at ``CMD:`` from the monitor; a reminder if the clock is still off."""

@@ -143,8 +143,9 @@ class Hare:
             if self._half <= 1e-6:
                 self.blend = False
             else:
-                self._d1 = tuple(c / la for c in _sub(a.end, a.start))
-                self._d2 = tuple(c / lb for c in _sub(b.end, b.start))
+                da, db = _sub(a.end, a.start), _sub(b.end, b.start)
+                self._d1: Vec = (da[0] / la, da[1] / la, da[2] / la)
+                self._d2: Vec = (db[0] / lb, db[1] / lb, db[2] / lb)
 
     @property
     def end(self) -> Vec:

@@ -135,8 +135,10 @@ class PatternRobot(Protocol):
 
     name: str
     active: bool
-    position: Vec
     last_stop: StopRecord | None
+
+    @property
+    def position(self) -> Vec: ...
 
     def to(self, target: Sequence[float]) -> Any: ...
 

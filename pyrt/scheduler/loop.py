@@ -40,10 +40,10 @@ from pyrt.scheduler.clock import Clock, SimClock, WallClock
 from pyrt.scheduler.gcwatch import GcWatch, attribute
 from pyrt.scheduler.readyqueue import ReadyQueue, fold_many
 from pyrt.scheduler.stats import (
-    NBINS,
     Accumulator,
     LoopStatistics,
     TaskStatistics,
+    bin_index,
 )
 
 __all__ = ["Job", "Loop", "TakenSamples", "overrun_line"]
@@ -709,7 +709,9 @@ def overrun_line(count: int, worst_ns: int, tick: int, culprit: str = "", width:
     line, the worst (ms past its next deadline), where, and where to look;
     never wider than ``width`` (the culprit's name is cut first)."""
     ticks = "tick" if count == 1 else "ticks"
-    head = f"overrun: {count} {ticks}, worst {worst_ns / 1e6:.2f} ms over at tick {tick}"
+    worst = (f"{worst_ns / 1e6:.2f} ms" if worst_ns >= 10_000
+             else f"{worst_ns / 1e3:.1f} µs")  # 0.00 ms would say nothing
+    head = f"overrun: {count} {ticks}, worst {worst} over at tick {tick}"
     tail = "; see stats"
     if culprit:
         room = width - len(head) - len(tail) - len(" in ")
@@ -732,9 +734,4 @@ def _record(acc: Accumulator, d: int) -> None:
     acc.total += d
     if d > acc.max:
         acc.max = d
-    if d < 8:
-        acc.hist[d if d > 0 else 0] += 1
-    else:
-        bl = d.bit_length()
-        i = (bl << 2) - 8 + ((d >> (bl - 3)) & 3)
-        acc.hist[i if i < NBINS else NBINS - 1] += 1
+    acc.hist[bin_index(d)] += 1

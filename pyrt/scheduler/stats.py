@@ -11,7 +11,9 @@ maximum.  Snapshots are plain frozen values (:class:`Distribution`,
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 __all__ = [
     "NBINS",
@@ -118,7 +120,8 @@ class Distribution:
     hist: tuple[tuple[int, int], ...] = ()
 
     @classmethod
-    def from_hist(cls, count: int, total: int, max_ns: int, hist) -> Distribution:
+    def from_hist(cls, count: int, total: int, max_ns: int,
+                  hist: Sequence[Any]) -> Distribution:
         """Build from raw counters; ``hist`` is dense (list) or sparse (pairs)."""
         if hist and isinstance(hist[0], (tuple, list)):
             sparse = tuple((int(b), int(c)) for b, c in hist if c)
@@ -141,7 +144,7 @@ class Distribution:
         return _percentile(self.hist, self.count, self.max_ns, q)
 
 
-def _percentile(sparse, count: int, max_ns: int, q: float) -> int:
+def _percentile(sparse: Iterable[tuple[int, int]], count: int, max_ns: int, q: float) -> int:
     if count == 0:
         return 0
     need = q * count

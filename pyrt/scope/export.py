@@ -22,11 +22,11 @@ def save_frame(frame: Frame, path: str | Path) -> Path:
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix == ".csv":
-        buf = io.StringIO()
+        text = io.StringIO()
         header = ",".join(["t_s", *(column_title(frame, k) for k in range(len(frame.channels)))])
         table = np.column_stack([frame.t_ns / 1e9, frame.data])
-        np.savetxt(buf, table, delimiter=",", header=header, comments="", fmt="%.9g")
-        data = buf.getvalue().encode("utf-8")
+        np.savetxt(text, table, delimiter=",", header=header, comments="", fmt="%.9g")
+        data = text.getvalue().encode("utf-8")
     elif suffix == ".npz":
         buf = io.BytesIO()
         np.savez(

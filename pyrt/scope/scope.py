@@ -342,9 +342,12 @@ class Scope:
         while True:
             if self.state == "armed":
                 start = max(j, self._arm_g + pre - g0)
-                if col is not None and start > max(j, 0):
-                    self._note_missed(col, max(j, self._arm_g - g0, 0), min(start, n), g0, trig)
-                hit = self._find_edge(col, start, trig) if col is not None else None
+                hit = None
+                if col is not None and trig is not None:
+                    if start > max(j, 0):
+                        self._note_missed(col, max(j, self._arm_g - g0, 0), min(start, n), g0,
+                                          trig)
+                    hit = self._find_edge(col, start, trig)
                 if hit is not None:
                     self._trig_g = g0 + hit
                     self.state = "triggered"
@@ -355,10 +358,12 @@ class Scope:
                 else:
                     break
             if self.state == "triggered":
-                end = self._trig_g + post
+                trig_g = self._trig_g
+                assert trig_g is not None, "a scope triggered without its trigger sample"
+                end = trig_g + post
                 if self._g < end:
                     break
-                self._complete(self._trig_g - pre, pre)
+                self._complete(trig_g - pre, pre)
                 if self.mode == "single":
                     self.state = "done"
                     break

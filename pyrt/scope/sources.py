@@ -58,8 +58,9 @@ class Source:
         return cls("word", mem, address, signed)
 
     @classmethod
-    def call(cls, fn: Callable[[], float]) -> Source:
-        """Whatever ``fn()`` returns (the slowest kind: a call per sample)."""
+    def call(cls, fn: Callable[[], float | str]) -> Source:
+        """Whatever ``fn()`` returns (the slowest kind: a call per sample): a
+        number, or text for a value only served (never plotted) by the server."""
         if not callable(fn):
             raise ValueError(f"not callable: {fn!r}")
         return cls("call", fn)

@@ -10,11 +10,12 @@ from __future__ import annotations
 
 from pyrt.server.connection import Connection
 from pyrt.server.protocol import format_error
+from pyrt.server.state import ServerState
 
 __all__ = ["FramingMixin"]
 
 
-class FramingMixin:
+class FramingMixin(ServerState):
     """The framing part of :class:`~pyrt.server.Server` (see the module text)."""
 
     def _on_readable(self, conn: Connection) -> None:

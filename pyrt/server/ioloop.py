@@ -31,13 +31,14 @@ from pyrt.server.limits import (
     lower_priority,
 )
 from pyrt.server.protocol import format_error, format_reply
+from pyrt.server.state import ServerState
 
 __all__ = ["IOLoopMixin"]
 
 log = logging.getLogger("pyrt.server")
 
 
-class IOLoopMixin:
+class IOLoopMixin(ServerState):
     """The I/O-thread part of :class:`~pyrt.server.Server` (see the module text)."""
 
     def _wake(self) -> None:

@@ -39,16 +39,33 @@ class Shell(Protocol):
 class ServedRobot(Protocol):
     """A robot as the server sees it."""
 
-    #: The robot's name (``gripper``, ``prototype``), shown in STATUS lines.
-    name: str
-    #: Names of the status fields, in the order of :meth:`status_sources`.
-    status_names: Sequence[str]
-    #: The status fields ``(name, signal, format)``: units and limits for EPICS.
-    fields: Sequence[tuple[str, Any, str]]
-    #: Values served beside the status fields (EPICS PVs): ``PVField`` records.
-    extra_fields: Sequence[Any]
-    #: The station served (acknowledging its fault is its own act).
-    station: Any
+    # Read-only to the server (properties here, so that a plain attribute of
+    # a narrower type, a tuple or a list, serves).
+
+    @property
+    def name(self) -> str:
+        """The robot's name (``gripper``, ``prototype``), shown in STATUS lines."""
+        ...
+
+    @property
+    def status_names(self) -> Sequence[str]:
+        """Names of the status fields, in the order of :meth:`status_sources`."""
+        ...
+
+    @property
+    def fields(self) -> Sequence[tuple[str, Any, str]]:
+        """The status fields ``(name, signal, format)``: units and limits for EPICS."""
+        ...
+
+    @property
+    def extra_fields(self) -> Sequence[Any]:
+        """Values served beside the status fields (EPICS PVs): ``PVField`` records."""
+        ...
+
+    @property
+    def station(self) -> Any:
+        """The station served (acknowledging its fault is its own act)."""
+        ...
 
     def status_sources(self) -> list[Source]:
         """Where the loop reads each status field (sampled in the loop thread)."""
@@ -58,8 +75,9 @@ class ServedRobot(Protocol):
         """The ``key=value`` fields of a STATUS line for one sample."""
         ...
 
-    def make_shell(self, runner: Any, stdout: TextIO) -> Shell:
-        """A fresh command shell for one connection, talking through ``runner``."""
+    def make_shell(self, runner: Any, stdout: TextIO, source: str = "remote") -> Shell:
+        """A fresh command shell for one connection (``source`` names it in the
+        audit trail), talking through ``runner``."""
         ...
 
     def is_read_only(self, line: str) -> bool:

@@ -23,6 +23,7 @@ from typing import Any
 from pyrt.server.connection import Connection
 from pyrt.server.limits import MAX_AUTH_FAILURES, lower_priority
 from pyrt.server.protocol import format_error, format_reply, split_verb
+from pyrt.server.state import ServerState
 
 __all__ = ["SessionMixin", "run_shell"]
 
@@ -82,7 +83,7 @@ def run_shell(shell: Any, line: str, extra: list[str] | None = None) -> tuple[st
 
 
 
-class SessionMixin:
+class SessionMixin(ServerState):
     """The requests part of :class:`~pyrt.server.Server` (see the module text)."""
 
     def _request(self, conn: Connection, raw: bytes) -> None:
@@ -293,7 +294,9 @@ class SessionMixin:
     def _shell(self, conn: Connection) -> Any:
         if conn.shell is None or conn.shell_privileged != conn.privileged:
             runner = self.runner if conn.privileged else self.observer
-            conn.shell = self.robot.make_shell(runner, io.StringIO())
+            host, port = conn.peer[:2]
+            conn.shell = self.robot.make_shell(runner, io.StringIO(),
+                                               source=f"DAQ client {conn.id} {host}:{port}")
             conn.shell_privileged = conn.privileged
         return conn.shell
 

@@ -10,6 +10,7 @@ the stop).  No second table of commands exists here.
 
 from __future__ import annotations
 
+import io
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -71,8 +72,8 @@ class ServedStation:
         return " ".join(f"{name}={_fmt(v, fmt)}"
                         for (name, _sig, fmt), v in zip(self.fields, values, strict=True))
 
-    def make_shell(self, runner: Any, stdout: TextIO) -> RobotShell:
-        return RobotShell(self.station, stdout, runner=runner)
+    def make_shell(self, runner: Any, stdout: TextIO, source: str = "remote") -> RobotShell:
+        return RobotShell(self.station, stdout, runner=runner, source=source)
 
     def is_read_only(self, line: str) -> bool:
         """True when ``line`` only reads, or any client may give it (the stop)."""
@@ -146,7 +147,9 @@ def _fmt(value: Any, fmt: str) -> str:
     return format(value, fmt)
 
 
-class _Null:
+class _Null(io.StringIO):
+    """A text stream that keeps nothing written to it."""
+
     def write(self, text: str) -> int:
         return len(text)
 

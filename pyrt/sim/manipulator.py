@@ -101,6 +101,12 @@ class ManipulatorRig:
     vessel_radius: float = 0.0
 
 
+def _vec(v: Sequence[float] | np.ndarray) -> Vec:
+    """``v`` (three numbers) as a point of floats."""
+    x, y, z = v
+    return (float(x), float(y), float(z))
+
+
 def rotation_xyz(angles_deg: Sequence[float]) -> np.ndarray:
     """Rotation matrix for rotations about global x, then y, then z (degrees)."""
     ax, ay, az = (math.radians(float(a)) for a in angles_deg)
@@ -158,15 +164,14 @@ def rig_from_station(
             loadcell_slope=lc.slope,
             loadcell_offset=lc.offset,
             loadcell_maxload=lc.maxload,
-            top=tuple(float(c) for c in ax.top),
+            top=_vec(ax.top),
             bottom=None if ax.bottom is None else vtog(ax.bottom),
-            offset=tuple(float(c) for c in ax.offset),
+            offset=_vec(ax.offset),
             dead=ax.deadlength,
             stretch=ax.stretch,
         ))
     axis = rot @ np.array([0.0, 0.0, 1.0])
-    ring = (vtog(av.neck_ring_static_position), tuple(float(a) for a in axis),
-            av.neck_ring_radius)
+    ring = (vtog(av.neck_ring_static_position), _vec(axis), av.neck_ring_radius)
     centre = vtog((0.0, 0.0, 0.0))
     if liquid_level == "neck":
         liquid_level = ring[0][2]
@@ -176,7 +181,7 @@ def rig_from_station(
         ropes=tuple(ropes),
         mass=pa.source_mass,
         volume=pa.source_volume,
-        position=tuple(float(c) for c in (position if position is not None else pa.position)),
+        position=_vec(position if position is not None else pa.position),
         ring=ring,
         floor_z=centre[2] - av.vessel_radius,
         liquid_level=liquid_level,

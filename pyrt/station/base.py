@@ -17,21 +17,38 @@ Both robots are a :class:`Station` plus a configuration
 * derives everything that lists signals or commands from the tree:
   :meth:`components`, :meth:`signals`, :meth:`resolve_signal`;
 * owns the robot's **boards** (:func:`pyrt.boards.open_boards`, chosen by
-  URL) when a configuration gives them to :meth:`attach_boards`: their
-  ``poll`` runs first in every tick, a :class:`~pyrt.errors.BoardError`
-  there trips the robot (the message names the back end's URL), and
-  :meth:`close` closes them last;
+  URL) when a configuration gives them to :meth:`attach_boards`, and runs
+  every tick in three phases (a process image, :mod:`pyrt.boards.image`):
+
+  1. ``io:read`` (the first loop handler): every input of every board read
+     into the image, one exchange per back end;
+  2. the tasks: the robot's handlers, its ready queues and motions, the
+     scope, the mailbox (consoles, server): reads and writes of board
+     registers go to the image and never block on I/O;
+  3. ``io:write`` (the last loop handler): the outputs the tick changed
+     written, one exchange per back end.
+
+  The reflex (:meth:`reflex`, run by :meth:`trip` and :meth:`stop`) writes
+  its outputs at once, not at the end of the tick.  Each phase is a named
+  loop handler, timed on its own in ``stats``.  A
+  :class:`~pyrt.errors.BoardError` in a phase trips the robot (the message
+  names the back end's URL); :meth:`close` closes the boards last.  The
+  in-process ``sim:`` boards have no I/O: they attach no phase;
 * starts and stops in one order (:meth:`start`, :meth:`close`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import logging
+import logging.handlers
+from collections import deque
 from collections.abc import Callable, Iterable
+from pathlib import Path
 from typing import Any
 
 from pyrt.boards import Boards
-from pyrt.component import Command, Component, Signal, command, walk
+from pyrt.component import Command, Component, Param, Signal, command, walk
 from pyrt.errors import BoardError, CommandError, ConfigError, Fault, PyrtError
 from pyrt.scheduler import Loop, ReadyQueue
 from pyrt.scheduler.motion import MotionExecutor, MotionType, motion_types_for
@@ -114,9 +131,11 @@ class Station:
     # -- assembly -------------------------------------------------------------------
 
     def attach_boards(self, boards: Boards) -> None:
-        """Own ``boards``: attach their per-tick poll to the loop now (call it
-        before the robot's handlers: the inputs of a tick come in first) if
-        the back end polls, and close them in :meth:`close`."""
+        """Own ``boards``: attach their read phase (``io:read``) to the loop now
+        (call it before the robot's handlers: the inputs of a tick come in
+        first) if the back end polls; :meth:`adopt` attaches the write phase
+        (``io:write``) last.  The back end derives its timeouts from the
+        loop's tick.  :meth:`close` closes them."""
         if not boards.in_process:
             clock = self.loop.clock
             speed = getattr(clock, "speed", 1.0)
@@ -126,12 +145,14 @@ class Station:
                                   f"in another process at real time: {what} is refused; run "
                                   "at real time (--speed 1)")
         self.boards = boards
+        boards.set_tick(self.loop.period_ns / 1e9)
         if boards.polls:
-            self.loop.attach(self._poll_boards, name="boards")
+            self.loop.attach(self._poll_boards, name="io:read")
 
     def _poll_boards(self, now_ns: int) -> None:
-        """Loop handler: the boards' inputs for this tick.  A BoardError trips
-        the robot (once per fault: after ``ack`` the next failure trips again)."""
+        """Loop handler ``io:read``: the boards' inputs for this tick.  A
+        BoardError trips the robot (once per fault: after ``ack`` the next
+        failure trips again)."""
         boards = self.boards
         assert boards is not None
         if self._fault is not None and boards.down is not None:
@@ -139,10 +160,24 @@ class Station:
         try:
             boards.poll(now_ns)
         except BoardError as exc:
-            if self.board_error is None:
-                self.board_error = exc
-            if self._fault is None:
-                self.trip(str(exc), source="boards")
+            self._board_failed(exc)
+
+    def _flush_boards(self, now_ns: int) -> None:
+        """Loop handler ``io:write`` (the last): the outputs this tick changed."""
+        boards = self.boards
+        assert boards is not None
+        if self._fault is not None and boards.down is not None:
+            return
+        try:
+            boards.flush(now_ns)
+        except BoardError as exc:
+            self._board_failed(exc)
+
+    def _board_failed(self, exc: BoardError) -> None:
+        if self.board_error is None:
+            self.board_error = exc
+        if self._fault is None:
+            self.trip(str(exc), source="boards")
 
     def adopt(self, root: Component, *, queues: Iterable[ReadyQueue] = (),
               executors: Iterable[MotionExecutor] = (),
@@ -169,6 +204,8 @@ class Station:
         self.loop.trip_handlers.append(self.trip)
         self.loop.attach(self.scope.sample, name="scope")
         self.runner = Runner(self.loop, motion_queue=self.motion)
+        if self.boards is not None and self.boards.flushes:
+            self.loop.attach(self._flush_boards, name="io:write")
         return self.runner
 
     # -- the tree -----------------------------------------------------------------
@@ -220,6 +257,109 @@ class Station:
         """Every command record of every component."""
         return [(c, r) for c in self.components() for r in c.commands()]
 
+    # -- parameters (get/set) ---------------------------------------------------------
+
+    def params_of(self, component: Component) -> list[Param]:
+        """The run-time parameters of ``component``: its own
+        (:meth:`Component.params`) and any the station adds for it (a
+        configuration's own tunables); ``get``/``set`` and the server read these."""
+        return list(component.params())
+
+    def param(self, name: str) -> tuple[Component, Param]:
+        """``OBJECT.FIELD`` as (component, parameter); CommandError naming what there is."""
+        obj, dot, field = name.strip().partition(".")
+        comp = self.component(obj)
+        params = self.params_of(comp)
+        if not dot or not field:
+            raise CommandError(f"{name[:60]!r}: give OBJECT.FIELD (get {comp.name} lists "
+                               "its parameters)")
+        key = field.lower()
+        for p in params:
+            if p.name.lower() == key:
+                return comp, p
+        raise CommandError(f"{comp.name} has no parameter {field[:40]!r}; it has "
+                           f"{', '.join(p.name for p in params) or 'none'}")
+
+    def set_param(self, component: Component, param: Param, value: Any) -> str:
+        """Change ``param`` of ``component`` to a checked ``value`` (loop thread):
+        refused if it is read only, or while a move runs when changing it then
+        is unsafe; the line says what changed and whether it is written back."""
+        who = f"set {component.name}.{param.name}"
+        if param.write is None:
+            raise CommandError(f"{who}: read only; nothing changed")
+        if not param.safe_while_moving and self.busy():
+            raise CommandError(f"{who}: refused while a move runs (changing it then is "
+                               "unsafe); stop or wait first; nothing changed")
+        old = param.read()
+        said = param.write(value)
+        new = param.read()
+        u = f" {param.units}" if param.units else ""
+        back = ("written back" if param.written_back
+                else "not written back: lost at exit")
+        line = f"{component.name}.{param.name} {param.text(old)} -> {param.text(new)}{u} ({back})"
+        return f"{line}; {said}" if isinstance(said, str) and said else line
+
+    # -- the audit trail --------------------------------------------------------------
+
+    #: Largest size of the audit log before it is rotated, bytes; rotated copies kept.
+    audit_max_bytes: int = 1_000_000
+    audit_backups: int = 3
+
+    def audit(self, source: str, line: str) -> None:
+        """A command that moves or changes the robot came from ``source`` (a
+        DAQ client, EPICS CMD or STOP; any thread): one line for the operator's
+        console naming the source (:meth:`audit_lines`), and a timestamped line
+        in the audit log when one is open (:meth:`open_audit_log`)."""
+        text = f"{source}: {line.strip()[:200]}"
+        # Not the runner's messages: a remote shell's wait drains those, and
+        # the operator would never see the line.  The console's shell takes
+        # these (RobotShell.messages); a bounded queue when there is none.
+        pending = self.__dict__.setdefault("_audit_pending", deque(maxlen=1000))
+        pending.append(f"remote: {text}")
+        logger = getattr(self, "_audit_logger", None)
+        if logger is not None:
+            logger.info("%s", text)
+
+    def audit_lines(self) -> list[str]:
+        """Take the audit lines not yet shown on the console (any thread)."""
+        pending = self.__dict__.get("_audit_pending")
+        out: list[str] = []
+        while pending:
+            try:
+                out.append(pending.popleft())
+            except IndexError:
+                break
+        return out
+
+    def audit_log_path(self) -> Path:
+        """Where the audit log goes when the station is served: the working
+        directory by default (a station with databases puts it beside them)."""
+        return Path.cwd() / f"pyrt-{self.name}-audit.log"
+
+    def open_audit_log(self, path: str | Path | None = None) -> Path:
+        """Write the audit trail to ``path`` (default :meth:`audit_log_path`), rotated
+        by size (:attr:`audit_max_bytes`, :attr:`audit_backups` copies); the path."""
+        self.close_audit_log()
+        where = Path(path) if path is not None else self.audit_log_path()
+        handler = logging.handlers.RotatingFileHandler(
+            where, maxBytes=self.audit_max_bytes, backupCount=self.audit_backups,
+            encoding="utf-8", delay=True)  # the file appears with the first line
+        handler.setFormatter(logging.Formatter("%(asctime)s %(message)s"))
+        logger = logging.Logger(f"pyrt.audit.{self.name}")  # its own, not the root's tree
+        logger.addHandler(handler)
+        self._audit_logger: Any = logger
+        return where
+
+    def close_audit_log(self) -> None:
+        """Close the audit log, if one is open."""
+        logger = getattr(self, "_audit_logger", None)
+        if logger is None:
+            return
+        self._audit_logger = None
+        for h in list(logger.handlers):
+            logger.removeHandler(h)
+            h.close()
+
     # -- faults (loop thread) ---------------------------------------------------------
 
     @property
@@ -266,6 +406,13 @@ class Station:
                 errors.append(f"{c.name}: {exc}")
             except Exception as exc:
                 errors.append(f"{c.name}: {exc!r}")
+        if self.boards is not None:
+            try:  # the reflex's outputs go out now, not at the end of the tick
+                self.boards.write_now()
+            except BoardError as exc:
+                if self.board_error is None:
+                    self.board_error = exc
+                errors.append(f"boards: {exc}")
         for ex in self.executors:
             with contextlib.suppress(Exception):
                 ex.abort(why)
@@ -484,6 +631,12 @@ class Station:
         """What closing did beyond stopping the motors, for the one line said
         on the way out ("; databases written back in DIR"), or ""."""
         return ""
+
+    def closing_where(self) -> str:
+        """Where the robot was left, for the line said on the way out (SIGINT,
+        SIGTERM, end of input, quit): :meth:`where`, unless :meth:`closing_note`
+        says it already ('' then)."""
+        return self.where()
 
     def write_back(self) -> None:
         """Write databases back on the way out (configurations that have them)."""

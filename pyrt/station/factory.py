@@ -93,7 +93,17 @@ class StationFactory(WorldFactory):
         where = ("simulated boards" if station.boards is None or station.boards.in_process
                  else f"boards at {station.boards.url}")
         return (f"pyrt {self.name or station.name}: {station.name}, {where}; "
-                f"tick {args.tick_us} µs, speed {speed}; type help")
+                f"tick {args.tick_us} µs, speed {speed}; {self.next_step(args)}")
+
+    def next_step(self, args: argparse.Namespace) -> str:
+        """The banner's last words: what the operator does next (a console: type
+        help; ``--headless``: there is no console, the link serves the commands)."""
+        if not getattr(args, "headless", False):
+            return "type help"
+        links = [w for w, on in (("the DAQ link", getattr(args, "serve", None)),
+                                 ("EPICS", getattr(args, "epics", None))) if on]
+        return (f"headless: no console; commands come over {' and '.join(links) or 'the link'}"
+                "; SIGTERM or SIGINT stops every motor and ends the run")
 
 
 class _FunctionFactory(StationFactory):

@@ -6,14 +6,17 @@ The boards come from a back end chosen by URL (:func:`pyrt.boards.open_boards`):
 (:class:`~pyrt.sim.gripper.JawPlant`) behind it; ``tcp://HOST:PORT`` reaches
 the cage of a ``pyrt board-sim gripper`` in another process, whose jaws move
 at real time there (so the loop must run at real time, and the jaws'
-settings are board-sim's options).
+settings are board-sim's options); ``modbus://HOST:PORT?map=builtin:gripper``
+the same over Modbus TCP (``pyrt board-sim gripper --modbus``, or a real
+I/O module with a map of its own: docs/hardware.md).
 
-Per tick: the boards' inputs come in (a back end that polls: one ``SNAP``
-over tcp, raising the encoder interrupts that arrived; a BoardError there
-faults the robot), or the jaws move (in-process physics, dt = now - last);
-the clock interrupt walks the ready queue, the stall watchdog looks, the
-motion executor starts or follows a queued ``P`` move, the scope samples,
-and the mailbox is served.  A fault's reflex (the station's) nulls the
+Per tick: the boards' inputs come into the process image (``io:read``, a
+back end with a link: one exchange, raising the encoder interrupts that
+arrived; a BoardError there faults the robot), or the jaws move (in-process
+physics, dt = now - last); the clock interrupt walks the ready queue, the
+stall watchdog looks, the motion executor starts or follows a queued ``P``
+move, the scope samples, the mailbox is served, and the outputs the tick
+changed are written (``io:write``).  A fault's reflex (the station's) nulls the
 drive, ends the current motion and drops every queued one, in the same tick.
 
 The component tree: ``gripper`` (the controller: RAM signals, ``CMD:``
@@ -245,12 +248,17 @@ class GripperStation(Station):
     def status(self) -> str:
         """One line: position, target, error, state, drive current (and the fault)."""
         ctl = self.controller
-        state = ("fault" if self.fault is not None else ctl.job.name if ctl.busy
+        job = ctl.job
+        state = ("fault" if self.fault is not None else job.name if ctl.busy and job is not None
                  else "moving" if ctl.moving else "idle")
         line = f"{self.where()}, {state}, drive {ctl.dac - 0x80:+d}"
         if self.fault is not None:
             line += f"  FAULT: {self.fault.cause}"
         return line
+
+    def closing_where(self) -> str:
+        """'' : the closing note says where the jaws are."""
+        return ""
 
     def closing_note(self) -> str:
         """Where the jaws were left and the drive current, for the line said on the way out."""
@@ -350,8 +358,9 @@ def add_jaw_arguments(parser: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--start", type=counts_type, metavar="HEX",
-        help="jaw position at power-up, encoder counts from wide open, in hex: F400 (the "
-             "default, two's complement) or -0C00 (the same, negative)",
+        help="jaw position at power-up, encoder counts from wide open, in hex as the "
+             "console shows them (two's complement; a negative number is accepted too: "
+             f"-0C00 is F400); default {DEFAULT_START & 0xFFFF:04X}",
     )
     g.add_argument(
         "--fault", action="append", choices=[f for f in FAULTS if f != "port"],
@@ -426,9 +435,9 @@ is accepted and the simulation options are board-sim's.
                  else f"{args.speed:g}x real time")
         boards = station.boards
         jaws = ("simulated jaws" if station.plant is not None or boards is None
-                else f"boards at {boards.url} ({boards.world})")
+                else f"boards at {boards.url}" + (f" ({boards.world})" if boards.world else ""))
         return (f"pyrt gripper: 002 parallel-jaw controller, {jaws}; tick {args.tick_us} µs, "
-                f"speed {speed}; type help")
+                f"speed {speed}; {self.next_step(args)}")
 
 
 #: ``pyrt gripper`` (registered in the entry-point group ``pyrt.stations``).

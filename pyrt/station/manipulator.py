@@ -51,13 +51,14 @@ import argparse
 import math
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from functools import partial
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, TextIO, cast
 
 from pyrt.boards import Boards, open_boards
 from pyrt.boards.registers import BoardKind
-from pyrt.component import Arg, Component, Signal, command, finite
+from pyrt.component import Arg, Component, Param, Signal, command, finite
 from pyrt.db import (
     FILES,
     STATIONS,
@@ -73,12 +74,14 @@ from pyrt.errors import BoardError, CommandError, ConfigError, NativeError, Pyrt
 from pyrt.native import FuzzyParams, NativeInputError
 from pyrt.robots.av import AV
 from pyrt.robots.axis import Axis, tension_alarms
-from pyrt.robots.polyaxis import MIN_TOP_SEGMENT, PolyAxis
+from pyrt.robots.polyaxis import PolyAxis
+from pyrt.robots.ropes import MIN_TOP_SEGMENT, RopeModel, payout
 from pyrt.robots.stops import StopRecord
 from pyrt.scheduler import Loop, ReadyQueue, SimClock
 from pyrt.sim.manipulator import ManipulatorPlant, rig_from_station
 from pyrt.sim.sensors import Imperfections
 from pyrt.sim.world import MANIPULATOR_BOARDS, ManipulatorWorld, World, WorldFactory
+from pyrt.station._manip_params import axis_fuzzy_params, polyaxis_params
 from pyrt.station.base import BoardWorld, Station, refuse_sim_options
 from pyrt.station.factory import StationFactory
 from pyrt.tasks import SyncWriter, ThreadWriter, WriteBack, register_tasks
@@ -107,6 +110,11 @@ RECONCILE_COUNTS = 1.5
 _SIM_FAULTS = ("slip", "dead", "stuck", "stall", "break", "none")
 POLL_S = 0.05
 AXIS_POLL_S = 0.01
+
+
+def _item_of(read: Callable[[], Sequence[float]], i: int) -> Callable[[], float]:
+    """A reader of item ``i`` of what ``read`` returns, read each time."""
+    return lambda: read()[i]
 
 
 class MessageSink:
@@ -153,15 +161,15 @@ class ManipulatorSim(Component):
 
     def signals(self) -> list[Signal]:
         p = self.plant
-        out = [Signal(c, "cm", (lambda i=i: p.position[i]), f"true source position {c}")
+        out = [Signal(c, "cm", _item_of(lambda: p.position, i), f"true source position {c}")
                for i, c in enumerate("xyz")]
-        out += [Signal(f"tension{i}", "N", (lambda i=i: p.tensions()[i]),
+        out += [Signal(f"tension{i}", "N", _item_of(p.tensions, i),
                        f"true tension of {a.name}", limits=tension_alarms(a.tension_limits))
                 for i, a in enumerate(self.axes)]
         return out
 
     @command(name="show", reads_only=True)
-    def show(self) -> str:
+    def cmd_show(self) -> str:
         """sim: where the source really is and the true tensions."""
         p = self.plant
         pos, t, wrapped = p.position, p.tensions(), p.wrapped()
@@ -173,12 +181,12 @@ class ManipulatorSim(Component):
     @command(Arg("ROPE", str), Arg("KIND", str.lower, choices=_SIM_FAULTS),
              Arg("FRACTION", finite("slip fraction", 0.0, 1.0), optional=True, lo=0.0, hi=1.0,
                  what="the share of the rope the encoder misses"), name="fault")
-    def fault(self, rope: str, what: str, fraction: float | None = None) -> str:
+    def cmd_fault(self, rope: str, what: str, fraction: float | None = None) -> str:
         """sim fault ROPE slip [FRACTION]|dead|stuck|stall|break|none: inject a fault.
 
         ROPE is an axis name (axis1) or index."""
         p = self.plant
-        key: int | str = int(rope) if rope.isdigit() else rope
+        key: int | str = int(rope) if rope.isdecimal() else rope
         actions: dict[str, Callable[..., None]] = {
             "slip": p.inject_slip, "dead": p.inject_loadcell_dead,
             "stuck": p.inject_loadcell_stuck, "stall": p.inject_stall,
@@ -198,7 +206,7 @@ class ManipulatorSim(Component):
     @command(Arg("ROPE", str),
              Arg("NEWTONS", str, lo=0.0, hi=MAX_HUNG_LOAD_N, units="N", what="a hung load"),
              name="load")
-    def load(self, rope: str, newtons: float | str) -> str:
+    def cmd_load(self, rope: str, newtons: float | str) -> str:
         """sim load ROPE NEWTONS: hang a known load on the rope's loadcell (calibration).
 
         The loadcell then reads that load (with its offset, non-linearity and
@@ -210,13 +218,13 @@ class ManipulatorSim(Component):
         return f"sim: {n:g} N hangs on {rope}'s loadcell"
 
     @command(Arg("ROPE", str), name="unload")
-    def unload(self, rope: str) -> str:
+    def cmd_unload(self, rope: str) -> str:
         """sim unload ROPE: take the calibration load off the rope's loadcell."""
         self._rope_call(self.plant.hang_load, rope, None)
         return f"sim: {rope}'s loadcell carries the rope again"
 
     def _rope_call(self, fn: Callable[..., None], rope: str, *args: Any) -> None:
-        key: int | str = int(rope) if rope.isdigit() else rope
+        key: int | str = int(rope) if rope.isdecimal() else rope
         try:
             fn(key, *args)
         except ValueError as exc:
@@ -232,7 +240,7 @@ class ManipulatorWords(Component):
         self.station = station
 
     @command(Arg("FILE", str, optional=True, rest=True), name="log")
-    def log(self, path: str | None = None) -> str:
+    def cmd_log(self, path: str | None = None) -> str:
         """log [FILE]: toggle logging of per-axis state and rule outputs every poll.
 
         The default file is manipulator.log in the station directory; split
@@ -244,7 +252,7 @@ class ManipulatorWords(Component):
         return f"logging on: {st.start_log(target)}"
 
     @command(name="debug")
-    def debug(self) -> str:
+    def cmd_debug(self) -> str:
         """debug: toggle the debugging state (a status line every second)."""
         pa = self.station.polyaxis
         pa.debug = not pa.debug
@@ -325,7 +333,7 @@ class ManipulatorStation(Station):
                stdout: TextIO | None) -> None:
         tick_s = self.loop.period_ns * 1e-9
         self.messages = MessageSink()
-        self.stdout = stdout if stdout is not None else self.messages
+        self.stdout = stdout if stdout is not None else cast(TextIO, self.messages)
         st = self.station
         pa_rec = st.polyaxis()
         self.av = AV.from_record(st.av_of(pa_rec))
@@ -337,7 +345,7 @@ class ManipulatorStation(Station):
         refuse_sim_options(boards, ["sensor imperfections (--ideal-sensors)"]
                            if imperfections is not None else [])
         want = pa_rec.name.lower()
-        if not boards.in_process and boards.world.lower() != want:
+        if not boards.in_process and boards.world and boards.world.lower() != want:
             raise ConfigError(f"board URL {boards.url!r} serves the {boards.world!r} world, not "
                               f"this station's {want!r}: start 'pyrt board-sim {want}' with "
                               f"the same --db")
@@ -357,25 +365,33 @@ class ManipulatorStation(Station):
                 fuzzy.append(FuzzyParams.from_mapping(dict(rec.fuzzy), base=base))
             except NativeInputError as exc:
                 raise rec.where.error(None, f"AXIS {rec.name}: {exc}") from None
+        # Everything the PolyAxis works with is given here: the motion queue the
+        # mailbox fills (the station's runner takes it), the loop's spawn and
+        # the pattern log's writer, the stop listeners, the task periods.
+        self.stops: list[StopRecord] = []
+        self._unreported: StopRecord | None = None
         self.polyaxis = PolyAxis.from_record(
-            pa_rec, self.axes, self.av, poll_s=poll_s, fuzzy=fuzzy,
-            liquid_level=liquid_level, stdout=self.stdout)
-        self.polyaxis.name = pa_rec.name.lower()
+            pa_rec, self.axes, self.av, name=pa_rec.name.lower(), poll_s=poll_s, fuzzy=fuzzy,
+            liquid_level=liquid_level, stdout=self.stdout, motion=self.motion,
+            spawn=self.loop.spawn,
+            pattern_writer="sync" if self.loop.clock.virtual else "thread",
+            on_stop=(self.stops.append, self._report_stop),
+            task_periods=(_checks(poll_s, tick_s, "control poll"),
+                          _checks(axis_poll_s, tick_s, "axis poll")))
         pa = self.polyaxis
+        model = pa.model
         self.name = pa.name
 
         # The world behind the boards, holding the source where the database says.
         pos = pa_rec.position
-        why = pa.refusal(pos)
+        why = model.refusal(pos)
         if why is not None:
             raise pa_rec.where.error("POSITION", f"POLYAXIS {pa_rec.name}: POSITION "
                                      f"({pos[0]:g}, {pos[1]:g}, {pos[2]:g}) cm is {why}")
-        tensions, _ = pa.equilibrium_tensions(pos)
+        tensions, _ = model.equilibrium_tensions(pos)
         tensions = [max(t, pa.low_tension + 1.0) for t in tensions]
-        payouts = []
-        for i, a in enumerate(self.axes):
-            g = pa.rope_geometry(i, pos)[0]
-            payouts.append((a.dead_length + g) / (1.0 + a.stretch * tensions[i]))
+        payouts = [payout(model.length_at(i, pos), tensions[i], a.stretch, a.dead_length)
+                   for i, a in enumerate(self.axes)]
         self.rig = rig_from_station(st, liquid_level=liquid_level)
         if boards.in_process:  # else the world is board-sim's, built the same way
             self.plant = ManipulatorPlant(self.rig, self.tio10, self.dc,
@@ -383,19 +399,12 @@ class ManipulatorStation(Station):
         self.startup_notes = self._reconcile(pa_rec, payouts)
         # Every move of every kind is held to the ropes' physical length
         # ranges and the tension limits (tensionStop), in axis-poll.
-        for a, r in zip(self.axes, rope_ranges(pa), strict=True):
+        for a, r in zip(self.axes, rope_ranges(model), strict=True):
             a.set_supervision(r, (pa.low_tension, pa.max_tension),
                               lambda: pa.tension_stop)
 
-        # The motion queue the mailbox fills (the station's runner takes it).
-        pa.motion = self.motion
-        pa.spawn = self.loop.spawn
-        pa.pattern_writer = "sync" if self.loop.clock.virtual else "thread"  # the pattern log
-
         # Level 4+: the ready queue and its tasks; write-back.
         self.queue = ReadyQueue(capacity=4, divisor=1, name=pa.name)
-        pa.set_task_periods(_checks(poll_s, tick_s, "control poll"),
-                            _checks(axis_poll_s, tick_s, "axis poll"))
         register_tasks(self.queue, pa)  # every task the tree declares
         if writer is None:
             writer = "sync" if self.loop.clock.virtual else "thread"
@@ -433,15 +442,8 @@ class ManipulatorStation(Station):
         self.messages.connect(self.runner.post)
         self.log_path: Path | None = None
         self._log_file: TextIO | None = None
-        self.stops: list[StopRecord] = []
-        pa.on_stop.append(self.stops.append)
-        pa.on_stop.append(self._report_stop)
-        self._unreported: StopRecord | None = None
         boards.poll(self.loop.now_ns)  # the encoders' counters now ride along
-        try:  # the first status line shows real tensions and lengths
-            pa.measure()
-        except NativeError as exc:
-            pa.position_error = f"position finder failed: {exc}"
+        pa.measure()  # the first status line shows real tensions and lengths
 
     def _reconcile(self, pa_rec: Any, payouts: list[float]) -> list[str]:
         """Start-up: the encoders' ZEROLENGTH and the axes' LENGTH from the
@@ -465,7 +467,7 @@ class ManipulatorStation(Station):
                 notes.append(f"{a.encoder.name} ZEROLENGTH {db_zero:.3f} cm is "
                              f"{db_zero - p:+.3f} cm from the rope with the source at POSITION; "
                              f"set to {p:.3f} cm")
-            geometric = self.polyaxis.rope_geometry(self.axes.index(a), pa_rec.position)[0]
+            geometric = self.polyaxis.model.length_at(self.axes.index(a), pa_rec.position)
             if abs(rec.length - geometric) > tol:
                 notes.append(f"AXIS {rec.name} LENGTH {rec.length:.3f} cm is "
                              f"{rec.length - geometric:+.3f} cm from the rope at POSITION "
@@ -518,6 +520,21 @@ class ManipulatorStation(Station):
         return super().stop()
 
     stop_all = stop
+
+    def audit_log_path(self) -> Path:
+        """The audit log goes beside the databases."""
+        return Path(self.directory) / "audit.log"
+
+    def params_of(self, component: Component) -> list[Param]:
+        """A component's own parameters, and what the station holds for it: the
+        PolyAxis's MAX_TENSION and END_ERROR, each rope's fuzzy gains."""
+        out = super().params_of(component)
+        pa = self.polyaxis
+        if component is pa:
+            out += polyaxis_params(pa)
+        elif component in pa.axes:
+            out += axis_fuzzy_params(pa, pa.axes.index(component))
+        return out
 
     def where(self) -> str:
         """The source's estimated position (and that it is not trusted, when lost)."""
@@ -576,7 +593,7 @@ class ManipulatorStation(Station):
         moved, self._axis_moves = getattr(self, "_axis_moves", []), []
         if moved and not pa.active and not lines:
             for a in moved:
-                lines.append(f"{a.name}: move ended at length {a.getLength():.3f} cm")
+                lines.append(f"{a.name}: move ended at length {a.length():.3f} cm")
             return "\n".join(lines)
         last, unreported, self._unreported = pa.last_stop, self._unreported, None
         if last is None:
@@ -628,7 +645,7 @@ class ManipulatorStation(Station):
                   ("distErr", sig["distErr"], ".3f"), ("netForce", sig["netForce"], ".2f"),
                   ("moving", Signal("moving", "bool", self.busy, "a move runs or waits", "d"),
                    "d"), self.fault_field()]
-        fields += [(f"tension{i}", Signal(f"tension{i}", "N", (lambda i=i: pa.tensions[i]),
+        fields += [(f"tension{i}", Signal(f"tension{i}", "N", _item_of(lambda: pa.tensions, i),
                                           f"measured tension of {a.name}",
                                           limits=tension_alarms(a.tension_limits)), ".2f")
                    for i, a in enumerate(self.axes)]
@@ -643,7 +660,7 @@ class ManipulatorStation(Station):
             end = pa.endpoint if pa.active else None
             return math.nan if end is None else float(end[k])
 
-        return [Signal(f"target_{c}", "cm", (lambda k=k: coord(k)),
+        return [Signal(f"target_{c}", "cm", partial(coord, k),
                        f"endpoint {c} of the move (NaN: none)", ".2f",
                        limits=pa.position_limits(k))
                 for k, c in enumerate("xyz")]
@@ -676,12 +693,12 @@ class ManipulatorStation(Station):
             self.stop_log()
 
 
-def rope_ranges(pa: PolyAxis, cells: int = 12) -> list[tuple[float, float]]:
+def rope_ranges(model: RopeModel, cells: int = 12) -> list[tuple[float, float]]:
     """Every rope's physical length range (cm): the least and greatest length
     with the source anywhere it may be (the vessel sphere and the neck,
-    :meth:`PolyAxis.refusal`), sampled on a grid of ``cells`` per vessel
+    :meth:`RopeModel.refusal`), sampled on a grid of ``cells`` per vessel
     diameter and over the sphere's surface, widened by ROPE_RANGE_MARGIN."""
-    av = pa.av
+    av = model.av
     r = av.vessel_radius
     ring = av.neck_ring_static_position
     pts: list[tuple[float, float, float]] = []
@@ -706,18 +723,18 @@ def rope_ranges(pa: PolyAxis, cells: int = 12) -> list[tuple[float, float]]:
     # rope is shortest with the carriage MIN_TOP_SEGMENT from its pulley, the
     # closest 'to' allows: sample that sphere too.
     dirs = [(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1) if a or b or c]
-    for top, off in zip(pa.tops, pa.offsets, strict=True):
+    for top, off in zip(model.tops, model.offsets, strict=True):
         for d in dirs:
             k = 1.001 * MIN_TOP_SEGMENT / math.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
             gpts.append((top[0] - off[0] + k * d[0], top[1] - off[1] + k * d[1],
                          top[2] - off[2] + k * d[2]))
-    lo = [math.inf] * pa.n
-    hi = [0.0] * pa.n
+    lo = [math.inf] * model.n
+    hi = [0.0] * model.n
     for x in gpts:
-        if pa.refusal(x) is not None:
+        if model.refusal(x) is not None:
             continue
         try:
-            lengths = pa.lengths_at(x)
+            lengths = model.lengths_at(x)
         except NativeError:  # a sample on a pulley, an attachment or the ring's rim
             continue
         for i, length in enumerate(lengths):
@@ -750,7 +767,7 @@ def _trusted(pa: PolyAxis, read: Callable[[], Any], held: Callable[[Any], Any]
 
 def _length_reader(axis: Axis) -> Callable[[], tuple[float, bool]]:
     def read() -> tuple[float, bool]:
-        return axis.getLength(), axis.motor.running
+        return axis.length(), axis.motor.running
     return read
 
 
@@ -817,8 +834,9 @@ class ManipulatorFactory(ManipulatorWorlds, StationFactory):
 Commands are addressed to named objects, as the document's
 Hardware::doCommand: prototype to 0 0 150, axis1 up 5, axis0Motor
 maxspeed 3, axis0Encoder read, axis0Loadcell calibrate; plus the shared
-words (help [object], wait, sleep, stop, ack, status, stats, scope, motion,
-sim, clear, quit) and the manipulator's log and debug.  Type help.
+words (help [object [verb]], wait, sleep, stop, ack, status, stats, scope,
+motion, get, set, clear, quit) and the manipulator's log and debug; sim is
+the simulated world's object.  Type help.
 
 Without --db DIR the packaged station (--station) is copied to a
 working directory first (existing files there are kept: they carry the last
@@ -916,7 +934,7 @@ station's.
         where = "" if station.plant is not None or boards is None else f", boards at {boards.url}"
         return (f"pyrt manipulator: {station.polyaxis.name}, {len(station.axes)} ropes, "
                 f"database {args.directory}{where}; tick {args.tick_us} µs, speed {speed}; "
-                "type help")
+                f"{self.next_step(args)}")
 
 
 #: ``pyrt manipulator`` (registered in the entry-point group ``pyrt.stations``).

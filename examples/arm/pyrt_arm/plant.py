@@ -30,7 +30,9 @@ current limit, ``tau = Kt * i * gear``.  The torque limit is ``Kt * i_limit * ge
 
 Integration is semi-implicit Euler (velocity first, implicit in the viscous and the
 Coulomb friction, then position) over equal internal steps of at most
-:data:`MAX_STEP_S` (0.2 ms) covering whatever ``dt_s`` it is given.  Mechanical end
+:data:`MAX_STEP_S` (0.2 ms; ``max_step_s`` sets another) covering whatever ``dt_s`` it is
+given.  At rest with no current (amplifiers off or no drive) nothing moves, and a step
+costs next to nothing.  Mechanical end
 stops a little beyond the software limits (:attr:`PlantParams.hard_stops_deg`) stop
 a joint dead.
 
@@ -209,8 +211,14 @@ class Plant:
 
     def __init__(self, params: PlantParams | None = None,
                  q_deg: Sequence[float] = (0.0, 0.0),
-                 qd_deg_s: Sequence[float] = (0.0, 0.0)) -> None:
+                 qd_deg_s: Sequence[float] = (0.0, 0.0),
+                 max_step_s: float = MAX_STEP_S) -> None:
         self.params = params if params is not None else PlantParams()
+        if not (isinstance(max_step_s, (int, float)) and math.isfinite(max_step_s)
+                and 0.0 < max_step_s <= 0.01):
+            raise ValueError(f"max_step_s must be a step of 0 .. 10 ms, got {max_step_s!r}")
+        #: The longest internal integration step (s).
+        self.max_step_s = float(max_step_s)
         q = _pair("q_deg", q_deg)
         qd = _pair("qd_deg_s", qd_deg_s)
         for j in (0, 1):
@@ -255,7 +263,7 @@ class Plant:
 
     def step(self, dt_s: float) -> None:
         """Advance the plant by ``dt_s`` seconds (>= 0) in equal internal steps of at most
-        :data:`MAX_STEP_S`.  A drive that is not a finite number is refused (ValueError)
+        :attr:`max_step_s`.  A drive that is not a finite number is refused (ValueError)
         and nothing changes."""
         if not isinstance(dt_s, (int, float)) or not math.isfinite(dt_s) or dt_s < 0.0:
             raise ValueError(f"dt_s must be a finite number of seconds >= 0, got {dt_s!r}")
@@ -266,10 +274,14 @@ class Plant:
                 raise ValueError(f"drive[{j}] must be a finite number, got {d!r}")
         if dt_s == 0.0:
             return
-        n = max(1, math.ceil(dt_s / MAX_STEP_S - 1e-9))
-        h = dt_s / n
         current = self._currents()
         self._current = current
+        v0, v1 = self._qd
+        if v0 == 0.0 and v1 == 0.0 and current[0] == 0.0 and current[1] == 0.0:
+            self.time_s += dt_s  # at rest, no torque: friction holds it (no gravity)
+            return
+        n = max(1, math.ceil(dt_s / self.max_step_s - 1e-9))
+        h = dt_s / n
         m0, m1 = self.params.motors
         t0 = current[0] * m0.kt_nm_per_a * m0.gear
         t1 = current[1] * m1.kt_nm_per_a * m1.gear

@@ -178,6 +178,8 @@ class JointServo:
         self.config = config
         self.period_s = period_s
         self._last_count: int | None = None
+        self._alpha_key = (0.0, 0.0)
+        self._alpha = 0.0
         #: the measured angle (deg) and filtered rate (deg/s) of the last update
         self.position_deg = 0.0
         self.velocity_deg_s = 0.0
@@ -209,21 +211,29 @@ class JointServo:
         ``qdd_sp_deg_s2`` and the counter reading ``count``; ``dt_s`` is the time since
         the last update (default :attr:`period_s`)."""
         cfg = self.config
-        for name, value in (("q_sp_deg", q_sp_deg), ("qd_sp_deg_s", qd_sp_deg_s),
-                            ("qdd_sp_deg_s2", qdd_sp_deg_s2)):
-            if not math.isfinite(value):
-                raise ValueError(f"{cfg.name}: {name} must be a finite number, got {value!r}")
+        isfinite = math.isfinite
+        if not (isfinite(q_sp_deg) and isfinite(qd_sp_deg_s) and isfinite(qdd_sp_deg_s2)):
+            for name, value in (("q_sp_deg", q_sp_deg), ("qd_sp_deg_s", qd_sp_deg_s),
+                                ("qdd_sp_deg_s2", qdd_sp_deg_s2)):
+                if not isfinite(value):
+                    raise ValueError(f"{cfg.name}: {name} must be a finite number, "
+                                     f"got {value!r}")
         dt = self.period_s if dt_s is None else dt_s
-        if not (math.isfinite(dt) and dt > 0.0):
+        if not (isfinite(dt) and dt > 0.0):
             raise ValueError(f"{cfg.name}: dt_s must be a positive number of seconds, "
                              f"got {dt_s!r}")
-        position = counts_to_deg(count, cfg.zero_count, cfg.counts_per_deg)
-        if self._last_count is None:
+        cpd = cfg.counts_per_deg
+        position = wrap_int32(count - cfg.zero_count) / cpd
+        last = self._last_count
+        if last is None:
             velocity = 0.0
         else:
-            raw = wrap_int32(count - self._last_count) / cfg.counts_per_deg / dt
-            alpha = 1.0 - math.exp(-2.0 * math.pi * cfg.velocity_filter_hz * dt)
-            velocity = self.velocity_deg_s + alpha * (raw - self.velocity_deg_s)
+            raw = wrap_int32(count - last) / cpd / dt
+            key = (dt, cfg.velocity_filter_hz)
+            if key != self._alpha_key:  # the filter's gain for this period (kept while it holds)
+                self._alpha_key = key
+                self._alpha = 1.0 - math.exp(-2.0 * math.pi * cfg.velocity_filter_hz * dt)
+            velocity = self.velocity_deg_s + self._alpha * (raw - self.velocity_deg_s)
         self._last_count = count
         error = q_sp_deg - position
         sign = 1.0 if qd_sp_deg_s > 0.0 else (-1.0 if qd_sp_deg_s < 0.0 else 0.0)
@@ -245,6 +255,10 @@ class JointServo:
         """The fault reason after the last update (following error first, then the joint
         limit), or None."""
         cfg = self.config
+        low, high = cfg.limits_deg
+        if (abs(self.error_deg) <= cfg.following_error_limit_deg
+                and low <= self.position_deg <= high):
+            return None  # the common case, without building the reasons
         return (following_error_fault(cfg.name, self.setpoint_deg, self.position_deg,
                                       cfg.following_error_limit_deg)
                 or joint_limit_fault(cfg.name, self.position_deg, cfg.limits_deg))

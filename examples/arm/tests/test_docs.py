@@ -1,0 +1,54 @@
+"""docs/writing-a-robot.md stays current: every code excerpt it attributes to a file of the
+example is still in that file, line for line and in order."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+PACKAGE_ROOT = Path(__file__).resolve().parents[1]
+GUIDE = PACKAGE_ROOT.parents[1] / "docs" / "writing-a-robot.md"
+_BLOCK = re.compile(r"```(?:python|toml)\n# ((?:pyrt_arm/)?[\w./]+\.(?:py|toml))\n(.*?)```", re.S)
+
+
+def excerpts(text: str) -> list[tuple[str, list[str]]]:
+    """(file, lines) of every code block that opens with ``# FILE``; ``...`` lines skip."""
+    return [(m.group(1), m.group(2).splitlines()) for m in _BLOCK.finditer(text)]
+
+
+def missing_lines(excerpt: list[str], source: list[str]) -> list[str]:
+    """The excerpt's lines not found in ``source`` in order (each after the one before)."""
+    at = 0
+    missing = []
+    for line in excerpt:
+        if not line.strip() or line.strip() == "...":
+            continue
+        try:
+            at = source.index(line.rstrip(), at) + 1
+        except ValueError:
+            missing.append(line)
+    return missing
+
+
+@pytest.mark.skipif(not GUIDE.exists(), reason="the guide lives in pyrt's repository")
+def test_every_excerpt_of_the_guide_is_in_the_file_it_names():
+    """Each code block of the guide headed '# pyrt_arm/X.py' or '# pyproject.toml' appears, line by line in order, in that file of examples/arm."""
+    found = excerpts(GUIDE.read_text())
+    assert len(found) >= 10
+    stale = {}
+    for name, lines in found:
+        source = (PACKAGE_ROOT / name).read_text().splitlines()
+        missing = missing_lines(lines, source)
+        if missing:
+            stale[name] = missing
+    assert stale == {}
+
+
+def test_the_checker_finds_a_changed_line():
+    """A line that is not in the source, or out of order, is reported; '...' skips freely."""
+    source = ["a = 1", "b = 2", "c = 3"]
+    assert missing_lines(["a = 1", "...", "c = 3"], source) == []
+    assert missing_lines(["c = 3", "a = 1"], source) == ["a = 1"]
+    assert missing_lines(["a = 2"], source) == ["a = 2"]

@@ -1,0 +1,374 @@
+"""The process image: a back end's copy of its boards' registers, one exchange per phase.
+
+:class:`ImageBackend` is the base class of every back end that reaches its
+boards over a link (``tcp://`` in :mod:`pyrt.boards.tcp`, ``modbus://`` in
+:mod:`pyrt.boards.modbus`); :class:`ImageRegisters` is the register view of
+one of its boards (``read``/``write`` by register name, as
+:class:`~pyrt.boards.registers.RegisterBoard` has them), which a built-in
+kind wraps in its typed interface.
+
+The back-end contract
+=====================
+
+This is the one place it is written; ``tests/test_backend_contract.py`` is
+the suite every back end passes (``sim:``, ``tcp://``, ``modbus://``, and
+one of one's own: add it to the suite's parameters).
+
+Phases of a tick (the station attaches them to its loop, :class:`pyrt.station.base.Station`):
+
+1. **read** (loop handler ``io:read``, first in the tick): :meth:`read_phase`
+   reads every input register of every declared board into the image, in
+   **one exchange** (:meth:`exchange_inputs`: one request and its reply, or
+   a batch of requests sent together and their replies read together).
+2. **tasks** (the ready queues, the motion executors, the mailbox): a
+   register read is answered from the image and never blocks on I/O; a
+   write of an output is remembered in the image (a later read in the tick
+   sees it) and marked changed.  A write of the value the output already
+   holds is not a change (a write-only strobe always is).
+3. **write** (loop handler ``io:write``, last in the tick, after the
+   mailbox): :meth:`write_phase` writes the changed outputs in **one
+   exchange** (:meth:`exchange_outputs`), which a back end may send
+   without waiting for its reply (it is read with the next exchange: the
+   batches are pipelined).
+
+Outside the ticks (opening, a tool, a test), and until :meth:`set_tick`
+says that a station runs the phases, a write goes out at once; a read of
+an input outside a tick older than ``max_age`` reads the inputs again.
+Once the phases run, a read between ticks answers from the image of the
+last read phase (the loop keeps it fresh) and makes no I/O.
+On a link that is down every read and write raises BoardError naming the
+URL (but see the reflex).
+
+Reflex.  :meth:`write_now` (the station calls it after every reflex, in the
+tick that tripped) writes the changed outputs **at once**, waiting for the
+reply, not at the end of the tick.  On a link that is down it is recorded
+as failed: it raises :class:`~pyrt.errors.BoardError` naming the URL, which
+the station keeps and names in the fault -- unless the far side is known
+to turn its outputs off when the link drops (:attr:`off_on_loss`, board-sim
+does) and every write is of an output's declared ``off`` value: then it
+succeeds, since the drop did it.  The caller clears its own state whatever
+the write does (``finally``).
+
+Timeout.  It is derived from the tick (:meth:`set_tick`, called by the
+station with the loop's period): a reply later than ``overrun_ticks``
+ticks (N, default :data:`DEFAULT_OVERRUN_TICKS`) is an **overrun**
+(counted in :attr:`overruns`); ``overrun_limit`` (M, default
+:data:`DEFAULT_OVERRUN_LIMIT`) overruns in a row raise BoardError, and no
+reply at all within N x M ticks (at least :data:`MIN_TIMEOUT_S`: a loaded
+host can stall a process that long) is a lost link.  A lost link (refused,
+reset, closed, timed out) raises BoardError naming the URL and stays down:
+every later exchange raises it at once; the station trips on the first.
+A ``timeout=S`` option fixes the hard timeout instead.
+
+Open and close.  A back end's factory connects, checks that the far side
+holds the declared boards, reads the inputs and the readable outputs once
+(:meth:`open`), and returns a :class:`~pyrt.boards.registry.Boards` built
+with :meth:`boards_hooks`.  :meth:`close` releases the link (idempotent);
+what the far side does with the outputs then is its own (board-sim and a
+device with a watchdog turn them off).
+
+A subclass implements :meth:`exchange_inputs`, :meth:`exchange_outputs`,
+:meth:`exchange_outputs_now`, :meth:`read_outputs`, :meth:`apply_timeout`,
+:meth:`close_link` and :attr:`down`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+from pyrt.boards.registers import BoardKind, Register
+from pyrt.errors import BoardError
+
+__all__ = [
+    "DEFAULT_OVERRUN_LIMIT",
+    "DEFAULT_OVERRUN_TICKS",
+    "MIN_TIMEOUT_S",
+    "ImageBackend",
+    "ImageRegisters",
+    "Write",
+]
+
+#: A reply later than this many ticks is an overrun.
+DEFAULT_OVERRUN_TICKS = 5
+#: This many overruns in a row trip the station.
+DEFAULT_OVERRUN_LIMIT = 10
+#: The hard timeout is never shorter than this.
+MIN_TIMEOUT_S = 0.1
+
+#: One output write: (board, register, index, value).
+Write = tuple[str, str, int, int]
+
+
+class ImageBackend:
+    """The process image of one link's boards (see the module text for the contract).
+
+    ``kinds``: the declared boards (name -> kind).  ``max_age``: seconds an
+    input copy is good for outside the ticks (0: every read outside a tick
+    reads the inputs again).
+    """
+
+    #: Whether the far side turns its outputs off when the link drops.
+    off_on_loss: bool = False
+
+    def __init__(self, url: str, kinds: Mapping[str, BoardKind], *,
+                 max_age: float = 0.05,
+                 overrun_ticks: int = DEFAULT_OVERRUN_TICKS,
+                 overrun_limit: int = DEFAULT_OVERRUN_LIMIT,
+                 timeout: float | None = None):
+        self.url = url
+        self.kinds = dict(kinds)
+        self.max_age_ns = int(max_age * 1e9)
+        self.overrun_ticks = int(overrun_ticks)
+        self.overrun_limit = int(overrun_limit)
+        self.fixed_timeout = timeout
+        #: The hard per-exchange timeout in seconds (until :meth:`set_tick`: the fixed one
+        #: or 0.25 s).
+        self.timeout_s = timeout if timeout is not None else 0.25
+        self.overrun_ns = 0
+        #: Every input in declared order: (board, register, count).
+        self.layout: list[tuple[str, str, int]] = [
+            (board, reg.name, reg.count) for board, kind in self.kinds.items()
+            for reg in kind.inputs()]
+        self.input_count = sum(c for _, _, c in self.layout)
+        self._image: dict[str, dict[str, list[int]]] = {b: {} for b in self.kinds}
+        self._outputs: dict[tuple[str, str, int], int] = {}
+        self._changed: dict[tuple[str, str, int], int] = {}
+        self._fresh_until = 0
+        self.in_tick = False
+        #: Whether a station runs the phases (:meth:`set_tick` was called): only
+        #: then are the writes of a tick kept for the write phase.
+        self.phased = False
+        #: Exchanges made; replies later than N ticks; of them in a row now.
+        self.exchanges = 0
+        self.overruns = 0
+        self.late_in_row = 0
+
+    # -- what a subclass implements ------------------------------------------------------
+
+    def exchange_inputs(self) -> list[int]:
+        """One exchange: every input, in :attr:`layout` order (BoardError on a lost link)."""
+        raise NotImplementedError
+
+    def exchange_outputs(self, writes: list[Write]) -> None:
+        """One exchange writing ``writes``; it may return before the reply (pipelined)."""
+        raise NotImplementedError
+
+    def exchange_outputs_now(self, writes: list[Write]) -> None:
+        """Write ``writes`` and wait for the reply (the reflex, writes outside a tick)."""
+        raise NotImplementedError
+
+    def read_outputs(self) -> dict[tuple[str, str, int], int]:
+        """Every readable output's value (on opening)."""
+        raise NotImplementedError
+
+    def apply_timeout(self, seconds: float) -> None:
+        """Use ``seconds`` as the hard timeout of an exchange."""
+
+    def close_link(self) -> None:
+        """Release the link."""
+
+    @property
+    def down(self) -> str | None:
+        """Why the link is down, or None while it is up."""
+        return None
+
+    # -- the contract ------------------------------------------------------------------------
+
+    def open(self) -> None:
+        """Read the inputs and the readable outputs once."""
+        self._take_inputs(self.exchange_inputs())
+        self._outputs = dict(self.read_outputs())
+
+    def set_tick(self, period_s: float) -> None:
+        """Derive the timeouts from the loop's tick period (see the module text)
+        and run the phases: from now on the writes between :meth:`read_phase`
+        and :meth:`write_phase` wait for the write phase (before, and without a
+        station, every write goes out at once)."""
+        if period_s <= 0:
+            raise ValueError(f"tick period must be positive, got {period_s!r}")
+        self.phased = True
+        self.overrun_ns = int(self.overrun_ticks * period_s * 1e9)
+        if self.fixed_timeout is None:
+            self.timeout_s = max(MIN_TIMEOUT_S,
+                                 self.overrun_ticks * self.overrun_limit * period_s)
+        self.apply_timeout(self.timeout_s)
+
+    def _timed(self, start_ns: int, what: str) -> None:
+        self.exchanges += 1
+        if not self.overrun_ns:
+            return
+        if time.monotonic_ns() - start_ns > self.overrun_ns:
+            self.overruns += 1
+            self.late_in_row += 1
+            if self.late_in_row >= self.overrun_limit:
+                self.late_in_row = 0
+                raise BoardError(self.url, f"{what}: {self.overrun_limit} replies in a row "
+                                           f"later than {self.overrun_ticks} ticks "
+                                           f"({self.overrun_ns / 1e6:g} ms)")
+        else:
+            self.late_in_row = 0
+
+    def _take_inputs(self, values: list[int]) -> None:
+        if len(values) != self.input_count:
+            raise BoardError(self.url, f"read {len(values)} input values, "
+                                       f"not {self.input_count}")
+        pos = 0
+        image = self._image
+        for board, reg, count in self.layout:
+            image[board][reg] = values[pos:pos + count]
+            pos += count
+        self._fresh_until = time.monotonic_ns() + self.max_age_ns
+
+    def read_phase(self, now_ns: int = 0) -> None:
+        """The tick's read phase: every input into the image, one exchange."""
+        self.in_tick = True
+        t0 = time.monotonic_ns()
+        self._take_inputs(self.exchange_inputs())
+        self._timed(t0, "read")
+
+    def write_phase(self, now_ns: int = 0) -> None:
+        """The tick's write phase: the changed outputs, one exchange; then
+        :meth:`end_of_tick`."""
+        self.in_tick = False
+        if self._changed:
+            writes = [(b, n, i, v) for (b, n, i), v in self._changed.items()]
+            self._changed.clear()
+            t0 = time.monotonic_ns()
+            self.exchange_outputs(writes)
+            self._timed(t0, "write")
+        self.end_of_tick()
+
+    def end_of_tick(self) -> None:
+        """After the write phase (nothing by default; ``tcp://`` sends the next
+        tick's input request here)."""
+
+    def resync(self) -> None:
+        """The station's loop starts: the writes made while it was being built go
+        out now (outside a tick from here on until the first read phase)."""
+        self.in_tick = False
+        self.write_now()
+
+    def write_now(self) -> None:
+        """Write the changed outputs at once (the reflex; see the module text)."""
+        if not self._changed:
+            return
+        writes = [(b, n, i, v) for (b, n, i), v in self._changed.items()]
+        self._changed.clear()
+        self._send_now(writes)
+
+    def _send_now(self, writes: list[Write]) -> None:
+        if self.down is not None:
+            if self.off_on_loss and all(
+                    self.kinds[b].register(n).off_value(i) == v for b, n, i, v in writes):
+                return  # the far side turned them off when the link dropped
+            shown = ", ".join(f"{b}.{n}[{i}]={v}" for b, n, i, v in writes[:4])
+            raise BoardError(self.url, f"write {shown}: the link is down ({self.down})")
+        self.exchange_outputs_now(writes)
+
+    # -- register access (the tasks' side) --------------------------------------------------
+
+    def read(self, board: str, name: str, index: int = 0) -> int:
+        """``board``'s register ``name[index]`` from the image."""
+        reg = self.kinds[board].check_read(name, index)
+        if self.down is not None:
+            off = reg.off_value(index) if self.off_on_loss and not reg.is_input else None
+            if off is not None:
+                return off  # the far side turned it off when the link dropped
+            raise BoardError(self.url, f"read {board}.{name}[{index}]: the link is down "
+                                       f"({self.down})")
+        if reg.is_input:
+            if not self.in_tick and not self.phased \
+                    and time.monotonic_ns() >= self._fresh_until:
+                self._take_inputs(self.exchange_inputs())
+            return self._image[board][name][index]
+        key = (board, name, index)
+        value = self._changed.get(key)
+        if value is None:
+            value = self._outputs.get(key, 0)
+        return value
+
+    def write(self, board: str, name: str, value: int, index: int = 0) -> None:
+        """Write ``board``'s output ``name[index]``: into the image in a tick (the
+        write phase sends it), at once outside one.  ValueError if refused."""
+        reg = self.kinds[board].check_write(name, index, value)
+        self.write_many([(board, name, index, value)], _regs=[reg])
+
+    def write_many(self, writes: Iterable[Write], _regs: list[Register] | None = None) -> None:
+        """Write several outputs, each ``(board, register, index, value)``
+        (checked first: none is made if one is refused)."""
+        todo = list(writes)
+        regs = _regs or [self.kinds[b].check_write(n, i, v) for b, n, i, v in todo]
+        if self.down is not None:
+            self._send_now(todo)  # raises unless the drop did it
+            return
+        for reg, (b, n, i, v) in zip(regs, todo, strict=True):
+            key = (b, n, i)
+            if reg.readback:
+                if self._outputs.get(key) == v and key not in self._changed:
+                    continue
+                self._outputs[key] = v
+            self._changed[key] = v
+        if not (self.in_tick and self.phased):
+            self.write_now()
+
+    def set_cached(self, board: str, name: str, value: int, index: int = 0) -> None:
+        """Set the image's copy of an input (what a write made of it: a cleared counter)."""
+        values = self._image[board].get(name)
+        if values is not None and 0 <= index < len(values):
+            values[index] = value
+
+    def forget_outputs(self, values: Mapping[tuple[str, str, int], int]) -> None:
+        """Take ``values`` as the outputs (the far side changed them: a watchdog)."""
+        self._outputs = dict(values)
+        self._changed.clear()
+
+    def close(self) -> None:
+        """Release the link (idempotent)."""
+        self.close_link()
+
+    def boards_hooks(self, pollers: Iterable[Any] = ()) -> dict[str, Any]:
+        """The :class:`~pyrt.boards.registry.Boards` keyword arguments of this back
+        end: the phases, the reflex write, the tick, close and down.  ``pollers``:
+        a board's own ``poll(now_ns)`` run after the read phase (the gripper cage
+        raises its encoder interrupts)."""
+        polls = list(pollers)
+
+        def poll(now_ns: int) -> None:
+            self.read_phase(now_ns)
+            for p in polls:
+                p(now_ns)
+
+        return {"poll": poll, "flush": self.write_phase, "write_now": self.write_now,
+                "set_tick": self.set_tick, "close": self.close, "down": lambda: self.down,
+                "resync": self.resync}
+
+
+class ImageRegisters:
+    """One board of an :class:`ImageBackend`: ``read(name, index=0)`` and
+    ``write(name, value, index=0)`` as a :class:`~pyrt.boards.registers.RegisterBoard`
+    has them."""
+
+    def __init__(self, client: ImageBackend, board: str):
+        self.client = client
+        self.board = board
+        self.kind = client.kinds[board]
+        self.url = client.url
+        self.link = getattr(client, "link", None)
+
+    def read(self, name: str, index: int = 0) -> int:
+        return self.client.read(self.board, name, index)
+
+    def write(self, name: str, value: int, index: int = 0) -> None:
+        self.client.write(self.board, name, value, index)
+
+    def snapshot(self) -> list[int]:
+        """Every input of this board, in declared order."""
+        return [self.read(reg.name, i) for reg in self.kind.inputs() for i in range(reg.count)]
+
+    def set_cached(self, name: str, value: int, index: int = 0) -> None:
+        self.client.set_cached(self.board, name, value, index)
+
+    def __repr__(self) -> str:
+        return f"<{self.kind.name} board {self.board!r} at {self.url}>"
