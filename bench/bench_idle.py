@@ -25,7 +25,13 @@ The rows:
                     share of a core at 1 kHz (no waiting at all);
 ``pyrt gripper``    the command itself, idle, stdin a pipe (Linux: CPU from
                     ``/proc``, lateness from its ``stats``), as it starts by
-                    default and with ``--timer-slack 1``.
+                    default and with ``--timer-slack 1``;
+``bare C``          the floor of the machine's timer: a 1 kHz loop in C
+                    (compiled here with gcc) sleeping to absolute deadlines
+                    with ``clock_nanosleep(TIMER_ABSTIME)``, doing nothing,
+                    timer slack 1 ns; its CPU and lateness;
+``bare Python``     Python's bare sleep loop: ``time.sleep`` to each 1 kHz
+                    deadline, nothing else (no station, no spin).
 
 The CLI rows count the whole process over the whole interval (its console
 thread too) and their lateness is over the whole run, start-up included.
@@ -90,6 +96,85 @@ def idle_figures(make_clock) -> dict[str, float | str]:
     }
 
 
+_BARE_C = r"""
+#define _GNU_SOURCE
+#include <stdio.h>
+#include <stdlib.h>
+#include <time.h>
+#include <sys/prctl.h>
+#include <sys/resource.h>
+static int cmp(const void *a, const void *b) {
+    long long x = *(const long long *)a, y = *(const long long *)b;
+    return (x > y) - (x < y);
+}
+int main(int argc, char **argv) {
+    double seconds = atof(argv[1]);
+    long n = (long)(seconds * 1000), i;
+    long long *late = malloc(n * sizeof *late), period = 1000000;
+    struct timespec t, now;
+    struct rusage r0, r1;
+    prctl(PR_SET_TIMERSLACK, 1UL, 0, 0, 0);
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    getrusage(RUSAGE_SELF, &r0);
+    for (i = 0; i < n; i++) {
+        t.tv_nsec += period;
+        if (t.tv_nsec >= 1000000000) { t.tv_nsec -= 1000000000; t.tv_sec++; }
+        clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &t, NULL);
+        clock_gettime(CLOCK_MONOTONIC, &now);
+        late[i] = (now.tv_sec - t.tv_sec) * 1000000000LL + (now.tv_nsec - t.tv_nsec);
+    }
+    getrusage(RUSAGE_SELF, &r1);
+    double cpu = (r1.ru_utime.tv_sec - r0.ru_utime.tv_sec) + (r1.ru_stime.tv_sec - r0.ru_stime.tv_sec)
+        + 1e-6 * ((r1.ru_utime.tv_usec - r0.ru_utime.tv_usec) + (r1.ru_stime.tv_usec - r0.ru_stime.tv_usec));
+    qsort(late, n, sizeof *late, cmp);
+    printf("{\"cpu_percent\": %.3f, \"p50_ns\": %lld, \"p99_ns\": %lld, \"max_ns\": %lld}\n",
+           100.0 * cpu / seconds, late[n / 2], late[(long)(n * 0.99)], late[n - 1]);
+    return 0;
+}
+"""
+
+
+def _lateness_row(cpu: float, p50: int, p99: int, mx: int) -> dict[str, float | str]:
+    return {"cpu_percent": round(cpu, 2), "p50_us": f"{p50 / 1e3:.1f}",
+            "p99_us": f"{p99 / 1e3:.1f}", "p99_ns": p99, "max_us": round(mx / 1e3, 1),
+            "ticks": int(SECONDS * 1000), "overruns": 0, "spin_window_us": 0.0}
+
+
+def bare_c_figures(tmp: Path) -> dict[str, float | str] | None:
+    """The bare C clock_nanosleep loop at 1 kHz (None without gcc)."""
+    import json
+    import shutil
+
+    if shutil.which("gcc") is None:
+        return None
+    exe = tmp / "bare_loop"
+    if not exe.exists():
+        src = tmp / "bare_loop.c"
+        src.write_text(_BARE_C)
+        subprocess.run(["gcc", "-O2", "-o", str(exe), str(src)], check=True)
+    out = subprocess.run([str(exe), str(SECONDS)], capture_output=True, text=True, check=True)
+    r = json.loads(out.stdout)
+    return _lateness_row(r["cpu_percent"], r["p50_ns"], r["p99_ns"], r["max_ns"])
+
+
+def bare_python_figures() -> dict[str, float | str]:
+    """Python's bare sleep loop: time.sleep to each 1 kHz deadline, nothing else."""
+    mono = time.monotonic_ns
+    n = int(SECONDS * 1000)
+    late = [0] * n
+    c0 = time.process_time()
+    t = mono()
+    for i in range(n):
+        t += 1_000_000
+        remaining = t - mono()
+        if remaining > 0:
+            time.sleep(remaining / 1e9)
+        late[i] = mono() - t
+    cpu = 100 * (time.process_time() - c0) / SECONDS
+    late.sort()
+    return _lateness_row(cpu, late[n // 2], late[int(n * 0.99)], late[-1])
+
+
 def work_only_cpu() -> float:
     """The idle gripper's per-tick work as a share of a core at 1 kHz (virtual time)."""
     loop = Loop(SimClock(), period_ns=1_000_000)
@@ -145,7 +230,7 @@ def cli_figures(*options: str) -> dict[str, float | str]:
 
 
 @pytest.mark.benchmark(group="idle 1 kHz gripper")
-def test_idle_gripper_cpu_and_lateness_side_by_side(benchmark):
+def test_idle_gripper_cpu_and_lateness_side_by_side(benchmark, tmp_path):
     """Idle 1 kHz gripper: CPU share and lateness for each way of waiting, one table."""
     runs: dict[str, list[dict]] = {}
 
@@ -156,6 +241,10 @@ def test_idle_gripper_cpu_and_lateness_side_by_side(benchmark):
             for name, make in CLOCKS.items():
                 runs.setdefault(name, []).append(idle_figures(make))
             runs.setdefault("work only", []).append({"cpu_percent": work_only_cpu()})
+            bare = bare_c_figures(tmp_path)
+            if bare is not None:
+                runs.setdefault("bare C", []).append(bare)
+            runs.setdefault("bare Python", []).append(bare_python_figures())
             if sys.platform.startswith("linux"):
                 runs.setdefault("pyrt gripper", []).append(cli_figures())
                 runs.setdefault("  --timer-slack 1", []).append(

@@ -2,6 +2,12 @@
 simpy and asyncio; WallClock lateness at 1 kHz and 100 Hz.
 
 Run: ``python -m pytest bench/bench_scheduler.py --benchmark-only``.
+
+``test_side_by_side`` (``-s`` shows its table) runs, interleaved in one
+process and the same minutes, the 6-task dispatch of pyrt with timing on,
+with timing off, the Python dispatch (``native=False``, the path before the
+dispatch moved to C) and simpy, best of ``PYRT_SBS_ROUNDS`` rounds each
+(default 7); target: pyrt with timing on at least 2x simpy.
 The lateness benchmarks take 5 s each and report their figures in
 ``extra_info`` (shown with ``--benchmark-columns`` or ``--benchmark-json``)
 and on stdout (``-s``).
@@ -10,6 +16,8 @@ and on stdout (``-s``).
 from __future__ import annotations
 
 import asyncio
+import os
+import time
 
 import pytest
 
@@ -18,9 +26,12 @@ from pyrt.scheduler import Loop, ReadyQueue, SimClock, WallClock
 TICKS = 20_000
 
 
-def make_loop(ntasks: int, *, timing: bool = True, divisor: int = 1, period: int = 1) -> Loop:
+def make_loop(ntasks: int, *, timing: bool = True, divisor: int = 1, period: int = 1,
+              native: bool = True) -> Loop:
+    """A SimClock loop with one queue of ``ntasks`` period-``period`` tasks
+    (``native``: the dispatch in C; False: the Python dispatch it replaced)."""
     loop = Loop(SimClock(), timing=timing)
-    queue = ReadyQueue(capacity=6, divisor=divisor)
+    queue = ReadyQueue(capacity=max(6, ntasks), divisor=divisor, native=native)
     for i in range(ntasks):
         queue.add_periodic(0x100 + i, f"T{i}", lambda: None, period)
         queue.schedule(0x100 + i, period)
@@ -45,6 +56,64 @@ def test_pyrt_dispatch(benchmark, ntasks, timing):
     loop = make_loop(ntasks, timing=timing)
     benchmark.extra_info["dispatches"] = TICKS * ntasks
     benchmark(loop.run, TICKS)
+
+
+def simpy_run(nprocs: int, ticks: int) -> None:
+    """simpy: ``nprocs`` processes each waking every time unit, until ``ticks``."""
+    import simpy
+
+    env = simpy.Environment()
+
+    def proc(env):
+        while True:
+            yield env.timeout(1)
+
+    for _ in range(nprocs):
+        env.process(proc(env))
+    env.run(until=ticks)
+
+
+def best_of(fn, rounds: int) -> float:
+    """The fastest of ``rounds`` calls of ``fn``, in seconds."""
+    times = []
+    for _ in range(rounds):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return min(times)
+
+
+def side_by_side(ticks: int = TICKS, rounds: int = 7, ntasks: int = 6) -> dict[str, float]:
+    """ms for ``ticks`` ticks of ``ntasks`` period-1 tasks, each variant
+    interleaved with the others round by round (best of ``rounds``)."""
+    variants = {
+        "pyrt timing on": lambda: make_loop(ntasks).run(ticks),
+        "pyrt timing off": lambda: make_loop(ntasks, timing=False).run(ticks),
+        "pyrt Python dispatch, timing on": lambda: make_loop(ntasks, native=False).run(ticks),
+        "simpy": lambda: simpy_run(ntasks, ticks),
+    }
+    best = {k: float("inf") for k in variants}
+    for _ in range(rounds):
+        for k, fn in variants.items():
+            best[k] = min(best[k], best_of(fn, 1))
+    return {k: v * 1e3 for k, v in best.items()}
+
+
+@pytest.mark.benchmark(group="dispatch side by side")
+def test_side_by_side(benchmark):
+    """pyrt (timing on, off, Python dispatch) and simpy in one run: ms and ratios."""
+    pytest.importorskip("simpy")
+    rounds = int(os.environ.get("PYRT_SBS_ROUNDS", "7"))
+    ms = benchmark.pedantic(side_by_side, kwargs={"rounds": rounds}, rounds=1, iterations=1)
+    benchmark.extra_info.update({k: round(v, 2) for k, v in ms.items()})
+    ratio = ms["simpy"] / ms["pyrt timing on"]
+    benchmark.extra_info["simpy_over_pyrt"] = round(ratio, 2)
+    print(f"\n{TICKS} ticks of 6 period-1 tasks (best of {rounds}, interleaved):")
+    for k, v in ms.items():
+        print(f"  {k:34s} {v:8.1f} ms  {v * 1e3 / (TICKS * 6):6.3f} µs/dispatch"
+              f"  simpy/this {ms['simpy'] / v:5.2f}x")
+    print(f"  target: pyrt timing on >= 2x simpy: {'met' if ratio >= 2 else 'NOT met'}"
+          f" ({ratio:.2f}x)")
 
 
 @pytest.mark.benchmark(group="dispatch")

@@ -32,7 +32,7 @@ from pyrt.native._neck import LOWER as NECK_LOWER
 from pyrt.native._neck import UPPER as NECK_UPPER
 from pyrt.native._neck import NeckRing, RopePath, ring_contact
 from pyrt.native._polyctl import PolyControl
-from pyrt.native._readyq import QueueChecker
+from pyrt.native._readyq import QueueChecker, native_dispatcher
 from pyrt.native._statics import StaticsSolver
 
 __all__ = [
@@ -63,6 +63,7 @@ __all__ = [
     "freeze_mask",
     "from_excess128",
     "fuzzy_step",
+    "native_dispatcher",
     "ring_contact",
     "rope_lengths",
     "rope_segments",

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from pyrt.native._errors import raise_for_status
 from pyrt.native._lib import ffi, lib
 
-__all__ = ["QueueChecker"]
+__all__ = ["QueueChecker", "native_dispatcher"]
 
 
 class QueueChecker:
@@ -47,3 +49,13 @@ class QueueChecker:
         raise_for_status(self._check(rq), "QueueChecker.check")
         n = rq.n_ready
         return self._unpack(self._ready, n) if n else []
+
+
+def native_dispatcher(mem: bytearray, t_addr: int, q_addr: int, capacity: int, *,
+                      wide: bool = False) -> Any:
+    """The ready queue's check-and-dispatch in C (csrc/ext/dispatch.c) over
+    ``mem``: :meth:`check` does what :class:`QueueChecker` does and then runs
+    the routines it found, rescheduling and timing them (see the C file)."""
+    from pyrt.native._dispatch import Dispatcher
+
+    return Dispatcher(mem, t_addr, q_addr, capacity, wide)

@@ -19,6 +19,12 @@ duration is appended to the handler's sample list, and the lists are folded
 into histograms in bulk, off the tick (:meth:`Loop.take_samples`).  An
 overrun is attributed to whichever entry, routine or handler, took longest
 in its tick.
+
+On real time the loop keeps the garbage collector out of its ticks
+(:mod:`pyrt.scheduler.gcwatch`): the start-up heap frozen, automatic
+collection off while it runs, collections in the idle part of a tick, and
+any collection inside a tick counted (the entry ``gc``) and blamed for the
+overrun it causes.
 """
 
 from __future__ import annotations
@@ -26,10 +32,12 @@ from __future__ import annotations
 import threading
 from collections import deque
 from collections.abc import Callable, Generator
+from gc import get_count as gc_count
 from typing import Any
 
 from pyrt.errors import Fault, FaultError, PyrtError
-from pyrt.scheduler.clock import Clock, SimClock
+from pyrt.scheduler.clock import Clock, SimClock, WallClock
+from pyrt.scheduler.gcwatch import GcWatch, attribute
 from pyrt.scheduler.readyqueue import ReadyQueue, fold_many
 from pyrt.scheduler.stats import (
     Accumulator,
@@ -124,6 +132,10 @@ class Loop:
     ``warn`` receives at most one overrun summary line per second of loop
     time (one line of at most :attr:`WARN_WIDTH` characters, with the count);
     the full detail goes to ``timing_log`` and :meth:`statistics`.
+    ``gc_control`` (on a :class:`WallClock`): freeze the start-up heap, switch
+    automatic garbage collection off while running and collect in the idle
+    part of ticks (see :mod:`pyrt.scheduler.gcwatch`); collections inside
+    ticks are counted either way.
 
     **Start-up**: the first ticks a loop ever runs execute its code for the
     first time (imports, caches, the first command); until the first tick
@@ -148,6 +160,7 @@ class Loop:
         max_consecutive_overruns: int | None = None,
         warn: Callable[[str], None] | None = None,
         summary_interval_ns: int = 1_000_000_000,
+        gc_control: bool = True,
     ):
         if period_ns <= 0:
             raise ValueError(f"tick period must be positive, got {period_ns} ns")
@@ -206,6 +219,8 @@ class Loop:
         self._warn_worst: tuple[int, int, str] | None = None
         self._last_warn_ns: int | None = None
         self._log_started = False
+        self.gc_control = gc_control
+        self._gc = GcWatch(lambda: self.tick_index, self.clock.timer)
 
     # -- composition ---------------------------------------------------------
 
@@ -350,11 +365,13 @@ class Loop:
         self._timing_handlers = self.timing and bool(self._entries)
         self.running = True
         try:
+            self._gc.begin(self.gc_control and isinstance(self.clock, WallClock))
             self._start_log()
             if self.clock.virtual and until is None and end_ns is None and ticks is not None:
                 return self._run_sim_counted(ticks)
             return self._run_general(ticks, until, end_ns)
         finally:
+            self._gc.end()
             self.running = False
             if self.timing_log is not None:
                 self.timing_log.flush()
@@ -424,6 +441,10 @@ class Loop:
         timing = self.timing
         late_acc = self._lateness
         work_acc = self._work
+        gcw = self._gc
+        # idle collections: due at this many allocations, if half a tick is left
+        gc_at = gcw.threshold if gcw.controlling else None
+        gc_slack = period // 2
         n = 0
         while ticks is None or n < ticks:
             deadline = self._deadline
@@ -462,6 +483,9 @@ class Loop:
                     self.consecutive_overruns = 0
                     self._starting = False
                 self._deadline = nxt
+                if gc_at is not None and gc_count()[0] >= gc_at and (
+                        nxt - clock.now_ns() > gc_slack or gcw.forced()):
+                    gcw.collect_idle()
             if start >= self._next_summary:
                 self._summary(start)
             if stop.is_set():
@@ -503,6 +527,10 @@ class Loop:
                     continue
                 tasks.append((keys[item.name], d))
                 owners.append(item)
+        pauses = self._gc.pauses_in(self.tick_index - 1)
+        if pauses:  # a collection inside the tick: its pause is an entry of its own
+            tasks = attribute(tasks, pauses)
+            owners.append(self._gc)  # type: ignore[arg-type]
         culprit = ""
         if tasks:
             i = max(range(len(tasks)), key=lambda k: tasks[k][1])
@@ -643,6 +671,9 @@ class Loop:
             with self._entry_lock:
                 for e in self._entries:
                     tasks[keys[e.name]] = _task_statistics(keys[e.name], e.acc, "handler")
+        for acc in (self._gc.acc, self._gc.idle_acc):
+            if acc.calls:  # collections: inside ticks (blamed for overruns), idle
+                tasks[acc.name] = _task_statistics(acc.name, acc, "gc")
         return LoopStatistics(
             period_ns=self.period_ns,
             ticks=self.tick_index,
@@ -668,6 +699,7 @@ class Loop:
                 e.samples.clear()
                 e.acc.reset()
         self._sink.clear()
+        self._gc.reset()
         self.overruns = self.missed = self.consecutive_overruns = 0
         self.startup_overruns = self.startup_worst_ns = 0
 

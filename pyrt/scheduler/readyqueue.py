@@ -33,6 +33,11 @@ SYSCLKCNT and SYSCLKPD are bytes on both.
 Snapshot rule: routines found ready during one check run after the walk, so a
 routine scheduled while they run (a self-scheduling routine rescheduling
 itself) is first decremented at the *next* check and never runs twice in one.
+
+The check and the dispatch that follows it run in C by default
+(csrc/ext/dispatch.c: the walk, each body called, its rescheduling and one
+clock read per dispatch); ``native=False`` runs the same steps in Python
+(:meth:`ReadyQueue._check_py`), the reference the C path is tested against.
 """
 
 from __future__ import annotations
@@ -44,12 +49,12 @@ from collections.abc import Callable, Generator, MutableSequence
 from dataclasses import dataclass
 from itertools import chain
 from time import perf_counter_ns
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
 from pyrt.errors import QueueFullError
-from pyrt.native import QueueChecker
+from pyrt.native import QueueChecker, native_dispatcher
 from pyrt.scheduler.stats import NBINS, Accumulator
 
 __all__ = ["ByteImage", "ByteRef", "ReadyQueue", "Routine"]
@@ -57,8 +62,12 @@ __all__ = ["ByteImage", "ByteRef", "ReadyQueue", "Routine"]
 #: Address of the built-in routine that ends a :meth:`ReadyQueue.wait`.
 WAIT_ADDRESS = 0x0001
 
-#: Timing samples kept before they are folded into the accumulators.
+#: Timing samples kept before they are folded into the accumulators: at
+#: least this many, and this many per routine (a fold costs a few µs per
+#: routine, so a queue of many routines folds as rarely per routine as a
+#: small one and the cost per dispatch stays flat).
 _FOLD_AT = 2048
+_FOLD_PER_ROUTINE = 256
 
 #: The largest schedule value of a queue with 32-bit schedule variables.
 WIDE_MAX = 0xFFFFFFFF
@@ -147,6 +156,10 @@ class ReadyQueue:
     (1..2**32 - 1 checks; 0 is refused), and with ``capacity=None`` the queue
     has one slot per registered routine, growing as routines are registered
     (both need a private image).  :meth:`general` makes such a queue.
+
+    ``native`` (default True): the check and the dispatch run in C
+    (csrc/ext/dispatch.c); False runs them in Python (:meth:`_check_py`),
+    with the same semantics and statistics, slower.
     """
 
     def __init__(
@@ -157,8 +170,12 @@ class ReadyQueue:
         name: str = "robot",
         *,
         wide: bool = False,
+        native: bool = True,
     ):
         self._auto = capacity is None
+        self._native = native
+        self._core: Any = None
+        self._timer: Callable[[], int] = perf_counter_ns
         if capacity is None:
             if image is not None:
                 raise ValueError("a ready queue in an external byte image needs a capacity")
@@ -192,8 +209,6 @@ class ReadyQueue:
         self.on_error: Callable[[str, str, str], None] | None = None
         #: Loop time of the current tick, for routines that need the time.
         self.now_ns = 0
-        #: Measures routine execution times (the loop sets its clock's timer).
-        self.timer: Callable[[], int] = perf_counter_ns
         self.clear()
         self._mem[self._pd] = divisor
         self._mem[self._cnt] = divisor
@@ -250,12 +265,20 @@ class ReadyQueue:
             self._tv, self._t0 = _LittleEndianWords(self._mem, self._t, capacity, 4), 0
         self._slot_range = range(capacity)
         self._walk = QueueChecker(self._mem, self._t, self._q, capacity, wide=wide).check
+        if self._native:
+            self._core = native_dispatcher(self._mem, self._t, self._q, capacity, wide=wide)
+            self._core.set_full(self._put)
+            if hasattr(self, "_dispatch"):  # re-bound (grown): the routines and timing again
+                for address, (fn, pmem, paddr) in self._dispatch.items():
+                    self._core.set_routine(address, fn, pmem, paddr)
+                self._sync_timing()
 
     def _grow(self) -> None:
         """One slot more (a queue sized to its routines), the state kept."""
         if self.capacity >= MAX_CAPACITY:
             raise ValueError(f"ready queue of {self.name} holds at most {MAX_CAPACITY} routines")
         slots = self.slots()
+        pending = self._pending if hasattr(self, "_track") else 0
         old = self._mem
         cnt, pd, sema = old[self._cnt], old[self._pd], old[self._sema_addr]
         self._bind(ByteImage.private(self.capacity + 1, self.wide), self.capacity + 1)
@@ -263,6 +286,7 @@ class ReadyQueue:
             if slot is not None:
                 self._tv[self._t0 + i], self._q16[i] = slot
         self._mem[self._cnt], self._mem[self._pd], self._mem[self._sema_addr] = cnt, pd, sema
+        self._pending = pending
 
     # -- state -------------------------------------------------------------
 
@@ -324,11 +348,16 @@ class ReadyQueue:
             self._grow()
         routine = Routine(address, name, fn)
         self._routines[address] = routine
+        self._fold_at = max(_FOLD_AT, _FOLD_PER_ROUTINE * len(self._routines))
         self._dispatch[address] = (fn, None, 0)
         self._by_name[key] = routine
+        if self._core is not None:
+            self._core.set_routine(address, fn, None, 0)
         if self._stats is not None and self._samples is not None:
             self._stats[address] = Accumulator(name)
             self._samples[address] = []
+            if self._core is not None:
+                self._core.set_samples(self._samples)
         return routine
 
     def free_address(self) -> int:
@@ -392,6 +421,8 @@ class ReadyQueue:
             # The dispatcher runs the body and reschedules it itself, from the
             # period variable: the same thing, one call less on the hot path.
             self._dispatch[routine.address] = (fn, pmem, paddr)
+            if self._core is not None:
+                self._core.set_routine(routine.address, fn, pmem, paddr)
         return routine
 
     def routine(self, task: int | str) -> Routine:
@@ -507,6 +538,52 @@ class ReadyQueue:
         self._pending = 0
         self._tick_log: list[tuple[int, int]] = []
         self._checked_at = -1
+        self._sync_timing()
+
+    @property
+    def timer(self) -> Callable[[], int]:
+        """Measures routine execution times (the loop sets its clock's timer)."""
+        return self._timer
+
+    @timer.setter
+    def timer(self, timer: Callable[[], int]) -> None:
+        if not callable(timer):
+            raise TypeError(f"a timer must be callable, got {timer!r}")
+        self._timer = timer
+        self._sync_timing()
+
+    def _sync_timing(self) -> None:
+        """Tell the C dispatch the timer, the tracking and the sample lists."""
+        core = self._core
+        if core is None or not hasattr(self, "_track"):
+            return
+        on = self._samples is not None
+        timer = self._timer if on else None
+        core.set_timing(timer, timer is perf_counter_ns, self._track, self._samples)
+
+    @property
+    def _pending(self) -> int:
+        """Samples recorded since the last take."""
+        core = self._core
+        return core.pending if core is not None else self._pending_py
+
+    @_pending.setter
+    def _pending(self, n: int) -> None:
+        if self._core is not None:
+            self._core.pending = n
+        self._pending_py = n
+
+    @property
+    def _checked_at(self) -> int:
+        """Loop time of the last check that ran routines, tracked (-1: none)."""
+        core = self._core
+        return core.checked_at if core is not None else self._checked_at_py
+
+    @_checked_at.setter
+    def _checked_at(self, t: int) -> None:
+        if self._core is not None:
+            self._core.checked_at = t
+        self._checked_at_py = t
 
     def take_samples(self) -> dict[int, list[int]]:
         """Hand over the samples recorded so far and start new lists (loop
@@ -517,6 +594,8 @@ class ReadyQueue:
             return {}
         self._samples = {a: [] for a in taken}
         self._pending = 0
+        if self._core is not None:
+            self._core.set_samples(self._samples)
         return taken
 
     def fold_into_accumulators(self, samples: dict[int, list[int]]) -> None:
@@ -550,7 +629,8 @@ class ReadyQueue:
         if not self._track or self._checked_at != now_ns:
             return []
         names = self._routines
-        return [(names[a].name if a in names else f"{a:04X}", d) for a, d in self._tick_log]
+        log = self._core.tick_log if self._core is not None else self._tick_log
+        return [(names[a].name if a in names else f"{a:04X}", d) for a, d in log]
 
     # -- errors --------------------------------------------------------------
 
@@ -573,9 +653,29 @@ class ReadyQueue:
             return
         mem[self._cnt] = mem[self._pd]
         self.now_ns = now_ns
-        self._check()
+        core = self._core
+        if core is None:
+            self._check_py()
+            return
+        try:
+            pending = core.check(now_ns)  # csrc/ext/dispatch.c: _check_py in C
+        except Exception as exc:
+            self._failed(core.last, exc)
+            return
+        if pending >= self._fold_at:
+            self.fold_timing()
 
-    def _check(self) -> None:
+    def _failed(self, a: int, exc: Exception) -> None:
+        """The routine at ``a`` raised ``exc`` (call it while handling it)."""
+        r = self._routines.get(a)
+        if r is None:
+            cause = f"no routine at address {a:04X} (corrupted Q?)"
+            self._error(cause, f"{a:04X}")
+        else:
+            self._error(f"{type(exc).__name__}: {exc}", r.name, _tb.format_exc())
+
+    def _check_py(self) -> None:
+        """One check and its dispatch in Python (the reference of the C path)."""
         ready = self._walk()  # csrc/readyq.c: decrement, free, collect
         if not ready:
             return
@@ -587,7 +687,7 @@ class ReadyQueue:
         a = 0
         try:
             if timer is not None:
-                if self._pending >= _FOLD_AT:
+                if self._pending >= self._fold_at:
                     self.fold_timing()
                 samples = self._samples or {}
                 if self._track:
@@ -615,12 +715,7 @@ class ReadyQueue:
                         log.append((a, t1 - t0))
                     t0 = t1
         except Exception as exc:
-            r = self._routines.get(a)
-            if r is None:
-                cause = f"no routine at address {a:04X} (corrupted Q?)"
-                self._error(cause, f"{a:04X}")
-            else:
-                self._error(f"{type(exc).__name__}: {exc}", r.name, _tb.format_exc())
+            self._failed(a, exc)
 
 
 def fold_samples(stats: dict[int, Accumulator], samples: dict[int, list[int]]) -> None:

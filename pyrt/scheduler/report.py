@@ -14,7 +14,9 @@ def _us(ns: float) -> str:
 def format_statistics(stats: LoopStatistics) -> str:
     """A table: tick summary, lateness, then calls/mean/p99/max/overruns per
     task (the ready queues' routines), then the same per loop handler (board
-    polls, physics, motion, scope, mailbox: ``kind="handler"``)."""
+    polls, physics, motion, scope, mailbox: ``kind="handler"``), then the
+    garbage collections (``gc``: inside ticks; ``gc idle``: run by the loop
+    between ticks)."""
     lines = [
         f"tick {stats.period_ns / 1e3:g} µs: {stats.ticks} ticks, {stats.overruns} overruns, "
         f"{stats.missed} deadlines missed"
@@ -33,9 +35,9 @@ def format_statistics(stats: LoopStatistics) -> str:
             f"max {m / 1e3:.2f}"
         )
     width = max([12, *(len(name) + 1 for name in stats.tasks)])
-    for kind in ("task", "handler"):
+    for kind in ("task", "handler", "gc"):
         rows = sorted((n, t) for n, t in stats.tasks.items() if t.kind == kind)
-        if kind == "handler" and not rows:
+        if kind != "task" and not rows:
             continue
         lines.append(
             f"{kind:<{width}}{'calls':>10}{'mean µs':>10}{'p99 µs':>10}{'max µs':>10}"

@@ -169,7 +169,8 @@ class TaskStatistics:
     overruns: int
     distribution: Distribution = field(repr=False)
     #: ``"task"``: a ready-queue routine; ``"handler"``: a loop handler that is
-    #: not a ready queue (board poll, physics, motion executor, scope, mailbox).
+    #: not a ready queue (board poll, physics, motion executor, scope, mailbox);
+    #: ``"gc"``: garbage collections (``gc`` inside ticks, ``gc idle`` between).
     kind: str = "task"
 
 
