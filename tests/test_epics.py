@@ -350,14 +350,23 @@ def test_a_200_character_fault_message_is_intact(epics_env):
         assert _until(lambda: _text("FAULT_MSG") == cause)
 
 
-def test_value_pvs_are_read_only_to_channel_access_clients(epics_env):
-    """A client cannot write a value PV (POSITION, TARGET, MOVING): the IOC refuses and nothing changes."""
+def test_value_pvs_are_read_only_to_channel_access_clients(epics_env, caplog):
+    """A client cannot write a value PV (POSITION, TARGET, MOVING): the IOC refuses and nothing
+    changes; each refusal is one log line (no caproto traceback) and an audit line."""
+    import logging
+
+    caplog.set_level(logging.WARNING)
     with epics_served() as (sv, _ioc):
         for name, value in (("POSITION", 5), ("TARGET", -100), ("MOVING", "yes")):
             with pytest.raises(Exception):  # noqa: B017 - caproto's refusal
                 _write(name, value)
         assert _read("TARGET")[0] == 0 and sv.runner.call(sv.ctl.target) == 0
         assert sv.still_and_null()
+        refused = [r for r in caplog.records if "refused EPICS write" in r.getMessage()]
+        assert len(refused) == 3 and all(r.exc_info is None for r in refused)
+        assert not any("Forbidden" in (r.exc_text or "") for r in caplog.records)
+        audit = sv.rig.audit_lines()
+        assert sum("EPICS: refused EPICS write" in ln for ln in audit) == 3
 
 
 def test_caproto_logs_at_warning_unless_verbose(epics_env, caplog):

@@ -109,6 +109,30 @@ def pv_name(name: str) -> str:
     return "".join(out)
 
 
+class _RefusedWrites(logging.Filter):
+    """A Channel Access client's write to a read-only PV, refused by caproto: one
+    line (``refused EPICS write: ...``) instead of caproto's traceback, and an
+    audit line of the station; the follow-up error caproto's write handler
+    leaves in asyncio (a KeyError in ``handle_write``) is dropped."""
+
+    def __init__(self, station: Any):
+        super().__init__()
+        self.station = station
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        exc = record.exc_info[1] if record.exc_info else None
+        if record.name.startswith("caproto") and type(exc).__name__ == "Forbidden":
+            line = f"refused EPICS write: {exc}"
+            with contextlib.suppress(Exception):
+                self.station.audit("EPICS", line)
+            record.msg, record.args = line, ()
+            record.exc_info = record.exc_text = None
+            return True
+        leftover = (record.name == "asyncio" and isinstance(exc, KeyError)
+                    and "handle_write" in record.getMessage())
+        return not leftover
+
+
 def _read_only(ca: Any, base: type) -> type:
     """``base`` whose value Channel Access clients may read but not write."""
     from caproto import AccessRights
@@ -204,6 +228,10 @@ class EpicsService:
         if not prefix or any(c.isspace() for c in prefix) or len(prefix) > 40:
             raise ConfigError(f"EPICS prefix must be 1..40 characters, no spaces: {prefix!r}")
         logging.getLogger("caproto").setLevel(logging.INFO if verbose else logging.WARNING)
+        refused = _RefusedWrites(robot.station)
+        logging.getLogger("caproto.circ").addFilter(refused)
+        logging.getLogger("asyncio").addFilter(refused)
+        self._refused = refused
         self._ca = ca
         self.runner = runner
         self.robot = robot
@@ -305,6 +333,8 @@ class EpicsService:
 
     def close(self, timeout_s: float = 3.0) -> None:
         """Stop the Channel Access server."""
+        logging.getLogger("caproto.circ").removeFilter(self._refused)
+        logging.getLogger("asyncio").removeFilter(self._refused)
         self.server.hub.extras_wanted = False
         loop, task = self._loop, self._task
         if loop is not None and task is not None:

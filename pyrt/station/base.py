@@ -124,6 +124,9 @@ class Station:
         #: as ``start-up:`` lines before the console opens (the manipulator's
         #: reconciled ZEROLENGTH and LENGTH); none by default.
         self.startup_notes: list[str] = []
+        #: Audit lines not yet shown on the console (:meth:`audit`), and the log.
+        self._audit_pending: deque[str] = deque(maxlen=1000)
+        self._audit_logger: logging.Logger | None = None
         self._fault: Fault | None = None
         self._by_name: dict[str, Component] = {}
         self._closed = False
@@ -314,15 +317,14 @@ class Station:
         # Not the runner's messages: a remote shell's wait drains those, and
         # the operator would never see the line.  The console's shell takes
         # these (RobotShell.messages); a bounded queue when there is none.
-        pending = self.__dict__.setdefault("_audit_pending", deque(maxlen=1000))
-        pending.append(f"remote: {text}")
-        logger = getattr(self, "_audit_logger", None)
+        self._audit_pending.append(f"remote: {text}")
+        logger = self._audit_logger
         if logger is not None:
             logger.info("%s", text)
 
     def audit_lines(self) -> list[str]:
         """Take the audit lines not yet shown on the console (any thread)."""
-        pending = self.__dict__.get("_audit_pending")
+        pending = self._audit_pending
         out: list[str] = []
         while pending:
             try:
@@ -347,12 +349,12 @@ class Station:
         handler.setFormatter(logging.Formatter("%(asctime)s %(message)s"))
         logger = logging.Logger(f"pyrt.audit.{self.name}")  # its own, not the root's tree
         logger.addHandler(handler)
-        self._audit_logger: Any = logger
+        self._audit_logger = logger
         return where
 
     def close_audit_log(self) -> None:
         """Close the audit log, if one is open."""
-        logger = getattr(self, "_audit_logger", None)
+        logger = self._audit_logger
         if logger is None:
             return
         self._audit_logger = None
