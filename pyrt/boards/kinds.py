@@ -66,6 +66,7 @@ from pyrt.boards.tio10 import (
     RTC_CHANNELS,
     TIO10,
     check_channel,
+    check_period,
     check_port,
     source_hz,
 )
@@ -281,14 +282,7 @@ class RemoteTIO10(TIO10):
         return self.registers.read("src", check_channel(channel, allow_rtc=True))
 
     def load_period(self, channel: int, ticks: int) -> None:
-        check_channel(channel)
-        if isinstance(ticks, bool) or not isinstance(ticks, int):
-            raise ValueError(f"period must be an integer tick count, got {ticks!r}")
-        if not MIN_PERIOD <= ticks <= MAX_PERIOD:
-            raise ValueError(
-                f"period {ticks} out of the 16-bit load register's range "
-                f"{MIN_PERIOD}..{MAX_PERIOD} ticks"
-            )
+        check_period(channel, ticks)
         self.registers.write("per", ticks, channel)
 
     def period(self, channel: int) -> int:

@@ -22,13 +22,13 @@ from pyrt.boards.dataconcentrator import (
 from pyrt.boards.tio10 import (
     CHANNELS,
     CLOCK_HZ,
-    MAX_PERIOD,
     MIN_PERIOD,
     PIA_PORTS,
     PULSE_COUNTER_MODULUS,
     RTC_MODULUS,
     TIO10,
     check_channel,
+    check_period,
     check_port,
     source_hz,
 )
@@ -66,14 +66,7 @@ class SimTIO10(TIO10):
         return self._source[check_channel(channel, allow_rtc=True)]
 
     def load_period(self, channel: int, ticks: int) -> None:
-        check_channel(channel)
-        if isinstance(ticks, bool) or not isinstance(ticks, int):
-            raise ValueError(f"period must be an integer tick count, got {ticks!r}")
-        if not MIN_PERIOD <= ticks <= MAX_PERIOD:
-            raise ValueError(
-                f"period {ticks} out of the 16-bit load register's range "
-                f"{MIN_PERIOD}..{MAX_PERIOD} ticks"
-            )
+        check_period(channel, ticks)
         self._period[channel] = ticks
         self.writes += 1
 

@@ -39,6 +39,7 @@ __all__ = [
     "SOURCES",
     "TIO10",
     "check_channel",
+    "check_period",
     "check_port",
     "source_hz",
 ]
@@ -88,6 +89,20 @@ def check_channel(channel: int, *, allow_rtc: bool = False) -> int:
             f"TIO10 channel {channel} is reserved for the real-time clock (channels 4 and 5)"
         )
     return channel
+
+
+def check_period(channel: int, ticks: int) -> None:
+    """A load of ``ticks`` into ``channel``'s period register, checked as the card
+    takes it (ValueError naming what is wrong): an output channel, an integer
+    MIN_PERIOD..MAX_PERIOD."""
+    check_channel(channel)
+    if isinstance(ticks, bool) or not isinstance(ticks, int):
+        raise ValueError(f"period must be an integer tick count, got {ticks!r}")
+    if not MIN_PERIOD <= ticks <= MAX_PERIOD:
+        raise ValueError(
+            f"period {ticks} out of the 16-bit load register's range "
+            f"{MIN_PERIOD}..{MAX_PERIOD} ticks"
+        )
 
 
 def source_hz(source: int) -> int:

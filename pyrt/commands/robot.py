@@ -477,12 +477,9 @@ class RobotShell(CommandShell):
     @command(name="ack", console=True)
     def do_ack(self) -> None:
         """ack: acknowledge a fault: every motor stays stopped, the routines restart."""
-        for _ in range(8):
-            try:
-                self.say(self.runner.call(self.station.acknowledge, name="ack"))
-                return
-            except FaultError as exc:
-                self.fault(exc)
+        for fault in self.runner.take_faults():  # each report is shown before it is acknowledged
+            self.fault(FaultError(fault))
+        self.say(self.runner.call(self.station.acknowledge, name="ack", take_fault=False))
 
     @command(name="stop", console=True, anyone=True)
     def do_stop(self) -> None:

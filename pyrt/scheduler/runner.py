@@ -284,6 +284,14 @@ class Runner:
             finally:
                 self._driver = None
 
+    def take_faults(self) -> list[Fault]:
+        """Every fault report still pending, oldest first, taken (an acknowledgement
+        shows them, then acknowledges with ``call(..., take_fault=False)``)."""
+        out = []
+        while (fault := self.loop.take_fault()) is not None:
+            out.append(fault)
+        return out
+
     def take_fault(self, fault: Fault) -> None:
         """``fault`` has been shown to the operator: the next call does not raise it."""
         self.loop.take_fault(fault)

@@ -63,7 +63,7 @@ import threading
 from typing import Any
 
 from pyrt.component import Limits
-from pyrt.errors import ConfigError, FaultError, PyrtError
+from pyrt.errors import ConfigError, PyrtError
 from pyrt.server.protocol import format_error, format_reply
 from pyrt.server.robot import ObserverRunner
 from pyrt.server.session import run_shell
@@ -490,15 +490,12 @@ class EpicsService:
         the call meets first, is what is being acknowledged."""
         station = self.robot.station
         with self._shell_lock:
-            for _ in range(8):
-                try:
-                    said = self.runner.call(station.acknowledge, name="ack")
-                except FaultError:
-                    continue
-                except PyrtError as exc:
-                    return format_error("command", str(exc))
-                return format_reply([said])
-        return format_error("fault", "the robot faulted again while acknowledging")
+            self.runner.take_faults()  # FAULT_MSG has shown them; this acknowledges them
+            try:
+                said = self.runner.call(station.acknowledge, name="ack", take_fault=False)
+            except PyrtError as exc:
+                return format_error("command", str(exc))
+            return format_reply([said])
 
     def _run(self, line: str) -> str:
         with self._shell_lock:

@@ -130,6 +130,10 @@ class ObserverRunner:
     def take_fault(self, fault: Any) -> None:
         """A fault is the operator's to take: nothing here."""
 
+    def take_faults(self) -> list[Any]:
+        """Faults are the operator's to take: none here."""
+        return []
+
     def poll(self, timeout_s: float = 1.0) -> None:
         """A no-op round trip that does not take the operator's fault."""
         self.call(lambda: None, timeout_s=timeout_s, name="poll")
