@@ -43,6 +43,22 @@ def test_remote_commands_that_act_are_posted_and_logged(tmp_path):
                     logged[0])
 
 
+def test_a_failed_auth_is_audited(tmp_path):
+    """A wrong token is an audit line naming the client (console and log); nothing else changes."""
+    with served() as s:
+        path = s.rig.open_audit_log(tmp_path / "audit.log")
+        console = RobotShell(s.rig, io.StringIO())
+        console.messages()
+        c = s.client()
+        with pytest.raises(Exception, match="wrong token"):
+            c.auth("not-the-token")
+        said = [m for m in console.messages() if m.startswith("remote: ")]
+        s.rig.close_audit_log()
+    assert len(said) == 1 and re.fullmatch(
+        r"remote: DAQ client \d+ 127\.0\.0\.1:\d+: failed AUTH \(1 of \d+\)", said[0]), said
+    assert path.read_text().strip().endswith("failed AUTH (1 of 3)")
+
+
 def test_the_audit_log_rotates_by_size(tmp_path):
     """Past audit_max_bytes the log is rotated; the newest line is in the live file."""
     with served() as s:

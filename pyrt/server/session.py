@@ -12,6 +12,7 @@ that release instead of getting ``ERR busy``.
 
 from __future__ import annotations
 
+import contextlib
 import hmac
 import io
 import logging
@@ -203,6 +204,13 @@ class SessionMixin(ServerState):
         holder = self._privileged
         return holder is not None and holder is not conn and (holder.closing or holder.closed)
 
+    def _audit_failed_auth(self, conn: Connection) -> None:
+        """A wrong token: an audit line of the station (console and audit log)."""
+        host, port = conn.peer[:2]
+        with contextlib.suppress(Exception):  # auditing must never break the server
+            self.robot.station.audit(f"DAQ client {conn.id} {host}:{port}",
+                                     f"failed AUTH ({conn.auth_failures} of {MAX_AUTH_FAILURES})")
+
     def _auth(self, conn: Connection, given: str) -> str:
         holder = self._privileged
         if (holder is not None and holder is not conn and (holder.closing or holder.closed)
@@ -220,6 +228,7 @@ class SessionMixin(ServerState):
             if not given or not hmac.compare_digest(given.encode("utf-8"), self._token):
                 self.counters["auth_failed"] += 1
                 conn.auth_failures += 1
+                self._audit_failed_auth(conn)
                 if conn.auth_failures >= MAX_AUTH_FAILURES:
                     self._close_after_flush(conn)
                     return format_error("auth", "wrong token; too many failures, closing")
