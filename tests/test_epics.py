@@ -180,10 +180,28 @@ def test_command_pv_needs_the_token_in_the_written_value(epics_env):
         assert sv.still_and_null()
 
 
+def test_setpoint_pvs_set_parameters_with_the_token_rule(epics_env):
+    """OBJECT:PARAM_SP takes 'TOKEN VALUE' and runs set OBJECT.PARAM VALUE (range checked,
+    audited); a wrong token or a value out of range changes nothing."""
+    with epics_served() as (sv, _ioc):
+        assert f"{PREFIX}GRIPPER:SPEED_SP" in _ioc.pvdb
+        _write("GRIPPER:SPEED_SP", f"{TOKEN} 33")
+        assert _text("RESULT").startswith("OK"), _text("REPLY")
+        assert sv.runner.call(lambda: sv.rig.controller.ram[0x51]) == 0x33
+        _write("GRIPPER:SPEED_SP", f"{TOKEN} 99")
+        assert _text("RESULT").startswith("ERR") and "01..7F" in _text("REPLY")
+        _write("GRIPPER:SPEED_SP", "wrong 40")
+        assert _text("RESULT").startswith("ERR auth")
+        assert sv.runner.call(lambda: sv.rig.controller.ram[0x51]) == 0x33
+        assert TOKEN not in _text("GRIPPER:SPEED_SP")
+        assert any("set gripper.speed 33" in ln for ln in sv.rig.audit_lines())
+
+
 def test_no_command_pv_without_a_token(epics_env):
     """Without a token there is no CMD or ACK (nobody is privileged); STOP is served all the same."""
     with epics_served(token=None) as (_sv, ioc):
         assert f"{PREFIX}CMD" not in ioc.pvdb and f"{PREFIX}ACK" not in ioc.pvdb
+        assert not any(name.endswith("_SP") for name in ioc.pvdb)
         assert "no token" in ioc.summary and f"{PREFIX}STOP" in ioc.pvdb
         assert _read("FAULT")[0] == b"no"
         with pytest.raises(Exception, match=r"(?i)time"):

@@ -59,6 +59,7 @@ import hmac
 import io
 import logging
 import math
+import re
 import threading
 from typing import Any
 
@@ -131,6 +132,9 @@ class _RefusedWrites(logging.Filter):
         leftover = (record.name == "asyncio" and isinstance(exc, KeyError)
                     and "handle_write" in record.getMessage())
         return not leftover
+
+
+_PV_WORD = re.compile(r"^[A-Za-z0-9_]+$")
 
 
 def _read_only(ca: Any, base: type) -> type:
@@ -311,7 +315,40 @@ class EpicsService:
             db[p + "ACK"] = AckChannel(value="", max_length=CMD_LENGTH, string_encoding="utf-8")
             db[p + "REPLY"] = ro(ca.ChannelChar)(value="", max_length=REPLY_LENGTH,
                                                  string_encoding="utf-8")
+            for comp_name, param_name in self._setpoints():
+                key = p + pv_name(f"{comp_name}:{param_name}_SP")
+                if key in db:
+                    continue
+
+                class SetpointChannel(char_channel):
+                    async def verify_value(self, data: Any, _target: str =
+                                           f"{comp_name}.{param_name}") -> Any:
+                        return await service._setpoint(_target, data)
+
+                db[key] = SetpointChannel(value="", max_length=CMD_LENGTH,
+                                          string_encoding="utf-8")
         return db
+
+    def _setpoints(self) -> list[tuple[str, str]]:
+        """``(object, parameter)`` of every writable run-time parameter (``set``)."""
+        st = self.robot.station
+        return [(c.name, prm.name) for c in st.components() for prm in st.params_of(c)
+                if prm.write is not None and _PV_WORD.match(c.name) and _PV_WORD.match(prm.name)]
+
+    async def _setpoint(self, target: str, data: Any) -> str:
+        """A write to ``OBJECT:PARAM_SP``: ``TOKEN VALUE`` runs ``set OBJECT.PARAM VALUE``
+        (the CMD token rule; its reply goes to RESULT and REPLY, as CMD's)."""
+        token, _, value = self._text(data).partition(" ")
+        value = value.strip()
+        if not self._token_ok(token):
+            reply = format_error("auth", "wrong token in the written value; nothing was set")
+        elif not value:
+            reply = format_error("syntax", "write 'TOKEN VALUE'")
+        else:
+            loop = asyncio.get_running_loop()
+            reply = await loop.run_in_executor(None, self._run, f"set {target} {value}")
+        await self._result(reply)
+        return value if self._token_ok(token) else ""
 
     def _status_fields(self) -> list[tuple[str, str, str, Limits | None]]:
         """``(name, units, format, limits)`` of each status field, from the
