@@ -69,6 +69,11 @@ def pyrt_state_sandbox(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Pat
 @pytest.fixture(autouse=True)
 def _motion_types_restored():
     """A motion type a test registers is gone after it (the registry is process-wide)."""
+    # pyrt's own types register on import: import them before the snapshot, so that
+    # a test that happens to import one first does not take it away from the rest.
+    import pyrt.robots.gripper
+    import pyrt.robots.paths
+    import pyrt.robots.trajectory
     from pyrt.scheduler import motion
 
     before = dict(motion._registry)

@@ -121,11 +121,13 @@ class _RefusedWrites(logging.Filter):
         self.station = station
 
     def filter(self, record: logging.LogRecord) -> bool:
-        exc = record.exc_info[1] if record.exc_info else None
+        # Another IOC's filter may have seen the record first: it keeps the refusal.
+        exc = record.exc_info[1] if record.exc_info else getattr(record, "pyrt_refused", None)
         if record.name.startswith("caproto") and type(exc).__name__ == "Forbidden":
             line = f"refused EPICS write: {exc}"
             with contextlib.suppress(Exception):
                 self.station.audit("EPICS", line)
+            record.pyrt_refused = exc
             record.msg, record.args = line, ()
             record.exc_info = record.exc_text = None
             return True
