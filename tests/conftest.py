@@ -73,7 +73,7 @@ def _motion_types_restored():
     # a test that happens to import one first does not take it away from the rest.
     import pyrt.robots.gripper
     import pyrt.robots.paths
-    import pyrt.robots.trajectory
+    import pyrt.robots.trajectory  # noqa: F401
     from pyrt.scheduler import motion
 
     before = dict(motion._registry)
