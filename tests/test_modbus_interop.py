@@ -5,9 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import io
-import queue
 import re
-import subprocess
 import sys
 import threading
 import time
@@ -21,6 +19,7 @@ from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import SimData, SimDevice
 from pymodbus.simulator.simdata import DataType
 from test_gripper_transcript import SCRIPT, answers, hexword
+from test_station_boards import _Proc
 
 from pyrt.boards import open_boards
 from pyrt.boards.gripper import DAC_NULL
@@ -142,44 +141,6 @@ def test_pyrt_drives_a_plain_pymodbus_server_through_a_map(tmp_path):
 
 
 # -- board-sim --modbus in a subprocess ----------------------------------------------------
-
-
-class _Proc:
-    """A child Python process whose stdout lines a thread collects."""
-
-    def __init__(self, args: list[str]):
-        self.proc = subprocess.Popen([sys.executable, *args], stdin=subprocess.DEVNULL,
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        self.lines: queue.Queue[str | None] = queue.Queue()
-        self.seen: list[str] = []
-        threading.Thread(target=self._pump, daemon=True).start()
-
-    def _pump(self) -> None:
-        for line in self.proc.stdout:
-            self.lines.put(line.rstrip("\n"))
-        self.lines.put(None)
-
-    def expect(self, pattern: str, seconds: float = START_S) -> re.Match:
-        deadline = time.monotonic() + seconds
-        while True:
-            try:
-                line = self.lines.get(timeout=max(0.01, deadline - time.monotonic()))
-            except queue.Empty:
-                line = None
-            if line is not None:
-                self.seen.append(line)
-                m = re.search(pattern, line)
-                if m:
-                    return m
-            if time.monotonic() > deadline or (line is None and self.proc.poll() is not None):
-                self.kill()
-                raise AssertionError(f"no line matching {pattern!r}; got {self.seen[-20:]}, "
-                                     f"stderr {self.proc.stderr.read()[-2000:]!r}")
-
-    def kill(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.kill()
-        self.proc.wait(10)
 
 
 def _board_sim(*extra: str, listen: str = "127.0.0.1:0") -> tuple[_Proc, str]:
