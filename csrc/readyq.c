@@ -4,24 +4,33 @@
 
 #include <stddef.h>
 
+/* The image checks of both forms: T holds t_width bytes per slot, Q two. */
+static int rq_valid(pyrt_rq *rq, int32_t t_width)
+{
+    int32_t mem_len, capacity;
+    if (rq == NULL || rq->mem == NULL || rq->ready == NULL)
+        return 0;
+    mem_len = rq->mem_len;
+    capacity = rq->capacity;
+    rq->n_ready = 0;
+    return !(capacity < 1 || capacity > 255 || rq->t_addr < 0 || rq->q_addr < 0 ||
+             rq->t_addr > mem_len - t_width * capacity ||
+             rq->q_addr > mem_len - 2 * capacity);
+}
+
 int pyrt_rq_check(pyrt_rq *rq)
 {
     int32_t i, n = 0;
     uint8_t *mem;
     uint16_t *ready;
-    int32_t mem_len, t_addr, q_addr, capacity;
-    if (rq == NULL || rq->mem == NULL || rq->ready == NULL)
+    int32_t t_addr, q_addr, capacity;
+    if (!rq_valid(rq, 1))
         return PYRT_EINVAL;
     mem = rq->mem;
     ready = rq->ready;
-    mem_len = rq->mem_len;
     t_addr = rq->t_addr;
     q_addr = rq->q_addr;
     capacity = rq->capacity;
-    rq->n_ready = 0;
-    if (capacity < 1 || capacity > 255 || t_addr < 0 || q_addr < 0 ||
-        t_addr > mem_len - capacity || q_addr > mem_len - 2 * capacity)
-        return PYRT_EINVAL;
     for (i = 0; i < capacity; i++) {
         uint8_t *q = mem + q_addr + 2 * i;
         uint16_t address = (uint16_t)(q[0] | (q[1] << 8));
@@ -45,19 +54,14 @@ int pyrt_rq_check_wide(pyrt_rq *rq)
     int32_t i, n = 0;
     uint8_t *mem;
     uint16_t *ready;
-    int32_t mem_len, t_addr, q_addr, capacity;
-    if (rq == NULL || rq->mem == NULL || rq->ready == NULL)
+    int32_t t_addr, q_addr, capacity;
+    if (!rq_valid(rq, 4))
         return PYRT_EINVAL;
     mem = rq->mem;
     ready = rq->ready;
-    mem_len = rq->mem_len;
     t_addr = rq->t_addr;
     q_addr = rq->q_addr;
     capacity = rq->capacity;
-    rq->n_ready = 0;
-    if (capacity < 1 || capacity > 255 || t_addr < 0 || q_addr < 0 ||
-        t_addr > mem_len - 4 * capacity || q_addr > mem_len - 2 * capacity)
-        return PYRT_EINVAL;
     for (i = 0; i < capacity; i++) {
         uint8_t *q = mem + q_addr + 2 * i;
         uint8_t *t = mem + t_addr + 4 * i;
