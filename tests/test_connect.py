@@ -169,7 +169,8 @@ def test_pyrt_connect_on_a_terminal_asks_for_the_token_without_echo_and_shows_li
         assert child.exitstatus == 0
         assert TOKEN not in seen  # never echoed
         assert seen.count("privileged: every") == 1
-        assert "target=-7046" in seen and "moving=1" in seen  # the live status line, unasked
+        # the live status line, unasked: the console's own line, counts in hex with mm
+        assert "target E47A (26.2 mm)" in seen and ", moving, drive" in seen
         assert "gripper: every motor stopped" in seen
         assert sv.still_and_null()
 

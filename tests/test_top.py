@@ -37,7 +37,7 @@ def test_render_keeps_the_servers_values_and_puts_each_field_on_a_line():
 
 
 def test_once_prints_one_snapshot_of_a_served_gripper():
-    """--once against a served gripper: its status fields and the loop's timing, exit 0, no escape codes."""
+    """--once against a served gripper: its status line (hex, mm), its status fields and the loop's timing, exit 0, no escape codes."""
     with served(wall=True) as sv:
         done = _top(f"{sv.host}:{sv.port}", "--once")
     assert done.returncode == 0, done.stderr
@@ -45,6 +45,8 @@ def test_once_prints_one_snapshot_of_a_served_gripper():
     assert out.startswith(f"pyrt top: gripper at {sv.host}:{sv.port}\nt = ")
     assert re.search(r"^  position +-?\d+$", out, re.M)
     assert re.search(r"^  sensors +0x[0-9A-F]{4}$", out, re.M)
+    # the console's own line, in the gripper's radix: hex counts with mm beside them
+    assert re.search(r"^position [0-9A-F]{4} \(\d+\.\d mm\), target [0-9A-F]{4} ", out, re.M)
     assert re.search(r"^tick 1000 µs: \d+ ticks, \d+ overruns", out, re.M)
     assert "\x1b" not in out and out.count("pyrt top:") == 1
 

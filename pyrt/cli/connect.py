@@ -220,22 +220,32 @@ def _verb(obj: str, line: str) -> str | None:
 
 
 class _StatusWatch:
-    """A second connection subscribed to the status; the latest line for the toolbar."""
+    """A second connection reading the robot's status line (``statusline``: the
+    console's own line, in its radix: the gripper's counts in hex with mm) at
+    ``hz``; the latest line for the toolbar."""
 
     def __init__(self, host: str, port: int, hz: float):
         self.line = "connecting ..."
+        self._period_s = 1.0 / hz
+        self._stop = threading.Event()
         self._client = Client(host, port, timeout_s=max(5.0, 3.0 / hz))
-        self._client.command(f"SUBSCRIBE {hz:g}")
         self._thread = threading.Thread(target=self._read, name="pyrt-connect-status",
                                          daemon=True)
         self._thread.start()
 
     def _read(self) -> None:
-        for status in self._client.statuses(None):
-            self.line = status.raw.removeprefix("STATUS ").strip()
-        self.line = "status: the server stopped sending"
+        while not self._stop.is_set():
+            try:
+                lines = self._client.command("statusline")
+            except (OSError, TimeoutError, ServerError) as exc:
+                self.line = f"status: {exc}"
+                return
+            if lines:
+                self.line = lines[-1]
+            self._stop.wait(self._period_s)
 
     def close(self) -> None:
+        self._stop.set()
         self._client.close()
 
 

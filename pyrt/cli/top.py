@@ -66,8 +66,9 @@ def _fields(raw: str) -> tuple[str, list[tuple[str, str]]]:
 
 
 def render(title: str, status_line: str, stats: list[str] | None,
-           spaced: bool = False) -> list[str]:
-    """One snapshot as lines: a title, the time, the status fields in two
+           spaced: bool = False, shown: str = "") -> list[str]:
+    """One snapshot as lines: a title, the time, the robot's status line as its
+    console shows it (``shown``, if given), the status fields in two
     columns, then the loop's timing table (``stats``) if given.  ``spaced``
     (the screen): an empty line between the parts; without it the snapshot
     has none, so that piped snapshots are told apart by the empty line
@@ -78,7 +79,7 @@ def render(title: str, status_line: str, stats: list[str] | None,
         when = f"t = {float(t):.3f} s (loop time)"
     except ValueError:
         when = "t = ?"
-    lines = [title, when, *gap]
+    lines = [title, when, *([shown] if shown else []), *gap]
     width = max((len(k) for k, _ in fields), default=0)
     lines += [f"  {k:<{width}}  {v}" for k, v in fields] or ["  (no status fields)"]
     if stats is not None:
@@ -98,13 +99,18 @@ class _Source:
 
     def snapshot(self, spaced: bool) -> list[str]:
         status = self.client.command("STATUS")
+        try:
+            shown = self.client.command("statusline")
+        except ServerError:  # a server without it: the fields alone
+            shown = []
         stats = None
         if self.with_stats:
             try:
                 stats = self.client.command("stats")
             except ServerError as exc:  # a server without it: say so, keep the status
                 stats = [f"(no timing: {exc})"]
-        return render(self.title, status[-1] if status else "", stats, spaced)
+        return render(self.title, status[-1] if status else "", stats, spaced,
+                      shown[-1] if shown else "")
 
     def close(self) -> None:
         self.client.close()

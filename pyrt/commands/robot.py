@@ -499,6 +499,12 @@ class RobotShell(CommandShell):
         for s, v in values:
             self.say(f"{comp.name}.{s.name} = {s.format(v)}")
 
+    @command(name="statusline", reads_only=True, console=True)
+    def do_statusline(self) -> None:
+        """statusline: the robot's status line as the console shows it, in its radix (over
+        the DAQ link, where STATUS gives the machine-readable fields: connect and top show it)."""
+        self.say(self.runner.call(self.station.status, name="status"))
+
     def interrupt(self, at_prompt: bool) -> str:
         """Ctrl-C (the console calls it): a move that runs is stopped, every
         motor with it; idle at the prompt, a hint and nothing else."""
