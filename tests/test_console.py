@@ -284,7 +284,7 @@ def test_gripper_console_completes_words_objects_verbs_and_scope_channels():
     station = build_gripper(Loop(SimClock(), period_ns=1_000_000))
     try:
         table = RobotShell(station, io.StringIO()).completions()
-        assert complete(table, "st") == ["stats", "status", "stop"]
+        assert complete(table, "st") == ["stats", "status", "statusline", "stop"]
         assert complete(table, "gripper ") == ["C", "E", "I", "M", "P", "S", "T", "W", "X"]
         assert complete(table, "P") == ["P"]  # the level's letters, typed bare at CMD:
         assert complete(table, "w") == ["W", "wait"]

@@ -77,8 +77,12 @@ def shutdown_signals(reflex: Callable[[], Any], say: Callable[[str], Any],
     try:
         yield guard
     finally:
+        # After a shutdown signal the process is ending: a second one that comes
+        # after the close (two sent together, the close quicker than their gap)
+        # must not kill it before it exits with its status, so it is ignored.
+        ended = guard.first_at is not None
         for s, handler in old.items():
-            signal.signal(s, handler)
+            signal.signal(s, signal.SIG_IGN if ended and s != signal.SIGINT else handler)
 
 
 def _stop_now(station: Any) -> None:
