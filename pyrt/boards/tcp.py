@@ -255,21 +255,13 @@ class TcpLink:
         """The payload of the last request sent without waiting (the replies of
         those before it are read first); None if none is outstanding.
         BoardError as :meth:`request`, also for a refusal of an earlier one."""
-        refused = None
         with self._lock:
             if self._down is not None:
                 raise BoardError(self.url, f"the link is down ({self._down})")
             if not self._outstanding:
                 return None
             line = self._outstanding.pop()
-            try:
-                refused = self._read_outstanding()
-                reply = self._readline()
-            except (TimeoutError, BlockingIOError):
-                self._fail(f"no reply within {self.timeout:g} s", line)
-            except (OSError, EOFError) as exc:
-                self._fail(_why(exc), line)
-            self.requests += 1
+            refused, reply = self._reply(line)
         if refused is not None:
             raise BoardError(self.url, refused)
         if reply[:3] == b"OK " or reply == b"OK":
@@ -281,19 +273,10 @@ class TcpLink:
     def _exchange(self, line: str) -> bytes:
         """One round trip; the payload of the ``OK`` reply."""
         data = line.encode("ascii") + b"\n"
-        refused = None
         with self._lock:
             if self._down is not None:
                 raise BoardError(self.url, f"{line}: the link is down ({self._down})")
-            try:
-                self._sock.sendall(data)
-                refused = self._read_outstanding()
-                reply = self._readline()
-            except (TimeoutError, BlockingIOError):
-                self._fail(f"no reply within {self.timeout:g} s", line)
-            except (OSError, EOFError) as exc:
-                self._fail(_why(exc), line)
-            self.requests += 1
+            refused, reply = self._reply(line, data)
         if refused is not None:
             raise BoardError(self.url, refused)
         if reply[:3] == b"OK " or reply == b"OK":
@@ -306,6 +289,24 @@ class TcpLink:
         with self._lock:
             self._fail(f"unexpected reply {text[:60]!r}", line)
         raise AssertionError("unreachable")  # pragma: no cover
+
+    def _reply(self, line: str, data: bytes | None = None) -> tuple[str | None, bytes]:
+        """(Lock held.) Send ``data`` if given, read the replies still owed, then
+        ``line``'s: (the first refusal among those owed or None, the reply).  A
+        lost link fails it (BoardError naming the URL)."""
+        refused: str | None = None
+        reply = b""
+        try:
+            if data is not None:
+                self._sock.sendall(data)
+            refused = self._read_outstanding()
+            reply = self._readline()
+        except (TimeoutError, BlockingIOError):
+            self._fail(f"no reply within {self.timeout:g} s", line)
+        except (OSError, EOFError) as exc:
+            self._fail(_why(exc), line)
+        self.requests += 1
+        return refused, reply
 
     def _readline(self) -> bytes:
         buf = self._buf
