@@ -87,6 +87,7 @@ __all__ = [
     "MIN_TIMEOUT_S",
     "ImageBackend",
     "ImageRegisters",
+    "LocalImage",
     "Write",
 ]
 
@@ -132,6 +133,14 @@ class ImageBackend:
             (board, reg.name, reg.count) for board, kind in self.kinds.items()
             for reg in kind.inputs()]
         self.input_count = sum(c for _, _, c in self.layout)
+        #: Every output slot in declared order: (board, register, index).
+        self.output_layout: list[tuple[str, str, int]] = [
+            (board, reg.name, i) for board, kind in self.kinds.items()
+            for reg in kind.outputs() for i in range(reg.count)]
+        self.output_index = {key: n for n, key in enumerate(self.output_layout)}
+        #: What sees the image move (a journal's recorder): ``inputs(values)`` after
+        #: every read phase, ``wrote(slot, value)`` for every changed output, or None.
+        self.tap: Any = None
         self._image: dict[str, dict[str, list[int]]] = {b: {} for b in self.kinds}
         self._outputs: dict[tuple[str, str, int], int] = {}
         self._changed: dict[tuple[str, str, int], int] = {}
@@ -225,8 +234,11 @@ class ImageBackend:
         """The tick's read phase: every input into the image, one exchange."""
         self.in_tick = True
         t0 = time.monotonic_ns()
-        self._take_inputs(self.exchange_inputs())
+        values = self.exchange_inputs()
+        self._take_inputs(values)
         self._timed(t0, "read")
+        if self.tap is not None:
+            self.tap.inputs(values)
 
     def write_phase(self, now_ns: int = 0) -> None:
         """The tick's write phase: the changed outputs, one exchange; then
@@ -303,6 +315,7 @@ class ImageBackend:
         if self.down is not None:
             self._send_now(todo)  # raises unless the drop did it
             return
+        tap = self.tap
         for reg, (b, n, i, v) in zip(regs, todo, strict=True):
             key = (b, n, i)
             if reg.readback:
@@ -310,8 +323,16 @@ class ImageBackend:
                     continue
                 self._outputs[key] = v
             self._changed[key] = v
+            if tap is not None:
+                tap.wrote(self.output_index[key], v)
         if not (self.in_tick and self.phased):
             self.write_now()
+
+    def output_values(self) -> list[int]:
+        """Every output slot's value as the image holds it (0 where unknown: a
+        write-only strobe), in :attr:`output_layout` order."""
+        outs = self._outputs
+        return [outs.get(key, 0) for key in self.output_layout]
 
     def set_cached(self, board: str, name: str, value: int, index: int = 0) -> None:
         """Set the image's copy of an input (what a write made of it: a cleared counter)."""
@@ -342,7 +363,70 @@ class ImageBackend:
 
         return {"poll": poll, "flush": self.write_phase, "write_now": self.write_now,
                 "set_tick": self.set_tick, "close": self.close, "down": lambda: self.down,
-                "resync": self.resync}
+                "resync": self.resync, "image": self}
+
+
+class LocalImage(ImageBackend):
+    """A process image over boards in this process (``sim:?image=1``): the
+    controller meets its simulated boards exactly as it meets a link's (one
+    read phase, one write phase), and a journal can record the image.
+
+    ``views``: the register view of every declared board.  The world behind
+    them steps at the start of the read phase (:attr:`before_read`, filled by
+    :meth:`pyrt.boards.registry.Boards.attach_world`), so the inputs a tick
+    reads are those of the world as it stands at the tick: what the boards
+    without an image give.  ``feed`` (a replay): an object whose
+    ``current`` is every input, in declared order, as the tick being replayed
+    read them (the replay moves it on in :attr:`before_read`); the views are
+    then not touched (neither read nor written).
+    """
+
+    def __init__(self, url: str, kinds: Mapping[str, BoardKind],
+                 views: Mapping[str, Any] | None, *,
+                 feed: Any = None, outputs: Mapping[tuple[str, str, int], int] | None = None):
+        super().__init__(url, kinds, max_age=0.0)
+        self.views = dict(views) if views is not None else {}
+        self.feed = feed
+        self._initial = dict(outputs) if outputs is not None else None
+        #: Run with the loop's time before every read phase (the world's step).
+        self.before_read: list[Any] = []
+
+    def exchange_inputs(self) -> list[int]:
+        if self.feed is not None:
+            return list(self.feed.current)
+        out: list[int] = []
+        for name in self.kinds:
+            out += self.views[name].snapshot()
+        return out
+
+    def exchange_outputs(self, writes: list[Write]) -> None:
+        if self.feed is not None:
+            return
+        views = self.views
+        for b, n, i, v in writes:
+            views[b].write(n, v, i)
+
+    exchange_outputs_now = exchange_outputs
+
+    def read_outputs(self) -> dict[tuple[str, str, int], int]:
+        if self._initial is not None:
+            return dict(self._initial)
+        out: dict[tuple[str, str, int], int] = {}
+        for b, kind in self.kinds.items():
+            view = self.views[b]
+            for reg in kind.outputs():
+                if reg.readback:
+                    for i in range(reg.count):
+                        out[(b, reg.name, i)] = view.read(reg.name, i)
+        return out
+
+    def _timed(self, start_ns: int, what: str) -> None:
+        self.exchanges += 1  # no link: nothing is ever late
+
+    def read_phase(self, now_ns: int = 0) -> None:
+        for step in self.before_read:
+            step(now_ns)
+        super().read_phase(now_ns)
 
 
 class ImageRegisters:

@@ -147,6 +147,9 @@ class Boards(Mapping[str, Any]):
         flush: Callable[[int], None] | None = None,
         write_now: Callable[[], None] | None = None,
         set_tick: Callable[[float], None] | None = None,
+        image: Any = None,
+        simulated: Boards | None = None,
+        replay: bool = False,
     ):
         missing = [name for name in kinds if name not in boards]
         if missing:
@@ -167,6 +170,13 @@ class Boards(Mapping[str, Any]):
         self._flush = flush
         self._write_now = write_now
         self._set_tick = set_tick
+        #: The process image (:class:`~pyrt.boards.image.ImageBackend`) the boards
+        #: are reached through, or None (``sim:`` without one).
+        self.image = image
+        self._simulated = simulated
+        #: The inputs come from a journal being replayed, not from a world: the
+        #: loop may run on virtual time and the world (if one is built) stands still.
+        self.replay = replay
         self.closed = False
 
     # -- the mapping -------------------------------------------------------------------
@@ -190,6 +200,28 @@ class Boards(Mapping[str, Any]):
         if view is None:
             view = self._views[name] = self.kinds[name].view(self[name])
         return view
+
+    @property
+    def simulated(self) -> Boards | None:
+        """The in-process simulated boards the world drives (the world's side):
+        these boards themselves for ``sim:``, the boards behind the image for
+        ``sim:?image=1``; None when the world runs elsewhere."""
+        if self._simulated is not None:
+            return self._simulated
+        return self if self.in_process else None
+
+    def attach_world(self, step: Callable[[int], None]) -> bool:
+        """Run the world's ``step(now_ns)`` at the start of every read phase, if
+        the boards are an image over in-process boards (True); False otherwise:
+        the caller attaches it to the loop itself.  In a replay the world stands
+        still (True: nothing is attached)."""
+        if self.replay:
+            return True
+        before = getattr(self.image, "before_read", None)
+        if self._simulated is None or before is None:
+            return False
+        before.append(step)
+        return True
 
     # -- the back end ------------------------------------------------------------------
 
@@ -403,15 +435,53 @@ def open_boards(url: str | None, station: str, kinds: Mapping[str, BoardKind],
 # -- sim: ------------------------------------------------------------------------------
 
 
-def open_sim(url: BoardURL, station: str, kinds: dict[str, BoardKind], **options: Any) -> Boards:
+def open_sim(url: BoardURL, station: str, kinds: dict[str, BoardKind], *,
+             image: Any = "0", **options: Any) -> Boards:
     """The ``sim:`` back end: every declared board built in this process
     (:meth:`BoardKind.sim <pyrt.boards.registers.BoardKind.sim>`); the caller
-    attaches the physics.  It takes no host, path or option but those of
-    the declared kinds."""
+    attaches the physics.  It takes no host, path or option but ``image``
+    and those of the declared kinds.
+
+    ``image=1`` (a journal asks for it): the controller reaches the boards
+    through a process image (:class:`~pyrt.boards.image.LocalImage`), as it
+    reaches a link's, and :attr:`Boards.simulated` are the boards behind it."""
     if url.host or url.port is not None or url.path:
         raise url.error("sim: takes no host, port or path; write it as sim:")
     mine, rest = split_options(kinds, options)
     if rest:
-        raise url.error(f"sim: takes no option {', '.join(sorted(rest))}")
-    boards = {name: kind.sim(**options_for(kind, mine)) for name, kind in kinds.items()}
-    return Boards(url.text, station, boards, kinds, in_process=True, world="sim")
+        raise url.error(f"sim: takes no option {', '.join(sorted(rest))} (it takes image)")
+    flag = str(image).lower()
+    if flag not in ("0", "1", "true", "false"):
+        raise url.error(f"option image must be 0 or 1, got {image!r}")
+    if flag in ("0", "false"):
+        boards = {name: kind.sim(**options_for(kind, mine)) for name, kind in kinds.items()}
+        return Boards(url.text, station, boards, kinds, in_process=True, world="sim")
+    # the boards behind the image are the world's: mapped into no controller's CPU
+    behind = Boards(url.text, station, {name: kind.sim() for name, kind in kinds.items()},
+                    kinds, in_process=True, world="sim")
+    views = {name: behind.registers(name) for name in kinds}
+    return image_boards(url.text, station, kinds, views, mine, simulated=behind)
+
+
+def image_boards(url: str, station: str, kinds: Mapping[str, BoardKind],
+                 views: Mapping[str, Registers] | None, options: Mapping[str, Any], *,
+                 simulated: Boards | None = None, feed: Any = None,
+                 outputs: Mapping[tuple[str, str, int], int] | None = None,
+                 world: str = "sim") -> Boards:
+    """Boards reached through a :class:`~pyrt.boards.image.LocalImage` over
+    ``views`` (in this process), or fed by ``feed`` (a replay: ``views`` None,
+    ``outputs`` the outputs as they stood).  ``options``: those of the
+    declared kinds (the gripper cage's ``cpu``)."""
+    from pyrt.boards.image import ImageRegisters, LocalImage
+
+    local = LocalImage(url, kinds, views, feed=feed, outputs=outputs)
+    local.open()
+    regs = {name: ImageRegisters(local, name) for name in kinds}
+    typed = {name: kind.remote(regs[name], **options_for(kind, options))
+             for name, kind in kinds.items()}
+    pollers = [b.poll for b in typed.values()
+               if not isinstance(b, ImageRegisters) and callable(getattr(b, "poll", None))]
+    replay = feed is not None
+    return Boards(url, station, typed, kinds, in_process=simulated is not None or not replay,
+                  world=world, views=regs, simulated=simulated, replay=replay,
+                  **local.boards_hooks(pollers))

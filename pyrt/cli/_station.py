@@ -20,6 +20,7 @@ import time
 from collections.abc import Sequence
 
 from pyrt.cli._help import Parser
+from pyrt.cli._journal import add_journal_options, prepare_journal, start_recorder
 from pyrt.cli._loopopts import (
     add_boards_option,
     add_loop_options,
@@ -48,6 +49,7 @@ def add_station_arguments(parser: argparse.ArgumentParser, factory: StationFacto
     add_loop_options(parser, default_speed=factory.default_speed,
                      default_tick_us=factory.default_tick_us)
     add_serve_options(parser)
+    add_journal_options(parser)
     parser.set_defaults(run=lambda args: run_factory(factory, args))
 
 
@@ -89,15 +91,21 @@ def run_factory(factory: StationFactory, args: argparse.Namespace) -> int:
     _check_tick(factory, args)
     factory.configure(args, say)
     apply_rt_options(args, say)
+    prepare_journal(args)
     load_backend(args.boards)
     loop = make_loop(args)  # overrun lines: stderr, at most one a second
     station = factory.build(loop, args)
     station.close_report = say
     runner = station.runner
+    recorder = None
     try:
+        recorder = start_recorder(station, args, getattr(args, "_factory", "") or factory.name,
+                                  say)
         service = prepare_service(args, runner, ServedStation(station))
     except PyrtError:
         station.close()
+        if recorder is not None:
+            recorder.close()
         raise
     if service is not None:  # commands come from elsewhere too: keep their trail
         try:
@@ -124,6 +132,8 @@ def run_factory(factory: StationFactory, args: argparse.Namespace) -> int:
                                     first=run_first if first else None)
     finally:
         station.close_audit_log()
+        if recorder is not None:
+            recorder.close()
     if args.timing_log:
         wall = time.perf_counter() - wall0
         say(f"timing log written to {args.timing_log} ({loop.tick_index} ticks, {wall:.2f} s)")

@@ -46,5 +46,6 @@ def run(args: argparse.Namespace) -> int:
         factory.name = args.factory.rpartition(":")[2]
     parser = station_parser(factory, f"pyrt run {args.factory}")
     station_args = parser.parse_args(args.options)
+    station_args._factory = args.factory  # what a journal's replay builds again
     sys.stdout.flush()
     return run_factory(factory, station_args)

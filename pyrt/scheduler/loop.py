@@ -224,6 +224,12 @@ class Loop:
 
     # -- composition ---------------------------------------------------------
 
+    @property
+    def deadline_ns(self) -> int:
+        """The deadline of the tick being run (in a handler: its lateness is
+        ``now_ns - deadline_ns``), or of the next one between ticks."""
+        return self._deadline
+
     def attach(self, handler: ReadyQueue | Handler, name: str | None = None) -> None:
         """Call ``handler(now_ns)`` every tick, after those attached before it.
 

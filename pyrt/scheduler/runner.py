@@ -148,6 +148,12 @@ class Runner:
         self._thread: threading.Thread | None = None
         self._started = False
         self.crashed: BaseException | None = None
+        #: Sees every request as the mailbox applies it (a journal's recorder):
+        #: ``request_tap(name, fn, args, motion)``, in the loop thread, or None.
+        self.request_tap: Callable[[str, Callable[..., Any] | None, tuple, Any], None] | None = None
+        #: A replay's requests of this tick: a callable giving the calls to make
+        #: (in order, before the mailbox's own), or None.
+        self.replayed: Callable[[], list[Callable[[], Any]]] | None = None
         loop.attach(self._service, name="mailbox")
         loop.fault_listeners.append(self._on_fault)
 
@@ -394,13 +400,21 @@ class Runner:
 
     def _service(self, now_ns: int) -> None:
         """Loop handler: empty the mailbox, then evaluate the waiters."""
+        if self.replayed is not None:
+            for fn in self.replayed():
+                # as the request did then: its error was its own, never the loop's
+                with contextlib.suppress(Exception):
+                    fn()
         if self._mailbox:
             with self._lock:
                 batch = list(self._mailbox)
                 self._mailbox.clear()
                 for req in batch:
                     req.taken = True
+            tap = self.request_tap
             for req in batch:
+                if tap is not None:
+                    tap(req.name, req.fn, req.args, req.motion)
                 try:
                     if req.motion is not None:
                         self.motion.put(req.motion)

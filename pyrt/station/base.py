@@ -139,7 +139,7 @@ class Station:
         first) if the back end polls; :meth:`adopt` attaches the write phase
         (``io:write``) last.  The back end derives its timeouts from the
         loop's tick.  :meth:`close` closes them."""
-        if not boards.in_process:
+        if not boards.in_process and not boards.replay:
             clock = self.loop.clock
             speed = getattr(clock, "speed", 1.0)
             if clock.virtual or speed != 1.0:
@@ -151,6 +151,17 @@ class Station:
         boards.set_tick(self.loop.period_ns / 1e9)
         if boards.polls:
             self.loop.attach(self._poll_boards, name="io:read")
+
+    def attach_world(self, step: Callable[[int], None], name: str = "world") -> None:
+        """Attach the simulated world's ``step(now_ns)``: to the loop as handler
+        ``name`` (call it after :meth:`attach_boards`, before the robot's
+        handlers), or, for boards reached through an image over in-process
+        boards (``sim:?image=1``), at the start of their read phase, so that
+        the tick reads the world as it stands; in a replay not at all (the
+        recorded inputs stand in for the world)."""
+        if self.boards is not None and self.boards.attach_world(step):
+            return
+        self.loop.attach(step, name=name)
 
     def _poll_boards(self, now_ns: int) -> None:
         """Loop handler ``io:read``: the boards' inputs for this tick.  A
@@ -569,6 +580,16 @@ class Station:
                                 "a fault stopped the robot", "d"), "d")
 
     # -- life cycle -------------------------------------------------------------------
+
+    def journal_databases(self) -> dict[str, bytes]:
+        """The station's database files as they stand (name -> contents), kept in
+        a journal's header so that a replay starts from them; none by default."""
+        return {}
+
+    def seeds(self) -> dict[str, int]:
+        """Every random seed of the run (name -> seed), kept in a journal's
+        header; none by default."""
+        return {}
 
     def startup_commands(self) -> list[str]:
         """Console lines run once the loop runs, before the operator types (the

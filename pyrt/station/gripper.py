@@ -154,7 +154,7 @@ class GripperStation(Station):
         self.name = ctl.name
         self.controller = ctl
         if plant is not None:
-            loop.attach(plant.step, name="jaws")
+            self.attach_world(plant.step, "jaws")
         ctl.attach(loop, register=False)
         register_tasks(ctl.queue, ctl)  # every task the tree declares
         ctl.motion = self.motion
@@ -312,7 +312,9 @@ def build_gripper(
         plant = None
         if b.in_process:
             try:
-                plant = JawPlant(b["gripper"], start=DEFAULT_START if start is None else start)
+                sim = b.simulated
+                assert sim is not None
+                plant = JawPlant(sim["gripper"], start=DEFAULT_START if start is None else start)
                 plant.set_object(object_mm)
                 for fault in faults:
                     plant.inject(fault)

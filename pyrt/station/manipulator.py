@@ -394,7 +394,9 @@ class ManipulatorStation(Station):
                    for i, a in enumerate(self.axes)]
         self.rig = rig_from_station(st, liquid_level=liquid_level)
         if boards.in_process:  # else the world is board-sim's, built the same way
-            self.plant = ManipulatorPlant(self.rig, self.tio10, self.dc,
+            sim = boards.simulated
+            assert sim is not None
+            self.plant = ManipulatorPlant(self.rig, sim["tio10"], sim["dc"],
                                           imperfections=imperfections, payouts=payouts)
         self.startup_notes = self._reconcile(pa_rec, payouts)
         # Every move of every kind is held to the ropes' physical length
@@ -426,7 +428,7 @@ class ManipulatorStation(Station):
         pread, pbox = _trusted(pa, lambda: (pa.position, pa.active), lambda w: (w.last, False))
         pbox.append(self.writeback.watch_position(pa_rec.name, pread))
         if self.plant is not None:
-            self.loop.attach(self.plant.step, name="plant")
+            self.attach_world(self.plant.step, "plant")
         self.loop.attach(self.queue, name=f"queue:{pa.name}")
         self._writeback_failure: str | None = None
         self.loop.attach(self._write_back, name="writeback")
@@ -520,6 +522,19 @@ class ManipulatorStation(Station):
         return super().stop()
 
     stop_all = stop
+
+    def journal_databases(self) -> dict[str, bytes]:
+        """The six database files as they stand (a journal starts its replay from them)."""
+        out: dict[str, bytes] = {}
+        for name in FILES.values():
+            path = self.directory / name
+            if path.is_file():
+                out[name] = path.read_bytes()
+        return out
+
+    def seeds(self) -> dict[str, int]:
+        """The simulated sensors' seed (none on boards whose world runs elsewhere)."""
+        return {"imperfections": int(self.plant.imp.seed)} if self.plant is not None else {}
 
     def audit_log_path(self) -> Path:
         """The audit log goes beside the databases."""

@@ -593,7 +593,7 @@ class ArmStation(Station):
             physics = world.plant
             assert isinstance(physics, ArmPhysics)
             self.plant = physics.plant
-            loop.attach(world.step, name="physics")
+            self.attach_world(world.step, "physics")
         self.controller = ctl = ArmController(self, self.board, loop.period_ns)
         self.queue = ReadyQueue.general(name="arm")
         install(self.queue, ctl.tasks())
@@ -708,7 +708,7 @@ def build_arm(loop: Loop, *, boards: str | None = None,
         world = None
         if b.in_process:
             try:
-                world = arm_world(b, DEFAULT_START_DEG if start is None else start,
+                world = arm_world(b.simulated or b, DEFAULT_START_DEG if start is None else start,
                                   max_step_s=world_step_s)
             except ValueError as exc:
                 raise ConfigError(str(exc)) from None

@@ -1,0 +1,90 @@
+"""The flight recorder's options of every station: ``--journal FILE`` and ``--black-box``."""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+from typing import Any
+
+from pyrt.errors import ConfigError
+from pyrt.journal import DEFAULT_BUDGET, DEFAULT_SECONDS, BlackBox
+from pyrt.station.recording import Recorder, with_image
+
+__all__ = ["add_journal_options", "prepare_journal", "start_recorder"]
+
+
+def _black_box(text: str) -> float:
+    if text.strip().lower() == "off":
+        return 0.0
+    try:
+        seconds = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected seconds or off, got {text!r}") from None
+    if not 0 < seconds <= 600:
+        raise argparse.ArgumentTypeError(f"black box: 0 < SECONDS <= 600 (or off), got {text}")
+    return seconds
+
+
+def add_journal_options(parser: argparse.ArgumentParser) -> None:
+    """``--journal FILE`` and ``--black-box SECONDS|off`` on ``parser``."""
+    g = parser.add_argument_group("flight recorder")
+    g.add_argument(
+        "--journal", metavar="FILE",
+        help="record the run's inputs, commands, clock and outputs into FILE, at any speed; "
+             "'pyrt replay FILE' re-runs it on virtual time and checks every output "
+             "(on sim: the boards are then reached through a process image, as a link's are)")
+    g.add_argument(
+        "--black-box", type=_black_box, default=None, metavar="SECONDS|off",
+        help=f"keep the last SECONDS (default {DEFAULT_SECONDS:g} at real time; off on "
+             "virtual time, where a run repeats) of inputs and signals in memory, at most "
+             f"{DEFAULT_BUDGET // (1 << 20)} MB, and write them beside the databases (or "
+             "in the working directory) on a fault; off: none")
+
+
+def black_box_seconds(args: argparse.Namespace) -> float:
+    """The black box's span asked for (0: none): the option, else the default
+    at real time and none on virtual time."""
+    given = getattr(args, "black_box", None)
+    if given is not None:
+        return float(given)
+    return DEFAULT_SECONDS if getattr(args, "speed", None) == 1.0 else 0.0
+
+
+def prepare_journal(args: argparse.Namespace) -> bool:
+    """Before the station is built: give ``sim:`` boards a process image if
+    anything is to be recorded.  Returns whether something is."""
+    if not getattr(args, "journal", None) and not black_box_seconds(args):
+        return False
+    args.boards = with_image(getattr(args, "boards", None))
+    return True
+
+
+def _plain(args: argparse.Namespace) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in vars(args).items():
+        if key.startswith("_") or callable(value):
+            continue
+        if value is None or isinstance(value, bool | int | float | str):
+            out[key] = value
+        elif isinstance(value, list | tuple) and all(
+                isinstance(v, bool | int | float | str) for v in value):
+            out[key] = list(value)
+    return out
+
+
+def start_recorder(station: Any, args: argparse.Namespace, factory: str,
+                   say: Callable[[str], None]) -> Recorder | None:
+    """The station's recorder (its journal and black box), or None if neither is on."""
+    path = getattr(args, "journal", None)
+    seconds = black_box_seconds(args)
+    if not path and not seconds:
+        return None
+    box = BlackBox(seconds=seconds) if seconds else None
+    try:
+        rec = Recorder(station, path, black_box=box,
+                       metadata={"factory": factory, "args": _plain(args)}, warn=say)
+    except ConfigError:
+        raise
+    if path:
+        say(f"journal: recording into {path}")
+    return rec

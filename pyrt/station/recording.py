@@ -1,0 +1,367 @@
+"""A station's flight recorder: its journal (``--journal FILE``) and its black box.
+
+A :class:`Recorder` taps the three doors through which anything enters a
+running station (:mod:`pyrt.journal` has the file format):
+
+* the **process image** (:class:`~pyrt.boards.image.ImageBackend`): every
+  input of every tick, as the read phase brought it in, and every output
+  the tick changed, with the task that wrote it;
+* the **mailbox** (:class:`~pyrt.scheduler.runner.Runner`): every request
+  applied, in the tick it was applied in, as a replayable text
+  (:func:`encode_request`);
+* the **clock**: the tick's index, time, lateness and the deadlines missed
+  before it; and the faults, as events.
+
+It hands each tick to a :class:`~pyrt.journal.Journal` (whose thread
+encodes and writes: the loop never waits for the disk) at the end of the
+tick, after the write phase: the recorder is the loop's last handler,
+``journal``.  Boards without an image cannot be recorded: ``sim:`` gets one
+for the purpose (``sim:?image=1``, :func:`with_image`).
+
+Requests are recorded when they are calls of the station's or a
+component's methods with arguments of plain types (numbers, text, lists,
+components, commands, parameters, dataclass records of pyrt or of the
+station's package): every command typed, every motion queued, ``stop``,
+``ack``, ``set``.  Other requests (a console's lambdas that read signals)
+are not: a request that changed the controller without being recorded
+shows as a difference when the journal is replayed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import importlib
+import json
+import sys
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from pyrt._version import __version__
+from pyrt.component import Component
+from pyrt.errors import ConfigError, Fault
+from pyrt.journal import BlackBox, Header, Journal
+
+if TYPE_CHECKING:
+    from pyrt.station.base import Station
+
+__all__ = ["Recorder", "decode_request", "encode_request", "with_image"]
+
+
+def with_image(url: str | None) -> str:
+    """``url`` with a process image: ``sim:`` becomes ``sim:?image=1``; any
+    other back end has one already (it is returned as given)."""
+    text = url or "sim:"
+    if not text.lower().startswith("sim:"):
+        return text
+    if "image=" in text:
+        return text
+    return text + ("&" if "?" in text else "?") + "image=1"
+
+
+# -- requests as text ----------------------------------------------------------------------
+
+
+class _Unrecordable(Exception):
+    pass
+
+
+def _allowed_roots(station: Station) -> set[str]:
+    return {"pyrt", type(station).__module__.split(".")[0]}
+
+
+def _enc(station: Station, v: Any) -> Any:
+    if v is None or isinstance(v, bool | int | str):
+        return v
+    if isinstance(v, float):
+        return v
+    if isinstance(v, Component):
+        return {"$c": v.name}
+    if isinstance(v, tuple) and not hasattr(v, "_fields"):
+        return {"$t": [_enc(station, x) for x in v]}
+    if isinstance(v, list):
+        return [_enc(station, x) for x in v]
+    if isinstance(v, dict) and all(isinstance(k, str) for k in v):
+        return {"$d": {k: _enc(station, x) for k, x in v.items()}}
+    kind = type(v).__name__
+    if kind == "Command" and hasattr(v, "handler") and hasattr(v, "parse"):
+        return {"$r": v.name}
+    if kind == "Param" and hasattr(v, "describe"):
+        return {"$p": v.name}
+    if dataclasses.is_dataclass(v) and not isinstance(v, type):
+        cls = type(v)
+        if cls.__module__.split(".")[0] not in _allowed_roots(station):
+            raise _Unrecordable(cls.__qualname__)
+        return {"$dc": f"{cls.__module__}:{cls.__qualname__}",
+                "f": {f.name: _enc(station, getattr(v, f.name))
+                      for f in dataclasses.fields(v) if f.init}}
+    raise _Unrecordable(kind)
+
+
+def encode_request(station: Station, name: str, fn: Callable[..., Any] | None, args: tuple,
+                   motion: Any = None) -> str | None:
+    """The replayable text of one mailbox request, or None if it cannot be
+    recorded (not a method of the station or of one of its components, or an
+    argument of a type that has no text)."""
+    try:
+        if motion is not None:
+            return json.dumps({"motion": _enc(station, motion)}, separators=(",", ":"))
+        owner = getattr(fn, "__self__", None)
+        method = getattr(fn, "__name__", "")
+        if owner is None or not method.isidentifier() or method.startswith("__"):
+            return None
+        if owner is station:
+            who = ""
+        elif isinstance(owner, Component) and station.find(owner.name) is owner:
+            who = owner.name
+        else:
+            return None
+        return json.dumps({"o": who, "m": method, "a": [_enc(station, a) for a in args]},
+                          separators=(",", ":"))
+    except (_Unrecordable, ValueError, TypeError):
+        return None
+
+
+def _dec(station: Station, v: Any, comp: list[Component | None]) -> Any:
+    if isinstance(v, list):
+        return [_dec(station, x, comp) for x in v]
+    if not isinstance(v, dict):
+        return v
+    if "$c" in v:
+        c = station.component(v["$c"])
+        comp[0] = c
+        return c
+    if "$t" in v:
+        return tuple(_dec(station, x, comp) for x in v["$t"])
+    if "$d" in v:
+        return {k: _dec(station, x, comp) for k, x in v["$d"].items()}
+    if "$r" in v:
+        for c, rec in station.all_commands():
+            if rec.name == v["$r"] and (comp[0] is None or c is comp[0]):
+                return rec
+        raise ConfigError(f"no command {v['$r']!r}")
+    if "$p" in v:
+        if comp[0] is None:
+            raise ConfigError(f"parameter {v['$p']!r} without its object")
+        for p in station.params_of(comp[0]):
+            if p.name == v["$p"]:
+                return p
+        raise ConfigError(f"no parameter {comp[0].name}.{v['$p']}")
+    if "$dc" in v:
+        module, _, qual = str(v["$dc"]).partition(":")
+        if module.split(".")[0] not in _allowed_roots(station):
+            raise ConfigError(f"a record of {module!r} is not replayed")
+        obj: Any = importlib.import_module(module)
+        for part in qual.split("."):
+            obj = getattr(obj, part)
+        return obj(**{k: _dec(station, x, comp) for k, x in v["f"].items()})
+    raise ConfigError(f"unknown value {v!r}")
+
+
+def decode_request(station: Station, text: str) -> Callable[[], Any]:
+    """The call that applies a recorded request (:func:`encode_request`) to
+    ``station``; ConfigError if the station has no such method or object."""
+    try:
+        data = json.loads(text)
+    except ValueError:
+        raise ConfigError(f"recorded request {text[:60]!r} is not JSON") from None
+    comp: list[Component | None] = [None]
+    if "motion" in data:
+        record = _dec(station, data["motion"], comp)
+        runner = station.runner
+        assert runner is not None
+        return lambda: runner.motion.put(record)
+    who, method = data.get("o", ""), data.get("m", "")
+    owner: Any = station if not who else station.component(who)
+    if not isinstance(method, str) or not method.isidentifier() or method.startswith("__"):
+        raise ConfigError(f"recorded request names no method: {text[:60]!r}")
+    fn = getattr(owner, method, None)
+    if not callable(fn):
+        raise ConfigError(f"{type(owner).__name__} has no method {method!r}")
+    args = [_dec(station, a, comp) for a in data.get("a", [])]
+    return lambda: fn(*args)
+
+
+# -- who wrote an output -------------------------------------------------------------------
+
+
+_BOARDS = str(Path(__file__).resolve().parent.parent / "boards")
+
+
+def _code_of(fn: Any) -> Any:
+    for _ in range(8):  # what a routine wraps: a partial, a timed body
+        if isinstance(fn, functools.partial):
+            fn = fn.func
+        elif getattr(fn, "__wrapped__", None) is not None:
+            fn = fn.__wrapped__
+        else:
+            break
+    fn = getattr(fn, "__func__", fn)
+    code = getattr(fn, "__code__", None)
+    if code is None:
+        call = type(fn).__dict__.get("__call__")
+        code = getattr(call, "__code__", None)
+    return code
+
+
+class _Writers:
+    """Finds the task or loop handler that is writing: the innermost frame of
+    the calling stack whose code is a known routine's or handler's."""
+
+    def __init__(self, station: Station):
+        self.by_code: dict[Any, list[tuple[Any, str]]] = {}
+        loop = station.loop
+        for q in loop.queues:
+            table = q._dispatch
+            for a, r in q._routines.items():
+                self._add(table[a][0] if a in table else r.fn, r.name)
+        for h, name in zip(loop._handlers, loop._handler_names,
+                           strict=True):
+            if getattr(h, "__self__", None) in loop.queues:
+                continue
+            self._add(h, name)
+
+    def _add(self, fn: Any, name: str) -> None:
+        code = _code_of(fn)
+        if code is not None:
+            owner = getattr(fn, "__self__", None)
+            if owner is None and isinstance(fn, functools.partial) and fn.args:
+                owner = fn.args[0]
+            self.by_code.setdefault(code, []).append((owner, name))
+
+    def current(self) -> str:
+        f = sys._getframe(2)
+        by_code = self.by_code
+        other = ""
+        while f is not None:
+            found = by_code.get(f.f_code)
+            if found is not None:
+                if len(found) == 1:
+                    return found[0][1]
+                me = f.f_locals.get("self")
+                for owner, name in found:
+                    if owner is me:
+                        return name
+                return found[0][1]
+            if not other and _BOARDS not in f.f_code.co_filename:
+                other = f.f_code.co_qualname  # a job's generator, a command outside a tick
+            f = f.f_back
+        return other or "outside a task"
+
+
+# -- the recorder ----------------------------------------------------------------------------
+
+
+class Recorder:
+    """Records ``station`` into a journal at ``path`` and/or a black box (see
+    the module text).  Build it after the station (its handlers attached),
+    before the loop starts; :meth:`close` ends the journal.
+
+    ``metadata``: what a replay needs to build the station again (the
+    factory, the command line), kept in the header.  ``lossless``: the loop
+    waits for the journal's writer rather than leave a gap (a run on
+    virtual time, where waiting costs nothing).
+    """
+
+    def __init__(self, station: Station, path: str | Path | None, *,
+                 black_box: BlackBox | None = None, metadata: Mapping[str, Any] | None = None,
+                 lossless: bool | None = None, warn: Callable[[str], None] | None = None):
+        boards = station.boards
+        image = getattr(boards, "image", None)
+        if image is None:
+            raise ConfigError("a journal records the process image: these boards have none "
+                              "(sim: gets one with sim:?image=1)")
+        runner = station.runner
+        if runner is None:
+            raise ConfigError("a journal records a built station: adopt() it first")
+        self.station = station
+        self.image = image
+        loop = station.loop
+        self.loop = loop
+        self._writers = _Writers(station)
+        meta = dict(metadata or {})
+        meta.setdefault("boards", boards.url if boards is not None else "")
+        meta.setdefault("in_process", bool(boards is not None and boards.in_process))
+        meta.setdefault("world", boards.world if boards is not None else "")
+        meta["inputs_before"] = [image.read(b, r, i) for b, r, c in image.layout
+                                 for i in range(c)]
+        meta["fault"] = str(station.fault) if station.fault is not None else ""
+        meta["tick_index"] = loop.tick_index
+        header = Header(
+            station=station.name, period_ns=loop.period_ns,
+            inputs=[f"{b}.{r}" if c == 1 else f"{b}.{r}[{i}]"
+                    for b, r, c in image.layout for i in range(c)],
+            outputs=[f"{b}.{r}" if self._count(b, r) == 1 else f"{b}.{r}[{i}]"
+                     for b, r, i in image.output_layout],
+            output_values=image.output_values(), version=__version__,
+            databases=station.journal_databases(), seeds=station.seeds(),
+            writers=sorted({n for v in self._writers.by_code.values() for _, n in v}),
+            metadata=meta)
+        self.header = header
+        self.journal = Journal(header, path, black_box=black_box,
+                               lossless=loop.clock.virtual if lossless is None else lossless,
+                               warn=warn)
+        self._inputs: list[int] = list(meta["inputs_before"])
+        self._outputs: list[tuple[int, int, int]] = []
+        self._commands: list[tuple[str, str]] = []
+        self._events: list[tuple[str, int, str]] = []
+        self._missed = loop.missed
+        self._unrecorded = 0
+        image.tap = self
+        runner.request_tap = self._request
+        loop.fault_listeners.append(self._fault)
+        loop.attach(self._tick, name="journal")
+
+    def _count(self, board: str, reg: str) -> int:
+        return self.image.kinds[board].register(reg).count
+
+    # -- taps (loop thread) --------------------------------------------------------------
+
+    def inputs(self, values: list[int]) -> None:
+        """The image's read phase brought ``values`` in."""
+        self._inputs = values
+
+    def wrote(self, slot: int, value: int) -> None:
+        """Output ``slot`` was changed to ``value`` (by the task running now)."""
+        self._outputs.append((slot, value, self.journal.writer_index(self._writers.current())))
+
+    def _request(self, name: str, fn: Callable[..., Any] | None, args: tuple,
+                 motion: Any) -> None:
+        text = encode_request(self.station, name, fn, args, motion)
+        if text is None:
+            self._unrecorded += 1
+            return
+        self._commands.append((text, name))
+
+    def _fault(self, fault: Fault) -> None:
+        self._events.append(("fault", fault.id, str(fault)))
+
+    def _tick(self, now_ns: int) -> None:
+        loop = self.loop
+        missed = loop.missed - self._missed
+        self._missed = loop.missed
+        # the journal keeps the sequences it is given: an empty one is never handed
+        # over (a later append would land in every tick still waiting to be written)
+        outputs, commands, events = self._outputs, self._commands, self._events
+        if outputs:
+            self._outputs = []
+        if commands:
+            self._commands = []
+        if events:
+            self._events = []
+        self.journal.record_tick(loop.tick_index, now_ns, now_ns - loop.deadline_ns, missed,
+                                 self._inputs, outputs or (), commands or (), events or ())
+
+    # -- any thread ---------------------------------------------------------------------------
+
+    @property
+    def unrecorded(self) -> int:
+        """Requests applied that have no replayable text (reads, mostly)."""
+        return self._unrecorded
+
+    def close(self) -> None:
+        """End the journal (flushed, synced, its end frame written); idempotent."""
+        if self.image.tap is self:
+            self.image.tap = None
+        self.journal.close()
