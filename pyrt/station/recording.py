@@ -308,6 +308,9 @@ class Recorder:
         self._events: list[tuple[str, int, str]] = []
         self._missed = loop.missed
         self._unrecorded = 0
+        #: Called at the end of every tick, after it was handed to the journal:
+        #: ``listener(tick_index, now_ns)`` (the black box dumps from here).
+        self.tick_listeners: list[Callable[[int, int], None]] = []
         image.tap = self
         runner.request_tap = self._request
         loop.fault_listeners.append(self._fault)
@@ -352,6 +355,8 @@ class Recorder:
             self._events = []
         self.journal.record_tick(loop.tick_index, now_ns, now_ns - loop.deadline_ns, missed,
                                  self._inputs, outputs or (), commands or (), events or ())
+        for listener in self.tick_listeners:
+            listener(loop.tick_index, now_ns)
 
     # -- any thread ---------------------------------------------------------------------------
 
