@@ -25,6 +25,7 @@ from pyrt.cli import (
     logsort,
     overruns,
     reference,
+    replay,
     run,
     send,
     top,
@@ -37,10 +38,11 @@ from pyrt.station.factory import find_station, installed_stations
 
 __all__ = ["build_parser", "entry", "main"]
 
-_COMMANDS = [demo, overruns, logsort, forcemap, send, connect, top, boardsim, run, reference]
+_COMMANDS = [demo, overruns, logsort, forcemap, send, connect, top, boardsim, run, replay,
+             reference]
 #: The tools' names: an installed station cannot take one of them.
 _TOOLS = ("demo", "overruns", "logsort", "forcemap", "send", "connect", "top", "board-sim",
-          "run", "reference")
+          "run", "replay", "reference")
 
 
 def build_parser() -> argparse.ArgumentParser:

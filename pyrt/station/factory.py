@@ -82,6 +82,14 @@ class StationFactory(WorldFactory):
         """Check and complete ``args`` before the loop exists (seed a database
         directory, say where it is); ConfigError refuses the run.  Nothing by default."""
 
+    def use_databases(self, args: argparse.Namespace, directory: str) -> None:
+        """Point ``args`` at ``directory``, which holds the station's database
+        files as a journal recorded them (``pyrt replay`` builds the station
+        from them).  Default: ``args.db`` (and no ``--init-db``)."""
+        args.db = directory
+        if hasattr(args, "init_db"):
+            args.init_db = None
+
     def build(self, loop: Loop, args: argparse.Namespace) -> Station:
         """The station on ``loop``, not yet started (``args.boards`` is the board URL)."""
         raise NotImplementedError(f"{type(self).__name__}.build")
