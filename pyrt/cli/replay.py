@@ -198,7 +198,7 @@ def run(args: argparse.Namespace) -> int:
                 "commands; quit to leave")
             Console(shell, sys.stdin, out).run()
         return 0 if result.identical else 1
-    except ConfigError as exc:
+    except (ConfigError, JournalError) as exc:
         print(f"pyrt replay: {exc}", file=sys.stderr)
         return 1
     finally:

@@ -36,6 +36,7 @@ import json
 import sys
 from collections.abc import Callable, Mapping
 from pathlib import Path
+from types import FrameType
 from typing import TYPE_CHECKING, Any
 
 from pyrt._version import __version__
@@ -231,7 +232,8 @@ class _Writers:
             self.by_code.setdefault(code, []).append((owner, name))
 
     def current(self) -> str:
-        f = sys._getframe(2)
+        """The name of the task (or handler) writing now."""
+        f: FrameType | None = sys._getframe(2)  # who called the image's write
         by_code = self.by_code
         other = ""
         while f is not None:

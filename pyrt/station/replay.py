@@ -149,6 +149,10 @@ class Replay:
     def __init__(self, path: str | Path):
         self.path = str(path)
         self.reader = JournalReader(self.path)
+        if self.reader.damage:  # never replayed silently: say where
+            d = self.reader.damage[0]
+            raise JournalError(f"journal {self.path}: damaged at offset {d.offset} (frame "
+                               f"{d.frame}: {d.reason}); not replayed", d.offset, d.frame)
         self.header = self.reader.header
         meta = self.header.metadata
         self.meta: Mapping[str, Any] = meta if isinstance(meta, Mapping) else {}
@@ -170,6 +174,7 @@ class Replay:
         self.last_tick: int | None = None
         self._writers: _Writers | None = None
         self._notes: list[str] = []
+        self._pending: Tick | None = None
 
     # -- building ------------------------------------------------------------------------------
 
@@ -293,7 +298,7 @@ class Replay:
     # -- the run -------------------------------------------------------------------------------
 
     def _advance(self) -> int:
-        rec = getattr(self, "_pending", None)
+        rec: Tick | Gap | None = self._pending
         self._pending = None
         if rec is None:
             rec = next(self._records, None)
@@ -387,9 +392,9 @@ class Replay:
             if gap is not None and (until is None or (gap.first or 0) <= until):
                 notes.append(f"not replayable past tick {gap.first}: {gap.cause}")
             if until is None and not self.reader.complete:
-                why = self.reader.ended_early or "it has no end record"
-                notes.append(f"the journal ends early ({why}): the run was cut off; "
-                             "replayed up to its last complete tick")
+                why = self.reader.ended_early or "the journal has no end record"
+                notes.append(f"{why}: the run was cut off; replayed up to its last "
+                             "complete tick")
         return ReplayResult(self.ticks, self.first_tick, self.last_tick, self.difference,
                             tuple(notes))
 

@@ -1,0 +1,316 @@
+"""The flight recorder end to end: record a station's run (--journal), replay it on virtual time."""
+
+from __future__ import annotations
+
+import io
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from pyrt.boards.gripper import DAC_NULL
+from pyrt.cli import main
+from pyrt.commands import RobotShell
+from pyrt.errors import CommandError, ConfigError
+from pyrt.journal import JournalError, JournalReader
+from pyrt.robots.gripper import GripperController
+from pyrt.scheduler import Loop, SimClock
+from pyrt.scheduler.motion import MotionRecord
+from pyrt.station.gripper import build_gripper
+from pyrt.station.recording import Recorder, decode_request, encode_request, with_image
+from pyrt.station.replay import Replay
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _record(tmp_path: Path, station: str, stdin: str, *extra: str, name: str = "run.pj",
+            timeout: float = 120) -> Path:
+    path = tmp_path / name
+    args = [sys.executable, "-m", "pyrt", station, "--journal", str(path), *extra]
+    done = subprocess.run(args, input=stdin, capture_output=True, text=True, cwd=tmp_path,
+                          timeout=timeout)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert path.is_file(), done.stdout
+    return path
+
+
+def _replay(path: Path, *argv: str) -> tuple[int, str]:
+    out = io.StringIO()
+    old = sys.stdout
+    sys.stdout = out
+    try:
+        status = main(["replay", str(path), *argv])
+    finally:
+        sys.stdout = old
+    return status, out.getvalue()
+
+
+def _events(path: Path) -> list[tuple[int, str, str]]:
+    return [(t.tick, e.name, e.message) for t in JournalReader(path).ticks() for e in t.events]
+
+
+def _requests(path: Path) -> list[str]:
+    return [c.text for t in JournalReader(path).ticks() for c in t.commands]
+
+
+# -- real time, both robots ---------------------------------------------------------------------
+
+
+def test_a_real_time_gripper_run_with_a_jam_replays_identically(tmp_path):
+    """A gripper run at real time (a move, a jam ending a move short, a stop) replays identically."""
+    path = _record(tmp_path, "gripper",
+                   "P 30mm\nwait\nsim fault jam\nP 60mm\nwait\nstop\nquit\n")
+    r = JournalReader(path)
+    assert r.complete and r.summary().ticks > 1000
+    texts = _requests(path)
+    assert any('"$r":"P"' in t for t in texts) and any('"m":"stop"' in t for t in texts)
+    writes = [w for t in r.ticks() for w in t.outputs]
+    assert any(r.header.outputs[i] == "gripper.dac" and v != DAC_NULL for i, v, _ in writes)
+    status, out = _replay(path)
+    assert status == 0, out
+    assert f"replayed {r.summary().ticks} ticks" in out and "identical" in out
+
+
+def test_a_real_time_manipulator_fault_and_ack_replay_identically(tmp_path):
+    """A manipulator run at real time with a stalled motor (the tracking fault trips), ack and stop
+    replays identically: every output, the fault at the same tick with the same message."""
+    db = tmp_path / "db"
+    path = _record(tmp_path, "manipulator",
+                   "sim fault axis0 stall\nprototype to 0 0 93\nwait\nack\nstop\nquit\n",
+                   "--init-db", str(db))
+    events = _events(path)
+    assert len(events) == 1 and "TRACKING_FAULT" in events[0][2], events
+    assert any('"m":"acknowledge"' in t for t in _requests(path))
+    assert set(JournalReader(path).header.databases) >= {"POLYAXIS.dat", "AXIS.dat"}
+    status, out = _replay(path)
+    assert status == 0, out
+    assert "identical" in out
+
+
+# -- what a replay catches ------------------------------------------------------------------------
+
+
+def _virtual_gripper_journal(tmp_path: Path) -> Path:
+    return _record(tmp_path, "gripper", "P 30mm\nwait\nP 10mm\nwait\nstop\nquit\n",
+                   "--speed", "max", name="virtual.pj")
+
+
+def test_a_patched_gain_is_caught_naming_tick_register_and_task(tmp_path, monkeypatch):
+    """A code change that alters an output (the drive one count stronger) is reported at the
+    first tick it shows, with the register, both values and the task that wrote each."""
+    path = _virtual_gripper_journal(tmp_path)
+    first_drive = next(t for t in JournalReader(path).ticks()
+                       if any(v not in (DAC_NULL, 255) and i == 3 for i, v, _ in t.outputs))
+    original = GripperController.drive
+
+    def stronger(self, byte):
+        return original(self, byte if byte in (DAC_NULL, 255) else min(254, byte + 1))
+
+    monkeypatch.setattr(GripperController, "drive", stronger)
+    status, out = _replay(path)
+    assert status == 1, out
+    line = next(x for x in out.splitlines() if x.startswith("replay differs"))
+    w = next(w for w in first_drive.outputs if w[0] == 3)
+    assert f"at tick {first_drive.tick}: output gripper.dac: recorded {w[1]}" in line
+    assert f"replayed {w[1] + 1}" in line
+    assert line.count("written by MVJAWS") == 2
+
+
+def test_a_request_that_changes_differently_is_caught(tmp_path, monkeypatch):
+    """A command whose effect changed (P refuses everything) shows as missing output writes."""
+    path = _virtual_gripper_journal(tmp_path)
+    monkeypatch.setattr(GripperController, "drive", lambda self, byte: None)
+    status, out = _replay(path)
+    assert status == 1 and "not written" in out, out
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(where=st.floats(0.0, 1.0, exclude_max=True), bit=st.integers(0, 7))
+def test_a_corrupted_byte_is_reported_with_its_offset(tmp_path, where, bit):
+    """Any byte of a journal flipped: the replay refuses it, naming the offset; nothing runs."""
+    src = tmp_path / "clean.pj"
+    if not src.exists():
+        src.write_bytes(_virtual_gripper_journal(tmp_path).read_bytes())
+    data = bytearray(src.read_bytes())
+    pos = int(where * len(data))
+    data[pos] ^= 1 << bit
+    bad = tmp_path / "bad.pj"
+    bad.write_bytes(bytes(data))
+    with pytest.raises(JournalError) as info:
+        Replay(bad)
+    assert info.value.offset is not None and info.value.offset <= pos
+    assert "offset" in str(info.value)
+    status, out = _replay(bad)
+    assert status == 1 and "ticks identical" not in out
+
+
+def test_a_journal_killed_mid_move_replays_to_its_last_complete_tick(tmp_path):
+    """SIGKILL during a real-time move: the journal reads up to its last complete block and
+    replays identically that far, saying that the run was cut off."""
+    path = tmp_path / "killed.pj"
+    db = tmp_path / "db"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pyrt", "manipulator", "--init-db", str(db), "--journal",
+         str(path)], stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL, cwd=tmp_path, text=True)
+    try:
+        assert proc.stdin is not None
+        proc.stdin.write("prototype to 0 0 93\n")
+        proc.stdin.flush()
+        deadline = time.monotonic() + 60
+        ticks = 0
+        while time.monotonic() < deadline:
+            if path.exists():
+                try:
+                    ticks = JournalReader(path).summary().ticks
+                except JournalError:
+                    ticks = 0
+                if ticks >= 600:  # three seconds of the move at 200 Hz
+                    break
+            time.sleep(0.05)
+        assert ticks >= 600
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(10)
+    r = JournalReader(path)
+    assert not r.complete
+    moving = [t for t in r.ticks() if t.outputs]
+    assert moving, "the move wrote no output before the kill"
+    status, out = _replay(path)
+    assert status == 0, out
+    assert f"replayed {r.summary().ticks} ticks" in out and "cut off" in out
+
+
+# -- the pieces -----------------------------------------------------------------------------------
+
+
+def _station() -> tuple[Loop, object]:
+    loop = Loop(SimClock(), period_ns=1_000_000)
+    return loop, build_gripper(loop, boards="sim:?image=1")
+
+
+def test_with_image_gives_sim_boards_an_image_and_leaves_others_alone():
+    """--journal turns sim: into sim:?image=1 and leaves links (which have one) as they are."""
+    assert with_image(None) == "sim:?image=1"
+    assert with_image("sim:") == "sim:?image=1"
+    assert with_image("sim:?image=1") == "sim:?image=1"
+    assert with_image("tcp://h:1") == "tcp://h:1"
+
+
+def test_a_recorder_refuses_boards_without_an_image():
+    """Plain sim: boards have no process image to record: a clear error, nothing attached."""
+    loop = Loop(SimClock(), period_ns=1_000_000)
+    station = build_gripper(loop, boards="sim:")
+    try:
+        with pytest.raises(ConfigError, match="process image"):
+            Recorder(station, None)
+    finally:
+        station.close()
+
+
+_values = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.text(max_size=8)
+    | st.floats(allow_nan=False),
+    lambda inner: st.lists(inner, max_size=3) | st.tuples(inner, inner)
+    | st.dictionaries(st.text(max_size=4), inner, max_size=3),
+    max_leaves=8)
+
+
+@given(args=st.lists(_values, max_size=4))
+def test_a_request_round_trips_through_its_text(args):
+    """A station method's call with plain arguments encodes to text and decodes to the same call."""
+    _loop, station = _station()
+    try:
+        seen = []
+        station.journal_probe = lambda *a: seen.append(a)
+        text = encode_request(station, "x", station.journal_probe, tuple(args))
+        assert text is None  # a lambda is not a method: not recorded
+        text = encode_request(station, "x", station.acknowledge, tuple(args))
+        assert text is not None
+        called = []
+        station.acknowledge = lambda *a: called.append(a)  # the decoder looks the method up
+        decode_request(station, text)()
+        assert called == [tuple(args)]
+    finally:
+        station.close()
+
+
+def test_requests_name_components_commands_and_motion_records():
+    """execute(component, command, args) and a motion record come back as the same objects."""
+    _loop, station = _station()
+    try:
+        comp = station.component("gripper")
+        rec = next(r for c, r in station.all_commands() if c is comp and r.name == "P")
+        text = encode_request(station, "P", station.execute, (comp, rec, ["30mm"]))
+        got = []
+        station.execute = lambda *a: got.append(a)
+        decode_request(station, text)()
+        assert got == [(comp, rec, ["30mm"])]
+        m = encode_request(station, "motion", None, (), MotionRecord("line", {"x": 1.5}))
+        decode_request(station, m)()
+        assert station.runner.motion.get() == MotionRecord("line", {"x": 1.5})
+    finally:
+        station.close()
+
+
+def test_a_recorded_request_for_a_missing_method_is_an_error():
+    """A journal naming a method the station has not: ConfigError, nothing called."""
+    _loop, station = _station()
+    try:
+        with pytest.raises(ConfigError, match="no method"):
+            decode_request(station, '{"o":"","m":"no_such_thing","a":[]}')
+        with pytest.raises(ConfigError, match="names no method"):
+            decode_request(station, '{"o":"","m":"__class__","a":[]}')
+        with pytest.raises(ConfigError, match="not JSON"):
+            decode_request(station, "{oops")
+    finally:
+        station.close()
+
+
+def test_until_stops_at_the_tick_and_the_console_only_reads(tmp_path, monkeypatch):
+    """--until TICK stops there; the console answers reads and refuses a move."""
+    path = _virtual_gripper_journal(tmp_path)
+    monkeypatch.setattr(sys, "stdin", io.StringIO("W\nP 20mm\nstop\nquit\n"))
+    status, out = _replay(path, "--until", "1500")
+    assert status == 0, out
+    assert "replayed 1501 ticks (ticks 0..1500), identical" in out
+    assert "would change the controller" in out
+    assert out.count("a replay is read-only") == 2  # P and stop refused
+
+
+def test_scope_samples_any_signal_over_the_replay(tmp_path):
+    """--scope samples a signal nobody watched in the run; --scope-save writes it."""
+    path = _virtual_gripper_journal(tmp_path)
+    saved = tmp_path / "dac.csv"
+    status, out = _replay(path, "--scope", "dac,encoder", "--scope-save", str(saved))
+    assert status == 0, out
+    lines = saved.read_text().splitlines()
+    assert "dac" in lines[0] and len(lines) > 100
+
+
+def test_replay_boards_exist_only_while_a_replay_builds():
+    """A station asking for replay: boards outside pyrt replay gets a clear error."""
+    loop = Loop(SimClock(), period_ns=1_000_000)
+    with pytest.raises(ConfigError, match="replay"):
+        build_gripper(loop, boards="replay:")
+
+
+def test_frozen_shell_refuses_what_waits(tmp_path):
+    """The stopped replay's runner refuses to wait or move."""
+    from pyrt.cli.replay import FrozenRunner
+
+    _loop, station = _station()
+    try:
+        runner = FrozenRunner(station)
+        with pytest.raises(CommandError):
+            runner.wait_until(lambda: True, 1.0)
+        shell = RobotShell(station, io.StringIO(), runner=runner)
+        assert shell.runner is runner
+    finally:
+        station.close()
