@@ -314,3 +314,15 @@ def test_frozen_shell_refuses_what_waits(tmp_path):
         assert shell.runner is runner
     finally:
         station.close()
+
+
+def test_a_fault_of_the_clock_is_replayed_where_it_came(tmp_path):
+    """Consecutive overruns trip the station at real time (--max-overruns): the replay applies
+    the clock's decision at the same place, and every output and the fault match."""
+    path = _record(tmp_path, "gripper", "sleep 0.5\nack\nstop\nquit\n",
+                   "--tick-us", "50", "--max-overruns", "2")
+    events = [e for e in _events(path) if e[1] == "fault"]
+    assert events and "consecutive overruns" in events[0][2], events
+    status, out = _replay(path)
+    assert status == 0, out
+    assert "identical" in out

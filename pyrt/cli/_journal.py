@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import time
 from collections.abc import Callable
 from typing import Any
 
-from pyrt.errors import ConfigError
 from pyrt.journal import DEFAULT_BUDGET, DEFAULT_SECONDS, BlackBox
 from pyrt.station.recording import Recorder, with_image
 
@@ -72,6 +72,24 @@ def _plain(args: argparse.Namespace) -> dict[str, Any]:
     return out
 
 
+def _at_most_one_a_second(say: Callable[[str], None]) -> Callable[[str], None]:
+    """``say`` for the journal's warnings (a writer that falls behind at a fast
+    tick may warn of a gap every few ms): one line a second, then how many were not said."""
+    last = [0.0]
+    held = [0]
+
+    def warn(line: str) -> None:
+        now = time.monotonic()
+        if now - last[0] < 1.0:
+            held[0] += 1
+            return
+        more = f" (and {held[0]} more such lines)" if held[0] else ""
+        last[0], held[0] = now, 0
+        say(line + more)
+
+    return warn
+
+
 def start_recorder(station: Any, args: argparse.Namespace, factory: str,
                    say: Callable[[str], None]) -> Recorder | None:
     """The station's recorder (its journal and black box), or None if neither is on."""
@@ -80,11 +98,9 @@ def start_recorder(station: Any, args: argparse.Namespace, factory: str,
     if not path and not seconds:
         return None
     box = BlackBox(seconds=seconds) if seconds else None
-    try:
-        rec = Recorder(station, path, black_box=box,
-                       metadata={"factory": factory, "args": _plain(args)}, warn=say)
-    except ConfigError:
-        raise
+    rec = Recorder(station, path, black_box=box,
+                   metadata={"factory": factory, "args": _plain(args)},
+                   warn=_at_most_one_a_second(say))
     if path:
         say(f"journal: recording into {path}")
     return rec

@@ -47,7 +47,11 @@ from pyrt.journal import BlackBox, Header, Journal
 if TYPE_CHECKING:
     from pyrt.station.base import Station
 
-__all__ = ["Recorder", "decode_request", "encode_request", "with_image"]
+__all__ = ["LOOP_FAULT", "Recorder", "decode_request", "encode_request", "with_image"]
+
+#: The event of a fault the loop itself declared (consecutive overruns): the
+#: clock's decision, which a replay applies rather than checks.
+LOOP_FAULT = "loop-fault"
 
 
 def with_image(url: str | None) -> str:
@@ -340,6 +344,11 @@ class Recorder:
         self._commands.append((text, name))
 
     def _fault(self, fault: Fault) -> None:
+        if fault.source == "loop" and not any(
+                n == LOOP_FAULT and m == fault.cause for n, _i, m in self._events):
+            # a clock decision (consecutive overruns), taken after a tick: an input of
+            # the replay, which trips the station at the same place
+            self._events.append((LOOP_FAULT, fault.id, fault.cause))
         self._events.append(("fault", fault.id, str(fault)))
 
     def _tick(self, now_ns: int) -> None:

@@ -35,7 +35,7 @@ from pyrt.boards.registry import Boards, BoardURL, image_boards, register_backen
 from pyrt.errors import ConfigError, Fault
 from pyrt.journal import Gap, JournalError, JournalReader, Tick
 from pyrt.scheduler.clock import Clock
-from pyrt.station.recording import _Writers, decode_request
+from pyrt.station.recording import LOOP_FAULT, _Writers, decode_request
 
 if TYPE_CHECKING:
     from pyrt.scheduler import Loop
@@ -309,6 +309,9 @@ class Replay:
             raise _Stop
         self._expected = rec
         self.feed.current = list(rec.inputs)
+        for e in rec.events:  # the clock's decision after the previous tick, taken again
+            if e.name == LOOP_FAULT and self.station is not None:
+                self.station.loop.fault_all(e.message, source="loop")
         return rec.time_ns
 
     def _differ(self, d: Difference) -> None:
@@ -351,7 +354,7 @@ class Replay:
                 self._differ(Difference(t.tick, "output", self._name(r[0]), f"{r[1]}",
                                         f"{w[1]}", self._writer(r[2]), w[2]))
             return
-        recorded = [(e.name, e.message) for e in t.events]
+        recorded = [(e.name, e.message) for e in t.events if e.name != LOOP_FAULT]
         replayed = [("fault", str(f)) for f in faults]
         if recorded != replayed:
             self._differ(Difference(
