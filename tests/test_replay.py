@@ -295,9 +295,9 @@ def test_scope_samples_any_signal_over_the_replay(tmp_path):
 
 
 def test_replay_boards_exist_only_while_a_replay_builds():
-    """A station asking for replay: boards outside pyrt replay gets a clear error."""
+    """replay: is no scheme outside pyrt replay: a station asking for it gets a clear error."""
     loop = Loop(SimClock(), period_ns=1_000_000)
-    with pytest.raises(ConfigError, match="replay"):
+    with pytest.raises(ConfigError, match="no board back end for scheme 'replay'"):
         build_gripper(loop, boards="replay:")
 
 

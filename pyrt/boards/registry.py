@@ -80,6 +80,7 @@ __all__ = [
     "open_sim",
     "parse_board_url",
     "register_backend",
+    "unregister_backend",
 ]
 
 #: The back end when none is asked for.
@@ -357,6 +358,11 @@ def register_backend(scheme: str, factory: BackendFactory) -> None:
     if key in _BUILTIN:
         raise ConfigError(f"board scheme {key!r} is built in and cannot be replaced")
     _registered[key] = factory
+
+
+def unregister_backend(scheme: str) -> None:
+    """Forget a back end :func:`register_backend` registered (nothing if none was)."""
+    _registered.pop(scheme.lower(), None)
 
 
 def _entry_points() -> dict[str, Any]:

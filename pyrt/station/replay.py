@@ -31,7 +31,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from pyrt.boards.registers import BoardKind
-from pyrt.boards.registry import Boards, BoardURL, image_boards, register_backend
+from pyrt.boards.registry import (
+    Boards,
+    BoardURL,
+    image_boards,
+    register_backend,
+    unregister_backend,
+)
 from pyrt.errors import ConfigError, Fault
 from pyrt.journal import Gap, JournalError, JournalReader, Tick
 from pyrt.scheduler.clock import Clock
@@ -126,9 +132,6 @@ def open_replay(url: BoardURL, station: str, kinds: dict[str, BoardKind],
     if not _active:
         raise url.error("replay: boards exist only while 'pyrt replay' builds a station")
     return _active[-1].open_boards(url, station, kinds, options)
-
-
-register_backend("replay", open_replay)
 
 
 class _Stop(Exception):
@@ -413,11 +416,15 @@ class _Building:
         self.replay = replay
 
     def __enter__(self) -> Replay:
+        if not _active:
+            register_backend("replay", open_replay)
         _active.append(self.replay)
         return self.replay
 
     def __exit__(self, *exc: object) -> None:
         _active.remove(self.replay)
+        if not _active:
+            unregister_backend("replay")
 
 
 def header_summary(path: str | Path) -> str:
