@@ -97,6 +97,10 @@ def start_recorder(station: Any, args: argparse.Namespace, factory: str,
     seconds = black_box_seconds(args)
     if not path and not seconds:
         return None
+    if not path and getattr(getattr(station, "boards", None), "image", None) is None:
+        if getattr(args, "black_box", None) is not None:  # asked for: say why not
+            say("black box: off: these boards have no process image to record")
+        return None  # the default black box: where there is an image to record
     box = BlackBox(seconds=seconds) if seconds else None
     rec = Recorder(station, path, black_box=box,
                    metadata={"factory": factory, "args": _plain(args)},
