@@ -326,3 +326,24 @@ def test_a_fault_of_the_clock_is_replayed_where_it_came(tmp_path):
     status, out = _replay(path)
     assert status == 0, out
     assert "identical" in out
+
+
+def test_a_run_over_tcp_replays_without_its_board_sim(tmp_path):
+    """A gripper recorded over tcp:// against board-sim replays identically with board-sim gone;
+    'sim' (which asked board-sim) says the world was not replayed."""
+    sim = subprocess.Popen([sys.executable, "-m", "pyrt", "board-sim", "gripper", "--listen",
+                            "127.0.0.1:0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                           text=True, cwd=tmp_path)
+    try:
+        assert sim.stdout is not None
+        first = sim.stdout.readline()
+        url = first.split(" on ", 1)[1].split()[0]
+        assert url.startswith("tcp://127.0.0.1:"), first
+        path = _record(tmp_path, "gripper", "P 30mm\nwait\nsim\nstop\nquit\n", "--boards", url)
+    finally:
+        sim.kill()
+        sim.wait(10)
+    assert JournalReader(path).header.metadata["in_process"] is False
+    status, out = _replay(path)
+    assert status == 0, out
+    assert "identical" in out

@@ -473,7 +473,8 @@ def image_boards(url: str, station: str, kinds: Mapping[str, BoardKind],
                  views: Mapping[str, Registers] | None, options: Mapping[str, Any], *,
                  simulated: Boards | None = None, feed: Any = None,
                  outputs: Mapping[tuple[str, str, int], int] | None = None,
-                 world: str = "sim") -> Boards:
+                 world: str = "sim", info: Callable[[], dict[str, str]] | None = None
+                 ) -> Boards:
     """Boards reached through a :class:`~pyrt.boards.image.LocalImage` over
     ``views`` (in this process), or fed by ``feed`` (a replay: ``views`` None,
     ``outputs`` the outputs as they stood).  ``options``: those of the
@@ -489,5 +490,5 @@ def image_boards(url: str, station: str, kinds: Mapping[str, BoardKind],
                if not isinstance(b, ImageRegisters) and callable(getattr(b, "poll", None))]
     replay = feed is not None
     return Boards(url, station, typed, kinds, in_process=simulated is not None or not replay,
-                  world=world, views=regs, simulated=simulated, replay=replay,
+                  world=world, views=regs, simulated=simulated, replay=replay, info=info,
                   **local.boards_hooks(pollers))

@@ -38,7 +38,7 @@ from pyrt.boards.registry import (
     register_backend,
     unregister_backend,
 )
-from pyrt.errors import ConfigError, Fault
+from pyrt.errors import ConfigError, Fault, PyrtError
 from pyrt.journal import Gap, JournalError, JournalReader, Tick
 from pyrt.scheduler.clock import Clock
 from pyrt.station.recording import LOOP_FAULT, _Writers, decode_request
@@ -229,9 +229,13 @@ class Replay:
         if self.meta.get("in_process", False):
             simulated = Boards(url.text, station, {n: k.sim() for n, k in kinds.items()}, kinds,
                                in_process=True, world="sim")
+        world = str(self.meta.get("world") or "")
+        info = None
+        if simulated is None:  # the run's world was elsewhere: 'sim' says what a replay knows
+            def info() -> dict[str, str]:
+                return {"world": f"{world or 'elsewhere'} (not replayed: its inputs are)"}
         boards = image_boards(url.text, station, kinds, None, options, simulated=simulated,
-                              feed=self.feed, outputs=initial,
-                              world=str(self.meta.get("world") or ""))
+                              feed=self.feed, outputs=initial, world=world, info=info)
         self.boards = boards
         return boards
 
@@ -293,7 +297,7 @@ class Replay:
         for c in t.commands:
             try:
                 calls.append(decode_request(self.station, c.text))
-            except ConfigError as exc:
+            except PyrtError as exc:
                 self._differ(Difference(t.tick, f"the recorded request {c.text[:80]!r} "
                                                 f"(from {c.source}) cannot be applied: {exc}"))
         return calls
