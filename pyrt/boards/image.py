@@ -141,7 +141,16 @@ class ImageBackend:
         #: What sees the image move (a journal's recorder): ``inputs(values)`` after
         #: every read phase, ``wrote(slot, value)`` for every changed output, or None.
         self.tap: Any = None
-        self._image: dict[str, dict[str, list[int]]] = {b: {} for b in self.kinds}
+        #: The inputs, flat in :attr:`layout` order; where each register begins and its count.
+        self._values: list[int] = [0] * self.input_count
+        self._span: dict[tuple[str, str], tuple[int, int]] = {}
+        pos = 0
+        for board, name, count in self.layout:
+            self._span[(board, name)] = (pos, count)
+            pos += count
+        #: Registers a read has been checked for (board, name) -> Register: a read of
+        #: one of them with an index in range skips the check.
+        self._readable: dict[tuple[str, str], Register] = {}
         self._outputs: dict[tuple[str, str, int], int] = {}
         self._changed: dict[tuple[str, str, int], int] = {}
         self._fresh_until = 0
@@ -223,11 +232,7 @@ class ImageBackend:
         if len(values) != self.input_count:
             raise BoardError(self.url, f"read {len(values)} input values, "
                                        f"not {self.input_count}")
-        pos = 0
-        image = self._image
-        for board, reg, count in self.layout:
-            image[board][reg] = values[pos:pos + count]
-            pos += count
+        self._values = list(values)  # its own: set_cached changes it, never the caller's
         self._fresh_until = time.monotonic_ns() + self.max_age_ns
 
     def read_phase(self, now_ns: int = 0) -> None:
@@ -283,7 +288,10 @@ class ImageBackend:
 
     def read(self, board: str, name: str, index: int = 0) -> int:
         """``board``'s register ``name[index]`` from the image."""
-        reg = self.kinds[board].check_read(name, index)
+        reg = self._readable.get((board, name))
+        if reg is None or type(index) is not int or not 0 <= index < reg.count:
+            reg = self.kinds[board].check_read(name, index)
+            self._readable[(board, name)] = reg
         if self.down is not None:
             off = reg.off_value(index) if self.off_on_loss and not reg.is_input else None
             if off is not None:
@@ -294,7 +302,7 @@ class ImageBackend:
             if not self.in_tick and not self.phased \
                     and time.monotonic_ns() >= self._fresh_until:
                 self._take_inputs(self.exchange_inputs())
-            return self._image[board][name][index]
+            return self._values[self._span[(board, name)][0] + index]
         key = (board, name, index)
         value = self._changed.get(key)
         if value is None:
@@ -336,9 +344,9 @@ class ImageBackend:
 
     def set_cached(self, board: str, name: str, value: int, index: int = 0) -> None:
         """Set the image's copy of an input (what a write made of it: a cleared counter)."""
-        values = self._image[board].get(name)
-        if values is not None and 0 <= index < len(values):
-            values[index] = value
+        span = self._span.get((board, name))
+        if span is not None and 0 <= index < span[1]:
+            self._values[span[0] + index] = value
 
     def forget_outputs(self, values: Mapping[tuple[str, str, int], int]) -> None:
         """Take ``values`` as the outputs (the far side changed them: a watchdog)."""
