@@ -16,8 +16,12 @@ from typing import NamedTuple
 import pytest
 
 import pyrt.cli
+from pyrt.cli.replay import _arguments
 from pyrt.journal import Command, JournalReader, Tick
 from pyrt.native import FuzzyParams
+from pyrt.scheduler import Loop
+from pyrt.station.factory import find_station
+from pyrt.station.replay import Replay
 from pyrt.tasks import jawmove
 
 JOURNALS = Path(__file__).resolve().parent / "journals"
@@ -73,6 +77,22 @@ def first(ts: list[Tick], pred) -> tuple[int, Command | None]:
     return -1, None
 
 
+def replayed_until(path: Path, until: int, tmp: Path):
+    """The station of ``path`` replayed up to and including tick ``until`` (as
+    ``pyrt replay --until`` builds and runs it), and the replay's verdict."""
+    rp = Replay(path)
+    factory = find_station(rp.factory)
+    args = _arguments(rp, factory, str(tmp))
+    factory.configure(args, lambda line: None)
+    loop = Loop(rp.clock, period_ns=rp.header.period_ns, timing=True)
+    with rp.building():
+        station = factory.build(loop, args)
+    rp.attach(station)
+    result = rp.run(until)
+    rp.close()
+    return station, result
+
+
 def check_difference(line: str, path: Path, not_before: int) -> re.Match[str]:
     """``line`` names a real first difference: the journal's tick N has the recorded write
     (register, value, task), every tick before it replayed, N at or after ``not_before``."""
@@ -124,6 +144,23 @@ def test_kept_journal_holds_a_move_the_fault_the_ack_and_a_stop(name):
     assert c is not None and '"m":"acknowledge"' in c.text
     stop, c = first(ts, lambda c: c.source == "stop" and '"m":"stop"' in c.text)
     assert 0 <= move < injected < fault_tick < ack < stop
+
+
+def test_the_jammed_move_ended_short_by_the_stopped_bit_in_the_replay(tmp_path):
+    """Replayed up to the jam's clearing, the jammed move ended where the jam held it, by STOPCNT."""
+    ts = ticks(JOURNALS / "gripper.pj")
+    jam, _ = first(ts, lambda c: '{"$r":"fault"},["jam"]' in c.text)
+    cleared, _ = first(ts, lambda c: '{"$r":"fault"},["none"]' in c.text)
+    station, result = replayed_until(JOURNALS / "gripper.pj", cleared - 1, tmp_path)
+    try:
+        assert result.identical and result.last_tick == cleared - 1
+        report = station.wait_report()
+        assert report.startswith("stopped short of the target by ")
+        assert "(the stopped bit ended the move (STOPCNT ran out))" in report
+        assert station.fault is None and station.controller.dac == 0x80
+        assert jam < cleared
+    finally:
+        station.close()
 
 
 def test_a_patched_jaw_gain_is_caught_at_the_first_tick_it_changes(monkeypatch, capsys):
