@@ -32,6 +32,7 @@ from pyrt.console import Console
 from pyrt.errors import CommandError, ConfigError
 from pyrt.journal import JournalError
 from pyrt.scheduler import Loop
+from pyrt.scope.scope import MAX_BUFFER_BYTES, MAX_LENGTH
 from pyrt.station.factory import find_station, load_factory
 from pyrt.station.replay import Replay
 
@@ -176,11 +177,18 @@ def run(args: argparse.Namespace) -> int:
         replay.attach(station)
         shell = ReplayShell(station, out, runner=FrozenRunner(station))
         channels = [c.strip() for c in (args.scope or "").split(",") if c.strip()]
+        s = replay.reader.summary()
         for ch in channels:
             shell.onecmd(f"scope add {ch}")
-        if channels:
+        if channels:  # every replayed tick, as far as the scope's buffer goes
+            ticks = s.ticks if args.until is None else min(s.ticks, args.until + 1)
+            fits = MAX_BUFFER_BYTES // ((len(channels) + 1) * 8) - 64
+            length = max(2, min(ticks, MAX_LENGTH, fits))
+            shell.onecmd(f"scope length {length}")
+            if length < ticks:
+                say(f"scope: the last {length} of {ticks} ticks (the scope's buffer holds "
+                    "no more)")
             shell.onecmd("scope run roll")
-        s = replay.reader.summary()
         say(f"pyrt replay: {args.file}: {replay.header.station} ({spec}), pyrt "
             f"{replay.header.version}, {s.ticks} ticks of {replay.header.period_ns / 1e6:g} ms"
             + (f", until tick {args.until}" if args.until is not None else ""))
