@@ -215,25 +215,26 @@ class _Writers:
     the calling stack whose code is a known routine's or handler's."""
 
     def __init__(self, station: Station):
-        self.by_code: dict[Any, list[tuple[Any, str]]] = {}
+        #: code -> [(the bound instance or None, name, its queue or None, its address)]
+        self.by_code: dict[Any, list[tuple[Any, str, Any, int]]] = {}
         loop = station.loop
         for q in loop.queues:
             table = q._dispatch
             for a, r in q._routines.items():
-                self._add(table[a][0] if a in table else r.fn, r.name)
+                self._add(table[a][0] if a in table else r.fn, r.name, q, a)
         for h, name in zip(loop._handlers, loop._handler_names,
                            strict=True):
             if getattr(h, "__self__", None) in loop.queues:
                 continue
             self._add(h, name)
 
-    def _add(self, fn: Any, name: str) -> None:
+    def _add(self, fn: Any, name: str, queue: Any = None, address: int = -1) -> None:
         code = _code_of(fn)
         if code is not None:
             owner = getattr(fn, "__self__", None)
             if owner is None and isinstance(fn, functools.partial) and fn.args:
                 owner = fn.args[0]
-            self.by_code.setdefault(code, []).append((owner, name))
+            self.by_code.setdefault(code, []).append((owner, name, queue, address))
 
     def current(self) -> str:
         """The name of the task (or handler) writing now."""
@@ -245,8 +246,14 @@ class _Writers:
             if found is not None:
                 if len(found) == 1:
                     return found[0][1]
+                # one body, several routines (the same method of three axes): the
+                # queue's C dispatch knows which one it is running
+                for _owner, name, queue, address in found:
+                    core = getattr(queue, "_core", None)
+                    if core is not None and core.last == address:
+                        return name
                 me = f.f_locals.get("self")
-                for owner, name in found:
+                for owner, name, _q, _a in found:
                     if owner is me:
                         return name
                 return found[0][1]
@@ -302,7 +309,7 @@ class Recorder:
                      for b, r, i in image.output_layout],
             output_values=image.output_values(), version=__version__,
             databases=station.journal_databases(), seeds=station.seeds(),
-            writers=sorted({n for v in self._writers.by_code.values() for _, n in v}),
+            writers=sorted({e[1] for v in self._writers.by_code.values() for e in v}),
             metadata=meta)
         self.header = header
         self.journal = Journal(header, path, black_box=black_box,
