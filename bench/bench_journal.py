@@ -253,9 +253,12 @@ MOVES = {"gripper": ("P 30mm", "P 20mm"),
          "manipulator": ("prototype to 10 0 60", "prototype to -10 0 40")}
 #: Loop seconds between two moves.
 PAUSE_S = {"gripper": 0.2, "manipulator": 1.0}
-#: (board URL, row name, recorder): the rows of every table, in the order they run.
-VARIANTS = (("sim:", "sim:", False), ("sim:?image=1", "image", False),
-            ("sim:?image=1", "image + recorder", True))
+#: (board URL, row name, what is recorded: None, "file" or "box"): the rows of
+#: every table, in the order they run.  The last is what ``pyrt NAME --speed 1``
+#: runs without ``--journal``: its black box (10 s in memory, no file).
+VARIANTS = (("sim:", "sim:", None), ("sim:?image=1", "image", None),
+            ("sim:?image=1", "image + recorder", "file"),
+            ("sim:?image=1", "image + black box", "box"))
 
 
 class TimedSimClock(SimClock):
@@ -346,10 +349,11 @@ class Rig:
 _dbs = iter(range(1_000_000))
 
 
-def build(robot: str, boards: str, clock, tmp: Path, journal: Path | None = None) -> Rig:
+def build(robot: str, boards: str, clock, tmp: Path, journal: Path | None = None,
+          black_box: float = 0.0) -> Rig:
     """The station ``robot`` on ``boards``, built as ``pyrt ROBOT --boards BOARDS
-    [--journal FILE] --black-box off`` builds it (the manipulator: a fresh
-    copy of the prototype's database in ``tmp``), on a loop of ``clock``."""
+    [--journal FILE] --black-box SECONDS|off`` builds it (the manipulator: a
+    fresh copy of the prototype's database in ``tmp``), on a loop of ``clock``."""
     factory = find_station(robot)
     argv = ["--boards", boards]
     if robot == "manipulator":
@@ -357,7 +361,7 @@ def build(robot: str, boards: str, clock, tmp: Path, journal: Path | None = None
     args = station_parser(factory, f"pyrt {robot}").parse_args(argv)
     args.speed = None if clock.virtual else 1.0
     args.journal = str(journal) if journal is not None else None
-    args.black_box = 0.0
+    args.black_box = black_box
     factory.configure(args, lambda _line: None)
     loop = Loop(clock, period_ns=args.tick_us * 1000, timing=True)
     station = factory.build(loop, args)
@@ -405,6 +409,11 @@ def _plus(a: float, b: float) -> str:
     return f"{b - a:+.2f} µs ({(b - a) / a * 100:+.1f} %)" if a else "n/a"
 
 
+def _load() -> str:
+    return (time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())
+            + " load average " + " ".join(f"{x:.2f}" for x in os.getloadavg()))
+
+
 @contextlib.contextmanager
 def _clean() -> Iterator[None]:
     import gc
@@ -418,10 +427,10 @@ def test_station_tick_work(benchmark, tmp_path):
     image + recorder (rows interleaved, ROUNDS rounds pooled)."""
     pooled: dict[tuple[str, str], dict[str, list]] = {}
 
-    def one(robot: str, boards: str, name: str, record: bool) -> None:
+    def one(robot: str, boards: str, name: str, record: str | None) -> None:
         clock = TimedSimClock()
-        path = tmp_path / f"{robot}.pj" if record else None
-        rig = build(robot, boards, clock, tmp_path, path)
+        path = tmp_path / f"{robot}.pj" if record == "file" else None
+        rig = build(robot, boards, clock, tmp_path, path, 10.0 if record == "box" else 0.0)
         run = rig.loop.run
 
         def timed_run(*a, **kw):
@@ -458,8 +467,9 @@ def test_station_tick_work(benchmark, tmp_path):
                     with _clean():
                         one(robot, boards, name, record)
 
+    load0 = _load()
     benchmark.pedantic(run, rounds=1, iterations=1)
-    lines = []
+    lines = [f"\n{load0} -> {_load()}"]
     for robot in ROBOTS:
         lines.append(f"\n{robot}, virtual time, moving ({ROUNDS} x {VIRTUAL_S[robot]:g} s of loop "
                      "time a row): work per tick, µs")
@@ -483,12 +493,13 @@ def test_station_tick_work(benchmark, tmp_path):
                          f"{row['cpu_mean']:.2f} | {row['wall_p50']:.2f} | {row['wall_p99']:.2f} | "
                          f"{row['wall_mean']:.2f} | "
                          + (f"{jm:.2f}" if jc else "") + " | "
-                         + (f"{row['writer_cpu']:.2f}" if name.endswith("recorder") else "")
+                         + (f"{row['writer_cpu']:.2f}" if name.startswith("image +") else "")
                          + f" | {row['gc']} |")
-        a, b, c = (means[n] for _u, n, _r in VARIANTS)
+        a, b, c, d = (means[n] for _u, n, _r in VARIANTS)
         for what in ("cpu_p50", "cpu_p99", "cpu_mean", "wall_mean"):
             lines.append(f"  {what}: image - sim: {_plus(a[what], b[what])}; "
                          f"recorder - image: {_plus(b[what], c[what])}; "
+                         f"black box - image: {_plus(b[what], d[what])}; "
                          f"recorder + image - sim: {_plus(a[what], c[what])}")
     print("\n".join(lines))
 
@@ -522,10 +533,10 @@ def test_station_at_real_time(benchmark, tmp_path):
     the tick work, lateness, overruns, and the journal's gaps and size."""
     pooled: dict[tuple[str, str], dict[str, list]] = {}
 
-    def one(robot: str, boards: str, name: str, record: bool, seconds: float) -> None:
+    def one(robot: str, boards: str, name: str, record: str | None, seconds: float) -> None:
         clock = TimedWallClock()
-        path = tmp_path / f"{robot}-rt.pj" if record else None
-        rig = build(robot, boards, clock, tmp_path, path)
+        path = tmp_path / f"{robot}-rt.pj" if record == "file" else None
+        rig = build(robot, boards, clock, tmp_path, path, 10.0 if record == "box" else 0.0)
         clock.attach_end(rig.loop)
         rig.start()
         w = _window(rig, clock, seconds)
@@ -544,8 +555,9 @@ def test_station_at_real_time(benchmark, tmp_path):
                     with _clean():
                         one(robot, boards, name, record, WALL_S / 2)
 
+    load0 = _load()
     benchmark.pedantic(run, rounds=1, iterations=1)
-    lines = []
+    lines = [f"\n{load0} -> {_load()}"]
     for robot in ROBOTS:
         lines.append(f"\n{robot}, real time, moving (2 x {WALL_S / 2:g} s a row): µs")
         lines.append("| row | ticks | work p50 | work p99 | work mean | lateness p99 | overruns "
@@ -564,15 +576,17 @@ def test_station_at_real_time(benchmark, tmp_path):
                    "mb_per_min": sum(p["bytes"]) / 1e6 / minutes if minutes else 0.0}
             rows[name] = row
             benchmark.extra_info[f"{robot}/{name}"] = {k: round(v, 3) for k, v in row.items()}
-            rec = name.endswith("recorder")
+            rec = name.startswith("image +")
+            size = f"{row['mb_per_min']:.3f}" if name.endswith("recorder") else ""
             lines.append(f"| {name} | {ticks:,} | {row['work_p50']:.2f} | {row['work_p99']:.2f} | "
                          f"{row['work_mean']:.2f} | {row['late_p99']:.1f} | {row['overruns']} | "
-                         + (f"{row['writer_cpu']:.2f} | {row['dropped']} | "
-                            f"{row['mb_per_min']:.3f}" if rec else " | | ") + " |")
-        a, b, c = (rows[n] for _u, n, _r in VARIANTS)
+                         + (f"{row['writer_cpu']:.2f} | {row['dropped']} | {size}" if rec
+                            else " | | ") + " |")
+        a, b, c, d = (rows[n] for _u, n, _r in VARIANTS)
         for what in ("work_p50", "work_p99", "work_mean"):
             lines.append(f"  {what}: image - sim: {_plus(a[what], b[what])}; "
-                         f"recorder - image: {_plus(b[what], c[what])}")
+                         f"recorder - image: {_plus(b[what], c[what])}; "
+                         f"black box - image: {_plus(b[what], d[what])}")
     print("\n".join(lines))
 
 
