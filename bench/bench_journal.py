@@ -27,9 +27,11 @@ file, the rows interleaved round by round:
   thread's CPU; the image's price against plain ``sim:`` and the recorder's
   against the image alone; target <= 5 %.
 * ``station at real time`` (marker ``wallclock``; ``PYRT_JOURNAL_WALL_S``
-  seconds a row, default 20, 0 skips it): a WallClock run of each row: the tick
-  work (the handlers' wall time, tick by tick), lateness, overruns, the
-  journal's gaps and its size at real time; target: no added overruns.
+  seconds a row, default 20, in ``PYRT_JOURNAL_WALL_ROUNDS`` parts, default 4;
+  0 seconds skips it): a WallClock run of each row: the tick work (the
+  handlers' wall time, tick by tick), lateness, overruns and the entries the
+  loop blames them on, the journal's gaps and its size at real time; target:
+  no added overruns.
 * ``station size per minute``: virtual time, idle and moving, the second
   minute of a run (the header, with the databases, is in the first);
   target <= 1 MB/min for the gripper at 1 kHz moving.
@@ -243,6 +245,7 @@ def test_record_tick_at_1khz(benchmark, tmp_path):
 
 ROUNDS = int(os.environ.get("PYRT_JOURNAL_ROUNDS", "3"))
 WALL_S = float(os.environ.get("PYRT_JOURNAL_WALL_S", "20"))
+WALL_ROUNDS = int(os.environ.get("PYRT_JOURNAL_WALL_ROUNDS", "4"))
 REPLAY_MIN = float(os.environ.get("PYRT_JOURNAL_REPLAY_MIN", "10"))
 
 ROBOTS = ("gripper", "manipulator")
@@ -513,12 +516,16 @@ def _window(rig: Rig, clock: TimedWallClock, seconds: float) -> dict:
     if journal is not None:
         journal.flush(10)
         b0, d0 = journal.bytes_written, journal.dropped
+    runner = rig.station.runner  # type: ignore[attr-defined]
+    blamed0 = {k: t.overruns for k, t in runner.statistics().tasks.items()}
     cpu0 = writer_cpu_ns()
     t0 = loop.now_ns
     drive(rig, seconds)
     span = loop.now_ns - t0
+    blamed = {k: t.overruns - blamed0.get(k, 0) for k, t in runner.statistics().tasks.items()}
     out = {"work": clock.work[i0:], "late": clock.late[l0:], "overruns": loop.overruns - ov0,
-           "writer": writer_cpu_ns() - cpu0, "span_ns": span, "bytes": 0, "dropped": 0}
+           "writer": writer_cpu_ns() - cpu0, "span_ns": span, "bytes": 0, "dropped": 0,
+           "blamed": [blamed]}
     if journal is not None:
         journal.flush(10)
         out.update(bytes=journal.bytes_written - b0, dropped=journal.dropped - d0)
@@ -529,8 +536,9 @@ def _window(rig: Rig, clock: TimedWallClock, seconds: float) -> dict:
 @pytest.mark.skipif(WALL_S <= 0, reason="PYRT_JOURNAL_WALL_S=0")
 @pytest.mark.benchmark(group="journal: stations")
 def test_station_at_real_time(benchmark, tmp_path):
-    """Real time (WallClock), moving, WALL_S s a row in two halves, rows interleaved:
-    the tick work, lateness, overruns, and the journal's gaps and size."""
+    """Real time (WallClock), moving, WALL_S s a row in WALL_ROUNDS parts, rows
+    interleaved: the tick work, lateness, overruns (and the entries they are
+    blamed on), and the journal's gaps and size."""
     pooled: dict[tuple[str, str], dict[str, list]] = {}
 
     def one(robot: str, boards: str, name: str, record: str | None, seconds: float) -> None:
@@ -549,17 +557,18 @@ def test_station_at_real_time(benchmark, tmp_path):
                 p[k].append(v)
 
     def run() -> None:
-        for _ in range(2):
+        for _ in range(WALL_ROUNDS):
             for robot in ROBOTS:
                 for boards, name, record in VARIANTS:
                     with _clean():
-                        one(robot, boards, name, record, WALL_S / 2)
+                        one(robot, boards, name, record, WALL_S / WALL_ROUNDS)
 
     load0 = _load()
     benchmark.pedantic(run, rounds=1, iterations=1)
     lines = [f"\n{load0} -> {_load()}"]
     for robot in ROBOTS:
-        lines.append(f"\n{robot}, real time, moving (2 x {WALL_S / 2:g} s a row): µs")
+        lines.append(f"\n{robot}, real time, moving ({WALL_ROUNDS} x {WALL_S / WALL_ROUNDS:g} s "
+                     "a row): µs")
         lines.append("| row | ticks | work p50 | work p99 | work mean | lateness p99 | overruns "
                      "| writer thread CPU a tick | ticks lost (gaps) | journal MB/min |")
         lines.append("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
@@ -582,6 +591,14 @@ def test_station_at_real_time(benchmark, tmp_path):
                          f"{row['work_mean']:.2f} | {row['late_p99']:.1f} | {row['overruns']} | "
                          + (f"{row['writer_cpu']:.2f} | {row['dropped']} | {size}" if rec
                             else " | | ") + " |")
+        for _b, name, _r in VARIANTS:
+            blamed: dict[str, int] = {}
+            for b in pooled[(robot, name)]["blamed"]:
+                for k, v in b.items():
+                    blamed[k] = blamed.get(k, 0) + v
+            top = sorted(((v, k) for k, v in blamed.items() if v), reverse=True)
+            lines.append(f"  {name}: overruns blamed on "
+                         + (", ".join(f"{k} {v}" for v, k in top) or "nothing"))
         a, b, c, d = (rows[n] for _u, n, _r in VARIANTS)
         for what in ("work_p50", "work_p99", "work_mean"):
             lines.append(f"  {what}: image - sim: {_plus(a[what], b[what])}; "
