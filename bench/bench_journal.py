@@ -17,15 +17,17 @@ are in ``extra_info`` and on stdout.
 The stations themselves (the figures of docs/performance.md, "Flight recorder"):
 the gripper at 1 kHz moving (``P`` back and forth) and the manipulator's
 prototype at 200 Hz (5 ms tick) moving in the plane y = 0, each as plain
-``sim:``, as ``sim:?image=1`` (the process image alone) and as
-``sim:?image=1`` with a :class:`~pyrt.station.recording.Recorder` writing a
-file, the rows interleaved round by round:
+``sim:``, as ``sim:?image=1`` (the process image alone), as ``sim:?image=1``
+with a :class:`~pyrt.station.recording.Recorder` writing a file, and as
+``sim:?image=1`` with the 10 s black box alone (what a real-time run keeps
+without ``--journal``), the rows interleaved round by round:
 
 * ``station tick work``: virtual time; the work of every tick (from the top of
   one tick to the top of the next, the loop thread's CPU time and the wall
   time), p50, p99 and mean, the journal handler's own mean and the writer
-  thread's CPU; the image's price against plain ``sim:`` and the recorder's
-  against the image alone; target <= 5 %.
+  thread's CPU and the collections inside ticks; the image's price against
+  plain ``sim:`` and the recorder's and the black box's against the image
+  alone; target <= 5 %.
 * ``station at real time`` (marker ``wallclock``; ``PYRT_JOURNAL_WALL_S``
   seconds a row, default 20, in ``PYRT_JOURNAL_WALL_ROUNDS`` parts, default 4;
   0 seconds skips it): a WallClock run of each row: the tick work (the
