@@ -14,6 +14,7 @@ from __future__ import annotations
 from pyrt.boards.dataconcentrator import (
     ADC_CHANNELS,
     ADC_MAX,
+    COUNTER_ADDRESSES,
     COUNTER_BITS,
     DataConcentrator,
     check_adc_channel,
@@ -138,37 +139,36 @@ class SimDataConcentrator(DataConcentrator):
     """A dataConcentrator whose counters and ADCs are Python integers."""
 
     def __init__(self) -> None:
-        self._counters: dict[int, int] = {}
-        self._adc: dict[int, int] = {}
+        # the register file as lists (a process image copies it every tick)
+        self._counters: list[int] = [0] * len(COUNTER_ADDRESSES)
+        self._adc: list[int] = [0] * len(ADC_CHANNELS)
         self.writes = 0
 
     # -- driver side ---------------------------------------------------------
 
     def read_counter(self, address: int) -> int:
-        return self._counters.get(check_counter_address(address), 0)
+        return self._counters[check_counter_address(address)]
 
     def clear_counter(self, address: int) -> None:
         self._counters[check_counter_address(address)] = 0
         self.writes += 1
 
     def read_adc(self, channel: int) -> int:
-        return self._adc.get(check_adc_channel(channel), 0)
+        return self._adc[check_adc_channel(channel)]
 
     def counter_values(self) -> list[int]:
         """Every counter, addresses 0..255 (for a board server)."""
-        counters = self._counters
-        return [counters.get(a, 0) for a in range(256)]
+        return list(self._counters)
 
     def adc_codes(self) -> list[int]:
         """The latest conversion of every ADC channel, 0..15 (for a board server)."""
-        adc = self._adc
-        return [adc.get(c, 0) for c in ADC_CHANNELS]
+        return list(self._adc)
 
     # -- plant side ----------------------------------------------------------
 
     def plant_add_counts(self, address: int, n: int) -> None:
         """Count ``n`` encoder counts (signed) at ``address``; 24-bit wrap."""
-        self._counters[address] = (self._counters.get(address, 0) + n) & _COUNTER_MASK
+        self._counters[address] = (self._counters[address] + n) & _COUNTER_MASK
 
     def plant_set_adc(self, channel: int, code: int) -> None:
         """Latch a conversion, clamped to the converter's 0..4095."""
