@@ -26,6 +26,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from pyrt._version import __version__
 from pyrt.cli._station import station_parser
 from pyrt.commands import RobotShell
 from pyrt.console import Console
@@ -192,6 +193,9 @@ def run(args: argparse.Namespace) -> int:
         say(f"pyrt replay: {args.file}: {replay.header.station} ({spec}), pyrt "
             f"{replay.header.version}, {s.ticks} ticks of {replay.header.period_ns / 1e6:g} ms"
             + (f", until tick {args.until}" if args.until is not None else ""))
+        if replay.header.version and replay.header.version != __version__:
+            say(f"note: recorded with pyrt {replay.header.version}, replayed with pyrt "
+                f"{__version__}: a difference may be the change between them")
         result = replay.run(args.until)
         say(result.line())
         for note in result.notes:
