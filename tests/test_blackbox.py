@@ -78,6 +78,7 @@ def trip(st, cause: str):
 
 
 def read_csv(path: Path) -> tuple[list[str], np.ndarray]:
+    """The CSV's header and its rows as numbers."""
     with open(path, newline="") as fh:
         rows = list(csv.reader(fh))
     return rows[0], np.array(rows[1:], dtype=float)
@@ -248,22 +249,24 @@ def test_an_unwritable_directory_is_said_not_raised(tmp_path):
     """The files cannot be written: a line says which and why; the loop runs on."""
     st = build_gripper(Loop(SimClock()), boards="sim:?image=1")
     rec = Recorder(st, None, black_box=BlackBox(1.0))
-    box = FaultBox(rec, directory=tmp_path / "missing", plot=False)
+    box = FaultBox(rec, directory=tmp_path / "missing", plot=True)
     st.runner.start()
     try:
         st.runner.sleep(0.2)
         fault = trip(st, "test fault")
         st.runner.sleep(AFTER_S + 0.1)
-        assert box.dumps[0].wait(30)
+        assert box.dumps[0].wait(60)
         st.runner.sleep(0.1)
+        assert st.loop.tick_index > fault.tick + box.after_ticks + 90
     finally:
         st.shutdown()
         box.close()
         rec.close()
     errors = [m for m in st.runner.messages() if "not all written" in m]
     assert len(errors) == 1 and errors[0].startswith(f"black box of fault {fault.id}: ")
-    assert ".csv" in errors[0] and ".pj" in errors[0]
-    assert box.dumps[0].written == []
+    assert all(f"{box.dumps[0].stem.name}{x}: " in errors[0] for x in (".csv", ".png", ".pj"))
+    assert "No such file or directory" in errors[0]
+    assert box.dumps[0].written == [] and not (tmp_path / "missing").exists()
 
 
 def test_a_recorder_without_a_black_box_is_refused():

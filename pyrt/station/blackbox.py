@@ -30,9 +30,12 @@ if the recorder is closed first) writes, beside the station's databases
   marked (when matplotlib is installed: ``pip install 'pyrt[plot]'``;
   without it the first line says so).
 
-The CSV and the PNG are written atomically by a thread of the black box's
-own (at a lower priority), never by the loop: the loop thread only samples,
-and at the due tick hands the work over.  Signals that give text rather
+The CSV and the PNG are written atomically, never by the loop: the loop
+thread only samples, and at the due tick hands the work over to a thread of
+the black box's own (at a lower priority), which formats the CSV a few rows
+at a time and has the PNG drawn by a child process at the lowest priority
+(matplotlib would otherwise hold the interpreter for a second or two, and
+the loop's ticks with it).  Signals that give text rather
 than numbers are left out; a signal whose read fails gives ``nan`` for
 that sample.
 """
@@ -46,6 +49,8 @@ import math
 import os
 import queue
 import re
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -91,10 +96,17 @@ AFTER_S = 0.5
 SLACK_S = 1.0
 #: Signals drawn in one subplot, at most.
 PER_PLOT = 4
-#: How much nicer than the loop the writing thread runs (Linux).
+#: How much nicer than the loop the writing thread runs (Linux) ...
 NICE = 5
+#: ... and the plotting process: it takes a core for a second or two, the loop
+#: must not lose it.
+PLOT_NICE = 19
 #: How long :meth:`FaultBox.close` waits for the files, seconds.
 CLOSE_TIMEOUT_S = 60.0
+#: How long the plotting process may take, seconds.
+PLOT_TIMEOUT_S = 120.0
+#: CSV rows formatted between two hand-overs of the interpreter.
+CSV_ROWS = 64
 
 _ROW = 8  # bytes per value (float64) and per time (int64)
 
@@ -439,13 +451,11 @@ class FaultBox:
             dump.errors.append(f"{csv.name}: {exc.strerror or exc}")
         if dump.plot:
             png = dump.path(".png")
-            try:
-                atomic_write(png, _png(t_s, values, names, units, str(fault)))
+            failed = _plot_elsewhere(png, t_s, values, names, units, str(fault))
+            if failed:
+                dump.errors.append(f"{png.name}: {failed}")
+            else:
                 dump.written.append(png)
-            except ImportError:
-                dump.errors.append("no PNG: matplotlib is not installed")
-            except OSError as exc:
-                dump.errors.append(f"{png.name}: {exc.strerror or exc}")
         if dump.journal is not None:
             pj = dump.path(".pj")
             try:
@@ -459,11 +469,66 @@ class FaultBox:
 
 
 def _csv(t_s: np.ndarray, values: np.ndarray, names: list[str]) -> bytes:
+    """The CSV's bytes, formatted a few rows at a time with the interpreter handed
+    back between them (the loop thread never waits long for it)."""
     text = io.StringIO()
+    text.write(",".join(["t_s", *names]) + "\n")
     table = np.column_stack([t_s, values]) if names else t_s.reshape(-1, 1)
-    np.savetxt(text, table, delimiter=",", header=",".join(["t_s", *names]), comments="",
-               fmt="%.9g")
+    for k in range(0, len(table), CSV_ROWS):
+        np.savetxt(text, table[k:k + CSV_ROWS], delimiter=",", fmt="%.9g")
+        time.sleep(0)
     return text.getvalue().encode("utf-8")
+
+
+def _plot_elsewhere(png: Path, t_s: np.ndarray, values: np.ndarray, names: list[str],
+                    units: list[str], title: str) -> str:
+    """Draw the PNG in a child process (matplotlib would hold this interpreter's lock
+    for a second or more: the loop's ticks would wait); '' or what went wrong."""
+    buf = io.BytesIO()
+    np.savez(buf, t_s=t_s, values=values, names=np.array(names, dtype=str),
+             units=np.array(units, dtype=str), title=np.array(title))
+    root = str(Path(__file__).resolve().parent.parent.parent)  # where pyrt is imported from
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH", "")) if p)
+    try:
+        done = subprocess.run([sys.executable, "-c", _CHILD, str(png)], input=buf.getvalue(),
+                              capture_output=True, timeout=PLOT_TIMEOUT_S, env=env, check=False)
+    except subprocess.TimeoutExpired:
+        return f"not drawn within {PLOT_TIMEOUT_S:g} s"
+    except OSError as exc:
+        return f"no plotting process: {exc.strerror or exc}"
+    if done.returncode == 0:
+        return ""
+    said = done.stderr.decode("utf-8", "replace").strip().splitlines()
+    return said[-1] if said else f"the plotting process ended with status {done.returncode}"
+
+
+#: The plotting process: nicer first (its imports take a core too), then :func:`_plot_main`.
+_CHILD = (f"import os\n"
+          f"try: os.nice({PLOT_NICE})\n"
+          f"except (OSError, AttributeError): pass\n"
+          f"import sys\n"
+          f"from pyrt.station.blackbox import _plot_main\n"
+          f"sys.exit(_plot_main(sys.argv[1:]))\n")
+
+
+def _plot_main(argv: list[str]) -> int:
+    """The child's side of :func:`_plot_elsewhere`: the arrays on stdin, PNG path argv[0]."""
+    if len(argv) != 1:
+        sys.stderr.write("usage: _plot_main PNG < ARRAYS.npz\n")
+        return 2
+    if not plotting_available():
+        sys.stderr.write("no PNG: matplotlib is not installed\n")
+        return 3
+    with np.load(io.BytesIO(sys.stdin.buffer.read()), allow_pickle=False) as data:
+        png = _png(data["t_s"], data["values"], [str(n) for n in data["names"]],
+                   [str(u) for u in data["units"]], str(data["title"]))
+    try:
+        atomic_write(Path(argv[0]), png)
+    except OSError as exc:
+        sys.stderr.write(f"{exc.strerror or exc}\n")
+        return 1
+    return 0
 
 
 def _groups(names: list[str]) -> list[list[int]]:
@@ -527,3 +592,4 @@ class FaultRecorder(Recorder):
             self.fault_box.close()
         finally:
             super().close()
+
