@@ -45,8 +45,8 @@ def add_journal_options(parser: argparse.ArgumentParser) -> None:
         help=f"keep the last SECONDS (default {DEFAULT_SECONDS:g} at real time; off on "
              "virtual time, where a run repeats) of inputs and of every signal in memory, "
              f"at most {TOTAL_BUDGET >> 20} MiB in all (the journal's ring "
-             f"{DEFAULT_BUDGET >> 20} MiB, the signals' {SIGNAL_BUDGET >> 20} MiB, each "
-             f"sampled at up to {SIGNAL_RATE_HZ:g} Hz), and on a fault, {AFTER_S:g} s "
+             f"{DEFAULT_BUDGET >> 20} MiB; the signals' {SIGNAL_BUDGET >> 20} MiB, every "
+             f"signal sampled at up to {SIGNAL_RATE_HZ:g} Hz), and on a fault, {AFTER_S:g} s "
              "later, write them beside the databases (or in the working directory) as "
              "NAME-fault-ID-TIME.pj (a journal), .csv and .png (with matplotlib); "
              "the fault's message names them; off: none")
