@@ -316,9 +316,9 @@ def test_signal_ring_keeps_numbers_leaves_text_out_and_survives_failing_reads():
         vals.broken = 30 <= k < 50
         ring.tick(k * 1_000_000)
     assert ring.every == 10 and ring.samples == 10 and ring.text == {3}
-    t, v = ring.window(ring.samples)
+    t, v, cols = ring.window(ring.samples)
     assert t.tolist() == [k * 10_000_000 for k in range(10)]
-    assert v.shape == (10, 4)
+    assert v.shape == (10, 4) and cols == [0, 1, 2, 4]
     assert v[:, 0].tolist() == [10.0 * k for k in range(10)]
     assert v[:, 2].tolist() == [-10.0 * k for k in range(10)]
     flaky = v[:, 3]
@@ -335,11 +335,11 @@ def test_signal_ring_window_drops_what_the_loop_overwrote():
         ring.tick(k * 10_000_000)
     rows = ring.rows
     assert 3 <= rows <= 8 and ring.samples == 20
-    _, v = ring.window(20)
+    _, v, _ = ring.window(20)
     assert v[:, 0].tolist() == list(range(21 - rows, 20))
-    _, v = ring.window(19)  # the oldest of these is being overwritten: left out
+    _, v, _ = ring.window(19)  # the oldest of these is being overwritten: left out
     assert v[:, 0].tolist() == list(range(21 - rows, 19))
-    t, v = ring.window(20, since_ns=17 * 10_000_000)
+    t, v, _ = ring.window(20, since_ns=17 * 10_000_000)
     assert v[:, 0].tolist() == [17.0, 18.0, 19.0] and t[0] == 17 * 10_000_000
 
 

@@ -102,9 +102,9 @@ NICE = 5
 #: must not lose it.
 PLOT_NICE = 19
 #: How long :meth:`FaultBox.close` waits for the files, seconds.
-CLOSE_TIMEOUT_S = 60.0
+CLOSE_TIMEOUT_S = 90.0
 #: How long the plotting process may take, seconds.
-PLOT_TIMEOUT_S = 120.0
+PLOT_TIMEOUT_S = 60.0
 #: CSV rows formatted between two hand-overs of the interpreter.
 CSV_ROWS = 64
 
@@ -222,13 +222,17 @@ class SignalRing:
                     self._slow.append(c)
                 continue
             keep.append(c)
-        self._fast = keep
-        self._read_fast = self._compile(keep) if keep else tuple
+        if len(keep) != len(self._fast):  # else a read that failed once: no new getter
+            self._fast = keep
+            self._read_fast = self._compile(keep) if keep else tuple
 
-    def window(self, end: int, since_ns: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def window(self, end: int, since_ns: int | None = None
+               ) -> tuple[np.ndarray, np.ndarray, list[int]]:
         """The samples before sample number ``end`` (at most the ring's; those at or after
-        ``since_ns``, loop time): times (ns) and values (samples x :attr:`columns`).  Any
-        thread: samples the loop overwrote while they were copied are left out."""
+        ``since_ns``, loop time): times (ns), values (samples x columns) and the columns
+        (:attr:`columns`: the signals' indices).  Any thread: samples the loop overwrote
+        while they were copied are left out."""
+        cols = self.columns
         end = min(end, self.samples)
         first = max(0, end - self.rows + 1)
         index = np.arange(first, end) % self.rows
@@ -240,10 +244,9 @@ class SignalRing:
         if since_ns is not None:
             keep = t >= since_ns
             t, v = t[keep], v[keep]
-        cols = self.columns
         if len(cols) != len(self.names):
             v = v[:, cols]
-        return t, v
+        return t, v, cols
 
 
 # -- one fault's black box ---------------------------------------------------------------
@@ -438,10 +441,10 @@ class FaultBox:
     def _files(self, dump: FaultDump) -> None:
         fault = dump.fault
         ring = self.ring
-        t_ns, values = ring.window(dump.end, fault.time_ns - int(self.seconds * 1e9))
+        t_ns, values, cols = ring.window(dump.end, fault.time_ns - int(self.seconds * 1e9))
         t_s = (t_ns - fault.time_ns) / 1e9
-        names = [ring.names[c] for c in ring.columns]
-        units = [ring.units[c] for c in ring.columns]
+        names = [ring.names[c] for c in cols]
+        units = [ring.units[c] for c in cols]
         dump.rows = len(t_s)
         csv = dump.path(".csv")
         try:
