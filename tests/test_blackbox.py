@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from _manipulator_rig import TICK_NS
 
+from pyrt.cli import main
 from pyrt.cli._journal import add_journal_options, start_recorder
 from pyrt.commands import RobotShell
 from pyrt.component import Signal
@@ -434,6 +435,7 @@ def test_start_recorder_attaches_the_black_box_as_asked(argv, seconds):
         st.shutdown()
 
 
+@pytest.mark.wallclock
 def test_a_fault_at_real_time_writes_the_black_box(tmp_path, monkeypatch):
     """WallClock: a jam the watchdog trips writes the black box while the loop runs on."""
     monkeypatch.chdir(tmp_path)
@@ -459,3 +461,29 @@ def test_a_fault_at_real_time_writes_the_black_box(tmp_path, monkeypatch):
     assert any(e.id == dump.fault.id for t in ticks for e in t.events)
     _, table = read_csv(dump.path(".csv"))
     assert table[-1, 0] >= AFTER_S - 0.05
+
+
+SCRIPT = "M\nC 45 18\nQ\nI\nP -1B86\nwait\nquit\n"  # WTCHJWSPD 18: the move oscillates
+
+
+@pytest.mark.parametrize("given", ["2", "off"])
+def test_pyrt_gripper_writes_the_black_box_of_a_fault_and_names_it(given, tmp_path, monkeypatch,
+                                                                   capsys):
+    """pyrt gripper --black-box 2: the supervision's fault is followed by the black-box line and
+    the files are there when the run ends; --black-box off: neither."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr("sys.stdin", io.StringIO(SCRIPT))
+    assert main(["gripper", "--speed", "max", "--black-box", given]) == 0
+    out = capsys.readouterr().out.splitlines()
+    k = next(i for i, line in enumerate(out) if line.startswith("fault: P move oscillating"))
+    found = sorted(p.suffix for p in tmp_path.iterdir() if p.name.startswith("gripper-fault-1-"))
+    if given == "off":
+        assert not any(line.startswith("black box") for line in out) and found == []
+        return
+    assert out[k + 1].startswith("every motor stopped")
+    m = LINE.match(out[k + 2])
+    assert m is not None and m.group(1) == "1", out[k:]
+    assert Path(m.group(2)).parent == tmp_path.resolve()
+    assert found == [".csv", ".pj", ".png"]
+    _, table = read_csv(Path(m.group(2) + ".csv"))
+    assert table[0, 0] == pytest.approx(-2.0, abs=0.011) and table[-1, 0] >= -0.011
