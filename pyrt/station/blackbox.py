@@ -21,8 +21,8 @@ if the recorder is closed first) writes, beside the station's databases
 (``station.directory``) or else in the working directory:
 
 * ``NAME-fault-ID-TIME.pj``: the journal's ring, a journal file readable on
-  its own (``pyrt replay``, :class:`~pyrt.journal.JournalReader`), written by
-  the journal's thread;
+  its own (:class:`~pyrt.journal.JournalReader`; its first tick is a
+  keyframe), written by the journal's thread;
 * ``.csv``: a header ``t_s,OBJECT.SIGNAL,...`` and one row per sample, the
   time in seconds from the fault, the ``N`` seconds before it and what came
   after;
