@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from _manipulator_rig import TICK_NS
+from hypothesis import given, settings
+from hypothesis import strategies as hst
 
 from pyrt.cli import main
 from pyrt.cli._journal import add_journal_options, start_recorder
@@ -342,6 +344,26 @@ def test_signal_ring_window_drops_what_the_loop_overwrote():
     assert v[:, 0].tolist() == list(range(21 - rows, 19))
     t, v, _ = ring.window(20, since_ns=17 * 10_000_000)
     assert v[:, 0].tolist() == [17.0, 18.0, 19.0] and t[0] == 17 * 10_000_000
+
+
+@given(span=hst.floats(0.02, 0.2), taken=hst.integers(0, 60), back=hst.integers(0, 30),
+       since=hst.integers(-5, 70))
+@settings(max_examples=200, deadline=None)
+def test_signal_ring_window_is_the_samples_still_there(span, taken, back, since):
+    """Any fill and any window: exactly the samples not yet overwritten, in order, none newer
+    than asked, none older than ``since_ns``; times and values agree."""
+    vals = Values(2)
+    ring = SignalRing(vals.signals()[:2], span, 10_000_000, extra_s=0.0)
+    for k in range(taken):
+        vals.v[0] = k
+        vals.v[1] = 2 * k
+        ring.sample(k * 10_000_000)
+    end = max(0, taken - back)
+    t, v, cols = ring.window(end, since_ns=since * 10_000_000)
+    oldest = max(0, taken - ring.rows + 1, since)
+    want = list(range(oldest, end))
+    assert cols == [0, 1] and v[:, 0].tolist() == want and v[:, 1].tolist() == [2 * k for k in want]
+    assert t.tolist() == [k * 10_000_000 for k in want]
 
 
 @pytest.mark.parametrize("n, seconds", [(16, 10.0), (45, 600.0), (3000, 600.0)])
