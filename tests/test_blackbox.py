@@ -474,10 +474,14 @@ def test_a_fault_at_real_time_writes_the_black_box(tmp_path, monkeypatch):
         dump = rec.fault_box.dumps[0]
         assert dump.wait(60) and not dump.errors
         assert st.runner.running
+        messages = st.runner.messages()
     finally:
         st.shutdown()
         rec.close()
     assert dump.fault.source in ("stall watchdog", "P move")  # whichever bound first
+    k = messages.index(f"FAULT {dump.fault}")
+    assert messages[k + 1] == f"black box of fault {dump.fault.id}: {dump.path('.pj')} " \
+        "(+ .csv, .png)"
     assert {p.suffix for p in tmp_path.iterdir()} == {".pj", ".csv", ".png"}
     ticks = list(JournalReader(dump.path(".pj")).ticks())
     assert any(e.id == dump.fault.id for t in ticks for e in t.events)
