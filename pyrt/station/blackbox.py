@@ -326,7 +326,10 @@ class FaultBox:
         self._pending: dict[int, FaultDump] = {}
         self._lock = threading.Lock()
         self._jobs: queue.SimpleQueue[FaultDump | None] = queue.SimpleQueue()
-        self._thread: threading.Thread | None = None
+        # started now, idle until a fault: starting a thread waits for it to run,
+        # which the loop thread must not do
+        self._thread = threading.Thread(target=self._work, name="pyrt-black-box", daemon=True)
+        self._thread.start()
         self._closed = False
         loop.fault_listeners.append(self._fault)
         recorder.tick_listeners.append(self._tick)
@@ -390,10 +393,6 @@ class FaultBox:
                 dump.journal = self.recorder.journal.dump_black_box(dump.path(".pj"))
             except JournalError as exc:
                 dump.errors.append(f"{dump.path('.pj').name}: {exc}")
-            if self._thread is None:
-                self._thread = threading.Thread(target=self._work, name="pyrt-black-box",
-                                                daemon=True)
-                self._thread.start()
             self._jobs.put(dump)
 
     # -- any thread ------------------------------------------------------------------------
@@ -410,11 +409,8 @@ class FaultBox:
             self.recorder.tick_listeners.remove(self._tick)
         for dump in list(self._pending.values()):
             self._write(dump)
-        with self._lock:
-            thread = self._thread
-            self._jobs.put(None)
-        if thread is not None:
-            thread.join(timeout)
+        self._jobs.put(None)
+        self._thread.join(timeout)
 
     # -- the writing thread ----------------------------------------------------------------
 
