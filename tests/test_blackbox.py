@@ -436,9 +436,13 @@ def test_help_states_the_total_budget():
 @pytest.mark.parametrize("argv, seconds", [((), 10.0), (("--black-box", "4"), 4.0),
                                            (("--black-box", "off"), None),
                                            (("--speed", "0", "--black-box", "2"), 2.0),
-                                           (("--speed", "0"), None)])
-def test_start_recorder_attaches_the_black_box_as_asked(argv, seconds):
-    """--black-box SECONDS sets N (the journal's ring keeps the aftermath too); off: none."""
+                                           (("--speed", "0"), None),
+                                           (("--journal", "run.pj", "--black-box", "off"), 0.0),
+                                           (("--journal", "run.pj", "--black-box", "3"), 3.0)])
+def test_start_recorder_attaches_the_black_box_as_asked(argv, seconds, tmp_path, monkeypatch):
+    """--black-box SECONDS sets N (the journal's ring keeps the aftermath too); off: none (a
+    journal alone if --journal is given)."""
+    monkeypatch.chdir(tmp_path)
     st = build_gripper(Loop(SimClock()), boards="sim:?image=1")
     _, args = options(*argv)
     said: list[str] = []
@@ -446,6 +450,8 @@ def test_start_recorder_attaches_the_black_box_as_asked(argv, seconds):
     try:
         if seconds is None:
             assert rec is None
+        elif seconds == 0.0:
+            assert type(rec) is Recorder and rec.journal.black_box is None
         else:
             assert isinstance(rec, FaultRecorder)
             assert rec.fault_box.seconds == seconds
@@ -455,6 +461,7 @@ def test_start_recorder_attaches_the_black_box_as_asked(argv, seconds):
         if rec is not None:
             rec.close()
         st.shutdown()
+    assert (tmp_path / "run.pj").exists() == ("--journal" in argv)
 
 
 @pytest.mark.wallclock
