@@ -8,6 +8,13 @@ from collections.abc import Callable
 from typing import Any
 
 from pyrt.journal import DEFAULT_BUDGET, DEFAULT_SECONDS, BlackBox
+from pyrt.station.blackbox import (
+    AFTER_S,
+    SIGNAL_BUDGET,
+    SIGNAL_RATE_HZ,
+    TOTAL_BUDGET,
+    FaultRecorder,
+)
 from pyrt.station.recording import Recorder, with_image
 
 __all__ = ["add_journal_options", "prepare_journal", "start_recorder"]
@@ -36,9 +43,13 @@ def add_journal_options(parser: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--black-box", type=_black_box, default=None, metavar="SECONDS|off",
         help=f"keep the last SECONDS (default {DEFAULT_SECONDS:g} at real time; off on "
-             "virtual time, where a run repeats) of inputs and signals in memory, at most "
-             f"{DEFAULT_BUDGET // (1 << 20)} MB, and write them beside the databases (or "
-             "in the working directory) on a fault; off: none")
+             "virtual time, where a run repeats) of inputs and of every signal in memory, "
+             f"at most {TOTAL_BUDGET >> 20} MiB in all (the journal's ring "
+             f"{DEFAULT_BUDGET >> 20} MiB; the signals' {SIGNAL_BUDGET >> 20} MiB, every "
+             f"signal sampled at up to {SIGNAL_RATE_HZ:g} Hz), and on a fault, {AFTER_S:g} s "
+             "later, write them beside the databases (or in the working directory) as "
+             "NAME-fault-ID-TIME.pj (a journal), .csv and .png (with matplotlib); "
+             "the fault's message names them; off: none")
 
 
 def black_box_seconds(args: argparse.Namespace) -> float:
@@ -92,7 +103,9 @@ def _at_most_one_a_second(say: Callable[[str], None]) -> Callable[[str], None]:
 
 def start_recorder(station: Any, args: argparse.Namespace, factory: str,
                    say: Callable[[str], None]) -> Recorder | None:
-    """The station's recorder (its journal and black box), or None if neither is on."""
+    """The station's recorder (its journal and black box), or None if neither is on.
+    With a black box it is a :class:`~pyrt.station.blackbox.FaultRecorder`: the
+    black box is written on every fault."""
     path = getattr(args, "journal", None)
     seconds = black_box_seconds(args)
     if not path and not seconds:
@@ -101,10 +114,14 @@ def start_recorder(station: Any, args: argparse.Namespace, factory: str,
         if getattr(args, "black_box", None) is not None:  # asked for: say why not
             say("black box: off: these boards have no process image to record")
         return None  # the default black box: where there is an image to record
-    box = BlackBox(seconds=seconds) if seconds else None
-    rec = Recorder(station, path, black_box=box,
-                   metadata={"factory": factory, "args": _plain(args)},
-                   warn=_at_most_one_a_second(say))
+    metadata = {"factory": factory, "args": _plain(args)}
+    warn = _at_most_one_a_second(say)
+    rec: Recorder
+    if seconds:  # the journal's ring holds the aftermath too
+        rec = FaultRecorder(station, path, black_box=BlackBox(seconds=seconds + AFTER_S),
+                            seconds=seconds, metadata=metadata, warn=warn)
+    else:
+        rec = Recorder(station, path, metadata=metadata, warn=warn)
     if path:
         say(f"journal: recording into {path}")
     return rec

@@ -1,0 +1,596 @@
+"""The black box written on every fault: a station's last seconds, as a journal and as signals.
+
+A :class:`FaultBox` rides on a :class:`~pyrt.station.recording.Recorder`
+whose journal has a :class:`~pyrt.journal.BlackBox` (the last ``N`` seconds
+of the station's inputs, commands, clock and outputs).  Beside it, it keeps
+every signal of the station (:meth:`Station.signals`) in a ring of its own
+(:class:`SignalRing`): sampled every few ticks (at most
+:data:`SIGNAL_RATE_HZ`), numbers in preallocated numpy arrays, within
+:data:`SIGNAL_BUDGET` bytes whatever the span and the number of signals (the
+sampling rate is lowered to fit).  Both rings together stay within
+:data:`TOTAL_BUDGET`.
+
+On a fault (the first of an episode: a fault that comes while the black box
+of another is still to be written is in that one; each fault id once) it
+posts one line to the application, right after the fault's own::
+
+    black box of fault 3: /station/prototype-fault-3-20261125T031500.pj (+ .csv, .png)
+
+and :data:`AFTER_S` of ticks later (so that the aftermath is in it; at once
+if the recorder is closed first) writes, beside the station's databases
+(``station.directory``) or else in the working directory:
+
+* ``NAME-fault-ID-TIME.pj``: the journal's ring, a journal file readable on
+  its own (:class:`~pyrt.journal.JournalReader`; its first tick is a
+  keyframe), written by the journal's thread;
+* ``.csv``: a header ``t_s,OBJECT.SIGNAL,...`` and one row per sample, the
+  time in seconds from the fault, the ``N`` seconds before it and what came
+  after;
+* ``.png``: the signals around the fault, a few to a subplot, the fault
+  marked (when matplotlib is installed: ``pip install 'pyrt[plot]'``;
+  without it the first line says so).
+
+The CSV and the PNG are written atomically, never by the loop: the loop
+thread only samples, and at the due tick hands the work over to a thread of
+the black box's own (at a lower priority), which formats the CSV a few rows
+at a time and has the PNG drawn by a child process at the lowest priority
+(matplotlib would otherwise hold the interpreter for a second or two, and
+the loop's ticks with it).  The loop's share: a call per tick and, every few
+ticks, one compiled read of every signal into a row of the ring (about
+0.3 µs a tick on average for the gripper at 1 kHz).  Signals that give text
+rather than numbers are left out; a signal whose read fails gives ``nan``
+for that sample.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib.util
+import io
+import math
+import os
+import queue
+import re
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from pyrt.component import Signal
+from pyrt.errors import ConfigError, Fault
+from pyrt.fileio import atomic_write
+from pyrt.journal import DEFAULT_BUDGET, BlackBox, JournalError
+from pyrt.scope import compile_sources
+from pyrt.station.recording import Recorder
+
+if TYPE_CHECKING:
+    from pyrt.station.base import Station
+
+__all__ = [
+    "AFTER_S",
+    "SIGNAL_BUDGET",
+    "SIGNAL_RATE_HZ",
+    "TOTAL_BUDGET",
+    "FaultBox",
+    "FaultDump",
+    "FaultRecorder",
+    "SignalRing",
+    "plotting_available",
+]
+
+#: The fastest a signal is sampled into the ring, per second.
+SIGNAL_RATE_HZ = 100.0
+#: The signal ring's memory, at most (8 MiB): the rate is lowered to keep it.
+SIGNAL_BUDGET = 8 << 20
+#: Both rings of a black box, at most: the journal's and the signals'.
+TOTAL_BUDGET = DEFAULT_BUDGET + SIGNAL_BUDGET
+#: Loop time kept after a fault before the black box is written.
+AFTER_S = 0.5
+#: Loop time the ring holds beyond what a black box needs, so that the thread
+#: copying a window out of it is never overtaken by the loop.
+SLACK_S = 1.0
+#: Signals drawn in one subplot, at most.
+PER_PLOT = 4
+#: How much nicer than the loop the writing thread runs (Linux) ...
+NICE = 5
+#: ... and the plotting process: it takes a core for a second or two, the loop
+#: must not lose it.
+PLOT_NICE = 19
+#: How long :meth:`FaultBox.close` waits for the files, seconds.
+CLOSE_TIMEOUT_S = 90.0
+#: How long the plotting process may take, seconds.
+PLOT_TIMEOUT_S = 60.0
+#: CSV rows formatted between two hand-overs of the interpreter.
+CSV_ROWS = 64
+
+_ROW = 8  # bytes per value (float64) and per time (int64)
+
+
+def plotting_available() -> bool:
+    """Whether matplotlib can be imported (looked up, not imported)."""
+    try:
+        return importlib.util.find_spec("matplotlib") is not None
+    except (ImportError, ValueError):
+        return False
+
+
+# -- the signals' ring -------------------------------------------------------------------
+
+
+class SignalRing:
+    """Every one of ``signals`` (``(name, signal)``), sampled every :attr:`every`
+    ticks of ``period_ns`` (at most ``rate_hz``) into a ring of :attr:`rows`
+    samples that covers ``seconds`` plus ``extra_s``, within ``budget_bytes``
+    (the rate is lowered when the budget would not hold that span).
+
+    :meth:`tick` runs in the loop thread; :meth:`window` copies the samples
+    out from any thread.
+    """
+
+    def __init__(self, signals: Sequence[tuple[str, Signal]], seconds: float, period_ns: int,
+                 *, rate_hz: float = SIGNAL_RATE_HZ, budget_bytes: int = SIGNAL_BUDGET,
+                 extra_s: float = AFTER_S + SLACK_S):
+        if not seconds > 0 or not rate_hz > 0 or period_ns <= 0 or extra_s < 0:
+            raise ConfigError(f"signal ring: bad span {seconds!r} s, rate {rate_hz!r} Hz or "
+                              f"tick {period_ns!r} ns")
+        self.names = [name for name, _ in signals]
+        self.units = [sig.units for _, sig in signals]
+        self._signals = [sig for _, sig in signals]
+        n = len(self.names)
+        per_row = _ROW * (n + 1)
+        span = seconds + extra_s
+        rate = min(rate_hz, 1e9 / period_ns, budget_bytes / (span * per_row))
+        if budget_bytes // per_row < 2 or rate <= 0:
+            raise ConfigError(f"signal ring: {n} signals do not fit in {budget_bytes} bytes")
+        #: Ticks between two samples.
+        self.every = max(1, math.ceil(1e9 / (rate * period_ns) - 1e-9))
+        #: Samples a second.
+        self.rate_hz = 1e9 / (self.every * period_ns)
+        #: Samples held.
+        self.rows = min(math.ceil(span * self.rate_hz) + 1, budget_bytes // per_row)
+        self.budget_bytes = budget_bytes
+        self._t = np.zeros(self.rows, dtype=np.int64)
+        self._v = np.full((self.rows, n), np.nan)
+        #: Samples taken so far.
+        self.samples = 0
+        self._countdown = 1
+        #: Signals left out: they give text, not numbers.
+        self.text: set[int] = set()
+        self._slow: list[int] = []  # read one by one, each guarded
+        self._fast: list[int] = list(range(n))
+        self._read_fast: Callable[[], tuple] = self._compile(self._fast)
+
+    def _compile(self, cols: list[int]) -> Callable[[], tuple]:
+        return compile_sources([self._signals[c].scope_source() for c in cols])
+
+    @property
+    def nbytes(self) -> int:
+        """The ring's memory (both arrays), bytes."""
+        return int(self._t.nbytes + self._v.nbytes)
+
+    @property
+    def columns(self) -> list[int]:
+        """The signals kept (the text ones left out), in order."""
+        return [c for c in range(len(self.names)) if c not in self.text]
+
+    def tick(self, now_ns: int) -> None:
+        """Loop thread, every tick: a sample every :attr:`every` ticks."""
+        self._countdown -= 1
+        if self._countdown <= 0:
+            self._countdown = self.every
+            self.sample(now_ns)
+
+    def sample(self, now_ns: int) -> None:
+        """Take one sample now (loop thread)."""
+        g = self.samples
+        i = g % self.rows
+        row = self._v[i]
+        self._t[i] = now_ns
+        try:
+            if self._slow or self.text:
+                row[self._fast] = self._read_fast()
+            else:
+                row[:] = self._read_fast()
+        except Exception:
+            self._sort_out(row)
+        for c in self._slow:
+            try:
+                row[c] = float(self._signals[c].read())
+            except Exception:
+                row[c] = math.nan
+        self.samples = g + 1
+
+    def _sort_out(self, row: np.ndarray) -> None:
+        """The fast read failed: read each of its signals alone; those that fail
+        (or give text) are read one by one from now on (or left out)."""
+        keep = []
+        for c in self._fast:
+            value: Any = None
+            try:
+                value = self._signals[c].read()
+                row[c] = float(value)
+            except Exception:
+                row[c] = math.nan
+                if isinstance(value, str):
+                    self.text.add(c)
+                else:
+                    self._slow.append(c)
+                continue
+            keep.append(c)
+        if len(keep) != len(self._fast):  # else a read that failed once: no new getter
+            self._fast = keep
+            self._read_fast = self._compile(keep) if keep else tuple
+
+    def window(self, end: int, since_ns: int | None = None
+               ) -> tuple[np.ndarray, np.ndarray, list[int]]:
+        """The samples before sample number ``end`` (at most the ring's; those at or after
+        ``since_ns``, loop time): times (ns), values (samples x columns) and the columns
+        (:attr:`columns`: the signals' indices).  Any thread: samples the loop overwrote
+        while they were copied are left out."""
+        cols = self.columns
+        end = min(end, self.samples)
+        first = max(0, end - self.rows + 1)
+        index = np.arange(first, end) % self.rows
+        t = self._t[index]
+        v = self._v[index]
+        valid = self.samples - self.rows + 1  # the oldest sample surely not overwritten
+        if valid > first:
+            t, v = t[valid - first:], v[valid - first:]
+        if since_ns is not None:
+            keep = t >= since_ns
+            t, v = t[keep], v[keep]
+        if len(cols) != len(self.names):
+            v = v[:, cols]
+        return t, v, cols
+
+
+# -- one fault's black box ---------------------------------------------------------------
+
+
+@dataclass
+class FaultDump:
+    """One fault's black box: where it goes and, once :attr:`done` is set, what was written."""
+
+    fault: Fault
+    #: The files' common path, without the suffix.
+    stem: Path
+    #: The tick at which it is written.
+    due_tick: int
+    plot: bool
+    #: The samples of the signal ring up to the one it is written at.
+    end: int = 0
+    journal: Future[int] | None = None
+    #: The files written.
+    written: list[Path] = field(default_factory=list)
+    #: What could not be written, and why.
+    errors: list[str] = field(default_factory=list)
+    #: Tick records in the journal file and rows in the CSV.
+    ticks: int = 0
+    rows: int = 0
+    done: threading.Event = field(default_factory=threading.Event)
+
+    def path(self, suffix: str) -> Path:
+        """The file with ``suffix`` (``.pj``, ``.csv``, ``.png``)."""
+        return self.stem.with_name(self.stem.name + suffix)
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Wait until the files are written (or failed); False on timeout."""
+        return self.done.wait(timeout)
+
+
+def _safe(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or "station"
+
+
+class FaultBox:
+    """Writes a black box on every fault of ``recorder``'s station (see the
+    module text).  ``seconds``: the span kept before a fault (default: the
+    journal's black box's); ``directory``: where the files go (default: the
+    station's ``directory``, else the working directory); ``plot``: write the
+    PNG (default: when matplotlib is installed).  Build it with the recorder,
+    before the loop starts; :meth:`close` writes what is due and stops.
+    """
+
+    def __init__(self, recorder: Recorder, *, seconds: float | None = None,
+                 after_s: float = AFTER_S, directory: str | Path | None = None,
+                 plot: bool | None = None, rate_hz: float = SIGNAL_RATE_HZ,
+                 budget_bytes: int = SIGNAL_BUDGET):
+        box = recorder.journal.black_box
+        if box is None:
+            raise ConfigError("a fault's black box needs a journal with a black box")
+        if after_s < 0:
+            raise ConfigError(f"black box: the time kept after a fault must be >= 0, "
+                              f"got {after_s!r}")
+        station: Station = recorder.station
+        self.recorder = recorder
+        self.station = station
+        self.black_box: BlackBox = box
+        self.seconds = float(seconds if seconds is not None else box.seconds)
+        loop = recorder.loop
+        self.after_ticks = math.ceil(after_s * 1e9 / loop.period_ns - 1e-9)
+        where = directory if directory is not None else getattr(station, "directory", None)
+        self.directory = Path(where if where is not None else Path.cwd()).resolve()
+        self.plot = plotting_available() if plot is None else bool(plot)
+        self._said_no_plot = False
+        self.ring = SignalRing(station.signals(), self.seconds, loop.period_ns,
+                               rate_hz=rate_hz, budget_bytes=budget_bytes,
+                               extra_s=after_s + SLACK_S)
+        #: Every fault's black box, in order.
+        self.dumps: list[FaultDump] = []
+        self._seen: set[int] = set()
+        self._pending: dict[int, FaultDump] = {}
+        self._lock = threading.Lock()
+        self._jobs: queue.SimpleQueue[FaultDump | None] = queue.SimpleQueue()
+        # started now, idle until a fault: starting a thread waits for it to run,
+        # which the loop thread must not do
+        self._thread = threading.Thread(target=self._work, name="pyrt-black-box", daemon=True)
+        self._thread.start()
+        self._closed = False
+        loop.fault_listeners.append(self._fault)
+        recorder.tick_listeners.append(self._tick)
+
+    @property
+    def nbytes(self) -> int:
+        """Both rings' memory now: the journal's and the signals'."""
+        return self.black_box.nbytes + self.ring.nbytes
+
+    def _post(self, line: str) -> None:
+        runner = self.station.runner
+        if runner is not None:
+            runner.post(line)
+
+    # -- loop thread -----------------------------------------------------------------------
+
+    def _fault(self, fault: Fault) -> None:
+        if self._closed or fault.id in self._seen:
+            return
+        self._seen.add(fault.id)
+        with self._lock:
+            under_way = next(iter(self._pending.values()), None)
+            if under_way is None:
+                stamp = time.strftime("%Y%m%dT%H%M%S")
+                name = f"{_safe(self.station.name)}-fault-{fault.id}-{stamp}"
+                dump = FaultDump(fault, self.directory / name,
+                                 due_tick=fault.tick + self.after_ticks, plot=self.plot)
+                self._pending[fault.id] = dump
+                self.dumps.append(dump)
+        if under_way is not None:
+            self._post(f"black box of fault {fault.id}: in that of fault "
+                       f"{under_way.fault.id}, {under_way.path('.pj')}")
+            return
+        if self.plot:
+            more = "(+ .csv, .png)"
+        elif not self._said_no_plot:
+            self._said_no_plot = True
+            more = "(+ .csv; no PNG: matplotlib is not installed)"
+        else:
+            more = "(+ .csv)"
+        self._post(f"black box of fault {fault.id}: {dump.path('.pj')} {more}")
+
+    def _tick(self, tick: int, now_ns: int) -> None:
+        ring = self.ring
+        ring._countdown -= 1
+        if ring._countdown <= 0:
+            ring._countdown = ring.every
+            ring.sample(now_ns)
+        if self._pending:
+            for dump in list(self._pending.values()):
+                if tick >= dump.due_tick:
+                    self._write(dump)
+
+    def _write(self, dump: FaultDump) -> None:
+        """Hand ``dump`` over: the journal's thread writes the ring, ours the rest."""
+        with self._lock:
+            if self._pending.pop(dump.fault.id, None) is None:
+                return
+            dump.end = self.ring.samples
+            try:
+                dump.journal = self.recorder.journal.dump_black_box(dump.path(".pj"))
+            except JournalError as exc:
+                dump.errors.append(f"{dump.path('.pj').name}: {exc}")
+            self._jobs.put(dump)
+
+    # -- any thread ------------------------------------------------------------------------
+
+    def close(self, timeout: float = CLOSE_TIMEOUT_S) -> None:
+        """Write every black box still due now, wait for the files (at most
+        ``timeout`` seconds), stop listening.  Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        with contextlib.suppress(ValueError):
+            self.recorder.loop.fault_listeners.remove(self._fault)
+        with contextlib.suppress(ValueError):
+            self.recorder.tick_listeners.remove(self._tick)
+        for dump in list(self._pending.values()):
+            self._write(dump)
+        self._jobs.put(None)
+        self._thread.join(timeout)
+
+    # -- the writing thread ----------------------------------------------------------------
+
+    def _work(self) -> None:
+        if NICE > 0 and hasattr(os, "setpriority"):
+            with contextlib.suppress(OSError, AttributeError):
+                tid = threading.get_native_id()
+                os.setpriority(os.PRIO_PROCESS, tid,
+                               min(19, os.getpriority(os.PRIO_PROCESS, tid) + NICE))
+        while True:
+            dump = self._jobs.get()
+            if dump is None:
+                return
+            try:
+                self._files(dump)
+            except Exception as exc:  # never lose the thread: say it, go on
+                dump.errors.append(f"{type(exc).__name__}: {exc}")
+            finally:
+                if dump.errors:
+                    self._post(f"black box of fault {dump.fault.id}: not all written: "
+                               + "; ".join(dump.errors))
+                dump.done.set()
+
+    def _files(self, dump: FaultDump) -> None:
+        fault = dump.fault
+        ring = self.ring
+        t_ns, values, cols = ring.window(dump.end, fault.time_ns - int(self.seconds * 1e9))
+        t_s = (t_ns - fault.time_ns) / 1e9
+        names = [ring.names[c] for c in cols]
+        units = [ring.units[c] for c in cols]
+        dump.rows = len(t_s)
+        csv = dump.path(".csv")
+        try:
+            atomic_write(csv, _csv(t_s, values, names))
+            dump.written.append(csv)
+        except OSError as exc:
+            dump.errors.append(f"{csv.name}: {exc.strerror or exc}")
+        if dump.plot:
+            png = dump.path(".png")
+            failed = _plot_elsewhere(png, t_s, values, names, units, str(fault))
+            if failed:
+                dump.errors.append(f"{png.name}: {failed}")
+            else:
+                dump.written.append(png)
+        if dump.journal is not None:
+            pj = dump.path(".pj")
+            try:
+                dump.ticks = dump.journal.result(CLOSE_TIMEOUT_S)
+                dump.written.append(pj)
+            except JournalError as exc:
+                dump.errors.append(f"{pj.name}: {exc}")
+            except TimeoutError:
+                dump.errors.append(f"{pj.name}: the journal did not write it within "
+                                   f"{CLOSE_TIMEOUT_S:g} s")
+
+
+def _csv(t_s: np.ndarray, values: np.ndarray, names: list[str]) -> bytes:
+    """The CSV's bytes, formatted a few rows at a time with the interpreter handed
+    back between them (the loop thread never waits long for it)."""
+    text = io.StringIO()
+    text.write(",".join(["t_s", *names]) + "\n")
+    table = np.column_stack([t_s, values]) if names else t_s.reshape(-1, 1)
+    for k in range(0, len(table), CSV_ROWS):
+        np.savetxt(text, table[k:k + CSV_ROWS], delimiter=",", fmt="%.9g")
+        time.sleep(0)
+    return text.getvalue().encode("utf-8")
+
+
+def _plot_elsewhere(png: Path, t_s: np.ndarray, values: np.ndarray, names: list[str],
+                    units: list[str], title: str) -> str:
+    """Draw the PNG in a child process (matplotlib would hold this interpreter's lock
+    for a second or more: the loop's ticks would wait); '' or what went wrong."""
+    buf = io.BytesIO()
+    np.savez(buf, t_s=t_s, values=values, names=np.array(names, dtype=str),
+             units=np.array(units, dtype=str), title=np.array(title))
+    root = str(Path(__file__).resolve().parent.parent.parent)  # where pyrt is imported from
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH", "")) if p)
+    try:
+        done = subprocess.run([sys.executable, "-c", _CHILD, str(png)], input=buf.getvalue(),
+                              capture_output=True, timeout=PLOT_TIMEOUT_S, env=env, check=False)
+    except subprocess.TimeoutExpired:
+        return f"not drawn within {PLOT_TIMEOUT_S:g} s"
+    except OSError as exc:
+        return f"no plotting process: {exc.strerror or exc}"
+    if done.returncode == 0:
+        return ""
+    said = done.stderr.decode("utf-8", "replace").strip().splitlines()
+    return said[-1] if said else f"the plotting process ended with status {done.returncode}"
+
+
+#: The plotting process: nicer first (its imports take a core too), then :func:`_plot_main`.
+_CHILD = (f"import os\n"
+          f"try: os.nice({PLOT_NICE})\n"
+          f"except (OSError, AttributeError): pass\n"
+          f"import sys\n"
+          f"from pyrt.station.blackbox import _plot_main\n"
+          f"sys.exit(_plot_main(sys.argv[1:]))\n")
+
+
+def _plot_main(argv: list[str]) -> int:
+    """The child's side of :func:`_plot_elsewhere`: the arrays on stdin, PNG path argv[0]."""
+    if len(argv) != 1:
+        sys.stderr.write("usage: _plot_main PNG < ARRAYS.npz\n")
+        return 2
+    if not plotting_available():
+        sys.stderr.write("no PNG: matplotlib is not installed\n")
+        return 3
+    with np.load(io.BytesIO(sys.stdin.buffer.read()), allow_pickle=False) as data:
+        png = _png(data["t_s"], data["values"], [str(n) for n in data["names"]],
+                   [str(u) for u in data["units"]], str(data["title"]))
+    try:
+        atomic_write(Path(argv[0]), png)
+    except OSError as exc:
+        sys.stderr.write(f"{exc.strerror or exc}\n")
+        return 1
+    return 0
+
+
+def _groups(names: list[str]) -> list[list[int]]:
+    """Signal indices a subplot each: an object's signals together, at most :data:`PER_PLOT`."""
+    groups: list[list[int]] = []
+    owner = None
+    for k, name in enumerate(names):
+        who = name.partition(".")[0]
+        if groups and who == owner and len(groups[-1]) < PER_PLOT:
+            groups[-1].append(k)
+        else:
+            groups.append([k])
+        owner = who
+    return groups
+
+
+def _png(t_s: np.ndarray, values: np.ndarray, names: list[str], units: list[str],
+         title: str) -> bytes:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    groups = _groups(names) or [[]]
+    fig = Figure(figsize=(10, 0.6 + 1.7 * len(groups)), layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(len(groups), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, group in zip(axes, groups, strict=True):
+        for k in group:
+            ax.plot(t_s, values[:, k], linewidth=0.9,
+                    label=f"{names[k]} [{units[k]}]" if units[k] else names[k])
+        ax.axvline(0.0, color="red", linestyle="--", linewidth=1.0)
+        ax.grid(True, alpha=0.3)
+        if group:
+            ax.legend(loc="upper left", fontsize="x-small", framealpha=0.7)
+    axes[-1].set_xlabel("time from the fault [s]")
+    fig.suptitle(title, fontsize="small")
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    return buf.getvalue()
+
+
+# -- a recorder with its black box -------------------------------------------------------
+
+
+class FaultRecorder(Recorder):
+    """A :class:`Recorder` that writes its black box on every fault (a
+    :class:`FaultBox`, :attr:`fault_box`); ``seconds``: the span kept before a
+    fault (default: the black box's).  :meth:`close` writes what is due first."""
+
+    def __init__(self, station: Station, path: str | Path | None, *, black_box: BlackBox,
+                 seconds: float | None = None, **kw: Any):
+        super().__init__(station, path, black_box=black_box, **kw)
+        try:
+            self.fault_box = FaultBox(self, seconds=seconds)
+        except BaseException:
+            super().close()
+            raise
+
+    def close(self) -> None:
+        """Write the black boxes still due, then end the journal; idempotent."""
+        try:
+            self.fault_box.close()
+        finally:
+            super().close()
+
