@@ -130,6 +130,8 @@ static int segment(const pyrt_neck_ring *ring, const double *f, const double *q,
             slope(ring, &e, &f1, &f2);
             if (f2 > 0.0)
                 step = -f1 / f2;
+            else if (fabs(f1) <= PYRT_NECK_TIE * ring->radius)
+                step = PYRT_NECK_FALLBACK_STEP;  /* a tie: either way is a contact */
             else
                 step = f1 > 0.0 ? -PYRT_NECK_FALLBACK_STEP : PYRT_NECK_FALLBACK_STEP;
             if (step > PYRT_NECK_MAX_STEP)

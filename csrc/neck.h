@@ -38,8 +38,12 @@
 #define PYRT_NECK_STEP_TOL 1e-10
 /* ... each step at most this long (rad) ... */
 #define PYRT_NECK_MAX_STEP 0.5
-/* ... and this long, downhill, where the length is not convex in phi (rad). */
+/* ... and this long, downhill, where the length is not convex in phi (rad); */
 #define PYRT_NECK_FALLBACK_STEP 0.1
+/* where the slope is within this many cm per radian of the radius of zero there
+ * (the start is the symmetric point between two equal contacts: a rope from a
+ * point on the axis), the step is +FALLBACK_STEP: rounding does not choose. */
+#define PYRT_NECK_TIE 1e-12
 
 /*
  * The ring: centre, unit axis pointing out of the vessel, and two unit

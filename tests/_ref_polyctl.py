@@ -25,6 +25,7 @@ ITERATIONS: int = lib.PYRT_NECK_MAX_ITER
 STEP_TOL: float = lib.PYRT_NECK_STEP_TOL
 MAX_STEP: float = lib.PYRT_NECK_MAX_STEP
 FALLBACK_STEP: float = lib.PYRT_NECK_FALLBACK_STEP
+TIE: float = lib.PYRT_NECK_TIE
 MIN_SEGMENT: float = lib.PYRT_MIN_SEGMENT_CM
 UPPER: int = lib.PYRT_NECK_UPPER
 LOWER: int = lib.PYRT_NECK_LOWER
@@ -82,7 +83,12 @@ def contact(ring, t, q, hint=None):
         f2 = (rad * rad - pa * pa) / da + (rad * rad - pb * pb) / db
         f2 -= rad * (u[0] * (a[0] / da + b[0] / db) + u[1] * (a[1] / da + b[1] / db)
                      + u[2] * (a[2] / da + b[2] / db))
-        step = -f1 / f2 if f2 > 0.0 else (-FALLBACK_STEP if f1 > 0.0 else FALLBACK_STEP)
+        if f2 > 0.0:
+            step = -f1 / f2
+        elif abs(f1) <= TIE * rad:  # a tie (the symmetric point): rounding does not choose
+            step = FALLBACK_STEP
+        else:
+            step = -FALLBACK_STEP if f1 > 0.0 else FALLBACK_STEP
         step = min(MAX_STEP, max(-MAX_STEP, step))
         phi += step
         if abs(step) < STEP_TOL:

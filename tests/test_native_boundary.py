@@ -91,5 +91,6 @@ def test_neck_reference_reads_the_one_model():
     assert _ref_polyctl.STEP_TOL == lib.PYRT_NECK_STEP_TOL
     assert _ref_polyctl.MAX_STEP == lib.PYRT_NECK_MAX_STEP
     assert _ref_polyctl.FALLBACK_STEP == lib.PYRT_NECK_FALLBACK_STEP
+    assert _ref_polyctl.TIE == lib.PYRT_NECK_TIE
     assert _ref_polyctl.MIN_SEGMENT == lib.PYRT_MIN_SEGMENT_CM
     assert _ref_polyctl.CONTROLLER_SEGMENTS == nat.PolyControl.RING_SEGMENTS

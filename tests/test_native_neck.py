@@ -234,3 +234,15 @@ def test_controller_finds_the_source_where_lower_segments_bear(x):
                         stretch=[0.0] * n, dead=[0.0] * n, ring=ring, axis_point=(0.0, 0.0),
                         weight_air=50.0, weight_liquid=40.0, liquid_level=None,
                         offside_tension=10.0, near_end_cm=10.0, position=x, ring_segments=4)
+
+
+def test_a_tie_between_two_contacts_is_not_decided_by_rounding():
+    """A rope from a point on the ring's axis, started at the symmetric rim point: both the C
+    kernel and the reference step the same way (+), whatever the rounding of the slope."""
+    ring = nat.NeckRing((0.0, 0.0, 0.0), (0.0, 0.6246950475544243, 0.7808688094430304), 5.0)
+    far, q = _at(ring, 6.0, 0.0, 0.0), _at(ring, -1.0, -6.0, 0.0)
+    got = ring.contact(far, q, 0.0)
+    want = ref.contact(_frame(ring), far, q, 0.0)
+    assert got is not None and want is not None
+    np.testing.assert_allclose(got[0], want[0], rtol=0, atol=1e-9)
+    assert got[1] == pytest.approx(want[1], abs=1e-9) and got[1] > 0
