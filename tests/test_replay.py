@@ -260,13 +260,14 @@ def test_requests_name_components_commands_and_motion_records():
 
 
 def test_a_recorded_request_for_a_missing_method_is_an_error():
-    """A journal naming a method the station has not: ConfigError, nothing called."""
+    """A journal naming a method the station has not, or one a journal does not replay
+    (closing, writing files): ConfigError, nothing called."""
     _loop, station = _station()
     try:
-        with pytest.raises(ConfigError, match="no method"):
-            decode_request(station, '{"o":"","m":"no_such_thing","a":[]}')
-        with pytest.raises(ConfigError, match="names no method"):
-            decode_request(station, '{"o":"","m":"__class__","a":[]}')
+        for name in ("no_such_thing", "__class__", "close", "open_audit_log", "write_back"):
+            with pytest.raises(ConfigError, match="names no method a journal replays"):
+                decode_request(station, f'{{"o":"","m":"{name}","a":["/tmp/x"]}}')
+        assert encode_request(station, "x", station.close, ()) is None  # never recorded
         with pytest.raises(ConfigError, match="not JSON"):
             decode_request(station, "{oops")
     finally:
@@ -350,3 +351,35 @@ def test_a_run_over_tcp_replays_without_its_board_sim(tmp_path):
     status, out = _replay(path)
     assert status == 0, out
     assert "identical" in out
+
+
+def test_a_headless_run_ended_by_sigterm_replays_identically(tmp_path):
+    """A headless station stopped by SIGTERM stops every motor through the mailbox: the journal
+    records that stop as the station's, and the replay matches to the end."""
+    path = tmp_path / "headless.pj"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pyrt", "gripper", "--headless", "--serve", "127.0.0.1:0",
+         "--journal", str(path)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        cwd=tmp_path, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        ticks = 0
+        while time.monotonic() < deadline and ticks < 1500:  # past the power-up's I
+            time.sleep(0.05)
+            if path.exists():
+                try:
+                    ticks = JournalReader(path).summary().ticks
+                except JournalError:
+                    ticks = 0
+        assert ticks >= 1500
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+    assert proc.returncode == 0, out
+    assert any('"m":"stop"' in t for t in _requests(path))
+    status, replayed = _replay(path)
+    assert status == 0, replayed
+    assert "identical" in replayed

@@ -92,8 +92,10 @@ class ServedRobot(Protocol):
         """Why ``line`` names no command of this robot, or None."""
         ...
 
-    def stop_all(self) -> None:
-        """Stop every motor now (called in the loop thread)."""
+    @property
+    def stop_all(self) -> Callable[[], object]:
+        """What stops every motor now: a call made in the loop thread (a method of
+        the station itself, so that a journal records it as a request to the station)."""
         ...
 
     def release(self, shell: Shell) -> None:

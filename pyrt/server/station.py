@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import io
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, TextIO
 
@@ -98,8 +98,11 @@ class ServedStation:
             return False
         return rec.anyone and not rec.only_reads(words)
 
-    def stop_all(self) -> None:
-        self.station.stop()
+    @property
+    def stop_all(self) -> Callable[[], object]:
+        """Stop every motor (called in the loop thread): the station's own ``stop``, so
+        that a journal records the request as the station's, and a replay applies it."""
+        return self.station.stop
 
     def release(self, shell: Any) -> None:
         """A privileged connection ended: leave a monitor level it entered."""

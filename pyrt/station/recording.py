@@ -47,7 +47,19 @@ from pyrt.journal import BlackBox, Header, Journal
 if TYPE_CHECKING:
     from pyrt.station.base import Station
 
-__all__ = ["LOOP_FAULT", "Recorder", "decode_request", "encode_request", "with_image"]
+__all__ = ["LOOP_FAULT", "REPLAYED", "Recorder", "decode_request", "encode_request", "with_image"]
+
+#: The requests a journal records and a replay applies: what the consoles, the DAQ
+#: server and EPICS ask of a station (its command records run through ``execute``)
+#: and of a level (``enter_level``).  Nothing else is called from a journal: a
+#: journal from elsewhere names no method of one's choosing.
+REPLAYED = frozenset({
+    "execute", "submit_motion", "acknowledge", "after_acknowledge", "stop", "stop_all",
+    "set_param", "begin_wait", "end_wait", "enter_level", "reflex", "trip",
+    # reads, replayed as they were made (they change nothing; a read that did would show)
+    "status", "status_fields", "busy", "param", "params_of", "idle_report", "wait_report",
+    "where", "last_stop", "wait_refusal",
+})
 
 #: The event of a fault the loop itself declared (consecutive overruns): the
 #: clock's decision, which a replay applies rather than checks.
@@ -114,7 +126,7 @@ def encode_request(station: Station, name: str, fn: Callable[..., Any] | None, a
             return json.dumps({"motion": _enc(station, motion)}, separators=(",", ":"))
         owner = getattr(fn, "__self__", None)
         method = getattr(fn, "__name__", "")
-        if owner is None or not method.isidentifier() or method.startswith("__"):
+        if owner is None or method not in REPLAYED:
             return None
         if owner is station:
             who = ""
@@ -179,8 +191,9 @@ def decode_request(station: Station, text: str) -> Callable[[], Any]:
         return lambda: runner.motion.put(record)
     who, method = data.get("o", ""), data.get("m", "")
     owner: Any = station if not who else station.component(who)
-    if not isinstance(method, str) or not method.isidentifier() or method.startswith("__"):
-        raise ConfigError(f"recorded request names no method: {text[:60]!r}")
+    if not isinstance(method, str) or method not in REPLAYED:
+        raise ConfigError(f"recorded request names no method a journal replays: "
+                          f"{text[:60]!r}")
     fn = getattr(owner, method, None)
     if not callable(fn):
         raise ConfigError(f"{type(owner).__name__} has no method {method!r}")

@@ -24,7 +24,6 @@ journal ended early, or where a gap makes the rest unreplayable).
 from __future__ import annotations
 
 import contextlib
-import json
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -430,11 +429,3 @@ class _Building:
         if not _active:
             unregister_backend("replay")
 
-
-def header_summary(path: str | Path) -> str:
-    """One line about what a journal holds (for errors and ``--help``)."""
-    try:
-        r = JournalReader(path)
-    except JournalError as exc:
-        return str(exc)
-    return "; ".join(r.summary().lines()) + " " + json.dumps(dict(r.header.metadata))[:80]
