@@ -51,6 +51,20 @@ def _replay(path: Path, *argv: str) -> tuple[int, str]:
     return status, out.getvalue()
 
 
+def _wait_for_ticks(path: Path, ticks: int, seconds: float = 60) -> int:
+    """Poll a journal being written until it holds ``ticks`` complete ticks (or time is up)."""
+    deadline = time.monotonic() + seconds
+    have = 0
+    while time.monotonic() < deadline and have < ticks:
+        time.sleep(0.05)
+        if path.exists():
+            try:
+                have = JournalReader(path).summary().ticks
+            except JournalError:
+                have = 0
+    return have
+
+
 def _events(path: Path) -> list[tuple[int, str, str]]:
     return [(t.tick, e.name, e.message) for t in JournalReader(path).ticks() for e in t.events]
 
@@ -163,18 +177,7 @@ def test_a_journal_killed_mid_move_replays_to_its_last_complete_tick(tmp_path):
         assert proc.stdin is not None
         proc.stdin.write("prototype to 0 0 93\n")
         proc.stdin.flush()
-        deadline = time.monotonic() + 60
-        ticks = 0
-        while time.monotonic() < deadline:
-            if path.exists():
-                try:
-                    ticks = JournalReader(path).summary().ticks
-                except JournalError:
-                    ticks = 0
-                if ticks >= 600:  # three seconds of the move at 200 Hz
-                    break
-            time.sleep(0.05)
-        assert ticks >= 600
+        assert _wait_for_ticks(path, 600) >= 600  # three seconds of the move at 200 Hz
     finally:
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(10)
@@ -362,16 +365,7 @@ def test_a_headless_run_ended_by_sigterm_replays_identically(tmp_path):
          "--journal", str(path)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
         cwd=tmp_path, text=True)
     try:
-        deadline = time.monotonic() + 60
-        ticks = 0
-        while time.monotonic() < deadline and ticks < 1500:  # past the power-up's I
-            time.sleep(0.05)
-            if path.exists():
-                try:
-                    ticks = JournalReader(path).summary().ticks
-                except JournalError:
-                    ticks = 0
-        assert ticks >= 1500
+        assert _wait_for_ticks(path, 1500) >= 1500  # past the power-up's I
         proc.send_signal(signal.SIGTERM)
         out, _ = proc.communicate(timeout=30)
     finally:
