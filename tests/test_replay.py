@@ -37,6 +37,9 @@ def _record(tmp_path: Path, station: str, stdin: str, *extra: str, name: str = "
                           timeout=timeout)
     assert done.returncode == 0, done.stdout + done.stderr
     assert path.is_file(), done.stdout
+    ticks = JournalReader(path).summary().ticks
+    assert f"journal: {ticks} ticks in {path}" in done.stdout  # said at the end, with
+    assert f"'pyrt replay {path}' re-runs them" in done.stdout  # what to do with it
     return path
 
 

@@ -134,6 +134,12 @@ def run_factory(factory: StationFactory, args: argparse.Namespace) -> int:
         station.close_audit_log()
         if recorder is not None:
             recorder.close()
+            journal = recorder.journal
+            if journal.path is not None:
+                gaps = (f", {len(journal.gaps)} gap(s) where the writer fell behind"
+                        if journal.gaps else "")
+                say(f"journal: {journal.recorded} ticks in {journal.path}{gaps}; "
+                    f"'pyrt replay {journal.path}' re-runs them")
     if args.timing_log:
         wall = time.perf_counter() - wall0
         say(f"timing log written to {args.timing_log} ({loop.tick_index} ticks, {wall:.2f} s)")
