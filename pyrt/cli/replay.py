@@ -43,7 +43,7 @@ __all__ = ["add_parser", "run"]
 #: boards, and no links).
 _NOT_REPLAYED = {"boards", "journal", "black_box", "serve", "epics", "headless",
                  "timing_log", "history", "speed", "fifo", "timer_slack", "max_overruns",
-                 "cpu", "lock_memory", "run", "command"}
+                 "mlock", "run"}
 
 
 def _tick(text: str) -> int:

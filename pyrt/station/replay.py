@@ -338,7 +338,8 @@ class Replay:
         if t is None:
             return
         writes, self._writes = self._writes, []
-        faults, self._faults[:] = list(self._faults), []
+        faults = self._faults[:]
+        self._faults.clear()
         rec = t.outputs
         for k in range(max(len(rec), len(writes))):
             r = rec[k] if k < len(rec) else None
