@@ -248,6 +248,32 @@ def test_a_reader_neither_writes_nor_feeds_the_watchdog_while_the_controller_own
         server.close()
 
 
+def test_a_second_pyrt_controller_is_told_the_outputs_are_owned(served):
+    """Two pyrt controllers on one board-sim --modbus: the second opens (reading is open to
+    all) but its write fails with a BoardError naming exception 06 and the owner's claim, and
+    changes nothing; once the first has closed, the second's write is taken."""
+    from pyrt.boards import open_boards
+    from pyrt.boards.gripper import DAC
+    from pyrt.errors import BoardError
+
+    server, world = served
+    url = f"{server.url}?map=builtin:gripper"
+    first = open_boards(url, "gripper", GRIPPER_BOARDS, max_age=0)
+    second = open_boards(url, "gripper", GRIPPER_BOARDS, max_age=0)
+    try:
+        first["gripper"].write(DAC, 0x90)
+        with pytest.raises(BoardError, match=r"exception 06 \(server device busy"):
+            second["gripper"].write(DAC, 0x10)
+        assert _dac(world) == 0x90
+        first.close()
+        assert _until(lambda: server.owner is None)
+        second["gripper"].write(DAC, 0x70)
+        assert _dac(world) == 0x70
+    finally:
+        first.close()
+        second.close()
+
+
 # -- the controller killed while an HMI polls (board-sim and the controller in subprocesses) ---
 
 #: A pyrt controller that drives the DAC to 1 (near full drive), says 'driving', then polls.
@@ -455,3 +481,36 @@ def test_fuzzed_modbus_frames_never_crash_the_server_nor_write_an_illegal_value(
         fresh.close()
     finally:
         c.close()
+
+
+# -- the closing message, true to the link's settings ------------------------------------------
+
+
+@pytest.mark.wallclock
+@pytest.mark.parametrize("off_on_loss", ["0", "1"])
+def test_the_closing_message_says_what_the_link_promises_about_the_outputs(off_on_loss):
+    """A gripper over modbus:// whose server dies: closing reports the lost boards in one line
+    that says the device turns its outputs off only when the URL says so (off_on_loss=1), and
+    otherwise that they may still be driven."""
+    from pyrt.scheduler import Loop, WallClock
+    from pyrt.station.gripper import build_gripper
+
+    server, _world = _serve()
+    url = f"{server.url}?map=builtin:gripper&off_on_loss={off_on_loss}"
+    station = build_gripper(Loop(WallClock()), boards=url)
+    reports: list[str] = []
+    station.close_report = reports.append
+    try:
+        station.start()
+        server.close()
+        assert _until(lambda: station.fault is not None), "no fault"
+    finally:
+        station.close()
+        server.close()
+    assert len(reports) == 1, reports
+    if off_on_loss == "1":
+        assert reports[0].endswith("the board turns its outputs off when its link drops")
+    else:
+        assert "the board turns its outputs off" not in reports[0]
+        assert "not known to turn its outputs off" in reports[0]
+        assert "off_on_loss=0" in reports[0] and "may still be driven" in reports[0]

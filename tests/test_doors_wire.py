@@ -16,6 +16,7 @@ import pytest
 from pyrt.boards import open_boards
 from pyrt.boards.gripper import DAC, DAC_NULL
 from pyrt.boards.wire import MAX_LINE
+from pyrt.cli import main
 from pyrt.errors import BoardError
 from pyrt.sim.boardsim import BoardServer
 from pyrt.sim.world import GRIPPER_BOARDS, GripperWorld
@@ -277,3 +278,15 @@ def test_fuzzed_wire_lines_never_crash_the_server_nor_write_an_illegal_value(ser
         assert fresh_reply == f"OK {_dac(world)}"
     finally:
         c.close()
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["--max-clients", "1"], "--max-clients must be 2..1024 connections, got 1"),
+    (["--max-clients", "many"], "--max-clients must be a whole number of connections"),
+    (["--idle", "0"], "must be 0.01..86400 s, got '0'"),
+])
+def test_board_sim_refuses_bad_connection_bounds_in_one_line(capsys, argv, message):
+    """pyrt board-sim gripper with a bound it cannot keep: exit 1, one line naming it."""
+    assert main(["board-sim", "gripper", *argv]) == 1
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1, err

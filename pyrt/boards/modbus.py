@@ -198,7 +198,7 @@ class ModbusRegisters(ImageBackend):
             reply = self._receive(what, pdu)
             if reply.isError():
                 self._pending.clear()
-                raise BoardError(self.url, f"{what}: the device answered {reply}")
+                raise BoardError(self.url, f"{what}: {_refusal(reply)}")
             out.append((kind, what, reply))
         return out
 
@@ -215,7 +215,7 @@ class ModbusRegisters(ImageBackend):
         except OSError as exc:
             self._fail(what, exc.strerror or str(exc))
         if reply.isError():
-            raise BoardError(self.url, f"{what}: the device answered {reply}")
+            raise BoardError(self.url, f"{what}: {_refusal(reply)}")
         return reply
 
     def _read_group(self, g: Group) -> list[int]:
@@ -358,6 +358,28 @@ def _pdu_classes() -> dict[str, Any]:
 def _exception_types() -> tuple[type[BaseException], ...]:
     from pymodbus.exceptions import ModbusException
     return (ModbusException,)
+
+
+#: The exception codes of the Modbus application protocol, in words.
+_EXCEPTIONS = {
+    1: "illegal function",
+    2: "illegal data address (the map places a register where the device has none)",
+    3: "illegal data value",
+    4: "server device failure",
+    5: "acknowledge (the device is still working on it)",
+    6: "server device busy (board-sim: another controller owns the outputs)",
+    8: "memory parity error",
+    10: "gateway path unavailable",
+    11: "gateway target device failed to respond (no such unit there?)",
+}
+
+
+def _refusal(reply: Any) -> str:
+    """An exception reply in words: ``the device answered exception 06 (...)``."""
+    code = getattr(reply, "exception_code", None)
+    if not isinstance(code, int):
+        return f"the device answered {reply}"
+    return f"the device answered exception {code:02X} ({_EXCEPTIONS.get(code, 'unknown')})"
 
 
 def _why(exc: BaseException) -> str:
