@@ -15,7 +15,7 @@ import pytest
 
 from pyrt.boards import open_boards
 from pyrt.boards.gripper import DAC, DAC_NULL
-from pyrt.boards.wire import MAX_LINE
+from pyrt.boards.wire import MAX_LINE, WireError, parse_request
 from pyrt.cli import main
 from pyrt.errors import BoardError
 from pyrt.sim.boardsim import BoardServer
@@ -119,6 +119,16 @@ def test_a_second_writer_is_busy_while_the_controller_owns_the_outputs(served):
         assert other.ask("W gripper dac 0x10") == "OK" and _dac(world) == 0x10
     finally:
         other.close()
+
+
+def test_own_is_a_request_of_its_own_without_arguments():
+    """OWN parses as the claim (any case); OWN with an argument is a syntax error."""
+    kinds = GRIPPER_BOARDS
+    assert parse_request(b"OWN", kinds).verb == "OWN"
+    assert parse_request(b"own\r", kinds).verb == "OWN"
+    with pytest.raises(WireError) as err:
+        parse_request(b"OWN gripper", kinds)
+    assert err.value.code == "syntax"
 
 
 def test_a_reader_does_not_feed_the_watchdog():
