@@ -218,6 +218,28 @@ def test_connections_are_bounded_and_a_controller_always_gets_in():
         server.close()
 
 
+def test_250_half_open_connections_neither_exhaust_the_server_nor_keep_a_controller_out(served):
+    """250 connections each stopped in the middle of a frame (the default bounds): the server
+    holds at most max_clients of them, and a controller still reads the inputs and drives the
+    DAC at once."""
+    server, world = served
+    held: list[_Raw] = []
+    try:
+        for n in range(250):
+            c = _Raw(server.port)
+            c.sock.sendall(_frame(n, struct.pack(">BHH", 4, 0, 7))[:9])
+            held.append(c)
+        assert _until(lambda: server.clients <= server.max_clients)
+        ctl = _Raw(server.port)
+        assert ctl.read_inputs()[:2] == bytes([4, 14])
+        assert ctl.write(DAC_AT, 0x90)[:1] == b"\x06" and _dac(world) == 0x90
+        assert server.clients <= server.max_clients and server.evicted >= 250 - server.max_clients
+        ctl.close()
+    finally:
+        for c in held:
+            c.close()
+
+
 def test_a_reader_neither_writes_nor_feeds_the_watchdog_while_the_controller_owns():
     """The controller writes the DAC and owns the outputs; a second client's write gets
     exception 06 (busy) and changes nothing; the controller falls silent while the reader keeps

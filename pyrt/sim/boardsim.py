@@ -153,7 +153,7 @@ class LinkServer:
         try:
             family = socket.AF_INET6 if ":" in host else socket.AF_INET
             self._listener = socket.create_server((host, port), family=family,
-                                                  backlog=max(8, min(max_clients, 128)))
+                                                  backlog=64)
         except OSError as exc:
             raise ConfigError(f"board-sim cannot listen on {host}:{port}: "
                               f"{exc.strerror or exc}") from None
@@ -343,10 +343,14 @@ class LinkServer:
                 self._drop(conn, f"closed: no complete request for {idle / 1e9:.1f} s")
 
     def _accept(self) -> None:
-        try:
-            sock, peer = self._listener.accept()
-        except OSError:
-            return
+        for _ in range(64):  # what the backlog holds, and no more per pass: the world steps on
+            try:
+                sock, peer = self._listener.accept()
+            except OSError:
+                return
+            self._admit(sock, peer)
+
+    def _admit(self, sock: socket.socket, peer: tuple) -> None:
         addr = f"{peer[0]}:{peer[1]}"
         if len(self._conns) >= self.max_clients:
             readers = [c for c in self._conns if c is not self._owner]
