@@ -366,14 +366,14 @@ def _exception_types() -> tuple[type[BaseException], ...]:
 #: The exception codes of the Modbus application protocol, in words.
 _EXCEPTIONS = {
     1: "illegal function",
-    2: "illegal data address (the map places a register where the device has none)",
+    2: "illegal data address; the map places a register where the device has none?",
     3: "illegal data value",
     4: "server device failure",
-    5: "acknowledge (the device is still working on it)",
-    6: "server device busy (board-sim: another controller owns the outputs)",
+    5: "acknowledge; the device is still working on it",
+    6: "server device busy; board-sim says so while another controller owns the outputs",
     8: "memory parity error",
     10: "gateway path unavailable",
-    11: "gateway target device failed to respond (no such unit there?)",
+    11: "gateway target device failed to respond; no such unit there?",
 }
 
 
