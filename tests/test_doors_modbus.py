@@ -177,6 +177,7 @@ def test_pipelined_requests_all_get_replies_in_order(served):
         c.close()
 
 
+@pytest.mark.wallclock
 def test_idle_and_half_open_connections_are_closed_and_the_server_keeps_serving():
     """A connection that sends nothing and one that stops mid-frame are closed after the idle
     time (0.3 s); a fresh connection is still served."""
@@ -240,6 +241,7 @@ def test_250_half_open_connections_neither_exhaust_the_server_nor_keep_a_control
             c.close()
 
 
+@pytest.mark.wallclock
 def test_a_reader_neither_writes_nor_feeds_the_watchdog_while_the_controller_owns():
     """The controller writes the DAC and owns the outputs; a second client's write gets
     exception 06 (busy) and changes nothing; the controller falls silent while the reader keeps

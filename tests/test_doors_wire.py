@@ -131,6 +131,7 @@ def test_own_is_a_request_of_its_own_without_arguments():
     assert err.value.code == "syntax"
 
 
+@pytest.mark.wallclock
 def test_a_reader_does_not_feed_the_watchdog():
     """The controller writes the DAC and falls silent; a reader polls SNAP every 50 ms: the
     watchdog (0.3 s) turns the DAC off all the same, and the reader is served throughout."""
@@ -160,6 +161,7 @@ def test_a_reader_does_not_feed_the_watchdog():
         server.close()
 
 
+@pytest.mark.wallclock
 def test_a_silent_owner_is_displaced_by_a_new_controller_after_the_watchdog_time():
     """A controller that owns the outputs and then says nothing (its host gone, the socket
     half-open): once the watchdog has turned the outputs off, a new controller opens the boards
@@ -178,6 +180,7 @@ def test_a_silent_owner_is_displaced_by_a_new_controller_after_the_watchdog_time
         server.close()
 
 
+@pytest.mark.wallclock
 def test_idle_and_half_open_connections_are_closed_and_the_server_keeps_serving():
     """A connection that sends nothing and one that stops mid-line are closed after the idle
     time (0.3 s); a fresh connection is still served."""
