@@ -538,3 +538,27 @@ def test_the_closing_message_says_what_the_link_promises_about_the_outputs(off_o
         assert "the board turns its outputs off" not in reports[0]
         assert "not known to turn its outputs off" in reports[0]
         assert "off_on_loss=0" in reports[0] and "may still be driven" in reports[0]
+
+
+def test_random_byte_streams_on_many_connections_leave_the_server_serving(served):
+    """Fifty connections (seeded) each blast 4 kB of random bytes, or random frames with a good
+    header, and close at once: the server keeps running, every output holds a legal value,
+    and a well-formed request is answered afterwards."""
+    server, world = served
+    rng = random.Random(37)
+    for n in range(50):
+        c = _Raw(server.port)
+        if n % 2:
+            data = bytes(rng.randrange(256) for _ in range(4096))
+        else:
+            data = b"".join(_frame(k, _random_pdu(rng) or b"\x03") for k in range(100))
+        with contextlib.suppress(OSError):
+            c.sock.sendall(data)
+        c.close()
+        assert server.alive and _legal(world, _outputs(world))
+    fresh = _Raw(server.port)
+    try:
+        assert fresh.read_inputs()[:2] == bytes([4, 14])
+        assert fresh.read_holding(DAC_AT) == [_dac(world)]
+    finally:
+        fresh.close()

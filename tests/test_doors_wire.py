@@ -303,3 +303,23 @@ def test_board_sim_refuses_bad_connection_bounds_in_one_line(capsys, argv, messa
     assert main(["board-sim", "gripper", *argv]) == 1
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1, err
+
+
+def test_random_byte_streams_on_many_connections_leave_the_server_serving(served):
+    """Fifty connections (seeded) each blast 4 kB of random bytes, some cut mid-line, some
+    closed at once: the server keeps running, every output holds a legal value, and a
+    well-formed request is answered afterwards."""
+    server, world = served
+    rng = random.Random(37)
+    for _ in range(50):
+        c = _Raw(server.port)
+        data = bytes(rng.randrange(256) for _ in range(4096))
+        with contextlib.suppress(OSError):
+            c.sock.sendall(data)
+        c.close()
+        assert server.alive and _legal(world, _outputs(world))
+    fresh = _Raw(server.port)
+    try:
+        assert fresh.ask("R gripper dac") == f"OK {_dac(world)}"
+    finally:
+        fresh.close()
