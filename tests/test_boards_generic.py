@@ -243,11 +243,11 @@ def test_a_greeting_without_a_declared_board_is_refused_naming_it(served):
     text = str(err.value)
     assert server.url in text and "serves the arm station" in text
     assert "missing: gripper (gripper-cage)" in text
-    assert _until(lambda: server._client is None)  # the refused link is closed first
+    assert _until(lambda: server.clients == 0)  # the refused link is closed first
     with pytest.raises(ConfigError) as err:
         open_boards(server.url, "arm", {"servo": wider})
     assert f"different: servo (declared {wider.tag}, served {SERVO.tag})" in str(err.value)
-    assert _until(lambda: server._client is None)
+    assert _until(lambda: server.clients == 0)
     with open_boards(server.url, "arm", ARM_BOARDS) as boards:  # free again
         assert list(boards) == ["servo"]
 

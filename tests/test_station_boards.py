@@ -229,7 +229,7 @@ def test_killed_controller_process_leaves_the_outputs_off_within_the_watchdog_ti
                 break
         else:
             raise AssertionError(f"the jaws did not move: {ctl.seen[-10:]}")
-        sim.expect(r"^controller \S+ connected$", 10.0)
+        sim.expect(r"^controller \S+ owns the outputs$", 10.0)
         ctl.proc.send_signal(signal.SIGKILL)
         t_kill = time.monotonic()
         ctl.kill()

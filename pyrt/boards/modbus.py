@@ -13,11 +13,13 @@ is an :class:`~pyrt.boards.image.ImageBackend` (the back-end contract):
   waiting (``prefetch=1``, the default) and the next read phase only reads
   its reply, which came while the loop slept: no round trip is left inside
   a tick that changes no output.  One transaction is in flight at a time
-  (many devices, and pymodbus's server, answer one at a time);
+  (many devices answer one at a time; board-sim answers pipelined ones too);
 * the reflex's writes go out at once; a device is not assumed to turn its
   outputs off when the link drops, so on a dead link they are recorded as
   failed (BoardError naming the URL) -- ``off_on_loss=1`` says the device
-  does (board-sim does: its map's watchdog);
+  does (board-sim does: its watchdog, fed only by the controller that owns
+  the outputs -- the connection that wrote first -- turns them off when that
+  connection drops or falls silent, whoever else is reading);
 * a reply later than N ticks is an overrun, M in a row or none within the
   timeout (N x M ticks, at least 0.1 s) trips the station naming the URL.
 
@@ -30,7 +32,8 @@ The client.  pymodbus's synchronous client (:class:`pymodbus.client.ModbusTcpCli
 chosen by measurement (``bench/bench_image.py``, ``test_modbus_exchange_cost``:
 one grouped read of the gripper's inputs, input registers 0..6 of unit 1,
 from ``pyrt board-sim gripper --modbus`` in another process on loopback,
-2000 reads each, two runs on this shared two-core machine):
+2000 reads each, two runs on this shared two-core machine, when board-sim
+served Modbus through pymodbus's server):
 
 ==========================================  ===============  ===============
 client                                      p50              p99
@@ -45,8 +48,8 @@ the coroutine to the client's event-loop thread and waits for the result,
 two thread hand-offs per request, which is what makes it slower and its
 tail wider.  The sync client is lower and steadier.  What remains is
 pymodbus's own cost per request (building and parsing the frame in
-Python, some 40-60 µs of the figures) and the server's (board-sim's
-asyncio loop shares the machine with its world), more than the loopback
+Python, some 40-60 µs of the figures) and the server's (board-sim's one
+thread shares the machine with its world), more than the loopback
 (a bare TCP round trip is some 20-30 µs here).  Pipelining (above) takes
 the read's wait out of the tick: what is left in ``io:read`` is parsing a
 reply that is already there.
@@ -198,7 +201,7 @@ class ModbusRegisters(ImageBackend):
             reply = self._receive(what, pdu)
             if reply.isError():
                 self._pending.clear()
-                raise BoardError(self.url, f"{what}: the device answered {reply}")
+                raise BoardError(self.url, f"{what}: {_refusal(reply)}")
             out.append((kind, what, reply))
         return out
 
@@ -215,7 +218,7 @@ class ModbusRegisters(ImageBackend):
         except OSError as exc:
             self._fail(what, exc.strerror or str(exc))
         if reply.isError():
-            raise BoardError(self.url, f"{what}: the device answered {reply}")
+            raise BoardError(self.url, f"{what}: {_refusal(reply)}")
         return reply
 
     def _read_group(self, g: Group) -> list[int]:
@@ -358,6 +361,28 @@ def _pdu_classes() -> dict[str, Any]:
 def _exception_types() -> tuple[type[BaseException], ...]:
     from pymodbus.exceptions import ModbusException
     return (ModbusException,)
+
+
+#: The exception codes of the Modbus application protocol, in words.
+_EXCEPTIONS = {
+    1: "illegal function",
+    2: "illegal data address; the map places a register where the device has none?",
+    3: "illegal data value",
+    4: "server device failure",
+    5: "acknowledge; the device is still working on it",
+    6: "server device busy; board-sim says so while another controller owns the outputs",
+    8: "memory parity error",
+    10: "gateway path unavailable",
+    11: "gateway target device failed to respond; no such unit there?",
+}
+
+
+def _refusal(reply: Any) -> str:
+    """An exception reply in words: ``the device answered exception 06 (...)``."""
+    code = getattr(reply, "exception_code", None)
+    if not isinstance(code, int):
+        return f"the device answered {reply}"
+    return f"the device answered exception {code:02X} ({_EXCEPTIONS.get(code, 'unknown')})"
 
 
 def _why(exc: BaseException) -> str:

@@ -45,7 +45,10 @@ two's complement if signed), multiplied by ``scale`` and rounded; an
 unsigned value is kept to the register's declared width (a 24-bit counter
 in a 32-bit place wraps as the counter does), a signed one is clamped to
 its range.  A value written is divided by ``scale``, rounded and encoded
-the other way round.
+the other way round.  A server decodes a value written to it with
+:meth:`Place.decode_write`, which refuses (ValueError) a value the register
+cannot hold instead of keeping it to the width: 0x0100 written to an 8-bit
+register is an illegal value, never 0.
 
 Grouping.  :meth:`RegisterMap.read_groups` joins the inputs of one unit
 and table whose places are contiguous into one request (at most 125
@@ -121,8 +124,9 @@ class Place:
         """(board, register, index)."""
         return (self.board, self.register.name, self.index)
 
-    def decode(self, words: list[int]) -> int:
-        """The register value of the protocol values ``words`` (``size`` of them)."""
+    def _value(self, words: list[int]) -> int:
+        """The words joined, two's complement if signed, times ``scale`` (not kept
+        to the register's range)."""
         if self.width == 1:
             raw = int(bool(words[0]))
         elif self.width == 16:
@@ -132,11 +136,22 @@ class Place:
             raw = ((hi & 0xFFFF) << 16) | (lo & 0xFFFF)
         if self.signed and raw >= 1 << (self.width - 1):
             raw -= 1 << self.width
-        value = raw if self.scale == 1 else round(raw * self.scale)
+        return raw if self.scale == 1 else round(raw * self.scale)
+
+    def decode(self, words: list[int]) -> int:
+        """The register value of the protocol values ``words`` (``size`` of them),
+        as read: kept to the register's declared width (see the module text)."""
+        value = self._value(words)
         reg = self.register
         if reg.signed:
             return min(max(value, reg.low), reg.high)
         return value & reg.high
+
+    def decode_write(self, words: list[int]) -> int:
+        """The register value a write of ``words`` asks for; ValueError if the
+        register cannot hold it (a device answers exception 03 and writes nothing:
+        a value is never wrapped or clamped into range)."""
+        return self.register.check_value(self._value(words))
 
     def encode(self, value: int) -> list[int]:
         """The protocol values of the register value ``value``."""

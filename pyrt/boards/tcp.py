@@ -14,7 +14,11 @@ the same; the TIO10; the dataConcentrator; :mod:`pyrt.boards.kinds`).
 
 On connect the greeting names the station and its boards with their kinds:
 every board the station declares must be there with the same kind and
-fingerprint, else ConfigError names those missing or different.
+fingerprint, else ConfigError names those missing or different.  The
+controller then claims the outputs (``OWN``): while another controller
+owns them, opening fails with BoardError ``busy`` naming it.  Other
+connections may read the same boards (an HMI); only the owner's accesses
+feed board-sim's watchdog.
 
 The process image (:mod:`pyrt.boards.image`, the back-end contract).  The
 read phase is one ``SNAP`` (every declared input); the write phase one
@@ -159,6 +163,16 @@ class TcpLink:
         """Take the board's watchdog count as it is at the next look (the
         controller's loop starts: trips while nothing polled are not news)."""
         self._trips = None
+
+    def own(self) -> None:
+        """Claim the outputs for this connection (``OWN``): BoardError ``busy``
+        naming the owner while another controller owns them.  (A board-sim that
+        does not know ``OWN`` has its one controller per connection already.)"""
+        try:
+            self._exchange("OWN")
+        except BoardError as exc:
+            if "refused: syntax " not in str(exc):
+                raise
 
     def info(self) -> dict[str, str]:
         """The world's state (``INFO``, not a register access): KEY -> VALUE."""
@@ -578,6 +592,7 @@ def open_tcp(
     client = TcpRegisters(link, kinds, max_age=age, timeout=t, overrun_ticks=n,
                           overrun_limit=m, prefetch=str(prefetch) in ("1", "True"))
     try:
+        link.own()  # the outputs are this controller's, or BoardError busy
         client.open()  # the first copy: what the boards hold as this controller comes
         views = {name: ImageRegisters(client, name) for name in kinds}
         boards = {name: kind.remote(views[name], **options_for(kind, mine))

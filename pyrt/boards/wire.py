@@ -8,7 +8,7 @@ kinds in :mod:`pyrt.boards.kinds`).  Every request is a read or a write of
 a declared register, plus one ``SNAP`` that reads every input of a tick in
 one round trip.
 
-Transport.  One TCP connection per controller.  ASCII lines ending in LF
+Transport.  One TCP connection per client.  ASCII lines ending in LF
 (CR LF accepted), at most :data:`MAX_LINE` bytes with the line end.  Every
 request line gets exactly one reply line, in order (a client may pipeline
 requests without waiting for the replies).  Tokens are separated by
@@ -28,8 +28,18 @@ kind's fingerprint (eight hex digits over its register declarations,
 :attr:`~pyrt.boards.registers.BoardKind.fingerprint`).  The controller
 checks that every board it declares is there with the same kind and
 fingerprint, and refuses the boards naming those that are missing or
-different.  While another controller is connected the server answers
-``ERR busy ...`` instead and closes the connection: one controller at a time.
+different.
+
+One owner, any readers.  The controller then claims the outputs with
+``OWN``; a connection's first write claims them too.  One connection owns
+them at a time: while another owns them (it made a register access within
+the watchdog time), ``OWN`` and every write are answered ``ERR busy ...``
+and change nothing.  Any connection may read (``R``, ``SNAP``, ``INFO``):
+an HMI or a logger next to the controller.  An owner silent for longer
+than the watchdog time (its outputs are off already) is displaced by the
+next claim.  board-sim holds a bounded number of connections and closes
+one that completes no request for its idle time (``pyrt board-sim
+--max-clients``, ``--idle``).
 
 Replies.  ``OK [VALUE ...]`` or ``ERR CODE TEXT``, codes:
 
@@ -42,6 +52,7 @@ Replies.  ``OK [VALUE ...]`` or ``ERR CODE TEXT``, codes:
   in-process board raises as ``ValueError``;
 * ``too-long``: the line exceeds :data:`MAX_LINE` (the rest up to the next
   line end is discarded); ``ascii``: the line is not ASCII;
+* ``busy``: another connection owns the outputs (``OWN``, ``W``);
 * ``internal``: the server failed (a bug; it keeps serving).
 
 An error reply to a single access changes nothing and leaves the connection
@@ -53,6 +64,7 @@ Requests::
     W BOARD REG [INDEX] VALUE      OK              write an output
     W ...; W ...; ...              OK              several writes, one reply
     SNAP [BOARD ...]               OK TRIPS V ...  every input, in one round trip
+    OWN                            OK              claim the outputs (or ERR busy); a keep-alive
     INFO                           OK KEY=VALUE ...  the world's state (not a register access)
     QUIT                           OK bye          then the server closes the connection
 
@@ -67,13 +79,15 @@ declared order and an array index by index, after ``TRIPS``: the count of
 the watchdog's trips since board-sim started (a controller that sees it
 grow learns that its outputs were turned off).
 
-Watchdog.  Every request except ``INFO`` and ``QUIT`` is a register access.
-When none has come for the watchdog time, the boards turn their outputs
-off, as a real motion board does: every output register that declares an
-``off`` value is written with it (the gripper's DAC to null 80; every TIO10
-motor channel disarmed and every all-windings-off bit set).  The same
-happens at once when the controller's connection closes.  A later write
-drives the outputs again.
+Watchdog, fed only by the owner.  Every request except ``INFO`` and
+``QUIT`` is a register access; the owner's feed the watchdog (its ``SNAP``
+every tick is its keep-alive), a reader's never do.  When the owner has
+made none for the watchdog time, the boards turn their outputs off, as a
+real motion board does: every output register that declares an ``off``
+value is written with it (the gripper's DAC to null 80; every TIO10 motor
+channel disarmed and every all-windings-off bit set).  The same happens at
+once when the owner's connection closes, whoever else is connected.  A
+later write of the owner drives the outputs again.
 """
 
 from __future__ import annotations
@@ -108,7 +122,7 @@ VERSION = 2
 #: Longest line, line end included.
 MAX_LINE = 4096
 #: The request verbs.
-VERBS = ("R", "W", "SNAP", "INFO", "QUIT")
+VERBS = ("R", "W", "SNAP", "OWN", "INFO", "QUIT")
 #: Requests that are not register accesses (they do not feed the watchdog).
 NOT_ACCESSES = frozenset(("INFO", "QUIT"))
 
@@ -232,7 +246,7 @@ def parse_request(line: bytes, kinds: Mapping[str, BoardKind]) -> Request:
         if len(set(names)) != len(names):
             raise WireError("syntax", "SNAP names a board twice")
         return Request(verb, boards=names)
-    if verb in NOT_ACCESSES:
+    if verb in NOT_ACCESSES or verb == "OWN":
         if args:
             raise WireError("syntax", f"{verb} takes no arguments, got {len(args)}")
         return Request(verb)

@@ -9,20 +9,25 @@ world of a station, ``--station prototype|sno`` or ``--db DIR``; the
 names ``prototype`` and ``sno`` are short for ``manipulator --station``
 that station).  ``pyrt board-sim NAME --help`` lists the world's own
 options.  The first line printed says where (port 0 picks a free port).
-The wire protocol is in the module text of pyrt.boards.wire.  One
-controller at a time.
+The wire protocol is in the module text of pyrt.boards.wire.
 
-With ``--modbus HOST:PORT`` the boards are served as a Modbus TCP server
-instead (pymodbus; pip install 'pyrt[modbus]'), their registers placed by
-the map shipped for the station (pyrt/boards/maps/NAME.toml) or by
-``--map FILE``; a controller opens them with the URL board-sim prints,
-``modbus://HOST:PORT?map=builtin:NAME``, and any Modbus tool can read them
-(docs/hardware.md has the gripper's table).
+With ``--modbus HOST:PORT`` the boards are served as a Modbus TCP device
+instead, their registers placed by the map shipped for the station
+(pyrt/boards/maps/NAME.toml) or by ``--map FILE``; a controller opens them
+with the URL board-sim prints, ``modbus://HOST:PORT?map=builtin:NAME``, and
+any Modbus tool can read them (docs/hardware.md has the gripper's table).
+An illegal value is exception 03 and changes nothing.
 
-Watchdog: when no register access comes for ``--watchdog`` seconds, or the
-controller's connection closes, the outputs are turned off: every output
-register that declares an off value gets it (gripper: DAC to null 80;
-manipulator: every motor channel disarmed, all windings off).
+One controller owns the outputs (it claims them, or writes first); any
+other client may read them, and its writes are refused (busy).  Watchdog:
+when the owner makes no register access for ``--watchdog`` seconds, or
+its connection closes, the outputs are turned off, whoever else is
+connected: every output register that declares an off value gets it
+(gripper: DAC to null 80; manipulator: every motor channel disarmed, all
+windings off).  A reader never keeps them on.  At most ``--max-clients``
+connections are held (a newcomer closes the reader idle longest, never
+the owner) and one that completes no request for ``--idle`` seconds is
+closed.
 
 The manipulator's world starts with the source at the database POSITION,
 held as the controller leaves it; give the controller the same ``--db DIR``
@@ -43,14 +48,18 @@ import argparse
 import ipaddress
 import signal
 import sys
-import threading
 from typing import Any, NoReturn
 
 from pyrt.boards.registry import open_boards
 from pyrt.cli._help import Parser
 from pyrt.cli._loopopts import _whole
 from pyrt.errors import ConfigError
-from pyrt.sim.boardsim import DEFAULT_WATCHDOG_S, BoardServer
+from pyrt.sim.boardsim import (
+    DEFAULT_IDLE_S,
+    DEFAULT_MAX_CLIENTS,
+    DEFAULT_WATCHDOG_S,
+    BoardServer,
+)
 from pyrt.sim.world import World, WorldFactory
 from pyrt.station.factory import find_station, installed_stations, load_factory
 
@@ -130,6 +139,17 @@ def _positive_seconds(text: str) -> float:
 
 
 _step_us = _whole("world step", "µs", 50, 100_000)
+_max_clients = _whole("--max-clients", "connections", 2, 1024)
+
+
+def _idle_seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected seconds, got {text!r}") from None
+    if not 0.01 <= value <= 86400:
+        raise argparse.ArgumentTypeError(f"must be 0.01..86400 s, got {text!r}")
+    return value
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:
@@ -138,12 +158,18 @@ def _add_common(p: argparse.ArgumentParser) -> None:
                         "PORT alone means 127.0.0.1)")
     p.add_argument("--watchdog", type=_positive_seconds, default=DEFAULT_WATCHDOG_S,
                    metavar="S", help="outputs off after S seconds without a register access "
-                                     f"(default {DEFAULT_WATCHDOG_S:g})")
+                                     f"of the owning controller (default {DEFAULT_WATCHDOG_S:g})")
+    p.add_argument("--idle", type=_idle_seconds, default=DEFAULT_IDLE_S, metavar="S",
+                   help="close a connection that completes no request for S seconds "
+                        f"(default {DEFAULT_IDLE_S:g})")
+    p.add_argument("--max-clients", type=_max_clients, default=DEFAULT_MAX_CLIENTS,
+                   metavar="N", help="hold at most N connections, the owner's among them "
+                                     f"(2..1024, default {DEFAULT_MAX_CLIENTS})")
     p.add_argument("--step-us", type=_step_us, default=1000, metavar="US",
                    help="step the world every US µs of real time (default 1000)")
     p.add_argument("--modbus", type=_listen, default=None, metavar="HOST:PORT",
                    help="serve the boards as a Modbus TCP server on HOST:PORT instead "
-                        "(controllers open modbus://HOST:PORT?map=...; needs pyrt[modbus])")
+                        "(controllers open modbus://HOST:PORT?map=...)")
     p.add_argument("--map", default=None, metavar="FILE",
                    help="with --modbus: the register map (default: the one shipped for the "
                         "station, pyrt/boards/maps/NAME.toml)")
@@ -197,7 +223,8 @@ def _parse(args: argparse.Namespace) -> tuple[WorldFactory, argparse.Namespace] 
     parser = _world_parser(factory, args.world)
     # board-sim's own options given before NAME, then an alias's presets
     parser.set_defaults(listen=args.listen, watchdog=args.watchdog, step_us=args.step_us,
-                        **preset)
+                        idle=args.idle, max_clients=args.max_clients, modbus=args.modbus,
+                        map=args.map, **preset)
     rest = list(args.rest)
     if args.help:
         rest.append("--help")
@@ -238,7 +265,8 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("pyrt board-sim: --map goes with --modbus")
     host, port = opts.listen
     server = BoardServer(world, host, port, watchdog_s=opts.watchdog,
-                         step_ns=opts.step_us * 1000, stdout=out)
+                         step_ns=opts.step_us * 1000, idle_s=opts.idle,
+                         max_clients=opts.max_clients, stdout=out)
     boards = " ".join(f"{n}={k.name}" for n, k in world.kinds.items())
     print(f"pyrt board-sim: {factory.name} {world.name} on {server.url} (boards {boards}; "
           f"watchdog {opts.watchdog:g} s, world step {opts.step_us} µs)", file=out, flush=True)
@@ -276,9 +304,9 @@ def _run_modbus(factory: WorldFactory, world: World, opts: argparse.Namespace,
     regmap = load_map(path, world.kinds)
     host, port = opts.modbus
     server = ModbusBoardServer(world, regmap, host, port, watchdog_s=opts.watchdog,
-                               step_ns=opts.step_us * 1000, stdout=out)
+                               step_ns=opts.step_us * 1000, idle_s=opts.idle,
+                               max_clients=opts.max_clients, stdout=out)
     boards = " ".join(f"{n}={k.name}" for n, k in world.kinds.items())
-    server.start()
     print(f"pyrt board-sim: {factory.name} {world.name} on {server.url}?map={shown} "
           f"(Modbus TCP; boards {boards}; map {path}; watchdog {opts.watchdog:g} s, "
           f"world step {opts.step_us} µs)", file=out, flush=True)
@@ -286,16 +314,13 @@ def _run_modbus(factory: WorldFactory, world: World, opts: argparse.Namespace,
         print(f"pyrt board-sim: warning: serving on {server.host}: Modbus has no "
               "authentication; anyone who reaches the port drives the boards", file=out,
               flush=True)
-    done = threading.Event()
 
     def stop(signum: int, frame: object) -> None:
-        done.set()
+        server.stop()
 
     old = {s: signal.signal(s, stop) for s in (signal.SIGTERM, signal.SIGINT)}
     try:
-        while not done.wait(0.2):
-            if not server.alive:
-                break
+        server.serve_forever()
     finally:
         server.close()
         for s, h in old.items():

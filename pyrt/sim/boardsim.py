@@ -5,19 +5,40 @@ station's: its boards' declared registers) on a TCP address with the wire
 protocol of :mod:`pyrt.boards.wire`, so that a
 controller in another process reaches the boards through the ``tcp://``
 back end (:mod:`pyrt.boards.tcp`) exactly as it reaches the in-process
-``sim:`` boards.
+``sim:`` boards.  :class:`~pyrt.sim.modbusserver.ModbusBoardServer` serves
+the same world over Modbus TCP; both are a :class:`LinkServer`, which does
+what is common to them:
 
 One thread does everything, in a selectors loop: it steps the world every
 ``step_ns`` of the monotonic clock (dt = now - last, so a late step moves
-the world by the time that really passed), answers requests as they come,
-and keeps the watchdog.  One controller is served at a time: a second
-connection is answered ``ERR busy ...`` and closed.
+the world by the time that really passed), answers requests as they come
+(every complete request in what arrived, so pipelined requests all get
+their replies, in order), and keeps the watchdog.
 
-Watchdog: when no register access has come for ``watchdog_s`` the world's
-outputs are turned off (:meth:`~pyrt.sim.world.World.outputs_off`);
-so they are at once when the controller's connection closes, whether it
-said QUIT or its process died.  A bad request gets an error reply; nothing
-a client sends stops the server.
+One owner, any readers.  A board has one owning controller: the
+connection that claims the outputs (``OWN`` on the wire; its first write
+claims them too, on either protocol) while no other holds them.  Any other
+connection may read (an HMI, a logger, a tool); its write is refused
+(``ERR busy`` on the wire, exception 06 over Modbus) and changes nothing.
+An owner that has been silent for longer than the watchdog time (its
+outputs are off already) is displaced by the next connection that claims
+them: a dead controller's half-open socket never keeps the next one out.
+
+Watchdog, fed only by the owner.  Every register access of the owning
+connection (its writes, and its reads: the keep-alive of its session)
+feeds the watchdog; a reader's never does.  When the owner has made none
+for ``watchdog_s`` the world's outputs are turned off
+(:meth:`~pyrt.sim.world.World.outputs_off`); so they are at once when the
+owner's connection closes, whether it said goodbye or its process died,
+whoever else is connected and polling.
+
+Connections.  At most ``max_clients`` are held: a newcomer when all are
+taken closes the reader that has been idle longest (never the owner), so
+a controller always gets in.  A connection that completes no request for
+``idle_s`` (idle, or half-open: a client gone without a word, or one that
+stopped in the middle of a request) is closed.  A client that leaves
+:data:`MAX_PENDING_OUTPUT` of replies unread is dropped.  A bad request
+gets an error reply; nothing a client sends stops the server.
 """
 
 from __future__ import annotations
@@ -43,34 +64,57 @@ from pyrt.boards.wire import (
 from pyrt.errors import ConfigError
 from pyrt.sim.world import World
 
-__all__ = ["DEFAULT_STEP_NS", "DEFAULT_WATCHDOG_S", "BoardServer"]
+__all__ = [
+    "DEFAULT_IDLE_S",
+    "DEFAULT_MAX_CLIENTS",
+    "DEFAULT_STEP_NS",
+    "DEFAULT_WATCHDOG_S",
+    "BoardServer",
+    "Connection",
+    "LinkServer",
+]
 
 DEFAULT_WATCHDOG_S = 0.5
 DEFAULT_STEP_NS = 1_000_000
+#: A connection that completes no request for this long is closed.
+DEFAULT_IDLE_S = 30.0
+#: The most connections held at once (the owner and the readers).
+DEFAULT_MAX_CLIENTS = 8
 #: A client that leaves this much of our output unread is dropped.
 MAX_PENDING_OUTPUT = 1 << 20
+#: How often idle connections are looked for.
+_SWEEP_NS = 20_000_000
 
 
-class _Client:
-    __slots__ = ("addr", "discarding", "inbuf", "out", "quitting", "sock", "writing")
+class Connection:
+    """One client's connection: its socket, what came and what goes out."""
 
-    def __init__(self, sock: socket.socket, addr: str):
+    __slots__ = ("addr", "discarding", "gone", "inbuf", "last_ns", "out", "quitting", "sock",
+                 "told", "writing")
+
+    def __init__(self, sock: socket.socket, addr: str, now: int):
         self.sock = sock
         self.addr = addr
         self.inbuf = bytearray()
         self.out = bytearray()
+        #: When its last complete request came (or it connected): the idle timeout's start.
+        self.last_ns = now
         self.discarding = False
         self.quitting = False
         self.writing = False
+        self.gone = False
+        #: Whether a refusal (busy) was said about it already (said once per connection).
+        self.told = False
 
 
-class BoardServer:
-    """Serve ``world`` on ``host:port`` (port 0: any free port; see :attr:`url`).
+class LinkServer:
+    """What board-sim's servers share (see the module text): the socket loop, the
+    world stepping, the owner and its watchdog, idle and surplus connections.
 
-    ``stdout`` receives one line per event (connections, refusals, watchdog
-    trips); ``clock`` is the monotonic clock in ns.  Call
-    :meth:`serve_forever` (blocks until :meth:`stop`), or :meth:`start` to
-    run it in a thread of its own.
+    A subclass gives :meth:`greeting` and :meth:`consume` (the requests in a
+    connection's :attr:`Connection.inbuf`, replies appended to its ``out``),
+    calling :meth:`claim` before a write and :meth:`feed` on every register
+    access.
     """
 
     def __init__(
@@ -81,6 +125,8 @@ class BoardServer:
         *,
         watchdog_s: float = DEFAULT_WATCHDOG_S,
         step_ns: int = DEFAULT_STEP_NS,
+        idle_s: float = DEFAULT_IDLE_S,
+        max_clients: int = DEFAULT_MAX_CLIENTS,
         stdout: TextIO | None = None,
         clock: Callable[[], int] = time.monotonic_ns,
     ):
@@ -88,17 +134,26 @@ class BoardServer:
             raise ConfigError(f"watchdog time must be 0.001..3600 s, got {watchdog_s!r}")
         if not 50_000 <= step_ns <= 100_000_000:
             raise ConfigError(f"world step must be 50 µs..100 ms, got {step_ns} ns")
+        if not 0.01 <= idle_s <= 86400:
+            raise ConfigError(f"idle time must be 0.01..86400 s, got {idle_s!r}")
+        if isinstance(max_clients, bool) or not isinstance(max_clients, int) \
+                or not 2 <= max_clients <= 1024:
+            raise ConfigError(f"the most clients must be 2..1024 (the owner and at least one "
+                              f"reader), got {max_clients!r}")
         self.world = world
         #: The boards served (name -> kind) and their register views.
         self.kinds = dict(world.kinds)
-        self._views = {name: world.registers(name) for name in self.kinds}
+        self.views = {name: world.registers(name) for name in self.kinds}
         self.watchdog_ns = int(watchdog_s * 1e9)
+        self.idle_ns = int(idle_s * 1e9)
+        self.max_clients = max_clients
         self.step_ns = int(step_ns)
         self.stdout = stdout
         self.clock = clock
         try:
             family = socket.AF_INET6 if ":" in host else socket.AF_INET
-            self._listener = socket.create_server((host, port), family=family, backlog=8)
+            self._listener = socket.create_server((host, port), family=family,
+                                                  backlog=64)
         except OSError as exc:
             raise ConfigError(f"board-sim cannot listen on {host}:{port}: "
                               f"{exc.strerror or exc}") from None
@@ -109,23 +164,49 @@ class BoardServer:
         self._wake_r.setblocking(False)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self._client: _Client | None = None
+        self._conns: list[Connection] = []
+        self._owner: Connection | None = None
         self._sel: selectors.BaseSelector | None = None
         self._last_access = 0
         self._fed = False
         self.t0 = clock()
-        #: Counters: requests answered, error replies, watchdog trips, refused connections.
+        #: Counters: requests answered, error replies, watchdog trips, refused claims
+        #: (busy), connections closed idle and to make room, world steps.
         self.requests = 0
         self.errors = 0
         self.watchdog_trips = 0
         self.refused = 0
+        self.timed_out = 0
+        self.evicted = 0
         self.steps = 0
 
+    # -- what a subclass gives --------------------------------------------------------------
+
+    def greeting(self) -> bytes:
+        """What the server says first on a new connection (nothing by default)."""
+        return b""
+
+    def consume(self, conn: Connection) -> None:
+        """Answer the complete requests in ``conn.inbuf`` (removing them), each
+        reply appended to ``conn.out``; call :meth:`came` for each."""
+        raise NotImplementedError
+
+    # -- state -------------------------------------------------------------------------------
+
     @property
-    def url(self) -> str:
-        """The back-end URL a controller opens: ``tcp://HOST:PORT``."""
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"tcp://{host}:{self.port}"
+    def alive(self) -> bool:
+        """Whether the thread :meth:`start` made still serves."""
+        return self._thread is not None and self._thread.is_alive()
+
+    @property
+    def owner(self) -> str | None:
+        """The address of the connection that owns the outputs, or None."""
+        return self._owner.addr if self._owner is not None else None
+
+    @property
+    def clients(self) -> int:
+        """How many connections are held."""
+        return len(self._conns)
 
     def _say(self, line: str) -> None:
         if self.stdout is not None:
@@ -135,7 +216,51 @@ class BoardServer:
             except (OSError, ValueError):  # a closed log must not stop the boards
                 self.stdout = None
 
-    # -- running ------------------------------------------------------------------
+    # -- the owner and the watchdog ------------------------------------------------------------
+
+    def came(self, conn: Connection) -> None:
+        """A complete request came on ``conn``: its idle time starts again."""
+        conn.last_ns = self.clock()
+
+    def claim(self, conn: Connection) -> str | None:
+        """Make ``conn`` the owner of the outputs: None if it is (or now is), else
+        why not (another owner is alive: it fed the watchdog within its time)."""
+        owner = self._owner
+        if owner is conn:
+            return None
+        now = self.clock()
+        if owner is not None:
+            silent = now - self._last_access
+            if silent <= self.watchdog_ns:
+                self.refused += 1
+                if not conn.told:
+                    conn.told = True
+                    self._say(f"refused {conn.addr}: {owner.addr} owns the outputs")
+                return (f"{owner.addr} owns the outputs (one controller at a time; "
+                        "reading is open to all)")
+            self._drop(owner, f"displaced by {conn.addr} (silent for {silent / 1e9:.3f} s)")
+        self._owner = conn
+        self._last_access = now
+        self._say(f"controller {conn.addr} owns the outputs")
+        return None
+
+    def feed(self, conn: Connection) -> None:
+        """A register access on ``conn``: the watchdog starts again if it is the owner's."""
+        if conn is self._owner:
+            self._last_access = self.clock()
+            self._fed = True
+
+    def _watchdog(self, now: int) -> None:
+        self._fed = False
+        self.watchdog_trips += 1
+        self.world.trips += 1
+        was_on = not self.world.outputs_are_off()
+        self.world.outputs_off()
+        if was_on:
+            self._say(f"watchdog: no register access for "
+                      f"{(now - self._last_access) / 1e9:.3f} s: outputs off")
+
+    # -- running ---------------------------------------------------------------------------
 
     def start(self) -> threading.Thread:
         """Serve in a daemon thread; returns it."""
@@ -156,8 +281,9 @@ class BoardServer:
         self.stop()
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(5.0)
-        if self._client is not None:
-            self._drop("server closing")
+        for conn in list(self._conns):
+            self._drop(conn, "closed: server closing")
+        self.world.outputs_off()
         for s in (self._listener, self._wake_r, self._wake_w):
             with contextlib.suppress(OSError):
                 s.close()
@@ -171,7 +297,7 @@ class BoardServer:
         clock = self.clock
         step = self.step_ns
         world = self.world
-        next_step = clock()
+        next_step = next_sweep = clock()
         try:
             while not self._stop.is_set():
                 now = clock()
@@ -183,10 +309,10 @@ class BoardServer:
                     elif what == "wake":
                         with contextlib.suppress(OSError):
                             self._wake_r.recv(4096)
-                    elif isinstance(what, _Client) and what is self._client:
+                    elif isinstance(what, Connection) and not what.gone:
                         if mask & selectors.EVENT_WRITE:
                             self._flush(what)
-                        if mask & selectors.EVENT_READ and what is self._client:
+                        if mask & selectors.EVENT_READ and not what.gone:
                             self._read(what)
                 now = clock()
                 if now >= next_step:
@@ -197,117 +323,179 @@ class BoardServer:
                         next_step = now + step
                 if self._fed and now - self._last_access > self.watchdog_ns:
                     self._watchdog(now)
+                if now >= next_sweep:
+                    next_sweep = now + _SWEEP_NS
+                    self._sweep(now)
         finally:
-            if self._client is not None:
-                self._drop("server stopping")
+            for conn in list(self._conns):
+                self._drop(conn, "closed: server stopping")
+            world.outputs_off()
             sel.close()
             self._sel = None
 
-    # -- the watchdog ----------------------------------------------------------------
-
-    def _watchdog(self, now: int) -> None:
-        self._fed = False
-        self.watchdog_trips += 1
-        self.world.trips += 1
-        was_on = not self.world.outputs_are_off()
-        self.world.outputs_off()
-        if was_on:
-            self._say(f"watchdog: no register access for "
-                      f"{(now - self._last_access) / 1e9:.3f} s: outputs off")
-
     # -- connections -------------------------------------------------------------------
 
+    def _sweep(self, now: int) -> None:
+        for conn in list(self._conns):
+            idle = now - conn.last_ns
+            if idle > self.idle_ns:
+                self.timed_out += 1
+                self._drop(conn, f"closed: no complete request for {idle / 1e9:.1f} s")
+
     def _accept(self) -> None:
-        try:
-            sock, peer = self._listener.accept()
-        except OSError:
-            return
+        for _ in range(64):  # what the backlog holds, and no more per pass: the world steps on
+            try:
+                sock, peer = self._listener.accept()
+            except OSError:
+                return
+            self._admit(sock, peer)
+
+    def _admit(self, sock: socket.socket, peer: tuple) -> None:
         addr = f"{peer[0]}:{peer[1]}"
-        if self._client is not None:
-            self.refused += 1
-            with contextlib.suppress(OSError):
-                sock.setblocking(False)
-                sock.send(error_line("busy", f"board-sim serves one controller at a time and "
-                                             f"{self._client.addr} is connected"))
-            sock.close()
-            self._say(f"refused {addr}: busy with {self._client.addr}")
-            return
+        if len(self._conns) >= self.max_clients:
+            readers = [c for c in self._conns if c is not self._owner]
+            victim = min(readers, key=lambda c: c.last_ns)
+            self.evicted += 1
+            self._drop(victim, f"closed to make room for {addr} "
+                               f"(at most {self.max_clients} connections)")
         sock.setblocking(False)
         with contextlib.suppress(OSError):
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        client = _Client(sock, addr)
-        self._client = client
+        conn = Connection(sock, addr, self.clock())
+        self._conns.append(conn)
         assert self._sel is not None
-        self._sel.register(sock, selectors.EVENT_READ, client)
-        self._say(f"controller {addr} connected")
-        client.out += greeting_line(self.world.name, self.watchdog_ns // 1_000_000, self.kinds)
-        self._flush(client)
+        self._sel.register(sock, selectors.EVENT_READ, conn)
+        self._say(f"client {addr} connected")
+        conn.out += self.greeting()
+        self._flush(conn)
 
-    def _drop(self, why: str) -> None:
-        client = self._client
-        if client is None:
+    def _drop(self, conn: Connection, why: str) -> None:
+        if conn.gone:
             return
-        self._client = None
+        conn.gone = True
+        with contextlib.suppress(ValueError):
+            self._conns.remove(conn)
         if self._sel is not None:
             with contextlib.suppress(KeyError, ValueError):
-                self._sel.unregister(client.sock)
+                self._sel.unregister(conn.sock)
         with contextlib.suppress(OSError):
-            client.sock.close()
+            conn.sock.close()
+        if conn is not self._owner:
+            self._say(f"client {conn.addr} {why}")
+            return
+        self._owner = None
         self._fed = False
         was_on = not self.world.outputs_are_off()
         self.world.outputs_off()
-        self._say(f"controller {client.addr} {why}"
-                  + (": outputs off" if was_on else ""))
+        self._say(f"controller {conn.addr} {why}" + (": outputs off" if was_on else ""))
 
-    def _read(self, client: _Client) -> None:
+    def _read(self, conn: Connection) -> None:
         try:
-            data = client.sock.recv(65536)
+            data = conn.sock.recv(65536)
         except (BlockingIOError, InterruptedError):
             return
         except OSError as exc:
-            self._drop(f"lost ({exc.strerror or exc})")
+            self._drop(conn, f"lost ({exc.strerror or exc})")
             return
         if not data:
-            self._drop("disconnected")
+            self._drop(conn, "disconnected")
             return
-        buf = client.inbuf
-        buf += data
-        while True:
+        conn.inbuf += data
+        self.consume(conn)
+        if not conn.gone:
+            self._flush(conn)
+
+    def _flush(self, conn: Connection) -> None:
+        if conn.gone:
+            return
+        out = conn.out
+        try:
+            while out:
+                n = conn.sock.send(out)
+                del out[:n]
+        except (BlockingIOError, InterruptedError):
+            pass
+        except OSError as exc:
+            self._drop(conn, f"lost ({exc.strerror or exc})")
+            return
+        if conn.quitting and not out:
+            self._drop(conn, "said QUIT")
+            return
+        if len(out) > MAX_PENDING_OUTPUT:
+            self._drop(conn, "does not read its replies")
+            return
+        writing = bool(out)
+        if writing != conn.writing:  # wait for room to write only while output waits
+            conn.writing = writing
+            assert self._sel is not None
+            events = selectors.EVENT_READ | (selectors.EVENT_WRITE if writing else 0)
+            with contextlib.suppress(KeyError, ValueError):
+                self._sel.modify(conn.sock, events, conn)
+
+
+class BoardServer(LinkServer):
+    """Serve ``world`` on ``host:port`` with the wire protocol (port 0: any free
+    port; see :attr:`url`).
+
+    ``stdout`` receives one line per event (connections, the owner, refusals,
+    watchdog trips); ``clock`` is the monotonic clock in ns; ``idle_s`` and
+    ``max_clients`` bound the connections (see the module text).  Call
+    :meth:`serve_forever` (blocks until :meth:`stop`), or :meth:`start` to
+    run it in a thread of its own.
+    """
+
+    @property
+    def url(self) -> str:
+        """The back-end URL a controller opens: ``tcp://HOST:PORT``."""
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"tcp://{host}:{self.port}"
+
+    def greeting(self) -> bytes:
+        return greeting_line(self.world.name, self.watchdog_ns // 1_000_000, self.kinds)
+
+    def consume(self, conn: Connection) -> None:
+        buf = conn.inbuf
+        while not conn.quitting:
             i = buf.find(b"\n")
             if i < 0:
                 if len(buf) >= MAX_LINE:
-                    if not client.discarding:
-                        self._reply(client, error_line(
+                    if not conn.discarding:
+                        self._reply(conn, error_line(
                             "too-long", f"a request is at most {MAX_LINE} bytes"))
-                        client.discarding = True
+                        conn.discarding = True
                     buf.clear()
                 break
             line = bytes(buf[:i])
             del buf[: i + 1]
-            if client.discarding:  # the end of an over-long line
-                client.discarding = False
+            self.came(conn)
+            if conn.discarding:  # the end of an over-long line
+                conn.discarding = False
                 continue
             if i + 1 > MAX_LINE:
-                self._reply(client, error_line("too-long",
-                                               f"a request is at most {MAX_LINE} bytes"))
+                self._reply(conn, error_line("too-long",
+                                             f"a request is at most {MAX_LINE} bytes"))
                 continue
-            self._reply(client, self._answer(client, line.rstrip(b"\r")))
-            if client.quitting:
-                break
-        self._flush(client)
+            self._reply(conn, self._answer(conn, line.rstrip(b"\r")))
+            if conn.gone:
+                return
 
-    def _answer(self, client: _Client, line: bytes) -> bytes:
+    def _answer(self, conn: Connection, line: bytes) -> bytes:
         world = self.world
         try:
             req = parse_request(line, self.kinds)
             verb = req.verb
+            if verb in ("W", "OWN"):
+                busy = self.claim(conn)
+                if busy is not None:
+                    return error_line("busy", busy)
             if verb not in NOT_ACCESSES:
-                self._last_access = self.clock()
-                self._fed = True
+                self.feed(conn)
+                if verb == "OWN":
+                    return b"OK\n"
                 return self._access(req.verb, req.accesses, req.boards)
             if verb == "INFO":
                 return ok_line(*(f"{k}={v}" for k, v in world.info().items()))
-            client.quitting = True
+            conn.quitting = True
             return ok_line("bye")
         except WireError as exc:
             return error_line(exc.code, exc.text)
@@ -318,7 +506,7 @@ class BoardServer:
             return error_line("internal", f"{type(exc).__name__}: {exc}")
 
     def _access(self, verb: str, accesses: tuple[Access, ...], boards: tuple[str, ...]) -> bytes:
-        views = self._views
+        views = self.views
         if verb == "SNAP":
             values: list[int] = [self.world.trips]
             for name in boards or views:
@@ -338,35 +526,8 @@ class BoardServer:
                 raise ValueError(f"write {k} of {n}: {exc}") from None
         return b"OK\n"
 
-    def _reply(self, client: _Client, line: bytes) -> None:
+    def _reply(self, conn: Connection, line: bytes) -> None:
         self.requests += 1
         if line.startswith(b"ERR"):
             self.errors += 1
-        client.out += line
-
-    def _flush(self, client: _Client) -> None:
-        if client is not self._client:
-            return
-        out = client.out
-        try:
-            while out:
-                n = client.sock.send(out)
-                del out[:n]
-        except (BlockingIOError, InterruptedError):
-            pass
-        except OSError as exc:
-            self._drop(f"lost ({exc.strerror or exc})")
-            return
-        if client.quitting and not out:
-            self._drop("said QUIT")
-            return
-        if len(out) > MAX_PENDING_OUTPUT:
-            self._drop("does not read its replies")
-            return
-        writing = bool(out)
-        if writing != client.writing:  # wait for room to write only while output waits
-            client.writing = writing
-            assert self._sel is not None
-            events = selectors.EVENT_READ | (selectors.EVENT_WRITE if writing else 0)
-            with contextlib.suppress(KeyError, ValueError):
-                self._sel.modify(client.sock, events, client)
+        conn.out += line

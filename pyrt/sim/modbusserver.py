@@ -1,281 +1,289 @@
-"""board-sim over Modbus TCP: a station's simulated boards served by a pymodbus server.
+"""board-sim over Modbus TCP: a station's simulated boards served as a Modbus device.
 
 :class:`ModbusBoardServer` serves one :class:`~pyrt.sim.world.World` (any
 station's) on a Modbus TCP address, its declared registers placed by a
 register map (:mod:`pyrt.boards.modbusmap`; the map shipped for each
 built-in station is ``pyrt/boards/maps/NAME.toml``), so that any Modbus
 tool -- and pyrt's ``modbus://`` back end -- reads and drives a simulated
-robot.  The server is pymodbus's :class:`~pymodbus.server.ModbusTcpServer`
-with a data store that answers every request from the world's boards:
+robot.  It is a :class:`~pyrt.sim.boardsim.LinkServer`: the same loop,
+world stepping, owner, watchdog and connection bounds as ``tcp://``
+(read the module text of :mod:`pyrt.sim.boardsim`), speaking the Modbus
+application protocol as a device does:
 
-* read coils / discrete inputs / input registers / holding registers: the
-  places the map gives, each register encoded as the map says (an
-  address the map does not place is an ``ILLEGAL_ADDRESS`` exception;
-  a write-only strobe reads 0);
-* write single / multiple coils and registers: the outputs placed there
-  (a 32-bit place written by halves keeps the other half); an input, or a
-  value the board refuses, is an exception reply and changes nothing.
+* function 1, 2, 3, 4 (read coils, discrete inputs, holding registers,
+  input registers): the places the map gives, each register encoded as
+  the map says (a write-only strobe reads 0);
+* function 5, 6, 15, 16 (write single / multiple coils and registers) and
+  23 (read/write multiple registers): the outputs placed there (a 32-bit
+  place written by halves keeps the other half);
+* every request of a Modbus TCP frame (MBAP header: transaction, protocol
+  0, length, unit) is answered, in order, pipelined requests included.
 
-One thread runs an asyncio loop: the server, and a task that steps the
-world every ``step_ns`` of the monotonic clock (dt = now - last) and keeps
-the **watchdog**: when no request has come for ``watchdog_s``, or the
-client's connection closes, every output register that declares an
-``off`` value is written with it (the gripper's DAC to null 80).  Any
-number of clients may connect (Modbus has no greeting); the last one to
-close turns the outputs off.
+Exceptions, and what they change: nothing.  01 illegal function (a
+function not above); 02 illegal data address (an address the map does not
+place on that unit and table, or a write to an input); 03 illegal data
+value (a count beyond the protocol's limits, a byte count that disagrees
+with it, a coil value other than 0000/FF00, or a value the register cannot
+hold: 0x0100 to the 8-bit DAC is refused, never wrapped; a value the board
+refuses); 06 server device busy (a write while another connection owns the
+outputs); 0B gateway target failed to respond (a unit the map does not
+use).  Every value of a write is checked before any is made.  A frame
+whose header is not Modbus TCP (protocol id not 0, a length beyond 254)
+closes the connection: the stream cannot be followed past it.
+
+Owner and watchdog.  The connection that writes first owns the outputs
+(Modbus has no session: a connection is one); every request of the
+owner's connection -- its writes, and its reads, the keep-alive of its
+session -- feeds the watchdog, a reader's never does.  When the owner has
+made none for ``watchdog_s``, or its connection closes, every output
+register that declares an ``off`` value is written with it (the gripper's
+DAC to null 80), whoever else is connected and polling.
 """
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
-import logging
-import socket
-import threading
+import struct
 import time
-from collections.abc import Callable, Sequence
-from typing import Any, TextIO
+from collections.abc import Callable
+from typing import TextIO
 
 from pyrt.boards.modbusmap import COIL, DISCRETE, HOLDING, INPUT_REG, Place, RegisterMap
-from pyrt.errors import ConfigError
+from pyrt.sim.boardsim import (
+    DEFAULT_IDLE_S,
+    DEFAULT_MAX_CLIENTS,
+    DEFAULT_STEP_NS,
+    DEFAULT_WATCHDOG_S,
+    Connection,
+    LinkServer,
+)
 from pyrt.sim.world import World
 
-__all__ = ["ModbusBoardServer"]
+__all__ = ["ILLEGAL_ADDRESS", "ILLEGAL_FUNCTION", "ILLEGAL_VALUE", "SERVER_BUSY",
+           "ModbusBoardServer"]
+
+#: The exception codes it answers.
+ILLEGAL_FUNCTION = 0x01
+ILLEGAL_ADDRESS = 0x02
+ILLEGAL_VALUE = 0x03
+SERVER_FAILURE = 0x04
+SERVER_BUSY = 0x06
+NO_SUCH_UNIT = 0x0B
 
 _READ = {1: COIL, 2: DISCRETE, 3: HOLDING, 4: INPUT_REG}
-_WRITE = {5: COIL, 15: COIL, 6: HOLDING, 16: HOLDING, 23: HOLDING}
+_MAX_LENGTH = 254  # MBAP length: the unit and a PDU of at most 253 bytes
+_HEADER = struct.Struct(">HHHB")
 
 
-def _pymodbus() -> tuple[Any, Any, Any]:
-    try:
-        from pymodbus.constants import ExcCodes
-        from pymodbus.datastore import ModbusServerContext
-        from pymodbus.server import ModbusTcpServer
-    except ImportError:
-        raise ConfigError("board-sim --modbus needs pymodbus: pip install 'pyrt[modbus]'") \
-            from None
-    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
-    return ModbusTcpServer, ModbusServerContext, ExcCodes
+class _Exception(Exception):
+    """A Modbus exception reply (its code)."""
+
+    def __init__(self, code: int):
+        super().__init__(code)
+        self.code = code
 
 
-class _WorldStore:
-    """The data store: Modbus places -> the world's registers (the server's context)."""
+def _bits(data: bytes, count: int) -> list[int]:
+    return [(data[i // 8] >> (i % 8)) & 1 for i in range(count)]
 
-    old_simulator = True  # pymodbus: call async_getValues/async_setValues of this object
-    simdevices: list[Any] = []
 
-    def __init__(self, server: ModbusBoardServer, exc_codes: Any):
-        self.server = server
-        self.exc = exc_codes
+def _pack_bits(values: list[int]) -> bytes:
+    out = bytearray((len(values) + 7) // 8)
+    for i, v in enumerate(values):
+        if v:
+            out[i // 8] |= 1 << (i % 8)
+    return bytes(out)
+
+
+class ModbusBoardServer(LinkServer):
+    """Serve ``world`` over Modbus TCP on ``host:port`` with ``regmap`` (see the module text).
+
+    Port 0 picks a free port (:attr:`url`).  ``stdout`` receives one line per
+    event (connections, the owner, watchdog trips).  :meth:`serve_forever`
+    blocks until :meth:`stop`; :meth:`start` runs it in a thread of its own.
+    ConfigError if it cannot listen.
+    """
+
+    def __init__(self, world: World, regmap: RegisterMap, host: str = "127.0.0.1",
+                 port: int = 0, *, watchdog_s: float = DEFAULT_WATCHDOG_S,
+                 step_ns: int = DEFAULT_STEP_NS, idle_s: float = DEFAULT_IDLE_S,
+                 max_clients: int = DEFAULT_MAX_CLIENTS, stdout: TextIO | None = None,
+                 clock: Callable[[], int] = time.monotonic_ns):
+        super().__init__(world, host, port, watchdog_s=watchdog_s, step_ns=step_ns,
+                         idle_s=idle_s, max_clients=max_clients, stdout=stdout, clock=clock)
+        self.map = regmap
         self.at: dict[tuple[int, str, int], tuple[Place, int]] = {}
-        for p in server.map.places:
+        for p in regmap.places:
             for k in range(p.size):
                 self.at[(p.unit, p.table, p.address + k)] = (p, k)
-        self.units = sorted({p.unit for p in server.map.places})
+        self.units = frozenset(p.unit for p in regmap.places)
+        self._handlers: dict[int, Callable[[Connection, int, int, bytes], bytes]] = {
+            1: self._fc_read, 2: self._fc_read, 3: self._fc_read, 4: self._fc_read,
+            5: self._write_coil, 6: self._write_register, 15: self._write_coils,
+            16: self._write_registers, 23: self._read_write}
 
-    def device_ids(self) -> list[int]:
-        return self.units
+    @property
+    def url(self) -> str:
+        """The back-end URL of these boards (add ``?map=...``)."""
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"modbus://{host}:{self.port}"
+
+    # -- frames ------------------------------------------------------------------------------
+
+    def consume(self, conn: Connection) -> None:
+        buf = conn.inbuf
+        while len(buf) >= _HEADER.size:
+            tid, protocol, length, unit = _HEADER.unpack_from(buf)
+            if protocol != 0 or not 2 <= length <= _MAX_LENGTH:
+                self.errors += 1
+                self._drop(conn, f"closed: not a Modbus TCP frame (protocol {protocol}, "
+                                 f"length {length})")
+                return
+            end = 6 + length
+            if len(buf) < end:
+                break
+            pdu = bytes(buf[_HEADER.size:end])
+            del buf[:end]
+            self.came(conn)
+            reply = self.answer(conn, unit, pdu)
+            self.requests += 1
+            if reply[0] & 0x80:
+                self.errors += 1
+            conn.out += _HEADER.pack(tid, 0, len(reply) + 1, unit) + reply
+
+    def answer(self, conn: Connection, unit: int, pdu: bytes) -> bytes:
+        """The reply PDU to the request PDU ``pdu`` for ``unit`` from ``conn``."""
+        fc = pdu[0]
+        handler = self._handlers.get(fc)
+        try:
+            if handler is None:
+                raise _Exception(ILLEGAL_FUNCTION)
+            if unit not in self.units:
+                raise _Exception(NO_SUCH_UNIT)
+            return handler(conn, unit, fc, pdu)
+        except _Exception as exc:
+            return bytes([fc | 0x80, exc.code])
+        except Exception as exc:  # a bug in the world: answer it, keep serving
+            self._say(f"internal error on function {fc} from {conn.addr}: "
+                      f"{type(exc).__name__}: {exc}")
+            return bytes([fc | 0x80, SERVER_FAILURE])
+
+    # -- the places ----------------------------------------------------------------------------
 
     def _words(self, p: Place) -> list[int]:
         reg = p.register
         if not reg.readback:
             return [0] * p.size
-        return p.encode(self.server.views[p.board].read(reg.name, p.index))
+        return p.encode(self.views[p.board].read(reg.name, p.index))
 
-    async def async_getValues(self, device_id: int, func_code: int, address: int,
-                              count: int = 1) -> Any:
-        table = _READ.get(func_code, _WRITE.get(func_code))
-        if table is None:
-            return self.exc.ILLEGAL_FUNCTION
-        self.server.feed()
+    def _get(self, unit: int, table: str, address: int, count: int) -> list[int]:
+        if address + count > 0x10000:
+            raise _Exception(ILLEGAL_ADDRESS)
         out: list[int] = []
         cache: dict[tuple[str, str, int], list[int]] = {}
         for a in range(address, address + count):
-            hit = self.at.get((device_id, table, a))
+            hit = self.at.get((unit, table, a))
             if hit is None:
-                return self.exc.ILLEGAL_ADDRESS
+                raise _Exception(ILLEGAL_ADDRESS)
             p, k = hit
             words = cache.get(p.key)
             if words is None:
                 words = cache[p.key] = self._words(p)
             out.append(words[k])
-        if table in (COIL, DISCRETE):
-            return [bool(v) for v in out]
         return out
 
-    async def async_setValues(self, device_id: int, func_code: int, address: int,
-                              values: Sequence[int] | Sequence[bool]) -> Any:
-        table = _WRITE.get(func_code)
-        if table is None:
-            return self.exc.ILLEGAL_FUNCTION
-        self.server.feed()
+    def _set(self, conn: Connection, unit: int, table: str, address: int,
+             values: list[int]) -> None:
+        """Write ``values`` from ``address`` on: every one checked first (02, 03),
+        then the claim (06), then the writes."""
+        if address + len(values) > 0x10000:
+            raise _Exception(ILLEGAL_ADDRESS)
         touched: dict[tuple[str, str, int], tuple[Place, list[int]]] = {}
         for a, v in zip(range(address, address + len(values)), values, strict=True):
-            hit = self.at.get((device_id, table, a))
+            hit = self.at.get((unit, table, a))
             if hit is None or hit[0].register.is_input:
-                return self.exc.ILLEGAL_ADDRESS
+                raise _Exception(ILLEGAL_ADDRESS)
             p, k = hit
             if p.key not in touched:
                 touched[p.key] = (p, self._words(p))
-            touched[p.key][1][k] = int(v)
+            touched[p.key][1][k] = v
         writes = []
         for p, words in touched.values():
-            value = p.decode(words)
             try:
-                self.server.kinds[p.board].check_write(p.register.name, p.index, value)
+                value = p.decode_write(words)
+                self.kinds[p.board].check_write(p.register.name, p.index, value)
             except ValueError:
-                return self.exc.ILLEGAL_VALUE
+                raise _Exception(ILLEGAL_VALUE) from None
             writes.append((p, value))
+        if self.claim(conn) is not None:
+            raise _Exception(SERVER_BUSY)
+        self.feed(conn)
         for p, value in writes:
             try:
-                self.server.views[p.board].write(p.register.name, value, p.index)
-            except ValueError:
-                return self.exc.ILLEGAL_VALUE
-        return None
+                self.views[p.board].write(p.register.name, value, p.index)
+            except ValueError:  # the board refused it (those before it stand)
+                raise _Exception(ILLEGAL_VALUE) from None
 
+    # -- the functions -------------------------------------------------------------------------
 
-class ModbusBoardServer:
-    """Serve ``world`` over Modbus TCP on ``host:port`` with ``regmap`` (see the module text).
+    def _fc_read(self, conn: Connection, unit: int, fc: int, pdu: bytes) -> bytes:
+        if len(pdu) != 5:
+            raise _Exception(ILLEGAL_VALUE)
+        address, count = struct.unpack_from(">HH", pdu, 1)
+        table = _READ[fc]
+        bits = table in (COIL, DISCRETE)
+        if not 1 <= count <= (2000 if bits else 125):
+            raise _Exception(ILLEGAL_VALUE)
+        values = self._get(unit, table, address, count)
+        self.feed(conn)
+        if bits:
+            data = _pack_bits(values)
+            return bytes([fc, len(data)]) + data
+        return bytes([fc, 2 * count]) + struct.pack(f">{count}H", *values)
 
-    Port 0 picks a free port (:attr:`url`).  ``stdout`` receives one line per
-    event (connections, watchdog trips).  :meth:`serve_forever` blocks until
-    :meth:`stop`; :meth:`start` runs it in a thread of its own.
-    """
+    def _write_coil(self, conn: Connection, unit: int, fc: int, pdu: bytes) -> bytes:
+        if len(pdu) != 5:
+            raise _Exception(ILLEGAL_VALUE)
+        address, value = struct.unpack_from(">HH", pdu, 1)
+        if value not in (0x0000, 0xFF00):
+            raise _Exception(ILLEGAL_VALUE)
+        self._set(conn, unit, COIL, address, [1 if value else 0])
+        return pdu
 
-    def __init__(self, world: World, regmap: RegisterMap, host: str = "127.0.0.1",
-                 port: int = 0, *, watchdog_s: float = 0.5, step_ns: int = 1_000_000,
-                 stdout: TextIO | None = None,
-                 clock: Callable[[], int] = time.monotonic_ns):
-        self._server_cls, ctx, self._exc = _pymodbus()
-        # pymodbus serves a ModbusServerContext: ours answers from the world
-        self._store_cls = type("WorldStore", (_WorldStore, ctx), {})
-        if not 0.001 <= watchdog_s <= 3600:
-            raise ConfigError(f"watchdog time must be 0.001..3600 s, got {watchdog_s!r}")
-        self.world = world
-        self.map = regmap
-        self.kinds = dict(world.kinds)
-        self.views = {name: world.registers(name) for name in self.kinds}
-        self.watchdog_ns = int(watchdog_s * 1e9)
-        self.step_ns = int(step_ns)
-        self.stdout = stdout
-        self.clock = clock
-        if port == 0:
-            try:
-                with socket.create_server((host, 0)) as probe:
-                    port = probe.getsockname()[1]
-            except OSError as exc:
-                raise ConfigError(f"board-sim cannot listen on {host}:0: "
-                                  f"{exc.strerror or exc}") from None
-        self.host, self.port = host, port
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._ready = threading.Event()
-        self._error: BaseException | None = None
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._last_access = 0
-        self._fed = False
-        self.clients = 0
-        #: Counters: requests served, watchdog trips.
-        self.requests = 0
-        self.watchdog_trips = 0
-        self.t0 = clock()
+    def _write_register(self, conn: Connection, unit: int, fc: int, pdu: bytes) -> bytes:
+        if len(pdu) != 5:
+            raise _Exception(ILLEGAL_VALUE)
+        address, value = struct.unpack_from(">HH", pdu, 1)
+        self._set(conn, unit, HOLDING, address, [value])
+        return pdu
 
-    @property
-    def url(self) -> str:
-        """The back-end URL of these boards with the shipped map of the world's station."""
-        return f"modbus://{self.host}:{self.port}"
+    def _write_coils(self, conn: Connection, unit: int, fc: int, pdu: bytes) -> bytes:
+        if len(pdu) < 6:
+            raise _Exception(ILLEGAL_VALUE)
+        address, count, size = struct.unpack_from(">HHB", pdu, 1)
+        if not 1 <= count <= 1968 or size != (count + 7) // 8 or len(pdu) != 6 + size:
+            raise _Exception(ILLEGAL_VALUE)
+        self._set(conn, unit, COIL, address, _bits(pdu[6:], count))
+        return pdu[:5]
 
-    def _say(self, line: str) -> None:
-        if self.stdout is not None:
-            try:
-                self.stdout.write(line + "\n")
-                self.stdout.flush()
-            except (OSError, ValueError):
-                self.stdout = None
+    def _write_registers(self, conn: Connection, unit: int, fc: int, pdu: bytes) -> bytes:
+        if len(pdu) < 6:
+            raise _Exception(ILLEGAL_VALUE)
+        address, count, size = struct.unpack_from(">HHB", pdu, 1)
+        if not 1 <= count <= 123 or size != 2 * count or len(pdu) != 6 + size:
+            raise _Exception(ILLEGAL_VALUE)
+        self._set(conn, unit, HOLDING, address, list(struct.unpack_from(f">{count}H", pdu, 6)))
+        return pdu[:5]
 
-    def feed(self) -> None:
-        """A register access came: the watchdog starts again."""
-        self.requests += 1
-        self._last_access = self.clock()
-        self._fed = True
-
-    def _connected(self, up: bool) -> None:
-        if up:
-            self.clients += 1
-            self._say("controller connected")
-            return
-        self.clients = max(0, self.clients - 1)
-        if self.clients == 0:
-            self._fed = False
-            was_on = not self.world.outputs_are_off()
-            self.world.outputs_off()
-            self._say("controller disconnected" + (": outputs off" if was_on else ""))
-
-    # -- running ------------------------------------------------------------------------
-
-    def start(self) -> threading.Thread:
-        """Serve in a daemon thread (returns once it listens); ConfigError if it cannot."""
-        t = threading.Thread(target=self.serve_forever, name="board-sim-modbus", daemon=True)
-        self._thread = t
-        t.start()
-        self._ready.wait(10.0)
-        if self._error is not None:
-            raise ConfigError(f"board-sim cannot listen on {self.host}:{self.port}: "
-                              f"{self._error}")
-        return t
-
-    @property
-    def alive(self) -> bool:
-        """Whether the thread :meth:`start` made still serves."""
-        return self._thread is not None and self._thread.is_alive()
-
-    def stop(self) -> None:
-        """Ask :meth:`serve_forever` to return (thread-safe)."""
-        self._stop.set()
-
-    def close(self) -> None:
-        """Stop, join the thread, turn the outputs off."""
-        self.stop()
-        if self._thread is not None and self._thread is not threading.current_thread():
-            self._thread.join(5.0)
-        self.world.outputs_off()
-
-    def serve_forever(self) -> None:
-        """Step the world, serve requests and keep the watchdog until :meth:`stop`."""
-        try:
-            asyncio.run(self._main())
-        except BaseException as exc:
-            self._error = exc
-            self._ready.set()
-            if not isinstance(exc, (OSError, RuntimeError)):
-                raise
-        finally:
-            self.world.outputs_off()
-
-    async def _main(self) -> None:
-        server = self._server_cls(self._store_cls(self, self._exc), address=(self.host, self.port),
-                                  trace_connect=self._connected)
-        await server.serve_forever(background=True)
-        self._ready.set()
-        clock, world, step = self.clock, self.world, self.step_ns
-        next_step = clock()
-        try:
-            while not self._stop.is_set():
-                now = clock()
-                if now >= next_step:
-                    world.step(now - self.t0)
-                    next_step += step
-                    if next_step <= now:
-                        next_step = now + step
-                if self._fed and now - self._last_access > self.watchdog_ns:
-                    self._fed = False
-                    self.watchdog_trips += 1
-                    world.trips += 1
-                    if not world.outputs_are_off():
-                        world.outputs_off()
-                        self._say(f"watchdog: no register access for "
-                                  f"{(now - self._last_access) / 1e9:.3f} s: outputs off")
-                await asyncio.sleep(max(0.0, (next_step - clock()) / 1e9))
-        finally:
-            with contextlib.suppress(Exception):
-                await server.shutdown()
+    def _read_write(self, conn: Connection, unit: int, fc: int, pdu: bytes) -> bytes:
+        if len(pdu) < 10:
+            raise _Exception(ILLEGAL_VALUE)
+        raddr, rcount, waddr, wcount, size = struct.unpack_from(">HHHHB", pdu, 1)
+        if not 1 <= rcount <= 125 or not 1 <= wcount <= 121 or size != 2 * wcount \
+                or len(pdu) != 10 + size:
+            raise _Exception(ILLEGAL_VALUE)
+        if raddr + rcount > 0x10000 \
+                or any((unit, HOLDING, a) not in self.at for a in range(raddr, raddr + rcount)):
+            raise _Exception(ILLEGAL_ADDRESS)
+        self._set(conn, unit, HOLDING, waddr, list(struct.unpack_from(f">{wcount}H", pdu, 10)))
+        values = self._get(unit, HOLDING, raddr, rcount)
+        return bytes([fc, 2 * rcount]) + struct.pack(f">{rcount}H", *values)

@@ -642,8 +642,12 @@ class Station:
             return
         err = failed or self.board_error
         why = str(err) if err is not None else f"board {boards.url}: {gone}"
-        line = (f"{self.name}: closed without its boards ({why}); the board turns its "
-                "outputs off when its link drops")
+        if getattr(boards.image, "off_on_loss", True):
+            tail = "the board turns its outputs off when its link drops"
+        else:  # a Modbus device not said to (modbus:// without off_on_loss=1)
+            tail = ("the device is not known to turn its outputs off when its link drops "
+                    "(off_on_loss=0): they may still be driven; check them at the device")
+        line = f"{self.name}: closed without its boards ({why}); {tail}"
         report = self.close_report
         if report is None and self.runner is not None:
             report = self.runner.post
