@@ -1,6 +1,13 @@
 """The software oscilloscope: channels sampled into a ring buffer, triggers, export, spew."""
 
-from pyrt.scope.export import plot_frame, save_frame
+from pyrt.scope.export import (
+    PLOT_SUFFIXES,
+    SAVE_SUFFIXES,
+    check_plot_path,
+    check_save_path,
+    plot_frame,
+    save_frame,
+)
 from pyrt.scope.scope import MAX_BUFFER_BYTES, MAX_LENGTH, MODES, Frame, Scope, Trigger
 from pyrt.scope.sources import Source, compile_sources
 from pyrt.scope.spew import Spew
@@ -9,11 +16,15 @@ __all__ = [
     "MAX_BUFFER_BYTES",
     "MAX_LENGTH",
     "MODES",
+    "PLOT_SUFFIXES",
+    "SAVE_SUFFIXES",
     "Frame",
     "Scope",
     "Source",
     "Spew",
     "Trigger",
+    "check_plot_path",
+    "check_save_path",
     "compile_sources",
     "plot_frame",
     "save_frame",
