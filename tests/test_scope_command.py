@@ -274,3 +274,31 @@ def test_help_scope_documents_every_sub_command():
                                     "single", "stop", "show", "save", "plot"}
     said = run("scope help trigger")
     assert said.startswith("scope trigger CH LEVEL") and "scope trigger off" in said
+
+
+# -- scope plot writes the format its extension names ---------------------------------------
+
+PLOT_MAGIC = [("f.png", b"\x89PNG"), ("f.svg", b"<?xml"), ("f.PDF", b"%PDF")]
+
+
+@pytest.mark.parametrize(("name", "magic"), PLOT_MAGIC)
+def test_scope_plot_writes_the_format_its_extension_names(tmp_path, name, magic):
+    """scope plot FILE.svg writes SVG, .pdf PDF, .png PNG: the bytes are the named format's."""
+    pytest.importorskip("matplotlib")
+    cmd, runner, _scope, out = make()
+    cmd("add plant.x")
+    cmd("run roll")
+    runner.sleep(0.05)
+    cmd(f"plot {tmp_path / name}")
+    assert (tmp_path / name).read_bytes()[:len(magic)] == magic
+    assert out.getvalue().splitlines()[-1] == f"plotted {tmp_path / name}"
+
+
+@pytest.mark.parametrize("name", ["s2", "f.jpg", "f.csv", "f.png.txt"])
+def test_scope_plot_refuses_a_format_it_cannot_write_before_reading_the_frame(tmp_path, name):
+    """A name without a plot extension is refused naming the formats (even before any
+    capture), and no file is written."""
+    cmd, _runner, _scope, _out = make()
+    with pytest.raises(CommandError, match=r"one of \.png, \.svg or \.pdf"):
+        cmd(f"plot {tmp_path / name}")
+    assert list(tmp_path.iterdir()) == []

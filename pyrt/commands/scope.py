@@ -22,6 +22,8 @@ from pyrt.scope import (
     Frame,
     Scope,
     Source,
+    check_plot_path,
+    check_save_path,
     plot_frame,
     save_frame,
 )
@@ -55,7 +57,8 @@ SUBCOMMAND_HELP: dict[str, str] = {
     "show": "scope show [N]: print the last N samples (default 10) of the latest frame",
     "save": "scope save FILE.csv|FILE.npz: write the latest frame (the CSV header names "
             "each column with its units: encoder [counts])",
-    "plot": "scope plot FILE.png: draw the latest frame (needs matplotlib)",
+    "plot": "scope plot FILE.png|FILE.svg|FILE.pdf: draw the latest frame in the format "
+            "the extension names (needs matplotlib)",
     "help": "scope help [SUB]: this help, or one sub-command's",
 }
 
@@ -273,6 +276,7 @@ class ScopeCommand:
     def _do_save(self, rest: list[str]) -> None:
         if len(rest) != 1:
             raise CommandError("scope save: one file name ending .csv or .npz")
+        check_save_path(rest[0])
         frame = self._frame()
         path = save_frame(frame, rest[0])
         n = frame.data.shape[0]
@@ -281,6 +285,7 @@ class ScopeCommand:
 
     def _do_plot(self, rest: list[str]) -> None:
         if len(rest) != 1:
-            raise CommandError("scope plot: one .png file name")
+            raise CommandError("scope plot: one file name ending .png, .svg or .pdf")
+        check_plot_path(rest[0])
         path = plot_frame(self._frame(), rest[0])
         self.say(f"plotted {path}")
