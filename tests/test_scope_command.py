@@ -302,3 +302,20 @@ def test_scope_plot_refuses_a_format_it_cannot_write_before_reading_the_frame(tm
     with pytest.raises(CommandError, match=r"one of \.png, \.svg or \.pdf"):
         cmd(f"plot {tmp_path / name}")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_scope_show_and_plot_during_a_move_show_the_move_so_far(tmp_path):
+    """'scope run' (auto, no trigger), a move, one second in: show and save give the move so
+    far (a frame is 16 s), the encoder falling; no 'nothing captured yet'."""
+    station, run = _gripper_shell()
+    run("scope add encoder", "scope run")
+    said = run("P E47A", "sleep 1", "scope show 3", f"scope save {tmp_path / 'so-far.csv'}")
+    assert "nothing captured" not in said
+    lines = said.splitlines()
+    assert lines[0] == "t_s encoder"
+    assert lines[-1].startswith("saved ") and "(a partial frame: of 16000)" in lines[-1]
+    rows = (tmp_path / "so-far.csv").read_text().splitlines()[1:]
+    assert 900 <= len(rows) <= 1100  # one second of 1 ms samples, as they came
+    enc = [float(r.split(",")[1]) for r in rows]
+    assert enc[-1] < enc[0]  # the jaws are closing
+    assert station.runner.call(lambda: station.scope.state) == "armed"  # still acquiring

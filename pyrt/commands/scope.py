@@ -50,7 +50,9 @@ SUBCOMMAND_HELP: dict[str, str] = {
               f"at most {MAX_BUFFER_BYTES // 2**20} MiB); capture restarts",
     "run": "scope run [normal|auto|roll|single]: start acquiring (default: the mode last "
            "used; auto on a fresh scope).  normal: a frame at each trigger; auto: also one "
-           "per frame length without a trigger; roll: always the latest samples",
+           "per frame length without a trigger, and without a trigger set the latest "
+           "samples as they come; roll: always the latest samples.  A frame shows as it "
+           "fills: show, save and plot give the samples so far",
     "single": "scope single: arm for one triggered frame, then stop (needs a trigger)",
     "stop": "scope stop: stop acquiring; what was sampled stays readable (a partial "
             "frame if no frame was complete)",

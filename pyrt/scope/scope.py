@@ -7,7 +7,8 @@ numpy ring buffer.  Modes, as on a bench scope:
   trigger point), keep the frame for read-out, re-arm;
 * ``single``: the same, once, then stop;
 * ``auto``: like normal, but a frame is captured anyway when no trigger
-  comes within one frame length;
+  comes within one frame length; without a trigger it shows the latest
+  samples as they come, as roll does;
 * ``roll``: no trigger; the read-out is always the latest ``capacity``
   samples, oldest first (what halscope never had).
 
@@ -236,9 +237,17 @@ class Scope:
     def stop(self) -> None:
         """Stop acquiring; what was captured stays readable.  Stopped before
         the first frame filled, the samples taken so far become the frame
-        (the trigger's, if one was seen), so a stop never loses what was seen."""
+        (the trigger's, if one was seen), so a stop never loses what was seen.
+        In auto mode without a trigger the latest samples, what :meth:`read`
+        showed, become the frame."""
         self._flush()
-        if self._frame is None and self.state in ("armed", "triggered"):
+        if self.mode == "auto" and self.trigger is None and self._acquiring:
+            # what was shown (the latest samples) is what is kept
+            if self._frame is None or self._g > self._arm_g:
+                first = max(0, self._g - self.capacity)
+                if self._g > first:
+                    self._complete(first, None, self._g - first)
+        elif self._frame is None and self.state in ("armed", "triggered"):
             if self.state == "triggered" and self._trig_g is not None:
                 pre = round(self.trigger.pre * self.capacity) if self.trigger else 0
                 first = max(self._trig_g - pre, self._g - self.capacity, 0)
@@ -422,22 +431,43 @@ class Scope:
     # -- read-out (application side) -----------------------------------------
 
     def read(self) -> Frame | None:
-        """The latest frame (roll mode: the latest samples), or None if none yet."""
+        """What the scope shows now, drawn as it comes (as halscope draws its trace),
+        or None while there is nothing to show:
+
+        * roll, and auto without a trigger while acquiring: the latest samples,
+          up to a frame length (fewer while the first frame length fills);
+        * the latest complete frame, if there is one;
+        * else, while acquiring, the frame so far: after the trigger, the samples
+          from the frame's start (its pre-trigger part) with the trigger point; in
+          auto mode still waiting for its trigger, the samples since it was armed;
+          normal and single modes show nothing before their trigger.
+        """
         self._flush()
-        if self.mode == "roll":
-            n = min(self._g, self.capacity)
-            if n == 0:
-                return None
-            size = self._ring.shape[0]
-            pos = (self._g - n + np.arange(n)) % size
-            nch = len(self._names)
-            return Frame(
-                self._ring_t[pos].copy(), self._ring[pos, :nch].copy(),
-                tuple(self._names), None, "roll",
-                units=tuple(src.units for src in self._sources),
-                formats=tuple(src.fmt for src in self._sources),
-            )
-        return self._frame
+        if self.mode == "roll" or (self.mode == "auto" and self.trigger is None
+                                   and self._acquiring):
+            return self._latest(max(0, self._g - self.capacity), None)
+        if self._frame is not None or not self._acquiring:
+            return self._frame
+        if self.state == "triggered" and self._trig_g is not None:
+            first = max(self._trig_g - self.pre_samples, self._g - self.capacity, 0)
+            return self._latest(first, self._trig_g - first)
+        if self.mode == "auto":
+            return self._latest(max(self._arm_g, self._g - self.capacity), None)
+        return None
+
+    def _latest(self, first_g: int, trigger_index: int | None) -> Frame | None:
+        """The samples from ``first_g`` to the latest, as a frame (None if none)."""
+        n = self._g - first_g
+        if n <= 0:
+            return None
+        pos = (first_g + np.arange(n)) % self._ring.shape[0]
+        nch = len(self._names)
+        return Frame(
+            self._ring_t[pos].copy(), self._ring[pos, :nch].copy(),
+            tuple(self._names), trigger_index, self.mode,
+            units=tuple(src.units for src in self._sources),
+            formats=tuple(src.fmt for src in self._sources),
+        )
 
     # -- what the scope is doing (application side) ------------------------
 
@@ -502,7 +532,8 @@ class Scope:
                     f"more{self.seconds(left)}")
         fill = self.pre_fill()
         if self.trigger is None:
-            return "armed (auto, no trigger): a frame comes after one frame length"
+            return ("armed (auto, no trigger): samples show as they come, as soon as time "
+                    "passes (wait, sleep)")
         note = self.missed_note()
         note = f"; {note}" if note else ""
         auto = ", or after one frame length without one" if mode == "auto" else ""
