@@ -17,6 +17,13 @@ from pyrt.scheduler.runner import Runner
 from pyrt.scope import Scope, Source
 
 
+@pytest.fixture(autouse=True)
+def _in_tmp(tmp_path, monkeypatch):
+    """Each test runs in its own directory: the scope writes files only inside the
+    working directory."""
+    monkeypatch.chdir(tmp_path)
+
+
 class Plant:
     def __init__(self):
         self.n = 0
@@ -186,7 +193,7 @@ def test_scope_plot_without_matplotlib_is_one_line_and_writes_nothing(tmp_path):
     code = ("import sys; sys.modules['matplotlib'] = None\n"
             "from pyrt.cli import main; sys.exit(main(['gripper', '--speed', 'max']))")
     done = subprocess.run([sys.executable, "-c", code], input=script, capture_output=True,
-                          text=True, timeout=60)
+                          text=True, timeout=60, cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     hint = [ln for ln in done.stdout.splitlines() + done.stderr.splitlines() if "matplotlib" in ln]
     assert len(hint) == 1 and "pip install 'pyrt[plot]'" in hint[0]

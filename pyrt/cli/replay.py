@@ -62,7 +62,7 @@ __all__ = ["add_parser", "run"]
 #: boards, and no links).
 _NOT_REPLAYED = {"boards", "journal", "black_box", "serve", "epics", "headless",
                  "timing_log", "history", "speed", "fifo", "timer_slack", "max_overruns",
-                 "mlock", "run"}
+                 "mlock", "run", "scope_dir"}
 
 
 def _tick(text: str) -> int:

@@ -24,11 +24,16 @@ from pyrt.scope import (
     Source,
     check_plot_path,
     check_save_path,
+    confine,
     plot_frame,
     save_frame,
 )
 
-__all__ = ["SCOPE_HELP", "SUBCOMMAND_HELP", "ScopeCommand"]
+__all__ = ["MAX_SHOW", "SCOPE_HELP", "SUBCOMMAND_HELP", "ScopeCommand"]
+
+#: The most samples one ``scope show`` prints (one request's work is bounded:
+#: ``scope save`` writes a whole frame).
+MAX_SHOW = 5000
 
 #: One entry per sub-command: its usage and what it does.
 SUBCOMMAND_HELP: dict[str, str] = {
@@ -56,9 +61,11 @@ SUBCOMMAND_HELP: dict[str, str] = {
     "single": "scope single: arm for one triggered frame, then stop (needs a trigger)",
     "stop": "scope stop: stop acquiring; what was sampled stays readable (a partial "
             "frame if no frame was complete)",
-    "show": "scope show [N]: print the last N samples (default 10) of the latest frame",
+    "show": f"scope show [N]: print the last N samples (default 10, at most {MAX_SHOW}) of "
+            "the latest frame",
     "save": "scope save FILE.csv|FILE.npz: write the latest frame (the CSV header names "
-            "each column with its units: encoder [counts])",
+            "each column with its units: encoder [counts]) into the working directory, or "
+            "the one --scope-dir names (nowhere else)",
     "plot": "scope plot FILE.png|FILE.svg|FILE.pdf: draw the latest frame in the format "
             "the extension names (needs matplotlib)",
     "help": "scope help [SUB]: this help, or one sub-command's",
@@ -246,8 +253,8 @@ class ScopeCommand:
                     else f"a partial frame of {n} samples is kept")
         self.say(f"scope stopped (it was {was}); {kept}")
 
-    def _frame(self) -> Frame:
-        frame = self._call(self.scope.read)
+    def _frame(self, last: int | None = None) -> Frame:
+        frame = self._call(self.scope.read, last)
         if frame is None:
             raise CommandError(f"scope: nothing captured yet: {self._call(self.scope.waiting)}")
         return frame
@@ -255,10 +262,13 @@ class ScopeCommand:
     def _do_show(self, rest: list[str]) -> None:
         n = 10
         if rest:
-            if len(rest) != 1 or not rest[0].isdigit():
-                raise CommandError("scope show: a number of samples")
+            if len(rest) != 1 or not (rest[0].isascii() and rest[0].isdigit()) \
+                    or not 1 <= int(rest[0]) <= MAX_SHOW:
+                raise CommandError(f"scope show: a number of samples, 1..{MAX_SHOW} (one "
+                                   f"show prints at most {MAX_SHOW}; 'scope save FILE' "
+                                   "writes the whole frame)")
             n = int(rest[0])
-        frame = self._frame()
+        frame = self._frame(n)
         shows = [self._show_of(name) for name in frame.channels]
         self.say("t_s " + " ".join(frame.channels))
         for t, row in zip(frame.t_ns[-n:], frame.data[-n:], strict=True):
@@ -279,8 +289,9 @@ class ScopeCommand:
         if len(rest) != 1:
             raise CommandError("scope save: one file name ending .csv or .npz")
         check_save_path(rest[0])
+        target = confine(rest[0], self.scope.directory, "scope save")
         frame = self._frame()
-        path = save_frame(frame, rest[0])
+        path = save_frame(frame, target)
         n = frame.data.shape[0]
         whole = "" if n == self.scope.capacity else f" (a partial frame: of {self.scope.capacity})"
         self.say(f"saved {n} samples of {len(frame.channels)} channel(s){whole} to {path}")
@@ -289,5 +300,6 @@ class ScopeCommand:
         if len(rest) != 1:
             raise CommandError("scope plot: one file name ending .png, .svg or .pdf")
         check_plot_path(rest[0])
-        path = plot_frame(self._frame(), rest[0])
+        target = confine(rest[0], self.scope.directory, "scope plot")
+        path = plot_frame(self._frame(), target)
         self.say(f"plotted {path}")

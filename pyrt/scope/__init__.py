@@ -5,6 +5,7 @@ from pyrt.scope.export import (
     SAVE_SUFFIXES,
     check_plot_path,
     check_save_path,
+    confine,
     plot_frame,
     save_frame,
 )
@@ -26,6 +27,7 @@ __all__ = [
     "check_plot_path",
     "check_save_path",
     "compile_sources",
+    "confine",
     "plot_frame",
     "save_frame",
 ]

@@ -19,6 +19,7 @@ __all__ = [
     "check_plot_path",
     "check_save_path",
     "column_title",
+    "confine",
     "frame_figure",
     "is_hex",
     "plot_frame",
@@ -51,6 +52,23 @@ def check_plot_path(path: str | Path) -> Path:
         raise CommandError(f"scope plot: the file name's extension names the format, one of "
                            f"{_either(PLOT_SUFFIXES)}; {got}")
     return path
+
+
+def confine(name: str | Path, directory: str | Path | None, what: str) -> Path:
+    """The file ``name`` inside ``directory`` (None: the working directory), or
+    CommandError if it would land outside it: an absolute path elsewhere, a
+    ``..`` that climbs out, a symbolic link that points out.  A relative name is
+    taken relative to ``directory``.  ``what`` names the command in the message."""
+    root = Path(directory if directory is not None else Path.cwd()).resolve()
+    path = Path(name)
+    target = (path if path.is_absolute() else root / path).resolve()
+    if target == root or not target.is_relative_to(root):
+        where = ("the directory --scope-dir names" if directory is not None
+                 else "the working directory")
+        raise CommandError(f"{what}: {str(name)[:80]!r} is outside {root}: the scope writes "
+                           f"files only inside {where}; give a name inside it "
+                           f"(nothing written)")
+    return target
 
 
 def _either(suffixes: tuple[str, ...]) -> str:

@@ -30,7 +30,7 @@ other method is for the application, through the runner's mailbox.
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -133,6 +133,9 @@ class Scope:
         #: The loop's tick, ns, when whoever runs the scope says it (for times
         #: before a sample was taken).
         self.tick_ns: int | None = None
+        #: The directory ``scope save`` and ``scope plot`` write into (and
+        #: nowhere else); None: the working directory.
+        self.directory: str | None = None
         self._reset_buffers()
 
     # -- configuration (application side, with the scope stopped or not) -----
@@ -430,9 +433,10 @@ class Scope:
 
     # -- read-out (application side) -----------------------------------------
 
-    def read(self) -> Frame | None:
-        """What the scope shows now, drawn as it comes (as halscope draws its trace),
-        or None while there is nothing to show:
+    def read(self, last: int | None = None) -> Frame | None:
+        """What the scope shows now, drawn as it comes (as halscope draws its
+        trace), or None while there is nothing to show; only its ``last`` samples
+        if given (the work is then bounded by ``last``, whatever the record length):
 
         * roll, and auto without a trigger while acquiring: the latest samples,
           up to a frame length (fewer while the first frame length fills);
@@ -442,21 +446,31 @@ class Scope:
           auto mode still waiting for its trigger, the samples since it was armed;
           normal and single modes show nothing before their trigger.
         """
+        if last is not None and (isinstance(last, bool) or not isinstance(last, int)
+                                 or last < 0):
+            raise CommandError(f"a number of samples is a whole number >= 0, got {last!r}")
         self._flush()
         if self.mode == "roll" or (self.mode == "auto" and self.trigger is None
                                    and self._acquiring):
-            return self._latest(max(0, self._g - self.capacity), None)
+            return self._latest(max(0, self._g - self.capacity), None, last)
         if self._frame is not None or not self._acquiring:
-            return self._frame
+            return _tail(self._frame, last)
         if self.state == "triggered" and self._trig_g is not None:
             first = max(self._trig_g - self.pre_samples, self._g - self.capacity, 0)
-            return self._latest(first, self._trig_g - first)
+            return self._latest(first, self._trig_g - first, last)
         if self.mode == "auto":
-            return self._latest(max(self._arm_g, self._g - self.capacity), None)
+            return self._latest(max(self._arm_g, self._g - self.capacity), None, last)
         return None
 
-    def _latest(self, first_g: int, trigger_index: int | None) -> Frame | None:
-        """The samples from ``first_g`` to the latest, as a frame (None if none)."""
+    def _latest(self, first_g: int, trigger_index: int | None,
+                last: int | None = None) -> Frame | None:
+        """The samples from ``first_g`` to the latest (only the ``last`` of them if
+        given), as a frame (None if none)."""
+        if last is not None and self._g - first_g > last:
+            cut = self._g - last - first_g
+            first_g += cut
+            trigger_index = (None if trigger_index is None or trigger_index < cut
+                             else trigger_index - cut)
         n = self._g - first_g
         if n <= 0:
             return None
@@ -567,3 +581,13 @@ class Scope:
         note = self.missed_note()
         line += f"; {note}" if note else ""
         return line + (f"; {self.error}" if self.error else "")
+
+
+def _tail(frame: Frame | None, last: int | None) -> Frame | None:
+    """``frame``'s last ``last`` samples (the whole frame if ``last`` is None)."""
+    if frame is None or last is None or frame.t_ns.size <= last:
+        return frame
+    cut = frame.t_ns.size - last
+    index = frame.trigger_index
+    return replace(frame, t_ns=frame.t_ns[cut:].copy(), data=frame.data[cut:].copy(),
+                   trigger_index=None if index is None or index < cut else index - cut)
