@@ -174,7 +174,7 @@ def test_export_csv_and_npz(tmp_path):
     assert float(rows[1][1]) == 11.0 and float(rows[1][0]) == pytest.approx(0.011)
     npz = np.load(save_frame(frame, tmp_path / "f.npz"))
     assert list(npz["channels"]) == ["ramp", "square"] and npz["data"].shape == (50, 2)
-    with pytest.raises(CommandError, match=r"\.csv or \.npz"):
+    with pytest.raises(CommandError, match=r"\.csv, \.npz or \.mcap"):
         save_frame(frame, tmp_path / "f.txt")
 
 

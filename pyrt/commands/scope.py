@@ -63,9 +63,10 @@ SUBCOMMAND_HELP: dict[str, str] = {
             "frame if no frame was complete)",
     "show": f"scope show [N]: print the last N samples (default 10, at most {MAX_SHOW}) of "
             "the latest frame",
-    "save": "scope save FILE.csv|FILE.npz: write the latest frame (the CSV header names "
-            "each column with its units: encoder [counts]) into the working directory, or "
-            "the one --scope-dir names (nowhere else)",
+    "save": "scope save FILE.csv|FILE.npz|FILE.mcap: write the latest frame (the CSV "
+            "header names each column with its units: encoder [counts]; MCAP, for Foxglove "
+            "and PlotJuggler, needs pyrt[mcap]) into the working directory, or the one "
+            "--scope-dir names (nowhere else)",
     "plot": "scope plot FILE.png|FILE.svg|FILE.pdf: draw the latest frame in the format "
             "the extension names (needs matplotlib)",
     "help": "scope help [SUB]: this help, or one sub-command's",
@@ -287,7 +288,7 @@ class ScopeCommand:
 
     def _do_save(self, rest: list[str]) -> None:
         if len(rest) != 1:
-            raise CommandError("scope save: one file name ending .csv or .npz")
+            raise CommandError("scope save: one file name ending .csv, .npz or .mcap")
         check_save_path(rest[0])
         target = confine(rest[0], self.scope.directory, "scope save")
         frame = self._frame()

@@ -1,4 +1,4 @@
-"""Scope frames to CSV, .npz and PNG (files written atomically)."""
+"""Scope frames to CSV, .npz, MCAP, and plots as PNG, SVG or PDF (files written atomically)."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import numpy as np
 
 from pyrt.errors import CommandError
 from pyrt.fileio import atomic_write
+from pyrt.scope.mcapfile import save_frame_mcap
 from pyrt.scope.scope import Frame
 
 __all__ = [
@@ -26,8 +27,9 @@ __all__ = [
     "save_frame",
 ]
 
-#: The file name endings ``scope save`` writes (a table of the samples).
-SAVE_SUFFIXES = (".csv", ".npz")
+#: The file name endings ``scope save`` writes (the samples: a table, numpy
+#: arrays, or MCAP, which needs the ``mcap`` library).
+SAVE_SUFFIXES = (".csv", ".npz", ".mcap")
 #: The file name endings ``scope plot`` writes, each in the format it names.
 PLOT_SUFFIXES = (".png", ".svg", ".pdf")
 
@@ -78,9 +80,13 @@ def _either(suffixes: tuple[str, ...]) -> str:
 def save_frame(frame: Frame, path: str | Path) -> Path:
     """Write ``frame`` as CSV (``.csv``: a header naming the columns with their
     units, ``encoder [counts]``, time in seconds first) or numpy ``.npz``
-    (arrays ``t_ns``, ``data``, ``channels``, ``units``)."""
+    (arrays ``t_ns``, ``data``, ``channels``, ``units``), or MCAP (``.mcap``:
+    a JSON channel per object, a message per sample; see
+    :func:`~pyrt.scope.mcapfile.save_frame_mcap`)."""
     path = check_save_path(path)
     suffix = path.suffix.lower()
+    if suffix == ".mcap":
+        return save_frame_mcap(frame, path)
     if suffix == ".csv":
         text = io.StringIO()
         header = ",".join(["t_s", *(column_title(frame, k) for k in range(len(frame.channels)))])
