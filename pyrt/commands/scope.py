@@ -28,6 +28,7 @@ from pyrt.scope import (
     plot_frame,
     save_frame,
 )
+from pyrt.scope.stream import DEFAULT_HZ, MAX_HZ, UdpStream, parse_udp_url
 
 __all__ = ["MAX_SHOW", "SCOPE_HELP", "SUBCOMMAND_HELP", "ScopeCommand"]
 
@@ -69,12 +70,17 @@ SUBCOMMAND_HELP: dict[str, str] = {
             "--scope-dir names (nowhere else)",
     "plot": "scope plot FILE.png|FILE.svg|FILE.pdf: draw the latest frame in the format "
             "the extension names (needs matplotlib)",
+    "stream": "scope stream udp://HOST:PORT [HZ]: send the scope's channels live to "
+              "PlotJuggler's UDP server (JSON protocol, timestamp field 'timestamp', loop "
+              f"time in s), one object every 1/HZ s of loop time (default {DEFAULT_HZ:g}, "
+              f"at most {MAX_HZ:g}) while the scope samples; the loop never waits for the "
+              "network.  scope stream off: stop; scope stream: what it sent",
     "help": "scope help [SUB]: this help, or one sub-command's",
 }
 
 #: ``help scope``: the word's usage, then every sub-command (lines of at most 96).
 SCOPE_HELP = "\n".join([
-    "scope [add|remove|trigger|every|length|run|single|stop|show|save|plot|help ...]",
+    "scope [add|remove|trigger|every|length|run|single|stop|show|save|plot|stream|help ...]",
     "",
     *textwrap.wrap("The software oscilloscope over any signal: OBJECT.SIGNAL (e.g. "
                    "prototype.x, axis0.tension, sim.x), or a signal of the robot by its name "
@@ -127,7 +133,7 @@ class ScopeCommand:
         if handler is None:
             raise CommandError(
                 f"scope: unknown sub-command {words[0]!r}; one of add, remove, trigger, every, "
-                "length, run, single, stop, show, save, plot, list, help"
+                "length, run, single, stop, show, save, plot, stream, list, help"
             )
         handler(rest)
 
@@ -304,3 +310,37 @@ class ScopeCommand:
         target = confine(rest[0], self.scope.directory, "scope plot")
         path = plot_frame(self._frame(), target)
         self.say(f"plotted {path}")
+
+    def _do_stream(self, rest: list[str]) -> None:
+        sc = self.scope
+        if not rest:
+            stream = self._call(lambda: sc.stream)
+            self.say(stream.describe() if stream is not None else
+                     "not streaming: scope stream udp://HOST:PORT [HZ] starts it")
+            return
+        if len(rest) == 1 and rest[0].lower() == "off":
+            old = self._call(sc.stop_stream)
+            if old is None:
+                self.say("not streaming")
+                return
+            old.close()
+            self.say(f"stream off; {old.describe()}")
+            return
+        if len(rest) > 2:
+            raise CommandError("scope stream: udp://HOST:PORT [HZ], or 'off'")
+        host, port = parse_udp_url(rest[0])
+        hz = parse_number(rest[1], "scope stream: rate") if len(rest) == 2 else DEFAULT_HZ
+        stream = UdpStream(host, port, hz)
+        try:
+            old = self._call(sc.start_stream, stream)
+        except BaseException:
+            stream.close()
+            raise
+        if old is not None:
+            old.close()
+        chans, state = self._call(lambda: (sc.channels, sc.state))
+        note = ("" if state not in ("stopped", "done") else
+                f"; the scope is {state}: 'scope run' starts the samples")
+        self.say(f"streaming {', '.join(chans) or 'no channels yet'} to {stream.url} at "
+                 f"{hz:g} Hz of loop time, PlotJuggler's UDP JSON (field 'timestamp': loop "
+                 f"time, s){note}")

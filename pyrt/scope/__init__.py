@@ -1,4 +1,5 @@
-"""The software oscilloscope: channels sampled into a ring buffer, triggers, export, spew."""
+"""The software oscilloscope: channels sampled into a ring buffer, triggers, export
+(CSV, npz, MCAP, plots), the live UDP stream, spew."""
 
 from pyrt.scope.export import (
     PLOT_SUFFIXES,
@@ -12,6 +13,7 @@ from pyrt.scope.export import (
 from pyrt.scope.scope import MAX_BUFFER_BYTES, MAX_LENGTH, MODES, Frame, Scope, Trigger
 from pyrt.scope.sources import Source, compile_sources
 from pyrt.scope.spew import Spew
+from pyrt.scope.stream import UdpStream
 
 __all__ = [
     "MAX_BUFFER_BYTES",
@@ -24,6 +26,7 @@ __all__ = [
     "Source",
     "Spew",
     "Trigger",
+    "UdpStream",
     "check_plot_path",
     "check_save_path",
     "compile_sources",

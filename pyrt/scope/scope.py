@@ -36,10 +36,12 @@ import numpy as np
 
 from pyrt.errors import CommandError
 from pyrt.scope.sources import Source, compile_sampler, compile_sources
+from pyrt.scope.stream import Layout, UdpStream
 
 __all__ = ["MAX_BUFFER_BYTES", "MAX_LENGTH", "Frame", "Scope", "Trigger"]
 
 _STAGE = 64
+_NEVER = 2**63  # the next stream time when nothing streams: one comparison a sample
 MODES = ("normal", "single", "auto", "roll")
 #: The longest record length, samples per channel.
 MAX_LENGTH = 1_000_000
@@ -136,6 +138,9 @@ class Scope:
         #: The directory ``scope save`` and ``scope plot`` write into (and
         #: nowhere else); None: the working directory.
         self.directory: str | None = None
+        #: The live stream of the samples (``scope stream``), or None.
+        self.stream: UdpStream | None = None
+        self._stream_next = _NEVER
         self._reset_buffers()
 
     # -- configuration (application side, with the scope stopped or not) -----
@@ -280,6 +285,7 @@ class Scope:
         self._dtype = np.dtype([("t", "<i8"), ("v", "<f8", (nch,))])
         self._stage = bytearray(packer.size * _STAGE)
         self._sampler = compile_sampler(self._sources, packer.pack_into)
+        self._layout = Layout(packer, tuple(self._names))
         self._staged = 0
         self._arm_g = 0
         self._trig_g: int | None = None
@@ -314,9 +320,37 @@ class Scope:
             self.error = f"sampling stopped: {type(exc).__name__}: {exc}"
             self.state = "stopped"
             return
+        if now_ns >= self._stream_next:
+            self._offer(now_ns)
         self._staged += 1
         if self._staged >= _STAGE:
             self._flush()
+
+    def _offer(self, now_ns: int) -> None:
+        """Hand the sample just taken to the stream; the next one is due a period on."""
+        stream = self.stream
+        if stream is None:
+            self._stream_next = _NEVER
+            return
+        off = self._staged * self._row
+        stream.offer(self._layout, bytes(self._stage[off:off + self._row]))
+        nxt = (self._stream_next or now_ns) + stream.period_ns  # 0: the first, just now
+        self._stream_next = nxt if nxt > now_ns else now_ns + stream.period_ns
+
+    # -- the live stream (application side) ------------------------------------------
+
+    def start_stream(self, stream: UdpStream) -> UdpStream | None:
+        """Stream the samples (from the next one on) to ``stream``; the stream it
+        replaces, if any (the caller closes it, outside the loop)."""
+        old, self.stream = self.stream, stream
+        self._stream_next = 0
+        return old
+
+    def stop_stream(self) -> UdpStream | None:
+        """Stream no more; the stream that was on, if any (the caller closes it)."""
+        old, self.stream = self.stream, None
+        self._stream_next = _NEVER
+        return old
 
     def _flush(self) -> None:
         n = self._staged
