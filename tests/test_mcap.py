@@ -157,3 +157,32 @@ def test_scope_save_mcap_holds_every_sample_as_the_csv_does(tmp_path, monkeypatc
         assert by_topic["/scope"][i][1]["encoder"] == pytest.approx(float(row[1]))
         assert by_topic["/scope/gripper"][i][1]["dac"] == pytest.approx(float(row[2]))
         assert by_topic["/scope/sim"][i][1]["x"] == pytest.approx(float(row[3]), rel=1e-8)
+
+
+def test_a_damaged_journal_is_refused_or_salvaged_around_the_damage(tmp_path):
+    """A byte flipped inside a tick block: pyrt export refuses (exit 1, naming the frame and
+    offset, nothing written); --salvage exports every readable tick, the lost ones on /gaps."""
+    from pyrt.journal.format import HEADER_SIZE
+
+    data = bytearray((ROOT / "tests" / "journals" / "gripper.pj").read_bytes())
+    offs, pos = [], 0
+    while pos < len(data):
+        offs.append(pos)
+        pos += HEADER_SIZE + int.from_bytes(data[pos + 5:pos + 9], "little")
+    mid = offs[len(offs) // 2]
+    data[mid + HEADER_SIZE + 20] ^= 0x55
+    bad = tmp_path / "bad.pj"
+    bad.write_bytes(bytes(data))
+    done = _pyrt(tmp_path, "export", str(bad), "bad.mcap")
+    assert done.returncode == 1 and f"at offset {mid}" in done.stderr, done.stderr
+    assert not (tmp_path / "bad.mcap").exists()
+    done = _pyrt(tmp_path, "export", "--salvage", str(bad), "bad.mcap")
+    assert done.returncode == 0, done.stderr
+    by_topic, _schemas, _ = _read(tmp_path / "bad.mcap")
+    kept = [t for t in JournalReader(bad, salvage=True).ticks()]
+    assert len(by_topic["/ticks"]) == len(kept) < JournalReader(GRIPPER_PJ).summary().ticks
+    (gap,) = by_topic["/gaps"]
+    assert "damaged bytes" in gap[1]["cause"]
+
+
+GRIPPER_PJ = ROOT / "tests" / "journals" / "gripper.pj"

@@ -21,7 +21,7 @@ USAGE_ERRORS = [
     (["--scope", "gripper.nope", "--scope-save", "k.csv"],
      "--scope gripper.nope: no channel 'gripper.nope': gripper has no signal 'nope'"),
     (["--scope", "encoder", "--scope-save", "j.txt"],
-     "--scope-save j.txt: use a file name ending .csv, .npz, .png, .svg, .pdf"),
+     "--scope-save j.txt: use a file name ending .csv, .npz, .mcap, .png, .svg, .pdf"),
     (["--scope", "encoder", "--scope-save", "noext"], "--scope-save noext: use a file name"),
     (["--scope-save", "k.csv"], "--scope-save needs --scope CHANNELS"),
     (["--scope", "encoder", "--scope-save", "no/such/dir/k.csv"],
@@ -50,10 +50,11 @@ def test_a_journal_that_cannot_be_read_exits_1(tmp_path):
     assert "Traceback" not in done.stderr
 
 
-def test_good_options_replay_and_write_the_file(tmp_path):
+@pytest.mark.parametrize("name", ["run.npz", "run.mcap"])
+def test_good_options_replay_and_write_the_file(tmp_path, name):
     """Channels that exist and a known extension replay (exit 0) and write the file."""
-    done = _replay(tmp_path, str(GRIPPER), "--scope", "encoder,dac", "--scope-save", "run.npz")
+    done = _replay(tmp_path, str(GRIPPER), "--scope", "encoder,dac", "--scope-save", name)
     assert done.returncode == 0, done.stdout + done.stderr
     assert "identical" in done.stdout
-    assert "saved 6636 samples of 2 channel(s) to run.npz" in done.stdout
-    assert (tmp_path / "run.npz").is_file()
+    assert f"saved 6636 samples of 2 channel(s) to {name}" in done.stdout
+    assert (tmp_path / name).is_file()

@@ -137,6 +137,9 @@ def test_the_scope_offers_one_sample_per_period_of_loop_time():
         def offer(self, layout, row):
             offered.append(layout.packer.unpack(row))
 
+        def bind(self, owner):
+            pass
+
     scope.run("roll")
     loop.run(5)
     scope.start_stream(Probe())
@@ -175,3 +178,19 @@ def test_starting_a_stream_needs_the_token():
         op = sv.operator()
         assert "streaming" in op.command("scope stream udp://127.0.0.1:9")[0]
         assert op.command("scope stream off")[0].startswith("stream off")
+
+
+def test_the_streams_thread_ends_when_its_scope_is_gone():
+    """A scope dropped while it streams (a station closed without 'scope stream off'):
+    the stream's thread ends by itself."""
+    import gc
+
+    scope = Scope(capacity=10)
+    stream = UdpStream("127.0.0.1", 9, 10)
+    scope.start_stream(stream)
+    assert stream._thread.is_alive()
+    del scope
+    gc.collect()
+    stream._thread.join(timeout=10)  # the thread looks every 10 ms
+    assert not stream._thread.is_alive()
+    stream.close()

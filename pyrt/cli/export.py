@@ -10,9 +10,12 @@ schema; log times are the journal's tick times (the loop's clock, ns).  The
 run's databases travel as attachments, its station and options as metadata.
 Needs the ``mcap`` library: ``pip install 'pyrt[mcap]'``.
 
-A name that does not end ``.mcap`` is a usage error (exit status 2, nothing
-read); a journal that cannot be read, or a file that cannot be written, exit
-status 1.
+A damaged journal (a checksum that does not match) is refused, naming the
+frame and its offset; ``--salvage`` exports every tick it can read around
+the damage, the ticks lost as messages on ``/gaps``.  A name that does not
+end ``.mcap`` is a usage error (exit status 2, nothing read); a journal that
+cannot be read, or a file that cannot be written, exit status 1 (and nothing
+is written).
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ import sys
 from pathlib import Path
 
 from pyrt.errors import CommandError
-from pyrt.journal import JournalError
+from pyrt.journal import JournalError, JournalReader
 from pyrt.scope.mcapfile import export_journal
 
 __all__ = ["add_parser", "run"]
@@ -34,6 +37,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("journal", metavar="RUN.pj", help="a journal or a black box (.pj)")
     p.add_argument("out", metavar="OUT.mcap", help="the MCAP file to write")
+    p.add_argument("--salvage", action="store_true",
+                   help="read past damaged frames (the ticks lost go on /gaps)")
     p.set_defaults(run=run, usage=p.format_usage)
 
 
@@ -50,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 2
     try:
-        done = export_journal(args.journal, out)
+        done = export_journal(JournalReader(args.journal, salvage=args.salvage), out)
     except (JournalError, CommandError) as exc:
         print(f"pyrt export: {exc}", file=sys.stderr)
         return 1

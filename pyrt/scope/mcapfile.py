@@ -191,8 +191,9 @@ def export_journal(source: str | Path | JournalReader, out: str | Path) -> Expor
                                                   "message": text})
     c_event = m.channel("/events", "pyrt.event", {"tick": integer, "name": text,
                                                   "id": integer, "message": text})
-    c_gap = m.channel("/gaps", "pyrt.gap", {"first": integer, "last": integer,
-                                            "ticks": integer, "cause": text})
+    maybe = {"type": ["integer", "null"]}  # null: to the end, or not known
+    c_gap = m.channel("/gaps", "pyrt.gap", {"first": integer, "last": maybe,
+                                            "ticks": maybe, "cause": text})
     writers = reader.writers
     outputs = h.outputs
     ticks = 0

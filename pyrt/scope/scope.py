@@ -342,6 +342,7 @@ class Scope:
     def start_stream(self, stream: UdpStream) -> UdpStream | None:
         """Stream the samples (from the next one on) to ``stream``; the stream it
         replaces, if any (the caller closes it, outside the loop)."""
+        stream.bind(self)
         old, self.stream = self.stream, stream
         self._stream_next = 0
         return old

@@ -29,6 +29,7 @@ import math
 import socket
 import struct
 import threading
+import weakref
 from dataclasses import dataclass
 from urllib.parse import urlsplit
 
@@ -125,6 +126,7 @@ class UdpStream:
         self.lost = 0
         self.dropped = 0
         self._stop = threading.Event()
+        self._owner: weakref.ref[object] | None = None
         self._templates: dict[Layout, tuple[str, list[int]]] = {}
         self._thread = threading.Thread(target=self._run, name="pyrt scope stream",
                                         daemon=True)
@@ -148,9 +150,17 @@ class UdpStream:
 
     # -- the stream's thread ---------------------------------------------------------
 
+    def bind(self, owner: object) -> None:
+        """Tie the stream's thread to ``owner`` (the scope): once the owner is gone
+        (a station closed and dropped without ``scope stream off``), the thread ends."""
+        self._owner = weakref.ref(owner)
+
     def _run(self) -> None:
         while not self._stop.wait(POLL_S):
             self.drain()
+            owner = self._owner
+            if owner is not None and owner() is None:
+                break
         self.drain()
 
     def drain(self) -> int:
