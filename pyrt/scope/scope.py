@@ -450,14 +450,25 @@ class Scope:
         hits = self._edges(col, start, col.shape[0], trig)
         return int(hits[0]) + max(start, 0) if hits.size else None
 
+    def _span(self, first_g: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """Copies of the times and values of samples ``first_g`` .. ``first_g + n - 1``
+        (at most two contiguous slices of the ring)."""
+        size = self._ring.shape[0]
+        nch = len(self._names)
+        start = first_g % size
+        end = start + n
+        if end <= size:
+            return self._ring_t[start:end].copy(), self._ring[start:end, :nch].copy()
+        wrap = end - size
+        return (np.concatenate((self._ring_t[start:], self._ring_t[:wrap])),
+                np.concatenate((self._ring[start:, :nch], self._ring[:wrap, :nch])))
+
     def _complete(self, first_g: int, trigger_index: int | None,
                   count: int | None = None) -> None:
-        size = self._ring.shape[0]
-        pos = (first_g + np.arange(self.capacity if count is None else count)) % size
-        nch = len(self._names)
+        t_ns, data = self._span(first_g, self.capacity if count is None else count)
         self._frame = Frame(
-            t_ns=self._ring_t[pos].copy(),
-            data=self._ring[pos, :nch].copy(),
+            t_ns=t_ns,
+            data=data,
             channels=tuple(self._names),
             trigger_index=trigger_index,
             mode=self.mode,
@@ -509,11 +520,9 @@ class Scope:
         n = self._g - first_g
         if n <= 0:
             return None
-        pos = (first_g + np.arange(n)) % self._ring.shape[0]
-        nch = len(self._names)
+        t_ns, data = self._span(first_g, n)
         return Frame(
-            self._ring_t[pos].copy(), self._ring[pos, :nch].copy(),
-            tuple(self._names), trigger_index, self.mode,
+            t_ns, data, tuple(self._names), trigger_index, self.mode,
             units=tuple(src.units for src in self._sources),
             formats=tuple(src.fmt for src in self._sources),
         )
