@@ -174,7 +174,7 @@ def test_export_csv_and_npz(tmp_path):
     assert float(rows[1][1]) == 11.0 and float(rows[1][0]) == pytest.approx(0.011)
     npz = np.load(save_frame(frame, tmp_path / "f.npz"))
     assert list(npz["channels"]) == ["ramp", "square"] and npz["data"].shape == (50, 2)
-    with pytest.raises(CommandError, match=r"\.csv or \.npz"):
+    with pytest.raises(CommandError, match=r"\.csv, \.npz or \.mcap"):
         save_frame(frame, tmp_path / "f.txt")
 
 
@@ -227,11 +227,12 @@ def test_run_without_a_mode_or_trigger_chooses_auto():
 
 @pytest.mark.parametrize("ticks", [1, 37, 99])
 def test_stop_before_the_first_frame_keeps_what_was_sampled(ticks):
-    """Auto mode stopped before a frame filled: the samples taken so far are the frame."""
+    """Auto mode stopped before a frame filled: the samples taken so far (shown as they
+    came) are the frame."""
     loop, _, scope = rig(capacity=100)
     scope.run("auto")
     loop.run(ticks)
-    assert scope.read() is None
+    assert scope.read().data.shape == (ticks, 2)
     scope.stop()
     frame = scope.read()
     assert frame is not None and frame.data.shape == (ticks, 2)
@@ -321,3 +322,43 @@ def test_csv_header_carries_each_channels_units(tmp_path):
     rows = list(csv.reader(save_frame(scope.read(), tmp_path / "f.csv").open()))
     assert rows[0] == ["t_s", "encoder [counts]", "square"]
     assert list(np.load(save_frame(scope.read(), tmp_path / "f.npz"))["units"]) == ["counts", ""]
+
+
+# -- samples show as they come -----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("ticks", [1, 63, 64, 65, 99, 100, 101, 250])
+def test_the_default_scope_shows_the_samples_as_they_come(ticks):
+    """'scope run' on a fresh scope (auto, no trigger) shows every sample up to now, the
+    latest frame length of them, before any frame has filled and after."""
+    loop, _, scope = rig(capacity=100)
+    scope.run()
+    loop.run(ticks)
+    ramp = scope.read().column("ramp")
+    assert list(ramp) == [float(n) for n in range(max(1, ticks - 99), ticks + 1)]
+    scope.stop()  # what was shown is what is kept
+    assert list(scope.read().column("ramp")) == list(ramp)
+
+
+def test_a_triggered_frame_shows_as_it_fills():
+    """After the trigger, before the frame is full, read gives the frame so far with its
+    trigger point; a normal scope before its trigger shows nothing."""
+    loop, _, scope = rig(capacity=100)
+    scope.set_trigger("square", 0.5, "rising", pre=0.2)
+    scope.run("normal")
+    loop.run(40)
+    assert scope.read() is None
+    loop.run(30)  # the square rises at tick 50: 20 samples of the 80 after it are there
+    frame = scope.read()
+    assert frame.trigger_index == 20 and frame.data.shape == (41, 2)
+    assert frame.column("ramp")[frame.trigger_index] == 50 and frame.column("ramp")[-1] == 70
+    assert scope.frames == 0 and scope.state == "triggered"
+
+
+def test_auto_with_a_trigger_shows_the_samples_while_it_waits():
+    """Auto mode waiting for its trigger shows the samples since it was armed."""
+    loop, _, scope = rig(capacity=100)
+    scope.set_trigger("ramp", 1e9)  # never comes
+    scope.run("auto")
+    loop.run(30)
+    assert list(scope.read().column("ramp")) == [float(n) for n in range(1, 31)]

@@ -17,6 +17,13 @@ from pyrt.scheduler.runner import Runner
 from pyrt.scope import Scope, Source
 
 
+@pytest.fixture(autouse=True)
+def _in_tmp(tmp_path, monkeypatch):
+    """Each test runs in its own directory: the scope writes files only inside the
+    working directory."""
+    monkeypatch.chdir(tmp_path)
+
+
 class Plant:
     def __init__(self):
         self.n = 0
@@ -186,7 +193,7 @@ def test_scope_plot_without_matplotlib_is_one_line_and_writes_nothing(tmp_path):
     code = ("import sys; sys.modules['matplotlib'] = None\n"
             "from pyrt.cli import main; sys.exit(main(['gripper', '--speed', 'max']))")
     done = subprocess.run([sys.executable, "-c", code], input=script, capture_output=True,
-                          text=True, timeout=60)
+                          text=True, timeout=60, cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     hint = [ln for ln in done.stdout.splitlines() + done.stderr.splitlines() if "matplotlib" in ln]
     assert len(hint) == 1 and "pip install 'pyrt[plot]'" in hint[0]
@@ -274,3 +281,48 @@ def test_help_scope_documents_every_sub_command():
                                     "single", "stop", "show", "save", "plot"}
     said = run("scope help trigger")
     assert said.startswith("scope trigger CH LEVEL") and "scope trigger off" in said
+
+
+# -- scope plot writes the format its extension names ---------------------------------------
+
+PLOT_MAGIC = [("f.png", b"\x89PNG"), ("f.svg", b"<?xml"), ("f.PDF", b"%PDF")]
+
+
+@pytest.mark.parametrize(("name", "magic"), PLOT_MAGIC)
+def test_scope_plot_writes_the_format_its_extension_names(tmp_path, name, magic):
+    """scope plot FILE.svg writes SVG, .pdf PDF, .png PNG: the bytes are the named format's."""
+    pytest.importorskip("matplotlib")
+    cmd, runner, _scope, out = make()
+    cmd("add plant.x")
+    cmd("run roll")
+    runner.sleep(0.05)
+    cmd(f"plot {tmp_path / name}")
+    assert (tmp_path / name).read_bytes()[:len(magic)] == magic
+    assert out.getvalue().splitlines()[-1] == f"plotted {tmp_path / name}"
+
+
+@pytest.mark.parametrize("name", ["s2", "f.jpg", "f.csv", "f.png.txt"])
+def test_scope_plot_refuses_a_format_it_cannot_write_before_reading_the_frame(tmp_path, name):
+    """A name without a plot extension is refused naming the formats (even before any
+    capture), and no file is written."""
+    cmd, _runner, _scope, _out = make()
+    with pytest.raises(CommandError, match=r"one of \.png, \.svg or \.pdf"):
+        cmd(f"plot {tmp_path / name}")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_scope_show_and_plot_during_a_move_show_the_move_so_far(tmp_path):
+    """'scope run' (auto, no trigger), a move, one second in: show and save give the move so
+    far (a frame is 16 s), the encoder falling; no 'nothing captured yet'."""
+    station, run = _gripper_shell()
+    run("scope add encoder", "scope run")
+    said = run("P E47A", "sleep 1", "scope show 3", f"scope save {tmp_path / 'so-far.csv'}")
+    assert "nothing captured" not in said
+    lines = said.splitlines()
+    assert lines[0] == "t_s encoder"
+    assert lines[-1].startswith("saved ") and "(a partial frame: of 16000)" in lines[-1]
+    rows = (tmp_path / "so-far.csv").read_text().splitlines()[1:]
+    assert 900 <= len(rows) <= 1100  # one second of 1 ms samples, as they came
+    enc = [float(r.split(",")[1]) for r in rows]
+    assert enc[-1] < enc[0]  # the jaws are closing
+    assert station.runner.call(lambda: station.scope.state) == "armed"  # still acquiring

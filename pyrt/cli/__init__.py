@@ -21,6 +21,7 @@ from pyrt.cli import (
     boardsim,
     connect,
     demo,
+    export,
     forcemap,
     logsort,
     overruns,
@@ -39,10 +40,10 @@ from pyrt.station.factory import find_station, installed_stations
 __all__ = ["build_parser", "entry", "main"]
 
 _COMMANDS = [demo, overruns, logsort, forcemap, send, connect, top, boardsim, run, replay,
-             reference]
+             export, reference]
 #: The tools' names: an installed station cannot take one of them.
 _TOOLS = ("demo", "overruns", "logsort", "forcemap", "send", "connect", "top", "board-sim",
-          "run", "replay", "reference")
+          "run", "replay", "export", "reference")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -15,6 +15,7 @@ every motor stopped, databases written back, one line saying so.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from collections.abc import Sequence
@@ -46,6 +47,9 @@ def add_station_arguments(parser: argparse.ArgumentParser, factory: StationFacto
     factory.add_arguments(parser)
     c = parser.add_argument_group("console")
     c.add_argument("--history", metavar="FILE", help="keep the command history in FILE")
+    c.add_argument("--scope-dir", metavar="DIR",
+                   help="the directory 'scope save' and 'scope plot' write into, and no "
+                        "other (default: the working directory)")
     add_loop_options(parser, default_speed=factory.default_speed,
                      default_tick_us=factory.default_tick_us)
     add_serve_options(parser)
@@ -94,8 +98,10 @@ def run_factory(factory: StationFactory, args: argparse.Namespace) -> int:
     prepare_journal(args)
     load_backend(args.boards)
     loop = make_loop(args)  # overrun lines: stderr, at most one a second
+    scope_dir = _scope_dir(getattr(args, "scope_dir", None))
     station = factory.build(loop, args)
     station.close_report = say
+    station.scope.directory = scope_dir
     runner = station.runner
     recorder = None
     try:
@@ -144,6 +150,16 @@ def run_factory(factory: StationFactory, args: argparse.Namespace) -> int:
         wall = time.perf_counter() - wall0
         say(f"timing log written to {args.timing_log} ({loop.tick_index} ticks, {wall:.2f} s)")
     return status
+
+
+def _scope_dir(name: str | None) -> str | None:
+    """``--scope-dir``'s directory, absolute (None: the working directory);
+    ConfigError if it is not there."""
+    if name is None:
+        return None
+    if not os.path.isdir(name):
+        raise ConfigError(f"--scope-dir {name}: there is no such directory")
+    return os.path.abspath(name)
 
 
 def run_station(factory: object, argv: Sequence[str] | None = None, *, prog: str = "") -> int:

@@ -14,7 +14,16 @@ register, the recorded and the replayed value, and the task that wrote each
 controller as it stood then (read-only: nothing is moved; ``scope`` shows
 what was sampled over the replayed ticks).  ``--scope CHANNELS`` samples any
 signals over the replay, whether or not anybody watched them in the run;
-``--scope-save FILE`` writes them (``.csv``, ``.npz`` or ``.png``).
+``--scope-save FILE`` writes them (``.csv`` or ``.npz``; a plot as ``.png``,
+``.svg`` or ``.pdf``).
+
+Every option is checked before the first tick is replayed: an unknown
+channel, a file name whose extension names no format, ``--scope-save``
+without ``--scope`` or into a directory that is not there.  Such a usage
+error ends as argparse ends one (the usage line, ``pyrt replay: error:
+...`` on stderr, exit status 2) and replays nothing.  Exit status 1 is a
+run that failed: a journal that cannot be read, a replay that differs, a
+file that could not be written.
 """
 
 from __future__ import annotations
@@ -33,7 +42,17 @@ from pyrt.console import Console
 from pyrt.errors import CommandError, ConfigError
 from pyrt.journal import JournalError
 from pyrt.scheduler import Loop
-from pyrt.scope.scope import MAX_BUFFER_BYTES, MAX_LENGTH
+from pyrt.scope import (
+    MAX_BUFFER_BYTES,
+    MAX_LENGTH,
+    PLOT_SUFFIXES,
+    SAVE_SUFFIXES,
+    Scope,
+    check_plot_path,
+    check_save_path,
+    plot_frame,
+    save_frame,
+)
 from pyrt.station.factory import find_station, load_factory
 from pyrt.station.replay import Replay
 
@@ -43,7 +62,7 @@ __all__ = ["add_parser", "run"]
 #: boards, and no links).
 _NOT_REPLAYED = {"boards", "journal", "black_box", "serve", "epics", "headless",
                  "timing_log", "history", "speed", "fifo", "timer_slack", "max_overruns",
-                 "mlock", "run"}
+                 "mlock", "run", "scope_dir"}
 
 
 def _tick(text: str) -> int:
@@ -68,9 +87,43 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="sample these signals (comma-separated, as 'scope add' names them) "
                         "over every replayed tick")
     p.add_argument("--scope-save", metavar="FILE",
-                   help="write the sampled signals to FILE (.csv, .npz, or .png: needs "
-                        "matplotlib)")
-    p.set_defaults(run=run)
+                   help=f"write the sampled signals to FILE ({', '.join(SAVE_SUFFIXES)}; or a "
+                        f"plot, {', '.join(PLOT_SUFFIXES)}: needs matplotlib)")
+    p.set_defaults(run=run, usage=p.format_usage)
+
+
+class UsageError(Exception):
+    """An option of ``pyrt replay`` that cannot be used (exit status 2)."""
+
+
+def _check_options(args: argparse.Namespace) -> None:
+    """The checks that need no journal: UsageError for the first that fails."""
+    if args.scope_save is None:
+        return
+    path = Path(args.scope_save)
+    check = check_plot_path if path.suffix.lower() in PLOT_SUFFIXES else check_save_path
+    try:
+        check(path)
+    except CommandError:
+        raise UsageError(f"--scope-save {args.scope_save}: use a file name ending "
+                         f"{', '.join((*SAVE_SUFFIXES, *PLOT_SUFFIXES))}") from None
+    if not _channels(args):
+        raise UsageError("--scope-save needs --scope CHANNELS (the signals to write)")
+    parent = path.parent
+    if not parent.is_dir():
+        raise UsageError(f"--scope-save {args.scope_save}: there is no directory {parent}")
+
+
+def _channels(args: argparse.Namespace) -> list[str]:
+    return [c.strip() for c in (args.scope or "").split(",") if c.strip()]
+
+
+def _usage_error(args: argparse.Namespace, message: str) -> int:
+    usage = getattr(args, "usage", None)
+    if usage is not None:
+        sys.stderr.write(usage())
+    print(f"pyrt replay: error: {message}", file=sys.stderr)
+    return 2
 
 
 class FrozenRunner:
@@ -151,12 +204,26 @@ def _arguments(replay: Replay, factory: Any, directory: str) -> argparse.Namespa
     return args
 
 
+def _add_channels(station: Any, scope: Scope, channels: list[str]) -> None:
+    """Put ``channels`` on the replay's scope; UsageError naming the first that
+    is not a signal of the station (or does not fit)."""
+    for ch in channels:
+        try:
+            scope.add(ch, station.resolve_signal(ch).scope_source())
+        except CommandError as exc:
+            raise UsageError(f"--scope {ch}: {exc}") from None
+
+
 def run(args: argparse.Namespace) -> int:
     out = sys.stdout
 
     def say(line: str) -> None:
         print(line, file=out, flush=True)
 
+    try:
+        _check_options(args)
+    except UsageError as exc:
+        return _usage_error(args, str(exc))
     try:
         replay = Replay(args.file)
     except JournalError as exc:
@@ -177,19 +244,22 @@ def run(args: argparse.Namespace) -> int:
             station = factory.build(loop, st_args)
         replay.attach(station)
         shell = ReplayShell(station, out, runner=FrozenRunner(station))
-        channels = [c.strip() for c in (args.scope or "").split(",") if c.strip()]
+        channels = _channels(args)
         s = replay.reader.summary()
-        for ch in channels:
-            shell.onecmd(f"scope add {ch}")
+        scope = station.scope
+        try:
+            _add_channels(station, scope, channels)
+        except UsageError as exc:
+            return _usage_error(args, str(exc))
         if channels:  # every replayed tick, as far as the scope's buffer goes
             ticks = s.ticks if args.until is None else min(s.ticks, args.until + 1)
             fits = MAX_BUFFER_BYTES // ((len(channels) + 1) * 8) - 64
             length = max(2, min(ticks, MAX_LENGTH, fits))
-            shell.onecmd(f"scope length {length}")
+            scope.set_length(length)
             if length < ticks:
                 say(f"scope: the last {length} of {ticks} ticks (the scope's buffer holds "
                     "no more)")
-            shell.onecmd("scope run roll")
+            scope.run("roll")
         say(f"pyrt replay: {args.file}: {replay.header.station} ({spec}), pyrt "
             f"{replay.header.version}, {s.ticks} ticks of {replay.header.period_ns / 1e6:g} ms"
             + (f", until tick {args.until}" if args.until is not None else ""))
@@ -200,16 +270,16 @@ def run(args: argparse.Namespace) -> int:
         say(result.line())
         for note in result.notes:
             say(f"note: {note}")
+        saved = True
         if channels:
-            shell.onecmd("scope stop")
+            scope.stop()
             if args.scope_save:
-                verb = "plot" if args.scope_save.lower().endswith(".png") else "save"
-                shell.onecmd(f"scope {verb} {args.scope_save}")
+                saved = _save(scope, args.scope_save, say)
         if args.until is not None and result.identical:
             say(f"the controller as it stood after tick {result.last_tick}: read-only "
                 "commands; quit to leave")
             Console(shell, sys.stdin, out).run()
-        return 0 if result.identical else 1
+        return 0 if result.identical and saved else 1
     except (ConfigError, JournalError) as exc:
         print(f"pyrt replay: {exc}", file=sys.stderr)
         return 1
@@ -218,3 +288,23 @@ def run(args: argparse.Namespace) -> int:
         if station is not None:
             station.close()
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _save(scope: Scope, name: str, say: Any) -> bool:
+    """Write what the scope sampled to ``name`` (its extension checked already);
+    False, said on stderr, if nothing was sampled or the file cannot be written."""
+    frame = scope.read()
+    if frame is None:
+        print(f"pyrt replay: --scope-save {name}: nothing was sampled (no tick replayed)",
+              file=sys.stderr)
+        return False
+    plot = Path(name).suffix.lower() in PLOT_SUFFIXES
+    try:
+        path = plot_frame(frame, name) if plot else save_frame(frame, name)
+    except CommandError as exc:
+        print(f"pyrt replay: --scope-save: {exc}", file=sys.stderr)
+        return False
+    n = frame.data.shape[0]
+    say(f"{'plotted' if plot else 'saved'} {n} samples of {len(frame.channels)} "
+        f"channel(s) to {path}")
+    return True

@@ -22,11 +22,19 @@ from pyrt.scope import (
     Frame,
     Scope,
     Source,
+    check_plot_path,
+    check_save_path,
+    confine,
     plot_frame,
     save_frame,
 )
+from pyrt.scope.stream import DEFAULT_HZ, MAX_HZ, UdpStream, parse_udp_url
 
-__all__ = ["SCOPE_HELP", "SUBCOMMAND_HELP", "ScopeCommand"]
+__all__ = ["MAX_SHOW", "SCOPE_HELP", "SUBCOMMAND_HELP", "ScopeCommand"]
+
+#: The most samples one ``scope show`` prints (one request's work is bounded:
+#: ``scope save`` writes a whole frame).
+MAX_SHOW = 5000
 
 #: One entry per sub-command: its usage and what it does.
 SUBCOMMAND_HELP: dict[str, str] = {
@@ -48,20 +56,31 @@ SUBCOMMAND_HELP: dict[str, str] = {
               f"at most {MAX_BUFFER_BYTES // 2**20} MiB); capture restarts",
     "run": "scope run [normal|auto|roll|single]: start acquiring (default: the mode last "
            "used; auto on a fresh scope).  normal: a frame at each trigger; auto: also one "
-           "per frame length without a trigger; roll: always the latest samples",
+           "per frame length without a trigger, and without a trigger set the latest "
+           "samples as they come; roll: always the latest samples.  A frame shows as it "
+           "fills: show, save and plot give the samples so far",
     "single": "scope single: arm for one triggered frame, then stop (needs a trigger)",
     "stop": "scope stop: stop acquiring; what was sampled stays readable (a partial "
             "frame if no frame was complete)",
-    "show": "scope show [N]: print the last N samples (default 10) of the latest frame",
-    "save": "scope save FILE.csv|FILE.npz: write the latest frame (the CSV header names "
-            "each column with its units: encoder [counts])",
-    "plot": "scope plot FILE.png: draw the latest frame (needs matplotlib)",
+    "show": f"scope show [N]: print the last N samples (default 10, at most {MAX_SHOW}) of "
+            "the latest frame",
+    "save": "scope save FILE.csv|FILE.npz|FILE.mcap: write the latest frame (the CSV "
+            "header names each column with its units: encoder [counts]; MCAP, for Foxglove "
+            "and PlotJuggler, needs pyrt[mcap]) into the working directory, or the one "
+            "--scope-dir names (nowhere else)",
+    "plot": "scope plot FILE.png|FILE.svg|FILE.pdf: draw the latest frame in the format "
+            "the extension names (needs matplotlib)",
+    "stream": "scope stream udp://HOST:PORT [HZ]: send the scope's channels live to "
+              "PlotJuggler's UDP server (JSON protocol, timestamp field 'timestamp', loop "
+              f"time in s), one object every 1/HZ s of loop time (default {DEFAULT_HZ:g}, "
+              f"at most {MAX_HZ:g}) while the scope samples; the loop never waits for the "
+              "network.  scope stream off: stop; scope stream: what it sent",
     "help": "scope help [SUB]: this help, or one sub-command's",
 }
 
 #: ``help scope``: the word's usage, then every sub-command (lines of at most 96).
 SCOPE_HELP = "\n".join([
-    "scope [add|remove|trigger|every|length|run|single|stop|show|save|plot|help ...]",
+    "scope [add|remove|trigger|every|length|run|single|stop|show|save|plot|stream|help ...]",
     "",
     *textwrap.wrap("The software oscilloscope over any signal: OBJECT.SIGNAL (e.g. "
                    "prototype.x, axis0.tension, sim.x), or a signal of the robot by its name "
@@ -114,7 +133,7 @@ class ScopeCommand:
         if handler is None:
             raise CommandError(
                 f"scope: unknown sub-command {words[0]!r}; one of add, remove, trigger, every, "
-                "length, run, single, stop, show, save, plot, list, help"
+                "length, run, single, stop, show, save, plot, stream, list, help"
             )
         handler(rest)
 
@@ -241,8 +260,8 @@ class ScopeCommand:
                     else f"a partial frame of {n} samples is kept")
         self.say(f"scope stopped (it was {was}); {kept}")
 
-    def _frame(self) -> Frame:
-        frame = self._call(self.scope.read)
+    def _frame(self, last: int | None = None) -> Frame:
+        frame = self._call(self.scope.read, last)
         if frame is None:
             raise CommandError(f"scope: nothing captured yet: {self._call(self.scope.waiting)}")
         return frame
@@ -250,10 +269,13 @@ class ScopeCommand:
     def _do_show(self, rest: list[str]) -> None:
         n = 10
         if rest:
-            if len(rest) != 1 or not rest[0].isdigit():
-                raise CommandError("scope show: a number of samples")
+            if len(rest) != 1 or not (rest[0].isascii() and rest[0].isdigit()) \
+                    or not 1 <= int(rest[0]) <= MAX_SHOW:
+                raise CommandError(f"scope show: a number of samples, 1..{MAX_SHOW} (one "
+                                   f"show prints at most {MAX_SHOW}; 'scope save FILE' "
+                                   "writes the whole frame)")
             n = int(rest[0])
-        frame = self._frame()
+        frame = self._frame(n)
         shows = [self._show_of(name) for name in frame.channels]
         self.say("t_s " + " ".join(frame.channels))
         for t, row in zip(frame.t_ns[-n:], frame.data[-n:], strict=True):
@@ -272,15 +294,53 @@ class ScopeCommand:
 
     def _do_save(self, rest: list[str]) -> None:
         if len(rest) != 1:
-            raise CommandError("scope save: one file name ending .csv or .npz")
+            raise CommandError("scope save: one file name ending .csv, .npz or .mcap")
+        check_save_path(rest[0])
+        target = confine(rest[0], self.scope.directory, "scope save")
         frame = self._frame()
-        path = save_frame(frame, rest[0])
+        path = save_frame(frame, target)
         n = frame.data.shape[0]
         whole = "" if n == self.scope.capacity else f" (a partial frame: of {self.scope.capacity})"
         self.say(f"saved {n} samples of {len(frame.channels)} channel(s){whole} to {path}")
 
     def _do_plot(self, rest: list[str]) -> None:
         if len(rest) != 1:
-            raise CommandError("scope plot: one .png file name")
-        path = plot_frame(self._frame(), rest[0])
+            raise CommandError("scope plot: one file name ending .png, .svg or .pdf")
+        check_plot_path(rest[0])
+        target = confine(rest[0], self.scope.directory, "scope plot")
+        path = plot_frame(self._frame(), target)
         self.say(f"plotted {path}")
+
+    def _do_stream(self, rest: list[str]) -> None:
+        sc = self.scope
+        if not rest:
+            stream = self._call(lambda: sc.stream)
+            self.say(stream.describe() if stream is not None else
+                     "not streaming: scope stream udp://HOST:PORT [HZ] starts it")
+            return
+        if len(rest) == 1 and rest[0].lower() == "off":
+            old = self._call(sc.stop_stream)
+            if old is None:
+                self.say("not streaming")
+                return
+            old.close()
+            self.say(f"stream off; {old.describe()}")
+            return
+        if len(rest) > 2:
+            raise CommandError("scope stream: udp://HOST:PORT [HZ], or 'off'")
+        host, port = parse_udp_url(rest[0])
+        hz = parse_number(rest[1], "scope stream: rate") if len(rest) == 2 else DEFAULT_HZ
+        stream = UdpStream(host, port, hz)
+        try:
+            old = self._call(sc.start_stream, stream)
+        except BaseException:
+            stream.close()
+            raise
+        if old is not None:
+            old.close()
+        chans, state = self._call(lambda: (sc.channels, sc.state))
+        note = ("" if state not in ("stopped", "done") else
+                f"; the scope is {state}: 'scope run' starts the samples")
+        self.say(f"streaming {', '.join(chans) or 'no channels yet'} to {stream.url} at "
+                 f"{hz:g} Hz of loop time, PlotJuggler's UDP JSON (field 'timestamp': loop "
+                 f"time, s){note}")

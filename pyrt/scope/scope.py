@@ -7,7 +7,8 @@ numpy ring buffer.  Modes, as on a bench scope:
   trigger point), keep the frame for read-out, re-arm;
 * ``single``: the same, once, then stop;
 * ``auto``: like normal, but a frame is captured anyway when no trigger
-  comes within one frame length;
+  comes within one frame length; without a trigger it shows the latest
+  samples as they come, as roll does;
 * ``roll``: no trigger; the read-out is always the latest ``capacity``
   samples, oldest first (what halscope never had).
 
@@ -29,16 +30,18 @@ other method is for the application, through the runner's mailbox.
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from pyrt.errors import CommandError
 from pyrt.scope.sources import Source, compile_sampler, compile_sources
+from pyrt.scope.stream import Layout, UdpStream
 
 __all__ = ["MAX_BUFFER_BYTES", "MAX_LENGTH", "Frame", "Scope", "Trigger"]
 
 _STAGE = 64
+_NEVER = 2**63  # the next stream time when nothing streams: one comparison a sample
 MODES = ("normal", "single", "auto", "roll")
 #: The longest record length, samples per channel.
 MAX_LENGTH = 1_000_000
@@ -132,6 +135,12 @@ class Scope:
         #: The loop's tick, ns, when whoever runs the scope says it (for times
         #: before a sample was taken).
         self.tick_ns: int | None = None
+        #: The directory ``scope save`` and ``scope plot`` write into (and
+        #: nowhere else); None: the working directory.
+        self.directory: str | None = None
+        #: The live stream of the samples (``scope stream``), or None.
+        self.stream: UdpStream | None = None
+        self._stream_next = _NEVER
         self._reset_buffers()
 
     # -- configuration (application side, with the scope stopped or not) -----
@@ -236,9 +245,17 @@ class Scope:
     def stop(self) -> None:
         """Stop acquiring; what was captured stays readable.  Stopped before
         the first frame filled, the samples taken so far become the frame
-        (the trigger's, if one was seen), so a stop never loses what was seen."""
+        (the trigger's, if one was seen), so a stop never loses what was seen.
+        In auto mode without a trigger the latest samples, what :meth:`read`
+        showed, become the frame."""
         self._flush()
-        if self._frame is None and self.state in ("armed", "triggered"):
+        if self.mode == "auto" and self.trigger is None and self._acquiring:
+            # what was shown (the latest samples) is what is kept
+            if self._frame is None or self._g > self._arm_g:
+                first = max(0, self._g - self.capacity)
+                if self._g > first:
+                    self._complete(first, None, self._g - first)
+        elif self._frame is None and self.state in ("armed", "triggered"):
             if self.state == "triggered" and self._trig_g is not None:
                 pre = round(self.trigger.pre * self.capacity) if self.trigger else 0
                 first = max(self._trig_g - pre, self._g - self.capacity, 0)
@@ -268,6 +285,7 @@ class Scope:
         self._dtype = np.dtype([("t", "<i8"), ("v", "<f8", (nch,))])
         self._stage = bytearray(packer.size * _STAGE)
         self._sampler = compile_sampler(self._sources, packer.pack_into)
+        self._layout = Layout(packer, tuple(self._names))
         self._staged = 0
         self._arm_g = 0
         self._trig_g: int | None = None
@@ -302,9 +320,38 @@ class Scope:
             self.error = f"sampling stopped: {type(exc).__name__}: {exc}"
             self.state = "stopped"
             return
+        if now_ns >= self._stream_next:
+            self._offer(now_ns)
         self._staged += 1
         if self._staged >= _STAGE:
             self._flush()
+
+    def _offer(self, now_ns: int) -> None:
+        """Hand the sample just taken to the stream; the next one is due a period on."""
+        stream = self.stream
+        if stream is None:
+            self._stream_next = _NEVER
+            return
+        off = self._staged * self._row
+        stream.offer(self._layout, bytes(self._stage[off:off + self._row]))
+        nxt = (self._stream_next or now_ns) + stream.period_ns  # 0: the first, just now
+        self._stream_next = nxt if nxt > now_ns else now_ns + stream.period_ns
+
+    # -- the live stream (application side) ------------------------------------------
+
+    def start_stream(self, stream: UdpStream) -> UdpStream | None:
+        """Stream the samples (from the next one on) to ``stream``; the stream it
+        replaces, if any (the caller closes it, outside the loop)."""
+        stream.bind(self)
+        old, self.stream = self.stream, stream
+        self._stream_next = 0
+        return old
+
+    def stop_stream(self) -> UdpStream | None:
+        """Stream no more; the stream that was on, if any (the caller closes it)."""
+        old, self.stream = self.stream, None
+        self._stream_next = _NEVER
+        return old
 
     def _flush(self) -> None:
         n = self._staged
@@ -403,14 +450,25 @@ class Scope:
         hits = self._edges(col, start, col.shape[0], trig)
         return int(hits[0]) + max(start, 0) if hits.size else None
 
+    def _span(self, first_g: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """Copies of the times and values of samples ``first_g`` .. ``first_g + n - 1``
+        (at most two contiguous slices of the ring)."""
+        size = self._ring.shape[0]
+        nch = len(self._names)
+        start = first_g % size
+        end = start + n
+        if end <= size:
+            return self._ring_t[start:end].copy(), self._ring[start:end, :nch].copy()
+        wrap = end - size
+        return (np.concatenate((self._ring_t[start:], self._ring_t[:wrap])),
+                np.concatenate((self._ring[start:, :nch], self._ring[:wrap, :nch])))
+
     def _complete(self, first_g: int, trigger_index: int | None,
                   count: int | None = None) -> None:
-        size = self._ring.shape[0]
-        pos = (first_g + np.arange(self.capacity if count is None else count)) % size
-        nch = len(self._names)
+        t_ns, data = self._span(first_g, self.capacity if count is None else count)
         self._frame = Frame(
-            t_ns=self._ring_t[pos].copy(),
-            data=self._ring[pos, :nch].copy(),
+            t_ns=t_ns,
+            data=data,
             channels=tuple(self._names),
             trigger_index=trigger_index,
             mode=self.mode,
@@ -421,23 +479,53 @@ class Scope:
 
     # -- read-out (application side) -----------------------------------------
 
-    def read(self) -> Frame | None:
-        """The latest frame (roll mode: the latest samples), or None if none yet."""
+    def read(self, last: int | None = None) -> Frame | None:
+        """What the scope shows now, drawn as it comes (as halscope draws its
+        trace), or None while there is nothing to show; only its ``last`` samples
+        if given (the work is then bounded by ``last``, whatever the record length):
+
+        * roll, and auto without a trigger while acquiring: the latest samples,
+          up to a frame length (fewer while the first frame length fills);
+        * the latest complete frame, if there is one;
+        * else, while acquiring, the frame so far: after the trigger, the samples
+          from the frame's start (its pre-trigger part) with the trigger point; in
+          auto mode still waiting for its trigger, the samples since it was armed;
+          normal and single modes show nothing before their trigger.
+        """
+        if last is not None and (isinstance(last, bool) or not isinstance(last, int)
+                                 or last < 0):
+            raise CommandError(f"a number of samples is a whole number >= 0, got {last!r}")
         self._flush()
-        if self.mode == "roll":
-            n = min(self._g, self.capacity)
-            if n == 0:
-                return None
-            size = self._ring.shape[0]
-            pos = (self._g - n + np.arange(n)) % size
-            nch = len(self._names)
-            return Frame(
-                self._ring_t[pos].copy(), self._ring[pos, :nch].copy(),
-                tuple(self._names), None, "roll",
-                units=tuple(src.units for src in self._sources),
-                formats=tuple(src.fmt for src in self._sources),
-            )
-        return self._frame
+        if self.mode == "roll" or (self.mode == "auto" and self.trigger is None
+                                   and self._acquiring):
+            return self._latest(max(0, self._g - self.capacity), None, last)
+        if self._frame is not None or not self._acquiring:
+            return _tail(self._frame, last)
+        if self.state == "triggered" and self._trig_g is not None:
+            first = max(self._trig_g - self.pre_samples, self._g - self.capacity, 0)
+            return self._latest(first, self._trig_g - first, last)
+        if self.mode == "auto":
+            return self._latest(max(self._arm_g, self._g - self.capacity), None, last)
+        return None
+
+    def _latest(self, first_g: int, trigger_index: int | None,
+                last: int | None = None) -> Frame | None:
+        """The samples from ``first_g`` to the latest (only the ``last`` of them if
+        given), as a frame (None if none)."""
+        if last is not None and self._g - first_g > last:
+            cut = self._g - last - first_g
+            first_g += cut
+            trigger_index = (None if trigger_index is None or trigger_index < cut
+                             else trigger_index - cut)
+        n = self._g - first_g
+        if n <= 0:
+            return None
+        t_ns, data = self._span(first_g, n)
+        return Frame(
+            t_ns, data, tuple(self._names), trigger_index, self.mode,
+            units=tuple(src.units for src in self._sources),
+            formats=tuple(src.fmt for src in self._sources),
+        )
 
     # -- what the scope is doing (application side) ------------------------
 
@@ -502,7 +590,8 @@ class Scope:
                     f"more{self.seconds(left)}")
         fill = self.pre_fill()
         if self.trigger is None:
-            return "armed (auto, no trigger): a frame comes after one frame length"
+            return ("armed (auto, no trigger): samples show as they come, as soon as time "
+                    "passes (wait, sleep)")
         note = self.missed_note()
         note = f"; {note}" if note else ""
         auto = ", or after one frame length without one" if mode == "auto" else ""
@@ -536,3 +625,13 @@ class Scope:
         note = self.missed_note()
         line += f"; {note}" if note else ""
         return line + (f"; {self.error}" if self.error else "")
+
+
+def _tail(frame: Frame | None, last: int | None) -> Frame | None:
+    """``frame``'s last ``last`` samples (the whole frame if ``last`` is None)."""
+    if frame is None or last is None or frame.t_ns.size <= last:
+        return frame
+    cut = frame.t_ns.size - last
+    index = frame.trigger_index
+    return replace(frame, t_ns=frame.t_ns[cut:].copy(), data=frame.data[cut:].copy(),
+                   trigger_index=None if index is None or index < cut else index - cut)
