@@ -1,0 +1,403 @@
+"""The PUMA 560, RCCL's arm: its packaged URDF and Paul's closed-form inverse.
+
+The arm is described by ``data/puma560.urdf``, built from the standard
+Denavit-Hartenberg table and the dynamic parameters of P. Corke and
+B. Armstrong-Helouvry, "A search for consensus among model parameters
+reported for the PUMA 560 robot" (ICRA 1994), as the Robotics Toolbox's
+``Puma560`` model gives them (:data:`DH` here; the URDF's comments say how
+each number went in).
+
+The inverse is Paul's (R. Paul, B. Shimano, G. Mayer, "Kinematic control
+equations for simple manipulators", IEEE SMC 11(6), 1981), worked from this
+table: the wrist centre (the flange origin, since d5 = d6 = a4 = a5 = 0) gives
+joint 1 from the shoulder offset d3, joints 2 and 3 from the planar triangle
+shoulder-elbow-wrist, and the wrist's three from R36 = R03^T R, a ZYZ
+product.  Its eight solutions are named as RCCL names them, one word of each
+pair (:data:`CONFIGURATIONS`, e.g. ``"righty-above-noflip"``):
+
+* ``righty`` / ``lefty``: the wrist centre in front of / behind the plane of
+  joint 1's axis that is normal to the upper arm's plane (the horizontal
+  reach ``X = a2 c2 + a3 c23 - d4 s23`` is >= 0 / < 0);
+* ``above`` / ``below``: the elbow above / below the line from the shoulder
+  to the wrist centre;
+* ``noflip`` / ``flip``: joint 5 in [0, 180) / (-180, 0) degrees (mod 360).
+
+:meth:`PaulInverse.config_of` names the configuration of a joint vector, and
+``solve(fk(q), config_of(q))`` gives ``q`` back (joint 4 and 6 up to their
+sum when joint 5 is 0, the wrist's singularity).  Joint angles come back
+within the chain's limits (a multiple of 360 degrees added where that
+brings one inside); a configuration that cannot be reached within them is
+refused with the joint and the limit named.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator, Sequence
+from importlib import resources
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from pyrt.kinematics.chain import Chain
+
+__all__ = [
+    "CONFIGURATIONS",
+    "DH",
+    "LOWER_DEG",
+    "UPPER_DEG",
+    "URDF",
+    "PaulInverse",
+    "Unreachable",
+    "parse_config",
+    "puma560",
+    "puma560_dh",
+]
+
+Matrix = npt.NDArray[np.float64]
+
+#: The standard DH table of the PUMA 560, one row per joint: (d, a, alpha)
+#: in metres and radians, theta the joint variable (Corke & Armstrong-Helouvry
+#: 1994; Robotics Toolbox ``Puma560``, whose d1 = 0.672 m is the height of the
+#: shoulder axis above the mounting surface).
+DH: tuple[tuple[float, float, float], ...] = (
+    (0.672, 0.0, math.pi / 2),
+    (0.0, 0.4318, 0.0),
+    (0.15005, 0.0203, -math.pi / 2),
+    (0.4318, 0.0, math.pi / 2),
+    (0.0, 0.0, -math.pi / 2),
+    (0.0, 0.0, 0.0),
+)
+
+#: Joint limits (degrees) of the same model (from Wang & Chen 1991).
+LOWER_DEG = (-160.0, -45.0, -225.0, -110.0, -100.0, -266.0)
+UPPER_DEG = (160.0, 225.0, 45.0, 170.0, 100.0, 266.0)
+
+#: The eight configurations, one word of each of RCCL's pairs.
+CONFIGURATIONS: tuple[str, ...] = tuple(
+    f"{arm}-{elbow}-{wrist}"
+    for arm in ("righty", "lefty")
+    for elbow in ("above", "below")
+    for wrist in ("noflip", "flip")
+)
+
+_PAIRS = (("righty", "lefty"), ("above", "below"), ("noflip", "flip"))
+_TWO_PI = 2.0 * math.pi
+#: |sin q5| at or below which the wrist is at its singularity.
+_SINGULAR = 1e-12
+
+#: The packaged URDF (a path inside the installed package).
+URDF: Path = Path(str(resources.files("pyrt.kinematics") / "data" / "puma560.urdf"))
+
+
+class Unreachable(ValueError):
+    """A pose the arm cannot take in the configuration asked for; says why."""
+
+
+def parse_config(config: str) -> str:
+    """The canonical name of a configuration: one word of each pair, any order.
+
+    Words may be separated by ``-``, ``,``, ``/`` or spaces and are not case
+    sensitive (``"flip lefty above"`` is ``"lefty-above-flip"``).
+    """
+    if not isinstance(config, str):
+        raise ValueError(
+            f"a configuration is a string such as 'righty-above-noflip', got {config!r}"
+        )
+    words = config.lower().replace(",", " ").replace("/", " ").replace("-", " ").split()
+    picked = []
+    for pair in _PAIRS:
+        hit = [w for w in words if w in pair]
+        if len(hit) != 1:
+            raise ValueError(
+                f"configuration {config!r}: give exactly one of {pair[0]}/{pair[1]} "
+                f"(e.g. {CONFIGURATIONS[0]!r})"
+            )
+        picked.append(hit[0])
+    extra = [w for w in words if all(w not in pair for pair in _PAIRS)]
+    if extra or len(words) != 3:
+        raise ValueError(
+            f"configuration {config!r}: unknown word(s) {extra or words}; "
+            f"one of each pair: righty/lefty, above/below, noflip/flip"
+        )
+    return "-".join(picked)
+
+
+def _rigid(value: npt.ArrayLike | None, what: str) -> Matrix:
+    m = np.eye(4) if value is None else np.array(value, dtype=np.float64)
+    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+        raise ValueError(f"{what}: expected a finite 4x4 transform, got shape {m.shape}")
+    return m
+
+
+def _inv(t: Matrix) -> Matrix:
+    out = np.eye(4)
+    out[:3, :3] = t[:3, :3].T
+    out[:3, 3] = -t[:3, :3].T @ t[:3, 3]
+    return out
+
+
+class PaulInverse:
+    """Paul's closed-form inverse of the PUMA 560, with RCCL's configuration names.
+
+    ``base`` and ``tool`` are the chain's (the pose solved for is
+    ``base @ A1 ... A6 @ tool``), ``offsets`` are added to the joint values
+    before the DH table (``theta = q + offset``), ``lower`` and ``upper``
+    bound q (radians; None: no limits).  The geometry is :data:`DH` unless
+    ``dh`` gives another table of the same shape (the same zeros and twists).
+    """
+
+    configurations: tuple[str, ...] = CONFIGURATIONS
+
+    def __init__(
+        self,
+        *,
+        base: npt.ArrayLike | None = None,
+        tool: npt.ArrayLike | None = None,
+        offsets: npt.ArrayLike | None = None,
+        lower: npt.ArrayLike | None = None,
+        upper: npt.ArrayLike | None = None,
+        dh: Sequence[tuple[float, float, float]] = DH,
+    ) -> None:
+        self.base = _rigid(base, "base")
+        self.tool = _rigid(tool, "tool")
+        self._base_inv = _inv(self.base)
+        self._tool_inv = _inv(self.tool)
+        self.offsets = np.zeros(6) if offsets is None else np.array(offsets, dtype=np.float64)
+        if self.offsets.shape != (6,):
+            raise ValueError(f"offsets: expected 6 values, got {self.offsets.shape}")
+        if (lower is None) != (upper is None):
+            raise ValueError("lower and upper limits go together")
+        self.lower = None if lower is None else np.array(lower, dtype=np.float64)
+        self.upper = None if upper is None else np.array(upper, dtype=np.float64)
+        if len(dh) != 6 or any(len(r) != 3 for r in dh):
+            raise ValueError("dh: expected six rows of (d, a, alpha)")
+        dh = tuple((float(r[0]), float(r[1]), float(r[2])) for r in dh)
+        shape_ok = all(
+            abs(dh[i][2] - DH[i][2]) < 1e-12 for i in range(6)
+        ) and dh[1][0] == 0.0 and all(dh[i][1] == 0.0 for i in (0, 3, 4, 5)) and all(
+            dh[i][0] == 0.0 for i in (4, 5)
+        )
+        if not shape_ok:
+            raise ValueError(
+                "dh: Paul's inverse needs the PUMA's twists and zeros (a spherical wrist)"
+            )
+        self.dh = dh
+        self._d1, self._a2, self._a3 = dh[0][0], dh[1][1], dh[2][1]
+        self._d3, self._d4 = dh[2][0], dh[3][0]
+
+    @classmethod
+    def for_chain(cls, chain: Chain) -> PaulInverse:
+        """The inverse for ``chain``'s base, tool, offsets and limits (its geometry the PUMA's)."""
+        return cls(base=chain.base, tool=chain.tool, offsets=chain.offsets,
+                   lower=chain.lower, upper=chain.upper)
+
+    def replace(self, **changes: Any) -> PaulInverse:
+        """A copy with some of base, tool, offsets, lower, upper or dh changed."""
+        kw: dict[str, Any] = {
+            "base": self.base, "tool": self.tool, "offsets": self.offsets,
+            "lower": self.lower, "upper": self.upper, "dh": self.dh,
+        }
+        unknown = set(changes) - set(kw)
+        if unknown:
+            raise TypeError(f"PaulInverse.replace: unknown field(s) {sorted(unknown)}")
+        kw.update(changes)
+        return PaulInverse(**kw)
+
+    # -- forward (the DH product; the reference the inverse is checked against) ------
+    def fk(self, q: npt.ArrayLike) -> Matrix:
+        """The pose ``base @ A1(q1 + o1) ... A6(q6 + o6) @ tool``."""
+        theta = np.asarray(q, dtype=np.float64) + self.offsets
+        t = self.base.copy()
+        for (d, a, alpha), th in zip(self.dh, theta, strict=True):
+            ct, st, ca, sa = math.cos(th), math.sin(th), math.cos(alpha), math.sin(alpha)
+            t = t @ np.array([
+                [ct, -st * ca, st * sa, a * ct],
+                [st, ct * ca, -ct * sa, a * st],
+                [0.0, sa, ca, d],
+                [0.0, 0.0, 0.0, 1.0],
+            ])
+        return t @ self.tool
+
+    # -- the configuration of a joint vector --------------------------------------------
+    def config_of(self, q: npt.ArrayLike) -> str:
+        """The configuration (e.g. ``"righty-above-noflip"``) the joint vector is in."""
+        th = np.asarray(q, dtype=np.float64) + self.offsets
+        if th.shape != (6,) or not np.all(np.isfinite(th)):
+            raise ValueError(f"config_of: expected 6 finite joint values, got {q!r}")
+        a2, a3, d4 = self._a2, self._a3, self._d4
+        c2 = math.cos(th[1])
+        c23, s23 = math.cos(th[1] + th[2]), math.sin(th[1] + th[2])
+        reach = a2 * c2 + a3 * c23 - d4 * s23
+        arm = "righty" if reach >= 0.0 else "lefty"
+        # the wrist centre's y in frame 2: < 0 puts a righty elbow above the line
+        y2 = a3 * math.sin(th[2]) + d4 * math.cos(th[2])
+        above = y2 < 0.0 if arm == "righty" else y2 > 0.0
+        # at the wrist's singularity (sin q5 = 0 to rounding) flip and noflip are one
+        wrist = "noflip" if math.sin(th[4]) >= -_SINGULAR else "flip"
+        return f"{arm}-{'above' if above else 'below'}-{wrist}"
+
+    # -- the inverse ------------------------------------------------------------------
+    def inverse(self, target: npt.ArrayLike, config: str, seed: npt.ArrayLike | None = None,
+                *, limits: bool = True) -> Matrix:
+        """Joint values putting the tool at ``target`` in ``config``; raises Unreachable.
+
+        With ``seed``, each joint is the 360-degree turn of its angle nearest the
+        seed's (within the limits); otherwise the one nearest zero.  ``limits=False``
+        returns the kinematic solution in (-180, 180] degrees, ignoring limits.
+        """
+        cfg = parse_config(config)
+        t = np.asarray(target, dtype=np.float64)
+        if t.shape != (4, 4) or not np.all(np.isfinite(t)):
+            raise ValueError(f"target: expected a finite 4x4 transform, got shape {t.shape}")
+        th4 = 0.0
+        if seed is not None:
+            s = np.asarray(seed, dtype=np.float64)
+            if s.shape != (6,):
+                raise ValueError(f"seed: expected 6 joint values, got shape {s.shape}")
+            th4 = float(s[3] + self.offsets[3])
+        theta = self._angles(self._base_inv @ t @ self._tool_inv, cfg, th4)
+        q = theta - self.offsets
+        q = np.arctan2(np.sin(q), np.cos(q))
+        if seed is not None:
+            q = q + _TWO_PI * np.round((s - q) / _TWO_PI)
+        if not limits or self.lower is None or self.upper is None:
+            return q
+        for i in range(6):
+            q[i] = self._into_limits(i, q[i], cfg)
+        return q
+
+    def solve(self, target: npt.ArrayLike, config: str,
+              seed: npt.ArrayLike | None = None) -> Matrix | None:
+        """Joint values for ``target`` in ``config``, or None when it cannot be reached."""
+        try:
+            return self.inverse(target, config, seed)
+        except Unreachable:
+            return None
+
+    def reason(self, target: npt.ArrayLike, config: str) -> str | None:
+        """Why ``target`` cannot be reached in ``config`` (None: it can)."""
+        try:
+            self.inverse(target, config)
+        except Unreachable as exc:
+            return str(exc)
+        return None
+
+    def solve_all(self, target: npt.ArrayLike,
+                  seed: npt.ArrayLike | None = None) -> dict[str, Matrix]:
+        """Every configuration that reaches ``target`` within the limits, by name."""
+        out = {}
+        for cfg in self.configurations:
+            q = self.solve(target, cfg, seed)
+            if q is not None:
+                out[cfg] = q
+        return out
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.configurations)
+
+    def _into_limits(self, i: int, qi: float, cfg: str) -> float:
+        assert self.lower is not None and self.upper is not None
+        lo, hi = float(self.lower[i]), float(self.upper[i])
+        tol = 1e-9
+        if lo - tol <= qi <= hi + tol:
+            return min(max(qi, lo), hi)
+        # another turn may lie within the limits: the one nearest the present value
+        best = None
+        for k in range(-2, 3):
+            cand = qi + k * _TWO_PI
+            if lo - tol <= cand <= hi + tol and (best is None or abs(cand - qi) < abs(best - qi)):
+                best = cand
+        if best is None:
+            raise Unreachable(
+                f"{cfg}: joint q{i + 1} would be at {math.degrees(qi):.2f} deg, beyond its "
+                f"limits {math.degrees(lo):.1f} .. {math.degrees(hi):.1f} deg"
+            )
+        return min(max(best, lo), hi)
+
+    def _angles(self, t: Matrix, cfg: str, th4_seed: float = 0.0) -> Matrix:
+        """The DH joint angles for flange pose ``t`` (in the DH base frame)."""
+        arm, elbow, wrist = cfg.split("-")
+        d1, a2, a3, d3, d4 = self._d1, self._a2, self._a3, self._d3, self._d4
+        px, py, pz = float(t[0, 3]), float(t[1, 3]), float(t[2, 3]) - d1
+        # joint 1: px s1 - py c1 = d3 (the shoulder offset)
+        r = math.hypot(px, py)
+        if r < abs(d3) * (1.0 - 1e-12):
+            raise Unreachable(
+                f"{cfg}: the wrist centre is {r * 1e3:.1f} mm from joint 1's axis, "
+                f"closer than the shoulder offset {abs(d3) * 1e3:.1f} mm"
+            )
+        phi = math.atan2(py, px)
+        off = math.asin(max(-1.0, min(1.0, d3 / r))) if r > 0 else 0.0
+        th1 = phi + off if arm == "righty" else phi + math.pi - off
+        c1, s1 = math.cos(th1), math.sin(th1)
+        x = px * c1 + py * s1  # horizontal reach in the arm's plane
+        y = pz
+        # joints 2 and 3: (x, y) = a2 (c2, s2) + Rot(th2 + th3) (a3, d4)
+        rho = math.hypot(x, y)
+        length2 = a3 * a3 + d4 * d4
+        k = (x * x + y * y + a2 * a2 - length2) / (2.0 * a2)
+        if rho == 0.0 or abs(k) > rho * (1.0 + 1e-12):
+            near, far = abs(a2 - math.sqrt(length2)), a2 + math.sqrt(length2)
+            where = "beyond the arm's reach" if rho >= far else "too close to the shoulder"
+            raise Unreachable(
+                f"{cfg}: the wrist centre is {rho * 1e3:.1f} mm from the shoulder, {where} "
+                f"(the arm reaches {near * 1e3:.1f} .. {far * 1e3:.1f} mm)"
+            )
+        psi = math.acos(max(-1.0, min(1.0, k / rho)))
+        beta = math.atan2(y, x)
+        up = (elbow == "above") == (arm == "righty")
+        th2 = beta + psi if up else beta - psi
+        c2, s2 = math.cos(th2), math.sin(th2)
+        th23 = math.atan2(y - a2 * s2, x - a2 * c2) - math.atan2(d4, a3)
+        th3 = th23 - th2
+        # the wrist: R36 = R03^T R = Rz(th4) Ry(-th5) Rz(th6)
+        c23, s23 = math.cos(th23), math.sin(th23)
+        r03 = np.array([
+            [c1 * c23, -s1, -c1 * s23],
+            [s1 * c23, c1, -s1 * s23],
+            [s23, 0.0, c23],
+        ])
+        m = r03.T @ t[:3, :3]
+        s5 = math.hypot(m[0, 2], m[1, 2])
+        th5 = math.atan2(s5, m[2, 2])
+        if s5 > _SINGULAR:
+            th4 = math.atan2(-m[1, 2], -m[0, 2])
+            if wrist == "flip":
+                th4 += math.pi
+                th5 = -th5
+        else:
+            # the wrist's singularity: joints 4 and 6 share one angle; flip and
+            # noflip are the same; joint 4 stays where the seed has it
+            th4 = th4_seed
+        c4, s4, c5, s5_ = math.cos(th4), math.sin(th4), math.cos(th5), math.sin(th5)
+        # Rz(th6) = (Rz(th4) Ry(-th5))^T m: its first column gives th6
+        rz4ry5 = np.array([[c4 * c5, -s4, -c4 * s5_], [s4 * c5, c4, -s4 * s5_], [s5_, 0.0, c5]])
+        r6 = rz4ry5.T @ m
+        th6 = math.atan2(r6[1, 0], r6[0, 0])
+        return np.array([th1, th2, th3, th4, th5, th6])
+
+
+def puma560(*, closed_form: bool = True) -> Chain:
+    """The PUMA 560 as a chain from the packaged URDF, with Paul's inverse attached."""
+    from pyrt.kinematics.chain import Chain
+
+    chain = Chain.from_urdf(URDF)
+    if closed_form:
+        chain = chain.replace(closed_form=PaulInverse.for_chain(chain))
+    return chain
+
+
+def puma560_dh() -> Chain:
+    """The same arm from its DH table (and limits) rather than the URDF; no inertials."""
+    from pyrt.kinematics.chain import Chain
+    from pyrt.kinematics.dh import DHRow
+
+    rows = [
+        DHRow(d=d, a=a, alpha=alpha, lower=math.radians(lo), upper=math.radians(hi))
+        for (d, a, alpha), lo, hi in zip(DH, LOWER_DEG, UPPER_DEG, strict=True)
+    ]
+    return Chain.from_dh(rows, name="puma560")
