@@ -242,12 +242,14 @@ class PaulInverse:
 
     # -- the inverse ------------------------------------------------------------------
     def inverse(self, target: npt.ArrayLike, config: str, seed: npt.ArrayLike | None = None,
-                *, limits: bool = True) -> Matrix:
+                *, limits: bool = True, nearest: bool = False) -> Matrix:
         """Joint values putting the tool at ``target`` in ``config``; raises Unreachable.
 
         With ``seed``, each joint is the 360-degree turn of its angle nearest the
         seed's (within the limits); otherwise the one nearest zero.  ``limits=False``
         returns the kinematic solution in (-180, 180] degrees, ignoring limits.
+        ``nearest=True`` answers a wrist centre just out of reach with the arm
+        stretched (or folded) towards it, as a seed for a numerical inverse.
         """
         cfg = parse_config(config)
         t = np.asarray(target, dtype=np.float64)
@@ -259,7 +261,7 @@ class PaulInverse:
             if s.shape != (6,):
                 raise ValueError(f"seed: expected 6 joint values, got shape {s.shape}")
             th4 = float(s[3] + self.offsets[3])
-        theta = self._angles(self._base_inv @ t @ self._tool_inv, cfg, th4)
+        theta = self._angles(self._base_inv @ t @ self._tool_inv, cfg, th4, nearest)
         q = theta - self.offsets
         q = np.arctan2(np.sin(q), np.cos(q))
         if seed is not None:
@@ -318,14 +320,15 @@ class PaulInverse:
             )
         return min(max(best, lo), hi)
 
-    def _angles(self, t: Matrix, cfg: str, th4_seed: float = 0.0) -> Matrix:
+    def _angles(self, t: Matrix, cfg: str, th4_seed: float = 0.0,
+                nearest: bool = False) -> Matrix:
         """The DH joint angles for flange pose ``t`` (in the DH base frame)."""
         arm, elbow, wrist = cfg.split("-")
         d1, a2, a3, d3, d4 = self._d1, self._a2, self._a3, self._d3, self._d4
         px, py, pz = float(t[0, 3]), float(t[1, 3]), float(t[2, 3]) - d1
         # joint 1: px s1 - py c1 = d3 (the shoulder offset)
         r = math.hypot(px, py)
-        if r < abs(d3) * (1.0 - 1e-12):
+        if r < abs(d3) * (1.0 - 1e-12) and not nearest:
             raise Unreachable(
                 f"{cfg}: the wrist centre is {r * 1e3:.1f} mm from joint 1's axis, "
                 f"closer than the shoulder offset {abs(d3) * 1e3:.1f} mm"
@@ -340,7 +343,7 @@ class PaulInverse:
         rho = math.hypot(x, y)
         length2 = a3 * a3 + d4 * d4
         k = (x * x + y * y + a2 * a2 - length2) / (2.0 * a2)
-        if rho == 0.0 or abs(k) > rho * (1.0 + 1e-12):
+        if rho == 0.0 or (abs(k) > rho * (1.0 + 1e-12) and not nearest):
             near, far = abs(a2 - math.sqrt(length2)), a2 + math.sqrt(length2)
             where = "beyond the arm's reach" if rho >= far else "too close to the shoulder"
             raise Unreachable(
@@ -348,6 +351,8 @@ class PaulInverse:
                 f"(the arm reaches {near * 1e3:.1f} .. {far * 1e3:.1f} mm)"
             )
         psi = math.acos(max(-1.0, min(1.0, k / rho)))
+        if nearest and abs(k) >= rho:
+            psi = max(psi, 0.02)  # off the stretched arm, on the configuration's side
         beta = math.atan2(y, x)
         up = (elbow == "above") == (arm == "righty")
         th2 = beta + psi if up else beta - psi
