@@ -170,7 +170,7 @@ def test_bad_input_is_refused_and_changes_nothing(puma):
     model = CalibrationModel.for_chains(puma)
     model.update({"base.x": 1e-3})
     before = model.params
-    with pytest.raises(ValueError, match="no parameter 'base.w'"):
+    with pytest.raises(ValueError, match=r"no parameter 'base\.w'"):
         model.update({"base.y": 2e-3, "base.w": 1.0})
     with pytest.raises(ValueError, match="not a finite"):
         model.update({"base.y": math.nan})
