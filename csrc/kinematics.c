@@ -364,6 +364,14 @@ static void pose_error(const double *target, const double *pose, double *e)
     e[5] = sign * angle * a[2] / norm;
 }
 
+/* The inverse's damping: lambda = mu (|e|^2 / 2 + IK_LAMBDA0), mu raised
+ * tenfold on a rejected step, lowered tenfold on an accepted one. */
+#define IK_LAMBDA0 1e-9
+#define IK_MU_MIN 1e-6
+#define IK_MU_MAX 1e12
+/* The longest null-space step (rad or m). */
+#define IK_MAX_NULL 0.2
+
 static double clamp(double v, double lo, double hi)
 {
     return v < lo ? lo : (v > hi ? hi : v);
@@ -385,6 +393,46 @@ static void jjt(const double *jac, int n, double lambda, double *a)
     }
 }
 
+/* ns = (I - J^T (J J^T)^-1 J) (q - seed): the part of the way back to the
+ * seed that leaves the pose alone to first order, at most IK_MAX_NULL long;
+ * returns its length (0 when J J^T cannot be factored). */
+static double null_step(const double *jac, int n, const double *q, const double *seed,
+                        double *d, double *a, double *b, double *ns)
+{
+    for (int i = 0; i < n; i++) {
+        d[i] = q[i] - seed[i];
+    }
+    for (int r = 0; r < 6; r++) {
+        double acc = 0.0;
+        for (int k = 0; k < n; k++) {
+            acc += jac[r * n + k] * d[k];
+        }
+        b[r] = acc;
+    }
+    jjt(jac, n, 1e-12, a);
+    if (!cholesky(a, 6)) {
+        memset(ns, 0, (size_t)n * sizeof(double));
+        return 0.0;
+    }
+    chol_solve(a, 6, b);
+    double norm = 0.0;
+    for (int k = 0; k < n; k++) {
+        double acc = d[k];
+        for (int r = 0; r < 6; r++) {
+            acc -= jac[r * n + k] * b[r];
+        }
+        ns[k] = acc;
+        norm += acc * acc;
+    }
+    norm = sqrt(norm);
+    if (norm > IK_MAX_NULL) {
+        for (int k = 0; k < n; k++) {
+            ns[k] *= IK_MAX_NULL / norm;
+        }
+    }
+    return norm;
+}
+
 int pyrt_kin_ik(const pyrt_kin_chain *c, double *ws, const double *target, const double *seed,
                 double *q, pyrt_kin_ik_opts *opts)
 {
@@ -402,94 +450,100 @@ int pyrt_kin_ik(const pyrt_kin_chain *c, double *ws, const double *target, const
     }
     double *jac = ws + JAC(n);
     double *d = ws + IKB(n);
-    double *dq = d + n;
-    double *best = dq + n;
-    double *ns = best + n;
-    double *a = ns + n;
+    double *qt = d + n;
+    double *ns = qt + n;
+    double *best = ns + n;
+    double *a = best + n;
     double *e = a + 36;
-    double *y = e + 6;
-    double *b = y + 6;
+    double *et = e + 6;
+    double *b = et + 6;
     const int redundant = n > 6;
-    double best_res = INFINITY;
+    double mu = 1.0;
+    double best_dist = INFINITY; /* redundant: the nearest pose-reaching point so far */
 
     for (int i = 0; i < n; i++) {
         q[i] = clamp(seed[i], c->lower[i], c->upper[i]);
-        best[i] = q[i];
     }
-    for (int it = 0;; it++) {
-        forward(c, ws, q);
-        jacobian_from_frames(c, ws, jac);
-        pose_error(target, ws + TIP(n), e);
-        const double res = sqrt(dot3(e, e) + dot3(e + 3, e + 3));
-        double ns_norm = 0.0;
-        if (redundant) {
-            /* ns = (I - J^T (J J^T)^-1 J) (q - seed): the part of the way
-             * back to the seed that leaves the pose alone (to first order). */
+    forward(c, ws, q);
+    jacobian_from_frames(c, ws, jac);
+    pose_error(target, ws + TIP(n), e);
+    double res = sqrt(dot3(e, e) + dot3(e + 3, e + 3));
+    int it = 0;
+    for (;; it++) {
+        if (res <= opts->tol) {
+            if (!redundant) {
+                break;
+            }
+            /* the pose is reached: keep the point if it is the nearest yet,
+             * then take the null-space step toward the seed (unless it is
+             * short enough) and reach the pose again from there */
+            const double ns_norm = null_step(jac, n, q, seed, d, a, b, ns);
+            double dist = 0.0;
             for (int i = 0; i < n; i++) {
-                d[i] = q[i] - seed[i];
+                dist += (q[i] - seed[i]) * (q[i] - seed[i]);
             }
-            for (int r = 0; r < 6; r++) {
-                double acc = 0.0;
-                for (int k = 0; k < n; k++) {
-                    acc += jac[r * n + k] * d[k];
-                }
-                b[r] = acc;
+            if (dist < best_dist) {
+                best_dist = dist;
+                memcpy(best, q, (size_t)n * sizeof(double));
+                opts->residual = res;
             }
-            jjt(jac, n, 1e-12, a);
-            if (cholesky(a, 6)) {
-                chol_solve(a, 6, b);
-                for (int k = 0; k < n; k++) {
-                    double acc = d[k];
-                    for (int r = 0; r < 6; r++) {
-                        acc -= jac[r * n + k] * b[r];
-                    }
-                    ns[k] = acc;
-                    ns_norm += acc * acc;
-                }
-                ns_norm = sqrt(ns_norm);
-            } else {
-                memset(ns, 0, (size_t)n * sizeof(double));
+            if (ns_norm <= opts->null_tol || it >= opts->max_iter) {
+                break;
             }
-        }
-        if (res < best_res) {
-            best_res = res;
-            memcpy(best, q, (size_t)n * sizeof(double));
-        }
-        if (res <= opts->tol && ns_norm <= opts->null_tol) {
-            opts->iterations = it;
-            opts->residual = res;
-            return PYRT_OK;
+            for (int k = 0; k < n; k++) {
+                q[k] = clamp(q[k] - ns[k], c->lower[k], c->upper[k]);
+            }
+            forward(c, ws, q);
+            jacobian_from_frames(c, ws, jac);
+            pose_error(target, ws + TIP(n), e);
+            res = sqrt(dot3(e, e) + dot3(e + 3, e + 3));
+            mu = 1.0;
+            continue;
         }
         if (it >= opts->max_iter) {
             break;
         }
-        jjt(jac, n, 0.5 * res * res + 1e-14, a);
+        /* the damped minimum-norm step */
+        jjt(jac, n, mu * (0.5 * res * res + IK_LAMBDA0), a);
         if (!cholesky(a, 6)) {
             break;
         }
-        memcpy(y, e, 6 * sizeof(double));
+        double y[6];
+        memcpy(y, e, sizeof y);
         chol_solve(a, 6, y);
         for (int k = 0; k < n; k++) {
             double acc = 0.0;
             for (int r = 0; r < 6; r++) {
                 acc += jac[r * n + k] * y[r];
             }
-            dq[k] = acc;
-            if (redundant) {
-                dq[k] -= ns[k];
-            }
+            qt[k] = clamp(q[k] + acc, c->lower[k], c->upper[k]);
         }
-        for (int i = 0; i < n; i++) {
-            q[i] = clamp(q[i] + dq[i], c->lower[i], c->upper[i]);
-        }
-        if (!all_finite(q, n)) {
+        if (!all_finite(qt, n)) {
             break;
         }
+        forward(c, ws, qt);
+        pose_error(target, ws + TIP(n), et);
+        const double res_t = sqrt(dot3(et, et) + dot3(et + 3, et + 3));
+        if (res_t < res) {
+            memcpy(q, qt, (size_t)n * sizeof(double));
+            memcpy(e, et, 6 * sizeof(double));
+            res = res_t;
+            jacobian_from_frames(c, ws, jac);
+            mu = mu * 0.1 > IK_MU_MIN ? mu * 0.1 : IK_MU_MIN;
+        } else {
+            mu *= 10.0;
+            if (mu > IK_MU_MAX) {
+                break;
+            }
+        }
     }
-    memcpy(q, best, (size_t)n * sizeof(double));
-    opts->iterations = opts->max_iter;
-    opts->residual = best_res;
-    return PYRT_ENOCONVERGE;
+    opts->iterations = it;
+    if (best_dist < INFINITY) {
+        memcpy(q, best, (size_t)n * sizeof(double));
+        return PYRT_OK;
+    }
+    opts->residual = res;
+    return res <= opts->tol ? PYRT_OK : PYRT_ENOCONVERGE;
 }
 
 /* --------------------------------------------------------------- dynamics */

@@ -42,7 +42,8 @@
 #define PYRT_KIN_AXIS_TOL 1e-6
 
 /* Defaults of the numerical inverse: pose error (m and rad, 2-norm of the
- * 6-vector), null-space step (rad or m, redundant chains), iterations. */
+ * 6-vector), null-space step (rad or m, redundant chains), iterations
+ * (steps tried, refused ones included). */
 #define PYRT_KIN_DEFAULT_TOL 1e-9
 #define PYRT_KIN_DEFAULT_NULL_TOL 1e-7
 #define PYRT_KIN_DEFAULT_MAX_ITER 100
@@ -82,10 +83,10 @@ typedef struct {
  * Options and outcome of the numerical inverse.
  *
  *   tol         in: stop when the pose error's norm is <= tol (> 0)
- *   null_tol    in: redundant chains (n > 6) also wait until the
- *               null-space step toward the seed is <= null_tol (> 0)
+ *   null_tol    in: redundant chains (n > 6) move toward the seed until
+ *               the null-space step is <= null_tol (> 0)
  *   max_iter    in: iteration limit (>= 1)
- *   iterations  out: Jacobian evaluations before the answer
+ *   iterations  out: steps tried before the answer
  *   residual    out: the answer's pose error norm
  */
 typedef struct {
@@ -116,14 +117,18 @@ int pyrt_kin_jacobian(const pyrt_kin_chain *c, double *ws, const double *q, doub
 
 /*
  * Numerical inverse: joint values q (n, out) whose tool pose is target (16).
- * Levenberg-Marquardt on the pose error (position; rotation vector of
- * target . pose^T) with damping 0.5 |e|^2 (Chan and Lawrence), the damped
- * minimum-norm step J^T (J J^T + lambda I)^-1 e, started from seed (n,
- * clamped to the limits) and kept within the limits by clamping each step.
- * A redundant chain (n > 6) adds the exact null-space step toward the seed
- * every iteration, so the answer is a nearest solution to the seed on its
- * self-motion manifold.  PYRT_ENOCONVERGE after max_iter with q the best
- * point met (opts->residual says how good).
+ * Levenberg-Marquardt on the pose error e (position; rotation vector of
+ * target . pose^T): the damped minimum-norm step J^T (J J^T + lambda I)^-1 e
+ * with lambda = mu (|e|^2 / 2 + 1e-9) (Chan and Lawrence's damping, mu
+ * lowered tenfold on a step that reduces |e| and raised tenfold on one that
+ * does not, which is refused), started from seed (n, clamped to the
+ * limits), each step clamped to the limits.  Done when |e| <= tol.  A
+ * redundant chain (n > 6) then takes the exact null-space step toward the
+ * seed and reaches the pose again, until that step is <= null_tol or the
+ * iterations run out; q is the pose-reaching point nearest the seed met, a
+ * nearest solution on the self-motion manifold.  PYRT_ENOCONVERGE when the
+ * pose was not reached within max_iter, q then the point of least error
+ * (opts->residual says how good).
  */
 int pyrt_kin_ik(const pyrt_kin_chain *c, double *ws, const double *target, const double *seed,
                 double *q, pyrt_kin_ik_opts *opts);

@@ -160,3 +160,55 @@ def pose_error(target: np.ndarray, pose: np.ndarray) -> np.ndarray:
     else:
         err[3:] = v * angle / (2.0 * np.sin(angle))
     return err
+
+
+# --------------------------------------------------- chains for the tests
+
+
+def random_rotation(rng) -> np.ndarray:
+    """A uniformly random rotation matrix."""
+    q = rng.normal(size=4)
+    w, x, y, z = q / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def random_pose(rng, reach: float = 0.5) -> np.ndarray:
+    """A random 4x4 transform, translation within +-reach."""
+    t = np.eye(4)
+    t[:3, :3] = random_rotation(rng)
+    t[:3, 3] = rng.uniform(-reach, reach, 3)
+    return t
+
+
+def random_inertia(rng, mass: float) -> np.ndarray:
+    """The inertia of a solid box of *mass*, turned at random."""
+    a, b, c = rng.uniform(0.02, 0.4, 3)
+    d = mass / 12.0 * np.array([b * b + c * c, a * a + c * c, a * a + b * b])
+    r = random_rotation(rng)
+    return r @ np.diag(d) @ r.T
+
+
+def random_chain(rng, n: int, prismatic: float = 0.25) -> dict:
+    """A random chain (dict as above, plus names, lower and upper)."""
+    kinds = ["prismatic" if rng.random() < prismatic else "revolute" for _ in range(n)]
+    axes = rng.normal(size=(n, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    masses = rng.uniform(0.1, 5.0, n)
+    return dict(
+        names=[f"j{i + 1}" for i in range(n)],
+        kinds=kinds,
+        origins=np.array([random_pose(rng) for _ in range(n)]),
+        axes=axes,
+        offsets=rng.uniform(-1.0, 1.0, n),
+        base=random_pose(rng),
+        tool=random_pose(rng, 0.2),
+        lower=np.array([-3.0 if k == "revolute" else -0.5 for k in kinds]),
+        upper=np.array([3.0 if k == "revolute" else 0.5 for k in kinds]),
+        masses=masses,
+        coms=rng.uniform(-0.2, 0.2, (n, 3)),
+        inertias=np.array([random_inertia(rng, m) for m in masses]),
+    )

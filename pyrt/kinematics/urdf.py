@@ -188,6 +188,13 @@ def read_urdf(source: str | PathLike[str], base_link: str | None = None,
     or a path).  Raises :class:`~pyrt.errors.ConfigError` naming the file,
     the line and what is wrong."""
     text, where = _source(source)
+    try:
+        return _read(text, where, base_link, tip_link)
+    except ValueError as exc:  # arithmetic on accepted numbers gone out of range
+        raise ConfigError(f"unusable values: {exc}", where) from None
+
+
+def _read(text: str, where: str, base_link: str | None, tip_link: str | None) -> UrdfChain:
     rd = _Reader(where)
     robot = _parse_xml(text, where)
     if robot.tag != "robot":
