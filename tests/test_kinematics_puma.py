@@ -215,3 +215,106 @@ def test_base_tool_and_offsets_are_honoured_both_ways(chain, q, six, offsets):
         sol = cf.inverse(pose, cfg, limits=False)
         assert_pose(moved.fk(sol), pose)
     assert_pose(cf.fk(q), pose, 1e-12)
+
+
+# ---------------------------------------------------------------- the C kernel
+
+
+@st.composite
+def arms(draw):
+    """A PUMA with a random base, tool and offsets (limits the PUMA's, or none)."""
+    from pyrt.kinematics.joint import transform
+
+    six = [draw(st.floats(-0.5, 0.5)) for _ in range(12)]
+    offsets = [draw(st.floats(-0.3, 0.3)) for _ in range(6)]
+    limited = draw(st.booleans())
+    return PaulInverse(base=transform(six[:3], six[3:6]), tool=transform(six[6:9], six[9:12]),
+                       offsets=offsets, lower=LOWER if limited else None,
+                       upper=UPPER if limited else None)
+
+
+@settings(max_examples=300, deadline=None)
+@given(arms(), joints(), st.sampled_from(CONFIGURATIONS), st.booleans(), st.booleans(),
+       st.lists(st.floats(-1.2, 1.2), min_size=3, max_size=3), st.booleans())
+def test_the_c_inverse_matches_its_python_reference(arm, q, cfg, seeded, nearest, xyz, moved):
+    """csrc/puma.c gives the reference's joints (to 1e-9), reason and deciding number, reachable or not, seeded or not."""
+    import _ref_puma as ref
+
+    pose = arm.fk(q)
+    if moved:  # anywhere in a box: out of reach or inside the shoulder offset too
+        pose = pose.copy()
+        pose[:3, 3] = xyz
+    seed = q + 0.3 if seeded else None
+    lengths = (DH[0][0], DH[1][1], DH[2][1], DH[2][0], DH[3][0])
+    lower = arm.lower if arm.lower is not None else np.full(6, -np.inf)
+    upper = arm.upper if arm.upper is not None else np.full(6, np.inf)
+    want, why, detail = ref.inverse(lengths, arm.base, arm.tool, arm.offsets, lower, upper, pose,
+                                    cfg, seed, nearest=nearest)
+    bits = _bits(cfg) | (8 if nearest else 0)
+    got, gwhy, gdetail = arm._kernel.inverse(pose, bits, seed)
+    assert gwhy == why
+    assert gdetail == pytest.approx(detail, abs=1e-9)
+    if want is None:
+        assert got is None
+    elif abs(math.sin(want[4])) < 1e-5:
+        # near the wrist's singularity only q4 + q6 is well determined
+        keep = [0, 1, 2, 4]
+        np.testing.assert_allclose(got[keep], want[keep], atol=1e-9)
+        assert abs(wrapped(got[3] + got[5] - want[3] - want[5])) < 1e-9
+    else:
+        np.testing.assert_allclose(got, want, atol=1e-9)
+
+
+def _bits(cfg: str) -> int:
+    arm, elbow, wrist = cfg.split("-")
+    return (arm == "lefty") * 1 + (elbow == "below") * 2 + (wrist == "flip") * 4
+
+
+def test_the_c_inverse_refuses_bad_arrays():
+    """A pose of the wrong shape, or NaN in the pose or the seed, is refused before any answer."""
+    from pyrt.errors import NativeError
+
+    paul = PaulInverse()
+    pose = paul.fk(np.zeros(6))
+    with pytest.raises(NativeError, match="pose"):
+        paul.inverse(np.eye(3), "righty-above-noflip")
+    bad = pose.copy()
+    bad[0, 3] = np.nan
+    with pytest.raises(NativeError, match=r"non-finite|NaN"):
+        paul.inverse(bad, "righty-above-noflip")
+    with pytest.raises(NativeError, match=r"non-finite|NaN"):
+        paul.inverse(pose, "righty-above-noflip", seed=[0, 0, np.nan, 0, 0, 0])
+
+
+@pytest.mark.sanitize
+def test_the_c_inverse_under_the_sanitizers(tmp_path):
+    """pyrt_puma_inverse under ASan and UBSan: every configuration and option, out of reach, NULL pointers and NaN."""
+    import textwrap
+
+    from _sanitize import PRELUDE, assert_clean, run_under_asan
+
+    driver = PRELUDE + textwrap.dedent(
+        """
+        import numpy as np
+        from pyrt.kinematics.puma import CONFIGURATIONS, PaulInverse, LOWER_DEG, UPPER_DEG
+        ffi, lib = native.ffi, native.lib
+        paul = PaulInverse(lower=np.radians(LOWER_DEG), upper=np.radians(UPPER_DEG))
+        rng = np.random.default_rng(0)
+        for _ in range(300):
+            q = rng.uniform(-3, 3, 6)
+            pose = paul.fk(q)
+            pose[:3, 3] += rng.normal(0, 0.3, 3) * rng.integers(0, 2)
+            for bits in range(32):
+                paul._kernel.inverse(pose, bits, q if bits & 1 else None)
+        arm = paul._kernel._arm
+        q = ffi.new("double[6]"); why = ffi.new("int32_t *"); d = ffi.new("double[2]")
+        p = ffi.new("double[16]", list(np.eye(4).ravel()))
+        assert lib.pyrt_puma_inverse(ffi.NULL, p, 0, ffi.NULL, q, why, d) == lib.PYRT_EINVAL
+        assert lib.pyrt_puma_inverse(arm, ffi.NULL, 0, ffi.NULL, q, why, d) == lib.PYRT_EINVAL
+        assert lib.pyrt_puma_inverse(arm, p, 0, ffi.NULL, ffi.NULL, why, d) == lib.PYRT_EINVAL
+        p[3] = float("nan")
+        assert lib.pyrt_puma_inverse(arm, p, 0, ffi.NULL, q, why, d) == lib.PYRT_ENONFINITE
+        print("SANITIZE-DRIVER-OK")
+        """
+    )
+    assert_clean(run_under_asan(driver, tmp_path))

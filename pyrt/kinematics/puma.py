@@ -41,6 +41,20 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
+from pyrt.native._puma import (
+    PUMA_BELOW,
+    PUMA_FLIP,
+    PUMA_INSIDE_OFFSET,
+    PUMA_LEFTY,
+    PUMA_LIMIT,
+    PUMA_NEAREST,
+    PUMA_NO_LIMITS,
+    PUMA_SINGULAR,
+    PUMA_TOO_FAR,
+    PUMA_TOO_NEAR,
+    PumaKernel,
+)
+
 if TYPE_CHECKING:
     from pyrt.kinematics.chain import Chain
 
@@ -85,9 +99,12 @@ CONFIGURATIONS: tuple[str, ...] = tuple(
 )
 
 _PAIRS = (("righty", "lefty"), ("above", "below"), ("noflip", "flip"))
-_TWO_PI = 2.0 * math.pi
-#: |sin q5| at or below which the wrist is at its singularity.
-_SINGULAR = 1e-12
+#: Each configuration's bits for the C kernel.
+_BITS: dict[str, int] = {
+    f"{arm}-{elbow}-{wrist}": (PUMA_LEFTY if arm == "lefty" else 0)
+    | (PUMA_BELOW if elbow == "below" else 0) | (PUMA_FLIP if wrist == "flip" else 0)
+    for arm in ("righty", "lefty") for elbow in ("above", "below") for wrist in ("noflip", "flip")
+}
 
 #: The packaged URDF (a path inside the installed package).
 URDF: Path = Path(str(resources.files("pyrt.kinematics") / "data" / "puma560.urdf"))
@@ -188,6 +205,11 @@ class PaulInverse:
         self.dh = dh
         self._d1, self._a2, self._a3 = dh[0][0], dh[1][1], dh[2][1]
         self._d3, self._d4 = dh[2][0], dh[3][0]
+        self._lower = np.full(6, -np.inf) if self.lower is None else self.lower
+        self._upper = np.full(6, np.inf) if self.upper is None else self.upper
+        self._kernel = PumaKernel((self._d1, self._a2, self._a3, self._d3, self._d4),
+                                  self._base_inv, self._tool_inv, self.offsets,
+                                  self._lower, self._upper)
 
     @classmethod
     def for_chain(cls, chain: Chain) -> PaulInverse:
@@ -237,7 +259,7 @@ class PaulInverse:
         y2 = a3 * math.sin(th[2]) + d4 * math.cos(th[2])
         above = y2 < 0.0 if arm == "righty" else y2 > 0.0
         # at the wrist's singularity (sin q5 = 0 to rounding) flip and noflip are one
-        wrist = "noflip" if math.sin(th[4]) >= -_SINGULAR else "flip"
+        wrist = "noflip" if math.sin(th[4]) >= -PUMA_SINGULAR else "flip"
         return f"{arm}-{'above' if above else 'below'}-{wrist}"
 
     # -- the inverse ------------------------------------------------------------------
@@ -250,27 +272,35 @@ class PaulInverse:
         returns the kinematic solution in (-180, 180] degrees, ignoring limits.
         ``nearest=True`` answers a wrist centre just out of reach with the arm
         stretched (or folded) towards it, as a seed for a numerical inverse.
+        The work is done in C (csrc/puma.c).
         """
-        cfg = parse_config(config)
-        t = np.asarray(target, dtype=np.float64)
-        if t.shape != (4, 4) or not np.all(np.isfinite(t)):
-            raise ValueError(f"target: expected a finite 4x4 transform, got shape {t.shape}")
-        th4 = 0.0
-        if seed is not None:
-            s = np.asarray(seed, dtype=np.float64)
-            if s.shape != (6,):
-                raise ValueError(f"seed: expected 6 joint values, got shape {s.shape}")
-            th4 = float(s[3] + self.offsets[3])
-        theta = self._angles(self._base_inv @ t @ self._tool_inv, cfg, th4, nearest)
-        q = theta - self.offsets
-        q = np.arctan2(np.sin(q), np.cos(q))
-        if seed is not None:
-            q = q + _TWO_PI * np.round((s - q) / _TWO_PI)
-        if not limits or self.lower is None or self.upper is None:
-            return q
-        for i in range(6):
-            q[i] = self._into_limits(i, q[i], cfg)
+        bits = _BITS.get(config)  # type: ignore[arg-type]
+        if bits is None:
+            config = parse_config(config)
+            bits = _BITS[config]
+        if not limits:
+            bits |= PUMA_NO_LIMITS
+        if nearest:
+            bits |= PUMA_NEAREST
+        q, why, detail = self._kernel.inverse(target, bits, seed)
+        if q is None:
+            raise Unreachable(self._why(config, why, detail))
         return q
+
+    def _why(self, cfg: str, why: int, detail: float) -> str:
+        if why == PUMA_INSIDE_OFFSET:
+            return (f"{cfg}: the wrist centre is {detail * 1e3:.1f} mm from joint 1's axis, "
+                    f"closer than the shoulder offset {abs(self._d3) * 1e3:.1f} mm")
+        if why in (PUMA_TOO_FAR, PUMA_TOO_NEAR):
+            arm = math.hypot(self._a3, self._d4)
+            near, far = abs(self._a2 - arm), self._a2 + arm
+            where = "beyond the arm's reach" if why == PUMA_TOO_FAR else "too close to the shoulder"
+            return (f"{cfg}: the wrist centre is {detail * 1e3:.1f} mm from the shoulder, {where} "
+                    f"(the arm reaches {near * 1e3:.1f} .. {far * 1e3:.1f} mm)")
+        i = why - PUMA_LIMIT
+        lo, hi = math.degrees(self._lower[i]), math.degrees(self._upper[i])
+        return (f"{cfg}: joint q{i + 1} would be at {math.degrees(detail):.2f} deg, beyond its "
+                f"limits {lo:.1f} .. {hi:.1f} deg")
 
     def solve(self, target: npt.ArrayLike, config: str,
               seed: npt.ArrayLike | None = None) -> Matrix | None:
@@ -300,90 +330,6 @@ class PaulInverse:
 
     def __iter__(self) -> Iterator[str]:
         return iter(self.configurations)
-
-    def _into_limits(self, i: int, qi: float, cfg: str) -> float:
-        assert self.lower is not None and self.upper is not None
-        lo, hi = float(self.lower[i]), float(self.upper[i])
-        tol = 1e-9
-        if lo - tol <= qi <= hi + tol:
-            return min(max(qi, lo), hi)
-        # another turn may lie within the limits: the one nearest the present value
-        best = None
-        for k in range(-2, 3):
-            cand = qi + k * _TWO_PI
-            if lo - tol <= cand <= hi + tol and (best is None or abs(cand - qi) < abs(best - qi)):
-                best = cand
-        if best is None:
-            raise Unreachable(
-                f"{cfg}: joint q{i + 1} would be at {math.degrees(qi):.2f} deg, beyond its "
-                f"limits {math.degrees(lo):.1f} .. {math.degrees(hi):.1f} deg"
-            )
-        return min(max(best, lo), hi)
-
-    def _angles(self, t: Matrix, cfg: str, th4_seed: float = 0.0,
-                nearest: bool = False) -> Matrix:
-        """The DH joint angles for flange pose ``t`` (in the DH base frame)."""
-        arm, elbow, wrist = cfg.split("-")
-        d1, a2, a3, d3, d4 = self._d1, self._a2, self._a3, self._d3, self._d4
-        px, py, pz = float(t[0, 3]), float(t[1, 3]), float(t[2, 3]) - d1
-        # joint 1: px s1 - py c1 = d3 (the shoulder offset)
-        r = math.hypot(px, py)
-        if r < abs(d3) * (1.0 - 1e-12) and not nearest:
-            raise Unreachable(
-                f"{cfg}: the wrist centre is {r * 1e3:.1f} mm from joint 1's axis, "
-                f"closer than the shoulder offset {abs(d3) * 1e3:.1f} mm"
-            )
-        phi = math.atan2(py, px)
-        off = math.asin(max(-1.0, min(1.0, d3 / r))) if r > 0 else 0.0
-        th1 = phi + off if arm == "righty" else phi + math.pi - off
-        c1, s1 = math.cos(th1), math.sin(th1)
-        x = px * c1 + py * s1  # horizontal reach in the arm's plane
-        y = pz
-        # joints 2 and 3: (x, y) = a2 (c2, s2) + Rot(th2 + th3) (a3, d4)
-        rho = math.hypot(x, y)
-        length2 = a3 * a3 + d4 * d4
-        k = (x * x + y * y + a2 * a2 - length2) / (2.0 * a2)
-        if rho == 0.0 or (abs(k) > rho * (1.0 + 1e-12) and not nearest):
-            near, far = abs(a2 - math.sqrt(length2)), a2 + math.sqrt(length2)
-            where = "beyond the arm's reach" if rho >= far else "too close to the shoulder"
-            raise Unreachable(
-                f"{cfg}: the wrist centre is {rho * 1e3:.1f} mm from the shoulder, {where} "
-                f"(the arm reaches {near * 1e3:.1f} .. {far * 1e3:.1f} mm)"
-            )
-        psi = math.acos(max(-1.0, min(1.0, k / rho)))
-        if nearest and abs(k) >= rho:
-            psi = max(psi, 0.02)  # off the stretched arm, on the configuration's side
-        beta = math.atan2(y, x)
-        up = (elbow == "above") == (arm == "righty")
-        th2 = beta + psi if up else beta - psi
-        c2, s2 = math.cos(th2), math.sin(th2)
-        th23 = math.atan2(y - a2 * s2, x - a2 * c2) - math.atan2(d4, a3)
-        th3 = th23 - th2
-        # the wrist: R36 = R03^T R = Rz(th4) Ry(-th5) Rz(th6)
-        c23, s23 = math.cos(th23), math.sin(th23)
-        r03 = np.array([
-            [c1 * c23, -s1, -c1 * s23],
-            [s1 * c23, c1, -s1 * s23],
-            [s23, 0.0, c23],
-        ])
-        m = r03.T @ t[:3, :3]
-        s5 = math.hypot(m[0, 2], m[1, 2])
-        th5 = math.atan2(s5, m[2, 2])
-        if s5 > _SINGULAR:
-            th4 = math.atan2(-m[1, 2], -m[0, 2])
-            if wrist == "flip":
-                th4 += math.pi
-                th5 = -th5
-        else:
-            # the wrist's singularity: joints 4 and 6 share one angle; flip and
-            # noflip are the same; joint 4 stays where the seed has it
-            th4 = th4_seed
-        c4, s4, c5, s5_ = math.cos(th4), math.sin(th4), math.cos(th5), math.sin(th5)
-        # Rz(th6) = (Rz(th4) Ry(-th5))^T m: its first column gives th6
-        rz4ry5 = np.array([[c4 * c5, -s4, -c4 * s5_], [s4 * c5, c4, -s4 * s5_], [s5_, 0.0, c5]])
-        r6 = rz4ry5.T @ m
-        th6 = math.atan2(r6[1, 0], r6[0, 0])
-        return np.array([th1, th2, th3, th4, th5, th6])
 
 
 def puma560(*, closed_form: bool = True) -> Chain:
