@@ -132,8 +132,8 @@ int pyrt_puma_inverse(const pyrt_puma *arm, const double *pose, int32_t config,
     s5 = hypot(w[2], w[5]);
     th5 = atan2(s5, w[8]);
     if (s5 > PYRT_PUMA_SINGULAR) {
-        th4 = atan2(-w[5], -w[2]);
-        if (config & PYRT_PUMA_FLIP) {
+        th4 = atan2(-w[5], -w[2]); /* q5 > 0 here: flipped */
+        if (!(config & PYRT_PUMA_FLIP)) {
             th4 += PUMA_PI;
             th5 = -th5;
         }

@@ -69,8 +69,8 @@ def inverse(lengths, base, tool, offsets, lower, upper, pose, config: str, seed=
     s5 = math.hypot(m[0, 2], m[1, 2])
     th5 = math.atan2(s5, m[2, 2])
     if s5 > SINGULAR:
-        th4 = math.atan2(-m[1, 2], -m[0, 2])
-        if wrist == "flip":
+        th4 = math.atan2(-m[1, 2], -m[0, 2])  # q5 > 0: flipped
+        if wrist == "noflip":
             th4 += math.pi
             th5 = -th5
     else:

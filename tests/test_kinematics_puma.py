@@ -172,16 +172,16 @@ def test_a_configuration_beyond_a_joint_limit_is_refused_naming_the_joint(chain)
     q = np.radians([150.0, 30.0, -60.0, 10.0, 40.0, 0.0])
     pose = chain.fk(q)
     cf = chain.closed_form
-    why = cf.reason(pose, "lefty-above-noflip")
-    m = re.fullmatch(r"lefty-above-noflip: joint q(\d) would be at (-?[\d.]+) deg, "
+    why = cf.reason(pose, "lefty-above-flip")
+    m = re.fullmatch(r"lefty-above-flip: joint q(\d) would be at (-?[\d.]+) deg, "
                      r"beyond its limits (-?[\d.]+) \.\. (-?[\d.]+) deg", why or "")
     assert m, why
     k, at, lo, hi = int(m[1]) - 1, float(m[2]), float(m[3]), float(m[4])
     assert (lo, hi) == (LOWER_DEG[k], UPPER_DEG[k]) and not lo <= at <= hi
-    assert cf.solve(pose, "lefty-above-noflip") is None
-    assert cf.config_of(q) == "righty-below-noflip"
-    np.testing.assert_allclose(cf.solve(pose, "righty-below-noflip"), q, atol=1e-9)
-    sol = cf.inverse(pose, "lefty-above-noflip", limits=False)
+    assert cf.solve(pose, "lefty-above-flip") is None
+    assert cf.config_of(q) == "righty-below-flip"
+    np.testing.assert_allclose(cf.solve(pose, "righty-below-flip"), q, atol=1e-9)
+    sol = cf.inverse(pose, "lefty-above-flip", limits=False)
     assert_pose(chain.fk(sol), pose)
 
 

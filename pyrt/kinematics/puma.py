@@ -20,7 +20,10 @@ pair (:data:`CONFIGURATIONS`, e.g. ``"righty-above-noflip"``):
   reach ``X = a2 c2 + a3 c23 - d4 s23`` is >= 0 / < 0);
 * ``above`` / ``below``: the elbow above / below the line from the shoulder
   to the wrist centre;
-* ``noflip`` / ``flip``: joint 5 in [0, 180) / (-180, 0) degrees (mod 360).
+* ``noflip`` / ``flip``: joint 5 in (-180, 0] / (0, 180) degrees (mod 360).
+
+These are the Robotics Toolbox's ``ikine_a`` configurations (``r``/``l``,
+``u``/``d``, ``n``/``f``) for the same table, which keeps Paul's link twists.
 
 :meth:`PaulInverse.config_of` names the configuration of a joint vector, and
 ``solve(fk(q), config_of(q))`` gives ``q`` back (joint 4 and 6 up to their
@@ -75,10 +78,10 @@ Matrix = npt.NDArray[np.float64]
 
 #: The standard DH table of the PUMA 560, one row per joint: (d, a, alpha)
 #: in metres and radians, theta the joint variable (Corke & Armstrong-Helouvry
-#: 1994; Robotics Toolbox ``Puma560``, whose d1 = 0.672 m is the height of the
-#: shoulder axis above the mounting surface).
+#: 1994; Robotics Toolbox 1.5 ``Puma560``, whose d1 = 26.45 in is the height of
+#: the shoulder axis above the mounting surface).
 DH: tuple[tuple[float, float, float], ...] = (
-    (0.672, 0.0, math.pi / 2),
+    (0.67183, 0.0, math.pi / 2),  # 26.45 in
     (0.0, 0.4318, 0.0),
     (0.15005, 0.0203, -math.pi / 2),
     (0.4318, 0.0, math.pi / 2),
@@ -259,7 +262,7 @@ class PaulInverse:
         y2 = a3 * math.sin(th[2]) + d4 * math.cos(th[2])
         above = y2 < 0.0 if arm == "righty" else y2 > 0.0
         # at the wrist's singularity (sin q5 = 0 to rounding) flip and noflip are one
-        wrist = "noflip" if math.sin(th[4]) >= -PUMA_SINGULAR else "flip"
+        wrist = "flip" if math.sin(th[4]) > PUMA_SINGULAR else "noflip"
         return f"{arm}-{'above' if above else 'below'}-{wrist}"
 
     # -- the inverse ------------------------------------------------------------------
