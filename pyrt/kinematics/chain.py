@@ -33,16 +33,17 @@ from numpy.typing import ArrayLike
 from pyrt.errors import ConfigError, NativeError
 from pyrt.kinematics.joint import Inertial, Joint
 from pyrt.native import ChainKernels
-from pyrt.native._kinematics import IK_DEFAULT_MAX_ITER, IK_DEFAULT_NULL_TOL, IK_DEFAULT_TOL
+from pyrt.native._kinematics import (
+    GRAVITY,
+    IK_DEFAULT_MAX_ITER,
+    IK_DEFAULT_NULL_TOL,
+    IK_DEFAULT_TOL,
+)
 
 if TYPE_CHECKING:
     from pyrt.kinematics.dh import DHRow
 
 __all__ = ["GRAVITY", "Chain", "ClosedForm", "IKResult"]
-
-#: Gravity in the world frame by default (m/s^2): z up.
-GRAVITY = (0.0, 0.0, -9.81)
-
 
 @runtime_checkable
 class ClosedForm(Protocol):
@@ -132,6 +133,14 @@ class Chain:
             )
         except NativeError as exc:
             raise ConfigError(f"chain {self.name!r}: {exc}") from None
+        # The per-call path goes straight to the kernels (same signatures as
+        # the methods below, which document them): one Python call less.
+        k = self._k
+        self.fk = k.fk  # type: ignore[method-assign]
+        self.jacobian = k.jacobian  # type: ignore[method-assign]
+        self.rnea = k.rnea  # type: ignore[method-assign]
+        self.gravity_torque = k.gravity_torque  # type: ignore[method-assign]
+        self.aba = k.forward_dynamics  # type: ignore[method-assign]
 
     # ------------------------------------------------------------ constructors
 

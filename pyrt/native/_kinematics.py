@@ -19,7 +19,7 @@ from pyrt.native._arrays import F64, as_f64
 from pyrt.native._errors import NativeInputError, Status, converged, raise_for_status
 from pyrt.native._lib import ffi, lib
 
-__all__ = ["IK_DEFAULT_MAX_ITER", "IK_DEFAULT_NULL_TOL", "IK_DEFAULT_TOL", "MAX_JOINTS",
+__all__ = ["GRAVITY", "IK_DEFAULT_MAX_ITER", "IK_DEFAULT_NULL_TOL", "IK_DEFAULT_TOL", "MAX_JOINTS",
            "ChainKernels", "IKOutcome"]
 
 MAX_JOINTS: int = lib.PYRT_KIN_MAX_JOINTS
@@ -31,6 +31,8 @@ IK_DEFAULT_MAX_ITER: int = lib.PYRT_KIN_DEFAULT_MAX_ITER
 AXIS_TOL: float = lib.PYRT_KIN_AXIS_TOL
 
 _NDARRAY = np.ndarray
+#: Gravity in the world frame by default (m/s^2): z up.
+GRAVITY = (0.0, 0.0, -9.81)
 _KINDS = {"revolute": REVOLUTE, "prismatic": PRISMATIC}
 _CHECK_WHY = {
     Status.EINVAL: "refused (kinds, unit axes, ordered limits, masses >= 0)",
@@ -101,6 +103,17 @@ class ChainKernels:
         self._gbuf = _buf(self._gravity)
         self._g_last: object = None
         self._qshape = (n,)
+        # argument slots (one shape each): q, qd, qdd or tau, target, seed;
+        # then the out= of fk, jacobian, ik, rnea, forward_dynamics
+        self._objs: list[object] = [None] * 10
+        self._cds: list[Any] = [None] * 10
+        # results computed here and copied out when the caller gives no out=
+        self._pose = np.empty((4, 4), F64)
+        self._jac_buf = np.empty((6, n), F64)
+        self._vec_buf = np.empty(n, F64)
+        self._pose_p = _buf(self._pose)
+        self._jac_p = _buf(self._jac_buf)
+        self._vec_p = _buf(self._vec_buf)
         self._fk = lib.pyrt_kin_fk
         self._jac = lib.pyrt_kin_jacobian
         self._rnea = lib.pyrt_kin_rnea
@@ -110,13 +123,37 @@ class ChainKernels:
 
     # ------------------------------------------------------------ arguments
 
-    def _vec(self, name: str, value: object) -> np.ndarray:
-        """*value* as a float64 (n,) array: as it is when it already is one."""
+    def _ptr(self, slot: int, name: str, value: object, shape: tuple[int, ...]) -> Any:
+        """A C pointer to *value*'s float64 data of *shape*.
+
+        The caller's own array is bound once: while the same array object
+        comes back in this argument's *slot* (a preallocated buffer, as a
+        control loop passes), its pointer is reused without a check (the
+        binding keeps the array from being resized).  Anything else is
+        checked and, when need be, converted (a list, another dtype).
+        """
+        if value is self._objs[slot]:
+            return self._cds[slot]
         if (value.__class__ is _NDARRAY and value.dtype is F64  # type: ignore[attr-defined]
-                and value.shape == self._qshape  # type: ignore[attr-defined]
+                and value.shape == shape  # type: ignore[attr-defined]
                 and value.flags.c_contiguous):  # type: ignore[attr-defined]
-            return value  # type: ignore[return-value]
-        return as_f64(name, value, self._qshape)
+            cd = ffi.from_buffer("double[]", value)
+            self._objs[slot] = value
+            self._cds[slot] = cd
+            return cd
+        return ffi.from_buffer("double[]", as_f64(name, value, shape))
+
+    def _out_ptr(self, slot: int, name: str, out: np.ndarray, shape: tuple[int, ...]) -> Any:
+        if out is self._objs[slot]:
+            return self._cds[slot]
+        if (out.__class__ is not _NDARRAY or out.dtype is not F64 or out.shape != shape
+                or not out.flags.c_contiguous or not out.flags.writeable):
+            raise NativeInputError(
+                f"{name}: expected a writeable C-contiguous float64 array of shape {shape}")
+        cd = ffi.from_buffer("double[]", out)
+        self._objs[slot] = out
+        self._cds[slot] = cd
+        return cd
 
     def _out(self, name: str, out: np.ndarray | None, shape: tuple[int, ...]) -> np.ndarray:
         if out is None:
@@ -141,51 +178,50 @@ class ChainKernels:
 
     def fk(self, q: object, out: np.ndarray | None = None) -> np.ndarray:
         """Tool pose (4, 4) in the world at joint values *q*."""
-        qa = self._vec("q", q)
-        pose = self._out("out", out, (4, 4))
-        rc = self._fk(self._c, self._w, ffi.from_buffer("double[]", qa),
-                      ffi.from_buffer("double[]", pose))
+        qp = self._ptr(0, "q", q, self._qshape)
+        if out is None:
+            rc = self._fk(self._c, self._w, qp, self._pose_p)
+            if rc:
+                raise_for_status(rc, "fk")
+            return self._pose.copy()
+        rc = self._fk(self._c, self._w, qp, self._out_ptr(5, "out", out, (4, 4)))
         if rc:
             raise_for_status(rc, "fk")
-        return pose
+        return out
 
     def frames(self, q: object, out: np.ndarray | None = None) -> np.ndarray:
         """Base and each joint's child frame in the world, (n + 1, 4, 4)."""
-        qa = self._vec("q", q)
         fr = self._out("out", out, (self.n + 1, 4, 4))
-        raise_for_status(lib.pyrt_kin_frames(self._c, self._w, _buf(qa), _buf(fr)), "frames")
+        raise_for_status(lib.pyrt_kin_frames(self._c, self._w, self._ptr(0, "q", q, self._qshape),
+                                             _buf(fr)), "frames")
         return fr
 
-    def jacobian(self, q: object, out: np.ndarray | None = None,
-                 pose: np.ndarray | None = None) -> np.ndarray:
-        """Geometric Jacobian (6, n), world frame, rows (v; w) at the tool;
-        *pose* (4, 4), when given, receives the tool pose."""
-        qa = self._vec("q", q)
-        jac = self._out("out", out, (6, self.n))
-        pp = ffi.NULL if pose is None else ffi.from_buffer(
-            "double[]", self._out("pose", pose, (4, 4)))
-        rc = self._jac(self._c, self._w, ffi.from_buffer("double[]", qa),
-                       ffi.from_buffer("double[]", jac), pp)
+    def jacobian(self, q: object, out: np.ndarray | None = None) -> np.ndarray:
+        """Geometric Jacobian (6, n), world frame, rows (v; w) at the tool."""
+        qp = self._ptr(0, "q", q, self._qshape)
+        if out is None:
+            rc = self._jac(self._c, self._w, qp, self._jac_p, ffi.NULL)
+            if rc:
+                raise_for_status(rc, "jacobian")
+            return self._jac_buf.copy()
+        rc = self._jac(self._c, self._w, qp, self._out_ptr(6, "out", out, (6, self.n)), ffi.NULL)
         if rc:
             raise_for_status(rc, "jacobian")
-        return jac
+        return out
 
     def ik(self, target: object, seed: object, out: np.ndarray | None = None, *,
            tol: float = IK_DEFAULT_TOL, null_tol: float = IK_DEFAULT_NULL_TOL,
            max_iter: int = IK_DEFAULT_MAX_ITER) -> tuple[np.ndarray, IKOutcome]:
         """Joint values whose tool pose is *target*, from *seed*; see
         ``pyrt_kin_ik``.  Non-convergence is not an error: the outcome says."""
-        t = target
-        if not (t.__class__ is _NDARRAY and t.dtype is F64  # type: ignore[attr-defined]
-                and t.shape == (4, 4) and t.flags.c_contiguous):  # type: ignore[attr-defined]
-            t = as_f64("target", target, (4, 4))
-        s = self._vec("seed", seed)
-        q = self._out("out", out, self._qshape)
+        tp = self._ptr(3, "target", target, (4, 4))
+        sp = self._ptr(4, "seed", seed, self._qshape)
+        q = np.empty(self._qshape, F64) if out is None else out
+        qp = self._out_ptr(7, "out", q, self._qshape) if out is not None else _buf(q)
         o = self._opts
         if tol != o.tol or null_tol != o.null_tol or max_iter != o.max_iter:
             self._ik_options(tol, null_tol, max_iter)
-        rc = lib.pyrt_kin_ik(self._c, self._w, ffi.from_buffer("double[]", t),
-                             ffi.from_buffer("double[]", s), ffi.from_buffer("double[]", q), o)
+        rc = lib.pyrt_kin_ik(self._c, self._w, tp, sp, qp, o)
         ok = True if not rc else converged(rc, "ik")
         return q, IKOutcome(ok, o.iterations, o.residual)
 
@@ -200,40 +236,55 @@ class ChainKernels:
         self._opts.null_tol = float(null_tol)
         self._opts.max_iter = int(max_iter)
 
-    def rnea(self, q: object, qd: object | None, qdd: object | None, gravity: object | None,
-             out: np.ndarray | None = None) -> np.ndarray:
+    def rnea(self, q: object, qd: object | None, qdd: object | None,
+             gravity: object | None = GRAVITY, out: np.ndarray | None = None) -> np.ndarray:
         """Joint forces (n,) for the motion (q, qd, qdd); None = zero."""
-        qa = self._vec("q", q)
-        qdp = ffi.NULL if qd is None else ffi.from_buffer("double[]", self._vec("qd", qd))
-        qddp = ffi.NULL if qdd is None else ffi.from_buffer("double[]", self._vec("qdd", qdd))
-        tau = self._out("out", out, self._qshape)
-        rc = self._rnea(self._c, self._w, ffi.from_buffer("double[]", qa), qdp, qddp,
-                        self._set_gravity(gravity), ffi.from_buffer("double[]", tau))
+        shape = self._qshape
+        qp = self._ptr(0, "q", q, shape)
+        qdp = ffi.NULL if qd is None else self._ptr(1, "qd", qd, shape)
+        qddp = ffi.NULL if qdd is None else self._ptr(2, "qdd", qdd, shape)
+        gp = self._gbuf if gravity is self._g_last else self._set_gravity(gravity)
+        if out is None:
+            rc = self._rnea(self._c, self._w, qp, qdp, qddp, gp, self._vec_p)
+            if rc:
+                raise_for_status(rc, "rnea")
+            return self._vec_buf.copy()
+        rc = self._rnea(self._c, self._w, qp, qdp, qddp, gp, self._out_ptr(8, "out", out, shape))
         if rc:
             raise_for_status(rc, "rnea")
-        return tau
+        return out
+
+    def gravity_torque(self, q: object, gravity: object | None = GRAVITY,
+                       out: np.ndarray | None = None) -> np.ndarray:
+        """Joint forces (n,) that hold the chain still at *q*."""
+        return self.rnea(q, None, None, gravity, out)
 
     def mass_matrix(self, q: object, out: np.ndarray | None = None) -> np.ndarray:
         """Joint-space mass matrix (n, n)."""
-        qa = self._vec("q", q)
         m = self._out("out", out, (self.n, self.n))
-        raise_for_status(lib.pyrt_kin_mass_matrix(self._c, self._w, _buf(qa), _buf(m)),
+        raise_for_status(lib.pyrt_kin_mass_matrix(self._c, self._w,
+                                                  self._ptr(0, "q", q, self._qshape), _buf(m)),
                          "mass_matrix")
         return m
 
     def forward_dynamics(self, q: object, qd: object | None, tau: object,
-                         gravity: object | None, out: np.ndarray | None = None) -> np.ndarray:
+                         gravity: object | None = GRAVITY, out: np.ndarray | None = None
+                         ) -> np.ndarray:
         """Joint accelerations (n,) for joint forces *tau*."""
-        qa = self._vec("q", q)
-        qdp = ffi.NULL if qd is None else ffi.from_buffer("double[]", self._vec("qd", qd))
-        ta = self._vec("tau", tau)
-        qdd = self._out("out", out, self._qshape)
-        rc = self._fd(self._c, self._w, ffi.from_buffer("double[]", qa), qdp,
-                      ffi.from_buffer("double[]", ta), self._set_gravity(gravity),
-                      ffi.from_buffer("double[]", qdd))
+        shape = self._qshape
+        qp = self._ptr(0, "q", q, shape)
+        qdp = ffi.NULL if qd is None else self._ptr(1, "qd", qd, shape)
+        tp = self._ptr(2, "tau", tau, shape)
+        gp = self._gbuf if gravity is self._g_last else self._set_gravity(gravity)
+        if out is None:
+            rc = self._fd(self._c, self._w, qp, qdp, tp, gp, self._vec_p)
+            result = self._vec_buf
+        else:
+            rc = self._fd(self._c, self._w, qp, qdp, tp, gp, self._out_ptr(9, "out", out, shape))
+            result = out
         if rc:
             raise_for_status(rc, "forward_dynamics",
                              lambda exc: "the mass matrix is not positive definite (a joint "
                              "that moves no mass or inertia)" if rc == Status.ESINGULAR
                              else None)
-        return qdd
+        return result.copy() if out is None else out
