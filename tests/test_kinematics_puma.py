@@ -318,3 +318,16 @@ def test_the_c_inverse_under_the_sanitizers(tmp_path):
         """
     )
     assert_clean(run_under_asan(driver, tmp_path))
+
+
+def test_the_examples_of_docs_kinematics_run_as_written():
+    """The python blocks of docs/kinematics.md, run one after the other in one namespace, raise nothing (their asserts hold)."""
+    import re
+    from pathlib import Path
+
+    page = Path(__file__).resolve().parent.parent / "docs" / "kinematics.md"
+    blocks = re.findall(r"```python\n(.*?)```", page.read_text(encoding="utf-8"), re.S)
+    assert len(blocks) >= 6
+    namespace: dict = {"print": lambda *a, **k: None}
+    exec(compile("\n".join(blocks), str(page), "exec"), namespace)
+    assert namespace["fit"].converged
