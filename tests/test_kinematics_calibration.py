@@ -63,6 +63,29 @@ def test_a_known_error_is_identified_from_20_measured_poses(puma):
         assert np.max(np.abs(cal.fk(q) - real.fk(q))) < 1e-6
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_identification_from_noisy_measurements_stays_within_tolerance(puma, seed):
+    """Poses measured with 10 um and 0.002 deg of noise still give the 0.5 deg offset and the 1 mm / 0.2 deg base error to within 0.01 deg and 0.05 mm."""
+    truth = CalibrationModel.for_chains(puma)
+    truth.update({"offset.joint2": math.radians(0.5), "base.x": 0.6e-3, "base.y": -0.48e-3,
+                  "base.z": 0.64e-3, "base.rx": math.radians(0.12), "base.ry": math.radians(0.16)})
+    real = truth.apply(puma)
+    rng = np.random.default_rng(seed)
+    qs = random_q(rng)
+    measured = [real.fk(q) @ correction([*rng.normal(0, 10e-6, 3),
+                                         *rng.normal(0, math.radians(0.002), 3)]) for q in qs]
+    model = CalibrationModel.for_chains(puma)
+    free = [f"offset.joint{k}" for k in range(2, 7)] + ["base"]
+    fit = model.identify(observations(puma, qs, measured), free)
+    assert fit.converged and fit.rms_position < 30e-6
+    for k in range(2, 7):
+        assert abs(math.degrees(model[f"offset.joint{k}"] - truth[f"offset.joint{k}"])) < 0.01
+    err = [model[f"base.{a}"] - truth[f"base.{a}"] for a in ("x", "y", "z")]
+    assert np.linalg.norm(err) < 0.05e-3
+    rot = [model[f"base.{a}"] - truth[f"base.{a}"] for a in ("rx", "ry", "rz")]
+    assert math.degrees(np.linalg.norm(rot)) < 0.01
+
+
 def test_parameters_the_data_cannot_separate_are_named_and_left_alone(puma):
     """Joint 1's offset and a base rotation about joint 1's axis are one error to the data: the fit names both unobservable and still matches the poses."""
     truth = CalibrationModel.for_chains(puma)
