@@ -185,6 +185,20 @@ def test_a_configuration_beyond_a_joint_limit_is_refused_naming_the_joint(chain)
     assert_pose(chain.fk(sol), pose)
 
 
+def test_a_closed_form_for_another_arm_is_refused(chain):
+    """PaulInverse.for_chain refuses a chain whose forward kinematics is not the PUMA table's (a longer forearm; three joints)."""
+    from pyrt.kinematics import Chain
+    from pyrt.kinematics.joint import transform
+
+    longer = chain.replace(origins=[j.origin for j in chain.joints[:3]]
+                           + [chain.joints[3].origin @ transform((0.0, 0.01, 0.0))]
+                           + [j.origin for j in chain.joints[4:]])
+    with pytest.raises(ValueError, match="not the arm of this DH table"):
+        PaulInverse.for_chain(longer)
+    with pytest.raises(ValueError, match="needs 6"):
+        PaulInverse.for_chain(Chain("three", chain.joints[:3]))
+
+
 def test_configuration_words_in_any_order_and_bad_ones_refused():
     """A configuration is one word of each pair in any order and case; a missing pair or an unknown word is refused naming the pairs."""
     assert parse_config("Flip, lefty above") == "lefty-above-flip"

@@ -109,6 +109,10 @@ _BITS: dict[str, int] = {
     for arm in ("righty", "lefty") for elbow in ("above", "below") for wrist in ("noflip", "flip")
 }
 
+#: Joint vectors at which a chain's forward kinematics is compared with the table's.
+_PROBES = (np.zeros(6), np.array([0.3, -0.7, 1.1, -0.4, 0.9, 2.0]),
+           np.array([-2.0, 1.3, -2.5, 1.7, -1.2, -0.6]))
+
 #: The packaged URDF (a path inside the installed package).
 URDF: Path = Path(str(resources.files("pyrt.kinematics") / "data" / "puma560.urdf"))
 
@@ -216,9 +220,23 @@ class PaulInverse:
 
     @classmethod
     def for_chain(cls, chain: Chain) -> PaulInverse:
-        """The inverse for ``chain``'s base, tool, offsets and limits (its geometry the PUMA's)."""
-        return cls(base=chain.base, tool=chain.tool, offsets=chain.offsets,
-                   lower=chain.lower, upper=chain.upper)
+        """The inverse for ``chain``'s base, tool, offsets and limits.
+
+        Refuses (ValueError) a chain whose forward kinematics is not this
+        table's: the chain and the inverse must describe one arm.
+        """
+        if chain.n != 6:
+            raise ValueError(f"chain {chain.name!r} has {chain.n} joints; Paul's inverse needs 6")
+        inv = cls(base=chain.base, tool=chain.tool, offsets=chain.offsets,
+                  lower=chain.lower, upper=chain.upper)
+        for probe in _PROBES:
+            gap = float(np.max(np.abs(chain.fk(probe) - inv.fk(probe))))
+            if gap > 1e-9:
+                raise ValueError(
+                    f"chain {chain.name!r} is not the arm of this DH table: its pose differs "
+                    f"by {gap:.3g} at q = {np.round(probe, 3).tolist()}"
+                )
+        return inv
 
     def replace(self, **changes: Any) -> PaulInverse:
         """A copy with some of base, tool, offsets, lower, upper or dh changed."""
