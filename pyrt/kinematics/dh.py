@@ -99,9 +99,10 @@ def dh_chain(rows: Sequence[DHRow], modified: bool = False
                      @ _rx(row.alpha))
             to_link = after
         try:
-            inertial = Inertial(row.mass, row.com, row.inertia).moved(to_link)
-            joints.append(Joint(name, row.kind, origin, _Z, row.lower, row.upper, row.velocity,
-                                row.effort, row.damping, row.friction, inertial))
+            inertial = Inertial(row.mass, np.asarray(row.com, dtype=float),
+                                np.asarray(row.inertia, dtype=float)).moved(to_link)
+            joints.append(Joint(name, row.kind, origin, np.array(_Z), row.lower, row.upper,
+                                row.velocity, row.effort, row.damping, row.friction, inertial))
         except ValueError as exc:
             raise ConfigError(f"DH table row {i + 1} ({name}): {exc}") from None
     return joints, offsets, (np.eye(4) if modified else after)

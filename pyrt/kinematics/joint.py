@@ -60,7 +60,8 @@ def transform(xyz: ArrayLike = (0.0, 0.0, 0.0), rpy: ArrayLike = (0.0, 0.0, 0.0)
     """The 4x4 transform of a translation *xyz* and a rotation *rpy* (URDF's
     ``<origin xyz rpy>``)."""
     t = np.eye(4)
-    t[:3, :3] = rpy_matrix(*(float(v) for v in rpy))
+    r, p, y = np.asarray(rpy, dtype=float)
+    t[:3, :3] = rpy_matrix(float(r), float(p), float(y))
     t[:3, 3] = np.asarray(xyz, dtype=float)
     return t
 
@@ -100,7 +101,7 @@ class Inertial:
         """Two bodies (in the same frame) rigidly joined."""
         m = self.mass + other.mass
         if m == 0.0:
-            return Inertial(0.0, (0.0, 0.0, 0.0), self.inertia + other.inertia)
+            return Inertial(0.0, np.zeros(3), self.inertia + other.inertia)
         c = (self.mass * self.com + other.mass * other.com) / m
         total = np.zeros((3, 3))
         for body in (self, other):

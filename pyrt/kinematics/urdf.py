@@ -160,8 +160,8 @@ class _Reader:
             "ixx", "ixy", "ixz", "iyy", "iyz", "izz"))
         pose = self.origin(el, what)
         try:
-            body = Inertial(mass, (0.0, 0.0, 0.0),
-                            [[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+            body = Inertial(mass, np.zeros(3),
+                            np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]]))
         except ValueError as exc:
             raise self.fail(in_el, f"{what}: {exc}") from None
         return body.moved(pose)
@@ -304,7 +304,7 @@ def _read(text: str, where: str, base_link: str | None, tip_link: str | None) ->
                                                     ).moved(pending)
             continue
         axis_el = el.find("axis")
-        axis = (1.0, 0.0, 0.0)
+        axis: tuple[float, ...] = (1.0, 0.0, 0.0)
         if axis_el is not None:
             axis = rd.numbers(axis_el, "xyz", 3, what, axis)
             if math.hypot(*axis) < 1e-12:
