@@ -65,15 +65,16 @@ def urdf_text(chain: Chain) -> str:
     out = [f'<robot name="{chain.name}"><link name="l0"/>']
     for k, j in enumerate(chain.joints, 1):
         i = j.inertial
+        t = i.inertia
         out.append(
             f'<joint name="{j.name}" type="revolute"><parent link="l{k - 1}"/>'
             f'<child link="l{k}"/><origin xyz="{f(j.origin[:3, 3])}" rpy="{f(rpy_of(j.origin))}"/>'
-            f'<axis xyz="{f(j.axis)}"/><limit lower="{j.lower!r}" upper="{j.upper!r}" '
+            f'<axis xyz="{f(j.axis)}"/><limit lower="{float(j.lower)!r}" upper="{float(j.upper)!r}" '
             f'effort="100" velocity="3"/></joint>'
-            f'<link name="l{k}"><inertial><origin xyz="{f(i.com)}"/><mass value="{i.mass!r}"/>'
-            f'<inertia ixx="{i.inertia[0, 0]!r}" ixy="{i.inertia[0, 1]!r}" '
-            f'ixz="{i.inertia[0, 2]!r}" iyy="{i.inertia[1, 1]!r}" iyz="{i.inertia[1, 2]!r}" '
-            f'izz="{i.inertia[2, 2]!r}"/></inertial></link>')
+            f'<link name="l{k}"><inertial><origin xyz="{f(i.com)}"/>'
+            f'<mass value="{float(i.mass)!r}"/><inertia ixx="{float(t[0, 0])!r}" '
+            f'ixy="{float(t[0, 1])!r}" ixz="{float(t[0, 2])!r}" iyy="{float(t[1, 1])!r}" '
+            f'iyz="{float(t[1, 2])!r}" izz="{float(t[2, 2])!r}"/></inertial></link>')
     out.append("</robot>")
     return "".join(out)
 
@@ -195,6 +196,8 @@ def pin_model():
     # the same arm: the offsets are zero in the RTB table, so q means the same
     pin.forwardKinematics(model, data, Q)
     np.testing.assert_allclose(data.oMi[6].homogeneous @ PUMA.tool, PUMA.fk(Q), atol=1e-12)
+    np.testing.assert_allclose(pin.rnea(model, data, Q, QD, QDD), TAU, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(pin.aba(model, data, Q, QD, TAU), QDD, rtol=1e-9, atol=1e-9)
     return pin, model, data
 
 
