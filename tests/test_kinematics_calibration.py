@@ -175,6 +175,25 @@ def test_the_calibrated_chain_is_consistent_forward_and_inverse(puma, lengths, a
     assert res.ok and np.max(np.abs(cal.fk(res.q) - pose)) < 1e-8
 
 
+def test_the_calibrated_closed_form_refuses_with_a_reason(puma):
+    """With joint origins corrected, an unreachable pose or a configuration beyond a limit is refused with the reason; a bad configuration name is an error."""
+    model = CalibrationModel.for_chains(puma)
+    model.update({"origin.joint3.x": 0.5e-3, "base.z": 1e-3})
+    cf = model.apply(puma).closed_form
+    far = np.eye(4)
+    far[:3, 3] = (1.5, 0.0, 0.8)
+    assert cf.solve(far, "righty-above-noflip") is None
+    assert "beyond the arm's reach" in cf.reason(far, "righty-above-noflip")
+    assert cf.solve_all(far) == {}
+    q = np.radians([150.0, 30.0, -60.0, 10.0, 40.0, 0.0])
+    pose = model.apply(puma).fk(q)
+    assert cf.reason(pose, cf.config_of(q)) is None
+    refused = [c for c in cf.configurations if cf.solve(pose, c) is None]
+    assert refused and all("joint4" in cf.reason(pose, c) for c in refused)
+    with pytest.raises(ValueError, match="righty/lefty"):
+        cf.solve(pose, "sideways")
+
+
 def test_offsets_base_and_tool_alone_keep_the_exact_closed_form(puma):
     """Without origin corrections the calibrated PUMA keeps Paul's inverse, rebuilt for the corrected base, tool and offsets."""
     from pyrt.kinematics.puma import PaulInverse

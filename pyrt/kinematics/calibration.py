@@ -43,6 +43,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
+from pyrt.kinematics.puma import Unreachable
+
 if TYPE_CHECKING:
     from pyrt.kinematics.chain import Chain
 
@@ -143,6 +145,11 @@ class Identification:
     converged: bool
 
 
+#: How far (rad or m) beyond a limit the nominal arm's joint may be and the
+#: calibrated arm's still be tried within it.
+_LIMIT_MARGIN = 0.05
+
+
 class _Refined:
     """A closed form followed by the numerical inverse on the calibrated chain."""
 
@@ -152,25 +159,60 @@ class _Refined:
         self.configurations: tuple[str, ...] = tuple(nominal.configurations)
 
     def solve(self, pose: Matrix, config: str) -> Matrix | None:
+        """Joint values of the calibrated arm for ``pose`` in ``config``, or None."""
+        return self._solve(pose, config)[0]
+
+    def reason(self, pose: Matrix, config: str) -> str | None:
+        """Why ``pose`` cannot be reached in ``config`` (None: it can)."""
+        return self._solve(pose, config)[1]
+
+    def solve_all(self, pose: Matrix) -> dict[str, Matrix]:
+        """Every configuration that reaches ``pose`` within the limits, by name."""
+        out = {}
+        for cfg in self.configurations:
+            q = self.solve(pose, cfg)
+            if q is not None:
+                out[cfg] = q
+        return out
+
+    def _solve(self, pose: Matrix, config: str) -> tuple[Matrix | None, str | None]:
         inverse = getattr(self._nominal, "inverse", None)
         q0: Matrix | None
+        nominal_says: str | None = None
         if inverse is not None:
             # the nominal arm's answer, even a little out of its reach, seeds the calibrated one
             try:
-                q0 = np.asarray(inverse(pose, config, limits=False, nearest=True), dtype=float)
-            except ValueError:
-                q0 = None
+                q0 = np.asarray(inverse(pose, config, limits=False), dtype=float)
+            except Unreachable as exc:
+                nominal_says = str(exc)
+                try:
+                    q0 = np.asarray(inverse(pose, config, limits=False, nearest=True), dtype=float)
+                except Unreachable:
+                    return None, nominal_says
         else:
             q0 = self._nominal.solve(pose, config)
-        if q0 is None:
-            return None
-        res = self._chain.ik(pose, self._into_limits(q0))
+            if q0 is None:
+                why = getattr(self._nominal, "reason", None)
+                return None, (why(pose, config) if why else None) or f"{config}: out of reach"
+        seed = self._into_limits(q0)
+        lower, upper = self._chain.lower, self._chain.upper
+        beyond = np.maximum(lower - seed, seed - upper)
+        if np.max(beyond) > _LIMIT_MARGIN:
+            # far beyond a limit for the nominal arm: a small correction cannot bring it in
+            return None, nominal_says or f"{config}: {self._chain.limit_violation(seed)}"
+        res = self._chain.ik(pose, np.clip(seed, lower, upper))
         q = self._into_limits(np.asarray(res.q, dtype=float))
-        if not res.ok or self.config_of(q) != self._nominal.config_of(q0):
-            return None
-        if self._chain.limit_violation(q) is not None:
-            return None
-        return q
+        if not res.ok:
+            return None, nominal_says or (
+                f"{config}: out of the calibrated arm's reach (the numerical inverse stopped "
+                f"{res.residual:.3g} from the pose)")
+        if self.config_of(q) != self._nominal.config_of(q0):
+            return None, (f"{config}: the calibrated arm reaches the pose only in another "
+                          "configuration")
+        limit = self._chain.limit_violation(q)
+        if limit is not None:
+            return None, f"{config}: {limit}"
+        return q, None
 
     def _into_limits(self, q: Matrix) -> Matrix:
         """Each revolute joint out of its limits moved a turn or two, where that brings it in."""
