@@ -129,6 +129,13 @@ def _statics_solve():
     s.solve()
 
 
+def _puma():
+    from pyrt.native._puma import PumaKernel
+
+    return PumaKernel((0.672, 0.4318, 0.0203, 0.15005, 0.4318), np.eye(4), np.eye(4),
+                      np.zeros(6), np.full(6, -np.inf), np.full(6, np.inf))
+
+
 #: Public C entry point -> a wrapper call with input only C refuses.
 THROUGH_WRAPPERS = {
     "pyrt_findpos_solve": lambda: nat.find_position(_TOPS, _BOTTOMS, [600.0, NAN, 1100.0],
@@ -148,6 +155,7 @@ THROUGH_WRAPPERS = {
                                                    [0.0] * 3, [0.0] * 3, [0.0] * 3, [0.0] * 3),
     "pyrt_statics_solve": _statics_solve,
     "pyrt_statics_evaluate": lambda: _statics().evaluate(_TOPS[1]),
+    "pyrt_puma_inverse": lambda: _puma().inverse(np.full((4, 4), NAN), 0),
 }
 
 #: Entry points whose only failure is a NULL pointer or a struct the wrapper
