@@ -86,6 +86,27 @@ def test_identification_from_noisy_measurements_stays_within_tolerance(puma, see
     assert math.degrees(np.linalg.norm(rot)) < 0.01
 
 
+@settings(max_examples=15, deadline=None)
+@given(st.lists(st.floats(-0.02, 0.02), min_size=5, max_size=5),
+       st.lists(st.floats(-2e-3, 2e-3), min_size=3, max_size=3),
+       st.lists(st.floats(-0.01, 0.01), min_size=3, max_size=3),
+       st.integers(0, 2**32 - 1))
+def test_any_small_error_of_offsets_and_base_is_identified(puma, offsets, shift, turn, seed):
+    """Random offsets on joints 2-6 (up to 1.1 deg) and a random base error (2 mm, 0.6 deg) are identified from 20 exact poses to 1e-8."""
+    truth = CalibrationModel.for_chains(puma)
+    truth.update({f"offset.joint{k}": v for k, v in zip(range(2, 7), offsets, strict=True)})
+    truth.update({f"base.{a}": v for a, v in zip(("x", "y", "z", "rx", "ry", "rz"), [*shift, *turn],
+                                                 strict=True)})
+    real = truth.apply(puma)
+    qs = random_q(np.random.default_rng(seed))
+    model = CalibrationModel.for_chains(puma)
+    fit = model.identify(observations(puma, qs, [real.fk(q) for q in qs]),
+                         [f"offset.joint{k}" for k in range(2, 7)] + ["base"])
+    assert fit.converged and fit.unobservable == ()
+    for name in fit.params:
+        assert model[name] == pytest.approx(truth[name], abs=1e-8), name
+
+
 def test_parameters_the_data_cannot_separate_are_named_and_left_alone(puma):
     """Joint 1's offset and a base rotation about joint 1's axis are one error to the data: the fit names both unobservable and still matches the poses."""
     truth = CalibrationModel.for_chains(puma)
