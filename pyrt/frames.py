@@ -32,6 +32,7 @@ Everything here is pure numpy; lengths are whatever unit the user keeps
 
 from __future__ import annotations
 
+import math
 import threading
 from collections import deque
 from collections.abc import Callable, Iterable, Sequence
@@ -82,15 +83,22 @@ def check_rigid(value: npt.ArrayLike, what: str = "transform") -> Matrix:
         raise FrameError(f"{what}: not a 4x4 matrix of numbers ({exc})") from None
     if m.shape != (4, 4):
         raise FrameError(f"{what}: expected a 4x4 homogeneous transform, got shape {m.shape}")
-    if not np.all(np.isfinite(m)):
+    rows = m.tolist()  # plain floats: the checks below cost a few microseconds
+    if not all(math.isfinite(v) for row in rows for v in row):
         raise FrameError(f"{what}: has a non-finite entry")
-    if np.max(np.abs(m[3] - (0.0, 0.0, 0.0, 1.0))) > RIGID_TOL:
-        raise FrameError(f"{what}: bottom row is {m[3].tolist()}, expected [0, 0, 0, 1]")
-    r = m[:3, :3]
-    err = float(np.max(np.abs(r.T @ r - np.eye(3))))
+    bottom = rows[3]
+    if max(abs(bottom[0]), abs(bottom[1]), abs(bottom[2]), abs(bottom[3] - 1.0)) > RIGID_TOL:
+        raise FrameError(f"{what}: bottom row is {bottom}, expected [0, 0, 0, 1]")
+    (a, b, c, _), (d, e, f, _), (g, h, i, _) = rows[0], rows[1], rows[2]
+    cols = ((a, d, g), (b, e, h), (c, f, i))
+    err = 0.0
+    for j in range(3):
+        for k in range(j, 3):
+            dot = cols[j][0] * cols[k][0] + cols[j][1] * cols[k][1] + cols[j][2] * cols[k][2]
+            err = max(err, abs(dot - (1.0 if j == k else 0.0)))
     if err > RIGID_TOL:
         raise FrameError(f"{what}: rotation is not orthonormal (R^T R - I up to {err:.3g})")
-    if np.linalg.det(r) < 0:
+    if a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) < 0:
         raise FrameError(f"{what}: rotation is a reflection (determinant -1)")
     m[3] = (0.0, 0.0, 0.0, 1.0)
     m.setflags(write=False)
