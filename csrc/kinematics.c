@@ -12,7 +12,7 @@
  *   JAC   6 n        Jacobian (the inverse's)
  *   IK    4 n + 54   the inverse's vectors and 6 x 6 systems
  *   DYN   15 n       Newton-Euler: w, wd, acc, f, moment per link
- *   MM    n n + 3 n  mass matrix, bias, unit vector, a column
+ *   MM    n n + 14 n mass matrix, bias, composite bodies (m, h, I)
  */
 #include "kinematics.h"
 
@@ -33,7 +33,7 @@ int32_t pyrt_kin_workspace_size(int32_t n)
     if (n < 1 || n > PYRT_KIN_MAX_JOINTS) {
         return 0;
     }
-    return MMB(n) + n * n + 3 * n;
+    return MMB(n) + n * n + n + 13 * n;
 }
 
 /* ------------------------------------------------------------------ algebra */
@@ -674,28 +674,95 @@ int pyrt_kin_rnea(const pyrt_kin_chain *c, double *ws, const double *q, const do
     return PYRT_OK;
 }
 
-/* Mass matrix into mass (n x n) from the local frames: column j is the
- * force for a unit acceleration of joint j alone (no velocity, no gravity). */
-static void mass_columns(const pyrt_kin_chain *c, double *ws, double *mass)
+/*
+ * Mass matrix into mass (n x n) from the local frames, by the composite
+ * rigid body algorithm: each link's subtree (the link and every link after
+ * it) as one body -- mass, first moment h = m c and inertia about the
+ * link frame's origin, in that frame -- summed tip to base; then column j
+ * is the force and moment that accelerate subtree j alone at unit rate
+ * about (or along) joint j from rest, carried back to each earlier joint.
+ */
+static void mass_crba(const pyrt_kin_chain *c, double *ws, double *mass)
 {
     const int n = c->n;
-    double *unit = ws + MMB(n) + n * n + n;
-    double *col = unit + n;
-    memset(unit, 0, (size_t)n * sizeof(double));
-    for (int j = 0; j < n; j++) {
-        unit[j] = 1.0;
-        newton_euler(c, ws, NULL, unit, NULL, col);
-        unit[j] = 0.0;
-        for (int i = 0; i < n; i++) {
-            mass[i * n + j] = col[i];
+    const double *loc = ws + LOC(n);
+    double *cm = ws + MMB(n) + n * n + n; /* per link: m, h[3], I[9] */
+    for (int i = 0; i < n; i++) {
+        double *b = cm + 13 * i;
+        const double m = c->masses[i];
+        const double *r = c->coms + 3 * i;
+        const double *ic = c->inertias + 9 * i;
+        const double rr = dot3(r, r);
+        b[0] = m;
+        for (int k = 0; k < 3; k++) {
+            b[1 + k] = m * r[k];
+            for (int l = 0; l < 3; l++) {
+                b[4 + 3 * k + l] = ic[3 * k + l] + m * ((k == l ? rr : 0.0) - r[k] * r[l]);
+            }
         }
     }
-    /* exactly symmetric: the upper triangle from the lower */
-    for (int i = 0; i < n; i++) {
-        for (int j = i + 1; j < n; j++) {
-            const double s = 0.5 * (mass[i * n + j] + mass[j * n + i]);
-            mass[i * n + j] = s;
-            mass[j * n + i] = s;
+    for (int i = n - 1; i > 0; i--) {
+        /* add subtree i (frame i) into link i-1 (frame i-1) */
+        const double *m = loc + 12 * i;
+        const double p[3] = {m[3], m[7], m[11]};
+        const double *ch = cm + 13 * i;
+        double *pa = cm + 13 * (i - 1);
+        const double mass_c = ch[0];
+        double h[3], ri[9];
+        rot(m, ch + 1, h);
+        /* R I R^T */
+        for (int k = 0; k < 3; k++) {
+            for (int l = 0; l < 3; l++) {
+                ri[3 * k + l] = m[4 * k] * ch[4 + l] + m[4 * k + 1] * ch[7 + l] +
+                                m[4 * k + 2] * ch[10 + l];
+            }
+        }
+        const double pp = dot3(p, p), ph = dot3(p, h);
+        for (int k = 0; k < 3; k++) {
+            for (int l = 0; l < 3; l++) {
+                const double rir = ri[3 * k] * m[4 * l] + ri[3 * k + 1] * m[4 * l + 1] +
+                                   ri[3 * k + 2] * m[4 * l + 2];
+                pa[4 + 3 * k + l] += rir + mass_c * ((k == l ? pp : 0.0) - p[k] * p[l]) +
+                                     (k == l ? 2.0 * ph : 0.0) - p[k] * h[l] - h[k] * p[l];
+            }
+        }
+        pa[0] += mass_c;
+        for (int k = 0; k < 3; k++) {
+            pa[1 + k] += h[k] + mass_c * p[k];
+        }
+    }
+    for (int j = 0; j < n; j++) {
+        const double *b = cm + 13 * j;
+        const double *a = c->axes + 3 * j;
+        double f[3], mo[3];
+        if (c->kinds[j] == PYRT_KIN_REVOLUTE) {
+            cross(a, b + 1, f);
+            for (int k = 0; k < 3; k++) {
+                mo[k] = b[4 + 3 * k] * a[0] + b[5 + 3 * k] * a[1] + b[6 + 3 * k] * a[2];
+            }
+        } else {
+            for (int k = 0; k < 3; k++) {
+                f[k] = b[0] * a[k];
+            }
+            cross(b + 1, a, mo);
+        }
+        for (int i = j; i >= 0; i--) {
+            if (i < j) {
+                /* carry (f, mo) from frame i+1 into frame i */
+                const double *m = loc + 12 * (i + 1);
+                const double p[3] = {m[3], m[7], m[11]};
+                double fr[3], mr[3], t[3];
+                rot(m, f, fr);
+                rot(m, mo, mr);
+                cross(p, fr, t);
+                for (int k = 0; k < 3; k++) {
+                    f[k] = fr[k];
+                    mo[k] = mr[k] + t[k];
+                }
+            }
+            const double v = dot3(c->axes + 3 * i, c->kinds[i] == PYRT_KIN_REVOLUTE ? mo : f);
+            mass[i * n + j] = v;
+            mass[j * n + i] = v;
         }
     }
 }
@@ -709,7 +776,7 @@ int pyrt_kin_mass_matrix(const pyrt_kin_chain *c, double *ws, const double *q, d
         return PYRT_ENONFINITE;
     }
     local_frames(c, q, ws + LOC(c->n));
-    mass_columns(c, ws, mass);
+    mass_crba(c, ws, mass);
     return PYRT_OK;
 }
 
@@ -730,7 +797,7 @@ int pyrt_kin_forward_dynamics(const pyrt_kin_chain *c, double *ws, const double 
     double *bias = mass + n * n;
     local_frames(c, q, ws + LOC(n));
     newton_euler(c, ws, qd, NULL, base_gravity(c, gravity, gb), bias);
-    mass_columns(c, ws, mass);
+    mass_crba(c, ws, mass);
     if (!cholesky(mass, n)) {
         return PYRT_ESINGULAR;
     }
