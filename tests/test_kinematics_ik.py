@@ -64,7 +64,7 @@ def test_ik_reaches_random_reachable_poses(chain, seed):
 @settings(max_examples=60, deadline=None)
 @given(seed=SEEDS)
 def test_redundant_ik_minimises_joint_motion(seed):
-    """For the 7-joint arm the answer is no farther from the seed than the joints the pose came from, and no self-motion brings it nearer."""
+    """For the 7-joint arm the answer is no farther from the seed than the joints the pose came from, and (away from singularities) no self-motion brings it nearer."""
     rng = np.random.default_rng(seed)
     q, target = reachable(PANDA, rng, margin=0.4)
     seed_q = q + rng.uniform(-0.15, 0.15, 7)
@@ -72,9 +72,13 @@ def test_redundant_ik_minimises_joint_motion(seed):
     assert r.ok
     assert np.linalg.norm(r.q - seed_q) <= np.linalg.norm(q - seed_q) + 1e-9
     jac = PANDA.jacobian(r.q)
-    d = r.q - seed_q
-    along_self_motion = d - np.linalg.pinv(jac) @ (jac @ d)
-    assert np.linalg.norm(along_self_motion) < 1e-6
+    if np.linalg.svd(jac, compute_uv=False).min() > 1e-2:
+        # away from a singularity the answer is a stationary point of the
+        # distance on the self-motion manifold (near one the manifold's
+        # tangent is ill-conditioned and only the distance is asserted)
+        d = r.q - seed_q
+        along_self_motion = d - np.linalg.pinv(jac) @ (jac @ d)
+        assert np.linalg.norm(along_self_motion) < 1e-6
 
 
 def test_ik_at_the_solution_takes_no_step():

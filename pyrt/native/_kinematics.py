@@ -31,6 +31,7 @@ IK_DEFAULT_MAX_ITER: int = lib.PYRT_KIN_DEFAULT_MAX_ITER
 AXIS_TOL: float = lib.PYRT_KIN_AXIS_TOL
 
 _NDARRAY = np.ndarray
+_UNBOUND = object()  # an argument slot's array before the first call
 #: Gravity in the world frame by default (m/s^2): z up.
 GRAVITY = (0.0, 0.0, -9.81)
 _KINDS = {"revolute": REVOLUTE, "prismatic": PRISMATIC}
@@ -105,7 +106,7 @@ class ChainKernels:
         self._qshape = (n,)
         # argument slots (one shape each): q, qd, qdd or tau, target, seed;
         # then the out= of fk, jacobian, ik, rnea, forward_dynamics
-        self._objs: list[object] = [None] * 10
+        self._objs: list[object] = [_UNBOUND] * 10
         self._cds: list[Any] = [None] * 10
         # results computed here and copied out when the caller gives no out=
         self._pose = np.empty((4, 4), F64)
@@ -178,13 +179,14 @@ class ChainKernels:
 
     def fk(self, q: object, out: np.ndarray | None = None) -> np.ndarray:
         """Tool pose (4, 4) in the world at joint values *q*."""
-        qp = self._ptr(0, "q", q, self._qshape)
+        qp = self._cds[0] if q is self._objs[0] else self._ptr(0, "q", q, self._qshape)
         if out is None:
             rc = self._fk(self._c, self._w, qp, self._pose_p)
             if rc:
                 raise_for_status(rc, "fk")
             return self._pose.copy()
-        rc = self._fk(self._c, self._w, qp, self._out_ptr(5, "out", out, (4, 4)))
+        op = self._cds[5] if out is self._objs[5] else self._out_ptr(5, "out", out, (4, 4))
+        rc = self._fk(self._c, self._w, qp, op)
         if rc:
             raise_for_status(rc, "fk")
         return out
@@ -198,13 +200,14 @@ class ChainKernels:
 
     def jacobian(self, q: object, out: np.ndarray | None = None) -> np.ndarray:
         """Geometric Jacobian (6, n), world frame, rows (v; w) at the tool."""
-        qp = self._ptr(0, "q", q, self._qshape)
+        qp = self._cds[0] if q is self._objs[0] else self._ptr(0, "q", q, self._qshape)
         if out is None:
             rc = self._jac(self._c, self._w, qp, self._jac_p, ffi.NULL)
             if rc:
                 raise_for_status(rc, "jacobian")
             return self._jac_buf.copy()
-        rc = self._jac(self._c, self._w, qp, self._out_ptr(6, "out", out, (6, self.n)), ffi.NULL)
+        op = self._cds[6] if out is self._objs[6] else self._out_ptr(6, "out", out, (6, self.n))
+        rc = self._jac(self._c, self._w, qp, op, ffi.NULL)
         if rc:
             raise_for_status(rc, "jacobian")
         return out
@@ -240,16 +243,20 @@ class ChainKernels:
              gravity: object | None = GRAVITY, out: np.ndarray | None = None) -> np.ndarray:
         """Joint forces (n,) for the motion (q, qd, qdd); None = zero."""
         shape = self._qshape
-        qp = self._ptr(0, "q", q, shape)
-        qdp = ffi.NULL if qd is None else self._ptr(1, "qd", qd, shape)
-        qddp = ffi.NULL if qdd is None else self._ptr(2, "qdd", qdd, shape)
+        objs, cds = self._objs, self._cds
+        qp = cds[0] if q is objs[0] else self._ptr(0, "q", q, shape)
+        qdp = (cds[1] if qd is objs[1] else ffi.NULL if qd is None
+               else self._ptr(1, "qd", qd, shape))
+        qddp = (cds[2] if qdd is objs[2] else ffi.NULL if qdd is None
+                else self._ptr(2, "qdd", qdd, shape))
         gp = self._gbuf if gravity is self._g_last else self._set_gravity(gravity)
         if out is None:
             rc = self._rnea(self._c, self._w, qp, qdp, qddp, gp, self._vec_p)
             if rc:
                 raise_for_status(rc, "rnea")
             return self._vec_buf.copy()
-        rc = self._rnea(self._c, self._w, qp, qdp, qddp, gp, self._out_ptr(8, "out", out, shape))
+        op = cds[8] if out is objs[8] else self._out_ptr(8, "out", out, shape)
+        rc = self._rnea(self._c, self._w, qp, qdp, qddp, gp, op)
         if rc:
             raise_for_status(rc, "rnea")
         return out
@@ -272,15 +279,18 @@ class ChainKernels:
                          ) -> np.ndarray:
         """Joint accelerations (n,) for joint forces *tau*."""
         shape = self._qshape
-        qp = self._ptr(0, "q", q, shape)
-        qdp = ffi.NULL if qd is None else self._ptr(1, "qd", qd, shape)
-        tp = self._ptr(2, "tau", tau, shape)
+        objs, cds = self._objs, self._cds
+        qp = cds[0] if q is objs[0] else self._ptr(0, "q", q, shape)
+        qdp = (cds[1] if qd is objs[1] else ffi.NULL if qd is None
+               else self._ptr(1, "qd", qd, shape))
+        tp = cds[2] if tau is objs[2] else self._ptr(2, "tau", tau, shape)
         gp = self._gbuf if gravity is self._g_last else self._set_gravity(gravity)
         if out is None:
             rc = self._fd(self._c, self._w, qp, qdp, tp, gp, self._vec_p)
             result = self._vec_buf
         else:
-            rc = self._fd(self._c, self._w, qp, qdp, tp, gp, self._out_ptr(9, "out", out, shape))
+            op = cds[9] if out is objs[9] else self._out_ptr(9, "out", out, shape)
+            rc = self._fd(self._c, self._w, qp, qdp, tp, gp, op)
             result = out
         if rc:
             raise_for_status(rc, "forward_dynamics",
