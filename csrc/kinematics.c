@@ -312,6 +312,21 @@ int pyrt_kin_jacobian(const pyrt_kin_chain *c, double *ws, const double *q, doub
     return PYRT_OK;
 }
 
+int pyrt_kin_call(const pyrt_kin_call_args *a)
+{
+    if (a == NULL) {
+        return PYRT_EINVAL;
+    }
+    switch (a->op) {
+    case PYRT_KIN_OP_FK:
+        return pyrt_kin_fk(a->chain, a->ws, a->q, a->out);
+    case PYRT_KIN_OP_JACOBIAN:
+        return pyrt_kin_jacobian(a->chain, a->ws, a->q, a->out, NULL);
+    default:
+        return PYRT_EINVAL;
+    }
+}
+
 /* ---------------------------------------------------------------- inverse */
 
 /* Position error and rotation vector of target . pose^T, world frame. */
@@ -460,6 +475,7 @@ int pyrt_kin_ik(const pyrt_kin_chain *c, double *ws, const double *target, const
     const int redundant = n > 6;
     double mu = 1.0;
     double best_dist = INFINITY; /* redundant: the nearest pose-reaching point so far */
+    double gain = 1.0;           /* redundant: the null-space step's length, relative */
 
     for (int i = 0; i < n; i++) {
         q[i] = clamp(seed[i], c->lower[i], c->upper[i]);
@@ -474,10 +490,10 @@ int pyrt_kin_ik(const pyrt_kin_chain *c, double *ws, const double *target, const
             if (!redundant) {
                 break;
             }
-            /* the pose is reached: keep the point if it is the nearest yet,
-             * then take the null-space step toward the seed (unless it is
-             * short enough) and reach the pose again from there */
-            const double ns_norm = null_step(jac, n, q, seed, d, a, b, ns);
+            /* the pose is reached.  The nearest point yet is kept and the
+             * null-space step toward the seed taken from it; a step that
+             * ended farther (the self-motion manifold bends away) is taken
+             * again from the nearest point, half as long. */
             double dist = 0.0;
             for (int i = 0; i < n; i++) {
                 dist += (q[i] - seed[i]) * (q[i] - seed[i]);
@@ -486,12 +502,19 @@ int pyrt_kin_ik(const pyrt_kin_chain *c, double *ws, const double *target, const
                 best_dist = dist;
                 memcpy(best, q, (size_t)n * sizeof(double));
                 opts->residual = res;
+                gain = gain * 2.0 < 1.0 ? gain * 2.0 : 1.0;
+            } else {
+                memcpy(q, best, (size_t)n * sizeof(double));
+                forward(c, ws, q);
+                jacobian_from_frames(c, ws, jac);
+                gain *= 0.5;
             }
-            if (ns_norm <= opts->null_tol || it >= opts->max_iter) {
+            const double ns_norm = null_step(jac, n, q, seed, d, a, b, ns);
+            if (gain * ns_norm <= opts->null_tol || it >= opts->max_iter) {
                 break;
             }
             for (int k = 0; k < n; k++) {
-                q[k] = clamp(q[k] - ns[k], c->lower[k], c->upper[k]);
+                q[k] = clamp(q[k] - gain * ns[k], c->lower[k], c->upper[k]);
             }
             forward(c, ws, q);
             jacobian_from_frames(c, ws, jac);

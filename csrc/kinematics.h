@@ -133,6 +133,24 @@ int pyrt_kin_jacobian(const pyrt_kin_chain *c, double *ws, const double *q, doub
 int pyrt_kin_ik(const pyrt_kin_chain *c, double *ws, const double *target, const double *seed,
                 double *q, pyrt_kin_ik_opts *opts);
 
+/*
+ * One call of fk or jacobian with its arguments in a struct that the caller
+ * fills once and reuses (a binding pays one argument per call instead of
+ * four): op PYRT_KIN_OP_FK (out: 16) or PYRT_KIN_OP_JACOBIAN (out: 6 x n).
+ */
+#define PYRT_KIN_OP_FK 0
+#define PYRT_KIN_OP_JACOBIAN 1
+
+typedef struct {
+    int32_t op;
+    const pyrt_kin_chain *chain;
+    double *ws;
+    const double *q;
+    double *out;
+} pyrt_kin_call_args;
+
+int pyrt_kin_call(const pyrt_kin_call_args *a);
+
 /* Inverse dynamics (recursive Newton-Euler): joint forces tau (n) for
  * motion q, qd, qdd (qd or qdd NULL: zero) under gravity (3, world frame;
  * NULL: none).  Rigid bodies only: joint friction and damping are not in it. */

@@ -71,6 +71,10 @@ def test_redundant_ik_minimises_joint_motion(seed):
     r = PANDA.ik(target, seed_q)
     assert r.ok
     assert np.linalg.norm(r.q - seed_q) <= np.linalg.norm(q - seed_q) + 1e-9
+    # the way along the self-motion converges linearly (slowly where the
+    # manifold bends hard): the stationarity is asserted with more iterations
+    r = PANDA.ik(target, seed_q, max_iter=2000)
+    assert r.ok
     jac = PANDA.jacobian(r.q)
     if np.linalg.svd(jac, compute_uv=False).min() > 1e-2:
         # away from a singularity the answer is a stationary point of the

@@ -113,16 +113,59 @@ class ChainKernels:
         self._jac_buf = np.empty((6, n), F64)
         self._vec_buf = np.empty(n, F64)
         self._pose_p = _buf(self._pose)
+        # fk and jacobian through pyrt_kin_call: one argument struct each for
+        # results copied out and for the caller's out=, filled when the
+        # arrays change (_bind), so a call passes one pointer
+        self._call = lib.pyrt_kin_call
+        self._held: dict[tuple[int, str], Any] = {}
+        self._fk_new = self._call_args(lib.PYRT_KIN_OP_FK, self._pose_p)
+        self._fk_out = self._call_args(lib.PYRT_KIN_OP_FK, ffi.NULL)
+        self._jac_new = self._call_args(lib.PYRT_KIN_OP_JACOBIAN, ffi.NULL)
+        self._jac_out = self._call_args(lib.PYRT_KIN_OP_JACOBIAN, ffi.NULL)
+        self._fk_new_q: object = _UNBOUND
+        self._fk_out_q: object = _UNBOUND
+        self._fk_out_o: object = _UNBOUND
+        self._jac_new_q: object = _UNBOUND
+        self._jac_out_q: object = _UNBOUND
+        self._jac_out_o: object = _UNBOUND
         self._jac_p = _buf(self._jac_buf)
+        self._jac_new.out = self._jac_p
         self._vec_p = _buf(self._vec_buf)
-        self._fk = lib.pyrt_kin_fk
-        self._jac = lib.pyrt_kin_jacobian
         self._rnea = lib.pyrt_kin_rnea
         self._fd = lib.pyrt_kin_forward_dynamics
         for a in arrays[:-1]:
             a.flags.writeable = False
 
     # ------------------------------------------------------------ arguments
+
+    def _call_args(self, op: int, out: Any) -> Any:
+        a = ffi.new("pyrt_kin_call_args *")
+        a.op = op
+        a.chain = self._c
+        a.ws = self._w
+        a.out = out
+        return a
+
+    def _bind(self, a: Any, field: str, name: str, value: object, shape: tuple[int, ...],
+              out: bool = False) -> object:
+        """Point *a*.*field* at *value*'s data; return *value* when it is the
+        caller's own float64 array (bound: the next call with it skips
+        this), else a converted copy is pointed at and nothing is bound."""
+        bound: object = value
+        if (value.__class__ is _NDARRAY and value.dtype is F64  # type: ignore[attr-defined]
+                and value.shape == shape  # type: ignore[attr-defined]
+                and value.flags.c_contiguous  # type: ignore[attr-defined]
+                and (not out or value.flags.writeable)):  # type: ignore[attr-defined]
+            cd = ffi.from_buffer("double[]", value)
+        elif out:
+            raise NativeInputError(
+                f"{name}: expected a writeable C-contiguous float64 array of shape {shape}")
+        else:
+            cd = ffi.from_buffer("double[]", as_f64(name, value, shape))
+            bound = _UNBOUND
+        setattr(a, field, cd)
+        self._held[(id(a), field)] = cd  # the struct's pointer stays valid
+        return bound
 
     def _ptr(self, slot: int, name: str, value: object, shape: tuple[int, ...]) -> Any:
         """A C pointer to *value*'s float64 data of *shape*.
@@ -179,14 +222,20 @@ class ChainKernels:
 
     def fk(self, q: object, out: np.ndarray | None = None) -> np.ndarray:
         """Tool pose (4, 4) in the world at joint values *q*."""
-        qp = self._cds[0] if q is self._objs[0] else self._ptr(0, "q", q, self._qshape)
         if out is None:
-            rc = self._fk(self._c, self._w, qp, self._pose_p)
+            a = self._fk_new
+            if q is not self._fk_new_q:
+                self._fk_new_q = self._bind(a, "q", "q", q, self._qshape)
+            rc = self._call(a)
             if rc:
                 raise_for_status(rc, "fk")
             return self._pose.copy()
-        op = self._cds[5] if out is self._objs[5] else self._out_ptr(5, "out", out, (4, 4))
-        rc = self._fk(self._c, self._w, qp, op)
+        a = self._fk_out
+        if q is not self._fk_out_q:
+            self._fk_out_q = self._bind(a, "q", "q", q, self._qshape)
+        if out is not self._fk_out_o:
+            self._fk_out_o = self._bind(a, "out", "out", out, (4, 4), out=True)
+        rc = self._call(a)
         if rc:
             raise_for_status(rc, "fk")
         return out
@@ -200,14 +249,20 @@ class ChainKernels:
 
     def jacobian(self, q: object, out: np.ndarray | None = None) -> np.ndarray:
         """Geometric Jacobian (6, n), world frame, rows (v; w) at the tool."""
-        qp = self._cds[0] if q is self._objs[0] else self._ptr(0, "q", q, self._qshape)
         if out is None:
-            rc = self._jac(self._c, self._w, qp, self._jac_p, ffi.NULL)
+            a = self._jac_new
+            if q is not self._jac_new_q:
+                self._jac_new_q = self._bind(a, "q", "q", q, self._qshape)
+            rc = self._call(a)
             if rc:
                 raise_for_status(rc, "jacobian")
             return self._jac_buf.copy()
-        op = self._cds[6] if out is self._objs[6] else self._out_ptr(6, "out", out, (6, self.n))
-        rc = self._jac(self._c, self._w, qp, op, ffi.NULL)
+        a = self._jac_out
+        if q is not self._jac_out_q:
+            self._jac_out_q = self._bind(a, "q", "q", q, self._qshape)
+        if out is not self._jac_out_o:
+            self._jac_out_o = self._bind(a, "out", "out", out, (6, self.n), out=True)
+        rc = self._call(a)
         if rc:
             raise_for_status(rc, "jacobian")
         return out
