@@ -28,12 +28,13 @@
 #define DYN(n) (34 * (n) + 78)
 #define MMB(n) (49 * (n) + 78)
 
-int32_t pyrt_kin_workspace_size(int32_t n)
+int pyrt_kin_workspace_size(int32_t n, int32_t *size)
 {
-    if (n < 1 || n > PYRT_KIN_MAX_JOINTS) {
-        return 0;
+    if (size == NULL || n < 1 || n > PYRT_KIN_MAX_JOINTS) {
+        return PYRT_EINVAL;
     }
-    return MMB(n) + n * n + n + 13 * n;
+    *size = MMB(n) + n * n + n + 13 * n;
+    return PYRT_OK;
 }
 
 /* ------------------------------------------------------------------ algebra */

@@ -97,8 +97,8 @@ typedef struct {
     double residual;
 } pyrt_kin_ik_opts;
 
-/* Doubles of workspace a chain of n joints needs (0 when n is out of range). */
-int32_t pyrt_kin_workspace_size(int32_t n);
+/* size (out): doubles of workspace a chain of n joints needs. */
+int pyrt_kin_workspace_size(int32_t n, int32_t *size);
 
 /* Check a chain: sizes, kinds, finite values, unit axes, ordered limits,
  * non-negative masses.  PYRT_EINVAL or PYRT_ENONFINITE when refused. */

@@ -54,8 +54,16 @@ DRIVER = textwrap.dedent(
     out = ffi.new("double[]", 64)
     assert lib.pyrt_kin_check(ffi.NULL) == lib.PYRT_EINVAL
     assert lib.pyrt_kin_check(c) == lib.PYRT_EINVAL
-    assert lib.pyrt_kin_workspace_size(0) == 0
-    assert lib.pyrt_kin_workspace_size(lib.PYRT_KIN_MAX_JOINTS + 1) == 0
+    size = ffi.new("int32_t *")
+    assert lib.pyrt_kin_workspace_size(0, size) == lib.PYRT_EINVAL
+    assert lib.pyrt_kin_workspace_size(lib.PYRT_KIN_MAX_JOINTS + 1, size) == lib.PYRT_EINVAL
+    assert lib.pyrt_kin_workspace_size(6, ffi.NULL) == lib.PYRT_EINVAL
+    assert lib.pyrt_kin_call(ffi.NULL) == lib.PYRT_EINVAL
+    call = ffi.new("pyrt_kin_call_args *")
+    call.op = 7
+    assert lib.pyrt_kin_call(call) == lib.PYRT_EINVAL
+    call.op = lib.PYRT_KIN_OP_FK
+    assert lib.pyrt_kin_call(call) == lib.PYRT_EINVAL
     for fn in (lib.pyrt_kin_fk, lib.pyrt_kin_frames, lib.pyrt_kin_mass_matrix):
         assert fn(ffi.NULL, ws, out, out) == lib.PYRT_EINVAL
         assert fn(c, ffi.NULL, out, out) == lib.PYRT_EINVAL

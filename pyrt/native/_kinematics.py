@@ -15,8 +15,15 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from pyrt.errors import NativeError
 from pyrt.native._arrays import F64, as_f64
-from pyrt.native._errors import NativeInputError, Status, converged, raise_for_status
+from pyrt.native._errors import (
+    NativeInputError,
+    NonFiniteError,
+    SingularError,
+    converged,
+    raise_for_status,
+)
 from pyrt.native._lib import ffi, lib
 
 __all__ = ["GRAVITY", "IK_DEFAULT_MAX_ITER", "IK_DEFAULT_NULL_TOL", "IK_DEFAULT_TOL", "MAX_JOINTS",
@@ -35,10 +42,18 @@ _UNBOUND = object()  # an argument slot's array before the first call
 #: Gravity in the world frame by default (m/s^2): z up.
 GRAVITY = (0.0, 0.0, -9.81)
 _KINDS = {"revolute": REVOLUTE, "prismatic": PRISMATIC}
-_CHECK_WHY = {
-    Status.EINVAL: "refused (kinds, unit axes, ordered limits, masses >= 0)",
-    Status.ENONFINITE: "NaN or infinity in an origin, axis, offset, base, tool or inertial",
-}
+
+
+def _check_why(exc: NativeError) -> str:
+    if isinstance(exc, NonFiniteError):
+        return "NaN or infinity in an origin, axis, offset, base, tool or inertial"
+    return "refused (kinds, unit axes, ordered limits, masses >= 0)"
+
+
+def _fd_why(exc: NativeError) -> str | None:
+    if isinstance(exc, SingularError):
+        return "the mass matrix is not positive definite (a joint that moves no mass or inertia)"
+    return None
 
 
 class IKOutcome(NamedTuple):
@@ -85,7 +100,9 @@ class ChainKernels:
         self._masses = as_f64("masses", masses, (n,)).copy()
         self._coms = as_f64("coms", coms, (n, 3)).copy()
         self._inertias = as_f64("inertias", inertias, (n, 3, 3)).copy()
-        self._ws = np.zeros(lib.pyrt_kin_workspace_size(n), dtype=F64)
+        size = ffi.new("int32_t *")
+        raise_for_status(lib.pyrt_kin_workspace_size(n, size), "workspace_size")
+        self._ws = np.zeros(size[0], dtype=F64)
         arrays = (self._origins, self._axes, self._offsets, self._base, self._tool,
                   self._lower, self._upper, self._masses, self._coms, self._inertias, self._ws)
         self._keep = [ffi.from_buffer(a) for a in (self._kinds, *arrays)]
@@ -96,9 +113,7 @@ class ChainKernels:
          c.inertias) = (ffi.cast("double *", b) for b in self._keep[1:-1])
         self._c = c
         self._w = ffi.cast("double *", self._keep[-1])
-        rc = lib.pyrt_kin_check(c)
-        if rc:
-            raise_for_status(rc, f"chain of {n} joints", lambda exc: _CHECK_WHY.get(Status(rc)))
+        raise_for_status(lib.pyrt_kin_check(c), f"chain of {n} joints", _check_why)
         self._opts = ffi.new("pyrt_kin_ik_opts *")
         self._gravity = np.zeros(3, F64)
         self._gbuf = _buf(self._gravity)
@@ -227,8 +242,7 @@ class ChainKernels:
             if q is not self._fk_new_q:
                 self._fk_new_q = self._bind(a, "q", "q", q, self._qshape)
             rc = self._call(a)
-            if rc:
-                raise_for_status(rc, "fk")
+            raise_for_status(rc, "fk")
             return self._pose.copy()
         a = self._fk_out
         if q is not self._fk_out_q:
@@ -236,8 +250,7 @@ class ChainKernels:
         if out is not self._fk_out_o:
             self._fk_out_o = self._bind(a, "out", "out", out, (4, 4), out=True)
         rc = self._call(a)
-        if rc:
-            raise_for_status(rc, "fk")
+        raise_for_status(rc, "fk")
         return out
 
     def frames(self, q: object, out: np.ndarray | None = None) -> np.ndarray:
@@ -254,8 +267,7 @@ class ChainKernels:
             if q is not self._jac_new_q:
                 self._jac_new_q = self._bind(a, "q", "q", q, self._qshape)
             rc = self._call(a)
-            if rc:
-                raise_for_status(rc, "jacobian")
+            raise_for_status(rc, "jacobian")
             return self._jac_buf.copy()
         a = self._jac_out
         if q is not self._jac_out_q:
@@ -263,8 +275,7 @@ class ChainKernels:
         if out is not self._jac_out_o:
             self._jac_out_o = self._bind(a, "out", "out", out, (6, self.n), out=True)
         rc = self._call(a)
-        if rc:
-            raise_for_status(rc, "jacobian")
+        raise_for_status(rc, "jacobian")
         return out
 
     def ik(self, target: object, seed: object, out: np.ndarray | None = None, *,
@@ -280,7 +291,7 @@ class ChainKernels:
         if tol != o.tol or null_tol != o.null_tol or max_iter != o.max_iter:
             self._ik_options(tol, null_tol, max_iter)
         rc = lib.pyrt_kin_ik(self._c, self._w, tp, sp, qp, o)
-        ok = True if not rc else converged(rc, "ik")
+        ok = converged(rc, "ik")
         return q, IKOutcome(ok, o.iterations, o.residual)
 
     def _ik_options(self, tol: float, null_tol: float, max_iter: int) -> None:
@@ -307,13 +318,11 @@ class ChainKernels:
         gp = self._gbuf if gravity is self._g_last else self._set_gravity(gravity)
         if out is None:
             rc = self._rnea(self._c, self._w, qp, qdp, qddp, gp, self._vec_p)
-            if rc:
-                raise_for_status(rc, "rnea")
+            raise_for_status(rc, "rnea")
             return self._vec_buf.copy()
         op = cds[8] if out is objs[8] else self._out_ptr(8, "out", out, shape)
         rc = self._rnea(self._c, self._w, qp, qdp, qddp, gp, op)
-        if rc:
-            raise_for_status(rc, "rnea")
+        raise_for_status(rc, "rnea")
         return out
 
     def gravity_torque(self, q: object, gravity: object | None = GRAVITY,
@@ -347,9 +356,5 @@ class ChainKernels:
             op = cds[9] if out is objs[9] else self._out_ptr(9, "out", out, shape)
             rc = self._fd(self._c, self._w, qp, qdp, tp, gp, op)
             result = out
-        if rc:
-            raise_for_status(rc, "forward_dynamics",
-                             lambda exc: "the mass matrix is not positive definite (a joint "
-                             "that moves no mass or inertia)" if rc == Status.ESINGULAR
-                             else None)
+        raise_for_status(rc, "forward_dynamics", _fd_why)
         return result.copy() if out is None else out
