@@ -282,3 +282,38 @@ def test_arrays_are_read_only():
                 chain.joints[0].origin, chain.joints[0].axis):
         with pytest.raises(ValueError):
             arr[...] = 0
+
+
+def test_a_bound_array_changed_in_place_is_read_afresh():
+    """A preallocated joint array written in place between calls (as a control loop does) gives each call's own answer."""
+    d, chain, rng = case(8, 6)
+    q = np.zeros(6)
+    pose, jac, tau = np.empty((4, 4)), np.empty((6, 6)), np.empty(6)
+    for _ in range(5):
+        q[:] = rng.uniform(-2, 2, 6)
+        chain.fk(q, out=pose)
+        chain.jacobian(q, out=jac)
+        chain.rnea(q, q, q, out=tau)
+        np.testing.assert_allclose(pose, ref.fk(d, q), atol=1e-12)
+        np.testing.assert_allclose(chain.fk(q), ref.fk(d, q), atol=1e-12)
+        np.testing.assert_allclose(jac, ref.jacobian(d, q), atol=1e-12)
+        np.testing.assert_allclose(tau, ref.rnea(d, q, q, q), rtol=1e-10, atol=1e-9)
+
+
+def test_arrays_lists_and_outputs_may_alternate():
+    """Calls that alternate arrays, lists and out arrays (and results kept from earlier calls) each get their own answer."""
+    d, chain, rng = case(9, 5)
+    qs = [rng.uniform(-2, 2, 5) for _ in range(3)]
+    outs = [np.empty((4, 4)) for _ in range(2)]
+    kept = []
+    for k in range(9):
+        q = qs[k % 3] if k % 2 else qs[k % 3].tolist()
+        out = outs[k % 2]
+        assert chain.fk(q, out=out) is out
+        np.testing.assert_allclose(out, ref.fk(d, qs[k % 3]), atol=1e-12)
+        kept.append((chain.jacobian(q), qs[k % 3]))
+    for jac, q in kept:
+        np.testing.assert_allclose(jac, ref.jacobian(d, q), atol=1e-12)
+    other = build(ref.random_chain(np.random.default_rng(10), 5))
+    np.testing.assert_allclose(other.fk(qs[0]) @ np.eye(4), other.fk(qs[0].tolist()), atol=0)
+    np.testing.assert_allclose(chain.fk(qs[0]), ref.fk(d, qs[0]), atol=1e-12)
