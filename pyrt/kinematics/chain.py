@@ -13,6 +13,13 @@ along (prismatic) the joint's axis; the tool pose is ``F_n . tool``.  Every
 pose, Jacobian and gravity vector is in the world frame, the frame that
 ``base`` is given in.  Metres, radians, kilograms, seconds.
 
+Per call from Python the cost is mostly the call itself: pass float64
+arrays, and for a loop pass the same preallocated arrays every time (``q``
+written in place, ``out=`` reused).  The chain binds such an array on first
+use and reuses its pointer while the same array comes back (it then holds a
+reference to it, and numpy will not resize it); lists and other dtypes work
+too, converted on every call.
+
 A chain is immutable: :meth:`Chain.replace` makes a new one (calibration
 changes origins, base, tool and offsets that way).  Its workspace serves one
 call at a time: a chain is not for two threads at once (make one per thread
