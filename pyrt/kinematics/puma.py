@@ -280,7 +280,8 @@ class PaulInverse:
         y2 = a3 * math.sin(th[2]) + d4 * math.cos(th[2])
         above = y2 < 0.0 if arm == "righty" else y2 > 0.0
         # at the wrist's singularity (sin q5 = 0 to rounding) flip and noflip are one
-        wrist = "flip" if math.sin(th[4]) > PUMA_SINGULAR else "noflip"
+        # (half the kernel's band: a q5 named noflip is never solved as a flipped one)
+        wrist = "flip" if math.sin(th[4]) > PUMA_SINGULAR / 2 else "noflip"
         return f"{arm}-{'above' if above else 'below'}-{wrist}"
 
     # -- the inverse ------------------------------------------------------------------
