@@ -240,3 +240,39 @@ def test_mutated_urdf_reads_or_is_refused_clearly(data):
         return
     q = np.zeros(chain.n)
     assert np.isfinite(chain.fk(q)).all()
+
+
+def _with_fixed_links(text: str, mass: float | None) -> str:
+    """*text* with a 'world' root fixed below its base, and a link 'mid' fixed
+    to l1 (a point mass *mass* at its origin, when given)."""
+    world = ('<link name="world"/><joint name="mount" type="fixed"><parent link="world"/>'
+             '<child link="base"/><origin xyz="0.1 -0.2 0.3" rpy="0.2 0.1 -0.4"/></joint>')
+    inertial = "" if mass is None else (
+        f'<inertial><mass value="{mass!r}"/>'
+        '<inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial>')
+    mid = (f'<link name="mid">{inertial}</link><joint name="bracket" type="fixed">'
+           '<parent link="l1"/><child link="mid"/><origin xyz="0.05 0.1 -0.2" rpy="0 0.3 0"/>'
+           '</joint>')
+    return text.replace('  <link name="base"/>', f'  <link name="base"/>{world}{mid}')
+
+
+def test_fixed_joints_before_and_inside_the_chain():
+    """A fixed mount before the first joint moves the whole arm; a mass on a link fixed to link 1 weighs only on joint 1, as a point there."""
+    rows = random_dh(np.random.default_rng(12), 3)
+    plain = Chain.from_urdf(urdf_of_dh(rows))
+    bare = Chain.from_urdf(_with_fixed_links(urdf_of_dh(rows), None), tip_link="flange")
+    loaded = Chain.from_urdf(_with_fixed_links(urdf_of_dh(rows), 3.0), tip_link="flange")
+    assert bare.joint_names == ("j1", "j2", "j3")
+    mount = np.eye(4)
+    mount[:3, :3] = ref.rotation((0, 0, 1), -0.4) @ ref.rotation((0, 1, 0), 0.1) @ \
+        ref.rotation((1, 0, 0), 0.2)
+    mount[:3, 3] = (0.1, -0.2, 0.3)
+    q = np.array([0.4, -0.3, 0.8])
+    np.testing.assert_allclose(bare.fk(q), mount @ plain.fk(q), atol=1e-12)
+    # the mass's Jacobian: the one-joint chain from the world to 'mid'
+    to_mid = Chain.from_urdf(_with_fixed_links(urdf_of_dh(rows), None), tip_link="mid")
+    assert to_mid.joint_names == ("j1",)
+    jv = to_mid.jacobian(q[:1])[:3, 0]
+    extra = np.array([-jv @ (3.0 * np.array([0.0, 0.0, -9.81])), 0.0, 0.0])
+    np.testing.assert_allclose(loaded.gravity_torque(q) - bare.gravity_torque(q), extra,
+                               atol=1e-10)
