@@ -317,3 +317,17 @@ def test_arrays_lists_and_outputs_may_alternate():
     other = build(ref.random_chain(np.random.default_rng(10), 5))
     np.testing.assert_allclose(other.fk(qs[0]) @ np.eye(4), other.fk(qs[0].tolist()), atol=0)
     np.testing.assert_allclose(chain.fk(qs[0]), ref.fk(d, qs[0]), atol=1e-12)
+
+
+def test_a_chain_pickles_and_copies_as_its_description():
+    """pickle and copy give an equal chain with a workspace of its own."""
+    import copy
+    import pickle
+
+    _, chain, rng = case(13, 4)
+    q = rng.uniform(-1, 1, 4)
+    for other in (pickle.loads(pickle.dumps(chain)), copy.deepcopy(chain), copy.copy(chain)):
+        assert other is not chain and other._k is not chain._k
+        np.testing.assert_array_equal(other.fk(q), chain.fk(q))
+        np.testing.assert_array_equal(other.rnea(q, q, q), chain.rnea(q, q, q))
+        assert other.joint_names == chain.joint_names

@@ -221,6 +221,12 @@ class Chain:
                 return f"joint {j.name}: {v:.6g} is outside [{j.lower:.6g}, {j.upper:.6g}]"
         return None
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickled (and copied) as its description: the copy has a workspace
+        of its own."""
+        return (_rebuild, (self.name, self.joints, self.base, self.tool, self.offsets,
+                           self.closed_form))
+
     def __repr__(self) -> str:
         kinds = "".join("R" if j.kind == "revolute" else "P" for j in self.joints)
         return f"Chain({self.name!r}, {self.n} joints {kinds})"
@@ -280,3 +286,8 @@ class Chain:
         (the mass matrix and a Cholesky solve).  Raises
         :class:`~pyrt.native.SingularError` when a joint moves no inertia."""
         return self._k.forward_dynamics(q, qd, tau, gravity, out)
+
+
+def _rebuild(name: str, joints: tuple[Joint, ...], base: np.ndarray, tool: np.ndarray,
+             offsets: np.ndarray, closed_form: ClosedForm | None) -> Chain:
+    return Chain(name, joints, base=base, tool=tool, offsets=offsets, closed_form=closed_form)
