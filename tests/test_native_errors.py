@@ -129,6 +129,20 @@ def _statics_solve():
     s.solve()
 
 
+def _puma():
+    from pyrt.native._puma import PumaKernel
+
+    return PumaKernel((0.672, 0.4318, 0.0203, 0.15005, 0.4318), np.eye(4), np.eye(4),
+                      np.zeros(6), np.full(6, -np.inf), np.full(6, np.inf))
+
+
+def _chain(**bad):
+    kw = dict(kinds=["revolute"], origins=[np.eye(4)], axes=[[0.0, 0.0, 1.0]], offsets=[0.0],
+              base=np.eye(4), tool=np.eye(4), lower=[-1.0], upper=[1.0], masses=[1.0],
+              coms=[[0.1, 0.0, 0.0]], inertias=[np.eye(3)])
+    return nat.ChainKernels(**dict(kw, **bad))
+
+
 #: Public C entry point -> a wrapper call with input only C refuses.
 THROUGH_WRAPPERS = {
     "pyrt_findpos_solve": lambda: nat.find_position(_TOPS, _BOTTOMS, [600.0, NAN, 1100.0],
@@ -148,6 +162,15 @@ THROUGH_WRAPPERS = {
                                                    [0.0] * 3, [0.0] * 3, [0.0] * 3, [0.0] * 3),
     "pyrt_statics_solve": _statics_solve,
     "pyrt_statics_evaluate": lambda: _statics().evaluate(_TOPS[1]),
+    "pyrt_puma_inverse": lambda: _puma().inverse(np.full((4, 4), NAN), 0),
+    "pyrt_kin_check": lambda: _chain(axes=[[0.0, 0.0, 2.0]]),
+    "pyrt_kin_call": lambda: _chain().fk([NAN]),
+    "pyrt_kin_frames": lambda: _chain().frames([NAN]),
+    "pyrt_kin_ik": lambda: _chain().ik(np.full((4, 4), NAN), [0.0]),
+    "pyrt_kin_rnea": lambda: _chain().rnea([NAN], None, None),
+    "pyrt_kin_mass_matrix": lambda: _chain().mass_matrix([NAN]),
+    "pyrt_kin_forward_dynamics": lambda: _chain(masses=[0.0], inertias=[np.zeros((3, 3))]).
+    forward_dynamics([0.0], None, [1.0]),
 }
 
 #: Entry points whose only failure is a NULL pointer or a struct the wrapper
@@ -160,6 +183,10 @@ ONLY_RAW = {
     "pyrt_fuzzy_default_params": lambda: lib.pyrt_fuzzy_default_params(ffi.NULL),
     "pyrt_rq_check": lambda: lib.pyrt_rq_check(ffi.NULL),
     "pyrt_rq_check_wide": lambda: lib.pyrt_rq_check_wide(ffi.NULL),
+    "pyrt_kin_workspace_size": lambda: lib.pyrt_kin_workspace_size(0, ffi.NULL),
+    "pyrt_kin_fk": lambda: lib.pyrt_kin_fk(ffi.NULL, ffi.NULL, ffi.NULL, ffi.NULL),
+    "pyrt_kin_jacobian": lambda: lib.pyrt_kin_jacobian(ffi.NULL, ffi.NULL, ffi.NULL, ffi.NULL,
+                                                       ffi.NULL),
 }
 
 

@@ -28,6 +28,7 @@ from pyrt.native._findpos import (
     rope_segments,
 )
 from pyrt.native._fuzzy import FuzzyBatch, FuzzyInput, FuzzyParams, FuzzyRule, fuzzy_step
+from pyrt.native._kinematics import ChainKernels, IKOutcome
 from pyrt.native._neck import LOWER as NECK_LOWER
 from pyrt.native._neck import UPPER as NECK_UPPER
 from pyrt.native._neck import NeckRing, RopePath, ring_contact
@@ -38,11 +39,13 @@ from pyrt.native._statics import StaticsSolver
 __all__ = [
     "NECK_LOWER",
     "NECK_UPPER",
+    "ChainKernels",
     "DegenerateGeometryError",
     "FuzzyBatch",
     "FuzzyInput",
     "FuzzyParams",
     "FuzzyRule",
+    "IKOutcome",
     "NativeInputError",
     "NeckRing",
     "NoConvergenceError",

@@ -1,0 +1,31 @@
+"""Kinematic chains: forward and inverse kinematics and rigid-body dynamics
+of serial arms, from a URDF or a DH table, computed by C kernels
+(csrc/kinematics.c).  See :mod:`pyrt.kinematics.chain` for the conventions.
+"""
+
+from pyrt.kinematics.chain import GRAVITY, Chain, ClosedForm, IKResult
+from pyrt.kinematics.dh import DHRow
+from pyrt.kinematics.joint import (
+    Inertial,
+    Joint,
+    JointKind,
+    rotation,
+    rpy_matrix,
+    rpy_of,
+    transform,
+)
+
+__all__ = [
+    "GRAVITY",
+    "Chain",
+    "ClosedForm",
+    "DHRow",
+    "IKResult",
+    "Inertial",
+    "Joint",
+    "JointKind",
+    "rotation",
+    "rpy_matrix",
+    "rpy_of",
+    "transform",
+]

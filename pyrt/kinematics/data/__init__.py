@@ -1,0 +1,1 @@
+"""Data files of pyrt.kinematics: the packaged robot descriptions (puma560.urdf)."""

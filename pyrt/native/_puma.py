@@ -1,0 +1,94 @@
+"""Paul's closed-form inverse of the PUMA 560 (csrc/puma.c)."""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from pyrt.native._arrays import F64, as_f64
+from pyrt.native._errors import NativeInputError, raise_for_status
+from pyrt.native._lib import ffi, lib
+
+__all__ = [
+    "PUMA_BELOW",
+    "PUMA_FLIP",
+    "PUMA_INSIDE_OFFSET",
+    "PUMA_LEFTY",
+    "PUMA_LIMIT",
+    "PUMA_NEAREST",
+    "PUMA_NO_LIMITS",
+    "PUMA_REACHED",
+    "PUMA_SINGULAR",
+    "PUMA_TOO_FAR",
+    "PUMA_TOO_NEAR",
+    "PumaKernel",
+]
+
+PUMA_LEFTY: int = lib.PYRT_PUMA_LEFTY
+PUMA_BELOW: int = lib.PYRT_PUMA_BELOW
+PUMA_FLIP: int = lib.PYRT_PUMA_FLIP
+PUMA_NEAREST: int = lib.PYRT_PUMA_NEAREST
+PUMA_NO_LIMITS: int = lib.PYRT_PUMA_NO_LIMITS
+PUMA_REACHED: int = lib.PYRT_PUMA_REACHED
+PUMA_INSIDE_OFFSET: int = lib.PYRT_PUMA_INSIDE_OFFSET
+PUMA_TOO_FAR: int = lib.PYRT_PUMA_TOO_FAR
+PUMA_TOO_NEAR: int = lib.PYRT_PUMA_TOO_NEAR
+PUMA_LIMIT: int = lib.PYRT_PUMA_LIMIT
+#: |sin q5| at or below which the wrist is at its singularity.
+PUMA_SINGULAR: float = lib.PYRT_PUMA_SINGULAR
+
+
+class PumaKernel:
+    """One arm's description for the C inverse, made once; :meth:`inverse` per call.
+
+    ``lengths`` are (d1, a2, a3, d3, d4) in metres; ``base_inv`` and
+    ``tool_inv`` the inverses of the base and tool (4, 4); ``offsets``,
+    ``lower`` and ``upper`` (6,) in radians (limits may be infinite).
+    """
+
+    def __init__(self, lengths: npt.ArrayLike, base_inv: npt.ArrayLike, tool_inv: npt.ArrayLike,
+                 offsets: npt.ArrayLike, lower: npt.ArrayLike, upper: npt.ArrayLike) -> None:
+        ln = as_f64("lengths", lengths, (5,))
+        arrays = {
+            "base_inv": as_f64("base_inv", base_inv, (4, 4)),
+            "tool_inv": as_f64("tool_inv", tool_inv, (4, 4)),
+            "offsets": as_f64("offsets", offsets, (6,)),
+            "lower": as_f64("lower", lower, (6,)),
+            "upper": as_f64("upper", upper, (6,)),
+        }
+        if not np.all(np.isfinite(ln)) or ln[1] <= 0.0:
+            raise NativeInputError(
+                f"lengths: expected finite (d1, a2, a3, d3, d4), a2 > 0; got {ln}"
+            )
+        for name in ("base_inv", "tool_inv", "offsets"):
+            if not np.all(np.isfinite(arrays[name])):
+                raise NativeInputError(f"{name}: has a non-finite entry")
+        if np.any(np.isnan(arrays["lower"])) or np.any(arrays["lower"] > arrays["upper"]):
+            raise NativeInputError("lower and upper: expected lower <= upper for each joint")
+        arm = ffi.new("pyrt_puma *")
+        arm.d1, arm.a2, arm.a3, arm.d3, arm.d4 = (float(v) for v in ln)
+        for name, arr in arrays.items():
+            ffi.memmove(getattr(arm, name), ffi.from_buffer("double[]", arr.ravel()), arr.nbytes)
+        self._arm = arm
+        self._why = ffi.new("int32_t *")
+        self._detail = ffi.new("double[2]")
+
+    def inverse(self, pose: npt.ArrayLike, config: int,
+                seed: npt.ArrayLike | None = None) -> tuple[np.ndarray | None, int, float]:
+        """(q, why, detail): q (6,) when ``why`` is PUMA_REACHED, else None
+        and the deciding number (a distance in m, or the joint's angle)."""
+        p = pose if isinstance(pose, np.ndarray) and pose.dtype == F64 \
+            and pose.shape == (4, 4) and pose.flags.c_contiguous else as_f64("pose", pose, (4, 4))
+        q = np.empty(6)
+        if seed is None:
+            sp = ffi.NULL
+        else:
+            s = as_f64("seed", seed, (6,))
+            sp = ffi.from_buffer("double[]", s)
+        rc = lib.pyrt_puma_inverse(self._arm, ffi.from_buffer("double[]", p), int(config), sp,
+                                   ffi.from_buffer("double[]", q), self._why, self._detail)
+        raise_for_status(rc, "puma inverse")
+        why = int(self._why[0])
+        if why != lib.PYRT_PUMA_REACHED:
+            return None, why, float(self._detail[0])
+        return q, why, 0.0
