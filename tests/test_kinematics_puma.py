@@ -357,3 +357,31 @@ def test_the_examples_of_docs_kinematics_run_as_written():
     namespace: dict = {"print": lambda *a, **k: None}
     exec(compile("\n".join(blocks), str(page), "exec"), namespace)
     assert namespace["fit"].converged
+
+
+def test_a_chain_replaced_with_new_geometry_never_keeps_a_stale_closed_form(chain):
+    """replace(base/tool/offsets) remakes the closed form for the new arm; a foreign one is dropped."""
+    from pyrt.kinematics.joint import rpy_matrix
+
+    base = np.eye(4)
+    base[:3, :3] = rpy_matrix(0.0, 0.0, 0.3)
+    base[:3, 3] = (0.1, -0.2, 0.05)
+    moved = chain.replace(base=base, offsets=np.full(6, 0.01))
+    assert moved.closed_form is not None and moved.closed_form is not chain.closed_form
+    q = np.array([0.2, -0.5, 0.3, 0.4, -0.6, 0.7])
+    pose = moved.fk(q)
+    cfg = moved.closed_form.config_of(q)
+    assert_pose(moved.fk(moved.closed_form.solve(pose, cfg)), pose)
+
+    class Foreign:
+        configurations = ("only",)
+
+        def solve(self, pose, config):
+            return np.zeros(6)
+
+        def config_of(self, q):
+            return "only"
+
+    foreign = chain.replace(closed_form=Foreign())
+    assert foreign.replace(name="same geometry").closed_form is foreign.closed_form
+    assert foreign.replace(base=base).closed_form is None

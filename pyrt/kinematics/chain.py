@@ -176,7 +176,9 @@ class Chain:
     def replace(self, **changes: Any) -> Chain:
         """A new chain with some of: ``name``, ``joints``, ``origins`` (n
         transforms, one per joint), ``base``, ``tool``, ``offsets``,
-        ``closed_form``."""
+        ``closed_form``.  A closed form is kept only while it describes the
+        new geometry: one that can be made again for it (``for_chain``) is,
+        any other is dropped (the numerical inverse answers)."""
         allowed = {"name", "joints", "origins", "base", "tool", "offsets", "closed_form"}
         bad = sorted(set(changes) - allowed)
         if bad:
@@ -192,9 +194,25 @@ class Chain:
             except ValueError as exc:
                 raise ConfigError(f"origins: {exc}") from None
         offsets = changes.get("offsets", self.offsets if len(joints) == self.n else None)
-        return Chain(changes.get("name", self.name), joints,
-                     base=changes.get("base", self.base), tool=changes.get("tool", self.tool),
-                     offsets=offsets, closed_form=changes.get("closed_form", self.closed_form))
+        chain = Chain(changes.get("name", self.name), joints,
+                      base=changes.get("base", self.base), tool=changes.get("tool", self.tool),
+                      offsets=offsets, closed_form=changes.get("closed_form"))
+        if "closed_form" in changes or self.closed_form is None:
+            return chain
+        if not set(changes) & {"joints", "origins", "base", "tool", "offsets"}:
+            chain.closed_form = self.closed_form
+            return chain
+        # The geometry changed: a closed form made for the old one would give the
+        # old arm's answers.  One that can be made again for the new geometry
+        # (``for_chain``, which checks itself against the chain) is; any other
+        # is dropped, and the chain's numerical inverse answers instead.
+        remake = getattr(type(self.closed_form), "for_chain", None)
+        if remake is not None:
+            try:
+                chain.closed_form = remake(chain)
+            except (ValueError, ConfigError):
+                chain.closed_form = None
+        return chain
 
     # ------------------------------------------------------------ description
 
