@@ -166,7 +166,9 @@ def test_serving_beyond_loopback_without_a_token_is_refused():
     for host in ("0.0.0.0", "", "::", "192.0.2.1"):
         with pytest.raises(ConfigError, match="without a token"):
             Server(runner, robot, host, 0)
-    Server(runner, robot, "0.0.0.0", 0, token="t")  # allowed (not started)
+    Server(runner, robot, "0.0.0.0", 0, token="t" * 16)  # allowed (not started)
+    with pytest.raises(ConfigError, match="at least 16"):  # reachable: a token not guessed
+        Server(runner, robot, "0.0.0.0", 0, token="t" * 15)
     with pytest.raises(ConfigError):
         Server(runner, robot, "127.0.0.1", 0, token="")
 

@@ -34,12 +34,31 @@ from collections import OrderedDict, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from pyrt.errors import ConfigError
 from pyrt.server.limits import address_is_loopback
 
-__all__ = ["FailureGuard", "escape_text"]
+__all__ = ["MAX_TOKEN", "MIN_TOKEN", "FailureGuard", "check_token", "escape_text"]
 
 #: Longest client string kept in an audit line (characters, before escaping).
 MAX_CLIENT_TEXT = 120
+#: Shortest token accepted: 16 characters (about 95 bits when made by
+#: ``secrets.token_urlsafe``); a short one is guessed, back-off or not.
+MIN_TOKEN = 16
+#: Longest token accepted (one line of its file).
+MAX_TOKEN = 256
+
+
+def check_token(token: str) -> str:
+    """``token`` when it may guard a door; else :class:`~pyrt.errors.ConfigError`
+    with the reason (too short, too long, spaces or characters that are not printable)."""
+    if len(token) < MIN_TOKEN:
+        raise ConfigError(
+            f"the token is {len(token)} characters; at least {MIN_TOKEN} are needed (a short "
+            "token is guessed): make one with  python -c 'import secrets; "
+            "print(secrets.token_urlsafe(24))'")
+    if len(token) > MAX_TOKEN or any(c.isspace() or not c.isprintable() for c in token):
+        raise ConfigError(f"a token is one word of printable characters, at most {MAX_TOKEN}")
+    return token
 
 
 def escape_text(text: object, limit: int = MAX_CLIENT_TEXT) -> str:

@@ -86,7 +86,7 @@ from pyrt.errors import ConfigError
 from pyrt.scope.spew import MAX_SPEW_HZ
 from pyrt.server.connection import Connection
 from pyrt.server.framing import FramingMixin
-from pyrt.server.guard import FailureGuard
+from pyrt.server.guard import FailureGuard, check_token
 from pyrt.server.hub import StatusHub
 from pyrt.server.ioloop import IOLoopMixin
 from pyrt.server.limits import (
@@ -159,6 +159,8 @@ class Server(IOLoopMixin, FramingMixin, SessionMixin):
     ):
         if token is not None and not token:
             raise ConfigError("the token is empty")
+        if token is not None and not is_loopback(host):
+            check_token(token)  # reachable from the network: a token that is not guessed
         if token is None and not is_loopback(host):
             raise ConfigError(
                 f"refusing to serve on {host!r} without a token: anybody who can reach it "
