@@ -144,6 +144,13 @@ class IOLoopMixin(ServerState):
         tripped (every motor stopped), naming the server."""
         self.crashed = exc
         log.critical("the DAQ server has stopped: a bug in pyrt", exc_info=exc)
+        listener = self._listener
+        if listener is not None:  # refuse newcomers at once rather than leave them unanswered
+            with contextlib.suppress(Exception):
+                assert self._sel is not None
+                self._sel.unregister(listener)
+            with contextlib.suppress(OSError):
+                listener.close()
         cause = (f"the DAQ server has stopped ({type(exc).__name__}: {exc}; a bug in pyrt): "
                  "no client can reach the station")
         with contextlib.suppress(Exception):
