@@ -656,7 +656,7 @@ class EpicsService:
         refusal says did not happen."""
         who = _WRITER.get() or _Writer("?", 0, "", "")
         guard = self.server.guard
-        wait = guard.blocked(who.addr)
+        wait = guard.blocked(who.addr, "EPICS write")
         if wait > 0:
             return format_error("auth", f"too many refused writes from {who.addr}: try again "
                                 f"in {math.ceil(wait):.0f} s; {nothing}")

@@ -92,7 +92,7 @@ class _Peer:
     strikes: int = 0  # back-offs so far (each doubles the next)
     until: float = 0.0  # back-off end
     last: float = 0.0  # the latest failure
-    unlogged: int = 0  # failures counted, not yet written (summary)
+    unlogged: int = 0  # failures (and refusals) counted, not yet written (summary)
     unlogged_since: float = 0.0
     kinds: set[str] = field(default_factory=set)
 
@@ -143,19 +143,25 @@ class FailureGuard:
 
     # -- asking -----------------------------------------------------------------------
 
-    def blocked(self, addr: str) -> float:
-        """Seconds of back-off left for ``addr`` (0: it may try); a request
-        refused for it is counted in :attr:`refused`."""
+    def blocked(self, addr: str, kind: str = "request") -> float:
+        """Seconds of back-off left for ``addr`` (0: it may try).  A ``kind`` of
+        request refused for it is counted (:attr:`refused`, and in the summary)."""
         now = self._clock()
         with self._lock:
             peer = self._peers.get(addr)
             left = peer.until - now if peer is not None else 0.0
             if self._overall_until > now and not address_is_loopback(addr):
                 left = max(left, self._overall_until - now)
-            if left > 0:
-                self.refused += 1
-                return left
-            return 0.0
+            if left <= 0:
+                return 0.0
+            self.refused += 1
+            if peer is None:
+                peer = self._peers[addr] = _Peer(window_start=now, last=now)
+            if not peer.unlogged:
+                peer.unlogged_since = now
+            peer.unlogged += 1
+            peer.kinds.add(f"{kind} refused while backing off")
+            return left
 
     def failed(self, addr: str, who: str, what: str, kind: str = "") -> float:
         """Record a failure of ``who`` (from ``addr``): ``what`` happened (an
@@ -267,4 +273,4 @@ class FailureGuard:
 
 def _summary(n: int, where: str, secs: float, kinds: set[str]) -> str:
     what = ", ".join(sorted(kinds)) or "failures"
-    return f"{n} failures ({what}) from {where} in {secs:.0f} s, not written one by one"
+    return f"{n} failures from {where} in {secs:.0f} s ({what}), not written one by one"

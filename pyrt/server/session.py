@@ -16,6 +16,7 @@ import hmac
 import io
 import logging
 import math
+import re
 import threading
 import time
 from typing import Any
@@ -31,6 +32,9 @@ __all__ = ["SessionMixin", "run_shell"]
 log = logging.getLogger("pyrt.server")
 
 _VERBS = frozenset({"AUTH", "QUIT", "STATUS", "SUBSCRIBE", "UNSUBSCRIBE"})
+#: A rate as SUBSCRIBE takes it: a decimal number in ASCII digits (no
+#: ``nan``/``inf``, no ``_`` separators, no digits of other scripts).
+_RATE = re.compile(r"\+?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]{1,4})?", re.ASCII)
 
 
 def _control(line: str) -> int:
@@ -170,10 +174,7 @@ class SessionMixin(ServerState):
         if verb == "AUTH":
             return self._auth(conn, rest)
         if verb == "SUBSCRIBE":
-            try:
-                hz = float(rest)
-            except ValueError:
-                hz = math.nan
+            hz = float(rest) if _RATE.fullmatch(rest) else math.nan
             if not MIN_SPEW_HZ <= hz <= self.max_hz:  # NaN fails too
                 return format_error(
                     "syntax", f"SUBSCRIBE needs a rate {MIN_SPEW_HZ:g} <= hz <= "
@@ -231,7 +232,7 @@ class SessionMixin(ServerState):
             if self._token is None:
                 self.counters["auth_failed"] += 1
                 return format_error("auth", "no token is configured: this server only reports")
-            wait_s = self.guard.blocked(conn.addr)
+            wait_s = self.guard.blocked(conn.addr, "AUTH")
             if wait_s > 0:  # backing off: the token is not even looked at
                 self.counters["auth_backoff"] += 1
                 self._close_after_flush(conn)
