@@ -410,18 +410,27 @@ class EpicsService:
             """``base`` whose write handlers know who writes (:data:`_WRITER`)."""
 
             class Known(base):
+                pyrt_name = "?"
+
                 async def auth_write(self, hostname: Any, username: Any, data: Any,
                                      data_type: Any, metadata: Any, *, flags: int = 0,
                                      user_address: Any = None) -> Any:
-                    mark = _WRITER.set(_writer(hostname, username, user_address))
+                    who = _writer(hostname, username, user_address)
+                    mark = _WRITER.set(who)
                     try:
                         return await super().auth_write(hostname, username, data, data_type,
                                                         metadata, flags=flags,
                                                         user_address=user_address)
+                    except (UnicodeDecodeError, ValueError) as exc:
+                        # not text caproto can convert (invalid UTF-8, empty, a NUL first):
+                        # refused as a failure of its writer, one log line, no traceback
+                        raise Forbidden(service._undecodable(self.pyrt_name, who, exc)) from None
                     finally:
                         _WRITER.reset(mark)
 
             return Known
+
+        from caproto import Forbidden
 
         enum_channel = writer_known(enum_channel)
         char_channel = writer_known(char_channel)
@@ -459,10 +468,19 @@ class EpicsService:
                 db[key] = SetpointChannel(value="", max_length=CMD_LENGTH,
                                           string_encoding="utf-8")
         for key, pv in db.items():
+            pv.pyrt_name = key
             if hasattr(pv, "pyrt_refuse"):
-                pv.pyrt_name = key
                 pv.pyrt_refuse = self._refused_write
         return db
+
+    def _undecodable(self, pv: str, who: _Writer, exc: Exception) -> str:
+        """A write whose value cannot be read as text: a failure of the writer's address;
+        what is said of it."""
+        text = (f"{escape_text(pv)} takes UTF-8 text ({type(exc).__name__}); write from {who} "
+                "refused, nothing was run")
+        self.server.guard.failed(who.addr, "EPICS", f"refused EPICS write: {text}",
+                                 "refused EPICS write")
+        return text
 
     def _refused_write(self, pv: str, who: _Writer) -> None:
         """A write to a read-only PV: a failure of the writer's address (audited
