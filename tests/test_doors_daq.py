@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 from _server_rig import TOKEN, read_lines, read_until_closed, served
 
+from pyrt.cli._serve import Service
 from pyrt.client import Client, ServerError
 from pyrt.db import copy_station
 from pyrt.errors import ConfigError
@@ -149,6 +150,8 @@ def test_a_dead_server_thread_is_a_fault_the_operator_sees(monkeypatch):
         assert sv.still_and_null()
         with pytest.raises(OSError):
             Client(sv.host, sv.port, timeout_s=5)
+        # headless, nothing could reach the station: the service stops and says so (exit 1)
+        assert Service(sv.runner, sv.server.robot, sv.server).run_headless() == 1
 
 
 @pytest.mark.parametrize("tool", [["send", "{addr}", "STATUS", "--timeout", "600"],

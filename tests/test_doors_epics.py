@@ -139,6 +139,27 @@ def test_pyrt_epics_beyond_loopback_without_a_token_exits_with_the_reason(tmp_pa
     assert "without a token" in proc.stderr and "Traceback" not in proc.stderr
 
 
+def test_a_dead_epics_thread_is_a_fault_the_operator_sees(epics_env, monkeypatch):
+    """The IOC's thread fails while serving: the station is tripped naming EPICS (every motor
+    stopped), and the service records the error."""
+    from pyrt.server.epics import EpicsService
+
+    async def broken(self: EpicsService) -> None:
+        raise RuntimeError("the IOC's update loop is broken")
+
+    monkeypatch.setattr(EpicsService, "_update", broken)
+    with served() as sv:
+        ioc = EpicsService(sv.runner, sv.server.robot, sv.server, PREFIX, token=TOKEN,
+                           period_s=0.02)
+        ioc.start()
+        try:
+            fault = _until(lambda: sv.runner.call(lambda: sv.rig.fault, take_fault=False), 10)
+            assert fault is not None and "EPICS server has stopped" in fault.cause
+            assert isinstance(ioc.error, RuntimeError) and sv.still_and_null()
+        finally:
+            ioc.close()
+
+
 # -- an audit trail that holds ------------------------------------------------------------------
 
 EVIL_HOST = "ops\n2026-01-01 00:00:00,000 EPICS CMD: P 0000\x1b[2J\x1b]0;owned\x07"
