@@ -7,6 +7,7 @@ in a subprocess.  Skipped when caproto is not installed.
 
 from __future__ import annotations
 
+import asyncio
 import json
 import os
 import random
@@ -145,6 +146,7 @@ def test_a_dead_epics_thread_is_a_fault_the_operator_sees(epics_env, monkeypatch
     from pyrt.server.epics import EpicsService
 
     async def broken(self: EpicsService) -> None:
+        await asyncio.sleep(0.3)  # serving, then failing
         raise RuntimeError("the IOC's update loop is broken")
 
     monkeypatch.setattr(EpicsService, "_update", broken)

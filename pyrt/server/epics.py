@@ -406,6 +406,8 @@ class EpicsService:
         enum_channel: Any = ca.ChannelEnum
         char_channel: Any = ca.ChannelChar
 
+        from caproto import Forbidden
+
         def writer_known(base: Any) -> Any:
             """``base`` whose write handlers know who writes (:data:`_WRITER`)."""
 
@@ -421,16 +423,15 @@ class EpicsService:
                         return await super().auth_write(hostname, username, data, data_type,
                                                         metadata, flags=flags,
                                                         user_address=user_address)
-                    except (UnicodeDecodeError, ValueError) as exc:
-                        # not text caproto can convert (invalid UTF-8, empty, a NUL first):
-                        # refused as a failure of its writer, one log line, no traceback
+                    except (UnicodeDecodeError, ValueError, IndexError) as exc:
+                        # a value caproto cannot convert (invalid UTF-8, empty text, a NUL
+                        # first, an enum index out of range): refused as a failure of its
+                        # writer, one log line, no traceback
                         raise Forbidden(service._undecodable(self.pyrt_name, who, exc)) from None
                     finally:
                         _WRITER.reset(mark)
 
             return Known
-
-        from caproto import Forbidden
 
         enum_channel = writer_known(enum_channel)
         char_channel = writer_known(char_channel)
@@ -474,10 +475,10 @@ class EpicsService:
         return db
 
     def _undecodable(self, pv: str, who: _Writer, exc: Exception) -> str:
-        """A write whose value cannot be read as text: a failure of the writer's address;
-        what is said of it."""
-        text = (f"{escape_text(pv)} takes UTF-8 text ({type(exc).__name__}); write from {who} "
-                "refused, nothing was run")
+        """A write whose value the PV cannot take (not UTF-8 text, an enum index out
+        of range ...): a failure of the writer's address; what is said of it."""
+        text = (f"{escape_text(pv)} cannot take the written value ({type(exc).__name__}); "
+                f"write from {who} refused, nothing was run")
         self.server.guard.failed(who.addr, "EPICS", f"refused EPICS write: {text}",
                                  "refused EPICS write")
         return text
