@@ -26,6 +26,7 @@ import logging
 import os
 import sys
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -37,6 +38,9 @@ from pyrt.server.guard import MAX_TOKEN, check_token
 __all__ = ["Service", "add_serve_options", "prepare_service", "read_token"]
 
 log = logging.getLogger("pyrt.service")
+
+#: Longest wait, at start, for the loop's first status snapshot (the loop runs already).
+FIRST_STATUS_S = 5.0
 
 
 
@@ -121,6 +125,11 @@ class Service:
 
         if self.serve:
             host, port = self.server.start()
+            # "serving" means STATUS is answered: wait (bounded) for the loop's first snapshot
+            deadline = time.monotonic() + FIRST_STATUS_S
+            while (self.server.hub.snapshot[2] is None and self.runner.crashed is None
+                   and time.monotonic() < deadline):
+                time.sleep(0.005)
             who = ("AUTH with the token to command" if self.server.has_token
                    else "no token: status only")
             tell(f"serving {self.robot.name} on {host}:{port} ({who})")
