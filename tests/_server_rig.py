@@ -14,7 +14,7 @@ from pyrt.scheduler.runner import Runner
 from pyrt.server import ServedStation, Server
 from pyrt.station.gripper import GripperStation, build_gripper
 
-TOKEN = "s3cret-token"
+TOKEN = "s3cret-token-of-the-rig"
 
 
 @dataclass

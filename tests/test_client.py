@@ -112,10 +112,11 @@ def test_send_authenticates_with_the_token(capsys, monkeypatch, tmp_path):
         monkeypatch.delenv("PYRT_TOKEN")
         f = tmp_path / "token"
         f.write_text(TOKEN + "\n")
+        f.chmod(0o600)
         assert main(["send", "--token-file", str(f), f"{sv.host}:{sv.port}", "T"]) == 0
         assert capsys.readouterr().out == (
             "speed 7F -> 33: JSPEED 33, MXPJSPD B3, MXNJSPD 4D (up to 860 counts/s)\n0000\n")
-        f.write_text("wrong\n")
+        f.write_text("wrong-but-long-enough\n")
         assert main(["send", "--token-file", str(f), f"{sv.host}:{sv.port}", "T"]) == 1
         assert "ERR auth" in capsys.readouterr().err
 

@@ -201,6 +201,7 @@ def test_ctrl_c_to_a_piped_connect_during_a_wait_stops_the_robot_and_ends_130(tm
 
     with served(wall=True) as sv:
         (tmp_path / "token").write_text(TOKEN + "\n")
+        (tmp_path / "token").chmod(0o600)
         env = {k: v for k, v in os.environ.items() if k != "PYRT_TOKEN"}
         env.update(HOME=str(tmp_path), PYTHONUNBUFFERED="1")
         proc = subprocess.Popen(
@@ -235,6 +236,7 @@ def test_ctrl_c_during_a_remote_wait_stops_the_move_and_every_later_reply_is_its
 
     with served(wall=True) as sv:
         (tmp_path / "token").write_text(TOKEN + "\n")
+        (tmp_path / "token").chmod(0o600)
         env = {k: v for k, v in os.environ.items() if k != "PYRT_TOKEN"}
         env.update(TERM="xterm", HOME=str(tmp_path))
         child = pexpect.spawn(sys.executable, ["-m", "pyrt", "connect", f"{sv.host}:{sv.port}",

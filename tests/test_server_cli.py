@@ -16,7 +16,7 @@ from pyrt.db import copy_station
 
 pytestmark = pytest.mark.wallclock
 
-TOKEN = "cli-token"
+TOKEN = "cli-token-0123456789"
 
 
 def _start(args: list[str], env: dict | None = None, cwd=None) -> tuple[subprocess.Popen, int]:
@@ -47,6 +47,7 @@ def test_headless_gripper_serves_and_stops_every_motor_on_a_signal(tmp_path, sig
     """A headless gripper moves on a client's command; SIGTERM/SIGINT stop every motor and exit 0."""
     token = tmp_path / "token"
     token.write_text(TOKEN + "\n")
+    token.chmod(0o600)
     proc, port = _start(["gripper", "--serve", "127.0.0.1:0", "--headless", "--token-file",
                          str(token), "--speed", "4"], cwd=tmp_path)
     try:

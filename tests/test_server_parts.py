@@ -80,11 +80,12 @@ def test_read_token_from_file_or_environment(tmp_path, monkeypatch):
     """The token file's first line wins over PYRT_TOKEN; neither means no token."""
     monkeypatch.delenv("PYRT_TOKEN", raising=False)
     assert read_token(None) is None
-    monkeypatch.setenv("PYRT_TOKEN", "  env-token \n")
-    assert read_token(None) == "env-token"
+    monkeypatch.setenv("PYRT_TOKEN", "  env-token-0123456789 \n")
+    assert read_token(None) == "env-token-0123456789"
     f = tmp_path / "t"
-    f.write_text("file-token\nsecond line\n")
-    assert read_token(str(f)) == "file-token"
+    f.write_text("file-token-0123456789\nsecond line\n")
+    f.chmod(0o600)
+    assert read_token(str(f)) == "file-token-0123456789"
 
 
 @pytest.mark.parametrize("content", ["", "\n", "two words\n", "x" * 300 + "\n"])
@@ -92,6 +93,7 @@ def test_read_token_refuses_bad_files(tmp_path, content):
     """An empty first line, a token with spaces or an over-long one is a ConfigError."""
     f = tmp_path / "t"
     f.write_text(content)
+    f.chmod(0o600)
     with pytest.raises(ConfigError):
         read_token(str(f))
     with pytest.raises(ConfigError, match="cannot read"):

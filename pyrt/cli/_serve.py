@@ -8,11 +8,14 @@ Shared by every station (``pyrt NAME``, ``pyrt run``)::
     status = service.run_headless() if args.headless else console.run()
     service.close()
 
-The token is read from ``--token-file`` (its first line) or the
-``PYRT_TOKEN`` environment variable.  Without a token nobody is privileged
+The token is read from ``--token-file`` (its first line; the file must be
+its owner's only, mode 600) or the ``PYRT_TOKEN`` environment variable,
+and is at least 16 characters.  Without a token nobody is privileged
 (the server only reports), and serving on anything but a loopback address
-is refused.  ``--headless`` runs without a console: a service that logs to
-stderr and, on SIGTERM, SIGHUP or SIGINT, stops every motor and exits 0.
+(``--serve``, ``--epics-interface``) is refused.  A service whose server
+thread dies trips the station (every motor stopped) and, headless, exits 1.
+``--headless`` runs without a console: a service that logs to stderr and,
+on SIGTERM, SIGHUP or SIGINT, stops every motor and exits 0.
 """
 
 from __future__ import annotations
@@ -23,19 +26,22 @@ import logging
 import os
 import sys
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
 from pyrt.client import parse_address
 from pyrt.errors import ConfigError, PyrtError
 from pyrt.server import ServedRobot, Server
+from pyrt.server.guard import MAX_TOKEN, check_token
 
 __all__ = ["Service", "add_serve_options", "prepare_service", "read_token"]
 
 log = logging.getLogger("pyrt.service")
 
-#: Longest token accepted (it is one line of the file).
-MAX_TOKEN = 256
+#: Longest wait, at start, for the loop's first status snapshot (the loop runs already).
+FIRST_STATUS_S = 5.0
+
 
 
 def add_serve_options(parser: argparse.ArgumentParser) -> None:
@@ -52,16 +58,31 @@ def add_serve_options(parser: argparse.ArgumentParser) -> None:
                    help="also serve the robot over EPICS Channel Access with this PV prefix: "
                         "status, every signal, STATE, STOP (anyone); CMD and ACK with the "
                         "token (needs pyrt[epics])")
+    g.add_argument("--epics-interface", metavar="ADDR", action="append",
+                   help="serve EPICS on this interface address (repeat for more; default "
+                        "127.0.0.1, or $EPICS_CAS_INTF_ADDR_LIST); beyond loopback a token "
+                        "is required, and it crosses the network in clear (docs/daq.md)")
     g.add_argument("--verbose", action="store_true",
                    help="log caproto's INFO lines too (one per Channel Access client connect); "
                         "default: its warnings only")
 
 
 def read_token(token_file: str | None) -> str | None:
-    """The token from ``token_file`` (first line) or ``$PYRT_TOKEN``; None if neither."""
+    """The token from ``token_file`` (first line) or ``$PYRT_TOKEN``; None if neither.
+
+    Refused with the reason (:class:`~pyrt.errors.ConfigError`): a token
+    shorter than :data:`~pyrt.server.guard.MIN_TOKEN` characters, and a token
+    file that anybody but its owner may read or write (as ssh refuses such a key).
+    """
     if token_file:
         try:
             with open(token_file, encoding="utf-8") as f:
+                mode = os.fstat(f.fileno()).st_mode
+                if mode & 0o077:
+                    raise ConfigError(
+                        f"the token file may be read or written by others (mode "
+                        f"{mode & 0o777:04o}); make it its owner's only: chmod 600 {token_file}",
+                        token_file)
                 token = f.readline(MAX_TOKEN + 2).strip()
         except OSError as exc:
             raise ConfigError(f"cannot read the token: {exc.strerror}", token_file) from None
@@ -73,9 +94,11 @@ def read_token(token_file: str | None) -> str | None:
         token = os.environ.get("PYRT_TOKEN", "").strip()
         if not token:
             return None
-    if len(token) > MAX_TOKEN or any(c.isspace() for c in token):
-        raise ConfigError(f"a token is one word of at most {MAX_TOKEN} characters")
-    return token
+    try:
+        return check_token(token)
+    except ConfigError as exc:
+        where = token_file if token_file else "$PYRT_TOKEN"
+        raise ConfigError(exc.message, where) from None
 
 
 class Service:
@@ -102,6 +125,11 @@ class Service:
 
         if self.serve:
             host, port = self.server.start()
+            # "serving" means STATUS is answered: wait (bounded) for the loop's first snapshot
+            deadline = time.monotonic() + FIRST_STATUS_S
+            while (self.server.hub.snapshot[2] is None and self.runner.crashed is None
+                   and time.monotonic() < deadline):
+                time.sleep(0.005)
             who = ("AUTH with the token to command" if self.server.has_token
                    else "no token: status only")
             tell(f"serving {self.robot.name} on {host}:{port} ({who})")
@@ -119,8 +147,22 @@ class Service:
             if self.runner.crashed is not None:
                 log.error("the control loop has stopped: %r", self.runner.crashed)
                 return 1
+            dead = self._dead_door()
+            if dead:  # nothing can reach the station: stop, and say so by the exit status
+                log.error("%s; every motor stopped, exiting", dead)
+                self.stop_motors()
+                return 1
         self.stop_motors()
         return 0
+
+    def _dead_door(self) -> str:
+        """Why a door this service opened has stopped serving ('' if none has)."""
+        if self.serve and self.server.crashed is not None:
+            return f"the DAQ server has stopped ({self.server.crashed!r})"
+        epics = self.epics
+        if epics is not None and getattr(epics, "error", None) is not None:
+            return f"the EPICS server has stopped ({epics.error!r})"
+        return ""
 
     def stop(self) -> None:
         """End :meth:`run_headless` (from another thread)."""
@@ -153,6 +195,8 @@ def prepare_service(args: argparse.Namespace, runner: Any, robot: ServedRobot) -
         if args.token_file:
             raise ConfigError("--token-file needs --serve or --epics")
         return None
+    if getattr(args, "epics_interface", None) and not args.epics:
+        raise ConfigError("--epics-interface needs --epics PREFIX")
     if args.headless:
         logging.basicConfig(stream=sys.stderr, level=logging.INFO,
                             format="%(asctime)s %(name)s: %(message)s")
@@ -169,5 +213,6 @@ def prepare_service(args: argparse.Namespace, runner: Any, robot: ServedRobot) -
         from pyrt.server.epics import EpicsService
 
         epics = EpicsService(runner, robot, server, args.epics, token=token,
+                             interfaces=getattr(args, "epics_interface", None),
                              verbose=bool(getattr(args, "verbose", False)))
     return Service(runner, robot, server, epics, serve=bool(args.serve))

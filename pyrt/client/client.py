@@ -39,6 +39,8 @@ __all__ = ["Client", "Reply", "ServerError", "Status", "parse_address", "parse_s
 MAX_REPLY_LINE = 1 << 20
 #: How many replies to abandoned requests :attr:`Client.late` keeps.
 LATE_KEPT = 16
+#: Longest wait for the connection and the server's greeting, seconds.
+CONNECT_TIMEOUT_S = 5.0
 
 
 class ServerError(PyrtError):
@@ -118,11 +120,20 @@ def parse_address(
 
 
 class Client:
-    """A connection to a pyrt server; ``timeout_s`` bounds every wait for a reply."""
+    """A connection to a pyrt server; ``timeout_s`` bounds every wait for a reply,
+    ``connect_timeout_s`` (default the shorter of ``timeout_s`` and
+    :data:`CONNECT_TIMEOUT_S`) the connection and the server's greeting: a
+    live server greets at once, so a dead or stuck one is reported in
+    seconds even when replies may take minutes (``wait``)."""
 
-    def __init__(self, host: str, port: int, timeout_s: float = 10.0):
+    def __init__(self, host: str, port: int, timeout_s: float = 10.0,
+                 connect_timeout_s: float | None = None):
+        if not timeout_s > 0:
+            raise ValueError(f"timeout_s must be > 0, got {timeout_s!r}")
         self.timeout_s = timeout_s
-        self._sock = socket.create_connection((host, port), timeout=timeout_s)
+        greet_s = (min(timeout_s, CONNECT_TIMEOUT_S) if connect_timeout_s is None
+                   else connect_timeout_s)
+        self._sock = socket.create_connection((host, port), timeout=greet_s)
         self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         #: The server's ``(host, port)``.
         self.address = (host, port)
@@ -135,7 +146,15 @@ class Client:
         #: Replies read for abandoned requests, ``(request, Reply)``, the latest LATE_KEPT.
         self.late: deque[tuple[str, Reply]] = deque(maxlen=LATE_KEPT)
         self.closed = False
-        greeting = self._read_reply()
+        try:
+            greeting = self._read_reply(greet_s)
+        except TimeoutError:
+            self.close()
+            raise TimeoutError(f"no greeting from {host}:{port} within {greet_s:g} s: "
+                               "the server is not serving (stopped, stuck or not pyrt)") from None
+        except BaseException:
+            self.close()
+            raise
         if not greeting.ok:
             self.close()
             raise ServerError(greeting.code, greeting.text, greeting.lines)

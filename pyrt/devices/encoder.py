@@ -90,7 +90,9 @@ class Encoder(Component):
         """read: read and display the length (cm)."""
         return self.length()
 
-    @command(name="readloop", reads_only=True, reply=lambda _r: "readloop")
+    # Not read-only: it turns on a line at every poll on the operator's console
+    # (the asker never sees them), a flood that only the operator may start.
+    @command(name="readloop", reply=lambda _r: "readloop")
     def readloop(self) -> None:
         """readloop: enter the read/display loop (the length at every poll)."""
         self.looping = True

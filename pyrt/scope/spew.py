@@ -2,11 +2,18 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 
 from pyrt.scope.sources import Source, compile_sources
 
-__all__ = ["Spew"]
+__all__ = ["MAX_SPEW_HZ", "MIN_SPEW_HZ", "Spew"]
+
+#: The slowest spew: one sample every 100 s (a slower one would wait for ever,
+#: and its interval, in ns, would overflow long before the rate reaches 0).
+MIN_SPEW_HZ = 0.01
+#: The fastest spew.
+MAX_SPEW_HZ = 10_000.0
 
 
 class Spew:
@@ -26,8 +33,10 @@ class Spew:
     ):
         if len(names) != len(sources):
             raise ValueError("one name per source")
-        if not 0 < hz <= 10_000:
-            raise ValueError(f"spew rate must be 0 < hz <= 10000, got {hz!r}")
+        if not (isinstance(hz, (int, float)) and math.isfinite(hz)
+                and MIN_SPEW_HZ <= hz <= MAX_SPEW_HZ):
+            raise ValueError(f"spew rate must be {MIN_SPEW_HZ:g} <= hz <= {MAX_SPEW_HZ:g}, "
+                             f"got {hz!r}")
         self.names = tuple(names)
         self.hz = float(hz)
         self.interval_ns = int(1e9 / hz)

@@ -38,6 +38,14 @@ class Connection:
         self.subscribed = 0.0
         self.auth_failures = 0
         self.last_active = time.monotonic()
+        #: When a subscription sample was last queued for it (a subscriber
+        #: that has neither requests nor samples is idle: it may be evicted).
+        self.last_sample = 0.0
+        #: When the peer last took bytes of its replies (or, with nothing
+        #: owed before, when the first unsent byte was queued).
+        self.last_sent = time.monotonic()
+        #: A bug in pyrt was met handling it: it is being closed.
+        self.failed = False
         self.paused = False  # too many requests queued: read no more for now
         self.backlogged = False  # over the server's rate: lines wait in inbuf
         self.writing = False

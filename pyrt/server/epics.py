@@ -47,6 +47,26 @@ refused (``RESULT`` says ``ERR auth``) and runs nothing.  ``CMD`` and ``ACK``
 read back without the token.  Commands written over Channel Access run one
 at a time, in a console session of their own.
 
+**Closed by default.**  The IOC listens on loopback (127.0.0.1) unless
+interfaces are named (``interfaces``, ``--epics-interface``, or
+``EPICS_CAS_INTF_ADDR_LIST``); caproto's own default would be every
+interface.  Listening beyond loopback without a token is refused, and the
+token crosses the network in clear inside the written value (see
+``docs/daq.md``: a gateway or an SSH tunnel).
+
+**One master.**  A ``CMD``, ``ACK`` or setpoint write takes the one
+privilege the DAQ link also grants (:meth:`~pyrt.server.Server.claim_privilege`):
+refused (``ERR busy``) while a DAQ client is privileged, and while EPICS
+commands come (until ``lease_s`` after the last) a DAQ ``AUTH`` is refused.
+
+**An audit trail that holds.**  A write with a wrong token, and a write to
+a read-only PV, is a failure of the writer's real address (never the host
+name it claims) in the server's :class:`~pyrt.server.guard.FailureGuard`:
+audit lines within a budget, then summaries, and a back-off during which
+that address's token writes are refused unread.  Host and user names
+(whatever the client claims) are escaped before they reach a log line or
+the console, in pyrt's lines and in caproto's.
+
 caproto logs every client's connection at INFO; its logger is set to
 WARNING unless ``verbose``.
 """
@@ -55,21 +75,25 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import contextvars
 import hmac
 import io
 import logging
 import math
+import os
 import re
 import threading
-from typing import Any
+from typing import Any, NamedTuple
 
 from pyrt.component import Limits
 from pyrt.errors import ConfigError, PyrtError
+from pyrt.server.guard import check_token, escape_text
+from pyrt.server.limits import is_loopback
 from pyrt.server.protocol import format_error, format_reply
 from pyrt.server.robot import ObserverRunner
 from pyrt.server.session import run_shell
 
-__all__ = ["FIXED_PVS", "EpicsService", "caproto_available", "pv_name"]
+__all__ = ["FIXED_PVS", "EpicsService", "caproto_available", "epics_interfaces", "pv_name"]
 
 log = logging.getLogger("pyrt.server.epics")
 
@@ -86,6 +110,65 @@ FIXED_PVS = ("T", "FAULT_MSG", "RESULT", "STOP", "TICKS", "OVERRUNS", "LATE_P99_
 BOOL_STATES = ("no", "yes")
 #: The states of ``STOP``.
 STOP_STATES = ("idle", "stop")
+#: How long a master over EPICS keeps the privilege after its last command.
+LEASE_S = 10.0
+#: The name of that master where the privilege is claimed.
+MASTER = "EPICS CMD"
+#: caproto's loggers whose lines may carry what a client claims (host, user, PV names).
+_CAPROTO_LOGGERS = ("caproto", "caproto.ctx", "caproto.circ", "caproto.ch", "caproto.bcast",
+                    "caproto.bcast.search", "caproto.bcast.beacon", "caproto.server.common",
+                    "caproto.asyncio.server", "caproto.server.server")
+
+
+class _Writer(NamedTuple):
+    """Who writes a PV: the real address, and the names it claims."""
+
+    addr: str
+    port: int
+    host: str
+    user: str
+
+    def __str__(self) -> str:
+        return (f"{self.addr}:{self.port} (claims host '{escape_text(self.host, 60)}', "
+                f"user '{escape_text(self.user, 60)}')")
+
+
+#: The writer of the PV write being handled (set by the channels' ``auth_write``).
+_WRITER: contextvars.ContextVar[_Writer | None] = contextvars.ContextVar(
+    "pyrt_epics_writer", default=None)
+
+
+def _writer(hostname: Any, username: Any, user_address: Any) -> _Writer:
+    if isinstance(user_address, (tuple, list)) and len(user_address) >= 2:
+        addr, port = str(user_address[0]), int(user_address[1])
+    else:
+        addr, port = "?", 0
+    return _Writer(addr, port, str(hostname), str(username))
+
+
+def epics_interfaces(interfaces: list[str] | None) -> list[str]:
+    """The addresses the IOC listens on: ``interfaces`` when named, else
+    ``EPICS_CAS_INTF_ADDR_LIST`` when set, else loopback only."""
+    if interfaces:
+        return list(interfaces)
+    env = os.environ.get("EPICS_CAS_INTF_ADDR_LIST", "").split()
+    return [a.partition(":")[0] for a in env] if env else ["127.0.0.1"]
+
+
+class _EscapeClientText(logging.Filter):
+    """caproto's log lines made harmless: what a client claims (host and user
+    names, PV names) may hold line ends or terminal escapes."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.name.startswith("caproto"):
+            try:
+                msg = record.getMessage()
+            except Exception:  # a record that cannot format: leave it to logging
+                return True
+            clean = escape_text(msg, 2000)
+            if clean != msg:
+                record.msg, record.args = clean, ()
+        return True
 
 
 def _precision(fmt: str) -> int:
@@ -112,21 +195,16 @@ def pv_name(name: str) -> str:
 
 class _RefusedWrites(logging.Filter):
     """A Channel Access client's write to a read-only PV, refused by caproto: one
-    line (``refused EPICS write: ...``) instead of caproto's traceback, and an
-    audit line of the station; the follow-up error caproto's write handler
-    leaves in asyncio (a KeyError in ``handle_write``) is dropped."""
-
-    def __init__(self, station: Any):
-        super().__init__()
-        self.station = station
+    line (``refused EPICS write: ...``, its text escaped when the PV refused it)
+    instead of caproto's traceback (the audit line is the PV's own, through the
+    guard); the follow-up error caproto's write handler leaves in asyncio (a
+    KeyError in ``handle_write``) is dropped."""
 
     def filter(self, record: logging.LogRecord) -> bool:
         # Another IOC's filter may have seen the record first: it keeps the refusal.
         exc = record.exc_info[1] if record.exc_info else getattr(record, "pyrt_refused", None)
         if record.name.startswith("caproto") and type(exc).__name__ == "Forbidden":
-            line = f"refused EPICS write: {exc}"
-            with contextlib.suppress(Exception):
-                self.station.audit("EPICS", line)
+            line = f"refused EPICS write: {escape_text(exc, 400)}"
             record.pyrt_refused = exc
             record.msg, record.args = line, ()
             record.exc_info = record.exc_text = None
@@ -140,12 +218,26 @@ _PV_WORD = re.compile(r"^[A-Za-z0-9_]+$")
 
 
 def _read_only(ca: Any, base: type) -> type:
-    """``base`` whose value Channel Access clients may read but not write."""
-    from caproto import AccessRights
+    """``base`` whose value Channel Access clients may read but not write; a
+    write is refused through ``pyrt_refuse`` (set by the service: audited,
+    counted by the writer's real address), escaped, before caproto logs it."""
+    from caproto import AccessRights, Forbidden
 
     class ReadOnly(base):
+        pyrt_name = "?"
+        pyrt_refuse: Any = None
+
         def check_access(self, hostname: str, username: str) -> Any:
             return AccessRights.READ
+
+        async def auth_write(self, hostname: Any, username: Any, data: Any, data_type: Any,
+                             metadata: Any, *, flags: int = 0,
+                             user_address: Any = None) -> Any:
+            who = _writer(hostname, username, user_address)
+            refuse = self.pyrt_refuse
+            if refuse is not None:
+                refuse(self.pyrt_name, who)
+            raise Forbidden(f"{self.pyrt_name} is read-only; write from {who}")
 
     ReadOnly.__name__ = f"ReadOnly{base.__name__}"
     return ReadOnly
@@ -212,9 +304,11 @@ def _require_caproto() -> Any:
 class EpicsService:
     """Serve ``server``'s robot as Channel Access PVs (see the module text).
 
-    ``interfaces``: the addresses to serve on (default: caproto's, from
-    ``EPICS_CAS_INTF_ADDR_LIST``); ports follow ``EPICS_CA_SERVER_PORT``.
+    ``interfaces``: the addresses to serve on (default: those of
+    ``EPICS_CAS_INTF_ADDR_LIST`` when set, else 127.0.0.1 only; beyond
+    loopback a token is required); ports follow ``EPICS_CA_SERVER_PORT``.
     ``verbose``: keep caproto's INFO lines (one per client connect ...).
+    ``lease_s``: how long a CMD keeps the privilege after it has run.
     """
 
     def __init__(
@@ -229,22 +323,36 @@ class EpicsService:
         period_s: float = 0.1,
         stats_period_s: float = 1.0,
         verbose: bool = False,
+        lease_s: float = LEASE_S,
     ):
         ca = _require_caproto()
         if not prefix or any(c.isspace() for c in prefix) or len(prefix) > 40:
             raise ConfigError(f"EPICS prefix must be 1..40 characters, no spaces: {prefix!r}")
+        self.interfaces = epics_interfaces(interfaces)
+        beyond = [a for a in self.interfaces if not is_loopback(a)]
+        if beyond and not token:
+            raise ConfigError(
+                f"refusing to serve EPICS on {', '.join(beyond)} without a token: anybody who "
+                "can reach it could write STOP and read every PV, and nobody could command; "
+                "give --token-file or PYRT_TOKEN, or serve on 127.0.0.1")
+        if beyond and token:
+            check_token(token)
         logging.getLogger("caproto").setLevel(logging.INFO if verbose else logging.WARNING)
-        refused = _RefusedWrites(robot.station)
+        refused = _RefusedWrites()
+        escape = _EscapeClientText()
         logging.getLogger("caproto.circ").addFilter(refused)
         logging.getLogger("asyncio").addFilter(refused)
+        for name in _CAPROTO_LOGGERS:
+            logging.getLogger(name).addFilter(escape)
         self._refused = refused
+        self._escape = escape
         self._ca = ca
         self.runner = runner
         self.robot = robot
         self.server = server
         self.prefix = prefix
         self._token = token.encode("utf-8") if token else None
-        self.interfaces = interfaces
+        self.lease_s = float(lease_s)
         self.period_s = period_s
         self.stats_period_s = stats_period_s
         self._shell: Any = None
@@ -257,6 +365,7 @@ class EpicsService:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._task: asyncio.Task | None = None
         self._started = threading.Event()
+        self._closing = False
         self.error: BaseException | None = None
         self.pvdb = self._build()
 
@@ -264,7 +373,7 @@ class EpicsService:
     def summary(self) -> str:
         return f"{len(self.pvdb)} PVs, STOP for everyone, " + (
             "CMD and ACK with the token in the written value" if self._token
-            else "no token: no CMD or ACK")
+            else "no token: no CMD or ACK") + f"; on {', '.join(self.interfaces)}"
 
     def _build(self) -> dict[str, Any]:
         ca = self._ca
@@ -296,6 +405,36 @@ class EpicsService:
         # caproto's channel classes (no type information: Any to the checker)
         enum_channel: Any = ca.ChannelEnum
         char_channel: Any = ca.ChannelChar
+
+        from caproto import Forbidden
+
+        def writer_known(base: Any) -> Any:
+            """``base`` whose write handlers know who writes (:data:`_WRITER`)."""
+
+            class Known(base):
+                pyrt_name = "?"
+
+                async def auth_write(self, hostname: Any, username: Any, data: Any,
+                                     data_type: Any, metadata: Any, *, flags: int = 0,
+                                     user_address: Any = None) -> Any:
+                    who = _writer(hostname, username, user_address)
+                    mark = _WRITER.set(who)
+                    try:
+                        return await super().auth_write(hostname, username, data, data_type,
+                                                        metadata, flags=flags,
+                                                        user_address=user_address)
+                    except (UnicodeDecodeError, ValueError, IndexError) as exc:
+                        # a value caproto cannot convert (invalid UTF-8, empty text, a NUL
+                        # first, an enum index out of range): refused as a failure of its
+                        # writer, one log line, no traceback
+                        raise Forbidden(service._undecodable(self.pyrt_name, who, exc)) from None
+                    finally:
+                        _WRITER.reset(mark)
+
+            return Known
+
+        enum_channel = writer_known(enum_channel)
+        char_channel = writer_known(char_channel)
 
         class StopChannel(enum_channel):
             async def verify_value(self, data: Any) -> Any:
@@ -329,7 +468,26 @@ class EpicsService:
 
                 db[key] = SetpointChannel(value="", max_length=CMD_LENGTH,
                                           string_encoding="utf-8")
+        for key, pv in db.items():
+            pv.pyrt_name = key
+            if hasattr(pv, "pyrt_refuse"):
+                pv.pyrt_refuse = self._refused_write
         return db
+
+    def _undecodable(self, pv: str, who: _Writer, exc: Exception) -> str:
+        """A write whose value the PV cannot take (not UTF-8 text, an enum index out
+        of range ...): a failure of the writer's address; what is said of it."""
+        text = (f"{escape_text(pv)} cannot take the written value ({type(exc).__name__}); "
+                f"write from {who} refused, nothing was run")
+        self.server.guard.failed(who.addr, "EPICS", f"refused EPICS write: {text}",
+                                 "refused EPICS write")
+        return text
+
+    def _refused_write(self, pv: str, who: _Writer) -> None:
+        """A write to a read-only PV: a failure of the writer's address (audited
+        within the guard's budget, then summarised)."""
+        self.server.guard.failed(who.addr, "EPICS", f"refused EPICS write to {escape_text(pv)} "
+                                 f"from {who}: read-only", "refused EPICS write")
 
     def _setpoints(self) -> list[tuple[str, str]]:
         """``(object, parameter)`` of every writable run-time parameter (``set``)."""
@@ -342,15 +500,17 @@ class EpicsService:
         (the CMD token rule; its reply goes to RESULT and REPLY, as CMD's)."""
         token, _, value = self._text(data).partition(" ")
         value = value.strip()
-        if not self._token_ok(token):
-            reply = format_error("auth", "wrong token in the written value; nothing was set")
-        elif not value:
-            reply = format_error("syntax", "write 'TOKEN VALUE'")
-        else:
-            loop = asyncio.get_running_loop()
-            reply = await loop.run_in_executor(None, self._run, f"set {target} {value}")
-        await self._result(reply)
-        return value if self._token_ok(token) else ""
+        refusal = self._gate(token, "nothing was set")
+        if refusal is None and not value:
+            refusal = format_error("syntax", "write 'TOKEN VALUE'")
+        if refusal is None:
+            refusal = _unprintable(value, "nothing was set")
+        if refusal is not None:
+            await self._result(refusal)
+            return ""
+        loop = asyncio.get_running_loop()
+        await self._result(await loop.run_in_executor(None, self._run, f"set {target} {value}"))
+        return value
 
     def _status_fields(self) -> list[tuple[str, str, str, Limits | None]]:
         """``(name, units, format, limits)`` of each status field, from the
@@ -374,6 +534,9 @@ class EpicsService:
         """Stop the Channel Access server."""
         logging.getLogger("caproto.circ").removeFilter(self._refused)
         logging.getLogger("asyncio").removeFilter(self._refused)
+        for name in _CAPROTO_LOGGERS:
+            logging.getLogger(name).removeFilter(self._escape)
+        self._closing = True
         self.server.hub.extras_wanted = False
         loop, task = self._loop, self._task
         if loop is not None and task is not None:
@@ -391,8 +554,19 @@ class EpicsService:
         except BaseException as exc:
             self.error = exc
             log.exception("EPICS server stopped")
+            if self._started.is_set() and not self._closing:
+                self._died(exc)
         finally:
             self._started.set()
+
+    def _died(self, exc: BaseException) -> None:
+        """The IOC's thread has failed while serving: a fault the operator sees
+        (the station is tripped, naming EPICS)."""
+        cause = (f"the EPICS server has stopped ({type(exc).__name__}: {exc}; a bug in pyrt): "
+                 "no Channel Access client can reach the station")
+        with contextlib.suppress(Exception):
+            self.runner.call(self.robot.station.trip, cause[:300], "epics", take_fault=False,
+                             name="EPICS stopped")
 
     async def _serve(self) -> None:
         from caproto.asyncio.server import Context
@@ -494,6 +668,25 @@ class EpicsService:
         assert self._token is not None
         return bool(token) and hmac.compare_digest(token.encode("utf-8"), self._token)
 
+    def _gate(self, token: str, nothing: str) -> str | None:
+        """The token rule of a write that acts (CMD, ACK, a setpoint): an ``ERR``
+        reply when it may not (its address backs off, or the token is wrong:
+        a failure of that address), None when it may.  ``nothing``: what the
+        refusal says did not happen."""
+        who = _WRITER.get() or _Writer("?", 0, "", "")
+        guard = self.server.guard
+        wait = guard.blocked(who.addr, "EPICS write")
+        if wait > 0:
+            return format_error("auth", f"too many refused writes from {who.addr}: try again "
+                                f"in {math.ceil(wait):.0f} s; {nothing}")
+        if not self._token_ok(token):
+            wait = guard.failed(who.addr, "EPICS", f"refused EPICS write from {who}: wrong token",
+                                "refused EPICS write")
+            more = (f" ({who.addr} may write again in {math.ceil(wait):.0f} s)"
+                    if wait > 0 else "")
+            return format_error("auth", f"wrong token in the written value; {nothing}{more}")
+        return None
+
     @staticmethod
     def _text(data: Any) -> str:
         text = data if isinstance(data, str) else bytes(data).decode("utf-8", "replace")
@@ -502,23 +695,23 @@ class EpicsService:
     async def _command(self, data: Any) -> str:
         token, _, line = self._text(data).partition(" ")
         line = line.strip()
-        if not self._token_ok(token):
-            reply = format_error("auth", "wrong token in the written value; nothing was run")
-        elif not line:
-            reply = format_error("syntax", "write 'TOKEN COMMAND'")
-        else:
-            loop = asyncio.get_running_loop()
-            reply = await loop.run_in_executor(None, self._run, line)
-        await self._result(reply)
-        return line if self._token_ok(token) else ""
+        refusal = self._gate(token, "nothing was run")
+        if refusal is None and not line:
+            refusal = format_error("syntax", "write 'TOKEN COMMAND'")
+        if refusal is None:
+            refusal = _unprintable(line, "nothing was run")
+        if refusal is not None:
+            await self._result(refusal)
+            return ""
+        loop = asyncio.get_running_loop()
+        await self._result(await loop.run_in_executor(None, self._run, line))
+        return line
 
     async def _ack(self, data: Any) -> str:
         """A write to ACK: ``TOKEN`` acknowledges the fault (the operator's act)."""
         token = self._text(data).split(" ", 1)[0]
-        if not self._token_ok(token):
-            reply = format_error("auth", "wrong token in the written value; nothing was "
-                                 "acknowledged")
-        else:
+        reply = self._gate(token, "nothing was acknowledged")
+        if reply is None:
             loop = asyncio.get_running_loop()
             reply = await loop.run_in_executor(None, self._run_ack)
         await self._result(reply)
@@ -529,22 +722,44 @@ class EpicsService:
         the call meets first, is what is being acknowledged."""
         station = self.robot.station
         with self._shell_lock:
-            self.runner.take_faults()  # FAULT_MSG has shown them; this acknowledges them
+            busy = self.server.claim_privilege(MASTER)
+            if busy is not None:
+                return format_error("busy", busy)
             try:
-                said = self.runner.call(station.acknowledge, name="ack", take_fault=False)
-            except PyrtError as exc:
-                return format_error("command", str(exc))
-            return format_reply([said])
+                self.runner.take_faults()  # FAULT_MSG has shown them; this acknowledges them
+                try:
+                    said = self.runner.call(station.acknowledge, name="ack", take_fault=False)
+                except PyrtError as exc:
+                    return format_error("command", str(exc))
+                return format_reply([said])
+            finally:
+                self.server.renew_privilege(MASTER, self.lease_s)
 
     def _run(self, line: str) -> str:
+        """Run ``line`` in the EPICS session, holding the one privilege (one master)."""
         with self._shell_lock:
-            if self._shell is None:
-                self._shell = self.robot.make_shell(self.runner, io.StringIO(),
-                                                    source="EPICS CMD")
+            busy = self.server.claim_privilege(MASTER)
+            if busy is not None:
+                return format_error("busy", busy)
             try:
+                if self._shell is None:
+                    self._shell = self.robot.make_shell(self.runner, io.StringIO(),
+                                                        source="EPICS CMD")
                 reply, _end = run_shell(self._shell, line)
             except Exception as exc:
                 log.exception("EPICS command %r failed", line[:60])
                 reply = format_error("internal", f"{type(exc).__name__}: {exc}")
+            finally:
+                self.server.renew_privilege(MASTER, self.lease_s)
             return reply
+
+
+def _unprintable(text: str, nothing: str) -> str | None:
+    """``ERR text`` when ``text`` holds a character that is not printable (a line
+    end, a terminal escape ...), as the DAQ link refuses it; else None."""
+    for i, c in enumerate(text):
+        if not c.isprintable() and c != "\t":
+            return format_error("text", f"control character {ord(c):#04x} at character {i}; "
+                                f"{nothing}")
+    return None
 

@@ -21,7 +21,6 @@ from typing import Any
 from pyrt._version import __version__
 from pyrt.server.connection import Connection
 from pyrt.server.limits import (
-    EVICT_IDLE_S,
     GUARD_NS,
     GUARD_POLL_S,
     LINGER_S,
@@ -50,6 +49,17 @@ class IOLoopMixin(ServerState):
 
     def _io_main(self) -> None:
         lower_priority(self.nice)
+        try:
+            self._io_loop()
+        except BaseException as exc:  # a bug outside any one client's handling
+            if not self._stopping:
+                self._died(exc)
+        finally:
+            for conn in list(self._conns.values()):
+                with contextlib.suppress(Exception):
+                    self._finish(conn)
+
+    def _io_loop(self) -> None:
         sel = self._sel
         assert sel is not None
         next_check = 0.0
@@ -63,8 +73,11 @@ class IOLoopMixin(ServerState):
                 for conn in backlog:
                     conn.backlogged = False
                     if not conn.closed:
-                        self._parse(conn)
-                        self._set_events(conn)
+                        try:
+                            self._parse(conn)
+                            self._set_events(conn)
+                        except Exception as exc:
+                            self._client_failed(conn, exc)
             elif self._over_budget():
                 # Over the rate: let the loop (and everything else) have the CPU.
                 time.sleep(window_end - now)
@@ -84,10 +97,13 @@ class IOLoopMixin(ServerState):
                         while os.read(self._wake_r, 4096):
                             pass
                 else:
-                    if mask & selectors.EVENT_READ:
-                        self._on_readable(data)
-                    if mask & selectors.EVENT_WRITE and not data.closed:
-                        self._flush(data)
+                    try:
+                        if mask & selectors.EVENT_READ:
+                            self._on_readable(data)
+                        if mask & selectors.EVENT_WRITE and not data.closed:
+                            self._flush(data)
+                    except Exception as exc:
+                        self._client_failed(data, exc)
             if self.hub.events:
                 self._pump()
             self._service_dirty()
@@ -95,8 +111,51 @@ class IOLoopMixin(ServerState):
             if now >= next_check:
                 next_check = now + 0.1
                 self._check_timeouts(now)
-        for conn in list(self._conns.values()):
-            self._finish(conn)
+                self.guard.flush()
+
+    def _client_failed(self, conn: Connection, exc: BaseException) -> None:
+        """A bug met while handling ``conn`` (any server thread): that client is
+        closed with ``ERR internal`` and the traceback goes to the log; the
+        server, and every other client, go on."""
+        self.counters["internal"] += 1
+        log.error("%r: a bug in pyrt handling this client; it is closed, the server goes on",
+                  conn, exc_info=exc)
+        if conn.failed:  # failing again: close at once, without a reply
+            with conn.lock:
+                conn.drop = conn.drop or "a bug in pyrt handling it"
+            with contextlib.suppress(Exception):
+                self._touch(conn)
+            return
+        conn.failed = True
+        try:
+            self._output(conn, format_error(
+                "internal", f"{type(exc).__name__} (a bug in pyrt; the server log has the "
+                "traceback); closing this connection"))
+            self._close_after_flush(conn)
+        except Exception:
+            with conn.lock:
+                conn.drop = "a bug in pyrt handling it"
+            with contextlib.suppress(Exception):
+                self._touch(conn)
+
+    def _died(self, exc: BaseException) -> None:
+        """The I/O thread itself has failed: nobody can reach the station over
+        the network any more, a fault the operator must see.  The station is
+        tripped (every motor stopped), naming the server."""
+        self.crashed = exc
+        log.critical("the DAQ server has stopped: a bug in pyrt", exc_info=exc)
+        listener = self._listener
+        if listener is not None:  # refuse newcomers at once rather than leave them unanswered
+            with contextlib.suppress(Exception):
+                assert self._sel is not None
+                self._sel.unregister(listener)
+            with contextlib.suppress(OSError):
+                listener.close()
+        cause = (f"the DAQ server has stopped ({type(exc).__name__}: {exc}; a bug in pyrt): "
+                 "no client can reach the station")
+        with contextlib.suppress(Exception):
+            self.runner.call(self.robot.station.trip, cause[:300], "server", take_fault=False,
+                             name="server stopped")
 
     def _over_budget(self) -> bool:
         return self.counters["requests"] - self._window_start >= self._budget
@@ -134,33 +193,44 @@ class IOLoopMixin(ServerState):
             except OSError as exc:  # out of descriptors: leave it in the backlog
                 log.warning("accept failed: %s", exc)
                 return
-            reserve, refusal = self._admit(peer)
-            if reserve is None:
-                log.warning("refused %s: %s", peer, refusal)
+            try:
+                self._greet(sock, peer)
+            except Exception as exc:
+                self.counters["internal"] += 1
+                log.error("a bug in pyrt accepting %s; that connection is closed", peer,
+                          exc_info=exc)
                 with contextlib.suppress(OSError):
-                    sock.setblocking(False)
-                    sock.send(format_error("full", refusal).encode())
-                sock.close()
-                continue
-            sock.setblocking(False)
+                    sock.close()
+
+    def _greet(self, sock: socket.socket, peer: Any) -> None:
+        """Admit a new connection (or refuse it) and greet it."""
+        reserve, refusal = self._admit(peer)
+        if reserve is None:
+            log.warning("refused %s: %s", peer, refusal)
             with contextlib.suppress(OSError):
-                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            conn = Connection(self._next_id, sock, peer)
-            conn.reserve = reserve
-            self._next_id += 1
-            self._conns[conn.id] = conn
-            self.counters["accepted"] += 1
-            assert self._sel is not None
-            self._sel.register(sock, selectors.EVENT_READ, conn)
-            conn.events = selectors.EVENT_READ
-            who = "AUTH to command" if self._token is not None else "no token: status only"
-            if reserve:
-                self.counters["reserve"] += 1
-                who = f"{self.max_clients} clients already: a reserved slot, AUTH or stop only"
-            self._output(conn, format_reply(
-                [f"pyrt {__version__} {self.robot.name} server; {who}; HELP lists the commands"]
-            ))
-            log.info("%r connected%s", conn, " (reserved slot)" if reserve else "")
+                sock.setblocking(False)
+                sock.send(format_error("full", refusal).encode())
+            sock.close()
+            return
+        sock.setblocking(False)
+        with contextlib.suppress(OSError):
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        conn = Connection(self._next_id, sock, peer)
+        conn.reserve = reserve
+        self._next_id += 1
+        self._conns[conn.id] = conn
+        self.counters["accepted"] += 1
+        assert self._sel is not None
+        self._sel.register(sock, selectors.EVENT_READ, conn)
+        conn.events = selectors.EVENT_READ
+        who = "AUTH to command" if self._token is not None else "no token: status only"
+        if reserve:
+            self.counters["reserve"] += 1
+            who = f"{self.max_clients} clients already: a reserved slot, AUTH or stop only"
+        self._output(conn, format_reply(
+            [f"pyrt {__version__} {self.robot.name} server; {who}; HELP lists the commands"]
+        ))
+        log.info("%r connected%s", conn, " (reserved slot)" if reserve else "")
 
     def _admit(self, peer: Any) -> tuple[bool | None, str]:
         """Where a new connection from ``peer`` goes: a slot (False), a reserved
@@ -192,22 +262,29 @@ class IOLoopMixin(ServerState):
     def _evictable(self, conns: list[Connection], reserve: bool) -> Connection | None:
         """The connection a newcomer may replace: the oldest that has sent
         nothing, else the unprivileged, unsubscribed one idle longest (at
-        least :data:`EVICT_IDLE_S`); never the privileged one, a subscriber,
-        or one with work in hand."""
+        least ``evict_idle_s``), else the unprivileged subscriber that has
+        had neither a request nor a sample for longest (at least
+        ``evict_idle_s``: a subscription too slow to be in use); never the
+        privileged one or one with work in hand."""
         mine = [c for c in conns if c.reserve == reserve and not c.closing and not c.closed
-                and not c.privileged and not c.subscribed and c.pending == 0]
-        fresh = [c for c in mine if c.fresh]
+                and not c.privileged and c.pending == 0]
+        fresh = [c for c in mine if c.fresh and not c.subscribed]
         if fresh:
             return min(fresh, key=lambda c: c.connected_at)
-        limit = time.monotonic() - EVICT_IDLE_S
-        idle = [c for c in mine if c.last_active <= limit]
-        return min(idle, key=lambda c: c.last_active) if idle else None
+        limit = time.monotonic() - self.evict_idle_s
+        idle = [c for c in mine if not c.subscribed and c.last_active <= limit]
+        if idle:
+            return min(idle, key=lambda c: c.last_active)
+        quiet = [c for c in mine if c.subscribed and max(c.last_active, c.last_sample) <= limit]
+        return min(quiet, key=lambda c: max(c.last_active, c.last_sample)) if quiet else None
 
     def _evict(self, conn: Connection) -> None:
         """Close ``conn`` at once for a newcomer: one ``ERR full`` line, sent
         if the socket takes it, no lingering (a flood must not hold descriptors)."""
         self.counters["evicted"] += 1
+        quiet = time.monotonic() - max(conn.last_active, conn.last_sample)
         why = ("sent nothing" if conn.fresh
+               else f"had no sample and sent no request for {quiet:.0f} s" if conn.subscribed
                else f"no request for {time.monotonic() - conn.last_active:.0f} s")
         log.info("%r evicted: the server is full and it %s", conn, why)
         text = format_error("full", f"{self.max_clients} clients already; this connection "
@@ -260,6 +337,8 @@ class IOLoopMixin(ServerState):
                 conn.drop = f"slow reader: more than {self.max_output} bytes unread"
                 conn.out.clear()
             else:
+                if not conn.out:  # the peer has everything so far: its clock starts now
+                    conn.last_sent = time.monotonic()
                 conn.out += data
             if conn.dirty:
                 return
@@ -284,10 +363,13 @@ class IOLoopMixin(ServerState):
                 self._drop(conn, drop)
                 self.counters["dropped_slow"] += drop.startswith("slow")
                 continue
-            self._flush(conn)
-            if resume and not conn.closed:
-                self._parse(conn)
-                self._set_events(conn)
+            try:
+                self._flush(conn)
+                if resume and not conn.closed:
+                    self._parse(conn)
+                    self._set_events(conn)
+            except Exception as exc:
+                self._client_failed(conn, exc)
 
     def _flush(self, conn: Connection) -> None:
         with conn.lock:
@@ -300,6 +382,7 @@ class IOLoopMixin(ServerState):
                     n = -1
                 if n > 0:
                     del conn.out[:n]
+                    conn.last_sent = time.monotonic()
             else:
                 n = 0
         if n < 0:
@@ -311,15 +394,21 @@ class IOLoopMixin(ServerState):
         """Hand subscription samples and faults on to the subscribers."""
         fmt = self.robot.format_status
         conns = self._conns
+        now = time.monotonic()
         for n, (kind, key, t_ns, payload) in enumerate(self.hub.drain()):
             if n & 63 == 63:
                 self._stand_aside()
             if kind == "sample":
                 conn = conns.get(key)
                 if conn is not None and conn.subscribed:
-                    self._output(conn, f"STATUS t={t_ns / 1e9:.6f} {fmt(payload)}\n")
+                    try:
+                        self._output(conn, f"STATUS t={t_ns / 1e9:.6f} {fmt(payload)}\n")
+                        conn.last_sample = now
+                    except Exception as exc:
+                        self._client_failed(conn, exc)
             else:
-                line = f"STATUS FAULT {payload}\n".replace("\r", " ")
+                line = "STATUS FAULT " + "".join(
+                    c if c.isprintable() else " " for c in str(payload)) + "\n"
                 for conn in list(conns.values()):
                     if conn.subscribed:
                         self._output(conn, line)
@@ -328,24 +417,36 @@ class IOLoopMixin(ServerState):
         for conn in list(self._conns.values()):
             if conn.closed:
                 continue
-            if conn.linger_until:
-                if now >= conn.linger_until:
-                    self._finish(conn)
-                continue
-            if conn.closing or conn.subscribed or conn.pending:
-                continue
-            if conn.privileged:
-                bound, what, since = self.idle_timeout_s, "no request", conn.last_active
-            elif conn.fresh or conn.reserve:
-                bound, what = self.greeting_timeout_s, "no request"
-                since = conn.connected_at if conn.fresh else conn.last_active
-            else:
-                bound, what = self.guest_idle_s, "unprivileged: no request"
-                since = conn.last_active
-            if now - since > bound:
-                self.counters["idle"] += 1
-                self._output(conn, format_error("idle", f"{what} for {bound:g} s; closing"))
-                self._close_after_flush(conn)
+            try:
+                self._check_timeout(conn, now)
+            except Exception as exc:
+                self._client_failed(conn, exc)
+
+    def _check_timeout(self, conn: Connection, now: float) -> None:
+        """Close ``conn`` if it has been idle, or has taken no byte of its
+        replies, too long (the I/O thread, every 0.1 s)."""
+        if conn.out and now - conn.last_sent > self.write_stall_s:
+            self.counters["dropped_slow"] += 1
+            self._drop(conn, f"silent reader: no byte taken for {self.write_stall_s:g} s")
+            return
+        if conn.linger_until:
+            if now >= conn.linger_until:
+                self._finish(conn)
+            return
+        if conn.closing or conn.subscribed or conn.pending:
+            return
+        if conn.privileged:
+            bound, what, since = self.idle_timeout_s, "no request", conn.last_active
+        elif conn.fresh or conn.reserve:
+            bound, what = self.greeting_timeout_s, "no request"
+            since = conn.connected_at if conn.fresh else conn.last_active
+        else:
+            bound, what = self.guest_idle_s, "unprivileged: no request"
+            since = conn.last_active
+        if now - since > bound:
+            self.counters["idle"] += 1
+            self._output(conn, format_error("idle", f"{what} for {bound:g} s; closing"))
+            self._close_after_flush(conn)
 
     def _close_after_flush(self, conn: Connection) -> None:
         self._end(conn)

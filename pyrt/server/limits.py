@@ -16,7 +16,7 @@ __all__ = [
     "EVICT_IDLE_S", "GREETING_TIMEOUT_S", "GUARD_NS", "GUARD_POLL_S", "GUEST_IDLE_S",
     "IDLE_TIMEOUT_S", "LINGER_S", "MAX_AUTH_FAILURES", "MAX_CLIENTS", "MAX_FRESH_PER_ADDRESS",
     "MAX_OUTPUT", "MAX_PENDING", "MAX_RATE", "MAX_SUBSCRIPTION_RATE", "NICE", "PUMP_S",
-    "RATE_WINDOW_S", "RESERVED_SLOTS", "SWITCH_INTERVAL_S", "address_is_loopback",
+    "RATE_WINDOW_S", "RESERVED_SLOTS", "SWITCH_INTERVAL_S", "WRITE_STALL_S", "address_is_loopback",
     "is_loopback", "lower_priority",
 ]
 
@@ -44,7 +44,11 @@ EVICT_IDLE_S = 5.0
 #: there may only ``AUTH`` (the operator always gets in) or give a stop
 #: (any client may); anything else gets ``ERR full``.
 RESERVED_SLOTS = 4
+#: Bytes of replies and samples a client may leave unread; beyond, it is dropped.
 MAX_OUTPUT = 256 * 1024
+#: A client that takes no byte of what it is owed for this long is dropped
+#: (a silent peer: its TCP window closed), whatever the size of what waits.
+WRITE_STALL_S = 30.0
 MAX_PENDING = 32
 MAX_AUTH_FAILURES = 3
 #: How long a closing connection waits for its peer to take the last reply.

@@ -83,11 +83,14 @@ from collections import deque
 from typing import Any
 
 from pyrt.errors import ConfigError
+from pyrt.scope.spew import MAX_SPEW_HZ
 from pyrt.server.connection import Connection
 from pyrt.server.framing import FramingMixin
+from pyrt.server.guard import FailureGuard, check_token
 from pyrt.server.hub import StatusHub
 from pyrt.server.ioloop import IOLoopMixin
 from pyrt.server.limits import (
+    EVICT_IDLE_S,
     GREETING_TIMEOUT_S,
     GUEST_IDLE_S,
     IDLE_TIMEOUT_S,
@@ -101,6 +104,7 @@ from pyrt.server.limits import (
     RATE_WINDOW_S,
     RESERVED_SLOTS,
     SWITCH_INTERVAL_S,
+    WRITE_STALL_S,
     is_loopback,
 )
 from pyrt.server.protocol import MAX_LINE
@@ -149,9 +153,14 @@ class Server(IOLoopMixin, FramingMixin, SessionMixin):
         max_subscription_rate: float = MAX_SUBSCRIPTION_RATE,
         nice: int = NICE,
         switch_interval_s: float | None = SWITCH_INTERVAL_S,
+        evict_idle_s: float = EVICT_IDLE_S,
+        write_stall_s: float = WRITE_STALL_S,
+        guard: FailureGuard | None = None,
     ):
         if token is not None and not token:
             raise ConfigError("the token is empty")
+        if token is not None and not is_loopback(host):
+            check_token(token)  # reachable from the network: a token that is not guessed
         if token is None and not is_loopback(host):
             raise ConfigError(
                 f"refusing to serve on {host!r} without a token: anybody who can reach it "
@@ -167,7 +176,8 @@ class Server(IOLoopMixin, FramingMixin, SessionMixin):
         if reserved_slots < 0:
             raise ConfigError(f"reserved_slots must be >= 0, got {reserved_slots}")
         for what, secs in (("idle_timeout_s", idle_timeout_s), ("guest_idle_s", guest_idle_s),
-                           ("greeting_timeout_s", greeting_timeout_s)):
+                           ("greeting_timeout_s", greeting_timeout_s),
+                           ("evict_idle_s", evict_idle_s), ("write_stall_s", write_stall_s)):
             if not secs > 0:
                 raise ConfigError(f"{what} must be > 0 s, got {secs}")
         self.runner = runner
@@ -191,7 +201,17 @@ class Server(IOLoopMixin, FramingMixin, SessionMixin):
         self.max_subscription_rate = float(max_subscription_rate)
         self.nice = int(nice)
         self.switch_interval_s = switch_interval_s
-        self.max_hz = 1e9 / runner.loop.period_ns
+        self.evict_idle_s = float(evict_idle_s)
+        self.write_stall_s = float(write_stall_s)
+        self.max_hz = min(1e9 / runner.loop.period_ns, MAX_SPEW_HZ)
+        #: Failed AUTH (and, through EPICS, refused writes): back-off and
+        #: bounded audit lines, per address and overall.
+        self.guard = guard if guard is not None else FailureGuard(self._audit)
+        #: The I/O thread's failure, if it has died (the station is tripped).
+        self.crashed: BaseException | None = None
+        #: A master without a connection (EPICS CMD) holding the privilege, and until when.
+        self._lease_who: str | None = None
+        self._lease_until = 0.0
         extras = robot.extra_fields
         self.hub = StatusHub(robot.status_names, robot.status_sources(),
                              snapshot_every=snapshot_every,
@@ -210,6 +230,7 @@ class Server(IOLoopMixin, FramingMixin, SessionMixin):
             "accepted": 0, "refused_full": 0, "requests": 0, "status": 0, "denied": 0,
             "auth_failed": 0, "too_long": 0, "utf8": 0, "text": 0, "idle": 0,
             "dropped_slow": 0, "evicted": 0, "reserve": 0, "refused_address": 0,
+            "auth_backoff": 0, "internal": 0,
         }
         self._conns: dict[int, Connection] = {}
         self._next_id = 1
@@ -273,6 +294,7 @@ class Server(IOLoopMixin, FramingMixin, SessionMixin):
         self._wake()
         self._thread.join(timeout_s)
         self._thread = None
+        self.guard.flush(force=True)
         for conn in list(self._conns.values()):
             self._finish(conn)
         deadline = time.monotonic() + timeout_s
@@ -298,6 +320,15 @@ class Server(IOLoopMixin, FramingMixin, SessionMixin):
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+    def _audit(self, who: str, line: str) -> None:
+        """An audit line of the station (its console and audit log)."""
+        self.robot.station.audit(who, line)
+
+    @property
+    def alive(self) -> bool:
+        """The I/O thread is serving (False before start, after close, or if it died)."""
+        return self._thread is not None and self._thread.is_alive() and self.crashed is None
 
     @property
     def clients(self) -> int:

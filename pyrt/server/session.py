@@ -12,15 +12,16 @@ that release instead of getting ``ERR busy``.
 
 from __future__ import annotations
 
-import contextlib
 import hmac
 import io
 import logging
 import math
+import re
 import threading
 import time
 from typing import Any
 
+from pyrt.scope.spew import MIN_SPEW_HZ
 from pyrt.server.connection import Connection
 from pyrt.server.limits import MAX_AUTH_FAILURES, lower_priority
 from pyrt.server.protocol import format_error, format_reply, split_verb
@@ -31,12 +32,18 @@ __all__ = ["SessionMixin", "run_shell"]
 log = logging.getLogger("pyrt.server")
 
 _VERBS = frozenset({"AUTH", "QUIT", "STATUS", "SUBSCRIBE", "UNSUBSCRIBE"})
+#: A rate as SUBSCRIBE takes it: a decimal number in ASCII digits (no
+#: ``nan``/``inf``, no ``_`` separators, no digits of other scripts).
+_RATE = re.compile(r"\+?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]{1,4})?", re.ASCII)
 
 
 def _control(line: str) -> int:
-    """Index of the first control character of ``line`` (tab allowed), or -1."""
+    """Index of the first character of ``line`` that is not printable text
+    (tab allowed), or -1: controls, line and paragraph separators, format
+    characters (bidi overrides ...), so that no request can put a line or a
+    terminal escape of its own into a log or a console."""
     for i, c in enumerate(line):
-        if (c < " " and c != "\t") or "\x7f" <= c <= "\x9f":
+        if not c.isprintable() and c != "\t":
             return i
     return -1
 
@@ -167,13 +174,11 @@ class SessionMixin(ServerState):
         if verb == "AUTH":
             return self._auth(conn, rest)
         if verb == "SUBSCRIBE":
-            try:
-                hz = float(rest)
-            except ValueError:
-                hz = math.nan
-            if not 0 < hz <= self.max_hz:
+            hz = float(rest) if _RATE.fullmatch(rest) else math.nan
+            if not MIN_SPEW_HZ <= hz <= self.max_hz:  # NaN fails too
                 return format_error(
-                    "syntax", f"SUBSCRIBE needs a rate 0 < hz <= {self.max_hz:g}, got {rest!r}")
+                    "syntax", f"SUBSCRIBE needs a rate {MIN_SPEW_HZ:g} <= hz <= "
+                    f"{self.max_hz:g}, got {rest[:40]!r}")
             with self._lock:
                 if conn.closed:
                     return format_reply([])
@@ -204,12 +209,14 @@ class SessionMixin(ServerState):
         holder = self._privileged
         return holder is not None and holder is not conn and (holder.closing or holder.closed)
 
-    def _audit_failed_auth(self, conn: Connection) -> None:
-        """A wrong token: an audit line of the station (console and audit log)."""
+    def _audit_failed_auth(self, conn: Connection) -> float:
+        """A wrong token: an audit line of the station (console and audit log)
+        while the guard's budget allows, else counted for its summary; the
+        back-off now in force for the client's address, seconds."""
         host, port = conn.peer[:2]
-        with contextlib.suppress(Exception):  # auditing must never break the server
-            self.robot.station.audit(f"DAQ client {conn.id} {host}:{port}",
-                                     f"failed AUTH ({conn.auth_failures} of {MAX_AUTH_FAILURES})")
+        return self.guard.failed(conn.addr, f"DAQ client {conn.id} {host}:{port}",
+                                 f"failed AUTH ({conn.auth_failures} of {MAX_AUTH_FAILURES})",
+                                 "failed AUTH")
 
     def _auth(self, conn: Connection, given: str) -> str:
         holder = self._privileged
@@ -225,26 +232,86 @@ class SessionMixin(ServerState):
             if self._token is None:
                 self.counters["auth_failed"] += 1
                 return format_error("auth", "no token is configured: this server only reports")
+            wait_s = self.guard.blocked(conn.addr, "AUTH")
+            if wait_s > 0:  # backing off: the token is not even looked at
+                self.counters["auth_backoff"] += 1
+                self._close_after_flush(conn)
+                return format_error("auth", f"too many failed AUTH from {conn.addr}: try again "
+                                    f"in {math.ceil(wait_s):.0f} s; closing")
             if not given or not hmac.compare_digest(given.encode("utf-8"), self._token):
                 self.counters["auth_failed"] += 1
                 conn.auth_failures += 1
-                self._audit_failed_auth(conn)
-                if conn.auth_failures >= MAX_AUTH_FAILURES:
+                wait_s = self._audit_failed_auth(conn)
+                if wait_s > 0 or conn.auth_failures >= MAX_AUTH_FAILURES:
                     self._close_after_flush(conn)
-                    return format_error("auth", "wrong token; too many failures, closing")
+                    more = (f" ({conn.addr} may AUTH again in {math.ceil(wait_s):.0f} s)"
+                            if wait_s > 0 else "")
+                    return format_error("auth", f"wrong token; too many failures, closing{more}")
                 return format_error("auth", "wrong token")
             holder = self._privileged
             if holder is not None and holder is not conn:
                 return format_error("busy", "another client is privileged (one at a time)")
+            lease = self._lease_text()
+            if lease:
+                return format_error("busy", lease)
             self._privileged = conn
             conn.privileged = True
         log.info("%r is privileged", conn)
         return format_reply(["privileged: every console command is accepted"])
 
+    # -- the other master: commands over EPICS ----------------------------------------
+
+    def claim_privilege(self, who: str) -> str | None:
+        """Take the one privilege for ``who`` (``EPICS CMD``: a master without a
+        connection of its own) while its command runs; None when taken, else
+        why not (a DAQ client, or another such master, holds it)."""
+        with self._lock:
+            holder = self._privileged
+            if holder is not None:
+                host, port = holder.peer[:2]
+                return (f"DAQ client {holder.id} {host}:{port} is privileged "
+                        "(one master at a time); nothing was run")
+            if self._lease_who not in (None, who):
+                busy = self._lease_text()
+                if busy:
+                    return busy + "; nothing was run"
+            self._lease_who = who
+            self._lease_until = math.inf
+        return None
+
+    def renew_privilege(self, who: str, lease_s: float) -> None:
+        """``who``'s command has ended: it keeps the privilege ``lease_s`` more
+        seconds (a master's commands come one after another), then it is free."""
+        with self._lock:
+            if self._lease_who == who:
+                self._lease_until = time.monotonic() + lease_s
+
+    def _lease_text(self) -> str:
+        """Why the privilege is not free because of a lease ('' when it is; lock held)."""
+        who = self._lease_who
+        if who is None:
+            return ""
+        left = self._lease_until - time.monotonic()
+        if left <= 0:
+            self._lease_who = None
+            return ""
+        if math.isinf(left):
+            return f"{who} holds the privilege: one of its commands runs (one master at a time)"
+        return (f"{who} holds the privilege {math.ceil(left):.0f} s more after its last "
+                "command (one master at a time)")
+
     # -- the worker thread of a connection -------------------------------------------
 
     def _work(self, conn: Connection) -> None:
         lower_priority(self.nice)
+        try:
+            self._work_on(conn)
+        except Exception as exc:  # a bug outside a command: this client only
+            self._client_failed(conn, exc)
+        self._release(conn)
+
+    def _work_on(self, conn: Connection) -> None:
+        """Run ``conn``'s queued requests in order until it closes (its worker)."""
         while True:
             with conn.lock:
                 while not conn.requests and not conn.closed:
@@ -266,7 +333,6 @@ class SessionMixin(ServerState):
                 conn.pending -= 1
             if conn.paused or conn.closing:  # the I/O thread resumes reading, or closes
                 self._touch(conn)
-        self._release(conn)
 
     def _release(self, conn: Connection) -> None:
         if conn.privileged and conn.shell is not None and conn.shell_privileged:

@@ -19,6 +19,7 @@ from collections import deque
 from typing import TYPE_CHECKING, Any
 
 from pyrt.server.connection import Connection
+from pyrt.server.guard import FailureGuard
 
 if TYPE_CHECKING:
     from pyrt.server.hub import StatusHub
@@ -51,6 +52,12 @@ class ServerState:
     max_subscription_rate: float
     max_hz: float
     nice: int
+    evict_idle_s: float
+    write_stall_s: float
+    guard: FailureGuard
+    crashed: BaseException | None
+    _lease_who: str | None
+    _lease_until: float
     _token: bytes | None
     _period_wall_ns: int | None
     _conns: dict[int, Connection]
@@ -79,6 +86,7 @@ class ServerState:
         def _touch(self, conn: Connection) -> None: ...
         def _drop(self, conn: Connection, why: str) -> None: ...
         def _finish(self, conn: Connection) -> None: ...
+        def _client_failed(self, conn: Connection, exc: BaseException) -> None: ...
 
         # -- framing (framing.py) ------------------------------------------------
         def _on_readable(self, conn: Connection) -> None: ...
@@ -86,3 +94,4 @@ class ServerState:
 
         # -- requests (session.py) -----------------------------------------------
         def _request(self, conn: Connection, raw: bytes) -> None: ...
+        def _lease_text(self) -> str: ...
