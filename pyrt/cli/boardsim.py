@@ -225,6 +225,12 @@ def build_world(factory: WorldFactory, opts: argparse.Namespace) -> World:
     return world
 
 
+def _say(line: str) -> None:
+    """A board-sim event line, on standard output at once."""
+    sys.stdout.write(line + "\n")
+    sys.stdout.flush()
+
+
 def run(args: argparse.Namespace) -> int:
     out = sys.stdout
     parsed = _parse(args)
@@ -238,7 +244,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("pyrt board-sim: --map goes with --modbus")
     host, port = opts.listen
     server = BoardServer(world, host, port, watchdog_s=opts.watchdog,
-                         step_ns=opts.step_us * 1000, stdout=out)
+                         step_ns=opts.step_us * 1000, say=_say)
     boards = " ".join(f"{n}={k.name}" for n, k in world.kinds.items())
     print(f"pyrt board-sim: {factory.name} {world.name} on {server.url} (boards {boards}; "
           f"watchdog {opts.watchdog:g} s, world step {opts.step_us} µs)", file=out, flush=True)
@@ -276,7 +282,7 @@ def _run_modbus(factory: WorldFactory, world: World, opts: argparse.Namespace,
     regmap = load_map(path, world.kinds)
     host, port = opts.modbus
     server = ModbusBoardServer(world, regmap, host, port, watchdog_s=opts.watchdog,
-                               step_ns=opts.step_us * 1000, stdout=out)
+                               step_ns=opts.step_us * 1000, say=_say)
     boards = " ".join(f"{n}={k.name}" for n, k in world.kinds.items())
     server.start()
     print(f"pyrt board-sim: {factory.name} {world.name} on {server.url}?map={shown} "

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any, Protocol, TextIO
+from typing import TYPE_CHECKING, Any, Protocol
 
 from pyrt.boards.dataconcentrator import ADC_MAX, DataConcentrator
 from pyrt.boards.tio10 import TIO10
@@ -205,7 +205,6 @@ class Axis(Component):
         dc: DataConcentrator,
         *,
         av: AV | None = None,
-        stdout: TextIO | None = None,
         persist: Callable[[str, str, str, float], None] | None = None,
     ) -> Axis:
         """An Axis and its devices from a :class:`pyrt.db.AxisRecord` and its
@@ -227,10 +226,10 @@ class Axis(Component):
                 persist("LOADCELL", lrec.name, "SLOPE", slope)
                 persist("LOADCELL", lrec.name, "OFFSET", offset)
 
-        motor = Motor.from_record(mrec, tio10, name=f"{name}Motor", stdout=stdout)
-        encoder = Encoder.from_record(erec, dc, name=f"{name}Encoder", stdout=stdout,
+        motor = Motor.from_record(mrec, tio10, name=f"{name}Motor")
+        encoder = Encoder.from_record(erec, dc, name=f"{name}Encoder",
                                       write_back=put("ENCODER", erec.name, "ZEROLENGTH"))
-        loadcell = Loadcell.from_record(lrec, dc, name=f"{name}Loadcell", stdout=stdout,
+        loadcell = Loadcell.from_record(lrec, dc, name=f"{name}Loadcell",
                                         write_back=put_cal if persist is not None else None)
         return cls(
             name, motor, encoder, loadcell,

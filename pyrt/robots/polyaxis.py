@@ -91,7 +91,7 @@ import math
 from collections.abc import Callable, Generator, Sequence
 from functools import partial
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
 
 import numpy as np
 
@@ -209,7 +209,6 @@ class PolyAxis(Component):
         liquid_level: float | None = None,
         poll_s: float = 0.05,
         fuzzy: Sequence[FuzzyParams] | None = None,
-        stdout: TextIO | None = None,
         ring_segments: int | None = None,
         motion: MotionQueue | None = None,
         spawn: Callable[[str, Generator[Any, Any, Any]], Job] | None = None,
@@ -234,7 +233,6 @@ class PolyAxis(Component):
         self.find_tolerance = float(find_tolerance)
         self.dist_err_limit = float(dist_err_limit)
         self.poll_s = float(poll_s)
-        self.stdout = stdout
 
         # geometry (global co-ordinates: bottoms carried through av.vtog)
         tops: list[Vec] = [_point(a.top) for a in self.axes]
@@ -714,8 +712,8 @@ class PolyAxis(Component):
         ended itself stops the manipulator (DONE)."""
         reason = motion.stop_reason or ""
         if motion is not self.running:
-            if reason.startswith("refused") and self.stdout is not None:
-                self.stdout.write(f"queued move dropped: {reason.removeprefix('refused: ')}\n")
+            if reason.startswith("refused"):
+                self.say(f"queued move dropped: {reason.removeprefix('refused: ')}", "warning")
             return
         self.running = None
         if self.active and not reason.startswith("failed"):
@@ -728,8 +726,7 @@ class PolyAxis(Component):
     def _fault(self, detail: str) -> None:
         self.running = None
         self.halt(StopReason.FAULT, detail)
-        if self.adopted:
-            self.fail(detail)
+        self.fail(detail)
 
     def stop(self) -> None:
         """The ``stop`` command: every motor stopped, the move ended."""
@@ -760,9 +757,9 @@ class PolyAxis(Component):
                 fn(rec)
         if reason in SAFETY_STOPS or reason in (StopReason.STOP, StopReason.FAULT):
             dropped = self.motion.clear() if self.motion is not None else 0
-            if dropped and self.stdout is not None:
-                self.stdout.write(f"{self.name}: {dropped} queued move(s) dropped\n")
-        if reason in SAFETY_STOPS and self.adopted:
+            if dropped:
+                self.say(f"{self.name}: {dropped} queued move(s) dropped", "warning")
+        if reason in SAFETY_STOPS:
             self.fail(f"{reason.value}: {detail}")
         return rec
 
@@ -824,9 +821,9 @@ class PolyAxis(Component):
         for a in self.axes:
             if a.mode == POLYAXIS:
                 a.encoder.poll(now_s)
-        if self.debug and now_s >= self.debug_next and self.stdout is not None:
+        if self.debug and now_s >= self.debug_next:
             self.debug_next = now_s + 1.0
-            self.stdout.write(self.status_line() + "\n")
+            self.say(self.status_line())
 
     def measure(self) -> None:
         """Read every Axis and find the source position (the estimator's
@@ -843,8 +840,7 @@ class PolyAxis(Component):
         self.estimator.position_error = cause
         if self.active:
             self.halt(StopReason.FAULT, cause)
-            if self.adopted:
-                self.fail(cause)
+            self.fail(cause)
 
     def _estimate_fault(self, detail: str) -> None:
         """The estimator found the estimate lost (checked after every measure,
@@ -853,10 +849,8 @@ class PolyAxis(Component):
         until ``survey`` or ``setpos`` re-establishes the position."""
         if self.active:
             self._fault(detail)
-        elif self.adopted:
-            self.fail(detail)
         else:
-            self.stop_motors()
+            self.fail(detail)
 
     def _refuse_reestablish(self, word: str) -> None:
         if self.active or any(a.motor.running for a in self.axes):

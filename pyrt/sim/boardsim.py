@@ -28,7 +28,6 @@ import socket
 import threading
 import time
 from collections.abc import Callable
-from typing import TextIO
 
 from pyrt.boards.wire import (
     MAX_LINE,
@@ -67,7 +66,7 @@ class _Client:
 class BoardServer:
     """Serve ``world`` on ``host:port`` (port 0: any free port; see :attr:`url`).
 
-    ``stdout`` receives one line per event (connections, refusals, watchdog
+    ``say(line)`` is told one line per event (connections, refusals, watchdog
     trips); ``clock`` is the monotonic clock in ns.  Call
     :meth:`serve_forever` (blocks until :meth:`stop`), or :meth:`start` to
     run it in a thread of its own.
@@ -81,7 +80,7 @@ class BoardServer:
         *,
         watchdog_s: float = DEFAULT_WATCHDOG_S,
         step_ns: int = DEFAULT_STEP_NS,
-        stdout: TextIO | None = None,
+        say: Callable[[str], None] | None = None,
         clock: Callable[[], int] = time.monotonic_ns,
     ):
         if not 0.001 <= watchdog_s <= 3600:
@@ -94,7 +93,7 @@ class BoardServer:
         self._views = {name: world.registers(name) for name in self.kinds}
         self.watchdog_ns = int(watchdog_s * 1e9)
         self.step_ns = int(step_ns)
-        self.stdout = stdout
+        self.report = say
         self.clock = clock
         try:
             family = socket.AF_INET6 if ":" in host else socket.AF_INET
@@ -128,12 +127,11 @@ class BoardServer:
         return f"tcp://{host}:{self.port}"
 
     def _say(self, line: str) -> None:
-        if self.stdout is not None:
+        if self.report is not None:
             try:
-                self.stdout.write(line + "\n")
-                self.stdout.flush()
+                self.report(line)
             except (OSError, ValueError):  # a closed log must not stop the boards
-                self.stdout = None
+                self.report = None
 
     # -- running ------------------------------------------------------------------
 

@@ -34,7 +34,7 @@ import socket
 import threading
 import time
 from collections.abc import Callable, Sequence
-from typing import Any, TextIO
+from typing import Any
 
 from pyrt.boards.modbusmap import COIL, DISCRETE, HOLDING, INPUT_REG, Place, RegisterMap
 from pyrt.errors import ConfigError
@@ -137,14 +137,14 @@ class _WorldStore:
 class ModbusBoardServer:
     """Serve ``world`` over Modbus TCP on ``host:port`` with ``regmap`` (see the module text).
 
-    Port 0 picks a free port (:attr:`url`).  ``stdout`` receives one line per
+    Port 0 picks a free port (:attr:`url`).  ``say(line)`` is told one line per
     event (connections, watchdog trips).  :meth:`serve_forever` blocks until
     :meth:`stop`; :meth:`start` runs it in a thread of its own.
     """
 
     def __init__(self, world: World, regmap: RegisterMap, host: str = "127.0.0.1",
                  port: int = 0, *, watchdog_s: float = 0.5, step_ns: int = 1_000_000,
-                 stdout: TextIO | None = None,
+                 say: Callable[[str], None] | None = None,
                  clock: Callable[[], int] = time.monotonic_ns):
         self._server_cls, ctx, self._exc = _pymodbus()
         # pymodbus serves a ModbusServerContext: ours answers from the world
@@ -157,7 +157,7 @@ class ModbusBoardServer:
         self.views = {name: world.registers(name) for name in self.kinds}
         self.watchdog_ns = int(watchdog_s * 1e9)
         self.step_ns = int(step_ns)
-        self.stdout = stdout
+        self.report = say
         self.clock = clock
         if port == 0:
             try:
@@ -186,12 +186,11 @@ class ModbusBoardServer:
         return f"modbus://{self.host}:{self.port}"
 
     def _say(self, line: str) -> None:
-        if self.stdout is not None:
+        if self.report is not None:
             try:
-                self.stdout.write(line + "\n")
-                self.stdout.flush()
+                self.report(line)
             except (OSError, ValueError):
-                self.stdout = None
+                self.report = None
 
     def feed(self) -> None:
         """A register access came: the watchdog starts again."""

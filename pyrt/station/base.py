@@ -34,6 +34,10 @@ Both robots are a :class:`Station` plus a configuration
   :class:`~pyrt.errors.BoardError` in a phase trips the robot (the message
   names the back end's URL); :meth:`close` closes the boards last.  The
   in-process ``sim:`` boards have no I/O: they attach no phase;
+* publishes what its components say (:meth:`~pyrt.component.Component.say`,
+  a :class:`~pyrt.component.Message`) to its subscribers (:meth:`subscribe`):
+  the runner's asynchronous lines that the console shows, the server, and the
+  log (the ``pyrt.messages`` logger, at the message's level);
 * starts and stops in one order (:meth:`start`, :meth:`close`).
 """
 
@@ -48,7 +52,7 @@ from pathlib import Path
 from typing import Any
 
 from pyrt.boards import Boards
-from pyrt.component import Command, Component, Param, Signal, command, walk
+from pyrt.component import Command, Component, Message, Param, Signal, command, walk
 from pyrt.errors import BoardError, CommandError, ConfigError, Fault, PyrtError
 from pyrt.scheduler import Loop, ReadyQueue
 from pyrt.scheduler.motion import MotionExecutor, MotionType, motion_types_for
@@ -56,6 +60,12 @@ from pyrt.scheduler.runner import MotionQueue, Runner
 from pyrt.scope import Scope
 
 __all__ = ["BoardWorld", "Station", "refuse_sim_options"]
+
+#: The log every station's messages go to (at their level); silent until the
+#: application gives it a handler.
+MESSAGE_LOG = logging.getLogger("pyrt.messages")
+MESSAGE_LOG.addHandler(logging.NullHandler())
+_LOG_LEVELS = {"info": logging.INFO, "warning": logging.WARNING, "error": logging.ERROR}
 
 
 def refuse_sim_options(boards: Boards, given: Iterable[str]) -> None:
@@ -130,6 +140,9 @@ class Station:
         self._fault: Fault | None = None
         self._by_name: dict[str, Component] = {}
         self._closed = False
+        #: The subscribers of the components' messages (:meth:`subscribe`),
+        #: replaced whole on a change (the loop reads it without a lock).
+        self._listeners: tuple[Callable[[Message], None], ...] = ()
 
     # -- assembly -------------------------------------------------------------------
 
@@ -212,15 +225,53 @@ class Station:
                 if key in self._by_name and self._by_name[key] is not c:
                     raise PyrtError(f"two components of {self.name} are called {c.name!r}")
                 self._by_name[key] = c
-                c._trip = self.trip
         for q in self.queues:
             q.on_error = self._queue_error
         self.loop.trip_handlers.append(self.trip)
         self.loop.attach(self.scope.sample, name="scope")
         self.runner = Runner(self.loop, motion_queue=self.motion)
+        self.subscribe(self._to_console)
+        for c in self._by_name.values():  # what they said while being built comes now
+            c.connect(trip=self.trip, tell=self.publish)
         if self.boards is not None and self.boards.flushes:
             self.loop.attach(self._flush_boards, name="io:write")
         return self.runner
+
+    # -- messages -------------------------------------------------------------------
+
+    def subscribe(self, listener: Callable[[Message], None]) -> Callable[[], None]:
+        """Hand every message of the station's components to ``listener(message)``
+        from now on (in the thread that says it, the loop's as a rule: it must
+        not block); returns what ends the subscription."""
+        self._listeners = (*self._listeners, listener)
+
+        def unsubscribe() -> None:
+            self._listeners = tuple(x for x in self._listeners if x is not listener)
+        return unsubscribe
+
+    def publish(self, message: Message) -> None:
+        """Give ``message`` to the log and to every subscriber; a subscriber that
+        raises is dropped (and the log says so), the others still hear it."""
+        MESSAGE_LOG.log(_LOG_LEVELS.get(message.level, logging.INFO), "%s: %s",
+                        message.source, message.text)
+        for listener in self._listeners:
+            try:
+                listener(message)
+            except Exception as exc:
+                self._listeners = tuple(x for x in self._listeners if x is not listener)
+                MESSAGE_LOG.error("%s: a message subscriber failed and was dropped: %r",
+                                  self.name, exc)
+
+    def say(self, text: str, level: str = "info") -> None:
+        """Tell the operator ``text`` as the station itself (what no component owns:
+        the write-back at close), published as the components' messages are."""
+        self.publish(Message(self.name, level, text))
+
+    def _to_console(self, message: Message) -> None:
+        """The runner's asynchronous lines: what the console shows as it happens."""
+        runner = self.runner
+        if runner is not None:
+            runner.post(message.text)
 
     # -- the tree -----------------------------------------------------------------
 

@@ -161,8 +161,8 @@ class GripperStation(Station):
 
         def motion_done(motion: MotionType) -> None:
             reason = motion.stop_reason or ""
-            if reason.startswith("refused") and self.runner is not None:
-                self.runner.post(f"move {reason}")
+            if reason.startswith("refused"):
+                ctl.say(f"move {reason}", "warning")
 
         def motion_error(cause: str, motion: MotionType) -> None:
             self.trip(cause, source="P move")

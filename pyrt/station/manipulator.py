@@ -49,12 +49,10 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
-import threading
 from collections.abc import Callable, Sequence
 from functools import partial
 from pathlib import Path
-from typing import Any, TextIO, cast
+from typing import Any, TextIO
 
 from pyrt.boards import Boards, open_boards
 from pyrt.boards.registers import BoardKind
@@ -94,7 +92,6 @@ __all__ = [
     "ManipulatorFactory",
     "ManipulatorStation",
     "ManipulatorWorlds",
-    "MessageSink",
 ]
 
 TICK_NS = 1_000_000
@@ -115,38 +112,6 @@ AXIS_POLL_S = 0.01
 def _item_of(read: Callable[[], Sequence[float]], i: int) -> Callable[[], float]:
     """A reader of item ``i`` of what ``read`` returns, read each time."""
     return lambda: read()[i]
-
-
-class MessageSink:
-    """A text stream for the loop side: whole lines go to ``target`` (the
-    runner's ``post``), so device output never garbles the console."""
-
-    def __init__(self, target: Callable[[str], None] | None = None):
-        self.target = target
-        self._buf = ""
-        self._lock = threading.Lock()
-        self.pending: list[str] = []
-
-    def write(self, text: str) -> int:
-        with self._lock:
-            self._buf += text
-            *lines, self._buf = self._buf.split("\n")
-        for line in lines:
-            if self.target is not None:
-                self.target(line)
-            else:
-                self.pending.append(line)
-        return len(text)
-
-    def flush(self) -> None:
-        """Lines are passed on as they complete."""
-
-    def connect(self, target: Callable[[str], None]) -> None:
-        """Send lines to ``target`` from now on (and the ones held so far)."""
-        self.target = target
-        held, self.pending = self.pending, []
-        for line in held:
-            target(line)
 
 
 class ManipulatorSim(Component):
@@ -292,7 +257,6 @@ class ManipulatorStation(Station):
         imperfections: Imperfections | None = None,
         writer: Any = None,
         liquid_level: float | None = None,
-        stdout: TextIO | None = None,
         boards: str | None = None,
         expect: str | None = None,
         lock: bool = True,
@@ -313,7 +277,7 @@ class ManipulatorStation(Station):
             self._lock.release()
             raise
         try:
-            self._build(opened, poll_s, axis_poll_s, imperfections, writer, liquid_level, stdout)
+            self._build(opened, poll_s, axis_poll_s, imperfections, writer, liquid_level)
         except BaseException:
             try:
                 opened.close()
@@ -329,11 +293,9 @@ class ManipulatorStation(Station):
             self._lock.release()
 
     def _build(self, boards: Boards, poll_s: float, axis_poll_s: float,
-               imperfections: Imperfections | None, writer: Any, liquid_level: float | None,
-               stdout: TextIO | None) -> None:
+               imperfections: Imperfections | None, writer: Any, liquid_level: float | None
+               ) -> None:
         tick_s = self.loop.period_ns * 1e-9
-        self.messages = MessageSink()
-        self.stdout = stdout if stdout is not None else cast(TextIO, self.messages)
         st = self.station
         pa_rec = st.polyaxis()
         self.av = AV.from_record(st.av_of(pa_rec))
@@ -358,8 +320,7 @@ class ManipulatorStation(Station):
         fuzzy: list[FuzzyParams] = []
         base = FuzzyParams().for_poll_period(poll_s)
         for rec in st.axes_of(pa_rec):
-            axis = Axis.from_records(rec.name.lower(), rec, st, self.tio10, self.dc, av=self.av,
-                                     stdout=self.stdout)
+            axis = Axis.from_records(rec.name.lower(), rec, st, self.tio10, self.dc, av=self.av)
             self.axes.append(axis)
             try:
                 fuzzy.append(FuzzyParams.from_mapping(dict(rec.fuzzy), base=base))
@@ -372,7 +333,7 @@ class ManipulatorStation(Station):
         self._unreported: StopRecord | None = None
         self.polyaxis = PolyAxis.from_record(
             pa_rec, self.axes, self.av, name=pa_rec.name.lower(), poll_s=poll_s, fuzzy=fuzzy,
-            liquid_level=liquid_level, stdout=self.stdout, motion=self.motion,
+            liquid_level=liquid_level, motion=self.motion,
             spawn=self.loop.spawn,
             pattern_writer="sync" if self.loop.clock.virtual else "thread",
             on_stop=(self.stops.append, self._report_stop),
@@ -440,8 +401,6 @@ class ManipulatorStation(Station):
         elif boards.has_info:
             extras.append(BoardWorld(boards))
         self.adopt(pa, queues=[self.queue], executors=[pa.executor], extras=extras)
-        assert self.runner is not None
-        self.messages.connect(self.runner.post)
         self.log_path: Path | None = None
         self._log_file: TextIO | None = None
         boards.poll(self.loop.now_ns)  # the encoders' counters now ride along
@@ -485,7 +444,7 @@ class ManipulatorStation(Station):
         if self.waiters and len(self.motion) == 0 and (job is None or job.done):
             self._unreported = rec
             return
-        self.stdout.write(f"{self.polyaxis.name} stopped: {rec}\n")
+        self.say(f"{self.polyaxis.name} stopped: {rec}")
 
     # -- faults ----------------------------------------------------------------------
 
@@ -702,7 +661,7 @@ class ManipulatorStation(Station):
                 return
             self.writeback.poll(self.loop.now_ns + 10**12)
         except PyrtError as exc:  # the file keeps its last good value
-            self.stdout.write(f"database write-back refused at shutdown: {exc}\n")
+            self.say(f"database write-back refused at shutdown: {exc}", "error")
         finally:
             self.writeback.close()
             self.stop_log()
@@ -793,10 +752,6 @@ def _calibration_writer(wb: WriteBack, loadcell: str, loop: Loop, device: Any
                                date=device.date or None,
                                points=device.calibration_points or None)
     return write
-
-
-def _stderr_sink(line: str) -> None:  # pragma: no cover - used without a console
-    sys.stderr.write(line + "\n")
 
 
 # -- the factory: ``pyrt manipulator`` -----------------------------------------------------
