@@ -101,7 +101,7 @@ class RopeGroup(Protocol):
     @property
     def estimate_lost(self) -> str | None: ...
 
-    def halt(self, reason: Any, detail: str) -> Any: ...
+    def end_move(self, reason: Any, detail: str) -> Any: ...
 
 
 class TrackingError(PyrtError):
@@ -472,7 +472,7 @@ class Axis(Component):
             # one joint stopped stops the whole manipulator
             from pyrt.robots.stops import StopReason
 
-            group.halt(StopReason.STOP, f"{self.name} stop command")
+            group.end_move(StopReason.STOP, f"{self.name} stop command")
             return f"stopped; the {group.name} move is stopped with it"
         self.stop()
         return "stopped"
@@ -594,7 +594,7 @@ class Axis(Component):
         if self.mode == POLYAXIS and group is not None and getattr(group, "active", False):
             from pyrt.robots.stops import StopReason
 
-            group.halt(StopReason.FAULT, cause)
+            group.end_move(StopReason.FAULT, cause)
         super().fail(cause, source)
 
     def _length_at(self, tension: float) -> float:

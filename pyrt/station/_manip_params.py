@@ -1,8 +1,9 @@
 """The manipulator's run-time parameters that belong to the station's
-configuration rather than to one device: the PolyAxis's MAX_TENSION and
-END_ERROR, and each rope's fuzzy gains (the ``dv_*`` changes of its rules,
-held by the PolyAxis's batched fuzzy controller), as :class:`Param` records
-for ``get``/``set`` (:meth:`ManipulatorStation.params_of`)."""
+configuration rather than to one device: each rope's fuzzy gains (the
+``dv_*`` changes of its rules, held by the PolyAxis's batched fuzzy
+controller), as :class:`Param` records for ``get``/``set``
+(:meth:`ManipulatorStation.params_of`).  The PolyAxis's MAX_TENSION and
+END_ERROR are its own (:meth:`pyrt.robots.polyaxis.PolyAxis.params`)."""
 
 from __future__ import annotations
 
@@ -11,9 +12,8 @@ from typing import Any
 
 from pyrt.component import Param
 from pyrt.errors import CommandError, NativeError
-from pyrt.native import FuzzyInput
 
-__all__ = ["FUZZY_GAINS", "axis_fuzzy_params", "polyaxis_params"]
+__all__ = ["FUZZY_GAINS", "axis_fuzzy_params"]
 
 #: The fuzzy gains (FuzzyParams fields) ``set`` changes, with what each rule does.
 FUZZY_GAINS: dict[str, str] = {
@@ -28,37 +28,6 @@ FUZZY_GAINS: dict[str, str] = {
 
 #: A gain may be set up to this many times its value at start-up.
 GAIN_SPAN = 10.0
-
-
-def polyaxis_params(pa: Any) -> list[Param]:
-    """MAX_TENSION and END_ERROR of the PolyAxis ``pa`` (not written back:
-    POLYAXIS.dat keeps its values)."""
-    maxloads = [a.loadcell.maxload for a in pa.axes if a.loadcell.maxload > 0]
-    top = min(maxloads) if maxloads else 10_000.0
-    floor = pa.low_tension + 2.0 * pa.tension_margin
-
-    def set_max(value: float) -> str:
-        if value <= floor:
-            raise CommandError(f"set {pa.name}.MAX_TENSION: {value:g} N leaves no room above "
-                               f"LOW_TENSION {pa.low_tension:g} N and the margins "
-                               f"({pa.tension_margin:g} N each); nothing changed")
-        pa.max_tension = float(value)
-        pa.batch.inputs[:, FuzzyInput.TENSION_HIGH] = pa.max_tension
-        for a in pa.axes:
-            if a.length_range is not None:
-                a.set_supervision(a.length_range, (pa.low_tension, pa.max_tension),
-                                  a.tension_stops)
-        return "the fuzzy rules and every rope's tension stop use it from now"
-
-    def set_end(value: float) -> None:
-        pa.end_error = float(value)
-
-    return [
-        Param("MAX_TENSION", "N", lambda: pa.max_tension, set_max, round(floor, 3), top,
-              "the highest rope tension a move may need (tension stop, fuzzy TENSION_HIGH)"),
-        Param("END_ERROR", "cm", lambda: pa.end_error, set_end, 0.01, 50.0,
-              "a move ends within this distance of its target"),
-    ]
 
 
 def axis_fuzzy_params(pa: Any, k: int) -> list[Param]:

@@ -72,14 +72,14 @@ from pyrt.errors import BoardError, CommandError, ConfigError, NativeError, Pyrt
 from pyrt.native import FuzzyParams, NativeInputError
 from pyrt.robots.av import AV
 from pyrt.robots.axis import Axis, tension_alarms
-from pyrt.robots.polyaxis import PolyAxis
+from pyrt.robots.polyaxis import PolyAxis, PolyAxisServices
 from pyrt.robots.ropes import MIN_TOP_SEGMENT, RopeModel, payout
 from pyrt.robots.stops import StopRecord
 from pyrt.scheduler import Loop, ReadyQueue, SimClock
 from pyrt.sim.manipulator import ManipulatorPlant, rig_from_station
 from pyrt.sim.sensors import Imperfections
 from pyrt.sim.world import MANIPULATOR_BOARDS, ManipulatorWorld, World, WorldFactory
-from pyrt.station._manip_params import axis_fuzzy_params, polyaxis_params
+from pyrt.station._manip_params import axis_fuzzy_params
 from pyrt.station.base import BoardWorld, Station, refuse_sim_options
 from pyrt.station.factory import StationFactory
 from pyrt.tasks import SyncWriter, ThreadWriter, WriteBack, register_tasks
@@ -331,12 +331,12 @@ class ManipulatorStation(Station):
         # the pattern log's writer, the stop listeners, the task periods.
         self.stops: list[StopRecord] = []
         self._unreported: StopRecord | None = None
-        self.polyaxis = PolyAxis.from_record(
-            pa_rec, self.axes, self.av, name=pa_rec.name.lower(), poll_s=poll_s, fuzzy=fuzzy,
-            liquid_level=liquid_level, motion=self.motion,
-            spawn=self.loop.spawn,
-            pattern_writer="sync" if self.loop.clock.virtual else "thread",
-            on_stop=(self.stops.append, self._report_stop),
+        self.polyaxis = PolyAxis(
+            pa_rec, self.axes, self.av, PolyAxisServices(
+                motion=self.motion, spawn=self.loop.spawn,
+                pattern_writer="sync" if self.loop.clock.virtual else "thread",
+                on_stop=(self.stops.append, self._report_stop)),
+            name=pa_rec.name.lower(), poll_s=poll_s, fuzzy=fuzzy, liquid_level=liquid_level,
             task_periods=(_checks(poll_s, tick_s, "control poll"),
                           _checks(axis_poll_s, tick_s, "axis poll")))
         pa = self.polyaxis
@@ -500,13 +500,11 @@ class ManipulatorStation(Station):
         return Path(self.directory) / "audit.log"
 
     def params_of(self, component: Component) -> list[Param]:
-        """A component's own parameters, and what the station holds for it: the
-        PolyAxis's MAX_TENSION and END_ERROR, each rope's fuzzy gains."""
+        """A component's own parameters, and what the station holds for it: each
+        rope's fuzzy gains."""
         out = super().params_of(component)
         pa = self.polyaxis
-        if component is pa:
-            out += polyaxis_params(pa)
-        elif component in pa.axes:
+        if component in pa.axes:
             out += axis_fuzzy_params(pa, pa.axes.index(component))
         return out
 
