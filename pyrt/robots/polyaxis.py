@@ -172,15 +172,11 @@ class PolyAxisServices:
 
 class _Part:
     """An attribute (or method) one part of the PolyAxis holds, its one home
-    (the estimate's values, the rope model's limits, the move's state and
-    checks, the log's switches), read and set through the PolyAxis:
-    ``convert`` is applied to a value set; ``readonly`` refuses to set it."""
+    (the move's state and checks, the log's switches), read and set through
+    the PolyAxis."""
 
-    def __init__(self, part: str, convert: Callable[[Any], Any] | None = None, *,
-                 readonly: bool = False):
+    def __init__(self, part: str):
         self.part = part
-        self.convert = convert
-        self.readonly = readonly
 
     def __set_name__(self, owner: type, name: str) -> None:
         self.name = name
@@ -191,10 +187,21 @@ class _Part:
         return getattr(getattr(pa, self.part), self.name)
 
     def __set__(self, pa: PolyAxis, value: Any) -> None:
-        if self.readonly:
-            raise AttributeError(f"{self.name} is the {self.part}'s; it is read here, not set")
-        setattr(getattr(pa, self.part), self.name,
-                value if self.convert is None else self.convert(value))
+        setattr(getattr(pa, self.part), self.name, value)
+
+
+class _Limit(_Part):
+    """A limit the rope model holds, read and set (as a float) through the PolyAxis."""
+
+    def __set__(self, pa: PolyAxis, value: Any) -> None:
+        setattr(getattr(pa, self.part), self.name, float(value))
+
+
+class _Read(_Part):
+    """What a part holds and the PolyAxis only reads (the estimate, the move's checks)."""
+
+    def __set__(self, pa: PolyAxis, value: Any) -> None:
+        raise AttributeError(f"{self.name} is the {self.part}'s; it is read here, not set")
 
 
 class PolyAxis(Component):
@@ -211,26 +218,26 @@ class PolyAxis(Component):
     """
 
     # the estimate: the estimator's (cm, N; the lists are updated in place)
-    position = _Part("estimator", readonly=True)  # the source position estimate
-    dist_err = _Part("estimator", readonly=True)  # the RMS rope-length residual
-    tensions = _Part("estimator", readonly=True)  # every rope's measured tension
-    lengths = _Part("estimator", readonly=True)  # every rope's stretch-corrected length
-    net_force = _Part("estimator", readonly=True)  # the residual net force on the source
-    net_force_magnitude = _Part("estimator", readonly=True)  # and its magnitude
-    position_error = _Part("estimator", readonly=True)  # why the last poll found none
-    estimate_lost = _Part("estimator", readonly=True)  # why it is not trusted (moves refused)
+    position = _Read("estimator")  # the source position estimate
+    dist_err = _Read("estimator")  # the RMS rope-length residual
+    tensions = _Read("estimator")  # every rope's measured tension
+    lengths = _Read("estimator")  # every rope's stretch-corrected length
+    net_force = _Read("estimator")  # the residual net force on the source
+    net_force_magnitude = _Read("estimator")  # and its magnitude
+    position_error = _Read("estimator")  # why the last poll found none
+    estimate_lost = _Read("estimator")  # why it is not trusted (moves refused)
     # the limits: the rope model's (MAX_TENSION and END_ERROR are params)
-    low_tension = _Part("model", float)
-    max_tension = _Part("model", float)
-    tension_margin = _Part("model", float)
-    net_forcelimit = _Part("model", float)
-    offside_tension = _Part("model", float)
-    end_error = _Part("model", float)
+    low_tension = _Limit("model")
+    max_tension = _Limit("model")
+    tension_margin = _Limit("model")
+    net_forcelimit = _Limit("model")
+    offside_tension = _Limit("model")
+    end_error = _Limit("model")
     # the move: the move controller's (its checks: a motion type calls them)
-    check_target = _Part("mover", readonly=True)
-    plan_path = _Part("mover", readonly=True)
-    refuse_if_lost = _Part("mover", readonly=True)
-    begin = _Part("mover", readonly=True)
+    check_target = _Read("mover")
+    plan_path = _Read("mover")
+    refuse_if_lost = _Read("mover")
+    begin = _Read("mover")
     executor = _Part("mover")
     running = _Part("mover")
     active = _Part("mover")
@@ -676,7 +683,9 @@ class PolyAxis(Component):
         for a in self.axes:
             if a.mode == POLYAXIS:
                 a.encoder.poll(now_s)
-        self.status.poll(now_s)
+        status = self.status
+        if status.debug:
+            status.poll(now_s)
 
     def measure(self) -> None:
         """Read every Axis and find the source position (the estimator's

@@ -60,6 +60,11 @@ class MoveController:
         self.pa = pa
         self.axes = pa.axes
         self._motors = [a.motor for a in pa.axes]
+        # what every drive reads: the estimate, the poll's kernels, the log
+        self._est = pa.estimator
+        self._ctl = pa.control
+        self._status = pa.status
+        self._names = pa.model.names
         n = len(pa.axes)
         self.motion = motion
         #: Called with (StopRecord) after every stop.
@@ -277,7 +282,7 @@ class MoveController:
         pa = self.pa
         stops = self.stops
         assert stops is not None
-        est = pa.estimator
+        est = self._est
         hp = self.hare_position
         if hp is None:
             hp = self.hare_position = est.position
@@ -286,17 +291,17 @@ class MoveController:
             want, _ = pa.model.equilibrium_tensions(hp)
             self.desired_tensions[:] = want
             self.free[:] = [0.0] * len(motors)
-        dvs = pa.control.drive(
+        dvs = self._ctl.drive(
             hp, [m.velocity for m in motors], 1.0 / (dt if dt > 0 else pa.poll_s),
             self.error_lengths, self.error_tensions,
             self.desired_tensions, self.free, signal_all=self.signal_all)
         for m, dv in zip(motors, dvs, strict=True):
             m.set_desired_velocity((m.velocity if m.running else m.desired_velocity) + dv)
             m.poll()
-        if pa.status.log is not None:
-            pa.status.state(now_s, dvs)
+        if self._status.log is not None:
+            self._status.state(now_s, dvs)
         hit = stops.check(now_s, est.position, est.dist_err, est.tensions,
-                          est.net_force_magnitude, pa.model.names)
+                          est.net_force_magnitude, self._names)
         if hit is not None:
             self.halt(*hit)
 
