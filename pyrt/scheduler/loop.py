@@ -33,6 +33,7 @@ import threading
 from collections import deque
 from collections.abc import Callable, Generator
 from gc import get_count as gc_count
+from itertools import count
 from typing import Any
 
 from pyrt.errors import Fault, FaultError, PyrtError
@@ -364,12 +365,11 @@ class Loop:
         plan = self._plan if self._timing_handlers else None
         timer = clock.timer
         period = self.period_ns
-        limit = -1 if ticks is None else ticks
         deadline = self._deadline
         summary_at = self._next_summary
         done = _ending(until, end_ns)
-        n = 0
-        while n != limit:
+        first = self.tick_index
+        for _ in count() if ticks is None else range(ticks):
             start = start_tick(deadline)
             self.now_ns = start
             if plan is None:
@@ -383,7 +383,6 @@ class Loop:
                     record(t1 - t0)
                     t0 = t1
             self.tick_index += 1
-            n += 1
             deadline = self._close_tick(deadline, start) if measured else deadline + period
             self._deadline = deadline
             if start >= summary_at:
@@ -391,7 +390,7 @@ class Loop:
                 summary_at = self._next_summary
             if self._stopping or (done is not None and done(deadline)):
                 break
-        return n
+        return self.tick_index - first
 
     def _close_tick(self, deadline: int, start: int) -> int:
         """The end of a tick on real time: its lateness and work recorded, an
