@@ -53,6 +53,8 @@ if TYPE_CHECKING:
     from pyrt.sim.world import World, WorldFactory
     from pyrt.station.base import Station
     from pyrt.station.factory import StationFactory
+    from pyrt.station.moves import MoveEnded
+    from pyrt.station.profile import ShellProfile
 
 #: Public name -> the module that defines it (imported on first use).
 _LAZY = {
@@ -70,9 +72,11 @@ _LAZY = {
     "MotionExecutor": "pyrt.scheduler.motion",
     "MotionRecord": "pyrt.scheduler.motion",
     "MotionType": "pyrt.scheduler.motion",
+    "MoveEnded": "pyrt.station.moves",
     "ReadyQueue": "pyrt.scheduler",
     "Register": "pyrt.boards",
     "RegisterBoard": "pyrt.boards",
+    "ShellProfile": "pyrt.station.profile",
     "Signal": "pyrt.component",
     "SimClock": "pyrt.scheduler",
     "Source": "pyrt.scope",
@@ -126,6 +130,7 @@ __all__ = [
     "MotionExecutor",
     "MotionRecord",
     "MotionType",
+    "MoveEnded",
     "NativeError",
     "PyrtError",
     "PyrtInternalError",
@@ -133,6 +138,7 @@ __all__ = [
     "ReadyQueue",
     "Register",
     "RegisterBoard",
+    "ShellProfile",
     "Signal",
     "SimClock",
     "Source",

@@ -328,7 +328,7 @@ def test_the_polyaxis_is_constructed_whole_and_owns_its_poll(tmp_path):
         pa = station.polyaxis
         assert pa.motion is station.motion and pa.spawn == station.loop.spawn
         assert pa.pattern_writer == "sync" and pa.task_periods == (50, 10)
-        assert pa.on_stop == [station.stops.append, station._report_stop]
+        assert pa.on_stop == [station.stops.append, station._stopped]
         with pytest.raises(ConfigError, match="pattern writer"):
             PolyAxisServices(pattern_writer="later")
         seen = []

@@ -120,7 +120,7 @@ def run_factory(factory: StationFactory, args: argparse.Namespace) -> int:
     say(factory.banner(station, args))
     wall0 = time.perf_counter()
     station.start()
-    first = station.startup_commands()
+    first = station.profile.startup_commands
 
     def run_first() -> None:
         for line in first:

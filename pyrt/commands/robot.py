@@ -24,7 +24,6 @@ records (:meth:`RobotShell.resolve`, :meth:`RobotShell.completions`).
 
 from __future__ import annotations
 
-import contextlib
 import difflib
 import shlex
 import threading
@@ -39,6 +38,7 @@ from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
 from pyrt.scheduler import Job
 from pyrt.scheduler.report import format_statistics
 from pyrt.scheduler.runner import FaultMessage
+from pyrt.station.moves import MoveLine
 
 __all__ = ["RobotShell"]
 
@@ -68,23 +68,26 @@ class RobotShell(CommandShell):
         #: changes the robot is shown on the console: :meth:`Station.audit`).
         self.source = source
         self.runner = runner if runner is not None else station.runner
-        self.level: Component | None = station.letter_level()
+        self.profile = station.profile
+        self.level: Component | None = self.profile.level
         self._scope = ScopeCommand(self.runner, station.scope, self._channel,
                                    self._channel_names, stdout, self._channel_show)
         #: Fault events already shown to the operator (their ids), so each is shown once.
         self._shown: set[int] = set()
         self._shown_lock = threading.Lock()
+        #: Move-ended events a wait of this shell has reported (their numbers).
+        self._moves_shown: set[int] = set()
 
     # -- prompt -----------------------------------------------------------------------
 
     @property
     def prompt(self) -> str:  # type: ignore[override]
-        return self.station.prompt(self.level)
+        return self.profile.prompt_at(self.station.name, self.level)
 
     @property
     def in_monitor(self) -> bool:
         """The shell is at a level other than the station's first (the gripper's monitor)."""
-        first = self.station.letter_level()
+        first = self.profile.level
         return self.level is not None and self.level is not first
 
     # -- the records ------------------------------------------------------------------
@@ -92,7 +95,7 @@ class RobotShell(CommandShell):
     def words(self) -> list[Command]:
         """The shared words and the station's own words, as records."""
         own = records_of(self, "")
-        extra = self.station.words
+        extra = self.profile.words
         if extra is not None:
             own += extra.commands()
         return own
@@ -114,7 +117,7 @@ class RobotShell(CommandShell):
             if w is not None:
                 # the shell's own words run here; a station's words (the
                 # manipulator's log, debug) in the loop like any command
-                owner = self.station.words
+                owner = self.profile.words
                 mine = owner is None or owner.find_command(first) is None
                 return (None if mine else owner), w, words[1:], text[len(first):].strip()
             comp = self.station.find(first)
@@ -181,7 +184,7 @@ class RobotShell(CommandShell):
             for c in self.level.commands():
                 table.setdefault(c.name, None)
         for comp in self.station.components():
-            if comp is self.station.words:
+            if comp is self.profile.words:
                 continue  # its records are words, above
             verbs: dict[str, Any] = {}
             for c in comp.commands():
@@ -229,7 +232,7 @@ class RobotShell(CommandShell):
             result = self._wait_job(result)
             if result is None:
                 return False
-        plain = comp is self.level or comp is self.station.words
+        plain = comp is self.level or comp is self.profile.words
         prefix = "" if plain or rec.name == "show" else comp.name
         self._show(rec, result, prefix)
         return False
@@ -291,6 +294,10 @@ class RobotShell(CommandShell):
         if not self.source and take is not None:  # the console: what remote clients did
             out += take()
         for line in self.runner.messages():
+            if isinstance(line, MoveLine):
+                if line.seq not in self._moves_shown:
+                    out.append(line)
+                continue
             if isinstance(line, FaultMessage):
                 with self._shown_lock:
                     if line.fault.id in self._shown:
@@ -407,31 +414,32 @@ class RobotShell(CommandShell):
     def do_wait(self, arg: str = "") -> None:
         """wait [SECONDS]: wait until the current move (or job) ends; say why it ended."""
         timeout = parse_seconds(arg, "wait") if arg.strip() else WAIT_TIMEOUT_S
-        st = self.station
-        busy, refusal = self.call(st.begin_wait, name="wait")
-        if not busy:
-            self.say(self.runner.call(st.idle_report))
+        profile = self.profile
+        watch = self.call(self.station.watch_move, name="wait")  # the one mailbox call
+        if watch.idle:
+            last = watch.last.reason if watch.last is not None else ""
+            self.say(profile.idle_line(watch.where, last))
             return
-        if refusal:
-            self.say(refusal)
+        if watch.refusal:
+            self.say(watch.refusal)
             return
         try:
-            try:
-                done = self.runner.wait_until(lambda: not st.busy(), timeout)
-            finally:
-                with contextlib.suppress(PyrtError):
-                    self.runner.call(st.end_wait, name="wait", take_fault=False)
-        except FaultError as exc:
-            self.fault(exc, prefix=st.wait_fault_prefix)
+            done = self.runner.wait_until(lambda: watch.done, timeout)
+        except FaultError as exc:  # the fault says how the move ended
+            self._moves_shown.update(e.seq for e in list(watch.ended))
+            self.fault(exc, prefix=profile.fault_prefix)
             return
-        if not done:
-            self.say(f"still moving after {timeout:g} s")
-            return
-        report = self.runner.call(st.wait_report)
+        finally:
+            watch.waiting = False  # what ends from now on is said as it comes
+        ended = list(watch.ended)
+        self._moves_shown.update(e.seq for e in ended)
         for text in self.messages():
             self.say(text)  # what happened during the wait comes first, in order
-        for text in report.splitlines():
-            self.say(text)
+        for event in ended:
+            for text in event.report:
+                self.say(text)
+        if not done:
+            self.say(f"still moving after {timeout:g} s")
 
     @command(Arg("SECONDS", str), name="sleep", console=True)
     def do_sleep(self, arg: str) -> None:

@@ -181,6 +181,9 @@ class Axis(Component):
 
         self.mode = STANDALONE
         self.target: float | None = None
+        #: A standalone move (up, down, to) was started and has not been
+        #: reported ended yet (the station reports it when the motion stops).
+        self.moved = False
         #: The rope's physical length range (cm), set by the station from the
         #: geometry (:meth:`set_supervision`); None: lengths > 0 only.
         self.length_range: tuple[float, float] | None = None
@@ -417,6 +420,7 @@ class Axis(Component):
             raise CommandError(f"{self.name} {command}: the motor is moving the other way; "
                                "stop it first (STEP_MODE never reverses)")
         self.target = target
+        self.moved = True
         if m.mode == STEP_MODE and m.running and steps != 0:
             m.set_desired_steps(m.steps_taken + abs(steps))
         else:

@@ -308,7 +308,8 @@ class IOLoopMixin(ServerState):
         self._set_events(conn)
 
     def _pump(self) -> None:
-        """Hand subscription samples and faults on to the subscribers."""
+        """Hand subscription samples, faults, ends of moves and messages on to the
+        subscribers."""
         fmt = self.robot.format_status
         conns = self._conns
         for n, (kind, key, t_ns, payload) in enumerate(self.hub.drain()):
@@ -319,7 +320,13 @@ class IOLoopMixin(ServerState):
                 if conn is not None and conn.subscribed:
                     self._output(conn, f"STATUS t={t_ns / 1e9:.6f} {fmt(payload)}\n")
             else:
-                line = f"STATUS FAULT {payload}\n".replace("\r", " ")
+                if kind == "stop":  # a move ended: its reason, once
+                    text = f"STATUS STOP {payload.reason}"
+                elif kind == "message":
+                    text = f"STATUS MESSAGE {payload.source} {payload.level}: {payload.text}"
+                else:
+                    text = f"STATUS FAULT {payload}"
+                line = text.replace("\r", " ").replace("\n", " ") + "\n"
                 for conn in list(conns.values()):
                     if conn.subscribed:
                         self._output(conn, line)

@@ -16,6 +16,7 @@ import selectors
 import socket
 import threading
 from collections import deque
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from pyrt.server.connection import Connection
@@ -52,6 +53,7 @@ class ServerState:
     max_hz: float
     nice: int
     _token: bytes | None
+    _unsubscribe: tuple[Callable[[], None], ...]
     _period_wall_ns: int | None
     _conns: dict[int, Connection]
     _next_id: int

@@ -34,6 +34,11 @@ Both robots are a :class:`Station` plus a configuration
   :class:`~pyrt.errors.BoardError` in a phase trips the robot (the message
   names the back end's URL); :meth:`close` closes the boards last.  The
   in-process ``sim:`` boards have no I/O: they attach no phase;
+* watches its robot's motion and publishes the end of every move as one
+  event (:class:`~pyrt.station.moves.MoveEnded`: how it ended, where the
+  robot was left, the fault that ended it) to its subscribers
+  (:meth:`subscribe_moves`): ``wait`` takes it in one mailbox call
+  (:meth:`watch_move`), the console, the DAQ server and EPICS each show it once;
 * publishes what its components say (:meth:`~pyrt.component.Component.say`,
   a :class:`~pyrt.component.Message`) to its subscribers (:meth:`subscribe`):
   the runner's asynchronous lines that the console shows, the server, and the
@@ -44,10 +49,12 @@ Both robots are a :class:`Station` plus a configuration
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import logging
 import logging.handlers
+import threading
 from collections import deque
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -58,6 +65,8 @@ from pyrt.scheduler import Loop, ReadyQueue
 from pyrt.scheduler.motion import MotionExecutor, MotionType, motion_types_for
 from pyrt.scheduler.runner import MotionQueue, Runner
 from pyrt.scope import Scope
+from pyrt.station.moves import MoveEnded, MoveLine, MoveWatch
+from pyrt.station.profile import ShellProfile
 
 __all__ = ["BoardWorld", "Station", "refuse_sim_options"]
 
@@ -78,6 +87,14 @@ def refuse_sim_options(boards: Boards, given: Iterable[str]) -> None:
     raise ConfigError(f"board URL {boards.url!r}: the world behind these boards is not "
                       f"simulated in this process: {', '.join(names)} cannot be set here "
                       "(over tcp:// they are options of 'pyrt board-sim')")
+
+
+def _nothing() -> str:
+    return ""
+
+
+def _ended() -> tuple[str, Sequence[str]]:
+    return "ended", ()
 
 
 class BoardWorld(Component):
@@ -107,12 +124,9 @@ class Station:
 
     #: The robot's name (``gripper``, ``prototype``, ``sno``).
     name: str = "robot"
-    #: A component whose commands are console words of this station (the
-    #: manipulator's ``log`` and ``debug``), run in the loop like any command;
-    #: None: the shared words only.
-    words: Component | None = None
-    #: How ``wait`` opens the line of a fault that ended the move it waited for.
-    wait_fault_prefix: str = "FAULT"
+    #: How its console reads (prompt, letter level, words, ``wait``'s words):
+    #: presentation, given by the module that assembles the station.
+    profile: ShellProfile = ShellProfile()
 
     def __init__(self, loop: Loop, *, motion_capacity: int = 16):
         self.loop = loop
@@ -143,6 +157,20 @@ class Station:
         #: The subscribers of the components' messages (:meth:`subscribe`),
         #: replaced whole on a change (the loop reads it without a lock).
         self._listeners: tuple[Callable[[Message], None], ...] = ()
+        #: The subscribers of the move-ended event (:meth:`subscribe_moves`).
+        self._move_listeners: tuple[Callable[[MoveEnded], None], ...] = ()
+        self._subscribing = threading.Lock()
+        self._moving = False
+        self._move_seq = 0
+        self._watches: list[MoveWatch] = []
+        #: Move-ended events since the robot last became busy (``ended`` reads it:
+        #: a move already said need not be said again when the robot goes idle).
+        self.moves_this_period = 0
+        #: The last move's end (:class:`~pyrt.station.moves.MoveEnded`), or None.
+        self.last_move: MoveEnded | None = None
+        self._say_where: Callable[[], str] = _nothing
+        self._say_ended: Callable[[], tuple[str, Sequence[str]]] = _ended
+        self._say_status: Callable[[], str] | None = None
 
     # -- assembly -------------------------------------------------------------------
 
@@ -208,10 +236,25 @@ class Station:
 
     def adopt(self, root: Component, *, queues: Iterable[ReadyQueue] = (),
               executors: Iterable[MotionExecutor] = (),
-              extras: Iterable[Component] = ()) -> Runner:
+              extras: Iterable[Component] = (),
+              where: Callable[[], str] | None = None,
+              ended: Callable[[], tuple[str, Sequence[str]]] | None = None,
+              status: Callable[[], str] | None = None) -> Runner:
         """Take ``root`` (and ``extras``, e.g. the simulation's component) as
-        the station's tree; own ``queues``' errors; attach the scope and the
-        mailbox to the loop (in that order, after the robot's handlers)."""
+        the station's tree; own ``queues``' errors; attach the move watch, the
+        scope and the mailbox to the loop (in that order, after the robot's
+        handlers).
+
+        What the operator reads of the robot is given here, once (loop
+        thread, each returns text): ``where`` the robot is; how the move that
+        has just ended ended, ``ended() -> (reason, report lines)``, asked
+        once per move when the move-ended event is made; the ``status``
+        line (default: the root's signals)."""
+        if where is not None:
+            self._say_where = where
+        if ended is not None:
+            self._say_ended = ended
+        self._say_status = status
         self.root = root
         self.extras = list(extras)
         self.queues = list(queues)
@@ -228,14 +271,99 @@ class Station:
         for q in self.queues:
             q.on_error = self._queue_error
         self.loop.trip_handlers.append(self.trip)
+        self.loop.attach(self._watch_moves, name="moves")
         self.loop.attach(self.scope.sample, name="scope")
         self.runner = Runner(self.loop, motion_queue=self.motion)
         self.subscribe(self._to_console)
+        self.subscribe_moves(self._move_to_console)
         for c in self._by_name.values():  # what they said while being built comes now
             c.connect(trip=self.trip, tell=self.publish)
         if self.boards is not None and self.boards.flushes:
             self.loop.attach(self._flush_boards, name="io:write")
         return self.runner
+
+    # -- the end of a move ------------------------------------------------------------
+
+    def subscribe_moves(self, listener: Callable[[MoveEnded], None]) -> Callable[[], None]:
+        """Hand every :class:`~pyrt.station.moves.MoveEnded` to ``listener(event)``
+        from now on (loop thread: it must not block); returns what ends it."""
+        with self._subscribing:
+            self._move_listeners = (*self._move_listeners, listener)
+
+        def unsubscribe() -> None:
+            with self._subscribing:
+                self._move_listeners = tuple(x for x in self._move_listeners
+                                             if x is not listener)
+        return unsubscribe
+
+    def watch_move(self) -> MoveWatch:
+        """``wait``'s one mailbox call (loop thread): a watch of what runs now. It
+        collects every move-ended event until the robot is idle, then is done;
+        idle at once (with the last move's event and where the robot is) when
+        nothing runs; a refusal when nothing can end (a ready queue of the
+        robot is frozen: its clock interrupt is off)."""
+        if not self.busy():
+            return MoveWatch(True, self.last_move, where=self.where())
+        frozen = next((q for q in self.queues if not q.interrupts_enabled), None)
+        if frozen is not None:
+            return MoveWatch(False, self.last_move,
+                             f"the clock interrupt is OFF (the ready queue {frozen.name} is "
+                             "frozen): the move cannot end until it is on")
+        self._moving = True  # queued in this tick, after the watch ran: it is a move
+        watch = MoveWatch(False, self.last_move)
+        self._watches.append(watch)
+        return watch
+
+    def end_move(self, reason: str, report: Sequence[str] = ()) -> MoveEnded:
+        """Publish the end of a move (loop thread): ``reason`` how it ended, in
+        the operator's words, ``report`` the lines ``wait`` says (default: the
+        reason); where the robot was left and the fault that ended it are
+        added here.  A configuration calls it from its motion executor's
+        ``on_done`` (or its controller's stop listener); a move that is not a
+        motion (a job, a move of one axis) ends when the robot goes idle, as
+        ``ended`` (given to :meth:`adopt`) says."""
+        try:
+            where = self.where()
+        except Exception as exc:  # a report must never stop the tick
+            where = f"(where is not known: {exc!r})"
+        fault = self._fault
+        self._move_seq += 1
+        self.moves_this_period += 1
+        event = MoveEnded(self.name, self._move_seq, reason, where,
+                          fault.id if fault is not None else 0,
+                          tuple(report) or (reason,), self.loop.now_ns)
+        self.last_move = event
+        for watch in self._watches:
+            watch.collect(event)
+        for listener in self._move_listeners:
+            try:
+                listener(event)
+            except Exception as exc:
+                self._move_listeners = tuple(x for x in self._move_listeners
+                                             if x is not listener)
+                MESSAGE_LOG.error("%s: a move subscriber failed and was dropped: %r",
+                                  self.name, exc)
+        return event
+
+    def _watch_moves(self, now_ns: int) -> None:
+        """Loop handler ``moves``: when the robot goes idle, what ended and was not
+        a motion is published (``ended`` says whether there is any), and the
+        waits are done."""
+        busy = self.busy()
+        if self._moving and not busy:
+            try:
+                reason, report = self._say_ended()
+            except Exception as exc:  # a report must never stop the tick
+                reason, report = f"ended (its report failed: {exc!r})", ()
+            if reason or report:
+                self.end_move(reason, report)
+            watches, self._watches = self._watches, []
+            for watch in watches:
+                watch.finish()
+            self.moves_this_period = 0
+        elif busy and not self._moving:
+            self.moves_this_period = 0
+        self._moving = busy
 
     # -- messages -------------------------------------------------------------------
 
@@ -243,10 +371,12 @@ class Station:
         """Hand every message of the station's components to ``listener(message)``
         from now on (in the thread that says it, the loop's as a rule: it must
         not block); returns what ends the subscription."""
-        self._listeners = (*self._listeners, listener)
+        with self._subscribing:
+            self._listeners = (*self._listeners, listener)
 
         def unsubscribe() -> None:
-            self._listeners = tuple(x for x in self._listeners if x is not listener)
+            with self._subscribing:
+                self._listeners = tuple(x for x in self._listeners if x is not listener)
         return unsubscribe
 
     def publish(self, message: Message) -> None:
@@ -266,6 +396,17 @@ class Station:
         """Tell the operator ``text`` as the station itself (what no component owns:
         the write-back at close), published as the components' messages are."""
         self.publish(Message(self.name, level, text))
+
+    def _move_to_console(self, event: MoveEnded) -> None:
+        """The end of a move among the console's lines, as it comes (a station
+        whose profile announces stops), unless a ``wait`` waits for it."""
+        runner = self.runner
+        if runner is None or not self.profile.announce_stops:
+            return
+        if any(w.waiting for w in self._watches):
+            return
+        for text in event.report:
+            runner.post(MoveLine(text, event.seq))
 
     def _to_console(self, message: Message) -> None:
         """The runner's asynchronous lines: what the console shows as it happens."""
@@ -443,13 +584,16 @@ class Station:
         first = self._fault is None
         for q in self.queues:
             q.halt()
+        if first:  # recorded first: a move the reflex ends, ends by this fault
+            self._fault = self.loop.make_fault(self.name, cause, source, tb)
         failed = self.reflex(f"fault: {cause}")
+        fault = self._fault
+        assert fault is not None
         if not first:
-            assert self._fault is not None
-            return self._fault
+            return fault
         if failed:
-            cause = f"{cause}; reflex action failed: {failed}"
-        fault = self._fault = self.loop.make_fault(self.name, cause, source, tb)
+            fault = self._fault = dataclasses.replace(
+                fault, cause=f"{cause}; reflex action failed: {failed}")
         self.loop.report_fault(fault)
         return fault
 
@@ -507,13 +651,15 @@ class Station:
         return f"{said}; {here}" if here else said
 
     def where(self) -> str:
-        """Where the robot is, in the operator's words ('' if it cannot say)."""
-        return ""
+        """Where the robot is, in the operator's words ('' if it cannot say): as
+        given to :meth:`adopt`."""
+        return self._say_where()
 
     def last_stop(self) -> str:
-        """How the last move ended, in the operator's words ('' before any);
-        the server's and EPICS's ``stopReason``."""
-        return ""
+        """How the last move ended, in the operator's words ('' before any): the
+        last move-ended event's reason (the server's and EPICS's ``stopReason``)."""
+        last = self.last_move
+        return last.reason if last is not None else ""
 
     # -- commands (loop thread) -------------------------------------------------------
 
@@ -563,45 +709,6 @@ class Station:
         """The object motion types drive (the root component by default)."""
         return self.root
 
-    # -- what the shell asks ------------------------------------------------------------
-
-    def letter_level(self) -> Component | None:
-        """The component whose commands are single letters at the prompt (the
-        gripper's ``CMD:``), or None: commands are ``OBJECT VERB``."""
-        return None
-
-    def prompt(self, level: Component | None) -> str:
-        """The console prompt at ``level``."""
-        return f"{self.name}> "
-
-    def wait_refusal(self) -> str | None:
-        """Why ``wait`` cannot end now, or None."""
-        return None
-
-    #: Consoles waiting (``wait``) for the move to end: the stop that ends it
-    #: is then reported by the wait, once, not also as an asynchronous line.
-    waiters: int = 0
-
-    def begin_wait(self) -> tuple[bool, str | None]:
-        """A ``wait`` begins (loop thread): (whether anything runs, why the
-        wait cannot end or None); while it runs, :attr:`waiters` counts it."""
-        busy, refusal = self.busy(), self.wait_refusal()
-        if busy and not refusal:
-            self.waiters += 1
-        return busy, refusal
-
-    def end_wait(self) -> None:
-        """The ``wait`` that :meth:`begin_wait` counted has ended."""
-        self.waiters = max(0, self.waiters - 1)
-
-    def idle_report(self) -> str:
-        """``wait`` with nothing to wait for."""
-        return "nothing to wait for"
-
-    def wait_report(self) -> str:
-        """Why the move ``wait`` waited for ended."""
-        return "ended"
-
     # -- state ------------------------------------------------------------------------
 
     def busy(self) -> bool:
@@ -609,7 +716,11 @@ class Station:
         return len(self.motion) > 0 or any(ex.busy for ex in self.executors)
 
     def status(self) -> str:
-        """One status line (configurations say more): the root's signals."""
+        """The status line: as given to :meth:`adopt` (else the root's signals),
+        and the fault while one is not acknowledged."""
+        if self._say_status is not None:
+            line = self._say_status()
+            return f"{line}  FAULT: {self._fault.cause}" if self._fault is not None else line
         parts = [f"{s.name}={s.format(s.read())}" for s in self.root.signals()]
         if self._fault is not None:
             parts.append(f"FAULT: {self._fault.cause}")
@@ -641,11 +752,6 @@ class Station:
         """Every random seed of the run (name -> seed), kept in a journal's
         header; none by default."""
         return {}
-
-    def startup_commands(self) -> list[str]:
-        """Console lines run once the loop runs, before the operator types (the
-        gripper's power-up ``I``); none by default."""
-        return []
 
     def start(self) -> Runner:
         """Start the loop (its thread on a wall clock)."""
@@ -702,15 +808,12 @@ class Station:
             report(line)
 
     def closing_note(self) -> str:
-        """What closing did beyond stopping the motors, for the one line said
-        on the way out ("; databases written back in DIR"), or ""."""
-        return ""
-
-    def closing_where(self) -> str:
-        """Where the robot was left, for the line said on the way out (SIGINT,
-        SIGTERM, end of input, quit): :meth:`where`, unless :meth:`closing_note`
-        says it already ('' then)."""
-        return self.where()
+        """The end of the one line said on the way out (SIGINT, SIGTERM, end of
+        input, quit) after "every motor stopped": where the robot was left and
+        what closing did beyond stopping the motors ("; databases written back
+        in DIR"); by default "; " and :meth:`where` ('' when it cannot say)."""
+        here = self.where()
+        return f"; {here}" if here else ""
 
     def write_back(self) -> None:
         """Write databases back on the way out (configurations that have them)."""

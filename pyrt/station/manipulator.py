@@ -82,6 +82,7 @@ from pyrt.sim.world import MANIPULATOR_BOARDS, ManipulatorWorld, World, WorldFac
 from pyrt.station._manip_params import axis_fuzzy_params
 from pyrt.station.base import BoardWorld, Station, refuse_sim_options
 from pyrt.station.factory import StationFactory
+from pyrt.station.profile import ShellProfile
 from pyrt.tasks import SyncWriter, ThreadWriter, WriteBack, register_tasks
 
 __all__ = [
@@ -330,12 +331,11 @@ class ManipulatorStation(Station):
         # mailbox fills (the station's runner takes it), the loop's spawn and
         # the pattern log's writer, the stop listeners, the task periods.
         self.stops: list[StopRecord] = []
-        self._unreported: StopRecord | None = None
         self.polyaxis = PolyAxis(
             pa_rec, self.axes, self.av, PolyAxisServices(
                 motion=self.motion, spawn=self.loop.spawn,
                 pattern_writer="sync" if self.loop.clock.virtual else "thread",
-                on_stop=(self.stops.append, self._report_stop)),
+                on_stop=(self.stops.append, self._stopped)),
             name=pa_rec.name.lower(), poll_s=poll_s, fuzzy=fuzzy, liquid_level=liquid_level,
             task_periods=(_checks(poll_s, tick_s, "control poll"),
                           _checks(axis_poll_s, tick_s, "axis poll")))
@@ -394,13 +394,14 @@ class ManipulatorStation(Station):
         self._writeback_failure: str | None = None
         self.loop.attach(self._write_back, name="writeback")
 
-        self.words = ManipulatorWords(self)
+        self.profile = ShellProfile(words=ManipulatorWords(self), announce_stops=True)
         extras: list[Component] = []
         if self.plant is not None:
             extras.append(ManipulatorSim(self.plant, self.axes))
         elif boards.has_info:
             extras.append(BoardWorld(boards))
-        self.adopt(pa, queues=[self.queue], executors=[pa.executor], extras=extras)
+        self.adopt(pa, queues=[self.queue], executors=[pa.executor], extras=extras,
+                   where=self._where, ended=self._ended, status=pa.status_line)
         self.log_path: Path | None = None
         self._log_file: TextIO | None = None
         boards.poll(self.loop.now_ns)  # the encoders' counters now ride along
@@ -436,15 +437,6 @@ class ManipulatorStation(Station):
         if not notes:
             notes.append("encoders and lengths agree with POSITION (ZEROLENGTH and LENGTH kept)")
         return notes
-
-    def _report_stop(self, rec: StopRecord) -> None:
-        """Every stop is reported as it happens (asynchronous output), except
-        the one that ends a console's ``wait``: the wait reports that one."""
-        job = self.polyaxis.pattern_job
-        if self.waiters and len(self.motion) == 0 and (job is None or job.done):
-            self._unreported = rec
-            return
-        self.say(f"{self.polyaxis.name} stopped: {rec}")
 
     # -- faults ----------------------------------------------------------------------
 
@@ -508,12 +500,6 @@ class ManipulatorStation(Station):
             out += axis_fuzzy_params(pa, pa.axes.index(component))
         return out
 
-    def where(self) -> str:
-        """The source's estimated position (and that it is not trusted, when lost)."""
-        x, y, z = self.polyaxis.position
-        lost = "; position estimate not trusted" if self.polyaxis.estimate_lost else ""
-        return f"source at ({x:.2f}, {y:.2f}, {z:.2f}) cm{lost}"
-
     def busy(self) -> bool:
         """A move runs or waits, a pattern runs, or an axis moves on its own."""
         pa = self.polyaxis
@@ -535,44 +521,35 @@ class ManipulatorStation(Station):
             raise CommandError(f"motion {record.type}: a pattern is running ('{pa.name} stop' "
                                "ends it); nothing moved")
 
-    def wait_refusal(self) -> str | None:
-        """``wait`` begins: remember the axes moving on their own, to report them."""
-        self._axis_moves = [a for a in self.axes
-                            if a.mode == "standalone" and a.motor.running]
-        return None
+    def _where(self) -> str:
+        """The source's estimated position (and that it is not trusted, when lost)."""
+        x, y, z = self.polyaxis.position
+        lost = "; position estimate not trusted" if self.polyaxis.estimate_lost else ""
+        return f"source at ({x:.2f}, {y:.2f}, {z:.2f}) cm{lost}"
 
-    def last_stop(self) -> str:
-        """How the last PolyAxis move ended (its stop record), '' before any."""
-        last = self.polyaxis.last_stop
-        return str(last) if last else ""
+    def _stopped(self, rec: StopRecord) -> None:
+        """The PolyAxis stopped (loop thread): the end of its move, said once."""
+        self.end_move(str(rec), [f"{self.polyaxis.name} stopped: {rec}"])
 
-    def idle_report(self) -> str:
-        last = self.polyaxis.last_stop
-        return f"nothing to wait for; last stop: {last}" if last else "nothing to wait for"
-
-    def wait_report(self) -> str:
-        """How the pattern, the axis moves or the PolyAxis move ended."""
+    def _ended(self) -> tuple[str, list[str]]:
+        """The manipulator went idle: how the pattern or the axes' own moves
+        ended ('' when the PolyAxis's stop has said it all)."""
         pa = self.polyaxis
         job = pa.pattern_job
-        lines = []
         if job is not None and job.done:
             pa.pattern_job = None
             if job.error is not None:
-                lines.append(f"error: pattern failed: {job.error}")
+                text = f"error: pattern failed: {job.error}"
             else:
-                lines.append(f"pattern finished: {len(job.result or [])} endpoints; log "
-                             f"{pa.pattern_log}")
-        moved, self._axis_moves = getattr(self, "_axis_moves", []), []
-        if moved and not pa.active and not lines:
-            for a in moved:
-                lines.append(f"{a.name}: move ended at length {a.length():.3f} cm")
-            return "\n".join(lines)
-        last, unreported, self._unreported = pa.last_stop, self._unreported, None
-        if last is None:
-            lines.append("ended")
-        elif unreported is last or not lines:  # said once: here, or above already
-            lines.append(f"{pa.name} stopped: {last}")
-        return "\n".join(lines)
+                text = f"pattern finished: {len(job.result or [])} endpoints; log {pa.pattern_log}"
+            return text, [text]
+        moved = [a for a in self.axes if a.moved]
+        for a in moved:
+            a.moved = False
+        if moved and not self.moves_this_period:
+            lines = [f"{a.name}: move ended at length {a.length():.3f} cm" for a in moved]
+            return lines[0], lines
+        return "", []
 
     # -- logging -------------------------------------------------------------------------
 
@@ -601,13 +578,6 @@ class ManipulatorStation(Station):
         return self.log_path if fh is not None else None
 
     # -- status and shutdown -------------------------------------------------------------
-
-    def status(self) -> str:
-        """The status line (position, distErr, residual force, tensions, time)."""
-        line = self.polyaxis.status_line()
-        if self.fault is not None:
-            line += f"  FAULT: {self.fault.cause}"
-        return line
 
     def status_fields(self) -> list[tuple[str, Signal, str]]:
         """STATUS: x y z distErr netForce moving fault, then tension0 ... per rope."""
@@ -638,16 +608,18 @@ class ManipulatorStation(Station):
                 for k, c in enumerate("xyz")]
 
     def closing_note(self) -> str:
+        """Where the source was left, and what became of the databases."""
+        here = super().closing_note()
         if self.fault is not None:
-            return (f"; databases in {self.directory} keep the values last written before "
-                    "the fault")
+            return (f"{here}; databases in {self.directory} keep the values last written "
+                    "before the fault")
         if self.boards is not None and self.boards.down is not None:
-            return f"; databases in {self.directory} keep the values last written"
+            return f"{here}; databases in {self.directory} keep the values last written"
         if self.polyaxis.estimate_lost is not None:
-            return (f"; databases written back in {self.directory}, except POSITION, LENGTH "
-                    "and ZEROLENGTH (the position estimate is not trusted: they keep the "
-                    "values last written before it was lost)")
-        return f"; databases written back in {self.directory}"
+            return (f"{here}; databases written back in {self.directory}, except POSITION, "
+                    "LENGTH and ZEROLENGTH (the position estimate is not trusted: they keep "
+                    "the values last written before it was lost)")
+        return f"{here}; databases written back in {self.directory}"
 
     def write_back(self) -> None:
         """Write pending database values, close the log (on the way out).
