@@ -60,9 +60,13 @@ class RobotShell(CommandShell):
     #: Words that pass time and change nothing (not audited).
     _UNAUDITED = frozenset({"wait", "sleep", "help"})
 
-    def __init__(self, station: Any, stdout: TextIO, runner: Any = None, source: str = ""):
+    def __init__(self, station: Any, stdout: TextIO, runner: Any = None, source: str = "",
+                 audit: Callable[[str, str], None] | None = None):
         super().__init__(stdout)
         self.station = station
+        #: Where a remote source's commands that act are audited (the served
+        #: station's trail), or None.
+        self.audit = audit
         #: Who types into this shell: '' for the station's own console; a DAQ
         #: client or EPICS otherwise (each command of theirs that moves or
         #: changes the robot is shown on the console: :meth:`Station.audit`).
@@ -222,8 +226,9 @@ class RobotShell(CommandShell):
             if hint:
                 raise CommandError(f"{exc}{hint}") from None
             raise
-        if self.source and not rec.only_reads(words) and rec.name not in self._UNAUDITED:
-            self.station.audit(self.source, line)
+        if (self.source and self.audit is not None and not rec.only_reads(words)
+                and rec.name not in self._UNAUDITED):
+            self.audit(self.source, line)
         if comp is None:
             return bool(rec.handler(*args))
         result = self.call(self.station.execute, comp, rec, args,
@@ -290,9 +295,8 @@ class RobotShell(CommandShell):
         so the next command does not report it again; one the shell has
         shown already is left out."""
         out: list[str] = []
-        take = getattr(self.station, "audit_lines", None)
-        if not self.source and take is not None:  # the console: what remote clients did
-            out += take()
+        if self.source:  # a remote client's shell: the loop's lines are the console's
+            return out
         for line in self.runner.messages():
             if isinstance(line, MoveLine):
                 if line.seq not in self._moves_shown:

@@ -41,6 +41,7 @@ from pyrt.devices.loadcell import Loadcell, parse_load
 from pyrt.devices.motor import MAX_CRUISE_SPEED, MIN_START_SPEED, STEP_MODE, Motor
 from pyrt.errors import CommandError, ConfigError, PyrtError
 from pyrt.robots.av import AV
+from pyrt.robots.fuzzy_gains import fuzzy_gain_params
 from pyrt.robots.ropes import corrected_length
 from pyrt.tasks.axis_poll import POLYAXIS, STANDALONE
 
@@ -338,15 +339,20 @@ class Axis(Component):
 
     def params(self) -> list[Param]:
         """The limits every move of this rope is held to, read only (the PolyAxis
-        sets them: ``set POLYAXIS.MAX_TENSION``)."""
+        sets them: ``set POLYAXIS.MAX_TENSION``); under a PolyAxis, the rope's
+        fuzzy gains (:mod:`pyrt.robots.fuzzy_gains`)."""
         def limit(which: int, attr: str) -> Callable[[], float | None]:
             return lambda: (getattr(self, attr) or (None, None))[which]
 
+        batch = getattr(self.group, "batch", None)
+        gains = ([] if batch is None or self.group_index is None
+                 else fuzzy_gain_params(batch, self.group_index, self.name))
         return [
             Param("LENGTH_MIN", "cm", limit(0, "length_range"), doc="shortest rope length"),
             Param("LENGTH_MAX", "cm", limit(1, "length_range"), doc="longest rope length"),
             Param("LOW_TENSION", "N", limit(0, "tension_limits"), doc="lowest tension"),
             Param("HIGH_TENSION", "N", limit(1, "tension_limits"), doc="highest tension"),
+            *gains,
         ]
 
     def set_supervision(self, length_range: tuple[float, float],

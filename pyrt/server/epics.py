@@ -113,12 +113,12 @@ def pv_name(name: str) -> str:
 class _RefusedWrites(logging.Filter):
     """A Channel Access client's write to a read-only PV, refused by caproto: one
     line (``refused EPICS write: ...``) instead of caproto's traceback, and an
-    audit line of the station; the follow-up error caproto's write handler
+    audit line of the served station; the follow-up error caproto's write handler
     leaves in asyncio (a KeyError in ``handle_write``) is dropped."""
 
-    def __init__(self, station: Any):
+    def __init__(self, robot: Any):
         super().__init__()
-        self.station = station
+        self.robot = robot
 
     def filter(self, record: logging.LogRecord) -> bool:
         # Another IOC's filter may have seen the record first: it keeps the refusal.
@@ -126,7 +126,7 @@ class _RefusedWrites(logging.Filter):
         if record.name.startswith("caproto") and type(exc).__name__ == "Forbidden":
             line = f"refused EPICS write: {exc}"
             with contextlib.suppress(Exception):
-                self.station.audit("EPICS", line)
+                self.robot.audit("EPICS", line)
             record.pyrt_refused = exc
             record.msg, record.args = line, ()
             record.exc_info = record.exc_text = None
@@ -234,7 +234,7 @@ class EpicsService:
         if not prefix or any(c.isspace() for c in prefix) or len(prefix) > 40:
             raise ConfigError(f"EPICS prefix must be 1..40 characters, no spaces: {prefix!r}")
         logging.getLogger("caproto").setLevel(logging.INFO if verbose else logging.WARNING)
-        refused = _RefusedWrites(robot.station)
+        refused = _RefusedWrites(robot)
         logging.getLogger("caproto.circ").addFilter(refused)
         logging.getLogger("asyncio").addFilter(refused)
         self._refused = refused

@@ -208,7 +208,7 @@ class SessionMixin(ServerState):
         """A wrong token: an audit line of the station (console and audit log)."""
         host, port = conn.peer[:2]
         with contextlib.suppress(Exception):  # auditing must never break the server
-            self.robot.station.audit(f"DAQ client {conn.id} {host}:{port}",
+            self.robot.audit(f"DAQ client {conn.id} {host}:{port}",
                                      f"failed AUTH ({conn.auth_failures} of {MAX_AUTH_FAILURES})")
 
     def _auth(self, conn: Connection, given: str) -> str:

@@ -53,10 +53,9 @@ import dataclasses
 import logging
 import logging.handlers
 import threading
-from collections import deque
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, final
 
 from pyrt.boards import Boards
 from pyrt.component import Command, Component, Message, Param, Signal, command, walk
@@ -127,6 +126,9 @@ class Station:
     #: How its console reads (prompt, letter level, words, ``wait``'s words):
     #: presentation, given by the module that assembles the station.
     profile: ShellProfile = ShellProfile()
+    #: Where the station's files are (its databases), or None; a served
+    #: station keeps its audit log there.
+    directory: Path | None = None
 
     def __init__(self, loop: Loop, *, motion_capacity: int = 16):
         self.loop = loop
@@ -148,9 +150,6 @@ class Station:
         #: as ``start-up:`` lines before the console opens (the manipulator's
         #: reconciled ZEROLENGTH and LENGTH); none by default.
         self.startup_notes: list[str] = []
-        #: Audit lines not yet shown on the console (:meth:`audit`), and the log.
-        self._audit_pending: deque[str] = deque(maxlen=1000)
-        self._audit_logger: logging.Logger | None = None
         self._fault: Fault | None = None
         self._by_name: dict[str, Component] = {}
         self._closed = False
@@ -174,6 +173,7 @@ class Station:
 
     # -- assembly -------------------------------------------------------------------
 
+    @final
     def attach_boards(self, boards: Boards) -> None:
         """Own ``boards``: attach their read phase (``io:read``) to the loop now
         (call it before the robot's handlers: the inputs of a tick come in
@@ -193,6 +193,7 @@ class Station:
         if boards.polls:
             self.loop.attach(self._poll_boards, name="io:read")
 
+    @final
     def attach_world(self, step: Callable[[int], None], name: str = "world") -> None:
         """Attach the simulated world's ``step(now_ns)``: to the loop as handler
         ``name`` (call it after :meth:`attach_boards`, before the robot's
@@ -234,6 +235,7 @@ class Station:
         if self._fault is None:
             self.trip(str(exc), source="boards")
 
+    @final
     def adopt(self, root: Component, *, queues: Iterable[ReadyQueue] = (),
               executors: Iterable[MotionExecutor] = (),
               extras: Iterable[Component] = (),
@@ -284,6 +286,7 @@ class Station:
 
     # -- the end of a move ------------------------------------------------------------
 
+    @final
     def subscribe_moves(self, listener: Callable[[MoveEnded], None]) -> Callable[[], None]:
         """Hand every :class:`~pyrt.station.moves.MoveEnded` to ``listener(event)``
         from now on (loop thread: it must not block); returns what ends it."""
@@ -296,6 +299,7 @@ class Station:
                                              if x is not listener)
         return unsubscribe
 
+    @final
     def watch_move(self) -> MoveWatch:
         """``wait``'s one mailbox call (loop thread): a watch of what runs now. It
         collects every move-ended event until the robot is idle, then is done;
@@ -314,6 +318,7 @@ class Station:
         self._watches.append(watch)
         return watch
 
+    @final
     def end_move(self, reason: str, report: Sequence[str] = ()) -> MoveEnded:
         """Publish the end of a move (loop thread): ``reason`` how it ended, in
         the operator's words, ``report`` the lines ``wait`` says (default: the
@@ -367,6 +372,7 @@ class Station:
 
     # -- messages -------------------------------------------------------------------
 
+    @final
     def subscribe(self, listener: Callable[[Message], None]) -> Callable[[], None]:
         """Hand every message of the station's components to ``listener(message)``
         from now on (in the thread that says it, the loop's as a rule: it must
@@ -379,6 +385,7 @@ class Station:
                 self._listeners = tuple(x for x in self._listeners if x is not listener)
         return unsubscribe
 
+    @final
     def publish(self, message: Message) -> None:
         """Give ``message`` to the log and to every subscriber; a subscriber that
         raises is dropped (and the log says so), the others still hear it."""
@@ -392,6 +399,7 @@ class Station:
                 MESSAGE_LOG.error("%s: a message subscriber failed and was dropped: %r",
                                   self.name, exc)
 
+    @final
     def say(self, text: str, level: str = "info") -> None:
         """Tell the operator ``text`` as the station itself (what no component owns:
         the write-back at close), published as the components' messages are."""
@@ -416,10 +424,12 @@ class Station:
 
     # -- the tree -----------------------------------------------------------------
 
+    @final
     def components(self) -> list[Component]:
         """Every component, the robot's tree first, each once."""
         return list(self._by_name.values())
 
+    @final
     def component(self, name: str) -> Component:
         """The component called ``name`` (case-insensitive), or CommandError."""
         c = self._by_name.get(name.lower())
@@ -428,18 +438,22 @@ class Station:
                                f"{', '.join(self.names())}")
         return c
 
+    @final
     def find(self, name: str) -> Component | None:
         """The component called ``name``, or None."""
         return self._by_name.get(name.lower())
 
+    @final
     def names(self) -> list[str]:
         """The components' names, in the tree's order."""
         return [c.name for c in self._by_name.values()]
 
+    @final
     def signals(self) -> list[tuple[str, Signal]]:
         """``(OBJECT.SIGNAL, signal)`` of every signal of every component."""
         return [(f"{c.name}.{s.name}", s) for c in self.components() for s in c.signals()]
 
+    @final
     def resolve_signal(self, name: str) -> Signal:
         """``OBJECT.SIGNAL``, or a bare ``SIGNAL`` of the root component; CommandError if none."""
         text = name.strip()
@@ -459,18 +473,20 @@ class Station:
             raise CommandError(f"no channel {text[:60]!r}; 'scope list' shows them")
         return s
 
+    @final
     def all_commands(self) -> list[tuple[Component, Command]]:
         """Every command record of every component."""
         return [(c, r) for c in self.components() for r in c.commands()]
 
     # -- parameters (get/set) ---------------------------------------------------------
 
+    @final
     def params_of(self, component: Component) -> list[Param]:
-        """The run-time parameters of ``component``: its own
-        (:meth:`Component.params`) and any the station adds for it (a
-        configuration's own tunables); ``get``/``set`` and the server read these."""
+        """The run-time parameters of ``component``: its own, and only its own
+        (:meth:`Component.params`); ``get``/``set`` and the server read these."""
         return list(component.params())
 
+    @final
     def param(self, name: str) -> tuple[Component, Param]:
         """``OBJECT.FIELD`` as (component, parameter); CommandError naming what there is."""
         obj, dot, field = name.strip().partition(".")
@@ -486,6 +502,7 @@ class Station:
         raise CommandError(f"{comp.name} has no parameter {field[:40]!r}; it has "
                            f"{', '.join(p.name for p in params) or 'none'}")
 
+    @final
     def set_param(self, component: Component, param: Param, value: Any) -> str:
         """Change ``param`` of ``component`` to a checked ``value`` (loop thread):
         refused if it is read only, or while a move runs when changing it then
@@ -505,73 +522,15 @@ class Station:
         line = f"{component.name}.{param.name} {param.text(old)} -> {param.text(new)}{u} ({back})"
         return f"{line}; {said}" if isinstance(said, str) and said else line
 
-    # -- the audit trail --------------------------------------------------------------
-
-    #: Largest size of the audit log before it is rotated, bytes; rotated copies kept.
-    audit_max_bytes: int = 1_000_000
-    audit_backups: int = 3
-
-    def audit(self, source: str, line: str) -> None:
-        """A command that moves or changes the robot came from ``source`` (a
-        DAQ client, EPICS CMD or STOP; any thread): one line for the operator's
-        console naming the source (:meth:`audit_lines`), and a timestamped line
-        in the audit log when one is open (:meth:`open_audit_log`)."""
-        text = f"{source}: {line.strip()[:200]}"
-        # Not the runner's messages: a remote shell's wait drains those, and
-        # the operator would never see the line.  The console's shell takes
-        # these (RobotShell.messages); a bounded queue when there is none.
-        self._audit_pending.append(f"remote: {text}")
-        logger = self._audit_logger
-        if logger is not None:
-            logger.info("%s", text)
-
-    def audit_lines(self) -> list[str]:
-        """Take the audit lines not yet shown on the console (any thread)."""
-        pending = self._audit_pending
-        out: list[str] = []
-        while pending:
-            try:
-                out.append(pending.popleft())
-            except IndexError:
-                break
-        return out
-
-    def audit_log_path(self) -> Path:
-        """Where the audit log goes when the station is served: the working
-        directory by default (a station with databases puts it beside them)."""
-        return Path.cwd() / f"pyrt-{self.name}-audit.log"
-
-    def open_audit_log(self, path: str | Path | None = None) -> Path:
-        """Write the audit trail to ``path`` (default :meth:`audit_log_path`), rotated
-        by size (:attr:`audit_max_bytes`, :attr:`audit_backups` copies); the path."""
-        self.close_audit_log()
-        where = Path(path) if path is not None else self.audit_log_path()
-        handler = logging.handlers.RotatingFileHandler(
-            where, maxBytes=self.audit_max_bytes, backupCount=self.audit_backups,
-            encoding="utf-8", delay=True)  # the file appears with the first line
-        handler.setFormatter(logging.Formatter("%(asctime)s %(message)s"))
-        logger = logging.Logger(f"pyrt.audit.{self.name}")  # its own, not the root's tree
-        logger.addHandler(handler)
-        self._audit_logger = logger
-        return where
-
-    def close_audit_log(self) -> None:
-        """Close the audit log, if one is open."""
-        logger = self._audit_logger
-        if logger is None:
-            return
-        self._audit_logger = None
-        for h in list(logger.handlers):
-            logger.removeHandler(h)
-            h.close()
-
     # -- faults (loop thread) ---------------------------------------------------------
 
+    @final
     @property
     def fault(self) -> Fault | None:
         """The fault that stopped the robot, or None."""
         return self._fault
 
+    @final
     def trip(self, cause: str, source: str = "", tb: str = "") -> Fault:
         """The one fault path (every component's :meth:`~pyrt.component.Component.fail`,
         a task that raised, a board that cannot be reached, a motion that
@@ -600,6 +559,7 @@ class Station:
     def _queue_error(self, cause: str, source: str, tb: str) -> None:
         self.trip(cause, source, tb)
 
+    @final
     def reflex(self, why: str = "stop") -> str:
         """Every actuator stopped now: every component's reflex, the running
         motions ended, queued ones dropped.  Returns the reflex errors ('' if none);
@@ -627,6 +587,7 @@ class Station:
         self.motion.clear()
         return "; ".join(errors)
 
+    @final
     def acknowledge(self) -> str:
         """Clear the fault; the routines start again, nothing moves."""
         if self._fault is None:
@@ -636,11 +597,7 @@ class Station:
         self._fault = None
         for q in self.queues:
             q.resume(restart=True)
-        self.after_acknowledge()
         return f"fault acknowledged ({cause}); every motor stopped, routines running"
-
-    def after_acknowledge(self) -> None:
-        """What a configuration does after a fault is cleared (nothing by default)."""
 
     def stop(self) -> str:
         """The operator's stop: every motor stopped, the move ended, queued
@@ -650,11 +607,13 @@ class Station:
         here = self.where()
         return f"{said}; {here}" if here else said
 
+    @final
     def where(self) -> str:
         """Where the robot is, in the operator's words ('' if it cannot say): as
         given to :meth:`adopt`."""
         return self._say_where()
 
+    @final
     def last_stop(self) -> str:
         """How the last move ended, in the operator's words ('' before any): the
         last move-ended event's reason (the server's and EPICS's ``stopReason``)."""
@@ -663,6 +622,7 @@ class Station:
 
     # -- commands (loop thread) -------------------------------------------------------
 
+    @final
     def execute(self, component: Component, record: Command, args: list[Any]) -> Any:
         """Run ``record`` with checked ``args``: refused while faulted if it
         moves (or is not allowed while faulted); one mailbox call checks and acts."""
@@ -672,6 +632,7 @@ class Station:
                 f"({self._fault.cause}); give 'ack' first; nothing moved")
         return record.handler(*args)
 
+    @final
     def submit_motion(self, record: Any) -> tuple[int, bool]:
         """Check a motion record and put it on the motion queue (loop thread):
         refused while faulted; a type's ``check(robot, params)`` runs first.
@@ -686,12 +647,14 @@ class Station:
         self.motion.put(record)
         return len(self.motion), waiting
 
+    @final
     def motion_types(self) -> dict[str, type[MotionType]]:
         """The motion types this station runs, by name: every registered type
         (built-in and plug-in) that drives :meth:`motion_robot`.  ``motion``
         lists these and queues no other."""
         return motion_types_for(self.motion_robot())
 
+    @final
     def motion_type(self, name: str) -> type[MotionType]:
         """The motion type ``name`` of this station; CommandError naming this
         station's types if it runs none by that name."""
@@ -705,6 +668,7 @@ class Station:
     def check_motion(self, record: Any) -> None:
         """Configuration-specific refusals of a motion record (none by default)."""
 
+    @final
     def motion_robot(self) -> Any:
         """The object motion types drive (the root component by default)."""
         return self.root
@@ -715,6 +679,7 @@ class Station:
         """A move runs or waits (configurations say more)."""
         return len(self.motion) > 0 or any(ex.busy for ex in self.executors)
 
+    @final
     def status(self) -> str:
         """The status line: as given to :meth:`adopt` (else the root's signals),
         and the fault while one is not acknowledged."""
@@ -736,6 +701,7 @@ class Station:
         every component's signals (EPICS PVs by their names); none by default."""
         return []
 
+    @final
     def fault_field(self) -> tuple[str, Signal, str]:
         """The ``fault`` STATUS field (1 while a fault is not acknowledged)."""
         return ("fault", Signal("fault", "bool", lambda: self._fault is not None,
@@ -753,6 +719,7 @@ class Station:
         header; none by default."""
         return {}
 
+    @final
     def start(self) -> Runner:
         """Start the loop (its thread on a wall clock)."""
         assert self.runner is not None, "adopt() the tree first"

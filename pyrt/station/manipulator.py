@@ -56,7 +56,7 @@ from typing import Any, TextIO
 
 from pyrt.boards import Boards, open_boards
 from pyrt.boards.registers import BoardKind
-from pyrt.component import Arg, Component, Param, Signal, command, finite
+from pyrt.component import Arg, Component, Signal, command, finite
 from pyrt.db import (
     FILES,
     STATIONS,
@@ -79,7 +79,6 @@ from pyrt.scheduler import Loop, ReadyQueue, SimClock
 from pyrt.sim.manipulator import ManipulatorPlant, rig_from_station
 from pyrt.sim.sensors import Imperfections
 from pyrt.sim.world import MANIPULATOR_BOARDS, ManipulatorWorld, World, WorldFactory
-from pyrt.station._manip_params import axis_fuzzy_params
 from pyrt.station.base import BoardWorld, Station, refuse_sim_options
 from pyrt.station.factory import StationFactory
 from pyrt.station.profile import ShellProfile
@@ -246,6 +245,9 @@ class ManipulatorStation(Station):
     A database POSITION where the source may not be (outside the vessel and
     the neck) is a ConfigError naming the file and line.
     """
+
+    #: The station database.
+    directory: Path
 
     def __init__(
         self,
@@ -487,19 +489,6 @@ class ManipulatorStation(Station):
         """The simulated sensors' seed (none on boards whose world runs elsewhere)."""
         return {"imperfections": int(self.plant.imp.seed)} if self.plant is not None else {}
 
-    def audit_log_path(self) -> Path:
-        """The audit log goes beside the databases."""
-        return Path(self.directory) / "audit.log"
-
-    def params_of(self, component: Component) -> list[Param]:
-        """A component's own parameters, and what the station holds for it: each
-        rope's fuzzy gains."""
-        out = super().params_of(component)
-        pa = self.polyaxis
-        if component in pa.axes:
-            out += axis_fuzzy_params(pa, pa.axes.index(component))
-        return out
-
     def busy(self) -> bool:
         """A move runs or waits, a pattern runs, or an axis moves on its own."""
         pa = self.polyaxis
@@ -510,9 +499,6 @@ class ManipulatorStation(Station):
     def motors_running(self) -> list[str]:
         """Names of the motors that are stepping or have windings on."""
         return [a.motor.name for a in self.axes if a.motor.running]
-
-    def motion_robot(self) -> PolyAxis:
-        return self.polyaxis
 
     def check_motion(self, record: Any) -> None:
         pa = self.polyaxis

@@ -1,9 +1,6 @@
-"""The manipulator's run-time parameters that belong to the station's
-configuration rather than to one device: each rope's fuzzy gains (the
-``dv_*`` changes of its rules, held by the PolyAxis's batched fuzzy
-controller), as :class:`Param` records for ``get``/``set``
-(:meth:`ManipulatorStation.params_of`).  The PolyAxis's MAX_TENSION and
-END_ERROR are its own (:meth:`pyrt.robots.polyaxis.PolyAxis.params`)."""
+"""A rope's fuzzy gains as run-time parameters: the ``dv_*`` changes of its
+rules, held by its PolyAxis's batched fuzzy controller, as :class:`Param`
+records for ``get``/``set``; they are the rope's (:meth:`pyrt.robots.axis.Axis.params`)."""
 
 from __future__ import annotations
 
@@ -13,7 +10,7 @@ from typing import Any
 from pyrt.component import Param
 from pyrt.errors import CommandError, NativeError
 
-__all__ = ["FUZZY_GAINS", "axis_fuzzy_params"]
+__all__ = ["FUZZY_GAINS", "fuzzy_gain_params"]
 
 #: The fuzzy gains (FuzzyParams fields) ``set`` changes, with what each rule does.
 FUZZY_GAINS: dict[str, str] = {
@@ -30,15 +27,15 @@ FUZZY_GAINS: dict[str, str] = {
 GAIN_SPAN = 10.0
 
 
-def axis_fuzzy_params(pa: Any, k: int) -> list[Param]:
-    """The fuzzy gains of rope ``k`` of ``pa`` (per control poll, as the batch
-    uses them; not written back: FUZZY_<NAME> keys of AXIS.dat keep theirs)."""
-    batch = pa.batch
+def fuzzy_gain_params(batch: Any, k: int, rope: str) -> list[Param]:
+    """The fuzzy gains of rope ``k`` (called ``rope``) of the batched fuzzy
+    controller ``batch`` (per control poll, as the batch uses them; not written
+    back: FUZZY_<NAME> keys of AXIS.dat keep theirs)."""
     start = batch.params[k]
     out = []
     for field, doc in FUZZY_GAINS.items():
         out.append(Param(field.upper(), "cm/s per poll" if field != "dv_damping" else "fraction",
-                         _reader(batch, k, field), _writer(pa, k, field), 0.0,
+                         _reader(batch, k, field), _writer(batch, k, field, rope), 0.0,
                          max(GAIN_SPAN * getattr(start, field), 1.0), doc))
     return out
 
@@ -47,12 +44,11 @@ def _reader(batch: Any, k: int, field: str) -> Callable[[], float]:
     return lambda: getattr(batch.params[k], field)
 
 
-def _writer(pa: Any, k: int, field: str) -> Callable[[float], None]:
+def _writer(batch: Any, k: int, field: str, rope: str) -> Callable[[float], None]:
     def write(value: float) -> None:
         try:
-            pa.batch.set_params(k, pa.batch.params[k].replace(**{field: value}))
+            batch.set_params(k, batch.params[k].replace(**{field: value}))
         except NativeError as exc:
-            raise CommandError(f"set {pa.axes[k].name}.{field.upper()}: {exc}; "
-                               "nothing changed") from None
+            raise CommandError(f"set {rope}.{field.upper()}: {exc}; nothing changed") from None
 
     return write
