@@ -17,11 +17,19 @@ GUIDE = Path(pyrt.__file__).resolve().parent.parent / "docs" / "writing-a-robot.
 MAX_HOOKS = 12
 
 
+def _members() -> dict[str, object]:
+    """Every public method of Station and of its parts (the classes it is made of)."""
+    out: dict[str, object] = {}
+    for klass in reversed(Station.__mro__[:-1]):
+        out.update({n: m for n, m in vars(klass).items()
+                    if not n.startswith("_") and inspect.isfunction(m)})
+    return out
+
+
 def hooks() -> list[str]:
     """The public methods of Station not marked typing.final: what a station may override."""
-    return [name for name, member in vars(Station).items()
-            if not name.startswith("_") and inspect.isfunction(member)
-            and not getattr(member, "__final__", False)]
+    return [name for name, member in _members().items()
+            if not getattr(member, "__final__", False)]
 
 
 def _stations() -> list[type[Station]]:
@@ -37,9 +45,7 @@ def test_station_has_at_most_twelve_hooks():
     """Station has at most 12 overridable hooks; everything else is final."""
     found = hooks()
     assert 0 < len(found) <= MAX_HOOKS, found
-    public = [n for n, m in vars(Station).items()
-              if not n.startswith("_") and inspect.isfunction(m)]
-    assert len(public) > 2 * len(found)  # the rest is there, marked final
+    assert len(_members()) > 2 * len(found)  # the rest is there, marked final
 
 
 @pytest.mark.skipif(not GUIDE.is_file(), reason="no docs/ in this tree")
@@ -64,5 +70,5 @@ def test_the_guide_lists_each_hook_on_one_line():
 def test_the_stations_override_only_hooks(cls):
     """Every built-in station (and the example arm) overrides hooks only, never a final member."""
     overridden = [n for n, m in vars(cls).items()
-                  if not n.startswith("_") and callable(m) and n in vars(Station)]
+                  if not n.startswith("_") and callable(m) and n in _members()]
     assert set(overridden) <= set(hooks()), set(overridden) - set(hooks())

@@ -50,30 +50,23 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import logging
-import logging.handlers
-import threading
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any, final
 
 from pyrt.boards import Boards
-from pyrt.component import Command, Component, Message, Param, Signal, command, walk
+from pyrt.component import Command, Component, Signal, command, walk
 from pyrt.errors import BoardError, CommandError, ConfigError, Fault, PyrtError
 from pyrt.scheduler import Loop, ReadyQueue
-from pyrt.scheduler.motion import MotionExecutor, MotionType, motion_types_for
+from pyrt.scheduler.motion import MotionExecutor
 from pyrt.scheduler.runner import MotionQueue, Runner
 from pyrt.scope import Scope
-from pyrt.station.moves import MoveEnded, MoveLine, MoveWatch
+from pyrt.station.events import StationEvents
 from pyrt.station.profile import ShellProfile
+from pyrt.station.requests import StationRequests
 
 __all__ = ["BoardWorld", "Station", "refuse_sim_options"]
 
-#: The log every station's messages go to (at their level); silent until the
-#: application gives it a handler.
-MESSAGE_LOG = logging.getLogger("pyrt.messages")
-MESSAGE_LOG.addHandler(logging.NullHandler())
-_LOG_LEVELS = {"info": logging.INFO, "warning": logging.WARNING, "error": logging.ERROR}
 
 
 def refuse_sim_options(boards: Boards, given: Iterable[str]) -> None:
@@ -86,14 +79,6 @@ def refuse_sim_options(boards: Boards, given: Iterable[str]) -> None:
     raise ConfigError(f"board URL {boards.url!r}: the world behind these boards is not "
                       f"simulated in this process: {', '.join(names)} cannot be set here "
                       "(over tcp:// they are options of 'pyrt board-sim')")
-
-
-def _nothing() -> str:
-    return ""
-
-
-def _ended() -> tuple[str, Sequence[str]]:
-    return "ended", ()
 
 
 class BoardWorld(Component):
@@ -117,7 +102,7 @@ class BoardWorld(Component):
         return f"board-sim at {self.boards.url}: " + " ".join(f"{k}={v}" for k, v in info.items())
 
 
-class Station:
+class Station(StationEvents, StationRequests):
     """See the module text.  A configuration builds its tree and calls
     :meth:`adopt` last (after every loop handler is attached)."""
 
@@ -153,23 +138,7 @@ class Station:
         self._fault: Fault | None = None
         self._by_name: dict[str, Component] = {}
         self._closed = False
-        #: The subscribers of the components' messages (:meth:`subscribe`),
-        #: replaced whole on a change (the loop reads it without a lock).
-        self._listeners: tuple[Callable[[Message], None], ...] = ()
-        #: The subscribers of the move-ended event (:meth:`subscribe_moves`).
-        self._move_listeners: tuple[Callable[[MoveEnded], None], ...] = ()
-        self._subscribing = threading.Lock()
-        self._moving = False
-        self._move_seq = 0
-        self._watches: list[MoveWatch] = []
-        #: Move-ended events since the robot last became busy (``ended`` reads it:
-        #: a move already said need not be said again when the robot goes idle).
-        self.moves_this_period = 0
-        #: The last move's end (:class:`~pyrt.station.moves.MoveEnded`), or None.
-        self.last_move: MoveEnded | None = None
-        self._say_where: Callable[[], str] = _nothing
-        self._say_ended: Callable[[], tuple[str, Sequence[str]]] = _ended
-        self._say_status: Callable[[], str] | None = None
+        self._init_events()
 
     # -- assembly -------------------------------------------------------------------
 
@@ -284,144 +253,6 @@ class Station:
             self.loop.attach(self._flush_boards, name="io:write")
         return self.runner
 
-    # -- the end of a move ------------------------------------------------------------
-
-    @final
-    def subscribe_moves(self, listener: Callable[[MoveEnded], None]) -> Callable[[], None]:
-        """Hand every :class:`~pyrt.station.moves.MoveEnded` to ``listener(event)``
-        from now on (loop thread: it must not block); returns what ends it."""
-        with self._subscribing:
-            self._move_listeners = (*self._move_listeners, listener)
-
-        def unsubscribe() -> None:
-            with self._subscribing:
-                self._move_listeners = tuple(x for x in self._move_listeners
-                                             if x is not listener)
-        return unsubscribe
-
-    @final
-    def watch_move(self) -> MoveWatch:
-        """``wait``'s one mailbox call (loop thread): a watch of what runs now. It
-        collects every move-ended event until the robot is idle, then is done;
-        idle at once (with the last move's event and where the robot is) when
-        nothing runs; a refusal when nothing can end (a ready queue of the
-        robot is frozen: its clock interrupt is off)."""
-        if not self.busy():
-            return MoveWatch(True, self.last_move, where=self.where())
-        frozen = next((q for q in self.queues if not q.interrupts_enabled), None)
-        if frozen is not None:
-            return MoveWatch(False, self.last_move,
-                             f"the clock interrupt is OFF (the ready queue {frozen.name} is "
-                             "frozen): the move cannot end until it is on")
-        self._moving = True  # queued in this tick, after the watch ran: it is a move
-        watch = MoveWatch(False, self.last_move)
-        self._watches.append(watch)
-        return watch
-
-    @final
-    def end_move(self, reason: str, report: Sequence[str] = ()) -> MoveEnded:
-        """Publish the end of a move (loop thread): ``reason`` how it ended, in
-        the operator's words, ``report`` the lines ``wait`` says (default: the
-        reason); where the robot was left and the fault that ended it are
-        added here.  A configuration calls it from its motion executor's
-        ``on_done`` (or its controller's stop listener); a move that is not a
-        motion (a job, a move of one axis) ends when the robot goes idle, as
-        ``ended`` (given to :meth:`adopt`) says."""
-        try:
-            where = self.where()
-        except Exception as exc:  # a report must never stop the tick
-            where = f"(where is not known: {exc!r})"
-        fault = self._fault
-        self._move_seq += 1
-        self.moves_this_period += 1
-        event = MoveEnded(self.name, self._move_seq, reason, where,
-                          fault.id if fault is not None else 0,
-                          tuple(report) or (reason,), self.loop.now_ns)
-        self.last_move = event
-        for watch in self._watches:
-            watch.collect(event)
-        for listener in self._move_listeners:
-            try:
-                listener(event)
-            except Exception as exc:
-                self._move_listeners = tuple(x for x in self._move_listeners
-                                             if x is not listener)
-                MESSAGE_LOG.error("%s: a move subscriber failed and was dropped: %r",
-                                  self.name, exc)
-        return event
-
-    def _watch_moves(self, now_ns: int) -> None:
-        """Loop handler ``moves``: when the robot goes idle, what ended and was not
-        a motion is published (``ended`` says whether there is any), and the
-        waits are done."""
-        busy = self.busy()
-        if self._moving and not busy:
-            try:
-                reason, report = self._say_ended()
-            except Exception as exc:  # a report must never stop the tick
-                reason, report = f"ended (its report failed: {exc!r})", ()
-            if reason or report:
-                self.end_move(reason, report)
-            watches, self._watches = self._watches, []
-            for watch in watches:
-                watch.finish()
-            self.moves_this_period = 0
-        elif busy and not self._moving:
-            self.moves_this_period = 0
-        self._moving = busy
-
-    # -- messages -------------------------------------------------------------------
-
-    @final
-    def subscribe(self, listener: Callable[[Message], None]) -> Callable[[], None]:
-        """Hand every message of the station's components to ``listener(message)``
-        from now on (in the thread that says it, the loop's as a rule: it must
-        not block); returns what ends the subscription."""
-        with self._subscribing:
-            self._listeners = (*self._listeners, listener)
-
-        def unsubscribe() -> None:
-            with self._subscribing:
-                self._listeners = tuple(x for x in self._listeners if x is not listener)
-        return unsubscribe
-
-    @final
-    def publish(self, message: Message) -> None:
-        """Give ``message`` to the log and to every subscriber; a subscriber that
-        raises is dropped (and the log says so), the others still hear it."""
-        MESSAGE_LOG.log(_LOG_LEVELS.get(message.level, logging.INFO), "%s: %s",
-                        message.source, message.text)
-        for listener in self._listeners:
-            try:
-                listener(message)
-            except Exception as exc:
-                self._listeners = tuple(x for x in self._listeners if x is not listener)
-                MESSAGE_LOG.error("%s: a message subscriber failed and was dropped: %r",
-                                  self.name, exc)
-
-    @final
-    def say(self, text: str, level: str = "info") -> None:
-        """Tell the operator ``text`` as the station itself (what no component owns:
-        the write-back at close), published as the components' messages are."""
-        self.publish(Message(self.name, level, text))
-
-    def _move_to_console(self, event: MoveEnded) -> None:
-        """The end of a move among the console's lines, as it comes (a station
-        whose profile announces stops), unless a ``wait`` waits for it."""
-        runner = self.runner
-        if runner is None or not self.profile.announce_stops:
-            return
-        if any(w.waiting for w in self._watches):
-            return
-        for text in event.report:
-            runner.post(MoveLine(text, event.seq))
-
-    def _to_console(self, message: Message) -> None:
-        """The runner's asynchronous lines: what the console shows as it happens."""
-        runner = self.runner
-        if runner is not None:
-            runner.post(message.text)
-
     # -- the tree -----------------------------------------------------------------
 
     @final
@@ -477,50 +308,6 @@ class Station:
     def all_commands(self) -> list[tuple[Component, Command]]:
         """Every command record of every component."""
         return [(c, r) for c in self.components() for r in c.commands()]
-
-    # -- parameters (get/set) ---------------------------------------------------------
-
-    @final
-    def params_of(self, component: Component) -> list[Param]:
-        """The run-time parameters of ``component``: its own, and only its own
-        (:meth:`Component.params`); ``get``/``set`` and the server read these."""
-        return list(component.params())
-
-    @final
-    def param(self, name: str) -> tuple[Component, Param]:
-        """``OBJECT.FIELD`` as (component, parameter); CommandError naming what there is."""
-        obj, dot, field = name.strip().partition(".")
-        comp = self.component(obj)
-        params = self.params_of(comp)
-        if not dot or not field:
-            raise CommandError(f"{name[:60]!r}: give OBJECT.FIELD (get {comp.name} lists "
-                               "its parameters)")
-        key = field.lower()
-        for p in params:
-            if p.name.lower() == key:
-                return comp, p
-        raise CommandError(f"{comp.name} has no parameter {field[:40]!r}; it has "
-                           f"{', '.join(p.name for p in params) or 'none'}")
-
-    @final
-    def set_param(self, component: Component, param: Param, value: Any) -> str:
-        """Change ``param`` of ``component`` to a checked ``value`` (loop thread):
-        refused if it is read only, or while a move runs when changing it then
-        is unsafe; the line says what changed and whether it is written back."""
-        who = f"set {component.name}.{param.name}"
-        if param.write is None:
-            raise CommandError(f"{who}: read only; nothing changed")
-        if not param.safe_while_moving and self.busy():
-            raise CommandError(f"{who}: refused while a move runs (changing it then is "
-                               "unsafe); stop or wait first; nothing changed")
-        old = param.read()
-        said = param.write(value)
-        new = param.read()
-        u = f" {param.units}" if param.units else ""
-        back = ("written back" if param.written_back
-                else "not written back: lost at exit")
-        line = f"{component.name}.{param.name} {param.text(old)} -> {param.text(new)}{u} ({back})"
-        return f"{line}; {said}" if isinstance(said, str) and said else line
 
     # -- faults (loop thread) ---------------------------------------------------------
 
@@ -632,46 +419,8 @@ class Station:
                 f"({self._fault.cause}); give 'ack' first; nothing moved")
         return record.handler(*args)
 
-    @final
-    def submit_motion(self, record: Any) -> tuple[int, bool]:
-        """Check a motion record and put it on the motion queue (loop thread):
-        refused while faulted; a type's ``check(robot, params)`` runs first.
-        Returns (records waiting, whether a move was already running)."""
-        if self._fault is not None:
-            raise CommandError(f"motion {record.type}: refused: {self.name} is stopped by a "
-                               f"fault ({self._fault.cause}); give 'ack' first; nothing moved")
-        cls = self.motion_type(record.type)
-        self.check_motion(record)
-        cls.check(self.motion_robot(), record.params)
-        waiting = self.busy()
-        self.motion.put(record)
-        return len(self.motion), waiting
-
-    @final
-    def motion_types(self) -> dict[str, type[MotionType]]:
-        """The motion types this station runs, by name: every registered type
-        (built-in and plug-in) that drives :meth:`motion_robot`.  ``motion``
-        lists these and queues no other."""
-        return motion_types_for(self.motion_robot())
-
-    @final
-    def motion_type(self, name: str) -> type[MotionType]:
-        """The motion type ``name`` of this station; CommandError naming this
-        station's types if it runs none by that name."""
-        types = self.motion_types()
-        cls = types.get(name.lower())
-        if cls is None:
-            raise CommandError(f"motion {name[:40]}: not a motion type of {self.name} (it has "
-                               f"{', '.join(types) or 'none'}); nothing queued")
-        return cls
-
     def check_motion(self, record: Any) -> None:
         """Configuration-specific refusals of a motion record (none by default)."""
-
-    @final
-    def motion_robot(self) -> Any:
-        """The object motion types drive (the root component by default)."""
-        return self.root
 
     # -- state ------------------------------------------------------------------------
 
