@@ -18,7 +18,7 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, final
 
 from pyrt.component import Message
-from pyrt.station.moves import MoveEnded, MoveLine, MoveWatch
+from pyrt.station.moves import MessageLine, MoveEnded, MoveLine, MoveWatch
 
 if TYPE_CHECKING:
     from pyrt.errors import Fault
@@ -212,5 +212,5 @@ class StationEvents:
         """The runner's asynchronous lines: what the console shows as it happens."""
         runner = self.runner
         if runner is not None:
-            runner.post(message.text)
+            runner.post(MessageLine(message.text))
 

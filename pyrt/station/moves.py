@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["MoveEnded", "MoveLine", "MoveWatch"]
+__all__ = ["MessageLine", "MoveEnded", "MoveLine", "MoveWatch"]
 
 
 @dataclass(frozen=True)
@@ -88,3 +88,8 @@ class MoveLine(str):
         line = super().__new__(cls, text)
         line.seq = seq
         return line
+
+
+class MessageLine(str):
+    """A component's message among the runner's lines for the console (the
+    ``pyrt.messages`` log has it already: a headless service does not log it again)."""
