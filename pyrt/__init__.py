@@ -39,6 +39,7 @@ if TYPE_CHECKING:
         Command,
         Component,
         Limits,
+        Message,
         Signal,
         Switch,
         command,
@@ -52,6 +53,8 @@ if TYPE_CHECKING:
     from pyrt.sim.world import World, WorldFactory
     from pyrt.station.base import Station
     from pyrt.station.factory import StationFactory
+    from pyrt.station.moves import MoveEnded
+    from pyrt.station.profile import ShellProfile
 
 #: Public name -> the module that defines it (imported on first use).
 _LAZY = {
@@ -65,12 +68,15 @@ _LAZY = {
     "JointTrajectory": "pyrt.robots.trajectory",
     "Limits": "pyrt.component",
     "Loop": "pyrt.scheduler",
+    "Message": "pyrt.component",
     "MotionExecutor": "pyrt.scheduler.motion",
     "MotionRecord": "pyrt.scheduler.motion",
     "MotionType": "pyrt.scheduler.motion",
+    "MoveEnded": "pyrt.station.moves",
     "ReadyQueue": "pyrt.scheduler",
     "Register": "pyrt.boards",
     "RegisterBoard": "pyrt.boards",
+    "ShellProfile": "pyrt.station.profile",
     "Signal": "pyrt.component",
     "SimClock": "pyrt.scheduler",
     "Source": "pyrt.scope",
@@ -120,9 +126,11 @@ __all__ = [
     "Limits",
     "Loop",
     "MailboxTimeout",
+    "Message",
     "MotionExecutor",
     "MotionRecord",
     "MotionType",
+    "MoveEnded",
     "NativeError",
     "PyrtError",
     "PyrtInternalError",
@@ -130,6 +138,7 @@ __all__ = [
     "ReadyQueue",
     "Register",
     "RegisterBoard",
+    "ShellProfile",
     "Signal",
     "SimClock",
     "Source",

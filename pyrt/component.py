@@ -26,6 +26,15 @@ parsed values in the loop's thread, in one mailbox call.  A handler's
 return value is turned into reply lines by the record's ``reply`` (default:
 ``str(value)`` unless None).
 
+A component speaks to the operator through :meth:`Component.say`: a
+:class:`Message` (its source, a level, the text) handed to whoever the
+station connected (:meth:`Component.connect`: the station publishes it to
+the shell, the server and the log); a component no station has adopted yet
+holds its messages until one does.  It reports a fault through
+:meth:`Component.fail`, adopted or not: inside a station the station trips;
+before adoption the component's own reflex runs and the failure is raised
+(:class:`~pyrt.errors.FaultError`) to whoever is building it.
+
 A handler may also return a :class:`Switch` (the console changes its
 current command level, as the gripper's ``M`` enters the monitor) or a
 loop :class:`~pyrt.scheduler.Job` (the console waits for it, as ``I`` waits
@@ -34,23 +43,27 @@ for the initialization).
 
 from __future__ import annotations
 
+import contextlib
 import inspect
 import math
 import re
+from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, TypeVar
 
-from pyrt.errors import CommandError
+from pyrt.errors import CommandError, Fault, FaultError
 from pyrt.scheduler.task import Task
 from pyrt.scope import Source
 from pyrt.units import UnitError, parse_value, value_grammar
 
 __all__ = [
+    "MESSAGE_LEVELS",
     "Arg",
     "Command",
     "Component",
     "Limits",
+    "Message",
     "Param",
     "Signal",
     "Switch",
@@ -625,6 +638,32 @@ def _bind_range(arg: Arg, obj: Any) -> Arg:
 
 # -- components ---------------------------------------------------------------------
 
+#: The levels of a :class:`Message`, least urgent first.
+MESSAGE_LEVELS = ("info", "warning", "error")
+#: Messages a component holds before a station adopts it (the oldest go first).
+HELD_MESSAGES = 256
+
+
+@dataclass(frozen=True)
+class Message:
+    """Something a component says to the operator: who says it (``source``,
+    the component's name), how urgent it is (``level``, one of
+    :data:`MESSAGE_LEVELS`) and the ``text``, one line, complete in itself
+    (a console shows the text as it is)."""
+
+    source: str
+    level: str
+    text: str
+
+    def __post_init__(self) -> None:
+        if self.level not in MESSAGE_LEVELS:
+            raise ValueError(f"message level must be one of {', '.join(MESSAGE_LEVELS)}, "
+                             f"got {self.level!r}")
+
+    def __str__(self) -> str:
+        return self.text
+
+
 
 @dataclass(frozen=True)
 class Switch:
@@ -640,8 +679,10 @@ class Component:
 
     #: The name the console, the server and the scope address it by.
     name: str = ""
-    #: The station's trip, set when a station adopts the component (see :meth:`fail`).
+    #: Where :meth:`fail` and :meth:`say` go: set by :meth:`connect`.
     _trip: Callable[[str, str], Any] | None = None
+    _tell: Callable[[Message], None] | None = None
+    _held: deque[Message] | None = None
 
     def signals(self) -> list[Signal]:
         """The component's signals."""
@@ -671,20 +712,48 @@ class Component:
         returned :class:`Switch`); the lines to say (loop thread).  None by default."""
         return []
 
+    def connect(self, *, trip: Callable[[str, str], Any] | None = None,
+                tell: Callable[[Message], None] | None = None) -> None:
+        """Send this component's faults to ``trip(cause, source)`` and its
+        messages to ``tell(message)`` (a station's adopt does this for every
+        component of its tree); the messages held so far go to ``tell`` now."""
+        self._trip = trip
+        self._tell = tell
+        held = self._held
+        if tell is not None and held:
+            self._held = None
+            for msg in held:
+                tell(msg)
+
+    def say(self, text: str, level: str = "info") -> None:
+        """Tell the operator ``text`` (one line) at ``level``: a :class:`Message`
+        from this component, published by its station (held until one adopts it)."""
+        msg = Message(self.name, level, text)
+        tell = self._tell
+        if tell is not None:
+            tell(msg)
+            return
+        if self._held is None:
+            self._held = deque(maxlen=HELD_MESSAGES)
+        self._held.append(msg)
+
+    def held_messages(self) -> list[Message]:
+        """The messages said before any station adopted this component (oldest first)."""
+        return list(self._held or ())
+
     def fail(self, cause: str, source: str = "") -> None:
-        """Report a fault of the robot: the station records it and runs every
-        component's reflex in this tick.  Without a station it raises."""
+        """Report a fault of the robot.  Inside a station: the station records
+        it and runs every component's reflex in this tick.  Before a station
+        adopts it: the reflex of this component and of everything below it
+        runs, and :class:`~pyrt.errors.FaultError` is raised to its builder."""
         trip = self._trip
-        if trip is None:
-            from pyrt.errors import Fault, FaultError
-
-            raise FaultError(Fault(robot=self.name, cause=cause, source=source or self.name))
-        trip(cause, source or self.name)
-
-    @property
-    def adopted(self) -> bool:
-        """Whether a station has adopted this component (its :meth:`fail` trips it)."""
-        return self._trip is not None
+        if trip is not None:
+            trip(cause, source or self.name)
+            return
+        for c in reversed(list(walk(self))):  # leaves (motors) first, as a station does
+            with contextlib.suppress(Exception):  # the failure raised below says why
+                c.reflex()
+        raise FaultError(Fault(robot=self.name, cause=cause, source=source or self.name))
 
     def signal(self, name: str) -> Signal | None:
         """The signal called ``name`` (case-insensitive), or None."""

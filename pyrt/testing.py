@@ -393,7 +393,7 @@ class StationConformance:
         lines = out.getvalue().splitlines()
         objects = next(i for i, ln in enumerate(lines) if ln.startswith("objects"))
         at_words = lines.index("words:")
-        level = station.letter_level()
+        level = station.profile.level
         level_recs = level.commands() if level is not None else []
         assert [ln.strip() for ln in lines[1:objects]] == [
             r.summary if r.summary[:1].upper() == r.name.upper() else f"{r.name}  {r.summary}"

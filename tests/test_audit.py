@@ -19,7 +19,7 @@ from pyrt.commands import RobotShell
 def test_remote_commands_that_act_are_posted_and_logged(tmp_path):
     """A DAQ client's stop and set are posted for the console and written to the audit log; its reads are not."""
     with served() as s:
-        path = s.rig.open_audit_log(tmp_path / "audit.log")
+        path = s.server.robot.open_audit_log(tmp_path / "audit.log")
         console = RobotShell(s.rig, io.StringIO())
         console.messages()  # what start-up said
         guest = s.client()
@@ -32,7 +32,7 @@ def test_remote_commands_that_act_are_posted_and_logged(tmp_path):
         op.command("P E47A")
         assert len(op.command("wait")) == 1  # a remote wait does not take the console's lines
         said = [str(m) for m in console.messages()]
-        s.rig.close_audit_log()
+        s.server.robot.close_audit_log()
     audit = [m for m in said if m.startswith("remote: ")]
     assert len(audit) == 3, said
     assert re.fullmatch(r"remote: DAQ client \d+ 127\.0\.0\.1:\d+: stop", audit[0])
@@ -46,14 +46,14 @@ def test_remote_commands_that_act_are_posted_and_logged(tmp_path):
 def test_a_failed_auth_is_audited(tmp_path):
     """A wrong token is an audit line naming the client (console and log); nothing else changes."""
     with served() as s:
-        path = s.rig.open_audit_log(tmp_path / "audit.log")
+        path = s.server.robot.open_audit_log(tmp_path / "audit.log")
         console = RobotShell(s.rig, io.StringIO())
         console.messages()
         c = s.client()
         with pytest.raises(Exception, match="wrong token"):
             c.auth("not-the-token")
         said = [m for m in console.messages() if m.startswith("remote: ")]
-        s.rig.close_audit_log()
+        s.server.robot.close_audit_log()
     assert len(said) == 1 and re.fullmatch(
         r"remote: DAQ client \d+ 127\.0\.0\.1:\d+: failed AUTH \(1 of \d+\)", said[0]), said
     assert path.read_text().strip().endswith("failed AUTH (1 of 3)")
@@ -62,11 +62,11 @@ def test_a_failed_auth_is_audited(tmp_path):
 def test_the_audit_log_rotates_by_size(tmp_path):
     """Past audit_max_bytes the log is rotated; the newest line is in the live file."""
     with served() as s:
-        s.rig.audit_max_bytes = 400
-        path = s.rig.open_audit_log(tmp_path / "audit.log")
+        s.server.robot.audit_max_bytes = 400
+        path = s.server.robot.open_audit_log(tmp_path / "audit.log")
         for i in range(40):
-            s.rig.audit("DAQ client 1 x", f"P {i:04X}")
-        s.rig.close_audit_log()
+            s.server.robot.audit("DAQ client 1 x", f"P {i:04X}")
+        s.server.robot.close_audit_log()
     assert (tmp_path / "audit.log.1").exists()
     assert path.read_text().splitlines()[-1].endswith("P 0027")
     assert path.stat().st_size <= 400

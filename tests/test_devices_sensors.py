@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import io
-
 import pytest
 
 from pyrt.boards.dataconcentrator import AnalogChannel, DigitalChannel
@@ -31,8 +29,7 @@ def test_encoder_resets_at_start_and_converts():
 
 def test_encoder_commands():
     """reset clears the counter; setZeroLength sets the zero length; read replies the value."""
-    out = io.StringIO()
-    enc, dc = _encoder(stdout=out)
+    enc, dc = _encoder()
     dc.plant_add_counts(168, 10)
     assert enc.read() == pytest.approx(747.045410 + 2.392)
     assert enc.find_command("read").lines(enc.read()) == ["749.437 cm"]
@@ -46,16 +43,32 @@ def test_encoder_commands():
     assert enc.zero_length == 500.0
 
 
-def test_encoder_readloop_writes_every_poll():
-    """readloop writes the length at each poll until stoploop."""
-    out = io.StringIO()
-    enc, _ = _encoder(stdout=out)
+def test_encoder_readloop_says_every_poll():
+    """readloop says the length (an info message from the encoder) at each poll until stoploop."""
+    heard = []
+    enc, _ = _encoder()
+    enc.connect(tell=heard.append)
     enc.readloop()
     enc.poll(0.0)
     enc.poll(0.001)
     enc.stoploop()
     enc.poll(0.002)
-    assert out.getvalue().count("axis0Encoder:") == 2
+    assert [(m.source, m.level) for m in heard] == [("axis0Encoder", "info")] * 2
+    assert all(m.text.startswith("axis0Encoder: ") and m.text.endswith(" cm") for m in heard)
+
+
+def test_encoder_holds_what_it_says_until_connected():
+    """Said before anyone listens, the lines are held and handed over, in order, on connect."""
+    enc, _ = _encoder()
+    enc.readloop()
+    enc.poll(0.0)
+    enc.poll(0.001)
+    held = enc.held_messages()
+    assert len(held) == 2 and all(m.text.startswith("axis0Encoder: ") for m in held)
+    heard = []
+    enc.connect(tell=heard.append)
+    assert heard == held
+    assert enc.held_messages() == []
 
 
 def test_zerolength_write_back_once_a_second_while_changing():

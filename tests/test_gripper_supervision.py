@@ -95,7 +95,8 @@ def test_a_stale_stopped_bit_ends_the_move_short_and_wait_says_why():
     rig.ctl.poke(MVJAWSPD, 0x02)
     taken, bound = supervised_move(rig.station, rig.ctl, rig.loop, TARGET)
     assert rig.station.fault is None and taken < bound and rig.board.dac == 0x80
-    report = rig.station.wait_report()
+    assert rig.station.last_move is not None
+    report = rig.station.last_move.report[0]
     short = signed(rig.ctl.position()) - TARGET
     assert report.startswith(f"stopped short of the target by {short} counts (the stopped bit "
                              "ended the move (STOPCNT ran out); WTCHJWSPD 40 ≫ MVJAWSPD 02")
@@ -206,7 +207,8 @@ def test_every_schedule_settles_stops_short_truthfully_or_trips_within_the_bound
     assert station.board.dac == 0x80 and not ctl.moving
     if station.fault is None:
         assert taken <= bound + tick_us * 1000
-        report = station.wait_report()
+        assert station.last_move is not None
+        report = station.last_move.report[0]
         error = signed(ctl.position()) - target
         if report.startswith("at target"):
             assert abs(error) <= AT_TARGET_COUNTS

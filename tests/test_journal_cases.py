@@ -154,7 +154,8 @@ def test_the_jammed_move_ended_short_by_the_stopped_bit_in_the_replay(tmp_path):
     station, result = replayed_until(JOURNALS / "gripper.pj", cleared - 1, tmp_path)
     try:
         assert result.identical and result.last_tick == cleared - 1
-        report = station.wait_report()
+        assert station.last_move is not None
+        report = station.last_move.report[0]
         assert report.startswith("stopped short of the target by ")
         assert "(the stopped bit ended the move (STOPCNT ran out))" in report
         assert station.fault is None and station.controller.dac == 0x80

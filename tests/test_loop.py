@@ -546,3 +546,71 @@ def test_jobs_and_the_loop_s_own_handlers_are_timed_on_simclock():
     assert stats.tasks["boards"].calls == 10 and stats.tasks["jobs"].calls == 10
     loop.reset_statistics()
     assert loop.statistics().tasks["boards"].calls == 0
+
+
+def _tick_trace(clock, **run) -> list[tuple[str, int, int]]:
+    """What the handlers of a loop on ``clock`` saw: (handler, tick index, time), three ticks."""
+    loop = Loop(clock, period_ns=MS)
+    seen: list[tuple[str, int, int]] = []
+    loop.attach(lambda now: seen.append(("plant", loop.tick_index, now)), name="plant")
+    loop.attach(lambda now: seen.append(("control", loop.tick_index, now)), name="control")
+    if run:
+        loop.run(**run)
+    else:
+        loop.run(3)
+    return seen
+
+
+def test_one_tick_on_every_clock_and_every_way_of_running():
+    """A tick is the same on virtual time and on a real-time clock, counted or
+    run until a predicate or a duration: the handlers in order, each tick at its deadline."""
+    expected = [(name, i, (i + 1) * MS) for i in range(3) for name in ("plant", "control")]
+    assert _tick_trace(SimClock()) == expected
+    assert _tick_trace(WorkClock()) == expected
+    n = [0]
+
+    def third() -> bool:
+        n[0] += 1
+        return n[0] == 3
+
+    assert _tick_trace(SimClock(), until=third) == expected
+    assert _tick_trace(SimClock(), duration_ns=3 * MS) == expected
+
+
+def test_the_loop_moves_virtual_time_only_through_the_clock():
+    """A SimClock subclass that counts its waits sees one per tick, and the
+    loop never moves virtual time backward (a clock already ahead stays ahead)."""
+
+    class Counting(SimClock):
+        def __init__(self) -> None:
+            super().__init__()
+            self.waits = 0
+
+        def start_tick(self, deadline_ns: int) -> int:
+            self.waits += 1
+            return super().start_tick(deadline_ns)
+
+    clock = Counting()
+    loop = Loop(clock, period_ns=MS)
+    loop.run(5)
+    assert clock.waits == 5 and clock.now_ns() == 5 * MS
+    ahead = SimClock()
+    behind = Loop(ahead, period_ns=MS)
+    ahead.advance(10 * MS)  # moved by someone else after the loop was made
+    behind.run(2)
+    assert ahead.now_ns() == 10 * MS and behind.now_ns == 2 * MS
+
+
+def test_a_stop_from_a_handler_ends_the_run_after_that_tick():
+    """stop() inside a tick ends a counted run after that tick, and the next run starts afresh."""
+    loop = Loop(SimClock(), period_ns=MS)
+    seen: list[int] = []
+
+    def handler(now: int) -> None:
+        seen.append(now)
+        if len(seen) == 2:
+            loop.stop()
+
+    loop.attach(handler)
+    assert loop.run(10) == 2
+    assert loop.run(3) == 3 and seen[-1] == 5 * MS

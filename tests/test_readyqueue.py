@@ -251,3 +251,22 @@ def test_bad_arguments_are_refused():
     with pytest.raises(ValueError, match="already"):
         queue.register(0x10, "B", lambda: None)
     assert queue.pending() == []
+
+
+def test_a_queue_sized_to_its_routines_keeps_timing_and_dispatch_as_it_grows():
+    """A general queue that grows with each routine registered after timing was
+    turned on still dispatches and times every routine, in C and in Python."""
+    for native in (True, False):
+        q = ReadyQueue(None, 1, name="g", wide=True, native=native)
+        q.enable_timing(True)
+        ran: list[str] = []
+        for i in range(5):
+            q.add_periodic(None, f"R{i}", lambda i=i, ran=ran: ran.append(f"R{i}"), i + 1)
+            q.schedule(f"R{i}", 1)
+        assert q.capacity == 6
+        for t in range(1, 13):
+            q.tick(t)
+        calls = {a.name: a.calls for a in q.accumulators()}
+        assert {f"R{i}": calls[f"R{i}"] for i in range(5)} == {
+            f"R{i}": ran.count(f"R{i}") for i in range(5)}
+        assert ran.count("R0") == 12 and ran.count("R4") == 3

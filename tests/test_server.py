@@ -39,7 +39,10 @@ def test_full_move_commanded_by_a_client_and_reported_to_a_subscriber():
         (line,) = op.command("wait")
         assert line.startswith("at target: position")
         assert abs(_signed(op.command("W")[0]) + 0x1B86) <= 16
-        samples = list(sub.statuses(1.0))
+        pushed = list(sub.statuses(1.0))
+        samples = [s for s in pushed if s.time_s is not None]
+        # the end of each move once, as it happened: I's, then P's
+        assert [s.stop for s in pushed if s.stop is not None] == ["at target", "at target"]
         moving = [s for s in samples if s.fields.get("moving") == 1]
         assert len(moving) > 20
         positions = [s.fields["position"] for s in moving if s.fields["target"] == -0x1B86]

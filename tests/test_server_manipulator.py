@@ -46,7 +46,10 @@ def test_full_move_commanded_by_a_client_and_reported_to_a_subscriber(tmp_path):
                                                        "11.1 cm"]
         (ended,) = op.command("wait")
         assert ended.startswith("prototype stopped: ENDPOINT_STOP")
-        samples = list(itertools.islice(sub.statuses(0.5), 1000))
+        pushed = list(itertools.islice(sub.statuses(0.5), 1000))
+        samples = [s for s in pushed if s.time_s is not None]
+        stops = [s.stop for s in pushed if s.stop is not None]
+        assert len(stops) == 1 and stops[0].startswith("ENDPOINT_STOP")  # once
         xs = [s.fields["x"] for s in samples if s.fields["moving"] == 1]
         assert len(xs) > 10 and xs[0] < 1.0 and xs[-1] > 8.0
         assert {f"tension{i}" for i in range(3)} <= samples[0].fields.keys()

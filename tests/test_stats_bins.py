@@ -6,8 +6,8 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
+from pyrt.scheduler._routinetiming import _bin_indices
 from pyrt.scheduler.loop import _record
-from pyrt.scheduler.readyqueue import _bin_indices
 from pyrt.scheduler.stats import NBINS, Accumulator, bin_edges, bin_index
 
 _durations = st.integers(-10, 2**45) | st.integers(0, 4096)

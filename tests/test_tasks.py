@@ -320,7 +320,7 @@ def test_pattern_log_is_written_by_the_writer_thread(tmp_path):
 
 def test_the_polyaxis_is_constructed_whole_and_owns_its_poll(tmp_path):
     """The station passes the PolyAxis everything at construction; polyaxis-poll only calls its poll."""
-    from pyrt.robots.polyaxis import PolyAxis
+    from pyrt.robots.polyaxis import PolyAxisServices
     from pyrt.station.manipulator import ManipulatorStation
 
     station = ManipulatorStation(copy_station("prototype", tmp_path / "p"), tick_ns=1_000_000)
@@ -328,10 +328,9 @@ def test_the_polyaxis_is_constructed_whole_and_owns_its_poll(tmp_path):
         pa = station.polyaxis
         assert pa.motion is station.motion and pa.spawn == station.loop.spawn
         assert pa.pattern_writer == "sync" and pa.task_periods == (50, 10)
-        assert pa.on_stop == [station.stops.append, station._report_stop]
+        assert pa.on_stop == [station.stops.append, station._stopped]
         with pytest.raises(ConfigError, match="pattern writer"):
-            PolyAxis.from_record(station.station.polyaxis(), station.axes, station.av,
-                                 pattern_writer="later")
+            PolyAxisServices(pattern_writer="later")
         seen = []
         pa.poll = seen.append  # the task hands the tick time to the controller's poll
         pa.tasks()[0].fn(2_500_000_000)

@@ -34,6 +34,7 @@ from pyrt.client import parse_address
 from pyrt.errors import ConfigError, PyrtError
 from pyrt.server import ServedRobot, Server
 from pyrt.server.guard import MAX_TOKEN, check_token
+from pyrt.station.moves import MessageLine
 
 __all__ = ["Service", "add_serve_options", "prepare_service", "read_token"]
 
@@ -143,7 +144,8 @@ class Service:
         closes the station); 1 if the control loop stops by itself, else 0."""
         while not self._stop.wait(0.2):
             for line in self.runner.messages():  # the loop's messages: to the log
-                log.info("%s", line)
+                if not isinstance(line, MessageLine):  # (a message is in it already)
+                    log.info("%s", line)
             if self.runner.crashed is not None:
                 log.error("the control loop has stopped: %r", self.runner.crashed)
                 return 1

@@ -134,12 +134,11 @@ def run_until_shutdown(station: Any, console: Any, service: Any, *, headless: bo
             finally:
                 station.close()
         why = reason or ("stopped" if headless else console.ended_by)
-        try:  # where the source stopped (a piped run's SIGINT says it too)
-            here = station.closing_where()
+        try:  # where the robot stopped (a piped run's SIGINT says it too), what close did
+            note = station.closing_note()
         except Exception:
-            here = ""
-        here = f"; {here}" if here else ""
-        line = f"{what}: {why}: every motor stopped{here}{station.closing_note()}"
+            note = ""
+        line = f"{what}: {why}: every motor stopped{note}"
         if gone or getattr(console, "reader_gone", False):
             # the reader of stdout has gone: the closing line goes to stderr
             with contextlib.suppress(OSError, ValueError):

@@ -107,7 +107,8 @@ def run_factory(factory: StationFactory, args: argparse.Namespace) -> int:
     try:
         recorder = start_recorder(station, args, getattr(args, "_factory", "") or factory.name,
                                   say)
-        service = prepare_service(args, runner, ServedStation(station))
+        served = ServedStation(station)
+        service = prepare_service(args, runner, served)
     except PyrtError:
         station.close()
         if recorder is not None:
@@ -115,7 +116,7 @@ def run_factory(factory: StationFactory, args: argparse.Namespace) -> int:
         raise
     if service is not None:  # commands come from elsewhere too: keep their trail
         try:
-            say(f"audit log (remote commands): {station.open_audit_log()}")
+            say(f"audit log (remote commands): {served.open_audit_log()}")
         except OSError as exc:
             say(f"warning: no audit log: {exc}")
     shell = RobotShell(station, out)
@@ -126,7 +127,7 @@ def run_factory(factory: StationFactory, args: argparse.Namespace) -> int:
     say(factory.banner(station, args))
     wall0 = time.perf_counter()
     station.start()
-    first = station.startup_commands()
+    first = station.profile.startup_commands
 
     def run_first() -> None:
         for line in first:
@@ -137,7 +138,7 @@ def run_factory(factory: StationFactory, args: argparse.Namespace) -> int:
                                     headless=args.headless, what=what, say=say,
                                     first=run_first if first else None)
     finally:
-        station.close_audit_log()
+        served.close_audit_log()
         if recorder is not None:
             recorder.close()
             journal = recorder.journal

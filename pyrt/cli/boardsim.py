@@ -252,6 +252,12 @@ def build_world(factory: WorldFactory, opts: argparse.Namespace) -> World:
     return world
 
 
+def _say(line: str) -> None:
+    """A board-sim event line, on standard output at once."""
+    sys.stdout.write(line + "\n")
+    sys.stdout.flush()
+
+
 def run(args: argparse.Namespace) -> int:
     out = sys.stdout
     parsed = _parse(args)
@@ -266,7 +272,7 @@ def run(args: argparse.Namespace) -> int:
     host, port = opts.listen
     server = BoardServer(world, host, port, watchdog_s=opts.watchdog,
                          step_ns=opts.step_us * 1000, idle_s=opts.idle,
-                         max_clients=opts.max_clients, stdout=out)
+                         max_clients=opts.max_clients, say=_say)
     boards = " ".join(f"{n}={k.name}" for n, k in world.kinds.items())
     print(f"pyrt board-sim: {factory.name} {world.name} on {server.url} (boards {boards}; "
           f"watchdog {opts.watchdog:g} s, world step {opts.step_us} µs)", file=out, flush=True)
@@ -305,7 +311,7 @@ def _run_modbus(factory: WorldFactory, world: World, opts: argparse.Namespace,
     host, port = opts.modbus
     server = ModbusBoardServer(world, regmap, host, port, watchdog_s=opts.watchdog,
                                step_ns=opts.step_us * 1000, idle_s=opts.idle,
-                               max_clients=opts.max_clients, stdout=out)
+                               max_clients=opts.max_clients, say=_say)
     boards = " ".join(f"{n}={k.name}" for n, k in world.kinds.items())
     print(f"pyrt board-sim: {factory.name} {world.name} on {server.url}?map={shown} "
           f"(Modbus TCP; boards {boards}; map {path}; watchdog {opts.watchdog:g} s, "

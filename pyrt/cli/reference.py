@@ -113,7 +113,7 @@ def station_reference(station: Station, title: str) -> str:
     """The Markdown reference of one built station."""
     shell = RobotShell(station, io.StringIO())
     out = [f"## {title}", ""]
-    level = station.letter_level()
+    level = station.profile.level
     out.append(f"Objects: {', '.join(f'`{n}`' for n in station.names())}."
                + (f" The letters of `{level.name}` are typed bare at its prompt."
                   if level is not None else ""))

@@ -65,12 +65,15 @@ class Reply:
 
 @dataclass(frozen=True)
 class Status:
-    """A ``STATUS`` line: a sample (``fields``, ``time_s``) or a pushed fault."""
+    """A ``STATUS`` line: a sample (``fields``, ``time_s``), or a pushed fault, end
+    of a move (``stop``: how it ended) or message of the robot (``message``)."""
 
     raw: str
     time_s: float | None = None
     fields: dict = field(default_factory=dict)
     fault: str | None = None
+    stop: str | None = None
+    message: str | None = None
 
 
 def _value(text: str) -> int | float | str:
@@ -84,10 +87,15 @@ def _value(text: str) -> int | float | str:
 
 
 def parse_status(line: str) -> Status:
-    """Parse ``STATUS t=... key=value ...`` or ``STATUS FAULT <text>``."""
+    """Parse ``STATUS t=... key=value ...``, ``STATUS FAULT <text>``, ``STATUS STOP
+    <text>`` or ``STATUS MESSAGE <text>``."""
     body = line[len("STATUS"):].strip()
     if body.startswith("FAULT"):
         return Status(raw=line, fault=body[len("FAULT"):].strip())
+    if body.startswith("STOP ") or body == "STOP":
+        return Status(raw=line, stop=body[len("STOP"):].strip())
+    if body.startswith("MESSAGE "):
+        return Status(raw=line, message=body[len("MESSAGE"):].strip())
     fields: dict = {}
     for item in body.split():
         key, sep, val = item.partition("=")

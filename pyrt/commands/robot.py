@@ -24,21 +24,21 @@ records (:meth:`RobotShell.resolve`, :meth:`RobotShell.completions`).
 
 from __future__ import annotations
 
-import contextlib
-import difflib
 import shlex
 import threading
 from collections.abc import Callable
 from typing import Any, TextIO
 
+from pyrt.commands._lines import LineResolver, _did_you_mean
 from pyrt.commands._motion import motion_type_lines, parse_motion
 from pyrt.commands.scope import ScopeCommand
 from pyrt.commands.shell import CommandShell, parse_seconds
-from pyrt.component import Arg, Command, Component, Switch, command, records_of, reply_lines
+from pyrt.component import Arg, Command, Component, Switch, command, reply_lines
 from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
 from pyrt.scheduler import Job
 from pyrt.scheduler.report import format_statistics
 from pyrt.scheduler.runner import FaultMessage
+from pyrt.station.moves import MoveLine
 
 __all__ = ["RobotShell"]
 
@@ -50,7 +50,7 @@ WAIT_TIMEOUT_S = 3600.0
 _REST = Arg("ARGS", str, optional=True, rest=True)
 
 
-class RobotShell(CommandShell):
+class RobotShell(LineResolver, CommandShell):
     """The interpreter of one station (see the module text).
 
     ``runner`` defaults to the station's; a read-only network client passes
@@ -60,146 +60,39 @@ class RobotShell(CommandShell):
     #: Words that pass time and change nothing (not audited).
     _UNAUDITED = frozenset({"wait", "sleep", "help"})
 
-    def __init__(self, station: Any, stdout: TextIO, runner: Any = None, source: str = ""):
+    def __init__(self, station: Any, stdout: TextIO, runner: Any = None, source: str = "",
+                 audit: Callable[[str, str], None] | None = None):
         super().__init__(stdout)
         self.station = station
+        #: Where a remote source's commands that act are audited (the served
+        #: station's trail), or None.
+        self.audit = audit
         #: Who types into this shell: '' for the station's own console; a DAQ
         #: client or EPICS otherwise (each command of theirs that moves or
         #: changes the robot is shown on the console: :meth:`Station.audit`).
         self.source = source
         self.runner = runner if runner is not None else station.runner
-        self.level: Component | None = station.letter_level()
+        self.profile = station.profile
+        self.level: Component | None = self.profile.level
         self._scope = ScopeCommand(self.runner, station.scope, self._channel,
                                    self._channel_names, stdout, self._channel_show)
         #: Fault events already shown to the operator (their ids), so each is shown once.
         self._shown: set[int] = set()
         self._shown_lock = threading.Lock()
+        #: Move-ended events a wait of this shell has reported (their numbers).
+        self._moves_shown: set[int] = set()
 
     # -- prompt -----------------------------------------------------------------------
 
     @property
     def prompt(self) -> str:  # type: ignore[override]
-        return self.station.prompt(self.level)
+        return self.profile.prompt_at(self.station.name, self.level)
 
     @property
     def in_monitor(self) -> bool:
         """The shell is at a level other than the station's first (the gripper's monitor)."""
-        first = self.station.letter_level()
+        first = self.profile.level
         return self.level is not None and self.level is not first
-
-    # -- the records ------------------------------------------------------------------
-
-    def words(self) -> list[Command]:
-        """The shared words and the station's own words, as records."""
-        own = records_of(self, "")
-        extra = self.station.words
-        if extra is not None:
-            own += extra.commands()
-        return own
-
-    def word(self, name: str) -> Command | None:
-        """The word called ``name`` (case-insensitive), or None."""
-        return next((w for w in self.words() if w.answers_to(name)), None)
-
-    def resolve(self, line: str) -> tuple[Component | None, Command, list[str], str]:
-        """``(component, record, argument words, argument text)`` of ``line``
-        (component None for a word); CommandError if it names nothing."""
-        text = line.strip()
-        words = text.split()
-        if not words:
-            raise CommandError("empty command")
-        first = words[0]
-        if len(first) > 1:
-            w = self.word(first)
-            if w is not None:
-                # the shell's own words run here; a station's words (the
-                # manipulator's log, debug) in the loop like any command
-                owner = self.station.words
-                mine = owner is None or owner.find_command(first) is None
-                return (None if mine else owner), w, words[1:], text[len(first):].strip()
-            comp = self.station.find(first)
-            if comp is not None:
-                return self._object(comp, words, text)
-        level = self.level
-        if level is not None and first[0].isalpha():
-            shown = self.prompt.strip().rstrip(":*").strip()
-            if shown and len(first) > 1 and first.rstrip(":").lower() == shown.lower():
-                letters = " ".join(c.name for c in level.commands())
-                raise CommandError(f"{first[:40]!r} is the prompt, not a command: type a "
-                                   f"letter after it ({letters}), or help")
-            rec = level.find_command(first[0])
-            if rec is not None:
-                rest = text[1:].strip()
-                return level, rec, rest.split(), rest
-            letters = " ".join(c.name for c in level.commands())
-            where = "monitor command" if self.in_monitor else "command"
-            raise CommandError(f"unknown {where} {first[:40]!r} (letters: {letters}; "
-                               "words: type help)")
-        raise CommandError(f"unknown command or object {first[:40]!r}"
-                           f"{self._did_you_mean(first)}; objects: "
-                           f"{', '.join(self.station.names())}; type help")
-
-    def _object(self, comp: Component, words: list[str], text: str
-                ) -> tuple[Component | None, Command, list[str], str]:
-        if len(words) < 2:  # an object alone shows itself, or reads its signals
-            show = comp.find_command("show")
-            if show is not None and not show.args:
-                return comp, show, [], ""
-            status = self.word("status")
-            assert status is not None
-            return None, status, [comp.name], comp.name
-        rec = comp.find_command(words[1])
-        if rec is None:
-            verbs = [n for c in comp.commands() for n in (c.name, *c.aliases)]
-            raise CommandError(f"{comp.name}: unknown command {words[1][:40]!r}"
-                               f"{_did_you_mean(words[1], verbs)}; expected one "
-                               f"of {', '.join(c.name for c in comp.commands()) or 'none'}")
-        rest = text[len(words[0]):].strip()[len(words[1]):].strip()
-        return comp, rec, words[2:], rest
-
-    def reads_only(self, line: str) -> bool:
-        """True when ``line`` only reads (the server serves it without privilege)."""
-        try:
-            _comp, rec, words, _rest = self.resolve(line)
-        except CommandError:
-            return False
-        return rec.only_reads(words)
-
-    def anyone(self, line: str) -> bool:
-        """True when any client may give ``line`` (it reads, or it is the stop)."""
-        try:
-            _comp, rec, words, _rest = self.resolve(line)
-        except CommandError:
-            return False
-        return rec.anyone or rec.only_reads(words)
-
-    def completions(self) -> dict[str, Any]:
-        """The nested completion table: words, then objects and their verbs
-        (each record's name and its aliases: every name the object answers to)."""
-        table: dict[str, Any] = {w.name: None for w in self.words()}
-        if self.level is not None:  # the letters typed bare at this level's prompt
-            for c in self.level.commands():
-                table.setdefault(c.name, None)
-        for comp in self.station.components():
-            if comp is self.station.words:
-                continue  # its records are words, above
-            verbs: dict[str, Any] = {}
-            for c in comp.commands():
-                verbs[c.name] = None
-                verbs.update(dict.fromkeys(c.aliases))
-            table[comp.name] = verbs or None
-        objects = {name: None for name in table if name not in ("help",)}
-        table["help"] = objects
-        table["status"] = {c.name: None for c in self.station.components()
-                           if c.signals()} or None
-        channels: dict[str, Any] = {}
-        names = self._channel_names() + [n for n, _ in self.station.signals()]
-        channels.update({name: channels for name in names if name != "ram:XX"})
-        subs: dict[str, Any] = {verb: None for verb in self._scope.verbs()}
-        subs.update(add=channels, trigger={name: None for name in channels})
-        table["scope"] = subs
-        table["motion"] = dict.fromkeys(self.station.motion_types())
-        return table
 
     # -- dispatch ---------------------------------------------------------------------
 
@@ -219,8 +112,9 @@ class RobotShell(CommandShell):
             if hint:
                 raise CommandError(f"{exc}{hint}") from None
             raise
-        if self.source and not rec.only_reads(words) and rec.name not in self._UNAUDITED:
-            self.station.audit(self.source, line)
+        if (self.source and self.audit is not None and not rec.only_reads(words)
+                and rec.name not in self._UNAUDITED):
+            self.audit(self.source, line)
         if comp is None:
             return bool(rec.handler(*args))
         result = self.call(self.station.execute, comp, rec, args,
@@ -229,7 +123,7 @@ class RobotShell(CommandShell):
             result = self._wait_job(result)
             if result is None:
                 return False
-        plain = comp is self.level or comp is self.station.words
+        plain = comp is self.level or comp is self.profile.words
         prefix = "" if plain or rec.name == "show" else comp.name
         self._show(rec, result, prefix)
         return False
@@ -287,10 +181,13 @@ class RobotShell(CommandShell):
         so the next command does not report it again; one the shell has
         shown already is left out."""
         out: list[str] = []
-        take = getattr(self.station, "audit_lines", None)
-        if not self.source and take is not None:  # the console: what remote clients did
-            out += take()
+        if self.source:  # a remote client's shell: the loop's lines are the console's
+            return out
         for line in self.runner.messages():
+            if isinstance(line, MoveLine):
+                if line.seq not in self._moves_shown:
+                    out.append(line)
+                continue
             if isinstance(line, FaultMessage):
                 with self._shown_lock:
                     if line.fault.id in self._shown:
@@ -407,31 +304,32 @@ class RobotShell(CommandShell):
     def do_wait(self, arg: str = "") -> None:
         """wait [SECONDS]: wait until the current move (or job) ends; say why it ended."""
         timeout = parse_seconds(arg, "wait") if arg.strip() else WAIT_TIMEOUT_S
-        st = self.station
-        busy, refusal = self.call(st.begin_wait, name="wait")
-        if not busy:
-            self.say(self.runner.call(st.idle_report))
+        profile = self.profile
+        watch = self.call(self.station.watch_move, name="wait")  # the one mailbox call
+        if watch.idle:
+            last = watch.last.reason if watch.last is not None else ""
+            self.say(profile.idle_line(watch.where, last))
             return
-        if refusal:
-            self.say(refusal)
+        if watch.refusal:
+            self.say(watch.refusal)
             return
         try:
-            try:
-                done = self.runner.wait_until(lambda: not st.busy(), timeout)
-            finally:
-                with contextlib.suppress(PyrtError):
-                    self.runner.call(st.end_wait, name="wait", take_fault=False)
-        except FaultError as exc:
-            self.fault(exc, prefix=st.wait_fault_prefix)
+            done = self.runner.wait_until(lambda: watch.done, timeout)
+        except FaultError as exc:  # the fault says how the move ended
+            self._moves_shown.update(e.seq for e in list(watch.ended))
+            self.fault(exc, prefix=profile.fault_prefix)
             return
-        if not done:
-            self.say(f"still moving after {timeout:g} s")
-            return
-        report = self.runner.call(st.wait_report)
+        finally:
+            watch.waiting = False  # what ends from now on is said as it comes
+        ended = list(watch.ended)
+        self._moves_shown.update(e.seq for e in ended)
         for text in self.messages():
             self.say(text)  # what happened during the wait comes first, in order
-        for text in report.splitlines():
-            self.say(text)
+        for event in ended:
+            for text in event.report:
+                self.say(text)
+        if not done:
+            self.say(f"still moving after {timeout:g} s")
 
     @command(Arg("SECONDS", str), name="sleep", console=True)
     def do_sleep(self, arg: str) -> None:
@@ -570,15 +468,6 @@ class RobotShell(CommandShell):
         except (MailboxTimeout, PyrtError) as exc:
             self.error(f"could not stop the motors: {exc}")
         return True
-
-
-def _did_you_mean(text: str, names: list[str]) -> str:
-    """``" (did you mean 'NAME'?)"`` for the names closest to ``text`` (difflib), or ''."""
-    by_key = {n.lower(): n for n in names}
-    near = difflib.get_close_matches(text.lower(), list(by_key), n=2, cutoff=0.7)
-    if not near:
-        return ""
-    return f" (did you mean {' or '.join(repr(by_key[k]) for k in near)}?)"
 
 
 def split_words(text: str) -> list[str]:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING
 
 from pyrt.boards.dataconcentrator import DataConcentrator, DigitalChannel
 from pyrt.component import Arg, Component, Limits, Signal, command
@@ -37,7 +37,6 @@ class Encoder(Component):
         slope: float,
         zero_length: float,
         *,
-        stdout: TextIO | None = None,
         write_back: Callable[[float], None] | None = None,
     ):
         if not (isinstance(slope, (int, float)) and math.isfinite(slope) and slope != 0):
@@ -48,7 +47,6 @@ class Encoder(Component):
         self.channel = channel
         self.slope = float(slope)
         self.zero_length = float(zero_length)
-        self.stdout = stdout
         self.write_back = write_back
         self.looping = False
         #: The range of the total rope length (cm) ``setZeroLength`` may give
@@ -134,7 +132,7 @@ class Encoder(Component):
     def poll(self, now_s: float) -> None:
         """Read loop output; ZEROLENGTH write-back once a second while changing."""
         if self.looping:  # the read/display loop: asynchronous output
-            self._say(f"{self.name}: {self.read():.3f} cm")
+            self.say(f"{self.name}: {self.read():.3f} cm")
         if self.write_back is None:
             return
         if self._last_write is not None and now_s - self._last_write < ZEROLENGTH_WRITE_PERIOD:
@@ -145,6 +143,3 @@ class Encoder(Component):
             self._written = v
             self._last_write = now_s
 
-    def _say(self, text: str) -> None:
-        if self.stdout is not None:
-            self.stdout.write(text + "\n")

@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING
 
 from pyrt.boards.dataconcentrator import ADC_MAX, AnalogChannel, DataConcentrator
 from pyrt.component import Arg, Component, Limits, Param, Signal, command
@@ -77,7 +77,6 @@ class Loadcell(Component):
         offset: float,
         *,
         maxload: float = 0.0,
-        stdout: TextIO | None = None,
         write_back: Callable[[float, float], None] | None = None,
     ):
         for label, v in (("SLOPE", slope), ("OFFSET", offset)):
@@ -88,7 +87,6 @@ class Loadcell(Component):
         self.slope = float(slope)
         self.offset = float(offset)
         self.maxload = float(maxload)
-        self.stdout = stdout
         self.write_back = write_back
         #: The tension's display range and alarm levels (the rope's tension
         #: limits, given by the axis that reads this loadcell), or None.

@@ -28,7 +28,7 @@ left applied without movement.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING
 
 from pyrt.boards.tio10 import (
     AWO_BITS,
@@ -91,7 +91,6 @@ class Motor(Component):
         steps_per_cm: float = 40.0,
         dv_limit: float = 0.5,
         ramp_decrement: int = 10,
-        stdout: TextIO | None = None,
     ):
         if channel in RTC_CHANNELS:
             raise ConfigError(
@@ -122,7 +121,6 @@ class Motor(Component):
         self.steps_per_cm = float(steps_per_cm)
         self.dv_limit = float(dv_limit)
         self.ramp_decrement = ramp_decrement
-        self.stdout = stdout
         self._source_hz = source_hz(MOTOR_SOURCE)
         self._dir = DIR_BITS[channel]
         self._awo = AWO_BITS[channel]
@@ -152,13 +150,12 @@ class Motor(Component):
         self._last_pulses = tio10.pulses(channel)
 
     @classmethod
-    def from_record(cls, record: MotorRecord, tio10: TIO10, name: str | None = None,
-                    stdout: TextIO | None = None) -> Motor:
+    def from_record(cls, record: MotorRecord, tio10: TIO10, name: str | None = None) -> Motor:
         """A Motor from a :class:`pyrt.db.MotorRecord`."""
         return cls(
             name or record.name, tio10, record.channel, record.start_speed,
             record.cruise_speed, steps_per_cm=record.steps_per_cm,
-            dv_limit=record.dv_limit, ramp_decrement=record.ramp_decrement, stdout=stdout,
+            dv_limit=record.dv_limit, ramp_decrement=record.ramp_decrement,
         )
 
     # -- conversions -------------------------------------------------------------

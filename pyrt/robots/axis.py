@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any, Protocol, TextIO
+from typing import TYPE_CHECKING, Any, Protocol
 
 from pyrt.boards.dataconcentrator import ADC_MAX, DataConcentrator
 from pyrt.boards.tio10 import TIO10
@@ -41,6 +41,7 @@ from pyrt.devices.loadcell import Loadcell, parse_load
 from pyrt.devices.motor import MAX_CRUISE_SPEED, MIN_START_SPEED, STEP_MODE, Motor
 from pyrt.errors import CommandError, ConfigError, PyrtError
 from pyrt.robots.av import AV
+from pyrt.robots.fuzzy_gains import fuzzy_gain_params
 from pyrt.robots.ropes import corrected_length
 from pyrt.tasks.axis_poll import POLYAXIS, STANDALONE
 
@@ -101,7 +102,7 @@ class RopeGroup(Protocol):
     @property
     def estimate_lost(self) -> str | None: ...
 
-    def halt(self, reason: Any, detail: str) -> Any: ...
+    def end_move(self, reason: Any, detail: str) -> Any: ...
 
 
 class TrackingError(PyrtError):
@@ -181,6 +182,9 @@ class Axis(Component):
 
         self.mode = STANDALONE
         self.target: float | None = None
+        #: A standalone move (up, down, to) was started and has not been
+        #: reported ended yet (the station reports it when the motion stops).
+        self.moved = False
         #: The rope's physical length range (cm), set by the station from the
         #: geometry (:meth:`set_supervision`); None: lengths > 0 only.
         self.length_range: tuple[float, float] | None = None
@@ -205,7 +209,6 @@ class Axis(Component):
         dc: DataConcentrator,
         *,
         av: AV | None = None,
-        stdout: TextIO | None = None,
         persist: Callable[[str, str, str, float], None] | None = None,
     ) -> Axis:
         """An Axis and its devices from a :class:`pyrt.db.AxisRecord` and its
@@ -227,10 +230,10 @@ class Axis(Component):
                 persist("LOADCELL", lrec.name, "SLOPE", slope)
                 persist("LOADCELL", lrec.name, "OFFSET", offset)
 
-        motor = Motor.from_record(mrec, tio10, name=f"{name}Motor", stdout=stdout)
-        encoder = Encoder.from_record(erec, dc, name=f"{name}Encoder", stdout=stdout,
+        motor = Motor.from_record(mrec, tio10, name=f"{name}Motor")
+        encoder = Encoder.from_record(erec, dc, name=f"{name}Encoder",
                                       write_back=put("ENCODER", erec.name, "ZEROLENGTH"))
-        loadcell = Loadcell.from_record(lrec, dc, name=f"{name}Loadcell", stdout=stdout,
+        loadcell = Loadcell.from_record(lrec, dc, name=f"{name}Loadcell",
                                         write_back=put_cal if persist is not None else None)
         return cls(
             name, motor, encoder, loadcell,
@@ -336,15 +339,20 @@ class Axis(Component):
 
     def params(self) -> list[Param]:
         """The limits every move of this rope is held to, read only (the PolyAxis
-        sets them: ``set POLYAXIS.MAX_TENSION``)."""
+        sets them: ``set POLYAXIS.MAX_TENSION``); under a PolyAxis, the rope's
+        fuzzy gains (:mod:`pyrt.robots.fuzzy_gains`)."""
         def limit(which: int, attr: str) -> Callable[[], float | None]:
             return lambda: (getattr(self, attr) or (None, None))[which]
 
+        batch = getattr(self.group, "batch", None)
+        gains = ([] if batch is None or self.group_index is None
+                 else fuzzy_gain_params(batch, self.group_index, self.name))
         return [
             Param("LENGTH_MIN", "cm", limit(0, "length_range"), doc="shortest rope length"),
             Param("LENGTH_MAX", "cm", limit(1, "length_range"), doc="longest rope length"),
             Param("LOW_TENSION", "N", limit(0, "tension_limits"), doc="lowest tension"),
             Param("HIGH_TENSION", "N", limit(1, "tension_limits"), doc="highest tension"),
+            *gains,
         ]
 
     def set_supervision(self, length_range: tuple[float, float],
@@ -418,6 +426,7 @@ class Axis(Component):
             raise CommandError(f"{self.name} {command}: the motor is moving the other way; "
                                "stop it first (STEP_MODE never reverses)")
         self.target = target
+        self.moved = True
         if m.mode == STEP_MODE and m.running and steps != 0:
             m.set_desired_steps(m.steps_taken + abs(steps))
         else:
@@ -473,7 +482,7 @@ class Axis(Component):
             # one joint stopped stops the whole manipulator
             from pyrt.robots.stops import StopReason
 
-            group.halt(StopReason.STOP, f"{self.name} stop command")
+            group.end_move(StopReason.STOP, f"{self.name} stop command")
             return f"stopped; the {group.name} move is stopped with it"
         self.stop()
         return "stopped"
@@ -595,7 +604,7 @@ class Axis(Component):
         if self.mode == POLYAXIS and group is not None and getattr(group, "active", False):
             from pyrt.robots.stops import StopReason
 
-            group.halt(StopReason.FAULT, cause)
+            group.end_move(StopReason.FAULT, cause)
         super().fail(cause, source)
 
     def _length_at(self, tension: float) -> float:

@@ -14,30 +14,28 @@ queue, the encoder interrupt handlers from the board, the main-program
 sequences (``init``/``fullopen``, the ``C`` calibration) as foreground jobs,
 and the command entry points when a console calls them through the runner.
 
+The controller is three parts, one module each:
+
+* :mod:`pyrt.robots.gripper_ram`: the view of the 8031's RAM (words,
+  bits, the monitor's bytes, the schedule variables as periods);
+* :mod:`pyrt.robots.jaw_supervision`: pyrt's supervision of every move
+  (settle and stall bounds, oscillation, the stall watchdog, the schedule
+  values it refuses or warns about);
+* this module: the controller proper (power-up, the interrupt handlers,
+  the routines, the main-program sequences, the reflex and what the ``CMD:``
+  letters of :mod:`pyrt.robots.gripper_commands` and the monitor call).
+
 Safety (002's central fix, kept and extended): drive current is never left
 applied without movement.  ``fullopen`` aborts when the jaws stop before
 the limit bit; a commanded move ends STOPCNT bumps after the stopped bit; a
 jog held against a stop is cut off the same way; and pyrt supervises
 every commanded move, independently of the RAM (which the monitor can
-change): a settle bound from the distance, the speed limit and the schedule
-(:meth:`GripperController.settle_bound_ns`), oscillation about the target
-seen as sign changes of the error without decay (MVJAWS feeds a
-:class:`~pyrt.tasks.jawmove.MoveSupervisor`), and a stall watchdog that
-trips when current has been applied longer than the stall bound
-(:meth:`GripperController.stall_bound_ns`, at most
-:attr:`GripperController.stall_limit_ns`) without one encoder count.  A
-fault's reflex action nulls the DAC and clears the drive bit in the same
-tick.
-
-The schedule values in RAM are 002's to tune: monitor ``C`` refuses one the
-controller cannot serve (WATCHJAW faster than two encoder counts at the
-speed limit, or 00) and warns when the supervision predicts oscillation
-(:meth:`GripperController.oscillation_reason`).
+change; :class:`~pyrt.robots.jaw_supervision.JawSupervision`).  A fault's
+reflex action nulls the DAC and clears the drive bit in the same tick.
 """
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Generator
 from dataclasses import dataclass
 from functools import partial
@@ -52,27 +50,21 @@ from pyrt.boards.gripper import (
 )
 from pyrt.boards.i8031 import (
     COMMAND_CNT,
-    DOJOG,
-    DRVON,
     ENCODER_CNT,
     ERROR_CNT,
     FLAGS,
     I8031,
     JSPEED,
-    LIMIT,
     MVJAWSPD,
     MXNJSPD,
     MXPJSPD,
     OLD_ENC,
     OTHER,
     PROX,
-    RAM_SIZE,
     RATE,
     SEMA,
     SENSORPD,
-    SP_RESET,
     STOPCNT,
-    STOPPED,
     SYSCLKCNT,
     SYSCLKPD,
     VECTOR_EXT0,
@@ -83,12 +75,29 @@ from pyrt.boards.i8031 import (
 )
 from pyrt.component import Component, Signal
 from pyrt.errors import CommandError
-from pyrt.robots.gripper_commands import CommandLetters, GripperMonitor, parse_hex, parse_target
+from pyrt.robots.gripper_commands import (
+    SP_CMDLOOP,
+    CommandLetters,
+    GripperMonitor,
+    parse_hex,
+    parse_target,
+)
+from pyrt.robots.gripper_ram import (
+    DEFAULT_SYSCLKPD,
+    ENC16,
+    MASK_DOJOG,
+    MASK_DRVON,
+    MASK_JOGSTALL,
+    MASK_STOPPED,
+    GripperRam,
+    Schedule,
+)
+from pyrt.robots.jaw_supervision import JawSupervision
 from pyrt.scheduler import ByteImage, ByteRef, Job, Loop, ReadyQueue, Task, install
 from pyrt.scheduler.motion import MotionRecord, MotionType, register_motion_type
 from pyrt.scope import Source
 from pyrt.tasks import jawmove, jawwatch, sensors
-from pyrt.tasks.jawmove import BAND, JOGSTALL, STOPBUMPS, MoveSupervisor
+from pyrt.tasks.jawmove import STOPBUMPS, MoveSupervisor
 
 __all__ = [
     "ADDR_MVJAWS",
@@ -107,11 +116,6 @@ ADDR_MVJAWS = jawmove.ADDRESS  # 04C2
 ADDR_SENSORS = sensors.ADDRESS  # 0473
 ADDR_WATCHJAW = jawwatch.ADDRESS  # 0541
 
-# Appendix B schedule values, loaded into RAM at power-up.
-DEFAULT_SYSCLKPD = 0x04
-DEFAULT_MVJAWSPD = 0x0C
-DEFAULT_SENSORPD = 0x0A
-DEFAULT_WTCHJWSPD = 0x01
 #: 002: "a speed value of 7F is used" with the original worm/sector gears.
 DEFAULT_JSPEED = 0x7F
 #: 8155 command: ports A, B and C all input, timer stopped.
@@ -123,41 +127,10 @@ START_GRACE = 4
 START_GRACE_NS = 16_000_000
 #: Upper bound on any foreground drive, in queue checks (60 s at the defaults).
 MAX_DRIVE_CHECKS = 15000
-#: The stall watchdog looks at the schedule only after this long without a count.
-STALL_FLOOR_NS = 50_000_000
-#: SP while the command loop runs (main called it) and inside the monitor.
-SP_CMDLOOP = SP_RESET + 2
-SP_MONITOR = SP_RESET + 4
 
-_ENC16 = ENCODER_CNT // 2
-_MASK_STOPPED = 1 << STOPPED
-_MASK_DRVON = 1 << DRVON
-_MASK_DOJOG = 1 << DOJOG
-_MASK_JOGSTALL = 1 << JOGSTALL
-_MASK_LIMIT = 1 << LIMIT
-
-
-#: 002's routine periods at pyrt's 1 ms base tick (Appendix B: 04 checks x
-#: 0C, 0A, 01), kept at power-up whatever ``--tick-us`` is (see
-#: :meth:`GripperController.power_up_schedule`).
-CHECK_NS = 4_000_000
-SCHEDULE_NS = {MVJAWSPD: 48_000_000, SENSORPD: 40_000_000, WTCHJWSPD: 4_000_000}
-#: The schedule variables by RAM address, as the monitor names them.
-SCHEDULE_NAMES = {SYSCLKPD: "SYSCLKPD", MVJAWSPD: "MVJAWSPD", SENSORPD: "SENSORPD",
-                  WTCHJWSPD: "WTCHJWSPD"}
-#: MVJAWS drives with the error; with g = (counts/s per current unit) x the
-#: time a current rests on one error value (MVJAWS's period plus the error's
-#: age, up to WATCHJAW's), the sampled loop overshoots once g passes about 2
-#: (the simulated jaws: 1.04 at 002's defaults settles; 2.2 with WTCHJWSPD
-#: 10 and 3.9 with MVJAWSPD 30 oscillate; between, the deadband may or may
-#: not catch the jaws: a prediction, and the supervision is the guard).
-OSCILLATION_GAIN = 2.0
-#: Settle bound: travel at the speed limit times this, plus the end of the move.
-TRAVEL_MARGIN = 1.5
-SETTLE_EXTRA_NS = 500_000_000
-#: A move may hold current on jaws that do not move for STOPBUMPS MVJAWS runs
-#: after WATCHJAW sees them stopped; the stall bound adds this margin.
-STALL_EXTRA_NS = 100_000_000
+# The FLAGS bits the reflex and the sequences clear (named here as before).
+_MASK_DRVON = MASK_DRVON
+_MASK_DOJOG = MASK_DOJOG
 
 
 @dataclass(frozen=True)
@@ -186,43 +159,6 @@ class JawCalibration:
 
 
 @dataclass(frozen=True)
-class Schedule:
-    """The routines' periods as the RAM and the tick make them, in ns."""
-
-    tick_ns: int
-    sysclkpd: int
-    mvjawspd: int
-    sensorpd: int
-    wtchjwspd: int
-
-    @property
-    def check_ns(self) -> int:
-        """Between two checks of the ready queue."""
-        return self.tick_ns * (self.sysclkpd or 256)
-
-    @property
-    def move_ns(self) -> int:
-        """MVJAWS's period."""
-        return self.check_ns * (self.mvjawspd or 256)
-
-    @property
-    def watch_ns(self) -> int:
-        """WATCHJAW's period."""
-        return self.check_ns * (self.wtchjwspd or 256)
-
-    @property
-    def sensor_ns(self) -> int:
-        """SENSORS's period."""
-        return self.check_ns * (self.sensorpd or 256)
-
-    def text(self) -> str:
-        """The four variables as the monitor shows them."""
-        return (f"SYSCLKPD {self.sysclkpd:02X} MVJAWSPD {self.mvjawspd:02X} "
-                f"SENSORPD {self.sensorpd:02X} WTCHJWSPD {self.wtchjwspd:02X}, "
-                f"tick {self.tick_ns / 1e3:g} µs")
-
-
-@dataclass(frozen=True)
 class JobResult:
     """How a main-program sequence ended: ``ok``, a message, and a value if any."""
 
@@ -238,6 +174,8 @@ class GripperController(Component, CommandLetters):
     of Appendix A by name, its commands the ``CMD:`` letters, its child the
     monitor, its tasks the three self-scheduling routines (:meth:`tasks`),
     its reflex nulls the drive current and clears the drive and jog bits.
+    Its parts: :attr:`mem`, the view of the RAM; :attr:`supervision`, the
+    supervision of every move.
 
     ``cpu`` must have the gripper board mapped in its external data space
     (:class:`~pyrt.boards.gripper.SimGripperBoard` or a real one).  Call
@@ -257,12 +195,16 @@ class GripperController(Component, CommandLetters):
         self.calibration = calibration if calibration is not None else JawCalibration()
         self.cpu = cpu
         self.ram = cpu.ram
+        self._loop: Loop | None = None
+        #: The RAM as the controller reads and writes it (words, bits, schedule).
+        self.mem = GripperRam(self.ram, self._tick_ns)
         self.monitor = GripperMonitor(self)
-        # the RAM's even-addressed words, for the encoder interrupt handlers
-        self._w16: Any = (
-            memoryview(self.ram).cast("H") if sys.byteorder == "little" else _Words(self.ram)
-        )
-        self.stall_limit_ns = int(stall_limit_ns)
+        #: pyrt's supervision of every move (bounds, oscillation, stall watchdog).
+        self.supervision = JawSupervision(self, self.mem, stall_limit_ns)
+        # the RAM's words as the routines and the monitor name them here
+        self.word = self.mem.word
+        self._sword = self.mem.sword
+        self._set_word = self.mem.set_word
         self.queue = ReadyQueue(
             capacity=6,
             divisor=DEFAULT_SYSCLKPD,
@@ -277,20 +219,18 @@ class GripperController(Component, CommandLetters):
         cpu.set_vector(VECTOR_EXT1, self._isr_down)
         #: The foreground job (init, calibration) in progress, if any.
         self.job: Job | None = None
-        self._loop: Loop | None = None
         self._dac = DAC_NULL
-        self._wd_pulses = 0
-        self._wd_since = 0
         #: Why the last commanded move or jog ended, for the console's ``wait``.
         self.last_stop = ""
         #: The running move's supervision (armed by :meth:`move`).
-        self.supervisor = MoveSupervisor(_NoClock(), self._oscillating, self._not_settled)
-        #: The settle bound of the running move, seconds (for its fault message).
-        self.settle_bound_s = 0.0
+        self.supervisor: MoveSupervisor = self.supervision.supervisor
         #: Where the last commanded move started, counts (its direction, for ``wait``).
         self.move_from = 0
 
     # -- wiring ------------------------------------------------------------------
+
+    def _tick_ns(self) -> int:
+        return self._loop.period_ns if self._loop is not None else 1_000_000
 
     def attach(self, loop: Loop, *, register: bool = True) -> None:
         """Attach the clock interrupt (ready queue) and the stall watchdog to ``loop``.
@@ -315,8 +255,8 @@ class GripperController(Component, CommandLetters):
             ram[addr] = value
         ram[FLAGS] = 0
         ram[PROX] = ram[OTHER] = 0xFF
-        self._set_speed(DEFAULT_JSPEED)
-        self._zero_counts()
+        self.mem.set_speed(DEFAULT_JSPEED)
+        self.mem.zero_counts()
         ram[STOPCNT] = 0
         q = self.queue
         q.interrupts_enabled = True
@@ -327,123 +267,37 @@ class GripperController(Component, CommandLetters):
         q.schedule(ADDR_WATCHJAW, ram[WTCHJWSPD])
 
     def power_up_schedule(self) -> dict[int, int]:
-        """The schedule values power-up loads: Appendix B's (04, 0C, 0A, 01) at
-        a 1 ms tick.  At another ``--tick-us`` the 8031's timer would be
-        reprogrammed in EPROM; pyrt instead scales the values so that every
-        routine keeps 002's period as nearly as a byte allows (a 50 µs tick
-        with SYSCLKPD 04 would run WATCHJAW every 200 µs, less than one
-        encoder count at full speed: the stopped bit would be on while the
-        jaws move, and I would fail as 002 describes)."""
-        tick = self._loop.period_ns if self._loop is not None else 1_000_000
-        if tick == 1_000_000:
-            return {SYSCLKPD: DEFAULT_SYSCLKPD, MVJAWSPD: DEFAULT_MVJAWSPD,
-                    SENSORPD: DEFAULT_SENSORPD, WTCHJWSPD: DEFAULT_WTCHJWSPD}
-        div = min(0xFF, max(1, round(CHECK_NS / tick)))
-        check = tick * div
-        out = {SYSCLKPD: div}
-        for addr, period in SCHEDULE_NS.items():
-            out[addr] = min(0xFF, max(1, round(period / check)))
-        return out
+        """The schedule values power-up loads (:meth:`GripperRam.power_up_schedule`)."""
+        return self.mem.power_up_schedule()
 
-    # -- the schedule and the supervision -------------------------------------------
+    # -- the schedule and the supervision (the parts') -------------------------------
 
     def schedule(self) -> Schedule:
         """The routines' periods as the RAM and the loop's tick make them now."""
-        ram = self.ram
-        tick = self._loop.period_ns if self._loop is not None else 1_000_000
-        return Schedule(tick, ram[SYSCLKPD], ram[MVJAWSPD], ram[SENSORPD], ram[WTCHJWSPD])
-
-    def schedule_refusal(self, addr: int, value: int) -> str | None:
-        """Why storing ``value`` at schedule variable ``addr`` cannot be served, or None.
-
-        WATCHJAW must see the jaws move: a period shorter than the time of
-        two encoder counts at full speed (X 7F, what I drives at) leaves the
-        stopped bit on while they move (an I fails; a move ends where it
-        stands)."""
-        if addr not in SCHEDULE_NAMES:
-            return None
-        if value == 0:
-            return (f"{SCHEDULE_NAMES[addr]} 00 would stop the routine's clock "
-                    "(schedule values are 01..FF)")
-        if addr not in (SYSCLKPD, WTCHJWSPD):
-            return None
-        ram = bytearray(self.ram)
-        ram[addr] = value
-        sched = Schedule(self.schedule().tick_ns, ram[SYSCLKPD], ram[MVJAWSPD], ram[SENSORPD],
-                         ram[WTCHJWSPD])
-        need = 2e9 / self.calibration.speed(0x7F)
-        if sched.watch_ns < need:
-            return (f"{SCHEDULE_NAMES[addr]} {value:02X} would run WATCHJAW every "
-                    f"{sched.watch_ns / 1e3:g} µs, less than two encoder counts at full speed "
-                    f"({need / 1e3:.0f} µs at X 7F): the stopped bit would be on while the "
-                    "jaws move")
-        return None
-
-    def oscillation_reason(self, sched: Schedule | None = None) -> str | None:
-        """Why the supervision predicts that moves will oscillate on the
-        schedule ``sched`` (default: the RAM's now), or None."""
-        sched = sched if sched is not None else self.schedule()
-        gain = self.calibration.gain
-        held = sched.move_ns + sched.watch_ns
-        if gain * held / 1e9 <= OSCILLATION_GAIN:
-            return None
-        if sched.watch_ns > sched.move_ns:
-            rel = "≫" if sched.watch_ns >= 2 * sched.move_ns else ">"
-            return (f"WTCHJWSPD {sched.wtchjwspd:02X} {rel} MVJAWSPD {sched.mvjawspd:02X}: "
-                    f"MVJAWS drives {sched.move_ns / 1e6:g} ms at a time with an error up to "
-                    f"{sched.watch_ns / 1e6:g} ms old")
-        return (f"MVJAWS drives {sched.move_ns / 1e6:g} ms at a time (SYSCLKPD "
-                f"{sched.sysclkpd:02X} x MVJAWSPD {sched.mvjawspd:02X} x "
-                f"{sched.tick_ns / 1e3:g} µs tick): too long for jaws that move "
-                f"{gain:g} counts/s per current unit")
-
-    def settle_bound_ns(self, distance: int) -> int:
-        """How long a move of ``distance`` counts may take to end, on the
-        schedule and the speed limit in RAM now."""
-        sched = self.schedule()
-        v = self.calibration.speed(self.ram[JSPEED])
-        travel = abs(distance) / v * TRAVEL_MARGIN * 1e9
-        return int(travel + (STOPBUMPS + 4) * sched.move_ns + 4 * sched.watch_ns
-                   + SETTLE_EXTRA_NS)
+        return self.mem.schedule()
 
     def stall_bound_ns(self) -> int:
-        """How long current may be held on jaws that do not move, on the
-        schedule in RAM now (STOPCNT's bumps after WATCHJAW sees them stop),
-        never more than :attr:`stall_limit_ns`."""
-        sched = self.schedule()
-        bound = ((STOPBUMPS + 2) * sched.move_ns + 3 * sched.watch_ns + 3 * sched.check_ns
-                 + STALL_EXTRA_NS)
-        return min(bound, self.stall_limit_ns)
+        """How long current may be held on jaws that do not move (the supervision's)."""
+        return self.supervision.stall_bound_ns()
 
-    def _reason(self) -> str:
-        return self.oscillation_reason() or f"schedule {self.schedule().text()}"
+    @property
+    def stall_limit_ns(self) -> int:
+        """The stall bound is never more than this (ns)."""
+        return self.supervision.stall_limit_ns
 
-    def _oscillating(self, amplitude: int, flips: int) -> None:
-        self.fail(f"P move oscillating about the target: error ±{amplitude} counts, "
-                  f"{flips} sign changes without decay; {self._reason()}", source="P move")
+    @property
+    def settle_bound_s(self) -> float:
+        """The settle bound of the running move, seconds."""
+        return self.supervision.settle_bound_s
 
-    def _not_settled(self, error: int, amplitude: int, flips: int) -> None:
-        what = (f"error oscillating ±{amplitude} counts" if flips >= 2
-                else f"error {error:+d} counts")
-        self.fail(f"P move did not settle within {self.settle_bound_s:.1f} s: {what}; "
-                  f"{self._reason()}", source="P move")
+    def schedule_warning(self, addr: int, value: int) -> str | None:
+        """Monitor ``C``: the supervision's refusal or warning for a schedule value."""
+        return self.supervision.schedule_warning(addr, value)
 
     def move_ended(self, why: str) -> None:
-        """MVJAWS (or a jog) ended the commanded move: say why, stop supervising.
-
-        A move STOPCNT ended away from its target says that the stopped bit
-        ended it, and why the schedule may have made the bit lie."""
-        if why == "stopped":
-            err = self._sword(ENCODER_CNT) - self._sword(COMMAND_CNT)
-            if abs(err) > BAND:
-                sched = self.schedule()
-                why = "the stopped bit ended the move (STOPCNT ran out)"
-                if sched.watch_ns >= 2 * sched.move_ns:
-                    why += (f"; WTCHJWSPD {sched.wtchjwspd:02X} ≫ MVJAWSPD "
-                            f"{sched.mvjawspd:02X}: the bit is up to "
-                            f"{sched.watch_ns / 1e6:g} ms old")
-        self.last_stop = why
-        self.supervisor.disarm()
+        """MVJAWS (or a jog) ended the commanded move: say why, stop supervising
+        (:meth:`JawSupervision.ended`: a move the stopped bit ended short says so)."""
+        self.last_stop = self.supervision.ended(why)
 
     # -- registers -----------------------------------------------------------------
 
@@ -456,32 +310,6 @@ class GripperController(Component, CommandLetters):
     def dac(self) -> int:
         """The last byte written to the DAC (latched by the hardware)."""
         return self._dac
-
-    def word(self, addr: int) -> int:
-        """RAM word at ``addr`` (little-endian), 0000-FFFF."""
-        ram = self.ram
-        return ram[addr] | (ram[addr + 1] << 8)
-
-    def _sword(self, addr: int) -> int:
-        ram = self.ram
-        w = ram[addr] | (ram[addr + 1] << 8)
-        return w - 0x10000 if w & 0x8000 else w
-
-    def _set_word(self, addr: int, value: int) -> None:
-        ram = self.ram
-        ram[addr] = value & 0xFF
-        ram[addr + 1] = (value >> 8) & 0xFF
-
-    def _zero_counts(self) -> None:
-        for addr in (ENCODER_CNT, COMMAND_CNT, OLD_ENC, RATE):
-            self._set_word(addr, 0)
-        self._set_word(ERROR_CNT, 0x0080)
-
-    def _set_speed(self, speed: int) -> None:
-        ram = self.ram
-        ram[JSPEED] = speed
-        ram[MXPJSPD] = 0x80 + speed
-        ram[MXNJSPD] = 0x80 - speed
 
     # -- interrupt handlers (HHMVJAWS.51) ----------------------------------------
 
@@ -497,11 +325,11 @@ class GripperController(Component, CommandLetters):
         """The handler installed at the vector: the same work as
         :meth:`encoder_up`/:meth:`encoder_down` with every name bound local
         (it runs once per encoder count, several times a tick)."""
-        w = self._w16
+        w = self.mem.w16
         pulses = self._pulse_cell
 
         def isr() -> None:
-            w[_ENC16] = (w[_ENC16] + delta) & 0xFFFF
+            w[ENC16] = (w[ENC16] + delta) & 0xFFFF
             pulses[0] += 1
 
         return isr
@@ -534,38 +362,16 @@ class GripperController(Component, CommandLetters):
         finally:
             self._dac = DAC_NULL
             self.supervisor.disarm()
-            ram = self.ram
-            if ram[FLAGS] & (_MASK_DRVON | _MASK_DOJOG):
+            if self.mem.clear_drive():
                 self.last_stop = "stopped by the reflex (move abandoned)"
-            ram[FLAGS] &= ~(_MASK_DRVON | _MASK_DOJOG) & 0xFF
             if self.job is not None:
                 self.job.cancel()
                 self.job = None
 
     def watchdog(self, now_ns: int) -> None:
-        """Every tick: trip the robot when current has been applied longer
-        than the stall bound (:meth:`stall_bound_ns`) without a single
-        encoder count, or when a supervised move has outlived its settle
-        bound (whatever the schedule: MVJAWS may run seldom, or not at all)."""
-        sup = self.supervisor
-        if sup.active and now_ns > sup.deadline_ns:
-            sup.expired(self._sword(ERROR_CNT) - 0x80)
-            return
-        pulses = self._pulse_cell[0]
-        if self._dac == DAC_NULL or pulses != self._wd_pulses:
-            self._wd_pulses = pulses
-            self._wd_since = now_ns
-            return
-        held = now_ns - self._wd_since
-        if held > STALL_FLOOR_NS and held > self.stall_bound_ns():
-            self._wd_since = now_ns
-            sched = self.schedule()
-            self.fail(
-                f"drive current {self._dac - 0x80:+d} applied for {held / 1e9:.2f} s without "
-                f"jaw movement (stall bound {self.stall_bound_ns() / 1e9:.2f} s; MVJAWS every "
-                f"{sched.move_ns / 1e6:g} ms)",
-                source="stall watchdog",
-            )
+        """Every tick: the stall watchdog and the settle bound of the running
+        move (:meth:`JawSupervision.watchdog`)."""
+        self.supervision.watchdog(now_ns, self._dac, self._pulse_cell[0])
 
     # -- main-program sequences (foreground jobs) ------------------------------------
 
@@ -611,10 +417,10 @@ class GripperController(Component, CommandLetters):
         """HHINIT: init (8155, sensor bits, encoder variables), then fullopen."""
         ram = self.ram
         self.drive(DAC_NULL)
-        ram[FLAGS] &= ~(_MASK_DRVON | _MASK_DOJOG | _MASK_JOGSTALL) & 0xFF
+        ram[FLAGS] &= ~(MASK_DRVON | MASK_DOJOG | MASK_JOGSTALL) & 0xFF
         self.cpu.movx_write(P8155_CMD, MODE_8155)
         ram[PROX] = ram[OTHER] = 0xFF
-        self._zero_counts()
+        self.mem.zero_counts()
         ram[STOPCNT] = 0
         # wait for the 8155 to reset and for SENSORS to read the ports once
         yield from self._wait(ram[SENSORPD] + 1)
@@ -629,27 +435,21 @@ class GripperController(Component, CommandLetters):
             return START_GRACE
         return min(255, max(START_GRACE, -(-START_GRACE_NS // per_check)))
 
-    def _limit(self) -> bool:
-        return not self.ram[OTHER] & _MASK_LIMIT
-
-    def _stopped(self) -> bool:
-        return bool(self.ram[FLAGS] & _MASK_STOPPED)
-
     def _fullopen(self) -> Generator[None, None, JobResult]:
         """Drive the jaws wide open until the limit bit; abort if they stop first."""
         ram = self.ram
-        if not self._limit():
+        if not self.mem.at_limit:
             self.drive(ram[MXPJSPD])
             yield from self._wait(self._grace())
             for _ in range(MAX_DRIVE_CHECKS):
                 yield from self._wait(1)
-                if self._limit():
+                if self.mem.at_limit:
                     break
-                if self._stopped():
+                if self.mem.stopped:
                     self.drive(DAC_NULL)
                     # the limit bit may be up to one SENSORS period old: look again
                     yield from self._wait(ram[SENSORPD] + 1)
-                    if self._limit():
+                    if self.mem.at_limit:
                         break
                     return JobResult(
                         False,
@@ -661,14 +461,14 @@ class GripperController(Component, CommandLetters):
                 return JobResult(False, "INIT FAILED: limit sensor not reached in time")
         self.drive(DAC_NULL)
         yield from self._settle()
-        self._zero_counts()
+        self.mem.zero_counts()
         self.last_stop = "init"
         return JobResult(True, "jaws wide open (limit sensor on), encoder 0000", 0)
 
     def _settle(self) -> Generator[None, None, None]:
         for _ in range(MAX_DRIVE_CHECKS):
             yield from self._wait(1)
-            if self._stopped():
+            if self.mem.stopped:
                 return
 
     def _calibrate_job(self) -> Generator[None, None, JobResult]:
@@ -680,7 +480,7 @@ class GripperController(Component, CommandLetters):
         yield from self._wait(self._grace())
         for _ in range(MAX_DRIVE_CHECKS):
             yield from self._wait(1)
-            if self._stopped():
+            if self.mem.stopped:
                 break
         self.drive(DAC_NULL)
         yield from self._settle()
@@ -700,7 +500,7 @@ class GripperController(Component, CommandLetters):
     @property
     def moving(self) -> bool:
         """A commanded move or a jog is in progress (drive or dojog bit)."""
-        return bool(self.ram[FLAGS] & (_MASK_DRVON | _MASK_DOJOG))
+        return self.mem.moving
 
     def move(self, target: int) -> None:
         """``P``: store the target and set the drive bit (target -8000..0000)."""
@@ -720,12 +520,10 @@ class GripperController(Component, CommandLetters):
         # stopped bit goes on"), ending the move where it stands.
         self._set_word(ERROR_CNT, (self.word(ENCODER_CNT) - target + 0x80) & 0xFFFF)
         ram[STOPCNT] = STOPBUMPS
-        ram[FLAGS] = (ram[FLAGS] & ~(_MASK_DOJOG | _MASK_STOPPED) | _MASK_DRVON) & 0xFF
+        ram[FLAGS] = (ram[FLAGS] & ~(MASK_DOJOG | MASK_STOPPED) | MASK_DRVON) & 0xFF
         self.last_stop = ""
-        bound = self.settle_bound_ns(target - self._sword(ENCODER_CNT))
-        self.settle_bound_s = bound / 1e9
         now = self._loop.now_ns if self._loop is not None else 0
-        self.supervisor.arm(now + bound)
+        self.supervision.arm(now, target - self._sword(ENCODER_CNT))
 
     def check_can_move(self) -> None:
         """Raise CommandError unless a move may start now (no foreground job;
@@ -740,7 +538,7 @@ class GripperController(Component, CommandLetters):
             raise CommandError(f"speed {speed:02X} is out of range (01..7F)")
         ram = self.ram
         old = ram[JSPEED]
-        self._set_speed(speed)
+        self.mem.set_speed(speed)
         line = (f"speed {old:02X} -> {speed:02X}: JSPEED {speed:02X}, MXPJSPD {ram[MXPJSPD]:02X}, "
                 f"MXNJSPD {ram[MXNJSPD]:02X} (up to {self.calibration.speed(speed):.0f} counts/s)")
         if speed <= self.calibration.deadband:
@@ -753,26 +551,7 @@ class GripperController(Component, CommandLetters):
 
     def replaces_target(self) -> bool:
         """A commanded move runs (drive bit on, no jog): a new P changes its target."""
-        return bool(self.ram[FLAGS] & _MASK_DRVON) and not self.busy
-
-    def schedule_warning(self, addr: int, value: int) -> str | None:
-        """Monitor ``C``: CommandError if ``value`` at schedule variable
-        ``addr`` cannot be served; the predicted oscillation, if any, else None."""
-        refusal = self.schedule_refusal(addr, value)
-        if refusal:
-            raise CommandError(f"C {addr:02X} {value:02X} refused: {refusal}; nothing changed")
-        if addr not in SCHEDULE_NAMES:
-            return None
-        s = self.schedule()
-        values = {SYSCLKPD: s.sysclkpd, MVJAWSPD: s.mvjawspd, SENSORPD: s.sensorpd,
-                  WTCHJWSPD: s.wtchjwspd}
-        values[addr] = value
-        new = Schedule(s.tick_ns, values[SYSCLKPD], values[MVJAWSPD], values[SENSORPD],
-                       values[WTCHJWSPD])
-        why = self.oscillation_reason(new)
-        if why is None:
-            return None
-        return f"moves may oscillate: {why}; the supervision stops a move that does"
+        return bool(self.ram[FLAGS] & MASK_DRVON) and not self.busy
 
     def target(self) -> int:
         """``T``: COMMAND_CNT."""
@@ -794,18 +573,11 @@ class GripperController(Component, CommandLetters):
 
     def peek(self, addr: int) -> int:
         """Monitor ``D``: the RAM byte at ``addr`` (00-7F)."""
-        if not 0 <= addr < RAM_SIZE:
-            raise CommandError(f"address {addr:X} is outside the on-chip RAM (00-7F)")
-        return self.ram[addr]
+        return self.mem.peek(addr)
 
     def poke(self, addr: int, value: int) -> int:
         """Monitor ``C``: store ``value`` at ``addr``; return what is stored there."""
-        if not 0 <= addr < RAM_SIZE:
-            raise CommandError(f"address {addr:X} is outside the on-chip RAM (00-7F)")
-        if not 0 <= value <= 0xFF:
-            raise CommandError(f"value {value:X} is not a byte (00-FF)")
-        self.ram[addr] = value
-        return self.ram[addr]
+        return self.mem.poke(addr, value)
 
     def toggle_clock(self) -> bool:
         """Monitor ``I``: toggle the clock/timer interrupt; return whether it is on.
@@ -816,7 +588,7 @@ class GripperController(Component, CommandLetters):
         q = self.queue
         if q.interrupts_enabled and self.moving:
             self.drive(DAC_NULL)
-            self.ram[FLAGS] &= ~(_MASK_DRVON | _MASK_DOJOG) & 0xFF
+            self.mem.clear_drive()
             self.move_ended("clock interrupt turned off (monitor I): move ended, current nulled")
         q.interrupts_enabled = not q.interrupts_enabled
         return q.interrupts_enabled
@@ -836,19 +608,6 @@ class GripperController(Component, CommandLetters):
         self.cpu.movx_write(LED_LO, ram[PROX])
         self.cpu.movx_write(LED_HI, ram[OTHER])
         return ram[PROX]
-
-    def enter_monitor(self) -> int:
-        """The command loop calls the monitor; return SP (the monitor's first address)."""
-        self.cpu.sp = SP_MONITOR
-        return self.cpu.sp
-
-    def leave_monitor(self) -> None:
-        """The monitor returns to the command loop."""
-        self.cpu.sp = SP_CMDLOOP
-
-    def stack_pointer(self) -> int:
-        """Monitor ``S``: SP."""
-        return self.cpu.sp
 
     # -- the component contract ------------------------------------------------------
 
@@ -897,26 +656,6 @@ class GripperController(Component, CommandLetters):
             return Signal(f"ram:{addr:02X}", "byte", lambda: self.ram[addr],
                           f"RAM byte {addr:02X}", "02X", Source.item(self.ram, addr))
         return super().signal(name)
-
-
-class _NoClock:
-    """The supervision's clock before the controller is attached to a loop."""
-
-    now_ns = 0
-
-
-class _Words:  # pragma: no cover - big-endian hosts only
-    """The RAM as little-endian words (index = address / 2) on a big-endian host."""
-
-    def __init__(self, ram: bytearray):
-        self._ram = ram
-
-    def __getitem__(self, i: int) -> int:
-        return self._ram[2 * i] | (self._ram[2 * i + 1] << 8)
-
-    def __setitem__(self, i: int, v: int) -> None:
-        self._ram[2 * i] = v & 0xFF
-        self._ram[2 * i + 1] = (v >> 8) & 0xFF
 
 
 class GripperMove(MotionType):

@@ -13,7 +13,7 @@ from __future__ import annotations
 import re
 from typing import Any
 
-from pyrt.boards.i8031 import JSPEED, MVJAWSPD, SENSORPD, SYSCLKPD, WTCHJWSPD
+from pyrt.boards.i8031 import JSPEED, MVJAWSPD, SENSORPD, SP_RESET, SYSCLKPD, WTCHJWSPD
 from pyrt.component import Arg, Component, Param, Signal, Switch, command
 from pyrt.errors import CommandError
 from pyrt.scheduler.motion import MotionRecord
@@ -28,6 +28,11 @@ SENSOR_BITS = (
     (7, "right -X"), (6, "right +X"), (5, "right +Z"), (4, "right -Ya"),
     (3, "left -X"), (2, "left +X"), (1, "left +Z"), (0, "left +Ya"),
 )
+
+
+#: SP while the command loop runs (main called it) and inside the monitor.
+SP_CMDLOOP = SP_RESET + 2
+SP_MONITOR = SP_RESET + 4
 
 
 def sensor_names(word: int) -> str:
@@ -245,7 +250,7 @@ class CommandLetters:
 
     def enter_level(self) -> list[str]:
         """Back at ``CMD:`` from the monitor; a reminder if the clock is still off."""
-        self.leave_monitor()  # type: ignore[attr-defined]
+        self.monitor.leave()
         if not self.clock_enabled:  # type: ignore[attr-defined]
             return ["note: the clock interrupt is still OFF (ready queue frozen); M then I: on"]
         return []
@@ -270,9 +275,16 @@ class GripperMonitor(Component):
                             fmt="02X")]
 
     def enter_level(self) -> list[str]:
-        """Entered from ``CMD:``: the address starts at SP, as 002 says."""
-        self.address = self.ctl.enter_monitor()
+        """Entered from ``CMD:`` (the command loop calls the monitor): the
+        address starts at SP, the monitor's first address, as 002 says."""
+        cpu = self.ctl.cpu
+        cpu.sp = SP_MONITOR
+        self.address = cpu.sp
         return []
+
+    def leave(self) -> None:
+        """The monitor returns to the command loop."""
+        self.ctl.cpu.sp = SP_CMDLOOP
 
     def _at(self, addr: int, value: int) -> tuple[int, int]:
         self.address = addr
@@ -332,4 +344,4 @@ class GripperMonitor(Component):
     @command(name="S", reads_only=True, reply=lambda sp: f"SP {sp:02X}")
     def cmd_stack(self) -> int:
         """S: show the stack pointer SP (SFR 81; D cannot reach it)."""
-        return self.ctl.stack_pointer()
+        return self.ctl.cpu.sp

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -36,6 +37,9 @@ from pyrt.native import StaticsSolver
 from pyrt.robots._neck import NeckRing
 from pyrt.robots.av import AV
 from pyrt.robots.paths import VIA_BELOW
+
+if TYPE_CHECKING:
+    from pyrt.db import PolyAxisRecord
 
 __all__ = [
     "GRAVITY",
@@ -114,6 +118,9 @@ class RopeModel:
     co-ordinates; ``freeze`` is the position finder's mask (a direction it
     holds: a planar station); ``ring_segments`` the segments the controller
     lets bear on the neck ring; ``names`` name the ropes in messages.
+    ``record`` (a :class:`~pyrt.db.PolyAxisRecord`) gives the source (mass,
+    volume), the D2O density and the limits; the limits are the model's from
+    then (the PolyAxis sets MAX_TENSION and END_ERROR here while running).
     """
 
     def __init__(
@@ -128,16 +135,8 @@ class RopeModel:
         *,
         freeze: Sequence[int],
         ring_segments: int,
-        source_mass: float,
-        source_volume: float,
-        d2o_density: float,
+        record: PolyAxisRecord,
         liquid_level: float | None,
-        low_tension: float,
-        max_tension: float,
-        tension_margin: float,
-        net_forcelimit: float,
-        offside_tension: float,
-        end_error: float,
     ):
         self.av = av
         self.names = list(names)
@@ -151,16 +150,16 @@ class RopeModel:
         #: The directions the position finder solves in.
         self.free = [k for k in range(3) if not self.freeze[k]]
         self.ring_segments = int(ring_segments)
-        self.source_mass = float(source_mass)
-        self.source_volume = float(source_volume)
-        self.d2o_density = float(d2o_density)
+        self.source_mass = float(record.source_mass)
+        self.source_volume = float(record.source_volume)
+        self.d2o_density = float(record.d2o_density)
         self.liquid_level = liquid_level
-        self.low_tension = float(low_tension)
-        self.max_tension = float(max_tension)
-        self.tension_margin = float(tension_margin)
-        self.net_forcelimit = float(net_forcelimit)
-        self.offside_tension = float(offside_tension)
-        self.end_error = float(end_error)
+        self.low_tension = float(record.low_tension)
+        self.max_tension = float(record.max_tension)
+        self.tension_margin = float(record.tension_margin)
+        self.net_forcelimit = float(record.net_forcelimit)
+        self.offside_tension = float(record.offside_tension)
+        self.end_error = float(record.end_error)
         self.ring = av.neck_ring()
         self.neck = NeckRing(*self.ring)
         centre = av.vtog((0.0, 0.0, 0.0))

@@ -3,7 +3,9 @@
 A clock answers two questions: what time is it (``now_ns``), and "return
 when this deadline has come" (``wait_until``).  Times are integers in
 nanoseconds of the *loop's* time base, so the same control code runs on
-virtual time (:class:`SimClock`) or real time (:class:`WallClock`).
+virtual time (:class:`SimClock`) or real time (:class:`WallClock`).  The
+loop starts every tick with :meth:`Clock.start_tick`: the clocks differ in
+how they wait, never in what a tick does.
 """
 
 from __future__ import annotations
@@ -35,6 +37,12 @@ class Clock:
         """Return once ``now_ns() >= deadline_ns``."""
         raise NotImplementedError
 
+    def start_tick(self, deadline_ns: int) -> int:
+        """Wait for a tick's deadline; return the tick's start time (on real
+        time, the moment the wait ended: the deadline plus the lateness)."""
+        self.wait_until(deadline_ns)
+        return self.now_ns()
+
 
 class SimClock(Clock):
     """Virtual time: it stands still until the loop moves it to a deadline.
@@ -55,6 +63,12 @@ class SimClock(Clock):
     def wait_until(self, deadline_ns: int) -> None:
         if deadline_ns > self._now:
             self._now = deadline_ns
+
+    def start_tick(self, deadline_ns: int) -> int:
+        """Move to the deadline (never backward); a tick starts exactly on it."""
+        if deadline_ns > self._now:
+            self._now = deadline_ns
+        return deadline_ns
 
     def advance(self, dt_ns: int) -> None:
         """Move virtual time forward by ``dt_ns`` (never backward)."""

@@ -33,12 +33,14 @@ import threading
 from collections import deque
 from collections.abc import Callable, Generator
 from gc import get_count as gc_count
+from itertools import count
 from typing import Any
 
 from pyrt.errors import Fault, FaultError, PyrtError
+from pyrt.scheduler._handlertiming import HandlerTimes, HandlerTiming, TakenSamples
 from pyrt.scheduler.clock import Clock, SimClock, WallClock
 from pyrt.scheduler.gcwatch import GcWatch, attribute
-from pyrt.scheduler.readyqueue import ReadyQueue, fold_many
+from pyrt.scheduler.readyqueue import ReadyQueue
 from pyrt.scheduler.stats import (
     Accumulator,
     LoopStatistics,
@@ -49,31 +51,6 @@ from pyrt.scheduler.stats import (
 __all__ = ["Job", "Loop", "TakenSamples", "overrun_line"]
 
 Handler = Callable[[int], None]
-
-
-class _HandlerTiming:
-    """The timing of one loop handler that is not a ready queue."""
-
-    __slots__ = ("acc", "last", "name", "samples")
-
-    def __init__(self, name: str):
-        self.name = name
-        #: Durations (ns) not yet folded; the loop appends one per tick.
-        self.samples: list[int] = []
-        self.acc = Accumulator(name)
-        #: The last duration handed over by a take (for an overrun in that tick).
-        self.last = 0
-
-
-class TakenSamples:
-    """Timing samples handed over by :meth:`Loop.take_samples`, to fold elsewhere."""
-
-    __slots__ = ("handlers", "queues")
-
-    def __init__(self, queues: list[tuple[ReadyQueue, dict[int, list[int]]]],
-                 handlers: list[tuple[_HandlerTiming, list[int]]]):
-        self.queues = queues
-        self.handlers = handlers
 
 
 class Job:
@@ -179,12 +156,8 @@ class Loop:
         # Timed ticks run this plan: (handler, record its duration).
         self._plan: list[tuple[Handler, Callable[[int], None]]] = []
         # What ran, in attach order: a ready queue or a handler's timing.
-        self._order: list[ReadyQueue | _HandlerTiming] = []
-        self._entries: list[_HandlerTiming] = []
-        # Where a queue's own stretch goes (its routines are timed by the queue).
-        self._sink: list[int] = []
-        self._entry_lock = threading.Lock()
-        self._taken_tick = -1
+        self._order: list[ReadyQueue | HandlerTiming] = []
+        self._times = HandlerTimes()
         # Set per run(): handler durations are being recorded.
         self._timing_handlers = False
         self.queues: list[ReadyQueue] = []
@@ -198,7 +171,6 @@ class Loop:
         self.trip_handlers: list[Callable[[str, str], Any]] = []
         self._bare_queues: list[ReadyQueue] = []
         self._fault_lock = threading.Lock()
-        self._stop = threading.Event()
         self._stopping = False
         self.running = False
 
@@ -215,9 +187,7 @@ class Loop:
         self._lateness = Accumulator("lateness")
         self._work = Accumulator("work")
         self._next_summary = self.now_ns + self.summary_interval_ns
-        self._warn_pending = 0
-        self._warn_worst: tuple[int, int, str] | None = None
-        self._last_warn_ns: int | None = None
+        self._warnings = _OverrunWarnings(self)
         self._log_started = False
         self.gc_control = gc_control
         self._gc = GcWatch(lambda: self.tick_index, self.clock.timer)
@@ -251,19 +221,13 @@ class Loop:
             self.queues.append(handler)
             self._handlers.append(handler.tick)
             self._handler_names.append(name or f"queue:{handler.name}")
-            self._plan.append((handler.tick, self._sink.append))
+            self._plan.append((handler.tick, self._times.sink.append))
             self._order.append(handler)
         else:
             self._attach_timed(handler, name or str(getattr(handler, "__name__", "handler")))
 
     def _attach_timed(self, handler: Handler, name: str) -> None:
-        taken = {e.name for e in self._entries}
-        key, n = name, 1
-        while key in taken:
-            n += 1
-            key = f"{name} #{n}"
-        entry = _HandlerTiming(key)
-        self._entries.append(entry)
+        entry = self._times.add(name)
         self._order.append(entry)
         self._plan.append((handler, entry.samples.append))
         self._handlers.append(handler)
@@ -343,7 +307,6 @@ class Loop:
     def stop(self) -> None:
         """Ask the loop to return after the current tick (thread-safe)."""
         self._stopping = True
-        self._stop.set()
 
     def run(
         self,
@@ -359,7 +322,6 @@ class Loop:
             raise PyrtError("the loop is already running")
         if ticks is not None and ticks < 0:
             raise ValueError(f"ticks must be >= 0, got {ticks}")
-        self._stop.clear()
         self._stopping = False
         if not self.clock.virtual:
             # Time while the loop was not running (building the station,
@@ -368,14 +330,12 @@ class Loop:
             if self._deadline < now:
                 self._deadline = now
         end_ns = self.now_ns + duration_ns if duration_ns is not None else None
-        self._timing_handlers = self.timing and bool(self._entries)
+        self._timing_handlers = self.timing and bool(self._times.entries)
         self.running = True
         try:
             self._gc.begin(self.gc_control and isinstance(self.clock, WallClock))
             self._start_log()
-            if self.clock.virtual and until is None and end_ns is None and ticks is not None:
-                return self._run_sim_counted(ticks)
-            return self._run_general(ticks, until, end_ns)
+            return self._run(ticks, until, end_ns)
         finally:
             self._gc.end()
             self.running = False
@@ -390,72 +350,27 @@ class Loop:
         self.run(max_ticks, until=predicate)
         return predicate()
 
-    def _run_sim_counted(self, ticks: int) -> int:
-        """The fast path: virtual clock, a fixed number of ticks."""
+    def _run(self, ticks: int | None, until: Callable[[], bool] | None,
+             end_ns: int | None) -> int:
+        """The tick loop, one for every clock: wait for the deadline (the clock
+        decides how: virtual time moves there, real time sleeps and spins),
+        call the handlers, and close the tick.  On real time, closing it
+        measures lateness and work, detects an overrun (the passed deadlines
+        skipped) and collects garbage in the idle rest of the tick; virtual
+        time has nothing to measure."""
         clock = self.clock
+        start_tick = clock.start_tick
+        measured = not clock.virtual
         handlers = self._handlers
         plan = self._plan if self._timing_handlers else None
         timer = clock.timer
         period = self.period_ns
         deadline = self._deadline
-        stop = self._stop
-        plain = type(clock) is SimClock
-        # summaries (a timing log), or folding the handlers' samples, once a second
-        house = self.timing_log is not None or plan is not None
-        summary_at = self._next_summary if house else None
-        n = 0
-        try:
-            while n < ticks:
-                if plain:
-                    clock._now = deadline  # type: ignore[attr-defined]
-                else:
-                    clock.wait_until(deadline)
-                self.now_ns = deadline
-                if plan is None:
-                    for h in handlers:
-                        h(deadline)
-                else:
-                    t0 = timer()
-                    for h, record in plan:
-                        h(deadline)
-                        t1 = timer()
-                        record(t1 - t0)
-                        t0 = t1
-                self.tick_index += 1
-                n += 1
-                deadline += period
-                self._deadline = deadline
-                if summary_at is not None and deadline > summary_at:
-                    self._summary(deadline - period)
-                    summary_at = self._next_summary
-                if self._stopping and stop.is_set():
-                    break
-        finally:
-            self._deadline = deadline
-        return n
-
-    def _run_general(
-        self, ticks: int | None, until: Callable[[], bool] | None, end_ns: int | None
-    ) -> int:
-        clock = self.clock
-        virtual = clock.virtual
-        handlers = self._handlers
-        plan = self._plan if self._timing_handlers else None
-        timer = clock.timer
-        period = self.period_ns
-        stop = self._stop
-        timing = self.timing
-        late_acc = self._lateness
-        work_acc = self._work
-        gcw = self._gc
-        # idle collections: due at this many allocations, if half a tick is left
-        gc_at = gcw.threshold if gcw.controlling else None
-        gc_slack = period // 2
-        n = 0
-        while ticks is None or n < ticks:
-            deadline = self._deadline
-            clock.wait_until(deadline)
-            start = deadline if virtual else clock.now_ns()
+        summary_at = self._next_summary
+        done = _ending(until, end_ns)
+        first = self.tick_index
+        for _ in count() if ticks is None else range(ticks):
+            start = start_tick(deadline)
             self.now_ns = start
             if plan is None:
                 for h in handlers:
@@ -468,39 +383,41 @@ class Loop:
                     record(t1 - t0)
                     t0 = t1
             self.tick_index += 1
-            n += 1
-            nxt = deadline + period
-            if virtual:
-                self._deadline = nxt
-            else:
-                end = clock.now_ns()
-                if timing:
-                    late = start - deadline
-                    _record(late_acc, late)
-                    _record(work_acc, end - start)
-                if end > nxt:
-                    skipped = (end - nxt + period - 1) // period
-                    if self._starting and self.tick_index <= self.STARTUP_TICKS:
-                        self._startup_overrun(end - nxt)
-                    else:
-                        self._overrun(deadline, start, end, skipped)
-                    nxt += skipped * period
-                else:
-                    self.consecutive_overruns = 0
-                    self._starting = False
-                self._deadline = nxt
-                if gc_at is not None and gc_count()[0] >= gc_at and (
-                        nxt - clock.now_ns() > gc_slack or gcw.forced()):
-                    gcw.collect_idle()
-            if start >= self._next_summary:
+            deadline = self._close_tick(deadline, start) if measured else deadline + period
+            self._deadline = deadline
+            if start >= summary_at:
                 self._summary(start)
-            if stop.is_set():
+                summary_at = self._next_summary
+            if self._stopping or (done is not None and done(deadline)):
                 break
-            if until is not None and until():
-                break
-            if end_ns is not None and self._deadline > end_ns:
-                break
-        return n
+        return self.tick_index - first
+
+    def _close_tick(self, deadline: int, start: int) -> int:
+        """The end of a tick on real time: its lateness and work recorded, an
+        overrun detected (the deadlines it passed counted and skipped), an idle
+        collection if half a tick is left; returns the next deadline."""
+        clock = self.clock
+        period = self.period_ns
+        nxt = deadline + period
+        end = clock.now_ns()
+        if self.timing:
+            _record(self._lateness, start - deadline)
+            _record(self._work, end - start)
+        if end > nxt:
+            skipped = (end - nxt + period - 1) // period
+            if self._starting and self.tick_index <= self.STARTUP_TICKS:
+                self._startup_overrun(end - nxt)
+            else:
+                self._overrun(deadline, start, end, skipped)
+            nxt += skipped * period
+        else:
+            self.consecutive_overruns = 0
+            self._starting = False
+        gcw = self._gc
+        if gcw.controlling and gc_count()[0] >= gcw.threshold and (
+                nxt - clock.now_ns() > period // 2 or gcw.forced()):
+            gcw.collect_idle()
+        return nxt
 
     # -- overruns ------------------------------------------------------------
 
@@ -516,7 +433,7 @@ class Loop:
         self.consecutive_overruns += 1
         # what ran in this tick, in order: routines of each queue, handlers
         tasks: list[tuple[str, int]] = []
-        owners: list[ReadyQueue | _HandlerTiming] = []
+        owners: list[ReadyQueue | HandlerTiming] = []
         keys = self._entry_keys() if self._timing_handlers else {}
         for item in self._order:
             if isinstance(item, ReadyQueue):
@@ -524,15 +441,10 @@ class Loop:
                 tasks.extend(ran)
                 owners.extend([item] * len(ran))
             elif self._timing_handlers:
-                s = item.samples
-                if s:
-                    d = s[-1]
-                elif self._taken_tick == self.tick_index - 1:
-                    d = item.last  # the samples were taken during this tick
-                else:
-                    continue
-                tasks.append((keys[item.name], d))
-                owners.append(item)
+                d = self._times.last_duration(item, self.tick_index - 1)
+                if d is not None:
+                    tasks.append((keys[item.name], d))
+                    owners.append(item)
         pauses = self._gc.pauses_in(self.tick_index - 1)
         if pauses:  # a collection inside the tick: its pause is an entry of its own
             tasks = attribute(tasks, pauses)
@@ -557,11 +469,7 @@ class Loop:
                 missed=skipped,
                 tasks=tasks,
             )
-        self._warn_pending += 1
-        if self._warn_worst is None or lateness > self._warn_worst[0]:
-            self._warn_worst = (lateness, self.tick_index - 1, culprit)
-        if self._last_warn_ns is None or start - self._last_warn_ns >= 1_000_000_000:
-            self._flush_warning(start)
+        self._warnings.overrun(start, lateness, self.tick_index - 1, culprit)
         limit = self.max_consecutive_overruns
         if limit is not None and self.consecutive_overruns >= limit:
             self.fault_all(
@@ -571,20 +479,9 @@ class Loop:
             )
             self.consecutive_overruns = 0
 
-    def _flush_warning(self, now: int) -> None:
-        if not self._warn_pending or self._warn_worst is None:
-            return
-        worst, tick, culprit = self._warn_worst
-        if self.warn is not None:
-            self.warn(overrun_line(self._warn_pending, worst, tick, culprit, self.WARN_WIDTH))
-        self._warn_pending = 0
-        self._warn_worst = None
-        self._last_warn_ns = now
-
     def _summary(self, now: int) -> None:
         self._next_summary = now + self.summary_interval_ns
-        if self._last_warn_ns is not None and now - self._last_warn_ns >= 1_000_000_000:
-            self._flush_warning(now)
+        self._warnings.due(now)
         log = self.timing_log
         if log is not None:
             # Hand the raw samples over (O(1)); fold, build and write elsewhere.
@@ -595,8 +492,8 @@ class Loop:
                 log.summary(now, self.statistics(fold=False))
 
             log.defer(write_summary)
-        elif self._entries:
-            self.fold_samples(TakenSamples([], self._take_handler_samples()))
+        elif self._times.entries:
+            self._times.fold(self._times.take(self.tick_index))
 
     def _start_log(self) -> None:
         if self.timing_log is not None and not self._log_started:
@@ -623,23 +520,7 @@ class Loop:
     # -- statistics ----------------------------------------------------------
 
     def _entry_keys(self) -> dict[str, str]:
-        """Each handler entry's name in the statistics: its own, or
-        ``NAME (handler)`` where a ready-queue routine has that name."""
-        routines = {r.name for q in self.queues for r in q.routines}
-        return {e.name: f"{e.name} (handler)" if e.name in routines else e.name
-                for e in self._entries}
-
-    def _take_handler_samples(self) -> list[tuple[_HandlerTiming, list[int]]]:
-        taken = []
-        for e in self._entries:
-            s = e.samples
-            if s:
-                e.last = s[-1]
-                taken.append((e, s[:]))
-                s.clear()  # the same list: the tick plan appends to it
-        self._sink.clear()
-        self._taken_tick = self.tick_index
-        return taken
+        return self._times.keys({r.name for q in self.queues for r in q.routines})
 
     def take_samples(self) -> TakenSamples:
         """Hand over the timing samples recorded so far, of every queue and
@@ -647,15 +528,13 @@ class Loop:
         of the handlers' lists), to be folded by :meth:`fold_samples` in
         any thread."""
         return TakenSamples([(q, q.take_samples()) for q in self.queues],
-                            self._take_handler_samples())
+                            self._times.take(self.tick_index))
 
     def fold_samples(self, taken: TakenSamples) -> None:
         """Fold samples handed over by :meth:`take_samples` (any thread)."""
         for q, samples in taken.queues:
             q.fold_into_accumulators(samples)
-        if taken.handlers:
-            with self._entry_lock:
-                fold_many([(e.acc, durs) for e, durs in taken.handlers])
+        self._times.fold(taken.handlers)
 
     def statistics(self, fold: bool = True) -> LoopStatistics:
         """A frozen snapshot of lateness, work time and per-task timing: the
@@ -672,10 +551,10 @@ class Loop:
                 tasks[acc.name] = _task_statistics(acc.name, acc, "task")
         if self.timing:
             if fold:
-                self.fold_samples(TakenSamples([], self._take_handler_samples()))
+                self._times.fold(self._times.take(self.tick_index))
             keys = self._entry_keys()
-            with self._entry_lock:
-                for e in self._entries:
+            with self._times.lock:
+                for e in self._times.entries:
                     tasks[keys[e.name]] = _task_statistics(keys[e.name], e.acc, "handler")
         for acc in (self._gc.acc, self._gc.idle_acc):
             if acc.calls:  # collections: inside ticks (blamed for overruns), idle
@@ -700,14 +579,47 @@ class Loop:
         for q in self.queues:
             for acc in q.accumulators():
                 acc.reset()
-        with self._entry_lock:
-            for e in self._entries:
-                e.samples.clear()
-                e.acc.reset()
-        self._sink.clear()
+        self._times.reset()
         self._gc.reset()
         self.overruns = self.missed = self.consecutive_overruns = 0
         self.startup_overruns = self.startup_worst_ns = 0
+
+
+class _OverrunWarnings:
+    """At most one overrun line a second for :attr:`Loop.warn`: how many
+    ticks overran since the last line, and the worst of them."""
+
+    INTERVAL_NS = 1_000_000_000
+
+    def __init__(self, loop: Loop):
+        self._loop = loop
+        self._pending = 0
+        self._worst: tuple[int, int, str] | None = None
+        self._last_ns: int | None = None
+
+    def overrun(self, now: int, over_ns: int, tick: int, culprit: str) -> None:
+        """Tick ``tick`` ended ``over_ns`` past its next deadline (at ``now``)."""
+        self._pending += 1
+        if self._worst is None or over_ns > self._worst[0]:
+            self._worst = (over_ns, tick, culprit)
+        if self._last_ns is None or now - self._last_ns >= self.INTERVAL_NS:
+            self._flush(now)
+
+    def due(self, now: int) -> None:
+        """Say what is pending if the last line is a second old."""
+        if self._last_ns is not None and now - self._last_ns >= self.INTERVAL_NS:
+            self._flush(now)
+
+    def _flush(self, now: int) -> None:
+        if not self._pending or self._worst is None:
+            return
+        worst, tick, culprit = self._worst
+        loop = self._loop
+        if loop.warn is not None:
+            loop.warn(overrun_line(self._pending, worst, tick, culprit, loop.WARN_WIDTH))
+        self._pending = 0
+        self._worst = None
+        self._last_ns = now
 
 
 def overrun_line(count: int, worst_ns: int, tick: int, culprit: str = "", width: int = 80) -> str:
@@ -733,6 +645,19 @@ def _task_statistics(name: str, acc: Accumulator, kind: str) -> TaskStatistics:
     return TaskStatistics(name=name, calls=acc.calls, mean_ns=dist.mean_ns, max_ns=acc.max,
                           p99_ns=dist.p99_ns, overruns=acc.overruns, distribution=dist,
                           kind=kind)
+
+
+def _ending(until: Callable[[], bool] | None,
+            end_ns: int | None) -> Callable[[int], bool] | None:
+    """What ends a run after a tick, given the next deadline: ``until()``
+    holding, the deadline past ``end_ns``, either, or (None) neither."""
+    if until is None and end_ns is None:
+        return None
+    if end_ns is None:
+        return lambda deadline: until()  # type: ignore[misc]
+    if until is None:
+        return lambda deadline: deadline > end_ns
+    return lambda deadline: until() or deadline > end_ns
 
 
 def _record(acc: Accumulator, d: int) -> None:

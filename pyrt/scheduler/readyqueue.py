@@ -43,19 +43,15 @@ clock read per dispatch); ``native=False`` runs the same steps in Python
 from __future__ import annotations
 
 import sys
-import threading
 import traceback as _tb
 from collections.abc import Callable, Generator, MutableSequence
 from dataclasses import dataclass
-from itertools import chain
-from time import perf_counter_ns
 from typing import Any, Protocol
-
-import numpy as np
 
 from pyrt.errors import QueueFullError
 from pyrt.native import QueueChecker, native_dispatcher
-from pyrt.scheduler.stats import NBINS, Accumulator
+from pyrt.scheduler._routinetiming import RoutineTiming
+from pyrt.scheduler.stats import Accumulator
 
 __all__ = ["ByteImage", "ByteRef", "ReadyQueue", "Routine"]
 
@@ -120,6 +116,25 @@ class ByteImage:
         cnt = q + 2 * capacity
         return cls(bytearray(cnt + 3), t, q, cnt, cnt + 1, (cnt + 2, 0), w)
 
+    def check(self, capacity: int) -> None:
+        """Refuse an image that cannot hold a queue of ``capacity`` slots."""
+        if not isinstance(self.mem, bytearray):
+            raise TypeError(f"the byte image must be a bytearray, got {type(self.mem).__name__}")
+        for label, addr, size in (
+            ("T", self.t_addr, self.t_width * capacity),
+            ("Q", self.q_addr, 2 * capacity),
+            ("SYSCLKCNT", self.cnt_addr, 1),
+            ("SYSCLKPD", self.pd_addr, 1),
+        ):
+            if addr < 0 or addr + size > len(self.mem):
+                raise ValueError(f"{label} at {addr:#x} (+{size}) lies outside the byte image")
+
+    def words(self, addr: int, n: int, size: int) -> _Words:
+        """``n`` little-endian words of ``size`` bytes (2 or 4) from ``addr``."""
+        if sys.byteorder == "little":
+            return memoryview(self.mem)[addr : addr + size * n].cast("H" if size == 2 else "I")
+        return _LittleEndianWords(self.mem, addr, n, size)  # pragma: no cover - big-endian
+
 
 @dataclass(frozen=True)
 class ByteRef:
@@ -175,7 +190,6 @@ class ReadyQueue:
         self._auto = capacity is None
         self._native = native
         self._core: Any = None
-        self._timer: Callable[[], int] = perf_counter_ns
         if capacity is None:
             if image is not None:
                 raise ValueError("a ready queue in an external byte image needs a capacity")
@@ -190,14 +204,14 @@ class ReadyQueue:
         if image is not None and image.t_width not in (1, 4):
             raise ValueError(f"T must hold 1- or 4-byte schedule variables, got {image.t_width}")
         self.name = name
-        self._bind(image if image is not None else ByteImage.private(capacity, wide), capacity)
         self._routines: dict[int, Routine] = {}
         self._by_name: dict[str, Routine] = {}
         # address -> (body, period variable or None, its index)
         self._dispatch: dict[
             int, tuple[Callable[[], None], MutableSequence[int] | None, int]] = {}
-        self._fold_lock = threading.Lock()
-        self.enable_timing(False)
+        self._timing = RoutineTiming()
+        self._fold_at = _FOLD_AT
+        self._bind(image if image is not None else ByteImage.private(capacity, wide), capacity)
         self._interrupts = True
         self._halted = False
         # True while the clock handler does anything: interrupts on, not halted.
@@ -225,17 +239,8 @@ class ReadyQueue:
 
     def _bind(self, im: ByteImage, capacity: int) -> None:
         """Take ``im`` as the queue's image, with ``capacity`` slots."""
-        if not isinstance(im.mem, bytearray):
-            raise TypeError(f"the byte image must be a bytearray, got {type(im.mem).__name__}")
+        im.check(capacity)
         wide = im.t_width == 4
-        for label, addr, size in (
-            ("T", im.t_addr, im.t_width * capacity),
-            ("Q", im.q_addr, 2 * capacity),
-            ("SYSCLKCNT", im.cnt_addr, 1),
-            ("SYSCLKPD", im.pd_addr, 1),
-        ):
-            if addr < 0 or addr + size > len(im.mem):
-                raise ValueError(f"{label} at {addr:#x} (+{size}) lies outside the byte image")
         self.image = im
         self.capacity = capacity
         #: True when the schedule variables are 32-bit words (:meth:`general`).
@@ -249,36 +254,28 @@ class ReadyQueue:
         self._pd = im.pd_addr
         self._sema_addr, sema_bit = im.sema
         self._sema_mask = 1 << sema_bit
-        self._q16: _Words
-        if sys.byteorder == "little":
-            self._q16 = memoryview(self._mem)[self._q : self._q + 2 * capacity].cast("H")
-        else:  # pragma: no cover - no big-endian machine to test on
-            self._q16 = _LittleEndianWords(self._mem, self._q, capacity)
+        self._q16 = im.words(self._q, capacity, 2)
         # T as indexable schedule variables: _tv[_t0 + slot]
         self._tv: _Words
-        if not wide:
+        if wide:
+            self._tv, self._t0 = im.words(self._t, capacity, 4), 0
+        else:
             self._tv, self._t0 = self._mem, self._t
-        elif sys.byteorder == "little":
-            self._tv = memoryview(self._mem)[self._t : self._t + 4 * capacity].cast("I")
-            self._t0 = 0
-        else:  # pragma: no cover - no big-endian machine to test on
-            self._tv, self._t0 = _LittleEndianWords(self._mem, self._t, capacity, 4), 0
         self._slot_range = range(capacity)
         self._walk = QueueChecker(self._mem, self._t, self._q, capacity, wide=wide).check
-        if self._native:
+        if self._native:  # a dispatcher over this image, told every routine and the timing
             self._core = native_dispatcher(self._mem, self._t, self._q, capacity, wide=wide)
             self._core.set_full(self._put)
-            if hasattr(self, "_dispatch"):  # re-bound (grown): the routines and timing again
-                for address, (fn, pmem, paddr) in self._dispatch.items():
-                    self._core.set_routine(address, fn, pmem, paddr)
-                self._sync_timing()
+            for address, (fn, pmem, paddr) in self._dispatch.items():
+                self._core.set_routine(address, fn, pmem, paddr)
+            self._timing.attach(self._core)
 
     def _grow(self) -> None:
         """One slot more (a queue sized to its routines), the state kept."""
         if self.capacity >= MAX_CAPACITY:
             raise ValueError(f"ready queue of {self.name} holds at most {MAX_CAPACITY} routines")
         slots = self.slots()
-        pending = self._pending if hasattr(self, "_track") else 0
+        pending = self._timing.pending
         old = self._mem
         cnt, pd, sema = old[self._cnt], old[self._pd], old[self._sema_addr]
         self._bind(ByteImage.private(self.capacity + 1, self.wide), self.capacity + 1)
@@ -286,7 +283,7 @@ class ReadyQueue:
             if slot is not None:
                 self._tv[self._t0 + i], self._q16[i] = slot
         self._mem[self._cnt], self._mem[self._pd], self._mem[self._sema_addr] = cnt, pd, sema
-        self._pending = pending
+        self._timing.pending = pending
 
     # -- state -------------------------------------------------------------
 
@@ -353,11 +350,7 @@ class ReadyQueue:
         self._by_name[key] = routine
         if self._core is not None:
             self._core.set_routine(address, fn, None, 0)
-        if self._stats is not None and self._samples is not None:
-            self._stats[address] = Accumulator(name)
-            self._samples[address] = []
-            if self._core is not None:
-                self._core.set_samples(self._samples)
+        self._timing.add(address, name)
         return routine
 
     def free_address(self) -> int:
@@ -526,111 +519,48 @@ class ReadyQueue:
         routines run in the current tick are also kept, for overrun records
         (a loop on virtual time cannot overrun and turns it off).
         """
-        self._stats: dict[int, Accumulator] | None
-        self._samples: dict[int, list[int]] | None
-        if on:
-            self._stats = {a: Accumulator(r.name) for a, r in self._routines.items()}
-            self._samples = {a: [] for a in self._routines}
-        else:
-            self._stats = None
-            self._samples = None
-        self._track = on and track_ticks
-        self._pending = 0
-        self._tick_log: list[tuple[int, int]] = []
-        self._checked_at = -1
-        self._sync_timing()
+        self._timing.enable(on, track_ticks, {a: r.name for a, r in self._routines.items()})
 
     @property
     def timer(self) -> Callable[[], int]:
         """Measures routine execution times (the loop sets its clock's timer)."""
-        return self._timer
+        return self._timing.timer
 
     @timer.setter
     def timer(self, timer: Callable[[], int]) -> None:
-        if not callable(timer):
-            raise TypeError(f"a timer must be callable, got {timer!r}")
-        self._timer = timer
-        self._sync_timing()
-
-    def _sync_timing(self) -> None:
-        """Tell the C dispatch the timer, the tracking and the sample lists."""
-        core = self._core
-        if core is None or not hasattr(self, "_track"):
-            return
-        on = self._samples is not None
-        timer = self._timer if on else None
-        core.set_timing(timer, timer is perf_counter_ns, self._track, self._samples)
-
-    @property
-    def _pending(self) -> int:
-        """Samples recorded since the last take."""
-        core = self._core
-        return core.pending if core is not None else self._pending_py
-
-    @_pending.setter
-    def _pending(self, n: int) -> None:
-        if self._core is not None:
-            self._core.pending = n
-        self._pending_py = n
-
-    @property
-    def _checked_at(self) -> int:
-        """Loop time of the last check that ran routines, tracked (-1: none)."""
-        core = self._core
-        return core.checked_at if core is not None else self._checked_at_py
-
-    @_checked_at.setter
-    def _checked_at(self, t: int) -> None:
-        if self._core is not None:
-            self._core.checked_at = t
-        self._checked_at_py = t
+        self._timing.timer = timer
 
     def take_samples(self) -> dict[int, list[int]]:
         """Hand over the samples recorded so far and start new lists (loop
         thread, O(routines)), so that folding them can happen in another
         thread (:meth:`fold_into_accumulators`)."""
-        taken = self._samples
-        if not taken or not self._pending:
-            return {}
-        self._samples = {a: [] for a in taken}
-        self._pending = 0
-        if self._core is not None:
-            self._core.set_samples(self._samples)
-        return taken
+        return self._timing.take()
 
     def fold_into_accumulators(self, samples: dict[int, list[int]]) -> None:
         """Fold samples taken with :meth:`take_samples` (any thread)."""
-        if samples and self._stats is not None:
-            with self._fold_lock:
-                fold_samples(self._stats, samples)
+        self._timing.fold(samples)
 
     def fold_timing(self) -> None:
         """Fold every recorded sample into the accumulators (the loop thread)."""
-        if self._stats is not None and self._pending:
-            self.fold_into_accumulators(self.take_samples())
+        self._timing.fold_all()
 
     def accumulators(self, fold: bool = True) -> list[Accumulator]:
         """The timing accumulators (empty when timing is off); with ``fold``,
         first fold what was recorded (do that in the loop thread only)."""
-        if self._stats is None:
-            return []
-        if fold:
-            self.fold_timing()
-        return list(self._stats.values())
+        return self._timing.accumulators(fold)
 
     def count_overrun(self, name: str) -> None:
         """Attribute one overrun to the routine called ``name``."""
         routine = self._by_name.get(name.upper())
-        if self._stats is not None and routine is not None:
-            self._stats[routine.address].overruns += 1
+        stats = self._timing.stats
+        if stats is not None and routine is not None:
+            stats[routine.address].overruns += 1
 
     def tasks_in_tick(self, now_ns: int) -> list[tuple[str, int]]:
         """``(name, duration_ns)`` of the routines run in the tick at ``now_ns``."""
-        if not self._track or self._checked_at != now_ns:
-            return []
         names = self._routines
-        log = self._core.tick_log if self._core is not None else self._tick_log
-        return [(names[a].name if a in names else f"{a:04X}", d) for a, d in log]
+        return [(names[a].name if a in names else f"{a:04X}", d)
+                for a, d in self._timing.in_tick(now_ns)]
 
     # -- errors --------------------------------------------------------------
 
@@ -663,7 +593,7 @@ class ReadyQueue:
             self._failed(core.last, exc)
             return
         if pending >= self._fold_at:
-            self.fold_timing()
+            self._timing.fold_all()
 
     def _failed(self, a: int, exc: Exception) -> None:
         """The routine at ``a`` raised ``exc`` (call it while handling it)."""
@@ -682,19 +612,20 @@ class ReadyQueue:
         table = self._dispatch
         # T as schedule variables: 002's bytes in the image, or 32-bit words
         tv, q16, t, slots = self._tv, self._q16, self._t0, self._slot_range
-        timer = self.timer if self._samples is not None else None
+        tm = self._timing
+        timer = tm.timer if tm.samples is not None else None
         log: list[tuple[int, int]] | None = None
         a = 0
         try:
             if timer is not None:
-                if self._pending >= self._fold_at:
-                    self.fold_timing()
-                samples = self._samples or {}
-                if self._track:
+                if tm.pending >= self._fold_at:
+                    tm.fold_all()
+                samples = tm.samples or {}
+                if tm.track:
                     log = []
-                    self._tick_log = log
-                    self._checked_at = self.now_ns
-                self._pending += len(ready)
+                    tm.tick_log = log
+                    tm.checked_at = self.now_ns
+                tm.pending += len(ready)
                 t0 = timer()
             for a in ready:
                 fn, pmem, paddr = table[a]
@@ -716,56 +647,6 @@ class ReadyQueue:
                     t0 = t1
         except Exception as exc:
             self._failed(a, exc)
-
-
-def fold_samples(stats: dict[int, Accumulator], samples: dict[int, list[int]]) -> None:
-    """Add each routine's duration samples (ns) to its accumulator, in bulk."""
-    fold_many([(stats[a], durs) for a, durs in samples.items() if a in stats])
-
-
-def fold_into(acc: Accumulator, durs: list[int]) -> None:
-    """Add duration samples (ns) to ``acc``, in bulk (negative ones count as 0)."""
-    fold_many([(acc, durs)])
-
-
-def fold_many(pairs: list[tuple[Accumulator, list[int]]]) -> None:
-    """Add each list of duration samples (ns) to its accumulator: one numpy
-    pass over all of them (negative durations count as 0)."""
-    pairs = [(acc, durs) for acc, durs in pairs if durs]
-    if not pairs:
-        return
-    lengths = [len(durs) for _, durs in pairs]
-    total = sum(lengths)
-    d = np.fromiter(chain.from_iterable(durs for _, durs in pairs), dtype=np.int64, count=total)
-    np.maximum(d, 0, out=d)
-    k = len(pairs)
-    idx = _bin_indices(d)
-    if k > 1:
-        idx += np.repeat(np.arange(0, k * NBINS, NBINS, dtype=np.int64), lengths)
-    counts = np.bincount(idx, minlength=k * NBINS).reshape(k, NBINS)
-    starts = np.zeros(k, dtype=np.int64)
-    np.cumsum(lengths[:-1], out=starts[1:])
-    sums = np.add.reduceat(d, starts).tolist()
-    maxs = np.maximum.reduceat(d, starts).tolist()
-    for j, (acc, _) in enumerate(pairs):
-        acc.calls += lengths[j]
-        acc.total += int(sums[j])
-        if maxs[j] > acc.max:
-            acc.max = int(maxs[j])
-        row = counts[j]
-        hist = acc.hist
-        for i in np.flatnonzero(row).tolist():
-            hist[i] += int(row[i])
-
-
-def _bin_indices(d: np.ndarray) -> np.ndarray:
-    """Vectorised :func:`pyrt.scheduler.stats.bin_index` for non-negative int64 durations."""
-    _, bl = np.frexp(d.astype(np.float64))  # bit length, exact below 2**53
-    bl = bl.astype(np.int64)
-    shift = np.maximum(bl - 3, 0)
-    idx = (bl << 2) - 8 + ((d >> shift) & 3)
-    idx = np.where(d < 8, d, idx)
-    return np.minimum(idx, NBINS - 1)
 
 
 class _LittleEndianWords:  # pragma: no cover - big-endian hosts only

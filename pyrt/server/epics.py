@@ -392,6 +392,8 @@ class EpicsService:
                 continue
             kind, pv = _value_pv(ca, f.units, f.fmt, f.limits, f.kind, f.states)
             db[key] = pv
+            if f.name == "stopReason":  # written once per move-ended event, not sampled
+                kind = "event"
             self._extras.append((kind, pv))
         db[p + "FAULT_MSG"] = ro(ca.ChannelChar)(value="none", max_length=TEXT_LENGTH,
                                                  string_encoding="utf-8")
@@ -589,7 +591,7 @@ class EpicsService:
         p = self.prefix
         db = self.pvdb
         last_t = last_extra = None
-        shown = None
+        shown = moved = None
         next_stats = 0.0
         while True:
             t_ns, _tick, values = hub.snapshot
@@ -605,6 +607,10 @@ class EpicsService:
             if fault is not None and fault is not shown:
                 shown = fault
                 await db[p + "FAULT_MSG"].write(str(fault.cause)[:TEXT_LENGTH - 1])
+            move = hub.last_move
+            if move is not None and move is not moved and p + "STOP_REASON" in db:
+                moved = move  # each end of a move once, even when it ends as the last did
+                await db[p + "STOP_REASON"].write(str(move.reason)[:TEXT_LENGTH - 1])
             now = loop.time()
             if now >= next_stats:
                 next_stats = now + self.stats_period_s
@@ -620,6 +626,8 @@ class EpicsService:
     async def _write_all(pvs: list[tuple[str, Any]], values: tuple) -> None:
         """Write the values that changed; a write computes the PV's alarm."""
         for (kind, pv), value in zip(pvs, values, strict=True):
+            if kind == "event":  # written by its event, not by the sample
+                continue
             with contextlib.suppress(TypeError, ValueError, OverflowError, IndexError):
                 v = _pv_value(kind, value)
                 old = pv.value

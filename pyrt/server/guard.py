@@ -100,8 +100,8 @@ class _Peer:
 class FailureGuard:
     """Back-off and bounded audit lines for failures (see the module text).
 
-    ``audit(who, line)`` writes one audit line (the station's
-    :meth:`~pyrt.station.base.Station.audit`).  Thread-safe: the DAQ
+    ``audit(who, line)`` writes one audit line (the served station's
+    :meth:`~pyrt.server.station.ServedStation.audit`).  Thread-safe: the DAQ
     server's threads and the EPICS thread share one guard.
     """
 

@@ -10,7 +10,9 @@ scope's spew does (004), and never waits for it:
   no work to the tick beyond that one read;
 * each ``SUBSCRIBE`` is a :class:`~pyrt.scope.Spew` whose callback appends
   the sample to a bounded deque (an atomic append, never a block);
-* a fault is appended to the same deque the moment the loop records it.
+* a fault is appended to the same deque the moment the loop records it,
+  and so is the end of every move (the station's move-ended event) and
+  every message of the station's components.
 
 The server's I/O thread drains the deque and formats the lines.  The list
 of spews is replaced whole (copy on write) by the server thread and read
@@ -73,7 +75,8 @@ class StatusHub:
         self._tick = 0
         #: ``(time_ns, tick, values)`` of the latest snapshot; values None before the first.
         self.snapshot: tuple[int, int, tuple | None] = (0, -1, None)
-        #: ``("sample", key, time_ns, values)`` and ``("fault", None, time_ns, fault)``.
+        #: ``("sample", key, time_ns, values)``, ``("fault", None, time_ns, fault)``,
+        #: ``("stop", None, time_ns, move_ended)`` and ``("message", None, 0, message)``.
         self.events: deque[tuple[str, Any, int, Any]] = deque(maxlen=EVENT_CAPACITY)
         self._spews: tuple[tuple[Any, Spew], ...] = ()
         #: ``time.monotonic_ns()`` when the loop last ran this handler: where
@@ -81,6 +84,8 @@ class StatusHub:
         self.tick_wall_ns = 0
         #: The latest fault the loop recorded (None before the first).
         self.last_fault: Fault | None = None
+        #: The latest move-ended event (None before the first move ended).
+        self.last_move: Any = None
         #: More values (EPICS's per-device PVs), read every ``extra_every``
         #: ticks only while :attr:`extras_wanted` (a bool the server side sets).
         self.extra_sources = tuple(extra_sources)
@@ -123,6 +128,15 @@ class StatusHub:
         """Fault listener (loop thread): push the fault to the subscribers."""
         self.last_fault = fault
         self.events.append(("fault", None, fault.time_ns, fault))
+
+    def on_move(self, event: Any) -> None:
+        """Move-ended listener (loop thread): push the end of the move, once."""
+        self.last_move = event
+        self.events.append(("stop", None, event.time_ns, event))
+
+    def on_message(self, message: Any) -> None:
+        """Message listener (loop thread): push a component's message."""
+        self.events.append(("message", None, 0, message))
 
     # -- the server side -----------------------------------------------------------
 

@@ -391,7 +391,8 @@ class IOLoopMixin(ServerState):
         self._set_events(conn)
 
     def _pump(self) -> None:
-        """Hand subscription samples and faults on to the subscribers."""
+        """Hand subscription samples, faults, ends of moves and messages on to the
+        subscribers."""
         fmt = self.robot.format_status
         conns = self._conns
         now = time.monotonic()
@@ -407,8 +408,13 @@ class IOLoopMixin(ServerState):
                     except Exception as exc:
                         self._client_failed(conn, exc)
             else:
-                line = "STATUS FAULT " + "".join(
-                    c if c.isprintable() else " " for c in str(payload)) + "\n"
+                if kind == "stop":  # a move ended: its reason, once
+                    text = f"STATUS STOP {payload.reason}"
+                elif kind == "message":
+                    text = f"STATUS MESSAGE {payload.source} {payload.level}: {payload.text}"
+                else:
+                    text = f"STATUS FAULT {payload}"
+                line = "".join(c if c.isprintable() else " " for c in text) + "\n"
                 for conn in list(conns.values()):
                     if conn.subscribed:
                         self._output(conn, line)

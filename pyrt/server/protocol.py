@@ -6,9 +6,12 @@ line starts with ``OK``, ``ERR <code>`` or ``STATUS``:
 * ``OK-<text>``: a continuation line of a reply (more lines follow);
 * ``OK`` or ``OK <text>``: the last line of a successful reply;
 * ``ERR <code> <text>``: the last line of a refused or failed request;
-* ``STATUS <fields>``: a line of a subscription (``SUBSCRIBE <hz>``) or a
-  fault pushed as it happens (``STATUS FAULT <fault>``); never part of a
-  reply, so a client can take them out of the stream wherever they come.
+* ``STATUS <fields>``: a line of a subscription (``SUBSCRIBE <hz>``), or
+  pushed to a subscribed client as it happens: a fault (``STATUS FAULT
+  <fault>``), the end of a move (``STATUS STOP <how it ended>``, once per
+  move) or a message of the robot (``STATUS MESSAGE <source> <level>:
+  <text>``); never part of a reply, so a client can take them out of the
+  stream wherever they come.
 
 The server's own verbs are case-insensitive words that no robot command
 uses: ``AUTH``, ``STATUS``, ``SUBSCRIBE``, ``UNSUBSCRIBE``, ``QUIT``.

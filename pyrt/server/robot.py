@@ -98,6 +98,11 @@ class ServedRobot(Protocol):
         the station itself, so that a journal records it as a request to the station)."""
         ...
 
+    def audit(self, source: str, line: str) -> None:
+        """A command that moves or changes the robot came from ``source``: shown on
+        the operator's console and written to the audit log (any thread)."""
+        ...
+
     def release(self, shell: Shell) -> None:
         """A privileged connection has ended: undo what only its session meant
         (leave a monitor level ...); called in a server thread."""

@@ -219,6 +219,9 @@ class Server(IOLoopMixin, FramingMixin, SessionMixin):
                              extra_every=max(1, round(EXTRA_PERIOD_NS / runner.loop.period_ns)))
         runner.loop.attach(self.hub, name="server")
         runner.loop.fault_listeners.append(self.hub.on_fault)
+        station = robot.station  # the end of each move and each message, pushed once
+        self._unsubscribe = (station.subscribe_moves(self.hub.on_move),
+                             station.subscribe(self.hub.on_message))
         self.observer = ObserverRunner(runner)
         clock = runner.loop.clock
         #: The tick in wall-clock ns (None on a SimClock: nothing to stand aside for).
@@ -287,6 +290,9 @@ class Server(IOLoopMixin, FramingMixin, SessionMixin):
 
     def close(self, timeout_s: float = 2.0) -> None:
         """Stop serving: close every connection and the listener, stop the threads."""
+        for unsubscribe in self._unsubscribe:
+            unsubscribe()
+        self._unsubscribe = ()
         if self._thread is None:
             return
         conns = list(self._conns.values())
@@ -322,8 +328,8 @@ class Server(IOLoopMixin, FramingMixin, SessionMixin):
         self.close()
 
     def _audit(self, who: str, line: str) -> None:
-        """An audit line of the station (its console and audit log)."""
-        self.robot.station.audit(who, line)
+        """An audit line of the served station (its console and audit log)."""
+        self.robot.audit(who, line)
 
     @property
     def alive(self) -> bool:

@@ -16,6 +16,7 @@ import selectors
 import socket
 import threading
 from collections import deque
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from pyrt.server.connection import Connection
@@ -59,6 +60,7 @@ class ServerState:
     _lease_who: str | None
     _lease_until: float
     _token: bytes | None
+    _unsubscribe: tuple[Callable[[], None], ...]
     _period_wall_ns: int | None
     _conns: dict[int, Connection]
     _next_id: int

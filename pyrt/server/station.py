@@ -11,9 +11,12 @@ the stop).  No second table of commands exists here.
 from __future__ import annotations
 
 import io
+import logging
+import logging.handlers
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, TextIO
 
 from pyrt.commands.robot import RobotShell
@@ -73,7 +76,58 @@ class ServedStation:
                         for (name, _sig, fmt), v in zip(self.fields, values, strict=True))
 
     def make_shell(self, runner: Any, stdout: TextIO, source: str = "remote") -> RobotShell:
-        return RobotShell(self.station, stdout, runner=runner, source=source)
+        return RobotShell(self.station, stdout, runner=runner, source=source, audit=self.audit)
+
+    # -- the audit trail ------------------------------------------------------------------
+
+    #: Largest size of the audit log before it is rotated, bytes; rotated copies kept.
+    audit_max_bytes: int = 1_000_000
+    audit_backups: int = 3
+    _audit_logger: logging.Logger | None = None
+
+    def audit(self, source: str, line: str) -> None:
+        """A command that moves or changes the robot came from ``source`` (a
+        DAQ client, EPICS CMD or STOP; any thread): a message of the station
+        for the operator's console (``remote: SOURCE: LINE``) and a timestamped
+        line in the audit log when one is open (:meth:`open_audit_log`)."""
+        text = f"{source}: {line.strip()[:200]}"
+        self.station.say(f"remote: {text}")
+        logger = self._audit_logger
+        if logger is not None:
+            logger.info("%s", text)
+
+    def audit_log_path(self) -> Path:
+        """Where the audit log goes: beside the station's files (``audit.log`` in
+        its :attr:`~pyrt.station.base.Station.directory`), else the working
+        directory (``pyrt-NAME-audit.log``)."""
+        directory = self.station.directory
+        if directory is not None:
+            return Path(directory) / "audit.log"
+        return Path.cwd() / f"pyrt-{self.name}-audit.log"
+
+    def open_audit_log(self, path: str | Path | None = None) -> Path:
+        """Write the audit trail to ``path`` (default :meth:`audit_log_path`), rotated
+        by size (:attr:`audit_max_bytes`, :attr:`audit_backups` copies); the path."""
+        self.close_audit_log()
+        where = Path(path) if path is not None else self.audit_log_path()
+        handler = logging.handlers.RotatingFileHandler(
+            where, maxBytes=self.audit_max_bytes, backupCount=self.audit_backups,
+            encoding="utf-8", delay=True)  # the file appears with the first line
+        handler.setFormatter(logging.Formatter("%(asctime)s %(message)s"))
+        logger = logging.Logger(f"pyrt.audit.{self.name}")  # its own, not the root's tree
+        logger.addHandler(handler)
+        self._audit_logger = logger
+        return where
+
+    def close_audit_log(self) -> None:
+        """Close the audit log, if one is open."""
+        logger = self._audit_logger
+        if logger is None:
+            return
+        self._audit_logger = None
+        for h in list(logger.handlers):
+            logger.removeHandler(h)
+            h.close()
 
     def is_read_only(self, line: str) -> bool:
         """True when ``line`` only reads, or any client may give it (the stop)."""

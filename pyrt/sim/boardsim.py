@@ -49,7 +49,6 @@ import socket
 import threading
 import time
 from collections.abc import Callable
-from typing import TextIO
 
 from pyrt.boards.wire import (
     MAX_LINE,
@@ -127,7 +126,7 @@ class LinkServer:
         step_ns: int = DEFAULT_STEP_NS,
         idle_s: float = DEFAULT_IDLE_S,
         max_clients: int = DEFAULT_MAX_CLIENTS,
-        stdout: TextIO | None = None,
+        say: Callable[[str], None] | None = None,
         clock: Callable[[], int] = time.monotonic_ns,
     ):
         if not 0.001 <= watchdog_s <= 3600:
@@ -148,7 +147,7 @@ class LinkServer:
         self.idle_ns = int(idle_s * 1e9)
         self.max_clients = max_clients
         self.step_ns = int(step_ns)
-        self.stdout = stdout
+        self.report = say
         self.clock = clock
         try:
             family = socket.AF_INET6 if ":" in host else socket.AF_INET
@@ -209,12 +208,11 @@ class LinkServer:
         return len(self._conns)
 
     def _say(self, line: str) -> None:
-        if self.stdout is not None:
+        if self.report is not None:
             try:
-                self.stdout.write(line + "\n")
-                self.stdout.flush()
+                self.report(line)
             except (OSError, ValueError):  # a closed log must not stop the boards
-                self.stdout = None
+                self.report = None
 
     # -- the owner and the watchdog ------------------------------------------------------------
 
@@ -437,7 +435,7 @@ class BoardServer(LinkServer):
     """Serve ``world`` on ``host:port`` with the wire protocol (port 0: any free
     port; see :attr:`url`).
 
-    ``stdout`` receives one line per event (connections, the owner, refusals,
+    ``say(line)`` is told one line per event (connections, the owner, refusals,
     watchdog trips); ``clock`` is the monotonic clock in ns; ``idle_s`` and
     ``max_clients`` bound the connections (see the module text).  Call
     :meth:`serve_forever` (blocks until :meth:`stop`), or :meth:`start` to

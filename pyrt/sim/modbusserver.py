@@ -45,7 +45,6 @@ from __future__ import annotations
 import struct
 import time
 from collections.abc import Callable
-from typing import TextIO
 
 from pyrt.boards.modbusmap import COIL, DISCRETE, HOLDING, INPUT_REG, Place, RegisterMap
 from pyrt.sim.boardsim import (
@@ -97,7 +96,7 @@ def _pack_bits(values: list[int]) -> bytes:
 class ModbusBoardServer(LinkServer):
     """Serve ``world`` over Modbus TCP on ``host:port`` with ``regmap`` (see the module text).
 
-    Port 0 picks a free port (:attr:`url`).  ``stdout`` receives one line per
+    Port 0 picks a free port (:attr:`url`).  ``say(line)`` is told one line per
     event (connections, the owner, watchdog trips).  :meth:`serve_forever`
     blocks until :meth:`stop`; :meth:`start` runs it in a thread of its own.
     ConfigError if it cannot listen.
@@ -106,10 +105,11 @@ class ModbusBoardServer(LinkServer):
     def __init__(self, world: World, regmap: RegisterMap, host: str = "127.0.0.1",
                  port: int = 0, *, watchdog_s: float = DEFAULT_WATCHDOG_S,
                  step_ns: int = DEFAULT_STEP_NS, idle_s: float = DEFAULT_IDLE_S,
-                 max_clients: int = DEFAULT_MAX_CLIENTS, stdout: TextIO | None = None,
+                 max_clients: int = DEFAULT_MAX_CLIENTS,
+                 say: Callable[[str], None] | None = None,
                  clock: Callable[[], int] = time.monotonic_ns):
         super().__init__(world, host, port, watchdog_s=watchdog_s, step_ns=step_ns,
-                         idle_s=idle_s, max_clients=max_clients, stdout=stdout, clock=clock)
+                         idle_s=idle_s, max_clients=max_clients, say=say, clock=clock)
         self.map = regmap
         self.at: dict[tuple[int, str, int], tuple[Place, int]] = {}
         for p in regmap.places:

@@ -5,7 +5,6 @@ from pyrt.station.manipulator import (
     POLL_S,
     TICK_NS,
     ManipulatorStation,
-    MessageSink,
 )
 
-__all__ = ["AXIS_POLL_S", "POLL_S", "TICK_NS", "ManipulatorStation", "MessageSink"]
+__all__ = ["AXIS_POLL_S", "POLL_S", "TICK_NS", "ManipulatorStation"]

@@ -34,28 +34,39 @@ Both robots are a :class:`Station` plus a configuration
   :class:`~pyrt.errors.BoardError` in a phase trips the robot (the message
   names the back end's URL); :meth:`close` closes the boards last.  The
   in-process ``sim:`` boards have no I/O: they attach no phase;
+* watches its robot's motion and publishes the end of every move as one
+  event (:class:`~pyrt.station.moves.MoveEnded`: how it ended, where the
+  robot was left, the fault that ended it) to its subscribers
+  (:meth:`subscribe_moves`): ``wait`` takes it in one mailbox call
+  (:meth:`watch_move`), the console, the DAQ server and EPICS each show it once;
+* publishes what its components say (:meth:`~pyrt.component.Component.say`,
+  a :class:`~pyrt.component.Message`) to its subscribers (:meth:`subscribe`):
+  the runner's asynchronous lines that the console shows, the server, and the
+  log (the ``pyrt.messages`` logger, at the message's level);
 * starts and stops in one order (:meth:`start`, :meth:`close`).
 """
 
 from __future__ import annotations
 
 import contextlib
-import logging
-import logging.handlers
-from collections import deque
-from collections.abc import Callable, Iterable
+import dataclasses
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, final
 
 from pyrt.boards import Boards
-from pyrt.component import Command, Component, Param, Signal, command, walk
+from pyrt.component import Command, Component, Signal, command, walk
 from pyrt.errors import BoardError, CommandError, ConfigError, Fault, PyrtError
 from pyrt.scheduler import Loop, ReadyQueue
-from pyrt.scheduler.motion import MotionExecutor, MotionType, motion_types_for
+from pyrt.scheduler.motion import MotionExecutor
 from pyrt.scheduler.runner import MotionQueue, Runner
 from pyrt.scope import Scope
+from pyrt.station.events import StationEvents
+from pyrt.station.profile import ShellProfile
+from pyrt.station.requests import StationRequests
 
 __all__ = ["BoardWorld", "Station", "refuse_sim_options"]
+
 
 
 def refuse_sim_options(boards: Boards, given: Iterable[str]) -> None:
@@ -91,18 +102,18 @@ class BoardWorld(Component):
         return f"board-sim at {self.boards.url}: " + " ".join(f"{k}={v}" for k, v in info.items())
 
 
-class Station:
+class Station(StationEvents, StationRequests):
     """See the module text.  A configuration builds its tree and calls
     :meth:`adopt` last (after every loop handler is attached)."""
 
     #: The robot's name (``gripper``, ``prototype``, ``sno``).
     name: str = "robot"
-    #: A component whose commands are console words of this station (the
-    #: manipulator's ``log`` and ``debug``), run in the loop like any command;
-    #: None: the shared words only.
-    words: Component | None = None
-    #: How ``wait`` opens the line of a fault that ended the move it waited for.
-    wait_fault_prefix: str = "FAULT"
+    #: How its console reads (prompt, letter level, words, ``wait``'s words):
+    #: presentation, given by the module that assembles the station.
+    profile: ShellProfile = ShellProfile()
+    #: Where the station's files are (its databases), or None; a served
+    #: station keeps its audit log there.
+    directory: Path | None = None
 
     def __init__(self, loop: Loop, *, motion_capacity: int = 16):
         self.loop = loop
@@ -124,15 +135,14 @@ class Station:
         #: as ``start-up:`` lines before the console opens (the manipulator's
         #: reconciled ZEROLENGTH and LENGTH); none by default.
         self.startup_notes: list[str] = []
-        #: Audit lines not yet shown on the console (:meth:`audit`), and the log.
-        self._audit_pending: deque[str] = deque(maxlen=1000)
-        self._audit_logger: logging.Logger | None = None
         self._fault: Fault | None = None
         self._by_name: dict[str, Component] = {}
         self._closed = False
+        self._init_events()
 
     # -- assembly -------------------------------------------------------------------
 
+    @final
     def attach_boards(self, boards: Boards) -> None:
         """Own ``boards``: attach their read phase (``io:read``) to the loop now
         (call it before the robot's handlers: the inputs of a tick come in
@@ -152,6 +162,7 @@ class Station:
         if boards.polls:
             self.loop.attach(self._poll_boards, name="io:read")
 
+    @final
     def attach_world(self, step: Callable[[int], None], name: str = "world") -> None:
         """Attach the simulated world's ``step(now_ns)``: to the loop as handler
         ``name`` (call it after :meth:`attach_boards`, before the robot's
@@ -193,12 +204,28 @@ class Station:
         if self._fault is None:
             self.trip(str(exc), source="boards")
 
+    @final
     def adopt(self, root: Component, *, queues: Iterable[ReadyQueue] = (),
               executors: Iterable[MotionExecutor] = (),
-              extras: Iterable[Component] = ()) -> Runner:
+              extras: Iterable[Component] = (),
+              where: Callable[[], str] | None = None,
+              ended: Callable[[], tuple[str, Sequence[str]]] | None = None,
+              status: Callable[[], str] | None = None) -> Runner:
         """Take ``root`` (and ``extras``, e.g. the simulation's component) as
-        the station's tree; own ``queues``' errors; attach the scope and the
-        mailbox to the loop (in that order, after the robot's handlers)."""
+        the station's tree; own ``queues``' errors; attach the move watch, the
+        scope and the mailbox to the loop (in that order, after the robot's
+        handlers).
+
+        What the operator reads of the robot is given here, once (loop
+        thread, each returns text): ``where`` the robot is; how the move that
+        has just ended ended, ``ended() -> (reason, report lines)``, asked
+        once per move when the move-ended event is made; the ``status``
+        line (default: the root's signals)."""
+        if where is not None:
+            self._say_where = where
+        if ended is not None:
+            self._say_ended = ended
+        self._say_status = status
         self.root = root
         self.extras = list(extras)
         self.queues = list(queues)
@@ -212,22 +239,28 @@ class Station:
                 if key in self._by_name and self._by_name[key] is not c:
                     raise PyrtError(f"two components of {self.name} are called {c.name!r}")
                 self._by_name[key] = c
-                c._trip = self.trip
         for q in self.queues:
             q.on_error = self._queue_error
         self.loop.trip_handlers.append(self.trip)
+        self.loop.attach(self._watch_moves, name="moves")
         self.loop.attach(self.scope.sample, name="scope")
         self.runner = Runner(self.loop, motion_queue=self.motion)
+        self.subscribe(self._to_console)
+        self.subscribe_moves(self._move_to_console)
+        for c in self._by_name.values():  # what they said while being built comes now
+            c.connect(trip=self.trip, tell=self.publish)
         if self.boards is not None and self.boards.flushes:
             self.loop.attach(self._flush_boards, name="io:write")
         return self.runner
 
     # -- the tree -----------------------------------------------------------------
 
+    @final
     def components(self) -> list[Component]:
         """Every component, the robot's tree first, each once."""
         return list(self._by_name.values())
 
+    @final
     def component(self, name: str) -> Component:
         """The component called ``name`` (case-insensitive), or CommandError."""
         c = self._by_name.get(name.lower())
@@ -236,18 +269,22 @@ class Station:
                                f"{', '.join(self.names())}")
         return c
 
+    @final
     def find(self, name: str) -> Component | None:
         """The component called ``name``, or None."""
         return self._by_name.get(name.lower())
 
+    @final
     def names(self) -> list[str]:
         """The components' names, in the tree's order."""
         return [c.name for c in self._by_name.values()]
 
+    @final
     def signals(self) -> list[tuple[str, Signal]]:
         """``(OBJECT.SIGNAL, signal)`` of every signal of every component."""
         return [(f"{c.name}.{s.name}", s) for c in self.components() for s in c.signals()]
 
+    @final
     def resolve_signal(self, name: str) -> Signal:
         """``OBJECT.SIGNAL``, or a bare ``SIGNAL`` of the root component; CommandError if none."""
         text = name.strip()
@@ -267,119 +304,20 @@ class Station:
             raise CommandError(f"no channel {text[:60]!r}; 'scope list' shows them")
         return s
 
+    @final
     def all_commands(self) -> list[tuple[Component, Command]]:
         """Every command record of every component."""
         return [(c, r) for c in self.components() for r in c.commands()]
 
-    # -- parameters (get/set) ---------------------------------------------------------
-
-    def params_of(self, component: Component) -> list[Param]:
-        """The run-time parameters of ``component``: its own
-        (:meth:`Component.params`) and any the station adds for it (a
-        configuration's own tunables); ``get``/``set`` and the server read these."""
-        return list(component.params())
-
-    def param(self, name: str) -> tuple[Component, Param]:
-        """``OBJECT.FIELD`` as (component, parameter); CommandError naming what there is."""
-        obj, dot, field = name.strip().partition(".")
-        comp = self.component(obj)
-        params = self.params_of(comp)
-        if not dot or not field:
-            raise CommandError(f"{name[:60]!r}: give OBJECT.FIELD (get {comp.name} lists "
-                               "its parameters)")
-        key = field.lower()
-        for p in params:
-            if p.name.lower() == key:
-                return comp, p
-        raise CommandError(f"{comp.name} has no parameter {field[:40]!r}; it has "
-                           f"{', '.join(p.name for p in params) or 'none'}")
-
-    def set_param(self, component: Component, param: Param, value: Any) -> str:
-        """Change ``param`` of ``component`` to a checked ``value`` (loop thread):
-        refused if it is read only, or while a move runs when changing it then
-        is unsafe; the line says what changed and whether it is written back."""
-        who = f"set {component.name}.{param.name}"
-        if param.write is None:
-            raise CommandError(f"{who}: read only; nothing changed")
-        if not param.safe_while_moving and self.busy():
-            raise CommandError(f"{who}: refused while a move runs (changing it then is "
-                               "unsafe); stop or wait first; nothing changed")
-        old = param.read()
-        said = param.write(value)
-        new = param.read()
-        u = f" {param.units}" if param.units else ""
-        back = ("written back" if param.written_back
-                else "not written back: lost at exit")
-        line = f"{component.name}.{param.name} {param.text(old)} -> {param.text(new)}{u} ({back})"
-        return f"{line}; {said}" if isinstance(said, str) and said else line
-
-    # -- the audit trail --------------------------------------------------------------
-
-    #: Largest size of the audit log before it is rotated, bytes; rotated copies kept.
-    audit_max_bytes: int = 1_000_000
-    audit_backups: int = 3
-
-    def audit(self, source: str, line: str) -> None:
-        """A command that moves or changes the robot came from ``source`` (a
-        DAQ client, EPICS CMD or STOP; any thread): one line for the operator's
-        console naming the source (:meth:`audit_lines`), and a timestamped line
-        in the audit log when one is open (:meth:`open_audit_log`)."""
-        text = f"{source}: {line.strip()[:200]}"
-        # Not the runner's messages: a remote shell's wait drains those, and
-        # the operator would never see the line.  The console's shell takes
-        # these (RobotShell.messages); a bounded queue when there is none.
-        self._audit_pending.append(f"remote: {text}")
-        logger = self._audit_logger
-        if logger is not None:
-            logger.info("%s", text)
-
-    def audit_lines(self) -> list[str]:
-        """Take the audit lines not yet shown on the console (any thread)."""
-        pending = self._audit_pending
-        out: list[str] = []
-        while pending:
-            try:
-                out.append(pending.popleft())
-            except IndexError:
-                break
-        return out
-
-    def audit_log_path(self) -> Path:
-        """Where the audit log goes when the station is served: the working
-        directory by default (a station with databases puts it beside them)."""
-        return Path.cwd() / f"pyrt-{self.name}-audit.log"
-
-    def open_audit_log(self, path: str | Path | None = None) -> Path:
-        """Write the audit trail to ``path`` (default :meth:`audit_log_path`), rotated
-        by size (:attr:`audit_max_bytes`, :attr:`audit_backups` copies); the path."""
-        self.close_audit_log()
-        where = Path(path) if path is not None else self.audit_log_path()
-        handler = logging.handlers.RotatingFileHandler(
-            where, maxBytes=self.audit_max_bytes, backupCount=self.audit_backups,
-            encoding="utf-8", delay=True)  # the file appears with the first line
-        handler.setFormatter(logging.Formatter("%(asctime)s %(message)s"))
-        logger = logging.Logger(f"pyrt.audit.{self.name}")  # its own, not the root's tree
-        logger.addHandler(handler)
-        self._audit_logger = logger
-        return where
-
-    def close_audit_log(self) -> None:
-        """Close the audit log, if one is open."""
-        logger = self._audit_logger
-        if logger is None:
-            return
-        self._audit_logger = None
-        for h in list(logger.handlers):
-            logger.removeHandler(h)
-            h.close()
-
     # -- faults (loop thread) ---------------------------------------------------------
 
+    @final
     @property
     def fault(self) -> Fault | None:
         """The fault that stopped the robot, or None."""
         return self._fault
 
+    @final
     def trip(self, cause: str, source: str = "", tb: str = "") -> Fault:
         """The one fault path (every component's :meth:`~pyrt.component.Component.fail`,
         a task that raised, a board that cannot be reached, a motion that
@@ -392,19 +330,23 @@ class Station:
         first = self._fault is None
         for q in self.queues:
             q.halt()
+        if first:  # recorded first: a move the reflex ends, ends by this fault
+            self._fault = self.loop.make_fault(self.name, cause, source, tb)
         failed = self.reflex(f"fault: {cause}")
+        fault = self._fault
+        assert fault is not None
         if not first:
-            assert self._fault is not None
-            return self._fault
+            return fault
         if failed:
-            cause = f"{cause}; reflex action failed: {failed}"
-        fault = self._fault = self.loop.make_fault(self.name, cause, source, tb)
+            fault = self._fault = dataclasses.replace(
+                fault, cause=f"{cause}; reflex action failed: {failed}")
         self.loop.report_fault(fault)
         return fault
 
     def _queue_error(self, cause: str, source: str, tb: str) -> None:
         self.trip(cause, source, tb)
 
+    @final
     def reflex(self, why: str = "stop") -> str:
         """Every actuator stopped now: every component's reflex, the running
         motions ended, queued ones dropped.  Returns the reflex errors ('' if none);
@@ -432,6 +374,7 @@ class Station:
         self.motion.clear()
         return "; ".join(errors)
 
+    @final
     def acknowledge(self) -> str:
         """Clear the fault; the routines start again, nothing moves."""
         if self._fault is None:
@@ -441,11 +384,7 @@ class Station:
         self._fault = None
         for q in self.queues:
             q.resume(restart=True)
-        self.after_acknowledge()
         return f"fault acknowledged ({cause}); every motor stopped, routines running"
-
-    def after_acknowledge(self) -> None:
-        """What a configuration does after a fault is cleared (nothing by default)."""
 
     def stop(self) -> str:
         """The operator's stop: every motor stopped, the move ended, queued
@@ -455,17 +394,22 @@ class Station:
         here = self.where()
         return f"{said}; {here}" if here else said
 
+    @final
     def where(self) -> str:
-        """Where the robot is, in the operator's words ('' if it cannot say)."""
-        return ""
+        """Where the robot is, in the operator's words ('' if it cannot say): as
+        given to :meth:`adopt`."""
+        return self._say_where()
 
+    @final
     def last_stop(self) -> str:
-        """How the last move ended, in the operator's words ('' before any);
-        the server's and EPICS's ``stopReason``."""
-        return ""
+        """How the last move ended, in the operator's words ('' before any): the
+        last move-ended event's reason (the server's and EPICS's ``stopReason``)."""
+        last = self.last_move
+        return last.reason if last is not None else ""
 
     # -- commands (loop thread) -------------------------------------------------------
 
+    @final
     def execute(self, component: Component, record: Command, args: list[Any]) -> Any:
         """Run ``record`` with checked ``args``: refused while faulted if it
         moves (or is not allowed while faulted); one mailbox call checks and acts."""
@@ -475,81 +419,8 @@ class Station:
                 f"({self._fault.cause}); give 'ack' first; nothing moved")
         return record.handler(*args)
 
-    def submit_motion(self, record: Any) -> tuple[int, bool]:
-        """Check a motion record and put it on the motion queue (loop thread):
-        refused while faulted; a type's ``check(robot, params)`` runs first.
-        Returns (records waiting, whether a move was already running)."""
-        if self._fault is not None:
-            raise CommandError(f"motion {record.type}: refused: {self.name} is stopped by a "
-                               f"fault ({self._fault.cause}); give 'ack' first; nothing moved")
-        cls = self.motion_type(record.type)
-        self.check_motion(record)
-        cls.check(self.motion_robot(), record.params)
-        waiting = self.busy()
-        self.motion.put(record)
-        return len(self.motion), waiting
-
-    def motion_types(self) -> dict[str, type[MotionType]]:
-        """The motion types this station runs, by name: every registered type
-        (built-in and plug-in) that drives :meth:`motion_robot`.  ``motion``
-        lists these and queues no other."""
-        return motion_types_for(self.motion_robot())
-
-    def motion_type(self, name: str) -> type[MotionType]:
-        """The motion type ``name`` of this station; CommandError naming this
-        station's types if it runs none by that name."""
-        types = self.motion_types()
-        cls = types.get(name.lower())
-        if cls is None:
-            raise CommandError(f"motion {name[:40]}: not a motion type of {self.name} (it has "
-                               f"{', '.join(types) or 'none'}); nothing queued")
-        return cls
-
     def check_motion(self, record: Any) -> None:
         """Configuration-specific refusals of a motion record (none by default)."""
-
-    def motion_robot(self) -> Any:
-        """The object motion types drive (the root component by default)."""
-        return self.root
-
-    # -- what the shell asks ------------------------------------------------------------
-
-    def letter_level(self) -> Component | None:
-        """The component whose commands are single letters at the prompt (the
-        gripper's ``CMD:``), or None: commands are ``OBJECT VERB``."""
-        return None
-
-    def prompt(self, level: Component | None) -> str:
-        """The console prompt at ``level``."""
-        return f"{self.name}> "
-
-    def wait_refusal(self) -> str | None:
-        """Why ``wait`` cannot end now, or None."""
-        return None
-
-    #: Consoles waiting (``wait``) for the move to end: the stop that ends it
-    #: is then reported by the wait, once, not also as an asynchronous line.
-    waiters: int = 0
-
-    def begin_wait(self) -> tuple[bool, str | None]:
-        """A ``wait`` begins (loop thread): (whether anything runs, why the
-        wait cannot end or None); while it runs, :attr:`waiters` counts it."""
-        busy, refusal = self.busy(), self.wait_refusal()
-        if busy and not refusal:
-            self.waiters += 1
-        return busy, refusal
-
-    def end_wait(self) -> None:
-        """The ``wait`` that :meth:`begin_wait` counted has ended."""
-        self.waiters = max(0, self.waiters - 1)
-
-    def idle_report(self) -> str:
-        """``wait`` with nothing to wait for."""
-        return "nothing to wait for"
-
-    def wait_report(self) -> str:
-        """Why the move ``wait`` waited for ended."""
-        return "ended"
 
     # -- state ------------------------------------------------------------------------
 
@@ -557,8 +428,13 @@ class Station:
         """A move runs or waits (configurations say more)."""
         return len(self.motion) > 0 or any(ex.busy for ex in self.executors)
 
+    @final
     def status(self) -> str:
-        """One status line (configurations say more): the root's signals."""
+        """The status line: as given to :meth:`adopt` (else the root's signals),
+        and the fault while one is not acknowledged."""
+        if self._say_status is not None:
+            line = self._say_status()
+            return f"{line}  FAULT: {self._fault.cause}" if self._fault is not None else line
         parts = [f"{s.name}={s.format(s.read())}" for s in self.root.signals()]
         if self._fault is not None:
             parts.append(f"FAULT: {self._fault.cause}")
@@ -574,6 +450,7 @@ class Station:
         every component's signals (EPICS PVs by their names); none by default."""
         return []
 
+    @final
     def fault_field(self) -> tuple[str, Signal, str]:
         """The ``fault`` STATUS field (1 while a fault is not acknowledged)."""
         return ("fault", Signal("fault", "bool", lambda: self._fault is not None,
@@ -591,11 +468,7 @@ class Station:
         header; none by default."""
         return {}
 
-    def startup_commands(self) -> list[str]:
-        """Console lines run once the loop runs, before the operator types (the
-        gripper's power-up ``I``); none by default."""
-        return []
-
+    @final
     def start(self) -> Runner:
         """Start the loop (its thread on a wall clock)."""
         assert self.runner is not None, "adopt() the tree first"
@@ -655,15 +528,12 @@ class Station:
             report(line)
 
     def closing_note(self) -> str:
-        """What closing did beyond stopping the motors, for the one line said
-        on the way out ("; databases written back in DIR"), or ""."""
-        return ""
-
-    def closing_where(self) -> str:
-        """Where the robot was left, for the line said on the way out (SIGINT,
-        SIGTERM, end of input, quit): :meth:`where`, unless :meth:`closing_note`
-        says it already ('' then)."""
-        return self.where()
+        """The end of the one line said on the way out (SIGINT, SIGTERM, end of
+        input, quit) after "every motor stopped": where the robot was left and
+        what closing did beyond stopping the motors ("; databases written back
+        in DIR"); by default "; " and :meth:`where` ('' when it cannot say)."""
+        here = self.where()
+        return f"; {here}" if here else ""
 
     def write_back(self) -> None:
         """Write databases back on the way out (configurations that have them)."""

@@ -45,6 +45,7 @@ from pyrt.sim.gripper import FAULTS, JawParameters, JawPlant
 from pyrt.sim.world import GRIPPER_BOARDS, GripperWorld, World, WorldFactory
 from pyrt.station.base import BoardWorld, Station, refuse_sim_options
 from pyrt.station.factory import StationFactory
+from pyrt.station.profile import ShellProfile
 from pyrt.tasks import register_tasks
 
 __all__ = ["GRIPPER", "GripperFactory", "GripperSim", "GripperStation", "GripperWorlds",
@@ -161,8 +162,12 @@ class GripperStation(Station):
 
         def motion_done(motion: MotionType) -> None:
             reason = motion.stop_reason or ""
-            if reason.startswith("refused") and self.runner is not None:
-                self.runner.post(f"move {reason}")
+            if reason.startswith("refused"):
+                ctl.say(f"move {reason}", "warning")
+                return
+            if reason == "stop command":
+                ctl.move_ended(reason)
+            self.end_move(*self._outcome())
 
         def motion_error(cause: str, motion: MotionType) -> None:
             self.trip(cause, source="P move")
@@ -174,46 +179,19 @@ class GripperStation(Station):
             extras.append(GripperSim(plant))
         elif boards.has_info:
             extras.append(BoardWorld(boards))
-        self.adopt(ctl, queues=[ctl.queue], executors=[self.executor], extras=extras)
+        self.adopt(ctl, queues=[ctl.queue], executors=[self.executor], extras=extras,
+                   where=self._where, ended=self._ended, status=self._status)
+        self.profile = gripper_profile(ctl)
         ctl.power_up()
 
-    # -- what the shell's shared words ask ------------------------------------------------
-
-    #: Run I at power-up (002's main program does; ``--no-init`` does not).
-    power_up_init = True
-
-    def startup_commands(self) -> list[str]:
-        """002's power-up: I (drive the jaws wide open, zero the encoder)."""
-        return ["I"] if self.power_up_init else []
-
-    def letter_level(self) -> GripperController:
-        return self.controller
-
-    def prompt(self, level: Component | None) -> str:
-        return "* " if level is self.controller.monitor else "CMD: "
-
-    def motion_robot(self) -> GripperController:
-        return self.controller
+    # -- what the operator reads ----------------------------------------------------------
 
     def busy(self) -> bool:
         """A move, jog, init or calibration runs, or a move waits."""
         ctl = self.controller
         return ctl.moving or ctl.busy or super().busy()
 
-    def wait_refusal(self) -> str | None:
-        """Why ``wait`` cannot end (the clock interrupt is off), or None."""
-        if not self.controller.clock_enabled:
-            return "the clock interrupt is OFF (monitor I): the move cannot end; M, I: on"
-        return None
-
-    def idle_report(self) -> str:
-        """``wait`` with nothing to wait for."""
-        return "nothing to wait for: jaws idle"
-
-    #: How ``wait`` opens the line of a fault that ended the move ("fault: ...").
-    wait_fault_prefix = "fault"
-
-    def where(self) -> str:
+    def _where(self) -> str:
         """Where the jaws are: position, opening, target, error."""
         ctl = self.controller
         pos, tgt = ctl.word(ENCODER_CNT), ctl.word(COMMAND_CNT)
@@ -222,43 +200,40 @@ class GripperStation(Station):
         return (f"position {pos:04X} ({mm(_signed(pos)):.1f} mm), target {tgt:04X} "
                 f"({mm(_signed(tgt)):.1f} mm), error {err:+d}")
 
-    def last_stop(self) -> str:
-        """Why the last move or jog ended ('' before any)."""
-        return self.controller.last_stop
+    def _ended(self) -> tuple[str, list[str]]:
+        """The robot went idle: how the job (I, C, a jog) ended, unless a P move's
+        end has said it already."""
+        if self.moves_this_period:
+            return "", []
+        return self._outcome()
 
-    def wait_report(self) -> str:
+    def _outcome(self) -> tuple[str, list[str]]:
         """How the move ended: at target, stopped short (and why), or the fault."""
         ctl = self.controller
         err = _signed(ctl.word(ENCODER_CNT)) - _signed(ctl.word(COMMAND_CNT))
         if self.fault is not None:
-            return f"fault: {self.fault.cause}; {self.where()}"
-        why = ctl.last_stop or "ended"
-        if abs(err) <= AT_TARGET_COUNTS:
-            return f"at target: {self.where()}"
-        travel = _signed(ctl.word(COMMAND_CNT)) - ctl.move_from  # the move's direction
-        side = "past" if err * travel > 0 else "short of"
-        return f"stopped {side} the target by {abs(err)} counts ({why}): {self.where()}"
+            why = f"fault: {self.fault.cause}"
+        elif abs(err) <= AT_TARGET_COUNTS:
+            why = "at target"
+        else:
+            travel = _signed(ctl.word(COMMAND_CNT)) - ctl.move_from  # the move's direction
+            side = "past" if err * travel > 0 else "short of"
+            why = f"stopped {side} the target by {abs(err)} counts ({ctl.last_stop or 'ended'})"
+        return why, [f"{why}: {self.where()}"]
+
+    def _status(self) -> str:
+        """One line: position, target, error, state, drive current."""
+        ctl = self.controller
+        job = ctl.job
+        state = ("fault" if self.fault is not None else job.name if ctl.busy and job is not None
+                 else "moving" if ctl.moving else "idle")
+        return f"{self.where()}, {state}, drive {ctl.dac - 0x80:+d}"
 
     def stop(self) -> str:
         """The operator's stop, and where it left the jaws."""
         said = super().stop()
         self.controller.move_ended("stop command")
         return said
-
-    def status(self) -> str:
-        """One line: position, target, error, state, drive current (and the fault)."""
-        ctl = self.controller
-        job = ctl.job
-        state = ("fault" if self.fault is not None else job.name if ctl.busy and job is not None
-                 else "moving" if ctl.moving else "idle")
-        line = f"{self.where()}, {state}, drive {ctl.dac - 0x80:+d}"
-        if self.fault is not None:
-            line += f"  FAULT: {self.fault.cause}"
-        return line
-
-    def closing_where(self) -> str:
-        """'' : the closing note says where the jaws are."""
-        return ""
 
     def closing_note(self) -> str:
         """Where the jaws were left and the drive current, for the line said on the way out."""
@@ -278,6 +253,15 @@ class GripperStation(Station):
     def shutdown(self) -> None:
         """Null the drive, stop the loop and close the timing log."""
         self.close()
+
+
+def gripper_profile(ctl: GripperController, power_up_init: bool = True) -> ShellProfile:
+    """002's console: the ``CMD:`` letters and the monitor's (``* ``), the power-up
+    ``I`` (drive the jaws wide open, zero the encoder; not with ``--no-init``)."""
+    return ShellProfile(
+        prompt="CMD: ", level=ctl, level_prompts={ctl.name: "CMD: ", ctl.monitor.name: "* "},
+        startup_commands=("I",) if power_up_init else (), fault_prefix="fault",
+        idle="nothing to wait for: jaws idle")
 
 
 #: The jaws' start position when none is given, encoder counts.
@@ -429,7 +413,7 @@ is accepted and the simulation options are board-sim's.
     def build(self, loop: Loop, args: argparse.Namespace) -> GripperStation:
         station = build_gripper(loop, boards=args.boards, start=args.start,
                                 object_mm=args.object, faults=args.fault or ())
-        station.power_up_init = not args.no_init
+        station.profile = gripper_profile(station.controller, power_up_init=not args.no_init)
         return station
 
     def banner(self, station: Station, args: argparse.Namespace) -> str:

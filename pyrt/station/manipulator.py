@@ -49,16 +49,14 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
-import threading
 from collections.abc import Callable, Sequence
 from functools import partial
 from pathlib import Path
-from typing import Any, TextIO, cast
+from typing import Any, TextIO
 
 from pyrt.boards import Boards, open_boards
 from pyrt.boards.registers import BoardKind
-from pyrt.component import Arg, Component, Param, Signal, command, finite
+from pyrt.component import Arg, Component, Signal, command, finite
 from pyrt.db import (
     FILES,
     STATIONS,
@@ -74,16 +72,16 @@ from pyrt.errors import BoardError, CommandError, ConfigError, NativeError, Pyrt
 from pyrt.native import FuzzyParams, NativeInputError
 from pyrt.robots.av import AV
 from pyrt.robots.axis import Axis, tension_alarms
-from pyrt.robots.polyaxis import PolyAxis
+from pyrt.robots.polyaxis import PolyAxis, PolyAxisServices
 from pyrt.robots.ropes import MIN_TOP_SEGMENT, RopeModel, payout
 from pyrt.robots.stops import StopRecord
 from pyrt.scheduler import Loop, ReadyQueue, SimClock
 from pyrt.sim.manipulator import ManipulatorPlant, rig_from_station
 from pyrt.sim.sensors import Imperfections
 from pyrt.sim.world import MANIPULATOR_BOARDS, ManipulatorWorld, World, WorldFactory
-from pyrt.station._manip_params import axis_fuzzy_params, polyaxis_params
 from pyrt.station.base import BoardWorld, Station, refuse_sim_options
 from pyrt.station.factory import StationFactory
+from pyrt.station.profile import ShellProfile
 from pyrt.tasks import SyncWriter, ThreadWriter, WriteBack, register_tasks
 
 __all__ = [
@@ -94,7 +92,6 @@ __all__ = [
     "ManipulatorFactory",
     "ManipulatorStation",
     "ManipulatorWorlds",
-    "MessageSink",
 ]
 
 TICK_NS = 1_000_000
@@ -115,38 +112,6 @@ AXIS_POLL_S = 0.01
 def _item_of(read: Callable[[], Sequence[float]], i: int) -> Callable[[], float]:
     """A reader of item ``i`` of what ``read`` returns, read each time."""
     return lambda: read()[i]
-
-
-class MessageSink:
-    """A text stream for the loop side: whole lines go to ``target`` (the
-    runner's ``post``), so device output never garbles the console."""
-
-    def __init__(self, target: Callable[[str], None] | None = None):
-        self.target = target
-        self._buf = ""
-        self._lock = threading.Lock()
-        self.pending: list[str] = []
-
-    def write(self, text: str) -> int:
-        with self._lock:
-            self._buf += text
-            *lines, self._buf = self._buf.split("\n")
-        for line in lines:
-            if self.target is not None:
-                self.target(line)
-            else:
-                self.pending.append(line)
-        return len(text)
-
-    def flush(self) -> None:
-        """Lines are passed on as they complete."""
-
-    def connect(self, target: Callable[[str], None]) -> None:
-        """Send lines to ``target`` from now on (and the ones held so far)."""
-        self.target = target
-        held, self.pending = self.pending, []
-        for line in held:
-            target(line)
 
 
 class ManipulatorSim(Component):
@@ -281,6 +246,9 @@ class ManipulatorStation(Station):
     the neck) is a ConfigError naming the file and line.
     """
 
+    #: The station database.
+    directory: Path
+
     def __init__(
         self,
         directory: str | Path,
@@ -292,7 +260,6 @@ class ManipulatorStation(Station):
         imperfections: Imperfections | None = None,
         writer: Any = None,
         liquid_level: float | None = None,
-        stdout: TextIO | None = None,
         boards: str | None = None,
         expect: str | None = None,
         lock: bool = True,
@@ -313,7 +280,7 @@ class ManipulatorStation(Station):
             self._lock.release()
             raise
         try:
-            self._build(opened, poll_s, axis_poll_s, imperfections, writer, liquid_level, stdout)
+            self._build(opened, poll_s, axis_poll_s, imperfections, writer, liquid_level)
         except BaseException:
             try:
                 opened.close()
@@ -329,11 +296,9 @@ class ManipulatorStation(Station):
             self._lock.release()
 
     def _build(self, boards: Boards, poll_s: float, axis_poll_s: float,
-               imperfections: Imperfections | None, writer: Any, liquid_level: float | None,
-               stdout: TextIO | None) -> None:
+               imperfections: Imperfections | None, writer: Any, liquid_level: float | None
+               ) -> None:
         tick_s = self.loop.period_ns * 1e-9
-        self.messages = MessageSink()
-        self.stdout = stdout if stdout is not None else cast(TextIO, self.messages)
         st = self.station
         pa_rec = st.polyaxis()
         self.av = AV.from_record(st.av_of(pa_rec))
@@ -358,8 +323,7 @@ class ManipulatorStation(Station):
         fuzzy: list[FuzzyParams] = []
         base = FuzzyParams().for_poll_period(poll_s)
         for rec in st.axes_of(pa_rec):
-            axis = Axis.from_records(rec.name.lower(), rec, st, self.tio10, self.dc, av=self.av,
-                                     stdout=self.stdout)
+            axis = Axis.from_records(rec.name.lower(), rec, st, self.tio10, self.dc, av=self.av)
             self.axes.append(axis)
             try:
                 fuzzy.append(FuzzyParams.from_mapping(dict(rec.fuzzy), base=base))
@@ -369,13 +333,12 @@ class ManipulatorStation(Station):
         # mailbox fills (the station's runner takes it), the loop's spawn and
         # the pattern log's writer, the stop listeners, the task periods.
         self.stops: list[StopRecord] = []
-        self._unreported: StopRecord | None = None
-        self.polyaxis = PolyAxis.from_record(
-            pa_rec, self.axes, self.av, name=pa_rec.name.lower(), poll_s=poll_s, fuzzy=fuzzy,
-            liquid_level=liquid_level, stdout=self.stdout, motion=self.motion,
-            spawn=self.loop.spawn,
-            pattern_writer="sync" if self.loop.clock.virtual else "thread",
-            on_stop=(self.stops.append, self._report_stop),
+        self.polyaxis = PolyAxis(
+            pa_rec, self.axes, self.av, PolyAxisServices(
+                motion=self.motion, spawn=self.loop.spawn,
+                pattern_writer="sync" if self.loop.clock.virtual else "thread",
+                on_stop=(self.stops.append, self._stopped)),
+            name=pa_rec.name.lower(), poll_s=poll_s, fuzzy=fuzzy, liquid_level=liquid_level,
             task_periods=(_checks(poll_s, tick_s, "control poll"),
                           _checks(axis_poll_s, tick_s, "axis poll")))
         pa = self.polyaxis
@@ -433,15 +396,14 @@ class ManipulatorStation(Station):
         self._writeback_failure: str | None = None
         self.loop.attach(self._write_back, name="writeback")
 
-        self.words = ManipulatorWords(self)
+        self.profile = ShellProfile(words=ManipulatorWords(self), announce_stops=True)
         extras: list[Component] = []
         if self.plant is not None:
             extras.append(ManipulatorSim(self.plant, self.axes))
         elif boards.has_info:
             extras.append(BoardWorld(boards))
-        self.adopt(pa, queues=[self.queue], executors=[pa.executor], extras=extras)
-        assert self.runner is not None
-        self.messages.connect(self.runner.post)
+        self.adopt(pa, queues=[self.queue], executors=[pa.executor], extras=extras,
+                   where=self._where, ended=self._ended, status=pa.status_line)
         self.log_path: Path | None = None
         self._log_file: TextIO | None = None
         boards.poll(self.loop.now_ns)  # the encoders' counters now ride along
@@ -477,15 +439,6 @@ class ManipulatorStation(Station):
         if not notes:
             notes.append("encoders and lengths agree with POSITION (ZEROLENGTH and LENGTH kept)")
         return notes
-
-    def _report_stop(self, rec: StopRecord) -> None:
-        """Every stop is reported as it happens (asynchronous output), except
-        the one that ends a console's ``wait``: the wait reports that one."""
-        job = self.polyaxis.pattern_job
-        if self.waiters and len(self.motion) == 0 and (job is None or job.done):
-            self._unreported = rec
-            return
-        self.stdout.write(f"{self.polyaxis.name} stopped: {rec}\n")
 
     # -- faults ----------------------------------------------------------------------
 
@@ -536,27 +489,6 @@ class ManipulatorStation(Station):
         """The simulated sensors' seed (none on boards whose world runs elsewhere)."""
         return {"imperfections": int(self.plant.imp.seed)} if self.plant is not None else {}
 
-    def audit_log_path(self) -> Path:
-        """The audit log goes beside the databases."""
-        return Path(self.directory) / "audit.log"
-
-    def params_of(self, component: Component) -> list[Param]:
-        """A component's own parameters, and what the station holds for it: the
-        PolyAxis's MAX_TENSION and END_ERROR, each rope's fuzzy gains."""
-        out = super().params_of(component)
-        pa = self.polyaxis
-        if component is pa:
-            out += polyaxis_params(pa)
-        elif component in pa.axes:
-            out += axis_fuzzy_params(pa, pa.axes.index(component))
-        return out
-
-    def where(self) -> str:
-        """The source's estimated position (and that it is not trusted, when lost)."""
-        x, y, z = self.polyaxis.position
-        lost = "; position estimate not trusted" if self.polyaxis.estimate_lost else ""
-        return f"source at ({x:.2f}, {y:.2f}, {z:.2f}) cm{lost}"
-
     def busy(self) -> bool:
         """A move runs or waits, a pattern runs, or an axis moves on its own."""
         pa = self.polyaxis
@@ -568,9 +500,6 @@ class ManipulatorStation(Station):
         """Names of the motors that are stepping or have windings on."""
         return [a.motor.name for a in self.axes if a.motor.running]
 
-    def motion_robot(self) -> PolyAxis:
-        return self.polyaxis
-
     def check_motion(self, record: Any) -> None:
         pa = self.polyaxis
         job = pa.pattern_job
@@ -578,44 +507,35 @@ class ManipulatorStation(Station):
             raise CommandError(f"motion {record.type}: a pattern is running ('{pa.name} stop' "
                                "ends it); nothing moved")
 
-    def wait_refusal(self) -> str | None:
-        """``wait`` begins: remember the axes moving on their own, to report them."""
-        self._axis_moves = [a for a in self.axes
-                            if a.mode == "standalone" and a.motor.running]
-        return None
+    def _where(self) -> str:
+        """The source's estimated position (and that it is not trusted, when lost)."""
+        x, y, z = self.polyaxis.position
+        lost = "; position estimate not trusted" if self.polyaxis.estimate_lost else ""
+        return f"source at ({x:.2f}, {y:.2f}, {z:.2f}) cm{lost}"
 
-    def last_stop(self) -> str:
-        """How the last PolyAxis move ended (its stop record), '' before any."""
-        last = self.polyaxis.last_stop
-        return str(last) if last else ""
+    def _stopped(self, rec: StopRecord) -> None:
+        """The PolyAxis stopped (loop thread): the end of its move, said once."""
+        self.end_move(str(rec), [f"{self.polyaxis.name} stopped: {rec}"])
 
-    def idle_report(self) -> str:
-        last = self.polyaxis.last_stop
-        return f"nothing to wait for; last stop: {last}" if last else "nothing to wait for"
-
-    def wait_report(self) -> str:
-        """How the pattern, the axis moves or the PolyAxis move ended."""
+    def _ended(self) -> tuple[str, list[str]]:
+        """The manipulator went idle: how the pattern or the axes' own moves
+        ended ('' when the PolyAxis's stop has said it all)."""
         pa = self.polyaxis
         job = pa.pattern_job
-        lines = []
         if job is not None and job.done:
             pa.pattern_job = None
             if job.error is not None:
-                lines.append(f"error: pattern failed: {job.error}")
+                text = f"error: pattern failed: {job.error}"
             else:
-                lines.append(f"pattern finished: {len(job.result or [])} endpoints; log "
-                             f"{pa.pattern_log}")
-        moved, self._axis_moves = getattr(self, "_axis_moves", []), []
-        if moved and not pa.active and not lines:
-            for a in moved:
-                lines.append(f"{a.name}: move ended at length {a.length():.3f} cm")
-            return "\n".join(lines)
-        last, unreported, self._unreported = pa.last_stop, self._unreported, None
-        if last is None:
-            lines.append("ended")
-        elif unreported is last or not lines:  # said once: here, or above already
-            lines.append(f"{pa.name} stopped: {last}")
-        return "\n".join(lines)
+                text = f"pattern finished: {len(job.result or [])} endpoints; log {pa.pattern_log}"
+            return text, [text]
+        moved = [a for a in self.axes if a.moved]
+        for a in moved:
+            a.moved = False
+        if moved and not self.moves_this_period:
+            lines = [f"{a.name}: move ended at length {a.length():.3f} cm" for a in moved]
+            return lines[0], lines
+        return "", []
 
     # -- logging -------------------------------------------------------------------------
 
@@ -644,13 +564,6 @@ class ManipulatorStation(Station):
         return self.log_path if fh is not None else None
 
     # -- status and shutdown -------------------------------------------------------------
-
-    def status(self) -> str:
-        """The status line (position, distErr, residual force, tensions, time)."""
-        line = self.polyaxis.status_line()
-        if self.fault is not None:
-            line += f"  FAULT: {self.fault.cause}"
-        return line
 
     def status_fields(self) -> list[tuple[str, Signal, str]]:
         """STATUS: x y z distErr netForce moving fault, then tension0 ... per rope."""
@@ -681,16 +594,18 @@ class ManipulatorStation(Station):
                 for k, c in enumerate("xyz")]
 
     def closing_note(self) -> str:
+        """Where the source was left, and what became of the databases."""
+        here = super().closing_note()
         if self.fault is not None:
-            return (f"; databases in {self.directory} keep the values last written before "
-                    "the fault")
+            return (f"{here}; databases in {self.directory} keep the values last written "
+                    "before the fault")
         if self.boards is not None and self.boards.down is not None:
-            return f"; databases in {self.directory} keep the values last written"
+            return f"{here}; databases in {self.directory} keep the values last written"
         if self.polyaxis.estimate_lost is not None:
-            return (f"; databases written back in {self.directory}, except POSITION, LENGTH "
-                    "and ZEROLENGTH (the position estimate is not trusted: they keep the "
-                    "values last written before it was lost)")
-        return f"; databases written back in {self.directory}"
+            return (f"{here}; databases written back in {self.directory}, except POSITION, "
+                    "LENGTH and ZEROLENGTH (the position estimate is not trusted: they keep "
+                    "the values last written before it was lost)")
+        return f"{here}; databases written back in {self.directory}"
 
     def write_back(self) -> None:
         """Write pending database values, close the log (on the way out).
@@ -702,7 +617,7 @@ class ManipulatorStation(Station):
                 return
             self.writeback.poll(self.loop.now_ns + 10**12)
         except PyrtError as exc:  # the file keeps its last good value
-            self.stdout.write(f"database write-back refused at shutdown: {exc}\n")
+            self.say(f"database write-back refused at shutdown: {exc}", "error")
         finally:
             self.writeback.close()
             self.stop_log()
@@ -793,10 +708,6 @@ def _calibration_writer(wb: WriteBack, loadcell: str, loop: Loop, device: Any
                                date=device.date or None,
                                points=device.calibration_points or None)
     return write
-
-
-def _stderr_sink(line: str) -> None:  # pragma: no cover - used without a console
-    sys.stderr.write(line + "\n")
 
 
 # -- the factory: ``pyrt manipulator`` -----------------------------------------------------

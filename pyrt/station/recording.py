@@ -54,11 +54,10 @@ __all__ = ["LOOP_FAULT", "REPLAYED", "Recorder", "decode_request", "encode_reque
 #: and of a level (``enter_level``).  Nothing else is called from a journal: a
 #: journal from elsewhere names no method of one's choosing.
 REPLAYED = frozenset({
-    "execute", "submit_motion", "acknowledge", "after_acknowledge", "stop", "stop_all",
-    "set_param", "begin_wait", "end_wait", "enter_level", "reflex", "trip",
+    "execute", "submit_motion", "acknowledge", "stop", "stop_all",
+    "set_param", "watch_move", "enter_level", "reflex", "trip",
     # reads, replayed as they were made (they change nothing; a read that did would show)
-    "status", "status_fields", "busy", "param", "params_of", "idle_report", "wait_report",
-    "where", "last_stop", "wait_refusal",
+    "status", "status_fields", "busy", "param", "params_of", "where", "last_stop",
 })
 
 #: The event of a fault the loop itself declared (consecutive overruns): the

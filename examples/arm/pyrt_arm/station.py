@@ -50,13 +50,13 @@ from pyrt import (
     CommandError,
     Component,
     ConfigError,
-    Fault,
     Limits,
     Loop,
     MotionExecutor,
     MotionType,
     PyrtError,
     ReadyQueue,
+    ShellProfile,
     Signal,
     Station,
     StationFactory,
@@ -373,7 +373,7 @@ class ArmController(Component):
             try:
                 current.append(record.params)
             except CommandError as exc:
-                st.post(f"move refused: {exc}")
+                self.say(f"move refused: {exc}", "warning")
 
     def servo_tick(self, now_ns: int) -> None:
         """1 kHz: setpoint from the knots, each joint's servo law, the checks, settling."""
@@ -602,7 +602,7 @@ class ArmStation(Station):
         def done(motion: MotionType) -> None:
             reason = motion.stop_reason or "ended"
             if reason.startswith("refused"):
-                self.post(f"move {reason}")
+                ctl.say(f"move {reason}", "warning")
             ctl.motion_ended(reason)
 
         def error(cause: str, motion: MotionType) -> None:
@@ -614,62 +614,40 @@ class ArmStation(Station):
             extras.append(ArmSim(self.plant))
         elif boards.has_info:
             extras.append(BoardWorld(boards))
-        self.adopt(ctl, queues=[self.queue], executors=[self.executor], extras=extras)
+        self.adopt(ctl, queues=[self.queue], executors=[self.executor], extras=extras,
+                   where=ctl.where, ended=self._ended, status=self._status)
+        self.profile = ShellProfile(idle="nothing to wait for: arm idle at {where}")
 
-    def post(self, line: str) -> None:
-        """Say ``line`` to the operator (asynchronously), if the station runs."""
-        if self.runner is not None:
-            self.runner.post(line)
-
-    # -- what the shell, the server and EPICS ask -------------------------------------
+    # -- what the operator reads (given to adopt) --------------------------------------
 
     def busy(self) -> bool:
         """A move runs, waits, or the arm settles or brakes."""
         return super().busy() or self.controller.state != "idle"
 
-    def where(self) -> str:
-        return self.controller.where()
-
-    def last_stop(self) -> str:
-        return self.controller.last_stop
-
-    def idle_report(self) -> str:
-        return f"nothing to wait for: arm idle at {self.where()}"
-
-    def wait_report(self) -> str:
+    def _ended(self) -> tuple[str, list[str]]:
         """How the move ended: at target, stopped, did not settle, or the fault."""
         if self.fault is not None:
-            return f"FAULT: {self.fault.cause}; {self.where()}"
+            why = f"fault: {self.fault.cause}"
+            return why, [f"FAULT: {self.fault.cause}; {self.where()}"]
         why = self.controller.last_stop or "ended"
         if why == "at target":
-            return (f"at target (every joint within {AT_TARGET_DEG:g} deg): {self.where()}; "
-                    f"the true tip is within {TIP_TOLERANCE_MM:g} mm of it")
-        return f"{why}: {self.where()}"
+            return why, [f"at target (every joint within {AT_TARGET_DEG:g} deg): "
+                         f"{self.where()}; the true tip is within {TIP_TOLERANCE_MM:g} mm of it"]
+        return why, [f"{why}: {self.where()}"]
 
-    def status(self) -> str:
-        """One line: joints, tip, state, following errors (and the fault)."""
+    def _status(self) -> str:
+        """One line: joints, tip, state, following errors."""
         ctl = self.controller
         errs = (", following error " + ", ".join(f"{jt.servo.error_deg:+.4f}"
                                                   for jt in ctl.joints) + " deg"
                 if ctl.state != "idle" else ", amplifiers off")
-        line = f"{self.where()} (±{TIP_TOLERANCE_MM:g} mm at rest), {ctl.state}{errs}"
-        if self.fault is not None:
-            line += f"  FAULT: {self.fault.cause}"
-        return line
+        return f"{self.where()} (±{TIP_TOLERANCE_MM:g} mm at rest), {ctl.state}{errs}"
 
     def check_motion(self, record: Any) -> None:
         """Refuse a move while the arm brakes after a stop."""
         if self.controller.state == "braking":
             raise CommandError("arm: braking to rest after a stop: wait, then move; "
                                "nothing queued")
-
-    def trip(self, cause: str, source: str = "", tb: str = "") -> Fault:
-        """pyrt's one fault path; the arm remembers the first fault as how its move ended."""
-        first = self.fault is None
-        fault = super().trip(cause, source, tb)
-        if first:
-            self.controller.last_stop = f"fault: {fault.cause}"
-        return fault
 
     def stop(self) -> str:
         """The operator's stop: the move ended, queued moves dropped, the arm braked to rest
