@@ -164,6 +164,12 @@ def test_a_dead_epics_thread_is_a_fault_the_operator_sees(epics_env, monkeypatch
 
 # -- an audit trail that holds ------------------------------------------------------------------
 
+
+def _audit_lines(sv) -> list[str]:
+    """The served station's audit lines said since the last call (the runner's messages)."""
+    return [str(m) for m in sv.runner.messages() if str(m).startswith("remote: ")]
+
+
 EVIL_HOST = "ops\n2026-01-01 00:00:00,000 EPICS CMD: P 0000\x1b[2J\x1b]0;owned\x07"
 EVIL_USER = "root\r\x1b[31mforged"
 
@@ -176,13 +182,13 @@ def test_claimed_host_and_user_names_reach_the_audit_trail_escaped(epics_env, ca
 
     caplog.set_level(logging.INFO)
     with epics_served() as (sv, _ioc):
-        sv.rig.audit_lines()
+        _audit_lines(sv)  # what came before
         _ca_client([["POSITION", [5.0], False], ["CMD", "wrong P E47A", True]],
                    host=EVIL_HOST, user=EVIL_USER)
         audit: list[str] = []
         deadline = time.monotonic() + 10
         while len(audit) < 2 and time.monotonic() < deadline:  # both refusals, in any order
-            audit += [ln for ln in sv.rig.audit_lines() if "refused" in ln]
+            audit += [ln for ln in _audit_lines(sv) if "refused" in ln]
             time.sleep(0.05)
         assert len(audit) == 2, audit
         for ln in audit:
@@ -203,7 +209,7 @@ def test_wrong_token_writes_back_off_and_are_summarised(epics_env):
     backs off (even the right token is refused unread), one summary names the count and the
     address, and nothing ever ran."""
     with epics_served() as (sv, _ioc):
-        sv.rig.audit_lines()
+        _audit_lines(sv)  # what came before
         writes = [["CMD", f"guess-{i:04d}-abcdefghijkl P E47A", True] for i in range(WRONG_WRITES)]
         writes.append(["CMD", f"{TOKEN} X 33", True])
         results = _ca_client(writes, read_result=True)
@@ -213,7 +219,7 @@ def test_wrong_token_writes_back_off_and_are_summarised(epics_env):
         assert len(compared) <= 12, len(compared)  # the rest refused unread
         assert "too many refused writes from 127.0.0.1" in results[-1]  # the right token too
         sv.server.guard.flush(force=True)
-        audit = [ln for ln in sv.rig.audit_lines() if "refused" in ln or "failures" in ln]
+        audit = [ln for ln in _audit_lines(sv) if "refused" in ln or "failures" in ln]
         assert len(audit) <= 6, audit
         summary = [ln for ln in audit if "failures from 127.0.0.1" in ln]
         assert len(summary) == 1 and "EPICS write refused while backing off" in summary[0]

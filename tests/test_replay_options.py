@@ -56,5 +56,5 @@ def test_good_options_replay_and_write_the_file(tmp_path, name):
     done = _replay(tmp_path, str(GRIPPER), "--scope", "encoder,dac", "--scope-save", name)
     assert done.returncode == 0, done.stdout + done.stderr
     assert "identical" in done.stdout
-    assert f"saved 6636 samples of 2 channel(s) to {name}" in done.stdout
+    assert f"saved 5053 samples of 2 channel(s) to {name}" in done.stdout
     assert (tmp_path / name).is_file()
