@@ -34,6 +34,7 @@ from pyrt.native._neck import UPPER as NECK_UPPER
 from pyrt.native._neck import NeckRing, RopePath, ring_contact
 from pyrt.native._polyctl import PolyControl
 from pyrt.native._readyq import QueueChecker, native_dispatcher
+from pyrt.native._servo import Servo, ServoTrip, check_gains, gain_ranges, tuned_gains
 from pyrt.native._statics import StaticsSolver
 
 __all__ = [
@@ -56,18 +57,23 @@ __all__ = [
     "QueueChecker",
     "RopePath",
     "RopeSegments",
+    "Servo",
+    "ServoTrip",
     "SingularError",
     "SolverError",
     "StaticsSolver",
     "Status",
+    "check_gains",
     "excess128",
     "excess128_many",
     "find_position",
     "freeze_mask",
     "from_excess128",
     "fuzzy_step",
+    "gain_ranges",
     "native_dispatcher",
     "ring_contact",
     "rope_lengths",
     "rope_segments",
+    "tuned_gains",
 ]
