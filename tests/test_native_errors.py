@@ -171,6 +171,9 @@ THROUGH_WRAPPERS = {
     "pyrt_kin_mass_matrix": lambda: _chain().mass_matrix([NAN]),
     "pyrt_kin_forward_dynamics": lambda: _chain(masses=[0.0], inertias=[np.zeros((3, 3))]).
     forward_dynamics([0.0], None, [1.0]),
+    "pyrt_servo_reset": lambda: nat.Servo(1, 1e-3).reset([NAN]),
+    "pyrt_servo_load": lambda: nat.Servo(1, 1e-3).segment(0.01, [NAN], [0.0], [0.0], [0.0]),
+    "pyrt_servo_tick": lambda: nat.Servo(1, 1e-3).tick([NAN]),
 }
 
 #: Entry points whose only failure is a NULL pointer or a struct the wrapper

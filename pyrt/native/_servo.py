@@ -329,9 +329,7 @@ class Servo:
             self.q[...] = q
         c = self._c
         was = c.tripped
-        rc = self._tick(c)
-        if rc:
-            raise_for_status(rc, "servo tick", _tick_why)
+        raise_for_status(self._tick(c), "servo tick", _tick_why)
         if c.tripped and not was:
             return self.trip
         return None
