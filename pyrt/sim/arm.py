@@ -58,7 +58,7 @@ tests and the operator's ``sim`` words, never for control code.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from dataclasses import replace as _replace
 
@@ -69,10 +69,13 @@ from pyrt.boards.registers import OUTPUT, BoardKind, Register, RegisterBoard
 from pyrt.errors import ConfigError
 from pyrt.kinematics import GRAVITY, Chain, Inertial
 
+_solve: Callable[..., np.ndarray] = np.linalg.solve
 try:  # numpy's solver without the checks of np.linalg.solve (3x faster for 6 x 6)
-    from numpy.linalg._umath_linalg import solve1 as _solve
+    from numpy.linalg._umath_linalg import solve1 as _solve1
+
+    _solve = _solve1
 except ImportError:  # pragma: no cover - another numpy
-    _solve = np.linalg.solve
+    pass
 
 __all__ = [
     "DAC_FULL_SCALE",
@@ -326,7 +329,7 @@ class ArmWorld:
         self._noise = np.array([sn, sn, sn, st, st, st])
         self._ft_scale = self.ft.scale
         self._ft_offsets = np.array(self.ft.offsets, dtype=float)
-        self._counts = [None] * n
+        self._counts: list[int | None] = [None] * n
         self._armature = np.array([m.reflected_inertia for m in self.motors])
         self._nm_per_count = np.array([m.nm_per_count for m in self.motors])
         self._amps_per_count = np.array([m.amps_per_count for m in self.motors])
