@@ -122,7 +122,11 @@ class Evaluator:
         self._config = self.planner.config_of(q)
         self._equation: Any = None
         self._stop: tuple[str, Move | None] | None = None
-        self._sigma: tuple[int, float] | None = None  # (first sample, braking time)
+        #: While stopping: the rate at which the trajectory's time runs (1 -> 0).
+        self._sigma: float | None = None
+        self._vp: Vector | None = None
+        self._ap: Vector = np.zeros(chain.n)
+        self._first_brake = False
         self._events: list[tuple[str, Move]] = []
         self._mass = 0.0
         self._braked = False
@@ -268,13 +272,7 @@ class Evaluator:
             self.tracker.evaluate(tr, n_next)
         sigma = 1.0
         if self._sigma is not None:
-            m0, ts = self._sigma
-            x = (n_next - m0) * dt / ts
-            if x >= 1.0:
-                sigma = 0.0
-            else:
-                x = max(x, 0.0)
-                sigma = 1.0 - x * x * x * (10.0 - 15.0 * x + 6.0 * x * x)
+            sigma = self._brake_rate(dt)
         t_next = self._tp[-1] + sigma * dt
         q_next, t6_next = self._sample(t_next, n_next)
         if self._sigma is not None and sigma == 0.0:
@@ -304,6 +302,8 @@ class Evaluator:
             tau = -jac[:3].T @ (mass * np.asarray(GRAVITY))
         events = tuple(self._events)
         self._events.clear()
+        if self._sigma is None:
+            self._ap = qdd
         knot = Knot(n, knot_time, knot_q, qd, qdd, knot_t6, progress, move, events, dt,
                     mass, tau)
         if seg is not None and self._stop is None:
@@ -419,8 +419,37 @@ class Evaluator:
             self._pieces, self._k, self._segs = [brake], 0, []
             self._stop = None
             return
-        ts = float(np.max(1.875 * np.abs(v) / (0.45 * self.planner.amax)))
-        self._sigma = (self._n + 1, max(ts, 2 * dt))
+        self._sigma = 1.0
+        self._vp = v
+        self._first_brake = True
+
+    def _brake_rate(self, dt: float) -> float:
+        """The next sample's time rate while stopping: lowered as fast as the
+        joints' acceleration limits allow (a fifth in reserve), given the
+        path's velocity and acceleration estimated from the last samples."""
+        sig = self._sigma
+        assert sig is not None
+        q0, q1 = self._q
+        dtp = self._tp[-1] - self._tp[0]
+        amax = self.planner.amax
+        vp = self._vp if self._vp is not None else np.zeros_like(q1)
+        ap = self._ap
+        if dtp > 1e-4 and not self._first_brake:
+            v_new = (q1 - q0) / dtp
+            ap = np.clip((v_new - vp) / dtp, -amax, amax)
+            vp = v_new
+        self._first_brake = False
+        self._vp, self._ap = vp, ap
+        speed = np.abs(vp)
+        # the path's own acceleration against the motion uses up part of the limit
+        # (it is not counted on when it helps: it may end within the next tick)
+        against = np.maximum(-sig * sig * ap * np.sign(vp), 0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rate = np.where(speed > 1e-12, (0.8 * amax - against) / speed, np.inf)
+        r = max(float(np.min(rate)), 0.0)
+        out = max(0.0, sig - r * dt)
+        self._sigma = out
+        return out
 
     def _end_stop(self) -> None:
         self._sigma = None

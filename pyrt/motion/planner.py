@@ -32,6 +32,7 @@ polynomial added to the quartic (see ``docs/arm-motion.md``).
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -61,7 +62,7 @@ Vector = npt.NDArray[np.float64]
 #: Plan-time finite-difference step (s) for a state's velocity.
 _H = 1e-4
 #: How many times a plan is slowed and sampled again before it is refused.
-_TRIES = 14
+_TRIES = 20
 
 
 @dataclass(frozen=True)
@@ -155,10 +156,11 @@ class _Refused(Exception):
 
 
 class _Slow(Exception):
-    def __init__(self, where: str, what: str) -> None:
+    def __init__(self, where: str, what: str, ratio: float = 1.25) -> None:
         super().__init__(what)
         self.where = where
         self.what = what
+        self.ratio = max(ratio, 1.05)
 
 
 class Planner:
@@ -334,6 +336,7 @@ class Planner:
         tau_scale_in = tau_scale_out = 1.0
         t_guess = 0.0
         tau_guess = 0.0
+        last_slow: _Slow | None = None
         for _attempt in range(_TRIES):
             # -- the start state --------------------------------------------------------
             if how is BufferMode.BUFFERED:
@@ -446,8 +449,10 @@ class Planner:
                     v_in = self._incoming(last, kind, frames, r_c, p_c, tail)
                 else:
                     v_in = np.zeros_like(v_line)
-                tau_in = self._tau(kind, v_line - v_in) * tau_scale_in
-                tau_out = self._tau(kind, v_line) * tau_scale_out
+                q_end_guess = q_e if kind == JOINT else None
+                tau_in = self._tau(kind, v_line - v_in, q_s, frames) * tau_scale_in
+                tau_out = self._tau(kind, v_line, q_end_guess if q_end_guess is not None
+                                    else q_s, frames) * tau_scale_out
                 if spec.transition is not None:
                     need = max(tau_in, tau_out)
                     if spec.transition + 1e-12 < need / max(tau_scale_in, tau_scale_out):
@@ -492,20 +497,26 @@ class Planner:
             try:
                 self._check(seg, spec, tail, how)
             except _Slow as exc:
+                last_slow = exc
+                # a transition's joint acceleration is its own (1/tau) plus the
+                # curvature of the joints' path (1/T^2): stretch both
                 if exc.where == "in":
-                    tau_scale_in *= 1.25
+                    tau_scale_in *= exc.ratio
+                    slow /= math.sqrt(exc.ratio) if kind == CART else 1.0
                 elif exc.where == "out":
-                    tau_scale_out *= 1.25
+                    tau_scale_out *= exc.ratio
+                    slow /= math.sqrt(exc.ratio) if kind == CART else 1.0
                 elif exc.where == "blend":
                     # a slower new segment changes the velocity less at the corner
                     if how is not BufferMode.BLENDING or slow < 0.3:
                         raise
                     slow *= 0.7
                 else:
-                    slow *= 0.85
+                    slow /= exc.ratio
                 continue
             return seg
-        raise _Refused(f"cannot keep within the limits after slowing {_TRIES} times")
+        why = f": {last_slow.what}" if last_slow is not None else ""
+        raise _Refused(f"cannot keep within the limits after slowing {_TRIES} times{why}")
 
     # -- helpers --------------------------------------------------------------------------
     def _end_of(self, tail: Tail) -> tuple[Vector, Matrix]:
@@ -517,12 +528,23 @@ class Planner:
         assert last.t6_end is not None
         return last.q_end, last.t6_end
 
-    def _tau(self, kind: str, dv: Vector) -> float:
+    def _tau(self, kind: str, dv: Vector, q: Vector, frames: Frames) -> float:
+        """The least transition half-time for a velocity change ``dv`` (Paul's
+        quartic peaks at ``3 |dv| / (4 tau)``): in joint space the joint limits; in
+        drive space the Cartesian ones and the joints' (``dv`` mapped through the
+        Jacobian's pseudo-inverse at ``q``)."""
         if kind == JOINT:
             tau = float(np.max(0.75 * np.abs(dv) / self.amax))
         else:
             tau = max(0.75 * norm(dv[:3]) / self.limits.a_cart,
                       0.75 * norm(dv[3:]) / self.limits.alpha_cart)
+            pre = frames.parts(None)[0][:3, :3]
+            t6 = self.chain.fk(q)
+            tool = frames.tool(t6, None)
+            w = pre @ dv[3:]
+            v = pre @ dv[:3] - np.cross(w, tool[:3, 3] - t6[:3, 3])
+            qd = np.linalg.pinv(self.chain.jacobian(q)) @ np.concatenate([v, w])
+            tau = max(tau, 1.1 * float(np.max(0.75 * np.abs(qd) / self.amax)))
         return max(tau, 2e-3)
 
     def _incoming(self, last: Segment, kind: str, frames: Frames, r_c: Matrix | None,
@@ -546,17 +568,29 @@ class Planner:
         prev = q_s
         need = 0.0
         pose = np.eye(4)
+        steps: list[Vector] = []
         for i in range(1, k + 1):
             x = x_s + delta * (i / k)
             t6 = frames.t6(pose_of(x, r_c, p_c, pose), sample)
             got = self.solve(t6, q, config)
+            tool = frames.tool(t6, sample)[:3, 3] * 1e3
+            where = f"{100 * i / k:.0f}% of the segment (tool at {tool.round(1).tolist()} mm)"
+            sv = np.linalg.svd(self.chain.jacobian(q if got is None else got),
+                               compute_uv=False)[-1]
+            if sv < self.limits.singular:
+                raise _Refused(f"the line passes a singularity at {where}: smallest singular "
+                               f"value {sv:.2g}, q = {np.degrees(q).round(1).tolist()} deg")
             if got is None:
-                tool = frames.tool(t6, sample)[:3, 3] * 1e3
-                raise _Refused(f"the line leaves the arm's reach at {100 * i / k:.0f}% "
-                               f"(tool at {tool.round(1).tolist()} mm): "
+                raise _Refused(f"the line leaves the arm's reach at {where}: "
                                f"{self.why(t6, q, config)}")
             need = max(need, float(np.max(np.abs(got - prev) * k / (speed * self.vmax))))
+            steps.append(got - prev)
             prev = q = got
+        # the joints' path curves: its acceleration at constant speed along the line
+        # (d2q/dr2 / T^2) kept to half the limit, the other half for the transitions
+        for a, b in itertools.pairwise(steps):
+            curv = np.abs(b - a) * k * k
+            need = max(need, math.sqrt(float(np.max(curv / (0.5 * self.amax)))))
         return need
 
     def _tool_travel(self, q_s: Vector, q_e: Vector, frames: Frames) -> tuple[float, float]:
@@ -677,12 +711,16 @@ class Planner:
                         raise _Refused(f"the path passes a singularity at {frac:.0f}% of the "
                                        f"segment: joint {chain.joints[j].name} would jump "
                                        f"{math.degrees(abs(q[j] - q_prev[j])):.0f} deg")
-                    raise _Slow(where, f"joint {chain.joints[j].name} over its velocity limit")
+                    raise _Slow(where, f"joint {chain.joints[j].name} over its velocity limit "
+                                f"at {frac:.0f}% of the segment",
+                                1.02 * float(np.abs(qd)[j] / self.vmax[j]))
                 over_a = np.abs(qdd) > self.amax
                 if over_a.any():
                     j = int(np.argmax(np.abs(qdd) / self.amax))
+                    ratio = float(np.abs(qdd)[j] / self.amax[j])
                     raise _Slow(where, f"joint {chain.joints[j].name} over its acceleration "
-                                f"limit")
+                                f"limit at {frac:.0f}% of the segment",
+                                1.02 * (ratio if where != "line" else math.sqrt(ratio)))
             if spec.max_diff is not None and q_prev is not None:
                 a = seg.frames.tool(chain.fk(q_prev), n)
                 b = seg.frames.tool(chain.fk(q), n)
