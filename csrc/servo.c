@@ -185,10 +185,10 @@ int pyrt_servo_tick(pyrt_servo *s)
         frac = 1.0;
         held = 1;
     } else {
-        if ((double)s->ticks * dt < s->duration + 0.5 * dt) {
+        t = (double)s->ticks * dt;
+        if (t < s->duration + 0.5 * dt) {
             s->ticks += 1;
         }
-        t = (double)s->ticks * dt;
         held = t > s->duration + 0.5 * dt;
         if (held) {
             if (s->late < INT32_MAX) {

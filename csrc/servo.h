@@ -5,12 +5,15 @@
  * Interpolation.  The trajectory hands the servo one segment at a time, from
  * knot A (now) to knot B (duration later): position, velocity and
  * acceleration at both ends give a quintic per joint, position and velocity
- * alone a cubic.  Each tick first advances the segment clock by one period,
- * then evaluates the polynomial there, so the ticks of a segment of k
- * periods evaluate 1/k .. k/k of it and the last one lands on knot B.  Past
- * the end (the trajectory did not bring the next segment in time) the
- * reference holds knot B's position with zero velocity and acceleration and
- * the late counter counts the ticks: a reference is never extrapolated.
+ * alone a cubic.  A tick evaluates the polynomial at the segment's clock,
+ * then advances the clock by one period: the reference is where the joint
+ * should be at the instant it is measured, so the ticks of a segment of k
+ * periods evaluate 0/k .. (k-1)/k of it and the next segment's first tick
+ * is knot B (its knot A).  A tick that finds the clock at the end evaluates
+ * knot B; past it (the trajectory did not bring the next segment in time)
+ * the reference holds knot B's position with zero velocity and
+ * acceleration and the late counter counts the ticks: a reference is never
+ * extrapolated.
  *
  * Feed-forward.  The rigid-body torque (gravity, inertia, Coriolis: the
  * chain's inverse dynamics) is given with the segment at both knots and

@@ -81,9 +81,9 @@ class RefServo:
         if self.order == 0:
             t, frac, held = 0.0, 1.0, True
         else:
-            if self.ticks * dt < self.duration + 0.5 * dt:
-                self.ticks += 1
             t = self.ticks * dt
+            if t < self.duration + 0.5 * dt:
+                self.ticks += 1
             held = t > self.duration + 0.5 * dt
             if held:
                 self.late += 1
