@@ -162,16 +162,21 @@ class UrdfArm(Component):
         self.joints = tuple(ArmJoint(self, i) for i in range(n))
         # encoders: where each counter is in the board's snapshot, counts per unit
         layout = [(r.name, i) for r in board.kind.inputs() for i in range(r.count)]
-        self._at_count = [layout.index(("count", j)) for j in range(n)]
+        at = [layout.index(("count", j)) for j in range(n)]
+        if at != list(range(at[0], at[0] + n)):  # pragma: no cover - the kind declares them so
+            raise ValueError("the board's encoder counters are not one block of its inputs")
+        self._count_slice = slice(at[0], at[0] + n)
         self._cpu = np.array([d.counts_per_unit for d in self.drives])
         self._nm_per_count = np.array([d.nm_per_count for d in self.drives])
+        # the counters as last read and their unwrapped totals (int64: no wrap here)
         self._counts = [int(board.read("count", j)) for j in range(n)]
-        self._turns = [0] * n
+        self._total = list(self._counts)
         #: The measured joints (rad, m), from the encoders (unwrapped).
         self.q = np.zeros(n)
-        self._measure_all()
+        self._measure(self._counts)
         #: The DAC values last written.
         self.dac = [0] * n
+        self._dac_buf = np.zeros(n)
         effort = np.array([j.effort if math.isfinite(j.effort) and j.effort > 0
                            else d.nm_per_count * DAC_FULL_SCALE
                            for j, d in zip(joints, self.drives, strict=True)])
@@ -204,9 +209,13 @@ class UrdfArm(Component):
         self._ff = np.zeros(n)
         self._knot_q = np.zeros(n)
         self._records: list[Command] | None = None
-        margin = np.where(self.prismatic, LIMIT_MARGIN_DEG * 1e-3, math.radians(LIMIT_MARGIN_DEG))
-        self._lo_m = chain.lower - margin
-        self._hi_m = chain.upper + margin
+        self._margin = np.where(self.prismatic, LIMIT_MARGIN_DEG * 1e-3,
+                                math.radians(LIMIT_MARGIN_DEG))
+        #: Where the measured joints may go before that is a fault (the limits and a
+        #: margin; from where the arm lay, while it is brought back inside them).
+        self._lo_m = chain.lower - self._margin
+        self._hi_m = chain.upper + self._margin
+        self._recover_until: int | None = None
         #: The servo closes the loop by itself once, at the first servo tick.
         self._started = False
 
@@ -281,19 +290,21 @@ class UrdfArm(Component):
 
     # -- where it is ------------------------------------------------------------------
 
-    def _measure_all(self) -> None:
-        for j in range(self.n):
-            self._measure(j, int(self.board.read("count", j)))
-
-    def _measure(self, j: int, count: int) -> None:
-        last = self._counts[j]
-        if count != last:
-            step = ((count - last + _TWO31) % _TWO32) - _TWO31
-            if (last + step) != count:  # the counter wrapped
-                self._turns[j] += 1 if step > 0 else -1
-            self._counts[j] = count
-        total = count + self._turns[j] * _TWO32
-        self.q[j] = (total + 0.5) / self._cpu[j]
+    def _measure(self, counts: Sequence[int]) -> None:
+        """The joints from this tick's ``counts``: each counter's step since the last
+        read taken modulo 2^32 (a 32-bit counter wraps), the middle of the count."""
+        last, total = self._counts, self._total
+        for j, c in enumerate(counts):
+            d = c - last[j]
+            if d:
+                if not -_TWO31 <= d < _TWO31:
+                    d = ((d + _TWO31) % _TWO32) - _TWO31
+                total[j] += d
+                last[j] = c
+        q = self.q
+        q[:] = total
+        q += 0.5
+        q /= self._cpu
 
     def tool(self) -> np.ndarray:
         """The tool pose the encoders give (4, 4; m)."""
@@ -336,6 +347,22 @@ class UrdfArm(Component):
         self._ff[:] = ff
         start = np.clip(q, self.chain.lower, self.chain.upper)
         self.evaluator = Evaluator(self.chain, self.limits, start, period=self.traj_period_s)
+        margin = self._margin
+        self._lo_m = np.minimum(self.chain.lower, q) - margin
+        self._hi_m = np.maximum(self.chain.upper, q) + margin
+        self._recover_until = None
+        out = np.abs(start - q)
+        if out.any():
+            # lying beyond a limit (sunk onto an end stop while the amplifiers were
+            # off): first back inside, a quintic at half the acceleration limits,
+            # before the trajectory's knots begin
+            amax = np.array(self.limits.amax)
+            t = max(0.2, float(np.max(np.sqrt(5.77 * out / (0.5 * amax)))))
+            t = math.ceil(t / self.traj_period_s) * self.traj_period_s
+            zero = np.zeros(self.n)
+            self.servo.segment(t, q, zero, start, zero, zero, zero, ff,
+                               self.chain.gravity_torque(start))
+            self._recover_until = self._now_ns + round(t * 1e9)
         for j in range(self.n):
             self.dac[j] = 0
             self.board.write("dac", 0, j)
@@ -347,8 +374,7 @@ class UrdfArm(Component):
         """1 kHz: the encoders, the servo law, the DACs; the checks; settling."""
         self._now_ns = now_ns
         inputs = self.board.snapshot()  # one read of every input: this tick's
-        for j, at in enumerate(self._at_count):
-            self._measure(j, inputs[at])
+        self._measure(inputs[self._count_slice])
         if not self.powered:
             if self.evaluator is None and self.station.fault is None and not self._started:
                 self._started = True
@@ -371,14 +397,17 @@ class UrdfArm(Component):
                       f"limits {jt.lower * k:.3f} .. {jt.upper * k:.3f} {self.units[j]}",
                       self.joints[j].name)
             return
-        counts = np.rint(servo.tau / self._nm_per_count)
-        np.clip(counts, -DAC_FULL_SCALE, DAC_FULL_SCALE, out=counts)
+        counts = self._dac_buf
+        np.divide(servo.tau, self._nm_per_count, out=counts)
+        np.rint(counts, out=counts)
+        np.minimum(counts, DAC_FULL_SCALE, out=counts)
+        np.maximum(counts, -DAC_FULL_SCALE, out=counts)
         dac = self.dac
-        board = self.board
+        write = self.board.write
         for j, c in enumerate(counts.tolist()):
             v = int(c)
             if v != dac[j]:
-                board.write("dac", v, j)
+                write("dac", v, j)
                 dac[j] = v
         if self.state == "settling":
             self._settle(now_ns)
@@ -412,6 +441,12 @@ class UrdfArm(Component):
         ev = self.evaluator
         if not self.powered or ev is None:
             return
+        if self._recover_until is not None:
+            if now_ns < self._recover_until:
+                return
+            self._recover_until = None
+            self._lo_m = self.chain.lower - self._margin
+            self._hi_m = self.chain.upper + self._margin
         try:
             knot = ev.tick()
         except MotionFault as exc:

@@ -73,11 +73,21 @@ def load_arm(path: str | Path | None) -> tuple[Chain, tuple[Motor, ...], str]:
     if chain.n == 6:
         with contextlib.suppress(ValueError):
             chain = chain.replace(closed_form=PaulInverse.for_chain(chain))
-            if path is None or Path(path).resolve() == PUMA_URDF.resolve():
+            if text == _packaged_puma():  # the packaged PUMA, wherever it was read from
                 motors = PUMA560_MOTORS
     if motors is None:
         motors = default_motors(chain)
     return chain, motors, text
+
+
+def _packaged_puma() -> str:
+    global _PUMA_TEXT
+    if _PUMA_TEXT is None:
+        _PUMA_TEXT = PUMA_URDF.read_text(encoding="utf-8")
+    return _PUMA_TEXT
+
+
+_PUMA_TEXT: str | None = None
 
 
 def _robot_name(chain: Chain) -> str:
