@@ -16,6 +16,7 @@ from pyrt.native import Servo, ServoTrip, gain_ranges, tuned_gains
 from pyrt.sim.arm import (
     DAC_FULL_SCALE,
     PUMA560_MOTORS,
+    ArmPlant,
     ArmWorld,
     FTCalibration,
     Motor,
@@ -170,6 +171,37 @@ def test_dac_gives_current_and_torque_in_real_units():
     assert t.torque[1] == pytest.approx(m.kt * m.gear * t.current[1])
     assert t.torque[1] == pytest.approx(EFFORT[1] * 16384 / 32767)
     assert t.current[2] == 0.0 and t.torque[2] == 0.0
+
+
+def test_a_motor_stronger_than_the_effort_is_clamped_at_it():
+    """Full scale of a motor twice the joint's effort gives the URDF's effort, no more."""
+    strong = [Motor(kt=m.kt, gear=m.gear, rotor_inertia=m.rotor_inertia,
+                    max_current=2 * m.max_current) for m in PUMA560_MOTORS]
+    w = ArmWorld(CHAIN, motors=strong, q0=Q0)
+    w.board.write("enable", 1, 0)
+    w.board.write("dac", -DAC_FULL_SCALE, 0)
+    w.step(PERIOD)
+    assert w.truth().torque[0] == -EFFORT[0]
+
+
+def test_the_arm_plays_a_world_behind_sim_boards():
+    """On boards opened with sim: from arm_board_kind, ArmPlant steps the arm by the time that
+    passed, and the world's watchdog turns every DAC and enable off."""
+    from pyrt.boards import open_boards
+    from pyrt.sim.world import World
+
+    boards = open_boards("sim:", "puma560", {"arm": arm_board_kind(6)})
+    arm = puma(board=boards["arm"])
+    world = World("puma560", boards, ArmPlant(arm))
+    world.step(0)
+    world.step(5_000_000)
+    assert arm.time == pytest.approx(0.005)
+    assert "q2" in world.info() and "z" in world.info()
+    board = boards["arm"]
+    board.write("dac", 1000, 3)
+    board.write("enable", 1, 3)
+    world.outputs_off()
+    assert board.values("dac") == [0] * 6 and board.values("enable") == [0] * 6
 
 
 def test_encoder_counter_wraps_as_a_32_bit_counter():

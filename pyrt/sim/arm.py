@@ -81,6 +81,7 @@ __all__ = [
     "DAC_FULL_SCALE",
     "FT_CHANNELS",
     "PUMA560_MOTORS",
+    "ArmPlant",
     "ArmTruth",
     "ArmWorld",
     "FTCalibration",
@@ -332,6 +333,9 @@ class ArmWorld:
         self._counts: list[int | None] = [None] * n
         self._armature = np.array([m.reflected_inertia for m in self.motors])
         self._nm_per_count = np.array([m.nm_per_count for m in self.motors])
+        # a motor stronger than the joint's effort is limited to it (URDF's <limit effort>)
+        self._effort = np.array([min(m.torque_limit, j.effort if j.effort > 0 else math.inf)
+                                 for m, j in zip(self.motors, chain.joints, strict=True)])
         self._amps_per_count = np.array([m.amps_per_count for m in self.motors])
         self._cpr = np.array([m.counts_per_joint_rev for m in self.motors]) / (2.0 * math.pi)
         margin = float(stop_margin)
@@ -415,7 +419,8 @@ class ArmWorld:
         dac = np.array(b.values("dac"), dtype=float)
         on = np.array(b.values("enable"), dtype=bool)
         self._current = np.where(on, dac * self._amps_per_count, 0.0)
-        self._torque = np.where(on, dac * self._nm_per_count, 0.0)
+        np.clip(np.where(on, dac * self._nm_per_count, 0.0), -self._effort, self._effort,
+                out=self._torque)
         k = max(1, math.ceil(dt / self.max_step - 1e-9))
         h = dt / k
         for _ in range(k):
@@ -563,3 +568,23 @@ class ArmWorld:
         out["table"] = "none" if self.table_z is None else f"{self.table_z * 1e3:.1f}"
         out["payload"] = f"{self.payload:g}"
         return out
+
+
+class ArmPlant:
+    """An :class:`ArmWorld` as a :class:`pyrt.sim.world.World`'s plant:
+    ``step(now_ns)`` advances it by the time since the last call (none on
+    the first), ``info()`` is its truth in words."""
+
+    def __init__(self, world: ArmWorld):
+        self.world = world
+        self._last_ns: int | None = None
+
+    def step(self, now_ns: int) -> None:
+        """Advance the arm to ``now_ns`` (dt = now - last)."""
+        last, self._last_ns = self._last_ns, now_ns
+        if last is not None and now_ns > last:
+            self.world.step((now_ns - last) * 1e-9)
+
+    def info(self) -> dict[str, object]:
+        """The world's truth for ``sim show`` and board-sim's INFO."""
+        return self.world.info()
