@@ -331,6 +331,10 @@ class ArmWorld:
         self._ft_scale = self.ft.scale
         self._ft_offsets = np.array(self.ft.offsets, dtype=float)
         self._counts: list[int | None] = [None] * n
+        self._noise_block = np.zeros((0, 6))
+        self._noise_i = 0
+        self._dac_in: list[int] = []
+        self._on_in: list[int] = []
         self._armature = np.array([m.reflected_inertia for m in self.motors])
         self._nm_per_count = np.array([m.nm_per_count for m in self.motors])
         # a motor stronger than the joint's effort is limited to it (URDF's <limit effort>)
@@ -416,11 +420,12 @@ class ArmWorld:
         if dt == 0:
             return
         b = self.board
-        dac = np.array(b.values("dac"), dtype=float)
-        on = np.array(b.values("enable"), dtype=bool)
-        self._current = np.where(on, dac * self._amps_per_count, 0.0)
-        np.clip(np.where(on, dac * self._nm_per_count, 0.0), -self._effort, self._effort,
-                out=self._torque)
+        dac, on = b.values("dac"), b.values("enable")
+        if dac != self._dac_in or on != self._on_in:  # the amplifiers' new currents
+            self._dac_in, self._on_in = dac, on
+            d = np.array(dac, dtype=float) * np.array(on, dtype=bool)
+            self._current = d * self._amps_per_count
+            np.clip(d * self._nm_per_count, -self._effort, self._effort, out=self._torque)
         k = max(1, math.ceil(dt / self.max_step - 1e-9))
         h = dt / k
         for _ in range(k):
@@ -528,8 +533,12 @@ class ArmWorld:
         else:
             self._contact[:] = 0.0
             self._wrench[:] = 0.0
-        counts = np.rint((self._wrench + self._rng.standard_normal(6) * self._noise)
-                         * self._ft_scale) + self._ft_offsets
+        if self._noise_i == len(self._noise_block):  # the noise drawn 256 samples at a time
+            self._noise_block = self._rng.standard_normal((256, 6)) * self._noise
+            self._noise_i = 0
+        noise = self._noise_block[self._noise_i]
+        self._noise_i += 1
+        counts = np.rint((self._wrench + noise) * self._ft_scale) + self._ft_offsets
         lo, hi = _INT32
         for k, c in enumerate(counts.tolist()):
             b.set_input("ft", int(min(max(c, lo), hi)), k)
