@@ -125,6 +125,21 @@ def test_the_table_pushes_back_with_its_stiffness():
     assert t.tip[2] == pytest.approx(z - t.contact[2] / w.table_stiffness, abs=2e-5)
 
 
+def test_the_table_resists_sliding_with_its_friction():
+    """The tip sliding along the table at 0.1 m/s meets a tangential force of mu times the normal
+    force, against its velocity."""
+    w = puma(tip=(0.0, 0.0, 0.1))
+    w.set_table(float(w.truth().tip[2]) + 0.002)
+    jac = CHAIN.jacobian(Q0)
+    r = CHAIN.fk(Q0)[:3, :3] @ np.array([0.0, 0.0, 0.1])
+    jt = jac[:3] - np.cross(r, jac[3:].T).T           # the tip's linear Jacobian
+    w.set_state(Q0, np.linalg.pinv(jt) @ np.array([0.1, 0.0, 0.0]))
+    f = w.truth().contact
+    assert f[2] == pytest.approx(100.0, rel=1e-6)
+    assert f[0] == pytest.approx(-w.table_friction * f[2], rel=1e-6)
+    assert abs(f[1]) < 1e-6 * f[2]
+
+
 def test_ft_sensor_reads_the_contact_in_its_frame():
     """The wrist sensor's registers, through its calibration, read the table's force turned
     into the tool frame and its moment about the sensor (tip x f), within the noise."""
