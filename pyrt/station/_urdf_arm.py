@@ -69,7 +69,7 @@ FOLLOWING_ERROR_DEG = 2.0
 #: A move has ended "at target" when every joint's following error is this small (deg / mm) ...
 AT_TARGET_DEG = 0.005
 #: ... and its measured speed below this (deg/s, mm/s) ...
-SETTLED_SPEED_DEG_S = 0.5
+SETTLED_SPEED_DEG_S = 2.0
 #: ... for this long (s).
 SETTLE_S = 0.03
 #: The longest the servo waits for the arm to settle after the trajectory ended (s).
@@ -480,6 +480,10 @@ class UrdfArm(Component):
 
     def _queue(self, q: np.ndarray, what: str) -> str:
         """Queue a joint move to ``q`` (rad, m); refused with the reason, nothing moved."""
+        fault = self.station.fault
+        if fault is not None:
+            raise CommandError(f"{self.name} {what}: refused: stopped by a fault ({fault.cause});"
+                               " give 'ack' first; nothing moved")
         why = self.chain.limit_violation(q)
         if why:
             raise CommandError(f"{self.name} {what}: refused: the target is beyond a joint "
@@ -541,16 +545,17 @@ class UrdfArm(Component):
         if config is not None:
             if closed is None:
                 raise CommandError(f"{self.name} moveto: {chain.name} has no closed-form "
-                                   "inverse with named configurations; leave CONFIG out")
+                                   "inverse with named configurations; leave CONFIG out; "
+                                   "nothing moved")
             from pyrt.kinematics.puma import parse_config
 
             try:
                 cfg = parse_config(config)
             except ValueError as exc:
-                raise CommandError(f"{self.name} moveto: {exc}") from None
+                raise CommandError(f"{self.name} moveto: {exc}; nothing moved") from None
             if cfg not in closed.configurations:
                 raise CommandError(f"{self.name} moveto: {config!r} is not one of "
-                                   f"{', '.join(closed.configurations)}")
+                                   f"{', '.join(closed.configurations)}; nothing moved")
             q = closed.solve(target, cfg)
             if q is None:
                 why = getattr(closed, "reason", lambda t, c: None)(target, cfg)
