@@ -33,11 +33,12 @@ RZ fixed-axis, about the base's x, then y, then z: URDF's ``rpy``).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pyrt.boards.armservo import DAC_FULL_SCALE
 from pyrt.component import Arg, Command, Component, Limits, Signal, command, records_of
@@ -185,7 +186,8 @@ class UrdfArm(Component):
         inertia = self._inertia_bound(armature)
         felim = np.array([math.radians(FOLLOWING_ERROR_DEG) if not p
                           else FOLLOWING_ERROR_DEG * 1e-3 for p in self.prismatic])
-        gains = tuned_gains(inertia, effort, self.period_s, SERVO_BANDWIDTH_HZ)
+        gains: dict[str, ArrayLike] = dict(tuned_gains(inertia, effort, self.period_s,
+                                                       SERVO_BANDWIDTH_HZ))
         gains["felim"] = felim
         gains["ka"] = armature
         gains["kv"] = np.array([j.damping for j in joints])
@@ -246,16 +248,14 @@ class UrdfArm(Component):
     def signals(self) -> list[Signal]:
         out = []
         for i in range(self.n):
-            k = float(self.scales[i])
-            out.append(Signal(f"q{i + 1}", self.units[i],
-                              (lambda i=i, k=k: float(self.q[i]) * k),
+            out.append(Signal(f"q{i + 1}", self.units[i], self._joint_reader(i),
                               f"joint {self.chain.joints[i].name} (encoder)", ".4f",
                               limits=self.joint_limits(i)))
         for c, axis in enumerate("xyz"):
-            out.append(Signal(axis, "mm", (lambda c=c: float(self.tool()[c, 3]) * 1e3),
-                              f"tool {axis} (encoders)", ".3f"))
+            out.append(Signal(axis, "mm", self._tool_reader(c), f"tool {axis} (encoders)",
+                              ".3f"))
         for c, axis in enumerate(("rx", "ry", "rz")):
-            out.append(Signal(axis, "deg", (lambda c=c: math.degrees(rpy_of(self.tool())[c])),
+            out.append(Signal(axis, "deg", self._tool_reader(3 + c),
                               f"tool rotation about the base's {axis[1]} (encoders; URDF rpy)",
                               ".3f"))
         out.append(Signal("moving", "bool", lambda: self.state != "idle",
@@ -263,6 +263,16 @@ class UrdfArm(Component):
         out.append(Signal("powered", "bool", lambda: self.powered,
                           "the amplifiers are enabled (the servo holds the arm)", "d"))
         return out
+
+    def _joint_reader(self, i: int) -> Callable[[], float]:
+        k = float(self.scales[i])
+        return lambda: float(self.q[i]) * k
+
+    def _tool_reader(self, c: int) -> Callable[[], float]:
+        """Tool x y z (mm) for c = 0 1 2, rx ry rz (deg) for c = 3 4 5."""
+        if c < 3:
+            return lambda: float(self.tool()[c, 3]) * 1e3
+        return lambda: math.degrees(rpy_of(self.tool())[c - 3])
 
     def children(self) -> list[Component]:
         return list(self.joints)

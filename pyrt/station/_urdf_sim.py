@@ -12,6 +12,7 @@ in process: its truth (``sim show``, the signals ``sim.x`` ...) and the table
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -54,19 +55,29 @@ class UrdfSim(Component):
         self._units = ["mm" if j.kind == "prismatic" else "deg" for j in chain.joints]
 
     def signals(self) -> list[Signal]:
-        arm = self.arm
-        out = [Signal(f"q{i + 1}", u, (lambda i=i, k=k: float(arm._q[i]) * k),
-                      f"true joint {j.name}", ".4f")
-               for i, (j, k, u) in enumerate(zip(arm.chain.joints, self._scales, self._units,
-                                                 strict=True))]
-        out += [Signal(axis, "mm", (lambda c=c: float(arm.truth().tool[c, 3]) * 1e3),
-                       f"true tool {axis}", ".3f") for c, axis in enumerate("xyz")]
-        out += [Signal(axis, "deg", (lambda c=c: math.degrees(rpy_of(arm.truth().tool)[c])),
+        chain = self.arm.chain
+        out = [Signal(f"q{i + 1}", u, self._reader(i), f"true joint {j.name}", ".4f")
+               for i, (j, u) in enumerate(zip(chain.joints, self._units, strict=True))]
+        out += [Signal(axis, "mm", self._reader(-1 - c), f"true tool {axis}", ".3f")
+                for c, axis in enumerate("xyz")]
+        out += [Signal(axis, "deg", self._reader(-4 - c),
                        f"true tool rotation about the base's {axis[1]}", ".3f")
                 for c, axis in enumerate(("rx", "ry", "rz"))]
-        out.append(Signal("fz", "N", lambda: float(arm.truth().contact[2]),
+        out.append(Signal("fz", "N", lambda: float(self.arm.truth().contact[2]),
                           "the table's force on the tool (world z)", ".3f"))
         return out
+
+    def _reader(self, i: int) -> Callable[[], float]:
+        """Joint i (i >= 0, operator units); tool x y z (mm) for -1 -2 -3, rx ry rz (deg)
+        for -4 -5 -6."""
+        arm = self.arm
+        if i >= 0:
+            k = self._scales[i]
+            return lambda: float(arm.truth().q[i]) * k
+        c = -1 - i
+        if c < 3:
+            return lambda: float(arm.truth().tool[c, 3]) * 1e3
+        return lambda: math.degrees(rpy_of(arm.truth().tool)[c - 3])
 
     @command(name="show", reads_only=True)
     def show(self) -> str:

@@ -34,6 +34,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pyrt.boards import Boards, open_boards
 from pyrt.boards.armservo import arm_servo_kind
@@ -111,7 +112,7 @@ def _drives(motors: Sequence[Motor]) -> tuple[Drive, ...]:
 
 
 def arm_world(boards: Boards, chain: Chain, motors: Sequence[Motor],
-              start: Sequence[float] | None = None) -> World:
+              start: ArrayLike | None = None) -> World:
     """The simulated arm behind ``boards`` (in process), starting at rest at
     ``start`` (rad, m; default :func:`default_start`)."""
     q0 = default_start(chain) if start is None else np.asarray(start, dtype=float)
@@ -189,7 +190,7 @@ class UrdfStation(Station):
 
 
 def build_urdf(loop: Loop, urdf: str | Path | None = None, *, boards: str | None = None,
-               start: Sequence[float] | None = None) -> UrdfStation:
+               start: ArrayLike | None = None) -> UrdfStation:
     """The arm of ``urdf`` (None: the packaged PUMA 560) on ``loop``, not yet
     started.  ``boards`` the board URL (default ``sim:``); ``start`` the
     simulated arm's joints (rad, m; in-process boards only).  ConfigError for
