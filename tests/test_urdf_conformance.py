@@ -67,6 +67,9 @@ def _urdf_rules(monkeypatch):
     monkeypatch.setattr(conf, "_driven", _urdf_driven)
     monkeypatch.setattr(conf, "_settings", _urdf_settings)
     monkeypatch.setitem(conf._SAMPLES, "UrdfSim.table", [["-2000"], ["off"]])
+    for frame in ("tool", "coord"):
+        monkeypatch.setitem(conf._SAMPLES, f"UrdfArm.{frame}", [["0", "0", "50", "0", "0", "0"],
+                                                                 ["0"] * 6])
 
 
 @pytest.fixture

@@ -307,3 +307,62 @@ def test_any_urdf_runs_without_code(tmp_path):
     m = re.search(r"true joints ([-\d.]+) ([-\d.]+);", done.stdout)
     assert m, done.stdout
     assert abs(float(m.group(1)) - 30) < 0.05 and abs(float(m.group(2)) + 40) < 0.05
+
+
+# -- movel, tool and coord (the motion layer's Cartesian segments) -----------------------
+
+
+def _dist_to_line(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    ab = b - a
+    s = min(max(float((p - a) @ ab) / float(ab @ ab), 0.0), 1.0)
+    return float(np.linalg.norm(p - (a + s * ab)))
+
+
+@pytest.mark.parametrize("line", [((500, 100, 400, 180, 0, 90), (500, -150, 450, 180, 0, 90)),
+                                  ((450, -150, 500, 170, 10, 45), (600, 50, 350, 180, -10, 90))])
+def test_movel_keeps_the_true_tool_on_the_line_and_ends_at_the_target(puma, line):
+    """movel: at every servo tick the simulated true tool lies within 1 mm of the straight line, and it ends within 0.5 mm and 0.1 deg of the target."""
+    station, runner = puma
+    start, end = line
+    rec = station.arm.find_command("moveto")
+    words = [str(v) for v in start]
+    runner.call(station.execute, station.arm, rec, rec.parse(words, " ".join(words)))
+    _settle(station, runner)
+    a = runner.call(lambda: station.plant.truth().tool[:3, 3].copy())
+    b = _target(*end)[:3, 3]
+    worst = [0.0]
+
+    def watch() -> bool:
+        p = station.plant.truth().tool[:3, 3]
+        worst[0] = max(worst[0], _dist_to_line(p, a, b))
+        return not station.busy()
+
+    runner.call(station.arm.move_line, *map(float, end))
+    assert runner.wait_until(watch, 30.0)
+    assert worst[0] * 1e3 <= 1.0, f"{worst[0] * 1e3:.3f} mm off the line"
+    truth = runner.call(lambda: station.plant.truth().tool)
+    want = _target(*end)
+    assert np.linalg.norm(truth[:3, 3] - want[:3, 3]) * 1e3 <= POS_MM
+    assert _rot_deg(truth, want) <= ROT_DEG
+
+
+def test_tool_and_coord_frames_carry_into_the_signals_and_the_targets(puma):
+    """NAME tool puts a tool frame on the flange (the signals follow it), NAME coord the frame targets are given in: a moveto in a shifted COORD with a 100 mm tool ends with the true flange where the frames say; both refused while a move runs."""
+    station, runner = puma
+    arm = station.arm
+    _settle(station, runner)
+    try:
+        runner.call(arm.set_tool, 0, 0, 100, 0, 0, 0)
+        runner.call(arm.set_coord, 100, 0, 0, 0, 0, 0)
+        runner.call(arm.move_to, 400, 100, 300, 180, 0, 90)
+        with pytest.raises(CommandError, match="refused while a move runs"):
+            runner.call(arm.set_tool, 0, 0, 0, 0, 0, 0)
+        _settle(station, runner)
+        flange = runner.call(lambda: station.plant.truth().tool)
+        want = _target(500, 100, 300, 180, 0, 90) @ np.linalg.inv(_target(0, 0, 100, 0, 0, 0))
+        assert np.linalg.norm(flange[:3, 3] - want[:3, 3]) * 1e3 <= POS_MM
+        z = runner.call(lambda: station.arm.signal("z").read())
+        assert abs(z - 300.0) <= POS_MM
+    finally:
+        runner.call(arm.set_tool, 0, 0, 0, 0, 0, 0)
+        runner.call(arm.set_coord, 0, 0, 0, 0, 0, 0)

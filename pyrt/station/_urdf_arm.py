@@ -43,6 +43,7 @@ from numpy.typing import ArrayLike
 from pyrt.boards.armservo import DAC_FULL_SCALE
 from pyrt.component import Arg, Command, Component, Limits, Signal, command, records_of
 from pyrt.errors import CommandError
+from pyrt.frames import PositionEquation, Transform, inverse
 from pyrt.kinematics import GRAVITY, Chain, rpy_of, transform
 from pyrt.motion import Evaluator, MotionFault, MotionSpec, RecordError
 from pyrt.motion import Limits as MotionLimits
@@ -220,6 +221,11 @@ class UrdfArm(Component):
         self._recover_until: int | None = None
         #: The servo closes the loop by itself once, at the first servo tick.
         self._started = False
+        self._heading: np.ndarray | None = None
+        #: TOOL: the tool's frame on the chain's tool (``NAME tool``); COORD: the frame
+        #: moveto and movel targets are given in (``NAME coord``); identity at start.
+        self.tool_frame = np.eye(4)
+        self.coord_frame = np.eye(4)
 
     # -- set-up ---------------------------------------------------------------------
 
@@ -317,8 +323,9 @@ class UrdfArm(Component):
         q /= self._cpu
 
     def tool(self) -> np.ndarray:
-        """The tool pose the encoders give (4, 4; m)."""
-        return self.chain.fk(self.q)
+        """The tool pose the encoders give (4, 4; m, in the base's frame): the chain's
+        tool with :attr:`tool_frame` (``NAME tool``) on it."""
+        return self.chain.fk(self.q) @ self.tool_frame
 
     def config(self, q: np.ndarray | None = None) -> str:
         """The arm's configuration (the closed form's name), or '' without one."""
@@ -488,32 +495,44 @@ class UrdfArm(Component):
 
     # -- commands -------------------------------------------------------------------
 
-    def _queue(self, q: np.ndarray, what: str) -> str:
-        """Queue a joint move to ``q`` (rad, m); refused with the reason, nothing moved."""
+    def _powered_evaluator(self, what: str) -> Evaluator:
         fault = self.station.fault
         if fault is not None:
             raise CommandError(f"{self.name} {what}: refused: stopped by a fault ({fault.cause});"
                                " give 'ack' first; nothing moved")
-        why = self.chain.limit_violation(q)
-        if why:
-            raise CommandError(f"{self.name} {what}: refused: the target is beyond a joint "
-                               f"limit ({self._limit_words(q)}); nothing moved")
         if not self.powered or self.evaluator is None:
             self.power_on()
         ev = self.evaluator
         assert ev is not None
+        return ev
+
+    def _queue_spec(self, spec: MotionSpec, what: str, end: np.ndarray | None, to: str) -> str:
+        """Queue ``spec`` (its joints at the end ``end`` if known); refused with the
+        reason, nothing moved."""
+        ev = self._powered_evaluator(what)
         busy = self.state != "idle"
         try:
-            ev.queue(MotionSpec(target=tuple(float(v) for v in q), name=what))
+            ev.queue(spec)
         except RecordError as exc:
-            raise CommandError(f"{self.name} {what}: refused: {exc}; nothing moved") from None
+            why = str(exc).removeprefix(f"{what}: ").removeprefix("refused: ")
+            raise CommandError(f"{self.name} {what}: refused: {why}; nothing moved") from None
         self.last_stop = ""
+        self._heading = end
         if self.state == "idle":
             self.state = "moving"
-        to = f"joints {self.joints_text(q)}; tool {self.pose_text(self.chain.fk(q))}"
+        return f"queued: {to}; it blends into the running move" if busy else f"moving to {to}"
+
+    def _queue(self, q: np.ndarray, what: str) -> str:
+        """Queue a joint move to ``q`` (rad, m); refused with the reason, nothing moved."""
+        if self.chain.limit_violation(q):
+            raise CommandError(f"{self.name} {what}: refused: the target is beyond a joint "
+                               f"limit ({self._limit_words(q)}); nothing moved")
+        to = (f"joints {self.joints_text(q)}; "
+              f"tool {self.pose_text(self.chain.fk(q) @ self.tool_frame)}")
         cfg = self.config(q)
         to += f"; {cfg}" if cfg else ""
-        return f"queued: {to}; it blends into the running move" if busy else f"moving to {to}"
+        spec = MotionSpec(target=tuple(float(v) for v in q), name=what)
+        return self._queue_spec(spec, what, q.copy(), to)
 
     def _limit_words(self, q: np.ndarray) -> str:
         for i, (v, jt) in enumerate(zip(q, self.chain.joints, strict=True)):
@@ -547,8 +566,9 @@ class UrdfArm(Component):
     def solve(self, target: np.ndarray, config: str | None) -> np.ndarray:
         """Joint values putting the tool at ``target`` (4, 4): the closed form in
         ``config``, or the numerical inverse seeded at the joints the arm is
-        heading to (then the closed form in the arm's configuration, if the
-        chain has one); CommandError with the reason if none."""
+        heading to (then, if the chain has a closed form, the solution nearest
+        those joints among its configurations, the present one first);
+        CommandError with the reason if none."""
         chain = self.chain
         closed = chain.closed_form
         seed = self.heading()
@@ -576,14 +596,20 @@ class UrdfArm(Component):
         if r.ok and chain.limit_violation(r.q) is None:
             return r.q.copy()
         if closed is not None:
+            # the closed form: the present configuration first, then the one nearest
             cfg = str(closed.config_of(seed))
-            q = closed.solve(target, cfg)
-            if q is not None:
-                return self._nearest_turn(np.asarray(q, dtype=float), seed)
+            found = []
+            for name in (cfg, *(c for c in closed.configurations if c != cfg)):
+                q = closed.solve(target, name)
+                if q is not None:
+                    q = self._nearest_turn(np.asarray(q, dtype=float), seed)
+                    found.append((float(np.max(np.abs(q - seed))), len(found), q))
+            if found:
+                return min(found, key=lambda f: (f[0], f[1]))[2]
             why = getattr(closed, "reason", lambda t, c: None)(target, cfg)
             if why:
-                raise CommandError(f"{self.name} moveto: refused: unreachable: {why}; "
-                                   "nothing moved")
+                raise CommandError(f"{self.name} moveto: refused: unreachable in every "
+                                   f"configuration: {why}; nothing moved")
         raise CommandError(f"{self.name} moveto: refused: unreachable: no joint values within "
                            f"the limits reach it (the numerical inverse from the present "
                            f"joints ends {r.residual * 1e3:.3g} mm/mrad away after "
@@ -607,13 +633,8 @@ class UrdfArm(Component):
     def heading(self) -> np.ndarray:
         """Where the arm is heading: the last queued target while it moves, else the
         encoders."""
-        ev = self.evaluator
-        if ev is not None and self.state != "idle":
-            segs = getattr(ev, "_segs", None)
-            if segs:
-                end = segs[-1].q_end
-                if end is not None:
-                    return np.array(end, dtype=float)
+        if self.state != "idle" and self._heading is not None:
+            return self._heading.copy()
         return self.q.copy()
 
     @command(Arg("X", float, units="mm"), Arg("Y", float, units="mm"),
@@ -631,12 +652,70 @@ class UrdfArm(Component):
         lefty-above-noflip), from the arm's closed form in that
         configuration.  An unreachable pose is refused with the reason;
         nothing moves."""
-        for name, v in (("X", x), ("Y", y), ("Z", z)):
-            if not math.isfinite(v):
-                raise CommandError(f"{self.name} moveto: {name} must be a finite number of mm")
-        target = transform(np.array([x, y, z]) * 1e-3, np.radians([rx, ry, rz]))
-        q = self.solve(target, config)
+        pose = _pose("moveto", self.name, x, y, z, rx, ry, rz)
+        q = self.solve(self.coord_frame @ pose @ inverse(self.tool_frame), config)
         return self._queue(q, "moveto")
+
+    @command(Arg("X", float, units="mm"), Arg("Y", float, units="mm"),
+             Arg("Z", float, units="mm"), Arg("RX", float, lo=-360.0, hi=360.0, units="deg"),
+             Arg("RY", float, lo=-360.0, hi=360.0, units="deg"),
+             Arg("RZ", float, lo=-360.0, hi=360.0, units="deg"), name="movel", moves=True)
+    def move_line(self, x: float, y: float, z: float, rx: float, ry: float, rz: float) -> str:
+        """NAME movel X Y Z RX RY RZ: the tool on a straight line to a pose.
+
+        Same units and rotations as moveto; the orientation turns about one
+        axis on the way (Paul's drive transform); Cartesian and joint limits
+        both kept.  A line that leaves the reach, crosses a joint limit or
+        passes a singularity is refused before it starts, naming where;
+        nothing moves.  Queued moves blend."""
+        pose = _pose("movel", self.name, x, y, z, rx, ry, rz)
+        eq = PositionEquation("movel", [Transform.varb("T6"), Transform.const("TOOL",
+                                                                               self.tool_frame)],
+                              [Transform.const("COORD", self.coord_frame),
+                               Transform.varb("POS", pose)])
+        t6 = self.coord_frame @ pose @ inverse(self.tool_frame)
+        end = self.chain.ik(t6, self.heading())
+        return self._queue_spec(MotionSpec(mode="cart", equation=eq, name="movel"), "movel",
+                                end.q.copy() if end.ok else None,
+                                f"tool {self.pose_text(self.coord_frame @ pose)}")
+
+    @command(Arg("X", float, lo=-5000.0, hi=5000.0, units="mm"),
+             Arg("Y", float, lo=-5000.0, hi=5000.0, units="mm"),
+             Arg("Z", float, lo=-5000.0, hi=5000.0, units="mm"),
+             Arg("RX", float, lo=-360.0, hi=360.0, units="deg"),
+             Arg("RY", float, lo=-360.0, hi=360.0, units="deg"),
+             Arg("RZ", float, lo=-360.0, hi=360.0, units="deg"), name="tool")
+    def set_tool(self, x: float, y: float, z: float, rx: float, ry: float, rz: float) -> str:
+        """NAME tool X Y Z RX RY RZ: the tool's frame on the arm's flange (001's TOOL).
+
+        mm and degrees (URDF rpy) in the chain's tool frame; 0 0 0 0 0 0 takes
+        it off.  The signals, where, moveto and movel use it from now on.
+        Refused while a move runs."""
+        self._frames_free("tool")
+        self.tool_frame = _pose("tool", self.name, x, y, z, rx, ry, rz)
+        return (f"tool frame {self.pose_text(self.tool_frame)}; the tool now at "
+                f"{self.pose_text(self.tool())}")
+
+    @command(Arg("X", float, lo=-5000.0, hi=5000.0, units="mm"),
+             Arg("Y", float, lo=-5000.0, hi=5000.0, units="mm"),
+             Arg("Z", float, lo=-5000.0, hi=5000.0, units="mm"),
+             Arg("RX", float, lo=-360.0, hi=360.0, units="deg"),
+             Arg("RY", float, lo=-360.0, hi=360.0, units="deg"),
+             Arg("RZ", float, lo=-360.0, hi=360.0, units="deg"), name="coord")
+    def set_coord(self, x: float, y: float, z: float, rx: float, ry: float, rz: float) -> str:
+        """NAME coord X Y Z RX RY RZ: the frame moveto and movel targets are given in (001's COORD).
+
+        Its pose in the base's frame, mm and degrees (URDF rpy); 0 0 0 0 0 0
+        is the base.  Refused while a move runs."""
+        self._frames_free("coord")
+        self.coord_frame = _pose("coord", self.name, x, y, z, rx, ry, rz)
+        return f"coordinate frame {self.pose_text(self.coord_frame)} (in the base's frame)"
+
+    def _frames_free(self, what: str) -> None:
+        if self.state != "idle":
+            raise CommandError(f"{self.name} {what}: refused while a move runs (the queued "
+                               "targets were given in the frames as they are); wait or stop "
+                               "first; nothing changed")
 
     @command(name="where", reads_only=True)
     def where_cmd(self) -> str:
@@ -660,3 +739,12 @@ class UrdfArm(Component):
         self.last_stop = "stopped (stop command)"
         return f"{self.name}: stopping: braking along the path to rest, then holding"
 
+
+
+def _pose(verb: str, name: str, x: float, y: float, z: float, rx: float, ry: float,
+          rz: float) -> np.ndarray:
+    """A pose from the operator's words: mm, and degrees as URDF's rpy."""
+    for axis, v in (("X", x), ("Y", y), ("Z", z)):
+        if not math.isfinite(v):
+            raise CommandError(f"{name} {verb}: {axis} must be a finite number of mm")
+    return transform(np.array([x, y, z]) * 1e-3, np.radians([rx, ry, rz]))
