@@ -598,7 +598,7 @@ class UrdfArm(Component):
         if closed is not None:
             # the closed form: the present configuration first, then the one nearest
             cfg = str(closed.config_of(seed))
-            found = []
+            found: list[tuple[float, int, np.ndarray]] = []
             for name in (cfg, *(c for c in closed.configurations if c != cfg)):
                 q = closed.solve(target, name)
                 if q is not None:
