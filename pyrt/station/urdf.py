@@ -14,7 +14,7 @@ and an encoder per joint), ``tcp://HOST:PORT`` reaches the board that
 The component tree::
 
     NAME         the arm (the URDF's robot name): q1 .. qn, x y z rx ry rz;
-                 NAME movej / moveto / where
+                 NAME movej / moveto / movel / tool / coord / where
       JOINT ...  one per joint (the URDF's names): position, setpoint, error, torque, dac
     sim          the simulated arm's truth and its table (sim show, sim table)
 
@@ -219,7 +219,9 @@ gravity, the URDF's damping and friction, and torque limits from effort.
 A 1 kHz servo (PID with gravity and dynamics feed-forward) and a 100 Hz
 trajectory task.  Commands, on the arm named after the URDF's robot (NAME):
 NAME movej Q1 .. Qn (degrees, mm for a prismatic joint), NAME moveto X Y Z
-RX RY RZ [CONFIG] (mm, degrees: URDF rpy), NAME where; queued moves blend.
+RX RY RZ [CONFIG] (mm, degrees: URDF rpy), NAME movel X Y Z RX RY RZ (a
+straight line), NAME tool / coord (001's TOOL and COORD), NAME where;
+queued moves blend.
 An unreachable pose or a target beyond a joint limit is refused, nothing
 moves.  A following error above 2 degrees or a joint beyond its limits
 stops every joint in the same tick; ack clears it.  The truth: sim show,
