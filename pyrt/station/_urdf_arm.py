@@ -168,17 +168,17 @@ class UrdfArm(Component):
         if at != list(range(at[0], at[0] + n)):  # pragma: no cover - the kind declares them so
             raise ValueError("the board's encoder counters are not one block of its inputs")
         self._count_slice = slice(at[0], at[0] + n)
-        self._cpu = np.array([d.counts_per_unit for d in self.drives])
-        self._nm_per_count = np.array([d.nm_per_count for d in self.drives])
-        # the counters as last read and their unwrapped totals (int64: no wrap here)
+        # the counters as last read and their unwrapped totals (Python ints: no wrap)
         self._counts = [int(board.read("count", j)) for j in range(n)]
         self._total = list(self._counts)
+        self._cpu_list = [d.counts_per_unit for d in self.drives]
+        self._qs = [(t + 0.5) / c for t, c in zip(self._total, self._cpu_list, strict=True)]
+        self._counts_per_nm = [1.0 / d.nm_per_count for d in self.drives]
         #: The measured joints (rad, m), from the encoders (unwrapped).
         self.q = np.zeros(n)
         self._measure(self._counts)
         #: The DAC values last written.
         self.dac = [0] * n
-        self._dac_buf = np.zeros(n)
         effort = np.array([j.effort if math.isfinite(j.effort) and j.effort > 0
                            else d.nm_per_count * DAC_FULL_SCALE
                            for j, d in zip(joints, self.drives, strict=True)])
@@ -209,15 +209,14 @@ class UrdfArm(Component):
         self._quiet_since: int | None = None
         self._settle_from = 0
         self._now_ns = 0
-        self._ff = np.zeros(n)
-        self._knot_q = np.zeros(n)
         self._records: list[Command] | None = None
         self._margin = np.where(self.prismatic, LIMIT_MARGIN_DEG * 1e-3,
                                 math.radians(LIMIT_MARGIN_DEG))
         #: Where the measured joints may go before that is a fault (the limits and a
         #: margin; from where the arm lay, while it is brought back inside them).
-        self._lo_m = chain.lower - self._margin
-        self._hi_m = chain.upper + self._margin
+        self._lo_l: list[float] = []
+        self._hi_l: list[float] = []
+        self._bound(chain.lower - self._margin, chain.upper + self._margin)
         self._recover_until: int | None = None
         #: The servo closes the loop by itself once, at the first servo tick.
         self._started = False
@@ -309,18 +308,16 @@ class UrdfArm(Component):
     def _measure(self, counts: Sequence[int]) -> None:
         """The joints from this tick's ``counts``: each counter's step since the last
         read taken modulo 2^32 (a 32-bit counter wraps), the middle of the count."""
-        last, total = self._counts, self._total
+        last, total, qs, cpu = self._counts, self._total, self._qs, self._cpu_list
         for j, c in enumerate(counts):
             d = c - last[j]
             if d:
                 if not -_TWO31 <= d < _TWO31:
                     d = ((d + _TWO31) % _TWO32) - _TWO31
-                total[j] += d
+                t = total[j] = total[j] + d
                 last[j] = c
-        q = self.q
-        q[:] = total
-        q += 0.5
-        q /= self._cpu
+                qs[j] = (t + 0.5) / cpu[j]
+        self.q[:] = qs
 
     def tool(self) -> np.ndarray:
         """The tool pose the encoders give (4, 4; m, in the base's frame): the chain's
@@ -361,12 +358,11 @@ class UrdfArm(Component):
         k[...] = 0.0
         k[3] = q
         k[7] = ff
-        self._ff[:] = ff
         start = np.clip(q, self.chain.lower, self.chain.upper)
         self.evaluator = Evaluator(self.chain, self.limits, start, period=self.traj_period_s)
         margin = self._margin
-        self._lo_m = np.minimum(self.chain.lower, q) - margin
-        self._hi_m = np.maximum(self.chain.upper, q) + margin
+        self._bound(np.minimum(self.chain.lower, q) - margin,
+                    np.maximum(self.chain.upper, q) + margin)
         self._recover_until = None
         out = np.abs(start - q)
         if out.any():
@@ -405,29 +401,34 @@ class UrdfArm(Component):
                       f"{self.q[trip.joint] * self.scales[trip.joint]:.3f} "
                       f"{self.units[trip.joint]})", self.joints[trip.joint].name)
             return
-        over = (self.q < self._lo_m) | (self.q > self._hi_m)
-        if over.any():
-            j = int(np.argmax(over))
-            jt = self.chain.joints[j]
-            k = float(self.scales[j])
-            self.fail(f"joint {jt.name} at {self.q[j] * k:.3f} {self.units[j]} is beyond its "
-                      f"limits {jt.lower * k:.3f} .. {jt.upper * k:.3f} {self.units[j]}",
-                      self.joints[j].name)
-            return
-        counts = self._dac_buf
-        np.divide(servo.tau, self._nm_per_count, out=counts)
-        np.rint(counts, out=counts)
-        np.minimum(counts, DAC_FULL_SCALE, out=counts)
-        np.maximum(counts, -DAC_FULL_SCALE, out=counts)
-        dac = self.dac
-        write = self.board.write
-        for j, c in enumerate(counts.tolist()):
-            v = int(c)
-            if v != dac[j]:
-                write("dac", v, j)
-                dac[j] = v
+        # the limits and the DACs, joint by joint on plain floats (six numbers:
+        # cheaper than numpy's calls)
+        dac, write, lo, hi, qs = self.dac, self.board.write, self._lo_l, self._hi_l, self._qs
+        inv, full = self._counts_per_nm, DAC_FULL_SCALE
+        for j, tau in enumerate(servo.tau.tolist()):
+            v = qs[j]
+            if v < lo[j] or v > hi[j]:
+                self._beyond(j)
+                return
+            c = round(tau * inv[j])
+            c = full if c > full else (-full if c < -full else c)
+            if c != dac[j]:
+                write("dac", c, j)
+                dac[j] = c
         if self.state == "settling":
             self._settle(now_ns)
+
+    def _beyond(self, j: int) -> None:
+        """Joint ``j`` lies beyond its limit and margin: the fault."""
+        jt = self.chain.joints[j]
+        k, u = float(self.scales[j]), self.units[j]
+        self.fail(f"joint {jt.name} at {self.q[j] * k:.3f} {u} is beyond its limits "
+                  f"{jt.lower * k:.3f} .. {jt.upper * k:.3f} {u}", self.joints[j].name)
+
+    def _bound(self, lo: np.ndarray, hi: np.ndarray) -> None:
+        """Where the measured joints may go before that is a fault (plain floats)."""
+        self._lo_l = [float(v) for v in lo]
+        self._hi_l = [float(v) for v in hi]
 
     def _settle(self, now_ns: int) -> None:
         servo = self.servo
@@ -462,8 +463,7 @@ class UrdfArm(Component):
             if now_ns < self._recover_until:
                 return
             self._recover_until = None
-            self._lo_m = self.chain.lower - self._margin
-            self._hi_m = self.chain.upper + self._margin
+            self._bound(self.chain.lower - self._margin, self.chain.upper + self._margin)
         try:
             knot = ev.tick()
         except MotionFault as exc:
