@@ -8,6 +8,7 @@ headers (``lib``), never written down twice.  One private module per C
 source file; this ``__init__`` re-exports their API.
 """
 
+from pyrt.native._armworld import ARM_ROWS, ArmKernel
 from pyrt.native._convert import excess128, excess128_many, from_excess128
 from pyrt.native._errors import (
     DegenerateGeometryError,
@@ -38,8 +39,10 @@ from pyrt.native._servo import Servo, ServoTrip, check_gains, gain_ranges, tuned
 from pyrt.native._statics import StaticsSolver
 
 __all__ = [
+    "ARM_ROWS",
     "NECK_LOWER",
     "NECK_UPPER",
+    "ArmKernel",
     "ChainKernels",
     "DegenerateGeometryError",
     "FuzzyBatch",

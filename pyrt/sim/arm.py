@@ -58,7 +58,7 @@ tests and the operator's ``sim`` words, never for control code.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from dataclasses import replace as _replace
 
@@ -66,16 +66,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from pyrt.boards.registers import OUTPUT, BoardKind, Register, RegisterBoard
-from pyrt.errors import ConfigError
+from pyrt.errors import ConfigError, NativeError
 from pyrt.kinematics import GRAVITY, Chain, Inertial
-
-_solve: Callable[..., np.ndarray] = np.linalg.solve
-try:  # numpy's solver without the checks of np.linalg.solve (3x faster for 6 x 6)
-    from numpy.linalg._umath_linalg import solve1 as _solve1
-
-    _solve = _solve1
-except ImportError:  # pragma: no cover - another numpy
-    pass
+from pyrt.native import ArmKernel, ChainKernels
 
 __all__ = [
     "DAC_FULL_SCALE",
@@ -95,10 +88,6 @@ __all__ = [
 DAC_FULL_SCALE = 32767
 #: The wrist sensor's channels, in register order.
 FT_CHANNELS = ("fx", "fy", "fz", "tx", "ty", "tz")
-
-_INT32 = (-(1 << 31), (1 << 31) - 1)
-_TWO32 = 1 << 32
-_TWO31 = 1 << 31
 
 
 def arm_registers(n: int) -> tuple[Register, ...]:
@@ -273,7 +262,7 @@ class ArmWorld:
     :class:`Motor` per joint (default :func:`default_motors`); ``q0`` where
     it starts (default zero, at rest); ``table_z`` the table's height in m
     (None: no table); ``payload`` kg at the tool tip; ``seed`` the F/T
-    noise's.  ConfigError for anything refused.
+    noise's (an integer 0 .. 2**64 - 1).  ConfigError for anything refused.
     """
 
     def __init__(self, chain: Chain, *, motors: Sequence[Motor] | None = None,
@@ -315,65 +304,72 @@ class ArmWorld:
                 raise ConfigError(f"{name}: expected a number >= 0, got {v!r}")
         if max_step > 0.01:
             raise ConfigError(f"max_step: at most 10 ms, got {max_step!r}")
+        if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 1 << 64:
+            raise ConfigError(f"seed: expected an integer 0 .. 2**64 - 1, got {seed!r}")
         self.friction_velocity = float(friction_velocity)
         self.max_step = float(max_step)
         self.tip = _vec("tip", tip, 3, 0.0)
-        self._tip_any = bool(self.tip.any())
         self.table_stiffness = float(table_stiffness)
         self.table_damping = float(table_damping)
         self.table_friction = float(table_friction)
         self.table_z: float | None = None
         self.ft = ft if ft is not None else FTCalibration()
-        self.ft_noise = (float(ft_noise[0]), float(ft_noise[1]))
-        self._rng = np.random.default_rng(seed)
-        sn, st = self.ft_noise
-        self._noise = np.array([sn, sn, sn, st, st, st])
-        self._ft_scale = self.ft.scale
-        self._ft_offsets = np.array(self.ft.offsets, dtype=float)
-        self._counts: list[int | None] = [None] * n
-        self._noise_block = np.zeros((0, 6))
-        self._noise_i = 0
-        self._dac_in: list[int] = []
-        self._on_in: list[int] = []
+        sn, st = (float(ft_noise[0]), float(ft_noise[1]))
+        if not all(math.isfinite(v) and v >= 0 for v in (sn, st)):
+            raise ConfigError(f"ft_noise: expected two numbers >= 0 (N, N m), got {ft_noise!r}")
+        self.ft_noise = (sn, st)
         self._armature = np.array([m.reflected_inertia for m in self.motors])
-        self._nm_per_count = np.array([m.nm_per_count for m in self.motors])
         # a motor stronger than the joint's effort is limited to it (URDF's <limit effort>)
-        self._effort = np.array([min(m.torque_limit, j.effort if j.effort > 0 else math.inf)
-                                 for m, j in zip(self.motors, chain.joints, strict=True)])
-        self._amps_per_count = np.array([m.amps_per_count for m in self.motors])
-        self._cpr = np.array([m.counts_per_joint_rev for m in self.motors]) / (2.0 * math.pi)
+        effort = np.array([min(m.torque_limit, j.effort if j.effort > 0 else math.inf)
+                           for m, j in zip(self.motors, chain.joints, strict=True)])
         margin = float(stop_margin)
         self.stop_lower = chain.lower - margin
         self.stop_upper = chain.upper + margin
-        self._has_stops = bool(np.isfinite(self.stop_lower).any()
-                               or np.isfinite(self.stop_upper).any())
-        effort = np.array([m.torque_limit for m in self.motors])
         self.stop_stiffness = _vec("stop_stiffness", stop_stiffness, n,
-                                   effort / math.radians(0.5))
+                                   np.array([m.torque_limit for m in self.motors])
+                                   / math.radians(0.5))
+        if (self.stop_stiffness < 0).any():
+            raise ConfigError("stop_stiffness must be >= 0")
+        q_start = _vec("q0", q0, n, 0.0)
+        if ((q_start < self.stop_lower) | (q_start > self.stop_upper)).any():
+            raise ConfigError(f"q0 {q_start.tolist()} lies beyond the end stops")
+        m_diag = np.diag(chain.mass_matrix(q_start)) + self._armature
+        stop_damping = 2.0 * 0.7 * np.sqrt(self.stop_stiffness * m_diag)
+        params = {
+            "armature": self._armature, "damping": self.damping, "friction": self.friction,
+            "stop_lo": self.stop_lower, "stop_hi": self.stop_upper,
+            "stop_k": self.stop_stiffness, "stop_c": stop_damping,
+            "nm_per_count": [m.nm_per_count for m in self.motors],
+            "amps_per_count": [m.amps_per_count for m in self.motors],
+            "effort": effort,
+            "counts": [m.counts_per_joint_rev / (2.0 * math.pi) for m in self.motors],
+        }
+        try:
+            self._k = ArmKernel(
+                _kernels(chain), params, max_step=self.max_step,
+                friction_velocity=self.friction_velocity, gravity=self.gravity, tip=self.tip,
+                table_stiffness=self.table_stiffness, table_damping=self.table_damping,
+                table_friction=self.table_friction, ft_scale=self.ft.scale,
+                ft_offsets=[float(o) for o in self.ft.offsets],
+                ft_sigma=[sn, sn, sn, st, st, st], seed=seed)
+        except NativeError as exc:
+            raise ConfigError(f"simulated arm {chain.name!r}: {exc}") from None
+        k = self._k
+        # the kernel's own arrays: the state and the truth
+        self._q, self._qd = k.q, k.qd
+        self._torque, self._current = k.torque, k.current
+        self._contact, self._wrench = k.contact, k.wrench
+        self._q[:] = q_start
+        self._counts: list[int | None] = [None] * n
+        self._ft_last: list[int | None] = [None] * 6
+        self._dac_in: list[int] = []
+        self._on_in: list[int] = []
+        self._set_input = board.set_input
+        self._values = board.values
         self.payload = 0.0
         self._dyn = chain
         self.set_payload(float(payload))
         self.time = 0.0
-        self._q = _vec("q0", q0, n, 0.0)
-        if ((self._q < self.stop_lower) | (self._q > self.stop_upper)).any():
-            raise ConfigError(f"q0 {self._q.tolist()} lies beyond the end stops")
-        self._qd = np.zeros(n)
-        m_diag = np.diag(chain.mass_matrix(self._q)) + self._armature
-        self._stop_damping = 2.0 * 0.7 * np.sqrt(self.stop_stiffness * m_diag)
-        # preallocated buffers of the step
-        self._mass = np.empty((n, n))
-        self._mass_diag = self._mass.reshape(-1)[:: n + 1]  # a view of the diagonal
-        self._gravity = tuple(float(x) for x in self.gravity)  # the kernels cache a tuple
-        self._has_friction = bool(self.friction.any())
-        self._inv_vs = 1.0 / self.friction_velocity
-        self._fc_vs = self.friction / self.friction_velocity
-        self._bias = np.empty(n)
-        self._jac = np.empty((6, n))
-        self._pose = np.empty((4, 4))
-        self._torque = np.zeros(n)
-        self._current = np.zeros(n)
-        self._contact = np.zeros(3)
-        self._wrench = np.zeros(6)
         if table_z is not None:
             self.set_table(table_z)
         self._publish()
@@ -384,6 +380,7 @@ class ArmWorld:
         """Place the table at height ``z`` (m, world frame), or take it away (None)."""
         if z is not None and not (isinstance(z, (int, float)) and math.isfinite(z)):
             raise ConfigError(f"table height: expected metres, got {z!r}")
+        self._k.set_table(None if z is None else float(z))
         self.table_z = None if z is None else float(z)
 
     def set_payload(self, mass: float) -> None:
@@ -396,17 +393,19 @@ class ArmWorld:
             at = (chain.tool @ np.array([*self.tip, 1.0]))[:3]
             body = last.inertial + Inertial(mass, at, np.zeros((3, 3)))
             joints = (*chain.joints[:-1], _replace(last, inertial=body))
-            self._dyn = chain.replace(joints=joints)
+            dyn = chain.replace(joints=joints)
         else:
-            self._dyn = chain
+            dyn = chain
+        self._k.set_payload(float(mass), _kernels(dyn))
+        self._dyn = dyn
         self.payload = float(mass)
 
     def set_state(self, q: ArrayLike, qd: ArrayLike | None = None) -> None:
         """Put the arm at ``q`` moving at ``qd`` (default at rest); the encoders follow."""
         qv = _vec("q", q, self.n, 0.0)
+        qdv = _vec("qd", qd, self.n, 0.0)
         self._q[:] = qv
-        self._qd[:] = _vec("qd", qd, self.n, 0.0)
-        self._contact_force(self._dyn, with_jacobian=False)
+        self._qd[:] = qdv
         self._publish()
 
     # ------------------------------------------------------------ time
@@ -414,134 +413,49 @@ class ArmWorld:
     def step(self, dt: float) -> None:
         """Advance by ``dt`` seconds (>= 0) in equal internal steps of at
         most :attr:`max_step`, the board's outputs held over it (a DAC holds
-        its value between servo ticks); then set the board's inputs."""
-        if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt >= 0):
-            raise ValueError(f"dt: expected seconds >= 0, got {dt!r}")
+        its value between servo ticks); then set the board's inputs.  The
+        whole step is one call of the C kernel (csrc/armworld.c)."""
+        if dt.__class__ is not float or not 0.0 <= dt < math.inf:
+            if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt >= 0):
+                raise ValueError(f"dt: expected seconds >= 0, got {dt!r}")
+            dt = float(dt)
         if dt == 0:
             return
-        b = self.board
-        dac, on = b.values("dac"), b.values("enable")
+        values = self._values
+        dac, on = values("dac"), values("enable")
+        k = self._k
         if dac != self._dac_in or on != self._on_in:  # the amplifiers' new currents
+            k.set_drive(dac, on)
             self._dac_in, self._on_in = dac, on
-            d = np.array(dac, dtype=float) * np.array(on, dtype=bool)
-            self._current = d * self._amps_per_count
-            np.clip(d * self._nm_per_count, -self._effort, self._effort, out=self._torque)
-        k = max(1, math.ceil(dt / self.max_step - 1e-9))
-        h = dt / k
-        for _ in range(k):
-            self._substep(h)
+        k.step(dt)
         self.time += dt
-        self._publish()
-
-    def _substep(self, h: float) -> None:
-        q, qd, dyn = self._q, self._qd, self._dyn
-        mass = dyn.mass_matrix(q, out=self._mass)
-        diag = self._mass_diag
-        diag += self._armature
-        mv = mass @ qd
-        bias = dyn.rnea(q, qd, None, self._gravity, out=self._bias)
-        # force: every generalised force plus the h D qd term of the linearly
-        # implicit step (the viscous damping's cancels); the joint-wise damping
-        # and stiffness go onto the diagonal, the contact's into the matrix
-        force = self._torque - bias
-        diag += h * self.damping
-        if self._has_friction:
-            th = np.tanh(qd * self._inv_vs)
-            dfr = self._fc_vs * (1.0 - th * th)
-            force += dfr * qd - self.friction * th
-            diag += h * dfr
-        if self._has_stops and ((q < self.stop_lower) | (q > self.stop_upper)).any():
-            ks, cs = self.stop_stiffness, self._stop_damping
-            d_lo = self.stop_lower - q
-            d_hi = q - self.stop_upper
-            push_lo = (d_lo > 0) & (ks * d_lo - cs * qd > 0)
-            push_hi = (d_hi > 0) & (ks * d_hi + cs * qd > 0)
-            act = push_lo | push_hi
-            # k d - c qd + c qd: the spring's force (the damper's cancels with h D qd)
-            force += np.where(push_lo, ks * d_lo, 0.0) - np.where(push_hi, ks * d_hi, 0.0)
-            diag += np.where(act, h * cs + h * h * ks, 0.0)
-        if self.table_z is not None:
-            contact = self._contact_force(dyn, with_jacobian=True)
-            if contact is not None:
-                jt, cn, kn, ct = contact
-                jz = jt[2]
-                force += jt.T @ self._contact + cn * jz * (jz @ qd)
-                mass += (h * cn + h * h * kn) * np.outer(jz, jz)
-                if ct > 0:
-                    jxy = jt[:2]
-                    mass += h * ct * (jxy.T @ jxy)
-                    force += ct * (jxy.T @ (jxy @ qd))
-        qd[:] = _solve(mass, mv + h * force)
-        q += h * qd
-
-    def _contact_force(self, dyn: Chain, with_jacobian: bool
-                       ) -> tuple[np.ndarray, float, float, float] | None:
-        """The table's force on the tip (stored in self._contact, world
-        frame) and the wrist's wrench; with_jacobian: also the tip's linear
-        Jacobian (3, n), the normal damping and stiffness and the
-        tangential damping coefficient in effect, or None out of contact."""
-        pose = self.chain.fk(self._q, out=self._pose)
-        r = pose[:3, :3] @ self.tip
-        p = pose[:3, 3] + r
-        self._contact[:] = 0.0
-        z = self.table_z
-        result = None
-        if z is not None and p[2] < z:
-            jac = self.chain.jacobian(self._q, out=self._jac)
-            jv, jw = jac[:3], jac[3:]
-            if self._tip_any:
-                # v_tip = v + w x r = v - r x w: subtract [r]x Jw
-                rx, ry, rz = r
-                jt = jv.copy()
-                jt[0] -= ry * jw[2] - rz * jw[1]
-                jt[1] -= rz * jw[0] - rx * jw[2]
-                jt[2] -= rx * jw[1] - ry * jw[0]
-            else:
-                jt = jv.copy()
-            vel = jt @ self._qd
-            depth = z - p[2]
-            fn = self.table_stiffness * depth - self.table_damping * vel[2]
-            if fn > 0:
-                vt = math.hypot(vel[0], vel[1])
-                vs = 1e-3
-                ct = self.table_friction * fn * (math.tanh(vt / vs) / vt if vt > 1e-12
-                                                 else 1.0 / vs)
-                self._contact[0] = -ct * vel[0]
-                self._contact[1] = -ct * vel[1]
-                self._contact[2] = fn
-                result = (jt, self.table_damping, self.table_stiffness, ct)
-        # the wrist's wrench: contact and the payload's weight, at the tip, in the tool frame
-        f_world = self._contact + self.payload * self.gravity
-        fx, fy, fz = pose[:3, :3].T @ f_world
-        tx, ty, tz = self.tip
-        w = self._wrench
-        w[0], w[1], w[2] = fx, fy, fz
-        w[3], w[4], w[5] = ty * fz - tz * fy, tz * fx - tx * fz, tx * fy - ty * fx
-        return result if with_jacobian else None
+        self._set_inputs()
 
     def _publish(self) -> None:
-        """Set the board's inputs: encoder counters and the wrist sensor."""
-        b = self.board
+        """Compute the inputs at the present state (one draw of the sensor's
+        noise) and set them on the board."""
+        self._k.publish()
+        self._set_inputs()
+
+    def _set_inputs(self) -> None:
+        """Set the board's inputs the kernel published: encoder counters and
+        the wrist sensor (those that changed)."""
+        k = self._k
+        set_input = self._set_input
+        counts = k.counts()
         last = self._counts
-        for j, c in enumerate(np.floor(self._q * self._cpr).tolist()):
-            c = ((int(c) + _TWO31) % _TWO32) - _TWO31
-            if c != last[j]:
-                b.set_input("count", c, j)
-                last[j] = c
-        if self.table_z is not None or self.payload > 0:
-            self._contact_force(self._dyn, with_jacobian=False)
-        else:
-            self._contact[:] = 0.0
-            self._wrench[:] = 0.0
-        if self._noise_i == len(self._noise_block):  # the noise drawn 256 samples at a time
-            self._noise_block = self._rng.standard_normal((256, 6)) * self._noise
-            self._noise_i = 0
-        noise = self._noise_block[self._noise_i]
-        self._noise_i += 1
-        counts = np.rint((self._wrench + noise) * self._ft_scale) + self._ft_offsets
-        lo, hi = _INT32
-        for k, c in enumerate(counts.tolist()):
-            b.set_input("ft", int(min(max(c, lo), hi)), k)
+        if counts != last:
+            for j, c in enumerate(counts):
+                if c != last[j]:
+                    set_input("count", c, j)
+            self._counts = counts
+        ft = k.ft_counts()
+        last = self._ft_last
+        if ft != last:
+            for j, c in enumerate(ft):
+                if c != last[j]:
+                    set_input("ft", c, j)
+            self._ft_last = ft
 
     # ------------------------------------------------------------ truth
 
@@ -577,6 +491,18 @@ class ArmWorld:
         out["table"] = "none" if self.table_z is None else f"{self.table_z * 1e3:.1f}"
         out["payload"] = f"{self.payload:g}"
         return out
+
+
+def _kernels(chain: Chain) -> ChainKernels:
+    """The C kernels of ``chain``'s description, with a workspace of their own
+    (the arm's step shares it with no other caller)."""
+    joints = chain.joints
+    return ChainKernels(
+        [j.kind for j in joints], np.array([j.origin for j in joints]),
+        np.array([j.axis for j in joints]), chain.offsets, chain.base, chain.tool,
+        chain.lower, chain.upper, np.array([j.inertial.mass for j in joints]),
+        np.array([j.inertial.com for j in joints]),
+        np.array([j.inertial.inertia for j in joints]))
 
 
 class ArmPlant:
