@@ -147,7 +147,7 @@ REFUSED = [
     ("moveto", ["500", "100", "400", "180", "0", "90", "righty-below-flip"], "beyond its limits"),
     ("moveto", ["500", "100", "400", "180", "0", "90", "sideways"], "configuration"),
     ("movej", ["10", "300", "-150", "0", "0", "0"], "out of range"),
-    ("movej", ["10", "30"], "takes 6 argument"),
+    ("movej", ["10", "30"], "usage"),
 ]
 
 
@@ -366,3 +366,42 @@ def test_tool_and_coord_frames_carry_into_the_signals_and_the_targets(puma):
     finally:
         runner.call(arm.set_tool, 0, 0, 0, 0, 0, 0)
         runner.call(arm.set_coord, 0, 0, 0, 0, 0, 0)
+
+
+def test_options_set_the_speed_and_the_blend_and_bad_ones_are_refused(puma):
+    """movej speed=0.25 keeps every true joint speed within a quarter of its limit (the same move at full speed goes beyond it); blend=0 ends the first of two queued moves exactly (an exact stop, PLCopen's buffered); an unknown option is refused naming the options, nothing moves."""
+    station, runner = puma
+    arm = station.arm
+    _settle(station, runner)
+    home = (0, 45, -180, 0, -45, 0)
+    runner.call(arm.move_joints, *home)
+    _settle(station, runner)
+    vmax = np.array(arm.limits.vmax)
+    peaks = []
+    for speed in ("speed=1", "speed=0.25"):
+        peak = [0.0]
+
+        def fastest(peak=peak) -> bool:
+            peak[0] = max(peak[0], float(np.max(np.abs(station.plant.truth().qd) / vmax)))
+            return not station.busy()
+
+        runner.call(arm.move_joints, 60, 80, -120, 40, -20, 60, speed)
+        assert runner.wait_until(fastest, 30.0)
+        peaks.append(peak[0])
+        runner.call(arm.move_joints, *home)
+        _settle(station, runner)
+    assert peaks[0] > 0.3 and peaks[1] <= 0.25 * 1.03, peaks
+    with pytest.raises(CommandError, match="not an option"):
+        runner.call(arm.move_joints, 60, 80, -120, 40, -20, 60, "fast=1")
+    assert not runner.call(station.busy)
+    runner.call(arm.move_joints, 30, 60, -150, 20, -30, 30, "blend=0")
+    runner.call(arm.move_joints, 60, 80, -120, 40, -20, 60)
+    seen = []
+
+    def watch() -> bool:
+        q = np.degrees(station.plant.truth().q)
+        seen.append(float(np.max(np.abs(q - [30, 60, -150, 20, -30, 30]))))
+        return not station.busy()
+
+    assert runner.wait_until(watch, 30.0)
+    assert min(seen) < 0.05  # it passed through the first target (no corner cut)

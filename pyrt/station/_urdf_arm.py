@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -82,6 +82,12 @@ LIMIT_MARGIN_DEG = 1.0
 #: The share of each joint's effort the planner may use to accelerate it (the
 #: rest holds the arm against gravity and friction).
 ACCEL_SHARE = 0.4
+
+#: What OPTIONS of movej, moveto and movel may say.
+OPTIONS_HELP = ("OPTIONS: speed=F (a fraction 0 < F <= 1 of every velocity limit), blend=MM "
+                "(the most a blend into the next move may cut the corner, mm; 0: stop exactly "
+                "at the target).")
+_OPTIONS = Arg("OPTIONS", str, optional=True, rest=True)
 
 _TWO32 = 1 << 32
 _TWO31 = 1 << 31
@@ -218,6 +224,8 @@ class UrdfArm(Component):
         self._hi_l: list[float] = []
         self._bound(chain.lower - self._margin, chain.upper + self._margin)
         self._recover_until: int | None = None
+        #: The fault's bounds are widened to where the arm lay beyond a limit.
+        self._wide = False
         #: The servo closes the loop by itself once, at the first servo tick.
         self._started = False
         self._heading: np.ndarray | None = None
@@ -289,7 +297,9 @@ class UrdfArm(Component):
 
     def commands(self) -> list[Command]:
         if self._records is None:
-            self._records = [self._movej_record(), *records_of(self, self.name)]
+            own = [replace(r, help=r.help.replace("NAME ", f"{self.name} "))
+                   for r in records_of(self, self.name)]
+            self._records = [self._movej_record(), *own]
         return self._records
 
     def reflex(self) -> None:
@@ -363,6 +373,7 @@ class UrdfArm(Component):
         margin = self._margin
         self._bound(np.minimum(self.chain.lower, q) - margin,
                     np.maximum(self.chain.upper, q) + margin)
+        self._wide = bool(((q < self.chain.lower) | (q > self.chain.upper)).any())
         self._recover_until = None
         out = np.abs(start - q)
         if out.any():
@@ -463,7 +474,11 @@ class UrdfArm(Component):
             if now_ns < self._recover_until:
                 return
             self._recover_until = None
-            self._bound(self.chain.lower - self._margin, self.chain.upper + self._margin)
+        if self._wide:  # back inside the limits: the fault's bounds are the limits' again
+            lo, hi = self.chain.lower - self._margin, self.chain.upper + self._margin
+            if bool(((self.q >= lo) & (self.q <= hi)).all()):
+                self._bound(lo, hi)
+                self._wide = False
         try:
             knot = ev.tick()
         except MotionFault as exc:
@@ -522,7 +537,7 @@ class UrdfArm(Component):
             self.state = "moving"
         return f"queued: {to}; it blends into the running move" if busy else f"moving to {to}"
 
-    def _queue(self, q: np.ndarray, what: str) -> str:
+    def _queue(self, q: np.ndarray, what: str, options: dict[str, Any] | None = None) -> str:
         """Queue a joint move to ``q`` (rad, m); refused with the reason, nothing moved."""
         if self.chain.limit_violation(q):
             raise CommandError(f"{self.name} {what}: refused: the target is beyond a joint "
@@ -531,7 +546,7 @@ class UrdfArm(Component):
               f"tool {self.pose_text(self.chain.fk(q) @ self.tool_frame)}")
         cfg = self.config(q)
         to += f"; {cfg}" if cfg else ""
-        spec = MotionSpec(target=tuple(float(v) for v in q), name=what)
+        spec = MotionSpec(target=tuple(float(v) for v in q), name=what, **(options or {}))
         return self._queue_spec(spec, what, q.copy(), to)
 
     def _limit_words(self, q: np.ndarray) -> str:
@@ -549,19 +564,44 @@ class UrdfArm(Component):
             args.append(Arg(f"Q{i + 1}", float, lo=lim.lopr, hi=lim.hopr, units=self.units[i],
                             what=f"{jt.name} limits"))
         units = "degrees" if not any(self.prismatic) else "degrees, or mm for a prismatic joint"
-        doc = (f"{self.name} movej {' '.join(a.name for a in args)}: a joint move to the "
-               f"joint values ({units}); queued moves blend.\n\n"
+        doc = (f"{self.name} movej {' '.join(a.name for a in args)} [OPTIONS]: a joint move to "
+               f"the joint values ({units}); queued moves blend.\n\n"
                "A target beyond a joint limit is refused with the limit; nothing moves.\n"
+               f"{OPTIONS_HELP}\n"
                "Range: " + "; ".join(a.range_text for a in args) + ".")
-        return Command("movej", self.move_joints, tuple(args), doc, moves=True,
+        return Command("movej", self.move_joints, (*args, _OPTIONS), doc, moves=True,
                        while_faulted=False, owner=self.name)
 
-    def move_joints(self, *values: float) -> str:
-        """The handler of ``movej`` (one value per joint, operator units)."""
-        if len(values) != self.n:
+    def move_joints(self, *values: float | str) -> str:
+        """The handler of ``movej``: one value per joint (operator units), then the
+        options' text if any."""
+        opts = values[self.n] if len(values) == self.n + 1 else None
+        if len(values) not in (self.n, self.n + 1) or not (opts is None or isinstance(opts, str)):
             raise CommandError(f"{self.name} movej: {self.n} joint values, got {len(values)}")
-        q = np.array([float(v) for v in values]) / self.scales
-        return self._queue(q, "movej")
+        q = np.array([float(v) for v in values[: self.n]]) / self.scales
+        return self._queue(q, "movej", self._options("movej", opts))
+
+    def _options(self, what: str, text: str | None) -> dict[str, Any]:
+        """The motion record's fields that OPTIONS set (see :data:`OPTIONS_HELP`)."""
+        out: dict[str, Any] = {}
+        for word in (text or "").split():
+            key, eq, value = word.partition("=")
+            key = key.lower()
+            try:
+                v = float(value) if eq else math.nan
+            except ValueError:
+                v = math.nan
+            if key == "speed" and 0.0 < v <= 1.0:
+                out["speed"] = v
+            elif key == "blend" and 0.0 <= v <= 1e4:
+                if v == 0.0:
+                    out["buffer"] = "buffered"
+                else:
+                    out["tolerance"] = v * 1e-3
+            else:
+                raise CommandError(f"{self.name} {what}: {word[:40]!r} is not an option: "
+                                   f"{OPTIONS_HELP} nothing moved")
+        return out
 
     def solve(self, target: np.ndarray, config: str | None) -> np.ndarray:
         """Joint values putting the tool at ``target`` (4, 4): the closed form in
@@ -641,33 +681,39 @@ class UrdfArm(Component):
              Arg("Z", float, units="mm"), Arg("RX", float, lo=-360.0, hi=360.0, units="deg"),
              Arg("RY", float, lo=-360.0, hi=360.0, units="deg"),
              Arg("RZ", float, lo=-360.0, hi=360.0, units="deg"),
-             Arg("CONFIG", str, optional=True), name="moveto", moves=True)
+             Arg("CONFIG", str, optional=True), _OPTIONS, name="moveto", moves=True)
     def move_to(self, x: float, y: float, z: float, rx: float, ry: float, rz: float,
-                config: str | None = None) -> str:
-        """NAME moveto X Y Z RX RY RZ [CONFIG]: the tool to a pose by a joint move.
+                config: str | None = None, options: str | None = None) -> str:
+        """NAME moveto X Y Z RX RY RZ [CONFIG] [OPTIONS]: the tool to a pose by a joint move.
 
         X Y Z in mm, RX RY RZ in degrees: fixed-axis rotations about the
         base's x, then y, then z (URDF's rpy).  The joints come from the
         numerical inverse seeded at the present joints, or, with CONFIG (e.g.
         lefty-above-noflip), from the arm's closed form in that
         configuration.  An unreachable pose is refused with the reason;
-        nothing moves."""
+        nothing moves.  OPTIONS as movej's."""
+        if config is not None and "=" in config:  # no configuration: the options begin
+            config, options = None, f"{config} {options or ''}"
+        opts = self._options("moveto", options)
         pose = _pose("moveto", self.name, x, y, z, rx, ry, rz)
         q = self.solve(self.coord_frame @ pose @ inverse(self.tool_frame), config)
-        return self._queue(q, "moveto")
+        return self._queue(q, "moveto", opts)
 
     @command(Arg("X", float, units="mm"), Arg("Y", float, units="mm"),
              Arg("Z", float, units="mm"), Arg("RX", float, lo=-360.0, hi=360.0, units="deg"),
              Arg("RY", float, lo=-360.0, hi=360.0, units="deg"),
-             Arg("RZ", float, lo=-360.0, hi=360.0, units="deg"), name="movel", moves=True)
-    def move_line(self, x: float, y: float, z: float, rx: float, ry: float, rz: float) -> str:
-        """NAME movel X Y Z RX RY RZ: the tool on a straight line to a pose.
+             Arg("RZ", float, lo=-360.0, hi=360.0, units="deg"), _OPTIONS, name="movel",
+             moves=True)
+    def move_line(self, x: float, y: float, z: float, rx: float, ry: float, rz: float,
+                  options: str | None = None) -> str:
+        """NAME movel X Y Z RX RY RZ [OPTIONS]: the tool on a straight line to a pose.
 
         Same units and rotations as moveto; the orientation turns about one
         axis on the way (Paul's drive transform); Cartesian and joint limits
         both kept.  A line that leaves the reach, crosses a joint limit or
         passes a singularity is refused before it starts, naming where;
-        nothing moves.  Queued moves blend."""
+        nothing moves.  Queued moves blend.  OPTIONS as movej's."""
+        opts = self._options("movel", options)
         pose = _pose("movel", self.name, x, y, z, rx, ry, rz)
         eq = PositionEquation("movel", [Transform.varb("T6"), Transform.const("TOOL",
                                                                                self.tool_frame)],
@@ -675,7 +721,8 @@ class UrdfArm(Component):
                                Transform.varb("POS", pose)])
         t6 = self.coord_frame @ pose @ inverse(self.tool_frame)
         end = self.chain.ik(t6, self.heading())
-        return self._queue_spec(MotionSpec(mode="cart", equation=eq, name="movel"), "movel",
+        return self._queue_spec(MotionSpec(mode="cart", equation=eq, name="movel", **opts),
+                                "movel",
                                 end.q.copy() if end.ok else None,
                                 f"tool {self.pose_text(self.coord_frame @ pose)}")
 
