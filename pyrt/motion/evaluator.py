@@ -214,27 +214,30 @@ class Evaluator:
             return move
 
     def _splice(self, seg: Segment, tail: Tail) -> None:
-        how = seg.move.spec.buffer
+        how = seg.how
         t0 = seg.pieces[0].t0
         last = tail.last
-        if last is not None and t0 < self._pieces[-1].t1:
+        if how is BufferMode.BLENDING and last is not None:
+            # the previous line runs on to where the transition begins; its way to
+            # rest (not begun: the planner checked) is dropped
+            line, rest = last.pieces[-2], last.pieces[-1]
+            longer = line.copy_until(t0)
+            self._pieces = [longer if p is line else p for p in self._pieces if p is not rest]
+            last.pieces = [*last.pieces[:-2], longer]
+            last.t_reached = seg.t_c
+            last.rested = False
+        elif how is BufferMode.ABORTING and last is not None:
             keep: list[Piece] = []
             for p in self._pieces:
                 if p.t1 <= t0:
                     keep.append(p)
                 elif p.t0 < t0:
                     keep.append(p.copy_until(t0))
-            # segments cut short: aborted, or blended into the new one
             for s in self._segs:
                 if s.move.code is None and s.t_reached > t0 + 1e-12:
-                    if how is BufferMode.BLENDING and s is last:
-                        s.t_reached = seg.t_c
-                        s.rested = False
-                    elif s.t_begin >= t0 or how is BufferMode.ABORTING:
-                        self._events.append(("aborted", s.move))
-                        self._finish(s, Termination.ABORTED)
-            done = len(keep)
-            self._k = min(self._k, done)
+                    self._events.append(("aborted", s.move))
+                    self._finish(s, Termination.ABORTED)
+            self._k = min(self._k, len(keep))
             self._pieces = keep
         self._pieces.extend(seg.pieces)
         self._segs.append(seg)
@@ -376,7 +379,10 @@ class Evaluator:
         """The plan has run out: at rest, or brake a motion that ended moving."""
         q1, q0 = self._q[-1], self._q[0]
         v = (q1 - q0) / self._period
-        if float(np.max(np.abs(v))) <= REST_SPEED or self._braked:
+        ended = self._pieces[-1] if self._pieces else None
+        if ended is None or ended.space != FUNC or float(np.max(np.abs(v))) <= REST_SPEED \
+                or self._braked:
+            # a planned segment ends at rest exactly where it ends
             self._braked = False
             return q1, self._t6[-1]
         amax = self.planner.amax

@@ -271,7 +271,9 @@ class Planner:
             raise RecordError(f"target: {len(spec.target)} joint values; the arm has {chain.n}")
         if spec.update is not None:
             spec.update_transform()
-        frames = Frames(eq if (spec.target is None or mode is Mode.CART) else None, self.tracker)
+        # (a joint target still moves the tool of the last equation: blends and
+        # max_diff are measured at that tool)
+        frames = Frames(eq, self.tracker)
         period = 1.0 / spec.sample_rate if spec.sample_rate else tail.period
         config = tail.config
         if spec.config is not None:
@@ -460,6 +462,13 @@ class Planner:
                                           f"the {need:.3g} s the acceleration limits need")
                     tau_in = max(tau_in, spec.transition)
                     tau_out = max(tau_out, spec.transition)
+                if x_a is not None and v_a is not None:
+                    # the line starts where the motion at A would be tau_in later
+                    # (001's extrapolation), so the transition meets it exactly
+                    target_x = x_s + v_line_dir
+                    x_s = x_a + v_a * tau_in
+                    v_line_dir = target_x - x_s
+                    v_line = v_line_dir / t_seg
                 if t_seg >= tau_in + tau_out:
                     break
                 t_seg = tau_in + tau_out
@@ -478,12 +487,12 @@ class Planner:
             else:
                 t_c = tail.now + 2 * tail.period + tau_in
             again = False
-            if kind == JOINT and frames.moving and abs(t_c + t_seg - tail.now - t_guess) > 1e-3:
-                t_guess = t_c + t_seg - tail.now
+            if kind == JOINT and frames.moving and abs(
+                    t_c + t_seg + tau_out - tail.now - t_guess) > 1e-3:
+                t_guess = t_c + t_seg + tau_out - tail.now
                 again = True
-            if (prior is not None or (frames.moving and how is BufferMode.BUFFERED)) and abs(
-                    tau_in - tau_guess) > 1e-4:
-                tau_guess = tau_in
+            if prior is not None and abs(tau_in - tau_guess) > 0.05 * tau_in:
+                tau_guess = tau_in  # the line's joint time estimated from a nearer start
                 again = True
             if again and _attempt < _TRIES - 1:
                 continue
@@ -501,10 +510,10 @@ class Planner:
                 # a transition's joint acceleration is its own (1/tau) plus the
                 # curvature of the joints' path (1/T^2): stretch both
                 if exc.where == "in":
-                    tau_scale_in *= exc.ratio
+                    tau_scale_in *= max(exc.ratio, 1.1)
                     slow /= math.sqrt(exc.ratio) if kind == CART else 1.0
                 elif exc.where == "out":
-                    tau_scale_out *= exc.ratio
+                    tau_scale_out *= max(exc.ratio, 1.1)
                     slow /= math.sqrt(exc.ratio) if kind == CART else 1.0
                 elif exc.where == "blend":
                     # a slower new segment changes the velocity less at the corner
@@ -564,10 +573,10 @@ class Planner:
         """The least time of a Cartesian line that keeps the joint velocities
         within the limits (the joints' path sampled)."""
         k = 24
-        q = q_s
-        prev = q_s
-        need = 0.0
         pose = np.eye(4)
+        q0 = self.solve(frames.t6(pose_of(x_s, r_c, p_c, pose), sample), q_s, config)
+        q = prev = q_s if q0 is None else q0
+        need = 0.0
         steps: list[Vector] = []
         for i in range(1, k + 1):
             x = x_s + delta * (i / k)
