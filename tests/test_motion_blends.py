@@ -176,7 +176,7 @@ def test_a_gentle_corner_is_blended_within_its_tolerance():
     assert m2.buffer == "blending"
     knots = run(ev)
     speeds = [np.linalg.norm(tool_pose(PUMA, k2.q)[:3, 3] - tool_pose(PUMA, k1.q)[:3, 3])
-              for k1, k2 in itertools.pairwise(knots)]
+              for k1, k2 in itertools.pairwise(knots[20:-20])]
     assert min(speeds) > 1e-4  # it never stops at the corner
     cut = min(np.linalg.norm(tool_pose(PUMA, k.q)[:3, 3] - b[:3, 3]) for k in knots)
     worst = max(min(dist_to_segment(tool_pose(PUMA, k.q)[:3, 3], a[:3, 3], b[:3, 3]),

@@ -220,7 +220,7 @@ class Planner:
     @staticmethod
     def piece_at(pieces: list[Piece], t: float) -> Piece | None:
         for p in pieces:
-            if p.t0 <= t < p.t1:
+            if p.t0 - 1e-9 <= t < p.t1:
                 return p
         return pieces[-1] if pieces and t >= pieces[-1].t0 else None
 
@@ -664,9 +664,15 @@ class Planner:
         velocities, accelerations, max_diff, the blend's tolerance."""
         chain = self.chain
         dt = seg.period
-        t0 = seg.t_begin
+        # on the loop's own sample times, from the first one in the segment
+        t0 = tail.now + math.ceil((seg.t_begin - tail.now) / dt - 1e-9) * dt
         t_end = seg.t_reached
-        prior = self.piece_at(tail.pieces, t0 - dt) if how is not BufferMode.BUFFERED else None
+        if how is BufferMode.BLENDING and tail.last is not None:
+            prior = tail.last.pieces[-2]  # the line, run on to the transition
+        elif how is BufferMode.ABORTING:
+            prior = self.piece_at(tail.pieces, t0 - dt)
+        else:
+            prior = None
         q_prev2 = q_prev = None
         seed = self._end_of(tail)[0] if how is BufferMode.BUFFERED else tail.q
         if prior is not None:
@@ -713,7 +719,7 @@ class Planner:
                 qd = (q - q_prev) / dt
                 qdd = (q - 2 * q_prev + q_prev2) / (dt * dt)
                 where = self._where(seg, t - dt)
-                over_v = np.abs(qd) > self.vmax * 1.0005
+                over_v = np.abs(qd) > self.vmax * 0.999
                 if over_v.any():
                     j = int(np.argmax(np.abs(qd) / self.vmax))
                     if np.abs(q - q_prev)[j] > 0.5:
@@ -723,7 +729,7 @@ class Planner:
                     raise _Slow(where, f"joint {chain.joints[j].name} over its velocity limit "
                                 f"at {frac:.0f}% of the segment",
                                 1.02 * float(np.abs(qd)[j] / self.vmax[j]))
-                over_a = np.abs(qdd) > self.amax
+                over_a = np.abs(qdd) > self.amax * 0.995  # a reserve for rounding
                 if over_a.any():
                     j = int(np.argmax(np.abs(qdd) / self.amax))
                     ratio = float(np.abs(qdd)[j] / self.amax[j])
