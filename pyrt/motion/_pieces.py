@@ -92,8 +92,11 @@ class Frames:
                           if t.type is fun)
         self.moving = bool(self.live)
         self._static: tuple[Matrix, Matrix, Matrix] | None = None
+        self._pre_identity = self._post_identity = False
         if not self.moving:
             self._static = self._compute(None)
+            self._pre_identity = bool(np.array_equal(self._static[0], np.eye(4)))
+            self._post_identity = bool(np.array_equal(self._static[1], np.eye(4)))
 
     def _value(self, t: Transform, sample: float | None) -> Matrix:
         if t.type is TransformType.FUNCTIONAL:
@@ -125,6 +128,10 @@ class Frames:
         return self._compute(sample)
 
     def t6(self, pos: Matrix, sample: float | None) -> Matrix:
+        if self._static is not None:
+            pre, post, _ = self._static
+            out = pos if self._pre_identity else pre @ pos
+            return out if self._post_identity else out @ post
         pre, post, _ = self.parts(sample)
         return pre @ pos @ post
 
@@ -180,6 +187,7 @@ class Piece:
     ``u = t - origin``.  ``c`` holds the coefficients, lowest power first."""
 
     __slots__ = (
+        "_ref",
         "c",
         "config",
         "fn",
@@ -213,6 +221,9 @@ class Piece:
         self.fn = fn
         #: Set for a transition whose coefficients are made when it starts.
         self.runtime: Any = None
+        self._ref = ((tuple(float(v) for v in np.asarray(r_c).reshape(9)),
+                      tuple(float(v) for v in np.asarray(p_c)))
+                     if r_c is not None and p_c is not None else None)
 
     def x(self, t: float) -> Vector:
         u = t - self.origin
@@ -239,13 +250,32 @@ class Piece:
             return np.zeros_like(c[0])
         return ((20 * c[5] * u + 12 * c[4]) * u + 6 * c[3]) * u + 2 * c[2]
 
-    def pose(self, t: float, out: Matrix) -> Matrix:
-        """Drive piece: the POS value at ``t``."""
-        x = self.x(t)
-        assert self.r_c is not None and self.p_c is not None
-        out[:3, :3] = exp_rot(x[3:]) @ self.r_c
-        out[:3, 3] = self.p_c + x[:3]
-        return out
+    def pose(self, t: float, out: Matrix | None = None) -> Matrix:
+        """Drive piece: the POS value at ``t`` (``Exp(phi) R_c``, ``p_c + p``),
+        on plain floats: the trajectory tick's hot path."""
+        px, py, pz, a, b, c = self.x(t).tolist()
+        th2 = a * a + b * b + c * c
+        if th2 < 1e-24:
+            s, k = 1.0, 0.5
+        else:
+            th = math.sqrt(th2)
+            s, k = math.sin(th) / th, (1.0 - math.cos(th)) / th2
+        e00, e01, e02 = 1.0 - k * (b * b + c * c), -s * c + k * a * b, s * b + k * a * c
+        e10, e11, e12 = s * c + k * a * b, 1.0 - k * (a * a + c * c), -s * a + k * b * c
+        e20, e21, e22 = -s * b + k * a * c, s * a + k * b * c, 1.0 - k * (a * a + b * b)
+        (r00, r01, r02, r10, r11, r12, r20, r21, r22), (cx, cy, cz) = self._ref
+        m = np.array((
+            (e00 * r00 + e01 * r10 + e02 * r20, e00 * r01 + e01 * r11 + e02 * r21,
+             e00 * r02 + e01 * r12 + e02 * r22, cx + px),
+            (e10 * r00 + e11 * r10 + e12 * r20, e10 * r01 + e11 * r11 + e12 * r21,
+             e10 * r02 + e11 * r12 + e12 * r22, cy + py),
+            (e20 * r00 + e21 * r10 + e22 * r20, e20 * r01 + e21 * r11 + e22 * r21,
+             e20 * r02 + e21 * r12 + e22 * r22, cz + pz),
+            (0.0, 0.0, 0.0, 1.0)))
+        if out is not None:
+            out[:] = m
+            return out
+        return m
 
     def copy_until(self, t1: float) -> Piece:
         p = Piece(self.space, self.t0, t1, self.origin, self.c, self.seg, frames=self.frames,

@@ -345,7 +345,7 @@ class Evaluator:
             assert frames is not None
             for tr in frames.live:
                 self.tracker.evaluate(tr, n)
-            t6 = frames.t6(piece.pose(t, np.eye(4)), n)
+            t6 = frames.t6(piece.pose(t), n)
             q_opt = self.planner.solve(t6, seed, piece.config)
             if q_opt is None:
                 raise MotionFault(f"no inverse at t = {t:.3f} s: "
