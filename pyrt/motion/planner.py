@@ -41,7 +41,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pyrt.kinematics import Chain
-from pyrt.motion._geom import drive_of, inv, log_rot, pose_of
+from pyrt.motion._geom import drive_of, log_rot, pose_of
 from pyrt.motion._pieces import (
     CART,
     JOINT,
@@ -173,6 +173,9 @@ class Planner:
         self.chain = chain
         self.limits = limits
         self.vmax = np.array(limits.vmax)
+        #: The velocities planned for: just under the limits (the sampled check
+        #: keeps a reserve for rounding).
+        self.vplan = 0.998 * self.vmax
         self.amax = np.array(limits.amax)
         self.tracker = tracker
         self.closed = chain.closed_form
@@ -298,8 +301,8 @@ class Planner:
                 from pyrt.kinematics import transform
 
                 d = spec.distance
-                target_pos = target_pos @ frames.parts(None)[2] @ transform(d[:3], d[3:]) \
-                    @ inv(frames.parts(None)[2])
+                # in the tool frame (POS is where the tool frame goes)
+                target_pos = target_pos @ transform(d[:3], d[3:])
         # Where the new segment starts, and how.
         last = tail.last
         buffer = spec.buffer
@@ -402,7 +405,7 @@ class Planner:
                     x_s = np.array(q_s, dtype=float)
                 start = x_s
                 delta = q_e - x_s
-                t_need = float(np.max(np.abs(delta) / (speed * slow * self.vmax)))
+                t_need = float(np.max(np.abs(delta) / (speed * slow * self.vplan)))
                 end: Any = q_e
                 v_line_dir = delta
             else:
@@ -440,7 +443,7 @@ class Planner:
                 if spec.segment_time + 1e-12 < t_need:
                     raise RecordError(f"segment_time: {spec.segment_time:g} s is shorter than "
                                       f"the {t_need:.3g} s the limits need")
-                t_seg = spec.segment_time * slow
+                t_seg = spec.segment_time / slow
             # -- the transitions' half-times -------------------------------------------------
             for _ in range(4):
                 v_line = v_line_dir / t_seg
@@ -509,12 +512,13 @@ class Planner:
                 last_slow = exc
                 # a transition's joint acceleration is its own (1/tau) plus the
                 # curvature of the joints' path (1/T^2): stretch both
+                stretch = kind == CART and spec.segment_time is None
                 if exc.where == "in":
                     tau_scale_in *= max(exc.ratio, 1.1)
-                    slow /= math.sqrt(exc.ratio) if kind == CART else 1.0
+                    slow /= math.sqrt(exc.ratio) if stretch else 1.0
                 elif exc.where == "out":
                     tau_scale_out *= max(exc.ratio, 1.1)
-                    slow /= math.sqrt(exc.ratio) if kind == CART else 1.0
+                    slow /= math.sqrt(exc.ratio) if stretch else 1.0
                 elif exc.where == "blend":
                     # a slower new segment changes the velocity less at the corner
                     if how is not BufferMode.BLENDING or slow < 0.3:
@@ -592,7 +596,7 @@ class Planner:
             if got is None:
                 raise _Refused(f"the line leaves the arm's reach at {where}: "
                                f"{self.why(t6, q, config)}")
-            need = max(need, float(np.max(np.abs(got - prev) * k / (speed * self.vmax))))
+            need = max(need, float(np.max(np.abs(got - prev) * k / (speed * self.vplan))))
             steps.append(got - prev)
             prev = q = got
         # the joints' path curves: its acceleration at constant speed along the line
