@@ -28,7 +28,7 @@ def _station():
     station = URDF.build(Loop(SimClock(), timing=True),
                          argparse.Namespace(boards=None, urdf=None, start=None))
     runner = station.start()
-    runner.sleep(0.05)
+    runner.wait_until(lambda: station.arm.powered and not station.busy(), 5.0)
     return station, runner, RobotShell(station, io.StringIO())
 
 

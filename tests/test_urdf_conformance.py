@@ -76,7 +76,8 @@ def _urdf_rules(monkeypatch):
 def robot():
     station = URDF.build(Loop(SimClock()), argparse.Namespace(boards=None, urdf=None, start=None))
     runner = station.start()
-    runner.sleep(0.05)
+    assert runner.wait_until(lambda: station.arm.powered and not station.busy(), 5.0)
+    runner.sleep(0.2)
     yield station, runner
     station.close()
 

@@ -58,7 +58,7 @@ def puma():
     """One PUMA station on simulated time for the in-process tests of this module."""
     station = build_urdf(Loop(SimClock()))
     runner = station.start()
-    runner.sleep(0.05)
+    assert runner.wait_until(lambda: station.arm.powered and not station.busy(), 5.0)
     yield station, runner
     station.close()
 

@@ -33,6 +33,7 @@ RZ fixed-axis, about the base's x, then y, then z: URDF's ``rpy``).
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
@@ -83,6 +84,9 @@ LIMIT_MARGIN_DEG = 1.0
 #: rest holds the arm against gravity and friction).
 ACCEL_SHARE = 0.4
 
+#: The servo closes the loop by itself after this many encoder readings (the arm's
+#: speed then known: a falling or swinging arm is braked, not held where it was).
+POWER_ON_TICKS = 10
 #: What OPTIONS of movej, moveto and movel may say.
 OPTIONS_HELP = ("OPTIONS: speed=F (a fraction 0 < F <= 1 of every velocity limit), blend=MM "
                 "(the most a blend into the next move may cut the corner, mm; 0: stop exactly "
@@ -226,7 +230,9 @@ class UrdfArm(Component):
         self._recover_until: int | None = None
         #: The fault's bounds are widened to where the arm lay beyond a limit.
         self._wide = False
-        #: The servo closes the loop by itself once, at the first servo tick.
+        #: The last readings while unpowered (time, joints): the speed at power-on.
+        self._history: deque[tuple[int, np.ndarray]] = deque(maxlen=20)
+        #: The servo closes the loop by itself once, after POWER_ON_TICKS readings.
         self._started = False
         self._heading: np.ndarray | None = None
         #: TOOL: the tool's frame on the chain's tool (``NAME tool``); COORD: the frame
@@ -360,31 +366,38 @@ class UrdfArm(Component):
 
     def power_on(self) -> None:
         """Close the loop where the arm is (gravity held), amplifiers on; the
-        trajectory starts there (a joint beyond its limit: from the limit)."""
+        trajectory starts there.  An arm that is still moving (falling, swinging)
+        is first braked to rest, and one lying beyond a limit (sunk onto an end
+        stop while the amplifiers were off) brought back inside: a quintic at half
+        the acceleration limits before the trajectory's knots begin."""
         q = self.q.copy()
+        v = np.zeros(self.n)
+        if self._history:  # the speed over the last readings, by their times
+            t_old, q_old = self._history[0]
+            if self._now_ns > t_old:
+                v = (q - q_old) / ((self._now_ns - t_old) * 1e-9)
         ff = self.chain.gravity_torque(q)
         self.servo.reset(q, ff)
         k = self.servo.knots
         k[...] = 0.0
         k[3] = q
         k[7] = ff
-        start = np.clip(q, self.chain.lower, self.chain.upper)
+        amax = 0.5 * np.array(self.limits.amax)
+        t = float(np.max(np.abs(v) / amax))  # the time to brake every joint to rest
+        start = np.clip(q + 0.5 * v * t, self.chain.lower, self.chain.upper)
         self.evaluator = Evaluator(self.chain, self.limits, start, period=self.traj_period_s)
         margin = self._margin
+        self._history.clear()
         self._bound(np.minimum(self.chain.lower, q) - margin,
                     np.maximum(self.chain.upper, q) + margin)
         self._wide = bool(((q < self.chain.lower) | (q > self.chain.upper)).any())
         self._recover_until = None
         out = np.abs(start - q)
-        if out.any():
-            # lying beyond a limit (sunk onto an end stop while the amplifiers were
-            # off): first back inside, a quintic at half the acceleration limits,
-            # before the trajectory's knots begin
-            amax = np.array(self.limits.amax)
-            t = max(0.2, float(np.max(np.sqrt(5.77 * out / (0.5 * amax)))))
+        if out.any() or t > 0.0:
+            t = max(0.2, t, float(np.max(np.sqrt(5.77 * out / amax))))
             t = math.ceil(t / self.traj_period_s) * self.traj_period_s
             zero = np.zeros(self.n)
-            self.servo.segment(t, q, zero, start, zero, zero, zero, ff,
+            self.servo.segment(t, q, v, start, zero, zero, zero, ff,
                                self.chain.gravity_torque(start))
             self._recover_until = self._now_ns + round(t * 1e9)
         for j in range(self.n):
@@ -399,8 +412,11 @@ class UrdfArm(Component):
         self._now_ns = now_ns
         inputs = self.board.snapshot()  # one read of every input: this tick's
         self._measure(inputs[self._count_slice])
+        if not self.powered:  # the readings kept: an arm moving is braked at power-on
+            self._history.append((now_ns, self.q.copy()))
         if not self.powered:
-            if self.evaluator is None and self.station.fault is None and not self._started:
+            if (self.evaluator is None and self.station.fault is None and not self._started
+                    and len(self._history) >= POWER_ON_TICKS):
                 self._started = True
                 self.power_on()
             return
@@ -774,8 +790,8 @@ class UrdfArm(Component):
     # -- the station's questions -------------------------------------------------------
 
     def busy(self) -> bool:
-        """A move runs or the arm settles."""
-        return self.state != "idle"
+        """A move runs, the arm settles, or the servo brings it to rest after power-on."""
+        return self.state != "idle" or self._recover_until is not None
 
     def stop(self) -> str:
         """Brake along the path to rest and hold there (the servo stays on)."""
