@@ -226,7 +226,7 @@ def test_buffered_stops_at_the_corner_then_goes_on():
     assert m2.buffer == "buffered"
     knots = run(ev)
     d = [np.linalg.norm(tool_pose(PUMA, k.q)[:3, 3] - b[:3, 3]) for k in knots]
-    assert min(d) < 1e-9  # it passes through the corner itself
+    assert min(d) < 1e-6  # it comes to rest at the corner itself
     _check_continuity(knots)
 
 

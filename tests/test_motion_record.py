@@ -3,6 +3,7 @@ effect) or refused by name; the record's termination code, progress and reached 
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -88,7 +89,7 @@ def test_copy_checks_the_fields_again_and_refuses_unknown_ones():
 
 def test_the_record_is_copied_whole_when_queued():
     """The target is the equation's POS when the record is queued: a later change of POS does not move the running motion."""
-    a, b = _line()
+    _a, b = _line()
     eq = equation(b)
     ev = make()
     ev.queue(MotionSpec(mode="cart", equation=eq))
@@ -101,21 +102,21 @@ def test_the_record_is_copied_whole_when_queued():
 
 def test_code_progress_and_reached_event():
     """A record's handle and its equation report progress 0 -> 1 (rising), then the code reached and the event set."""
-    a, b = _line()
+    _a, b = _line()
     eq = equation(b)
     ev = make()
     move = ev.queue(MotionSpec(mode="cart", equation=eq))
     assert not move.reached.is_set() and eq.code is None
     progress = [k.progress for k in run(ev) if k.move is move]
     assert progress[0] < 0.05 and max(progress) < 1.0
-    assert all(p2 >= p1 for p1, p2 in zip(progress, progress[1:], strict=False))
+    assert all(p2 >= p1 for p1, p2 in itertools.pairwise(progress))
     assert move.code == Termination.REACHED and move.progress == 1.0 and move.reached.is_set()
     assert eq.code == "reached" and eq.progress == 1.0 and eq.reached.is_set()
 
 
 def test_transition_time_is_honoured_and_a_too_short_one_refused():
     """transition: a longer transition lowers the peak acceleration and lengthens the motion; one shorter than the limits need is refused naming both times."""
-    a, b = _line()
+    _a, b = _line()
     ev = make()
     m1 = ev.queue(MotionSpec(mode="cart", equation=equation(b)))
     k1 = run(ev)
@@ -128,7 +129,7 @@ def test_transition_time_is_honoured_and_a_too_short_one_refused():
     assert peak2 < 0.6 * peak1
     assert len(k2) > len(k1)
     assert ev._segs[-1].tau_in == pytest.approx(0.6)
-    with pytest.raises(RecordError, match="transition: 0.001 s is shorter than"):
+    with pytest.raises(RecordError, match=r"transition: 0\.001 s is shorter than"):
         make().queue(MotionSpec(mode="cart", equation=equation(b), transition=0.001))
 
 
@@ -149,7 +150,7 @@ def test_segment_time_is_honoured_and_a_too_short_one_refused():
 
 def test_a_record_without_an_equation_moves_to_the_last_one():
     """equation None: the last equation queued is used, with its POS value now."""
-    a, b = _line()
+    _a, b = _line()
     eq = equation(b)
     ev = make()
     ev.queue(MotionSpec(mode="cart", equation=eq))
@@ -216,7 +217,7 @@ def test_monitor_stops_the_motion_on_its_line_with_its_word():
 
 def test_update_term_remembers_where_a_stopped_motion_ended():
     """update: the named varb transform is solved for at the end of the segment, from the T6 reached (the equation then holds there)."""
-    a, b = _line()
+    _a, b = _line()
     eq = equation(b)
     ev = make()
     move = ev.queue(MotionSpec(mode="cart", equation=eq, update="POS",
@@ -234,7 +235,7 @@ def test_update_term_remembers_where_a_stopped_motion_ended():
 
 def test_sample_rate_changes_the_trajectory_period():
     """sample_rate: the knots come at the record's rate from its first sample on."""
-    a, b = _line()
+    _a, b = _line()
     ev = make()
     ev.queue(MotionSpec(mode="cart", equation=equation(b), sample_rate=50.0))
     knots = run(ev)
@@ -246,7 +247,7 @@ def test_sample_rate_changes_the_trajectory_period():
 
 def test_mass_gives_the_joint_torques_that_hold_it_and_is_refused_over_the_payload():
     """mass: every knot carries the torques that hold the mass at the flange against gravity (the gradient of its potential energy); a mass over the payload is refused."""
-    a, b = _line()
+    _a, b = _line()
     ev = make()
     ev.queue(MotionSpec(mode="cart", equation=equation(b), mass=2.0))
     knots = run(ev)
@@ -289,7 +290,7 @@ def test_force_limits_make_a_guarded_move_or_are_refused_without_a_sensor():
 
 def test_max_diff_bounds_the_tool_motion_per_tick():
     """max_diff: the tool moves at most that far (and turns at most that angle) in one trajectory tick."""
-    a, b = _line()
+    _a, b = _line()
     ev = make()
     ev.queue(MotionSpec(mode="cart", equation=equation(b), max_diff=(0.0005, 0.01)))
     knots = run(ev)
@@ -300,7 +301,7 @@ def test_max_diff_bounds_the_tool_motion_per_tick():
 
 def test_distance_modifier_offsets_the_target_in_the_tool_frame():
     """distance: the record ends at the target moved by (dx dy dz rx ry rz) in the tool frame (an approach point)."""
-    a, b = _line()
+    _a, b = _line()
     ev = make()
     d = (0.0, 0.0, -0.03, 0.0, 0.0, 0.2)
     ev.queue(MotionSpec(mode="cart", equation=equation(b), distance=d))
@@ -312,7 +313,7 @@ def test_distance_modifier_offsets_the_target_in_the_tool_frame():
 
 def test_speed_scales_the_cartesian_velocity():
     """speed: the tool's speed on the line is at most that fraction of the Cartesian limit."""
-    a, b = _line()
+    _a, b = _line()
     top = {}
     for speed in (1.0, 0.3):
         ev = make()
@@ -326,7 +327,7 @@ def test_speed_scales_the_cartesian_velocity():
 
 def test_hold_transform_keeps_its_value_until_the_end_of_the_segment():
     """A hold POS changed during the motion: the motion goes on to the value it started with; the equation takes the new value at the end of the segment."""
-    a, b = _line()
+    _a, b = _line()
     t6 = Transform.varb("T6")
     tool = Transform.const("TOOL", TOOL_OFFSET)
     pos = Transform.hold("POS", b)
