@@ -221,7 +221,8 @@ class Piece:
         self.fn = fn
         #: Set for a transition whose coefficients are made when it starts.
         self.runtime: Any = None
-        self._ref = ((tuple(float(v) for v in np.asarray(r_c).reshape(9)),
+        self._ref: tuple[tuple[float, ...], tuple[float, ...]] | None = (
+            (tuple(float(v) for v in np.asarray(r_c).reshape(9)),
                       tuple(float(v) for v in np.asarray(p_c)))
                      if r_c is not None and p_c is not None else None)
 
@@ -263,6 +264,7 @@ class Piece:
         e00, e01, e02 = 1.0 - k * (b * b + c * c), -s * c + k * a * b, s * b + k * a * c
         e10, e11, e12 = s * c + k * a * b, 1.0 - k * (a * a + c * c), -s * a + k * b * c
         e20, e21, e22 = -s * b + k * a * c, s * a + k * b * c, 1.0 - k * (a * a + b * b)
+        assert self._ref is not None
         (r00, r01, r02, r10, r11, r12, r20, r21, r22), (cx, cy, cz) = self._ref
         m = np.array((
             (e00 * r00 + e01 * r10 + e02 * r20, e00 * r01 + e01 * r11 + e02 * r21,

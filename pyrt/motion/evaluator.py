@@ -202,7 +202,7 @@ class Evaluator:
             if q0.shape != (self.chain.n,):
                 raise RecordError(f"{name}: gives {q0.shape} values; the arm has {self.chain.n}")
             move = Move(MotionSpec(name=name), len(self._segs))
-            seg = Segment(move, FUNC, self.planner.tracker and _no_frames(self.planner),
+            seg = Segment(move, FUNC, _no_frames(self.planner),
                           None, self._period, t0, t0 + duration, 0.0, 0.0, q0, None,
                           np.zeros(self.chain.n), None, None)
             seg.pieces = [Piece(FUNC, t0, t0 + duration, t0, np.zeros((2, self.chain.n)), seg,

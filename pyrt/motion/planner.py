@@ -186,7 +186,7 @@ class Planner:
         """Joint values of ``t6`` nearest ``seed`` (the closed form in
         ``config`` when the chain has one), or None."""
         if self.closed is not None and config is not None:
-            q = self.closed.solve(t6, config, seed)
+            q = self.closed.solve(t6, config, seed)  # type: ignore[call-arg]
             return None if q is None else np.asarray(q, dtype=float)
         r = self.chain.ik(t6, seed)
         if not r.ok:
@@ -305,7 +305,7 @@ class Planner:
                 target_pos = target_pos @ transform(d[:3], d[3:])
         # Where the new segment starts, and how.
         last = tail.last
-        buffer = spec.buffer
+        buffer = BufferMode(spec.buffer)
         moving = last is not None and not last.rested and tail.pieces and not (
             last.pieces and last.pieces[-1].t1 <= tail.now)
         if not moving or last is None:
@@ -316,6 +316,7 @@ class Planner:
             buffer = BufferMode.ABORTING
         kind = CART if mode is Mode.CART else JOINT
         attempts: list[str] = []
+        buffer = BufferMode(buffer)
         for how in ([buffer, BufferMode.BUFFERED] if buffer is BufferMode.BLENDING
                     else [buffer]):
             try:
@@ -353,15 +354,16 @@ class Planner:
                 x_a = None
             elif how is BufferMode.BLENDING:
                 assert last is not None
+                assert last.q_end is not None and last.t6_end is not None
                 q_s, t6_s = last.q_end, last.t6_end
-                assert q_s is not None and t6_s is not None
             else:  # aborting: from the state a few samples ahead
                 t_a = tail.now + 2 * tail.period
                 p = self.piece_at(tail.pieces, t_a)
                 assert p is not None
-                q_s = self.q_of(p, t_a, tail.q, self.sample_of(tail, t_a))
-                if q_s is None:
+                q_at = self.q_of(p, t_a, tail.q, self.sample_of(tail, t_a))
+                if q_at is None:
                     raise _Refused("the running motion cannot be followed to the abort point")
+                q_s = q_at
                 t6_s = chain.fk(q_s)
             # -- the target ---------------------------------------------------------------
             # in a moving frame, where the target will be when the segment ends (001)
@@ -671,6 +673,7 @@ class Planner:
         # on the loop's own sample times, from the first one in the segment
         t0 = tail.now + math.ceil((seg.t_begin - tail.now) / dt - 1e-9) * dt
         t_end = seg.t_reached
+        prior: Piece | None
         if how is BufferMode.BLENDING and tail.last is not None:
             prior = tail.last.pieces[-2]  # the line, run on to the transition
         elif how is BufferMode.ABORTING:
