@@ -405,3 +405,27 @@ def test_options_set_the_speed_and_the_blend_and_bad_ones_are_refused(puma):
 
     assert runner.wait_until(watch, 30.0)
     assert min(seen) < 0.05  # it passed through the first target (no corner cut)
+
+
+def test_a_guarded_move_onto_the_table_stops_on_the_wrist_force(puma):
+    """movel down onto sim table with force=20: the wrist sensor (the board's F/T registers) stops it within a few millimetres of the table, and last_stop says the force felt; without the table the same move reaches its target."""
+    station, runner = puma
+    arm = station.arm
+    _settle(station, runner)
+    q0 = CHAIN.closed_form.inverse(_target(500, 100, 450, 180, 0, 90), "righty-above-noflip")
+    runner.call(arm.move_joints, *np.degrees(q0).tolist())
+    _settle(station, runner)
+    sim = station.find("sim")
+    try:
+        runner.call(sim.table, "350")
+        runner.call(arm.move_line, 500, 100, 250, 180, 0, 90, "speed=0.1 force=20")
+        _settle(station, runner)
+        assert station.fault is None
+        assert station.last_stop().startswith("force limit"), station.last_stop()
+        z = runner.call(lambda: station.plant.truth().tool[2, 3]) * 1e3
+        assert 345.0 <= z <= 351.0, z
+    finally:
+        runner.call(sim.table, "off")
+    runner.call(arm.move_line, 500, 100, 300, 180, 0, 90, "speed=0.1 force=20")
+    _settle(station, runner)
+    assert station.last_stop() == "at target"

@@ -90,7 +90,8 @@ POWER_ON_TICKS = 10
 #: What OPTIONS of movej, moveto and movel may say.
 OPTIONS_HELP = ("OPTIONS: speed=F (a fraction 0 < F <= 1 of every velocity limit), blend=MM "
                 "(the most a blend into the next move may cut the corner, mm; 0: stop exactly "
-                "at the target).")
+                "at the target), force=N (a guarded move: braked to rest when the wrist feels "
+                "more than N newtons along any of its axes).")
 _OPTIONS = Arg("OPTIONS", str, optional=True, rest=True)
 
 _TWO32 = 1 << 32
@@ -158,7 +159,8 @@ class UrdfArm(Component):
     """
 
     def __init__(self, station: Station, name: str, chain: Chain, board: Any,
-                 drives: Sequence[Drive], period_ns: int) -> None:
+                 drives: Sequence[Drive], period_ns: int,
+                 wrench: Callable[[Sequence[int]], np.ndarray] | None = None) -> None:
         self.station = station
         self.name = name
         self.chain = chain
@@ -178,6 +180,12 @@ class UrdfArm(Component):
         if at != list(range(at[0], at[0] + n)):  # pragma: no cover - the kind declares them so
             raise ValueError("the board's encoder counters are not one block of its inputs")
         self._count_slice = slice(at[0], at[0] + n)
+        #: The wrist sensor: its channels in the snapshot and counts -> wrench (N, N m);
+        #: None: no sensor (no force limits).
+        self._wrench_of = wrench
+        ft = [layout.index(("ft", k)) for k in range(6)] if ("ft", 0) in layout else []
+        self._ft_slice = slice(ft[0], ft[0] + 6) if ft else slice(0, 0)
+        self._ft_counts: Sequence[int] = [0] * 6
         # the counters as last read and their unwrapped totals (Python ints: no wrap)
         self._counts = [int(board.read("count", j)) for j in range(n)]
         self._total = list(self._counts)
@@ -335,6 +343,13 @@ class UrdfArm(Component):
                 qs[j] = (t + 0.5) / cpu[j]
         self.q[:] = qs
 
+    def wrench(self) -> np.ndarray:
+        """The wrist sensor's wrench (fx fy fz N, tx ty tz N m; tool frame), or zeros
+        without a sensor."""
+        if self._wrench_of is None:
+            return np.zeros(6)
+        return self._wrench_of(self._ft_counts)
+
     def tool(self) -> np.ndarray:
         """The tool pose the encoders give (4, 4; m, in the base's frame): the chain's
         tool with :attr:`tool_frame` (``NAME tool``) on it."""
@@ -385,7 +400,8 @@ class UrdfArm(Component):
         amax = 0.5 * np.array(self.limits.amax)
         t = float(np.max(np.abs(v) / amax))  # the time to brake every joint to rest
         start = np.clip(q + 0.5 * v * t, self.chain.lower, self.chain.upper)
-        self.evaluator = Evaluator(self.chain, self.limits, start, period=self.traj_period_s)
+        self.evaluator = Evaluator(self.chain, self.limits, start, period=self.traj_period_s,
+                                   force_sensor=self._wrench_of is not None)
         margin = self._margin
         self._history.clear()
         self._bound(np.minimum(self.chain.lower, q) - margin,
@@ -412,6 +428,7 @@ class UrdfArm(Component):
         self._now_ns = now_ns
         inputs = self.board.snapshot()  # one read of every input: this tick's
         self._measure(inputs[self._count_slice])
+        self._ft_counts = inputs[self._ft_slice]
         if not self.powered:  # the readings kept: an arm moving is braked at power-on
             self._history.append((now_ns, self.q.copy()))
         if not self.powered:
@@ -495,15 +512,22 @@ class UrdfArm(Component):
             if bool(((self.q >= lo) & (self.q <= hi)).all()):
                 self._bound(lo, hi)
                 self._wide = False
+        wrench = self.wrench() if self._wrench_of is not None else None
         try:
-            knot = ev.tick()
+            knot = ev.tick(wrench)
         except MotionFault as exc:
             self.fail(f"trajectory: {exc}", self.name)
             return
         for word, _move in knot.events:
             if word == "reached":
                 continue
-            self.last_stop = "stopped (stop command)" if word == "stopped" else word
+            if word == "force" and wrench is not None:
+                self.last_stop = (f"force limit: the wrist felt |F| "
+                                  f"{float(np.linalg.norm(wrench[:3])):.2f} N (fx fy fz "
+                                  f"{' '.join(f'{v:.2f}' for v in wrench[:3])} N) at "
+                                  f"{self.pose_text(self.tool())}; braked to rest")
+            else:
+                self.last_stop = "stopped (stop command)" if word == "stopped" else word
         k = self.servo.knots
         moving = bool(knot.qd.any() or knot.qdd.any() or not np.array_equal(knot.q, k[3]))
         if moving:
@@ -609,6 +633,8 @@ class UrdfArm(Component):
                 v = math.nan
             if key == "speed" and 0.0 < v <= 1.0:
                 out["speed"] = v
+            elif key == "force" and 0.0 < v <= 1e5 and self._wrench_of is not None:
+                out["force_limits"] = (v, v, v, math.inf, math.inf, math.inf)
             elif key == "blend" and 0.0 <= v <= 1e4:
                 if v == 0.0:
                     out["buffer"] = "buffered"

@@ -45,7 +45,7 @@ from pyrt.kinematics import Chain
 from pyrt.kinematics.puma import URDF as PUMA_URDF
 from pyrt.kinematics.puma import PaulInverse
 from pyrt.scheduler import Loop, ReadyQueue, install
-from pyrt.sim.arm import PUMA560_MOTORS, ArmWorld, Motor, default_motors
+from pyrt.sim.arm import PUMA560_MOTORS, ArmWorld, FTCalibration, Motor, default_motors
 from pyrt.sim.world import World
 from pyrt.station._urdf_arm import Drive, UrdfArm
 from pyrt.station._urdf_sim import UrdfPhysics, UrdfSim
@@ -141,8 +141,9 @@ class UrdfStation(Station):
             extras.append(UrdfSim(physics.arm))
         elif boards.has_info:
             extras.append(BoardWorld(boards))
+        ft = FTCalibration()  # the wrist sensor's data sheet: counts per N and per N m
         self.arm = arm = UrdfArm(self, self.name, chain, self.board, _drives(motors),
-                                 loop.period_ns)
+                                 loop.period_ns, wrench=ft.wrench)
         taken = {c.lower() for c in ("sim", *(j.name for j in arm.joints))}
         if self.name.lower() in taken:
             raise ConfigError(f"robot {self.name!r}: a joint of the URDF has the robot's name "
