@@ -186,7 +186,10 @@ class Planner:
         """Joint values of ``t6`` nearest ``seed`` (the closed form in
         ``config`` when the chain has one), or None."""
         if self.closed is not None and config is not None:
-            q = self.closed.solve(t6, config, seed)  # type: ignore[call-arg]
+            try:
+                q = self.closed.solve(t6, config, seed)  # type: ignore[call-arg]
+            except TypeError:  # a closed form that takes no seed
+                q = self.closed.solve(t6, config)
             return None if q is None else np.asarray(q, dtype=float)
         r = self.chain.ik(t6, seed)
         if not r.ok:
