@@ -59,18 +59,9 @@ class NoiseSource:
 
 
 class RefArmWorld:
-    """The simulated arm (see the module text) behind ``board`` (a
-    :class:`~pyrt.boards.RegisterBoard` of :func:`arm_board_kind`; a new one
-    if not given).
-
-    ``chain`` the arm (its inertials, limits, ``effort``, ``damping`` and
-    ``friction`` are used; ``damping`` and ``friction`` given here override
-    the URDF's, per joint or one number for all); ``motors`` one
-    :class:`Motor` per joint (default :func:`default_motors`); ``q0`` where
-    it starts (default zero, at rest); ``table_z`` the table's height in m
-    (None: no table); ``payload`` kg at the tool tip; ``seed`` the F/T
-    noise's.  ConfigError for anything refused.
-    """
+    """pyrt.sim.arm.ArmWorld's step as it was computed in Python, one
+    internal step at a time (the same constructor, calls and registers); the
+    F/T noise from :class:`NoiseSource`."""
 
     def __init__(self, chain: Chain, *, motors: Sequence[Motor] | None = None,
                  board: RegisterBoard | None = None, q0: ArrayLike | None = None,

@@ -197,14 +197,25 @@ class ArmKernel:
 
     def set_drive(self, dac: Sequence[int], enable: Sequence[int]) -> None:
         """The board's DAC counts and enables (``n`` integers each), held over the next steps."""
+        self.set_dac(dac)
+        self.set_enable(enable)
+
+    def set_dac(self, dac: Sequence[int]) -> None:
+        """The board's DAC counts (``n`` integers), held over the next steps."""
+        self._ints("dac", self._dac_p, dac)
+
+    def set_enable(self, enable: Sequence[int]) -> None:
+        """The board's amplifier enables (``n`` integers, 0 off), held over the next steps."""
+        self._ints("enable", self._on_p, enable)
+
+    def _ints(self, name: str, ptr: Any, values: Sequence[int]) -> None:
         n = self.n
-        if len(dac) != n or len(enable) != n:
-            raise NativeInputError(f"drive: expected {n} DAC values and {n} enables")
+        if len(values) != n:
+            raise NativeInputError(f"{name}: expected {n} integers, got {len(values)}")
         try:
-            self._dac_p[0:n] = dac
-            self._on_p[0:n] = enable
+            ptr[0:n] = values
         except (TypeError, OverflowError) as exc:
-            raise NativeInputError(f"drive: expected 32-bit integers ({exc})") from None
+            raise NativeInputError(f"{name}: expected 32-bit integers ({exc})") from None
 
     # ------------------------------------------------------------ time
 

@@ -51,6 +51,14 @@ stable for the stiff stops and contact at a 1 ms step, and with no
 damping or friction it is the symplectic Euler step (energy bounded, not
 drifting).
 
+The whole of one :meth:`ArmWorld.step` -- every internal step, then the
+encoder counts, the contact and the wrist's counts -- is one call of the C
+kernel (csrc/armworld.c through :class:`pyrt.native.ArmKernel`); Python
+only carries the board's registers in and out.  The sensor's noise comes
+from the kernel's own generator (splitmix64 and Box-Muller from ``seed``,
+one draw per step), so a run is reproducible from its seed anywhere; the
+same step in Python is kept as the tests' reference (tests/_ref_armworld.py).
+
 The truth (:meth:`ArmWorld.truth`: joints, tool pose, contact force) is for
 tests and the operator's ``sim`` words, never for control code.
 """
@@ -422,11 +430,15 @@ class ArmWorld:
         if dt == 0:
             return
         values = self._values
-        dac, on = values("dac"), values("enable")
         k = self._k
-        if dac != self._dac_in or on != self._on_in:  # the amplifiers' new currents
-            k.set_drive(dac, on)
-            self._dac_in, self._on_in = dac, on
+        dac = values("dac")
+        if dac != self._dac_in:  # the amplifiers' new currents
+            k.set_dac(dac)
+            self._dac_in = dac
+        on = values("enable")
+        if on != self._on_in:
+            k.set_enable(on)
+            self._on_in = on
         k.step(dt)
         self.time += dt
         self._set_inputs()
