@@ -92,6 +92,12 @@ class Frames:
                           if t.type is fun)
         self.moving = bool(self.live)
         self._static: tuple[Matrix, Matrix, Matrix] | None = None
+        self._fast: tuple[Transform, Matrix, Matrix] | None = None
+        fixed = (TransformType.CONST, TransformType.VARB)
+        if (not self.before and len(self.coord) == 1 and self.coord[0].type is fun
+                and all(t.type in fixed for t in (*self.after, *self.toolpart))):
+            _, post, tool = self._compute(None)
+            self._fast = (self.coord[0], post, tool)
         self._pre_identity = self._post_identity = False
         if not self.moving:
             self._static = self._compute(None)
@@ -125,6 +131,10 @@ class Frames:
         """``(pre, post, tool)`` at ``sample``."""
         if self._static is not None:
             return self._static
+        if self._fast is not None and sample is not None:
+            # one moving COORD term, everything else fixed: one product per sample
+            conv, post, tool = self._fast
+            return self.tracker.value(conv, sample), post, tool
         return self._compute(sample)
 
     def t6(self, pos: Matrix, sample: float | None) -> Matrix:
