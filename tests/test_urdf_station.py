@@ -4,6 +4,7 @@ simulated arm's truth; refusals; faults; the board, the journal and the command 
 from __future__ import annotations
 
 import contextlib
+import importlib.util
 import math
 import os
 import re
@@ -429,3 +430,24 @@ def test_a_guarded_move_onto_the_table_stops_on_the_wrist_force(puma):
     runner.call(arm.move_line, 500, 100, 300, 180, 0, 90, "speed=0.1 force=20")
     _settle(station, runner)
     assert station.last_stop() == "at target"
+
+
+@pytest.mark.skipif(importlib.util.find_spec("caproto") is None, reason="caproto not installed")
+def test_epics_serves_the_joints_with_their_limits_as_display_limits(puma):
+    """--epics: the PV of each joint (NAME:Q1 ..) has the joint's limits as its display limits, in degrees."""
+    from pyrt.server import ServedStation, Server
+    from pyrt.server.epics import EpicsService
+
+    station, runner = puma
+    served = ServedStation(station)
+    server = Server(runner, served, "127.0.0.1", 0)
+    epics = EpicsService(runner, served, server, "PUMA:")
+    try:
+        for j, (lo, hi) in enumerate(zip(CHAIN.lower, CHAIN.upper, strict=True)):
+            pv = epics.pvdb[f"PUMA:Q{j + 1}"]
+            assert (pv.lower_disp_limit, pv.upper_disp_limit) == pytest.approx(
+                (math.degrees(lo), math.degrees(hi)))
+            assert pv.units == "deg"
+    finally:
+        epics.close()
+        server.close()
