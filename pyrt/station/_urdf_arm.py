@@ -7,10 +7,11 @@ current), an amplifier enable and an encoder counter.  Two tasks on one
 ready queue:
 
 * ``trajectory`` (every :data:`TRAJECTORY_PERIOD` ticks, 100 Hz at 1 ms):
-  one tick of :class:`pyrt.motion.Evaluator` gives a knot (joint position,
-  velocity, acceleration); the servo is handed the segment from the last
-  knot to this one with the chain's inverse dynamics at both ends (gravity,
-  inertia and Coriolis feed-forward);
+  one tick of :class:`pyrt.motion.Evaluator` (given the wrist sensor's
+  wrench, for guarded moves) gives a knot (joint position, velocity,
+  acceleration); the servo is handed the segment from the last knot to this
+  one with the chain's inverse dynamics at both ends (gravity, inertia and
+  Coriolis feed-forward);
 * ``servo`` (every tick, 1 kHz): the encoders (unwrapped) into
   :class:`pyrt.native.Servo` (quintic interpolation of the segment, PID with
   velocity, acceleration and dynamics feed-forward), its torques as DAC
@@ -18,12 +19,18 @@ ready queue:
   beyond its limits trips the station: every joint's reflex writes DAC 0 and
   enable 0 in that tick.
 
-The arm carries its own weight: from the first servo tick the servo holds
-it where it is (the amplifiers enabled), moves it, and holds it at the
-target.  A fault or ``close`` switches every amplifier off (the simulated
-arm has no brakes: it then sinks onto its end stops); the next move closes
-the loop again where the arm lies.  ``stop`` brakes along the path and
-holds.
+Moves are records of the motion layer, planned when they are queued (in the
+command's handler): ``movej`` and ``moveto`` joint-mode records to a joint
+target, ``movel`` a Cartesian record in ``T6 . TOOL = COORD . POS``; OPTIONS
+set a record's speed, blend tolerance and force limit.
+
+The arm carries its own weight: after :data:`POWER_ON_TICKS` encoder
+readings the servo takes it (the amplifiers enabled; an arm still moving is
+braked to rest first, one beyond a limit brought back inside), moves it,
+and holds it at the target.  A fault or ``close`` switches every amplifier
+off (the simulated arm has no brakes: it then sinks onto its end stops);
+the next move closes the loop again where the arm lies.  ``stop`` brakes
+along the path and holds.
 
 Units at the console: degrees (revolute joints) or millimetres (prismatic
 ones), millimetres for the tool position, degrees for its rotations (RX RY
