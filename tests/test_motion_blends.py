@@ -337,3 +337,25 @@ def test_joint_to_joint_with_a_moving_frame_arrives_where_the_frame_will_be():
     belt[1, 3] = 0.05 * t_r.sample * ev.period
     assert np.linalg.norm(tool_pose(PUMA, k.q)[:3, 3] - (belt @ pos)[:3, 3]) < 0.002
     _check_continuity(knots)
+
+
+@pytest.mark.parametrize("at", [0.2, 0.6, 0.95])
+def test_stop_during_a_joint_segment_and_its_blend_brakes_within_the_limits(at):
+    """stop during a joint segment or in the blend into a Cartesian one: the joints stay on the path (joint line, then the planned transition) and within their limits; every queued record ends stopped."""
+    ev = make()
+    q1 = PUMA_HOME + np.array([0.2, 0.1, -0.1, 0.2, 0.1, -0.2])
+    m1 = ev.queue(MotionSpec(mode="joint", target=q1))
+    a = tool_pose(PUMA, q1)
+    b = a.copy()
+    b[:3, 3] += [0.05, 0.05, 0.0]
+    m2 = ev.queue(MotionSpec(mode="cart", equation=equation(b)))
+    knots = run(ev, until=lambda k: k.move is m1 and k.progress >= at)
+    ev.stop()
+    knots += run(ev)
+    assert m1.code == m2.code == Termination.STOPPED
+    assert np.abs(knots[-1].qd).max() < 1e-9
+    _check_continuity(knots)
+    if at < 0.5:  # still on the joint line: every joint on the segment from start to q1
+        for k in knots:
+            s = (k.q - PUMA_HOME) / (q1 - PUMA_HOME)
+            assert np.allclose(s, s[0], atol=1e-9)
