@@ -368,8 +368,8 @@ class ArmWorld:
         self._torque, self._current = k.torque, k.current
         self._contact, self._wrench = k.contact, k.wrench
         self._q[:] = q_start
-        self._counts: list[int | None] = [None] * n
-        self._ft_last: list[int | None] = [None] * 6
+        self._counts: Sequence[int | None] = [None] * n
+        self._ft_last: Sequence[int | None] = [None] * 6
         self._dac_in: list[int] = []
         self._on_in: list[int] = []
         self._set_input = board.set_input
