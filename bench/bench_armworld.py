@@ -9,6 +9,8 @@ the board's registers to the board's registers:
 
 * free: motors off, the arm swinging under gravity, damping and friction;
 * driven: every amplifier enabled with a current on every DAC;
+* servoed: new DAC values every millisecond, as a servo writes them (every
+  encoder and F/T register changes: the station's case);
 * on the table: the tool tip resting on the table (contact, friction, F/T);
 * 10 ms in one call (ten internal steps), per simulated millisecond;
 * the kernel alone (``ArmKernel.step``, no registers), for scale.
@@ -21,6 +23,7 @@ figure on a machine that other work shares) and the ratio to the reference.
 from __future__ import annotations
 
 import math
+import random
 
 import pytest
 from _ref_armworld import RefArmWorld
@@ -67,6 +70,29 @@ def test_driven(benchmark, impl):
 
 
 @pytest.mark.parametrize("impl", ["C", "Python"])
+@pytest.mark.benchmark(group="PUMA world per simulated ms: servoed")
+def test_servoed(benchmark, impl):
+    """1 ms of the PUMA whose DACs change every millisecond, as under a servo (new currents,
+    every encoder and F/T register changing)."""
+    w = _world(impl)
+    rng = random.Random(3)
+    for j in range(6):
+        w.board.write("enable", 1, j)
+    dacs = [[rng.randint(-4000, 4000) for _ in range(6)] for _ in range(64)]
+    k = [0]
+
+    def new_currents():
+        for j, d in enumerate(dacs[k[0] & 63]):
+            w.board.write("dac", d, j)
+        k[0] += 1
+        return (1e-3,), {}
+
+    benchmark.pedantic(w.step, setup=new_currents, rounds=3000 if impl == "C" else 600,
+                       warmup_rounds=10)
+    _keep(benchmark, "servoed", impl)
+
+
+@pytest.mark.parametrize("impl", ["C", "Python"])
 @pytest.mark.benchmark(group="PUMA world per simulated ms: on the table")
 def test_on_the_table(benchmark, impl):
     """1 ms of the PUMA resting its tool tip on the table (contact, friction, F/T)."""
@@ -102,7 +128,7 @@ def _summary():
         return
     lines = ["", "PUMA 560 simulated arm, us per simulated ms: min (median)",
              f"  {'case':22s} {'C':>18s} {'Python reference':>20s} {'ratio':>7s}"]
-    for case in ("free", "driven", "on the table", "free, 10 ms a call", "kernel alone"):
+    for case in ("free", "driven", "servoed", "on the table", "free, 10 ms a call", "kernel alone"):
         c = _FIGURES.get((case, "C"))
         p = _FIGURES.get((case, "Python"))
         cs = f"{c[0]:.2f} ({c[1]:.2f})" if c else "-"
