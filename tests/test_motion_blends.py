@@ -359,3 +359,16 @@ def test_stop_during_a_joint_segment_and_its_blend_brakes_within_the_limits(at):
         for k in knots:
             s = (k.q - PUMA_HOME) / (q1 - PUMA_HOME)
             assert np.allclose(s, s[0], atol=1e-9)
+
+
+def test_a_long_run_keeps_the_tick_bounded():
+    """Forty records one after another: the evaluator keeps only the pieces and records still to come (the tick does not grow with the run), and the handles keep distinct numbers."""
+    ev = make()
+    moves = []
+    for i in range(40):
+        q = PUMA_HOME + 0.05 * np.array([(-1) ** i, 0.5, 0.0, 0.0, 0.0, 0.0])
+        moves.append(ev.queue(MotionSpec(mode="joint", target=q, buffer="buffered")))
+        run(ev)
+        assert len(ev._pieces) <= 8 and len(ev._segs) <= 3
+    assert all(m.code == Termination.REACHED for m in moves)
+    assert len({m.index for m in moves}) == 40

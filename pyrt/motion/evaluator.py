@@ -174,12 +174,13 @@ class Evaluator:
                 stopping = self._sigma is not None or self._stop is not None
             if stopping:
                 raise RecordError("the arm is stopping; queue again when it is at rest")
-            move = Move(spec, len(self._segs))
+            move = Move(spec, self._count)
             seg = self.planner.plan(spec, tail, move, force_sensor=self.force_sensor)
             with self._lock:
                 if self._tp[-1] != tail.now or len(self._pieces) != len(tail.pieces):
                     continue  # the loop moved on while planning: plan again
                 self._splice(seg, tail)
+                self._count += 1
                 if spec.equation is not None:
                     self._equation = spec.equation
                     spec.equation.start()
@@ -201,7 +202,8 @@ class Evaluator:
             q0 = np.asarray(fn(0.0), dtype=float)
             if q0.shape != (self.chain.n,):
                 raise RecordError(f"{name}: gives {q0.shape} values; the arm has {self.chain.n}")
-            move = Move(MotionSpec(name=name), len(self._segs))
+            move = Move(MotionSpec(name=name), self._count)
+            self._count += 1
             seg = Segment(move, FUNC, _no_frames(self.planner),
                           None, self._period, t0, t0 + duration, 0.0, 0.0, q0, None,
                           np.zeros(self.chain.n), None, None)
@@ -297,6 +299,13 @@ class Evaluator:
         self._time += dt
         # events, progress, the running record
         move, progress, seg = self._progress(t_knot, knot_q, knot_t6)
+        if self._k > 4:
+            # a long run keeps its tick bounded: pieces and records that are over go
+            # (the last two pieces stay for a plan that looks back one sample)
+            del self._pieces[:self._k - 2]
+            self._k = 2
+            keep = [s for s in self._segs[:-1] if s.move.code is None or s.tracking]
+            self._segs = [*keep, self._segs[-1]] if self._segs else []
         mass = seg.move.spec.mass if seg is not None else self._mass
         self._mass = mass
         tau = None
