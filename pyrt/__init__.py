@@ -29,6 +29,7 @@ from pyrt.errors import (
     PyrtError,
     PyrtInternalError,
     QueueFullError,
+    UsageError,
 )
 
 if TYPE_CHECKING:
@@ -140,6 +141,7 @@ __all__ = [
     "StationFactory",
     "Switch",
     "Task",
+    "UsageError",
     "WallClock",
     "World",
     "WorldFactory",
