@@ -147,3 +147,58 @@ def test_the_arm_moving_is_seen_as_joint_states_and_its_urdf():
         if client is not None:
             client.close()
         station.close()
+
+
+def test_a_piped_arm_serves_foxglove_to_a_client_in_another_process():
+    """pyrt arm --speed max with its script on a pipe: 'scope foxglove 0' says where it
+    serves (loopback); a client in this process sees /joint_states follow 'arm to 30 60'
+    and the station ends cleanly after 'scope foxglove off'."""
+    import os
+    import subprocess
+    import sys
+
+    pytest.importorskip("pyrt_arm", reason="the example arm is not installed")
+    env = {k: v for k, v in os.environ.items() if k != "PYRT_TOKEN"}
+    proc = subprocess.Popen([sys.executable, "-m", "pyrt", "arm", "--speed", "max"],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env)
+    client = None
+    try:
+        proc.stdin.write("scope foxglove 0 20\n")
+        proc.stdin.flush()
+        port = None
+        for _ in range(200):  # a bound: the banner and the answer are a few lines
+            line = proc.stdout.readline()
+            m = re.search(r"Foxglove server on ws://127\.0\.0\.1:(\d+)", line)
+            if m or not line:
+                port = m and int(m.group(1))
+                break
+        assert port, "the arm did not say where it serves Foxglove"
+        client = FoxgloveClient("127.0.0.1", port)
+        client.until(lambda c: "/joint_states" in c.subscribed.values(),
+                     subscribe=["/joint_states"])
+        # on virtual time the loop runs while a command does: a sleep until the
+        # subscription is seen to carry samples, then the move
+        for _ in range(50):
+            proc.stdin.write("sleep 0.2\n")
+            proc.stdin.flush()
+            try:
+                client.until(lambda c: c.messages.get("/joint_states"), timeout_s=0.5)
+                break
+            except (TimeoutError, OSError):
+                continue
+        proc.stdin.write("arm to 30 60\nwait\nsleep 1\n")
+        proc.stdin.flush()
+        client.until(lambda c: json.loads(c.messages["/joint_states"][-1][1])["position"]
+                     == pytest.approx([math.radians(30), math.radians(60)], abs=1e-3))
+        proc.stdin.write("scope foxglove off\nquit\n")
+        proc.stdin.flush()
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if client is not None:
+            client.close()
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 0, err
+    assert "Foxglove server off" in out
