@@ -44,6 +44,7 @@ from typing import Any, TypeVar
 from pyrt.errors import CommandError
 from pyrt.scheduler.task import Task
 from pyrt.scope import Source
+from pyrt.scope.joints import JointStates
 from pyrt.units import UnitError, parse_value, value_grammar
 
 __all__ = [
@@ -640,6 +641,10 @@ class Component:
 
     #: The name the console, the server and the scope address it by.
     name: str = ""
+    #: A robot's joints for viewers (the root's): their URDF names, the signals
+    #: giving each one's position (velocity, effort) and the URDF; ``scope foxglove``
+    #: serves them as ``/joint_states``, ``pyrt export`` writes them.  None: no joints.
+    joint_states: JointStates | None = None
     #: The station's trip, set when a station adopts the component (see :meth:`fail`).
     _trip: Callable[[str, str], Any] | None = None
 

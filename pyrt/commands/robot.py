@@ -70,7 +70,8 @@ class RobotShell(CommandShell):
         self.runner = runner if runner is not None else station.runner
         self.level: Component | None = station.letter_level()
         self._scope = ScopeCommand(self.runner, station.scope, self._channel,
-                                   self._channel_names, stdout, self._channel_show)
+                                   self._channel_names, stdout, self._channel_show,
+                                   root=station.root)
         #: Fault events already shown to the operator (their ids), so each is shown once.
         self._shown: set[int] = set()
         self._shown_lock = threading.Lock()
