@@ -29,6 +29,7 @@ from pyrt.errors import (
     PyrtError,
     PyrtInternalError,
     QueueFullError,
+    UsageError,
 )
 
 if TYPE_CHECKING:
@@ -50,6 +51,7 @@ if TYPE_CHECKING:
     from pyrt.scheduler import Job, Loop, ReadyQueue, SimClock, Task, WallClock, install
     from pyrt.scheduler.motion import MotionExecutor, MotionRecord, MotionType
     from pyrt.scope import Source
+    from pyrt.scope.joints import JointStates
     from pyrt.sim.world import World, WorldFactory
     from pyrt.station.base import Station
     from pyrt.station.factory import StationFactory
@@ -65,6 +67,7 @@ _LAZY = {
     "Component": "pyrt.component",
     "Job": "pyrt.scheduler",
     "JointRobot": "pyrt.robots.trajectory",
+    "JointStates": "pyrt.scope.joints",
     "JointTrajectory": "pyrt.robots.trajectory",
     "Limits": "pyrt.component",
     "Loop": "pyrt.scheduler",
@@ -122,6 +125,7 @@ __all__ = [
     "FaultError",
     "Job",
     "JointRobot",
+    "JointStates",
     "JointTrajectory",
     "Limits",
     "Loop",
@@ -146,6 +150,7 @@ __all__ = [
     "StationFactory",
     "Switch",
     "Task",
+    "UsageError",
     "WallClock",
     "World",
     "WorldFactory",

@@ -55,6 +55,7 @@ from typing import Any, TypeVar
 from pyrt.errors import CommandError, Fault, FaultError
 from pyrt.scheduler.task import Task
 from pyrt.scope import Source
+from pyrt.scope.joints import JointStates
 from pyrt.units import UnitError, parse_value, value_grammar
 
 __all__ = [
@@ -679,6 +680,10 @@ class Component:
 
     #: The name the console, the server and the scope address it by.
     name: str = ""
+    #: A robot's joints for viewers (the root's): their URDF names, the signals
+    #: giving each one's position (velocity, effort) and the URDF; ``scope foxglove``
+    #: serves them as ``/joint_states``, ``pyrt export`` writes them.  None: no joints.
+    joint_states: JointStates | None = None
     #: Where :meth:`fail` and :meth:`say` go: set by :meth:`connect`.
     _trip: Callable[[str, str], Any] | None = None
     _tell: Callable[[Message], None] | None = None

@@ -46,6 +46,7 @@ __all__ = [
     "PyrtError",
     "PyrtInternalError",
     "QueueFullError",
+    "UsageError",
 ]
 
 
@@ -72,6 +73,13 @@ class ConfigError(PyrtError):
         if self.line is None:
             return f"{self.file}: {self.message}"
         return f"{self.file}:{self.line}: {self.message}"
+
+
+class UsageError(ConfigError):
+    """A command line that cannot be used: an option's value out of its range,
+    an option that needs another, a name that is no choice.  Found before
+    anything runs; the ``pyrt`` program ends it as argparse ends its own
+    (``pyrt CMD: error: ...``, exit status 2), where a run that fails is 1."""
 
 
 class BoardError(PyrtError):

@@ -17,8 +17,17 @@ from pathlib import Path
 
 import platformdirs
 import pytest
+from hypothesis import settings
 
 pytest_plugins = ["pytester"]
+
+# Property tests explore new examples on a developer's machine; under CI (CI set,
+# as .ci/run's caller does) they draw the same examples every run, so a result
+# can be reproduced and a green run does not depend on the draw.  Every failure
+# found locally is kept in the example database and tried again.
+settings.register_profile("ci", derandomize=True, print_blob=True)
+settings.register_profile("dev", print_blob=True)
+settings.load_profile(os.environ.get("PYRT_HYPOTHESIS_PROFILE", "ci" if os.environ.get("CI") else "dev"))
 
 
 def real_state_directories() -> list[Path]:

@@ -249,20 +249,21 @@ def test_help_tells_the_options_and_the_url():
     assert "board-sim" in top
 
 
-@pytest.mark.parametrize(("argv", "message"), [
-    (["board-sim", "gripper", "--db", "somewhere"], "unrecognized arguments: --db somewhere"),
-    (["board-sim", "sno", "--start", "F400"], "unrecognized arguments: --start F400"),
+@pytest.mark.parametrize(("argv", "message", "status"), [
+    (["board-sim", "gripper", "--db", "somewhere"], "unrecognized arguments: --db somewhere", 2),
+    (["board-sim", "sno", "--start", "F400"], "unrecognized arguments: --start F400", 2),
     (["board-sim", "hexapod"], "no station named 'hexapod' gives a world to serve; stations: "
-                               + STATIONS),
-    (["board-sim"], "name the station whose world to serve"),
+                               + STATIONS, 2),
+    (["board-sim"], "pyrt board-sim: error: name the station whose world to serve", 2),
     (["board-sim", "manipulator", "--station", "sno", "--db", "/nonexistent/db"],
-     "/nonexistent/db"),
-    (["board-sim", "gripper", "--object", "99"], "object width must be between 0 and 76 mm"),
-    (["board-sim", "prototype", "--db", "/nonexistent/db"], "/nonexistent/db"),
+     "/nonexistent/db", 1),
+    (["board-sim", "gripper", "--object", "99"], "object width must be between 0 and 76 mm", 1),
+    (["board-sim", "prototype", "--db", "/nonexistent/db"], "/nonexistent/db", 1),
 ])
-def test_bad_options_end_with_one_line(capsys, argv, message):
-    """Options of the other world, a bad object, a missing database: exit 1 with one line, no traceback."""
-    assert main(argv) == 1
+def test_bad_options_end_with_one_line(capsys, argv, message, status):
+    """Options of the other world, a bad object, a missing database: one line, no traceback;
+    exit 2 for a command line that cannot be used, 1 for a world that cannot be made."""
+    assert main(argv) == status
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err and err.count("\n") == 1
 

@@ -158,7 +158,8 @@ def test_run_station_from_a_script_of_ones_own():
 
 
 def test_a_tick_longer_than_the_station_runs_on_is_refused():
-    """--tick-us above what the manipulator's polls allow says why, not 'an earlier pyrt'."""
+    """--tick-us above what the manipulator's polls allow says why, not 'an earlier pyrt'
+    (a usage error: exit 2)."""
     run = _pyrt("manipulator", "--tick-us", "100000")
-    assert run.returncode == 1
+    assert run.returncode == 2
     assert "at most 10000 µs" in run.stderr and "earlier pyrt" not in run.stderr

@@ -130,11 +130,14 @@ def test_send_subscribe_prints_status_lines(capsys):
 
 
 def test_send_to_nobody_fails_cleanly(capsys):
-    """No server at the address: one line on stderr and exit status 1."""
+    """No server at the address: one line on stderr saying so in words (no errno) and
+    what to check, exit status 1."""
     with served() as sv:
         port = sv.port
     assert main(["send", f"127.0.0.1:{port}", "W"]) == 1
-    assert "pyrt send" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert err == (f"pyrt send: 127.0.0.1:{port}: cannot connect: connection refused (is a "
+                   "station served there with --serve?)\n")
     assert main(["send", "nonsense:port", "W"]) == 2
 
 

@@ -299,8 +299,9 @@ def test_fuzzed_wire_lines_never_crash_the_server_nor_write_an_illegal_value(ser
     (["--idle", "0"], "must be 0.01..86400 s, got '0'"),
 ])
 def test_board_sim_refuses_bad_connection_bounds_in_one_line(capsys, argv, message):
-    """pyrt board-sim gripper with a bound it cannot keep: exit 1, one line naming it."""
-    assert main(["board-sim", "gripper", *argv]) == 1
+    """pyrt board-sim gripper with a bound it cannot keep: exit 2 (a usage error), one line
+    naming it."""
+    assert main(["board-sim", "gripper", *argv]) == 2
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1, err
 

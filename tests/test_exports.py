@@ -12,7 +12,7 @@ from pyrt.errors import PyrtError
 PACKAGES = [
     "pyrt", "pyrt.errors", "pyrt.scheduler", "pyrt.native", "pyrt.units", "pyrt.fileio",
     "pyrt.db", "pyrt.scope", "pyrt.tasks", "pyrt.station", "pyrt.commands", "pyrt.console",
-    "pyrt.client", "pyrt.server", "pyrt.cli",
+    "pyrt.client", "pyrt.server", "pyrt.cli", "pyrt.motion",
 ]
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import csv
+
 import numpy as np
 import pytest
 
@@ -13,15 +15,21 @@ from pyrt.sim.manipulator import GRAVITY
 @pytest.mark.parametrize(("station", "ropes", "step"), [("prototype", 3, "40"),
                                                         ("sno", 5, "100")])
 def test_force_maps_balance_the_weight(tmp_path, capsys, station, ropes, step):
-    """One map per rope; at every position the rope forces sum to the net weight."""
+    """One map per rope, a CSV table whose header line (after the '#' lines) names the
+    columns; at every position the rope forces sum to the net weight."""
     assert main(["forcemap", "--station", station, "--out", str(tmp_path), "--step", step]) == 0
     maps = []
     for i in range(ropes):
         lines = (tmp_path / f"axis{i}.map").read_text().splitlines()
         head = [ln for ln in lines if ln.startswith("#")]
-        assert head[-1] == "# " + " ".join(COLUMNS) and lines[len(head) - 1] == head[-1]
+        assert lines[:len(head)] == head and lines[len(head)] == ",".join(COLUMNS)
         assert all(c.endswith(("_cm", "_N")) for c in COLUMNS[:-1])  # then holdable, 0 or 1
-        maps.append(np.loadtxt(lines[len(head):]))
+        rows = list(csv.DictReader(lines[len(head):]))  # as pandas.read_csv(comment="#")
+        assert list(rows[0]) == list(COLUMNS)
+        named = np.genfromtxt(tmp_path / f"axis{i}.map", delimiter=",", names=True,
+                              skip_header=len(head))
+        assert named.dtype.names == COLUMNS and len(named) == len(rows)
+        maps.append(np.array([[float(r[c]) for c in COLUMNS] for r in rows]))
     assert all(m.shape == maps[0].shape for m in maps) and len(maps[0]) > 10
     total = sum(m[:, 4:7] for m in maps)
     z = maps[0][:, 2]
@@ -43,8 +51,9 @@ def test_force_maps_balance_the_weight(tmp_path, capsys, station, ropes, step):
 
 
 def test_bad_step_refused(tmp_path, capsys):
-    """A step that is not a positive length: one error line, exit 1, nothing written."""
-    assert main(["forcemap", "--out", str(tmp_path), "--step", "-5"]) == 1
+    """A step that is not a positive length: one error line, exit 2 (a usage error),
+    nothing written."""
+    assert main(["forcemap", "--out", str(tmp_path), "--step", "-5"]) == 2
     assert "--step" in capsys.readouterr().err
     assert not list(tmp_path.glob("*.map"))
 
@@ -57,9 +66,9 @@ def test_bad_step_refused(tmp_path, capsys):
     (["--step", "nan"], "--step must be a positive finite number"),
 ])
 def test_bad_grid_is_one_line_error(tmp_path, capsys, args, match):
-    """NaN planes, planes off the vessel, too fine or infinite steps: one error line, exit 1,
-    no traceback, nothing written."""
-    assert main(["forcemap", "--out", str(tmp_path), *args]) == 1
+    """NaN planes, planes off the vessel, too fine or infinite steps: one error line, exit 2
+    (a usage error), no traceback, nothing written."""
+    assert main(["forcemap", "--out", str(tmp_path), *args]) == 2
     err = capsys.readouterr().err
     assert match in err and "Traceback" not in err
     assert len(err.strip().splitlines()) == 1
@@ -77,10 +86,11 @@ def test_negative_tensions_are_explained_and_marked_not_holdable(tmp_path, capsy
     printed = capsys.readouterr().out
     lines = (tmp_path / "axis0.map").read_text().splitlines()
     header = [ln for ln in lines if ln.startswith("#")]
-    table = np.loadtxt([ln for ln in lines if not ln.startswith("#")])
+    assert lines[len(header)] == ",".join(COLUMNS)
+    table = np.loadtxt(lines[len(header) + 1:], delimiter=",")
     pushes = int(np.sum(table[:, 3] < 0))
     assert pushes > 0
-    assert header[-1] == "# " + " ".join(COLUMNS) and COLUMNS[-1] == "holdable"
+    assert COLUMNS[-1] == "holdable"
     assert any("a negative tension_N is a push the rope would have to give, which no rope "
                f"can: the source cannot be held there ({pushes} of {len(table)} positions"
                in ln for ln in header)

@@ -186,3 +186,37 @@ def test_a_damaged_journal_is_refused_or_salvaged_around_the_damage(tmp_path):
 
 
 GRIPPER_PJ = ROOT / "tests" / "journals" / "gripper.pj"
+
+
+def test_an_arms_export_carries_its_joint_states_every_tick(tmp_path):
+    """pyrt export of the example arm's journal writes /joint_states as
+    sensor_msgs/msg/JointState: one message a tick (first and last at the journal's
+    first and last tick), the URDF's joint names, positions and velocities in rad and
+    rad/s equal to the replay's samples of the declared signals; the URDF once."""
+    pytest.importorskip("pyrt_arm", reason="the example arm is not installed")
+    np = pytest.importorskip("numpy")
+    arm = ROOT / "tests" / "journals" / "arm.pj"
+    done = _pyrt(tmp_path, "export", str(arm), "arm.mcap")
+    assert done.returncode == 0, done.stderr
+    by_topic, schemas, _ = _read(tmp_path / "arm.mcap")
+    ticks = [t.time_ns for t in JournalReader(arm).ticks()]
+    states = by_topic["/joint_states"]
+    assert len(states) == len(ticks)
+    assert (states[0][0], states[-1][0]) == (ticks[0], ticks[-1])
+    assert schemas["/joint_states"]["title"] == "sensor_msgs/msg/JointState"
+    assert set(schemas["/joint_states"]["required"]) == {"header", "name", "position",
+                                                        "velocity", "effort"}
+    t, last = states[-1]
+    assert last["header"]["stamp"] == {"sec": t // 10**9, "nsec": t % 10**9}
+    assert last["name"] == ["shoulder", "elbow"]
+    [(_, desc)] = by_topic["/robot_description"]
+    assert '<joint name="elbow"' in desc["data"]
+    chans = "q0,q1,shoulder.velocity,elbow.velocity"
+    done = _pyrt(tmp_path, "replay", str(arm), "--scope", chans, "--scope-save", "j.npz")
+    assert done.returncode == 0, done.stderr
+    saved = np.load(tmp_path / "j.npz")
+    assert list(saved["channels"]) == chans.split(",")
+    assert saved["t_ns"].tolist() == [t for t, _ in states]
+    data = saved["data"]
+    got = np.array([m["position"] + m["velocity"] for _, m in states])
+    assert got == pytest.approx(np.radians(data), abs=1e-12)

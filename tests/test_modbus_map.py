@@ -158,7 +158,7 @@ def test_board_sim_refuses_a_bad_map_in_one_line_and_map_without_modbus(tmp_path
     assert main(["board-sim", "gripper", "--modbus", "127.0.0.1:0", "--map", str(bad)]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"{bad}:{line}: unknown register gripper.pd" in err[0], err
-    assert main(["board-sim", "gripper", "--map", str(bad)]) == 1
+    assert main(["board-sim", "gripper", "--map", str(bad)]) == 2  # a usage error
     assert "--map goes with --modbus" in capsys.readouterr().err
 
 

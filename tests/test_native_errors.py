@@ -143,6 +143,23 @@ def _chain(**bad):
     return nat.ChainKernels(**dict(kw, **bad))
 
 
+def _arm(**bad):
+    params = dict(armature=[0.1], damping=[0.0], friction=[0.0], stop_lo=[-2.0],
+                  stop_hi=[2.0], stop_k=[1e3], stop_c=[10.0], nm_per_count=[1e-3],
+                  amps_per_count=[1e-4], effort=[30.0], counts=[1000.0])
+    params.update(bad)
+    return nat.ArmKernel(_chain(), params, max_step=1e-3, friction_velocity=0.005,
+                         gravity=(0.0, 0.0, -9.81), tip=(0.0, 0.0, 0.0), table_stiffness=5e4,
+                         table_damping=500.0, table_friction=0.3, ft_scale=[1e3] * 6,
+                         ft_offsets=[0.0] * 6, ft_sigma=[0.0] * 6)
+
+
+def _arm_nan_state():
+    a = _arm()
+    a.q[0] = NAN
+    a.publish()
+
+
 #: Public C entry point -> a wrapper call with input only C refuses.
 THROUGH_WRAPPERS = {
     "pyrt_findpos_solve": lambda: nat.find_position(_TOPS, _BOTTOMS, [600.0, NAN, 1100.0],
@@ -171,6 +188,12 @@ THROUGH_WRAPPERS = {
     "pyrt_kin_mass_matrix": lambda: _chain().mass_matrix([NAN]),
     "pyrt_kin_forward_dynamics": lambda: _chain(masses=[0.0], inertias=[np.zeros((3, 3))]).
     forward_dynamics([0.0], None, [1.0]),
+    "pyrt_servo_reset": lambda: nat.Servo(1, 1e-3).reset([NAN]),
+    "pyrt_servo_load": lambda: nat.Servo(1, 1e-3).segment(0.01, [NAN], [0.0], [0.0], [0.0]),
+    "pyrt_servo_tick": lambda: nat.Servo(1, 1e-3).tick([NAN]),
+    "pyrt_arm_check": lambda: _arm(damping=[-1.0]),
+    "pyrt_arm_step": lambda: _arm().step(NAN),
+    "pyrt_arm_publish": _arm_nan_state,
 }
 
 #: Entry points whose only failure is a NULL pointer or a struct the wrapper
@@ -184,6 +207,7 @@ ONLY_RAW = {
     "pyrt_rq_check": lambda: lib.pyrt_rq_check(ffi.NULL),
     "pyrt_rq_check_wide": lambda: lib.pyrt_rq_check_wide(ffi.NULL),
     "pyrt_kin_workspace_size": lambda: lib.pyrt_kin_workspace_size(0, ffi.NULL),
+    "pyrt_arm_work_size": lambda: lib.pyrt_arm_work_size(0, ffi.NULL),
     "pyrt_kin_fk": lambda: lib.pyrt_kin_fk(ffi.NULL, ffi.NULL, ffi.NULL, ffi.NULL),
     "pyrt_kin_jacobian": lambda: lib.pyrt_kin_jacobian(ffi.NULL, ffi.NULL, ffi.NULL, ffi.NULL,
                                                        ffi.NULL),

@@ -85,18 +85,19 @@ def test_headless_manipulator_serves_status(tmp_path):
     assert "every motor stopped" in err
 
 
-@pytest.mark.parametrize(("args", "message"), [
-    (["gripper", "--serve", "0.0.0.0:0", "--headless"], "without a token"),
-    (["gripper", "--headless"], "--headless needs --serve"),
-    (["gripper", "--serve", "127.0.0.1:99999"], "port"),
+@pytest.mark.parametrize(("args", "message", "status"), [
+    (["gripper", "--serve", "0.0.0.0:0", "--headless"], "without a token", 1),
+    (["gripper", "--headless"], "--headless needs --serve", 2),
+    (["gripper", "--serve", "127.0.0.1:99999"], "port", 2),
 ])
-def test_refused_start_ups(args, message):
-    """Serving beyond loopback without a token, --headless alone, a bad port: one line, exit 1."""
+def test_refused_start_ups(args, message, status):
+    """Serving beyond loopback without a token, --headless alone, a bad port: one line,
+    exit 2 for a usage error, 1 for a start-up refused."""
     env = {k: v for k, v in os.environ.items() if k != "PYRT_TOKEN"}
     proc = subprocess.run([sys.executable, "-m", "pyrt", *args, "--speed", "max"],
                           stdin=subprocess.DEVNULL, capture_output=True, text=True, env=env,
                           timeout=60)
-    assert proc.returncode == 1
+    assert proc.returncode == status
     assert message in proc.stderr
     assert "Traceback" not in proc.stderr
 

@@ -37,14 +37,14 @@ def test_render_keeps_the_servers_values_and_puts_each_field_on_a_line():
 
 
 def test_once_prints_one_snapshot_of_a_served_gripper():
-    """--once against a served gripper: its status line (hex, mm), its status fields and the loop's timing, exit 0, no escape codes."""
+    """--once against a served gripper: its status line (hex, mm), its status fields with their units and the loop's timing, exit 0, no escape codes."""
     with served(wall=True) as sv:
         done = _top(f"{sv.host}:{sv.port}", "--once")
     assert done.returncode == 0, done.stderr
     out = done.stdout
     assert out.startswith(f"pyrt top: gripper at {sv.host}:{sv.port}\nt = ")
-    assert re.search(r"^  position +-?\d+$", out, re.M)
-    assert re.search(r"^  sensors +0x[0-9A-F]{4}$", out, re.M)
+    assert re.search(r"^  position +-?\d+ counts$", out, re.M)
+    assert re.search(r"^  sensors +0x[0-9A-F]{4} word$", out, re.M)
     # the console's own line, in the gripper's radix: hex counts with mm beside them
     assert re.search(r"^position [0-9A-F]{4} \(\d+\.\d mm\), target [0-9A-F]{4} ", out, re.M)
     assert re.search(r"^tick 1000 µs: \d+ ticks, \d+ overruns", out, re.M)
@@ -136,6 +136,7 @@ def test_top_shows_a_served_manipulator(tmp_path):
     assert done.returncode == 0, done.stderr
     out = done.stdout
     assert out.startswith(f"pyrt top: prototype at 127.0.0.1:{port}\n")
-    for field in ("x", "y", "z", "tension0", "fault"):
-        assert re.search(rf"^  {field} +\S+$", out, re.M), field
+    for field, unit in (("x", "cm"), ("y", "cm"), ("z", "cm"), ("tension0", "N"),
+                        ("fault", "bool")):
+        assert re.search(rf"^  {field} +\S+ {unit}$", out, re.M), field
     assert "tick 5000 µs:" in out

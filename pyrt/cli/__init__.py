@@ -32,9 +32,10 @@ from pyrt.cli import (
     top,
 )
 from pyrt.cli._help import Parser
+from pyrt.cli._pipe import PipeGuard
 from pyrt.cli._station import add_station_parser
 from pyrt.console import ReaderGone, silence
-from pyrt.errors import ConfigError, PyrtError
+from pyrt.errors import ConfigError, PyrtError, UsageError
 from pyrt.station.factory import find_station, installed_stations
 
 __all__ = ["build_parser", "entry", "main"]
@@ -81,6 +82,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     try:
         return int(args.run(args) or 0)
+    except UsageError as exc:  # a command line that cannot be used: as argparse ends one
+        print(f"pyrt {args.command}: error: {exc}", file=sys.stderr)
+        return 2
     except PyrtError as exc:
         print(f"pyrt {args.command}: {exc}", file=sys.stderr)
         return 1
@@ -99,6 +103,9 @@ def entry() -> None:
     A reader of stdout that has gone (``| head``) ends any command quietly,
     status 0."""
     status: int | str | None
+    stdout = sys.stdout
+    if stdout is not None and not isinstance(stdout, PipeGuard):
+        sys.stdout = PipeGuard(stdout)  # type: ignore[assignment]
     try:
         try:
             status = main()
@@ -108,7 +115,7 @@ def entry() -> None:
     except (BrokenPipeError, ReaderGone):
         # the reader of stdout has gone (`pyrt overruns F --json | head`): it has
         # what it wanted; end quietly, as `pyrt send` does
-        silence(sys.stdout)
+        silence(stdout)
         status = 0
     for name in ("SIGTERM", "SIGHUP"):
         sig = getattr(signal, name, None)

@@ -12,7 +12,7 @@ from typing import Any
 from pyrt._version import __version__
 from pyrt.boards import DEFAULT_URL, parse_board_url
 from pyrt.boards.registry import backend
-from pyrt.errors import ConfigError
+from pyrt.errors import ConfigError, UsageError
 from pyrt.scheduler import Loop, SimClock, TimingLog, WallClock
 from pyrt.scheduler import rt as _rt
 
@@ -187,7 +187,7 @@ class StderrLines:
 def make_loop(args: argparse.Namespace, warn: Callable[[str], None] | None = None) -> Loop:
     """A loop configured from the options of :func:`add_loop_options`."""
     if args.max_overruns is not None and args.max_overruns < 1:
-        raise ConfigError(f"--max-overruns must be >= 1, got {args.max_overruns}")
+        raise UsageError(f"--max-overruns must be >= 1, got {args.max_overruns}")
     clock = (SimClock() if args.speed is None
              else WallClock(speed=args.speed, timer_slack_ns=args.timer_slack))
     log = None

@@ -31,7 +31,7 @@ from collections.abc import Callable
 from typing import Any
 
 from pyrt.client import parse_address
-from pyrt.errors import ConfigError, PyrtError
+from pyrt.errors import ConfigError, PyrtError, UsageError
 from pyrt.server import ServedRobot, Server
 from pyrt.server.guard import MAX_TOKEN, check_token
 from pyrt.station.moves import MessageLine
@@ -192,13 +192,13 @@ def prepare_service(args: argparse.Namespace, runner: Any, robot: ServedRobot) -
     """The service the options ask for (None without ``--serve``/``--epics``);
     call it before ``runner.start()``: it attaches its handler to the loop."""
     if args.headless and not (args.serve or args.epics):
-        raise ConfigError("--headless needs --serve [HOST:]PORT or --epics PREFIX")
+        raise UsageError("--headless needs --serve [HOST:]PORT or --epics PREFIX")
     if not (args.serve or args.epics):
         if args.token_file:
-            raise ConfigError("--token-file needs --serve or --epics")
+            raise UsageError("--token-file needs --serve or --epics")
         return None
     if getattr(args, "epics_interface", None) and not args.epics:
-        raise ConfigError("--epics-interface needs --epics PREFIX")
+        raise UsageError("--epics-interface needs --epics PREFIX")
     if args.headless:
         logging.basicConfig(stream=sys.stderr, level=logging.INFO,
                             format="%(asctime)s %(name)s: %(message)s")
@@ -208,8 +208,10 @@ def prepare_service(args: argparse.Namespace, runner: Any, robot: ServedRobot) -
         try:
             host, port = parse_address(args.serve, allow_zero=True)
         except ValueError as exc:
-            raise ConfigError(f"--serve: {exc}") from None
+            raise UsageError(f"--serve: {exc}") from None
     server = Server(runner, robot, host, port, token=token)
+    if args.serve:
+        server.bind()  # a port that cannot be had fails here, before any banner
     epics = None
     if args.epics:
         from pyrt.server.epics import EpicsService

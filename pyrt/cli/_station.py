@@ -34,7 +34,7 @@ from pyrt.cli._serve import add_serve_options, prepare_service
 from pyrt.cli._shutdown import run_until_shutdown
 from pyrt.commands import RobotShell
 from pyrt.console import Console
-from pyrt.errors import ConfigError, PyrtError
+from pyrt.errors import PyrtError, UsageError
 from pyrt.server import ServedStation
 from pyrt.station.factory import StationFactory, as_factory
 
@@ -79,7 +79,7 @@ def _check_tick(factory: StationFactory, args: argparse.Namespace) -> None:
     hi = factory.max_tick_us
     if hi is not None and args.tick_us > hi:
         why = f" ({factory.max_tick_why})" if factory.max_tick_why else ""
-        raise ConfigError(f"--tick-us {args.tick_us}: this station runs on ticks of at most "
+        raise UsageError(f"--tick-us {args.tick_us}: this station runs on ticks of at most "
                           f"{hi} µs{why}")
 
 
@@ -159,7 +159,7 @@ def _scope_dir(name: str | None) -> str | None:
     if name is None:
         return None
     if not os.path.isdir(name):
-        raise ConfigError(f"--scope-dir {name}: there is no such directory")
+        raise UsageError(f"--scope-dir {name}: there is no such directory")
     return os.path.abspath(name)
 
 
@@ -175,6 +175,9 @@ def run_station(factory: object, argv: Sequence[str] | None = None, *, prog: str
     args = parser.parse_args(list(argv) if argv is not None else None)
     try:
         return run_factory(fac, args)
+    except UsageError as exc:
+        print(f"{name}: error: {exc}", file=sys.stderr)
+        return 2
     except PyrtError as exc:
         print(f"{name}: {exc}", file=sys.stderr)
         return 1

@@ -53,7 +53,7 @@ from typing import Any, NoReturn
 from pyrt.boards.registry import open_boards
 from pyrt.cli._help import Parser
 from pyrt.cli._loopopts import _whole
-from pyrt.errors import ConfigError
+from pyrt.errors import ConfigError, UsageError
 from pyrt.sim.boardsim import (
     DEFAULT_IDLE_S,
     DEFAULT_MAX_CLIENTS,
@@ -106,7 +106,7 @@ def find_world(name: str) -> tuple[WorldFactory, dict[str, Any]]:
         preset = factory.world_aliases.get(key)
         if preset is not None:
             return factory, dict(preset)
-    raise ConfigError(f"no station named {name[:40]!r} gives a world to serve; stations: "
+    raise UsageError(f"no station named {name[:40]!r} gives a world to serve; stations: "
                       f"{', '.join(worlds()) or 'none'}")
 
 
@@ -199,7 +199,7 @@ class _Parser(Parser):
     """An argument parser whose errors are one line (ConfigError), not an exit."""
 
     def error(self, message: str) -> NoReturn:
-        raise ConfigError(f"pyrt board-sim: {message}")
+        raise UsageError(message)
 
 
 def _world_parser(factory: WorldFactory, name: str) -> argparse.ArgumentParser:
@@ -217,7 +217,7 @@ def _parse(args: argparse.Namespace) -> tuple[WorldFactory, argparse.Namespace] 
             args.board_sim_parser.print_help()
             sys.stdout.write("\nstations: " + ", ".join(worlds()) + "\n")
             return None
-        raise ConfigError("pyrt board-sim: name the station whose world to serve: "
+        raise UsageError("name the station whose world to serve: "
                           + ", ".join(worlds()))
     factory, preset = find_world(args.world)
     parser = _world_parser(factory, args.world)
@@ -268,7 +268,7 @@ def run(args: argparse.Namespace) -> int:
     if opts.modbus is not None:
         return _run_modbus(factory, world, opts, out)
     if opts.map is not None:
-        raise ConfigError("pyrt board-sim: --map goes with --modbus")
+        raise UsageError("--map goes with --modbus")
     host, port = opts.listen
     server = BoardServer(world, host, port, watchdog_s=opts.watchdog,
                          step_ns=opts.step_us * 1000, idle_s=opts.idle,

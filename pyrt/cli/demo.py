@@ -14,7 +14,7 @@ import time
 from collections.abc import Callable
 
 from pyrt.cli._loopopts import add_loop_options, apply_rt_options, make_loop
-from pyrt.errors import ConfigError
+from pyrt.errors import UsageError
 from pyrt.scheduler import ReadyQueue
 from pyrt.scheduler.report import format_statistics
 
@@ -51,9 +51,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     out = sys.stdout
     if not 0 < args.seconds <= 24 * 3600:
-        raise ConfigError("--seconds must be > 0 and at most a day")
+        raise UsageError("--seconds must be > 0 and at most a day")
     if not 0 <= args.divisor <= 0xFF:
-        raise ConfigError("--divisor must be 00..FF")
+        raise UsageError("--divisor must be 00..FF")
     apply_rt_options(args, lambda m: print(m, file=out))
     loop = make_loop(args)
     queue = ReadyQueue(capacity=6, divisor=args.divisor, name="demo")

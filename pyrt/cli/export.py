@@ -8,6 +8,11 @@ it.  Every tick becomes a JSON message per board on ``/inputs/BOARD`` and
 have ``/commands``, ``/faults`` and ``/events``.  Every channel has a JSON
 schema; log times are the journal's tick times (the loop's clock, ns).  The
 run's databases travel as attachments, its station and options as metadata.
+For a station whose robot declares its joints (the example arm, and any whose
+root component sets ``joint_states``), the journal is replayed (the station
+must be installed) and the joints sampled every tick go on ``/joint_states``
+as ``sensor_msgs/msg/JointState`` (SI units), with the URDF on
+``/robot_description``: Foxglove's 3D panel plays the run back.
 Needs the ``mcap`` library: ``pip install 'pyrt[mcap]'``.
 
 A damaged journal (a checksum that does not match) is refused, naming the
@@ -21,12 +26,17 @@ is written).
 from __future__ import annotations
 
 import argparse
+import shutil
 import sys
+import tempfile
 from pathlib import Path
 
-from pyrt.errors import CommandError
+from pyrt.cli.replay import build_replayed
+from pyrt.errors import CommandError, ConfigError
 from pyrt.journal import JournalError, JournalReader
-from pyrt.scope.mcapfile import export_journal
+from pyrt.scope import MAX_BUFFER_BYTES, MAX_LENGTH
+from pyrt.scope.mcapfile import JointSamples, export_journal, require_mcap
+from pyrt.station.replay import Replay
 
 __all__ = ["add_parser", "run"]
 
@@ -55,9 +65,55 @@ def run(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 2
     try:
-        done = export_journal(JournalReader(args.journal, salvage=args.salvage), out)
+        require_mcap()
+        reader = JournalReader(args.journal, salvage=args.salvage)
+        joints, note = (None, "") if args.salvage else joint_samples(args.journal)
+        done = export_journal(reader, out, joints)
     except (JournalError, CommandError) as exc:
         print(f"pyrt export: {exc}", file=sys.stderr)
         return 1
     print(f"pyrt export: {done.line()}", flush=True)
+    if note:
+        print(f"pyrt export: note: {note}", flush=True)
     return 0
+
+
+def joint_samples(path: str | Path) -> tuple[JointSamples | None, str]:
+    """The joints of the journal's station over its run, by a replay on virtual
+    time: (None, "") for a station without joints; (None, why) when they
+    cannot be had (the station is not installed, the replay differs ...)."""
+    replay = Replay(path)
+    tmp = tempfile.mkdtemp(prefix="pyrt-export-")
+    station = None
+    try:
+        try:
+            station = build_replayed(replay, tmp)
+        except ConfigError as exc:
+            return None, f"no /joint_states: the station cannot be built to replay ({exc})"
+        joints = getattr(station.root, "joint_states", None)
+        if joints is None:
+            return None, ""
+        names = joints.signals()
+        scope = station.scope
+        sources = [station.resolve_signal(n).scope_source() for n in names]
+        for name, src in zip(names, sources, strict=True):
+            scope.add(name, src)
+        ticks = replay.reader.summary().ticks
+        fits = MAX_BUFFER_BYTES // ((len(names) + 1) * 8) - 64
+        scope.set_length(max(2, min(ticks, MAX_LENGTH, fits)))
+        scope.run("roll")
+        result = replay.run(None)
+        scope.stop()
+        frame = scope.read()
+        if not result.identical:
+            return None, f"no /joint_states: the replay differs ({result.line()})"
+        if frame is None:
+            return None, ""
+        note = "" if frame.data.shape[0] == ticks else (
+            f"/joint_states holds the last {frame.data.shape[0]} of {ticks} ticks")
+        return JointSamples(joints, [s.units for s in sources], frame), note
+    finally:
+        replay.close()
+        if station is not None:
+            station.close()
+        shutil.rmtree(tmp, ignore_errors=True)

@@ -3,9 +3,12 @@
 For every grid position the source may occupy (in the vessel or the neck),
 the tensions that hold it there as the controller would (off-side ropes at
 OFFSIDE_TENSION, the others balancing the net weight) and each rope's force
-vector on the source.  One file per rope, ``axis0.map`` ..., each with a
-header naming the columns and their units.  The grid covers the vertical
-plane through the first side rope's attachment (000's maps were for the
+vector on the source.  One file per rope, ``axis0.map`` ..., each a CSV
+table: lines starting ``#`` that describe it, then a header line naming
+the columns with their units (``x_cm,y_cm,...``), then one comma-separated
+row per position: ``pandas.read_csv(F, comment="#")`` reads it as it
+is (000's maps had their column names in a comment, which CSV readers skip).
+The grid covers the vertical plane through the first side rope's attachment (000's maps were for the
 planar prototype), or the box given with ``--y``.
 
 The free ropes' tensions are those that balance the weight exactly (least
@@ -30,7 +33,7 @@ import tempfile
 from pathlib import Path
 
 from pyrt.db import STATIONS, copy_station
-from pyrt.errors import ConfigError
+from pyrt.errors import ConfigError, UsageError
 from pyrt.fileio import atomic_write
 from pyrt.station.manipulator import ManipulatorStation
 
@@ -69,19 +72,19 @@ def check_grid(station: ManipulatorStation, step: float, y: float) -> None:
     """ConfigError (one line) unless ``step`` is a positive finite number of cm
     giving at most MAX_CELLS cells and ``y`` a finite plane inside the vessel."""
     if not (math.isfinite(step) and step > 0):
-        raise ConfigError(f"--step must be a positive finite number of cm, got {step!r}")
+        raise UsageError(f"--step must be a positive finite number of cm, got {step!r}")
     if not math.isfinite(y):
-        raise ConfigError(f"--y must be a finite number of cm, got {y!r}")
+        raise UsageError(f"--y must be a finite number of cm, got {y!r}")
     av = station.av
     c = av.vtog((0.0, 0.0, 0.0))
     r = av.vessel_radius
     if abs(y - c[1]) >= r:
-        raise ConfigError(f"--y {y:g} cm misses the vessel: the plane must be within "
+        raise UsageError(f"--y {y:g} cm misses the vessel: the plane must be within "
                           f"{c[1] - r:g}..{c[1] + r:g} cm")
     nx, lo, hi = grid_size(station, step)
     cells = (2 * nx + 1) * (lo + hi + 1)
     if cells > MAX_CELLS:
-        raise ConfigError(f"--step {step:g} cm makes {cells} grid cells, more than {MAX_CELLS}; "
+        raise UsageError(f"--step {step:g} cm makes {cells} grid cells, more than {MAX_CELLS}; "
                           f"give --step {math.ceil(step * math.sqrt(cells / MAX_CELLS)):g} or "
                           "more")
 
@@ -151,8 +154,8 @@ def _write_maps(station: ManipulatorStation, step: float, y: float, out: Path) -
                 f"({pa.low_tension:g}..{pa.max_tension:g} N) and at most NET_FORCELIMIT "
                 f"({pa.net_forcelimit:g} N) is left unbalanced, else 0 ({held} of "
                 f"{len(table)} positions are holdable)",
-                "# " + " ".join(COLUMNS)]
-        text.extend(" ".join(f"{v:.4f}" for v in row[:7]) + f" {int(row[7])}" for row in table)
+                ",".join(COLUMNS)]  # the header line: no '#', so CSV readers take it
+        text.extend(",".join(f"{v:.4f}" for v in row[:7]) + f",{int(row[7])}" for row in table)
         target = out / f"{axis.name}.map"
         atomic_write(target, ("\n".join(text) + "\n").encode())
         print(f"{target}: {len(table)} positions, {held} holdable; {axis.name} would have to "

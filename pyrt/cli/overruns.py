@@ -14,7 +14,7 @@ import json
 import sys
 from typing import Any
 
-from pyrt.errors import ConfigError
+from pyrt.errors import ConfigError, UsageError
 from pyrt.scheduler.stats import QUANTILE_NOTE, bin_edges, format_bound_us
 from pyrt.scheduler.timinglog import TimingReport, read_timing_log
 
@@ -192,9 +192,9 @@ def report_figure(rep: TimingReport) -> Any:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.worst < 0:  # the options first: a usage error reads nothing
+        raise UsageError(f"--worst must be >= 0, got {args.worst}")
     rep = read_timing_log(args.file)
-    if args.worst < 0:
-        raise ConfigError(f"--worst must be >= 0, got {args.worst}")
     if args.plot:
         _pyplot()  # before any output: the whole report, or one line
     if args.json:

@@ -56,7 +56,7 @@ from pyrt.scope import (
 from pyrt.station.factory import find_station, load_factory
 from pyrt.station.replay import Replay
 
-__all__ = ["add_parser", "run"]
+__all__ = ["add_parser", "build_replayed", "run"]
 
 #: Options of the run that a replay never takes over (it has its own clock,
 #: boards, and no links).
@@ -214,6 +214,23 @@ def _add_channels(station: Any, scope: Scope, channels: list[str]) -> None:
             raise UsageError(f"--scope {ch}: {exc}") from None
 
 
+def build_replayed(replay: Replay, directory: str) -> Any:
+    """The station of ``replay``'s run (its factory, options and databases, the
+    databases written into ``directory``), attached to the replay, not yet run;
+    ConfigError if the factory is not installed or refuses the options."""
+    spec = replay.factory
+    factory = load_factory(spec) if ":" in spec else find_station(spec)
+    st_args = _arguments(replay, factory, directory)
+    factory.configure(st_args, lambda line: None)
+    if replay.header.period_ns % 1000 == 0:
+        st_args.tick_us = replay.header.period_ns // 1000
+    loop = Loop(replay.clock, period_ns=replay.header.period_ns, timing=True)
+    with replay.building():
+        station = factory.build(loop, st_args)
+    replay.attach(station)
+    return station
+
+
 def run(args: argparse.Namespace) -> int:
     out = sys.stdout
 
@@ -230,19 +247,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"pyrt replay: {exc}", file=sys.stderr)
         return 1
     spec = replay.factory
-    factory = load_factory(spec) if ":" in spec else find_station(spec)
     tmp = tempfile.mkdtemp(prefix="pyrt-replay-")
     station = None
     try:
-        st_args = _arguments(replay, factory, tmp)
-        factory.configure(st_args, lambda line: None)
-        tick_us = replay.header.period_ns // 1000
-        if replay.header.period_ns % 1000 == 0:
-            st_args.tick_us = tick_us
-        loop = Loop(replay.clock, period_ns=replay.header.period_ns, timing=True)
-        with replay.building():
-            station = factory.build(loop, st_args)
-        replay.attach(station)
+        station = build_replayed(replay, tmp)
         shell = ReplayShell(station, out, runner=FrozenRunner(station))
         channels = _channels(args)
         s = replay.reader.summary()

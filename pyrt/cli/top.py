@@ -2,8 +2,9 @@
 
 Connects to a robot served with ``--serve`` (no token needed: it only
 reads) and shows, every ``1/--hz`` seconds, the robot's status fields (the
-``STATUS`` line: position, target, tensions, state, fault ...) and the
-loop's timing (``stats``: ticks, overruns, lateness, per-task times).
+``STATUS`` line: position, target, tensions, state, fault ..., each with
+its units as the server's ``FIELDS`` names them) and the loop's timing
+(``stats``: ticks, overruns, lateness, per-task times).
 
 On a terminal the screen is redrawn in place; Ctrl-C leaves (the robot
 keeps running: watching stops nothing).  When stdout is not a terminal,
@@ -66,10 +67,12 @@ def _fields(raw: str) -> tuple[str, list[tuple[str, str]]]:
 
 
 def render(title: str, status_line: str, stats: list[str] | None,
-           spaced: bool = False, shown: str = "") -> list[str]:
+           spaced: bool = False, shown: str = "",
+           units: dict[str, str] | None = None) -> list[str]:
     """One snapshot as lines: a title, the time, the robot's status line as its
     console shows it (``shown``, if given), the status fields in two
-    columns, then the loop's timing table (``stats``) if given.  ``spaced``
+    columns (each value with its ``units``, where known), then the loop's
+    timing table (``stats``) if given.  ``spaced``
     (the screen): an empty line between the parts; without it the snapshot
     has none, so that piped snapshots are told apart by the empty line
     between them."""
@@ -81,7 +84,9 @@ def render(title: str, status_line: str, stats: list[str] | None,
         when = "t = ?"
     lines = [title, when, *([shown] if shown else []), *gap]
     width = max((len(k) for k, _ in fields), default=0)
-    lines += [f"  {k:<{width}}  {v}" for k, v in fields] or ["  (no status fields)"]
+    units = units or {}
+    lines += [f"  {k:<{width}}  {v}" + (f" {units[k]}" if units.get(k) else "")
+              for k, v in fields] or ["  (no status fields)"]
     if stats is not None:
         lines += gap + stats
     return lines
@@ -96,6 +101,15 @@ class _Source:
         words = self.client.greeting.split()  # "pyrt 0.1.0 NAME server; ..."
         robot = words[2] if len(words) > 2 and words[0] == "pyrt" else "robot"
         self.title = f"pyrt top: {robot} at {host}:{port}"
+        #: Each STATUS field's units (none known from a server without FIELDS).
+        self.units: dict[str, str] = {}
+        try:
+            for line in self.client.command("FIELDS"):
+                name, _, unit = line.partition(" ")
+                if unit and unit != "-":
+                    self.units[name] = unit
+        except ServerError:
+            pass
 
     def snapshot(self, spaced: bool) -> list[str]:
         status = self.client.command("STATUS")
@@ -110,7 +124,7 @@ class _Source:
             except ServerError as exc:  # a server without it: say so, keep the status
                 stats = [f"(no timing: {exc})"]
         return render(self.title, status[-1] if status else "", stats, spaced,
-                      shown[-1] if shown else "")
+                      shown[-1] if shown else "", self.units)
 
     def close(self) -> None:
         self.client.close()

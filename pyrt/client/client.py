@@ -141,7 +141,15 @@ class Client:
         self.timeout_s = timeout_s
         greet_s = (min(timeout_s, CONNECT_TIMEOUT_S) if connect_timeout_s is None
                    else connect_timeout_s)
-        self._sock = socket.create_connection((host, port), timeout=greet_s)
+        try:
+            self._sock = socket.create_connection((host, port), timeout=greet_s)
+        except ConnectionRefusedError:
+            raise ConnectionRefusedError("cannot connect: connection refused (is a station "
+                                         "served there with --serve?)") from None
+        except TimeoutError:
+            raise TimeoutError(f"cannot connect: no answer within {greet_s:g} s") from None
+        except OSError as exc:
+            raise OSError(f"cannot connect: {exc.strerror or exc}") from None
         self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         #: The server's ``(host, port)``.
         self.address = (host, port)

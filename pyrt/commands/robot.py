@@ -75,7 +75,8 @@ class RobotShell(LineResolver, CommandShell):
         self.profile = station.profile
         self.level: Component | None = self.profile.level
         self._scope = ScopeCommand(self.runner, station.scope, self._channel,
-                                   self._channel_names, stdout, self._channel_show)
+                                   self._channel_names, stdout, self._channel_show,
+                                   root=station.root)
         #: Fault events already shown to the operator (their ids), so each is shown once.
         self._shown: set[int] = set()
         self._shown_lock = threading.Lock()

@@ -75,12 +75,20 @@ SUBCOMMAND_HELP: dict[str, str] = {
               f"time in s), one object every 1/HZ s of loop time (default {DEFAULT_HZ:g}, "
               f"at most {MAX_HZ:g}) while the scope samples; the loop never waits for the "
               "network.  scope stream off: stop; scope stream: what it sent",
+    "foxglove": "scope foxglove [PORT [HZ]]: serve the scope's channels live to Foxglove "
+                "(ws://127.0.0.1:PORT, loopback only; default port 8765; at most HZ samples "
+                "a second, default 50; with a server on, scope foxglove says what it sent): "
+                "one JSON channel per object (/scope/OBJECT); for a "
+                "robot that declares its joints also /joint_states (sensor_msgs/JointState) "
+                "and /robot_description (its URDF), for the 3D panel (its joint signals are "
+                "put on the scope).  Needs pyrt[foxglove].  scope foxglove off: stop",
     "help": "scope help [SUB]: this help, or one sub-command's",
 }
 
 #: ``help scope``: the word's usage, then every sub-command (lines of at most 96).
 SCOPE_HELP = "\n".join([
-    "scope [add|remove|trigger|every|length|run|single|stop|show|save|plot|stream|help ...]",
+    "scope [add|remove|trigger|every|length|run|single|stop|show|save|plot|stream|foxglove|"
+    "help ...]",
     "",
     *textwrap.wrap("The software oscilloscope over any signal: OBJECT.SIGNAL (e.g. "
                    "prototype.x, axis0.tension, sim.x), or a signal of the robot by its name "
@@ -101,10 +109,13 @@ class ScopeCommand:
         available: Callable[[], list[str]],
         stdout: TextIO,
         display: Callable[[str], Callable[[Any], str] | None] | None = None,
+        root: Any = None,
     ):
         self.runner = runner
         #: A channel's console format (``Signal.show``), or None: numbers as they are.
         self.display = display
+        #: The robot's root component (its :attr:`~pyrt.Component.joint_states`), or None.
+        self.root = root
         self.scope = scope
         self.resolve = resolve
         self.available = available
@@ -133,7 +144,7 @@ class ScopeCommand:
         if handler is None:
             raise CommandError(
                 f"scope: unknown sub-command {words[0]!r}; one of add, remove, trigger, every, "
-                "length, run, single, stop, show, save, plot, stream, list, help"
+                "length, run, single, stop, show, save, plot, stream, foxglove, list, help"
             )
         handler(rest)
 
@@ -344,3 +355,59 @@ class ScopeCommand:
         self.say(f"streaming {', '.join(chans) or 'no channels yet'} to {stream.url} at "
                  f"{hz:g} Hz of loop time, PlotJuggler's UDP JSON (field 'timestamp': loop "
                  f"time, s){note}")
+
+    def _do_foxglove(self, rest: list[str]) -> None:
+        from pyrt.scope.foxglove import DEFAULT_HZ as FOX_HZ
+        from pyrt.scope.foxglove import DEFAULT_PORT, FoxgloveServer
+
+        sc = self.scope
+        if not rest:
+            server = self._call(lambda: sc.foxglove)
+            if server is not None:
+                self.say(server.describe())
+                return
+        if len(rest) == 1 and rest[0].lower() == "off":
+            old = self._call(sc.stop_foxglove)
+            if old is None:
+                self.say("no Foxglove server")
+                return
+            old.close()
+            self.say(f"Foxglove server off; {old.describe()}")
+            return
+        if len(rest) > 2 or (rest and (not (rest[0].isascii() and rest[0].isdigit())
+                                      or not 0 <= int(rest[0]) <= 65535)):
+            raise CommandError("scope foxglove: [PORT [HZ]] (PORT 1..65535, or 0 for any "
+                               f"free one; default {DEFAULT_PORT}), or 'off'")
+        port = int(rest[0]) if rest else DEFAULT_PORT
+        hz = parse_number(rest[1], "scope foxglove: rate") if len(rest) == 2 else FOX_HZ
+        joints = getattr(self.root, "joint_states", None)
+        spec = None
+        added: list[str] = []
+        if joints is not None:
+            sources = [(name, self.resolve(name)) for name in joints.signals()]
+            have = self._call(lambda: sc.channels)
+            for name, source in sources:
+                if name not in have:
+                    self._call(sc.add, name, source)
+                    added.append(name)
+            spec = (joints, [src.units for _n, src in sources])
+        chans = self._call(lambda: list(sc.channels))
+        units = {name: self.resolve(name).units for name in chans}
+        server = FoxgloveServer(port, hz, units=units, joints=spec)
+        try:
+            old = self._call(sc.start_foxglove, server)
+        except BaseException:
+            server.close()
+            raise
+        if old is not None:
+            old.close()
+        state = self._call(lambda: sc.state)
+        if state in ("stopped", "done") and chans:
+            self._call(sc.run, None)
+            state = "started (" + self._call(lambda: sc.mode) + ")"
+        what = ", ".join(chans) or "no channels yet"
+        note = f"; added {', '.join(added)} for /joint_states" if added else ""
+        self.say(f"Foxglove server on {server.url}: {what} at {hz:g} Hz of loop time"
+                 + (", /joint_states" + (" and /robot_description" if joints.urdf else "")
+                    if joints is not None else "")
+                 + f"{note}; the scope {state}")

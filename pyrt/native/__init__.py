@@ -8,6 +8,7 @@ headers (``lib``), never written down twice.  One private module per C
 source file; this ``__init__`` re-exports their API.
 """
 
+from pyrt.native._armworld import ARM_ROWS, ArmKernel
 from pyrt.native._convert import excess128, excess128_many, from_excess128
 from pyrt.native._errors import (
     DegenerateGeometryError,
@@ -34,11 +35,14 @@ from pyrt.native._neck import UPPER as NECK_UPPER
 from pyrt.native._neck import NeckRing, RopePath, ring_contact
 from pyrt.native._polyctl import PolyControl
 from pyrt.native._readyq import QueueChecker, native_dispatcher
+from pyrt.native._servo import Servo, ServoTrip, check_gains, gain_ranges, tuned_gains
 from pyrt.native._statics import StaticsSolver
 
 __all__ = [
+    "ARM_ROWS",
     "NECK_LOWER",
     "NECK_UPPER",
+    "ArmKernel",
     "ChainKernels",
     "DegenerateGeometryError",
     "FuzzyBatch",
@@ -56,18 +60,23 @@ __all__ = [
     "QueueChecker",
     "RopePath",
     "RopeSegments",
+    "Servo",
+    "ServoTrip",
     "SingularError",
     "SolverError",
     "StaticsSolver",
     "Status",
+    "check_gains",
     "excess128",
     "excess128_many",
     "find_position",
     "freeze_mask",
     "from_excess128",
     "fuzzy_step",
+    "gain_ranges",
     "native_dispatcher",
     "ring_contact",
     "rope_lengths",
     "rope_segments",
+    "tuned_gains",
 ]

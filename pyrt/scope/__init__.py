@@ -10,6 +10,7 @@ from pyrt.scope.export import (
     plot_frame,
     save_frame,
 )
+from pyrt.scope.joints import JointStates
 from pyrt.scope.scope import MAX_BUFFER_BYTES, MAX_LENGTH, MODES, Frame, Scope, Trigger
 from pyrt.scope.sources import Source, compile_sources
 from pyrt.scope.spew import Spew
@@ -22,6 +23,7 @@ __all__ = [
     "PLOT_SUFFIXES",
     "SAVE_SUFFIXES",
     "Frame",
+    "JointStates",
     "Scope",
     "Source",
     "Spew",

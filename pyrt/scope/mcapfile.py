@@ -20,6 +20,10 @@ A journal (``--journal FILE``, or a black box ``.pj``), by
   one per fault (its id and message); ``/events``: any other event;
   ``/gaps``: stretches the journal does not hold (at the time of the tick
   before them);
+* ``/joint_states``: for a station whose root declares its joints
+  (:attr:`pyrt.Component.joint_states`), one ``sensor_msgs/msg/JointState``
+  a tick (SI units), sampled from a replay of the journal (the caller's:
+  :class:`JointSamples`); and ``/robot_description`` (the URDF, once);
 * metadata ``pyrt`` (station, tick, version, factory, ...), and the run's
   databases as attachments.
 
@@ -43,12 +47,26 @@ from pyrt._version import __version__
 from pyrt.errors import CommandError
 from pyrt.fileio import atomic_write
 from pyrt.journal import Gap, JournalReader, Tick
+from pyrt.scope.joints import (
+    JOINT_STATE_SCHEMA,
+    JOINT_STATE_SCHEMA_NAME,
+    ROBOT_DESCRIPTION_SCHEMA,
+    JointStates,
+    joint_state_json,
+    si_factor,
+)
 from pyrt.scope.scope import Frame
 
-__all__ = ["Exported", "JsonMcap", "export_journal", "save_frame_mcap"]
+__all__ = ["Exported", "JointSamples", "JsonMcap", "export_journal", "require_mcap",
+           "save_frame_mcap"]
 
 PROFILE = ""  # no ROS profile: plain JSON messages
 INSTALL = "pip install 'pyrt[mcap]'"
+
+
+def require_mcap() -> None:
+    """CommandError saying what to install if the mcap library is not there."""
+    _writer_class()
 
 
 def _writer_class() -> Any:
@@ -74,14 +92,15 @@ class JsonMcap:
         self._seq: dict[int, int] = {}
 
     def channel(self, topic: str, title: str, properties: Mapping[str, Mapping[str, Any]],
-                description: str = "") -> int:
+                description: str = "", schema: Mapping[str, Any] | None = None) -> int:
         """A channel on ``topic`` whose messages are objects with ``properties``
-        (each a JSON schema, e.g. ``{"type": "number", "description": "cm"}``)."""
-        schema: dict[str, Any] = {"title": title, "type": "object",
-                                  "properties": dict(properties),
-                                  "required": list(properties)}
-        if description:
-            schema["description"] = description
+        (each a JSON schema, e.g. ``{"type": "number", "description": "cm"}``);
+        or, given, the whole ``schema`` (its title ``title``)."""
+        if schema is None:
+            schema = {"title": title, "type": "object", "properties": dict(properties),
+                      "required": list(properties)}
+            if description:
+                schema["description"] = description
         sid = self._w.register_schema(name=title, encoding="jsonschema",
                                       data=json.dumps(schema).encode())
         cid = self._w.register_channel(topic=topic, message_encoding="json", schema_id=sid)
@@ -150,14 +169,43 @@ class Exported:
                 f"{self.path} ({self.size} bytes; the journal {self.journal_size} bytes)")
 
 
+@dataclass(frozen=True)
+class JointSamples:
+    """A station's joints over a run: its declaration, the units of its signals
+    (in :meth:`JointStates.signals` order) and their samples (a frame, one row a
+    tick, its columns in that order)."""
+
+    joints: JointStates
+    units: Sequence[str]
+    frame: Frame
+
+    def write(self, m: JsonMcap) -> None:
+        """``/joint_states``, a message per sample, and ``/robot_description``."""
+        js = self.joints
+        if js.urdf:
+            c_urdf = m.channel("/robot_description", "std_msgs/msg/String", {},
+                               schema=ROBOT_DESCRIPTION_SCHEMA)
+            t0 = int(self.frame.t_ns[0]) if len(self.frame.t_ns) else 0
+            m.message(c_urdf, t0, _json({"data": js.urdf}))
+        cid = m.channel("/joint_states", JOINT_STATE_SCHEMA_NAME, {},
+                        schema=JOINT_STATE_SCHEMA)
+        factors = [si_factor(u) for u in self.units]
+        si = self.frame.data * factors
+        for t, row in zip(self.frame.t_ns.tolist(), si.tolist(), strict=True):
+            pos, vel, eff = js.split(row)
+            m.message(cid, int(t), joint_state_json(int(t), js.names, pos, vel, eff))
+
+
 def _json(obj: Any) -> bytes:
     return json.dumps(obj, ensure_ascii=False, separators=(",", ":")).encode()
 
 
-def export_journal(source: str | Path | JournalReader, out: str | Path) -> Exported:
+def export_journal(source: str | Path | JournalReader, out: str | Path,
+                   joints: JointSamples | None = None) -> Exported:
     """Write the journal ``source`` (a run's or a black box's) to the MCAP file
-    ``out`` (see the module text); JournalError if it cannot be read,
-    CommandError if ``out`` cannot be written (nothing written then)."""
+    ``out`` (see the module text), with ``joints`` on ``/joint_states`` if given;
+    JournalError if it cannot be read, CommandError if ``out`` cannot be written
+    (nothing written then)."""
     reader = source if isinstance(source, JournalReader) else JournalReader(source)
     h = reader.header
     m = JsonMcap()
@@ -206,6 +254,8 @@ def export_journal(source: str | Path | JournalReader, out: str | Path) -> Expor
         _tick(m, rec, ins, outs, c_tick, c_write, c_cmd, c_fault, c_event, outputs, writers)
         ticks += 1
         last_ns = rec.time_ns
+    if joints is not None:
+        joints.write(m)
     try:
         size = m.finish(out)
     except OSError as exc:

@@ -37,7 +37,7 @@ import numpy as np
 from pyrt.errors import CommandError
 from pyrt.scope.report import ScopeReport
 from pyrt.scope.sources import Source, compile_sampler, compile_sources
-from pyrt.scope.stream import Layout, UdpStream
+from pyrt.scope.stream import Layout, Sink, UdpStream
 
 __all__ = ["MAX_BUFFER_BYTES", "MAX_LENGTH", "Frame", "Scope", "Trigger"]
 
@@ -141,6 +141,10 @@ class Scope(ScopeReport):
         self.directory: str | None = None
         #: The live stream of the samples (``scope stream``), or None.
         self.stream: UdpStream | None = None
+        #: The Foxglove live server of the samples (``scope foxglove``), or None.
+        self.foxglove: Sink | None = None
+        #: The sinks that take samples, each with the loop time its next is due.
+        self._sinks: list[list] = []
         self._stream_next = _NEVER
         self._reset_buffers()
 
@@ -328,31 +332,48 @@ class Scope(ScopeReport):
             self._flush()
 
     def _offer(self, now_ns: int) -> None:
-        """Hand the sample just taken to the stream; the next one is due a period on."""
-        stream = self.stream
-        if stream is None:
-            self._stream_next = _NEVER
-            return
+        """Hand the sample just taken to each sink it is due at; each one's next
+        is due a period on."""
         off = self._staged * self._row
-        stream.offer(self._layout, bytes(self._stage[off:off + self._row]))
-        nxt = (self._stream_next or now_ns) + stream.period_ns  # 0: the first, just now
-        self._stream_next = nxt if nxt > now_ns else now_ns + stream.period_ns
+        row = bytes(self._stage[off:off + self._row])
+        soonest = _NEVER
+        for slot in self._sinks:
+            sink, due = slot
+            if now_ns >= due:
+                sink.offer(self._layout, row)
+                nxt = (due or now_ns) + sink.period_ns  # 0: the first, just now
+                slot[1] = due = nxt if nxt > now_ns else now_ns + sink.period_ns
+            soonest = min(soonest, due)
+        self._stream_next = soonest
 
-    # -- the live stream (application side) ------------------------------------------
+    # -- the live sinks (application side) -------------------------------------------
+
+    def _plug(self, attr: str, sink: Sink | None) -> Sink | None:
+        old = getattr(self, attr)
+        setattr(self, attr, sink)
+        if sink is not None:
+            sink.bind(self)
+        self._sinks = [[s, 0] for s in (self.stream, self.foxglove) if s is not None]
+        self._stream_next = 0 if self._sinks else _NEVER
+        return old
 
     def start_stream(self, stream: UdpStream) -> UdpStream | None:
         """Stream the samples (from the next one on) to ``stream``; the stream it
         replaces, if any (the caller closes it, outside the loop)."""
-        stream.bind(self)
-        old, self.stream = self.stream, stream
-        self._stream_next = 0
-        return old
+        return self._plug("stream", stream)  # type: ignore[return-value]
 
     def stop_stream(self) -> UdpStream | None:
         """Stream no more; the stream that was on, if any (the caller closes it)."""
-        old, self.stream = self.stream, None
-        self._stream_next = _NEVER
-        return old
+        return self._plug("stream", None)  # type: ignore[return-value]
+
+    def start_foxglove(self, server: Sink) -> Sink | None:
+        """Serve the samples (from the next one on) on a Foxglove server; the one
+        it replaces, if any (the caller closes it, outside the loop)."""
+        return self._plug("foxglove", server)
+
+    def stop_foxglove(self) -> Sink | None:
+        """Serve no more; the server that was on, if any (the caller closes it)."""
+        return self._plug("foxglove", None)
 
     def _flush(self) -> None:
         n = self._staged

@@ -31,11 +31,12 @@ import struct
 import threading
 import weakref
 from dataclasses import dataclass
+from typing import Protocol
 from urllib.parse import urlsplit
 
 from pyrt.errors import CommandError
 
-__all__ = ["DEFAULT_HZ", "MAX_HZ", "Layout", "UdpStream", "parse_udp_url"]
+__all__ = ["DEFAULT_HZ", "MAX_HZ", "Layout", "Sink", "UdpStream", "parse_udp_url"]
 
 #: Objects a second of loop time, unless the command names a rate.
 DEFAULT_HZ = 50.0
@@ -87,6 +88,18 @@ class Layout:
             order += [k for k, _sig in fields]
             parts.append(inner if not obj else _key(obj) + ":{" + inner + "}")
         return "{" + ",".join(parts) + "}", order
+
+
+class Sink(Protocol):
+    """What the scope hands live samples to (:class:`UdpStream`, the Foxglove
+    server): in the loop thread, :meth:`offer` every :attr:`period_ns` of loop
+    time; it only queues."""
+
+    period_ns: int
+
+    def offer(self, layout: Layout, row: bytes) -> None: ...
+
+    def bind(self, owner: object) -> None: ...
 
 
 def _key(name: str) -> str:

@@ -14,7 +14,7 @@ line starts with ``OK``, ``ERR <code>`` or ``STATUS``:
   stream wherever they come.
 
 The server's own verbs are case-insensitive words that no robot command
-uses: ``AUTH``, ``STATUS``, ``SUBSCRIBE``, ``UNSUBSCRIBE``, ``QUIT``.
+uses: ``AUTH``, ``STATUS``, ``FIELDS``, ``SUBSCRIBE``, ``UNSUBSCRIBE``, ``QUIT``.
 Everything else is a robot console command.
 """
 
@@ -35,7 +35,7 @@ __all__ = [
 MAX_LINE = 1024
 
 #: Verbs the server answers itself (upper case; requests are case-insensitive).
-SERVER_VERBS = ("AUTH", "QUIT", "STATUS", "SUBSCRIBE", "UNSUBSCRIBE")
+SERVER_VERBS = ("AUTH", "FIELDS", "QUIT", "STATUS", "SUBSCRIBE", "UNSUBSCRIBE")
 
 #: The ``ERR`` codes and what each means.
 ERROR_CODES = {

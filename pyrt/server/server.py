@@ -252,10 +252,14 @@ class Server(IOLoopMixin, FramingMixin, SessionMixin):
 
     # -- life cycle ----------------------------------------------------------------
 
-    def start(self) -> tuple[str, int]:
-        """Bind, listen and start the I/O thread; returns ``(host, port)`` bound."""
-        if self._thread is not None:
-            raise ConfigError("the server is already running")
+    def bind(self) -> tuple[str, int]:
+        """Bind and listen (nothing is served until :meth:`start`); returns
+        ``(host, port)`` bound; ConfigError (a taken port ...) saying why.  A
+        station binds before it says anything, so that a port it cannot have
+        is its first and only word."""
+        if self._listener is not None:
+            assert self.address is not None
+            return self.address
         try:
             infos = socket.getaddrinfo(self.host or None, self.port, type=socket.SOCK_STREAM,
                                        flags=socket.AI_PASSIVE)
@@ -273,6 +277,16 @@ class Server(IOLoopMixin, FramingMixin, SessionMixin):
         listener.setblocking(False)
         self._listener = listener
         self.address = listener.getsockname()[:2]
+        return self.address
+
+    def start(self) -> tuple[str, int]:
+        """Bind (unless :meth:`bind` has), listen and start the I/O thread; returns
+        ``(host, port)`` bound."""
+        if self._thread is not None:
+            raise ConfigError("the server is already running")
+        self.bind()
+        listener = self._listener
+        assert listener is not None and self.address is not None
         self._wake_r, self._wake_w = os.pipe()
         os.set_blocking(self._wake_r, False)
         os.set_blocking(self._wake_w, False)
@@ -294,6 +308,9 @@ class Server(IOLoopMixin, FramingMixin, SessionMixin):
             unsubscribe()
         self._unsubscribe = ()
         if self._thread is None:
+            if self._listener is not None:  # bound, never started
+                self._listener.close()
+                self._listener = None
             return
         conns = list(self._conns.values())
         self._stopping = True

@@ -31,7 +31,7 @@ __all__ = ["SessionMixin", "run_shell"]
 
 log = logging.getLogger("pyrt.server")
 
-_VERBS = frozenset({"AUTH", "QUIT", "STATUS", "SUBSCRIBE", "UNSUBSCRIBE"})
+_VERBS = frozenset({"AUTH", "FIELDS", "QUIT", "STATUS", "SUBSCRIBE", "UNSUBSCRIBE"})
 #: A rate as SUBSCRIBE takes it: a decimal number in ASCII digits (no
 #: ``nan``/``inf``, no ``_`` separators, no digits of other scripts).
 _RATE = re.compile(r"\+?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]{1,4})?", re.ASCII)
@@ -171,6 +171,12 @@ class SessionMixin(ServerState):
             if values is None:
                 return format_error("timeout", "no status yet: the control loop has not run")
             return format_reply([f"t={t_ns / 1e9:.6f} {self.robot.format_status(values)}"])
+        if verb == "FIELDS":
+            if rest:
+                return format_error("syntax", "FIELDS takes no argument")
+            # one line per STATUS field: its name and units ('-' for none)
+            return format_reply([f"{name} {getattr(sig, 'units', '') or '-'}"
+                                 for name, sig, _fmt in self.robot.fields])
         if verb == "AUTH":
             return self._auth(conn, rest)
         if verb == "SUBSCRIBE":

@@ -50,6 +50,7 @@ from pyrt import (
     CommandError,
     Component,
     ConfigError,
+    JointStates,
     Limits,
     Loop,
     MotionExecutor,
@@ -77,7 +78,7 @@ from pyrt_arm.boards import (
     arm_world,
     drive_counts,
 )
-from pyrt_arm.kinematics import GEOMETRY, KinematicsError, elbow_of, fk, ik
+from pyrt_arm.kinematics import GEOMETRY, KinematicsError, elbow_of, fk, ik, urdf
 from pyrt_arm.plant import JOINTS, Plant
 from pyrt_arm.servo import ELBOW, FOLLOWING_ERROR_LIMIT_DEG, SHOULDER, JointServo, JointServoConfig
 
@@ -235,6 +236,9 @@ class ArmController(Component):
 
     name = "arm"
     joint_count = 2
+    #: The joints as viewers take them (scope foxglove, pyrt export): the URDF's names.
+    joint_states = JointStates(names=("shoulder", "elbow"), position=("q0", "q1"),
+                               velocity=("shoulder.velocity", "elbow.velocity"), urdf=urdf())
 
     def __init__(self, station: ArmStation, board: Any, period_ns: int) -> None:
         self.station = station

@@ -1,0 +1,819 @@
+"""Planning a motion record when it is queued (outside the loop).
+
+:class:`Planner` holds the arm (a :class:`~pyrt.kinematics.Chain`) and its
+limits; :meth:`Planner.plan` turns one :class:`~pyrt.motion.MotionSpec` into
+the pieces that follow the plan already queued (:mod:`pyrt.motion._pieces`),
+and checks them by sampling at the trajectory period before anything runs:
+
+* the segment's time is the least that keeps every joint velocity, the
+  Cartesian velocities (translation and rotation), the record's ``speed``
+  and ``max_diff`` within their limits, or the record's ``segment_time``;
+* each transition's half-time ``tau`` is the least that keeps the
+  accelerations (joint, or Cartesian for a Cartesian transition) within
+  the limits, or the record's ``transition``;
+* the sampled joint velocities and accelerations are checked (a joint path
+  of a Cartesian line curves): a segment or a transition that exceeds them
+  is slowed and sampled again;
+* a Cartesian segment that would pass a singularity (the Jacobian's
+  smallest singular value under ``Limits.singular``), leave the reach or
+  cross a joint limit is refused, naming where (the fraction of the
+  segment, the tool position, the joint).
+
+Transitions (001, Paul): the space of a transition is the new segment's:
+joint -> joint and Cartesian -> joint in joint space (the joint values at A
+extrapolated with their velocity, 001's cart -> joint), joint -> Cartesian
+and Cartesian -> Cartesian in the new equation's drive space (T6 at A
+extrapolated along its drive parameters, 001's joint -> cart).  With a
+moving frame on either side the transition is made when it starts, from the
+last samples expressed in the new equation's frames: the frames' extra
+velocity is then part of the start velocity, which is 001's third-order
+polynomial added to the quartic (see ``docs/arm-motion.md``).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from pyrt.kinematics import Chain
+from pyrt.motion._geom import drive_of, log_rot, pose_of
+from pyrt.motion._pieces import (
+    CART,
+    JOINT,
+    Frames,
+    FrameTracker,
+    Piece,
+    line_coeffs,
+    norm,
+    transition_coeffs,
+)
+from pyrt.motion.record import BufferMode, Mode, MotionSpec, Move, RecordError
+
+__all__ = ["Limits", "Planner", "Segment"]
+
+Matrix = npt.NDArray[np.float64]
+Vector = npt.NDArray[np.float64]
+
+#: Plan-time finite-difference step (s) for a state's velocity.
+_H = 1e-4
+#: How many times a plan is slowed and sampled again before it is refused.
+_TRIES = 20
+
+
+@dataclass(frozen=True)
+class Limits:
+    """The arm's limits: joint velocity ``vmax`` and acceleration ``amax``
+    (n,), the tool's Cartesian velocity ``v_cart`` (m/s) and ``w_cart``
+    (rad/s) and acceleration ``a_cart`` (m/s^2) and ``alpha_cart``
+    (rad/s^2); ``singular``: the smallest singular value of the Jacobian a
+    Cartesian segment may pass; ``payload``: the largest mass a record may
+    carry (kg)."""
+
+    vmax: tuple[float, ...]
+    amax: tuple[float, ...]
+    v_cart: float = 0.5
+    w_cart: float = 1.5
+    a_cart: float = 2.0
+    alpha_cart: float = 6.0
+    singular: float = 0.02
+    payload: float = math.inf
+
+    def __post_init__(self) -> None:
+        v = np.asarray(self.vmax, dtype=float)
+        a = np.asarray(self.amax, dtype=float)
+        if v.shape != a.shape or v.ndim != 1 or (v <= 0).any() or (a <= 0).any() or not (
+                np.isfinite(v).all() and np.isfinite(a).all()):
+            raise ValueError("Limits: vmax and amax are one finite value > 0 per joint")
+        for name in ("v_cart", "w_cart", "a_cart", "alpha_cart"):
+            x = getattr(self, name)
+            if not (math.isfinite(x) and x > 0):
+                raise ValueError(f"Limits: {name} must be finite and > 0, got {x!r}")
+        object.__setattr__(self, "vmax", tuple(float(x) for x in v))
+        object.__setattr__(self, "amax", tuple(float(x) for x in a))
+
+
+@dataclass
+class Segment:
+    """A planned record: its pieces and the times that matter."""
+
+    move: Move
+    kind: str
+    frames: Frames
+    config: str | None
+    period: float
+    #: When the straight line passes its start point and its end point.
+    t_c: float
+    t_e: float
+    tau_in: float
+    tau_out: float
+    start: Any
+    end: Any
+    velocity: Vector
+    r_c: Matrix | None
+    p_c: Vector | None
+    pieces: list[Piece] = field(default_factory=list)
+    #: When the first piece begins and when the record counts as reached.
+    t_begin: float = 0.0
+    t_reached: float = 0.0
+    q_end: Vector | None = None
+    t6_end: Matrix | None = None
+    #: True when the record ended with a rest (buffered, or a blend refused).
+    rested: bool = True
+    #: The tool position at the start corner and the largest blend error there (m).
+    blend_error: float = 0.0
+    tracking: bool = False
+    #: The buffer mode the segment was planned with (a blend that could not be
+    #: made within the limits and the tolerance is buffered), and why not.
+    how: BufferMode = BufferMode.BUFFERED
+    #: The line's start in its space, and the start state A when not at rest.
+    x0: Any = None
+    state_a: Any = None
+    refusals: list[str] = field(default_factory=list)
+
+
+@dataclass
+class Tail:
+    """What a new record starts from: the plan queued so far, seen at ``now``."""
+
+    now: float
+    sample: int
+    period: float
+    q: Vector
+    t6: Matrix
+    pieces: list[Piece]
+    last: Segment | None
+    equation: Any = None
+    config: str | None = None
+
+
+class _Refused(Exception):
+    pass
+
+
+class _Slow(Exception):
+    def __init__(self, where: str, what: str, ratio: float = 1.25) -> None:
+        super().__init__(what)
+        self.where = where
+        self.what = what
+        self.ratio = max(ratio, 1.05)
+
+
+class Planner:
+    """Plans records for one chain (see the module doc)."""
+
+    def __init__(self, chain: Chain, limits: Limits, tracker: FrameTracker) -> None:
+        if len(limits.vmax) != chain.n:
+            raise ValueError(f"Limits give {len(limits.vmax)} joints; chain {chain.name!r} "
+                             f"has {chain.n}")
+        self.chain = chain
+        self.limits = limits
+        self.vmax = np.array(limits.vmax)
+        #: The velocities planned for: just under the limits (the sampled check
+        #: keeps a reserve for rounding).
+        self.vplan = 0.998 * self.vmax
+        self.amax = np.array(limits.amax)
+        self.tracker = tracker
+        self.closed = chain.closed_form
+        self._t6 = np.eye(4)
+
+    # -- the inverse ------------------------------------------------------------------
+    def solve(self, t6: Matrix, seed: Vector, config: str | None) -> Vector | None:
+        """Joint values of ``t6`` nearest ``seed`` (the closed form in
+        ``config`` when the chain has one), or None."""
+        if self.closed is not None and config is not None:
+            try:
+                q = self.closed.solve(t6, config, seed)  # type: ignore[call-arg]
+            except TypeError:  # a closed form that takes no seed
+                q = self.closed.solve(t6, config)
+            return None if q is None else np.asarray(q, dtype=float)
+        r = self.chain.ik(t6, seed)
+        if not r.ok:
+            return None
+        return r.q.copy()
+
+    def why(self, t6: Matrix, seed: Vector, config: str | None) -> str:
+        if self.closed is not None and config is not None and hasattr(self.closed, "reason"):
+            reason = self.closed.reason(t6, config)
+            if reason:
+                return str(reason)
+        r = self.chain.ik(t6, seed)
+        return f"no inverse (residual {r.residual:.3g} after {r.iterations} iterations)"
+
+    def config_of(self, q: Vector) -> str | None:
+        return None if self.closed is None else self.closed.config_of(q)
+
+    # -- evaluating pieces at plan time -------------------------------------------------
+    def sample_of(self, tail: Tail, t: float) -> float:
+        """The (fractional) sample number of trajectory time ``t``, for a moving
+        frame's predicted value."""
+        return tail.sample + (t - tail.now) / tail.period
+
+    def q_of(self, piece: Piece, t: float, seed: Vector, sample: float) -> Vector | None:
+        if piece.space == JOINT:
+            return piece.x(t)
+        if piece.space == CART:
+            assert piece.frames is not None
+            pos = piece.pose(t, np.eye(4))
+            return self.solve(piece.frames.t6(pos, sample), seed, piece.config)
+        assert piece.fn is not None
+        return np.asarray(piece.fn(t - piece.origin), dtype=float)
+
+    @staticmethod
+    def piece_at(pieces: list[Piece], t: float) -> Piece | None:
+        for p in pieces:
+            if p.t0 - 1e-9 <= t < p.t1:
+                return p
+        return pieces[-1] if pieces and t >= pieces[-1].t0 else None
+
+    def _state(self, piece: Piece, t: float, seed: Vector, tail: Tail, space: str,
+               frames: Frames, ref: tuple[Matrix, Vector] | None) -> tuple[Vector, Vector, Vector]:
+        """(x, v, q) of ``piece`` (extrapolated if ``t`` is past it) at ``t``, in
+        ``space`` (drive coordinates about ``ref`` through ``frames``)."""
+        xs = []
+        q0 = seed
+        for dt in (-_H, 0.0, _H):
+            n = self.sample_of(tail, t + dt)
+            q = self.q_of(piece, t + dt, q0, n)
+            if q is None:
+                raise _Refused(f"the motion queued before cannot be followed at {t:.3f} s")
+            if space == JOINT:
+                xs.append(q)
+            else:
+                assert ref is not None
+                pos = frames.pos(self.chain.fk(q), n)
+                xs.append(drive_of(pos, ref[0], ref[1]))
+            if dt == 0.0:
+                q0 = q
+        return xs[1], (xs[2] - xs[0]) / (2 * _H), q0
+
+    # -- the plan ---------------------------------------------------------------------
+    def plan(self, spec: MotionSpec, tail: Tail, move: Move, *,
+             force_sensor: bool) -> Segment:
+        """The segment of ``spec`` after ``tail``; RecordError names what is refused."""
+        try:
+            return self._plan(spec, tail, move, force_sensor)
+        except _Refused as exc:
+            raise RecordError(f"{spec.name or 'record'}: refused: {exc}") from None
+
+    def _plan(self, spec: MotionSpec, tail: Tail, move: Move, force_sensor: bool) -> Segment:
+        chain = self.chain
+        if spec.force_limits is not None and not force_sensor:
+            raise RecordError("force_limits: refused: this arm's evaluator has no force sensor "
+                              "(a guarded move needs one)")
+        if spec.mass > self.limits.payload:
+            raise RecordError(f"mass: {spec.mass:g} kg is more than the arm's payload "
+                              f"{self.limits.payload:g} kg")
+        eq = spec.equation if spec.equation is not None else tail.equation
+        mode = spec.mode
+        if mode is Mode.CART and eq is None:
+            raise RecordError("equation: a Cartesian record needs a position equation (none "
+                              "given and none queued before)")
+        if spec.target is not None and len(spec.target) != chain.n:
+            raise RecordError(f"target: {len(spec.target)} joint values; the arm has {chain.n}")
+        if spec.update is not None:
+            spec.update_transform()
+        # (a joint target still moves the tool of the last equation: blends and
+        # max_diff are measured at that tool)
+        frames = Frames(eq, self.tracker)
+        period = 1.0 / spec.sample_rate if spec.sample_rate else tail.period
+        config = tail.config
+        if spec.config is not None:
+            if self.closed is None:
+                raise RecordError(f"config: refused: chain {chain.name!r} has no closed-form "
+                                  "inverse with named configurations")
+            try:
+                from pyrt.kinematics.puma import parse_config
+
+                config = parse_config(spec.config)
+            except ValueError as exc:
+                raise RecordError(f"config: {exc}") from None
+            if config not in self.closed.configurations:
+                raise RecordError(f"config: {spec.config!r} is not one of "
+                                  f"{', '.join(self.closed.configurations)}")
+        # The target POS (equation mode), with the distance modifier.
+        target_pos: Matrix | None = None
+        if spec.target is None:
+            assert eq is not None
+            target_pos = np.array(eq.values(eq.pos)[1])
+            if spec.distance is not None:
+                from pyrt.kinematics import transform
+
+                d = spec.distance
+                # in the tool frame (POS is where the tool frame goes)
+                target_pos = target_pos @ transform(d[:3], d[3:])
+        # Where the new segment starts, and how.
+        last = tail.last
+        buffer = BufferMode(spec.buffer)
+        moving = last is not None and not last.rested and tail.pieces and not (
+            last.pieces and last.pieces[-1].t1 <= tail.now)
+        if not moving or last is None:
+            buffer = BufferMode.BUFFERED
+        elif last.tracking:
+            # following a moving frame: the new motion starts from that motion (001's
+            # extrapolation), as an aborting record does
+            buffer = BufferMode.ABORTING
+        kind = CART if mode is Mode.CART else JOINT
+        attempts: list[str] = []
+        buffer = BufferMode(buffer)
+        for how in ([buffer, BufferMode.BUFFERED] if buffer is BufferMode.BLENDING
+                    else [buffer]):
+            try:
+                seg = self._segment(spec, tail, move, kind, frames, config, period,
+                                    target_pos, how)
+            except _Slow as exc:
+                attempts.append(exc.what)
+                continue
+            if how is not buffer:
+                seg.blend_error = 0.0
+            seg.how = how
+            seg.refusals = attempts
+            return seg
+        raise _Refused("; ".join(attempts))
+
+    def _segment(self, spec: MotionSpec, tail: Tail, move: Move, kind: str, frames: Frames,
+                 config: str | None, period: float, target_pos: Matrix | None,
+                 how: BufferMode) -> Segment:
+        chain, lim = self.chain, self.limits
+        last = tail.last
+        speed = spec.speed
+        slow = 1.0
+        tau_scale_in = tau_scale_out = 1.0
+        t_guess = 0.0
+        tau_guess = 0.0
+        last_slow: _Slow | None = None
+        for _attempt in range(_TRIES):
+            # -- the start state --------------------------------------------------------
+            if how is BufferMode.BUFFERED:
+                t_rest = tail.now
+                if last is not None and tail.pieces:
+                    t_rest = max(t_rest, tail.pieces[-1].t0 if last.tracking
+                                 else tail.pieces[-1].t1)
+                q_s, t6_s = self._end_of(tail)
+                x_a = None
+            elif how is BufferMode.BLENDING:
+                assert last is not None
+                assert last.q_end is not None and last.t6_end is not None
+                q_s, t6_s = last.q_end, last.t6_end
+            else:  # aborting: from the state a few samples ahead
+                t_a = tail.now + 2 * tail.period
+                p = self.piece_at(tail.pieces, t_a)
+                assert p is not None
+                q_at = self.q_of(p, t_a, tail.q, self.sample_of(tail, t_a))
+                if q_at is None:
+                    raise _Refused("the running motion cannot be followed to the abort point")
+                q_s = q_at
+                t6_s = chain.fk(q_s)
+            # -- the target ---------------------------------------------------------------
+            # in a moving frame, where the target will be when the segment ends (001)
+            n_end_guess = self.sample_of(tail, tail.now + t_guess)
+            if kind == JOINT:
+                if spec.target is not None:
+                    q_e = np.array(spec.target)
+                else:
+                    assert target_pos is not None
+                    t6_e = frames.t6(target_pos, n_end_guess)
+                    q_e_opt = self.solve(t6_e, q_s, config)
+                    if q_e_opt is None:
+                        raise _Refused("the target cannot be reached: "
+                                       + self.why(t6_e, q_s, config))
+                    q_e = q_e_opt
+                why = chain.limit_violation(q_e)
+                if why:
+                    raise _Refused(f"the target is outside the joint limits ({why})")
+            # -- the line in its space ----------------------------------------------------
+            # The start state A in the new segment's space, when the segment does not
+            # start from rest in it: aborting (the running motion at t_a), or from rest
+            # in the world while the new equation's frame moves.
+            r_c = p_c = None
+            x_a = v_a = None
+            if how is BufferMode.ABORTING:
+                t_a = tail.now + 2 * tail.period
+                prior = self.piece_at(tail.pieces, t_a)
+            elif how is BufferMode.BUFFERED and frames.moving:
+                t_a = t_rest
+                prior = Piece(JOINT, -math.inf, math.inf, 0.0,
+                              line_coeffs(q_s, np.zeros_like(q_s)), None)
+            else:
+                prior = None
+            if kind == JOINT:
+                if prior is not None:
+                    x_a, v_a, _ = self._state(prior, t_a, q_s, tail, JOINT, frames, None)
+                    # 001's extrapolation: the line starts where the motion would be
+                    # tau later at its present velocity
+                    x_s = x_a + v_a * tau_guess
+                else:
+                    x_s = np.array(q_s, dtype=float)
+                start = x_s
+                delta = q_e - x_s
+                t_need = float(np.max(np.abs(delta) / (speed * slow * self.vplan)))
+                end: Any = q_e
+                v_line_dir = delta
+            else:
+                if prior is not None:
+                    n_a = self.sample_of(tail, t_a)
+                    pos_a = frames.pos(t6_s, n_a)
+                    r_c, p_c = pos_a[:3, :3].copy(), pos_a[:3, 3].copy()
+                    x_a, v_a, _ = self._state(prior, t_a, q_s, tail, CART, frames, (r_c, p_c))
+                    x_s = x_a + v_a * tau_guess
+                    pos_s = pose_of(x_s, r_c, p_c)
+                else:
+                    t_ref = last.t_e if how is BufferMode.BLENDING and last is not None \
+                        else t_rest + tau_guess
+                    pos_s = frames.pos(t6_s, self.sample_of(tail, t_ref))
+                    r_c, p_c = pos_s[:3, :3].copy(), pos_s[:3, 3].copy()
+                    x_s = np.zeros(6)
+                assert target_pos is not None
+                v_line_dir = drive_of(target_pos, r_c, p_c) - x_s
+                dp, phi = norm(v_line_dir[:3]), norm(v_line_dir[3:])
+                t_need = max(dp / (speed * slow * lim.v_cart), phi / (speed * slow * lim.w_cart))
+                n_c = self.sample_of(tail, tail.now + tau_guess)
+                t_need = max(t_need, self._joint_time(frames, r_c, p_c, v_line_dir, x_s, q_s,
+                                                      config, n_c, speed * slow))
+                start = pos_s
+                end = target_pos
+            if spec.max_diff is not None:
+                if kind == CART:
+                    dp, phi = norm(v_line_dir[:3]), norm(v_line_dir[3:])
+                else:
+                    dp, phi = self._tool_travel(q_s, q_e, frames)
+                t_need = max(t_need, dp * period / spec.max_diff[0],
+                             phi * period / spec.max_diff[1])
+            t_seg = max(t_need, 1e-3)
+            if spec.segment_time is not None:
+                if spec.segment_time + 1e-12 < t_need:
+                    raise RecordError(f"segment_time: {spec.segment_time:g} s is shorter than "
+                                      f"the {t_need:.3g} s the limits need")
+                t_seg = spec.segment_time / slow
+            # -- the transitions' half-times -------------------------------------------------
+            for _ in range(4):
+                v_line = v_line_dir / t_seg
+                if v_a is not None:
+                    v_in = v_a
+                elif how is BufferMode.BLENDING:
+                    assert last is not None
+                    v_in = self._incoming(last, kind, frames, r_c, p_c, tail)
+                else:
+                    v_in = np.zeros_like(v_line)
+                q_end_guess = q_e if kind == JOINT else None
+                tau_in = self._tau(kind, v_line - v_in, q_s, frames) * tau_scale_in
+                tau_out = self._tau(kind, v_line, q_end_guess if q_end_guess is not None
+                                    else q_s, frames) * tau_scale_out
+                if spec.transition is not None:
+                    need = max(tau_in, tau_out)
+                    if spec.transition + 1e-12 < need / max(tau_scale_in, tau_scale_out):
+                        raise RecordError(f"transition: {spec.transition:g} s is shorter than "
+                                          f"the {need:.3g} s the acceleration limits need")
+                    tau_in = max(tau_in, spec.transition)
+                    tau_out = max(tau_out, spec.transition)
+                if x_a is not None and v_a is not None:
+                    # the line starts where the motion at A would be tau_in later
+                    # (001's extrapolation), so the transition meets it exactly
+                    target_x = x_s + v_line_dir
+                    x_s = x_a + v_a * tau_in
+                    v_line_dir = target_x - x_s
+                    v_line = v_line_dir / t_seg
+                if t_seg >= tau_in + tau_out:
+                    break
+                t_seg = tau_in + tau_out
+            # -- the corner's time -----------------------------------------------------------
+            if how is BufferMode.BUFFERED:
+                t_c = t_rest + tau_in
+                if prior is not None:
+                    t_c = t_a + tau_in
+            elif how is BufferMode.BLENDING:
+                assert last is not None
+                t_c = last.t_e
+                begin = t_c - tau_in
+                if len(last.pieces) < 3 or last.tracking or begin < last.t_c + last.tau_in \
+                        or min(begin, last.t_e - last.tau_out) < tail.now + 2 * tail.period:
+                    raise _Slow("blend", "no room to blend into the motion before")
+            else:
+                t_c = tail.now + 2 * tail.period + tau_in
+            again = False
+            if kind == JOINT and frames.moving and abs(
+                    t_c + t_seg + tau_out - tail.now - t_guess) > 1e-3:
+                t_guess = t_c + t_seg + tau_out - tail.now
+                again = True
+            if prior is not None and abs(tau_in - tau_guess) > 0.05 * tau_in:
+                tau_guess = tau_in  # the line's joint time estimated from a nearer start
+                again = True
+            if again and _attempt < _TRIES - 1:
+                continue
+            seg = Segment(move, kind, frames, config, period, t_c, t_c + t_seg, tau_in, tau_out,
+                          start, end, v_line, r_c, p_c)
+            seg.x0 = x_s
+            seg.state_a = None if x_a is None else (x_a, v_a)
+            seg.rested = False
+            seg.tracking = frames.moving and kind == CART
+            self._pieces(seg, tail, how, v_in)
+            try:
+                self._check(seg, spec, tail, how)
+            except _Slow as exc:
+                last_slow = exc
+                # a transition's joint acceleration is its own (1/tau) plus the
+                # curvature of the joints' path (1/T^2): stretch both
+                stretch = kind == CART and spec.segment_time is None
+                if exc.where == "in":
+                    tau_scale_in *= max(exc.ratio, 1.1)
+                    slow /= math.sqrt(exc.ratio) if stretch else 1.0
+                elif exc.where == "out":
+                    tau_scale_out *= max(exc.ratio, 1.1)
+                    slow /= math.sqrt(exc.ratio) if stretch else 1.0
+                elif exc.where == "blend":
+                    # a slower new segment changes the velocity less at the corner
+                    if how is not BufferMode.BLENDING or slow < 0.3:
+                        raise
+                    slow *= 0.7
+                else:
+                    slow /= exc.ratio
+                continue
+            return seg
+        why = f": {last_slow.what}" if last_slow is not None else ""
+        raise _Refused(f"cannot keep within the limits after slowing {_TRIES} times{why}")
+
+    # -- helpers --------------------------------------------------------------------------
+    def _end_of(self, tail: Tail) -> tuple[Vector, Matrix]:
+        last = tail.last
+        if last is None or last.q_end is None or last.rested is None:
+            return tail.q, tail.t6
+        if not tail.pieces or tail.pieces[-1].t1 <= tail.now or last.tracking:
+            return tail.q, tail.t6
+        assert last.t6_end is not None
+        return last.q_end, last.t6_end
+
+    def _tau(self, kind: str, dv: Vector, q: Vector, frames: Frames) -> float:
+        """The least transition half-time for a velocity change ``dv`` (Paul's
+        quartic peaks at ``3 |dv| / (4 tau)``): in joint space the joint limits; in
+        drive space the Cartesian ones and the joints' (``dv`` mapped through the
+        Jacobian's pseudo-inverse at ``q``)."""
+        if kind == JOINT:
+            tau = float(np.max(0.75 * np.abs(dv) / self.amax))
+        else:
+            tau = max(0.75 * norm(dv[:3]) / self.limits.a_cart,
+                      0.75 * norm(dv[3:]) / self.limits.alpha_cart)
+            pre = frames.parts(None)[0][:3, :3]
+            t6 = self.chain.fk(q)
+            tool = frames.tool(t6, None)
+            w = pre @ dv[3:]
+            v = pre @ dv[:3] - np.cross(w, tool[:3, 3] - t6[:3, 3])
+            qd = np.linalg.pinv(self.chain.jacobian(q)) @ np.concatenate([v, w])
+            tau = max(tau, 1.1 * float(np.max(0.75 * np.abs(qd) / self.amax)))
+        return max(tau, 2e-3)
+
+    def _incoming(self, last: Segment, kind: str, frames: Frames, r_c: Matrix | None,
+                  p_c: Vector | None, tail: Tail) -> Vector:
+        """The previous line's velocity at its end, in the new segment's space."""
+        line = last.pieces[1]
+        assert last.q_end is not None
+        if kind == JOINT and last.kind == JOINT:
+            return last.velocity.copy()
+        ref = None if kind == JOINT else (r_c, p_c)
+        _, v, _ = self._state(line, last.t_e, last.q_end, tail, kind, frames, ref)  # type: ignore[arg-type]
+        return v
+
+    def _joint_time(self, frames: Frames, r_c: Matrix, p_c: Vector, delta: Vector,
+                    x_s: Vector, q_s: Vector, config: str | None, sample: float,
+                    speed: float) -> float:
+        """The least time of a Cartesian line that keeps the joint velocities
+        within the limits (the joints' path sampled)."""
+        k = 24
+        pose = np.eye(4)
+        q0 = self.solve(frames.t6(pose_of(x_s, r_c, p_c, pose), sample), q_s, config)
+        q = prev = q_s if q0 is None else q0
+        need = 0.0
+        steps: list[Vector] = []
+        for i in range(1, k + 1):
+            x = x_s + delta * (i / k)
+            t6 = frames.t6(pose_of(x, r_c, p_c, pose), sample)
+            got = self.solve(t6, q, config)
+            tool = frames.tool(t6, sample)[:3, 3] * 1e3
+            where = f"{100 * i / k:.0f}% of the segment (tool at {tool.round(1).tolist()} mm)"
+            sv = np.linalg.svd(self.chain.jacobian(q if got is None else got),
+                               compute_uv=False)[-1]
+            if sv < self.limits.singular:
+                raise _Refused(f"the line passes a singularity at {where}: smallest singular "
+                               f"value {sv:.2g}, q = {np.degrees(q).round(1).tolist()} deg")
+            if got is None:
+                raise _Refused(f"the line leaves the arm's reach at {where}: "
+                               f"{self.why(t6, q, config)}")
+            need = max(need, float(np.max(np.abs(got - prev) * k / (speed * self.vplan))))
+            steps.append(got - prev)
+            prev = q = got
+        # the joints' path curves: its acceleration at constant speed along the line
+        # (d2q/dr2 / T^2) kept to half the limit, the other half for the transitions
+        for a, b in itertools.pairwise(steps):
+            curv = np.abs(b - a) * k * k
+            need = max(need, math.sqrt(float(np.max(curv / (0.5 * self.amax)))))
+        return need
+
+    def _tool_travel(self, q_s: Vector, q_e: Vector, frames: Frames) -> tuple[float, float]:
+        k = 24
+        length = angle = 0.0
+        prev = frames.tool(self.chain.fk(q_s), None)
+        for i in range(1, k + 1):
+            cur = frames.tool(self.chain.fk(q_s + (q_e - q_s) * i / k), None)
+            length += norm(cur[:3, 3] - prev[:3, 3])
+            angle += norm(log_rot(prev[:3, :3].T @ cur[:3, :3]))
+            prev = cur
+        return length, angle
+
+    def _pieces(self, seg: Segment, tail: Tail, how: BufferMode, v_in: Vector) -> None:
+        """Make the segment's pieces: the transition in, the line, the way to rest."""
+        kw: dict[str, Any] = {}
+        if seg.kind == CART:
+            kw = {"frames": seg.frames, "r_c": seg.r_c, "p_c": seg.p_c, "config": seg.config}
+        x_s = np.asarray(seg.x0, dtype=float)
+        v = seg.velocity
+        t_c, t_e, ti, to = seg.t_c, seg.t_e, seg.tau_in, seg.tau_out
+        x_e = x_s + v * (t_e - t_c)
+        pieces: list[Piece] = []
+        runtime = None
+        last = tail.last
+        if seg.state_a is not None:
+            xa, va = seg.state_a
+            c_in = transition_coeffs(xa, va, x_s + v * ti, v, ti)
+            if seg.frames.moving or (last is not None and last.frames.moving):
+                runtime = (seg.kind, x_s + v * ti, v, ti)
+        elif how is BufferMode.BUFFERED:
+            c_in = transition_coeffs(x_s, np.zeros_like(v), x_s + v * ti, v, ti)
+        else:
+            assert last is not None
+            piece = last.pieces[1]
+            ref = None if seg.kind == JOINT else (seg.r_c, seg.p_c)
+            assert last.q_end is not None
+            xa, va, _ = self._state(piece, t_c - ti, last.q_end, tail, seg.kind, seg.frames,
+                                    ref)  # type: ignore[arg-type]
+            c_in = transition_coeffs(xa, va, x_s + v * ti, v, ti)
+            if (last.frames.moving or seg.frames.moving) and last.frames.eq is not seg.frames.eq:
+                runtime = (seg.kind, x_s + v * ti, v, ti)
+        p_in = Piece(seg.kind, t_c - ti, t_c + ti, t_c - ti, c_in, seg, **kw)
+        p_in.runtime = runtime
+        pieces.append(p_in)
+        if t_e - to > t_c + ti:
+            pieces.append(Piece(seg.kind, t_c + ti, t_e - to, t_c, line_coeffs(x_s, v), seg,
+                                **kw))
+        c_out = transition_coeffs(x_e - v * to, v, x_e, np.zeros_like(v), to)
+        t_end = t_e + to
+        pieces.append(Piece(seg.kind, t_e - to, t_end, t_e - to, c_out, seg, **kw))
+        if seg.tracking:
+            # at rest in a moving frame: the tool keeps following it
+            pieces.append(Piece(seg.kind, t_end, math.inf, t_end, line_coeffs(x_e, 0 * v), seg,
+                                **kw))
+        seg.pieces = pieces
+        seg.t_begin = pieces[0].t0
+        seg.t_reached = t_end
+
+    def _check(self, seg: Segment, spec: MotionSpec, tail: Tail, how: BufferMode) -> None:
+        """Sample the segment at its period: reach, limits, singularities,
+        velocities, accelerations, max_diff, the blend's tolerance."""
+        chain = self.chain
+        dt = seg.period
+        # on the loop's own sample times, from the first one in the segment
+        t0 = tail.now + math.ceil((seg.t_begin - tail.now) / dt - 1e-9) * dt
+        t_end = seg.t_reached
+        prior: Piece | None
+        if how is BufferMode.BLENDING and tail.last is not None:
+            prior = tail.last.pieces[-2]  # the line, run on to the transition
+        elif how is BufferMode.ABORTING:
+            prior = self.piece_at(tail.pieces, t0 - dt)
+        else:
+            prior = None
+        q_prev2 = q_prev = None
+        seed = self._end_of(tail)[0] if how is BufferMode.BUFFERED else tail.q
+        if prior is not None:
+            qa = self.q_of(prior, t0 - 2 * dt, tail.q, self.sample_of(tail, t0 - 2 * dt))
+            qb = self.q_of(prior, t0 - dt, tail.q if qa is None else qa,
+                           self.sample_of(tail, t0 - dt))
+            if qa is not None and qb is not None:
+                q_prev2, q_prev, seed = qa, qb, qb
+        elif how is BufferMode.BUFFERED:
+            q_prev2 = q_prev = seed
+        n_steps = max(math.ceil((t_end - t0) / dt), 1)
+        blend_pts: list[Vector] = []
+        q_end = None
+        t6 = np.eye(4)
+        for i in range(n_steps + 1):
+            t = min(t0 + i * dt, t_end)
+            piece = self.piece_at(seg.pieces, t)
+            assert piece is not None
+            n = self.sample_of(tail, t)
+            q = self.q_of(piece, t, seed, n)
+            frac = 100.0 * (t - seg.t_c) / max(seg.t_e - seg.t_c, 1e-9)
+            frac = min(max(frac, 0.0), 100.0)
+            if q is None:
+                assert piece.frames is not None
+                t6 = piece.frames.t6(piece.pose(t, np.eye(4)), n)
+                tool = t6[:3, 3] * 1e3
+                raise _Refused(f"the path leaves the arm's reach at {frac:.0f}% of the segment "
+                               f"(T6 at {tool.round(1).tolist()} mm): "
+                               f"{self.why(t6, seed, piece.config)}")
+            why = chain.limit_violation(q)
+            if why:
+                tool = chain.fk(q)[:3, 3] * 1e3
+                raise _Refused(f"the path crosses a joint limit at {frac:.0f}% of the segment "
+                               f"(T6 at {tool.round(1).tolist()} mm): {why}")
+            if piece.space == CART:
+                sv = np.linalg.svd(chain.jacobian(q), compute_uv=False)
+                if sv[-1] < self.limits.singular:
+                    tool = chain.fk(q)[:3, 3] * 1e3
+                    raise _Refused(f"the path passes a singularity at {frac:.0f}% of the "
+                                   f"segment (T6 at {tool.round(1).tolist()} mm, q = "
+                                   f"{np.degrees(q).round(1).tolist()} deg; smallest singular "
+                                   f"value {sv[-1]:.2g})")
+            if q_prev is not None and q_prev2 is not None:
+                qd = (q - q_prev) / dt
+                qdd = (q - 2 * q_prev + q_prev2) / (dt * dt)
+                where = self._where(seg, t - dt)
+                over_v = np.abs(qd) > self.vmax * 0.999
+                if over_v.any():
+                    j = int(np.argmax(np.abs(qd) / self.vmax))
+                    if np.abs(q - q_prev)[j] > 0.5:
+                        raise _Refused(f"the path passes a singularity at {frac:.0f}% of the "
+                                       f"segment: joint {chain.joints[j].name} would jump "
+                                       f"{math.degrees(abs(q[j] - q_prev[j])):.0f} deg")
+                    raise _Slow(where, f"joint {chain.joints[j].name} over its velocity limit "
+                                f"at {frac:.0f}% of the segment",
+                                1.02 * float(np.abs(qd)[j] / self.vmax[j]))
+                over_a = np.abs(qdd) > self.amax * 0.995  # a reserve for rounding
+                if over_a.any():
+                    j = int(np.argmax(np.abs(qdd) / self.amax))
+                    ratio = float(np.abs(qdd)[j] / self.amax[j])
+                    raise _Slow(where, f"joint {chain.joints[j].name} over its acceleration "
+                                f"limit at {frac:.0f}% of the segment",
+                                1.02 * (ratio if where != "line" else math.sqrt(ratio)))
+            if spec.max_diff is not None and q_prev is not None:
+                a = seg.frames.tool(chain.fk(q_prev), n)
+                b = seg.frames.tool(chain.fk(q), n)
+                if norm(b[:3, 3] - a[:3, 3]) > spec.max_diff[0] * 1.001 or norm(
+                        log_rot(a[:3, :3].T @ b[:3, :3])) > spec.max_diff[1] * 1.001:
+                    raise _Slow("line", "over the maximum differential motion")
+            if how is BufferMode.BLENDING and t <= seg.t_c + seg.tau_in:
+                blend_pts.append(self._tool_point(seg, q, n))
+            q_prev2, q_prev, seed = q_prev, q, q
+            q_end = q
+        assert q_end is not None
+        if how is BufferMode.BLENDING:
+            corner_tool = self._blend_error(seg, tail, blend_pts)
+            seg.blend_error = corner_tool
+            tol = seg.move.spec.tolerance
+            if tol is not None and corner_tool > 0.9 * tol:
+                raise _Slow("blend", f"the blend would cut the corner by "
+                            f"{corner_tool * 1e3:.2f} mm, more than its tolerance "
+                            f"{tol * 1e3:.2f} mm")
+        # where the segment ends (the last piece before any tracking)
+        t_fin = seg.t_reached
+        piece = self.piece_at(seg.pieces, t_fin - 1e-12)
+        assert piece is not None
+        qf = self.q_of(piece, t_fin, q_end, self.sample_of(tail, t_fin))
+        seg.q_end = q_end if qf is None else qf
+        seg.t6_end = chain.fk(seg.q_end)
+
+    def _where(self, seg: Segment, t: float) -> str:
+        if t < seg.t_c + seg.tau_in:
+            return "in"
+        if t > seg.t_e - seg.tau_out:
+            return "out"
+        return "line"
+
+    def _tool_point(self, seg: Segment, q: Vector, n: float) -> Vector:
+        return np.asarray(seg.frames.tool(self.chain.fk(q), n)[:3, 3], dtype=float)
+
+    def _blend_error(self, seg: Segment, tail: Tail, pts: list[Vector]) -> float:
+        """The largest distance of the blended tool path from the unblended
+        one (the previous line to its end, then the new line), sampled."""
+        last = tail.last
+        if last is None or not pts:
+            return 0.0
+        line = last.pieces[1] if len(last.pieces) > 1 else last.pieces[0]
+        ref: list[Vector] = []
+        k = 60
+        assert last.q_end is not None
+        q = last.q_end
+        t_c, ti = seg.t_c, seg.tau_in
+        for i in range(k + 1):
+            t = t_c - ti + ti * i / k
+            n = self.sample_of(tail, t)
+            got = self.q_of(line, t, q, n)
+            if got is not None:
+                q = got
+                ref.append(self._tool_point(seg, q, n))
+        new_line = Piece(seg.kind, t_c, seg.t_e, t_c, line_coeffs(seg.x0, seg.velocity), seg,
+                         frames=seg.frames, r_c=seg.r_c, p_c=seg.p_c, config=seg.config)
+        for i in range(k + 1):
+            t = t_c + ti * i / k
+            n = self.sample_of(tail, t)
+            got = self.q_of(new_line, t, q, n)
+            if got is not None:
+                q = got
+                ref.append(self._tool_point(seg, q, n))
+        r = np.array(ref)
+        worst = 0.0
+        for p in pts:
+            d = np.sqrt(((r - p) ** 2).sum(axis=1))
+            worst = max(worst, float(d.min()))
+        return worst

@@ -1,0 +1,846 @@
+"""The controller of ``pyrt urdf``: the arm (root component), its joints, its two tasks.
+
+:class:`UrdfArm` is the root component, named after the URDF's robot.  It
+talks to the arm only through one passive servo board
+(:func:`pyrt.boards.armservo.arm_servo_kind`): per joint a DAC (motor
+current), an amplifier enable and an encoder counter.  Two tasks on one
+ready queue:
+
+* ``trajectory`` (every :data:`TRAJECTORY_PERIOD` ticks, 100 Hz at 1 ms):
+  one tick of :class:`pyrt.motion.Evaluator` (given the wrist sensor's
+  wrench, for guarded moves) gives a knot (joint position, velocity,
+  acceleration); the servo is handed the segment from the last knot to this
+  one with the chain's inverse dynamics at both ends (gravity, inertia and
+  Coriolis feed-forward);
+* ``servo`` (every tick, 1 kHz): the encoders (unwrapped) into
+  :class:`pyrt.native.Servo` (quintic interpolation of the segment, PID with
+  velocity, acceleration and dynamics feed-forward), its torques as DAC
+  counts; a following error beyond the limit trips the servo, and a joint
+  beyond its limits trips the station: every joint's reflex writes DAC 0 and
+  enable 0 in that tick.
+
+Moves are records of the motion layer, planned when they are queued (in the
+command's handler): ``movej`` and ``moveto`` joint-mode records to a joint
+target, ``movel`` a Cartesian record in ``T6 . TOOL = COORD . POS``; OPTIONS
+set a record's speed, blend tolerance and force limit.
+
+The arm carries its own weight: after :data:`POWER_ON_TICKS` encoder
+readings the servo takes it (the amplifiers enabled; an arm still moving is
+braked to rest first, one beyond a limit brought back inside), moves it,
+and holds it at the target.  A fault or ``close`` switches every amplifier
+off (the simulated arm has no brakes: it then sinks onto its end stops);
+the next move closes the loop again where the arm lies.  ``stop`` brakes
+along the path and holds.
+
+Units at the console: degrees (revolute joints) or millimetres (prismatic
+ones), millimetres for the tool position, degrees for its rotations (RX RY
+RZ fixed-axis, about the base's x, then y, then z: URDF's ``rpy``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from pyrt.boards.armservo import DAC_FULL_SCALE
+from pyrt.component import Arg, Command, Component, Limits, Signal, command, records_of
+from pyrt.errors import CommandError
+from pyrt.frames import PositionEquation, Transform, inverse
+from pyrt.kinematics import GRAVITY, Chain, rpy_of, transform
+from pyrt.motion import Evaluator, MotionFault, MotionSpec, RecordError
+from pyrt.motion import Limits as MotionLimits
+from pyrt.native import Servo, tuned_gains
+from pyrt.scheduler import Task
+
+if TYPE_CHECKING:
+    from pyrt.station.base import Station
+
+__all__ = [
+    "AT_TARGET_DEG",
+    "SERVO_BANDWIDTH_HZ",
+    "TRAJECTORY_PERIOD",
+    "ArmJoint",
+    "Drive",
+    "UrdfArm",
+]
+
+#: The trajectory task's period, in ticks (100 Hz at the 1 ms tick).
+TRAJECTORY_PERIOD = 10
+#: The servo's closed-loop bandwidth (Hz): a triple real pole (pyrt.native.tuned_gains).
+SERVO_BANDWIDTH_HZ = 12.0
+#: The following-error limit of every joint (deg, or mm for a prismatic joint).
+FOLLOWING_ERROR_DEG = 2.0
+#: A move has ended "at target" when every joint's following error is this small (deg / mm) ...
+AT_TARGET_DEG = 0.005
+#: ... and its measured speed below this (deg/s, mm/s) ...
+SETTLED_SPEED_DEG_S = 2.0
+#: ... for this long (s).
+SETTLE_S = 0.03
+#: The longest the servo waits for the arm to settle after the trajectory ended (s).
+SETTLE_TIMEOUT_S = 3.0
+#: How far beyond a joint limit the measured joint may go before that is a fault
+#: (deg or mm): the servo's overshoot at a target on the limit stays inside it.
+LIMIT_MARGIN_DEG = 1.0
+#: The share of each joint's effort the planner may use to accelerate it (the
+#: rest holds the arm against gravity and friction).
+ACCEL_SHARE = 0.4
+
+#: The servo closes the loop by itself after this many encoder readings (the arm's
+#: speed then known: a falling or swinging arm is braked, not held where it was).
+POWER_ON_TICKS = 10
+#: What OPTIONS of movej, moveto and movel may say.
+OPTIONS_HELP = ("OPTIONS: speed=F (a fraction 0 < F <= 1 of every velocity limit), blend=MM "
+                "(the most a blend into the next move may cut the corner, mm; 0: stop exactly "
+                "at the target), force=N (a guarded move: braked to rest when the wrist feels "
+                "more than N newtons along any of its axes).")
+_OPTIONS = Arg("OPTIONS", str, optional=True, rest=True)
+
+_TWO32 = 1 << 32
+_TWO31 = 1 << 31
+
+
+@dataclass(frozen=True)
+class Drive:
+    """One joint's drive as the controller knows it: encoder counts per joint
+    radian (or metre), joint torque (N m, or N) per DAC count, and the rotor
+    inertia seen at the joint (kg m^2), the acceleration feed-forward."""
+
+    counts_per_unit: float
+    nm_per_count: float
+    reflected_inertia: float
+
+
+def _scale(prismatic: bool) -> tuple[float, str]:
+    """Operator units per SI unit, and their name."""
+    return (1e3, "mm") if prismatic else (180.0 / math.pi, "deg")
+
+
+class ArmJoint(Component):
+    """One joint (named as in the URDF): its registers at its index and its reflex."""
+
+    def __init__(self, arm: UrdfArm, index: int) -> None:
+        j = arm.chain.joints[index]
+        self.arm = arm
+        self.index = index
+        self.name = j.name
+        self.prismatic = j.kind == "prismatic"
+        self.scale, self.units = _scale(self.prismatic)
+
+    def signals(self) -> list[Signal]:
+        a, i, k, u = self.arm, self.index, self.scale, self.units
+        return [
+            Signal("position", u, lambda: float(a.q[i]) * k, f"{self.name} (encoder)", ".4f",
+                   limits=a.joint_limits(i)),
+            Signal("setpoint", u, lambda: float(a.servo.q_ref[i]) * k, "servo reference",
+                   ".4f"),
+            Signal("error", u, lambda: float(a.servo.error[i]) * k if a.powered else 0.0,
+                   "following error", ".4f"),
+            Signal("torque", "N" if self.prismatic else "N m", lambda: float(a.servo.tau[i])
+                   if a.powered else 0.0, "commanded joint torque", ".3f"),
+            Signal("dac", "DAC counts", lambda: a.dac[i], "amplifier command", "d"),
+        ]
+
+    def reflex(self) -> None:
+        """DAC 0 and the amplifier disabled, now."""
+        board = self.arm.board
+        try:
+            board.write("dac", 0, self.index)
+        finally:
+            try:
+                board.write("enable", 0, self.index)
+            finally:
+                self.arm.dac[self.index] = 0
+
+
+class UrdfArm(Component):
+    """The arm: the root component of ``pyrt urdf`` (see the module text).
+
+    ``chain`` the arm (its limits and inertials), ``board`` its passive servo
+    board, ``drives`` one :class:`Drive` per joint, ``period_ns`` the tick.
+    """
+
+    def __init__(self, station: Station, name: str, chain: Chain, board: Any,
+                 drives: Sequence[Drive], period_ns: int,
+                 wrench: Callable[[Sequence[int]], np.ndarray] | None = None) -> None:
+        self.station = station
+        self.name = name
+        self.chain = chain
+        self.board = board
+        self.n = n = chain.n
+        self.drives = tuple(drives)
+        self.period_s = period_ns * 1e-9
+        self.traj_period_s = TRAJECTORY_PERIOD * self.period_s
+        joints = chain.joints
+        self.prismatic = [j.kind == "prismatic" for j in joints]
+        self.scales = np.array([_scale(p)[0] for p in self.prismatic])
+        self.units = [_scale(p)[1] for p in self.prismatic]
+        self.joints = tuple(ArmJoint(self, i) for i in range(n))
+        # encoders: where each counter is in the board's snapshot, counts per unit
+        layout = [(r.name, i) for r in board.kind.inputs() for i in range(r.count)]
+        at = [layout.index(("count", j)) for j in range(n)]
+        if at != list(range(at[0], at[0] + n)):  # pragma: no cover - the kind declares them so
+            raise ValueError("the board's encoder counters are not one block of its inputs")
+        self._count_slice = slice(at[0], at[0] + n)
+        #: The wrist sensor: its channels in the snapshot and counts -> wrench (N, N m);
+        #: None: no sensor (no force limits).
+        self._wrench_of = wrench
+        ft = [layout.index(("ft", k)) for k in range(6)] if ("ft", 0) in layout else []
+        self._ft_slice = slice(ft[0], ft[0] + 6) if ft else slice(0, 0)
+        self._ft_counts: Sequence[int] = [0] * 6
+        # the counters as last read and their unwrapped totals (Python ints: no wrap)
+        self._counts = [int(board.read("count", j)) for j in range(n)]
+        self._total = list(self._counts)
+        self._cpu_list = [d.counts_per_unit for d in self.drives]
+        self._qs = [(t + 0.5) / c for t, c in zip(self._total, self._cpu_list, strict=True)]
+        self._counts_per_nm = [1.0 / d.nm_per_count for d in self.drives]
+        #: The measured joints (rad, m), from the encoders (unwrapped).
+        self.q = np.zeros(n)
+        self._measure(self._counts)
+        #: The DAC values last written.
+        self.dac = [0] * n
+        effort = np.array([j.effort if math.isfinite(j.effort) and j.effort > 0
+                           else d.nm_per_count * DAC_FULL_SCALE
+                           for j, d in zip(joints, self.drives, strict=True)])
+        self.effort = effort
+        armature = np.array([d.reflected_inertia for d in self.drives])
+        inertia = self._inertia_bound(armature)
+        felim = np.array([math.radians(FOLLOWING_ERROR_DEG) if not p
+                          else FOLLOWING_ERROR_DEG * 1e-3 for p in self.prismatic])
+        gains: dict[str, ArrayLike] = dict(tuned_gains(inertia, effort, self.period_s,
+                                                       SERVO_BANDWIDTH_HZ))
+        gains["felim"] = felim
+        gains["ka"] = armature
+        gains["kv"] = np.array([j.damping for j in joints])
+        self.servo = Servo(n, self.period_s, names=chain.joint_names, gains=gains)
+        # the planner's limits: the URDF's velocities, accelerations from the efforts
+        vmax = np.array([j.velocity if math.isfinite(j.velocity) and j.velocity > 0
+                         else (0.25 if p else 1.0) for j, p in zip(joints, self.prismatic,
+                                                                    strict=True)])
+        amax = ACCEL_SHARE * effort / inertia
+        self.limits = MotionLimits(tuple(vmax), tuple(amax))
+        self.evaluator: Evaluator | None = None
+        #: True while the amplifiers are enabled and the servo holds or moves the arm.
+        self.powered = False
+        #: What the arm does: idle, moving, settling.
+        self.state = "idle"
+        #: How the last move ended ('' before any).
+        self.last_stop = ""
+        self._quiet_since: int | None = None
+        self._settle_from = 0
+        self._now_ns = 0
+        self._records: list[Command] | None = None
+        self._margin = np.where(self.prismatic, LIMIT_MARGIN_DEG * 1e-3,
+                                math.radians(LIMIT_MARGIN_DEG))
+        #: Where the measured joints may go before that is a fault (the limits and a
+        #: margin; from where the arm lay, while it is brought back inside them).
+        self._lo_l: list[float] = []
+        self._hi_l: list[float] = []
+        self._bound(chain.lower - self._margin, chain.upper + self._margin)
+        self._recover_until: int | None = None
+        #: The fault's bounds are widened to where the arm lay beyond a limit.
+        self._wide = False
+        #: The last readings while unpowered (time, joints): the speed at power-on.
+        self._history: deque[tuple[int, np.ndarray]] = deque(maxlen=20)
+        #: The servo closes the loop by itself once, after POWER_ON_TICKS readings.
+        self._started = False
+        self._heading: np.ndarray | None = None
+        #: TOOL: the tool's frame on the chain's tool (``NAME tool``); COORD: the frame
+        #: moveto and movel targets are given in (``NAME coord``); identity at start.
+        self.tool_frame = np.eye(4)
+        self.coord_frame = np.eye(4)
+
+    # -- set-up ---------------------------------------------------------------------
+
+    def _inertia_bound(self, armature: np.ndarray) -> np.ndarray:
+        """Each joint's largest inertia over a spread of joint values (kg m^2 or kg),
+        the rotor's included: what the servo's gains and the acceleration limits are
+        sized for."""
+        chain = self.chain
+        lo = np.where(np.isfinite(chain.lower), chain.lower, -math.pi)
+        hi = np.where(np.isfinite(chain.upper), chain.upper, math.pi)
+        rng = np.random.default_rng(0)
+        best = np.zeros(self.n)
+        for u in rng.random((64, self.n)):
+            best = np.maximum(best, np.diag(chain.mass_matrix(lo + u * (hi - lo))))
+        return np.maximum(best + armature, 1e-4)
+
+    def joint_limits(self, i: int) -> Limits:
+        """Joint ``i``'s limits in operator units, as a display range and major alarms."""
+        j, k = self.chain.joints[i], float(self.scales[i])
+        lo = j.lower * k if math.isfinite(j.lower) else -360.0
+        hi = j.upper * k if math.isfinite(j.upper) else 360.0
+        return Limits(lo, hi, lolo=lo, low=lo, high=hi, hihi=hi)
+
+    # -- the component ----------------------------------------------------------------
+
+    def signals(self) -> list[Signal]:
+        out = []
+        for i in range(self.n):
+            out.append(Signal(f"q{i + 1}", self.units[i], self._joint_reader(i),
+                              f"joint {self.chain.joints[i].name} (encoder)", ".4f",
+                              limits=self.joint_limits(i)))
+        for c, axis in enumerate("xyz"):
+            out.append(Signal(axis, "mm", self._tool_reader(c), f"tool {axis} (encoders)",
+                              ".3f"))
+        for c, axis in enumerate(("rx", "ry", "rz")):
+            out.append(Signal(axis, "deg", self._tool_reader(3 + c),
+                              f"tool rotation about the base's {axis[1]} (encoders; URDF rpy)",
+                              ".3f"))
+        out.append(Signal("moving", "bool", lambda: self.state != "idle",
+                          "a move runs or settles", "d"))
+        out.append(Signal("powered", "bool", lambda: self.powered,
+                          "the amplifiers are enabled (the servo holds the arm)", "d"))
+        return out
+
+    def _joint_reader(self, i: int) -> Callable[[], float]:
+        k = float(self.scales[i])
+        return lambda: float(self.q[i]) * k
+
+    def _tool_reader(self, c: int) -> Callable[[], float]:
+        """Tool x y z (mm) for c = 0 1 2, rx ry rz (deg) for c = 3 4 5."""
+        if c < 3:
+            return lambda: float(self.tool()[c, 3]) * 1e3
+        return lambda: math.degrees(rpy_of(self.tool())[c - 3])
+
+    def children(self) -> list[Component]:
+        return list(self.joints)
+
+    def tasks(self) -> list[Task]:
+        return [Task(self.trajectory_tick, period=TRAJECTORY_PERIOD, name="trajectory",
+                     timed=True),
+                Task(self.servo_tick, period=1, name="servo", timed=True)]
+
+    def commands(self) -> list[Command]:
+        if self._records is None:
+            own = [replace(r, help=r.help.replace("NAME ", f"{self.name} "))
+                   for r in records_of(self, self.name)]
+            self._records = [self._movej_record(), *own]
+        return self._records
+
+    def reflex(self) -> None:
+        """The servo off and the motion dropped (the joints' reflexes cut the currents)."""
+        try:
+            if self.state != "idle":
+                self.last_stop = "stopped: every joint off"
+        finally:
+            self.powered = False
+            self.state = "idle"
+            self.evaluator = None
+            self._quiet_since = None
+
+    # -- where it is ------------------------------------------------------------------
+
+    def _measure(self, counts: Sequence[int]) -> None:
+        """The joints from this tick's ``counts``: each counter's step since the last
+        read taken modulo 2^32 (a 32-bit counter wraps), the middle of the count."""
+        last, total, qs, cpu = self._counts, self._total, self._qs, self._cpu_list
+        for j, c in enumerate(counts):
+            d = c - last[j]
+            if d:
+                if not -_TWO31 <= d < _TWO31:
+                    d = ((d + _TWO31) % _TWO32) - _TWO31
+                t = total[j] = total[j] + d
+                last[j] = c
+                qs[j] = (t + 0.5) / cpu[j]
+        self.q[:] = qs
+
+    def wrench(self) -> np.ndarray:
+        """The wrist sensor's wrench (fx fy fz N, tx ty tz N m; tool frame), or zeros
+        without a sensor."""
+        if self._wrench_of is None:
+            return np.zeros(6)
+        return self._wrench_of(self._ft_counts)
+
+    def tool(self) -> np.ndarray:
+        """The tool pose the encoders give (4, 4; m, in the base's frame): the chain's
+        tool with :attr:`tool_frame` (``NAME tool``) on it."""
+        return self.chain.fk(self.q) @ self.tool_frame
+
+    def config(self, q: np.ndarray | None = None) -> str:
+        """The arm's configuration (the closed form's name), or '' without one."""
+        closed = self.chain.closed_form
+        if closed is None:
+            return ""
+        return str(closed.config_of(self.q if q is None else q))
+
+    def joints_text(self, q: np.ndarray) -> str:
+        return " ".join(f"{float(v) * k:.3f}" for v, k in zip(q, self.scales, strict=True))
+
+    def pose_text(self, t: np.ndarray) -> str:
+        x, y, z = (t[:3, 3] * 1e3).tolist()
+        rx, ry, rz = (math.degrees(a) for a in rpy_of(t))
+        return f"({x:.2f}, {y:.2f}, {z:.2f}) mm, rpy ({rx:.3f}, {ry:.3f}, {rz:.3f}) deg"
+
+    def where(self) -> str:
+        """The joints, the tool pose and the configuration, in the operator's words."""
+        units = "deg" if not any(self.prismatic) else "deg/mm"
+        cfg = self.config()
+        return (f"joints {self.joints_text(self.q)} {units}; tool {self.pose_text(self.tool())}"
+                + (f"; {cfg}" if cfg else ""))
+
+    # -- the servo ---------------------------------------------------------------------
+
+    def power_on(self) -> None:
+        """Close the loop where the arm is (gravity held), amplifiers on; the
+        trajectory starts there.  An arm that is still moving (falling, swinging)
+        is first braked to rest, and one lying beyond a limit (sunk onto an end
+        stop while the amplifiers were off) brought back inside: a quintic at half
+        the acceleration limits before the trajectory's knots begin."""
+        q = self.q.copy()
+        v = np.zeros(self.n)
+        if self._history:  # the speed over the last readings, by their times
+            t_old, q_old = self._history[0]
+            if self._now_ns > t_old:
+                v = (q - q_old) / ((self._now_ns - t_old) * 1e-9)
+        ff = self.chain.gravity_torque(q)
+        self.servo.reset(q, ff)
+        k = self.servo.knots
+        k[...] = 0.0
+        k[3] = q
+        k[7] = ff
+        amax = 0.5 * np.array(self.limits.amax)
+        t = float(np.max(np.abs(v) / amax))  # the time to brake every joint to rest
+        start = np.clip(q + 0.5 * v * t, self.chain.lower, self.chain.upper)
+        self.evaluator = Evaluator(self.chain, self.limits, start, period=self.traj_period_s,
+                                   force_sensor=self._wrench_of is not None)
+        margin = self._margin
+        self._history.clear()
+        self._bound(np.minimum(self.chain.lower, q) - margin,
+                    np.maximum(self.chain.upper, q) + margin)
+        self._wide = bool(((q < self.chain.lower) | (q > self.chain.upper)).any())
+        self._recover_until = None
+        out = np.abs(start - q)
+        if out.any() or t > 0.0:
+            t = max(0.2, t, float(np.max(np.sqrt(5.77 * out / amax))))
+            t = math.ceil(t / self.traj_period_s) * self.traj_period_s
+            zero = np.zeros(self.n)
+            self.servo.segment(t, q, v, start, zero, zero, zero, ff,
+                               self.chain.gravity_torque(start))
+            self._recover_until = self._now_ns + round(t * 1e9)
+        for j in range(self.n):
+            self.dac[j] = 0
+            self.board.write("dac", 0, j)
+            self.board.write("enable", 1, j)
+        self.powered = True
+        self.state = "idle"
+
+    def servo_tick(self, now_ns: int) -> None:
+        """1 kHz: the encoders, the servo law, the DACs; the checks; settling."""
+        self._now_ns = now_ns
+        inputs = self.board.snapshot()  # one read of every input: this tick's
+        self._measure(inputs[self._count_slice])
+        self._ft_counts = inputs[self._ft_slice]
+        if not self.powered:  # the readings kept: an arm moving is braked at power-on
+            self._history.append((now_ns, self.q.copy()))
+        if not self.powered:
+            if (self.evaluator is None and self.station.fault is None and not self._started
+                    and len(self._history) >= POWER_ON_TICKS):
+                self._started = True
+                self.power_on()
+            return
+        servo = self.servo
+        servo.q[:] = self.q
+        trip = servo.tick()
+        if trip is not None:
+            self.fail(f"{trip} (joint {trip.name} at "
+                      f"{self.q[trip.joint] * self.scales[trip.joint]:.3f} "
+                      f"{self.units[trip.joint]})", self.joints[trip.joint].name)
+            return
+        # the limits and the DACs, joint by joint on plain floats (six numbers:
+        # cheaper than numpy's calls)
+        dac, write, lo, hi, qs = self.dac, self.board.write, self._lo_l, self._hi_l, self._qs
+        inv, full = self._counts_per_nm, DAC_FULL_SCALE
+        for j, tau in enumerate(servo.tau.tolist()):
+            v = qs[j]
+            if v < lo[j] or v > hi[j]:
+                self._beyond(j)
+                return
+            c = round(tau * inv[j])
+            c = full if c > full else (-full if c < -full else c)
+            if c != dac[j]:
+                write("dac", c, j)
+                dac[j] = c
+        if self.state == "settling":
+            self._settle(now_ns)
+
+    def _beyond(self, j: int) -> None:
+        """Joint ``j`` lies beyond its limit and margin: the fault."""
+        jt = self.chain.joints[j]
+        k, u = float(self.scales[j]), self.units[j]
+        self.fail(f"joint {jt.name} at {self.q[j] * k:.3f} {u} is beyond its limits "
+                  f"{jt.lower * k:.3f} .. {jt.upper * k:.3f} {u}", self.joints[j].name)
+
+    def _bound(self, lo: np.ndarray, hi: np.ndarray) -> None:
+        """Where the measured joints may go before that is a fault (plain floats)."""
+        self._lo_l = [float(v) for v in lo]
+        self._hi_l = [float(v) for v in hi]
+
+    def _settle(self, now_ns: int) -> None:
+        servo = self.servo
+        if servo.late == 0:
+            return  # the last segment still runs
+        k = self.scales
+        quiet = (float(np.max(np.abs(servo.error) * k)) <= AT_TARGET_DEG
+                 and float(np.max(np.abs(servo.velocity) * k)) <= SETTLED_SPEED_DEG_S)
+        if not quiet:
+            self._quiet_since = None
+        elif self._quiet_since is None:
+            self._quiet_since = now_ns
+        if self._quiet_since is not None and now_ns - self._quiet_since >= SETTLE_S * 1e9:
+            self.state = "idle"
+            self._quiet_since = None
+            if not self.last_stop:
+                self.last_stop = "at target"
+        elif now_ns - self._settle_from >= SETTLE_TIMEOUT_S * 1e9:
+            errs = ", ".join(f"{jt.name} {float(e) * kk:+.4f}" for jt, e, kk in
+                             zip(self.chain.joints, servo.error, k, strict=True))
+            self.state = "idle"
+            self.last_stop = f"did not settle within {SETTLE_TIMEOUT_S:g} s ({errs})"
+
+    # -- the trajectory ----------------------------------------------------------------
+
+    def trajectory_tick(self, now_ns: int) -> None:
+        """100 Hz: one knot of the evaluator, handed to the servo as the next segment."""
+        ev = self.evaluator
+        if not self.powered or ev is None:
+            return
+        if self._recover_until is not None:
+            if now_ns < self._recover_until:
+                return
+            self._recover_until = None
+        if self._wide:  # back inside the limits: the fault's bounds are the limits' again
+            lo, hi = self.chain.lower - self._margin, self.chain.upper + self._margin
+            if bool(((self.q >= lo) & (self.q <= hi)).all()):
+                self._bound(lo, hi)
+                self._wide = False
+        wrench = self.wrench() if self._wrench_of is not None else None
+        try:
+            knot = ev.tick(wrench)
+        except MotionFault as exc:
+            self.fail(f"trajectory: {exc}", self.name)
+            return
+        for word, _move in knot.events:
+            if word == "reached":
+                continue
+            if word == "force" and wrench is not None:
+                self.last_stop = (f"force limit: the wrist felt |F| "
+                                  f"{float(np.linalg.norm(wrench[:3])):.2f} N (fx fy fz "
+                                  f"{' '.join(f'{v:.2f}' for v in wrench[:3])} N) at "
+                                  f"{self.pose_text(self.tool())}; braked to rest")
+            else:
+                self.last_stop = "stopped (stop command)" if word == "stopped" else word
+        k = self.servo.knots
+        moving = bool(knot.qd.any() or knot.qdd.any() or not np.array_equal(knot.q, k[3]))
+        if moving:
+            ff = self.chain.rnea(knot.q, knot.qd, knot.qdd, GRAVITY)
+            if knot.payload_torque is not None:
+                ff = ff + knot.payload_torque
+            k[0:3] = k[3:6]
+            k[6] = k[7]
+            k[3] = knot.q
+            k[4] = knot.qd
+            k[5] = knot.qdd
+            k[7] = ff
+            self.servo.load(knot.period, quintic=True)
+            if self.state != "moving":
+                self.state = "moving"
+        elif self.state == "moving" and ev.idle:
+            self.state = "settling"
+            self._settle_from = now_ns
+            self._quiet_since = None
+
+    # -- commands -------------------------------------------------------------------
+
+    def _powered_evaluator(self, what: str) -> Evaluator:
+        fault = self.station.fault
+        if fault is not None:
+            raise CommandError(f"{self.name} {what}: refused: stopped by a fault ({fault.cause});"
+                               " give 'ack' first; nothing moved")
+        if not self.powered or self.evaluator is None:
+            self.power_on()
+        ev = self.evaluator
+        assert ev is not None
+        return ev
+
+    def _queue_spec(self, spec: MotionSpec, what: str, end: np.ndarray | None, to: str) -> str:
+        """Queue ``spec`` (its joints at the end ``end`` if known); refused with the
+        reason, nothing moved."""
+        ev = self._powered_evaluator(what)
+        busy = self.state != "idle"
+        try:
+            ev.queue(spec)
+        except RecordError as exc:
+            why = str(exc).removeprefix(f"{what}: ").removeprefix("refused: ")
+            raise CommandError(f"{self.name} {what}: refused: {why}; nothing moved") from None
+        self.last_stop = ""
+        self._heading = end
+        if self.state == "idle":
+            self.state = "moving"
+        return f"queued: {to}; it blends into the running move" if busy else f"moving to {to}"
+
+    def _queue(self, q: np.ndarray, what: str, options: dict[str, Any] | None = None) -> str:
+        """Queue a joint move to ``q`` (rad, m); refused with the reason, nothing moved."""
+        if self.chain.limit_violation(q):
+            raise CommandError(f"{self.name} {what}: refused: the target is beyond a joint "
+                               f"limit ({self._limit_words(q)}); nothing moved")
+        to = (f"joints {self.joints_text(q)}; "
+              f"tool {self.pose_text(self.chain.fk(q) @ self.tool_frame)}")
+        cfg = self.config(q)
+        to += f"; {cfg}" if cfg else ""
+        spec = MotionSpec(target=tuple(float(v) for v in q), name=what, **(options or {}))
+        return self._queue_spec(spec, what, q.copy(), to)
+
+    def _limit_words(self, q: np.ndarray) -> str:
+        for i, (v, jt) in enumerate(zip(q, self.chain.joints, strict=True)):
+            if not jt.lower <= v <= jt.upper:
+                k, u = float(self.scales[i]), self.units[i]
+                return (f"joint {jt.name}: {v * k:.3f} {u} is outside "
+                        f"{jt.lower * k:.3f} .. {jt.upper * k:.3f} {u}")
+        return "none"
+
+    def _movej_record(self) -> Command:
+        args = []
+        for i, jt in enumerate(self.chain.joints):
+            lim = self.joint_limits(i)
+            args.append(Arg(f"Q{i + 1}", float, lo=lim.lopr, hi=lim.hopr, units=self.units[i],
+                            what=f"{jt.name} limits"))
+        units = "degrees" if not any(self.prismatic) else "degrees, or mm for a prismatic joint"
+        doc = (f"{self.name} movej {' '.join(a.name for a in args)} [OPTIONS]: a joint move to "
+               f"the joint values ({units}); queued moves blend.\n\n"
+               "A target beyond a joint limit is refused with the limit; nothing moves.\n"
+               f"{OPTIONS_HELP}\n"
+               "Range: " + "; ".join(a.range_text for a in args) + ".")
+        return Command("movej", self.move_joints, (*args, _OPTIONS), doc, moves=True,
+                       while_faulted=False, owner=self.name)
+
+    def move_joints(self, *values: float | str) -> str:
+        """The handler of ``movej``: one value per joint (operator units), then the
+        options' text if any."""
+        opts = values[self.n] if len(values) == self.n + 1 else None
+        if len(values) not in (self.n, self.n + 1) or not (opts is None or isinstance(opts, str)):
+            raise CommandError(f"{self.name} movej: {self.n} joint values, got {len(values)}")
+        q = np.array([float(v) for v in values[: self.n]]) / self.scales
+        return self._queue(q, "movej", self._options("movej", opts))
+
+    def _options(self, what: str, text: str | None) -> dict[str, Any]:
+        """The motion record's fields that OPTIONS set (see :data:`OPTIONS_HELP`)."""
+        out: dict[str, Any] = {}
+        for word in (text or "").split():
+            key, eq, value = word.partition("=")
+            key = key.lower()
+            try:
+                v = float(value) if eq else math.nan
+            except ValueError:
+                v = math.nan
+            if key == "speed" and 0.0 < v <= 1.0:
+                out["speed"] = v
+            elif key == "force" and 0.0 < v <= 1e5 and self._wrench_of is not None:
+                out["force_limits"] = (v, v, v, math.inf, math.inf, math.inf)
+            elif key == "blend" and 0.0 <= v <= 1e4:
+                if v == 0.0:
+                    out["buffer"] = "buffered"
+                else:
+                    out["tolerance"] = v * 1e-3
+            else:
+                raise CommandError(f"{self.name} {what}: {word[:40]!r} is not an option: "
+                                   f"{OPTIONS_HELP} nothing moved")
+        return out
+
+    def solve(self, target: np.ndarray, config: str | None) -> np.ndarray:
+        """Joint values putting the tool at ``target`` (4, 4): the closed form in
+        ``config``, or the numerical inverse seeded at the joints the arm is
+        heading to (then, if the chain has a closed form, the solution nearest
+        those joints among its configurations, the present one first);
+        CommandError with the reason if none."""
+        chain = self.chain
+        closed = chain.closed_form
+        seed = self.heading()
+        if config is not None:
+            if closed is None:
+                raise CommandError(f"{self.name} moveto: {chain.name} has no closed-form "
+                                   "inverse with named configurations; leave CONFIG out; "
+                                   "nothing moved")
+            from pyrt.kinematics.puma import parse_config
+
+            try:
+                cfg = parse_config(config)
+            except ValueError as exc:
+                raise CommandError(f"{self.name} moveto: {exc}; nothing moved") from None
+            if cfg not in closed.configurations:
+                raise CommandError(f"{self.name} moveto: {config!r} is not one of "
+                                   f"{', '.join(closed.configurations)}; nothing moved")
+            q = closed.solve(target, cfg)
+            if q is None:
+                why = getattr(closed, "reason", lambda t, c: None)(target, cfg)
+                raise CommandError(f"{self.name} moveto: refused: unreachable: "
+                                   f"{why or cfg}; nothing moved")
+            return self._nearest_turn(np.asarray(q, dtype=float), seed)
+        r = chain.ik(target, seed)
+        if r.ok and chain.limit_violation(r.q) is None:
+            return r.q.copy()
+        if closed is not None:
+            # the closed form: the present configuration first, then the one nearest
+            cfg = str(closed.config_of(seed))
+            found: list[tuple[float, int, np.ndarray]] = []
+            for name in (cfg, *(c for c in closed.configurations if c != cfg)):
+                q = closed.solve(target, name)
+                if q is not None:
+                    q = self._nearest_turn(np.asarray(q, dtype=float), seed)
+                    found.append((float(np.max(np.abs(q - seed))), len(found), q))
+            if found:
+                return min(found, key=lambda f: (f[0], f[1]))[2]
+            why = getattr(closed, "reason", lambda t, c: None)(target, cfg)
+            if why:
+                raise CommandError(f"{self.name} moveto: refused: unreachable in every "
+                                   f"configuration: {why}; nothing moved")
+        raise CommandError(f"{self.name} moveto: refused: unreachable: no joint values within "
+                           f"the limits reach it (the numerical inverse from the present "
+                           f"joints ends {r.residual * 1e3:.3g} mm/mrad away after "
+                           f"{r.iterations} iterations); nothing moved")
+
+    def _nearest_turn(self, q: np.ndarray, seed: np.ndarray) -> np.ndarray:
+        """``q`` with each revolute joint turned by whole turns to lie nearest ``seed``
+        within the limits."""
+        out = q.copy()
+        for i, jt in enumerate(self.chain.joints):
+            if self.prismatic[i]:
+                continue
+            best = out[i]
+            for turns in (-2, -1, 1, 2):
+                v = q[i] + turns * 2.0 * math.pi
+                if jt.lower <= v <= jt.upper and abs(v - seed[i]) < abs(best - seed[i]):
+                    best = v
+            out[i] = best
+        return out
+
+    def heading(self) -> np.ndarray:
+        """Where the arm is heading: the last queued target while it moves, else the
+        encoders."""
+        if self.state != "idle" and self._heading is not None:
+            return self._heading.copy()
+        return self.q.copy()
+
+    @command(Arg("X", float, units="mm"), Arg("Y", float, units="mm"),
+             Arg("Z", float, units="mm"), Arg("RX", float, lo=-360.0, hi=360.0, units="deg"),
+             Arg("RY", float, lo=-360.0, hi=360.0, units="deg"),
+             Arg("RZ", float, lo=-360.0, hi=360.0, units="deg"),
+             Arg("CONFIG", str, optional=True), _OPTIONS, name="moveto", moves=True)
+    def move_to(self, x: float, y: float, z: float, rx: float, ry: float, rz: float,
+                config: str | None = None, options: str | None = None) -> str:
+        """NAME moveto X Y Z RX RY RZ [CONFIG] [OPTIONS]: the tool to a pose by a joint move.
+
+        X Y Z in mm, RX RY RZ in degrees: fixed-axis rotations about the
+        base's x, then y, then z (URDF's rpy).  The joints come from the
+        numerical inverse seeded at the present joints, or, with CONFIG (e.g.
+        lefty-above-noflip), from the arm's closed form in that
+        configuration.  An unreachable pose is refused with the reason;
+        nothing moves.  OPTIONS as movej's."""
+        if config is not None and "=" in config:  # no configuration: the options begin
+            config, options = None, f"{config} {options or ''}"
+        opts = self._options("moveto", options)
+        pose = _pose("moveto", self.name, x, y, z, rx, ry, rz)
+        q = self.solve(self.coord_frame @ pose @ inverse(self.tool_frame), config)
+        return self._queue(q, "moveto", opts)
+
+    @command(Arg("X", float, units="mm"), Arg("Y", float, units="mm"),
+             Arg("Z", float, units="mm"), Arg("RX", float, lo=-360.0, hi=360.0, units="deg"),
+             Arg("RY", float, lo=-360.0, hi=360.0, units="deg"),
+             Arg("RZ", float, lo=-360.0, hi=360.0, units="deg"), _OPTIONS, name="movel",
+             moves=True)
+    def move_line(self, x: float, y: float, z: float, rx: float, ry: float, rz: float,
+                  options: str | None = None) -> str:
+        """NAME movel X Y Z RX RY RZ [OPTIONS]: the tool on a straight line to a pose.
+
+        Same units and rotations as moveto; the orientation turns about one
+        axis on the way (Paul's drive transform); Cartesian and joint limits
+        both kept.  A line that leaves the reach, crosses a joint limit or
+        passes a singularity is refused before it starts, naming where;
+        nothing moves.  Queued moves blend.  OPTIONS as movej's."""
+        opts = self._options("movel", options)
+        pose = _pose("movel", self.name, x, y, z, rx, ry, rz)
+        eq = PositionEquation("movel", [Transform.varb("T6"), Transform.const("TOOL",
+                                                                               self.tool_frame)],
+                              [Transform.const("COORD", self.coord_frame),
+                               Transform.varb("POS", pose)])
+        t6 = self.coord_frame @ pose @ inverse(self.tool_frame)
+        end = self.chain.ik(t6, self.heading())
+        return self._queue_spec(MotionSpec(mode="cart", equation=eq, name="movel", **opts),
+                                "movel",
+                                end.q.copy() if end.ok else None,
+                                f"tool {self.pose_text(self.coord_frame @ pose)}")
+
+    @command(Arg("X", float, lo=-5000.0, hi=5000.0, units="mm"),
+             Arg("Y", float, lo=-5000.0, hi=5000.0, units="mm"),
+             Arg("Z", float, lo=-5000.0, hi=5000.0, units="mm"),
+             Arg("RX", float, lo=-360.0, hi=360.0, units="deg"),
+             Arg("RY", float, lo=-360.0, hi=360.0, units="deg"),
+             Arg("RZ", float, lo=-360.0, hi=360.0, units="deg"), name="tool")
+    def set_tool(self, x: float, y: float, z: float, rx: float, ry: float, rz: float) -> str:
+        """NAME tool X Y Z RX RY RZ: the tool's frame on the arm's flange (001's TOOL).
+
+        mm and degrees (URDF rpy) in the chain's tool frame; 0 0 0 0 0 0 takes
+        it off.  The signals, where, moveto and movel use it from now on.
+        Refused while a move runs."""
+        self._frames_free("tool")
+        self.tool_frame = _pose("tool", self.name, x, y, z, rx, ry, rz)
+        return (f"tool frame {self.pose_text(self.tool_frame)}; the tool now at "
+                f"{self.pose_text(self.tool())}")
+
+    @command(Arg("X", float, lo=-5000.0, hi=5000.0, units="mm"),
+             Arg("Y", float, lo=-5000.0, hi=5000.0, units="mm"),
+             Arg("Z", float, lo=-5000.0, hi=5000.0, units="mm"),
+             Arg("RX", float, lo=-360.0, hi=360.0, units="deg"),
+             Arg("RY", float, lo=-360.0, hi=360.0, units="deg"),
+             Arg("RZ", float, lo=-360.0, hi=360.0, units="deg"), name="coord")
+    def set_coord(self, x: float, y: float, z: float, rx: float, ry: float, rz: float) -> str:
+        """NAME coord X Y Z RX RY RZ: the frame moveto and movel targets are given in (001's COORD).
+
+        Its pose in the base's frame, mm and degrees (URDF rpy); 0 0 0 0 0 0
+        is the base.  Refused while a move runs."""
+        self._frames_free("coord")
+        self.coord_frame = _pose("coord", self.name, x, y, z, rx, ry, rz)
+        return f"coordinate frame {self.pose_text(self.coord_frame)} (in the base's frame)"
+
+    def _frames_free(self, what: str) -> None:
+        if self.state != "idle":
+            raise CommandError(f"{self.name} {what}: refused while a move runs (the queued "
+                               "targets were given in the frames as they are); wait or stop "
+                               "first; nothing changed")
+
+    @command(name="where", reads_only=True)
+    def where_cmd(self) -> str:
+        """NAME where: the joints, the tool pose (from the encoders), the configuration."""
+        last = f"; last move: {self.last_stop}" if self.last_stop else ""
+        power = "" if self.powered else "; amplifiers off"
+        return f"{self.where()}; {self.state}{power}{last}"
+
+    # -- the station's questions -------------------------------------------------------
+
+    def busy(self) -> bool:
+        """A move runs, the arm settles, or the servo brings it to rest after power-on."""
+        return self.state != "idle" or self._recover_until is not None
+
+    def stop(self) -> str:
+        """Brake along the path to rest and hold there (the servo stays on)."""
+        ev = self.evaluator
+        if ev is None or not self.powered or self.state == "idle":
+            return ""
+        ev.stop()
+        self.last_stop = "stopped (stop command)"
+        return f"{self.name}: stopping: braking along the path to rest, then holding"
+
+
+
+def _pose(verb: str, name: str, x: float, y: float, z: float, rx: float, ry: float,
+          rz: float) -> np.ndarray:
+    """A pose from the operator's words: mm, and degrees as URDF's rpy."""
+    for axis, v in (("X", x), ("Y", y), ("Z", z)):
+        if not math.isfinite(v):
+            raise CommandError(f"{name} {verb}: {axis} must be a finite number of mm")
+    return transform(np.array([x, y, z]) * 1e-3, np.radians([rx, ry, rz]))
