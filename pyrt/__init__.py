@@ -47,7 +47,16 @@ if TYPE_CHECKING:
         word,
     )
     from pyrt.robots.trajectory import JointRobot, JointTrajectory
-    from pyrt.scheduler import Job, Loop, ReadyQueue, SimClock, Task, WallClock, install
+    from pyrt.scheduler import (
+        Job,
+        Loop,
+        RateGroup,
+        ReadyQueue,
+        SimClock,
+        Task,
+        WallClock,
+        install,
+    )
     from pyrt.scheduler.motion import MotionExecutor, MotionRecord, MotionType
     from pyrt.scope import Source
     from pyrt.sim.world import World, WorldFactory
@@ -73,6 +82,7 @@ _LAZY = {
     "MotionRecord": "pyrt.scheduler.motion",
     "MotionType": "pyrt.scheduler.motion",
     "MoveEnded": "pyrt.station.moves",
+    "RateGroup": "pyrt.scheduler",
     "ReadyQueue": "pyrt.scheduler",
     "Register": "pyrt.boards",
     "RegisterBoard": "pyrt.boards",
@@ -135,6 +145,7 @@ __all__ = [
     "PyrtError",
     "PyrtInternalError",
     "QueueFullError",
+    "RateGroup",
     "ReadyQueue",
     "Register",
     "RegisterBoard",
