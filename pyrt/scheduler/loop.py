@@ -1,5 +1,8 @@
 """The tick loop: deadlines, lateness, overruns, handlers and foreground jobs.
 
+Rate groups (:mod:`pyrt.scheduler.rategroup`) are released at their own
+periods, fastest first; a queue attached directly is a group of the tick.
+
 One tick: wait for the deadline; record lateness; call each handler with the
 tick's time (the plant, then each robot's clock interrupt, then the mailbox
 and foreground jobs: whatever was attached, in attachment order); record the
