@@ -216,7 +216,7 @@ def rate_monotonic(entries: list[tuple[int | None, Any]]) -> list[Any]:
     the groups (a period) fill the places where groups were attached, fastest
     first (equal periods in attach order); the others (None) keep theirs."""
     slots = [i for i, (p, _) in enumerate(entries) if p is not None]
-    groups = sorted((entries[i] for i in slots), key=lambda e: e[0])
+    groups = sorted((entries[i] for i in slots), key=lambda e: e[0] or 0)
     out = [item for _, item in entries]
     for i, (_, item) in zip(slots, groups, strict=True):
         out[i] = item
