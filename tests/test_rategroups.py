@@ -268,3 +268,19 @@ def test_a_log_from_before_rate_groups_is_still_read(tmp_path, capsys):
     path.write_text(json.dumps(future) + "\n")
     with pytest.raises(ConfigError, match="pyrt-timing/9 is not one this pyrt reads"):
         read_timing_log(str(path))
+
+
+def test_release_times_are_folded_every_summary_without_a_log():
+    """Without a timing log the groups' release times are folded once a second (memory stays bounded) and all of them are counted."""
+    loop = Loop(SimClock(), period_ns=MS)
+    queue = ReadyQueue(divisor=1, name="r")
+    loop.attach(queue)
+    loop.attach(lambda now: None, name="boards")
+    group = RateGroup("g", hz=1000)
+    group.attach(lambda now: None, name="h")
+    loop.attach(group)
+    loop.run(3_500)
+    assert all(len(g.samples) <= 1_000 for g in loop._groups)  # what is not yet folded
+    st = loop.statistics()
+    assert st.groups["queue:r"].distribution.count == 3_500
+    assert st.groups["g"].distribution.count == st.groups["g"].releases == 3_500

@@ -474,8 +474,9 @@ class Loop:
                 log.summary(now, self.statistics(fold=False))
 
             log.defer(write_summary)
-        elif self._times.entries:
+        elif self._times.entries or self._groups:
             self._times.fold(self._times.take(self.tick_index))
+            _accounting.fold_groups(self, _accounting.take_groups(self))
 
     def _start_log(self) -> None:
         if self.timing_log is not None and not self._log_started:
