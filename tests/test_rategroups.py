@@ -284,3 +284,20 @@ def test_release_times_are_folded_every_summary_without_a_log():
     st = loop.statistics()
     assert st.groups["queue:r"].distribution.count == 3_500
     assert st.groups["g"].distribution.count == st.groups["g"].releases == 3_500
+
+
+def test_tick_us_500_from_the_command_line_leaves_a_100_hz_group_at_100_hz():
+    """The loop the command line makes with '--tick-us 500 --speed max' releases a 100 Hz group 100 times a second of loop time."""
+    import argparse
+
+    from pyrt.cli._loopopts import add_loop_options, make_loop
+
+    parser = argparse.ArgumentParser()
+    add_loop_options(parser)
+    loop = make_loop(parser.parse_args(["--tick-us", "500", "--speed", "max"]), warn=print)
+    group = RateGroup("trajectory", hz=100)
+    runs: list[int] = []
+    group.attach(runs.append, name="plan")
+    loop.attach(group)
+    loop.run(duration_ns=1_000 * MS)
+    assert loop.period_ns == 500_000 and loop.tick_index == 2_000 and len(runs) == 100
