@@ -12,7 +12,6 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from pyrt.errors import ConfigError
-from pyrt.scheduler._routinetiming import fold_many
 from pyrt.scheduler.gcwatch import attribute
 from pyrt.scheduler.rategroup import GroupTiming, RateGroup
 from pyrt.scheduler.readyqueue import ReadyQueue
@@ -195,13 +194,6 @@ def take_groups(loop: Loop) -> list[tuple[GroupTiming, list[int]]]:
     return taken
 
 
-def fold_groups(loop: Loop, taken: list[tuple[GroupTiming, list[int]]]) -> None:
-    """Fold release times handed over by :func:`take_groups` (any thread)."""
-    if taken:
-        with loop._times.lock:
-            fold_many([(g.acc, durs) for g, durs in taken])
-
-
 def _task_statistics(name: str, acc: Accumulator, kind: str, group: str = "") -> TaskStatistics:
     dist = acc.distribution()
     return TaskStatistics(name=name, calls=acc.calls, mean_ns=dist.mean_ns, max_ns=acc.max,
@@ -226,8 +218,7 @@ def statistics(loop: Loop, fold: bool) -> LoopStatistics:
             members[id(g)].append(key)
     if loop.timing:
         if fold:
-            loop._times.fold(loop._times.take(loop.tick_index))
-            fold_groups(loop, take_groups(loop))
+            loop._times.fold(loop._times.take(loop.tick_index), take_groups(loop))
         keys = loop._entry_keys()
         with loop._times.lock:
             for e in loop._times.entries:

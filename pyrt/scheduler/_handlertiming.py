@@ -101,11 +101,14 @@ class HandlerTimes:
         self._taken_tick = tick
         return taken
 
-    def fold(self, taken: list[tuple[HandlerTiming, list[int]]]) -> None:
-        """Fold samples handed over by :meth:`take` (any thread)."""
-        if taken:
+    def fold(self, taken: list[tuple[HandlerTiming, list[int]]],
+             groups: list[tuple[GroupTiming, list[int]]] | None = None) -> None:
+        """Fold samples handed over by :meth:`take` (any thread), and the rate
+        groups' release times with them (one numpy pass for all)."""
+        if taken or groups:
             with self.lock:
-                fold_many([(e.acc, durs) for e, durs in taken])
+                fold_many([(e.acc, durs) for e, durs in taken]
+                          + [(g.acc, durs) for g, durs in groups or ()])
 
     def reset(self) -> None:
         """Forget every sample and accumulated figure."""

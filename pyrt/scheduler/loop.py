@@ -475,8 +475,7 @@ class Loop:
 
             log.defer(write_summary)
         elif self._times.entries or self._groups:
-            self._times.fold(self._times.take(self.tick_index))
-            _accounting.fold_groups(self, _accounting.take_groups(self))
+            self._times.fold(self._times.take(self.tick_index), _accounting.take_groups(self))
 
     def _start_log(self) -> None:
         if self.timing_log is not None and not self._log_started:
@@ -518,8 +517,7 @@ class Loop:
         """Fold samples handed over by :meth:`take_samples` (any thread)."""
         for q, samples in taken.queues:
             q.fold_into_accumulators(samples)
-        self._times.fold(taken.handlers)
-        _accounting.fold_groups(self, taken.groups)
+        self._times.fold(taken.handlers, taken.groups)
 
     def statistics(self, fold: bool = True) -> LoopStatistics:
         """A frozen snapshot of lateness, work time and per-task timing: the
