@@ -21,7 +21,7 @@ import time
 
 import pytest
 
-from pyrt.scheduler import Loop, ReadyQueue, SimClock, WallClock
+from pyrt.scheduler import Loop, RateGroup, ReadyQueue, SimClock, Task, WallClock
 
 TICKS = 20_000
 
@@ -44,6 +44,19 @@ def make_loop(ntasks: int, *, timing: bool = True, divisor: int = 1, period: int
 def test_idle_tick(benchmark, timing):
     """Cost of one tick when the queue is not checked (divisor FF), per tick."""
     loop = make_loop(6, timing=timing, divisor=0xFF)
+    benchmark.extra_info["unit"] = f"per {TICKS} ticks"
+    benchmark(loop.run, TICKS)
+
+
+@pytest.mark.benchmark(group="idle tick")
+@pytest.mark.parametrize("timing", [True, False], ids=["timing-on", "timing-off"])
+def test_idle_tick_with_a_rate_group(benchmark, timing):
+    """The idle tick above plus a 100 Hz rate group (one task) on the 1 ms tick:
+    nine ticks in ten only count down, the tenth releases the group."""
+    loop = make_loop(6, timing=timing, divisor=0xFF)
+    group = RateGroup("trajectory", hz=100)
+    group.new_queue("arm", [Task(lambda: None, period=1, name="plan")])
+    loop.attach(group)
     benchmark.extra_info["unit"] = f"per {TICKS} ticks"
     benchmark(loop.run, TICKS)
 

@@ -48,7 +48,16 @@ if TYPE_CHECKING:
         word,
     )
     from pyrt.robots.trajectory import JointRobot, JointTrajectory
-    from pyrt.scheduler import Job, Loop, ReadyQueue, SimClock, Task, WallClock, install
+    from pyrt.scheduler import (
+        Job,
+        Loop,
+        RateGroup,
+        ReadyQueue,
+        SimClock,
+        Task,
+        WallClock,
+        install,
+    )
     from pyrt.scheduler.motion import MotionExecutor, MotionRecord, MotionType
     from pyrt.scope import Source
     from pyrt.scope.joints import JointStates
@@ -76,6 +85,7 @@ _LAZY = {
     "MotionRecord": "pyrt.scheduler.motion",
     "MotionType": "pyrt.scheduler.motion",
     "MoveEnded": "pyrt.station.moves",
+    "RateGroup": "pyrt.scheduler",
     "ReadyQueue": "pyrt.scheduler",
     "Register": "pyrt.boards",
     "RegisterBoard": "pyrt.boards",
@@ -139,6 +149,7 @@ __all__ = [
     "PyrtError",
     "PyrtInternalError",
     "QueueFullError",
+    "RateGroup",
     "ReadyQueue",
     "Register",
     "RegisterBoard",

@@ -150,6 +150,8 @@ def test_timing_log_records_overruns_and_reads_back():
     first = overruns[0]
     assert first["tick"] == 9 and first["missed"] == 2
     assert first["tasks"] == [["TASK", 3 * MS]]
+    assert first["task_groups"] == ["queue:r"]  # the queue is a group of its own
+    assert first["group"] == "queue:r" and first["missed_releases"] == {"queue:r": 2}
     assert first["end_ns"] - first["start_ns"] == 3 * MS
     summaries = [r for r in records if r["type"] == "summary"]
     assert len(summaries) >= 2 and summaries[-1]["tasks"]["TASK"]["calls"] == 2500

@@ -1,8 +1,11 @@
 """``pyrt overruns FILE``: what a timing log says about the loop's timing.
 
-Prints a per-task table (calls, mean, p99 and max in µs, and the overruns
-attributed to the task: those in which it ran longest) and the worst
-overruns with their tick and the tasks run in them.  ``--json`` prints the
+Prints the rate groups (period, releases, time per release, the overruns
+charged to each group and the releases it missed), a per-task table (calls,
+mean, p99 and max in µs, and the overruns attributed to the task: those in
+which it ran longest; under their groups when there are several) and the
+worst overruns with their tick, the group charged and the tasks run in them.
+A log written before rate groups (pyrt-timing/1) is read too: no groups.  ``--json`` prints the
 same as one JSON object; ``--plot PNG`` draws per-task histograms and an
 overrun timeline (needs matplotlib: pip install 'pyrt[plot]').
 """
@@ -40,6 +43,7 @@ def report_dict(rep: TimingReport, worst: int) -> dict[str, Any]:
     s = rep.summary or {}
     return {
         "file": rep.path,
+        "format": rep.format,
         "period_ns": rep.period_ns,
         "clock": rep.header.get("clock", ""),
         "ticks": s.get("ticks", 0),
@@ -48,6 +52,19 @@ def report_dict(rep: TimingReport, worst: int) -> dict[str, Any]:
         "startup_overruns": s.get("startup_overruns", 0),
         "startup_worst_ns": s.get("startup_worst_ns", 0),
         "lateness": s.get("lateness", {}),
+        "groups": {
+            name: {
+                "period_us": g.period_ns / 1e3,
+                "releases": g.releases,
+                "mean_us": round(g.mean_ns / 1e3, 3),
+                "p99_us": round(g.p99_ns / 1e3, 3),
+                "max_us": round(g.max_ns / 1e3, 3),
+                "overruns": g.overruns,
+                "missed": g.missed,
+                "tasks": g.tasks,
+            }
+            for name, g in rep.groups.items()
+        },
         "tasks": {
             name: {
                 "calls": t.calls,
@@ -56,6 +73,7 @@ def report_dict(rep: TimingReport, worst: int) -> dict[str, Any]:
                 "max_us": round(t.max_ns / 1e3, 3),
                 "overruns": t.overruns,
                 "in_overruns": t.present,
+                "group": t.group,
             }
             for name, t in rep.tasks.items()
         },
@@ -66,6 +84,8 @@ def report_dict(rep: TimingReport, worst: int) -> dict[str, Any]:
                 "lateness_us": round(r["lateness_ns"] / 1e3, 3),
                 "overrun_us": round(r["overrun_ns"] / 1e3, 3),
                 "missed": r.get("missed", 0),
+                "group": r.get("group"),
+                "missed_releases": r.get("missed_releases", {}),
                 "tasks": r["tasks"],
             }
             for r in rep.worst(worst)
@@ -96,27 +116,46 @@ def format_report(rep: TimingReport, worst: int) -> str:
             f"p99.9 {format_bound_us(late['p999_ns'], m)}  max {m / 1e3:.2f}"
         )
     lines.append("")
+    groups = d["groups"]
+    if groups:
+        lines.append(f"{'group':<14}{'period µs':>10}{'releases':>10}{'mean µs':>11}"
+                     f"{'p99 µs':>11}{'max µs':>11}{'overruns':>10}{'missed':>10}")
+        for name, g in groups.items():
+            lines.append(
+                f"{name:<14}{g['period_us']:>10g}{g['releases']:>10}{g['mean_us']:>11.2f}"
+                f"{format_bound_us(round(g['p99_us'] * 1e3), round(g['max_us'] * 1e3)):>11}"
+                f"{g['max_us']:>11.2f}{g['overruns']:>10}{g['missed']:>10}")
+        lines.append("")
     lines.append(
         f"{'task':<14}{'calls':>10}{'mean µs':>11}{'p99 µs':>11}{'max µs':>11}{'overruns':>10}"
     )
-    for name, t in sorted(d["tasks"].items()):
-        lines.append(
-            f"{name:<14}{t['calls']:>10}{t['mean_us']:>11.2f}"
-            f"{format_bound_us(round(t['p99_us'] * 1e3), round(t['max_us'] * 1e3)):>11}"
-            f"{t['max_us']:>11.2f}{t['overruns']:>10}"
-        )
+    several = len(groups) > 1
+    for group in [*groups, ""] if several else [None]:
+        rows = sorted((n, t) for n, t in d["tasks"].items()
+                      if group is None or t["group"] == group)
+        if group is not None and rows:
+            lines.append(f"{group or '(no group)'}:")
+        for name, t in rows:
+            label = f"  {name}" if group is not None else name
+            lines.append(
+                f"{label:<14}{t['calls']:>10}{t['mean_us']:>11.2f}"
+                f"{format_bound_us(round(t['p99_us'] * 1e3), round(t['max_us'] * 1e3)):>11}"
+                f"{t['max_us']:>11.2f}{t['overruns']:>10}"
+            )
     lines.append(f"({QUANTILE_NOTE})")
     if d["worst"]:
         lines.append("")
         lines.append(f"worst {len(d['worst'])} overruns:")
         lines.append(
-            f"{'tick':>10}{'time s':>12}{'late µs':>10}{'over µs':>10}{'missed':>8}  tasks (µs)"
+            f"{'tick':>10}{'time s':>12}{'late µs':>10}{'over µs':>10}{'missed':>8}  "
+            + ("charged to  " if groups else "") + "tasks (µs)"
         )
         for r in d["worst"]:
             tasks = ", ".join(f"{n} {ns / 1e3:.1f}" for n, ns in r["tasks"]) or "-"
+            charged = f"{r['group'] or '-':<10}  " if groups else ""
             lines.append(
                 f"{r['tick']:>10}{r['deadline_ns'] / 1e9:>12.6f}{r['lateness_us']:>10.1f}"
-                f"{r['overrun_us']:>10.1f}{r['missed']:>8}  {tasks}"
+                f"{r['overrun_us']:>10.1f}{r['missed']:>8}  {charged}{tasks}"
             )
     return "\n".join(lines)
 

@@ -2,8 +2,9 @@
 
 from pyrt.scheduler.clock import Clock, SimClock, WallClock
 from pyrt.scheduler.loop import Job, Loop
+from pyrt.scheduler.rategroup import RateGroup
 from pyrt.scheduler.readyqueue import ByteImage, ByteRef, ReadyQueue, Routine
-from pyrt.scheduler.stats import Distribution, LoopStatistics, TaskStatistics
+from pyrt.scheduler.stats import Distribution, GroupStatistics, LoopStatistics, TaskStatistics
 from pyrt.scheduler.task import Task, install
 from pyrt.scheduler.timinglog import TimingLog, TimingReport, read_timing_log
 
@@ -12,9 +13,11 @@ __all__ = [
     "ByteRef",
     "Clock",
     "Distribution",
+    "GroupStatistics",
     "Job",
     "Loop",
     "LoopStatistics",
+    "RateGroup",
     "ReadyQueue",
     "Routine",
     "SimClock",

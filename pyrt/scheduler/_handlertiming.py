@@ -17,6 +17,7 @@ from pyrt.scheduler._routinetiming import fold_many
 from pyrt.scheduler.stats import Accumulator
 
 if TYPE_CHECKING:
+    from pyrt.scheduler.rategroup import GroupTiming
     from pyrt.scheduler.readyqueue import ReadyQueue
 
 __all__ = ["HandlerTimes", "HandlerTiming", "TakenSamples"]
@@ -40,12 +41,15 @@ class TakenSamples:
     """Timing samples handed over by :meth:`~pyrt.scheduler.loop.Loop.take_samples`,
     to fold elsewhere."""
 
-    __slots__ = ("handlers", "queues")
+    __slots__ = ("groups", "handlers", "queues")
 
     def __init__(self, queues: list[tuple[ReadyQueue, dict[int, list[int]]]],
-                 handlers: list[tuple[HandlerTiming, list[int]]]):
+                 handlers: list[tuple[HandlerTiming, list[int]]],
+                 groups: list[tuple[GroupTiming, list[int]]] | None = None):
         self.queues = queues
         self.handlers = handlers
+        #: Each rate group's work time per release.
+        self.groups = groups or []
 
 
 class HandlerTimes:
@@ -97,11 +101,14 @@ class HandlerTimes:
         self._taken_tick = tick
         return taken
 
-    def fold(self, taken: list[tuple[HandlerTiming, list[int]]]) -> None:
-        """Fold samples handed over by :meth:`take` (any thread)."""
-        if taken:
+    def fold(self, taken: list[tuple[HandlerTiming, list[int]]],
+             groups: list[tuple[GroupTiming, list[int]]] | None = None) -> None:
+        """Fold samples handed over by :meth:`take` (any thread), and the rate
+        groups' release times with them (one numpy pass for all)."""
+        if taken or groups:
             with self.lock:
-                fold_many([(e.acc, durs) for e, durs in taken])
+                fold_many([(e.acc, durs) for e, durs in taken]
+                          + [(g.acc, durs) for g, durs in groups or ()])
 
     def reset(self) -> None:
         """Forget every sample and accumulated figure."""

@@ -1,5 +1,8 @@
 """The tick loop: deadlines, lateness, overruns, handlers and foreground jobs.
 
+Rate groups (:mod:`pyrt.scheduler.rategroup`) are released at their own
+periods, fastest first; a queue attached directly is a group of the tick.
+
 One tick: wait for the deadline; record lateness; call each handler with the
 tick's time (the plant, then each robot's clock interrupt, then the mailbox
 and foreground jobs: whatever was attached, in attachment order); record the
@@ -37,16 +40,13 @@ from itertools import count
 from typing import Any
 
 from pyrt.errors import Fault, FaultError, PyrtError
-from pyrt.scheduler._handlertiming import HandlerTimes, HandlerTiming, TakenSamples
+from pyrt.scheduler import _accounting
+from pyrt.scheduler._handlertiming import HandlerTimes, TakenSamples
 from pyrt.scheduler.clock import Clock, SimClock, WallClock
-from pyrt.scheduler.gcwatch import GcWatch, attribute
+from pyrt.scheduler.gcwatch import GcWatch
+from pyrt.scheduler.rategroup import GroupTiming, RateGroup, rate_monotonic
 from pyrt.scheduler.readyqueue import ReadyQueue
-from pyrt.scheduler.stats import (
-    Accumulator,
-    LoopStatistics,
-    TaskStatistics,
-    bin_index,
-)
+from pyrt.scheduler.stats import Accumulator, LoopStatistics, bin_index
 
 __all__ = ["Job", "Loop", "TakenSamples", "overrun_line"]
 
@@ -155,8 +155,16 @@ class Loop:
         self._handler_names: list[str] = []
         # Timed ticks run this plan: (handler, record its duration).
         self._plan: list[tuple[Handler, Callable[[int], None]]] = []
-        # What ran, in attach order: a ready queue or a handler's timing.
-        self._order: list[ReadyQueue | HandlerTiming] = []
+        # What ran, in order: a ready queue, a rate group or a handler's timing.
+        self._order: list[Any] = []
+        # Everything attached, in attach order: (a group's period or None, its parts).
+        self._attached: list[tuple[int | None, Any]] = []
+        # The rate groups (a queue attached alone is one), the RateGroups, and
+        # the group of each queue (by id) and of each handler entry in a group.
+        self._groups: list[GroupTiming] = []
+        self.rate_groups: list[RateGroup] = []
+        self._group_of: dict[int, GroupTiming] = {}
+        self._entry_group: dict[str, GroupTiming] = {}
         self._times = HandlerTimes()
         # Set per run(): handler durations are being recorded.
         self._timing_handlers = False
@@ -200,38 +208,60 @@ class Loop:
         ``now_ns - deadline_ns``), or of the next one between ticks."""
         return self._deadline
 
-    def attach(self, handler: ReadyQueue | Handler, name: str | None = None) -> None:
+    def attach(self, handler: ReadyQueue | RateGroup | Handler, name: str | None = None) -> None:
         """Call ``handler(now_ns)`` every tick, after those attached before it.
 
-        A :class:`ReadyQueue` is attached by its clock handler; its faults are
-        reported to this loop and its routines timed when timing is on.  Any
-        other handler is timed as an entry of its own, called ``name`` (by
-        default the function's name; a second handler of the same name gets
-        ``#2``).
+        A :class:`RateGroup` is released at its own rate, groups in
+        rate-monotonic order (:mod:`pyrt.scheduler.rategroup`); its period
+        must be a whole number of ticks (:class:`ConfigError` otherwise).  A
+        :class:`ReadyQueue` is attached by its clock handler, as a group of
+        its own at the tick's rate; its faults are reported to this loop and
+        its routines timed when timing is on.  Any other handler is timed as
+        an entry of its own, called ``name`` (by default the function's name;
+        a second handler of the same name gets ``#2``).
         """
         if self.running:
             raise PyrtError("attach handlers before the loop runs")
-        if isinstance(handler, ReadyQueue):
-            if handler.on_error is None:  # a queue no station owns: its faults are the loop's
-                self._bare_queues.append(handler)
-                handler.on_error = lambda cause, source, tb, q=handler: self.report_fault(
-                    self.make_fault(q.name, cause, source, tb))
-            handler.timer = self.clock.timer
-            handler.enable_timing(self.timing, track_ticks=not self.clock.virtual)
-            self.queues.append(handler)
-            self._handlers.append(handler.tick)
-            self._handler_names.append(name or f"queue:{handler.name}")
-            self._plan.append((handler.tick, self._times.sink.append))
-            self._order.append(handler)
+        if isinstance(handler, RateGroup):
+            _accounting.attach_group(self, handler)
+        elif isinstance(handler, ReadyQueue):
+            label = name or f"queue:{handler.name}"
+            group = GroupTiming(_accounting.group_name(self, label), self.period_ns)
+            self._take_queue(handler, group)
+            self._add(self.period_ns, label, handler.tick, group.samples.append, handler)
         else:
             self._attach_timed(handler, name or str(getattr(handler, "__name__", "handler")))
 
+    def _take_queue(self, queue: ReadyQueue, group: GroupTiming) -> None:
+        if queue.on_error is None:  # a queue no station owns: its faults are the loop's
+            self._bare_queues.append(queue)
+            queue.on_error = lambda cause, source, tb, q=queue: self.report_fault(
+                self.make_fault(q.name, cause, source, tb))
+        queue.timer = self.clock.timer
+        queue.enable_timing(self.timing, track_ticks=not self.clock.virtual)
+        self.queues.append(queue)
+        self._group_of[id(queue)] = group
+        if group not in self._groups:
+            self._groups.append(group)
+
+    def _join_group_member(self, group: RateGroup, name: str, member: Any) -> None:
+        _accounting.join_member(self, group, name, member)
+
+    def _add(self, period: int | None, name: str, fn: Handler, record: Callable[[int], None],
+             item: Any) -> None:
+        """Attach ``fn`` (``period``: a group's, None: a plain handler) and
+        arrange what runs: groups rate-monotonic, in the groups' places."""
+        self._attached.append((period, (fn, record, item, name)))
+        run = rate_monotonic(self._attached)
+        # in place: a job spawned while the loop runs is attached to the lists it runs
+        self._handlers[:] = [fn for fn, _, _, _ in run]
+        self._plan[:] = [(fn, rec) for fn, rec, _, _ in run]
+        self._order[:] = [item for _, _, item, _ in run]
+        self._handler_names[:] = [n for _, _, _, n in run]
+
     def _attach_timed(self, handler: Handler, name: str) -> None:
         entry = self._times.add(name)
-        self._order.append(entry)
-        self._plan.append((handler, entry.samples.append))
-        self._handlers.append(handler)
-        self._handler_names.append(name)
+        self._add(None, name, handler, entry.samples.append, entry)
 
     def spawn(self, name: str, gen: Generator[Any, None, Any]) -> Job:
         """Run ``gen`` as a foreground job, one step per tick after the handlers."""
@@ -406,7 +436,7 @@ class Loop:
         if end > nxt:
             skipped = (end - nxt + period - 1) // period
             if self._starting and self.tick_index <= self.STARTUP_TICKS:
-                self._startup_overrun(end - nxt)
+                self._startup_overrun(end - nxt, skipped)
             else:
                 self._overrun(deadline, start, end, skipped)
             nxt += skipped * period
@@ -421,63 +451,15 @@ class Loop:
 
     # -- overruns ------------------------------------------------------------
 
-    def _startup_overrun(self, over_ns: int) -> None:
+    def _startup_overrun(self, over_ns: int, skipped: int) -> None:
+        if self.rate_groups:  # their grids keep to time; nothing is counted
+            _accounting.skip_groups(self, skipped, count=False)
         self.startup_overruns += 1
         if over_ns > self.startup_worst_ns:
             self.startup_worst_ns = over_ns
 
     def _overrun(self, deadline: int, start: int, end: int, skipped: int) -> None:
-        self._starting = False
-        self.overruns += 1
-        self.missed += skipped
-        self.consecutive_overruns += 1
-        # what ran in this tick, in order: routines of each queue, handlers
-        tasks: list[tuple[str, int]] = []
-        owners: list[ReadyQueue | HandlerTiming] = []
-        keys = self._entry_keys() if self._timing_handlers else {}
-        for item in self._order:
-            if isinstance(item, ReadyQueue):
-                ran = item.tasks_in_tick(start)
-                tasks.extend(ran)
-                owners.extend([item] * len(ran))
-            elif self._timing_handlers:
-                d = self._times.last_duration(item, self.tick_index - 1)
-                if d is not None:
-                    tasks.append((keys[item.name], d))
-                    owners.append(item)
-        pauses = self._gc.pauses_in(self.tick_index - 1)
-        if pauses:  # a collection inside the tick: its pause is an entry of its own
-            tasks = attribute(tasks, pauses)
-            owners.append(self._gc)  # type: ignore[arg-type]
-        culprit = ""
-        if tasks:
-            i = max(range(len(tasks)), key=lambda k: tasks[k][1])
-            culprit, owner = tasks[i][0], owners[i]
-            if isinstance(owner, ReadyQueue):
-                owner.count_overrun(culprit)
-            else:
-                owner.acc.overruns += 1
-        lateness = end - deadline - self.period_ns
-        if self.timing_log is not None:
-            self.timing_log.overrun(
-                tick=self.tick_index - 1,
-                deadline_ns=deadline,
-                start_ns=start,
-                end_ns=end,
-                lateness_ns=start - deadline,
-                overrun_ns=lateness,
-                missed=skipped,
-                tasks=tasks,
-            )
-        self._warnings.overrun(start, lateness, self.tick_index - 1, culprit)
-        limit = self.max_consecutive_overruns
-        if limit is not None and self.consecutive_overruns >= limit:
-            self.fault_all(
-                f"{self.consecutive_overruns} consecutive overruns "
-                f"(limit {limit}, tick {self.period_ns / 1e3:g} µs)",
-                source="loop",
-            )
-            self.consecutive_overruns = 0
+        _accounting.record_overrun(self, deadline, start, end, skipped)
 
     def _summary(self, now: int) -> None:
         self._next_summary = now + self.summary_interval_ns
@@ -492,8 +474,8 @@ class Loop:
                 log.summary(now, self.statistics(fold=False))
 
             log.defer(write_summary)
-        elif self._times.entries:
-            self._times.fold(self._times.take(self.tick_index))
+        elif self._times.entries or self._groups:
+            self._times.fold(self._times.take(self.tick_index), _accounting.take_groups(self))
 
     def _start_log(self) -> None:
         if self.timing_log is not None and not self._log_started:
@@ -505,6 +487,7 @@ class Loop:
                 clock=type(self.clock).__name__,
                 tasks=names,
                 handlers=list(self._handler_names),
+                groups=_accounting.group_table(self),
             )
             self._log_started = True
 
@@ -528,49 +511,25 @@ class Loop:
         of the handlers' lists), to be folded by :meth:`fold_samples` in
         any thread."""
         return TakenSamples([(q, q.take_samples()) for q in self.queues],
-                            self._times.take(self.tick_index))
+                            self._times.take(self.tick_index), _accounting.take_groups(self))
 
     def fold_samples(self, taken: TakenSamples) -> None:
         """Fold samples handed over by :meth:`take_samples` (any thread)."""
         for q, samples in taken.queues:
             q.fold_into_accumulators(samples)
-        self._times.fold(taken.handlers)
+        self._times.fold(taken.handlers, taken.groups)
 
     def statistics(self, fold: bool = True) -> LoopStatistics:
         """A frozen snapshot of lateness, work time and per-task timing: the
         ready queues' routines and, as entries of their own
-        (``kind="handler"``), the other handlers.
+        (``kind="handler"``), the other handlers; and per rate group
+        (``groups``) its releases, time per release and overruns.
 
         With ``fold`` (call it in the loop thread, or with the loop stopped)
         the samples recorded since the last fold are included; a runner builds
         the snapshot outside the loop thread instead
         (:meth:`~pyrt.scheduler.runner.Runner.statistics`)."""
-        tasks: dict[str, TaskStatistics] = {}
-        for q in self.queues:
-            for acc in q.accumulators(fold=fold):
-                tasks[acc.name] = _task_statistics(acc.name, acc, "task")
-        if self.timing:
-            if fold:
-                self._times.fold(self._times.take(self.tick_index))
-            keys = self._entry_keys()
-            with self._times.lock:
-                for e in self._times.entries:
-                    tasks[keys[e.name]] = _task_statistics(keys[e.name], e.acc, "handler")
-        for acc in (self._gc.acc, self._gc.idle_acc):
-            if acc.calls:  # collections: inside ticks (blamed for overruns), idle
-                tasks[acc.name] = _task_statistics(acc.name, acc, "gc")
-        return LoopStatistics(
-            period_ns=self.period_ns,
-            ticks=self.tick_index,
-            overruns=self.overruns,
-            missed=self.missed,
-            consecutive_overruns=self.consecutive_overruns,
-            startup_overruns=self.startup_overruns,
-            startup_worst_ns=self.startup_worst_ns,
-            lateness=self._lateness.distribution(),
-            work=self._work.distribution(),
-            tasks=tasks,
-        )
+        return _accounting.statistics(self, fold)
 
     def reset_statistics(self) -> None:
         """Forget timing recorded so far (LinuxCNC's tmax reset); counts too."""
@@ -580,6 +539,8 @@ class Loop:
             for acc in q.accumulators():
                 acc.reset()
         self._times.reset()
+        for g in self._groups:
+            g.reset()
         self._gc.reset()
         self.overruns = self.missed = self.consecutive_overruns = 0
         self.startup_overruns = self.startup_worst_ns = 0
@@ -638,13 +599,6 @@ def overrun_line(count: int, worst_ns: int, tick: int, culprit: str = "", width:
             head += f" in {name}"
     line = head + tail
     return line if len(line) <= width else line[: width - 1] + "…"
-
-
-def _task_statistics(name: str, acc: Accumulator, kind: str) -> TaskStatistics:
-    dist = acc.distribution()
-    return TaskStatistics(name=name, calls=acc.calls, mean_ns=dist.mean_ns, max_ns=acc.max,
-                          p99_ns=dist.p99_ns, overruns=acc.overruns, distribution=dist,
-                          kind=kind)
 
 
 def _ending(until: Callable[[], bool] | None,

@@ -19,6 +19,7 @@ __all__ = [
     "NBINS",
     "Accumulator",
     "Distribution",
+    "GroupStatistics",
     "LoopStatistics",
     "TaskStatistics",
     "bin_edges",
@@ -172,6 +173,28 @@ class TaskStatistics:
     #: not a ready queue (board poll, physics, motion executor, scope, mailbox);
     #: ``"gc"``: garbage collections (``gc`` inside ticks, ``gc idle`` between).
     kind: str = "task"
+    #: The rate group the task ran in ("" for a loop handler outside groups).
+    group: str = ""
+
+
+@dataclass(frozen=True)
+class GroupStatistics:
+    """One rate group: its period, its releases and the work time of each
+    (004's max and average per loop), the overruns charged to it (its tasks
+    ran longest in a tick that passed a deadline) and its releases missed
+    (the loop was still busy at its next release)."""
+
+    name: str
+    period_ns: int
+    releases: int
+    mean_ns: float
+    max_ns: int
+    p99_ns: int
+    overruns: int
+    missed: int
+    distribution: Distribution = field(repr=False)
+    #: The keys in :attr:`LoopStatistics.tasks` of the group's tasks.
+    tasks: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -190,3 +213,6 @@ class LoopStatistics:
     #: the worst of them in ns past the next deadline.
     startup_overruns: int = 0
     startup_worst_ns: int = 0
+    #: Per rate group, in the order they run (a queue attached to the loop
+    #: directly is a group of the tick's rate, named as attached).
+    groups: dict[str, GroupStatistics] = field(default_factory=dict)

@@ -3,15 +3,25 @@
 Records, one JSON object per line, each with a ``type``:
 
 * ``header``: format version, pyrt version, tick period, clock, task names
-  (the ready queues' routines, then the timed loop handlers), handler names;
+  (the ready queues' routines, then the timed loop handlers), handler names,
+  and the rate groups as they run (``[{name, period_ns, tasks}, ...]``);
 * ``overrun``: tick index, deadline, start, end, lateness (start - deadline),
-  overrun (end - next deadline), deadlines missed, and the tasks run in that
+  overrun (end - next deadline), deadlines missed, the tasks run in that
   tick with their durations (``[[name, ns], ...]``, in the order they ran:
-  routines and loop handlers such as ``boards`` alike);
+  routines and loop handlers such as ``boards`` alike) and their groups
+  (``task_groups``, one per task; "" for a loop handler outside groups),
+  the group the overrun is charged
+  to (``group``: that of the task that ran longest; null for a loop
+  handler) and the releases each group missed (``missed_releases``);
 * ``summary``: cumulative counts since the start: ticks, overruns, missed,
-  lateness and work distributions, and per task calls, mean, max, p99, kind
-  (``task`` or ``handler``) and the sparse log-spaced histogram
-  (``[[bin, count], ...]``; see :mod:`pyrt.scheduler.stats` for the bins).
+  lateness and work distributions, per task calls, mean, max, p99, kind
+  (``task`` or ``handler``), group and the sparse log-spaced histogram
+  (``[[bin, count], ...]``; see :mod:`pyrt.scheduler.stats` for the bins),
+  and per group its period, releases, time per release (mean, max, p99,
+  histogram), overruns charged and releases missed.
+
+Format ``pyrt-timing/2``; logs of ``pyrt-timing/1`` (before rate groups:
+no groups) are still read, their tasks in no group.
 
 All times are integers in nanoseconds of the loop's clock.  Overrun
 records are buffered in memory; summaries are built and everything is
@@ -32,9 +42,11 @@ from typing import IO, Any
 from pyrt.errors import ConfigError
 from pyrt.scheduler.stats import Distribution, LoopStatistics
 
-__all__ = ["FORMAT", "TimingLog", "TimingReport", "read_timing_log"]
+__all__ = ["FORMAT", "READABLE", "GroupReport", "TimingLog", "TimingReport", "read_timing_log"]
 
-FORMAT = "pyrt-timing/1"
+FORMAT = "pyrt-timing/2"
+#: Formats read back: the current one, and the one before rate groups.
+READABLE = ("pyrt-timing/1", FORMAT)
 
 
 def _dist_json(d: Distribution) -> dict[str, Any]:
@@ -91,7 +103,8 @@ class TimingLog:
                 if self.error is None:
                     self.error = exc
 
-    def header(self, *, period_ns: int, clock: str, tasks: list[str], handlers: list[str]) -> None:
+    def header(self, *, period_ns: int, clock: str, tasks: list[str], handlers: list[str],
+               groups: list[dict[str, Any]] | None = None) -> None:
         """Write the header record (once, before anything else)."""
         self._emit(
             {
@@ -102,6 +115,7 @@ class TimingLog:
                 "clock": clock,
                 "tasks": tasks,
                 "handlers": handlers,
+                "groups": groups or [],
                 "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             }
         )
@@ -133,9 +147,24 @@ class TimingLog:
                         "p99_ns": t.p99_ns,
                         "overruns": t.overruns,
                         "kind": t.kind,
+                        "group": t.group,
                         "hist": [list(p) for p in t.distribution.hist],
                     }
                     for name, t in stats.tasks.items()
+                },
+                "groups": {
+                    name: {
+                        "period_ns": g.period_ns,
+                        "releases": g.releases,
+                        "mean_ns": round(g.mean_ns, 1),
+                        "max_ns": g.max_ns,
+                        "p99_ns": g.p99_ns,
+                        "overruns": g.overruns,
+                        "missed": g.missed,
+                        "tasks": list(g.tasks),
+                        "hist": [list(p) for p in g.distribution.hist],
+                    }
+                    for name, g in stats.groups.items()
                 },
             }
         )
@@ -179,6 +208,25 @@ class TaskReport:
     present: int = 0
     #: ``"task"`` (a ready-queue routine) or ``"handler"`` (a loop handler).
     kind: str = "task"
+    #: Its rate group ("": a loop handler outside groups, or a log before groups).
+    group: str = ""
+
+
+@dataclass
+class GroupReport:
+    """What the log says about one rate group."""
+
+    name: str
+    period_ns: int
+    releases: int = 0
+    mean_ns: float = 0.0
+    p99_ns: int = 0
+    max_ns: int = 0
+    #: Overruns charged to the group (its task ran longest in the tick).
+    overruns: int = 0
+    #: Its releases that the loop was too busy to run.
+    missed: int = 0
+    tasks: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -190,6 +238,12 @@ class TimingReport:
     summary: dict[str, Any] | None
     overruns: list[dict[str, Any]] = field(default_factory=list)
     tasks: dict[str, TaskReport] = field(default_factory=dict)
+    #: Per rate group, as they run (empty for a log before rate groups).
+    groups: dict[str, GroupReport] = field(default_factory=dict)
+
+    @property
+    def format(self) -> str:
+        return str(self.header["format"])
 
     @property
     def period_ns(self) -> int:
@@ -240,10 +294,15 @@ def read_timing_log(path: str) -> TimingReport:
             raise ConfigError("not a timing record (no 'type' field)", path, lineno)
         kind = rec["type"]
         if header is None:
-            if kind != "header" or rec.get("format") != FORMAT:
+            if kind != "header" or not str(rec.get("format", "")).startswith("pyrt-timing/"):
                 raise ConfigError(
                     f"not a pyrt timing log: first record must be a {FORMAT} header", path, lineno
                 )
+            if rec["format"] not in READABLE:
+                raise ConfigError(
+                    f"timing log format {rec['format']} is not one this pyrt reads "
+                    f"({', '.join(READABLE)}): read it with the pyrt that wrote it "
+                    f"(version {rec.get('version') or 'unknown'})", path, lineno)
             if not isinstance(rec.get("period_ns"), int) or rec["period_ns"] <= 0:
                 raise ConfigError("header has no valid period_ns", path, lineno)
             header = rec
@@ -265,6 +324,12 @@ def read_timing_log(path: str) -> TimingReport:
     handlers = set(header.get("handlers", []))
     for name in header.get("tasks", []):
         report.tasks[name] = TaskReport(name, kind="handler" if name in handlers else "task")
+    for g in header.get("groups", []):
+        report.groups[g["name"]] = GroupReport(g["name"], int(g["period_ns"]),
+                                               tasks=list(g.get("tasks", [])))
+        for name in g.get("tasks", []):
+            if name in report.tasks:
+                report.tasks[name].group = g["name"]
     if summary is not None:
         for name, t in summary["tasks"].items():
             tr = report.tasks.setdefault(name, TaskReport(name))
@@ -273,12 +338,27 @@ def read_timing_log(path: str) -> TimingReport:
             tr.p99_ns = int(t.get("p99_ns", 0))
             tr.max_ns = int(t.get("max_ns", 0))
             tr.kind = str(t.get("kind", "task"))
+            tr.group = str(t.get("group", tr.group))
+        for name, g in summary.get("groups", {}).items():
+            gr = report.groups.setdefault(name, GroupReport(name, int(g.get("period_ns", 0))))
+            gr.releases = int(g.get("releases", 0))
+            gr.mean_ns = float(g.get("mean_ns", 0.0))
+            gr.p99_ns = int(g.get("p99_ns", 0))
+            gr.max_ns = int(g.get("max_ns", 0))
+            gr.missed = int(g.get("missed", 0))
     for rec in overruns:
         tasks = rec["tasks"]
         if not tasks:
             continue
-        for name, _ in tasks:
-            report.tasks.setdefault(name, TaskReport(name)).present += 1
+        for (name, _), group in zip(tasks, rec.get("task_groups") or [""] * len(tasks),
+                                    strict=False):
+            tr = report.tasks.setdefault(name, TaskReport(name))
+            tr.present += 1
+            if group:
+                tr.group = str(group)
         culprit = max(tasks, key=lambda t: t[1])[0]
         report.tasks[culprit].overruns += 1
+        charged = rec.get("group")
+        if charged in report.groups:
+            report.groups[charged].overruns += 1
     return report
