@@ -125,6 +125,7 @@ import json, os, selectors, socket, sys, time
 os.nice(19)
 host, port, n, seconds = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), float(sys.argv[4])
 line = sys.argv[5].encode() + b"\n"
+at_least, hang = int(sys.argv[6]), float(sys.argv[7])
 sel = selectors.DefaultSelector()
 for _ in range(n):
     s = socket.create_connection((host, port))
@@ -138,10 +139,12 @@ sys.stdout.write("ready\n"); sys.stdout.flush()
 sys.stdin.readline()
 start = time.perf_counter()
 end = start + seconds
+give_up = end + hang
 for key in list(sel.get_map().values()):
     key.fileobj.send(line)
 count = errors = 0
-while time.perf_counter() < end:
+while sel.get_map() and (time.perf_counter() < end
+                         or (count < at_least and time.perf_counter() < give_up)):
     for key, _ in sel.select(0.05):
         s, st = key.fileobj, key.data
         try:
@@ -165,10 +168,17 @@ print(json.dumps({"requests": count, "seconds": time.perf_counter() - start,
 '''
 
 
+#: How long past its ``seconds`` a load with ``at_least`` keeps on for its replies:
+#: only a hang takes this long, however loaded the machine is.
+LOAD_HANG_S = 60.0
+
+
 def run_load(host: str, port: int, clients: int, seconds: float, line: str = "STATUS",
-             procs: int = 2, during=None) -> dict:
+             procs: int = 2, during=None, at_least: int = 0) -> dict:
     """``clients`` connections (spread over ``procs`` processes), each with one
-    request in flight for ``seconds``; ``during()`` runs while they do.
+    request in flight for ``seconds``, and on until each process has had
+    ``at_least`` replies (a count that does not depend on the machine's speed;
+    bounded by :data:`LOAD_HANG_S`); ``during()`` runs while they do.
     Returns requests, requests per second and errors."""
     import json
     import os
@@ -178,7 +188,7 @@ def run_load(host: str, port: int, clients: int, seconds: float, line: str = "ST
     per = [clients // procs + (1 if i < clients % procs else 0) for i in range(procs)]
     children = [
         subprocess.Popen([sys.executable, "-c", _LOAD, host, str(port), str(n), str(seconds),
-                          line], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                          line, str(at_least), str(LOAD_HANG_S)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
                          preexec_fn=lambda: os.nice(19))  # nice from the interpreter's start
         for n in per if n
     ]
@@ -189,7 +199,7 @@ def run_load(host: str, port: int, clients: int, seconds: float, line: str = "ST
             child.stdin.write("go\n")
             child.stdin.flush()
         result = during() if during is not None else None
-        outs = [json.loads(child.communicate(timeout=seconds + 30)[0]) for child in children]
+        outs = [json.loads(child.communicate(timeout=seconds + LOAD_HANG_S + 30)[0]) for child in children]
     finally:
         for child in children:
             if child.poll() is None:

@@ -26,6 +26,8 @@ pytestmark = pytest.mark.wallclock
 
 #: Generous: a loaded two-core machine may be slow to start a Python process.
 START_S = 60.0
+#: Only a hang takes this long: a bound that catches one, never a measure of speed.
+HANG_S = 30.0
 
 #: The stations board-sim serves: the built-in ones, and the arm of examples/arm if installed.
 STATIONS = ", ".join(sorted(["gripper", "manipulator", "prototype", "sno"]
@@ -141,19 +143,19 @@ def _driving_controller(url: str, world: str) -> _Proc:
 
 
 @pytest.mark.parametrize("world", ["gripper", "prototype"])
-def test_killed_controller_leaves_the_outputs_off_within_the_watchdog_time(world):
+def test_killed_controller_leaves_the_outputs_off_on_the_disconnect(world):
     """SIGKILL of a controller that is driving: a fresh connection finds the outputs off
-    (DAC null; every channel disarmed, windings off) within the watchdog time (1 s)."""
-    sim, url = _board_sim(world, watchdog=1.0)
+    (DAC null; every channel disarmed, windings off), turned off for the lost connection,
+    not by the watchdog (60 s: it cannot have run out)."""
+    sim, url = _board_sim(world, watchdog=60.0)
     try:
         ctl = _driving_controller(url, world)
         ctl.proc.send_signal(signal.SIGKILL)
-        t_kill = time.monotonic()
         ctl.kill()
-        info = _outputs(url, world, 1.0)
+        info = _outputs(url, world, HANG_S)
         assert _off(info), info
-        assert time.monotonic() - t_kill < 1.0
-        sim.expect(r"^controller \S+ (disconnected|lost \(.*\)): outputs off$", 5.0)
+        sim.expect(r"^controller \S+ (disconnected|lost \(.*\)): outputs off$", HANG_S)
+        assert not any("watchdog:" in line for line in sim.seen)
     finally:
         sim.kill()
 
@@ -162,20 +164,20 @@ def test_killed_controller_leaves_the_outputs_off_within_the_watchdog_time(world
 def test_hung_controller_trips_the_watchdog(world):
     """SIGSTOP of a controller that is driving (connected, silent): board-sim turns the outputs
     off after the watchdog time (0.3 s), not before; the controller, resumed, is told by a
-    BoardError at its next poll; killed, it leaves the outputs off."""
+    BoardError at its next poll; killed, it leaves the outputs off.  (How soon after the
+    watchdog time it trips is a property of board-sim's clock: test_boards_generic.py.)"""
     sim, url = _board_sim(world, watchdog=0.3)
     ctl = _driving_controller(url, world)
     try:
         ctl.proc.send_signal(signal.SIGSTOP)
-        t_stop = time.monotonic()
-        at, m = sim.expect(r"watchdog: no register access for ([0-9.]+) s: outputs off", 10.0)
-        assert 0.3 <= float(m.group(1)) < 1.3
-        assert at - t_stop < 1.3
+        _at, m = sim.expect(r"watchdog: no register access for ([0-9.]+) s: outputs off",
+                            HANG_S)
+        assert float(m.group(1)) >= 0.3  # never before its time, however late the check
         ctl.proc.send_signal(signal.SIGCONT)  # it wakes up and is told
-        ctl.expect(re.escape(f"board {url}: the board's watchdog turned the outputs off"), 10.0)
+        ctl.expect(re.escape(f"board {url}: the board's watchdog turned the outputs off"), HANG_S)
         ctl.proc.send_signal(signal.SIGKILL)
         ctl.kill()
-        info = _outputs(url, world, 5.0)
+        info = _outputs(url, world, HANG_S)
         assert _off(info), info
     finally:
         ctl.kill()
@@ -184,16 +186,14 @@ def test_hung_controller_trips_the_watchdog(world):
 
 def test_killed_board_sim_makes_the_next_access_raise_board_error_naming_the_url():
     """SIGKILL of board-sim: the controller's next register access raises BoardError naming the
-    URL within a bounded time, and so does every later one."""
+    URL (the link's own timeout bounds the wait), and so does every later one."""
     sim, url = _board_sim("gripper")
     boards = open_boards(url, "gripper", GRIPPER_BOARDS, max_age=0)
     try:
         boards["gripper"].write(DAC, 0x90)
         sim.kill()
-        t0 = time.monotonic()
         with pytest.raises(BoardError) as err:
             boards.poll(0)
-        assert time.monotonic() - t0 < 2.0
         assert str(err.value).startswith(f"board {url}: SNAP: ")
         with pytest.raises(BoardError, match=re.escape(url)):
             boards["gripper"].read(P8155_PB)  # an input: nothing to answer it with
@@ -214,13 +214,13 @@ def test_manipulator_world_is_the_stations_and_sigterm_ends_it_with_outputs_off(
     db = copy_station("prototype", tmp_path / "db")
     sim, url = _board_sim("prototype", "--db", str(db), "--ideal-sensors")
     try:
-        info = _outputs(url, "prototype", 5.0)
+        info = _outputs(url, "prototype", HANG_S)
         local = ManipulatorStation(db, writer="sync").plant
         for i in range(len(local.ropes)):
             assert float(info[f"payout{i}"]) == pytest.approx(local.payout(i), abs=1e-4)
         sim.proc.send_signal(signal.SIGTERM)
-        sim.expect(r"^pyrt board-sim: stopped, outputs off", 10.0)
-        assert sim.proc.wait(10) == 0
+        sim.expect(r"^pyrt board-sim: stopped, outputs off", HANG_S)
+        assert sim.proc.wait(HANG_S) == 0
     finally:
         sim.kill()
 
@@ -288,14 +288,14 @@ def test_a_station_of_ones_own_is_served_and_driven_over_tcp():
             assert servo.read("home") == 1
             servo.write("drive", 1000, 0)
             servo.write("enable", 1)
-            deadline = time.monotonic() + 10
+            deadline = time.monotonic() + HANG_S  # a bound for a hang only
             while servo.read("count", 0) < 50 and time.monotonic() < deadline:
                 b.poll(0)
                 time.sleep(0.005)
             assert servo.read("count", 0) >= 50 and servo.read("count", 1) == 0
-        sim.expect(r"^controller \S+ said QUIT: outputs off$", 10.0)
+        sim.expect(r"^controller \S+ said QUIT: outputs off$", HANG_S)
         sim.proc.send_signal(signal.SIGTERM)
-        sim.expect(r"^pyrt board-sim: stopped, outputs off", 10.0)
-        assert sim.proc.wait(10) == 0
+        sim.expect(r"^pyrt board-sim: stopped, outputs off", HANG_S)
+        assert sim.proc.wait(HANG_S) == 0
     finally:
         sim.kill()

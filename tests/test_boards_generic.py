@@ -190,9 +190,10 @@ def test_write_many_sends_several_writes_in_one_round_trip(served):
 
 
 def test_the_watchdog_turns_the_declared_outputs_off_and_the_controller_is_told(served):
-    """No register access for the watchdog time (on board-sim's clock): every output that
-    declares an off value gets it; the next poll raises BoardError once and the outputs read
-    off again; a later write drives again."""
+    """No register access for the watchdog time (on board-sim's clock): not before (0.4 s
+    of 0.5 s, board-sim having looked), then every output that declares an off value gets
+    it; the next poll raises BoardError once and the outputs read off again; a later write
+    drives again."""
     server, world, clock = served
     board = world.boards["servo"]
     with open_boards(server.url, "arm", ARM_BOARDS) as boards:
@@ -200,7 +201,17 @@ def test_the_watchdog_turns_the_declared_outputs_off_and_the_controller_is_told(
         servo.write("drive", 900, 0)
         servo.write("enable", 1)
         boards.poll(0)
-        clock.advance(600_000_000)
+        clock.advance(400_000_000)
+        sock, f = _raw(server)  # a reader: its INFO feeds no watchdog
+        try:
+            f.readline()
+            for _ in range(2):  # the second answer: board-sim has kept the watchdog since
+                sock.sendall(b"INFO\n")
+                assert f.readline().startswith(b"OK")
+        finally:
+            sock.close()
+        assert server.watchdog_trips == 0 and board.output("enable") == 1
+        clock.advance(200_000_000)
         assert _until(lambda: server.watchdog_trips == 1)
         assert board.values("drive") == [0, 0] and board.output("enable") == 0
         assert world.outputs_are_off()

@@ -65,8 +65,12 @@ def _info(link) -> dict[str, str]:
     return dict(kv.split("=", 1) for kv in link.request("INFO"))
 
 
-def _until(predicate, seconds: float = 5.0) -> bool:
-    """Poll ``predicate`` until it holds or the deadline passes."""
+#: Only a hang takes this long: a bound that catches one, never a measure of speed.
+HANG_S = 30.0
+
+
+def _until(predicate, seconds: float = HANG_S) -> bool:
+    """Poll ``predicate`` until it holds or the deadline (a bound for a hang) passes."""
     deadline = time.monotonic() + seconds
     while time.monotonic() < deadline:
         if predicate():
@@ -285,7 +289,8 @@ def test_gripper_controller_runs_init_over_tcp_unchanged(gripper_sim):
         ctl.attach(loop)
         ctl.power_up()
         job = ctl.start_init()
-        loop.run(until=lambda: job.done, duration_ns=10_000_000_000)
+        # a bound for a hang only: the init takes well under a second of a quiet machine
+        loop.run(until=lambda: job.done, duration_ns=60_000_000_000)
         assert job.done and job.value().ok, job.value()
         assert not ctl.ram[OTHER] & (1 << LIMIT)  # the limit sensor, read over TCP
         assert ctl.word(ENCODER_CNT) == 0
@@ -345,22 +350,39 @@ def test_manipulator_motor_driven_over_tcp_moves_the_world_and_counts_come_back(
         assert float(_info(link)["payout0"]) > before
 
 
-@pytest.mark.wallclock
-def test_the_world_steps_at_real_time(manipulator_sim):
-    """The world's clock (the TIO10's 5 MHz RTC, set by each step) advances with the wall clock."""
-    with open_boards(manipulator_sim.url, "prototype", MANIPULATOR_BOARDS, max_age=0) as boards:
-        tio = boards["tio10"]
-        t0, r0 = time.monotonic(), tio.rtc_ticks()
-        last: list[tuple[float, int]] = []
+class _MovedClock:
+    """A monotonic clock the test moves (board-sim's steps and watchdog follow it)."""
 
-        def advanced() -> bool:
-            r = tio.rtc_ticks()
-            last[:] = [(time.monotonic(), r)]
-            return r - r0 >= 1_500_000  # 0.3 s of the world's time
+    def __init__(self) -> None:
+        self.now = 1_000_000_000
+        self.lock = threading.Lock()
 
-        assert _until(advanced, 5.0)
-        t1, r1 = last[0]
-        assert (r1 - r0) / 5e6 == pytest.approx(t1 - t0, abs=0.05)
+    def __call__(self) -> int:
+        with self.lock:
+            return self.now
+
+    def advance(self, ns: int) -> None:
+        with self.lock:
+            self.now += ns
+
+
+def test_the_world_steps_on_board_sims_clock():
+    """The world's clock (the TIO10's 5 MHz RTC, set by each step) advances as board-sim's
+    monotonic clock does: 0.3 s of it, 1,500,000 RTC ticks."""
+    world = ManipulatorWorld.from_station(load_station(station_directory("prototype")),
+                                          imperfections=Imperfections.ideal())
+    clock = _MovedClock()
+    server = _serve(world, clock=clock)
+    try:
+        with open_boards(server.url, "prototype", MANIPULATOR_BOARDS, max_age=0) as boards:
+            tio = boards["tio10"]
+            r0 = tio.rtc_ticks()
+            clock.advance(300_000_000)
+            # a bound for a hang only: board-sim steps at its next pass
+            assert _until(lambda: tio.rtc_ticks() != r0, HANG_S)
+            assert tio.rtc_ticks() - r0 == 1_500_000
+    finally:
+        server.close()
 
 
 # -- failures -------------------------------------------------------------------------------------
@@ -368,16 +390,15 @@ def test_the_world_steps_at_real_time(manipulator_sim):
 
 def test_board_sim_gone_makes_the_next_access_raise_board_error_naming_the_url():
     """When board-sim closes, the next access raises BoardError naming the URL, and so does every
-    later one, at once."""
+    later one, at once (for the closed connection, not after the reply timeout)."""
     server = _serve(GripperWorld())
     boards = open_boards(server.url, "gripper", GRIPPER_BOARDS, max_age=0)
     url = server.url
     server.close()
-    t0 = time.monotonic()
     with pytest.raises(BoardError) as err:
         boards["gripper"].read(P8155_PA)  # outside a tick, max_age=0: the inputs are read
-    assert time.monotonic() - t0 < 2.0
     assert str(err.value).startswith(f"board {url}: SNAP: ") and err.value.url == url
+    assert "no reply within" not in str(err.value)
     with pytest.raises(BoardError, match="link is down"):
         boards.poll(0)
     boards.close()
@@ -442,17 +463,17 @@ def test_a_peer_that_is_not_board_sim_is_refused():
         listener.close()
 
 
-@pytest.mark.wallclock
 def test_a_silent_controller_trips_the_watchdog_in_process():
-    """No register access for the watchdog time: the DAC goes to null while still connected,
-    and the controller's next poll raises BoardError saying so (once)."""
-    server = _serve(GripperWorld(), watchdog_s=0.1)
+    """No register access for the watchdog time (0.1 s of board-sim's clock): the DAC goes to
+    null while still connected, and the controller's next poll raises BoardError saying so (once)."""
+    clock = _MovedClock()
+    server = _serve(GripperWorld(), watchdog_s=0.1, clock=clock)
     try:
         with open_boards(server.url, "gripper", GRIPPER_BOARDS) as boards:
             boards["gripper"].write(DAC, 0x70)
-            t0 = time.monotonic()
-            assert _until(lambda: server.watchdog_trips == 1, 2.0)
-            assert time.monotonic() - t0 < 1.0
+            clock.advance(150_000_000)
+            # a bound for a hang only: board-sim keeps the watchdog at its next pass
+            assert _until(lambda: server.watchdog_trips == 1, HANG_S)
             with pytest.raises(BoardError) as err:  # the controller is told, once
                 boards.poll(0)
             assert str(err.value) == (f"board {server.url}: the board's watchdog turned the "

@@ -451,7 +451,8 @@ def _legal(world: GripperWorld, values: dict[str, int]) -> bool:
     return True
 
 
-#: The fuzz's bounds: frames sent, and a generous wall-time bound on the whole run.
+#: The fuzz's bounds: frames sent, and a wall-time bound on the whole run that only a
+#: hang reaches (the run takes seconds, on a loaded machine too).
 FUZZ_FRAMES = 1500
 FUZZ_S = 120.0
 

@@ -239,7 +239,8 @@ def _random_line(rng: random.Random) -> bytes:
     return " ".join(tokens).encode("utf-8", "surrogateescape")
 
 
-#: The fuzz's bounds: lines sent, and a generous wall-time bound on the whole run.
+#: The fuzz's bounds: lines sent, and a wall-time bound on the whole run that only a
+#: hang reaches (the run takes seconds, on a loaded machine too).
 FUZZ_LINES = 2000
 FUZZ_S = 120.0
 

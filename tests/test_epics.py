@@ -145,7 +145,8 @@ def _write(name: str, value: str) -> None:
     write(PREFIX + name, value, notify=True, timeout=5.0, repeater=False)
 
 
-def _until(fn, timeout_s: float = 5.0):
+def _until(fn, timeout_s: float = 30.0):
+    """Poll ``fn`` until it is true; the bound catches a hang only (a loaded machine)."""
     deadline = time.monotonic() + timeout_s
     while True:
         value = fn()

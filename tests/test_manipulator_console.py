@@ -208,11 +208,13 @@ def test_piped_cli_transcript(tmp_path):
 
 
 def test_wall_clock_run(tmp_path):
-    """On a wall clock (--speed 50) the loop runs in its own thread; a script still completes."""
+    """On a wall clock (--speed 2) the loop runs in its own thread; a script still completes."""
     env = dict(os.environ, PYRT_HOME=str(tmp_path))
-    script = "prototype to 5 0 100\nwait 120\nquit\n"
-    proc = subprocess.run([sys.executable, "-m", "pyrt", "manipulator", "--speed", "50"],
-                          input=script, capture_output=True, text=True, env=env, timeout=120)
+    # The move takes 16 s of loop time (8 s here); the wait's and the run's bounds catch a hang
+    # only.  A slow speed: at 50x the 0.1 ms ticks of a loaded machine are mostly skipped.
+    script = "prototype to 5 0 100\nwait 900\nquit\n"
+    proc = subprocess.run([sys.executable, "-m", "pyrt", "manipulator", "--speed", "2"],
+                          input=script, capture_output=True, text=True, env=env, timeout=600)
     assert proc.returncode == 0, proc.stderr
     assert "ENDPOINT_STOP" in proc.stdout
     pos = load_station(tmp_path / "stations" / "prototype").polyaxis().position

@@ -1,4 +1,8 @@
-"""The server under load, against a real-time (WallClock) gripper loop."""
+"""The server under load, against a real-time (WallClock) gripper loop.
+
+Only what holds however late the ticks come is asserted: every reply right,
+counts of replies (not rates), nothing faults.  The rates and the loop's
+lateness idle and loaded are figures: bench/bench_server.py."""
 
 from __future__ import annotations
 
@@ -8,10 +12,6 @@ import pytest
 from _server_rig import read_lines, run_load, served
 
 pytestmark = pytest.mark.wallclock
-
-#: Generous: a shared two-core machine; the figures are reported by bench/bench_server.py.
-LATE_P99_BOUND_NS = 20_000_000
-
 
 def _signed(word: str) -> int:
     v = int(word, 16)
@@ -29,15 +29,17 @@ def test_32_clients_read_status_while_a_move_runs():
             op.command("P E47A")
             return op.command("wait 30")
 
-        status = run_load(sv.host, sv.port, 32, 2.0, "STATUS", during=move)
-        reads = run_load(sv.host, sv.port, 32, 0.5, "W")
+        # counts of replies, not rates: they hold however loaded the machine is
+        status = run_load(sv.host, sv.port, 32, 2.0, "STATUS", during=move, at_least=500)
+        reads = run_load(sv.host, sv.port, 32, 0.5, "W", at_least=50)
         assert status["errors"] == reads["errors"] == 0
-        assert status["requests"] > 1000 and reads["requests"] > 100
+        assert status["requests"] >= 1000 and reads["requests"] >= 100
         (ended,) = status["during"]
         assert ended.startswith("at target: position")
         assert abs(_signed(op.command("W")[0]) + 0x1B86) <= 16
         moving = []
-        for sample in itertools.islice(sub.statuses(1.0), 400):  # a live stream: stop at the end
+        # a live stream: stop at the end (the read's bound catches a hang only)
+        for sample in itertools.islice(sub.statuses(30.0), 400):
             if sample.time_s is None:  # a pushed line (the end of the move), not a sample
                 continue
             moving.append(sample.fields["moving"])
@@ -47,28 +49,16 @@ def test_32_clients_read_status_while_a_move_runs():
         assert sv.still_and_null()
 
 
-def test_loop_lateness_with_and_without_32_busy_clients():
-    """Tick lateness idle and under 32 busy clients stays within a generous bound; no reply is wrong or lost, nothing faults (STATUS/s: bench/bench_server.py)."""
+def test_32_busy_clients_get_only_right_replies_and_fault_nothing():
+    """32 busy clients: no reply wrong or lost, nothing faults, the loop ticks on and a new connection is answered (lateness and STATUS/s idle vs loaded: bench/bench_server.py)."""
     with served(wall=True) as sv:
         loop = sv.rig.loop
-        stats = lambda: sv.runner.call(loop.statistics)  # noqa: E731
         sv.runner.call(loop.reset_statistics)
-        sv.runner.sleep(1.5)
-        idle = stats()
-        sv.runner.call(loop.reset_statistics)
-        load = run_load(sv.host, sv.port, 32, 1.5, "STATUS")
-        busy = stats()
-        print(
-            f"\nidle: p99 lateness {idle.lateness.p99_ns / 1e3:.0f} µs, {idle.overruns} overruns "
-            f"in {idle.lateness.count} ticks; 32 clients: {load['per_s']:.0f} STATUS/s, p99 "
-            f"{busy.lateness.p99_ns / 1e3:.0f} µs, {busy.overruns} overruns in "
-            f"{busy.lateness.count} ticks"
-        )
-        assert load["errors"] == 0 and load["requests"] > 0
+        load = run_load(sv.host, sv.port, 32, 1.5, "STATUS", at_least=500)
+        busy = sv.runner.call(loop.statistics)
+        assert load["errors"] == 0 and load["requests"] >= 2 * 500
         assert sv.rig.fault is None
-        assert busy.lateness.count > 1000
-        assert busy.lateness.p99_ns < max(LATE_P99_BOUND_NS, 4 * idle.lateness.p99_ns)
-        assert busy.overruns < busy.lateness.count // 10
+        assert busy.lateness.count > 0
         s = sv.raw()
         s.sendall(b"STATUS\n")
         assert read_lines(s, 1)[0].startswith("OK t=")

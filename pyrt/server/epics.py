@@ -575,6 +575,7 @@ class EpicsService:
 
         self._loop = asyncio.get_running_loop()
         self._task = asyncio.current_task()
+        await self._first_values()
         ctx = Context(self.pvdb, self.interfaces)
 
         async def startup(async_lib: Any) -> None:
@@ -584,6 +585,26 @@ class EpicsService:
         await ctx.run(startup_hook=startup)
 
     # -- the values ----------------------------------------------------------------
+
+    #: At most this long (s) the server waits for the loop's first status
+    #: snapshot before it serves (a loop that has not ticked by then: the PVs
+    #: are served and their values follow).
+    FIRST_VALUES_S = 2.0
+
+    async def _first_values(self) -> None:
+        """The status PVs hold the loop's first snapshot before any client can
+        find them, never the placeholders they were built with.  On a virtual
+        clock the loop ticks only when its caller asks: nothing to wait for."""
+        hub = self.server.hub
+        if not self.runner.virtual:
+            loop = asyncio.get_running_loop()
+            deadline = loop.time() + self.FIRST_VALUES_S
+            while hub.snapshot[2] is None and loop.time() < deadline:
+                await asyncio.sleep(0.005)
+        t_ns, _tick, values = hub.snapshot
+        if values is not None:
+            await self.pvdb[self.prefix + "T"].write(t_ns / 1e9)
+            await self._write_all(self._fields, values)
 
     async def _update(self) -> None:
         loop = asyncio.get_running_loop()

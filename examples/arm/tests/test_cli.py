@@ -17,6 +17,8 @@ import pytest
 
 #: Generous: a loaded two-core machine may be slow to start a Python process.
 START_S = 60.0
+#: A Channel Access read's bound: only a hang takes this long, on a loaded machine too.
+CA_S = 30.0
 
 SCRIPT = """\
 arm to 45 30
@@ -174,19 +176,19 @@ def test_with_epics_q0_shows_the_joint_limits_as_its_display_limits():
     proc = _Proc(["-m", "pyrt", "arm", "--headless", "--epics", "T:"], env=env)
     try:
         proc.expect(r"EPICS Channel Access: PVs T:")
-        meta = read("T:Q0", data_type=ChannelType.CTRL_DOUBLE, timeout=5.0,
+        meta = read("T:Q0", data_type=ChannelType.CTRL_DOUBLE, timeout=CA_S,
                     repeater=False).metadata
         assert meta.units == b"deg"
         assert (meta.lower_disp_limit, meta.upper_disp_limit) == (-170.0, 170.0)
         assert (meta.lower_alarm_limit, meta.upper_alarm_limit) == (-170.0, 170.0)
-        q1 = read("T:Q1", data_type=ChannelType.CTRL_DOUBLE, timeout=5.0,
+        q1 = read("T:Q1", data_type=ChannelType.CTRL_DOUBLE, timeout=CA_S,
                   repeater=False).metadata
         assert (q1.lower_disp_limit, q1.upper_disp_limit) == (-150.0, 150.0)
-        x = read("T:X", data_type=ChannelType.CTRL_DOUBLE, timeout=5.0, repeater=False)
+        x = read("T:X", data_type=ChannelType.CTRL_DOUBLE, timeout=CA_S, repeater=False)
         assert (x.metadata.units, x.metadata.upper_disp_limit) == (b"mm", 550.0)
         assert abs(float(x.data[0]) - 300.0) < 0.1  # the arm starts at q 0, 90: tip (300, 250)
         proc.proc.send_signal(signal.SIGTERM)
-        assert proc.proc.wait(20) == 0
+        assert proc.proc.wait(START_S) == 0
     finally:
         proc.kill()
         for k, v in saved.items():
