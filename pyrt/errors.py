@@ -39,6 +39,7 @@ __all__ = [
     "BoardError",
     "CommandError",
     "ConfigError",
+    "DiskError",
     "Fault",
     "FaultError",
     "MailboxTimeout",
@@ -72,6 +73,19 @@ class ConfigError(PyrtError):
         if self.line is None:
             return f"{self.file}: {self.message}"
         return f"{self.file}:{self.line}: {self.message}"
+
+
+class DiskError(PyrtError):
+    """A file pyrt writes could not be written (the disk is full, a write or
+    an fsync failed).  A running robot's write error is a fault like any other;
+    ``path`` is the file (or None), ``errno`` the system's error number (or None).
+    """
+
+    def __init__(self, message: str, path: str | None = None, errno: int | None = None):
+        self.message = message
+        self.path = path
+        self.errno = errno
+        super().__init__(message)
 
 
 class BoardError(PyrtError):

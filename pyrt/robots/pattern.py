@@ -121,7 +121,7 @@ def log_writer(path: str | Path, kind: str = "thread") -> Writer:
     thread: the loop never waits for the disk) or ``"sync"`` (at once)."""
     sink = PatternLog(path)
     if kind == "sync":
-        return SyncWriter(sink)
+        return SyncWriter(sink, what=f"pattern log {path}")
     if kind == "thread":
         return ThreadWriter(sink, name="pyrt-pattern-log", what=f"pattern log {path}")
     raise ValueError(f"pattern log writer must be 'sync' or 'thread', got {kind!r}")

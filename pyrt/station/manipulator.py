@@ -70,7 +70,7 @@ from pyrt.db import (
     station_directory,
 )
 from pyrt.db import Station as StationDB
-from pyrt.errors import BoardError, CommandError, ConfigError, NativeError, PyrtError
+from pyrt.errors import BoardError, CommandError, ConfigError, DiskError, NativeError, PyrtError
 from pyrt.native import FuzzyParams, NativeInputError
 from pyrt.robots.av import AV
 from pyrt.robots.axis import Axis, tension_alarms
@@ -431,6 +431,8 @@ class ManipulatorStation(Station):
             self.attach_world(self.plant.step, "plant")
         self.loop.attach(self.queue, name=f"queue:{pa.name}")
         self._writeback_failure: str | None = None
+        #: What write-back could not write on the way out (said in the closing line).
+        self.shutdown_failure: PyrtError | None = None
         self.loop.attach(self._write_back, name="writeback")
 
         self.words = ManipulatorWords(self)
@@ -501,6 +503,9 @@ class ManipulatorStation(Station):
             return
         try:
             self.writeback.poll(now_ns)
+        except DiskError as exc:  # a disk that refuses: a fault each time
+            self._writeback_failure = None
+            self.trip(str(exc), source="WRITEBACK")
         except PyrtError as exc:
             cause = f"database write-back refused: {exc}"
             if cause != self._writeback_failure:
@@ -681,6 +686,9 @@ class ManipulatorStation(Station):
                 for k, c in enumerate("xyz")]
 
     def closing_note(self) -> str:
+        if self.shutdown_failure is not None:
+            return (f"; databases in {self.directory} keep the values last written "
+                    f"({self.shutdown_failure})")
         if self.fault is not None:
             return (f"; databases in {self.directory} keep the values last written before "
                     "the fault")
@@ -702,9 +710,10 @@ class ManipulatorStation(Station):
                 return
             self.writeback.poll(self.loop.now_ns + 10**12)
         except PyrtError as exc:  # the file keeps its last good value
+            self.shutdown_failure = exc
             self.stdout.write(f"database write-back refused at shutdown: {exc}\n")
         finally:
-            self.writeback.close()
+            self.shutdown_failure = self.writeback.close() or self.shutdown_failure
             self.stop_log()
 
 
