@@ -73,8 +73,8 @@ def lock_directory(directory: str | os.PathLike[str]) -> DirectoryLock:
         with contextlib.suppress(OSError):
             lock.release()
         raise ConfigError(f"cannot start on the station directory: writing {LOCK_FILE} "
-                          f"failed: {_reason(exc)}; the databases could not be written "
-                          "back either: free some space (or give another --db) first",
+                          f"failed: {_reason(exc)}; write-back could not keep the databases "
+                          "either: free some space (or give another --db) first",
                           str(d)) from None
     return DirectoryLock(d, fd)
 

@@ -291,7 +291,8 @@ class Station:
                                       "write-back")
                 by_type[t][slot] = value
             staged: list[tuple[str, DatFile, dict[str, Any], bytes]] = []
-            for t, values in by_type.items():
+            # files in one order whatever the batch's (a failure names the same file)
+            for t, values in sorted(by_type.items(), key=lambda kv: TYPES.index(kv[0])):
                 staged_file = self._stage(t, values)
                 if staged_file is not None:
                     staged.append((t, *staged_file))
