@@ -63,6 +63,7 @@ from pyrt.db import (
     FILES,
     STATIONS,
     DirectoryLock,
+    check_startup_correction,
     copy_station,
     default_working_directory,
     load_station,
@@ -467,6 +468,10 @@ class ManipulatorStation(Station):
             db_zero = a.encoder.zero_length
             tol = RECONCILE_COUNTS * abs(a.encoder.slope)
             if abs(db_zero - p) > tol:
+                check_startup_correction(
+                    st.encoder_of(rec), "ZEROLENGTH", db_zero, p,
+                    what="the rope's length with the source at POSITION",
+                    check=f"POSITION (POLYAXIS.dat) and AXIS {rec.name} DEADLENGTH (AXIS.dat)")
                 a.encoder.zero_length = p
                 notes.append(f"{a.encoder.name} ZEROLENGTH {db_zero:.3f} cm is "
                              f"{db_zero - p:+.3f} cm from the rope with the source at POSITION; "
