@@ -30,7 +30,7 @@ from pyrt._version import __version__
 from pyrt.cli._station import station_parser
 from pyrt.commands import RobotShell
 from pyrt.console import Console
-from pyrt.errors import CommandError, ConfigError
+from pyrt.errors import CommandError, ConfigError, PyrtError
 from pyrt.journal import JournalError
 from pyrt.scheduler import Loop
 from pyrt.scope.scope import MAX_BUFFER_BYTES, MAX_LENGTH
@@ -67,6 +67,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scope", metavar="CHANNELS",
                    help="sample these signals (comma-separated, as 'scope add' names them) "
                         "over every replayed tick")
+    p.add_argument("--factory", metavar="MODULE:FACTORY",
+                   help="replay a journal recorded with 'pyrt run MODULE:FACTORY': the "
+                        "factory it names is imported only when given here, the same")
     p.add_argument("--scope-save", metavar="FILE",
                    help="write the sampled signals to FILE (.csv, .npz, or .png: needs "
                         "matplotlib)")
@@ -134,8 +137,10 @@ def _arguments(replay: Replay, factory: Any, directory: str) -> argparse.Namespa
     parser = station_parser(factory, "pyrt replay")
     args = parser.parse_args([])
     defaults = vars(args)
+    actions = {a.dest: a for a in parser._actions}
     for key, value in replay.arguments.items():
         if key in defaults and key not in _NOT_REPLAYED:
+            _check_option(replay.path, actions.get(key), key, value)
             setattr(args, key, value)
     args.boards = replay.url
     args.speed = None
@@ -151,6 +156,33 @@ def _arguments(replay: Replay, factory: Any, directory: str) -> argparse.Namespa
     return args
 
 
+def _check_option(path: str, action: argparse.Action | None, key: str, value: Any) -> None:
+    """ConfigError unless ``value`` is one the option's own parser could have given
+    (a journal from elsewhere may hold anything: it is refused, not obeyed)."""
+    if action is None or value is None or value == action.default:
+        return
+    many = action.nargs not in (None, 0, "?") or isinstance(action, argparse._AppendAction)
+    values = value if isinstance(value, list) and many else [value]
+    for v in values:
+        if action.nargs == 0:  # a flag
+            ok = isinstance(v, bool)
+        elif isinstance(v, bool) or not isinstance(v, str | int | float):
+            ok = False
+        elif action.type is None:
+            ok = isinstance(v, str)
+        else:
+            try:
+                ok = action.type(str(v)) == v  # type: ignore[operator]
+            except (TypeError, ValueError, argparse.ArgumentTypeError, PyrtError):
+                ok = False
+        if ok and action.choices is not None:
+            ok = v in action.choices
+        if not ok:
+            raise ConfigError(f"journal {path}: its run's option {key} is {str(value)[:40]!r}, "
+                              "which that option never takes (not a journal pyrt wrote); "
+                              "not replayed")
+
+
 def run(args: argparse.Namespace) -> int:
     out = sys.stdout
 
@@ -163,7 +195,17 @@ def run(args: argparse.Namespace) -> int:
         print(f"pyrt replay: {exc}", file=sys.stderr)
         return 1
     spec = replay.factory
-    factory = load_factory(spec) if ":" in spec else find_station(spec)
+    if ":" in spec:  # code outside the installed stations: never chosen by a journal
+        if args.factory != spec:
+            replay.close()
+            print(f"pyrt replay: journal {args.file} was recorded with the station factory "
+                  f"{spec[:80]!r}, code outside pyrt's installed stations: a journal does "
+                  f"not choose code to run; if you trust it, give --factory {spec[:80]}",
+                  file=sys.stderr)
+            return 1
+        factory = load_factory(spec)
+    else:
+        factory = find_station(spec)
     tmp = tempfile.mkdtemp(prefix="pyrt-replay-")
     station = None
     try:
