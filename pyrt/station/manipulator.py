@@ -467,16 +467,17 @@ class ManipulatorStation(Station):
             a.encoder.reset()
             db_zero = a.encoder.zero_length
             tol = RECONCILE_COUNTS * abs(a.encoder.slope)
+            geometric = self.polyaxis.model.length_at(self.axes.index(a), pa_rec.position)
             if abs(db_zero - p) > tol:
                 check_startup_correction(
                     st.encoder_of(rec), "ZEROLENGTH", db_zero, p,
+                    explained=geometric - rec.length,
                     what="the rope's length with the source at POSITION",
-                    check=f"POSITION (POLYAXIS.dat) and AXIS {rec.name} DEADLENGTH (AXIS.dat)")
+                    check=f"AXIS {rec.name} DEADLENGTH and LENGTH (AXIS.dat)")
                 a.encoder.zero_length = p
                 notes.append(f"{a.encoder.name} ZEROLENGTH {db_zero:.3f} cm is "
                              f"{db_zero - p:+.3f} cm from the rope with the source at POSITION; "
                              f"set to {p:.3f} cm")
-            geometric = self.polyaxis.model.length_at(self.axes.index(a), pa_rec.position)
             if abs(rec.length - geometric) > tol:
                 notes.append(f"AXIS {rec.name} LENGTH {rec.length:.3f} cm is "
                              f"{rec.length - geometric:+.3f} cm from the rope at POSITION "
