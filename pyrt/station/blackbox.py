@@ -30,6 +30,13 @@ if the recorder is closed first) writes, beside the station's databases
   marked (when matplotlib is installed: ``pip install 'pyrt[plot]'``;
   without it the first line says so).
 
+Files that cannot be written (a full disk) are said in a line naming each
+one and the reason, and are a fault of the station (source ``BLACKBOX``,
+tripped by the loop at its next record).  Closing writes every black box
+still due at once (the operator quit right after a fault) and says what it
+could not write through the station's ``close_report``, the console being
+gone by then.
+
 The CSV and the PNG are written atomically, never by the loop: the loop
 thread only samples, and at the due tick hands the work over to a thread of
 the black box's own (at a lower priority), which formats the CSV a few rows

@@ -80,7 +80,9 @@ class Sink(Protocol):
 
 
 class Writer(Protocol):
-    """Where a batch of ``{(TYPE, name, KEY): value}`` goes."""
+    """Where a batch of ``{(TYPE, name, KEY): value}`` goes.  A writer may also have
+    ``check()``, raising a failure found since the last one (:class:`ThreadWriter`);
+    :meth:`WriteBack.poll` calls it every poll."""
 
     def submit(self, changes: Mapping[Any, Any]) -> None: ...
 
