@@ -224,6 +224,29 @@ def test_a_calibration_the_disk_refuses_comes_back_at_the_next_poll(tmp_path, mo
     assert wb.close() is None
 
 
+def test_a_refused_value_is_written_once_there_is_room_though_it_never_changes(
+        tmp_path, monkeypatch):
+    """A stationary value the disk refused (the thread's batch) is written again at the
+    write-back's pace once there is room, with no new value to carry it."""
+    disk = FullDisk(monkeypatch)
+    directory = copy_station("prototype", tmp_path / "p")
+    db = load_station(directory)
+    wb = WriteBack(db, ThreadWriter(db))
+    name = db.polyaxis().name
+    wb.watch_position(name, lambda: ((1.0, 0.0, 80.0), False))
+    disk.full = True
+    wb.poll(0)
+    with pytest.raises(DiskError):
+        wb.flush(10)  # the thread's failure, reported once
+    wb.poll(10**6)
+    disk.full = False
+    assert wb.poll(2 * 10**9) == 0  # not due: nothing tried yet
+    wb.poll(11 * 10**9)  # due: the refused batch goes again
+    wb.flush(10)
+    assert load_station(directory).polyaxis().position == pytest.approx((1.0, 0.0, 80.0))
+    assert wb.close() is None
+
+
 # -- the journal and the black box -----------------------------------------------------------
 
 

@@ -157,6 +157,11 @@ class ThreadWriter:
         if error is not None:
             raise _failure(self.what, error) from error
 
+    @property
+    def unwritten(self) -> bool:
+        """Whether a refused batch waits to be written again (with the next submit)."""
+        return bool(self._failed)
+
     def check(self) -> None:
         """Raise a write that failed since the last report (the loop's poll, every
         time: a lock only when there is one)."""
@@ -349,6 +354,8 @@ class WriteBack:
         self._next_due = next_due if next_due is not None else now_ns + self.moving_period_ns
         if self._unwritten:
             batch = {**self._unwritten, **batch}
+        if not batch and getattr(self.writer, "unwritten", False):
+            self.writer.submit({})  # a refused batch, tried again at the write-back's pace
         if batch:
             # a refused batch raises here and leaves ``last`` alone: retried when next due
             self.writer.submit(batch)
