@@ -381,6 +381,29 @@ def test_a_journal_naming_code_outside_the_installed_stations_is_refused(gripper
     assert "cannot import" not in err and "pyrt_no_such_module_xyz" not in sys.modules
 
 
+def test_an_option_whose_type_gives_a_tuple_is_still_replayed(tmp_path):
+    """A journal pyrt wrote keeps replaying: the arm's --start Q0,Q1 (recorded as a list)
+    is taken; the same option holding what its parser never gives is refused."""
+    import dataclasses
+    import json
+
+    from pyrt.journal.format import Header
+
+    frames = _frames((JOURNALS / "arm.pj").read_bytes())
+    header = Header.decode(frames[0][1])
+    for start, replayed in (([10.0, 20.0], True), ([1], False), ("x", False)):
+        meta = json.loads(json.dumps(dict(header.metadata)))
+        meta["args"]["start"] = start
+        path = tmp_path / "arm.pj"
+        path.write_bytes(frame(KIND_HEADER, dataclasses.replace(header, metadata=meta).encode())
+                         + b"".join(frame(k, p) for k, p in frames[1:]))
+        rc, out, err, built = _replay(path)
+        if replayed:
+            assert rc == 0 and built and out.strip().endswith("identical"), out + err
+        else:
+            assert rc == 1 and not built and "its run's option start is" in err
+
+
 def test_a_random_file_is_not_a_journal(tmp_path):
     """Random bytes, an empty file and a text file: refused in one line, nothing built."""
     for name, data in [("random.pj", bytes(range(256)) * 8), ("empty.pj", b""),

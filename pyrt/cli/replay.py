@@ -166,6 +166,12 @@ def _check_option(path: str, action: argparse.Action | None, key: str, value: An
     for v in values:
         if action.nargs == 0:  # a flag
             ok = isinstance(v, bool)
+        elif isinstance(v, list) and action.type is not None:  # a type giving a tuple
+            try:  # (the arm's --start Q0,Q1): its text is the items, comma-separated
+                got = action.type(",".join(str(x) for x in v))  # type: ignore[operator]
+                ok = isinstance(got, list | tuple) and list(got) == v
+            except (TypeError, ValueError, argparse.ArgumentTypeError, PyrtError):
+                ok = False
         elif isinstance(v, bool) or not isinstance(v, str | int | float):
             ok = False
         elif action.type is None:
