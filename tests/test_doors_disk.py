@@ -247,6 +247,38 @@ def test_a_refused_value_is_written_once_there_is_room_though_it_never_changes(
     assert wb.close() is None
 
 
+def test_a_pattern_log_the_disk_refuses_ends_the_pattern_and_says_so(tmp_path, monkeypatch):
+    """The pattern's log fails after its first line: no further move is made (none the log
+    could not record), the robot stopped where the first move ended, and a line says why."""
+    import pyrt.robots.pattern as pattern
+
+    real = pattern.PatternLog.write_back
+    calls = [0]
+
+    def full(self, changes):
+        calls[0] += 1
+        if calls[0] > 1:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(self.path))
+        return real(self, changes)
+
+    monkeypatch.setattr(pattern.PatternLog, "write_back", full)
+    st = _station(tmp_path, "sync")
+    r = st.start()
+    pat = tmp_path / "p.pat"
+    pat.write_text("p.log\n0 0 60\n0 0 80\n")
+    try:
+        r.call(st.polyaxis.run_command, "pattern", str(pat))
+        r.wait_until(lambda: st.polyaxis.pattern_job.done, 600)
+        assert not st.polyaxis.active and not st.motors_running()
+        assert abs(st.polyaxis.position[2] - 60.0) < 1.0  # the second endpoint never started
+        said = [m for m in r.messages() if "pattern abandoned" in str(m)]
+        assert said == [f"{st.polyaxis.name}: pattern abandoned: pattern log {tmp_path / 'p.log'} "
+                        f"failed: cannot write {tmp_path / 'p.log'}: {FULL}; the robot is "
+                        "stopped where its last move ended"]
+    finally:
+        st.close()
+
+
 # -- the journal and the black box -----------------------------------------------------------
 
 

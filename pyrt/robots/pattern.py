@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from pyrt.db import read_regular_file
-from pyrt.errors import CommandError, ConfigError
+from pyrt.errors import CommandError, ConfigError, DiskError
 from pyrt.robots.stops import StopReason, StopRecord
 from pyrt.tasks.writeback import SyncWriter, ThreadWriter, Writer
 from pyrt.units import UnitError, parse_number
@@ -156,13 +156,25 @@ def run_pattern(robot: PatternRobot, points: Sequence[Vec], open_log: Callable[[
                 ) -> Generator[None, None, list[StopRecord | str]]:
     """A foreground job: move to each endpoint, pause, go on; the log (a
     writer from ``open_log()`` at the first step, closed at the end without
-    waiting) records where each move stopped and why.  Returns the records."""
+    waiting) records where each move stopped and why.  A log the disk refuses
+    ends the pattern where the last move ended (no move is made that the log
+    cannot record) and is said on the robot's ``stdout``.  Returns the records."""
     results: list[StopRecord | str] = []
     writer = open_log()
     seq = [0]
+    failed: list[DiskError] = []
 
     def write(line: str) -> None:
-        writer.submit({seq[0]: line})
+        if failed:
+            return
+        try:
+            writer.submit({seq[0]: line})
+        except DiskError as exc:  # the log cannot be written: the pattern ends, said
+            failed.append(exc)
+            out = getattr(robot, "stdout", None)
+            if out is not None:
+                out.write(f"{robot.name}: pattern abandoned: {exc}; the robot is stopped "
+                          "where its last move ended\n")
         seq[0] += 1
 
     def ended(k: int, p: Vec) -> StopRecord | None:
@@ -179,6 +191,8 @@ def run_pattern(robot: PatternRobot, points: Sequence[Vec], open_log: Callable[[
         k, moving = 0, False
         try:
             for k, p in enumerate(points, 1):
+                if failed:  # no move is made that the log cannot record
+                    return results
                 try:
                     robot.to(p)
                 except CommandError as exc:
@@ -190,6 +204,8 @@ def run_pattern(robot: PatternRobot, points: Sequence[Vec], open_log: Callable[[
                     yield
                 moving = False
                 rec = ended(k, p)
+                if failed:
+                    return results
                 if rec is not None and rec.reason not in (StopReason.ENDPOINT_STOP,
                                                           StopReason.STUCK_STOP):
                     write(f"# pattern abandoned after endpoint {k}: {rec.reason.value}")
