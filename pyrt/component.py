@@ -256,6 +256,8 @@ class Param:
         rng = f" ({self.range_text})" if self.range_text else ""
         try:
             if self.hex:
+                if not re.fullmatch(r"[0-9A-Fa-f]+", t):  # int() takes other scripts'
+                    raise ValueError(t)                     # digits, 0x and 1_0 too
                 value: float | int = int(t, 16)
             else:
                 value = parse_value(t, self.units)  # the one number-and-unit grammar

@@ -39,6 +39,7 @@ __all__ = [
     "BoardError",
     "CommandError",
     "ConfigError",
+    "DiskError",
     "Fault",
     "FaultError",
     "MailboxTimeout",
@@ -80,6 +81,19 @@ class UsageError(ConfigError):
     an option that needs another, a name that is no choice.  Found before
     anything runs; the ``pyrt`` program ends it as argparse ends its own
     (``pyrt CMD: error: ...``, exit status 2), where a run that fails is 1."""
+
+
+class DiskError(PyrtError):
+    """A file pyrt writes could not be written (the disk is full, a write or
+    an fsync failed).  A running robot's write error is a fault like any other;
+    ``path`` is the file (or None), ``errno`` the system's error number (or None).
+    """
+
+    def __init__(self, message: str, path: str | None = None, errno: int | None = None):
+        self.message = message
+        self.path = path
+        self.errno = errno
+        super().__init__(message)
 
 
 class BoardError(PyrtError):

@@ -1,17 +1,38 @@
 """Atomic file replacement: a crash at any moment leaves the old file or the new one.
 
 Used by every writer of files a user relies on: the object databases, scope
-exports, logs written as a whole.
+exports, logs written as a whole.  :func:`disk_error` turns the system's
+``OSError`` of a failed write into the one :class:`~pyrt.errors.DiskError`
+every writer reports (the file and the system's reason, one sentence).
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_write"]
+from pyrt.errors import DiskError
+
+__all__ = ["FULL", "atomic_write", "disk_error", "restate"]
+
+#: The system's errors that mean the disk (or the user's quota) is full.
+FULL = frozenset({errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC)})
+
+
+def disk_error(what: str, path: str | os.PathLike[str] | None, exc: OSError) -> DiskError:
+    """The DiskError of ``what`` (``"database write-back"``) failing on ``path``:
+    ``"database write-back failed: cannot write /db/AXIS.dat: No space left on
+    device (the disk is full)"`` (without ``what``: from ``"cannot write"`` on)."""
+    where = os.fspath(path) if path is not None else (exc.filename or None)
+    reason = exc.strerror or str(exc) or type(exc).__name__
+    if exc.errno in FULL:
+        reason += " (the disk is full)"
+    target = f"cannot write {where}: " if where else ""
+    return DiskError(f"{what} failed: {target}{reason}" if what else f"{target}{reason}",
+                     None if where is None else str(where), exc.errno)
 
 
 def atomic_write(path: Path, data: bytes) -> None:
@@ -44,3 +65,8 @@ def atomic_write(path: Path, data: bytes) -> None:
         os.fsync(dfd)
     finally:
         os.close(dfd)
+
+
+def restate(what: str, exc: DiskError) -> DiskError:
+    """``exc`` said as ``what``'s failure (``"pattern log failed: cannot write ..."``)."""
+    return DiskError(f"{what} failed: {exc.message}", exc.path, exc.errno)

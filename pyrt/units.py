@@ -7,9 +7,11 @@ quantity (unless the caller demands a unit, as Table 1 does for the source
 mass and volume).
 
 Numbers are written the way the database files write them: an optional
-sign, digits with an optional decimal point (``0.``, ``.5``, ``95.569618``)
-and an optional exponent.  Python's extras (``nan``, ``inf``, ``1_000``,
-hexadecimal) are refused: a database value is a plain decimal number.
+sign, ASCII digits with an optional decimal point (``0.``, ``.5``,
+``95.569618``) and an optional exponent.  Python's extras (``nan``, ``inf``,
+``1_000``, hexadecimal, the digits of other scripts such as ``\u0663\u0660``
+or fullwidth ``\uff13``) are refused: a database value is a plain decimal
+number.
 
 The same grammar serves every numeric argument of every command (console,
 network and EPICS ``CMD`` alike): :func:`parse_value` takes a number with an
@@ -47,8 +49,9 @@ class UnitError(PyrtError, ValueError):
     """A number or unit that is malformed, unknown, or not of the quantity asked for."""
 
 
-#: A decimal number as the database files write it.
-NUMBER_PATTERN = r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?"
+#: A decimal number as the database files write it: ASCII digits only (Python's
+#: ``\d`` and ``float()`` take any script's digits: ``"\u0663\u0660"`` would be 30).
+NUMBER_PATTERN = r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
 _NUMBER = re.compile(NUMBER_PATTERN)
 _QUANTITY = re.compile(rf"\s*({NUMBER_PATTERN})\s*(\S*)\s*")
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import random
+import re
 import signal
 import subprocess
 import sys
@@ -33,7 +34,7 @@ from pyrt.db import (
     station_directory,
 )
 from pyrt.db import __all__ as db_all
-from pyrt.errors import ConfigError
+from pyrt.errors import ConfigError, DiskError
 
 LB = 4.4482216152605
 
@@ -439,7 +440,8 @@ def test_bad_write_back_changes_nothing(tmp_path: Path, change: tuple, message: 
 
 
 def test_failed_rename_leaves_old_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """If the rename fails the old file and the in-memory records stay; no temp file is left."""
+    """If the rename fails the old file and the in-memory records stay; no temp file is left;
+    the error is a DiskError naming the file and the reason."""
     d = _station(tmp_path)
     before = (d / "AXIS.dat").read_bytes()
     s = load_station(d)
@@ -448,7 +450,8 @@ def test_failed_rename_leaves_old_file(tmp_path: Path, monkeypatch: pytest.Monke
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(os, "replace", boom)
-    with pytest.raises(OSError):
+    with pytest.raises(DiskError, match=re.escape(f"cannot write {d / 'AXIS.dat'}: No space "
+                                                  "left on device (the disk is full)")):
         s.update("AXIS", "axis0", "LENGTH", 1.0)
     assert (d / "AXIS.dat").read_bytes() == before
     assert s.axis("axis0").length == pytest.approx(293.405273)

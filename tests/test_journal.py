@@ -32,8 +32,10 @@ from pyrt.journal import (
 )
 from pyrt.journal.format import (
     HEADER_SIZE,
+    KIND_HEADER,
     BlockEncoder,
     _Cursor,
+    frame,
     put_svarint,
     put_uvarint,
 )
@@ -434,23 +436,44 @@ def test_bad_ticks_are_refused():
         j.record_tick(3, 3 * PERIOD, 0, 0, [1, 2, 3, 4])
 
 
-def test_a_failing_disk_is_reported_at_close_not_in_the_loop():
-    """A sink that fails: record_tick goes on, the warning and close() name the failure."""
+class Full(io.RawIOBase):
+    """A sink that takes ``room`` bytes, then fails as a full disk does."""
 
-    class Full(io.RawIOBase):
-        def writable(self):
-            return True
+    def __init__(self, room: int = 0):
+        self.room = room
 
-        def write(self, b):
+    def writable(self):
+        return True
+
+    def write(self, b):
+        if len(b) > self.room:
             raise OSError(28, "No space left on device")
+        self.room -= len(b)
+        return len(b)
 
+
+def test_a_failing_disk_is_reported_at_close_not_in_the_loop():
+    """A sink that fails after the header: record_tick goes on, the journal's error, the
+    warning and close() name the failure."""
     warnings = []
-    j = Journal(header(), Full(), warn=warnings.append, lossless=True)
+    j = Journal(header(), Full(room=len(frame(KIND_HEADER, header().encode()))),
+                warn=warnings.append, lossless=True)
     for r in run(600):
         j.record_tick(*r)
     with pytest.raises(JournalError, match="No space left"):
         j.close()
     assert any("No space left" in w for w in warnings)
+    assert "No space left on device (the disk is full)" in j.error
+
+
+def test_a_journal_whose_header_cannot_be_written_is_refused_at_once():
+    """A full disk from the first byte: the Journal is refused when made (before any
+    tick), naming the file and the reason; no thread is left behind."""
+    before = threading.active_count()
+    with pytest.raises(JournalError, match=r"write failed after 0 bytes: No space left on "
+                                           r"device \(the disk is full\)"):
+        Journal(header(), Full())
+    assert threading.active_count() == before
 
 
 def test_writer_names_added_during_the_run():

@@ -39,7 +39,7 @@ from pyrt._version import __version__
 from pyrt.cli._station import station_parser
 from pyrt.commands import RobotShell
 from pyrt.console import Console
-from pyrt.errors import CommandError, ConfigError
+from pyrt.errors import CommandError, ConfigError, PyrtError
 from pyrt.journal import JournalError
 from pyrt.scheduler import Loop
 from pyrt.scope import (
@@ -86,6 +86,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scope", metavar="CHANNELS",
                    help="sample these signals (comma-separated, as 'scope add' names them) "
                         "over every replayed tick")
+    p.add_argument("--factory", metavar="MODULE:FACTORY",
+                   help="replay a journal recorded with 'pyrt run MODULE:FACTORY': the "
+                        "factory it names is imported only when given here, the same")
     p.add_argument("--scope-save", metavar="FILE",
                    help=f"write the sampled signals to FILE ({', '.join(SAVE_SUFFIXES)}; or a "
                         f"plot, {', '.join(PLOT_SUFFIXES)}: needs matplotlib)")
@@ -187,8 +190,10 @@ def _arguments(replay: Replay, factory: Any, directory: str) -> argparse.Namespa
     parser = station_parser(factory, "pyrt replay")
     args = parser.parse_args([])
     defaults = vars(args)
+    actions = {a.dest: a for a in parser._actions}
     for key, value in replay.arguments.items():
         if key in defaults and key not in _NOT_REPLAYED:
+            _check_option(replay.path, actions.get(key), key, value)
             setattr(args, key, value)
     args.boards = replay.url
     args.speed = None
@@ -214,11 +219,20 @@ def _add_channels(station: Any, scope: Scope, channels: list[str]) -> None:
             raise UsageError(f"--scope {ch}: {exc}") from None
 
 
-def build_replayed(replay: Replay, directory: str) -> Any:
+def build_replayed(replay: Replay, directory: str, trusted: str | None = None) -> Any:
     """The station of ``replay``'s run (its factory, options and databases, the
     databases written into ``directory``), attached to the replay, not yet run;
-    ConfigError if the factory is not installed or refuses the options."""
+    ConfigError if the factory is not installed or refuses the options.
+
+    A journal never chooses code to run: a factory outside the installed
+    stations (``MODULE:FACTORY``) is imported only when ``trusted`` names the
+    same (``--factory``)."""
     spec = replay.factory
+    if ":" in spec and trusted != spec:
+        raise ConfigError(
+            f"journal {replay.path} was recorded with the station factory {spec[:80]!r}, "
+            "code outside pyrt's installed stations: a journal does not choose code to "
+            f"run; if you trust it, give --factory {spec[:80]}")
     factory = load_factory(spec) if ":" in spec else find_station(spec)
     st_args = _arguments(replay, factory, directory)
     factory.configure(st_args, lambda line: None)
@@ -229,6 +243,39 @@ def build_replayed(replay: Replay, directory: str) -> Any:
         station = factory.build(loop, st_args)
     replay.attach(station)
     return station
+
+
+def _check_option(path: str, action: argparse.Action | None, key: str, value: Any) -> None:
+    """ConfigError unless ``value`` is one the option's own parser could have given
+    (a journal from elsewhere may hold anything: it is refused, not obeyed)."""
+    if action is None or value is None or value == action.default:
+        return
+    many = action.nargs not in (None, 0, "?") or isinstance(action, argparse._AppendAction)
+    values = value if isinstance(value, list) and many else [value]
+    for v in values:
+        if action.nargs == 0:  # a flag
+            ok = isinstance(v, bool)
+        elif isinstance(v, list) and action.type is not None:  # a type giving a tuple
+            try:  # (the arm's --start Q0,Q1): its text is the items, comma-separated
+                got = action.type(",".join(str(x) for x in v))  # type: ignore[operator]
+                ok = isinstance(got, list | tuple) and list(got) == v
+            except (TypeError, ValueError, argparse.ArgumentTypeError, PyrtError):
+                ok = False
+        elif isinstance(v, bool) or not isinstance(v, str | int | float):
+            ok = False
+        elif action.type is None:
+            ok = isinstance(v, str)
+        else:
+            try:
+                ok = action.type(str(v)) == v  # type: ignore[operator]
+            except (TypeError, ValueError, argparse.ArgumentTypeError, PyrtError):
+                ok = False
+        if ok and action.choices is not None:
+            ok = v in action.choices
+        if not ok:
+            raise ConfigError(f"journal {path}: its run's option {key} is {str(value)[:40]!r}, "
+                              "which that option never takes (not a journal pyrt wrote); "
+                              "not replayed")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -250,7 +297,7 @@ def run(args: argparse.Namespace) -> int:
     tmp = tempfile.mkdtemp(prefix="pyrt-replay-")
     station = None
     try:
-        station = build_replayed(replay, tmp)
+        station = build_replayed(replay, tmp, trusted=args.factory)
         shell = ReplayShell(station, out, runner=FrozenRunner(station))
         channels = _channels(args)
         s = replay.reader.summary()

@@ -13,6 +13,7 @@ rewrites values in place, atomically, keeping every other byte.
 
 from pyrt.db._lock import DirectoryLock, lock_directory
 from pyrt.db._schema import FILES, VERSIONS, defaults
+from pyrt.db._startup import MAX_STARTUP_CORRECTION_CM, check_startup_correction
 from pyrt.db._stations import (
     STATIONS,
     copy_station,
@@ -45,6 +46,7 @@ from pyrt.fileio import atomic_write
 __all__ = [
     "FILES",
     "MAX_DB_BYTES",
+    "MAX_STARTUP_CORRECTION_CM",
     "STATIONS",
     "TYPES",
     "VERSIONS",
@@ -61,6 +63,7 @@ __all__ = [
     "UnknownNameError",
     "Vector",
     "atomic_write",
+    "check_startup_correction",
     "copy_station",
     "default_working_directory",
     "defaults",

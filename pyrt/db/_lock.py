@@ -6,16 +6,19 @@ non-blocking ``flock`` on ``DIR/.pyrt.lock`` and writes the holder's pid
 into it; a second process (or a second station in the same process) gets a
 :class:`~pyrt.errors.ConfigError` naming the holder's pid.  The lock goes
 with the process (the kernel drops it on exit, even after a crash); the
-file stays.
+file stays.  Writing the pid is start-up's first write: a full disk refuses
+the start there, with a sentence, before anything moves.
 """
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import os
 from pathlib import Path
 
 from pyrt.errors import ConfigError
+from pyrt.fileio import FULL
 
 __all__ = ["LOCK_FILE", "DirectoryLock", "lock_directory"]
 
@@ -62,6 +65,20 @@ def lock_directory(directory: str | os.PathLike[str]) -> DirectoryLock:
         raise ConfigError(f"station directory {str(d)!r} is in use by process {holder} "
                           f"(lock {LOCK_FILE}); stop that one first or give another --db",
                           None) from None
-    os.ftruncate(fd, 0)
-    os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
+    try:
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
+    except OSError as exc:  # a full disk: refused at start-up, not a fault later
+        lock = DirectoryLock(d, fd)
+        with contextlib.suppress(OSError):
+            lock.release()
+        raise ConfigError(f"cannot start on the station directory: writing {LOCK_FILE} "
+                          f"failed: {_reason(exc)}; write-back could not keep the databases "
+                          "either: free some space (or give another --db) first",
+                          str(d)) from None
     return DirectoryLock(d, fd)
+
+
+def _reason(exc: OSError) -> str:
+    full = exc.errno in FULL
+    return (exc.strerror or str(exc)) + (" (the disk is full)" if full else "")

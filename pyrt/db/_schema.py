@@ -61,7 +61,7 @@ _PLAIN = {"name", "text", "int", "number", "vector", "angles"}
 MIN_DECIMALS = 6
 
 _NUMBER_TOKEN = re.compile(rf"(?<![\w.+\-])({NUMBER_PATTERN})(?![\w.])")
-_INT = re.compile(r"[+-]?\d+")
+_INT = re.compile(r"[+-]?[0-9]+")  # ASCII digits only, as every number
 _NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.\-]*")
 _NUMBER = re.compile(NUMBER_PATTERN)
 _LEADING_NUMBER = re.compile(rf"({NUMBER_PATTERN})")
@@ -117,6 +117,8 @@ def _positive(v: float) -> str | None:
 
 
 def _nonnegative(v: float) -> str | None:
+    if v == 0 and math.copysign(1.0, v) < 0:  # "-0": a sign slip more likely than a zero
+        return "expected a value >= 0, got -0 (a minus sign on a value that cannot be negative)"
     return None if v >= 0 else f"expected a value >= 0, got {v:g}"
 
 

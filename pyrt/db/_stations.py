@@ -16,7 +16,7 @@ import platformdirs
 
 from pyrt.db._schema import FILES
 from pyrt.errors import ConfigError
-from pyrt.fileio import atomic_write
+from pyrt.fileio import atomic_write, disk_error
 
 __all__ = ["STATIONS", "copy_station", "station_directory"]
 
@@ -63,13 +63,21 @@ def copy_station(name: str, dest_dir: str | os.PathLike[str], *, overwrite: bool
     """
     src = station_directory(name)
     dest = Path(dest_dir)
-    dest.mkdir(parents=True, exist_ok=True)
+    try:
+        dest.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"cannot make the station directory: {exc.strerror or exc}",
+                          str(dest)) from None
     if dest.resolve() == src.resolve():
         raise ConfigError("refusing to copy a packaged station onto itself", str(dest))
     for filename in FILES.values():
         target = dest / filename
         if target.exists() and not overwrite:
             continue
-        atomic_write(target, (src / filename).read_bytes())
-        shutil.copymode(src / filename, target)
+        try:
+            atomic_write(target, (src / filename).read_bytes())
+            shutil.copymode(src / filename, target)
+        except OSError as exc:  # a full disk: a sentence, not a traceback
+            raise ConfigError(f"cannot copy the packaged {name.lower()} station here: "
+                              f"{disk_error('', target, exc).message}", str(dest)) from None
     return dest

@@ -35,7 +35,7 @@ from pyrt.db.records import (
     PolyAxisRecord,
 )
 from pyrt.errors import ConfigError, PyrtError
-from pyrt.fileio import atomic_write
+from pyrt.fileio import atomic_write, disk_error
 
 __all__ = [
     "MAX_DB_BYTES",
@@ -273,8 +273,9 @@ class Station:
         the number is converted into it); each touched file is re-read from
         its new text (so a value a record would refuse is refused here) and
         replaced atomically.  Bad input raises ConfigError and writes
-        nothing.  Returns the files written (a value equal to the file's is
-        no change).
+        nothing.  A file that cannot be written (a full disk) raises
+        DiskError naming it and keeps its last good value.  Returns the files
+        written (a value equal to the file's is no change).
         """
         items = list(changes.items()) if isinstance(changes, Mapping) else list(changes)
         with self._lock:
@@ -290,13 +291,17 @@ class Station:
                                       "write-back")
                 by_type[t][slot] = value
             staged: list[tuple[str, DatFile, dict[str, Any], bytes]] = []
-            for t, values in by_type.items():
+            # files in one order whatever the batch's (a failure names the same file)
+            for t, values in sorted(by_type.items(), key=lambda kv: TYPES.index(kv[0])):
                 staged_file = self._stage(t, values)
                 if staged_file is not None:
                     staged.append((t, *staged_file))
             written = []
             for t, dat, records, data in staged:
-                atomic_write(self.path(t), data)
+                try:
+                    atomic_write(self.path(t), data)
+                except OSError as exc:  # the file keeps its last good value
+                    raise disk_error("", self.path(t), exc) from None
                 self._files[t] = dat
                 self._records[t] = _keep_resolved(self._records[t], records)
                 written.append(self.path(t))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import os
 import threading
 import time
@@ -32,6 +34,14 @@ __all__ = ["DEFAULT_BLOCK_TICKS", "DEFAULT_QUEUE_TICKS", "Journal"]
 DEFAULT_BLOCK_TICKS = 250
 #: Ticks the loop may hand over before the writer takes them; beyond, a gap.
 DEFAULT_QUEUE_TICKS = 4096
+
+def _reason(exc: BaseException) -> str:
+    """The system's reason for a failed write, in words (a full disk said so)."""
+    if isinstance(exc, OSError) and exc.strerror:
+        full = exc.errno in (errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC))
+        return exc.strerror + (" (the disk is full)" if full else "")
+    return str(exc) or type(exc).__name__
+
 
 _GAP = object()
 _NAMES = object()
@@ -122,6 +132,8 @@ class Journal:
         #: Bytes written to the file so far (writer thread).
         self.bytes_written = 0
         #: The first write error (the file is no longer written; the black box is).
+        #: A station's recorder reads it every tick: a journal that cannot be
+        #: written is a fault of the station (:class:`~pyrt.station.recording.Recorder`).
         self.error: str | None = None
         self._fail: BaseException | None = None
         #: Ticks the writer refused (not integers, an output index out of range ...)
@@ -129,6 +141,14 @@ class Journal:
         self.refused = 0
         self.refusal: str | None = None
         self._block_started = 0
+        # The header is written here, not by the thread: a file that cannot be
+        # written (a full disk) refuses the journal, and the run, before it starts.
+        self._write(frame(KIND_HEADER, self.header.encode()), warn=False)
+        if self.error is not None:
+            if self._owned:
+                with contextlib.suppress(OSError):
+                    self._fh.close()
+            raise JournalError(f"journal {self.path}: {self.error}")
         self._thread = threading.Thread(target=self._run, name="pyrt-journal", daemon=True)
         self._thread.start()
 
@@ -281,7 +301,7 @@ class Journal:
                        metadata=h.metadata)
         return h.encode()
 
-    def _write(self, data: bytes) -> None:
+    def _write(self, data: bytes, warn: bool = True) -> None:
         fh = self._fh
         if fh is None or self.error is not None:
             return
@@ -297,8 +317,8 @@ class Journal:
                 flush()
             self.bytes_written += len(data)
         except (OSError, ValueError) as exc:
-            self.error = f"write failed after {self.bytes_written} bytes: {exc}"
-            if self.warn is not None:
+            self.error = f"write failed after {self.bytes_written} bytes: {_reason(exc)}"
+            if self.warn is not None and warn:
                 self.warn(f"journal {self.path}: {self.error}; the file ends there")
 
     def _emit(self, data: bytes, first_time: int, last_time: int, ticks: int) -> None:
@@ -321,10 +341,10 @@ class Journal:
 
     def _run(self) -> None:
         try:
-            self._write(frame(KIND_HEADER, self.header.encode()))
             self._loop()
         except BaseException as exc:
             self._fail = exc
+            self.error = self.error or f"the writer failed: {exc!r}"
             if self.warn is not None:
                 self.warn(f"journal {self.path}: the writer failed: {exc!r}")
             # keep taking records so the loop thread never fills the queue for nothing

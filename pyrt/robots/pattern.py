@@ -19,15 +19,15 @@ at once (``"sync"``: deterministic, for simulated-clock runs and tests).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Generator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
 from pyrt.db import read_regular_file
-from pyrt.errors import CommandError, ConfigError
+from pyrt.errors import CommandError, ConfigError, DiskError
 from pyrt.robots.stops import StopReason, StopRecord
 from pyrt.tasks.writeback import SyncWriter, ThreadWriter, Writer
+from pyrt.units import UnitError, parse_number
 
 __all__ = [
     "MAX_PATTERN_BYTES",
@@ -57,15 +57,21 @@ def read_pattern(text: str) -> tuple[Path, list[Vec], str]:
     try:
         log.parent.mkdir(parents=True, exist_ok=True)
         log.open("a", encoding="utf-8").close()
-    except OSError as exc:
-        raise CommandError(f"pattern: cannot write the log {str(log)!r}: "
-                           f"{exc.strerror}") from None
+    except OSError as exc:  # the name is the file's line 1: not echoed
+        raise CommandError(f"pattern {text.strip()[:200]}:1: cannot write the log file named "
+                           f"on that line: {exc.strerror}") from None
     return log, points, text
 
 
 def parse_pattern(path: str | Path) -> tuple[Path, list[Vec]]:
     """A pattern file: first line the log file (relative to the pattern file),
-    then one endpoint ``x y z`` per line (blank lines and ``//`` comments skipped)."""
+    then one endpoint ``x y z`` per line (blank lines and ``//`` comments
+    skipped), each coordinate a decimal number in cm (ASCII digits, as every
+    number: :func:`pyrt.units.parse_number`).
+
+    A refusal names the file and the line and says what was expected, never
+    what the line holds: ``pattern FILE`` may name any readable file, and
+    its answer goes to whoever asked (a network client too)."""
     p = Path(path)
     try:  # a regular file of bounded size: never /dev/zero, a FIFO or a growing log
         text = read_regular_file(p, MAX_PATTERN_BYTES).decode("utf-8")
@@ -74,7 +80,8 @@ def parse_pattern(path: str | Path) -> tuple[Path, list[Vec]]:
     except OSError as exc:
         raise CommandError(f"pattern: cannot read {str(p)!r}: {exc.strerror}") from None
     except UnicodeDecodeError as exc:
-        raise CommandError(f"pattern: cannot read {str(p)!r}: {exc}") from None
+        raise CommandError(f"pattern: cannot read {str(p)!r}: not UTF-8 text (byte "
+                           f"{exc.start})") from None
     lines = [(n, ln.split("//", 1)[0].strip()) for n, ln in enumerate(text.splitlines(), 1)]
     lines = [(n, ln) for n, ln in lines if ln]
     if not lines:
@@ -86,13 +93,14 @@ def parse_pattern(path: str | Path) -> tuple[Path, list[Vec]]:
     for n, ln in lines[1:]:
         parts = ln.replace(",", " ").split()
         if len(parts) != 3:
-            raise CommandError(f"pattern {p}:{n}: expected an endpoint 'x y z', got {ln!r}")
+            raise CommandError(f"pattern {p}:{n}: expected an endpoint 'x y z' (three numbers, "
+                               "cm); nothing moved")
         try:
-            v = tuple(float(c) for c in parts)
-        except ValueError:
-            raise CommandError(f"pattern {p}:{n}: not numbers: {ln!r}") from None
-        if not all(math.isfinite(c) for c in v):
-            raise CommandError(f"pattern {p}:{n}: endpoint must be finite: {ln!r}")
+            v = tuple(parse_number(c) for c in parts)
+        except UnitError:
+            raise CommandError(f"pattern {p}:{n}: expected an endpoint 'x y z' of three "
+                               "finite decimal numbers (cm, ASCII digits); nothing "
+                               "moved") from None
         points.append(v)  # type: ignore[arg-type]
     if not points:
         raise CommandError(f"pattern {p}: no endpoints after the log file line")
@@ -121,7 +129,7 @@ def log_writer(path: str | Path, kind: str = "thread") -> Writer:
     thread: the loop never waits for the disk) or ``"sync"`` (at once)."""
     sink = PatternLog(path)
     if kind == "sync":
-        return SyncWriter(sink)
+        return SyncWriter(sink, what=f"pattern log {path}")
     if kind == "thread":
         return ThreadWriter(sink, name="pyrt-pattern-log", what=f"pattern log {path}")
     raise ValueError(f"pattern log writer must be 'sync' or 'thread', got {kind!r}")
@@ -148,13 +156,25 @@ def run_pattern(robot: PatternRobot, points: Sequence[Vec], open_log: Callable[[
                 ) -> Generator[None, None, list[StopRecord | str]]:
     """A foreground job: move to each endpoint, pause, go on; the log (a
     writer from ``open_log()`` at the first step, closed at the end without
-    waiting) records where each move stopped and why.  Returns the records."""
+    waiting) records where each move stopped and why.  A log the disk refuses
+    ends the pattern where the last move ended (no move is made that the log
+    cannot record) and is said on the robot's ``stdout``.  Returns the records."""
     results: list[StopRecord | str] = []
     writer = open_log()
     seq = [0]
+    failed: list[DiskError] = []
 
     def write(line: str) -> None:
-        writer.submit({seq[0]: line})
+        if failed:
+            return
+        try:
+            writer.submit({seq[0]: line})
+        except DiskError as exc:  # the log cannot be written: the pattern ends, said
+            failed.append(exc)
+            out = getattr(robot, "stdout", None)
+            if out is not None:
+                out.write(f"{robot.name}: pattern abandoned: {exc}; the robot is stopped "
+                          "where its last move ended\n")
         seq[0] += 1
 
     def ended(k: int, p: Vec) -> StopRecord | None:
@@ -171,6 +191,8 @@ def run_pattern(robot: PatternRobot, points: Sequence[Vec], open_log: Callable[[
         k, moving = 0, False
         try:
             for k, p in enumerate(points, 1):
+                if failed:  # no move is made that the log cannot record
+                    return results
                 try:
                     robot.to(p)
                 except CommandError as exc:
@@ -182,6 +204,8 @@ def run_pattern(robot: PatternRobot, points: Sequence[Vec], open_log: Callable[[
                     yield
                 moving = False
                 rec = ended(k, p)
+                if failed:
+                    return results
                 if rec is not None and rec.reason not in (StopReason.ENDPOINT_STOP,
                                                           StopReason.STUCK_STOP):
                     write(f"# pattern abandoned after endpoint {k}: {rec.reason.value}")

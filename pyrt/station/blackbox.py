@@ -30,6 +30,13 @@ if the recorder is closed first) writes, beside the station's databases
   marked (when matplotlib is installed: ``pip install 'pyrt[plot]'``;
   without it the first line says so).
 
+Files that cannot be written (a full disk) are said in a line naming each
+one and the reason, and are a fault of the station (source ``BLACKBOX``,
+tripped by the loop at its next record).  Closing writes every black box
+still due at once (the operator quit right after a fault) and says what it
+could not write through the station's ``close_report``, the console being
+gone by then.
+
 The CSV and the PNG are written atomically, never by the loop: the loop
 thread only samples, and at the due tick hands the work over to a thread of
 the black box's own (at a lower priority), which formats the CSV a few rows
@@ -342,8 +349,15 @@ class FaultBox:
         return self.black_box.nbytes + self.ring.nbytes
 
     def _post(self, line: str) -> None:
-        runner = self.station.runner
-        if runner is not None:
+        """A line to the application: through the runner while the station runs;
+        once it is closing (the loop stopped, the console gone), to the station's
+        ``close_report`` (the command line's output), so that it is still said."""
+        station = self.station
+        runner = station.runner
+        report = getattr(station, "close_report", None)
+        if report is not None and (self._closed or runner is None or not runner.running):
+            report(line)
+        elif runner is not None:
             runner.post(line)
 
     # -- loop thread -----------------------------------------------------------------------
@@ -413,6 +427,11 @@ class FaultBox:
             self._write(dump)
         self._jobs.put(None)
         self._thread.join(timeout)
+        for dump in self.dumps:
+            if not dump.done.is_set():
+                self._post(f"black box of fault {dump.fault.id}: not written within "
+                           f"{timeout:g} s of closing; {dump.path('.pj')} may be missing "
+                           "or incomplete")
 
     # -- the writing thread ----------------------------------------------------------------
 
@@ -432,8 +451,11 @@ class FaultBox:
                 dump.errors.append(f"{type(exc).__name__}: {exc}")
             finally:
                 if dump.errors:
-                    self._post(f"black box of fault {dump.fault.id}: not all written: "
-                               + "; ".join(dump.errors))
+                    line = (f"black box of fault {dump.fault.id}: not all written: "
+                            + "; ".join(dump.errors))
+                    self._post(line)
+                    if not self._closed:  # a write error is a fault (the loop trips it)
+                        self.recorder.disk_fault(line, "BLACKBOX")
                 dump.done.set()
 
     def _files(self, dump: FaultDump) -> None:

@@ -61,6 +61,7 @@ from pyrt.db import (
     FILES,
     STATIONS,
     DirectoryLock,
+    check_startup_correction,
     copy_station,
     default_working_directory,
     load_station,
@@ -68,7 +69,7 @@ from pyrt.db import (
     station_directory,
 )
 from pyrt.db import Station as StationDB
-from pyrt.errors import BoardError, CommandError, ConfigError, NativeError, PyrtError
+from pyrt.errors import BoardError, CommandError, ConfigError, DiskError, NativeError, PyrtError
 from pyrt.native import FuzzyParams, NativeInputError
 from pyrt.robots.av import AV
 from pyrt.robots.axis import Axis, tension_alarms
@@ -394,6 +395,8 @@ class ManipulatorStation(Station):
             self.attach_world(self.plant.step, "plant")
         self.loop.attach(self.queue, name=f"queue:{pa.name}")
         self._writeback_failure: str | None = None
+        #: What write-back could not write on the way out (said in the closing line).
+        self.shutdown_failure: PyrtError | None = None
         self.loop.attach(self._write_back, name="writeback")
 
         self.profile = ShellProfile(words=ManipulatorWords(self), announce_stops=True)
@@ -426,12 +429,17 @@ class ManipulatorStation(Station):
             a.encoder.reset()
             db_zero = a.encoder.zero_length
             tol = RECONCILE_COUNTS * abs(a.encoder.slope)
+            geometric = self.polyaxis.model.length_at(self.axes.index(a), pa_rec.position)
             if abs(db_zero - p) > tol:
+                check_startup_correction(
+                    st.encoder_of(rec), "ZEROLENGTH", db_zero, p,
+                    explained=geometric - rec.length,
+                    what="the rope's length with the source at POSITION",
+                    check=f"AXIS {rec.name} DEADLENGTH and LENGTH (AXIS.dat)")
                 a.encoder.zero_length = p
                 notes.append(f"{a.encoder.name} ZEROLENGTH {db_zero:.3f} cm is "
                              f"{db_zero - p:+.3f} cm from the rope with the source at POSITION; "
                              f"set to {p:.3f} cm")
-            geometric = self.polyaxis.model.length_at(self.axes.index(a), pa_rec.position)
             if abs(rec.length - geometric) > tol:
                 notes.append(f"AXIS {rec.name} LENGTH {rec.length:.3f} cm is "
                              f"{rec.length - geometric:+.3f} cm from the rope at POSITION "
@@ -454,6 +462,9 @@ class ManipulatorStation(Station):
             return
         try:
             self.writeback.poll(now_ns)
+        except DiskError as exc:  # a disk that refuses: a fault each time
+            self._writeback_failure = None
+            self.trip(str(exc), source="WRITEBACK")
         except PyrtError as exc:
             cause = f"database write-back refused: {exc}"
             if cause != self._writeback_failure:
@@ -596,6 +607,9 @@ class ManipulatorStation(Station):
     def closing_note(self) -> str:
         """Where the source was left, and what became of the databases."""
         here = super().closing_note()
+        if self.shutdown_failure is not None:
+            return (f"{here}; databases in {self.directory} keep the values last written "
+                    f"({self.shutdown_failure})")
         if self.fault is not None:
             return (f"{here}; databases in {self.directory} keep the values last written "
                     "before the fault")
@@ -617,9 +631,10 @@ class ManipulatorStation(Station):
                 return
             self.writeback.poll(self.loop.now_ns + 10**12)
         except PyrtError as exc:  # the file keeps its last good value
+            self.shutdown_failure = exc
             self.say(f"database write-back refused at shutdown: {exc}", "error")
         finally:
-            self.writeback.close()
+            self.shutdown_failure = self.writeback.close() or self.shutdown_failure
             self.stop_log()
 
 

@@ -333,6 +333,11 @@ class Recorder:
         self._events: list[tuple[str, int, str]] = []
         self._missed = loop.missed
         self._unrecorded = 0
+        #: Files of the recorder's that could not be written (the journal, a
+        #: black box), any thread: each is a fault of the station, tripped by
+        #: the loop at the top of its next record (:meth:`disk_fault`).
+        self._disk_faults: list[tuple[str, str]] = []
+        self._journal_said = False
         #: Called at the end of every tick, after it was handed to the journal:
         #: ``listener(tick_index, now_ns)`` (the black box dumps from here).
         self.tick_listeners: list[Callable[[int, int], None]] = []
@@ -370,7 +375,24 @@ class Recorder:
             self._events.append((LOOP_FAULT, fault.id, fault.cause))
         self._events.append(("fault", fault.id, str(fault)))
 
+    def disk_fault(self, cause: str, source: str) -> None:
+        """A file of the recorder's could not be written (any thread): the station
+        trips at the top of the loop's next record, with every motor stopped."""
+        self._disk_faults.append((cause, source))
+
+    def _trip_disk_faults(self) -> None:
+        journal = self.journal
+        if journal.error is not None and not self._journal_said:
+            self._journal_said = True
+            self._disk_faults.append((f"journal {journal.path}: {journal.error}; "
+                                      "the journal ends there", "JOURNAL"))
+        while self._disk_faults:
+            cause, source = self._disk_faults.pop(0)
+            self.station.trip(cause, source=source)
+
     def _tick(self, now_ns: int) -> None:
+        if self._disk_faults or (self.journal.error is not None and not self._journal_said):
+            self._trip_disk_faults()  # before the record: the reflex's outputs are in it
         loop = self.loop
         missed = loop.missed - self._missed
         self._missed = loop.missed

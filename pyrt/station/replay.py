@@ -137,6 +137,36 @@ class _Stop(Exception):
     pass
 
 
+#: The header's metadata a replay reads, and what each must be (a recorder writes
+#: them so; a journal from elsewhere may hold anything: refused, not obeyed).
+_METADATA: dict[str, tuple[tuple[type, ...], str]] = {
+    "factory": ((str,), "a station's name or MODULE:FACTORY"),
+    "boards": ((str,), "a board URL"),
+    "world": ((str,), "a world's name"),
+    "fault": ((str,), "a fault's text"),
+    "in_process": ((bool,), "true or false"),
+    "tick_index": ((int,), "a tick number >= 0"),
+    "inputs_before": ((list,), "a list of integers, one per input"),
+    "args": ((dict,), "the run's options by name"),
+}
+
+
+def _check_metadata(path: str, meta: Mapping[str, Any]) -> None:
+    """JournalError naming the first metadata field that is not as a recorder writes it."""
+    for key, (types, what) in _METADATA.items():
+        if key not in meta or meta[key] is None:
+            continue
+        v = meta[key]
+        ok = isinstance(v, types) and not (bool not in types and isinstance(v, bool))
+        if ok and key == "tick_index":
+            ok = v >= 0
+        elif ok and key == "inputs_before":
+            ok = all(isinstance(x, int) and not isinstance(x, bool) for x in v)
+        if not ok:
+            raise JournalError(f"journal {path}: its header's {key} is {str(v)[:40]!r}, not "
+                               f"{what} (not a journal pyrt wrote); not replayed")
+
+
 class Replay:
     """Replays the journal at ``path`` (see the module text).
 
@@ -158,6 +188,7 @@ class Replay:
         self.header = self.reader.header
         meta = self.header.metadata
         self.meta: Mapping[str, Any] = meta if isinstance(meta, Mapping) else {}
+        _check_metadata(self.path, self.meta)
         self.clock = ReplayClock()
         before = list(self.meta.get("inputs_before") or [])
         if len(before) != len(self.header.inputs):

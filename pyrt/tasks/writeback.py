@@ -23,8 +23,16 @@ costs an fsync of the file and of its directory, milliseconds on a real
 disk, which would overrun a 1 ms tick).  It coalesces pending values (the
 latest value of each key wins), so the pending set is bounded by the
 number of written keys, and a failed write is raised at the next
-``poll``, where the ready queue turns it into a fault.  :class:`SyncWriter`
-writes in the caller: deterministic, for SimClock runs and tests.  Both
+``poll`` (every poll asks the writer, not only one that hands over values),
+where the station turns it into a fault.  :class:`SyncWriter` writes in the
+caller: deterministic, for SimClock runs and tests.
+
+A write the disk refuses (``ENOSPC``, any ``OSError``) is one
+:class:`~pyrt.errors.DiskError` from either writer, said the same way at
+every speed (``database write-back failed: cannot write /db/AXIS.dat: No
+space left on device (the disk is full)``); the values it held are not
+lost: they are written with the next batch (and a calibration's values,
+refused in a command, come back at the next poll as that poll's failure).  Both
 write to any :class:`Sink` (``write_back(changes)``): the station database,
 or a log file that appends its lines in key order (a pattern's log,
 :mod:`pyrt.robots.pattern`).
@@ -39,7 +47,8 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 from pyrt.db import Station
-from pyrt.errors import ConfigError, QueueFullError
+from pyrt.errors import ConfigError, DiskError, PyrtError, QueueFullError
+from pyrt.fileio import disk_error, restate
 from pyrt.scheduler import Clock, ReadyQueue, Routine
 
 __all__ = [
@@ -71,7 +80,9 @@ class Sink(Protocol):
 
 
 class Writer(Protocol):
-    """Where a batch of ``{(TYPE, name, KEY): value}`` goes."""
+    """Where a batch of ``{(TYPE, name, KEY): value}`` goes.  A writer may also have
+    ``check()``, raising a failure found since the last one (:class:`ThreadWriter`);
+    :meth:`WriteBack.poll` calls it every poll."""
 
     def submit(self, changes: Mapping[Any, Any]) -> None: ...
 
@@ -80,16 +91,33 @@ class Writer(Protocol):
     def close(self, wait: bool = True) -> None: ...
 
 
-class SyncWriter:
-    """Writes each batch at once, in the caller (deterministic)."""
+def _failure(what: str, exc: BaseException) -> PyrtError:
+    """A sink's exception as the writer reports it: a disk's as DiskError."""
+    if isinstance(exc, DiskError):
+        return restate(what, exc)
+    if isinstance(exc, OSError):
+        return disk_error(what, None, exc)
+    return ConfigError(f"{what} failed: {exc}")
 
-    def __init__(self, station: Station | Sink):
+
+class SyncWriter:
+    """Writes each batch at once, in the caller (deterministic).  A batch the
+    disk refuses raises DiskError (as :class:`ThreadWriter` reports it)."""
+
+    def __init__(self, station: Station | Sink, what: str = "database write-back"):
         self.station = station
+        self.what = what
         self.batches = 0
 
     def submit(self, changes: Mapping[Any, Any]) -> None:
-        self.station.write_back(changes)
+        try:
+            self.station.write_back(changes)
+        except (DiskError, OSError) as exc:
+            raise _failure(self.what, exc) from exc
         self.batches += 1
+
+    def check(self) -> None:
+        """Nothing is ever pending: nothing to report."""
 
     def flush(self, timeout: float | None = None) -> None:
         """Nothing is ever pending."""
@@ -103,8 +131,10 @@ class ThreadWriter:
 
     Pending values are coalesced by key (the latest wins), so at most
     ``max_pending`` distinct keys wait; more raises QueueFullError.  A write
-    that fails is raised (as ConfigError) at the next ``submit`` or
-    ``flush``.  ``what`` names the writer in its errors.
+    that fails is raised at the next :meth:`check`, ``submit`` or ``flush``
+    (DiskError when the disk refused it, ConfigError otherwise); its values
+    go out again with the next batch (newer values of the same keys win).
+    ``what`` names the writer in its errors.
     """
 
     def __init__(self, station: Station | Sink, max_pending: int = 256,
@@ -118,13 +148,26 @@ class ThreadWriter:
         self._busy = False
         self._closed = False
         self._error: BaseException | None = None
+        self._failed: dict[Any, Any] = {}  # a refused batch, written with the next one
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
 
     def _raise_error(self) -> None:
         error, self._error = self._error, None
         if error is not None:
-            raise ConfigError(f"{self.what} failed: {error}") from error
+            raise _failure(self.what, error) from error
+
+    @property
+    def unwritten(self) -> bool:
+        """Whether a refused batch waits to be written again (with the next submit)."""
+        return bool(self._failed)
+
+    def check(self) -> None:
+        """Raise a write that failed since the last report (the loop's poll, every
+        time: a lock only when there is one)."""
+        if self._error is not None:
+            with self._cond:
+                self._raise_error()
 
     def submit(self, changes: Mapping[Any, Any]) -> None:
         with self._cond:
@@ -135,6 +178,9 @@ class ThreadWriter:
             if len(self._pending) + len(fresh) > self.max_pending:
                 raise QueueFullError(
                     f"{self.what}: more than {self.max_pending} values pending")
+            if self._failed:  # a refused batch goes again, under the newer values
+                self._pending = {**self._failed, **self._pending}
+                self._failed = {}
             self._pending.update(changes)
             self._cond.notify()
 
@@ -149,9 +195,10 @@ class ThreadWriter:
                 self._busy = True
             try:
                 self.station.write_back(batch)
-            except Exception as e:  # reported at the next submit/flush
+            except Exception as e:  # reported at the next check/submit/flush
                 with self._cond:
                     self._error = e
+                    self._failed = {**batch, **self._failed}
             finally:
                 with self._cond:
                     self._busy = False
@@ -165,10 +212,14 @@ class ThreadWriter:
             self._raise_error()
 
     def close(self, wait: bool = True) -> None:
-        """Write what is pending, then stop the thread.  Without ``wait`` (the
-        loop thread, which must not wait for a disk) the thread writes what is
-        pending and ends on its own; a failure then is not reported."""
+        """Write what is pending (a batch refused earlier once more), then stop
+        the thread.  Without ``wait`` (the loop thread, which must not wait for
+        a disk) the thread writes what is pending and ends on its own; a
+        failure then is not reported."""
         with self._cond:
+            if self._failed and not self._closed:
+                self._pending = {**self._failed, **self._pending}
+                self._failed = {}
             self._closed = True
             self._cond.notify_all()
         if not wait:
@@ -228,6 +279,11 @@ class WriteBack:
         #: (now_ns, TYPE, name, KEY, value) of the latest submissions
         self.history: deque[tuple[int, str, str, str, Any]] = deque(maxlen=history)
         self._next_due = 0
+        self._check = getattr(self.writer, "check", None)
+        #: A calibration's batch the writer refused: raised at the next poll,
+        #: handed over again with the next batch.
+        self._refused: PyrtError | None = None
+        self._unwritten: dict[Key, Any] = {}
 
     # -- sources -------------------------------------------------------------
 
@@ -273,7 +329,13 @@ class WriteBack:
     # -- the task ------------------------------------------------------------
 
     def poll(self, now_ns: int) -> int:
-        """Hand every due, changed value to the writer; returns how many."""
+        """Hand every due, changed value to the writer; returns how many.  A write
+        that failed since the last poll (any writer, any speed) is raised here."""
+        if self._refused is not None:
+            refused, self._refused = self._refused, None
+            raise refused
+        if self._check is not None:
+            self._check()
         if now_ns < self._next_due:
             return 0
         batch: dict[Key, Any] = {}
@@ -290,9 +352,14 @@ class WriteBack:
             if next_due is None or w.due_ns < next_due:
                 next_due = w.due_ns
         self._next_due = next_due if next_due is not None else now_ns + self.moving_period_ns
+        if self._unwritten:
+            batch = {**self._unwritten, **batch}
+        if not batch and getattr(self.writer, "unwritten", False):
+            self.writer.submit({})  # a refused batch, tried again at the write-back's pace
         if batch:
             # a refused batch raises here and leaves ``last`` alone: retried when next due
             self.writer.submit(batch)
+            self._unwritten = {}
             for w, value in changed:
                 w.last = value
                 w.writes += 1
@@ -303,7 +370,9 @@ class WriteBack:
                             date: str | None = None, now_ns: int = 0,
                             points: str | None = None) -> None:
         """Write a calibration's SLOPE and OFFSET (and DATE and CALIBRATIONPOINT,
-        the points it was fitted to, if given) once, in one batch."""
+        the points it was fitted to, if given) once, in one batch.  A disk that
+        refuses it is not the calibrating command's error: it is raised at the
+        next :meth:`poll`, as every write-back failure is."""
         record = self.station.loadcell(loadcell)
         batch: dict[Key, Any] = {("LOADCELL", record.name, "SLOPE"): slope,
                                  ("LOADCELL", record.name, "OFFSET"): offset}
@@ -313,7 +382,11 @@ class WriteBack:
             batch[("LOADCELL", record.name, "CALIBRATIONPOINT")] = points
         for (t, n, k), v in batch.items():
             self.history.append((now_ns, t, n, k, v))
-        self.writer.submit(batch)
+        try:
+            self.writer.submit(batch)
+        except DiskError as exc:
+            self._refused = exc
+            self._unwritten.update(batch)
 
     def attach(self, queue: ReadyQueue, address: int, period: int | Callable[[], int],
                clock: Clock | None = None, name: str = "WRITEBACK") -> Routine:
@@ -334,9 +407,22 @@ class WriteBack:
         """Wait until everything handed to the writer is on disk."""
         self.writer.flush(timeout)
 
-    def close(self) -> None:
-        """Write what is pending and stop the writer."""
-        self.writer.close()
+    def close(self) -> PyrtError | None:
+        """Write what is pending and stop the writer.  Returns what could not be
+        written (a refused batch, the disk's refusal now), or None: the way out
+        goes on and says it; it is not raised."""
+        failure, self._refused = self._refused, None
+        try:
+            if self._unwritten:
+                self.writer.submit(self._unwritten)
+                self._unwritten = {}
+        except PyrtError as exc:
+            failure = exc
+        try:
+            self.writer.close()
+        except PyrtError as exc:
+            failure = exc
+        return failure
 
 
 def _plain(value: Any) -> Any:
