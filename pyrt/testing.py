@@ -120,6 +120,10 @@ class StationConformance:
         """Bring a robot that a check found driven back to rest (default: ``stop``)."""
         runner.call(station.stop, take_fault=False)
 
+    def ready(self, station: Station, runner: Any) -> None:
+        """Called once the station is started, before any check: wait here for
+        what a robot does on its own at power-on (default: nothing)."""
+
     def after_record(self, station: Station, runner: Any) -> None:
         """Called after each record the no-move check ran (default: nothing)."""
 
@@ -131,6 +135,7 @@ class StationConformance:
         if runner is None or not runner.running:
             runner = station.start()
         runner.poll()
+        self.ready(station, runner)
         return station, runner
 
     @pytest.fixture
@@ -156,7 +161,7 @@ class StationConformance:
     def records(self, station: Station) -> list[tuple[Component | None, Command]]:
         """Every record: the components', the station's own words, the shell's words."""
         out: list[tuple[Component | None, Command]] = list(station.all_commands())
-        words = getattr(station, "words", None)
+        words = station.profile.words  # the station's own console words (ShellProfile)
         if words is not None:
             out += [(words, r) for r in words.commands()]
         shell = RobotShell(station, io.StringIO())
