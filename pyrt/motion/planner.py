@@ -19,6 +19,8 @@ and checks them by sampling at the trajectory period before anything runs:
   cross a joint limit is refused, naming where (the fraction of the
   segment, the tool position, the joint).
 
+The sampling, the limits' checks and the refusals are :mod:`pyrt.motion._checks`.
+
 Transitions (001, Paul): the space of a transition is the new segment's:
 joint -> joint and Cartesian -> joint in joint space (the joint values at A
 extrapolated with their velocity, 001's cart -> joint), joint -> Cartesian
@@ -32,7 +34,6 @@ polynomial added to the quartic (see ``docs/arm-motion.md``).
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -41,7 +42,8 @@ import numpy as np
 import numpy.typing as npt
 
 from pyrt.kinematics import Chain
-from pyrt.motion._geom import drive_of, log_rot, pose_of
+from pyrt.motion._checks import Refused, Slow, check_segment, end_of, joint_time, tool_travel
+from pyrt.motion._geom import drive_of, pose_of
 from pyrt.motion._pieces import (
     CART,
     JOINT,
@@ -151,18 +153,6 @@ class Tail:
     config: str | None = None
 
 
-class _Refused(Exception):
-    pass
-
-
-class _Slow(Exception):
-    def __init__(self, where: str, what: str, ratio: float = 1.25) -> None:
-        super().__init__(what)
-        self.where = where
-        self.what = what
-        self.ratio = max(ratio, 1.05)
-
-
 class Planner:
     """Plans records for one chain (see the module doc)."""
 
@@ -240,7 +230,7 @@ class Planner:
             n = self.sample_of(tail, t + dt)
             q = self.q_of(piece, t + dt, q0, n)
             if q is None:
-                raise _Refused(f"the motion queued before cannot be followed at {t:.3f} s")
+                raise Refused(f"the motion queued before cannot be followed at {t:.3f} s")
             if space == JOINT:
                 xs.append(q)
             else:
@@ -257,7 +247,7 @@ class Planner:
         """The segment of ``spec`` after ``tail``; RecordError names what is refused."""
         try:
             return self._plan(spec, tail, move, force_sensor)
-        except _Refused as exc:
+        except Refused as exc:
             raise RecordError(f"{spec.name or 'record'}: refused: {exc}") from None
 
     def _plan(self, spec: MotionSpec, tail: Tail, move: Move, force_sensor: bool) -> Segment:
@@ -325,7 +315,7 @@ class Planner:
             try:
                 seg = self._segment(spec, tail, move, kind, frames, config, period,
                                     target_pos, how)
-            except _Slow as exc:
+            except Slow as exc:
                 attempts.append(exc.what)
                 continue
             if how is not buffer:
@@ -333,7 +323,7 @@ class Planner:
             seg.how = how
             seg.refusals = attempts
             return seg
-        raise _Refused("; ".join(attempts))
+        raise Refused("; ".join(attempts))
 
     def _segment(self, spec: MotionSpec, tail: Tail, move: Move, kind: str, frames: Frames,
                  config: str | None, period: float, target_pos: Matrix | None,
@@ -345,7 +335,7 @@ class Planner:
         tau_scale_in = tau_scale_out = 1.0
         t_guess = 0.0
         tau_guess = 0.0
-        last_slow: _Slow | None = None
+        last_slow: Slow | None = None
         for _attempt in range(_TRIES):
             # -- the start state --------------------------------------------------------
             if how is BufferMode.BUFFERED:
@@ -353,7 +343,7 @@ class Planner:
                 if last is not None and tail.pieces:
                     t_rest = max(t_rest, tail.pieces[-1].t0 if last.tracking
                                  else tail.pieces[-1].t1)
-                q_s, t6_s = self._end_of(tail)
+                q_s, t6_s = end_of(tail)
                 x_a = None
             elif how is BufferMode.BLENDING:
                 assert last is not None
@@ -365,7 +355,7 @@ class Planner:
                 assert p is not None
                 q_at = self.q_of(p, t_a, tail.q, self.sample_of(tail, t_a))
                 if q_at is None:
-                    raise _Refused("the running motion cannot be followed to the abort point")
+                    raise Refused("the running motion cannot be followed to the abort point")
                 q_s = q_at
                 t6_s = chain.fk(q_s)
             # -- the target ---------------------------------------------------------------
@@ -379,12 +369,12 @@ class Planner:
                     t6_e = frames.t6(target_pos, n_end_guess)
                     q_e_opt = self.solve(t6_e, q_s, config)
                     if q_e_opt is None:
-                        raise _Refused("the target cannot be reached: "
-                                       + self.why(t6_e, q_s, config))
+                        raise Refused("the target cannot be reached: "
+                                      + self.why(t6_e, q_s, config))
                     q_e = q_e_opt
                 why = chain.limit_violation(q_e)
                 if why:
-                    raise _Refused(f"the target is outside the joint limits ({why})")
+                    raise Refused(f"the target is outside the joint limits ({why})")
             # -- the line in its space ----------------------------------------------------
             # The start state A in the new segment's space, when the segment does not
             # start from rest in it: aborting (the running motion at t_a), or from rest
@@ -432,15 +422,15 @@ class Planner:
                 dp, phi = norm(v_line_dir[:3]), norm(v_line_dir[3:])
                 t_need = max(dp / (speed * slow * lim.v_cart), phi / (speed * slow * lim.w_cart))
                 n_c = self.sample_of(tail, tail.now + tau_guess)
-                t_need = max(t_need, self._joint_time(frames, r_c, p_c, v_line_dir, x_s, q_s,
-                                                      config, n_c, speed * slow))
+                t_need = max(t_need, joint_time(self, frames, r_c, p_c, v_line_dir, x_s, q_s,
+                                                config, n_c, speed * slow))
                 start = pos_s
                 end = target_pos
             if spec.max_diff is not None:
                 if kind == CART:
                     dp, phi = norm(v_line_dir[:3]), norm(v_line_dir[3:])
                 else:
-                    dp, phi = self._tool_travel(q_s, q_e, frames)
+                    dp, phi = tool_travel(self, q_s, q_e, frames)
                 t_need = max(t_need, dp * period / spec.max_diff[0],
                              phi * period / spec.max_diff[1])
             t_seg = max(t_need, 1e-3)
@@ -491,7 +481,7 @@ class Planner:
                 begin = t_c - tau_in
                 if len(last.pieces) < 3 or last.tracking or begin < last.t_c + last.tau_in \
                         or min(begin, last.t_e - last.tau_out) < tail.now + 2 * tail.period:
-                    raise _Slow("blend", "no room to blend into the motion before")
+                    raise Slow("blend", "no room to blend into the motion before")
             else:
                 t_c = tail.now + 2 * tail.period + tau_in
             again = False
@@ -512,8 +502,8 @@ class Planner:
             seg.tracking = frames.moving and kind == CART
             self._pieces(seg, tail, how, v_in)
             try:
-                self._check(seg, spec, tail, how)
-            except _Slow as exc:
+                check_segment(self, seg, spec, tail, how)
+            except Slow as exc:
                 last_slow = exc
                 # a transition's joint acceleration is its own (1/tau) plus the
                 # curvature of the joints' path (1/T^2): stretch both
@@ -534,18 +524,9 @@ class Planner:
                 continue
             return seg
         why = f": {last_slow.what}" if last_slow is not None else ""
-        raise _Refused(f"cannot keep within the limits after slowing {_TRIES} times{why}")
+        raise Refused(f"cannot keep within the limits after slowing {_TRIES} times{why}")
 
     # -- helpers --------------------------------------------------------------------------
-    def _end_of(self, tail: Tail) -> tuple[Vector, Matrix]:
-        last = tail.last
-        if last is None or last.q_end is None or last.rested is None:
-            return tail.q, tail.t6
-        if not tail.pieces or tail.pieces[-1].t1 <= tail.now or last.tracking:
-            return tail.q, tail.t6
-        assert last.t6_end is not None
-        return last.q_end, last.t6_end
-
     def _tau(self, kind: str, dv: Vector, q: Vector, frames: Frames) -> float:
         """The least transition half-time for a velocity change ``dv`` (Paul's
         quartic peaks at ``3 |dv| / (4 tau)``): in joint space the joint limits; in
@@ -575,52 +556,6 @@ class Planner:
         ref = None if kind == JOINT else (r_c, p_c)
         _, v, _ = self._state(line, last.t_e, last.q_end, tail, kind, frames, ref)  # type: ignore[arg-type]
         return v
-
-    def _joint_time(self, frames: Frames, r_c: Matrix, p_c: Vector, delta: Vector,
-                    x_s: Vector, q_s: Vector, config: str | None, sample: float,
-                    speed: float) -> float:
-        """The least time of a Cartesian line that keeps the joint velocities
-        within the limits (the joints' path sampled)."""
-        k = 24
-        pose = np.eye(4)
-        q0 = self.solve(frames.t6(pose_of(x_s, r_c, p_c, pose), sample), q_s, config)
-        q = prev = q_s if q0 is None else q0
-        need = 0.0
-        steps: list[Vector] = []
-        for i in range(1, k + 1):
-            x = x_s + delta * (i / k)
-            t6 = frames.t6(pose_of(x, r_c, p_c, pose), sample)
-            got = self.solve(t6, q, config)
-            tool = frames.tool(t6, sample)[:3, 3] * 1e3
-            where = f"{100 * i / k:.0f}% of the segment (tool at {tool.round(1).tolist()} mm)"
-            sv = np.linalg.svd(self.chain.jacobian(q if got is None else got),
-                               compute_uv=False)[-1]
-            if sv < self.limits.singular:
-                raise _Refused(f"the line passes a singularity at {where}: smallest singular "
-                               f"value {sv:.2g}, q = {np.degrees(q).round(1).tolist()} deg")
-            if got is None:
-                raise _Refused(f"the line leaves the arm's reach at {where}: "
-                               f"{self.why(t6, q, config)}")
-            need = max(need, float(np.max(np.abs(got - prev) * k / (speed * self.vplan))))
-            steps.append(got - prev)
-            prev = q = got
-        # the joints' path curves: its acceleration at constant speed along the line
-        # (d2q/dr2 / T^2) kept to half the limit, the other half for the transitions
-        for a, b in itertools.pairwise(steps):
-            curv = np.abs(b - a) * k * k
-            need = max(need, math.sqrt(float(np.max(curv / (0.5 * self.amax)))))
-        return need
-
-    def _tool_travel(self, q_s: Vector, q_e: Vector, frames: Frames) -> tuple[float, float]:
-        k = 24
-        length = angle = 0.0
-        prev = frames.tool(self.chain.fk(q_s), None)
-        for i in range(1, k + 1):
-            cur = frames.tool(self.chain.fk(q_s + (q_e - q_s) * i / k), None)
-            length += norm(cur[:3, 3] - prev[:3, 3])
-            angle += norm(log_rot(prev[:3, :3].T @ cur[:3, :3]))
-            prev = cur
-        return length, angle
 
     def _pieces(self, seg: Segment, tail: Tail, how: BufferMode, v_in: Vector) -> None:
         """Make the segment's pieces: the transition in, the line, the way to rest."""
@@ -667,153 +602,3 @@ class Planner:
         seg.pieces = pieces
         seg.t_begin = pieces[0].t0
         seg.t_reached = t_end
-
-    def _check(self, seg: Segment, spec: MotionSpec, tail: Tail, how: BufferMode) -> None:
-        """Sample the segment at its period: reach, limits, singularities,
-        velocities, accelerations, max_diff, the blend's tolerance."""
-        chain = self.chain
-        dt = seg.period
-        # on the loop's own sample times, from the first one in the segment
-        t0 = tail.now + math.ceil((seg.t_begin - tail.now) / dt - 1e-9) * dt
-        t_end = seg.t_reached
-        prior: Piece | None
-        if how is BufferMode.BLENDING and tail.last is not None:
-            prior = tail.last.pieces[-2]  # the line, run on to the transition
-        elif how is BufferMode.ABORTING:
-            prior = self.piece_at(tail.pieces, t0 - dt)
-        else:
-            prior = None
-        q_prev2 = q_prev = None
-        seed = self._end_of(tail)[0] if how is BufferMode.BUFFERED else tail.q
-        if prior is not None:
-            qa = self.q_of(prior, t0 - 2 * dt, tail.q, self.sample_of(tail, t0 - 2 * dt))
-            qb = self.q_of(prior, t0 - dt, tail.q if qa is None else qa,
-                           self.sample_of(tail, t0 - dt))
-            if qa is not None and qb is not None:
-                q_prev2, q_prev, seed = qa, qb, qb
-        elif how is BufferMode.BUFFERED:
-            q_prev2 = q_prev = seed
-        n_steps = max(math.ceil((t_end - t0) / dt), 1)
-        blend_pts: list[Vector] = []
-        q_end = None
-        t6 = np.eye(4)
-        for i in range(n_steps + 1):
-            t = min(t0 + i * dt, t_end)
-            piece = self.piece_at(seg.pieces, t)
-            assert piece is not None
-            n = self.sample_of(tail, t)
-            q = self.q_of(piece, t, seed, n)
-            frac = 100.0 * (t - seg.t_c) / max(seg.t_e - seg.t_c, 1e-9)
-            frac = min(max(frac, 0.0), 100.0)
-            if q is None:
-                assert piece.frames is not None
-                t6 = piece.frames.t6(piece.pose(t, np.eye(4)), n)
-                tool = t6[:3, 3] * 1e3
-                raise _Refused(f"the path leaves the arm's reach at {frac:.0f}% of the segment "
-                               f"(T6 at {tool.round(1).tolist()} mm): "
-                               f"{self.why(t6, seed, piece.config)}")
-            why = chain.limit_violation(q)
-            if why:
-                tool = chain.fk(q)[:3, 3] * 1e3
-                raise _Refused(f"the path crosses a joint limit at {frac:.0f}% of the segment "
-                               f"(T6 at {tool.round(1).tolist()} mm): {why}")
-            if piece.space == CART:
-                sv = np.linalg.svd(chain.jacobian(q), compute_uv=False)
-                if sv[-1] < self.limits.singular:
-                    tool = chain.fk(q)[:3, 3] * 1e3
-                    raise _Refused(f"the path passes a singularity at {frac:.0f}% of the "
-                                   f"segment (T6 at {tool.round(1).tolist()} mm, q = "
-                                   f"{np.degrees(q).round(1).tolist()} deg; smallest singular "
-                                   f"value {sv[-1]:.2g})")
-            if q_prev is not None and q_prev2 is not None:
-                qd = (q - q_prev) / dt
-                qdd = (q - 2 * q_prev + q_prev2) / (dt * dt)
-                where = self._where(seg, t - dt)
-                over_v = np.abs(qd) > self.vmax * 0.999
-                if over_v.any():
-                    j = int(np.argmax(np.abs(qd) / self.vmax))
-                    if np.abs(q - q_prev)[j] > 0.5:
-                        raise _Refused(f"the path passes a singularity at {frac:.0f}% of the "
-                                       f"segment: joint {chain.joints[j].name} would jump "
-                                       f"{math.degrees(abs(q[j] - q_prev[j])):.0f} deg")
-                    raise _Slow(where, f"joint {chain.joints[j].name} over its velocity limit "
-                                f"at {frac:.0f}% of the segment",
-                                1.02 * float(np.abs(qd)[j] / self.vmax[j]))
-                over_a = np.abs(qdd) > self.amax * 0.995  # a reserve for rounding
-                if over_a.any():
-                    j = int(np.argmax(np.abs(qdd) / self.amax))
-                    ratio = float(np.abs(qdd)[j] / self.amax[j])
-                    raise _Slow(where, f"joint {chain.joints[j].name} over its acceleration "
-                                f"limit at {frac:.0f}% of the segment",
-                                1.02 * (ratio if where != "line" else math.sqrt(ratio)))
-            if spec.max_diff is not None and q_prev is not None:
-                a = seg.frames.tool(chain.fk(q_prev), n)
-                b = seg.frames.tool(chain.fk(q), n)
-                if norm(b[:3, 3] - a[:3, 3]) > spec.max_diff[0] * 1.001 or norm(
-                        log_rot(a[:3, :3].T @ b[:3, :3])) > spec.max_diff[1] * 1.001:
-                    raise _Slow("line", "over the maximum differential motion")
-            if how is BufferMode.BLENDING and t <= seg.t_c + seg.tau_in:
-                blend_pts.append(self._tool_point(seg, q, n))
-            q_prev2, q_prev, seed = q_prev, q, q
-            q_end = q
-        assert q_end is not None
-        if how is BufferMode.BLENDING:
-            corner_tool = self._blend_error(seg, tail, blend_pts)
-            seg.blend_error = corner_tool
-            tol = seg.move.spec.tolerance
-            if tol is not None and corner_tool > 0.9 * tol:
-                raise _Slow("blend", f"the blend would cut the corner by "
-                            f"{corner_tool * 1e3:.2f} mm, more than its tolerance "
-                            f"{tol * 1e3:.2f} mm")
-        # where the segment ends (the last piece before any tracking)
-        t_fin = seg.t_reached
-        piece = self.piece_at(seg.pieces, t_fin - 1e-12)
-        assert piece is not None
-        qf = self.q_of(piece, t_fin, q_end, self.sample_of(tail, t_fin))
-        seg.q_end = q_end if qf is None else qf
-        seg.t6_end = chain.fk(seg.q_end)
-
-    def _where(self, seg: Segment, t: float) -> str:
-        if t < seg.t_c + seg.tau_in:
-            return "in"
-        if t > seg.t_e - seg.tau_out:
-            return "out"
-        return "line"
-
-    def _tool_point(self, seg: Segment, q: Vector, n: float) -> Vector:
-        return np.asarray(seg.frames.tool(self.chain.fk(q), n)[:3, 3], dtype=float)
-
-    def _blend_error(self, seg: Segment, tail: Tail, pts: list[Vector]) -> float:
-        """The largest distance of the blended tool path from the unblended
-        one (the previous line to its end, then the new line), sampled."""
-        last = tail.last
-        if last is None or not pts:
-            return 0.0
-        line = last.pieces[1] if len(last.pieces) > 1 else last.pieces[0]
-        ref: list[Vector] = []
-        k = 60
-        assert last.q_end is not None
-        q = last.q_end
-        t_c, ti = seg.t_c, seg.tau_in
-        for i in range(k + 1):
-            t = t_c - ti + ti * i / k
-            n = self.sample_of(tail, t)
-            got = self.q_of(line, t, q, n)
-            if got is not None:
-                q = got
-                ref.append(self._tool_point(seg, q, n))
-        new_line = Piece(seg.kind, t_c, seg.t_e, t_c, line_coeffs(seg.x0, seg.velocity), seg,
-                         frames=seg.frames, r_c=seg.r_c, p_c=seg.p_c, config=seg.config)
-        for i in range(k + 1):
-            t = t_c + ti * i / k
-            n = self.sample_of(tail, t)
-            got = self.q_of(new_line, t, q, n)
-            if got is not None:
-                q = got
-                ref.append(self._tool_point(seg, q, n))
-        r = np.array(ref)
-        worst = 0.0
-        for p in pts:
-            d = np.sqrt(((r - p) ** 2).sum(axis=1))
-            worst = max(worst, float(d.min()))
-        return worst

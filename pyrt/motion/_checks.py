@@ -1,0 +1,266 @@
+"""The planner's checks: the sampled refusals and the limits a plan must keep.
+
+The functions here take the :class:`~pyrt.motion.planner.Planner` whose arm
+and limits they judge:
+
+* :func:`joint_time` samples a Cartesian line's joint path before its pieces
+  are made: the least time that keeps the joint velocities (and the path's
+  curvature) within the limits, refusing a line that passes a singularity or
+  leaves the reach, naming where;
+* :func:`tool_travel` is the tool's path length and turn along a joint line
+  (for ``max_diff``);
+* :func:`check_segment` samples a planned segment at its period: reach,
+  joint limits, singularities (refused, :class:`Refused`), joint velocities
+  and accelerations, ``max_diff`` and a blend's tolerance (to be slowed,
+  :class:`Slow`).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+
+from pyrt.motion._geom import log_rot, pose_of
+from pyrt.motion._pieces import CART, Frames, Piece, line_coeffs, norm
+from pyrt.motion.record import BufferMode, MotionSpec
+
+if TYPE_CHECKING:
+    from pyrt.motion.planner import Planner, Segment, Tail
+
+Matrix = npt.NDArray[np.float64]
+Vector = npt.NDArray[np.float64]
+
+
+class Refused(Exception):
+    """A record the arm cannot do; the message names where and why."""
+
+
+class Slow(Exception):
+    """A plan over a limit at ``where`` (``in``, ``line``, ``out``, ``blend``):
+    slow it by ``ratio`` and sample it again."""
+
+    def __init__(self, where: str, what: str, ratio: float = 1.25) -> None:
+        super().__init__(what)
+        self.where = where
+        self.what = what
+        self.ratio = max(ratio, 1.05)
+
+
+def end_of(tail: Tail) -> tuple[Vector, Matrix]:
+    """Where the plan queued in ``tail`` ends (joints, T6), or where the arm is."""
+    last = tail.last
+    if last is None or last.q_end is None or last.rested is None:
+        return tail.q, tail.t6
+    if not tail.pieces or tail.pieces[-1].t1 <= tail.now or last.tracking:
+        return tail.q, tail.t6
+    assert last.t6_end is not None
+    return last.q_end, last.t6_end
+
+
+def joint_time(planner: Planner, frames: Frames, r_c: Matrix, p_c: Vector, delta: Vector,
+               x_s: Vector, q_s: Vector, config: str | None, sample: float,
+               speed: float) -> float:
+    """The least time of a Cartesian line that keeps the joint velocities
+    within the limits (the joints' path sampled)."""
+    k = 24
+    pose = np.eye(4)
+    q0 = planner.solve(frames.t6(pose_of(x_s, r_c, p_c, pose), sample), q_s, config)
+    q = prev = q_s if q0 is None else q0
+    need = 0.0
+    steps: list[Vector] = []
+    for i in range(1, k + 1):
+        x = x_s + delta * (i / k)
+        t6 = frames.t6(pose_of(x, r_c, p_c, pose), sample)
+        got = planner.solve(t6, q, config)
+        tool = frames.tool(t6, sample)[:3, 3] * 1e3
+        where = f"{100 * i / k:.0f}% of the segment (tool at {tool.round(1).tolist()} mm)"
+        sv = np.linalg.svd(planner.chain.jacobian(q if got is None else got),
+                           compute_uv=False)[-1]
+        if sv < planner.limits.singular:
+            raise Refused(f"the line passes a singularity at {where}: smallest singular "
+                          f"value {sv:.2g}, q = {np.degrees(q).round(1).tolist()} deg")
+        if got is None:
+            raise Refused(f"the line leaves the arm's reach at {where}: "
+                          f"{planner.why(t6, q, config)}")
+        need = max(need, float(np.max(np.abs(got - prev) * k / (speed * planner.vplan))))
+        steps.append(got - prev)
+        prev = q = got
+    # the joints' path curves: its acceleration at constant speed along the line
+    # (d2q/dr2 / T^2) kept to half the limit, the other half for the transitions
+    for a, b in itertools.pairwise(steps):
+        curv = np.abs(b - a) * k * k
+        need = max(need, math.sqrt(float(np.max(curv / (0.5 * planner.amax)))))
+    return need
+
+
+def tool_travel(planner: Planner, q_s: Vector, q_e: Vector,
+                frames: Frames) -> tuple[float, float]:
+    """The tool's path length (m) and turn (rad) along the joint line ``q_s`` -> ``q_e``."""
+    k = 24
+    length = angle = 0.0
+    prev = frames.tool(planner.chain.fk(q_s), None)
+    for i in range(1, k + 1):
+        cur = frames.tool(planner.chain.fk(q_s + (q_e - q_s) * i / k), None)
+        length += norm(cur[:3, 3] - prev[:3, 3])
+        angle += norm(log_rot(prev[:3, :3].T @ cur[:3, :3]))
+        prev = cur
+    return length, angle
+
+
+def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
+                  how: BufferMode) -> None:
+    """Sample the segment at its period: reach, limits, singularities,
+    velocities, accelerations, max_diff, the blend's tolerance."""
+    chain = planner.chain
+    dt = seg.period
+    # on the loop's own sample times, from the first one in the segment
+    t0 = tail.now + math.ceil((seg.t_begin - tail.now) / dt - 1e-9) * dt
+    t_end = seg.t_reached
+    prior: Piece | None
+    if how is BufferMode.BLENDING and tail.last is not None:
+        prior = tail.last.pieces[-2]  # the line, run on to the transition
+    elif how is BufferMode.ABORTING:
+        prior = planner.piece_at(tail.pieces, t0 - dt)
+    else:
+        prior = None
+    q_prev2 = q_prev = None
+    seed = end_of(tail)[0] if how is BufferMode.BUFFERED else tail.q
+    if prior is not None:
+        qa = planner.q_of(prior, t0 - 2 * dt, tail.q, planner.sample_of(tail, t0 - 2 * dt))
+        qb = planner.q_of(prior, t0 - dt, tail.q if qa is None else qa,
+                       planner.sample_of(tail, t0 - dt))
+        if qa is not None and qb is not None:
+            q_prev2, q_prev, seed = qa, qb, qb
+    elif how is BufferMode.BUFFERED:
+        q_prev2 = q_prev = seed
+    n_steps = max(math.ceil((t_end - t0) / dt), 1)
+    blend_pts: list[Vector] = []
+    q_end = None
+    t6 = np.eye(4)
+    for i in range(n_steps + 1):
+        t = min(t0 + i * dt, t_end)
+        piece = planner.piece_at(seg.pieces, t)
+        assert piece is not None
+        n = planner.sample_of(tail, t)
+        q = planner.q_of(piece, t, seed, n)
+        frac = 100.0 * (t - seg.t_c) / max(seg.t_e - seg.t_c, 1e-9)
+        frac = min(max(frac, 0.0), 100.0)
+        if q is None:
+            assert piece.frames is not None
+            t6 = piece.frames.t6(piece.pose(t, np.eye(4)), n)
+            tool = t6[:3, 3] * 1e3
+            raise Refused(f"the path leaves the arm's reach at {frac:.0f}% of the segment "
+                          f"(T6 at {tool.round(1).tolist()} mm): "
+                          f"{planner.why(t6, seed, piece.config)}")
+        why = chain.limit_violation(q)
+        if why:
+            tool = chain.fk(q)[:3, 3] * 1e3
+            raise Refused(f"the path crosses a joint limit at {frac:.0f}% of the segment "
+                          f"(T6 at {tool.round(1).tolist()} mm): {why}")
+        if piece.space == CART:
+            sv = np.linalg.svd(chain.jacobian(q), compute_uv=False)
+            if sv[-1] < planner.limits.singular:
+                tool = chain.fk(q)[:3, 3] * 1e3
+                raise Refused(f"the path passes a singularity at {frac:.0f}% of the "
+                              f"segment (T6 at {tool.round(1).tolist()} mm, q = "
+                              f"{np.degrees(q).round(1).tolist()} deg; smallest singular "
+                              f"value {sv[-1]:.2g})")
+        if q_prev is not None and q_prev2 is not None:
+            qd = (q - q_prev) / dt
+            qdd = (q - 2 * q_prev + q_prev2) / (dt * dt)
+            where = _where(seg, t - dt)
+            over_v = np.abs(qd) > planner.vmax * 0.999
+            if over_v.any():
+                j = int(np.argmax(np.abs(qd) / planner.vmax))
+                if np.abs(q - q_prev)[j] > 0.5:
+                    raise Refused(f"the path passes a singularity at {frac:.0f}% of the "
+                                  f"segment: joint {chain.joints[j].name} would jump "
+                                  f"{math.degrees(abs(q[j] - q_prev[j])):.0f} deg")
+                raise Slow(where, f"joint {chain.joints[j].name} over its velocity limit "
+                           f"at {frac:.0f}% of the segment",
+                           1.02 * float(np.abs(qd)[j] / planner.vmax[j]))
+            over_a = np.abs(qdd) > planner.amax * 0.995  # a reserve for rounding
+            if over_a.any():
+                j = int(np.argmax(np.abs(qdd) / planner.amax))
+                ratio = float(np.abs(qdd)[j] / planner.amax[j])
+                raise Slow(where, f"joint {chain.joints[j].name} over its acceleration "
+                           f"limit at {frac:.0f}% of the segment",
+                           1.02 * (ratio if where != "line" else math.sqrt(ratio)))
+        if spec.max_diff is not None and q_prev is not None:
+            a = seg.frames.tool(chain.fk(q_prev), n)
+            b = seg.frames.tool(chain.fk(q), n)
+            if norm(b[:3, 3] - a[:3, 3]) > spec.max_diff[0] * 1.001 or norm(
+                    log_rot(a[:3, :3].T @ b[:3, :3])) > spec.max_diff[1] * 1.001:
+                raise Slow("line", "over the maximum differential motion")
+        if how is BufferMode.BLENDING and t <= seg.t_c + seg.tau_in:
+            blend_pts.append(_tool_point(planner, seg, q, n))
+        q_prev2, q_prev, seed = q_prev, q, q
+        q_end = q
+    assert q_end is not None
+    if how is BufferMode.BLENDING:
+        corner_tool = _blend_error(planner, seg, tail, blend_pts)
+        seg.blend_error = corner_tool
+        tol = seg.move.spec.tolerance
+        if tol is not None and corner_tool > 0.9 * tol:
+            raise Slow("blend", f"the blend would cut the corner by "
+                       f"{corner_tool * 1e3:.2f} mm, more than its tolerance "
+                       f"{tol * 1e3:.2f} mm")
+    # where the segment ends (the last piece before any tracking)
+    t_fin = seg.t_reached
+    piece = planner.piece_at(seg.pieces, t_fin - 1e-12)
+    assert piece is not None
+    qf = planner.q_of(piece, t_fin, q_end, planner.sample_of(tail, t_fin))
+    seg.q_end = q_end if qf is None else qf
+    seg.t6_end = chain.fk(seg.q_end)
+
+
+def _where(seg: Segment, t: float) -> str:
+    if t < seg.t_c + seg.tau_in:
+        return "in"
+    if t > seg.t_e - seg.tau_out:
+        return "out"
+    return "line"
+
+
+def _tool_point(planner: Planner, seg: Segment, q: Vector, n: float) -> Vector:
+    return np.asarray(seg.frames.tool(planner.chain.fk(q), n)[:3, 3], dtype=float)
+
+
+def _blend_error(planner: Planner, seg: Segment, tail: Tail, pts: list[Vector]) -> float:
+    """The largest distance of the blended tool path from the unblended
+    one (the previous line to its end, then the new line), sampled."""
+    last = tail.last
+    if last is None or not pts:
+        return 0.0
+    line = last.pieces[1] if len(last.pieces) > 1 else last.pieces[0]
+    ref: list[Vector] = []
+    k = 60
+    assert last.q_end is not None
+    q = last.q_end
+    t_c, ti = seg.t_c, seg.tau_in
+    for i in range(k + 1):
+        t = t_c - ti + ti * i / k
+        n = planner.sample_of(tail, t)
+        got = planner.q_of(line, t, q, n)
+        if got is not None:
+            q = got
+            ref.append(_tool_point(planner, seg, q, n))
+    new_line = Piece(seg.kind, t_c, seg.t_e, t_c, line_coeffs(seg.x0, seg.velocity), seg,
+                     frames=seg.frames, r_c=seg.r_c, p_c=seg.p_c, config=seg.config)
+    for i in range(k + 1):
+        t = t_c + ti * i / k
+        n = planner.sample_of(tail, t)
+        got = planner.q_of(new_line, t, q, n)
+        if got is not None:
+            q = got
+            ref.append(_tool_point(planner, seg, q, n))
+    r = np.array(ref)
+    worst = 0.0
+    for p in pts:
+        d = np.sqrt(((r - p) ** 2).sum(axis=1))
+        worst = max(worst, float(d.min()))
+    return worst
