@@ -151,7 +151,7 @@ class UrdfStation(Station):
         self.queue = ReadyQueue.general(name=self.name)
         install(self.queue, arm.tasks())
         loop.attach(self.queue, name=f"queue:{self.name}")
-        self.adopt(arm, queues=[self.queue], extras=extras)
+        self.adopt(arm, queues=[self.queue], extras=extras, where=arm.where, ended=self._ended)
 
     # -- what the shell, the server and EPICS ask -----------------------------------------
 
@@ -159,13 +159,12 @@ class UrdfStation(Station):
         """A move runs or the arm settles."""
         return super().busy() or self.arm.busy()
 
-    def where(self) -> str:
-        return self.arm.where()
-
-    def last_stop(self) -> str:
+    def _ended(self) -> tuple[str, list[str]]:
+        """How the move that has just ended ended: the arm's words, or the fault."""
         if self.fault is not None:
-            return f"fault: {self.fault.cause}"
-        return self.arm.last_stop
+            return f"fault: {self.fault.cause}", [f"FAULT: {self.fault.cause}; {self.where()}"]
+        why = self.arm.last_stop or "ended"
+        return why, [f"{why}: {self.where()}"]
 
     def stop(self) -> str:
         """The operator's stop: a move brakes along its path to rest and the servo
