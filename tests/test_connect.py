@@ -212,7 +212,7 @@ def test_ctrl_c_to_a_piped_connect_during_a_wait_stops_the_robot_and_ends_130(tm
             stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path,
             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
         busy = lambda: sv.runner.call(lambda: sv.rig.busy(), take_fault=False)  # noqa: E731
-        waiting = lambda: sv.runner.call(lambda: sv.rig.waiters, take_fault=False)  # noqa: E731
+        waiting = lambda: sv.runner.call(lambda: sv.rig.waits_pending(), take_fault=False)  # noqa: E731
         try:
             proc.stdin.write("P D800\nwait\n")
             proc.stdin.flush()
@@ -247,7 +247,7 @@ def test_ctrl_c_during_a_remote_wait_stops_the_move_and_every_later_reply_is_its
                               encoding="utf-8", timeout=30, dimensions=(24, 120), env=env,
                               cwd=str(tmp_path))
         busy = lambda: sv.runner.call(lambda: sv.rig.busy(), take_fault=False)  # noqa: E731
-        waiting = lambda: sv.runner.call(lambda: sv.rig.waiters, take_fault=False)  # noqa: E731
+        waiting = lambda: sv.runner.call(lambda: sv.rig.waits_pending(), take_fault=False)  # noqa: E731
         try:
             seen = _read_until(child, pexpect, "gripper>")
             child.sendline("P D800")  # 7000 counts: 3.5 s of loop time

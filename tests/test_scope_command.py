@@ -97,6 +97,7 @@ BAD = [
     "trigger plant.x 1 sideways", "every 0", "every x", "run warp", "single now",
     "show x", "save", "save a.txt", "frobnicate", "trigger 'unclosed",
     "length", "length 1", "length x", "length 1000001", "help nope", "stop now",
+    "every \u0663", "length \u0663\u0660\u0660",  # digits of another script are no number
 ]
 
 

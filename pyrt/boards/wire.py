@@ -269,7 +269,7 @@ def parse_greeting(line: str) -> Greeting:
     if len(tokens) < 3 or tokens[2] != str(VERSION):
         raise WireError("syntax", f"a pyrt board-sim of another protocol version (this "
                                   f"controller speaks {VERSION}): greeting {shown!r}")
-    if len(tokens) < 5 or not tokens[4].isdigit():
+    if len(tokens) < 5 or not (tokens[4].isascii() and tokens[4].isdigit()):
         raise WireError("syntax", f"malformed greeting {shown!r}")
     boards: dict[str, str] = {}
     for token in tokens[5:]:

@@ -126,6 +126,7 @@ def run_factory(factory: StationFactory, args: argparse.Namespace) -> int:
         say(f"start-up: {note}")
     say(factory.banner(station, args))
     wall0 = time.perf_counter()
+    timing_log = loop.timing_log  # the loop lets go of it when it closes
     station.start()
     first = station.profile.startup_commands
 
@@ -149,7 +150,14 @@ def run_factory(factory: StationFactory, args: argparse.Namespace) -> int:
                     f"'pyrt replay {journal.path}' re-runs them")
     if args.timing_log:
         wall = time.perf_counter() - wall0
-        say(f"timing log written to {args.timing_log} ({loop.tick_index} ticks, {wall:.2f} s)")
+        failed = getattr(timing_log, "failed", None)
+        if failed is not None:
+            why = getattr(failed, "strerror", None) or failed
+            say(f"timing log {args.timing_log}: ended early, a write was refused ({why}); "
+                "the records before it are in the file")
+        else:
+            say(f"timing log written to {args.timing_log} ({loop.tick_index} ticks, "
+                f"{wall:.2f} s)")
     return status
 
 

@@ -113,7 +113,7 @@ def find_world(name: str) -> tuple[WorldFactory, dict[str, Any]]:
 def _listen(text: str) -> tuple[str, int]:
     """``HOST:PORT``, ``[V6]:PORT`` or ``PORT`` (host 127.0.0.1)."""
     t = text.strip()
-    if t.isdigit():
+    if t.isascii() and t.isdigit():
         host, port_text = "127.0.0.1", t
     elif t.startswith("["):
         host, sep, port_text = t[1:].partition("]:")
@@ -123,7 +123,7 @@ def _listen(text: str) -> tuple[str, int]:
         host, sep, port_text = t.rpartition(":")
         if not sep or not host:
             raise argparse.ArgumentTypeError(f"expected HOST:PORT or PORT, got {text!r}")
-    if not port_text.isdigit() or not 0 <= int(port_text) <= 65535:
+    if not (port_text.isascii() and port_text.isdigit()) or not 0 <= int(port_text) <= 65535:
         raise argparse.ArgumentTypeError(f"port must be 0..65535, got {port_text!r}")
     return host, int(port_text)
 

@@ -122,7 +122,7 @@ def parse_address(
         host, _, t = t.rpartition(":")
         host = host or default_host
     low = 0 if allow_zero else 1
-    if not t.isdigit() or not low <= int(t) <= 65535:
+    if not (t.isascii() and t.isdigit()) or not low <= int(t) <= 65535:
         raise ValueError(f"port must be {low}..65535, got {text!r}")
     return host, int(t)
 

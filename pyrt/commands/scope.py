@@ -214,7 +214,7 @@ class ScopeCommand:
         return "" if state in ("stopped", "done") else f"; capture restarted ({state})"
 
     def _do_every(self, rest: list[str]) -> None:
-        if len(rest) != 1 or not rest[0].isdigit():
+        if len(rest) != 1 or not (rest[0].isascii() and rest[0].isdigit()):
             raise CommandError("scope every: a whole number of ticks, 1 or more")
         n = int(rest[0])
 
@@ -227,7 +227,7 @@ class ScopeCommand:
                  f"a frame of {cap} samples{self._call(self.scope.seconds, cap, n)}")
 
     def _do_length(self, rest: list[str]) -> None:
-        if len(rest) != 1 or not rest[0].isdigit():
+        if len(rest) != 1 or not (rest[0].isascii() and rest[0].isdigit()):
             raise CommandError(f"scope length: a whole number of samples, 2..{MAX_LENGTH}")
         self._call(self.scope.set_length, int(rest[0]))
         n = int(rest[0])

@@ -158,7 +158,7 @@ def run_pattern(robot: PatternRobot, points: Sequence[Vec], open_log: Callable[[
     writer from ``open_log()`` at the first step, closed at the end without
     waiting) records where each move stopped and why.  A log the disk refuses
     ends the pattern where the last move ended (no move is made that the log
-    cannot record) and is said on the robot's ``stdout``.  Returns the records."""
+    cannot record) and is said as the robot's message (``say``).  Returns the records."""
     results: list[StopRecord | str] = []
     writer = open_log()
     seq = [0]
@@ -171,10 +171,10 @@ def run_pattern(robot: PatternRobot, points: Sequence[Vec], open_log: Callable[[
             writer.submit({seq[0]: line})
         except DiskError as exc:  # the log cannot be written: the pattern ends, said
             failed.append(exc)
-            out = getattr(robot, "stdout", None)
-            if out is not None:
-                out.write(f"{robot.name}: pattern abandoned: {exc}; the robot is stopped "
-                          "where its last move ended\n")
+            say = getattr(robot, "say", None)
+            if say is not None:
+                say(f"{robot.name}: pattern abandoned: {exc}; the robot is stopped "
+                    "where its last move ended", "error")
         seq[0] += 1
 
     def ended(k: int, p: Vec) -> StopRecord | None:

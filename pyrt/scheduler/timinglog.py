@@ -79,6 +79,8 @@ class TimingLog:
         self._jobs: queue.SimpleQueue[Callable[[], None] | None] = queue.SimpleQueue()
         self._worker: threading.Thread | None = None
         self.error: BaseException | None = None
+        #: The write error that ended the log early, or None.
+        self.failed: BaseException | None = None
 
     def _emit(self, record: dict[str, Any]) -> None:
         line = json.dumps(record, separators=(",", ":"))
@@ -171,12 +173,22 @@ class TimingLog:
         self.flush()
 
     def flush(self) -> None:
-        """Write buffered records to the file."""
+        """Write buffered records to the file.  A write the file refuses (a full
+        disk) ends the log there: the error is kept (:attr:`error`) and said when
+        the run ends; the run itself goes on (the log is a diagnostic, not a
+        record a robot depends on)."""
         with self._lock:
             lines, self._buf = self._buf, []
-            if lines:
-                self._fh.write("\n".join(lines) + "\n")
-            self._fh.flush()
+            if self.failed is not None:
+                return
+            try:
+                if lines:
+                    self._fh.write("\n".join(lines) + "\n")
+                self._fh.flush()
+            except (OSError, ValueError) as exc:
+                self.failed = exc
+                if self.error is None:
+                    self.error = exc
 
     def drain(self) -> None:
         """Wait for the deferred work (summaries) to be done."""
@@ -190,7 +202,11 @@ class TimingLog:
         self.drain()
         self.flush()
         if self._owned:
-            self._fh.close()
+            try:
+                self._fh.close()
+            except OSError as exc:
+                if self.failed is None:
+                    self.failed = exc
 
 
 @dataclass

@@ -92,6 +92,11 @@ class StationEvents:
         return unsubscribe
 
     @final
+    def waits_pending(self) -> int:
+        """How many ``wait`` watches are still collecting (loop thread)."""
+        return sum(1 for w in self._watches if not w.done)
+
+    @final
     def watch_move(self) -> MoveWatch:
         """``wait``'s one mailbox call (loop thread): a watch of what runs now. It
         collects every move-ended event until the robot is idle, then is done;

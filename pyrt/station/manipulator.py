@@ -152,7 +152,7 @@ class ManipulatorSim(Component):
 
         ROPE is an axis name (axis1) or index."""
         p = self.plant
-        key: int | str = int(rope) if rope.isdecimal() else rope
+        key: int | str = int(rope) if rope.isascii() and rope.isdecimal() else rope
         actions: dict[str, Callable[..., None]] = {
             "slip": p.inject_slip, "dead": p.inject_loadcell_dead,
             "stuck": p.inject_loadcell_stuck, "stall": p.inject_stall,
@@ -190,7 +190,7 @@ class ManipulatorSim(Component):
         return f"sim: {rope}'s loadcell carries the rope again"
 
     def _rope_call(self, fn: Callable[..., None], rope: str, *args: Any) -> None:
-        key: int | str = int(rope) if rope.isdecimal() else rope
+        key: int | str = int(rope) if rope.isascii() and rope.isdecimal() else rope
         try:
             fn(key, *args)
         except ValueError as exc:
