@@ -19,6 +19,7 @@
  *   FT    6      the sensor counts to publish
  */
 #include "armworld.h"
+#include "_linalg.h"
 
 #include <math.h>
 #include <stddef.h>
@@ -141,50 +142,6 @@ int pyrt_arm_check(const pyrt_arm *a)
 }
 
 /* ------------------------------------------------------------------ algebra */
-
-/* Cholesky of the n x n SPD matrix a (row-major, lower triangle) in place;
- * 0 when it is not positive definite. */
-static int cholesky(double *a, int n)
-{
-    for (int j = 0; j < n; j++) {
-        double d = a[j * n + j];
-        for (int k = 0; k < j; k++) {
-            d -= a[j * n + k] * a[j * n + k];
-        }
-        if (!(d > 0.0) || !isfinite(d)) {
-            return 0;
-        }
-        d = sqrt(d);
-        a[j * n + j] = d;
-        for (int i = j + 1; i < n; i++) {
-            double s = a[i * n + j];
-            for (int k = 0; k < j; k++) {
-                s -= a[i * n + k] * a[j * n + k];
-            }
-            a[i * n + j] = s / d;
-        }
-    }
-    return 1;
-}
-
-/* Solve L L^T x = b in place (x = b on entry). */
-static void chol_solve(const double *l, int n, double *x)
-{
-    for (int i = 0; i < n; i++) {
-        double s = x[i];
-        for (int k = 0; k < i; k++) {
-            s -= l[i * n + k] * x[k];
-        }
-        x[i] = s / l[i * n + i];
-    }
-    for (int i = n - 1; i >= 0; i--) {
-        double s = x[i];
-        for (int k = i + 1; k < n; k++) {
-            s -= l[k * n + i] * x[k];
-        }
-        x[i] = s / l[i * n + i];
-    }
-}
 
 /* ------------------------------------------------------------------ noise */
 

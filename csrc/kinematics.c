@@ -15,6 +15,7 @@
  *   MM    n n + 14 n mass matrix, bias, composite bodies (m, h, I)
  */
 #include "kinematics.h"
+#include "_linalg.h"
 
 #include <math.h>
 #include <stddef.h>
@@ -88,50 +89,6 @@ static void to16(const double *m, double *out)
     out[13] = 0.0;
     out[14] = 0.0;
     out[15] = 1.0;
-}
-
-/* Cholesky of the n x n SPD matrix a (row-major, lower triangle used) in
- * place; 0 when it is not positive definite. */
-static int cholesky(double *a, int n)
-{
-    for (int j = 0; j < n; j++) {
-        double d = a[j * n + j];
-        for (int k = 0; k < j; k++) {
-            d -= a[j * n + k] * a[j * n + k];
-        }
-        if (!(d > 0.0)) {
-            return 0;
-        }
-        d = sqrt(d);
-        a[j * n + j] = d;
-        for (int i = j + 1; i < n; i++) {
-            double s = a[i * n + j];
-            for (int k = 0; k < j; k++) {
-                s -= a[i * n + k] * a[j * n + k];
-            }
-            a[i * n + j] = s / d;
-        }
-    }
-    return 1;
-}
-
-/* Solve L L^T x = b in place (x = b on entry). */
-static void chol_solve(const double *l, int n, double *x)
-{
-    for (int i = 0; i < n; i++) {
-        double s = x[i];
-        for (int k = 0; k < i; k++) {
-            s -= l[i * n + k] * x[k];
-        }
-        x[i] = s / l[i * n + i];
-    }
-    for (int i = n - 1; i >= 0; i--) {
-        double s = x[i];
-        for (int k = i + 1; k < n; k++) {
-            s -= l[k * n + i] * x[k];
-        }
-        x[i] = s / l[i * n + i];
-    }
 }
 
 static int all_finite(const double *v, int n)
