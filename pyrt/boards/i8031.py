@@ -59,6 +59,7 @@ __all__ = [
     "VECTOR_TIMER0",
     "WTCHJWSPD",
     "Q",
+    "RamWords",
     "T",
 ]
 
@@ -117,7 +118,33 @@ Reader = Callable[[], int]
 Writer = Callable[[int], None]
 
 
-class I8031:
+class RamWords:
+    """16-bit words over a RAM image ``ram`` (low byte first, as the 8031's
+    programs keep them): the processor's view and every controller view of
+    the same RAM share these."""
+
+    __slots__ = ()
+    ram: bytearray
+
+    def word(self, addr: int) -> int:
+        """Unsigned 16-bit word at ``addr``, ``addr+1`` (low byte first)."""
+        ram = self.ram
+        return ram[addr] | (ram[addr + 1] << 8)
+
+    def sword(self, addr: int) -> int:
+        """The word at ``addr`` read as two's complement (-8000..7FFF)."""
+        ram = self.ram
+        w = ram[addr] | (ram[addr + 1] << 8)
+        return w - 0x10000 if w & 0x8000 else w
+
+    def set_word(self, addr: int, value: int) -> None:
+        """Store the low 16 bits of ``value`` at ``addr`` (low byte first)."""
+        ram = self.ram
+        ram[addr] = value & 0xFF
+        ram[addr + 1] = (value >> 8) & 0xFF
+
+
+class I8031(RamWords):
     """The processor as the controller program sees it.
 
     ``ram`` is the 128-byte on-chip RAM (a ``bytearray`` that never changes
@@ -154,23 +181,6 @@ class I8031:
         if not 0 <= value <= 0xFF:
             raise ValueError(f"byte value must be 00..FF, got {value:#x}")
         self.ram[addr] = value
-
-    def word(self, addr: int) -> int:
-        """Unsigned 16-bit word at ``addr``, ``addr+1`` (low byte first)."""
-        ram = self.ram
-        return ram[addr] | (ram[addr + 1] << 8)
-
-    def sword(self, addr: int) -> int:
-        """The word at ``addr`` read as two's complement (-8000..7FFF)."""
-        ram = self.ram
-        w = ram[addr] | (ram[addr + 1] << 8)
-        return w - 0x10000 if w & 0x8000 else w
-
-    def set_word(self, addr: int, value: int) -> None:
-        """Store the low 16 bits of ``value`` at ``addr`` (low byte first)."""
-        ram = self.ram
-        ram[addr] = value & 0xFF
-        ram[addr + 1] = (value >> 8) & 0xFF
 
     def bit(self, addr: int, bit: int) -> bool:
         """Bit ``bit`` of RAM byte ``addr``."""

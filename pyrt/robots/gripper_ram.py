@@ -34,6 +34,7 @@ from pyrt.boards.i8031 import (
     STOPPED,
     SYSCLKPD,
     WTCHJWSPD,
+    RamWords,
 )
 from pyrt.errors import CommandError
 from pyrt.tasks.jawmove import JOGSTALL
@@ -117,7 +118,7 @@ class Schedule:
                 f"tick {self.tick_ns / 1e3:g} µs")
 
 
-class GripperRam:
+class GripperRam(RamWords):
     """The controller's access to the 8031's on-chip RAM ``ram`` (see the
     module text).  ``tick_ns`` gives the loop's tick (1 ms before the
     controller is attached to one)."""
@@ -127,25 +128,6 @@ class GripperRam:
         self._tick_ns = tick_ns
         #: The RAM's even-addressed words, for the encoder interrupt handlers.
         self.w16: Any = memoryview(ram).cast("H") if sys.byteorder == "little" else _Words(ram)
-
-    # -- words ---------------------------------------------------------------------
-
-    def word(self, addr: int) -> int:
-        """RAM word at ``addr`` (little-endian), 0000-FFFF."""
-        ram = self.ram
-        return ram[addr] | (ram[addr + 1] << 8)
-
-    def sword(self, addr: int) -> int:
-        """RAM word at ``addr`` as a signed (two's complement) number."""
-        ram = self.ram
-        w = ram[addr] | (ram[addr + 1] << 8)
-        return w - 0x10000 if w & 0x8000 else w
-
-    def set_word(self, addr: int, value: int) -> None:
-        """Store ``value`` (any int, taken modulo 2**16) as the word at ``addr``."""
-        ram = self.ram
-        ram[addr] = value & 0xFF
-        ram[addr + 1] = (value >> 8) & 0xFF
 
     def zero_counts(self) -> None:
         """The encoder variables at zero: ENCODER_CNT, COMMAND_CNT, OLD_ENC,
