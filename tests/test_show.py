@@ -377,3 +377,36 @@ def test_table_that_matches_nothing_is_ok_with_no_rows_and_a_bad_request_is_a_sy
             assert "TABLE [PREFIX]" in c.command("help")[-2]
         finally:
             c.close()
+
+
+def test_a_reserved_slot_may_not_read_the_table_as_it_may_not_read_anything():
+    """With every slot taken, a newcomer in a reserved slot gets ERR full for TABLE (AUTH
+    and stop only there); the clients in slots read it."""
+    with served(max_clients=2, reserved_slots=1) as sv:
+        a, b = sv.client(), sv.client()
+        try:
+            assert a.command("W") == b.command("W") == ["0000"]  # both asked: not evictable
+            spare = sv.client()
+            assert "reserved slot" in spare.greeting
+            assert spare.request("TABLE").code == "full"
+            assert json.loads(a.command("TABLE sim.x")[-1])["rows"] == 1
+        finally:
+            a.close()
+            b.close()
+
+
+def test_show_through_the_gripper_command_piped():
+    """pyrt gripper with show piped in prints the table (the console's word, not only the
+    interpreter's) and exits 0."""
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-m", "pyrt", "gripper", "--speed", "max"],
+                          input="show gripper.SYS\nshow zz\nquit\n", capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    head = next(k for k, ln in enumerate(lines) if ln.rstrip().endswith("writable"))
+    table = [lines[head][lines[head].index("name"):], *lines[head + 1:head + 3]]  # no prompt
+    assert _rows(table) == {"gripper.SYSCLKPD": ("04", "ticks", "01..FF", "yes")}
+    assert any("show: nothing matches 'zz'; " in ln for ln in lines[head + 3:])
