@@ -188,13 +188,13 @@ def test_a_manipulator_parameter_set_shows_up(manipulator):
 
 @pytest.mark.parametrize("prefix", ["nope", "gripp.x", "sim.zz", "x" * 500, "'é'"])
 def test_a_prefix_that_matches_nothing_says_so_and_changes_nothing(gripper, prefix):
-    """show with a prefix that names nothing: one line saying nothing matches, with the
-    objects there are; not an error line, and every value of the table is as before."""
+    """show with a prefix that names nothing: one error line saying nothing matches, with
+    the objects there are; every value of the table is as before."""
     station, shell = gripper
     params = {p.name: p.read() for p in station.params_of(station.root)}
     lines = _run(shell, f"show {prefix}")
     assert len(lines) == 1
-    assert lines[0].startswith(f"show: nothing matches {prefix[:40]!r}")
+    assert lines[0].startswith(f"error: show: nothing matches {prefix[:40]!r}")
     assert "objects: gripper, monitor, sim" in lines[0]
     assert len(lines[0]) < 200  # a long prefix is cut, not echoed whole
     assert {p.name: p.read() for p in station.params_of(station.root)} == params
@@ -359,17 +359,18 @@ def test_table_over_the_link_is_served_to_a_reader_and_equals_show():
             operator.close()
 
 
-def test_table_that_matches_nothing_is_ok_with_no_rows_and_a_bad_request_is_a_syntax_error():
-    """TABLE nope: OK, no row, the note saying nothing matches; TABLE a b: ERR syntax,
-    and the connection serves on."""
+def test_table_that_matches_nothing_is_a_command_error_and_a_bad_request_a_syntax_error():
+    """TABLE nope: ERR command saying nothing matches, as show nope says it; TABLE a b:
+    ERR syntax; the connection serves on."""
     with served() as s:
         c = s.client()
         try:
-            data = c.command("TABLE nope")
-            assert len(data) == 1
-            tail = json.loads(data[0])
-            assert tail["rows"] == tail["matched"] == 0
-            assert tail["note"].startswith("show: nothing matches 'nope'")
+            with pytest.raises(ServerError) as err:
+                c.command("TABLE nope")
+            assert err.value.code == "command"
+            assert err.value.text.startswith("show: nothing matches 'nope'")
+            shown = c.request("show nope")
+            assert (shown.code, shown.text) == ("command", err.value.text)
             with pytest.raises(ServerError) as err:
                 c.command("TABLE a b")
             assert err.value.code == "syntax"
@@ -402,11 +403,10 @@ def test_show_through_the_gripper_command_piped():
     import sys
 
     proc = subprocess.run([sys.executable, "-m", "pyrt", "gripper", "--speed", "max"],
-                          input="show gripper.SYS\nshow zz\nquit\n", capture_output=True,
+                          input="show gripper.SYS\nquit\n", capture_output=True,
                           text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     lines = proc.stdout.splitlines()
     head = next(k for k, ln in enumerate(lines) if ln.rstrip().endswith("writable"))
     table = [lines[head][lines[head].index("name"):], *lines[head + 1:head + 3]]  # no prompt
     assert _rows(table) == {"gripper.SYSCLKPD": ("04", "ticks", "01..FF", "yes")}
-    assert any("show: nothing matches 'zz'; " in ln for ln in lines[head + 3:])

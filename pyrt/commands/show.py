@@ -14,7 +14,9 @@ The values are read in one mailbox call, each read of the table in the
 same tick; only the rows shown are read, and at most :data:`MAX_ROWS` are
 shown: a line after the table says how many were left out and which
 prefixes narrow it, so a station of thousands of signals does not flood a
-console or cost the loop a long tick.
+console or cost the loop a long tick.  A prefix that matches nothing is a
+command error (``error: show: nothing matches ...``, naming the objects):
+a script that asks for a row that is not there fails, and nothing changes.
 
 The same :class:`Table` is what the DAQ link's ``TABLE [PREFIX]`` request
 serves as data (:func:`data_lines`: one JSON object a row, then one for
@@ -30,8 +32,10 @@ from typing import TYPE_CHECKING, Any
 
 from pyrt.commands._lines import _did_you_mean
 from pyrt.component import Arg, Param, Signal, command
+from pyrt.errors import CommandError
 
-__all__ = ["MAX_ROWS", "Row", "ShowWord", "Table", "data_lines", "read_table", "table_lines"]
+__all__ = ["MAX_ROWS", "Row", "ShowWord", "Table", "data_lines", "read_table", "require_rows",
+           "table_lines"]
 
 #: The most rows one table shows (every built-in robot's whole table fits).
 MAX_ROWS = 100
@@ -94,6 +98,8 @@ class Table:
     def note(self) -> str:
         """The line after the table: nothing matched, or what was left out and
         how to narrow it ('' when every row that matched is shown)."""
+        if not self.total:
+            return "show: the station has no signals or parameters"
         if not self.matched:
             shown = self.prefix[:40]
             hint = _did_you_mean(self.prefix.partition(".")[0], list(self.objects))
@@ -205,6 +211,15 @@ def read_table(station: Any, prefix: str = "", limit: int = MAX_ROWS) -> Table:
     return Table(prefix.strip(), rows, matched, total, tuple(left.items()), tuple(objects))
 
 
+def require_rows(table: Table) -> Table:
+    """``table`` when its prefix matched a row (or the station has none at all);
+    else CommandError saying that nothing matches and what there is (a
+    read: nothing was changed)."""
+    if not table.matched and table.total:
+        raise CommandError(table.note())
+    return table
+
+
 def table_lines(table: Table) -> list[str]:
     """The table as the console shows it: a header and aligned columns, then
     :meth:`Table.note` when it says something."""
@@ -256,10 +271,11 @@ class ShowWord:
         for a parameter set OBJECT.FIELD VALUE may change (get says when),
         no for signals.  Every value comes from the same tick.  At most
         100 rows are shown; the line after the table says how many were
-        left out and which prefixes narrow it.  Nothing matching is said,
-        and changes nothing.  Over the DAQ link, TABLE [PREFIX] gives the
-        same rows as JSON."""
+        left out and which prefixes narrow it.  A prefix that matches
+        nothing is an error that says what there is (a read: nothing
+        changed).  Over the DAQ link, TABLE [PREFIX] gives the same rows
+        as JSON."""
         st = self.station
         table = self.runner.call(read_table, st, prefix or "", name="show", take_fault=False)
-        for text in table_lines(table):
+        for text in table_lines(require_rows(table)):
             self.say(text)

@@ -18,7 +18,8 @@ uses: ``AUTH``, ``STATUS``, ``FIELDS``, ``TABLE``, ``SUBSCRIBE``, ``UNSUBSCRIBE`
 ``QUIT``.  ``TABLE [PREFIX]`` is the console's ``show [PREFIX]`` as data: one
 ``OK-`` line per row, each a JSON object (name, kind, value, text, units,
 range, lo, hi, writable), then ``OK`` and one for the table (rows, matched,
-total, left_out, note); anyone that may read may ask.
+total, left_out, note), or ``ERR command`` when the prefix matches nothing;
+anyone that may read may ask.
 Everything else is a robot console command.
 """
 

@@ -82,7 +82,8 @@ class ServedRobot(Protocol):
 
     def table(self, runner: Any, prefix: str = "") -> list[str]:
         """``TABLE [PREFIX]``: the rows the console's ``show PREFIX`` lists, as data
-        lines (one JSON object each), read through ``runner``."""
+        lines (one JSON object each), read through ``runner``; CommandError when
+        the prefix matches nothing."""
         ...
 
     def is_read_only(self, line: str) -> bool:

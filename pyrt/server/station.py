@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from pyrt.commands.robot import RobotShell
-from pyrt.commands.show import data_lines, read_table
+from pyrt.commands.show import data_lines, read_table, require_rows
 from pyrt.component import Limits
 from pyrt.errors import CommandError
 from pyrt.scope import Source
@@ -81,9 +81,10 @@ class ServedStation:
 
     def table(self, runner: Any, prefix: str = "") -> list[str]:
         """The rows ``show PREFIX`` lists, as data (``TABLE``: one JSON object a row,
-        then one for the table), read through ``runner`` in one mailbox call."""
+        then one for the table), read through ``runner`` in one mailbox call;
+        CommandError when the prefix matches nothing, as ``show`` says it."""
         table = runner.call(read_table, self.station, prefix, name="show", take_fault=False)
-        return data_lines(table)
+        return data_lines(require_rows(table))
 
     # -- the audit trail ------------------------------------------------------------------
 
