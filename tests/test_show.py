@@ -212,7 +212,7 @@ def test_the_rows_shown_are_exactly_those_the_prefix_names(gripper, prefix):
     """For any prefix, the table's names are exactly the station's OBJECT.NAMEs that start
     with it in any case (a reference computed from the records), in the tree's order."""
     station, _shell = gripper
-    table = station.runner.call(read_table, station, prefix)
+    table = read_table(station, prefix, runner=station.runner)
     names = [f"{c.name}.{x.name}" for c in station.components()
              for x in [*c.signals(), *station.params_of(c)]]
     want = [n for n in names if n.lower().startswith(prefix.strip().lower())]
@@ -287,6 +287,31 @@ def test_a_huge_station_shows_a_bounded_table_and_says_how_to_narrow_it(huge):
     assert hint is not None, note
     narrowed = _run(shell, hint.group(1))
     assert len(_rows(narrowed)) == 21 and len(narrowed) == 2 + 21
+
+
+class _Counting:
+    """A runner that counts its mailbox calls and the values each one reads."""
+
+    def __init__(self, runner):
+        self.runner = runner
+        self.calls: list[int] = []
+
+    def call(self, fn, *args, **kw):
+        self.calls.append(len(args[0]) if args and isinstance(args[0], list) else -1)
+        return self.runner.call(fn, *args, **kw)
+
+
+def test_show_reads_in_one_mailbox_call_only_the_rows_it_shows(huge):
+    """show on the huge station is one mailbox call reading MAX_ROWS values (not 630);
+    show bank03 one call reading bank03's 21."""
+    station, _shell = huge
+    counting = _Counting(station.runner)
+    shell = RobotShell(station, io.StringIO(), runner=counting)
+    _run(shell, "show")
+    assert counting.calls == [MAX_ROWS]
+    counting.calls.clear()
+    _run(shell, "show bank03")
+    assert counting.calls == [21]
 
 
 def test_over_the_bound_the_data_says_the_same(huge):

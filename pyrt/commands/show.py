@@ -10,8 +10,9 @@ set).  ``PREFIX`` keeps the rows whose name starts with it, in any case
 (``show axis0`` is ``axis0``, ``axis0Motor`` ...; ``show puma.`` the root's
 rows alone).
 
-The values are read in one mailbox call, each read of the table in the
-same tick; only the rows shown are read, and at most :data:`MAX_ROWS` are
+The rows are picked in the shell's thread and their values read in one
+mailbox call, every value of the table from the same tick; only the rows
+shown are read, and at most :data:`MAX_ROWS` are
 shown: a line after the table says how many were left out and which
 prefixes narrow it, so a station of thousands of signals does not flood a
 console or cost the loop a long tick.  A prefix that matches nothing is a
@@ -137,20 +138,37 @@ def _cut(text: str) -> str:
     return text if len(text) <= MAX_CELL else text[:MAX_CELL - 3] + "..."
 
 
-def _signal_row(owner: str, s: Signal) -> Row:
-    try:
-        value = s.read()
-    except Exception as exc:  # one unreadable signal must not hide the others
-        return Row(f"{owner}.{s.name}", "signal", None, f"<unreadable: {type(exc).__name__}>",
-                   s.units, *_limits(s), False)
+#: A value read, or the error its read raised.
+_Read = tuple[Any, BaseException | None]
+
+
+def _read_all(items: list[Signal | Param]) -> list[_Read]:
+    """Every item's value (loop thread: the one mailbox call of a table)."""
+    out: list[_Read] = []
+    for item in items:
+        try:
+            out.append((item.read(), None))
+        except Exception as exc:  # one unreadable value must not hide the others
+            out.append((None, exc))
+    return out
+
+
+def _signal_row(owner: str, s: Signal, value: Any, failed: BaseException | None) -> Row:
+    name = f"{owner}.{s.name}"
+    if failed is not None:
+        return Row(name, "signal", None, _unreadable(failed), s.units, *_limits(s), False)
+    text = ""
     if s.show is not None:
         try:
             text = s.show(value)
         except (TypeError, ValueError):
-            text = _format(value, s.fmt)
-    else:
-        text = _format(value, s.fmt)
-    return Row(f"{owner}.{s.name}", "signal", value, text, s.units, *_limits(s), False)
+            text = ""
+    return Row(name, "signal", value, text or _format(value, s.fmt), s.units, *_limits(s),
+               False)
+
+
+def _unreadable(exc: BaseException) -> str:
+    return f"<unreadable: {type(exc).__name__}>"
 
 
 def _limits(s: Signal) -> tuple[str, float | None, float | None]:
@@ -167,12 +185,8 @@ def _format(value: Any, fmt: str) -> str:
         return str(value)
 
 
-def _param_row(owner: str, p: Param) -> Row:
-    try:
-        value = p.read()
-        text = p.text(value)
-    except Exception as exc:  # as for a signal
-        value, text = None, f"<unreadable: {type(exc).__name__}>"
+def _param_row(owner: str, p: Param, value: Any, failed: BaseException | None) -> Row:
+    text = _unreadable(failed) if failed is not None else p.text(value)
     lo = "" if p.lo is None else p.text(p.lo)
     hi = "" if p.hi is None else p.text(p.hi)
     if p.lo is not None and p.hi is not None:
@@ -186,10 +200,14 @@ def _param_row(owner: str, p: Param) -> Row:
     return Row(f"{owner}.{p.name}", "param", value, text, p.units, rng, p.lo, p.hi, p.writable)
 
 
-def read_table(station: Any, prefix: str = "", limit: int = MAX_ROWS) -> Table:
+def read_table(station: Any, prefix: str = "", limit: int = MAX_ROWS,
+               runner: Any = None) -> Table:
     """The rows of ``station`` whose ``OBJECT.NAME`` starts with ``prefix`` (any
-    case), at most ``limit`` of them read (call it in the loop thread: one
-    mailbox call, every value of the table from the same tick)."""
+    case), at most ``limit`` of them.  The rows are picked in the caller's
+    thread; their values are read in **one** mailbox call of ``runner`` (so
+    every value is of the same tick, and the loop pays only for the rows
+    shown), or here when ``runner`` is None (the loop thread, or a station
+    not started)."""
     key = prefix.strip().lower()
     picked: list[tuple[str, Signal | Param]] = []
     left: dict[str, int] = {}
@@ -206,8 +224,14 @@ def read_table(station: Any, prefix: str = "", limit: int = MAX_ROWS) -> Table:
                 picked.append((comp.name, item))
             else:
                 left[comp.name] = left.get(comp.name, 0) + 1
-    rows = tuple(_signal_row(owner, item) if isinstance(item, Signal) else _param_row(owner, item)
-                 for owner, item in picked)
+    items = [item for _owner, item in picked]
+    if runner is None:
+        values = _read_all(items)
+    else:
+        values = runner.call(_read_all, items, name="show", take_fault=False)
+    rows = tuple(_signal_row(owner, item, *read) if isinstance(item, Signal)
+                 else _param_row(owner, item, *read)
+                 for (owner, item), read in zip(picked, values, strict=True))
     return Table(prefix.strip(), rows, matched, total, tuple(left.items()), tuple(objects))
 
 
@@ -276,6 +300,6 @@ class ShowWord:
         changed).  Over the DAQ link, TABLE [PREFIX] gives the same rows
         as JSON."""
         st = self.station
-        table = self.runner.call(read_table, st, prefix or "", name="show", take_fault=False)
+        table = read_table(st, prefix or "", runner=self.runner)
         for text in table_lines(require_rows(table)):
             self.say(text)

@@ -83,7 +83,7 @@ class ServedStation:
         """The rows ``show PREFIX`` lists, as data (``TABLE``: one JSON object a row,
         then one for the table), read through ``runner`` in one mailbox call;
         CommandError when the prefix matches nothing, as ``show`` says it."""
-        table = runner.call(read_table, self.station, prefix, name="show", take_fault=False)
+        table = read_table(self.station, prefix, runner=runner)
         return data_lines(require_rows(table))
 
     # -- the audit trail ------------------------------------------------------------------
