@@ -230,13 +230,6 @@ def test_help_show_says_what_the_table_has_and_its_bound(gripper):
     assert any(ln.strip().startswith("show [PREFIX]:") for ln in _run(shell, "help"))
 
 
-def test_the_console_completes_show_with_the_objects(manipulator):
-    """show <TAB> offers every object of the station (a prefix is an object's name, or
-    the start of one)."""
-    station, shell = manipulator
-    assert set(shell.completions()["show"]) == set(station.names())
-
-
 # -- a huge station ----------------------------------------------------------------------
 
 

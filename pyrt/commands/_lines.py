@@ -138,7 +138,6 @@ class LineResolver:
         table["help"] = objects
         table["status"] = {c.name: None for c in self.station.components()
                            if c.signals()} or None
-        table["show"] = dict.fromkeys(self.station.names()) or None  # a prefix: an object
         channels: dict[str, Any] = {}
         names = self._channel_names() + [n for n, _ in self.station.signals()]
         channels.update({name: channels for name in names if name != "ram:XX"})
