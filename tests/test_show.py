@@ -289,6 +289,14 @@ def test_a_huge_station_shows_a_bounded_table_and_says_how_to_narrow_it(huge):
     assert len(_rows(narrowed)) == 21 and len(narrowed) == 2 + 21
 
 
+def test_nothing_matching_on_a_huge_station_names_a_bounded_list_of_objects(huge):
+    """show nope on 31 objects: one error line naming the first 16 and how many there are."""
+    _station, shell = huge
+    lines = _run(shell, "show nope")
+    assert len(lines) == 1 and lines[0].startswith("error: show: nothing matches 'nope'")
+    assert lines[0].endswith("bank14, ... (31 objects)") and "bank15" not in lines[0]
+
+
 class _Counting:
     """A runner that counts its mailbox calls and the values each one reads."""
 

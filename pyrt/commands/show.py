@@ -11,11 +11,11 @@ set).  ``PREFIX`` keeps the rows whose name starts with it, in any case
 rows alone).
 
 The rows are picked in the shell's thread and their values read in one
-mailbox call, every value of the table from the same tick; only the rows
-shown are read, and at most :data:`MAX_ROWS` are
-shown: a line after the table says how many were left out and which
-prefixes narrow it, so a station of thousands of signals does not flood a
-console or cost the loop a long tick.  A prefix that matches nothing is a
+mailbox call, every value of the table from the same tick.  At most
+:data:`MAX_ROWS` rows are shown, and only those are read: a line after the
+table says how many were left out and which prefixes narrow it, so a
+station of thousands of signals neither floods a console nor costs the
+loop a long tick.  A prefix that matches nothing is a
 command error (``error: show: nothing matches ...``, naming the objects):
 a script that asks for a row that is not there fails, and nothing changes.
 
@@ -42,6 +42,8 @@ __all__ = ["MAX_ROWS", "Row", "ShowWord", "Table", "data_lines", "read_table", "
 MAX_ROWS = 100
 #: The widest a cell is shown; a longer one is cut with "...".
 MAX_CELL = 40
+#: The most objects the line that says nothing matches names.
+MAX_OBJECTS = 16
 #: The columns, as the header names them.
 COLUMNS = ("name", "value", "units", "range", "writable")
 
@@ -90,6 +92,8 @@ class Table:
     left_out: tuple[tuple[str, int], ...]
     #: The station's objects (for the line that says nothing matches).
     objects: tuple[str, ...]
+    #: The most rows shown.
+    limit: int = MAX_ROWS
 
     @property
     def omitted(self) -> int:
@@ -104,14 +108,17 @@ class Table:
         if not self.matched:
             shown = self.prefix[:40]
             hint = _did_you_mean(self.prefix.partition(".")[0], list(self.objects))
+            objects = ", ".join(self.objects[:MAX_OBJECTS])
+            if len(self.objects) > MAX_OBJECTS:
+                objects += f", ... ({len(self.objects)} objects)"
             return (f"show: nothing matches {shown!r}{hint}; the {self.total} rows are named "
-                    f"OBJECT.NAME, objects: {', '.join(self.objects)}")
+                    f"OBJECT.NAME, objects: {objects}")
         if not self.omitted:
             return ""
         where = ", ".join(f"{name} ({n})" for name, n in self.left_out[:8])
         more = ", ..." if len(self.left_out) > 8 else ""
         example = self.left_out[0][0]
-        return (f"{self.omitted} of {self.matched} rows left out (at most {MAX_ROWS} are "
+        return (f"{self.omitted} of {self.matched} rows left out (at most {self.limit} are "
                 f"shown): narrow with a prefix, e.g. show {example}; left out: {where}{more}")
 
 
@@ -232,7 +239,8 @@ def read_table(station: Any, prefix: str = "", limit: int = MAX_ROWS,
     rows = tuple(_signal_row(owner, item, *read) if isinstance(item, Signal)
                  else _param_row(owner, item, *read)
                  for (owner, item), read in zip(picked, values, strict=True))
-    return Table(prefix.strip(), rows, matched, total, tuple(left.items()), tuple(objects))
+    return Table(prefix.strip(), rows, matched, total, tuple(left.items()), tuple(objects),
+                 limit)
 
 
 def require_rows(table: Table) -> Table:
