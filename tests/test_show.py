@@ -7,6 +7,7 @@ import json
 import math
 import re
 
+import numpy as np
 import pytest
 from _manipulator_rig import make_station
 from _server_rig import TOKEN, served
@@ -16,7 +17,7 @@ from hypothesis import strategies as st
 from pyrt import Component, Signal, Station
 from pyrt.client import ServerError
 from pyrt.commands import RobotShell
-from pyrt.commands.show import COLUMNS, MAX_ROWS, read_table
+from pyrt.commands.show import COLUMNS, MAX_ROWS, Row, Table, data_lines, read_table
 from pyrt.component import Limits, Param
 from pyrt.scheduler import Loop, SimClock
 from pyrt.server import ServedStation
@@ -295,6 +296,38 @@ def test_nothing_matching_on_a_huge_station_names_a_bounded_list_of_objects(huge
     lines = _run(shell, "show nope")
     assert len(lines) == 1 and lines[0].startswith("error: show: nothing matches 'nope'")
     assert lines[0].endswith("bank14, ... (31 objects)") and "bank15" not in lines[0]
+
+
+_VALUES = st.one_of(
+    st.none(), st.booleans(), st.integers(), st.floats(), st.text(max_size=20),
+    st.floats(width=32).map(np.float32), st.integers(-2**31, 2**31 - 1).map(np.int32),
+    st.booleans().map(np.bool_), st.tuples(st.floats(), st.floats()))
+
+
+def _strict(text: str):
+    """JSON as a strict reader takes it: NaN and Infinity refused."""
+    def refuse(word):
+        raise ValueError(f"not JSON: {word}")
+    return json.loads(text, parse_constant=refuse)
+
+
+@settings(max_examples=200, deadline=None)
+@given(value=_VALUES)
+def test_every_row_is_strict_json_whatever_its_value(value):
+    """A row of any value (NaN, infinity, numpy scalars, text, a tuple) is one line of
+    strict JSON; a finite number or a flag keeps its value, anything else is null or text."""
+    row = Row("obj.x", "signal", value, str(value), "V", "", None, None, False)
+    table = Table("", (row,), 1, 1, (), ("obj",))
+    lines = data_lines(table)
+    assert all("\n" not in ln for ln in lines)
+    got = _strict(lines[0])["value"]
+    plain = value.item() if isinstance(value, np.generic) else value
+    if isinstance(plain, bool | int | str) or plain is None:
+        assert got == plain and type(got) is type(plain)
+    elif isinstance(plain, float):
+        assert got == plain if math.isfinite(plain) else got is None
+    else:
+        assert got == str(value)
 
 
 class _Counting:
