@@ -385,9 +385,7 @@ def _wait_refused(port: int) -> bool:
 
 def test_closing_the_station_closes_the_udp_stream_and_the_foxglove_server(tmp_path,
                                                                           monkeypatch):
-    """A station closed while scope stream udp:// and scope foxglove run: the stream's
-    socket is closed and its thread ended, the Foxglove server no longer accepts a
-    connection and its thread ended, and the scope holds neither."""
+    """A station closed while scope stream udp:// and scope foxglove run: the stream's socket is closed and its thread ended, the Foxglove server no longer accepts a connection and its thread ended, and the scope holds neither."""
     import io
     import socket
 
@@ -421,8 +419,7 @@ def test_closing_the_station_closes_the_udp_stream_and_the_foxglove_server(tmp_p
 
 
 def test_scope_close_closes_every_sink_even_when_one_fails_and_may_be_called_twice():
-    """Scope.close: a sink whose close raises is logged, the other is still closed; a
-    second close does nothing."""
+    """Scope.close: a sink whose close raises is logged, the other is still closed; a second close does nothing."""
     import socket
 
     from pyrt.scope import UdpStream

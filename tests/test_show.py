@@ -134,8 +134,7 @@ KNOWN = {
 @pytest.mark.parametrize("robot", list(KNOWN))
 def test_the_table_of_each_robot_lists_its_signals_and_parameters_with_units_and_ranges(
         robot, request):
-    """show alone, on each robot: an aligned table with a row for every signal and
-    parameter of every object (OBJECT.NAME), the known ones with their units and ranges."""
+    """show alone, on each robot: an aligned table with a row for every signal and parameter of every object (OBJECT.NAME), the known ones with their units and ranges."""
     station, shell = request.getfixturevalue(robot)
     lines = _run(shell, "show")
     rows = _rows(lines)
@@ -152,8 +151,7 @@ def test_the_table_of_each_robot_lists_its_signals_and_parameters_with_units_and
 
 
 def test_a_prefix_keeps_the_rows_whose_name_starts_with_it_in_any_case(manipulator):
-    """show AXIS0 lists axis0's rows and its motor's, encoder's and loadcell's, no other;
-    show prototype. the root's alone."""
+    """show AXIS0 lists axis0's rows and its motor's, encoder's and loadcell's, no other; show prototype. the root's alone."""
     _station, shell = manipulator
     rows = _rows(_run(shell, "show AXIS0"))
     assert rows and all(n.lower().startswith("axis0") for n in rows)
@@ -189,8 +187,7 @@ def test_a_manipulator_parameter_set_shows_up(manipulator):
 
 @pytest.mark.parametrize("prefix", ["nope", "gripp.x", "sim.zz", "x" * 500, "'é'"])
 def test_a_prefix_that_matches_nothing_says_so_and_changes_nothing(gripper, prefix):
-    """show with a prefix that names nothing: one error line saying nothing matches, with
-    the objects there are; every value of the table is as before."""
+    """show with a prefix that names nothing: one error line saying nothing matches, with the objects there are; every value of the table is as before."""
     station, shell = gripper
     params = {p.name: p.read() for p in station.params_of(station.root)}
     lines = _run(shell, f"show {prefix}")
@@ -210,8 +207,7 @@ def test_a_near_miss_of_an_object_is_named(gripper):
 @settings(max_examples=60, deadline=None)
 @given(prefix=st.text(alphabet="abcdeginoprstxyzAEGMPS._:0 ", max_size=12))
 def test_the_rows_shown_are_exactly_those_the_prefix_names(gripper, prefix):
-    """For any prefix, the table's names are exactly the station's OBJECT.NAMEs that start
-    with it in any case (a reference computed from the records), in the tree's order."""
+    """For any prefix, the table's names are exactly the station's OBJECT.NAMEs that start with it in any case (a reference computed from the records), in the tree's order."""
     station, _shell = gripper
     table = read_table(station, prefix, runner=station.runner)
     names = [f"{c.name}.{x.name}" for c in station.components()
@@ -222,8 +218,7 @@ def test_the_rows_shown_are_exactly_those_the_prefix_names(gripper, prefix):
 
 
 def test_help_show_says_what_the_table_has_and_its_bound(gripper):
-    """help show names the columns, the prefix, the bound the table keeps and TABLE;
-    help lists show among the words."""
+    """help show names the columns, the prefix, the bound the table keeps and TABLE; help lists show among the words."""
     _station, shell = gripper
     text = " ".join(" ".join(_run(shell, "help show")).split())
     for word in (*COLUMNS, "PREFIX", f"At most {MAX_ROWS} rows", "TABLE [PREFIX]"):
@@ -276,8 +271,7 @@ def huge():
 
 
 def test_a_huge_station_shows_a_bounded_table_and_says_how_to_narrow_it(huge):
-    """show on 630 rows: MAX_ROWS rows, then a line saying how many were left out and
-    which prefix narrows; following it lists that object's rows whole."""
+    """show on 630 rows: MAX_ROWS rows, then a line saying how many were left out and which prefix narrows; following it lists that object's rows whole."""
     _station, shell = huge
     lines = _run(shell, "show")
     assert len(_rows(lines)) == MAX_ROWS
@@ -314,8 +308,7 @@ def _strict(text: str):
 @settings(max_examples=200, deadline=None)
 @given(value=_VALUES)
 def test_every_row_is_strict_json_whatever_its_value(value):
-    """A row of any value (NaN, infinity, numpy scalars, text, a tuple) is one line of
-    strict JSON; a finite number or a flag keeps its value, anything else is null or text."""
+    """A row of any value (NaN, infinity, numpy scalars, text, a tuple) is one line of strict JSON; a finite number or a flag keeps its value, anything else is null or text."""
     row = Row("obj.x", "signal", value, str(value), "V", "", None, None, False)
     table = Table("", (row,), 1, 1, (), ("obj",))
     lines = data_lines(table)
@@ -343,8 +336,7 @@ class _Counting:
 
 
 def test_show_reads_in_one_mailbox_call_only_the_rows_it_shows(huge):
-    """show on the huge station is one mailbox call reading MAX_ROWS values (not 630);
-    show bank03 one call reading bank03's 21."""
+    """show on the huge station is one mailbox call reading MAX_ROWS values (not 630); show bank03 one call reading bank03's 21."""
     station, _shell = huge
     counting = _Counting(station.runner)
     shell = RobotShell(station, io.StringIO(), runner=counting)
@@ -356,8 +348,7 @@ def test_show_reads_in_one_mailbox_call_only_the_rows_it_shows(huge):
 
 
 def test_over_the_bound_the_data_says_the_same(huge):
-    """TABLE's rows over a huge station are the console's, and its last object counts
-    what was left out and says the same note; a NaN value is null, never NaN."""
+    """TABLE's rows over a huge station are the console's, and its last object counts what was left out and says the same note; a NaN value is null, never NaN."""
     station, shell = huge
     lines = ServedStation(station).table(station.runner, "")
     rows = [json.loads(x) for x in lines[:-1]]
@@ -384,8 +375,7 @@ def _as_cells(row: dict) -> tuple[str, ...]:
 
 @pytest.mark.parametrize("robot", list(KNOWN))
 def test_the_served_table_has_the_consoles_rows(robot, request):
-    """The served station's TABLE rows are the console's show rows, row for row (names,
-    values as shown, units, ranges, writable), with and without a prefix."""
+    """The served station's TABLE rows are the console's show rows, row for row (names, values as shown, units, ranges, writable), with and without a prefix."""
     station, shell = request.getfixturevalue(robot)
     served_station = ServedStation(station)
     for prefix in ("", station.root.name[:3].upper()):
@@ -401,8 +391,7 @@ def test_the_served_table_has_the_consoles_rows(robot, request):
 
 
 def test_table_over_the_link_is_served_to_a_reader_and_equals_show():
-    """Over TCP, an unprivileged client's TABLE gripper.s gives the rows show gripper.s
-    gives (the same names, values, units, ranges); a value the operator sets shows up."""
+    """Over TCP, an unprivileged client's TABLE gripper.s gives the rows show gripper.s gives (the same names, values, units, ranges); a value the operator sets shows up."""
     with served() as s:
         reader = s.client()
         operator = s.client()
@@ -426,8 +415,7 @@ def test_table_over_the_link_is_served_to_a_reader_and_equals_show():
 
 
 def test_table_that_matches_nothing_is_a_command_error_and_a_bad_request_a_syntax_error():
-    """TABLE nope: ERR command saying nothing matches, as show nope says it; TABLE a b:
-    ERR syntax; the connection serves on."""
+    """TABLE nope: ERR command saying nothing matches, as show nope says it; TABLE a b: ERR syntax; the connection serves on."""
     with served() as s:
         c = s.client()
         try:
@@ -447,8 +435,7 @@ def test_table_that_matches_nothing_is_a_command_error_and_a_bad_request_a_synta
 
 
 def test_a_reserved_slot_may_not_read_the_table_as_it_may_not_read_anything():
-    """With every slot taken, a newcomer in a reserved slot gets ERR full for TABLE (AUTH
-    and stop only there); the clients in slots read it."""
+    """With every slot taken, a newcomer in a reserved slot gets ERR full for TABLE (AUTH and stop only there); the clients in slots read it."""
     with served(max_clients=2, reserved_slots=1) as sv:
         a, b = sv.client(), sv.client()
         try:
@@ -463,8 +450,7 @@ def test_a_reserved_slot_may_not_read_the_table_as_it_may_not_read_anything():
 
 
 def test_show_through_the_gripper_command_piped():
-    """pyrt gripper with show piped in prints the table (the console's word, not only the
-    interpreter's) and exits 0."""
+    """pyrt gripper with show piped in prints the table (the console's word, not only the interpreter's) and exits 0."""
     import subprocess
     import sys
 
