@@ -217,6 +217,16 @@ def test_the_rows_shown_are_exactly_those_the_prefix_names(gripper, prefix):
     assert table.matched == len(want) and table.total == len(names)
 
 
+def test_the_prefixes_help_gives_as_examples_name_rows(gripper, manipulator, puma):
+    """Each example of help show (show axis0, show puma560., show gripper.s) lists rows on the robot it is written for."""
+    _station, shell = gripper
+    text = " ".join(_run(shell, "help show"))
+    for example in ("show axis0 (", "show puma560. (", "show gripper.s."):
+        assert example in text, example
+    for (_st, sh), prefix in ((manipulator, "axis0"), (puma, "puma560."), (gripper, "gripper.s")):
+        assert _rows(_run(sh, f"show {prefix}")), prefix
+
+
 def test_help_show_says_what_the_table_has_and_its_bound(gripper):
     """help show names the columns, the prefix, the bound the table keeps and TABLE; help lists show among the words."""
     _station, shell = gripper

@@ -7,8 +7,8 @@ value as the console shows it (the gripper's radix, hexadecimal RAM
 bytes), the units, the range (a signal's display range, a parameter's
 checked range) and whether ``set`` may change it (signals are read, never
 set).  ``PREFIX`` keeps the rows whose name starts with it, in any case
-(``show axis0`` is ``axis0``, ``axis0Motor`` ...; ``show puma.`` the root's
-rows alone).
+(the manipulator's ``show axis0`` is ``axis0``, ``axis0Motor`` ...; ``pyrt
+urdf``'s ``show puma560.`` the root's rows alone).
 
 The rows are picked in the shell's thread and their values read in one
 mailbox call, every value of the table from the same tick.  At most
@@ -297,8 +297,9 @@ class ShowWord:
     def do_show(self, prefix: str = "") -> None:
         """show [PREFIX]: every signal and parameter: name, value, units, range, writable.
 
-        PREFIX keeps the rows whose OBJECT.NAME starts with it, in any case
-        (show axis0, show puma., show gripper.s).  A signal's range is its
+        PREFIX keeps the rows whose OBJECT.NAME starts with it, in any case:
+        show axis0 (axis0, axis0Motor ...), show puma560. (the PUMA's own
+        rows), show gripper.s.  A signal's range is its
         display range, a parameter's the range set checks; writable: yes
         for a parameter set OBJECT.FIELD VALUE may change (get says when),
         no for signals.  Every value comes from the same tick.  At most
