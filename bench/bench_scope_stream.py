@@ -8,8 +8,9 @@
   onto the queue.
 * At real time (WallClock, 1 kHz, 3 s each): the same scope with the stream
   off, at 50 Hz and at 1 kHz to a listener on loopback, its thread encoding
-  and sending beside the loop: the scope handler's time per tick and the
-  loop's lateness (p99, max) and overruns.
+  and sending beside the loop: the scope handler's time per tick, the
+  loop's lateness (p99, max) and overruns, and the stream's rate (objects
+  sent a second).
 
 Run: ``python -m pytest bench/bench_scope_stream.py --benchmark-only -s``.
 """
@@ -107,7 +108,8 @@ def test_real_time_tick_with_the_stream(benchmark, listener, hz):
         "lateness_max_us": round(st.lateness.max_ns / 1e3, 1),
         "overruns": st.overruns, "ticks": st.ticks,
     }
-    if stream is not None:
-        result.update(sent=stream.sent, lost=stream.lost, dropped=stream.dropped)
+    if stream is not None:  # the rate: objects sent a second of the run (loop time = wall)
+        result.update(sent=stream.sent, rate_hz=round(stream.sent / SECONDS, 1),
+                      lost=stream.lost, dropped=stream.dropped)
     benchmark.extra_info.update(result)
     print(f"\nreal time, stream {hz or 'off'}: {result}")

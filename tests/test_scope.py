@@ -362,3 +362,90 @@ def test_auto_with_a_trigger_shows_the_samples_while_it_waits():
     scope.run("auto")
     loop.run(30)
     assert list(scope.read().column("ramp")) == [float(n) for n in range(1, 31)]
+
+
+# -- closing the live sinks with the station ------------------------------------------------
+
+
+def _wait_refused(port: int) -> bool:
+    """True once nothing accepts a TCP connection on loopback ``port``; polled, bounded by
+    10 s (only a server that never stops reaches the bound)."""
+    import socket
+    import time
+
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=1.0).close()
+        except OSError:
+            return True
+        time.sleep(0.02)
+    return False
+
+
+def test_closing_the_station_closes_the_udp_stream_and_the_foxglove_server(tmp_path,
+                                                                          monkeypatch):
+    """A station closed while scope stream udp:// and scope foxglove run: the stream's socket is closed and its thread ended, the Foxglove server no longer accepts a connection and its thread ended, and the scope holds neither."""
+    import io
+    import socket
+
+    pytest.importorskip("foxglove", reason="the Foxglove SDK (pyrt[foxglove]) is not installed")
+    from pyrt.commands import RobotShell
+    from pyrt.station.gripper import build_gripper
+
+    monkeypatch.chdir(tmp_path)
+    listener = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    listener.bind(("127.0.0.1", 0))
+    station = build_gripper(Loop(SimClock()))
+    try:
+        station.start()
+        out = io.StringIO()
+        shell = RobotShell(station, out)
+        for line in ("scope add encoder", f"scope stream udp://127.0.0.1:"
+                     f"{listener.getsockname()[1]} 100", "scope foxglove 0 20"):
+            shell.onecmd(line)
+        stream, server = station.scope.stream, station.scope.foxglove
+        assert stream is not None and server is not None, out.getvalue()
+        socket.create_connection(("127.0.0.1", server.port), timeout=5).close()  # serving
+        station.runner.sleep(0.2)  # samples flow to both
+    finally:
+        station.close()
+        listener.close()
+    assert stream._sock.fileno() == -1
+    assert not stream._thread.is_alive()
+    assert not server._thread.is_alive()
+    assert _wait_refused(server.port)
+    assert station.scope.stream is None and station.scope.foxglove is None
+
+
+def test_scope_close_closes_every_sink_even_when_one_fails_and_may_be_called_twice():
+    """Scope.close: a sink whose close raises is logged, the other is still closed; a second close does nothing."""
+    import socket
+
+    from pyrt.scope import UdpStream
+
+    class Broken:
+        period_ns = 1_000_000
+
+        def offer(self, layout, row):
+            pass
+
+        def bind(self, owner):
+            pass
+
+        def close(self):
+            raise RuntimeError("the SDK would not stop")
+
+    listener = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    listener.bind(("127.0.0.1", 0))
+    try:
+        scope = Scope()
+        stream = UdpStream("127.0.0.1", listener.getsockname()[1], 50)
+        scope.start_stream(stream)
+        scope.start_foxglove(Broken())
+        scope.close()
+        assert stream._sock.fileno() == -1 and not stream._thread.is_alive()
+        assert scope.stream is None and scope.foxglove is None
+        scope.close()
+    finally:
+        listener.close()

@@ -33,6 +33,7 @@ from pyrt.commands._lines import LineResolver, _did_you_mean
 from pyrt.commands._motion import motion_type_lines, parse_motion
 from pyrt.commands.scope import ScopeCommand
 from pyrt.commands.shell import CommandShell, parse_seconds
+from pyrt.commands.show import ShowWord
 from pyrt.component import Arg, Command, Component, Switch, command, reply_lines
 from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
 from pyrt.scheduler import Job
@@ -50,7 +51,7 @@ WAIT_TIMEOUT_S = 3600.0
 _REST = Arg("ARGS", str, optional=True, rest=True)
 
 
-class RobotShell(LineResolver, CommandShell):
+class RobotShell(LineResolver, CommandShell, ShowWord):
     """The interpreter of one station (see the module text).
 
     ``runner`` defaults to the station's; a read-only network client passes

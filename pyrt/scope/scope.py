@@ -29,6 +29,7 @@ other method is for the application, through the runner's mailbox.
 
 from __future__ import annotations
 
+import logging
 import struct
 from dataclasses import dataclass, replace
 
@@ -40,6 +41,8 @@ from pyrt.scope.sources import Source, compile_sampler, compile_sources
 from pyrt.scope.stream import Layout, Sink, UdpStream
 
 __all__ = ["MAX_BUFFER_BYTES", "MAX_LENGTH", "Frame", "Scope", "Trigger"]
+
+log = logging.getLogger("pyrt.scope")
 
 _STAGE = 64
 _NEVER = 2**63  # the next stream time when nothing streams: one comparison a sample
@@ -374,6 +377,23 @@ class Scope(ScopeReport):
     def stop_foxglove(self) -> Sink | None:
         """Serve no more; the server that was on, if any (the caller closes it)."""
         return self._plug("foxglove", None)
+
+    def close(self) -> None:
+        """Close the live sinks the scope feeds: ``scope stream``'s socket and
+        thread, ``scope foxglove``'s server and thread (what they held queued is
+        sent first).  The station calls it on its way out, once the loop has
+        stopped sampling.  Safe to call twice; it never raises, so that a sink
+        that fails to close keeps neither the other one open nor the station
+        from closing (the failure goes to the ``pyrt.scope`` log)."""
+        for what, unplug in (("scope stream", self.stop_stream),
+                             ("scope foxglove", self.stop_foxglove)):
+            sink = unplug()
+            if sink is None:
+                continue
+            try:
+                sink.close()
+            except Exception:  # a third-party SDK's error: logged, the rest still closes
+                log.exception("%s: closing %r failed", what, sink)
 
     def _flush(self) -> None:
         n = self._staged

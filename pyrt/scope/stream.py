@@ -93,13 +93,15 @@ class Layout:
 class Sink(Protocol):
     """What the scope hands live samples to (:class:`UdpStream`, the Foxglove
     server): in the loop thread, :meth:`offer` every :attr:`period_ns` of loop
-    time; it only queues."""
+    time; it only queues.  :meth:`close` (application side) ends it."""
 
     period_ns: int
 
     def offer(self, layout: Layout, row: bytes) -> None: ...
 
     def bind(self, owner: object) -> None: ...
+
+    def close(self) -> None: ...
 
 
 def _key(name: str) -> str:

@@ -14,7 +14,12 @@ line starts with ``OK``, ``ERR <code>`` or ``STATUS``:
   stream wherever they come.
 
 The server's own verbs are case-insensitive words that no robot command
-uses: ``AUTH``, ``STATUS``, ``FIELDS``, ``SUBSCRIBE``, ``UNSUBSCRIBE``, ``QUIT``.
+uses: ``AUTH``, ``STATUS``, ``FIELDS``, ``TABLE``, ``SUBSCRIBE``, ``UNSUBSCRIBE``,
+``QUIT``.  ``TABLE [PREFIX]`` is the console's ``show [PREFIX]`` as data: one
+``OK-`` line per row, each a JSON object (name, kind, value, text, units,
+range, lo, hi, writable), then ``OK`` and one for the table (rows, matched,
+total, left_out, note), or ``ERR command`` when the prefix matches nothing;
+anyone that may read may ask.
 Everything else is a robot console command.
 """
 
@@ -35,7 +40,7 @@ __all__ = [
 MAX_LINE = 1024
 
 #: Verbs the server answers itself (upper case; requests are case-insensitive).
-SERVER_VERBS = ("AUTH", "FIELDS", "QUIT", "STATUS", "SUBSCRIBE", "UNSUBSCRIBE")
+SERVER_VERBS = ("AUTH", "FIELDS", "QUIT", "STATUS", "SUBSCRIBE", "TABLE", "UNSUBSCRIBE")
 
 #: The ``ERR`` codes and what each means.
 ERROR_CODES = {

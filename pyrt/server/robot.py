@@ -80,6 +80,12 @@ class ServedRobot(Protocol):
         audit trail), talking through ``runner``."""
         ...
 
+    def table(self, runner: Any, prefix: str = "") -> list[str]:
+        """``TABLE [PREFIX]``: the rows the console's ``show PREFIX`` lists, as data
+        lines (one JSON object each), read through ``runner``; CommandError when
+        the prefix matches nothing."""
+        ...
+
     def is_read_only(self, line: str) -> bool:
         """True when ``line`` only reads (served without privilege)."""
         ...

@@ -21,6 +21,7 @@ import threading
 import time
 from typing import Any
 
+from pyrt.errors import MailboxTimeout, PyrtError
 from pyrt.scope.spew import MIN_SPEW_HZ
 from pyrt.server.connection import Connection
 from pyrt.server.limits import MAX_AUTH_FAILURES, lower_priority
@@ -121,6 +122,9 @@ class SessionMixin(ServerState):
                 "full", f"{self.max_clients} clients already: this reserved slot serves "
                 "AUTH and stop only; closing"))
             self._close_after_flush(conn)
+            return
+        if verb == "TABLE":  # a read of the loop: in the worker, in order, for anyone
+            self._enqueue(conn, line)
             return
         if _server_verb(verb, rest):
             if conn.pending == 0 and not (verb == "AUTH" and self._held_by_a_closing(conn)):
@@ -355,6 +359,8 @@ class SessionMixin(ServerState):
         verb, rest = split_verb(line)
         if _server_verb(verb, rest):
             return self._verb(conn, verb, rest)
+        if verb == "TABLE":
+            return self._table(conn, rest)
         if verb != "HELP" and not (conn.privileged or self.robot.is_read_only(line)):
             return self._refusal(line)
         extra = self._help_lines(conn) if verb == "HELP" and not rest else []
@@ -362,6 +368,22 @@ class SessionMixin(ServerState):
         if end:
             self._close_after_flush(conn)
         return reply
+
+    def _table(self, conn: Connection, prefix: str) -> str:
+        """``TABLE [PREFIX]``: the rows the console's ``show PREFIX`` lists, as
+        data (one JSON object a row, then one for the table); a read, served
+        to every client that may read (an unprivileged one through the
+        observer: the operator's fault stays pending)."""
+        if len(prefix.split()) > 1:
+            return format_error("syntax", "TABLE takes at most one PREFIX (the rows whose "
+                                f"OBJECT.NAME starts with it), got {prefix[:60]!r}")
+        runner = self.runner if conn.privileged else self.observer
+        try:
+            return format_reply(self.robot.table(runner, prefix))
+        except MailboxTimeout as exc:
+            return format_error("timeout", f"the control loop did not answer: {exc}")
+        except PyrtError as exc:
+            return format_error("command", str(exc))
 
     def _refusal(self, line: str) -> str:
         """An unprivileged client's line that is not served: ``ERR command``
@@ -383,7 +405,8 @@ class SessionMixin(ServerState):
 
     def _help_lines(self, conn: Connection) -> list[str]:
         lines = [
-            "server (any case): AUTH TOKEN | STATUS | SUBSCRIBE HZ | UNSUBSCRIBE | QUIT",
+            "server (any case): AUTH TOKEN | STATUS | FIELDS | TABLE [PREFIX] | SUBSCRIBE HZ | "
+            "UNSUBSCRIBE | QUIT",
         ]
         if not conn.privileged:
             lines.append("read-only until AUTH: commands that change the robot get ERR denied; "

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from pyrt.commands.robot import RobotShell
+from pyrt.commands.show import data_lines, read_table, require_rows
 from pyrt.component import Limits
 from pyrt.errors import CommandError
 from pyrt.scope import Source
@@ -77,6 +78,13 @@ class ServedStation:
 
     def make_shell(self, runner: Any, stdout: TextIO, source: str = "remote") -> RobotShell:
         return RobotShell(self.station, stdout, runner=runner, source=source, audit=self.audit)
+
+    def table(self, runner: Any, prefix: str = "") -> list[str]:
+        """The rows ``show PREFIX`` lists, as data (``TABLE``: one JSON object a row,
+        then one for the table), read through ``runner`` in one mailbox call;
+        CommandError when the prefix matches nothing, as ``show`` says it."""
+        table = read_table(self.station, prefix, runner=runner)
+        return data_lines(require_rows(table))
 
     # -- the audit trail ------------------------------------------------------------------
 

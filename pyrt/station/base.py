@@ -497,6 +497,7 @@ class Station(StationEvents, StationRequests):
         else:
             with contextlib.suppress(Exception):
                 self.reflex("shutdown")
+        self.scope.close()  # its live sinks: the UDP stream, the Foxglove server
         try:
             self.write_back()
         finally:

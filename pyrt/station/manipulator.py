@@ -775,7 +775,7 @@ class ManipulatorFactory(ManipulatorWorlds, StationFactory):
 Commands are addressed to named objects, as the document's
 Hardware::doCommand: prototype to 0 0 150, axis1 up 5, axis0Motor
 maxspeed 3, axis0Encoder read, axis0Loadcell calibrate; plus the shared
-words (help [object [verb]], wait, sleep, stop, ack, status, statusline, stats, scope,
+words (help [object [verb]], wait, sleep, stop, ack, status, statusline, show, stats, scope,
 motion, get, set, clear, quit) and the manipulator's log and debug; sim is
 the simulated world's object.  Type help.
 
