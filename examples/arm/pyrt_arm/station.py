@@ -6,20 +6,23 @@ arm behind it; ``tcp://HOST:PORT``: ``pyrt board-sim arm`` in another
 process).  The component tree::
 
     arm          the controller (root): q0 q1 x y, following errors; arm to / xy / show
-      shoulder   joint q0: its servo law, its registers, its reflex
+      shoulder   joint q0: its registers, its reflex
       elbow      joint q1
     sim          the simulated arm's truth and fault injection (sim show, sim fault ...)
 
 One general ready queue runs two tasks: ``servo`` every tick (1 kHz at the
-default 1 ms tick) and ``trajectory`` every 10th (100 Hz).  The trajectory
-task steps the motion executor: a ``joint_trajectory`` motion (pyrt's
-:mod:`pyrt.robots.trajectory`) writes a setpoint knot ``(q, qd)`` every
-10 ms through :meth:`ArmController.command_joints`, and a joint_trajectory
-record queued behind the running one is appended to it, so that queued
-moves blend.  The servo task interpolates the knots (cubic Hermite, one
-trajectory period behind) into a 1 kHz setpoint with velocity and
-acceleration, runs each joint's PD law with feed-forward
-(:mod:`pyrt_arm.servo`) on its encoder counter and writes its drive.
+default 1 ms tick) and ``trajectory`` every 10th (100 Hz).  The control is
+pyrt's arm layer: the arm is a :class:`pyrt.kinematics.Chain` (from its
+URDF, :func:`pyrt_arm.kinematics.urdf`); ``arm to`` and ``arm xy`` queue a
+joint-mode :class:`pyrt.motion.MotionSpec` on a :class:`pyrt.motion.Evaluator`
+(planned when queued, within the arm's velocity and acceleration limits;
+a move queued behind the running one blends into it by Paul's transition);
+the trajectory task hands each knot (position, velocity) to pyrt's generic
+servo (:class:`pyrt.native.Servo`, C: cubic interpolation to 1 kHz, the
+arm's PD law with feed-forward, :mod:`pyrt_arm.servo`), whose torques the
+servo task writes as the drives.  A plug-in motion type
+(``motion joint_trajectory ...``) drives the same servo through
+:meth:`ArmController.command_joints`, one knot per trajectory tick.
 
 The amplifiers are enabled while a move runs and until the arm has settled
 at its target (within :data:`AT_TARGET_DEG` on every joint, at rest for
@@ -30,27 +33,29 @@ Faults: a following error beyond 1 deg, a joint outside its limits, or an
 amplifier that reports no power calls :meth:`pyrt.Component.fail`, and the
 station trips: in the same tick every joint's reflex writes drive 0 and
 enable 0 (and clears its state in a ``finally``), the motion ends and queued
-moves are dropped.  The operator's ``stop`` brakes the setpoint to rest at
-the arm's acceleration limits, then switches the amplifiers off.
+moves are dropped.  The operator's ``stop`` brakes along the path to rest
+at the arm's acceleration limits, then switches the amplifiers off.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
-import itertools
 import math
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
 from pyrt import (
     Arg,
     BoardKind,
     Boards,
+    BoardWorld,
     CommandError,
     Component,
     ConfigError,
     JointStates,
+    JointTrajectory,
     Limits,
     Loop,
     MotionExecutor,
@@ -67,8 +72,9 @@ from pyrt import (
     install,
     open_boards,
 )
-from pyrt.robots.trajectory import JointTrajectory, joint_trajectory_record
-from pyrt.station.base import BoardWorld
+from pyrt.kinematics import Chain
+from pyrt.motion import Evaluator, MotionFault, MotionSpec, RecordError
+from pyrt.motion import Limits as MotionLimits
 
 from pyrt_arm.boards import (
     ARM_BOARDS,
@@ -80,12 +86,23 @@ from pyrt_arm.boards import (
 )
 from pyrt_arm.kinematics import GEOMETRY, KinematicsError, elbow_of, fk, ik, urdf
 from pyrt_arm.plant import JOINTS, Plant
-from pyrt_arm.servo import ELBOW, FOLLOWING_ERROR_LIMIT_DEG, SHOULDER, JointServo, JointServoConfig
+from pyrt_arm.servo import (
+    ELBOW,
+    FOLLOWING_ERROR_LIMIT_DEG,
+    SHOULDER,
+    JointServoConfig,
+    arm_servo,
+    coulomb,
+    counts_to_deg,
+    following_error_fault,
+    joint_limit_fault,
+)
 
 __all__ = [
     "AMAX_DEG_S2",
     "ARM",
     "AT_TARGET_DEG",
+    "CHAIN",
     "SETTLE_S",
     "TIP_TOLERANCE_MM",
     "TRAJECTORY_PERIOD",
@@ -104,7 +121,7 @@ VMAX_DEG_S = (90.0, 90.0)
 AMAX_DEG_S2 = (360.0, 360.0)
 #: The trajectory task's period, in ticks (100 Hz at the 1 ms tick).
 TRAJECTORY_PERIOD = 10
-#: A move has ended "at target" when every joint's measured angle is this close (deg).
+#: A move has ended "at target" when every joint's following error is this small (deg) ...
 AT_TARGET_DEG = 0.05
 #: ... and its measured speed below this (deg/s) ...
 SETTLED_SPEED_DEG_S = 2.0
@@ -118,7 +135,15 @@ TIP_TOLERANCE_MM = 0.05
 #: Servo ticks in a row with an amplifier reporting no power before that is a fault.
 AMP_GRACE_TICKS = 5
 
+#: The arm as a kinematic chain (rad, m), from its URDF.
+CHAIN = Chain.from_urdf(urdf())
+
+#: The plug-in motion types the arm runs besides its own moves (``motion NAME ...``):
+#: pyrt's joint trajectory, registered by its import here.
+MOTION_TYPES = (JointTrajectory.name,)
+
 _REACH = GEOMETRY.r_max_mm
+_DEG = 180.0 / math.pi
 
 
 def _joint_limits(config: JointServoConfig) -> Limits:
@@ -136,69 +161,56 @@ _TIP = Limits(-_REACH, _REACH)
 
 
 class Joint(Component):
-    """One joint: its servo law, its board registers (``count``, ``amp_ok``, ``drive``,
-    ``enable`` at its index) and its reflex (drive 0, amplifier disabled)."""
+    """One joint: its board registers (``count``, ``amp_ok``, ``drive``, ``enable`` at its
+    index), what the servo says of it, and its reflex (drive 0, amplifier disabled)."""
 
-    def __init__(self, name: str, index: int, board: Any, config: JointServoConfig) -> None:
-        self.name = name
+    def __init__(self, arm: ArmController, index: int, config: JointServoConfig) -> None:
+        self.name = ("shoulder", "elbow")[index]
+        self.arm = arm
         self.index = index
-        self.board = board
-        self.servo = JointServo(config)
+        self.board = arm.board
+        self.config = config
+        #: Where the measured angle may go before that is a fault (deg).
+        self.limits_deg = config.limits_deg
         #: True while the amplifier is enabled and the servo closes the loop.
         self.engaged = False
         #: The drive last written (DAC counts).
         self.drive = 0
-        self._no_power = 0
+        self.no_power = 0
 
     def signals(self) -> list[Signal]:
-        s = self.servo
+        s, j = self.arm.servo, self.index
         return [
-            Signal(f"q{self.index}", "deg", self.position, f"{self.name} angle (encoder)",
-                   ".4f", limits=_joint_limits(s.config)),
-            Signal("setpoint", "deg", lambda: s.setpoint_deg, "servo setpoint", ".4f"),
-            Signal("error", "deg", lambda: s.error_deg, "following error", ".4f", limits=_FERR),
-            Signal("velocity", "deg/s", lambda: s.velocity_deg_s, "measured speed", ".3f"),
+            Signal(f"q{j}", "deg", self.position, f"{self.name} angle (encoder)", ".4f",
+                   limits=_joint_limits(self.config)),
+            Signal("setpoint", "deg", lambda: float(s.q_ref[j]) * _DEG, "servo setpoint", ".4f"),
+            Signal("error", "deg", lambda: self.error_deg, "following error", ".4f",
+                   limits=_FERR),
+            Signal("velocity", "deg/s", lambda: float(s.velocity[j]) * _DEG, "measured speed",
+                   ".3f"),
             Signal("drive", "DAC counts", lambda: self.drive, "amplifier command", "d"),
             Signal("enabled", "bool", lambda: self.engaged, "amplifier enabled", "d"),
         ]
 
-    def count(self) -> int:
-        """The encoder counter."""
-        value: int = self.board.read("count", self.index)
-        return value
+    @property
+    def error_deg(self) -> float:
+        """The servo's following error (deg) while engaged, else 0."""
+        return float(self.arm.servo.error[self.index]) * _DEG if self.engaged else 0.0
+
+    def measure(self, count: int) -> float:
+        """The joint angle (deg) the counter reading ``count`` gives."""
+        return counts_to_deg(count, self.config.zero_count, self.config.counts_per_deg)
 
     def position(self) -> float:
         """The joint angle the encoder gives (deg)."""
-        return self.servo.measure(self.count())
+        return self.measure(self.board.read("count", self.index))
 
     def engage(self) -> None:
-        """Close the loop at the present angle and enable the amplifier."""
-        self.servo.reset(self.count())
-        self.drive = 0
-        self._no_power = 0
+        """Drive 0 and the amplifier enabled."""
+        self.drive = self.no_power = 0
         self.board.write("drive", 0, self.index)
         self.board.write("enable", 1, self.index)
         self.engaged = True
-
-    def update(self, q: float, qd: float, qdd: float, dt_s: float, count: int,
-               amp_ok: int) -> str | None:
-        """One servo tick on this tick's ``count`` and ``amp_ok`` inputs: write the drive;
-        the fault reason, or None."""
-        drive = drive_counts(self.servo.update(q, qd, count, qdd, dt_s))
-        if drive != self.drive:
-            self.board.write("drive", drive, self.index)
-            self.drive = drive
-        if amp_ok:
-            self._no_power = 0
-        else:
-            self._no_power += 1
-            if self._no_power >= AMP_GRACE_TICKS:
-                return f"{JOINTS[self.index]} amplifier reports no power"
-        return self.servo.fault()
-
-    def release(self) -> None:
-        """Drive 0 and the amplifier disabled: the joint is left to its friction."""
-        self.reflex()
 
     def reflex(self) -> None:
         """Drive 0 and amplifier disabled, now; the joint's state cleared whatever happens."""
@@ -209,26 +221,10 @@ class Joint(Component):
                 self.board.write("enable", 0, self.index)
             finally:
                 self.engaged = False
-                self.drive = 0
-                self._no_power = 0
+                self.drive = self.no_power = 0
 
 
 # -- the controller -----------------------------------------------------------------------------
-
-
-Knot = tuple[int, tuple[float, float], tuple[float, float]]
-
-
-def _cubic(a: Knot, b: Knot) -> tuple[int, tuple[tuple[float, float, float, float], ...]]:
-    """The cubic Hermite from knot ``a`` to knot ``b``: its start time and, per joint, the
-    coefficients of ``q(u) = c0 + c1 u + c2 u**2 + c3 u**3`` (``u`` seconds from ``a``)."""
-    h = (b[0] - a[0]) * 1e-9
-    out = []
-    for j in (0, 1):
-        p0, m0, p1, m1 = a[1][j], a[2][j], b[1][j], b[2][j]
-        d = (p1 - p0) / h
-        out.append((p0, m0, (3.0 * d - 2.0 * m0 - m1) / h, (m0 + m1 - 2.0 * d) / (h * h)))
-    return a[0], tuple(out)
 
 
 class ArmController(Component):
@@ -243,29 +239,26 @@ class ArmController(Component):
     def __init__(self, station: ArmStation, board: Any, period_ns: int) -> None:
         self.station = station
         self.board = board
-        self.joints = (Joint("shoulder", 0, board, SHOULDER), Joint("elbow", 1, board, ELBOW))
-        self.period_ns = period_ns
+        self.servo = arm_servo((SHOULDER, ELBOW), period_ns * 1e-9)
+        self.joints = (Joint(self, 0, SHOULDER), Joint(self, 1, ELBOW))
         # where each joint's count and amp_ok are in the board's snapshot of its inputs
         layout = [(r.name, i) for r in board.kind.inputs() for i in range(r.count)]
         self._inputs = [(layout.index(("count", j)), layout.index(("amp_ok", j)))
                         for j in (0, 1)]
-        #: The servo runs this far behind the trajectory's knots (one trajectory period).
-        self.delay_ns = TRAJECTORY_PERIOD * period_ns
+        self.limits = MotionLimits(tuple(math.radians(v) for v in VMAX_DEG_S),
+                                   tuple(math.radians(a) for a in AMAX_DEG_S2))
+        self.traj_period_s = TRAJECTORY_PERIOD * period_ns * 1e-9
+        #: The arm's queued motion while the servo holds it (None: amplifiers off).
+        self.evaluator: Evaluator | None = None
         #: How the last move ended ('' before any).
         self.last_stop = ""
         #: What the arm does: idle, moving, settling, braking.
         self.state = "idle"
-        self.target: tuple[float, float] | None = None
-        self._knots: list[Knot] = []
-        #: the knots' segment the servo is on: (start, end, per joint cubic coefficients)
-        self._segment: tuple[int, int, tuple[tuple[float, float, float, float], ...]] | None = None
         self._now_ns = 0
-        self._last_servo_ns: int | None = None
-        self._sp_q = [0.0, 0.0]
-        self._sp_qd = [0.0, 0.0]
-        self._settled_ns = 0
+        self._reason = "at target"
+        self._ended = True  # the knots have stopped coming: the servo holds the last one
+        self._settle_from = 0
         self._quiet_since: int | None = None
-        self._stop_reason = "endpoint"
 
     # -- the component ----------------------------------------------------------------
 
@@ -273,15 +266,15 @@ class ArmController(Component):
         sh, el = self.joints
         return [
             Signal("q0", "deg", sh.position, "shoulder angle (encoder)", ".4f",
-                   limits=_joint_limits(sh.servo.config)),
+                   limits=_joint_limits(sh.config)),
             Signal("q1", "deg", el.position, "elbow angle (encoder)", ".4f",
-                   limits=_joint_limits(el.servo.config)),
+                   limits=_joint_limits(el.config)),
             Signal("x", "mm", lambda: self.tip()[0], "tip x (encoders)", ".3f", limits=_TIP),
             Signal("y", "mm", lambda: self.tip()[1], "tip y (encoders)", ".3f", limits=_TIP),
-            Signal("ferr0", "deg", lambda: sh.servo.error_deg if sh.engaged else 0.0,
-                   "shoulder following error", ".4f", limits=_FERR),
-            Signal("ferr1", "deg", lambda: el.servo.error_deg if el.engaged else 0.0,
-                   "elbow following error", ".4f", limits=_FERR),
+            Signal("ferr0", "deg", lambda: sh.error_deg, "shoulder following error", ".4f",
+                   limits=_FERR),
+            Signal("ferr1", "deg", lambda: el.error_deg, "elbow following error", ".4f",
+                   limits=_FERR),
             Signal("moving", "bool", lambda: self.state != "idle", "a move runs or settles", "d"),
         ]
 
@@ -289,20 +282,19 @@ class ArmController(Component):
         return list(self.joints)
 
     def tasks(self) -> list[Task]:
-        return [Task(self.servo_tick, period=1, name="servo", timed=True),
-                Task(self.trajectory_tick, period=TRAJECTORY_PERIOD, name="trajectory",
-                     timed=True)]
+        return [Task(self.trajectory_tick, period=TRAJECTORY_PERIOD, name="trajectory",
+                     timed=True),
+                Task(self.servo_tick, period=1, name="servo", timed=True)]
 
     def reflex(self) -> None:
-        """Every setpoint dropped, the move ended (the joints' reflexes cut the drives)."""
+        """The motion dropped, the move ended (the joints' reflexes cut the drives)."""
         try:
             if self.state != "idle":
                 self.last_stop = "stopped: every motor off"
         finally:
-            self._knots = []
-            self._segment = None
             self.state = "idle"
-            self._last_servo_ns = None
+            self.evaluator = None
+            self._ended = True
             self._quiet_since = None
 
     # -- where it is --------------------------------------------------------------------
@@ -313,8 +305,7 @@ class ArmController(Component):
 
     def tip(self) -> tuple[float, float]:
         """The tip the encoders give (mm)."""
-        q0, q1 = self.angles()
-        return fk(q0, q1)
+        return fk(*self.angles())
 
     def where(self) -> str:
         """The joints and the tip, in the operator's words."""
@@ -322,13 +313,14 @@ class ArmController(Component):
         x, y = fk(q0, q1)
         return f"q0 {q0:.3f} deg, q1 {q1:.3f} deg, tip ({x:.2f}, {y:.2f}) mm"
 
-    # -- JointRobot: what joint_trajectory drives -----------------------------------------
+    # -- JointRobot: what a plug-in motion type drives -----------------------------------
 
     def joint_positions(self) -> Sequence[float]:
-        """Where the servo's setpoint is heading (its last knot) while the servo holds the
-        arm, else the encoders' angles."""
-        if self.state != "idle" and self._knots:
-            return self._knots[-1][1]
+        """Where the servo's reference is heading (its last knot) while the servo holds the
+        arm, else the encoders' angles (deg)."""
+        if self.state != "idle":
+            q = self.servo.knots[3]
+            return float(q[0]) * _DEG, float(q[1]) * _DEG
         return self.angles()
 
     def joint_limits(self) -> tuple[Sequence[float], Sequence[float]]:
@@ -339,156 +331,168 @@ class ArmController(Component):
         return (l0, l1), (h0, h1)
 
     def command_joints(self, q: Sequence[float], qd: Sequence[float]) -> None:
-        """A setpoint knot at the trajectory task's time; the first one engages the servo."""
+        """A knot (deg, deg/s) at this trajectory tick: the servo's next cubic segment; the
+        first one engages the servo."""
         if self.state == "idle":
-            self._engage(self._now_ns)
+            self._engage()
         self.state = "moving"
-        knot = (self._now_ns, (float(q[0]), float(q[1])), (float(qd[0]), float(qd[1])))
-        if self._knots and self._knots[-1][0] >= knot[0]:
-            self._knots[-1] = knot
-            self._segment = None
-        else:
-            self._knots.append(knot)
-        del self._knots[:-4]
+        self._load(np.radians(q), np.radians(qd), self.traj_period_s)
 
-    def _engage(self, now_ns: int) -> None:
+    def motion_ended(self, reason: str) -> None:
+        """The plug-in motion ended: the servo holds its last knot and the arm settles;
+        a move given now starts there."""
+        if self.state == "moving":
+            self.evaluator = self._evaluator(self.servo.knots[3])
+            self._end_of_knots(self._now_ns)
+
+    # -- the servo ------------------------------------------------------------------------
+
+    def _evaluator(self, q: Any) -> Evaluator:
+        start = np.clip(np.asarray(q, dtype=float), CHAIN.lower, CHAIN.upper)
+        return Evaluator(CHAIN, self.limits, start, period=self.traj_period_s)
+
+    def _engage(self) -> None:
+        """Close the loop where the arm is (the trajectory starts there), amplifiers on."""
+        q = np.array(self.angles()) / _DEG
+        self.servo.reset(q)
+        self.servo.segment(self.traj_period_s, q, np.zeros(2), q, np.zeros(2))
+        self.evaluator = self._evaluator(q)
         for jt in self.joints:
             jt.engage()
-        q = [jt.servo.position_deg for jt in self.joints]
-        self._sp_q, self._sp_qd = list(q), [0.0, 0.0]
-        self._knots = [(now_ns - self.delay_ns, (q[0], q[1]), (0.0, 0.0))]
-        self._segment = None
-        self._last_servo_ns = None
+        self._ended = True
         self._quiet_since = None
 
-    # -- the tasks ------------------------------------------------------------------------
+    def _load(self, q: Any, qd: Any, duration: float) -> None:
+        """The servo's next segment: the cubic from the last knot to this one (position
+        and velocity) in ``duration`` s."""
+        k = self.servo.knots
+        k[0:2] = k[3:5]
+        k[3], k[4] = q, qd
+        self.servo.load(duration, quintic=False)
+        self._ended = False
+
+    def _end_of_knots(self, now_ns: int) -> None:
+        self._ended = True
+        self._settle_from = now_ns
+        self._quiet_since = None
+        if self.state == "moving":
+            self.state = "settling"
 
     def trajectory_tick(self, now_ns: int) -> None:
-        """100 Hz: step the motion executor; queued joint moves blend into the running one."""
+        """100 Hz: a plug-in motion steps (its knots come by command_joints), or the
+        evaluator's knot goes to the servo as its next segment."""
         self._now_ns = now_ns
-        st = self.station
-        st.executor.poll(now_ns)
-        current = st.executor.current
-        while isinstance(current, JointTrajectory) and not current.done:
-            record = st.motion.peek()
-            if record is None or record.type != JointTrajectory.name:
-                break
-            st.motion.get()
-            try:
-                current.append(record.params)
-            except CommandError as exc:
-                self.say(f"move refused: {exc}", "warning")
+        executor = self.station.executor
+        executor.poll(now_ns)
+        ev = self.evaluator
+        if executor.busy or ev is None or self.state == "idle":
+            return
+        try:
+            knot = ev.tick()
+        except MotionFault as exc:
+            self.fail(f"trajectory: {exc}", self.name)
+            return
+        if knot.qd.any() or knot.qdd.any() or not np.array_equal(knot.q, self.servo.knots[3]):
+            self._load(knot.q, knot.qd, knot.period)
+        elif ev.idle and not self._ended:
+            self._end_of_knots(now_ns)
 
     def servo_tick(self, now_ns: int) -> None:
-        """1 kHz: setpoint from the knots, each joint's servo law, the checks, settling."""
+        """1 kHz: the encoders into the servo, its torques as the drives; the checks;
+        settling."""
+        self._now_ns = now_ns
         if self.state == "idle":
             return
-        last, self._last_servo_ns = self._last_servo_ns, now_ns
-        dt = (now_ns - last) * 1e-9 if last is not None and now_ns > last else self.period_ns * 1e-9
-        tau = now_ns - self.delay_ns
-        q, qd, qdd = self._setpoint(tau)
-        self._sp_q, self._sp_qd = q, qd
         inputs = self.board.snapshot()  # one read of every input: this tick's
-        for j, jt in enumerate(self.joints):
-            at_count, at_ok = self._inputs[j]
-            reason = jt.update(q[j], qd[j], qdd[j], dt, inputs[at_count], inputs[at_ok])
+        servo, joints = self.servo, self.joints
+        q = [jt.measure(inputs[at]) for jt, (at, _ok) in zip(joints, self._inputs, strict=True)]
+        trip = servo.tick(np.array(q) / _DEG)
+        if trip is not None:
+            m = q[trip.joint]
+            self.fail(following_error_fault(trip.name, m + trip.error * _DEG, m,
+                                            trip.limit * _DEG) or str(trip),
+                      joints[trip.joint].name)
+            return
+        for jt, tau, qd, (_at, ok), qj in zip(joints, servo.tau.tolist(), servo.qd_ref.tolist(),
+                                              self._inputs, q, strict=True):
+            reason = joint_limit_fault(jt.config.name, qj, jt.limits_deg)
+            drive = drive_counts((tau + coulomb(jt.config, qd)) / jt.config.torque_per_drive_nm)
+            if drive != jt.drive:
+                self.board.write("drive", drive, jt.index)
+                jt.drive = drive
+            jt.no_power = 0 if inputs[ok] else jt.no_power + 1
+            if jt.no_power >= AMP_GRACE_TICKS:
+                reason = f"{JOINTS[jt.index]} amplifier reports no power"
             if reason is not None:
                 self.fail(reason, jt.name)
                 return
-        if self.state != "moving" and tau >= self._knots[-1][0]:
+        if self._ended and servo.late > 0:
             self._settle(now_ns)
 
-    def _setpoint(self, tau: int) -> tuple[list[float], list[float], list[float]]:
-        knots = self._knots
-        first, final = knots[0], knots[-1]
-        if tau <= first[0]:
-            return list(first[1]), [0.0, 0.0], [0.0, 0.0]
-        if tau >= final[0]:
-            if final[2] == (0.0, 0.0):
-                return list(final[1]), [0.0, 0.0], [0.0, 0.0]
-            dt = (tau - final[0]) * 1e-9
-            return ([final[1][j] + final[2][j] * dt for j in (0, 1)], list(final[2]),
-                    [0.0, 0.0])
-        seg = self._segment
-        if seg is None or not seg[0] < tau <= seg[1]:
-            for a, b in itertools.pairwise(knots):
-                if a[0] < tau <= b[0]:
-                    seg = self._segment = (a[0], b[0], _cubic(a, b)[1])
-                    break
-            else:  # pragma: no cover - the knots cover (first, final]
-                return list(final[1]), [0.0, 0.0], [0.0, 0.0]
-        u = (tau - seg[0]) * 1e-9
-        (a0, a1, a2, a3), (b0, b1, b2, b3) = seg[2]
-        return ([a0 + u * (a1 + u * (a2 + u * a3)), b0 + u * (b1 + u * (b2 + u * b3))],
-                [a1 + u * (2.0 * a2 + 3.0 * u * a3), b1 + u * (2.0 * b2 + 3.0 * u * b3)],
-                [2.0 * a2 + 6.0 * u * a3, 2.0 * b2 + 6.0 * u * b3])
-
-    def motion_ended(self, reason: str) -> None:
-        """The executor's motion ended (``reason``): the servo settles at the last knot."""
-        if self.state == "moving":
-            self.state = "settling"
-            self._stop_reason = reason
-            self._quiet_since = None
-            self._settled_ns = self._now_ns
-
     def _settle(self, now_ns: int) -> None:
-        quiet = all(abs(jt.servo.error_deg) <= AT_TARGET_DEG
-                    and abs(jt.servo.velocity_deg_s) <= SETTLED_SPEED_DEG_S
-                    for jt in self.joints)
+        s = self.servo
+        quiet = (max(abs(e) for e in s.error.tolist()) * _DEG <= AT_TARGET_DEG
+                 and max(abs(v) for v in s.velocity.tolist()) * _DEG <= SETTLED_SPEED_DEG_S)
         if not quiet:
             self._quiet_since = None
         elif self._quiet_since is None:
             self._quiet_since = now_ns
         if self._quiet_since is not None and now_ns - self._quiet_since >= SETTLE_S * 1e9:
-            self._finish("at target" if self.state == "settling" else self._stop_reason)
-        elif now_ns - self._settled_ns >= SETTLE_TIMEOUT_S * 1e9 + self.delay_ns:
-            errs = ", ".join(f"{JOINTS[j]} {jt.servo.error_deg:+.4f} deg"
-                             for j, jt in enumerate(self.joints))
+            self._finish("at target" if self.state == "settling" else self._reason)
+        elif now_ns - self._settle_from >= SETTLE_TIMEOUT_S * 1e9:
+            errs = ", ".join(f"{JOINTS[jt.index]} {jt.error_deg:+.4f} deg" for jt in self.joints)
             self._finish(f"did not settle within {SETTLE_TIMEOUT_S:g} s ({errs})")
 
     def _finish(self, why: str) -> None:
         for jt in self.joints:
-            jt.release()
+            jt.reflex()
+        self.reflex()
         self.last_stop = why
-        self.state = "idle"
-        self._knots = []
-        self._segment = None
-        self._quiet_since = None
 
     def brake(self) -> None:
-        """The operator's stop: the setpoint decelerates to rest from where it is, every
-        joint at once at the acceleration limits; then the arm settles and is switched off."""
+        """The operator's stop: the servo's reference brakes to rest from where it is,
+        every joint at once at the acceleration limits (on the path of a joint move);
+        queued moves dropped; then the arm settles and is switched off."""
         if self.state == "idle":
             return
-        tau = self._now_ns - self.delay_ns
-        if self._last_servo_ns is not None:
-            tau = self._last_servo_ns - self.delay_ns
-        q, qd = self._sp_q, self._sp_qd
-        t_stop = max(abs(qd[j]) / AMAX_DEG_S2[j] for j in (0, 1))
-        stop_ns = int(t_stop * 1e9)
-        if stop_ns < 1000:
-            self._knots = [(tau, (q[0], q[1]), (0.0, 0.0))]
-        else:
-            end = (q[0] + 0.5 * qd[0] * t_stop, q[1] + 0.5 * qd[1] * t_stop)
-            self._knots = [(tau, (q[0], q[1]), (qd[0], qd[1])),
-                           (tau + stop_ns, end, (0.0, 0.0))]
-        self._segment = None
+        s = self.servo
+        q, qd = s.q_ref.copy(), s.qd_ref.copy()
+        t = float(np.max(np.abs(qd) / np.radians(AMAX_DEG_S2)))
+        if t > 1e-6:
+            s.segment(t, q, qd, q + 0.5 * qd * t, np.zeros(2))
+        self.evaluator = self._evaluator(q + 0.5 * qd * t)
+        self._end_of_knots(self._now_ns + round(t * 1e9))
         self.state = "braking"
-        self._stop_reason = "stopped (stop command)"
-        self._quiet_since = None
-        self._settled_ns = tau + self.delay_ns + stop_ns
+        self._reason = "stopped (stop command)"
 
     # -- commands -------------------------------------------------------------------------
 
     def _move(self, q0: float, q1: float) -> str:
-        x, y = fk(q0, q1)
+        st = self.station
         if self.state == "braking":
             raise CommandError("arm: braking to rest after a stop: wait, then move; "
                                "nothing moved")
-        _n, waiting = self.station.submit_motion(joint_trajectory_record((q0, q1)))
+        if st.executor.busy or len(st.motion):
+            raise CommandError("arm: a motion record runs: wait for it (or stop), then move; "
+                               "nothing moved")
+        x, y = fk(q0, q1)
         to = f"q0 {q0:.3f} deg, q1 {q1:.3f} deg, tip ({x:.2f}, {y:.2f}) mm"
-        self.target = (q0, q1)
-        if waiting:
+        busy = self.state != "idle"
+        if not busy:
+            self._engage()
+        assert self.evaluator is not None
+        try:
+            self.evaluator.queue(MotionSpec(target=(math.radians(q0), math.radians(q1)),
+                                            name="arm to"))
+        except RecordError as exc:
+            if not busy:
+                self.reflex()
+                for jt in self.joints:
+                    jt.reflex()
+            raise CommandError(f"arm: refused: {exc}; nothing moved") from None
+        self.state = "moving"
+        self._ended = False
+        if busy:
             return f"queued: {to}; it blends into the running move"
         return f"moving to {to}"
 
@@ -642,15 +646,20 @@ class ArmStation(Station):
     def _status(self) -> str:
         """One line: joints, tip, state, following errors."""
         ctl = self.controller
-        errs = (", following error " + ", ".join(f"{jt.servo.error_deg:+.4f}"
+        errs = (", following error " + ", ".join(f"{jt.error_deg:+.4f}"
                                                   for jt in ctl.joints) + " deg"
                 if ctl.state != "idle" else ", amplifiers off")
         return f"{self.where()} (±{TIP_TOLERANCE_MM:g} mm at rest), {ctl.state}{errs}"
 
     def check_motion(self, record: Any) -> None:
-        """Refuse a move while the arm brakes after a stop."""
-        if self.controller.state == "braking":
+        """Refuse a motion record while the arm brakes after a stop, or while a move of its
+        own (arm to, arm xy) runs: the servo follows one source of knots at a time."""
+        ctl = self.controller
+        if ctl.state == "braking":
             raise CommandError("arm: braking to rest after a stop: wait, then move; "
+                               "nothing queued")
+        if ctl.evaluator is not None and not ctl.evaluator.idle:
+            raise CommandError("arm: a move of the arm runs: wait, then queue the motion; "
                                "nothing queued")
 
     def stop(self) -> str:

@@ -3,7 +3,6 @@ tick of the fault, the truth of status, the registers it drives."""
 
 from __future__ import annotations
 
-import dataclasses
 import io
 import math
 import re
@@ -21,7 +20,6 @@ from pyrt_arm.station import (
     TIP_TOLERANCE_MM,
     ArmController,
     ArmStation,
-    _cubic,
     build_arm,
 )
 
@@ -190,7 +188,7 @@ def test_a_move_given_while_the_arm_settles_goes_on_from_its_target(arm):
     errors: list[float] = []
 
     def sample() -> bool:
-        errors.extend(abs(jt.servo.error_deg) for jt in station.controller.joints if jt.engaged)
+        errors.extend(abs(jt.error_deg) for jt in station.controller.joints if jt.engaged)
         return not station.busy()
 
     assert runner.wait_until(sample, 10.0)
@@ -236,22 +234,6 @@ def test_arm_xy_keeps_the_present_elbow_unless_told(arm):
     assert runner.call(station.controller.angles)[1] < 0
 
 
-@settings(max_examples=50, derandomize=True, deadline=None)
-@given(k=st.lists(st.floats(-200.0, 200.0), min_size=8, max_size=8),
-       h_ms=st.integers(1, 50))
-def test_the_servo_cubic_meets_both_knots_position_and_velocity(k, h_ms):
-    """The cubic the servo interpolates between two setpoint knots starts and ends at their positions and velocities."""
-    a = (1_000_000, (k[0], k[1]), (k[2], k[3]))
-    b = (1_000_000 + h_ms * 1_000_000, (k[4], k[5]), (k[6], k[7]))
-    start, coeffs = _cubic(a, b)
-    h = h_ms * 1e-3
-    assert start == a[0]
-    for j, (c0, c1, c2, c3) in enumerate(coeffs):
-        assert (c0, c1) == (a[1][j], a[2][j])
-        assert c0 + h * (c1 + h * (c2 + h * c3)) == pytest.approx(b[1][j], abs=1e-9)
-        assert c1 + h * (2 * c2 + 3 * h * c3) == pytest.approx(b[2][j], abs=1e-9)
-
-
 # -- faults -----------------------------------------------------------------------------------
 
 
@@ -293,8 +275,7 @@ def test_a_following_error_trips_every_drive_and_enable_off_in_the_same_tick(arm
 def test_a_joint_limit_fault_trips_every_drive_and_enable_off_in_the_same_tick(arm):
     """A servo limit tighter than the planner's (shoulder 60 deg): a move to 90 crosses it, a joint-limit fault (not a following error); every drive and enable 0 in that tick."""
     station, runner, shell, out = arm
-    servo = station.controller.joints[0].servo
-    servo.config = dataclasses.replace(servo.config, limits_deg=(-170.0, 60.0))
+    station.controller.joints[0].limits_deg = (-170.0, 60.0)
     _say(shell, out, "arm to 90 90")
     assert _fault_tick(station, runner) == {"drive": [0, 0], "enable": [0, 0]}
     assert "q0 at 60.0" in station.fault.cause and "outside its limits" in station.fault.cause
