@@ -15,13 +15,8 @@ from pyrt.commands.robot import RobotShell
 
 from pyrt_arm.boards import DRIVE_FULL_SCALE, SERVO
 from pyrt_arm.kinematics import GEOMETRY, JointLimitError, ik
-from pyrt_arm.station import (
-    AT_TARGET_DEG,
-    TIP_TOLERANCE_MM,
-    ArmController,
-    ArmStation,
-    build_arm,
-)
+from pyrt_arm.controller import AT_TARGET_DEG, TIP_TOLERANCE_MM, ArmController
+from pyrt_arm.station import ArmStation, build_arm
 
 _TIP = re.compile(r"tip \((-?[\d.]+), (-?[\d.]+)\) mm")
 
@@ -333,7 +328,7 @@ def test_a_start_beyond_the_end_stops_is_refused():
 
 def test_the_controller_is_a_joint_robot_with_ranges():
     """The root drives joint_trajectory: joint_count 2, limits and the joints' range from the geometry."""
-    from pyrt.robots.trajectory import RangedJointRobot
+    from pyrt import RangedJointRobot
 
     station = build_arm(Loop(SimClock()))
     try:
