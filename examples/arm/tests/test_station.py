@@ -14,8 +14,8 @@ from pyrt import CommandError, ConfigError, FaultError, Loop, SimClock
 from pyrt.commands.robot import RobotShell
 
 from pyrt_arm.boards import DRIVE_FULL_SCALE, SERVO
-from pyrt_arm.kinematics import GEOMETRY, JointLimitError, ik
 from pyrt_arm.controller import AT_TARGET_DEG, TIP_TOLERANCE_MM, ArmController
+from pyrt_arm.kinematics import GEOMETRY, JointLimitError, ik
 from pyrt_arm.station import ArmStation, build_arm
 
 _TIP = re.compile(r"tip \((-?[\d.]+), (-?[\d.]+)\) mm")
