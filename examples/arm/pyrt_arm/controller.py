@@ -367,7 +367,7 @@ class ArmController(Component):
         except MotionFault as exc:
             self.fail(f"trajectory: {exc}", self.name)
             return
-        if knot.qd.any() or knot.qdd.any() or not np.array_equal(knot.q, self.servo.knots[3]):
+        if knot.qd.any() or knot.qdd.any() or (knot.q != self.servo.knots[3]).any():
             self._load(knot.q, knot.qd, knot.period)
         elif ev.idle and not self._ended:
             self._end_of_knots(now_ns)

@@ -109,7 +109,7 @@ class ArmStation(Station):
 
     def busy(self) -> bool:
         """A move runs, waits, or the arm settles or brakes."""
-        return super().busy() or self.controller.state != "idle"
+        return self.controller.state != "idle" or super().busy()
 
     def _ended(self) -> tuple[str, list[str]]:
         """How the move ended: at target, stopped, did not settle, or the fault."""
