@@ -1,32 +1,24 @@
-"""The arm's controller: the root component ``arm`` and its joints, on pyrt's arm layer.
+"""The arm's controller: the root component ``arm`` and its joints ``shoulder`` (q0) and
+``elbow`` (q1), on pyrt's arm layer.
 
-The component tree::
-
-    arm          the controller (root): q0 q1 x y, following errors; arm to / xy / show
-      shoulder   joint q0: its registers, its reflex
-      elbow      joint q1
-
-Two tasks on the station's ready queue: ``trajectory`` every
-:data:`TRAJECTORY_PERIOD` ticks (100 Hz at the 1 ms tick) and ``servo`` every
-tick.  The arm is a :class:`pyrt.kinematics.Chain` (:data:`CHAIN`, from its
-URDF, :func:`pyrt_arm.kinematics.urdf`); ``arm to`` and ``arm xy`` queue a
-joint-mode :class:`pyrt.motion.MotionSpec` on a :class:`pyrt.motion.Evaluator`
-(planned when queued, within :data:`VMAX_DEG_S` and :data:`AMAX_DEG_S2`; a
-move queued behind the running one blends into it by Paul's transition).  The
-trajectory task hands each knot (position, velocity) to pyrt's generic servo
+Two tasks: ``trajectory`` every :data:`TRAJECTORY_PERIOD` ticks (100 Hz) and
+``servo`` every tick.  The arm is a :class:`pyrt.kinematics.Chain`
+(:data:`CHAIN`, from its URDF); ``arm to`` and ``arm xy`` queue a joint-mode
+:class:`pyrt.motion.MotionSpec` on a :class:`pyrt.motion.Evaluator` (planned
+when queued, within :data:`VMAX_DEG_S` and :data:`AMAX_DEG_S2`; a move queued
+behind the running one blends into it by Paul's transition).  The trajectory
+task hands each knot (position, velocity) to pyrt's servo
 (:class:`pyrt.native.Servo`, C: cubic interpolation to the servo rate, the
-arm's PD law with feed-forward and its gains, :mod:`pyrt_arm.servo`), and
-the servo task writes its torques as the drives.  A plug-in motion type
-(``motion joint_trajectory ...``) drives the same servo through
-:meth:`ArmController.command_joints`, one knot per trajectory tick.
+arm's PD law and gains, :mod:`pyrt_arm.servo`); the servo task writes its
+torques as the drives.  A plug-in motion type (``motion joint_trajectory``)
+drives the same servo through :meth:`ArmController.command_joints`.
 
-The amplifiers are enabled while a move runs and until the arm has settled
-at its target (within :data:`AT_TARGET_DEG` on every joint, at rest for
-:data:`SETTLE_S`); then every drive is 0 and every amplifier disabled, and
-the arm lies still on its friction (it lies on a table: no gravity).  A
-following error beyond 1 deg, a joint outside its limits, or an amplifier
-that reports no power calls :meth:`pyrt.Component.fail`: the station trips,
-and in that tick every joint's reflex writes drive 0 and enable 0.  ``stop``
+The amplifiers are on while a move runs and until the arm has settled at its
+target (within :data:`AT_TARGET_DEG`, at rest for :data:`SETTLE_S`); then
+every drive is 0 and every amplifier off, and the arm lies on its friction
+(on a table: no gravity).  A following error beyond 1 deg, a joint outside
+its limits or an amplifier without power calls :meth:`pyrt.Component.fail`:
+in that tick every joint's reflex writes drive 0 and enable 0.  ``stop``
 brakes the servo's reference to rest at the acceleration limits, then
 switches the amplifiers off.
 """
@@ -126,9 +118,6 @@ _FERR = Limits(-FOLLOWING_ERROR_LIMIT_DEG, FOLLOWING_ERROR_LIMIT_DEG,
 _TIP = Limits(-_REACH, _REACH)
 
 
-# -- a joint ----------------------------------------------------------------------------------
-
-
 class Joint(Component):
     """One joint: its board registers (``count``, ``amp_ok``, ``drive``, ``enable`` at its
     index), what the servo says of it, and its reflex (drive 0, amplifier disabled)."""
@@ -175,7 +164,6 @@ class Joint(Component):
         return self.measure(self.board.read("count", self.index))
 
     def engage(self) -> None:
-        """Drive 0 and the amplifier enabled."""
         self.drive = self.no_power = 0
         self.board.write("drive", 0, self.index)
         self.board.write("enable", 1, self.index)
@@ -191,9 +179,6 @@ class Joint(Component):
             finally:
                 self.engaged = False
                 self.drive = self.no_power = 0
-
-
-# -- the controller -----------------------------------------------------------------------------
 
 
 class ArmController(Component):
@@ -279,14 +264,12 @@ class ArmController(Component):
         return self.joints[0].position(), self.joints[1].position()
 
     def tip(self) -> tuple[float, float]:
-        """The tip the encoders give (mm)."""
-        return fk(*self.angles())
+        return fk(*self.angles())  # the tip the encoders give (mm)
 
-    def where(self) -> str:
-        """The joints and the tip, in the operator's words."""
-        q0, q1 = self.angles()
-        x, y = fk(q0, q1)
-        return f"q0 {q0:.3f} deg, q1 {q1:.3f} deg, tip ({x:.2f}, {y:.2f}) mm"
+    def where(self, q: Sequence[float] | None = None) -> str:
+        """The joints ``q`` (default: the encoders') and the tip, in the operator's words."""
+        q0, q1 = self.angles() if q is None else q
+        return "q0 {:.3f} deg, q1 {:.3f} deg, tip ({:.2f}, {:.2f}) mm".format(q0, q1, *fk(q0, q1))
 
     # -- JointRobot: what a plug-in motion type drives -----------------------------------
 
@@ -425,10 +408,14 @@ class ArmController(Component):
             errs = ", ".join(f"{JOINTS[jt.index]} {jt.error_deg:+.4f} deg" for jt in self.joints)
             self._finish(f"did not settle within {SETTLE_TIMEOUT_S:g} s ({errs})")
 
-    def _finish(self, why: str) -> None:
+    def _off(self) -> None:
+        """Every drive 0 and amplifier off, the motion dropped."""
         for jt in self.joints:
             jt.reflex()
         self.reflex()
+
+    def _finish(self, why: str) -> None:
+        self._off()
         self.last_stop = why
 
     def brake(self) -> None:
@@ -455,10 +442,8 @@ class ArmController(Component):
             raise CommandError("arm: braking to rest after a stop: wait, then move; "
                                "nothing moved")
         if st.executor.busy or len(st.motion):
-            raise CommandError("arm: a motion record runs: wait for it (or stop), then move; "
-                               "nothing moved")
-        x, y = fk(q0, q1)
-        to = f"q0 {q0:.3f} deg, q1 {q1:.3f} deg, tip ({x:.2f}, {y:.2f}) mm"
+            raise CommandError("arm: a motion record runs: wait, then move; nothing moved")
+        to = self.where((q0, q1))
         busy = self.state != "idle"
         if not busy:
             self._engage()
@@ -468,9 +453,7 @@ class ArmController(Component):
                                             name="arm to"))
         except RecordError as exc:
             if not busy:
-                self.reflex()
-                for jt in self.joints:
-                    jt.reflex()
+                self._off()
             raise CommandError(f"arm: refused: {exc}; nothing moved") from None
         self.state = "moving"
         self._ended = False
