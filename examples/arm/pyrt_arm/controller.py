@@ -214,10 +214,9 @@ class ArmController(Component):
         self.last_stop = ""
         #: What the arm does: idle, moving, settling, braking.
         self.state = "idle"
-        self._now_ns = 0
+        self._now_ns = self._settle_from = 0
         self._reason = "at target"
         self._ended = True  # the knots have stopped coming: the servo holds the last one
-        self._settle_from = 0
         self._quiet_since: int | None = None
 
     # -- the component ----------------------------------------------------------------
@@ -289,23 +288,26 @@ class ArmController(Component):
         return (l0, l1), (h0, h1)
 
     def command_joints(self, q: Sequence[float], qd: Sequence[float]) -> None:
-        """A knot (deg, deg/s) at this trajectory tick: the servo's next cubic segment; the
-        first one engages the servo."""
+        """A knot (deg, deg/s): the servo's next segment; the first one engages the servo."""
         if self.state == "idle":
             self._engage()
         self.state = "moving"
         self._load(np.radians(q), np.radians(qd), self.traj_period_s)
 
     def motion_ended(self, reason: str) -> None:
-        """The plug-in motion ended: the servo holds its last knot and the arm settles;
-        a move given now starts there."""
-        if self.state == "moving":
+        """The plug-in motion ended: the servo ends at its last knot, or, if the motion
+        ended moving, brakes to rest (never extrapolated); the arm settles there."""
+        if self.state != "moving":
+            return
+        if self.servo.knots[4].any():
+            self._to_rest()
+        else:
             self.evaluator = self._evaluator(self.servo.knots[3])
             self._end_of_knots(self._now_ns)
 
     # -- the servo ------------------------------------------------------------------------
 
-    def _evaluator(self, q: Any) -> Evaluator:
+    def _evaluator(self, q: Any) -> Evaluator:  # the next move starts at q
         start = np.clip(np.asarray(q, dtype=float), CHAIN.lower, CHAIN.upper)
         return Evaluator(CHAIN, self.limits, start, period=self.traj_period_s)
 
@@ -329,10 +331,8 @@ class ArmController(Component):
         self.servo.load(duration, quintic=False)
         self._ended = False
 
-    def _end_of_knots(self, now_ns: int) -> None:
-        self._ended = True
-        self._settle_from = now_ns
-        self._quiet_since = None
+    def _end_of_knots(self, now_ns: int) -> None:  # the servo holds the last one; settle
+        self._ended, self._settle_from, self._quiet_since = True, now_ns, None
         if self.state == "moving":
             self.state = "settling"
 
@@ -418,12 +418,9 @@ class ArmController(Component):
         self._off()
         self.last_stop = why
 
-    def brake(self) -> None:
-        """The operator's stop: the servo's reference brakes to rest from where it is,
-        every joint at once at the acceleration limits (on the path of a joint move);
-        queued moves dropped; then the arm settles and is switched off."""
-        if self.state == "idle":
-            return
+    def _to_rest(self) -> None:
+        """The servo's reference from where it is to rest, every joint at once at the
+        acceleration limits."""
         s = self.servo
         q, qd = s.q_ref.copy(), s.qd_ref.copy()
         t = float(np.max(np.abs(qd) / np.radians(AMAX_DEG_S2)))
@@ -431,6 +428,14 @@ class ArmController(Component):
             s.segment(t, q, qd, q + 0.5 * qd * t, np.zeros(2))
         self.evaluator = self._evaluator(q + 0.5 * qd * t)
         self._end_of_knots(self._now_ns + round(t * 1e9))
+
+    def brake(self) -> None:
+        """The operator's stop: the servo's reference brakes to rest from where it is,
+        every joint at once at the acceleration limits (on the path of a joint move);
+        queued moves dropped; then the arm settles and is switched off."""
+        if self.state == "idle":
+            return
+        self._to_rest()
         self.state = "braking"
         self._reason = "stopped (stop command)"
 

@@ -4,14 +4,16 @@ tick of the fault, the truth of status, the registers it drives."""
 from __future__ import annotations
 
 import io
+import itertools
 import math
 import re
 
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from pyrt import CommandError, ConfigError, FaultError, Loop, SimClock
+from pyrt import CommandError, ConfigError, FaultError, Loop, MotionType, SimClock
 from pyrt.commands.robot import RobotShell
+from pyrt.scheduler.motion import register_motion_type
 
 from pyrt_arm.boards import DRIVE_FULL_SCALE, SERVO
 from pyrt_arm.controller import AT_TARGET_DEG, TIP_TOLERANCE_MM, ArmController
@@ -338,3 +340,51 @@ def test_the_controller_is_a_joint_robot_with_ranges():
         assert ctl.joint_range() == ((-170.0, -150.0), (170.0, 150.0))
     finally:
         station.close()
+
+
+class _Drifting(MotionType):
+    """A plug-in motion that drives the shoulder at 30 deg/s for 0.3 s and ends moving."""
+
+    name = "arm_test_drift"
+    drives = (ArmController,)
+
+    def start(self, robot, record, now_ns):
+        self.robot, self.t0 = robot, now_ns
+        self.q = list(robot.joint_positions())
+
+    def step(self, now_ns):
+        t = (now_ns - self.t0) * 1e-9
+        self.robot.command_joints((self.q[0] + 30.0 * t, self.q[1]), (30.0, 0.0))
+        if t >= 0.3:
+            self.stop("ended moving")
+
+
+def test_a_plug_in_motion_that_ends_moving_is_braked_to_rest_not_extrapolated(arm):
+    """A motion whose last knot has 30 deg/s: the shoulder is braked to rest near its acceleration limit (not held at once, not extrapolated: at most 1.25 deg past its last knot), no fault, every output off after."""
+    from pyrt import MotionRecord
+
+    from pyrt_arm.controller import AMAX_DEG_S2
+
+    register_motion_type(_Drifting.name, _Drifting, replace=True)
+    station, runner, _shell, _out = arm
+    runner.call(station.submit_motion, MotionRecord(_Drifting.name, {}))
+    assert runner.wait_until(lambda: station.controller.state == "moving", 5.0)
+    assert runner.wait_until(lambda: station.controller.state != "moving", 5.0)
+    speeds: list[float] = []
+
+    def sample() -> bool:
+        speeds.append(station.plant.qd_deg_s[0])
+        return not station.busy()
+
+    assert runner.wait_until(sample, 5.0)
+    # the way to rest (until friction holds the last 2 deg/s): the true deceleration stays
+    # near the limit (the servo's transient adds up to about 85 %); a hold at the last knot
+    # would saturate the drive (about 2700 deg/s^2)
+    decel = max(a - b for a, b in itertools.pairwise(speeds) if b > 2.0) / 1e-3
+    assert decel <= 2.5 * AMAX_DEG_S2[0], decel
+    assert runner.call(station.last_stop) == "at target"
+    q0 = runner.call(lambda: station.plant.q_deg[0])
+    last_knot = 30.0 * 0.3
+    assert last_knot - 0.5 <= q0 <= last_knot + 30.0 ** 2 / (2 * AMAX_DEG_S2[0]) + 0.1, q0
+    assert station.fault is None
+    assert runner.call(lambda: _registers(station)) == {"drive": [0, 0], "enable": [0, 0]}
