@@ -11,12 +11,14 @@ at real time (1 kHz servo, 100 Hz trajectory) for a few seconds of moves and
 reports the servo task's mean, p99 and max and the overruns, from the loop's
 own statistics.
 
-Figures (CPU time, best of 9, the same machine and run, a shared two-core
-machine): the arm with its own servo, interpolation and trajectory code (before
-pyrt's arm layer) 64-70x; on pyrt.kinematics, pyrt.motion and pyrt.native.Servo
-56-65x.  Per 1 ms tick: the servo task about 3 µs, the simulated arm's step (pure
-Python) about 5 µs, the trajectory task 2.5 µs (one knot of the evaluator every
-10th tick), a move's plan a few ms once per move, the loop's own work the rest.
+Figures (best of 9, the same runs, a shared two-core machine at load 5-7): the
+arm with its own servo, interpolation and trajectory code (before pyrt's arm
+layer) 63-70x in CPU time (31-32x wall); on pyrt.kinematics, pyrt.motion and
+pyrt.native.Servo 53-65x (24-29x wall).  Of the timed work after: the simulated
+arm's step (pure Python, about 5 µs per 1 ms tick) 34-48 %, the servo task
+(about 3 µs) 21-22 %, the mailbox 15-28 % (each move is planned there when it
+is queued, a few ms), the trajectory task 10-14 % (one knot of the evaluator
+every 10th tick).
 """
 
 from __future__ import annotations
