@@ -33,7 +33,7 @@ from pyrt.errors import (
 )
 
 if TYPE_CHECKING:
-    from pyrt.boards import BoardKind, Boards, Register, RegisterBoard, open_boards
+    from pyrt.boards import INPUT, OUTPUT, BoardKind, Boards, Register, RegisterBoard, open_boards
     from pyrt.cli._station import run_station
     from pyrt.component import (
         Arg,
@@ -47,7 +47,7 @@ if TYPE_CHECKING:
         finite,
         word,
     )
-    from pyrt.robots.trajectory import JointRobot, JointTrajectory
+    from pyrt.robots.trajectory import JointRobot, JointTrajectory, RangedJointRobot
     from pyrt.scheduler import (
         Job,
         Loop,
@@ -62,7 +62,7 @@ if TYPE_CHECKING:
     from pyrt.scope import Source
     from pyrt.scope.joints import JointStates
     from pyrt.sim.world import World, WorldFactory
-    from pyrt.station.base import Station
+    from pyrt.station.base import BoardWorld, Station
     from pyrt.station.factory import StationFactory
     from pyrt.station.moves import MoveEnded
     from pyrt.station.profile import ShellProfile
@@ -71,9 +71,11 @@ if TYPE_CHECKING:
 _LAZY = {
     "Arg": "pyrt.component",
     "BoardKind": "pyrt.boards",
+    "BoardWorld": "pyrt.station.base",
     "Boards": "pyrt.boards",
     "Command": "pyrt.component",
     "Component": "pyrt.component",
+    "INPUT": "pyrt.boards",
     "Job": "pyrt.scheduler",
     "JointRobot": "pyrt.robots.trajectory",
     "JointStates": "pyrt.scope.joints",
@@ -85,6 +87,8 @@ _LAZY = {
     "MotionRecord": "pyrt.scheduler.motion",
     "MotionType": "pyrt.scheduler.motion",
     "MoveEnded": "pyrt.station.moves",
+    "OUTPUT": "pyrt.boards",
+    "RangedJointRobot": "pyrt.robots.trajectory",
     "RateGroup": "pyrt.scheduler",
     "ReadyQueue": "pyrt.scheduler",
     "Register": "pyrt.boards",
@@ -123,9 +127,12 @@ def __dir__() -> list[str]:
 
 
 __all__ = [
+    "INPUT",
+    "OUTPUT",
     "Arg",
     "BoardError",
     "BoardKind",
+    "BoardWorld",
     "Boards",
     "Command",
     "CommandError",
@@ -149,6 +156,7 @@ __all__ = [
     "PyrtError",
     "PyrtInternalError",
     "QueueFullError",
+    "RangedJointRobot",
     "RateGroup",
     "ReadyQueue",
     "Register",

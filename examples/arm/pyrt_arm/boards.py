@@ -26,15 +26,27 @@ world integrates in internal steps of one servo period (:data:`WORLD_STEP_S`,
 then stay within 0.001 deg of where the fine step puts them (less than one
 encoder count; a test compares the two), at a fifth of the cost.
 :func:`arm_world` makes the :class:`pyrt.World` of it, for ``sim:`` boards in
-process and for ``pyrt board-sim arm`` alike.
+process and for ``pyrt board-sim arm`` alike; :class:`ArmSim` is the
+component ``sim`` that shows its truth and injects its faults.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 
-from pyrt import BoardKind, Boards, Register, RegisterBoard, World
-from pyrt.boards import OUTPUT
+from pyrt import (
+    OUTPUT,
+    Arg,
+    BoardKind,
+    Boards,
+    CommandError,
+    Component,
+    Register,
+    RegisterBoard,
+    Signal,
+    World,
+    command,
+)
 
 from pyrt_arm.plant import JOINTS, Plant
 
@@ -45,6 +57,7 @@ __all__ = [
     "SERVO",
     "WORLD_STEP_S",
     "ArmPhysics",
+    "ArmSim",
     "arm_world",
     "drive_counts",
 ]
@@ -141,3 +154,51 @@ def arm_world(boards: Boards, start_deg: Sequence[float] = DEFAULT_START_DEG,
     plant = Plant(q_deg=(float(start_deg[0]), float(start_deg[1])), max_step_s=max_step_s)
     plant.amp_enable = [False] * len(JOINTS)
     return World(name, boards, ArmPhysics(board, plant))
+
+
+class ArmSim(Component):
+    """The simulated arm in this process: its truth and its faults (``sim``)."""
+
+    name = "sim"
+
+    def __init__(self, plant: Plant) -> None:
+        self.plant = plant
+
+    def signals(self) -> list[Signal]:
+        p = self.plant
+        return [
+            Signal("q0", "deg", lambda: p.q_deg[0], "true shoulder angle", ".4f"),
+            Signal("q1", "deg", lambda: p.q_deg[1], "true elbow angle", ".4f"),
+            Signal("qd0", "deg/s", lambda: p.qd_deg_s[0], "true shoulder speed", ".3f"),
+            Signal("qd1", "deg/s", lambda: p.qd_deg_s[1], "true elbow speed", ".3f"),
+            Signal("x", "mm", lambda: p.tip_mm[0], "true tip x", ".3f"),
+            Signal("y", "mm", lambda: p.tip_mm[1], "true tip y", ".3f"),
+        ]
+
+    @command(name="show", reads_only=True)
+    def show(self) -> str:
+        """sim show: the simulated arm's truth (true joints, speeds and tip, faults)."""
+        p = self.plant
+        (q0, q1), (v0, v1), (x, y) = p.q_deg, p.qd_deg_s, p.tip_mm
+        faults = ", ".join(p.active_faults()) or "none"
+        return (f"true q0 {q0:.4f} deg, q1 {q1:.4f} deg; speed {v0:.3f}, {v1:.3f} deg/s; "
+                f"tip ({x:.3f}, {y:.3f}) mm; faults: {faults}")
+
+    @command(Arg("KIND", str.lower, choices=("jam", "encoder", "motor", "none")),
+             Arg("JOINT", str.lower, optional=True, choices=JOINTS), name="fault")
+    def fault(self, kind: str, joint: str | None = None) -> str:
+        """sim fault jam|encoder|motor q0|q1, or sim fault none: inject a fault.
+
+        jam (the joint is braked where it is), encoder (its counter freezes),
+        motor (its power is cut); none clears them all."""
+        p = self.plant
+        if kind == "none":
+            if joint is not None:
+                raise CommandError("sim fault none takes no joint")
+            p.clear_faults()
+            return "sim: every fault cleared"
+        if joint is None:
+            raise CommandError(f"sim fault {kind}: which joint? q0 or q1")
+        j = JOINTS.index(joint)
+        {"jam": p.jam, "encoder": p.disconnect_encoder, "motor": p.motor_off}[kind](j)
+        return f"sim: {', '.join(p.active_faults())}"

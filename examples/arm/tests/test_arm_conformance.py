@@ -32,9 +32,10 @@ class TestArmConformance(StationConformance):
     def settings(self, station):
         board = station.board
         regs = tuple(board.read(r.name, j) for r in board.kind.registers for j in range(r.count))
-        joints = tuple((jt.engaged, jt.drive, jt.servo.config)
+        joints = tuple((jt.engaged, jt.drive, jt.config, jt.limits_deg)
                        for jt in station.controller.joints)
-        return (regs, joints, station.controller.state, tuple(station.plant.active_faults()),
+        gains = station.controller.servo.gains.tobytes()
+        return (regs, joints, gains, station.controller.state, tuple(station.plant.active_faults()),
                 len(station.motion))
 
     def start_move(self, station, runner):

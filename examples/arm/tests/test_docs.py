@@ -52,3 +52,65 @@ def test_the_checker_finds_a_changed_line():
     assert missing_lines(["a = 1", "...", "c = 3"], source) == []
     assert missing_lines(["c = 3", "a = 1"], source) == ["a = 1"]
     assert missing_lines(["a = 2"], source) == ["a = 2"]
+
+
+#: What the guide spells like a pyrt name but is not one: an entry-point group, a log.
+_NOT_PYTHON = {"pyrt.stations", "pyrt.motion_types", "pyrt.messages"}
+
+
+def _is_module(name: str) -> bool:
+    import importlib.util
+
+    try:
+        return importlib.util.find_spec(name) is not None
+    except ModuleNotFoundError:  # a name below a module that is not a package
+        return False
+
+
+@pytest.mark.skipif(not GUIDE.exists(), reason="the guide lives in pyrt's repository")
+def test_every_pyrt_name_the_guide_gives_is_public():
+    """Each `pyrt.NAME...` the guide names is a public pyrt module, or a name in pyrt.__all__ (then its attributes resolve)."""
+    import importlib
+
+    import pyrt
+
+    bad = []
+    for dotted in sorted(set(re.findall(r"`(pyrt(?:\.[A-Za-z_]\w*)+)", GUIDE.read_text()))):
+        if dotted in _NOT_PYTHON or dotted.endswith("__"):
+            continue
+        parts = dotted.split(".")
+        k = len(parts)
+        while k > 1 and not _is_module(".".join(parts[:k])):
+            k -= 1  # the longest prefix that is a module
+        module, rest = ".".join(parts[:k]), parts[k:]
+        if any(p.startswith("_") for p in parts) or (
+                module == "pyrt" and rest and rest[0] not in pyrt.__all__):
+            bad.append(dotted)
+            continue
+        obj = importlib.import_module(module)
+        if rest and module != "pyrt" and rest[0] not in getattr(obj, "__all__", ()):
+            bad.append(dotted)
+            continue
+        for name in rest:
+            if not hasattr(obj, name):
+                bad.append(dotted)
+                break
+            obj = getattr(obj, name)
+    assert bad == []
+
+
+@pytest.mark.skipif(not GUIDE.exists(), reason="the guide lives in pyrt's repository")
+def test_the_guides_session_is_what_the_arm_says():
+    """The guide's session (a printf piped into pyrt arm --speed max) is, line for line, what the arm says."""
+    import subprocess
+    import sys
+
+    text = GUIDE.read_text()
+    m = re.search(r"^\$ printf '(?P<script>[^']*)' \| pyrt arm --speed max\n(?P<out>.*?)^```",
+                  text, re.S | re.M)
+    assert m, "no session in the guide"
+    script = m["script"].replace("\\n", "\n")
+    run = subprocess.run([sys.executable, "-m", "pyrt", "arm", "--speed", "max"], input=script,
+                         text=True, capture_output=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.splitlines() == m["out"].splitlines()

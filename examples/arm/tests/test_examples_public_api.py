@@ -79,6 +79,19 @@ def private_uses(source: str, filename: str = "<source>") -> list[str]:
     return found
 
 
+def unlisted_imports(source: str, filename: str = "<source>") -> list[str]:
+    """Each name imported ``from pyrt...`` in ``source`` that its module does not list in
+    ``__all__`` (a name a module merely happens to hold is not its public API)."""
+    found = []
+    for node in ast.walk(ast.parse(source, filename)):
+        if (isinstance(node, ast.ImportFrom) and node.level == 0 and node.module
+                and _pyrt_module(node.module) and not _private_path(node.module)):
+            public = set(getattr(importlib.import_module(node.module), "__all__", ()))
+            found += [f"{filename}:{node.lineno}: {node.module}.{a.name}"
+                      for a in node.names if a.name not in public]
+    return found
+
+
 def example_files() -> list[Path]:
     return sorted(p for p in EXAMPLES.rglob("*.py")
                   if not any(part.startswith(".") or part in ("build", "__pycache__")
@@ -91,6 +104,21 @@ def test_no_example_uses_a_private_pyrt_name():
     assert any(p.name == "kinematics.py" for p in files)
     uses = [use for p in files for use in private_uses(p.read_text(), str(p.relative_to(EXAMPLES)))]
     assert uses == []
+
+
+def test_every_pyrt_name_an_example_imports_is_in_its_modules_all():
+    """Every name an example imports from pyrt or a pyrt subpackage is in that module's __all__."""
+    files = example_files()
+    found = [u for p in files for u in unlisted_imports(p.read_text(), str(p.relative_to(EXAMPLES)))]
+    assert found == []
+
+
+def test_the_all_checker_catches_a_name_outside_all():
+    """A name a pyrt module holds but does not list in __all__ is reported; listed ones are not."""
+    assert unlisted_imports("from pyrt import Station, Arg") == []
+    assert unlisted_imports("from pyrt.motion import Evaluator") == []
+    assert len(unlisted_imports("from pyrt.motion import importlib_not_there")) == 1
+    assert len(unlisted_imports("from pyrt.kinematics.chain import np")) == 1
 
 
 @pytest.mark.parametrize("source", [

@@ -204,3 +204,29 @@ def test_another_geometry_is_honoured():
     assert q == pytest.approx((90.0, 0.0), abs=1e-6)
     with pytest.raises(ReachError, match=r"0\.000 <= r <= 400\.000"):
         ik(401.0, 0.0, "up", geo)
+
+
+@settings(max_examples=300, deadline=None)
+@given(q0=st.floats(-170.0, 170.0), q1=st.floats(-150.0, 150.0))
+def test_the_chain_pyrt_plans_on_is_the_arm_of_the_closed_form(q0, q1):
+    """The arm's kinematic chain (pyrt.kinematics, from its URDF: what its moves are planned on) puts the tip where fk does, and its Jacobian's planar part is jacobian's; ik of that tip comes back to q for the matching elbow."""
+    from pyrt_arm.controller import CHAIN
+
+    q = np.radians([q0, q1])
+    t = CHAIN.fk(q)
+    x, y = fk(q0, q1)
+    assert t[:3, 3] * 1e3 == pytest.approx([x, y, 0.0], abs=1e-6)
+    jac = CHAIN.jacobian(q)[:2] * 1e3 * math.pi / 180.0  # m/rad -> mm/deg
+    assert jac == pytest.approx(jacobian(q0, q1), abs=1e-6)
+    back = ik(float(t[0, 3] * 1e3), float(t[1, 3] * 1e3), elbow_of(q1))
+    if abs(math.sin(math.radians(q1))) > 1e-3:  # away from the stretched arm's rounding
+        assert back == pytest.approx((q0, q1), abs=1e-6)
+
+
+def test_the_chain_has_the_arms_joint_limits():
+    """The chain's joint limits are the geometry's (the URDF keeps them to 1e-6 rad)."""
+    from pyrt_arm.controller import CHAIN
+
+    assert CHAIN.n == 2
+    assert np.degrees(CHAIN.lower) == pytest.approx([-170.0, -150.0], abs=1e-4)
+    assert np.degrees(CHAIN.upper) == pytest.approx([170.0, 150.0], abs=1e-4)

@@ -1,13 +1,16 @@
-"""The servo law, alone and closed around the simulated arm on a fixed 1 ms step."""
+"""The arm's tuning on pyrt's generic servo, alone and closed around the simulated arm on
+a fixed 1 ms step; the words of its faults."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from pyrt.native import NativeInputError
 
 from pyrt_arm.kinematics import fk
 from pyrt_arm.plant import Plant
@@ -18,13 +21,67 @@ from pyrt_arm.servo import (
     SERVO_PERIOD_S,
     SHOULDER,
     TRACKING_BOUND_DEG,
-    ArmServo,
-    JointServo,
     JointServoConfig,
+    arm_servo,
+    coulomb,
     counts_to_deg,
     following_error_fault,
     joint_limit_fault,
 )
+
+_RAD = math.pi / 180.0
+_CONFIGS = (SHOULDER, ELBOW)
+
+
+class Rig:
+    """The arm's servo as the station runs it, one tick at a time: the setpoint (deg,
+    deg/s, deg/s^2) is the segment's start, the encoders' counts are the measurement;
+    :meth:`update` gives the drives (-1 .. 1) and :meth:`fault` the reason, if any."""
+
+    def __init__(self, configs: tuple[JointServoConfig, ...] = _CONFIGS,
+                 period_s: float = SERVO_PERIOD_S) -> None:
+        self.configs = configs
+        self.servo = arm_servo(configs, period_s)
+        self.period_s = period_s
+        self.reason: str | None = None
+        self.last = np.zeros(len(configs))
+
+    def measure(self, counts) -> np.ndarray:
+        return np.array([counts_to_deg(c, cfg.zero_count, cfg.counts_per_deg)
+                         for c, cfg in zip(counts, self.configs, strict=True)])
+
+    def reset(self, counts) -> None:
+        self.last = self.measure(counts)
+        self.servo.reset(self.last * _RAD)
+
+    @property
+    def position_deg(self) -> tuple[float, ...]:
+        """The angles (deg) of the last reading."""
+        return tuple(self.last.tolist())
+
+    def update(self, q, qd, counts, qdd=(0.0, 0.0)) -> list[float]:
+        q, qd, qdd = (np.asarray(v, dtype=float) * _RAD for v in (q, qd, qdd))
+        h = self.period_s
+        self.servo.segment(h, q, qd, q + qd * h + 0.5 * qdd * h * h, qd + qdd * h, qdd, qdd)
+        measured = self.last = self.measure(counts)
+        trip = self.servo.tick(measured * _RAD)
+        if trip is not None:
+            m = float(measured[trip.joint])
+            self.reason = following_error_fault(trip.name, m + math.degrees(trip.error), m,
+                                                math.degrees(trip.limit))
+        else:
+            for cfg, m in zip(self.configs, measured.tolist(), strict=True):
+                self.reason = self.reason or joint_limit_fault(cfg.name, m, cfg.limits_deg)
+        return [max(-1.0, min(1.0, (t + coulomb(c, v)) / c.torque_per_drive_nm))
+                for t, v, c in zip(self.servo.tau.tolist(), self.servo.qd_ref.tolist(),
+                                   self.configs, strict=True)]
+
+    def fault(self) -> str | None:
+        return self.reason
+
+    def error_deg(self, j: int) -> float:
+        return float(self.servo.error[j]) / _RAD
+
 
 V_MAX = 90.0    # deg/s
 A_MAX = 360.0   # deg/s^2
@@ -49,7 +106,7 @@ def closed_loop(start: tuple[float, float], end: tuple[float, float], settle_s: 
     slower joint's duration for both), the servo closed around the plant on steps taken in
     turn from periods_s (1 ms by default); the run stops at the first fault."""
     plant = Plant(q_deg=start)
-    servo = ArmServo()
+    servo = Rig()
     servo.reset(plant.counts())
     duration = max(quintic_duration(e - s, V_MAX, A_MAX) for s, e in zip(start, end, strict=True))
     moves = [Quintic(s, e, duration) for s, e in zip(start, end, strict=True)]
@@ -65,10 +122,10 @@ def closed_loop(start: tuple[float, float], end: tuple[float, float], settle_s: 
             plant.jam(0)
         sp = [m.at(t) for m in moves]
         drives = servo.update([p[0] for p in sp], [p[1] for p in sp], plant.counts(),
-                              [p[2] for p in sp], dt_s=dt)
+                              [p[2] for p in sp])
         plant.drive[:] = drives
         for j in (0, 1):
-            run.max_error_deg[j] = max(run.max_error_deg[j], abs(servo.joints[j].error_deg))
+            run.max_error_deg[j] = max(run.max_error_deg[j], abs(servo.error_deg(j)))
             run.max_speed_deg_s[j] = max(run.max_speed_deg_s[j], abs(plant.qd_deg_s[j]))
         reason = servo.fault()
         if reason is not None:
@@ -109,7 +166,7 @@ def test_after_a_move_the_true_tip_is_where_the_encoders_say_and_near_the_target
     run = closed_loop(start, end, settle_s=0.5)
     plant = run.plant
     assert plant is not None and run.fault is None
-    servo = ArmServo()
+    servo = Rig()
     servo.reset(plant.counts())
     measured_tip = fk(*servo.position_deg)
     assert math.dist(measured_tip, plant.tip_mm) < 0.03
@@ -144,7 +201,7 @@ def test_a_jammed_joint_trips_even_early_in_a_move():
 def test_holding_still_there_is_no_fault_and_the_arm_stays():
     """Servoing to the present position for 1 s keeps the arm within 0.02 deg and trips nothing."""
     plant = Plant(q_deg=(45.0, -30.0))
-    servo = ArmServo()
+    servo = Rig()
     servo.reset(plant.counts())
     hold = servo.position_deg
     for _ in range(1000):
@@ -157,7 +214,7 @@ def test_holding_still_there_is_no_fault_and_the_arm_stays():
 def test_measured_beyond_a_joint_limit_is_a_fault_naming_the_joint():
     """A measured elbow at 151 deg (setpoint there too) gives the joint-limit reason for q1."""
     plant = Plant(q_deg=(0.0, 151.0))
-    servo = ArmServo()
+    servo = Rig()
     servo.reset(plant.counts())
     servo.update((0.0, 151.0), (0.0, 0.0), plant.counts())
     assert servo.fault() == "q1 at 151.000 deg is outside its limits [-150.000, 150.000] deg"
@@ -189,60 +246,72 @@ def test_counts_to_deg_follows_the_counter_across_the_32_bit_wrap(zero, offset):
 
 
 def test_velocity_estimate_converges_on_a_steady_rate_and_starts_at_zero():
-    """Counts rising 100 per ms read as 100 / cpd * 1000 deg/s after a few ms; the first update after reset reads 0."""
-    servo = JointServo(SHOULDER)
-    servo.reset(5000)
-    servo.update(servo.position_deg, 0.0, 5000)
-    assert servo.velocity_deg_s == 0.0
+    """Counts rising 100 per ms read as 100 / cpd * 1000 deg/s after a few ms; the first tick after reset reads 0."""
+    rig = Rig()
+    rig.reset((5000, 0))
+    rig.update(rig.position_deg, (0.0, 0.0), (5000, 0))
+    assert float(rig.servo.velocity[0]) == 0.0
     for k in range(1, 30):
-        servo.update(servo.position_deg, 0.0, 5000 + 100 * k)
-    assert servo.velocity_deg_s == pytest.approx(100 / SHOULDER.counts_per_deg * 1000, rel=1e-3)
+        rig.update(rig.position_deg, (0.0, 0.0), (5000 + 100 * k, 0))
+    rate = float(rig.servo.velocity[0]) / _RAD
+    assert rate == pytest.approx(100 / SHOULDER.counts_per_deg * 1000, rel=1e-3)
 
 
 def test_large_error_saturates_the_drive_at_full_scale():
-    """A 10 deg error asks for more torque than the drive gives: the drive is clamped to +-1."""
-    servo = JointServo(SHOULDER)
-    servo.reset(0)
-    assert servo.update(10.0, 0.0, 0) == 1.0
-    assert servo.torque_nm > SHOULDER.torque_per_drive_nm
-    servo.reset(0)
-    assert servo.update(-10.0, 0.0, 0) == -1.0
+    """A small error drives kp e; a 10 deg error (the trip widened) asks for more torque than the drive gives: the drive is clamped to +-1."""
+    rig = Rig()
+    rig.reset((0, 0))
+    drive = rig.update((0.5, 0.0), (0.0, 0.0), (0, 0))[0]
+    assert drive == pytest.approx(0.5 * SHOULDER.kp_nm_per_deg / SHOULDER.torque_per_drive_nm)
+    rig.reset((0, 0))
+    rig.servo.felim[:] = 20.0 * _RAD  # an error this large is otherwise a trip
+    assert rig.update((10.0, 0.0), (0.0, 0.0), (0, 0))[0] == 1.0
+    rig.reset((0, 0))
+    assert rig.update((-10.0, 0.0), (0.0, 0.0), (0, 0))[0] == -1.0
 
 
 def test_feed_forward_alone_drives_the_nominal_torque_with_no_error():
-    """With no position or velocity error, the drive is (kv qd + ka qdd + kc) / torque per drive."""
-    servo = JointServo(SHOULDER)
-    servo.reset(0)
-    servo.update(0.0, 0.0, 0)
-    drive = servo.update(0.0, 0.0, 0, qdd_sp_deg_s2=100.0)
+    """With no position error and the arm at rest, the drive is (ka qdd) / torque per drive; moving at the setpoint's rate, (kv qd + kc) / torque per drive."""
+    rig = Rig()
+    rig.reset((0, 0))
+    drive = rig.update((0.0, 0.0), (0.0, 0.0), (0, 0), qdd=(100.0, 0.0))[0]
     assert drive == pytest.approx(SHOULDER.ka_nm_s2_per_deg * 100.0 / SHOULDER.torque_per_drive_nm)
-    servo.reset(0)
-    servo.velocity_deg_s = 20.0  # as if measured already moving at the setpoint's rate
-    drive = servo.update(0.0, 20.0, 0)
-    expected = SHOULDER.kv_nm_s_per_deg * 20.0 + SHOULDER.kc_nm
-    assert servo.torque_nm == pytest.approx(expected + SHOULDER.kd_nm_s_per_deg
-                                            * (20.0 - servo.velocity_deg_s))
-    assert drive == pytest.approx(servo.torque_nm / SHOULDER.torque_per_drive_nm)
+    rig.reset((0, 0))
+    cpd = SHOULDER.counts_per_deg
+    drive = 0.0
+    for k in range(200):  # counts rising at 20 deg/s, the setpoint on them
+        count = round(20.0 * cpd * k * 1e-3)
+        drive = rig.update((count / cpd, 0.0), (20.0, 0.0), (count, 0))[0]
+    v = float(rig.servo.velocity[0]) / _RAD
+    assert v == pytest.approx(20.0, rel=0.05)
+    torque = (SHOULDER.kv_nm_s_per_deg * 20.0 + SHOULDER.kc_nm
+              + SHOULDER.kd_nm_s_per_deg * (20.0 - v))
+    assert drive * SHOULDER.torque_per_drive_nm == pytest.approx(torque, rel=1e-9)
 
 
 def test_gains_are_the_stated_numbers():
-    """The gains are those the module states: kp 29.5 and 7.6 N m/deg, kd 0.70 and 0.18 N m/(deg/s)."""
+    """The gains are those the module states: kp 29.5 and 7.6 N m/deg, kd 0.70 and 0.18 N m/(deg/s); the generic servo has them per radian."""
     assert SHOULDER.kp_nm_per_deg == pytest.approx(29.5, abs=0.05)
     assert SHOULDER.kd_nm_s_per_deg == pytest.approx(0.70, abs=0.005)
     assert ELBOW.kp_nm_per_deg == pytest.approx(7.6, abs=0.05)
     assert ELBOW.kd_nm_s_per_deg == pytest.approx(0.18, abs=0.005)
+    servo = arm_servo()
+    assert servo.kp.tolist() == pytest.approx([c.kp_nm_per_deg / _RAD for c in _CONFIGS])
+    assert servo.felim.tolist() == pytest.approx([FOLLOWING_ERROR_LIMIT_DEG * _RAD] * 2)
+    assert servo.ki.tolist() == [0.0, 0.0]
 
 
 def test_a_non_finite_setpoint_is_refused_and_changes_nothing():
-    """update with a NaN setpoint is a ValueError; the servo's state is as before."""
-    servo = JointServo(SHOULDER)
-    servo.reset(100)
-    before = (servo.position_deg, servo.velocity_deg_s, servo.drive, servo.setpoint_deg)
-    with pytest.raises(ValueError, match="q_sp_deg"):
-        servo.update(math.nan, 0.0, 200)
-    with pytest.raises(ValueError, match="dt_s"):
-        servo.update(0.0, 0.0, 200, dt_s=0.0)
-    assert (servo.position_deg, servo.velocity_deg_s, servo.drive, servo.setpoint_deg) == before
+    """A segment with a NaN setpoint is refused (NativeInputError); the servo's reference is as before."""
+    rig = Rig()
+    rig.reset((100, 0))
+    rig.update(rig.position_deg, (0.0, 0.0), (100, 0))
+    before = rig.servo.state.copy()
+    with pytest.raises(NativeInputError):
+        rig.update((math.nan, 0.0), (0.0, 0.0), (200, 0))
+    assert np.array_equal(rig.servo.state, before)
+    trip = rig.servo.tick(np.array(rig.position_deg) * _RAD)
+    assert trip is None and float(rig.servo.q_ref[0]) == pytest.approx(rig.position_deg[0] * _RAD)
 
 
 def test_config_refuses_negative_gains_and_bad_limits():
@@ -254,12 +323,6 @@ def test_config_refuses_negative_gains_and_bad_limits():
                    {"limits_deg": (10.0, -10.0)}):
         with pytest.raises(ValueError, match="qx"):
             JointServoConfig(**{**base, **change})  # type: ignore[arg-type]
-
-
-def test_arm_servo_needs_one_config_per_joint():
-    """An ArmServo of one joint's config is refused."""
-    with pytest.raises(ValueError, match="2 servo configs"):
-        ArmServo((SHOULDER,))
 
 
 def test_quintic_duration_puts_the_peak_at_the_limits():
