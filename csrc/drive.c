@@ -127,8 +127,8 @@ int pyrt_drive_tick(pyrt_drive *d)
     }
     if (!d->on) {
         outputs_off(d);
-        for (int32_t j = 0; j < n; j++) {
-            d->ferr[j] = 0;
+        for (int32_t j = 0; j < n && !d->faulted; j++) {
+            d->ferr[j] = 0; /* faulted: the errors of the trip are kept */
         }
         if (d->faulted) {
             status |= PYRT_DRIVE_FAULT | (d->fault_joint << PYRT_DRIVE_JOINT_SHIFT);

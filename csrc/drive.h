@@ -42,7 +42,8 @@
  *    board's fault: every output 0 in that same tick, FAULT and the joint
  *    in the status word until enable is written 0.  Else dac[j] =
  *    rint(tau[j] / NM_PER_COUNT[j]) within +-32767 and amp[j] = 1.
- * 5. The inputs: status, ferr[j] = rint(error * COUNTS) within int32.
+ * 5. The inputs: status, ferr[j] = rint(error * COUNTS) within int32 (0
+ *    while off; the trip's errors while faulted).
  *
  * pyrt_drive_run advances a simulated arm (armworld.h) by dt with the
  * drive ticking every period on the arm's encoders and driving its

@@ -12,10 +12,11 @@ from dataclasses import replace as _replace
 import numpy as np
 from numpy.typing import ArrayLike
 
+from pyrt.boards.armservo import arm_servo_kind
 from pyrt.boards.registers import RegisterBoard
 from pyrt.errors import ConfigError
 from pyrt.kinematics import GRAVITY, Chain, Inertial
-from pyrt.sim.arm import ArmTruth, FTCalibration, Motor, _vec, arm_board_kind, default_motors
+from pyrt.sim.arm import ArmTruth, FTCalibration, Motor, _vec, default_motors
 
 _solve: Callable[..., np.ndarray] = np.linalg.solve
 try:  # numpy's solver without the checks of np.linalg.solve (3x faster for 6 x 6)
@@ -79,7 +80,7 @@ class RefArmWorld:
         self.motors = tuple(motors) if motors is not None else default_motors(chain)
         if len(self.motors) != n or not all(isinstance(m, Motor) for m in self.motors):
             raise ConfigError(f"motors: expected {n} Motor, got {len(self.motors)}")
-        self.kind = arm_board_kind(n)
+        self.kind = arm_servo_kind(n)
         if board is None:
             board = RegisterBoard(self.kind)
         for reg in self.kind.registers:

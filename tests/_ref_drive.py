@@ -66,7 +66,8 @@ class RefDrive:
                 status |= REFUSED
         if not self.on:
             self._off()
-            self.ferr = [0] * n
+            if not self.faulted:
+                self.ferr = [0] * n
             if self.faulted:
                 status |= FAULT | (self.fault_joint << JOINT_SHIFT)
             self.status = status

@@ -542,13 +542,18 @@ class UrdfArm(ArmMoves, Component):
             k[4] = knot.qd
             k[5] = knot.qdd
             k[7] = ff
-            self.servo.load(knot.period, quintic=True)
+            self.follow(knot.period)
             if self.state != "moving":
                 self.state = "moving"
         elif self.state == "moving" and ev.idle:
             self.state = "settling"
             self._settle_from = now_ns
             self._quiet_since = None
+
+    def follow(self, period: float) -> None:
+        """Hand the servo the segment to the knot just made (the servo's knots B;
+        a hardware (a) arm writes it to its board instead)."""
+        self.servo.load(period, quintic=True)
 
     # -- commands (the moves: ArmMoves) ----------------------------------------------
 
