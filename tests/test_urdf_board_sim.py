@@ -56,3 +56,31 @@ def test_the_controller_closes_the_loop_on_a_board_sim_over_tcp(urdf):
     finally:
         sim.kill()
         sim.wait(10)
+
+
+def test_hardware_a_over_tcp_moves_the_arm_with_the_board_servoing_in_board_sim():
+    """board-sim urdf --hardware a serves the motion-control board (its servo at 1 kHz in board-sim's world step); pyrt urdf --hardware a --tick-us 10000 writes setpoints at 100 Hz over tcp://: a joint move ends at target and the world's truth agrees with the target within 0.05 deg per joint."""
+    sim = subprocess.Popen([sys.executable, "-m", "pyrt", "board-sim", "urdf", "--hardware", "a",
+                            "--listen", "127.0.0.1:0", "--watchdog", "2"],
+                           stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE, text=True, env=_env())
+    try:
+        first = sim.stdout.readline()
+        m = re.search(r" on (tcp://127\.0\.0\.1:\d+) \(boards drive=arm-drive", first)
+        assert m, first + sim.stderr.read()
+        target = [10.0, 30.0, -150.0, 20.0, -30.0, 40.0]
+        script = (f"sleep 1\npuma560 movej {' '.join(map(str, target))}\nwait\nsim show\n"
+                  "quit\n")
+        done = subprocess.run([sys.executable, "-m", "pyrt", "urdf", "--hardware", "a",
+                               "--tick-us", "10000", "--boards", m.group(1)], input=script,
+                              capture_output=True, text=True, timeout=300, env=_env(), cwd=ROOT)
+        out = done.stdout
+        assert done.returncode == 0, out + done.stderr
+        assert "FAULT" not in out and "at target" in out, out
+        info = re.search(r"board-sim at tcp://\S+: (.*)$", out, re.M)
+        assert info, out
+        true = {int(k): float(v) for k, v in re.findall(r"q(\d+)=([-\d.]+)", info.group(1))}
+        assert [true[j + 1] for j in range(6)] == pytest.approx(target, abs=0.05)
+    finally:
+        sim.kill()
+        sim.wait(10)
