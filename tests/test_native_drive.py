@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import math
+import textwrap
 
 import numpy as np
 import pytest
 from _ref_drive import FAULT, JOINT_SHIFT, REFUSED, RefDrive
+from _sanitize import PRELUDE, assert_clean, run_under_asan
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -166,3 +168,44 @@ def test_the_status_bits_are_the_headers():
     """The status bits pyrt.native exports are csrc/drive.h's, and the reference's."""
     assert (DRIVE_ENABLED, DRIVE_FAULT, DRIVE_LATE, DRIVE_REFUSED) == (1, 2, 4, 8)
     assert FAULT == DRIVE_FAULT and JOINT_SHIFT == 8
+
+
+SANITIZE_DRIVER = textwrap.dedent(
+    """
+    import numpy as np
+    from pyrt.native import DriveKernel, tuned_gains
+
+    ffi, lib = native.ffi, native.lib
+    import pyrt.native._lib as bound
+    assert bound.lib is lib, "pyrt.native is not using the sanitized build"
+    rng = np.random.default_rng(2)
+    for n in (1, 6, lib.PYRT_DRIVE_MAX_JOINTS):
+        d = DriveKernel(n, 1e-3, counts=rng.uniform(1e3, 1e5, n),
+                        nm_per_count=rng.uniform(1e-4, 1e-2, n),
+                        gains=tuned_gains(np.full(n, 0.5), np.full(n, 30.0), 1e-3, 10.0))
+        d.set_outputs("felim", [1000] * n)
+        d.set_registers(enable=1, period_us=10000)
+        for k in range(60):
+            if k % 10 == 0:
+                d.set_outputs("setpoint", rng.integers(-2000, 2000, n).tolist())
+                d.set_registers(sync=k)
+            if k == 45:
+                d.set_registers(enable=0)
+            d.count[:] = rng.integers(-300, 300, n)
+            d.tick()
+    c = ffi.new("pyrt_drive *")
+    assert lib.pyrt_drive_tick(ffi.NULL) == lib.PYRT_EINVAL
+    assert lib.pyrt_drive_tick(c) == lib.PYRT_EINVAL
+    assert lib.pyrt_drive_run(ffi.NULL, ffi.NULL, 1.0) == lib.PYRT_EINVAL
+    assert lib.pyrt_drive_run(c, ffi.NULL, 1.0) == lib.PYRT_EINVAL
+    c.n = lib.PYRT_DRIVE_MAX_JOINTS + 1
+    assert lib.pyrt_drive_tick(c) == lib.PYRT_EINVAL
+    print("SANITIZE-DRIVER-OK")
+    """
+)
+
+
+@pytest.mark.sanitize
+def test_drive_kernel_is_clean_under_the_sanitizers(tmp_path):
+    """Every drive entry point, good input and bad, runs without an ASan or UBSan report."""
+    assert_clean(run_under_asan(PRELUDE + SANITIZE_DRIVER, tmp_path))
