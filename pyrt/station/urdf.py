@@ -19,7 +19,10 @@ The component tree::
     sim          the simulated arm's truth and its table (sim show, sim table)
 
 One ready queue: ``trajectory`` (100 Hz) and ``servo`` (every tick, 1 kHz);
-see :mod:`pyrt.station._urdf_arm` for the control.  A following error
+see :mod:`pyrt.station._urdf_arm` for the control.  With ``--hardware a`` the
+board is a motion-control board instead (:func:`pyrt.boards.armdrive.arm_drive_kind`,
+board name ``drive``) that interpolates and servos on its own: the host has
+only ``trajectory`` (:mod:`pyrt.station._urdf_drive`).  A following error
 beyond 2 degrees or a joint beyond its limits trips the station: every
 joint's DAC and enable are written 0 in that tick.
 """
@@ -271,6 +274,11 @@ the signals sim.x sim.y sim.z.
 
 With --boards tcp://HOST:PORT the controller drives the board of a
 'pyrt board-sim urdf [FILE.urdf]' in another process, at real time.
+
+--hardware a puts the arm behind a motion-control board instead (004's
+hardware (a)): the host writes joint setpoints at 100 Hz and the board
+interpolates and servos at 1 kHz; the host's tick may then be 10 ms
+(--tick-us 10000).  board-sim takes --hardware too.
 """
 
     name = "urdf"
