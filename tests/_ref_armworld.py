@@ -18,6 +18,10 @@ from pyrt.errors import ConfigError
 from pyrt.kinematics import GRAVITY, Chain, Inertial
 from pyrt.sim.arm import ArmTruth, FTCalibration, Motor, _vec, default_motors
 
+#: An engaged brake's creep speed per unit of torque over its rating (csrc/armworld.h's
+#: PYRT_ARM_BRAKE_VS).
+BRAKE_VS = 1e-4
+
 _solve: Callable[..., np.ndarray] = np.linalg.solve
 try:  # numpy's solver without the checks of np.linalg.solve (3x faster for 6 x 6)
     from numpy.linalg._umath_linalg import solve1 as _solve1
@@ -73,8 +77,12 @@ class RefArmWorld:
                  table_z: float | None = None, table_stiffness: float = 5e4,
                  table_damping: float = 500.0, table_friction: float = 0.3,
                  payload: float = 0.0, ft: FTCalibration | None = None,
-                 ft_noise: tuple[float, float] = (0.05, 0.002), seed: int = 0):
+                 ft_noise: tuple[float, float] = (0.05, 0.002), seed: int = 0,
+                 brake: ArrayLike | None = None):
         n = chain.n
+        #: The brakes' holding torques and whether each is released (set_release).
+        self.brake = _vec("brake", brake, n, 0.0)
+        self.release = [1] * n
         self.n = n
         self.chain = chain
         self.motors = tuple(motors) if motors is not None else default_motors(chain)
@@ -197,6 +205,9 @@ class RefArmWorld:
 
     # ------------------------------------------------------------ time
 
+    def set_release(self, release) -> None:
+        self.release = [1 if r else 0 for r in release]
+
     def step(self, dt: float) -> None:
         """Advance by ``dt`` seconds (>= 0) in equal internal steps of at
         most :attr:`max_step`, the board's outputs held over it (a DAC holds
@@ -236,6 +247,9 @@ class RefArmWorld:
             dfr = self._fc_vs * (1.0 - th * th)
             force += dfr * qd - self.friction * th
             diag += h * dfr
+        for j in range(self.n):  # an engaged brake: a viscous lock of BRAKE / BRAKE_VS
+            if not self.release[j]:
+                diag[j] += h * self.brake[j] / BRAKE_VS
         if self._has_stops and ((q < self.stop_lower) | (q > self.stop_upper)).any():
             ks, cs = self.stop_stiffness, self._stop_damping
             d_lo = self.stop_lower - q

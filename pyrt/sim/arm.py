@@ -13,7 +13,9 @@ The control code sees only the board's registers:
   ``drive=`` a :class:`DriveTuning`): setpoints at the trajectory rate, the
   board's own servo (csrc/drive.c) interpolating and closing the loop at
   :attr:`DriveTuning.period` on the same encoders and amplifiers, inside the
-  world's step (:meth:`ArmWorld.step` runs it between the controller's ticks).
+  world's step (:meth:`ArmWorld.step` runs it between the controller's ticks);
+  the board engages each joint's brake while its amplifier is off, so the arm
+  stays where it was after a fault.
 
 Physics, per internal step ``h`` (:attr:`ArmWorld.max_step`, default 1 ms;
 :meth:`ArmWorld.step` covers any ``dt`` in equal steps of at most that)::
@@ -101,6 +103,10 @@ class DriveTuning:
 
     period: float = 1e-3
     bandwidth_hz: float = 12.0
+    #: Each joint has a brake (holding the motor's torque limit) that the board engages
+    #: while the joint's amplifier is off (a fault, enable 0, a lost link) and releases
+    #: while it is on, as a servo drive's brake output does.
+    brakes: bool = True
 
     def __post_init__(self) -> None:
         for name in ("period", "bandwidth_hz"):
@@ -277,7 +283,11 @@ class ArmWorld:
     it starts (default zero, at rest); ``table_z`` the table's height in m
     (None: no table); ``payload`` kg at the tool tip; ``seed`` the F/T
     noise's (an integer 0 .. 2**64 - 1); ``drive`` the hardware (a) board's
-    tuning (None: the passive board, hardware (b)).  ConfigError for
+    tuning (None: the passive board, hardware (b)); ``brake`` each joint's
+    brake's rated holding torque (N m or N; None: none, or the motor's torque
+    limit when ``drive`` has brakes; csrc/armworld.h models it as a stiff
+    viscous lock): engaged where :meth:`set_release` says 0, or with a drive
+    while the joint's amplifier is off.  ConfigError for
     anything refused.
     """
 
@@ -291,7 +301,7 @@ class ArmWorld:
                  table_damping: float = 500.0, table_friction: float = 0.3,
                  payload: float = 0.0, ft: FTCalibration | None = None,
                  ft_noise: tuple[float, float] = (0.05, 0.002), seed: int = 0,
-                 drive: DriveTuning | None = None):
+                 drive: DriveTuning | None = None, brake: ArrayLike | None = None):
         n = chain.n
         self.n = n
         self.chain = chain
@@ -362,6 +372,13 @@ class ArmWorld:
             "effort": effort,
             "counts": [m.counts_per_joint_rev / (2.0 * math.pi) for m in self.motors],
         }
+        if brake is None and drive is not None and drive.brakes:
+            brake = [m.torque_limit for m in self.motors]
+        #: Each joint's brake's holding torque (zeros: no brakes).
+        self.brake = _vec("brake", brake, n, 0.0)
+        if (self.brake < 0).any():
+            raise ConfigError("brake: holding torques must be >= 0")
+        params["brake"] = self.brake
         try:
             self._k = ArmKernel(
                 _kernels(chain), params, max_step=self.max_step,
@@ -373,6 +390,8 @@ class ArmWorld:
         except NativeError as exc:
             raise ConfigError(f"simulated arm {chain.name!r}: {exc}") from None
         k = self._k
+        if brake is not None:
+            k.use_brakes(k.enable if drive is not None else None)
         self._drive: DriveKernel | None = None
         if drive is not None:
             gains: dict[str, ArrayLike] = dict(tuned_gains(
@@ -432,6 +451,14 @@ class ArmWorld:
         self._k.set_payload(float(mass), _kernels(dyn))
         self._dyn = dyn
         self.payload = float(mass)
+
+    def set_release(self, release: Sequence[int]) -> None:
+        """The brakes without a drive: released (non-zero) or engaged (0), per joint."""
+        if self._drive is not None:
+            raise ConfigError("the drive releases the brakes (with its amplifiers)")
+        if len(release) != self.n:
+            raise ConfigError(f"release: expected {self.n} values, got {len(release)}")
+        self._k.release[:] = [1 if r else 0 for r in release]
 
     def set_state(self, q: ArrayLike, qd: ArrayLike | None = None) -> None:
         """Put the arm at ``q`` moving at ``qd`` (default at rest); the encoders follow."""
