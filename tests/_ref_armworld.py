@@ -80,7 +80,7 @@ class RefArmWorld:
                  ft_noise: tuple[float, float] = (0.05, 0.002), seed: int = 0,
                  brake: ArrayLike | None = None):
         n = chain.n
-        #: The brakes' holding torques and whether each is released (set_release).
+        #: The brakes' holding torques and whether each is released (the board's register).
         self.brake = _vec("brake", brake, n, 0.0)
         self.release = [1] * n
         self.n = n
@@ -205,9 +205,6 @@ class RefArmWorld:
 
     # ------------------------------------------------------------ time
 
-    def set_release(self, release) -> None:
-        self.release = [1 if r else 0 for r in release]
-
     def step(self, dt: float) -> None:
         """Advance by ``dt`` seconds (>= 0) in equal internal steps of at
         most :attr:`max_step`, the board's outputs held over it (a DAC holds
@@ -217,6 +214,7 @@ class RefArmWorld:
         if dt == 0:
             return
         b = self.board
+        self.release = b.values("release")
         dac, on = b.values("dac"), b.values("enable")
         if dac != self._dac_in or on != self._on_in:  # the amplifiers' new currents
             self._dac_in, self._on_in = dac, on

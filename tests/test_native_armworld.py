@@ -124,7 +124,8 @@ def test_the_brakes_match_the_python_reference(s, data):
     c, r = _pair(s["name"], seed=s["seed"], brake=brake)
     for w in (c, r):
         w.set_state(s["q"], s["qd"])
-        w.set_release(release)
+        for j, v in enumerate(release):
+            w.board.write("release", v, j)
         for j, (d, e) in enumerate(zip(s["dac"], s["enable"], strict=True)):
             w.board.write("dac", d, j)
             w.board.write("enable", e, j)
@@ -135,17 +136,21 @@ def test_the_brakes_match_the_python_reference(s, data):
 
 
 def test_an_engaged_brake_holds_the_arm_against_gravity():
-    """The PUMA at rest with its amplifiers off: with every brake (holding the effort) engaged it moves less than 0.01 deg in 2 s; released, the upper arm falls."""
+    """The PUMA at rest with its amplifiers off: with a brake per joint (rated at the effort), engaged by the board's release registers at 0, it moves less than 0.01 deg in 2 s; without brakes, or with them released, the upper arm falls."""
     q0 = np.radians([0.0, 60.0, -150.0, 0.0, -45.0, 0.0])
     held = ArmWorld(PUMA, motors=PUMA560_MOTORS, q0=q0,
                     brake=[m.torque_limit for m in PUMA560_MOTORS])
-    held.set_release([0] * 6)
+    assert held.board.values("release") == [0] * 6  # off: engaged
     free = ArmWorld(PUMA, motors=PUMA560_MOTORS, q0=q0)
     for _ in range(200):
         held.step(0.01)
         free.step(0.01)
     assert np.degrees(np.abs(held.truth().q - q0)).max() < 0.01
     assert np.degrees(np.abs(free.truth().q - q0)).max() > 5.0
+    for j in range(6):
+        held.board.write("release", 1, j)
+    held.step(0.5)
+    assert np.degrees(np.abs(held.truth().q - q0)).max() > 1.0
 
 
 def test_a_long_run_on_the_table_matches_the_reference():

@@ -24,7 +24,7 @@ def _env() -> dict[str, str]:
 
 @pytest.mark.parametrize("urdf", [None], ids=["puma560"])
 def test_the_controller_closes_the_loop_on_a_board_sim_over_tcp(urdf):
-    """board-sim urdf [FILE] serves the arm's board and world; pyrt urdf [FILE] --boards tcp:// closes the loop over the link: the arm, which sank onto an end stop while nobody held it, is brought back inside its limits and held there, and the world's INFO (sim show) agrees with the encoders."""
+    """board-sim urdf [FILE] serves the arm's board and world; pyrt urdf [FILE] --boards tcp:// closes the loop over the link: the arm, held by its brakes while nobody drove it, is taken by the servo (brakes released) inside its limits and held there, and the world's INFO (sim show) agrees with the encoders."""
     file_args = [] if urdf is None else [str(urdf)]
     sim = subprocess.Popen([sys.executable, "-m", "pyrt", "board-sim", "urdf", *file_args,
                             "--listen", "127.0.0.1:0", "--watchdog", "2"],

@@ -186,8 +186,8 @@ def test_board_kinds_follow_the_hardware_named_on_the_command_line():
         p.parse_args(["--hardware", "c"])
 
 
-def test_after_a_fault_the_hardware_a_board_brakes_hold_the_arm_where_it_was():
-    """On hardware (a) the board engages each joint's brake while its amplifier is off: after a fault (enable 0 in its tick) the arm stays within 0.05 deg of where it was for 2 s, where on hardware (b) (no brakes) the upper arm sinks by degrees; ack and a move release them again."""
+def test_after_a_fault_the_brakes_hold_the_arm_where_it_was():
+    """On hardware (a) the board engages each joint's brake while its amplifier is off, on hardware (b) the reflex writes each brake's release 0: after a fault the arm stays within 0.05 deg of where it was for 2 s (it does not sink onto its stops); ack and a move release them again."""
     moved = {}
     for hw, tick in (("a", 10_000_000), ("b", 1_000_000)):
         station, runner = _start(hw, tick)
@@ -200,14 +200,12 @@ def test_after_a_fault_the_hardware_a_board_brakes_hold_the_arm_where_it_was():
             runner.sleep(2.0)
             q1 = runner.call(lambda s=station: s.plant.truth().q, take_fault=False)
             moved[hw] = float(np.degrees(np.abs(q1 - q0)).max())
-            if hw == "a":
-                with contextlib.suppress(FaultError):  # the fault, told once
-                    runner.call(lambda: None)
-                runner.call(station.acknowledge, take_fault=False)
-                runner.call(station.arm.move_joints, 0, 45, -180, 0, -45, 0)
-                assert runner.wait_until(lambda s=station: not s.busy(), 60.0)
-                assert station.fault is None and station.arm.last_stop == "at target"
+            with contextlib.suppress(FaultError):  # the fault, told once
+                runner.call(lambda: None)
+            runner.call(station.acknowledge, take_fault=False)
+            runner.call(station.arm.move_joints, 0, 45, -180, 0, -45, 0)
+            assert runner.wait_until(lambda s=station: not s.busy(), 60.0)
+            assert station.fault is None and station.arm.last_stop == "at target"
         finally:
             station.close()
-    assert moved["a"] < 0.05, moved
-    assert moved["b"] > 1.0, moved
+    assert moved["a"] < 0.05 and moved["b"] < 0.05, moved

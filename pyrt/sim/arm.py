@@ -5,7 +5,7 @@ The control code sees only the board's registers:
 
 * (b) the passive servo board (:func:`pyrt.boards.armservo.arm_servo_kind`,
   the default): per joint a DAC (``+-32767`` counts is ``+-Motor.max_current``
-  A), an amplifier enable and an encoder counter
+  A), an amplifier enable, a brake release and an encoder counter
   (``Motor.counts_per_joint_rev`` per joint turn, 0 at joint value 0), and
   the wrist sensor's six channels (counts of :class:`FTCalibration`); the
   controller's servo writes the DACs at the servo rate;
@@ -286,8 +286,8 @@ class ArmWorld:
     tuning (None: the passive board, hardware (b)); ``brake`` each joint's
     brake's rated holding torque (N m or N; None: none, or the motor's torque
     limit when ``drive`` has brakes; csrc/armworld.h models it as a stiff
-    viscous lock): engaged where :meth:`set_release` says 0, or with a drive
-    while the joint's amplifier is off.  ConfigError for
+    viscous lock): engaged where the passive board's ``release`` register is
+    0, or with a drive while the joint's amplifier is off.  ConfigError for
     anything refused.
     """
 
@@ -390,8 +390,10 @@ class ArmWorld:
         except NativeError as exc:
             raise ConfigError(f"simulated arm {chain.name!r}: {exc}") from None
         k = self._k
-        if brake is not None:
-            k.use_brakes(k.enable if drive is not None else None)
+        # the brakes: the drive's amplifier enables release them (hardware (a)), or the
+        # passive board's release register (hardware (b)); none fitted: zero torques
+        k.use_brakes(k.enable if drive is not None else None)
+        self._release_in: list[int] = []
         self._drive: DriveKernel | None = None
         if drive is not None:
             gains: dict[str, ArrayLike] = dict(tuned_gains(
@@ -452,14 +454,6 @@ class ArmWorld:
         self._dyn = dyn
         self.payload = float(mass)
 
-    def set_release(self, release: Sequence[int]) -> None:
-        """The brakes without a drive: released (non-zero) or engaged (0), per joint."""
-        if self._drive is not None:
-            raise ConfigError("the drive releases the brakes (with its amplifiers)")
-        if len(release) != self.n:
-            raise ConfigError(f"release: expected {self.n} values, got {len(release)}")
-        self._k.release[:] = [1 if r else 0 for r in release]
-
     def set_state(self, q: ArrayLike, qd: ArrayLike | None = None) -> None:
         """Put the arm at ``q`` moving at ``qd`` (default at rest); the encoders follow."""
         qv = _vec("q", q, self.n, 0.0)
@@ -494,6 +488,10 @@ class ArmWorld:
         if on != self._on_in:
             k.set_enable(on)
             self._on_in = on
+        release = values("release")
+        if release != self._release_in:
+            k.release[:] = release
+            self._release_in = release
         k.step(dt)
         self.time += dt
         self._set_inputs()

@@ -152,7 +152,8 @@ def arm_world(boards: Boards, chain: Chain, motors: Sequence[Motor],
     q0 = default_start(chain) if start is None else np.asarray(start, dtype=float)
     driven = "drive" in boards
     arm = ArmWorld(chain, motors=motors, board=_arm_board(boards), q0=q0,
-                   drive=DriveTuning() if driven else None)
+                   drive=DriveTuning() if driven else None,
+                   brake=[m.torque_limit for m in motors])  # a brake per joint
     return World("urdf", boards, UrdfPhysics(arm))
 
 
