@@ -84,6 +84,8 @@ def test_on_hardware_a_the_host_has_no_servo_task_and_the_board_servos():
             assert status & ENABLED and not status & FAULT
             assert station.board.kind == arm_drive_kind(6)
             assert runner.call(lambda s=station: np.abs(s.plant.truth().current).max()) > 0.0
+            sig = station.arm.signal("status")
+            assert sig is not None and runner.call(sig.read) & ENABLED
         finally:
             station.close()
 
@@ -209,3 +211,23 @@ def test_after_a_fault_the_brakes_hold_the_arm_where_it_was():
         finally:
             station.close()
     assert moved["a"] < 0.05 and moved["b"] < 0.05, moved
+
+
+@pytest.mark.parametrize("hardware", ["a", "b"])
+def test_an_arm_lying_beyond_a_limit_at_power_on_is_brought_back_inside(hardware):
+    """The simulated arm starts 1.5 deg beyond joint 1's upper limit (inside its end stop): at power-on the servo (b) or the board's setpoints (a) bring it back inside its limits, with no fault, and a move then ends at target."""
+    station = build_urdf(Loop(SimClock(), period_ns=1_000_000), hardware=hardware)
+    try:
+        q = station.plant.truth().q
+        q[0] = station.chain.upper[0] + math.radians(1.5)
+        station.plant.set_state(q)
+        runner = station.start()
+        assert runner.wait_until(lambda: station.arm.powered and not station.busy(), 10.0)
+        assert station.fault is None
+        q1 = runner.call(lambda: station.plant.truth().q)
+        assert q1[0] <= station.chain.upper[0] + 1e-4
+        runner.call(station.arm.move_joints, 100, 45, -180, 0, -45, 0)
+        assert runner.wait_until(lambda: not station.busy(), 60.0)
+        assert station.fault is None and station.arm.last_stop == "at target"
+    finally:
+        station.close()

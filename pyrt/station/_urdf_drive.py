@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from pyrt.boards.armdrive import DAC_FULL_SCALE, ENABLED, FAULT, JOINT_SHIFT
+from pyrt.component import Signal
 from pyrt.errors import ConfigError
 from pyrt.motion import Evaluator
 from pyrt.scheduler import Task
@@ -116,6 +117,12 @@ class DrivenArm(UrdfArm):
     def _felim_rad(self) -> list[float]:
         return [FOLLOWING_ERROR_DEG * 1e-3 if p else math.radians(FOLLOWING_ERROR_DEG)
                 for p in self.prismatic]
+
+    def signals(self) -> list[Signal]:
+        return [*super().signals(),
+                Signal("status", "bits", lambda: self.status,
+                       "the board's status word: 1 enabled, 2 fault, 4 late, 8 refused; "
+                       "bits 8..15 the joint that tripped", "d")]
 
     def tasks(self) -> list[Task]:
         return [Task(self.drive_tick, period=self.every, name="trajectory", timed=True)]
