@@ -81,6 +81,7 @@ def test_hardware_a_over_tcp_moves_the_arm_with_the_board_servoing_in_board_sim(
         assert info, out
         true = {int(k): float(v) for k, v in re.findall(r"q(\d+)=([-\d.]+)", info.group(1))}
         assert [true[j + 1] for j in range(6)] == pytest.approx(target, abs=0.05)
+        assert re.search(r"drive=0x000[15]", info.group(1)), info.group(1)  # enabled, no fault
     finally:
         sim.kill()
         sim.wait(10)

@@ -577,7 +577,8 @@ class ArmWorld:
 
     def info(self) -> dict[str, object]:
         """The truth in words (board-sim's INFO, the operator's ``sim show``):
-        joints in degrees, the tip in mm, the contact force in N."""
+        joints in degrees, the tip in mm, the contact force in N (and a
+        hardware (a) board's status word)."""
         t = self.truth()
         out: dict[str, object] = {f"q{j + 1}": f"{math.degrees(v):.4f}"
                                   for j, v in enumerate(t.q)}
@@ -586,6 +587,8 @@ class ArmWorld:
         out["fz"] = f"{t.contact[2]:.3f}"
         out["table"] = "none" if self.table_z is None else f"{self.table_z * 1e3:.1f}"
         out["payload"] = f"{self.payload:g}"
+        if self._drive is not None:  # hardware (a): the board's status word
+            out["drive"] = f"0x{self._drive.status:04x}"
         return out
 
 
