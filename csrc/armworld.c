@@ -275,6 +275,7 @@ static int substep(const pyrt_arm *a, double *w, double h)
     const double *arm = p + PYRT_ARM_ARMATURE * n;
     const double *damp = p + PYRT_ARM_DAMPING * n;
     const double *fc = p + PYRT_ARM_FRICTION * n;
+    const double *brake = p + PYRT_ARM_BRAKE * n;
     const double *lo = p + PYRT_ARM_STOP_LO * n;
     const double *hi = p + PYRT_ARM_STOP_HI * n;
     const double *ks = p + PYRT_ARM_STOP_K * n;
@@ -300,6 +301,10 @@ static int substep(const pyrt_arm *a, double *w, double h)
             const double dfr = fc[i] / a->friction_vs * (1.0 - th * th);
             fi += dfr * qd[i] - fc[i] * th;
             di += h * dfr;
+        }
+        if (a->release != NULL && !a->release[i]) {
+            /* the engaged brake: a stiff viscous lock, wholly in the matrix */
+            di += h * brake[i] / PYRT_ARM_BRAKE_VS;
         }
         /* an end stop pushes while its spring-damper pushes */
         const double d_lo = lo[i] - q[i];

@@ -9,6 +9,8 @@
  *     A  = M(q) + diag(ARMATURE)                       (the chain's mass matrix)
  *     f  = tau_m - rnea(q, qd, 0, g)
  *          - FRICTION tanh(qd / vs) + dfr qd           dfr = FRICTION / vs (1 - tanh^2)
+ *          - BRAKE / bvs qd                            joints whose brake is engaged
+ *                                                      (release[j] 0; bvs PYRT_ARM_BRAKE_VS)
  *          + stop springs (joints beyond STOP_LO / STOP_HI, pushing)
  *          + J_tip^T F_contact + contact damping terms
  *     (A + h D + h^2 K) qd+ = A qd + h f               D, K: the damping and stiffness
@@ -71,7 +73,14 @@
 #define PYRT_ARM_AMPS_PER_COUNT 8 /* motor current per DAC count, > 0 */
 #define PYRT_ARM_EFFORT 9         /* torque limit, N m, > 0 */
 #define PYRT_ARM_COUNTS 10        /* encoder counts per rad (or per m), > 0 */
-#define PYRT_ARM_NROWS 11
+#define PYRT_ARM_BRAKE 11         /* the brake's rated holding torque, N m, >= 0 (0: none) */
+#define PYRT_ARM_NROWS 12
+
+/* The engaged brake is a stiff viscous lock of BRAKE / BRAKE_VS (N m s/rad):
+ * it holds a joint to a creep of BRAKE_VS (rad/s, m/s) times the torque on it
+ * over BRAKE, taken wholly into the implicit step (it never chatters; it does
+ * not slip either: a torque beyond BRAKE is held all the same, creeping faster). */
+#define PYRT_ARM_BRAKE_VS 1e-4
 
 /*
  * One simulated arm.  The caller fills the description and the pointers
@@ -95,6 +104,8 @@
  *   ft_sigma     noise standard deviation, N and N m, >= 0
  *   params       PYRT_ARM_NROWS x n
  *   dac, enable  n: the board's outputs (in)
+ *   release      n: each joint's brake released (non-zero) or engaged (0)
+ *                (in); NULL: no brakes
  *   count, ft    n and 6: the board's inputs (out)
  *   q, qd        n: the state (in and out)
  *   torque, current  n: the motors' joint torque and current (out)
@@ -123,6 +134,7 @@ typedef struct {
     const double *params;
     const int32_t *dac;
     const int32_t *enable;
+    const int32_t *release;
     int32_t *count;
     int32_t *ft;
     double *q;

@@ -12,10 +12,15 @@ from dataclasses import replace as _replace
 import numpy as np
 from numpy.typing import ArrayLike
 
+from pyrt.boards.armservo import arm_servo_kind
 from pyrt.boards.registers import RegisterBoard
 from pyrt.errors import ConfigError
 from pyrt.kinematics import GRAVITY, Chain, Inertial
-from pyrt.sim.arm import ArmTruth, FTCalibration, Motor, _vec, arm_board_kind, default_motors
+from pyrt.sim.arm import ArmTruth, FTCalibration, Motor, _vec, default_motors
+
+#: An engaged brake's creep speed per unit of torque over its rating (csrc/armworld.h's
+#: PYRT_ARM_BRAKE_VS).
+BRAKE_VS = 1e-4
 
 _solve: Callable[..., np.ndarray] = np.linalg.solve
 try:  # numpy's solver without the checks of np.linalg.solve (3x faster for 6 x 6)
@@ -72,14 +77,18 @@ class RefArmWorld:
                  table_z: float | None = None, table_stiffness: float = 5e4,
                  table_damping: float = 500.0, table_friction: float = 0.3,
                  payload: float = 0.0, ft: FTCalibration | None = None,
-                 ft_noise: tuple[float, float] = (0.05, 0.002), seed: int = 0):
+                 ft_noise: tuple[float, float] = (0.05, 0.002), seed: int = 0,
+                 brake: ArrayLike | None = None):
         n = chain.n
+        #: The brakes' holding torques and whether each is released (the board's register).
+        self.brake = _vec("brake", brake, n, 0.0)
+        self.release = [1] * n
         self.n = n
         self.chain = chain
         self.motors = tuple(motors) if motors is not None else default_motors(chain)
         if len(self.motors) != n or not all(isinstance(m, Motor) for m in self.motors):
             raise ConfigError(f"motors: expected {n} Motor, got {len(self.motors)}")
-        self.kind = arm_board_kind(n)
+        self.kind = arm_servo_kind(n)
         if board is None:
             board = RegisterBoard(self.kind)
         for reg in self.kind.registers:
@@ -205,6 +214,7 @@ class RefArmWorld:
         if dt == 0:
             return
         b = self.board
+        self.release = b.values("release")
         dac, on = b.values("dac"), b.values("enable")
         if dac != self._dac_in or on != self._on_in:  # the amplifiers' new currents
             self._dac_in, self._on_in = dac, on
@@ -235,6 +245,9 @@ class RefArmWorld:
             dfr = self._fc_vs * (1.0 - th * th)
             force += dfr * qd - self.friction * th
             diag += h * dfr
+        for j in range(self.n):  # an engaged brake: a viscous lock of BRAKE / BRAKE_VS
+            if not self.release[j]:
+                diag[j] += h * self.brake[j] / BRAKE_VS
         if self._has_stops and ((q < self.stop_lower) | (q > self.stop_upper)).any():
             ks, cs = self.stop_stiffness, self._stop_damping
             d_lo = self.stop_lower - q

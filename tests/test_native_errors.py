@@ -160,6 +160,13 @@ def _arm_nan_state():
     a.publish()
 
 
+def _drive_nan(run: bool):
+    """A drive whose counts per unit the caller turned to NaN in its own array."""
+    d = nat.DriveKernel(1, 1e-3, counts=[1e3], nm_per_count=[1e-3], arm=_arm() if run else None)
+    d.params[0, 0] = NAN
+    d.run(0.01) if run else d.tick()
+
+
 #: Public C entry point -> a wrapper call with input only C refuses.
 THROUGH_WRAPPERS = {
     "pyrt_findpos_solve": lambda: nat.find_position(_TOPS, _BOTTOMS, [600.0, NAN, 1100.0],
@@ -194,6 +201,8 @@ THROUGH_WRAPPERS = {
     "pyrt_arm_check": lambda: _arm(damping=[-1.0]),
     "pyrt_arm_step": lambda: _arm().step(NAN),
     "pyrt_arm_publish": _arm_nan_state,
+    "pyrt_drive_tick": lambda: _drive_nan(False),
+    "pyrt_drive_run": lambda: _drive_nan(True),
 }
 
 #: Entry points whose only failure is a NULL pointer or a struct the wrapper

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from pyrt.boards import RegisterBoard
+from pyrt.boards.armservo import arm_servo_kind
 from pyrt.errors import ConfigError
 from pyrt.kinematics import Chain, Inertial, Joint
 from pyrt.kinematics.puma import puma560
@@ -20,7 +21,6 @@ from pyrt.sim.arm import (
     ArmWorld,
     FTCalibration,
     Motor,
-    arm_board_kind,
     default_motors,
 )
 
@@ -200,12 +200,12 @@ def test_a_motor_stronger_than_the_effort_is_clamped_at_it():
 
 
 def test_the_arm_plays_a_world_behind_sim_boards():
-    """On boards opened with sim: from arm_board_kind, ArmPlant steps the arm by the time that
+    """On boards opened with sim: from arm_servo_kind, ArmPlant steps the arm by the time that
     passed, and the world's watchdog turns every DAC and enable off."""
     from pyrt.boards import open_boards
     from pyrt.sim.world import World
 
-    boards = open_boards("sim:", "puma560", {"arm": arm_board_kind(6)})
+    boards = open_boards("sim:", "puma560", {"arm": arm_servo_kind(6)})
     arm = puma(board=boards["arm"])
     world = World("puma560", boards, ArmPlant(arm))
     world.step(0)
@@ -245,7 +245,7 @@ def test_bad_configuration_is_refused():
     with pytest.raises(ConfigError, match="no effort limit"):
         default_motors(free)
     with pytest.raises(ConfigError, match="lacks register"):
-        ArmWorld(CHAIN, board=RegisterBoard(arm_board_kind(2)))
+        ArmWorld(CHAIN, board=RegisterBoard(arm_servo_kind(2)))
 
 
 # ------------------------------------------------------------------ the servo on the world

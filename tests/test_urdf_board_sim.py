@@ -24,7 +24,7 @@ def _env() -> dict[str, str]:
 
 @pytest.mark.parametrize("urdf", [None], ids=["puma560"])
 def test_the_controller_closes_the_loop_on_a_board_sim_over_tcp(urdf):
-    """board-sim urdf [FILE] serves the arm's board and world; pyrt urdf [FILE] --boards tcp:// closes the loop over the link: the arm, which sank onto an end stop while nobody held it, is brought back inside its limits and held there, and the world's INFO (sim show) agrees with the encoders."""
+    """board-sim urdf [FILE] serves the arm's board and world; pyrt urdf [FILE] --boards tcp:// closes the loop over the link: the arm, held by its brakes while nobody drove it, is taken by the servo (brakes released) inside its limits and held there, and the world's INFO (sim show) agrees with the encoders."""
     file_args = [] if urdf is None else [str(urdf)]
     sim = subprocess.Popen([sys.executable, "-m", "pyrt", "board-sim", "urdf", *file_args,
                             "--listen", "127.0.0.1:0", "--watchdog", "2"],
@@ -53,6 +53,35 @@ def test_the_controller_closes_the_loop_on_a_board_sim_over_tcp(urdf):
         chain = load_arm(urdf)[0]
         for v, lo, hi in zip(enc, chain.lower, chain.upper, strict=True):
             assert math.degrees(lo) - 0.2 <= v <= math.degrees(hi) + 0.2
+    finally:
+        sim.kill()
+        sim.wait(10)
+
+
+def test_hardware_a_over_tcp_moves_the_arm_with_the_board_servoing_in_board_sim():
+    """board-sim urdf --hardware a serves the motion-control board (its servo at 1 kHz in board-sim's world step); pyrt urdf --hardware a --tick-us 10000 writes setpoints at 100 Hz over tcp://: a joint move ends at target and the world's truth agrees with the target within 0.05 deg per joint."""
+    sim = subprocess.Popen([sys.executable, "-m", "pyrt", "board-sim", "urdf", "--hardware", "a",
+                            "--listen", "127.0.0.1:0", "--watchdog", "2"],
+                           stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE, text=True, env=_env())
+    try:
+        first = sim.stdout.readline()
+        m = re.search(r" on (tcp://127\.0\.0\.1:\d+) \(boards drive=arm-drive", first)
+        assert m, first + sim.stderr.read()
+        target = [10.0, 30.0, -150.0, 20.0, -30.0, 40.0]
+        script = (f"sleep 1\npuma560 movej {' '.join(map(str, target))}\nwait\nsim show\n"
+                  "quit\n")
+        done = subprocess.run([sys.executable, "-m", "pyrt", "urdf", "--hardware", "a",
+                               "--tick-us", "10000", "--boards", m.group(1)], input=script,
+                              capture_output=True, text=True, timeout=300, env=_env(), cwd=ROOT)
+        out = done.stdout
+        assert done.returncode == 0, out + done.stderr
+        assert "FAULT" not in out and "at target" in out, out
+        info = re.search(r"board-sim at tcp://\S+: (.*)$", out, re.M)
+        assert info, out
+        true = {int(k): float(v) for k, v in re.findall(r"q(\d+)=([-\d.]+)", info.group(1))}
+        assert [true[j + 1] for j in range(6)] == pytest.approx(target, abs=0.05)
+        assert re.search(r"drive=0x000[15]", info.group(1)), info.group(1)  # enabled, no fault
     finally:
         sim.kill()
         sim.wait(10)

@@ -91,3 +91,31 @@ class TestUrdfConformance(StationConformance):
     def start_move(self, station, runner):
         runner.call(station.arm.move_joints, 40, 60, -150, 30, -40, 50)
         assert runner.wait_until(lambda: bool(self.driven(station)), 5.0)
+
+
+def _drive_driven(station) -> list[str]:
+    """Hardware (a): with the arm unpowered, the board drives only while enabled (its
+    setpoints and limits stay as written, read by a board that is off)."""
+    if station.fault is not None or not station.arm.powered:
+        out = [f"the arm {station.arm.state}"] if station.arm.state != "idle" else []
+        enable = station.board.read("enable")
+        return out + ([f"enable = {enable}"] if enable else [])
+    return _urdf_driven(station)
+
+
+class TestUrdfHardwareAConformance(TestUrdfConformance):
+    """The PUMA 560 as 'pyrt urdf --hardware a --tick-us 10000' runs it: the motion-control
+    board servos, the host writes setpoints at 100 Hz."""
+
+    samples: ClassVar[dict[str, list[list[str]]]] = {
+        "UrdfSim.table": [["-2000"], ["off"]],
+        "DrivenArm.tool": [["0", "0", "50", "0", "0", "0"], ["0"] * 6],
+        "DrivenArm.coord": [["0", "0", "50", "0", "0", "0"], ["0"] * 6],
+    }
+
+    def build(self, tmp_path):
+        return URDF.build(Loop(SimClock(), period_ns=10_000_000),
+                          argparse.Namespace(boards=None, urdf=None, start=None, hardware="a"))
+
+    def driven(self, station):
+        return _drive_driven(station)

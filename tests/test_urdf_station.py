@@ -253,10 +253,11 @@ def test_stop_brakes_along_the_path_and_holds():
 
 
 def test_the_board_declares_a_dac_enable_and_counter_per_joint_and_six_wrench_channels():
-    """The arm's passive servo board: per joint a 16-bit DAC and an enable (off 0) and a 32-bit counter; six F/T channels; the joint count is part of the kind's fingerprint."""
+    """The arm's passive servo board: per joint a 16-bit DAC, an enable and a brake release (off 0: no current, brake engaged) and a 32-bit counter; six F/T channels; the joint count is part of the kind's fingerprint."""
     k6, k7 = arm_servo_kind(6), arm_servo_kind(7)
     assert [(r.name, r.count) for r in k6.registers] == [("dac", 6), ("enable", 6),
-                                                         ("count", 6), ("ft", 6)]
+                                                         ("release", 6), ("count", 6),
+                                                         ("ft", 6)]
     assert all(r.off == 0 for r in k6.outputs())
     assert k6.fingerprint != k7.fingerprint
     with pytest.raises(ValueError):

@@ -6,20 +6,22 @@ encoder and the wrist force/torque sensor.  The board closes no loop of its
 own (a passive board: the servo is the controller's).  Per joint ``j`` of
 ``n``:
 
-============  ======  ====================  ================================================
-register      dir     width                 meaning
-============  ======  ====================  ================================================
-``dac[j]``    output  16-bit signed, off 0  the amplifier's current command, DAC counts:
-                                            +-:data:`DAC_FULL_SCALE` is full-scale current
-``enable[j]`` output  1 bit, off 0          the amplifier's enable (0: no current)
-``count[j]``  input   32-bit signed         the encoder's counter; it wraps at 32 bits
-``ft[k]``     input   32-bit signed         the wrist sensor, k = fx fy fz tx ty tz
-                                            (:data:`FT_CHANNELS`), counts
-============  ======  ====================  ================================================
+===============  ======  ====================  ==============================================
+register         dir     width                 meaning
+===============  ======  ====================  ==============================================
+``dac[j]``       output  16-bit signed, off 0  the amplifier's current command, DAC counts:
+                                               +-:data:`DAC_FULL_SCALE` is full-scale current
+``enable[j]``    output  1 bit, off 0          the amplifier's enable (0: no current)
+``release[j]``   output  1 bit, off 0          the joint's brake released (0: the brake
+                                               holds the joint; fail-safe)
+``count[j]``     input   32-bit signed         the encoder's counter; it wraps at 32 bits
+``ft[k]``        input   32-bit signed         the wrist sensor, k = fx fy fz tx ty tz
+                                               (:data:`FT_CHANNELS`), counts
+===============  ======  ====================  ==============================================
 
 ``off`` is what the board's watchdog (``pyrt board-sim``) and a lost link
-leave an output at: no current, amplifiers disabled.  The number of joints
-is part of the kind: an arm of six joints and one of seven have boards of
+leave an output at: no current, amplifiers disabled, brakes engaged.  The
+number of joints is part of the kind: an arm of six joints and one of seven have boards of
 different fingerprints, and a controller refuses a board that is not its own.
 """
 
@@ -48,8 +50,11 @@ def arm_servo_kind(n: int) -> BoardKind:
                  doc=f"motor current command, per joint: +-{DAC_FULL_SCALE} is full scale"),
         Register("enable", count=n, width=1, direction=OUTPUT, off=0,
                  doc="amplifier enable, per joint"),
+        Register("release", count=n, width=1, direction=OUTPUT, off=0,
+                 doc="brake release, per joint (0: the brake holds the joint)"),
         Register("count", count=n, width=32, signed=True, units="counts",
                  doc="incremental encoder counter, per joint (wraps at 32 bits)"),
         Register("ft", count=len(FT_CHANNELS), width=32, signed=True, units="counts",
                  doc="wrist force/torque fx fy fz tx ty tz, sensor frame"),
-    ), doc=f"{n}-joint passive servo board: DACs, amplifier enables, encoders, wrist F/T")
+    ), doc=f"{n}-joint passive servo board: DACs, amplifier enables, brake releases, "
+           "encoders, wrist F/T")

@@ -24,6 +24,12 @@ which Modbus **unit** (device id), **table**, **address**, **width**,
     signed = false                # default: the register's declaration
     scale = 1                     # pyrt value = Modbus value x scale (default 1)
 
+The top level may also name the outputs' **owner**, ``owner = "10.0.0.5"``
+(an IP address, ``localhost``, or a list of them): a device serving the
+map (``pyrt board-sim --modbus``) then lets only a connection from there
+own its outputs and write them; anyone may still read.  Without it, the
+first connection that writes owns them (one controller at a time).
+
 Keys of a register's table: ``table`` (required), ``address`` (required,
 0..65535: the protocol address, counted from 0), ``unit`` (0..255; default
 the top-level ``unit``, else 1), ``width`` (16 or 32 for the register
@@ -58,6 +64,7 @@ does the same for a set of output writes.
 
 from __future__ import annotations
 
+import ipaddress
 import re
 import tomllib
 from collections.abc import Iterable, Mapping
@@ -180,9 +187,11 @@ class Group:
 class RegisterMap:
     """A checked map (see the module text): every declared register's places."""
 
-    def __init__(self, source: str, places: list[Place]):
+    def __init__(self, source: str, places: list[Place], owner: tuple[str, ...] = ()):
         self.source = source
         self.places = places
+        #: The addresses a connection must come from to own the outputs (none named: any).
+        self.owner = owner
         self.by_key = {p.key: p for p in places}
         self.inputs = [p for p in places if p.register.is_input]
         self.readable_outputs = [p for p in places
@@ -197,6 +206,18 @@ class RegisterMap:
     def output_groups(self) -> list[Group]:
         """The fewest requests that read every readable output (on opening)."""
         return self._output_groups
+
+    def may_own(self, host: str) -> bool:
+        """Whether a connection from ``host`` (an IP address) may own the outputs."""
+        if not self.owner:
+            return True
+        try:
+            ip = ipaddress.ip_address(host.strip("[]").split("%")[0])
+        except ValueError:
+            return False
+        if isinstance(ip, ipaddress.IPv6Address) and ip.ipv4_mapped is not None:
+            ip = ip.ipv4_mapped
+        return str(ip) in self.owner
 
     def write_groups(self, keys: Iterable[tuple[str, str, int]]) -> list[Group]:
         """The fewest requests that write the outputs ``keys`` (board, register, index)."""
@@ -262,9 +283,10 @@ def parse_map(text: str, kinds: Mapping[str, BoardKind], source: str = "<map>") 
     default_unit = doc.get("unit", 1)
     if not _is_int(default_unit) or not 0 <= default_unit <= 255:
         raise bad(_key_line(lines, None, "unit"), f"unit must be 0..255, got {default_unit!r}")
+    owner = _owner(doc.get("owner", ()), lambda m: bad(_key_line(lines, None, "owner"), m))
     places: list[Place] = []
     for board, regs in doc.items():
-        if board == "unit":
+        if board in ("unit", "owner"):
             continue
         if not isinstance(regs, dict):
             raise bad(_key_line(lines, None, board), f"{board!r} is not a board's table "
@@ -300,7 +322,24 @@ def parse_map(text: str, kinds: Mapping[str, BoardKind], source: str = "<map>") 
                           f"{other.board}.{other.register.name}[{other.index}] at unit "
                           f"{p.unit} {p.table} address {a}")
             seen[(p.unit, p.table, a)] = p
-    return RegisterMap(source, places)
+    return RegisterMap(source, places, owner)
+
+
+def _owner(value: Any, bad: Any) -> tuple[str, ...]:
+    """The top-level ``owner``: IP addresses (``localhost``: the loopback ones)."""
+    names = [value] if isinstance(value, str) else value
+    if not isinstance(names, (list, tuple)) or not all(isinstance(v, str) for v in names):
+        raise bad(f"owner must be an IP address or a list of them, got {value!r}")
+    out: list[str] = []
+    for name in names:
+        if name.strip().lower() == "localhost":
+            out += ["127.0.0.1", "::1"]
+            continue
+        try:
+            out.append(str(ipaddress.ip_address(name.strip())))
+        except ValueError:
+            raise bad(f"owner: {name!r} is not an IP address (or localhost)") from None
+    return tuple(out)
 
 
 def _is_int(v: Any) -> bool:

@@ -10,6 +10,13 @@ source file; this ``__init__`` re-exports their API.
 
 from pyrt.native._armworld import ARM_ROWS, ArmKernel
 from pyrt.native._convert import excess128, excess128_many, from_excess128
+from pyrt.native._drive import (
+    DRIVE_ENABLED,
+    DRIVE_FAULT,
+    DRIVE_LATE,
+    DRIVE_REFUSED,
+    DriveKernel,
+)
 from pyrt.native._errors import (
     DegenerateGeometryError,
     NativeInputError,
@@ -40,11 +47,16 @@ from pyrt.native._statics import StaticsSolver
 
 __all__ = [
     "ARM_ROWS",
+    "DRIVE_ENABLED",
+    "DRIVE_FAULT",
+    "DRIVE_LATE",
+    "DRIVE_REFUSED",
     "NECK_LOWER",
     "NECK_UPPER",
     "ArmKernel",
     "ChainKernels",
     "DegenerateGeometryError",
+    "DriveKernel",
     "FuzzyBatch",
     "FuzzyInput",
     "FuzzyParams",

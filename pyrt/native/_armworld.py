@@ -27,7 +27,7 @@ from pyrt.native._errors import NativeInputError, NonFiniteError, SingularError,
 from pyrt.native._kinematics import ChainKernels
 from pyrt.native._lib import ffi, lib
 
-__all__ = ["ARM_ROWS", "ArmKernel"]
+__all__ = ["ARM_ROWS", "OPTIONAL_ROWS", "ArmKernel"]
 
 MAX_JOINTS: int = lib.PYRT_ARM_MAX_JOINTS
 NROWS: int = lib.PYRT_ARM_NROWS
@@ -35,7 +35,9 @@ NROWS: int = lib.PYRT_ARM_NROWS
 #: The per-joint parameter rows, in the order of csrc/armworld.h.
 ARM_ROWS: tuple[str, ...] = ("armature", "damping", "friction", "stop_lo", "stop_hi", "stop_k",
                              "stop_c", "nm_per_count", "amps_per_count", "effort", "counts")
-_ROWS = {name: getattr(lib, f"PYRT_ARM_{name.upper()}") for name in ARM_ROWS}
+#: Rows that may be left out (zero): the brakes' holding torques.
+OPTIONAL_ROWS: tuple[str, ...] = ("brake",)
+_ROWS = {name: getattr(lib, f"PYRT_ARM_{name.upper()}") for name in ARM_ROWS + OPTIONAL_ROWS}
 if sorted(_ROWS.values()) != list(range(NROWS)):  # pragma: no cover - header out of step
     raise ImportError("csrc/armworld.h's parameter rows differ from pyrt.native's")
 
@@ -81,13 +83,14 @@ class ArmKernel:
         n = chain.n
         self.n = n
         missing = sorted(set(ARM_ROWS) - set(params))
-        extra = sorted(set(params) - set(ARM_ROWS))
+        extra = sorted(set(params) - set(ARM_ROWS) - set(OPTIONAL_ROWS))
         if missing or extra:
             raise NativeInputError(f"params: missing {missing}, unknown {extra}; "
                                    f"expected {' '.join(ARM_ROWS)}")
-        self.params = np.empty((NROWS, n), F64)
+        self.params = np.zeros((NROWS, n), F64)
         for name, row in _ROWS.items():
-            self.params[row] = as_f64(name, params[name], (n,))
+            if name in params:
+                self.params[row] = as_f64(name, params[name], (n,))
         size = ffi.new("int32_t *")
         raise_for_status(lib.pyrt_arm_work_size(n, size), "arm work size")
         self._work = np.zeros(size[0], F64)
@@ -101,15 +104,19 @@ class ArmKernel:
         self.enable = np.zeros(n, np.int32)
         self.count = np.zeros(n, np.int32)
         self.ft = np.zeros(6, np.int32)
+        #: Each joint's brake: released (1) or engaged (0); used once :meth:`use_brakes`.
+        self.release = np.ones(n, np.int32)
         doubles = (self.params, self.q, self.qd, self.torque, self.current, self.contact,
                    self.wrench, self._work)
-        ints = (self.dac, self.enable, self.count, self.ft)
+        ints = (self.dac, self.enable, self.count, self.ft, self.release)
         self._keep = [ffi.from_buffer(a) for a in (*doubles, *ints)]
         c = ffi.new("pyrt_arm *")
         c.n = n
         (c.params, c.q, c.qd, c.torque, c.current, c.contact, c.wrench, c.work) = (
             ffi.cast("double *", b) for b in self._keep[:8])
-        (c.dac, c.enable, c.count, c.ft) = (ffi.cast("int32_t *", b) for b in self._keep[8:])
+        (c.dac, c.enable, c.count, c.ft, self._release_p) = (
+            ffi.cast("int32_t *", b) for b in self._keep[8:])
+        c.release = ffi.NULL
         self._c = c
         self._dac_p = c.dac
         self._on_p = c.enable
@@ -194,6 +201,21 @@ class ArmKernel:
         c.payload = self._number("payload", mass)
         self._bind_chain(chain)
         self._checked("payload", undo)
+
+    def use_brakes(self, release: np.ndarray | None = None) -> None:
+        """Let the brakes act (their holding torques are the ``brake`` row):
+        engaged where ``release`` (``n`` int32, this kernel's :attr:`release`
+        by default, or another of its own arrays such as :attr:`enable`) is 0."""
+        if release is None:
+            self._c.release = self._release_p
+            return
+        if release is self.enable:
+            self._c.release = self._c.enable
+            return
+        if release is self.release:
+            self._c.release = self._release_p
+            return
+        raise NativeInputError("release: one of the kernel's own arrays (release, enable)")
 
     def set_drive(self, dac: Sequence[int], enable: Sequence[int]) -> None:
         """The board's DAC counts and enables (``n`` integers each), held over the next steps."""

@@ -1,22 +1,21 @@
 """The simulated arm: any :class:`~pyrt.kinematics.Chain` with inertials,
-behind one passive servo board (004's hardware (b)).
+behind one board of either of 004's two kinds of hardware.
 
-The control code sees only the board's registers (:func:`arm_registers`,
-per joint ``j`` of ``n``, and the wrist sensor):
+The control code sees only the board's registers:
 
-============  ======  ====================  ================================================
-register      dir     width                 meaning
-============  ======  ====================  ================================================
-``dac[j]``    output  16-bit signed, off 0  motor current command: +-32767 counts is
-                                            +-``Motor.max_current`` A (``DAC_FULL_SCALE``)
-``enable[j]`` output  1 bit, off 0          the amplifier's enable (0: no current)
-``count[j]``  input   32-bit signed         the incremental encoder's counter, wrapping;
-                                            ``Motor.counts_per_joint_rev`` per joint turn,
-                                            0 at joint value 0
-``ft[k]``     input   32-bit signed         wrist force/torque, k = fx fy fz tx ty tz in
-                                            the sensor frame (the tool frame): counts of
-                                            :class:`FTCalibration`
-============  ======  ====================  ================================================
+* (b) the passive servo board (:func:`pyrt.boards.armservo.arm_servo_kind`,
+  the default): per joint a DAC (``+-32767`` counts is ``+-Motor.max_current``
+  A), an amplifier enable, a brake release and an encoder counter
+  (``Motor.counts_per_joint_rev`` per joint turn, 0 at joint value 0), and
+  the wrist sensor's six channels (counts of :class:`FTCalibration`); the
+  controller's servo writes the DACs at the servo rate;
+* (a) the motion-control board (:func:`pyrt.boards.armdrive.arm_drive_kind`,
+  ``drive=`` a :class:`DriveTuning`): setpoints at the trajectory rate, the
+  board's own servo (csrc/drive.c) interpolating and closing the loop at
+  :attr:`DriveTuning.period` on the same encoders and amplifiers, inside the
+  world's step (:meth:`ArmWorld.step` runs it between the controller's ticks);
+  the board engages each joint's brake while its amplifier is off, so the arm
+  stays where it was after a fault.
 
 Physics, per internal step ``h`` (:attr:`ArmWorld.max_step`, default 1 ms;
 :meth:`ArmWorld.step` covers any ``dt`` in equal steps of at most that)::
@@ -73,10 +72,12 @@ from dataclasses import replace as _replace
 import numpy as np
 from numpy.typing import ArrayLike
 
-from pyrt.boards.registers import OUTPUT, BoardKind, Register, RegisterBoard
+from pyrt.boards.armdrive import arm_drive_kind
+from pyrt.boards.armservo import DAC_FULL_SCALE, FT_CHANNELS, arm_servo_kind
+from pyrt.boards.registers import RegisterBoard
 from pyrt.errors import ConfigError, NativeError
 from pyrt.kinematics import GRAVITY, Chain, Inertial
-from pyrt.native import ArmKernel, ChainKernels
+from pyrt.native import ArmKernel, ChainKernels, DriveKernel, tuned_gains
 
 __all__ = [
     "DAC_FULL_SCALE",
@@ -85,38 +86,48 @@ __all__ = [
     "ArmPlant",
     "ArmTruth",
     "ArmWorld",
+    "DriveTuning",
     "FTCalibration",
     "Motor",
-    "arm_board_kind",
-    "arm_registers",
     "default_motors",
+    "inertia_bound",
 ]
 
-#: DAC counts of full-scale current (the 16-bit DAC's largest value).
-DAC_FULL_SCALE = 32767
-#: The wrist sensor's channels, in register order.
-FT_CHANNELS = ("fx", "fy", "fz", "tx", "ty", "tz")
+@dataclass(frozen=True)
+class DriveTuning:
+    """A hardware (a) board's servo as it was commissioned: its tick
+    ``period`` (s) and each joint's closed loop at a triple real pole at
+    ``bandwidth_hz`` (:func:`pyrt.native.tuned_gains` on the joint's largest
+    inertia, the rotor's included; the rotor's inertia and the URDF's damping
+    as acceleration and velocity feed-forward)."""
+
+    period: float = 1e-3
+    bandwidth_hz: float = 12.0
+    #: Each joint has a brake (holding the motor's torque limit) that the board engages
+    #: while the joint's amplifier is off (a fault, enable 0, a lost link) and releases
+    #: while it is on, as a servo drive's brake output does.
+    brakes: bool = True
+
+    def __post_init__(self) -> None:
+        for name in ("period", "bandwidth_hz"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ConfigError(f"drive {name}: expected a number > 0, got {v!r}")
+        if self.bandwidth_hz * self.period > 0.05:
+            raise ConfigError(f"drive bandwidth {self.bandwidth_hz} Hz: at most a twentieth "
+                              f"of the board's rate ({0.05 / self.period:g} Hz)")
 
 
-def arm_registers(n: int) -> tuple[Register, ...]:
-    """The registers of an ``n``-joint arm's passive servo board (see the module text)."""
-    return (
-        Register("dac", count=n, width=16, signed=True, direction=OUTPUT, off=0,
-                 units="DAC counts",
-                 doc="motor current command, per joint: +-32767 = +-max_current A"),
-        Register("enable", count=n, width=1, direction=OUTPUT, off=0,
-                 doc="amplifier enable, per joint"),
-        Register("count", count=n, width=32, signed=True, units="counts",
-                 doc="incremental encoder counter, per joint (wraps)"),
-        Register("ft", count=6, width=32, signed=True, units="counts",
-                 doc="wrist force/torque fx fy fz tx ty tz, sensor frame"),
-    )
-
-
-def arm_board_kind(n: int, name: str = "arm-servo") -> BoardKind:
-    """A board kind of :func:`arm_registers` (``n`` joints)."""
-    return BoardKind(name, arm_registers(n),
-                     doc=f"{n}-joint passive servo board: DACs, enables, encoders, wrist F/T")
+def inertia_bound(chain: Chain, armature: np.ndarray) -> np.ndarray:
+    """Each joint's largest inertia over a spread of joint values (kg m^2 or kg),
+    ``armature`` (the rotors') included: what a servo's gains are sized for."""
+    lo = np.where(np.isfinite(chain.lower), chain.lower, -math.pi)
+    hi = np.where(np.isfinite(chain.upper), chain.upper, math.pi)
+    rng = np.random.default_rng(0)
+    best = np.zeros(chain.n)
+    for u in rng.random((64, chain.n)):
+        best = np.maximum(best, np.diag(chain.mass_matrix(lo + u * (hi - lo))))
+    return np.maximum(best + armature, 1e-4)
 
 
 @dataclass(frozen=True)
@@ -261,8 +272,9 @@ def _vec(name: str, value: ArrayLike | None, n: int, default: float | np.ndarray
 
 class ArmWorld:
     """The simulated arm (see the module text) behind ``board`` (a
-    :class:`~pyrt.boards.RegisterBoard` of :func:`arm_board_kind`; a new one
-    if not given).
+    :class:`~pyrt.boards.RegisterBoard` of :func:`~pyrt.boards.armservo.arm_servo_kind`,
+    or of :func:`~pyrt.boards.armdrive.arm_drive_kind` with ``drive``; a new
+    one if not given).
 
     ``chain`` the arm (its inertials, limits, ``effort``, ``damping`` and
     ``friction`` are used; ``damping`` and ``friction`` given here override
@@ -270,7 +282,13 @@ class ArmWorld:
     :class:`Motor` per joint (default :func:`default_motors`); ``q0`` where
     it starts (default zero, at rest); ``table_z`` the table's height in m
     (None: no table); ``payload`` kg at the tool tip; ``seed`` the F/T
-    noise's (an integer 0 .. 2**64 - 1).  ConfigError for anything refused.
+    noise's (an integer 0 .. 2**64 - 1); ``drive`` the hardware (a) board's
+    tuning (None: the passive board, hardware (b)); ``brake`` each joint's
+    brake's rated holding torque (N m or N; None: none, or the motor's torque
+    limit when ``drive`` has brakes; csrc/armworld.h models it as a stiff
+    viscous lock): engaged where the passive board's ``release`` register is
+    0, or with a drive while the joint's amplifier is off.  ConfigError for
+    anything refused.
     """
 
     def __init__(self, chain: Chain, *, motors: Sequence[Motor] | None = None,
@@ -282,14 +300,16 @@ class ArmWorld:
                  table_z: float | None = None, table_stiffness: float = 5e4,
                  table_damping: float = 500.0, table_friction: float = 0.3,
                  payload: float = 0.0, ft: FTCalibration | None = None,
-                 ft_noise: tuple[float, float] = (0.05, 0.002), seed: int = 0):
+                 ft_noise: tuple[float, float] = (0.05, 0.002), seed: int = 0,
+                 drive: DriveTuning | None = None, brake: ArrayLike | None = None):
         n = chain.n
         self.n = n
         self.chain = chain
         self.motors = tuple(motors) if motors is not None else default_motors(chain)
         if len(self.motors) != n or not all(isinstance(m, Motor) for m in self.motors):
             raise ConfigError(f"motors: expected {n} Motor, got {len(self.motors)}")
-        self.kind = arm_board_kind(n)
+        self.drive = drive
+        self.kind = arm_drive_kind(n) if drive is not None else arm_servo_kind(n)
         if board is None:
             board = RegisterBoard(self.kind)
         for reg in self.kind.registers:
@@ -352,6 +372,13 @@ class ArmWorld:
             "effort": effort,
             "counts": [m.counts_per_joint_rev / (2.0 * math.pi) for m in self.motors],
         }
+        if brake is None and drive is not None and drive.brakes:
+            brake = [m.torque_limit for m in self.motors]
+        #: Each joint's brake's holding torque (zeros: no brakes).
+        self.brake = _vec("brake", brake, n, 0.0)
+        if (self.brake < 0).any():
+            raise ConfigError("brake: holding torques must be >= 0")
+        params["brake"] = self.brake
         try:
             self._k = ArmKernel(
                 _kernels(chain), params, max_step=self.max_step,
@@ -363,6 +390,25 @@ class ArmWorld:
         except NativeError as exc:
             raise ConfigError(f"simulated arm {chain.name!r}: {exc}") from None
         k = self._k
+        # the brakes: the drive's amplifier enables release them (hardware (a)), or the
+        # passive board's release register (hardware (b)); none fitted: zero torques
+        k.use_brakes(k.enable if drive is not None else None)
+        self._release_in: list[int] = []
+        self._drive: DriveKernel | None = None
+        if drive is not None:
+            gains: dict[str, ArrayLike] = dict(tuned_gains(
+                inertia_bound(chain, self._armature), effort, drive.period, drive.bandwidth_hz))
+            gains["ka"] = self._armature
+            gains["kv"] = self.damping
+            try:
+                self._drive = DriveKernel(
+                    n, drive.period, counts=params["counts"],
+                    nm_per_count=params["nm_per_count"], gains=gains, arm=k)
+            except NativeError as exc:
+                raise ConfigError(f"simulated arm {chain.name!r}: its drive: {exc}") from None
+        self._regs: dict[str, list[int]] = {}
+        self._status_last: int | None = None
+        self._ferr_last: Sequence[int | None] = [None] * n
         # the kernel's own arrays: the state and the truth
         self._q, self._qd = k.q, k.qd
         self._torque, self._current = k.torque, k.current
@@ -431,6 +477,9 @@ class ArmWorld:
             return
         values = self._values
         k = self._k
+        if self._drive is not None:
+            self._step_driven(dt)
+            return
         dac = values("dac")
         if dac != self._dac_in:  # the amplifiers' new currents
             k.set_dac(dac)
@@ -439,9 +488,44 @@ class ArmWorld:
         if on != self._on_in:
             k.set_enable(on)
             self._on_in = on
+        release = values("release")
+        if release != self._release_in:
+            k.release[:] = release
+            self._release_in = release
         k.step(dt)
         self.time += dt
         self._set_inputs()
+
+    def _step_driven(self, dt: float) -> None:
+        """Hardware (a): the board's output registers into its servo, the arm
+        advanced with the servo ticking at the board's rate (one C call), then
+        the inputs: encoders, wrist, status, following errors."""
+        d = self._drive
+        assert d is not None
+        values, regs = self._values, self._regs
+        for name in ("setpoint", "velocity", "torque", "felim"):
+            v = values(name)
+            if v != regs.get(name):
+                getattr(d, name)[:] = v
+                regs[name] = v
+        scalars = values("enable") + values("sync") + values("period_us")
+        if scalars != regs.get("scalars"):
+            d.set_registers(enable=scalars[0], sync=scalars[1], period_us=scalars[2])
+            regs["scalars"] = scalars
+        d.run(dt)
+        self.time += dt
+        self._set_inputs()
+        status = d.status
+        if status != self._status_last:
+            self._set_input("status", status)
+            self._status_last = status
+        ferr: list[int] = d.ferr.tolist()
+        last = self._ferr_last
+        if ferr != last:
+            for j, e in enumerate(ferr):
+                if e != last[j]:
+                    self._set_input("ferr", e, j)
+            self._ferr_last = ferr
 
     def _publish(self) -> None:
         """Compute the inputs at the present state (one draw of the sensor's
@@ -493,7 +577,8 @@ class ArmWorld:
 
     def info(self) -> dict[str, object]:
         """The truth in words (board-sim's INFO, the operator's ``sim show``):
-        joints in degrees, the tip in mm, the contact force in N."""
+        joints in degrees, the tip in mm, the contact force in N (and a
+        hardware (a) board's status word)."""
         t = self.truth()
         out: dict[str, object] = {f"q{j + 1}": f"{math.degrees(v):.4f}"
                                   for j, v in enumerate(t.q)}
@@ -502,6 +587,8 @@ class ArmWorld:
         out["fz"] = f"{t.contact[2]:.3f}"
         out["table"] = "none" if self.table_z is None else f"{self.table_z * 1e3:.1f}"
         out["payload"] = f"{self.payload:g}"
+        if self._drive is not None:  # hardware (a): the board's status word
+            out["drive"] = f"0x{self._drive.status:04x}"
         return out
 
 

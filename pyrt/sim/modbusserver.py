@@ -32,7 +32,10 @@ whose header is not Modbus TCP (protocol id not 0, a length beyond 254)
 closes the connection: the stream cannot be followed past it.
 
 Owner and watchdog.  The connection that writes first owns the outputs
-(Modbus has no session: a connection is one); every request of the
+(Modbus has no session: a connection is one); a map that names the owner
+(``owner = "ADDRESS"``, :mod:`pyrt.boards.modbusmap`) lets only a
+connection from there own them, and any other connection's write gets
+exception 06 and changes nothing even while nobody owns them; every request of the
 owner's connection -- its writes, and its reads, the keep-alive of its
 session -- feeds the watchdog, a reader's never does.  When the owner has
 made none for ``watchdog_s``, or its connection closes, every output
@@ -214,6 +217,13 @@ class ModbusBoardServer(LinkServer):
             except ValueError:
                 raise _Exception(ILLEGAL_VALUE) from None
             writes.append((p, value))
+        if not self.map.may_own(conn.addr.rsplit(":", 1)[0]):
+            if not conn.told:
+                conn.told = True
+                self._say(f"refused {conn.addr}: the map names "
+                          f"{' or '.join(self.map.owner)} as the outputs' owner")
+            self.refused += 1
+            raise _Exception(SERVER_BUSY)
         if self.claim(conn) is not None:
             raise _Exception(SERVER_BUSY)
         self.feed(conn)

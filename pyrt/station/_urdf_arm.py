@@ -29,8 +29,8 @@ The arm carries its own weight: after :data:`POWER_ON_TICKS` encoder
 readings the servo takes it (the amplifiers enabled; an arm still moving is
 braked to rest first, one beyond a limit brought back inside), moves it,
 and holds it at the target.  A fault or ``close`` switches every amplifier
-off (the simulated arm has no brakes: it then sinks onto its end stops);
-the next move closes the loop again where the arm lies.  ``stop`` brakes
+off and engages every brake (the board's ``release`` 0: the arm stays where
+it was); the next move closes the loop again where the arm lies.  ``stop`` brakes
 along the path and holds.
 
 Units at the console: degrees (revolute joints) or millimetres (prismatic
@@ -141,7 +141,7 @@ class ArmJoint(Component):
         ]
 
     def reflex(self) -> None:
-        """DAC 0 and the amplifier disabled, now."""
+        """DAC 0, the amplifier disabled and the brake engaged, now."""
         board = self.arm.board
         try:
             board.write("dac", 0, self.index)
@@ -150,6 +150,7 @@ class ArmJoint(Component):
                 board.write("enable", 0, self.index)
             finally:
                 self.arm.dac[self.index] = 0
+                board.write("release", 0, self.index)
 
 
 class UrdfArm(ArmMoves, Component):
@@ -422,6 +423,7 @@ class UrdfArm(ArmMoves, Component):
             self.dac[j] = 0
             self.board.write("dac", 0, j)
             self.board.write("enable", 1, j)
+            self.board.write("release", 1, j)
         self.powered = True
         self.state = "idle"
 
@@ -542,13 +544,18 @@ class UrdfArm(ArmMoves, Component):
             k[4] = knot.qd
             k[5] = knot.qdd
             k[7] = ff
-            self.servo.load(knot.period, quintic=True)
+            self.follow(knot.period)
             if self.state != "moving":
                 self.state = "moving"
         elif self.state == "moving" and ev.idle:
             self.state = "settling"
             self._settle_from = now_ns
             self._quiet_since = None
+
+    def follow(self, period: float) -> None:
+        """Hand the servo the segment to the knot just made (the servo's knots B;
+        a hardware (a) arm writes it to its board instead)."""
+        self.servo.load(period, quintic=True)
 
     # -- commands (the moves: ArmMoves) ----------------------------------------------
 

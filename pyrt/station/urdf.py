@@ -19,7 +19,10 @@ The component tree::
     sim          the simulated arm's truth and its table (sim show, sim table)
 
 One ready queue: ``trajectory`` (100 Hz) and ``servo`` (every tick, 1 kHz);
-see :mod:`pyrt.station._urdf_arm` for the control.  A following error
+see :mod:`pyrt.station._urdf_arm` for the control.  With ``--hardware a`` the
+board is a motion-control board instead (:func:`pyrt.boards.armdrive.arm_drive_kind`,
+board name ``drive``) that interpolates and servos on its own: the host has
+only ``trajectory`` (:mod:`pyrt.station._urdf_drive`).  A following error
 beyond 2 degrees or a joint beyond its limits trips the station: every
 joint's DAC and enable are written 0 in that tick.
 """
@@ -32,11 +35,13 @@ import math
 import re
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from pyrt.boards import Boards, open_boards
+from pyrt.boards.armdrive import arm_drive_kind
 from pyrt.boards.armservo import arm_servo_kind
 from pyrt.boards.registers import BoardKind
 from pyrt.component import Component
@@ -45,14 +50,28 @@ from pyrt.kinematics import Chain
 from pyrt.kinematics.puma import URDF as PUMA_URDF
 from pyrt.kinematics.puma import PaulInverse
 from pyrt.scheduler import Loop, ReadyQueue, install
-from pyrt.sim.arm import PUMA560_MOTORS, ArmWorld, FTCalibration, Motor, default_motors
+from pyrt.sim.arm import (
+    PUMA560_MOTORS,
+    ArmWorld,
+    DriveTuning,
+    FTCalibration,
+    Motor,
+    default_motors,
+)
 from pyrt.sim.world import World
 from pyrt.station._urdf_arm import Drive, UrdfArm
+from pyrt.station._urdf_drive import DrivenArm
 from pyrt.station._urdf_sim import UrdfPhysics, UrdfSim
 from pyrt.station.base import BoardWorld, Station
 from pyrt.station.factory import StationFactory
 
-__all__ = ["PUMA_START_DEG", "URDF", "UrdfFactory", "UrdfStation", "build_urdf", "load_arm"]
+__all__ = ["HARDWARE", "PUMA_START_DEG", "URDF", "UrdfFactory", "UrdfStation", "arm_boards",
+           "build_urdf", "load_arm"]
+
+#: 004's two kinds of hardware, as ``--hardware`` names them: (a) a motion-control
+#: board that takes setpoints at the trajectory rate and servos on the board, (b) a
+#: passive servo board written at the servo rate.
+HARDWARE = ("a", "b")
 
 #: Where the simulated PUMA starts (deg): Corke's nominal pose, the wrist noflip.
 PUMA_START_DEG = (0.0, 45.0, -180.0, 0.0, -45.0, 0.0)
@@ -111,12 +130,30 @@ def _drives(motors: Sequence[Motor]) -> tuple[Drive, ...]:
                        m.reflected_inertia) for m in motors)
 
 
+def arm_boards(chain: Chain, hardware: str = "b") -> dict[str, BoardKind]:
+    """The arm's board: ``servo`` (hardware (b), :func:`~pyrt.boards.armservo.arm_servo_kind`)
+    or ``drive`` (hardware (a), :func:`~pyrt.boards.armdrive.arm_drive_kind`)."""
+    if hardware not in HARDWARE:
+        raise ConfigError(f"hardware: expected a or b, got {hardware!r}")
+    if hardware == "a":
+        return {"drive": arm_drive_kind(chain.n)}
+    return {"servo": arm_servo_kind(chain.n)}
+
+
+def _arm_board(boards: Boards) -> Any:
+    return boards["drive"] if "drive" in boards else boards["servo"]
+
+
 def arm_world(boards: Boards, chain: Chain, motors: Sequence[Motor],
               start: ArrayLike | None = None) -> World:
-    """The simulated arm behind ``boards`` (in process), starting at rest at
-    ``start`` (rad, m; default :func:`default_start`)."""
+    """The simulated arm behind ``boards`` (in process; the board of either
+    hardware, :func:`arm_boards`), starting at rest at ``start`` (rad, m;
+    default :func:`default_start`)."""
     q0 = default_start(chain) if start is None else np.asarray(start, dtype=float)
-    arm = ArmWorld(chain, motors=motors, board=boards["servo"], q0=q0)
+    driven = "drive" in boards
+    arm = ArmWorld(chain, motors=motors, board=_arm_board(boards), q0=q0,
+                   drive=DriveTuning() if driven else None,
+                   brake=[m.torque_limit for m in motors])  # a brake per joint
     return World("urdf", boards, UrdfPhysics(arm))
 
 
@@ -131,7 +168,7 @@ class UrdfStation(Station):
         self.urdf_text = urdf_text
         self.attach_boards(boards)
         self.world = world
-        self.board = boards["servo"]
+        self.board = _arm_board(boards)
         extras: list[Component] = []
         if world is not None:
             physics = world.plant
@@ -142,8 +179,10 @@ class UrdfStation(Station):
         elif boards.has_info:
             extras.append(BoardWorld(boards))
         ft = FTCalibration()  # the wrist sensor's data sheet: counts per N and per N m
-        self.arm = arm = UrdfArm(self, self.name, chain, self.board, _drives(motors),
-                                 loop.period_ns, wrench=ft.wrench)
+        # hardware (a): the board servos, the host writes setpoints (pyrt.station._urdf_drive)
+        arm_class = DrivenArm if self.board.kind.name == "arm-drive" else UrdfArm
+        self.arm = arm = arm_class(self, self.name, chain, self.board, _drives(motors),
+                                   loop.period_ns, wrench=ft.wrench)
         taken = {c.lower() for c in ("sim", *(j.name for j in arm.joints))}
         if self.name.lower() in taken:
             raise ConfigError(f"robot {self.name!r}: a joint of the URDF has the robot's name "
@@ -190,13 +229,20 @@ class UrdfStation(Station):
 
 
 def build_urdf(loop: Loop, urdf: str | Path | None = None, *, boards: str | None = None,
-               start: ArrayLike | None = None) -> UrdfStation:
+               start: ArrayLike | None = None, hardware: str = "b") -> UrdfStation:
     """The arm of ``urdf`` (None: the packaged PUMA 560) on ``loop``, not yet
     started.  ``boards`` the board URL (default ``sim:``); ``start`` the
-    simulated arm's joints (rad, m; in-process boards only).  ConfigError for
-    a bad file or setting; BoardError if the boards cannot be reached."""
+    simulated arm's joints (rad, m; in-process boards only); ``hardware``
+    ``b`` (a passive servo board, the host's servo at every tick of at most
+    1 ms) or ``a`` (a motion-control board: the host writes setpoints at
+    100 Hz, on a tick that divides 10 ms).  ConfigError for a bad file or
+    setting; BoardError if the boards cannot be reached."""
     chain, motors, text = load_arm(urdf)
-    b = open_boards(boards, "urdf", {"servo": arm_servo_kind(chain.n)})
+    kinds = arm_boards(chain, hardware)
+    if hardware == "b" and loop.period_ns > 1_000_000:
+        raise ConfigError(f"a tick of {loop.period_ns / 1e3:g} µs: hardware b runs its servo "
+                          "every tick and is tuned for 1 kHz (at most 1000 µs)")
+    b = open_boards(boards, "urdf", kinds)
     try:
         world = None
         if b.in_process:
@@ -229,17 +275,30 @@ the signals sim.x sim.y sim.z.
 
 With --boards tcp://HOST:PORT the controller drives the board of a
 'pyrt board-sim urdf [FILE.urdf]' in another process, at real time.
+
+--hardware a puts the arm behind a motion-control board instead (004's
+hardware (a)): the host writes joint setpoints at 100 Hz and the board
+interpolates and servos at 1 kHz; the host's tick may then be 10 ms
+(--tick-us 10000).  board-sim takes --hardware too.
 """
 
     name = "urdf"
     summary = "run any serial arm from its URDF (default: the PUMA 560)"
     description = __doc__ or ""
     default_tick_us = 1000
-    max_tick_us = 1000
-    max_tick_why = "the servo task runs every tick and is tuned for 1 kHz"
+    max_tick_us = 10000
+    max_tick_why = "hardware (a) takes setpoints at 100 Hz; hardware (b) at most 1000 µs"
 
     def __init__(self) -> None:
         self._named: str | None = None
+        self._hardware = "b"
+
+    def _hardware_of(self, text: str) -> str:
+        """argparse's type of --hardware: a or b, remembered for :meth:`board_kinds`."""
+        if text not in HARDWARE:
+            raise argparse.ArgumentTypeError(f"expected a or b, got {text!r}")
+        self._hardware = text
+        return text
 
     def _file(self, text: str) -> str:
         """argparse's type of FILE.urdf: read and checked now (a bad file is a usage
@@ -254,7 +313,7 @@ With --boards tcp://HOST:PORT the controller drives the board of a
     def board_kinds(self) -> dict[str, BoardKind]:
         """The board of the URDF named last on the command line (the PUMA's before)."""
         chain, _motors, _text = load_arm(self._named)
-        return {"servo": arm_servo_kind(chain.n)}
+        return arm_boards(chain, self._hardware)
 
     def add_world_arguments(self, parser: argparse.ArgumentParser) -> None:
         parser.add_argument("urdf", nargs="?", type=self._file, default=None,
@@ -264,6 +323,12 @@ With --boards tcp://HOST:PORT the controller drives the board of a
         g.add_argument("--start", type=_start, metavar="Q1,Q2,...", default=None,
                        help="the simulated arm's joints at start, degrees (mm for a prismatic "
                             "joint); default: the PUMA's nominal pose, or zero")
+        parser.add_argument(
+            "--hardware", type=self._hardware_of, default="b", metavar="a|b",
+            help="the arm's board (004's hardware): b a passive servo board written at the "
+                 "servo rate by the host's 1 kHz servo (default); a a motion-control board "
+                 "that takes setpoints at 100 Hz and servos on the board (the host's tick "
+                 "may then be --tick-us 10000)")
 
     def add_arguments(self, parser: argparse.ArgumentParser) -> None:
         self.add_world_arguments(parser)
@@ -284,7 +349,8 @@ With --boards tcp://HOST:PORT the controller drives the board of a
         if start is not None:
             chain, _m, _t = load_arm(urdf)
             start = _start_of(chain, start)
-        return build_urdf(loop, urdf, boards=args.boards, start=start)
+        return build_urdf(loop, urdf, boards=args.boards, start=start,
+                          hardware=getattr(args, "hardware", "b"))
 
 
 def _start(text: str) -> tuple[float, ...]:
