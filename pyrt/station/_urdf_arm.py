@@ -50,12 +50,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from pyrt.boards.armservo import DAC_FULL_SCALE
-from pyrt.component import Command, Component, Limits, Signal, command, records_of
+from pyrt.component import Command, Component, Limits, Param, Signal, command, records_of
 from pyrt.kinematics import GRAVITY, Chain, rpy_of
 from pyrt.motion import Evaluator, MotionFault
 from pyrt.motion import Limits as MotionLimits
-from pyrt.native import Servo, tuned_gains
+from pyrt.native import Servo, gain_ranges, tuned_gains
 from pyrt.scheduler import Task
+from pyrt.station._urdf_gains import ArmTuning, arm_gain_params, joint_gain_params
 from pyrt.station._urdf_moves import ArmMoves
 
 if TYPE_CHECKING:
@@ -140,6 +141,11 @@ class ArmJoint(Component):
             Signal("dac", "DAC counts", lambda: a.dac[i], "amplifier command", "d"),
         ]
 
+    def params(self) -> list[Param]:
+        """The servo's gains of this joint (:mod:`pyrt.station._urdf_gains`)."""
+        return joint_gain_params(self.arm.servo, self.index, self.prismatic,
+                                 self.arm.gain_ranges)
+
     def reflex(self) -> None:
         """DAC 0 and the amplifier disabled, now."""
         board = self.arm.board
@@ -213,6 +219,10 @@ class UrdfArm(ArmMoves, Component):
         gains["ka"] = armature
         gains["kv"] = np.array([j.damping for j in joints])
         self.servo = Servo(n, self.period_s, names=chain.joint_names, gains=gains)
+        #: Each gain's safe range per joint: get/set take the gains within them.
+        self.gain_ranges = gain_ranges(inertia, effort, self.period_s)
+        self.servo.ranges = self.gain_ranges
+        self.tuning = ArmTuning(self.servo, inertia, effort, SERVO_BANDWIDTH_HZ)
         # the planner's limits: the URDF's velocities, accelerations from the efforts
         vmax = np.array([j.velocity if math.isfinite(j.velocity) and j.velocity > 0
                          else (0.25 if p else 1.0) for j, p in zip(joints, self.prismatic,
@@ -305,6 +315,12 @@ class UrdfArm(ArmMoves, Component):
 
     def children(self) -> list[Component]:
         return list(self.joints)
+
+    def params(self) -> list[Param]:
+        """The servo's bandwidth and dynamics feed-forward for every joint at once
+        (:mod:`pyrt.station._urdf_gains`)."""
+        w = float(self.gain_ranges["kd"][1][0]) / (3.0 * float(self.tuning.inertia[0]))
+        return arm_gain_params(self.name, self.tuning, w / (2.0 * math.pi))
 
     def tasks(self) -> list[Task]:
         return [Task(self.trajectory_tick, period=TRAJECTORY_PERIOD, name="trajectory",
