@@ -138,6 +138,12 @@ class Evaluator:
         return self._period
 
     @property
+    def sample(self) -> int:
+        """The sample number of the knot the next :meth:`tick` hands out (its
+        functional transforms are evaluated one sample ahead of it)."""
+        return self._n
+
+    @property
     def idle(self) -> bool:
         """True when nothing is queued or running and the arm is at rest."""
         with self._lock:

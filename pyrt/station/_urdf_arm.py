@@ -259,6 +259,11 @@ class UrdfArm(ArmMoves, Component):
         #: moveto and movel targets are given in (``NAME coord``); identity at start.
         self.tool_frame = np.eye(4)
         self.coord_frame = np.eye(4)
+        #: The conveyor COORD rides on (``NAME conveyor``), or None; a trajectory
+        #: tick's loop time and the sample it hands out (a sample's time for it).
+        self.conveyor = None
+        self._anchor = (0.0, 0)
+        self._latest = None
 
     # -- set-up ---------------------------------------------------------------------
 
@@ -420,6 +425,7 @@ class UrdfArm(ArmMoves, Component):
         start = np.clip(q + 0.5 * v * t, self.chain.lower, self.chain.upper)
         self.evaluator = Evaluator(self.chain, self.limits, start, period=self.traj_period_s,
                                    force_sensor=self._wrench_of is not None)
+        self._anchor = (self._now_ns * 1e-9 + self.traj_period_s, 0)
         margin = self._margin
         self._history.clear()
         self._bound(np.minimum(self.chain.lower, q) - margin,
@@ -531,13 +537,14 @@ class UrdfArm(ArmMoves, Component):
                 self._bound(lo, hi)
                 self._wide = False
         wrench = self.wrench() if self._wrench_of is not None else None
+        self._anchor = (now_ns * 1e-9 + self.traj_period_s, ev.sample)
         try:
             knot = ev.tick(wrench)
         except MotionFault as exc:
             self.fail(f"trajectory: {exc}", self.name)
             return
         for word, _move in knot.events:
-            if word == "reached":
+            if word in ("reached", "aborted"):  # the end of the whole motion is reported
                 continue
             if word == "force" and wrench is not None:
                 self.last_stop = (f"force limit: the wrist felt |F| "
@@ -559,7 +566,13 @@ class UrdfArm(ArmMoves, Component):
             k[5] = knot.qdd
             k[7] = ff
             self.servo.load(knot.period, quintic=True)
-            if self.state != "moving":
+            if knot.move is not None and knot.move.done and knot.move is self._latest:
+                # the last record queued has reached its point on a moving frame
+                if self.state != "tracking":
+                    self.state = "tracking"
+                    self.last_stop = (f"tracking: the tool follows its point on the moving "
+                                      f"conveyor at {self.pose_text(self.tool())}")
+            elif self.state != "moving":
                 self.state = "moving"
         elif self.state == "moving" and ev.idle:
             self.state = "settling"
@@ -578,8 +591,18 @@ class UrdfArm(ArmMoves, Component):
     # -- the station's questions -------------------------------------------------------
 
     def busy(self) -> bool:
-        """A move runs, the arm settles, or the servo brings it to rest after power-on."""
-        return self.state != "idle" or self._recover_until is not None
+        """A move runs, the arm settles, or the servo brings it to rest after power-on
+        (the tool tracking a conveyor has reached its point: not busy)."""
+        return self.state not in ("idle", "tracking") or self._recover_until is not None
+
+    def _time_now(self) -> float:
+        """The loop's time (s), for the conveyor."""
+        return self._now_ns * 1e-9
+
+    def _sample_time(self, sample: int) -> float:
+        """The loop time (s) the servo reaches trajectory sample ``sample`` at."""
+        t0, n0 = self._anchor
+        return t0 + (sample - n0) * self.traj_period_s
 
     def stop(self) -> str:
         """Brake along the path to rest and hold there (the servo stays on)."""
@@ -588,4 +611,5 @@ class UrdfArm(ArmMoves, Component):
             return ""
         ev.stop()
         self.last_stop = "stopped (stop command)"
+        self.state = "moving"  # tracking a conveyor too: braking is a move
         return f"{self.name}: stopping: braking along the path to rest, then holding"
