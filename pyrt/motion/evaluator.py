@@ -21,6 +21,15 @@ limits (Paul's transition to rest from the last position and velocity); if
 that rest would be beyond a joint limit it raises :class:`MotionFault`
 instead, which the trajectory task turns into the robot's fault.
 
+**Comply** (a record's :class:`~pyrt.motion.Comply`): while its segment
+runs, each tick turns the wrist's force into the tool frame (the
+equation's TOOL), low-passes it, and moves an offset of the tool along the
+complied axes by the admittance (gain x force error, within the record's
+speed and travel); the samples are the planned pose with that offset, in
+the tool frame, so the other directions keep the path.  When the segment
+ends (or is stopped) the offset stays: the arm holds where the force put
+it, and the next record, queued only then, starts from there.
+
 **stop** brakes along the path: the trajectory's time is slowed to a halt
 by a smooth step whose length keeps every joint's acceleration within its
 limit, so a Cartesian segment's tool stays on its line.  In a moving frame
@@ -52,6 +61,9 @@ Vector = npt.NDArray[np.float64]
 
 #: A joint speed below which a motion counts as at rest (rad/s or m/s).
 REST_SPEED = 1e-6
+#: The comply loop's low-pass on the wrist's force: the share of a new reading
+#: taken each trajectory tick.
+COMPLY_FILTER = 0.7
 
 
 class MotionFault(RuntimeError):
@@ -131,6 +143,12 @@ class Evaluator:
         self._mass = 0.0
         self._braked = False
         self._watched: list[Any] = []
+        #: Comply: the running comply segment, the tool's offset from its path
+        #: (tool frame, m) and the filtered force it exerts (tool frame, N).
+        self._comply_seg: Segment | None = None
+        self._offset = np.zeros(3)
+        self._force = np.zeros(3)
+        self._path0: Vector | None = None
 
     # -- queueing (the caller's thread) ---------------------------------------------------
     @property
@@ -180,6 +198,12 @@ class Evaluator:
                 stopping = self._sigma is not None or self._stop is not None
             if stopping:
                 raise RecordError("the arm is stopping; queue again when it is at rest")
+            complying = next((s.move for s in self._segs
+                              if s.move.code is None and s.move.spec.comply is not None), None)
+            if complying is not None:
+                raise RecordError(f"comply: the complying record {complying.spec.name or ''} "
+                                  "runs; queue the next one when it has ended (it starts "
+                                  "where the force put the arm)")
             move = Move(spec, self._count)
             seg = self.planner.plan(spec, tail, move, force_sensor=self.force_sensor)
             with self._lock:
@@ -281,6 +305,8 @@ class Evaluator:
                 self.tracker.period = dt
         for tr in self._watched:
             self.tracker.evaluate(tr, n_next)
+        if wrench is not None and self._k < len(self._pieces):
+            self._comply(self._pieces[self._k], wrench, dt, n_next)
         sigma = 1.0
         if self._sigma is not None:
             sigma = self._brake_rate(dt)
@@ -361,6 +387,8 @@ class Evaluator:
             for tr in frames.live:
                 self.tracker.evaluate(tr, n)
             t6 = frames.t6(piece.pose(t), n)
+            if piece.seg is not None and piece.seg is self._comply_seg:
+                t6 = self._complied(t6, frames.parts(n)[2])
             q_opt = self.planner.solve(t6, seed, piece.config)
             if q_opt is None:
                 raise MotionFault(f"no inverse at t = {t:.3f} s: "
@@ -369,6 +397,52 @@ class Evaluator:
         assert piece.fn is not None
         q = np.asarray(piece.fn(t - piece.origin), dtype=float)
         return q, self.chain.fk(q)
+
+    @property
+    def comply_force(self) -> Vector:
+        """The force the tool exerts (N, tool frame; filtered) as the comply loop
+        last saw it (zeros before any comply record)."""
+        return self._force.copy()
+
+    def _complied(self, t6: Matrix, tool: Matrix) -> Matrix:
+        """``t6`` with the tool moved along the complied axes of its own frame: to
+        where the segment's first sample had it along them (the path's motion
+        there left out) and by the force loop's offset."""
+        world = t6 @ tool
+        if self._path0 is None:
+            self._path0 = world[:3, 3].copy()
+        r = world[:3, :3]
+        along = r.T @ (world[:3, 3] - self._path0)
+        seg = self._comply_seg
+        assert seg is not None and seg.move.spec.comply is not None
+        shift = np.zeros(3)
+        for i in seg.move.spec.comply.index():
+            shift[i] = self._offset[i] - along[i]
+        out = world.copy()
+        out[:3, 3] += r @ shift
+        return out @ np.linalg.inv(tool)
+
+    def _comply(self, piece: Piece, wrench: Any, dt: float, n: int) -> None:
+        """One tick of the comply loop (module doc), before the next sample."""
+        seg = piece.seg
+        spec = seg.move.spec if seg is not None else None
+        if seg is None or spec is None or spec.comply is None or piece.frames is None \
+                or self._sigma is not None or self._stop is not None:
+            return
+        c = spec.comply
+        tool = piece.frames.parts(n)[2]
+        felt = np.asarray(wrench, dtype=float)[:3]
+        exerted = -(tool[:3, :3].T @ felt)  # the wrist feels the opposite, in the TOOL frame
+        if seg is not self._comply_seg:
+            self._comply_seg = seg
+            self._path0 = None
+            self._offset = np.zeros(3)
+            self._force = exerted
+        self._force = self._force + COMPLY_FILTER * (exerted - self._force)
+        step = c.speed * dt
+        for i, f in zip(c.index(), c.forces, strict=True):
+            d = min(max(c.gain * (f - float(self._force[i])) * dt, -step), step)
+            self._offset[i] = min(max(self._offset[i] + d, -c.travel), c.travel)
 
     def _make_runtime(self, piece: Piece, t: float, n: int) -> None:
         """A transition that involves a moving frame: made now, from the last

@@ -543,7 +543,13 @@ class UrdfArm(ArmMoves, Component):
         except MotionFault as exc:
             self.fail(f"trajectory: {exc}", self.name)
             return
-        for word, _move in knot.events:
+        for word, move in knot.events:
+            c = move.spec.comply
+            if word == "reached" and c is not None:
+                f = ev.comply_force
+                said = ", ".join(f"{float(f['xyz'.index(a)]):.2f} N along {a} (set {v:g} N)"
+                                 for a, v in zip(c.axes, c.forces, strict=True))
+                self.last_stop = f"at target, complying: the tool presses {said}"
             if word in ("reached", "aborted"):  # the end of the whole motion is reported
                 continue
             if word == "force" and wrench is not None:

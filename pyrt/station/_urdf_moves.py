@@ -25,12 +25,12 @@ from pyrt.component import Arg, Command, Limits, command
 from pyrt.errors import CommandError
 from pyrt.frames import PositionEquation, Transform, inverse
 from pyrt.kinematics import Chain, transform
-from pyrt.motion import Evaluator, MotionSpec, Move, RecordError
+from pyrt.motion import Comply, Evaluator, MotionSpec, Move, RecordError
 
 if TYPE_CHECKING:
     from pyrt.station.base import Station
 
-__all__ = ["OPTIONS_HELP", "ArmMoves"]
+__all__ = ["COMPLY_HELP", "OPTIONS_HELP", "ArmMoves"]
 
 #: What OPTIONS of movej, moveto and movel may say.
 OPTIONS_HELP = ("OPTIONS: speed=F (a fraction 0 < F <= 1 of every velocity limit), blend=MM "
@@ -42,6 +42,13 @@ OPTIONS_HELP = ("OPTIONS: speed=F (a fraction 0 < F <= 1 of every velocity limit
                 "when the running one is at rest on its target, as blend=0) or aborting (it "
                 "replaces the running one and what is queued at once, braking into the new "
                 "path within the limits; the replaced moves end 'aborted')).")
+
+#: What movel's comply option says.
+COMPLY_HELP = ("movel's OPTIONS may say comply AXES N[,N..]: the tool frame's AXES (some of x "
+               "y z) held at N newtons each (the force the tool exerts along +axis, from the "
+               "wrist sensor; one N for every axis, or one per axis), the others on the line: "
+               "e.g. comply z 5 presses 5 N along the tool's z while it moves in x and y; "
+               "the next move is given once it has ended.")
 
 #: The fastest conveyor ``NAME conveyor`` takes, per axis (mm/s).
 CONVEYOR_MAX_MM_S = 500.0
@@ -167,7 +174,13 @@ class ArmMoves:
     def _options(self, what: str, text: str | None) -> dict[str, Any]:
         """The motion record's fields that OPTIONS set (see :data:`OPTIONS_HELP`)."""
         out: dict[str, Any] = {}
-        for word in (text or "").split():
+        words = (text or "").split()
+        while words:
+            word = words.pop(0)
+            if word.lower() == "comply":
+                out["comply"] = self._comply_words(what, words[:2])
+                del words[:2]
+                continue
             key, eq, value = word.partition("=")
             key = key.lower()
             try:
@@ -189,6 +202,29 @@ class ArmMoves:
                 raise CommandError(f"{self.name} {what}: {word[:40]!r} is not an option: "
                                    f"{OPTIONS_HELP} nothing moved")
         return out
+
+    def _comply_words(self, what: str, words: list[str]) -> Comply:
+        """``comply AXES N[,N..]`` of movel's OPTIONS (see :data:`COMPLY_HELP`)."""
+        who = f"{self.name} {what}: comply"
+        if what != "movel":
+            raise CommandError(f"{who}: only movel complies (its directions are the tool "
+                               "frame's on a straight line); nothing moved")
+        if self._wrench_of is None:
+            raise CommandError(f"{who}: refused: this arm has no wrist force sensor; "
+                               "nothing moved")
+        if len(words) != 2:
+            raise CommandError(f"{who}: {COMPLY_HELP} nothing moved")
+        axes, forces = words
+        try:
+            values = [float(v) for v in forces.split(",")]
+            if not all(math.isfinite(v) for v in values):
+                raise ValueError(forces)
+            force: float | list[float] = values[0] if len(values) == 1 else values
+            return Comply(axes, force)
+        except ValueError as exc:
+            why = str(exc).removeprefix("comply: ") if isinstance(exc, RecordError) else (
+                f"{forces[:40]!r} is not newtons")
+            raise CommandError(f"{who}: {why}; {COMPLY_HELP} nothing moved") from None
 
     def solve(self, target: np.ndarray, config: str | None) -> np.ndarray:
         """Joint values putting the tool at ``target`` (4, 4): the closed form in
@@ -300,7 +336,12 @@ class ArmMoves:
         axis on the way (Paul's drive transform); Cartesian and joint limits
         both kept.  A line that leaves the reach, crosses a joint limit or
         passes a singularity is refused before it starts, naming where;
-        nothing moves.  Queued moves blend.  OPTIONS as movej's.  While
+        nothing moves.  Queued moves blend.  OPTIONS as movej's, and
+        comply AXES N[,N..]: the tool frame's AXES (some of x y z) held at N
+        newtons (the force the tool exerts along +axis; the wrist sensor
+        measures it), the other directions on the line (comply z 5 presses
+        5 N along the tool's z while moving in x and y); the next move is
+        given when it has ended.  While
         the conveyor runs (NAME conveyor), the target is a point on it: the
         tool reaches it and then follows it ('tracking')."""
         opts = self._options("movel", options)
