@@ -55,9 +55,9 @@ field               what pyrt does with it
 ``buffer``          PLCopen's buffer mode: ``aborting``, ``buffered``,
                     ``blending``.
 ``speed``           a fraction 0 < speed <= 1 of every velocity limit.
-``tolerance``       the largest distance (m) a blend may cut the corner
-                    (the tool from the via point); None: no bound but the
-                    limits'.  A corner that cannot meet it within the
+``tolerance``       the largest distance (m) a blend may take the tool
+                    from the unblended path (the two lines); None: no
+                    bound but the limits'.  A corner that cannot meet it within the
                     limits stops exactly there instead.
 ``target``          joint mode only: a joint vector to move to instead of
                     an equation.

@@ -32,10 +32,17 @@ if TYPE_CHECKING:
 
 __all__ = ["COMPLY_HELP", "OPTIONS_HELP", "ArmMoves"]
 
+#: What a blend's tolerance keeps back for the servo's tracking of the planned path
+#: at the tool (mm; measured on the PUMA: at most 0.35 mm in a blend at full speed).
+BLEND_SERVO_MM = 0.5
+
 #: What OPTIONS of movej, moveto and movel may say.
 OPTIONS_HELP = ("OPTIONS: speed=F (a fraction 0 < F <= 1 of every velocity limit), blend=MM "
-                "(the most a blend into the next move may cut the corner, mm; 0: stop exactly "
-                "at the target), force=N (a guarded move: braked to rest when the wrist feels "
+                "(the most the blend from the running move into this one may take the tool "
+                "from the two moves' unblended path, mm, in truth: the servo's tracking is "
+                f"allowed for, so {BLEND_SERVO_MM:g} mm or less is an exact stop; 0: the "
+                "running move first stops exactly at its target), force=N (a guarded move: "
+                "braked to rest when the wrist feels "
                 "more than N newtons along any of its axes), buffer=MODE (PLCopen's buffer "
                 "mode, what this move does to the one running: blending (the default: it "
                 "starts from a blend at the end of the running one), buffered (it starts "
@@ -192,10 +199,10 @@ class ArmMoves:
             elif key == "force" and 0.0 < v <= 1e5 and self._wrench_of is not None:
                 out["force_limits"] = (v, v, v, math.inf, math.inf, math.inf)
             elif key == "blend" and 0.0 <= v <= 1e4:
-                if v == 0.0:
+                if v <= BLEND_SERVO_MM:  # no room left beside the servo's tracking
                     out["buffer"] = "buffered"
                 else:
-                    out["tolerance"] = v * 1e-3
+                    out["tolerance"] = (v - BLEND_SERVO_MM) * 1e-3
             elif key == "buffer" and value.lower() in _BUFFER_MODES:
                 out["buffer"] = value.lower()
             else:
