@@ -202,7 +202,7 @@ class UrdfArm(ArmMoves, Component):
         self._counts_per_nm = [1.0 / d.nm_per_count for d in self.drives]
         #: The measured joints (rad, m), from the encoders (unwrapped).
         self.q = np.zeros(n)
-        self._measure(self._counts)
+        self.q[:] = self._qs
         #: The DAC values last written.
         self.dac = [0] * n
         effort = np.array([j.effort if math.isfinite(j.effort) and j.effort > 0
@@ -219,6 +219,9 @@ class UrdfArm(ArmMoves, Component):
         gains["ka"] = armature
         gains["kv"] = np.array([j.damping for j in joints])
         self.servo = Servo(n, self.period_s, names=chain.joint_names, gains=gains)
+        # the measured joints are the servo's input array itself (no copy per tick)
+        self.servo.q[:] = self.q
+        self.q = self.servo.q
         #: Each gain's safe range per joint: get/set take the gains within them.
         self.gain_ranges = gain_ranges(inertia, effort, self.period_s)
         self.servo.ranges = self.gain_ranges
@@ -356,6 +359,8 @@ class UrdfArm(ArmMoves, Component):
         """The joints from this tick's ``counts``: each counter's step since the last
         read taken modulo 2^32 (a 32-bit counter wraps), the middle of the count."""
         last, total, qs, cpu = self._counts, self._total, self._qs, self._cpu_list
+        if counts == last:  # at rest: nothing to do
+            return
         for j, c in enumerate(counts):
             d = c - last[j]
             if d:
@@ -461,8 +466,7 @@ class UrdfArm(ArmMoves, Component):
                 self._started = True
                 self.power_on()
             return
-        servo = self.servo
-        servo.q[:] = self.q
+        servo = self.servo  # servo.q is self.q: measured above
         trip = servo.tick()
         if trip is not None:
             self.fail(f"{trip} (joint {trip.name} at "
