@@ -182,3 +182,25 @@ def test_a_bad_buffer_mode_is_refused_and_the_options_say_the_modes(puma):
     assert not runner.call(station.busy)
     text = arm.find_command("movej").help
     assert all(w in text for w in ("buffer=MODE", "aborting", "buffered", "blending"))
+
+
+def test_a_conveyor_that_carries_the_point_where_the_arm_cannot_follow_brakes_it(puma):
+    """A conveyor at 100 mm/s carries the tracked point toward the edge of the reach: before a joint would need more than its velocity limit (or the point leaves the reach) the arm is braked to rest and holds, without a fault; the move ends saying why; the truth is at rest."""
+    station, runner = puma
+    arm = station.arm
+    _go(station, runner, (500, 100, 400, 180, 20, 90))
+    runner.call(arm.set_conveyor, 0, 100, 0)
+    runner.call(arm.move_line, 450, -100, 350, 180, 20, 90)
+    _settle(station, runner)
+    assert arm.state == "tracking"
+    assert runner.wait_until(lambda: arm.state != "tracking", 20.0)
+    _settle(station, runner)
+    assert station.fault is None and arm.powered
+    said = station.last_stop()
+    assert said.startswith("stopped: the moving frame carried the tool's point where the arm "
+                           "cannot follow"), said
+    runner.sleep(0.2)
+    qd = runner.call(lambda: station.plant.truth().qd)
+    assert float(np.max(np.abs(qd))) < math.radians(0.5)
+    runner.call(arm.set_conveyor, 0, 0, 0)
+    runner.call(arm.set_coord, 0, 0, 0, 0, 0, 0)

@@ -30,6 +30,13 @@ the tool frame, so the other directions keep the path.  When the segment
 ends (or is stopped) the offset stays: the arm holds where the force put
 it, and the next record, queued only then, starts from there.
 
+**A moving frame the arm cannot follow**: when a moving frame (a
+conveyor) carries the target point beyond the arm's reach, or where a
+joint would need more than its velocity limit to follow it, that sample
+continues the joints' velocity and the next tick brakes them to rest, the
+record ending with a code that says why (elsewhere a sample without an
+inverse is a :class:`MotionFault`).
+
 **stop** brakes along the path: the trajectory's time is slowed to a halt
 by a smooth step whose length keeps every joint's acceleration within its
 limit, so a Cartesian segment's tool stays on its line.  In a moving frame
@@ -390,6 +397,26 @@ class Evaluator:
             if piece.seg is not None and piece.seg is self._comply_seg:
                 t6 = self._complied(t6, frames.parts(n)[2])
             q_opt = self.planner.solve(t6, seed, piece.config)
+            if frames.moving and piece.seg is not None and self._stop is None \
+                    and self._sigma is None:
+                q0, q1 = self._q
+                why = ""
+                if q_opt is None:
+                    why = f"out of reach: {self.planner.why(t6, seed, piece.config)}"
+                else:
+                    over = np.abs(q_opt - q1) / self._period > self.planner.vmax
+                    if over.any():
+                        j = int(np.argmax(over))
+                        why = (f"joint {self.chain.joints[j].name} would go beyond its "
+                               "velocity limit to follow it")
+                if why:
+                    # the moving frame carries the point where the arm cannot follow:
+                    # this sample goes on at the joints' velocity, the next tick brakes
+                    self._stop = (f"stopped: the moving frame carried the tool's point "
+                                  f"where the arm cannot follow ({why}); braked to rest",
+                                  piece.seg.move)
+                    q_ext = q1 + (q1 - q0) * (self._period / self._h)
+                    return q_ext, self.chain.fk(q_ext)
             if q_opt is None:
                 raise MotionFault(f"no inverse at t = {t:.3f} s: "
                                   f"{self.planner.why(t6, seed, piece.config)}")
@@ -497,11 +524,17 @@ class Evaluator:
         piece = self._pieces[self._k] if self._k < len(self._pieces) else None
         moving_frame = piece is not None and (
             piece.space == FUNC or (piece.frames is not None and piece.frames.moving))
+        told = False
         for s in self._segs:
             if s.move.code is None:
                 word = code if (by is None or s.move is by) else Termination.STOPPED
                 self._events.append((word, s.move))
                 self._finish(s, word)
+                told = told or s.move is by
+        if by is not None and not told:
+            # a record that had reached its point and tracked a moving frame: its
+            # code stays 'reached', the stop is said all the same
+            self._events.append((code, by))
         if piece is None or float(np.max(np.abs(v))) <= REST_SPEED:
             self._pieces, self._k, self._segs = [], 0, []
             self._stop = None
