@@ -415,8 +415,9 @@ class ArmMoves:
         new move leaves the belt, stop brakes the joints to rest).  moveto
         and movej stay joint moves to where the frame is when they are
         given.  0 0 0 stops the belt where it is (COORD keeps that pose).
-        A point carried out of the arm's reach is a fault.  Refused while a
-        move runs or the tool tracks."""
+        A point carried where the arm cannot follow (out of reach, or a
+        joint beyond its velocity limit) brakes the arm to rest, saying so.
+        Refused while a move runs or the tool tracks."""
         self._frames_free("conveyor")
         for axis, value in (("VX", vx), ("VY", vy), ("VZ", vz)):
             if not math.isfinite(value):
