@@ -57,6 +57,7 @@ import numpy.typing as npt
 
 from pyrt.frames import TransformType
 from pyrt.kinematics import GRAVITY, Chain
+from pyrt.motion._comply import ComplyLoop
 from pyrt.motion._pieces import CART, FUNC, JOINT, FrameTracker, Piece, transition_coeffs
 from pyrt.motion.planner import Limits, Planner, Segment, Tail
 from pyrt.motion.record import BufferMode, MotionSpec, Move, RecordError, Termination
@@ -68,9 +69,6 @@ Vector = npt.NDArray[np.float64]
 
 #: A joint speed below which a motion counts as at rest (rad/s or m/s).
 REST_SPEED = 1e-6
-#: The comply loop's low-pass on the wrist's force: the share of a new reading
-#: taken each trajectory tick.
-COMPLY_FILTER = 0.7
 
 
 class MotionFault(RuntimeError):
@@ -152,10 +150,7 @@ class Evaluator:
         self._watched: list[Any] = []
         #: Comply: the running comply segment, the tool's offset from its path
         #: (tool frame, m) and the filtered force it exerts (tool frame, N).
-        self._comply_seg: Segment | None = None
-        self._offset = np.zeros(3)
-        self._force = np.zeros(3)
-        self._path0: Vector | None = None
+        self._comply = ComplyLoop()
 
     # -- queueing (the caller's thread) ---------------------------------------------------
     @property
@@ -312,8 +307,12 @@ class Evaluator:
                 self.tracker.period = dt
         for tr in self._watched:
             self.tracker.evaluate(tr, n_next)
-        if wrench is not None and self._k < len(self._pieces):
-            self._comply(self._pieces[self._k], wrench, dt, n_next)
+        if wrench is not None and self._k < len(self._pieces) and self._sigma is None \
+                and self._stop is None:
+            piece = self._pieces[self._k]
+            seg = piece.seg
+            if seg is not None and seg.move.spec.comply is not None and piece.frames:
+                self._comply.update(seg, piece.frames.parts(n_next)[2], wrench, dt)
         sigma = 1.0
         if self._sigma is not None:
             sigma = self._brake_rate(dt)
@@ -394,27 +393,19 @@ class Evaluator:
             for tr in frames.live:
                 self.tracker.evaluate(tr, n)
             t6 = frames.t6(piece.pose(t), n)
-            if piece.seg is not None and piece.seg is self._comply_seg:
-                t6 = self._complied(t6, frames.parts(n)[2])
+            if piece.seg is not None and piece.seg is self._comply.seg:
+                t6 = self._comply.apply(t6, frames.parts(n)[2])
             q_opt = self.planner.solve(t6, seed, piece.config)
             if frames.moving and piece.seg is not None and self._stop is None \
                     and self._sigma is None:
-                q0, q1 = self._q
-                why = ""
-                if q_opt is None:
-                    why = f"out of reach: {self.planner.why(t6, seed, piece.config)}"
-                else:
-                    over = np.abs(q_opt - q1) / self._period > self.planner.vmax
-                    if over.any():
-                        j = int(np.argmax(over))
-                        why = (f"joint {self.chain.joints[j].name} would go beyond its "
-                               "velocity limit to follow it")
+                why = self._cannot_follow(q_opt, t6, seed, piece.config)
                 if why:
                     # the moving frame carries the point where the arm cannot follow:
                     # this sample goes on at the joints' velocity, the next tick brakes
                     self._stop = (f"stopped: the moving frame carried the tool's point "
                                   f"where the arm cannot follow ({why}); braked to rest",
                                   piece.seg.move)
+                    q0, q1 = self._q
                     q_ext = q1 + (q1 - q0) * (self._period / self._h)
                     return q_ext, self.chain.fk(q_ext)
             if q_opt is None:
@@ -425,51 +416,23 @@ class Evaluator:
         q = np.asarray(piece.fn(t - piece.origin), dtype=float)
         return q, self.chain.fk(q)
 
+    def _cannot_follow(self, q: Vector | None, t6: Matrix, seed: Vector,
+                       config: str | None) -> str:
+        """Why the arm cannot follow a moving frame's sample (no inverse, or a
+        joint over its velocity limit to reach it), or ''."""
+        if q is None:
+            return f"out of reach: {self.planner.why(t6, seed, config)}"
+        over = np.abs(q - self._q[1]) / self._period > self.planner.vmax
+        if not over.any():
+            return ""
+        return (f"joint {self.chain.joints[int(np.argmax(over))].name} would go beyond "
+                "its velocity limit to follow it")
+
     @property
     def comply_force(self) -> Vector:
         """The force the tool exerts (N, tool frame; filtered) as the comply loop
         last saw it (zeros before any comply record)."""
-        return self._force.copy()
-
-    def _complied(self, t6: Matrix, tool: Matrix) -> Matrix:
-        """``t6`` with the tool moved along the complied axes of its own frame: to
-        where the segment's first sample had it along them (the path's motion
-        there left out) and by the force loop's offset."""
-        world = t6 @ tool
-        if self._path0 is None:
-            self._path0 = world[:3, 3].copy()
-        r = world[:3, :3]
-        along = r.T @ (world[:3, 3] - self._path0)
-        seg = self._comply_seg
-        assert seg is not None and seg.move.spec.comply is not None
-        shift = np.zeros(3)
-        for i in seg.move.spec.comply.index():
-            shift[i] = self._offset[i] - along[i]
-        out = world.copy()
-        out[:3, 3] += r @ shift
-        return out @ np.linalg.inv(tool)
-
-    def _comply(self, piece: Piece, wrench: Any, dt: float, n: int) -> None:
-        """One tick of the comply loop (module doc), before the next sample."""
-        seg = piece.seg
-        spec = seg.move.spec if seg is not None else None
-        if seg is None or spec is None or spec.comply is None or piece.frames is None \
-                or self._sigma is not None or self._stop is not None:
-            return
-        c = spec.comply
-        tool = piece.frames.parts(n)[2]
-        felt = np.asarray(wrench, dtype=float)[:3]
-        exerted = -(tool[:3, :3].T @ felt)  # the wrist feels the opposite, in the TOOL frame
-        if seg is not self._comply_seg:
-            self._comply_seg = seg
-            self._path0 = None
-            self._offset = np.zeros(3)
-            self._force = exerted
-        self._force = self._force + COMPLY_FILTER * (exerted - self._force)
-        step = c.speed * dt
-        for i, f in zip(c.index(), c.forces, strict=True):
-            d = min(max(c.gain * (f - float(self._force[i])) * dt, -step), step)
-            self._offset[i] = min(max(self._offset[i] + d, -c.travel), c.travel)
+        return self._comply.force.copy()
 
     def _make_runtime(self, piece: Piece, t: float, n: int) -> None:
         """A transition that involves a moving frame: made now, from the last
