@@ -348,9 +348,9 @@ class ArmMoves:
         newtons (the force the tool exerts along +axis; the wrist sensor
         measures it), the other directions on the line (comply z 5 presses
         5 N along the tool's z while moving in x and y); the next move is
-        given when it has ended.  While
-        the conveyor runs (NAME conveyor), the target is a point on it: the
-        tool reaches it and then follows it ('tracking')."""
+        given when it has ended.  While the conveyor runs (NAME conveyor),
+        the target is a point on it: the tool reaches it and then follows
+        it ('tracking')."""
         opts = self._options("movel", options)
         pose = _pose("movel", self.name, x, y, z, rx, ry, rz)
         belt = self.conveyor
