@@ -22,7 +22,7 @@ from _motion_rig import (
 
 from pyrt.frames import PositionEquation, Transform
 from pyrt.kinematics import transform
-from pyrt.motion import Limits, MotionSpec, RecordError, Termination
+from pyrt.motion import Comply, Limits, MotionSpec, RecordError, Termination
 
 
 def _line(dp=(0.1, 0.0, -0.05)):
@@ -70,11 +70,38 @@ def test_a_malformed_field_is_refused_by_name(fields, name):
         MotionSpec(**fields)
 
 
-def test_comply_is_refused_with_its_reason():
-    """comply is refused by name, saying why (the station's force loop) and what to use instead."""
-    with pytest.raises(RecordError) as err:
+@pytest.mark.parametrize(("kw", "why"), [
+    ({"axes": "w", "force": 2.0}, "axes"),
+    ({"axes": "zz", "force": 2.0}, "axes"),
+    ({"axes": "", "force": 2.0}, "axes"),
+    ({"axes": "rx", "force": 2.0}, "torques are not offered"),
+    ({"axes": "z", "force": math.nan}, "force"),
+    ({"axes": "xz", "force": (1.0, 2.0, 3.0)}, "force"),
+    ({"axes": "z", "force": 5000.0}, "force"),
+    ({"axes": "z", "force": 2.0, "gain": 0.0}, "gain"),
+    ({"axes": "z", "force": 2.0, "travel": 2.0}, "travel"),
+    ({"axes": "z", "force": 2.0, "dwell": -1.0}, "dwell"),
+])
+def test_a_malformed_comply_specification_is_refused_by_name(kw, why):
+    """A comply specification with unknown or repeated axes, a torque axis, a force that is not one finite value per axis within 1000 N, or a gain, travel or dwell out of range: RecordError naming comply and the part."""
+    with pytest.raises(RecordError, match=why) as err:
+        Comply(**kw)
+    assert str(err.value).startswith("comply")
+
+
+def test_comply_is_a_cartesian_record_s_and_needs_a_force_sensor():
+    """comply on a joint-mode record is refused by name; a Cartesian record with comply is made (one force for every axis spread over them), and queued on an evaluator without a force sensor it is refused naming the sensor."""
+    c = Comply("XY", 1.5)
+    assert c.axes == "xy" and c.force == (1.5, 1.5) and c.index() == [0, 1]
+    with pytest.raises(RecordError, match="joint-mode record cannot comply"):
+        MotionSpec(mode="joint", target=(0.0,) * 6, comply=c)
+    with pytest.raises(RecordError, match="comply: expected a Comply"):
         MotionSpec(mode="cart", comply=("z", 2.0))
-    assert "comply" in str(err.value) and "force_limits" in str(err.value)
+    ev = make()
+    eq = equation(tool_pose(PUMA, PUMA_HOME))
+    with pytest.raises(RecordError, match="no force sensor"):
+        ev.queue(MotionSpec(mode="cart", equation=eq, comply=Comply("z", 2.0)))
+    assert ev.idle
 
 
 def test_copy_checks_the_fields_again_and_refuses_unknown_ones():

@@ -72,6 +72,7 @@ class TestUrdfConformance(StationConformance):
         "UrdfSim.table": [["-2000"], ["off"]],
         "UrdfArm.tool": [["0", "0", "50", "0", "0", "0"], ["0"] * 6],
         "UrdfArm.coord": [["0", "0", "50", "0", "0", "0"], ["0"] * 6],
+        "UrdfArm.conveyor": [["0", "50", "0"], ["0"] * 3],
     }
 
     def build(self, tmp_path):

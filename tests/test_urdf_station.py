@@ -371,7 +371,7 @@ def test_tool_and_coord_frames_carry_into_the_signals_and_the_targets(puma):
 
 
 def test_options_set_the_speed_and_the_blend_and_bad_ones_are_refused(puma):
-    """movej speed=0.25 keeps every true joint speed within a quarter of its limit (the same move at full speed goes beyond it); blend=0 ends the first of two queued moves exactly (an exact stop, PLCopen's buffered); an unknown option is refused naming the options, nothing moves."""
+    """movej speed=0.25 keeps every true joint speed within a quarter of its limit (the same move at full speed goes beyond it); blend=0 on the second of two queued moves makes the first end exactly on its target (an exact stop, PLCopen's buffered) where without it the blend cuts the corner; an unknown option is refused naming the options, nothing moves."""
     station, runner = puma
     arm = station.arm
     _settle(station, runner)
@@ -396,17 +396,23 @@ def test_options_set_the_speed_and_the_blend_and_bad_ones_are_refused(puma):
     with pytest.raises(CommandError, match="not an option"):
         runner.call(arm.move_joints, 60, 80, -120, 40, -20, 60, "fast=1")
     assert not runner.call(station.busy)
-    runner.call(arm.move_joints, 30, 60, -150, 20, -30, 30, "blend=0")
-    runner.call(arm.move_joints, 60, 80, -120, 40, -20, 60)
-    seen = []
+    nearest = []
+    for option in ([], ["blend=0"]):
+        runner.call(arm.move_joints, *home)
+        _settle(station, runner)
+        runner.call(arm.move_joints, 30, 60, -150, 20, -30, 30)
+        runner.call(arm.move_joints, 60, 80, -120, 40, -20, 60, *option)
+        seen = []
 
-    def watch() -> bool:
-        q = np.degrees(station.plant.truth().q)
-        seen.append(float(np.max(np.abs(q - [30, 60, -150, 20, -30, 30]))))
-        return not station.busy()
+        def watch(seen=seen) -> bool:
+            q = np.degrees(station.plant.truth().q)
+            seen.append(float(np.max(np.abs(q - [30, 60, -150, 20, -30, 30]))))
+            return not station.busy()
 
-    assert runner.wait_until(watch, 30.0)
-    assert min(seen) < 0.05  # it passed through the first target (no corner cut)
+        assert runner.wait_until(watch, 30.0)
+        nearest.append(min(seen))
+    # blended, the corner is cut; blend=0 on the second passes through the first target
+    assert nearest[0] > 0.01 and nearest[1] < 0.005, nearest
 
 
 def test_a_guarded_move_onto_the_table_stops_on_the_wrist_force(puma):

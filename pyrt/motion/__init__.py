@@ -13,6 +13,7 @@ from pyrt.motion.evaluator import Evaluator, Knot, MotionFault
 from pyrt.motion.planner import Limits, Planner, Segment
 from pyrt.motion.record import (
     BufferMode,
+    Comply,
     Mode,
     MotionSpec,
     Move,
@@ -22,6 +23,7 @@ from pyrt.motion.record import (
 
 __all__ = [
     "BufferMode",
+    "Comply",
     "Evaluator",
     "Knot",
     "Limits",

@@ -21,6 +21,22 @@ limits (Paul's transition to rest from the last position and velocity); if
 that rest would be beyond a joint limit it raises :class:`MotionFault`
 instead, which the trajectory task turns into the robot's fault.
 
+**Comply** (a record's :class:`~pyrt.motion.Comply`): while its segment
+runs, each tick turns the wrist's force into the tool frame (the
+equation's TOOL), low-passes it, and moves an offset of the tool along the
+complied axes by the admittance (gain x force error, within the record's
+speed and travel); the samples are the planned pose with that offset, in
+the tool frame, so the other directions keep the path.  When the segment
+ends (or is stopped) the offset stays: the arm holds where the force put
+it, and the next record, queued only then, starts from there.
+
+**A moving frame the arm cannot follow**: when a moving frame (a
+conveyor) carries the target point beyond the arm's reach, or where a
+joint would need more than its velocity limit to follow it, that sample
+continues the joints' velocity and the next tick brakes them to rest, the
+record ending with a code that says why (elsewhere a sample without an
+inverse is a :class:`MotionFault`).
+
 **stop** brakes along the path: the trajectory's time is slowed to a halt
 by a smooth step whose length keeps every joint's acceleration within its
 limit, so a Cartesian segment's tool stays on its line.  In a moving frame
@@ -41,6 +57,7 @@ import numpy.typing as npt
 
 from pyrt.frames import TransformType
 from pyrt.kinematics import GRAVITY, Chain
+from pyrt.motion._comply import ComplyLoop
 from pyrt.motion._pieces import CART, FUNC, JOINT, FrameTracker, Piece, transition_coeffs
 from pyrt.motion.planner import Limits, Planner, Segment, Tail
 from pyrt.motion.record import BufferMode, MotionSpec, Move, RecordError, Termination
@@ -131,11 +148,20 @@ class Evaluator:
         self._mass = 0.0
         self._braked = False
         self._watched: list[Any] = []
+        #: Comply: the running comply segment, the tool's offset from its path
+        #: (tool frame, m) and the filtered force it exerts (tool frame, N).
+        self._comply = ComplyLoop()
 
     # -- queueing (the caller's thread) ---------------------------------------------------
     @property
     def period(self) -> float:
         return self._period
+
+    @property
+    def sample(self) -> int:
+        """The sample number of the knot the next :meth:`tick` hands out (its
+        functional transforms are evaluated one sample ahead of it)."""
+        return self._n
 
     @property
     def idle(self) -> bool:
@@ -174,6 +200,12 @@ class Evaluator:
                 stopping = self._sigma is not None or self._stop is not None
             if stopping:
                 raise RecordError("the arm is stopping; queue again when it is at rest")
+            complying = next((s.move for s in self._segs
+                              if s.move.code is None and s.move.spec.comply is not None), None)
+            if complying is not None:
+                raise RecordError(f"comply: the complying record {complying.spec.name or ''} "
+                                  "runs; queue the next one when it has ended (it starts "
+                                  "where the force put the arm)")
             move = Move(spec, self._count)
             seg = self.planner.plan(spec, tail, move, force_sensor=self.force_sensor)
             with self._lock:
@@ -275,6 +307,12 @@ class Evaluator:
                 self.tracker.period = dt
         for tr in self._watched:
             self.tracker.evaluate(tr, n_next)
+        if wrench is not None and self._k < len(self._pieces) and self._sigma is None \
+                and self._stop is None:
+            piece = self._pieces[self._k]
+            seg = piece.seg
+            if seg is not None and seg.move.spec.comply is not None and piece.frames:
+                self._comply.update(seg, piece.frames.parts(n_next)[2], wrench, dt)
         sigma = 1.0
         if self._sigma is not None:
             sigma = self._brake_rate(dt)
@@ -355,7 +393,21 @@ class Evaluator:
             for tr in frames.live:
                 self.tracker.evaluate(tr, n)
             t6 = frames.t6(piece.pose(t), n)
+            if piece.seg is not None and piece.seg is self._comply.seg:
+                t6 = self._comply.apply(t6, frames.parts(n)[2])
             q_opt = self.planner.solve(t6, seed, piece.config)
+            if frames.moving and piece.seg is not None and self._stop is None \
+                    and self._sigma is None:
+                why = self._cannot_follow(q_opt, t6, seed, piece.config)
+                if why:
+                    # the moving frame carries the point where the arm cannot follow:
+                    # this sample goes on at the joints' velocity, the next tick brakes
+                    self._stop = (f"stopped: the moving frame carried the tool's point "
+                                  f"where the arm cannot follow ({why}); braked to rest",
+                                  piece.seg.move)
+                    q0, q1 = self._q
+                    q_ext = q1 + (q1 - q0) * (self._period / self._h)
+                    return q_ext, self.chain.fk(q_ext)
             if q_opt is None:
                 raise MotionFault(f"no inverse at t = {t:.3f} s: "
                                   f"{self.planner.why(t6, seed, piece.config)}")
@@ -363,6 +415,24 @@ class Evaluator:
         assert piece.fn is not None
         q = np.asarray(piece.fn(t - piece.origin), dtype=float)
         return q, self.chain.fk(q)
+
+    def _cannot_follow(self, q: Vector | None, t6: Matrix, seed: Vector,
+                       config: str | None) -> str:
+        """Why the arm cannot follow a moving frame's sample (no inverse, or a
+        joint over its velocity limit to reach it), or ''."""
+        if q is None:
+            return f"out of reach: {self.planner.why(t6, seed, config)}"
+        over = np.abs(q - self._q[1]) / self._period > self.planner.vmax
+        if not over.any():
+            return ""
+        return (f"joint {self.chain.joints[int(np.argmax(over))].name} would go beyond "
+                "its velocity limit to follow it")
+
+    @property
+    def comply_force(self) -> Vector:
+        """The force the tool exerts (N, tool frame; filtered) as the comply loop
+        last saw it (zeros before any comply record)."""
+        return self._comply.force.copy()
 
     def _make_runtime(self, piece: Piece, t: float, n: int) -> None:
         """A transition that involves a moving frame: made now, from the last
@@ -417,11 +487,17 @@ class Evaluator:
         piece = self._pieces[self._k] if self._k < len(self._pieces) else None
         moving_frame = piece is not None and (
             piece.space == FUNC or (piece.frames is not None and piece.frames.moving))
+        told = False
         for s in self._segs:
             if s.move.code is None:
                 word = code if (by is None or s.move is by) else Termination.STOPPED
                 self._events.append((word, s.move))
                 self._finish(s, word)
+                told = told or s.move is by
+        if by is not None and not told:
+            # a record that had reached its point and tracked a moving frame: its
+            # code stays 'reached', the stop is said all the same
+            self._events.append((code, by))
         if piece is None or float(np.max(np.abs(v))) <= REST_SPEED:
             self._pieces, self._k, self._segs = [], 0, []
             self._stop = None

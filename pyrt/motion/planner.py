@@ -255,6 +255,9 @@ class Planner:
         if spec.force_limits is not None and not force_sensor:
             raise RecordError("force_limits: refused: this arm's evaluator has no force sensor "
                               "(a guarded move needs one)")
+        if spec.comply is not None and not force_sensor:
+            raise RecordError("comply: refused: this arm's evaluator has no force sensor "
+                              "(holding a force needs one)")
         if spec.mass > self.limits.payload:
             raise RecordError(f"mass: {spec.mass:g} kg is more than the arm's payload "
                               f"{self.limits.payload:g} kg")
@@ -599,6 +602,12 @@ class Planner:
             # at rest in a moving frame: the tool keeps following it
             pieces.append(Piece(seg.kind, t_end, math.inf, t_end, line_coeffs(x_e, 0 * v), seg,
                                 **kw))
+        comply = seg.move.spec.comply
+        if comply is not None and comply.dwell > 0.0:
+            # at rest on the path, the force loop holds on before the record is reached
+            pieces.append(Piece(seg.kind, t_end, t_end + comply.dwell, t_end,
+                                line_coeffs(x_e, 0 * v), seg, **kw))
+            t_end += comply.dwell
         seg.pieces = pieces
         seg.t_begin = pieces[0].t0
         seg.t_reached = t_end

@@ -39,8 +39,13 @@ field               what pyrt does with it
                     torque: a guarded move.  Honoured when the evaluator has
                     a force sensor (``tick(wrench=...)``): the motion stops
                     with code ``force``; refused otherwise.
-``comply``          a comply specification: refused (holding a force needs
-                    the station's force loop, which this layer does not run).
+``comply``          a comply specification (:class:`Comply`): the tool
+                    frame's directions held at a force (an admittance on
+                    the wrist's wrench moves the tool along them, off its
+                    path) while the others follow the path.  Cartesian
+                    records only, with a force sensor (refused otherwise);
+                    the next record is queued once it has ended (the arm is
+                    where the force put it).
 ``max_diff``        the maximum differential motion: (metres, radians) the
                     tool may move in one trajectory tick; the segment is
                     slowed to keep within it.
@@ -50,9 +55,9 @@ field               what pyrt does with it
 ``buffer``          PLCopen's buffer mode: ``aborting``, ``buffered``,
                     ``blending``.
 ``speed``           a fraction 0 < speed <= 1 of every velocity limit.
-``tolerance``       the largest distance (m) a blend may cut the corner
-                    (the tool from the via point); None: no bound but the
-                    limits'.  A corner that cannot meet it within the
+``tolerance``       the largest distance (m) a blend may take the tool
+                    from the unblended path (the two lines); None: no
+                    bound but the limits'.  A corner that cannot meet it within the
                     limits stops exactly there instead.
 ``target``          joint mode only: a joint vector to move to instead of
                     an equation.
@@ -79,6 +84,7 @@ from pyrt.frames import PositionEquation, Transform, TransformType
 
 __all__ = [
     "BufferMode",
+    "Comply",
     "Mode",
     "MotionSpec",
     "Move",
@@ -150,6 +156,78 @@ def _vec(name: str, value: Any, n: int, *, positive: bool = False,
     return tuple(float(x) for x in arr)
 
 
+#: The largest force a comply specification may hold (N).
+MAX_COMPLY_FORCE = 1000.0
+
+
+@dataclass(frozen=True)
+class Comply:
+    """001's comply specification: ``axes`` of the tool frame (some of ``x``,
+    ``y``, ``z``) held at ``force`` (N, one per axis: the force the tool
+    exerts on what it touches along +axis; the wrist feels the opposite)
+    while the other directions follow the path.
+
+    An admittance: each trajectory tick the tool is moved along each axis
+    by ``gain`` (m/s per N) times the force error, at most ``speed`` m/s and
+    at most ``travel`` m from its path; at the end of the line it holds on
+    at rest for ``dwell`` s before the record is reached (what braking
+    stirred up settles under the loop).  The loop's time constant is
+    1 / (gain x the stiffness of what it touches): the default gain suits
+    contacts of 10^4 .. 10^5 N/m at 100 Hz; a stiffer contact needs a lower
+    gain.  Torque directions (rx ry rz) are not offered.
+    """
+
+    axes: str
+    force: Sequence[float] | float
+    gain: float = 5e-4
+    travel: float = 0.05
+    speed: float = 0.05
+    dwell: float = 0.3
+
+    def __post_init__(self) -> None:
+        put = object.__setattr__
+        axes = self.axes.lower() if isinstance(self.axes, str) else ""
+        if not axes or any(a not in "xyz" for a in axes) or len(set(axes)) != len(axes):
+            raise RecordError(f"comply: axes: expected some of x y z once each (forces along "
+                              f"the tool frame's axes; torques are not offered), got "
+                              f"{self.axes!r}")
+        put(self, "axes", axes)
+        f = self.force
+        values = [f] * len(axes) if isinstance(f, int | float) and not isinstance(f, bool) \
+            else f
+        try:
+            arr = np.array(values, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            raise RecordError(f"comply: force: expected newtons, got {f!r}") from None
+        if arr.shape != (len(axes),) or not np.isfinite(arr).all() or (
+                np.abs(arr) > MAX_COMPLY_FORCE).any():
+            raise RecordError(f"comply: force: expected {len(axes)} finite value(s) within "
+                              f"+-{MAX_COMPLY_FORCE:g} N (one per axis), got {f!r}")
+        put(self, "force", tuple(float(x) for x in arr))
+        for name, hi, unit in (("gain", 1e-2, "m/(N s)"), ("travel", 0.5, "m"),
+                               ("speed", 0.5, "m/s")):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not (
+                    math.isfinite(v) and 0.0 < v <= hi):
+                raise RecordError(f"comply: {name}: expected 0 < {name} <= {hi:g} {unit}, "
+                                  f"got {v!r}")
+            put(self, name, float(v))
+        d = self.dwell
+        if isinstance(d, bool) or not isinstance(d, int | float) or not (
+                math.isfinite(d) and 0.0 <= d <= 10.0):
+            raise RecordError(f"comply: dwell: expected 0 .. 10 s, got {d!r}")
+        put(self, "dwell", float(d))
+
+    @property
+    def forces(self) -> tuple[float, ...]:
+        """The force of each axis (N), in the order of :attr:`axes`."""
+        return tuple(self.force)  # type: ignore[arg-type]  # a tuple once checked
+
+    def index(self) -> list[int]:
+        """The tool-frame components (0 x, 1 y, 2 z) held at a force."""
+        return ["xyz".index(a) for a in self.axes]
+
+
 @dataclass(frozen=True)
 class MotionSpec:
     """One motion record (the module doc says what each field does).
@@ -169,7 +247,7 @@ class MotionSpec:
     sample_rate: float | None = None
     mass: float = 0.0
     force_limits: tuple[float, ...] | None = None
-    comply: Any = None
+    comply: Comply | None = None
     max_diff: tuple[float, ...] | None = None
     distance: tuple[float, ...] | None = None
     buffer: BufferMode | str = BufferMode.BLENDING
@@ -227,9 +305,12 @@ class MotionSpec:
         fl = _vec("force_limits", self.force_limits, 6, positive=True, allow_inf=True)
         put(self, "force_limits", fl)
         if self.comply is not None:
-            raise RecordError("comply: refused: holding a force along a tool axis needs the "
-                              "station's force loop, which pyrt.motion's planner does not run "
-                              "(use force_limits for a guarded move)")
+            if not isinstance(self.comply, Comply):
+                raise RecordError(f"comply: expected a Comply (axes, force), got "
+                                  f"{self.comply!r}")
+            if self.mode is not Mode.CART:
+                raise RecordError("comply: a joint-mode record cannot comply: its directions "
+                                  "are the tool frame's, on a Cartesian record")
         put(self, "max_diff", _vec("max_diff", self.max_diff, 2, positive=True))
         put(self, "distance", _vec("distance", self.distance, 6))
         s = self.speed

@@ -50,12 +50,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from pyrt.boards.armservo import DAC_FULL_SCALE
-from pyrt.component import Command, Component, Limits, Signal, command, records_of
+from pyrt.component import Command, Component, Limits, Param, Signal, command, records_of
 from pyrt.kinematics import GRAVITY, Chain, rpy_of
 from pyrt.motion import Evaluator, MotionFault
 from pyrt.motion import Limits as MotionLimits
-from pyrt.native import Servo, tuned_gains
+from pyrt.native import Servo, gain_ranges, tuned_gains
 from pyrt.scheduler import Task
+from pyrt.station._urdf_gains import ArmTuning, arm_gain_params, joint_gain_params
 from pyrt.station._urdf_moves import ArmMoves
 
 if TYPE_CHECKING:
@@ -140,6 +141,11 @@ class ArmJoint(Component):
             Signal("dac", "DAC counts", lambda: a.dac[i], "amplifier command", "d"),
         ]
 
+    def params(self) -> list[Param]:
+        """The servo's gains of this joint (:mod:`pyrt.station._urdf_gains`)."""
+        return joint_gain_params(self.arm.servo, self.index, self.prismatic,
+                                 self.arm.gain_ranges)
+
     def reflex(self) -> None:
         """DAC 0, the amplifier disabled and the brake engaged, now."""
         board = self.arm.board
@@ -197,7 +203,7 @@ class UrdfArm(ArmMoves, Component):
         self._counts_per_nm = [1.0 / d.nm_per_count for d in self.drives]
         #: The measured joints (rad, m), from the encoders (unwrapped).
         self.q = np.zeros(n)
-        self._measure(self._counts)
+        self.q[:] = self._qs
         #: The DAC values last written.
         self.dac = [0] * n
         effort = np.array([j.effort if math.isfinite(j.effort) and j.effort > 0
@@ -214,6 +220,13 @@ class UrdfArm(ArmMoves, Component):
         gains["ka"] = armature
         gains["kv"] = np.array([j.damping for j in joints])
         self.servo = Servo(n, self.period_s, names=chain.joint_names, gains=gains)
+        # the measured joints are the servo's input array itself (no copy per tick)
+        self.servo.q[:] = self.q
+        self.q = self.servo.q
+        #: Each gain's safe range per joint: get/set take the gains within them.
+        self.gain_ranges = gain_ranges(inertia, effort, self.period_s)
+        self.servo.ranges = self.gain_ranges
+        self.tuning = ArmTuning(self.servo, inertia, effort, SERVO_BANDWIDTH_HZ)
         # the planner's limits: the URDF's velocities, accelerations from the efforts
         vmax = np.array([j.velocity if math.isfinite(j.velocity) and j.velocity > 0
                          else (0.25 if p else 1.0) for j, p in zip(joints, self.prismatic,
@@ -250,6 +263,11 @@ class UrdfArm(ArmMoves, Component):
         #: moveto and movel targets are given in (``NAME coord``); identity at start.
         self.tool_frame = np.eye(4)
         self.coord_frame = np.eye(4)
+        #: The conveyor COORD rides on (``NAME conveyor``), or None; a trajectory
+        #: tick's loop time and the sample it hands out (a sample's time for it).
+        self.conveyor = None
+        self._anchor = (0.0, 0)
+        self._latest = None
 
     # -- set-up ---------------------------------------------------------------------
 
@@ -307,6 +325,12 @@ class UrdfArm(ArmMoves, Component):
     def children(self) -> list[Component]:
         return list(self.joints)
 
+    def params(self) -> list[Param]:
+        """The servo's bandwidth and dynamics feed-forward for every joint at once
+        (:mod:`pyrt.station._urdf_gains`)."""
+        w = float(self.gain_ranges["kd"][1][0]) / (3.0 * float(self.tuning.inertia[0]))
+        return arm_gain_params(self.name, self.tuning, w / (2.0 * math.pi))
+
     def tasks(self) -> list[Task]:
         return [Task(self.trajectory_tick, period=TRAJECTORY_PERIOD, name="trajectory",
                      timed=True),
@@ -336,6 +360,8 @@ class UrdfArm(ArmMoves, Component):
         """The joints from this tick's ``counts``: each counter's step since the last
         read taken modulo 2^32 (a 32-bit counter wraps), the middle of the count."""
         last, total, qs, cpu = self._counts, self._total, self._qs, self._cpu_list
+        if counts == last:  # at rest: nothing to do
+            return
         for j, c in enumerate(counts):
             d = c - last[j]
             if d:
@@ -405,6 +431,7 @@ class UrdfArm(ArmMoves, Component):
         start = np.clip(q + 0.5 * v * t, self.chain.lower, self.chain.upper)
         self.evaluator = Evaluator(self.chain, self.limits, start, period=self.traj_period_s,
                                    force_sensor=self._wrench_of is not None)
+        self._anchor = (self._now_ns * 1e-9 + self.traj_period_s, 0)
         margin = self._margin
         self._history.clear()
         self._bound(np.minimum(self.chain.lower, q) - margin,
@@ -441,8 +468,7 @@ class UrdfArm(ArmMoves, Component):
                 self._started = True
                 self.power_on()
             return
-        servo = self.servo
-        servo.q[:] = self.q
+        servo = self.servo  # servo.q is self.q: measured above
         trip = servo.tick()
         if trip is not None:
             self.fail(f"{trip} (joint {trip.name} at "
@@ -517,13 +543,20 @@ class UrdfArm(ArmMoves, Component):
                 self._bound(lo, hi)
                 self._wide = False
         wrench = self.wrench() if self._wrench_of is not None else None
+        self._anchor = (now_ns * 1e-9 + self.traj_period_s, ev.sample)
         try:
             knot = ev.tick(wrench)
         except MotionFault as exc:
             self.fail(f"trajectory: {exc}", self.name)
             return
-        for word, _move in knot.events:
-            if word == "reached":
+        for word, move in knot.events:
+            c = move.spec.comply
+            if word == "reached" and c is not None:
+                f = ev.comply_force
+                said = ", ".join(f"{float(f['xyz'.index(a)]):.2f} N along {a} (set {v:g} N)"
+                                 for a, v in zip(c.axes, c.forces, strict=True))
+                self.last_stop = f"at target, complying: the tool presses {said}"
+            if word in ("reached", "aborted"):  # the end of the whole motion is reported
                 continue
             if word == "force" and wrench is not None:
                 self.last_stop = (f"force limit: the wrist felt |F| "
@@ -545,7 +578,13 @@ class UrdfArm(ArmMoves, Component):
             k[5] = knot.qdd
             k[7] = ff
             self.follow(knot.period)
-            if self.state != "moving":
+            if knot.move is not None and knot.move.done and knot.move is self._latest:
+                # the last record queued has reached its point on a moving frame
+                if self.state != "tracking":
+                    self.state = "tracking"
+                    self.last_stop = (f"tracking: the tool follows its point on the moving "
+                                      f"conveyor at {self.pose_text(self.tool())}")
+            elif self.state != "moving":
                 self.state = "moving"
         elif self.state == "moving" and ev.idle:
             self.state = "settling"
@@ -569,8 +608,18 @@ class UrdfArm(ArmMoves, Component):
     # -- the station's questions -------------------------------------------------------
 
     def busy(self) -> bool:
-        """A move runs, the arm settles, or the servo brings it to rest after power-on."""
-        return self.state != "idle" or self._recover_until is not None
+        """A move runs, the arm settles, or the servo brings it to rest after power-on
+        (the tool tracking a conveyor has reached its point: not busy)."""
+        return self.state not in ("idle", "tracking") or self._recover_until is not None
+
+    def _time_now(self) -> float:
+        """The loop's time (s), for the conveyor."""
+        return self._now_ns * 1e-9
+
+    def _sample_time(self, sample: int) -> float:
+        """The loop time (s) the servo reaches trajectory sample ``sample`` at."""
+        t0, n0 = self._anchor
+        return t0 + (sample - n0) * self.traj_period_s
 
     def stop(self) -> str:
         """Brake along the path to rest and hold there (the servo stays on)."""
@@ -579,4 +628,5 @@ class UrdfArm(ArmMoves, Component):
             return ""
         ev.stop()
         self.last_stop = "stopped (stop command)"
+        self.state = "moving"  # tracking a conveyor too: braking is a move
         return f"{self.name}: stopping: braking along the path to rest, then holding"

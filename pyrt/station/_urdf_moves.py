@@ -1,12 +1,14 @@
-"""The commands of ``pyrt urdf``'s arm: its moves, their options, the inverse, TOOL and COORD.
+"""The commands of ``pyrt urdf``'s arm: moves, options, the inverse, TOOL, COORD, conveyor.
 
 :class:`ArmMoves` is the part of :class:`pyrt.station._urdf_arm.UrdfArm` that
 turns the operator's words into records of the motion layer and queues them
 on the arm's evaluator: ``movej`` (joint values), ``moveto`` (a tool pose by a
 joint move; the numerical inverse or the closed form in a named
 configuration), ``movel`` (a Cartesian record in ``T6 . TOOL = COORD .
-POS``), their OPTIONS (speed, blend tolerance, force limit), and ``tool`` /
-``coord``, the frames those targets are given in.  A mixin of the arm, not a
+POS``), their OPTIONS (speed, blend tolerance, force limit, PLCopen's
+buffer mode), ``tool`` / ``coord``, the frames those targets are given in,
+and ``conveyor``: COORD made a moving frame (001's functional transform)
+that ``movel`` targets ride on.  A mixin of the arm, not a
 part it holds: the commands are the arm's own records (named after it, their
 ranges shown from its signals), and the arm's moving state is theirs to read.
 """
@@ -23,19 +25,42 @@ from pyrt.component import Arg, Command, Limits, command
 from pyrt.errors import CommandError
 from pyrt.frames import PositionEquation, Transform, inverse
 from pyrt.kinematics import Chain, transform
-from pyrt.motion import Evaluator, MotionSpec, RecordError
+from pyrt.motion import Comply, Evaluator, MotionSpec, Move, RecordError
 
 if TYPE_CHECKING:
     from pyrt.station.base import Station
 
-__all__ = ["OPTIONS_HELP", "ArmMoves"]
+__all__ = ["COMPLY_HELP", "OPTIONS_HELP", "ArmMoves"]
+
+#: What a blend's tolerance keeps back for the servo's tracking of the planned path
+#: at the tool (mm; measured on the PUMA: at most 0.35 mm in a blend at full speed).
+BLEND_SERVO_MM = 0.5
 
 #: What OPTIONS of movej, moveto and movel may say.
 OPTIONS_HELP = ("OPTIONS: speed=F (a fraction 0 < F <= 1 of every velocity limit), blend=MM "
-                "(the most a blend into the next move may cut the corner, mm; 0: stop exactly "
-                "at the target), force=N (a guarded move: braked to rest when the wrist feels "
-                "more than N newtons along any of its axes).")
+                "(the most the blend from the running move into this one may take the tool "
+                "from the two moves' unblended path, mm, in truth: the servo's tracking is "
+                f"allowed for, so {BLEND_SERVO_MM:g} mm or less is an exact stop; 0: the "
+                "running move first stops exactly at its target), force=N (a guarded move: "
+                "braked to rest when the wrist feels "
+                "more than N newtons along any of its axes), buffer=MODE (PLCopen's buffer "
+                "mode, what this move does to the one running: blending (the default: it "
+                "starts from a blend at the end of the running one), buffered (it starts "
+                "when the running one is at rest on its target, as blend=0) or aborting (it "
+                "replaces the running one and what is queued at once, braking into the new "
+                "path within the limits; the replaced moves end 'aborted')).")
+
+#: What movel's comply option says.
+COMPLY_HELP = ("movel's OPTIONS may say comply AXES N[,N..]: the tool frame's AXES (some of x "
+               "y z) held at N newtons each (the force the tool exerts along +axis, from the "
+               "wrist sensor; one N for every axis, or one per axis), the others on the line: "
+               "e.g. comply z 5 presses 5 N along the tool's z while it moves in x and y; "
+               "the next move is given once it has ended.")
+
+#: The fastest conveyor ``NAME conveyor`` takes, per axis (mm/s).
+CONVEYOR_MAX_MM_S = 500.0
 _OPTIONS = Arg("OPTIONS", str, optional=True, rest=True)
+_BUFFER_MODES = ("aborting", "buffered", "blending")
 
 
 class ArmMoves:
@@ -56,6 +81,10 @@ class ArmMoves:
     last_stop: str
     tool_frame: np.ndarray
     coord_frame: np.ndarray
+    #: The running conveyor (``NAME conveyor``), or None.
+    conveyor: Conveyor | None
+    #: The record queued last (the one that may track a conveyor).
+    _latest: Move | None
     _heading: np.ndarray | None
     _wrench_of: Callable[[Sequence[int]], np.ndarray] | None
 
@@ -66,6 +95,8 @@ class ArmMoves:
         def config(self, q: np.ndarray | None = None) -> str: ...
         def joints_text(self, q: np.ndarray) -> str: ...
         def pose_text(self, t: np.ndarray) -> str: ...
+        def _time_now(self) -> float: ...
+        def _sample_time(self, sample: int) -> float: ...
 
     def _powered_evaluator(self, what: str) -> Evaluator:
         fault = self.station.fault
@@ -84,15 +115,24 @@ class ArmMoves:
         ev = self._powered_evaluator(what)
         busy = self.state != "idle"
         try:
-            ev.queue(spec)
+            self._latest = ev.queue(spec)
         except RecordError as exc:
             why = str(exc).removeprefix(f"{what}: ").removeprefix("refused: ")
             raise CommandError(f"{self.name} {what}: refused: {why}; nothing moved") from None
+        tracking = self.state == "tracking"
         self.last_stop = ""
         self._heading = end
-        if self.state == "idle":
+        if self.state in ("idle", "tracking"):
             self.state = "moving"
-        return f"queued: {to}; it blends into the running move" if busy else f"moving to {to}"
+        if tracking:
+            return f"leaving the moving frame: moving to {to}"
+        if not busy:
+            return f"moving to {to}"
+        if spec.buffer == "aborting":
+            return f"aborting the running move: braking into the move to {to}"
+        if spec.buffer == "buffered":
+            return f"queued: {to}; it starts when the running move is at rest on its target"
+        return f"queued: {to}; it blends into the running move"
 
     def _queue(self, q: np.ndarray, what: str, options: dict[str, Any] | None = None) -> str:
         """Queue a joint move to ``q`` (rad, m); refused with the reason, nothing moved."""
@@ -141,7 +181,13 @@ class ArmMoves:
     def _options(self, what: str, text: str | None) -> dict[str, Any]:
         """The motion record's fields that OPTIONS set (see :data:`OPTIONS_HELP`)."""
         out: dict[str, Any] = {}
-        for word in (text or "").split():
+        words = (text or "").split()
+        while words:
+            word = words.pop(0)
+            if word.lower() == "comply":
+                out["comply"] = self._comply_words(what, words[:2])
+                del words[:2]
+                continue
             key, eq, value = word.partition("=")
             key = key.lower()
             try:
@@ -153,14 +199,39 @@ class ArmMoves:
             elif key == "force" and 0.0 < v <= 1e5 and self._wrench_of is not None:
                 out["force_limits"] = (v, v, v, math.inf, math.inf, math.inf)
             elif key == "blend" and 0.0 <= v <= 1e4:
-                if v == 0.0:
+                if v <= BLEND_SERVO_MM:  # no room left beside the servo's tracking
                     out["buffer"] = "buffered"
                 else:
-                    out["tolerance"] = v * 1e-3
+                    out["tolerance"] = (v - BLEND_SERVO_MM) * 1e-3
+            elif key == "buffer" and value.lower() in _BUFFER_MODES:
+                out["buffer"] = value.lower()
             else:
                 raise CommandError(f"{self.name} {what}: {word[:40]!r} is not an option: "
                                    f"{OPTIONS_HELP} nothing moved")
         return out
+
+    def _comply_words(self, what: str, words: list[str]) -> Comply:
+        """``comply AXES N[,N..]`` of movel's OPTIONS (see :data:`COMPLY_HELP`)."""
+        who = f"{self.name} {what}: comply"
+        if what != "movel":
+            raise CommandError(f"{who}: only movel complies (its directions are the tool "
+                               "frame's on a straight line); nothing moved")
+        if self._wrench_of is None:
+            raise CommandError(f"{who}: refused: this arm has no wrist force sensor; "
+                               "nothing moved")
+        if len(words) != 2:
+            raise CommandError(f"{who}: {COMPLY_HELP} nothing moved")
+        axes, forces = words
+        try:
+            values = [float(v) for v in forces.split(",")]
+            if not all(math.isfinite(v) for v in values):
+                raise ValueError(forces)
+            force: float | list[float] = values[0] if len(values) == 1 else values
+            return Comply(axes, force)
+        except ValueError as exc:
+            why = str(exc).removeprefix("comply: ") if isinstance(exc, RecordError) else (
+                f"{forces[:40]!r} is not newtons")
+            raise CommandError(f"{who}: {why}; {COMPLY_HELP} nothing moved") from None
 
     def solve(self, target: np.ndarray, config: str | None) -> np.ndarray:
         """Joint values putting the tool at ``target`` (4, 4): the closed form in
@@ -255,7 +326,8 @@ class ArmMoves:
             config, options = None, f"{config} {options or ''}"
         opts = self._options("moveto", options)
         pose = _pose("moveto", self.name, x, y, z, rx, ry, rz)
-        q = self.solve(self.coord_frame @ pose @ inverse(self.tool_frame), config)
+        coord = self.conveyor.pose_now() if self.conveyor is not None else self.coord_frame
+        q = self.solve(coord @ pose @ inverse(self.tool_frame), config)
         return self._queue(q, "moveto", opts)
 
     @command(Arg("X", float, units="mm"), Arg("Y", float, units="mm"),
@@ -271,19 +343,30 @@ class ArmMoves:
         axis on the way (Paul's drive transform); Cartesian and joint limits
         both kept.  A line that leaves the reach, crosses a joint limit or
         passes a singularity is refused before it starts, naming where;
-        nothing moves.  Queued moves blend.  OPTIONS as movej's."""
+        nothing moves.  Queued moves blend.  OPTIONS as movej's, and
+        comply AXES N[,N..]: the tool frame's AXES (some of x y z) held at N
+        newtons (the force the tool exerts along +axis; the wrist sensor
+        measures it), the other directions on the line (comply z 5 presses
+        5 N along the tool's z while moving in x and y); the next move is
+        given when it has ended.  While the conveyor runs (NAME conveyor),
+        the target is a point on it: the tool reaches it and then follows
+        it ('tracking')."""
         opts = self._options("movel", options)
         pose = _pose("movel", self.name, x, y, z, rx, ry, rz)
+        belt = self.conveyor
+        coord = (belt.transform if belt is not None
+                 else Transform.const("COORD", self.coord_frame))
         eq = PositionEquation("movel", [Transform.varb("T6"), Transform.const("TOOL",
                                                                                self.tool_frame)],
-                              [Transform.const("COORD", self.coord_frame),
-                               Transform.varb("POS", pose)])
-        t6 = self.coord_frame @ pose @ inverse(self.tool_frame)
+                              [coord, Transform.varb("POS", pose)])
+        here = belt.pose_now() if belt is not None else self.coord_frame
+        t6 = here @ pose @ inverse(self.tool_frame)
         end = self.chain.ik(t6, self.heading())
         return self._queue_spec(MotionSpec(mode="cart", equation=eq, name="movel", **opts),
                                 "movel",
                                 end.q.copy() if end.ok else None,
-                                f"tool {self.pose_text(self.coord_frame @ pose)}")
+                                f"tool {self.pose_text(here @ pose)}"
+                                + (" on the moving conveyor" if belt is not None else ""))
 
     @command(Arg("X", float, lo=-5000.0, hi=5000.0, units="mm"),
              Arg("Y", float, lo=-5000.0, hi=5000.0, units="mm"),
@@ -312,16 +395,51 @@ class ArmMoves:
         """NAME coord X Y Z RX RY RZ: the frame moveto and movel targets are given in (001's COORD).
 
         Its pose in the base's frame, mm and degrees (URDF rpy); 0 0 0 0 0 0
-        is the base.  Refused while a move runs."""
+        is the base.  Refused while a move runs; a running conveyor stops
+        (its frame is the one given now)."""
         self._frames_free("coord")
         self.coord_frame = _pose("coord", self.name, x, y, z, rx, ry, rz)
+        self.conveyor = None
         return f"coordinate frame {self.pose_text(self.coord_frame)} (in the base's frame)"
+
+    @command(Arg("VX", float, lo=-CONVEYOR_MAX_MM_S, hi=CONVEYOR_MAX_MM_S, units="mm/s"),
+             Arg("VY", float, lo=-CONVEYOR_MAX_MM_S, hi=CONVEYOR_MAX_MM_S, units="mm/s"),
+             Arg("VZ", float, lo=-CONVEYOR_MAX_MM_S, hi=CONVEYOR_MAX_MM_S, units="mm/s"),
+             name="conveyor")
+    def set_conveyor(self, vx: float, vy: float, vz: float) -> str:
+        """NAME conveyor VX VY VZ: COORD moves at (VX, VY, VZ) mm/s in the base's frame (a belt).
+
+        A moving frame (001's functional COORD), starting where COORD is
+        (NAME coord).  movel targets are then points on the belt: the tool
+        reaches its point and follows it, 'tracking' (wait returns then; a
+        new move leaves the belt, stop brakes the joints to rest).  moveto
+        and movej stay joint moves to where the frame is when they are
+        given.  0 0 0 stops the belt where it is (COORD keeps that pose).
+        A point carried where the arm cannot follow (out of reach, or a
+        joint beyond its velocity limit) brakes the arm to rest, saying so.
+        Refused while a move runs or the tool tracks."""
+        self._frames_free("conveyor")
+        for axis, value in (("VX", vx), ("VY", vy), ("VZ", vz)):
+            if not math.isfinite(value):
+                raise CommandError(f"{self.name} conveyor: {axis} must be a finite number of "
+                                   "mm/s; nothing changed")
+        belt = self.conveyor
+        if belt is not None:  # the belt's frame where it is now
+            self.coord_frame = belt.pose_now()
+            self.conveyor = None
+        velocity = np.array([vx, vy, vz]) * 1e-3
+        if not velocity.any():
+            return (f"conveyor stopped; coordinate frame {self.pose_text(self.coord_frame)} "
+                    "(in the base's frame)")
+        self.conveyor = Conveyor(self.coord_frame, velocity, self._time_now, self._sample_time)
+        return (f"conveyor at ({vx:g}, {vy:g}, {vz:g}) mm/s from "
+                f"{self.pose_text(self.coord_frame)}: movel targets ride on it")
 
     def _frames_free(self, what: str) -> None:
         if self.state != "idle":
-            raise CommandError(f"{self.name} {what}: refused while a move runs (the queued "
-                               "targets were given in the frames as they are); wait or stop "
-                               "first; nothing changed")
+            raise CommandError(f"{self.name} {what}: refused while a move runs or the tool "
+                               "tracks the conveyor (the queued targets were given in the "
+                               "frames as they are); wait or stop first; nothing changed")
 
 
 def _pose(verb: str, name: str, x: float, y: float, z: float, rx: float, ry: float,
@@ -331,3 +449,30 @@ def _pose(verb: str, name: str, x: float, y: float, z: float, rx: float, ry: flo
         if not math.isfinite(v):
             raise CommandError(f"{name} {verb}: {axis} must be a finite number of mm")
     return transform(np.array([x, y, z]) * 1e-3, np.radians([rx, ry, rz]))
+
+
+class Conveyor:
+    """A conveyor: COORD translating at ``velocity`` (m/s, base frame) from
+    ``origin`` (4, 4) at loop time ``start`` (s).  Its :attr:`transform` is a
+    functional transform of the evaluator's sample, whose time
+    ``sample_time(sample)`` (s, loop time) the arm gives; ``now()`` is the
+    loop time."""
+
+    def __init__(self, origin: np.ndarray, velocity: np.ndarray, now: Callable[[], float],
+                 sample_time: Callable[[int], float]) -> None:
+        self.origin = origin.copy()
+        self.velocity = np.asarray(velocity, dtype=float).copy()
+        self._now = now
+        self.start = now()
+        self._sample_time = sample_time
+        self.transform = Transform.functional(
+            "COORD", lambda sample: self.pose_at(sample_time(sample)), self.origin)
+
+    def pose_at(self, t: float) -> np.ndarray:
+        """COORD at loop time ``t`` (s)."""
+        out = self.origin.copy()
+        out[:3, 3] += self.velocity * (t - self.start)
+        return out
+
+    def pose_now(self) -> np.ndarray:
+        return self.pose_at(self._now())

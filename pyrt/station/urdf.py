@@ -266,8 +266,11 @@ A 1 kHz servo (PID with gravity and dynamics feed-forward) and a 100 Hz
 trajectory task.  Commands, on the arm named after the URDF's robot (NAME):
 NAME movej Q1 .. Qn (degrees, mm for a prismatic joint), NAME moveto X Y Z
 RX RY RZ [CONFIG] (mm, degrees: URDF rpy), NAME movel X Y Z RX RY RZ (a
-straight line), NAME tool / coord (001's TOOL and COORD), NAME where;
-queued moves blend.
+straight line), NAME tool / coord (001's TOOL and COORD), NAME conveyor
+VX VY VZ (COORD moving, mm/s: movel targets ride on it), NAME where;
+queued moves blend.  OPTIONS: speed=F blend=MM force=N
+buffer=aborting|buffered|blending, and on movel comply AXES N (a force
+held along the tool's axes).  The servo's gains are parameters (get/set).
 An unreachable pose or a target beyond a joint limit is refused, nothing
 moves.  A following error above 2 degrees or a joint beyond its limits
 stops every joint in the same tick; ack clears it.  The truth: sim show,

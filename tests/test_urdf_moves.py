@@ -1,0 +1,206 @@
+"""pyrt urdf's console words for moving frames and buffer modes: the conveyor and PLCopen's
+aborting, checked against the simulated arm's truth."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pyrt.errors import CommandError
+from pyrt.kinematics import transform
+from pyrt.kinematics.puma import puma560
+from pyrt.scheduler import Loop, SimClock
+from pyrt.station.urdf import build_urdf
+
+CHAIN = puma560()
+#: How far the true tool may be from its point on a moving conveyor while tracking (mm).
+TRACK_MM = 2.0
+
+
+def _target(x, y, z, rx, ry, rz) -> np.ndarray:
+    return transform(np.array([x, y, z]) * 1e-3, np.radians([rx, ry, rz]))
+
+
+@pytest.fixture(scope="module")
+def puma():
+    """One PUMA station on simulated time for this module."""
+    station = build_urdf(Loop(SimClock()))
+    runner = station.start()
+    assert runner.wait_until(lambda: station.arm.powered and not station.busy(), 5.0)
+    yield station, runner
+    station.close()
+
+
+def _settle(station, runner) -> None:
+    assert runner.wait_until(lambda: not station.busy(), 60.0), "the move never ended"
+
+
+def _go(station, runner, pose) -> None:
+    """The tool to ``pose`` (mm, deg) by a joint move, righty-above-noflip, and at rest."""
+    q = CHAIN.closed_form.inverse(_target(*pose), "righty-above-noflip")
+    runner.call(station.arm.move_joints, *np.degrees(q).tolist())
+    _settle(station, runner)
+
+
+# -- the conveyor -----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("velocity", [(0.0, 50.0, 0.0), (-40.0, 0.0, 30.0)])
+def test_the_tool_tracks_its_point_on_the_conveyor_in_truth(puma, velocity):
+    """NAME conveyor at 50 mm/s, then movel to a point on the belt: once the tool has reached it (state tracking, wait returns), the simulated true tool stays within 2 mm of the point as the belt carries it for 2 s; stop brakes it to rest and holds; conveyor 0 0 0 leaves COORD where the belt took it."""
+    station, runner = puma
+    arm = station.arm
+    _go(station, runner, (500, 100, 400, 180, 20, 90))
+    said = runner.call(arm.set_conveyor, *velocity)
+    assert "conveyor at" in said
+    point = (450, -100, 350, 180, 20, 90)
+    assert "on the moving conveyor" in runner.call(arm.move_line, *point)
+    belt = arm.conveyor
+    assert belt is not None
+    # wait returns when the tool has reached its point and tracks it
+    _settle(station, runner)
+    assert arm.state == "tracking" and station.fault is None
+    assert station.last_stop().startswith("tracking"), station.last_stop()
+    want_local = _target(*point)
+    worst = [0.0]
+    t0 = runner.call(lambda: station.plant.truth().time)
+
+    def watch() -> bool:
+        tr = station.plant.truth()
+        want = (belt.pose_at(tr.time) @ want_local)[:3, 3]
+        worst[0] = max(worst[0], float(np.linalg.norm(tr.tool[:3, 3] - want)))
+        return tr.time - t0 >= 2.0
+
+    assert runner.wait_until(watch, 10.0)
+    assert worst[0] * 1e3 <= TRACK_MM, f"{worst[0] * 1e3:.3f} mm from the point on the belt"
+    moved = runner.call(lambda: station.plant.truth().tool[:3, 3].copy())
+    with pytest.raises(CommandError, match="tracks the conveyor"):
+        runner.call(arm.set_conveyor, 0, 0, 0)
+    assert "braking" in runner.call(station.stop)
+    _settle(station, runner)
+    assert station.fault is None and arm.powered and arm.state == "idle"
+    assert "stopped" in station.last_stop()
+    qd = runner.call(lambda: station.plant.truth().qd)
+    assert float(np.max(np.abs(qd))) < math.radians(0.5)
+    # the belt carried the tool along its velocity
+    assert np.dot(moved - (belt.pose_at(t0) @ want_local)[:3, 3], velocity) > 0
+    said = runner.call(arm.set_conveyor, 0, 0, 0)
+    assert "conveyor stopped" in said and arm.conveyor is None
+    at = runner.call(lambda: arm.coord_frame.copy())
+    assert np.linalg.norm(at[:3, 3]) > 0.05  # COORD kept where the belt took it
+    runner.call(arm.set_coord, 0, 0, 0, 0, 0, 0)
+
+
+def test_a_new_move_leaves_the_conveyor_and_ends_at_its_target_in_truth(puma):
+    """While the tool tracks the conveyor, a movej leaves it (continuously: no fault, no following-error trip) and ends at its target at rest in truth, 'at target'."""
+    station, runner = puma
+    arm = station.arm
+    _go(station, runner, (500, 100, 400, 180, 20, 90))
+    runner.call(arm.set_conveyor, 0, 50, 0)
+    runner.call(arm.move_line, 450, -100, 350, 180, 20, 90)
+    _settle(station, runner)
+    assert arm.state == "tracking"
+    runner.sleep(0.5)
+    assert "leaving the moving frame" in runner.call(arm.move_joints, 0, 45, -180, 0, -45, 0)
+    _settle(station, runner)
+    assert station.fault is None and station.last_stop() == "at target"
+    q = runner.call(lambda: station.plant.truth().q)
+    assert np.degrees(np.abs(q - np.radians([0, 45, -180, 0, -45, 0]))).max() < 0.05
+    runner.call(arm.set_conveyor, 0, 0, 0)
+    runner.call(arm.set_coord, 0, 0, 0, 0, 0, 0)
+
+
+def test_the_conveyor_word_is_refused_while_a_move_runs_and_for_bad_speeds(puma):
+    """conveyor while a move runs is refused (nothing changes); a speed beyond 500 mm/s is out of its range; help gives the grammar and the range."""
+    station, runner = puma
+    arm = station.arm
+    _settle(station, runner)
+    runner.call(arm.move_joints, 20, 60, -160, 10, -30, 10)
+    with pytest.raises(CommandError, match="refused while a move runs"):
+        runner.call(arm.set_conveyor, 0, 50, 0)
+    assert arm.conveyor is None
+    _settle(station, runner)
+    rec = arm.find_command("conveyor")
+    with pytest.raises(CommandError):
+        rec.parse(["0", "600", "0"], "0 600 0")
+    assert "conveyor VX VY VZ" in rec.help and "-500..500 mm/s" in rec.help
+    runner.call(arm.move_joints, 0, 45, -180, 0, -45, 0)
+    _settle(station, runner)
+
+
+# -- PLCopen's buffer modes on the console ----------------------------------------------------
+
+
+def _peak_deviation(station, runner, first, second, option):
+    """Queue movej ``first``, then after 0.4 s movej ``second`` with ``option``: (how near the
+    truth came to ``first`` (deg), the reply to the second, the last stop)."""
+    arm = station.arm
+    runner.call(arm.move_joints, 0, 45, -180, 0, -45, 0)
+    _settle(station, runner)
+    runner.call(arm.move_joints, *first)
+    runner.sleep(0.4)
+    said = runner.call(arm.move_joints, *second, option)
+    nearest = [math.inf]
+
+    def watch() -> bool:
+        q = np.degrees(station.plant.truth().q)
+        nearest[0] = min(nearest[0], float(np.max(np.abs(q - first))))
+        return not station.busy()
+
+    assert runner.wait_until(watch, 30.0)
+    assert station.fault is None
+    q = np.degrees(runner.call(lambda: station.plant.truth().q))
+    assert float(np.max(np.abs(q - second))) < 0.05  # on the second target in truth
+    return nearest[0], said, station.last_stop()
+
+
+def test_aborting_replaces_the_running_move_at_once_and_buffered_waits_for_it(puma):
+    """movej buffer=aborting given while a long move runs replaces it at once (the truth turns away and never comes near the first target; 'aborting' is said, and the move ends 'at target' on the new one); buffer=buffered passes through the first target exactly, then goes on."""
+    station, runner = puma
+    first = (90, 100, -100, 60, -60, 90)
+    second = (-20, 40, -170, -20, -30, -20)
+    near, said, last = _peak_deviation(station, runner, first, second, "buffer=aborting")
+    assert "aborting the running move" in said
+    assert near > 20.0, near
+    assert last == "at target"
+    near, said, last = _peak_deviation(station, runner, first, second, "buffer=buffered")
+    assert "at rest on its target" in said
+    assert near < 0.05, near
+    assert last == "at target"
+
+
+def test_a_bad_buffer_mode_is_refused_and_the_options_say_the_modes(puma):
+    """buffer=fast is refused naming the options (nothing moves); movej's help gives buffer=MODE with aborting, buffered and blending."""
+    station, runner = puma
+    arm = station.arm
+    _settle(station, runner)
+    with pytest.raises(CommandError, match="not an option") as info:
+        runner.call(arm.move_joints, 10, 50, -170, 0, -40, 0, "buffer=fast")
+    assert "nothing moved" in str(info.value)
+    assert not runner.call(station.busy)
+    text = arm.find_command("movej").help
+    assert all(w in text for w in ("buffer=MODE", "aborting", "buffered", "blending"))
+
+
+def test_a_conveyor_that_carries_the_point_where_the_arm_cannot_follow_brakes_it(puma):
+    """A conveyor at 100 mm/s carries the tracked point toward the edge of the reach: before a joint would need more than its velocity limit (or the point leaves the reach) the arm is braked to rest and holds, without a fault; the move ends saying why; the truth is at rest."""
+    station, runner = puma
+    arm = station.arm
+    _go(station, runner, (500, 100, 400, 180, 20, 90))
+    runner.call(arm.set_conveyor, 0, 100, 0)
+    runner.call(arm.move_line, 450, -100, 350, 180, 20, 90)
+    _settle(station, runner)
+    assert arm.state == "tracking"
+    assert runner.wait_until(lambda: arm.state != "tracking", 20.0)
+    _settle(station, runner)
+    assert station.fault is None and arm.powered
+    said = station.last_stop()
+    assert said.startswith("stopped: the moving frame carried the tool's point where the arm "
+                           "cannot follow"), said
+    runner.sleep(0.2)
+    qd = runner.call(lambda: station.plant.truth().qd)
+    assert float(np.max(np.abs(qd))) < math.radians(0.5)
+    runner.call(arm.set_conveyor, 0, 0, 0)
+    runner.call(arm.set_coord, 0, 0, 0, 0, 0, 0)
