@@ -160,3 +160,17 @@ def test_epics_serves_a_setpoint_pv_for_every_gain(puma):
     finally:
         epics.close()
         server.close()
+
+
+def test_on_hardware_a_the_host_servo_s_gains_are_not_offered():
+    """On hardware (a) the board servos with the gains it was built with: get lists no host gain and set refuses one, so nothing tunes a servo that does not run."""
+    station = build_urdf(Loop(SimClock(), period_ns=10_000_000), hardware="a")
+    try:
+        runner = station.start()
+        names = [f"{c.name}.{p.name}" for c in station.components() for p in c.params()]
+        assert not [n for n in names if n.rsplit(".", 1)[1] in
+                    ("kp", "ki", "kd", "ilim", "kv", "ka", "kff", "bandwidth")]
+        with pytest.raises(CommandError):
+            runner.call(station.param, f"{station.arm.name}.bandwidth")
+    finally:
+        station.close()

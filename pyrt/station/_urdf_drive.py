@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from pyrt.boards.armdrive import DAC_FULL_SCALE, ENABLED, FAULT, JOINT_SHIFT
-from pyrt.component import Signal
+from pyrt.component import Param, Signal
 from pyrt.errors import ConfigError
 from pyrt.motion import Evaluator
 from pyrt.scheduler import Task
@@ -73,6 +73,11 @@ def _i32(v: int) -> int:
 
 class DriveJoint(ArmJoint):
     """One joint of a hardware (a) arm: its reflex switches the board's power stage off."""
+
+    def params(self) -> list[Param]:
+        """None: the servo runs on the board, tuned when the board is built; the
+        host's gains would tune a servo that does not run."""
+        return []
 
     def reflex(self) -> None:
         """Enable 0 (every amplifier of the board off), now."""
@@ -117,6 +122,11 @@ class DrivenArm(UrdfArm):
     def _felim_rad(self) -> list[float]:
         return [FOLLOWING_ERROR_DEG * 1e-3 if p else math.radians(FOLLOWING_ERROR_DEG)
                 for p in self.prismatic]
+
+    def params(self) -> list[Param]:
+        """None: the board's servo is tuned when the board is built (see
+        :class:`DriveJoint.params`)."""
+        return []
 
     def signals(self) -> list[Signal]:
         return [*super().signals(),
