@@ -112,6 +112,7 @@ class TestUrdfHardwareAConformance(TestUrdfConformance):
         "UrdfSim.table": [["-2000"], ["off"]],
         "DrivenArm.tool": [["0", "0", "50", "0", "0", "0"], ["0"] * 6],
         "DrivenArm.coord": [["0", "0", "50", "0", "0", "0"], ["0"] * 6],
+        "DrivenArm.conveyor": [["0", "50", "0"], ["0"] * 3],
     }
 
     def build(self, tmp_path):
