@@ -36,6 +36,7 @@ from typing import Any, TextIO
 from pyrt.cli._serve import read_token
 from pyrt.client import Client, ServerError, parse_address
 from pyrt.console import Console
+from pyrt.errors import UsageError
 
 __all__ = ["RemoteShell", "add_parser", "run"]
 
@@ -275,11 +276,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         host, port = parse_address(args.address)
     except ValueError as exc:
-        print(f"pyrt connect: {exc}", file=sys.stderr)
-        return 2
+        raise UsageError(str(exc)) from None
     if args.hz < 0 or args.hz > 50:
-        print(f"pyrt connect: --hz must be 0..50, got {args.hz:g}", file=sys.stderr)
-        return 2
+        raise UsageError(f"--hz must be 0..50, got {args.hz:g}")
     token = read_token(args.token_file)
     try:
         client = Client(host, port, timeout_s=args.timeout)

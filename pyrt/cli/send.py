@@ -120,8 +120,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         host, port = parse_address(args.address)
     except ValueError as exc:
-        print(f"pyrt send: {exc}", file=sys.stderr)
-        return 2
+        raise UsageError(str(exc)) from None
     if bool(args.words) == bool(args.file):
         raise UsageError("give a COMMAND or -f FILE (one of them)")
     if args.keep_going and not args.file:

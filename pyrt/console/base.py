@@ -351,6 +351,8 @@ class Console:
             if self._failures() > before and number:
                 why = self._why(guard, "a fault") if guard is not None else "a fault"
                 self._line_failed(number, last, why, last=True)
+        else:
+            self.flush_messages()  # what came after the failure (a black box line) is shown
         if guard is not None:
             guard.kept = None
         out.flush()

@@ -69,7 +69,15 @@ from pyrt.db import (
     station_directory,
 )
 from pyrt.db import Station as StationDB
-from pyrt.errors import BoardError, CommandError, ConfigError, DiskError, NativeError, PyrtError
+from pyrt.errors import (
+    BoardError,
+    CommandError,
+    ConfigError,
+    DiskError,
+    NativeError,
+    PyrtError,
+    UsageError,
+)
 from pyrt.native import FuzzyParams, NativeInputError
 from pyrt.robots.av import AV
 from pyrt.robots.axis import Axis, tension_alarms
@@ -885,8 +893,8 @@ station's.
     def configure(self, args: argparse.Namespace, say: Callable[[str], None]) -> None:
         """Find, seed or copy the station database; ``args.directory`` is where it is."""
         if args.db and args.init_db:
-            raise ConfigError("give --db DIR (an existing database) or --init-db DIR (seed "
-                              "one), not both")
+            raise UsageError("give --db DIR (an existing database) or --init-db DIR (seed "
+                             "one), not both")
         if args.init_db:
             args.station = args.station or "prototype"
             try:
@@ -900,8 +908,8 @@ station's.
             directory = Path(args.db)
             if not (directory / FILES["POLYAXIS"]).is_file():
                 what = "no such directory" if not directory.is_dir() else "no station database"
-                raise ConfigError(f"{what}; seed it with 'pyrt manipulator --init-db {args.db} "
-                                  f"--station {'|'.join(STATIONS)}'", args.db)
+                raise UsageError(f"--db {args.db}: {what}; seed it with 'pyrt manipulator "
+                                 f"--init-db {args.db} --station {'|'.join(STATIONS)}'")
         else:
             args.station = args.station or "prototype"
             directory = default_working_directory(args.station)
