@@ -288,24 +288,33 @@ class Console:
                 return t[:ECHO_MAX]
         return fallback
 
+    def _mark(self, guard: _Output | None) -> int:
+        """Start keeping a line's output; the failures counted so far."""
+        if guard is not None:
+            guard.mark()
+        return self._failures()
+
+    def _failed_since(self, before: int, guard: _Output | None, number: int, text: str,
+                      fallback: str, *, at_end: bool = False) -> bool:
+        """If line ``number`` failed since ``before`` (its own failure, or a fault
+        that came after it), name it; True when the script stops there."""
+        if self._failures() <= before or not number:
+            return False
+        why = self._why(guard, fallback) if guard is not None else fallback
+        return self._line_failed(number, text, why, last=at_end)
+
     def _run_lines(self) -> int:
         out = self.stdout
         mine = getattr(self.shell, "stdout", None)  # where the line's output goes
         guard = mine if isinstance(mine, _Output) else (
             out if isinstance(out, _Output) else None)
-        number = 0
-        last = ""
-        stopped = False
+        number, last, stopped = 0, "", False
         while True:
-            before = self._failures()
-            if guard is not None:
-                guard.mark()
-            self.flush_messages()
-            if self._failures() > before and number:  # a fault since the last line: its
-                why = self._why(guard, "a fault") if guard is not None else "a fault"
-                if self._line_failed(number, last, why):
-                    stopped = True
-                    break
+            before = self._mark(guard)
+            self.flush_messages()  # a fault since the last line is that line's
+            if self._failed_since(before, guard, number, last, "a fault"):
+                stopped = True
+                break
             out.write(self.shell.prompt)
             out.flush()
             line = self.stdin.readline(MAX_LINE + 1)
@@ -332,27 +341,17 @@ class Console:
                 continue
             out.write(_echo(line))
             last = line.rstrip("\r\n")
-            before = self._failures()
-            if guard is not None:
-                guard.mark()
+            before = self._mark(guard)
             ended = self.shell.onecmd(last)
-            if self._failures() > before:
-                why = self._why(guard, "failed") if guard is not None else "failed"
-                if self._line_failed(number, last, why):
-                    stopped = True
-                    break
+            if self._failed_since(before, guard, number, last, "failed"):
+                stopped = True
+                break
             if ended:
                 break
+        before = self._mark(guard)
+        self.flush_messages()  # what came after the last line: a fault is its failure
         if not stopped:
-            before = self._failures()
-            if guard is not None:
-                guard.mark()
-            self.flush_messages()  # a fault after the last line is that line's
-            if self._failures() > before and number:
-                why = self._why(guard, "a fault") if guard is not None else "a fault"
-                self._line_failed(number, last, why, last=True)
-        else:
-            self.flush_messages()  # what came after the failure (a black box line) is shown
+            self._failed_since(before, guard, number, last, "a fault", at_end=True)
         if guard is not None:
             guard.kept = None
         out.flush()
