@@ -719,7 +719,7 @@ def test_manipulator_init_db_seeds_the_directory_and_runs_on_it(tmp_path: Path) 
     again = subprocess.run([sys.executable, "-m", "pyrt", "manipulator", "--db", str(target),
                             "--init-db", str(target), "--speed", "max"], input="",
                            capture_output=True, text=True, timeout=60)
-    assert again.returncode == 1 and "not both" in again.stderr
+    assert again.returncode == 2 and "error: give --db DIR" in again.stderr  # a usage error
 
 
 # -- bounded reads and the directory lock ------------------------------------------
