@@ -134,6 +134,10 @@ def test_send_a_script_stops_at_the_first_refused_line(tmp_path):
         assert kept.returncode == 1
         assert "0000" in kept.stdout.splitlines()
         assert "stdin: 2 lines failed: 1, 3" in kept.stderr
+        bad_token = _pyrt("send", f"{sv.host}:{sv.port}", "-f", "-",
+                          stdin="AUTH not-the-token-0123456789\nW\n", cwd=tmp_path)
+        assert bad_token.returncode == 1 and "stdin:1: 'AUTH ...' failed" in bad_token.stderr
+        assert "not-the-token" not in bad_token.stderr
         good = _pyrt("send", f"{sv.host}:{sv.port}", "-f", "-", stdin="W\nW\n", cwd=tmp_path,
                      env_extra={"PYRT_TOKEN": TOKEN})
         assert good.returncode == 0 and good.stdout.splitlines() == ["0000", "0000"]

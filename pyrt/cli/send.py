@@ -102,7 +102,8 @@ def _run_script(client: Client, args: argparse.Namespace, out: TextIO) -> int:
             _emit(None, out)
             failed.append(number)
             stop = "" if args.keep_going else "; the script stops here (-k runs on)"
-            print(f"pyrt send: {where}:{number}: {text[:200]!r} failed: {exc}{stop}",
+            shown = "AUTH ..." if text.split()[0].upper() == "AUTH" else text[:200]  # no token
+            print(f"pyrt send: {where}:{number}: {shown!r} failed: {exc}{stop}",
                   file=sys.stderr, flush=True)
             if not args.keep_going:
                 return 1
