@@ -116,7 +116,7 @@ def check_journal(path: Path, fault) -> None:
 def check_csv(path: Path, names: list[str], rate_hz: float) -> np.ndarray:
     """Header t_s and every signal; rows N s before the fault to AFTER_S after, at the rate."""
     header, table = read_csv(path)
-    assert header == ["t_s", *names]
+    assert [h.split(" [")[0] for h in header] == ["t_s", *names]  # each with its units
     t = table[:, 0]
     dt = 1.0 / rate_hz
     assert -N_S <= t[0] <= -N_S + dt + 1e-9
@@ -521,7 +521,8 @@ def test_pyrt_gripper_writes_the_black_box_of_a_fault_and_names_it(given, tmp_pa
     the files are there when the run ends; --black-box off: neither."""
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr("sys.stdin", io.StringIO(SCRIPT))
-    assert main(["gripper", "--speed", "max", "--black-box", given]) == 0
+    # the fault fails the piped script (status 1, docs/scripts.md); -k runs it to its quit
+    assert main(["gripper", "--speed", "max", "--black-box", given, "-k"]) == 1
     out = capsys.readouterr().out.splitlines()
     k = next(i for i, line in enumerate(out) if line.startswith("fault: P move oscillating"))
     found = sorted(p.suffix for p in tmp_path.iterdir() if p.name.startswith("gripper-fault-1-"))
@@ -535,3 +536,34 @@ def test_pyrt_gripper_writes_the_black_box_of_a_fault_and_names_it(given, tmp_pa
     assert found == [".csv", ".pj", ".png"]
     _, table = read_csv(Path(m.group(2) + ".csv"))
     assert table[0, 0] == pytest.approx(-2.0, abs=0.011) and table[-1, 0] >= -0.011
+
+
+def test_the_csv_header_gives_each_signals_units_as_the_scope_does():
+    """The black box's CSV header: t_s, then OBJECT.SIGNAL [UNITS] (none where a signal has none)."""
+    from pyrt.station.blackbox import _csv
+
+    data = _csv(np.array([-0.1, 0.0]), np.array([[1.0, 2.0], [3.0, 4.0]]),
+                ["gripper.encoder", "gripper.flags"], ["counts", ""]).decode()
+    assert data.splitlines()[0] == "t_s,gripper.encoder [counts],gripper.flags"
+    assert data.splitlines()[1] == "-0.1,1,2"
+
+
+def test_the_png_title_is_the_whole_fault_wrapped_to_the_figures_width():
+    """A long fault text is kept whole, on lines that each fit the PNG's width."""
+    pytest.importorskip("matplotlib")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from pyrt.station.blackbox import _title
+
+    fault = ("gripper: STALL: P move oscillating about the target: error ±367 counts, 4 sign "
+             "changes without decay; schedule SYSCLKPD 04 MVJAWSPD 0C SENSORPD 0A WTCHJWSPD 0B "
+             "at tick 2543 (7.711845 s); every motor stopped")
+    title = _title(fault)
+    assert " ".join(title.split()) == " ".join(fault.split())
+    fig = Figure(figsize=(10, 3))
+    canvas = FigureCanvasAgg(fig)
+    shown = fig.suptitle(title, fontsize="small")
+    canvas.draw()
+    box = shown.get_window_extent(canvas.get_renderer())
+    assert box.x0 >= 0 and box.x1 <= fig.bbox.width

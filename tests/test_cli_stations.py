@@ -111,7 +111,8 @@ def test_pyrt_run_a_function_factory_from_any_module():
     """pyrt run MODULE:FUNCTION runs a piped script on the station it builds."""
     run = _pyrt("run", "_tiny_station:build", "--speed", "max",
                 stdin="counter step 5\nsleep 0.01\nstatus counter\ncounter step 500\nquit\n")
-    assert run.returncode == 0, run.stderr
+    assert run.returncode == 1, run.stderr  # the refused last line fails the script
+    assert "stdin:4: 'counter step 500' failed" in run.stderr
     out = run.stdout
     assert "counter.count = " in out
     count = int(out.split("counter.count = ")[1].split()[0])

@@ -88,3 +88,22 @@ def test_usage_errors_found_by_a_commands_own_checks_exit_2_as_argparses_do(argv
     assert done.returncode == 2, done.stderr
     assert message in done.stderr and "Traceback" not in done.stderr
     assert _pyrt("demo", "--no-such-option").returncode == 2  # argparse's own, the same
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["manipulator", "--db", "a", "--init-db", "b"],
+     "pyrt manipulator: error: give --db DIR (an existing database) or --init-db DIR"),
+    (["manipulator", "--db", "/nonexistent/db"],
+     "pyrt manipulator: error: --db /nonexistent/db: no such directory; seed it with"),
+    (["top", "5050", "--hz", "0"], "pyrt top: error: --hz must be 0.5..20, got 0"),
+    (["top", "5050", "--count", "0"], "pyrt top: error: --count must be >= 1, got 0"),
+    (["connect", "5050", "--hz", "99"], "pyrt connect: error: --hz must be 0..50, got 99"),
+    (["send", "no:port:x", "W"], "pyrt send: error: "),
+    (["top", "no:port:x"], "pyrt top: error: "),
+])
+def test_every_commands_option_checks_read_and_exit_as_argparses(argv, message):
+    """The semantic checks of manipulator, top, connect and send: 'pyrt CMD: error: ...',
+    exit 2, as argparse's own usage errors (some were exit 1 or without 'error:')."""
+    done = _pyrt(*argv)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.startswith(message), done.stderr

@@ -110,11 +110,17 @@ def test_a_piped_auth_is_refused_and_never_takes_the_next_line_as_the_token(tmp_
     with served(wall=True) as sv:
         env = {k: v for k, v in os.environ.items() if k != "PYRT_TOKEN"}
         done = subprocess.run(
-            [sys.executable, "-m", "pyrt", "connect", f"{sv.host}:{sv.port}"],
+            [sys.executable, "-m", "pyrt", "connect", f"{sv.host}:{sv.port}", "-k"],
             input=f"auth\nstatus\nauth {TOKEN}\nP-1B86\nexit\n", capture_output=True,
             text=True, timeout=60, env=env, cwd=tmp_path)
-        assert done.returncode == 0, done.stderr
-        assert "GetPassWarning" not in done.stderr and done.stderr == ""
+        # the refused lines fail the script (-k: it runs on), named on stderr
+        assert done.returncode == 1, done.stderr
+        assert "GetPassWarning" not in done.stderr
+        assert done.stderr.splitlines() == [
+            ln for ln in done.stderr.splitlines() if ln.startswith("pyrt connect: stdin:")]
+        assert "stdin:1: 'auth' failed" in done.stderr
+        assert "stdin:3: 'auth ...' failed" in done.stderr and TOKEN not in done.stderr
+        assert "stdin:4: 'P-1B86' failed" in done.stderr
         out = done.stdout
         assert ("gripper> auth\nerror: auth asks for the token on a terminal, and this input "
                 "is not one") in out

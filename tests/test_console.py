@@ -152,18 +152,18 @@ def test_prompt_toolkit_completer_replaces_the_partial_word():
 
 @pytest.mark.parametrize(("robot", "read"), [("gripper", "W"), ("manipulator", "status")])
 def test_a_byte_that_is_not_utf8_is_a_bad_command_not_a_crash(robot, read, tmp_path):
-    """'\\xff' on a strictly decoded stdin: one error line, the next command runs, exit 0."""
+    """'\\xff' on a strictly decoded stdin: one error line, the next command runs (-k), exit 1."""
     import os
     import subprocess
     import sys
 
     env = dict(os.environ, PYTHONIOENCODING="utf-8:strict", HOME=str(tmp_path),
                PYRT_HOME=str(tmp_path / "pyrt-home"))
-    done = subprocess.run([sys.executable, "-m", "pyrt", robot, "--speed", "max"],
+    done = subprocess.run([sys.executable, "-m", "pyrt", robot, "--speed", "max", "-k"],
                           input=b"\xff\xfe bad\n" + read.encode() + b"\n", env=env,
                           capture_output=True, timeout=120, cwd=tmp_path)
     out = done.stdout.decode()
-    assert done.returncode == 0, done.stderr.decode()[-2000:]
+    assert done.returncode == 1, done.stderr.decode()[-2000:]  # the bad line fails the script
     assert "UnicodeDecodeError" not in done.stderr.decode()
     assert "error: unknown command or object '\ufffd\ufffd'" in out
     assert out.count("error:") == 1 and f" {read}\n" in out

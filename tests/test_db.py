@@ -695,9 +695,10 @@ def test_manipulator_db_without_a_database_says_how_to_seed_it(tmp_path: Path, m
     target = tmp_path / "db"
     if make == "empty":
         target.mkdir()
-    assert main(["manipulator", "--db", str(target), "--speed", "max"]) == 1
+    # a --db that is not a database is a usage error (exit 2, as argparse's), changed with them
+    assert main(["manipulator", "--db", str(target), "--speed", "max"]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and str(target) in err
+    assert err.count("\n") == 1 and str(target) in err and "pyrt manipulator: error: " in err
     assert f"seed it with 'pyrt manipulator --init-db {target} --station prototype|sno'" in err
     assert target.exists() == (make == "empty") and not (target.exists() and any(target.iterdir()))
 
@@ -718,7 +719,7 @@ def test_manipulator_init_db_seeds_the_directory_and_runs_on_it(tmp_path: Path) 
     again = subprocess.run([sys.executable, "-m", "pyrt", "manipulator", "--db", str(target),
                             "--init-db", str(target), "--speed", "max"], input="",
                            capture_output=True, text=True, timeout=60)
-    assert again.returncode == 1 and "not both" in again.stderr
+    assert again.returncode == 2 and "error: give --db DIR" in again.stderr  # a usage error
 
 
 # -- bounded reads and the directory lock ------------------------------------------

@@ -455,10 +455,11 @@ def test_cli_speed_max_full_disk_faults_refuses_the_next_move_and_quits_cleanly(
     error), the next move refused, quit with status 0 and no traceback, the closing line
     saying the databases keep their last values."""
     directory = copy_station("prototype", tmp_path / "db")
-    p = _pyrt(_WRITEBACK_FULL, ["manipulator", "--db", str(directory), "--speed", "max"],
+    p = _pyrt(_WRITEBACK_FULL, ["manipulator", "--db", str(directory), "--speed", "max", "-k"],
               "prototype to 0 0 60\nwait\nprototype to 0 0 80\nstatus\nquit\n", tmp_path)
     out = p.stdout + p.stderr
-    assert p.returncode == 0, out
+    # the fault and the refused move fail the piped script: status 1 (-k: it runs to quit)
+    assert p.returncode == 1, out
     assert "Traceback" not in out and "internal error" not in out
     assert re.search(re.escape(f"database write-back failed: cannot write {directory}/")
                      + r"[A-Z]+\.dat: " + re.escape(FULL), out), out
@@ -508,10 +509,11 @@ def test_cli_real_time_quit_at_once_says_the_black_box_it_could_not_write(tmp_pa
     b.atomic_write = full
     """
     p = _pyrt(script, ["manipulator", "--db", str(directory), "--speed", "1",
-                       "--black-box", "2"],
+                       "--black-box", "2", "-k"],
               "prototype to 0 0 60\nsleep 0.5\nquit\n", tmp_path, timeout=120)
     out = p.stdout + p.stderr
-    assert p.returncode == 0 and "Traceback" not in out, out
+    # the fault fails the piped script: status 1 (-k: it runs to quit)
+    assert p.returncode == 1 and "Traceback" not in out, out
     announced = [ln for ln in out.splitlines() if ln.startswith("black box of fault")]
     assert announced, out
     assert any("not all written" in ln and ".csv: No space left on device" in ln

@@ -148,7 +148,9 @@ def test_sim_object_and_faults(session):
     assert session("sim object 30", "sleep 0.1", "S") == ["1111101011111111",
                                                           "on: limit, crossfire"]
     assert session("sim object 99")[0].startswith("error:")
-    assert session("sim fault jam", "sim fault none") == []
+    assert session("sim fault jam", "sim fault none") == [  # each says what it did
+        "sim: motor jammed (the jaws do not move, whatever the drive); 'sim fault none' clears it",
+        "sim: every injected fault cleared"]
     assert session("sim fault port 2D G1")[0].startswith("error:")
     assert session("sim jog sideways")[0].startswith("error:")
 

@@ -291,3 +291,30 @@ def test_sigterm_to_a_real_time_gripper_stops_the_jaws_and_exits_0(tmp_path, sig
     assert f"pyrt gripper: {signal.Signals(sig).name}: every motor stopped; jaws at " in last
     assert last.endswith("drive current +0")
     assert "Traceback" not in err
+
+
+def test_sim_fault_says_what_it_did():
+    """sim fault jam|limit|encoder|port|none: one line each saying what was injected or cleared."""
+    from pyrt.commands import RobotShell
+    from pyrt.scheduler import Loop, SimClock
+    from pyrt.station.gripper import build_gripper
+
+    station = build_gripper(Loop(SimClock()))
+    station.start()
+    try:
+        out = io.StringIO()
+        shell = RobotShell(station, out)
+        for line in ("sim fault jam", "sim fault limit", "sim fault encoder",
+                     "sim fault port 2D 3F", "sim fault none"):
+            shell.onecmd(line)
+        assert out.getvalue().splitlines() == [
+            "sim: motor jammed (the jaws do not move, whatever the drive); 'sim fault none' "
+            "clears it",
+            "sim: limit sensor dead (it never fires, even at the open stop); 'sim fault none' "
+            "clears it",
+            "sim: encoder dead (its count stays where it is); 'sim fault none' clears it",
+            "sim: port 2D stuck at 3F",
+            "sim: every injected fault cleared"]
+        assert station.plant.faults == set()
+    finally:
+        station.shutdown()

@@ -59,9 +59,9 @@ quit
 """
 
 
-def run_cli(argv: list[str], script: str, monkeypatch, capsys) -> str:
+def run_cli(argv: list[str], script: str, monkeypatch, capsys, status: int = 0) -> str:
     monkeypatch.setattr(sys, "stdin", io.StringIO(script))
-    assert main(argv) == 0
+    assert main(argv) == status
     return capsys.readouterr().out
 
 
@@ -84,7 +84,8 @@ def hexword(s: str) -> int:
 
 def test_whole_command_set_transcript(monkeypatch, capsys):
     """Every CMD: and monitor command in one piped script, with the report's formats."""
-    out = run_cli(["gripper", "--speed", "max"], SCRIPT, monkeypatch, capsys)
+    # the script refuses some lines on purpose: -k runs it to its end, status 1
+    out = run_cli(["gripper", "--speed", "max", "-k"], SCRIPT, monkeypatch, capsys, status=1)
     assert out.splitlines()[1] == "jaws wide open (limit sensor on), encoder 0000"
     steps = answers(out)
     got = iter(steps)

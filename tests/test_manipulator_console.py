@@ -379,9 +379,11 @@ def test_a_fault_during_wait_is_shown_once_and_the_closing_line_says_what_was_ke
 
     script = "prototype to 0 0 40\nsleep 5\nsim fault 0 slip 1.0\nwait\nstatus\nack\n"
     done = subprocess.run([sys.executable, "-m", "pyrt", "manipulator", "--speed", "max",
-                           "--init-db", str(tmp_path / "db")], input=script,
+                           "--init-db", str(tmp_path / "db"), "-k"], input=script,
                           capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stderr
+    # the fault fails the piped script at its wait: status 1 (-k: it runs to its end)
+    assert done.returncode == 1, done.stderr
+    assert "stdin:4: 'wait' failed: FAULT" in done.stderr
     out = done.stdout
     assert out.count("position estimate lost") == 3  # wait, status, ack: once each
     assert out.count("nothing moves until you type ack") == 1

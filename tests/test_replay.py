@@ -30,12 +30,12 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def _record(tmp_path: Path, station: str, stdin: str, *extra: str, name: str = "run.pj",
-            timeout: float = 120) -> Path:
+            timeout: float = 120, status: int = 0) -> Path:
     path = tmp_path / name
     args = [sys.executable, "-m", "pyrt", station, "--journal", str(path), *extra]
     done = subprocess.run(args, input=stdin, capture_output=True, text=True, cwd=tmp_path,
                           timeout=timeout)
-    assert done.returncode == 0, done.stdout + done.stderr
+    assert done.returncode == status, done.stdout + done.stderr
     assert path.is_file(), done.stdout
     ticks = JournalReader(path).summary().ticks
     assert f"journal: {ticks} ticks in {path}" in done.stdout  # said at the end, with
@@ -100,7 +100,7 @@ def test_a_real_time_manipulator_fault_and_ack_replay_identically(tmp_path):
     db = tmp_path / "db"
     path = _record(tmp_path, "manipulator",
                    "sim fault axis0 stall\nprototype to 0 0 93\nwait\nack\nstop\nquit\n",
-                   "--init-db", str(db))
+                   "--init-db", str(db), "-k", status=1)  # the fault fails the script
     events = _events(path)
     assert len(events) == 1 and "TRACKING_FAULT" in events[0][2], events
     assert any('"m":"acknowledge"' in t for t in _requests(path))
@@ -330,7 +330,8 @@ def test_a_fault_of_the_clock_is_replayed_where_it_came(tmp_path):
     """Consecutive overruns trip the station at real time (--max-overruns): the replay applies
     the clock's decision at the same place, and every output and the fault match."""
     path = _record(tmp_path, "gripper", "sleep 0.5\nack\nstop\nquit\n",
-                   "--tick-us", "50", "--max-overruns", "2")
+                   "--tick-us", "50", "--max-overruns", "2", "-k",
+                   status=1)  # the fault fails the script
     events = [e for e in _events(path) if e[1] == "fault"]
     assert events and "consecutive overruns" in events[0][2], events
     status, out = _replay(path)

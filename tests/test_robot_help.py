@@ -129,3 +129,24 @@ def test_headless_banner_does_not_say_type_help(tmp_path):
         proc.wait(timeout=30)
     assert first.startswith("pyrt gripper:"), first
     assert "type help" not in first and "headless: no console" in first
+
+
+def test_help_and_the_usage_error_give_the_same_words_for_choices(manip):
+    """Where a command takes a choice ('to x y z [blend|stop]'), its help line names the
+    choices exactly as the usage in its refusal does."""
+    for comp in manip.components():
+        for rec in comp.commands():
+            head = rec.help.split(":")[0].strip()
+            if "|" in rec.usage and head.split()[:1] == [rec.name]:
+                assert head == rec.usage, (comp.name, head, rec.usage)
+    text = ask(manip, "help prototype")
+    assert any(ln.strip().startswith("to x y z [blend|stop]: ") for ln in text.splitlines())
+    assert "usage: to x y z [blend|stop]" in ask(manip, "prototype to 1 2")
+
+
+def test_quit_with_an_argument_is_refused_without_suggesting_quit(manip):
+    """'quit now': quit takes no argument; the answer does not ask 'did you mean quit?'."""
+    said = ask(manip, "quit now")
+    assert said == "error: quit takes no argument (got 'now')\n"
+    assert "did you mean" not in ask(manip, "wait x")
+    assert "did you mean 'wait'" in ask(manip, "wiat")

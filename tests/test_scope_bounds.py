@@ -137,7 +137,8 @@ def test_scope_save_writes_only_inside_the_working_directory(tmp_path):
     work.mkdir()
     script = ("scope add encoder\nscope run roll\nsleep 0.1\nscope save ../x.csv\n"
               f"scope save {tmp_path / 'y.csv'}\nscope plot ../z.png\nscope save x.csv\n")
-    done = _gripper(work, script)
+    done = _gripper(work, script, "-k")  # -k: the refused lines fail the script, it runs on
+    assert done.returncode == 1
     assert done.stdout.count("the scope writes files only inside the working directory") == 3
     assert sorted(p.name for p in tmp_path.rglob("*.*")) == ["x.csv"]
     assert (work / "x.csv").is_file()

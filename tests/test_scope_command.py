@@ -192,11 +192,13 @@ def test_scope_plot_without_matplotlib_is_one_line_and_writes_nothing(tmp_path):
     script = ("scope add ram:4A\nscope run roll\nsleep 0.2\n"
               f"scope plot {tmp_path / 'f.png'}\nW\n")
     code = ("import sys; sys.modules['matplotlib'] = None\n"
-            "from pyrt.cli import main; sys.exit(main(['gripper', '--speed', 'max']))")
+            "from pyrt.cli import main; sys.exit(main(['gripper', '--speed', 'max', '-k']))")
     done = subprocess.run([sys.executable, "-c", code], input=script, capture_output=True,
                           text=True, timeout=60, cwd=tmp_path)
-    assert done.returncode == 0, done.stderr
-    hint = [ln for ln in done.stdout.splitlines() + done.stderr.splitlines() if "matplotlib" in ln]
+    # the refused plot fails the piped script (-k: it runs on), named once on stderr
+    assert done.returncode == 1, done.stderr
+    assert [ln.split(": ")[1] for ln in done.stderr.splitlines()] == ["stdin:4"]
+    hint = [ln for ln in done.stdout.splitlines() if "matplotlib" in ln]
     assert len(hint) == 1 and "pip install 'pyrt[plot]'" in hint[0]
     assert "Traceback" not in done.stderr
     assert not (tmp_path / "f.png").exists()

@@ -190,3 +190,29 @@ def test_sigint_to_a_piped_manipulator_says_where_the_source_stopped(tmp_path):
     assert proc.returncode == 130, err
     assert re.search(r"pyrt manipulator: SIGINT: every motor stopped; source at "
                      r"\(\S+, \S+, \S+\) cm; databases written back in ", out), out[-400:]
+
+
+@pytest.mark.wallclock
+def test_a_headless_sigterm_says_its_closing_line_once_where_stderr_is_stdout(tmp_path):
+    """--headless with stderr on stdout (a terminal, 2>&1): the closing line once, not twice
+    (said on stdout and logged on stderr); with them apart both keep it (test above)."""
+    env = dict(os.environ, HOME=str(tmp_path), PYRT_HOME=str(tmp_path / "pyrt-home"),
+               PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen([sys.executable, "-m", "pyrt", "gripper", "--serve", "127.0.0.1:0",
+                             "--headless", "--speed", "1"], stdin=subprocess.DEVNULL,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env=env, cwd=tmp_path)
+    try:
+        seen = ""
+        deadline = time.monotonic() + 30  # a bound for a hang only
+        while "serving" not in seen:
+            assert time.monotonic() < deadline, seen
+            line = proc.stdout.readline()
+            assert line, f"ended before serving: {seen!r}"
+            seen += line
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, seen + out
+    assert (seen + out).count("SIGTERM: every motor stopped") == 1, seen + out

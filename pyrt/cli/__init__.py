@@ -56,6 +56,12 @@ def build_parser() -> argparse.ArgumentParser:
             "8031-style ready queue of self-scheduling tasks, with overrun "
             "detection and per-task timing."
         ),
+        epilog=(
+            "A console whose input is not a terminal runs a script: it stops at the first "
+            "line that fails (an error, a FAULT), names it on stderr and exits 1; -k runs "
+            "on and exits 1 at the end. The same for 'pyrt send -f FILE' and a piped "
+            "'pyrt connect'. See docs/scripts.md."
+        ),
     )
     parser.add_argument("--version", action="version", version=f"pyrt {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import queue
+import re
 import sys
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -16,7 +18,8 @@ from pyrt.errors import ConfigError, UsageError
 from pyrt.scheduler import Loop, SimClock, TimingLog, WallClock
 from pyrt.scheduler import rt as _rt
 
-__all__ = ["add_boards_option", "add_loop_options", "load_backend", "make_loop", "parse_speed"]
+__all__ = ["OverrunLines", "add_boards_option", "add_loop_options", "load_backend", "make_loop",
+           "parse_speed"]
 
 
 def add_boards_option(parser: argparse.ArgumentParser, world: str) -> None:
@@ -105,6 +108,15 @@ def add_loop_options(
         help="fault every robot after N consecutive overruns (default: never)",
     )
     g.add_argument(
+        "--quiet-overruns",
+        action="store_true",
+        help=(
+            "no overrun lines (stats, --timing-log and --max-overruns still count them); "
+            "without it: the first line of a burst, then at most one summary every "
+            f"{OverrunLines.WINDOW_S:g} s"
+        ),
+    )
+    g.add_argument(
         "--timer-slack",
         type=_slack_ns,
         nargs="?",
@@ -184,8 +196,93 @@ class StderrLines:
                 return
 
 
+_TICKS = re.compile(r"overrun: (\d+) tick")
+
+
+class OverrunLines:
+    """The loop's overrun lines as an operator gets them: the first line of
+    a burst as it comes, then the overruns of the next :data:`WINDOW_S`
+    counted and said in one summary (``overrun: 37 more overruns in the
+    last 10 s; see stats``), so that a loaded machine is not flooded.
+
+    The lines go to ``sink`` (stderr, by a thread of its own) until a
+    console attaches (:meth:`attach`): then they are the console's messages
+    (:meth:`messages`), printed on a line of their own before a prompt
+    (above the typed line on a terminal), never after a prompt on its line.
+    ``quiet``: no lines at all (``stats`` and the timing log still count)."""
+
+    #: The window of one summary, seconds (monotonic).
+    WINDOW_S = 10.0
+
+    def __init__(self, sink: Callable[[str], None] | None = None, *, quiet: bool = False,
+                 clock: Callable[[], float] = time.monotonic,
+                 window_s: float = WINDOW_S) -> None:
+        self._sink = sink if sink is not None else StderrLines().put
+        self.quiet = quiet
+        self._clock = clock
+        self.window_s = window_s
+        self._lock = threading.Lock()
+        self._since: float | None = None  # when the window opened
+        self._more = 0  # overruns counted in it, not shown
+        self._held: list[str] | None = None  # a console's lines, once attached
+
+    def attach(self) -> None:
+        """From now on the lines are :meth:`messages` (a console prints them)."""
+        with self._lock:
+            if self._held is None:
+                self._held = []
+
+    def put(self, line: str) -> None:
+        """One line from the loop (any thread; never blocks)."""
+        if self.quiet:
+            return
+        m = _TICKS.match(line)
+        count = int(m.group(1)) if m else 1
+        now = self._clock()
+        with self._lock:
+            out = self._due(now)
+            if self._since is None:
+                self._since = now
+                out.append(line)
+            else:
+                self._more += count
+            self._emit(out)
+
+    def _due(self, now: float) -> list[str]:
+        """The summary of a window that is over (and the window closed), or []."""
+        if self._since is None or now - self._since < self.window_s:
+            return []
+        out = []
+        if self._more:
+            s = now - self._since
+            what = "overrun" if self._more == 1 else "overruns"
+            out.append(f"overrun: {self._more} more {what} in the last {s:.0f} s; see stats")
+            self._since = now  # a summary opens the next window
+        else:
+            self._since = None  # quiet for a window: the next overrun is shown as it comes
+        self._more = 0
+        return out
+
+    def _emit(self, lines: list[str]) -> None:
+        if self._held is not None:
+            self._held.extend(lines)
+        else:
+            for line in lines:
+                self._sink(line)
+
+    def messages(self) -> list[str]:
+        """The lines for an attached console (a window that is over is summed up first)."""
+        with self._lock:
+            if self._held is None:
+                return []
+            self._emit(self._due(self._clock()))
+            out, self._held = self._held, []
+        return out
+
+
 def make_loop(args: argparse.Namespace, warn: Callable[[str], None] | None = None) -> Loop:
-    """A loop configured from the options of :func:`add_loop_options`."""
+    """A loop configured from the options of :func:`add_loop_options`; its
+    overrun lines go to ``warn`` (default: an :class:`OverrunLines` to stderr)."""
     if args.max_overruns is not None and args.max_overruns < 1:
         raise UsageError(f"--max-overruns must be >= 1, got {args.max_overruns}")
     clock = (SimClock() if args.speed is None
@@ -197,7 +294,7 @@ def make_loop(args: argparse.Namespace, warn: Callable[[str], None] | None = Non
         except OSError as exc:
             raise ConfigError(f"cannot write timing log: {exc.strerror}", args.timing_log) from None
     if warn is None:
-        warn = StderrLines().put
+        warn = OverrunLines(quiet=getattr(args, "quiet_overruns", False)).put
     return Loop(
         clock,
         period_ns=args.tick_us * 1000,

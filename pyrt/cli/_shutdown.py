@@ -145,6 +145,17 @@ def run_until_shutdown(station: Any, console: Any, service: Any, *, headless: bo
                 print(line, file=sys.stderr, flush=True)
         else:
             say(line)
-        if headless:  # a service's record is its log
+        if headless and not _same_file(sys.stdout, sys.stderr):
+            # a service's record is its log (stderr): said there too, unless
+            # stderr is where the line was just said (a terminal, 2>&1)
             logging.getLogger("pyrt.service").info("%s", line)
     return status
+
+
+def _same_file(a: Any, b: Any) -> bool:
+    """True when the streams ``a`` and ``b`` write to the same file (a terminal, a 2>&1)."""
+    try:
+        sa, sb = os.fstat(a.fileno()), os.fstat(b.fileno())
+    except (OSError, ValueError, AttributeError):
+        return False
+    return (sa.st_dev, sa.st_ino) == (sb.st_dev, sb.st_ino)

@@ -23,6 +23,7 @@ from collections.abc import Sequence
 from pyrt.cli._help import Parser
 from pyrt.cli._journal import add_journal_options, prepare_journal, start_recorder
 from pyrt.cli._loopopts import (
+    OverrunLines,
     add_boards_option,
     add_loop_options,
     apply_rt_options,
@@ -47,6 +48,10 @@ def add_station_arguments(parser: argparse.ArgumentParser, factory: StationFacto
     factory.add_arguments(parser)
     c = parser.add_argument_group("console")
     c.add_argument("--history", metavar="FILE", help="keep the command history in FILE")
+    c.add_argument("-k", "--keep-going", action="store_true",
+                   help="a script (stdin not a terminal) runs on after a line that failed "
+                        "and still exits 1; without it the script stops at the first "
+                        "(docs/scripts.md)")
     c.add_argument("--scope-dir", metavar="DIR",
                    help="the directory 'scope save' and 'scope plot' write into, and no "
                         "other (default: the working directory)")
@@ -97,7 +102,10 @@ def run_factory(factory: StationFactory, args: argparse.Namespace) -> int:
     apply_rt_options(args, say)
     prepare_journal(args)
     load_backend(args.boards)
-    loop = make_loop(args)  # overrun lines: stderr, at most one a second
+    # overrun lines: stderr until the console runs, then its messages (never on
+    # the prompt's line); the first of a burst, then a summary every 10 s
+    overruns = OverrunLines(quiet=args.quiet_overruns)
+    loop = make_loop(args, warn=overruns.put)
     scope_dir = _scope_dir(getattr(args, "scope_dir", None))
     station = factory.build(loop, args)
     station.close_report = say
@@ -120,8 +128,15 @@ def run_factory(factory: StationFactory, args: argparse.Namespace) -> int:
         except OSError as exc:
             say(f"warning: no audit log: {exc}")
     shell = RobotShell(station, out)
-    console = Console(shell, sys.stdin, out, messages=shell.messages,
-                      history_file=args.history, status=live_status(runner, station, args))
+    if not args.headless:
+        overruns.attach()
+
+    def messages() -> list[str]:
+        return overruns.messages() + shell.messages()
+
+    console = Console(shell, sys.stdin, out, messages=messages,
+                      history_file=args.history, status=live_status(runner, station, args),
+                      keep_going=args.keep_going, what=what)
     for note in station.startup_notes:
         say(f"start-up: {note}")
     say(factory.banner(station, args))

@@ -48,7 +48,7 @@ import argparse
 import ipaddress
 import signal
 import sys
-from typing import Any, NoReturn
+from typing import Any, NoReturn, TextIO
 
 from pyrt.boards.registry import open_boards
 from pyrt.cli._help import Parser
@@ -252,6 +252,14 @@ def build_world(factory: WorldFactory, opts: argparse.Namespace) -> World:
     return world
 
 
+def _say_origin(factory: WorldFactory, out: TextIO) -> None:
+    """The second line: which database the world was built from, when the
+    factory says (``world_origin``: the manipulator's)."""
+    origin = getattr(factory, "world_origin", "")
+    if isinstance(origin, str) and origin:
+        print(f"pyrt board-sim: {origin}", file=out, flush=True)
+
+
 def _say(line: str) -> None:
     """A board-sim event line, on standard output at once."""
     sys.stdout.write(line + "\n")
@@ -276,6 +284,7 @@ def run(args: argparse.Namespace) -> int:
     boards = " ".join(f"{n}={k.name}" for n, k in world.kinds.items())
     print(f"pyrt board-sim: {factory.name} {world.name} on {server.url} (boards {boards}; "
           f"watchdog {opts.watchdog:g} s, world step {opts.step_us} µs)", file=out, flush=True)
+    _say_origin(factory, out)
     if not _loopback(server.host):
         print(f"pyrt board-sim: warning: serving on {server.host}: the protocol has no "
               "authentication; anyone who reaches the port drives the boards", file=out,
@@ -316,6 +325,7 @@ def _run_modbus(factory: WorldFactory, world: World, opts: argparse.Namespace,
     print(f"pyrt board-sim: {factory.name} {world.name} on {server.url}?map={shown} "
           f"(Modbus TCP; boards {boards}; map {path}; watchdog {opts.watchdog:g} s, "
           f"world step {opts.step_us} µs)", file=out, flush=True)
+    _say_origin(factory, out)
     if not _loopback(server.host):
         print(f"pyrt board-sim: warning: serving on {server.host}: Modbus has no "
               "authentication; anyone who reaches the port drives the boards", file=out,

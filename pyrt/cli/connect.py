@@ -14,6 +14,11 @@ connection), and a move is stopped at the prompt; the abandoned reply is
 dropped when it comes, so every reply answers its own line.  Piped, Ctrl-C
 stops the robot and ends the script (status 130).
 
+Piped, the lines are a script that fails loudly (docs/scripts.md): the
+first line the robot refuses (an ``ERR`` reply) is named on stderr with its
+number, the script stops there and the exit status is 1; ``-k`` runs on and
+exits 1 at the end.
+
 On a terminal there is history, Tab completion from the server's own
 ``help`` (its words, objects and their commands), and a live status line
 from a second connection subscribed at ``--hz``; piped, it runs the lines
@@ -31,6 +36,7 @@ from typing import Any, TextIO
 from pyrt.cli._serve import read_token
 from pyrt.client import Client, ServerError, parse_address
 from pyrt.console import Console
+from pyrt.errors import UsageError
 
 __all__ = ["RemoteShell", "add_parser", "run"]
 
@@ -55,6 +61,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="status line refresh on a terminal (default 4; 0: no status line)")
     p.add_argument("--timeout", type=float, default=600.0, metavar="S",
                    help="seconds to wait for a reply (default 600: a 'wait' may be long)")
+    p.add_argument("-k", "--keep-going", action="store_true",
+                   help="a piped script runs on after a refused line (and exits 1 at the end); "
+                        "without it the script stops at the first (docs/scripts.md)")
     p.set_defaults(run=run)
 
 
@@ -69,9 +78,17 @@ class RemoteShell:
         self.stdin = stdin if stdin is not None else sys.stdin
         self.prompt = f"{name}> "
         self._table: dict[str, Any] | None = None
+        #: How many lines failed (refused, an ERR reply, the connection lost):
+        #: a script's console reads it (docs/scripts.md).
+        self.failures = 0
 
     def say(self, text: str) -> None:
         self.stdout.write(text + "\n")
+
+    def error(self, text: str) -> None:
+        """One ``error:`` line; the line failed."""
+        self.failures += 1
+        self.say(f"error: {text}")
 
     def onecmd(self, line: str) -> bool:
         """Send one line; True when the session ends (``exit``, ``QUIT``, server gone)."""
@@ -83,17 +100,23 @@ class RemoteShell:
             return True  # leaving a remote session stops nothing
         if word == "auth":
             if len(text.split()) > 1:
-                self.say("error: a token typed on a line is shown (on the screen, in a "
-                         "script's transcript); nothing sent: type 'auth' alone at a terminal, "
-                         "or start with --token-file FILE or $PYRT_TOKEN")
+                self.error("a token typed on a line is shown (on the screen, in a "
+                           "script's transcript); nothing sent: type 'auth' alone at a terminal, "
+                           "or start with --token-file FILE or $PYRT_TOKEN")
                 return False
             if not self.terminal():
-                self.say("error: auth asks for the token on a terminal, and this input is "
-                         "not one (the next line is not taken as the token); start with "
-                         "--token-file FILE or $PYRT_TOKEN")
+                self.error("auth asks for the token on a terminal, and this input is "
+                           "not one (the next line is not taken as the token); start with "
+                           "--token-file FILE or $PYRT_TOKEN")
                 return False
             return self.authenticate(getpass.getpass("token: "))
         return self._send(text)
+
+    @staticmethod
+    def redact(line: str) -> str:
+        """``line`` as a script's failure names it: a token after ``auth`` left out."""
+        words = line.split()
+        return "auth ..." if len(words) > 1 and words[0].lower() == "auth" else line
 
     def terminal(self) -> bool:
         """True when the token can be asked for without echo (stdin is a terminal)."""
@@ -116,12 +139,12 @@ class RemoteShell:
                              f"{self.client.owed[0][:40]!r}; its reply will be dropped)")
             reply = self.client.request(text)
         except (OSError, TimeoutError, ServerError) as exc:
-            self.say(f"error: the connection failed: {exc}")
+            self.error(f"the connection failed: {exc}")
             return True
         for out in reply.lines:
             self.say(out)
         if not reply.ok:
-            self.say(f"error: {reply.code} {reply.text}".rstrip())
+            self.error(f"{reply.code} {reply.text}".rstrip())
         elif auth and not reply.lines:
             self.say("privileged: every command is accepted")  # the server said nothing
         return False
@@ -253,11 +276,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         host, port = parse_address(args.address)
     except ValueError as exc:
-        print(f"pyrt connect: {exc}", file=sys.stderr)
-        return 2
+        raise UsageError(str(exc)) from None
     if args.hz < 0 or args.hz > 50:
-        print(f"pyrt connect: --hz must be 0..50, got {args.hz:g}", file=sys.stderr)
-        return 2
+        raise UsageError(f"--hz must be 0..50, got {args.hz:g}")
     token = read_token(args.token_file)
     try:
         client = Client(host, port, timeout_s=args.timeout)
@@ -273,7 +294,7 @@ def run(args: argparse.Namespace) -> int:
               "(the robot keeps running), 'stop' stops it", flush=True)
         if token is not None:
             shell.authenticate(token)
-        console = Console(shell)
+        console = Console(shell, keep_going=args.keep_going, what="pyrt connect")
         if console.interactive() and args.hz > 0:
             try:
                 watch = _StatusWatch(host, port, args.hz)

@@ -23,6 +23,7 @@ import time
 from typing import TextIO
 
 from pyrt.client import Client, ServerError, parse_address
+from pyrt.errors import UsageError
 
 __all__ = ["add_parser", "render", "run"]
 
@@ -142,14 +143,11 @@ def run(args: argparse.Namespace) -> int:
     try:
         host, port = parse_address(args.address)
     except ValueError as exc:
-        print(f"pyrt top: {exc}", file=sys.stderr)
-        return 2
+        raise UsageError(str(exc)) from None
     if not 0.5 <= args.hz <= 20:
-        print(f"pyrt top: --hz must be 0.5..20, got {args.hz:g}", file=sys.stderr)
-        return 2
+        raise UsageError(f"--hz must be 0.5..20, got {args.hz:g}")
     if args.count is not None and args.count < 1:
-        print(f"pyrt top: --count must be >= 1, got {args.count}", file=sys.stderr)
-        return 2
+        raise UsageError(f"--count must be >= 1, got {args.count}")
     count = 1 if args.once else args.count
     out = sys.stdout
     try:

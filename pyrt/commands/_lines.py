@@ -149,8 +149,9 @@ class LineResolver:
 
 
 def _did_you_mean(text: str, names: list[str]) -> str:
-    """``" (did you mean 'NAME'?)"`` for the names closest to ``text`` (difflib), or ''."""
-    by_key = {n.lower(): n for n in names}
+    """``" (did you mean 'NAME'?)"`` for the names closest to ``text`` (difflib), or
+    '' (never ``text`` itself: ``quit now`` is quit given an argument, not a misspelling)."""
+    by_key = {n.lower(): n for n in names if n.lower() != text.lower()}
     near = difflib.get_close_matches(text.lower(), list(by_key), n=2, cutoff=0.7)
     if not near:
         return ""

@@ -174,6 +174,7 @@ class RobotShell(LineResolver, CommandShell, ShowWord):
             if f.id in self._shown:
                 return
             self._shown.add(f.id)
+        self.failures += 1
         self.say(f"{prefix}: {f.cause} (in {f.source or self.station.name})")
         self.say("every motor stopped; reads still answer; nothing moves until you type ack")
 
@@ -195,6 +196,7 @@ class RobotShell(LineResolver, CommandShell, ShowWord):
                     if line.fault.id in self._shown:
                         continue
                     self._shown.add(line.fault.id)
+                self.failures += 1
                 self.runner.take_fault(line.fault)
                 out.append(line)
                 out.append("every motor stopped; reads still answer; nothing moves until you "

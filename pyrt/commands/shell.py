@@ -34,6 +34,9 @@ class CommandShell:
         self.stdout = stdout
         #: Where the traceback of a bug in pyrt goes (None: ``sys.stderr`` at the time).
         self.stderr = stderr
+        #: How many times a line failed (a refused command, a fault shown, a bug):
+        #: a script's console reads it to fail loudly (docs/scripts.md).
+        self.failures = 0
 
     # -- output -----------------------------------------------------------------
 
@@ -43,6 +46,7 @@ class CommandShell:
 
     def error(self, text: str) -> None:
         """Report a refused or malformed command: one line, nothing changed."""
+        self.failures += 1
         self.say(f"error: {text}")
 
     def internal_error(self, exc: BaseException) -> None:
@@ -61,6 +65,7 @@ class CommandShell:
 
     def fault(self, exc: FaultError) -> None:
         """Report a fault raised by the loop at this command (robots say more)."""
+        self.failures += 1
         self.say(f"FAULT: {exc.fault.cause}; give 'ack' to acknowledge")
 
     def guarded(self, dispatch: Callable[[str], bool], line: str) -> bool:

@@ -9,6 +9,10 @@ are then printed before each prompt.
 When stdin is not a terminal, plain lines: the same commands run as a
 script, each prompt is printed with the line echoed after it (as the 8031
 echoed every character it read), and the console ends at end of input.
+A script fails loudly (docs/scripts.md): a line that failed (the
+interpreter counts its failures in ``failures``: a refused command, a
+fault) is named on stderr with its file, number and text, the script stops
+there unless ``keep_going``, and :meth:`Console.run` returns 1.
 
 The interpreter is any object with ``prompt`` and ``onecmd(line) -> bool``
 (True ends the session) writing to its ``stdout`` attribute; ``messages``
@@ -72,10 +76,23 @@ class _Output:
     """A console's output stream: a reader that has gone (EPIPE) is
     :class:`ReaderGone`, not an error of the command that was writing."""
 
+    #: How much of a script line's output is kept to say why it failed (characters).
+    KEEP = 4000
+
     def __init__(self, out: TextIO):
         self._out = out
+        #: What was written since :meth:`mark` (at most KEEP characters), or None.
+        self.kept: list[str] | None = None
+        self._kept_n = 0
+
+    def mark(self) -> None:
+        """Keep what is written from here on (a script line's output)."""
+        self.kept, self._kept_n = [], 0
 
     def write(self, text: str) -> int:
+        if self.kept is not None and self._kept_n < self.KEEP:
+            self.kept.append(text)
+            self._kept_n += len(text)
         try:
             return self._out.write(text)
         except BrokenPipeError:
@@ -137,6 +154,9 @@ class Console:
         history_file: str | None = None,
         status: Callable[[], str] | None = None,
         status_period_s: float = 0.25,
+        keep_going: bool = True,
+        errors: TextIO | None = None,
+        what: str = "",
     ):
         self.shell = shell
         self.stdin = stdin if stdin is not None else sys.stdin
@@ -153,9 +173,9 @@ class Console:
         # The interpreter writes where the console does: both through one
         # guard, so that a reader that goes away ends the console quietly.
         shares = getattr(shell, "stdout", None) is out
-        if shares:
-            shell.stdout = _guarded(out)
         self.stdout = _guarded(out)
+        if shares:
+            shell.stdout = self.stdout
         self.messages = messages if messages is not None else (lambda: [])
         self.history_file = history_file
         #: The live status line (a terminal only: prompt_toolkit's bottom
@@ -166,6 +186,15 @@ class Console:
         self.ended_by = "quit"
         #: True when the run ended because the reader of its output went away.
         self.reader_gone = False
+        #: A script (stdin not a terminal) runs on after a line that failed
+        #: (and still returns 1); False stops it at the first (halcmd's way).
+        self.keep_going = keep_going
+        #: Where a script's failed lines are named (None: ``sys.stderr`` at the time).
+        self.errors = errors
+        #: The program's name on those lines (``pyrt gripper``), or ''.
+        self.what = what
+        #: The script's lines that failed: (number, text, why).
+        self.failed: list[tuple[int, str, str]] = []
 
     def interactive(self) -> bool:
         """True when both ends are a terminal (line editing and history)."""
@@ -175,7 +204,8 @@ class Console:
             return False
 
     def run(self) -> int:
-        """Run until ``quit`` or end of input; return the exit status (0).
+        """Run until ``quit`` or end of input; return the exit status (0; 1
+        when a script's line failed, see the module text).
 
         When the reader of the output goes away (``| head``), the console
         ends there, quietly (:attr:`reader_gone`; its output silenced), and
@@ -206,10 +236,85 @@ class Console:
 
     # -- a pipe or a file: a script ----------------------------------------------
 
+    def _failures(self) -> int:
+        n = getattr(self.shell, "failures", 0)
+        return n if isinstance(n, int) else 0
+
+    def _line_failed(self, number: int, text: str, why: str, last: bool = False) -> bool:
+        """Name a script's failed line on the error stream; True when the script
+        stops (``last``: there is nothing after it to stop)."""
+        redact = getattr(self.shell, "redact", None)
+        if callable(redact):
+            text = redact(text)
+        self.failed.append((number, text, why))
+        where = f"{self.source_name()}:{number}"
+        stop = not self.keep_going and not last
+        tail = "; the script stops here (-k runs on)" if stop else ""
+        self._tell(f"{where}: {text[:ECHO_MAX]!r} failed: {why}{tail}")
+        if stop:
+            low = why.lower()
+            kind = "an error" if low.startswith(("error", "internal")) else (
+                "a fault" if "fault" in low else "it failed")
+            self.ended_by = f"stopped at line {number} ({kind})"
+        return stop
+
+    def _tell(self, line: str) -> None:
+        err = self.errors if self.errors is not None else sys.stderr
+        head = f"{self.what}: " if self.what else ""
+        with contextlib.suppress(OSError, ValueError, AttributeError):
+            if err is not None:
+                err.write(head + line + "\n")
+                err.flush()
+
+    def source_name(self) -> str:
+        """The script's name for its failed lines: its file when stdin is one, else stdin."""
+        name = getattr(self.stdin, "name", None)
+        if isinstance(name, str) and name and not name.startswith("<"):
+            return name
+        with contextlib.suppress(OSError, ValueError, AttributeError, TypeError):
+            path = os.readlink(f"/proc/self/fd/{self.stdin.fileno()}")
+            if os.path.isfile(path):
+                rel = os.path.relpath(path)
+                return rel if not rel.startswith("..") else path
+        return "stdin"
+
+    def _why(self, out: _Output, fallback: str) -> str:
+        """What a failed line said about it (its first error or FAULT line)."""
+        said = "".join(out.kept or []).splitlines()
+        out.kept = None
+        for text in said:
+            t = text.strip()
+            if t.startswith(("error:", "internal error:")) or "fault" in t[:40].lower():
+                return t[:ECHO_MAX]
+        return fallback
+
+    def _mark(self, guard: _Output | None) -> int:
+        """Start keeping a line's output; the failures counted so far."""
+        if guard is not None:
+            guard.mark()
+        return self._failures()
+
+    def _failed_since(self, before: int, guard: _Output | None, number: int, text: str,
+                      fallback: str, *, at_end: bool = False) -> bool:
+        """If line ``number`` failed since ``before`` (its own failure, or a fault
+        that came after it), name it; True when the script stops there."""
+        if self._failures() <= before or not number:
+            return False
+        why = self._why(guard, fallback) if guard is not None else fallback
+        return self._line_failed(number, text, why, last=at_end)
+
     def _run_lines(self) -> int:
         out = self.stdout
+        mine = getattr(self.shell, "stdout", None)  # where the line's output goes
+        guard = mine if isinstance(mine, _Output) else (
+            out if isinstance(out, _Output) else None)
+        number, last, stopped = 0, "", False
         while True:
-            self.flush_messages()
+            before = self._mark(guard)
+            self.flush_messages()  # a fault since the last line is that line's
+            if self._failed_since(before, guard, number, last, "a fault"):
+                stopped = True
+                break
             out.write(self.shell.prompt)
             out.flush()
             line = self.stdin.readline(MAX_LINE + 1)
@@ -217,6 +322,7 @@ class Console:
                 out.write("\n")
                 self.ended_by = "end of input"
                 break
+            number += 1
             if len(line) > MAX_LINE and not line.endswith("\n"):
                 n = len(line)
                 while True:  # the rest of the line, read and dropped
@@ -225,15 +331,34 @@ class Console:
                     if not more or more.endswith("\n"):
                         break
                 out.write(f"{line[:ECHO_MAX]}... ({n} characters)\n")
-                out.write(f"error: a line of {n} characters is refused (at most {MAX_LINE}); "
-                          "nothing done\n")
+                why = (f"error: a line of {n} characters is refused (at most {MAX_LINE}); "
+                       "nothing done")
+                out.write(why + "\n")
+                last = f"{line[:40]}..."
+                if self._line_failed(number, last, why):
+                    stopped = True
+                    break
                 continue
             out.write(_echo(line))
-            if self.shell.onecmd(line.rstrip("\r\n")):
+            last = line.rstrip("\r\n")
+            before = self._mark(guard)
+            ended = self.shell.onecmd(last)
+            if self._failed_since(before, guard, number, last, "failed"):
+                stopped = True
                 break
-        self.flush_messages()
+            if ended:
+                break
+        before = self._mark(guard)
+        self.flush_messages()  # what came after the last line: a fault is its failure
+        if not stopped:
+            self._failed_since(before, guard, number, last, "a fault", at_end=True)
+        if guard is not None:
+            guard.kept = None
         out.flush()
-        return 0
+        if self.failed and self.keep_going and len(self.failed) > 1:
+            lines = ", ".join(str(n) for n, _t, _w in self.failed)
+            self._tell(f"{self.source_name()}: {len(self.failed)} lines failed: {lines}")
+        return 1 if self.failed else 0
 
     # -- a terminal ----------------------------------------------------------------
 

@@ -474,10 +474,10 @@ class PolyAxis(Component):
              Arg("blend", str.lower, optional=True, choices=("blend", "stop")),
              name="to", moves=True)
     def cmd_to(self, x: float, y: float, z: float, mode: str = "") -> str:
-        """to x y z [blend]: move the source to (x, y, z) cm.
+        """to x y z [blend|stop]: move the source to (x, y, z) cm.
 
-        'blend' joins the turn into the neck smoothly instead of stopping
-        at the corner; a move already running is followed, not replaced."""
+        'blend' joins the turn into the neck smoothly; 'stop' (the default)
+        stops at the corner; a move already running is followed, not replaced."""
         job = self.pattern_job
         if job is not None and not job.done:
             raise CommandError(f"{self.name} to: a pattern is running ('{self.name} stop' ends "

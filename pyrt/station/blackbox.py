@@ -23,7 +23,7 @@ if the recorder is closed first) writes, beside the station's databases
 * ``NAME-fault-ID-TIME.pj``: the journal's ring, a journal file readable on
   its own (:class:`~pyrt.journal.JournalReader`; its first tick is a
   keyframe), written by the journal's thread;
-* ``.csv``: a header ``t_s,OBJECT.SIGNAL,...`` and one row per sample, the
+* ``.csv``: a header ``t_s,OBJECT.SIGNAL [UNITS],...`` and one row per sample, the
   time in seconds from the fault, the ``N`` seconds before it and what came
   after;
 * ``.png``: the signals around the fault, a few to a subplot, the fault
@@ -60,6 +60,7 @@ import queue
 import re
 import subprocess
 import sys
+import textwrap
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -468,7 +469,7 @@ class FaultBox:
         dump.rows = len(t_s)
         csv = dump.path(".csv")
         try:
-            atomic_write(csv, _csv(t_s, values, names))
+            atomic_write(csv, _csv(t_s, values, names, units))
             dump.written.append(csv)
         except OSError as exc:
             dump.errors.append(f"{csv.name}: {exc.strerror or exc}")
@@ -491,11 +492,15 @@ class FaultBox:
                                    f"{CLOSE_TIMEOUT_S:g} s")
 
 
-def _csv(t_s: np.ndarray, values: np.ndarray, names: list[str]) -> bytes:
+def _csv(t_s: np.ndarray, values: np.ndarray, names: list[str],
+         units: list[str] | None = None) -> bytes:
     """The CSV's bytes, formatted a few rows at a time with the interpreter handed
-    back between them (the loop thread never waits long for it)."""
+    back between them (the loop thread never waits long for it).  The header
+    names each column with its units, as the scope's CSV does (``gripper.dac [byte]``)."""
     text = io.StringIO()
-    text.write(",".join(["t_s", *names]) + "\n")
+    shown = [f"{n} [{u}]" if u else n for n, u in zip(names, units or [""] * len(names),
+                                                         strict=True)]
+    text.write(",".join(["t_s", *shown]) + "\n")
     table = np.column_stack([t_s, values]) if names else t_s.reshape(-1, 1)
     for k in range(0, len(table), CSV_ROWS):
         np.savetxt(text, table[k:k + CSV_ROWS], delimiter=",", fmt="%.9g")
@@ -568,6 +573,16 @@ def _groups(names: list[str]) -> list[list[int]]:
     return groups
 
 
+#: The longest line of a PNG's title (characters): the fault's whole text is
+#: wrapped to lines of this width, which fit the figure's 10 inches at 90 dpi.
+TITLE_CHARS = 130
+
+
+def _title(text: str) -> str:
+    """The fault's text as the PNG's title: whole, wrapped on words."""
+    return textwrap.fill(text, TITLE_CHARS, break_long_words=True)
+
+
 def _png(t_s: np.ndarray, values: np.ndarray, names: list[str], units: list[str],
          title: str) -> bytes:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -586,7 +601,7 @@ def _png(t_s: np.ndarray, values: np.ndarray, names: list[str], units: list[str]
         if group:
             ax.legend(loc="upper left", fontsize="x-small", framealpha=0.7)
     axes[-1].set_xlabel("time from the fault [s]")
-    fig.suptitle(title, fontsize="small")
+    fig.suptitle(_title(title), fontsize="small")
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=90)
     return buf.getvalue()

@@ -112,24 +112,32 @@ class GripperSim(Component):
     @command(Arg("NAME", str.lower, choices=("limit", "jam", "encoder", "port", "none")),
              Arg("PORT", str.upper, optional=True), Arg("XX", str, optional=True),
              name="fault")
-    def fault(self, what: str, port: str | None = None, value: str | None = None) -> None:
+    def fault(self, what: str, port: str | None = None, value: str | None = None) -> str:
         """sim fault limit|jam|encoder|none, or sim fault port 2D|2E XX: inject a fault.
 
         limit (sensor dead), jam (motor), encoder (dead), port (a sensor port
-        stuck at XX), none (clear them all)."""
+        stuck at XX), none (clear them all).  Says what it did."""
         if what == "none":
             if port is not None:
                 raise CommandError("sim fault none takes no more arguments")
             self._apply(self.plant.clear_faults)
-        elif what == "port":
+            return "every injected fault cleared"
+        if what == "port":
             if port is None or value is None:
                 raise CommandError("sim fault port 2D|2E XX")
-            self._apply(self.plant.inject, "port", parse_hex(value, "stuck port value", 0xFF),
-                        port)
-        else:
-            if port is not None:
-                raise CommandError(f"sim fault {what} takes no more arguments")
-            self._apply(self.plant.inject, what)
+            byte = parse_hex(value, "stuck port value", 0xFF)
+            self._apply(self.plant.inject, "port", byte, port)
+            return f"port {port} stuck at {byte:02X}"
+        if port is not None:
+            raise CommandError(f"sim fault {what} takes no more arguments")
+        self._apply(self.plant.inject, what)
+        return _INJECTED[what] + "; 'sim fault none' clears it"
+
+
+#: What ``sim fault NAME`` did, in the operator's words.
+_INJECTED = {"limit": "limit sensor dead (it never fires, even at the open stop)",
+             "jam": "motor jammed (the jaws do not move, whatever the drive)",
+             "encoder": "encoder dead (its count stays where it is)"}
 
 
 class GripperStation(Station):

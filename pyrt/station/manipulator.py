@@ -69,7 +69,15 @@ from pyrt.db import (
     station_directory,
 )
 from pyrt.db import Station as StationDB
-from pyrt.errors import BoardError, CommandError, ConfigError, DiskError, NativeError, PyrtError
+from pyrt.errors import (
+    BoardError,
+    CommandError,
+    ConfigError,
+    DiskError,
+    NativeError,
+    PyrtError,
+    UsageError,
+)
 from pyrt.native import FuzzyParams, NativeInputError
 from pyrt.robots.av import AV
 from pyrt.robots.axis import Axis, tension_alarms
@@ -105,6 +113,13 @@ MAX_HUNG_LOAD_N = 500.0
 #: Start-up: an encoder whose database ZEROLENGTH is within this many counts of
 #: the rope with the source at POSITION keeps it (see ``_reconcile``).
 RECONCILE_COUNTS = 1.5
+#: Start-up belief check (boards in another process, whose world was built
+#: from a database of its own): how far the position the rope tensions give
+#: (tensionFind) may be from POSITION, cm.  The loadcells' error (zero error,
+#: noise, non-linearity: some 2.5 N) moves that position by up to 25 cm near
+#: the top of the vessel, where the tensions change little with the position;
+#: a world further off than this is said to disagree.
+BELIEF_CM = 35.0
 _SIM_FAULTS = ("slip", "dead", "stuck", "stall", "break", "none")
 POLL_S = 0.05
 AXIS_POLL_S = 0.01
@@ -352,8 +367,7 @@ class ManipulatorStation(Station):
         if why is not None:
             raise pa_rec.where.error("POSITION", f"POLYAXIS {pa_rec.name}: POSITION "
                                      f"({pos[0]:g}, {pos[1]:g}, {pos[2]:g}) cm is {why}")
-        tensions, _ = model.equilibrium_tensions(pos)
-        tensions = [max(t, pa.low_tension + 1.0) for t in tensions]
+        tensions = held_tensions(pa, pos)
         payouts = [payout(model.length_at(i, pos), tensions[i], a.stretch, a.dead_length)
                    for i, a in enumerate(self.axes)]
         self.rig = rig_from_station(st, liquid_level=liquid_level)
@@ -411,6 +425,24 @@ class ManipulatorStation(Station):
         self._log_file: TextIO | None = None
         boards.poll(self.loop.now_ns)  # the encoders' counters now ride along
         pa.measure()  # the first status line shows real tensions and lengths
+        if not boards.in_process:  # a world built elsewhere, from its own database
+            doubt = belief_doubt(pa_rec.position, pa.tensions, held_tensions(pa, pa_rec.position),
+                                 pa.tension_find())
+            if doubt is not None:
+                self._distrust(pa_rec, boards, doubt)
+
+    def _distrust(self, pa_rec: Any, boards: Boards, doubt: str) -> None:
+        """The world disagrees with the database at start: the estimate is not
+        trusted (moves refused until 'setpos X Y Z'), nothing measured is
+        written back, and the start-up note says both positions and what to do."""
+        x, y, z = pa_rec.position
+        why = (f"the world disagrees with the database at start-up: {doubt}, not at "
+               f"POSITION ({x:.2f}, {y:.2f}, {z:.2f}) cm of {self.directory / 'POLYAXIS.dat'}")
+        todo = (f"give 'pyrt board-sim {pa_rec.name.lower()}' this station's --db "
+                f"{self.directory} and restart both, or, where the source really is (board-sim's "
+                f"'sim' shows it), '{self.polyaxis.name} setpos X Y Z'")
+        self.polyaxis.estimator.estimate_lost = f"{why}; {todo}"
+        self.startup_notes.append(f"moves refused: {why}; {todo}")
 
     def _reconcile(self, pa_rec: Any, payouts: list[float]) -> list[str]:
         """Start-up: the encoders' ZEROLENGTH and the axes' LENGTH from the
@@ -638,6 +670,30 @@ class ManipulatorStation(Station):
             self.stop_log()
 
 
+def held_tensions(pa: PolyAxis, x: Sequence[float]) -> list[float]:
+    """The tensions that hold the source at ``x`` as the controller leaves it
+    (the world's start: the equilibrium, no rope below LOW_TENSION + 1 N)."""
+    tensions, _ = pa.model.equilibrium_tensions(x)
+    return [max(t, pa.low_tension + 1.0) for t in tensions]
+
+
+def belief_doubt(position: Sequence[float], measured: Sequence[float],
+                 held: Sequence[float], found: Sequence[float]) -> str | None:
+    """Whether the loadcells contradict the source at the database ``position``,
+    as far as they can tell: the position the ``measured`` tensions give
+    (``found``, tensionFind) is more than BELIEF_CM from it.  Returns what
+    they say instead, with the rope whose tension differs most from those
+    that hold the source at ``position`` (``held``); None: no contradiction."""
+    far = math.dist(found, position)
+    if far <= BELIEF_CM:
+        return None
+    diffs = [m - h for m, h in zip(measured, held, strict=True)]
+    worst = max(range(len(diffs)), key=lambda i: abs(diffs[i]))
+    return (f"the rope tensions put the source near ({found[0]:.2f}, {found[1]:.2f}, "
+            f"{found[2]:.2f}) cm, {far:.0f} cm away (rope {worst} holds "
+            f"{measured[worst]:.1f} N where POSITION needs {held[worst]:.1f} N)")
+
+
 def rope_ranges(model: RopeModel, cells: int = 12) -> list[tuple[float, float]]:
     """Every rope's physical length range (cm): the least and greatest length
     with the source anywhere it may be (the vessel sphere and the neck,
@@ -743,6 +799,8 @@ class ManipulatorWorlds(WorldFactory):
     name = "manipulator"
     world_aliases: dict[str, dict[str, Any]] = {
         name: {"station": name} for name in STATIONS}
+    #: Which database the last :meth:`world` was built from (board-sim says it).
+    world_origin = ""
 
     def board_kinds(self) -> dict[str, BoardKind]:
         return dict(MANIPULATOR_BOARDS)
@@ -766,6 +824,14 @@ class ManipulatorWorlds(WorldFactory):
         imp = Imperfections.ideal() if getattr(args, "ideal_sensors", False) else None
         station = ManipulatorStation(directory, writer="sync", imperfections=imp, lock=False,
                                      expect=name if db else None)
+        x, y, z = station.station.polyaxis().position
+        here = f"the source at its POSITION ({x:.2f}, {y:.2f}, {z:.2f}) cm"
+        self.world_origin = (
+            f"world from the database {directory.resolve()}, {here}; run the controller "
+            f"with the same --db" if db else
+            f"world from the packaged {name or 'prototype'} database ({directory}), {here}; "
+            "a controller whose database holds another POSITION refuses to move: give "
+            "both the same --db DIR")
         return ManipulatorWorld(station.plant, station.polyaxis.name)
 
 
@@ -827,8 +893,8 @@ station's.
     def configure(self, args: argparse.Namespace, say: Callable[[str], None]) -> None:
         """Find, seed or copy the station database; ``args.directory`` is where it is."""
         if args.db and args.init_db:
-            raise ConfigError("give --db DIR (an existing database) or --init-db DIR (seed "
-                              "one), not both")
+            raise UsageError("give --db DIR (an existing database) or --init-db DIR (seed "
+                             "one), not both")
         if args.init_db:
             args.station = args.station or "prototype"
             try:
@@ -842,8 +908,8 @@ station's.
             directory = Path(args.db)
             if not (directory / FILES["POLYAXIS"]).is_file():
                 what = "no such directory" if not directory.is_dir() else "no station database"
-                raise ConfigError(f"{what}; seed it with 'pyrt manipulator --init-db {args.db} "
-                                  f"--station {'|'.join(STATIONS)}'", args.db)
+                raise UsageError(f"--db {args.db}: {what}; seed it with 'pyrt manipulator "
+                                 f"--init-db {args.db} --station {'|'.join(STATIONS)}'")
         else:
             args.station = args.station or "prototype"
             directory = default_working_directory(args.station)

@@ -47,9 +47,10 @@ def _pyrt(*argv: str, stdin: str, timeout: float = 120.0) -> subprocess.Complete
 @pytest.mark.parametrize("argv", [["run", "pyrt_arm.station:ARM"], ["arm"]],
                          ids=["pyrt-run", "pyrt-arm"])
 def test_a_piped_script_moves_waits_stops_faults_and_recovers(argv):
-    """A move and wait (at target), a stop during a move (stopped), a jammed joint (the following-error fault shown once), ack, a second move (at target); exit status 0."""
-    run = _pyrt(*argv, "--speed", "max", stdin=SCRIPT)
-    assert run.returncode == 0, run.stderr
+    """A move and wait (at target), a stop during a move (stopped), a jammed joint (the following-error fault shown once), ack, a second move (at target); the fault fails the script: -k runs it to its end, exit status 1."""
+    run = _pyrt(*argv, "--speed", "max", "-k", stdin=SCRIPT)
+    assert run.returncode == 1, run.stderr
+    assert "stdin:10: 'wait' failed: FAULT: q0 following error" in run.stderr
     out = run.stdout
     assert out.startswith("pyrt arm: arm, simulated boards; tick 1000 µs, speed max"), out
     assert out.count("at target (every joint within 0.05 deg)") == 2, out
