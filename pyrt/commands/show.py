@@ -39,7 +39,7 @@ __all__ = ["MAX_ROWS", "Row", "ShowWord", "Table", "data_lines", "read_table", "
            "table_lines"]
 
 #: The most rows one table shows (every built-in robot's whole table fits).
-MAX_ROWS = 100
+MAX_ROWS = 250
 #: The widest a cell is shown; a longer one is cut with "...".
 MAX_CELL = 40
 #: The most objects the line that says nothing matches names.
@@ -303,7 +303,7 @@ class ShowWord:
         display range, a parameter's the range set checks; writable: yes
         for a parameter set OBJECT.FIELD VALUE may change (get says when),
         no for signals.  Every value comes from the same tick.  At most
-        100 rows are shown; the line after the table says how many were
+        250 rows are shown; the line after the table says how many were
         left out and which prefixes narrow it.  A prefix that matches
         nothing is an error that says what there is (a read: nothing
         changed).  Over the DAQ link, TABLE [PREFIX] gives the same rows

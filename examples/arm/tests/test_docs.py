@@ -101,16 +101,17 @@ def test_every_pyrt_name_the_guide_gives_is_public():
 
 @pytest.mark.skipif(not GUIDE.exists(), reason="the guide lives in pyrt's repository")
 def test_the_guides_session_is_what_the_arm_says():
-    """The guide's session (a printf piped into pyrt arm --speed max) is, line for line, what the arm says."""
+    """The guide's session (a printf piped into pyrt arm --speed max -k) is, line for line, what the arm says, and its jam fails line 6 and the exit status."""
     import subprocess
     import sys
 
     text = GUIDE.read_text()
-    m = re.search(r"^\$ printf '(?P<script>[^']*)' \| pyrt arm --speed max\n(?P<out>.*?)^```",
+    m = re.search(r"^\$ printf '(?P<script>[^']*)' \| pyrt arm --speed max -k\n(?P<out>.*?)^```",
                   text, re.S | re.M)
     assert m, "no session in the guide"
     script = m["script"].replace("\\n", "\n")
-    run = subprocess.run([sys.executable, "-m", "pyrt", "arm", "--speed", "max"], input=script,
-                         text=True, capture_output=True, timeout=120)
-    assert run.returncode == 0, run.stderr
+    run = subprocess.run([sys.executable, "-m", "pyrt", "arm", "--speed", "max", "-k"],
+                         input=script, text=True, capture_output=True, timeout=120)
+    assert run.returncode == 1, run.stderr
+    assert "stdin:6: 'wait' failed: FAULT" in run.stderr
     assert run.stdout.splitlines() == m["out"].splitlines()
