@@ -27,6 +27,7 @@ from pyrt.motion import Evaluator, MotionSpec, RecordError
 
 if TYPE_CHECKING:
     from pyrt.station.base import Station
+    from pyrt.station.domain import Robot
 
 __all__ = ["OPTIONS_HELP", "ArmMoves"]
 
@@ -42,7 +43,7 @@ class ArmMoves:
     """The arm's commands and the queueing of its moves (mixed into the arm, which
     sets the attributes declared here)."""
 
-    station: Station
+    station: Station | Robot  # what answers for its fault: the station, or its robot
     name: str
     n: int
     q: np.ndarray

@@ -296,7 +296,8 @@ class Station(StationRobots, StationEvents, StationRequests):
 
     @final
     def resolve_signal(self, name: str) -> Signal:
-        """``OBJECT.SIGNAL``, or a bare ``SIGNAL`` of the root component; CommandError if none."""
+        """``OBJECT.SIGNAL`` (``OBJECT.PART.SIGNAL``: of a part of OBJECT), or a bare
+        ``SIGNAL`` of the root component; CommandError if none."""
         text = name.strip()
         obj, dot, field = text.partition(".")
         if dot and field:
@@ -304,6 +305,10 @@ class Station(StationRobots, StationEvents, StationRequests):
             if c is None:
                 raise CommandError(f"no channel {text[:60]!r}: no object {obj[:40]!r}")
             s = c.signal(field)
+            part, dot2, rest = field.partition(".")
+            if s is None and dot2 and rest:  # PARENT.PART.SIGNAL: a signal of a part
+                child = next((k for k in c.children() if k.name.lower() == part.lower()), None)
+                s = child.signal(rest) if child is not None else None
             if s is None:
                 raise CommandError(f"no channel {text[:60]!r}: {c.name} has no signal "
                                    f"{field[:40]!r}; it has "
