@@ -220,3 +220,15 @@ class TestCellConformance(StationConformance):
         runner.call(station.arm.move_joints, 40, 60, -150, 30, -40, 50)
         runner.call(station.controller.cmd_position, "20mm")
         assert runner.wait_until(lambda: bool(self.driven(station)), 5.0)
+
+
+def test_pyrt_cell_refuses_a_journal_and_boards_elsewhere():
+    """--journal (it records one set of boards) and --boards tcp://... are refused in a sentence, exit 2 or 1, nothing run."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    for extra, words in ((["--journal", "x.pj"], "--journal: a journal records one set"),
+                         (["--boards", "tcp://127.0.0.1:1"], "runs on in-process boards")):
+        r = subprocess.run([sys.executable, "-m", "pyrt", "cell", "--speed", "max", *extra],
+                           input="quit\n", cwd=ROOT, env=env, capture_output=True, text=True,
+                           timeout=120)
+        assert r.returncode != 0 and words in r.stderr + r.stdout, r.stderr
+        assert "Traceback" not in r.stderr

@@ -32,6 +32,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import functools
+from collections.abc import Callable
 
 from pyrt.boards import Boards, open_boards
 from pyrt.boards.armservo import arm_servo_kind
@@ -80,7 +81,7 @@ class CellStation(Station):
         chain, motors, text = load_arm(None)
         self.chain = chain
         self.urdf_text = text
-        world = arm_world(arm_boards, chain, motors)
+        world = arm_world(arm_boards.simulated or arm_boards, chain, motors)
         physics = world.plant
         assert isinstance(physics, UrdfPhysics)
         self.plant = physics.arm
@@ -205,8 +206,10 @@ class CellStation(Station):
     def _arm_ended(self) -> tuple[str, list[str]]:
         if self.puma.fault is not None:
             why = f"fault: {self.puma.fault.cause}"
+        elif not self.arm.last_stop:
+            return "", []  # the servo brought the arm to rest at power-on: not a move
         else:
-            why = self.arm.last_stop or "ended"
+            why = self.arm.last_stop
         return why, [f"puma: {why}: {self.arm.where()}"]
 
     def _jaw_move_done(self, motion: MotionType) -> None:
@@ -296,13 +299,14 @@ class CellRoot(Component):
 def build_cell(loop: Loop, *, boards: str | None = None) -> CellStation:
     """The cell on ``loop``, not yet started.  ``boards``: ``sim:`` (the default)
     only: each robot gets its own in-process boards."""
-    if boards not in (None, "sim:"):
-        raise ConfigError(f"pyrt cell: --boards {boards!r}: the cell runs on its own in-process "
-                          "boards (sim:), one set for each robot")
+    url = boards or "sim:"
+    if not url.lower().startswith("sim:"):
+        raise ConfigError(f"--boards {boards!r}: the cell runs on in-process boards "
+                          "(sim:), a set of its own for each robot")
     chain, _motors, _text = load_arm(None)
-    arm_boards = open_boards(None, "puma", {"servo": arm_servo_kind(chain.n)})
+    arm_boards = open_boards(url, "puma", {"servo": arm_servo_kind(chain.n)})
     try:
-        jaw_boards = open_boards(None, "gripper", GRIPPER_BOARDS)
+        jaw_boards = open_boards(url, "gripper", GRIPPER_BOARDS)
     except BaseException:
         arm_boards.close()
         raise
@@ -338,6 +342,13 @@ object and lift, in the loop; wait waits for it to end.
     default_tick_us = 1000
     max_tick_us = 1000
     max_tick_why = "the arm's servo task runs every tick and is tuned for 1 kHz"
+
+    def configure(self, args: argparse.Namespace, say: Callable[[str], None]) -> None:
+        """A journal is refused: it records one set of boards, and the cell has one per
+        robot (the black box keeps the arm's inputs and every signal)."""
+        if getattr(args, "journal", None):
+            raise ConfigError("--journal: a journal records one set of boards and "
+                              "the cell has one for each robot (puma, gripper); not recorded")
 
     def build(self, loop: Loop, args: argparse.Namespace) -> CellStation:
         return build_cell(loop, boards=getattr(args, "boards", None))
