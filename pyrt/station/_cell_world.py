@@ -33,6 +33,10 @@ __all__ = ["CAPTURE_MM", "CAPTURE_Z_MM", "CellObject", "CellSim", "CellWorld"]
 CAPTURE_MM = 10.0
 #: ... and this close along the vertical (mm).
 CAPTURE_Z_MM = 15.0
+#: Beyond this from the object (mm) the tool is looked for only every FAR_SKIP_TICKS + 1
+#: ticks (it moves less than a metre a second: it cannot come within reach sooner).
+FAR_MM = 60.0
+FAR_SKIP_TICKS = 9
 #: The object's width when none is given (mm).
 DEFAULT_WIDTH_MM = 30.0
 #: Where the object is at start (mm): on the table below the PUMA's start pose.
@@ -45,13 +49,23 @@ class CellWorld:
     def __init__(self, arm: ArmWorld, jaws: JawPlant) -> None:
         self.arm = arm
         self.jaws = jaws
-        #: The object's true position (m, world frame), or None: no object.
-        self.position: np.ndarray | None = np.array(DEFAULT_OBJECT_MM) * 1e-3
+        #: The object's position when it is not held (m, world frame), or None.
+        self._resting: np.ndarray | None = np.array(DEFAULT_OBJECT_MM) * 1e-3
+        #: Ticks before the next look for the tool (far from the object: it cannot
+        #: come within reach sooner).
+        self._skip = 0
         self.width_mm = DEFAULT_WIDTH_MM
         #: The table height under the object (m): where it rests when let go.
         self.rest_z = float(DEFAULT_OBJECT_MM[2]) * 1e-3
         #: The object in the tool's frame while held (4,), or None.
         self._grasp: np.ndarray | None = None
+
+    @property
+    def position(self) -> np.ndarray | None:
+        """The object's true position (m, world frame), or None: no object."""
+        if self._grasp is not None:
+            return (self.arm.truth().tool @ self._grasp)[:3]
+        return self._resting
 
     @property
     def held(self) -> bool:
@@ -65,8 +79,9 @@ class CellWorld:
             raise ValueError("the jaws hold the object: open them first")
         if self.jaws.object_mm is not None:
             self.jaws.set_object(None)
-        self.position = np.array([x_mm, y_mm, z_mm]) * 1e-3
+        self._resting = np.array([x_mm, y_mm, z_mm]) * 1e-3
         self.rest_z = z_mm * 1e-3
+        self._skip = 0
         self.width_mm = width_mm
 
     def remove(self) -> None:
@@ -75,34 +90,42 @@ class CellWorld:
             raise ValueError("the jaws hold the object: open them first")
         if self.jaws.object_mm is not None:
             self.jaws.set_object(None)
-        self.position = None
+        self._resting = None
 
     def step(self, now_ns: int) -> None:
         """After the arm and the jaws moved: whether the jaws have the object, hold
-        it, carry it or let it fall."""
-        p = self.position
-        if p is None:
-            return
-        tool = self.arm.truth().tool
+        it (it moves with the tool: :attr:`position`) or let it fall."""
         jaws = self.jaws
         if self._grasp is not None:
             if jaws.squeeze > 0.0:
-                self.position = (tool @ self._grasp)[:3]
                 return
-            self._grasp = None  # let go: it falls onto the table below it
-            self.position = np.array([p[0], p[1], self.rest_z])
-            p = self.position
+            p = self.position  # let go: it falls onto the table below it
+            assert p is not None
+            self._grasp = None
+            self._resting = np.array([p[0], p[1], self.rest_z])
+            self._skip = 0
+        p = self._resting
+        if p is None:
+            return
+        if self._skip > 0:
+            self._skip -= 1
+            return
+        tool = self.arm.truth().tool
         d = (p - tool[:3, 3]) * 1e3
-        between = math.hypot(d[0], d[1]) <= CAPTURE_MM and abs(d[2]) <= CAPTURE_Z_MM
+        across, along = math.hypot(d[0], d[1]), abs(d[2])
+        between = across <= CAPTURE_MM and along <= CAPTURE_Z_MM
         if between and jaws.object_mm is None:
             try:
                 jaws.set_object(self.width_mm)
             except ValueError:  # the jaws are narrower than the object: not between them
                 return
-        elif not between and jaws.object_mm is not None:
-            jaws.set_object(None)
+        elif not between:
+            if jaws.object_mm is not None:
+                jaws.set_object(None)
+            if max(across, along) > FAR_MM:
+                self._skip = FAR_SKIP_TICKS
             return
-        if jaws.object_mm is not None and jaws.squeeze > 0.0:
+        if jaws.squeeze > 0.0:
             self._grasp = np.linalg.solve(tool, np.append(p, 1.0))
 
     def axis(self, i: int) -> float:
