@@ -247,3 +247,48 @@ def test_a_station_without_robots_is_one_robot_named_after_it():
     assert station.acknowledge("solo").startswith("fault acknowledged (x)")
     with pytest.raises(CommandError):
         station.robot("other")
+
+
+def _link(url: str, fail_after: int, in_process: bool = True):
+    """Boards whose read phase raises BoardError (naming the URL) from the Nth poll on."""
+    from pyrt.boards import Boards
+    from pyrt.errors import BoardError
+
+    polls = [0]
+
+    def poll(now_ns: int) -> None:
+        polls[0] += 1
+        if polls[0] > fail_after:
+            raise BoardError(url, "no reply")
+
+    return Boards(url, "test", {}, {}, in_process=in_process, poll=poll)
+
+
+def test_a_lost_board_trips_the_robot_that_owns_it_alone():
+    """A board set whose read phase fails trips the robot it was given to; the other robot's actuator stays on and its own boards are still read."""
+    station = Station(Loop(SimClock()))
+    a, b = _Part("a"), _Part("b")
+
+    class Root(Component):
+        name = "root"
+
+        def children(self) -> list[Component]:
+            return [a, b]
+
+    lost, good = _link("sim:lost", 5), _link("sim:good", 10**9)
+    station.add_robot("left", a, boards=[lost])
+    station.add_robot("right", b, boards=[good])
+    station.adopt(Root())
+    station.loop.run(ticks=20)
+    assert not a.on and b.on
+    left, right = station.robot("left"), station.robot("right")
+    assert left.fault is not None and "sim:lost" in left.fault.cause and right.fault is None
+
+
+def test_boards_with_one_url_outside_the_process_are_one_board():
+    """Two Boards objects of one tcp:// URL are one board (refused for a second robot); two sim: sets are two."""
+    from pyrt.station.domain import boards_clash
+
+    assert boards_clash(_link("tcp://h:1", 0, False), _link("tcp://h:1", 0, False))
+    assert not boards_clash(_link("tcp://h:1", 0, False), _link("tcp://h:2", 0, False))
+    assert not boards_clash(_link("sim:", 0), _link("sim:", 0))
