@@ -46,12 +46,18 @@ def _cell(clock):
     return station, runner, shell
 
 
-def _cycle(station, shell) -> None:
+def _cycle(station, shell) -> bool:
+    """One pick and the release; whether the pick ended picked (at real time on a loaded
+    machine a late tick may trip the arm's following error: acknowledged, counted)."""
     shell.onecmd(f"pick {OBJECT}")
     shell.onecmd("wait")
-    assert station.pick.last.startswith("picked"), station.pick.last
+    picked = station.pick.last.startswith("picked")
+    if station.fault is not None:
+        shell.onecmd("ack")
+        shell.onecmd("sim object " + OBJECT)  # what a fault dropped goes back in place
     shell.onecmd("gripper P 0")
     shell.onecmd("wait")
+    return picked
 
 
 def test_cell_pick_speed_max(benchmark):
@@ -66,7 +72,7 @@ def test_cell_pick_speed_max(benchmark):
         station, _runner, shell = built[-1]
         t0, c0 = station.loop.now_ns, time.process_time()
         for _ in range(3):
-            _cycle(station, shell)
+            assert _cycle(station, shell), station.pick.last
         sims.append((station.loop.now_ns - t0) / 1e9)
         cpus.append(time.process_time() - c0)
 
@@ -113,13 +119,13 @@ def test_cell_pick_at_real_time(benchmark):
         station, runner, shell = _cell(WallClock())
         try:
             runner.statistics()  # the start-up's figures are not the cycles'
-            cycles = 0
+            cycles = picked = 0
             end = time.monotonic() + SPAN_S
             while time.monotonic() < end:
-                _cycle(station, shell)
+                picked += _cycle(station, shell)
                 cycles += 1
             out["cell"] = runner.statistics()
-            out["cycles"] = cycles
+            out["cycles"] = f"{cycles} pick cycles, {picked} picked"
         finally:
             station.close()
         anchor = URDF.build(Loop(WallClock(), timing=True),
@@ -141,5 +147,5 @@ def test_cell_pick_at_real_time(benchmark):
     cell = _describe(out["cell"], ("puma", "sysclk"))
     urdf = _describe(out["urdf"], ("puma",))
     benchmark.extra_info.update(cell=cell, urdf=urdf, cycles=out["cycles"])
-    print(f"\npyrt cell at real time, {SPAN_S:g} s, {out['cycles']} pick cycles: {cell}"
+    print(f"\npyrt cell at real time, {SPAN_S:g} s, {out['cycles']}: {cell}"
           f"\npyrt urdf alone (anchor), {SPAN_S:g} s of the same poses: {urdf}")
