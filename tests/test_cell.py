@@ -232,3 +232,23 @@ def test_pyrt_cell_refuses_a_journal_and_boards_elsewhere():
                            timeout=120)
         assert r.returncode != 0 and words in r.stderr + r.stdout, r.stderr
         assert "Traceback" not in r.stderr
+
+
+def test_the_served_cell_has_each_robots_state_and_flags(cell):
+    """The served station: EPICS's puma:state and gripper:state (idle, moving, fault) and STATUS's per-robot fault flags follow each robot on its own."""
+    from pyrt.server.station import ServedStation
+
+    station, runner, _shell, _out = cell
+    served = ServedStation(station)
+    fields = {f.name: f for f in served.extra_fields}
+    assert {"puma:state", "gripper:state"} <= set(fields)
+    status = dict(zip(served.status_names, served.fields, strict=True))
+    assert {"puma_fault", "gripper_fault", "puma_busy", "gripper_busy"} <= set(status)
+
+    def read():
+        return (fields["puma:state"].source.read(), fields["gripper:state"].source.read(),
+                status["gripper_fault"][1].read(), status["puma_fault"][1].read())
+
+    assert runner.call(read) == (0, 0, False, False)
+    runner.call(station.controller.fail, "jaws", take_fault=False)
+    assert runner.call(read, take_fault=False) == (0, 2, True, False)

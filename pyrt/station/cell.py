@@ -172,8 +172,7 @@ class CellStation(Station):
 
     def _jaws_busy(self) -> bool:
         ctl = self.controller
-        return (ctl.moving or ctl.busy or len(self.jaw_moves) > 0
-                or any(ex.busy for ex in (self.executor,)))
+        return ctl.moving or ctl.busy or len(self.jaw_moves) > 0 or self.executor.busy
 
     def _jaws_where(self) -> str:
         ctl = self.controller
