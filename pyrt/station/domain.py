@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Callable, Iterable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from pyrt.component import Component, walk
 from pyrt.errors import BoardError, Fault
@@ -159,8 +159,3 @@ class Robot:
 
     def __repr__(self) -> str:
         return f"Robot({self.name!r}, fault={self.fault is not None})"
-
-
-def describe(obj: Any) -> str:
-    """A board set as an error names it."""
-    return str(getattr(obj, "url", obj))

@@ -62,7 +62,7 @@ class StationRobots:
         for boards in self.board_sets:
             if not boards.polls:
                 continue
-            if boards.down is not None and self._stopped_by(boards):
+            if self._stopped_by(boards) and boards.down is not None:
                 continue  # stopped, and nothing to reach: the fault says why
             try:
                 boards.poll(now_ns)
@@ -74,7 +74,7 @@ class StationRobots:
         for boards in self.board_sets:
             if not boards.flushes:
                 continue
-            if boards.down is not None and self._stopped_by(boards):
+            if self._stopped_by(boards) and boards.down is not None:
                 continue
             try:
                 boards.flush(now_ns)
