@@ -292,3 +292,16 @@ def test_boards_with_one_url_outside_the_process_are_one_board():
     assert boards_clash(_link("tcp://h:1", 0, False), _link("tcp://h:1", 0, False))
     assert not boards_clash(_link("tcp://h:1", 0, False), _link("tcp://h:2", 0, False))
     assert not boards_clash(_link("sim:", 0), _link("sim:", 0))
+
+
+def test_wait_name_takes_seconds_and_stop_refuses_an_unknown_robot(cell):
+    """wait gripper 0.2 while the jaws travel says it is still moving after 0.2 s; stop nobody is refused and stops nothing."""
+    station, _runner, shell, out = cell
+    shell.onecmd("gripper P 10mm")
+    shell.onecmd("wait gripper 0.2")
+    assert "still moving after 0.2 s" in out.getvalue()
+    shell.onecmd("stop nobody")
+    assert "no robot named 'nobody'" in out.getvalue()
+    assert station.gripper.busy()
+    shell.onecmd("wait gripper")
+    assert not station.gripper.busy()
