@@ -304,12 +304,24 @@ class RobotShell(LineResolver, CommandShell, ShowWord):
                                "says what it takes")
         self.error(f"no help for {first[:40]!r}{self._did_you_mean(first)}")
 
+    def _robot_word(self, arg: str) -> tuple[str | None, str]:
+        """``NAME [REST]``: a robot's name and the rest, or (None, ``arg``) when the
+        first word names no robot of the station."""
+        first, _, rest = arg.strip().partition(" ")
+        names = getattr(self.station, "robot_names", None)
+        if first and names is not None and first.lower() in (n.lower() for n in names()):
+            return first, rest.strip()
+        return None, arg
+
     @command(_REST, name="wait", console=True)
     def do_wait(self, arg: str = "") -> None:
-        """wait [SECONDS]: wait until the current move (or job) ends; say why it ended."""
+        """wait [ROBOT] [SECONDS]: wait until the current move (or job) ends; say why it ended.
+
+        With several robots: every robot's moves, or ROBOT's alone."""
+        robot, arg = self._robot_word(arg)
         timeout = parse_seconds(arg, "wait") if arg.strip() else WAIT_TIMEOUT_S
         profile = self.profile
-        watch = self.call(self.station.watch_move, name="wait")  # the one mailbox call
+        watch = self.call(self.station.watch_move, robot, name="wait")  # the one mailbox call
         if watch.idle:
             last = watch.last.reason if watch.last is not None else ""
             self.say(profile.idle_line(watch.where, last))
@@ -376,23 +388,42 @@ class RobotShell(LineResolver, CommandShell, ShowWord):
         self.say(f"motion {record.type} queued ({n} waiting)"
                  + (" behind the running move" if waiting else ""))
 
-    @command(name="ack", console=True)
-    def do_ack(self) -> None:
-        """ack: acknowledge a fault: every motor stays stopped, the routines restart."""
+    @command(Arg("ROBOT", str, optional=True), name="ack", console=True)
+    def do_ack(self, robot: str | None = None) -> None:
+        """ack [ROBOT]: acknowledge a fault: every motor stays stopped, the routines restart.
+
+        With several robots: ack ROBOT acknowledges that robot's fault; ack
+        alone, every robot's."""
+        st = self.station
+        if robot is not None:
+            st.robot(robot)  # an unknown robot: refused here, nothing acknowledged
         for fault in self.runner.take_faults():  # each report is shown before it is acknowledged
             self.fault(FaultError(fault))
-        self.say(self.runner.call(self.station.acknowledge, name="ack", take_fault=False))
+        for line in str(self.runner.call(st.acknowledge, robot, name="ack",
+                                         take_fault=False)).splitlines():
+            self.say(line)
 
-    @command(name="stop", console=True, anyone=True)
-    def do_stop(self) -> None:
-        """stop: stop every motor now, end the move, drop queued moves."""
-        self.say(self.runner.call(self.station.stop, name="stop", take_fault=False))
+    @command(Arg("ROBOT", str, optional=True), name="stop", console=True, anyone=True)
+    def do_stop(self, robot: str | None = None) -> None:
+        """stop [ROBOT]: stop every motor now, end the move, drop queued moves.
+
+        With several robots: stop alone stops every robot; stop ROBOT, that one."""
+        st = self.station
+        if robot is None:
+            said = self.runner.call(st.stop, name="stop", take_fault=False)
+        else:
+            st.robot(robot)  # an unknown robot: refused here
+            said = self.runner.call(st.stop_robot, robot, name="stop", take_fault=False)
+        for line in str(said).splitlines():
+            self.say(line)
 
     @command(Arg("OBJECT", str, optional=True), name="status", reads_only=True, console=True)
     def do_status(self, name: str | None = None) -> None:
-        """status [OBJECT]: the robot's status line, or every signal of OBJECT with units."""
+        """status [OBJECT]: the robot's status line (a line per robot), or every signal of
+        OBJECT with units."""
         if name is None:
-            self.say(self.runner.call(self.station.status, name="status"))
+            for line in str(self.runner.call(self.station.status, name="status")).splitlines():
+                self.say(line)
             return
         comp = self.station.component(name)
         values = self.runner.call(lambda: [(s, s.read()) for s in comp.signals()])

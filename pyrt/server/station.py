@@ -10,6 +10,7 @@ the stop).  No second table of commands exists here.
 
 from __future__ import annotations
 
+import functools
 import io
 import logging
 import logging.handlers
@@ -182,6 +183,15 @@ class ServedStation:
             PVField("stopReason", "", "s", Source.call(self._stop_reason), "text",
                     doc="how the last move ended"),
         ]
+        robots = list(getattr(st, "robots", ()))
+        if len(robots) > 1:  # a station of several robots: each robot's own state
+            for robot in robots:
+                if _PV_NAME.match(robot.name):
+                    fields.append(PVField(
+                        f"{robot.name}:state", "", "d",
+                        Source.call(functools.partial(self._robot_state, robot)), "enum",
+                        StationState,
+                        doc=f"{robot.name}: idle, moving or fault (until ack {robot.name})"))
         for sig in st.served_signals():
             fields.append(PVField(sig.name, sig.units, sig.fmt, sig.scope_source(),
                                   limits=sig.limits, doc=sig.doc))
@@ -199,6 +209,12 @@ class ServedStation:
         if st.fault is not None:
             return 2
         return 1 if st.busy() else 0
+
+    @staticmethod
+    def _robot_state(robot: Any) -> int:
+        if robot.fault is not None:
+            return 2
+        return 1 if robot.busy() else 0
 
     def _stop_reason(self) -> str:
         return self.station.last_stop()

@@ -61,6 +61,7 @@ from pyrt.station._urdf_moves import ArmMoves
 
 if TYPE_CHECKING:
     from pyrt.station.base import Station
+    from pyrt.station.domain import Robot
 
 __all__ = [
     "AT_TARGET_DEG",
@@ -167,7 +168,7 @@ class UrdfArm(ArmMoves, Component):
     board, ``drives`` one :class:`Drive` per joint, ``period_ns`` the tick.
     """
 
-    def __init__(self, station: Station, name: str, chain: Chain, board: Any,
+    def __init__(self, station: Station | Robot, name: str, chain: Chain, board: Any,
                  drives: Sequence[Drive], period_ns: int,
                  wrench: Callable[[Sequence[int]], np.ndarray] | None = None) -> None:
         self.station = station

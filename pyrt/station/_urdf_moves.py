@@ -29,6 +29,7 @@ from pyrt.motion import Comply, Evaluator, MotionSpec, Move, RecordError
 
 if TYPE_CHECKING:
     from pyrt.station.base import Station
+    from pyrt.station.domain import Robot
 
 __all__ = ["COMPLY_HELP", "OPTIONS_HELP", "ArmMoves"]
 
@@ -67,7 +68,7 @@ class ArmMoves:
     """The arm's commands and the queueing of its moves (mixed into the arm, which
     sets the attributes declared here)."""
 
-    station: Station
+    station: Station | Robot  # what answers for its fault: the station, or its robot
     name: str
     n: int
     q: np.ndarray

@@ -1,4 +1,4 @@
-"""A station: one loop, one component tree, one plant, one fault state.
+"""A station: one loop, one component tree, one plant, one or more robots.
 
 Both robots are a :class:`Station` plus a configuration
 (:mod:`pyrt.station.gripper`, :mod:`pyrt.station.manipulator`).  The station
@@ -6,7 +6,14 @@ Both robots are a :class:`Station` plus a configuration
 * owns the loop, the component tree (:mod:`pyrt.component`), the plant
   behind the boards (``None`` on real hardware), the motion queue and the
   runner (the mailbox the consoles and the server talk through);
-* holds the robot's **fault state**: :meth:`trip` records the first fault,
+* holds one or more **robots** (:class:`~pyrt.station.domain.Robot`,
+  declared by :meth:`add_robot`; a station that declares none is one robot),
+  each a fault domain with its components, queues, motion queue, executors
+  and boards (a board serves one robot): a fault on one stops that robot's
+  actuators in the same tick and leaves the others running, unless the
+  station declares them :attr:`coupled`; what cannot be attributed (the
+  loop's overruns) stops them all; ``ack NAME`` and ``stop NAME`` address one;
+* holds each robot's **fault state**: :meth:`trip` records the first fault,
   halts the robot's ready queues, runs **every** component's reflex in the
   same tick (004: one joint's error stops the whole robot), ends the
   running motion, drops queued ones and reports the fault once to the
@@ -49,24 +56,24 @@ Both robots are a :class:`Station` plus a configuration
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any, final
 
 from pyrt.boards import Boards
 from pyrt.component import Command, Component, Signal, command, walk
-from pyrt.errors import BoardError, CommandError, ConfigError, Fault, PyrtError
+from pyrt.errors import BoardError, CommandError, ConfigError, PyrtError
 from pyrt.scheduler import Loop, ReadyQueue
 from pyrt.scheduler.motion import MotionExecutor
 from pyrt.scheduler.runner import MotionQueue, Runner
 from pyrt.scope import Scope
+from pyrt.station.domain import Robot
 from pyrt.station.events import StationEvents
 from pyrt.station.profile import ShellProfile
 from pyrt.station.requests import StationRequests
+from pyrt.station.robots import StationRobots
 
-__all__ = ["BoardWorld", "Station", "refuse_sim_options"]
-
+__all__ = ["BoardWorld", "Robot", "Station", "refuse_sim_options"]
 
 
 def refuse_sim_options(boards: Boards, given: Iterable[str]) -> None:
@@ -102,7 +109,7 @@ class BoardWorld(Component):
         return f"board-sim at {self.boards.url}: " + " ".join(f"{k}={v}" for k, v in info.items())
 
 
-class Station(StationEvents, StationRequests):
+class Station(StationRobots, StationEvents, StationRequests):
     """See the module text.  A configuration builds its tree and calls
     :meth:`adopt` last (after every loop handler is attached)."""
 
@@ -124,7 +131,10 @@ class Station(StationEvents, StationRequests):
         self.queues: list[ReadyQueue] = []
         self.executors: list[MotionExecutor] = []
         self.plant: Any = None
+        #: The station's first boards (every set it owns: :attr:`board_sets`).
         self.boards: Boards | None = None
+        #: Every set of boards the station owns, in the order attached.
+        self.board_sets: list[Boards] = []
         #: The first BoardError seen (a poll, a reflex, the stop at close), or None.
         self.board_error: BoardError | None = None
         #: Where :meth:`close` reports what it could not do (boards already
@@ -135,7 +145,8 @@ class Station(StationEvents, StationRequests):
         #: as ``start-up:`` lines before the console opens (the manipulator's
         #: reconciled ZEROLENGTH and LENGTH); none by default.
         self.startup_notes: list[str] = []
-        self._fault: Fault | None = None
+        self._robots: list[Robot] = []
+        self._declared = False
         self._by_name: dict[str, Component] = {}
         self._closed = False
         self._init_events()
@@ -144,11 +155,13 @@ class Station(StationEvents, StationRequests):
 
     @final
     def attach_boards(self, boards: Boards) -> None:
-        """Own ``boards``: attach their read phase (``io:read``) to the loop now
-        (call it before the robot's handlers: the inputs of a tick come in
-        first) if the back end polls; :meth:`adopt` attaches the write phase
-        (``io:write``) last.  The back end derives its timeouts from the
-        loop's tick.  :meth:`close` closes them."""
+        """Own ``boards``: attach the read phase (``io:read``, one handler that
+        reads every set the station owns) to the loop now (call it before the
+        robot's handlers: the inputs of a tick come in first) if the back end
+        polls; :meth:`adopt` attaches the write phase (``io:write``) last.  The
+        back end derives its timeouts from the loop's tick.  A station may own
+        several sets (each robot its own: :meth:`add_robot`); :meth:`close`
+        closes them all."""
         if not boards.in_process and not boards.replay:
             clock = self.loop.clock
             speed = getattr(clock, "speed", 1.0)
@@ -157,52 +170,30 @@ class Station(StationEvents, StationRequests):
                 raise ConfigError(f"board URL {boards.url!r}: the boards and their world run "
                                   f"in another process at real time: {what} is refused; run "
                                   "at real time (--speed 1)")
-        self.boards = boards
+        if any(b is boards for b in self.board_sets):
+            raise ConfigError(f"board URL {boards.url!r}: these boards are attached already")
+        polled = any(b.polls for b in self.board_sets)
+        self.board_sets.append(boards)
+        if self.boards is None:
+            self.boards = boards
         boards.set_tick(self.loop.period_ns / 1e9)
-        if boards.polls:
+        if boards.polls and not polled:
             self.loop.attach(self._poll_boards, name="io:read")
 
     @final
-    def attach_world(self, step: Callable[[int], None], name: str = "world") -> None:
+    def attach_world(self, step: Callable[[int], None], name: str = "world",
+                     boards: Boards | None = None) -> None:
         """Attach the simulated world's ``step(now_ns)``: to the loop as handler
         ``name`` (call it after :meth:`attach_boards`, before the robot's
         handlers), or, for boards reached through an image over in-process
         boards (``sim:?image=1``), at the start of their read phase, so that
         the tick reads the world as it stands; in a replay not at all (the
-        recorded inputs stand in for the world)."""
-        if self.boards is not None and self.boards.attach_world(step):
+        recorded inputs stand in for the world).  ``boards``: the set the
+        world is behind (default: the station's first)."""
+        behind = boards if boards is not None else self.boards
+        if behind is not None and behind.attach_world(step):
             return
         self.loop.attach(step, name=name)
-
-    def _poll_boards(self, now_ns: int) -> None:
-        """Loop handler ``io:read``: the boards' inputs for this tick.  A
-        BoardError trips the robot (once per fault: after ``ack`` the next
-        failure trips again)."""
-        boards = self.boards
-        assert boards is not None
-        if self._fault is not None and boards.down is not None:
-            return  # stopped, and nothing to reach: the fault says why
-        try:
-            boards.poll(now_ns)
-        except BoardError as exc:
-            self._board_failed(exc)
-
-    def _flush_boards(self, now_ns: int) -> None:
-        """Loop handler ``io:write`` (the last): the outputs this tick changed."""
-        boards = self.boards
-        assert boards is not None
-        if self._fault is not None and boards.down is not None:
-            return
-        try:
-            boards.flush(now_ns)
-        except BoardError as exc:
-            self._board_failed(exc)
-
-    def _board_failed(self, exc: BoardError) -> None:
-        if self.board_error is None:
-            self.board_error = exc
-        if self._fault is None:
-            self.trip(str(exc), source="boards")
 
     @final
     def adopt(self, root: Component, *, queues: Iterable[ReadyQueue] = (),
@@ -216,6 +207,11 @@ class Station(StationEvents, StationRequests):
         scope and the mailbox to the loop (in that order, after the robot's
         handlers).
 
+        A station that declared no robot (:meth:`add_robot`) is one robot:
+        its name, every component, queue, executor and board.  Otherwise each
+        declared robot's components must be in the tree, and its queues'
+        errors and its components' faults trip that robot alone.
+
         What the operator reads of the robot is given here, once (loop
         thread, each returns text): ``where`` the robot is; how the move that
         has just ended ended, ``ended() -> (reason, report lines)``, asked
@@ -228,8 +224,6 @@ class Station(StationEvents, StationRequests):
         self._say_status = status
         self.root = root
         self.extras = list(extras)
-        self.queues = list(queues)
-        self.executors = list(executors)
         self._by_name = {}
         for top in [root, *self.extras]:
             for c in walk(top):
@@ -239,8 +233,22 @@ class Station(StationEvents, StationRequests):
                 if key in self._by_name and self._by_name[key] is not c:
                     raise PyrtError(f"two components of {self.name} are called {c.name!r}")
                 self._by_name[key] = c
+        if not self._declared:
+            self._robots = [Robot(self.name, root, motion=self.motion, queues=queues,
+                                  executors=executors, boards=self.board_sets,
+                                  parts=self.extras)]
+        for r in self._robots:
+            r.refresh()
+            stray = [c.name for c in r.components if self._by_name.get(c.name.lower()) is not c]
+            if stray:
+                raise PyrtError(f"robot {r.name!r}: {', '.join(stray)} not in {self.name}'s tree")
+        self.queues = list(queues) + [q for r in self._robots for q in r.queues
+                                      if not any(q is x for x in queues)]
+        self.executors = list(executors) + [e for r in self._robots for e in r.executors
+                                            if not any(e is x for x in executors)]
         for q in self.queues:
-            q.on_error = self._queue_error
+            owner = self._owner_of_queue(q)
+            q.on_error = self._queue_error if owner is None else self._robot_queue_error(owner)
         self.loop.trip_handlers.append(self.trip)
         self.loop.attach(self._watch_moves, name="moves")
         self.loop.attach(self.scope.sample, name="scope")
@@ -248,8 +256,10 @@ class Station(StationEvents, StationRequests):
         self.subscribe(self._to_console)
         self.subscribe_moves(self._move_to_console)
         for c in self._by_name.values():  # what they said while being built comes now
-            c.connect(trip=self.trip, tell=self.publish)
-        if self.boards is not None and self.boards.flushes:
+            owner = self.robot_of(c)
+            trip = self.trip if owner is None or not self._declared else self._robot_trip(owner)
+            c.connect(trip=trip, tell=self.publish)
+        if any(b.flushes for b in self.board_sets):
             self.loop.attach(self._flush_boards, name="io:write")
         return self.runner
 
@@ -286,7 +296,8 @@ class Station(StationEvents, StationRequests):
 
     @final
     def resolve_signal(self, name: str) -> Signal:
-        """``OBJECT.SIGNAL``, or a bare ``SIGNAL`` of the root component; CommandError if none."""
+        """``OBJECT.SIGNAL`` (``OBJECT.PART.SIGNAL``: of a part of OBJECT), or a bare
+        ``SIGNAL`` of the root component; CommandError if none."""
         text = name.strip()
         obj, dot, field = text.partition(".")
         if dot and field:
@@ -294,6 +305,10 @@ class Station(StationEvents, StationRequests):
             if c is None:
                 raise CommandError(f"no channel {text[:60]!r}: no object {obj[:40]!r}")
             s = c.signal(field)
+            part, dot2, rest = field.partition(".")
+            if s is None and dot2 and rest:  # PARENT.PART.SIGNAL: a signal of a part
+                child = next((k for k in c.children() if k.name.lower() == part.lower()), None)
+                s = child.signal(rest) if child is not None else None
             if s is None:
                 raise CommandError(f"no channel {text[:60]!r}: {c.name} has no signal "
                                    f"{field[:40]!r}; it has "
@@ -309,86 +324,12 @@ class Station(StationEvents, StationRequests):
         """Every command record of every component."""
         return [(c, r) for c in self.components() for r in c.commands()]
 
-    # -- faults (loop thread) ---------------------------------------------------------
-
-    @final
-    @property
-    def fault(self) -> Fault | None:
-        """The fault that stopped the robot, or None."""
-        return self._fault
-
-    @final
-    def trip(self, cause: str, source: str = "", tb: str = "") -> Fault:
-        """The one fault path (every component's :meth:`~pyrt.component.Component.fail`,
-        a task that raised, a board that cannot be reached, a motion that
-        failed, the loop's consecutive overruns all come here): halt the
-        queues, run every component's reflex and end the motions, in this
-        tick.  The first fault is kept and published once, as one event with
-        an id (:attr:`~pyrt.errors.Fault.id`) that the shell, the server and
-        EPICS each show once; a later cause while the robot is stopped runs
-        the reflex again and is not news.  Returns the station's fault."""
-        first = self._fault is None
-        for q in self.queues:
-            q.halt()
-        if first:  # recorded first: a move the reflex ends, ends by this fault
-            self._fault = self.loop.make_fault(self.name, cause, source, tb)
-        failed = self.reflex(f"fault: {cause}")
-        fault = self._fault
-        assert fault is not None
-        if not first:
-            return fault
-        if failed:
-            fault = self._fault = dataclasses.replace(
-                fault, cause=f"{cause}; reflex action failed: {failed}")
-        self.loop.report_fault(fault)
-        return fault
-
-    def _queue_error(self, cause: str, source: str, tb: str) -> None:
-        self.trip(cause, source, tb)
-
-    @final
-    def reflex(self, why: str = "stop") -> str:
-        """Every actuator stopped now: every component's reflex, the running
-        motions ended, queued ones dropped.  Returns the reflex errors ('' if none);
-        a failing reflex never keeps the others from running."""
-        errors = []
-        for c in reversed(self.components()):  # leaves (motors) first
-            try:
-                c.reflex()
-            except BoardError as exc:
-                if self.board_error is None:
-                    self.board_error = exc
-                errors.append(f"{c.name}: {exc}")
-            except Exception as exc:
-                errors.append(f"{c.name}: {exc!r}")
-        if self.boards is not None:
-            try:  # the reflex's outputs go out now, not at the end of the tick
-                self.boards.write_now()
-            except BoardError as exc:
-                if self.board_error is None:
-                    self.board_error = exc
-                errors.append(f"boards: {exc}")
-        for ex in self.executors:
-            with contextlib.suppress(Exception):
-                ex.abort(why)
-        self.motion.clear()
-        return "; ".join(errors)
-
-    @final
-    def acknowledge(self) -> str:
-        """Clear the fault; the routines start again, nothing moves."""
-        if self._fault is None:
-            return "no fault to acknowledge"
-        cause = self._fault.cause
-        self.reflex("acknowledge")
-        self._fault = None
-        for q in self.queues:
-            q.resume(restart=True)
-        return f"fault acknowledged ({cause}); every motor stopped, routines running"
-
     def stop(self) -> str:
         """The operator's stop: every motor stopped, the move ended, queued
-        moves dropped (no fault); the line says where the robot stopped."""
+        moves dropped (no fault); the line says where the robot stopped.  Of
+        several robots: each robot's stop (:meth:`stop_robot`), a line each."""
+        if self._declared:
+            return "\n".join(r.stop() for r in self._robots)
         failed = self.reflex("stop command")
         said = f"{self.name}: every motor stopped" + (f" ({failed})" if failed else "")
         here = self.where()
@@ -413,10 +354,13 @@ class Station(StationEvents, StationRequests):
     def execute(self, component: Component, record: Command, args: list[Any]) -> Any:
         """Run ``record`` with checked ``args``: refused while faulted if it
         moves (or is not allowed while faulted); one mailbox call checks and acts."""
-        if self._fault is not None and not record.while_faulted:
+        owner = self.robot_of(component) if self._declared else None
+        fault = owner.fault if owner is not None else self.fault
+        if fault is not None and not record.while_faulted:
+            who = owner.name if owner is not None else self.name
             raise CommandError(
-                f"{component.name} {record.name}: refused: {self.name} is stopped by a fault "
-                f"({self._fault.cause}); give 'ack' first; nothing moved")
+                f"{component.name} {record.name}: refused: {who} is stopped by a fault "
+                f"({fault.cause}); give 'ack' first; nothing moved")
         return record.handler(*args)
 
     def check_motion(self, record: Any) -> None:
@@ -425,13 +369,19 @@ class Station(StationEvents, StationRequests):
     # -- state ------------------------------------------------------------------------
 
     def busy(self) -> bool:
-        """A move runs or waits (configurations say more)."""
+        """A move runs or waits (configurations say more); of several robots: a
+        move of any of them."""
+        if self._declared:
+            return any(r.busy() for r in self._robots)
         return len(self.motion) > 0 or any(ex.busy for ex in self.executors)
 
     @final
     def status(self) -> str:
         """The status line: as given to :meth:`adopt` (else the root's signals),
-        and the fault while one is not acknowledged."""
+        and the fault while one is not acknowledged.  Of several robots: a
+        line each, ``NAME: ...``."""
+        if self._declared:
+            return "\n".join(f"{r.name}: {r.status()}" for r in self._robots)
         if self._say_status is not None:
             line = self._say_status()
             return f"{line}  FAULT: {self._fault.cause}" if self._fault is not None else line
@@ -472,8 +422,8 @@ class Station(StationEvents, StationRequests):
     def start(self) -> Runner:
         """Start the loop (its thread on a wall clock)."""
         assert self.runner is not None, "adopt() the tree first"
-        if self.boards is not None:
-            self.boards.resync()
+        for boards in self.board_sets:
+            boards.resync()
         self.runner.start()
         return self.runner
 
@@ -507,9 +457,10 @@ class Station(StationEvents, StationRequests):
                 self._close_boards(failed)
 
     def _close_boards(self, failed: BoardError | None) -> None:
-        boards = self.boards
-        if boards is None:
-            return
+        for boards in self.board_sets:
+            self._close_board_set(boards, failed)
+
+    def _close_board_set(self, boards: Boards, failed: BoardError | None) -> None:
         gone = boards.down
         boards.close()
         if gone is None and failed is None:

@@ -24,6 +24,7 @@ if TYPE_CHECKING:
     from pyrt.errors import Fault
     from pyrt.scheduler import Loop, ReadyQueue
     from pyrt.scheduler.runner import Runner
+    from pyrt.station.domain import Robot
     from pyrt.station.profile import ShellProfile
 
 __all__ = ["MESSAGE_LOG", "StationEvents"]
@@ -52,10 +53,14 @@ class StationEvents:
         runner: Runner | None
         profile: ShellProfile
         queues: list[ReadyQueue]
-        _fault: Fault | None
+        _robots: list[Robot]
+        _declared: bool
 
+        @property
+        def fault(self) -> Fault | None: ...
         def busy(self) -> bool: ...
         def where(self) -> str: ...
+        def robot(self, name: str) -> Robot: ...
 
     def _init_events(self) -> None:
         #: The subscribers of the components' messages (:meth:`subscribe`),
@@ -72,6 +77,8 @@ class StationEvents:
         self.moves_this_period = 0
         #: The last move's end (:class:`~pyrt.station.moves.MoveEnded`), or None.
         self.last_move: MoveEnded | None = None
+        #: The last move's end of each robot of several, by its name (lower case).
+        self._last_moves: dict[str, MoveEnded] = {}
         self._say_where: Callable[[], str] = _nothing
         self._say_ended: Callable[[], tuple[str, Sequence[str]]] = _ended
         self._say_status: Callable[[], str] | None = None
@@ -97,44 +104,62 @@ class StationEvents:
         return sum(1 for w in self._watches if not w.done)
 
     @final
-    def watch_move(self) -> MoveWatch:
+    def watch_move(self, robot: str | None = None) -> MoveWatch:
         """``wait``'s one mailbox call (loop thread): a watch of what runs now. It
         collects every move-ended event until the robot is idle, then is done;
         idle at once (with the last move's event and where the robot is) when
         nothing runs; a refusal when nothing can end (a ready queue of the
-        robot is frozen: its clock interrupt is off)."""
-        if not self.busy():
-            return MoveWatch(True, self.last_move, where=self.where())
-        frozen = next((q for q in self.queues if not q.interrupts_enabled), None)
+        robot is frozen: its clock interrupt is off).  ``robot``: of one robot
+        of the station (its events, until it is idle); None: every robot."""
+        one = self.robot(robot) if robot is not None and self._declared else None
+        busy = one.busy() if one is not None else self.busy()
+        name = one.name if one is not None else ""
+        if not busy:
+            last = self._last_of(name)
+            where = one.where() if one is not None else self.where()
+            return MoveWatch(True, last, where=where, robot=name)
+        queues = one.queues if one is not None else self.queues
+        frozen = next((q for q in queues if not q.interrupts_enabled), None)
         if frozen is not None:
             return MoveWatch(False, self.last_move,
                              f"the clock interrupt is OFF (the ready queue {frozen.name} is "
-                             "frozen): the move cannot end until it is on")
+                             "frozen): the move cannot end until it is on", robot=name)
         self._moving = True  # queued in this tick, after the watch ran: it is a move
-        watch = MoveWatch(False, self.last_move)
+        if one is not None:
+            one.moving = True
+        watch = MoveWatch(False, self.last_move, robot=name)
         self._watches.append(watch)
         return watch
 
+    def _last_of(self, robot: str) -> MoveEnded | None:
+        if not robot:
+            return self.last_move
+        return self._last_moves.get(robot.lower())
+
     @final
-    def end_move(self, reason: str, report: Sequence[str] = ()) -> MoveEnded:
+    def end_move(self, reason: str, report: Sequence[str] = (), robot: str = "") -> MoveEnded:
         """Publish the end of a move (loop thread): ``reason`` how it ended, in
         the operator's words, ``report`` the lines ``wait`` says (default: the
         reason); where the robot was left and the fault that ended it are
         added here.  A configuration calls it from its motion executor's
         ``on_done`` (or its controller's stop listener); a move that is not a
         motion (a job, a move of one axis) ends when the robot goes idle, as
-        ``ended`` (given to :meth:`adopt`) says."""
+        ``ended`` (given to :meth:`adopt`) says.  ``robot``: the robot of a
+        station of several whose move it was ('': the station's)."""
+        one = self.robot(robot) if robot and self._declared else None
         try:
-            where = self.where()
+            where = one.where() if one is not None else self.where()
         except Exception as exc:  # a report must never stop the tick
             where = f"(where is not known: {exc!r})"
-        fault = self._fault
+        fault = one.fault if one is not None else self.fault
         self._move_seq += 1
         self.moves_this_period += 1
-        event = MoveEnded(self.name, self._move_seq, reason, where,
-                          fault.id if fault is not None else 0,
+        event = MoveEnded(one.name if one is not None else self.name, self._move_seq, reason,
+                          where, fault.id if fault is not None else 0,
                           tuple(report) or (reason,), self.loop.now_ns)
         self.last_move = event
+        if one is not None:
+            self._last_moves[one.name.lower()] = event
         for watch in self._watches:
             watch.collect(event)
         for listener in self._move_listeners:
@@ -151,14 +176,17 @@ class StationEvents:
         """Loop handler ``moves``: when the robot goes idle, what ended and was not
         a motion is published (``ended`` says whether there is any), and the
         waits are done."""
+        if self._declared:
+            self._watch_robots()
         busy = self.busy()
         if self._moving and not busy:
-            try:
-                reason, report = self._say_ended()
-            except Exception as exc:  # a report must never stop the tick
-                reason, report = f"ended (its report failed: {exc!r})", ()
-            if reason or report:
-                self.end_move(reason, report)
+            if not self._declared:
+                try:
+                    reason, report = self._say_ended()
+                except Exception as exc:  # a report must never stop the tick
+                    reason, report = f"ended (its report failed: {exc!r})", ()
+                if reason or report:
+                    self.end_move(reason, report)
             watches, self._watches = self._watches, []
             for watch in watches:
                 watch.finish()
@@ -166,6 +194,24 @@ class StationEvents:
         elif busy and not self._moving:
             self.moves_this_period = 0
         self._moving = busy
+
+    def _watch_robots(self) -> None:
+        """Each robot of several that went idle: how its move ended, published as its
+        event; the waits for it alone are done."""
+        for r in self._robots:
+            busy = r.busy()
+            if r.moving and not busy:
+                try:
+                    reason, report = r.ended()
+                except Exception as exc:  # a report must never stop the tick
+                    reason, report = f"ended (its report failed: {exc!r})", ()
+                if reason or report:
+                    self.end_move(reason, report, robot=r.name)
+                mine = [w for w in self._watches if w.robot.lower() == r.name.lower()]
+                self._watches = [w for w in self._watches if w not in mine]
+                for watch in mine:
+                    watch.finish()
+            r.moving = busy
 
     # -- messages -------------------------------------------------------------------
 

@@ -52,10 +52,12 @@ class MoveWatch:
     None.  Otherwise :attr:`ended` collects the :class:`MoveEnded` events
     until the robot is idle, and then :attr:`done` (both in the loop thread)."""
 
-    __slots__ = ("done", "ended", "idle", "last", "refusal", "waiting", "where")
+    __slots__ = ("done", "ended", "idle", "last", "refusal", "robot", "waiting", "where")
 
     def __init__(self, idle: bool, last: MoveEnded | None, refusal: str | None = None,
-                 where: str = ""):
+                 where: str = "", robot: str = ""):
+        #: The robot it waits for ('': every robot of the station).
+        self.robot = robot
         self.idle = idle
         self.last = last
         self.refusal = refusal
@@ -70,8 +72,9 @@ class MoveWatch:
         self.waiting = True
 
     def collect(self, event: MoveEnded) -> None:
-        """A move ended (loop thread)."""
-        self.ended.append(event)
+        """A move ended (loop thread): kept if it is of the robot it waits for."""
+        if not self.robot or event.robot.lower() == self.robot.lower():
+            self.ended.append(event)
 
     def finish(self) -> None:
         """The robot is idle (loop thread)."""

@@ -26,7 +26,9 @@ class StationRequests:
         name: str
         root: Component
         motion: MotionQueue
-        _fault: Fault | None
+
+        @property
+        def fault(self) -> Fault | None: ...
 
         def busy(self) -> bool: ...
         def check_motion(self, record: Any) -> None: ...
@@ -81,9 +83,10 @@ class StationRequests:
         """Check a motion record and put it on the motion queue (loop thread):
         refused while faulted; a type's ``check(robot, params)`` runs first.
         Returns (records waiting, whether a move was already running)."""
-        if self._fault is not None:
+        fault = self.fault
+        if fault is not None:
             raise CommandError(f"motion {record.type}: refused: {self.name} is stopped by a "
-                               f"fault ({self._fault.cause}); give 'ack' first; nothing moved")
+                               f"fault ({fault.cause}); give 'ack' first; nothing moved")
         cls = self.motion_type(record.type)
         self.check_motion(record)
         cls.check(self.motion_robot(), record.params)
