@@ -188,6 +188,7 @@ class TestCellConformance(StationConformance):
         "UrdfSim.table": [["-2000"], ["off"]],
         "UrdfArm.tool": [["0", "0", "50", "0", "0", "0"], ["0"] * 6],
         "UrdfArm.coord": [["0", "0", "50", "0", "0", "0"], ["0"] * 6],
+        "UrdfArm.conveyor": [["0", "50", "0"], ["0"] * 3],
         "CellSim.fault": [["none"]],
         "CellSim.object": [["500", "100", "300"]],
     }
