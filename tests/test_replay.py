@@ -380,3 +380,24 @@ def test_a_headless_run_ended_by_sigterm_replays_identically(tmp_path):
     status, replayed = _replay(path)
     assert status == 0, replayed
     assert "identical" in replayed
+
+
+def test_each_write_is_named_by_the_task_or_job_that_ran(tmp_path):
+    """The recorder stamps every output write with what the loop and queue say runs: the
+    init job's writes are "init", a move's are MVJAWS; none is "outside a task"."""
+    loop = Loop(SimClock(), period_ns=1_000_000)
+    station = build_gripper(loop, boards="sim:?image=1")
+    rec = Recorder(station, tmp_path / "named.pj")
+    shell = RobotShell(station, io.StringIO())
+    try:
+        station.start()
+        for line in ("I", "wait", "P 30mm", "wait", "stop"):
+            shell.onecmd(line)
+    finally:
+        station.close()
+        rec.close()
+    reader = JournalReader(tmp_path / "named.pj")
+    dac = list(reader.header.outputs).index("gripper.dac")
+    by = {reader.writers[w] for t in reader.ticks() for i, _v, w in t.outputs if i == dac}
+    assert {"init", "MVJAWS"} <= by, by
+    assert "outside a task" not in by

@@ -205,6 +205,8 @@ class ReadyQueue:
             raise ValueError(f"T must hold 1- or 4-byte schedule variables, got {image.t_width}")
         self.name = name
         self._routines: dict[int, Routine] = {}
+        # the address whose body the Python dispatch runs now (0: none)
+        self._running = 0
         self._by_name: dict[str, Routine] = {}
         # address -> (body, period variable or None, its index)
         self._dispatch: dict[
@@ -430,6 +432,20 @@ class ReadyQueue:
         """All registered routines, in registration order."""
         return list(self._routines.values())
 
+    @property
+    def running(self) -> str | None:
+        """The name of the routine whose body runs now, or None between
+        routines (the dispatch, C or Python, stores its address before each
+        body).  While the fault of a routine that raised is handled (the
+        owner's reflex, in the same tick) it is still that routine's name.
+        Who writes an output is read here (a journal stamps each write)."""
+        core = self._core
+        a = core.running if core is not None else self._running
+        if not a:
+            return None
+        r = self._routines.get(a)
+        return r.name if r is not None else f"{a:04X}"
+
     # -- the queue -----------------------------------------------------------
 
     @property
@@ -590,7 +606,10 @@ class ReadyQueue:
         try:
             pending = core.check(now_ns)  # csrc/ext/dispatch.c: _check_py in C
         except Exception as exc:
-            self._failed(core.last, exc)
+            try:
+                self._failed(core.last, exc)
+            finally:
+                core.running = 0
             return
         if pending >= self._fold_at:
             self._timing.fold_all()
@@ -628,6 +647,7 @@ class ReadyQueue:
                 tm.pending += len(ready)
                 t0 = timer()
             for a in ready:
+                self._running = a
                 fn, pmem, paddr = table[a]
                 fn()
                 if pmem is not None:  # self-scheduling: again, with its period now
@@ -645,8 +665,12 @@ class ReadyQueue:
                     if log is not None:
                         log.append((a, t1 - t0))
                     t0 = t1
+            self._running = 0
         except Exception as exc:
-            self._failed(a, exc)
+            try:
+                self._failed(a, exc)
+            finally:
+                self._running = 0
 
 
 class _LittleEndianWords:  # pragma: no cover - big-endian hosts only

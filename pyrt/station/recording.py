@@ -30,13 +30,10 @@ shows as a difference when the journal is replayed.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import importlib
 import json
-import sys
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from types import FrameType
 from typing import TYPE_CHECKING, Any
 
 from pyrt._version import __version__
@@ -200,81 +197,6 @@ def decode_request(station: Station, text: str) -> Callable[[], Any]:
     return lambda: fn(*args)
 
 
-# -- who wrote an output -------------------------------------------------------------------
-
-
-_BOARDS = str(Path(__file__).resolve().parent.parent / "boards")
-
-
-def _code_of(fn: Any) -> Any:
-    for _ in range(8):  # what a routine wraps: a partial, a timed body
-        if isinstance(fn, functools.partial):
-            fn = fn.func
-        elif getattr(fn, "__wrapped__", None) is not None:
-            fn = fn.__wrapped__
-        else:
-            break
-    fn = getattr(fn, "__func__", fn)
-    code = getattr(fn, "__code__", None)
-    if code is None:
-        call = type(fn).__dict__.get("__call__")
-        code = getattr(call, "__code__", None)
-    return code
-
-
-class _Writers:
-    """Finds the task or loop handler that is writing: the innermost frame of
-    the calling stack whose code is a known routine's or handler's."""
-
-    def __init__(self, station: Station):
-        #: code -> [(the bound instance or None, name, its queue or None, its address)]
-        self.by_code: dict[Any, list[tuple[Any, str, Any, int]]] = {}
-        loop = station.loop
-        for q in loop.queues:
-            table = q._dispatch
-            for a, r in q._routines.items():
-                self._add(table[a][0] if a in table else r.fn, r.name, q, a)
-        for h, name in zip(loop._handlers, loop._handler_names,
-                           strict=True):
-            if getattr(h, "__self__", None) in loop.queues:
-                continue
-            self._add(h, name)
-
-    def _add(self, fn: Any, name: str, queue: Any = None, address: int = -1) -> None:
-        code = _code_of(fn)
-        if code is not None:
-            owner = getattr(fn, "__self__", None)
-            if owner is None and isinstance(fn, functools.partial) and fn.args:
-                owner = fn.args[0]
-            self.by_code.setdefault(code, []).append((owner, name, queue, address))
-
-    def current(self) -> str:
-        """The name of the task (or handler) writing now."""
-        f: FrameType | None = sys._getframe(2)  # who called the image's write
-        by_code = self.by_code
-        other = ""
-        while f is not None:
-            found = by_code.get(f.f_code)
-            if found is not None:
-                if len(found) == 1:
-                    return found[0][1]
-                # one body, several routines (the same method of three axes): the
-                # queue's C dispatch knows which one it is running
-                for _owner, name, queue, address in found:
-                    core = getattr(queue, "_core", None)
-                    if core is not None and core.last == address:
-                        return name
-                me = f.f_locals.get("self")
-                for owner, name, _q, _a in found:
-                    if owner is me:
-                        return name
-                return found[0][1]
-            if not other and _BOARDS not in f.f_code.co_filename:
-                other = f.f_code.co_qualname  # a job's generator, a command outside a tick
-            f = f.f_back
-        return other or "outside a task"
-
-
 # -- the recorder ----------------------------------------------------------------------------
 
 
@@ -304,7 +226,8 @@ class Recorder:
         self.image = image
         loop = station.loop
         self.loop = loop
-        self._writers = _Writers(station)
+        #: Who is writing now (the running routine or handler): the loop says.
+        self._writer = loop.writer
         meta = dict(metadata or {})
         meta.setdefault("boards", boards.url if boards is not None else "")
         meta.setdefault("in_process", bool(boards is not None and boards.in_process))
@@ -321,7 +244,7 @@ class Recorder:
                      for b, r, i in image.output_layout],
             output_values=image.output_values(), version=__version__,
             databases=station.journal_databases(), seeds=station.seeds(),
-            writers=sorted({e[1] for v in self._writers.by_code.values() for e in v}),
+            writers=loop.writer_names(),
             metadata=meta)
         self.header = header
         self.journal = Journal(header, path, black_box=black_box,
@@ -357,7 +280,7 @@ class Recorder:
 
     def wrote(self, slot: int, value: int) -> None:
         """Output ``slot`` was changed to ``value`` (by the task running now)."""
-        self._outputs.append((slot, value, self.journal.writer_index(self._writers.current())))
+        self._outputs.append((slot, value, self.journal.writer_index(self._writer())))
 
     def _request(self, name: str, fn: Callable[..., Any] | None, args: tuple,
                  motion: Any) -> None:
