@@ -401,3 +401,24 @@ def test_each_write_is_named_by_the_task_or_job_that_ran(tmp_path):
     by = {reader.writers[w] for t in reader.ticks() for i, _v, w in t.outputs if i == dac}
     assert {"init", "MVJAWS"} <= by, by
     assert "outside a task" not in by
+
+
+def test_a_statistics_reset_in_a_recorded_run_records_the_ticks_missed_since(tmp_path):
+    """Missed deadlines counted before and after a statistics reset (which zeroes the
+    count) are each recorded once and never as a negative count: no tick is refused."""
+    loop = Loop(SimClock(), period_ns=1_000_000)
+    station = build_gripper(loop, boards="sim:?image=1")
+    rec = Recorder(station, tmp_path / "reset.pj")
+    try:
+        loop.run(5)
+        loop.missed += 3  # three deadlines skipped (what an overrun at real time does)
+        loop.run(1)
+        loop.reset_statistics()
+        loop.run(1)
+        loop.missed += 2
+        loop.run(1)
+    finally:
+        station.close()
+        rec.close()  # raises if a tick was refused
+    ticks = list(JournalReader(tmp_path / "reset.pj").ticks())
+    assert [t.missed for t in ticks[-4:]] == [0, 3, 0, 2]

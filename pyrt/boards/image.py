@@ -138,9 +138,13 @@ class ImageBackend:
             (board, reg.name, i) for board, kind in self.kinds.items()
             for reg in kind.outputs() for i in range(reg.count)]
         self.output_index = {key: n for n, key in enumerate(self.output_layout)}
-        #: What sees the image move (a journal's recorder): ``inputs(values)`` after
-        #: every read phase, ``wrote(slot, value)`` for every changed output, or None.
+        #: What sees the outputs move (a journal's recorder): ``wrote(slot, value)``
+        #: for every changed output, or None.
         self.tap: Any = None
+        #: The inputs as the last exchange brought them, flat in :attr:`layout`
+        #: order: a new list every exchange, which the image never changes (a
+        #: journal keeps it as it is; None before the first).
+        self.last_inputs: list[int] | None = None
         #: The inputs, flat in :attr:`layout` order; where each register begins and its count.
         self._values: list[int] = [0] * self.input_count
         self._span: dict[tuple[str, str], tuple[int, int]] = {}
@@ -233,6 +237,7 @@ class ImageBackend:
             raise BoardError(self.url, f"read {len(values)} input values, "
                                        f"not {self.input_count}")
         self._values = list(values)  # its own: set_cached changes it, never the caller's
+        self.last_inputs = values
         self._fresh_until = time.monotonic_ns() + self.max_age_ns
 
     def read_phase(self, now_ns: int = 0) -> None:
@@ -242,8 +247,6 @@ class ImageBackend:
         values = self.exchange_inputs()
         self._take_inputs(values)
         self._timed(t0, "read")
-        if self.tap is not None:
-            self.tap.inputs(values)
 
     def write_phase(self, now_ns: int = 0) -> None:
         """The tick's write phase: the changed outputs, one exchange; then

@@ -251,6 +251,8 @@ class Recorder:
                                lossless=loop.clock.virtual if lossless is None else lossless,
                                warn=warn)
         self._inputs: list[int] = list(meta["inputs_before"])
+        #: The journal's index of each writer's name (its table only grows).
+        self._writer_index: dict[str, int] = {}
         self._outputs: list[tuple[int, int, int]] = []
         self._commands: list[tuple[str, str]] = []
         self._events: list[tuple[str, int, str]] = []
@@ -274,13 +276,13 @@ class Recorder:
 
     # -- taps (loop thread) --------------------------------------------------------------
 
-    def inputs(self, values: list[int]) -> None:
-        """The image's read phase brought ``values`` in."""
-        self._inputs = values
-
     def wrote(self, slot: int, value: int) -> None:
         """Output ``slot`` was changed to ``value`` (by the task running now)."""
-        self._outputs.append((slot, value, self.journal.writer_index(self._writer())))
+        name = self._writer()
+        index = self._writer_index.get(name)
+        if index is None:
+            index = self._writer_index[name] = self.journal.writer_index(name)
+        self._outputs.append((slot, value, index))
 
     def _request(self, name: str, fn: Callable[..., Any] | None, args: tuple,
                  motion: Any) -> None:
@@ -314,24 +316,42 @@ class Recorder:
             self.station.trip(cause, source=source)
 
     def _tick(self, now_ns: int) -> None:
-        if self._disk_faults or (self.journal.error is not None and not self._journal_said):
+        # the loop thread's whole share of a tick's record (a tick of the 1 kHz
+        # gripper is ~10 µs of work): a few reads and one hand-over
+        journal = self.journal
+        if self._disk_faults or (journal.error is not None and not self._journal_said):
             self._trip_disk_faults()  # before the record: the reflex's outputs are in it
         loop = self.loop
-        missed = loop.missed - self._missed
-        self._missed = loop.missed
+        missed = loop.missed
+        if missed != self._missed:
+            # the deadlines skipped since the last record (the count was reset to 0
+            # if it went down: those since the reset)
+            missed, self._missed = (missed - self._missed if missed > self._missed
+                                    else missed), missed
+        else:
+            missed = 0
         # the journal keeps the sequences it is given: an empty one is never handed
         # over (a later append would land in every tick still waiting to be written)
-        outputs, commands, events = self._outputs, self._commands, self._events
+        outputs = self._outputs
         if outputs:
             self._outputs = []
-        if commands:
-            self._commands = []
-        if events:
-            self._events = []
-        self.journal.record_tick(loop.tick_index, now_ns, now_ns - loop.deadline_ns, missed,
-                                 self._inputs, outputs or (), commands or (), events or ())
-        for listener in self.tick_listeners:
-            listener(loop.tick_index, now_ns)
+        else:
+            outputs = ()
+        if self._commands or self._events:
+            commands, events = self._commands or (), self._events or ()
+            self._commands, self._events = [], []
+        else:
+            commands = events = ()
+        # the read phase's list of inputs: new every tick, never changed afterwards
+        # (kept as it is, not copied)
+        inputs = self.image.last_inputs
+        if inputs is None:
+            inputs = self._inputs
+        journal.record_owned(loop.tick_index, now_ns, now_ns - loop.deadline_ns, missed,
+                             inputs, outputs, commands, events)
+        if self.tick_listeners:
+            for listener in self.tick_listeners:
+                listener(loop.tick_index, now_ns)
 
     # -- any thread ---------------------------------------------------------------------------
 

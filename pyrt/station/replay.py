@@ -310,9 +310,6 @@ class Replay:
 
     # -- the taps ------------------------------------------------------------------------------
 
-    def inputs(self, values: list[int]) -> None:
-        """The image's read phase (the recorded inputs: nothing to check)."""
-
     def wrote(self, slot: int, value: int) -> None:
         """The controller changed output ``slot`` to ``value``."""
         assert self._who is not None
