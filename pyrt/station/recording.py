@@ -32,7 +32,7 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import json
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -332,11 +332,13 @@ class Recorder:
             missed = 0
         # the journal keeps the sequences it is given: an empty one is never handed
         # over (a later append would land in every tick still waiting to be written)
-        outputs = self._outputs
+        outputs: Sequence[tuple[int, int, int]] = self._outputs
         if outputs:
             self._outputs = []
         else:
             outputs = ()
+        commands: Sequence[tuple[str, str]]
+        events: Sequence[tuple[str, int, str]]
         if self._commands or self._events:
             commands, events = self._commands or (), self._events or ()
             self._commands, self._events = [], []
