@@ -57,6 +57,9 @@ REPLAYED = frozenset({
     "status", "status_fields", "busy", "param", "params_of", "where", "last_stop",
 })
 
+#: How often the journal's writer looks for ticks at real time, seconds.
+REALTIME_POLL_S = 0.1
+
 #: The event of a fault the loop itself declared (consecutive overruns): the
 #: clock's decision, which a replay applies rather than checks.
 LOOP_FAULT = "loop-fault"
@@ -247,9 +250,12 @@ class Recorder:
             writers=loop.writer_names(),
             metadata=meta)
         self.header = header
-        self.journal = Journal(header, path, black_box=black_box,
-                               lossless=loop.clock.virtual if lossless is None else lossless,
-                               warn=warn)
+        lossless = loop.clock.virtual if lossless is None else lossless
+        # at real time the writer wakes a few times a second (a block is cut after
+        # 0.5 s anyway): each wake-up takes the interpreter from a loop that may be
+        # about to tick
+        self.journal = Journal(header, path, black_box=black_box, lossless=lossless,
+                               poll_s=0.02 if lossless else REALTIME_POLL_S, warn=warn)
         self._inputs: list[int] = list(meta["inputs_before"])
         #: The journal's index of each writer's name (its table only grows).
         self._writer_index: dict[str, int] = {}
