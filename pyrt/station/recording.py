@@ -5,7 +5,9 @@ running station (:mod:`pyrt.journal` has the file format):
 
 * the **process image** (:class:`~pyrt.boards.image.ImageBackend`): every
   input of every tick, as the read phase brought it in, and every output
-  the tick changed, with the task that wrote it;
+  the tick changed, with the task that wrote it (as the loop names it,
+  :meth:`~pyrt.scheduler.loop.Loop.writer`: the routine a ready queue is
+  dispatching, else the handler or foreground job running);
 * the **mailbox** (:class:`~pyrt.scheduler.runner.Runner`): every request
   applied, in the tick it was applied in, as a replayable text
   (:func:`encode_request`);
