@@ -277,11 +277,10 @@ class TimedSimClock(SimClock):
         self._w = time.perf_counter_ns
         self._c = time.thread_time_ns
 
-    def wait_until(self, deadline_ns: int) -> None:
+    def start_tick(self, deadline_ns: int) -> int:
         self.wall.append(self._w())
         self.cpu.append(self._c())
-        if deadline_ns > self._now:
-            self._now = deadline_ns
+        return super().start_tick(deadline_ns)
 
     def end_run(self) -> None:
         self.wall.append(self._w())
@@ -342,7 +341,7 @@ class Rig:
     def start(self) -> None:
         """Start the loop and run the start-up commands (the gripper's I)."""
         self.station.start()  # type: ignore[attr-defined]
-        for line in self.station.startup_commands():  # type: ignore[attr-defined]
+        for line in self.station.profile.startup_commands:  # type: ignore[attr-defined]
             self.shell.onecmd(line)
 
     def close(self) -> None:

@@ -567,3 +567,20 @@ def test_the_png_title_is_the_whole_fault_wrapped_to_the_figures_width():
     canvas.draw()
     box = shown.get_window_extent(canvas.get_renderer())
     assert box.x0 >= 0 and box.x1 <= fig.bbox.width
+
+
+def test_signal_ring_packs_every_number_and_a_passing_none_is_nan_for_its_sample_only():
+    """All-number signals are packed straight into the ring; a value that is briefly None
+    is nan in that sample alone, the others and the later samples keep their numbers."""
+    v = [0.0, 0.0]
+    signals = [(f"obj.s{k}", Signal.item(f"s{k}", "cm", v, k)) for k in range(2)]
+    ring = SignalRing(signals, 1.0, 10_000_000, extra_s=0.0)
+    for k in range(6):
+        v[0] = float(k)
+        v[1] = None if k == 2 else k * 0.5  # type: ignore[call-overload]
+        ring.sample(k * 10_000_000)
+    t, values, cols = ring.window(ring.samples)
+    assert cols == [0, 1] and t.tolist() == [k * 10_000_000 for k in range(6)]
+    assert values[:, 0].tolist() == [0.0, 1.0, 2.0, 3.0, 4.0, 5.0]
+    assert np.isnan(values[:, 1]).tolist() == [False, False, True, False, False, False]
+    assert values[[0, 1, 3, 4, 5], 1].tolist() == [0.0, 0.5, 1.5, 2.0, 2.5]

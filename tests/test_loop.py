@@ -620,3 +620,48 @@ def test_a_stop_from_a_handler_ends_the_run_after_that_tick():
     loop.attach(handler)
     assert loop.run(10) == 2
     assert loop.run(3) == 3 and seen[-1] == 5 * MS
+
+
+@pytest.mark.parametrize("timing", [False, True])
+def test_writer_names_the_running_routine_handler_or_job(timing):
+    """writer() is the routine a queue dispatches, else the handler or foreground job running,
+    "loop" between handlers, "outside a task" with no run or from another thread."""
+    loop = Loop(SimClock(), timing=timing)
+    q = ReadyQueue.general("robot")
+    seen: list[str] = []
+    q.add_periodic(None, "SERVO", lambda: seen.append(loop.writer()), 1)
+    q.schedule("SERVO", 1)
+    loop.attach(lambda now: seen.append(loop.writer()), name="io:read")
+    loop.attach(q)
+    loop.attach(lambda now: seen.append(loop.writer()), name="mailbox")
+    other: list[str] = []
+
+    def job():
+        seen.append(loop.writer())
+        t = threading.Thread(target=lambda: other.append(loop.writer()))
+        t.start()
+        t.join()
+        yield
+
+    loop.spawn("init", job())
+    assert loop.writer() == "outside a task"
+    loop.run(1)
+    assert seen == ["io:read", "SERVO", "mailbox", "init"]
+    assert other == ["outside a task"] and loop.writer() == "outside a task"
+    assert loop.writer_names() == ["SERVO", "WAIT", "io:read", "jobs", "mailbox"]
+
+
+def test_writer_names_a_rate_group_member_and_its_routines():
+    """In a rate group, writer() is the member handler running, or the routine of its queue."""
+    from pyrt.scheduler import RateGroup
+
+    loop = Loop(SimClock(), timing=True)
+    group = RateGroup("servo", period_ns=2 * MS)
+    seen: list[str] = []
+    group.attach(lambda now: seen.append(loop.writer()), name="trajectory")
+    q = group.new_queue("arm")
+    q.add_periodic(None, "PID", lambda: seen.append(loop.writer()), 1)
+    q.schedule("PID", 1)
+    loop.attach(group)
+    loop.run(4)
+    assert seen == ["trajectory", "PID", "trajectory", "PID"]

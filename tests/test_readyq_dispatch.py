@@ -193,3 +193,39 @@ def test_native_dispatcher_refuses_bad_arguments():
         d.set_timing(42, False, False, None)
     with pytest.raises(TypeError):
         d.set_samples([])
+
+
+@pytest.mark.parametrize("native", [False, True])
+def test_running_names_the_routine_whose_body_runs_and_none_between(native):
+    """running is the routine whose body runs now (C and Python dispatch alike), None between checks."""
+    q = ReadyQueue(6, name="r", native=native)
+    seen: list[str | None] = []
+    q.add_periodic(0x10, "FIRST", lambda: seen.append(q.running), 1)
+    q.add_periodic(0x20, "SECOND", lambda: seen.append(q.running), 2)
+    q.schedule("FIRST", 1)
+    q.schedule("SECOND", 1)
+    assert q.running is None
+    for t in range(4):
+        q.tick(t)
+        assert q.running is None
+    assert seen == ["FIRST", "SECOND", "FIRST", "FIRST", "SECOND", "FIRST"]
+
+
+@pytest.mark.parametrize("native", [False, True])
+def test_running_names_the_routine_that_raised_while_its_fault_is_handled(native):
+    """The owner's reflex (on_error, in the same tick) runs with running naming the routine
+    that raised; once handled, running is None again."""
+    q = ReadyQueue(6, name="r", native=native)
+    during: list[str | None] = []
+    q.on_error = lambda cause, source, tb: during.append(q.running)
+
+    def fails() -> None:
+        raise RuntimeError("jammed")
+
+    q.add_periodic(0x10, "GOOD", lambda: None, 1)
+    q.add_periodic(0x20, "BAD", fails, 1)
+    q.schedule("GOOD", 1)
+    q.schedule("BAD", 1)
+    q.tick(0)
+    assert during == ["BAD"] and q.halted
+    assert q.running is None

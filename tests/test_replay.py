@@ -381,3 +381,45 @@ def test_a_headless_run_ended_by_sigterm_replays_identically(tmp_path):
     status, replayed = _replay(path)
     assert status == 0, replayed
     assert "identical" in replayed
+
+
+def test_each_write_is_named_by_the_task_or_job_that_ran(tmp_path):
+    """The recorder stamps every output write with what the loop and queue say runs: the
+    init job's writes are "init", a move's are MVJAWS; none is "outside a task"."""
+    loop = Loop(SimClock(), period_ns=1_000_000)
+    station = build_gripper(loop, boards="sim:?image=1")
+    rec = Recorder(station, tmp_path / "named.pj")
+    shell = RobotShell(station, io.StringIO())
+    try:
+        station.start()
+        for line in ("I", "wait", "P 30mm", "wait", "stop"):
+            shell.onecmd(line)
+    finally:
+        station.close()
+        rec.close()
+    reader = JournalReader(tmp_path / "named.pj")
+    dac = list(reader.header.outputs).index("gripper.dac")
+    by = {reader.writers[w] for t in reader.ticks() for i, _v, w in t.outputs if i == dac}
+    assert {"init", "MVJAWS"} <= by, by
+    assert "outside a task" not in by
+
+
+def test_a_statistics_reset_in_a_recorded_run_records_the_ticks_missed_since(tmp_path):
+    """Missed deadlines counted before and after a statistics reset (which zeroes the
+    count) are each recorded once and never as a negative count: no tick is refused."""
+    loop = Loop(SimClock(), period_ns=1_000_000)
+    station = build_gripper(loop, boards="sim:?image=1")
+    rec = Recorder(station, tmp_path / "reset.pj")
+    try:
+        loop.run(5)
+        loop.missed += 3  # three deadlines skipped (what an overrun at real time does)
+        loop.run(1)
+        loop.reset_statistics()
+        loop.run(1)
+        loop.missed += 2
+        loop.run(1)
+    finally:
+        station.close()
+        rec.close()  # raises if a tick was refused
+    ticks = list(JournalReader(tmp_path / "reset.pj").ticks())
+    assert [t.missed for t in ticks[-4:]] == [0, 3, 0, 2]

@@ -20,6 +20,10 @@
  *
  * An exception from a body (or an address with no routine: KeyError) stops
  * the walk and propagates; ``last`` names the address that was running.
+ * ``running`` is the address whose body runs now (0 between bodies and
+ * after a walk): who writes an output is read from it (a store per
+ * dispatch).  After an exception it still names the routine that raised,
+ * until the queue has handled the fault and clears it.
  * The timer is CLOCK_MONOTONIC read directly when the queue's timer is
  * time.perf_counter_ns (what that function reads on Linux), otherwise the
  * Python callable, so a test's fake timer gives the same figures.
@@ -59,6 +63,7 @@ typedef struct {
     long long checked_at;
     long long pending;
     long last;
+    long running;       /* the address whose body runs now (0: none) */
 } Dispatcher;
 
 static void clear_entry(entry *e)
@@ -147,6 +152,7 @@ static int Dispatcher_init(Dispatcher *self, PyObject *args, PyObject *kwds)
     self->wide = wide;
     self->checked_at = -1;
     self->last = 0;
+    self->running = 0;
     return 0;
 }
 
@@ -397,9 +403,10 @@ static PyObject *Dispatcher_check(Dispatcher *self, PyObject *arg)
             return NULL;
         }
         e = &self->entries[idx - 1];
+        self->running = a;
         r = PyObject_CallNoArgs(e->fn);
         if (r == NULL)
-            return NULL;
+            return NULL;  /* running still names it: the fault's reflex is its */
         Py_DECREF(r);
         /* the body may have re-bound this routine: look it up again */
         e = &self->entries[self->index[a] - 1];
@@ -446,6 +453,7 @@ static PyObject *Dispatcher_check(Dispatcher *self, PyObject *arg)
             Py_DECREF(d);
             t0 = t1;
         }
+        self->running = 0;
     }
     return PyLong_FromLongLong(self->pending);
 }
@@ -480,6 +488,9 @@ static PyMemberDef Dispatcher_members[] = {
      "loop time of the last check that ran a routine with tracking on (-1: none)"},
     {"last", T_LONG, offsetof(Dispatcher, last), READONLY,
      "address of the routine dispatched last (the one that raised, after an error)"},
+    {"running", T_LONG, offsetof(Dispatcher, running), 0,
+     "address of the routine whose body runs now, 0 between bodies; after an error "
+     "the one that raised, until the queue clears it (its fault handled)"},
     {NULL, 0, 0, 0, NULL},
 };
 

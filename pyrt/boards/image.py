@@ -112,6 +112,9 @@ class ImageBackend:
 
     #: Whether the far side turns its outputs off when the link drops.
     off_on_loss: bool = False
+    #: Whether there is a link that can go down (:attr:`down`); False for boards in
+    #: this process, whose reads then skip asking.
+    has_link: bool = True
 
     def __init__(self, url: str, kinds: Mapping[str, BoardKind], *,
                  max_age: float = 0.05,
@@ -138,9 +141,13 @@ class ImageBackend:
             (board, reg.name, i) for board, kind in self.kinds.items()
             for reg in kind.outputs() for i in range(reg.count)]
         self.output_index = {key: n for n, key in enumerate(self.output_layout)}
-        #: What sees the image move (a journal's recorder): ``inputs(values)`` after
-        #: every read phase, ``wrote(slot, value)`` for every changed output, or None.
+        #: What sees the outputs move (a journal's recorder): ``wrote(slot, value)``
+        #: for every changed output, or None.
         self.tap: Any = None
+        #: The inputs as the last exchange brought them, flat in :attr:`layout`
+        #: order: a new list every exchange, which the image never changes (a
+        #: journal keeps it as it is; None before the first).
+        self.last_inputs: list[int] | None = None
         #: The inputs, flat in :attr:`layout` order; where each register begins and its count.
         self._values: list[int] = [0] * self.input_count
         self._span: dict[tuple[str, str], tuple[int, int]] = {}
@@ -148,9 +155,13 @@ class ImageBackend:
         for board, name, count in self.layout:
             self._span[(board, name)] = (pos, count)
             pos += count
-        #: Registers a read has been checked for (board, name) -> Register: a read of
-        #: one of them with an index in range skips the check.
-        self._readable: dict[tuple[str, str], Register] = {}
+        #: Registers a read has been checked for (board, name) -> (Register, where its
+        #: first value is in the inputs, or -1 for an output): a read of one of them
+        #: with an index in range skips the check.
+        self._readable: dict[tuple[str, str], tuple[Register, int]] = {}
+        #: Whether :attr:`_values` is the image's own copy (set_cached may change
+        #: it) or the list the last exchange made (:attr:`last_inputs`, never changed).
+        self._own_values = True
         self._outputs: dict[tuple[str, str, int], int] = {}
         self._changed: dict[tuple[str, str, int], int] = {}
         self._fresh_until = 0
@@ -232,8 +243,11 @@ class ImageBackend:
         if len(values) != self.input_count:
             raise BoardError(self.url, f"read {len(values)} input values, "
                                        f"not {self.input_count}")
-        self._values = list(values)  # its own: set_cached changes it, never the caller's
-        self._fresh_until = time.monotonic_ns() + self.max_age_ns
+        self._values = values  # copied before set_cached changes it: never the caller's
+        self._own_values = False
+        self.last_inputs = values
+        if not self.phased:
+            self._fresh_until = time.monotonic_ns() + self.max_age_ns
 
     def read_phase(self, now_ns: int = 0) -> None:
         """The tick's read phase: every input into the image, one exchange."""
@@ -242,8 +256,6 @@ class ImageBackend:
         values = self.exchange_inputs()
         self._take_inputs(values)
         self._timed(t0, "read")
-        if self.tap is not None:
-            self.tap.inputs(values)
 
     def write_phase(self, now_ns: int = 0) -> None:
         """The tick's write phase: the changed outputs, one exchange; then
@@ -288,21 +300,23 @@ class ImageBackend:
 
     def read(self, board: str, name: str, index: int = 0) -> int:
         """``board``'s register ``name[index]`` from the image."""
-        reg = self._readable.get((board, name))
-        if reg is None or type(index) is not int or not 0 <= index < reg.count:
+        known = self._readable.get((board, name))
+        if known is None or type(index) is not int or not 0 <= index < known[0].count:
             reg = self.kinds[board].check_read(name, index)
-            self._readable[(board, name)] = reg
-        if self.down is not None:
-            off = reg.off_value(index) if self.off_on_loss and not reg.is_input else None
+            known = (reg, self._span[(board, name)][0] if reg.is_input else -1)
+            self._readable[(board, name)] = known
+        reg, base = known
+        if self.has_link and self.down is not None:
+            off = reg.off_value(index) if self.off_on_loss and base < 0 else None
             if off is not None:
                 return off  # the far side turned it off when the link dropped
             raise BoardError(self.url, f"read {board}.{name}[{index}]: the link is down "
                                        f"({self.down})")
-        if reg.is_input:
-            if not self.in_tick and not self.phased \
+        if base >= 0:
+            if not self.phased and not self.in_tick \
                     and time.monotonic_ns() >= self._fresh_until:
                 self._take_inputs(self.exchange_inputs())
-            return self._values[self._span[(board, name)][0] + index]
+            return self._values[base + index]
         key = (board, name, index)
         value = self._changed.get(key)
         if value is None:
@@ -313,14 +327,28 @@ class ImageBackend:
         """Write ``board``'s output ``name[index]``: into the image in a tick (the
         write phase sends it), at once outside one.  ValueError if refused."""
         reg = self.kinds[board].check_write(name, index, value)
-        self.write_many([(board, name, index, value)], _regs=[reg])
+        if self.has_link and self.down is not None:
+            self._send_now([(board, name, index, value)])  # raises unless the drop did it
+            return
+        # write_many for one write, without its lists (a task's write, the hot path)
+        key = (board, name, index)
+        if reg.readback:
+            if self._outputs.get(key) == value and key not in self._changed:
+                return
+            self._outputs[key] = value
+        self._changed[key] = value
+        tap = self.tap
+        if tap is not None:
+            tap.wrote(self.output_index[key], value)
+        if not (self.in_tick and self.phased):
+            self.write_now()
 
     def write_many(self, writes: Iterable[Write], _regs: list[Register] | None = None) -> None:
         """Write several outputs, each ``(board, register, index, value)``
         (checked first: none is made if one is refused)."""
         todo = list(writes)
         regs = _regs or [self.kinds[b].check_write(n, i, v) for b, n, i, v in todo]
-        if self.down is not None:
+        if self.has_link and self.down is not None:
             self._send_now(todo)  # raises unless the drop did it
             return
         tap = self.tap
@@ -346,6 +374,9 @@ class ImageBackend:
         """Set the image's copy of an input (what a write made of it: a cleared counter)."""
         span = self._span.get((board, name))
         if span is not None and 0 <= index < span[1]:
+            if not self._own_values:  # the exchange's list stays as it was read
+                self._values = list(self._values)
+                self._own_values = True
             self._values[span[0] + index] = value
 
     def forget_outputs(self, values: Mapping[tuple[str, str, int], int]) -> None:
@@ -388,6 +419,8 @@ class LocalImage(ImageBackend):
     read them (the replay moves it on in :attr:`before_read`); the views are
     then not touched (neither read nor written).
     """
+
+    has_link = False
 
     def __init__(self, url: str, kinds: Mapping[str, BoardKind],
                  views: Mapping[str, Any] | None, *,

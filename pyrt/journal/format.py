@@ -147,6 +147,8 @@ import struct
 import zlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from itertools import compress
+from operator import ne
 from typing import Any, NamedTuple
 
 from pyrt.errors import PyrtError
@@ -553,7 +555,11 @@ class BlockEncoder:
         else:
             step = tick - self.tick - 1
             shift = deadline - (self.deadline + self.period * (1 + missed))
-            changes = [i for i, (a, b) in enumerate(zip(inputs, prev, strict=True)) if a != b] \
+            if len(inputs) != len(prev):
+                raise ValueError("the inputs changed in number")
+            # the indices that changed, found at C speed (the writer thread's largest
+            # share of a tick of many inputs)
+            changes = list(compress(range(len(inputs)), map(ne, inputs, prev))) \
                 if inputs != prev else ()
             if step:
                 flags |= F_STEP

@@ -126,8 +126,8 @@ class Journal:
         self._stop = False
         #: Gaps so far (as the loop thread knows them: a gap is listed when it ends).
         self.gaps: list[Gap] = []
-        #: Ticks handed over and ticks dropped into gaps.
-        self.recorded = 0
+        self._others = 0   # entries of the queue that are not ticks (gaps, names)
+        #: Ticks dropped into gaps (:attr:`recorded`: those handed over).
         self.dropped = 0
         #: Bytes written to the file so far (writer thread).
         self.bytes_written = 0
@@ -165,9 +165,32 @@ class Journal:
         ``(name, id, message)`` (the sequences are kept, not copied: pass new
         ones).  Never blocks.  Returns False if the tick was dropped into a gap
         (the writer is behind)."""
+        return self.record_owned(tick, time_ns, lateness_ns, missed, tuple(inputs), outputs,
+                                 commands, events)
+
+    def record_owned(self, tick: int, time_ns: int, lateness_ns: int, missed: int,
+                     inputs: Sequence[int], outputs: Sequence[tuple[int, int, int]] = (),
+                     commands: Sequence[tuple[str, str]] = (),
+                     events: Sequence[tuple[str, int, str]] = ()) -> bool:
+        """:meth:`record_tick` without the copy of ``inputs``: the caller hands
+        over a sequence it never changes again (a process image's read phase
+        makes a new list every tick).  The loop thread's share of a tick: a few
+        checks and one append."""
+        if self._put - self._taken < self._capacity and self._gap_first is None \
+                and len(inputs) == self._n_inputs and not self._closed:
+            self._queue.append((tick, time_ns, lateness_ns, missed, inputs, outputs, commands,
+                                events))
+            self._put += 1
+            return True
+        return self._record_slowly(tick, time_ns, lateness_ns, missed, inputs, outputs,
+                                   commands, events)
+
+    def _record_slowly(self, tick: int, time_ns: int, lateness_ns: int, missed: int,
+                       inputs: Sequence[int], outputs: Sequence[tuple[int, int, int]],
+                       commands: Sequence[tuple[str, str]],
+                       events: Sequence[tuple[str, int, str]]) -> bool:
         if self._closed:
             raise JournalError("journal: record_tick after close")
-        inputs = tuple(inputs)
         if len(inputs) != self._n_inputs:
             raise JournalError(f"journal: {len(inputs)} inputs, the header declares "
                                f"{self._n_inputs}")
@@ -185,7 +208,6 @@ class Journal:
         self._queue.append((tick, time_ns, lateness_ns, missed, inputs, outputs, commands,
                             events))
         self._put += 1
-        self.recorded += 1
         return True
 
     def _wait_for_room(self) -> None:
@@ -206,6 +228,7 @@ class Journal:
         self.gaps.append(gap)
         self._queue.append((_GAP, gap))
         self._put += 1
+        self._others += 1
         self._gap_first = None
         self._gap_count = 0
 
@@ -221,8 +244,14 @@ class Journal:
         index = len(self._writers) - 1
         self._queue.append((_NAMES, index, name))
         self._put += 1
+        self._others += 1
         self._wake.set()
         return index
+
+    @property
+    def recorded(self) -> int:
+        """Ticks handed over (not those dropped into gaps)."""
+        return self._put - self._others
 
     @property
     def writers(self) -> list[str]:

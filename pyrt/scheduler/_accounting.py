@@ -61,12 +61,12 @@ def join_member(loop: Loop, group: RateGroup, name: str, member: Any) -> None:
     (faults, timing) in that group; a handler is timed as an entry."""
     if isinstance(member, ReadyQueue):
         loop._take_queue(member, group.timing)
-        group.add_run(member.tick, loop._times.sink.append)
+        group.add_run(member.tick, loop._times.sink.append, name)
         group.order.append(member)
     else:
         entry = loop._times.add(name)
         loop._entry_group[entry.name] = group.timing
-        group.add_run(member, entry.samples.append)
+        group.add_run(member, entry.samples.append, entry.name)
         group.order.append(entry)
 
 

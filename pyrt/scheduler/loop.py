@@ -37,6 +37,7 @@ from collections import deque
 from collections.abc import Callable, Generator
 from gc import get_count as gc_count
 from itertools import count
+from threading import get_ident
 from typing import Any
 
 from pyrt.errors import Fault, FaultError, PyrtError
@@ -181,6 +182,12 @@ class Loop:
         self._fault_lock = threading.Lock()
         self._stopping = False
         self.running = False
+        #: The name of the handler (or foreground job) running now in the loop's
+        #: thread: ``"loop"`` between its handlers while a run lasts, ``""``
+        #: outside one.  A ready queue says which routine (:attr:`ReadyQueue.running`);
+        #: :meth:`writer` puts the two together.
+        self.current = ""
+        self._thread_id: int | None = None
 
         self.tick_index = 0
         self.now_ns = self.clock.now_ns()
@@ -276,8 +283,39 @@ class Loop:
         jobs = self._jobs
         for _ in range(len(jobs)):
             job = jobs.popleft()
+            self.current = job.name
             if not job.step():
                 jobs.append(job)
+        self.current = "jobs"
+
+    @property
+    def handler_names(self) -> list[str]:
+        """The names of the handlers, in the order a tick runs them."""
+        return list(self._handler_names)
+
+    def writer(self) -> str:
+        """Who is running now, by name, as a journal stamps an output write: the
+        routine a ready queue is dispatching (its name), else the loop's handler
+        or foreground job (:attr:`current`; ``"loop"`` for the loop's own work
+        between handlers, the reflex of a consecutive-overrun fault), else
+        ``"outside a task"`` (no run, or a thread other than the loop's).  Two
+        attribute reads per queue: no stack is walked."""
+        if self._thread_id != get_ident():
+            return "outside a task"
+        for q in self.queues:
+            name = q.running
+            if name is not None:
+                return name
+        return self.current or "outside a task"
+
+    def writer_names(self) -> list[str]:
+        """The names :meth:`writer` gives that are known before a run: every
+        routine of every queue and every handler that is not a queue, sorted
+        (a journal's table of writers starts with them)."""
+        names = {r.name for q in self.queues for r in q.routines}
+        names.update(n for n, item in zip(self._handler_names, self._order, strict=False)
+                     if not isinstance(item, ReadyQueue))
+        return sorted(names)
 
     @property
     def jobs(self) -> list[Job]:
@@ -362,6 +400,8 @@ class Loop:
         end_ns = self.now_ns + duration_ns if duration_ns is not None else None
         self._timing_handlers = self.timing and bool(self._times.entries)
         self.running = True
+        self._thread_id = get_ident()
+        self.current = "loop"
         try:
             self._gc.begin(self.gc_control and isinstance(self.clock, WallClock))
             self._start_log()
@@ -369,6 +409,8 @@ class Loop:
         finally:
             self._gc.end()
             self.running = False
+            self.current = ""
+            self._thread_id = None
             if self.timing_log is not None:
                 self.timing_log.flush()
 
@@ -392,6 +434,7 @@ class Loop:
         start_tick = clock.start_tick
         measured = not clock.virtual
         handlers = self._handlers
+        names = self._handler_names
         plan = self._plan if self._timing_handlers else None
         timer = clock.timer
         period = self.period_ns
@@ -402,16 +445,20 @@ class Loop:
         for _ in count() if ticks is None else range(ticks):
             start = start_tick(deadline)
             self.now_ns = start
+            # each handler is named in `current` as it runs (who writes an output)
             if plan is None:
-                for h in handlers:
+                for h, name in zip(handlers, names):  # noqa: B905 - the same length
+                    self.current = name
                     h(start)
             else:
                 t0 = timer()
-                for h, record in plan:
+                for (h, record), name in zip(plan, names):  # noqa: B905 - the same length
+                    self.current = name
                     h(start)
                     t1 = timer()
                     record(t1 - t0)
                     t0 = t1
+            self.current = "loop"
             self.tick_index += 1
             deadline = self._close_tick(deadline, start) if measured else deadline + period
             self._deadline = deadline

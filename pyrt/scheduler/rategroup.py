@@ -109,6 +109,7 @@ class RateGroup:
         #: What runs at a release, as the loop knows it (queues, handler entries).
         self.order: list[Any] = []
         self._handlers: list[Handler] = []
+        self._names: list[str] = []
         self._plan: list[tuple[Handler, Callable[[int], None]]] = []
         self._timer: Callable[[], int] | None = None
         self._loop: Any = None
@@ -168,9 +169,12 @@ class RateGroup:
         """Time each release with ``timer`` (None: timing off, no cost)."""
         self._timer = timer
 
-    def add_run(self, fn: Handler, record: Callable[[int], None]) -> None:
-        """Run ``fn`` at each release; ``record`` takes its duration (the loop's part)."""
+    def add_run(self, fn: Handler, record: Callable[[int], None], name: str = "") -> None:
+        """Run ``fn`` at each release; ``record`` takes its duration (the loop's
+        part); ``name`` is what the loop's :attr:`~pyrt.scheduler.loop.Loop.current`
+        says while it runs (by default the group's name)."""
         self._handlers.append(fn)
+        self._names.append(name or self.name)
         self._plan.append((fn, record))
 
     # -- the release ---------------------------------------------------------
@@ -186,12 +190,20 @@ class RateGroup:
         timing = self.timing
         timing.releases += 1
         timer = self._timer
-        if timer is None:
+        loop = self._loop
+        if loop is None:  # released by hand, not by a loop: nobody asks who runs
             for h in self._handlers:
                 h(now_ns)
             return
+        names = self._names
+        if timer is None:
+            for h, name in zip(self._handlers, names):  # noqa: B905 - the same length
+                loop.current = name
+                h(now_ns)
+            return
         t0 = start = timer()
-        for h, record in self._plan:
+        for (h, record), name in zip(self._plan, names):  # noqa: B905 - the same length
+            loop.current = name
             h(now_ns)
             t1 = timer()
             record(t1 - t0)

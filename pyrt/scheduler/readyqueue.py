@@ -37,7 +37,7 @@ itself) is first decremented at the *next* check and never runs twice in one.
 The check and the dispatch that follows it run in C by default
 (csrc/ext/dispatch.c: the walk, each body called, its rescheduling and one
 clock read per dispatch); ``native=False`` runs the same steps in Python
-(:meth:`ReadyQueue._check_py`), the reference the C path is tested against.
+(:func:`_check_py`), the reference the C path is tested against.
 """
 
 from __future__ import annotations
@@ -173,7 +173,7 @@ class ReadyQueue:
     (both need a private image).  :meth:`general` makes such a queue.
 
     ``native`` (default True): the check and the dispatch run in C
-    (csrc/ext/dispatch.c); False runs them in Python (:meth:`_check_py`),
+    (csrc/ext/dispatch.c); False runs them in Python (:func:`_check_py`),
     with the same semantics and statistics, slower.
     """
 
@@ -205,6 +205,8 @@ class ReadyQueue:
             raise ValueError(f"T must hold 1- or 4-byte schedule variables, got {image.t_width}")
         self.name = name
         self._routines: dict[int, Routine] = {}
+        # the address whose body the Python dispatch runs now (0: none)
+        self._running = 0
         self._by_name: dict[str, Routine] = {}
         # address -> (body, period variable or None, its index)
         self._dispatch: dict[
@@ -430,6 +432,14 @@ class ReadyQueue:
         """All registered routines, in registration order."""
         return list(self._routines.values())
 
+    @property
+    def running(self) -> str | None:
+        """The routine whose body runs now (each dispatch stores its address),
+        still the one that raised while its fault is handled; None between."""
+        a = self._core.running if self._core is not None else self._running
+        r = self._routines.get(a) if a else None
+        return None if not a else r.name if r is not None else f"{a:04X}"
+
     # -- the queue -----------------------------------------------------------
 
     @property
@@ -585,7 +595,7 @@ class ReadyQueue:
         self.now_ns = now_ns
         core = self._core
         if core is None:
-            self._check_py()
+            _check_py(self)
             return
         try:
             pending = core.check(now_ns)  # csrc/ext/dispatch.c: _check_py in C
@@ -596,57 +606,65 @@ class ReadyQueue:
             self._timing.fold_all()
 
     def _failed(self, a: int, exc: Exception) -> None:
-        """The routine at ``a`` raised ``exc`` (call it while handling it)."""
+        """The routine at ``a`` raised ``exc`` (call it while handling it); it is
+        :attr:`running` until its fault is handled."""
         r = self._routines.get(a)
-        if r is None:
-            cause = f"no routine at address {a:04X} (corrupted Q?)"
-            self._error(cause, f"{a:04X}")
-        else:
-            self._error(f"{type(exc).__name__}: {exc}", r.name, _tb.format_exc())
-
-    def _check_py(self) -> None:
-        """One check and its dispatch in Python (the reference of the C path)."""
-        ready = self._walk()  # csrc/readyq.c: decrement, free, collect
-        if not ready:
-            return
-        table = self._dispatch
-        # T as schedule variables: 002's bytes in the image, or 32-bit words
-        tv, q16, t, slots = self._tv, self._q16, self._t0, self._slot_range
-        tm = self._timing
-        timer = tm.timer if tm.samples is not None else None
-        log: list[tuple[int, int]] | None = None
-        a = 0
         try:
+            if r is None:
+                self._error(f"no routine at address {a:04X} (corrupted Q?)", f"{a:04X}")
+            else:
+                self._error(f"{type(exc).__name__}: {exc}", r.name, _tb.format_exc())
+        finally:
+            self._running = 0
+            if self._core is not None:
+                self._core.running = 0
+
+
+def _check_py(q: ReadyQueue) -> None:
+    """One check of ``q`` and its dispatch in Python (the reference of the C path)."""
+    ready = q._walk()  # csrc/readyq.c: decrement, free, collect
+    if not ready:
+        return
+    table = q._dispatch
+    # T as schedule variables: 002's bytes in the image, or 32-bit words
+    tv, q16, t, slots = q._tv, q._q16, q._t0, q._slot_range
+    tm = q._timing
+    timer = tm.timer if tm.samples is not None else None
+    log: list[tuple[int, int]] | None = None
+    a = 0
+    try:
+        if timer is not None:
+            if tm.pending >= q._fold_at:
+                tm.fold_all()
+            samples = tm.samples or {}
+            if tm.track:
+                log = []
+                tm.tick_log = log
+                tm.checked_at = q.now_ns
+            tm.pending += len(ready)
+            t0 = timer()
+        for a in ready:
+            q._running = a
+            fn, pmem, paddr = table[a]
+            fn()
+            if pmem is not None:  # self-scheduling: again, with its period now
+                n = pmem[paddr]
+                for i in slots:
+                    if not q16[i]:
+                        tv[t + i] = n
+                        q16[i] = a
+                        break
+                else:
+                    q._put(a, n)  # raises QueueFullError
             if timer is not None:
-                if tm.pending >= self._fold_at:
-                    tm.fold_all()
-                samples = tm.samples or {}
-                if tm.track:
-                    log = []
-                    tm.tick_log = log
-                    tm.checked_at = self.now_ns
-                tm.pending += len(ready)
-                t0 = timer()
-            for a in ready:
-                fn, pmem, paddr = table[a]
-                fn()
-                if pmem is not None:  # self-scheduling: again, with its period now
-                    n = pmem[paddr]
-                    for i in slots:
-                        if not q16[i]:
-                            tv[t + i] = n
-                            q16[i] = a
-                            break
-                    else:
-                        self._put(a, n)  # raises QueueFullError
-                if timer is not None:
-                    t1 = timer()
-                    samples[a].append(t1 - t0)
-                    if log is not None:
-                        log.append((a, t1 - t0))
-                    t0 = t1
-        except Exception as exc:
-            self._failed(a, exc)
+                t1 = timer()
+                samples[a].append(t1 - t0)
+                if log is not None:
+                    log.append((a, t1 - t0))
+                t0 = t1
+        q._running = 0
+    except Exception as exc:
+        q._failed(a, exc)
 
 
 class _LittleEndianWords:  # pragma: no cover - big-endian hosts only

@@ -58,6 +58,7 @@ import math
 import os
 import queue
 import re
+import struct
 import subprocess
 import sys
 import textwrap
@@ -76,6 +77,7 @@ from pyrt.errors import ConfigError, Fault
 from pyrt.fileio import atomic_write
 from pyrt.journal import DEFAULT_BUDGET, BlackBox, JournalError
 from pyrt.scope import compile_sources
+from pyrt.scope.sources import compile_sampler
 from pyrt.station.recording import Recorder
 
 if TYPE_CHECKING:
@@ -164,8 +166,14 @@ class SignalRing:
         #: Samples held.
         self.rows = min(math.ceil(span * self.rate_hz) + 1, budget_bytes // per_row)
         self.budget_bytes = budget_bytes
-        self._t = np.zeros(self.rows, dtype=np.int64)
-        self._v = np.full((self.rows, n), np.nan)
+        # one buffer of rows (the time, then every value), seen by numpy as two
+        # views; a sample packs a row straight into it (one C call, no tuple)
+        self._row_bytes = per_row
+        self._buf = bytearray(self.rows * per_row)
+        rows = np.frombuffer(self._buf, dtype=np.dtype([("t", "<i8"), ("v", "<f8", (n,))]))
+        self._t: np.ndarray = rows["t"]
+        self._v: np.ndarray = rows["v"]
+        self._v[:] = np.nan
         #: Samples taken so far.
         self.samples = 0
         self._countdown = 1
@@ -174,6 +182,11 @@ class SignalRing:
         self._slow: list[int] = []  # read one by one, each guarded
         self._fast: list[int] = list(range(n))
         self._read_fast: Callable[[], tuple] = self._compile(self._fast)
+        #: ``pack(buf, offset, now_ns)``: every signal read and packed into a row,
+        #: while every signal is a number (None once one is not: the slow path).
+        self._pack: Callable[[bytearray, int, int], None] | None = compile_sampler(
+            [sig.scope_source() for sig in self._signals],
+            struct.Struct("<q" + "d" * n).pack_into)
 
     def _compile(self, cols: list[int]) -> Callable[[], tuple]:
         return compile_sources([self._signals[c].scope_source() for c in cols])
@@ -199,6 +212,14 @@ class SignalRing:
         """Take one sample now (loop thread)."""
         g = self.samples
         i = g % self.rows
+        pack = self._pack
+        if pack is not None:
+            try:
+                pack(self._buf, i * self._row_bytes, now_ns)
+                self.samples = g + 1
+                return
+            except Exception:
+                pass  # a read that failed, or a value that is not a number: sorted out below
         row = self._v[i]
         self._t[i] = now_ns
         try:
@@ -213,6 +234,8 @@ class SignalRing:
                 row[c] = float(self._signals[c].read())
             except Exception:
                 row[c] = math.nan
+        if self._slow or self.text:
+            self._pack = None  # not every signal packs as a number: column by column
         self.samples = g + 1
 
     def _sort_out(self, row: np.ndarray) -> None:

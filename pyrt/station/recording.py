@@ -5,7 +5,9 @@ running station (:mod:`pyrt.journal` has the file format):
 
 * the **process image** (:class:`~pyrt.boards.image.ImageBackend`): every
   input of every tick, as the read phase brought it in, and every output
-  the tick changed, with the task that wrote it;
+  the tick changed, with the task that wrote it (as the loop names it,
+  :meth:`~pyrt.scheduler.loop.Loop.writer`: the routine a ready queue is
+  dispatching, else the handler or foreground job running);
 * the **mailbox** (:class:`~pyrt.scheduler.runner.Runner`): every request
   applied, in the tick it was applied in, as a replayable text
   (:func:`encode_request`);
@@ -30,13 +32,10 @@ shows as a difference when the journal is replayed.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import importlib
 import json
-import sys
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from types import FrameType
 from typing import TYPE_CHECKING, Any
 
 from pyrt._version import __version__
@@ -59,6 +58,9 @@ REPLAYED = frozenset({
     # reads, replayed as they were made (they change nothing; a read that did would show)
     "status", "status_fields", "busy", "param", "params_of", "where", "last_stop",
 })
+
+#: How often the journal's writer looks for ticks at real time, seconds.
+REALTIME_POLL_S = 0.1
 
 #: The event of a fault the loop itself declared (consecutive overruns): the
 #: clock's decision, which a replay applies rather than checks.
@@ -200,81 +202,6 @@ def decode_request(station: Station, text: str) -> Callable[[], Any]:
     return lambda: fn(*args)
 
 
-# -- who wrote an output -------------------------------------------------------------------
-
-
-_BOARDS = str(Path(__file__).resolve().parent.parent / "boards")
-
-
-def _code_of(fn: Any) -> Any:
-    for _ in range(8):  # what a routine wraps: a partial, a timed body
-        if isinstance(fn, functools.partial):
-            fn = fn.func
-        elif getattr(fn, "__wrapped__", None) is not None:
-            fn = fn.__wrapped__
-        else:
-            break
-    fn = getattr(fn, "__func__", fn)
-    code = getattr(fn, "__code__", None)
-    if code is None:
-        call = type(fn).__dict__.get("__call__")
-        code = getattr(call, "__code__", None)
-    return code
-
-
-class _Writers:
-    """Finds the task or loop handler that is writing: the innermost frame of
-    the calling stack whose code is a known routine's or handler's."""
-
-    def __init__(self, station: Station):
-        #: code -> [(the bound instance or None, name, its queue or None, its address)]
-        self.by_code: dict[Any, list[tuple[Any, str, Any, int]]] = {}
-        loop = station.loop
-        for q in loop.queues:
-            table = q._dispatch
-            for a, r in q._routines.items():
-                self._add(table[a][0] if a in table else r.fn, r.name, q, a)
-        for h, name in zip(loop._handlers, loop._handler_names,
-                           strict=True):
-            if getattr(h, "__self__", None) in loop.queues:
-                continue
-            self._add(h, name)
-
-    def _add(self, fn: Any, name: str, queue: Any = None, address: int = -1) -> None:
-        code = _code_of(fn)
-        if code is not None:
-            owner = getattr(fn, "__self__", None)
-            if owner is None and isinstance(fn, functools.partial) and fn.args:
-                owner = fn.args[0]
-            self.by_code.setdefault(code, []).append((owner, name, queue, address))
-
-    def current(self) -> str:
-        """The name of the task (or handler) writing now."""
-        f: FrameType | None = sys._getframe(2)  # who called the image's write
-        by_code = self.by_code
-        other = ""
-        while f is not None:
-            found = by_code.get(f.f_code)
-            if found is not None:
-                if len(found) == 1:
-                    return found[0][1]
-                # one body, several routines (the same method of three axes): the
-                # queue's C dispatch knows which one it is running
-                for _owner, name, queue, address in found:
-                    core = getattr(queue, "_core", None)
-                    if core is not None and core.last == address:
-                        return name
-                me = f.f_locals.get("self")
-                for owner, name, _q, _a in found:
-                    if owner is me:
-                        return name
-                return found[0][1]
-            if not other and _BOARDS not in f.f_code.co_filename:
-                other = f.f_code.co_qualname  # a job's generator, a command outside a tick
-            f = f.f_back
-        return other or "outside a task"
-
-
 # -- the recorder ----------------------------------------------------------------------------
 
 
@@ -304,7 +231,8 @@ class Recorder:
         self.image = image
         loop = station.loop
         self.loop = loop
-        self._writers = _Writers(station)
+        #: Who is writing now (the running routine or handler): the loop says.
+        self._writer = loop.writer
         meta = dict(metadata or {})
         meta.setdefault("boards", boards.url if boards is not None else "")
         meta.setdefault("in_process", bool(boards is not None and boards.in_process))
@@ -321,13 +249,18 @@ class Recorder:
                      for b, r, i in image.output_layout],
             output_values=image.output_values(), version=__version__,
             databases=station.journal_databases(), seeds=station.seeds(),
-            writers=sorted({e[1] for v in self._writers.by_code.values() for e in v}),
+            writers=loop.writer_names(),
             metadata=meta)
         self.header = header
-        self.journal = Journal(header, path, black_box=black_box,
-                               lossless=loop.clock.virtual if lossless is None else lossless,
-                               warn=warn)
+        lossless = loop.clock.virtual if lossless is None else lossless
+        # at real time the writer wakes a few times a second (a block is cut after
+        # 0.5 s anyway): each wake-up takes the interpreter from a loop that may be
+        # about to tick
+        self.journal = Journal(header, path, black_box=black_box, lossless=lossless,
+                               poll_s=0.02 if lossless else REALTIME_POLL_S, warn=warn)
         self._inputs: list[int] = list(meta["inputs_before"])
+        #: The journal's index of each writer's name (its table only grows).
+        self._writer_index: dict[str, int] = {}
         self._outputs: list[tuple[int, int, int]] = []
         self._commands: list[tuple[str, str]] = []
         self._events: list[tuple[str, int, str]] = []
@@ -351,13 +284,13 @@ class Recorder:
 
     # -- taps (loop thread) --------------------------------------------------------------
 
-    def inputs(self, values: list[int]) -> None:
-        """The image's read phase brought ``values`` in."""
-        self._inputs = values
-
     def wrote(self, slot: int, value: int) -> None:
         """Output ``slot`` was changed to ``value`` (by the task running now)."""
-        self._outputs.append((slot, value, self.journal.writer_index(self._writers.current())))
+        name = self._writer()
+        index = self._writer_index.get(name)
+        if index is None:
+            index = self._writer_index[name] = self.journal.writer_index(name)
+        self._outputs.append((slot, value, index))
 
     def _request(self, name: str, fn: Callable[..., Any] | None, args: tuple,
                  motion: Any) -> None:
@@ -391,24 +324,44 @@ class Recorder:
             self.station.trip(cause, source=source)
 
     def _tick(self, now_ns: int) -> None:
-        if self._disk_faults or (self.journal.error is not None and not self._journal_said):
+        # the loop thread's whole share of a tick's record (a tick of the 1 kHz
+        # gripper is ~10 µs of work): a few reads and one hand-over
+        journal = self.journal
+        if self._disk_faults or (journal.error is not None and not self._journal_said):
             self._trip_disk_faults()  # before the record: the reflex's outputs are in it
         loop = self.loop
-        missed = loop.missed - self._missed
-        self._missed = loop.missed
+        missed = loop.missed
+        if missed != self._missed:
+            # the deadlines skipped since the last record (the count was reset to 0
+            # if it went down: those since the reset)
+            missed, self._missed = (missed - self._missed if missed > self._missed
+                                    else missed), missed
+        else:
+            missed = 0
         # the journal keeps the sequences it is given: an empty one is never handed
         # over (a later append would land in every tick still waiting to be written)
-        outputs, commands, events = self._outputs, self._commands, self._events
+        outputs: Sequence[tuple[int, int, int]] = self._outputs
         if outputs:
             self._outputs = []
-        if commands:
-            self._commands = []
-        if events:
-            self._events = []
-        self.journal.record_tick(loop.tick_index, now_ns, now_ns - loop.deadline_ns, missed,
-                                 self._inputs, outputs or (), commands or (), events or ())
-        for listener in self.tick_listeners:
-            listener(loop.tick_index, now_ns)
+        else:
+            outputs = ()
+        commands: Sequence[tuple[str, str]]
+        events: Sequence[tuple[str, int, str]]
+        if self._commands or self._events:
+            commands, events = self._commands or (), self._events or ()
+            self._commands, self._events = [], []
+        else:
+            commands = events = ()
+        # the read phase's list of inputs: new every tick, never changed afterwards
+        # (kept as it is, not copied)
+        inputs = self.image.last_inputs
+        if inputs is None:
+            inputs = self._inputs
+        journal.record_owned(loop.tick_index, now_ns, now_ns - loop.deadline_ns, missed,
+                             inputs, outputs, commands, events)
+        if self.tick_listeners:
+            for listener in self.tick_listeners:
+                listener(loop.tick_index, now_ns)
 
     # -- any thread ---------------------------------------------------------------------------
 

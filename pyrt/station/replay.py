@@ -40,7 +40,7 @@ from pyrt.boards.registry import (
 from pyrt.errors import ConfigError, Fault, PyrtError
 from pyrt.journal import Gap, JournalError, JournalReader, Tick
 from pyrt.scheduler.clock import Clock
-from pyrt.station.recording import LOOP_FAULT, _Writers, decode_request
+from pyrt.station.recording import LOOP_FAULT, decode_request
 
 if TYPE_CHECKING:
     from pyrt.scheduler import Loop
@@ -205,7 +205,7 @@ class Replay:
         self.ticks = 0
         self.first_tick: int | None = None
         self.last_tick: int | None = None
-        self._writers: _Writers | None = None
+        self._who: Callable[[], str] | None = None
         self._notes: list[str] = []
         self._pending: Tick | None = None
 
@@ -282,7 +282,7 @@ class Replay:
         if loop.period_ns != self.header.period_ns:
             raise ConfigError(f"journal {self.path}: ticks of {self.header.period_ns} ns, the "
                               f"loop's are {loop.period_ns} ns")
-        self._writers = _Writers(station)
+        self._who = loop.writer
         image = boards.image
         image.tap = self
         runner.replayed = self._requests
@@ -310,13 +310,10 @@ class Replay:
 
     # -- the taps ------------------------------------------------------------------------------
 
-    def inputs(self, values: list[int]) -> None:
-        """The image's read phase (the recorded inputs: nothing to check)."""
-
     def wrote(self, slot: int, value: int) -> None:
         """The controller changed output ``slot`` to ``value``."""
-        assert self._writers is not None
-        self._writes.append((slot, value, self._writers.current()))
+        assert self._who is not None
+        self._writes.append((slot, value, self._who()))
 
     def _requests(self) -> list[Callable[[], Any]]:
         t = self._expected

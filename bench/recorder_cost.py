@@ -1,0 +1,200 @@
+"""What the flight recorder costs a tick, and what an idle recorded gripper costs a core,
+for one or more source trees side by side in one run.
+
+    python bench/recorder_cost.py                         # this tree
+    python bench/recorder_cost.py --tree /tmp/old --tree .   # two trees, interleaved
+
+Every row runs in a child process whose ``PYTHONPATH`` is the tree measured
+(its compiled modules built in place), the trees interleaved row by row and
+round by round, so that what the machine does meanwhile falls on all of them
+alike.  Two measures:
+
+* ``work``: virtual time, each robot moving (the gripper at 1 kHz with ``P``
+  back and forth, the manipulator's prototype at 200 Hz), built as
+  ``pyrt NAME`` builds it (:mod:`bench_journal`'s ``build`` and ``drive``):
+  the loop thread's CPU time from the top of one tick to the top of the
+  next, pooled over the rounds (p50, mean), for the rows ``sim:``, ``image``
+  (``sim:?image=1``), ``image + recorder`` (a journal file) and ``image +
+  black box`` (the 10 s ring, no file); the recorder's and the black box's
+  share is against ``image``, the target 5 %.
+* ``idle`` (``--idle S``, 0 skips it): ``pyrt gripper`` itself, idle at real
+  time with its stdin a pipe, the black box on (the default) and ``--black-box
+  off``, and a bare Python sleep loop at 1 kHz: the process's CPU share
+  (``/proc``) over ``S`` seconds after a second of start-up; the target 5 %.
+
+Not part of the test run (it is a script, not a ``bench_*`` module).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROWS = ("sim:", "image", "image + recorder", "image + black box")
+SECONDS = {"gripper": 10.0, "manipulator": 30.0}
+
+
+# -- one row, in a child process -------------------------------------------------------------
+
+
+def one_row(robot: str, row: str, seconds: float) -> dict:
+    """Build ``robot`` as the row says, drive it ``seconds`` of loop time; the
+    per-tick CPU ns (loop thread) and the journal handler's mean."""
+    sys.path.insert(0, str(HERE))
+    import bench_journal as bj
+
+    boards = "sim:" if row == "sim:" else "sim:?image=1"
+    with tempfile.TemporaryDirectory() as tmp:
+        t = Path(tmp)
+        clock = bj.TimedSimClock()
+        path = t / "run.pj" if row == "image + recorder" else None
+        rig = bj.build(robot, boards, clock, t, path, 10.0 if row.endswith("black box") else 0.0)
+        run = rig.loop.run
+
+        def timed_run(*a, **kw):
+            try:
+                return run(*a, **kw)
+            finally:
+                clock.end_run()
+
+        rig.loop.run = timed_run  # type: ignore[method-assign]
+        rig.start()
+        bj.drive(rig, 1.0)  # warm up: the first moves run code for the first time
+        rig.loop.reset_statistics()
+        i0 = len(clock.wall)
+        bj.drive(rig, seconds)
+        _dw, dc = clock.ticks_from(i0)
+        st = rig.loop.statistics()
+        rig.close()
+    j = st.tasks.get("journal")
+    return {"cpu": dc, "journal_ns": j.mean_ns if j else 0.0}
+
+
+def idle_row(row: str, seconds: float) -> dict:
+    """The CPU share of ``pyrt gripper`` idle at real time (or a bare sleep loop)."""
+    if row == "bare sleep":
+        code = ("import time\nn=time.monotonic_ns()\nwhile True:\n n+=1000000\n"
+                " d=n-time.monotonic_ns()\n if d>0: time.sleep(d/1e9)\n")
+        argv = [sys.executable, "-c", code]
+    else:
+        argv = [sys.executable, "-m", "pyrt", "gripper"]
+        if row == "black box off":
+            argv += ["--black-box", "off"]
+    with tempfile.TemporaryDirectory() as tmp:
+        proc = subprocess.Popen(argv, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL, cwd=tmp)
+        try:
+            time.sleep(1.5)  # start-up: imports, the station built, the loop running
+            c0, t0 = _cpu_s(proc.pid), time.monotonic()
+            time.sleep(seconds)
+            c1, t1 = _cpu_s(proc.pid), time.monotonic()
+        finally:
+            proc.kill()
+            proc.wait()
+    return {"cpu_pct": (c1 - c0) / (t1 - t0) * 100}
+
+
+def _cpu_s(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+# -- the driver ------------------------------------------------------------------------------
+
+
+def _child(tree: Path, *argv: str) -> dict:
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    out = subprocess.run([sys.executable, str(Path(__file__).resolve()), *argv], env=env,
+                         capture_output=True, text=True, check=False, cwd=tree)
+    if out.returncode:
+        raise SystemExit(f"{tree}: {' '.join(argv)} failed:\n{out.stderr[-2000:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def _pct(xs: list[int], p: float) -> float:
+    xs = sorted(xs)
+    return xs[min(len(xs) - 1, int(p * len(xs)))] / 1e3
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--tree", action="append", type=Path,
+                    help="a source tree (repeat: side by side); default this one")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--robot", action="append", choices=sorted(SECONDS))
+    ap.add_argument("--idle", type=float, default=10.0, help="seconds of idle a row (0: none)")
+    ap.add_argument("--no-work", action="store_true", help="only the idle rows")
+    ap.add_argument("--one", nargs=3, metavar=("ROBOT", "ROW", "SECONDS"), help=argparse.SUPPRESS)
+    ap.add_argument("--one-idle", nargs=2, metavar=("ROW", "SECONDS"), help=argparse.SUPPRESS)
+    a = ap.parse_args()
+    if a.one:
+        print(json.dumps(one_row(a.one[0], a.one[1], float(a.one[2]))))
+        return
+    if a.one_idle:
+        print(json.dumps(idle_row(a.one_idle[0], float(a.one_idle[1]))))
+        return
+    trees = [t.resolve() for t in (a.tree or [HERE.parent])]
+    robots = a.robot or ["gripper", "manipulator"]
+    t0 = time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())
+    load0 = os.getloadavg()[0]
+    work: dict[tuple, dict] = {}
+    idle: dict[tuple, list[float]] = {}
+    for _ in range(a.rounds):
+        if not a.no_work:
+            for robot in robots:
+                for row in ROWS:
+                    for tree in trees:
+                        r = _child(tree, "--one", robot, row, str(SECONDS[robot]))
+                        p = work.setdefault((tree, robot, row), {"cpu": [], "journal": []})
+                        p["cpu"] += r["cpu"]
+                        p["journal"].append(r["journal_ns"])
+        if a.idle > 0:
+            for row in ("black box on", "black box off", "bare sleep"):
+                for tree in trees:
+                    if row == "bare sleep" and tree != trees[0]:
+                        continue
+                    r = _child(tree, "--one-idle", row, str(a.idle))
+                    idle.setdefault((tree, row), []).append(r["cpu_pct"])
+    t1 = time.strftime("%H:%M:%S UTC", time.gmtime())
+    print(f"{t0} -> {t1}, load average {load0:.2f} -> {os.getloadavg()[0]:.2f}; "
+          f"{a.rounds} rounds, rows interleaved")
+    names = {t: (t.name if len(trees) > 1 else "") for t in trees}
+    if work:
+        for robot in robots:
+            print(f"\n{robot}, virtual time, moving ({a.rounds} x {SECONDS[robot]:g} s a row): "
+                  "loop-thread CPU a tick, µs")
+            print("| tree | row | ticks | p50 | p99 | mean | journal handler mean | "
+                  "added p50 | added mean |")
+            print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
+            for tree in trees:
+                base = work[(tree, robot, "image")]["cpu"]
+                b50, bmean = _pct(base, .5), statistics.fmean(base) / 1e3
+                for row in ROWS:
+                    p = work[(tree, robot, row)]
+                    c = p["cpu"]
+                    p50, mean = _pct(c, .5), statistics.fmean(c) / 1e3
+                    jm = statistics.fmean(p["journal"]) / 1e3
+                    added = (f"{(p50 - b50) / b50 * 100:+.1f} % | {(mean - bmean) / bmean * 100:+.1f} %"
+                             if row.startswith("image +") else " | ")
+                    print(f"| {names[tree]} | {row} | {len(c):,} | {p50:.2f} | {_pct(c, .99):.2f} "
+                          f"| {mean:.2f} | " + (f"{jm:.2f}" if jm else "") + f" | {added} |")
+    if idle:
+        print(f"\nidle at real time, {a.idle:g} s a row: CPU % of one core (median of "
+              f"{a.rounds}; all rounds)")
+        print("| tree | row | CPU % | rounds |")
+        print("|---|---|---:|---|")
+        for (tree, row), xs in idle.items():
+            print(f"| {names[tree]} | {row} | {statistics.median(xs):.2f} | "
+                  + ", ".join(f"{x:.2f}" for x in xs) + " |")
+
+
+if __name__ == "__main__":
+    main()
