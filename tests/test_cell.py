@@ -1,6 +1,8 @@
 """pyrt cell: the PUMA 560 with 002's gripper, two robots in one runtime; pick ends with the
 object lifted in the simulation's truth; a jam during the close stops the sequence with the
-arm holding still; the conformance suite (pyrt.testing) on the cell."""
+arm holding still; the arm's servo and trajectory groups and the gripper's SYSCLK group keep
+their rates whatever the tick; the conformance suite (pyrt.testing) on the cell and on each
+robot in it."""
 
 from __future__ import annotations
 
@@ -28,11 +30,22 @@ OBJECT = (600.0, -150.0, 400.0)
 LIFTED_MM = 140.0
 #: A joint of the simulated arm moving faster than this (deg/s) is driven.
 MOVING_DEG_S = 0.5
+MS = 1_000_000
 
 
 @pytest.fixture
 def cell():
-    station = build_cell(Loop(SimClock()))
+    yield from _started_cell(MS)
+
+
+@pytest.fixture
+def cell_500():
+    """The cell at --tick-us 500."""
+    yield from _started_cell(MS // 2)
+
+
+def _started_cell(tick_ns: int):
+    station = build_cell(Loop(SimClock(), period_ns=tick_ns))
     runner = station.start()
     out = io.StringIO()
     shell = RobotShell(station, out)
@@ -61,6 +74,42 @@ def test_pick_lifts_the_object_in_the_simulations_truth(cell):
     tool = station.plant.truth().tool[:3, 3] * 1e3
     assert np.linalg.norm(tool - obj) < 15.0
     assert station.fault is None
+
+
+def test_pick_at_tick_us_500_lifts_the_object(cell_500):
+    """--tick-us 500: the servo still at 1 kHz, the gripper's clock interrupt still every 1 ms; pick ends with the object lifted by the jaws (the world's truth)."""
+    station, _runner, shell, out = cell_500
+    assert station.loop.period_ns == MS // 2
+    shell.onecmd("sim object {} {} {}".format(*OBJECT))
+    shell.onecmd("pick {} {} {}".format(*OBJECT))
+    shell.onecmd("wait")
+    assert "picked: the object lifted" in out.getvalue(), out.getvalue()
+    assert _object(station)[2] - OBJECT[2] > LIFTED_MM
+    assert station.resolve_signal("sim.object.held").read() and station.fault is None
+
+
+def _cell_second(tick_ns: int) -> tuple[dict[str, tuple[int, int]], dict[str, int]]:
+    """One second of loop time of the cell on the SimClock: each group's (period, releases)
+    and the calls of each task in a group."""
+    loop = Loop(SimClock(), period_ns=tick_ns)
+    station = build_cell(loop)
+    try:
+        loop.run(duration_ns=1_000 * MS)
+        st = loop.statistics()
+        assert station.fault is None and station.arm.powered
+        return ({k: (g.period_ns, g.releases) for k, g in st.groups.items()},
+                {k: t.calls for k, t in st.tasks.items() if t.group})
+    finally:
+        station.close()
+
+
+def test_the_cells_rate_groups_keep_their_rates_whatever_the_tick():
+    """At --tick-us 500 as at 1000: servo 1000 and trajectory 100 releases a second, the gripper's SYSCLK group 1000 (its routines, which SYSCLKPD and their schedules divide, run as often)."""
+    groups, calls = _cell_second(MS)
+    assert groups == {"servo": (MS, 1_000), "SYSCLK": (MS, 1_000), "trajectory": (10 * MS, 100)}
+    assert calls["servo"] == 1_000 and calls["trajectory"] == 100
+    assert calls["MVJAWS"] > 0 and calls["SENSORS"] > 0
+    assert _cell_second(MS // 2) == (groups, calls)
 
 
 def test_a_pick_with_nothing_there_closes_on_nothing_and_says_so(cell):
@@ -160,11 +209,20 @@ def test_pyrt_cell_runs_a_piped_pick_at_speed_max():
 
 
 def _cell_driven(station) -> list[str]:
+    return _jaws_driven(station) + _arm_driven(station)
+
+
+def _jaws_driven(station) -> list[str]:
     out = []
     if station.jaws.board.dac != DAC_NULL:
         out.append(f"jaw DAC {station.jaws.board.dac:02X}")
     if station.controller.moving:
         out.append(f"jaw drive/jog bits in FLAGS {station.controller.cpu.ram[FLAGS]:02X}")
+    return out
+
+
+def _arm_driven(station) -> list[str]:
+    out = []
     if station.arm.state != "idle":
         out.append(f"the arm {station.arm.state}")
     if station.puma.fault is not None or not station.arm.powered:
@@ -219,6 +277,35 @@ class TestCellConformance(StationConformance):
 
     def start_move(self, station, runner):
         runner.call(station.arm.move_joints, 40, 60, -150, 30, -40, 50)
+        runner.call(station.controller.cmd_position, "20mm")
+        assert runner.wait_until(lambda: bool(self.driven(station)), 5.0)
+
+
+class TestCellPumaConformance(TestCellConformance):
+    """The cell's robot puma on its own: its records, its busy, its trip (the gripper keeps no fault)."""
+
+    robot_name = "puma"
+
+    def driven(self, station):
+        return _arm_driven(station)
+
+    def start_move(self, station, runner):
+        runner.call(station.arm.move_joints, 40, 60, -150, 30, -40, 50)
+        assert runner.wait_until(lambda: bool(self.driven(station)), 5.0)
+
+
+class TestCellGripperConformance(TestCellConformance):
+    """The cell's robot gripper on its own: its records, its busy, its trip (the arm keeps holding, no fault)."""
+
+    robot_name = "gripper"
+
+    def driven(self, station):
+        return _jaws_driven(station)
+
+    def rest(self, station, runner):
+        runner.call(station.robot("gripper").stop, take_fault=False)
+
+    def start_move(self, station, runner):
         runner.call(station.controller.cmd_position, "20mm")
         assert runner.wait_until(lambda: bool(self.driven(station)), 5.0)
 
