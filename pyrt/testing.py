@@ -190,7 +190,8 @@ class StationConformance:
         if self.robot_name is None:
             return list(records)
         robot = station.robot(self.robot_name)
-        own = [(c, r) for c, r in records if c is not None and robot.owns(c)]
+        own: list[tuple[Component | None, Command]] = [
+            (c, r) for c, r in records if c is not None and robot.owns(c)]
         assert own, f"robot {robot.name}: none of its components has a record to check"
         return own
 
@@ -469,7 +470,8 @@ class StationConformance:
                 assert served.is_read_only(line) == (rec.anyone or rec.only_reads(rest)), line
 
         # EPICS: the status fields' names, upper case, every component signal as
-        # OBJECT:SIGNAL, the station's state fields, plus the fixed PVs
+        # OBJECT:SIGNAL (of several robots, a robot's as ROBOT:OBJECT:SIGNAL, its root's
+        # as ROBOT:SIGNAL), the station's state fields, plus the fixed PVs
         if caproto_available():
             from pyrt.server.epics import EpicsService, pv_name
 
@@ -477,7 +479,14 @@ class StationConformance:
             epics = EpicsService(runner, served, server, "T:")
             pvs = {name[len("T:"):] for name in epics.pvdb}
             fields = {k.upper() for k, _s, _f in station.status_fields()}
-            signals = {f"{c.name}:{s.name}".upper() for c in station.components()
+            several = len(station.robots) > 1
+
+            def under(c: Component) -> str:
+                r = station.robot_of(c) if several else None
+                return c.name if r is None or r.name.lower() == c.name.lower() \
+                    else f"{r.name}:{c.name}"
+
+            signals = {f"{under(c)}:{s.name}".upper() for c in station.components()
                        for s in c.signals()}
             extras = {pv_name(f.name) for f in served.extra_fields}
             assert signals <= extras and {"STATE", "STOP_REASON"} <= extras

@@ -340,3 +340,37 @@ def test_the_served_cell_has_each_robots_state_and_flags(cell):
     assert runner.call(read) == (0, 0, False, False)
     runner.call(station.controller.fail, "jaws", take_fault=False)
     assert runner.call(read, take_fault=False) == (0, 2, True, False)
+
+
+def test_each_robot_of_the_served_cell_has_its_own_epics_prefix(cell):
+    """EPICS: every PV of a robot's components is under its robot's prefix (PUMA:JOINT1:POSITION, GRIPPER:MONITOR:ADDRESS, the roots' PUMA:Q1 and GRIPPER:ENCODER), with PUMA:FAULT_MSG and GRIPPER:FAULT_MSG each its own robot's fault; the world's PVs stay unprefixed."""
+    from pyrt.server import Server
+    from pyrt.server.epics import EpicsService, caproto_available
+    from pyrt.server.station import ServedStation
+
+    station, runner, _shell, _out = cell
+    served = ServedStation(station)
+    fields = {f.name.upper(): f for f in served.extra_fields}
+    for name in ("PUMA:STATE", "PUMA:FAULT_MSG", "PUMA:Q1", "PUMA:JOINT1:POSITION",
+                 "PUMA:JOINT6:DAC", "GRIPPER:STATE", "GRIPPER:FAULT_MSG", "GRIPPER:ENCODER",
+                 "GRIPPER:MONITOR:ADDRESS", "OBJECT:Z", "SIM:JAWS"):
+        assert name in fields, name
+    assert not any(n.startswith(("JOINT1:", "MONITOR:")) for n in fields)
+    for comp in station.components():  # every signal of a robot's component, under its prefix
+        robot = station.robot_of(comp)
+        if robot is None or comp.name == robot.name:
+            continue
+        for sig in comp.signals():
+            assert f"{robot.name}:{comp.name}:{sig.name}".upper() in fields
+            assert f"{comp.name}:{sig.name}".upper() not in fields
+
+    def read():
+        return fields["PUMA:FAULT_MSG"].source.read(), fields["GRIPPER:FAULT_MSG"].source.read()
+
+    assert runner.call(read) == ("", "")
+    runner.call(station.controller.fail, "jaws jammed", take_fault=False)
+    puma, gripper = runner.call(read, take_fault=False)
+    assert puma == "" and "jaws jammed" in gripper
+    if caproto_available():  # the PVs the IOC serves are these names under its prefix
+        epics = EpicsService(runner, served, Server(runner, served, "127.0.0.1", 0), "CELL:")
+        assert {"CELL:PUMA:JOINT1:POSITION", "CELL:GRIPPER:FAULT_MSG"} <= set(epics.pvdb)
