@@ -46,6 +46,19 @@ Then ``pytest`` runs every check on it (needs pytest and hypothesis:
   give a ``CommandError``, never another exception, and move nothing;
 * help, the server's privileges, the EPICS PVs and the completion table
   are what the records say.
+
+A station of several robots is checked whole and then robot by robot: set
+:attr:`~StationConformance.robot_name` in a subclass, and make its
+:meth:`~StationConformance.driven` say only what that robot drives.  Its
+checks then run that robot's component records only, ask that robot whether
+it is busy, and trip that robot alone, which must leave every other robot
+without a fault (unless the station declares them coupled)::
+
+    class TestCellPumaConformance(TestCellConformance):
+        robot_name = "puma"
+
+        def driven(self, station):
+            return arm_driven(station)
 """
 
 from __future__ import annotations
@@ -54,7 +67,7 @@ import contextlib
 import io
 import math
 import numbers
-from collections.abc import Hashable, Iterator, Mapping
+from collections.abc import Hashable, Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -93,6 +106,8 @@ class StationConformance:
     samples: ClassVar[Mapping[str, list[list[str]]]] = {}
     #: Records whose argument is a free file name: any text is a valid one.
     free_text: ClassVar[frozenset[str]] = frozenset({"log"})
+    #: The robot under test in a station of several (its name); None: the station whole.
+    robot_name: ClassVar[str | None] = None
 
     # -- what a station says about itself ---------------------------------------------
 
@@ -168,10 +183,29 @@ class StationConformance:
         out += [(None, r) for r in shell.words() if r.console]
         return out
 
+    def own_records(self, station: Station, records: Iterable[tuple[Component | None, Command]]
+                    ) -> list[tuple[Component | None, Command]]:
+        """``records`` as the checks run them: all, or with :attr:`robot_name` those
+        of that robot's components."""
+        if self.robot_name is None:
+            return list(records)
+        robot = station.robot(self.robot_name)
+        own: list[tuple[Component | None, Command]] = [
+            (c, r) for c, r in records if c is not None and robot.owns(c)]
+        assert own, f"robot {robot.name}: none of its components has a record to check"
+        return own
+
+    def own_fault(self, station: Station) -> Any:
+        """The fault of the station, or with :attr:`robot_name` of that robot."""
+        if self.robot_name is None:
+            return station.fault
+        return station.robot(self.robot_name).fault
+
     def at_rest(self, station: Station, runner: Any) -> list[str]:
         """Driven actuators, a running move, or queued moves (through the loop)."""
+        busy = station.busy if self.robot_name is None else station.robot(self.robot_name).busy
         return list(runner.call(lambda: self.driven(station)
-                                + (["busy"] if station.busy() else []), take_fault=False))
+                                + (["busy"] if busy() else []), take_fault=False))
 
     def sample_arguments(self, comp: Component, rec: Command) -> list[list[str]]:
         """The argument lists a check runs ``rec`` with."""
@@ -245,8 +279,8 @@ class StationConformance:
         monkeypatch.chdir(tmp_path)
         assert self.at_rest(station, runner) == []
         started = []
-        for comp, rec in station.all_commands():
-            if rec.moves or rec.console:
+        for comp, rec in self.own_records(station, station.all_commands()):
+            if rec.moves or rec.console or comp is None:
                 continue
             for words in self.sample_arguments(comp, rec):
                 with contextlib.suppress(CommandError):
@@ -264,8 +298,8 @@ class StationConformance:
         """Each reads_only component record leaves the robot's registers and settings as they were, in the same tick."""
         station, runner = robot
         changed = []
-        for comp, rec in station.all_commands():
-            if not rec.reads_only:
+        for comp, rec in self.own_records(station, station.all_commands()):
+            if not rec.reads_only or comp is None:
                 continue
             for words in self.sample_arguments(comp, rec):
                 args = rec.parse(words, " ".join(words))
@@ -307,13 +341,15 @@ class StationConformance:
         assert self.driven_now(station, runner), "start_move returned with nothing driven"
 
         def act() -> list[str]:
-            station.trip("conformance trip", "test")
+            station.trip("conformance trip", "test", robot=self.robot_name)
             return self.driven(station)
 
         assert runner.call(act, take_fault=False) == []
         runner.sleep(0.2)
         assert self.at_rest(station, runner) == []
-        assert station.fault is not None
+        assert self.own_fault(station) is not None
+        if self.robot_name is not None and not station.coupled:  # its own fault domain
+            assert [r.name for r in station.robots if r.fault is not None] == [self.robot_name]
 
     def driven_now(self, station: Station, runner: Any) -> list[str]:
         """:meth:`driven`, read in the loop thread."""
@@ -334,7 +370,7 @@ class StationConformance:
         """For every command record, random garbage argument words give a CommandError (never another exception) and move nothing."""
         station, runner, directory = garbage_robot
         monkeypatch.chdir(directory)  # where a garbage 'log FILE' name lands
-        comp, rec = data.draw(st.sampled_from(self.records(station)), label="record")
+        comp, rec = data.draw(st.sampled_from(self.own_records(station, self.records(station))), label="record")
         arity = max(1, len(rec.args))  # as many nasty words as the grammar takes, or any
         words = data.draw(st.one_of(st.lists(st.sampled_from(NASTY), min_size=arity,
                                              max_size=arity), _garbage), label="words")
@@ -358,7 +394,7 @@ class StationConformance:
                 if rec.name == "log":
                     runner.call(station.stop_log, take_fault=False)  # type: ignore[attr-defined]
         assert self.at_rest(station, runner) == []
-        assert station.fault is None
+        assert self.own_fault(station) is None
 
     def test_every_nasty_word_in_every_argument_gives_a_command_error(
             self, robot: tuple[Station, Any], tmp_path: Path,
@@ -367,7 +403,7 @@ class StationConformance:
         station, runner = robot
         monkeypatch.chdir(tmp_path)
         accepted = []
-        for comp, rec in self.records(station):
+        for comp, rec in self.own_records(station, self.records(station)):
             if rec.console or rec.name in self.free_text:
                 continue
             assert comp is not None
@@ -380,7 +416,7 @@ class StationConformance:
                 accepted.append(f"{comp.name} {rec.name} {' '.join(words)}")
         assert accepted == []
         assert self.at_rest(station, runner) == []
-        assert station.fault is None
+        assert self.own_fault(station) is None
 
     # -- the derived tables agree --------------------------------------------------------------
 
@@ -434,7 +470,8 @@ class StationConformance:
                 assert served.is_read_only(line) == (rec.anyone or rec.only_reads(rest)), line
 
         # EPICS: the status fields' names, upper case, every component signal as
-        # OBJECT:SIGNAL, the station's state fields, plus the fixed PVs
+        # OBJECT:SIGNAL (of several robots, a robot's as ROBOT:OBJECT:SIGNAL, its root's
+        # as ROBOT:SIGNAL), the station's state fields, plus the fixed PVs
         if caproto_available():
             from pyrt.server.epics import EpicsService, pv_name
 
@@ -442,7 +479,14 @@ class StationConformance:
             epics = EpicsService(runner, served, server, "T:")
             pvs = {name[len("T:"):] for name in epics.pvdb}
             fields = {k.upper() for k, _s, _f in station.status_fields()}
-            signals = {f"{c.name}:{s.name}".upper() for c in station.components()
+            several = len(station.robots) > 1
+
+            def under(c: Component) -> str:
+                r = station.robot_of(c) if several else None
+                return c.name if r is None or r.name.lower() == c.name.lower() \
+                    else f"{r.name}:{c.name}"
+
+            signals = {f"{under(c)}:{s.name}".upper() for c in station.components()
                        for s in c.signals()}
             extras = {pv_name(f.name) for f in served.extra_fields}
             assert signals <= extras and {"STATE", "STOP_REASON"} <= extras

@@ -1,6 +1,8 @@
 """pyrt cell: the PUMA 560 with 002's gripper, two robots in one runtime; pick ends with the
 object lifted in the simulation's truth; a jam during the close stops the sequence with the
-arm holding still; the conformance suite (pyrt.testing) on the cell."""
+arm holding still; the arm's servo and trajectory groups and the gripper's SYSCLK group keep
+their rates whatever the tick; the conformance suite (pyrt.testing) on the cell and on each
+robot in it."""
 
 from __future__ import annotations
 
@@ -28,11 +30,22 @@ OBJECT = (600.0, -150.0, 400.0)
 LIFTED_MM = 140.0
 #: A joint of the simulated arm moving faster than this (deg/s) is driven.
 MOVING_DEG_S = 0.5
+MS = 1_000_000
 
 
 @pytest.fixture
 def cell():
-    station = build_cell(Loop(SimClock()))
+    yield from _started_cell(MS)
+
+
+@pytest.fixture
+def cell_500():
+    """The cell at --tick-us 500."""
+    yield from _started_cell(MS // 2)
+
+
+def _started_cell(tick_ns: int):
+    station = build_cell(Loop(SimClock(), period_ns=tick_ns))
     runner = station.start()
     out = io.StringIO()
     shell = RobotShell(station, out)
@@ -61,6 +74,42 @@ def test_pick_lifts_the_object_in_the_simulations_truth(cell):
     tool = station.plant.truth().tool[:3, 3] * 1e3
     assert np.linalg.norm(tool - obj) < 15.0
     assert station.fault is None
+
+
+def test_pick_at_tick_us_500_lifts_the_object(cell_500):
+    """--tick-us 500: the servo still at 1 kHz, the gripper's clock interrupt still every 1 ms; pick ends with the object lifted by the jaws (the world's truth)."""
+    station, _runner, shell, out = cell_500
+    assert station.loop.period_ns == MS // 2
+    shell.onecmd("sim object {} {} {}".format(*OBJECT))
+    shell.onecmd("pick {} {} {}".format(*OBJECT))
+    shell.onecmd("wait")
+    assert "picked: the object lifted" in out.getvalue(), out.getvalue()
+    assert _object(station)[2] - OBJECT[2] > LIFTED_MM
+    assert station.resolve_signal("sim.object.held").read() and station.fault is None
+
+
+def _cell_second(tick_ns: int) -> tuple[dict[str, tuple[int, int]], dict[str, int]]:
+    """One second of loop time of the cell on the SimClock: each group's (period, releases)
+    and the calls of each task in a group."""
+    loop = Loop(SimClock(), period_ns=tick_ns)
+    station = build_cell(loop)
+    try:
+        loop.run(duration_ns=1_000 * MS)
+        st = loop.statistics()
+        assert station.fault is None and station.arm.powered
+        return ({k: (g.period_ns, g.releases) for k, g in st.groups.items()},
+                {k: t.calls for k, t in st.tasks.items() if t.group})
+    finally:
+        station.close()
+
+
+def test_the_cells_rate_groups_keep_their_rates_whatever_the_tick():
+    """At --tick-us 500 as at 1000: servo 1000 and trajectory 100 releases a second, the gripper's SYSCLK group 1000 (its routines, which SYSCLKPD and their schedules divide, run as often)."""
+    groups, calls = _cell_second(MS)
+    assert groups == {"servo": (MS, 1_000), "SYSCLK": (MS, 1_000), "trajectory": (10 * MS, 100)}
+    assert calls["servo"] == 1_000 and calls["trajectory"] == 100
+    assert calls["MVJAWS"] > 0 and calls["SENSORS"] > 0
+    assert _cell_second(MS // 2) == (groups, calls)
 
 
 def test_a_pick_with_nothing_there_closes_on_nothing_and_says_so(cell):
@@ -160,11 +209,20 @@ def test_pyrt_cell_runs_a_piped_pick_at_speed_max():
 
 
 def _cell_driven(station) -> list[str]:
+    return _jaws_driven(station) + _arm_driven(station)
+
+
+def _jaws_driven(station) -> list[str]:
     out = []
     if station.jaws.board.dac != DAC_NULL:
         out.append(f"jaw DAC {station.jaws.board.dac:02X}")
     if station.controller.moving:
         out.append(f"jaw drive/jog bits in FLAGS {station.controller.cpu.ram[FLAGS]:02X}")
+    return out
+
+
+def _arm_driven(station) -> list[str]:
+    out = []
     if station.arm.state != "idle":
         out.append(f"the arm {station.arm.state}")
     if station.puma.fault is not None or not station.arm.powered:
@@ -223,6 +281,35 @@ class TestCellConformance(StationConformance):
         assert runner.wait_until(lambda: bool(self.driven(station)), 5.0)
 
 
+class TestCellPumaConformance(TestCellConformance):
+    """The cell's robot puma on its own: its records, its busy, its trip (the gripper keeps no fault)."""
+
+    robot_name = "puma"
+
+    def driven(self, station):
+        return _arm_driven(station)
+
+    def start_move(self, station, runner):
+        runner.call(station.arm.move_joints, 40, 60, -150, 30, -40, 50)
+        assert runner.wait_until(lambda: bool(self.driven(station)), 5.0)
+
+
+class TestCellGripperConformance(TestCellConformance):
+    """The cell's robot gripper on its own: its records, its busy, its trip (the arm keeps holding, no fault)."""
+
+    robot_name = "gripper"
+
+    def driven(self, station):
+        return _jaws_driven(station)
+
+    def rest(self, station, runner):
+        runner.call(station.robot("gripper").stop, take_fault=False)
+
+    def start_move(self, station, runner):
+        runner.call(station.controller.cmd_position, "20mm")
+        assert runner.wait_until(lambda: bool(self.driven(station)), 5.0)
+
+
 def test_pyrt_cell_refuses_a_journal_and_boards_elsewhere():
     """--journal (it records one set of boards) and --boards tcp://... are refused in a sentence, exit 2 or 1, nothing run."""
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
@@ -253,3 +340,37 @@ def test_the_served_cell_has_each_robots_state_and_flags(cell):
     assert runner.call(read) == (0, 0, False, False)
     runner.call(station.controller.fail, "jaws", take_fault=False)
     assert runner.call(read, take_fault=False) == (0, 2, True, False)
+
+
+def test_each_robot_of_the_served_cell_has_its_own_epics_prefix(cell):
+    """EPICS: every PV of a robot's components is under its robot's prefix (PUMA:JOINT1:POSITION, GRIPPER:MONITOR:ADDRESS, the roots' PUMA:Q1 and GRIPPER:ENCODER), with PUMA:FAULT_MSG and GRIPPER:FAULT_MSG each its own robot's fault; the world's PVs stay unprefixed."""
+    from pyrt.server import Server
+    from pyrt.server.epics import EpicsService, caproto_available
+    from pyrt.server.station import ServedStation
+
+    station, runner, _shell, _out = cell
+    served = ServedStation(station)
+    fields = {f.name.upper(): f for f in served.extra_fields}
+    for name in ("PUMA:STATE", "PUMA:FAULT_MSG", "PUMA:Q1", "PUMA:JOINT1:POSITION",
+                 "PUMA:JOINT6:DAC", "GRIPPER:STATE", "GRIPPER:FAULT_MSG", "GRIPPER:ENCODER",
+                 "GRIPPER:MONITOR:ADDRESS", "OBJECT:Z", "SIM:JAWS"):
+        assert name in fields, name
+    assert not any(n.startswith(("JOINT1:", "MONITOR:")) for n in fields)
+    for comp in station.components():  # every signal of a robot's component, under its prefix
+        robot = station.robot_of(comp)
+        if robot is None or comp.name == robot.name:
+            continue
+        for sig in comp.signals():
+            assert f"{robot.name}:{comp.name}:{sig.name}".upper() in fields
+            assert f"{comp.name}:{sig.name}".upper() not in fields
+
+    def read():
+        return fields["PUMA:FAULT_MSG"].source.read(), fields["GRIPPER:FAULT_MSG"].source.read()
+
+    assert runner.call(read) == ("", "")
+    runner.call(station.controller.fail, "jaws jammed", take_fault=False)
+    puma, gripper = runner.call(read, take_fault=False)
+    assert puma == "" and "jaws jammed" in gripper
+    if caproto_available():  # the PVs the IOC serves are these names under its prefix
+        epics = EpicsService(runner, served, Server(runner, served, "127.0.0.1", 0), "CELL:")
+        assert {"CELL:PUMA:JOINT1:POSITION", "CELL:GRIPPER:FAULT_MSG"} <= set(epics.pvdb)

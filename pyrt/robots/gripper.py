@@ -93,7 +93,7 @@ from pyrt.robots.gripper_ram import (
     Schedule,
 )
 from pyrt.robots.jaw_supervision import JawSupervision
-from pyrt.scheduler import ByteImage, ByteRef, Job, Loop, ReadyQueue, Task, install
+from pyrt.scheduler import ByteImage, ByteRef, Job, Loop, RateGroup, ReadyQueue, Task, install
 from pyrt.scheduler.motion import MotionRecord, MotionType, register_motion_type
 from pyrt.scope import Source
 from pyrt.tasks import jawmove, jawwatch, sensors
@@ -196,6 +196,7 @@ class GripperController(Component, CommandLetters):
         self.cpu = cpu
         self.ram = cpu.ram
         self._loop: Loop | None = None
+        self._clock_ns = 0  # the clock interrupt's own period (0: the loop's tick)
         #: The RAM as the controller reads and writes it (words, bits, schedule).
         self.mem = GripperRam(self.ram, self._tick_ns)
         self.monitor = GripperMonitor(self)
@@ -230,19 +231,30 @@ class GripperController(Component, CommandLetters):
     # -- wiring ------------------------------------------------------------------
 
     def _tick_ns(self) -> int:
+        """The clock interrupt's period (ns): its rate group's, else the loop's tick."""
+        if self._clock_ns:
+            return self._clock_ns
         return self._loop.period_ns if self._loop is not None else 1_000_000
 
-    def attach(self, loop: Loop, *, register: bool = True) -> None:
+    def attach(self, loop: Loop, *, register: bool = True, clock_ns: int | None = None) -> None:
         """Attach the clock interrupt (ready queue) and the stall watchdog to ``loop``.
 
         With ``register`` (a controller used on its own) its :meth:`tasks` go
         on its ready queue too; a station registers them from its component
-        tree instead and passes ``register=False``."""
+        tree instead and passes ``register=False``.  ``clock_ns``: the clock
+        interrupt's period, a rate group ``SYSCLK`` of its own whatever the
+        loop's tick (None: the queue ticks with the loop, as on 002's board)."""
         if register:
             install(self.queue, self.tasks())
         self._loop = loop
         self.supervisor.clock = loop
-        loop.attach(self.queue, name="SYSCLK")
+        if clock_ns is None:
+            loop.attach(self.queue, name="SYSCLK")
+        else:
+            group = RateGroup("SYSCLK", period_ns=clock_ns)
+            group.attach(self.queue, name="SYSCLK")
+            loop.attach(group)
+            self._clock_ns = clock_ns
         loop.attach(self.watchdog, name="stall watchdog")
 
     def power_up(self) -> None:
@@ -430,7 +442,7 @@ class GripperController(Component, CommandLetters):
         """START_GRACE queue checks, but never less than START_GRACE_NS of loop time
         (a faster tick than 1 ms would otherwise end the grace before the motor
         is up to speed)."""
-        per_check = self._loop.period_ns * (self.ram[SYSCLKPD] or 256) if self._loop else 0
+        per_check = self._tick_ns() * (self.ram[SYSCLKPD] or 256) if self._loop else 0
         if per_check <= 0:
             return START_GRACE
         return min(255, max(START_GRACE, -(-START_GRACE_NS // per_check)))

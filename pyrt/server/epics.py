@@ -12,7 +12,10 @@ component's signal record or the station's state, named ``PREFIX`` + field:
 * one PV per signal of every component, ``COMPONENT:SIGNAL`` upper case
   (``AXIS0:LENGTH``, ``AXIS0:TENSION``, ``AXIS0ENCODER:LENGTH``,
   ``AXIS0MOTOR:RUNNING``, ``AXIS0MOTOR:SPEED`` ... ``GRIPPER:ENCODER``),
-  read in the loop every 0.1 s while the IOC runs;
+  read in the loop every 0.1 s while the IOC runs; in a station of several
+  robots each robot has a prefix of its own: its components' signals are
+  ``ROBOT:COMPONENT:SIGNAL`` (its root's ``ROBOT:SIGNAL``), beside
+  ``ROBOT:STATE`` and ``ROBOT:FAULT_MSG``;
 * ``STATE`` (enum ``idle``/``moving``/``fault``), ``STOP_REASON`` (how the
   last move ended), and for the manipulator ``TARGET_X/Y/Z``: the running
   move's endpoint, NaN between moves.  Target PVs are read-backs: a move is

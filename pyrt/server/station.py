@@ -192,12 +192,17 @@ class ServedStation:
                         Source.call(functools.partial(self._robot_state, robot)), "enum",
                         StationState,
                         doc=f"{robot.name}: idle, moving or fault (until ack {robot.name})"))
+                    fields.append(PVField(
+                        f"{robot.name}:fault_msg", "", "s",
+                        Source.call(functools.partial(self._robot_fault, robot)), "text",
+                        doc=f"{robot.name}: its fault, whole (empty: none)"))
         for sig in st.served_signals():
             fields.append(PVField(sig.name, sig.units, sig.fmt, sig.scope_source(),
                                   limits=sig.limits, doc=sig.doc))
         for comp in st.components():
+            prefix = self.signal_prefix(comp)
             for sig in comp.signals():
-                name = f"{comp.name}:{sig.name}"
+                name = f"{prefix}{sig.name}"
                 if not _PV_NAME.match(comp.name) or not _PV_NAME.match(sig.name):
                     continue
                 fields.append(PVField(name, sig.units, sig.fmt, sig.scope_source(),
@@ -209,6 +214,21 @@ class ServedStation:
         if st.fault is not None:
             return 2
         return 1 if st.busy() else 0
+
+    def signal_prefix(self, comp: Any) -> str:
+        """What ``comp``'s signals are served under: ``COMPONENT:``; in a station of
+        several robots, a robot's component under the robot's prefix
+        (``ROBOT:COMPONENT:``, its root ``ROBOT:``)."""
+        st = self.station
+        robot = st.robot_of(comp) if len(getattr(st, "robots", ())) > 1 else None
+        if robot is None or not _PV_NAME.match(robot.name) \
+                or comp.name.lower() == robot.name.lower():
+            return f"{comp.name}:"
+        return f"{robot.name}:{comp.name}:"
+
+    @staticmethod
+    def _robot_fault(robot: Any) -> str:
+        return str(robot.fault.cause) if robot.fault is not None else ""
 
     @staticmethod
     def _robot_state(robot: Any) -> int:

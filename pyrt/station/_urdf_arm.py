@@ -6,13 +6,13 @@ talks to the arm only through one passive servo board
 current), an amplifier enable and an encoder counter.  Two tasks on one
 ready queue:
 
-* ``trajectory`` (every :data:`TRAJECTORY_PERIOD` ticks, 100 Hz at 1 ms):
+* ``trajectory`` (rate group ``trajectory``, :data:`TRAJECTORY_HZ`, 100 Hz):
   one tick of :class:`pyrt.motion.Evaluator` (given the wrist sensor's
   wrench, for guarded moves) gives a knot (joint position, velocity,
   acceleration); the servo is handed the segment from the last knot to this
   one with the chain's inverse dynamics at both ends (gravity, inertia and
   Coriolis feed-forward);
-* ``servo`` (every tick, 1 kHz): the encoders (unwrapped) into
+* ``servo`` (rate group ``servo``, :data:`SERVO_HZ`, 1 kHz): the encoders (unwrapped) into
   :class:`pyrt.native.Servo` (quintic interpolation of the segment, PID with
   velocity, acceleration and dynamics feed-forward), its torques as DAC
   counts; a following error beyond the limit trips the servo, and a joint
@@ -55,7 +55,7 @@ from pyrt.kinematics import GRAVITY, Chain, rpy_of
 from pyrt.motion import Evaluator, MotionFault
 from pyrt.motion import Limits as MotionLimits
 from pyrt.native import Servo, gain_ranges, tuned_gains
-from pyrt.scheduler import Task
+from pyrt.scheduler import RateGroup, Task
 from pyrt.station._urdf_gains import ArmTuning, arm_gain_params, joint_gain_params
 from pyrt.station._urdf_moves import ArmMoves
 
@@ -66,14 +66,25 @@ if TYPE_CHECKING:
 __all__ = [
     "AT_TARGET_DEG",
     "SERVO_BANDWIDTH_HZ",
+    "SERVO_HZ",
+    "SERVO_PERIOD_NS",
+    "TRAJECTORY_HZ",
     "TRAJECTORY_PERIOD",
     "ArmJoint",
     "Drive",
     "UrdfArm",
 ]
 
-#: The trajectory task's period, in ticks (100 Hz at the 1 ms tick).
+#: The servo group's rate (Hz), in time units whatever the loop's tick.
+SERVO_HZ = 1000
+#: The servo's period (ns): what the servo's gains are tuned for.
+SERVO_PERIOD_NS = 1_000_000_000 // SERVO_HZ
+#: The trajectory's period, in servo periods (the servo interpolates over them).
 TRAJECTORY_PERIOD = 10
+#: The trajectory group's rate (Hz): 100 Hz.
+TRAJECTORY_HZ = SERVO_HZ // TRAJECTORY_PERIOD
+#: Each task's rate group and its rate (Hz): a task runs in the group of its name.
+GROUP_HZ = {"servo": SERVO_HZ, "trajectory": TRAJECTORY_HZ}
 #: The servo's closed-loop bandwidth (Hz): a triple real pole (pyrt.native.tuned_gains).
 SERVO_BANDWIDTH_HZ = 12.0
 #: The following-error limit of every joint (deg, or mm for a prismatic joint).
@@ -165,7 +176,8 @@ class UrdfArm(ArmMoves, Component):
     Its moves and their commands are :class:`ArmMoves`, mixed in.
 
     ``chain`` the arm (its limits and inertials), ``board`` its passive servo
-    board, ``drives`` one :class:`Drive` per joint, ``period_ns`` the tick.
+    board, ``drives`` one :class:`Drive` per joint, ``period_ns`` the servo's period
+    (:data:`SERVO_PERIOD_NS`: its group's, not the loop's tick).
     """
 
     def __init__(self, station: Station | Robot, name: str, chain: Chain, board: Any,
@@ -333,9 +345,20 @@ class UrdfArm(ArmMoves, Component):
         return arm_gain_params(self.name, self.tuning, w / (2.0 * math.pi))
 
     def tasks(self) -> list[Task]:
-        return [Task(self.trajectory_tick, period=TRAJECTORY_PERIOD, name="trajectory",
-                     timed=True),
+        """Each runs at every release of its rate group (:meth:`rate_groups`)."""
+        return [Task(self.trajectory_tick, period=1, name="trajectory", timed=True),
                 Task(self.servo_tick, period=1, name="servo", timed=True)]
+
+    def rate_groups(self, robot: str) -> list[RateGroup]:
+        """The arm's tasks in their rate groups (:data:`GROUP_HZ`: a task in the
+        group of its name), each in a ready queue of ``robot`` (faults name it),
+        fastest first; attach them to the loop and give the station their queues."""
+        groups = []
+        for task in self.tasks():
+            group = RateGroup(task.name, hz=GROUP_HZ[task.name])
+            group.new_queue(robot, [task])
+            groups.append(group)
+        return sorted(groups, key=lambda g: g.period_ns)
 
     def commands(self) -> list[Command]:
         if self._records is None:

@@ -135,7 +135,8 @@ class DrivenArm(UrdfArm):
                        "bits 8..15 the joint that tripped", "d")]
 
     def tasks(self) -> list[Task]:
-        return [Task(self.drive_tick, period=self.every, name="trajectory", timed=True)]
+        """The trajectory alone, at every release of its 100 Hz group (no host servo)."""
+        return [Task(self.drive_tick, period=1, name="trajectory", timed=True)]
 
     # -- the board ---------------------------------------------------------------------
 

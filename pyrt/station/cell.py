@@ -3,9 +3,12 @@
 The PUMA 560 (the arm of ``pyrt urdf``, robot ``puma``) carries 002's
 parallel-jaw gripper (robot ``gripper``) as its end effector.  One loop, one
 console; each robot has its own boards (the arm's passive servo board, the
-gripper's 8031 cage), its own ready queue (the arm's trajectory and servo
-tasks; the gripper's SYSCLK queue with 002's three routines, its ``CMD:``
-letters and its monitor), its own motion queue and its own fault:
+gripper's 8031 cage), its own ready queues in rate groups whose periods are
+time, not ticks (the arm's ``servo`` group at 1 kHz and ``trajectory`` group
+at 100 Hz; the gripper's 8031 queue, with 002's three routines, its ``CMD:``
+letters and its monitor, the group ``SYSCLK`` at its clock interrupt's 1 ms,
+which SYSCLKPD divides as on 002's board), its own motion queue and its own
+fault:
 
 * a **gripper fault** stops the gripper (drive nulled) and the cell's
   sequence; the arm keeps holding where it is;
@@ -21,7 +24,7 @@ open, descend, close on it, lift.
 
 Declaring the robots (what any station of several robots does)::
 
-    station.add_robot("puma", arm, queues=[arm_queue], boards=[arm_boards],
+    station.add_robot("puma", arm, queues=arm_queues, boards=[arm_boards],
                       stop=arm_stop, busy=arm.busy, where=arm.where)
     station.add_robot("gripper", ctl, queues=[ctl.queue], executors=[executor],
                       motion=jaw_moves, boards=[jaw_boards], stop=jaw_stop)
@@ -40,7 +43,7 @@ from pyrt.boards.i8031 import COMMAND_CNT, ENCODER_CNT
 from pyrt.component import Arg, Component, Signal, command, finite
 from pyrt.errors import ConfigError, Fault, PyrtError
 from pyrt.robots.gripper import GripperController, JawCalibration
-from pyrt.scheduler import Loop, ReadyQueue, install
+from pyrt.scheduler import Loop
 from pyrt.scheduler.motion import MotionExecutor, MotionType
 from pyrt.scheduler.runner import MotionQueue
 from pyrt.sim.arm import FTCalibration
@@ -48,7 +51,7 @@ from pyrt.sim.gripper import JawPlant
 from pyrt.sim.world import GRIPPER_BOARDS
 from pyrt.station._cell_pick import PickSequence
 from pyrt.station._cell_world import CellSim, CellWorld
-from pyrt.station._urdf_arm import UrdfArm
+from pyrt.station._urdf_arm import SERVO_PERIOD_NS, UrdfArm
 from pyrt.station._urdf_sim import UrdfPhysics, UrdfSim
 from pyrt.station.base import Robot, Station
 from pyrt.station.factory import StationFactory
@@ -58,6 +61,10 @@ from pyrt.station.urdf import _drives, arm_world, load_arm
 from pyrt.tasks import register_tasks
 
 __all__ = ["CELL", "CellFactory", "CellStation", "build_cell"]
+
+
+#: The gripper's clock interrupt period (ns): 002's board's 1 ms, whatever the loop's tick.
+GRIPPER_CLOCK_NS = 1_000_000
 
 
 def _signed(word: int) -> int:
@@ -95,10 +102,12 @@ class CellStation(Station):
         # -- robot puma: the arm, its trajectory and servo tasks ------------------------
         self.board = arm_boards["servo"]
         self.arm = arm = UrdfArm(self, "puma", chain, self.board, _drives(motors),
-                                 loop.period_ns, wrench=FTCalibration().wrench)
-        self.arm_queue = ReadyQueue.general(name="puma")
-        install(self.arm_queue, arm.tasks())
-        loop.attach(self.arm_queue, name="queue:puma")
+                                 SERVO_PERIOD_NS, wrench=FTCalibration().wrench)
+        #: The arm's rate groups: servo (1 kHz) and trajectory (100 Hz), whatever the tick.
+        self.arm_groups = arm.rate_groups("puma")
+        for group in self.arm_groups:
+            loop.attach(group)
+        arm_queues = [q for g in self.arm_groups for q in g.queues]
         # -- robot gripper: 002's controller, its ready queue and its P moves -----------
         self.jaw_board = jaw_boards["gripper"]
         p = self.jaws.p
@@ -106,7 +115,7 @@ class CellStation(Station):
                                 calibration=JawCalibration(p.closed, p.open_mm, p.gain,
                                                            p.deadband))
         self.controller = ctl
-        ctl.attach(loop, register=False)
+        ctl.attach(loop, register=False, clock_ns=GRIPPER_CLOCK_NS)  # group SYSCLK
         register_tasks(ctl.queue, ctl)
         self.jaw_moves = MotionQueue(capacity=16)
         ctl.motion = self.jaw_moves
@@ -116,7 +125,7 @@ class CellStation(Station):
         # -- the cell: its sequence, the robots, the tree --------------------------------
         self.pick = PickSequence(self)
         loop.attach(self.pick.step, name="sequence")
-        self.puma = self.add_robot("puma", arm, queues=[self.arm_queue], boards=[arm_boards],
+        self.puma = self.add_robot("puma", arm, queues=arm_queues, boards=[arm_boards],
                                    stop=self._stop_arm, busy=arm.busy, where=arm.where,
                                    ended=self._arm_ended)
         self.gripper = self.add_robot("gripper", ctl, queues=[ctl.queue],
@@ -340,7 +349,8 @@ object and lift, in the loop; wait waits for it to end.
     description = __doc__ or ""
     default_tick_us = 1000
     max_tick_us = 1000
-    max_tick_why = "the arm's servo task runs every tick and is tuned for 1 kHz"
+    max_tick_why = ("the arm's servo group runs at 1 kHz and the gripper's clock "
+                    "interrupt every 1 ms (a tick that divides 1000 µs)")
 
     def configure(self, args: argparse.Namespace, say: Callable[[str], None]) -> None:
         """A journal is refused: it records one set of boards, and the cell has one per

@@ -18,11 +18,13 @@ The component tree::
       JOINT ...  one per joint (the URDF's names): position, setpoint, error, torque, dac
     sim          the simulated arm's truth and its table (sim show, sim table)
 
-One ready queue: ``trajectory`` (100 Hz) and ``servo`` (every tick, 1 kHz);
-see :mod:`pyrt.station._urdf_arm` for the control.  With ``--hardware a`` the
+Two rate groups, periods in time units whatever the tick (``--tick-us 500``
+leaves them as they are): ``servo`` (1 kHz) and ``trajectory`` (100 Hz),
+each with its task in a ready queue of the robot's name and its own overrun
+accounting; see :mod:`pyrt.station._urdf_arm` for the control.  With ``--hardware a`` the
 board is a motion-control board instead (:func:`pyrt.boards.armdrive.arm_drive_kind`,
 board name ``drive``) that interpolates and servos on its own: the host has
-only ``trajectory`` (:mod:`pyrt.station._urdf_drive`).  A following error
+only the ``trajectory`` group (:mod:`pyrt.station._urdf_drive`).  A following error
 beyond 2 degrees or a joint beyond its limits trips the station: every
 joint's DAC and enable are written 0 in that tick.
 """
@@ -49,7 +51,7 @@ from pyrt.errors import ConfigError, PyrtError
 from pyrt.kinematics import Chain
 from pyrt.kinematics.puma import URDF as PUMA_URDF
 from pyrt.kinematics.puma import PaulInverse
-from pyrt.scheduler import Loop, ReadyQueue, install
+from pyrt.scheduler import Loop
 from pyrt.sim.arm import (
     PUMA560_MOTORS,
     ArmWorld,
@@ -59,7 +61,7 @@ from pyrt.sim.arm import (
     default_motors,
 )
 from pyrt.sim.world import World
-from pyrt.station._urdf_arm import Drive, UrdfArm
+from pyrt.station._urdf_arm import SERVO_PERIOD_NS, Drive, UrdfArm
 from pyrt.station._urdf_drive import DrivenArm
 from pyrt.station._urdf_sim import UrdfPhysics, UrdfSim
 from pyrt.station.base import BoardWorld, Station
@@ -181,16 +183,20 @@ class UrdfStation(Station):
         ft = FTCalibration()  # the wrist sensor's data sheet: counts per N and per N m
         # hardware (a): the board servos, the host writes setpoints (pyrt.station._urdf_drive)
         arm_class = DrivenArm if self.board.kind.name == "arm-drive" else UrdfArm
+        # the host's servo runs at its group's 1 kHz whatever the tick; (a) checks the tick
+        period = loop.period_ns if arm_class is DrivenArm else SERVO_PERIOD_NS
         self.arm = arm = arm_class(self, self.name, chain, self.board, _drives(motors),
-                                   loop.period_ns, wrench=ft.wrench)
+                                   period, wrench=ft.wrench)
         taken = {c.lower() for c in ("sim", *(j.name for j in arm.joints))}
         if self.name.lower() in taken:
             raise ConfigError(f"robot {self.name!r}: a joint of the URDF has the robot's name "
                               "(or 'sim'); the console names each once")
-        self.queue = ReadyQueue.general(name=self.name)
-        install(self.queue, arm.tasks())
-        loop.attach(self.queue, name=f"queue:{self.name}")
-        self.adopt(arm, queues=[self.queue], extras=extras, where=arm.where, ended=self._ended)
+        #: The arm's rate groups (servo 1 kHz, trajectory 100 Hz; (a): trajectory alone).
+        self.rate_groups = arm.rate_groups(self.name)
+        for group in self.rate_groups:
+            loop.attach(group)
+        queues = [q for g in self.rate_groups for q in g.queues]
+        self.adopt(arm, queues=queues, extras=extras, where=arm.where, ended=self._ended)
 
     # -- what the shell, the server and EPICS ask -----------------------------------------
 
@@ -233,15 +239,15 @@ def build_urdf(loop: Loop, urdf: str | Path | None = None, *, boards: str | None
     """The arm of ``urdf`` (None: the packaged PUMA 560) on ``loop``, not yet
     started.  ``boards`` the board URL (default ``sim:``); ``start`` the
     simulated arm's joints (rad, m; in-process boards only); ``hardware``
-    ``b`` (a passive servo board, the host's servo at every tick of at most
-    1 ms) or ``a`` (a motion-control board: the host writes setpoints at
+    ``b`` (a passive servo board, the host's servo group at 1 kHz on a tick
+    that divides 1 ms) or ``a`` (a motion-control board: the host writes setpoints at
     100 Hz, on a tick that divides 10 ms).  ConfigError for a bad file or
     setting; BoardError if the boards cannot be reached."""
     chain, motors, text = load_arm(urdf)
     kinds = arm_boards(chain, hardware)
-    if hardware == "b" and loop.period_ns > 1_000_000:
+    if hardware == "b" and SERVO_PERIOD_NS % loop.period_ns:
         raise ConfigError(f"a tick of {loop.period_ns / 1e3:g} µs: hardware b runs its servo "
-                          "every tick and is tuned for 1 kHz (at most 1000 µs)")
+                          "group at 1 kHz, on a tick that divides 1000 µs (1000, 500, 250 ...)")
     b = open_boards(boards, "urdf", kinds)
     try:
         world = None
