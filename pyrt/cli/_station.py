@@ -33,6 +33,7 @@ from pyrt.cli._loopopts import (
 )
 from pyrt.cli._serve import add_serve_options, prepare_service
 from pyrt.cli._shutdown import run_until_shutdown
+from pyrt.cli._stream import add_stream_options, stream_commands
 from pyrt.commands import RobotShell
 from pyrt.console import Console
 from pyrt.errors import PyrtError, UsageError
@@ -59,6 +60,7 @@ def add_station_arguments(parser: argparse.ArgumentParser, factory: StationFacto
                      default_tick_us=factory.default_tick_us)
     add_serve_options(parser)
     add_journal_options(parser)
+    add_stream_options(parser)
     parser.set_defaults(run=lambda args: run_factory(factory, args))
 
 
@@ -113,6 +115,7 @@ def run_factory(factory: StationFactory, args: argparse.Namespace) -> int:
     runner = station.runner
     recorder = None
     try:
+        streaming = stream_commands(args, station)
         recorder = start_recorder(station, args, getattr(args, "_factory", "") or factory.name,
                                   say)
         served = ServedStation(station)
@@ -143,7 +146,7 @@ def run_factory(factory: StationFactory, args: argparse.Namespace) -> int:
     wall0 = time.perf_counter()
     timing_log = loop.timing_log  # the loop lets go of it when it closes
     station.start()
-    first = station.profile.startup_commands
+    first = [*streaming, *station.profile.startup_commands]
 
     def run_first() -> None:
         for line in first:

@@ -36,7 +36,7 @@ from urllib.parse import urlsplit
 
 from pyrt.errors import CommandError
 
-__all__ = ["DEFAULT_HZ", "MAX_HZ", "Layout", "Sink", "UdpStream", "parse_udp_url"]
+__all__ = ["DEFAULT_HZ", "MAX_HZ", "MIN_HZ", "Layout", "Sink", "UdpStream", "parse_udp_url"]
 
 #: Objects a second of loop time, unless the command names a rate.
 DEFAULT_HZ = 50.0
