@@ -215,9 +215,10 @@ class RobotShell(LineResolver, CommandShell, ShowWord):
         return None if show is None else (lambda v: show(round(v)))
 
     def _channel_names(self) -> list[str]:
-        root = self.station.root
-        names = [s.name for s in root.signals()]
-        names += [n for n, _ in self.station.signals() if not n.startswith(root.name + ".")]
+        root = self.station.root  # the scope's channels: the numbers (text is not sampled)
+        names = [s.name for s in root.signals() if not s.is_text]
+        names += [n for n, s in self.station.signals()
+                  if not n.startswith(root.name + ".") and not s.is_text]
         if root.signal("ram:00") is not None:
             names.append("ram:XX")
         return names
@@ -271,7 +272,7 @@ class RobotShell(LineResolver, CommandShell, ShowWord):
             self.say(f"{comp.name} commands:")
             for rec in comp.commands():
                 self.say(f"  {rec.summary}")
-            sigs = comp.signals()
+            sigs = self.station.signals_of(comp)
             if sigs:
                 self.say("  signals: " + ", ".join(f"{s.name} ({s.units})" for s in sigs))
             return
@@ -426,7 +427,8 @@ class RobotShell(LineResolver, CommandShell, ShowWord):
                 self.say(line)
             return
         comp = self.station.component(name)
-        values = self.runner.call(lambda: [(s, s.read()) for s in comp.signals()])
+        sigs = self.station.signals_of(comp)
+        values = self.runner.call(lambda: [(s, s.read()) for s in sigs])
         if not values:
             self.say(f"{comp.name}: no signals")
         for s, v in values:

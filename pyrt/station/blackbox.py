@@ -169,11 +169,11 @@ class SignalRing:
         #: Samples taken so far.
         self.samples = 0
         self._countdown = 1
-        #: Signals left out: they give text, not numbers.
-        self.text: set[int] = set()
+        #: Signals left out: they give text, not numbers (text signals from the start).
+        self.text: set[int] = {c for c, sig in enumerate(self._signals) if sig.is_text}
         self._slow: list[int] = []  # read one by one, each guarded
-        self._fast: list[int] = list(range(n))
-        self._read_fast: Callable[[], tuple] = self._compile(self._fast)
+        self._fast: list[int] = [c for c in range(n) if c not in self.text]
+        self._read_fast: Callable[[], tuple] = self._compile(self._fast) if self._fast else tuple
 
     def _compile(self, cols: list[int]) -> Callable[[], tuple]:
         return compile_sources([self._signals[c].scope_source() for c in cols])
