@@ -567,3 +567,18 @@ def test_the_png_title_is_the_whole_fault_wrapped_to_the_figures_width():
     canvas.draw()
     box = shown.get_window_extent(canvas.get_renderer())
     assert box.x0 >= 0 and box.x1 <= fig.bbox.width
+
+
+def test_the_signal_ring_leaves_a_text_signal_out_without_reading_it():
+    """A text signal (a robot's where) is not a column of the black box's ring and is never read by it: the ring samples numbers."""
+    reads = []
+    x = [1.0]
+    sigs = [("r.x", Signal("x", "mm", lambda: x[0])),
+            ("r.where", Signal.text("where", lambda: reads.append(1) or "here"))]
+    ring = blackbox.SignalRing(sigs, 1.0, 1_000_000)
+    for k in range(5):
+        x[0] = float(k)
+        ring.sample(k * 1_000_000)
+    _t, v, cols = ring.window(ring.samples)
+    assert cols == [0] and ring.text == {1} and reads == []
+    assert v[:, 0].tolist() == [0.0, 1.0, 2.0, 3.0, 4.0]
