@@ -60,6 +60,8 @@ from pyrt.units import UnitError, parse_value, value_grammar
 
 __all__ = [
     "MESSAGE_LEVELS",
+    "SIGNAL_KINDS",
+    "STRING_LENGTH",
     "Arg",
     "Command",
     "Component",
@@ -132,6 +134,12 @@ class Limits:
         return f"{rng}; {', '.join(levels)}" if levels else rng
 
 
+#: What a signal's value may be (:attr:`Signal.kind`): a number, or a line of text.
+SIGNAL_KINDS = ("", "text")
+#: The longest text an EPICS string PV holds (DBR_STRING: 40 bytes with its end).
+STRING_LENGTH = 39
+
+
 @dataclass(frozen=True)
 class Signal:
     """A named readable value with units, read in the loop's thread.
@@ -144,6 +152,15 @@ class Signal:
     None: EPICS serves them as the PV's, ``status OBJECT`` shows them.
     ``show`` is how a console shows a value in its robot's radix (the
     gripper's counts: ``E47A (26.2 mm)``), or None: ``fmt`` and the units.
+
+    ``kind`` is what the value is: ``""`` a number (or a bool: units
+    ``bool``), ``"text"`` a line of text (:meth:`text`: where the robot is,
+    how its last move ended).  A text signal is read and shown (``status``,
+    ``show``, EPICS serves it as a string) but never sampled: the scope,
+    the black box and the exports take numbers.  ``length`` bounds a text
+    signal's value (characters; 0: no bound): EPICS serves a text of at
+    most :data:`STRING_LENGTH` characters as a string PV, a longer or
+    unbounded one as a char waveform, as an IOC does.
     """
 
     name: str
@@ -154,6 +171,28 @@ class Signal:
     source: Source | None = None
     limits: Limits | None = None
     show: Callable[[Any], str] | None = None
+    kind: str = ""
+    length: int = 0
+
+    def __post_init__(self) -> None:
+        if self.kind not in SIGNAL_KINDS:
+            raise ValueError(f"signal {self.name!r}: kind {self.kind!r} is not one of "
+                             f"{', '.join(repr(k) for k in SIGNAL_KINDS)}")
+        if self.length < 0 or (self.length and self.kind != "text"):
+            raise ValueError(f"signal {self.name!r}: a length bounds a text signal only "
+                             f"(got {self.length!r})")
+
+    @classmethod
+    def text(cls, name: str, read: Callable[[], str], doc: str = "",
+             length: int = 0) -> Signal:
+        """A signal whose value is a line of text (``str(value)``; units ``text``),
+        at most ``length`` characters when it is given."""
+        return cls(name, "text", read, doc, "s", kind="text", length=length)
+
+    @property
+    def is_text(self) -> bool:
+        """Its value is text (never sampled: the scope takes numbers)."""
+        return self.kind == "text"
 
     @classmethod
     def attr(cls, name: str, units: str, obj: Any, attr: str, doc: str = "",
@@ -173,12 +212,19 @@ class Signal:
         return replace(self, limits=limits)
 
     def scope_source(self) -> Source:
-        """Where the scope samples this signal."""
+        """Where the scope samples this signal; CommandError for a text signal
+        (the scope samples numbers: ``status`` and ``show`` read text)."""
+        if self.is_text:
+            raise CommandError(f"{self.name} is text ({self.doc or 'a line of text'}): the "
+                               "scope samples numbers; 'status' or 'show' reads it")
         src = self.source if self.source is not None else Source.call(self.read)
         return src.described(self.units, self.fmt)
 
     def format(self, value: Any) -> str:
-        """``value`` as ``status`` shows it, with its units (or as :attr:`show` says)."""
+        """``value`` as ``status`` shows it, with its units (or as :attr:`show` says;
+        a text signal's value as it is)."""
+        if self.is_text:
+            return str(value) or "''"
         if self.show is not None:
             try:
                 return self.show(value)

@@ -319,16 +319,17 @@ class StationConformance:
 
     def test_every_signal_has_units_and_reads_a_number(self, robot: tuple[Station, Any]
                                                        ) -> None:
-        """Every signal (and status field) has units and reads, in the loop thread, to a number or a bool."""
+        """Every signal (and status field) has units and reads, in the loop thread, to a number or a bool (a text signal to text)."""
         station, runner = robot
         sigs = [(n, s) for n, s in station.signals()]
         sigs += [(f"status.{k}", s) for k, s, _fmt in station.status_fields()]
         assert all(s.units.strip() for _n, s in sigs), [n for n, s in sigs if not s.units.strip()]
-        values = runner.call(lambda: [(n, s.read()) for n, s in sigs], take_fault=False)
-        bad = [(n, v) for n, v in values
-               if isinstance(v, str) or not isinstance(v, numbers.Number | bool)]
+        values = runner.call(lambda: [(n, s, s.read()) for n, s in sigs], take_fault=False)
+        bad = [(n, v) for n, s, v in values
+               if (not isinstance(v, str) if s.is_text
+                   else isinstance(v, str) or not isinstance(v, numbers.Number | bool))]
         assert bad == []
-        for n, v in values:
+        for n, _s, v in values:
             assert not isinstance(v, float) or not math.isinf(v), n
 
     # -- the reflex ------------------------------------------------------------------------------

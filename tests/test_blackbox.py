@@ -154,7 +154,7 @@ def test_a_jam_the_supervision_trips_writes_the_black_box(tmp_path, monkeypatch)
     check_journal(pj, fault)
     ring = rec.fault_box.ring
     assert ring.rate_hz == SIGNAL_RATE_HZ and ring.every == 10
-    names = [n for n, _ in st.signals()]
+    names = [n for n, s in st.signals() if not s.is_text]  # text signals: not sampled
     table = check_csv(dump.path(".csv"), names, ring.rate_hz)
     dac = table[:, names.index("gripper.dac") + 1]
     t = table[:, 0]
@@ -191,7 +191,7 @@ def test_a_manipulator_fault_is_written_beside_its_databases(tmp_path, monkeypat
     k = next(i for i, m in enumerate(messages) if m.startswith("FAULT "))
     assert messages[k + 1] == f"black box of fault {fault.id}: {dump.path('.pj')} (+ .csv, .png)"
     check_journal(dump.path(".pj"), fault)
-    names = [n for n, _ in st.signals()]
+    names = [n for n, s in st.signals() if not s.is_text]  # text signals: not sampled
     table = check_csv(dump.path(".csv"), names, rec.fault_box.ring.rate_hz)
     z = table[:, names.index("prototype.z") + 1]
     assert z[0] - z[-1] > 0.5  # the move down shows in the signals
@@ -584,3 +584,18 @@ def test_signal_ring_packs_every_number_and_a_passing_none_is_nan_for_its_sample
     assert values[:, 0].tolist() == [0.0, 1.0, 2.0, 3.0, 4.0, 5.0]
     assert np.isnan(values[:, 1]).tolist() == [False, False, True, False, False, False]
     assert values[[0, 1, 3, 4, 5], 1].tolist() == [0.0, 0.5, 1.5, 2.0, 2.5]
+
+
+def test_the_signal_ring_leaves_a_text_signal_out_without_reading_it():
+    """A text signal (a robot's where) is not a column of the black box's ring and is never read by it: the ring samples numbers."""
+    reads = []
+    x = [1.0]
+    sigs = [("r.x", Signal("x", "mm", lambda: x[0])),
+            ("r.where", Signal.text("where", lambda: reads.append(1) or "here"))]
+    ring = blackbox.SignalRing(sigs, 1.0, 1_000_000)
+    for k in range(5):
+        x[0] = float(k)
+        ring.sample(k * 1_000_000)
+    _t, v, cols = ring.window(ring.samples)
+    assert cols == [0] and ring.text == {1} and reads == []
+    assert v[:, 0].tolist() == [0.0, 1.0, 2.0, 3.0, 4.0]

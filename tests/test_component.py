@@ -77,3 +77,32 @@ def test_any_text_is_accepted_in_range_or_refused_cleanly(text):
         return
     v = float(r.got[0])  # type: ignore[arg-type]
     assert math.isfinite(v) and 10.0 <= v <= 20.0
+
+
+# -- text signals ------------------------------------------------------------------------
+
+
+def test_a_text_signal_is_read_and_shown_as_text_and_never_sampled():
+    """Signal.text: kind text, units text, format gives the text as it is ('' when empty), scope_source refuses with CommandError naming it."""
+    from pyrt.component import Signal
+
+    said = ["at home"]
+    s = Signal.text("where", lambda: said[0], "where the robot is")
+    assert s.is_text and s.units == "text" and s.length == 0
+    assert s.format(s.read()) == "at home"
+    said[0] = ""
+    assert s.format(s.read()) == "''"
+    with pytest.raises(CommandError, match=r"where is text \(where the robot is\): the scope "
+                                           "samples numbers"):
+        s.scope_source()
+    assert not Signal("x", "mm", lambda: 1.0).is_text
+
+
+@pytest.mark.parametrize("kw", [{"kind": "string"}, {"kind": "", "length": 10},
+                                {"kind": "text", "length": -1}])
+def test_a_signal_of_an_unknown_kind_or_a_length_that_bounds_no_text_is_refused(kw):
+    """kind must be '' or 'text'; a length only bounds a text signal and is not negative."""
+    from pyrt.component import Signal
+
+    with pytest.raises(ValueError, match="signal 'v'"):
+        Signal("v", "text", lambda: "", **kw)

@@ -7,6 +7,7 @@ or disturbed.
 
 from __future__ import annotations
 
+import re
 import socket
 import sys
 import time
@@ -425,3 +426,74 @@ def test_epics_writes_that_act_are_shown_on_the_console(epics_env):
         assert _text("RESULT").startswith("OK gripper: every motor stopped")
         audit = [m for m in console.messages() if m.startswith("remote: ")]
     assert audit == ["remote: EPICS CMD: X 33", "remote: EPICS STOP: stop"]
+
+
+class _WordStation(ManipulatorStation):
+    """The prototype with one more served value: a short text (a mode word, 12 characters at most)."""
+
+    def served_signals(self):
+        from pyrt.component import Signal
+
+        return [*super().served_signals(),
+                Signal.text("mode", lambda: "cruise", "the mode, a word", length=12)]
+
+
+def test_the_robot_text_signals_are_string_pvs_that_read_what_the_station_says(
+        epics_env, tmp_path):
+    """After a move: PROTOTYPE:WHERE, LAST_STOP and STATUSLINE are char waveforms (unbounded text) holding the station's where, the move's stop reason and the status line; a text bounded to 39 characters (MODE) is a DBR_STRING PV."""
+    from caproto import ChannelType
+
+    from pyrt.client import Client
+    from pyrt.server.epics import EpicsService
+
+    station = _WordStation(copy_station("prototype", tmp_path / "prototype"),
+                           tick_ns=5_000_000)
+    runner = station.runner
+    robot = ServedStation(station)
+    server = Server(runner, robot, token=TOKEN)
+    runner.start()
+    server.start()
+    ioc = EpicsService(runner, robot, server, PREFIX, token=TOKEN, interfaces=["127.0.0.1"],
+                       period_s=0.02, stats_period_s=0.2)
+    ioc.start()
+    try:
+        assert type(ioc.pvdb[PREFIX + "PROTOTYPE:WHERE"]).__mro__[1].__name__ == "ChannelChar"
+        assert type(ioc.pvdb[PREFIX + "MODE"]).__mro__[1].__name__ == "ChannelString"
+        assert _until(lambda: _string("MODE") == "cruise")
+        assert _ca_read("MODE", timeout=2.0).data_type == ChannelType.STRING
+        op = Client(*server.address)
+        op.auth(TOKEN)
+        op.command("prototype to 10 0 100")
+        (ended,) = op.command("wait")
+        assert ended.startswith("prototype stopped: ENDPOINT_STOP")
+        runner.sleep(0.3)
+        where = runner.call(station.where)
+        status = runner.call(station.status)
+        assert where and status
+        assert _until(lambda: _text("PROTOTYPE:WHERE") == where), (_text("PROTOTYPE:WHERE"),
+                                                                    where)
+        assert _until(lambda: _text("PROTOTYPE:LAST_STOP").startswith("ENDPOINT_STOP"))
+        assert _text("PROTOTYPE:LAST_STOP") == runner.call(station.last_stop)
+        def untimed(line: str) -> str:  # the line's first field is the loop time
+            return re.sub(r"^t=\s*[\d.]+ s\s+", "", line)
+
+        assert status.startswith("t=") and untimed(status) != status
+        assert _until(lambda: untimed(_text("PROTOTYPE:STATUSLINE")) == untimed(status))
+    finally:
+        ioc.close()
+        server.close()
+        runner.stop()
+        station.close()
+
+
+def test_a_text_pv_value_is_bounded_as_its_pv_holds_it():
+    """A string PV's value is cut to 39 bytes (whole characters), a waveform's to 1023; a text of 40 characters or an unbounded one is a char waveform."""
+    caproto = pytest.importorskip("caproto")
+    from pyrt.server.epics import _pv_value, _value_pv
+
+    assert _pv_value("string", "x" * 60) == "x" * 39
+    assert _pv_value("string", "é" * 30) == "é" * 19  # 38 bytes: no half character
+    assert _pv_value("text", "y" * 2000) == "y" * 1023
+    assert _value_pv(caproto, "text", "s", kind="text", length=39)[0] == "string"
+    assert _value_pv(caproto, "text", "s", kind="text", length=40)[0] == "text"
+    assert _value_pv(caproto, "text", "s", kind="text")[0] == "text"

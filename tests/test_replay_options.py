@@ -27,6 +27,8 @@ USAGE_ERRORS = [
     (["--scope", "encoder", "--scope-save", "no/such/dir/k.csv"],
      "--scope-save no/such/dir/k.csv: there is no directory no/such/dir"),
     (["--scope", "encoder,nosignal"], "--scope nosignal: no channel 'nosignal'"),
+    (["--scope", "gripper.where", "--scope-save", "k.csv"],  # a text signal: not sampled
+     "--scope gripper.where: where is text (where the robot is): the scope samples numbers"),
 ]
 
 

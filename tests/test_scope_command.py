@@ -329,3 +329,21 @@ def test_scope_show_and_plot_during_a_move_show_the_move_so_far(tmp_path):
     enc = [float(r.split(",")[1]) for r in rows]
     assert enc[-1] < enc[0]  # the jaws are closing
     assert station.runner.call(lambda: station.scope.state) == "armed"  # still acquiring
+
+
+def test_the_scope_refuses_a_text_channel_and_does_not_offer_one():
+    """scope add gripper.where (a text signal): one error line saying the scope samples numbers and what reads text; no channel added; 'scope' alone does not offer the text signals."""
+    station, run = _gripper_shell()
+    try:
+        before = station.scope.channels
+        for name in ("gripper.where", "gripper.statusline", "last_stop"):
+            said = run(f"scope add {name}")
+            assert "error" in said and "is text" in said and "scope samples numbers" in said
+            assert "'status' or 'show' reads it" in said, said
+            assert station.scope.channels == before
+        offered = run("scope")
+        assert "gripper.encoder" in offered or "encoder" in offered
+        assert "where" not in offered and "statusline" not in offered
+        assert "last_stop" not in offered
+    finally:
+        station.close()

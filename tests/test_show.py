@@ -138,7 +138,8 @@ def test_the_table_of_each_robot_lists_its_signals_and_parameters_with_units_and
     station, shell = request.getfixturevalue(robot)
     lines = _run(shell, "show")
     rows = _rows(lines)
-    expected = [f"{c.name}.{s.name}" for c in station.components() for s in c.signals()]
+    expected = [f"{c.name}.{s.name}" for c in station.components()
+                for s in station.signals_of(c)]  # a robot's root: its text signals too
     expected += [f"{c.name}.{p.name}" for c in station.components()
                  for p in station.params_of(c)]
     assert sorted(rows) == sorted(expected)
@@ -151,7 +152,7 @@ def test_the_table_of_each_robot_lists_its_signals_and_parameters_with_units_and
 
 
 def test_a_prefix_keeps_the_rows_whose_name_starts_with_it_in_any_case(manipulator):
-    """show AXIS0 lists axis0's rows and its motor's, encoder's and loadcell's, no other; show prototype. the root's alone."""
+    """show AXIS0 lists axis0's rows and its motor's, encoder's and loadcell's, no other; show prototype. the root's alone (with the robot's text signals)."""
     _station, shell = manipulator
     rows = _rows(_run(shell, "show AXIS0"))
     assert rows and all(n.lower().startswith("axis0") for n in rows)
@@ -160,7 +161,19 @@ def test_a_prefix_keeps_the_rows_whose_name_starts_with_it_in_any_case(manipulat
     root = _rows(_run(shell, "show prototype."))
     assert set(root) == {"prototype.x", "prototype.y", "prototype.z", "prototype.distErr",
                          "prototype.netForce", "prototype.active", "prototype.MAX_TENSION",
-                         "prototype.END_ERROR"}
+                         "prototype.END_ERROR", "prototype.where", "prototype.last_stop",
+                         "prototype.statusline"}
+
+
+def test_show_lists_the_robot_text_signals_as_the_station_says_them(manipulator):
+    """show prototype.where / statusline / last_stop: text rows (units text) holding what the station's where and status say; last_stop is '' before any move."""
+    station, shell = manipulator
+    rows = _rows(_run(shell, "show prototype."))
+    where = station.runner.call(station.where)
+    status = station.runner.call(station.status)
+    assert rows["prototype.where"] == (" ".join(where.split()), "text", "-", "no")
+    assert rows["prototype.statusline"][0].rstrip(".") in " ".join(status.split())
+    assert rows["prototype.last_stop"] == ("''", "text", "-", "no")
 
 
 def test_a_value_set_shows_up_in_the_table(gripper):
@@ -211,7 +224,7 @@ def test_the_rows_shown_are_exactly_those_the_prefix_names(gripper, prefix):
     station, _shell = gripper
     table = read_table(station, prefix, runner=station.runner)
     names = [f"{c.name}.{x.name}" for c in station.components()
-             for x in [*c.signals(), *station.params_of(c)]]
+             for x in [*station.signals_of(c), *station.params_of(c)]]
     want = [n for n in names if n.lower().startswith(prefix.strip().lower())]
     assert [r.name for r in table.rows] == want
     assert table.matched == len(want) and table.total == len(names)
@@ -271,7 +284,7 @@ class _Rack(Component):
 
 @pytest.fixture(scope="module")
 def huge():
-    """A station of 30 objects of 20 signals and a parameter each (630 rows)."""
+    """A station of 30 objects of 20 signals and a parameter each, and the robot's 3 text signals on its root (633 rows)."""
     station = Station(Loop(SimClock()))
     station.name = "rack"
     station.adopt(_Rack([_Bank(f"bank{k:02d}", 20) for k in range(30)]))
@@ -281,13 +294,13 @@ def huge():
 
 
 def test_a_huge_station_shows_a_bounded_table_and_says_how_to_narrow_it(huge):
-    """show on 630 rows: MAX_ROWS rows, then a line saying how many were left out and which prefix narrows; following it lists that object's rows whole."""
+    """show on 633 rows: MAX_ROWS rows, then a line saying how many were left out and which prefix narrows; following it lists that object's rows whole."""
     _station, shell = huge
     lines = _run(shell, "show")
     assert len(_rows(lines)) == MAX_ROWS
     assert len(lines) == 2 + MAX_ROWS + 1
     note = lines[-1]
-    assert note.startswith(f"{630 - MAX_ROWS} of 630 rows left out")
+    assert note.startswith(f"{633 - MAX_ROWS} of 633 rows left out")
     hint = re.search(r"e\.g\. (show \S+);", note)
     assert hint is not None, note
     narrowed = _run(shell, hint.group(1))
@@ -364,9 +377,9 @@ def test_over_the_bound_the_data_says_the_same(huge):
     rows = [json.loads(x) for x in lines[:-1]]
     tail = json.loads(lines[-1])
     assert len(rows) == tail["rows"] == MAX_ROWS
-    assert tail["matched"] == tail["total"] == 630 and tail["left_out"] == 630 - MAX_ROWS
+    assert tail["matched"] == tail["total"] == 633 and tail["left_out"] == 633 - MAX_ROWS
     assert tail["note"] == _run(shell, "show")[-1]
-    assert rows[0] == {"name": "bank00.s000", "kind": "signal", "value": None,
+    assert rows[3] == {"name": "bank00.s000", "kind": "signal", "value": None,
                        "text": "nan", "units": "V", "range": "-10..10", "lo": -10.0,
                        "hi": 10.0, "writable": False}
     gain = [json.loads(x) for x in ServedStation(station).table(station.runner, "bank07.g")]
@@ -408,11 +421,15 @@ def test_table_over_the_link_is_served_to_a_reader_and_equals_show():
         try:
             data = reader.command("TABLE gripper.s")
             rows = [json.loads(x) for x in data[:-1]]
-            assert json.loads(data[-1]) == {"rows": 5, "matched": 5, "total": 21,
-                                            "left_out": 0, "note": ""}
+            assert json.loads(data[-1]) == {"rows": 6, "matched": 6, "total": 24,
+                                            "left_out": 0, "note": ""}  # with statusline
             shown = _rows(reader.command("show gripper.s"))
-            assert {r["name"]: _as_cells(r) for r in rows} == shown
-            assert rows[2] == {"name": "gripper.speed", "kind": "param", "value": 127,
+            line = shown.pop("gripper.statusline")  # a long text: the console cuts it
+            cells = {r["name"]: _as_cells(r) for r in rows}
+            assert cells.pop("gripper.statusline")[1:] == line[1:] == ("text", "-", "no")
+            assert cells == shown
+            assert next(r for r in rows if r["name"] == "gripper.speed") == {
+                               "name": "gripper.speed", "kind": "param", "value": 127,
                                "text": "7F", "units": "speed byte", "range": "01..7F",
                                "lo": 1, "hi": 127, "writable": True}
             operator.auth(TOKEN)

@@ -305,3 +305,97 @@ def test_wait_name_takes_seconds_and_stop_refuses_an_unknown_robot(cell):
     assert station.gripper.busy()
     shell.onecmd("wait gripper")
     assert not station.gripper.busy()
+
+
+# -- where, last_stop, statusline: the robots' text signals ------------------------------------
+
+
+class _Probe(Component):
+    """A root with one numeric signal."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self.x = 1.5
+
+    def signals(self):
+        from pyrt.component import Signal
+
+        return [Signal.attr("x", "mm", self, "x")]
+
+
+def test_a_one_robot_station_serves_where_last_stop_and_statusline_as_text_signals_of_its_root():
+    """adopt(where=, ended=, status=): the root's where, last_stop and statusline signals (kind text) read what the station says: where, the last move's reason ('' before any), the status line with its fault."""
+    station = Station(Loop(SimClock()))
+    station.name = "solo"
+    root = _Probe("probe")
+    station.adopt(root, where=lambda: f"x at {root.x:g} mm", status=lambda: "idle, all well",
+                  ended=lambda: ("at target", ["solo: at target"]))
+    names = [n for n, _s in station.signals()]
+    assert names == ["probe.x", "probe.where", "probe.last_stop", "probe.statusline"]
+    assert all(s.is_text and s.units == "text" for s in station.signals_of(root)[1:])
+    where, last, line = (station.resolve_signal(f"probe.{n}") for n in
+                         ("where", "last_stop", "statusline"))
+    assert station.resolve_signal("where") is where  # a bare name: the root's
+    assert (where.read(), last.read(), line.read()) == ("x at 1.5 mm", "", "idle, all well")
+    root.x = 2.0
+    station.end_move("stopped by the operator")
+    assert where.read() == station.where() == "x at 2 mm"
+    assert last.read() == station.last_stop() == "stopped by the operator"
+    root.fail("a broken probe")
+    assert line.read() == station.status() == "idle, all well  FAULT: a broken probe"
+    with pytest.raises(CommandError, match="scope samples numbers"):
+        where.scope_source()
+
+
+def test_each_robot_of_several_has_its_own_text_signals_and_the_station_line_joins_them():
+    """Two robots: left.where / right.where read each robot's where; a move-ended event of one sets that robot's last_stop alone; the station's where (no line given) is 'NAME WHERE; ...'."""
+    station = Station(Loop(SimClock()))
+    station.name = "two"
+    a, b = _Part("a"), _Part("b")
+
+    class Root(Component):
+        name = "root"
+
+        def children(self) -> list[Component]:
+            return [a, b]
+
+    station.add_robot("left", a, where=lambda: "at 1")
+    station.add_robot("right", b, where=lambda: "at 2", status=lambda: "holding")
+    station.adopt(Root())
+    sig = dict(station.signals())
+    assert "root.where" not in sig  # the station's root is no robot's
+    assert sig["a.where"].read() == "at 1" and sig["b.where"].read() == "at 2"
+    assert station.where() == "left at 1; right at 2"
+    assert station.where("right") == "at 2"
+    station.end_move("left's move ended", robot="left")
+    assert sig["a.last_stop"].read() == "left's move ended" and sig["b.last_stop"].read() == ""
+    assert sig["b.statusline"].read() == "holding"
+
+
+def test_the_cell_robots_text_signals_read_what_each_robot_says(cell):
+    """In the cell: the arm's and the jaws' where signals read each robot's where, and after wait gripper the jaws' last_stop says how their move ended."""
+    station, runner, shell, _out = cell
+    arm, jaws = station.puma.root, station.gripper.root
+    values = runner.call(lambda: {n: s.read() for n, s in station.signals() if s.is_text})
+    assert values[f"{arm.name}.where"] == runner.call(station.puma.where)
+    assert values[f"{jaws.name}.where"] == runner.call(station.gripper.where)
+    shell.onecmd("gripper P 50mm")
+    shell.onecmd("wait gripper")
+    last = station.resolve_signal(f"{jaws.name}.last_stop")
+    assert runner.call(last.read) == "at target" == runner.call(station.gripper.last_stop)
+
+
+def test_a_root_with_a_signal_of_a_robot_text_signals_name_is_refused():
+    """A root component that has a signal called where: adopt refuses it, naming the signal."""
+    from pyrt.component import Signal
+    from pyrt.errors import PyrtError
+
+    class Clash(Component):
+        name = "clash"
+
+        def signals(self):
+            return [Signal("where", "mm", lambda: 0.0)]
+
+    station = Station(Loop(SimClock()))
+    with pytest.raises(PyrtError, match="signal called where"):
+        station.adopt(Clash())

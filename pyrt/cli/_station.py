@@ -35,12 +35,31 @@ from pyrt.cli._serve import add_serve_options, prepare_service
 from pyrt.cli._shutdown import run_until_shutdown
 from pyrt.cli._stream import add_stream_options, stream_commands
 from pyrt.commands import RobotShell
+from pyrt.commands.robot import WAIT_PROGRESS_S
 from pyrt.console import Console
 from pyrt.errors import PyrtError, UsageError
 from pyrt.server import ServedStation
 from pyrt.station.factory import StationFactory, as_factory
 
 __all__ = ["add_station_arguments", "add_station_parser", "run_factory", "run_station"]
+
+
+def _progress_seconds(text: str) -> float:
+    """``--wait-progress``: seconds, 0 or more (0: never)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not 0.0 <= value < float("inf"):
+        raise argparse.ArgumentTypeError(f"{text[:40]!r}: seconds, 0 or more (0: never)")
+    return value
+
+
+def _on_terminal(stream: object) -> bool:
+    try:
+        return bool(stream.isatty())  # type: ignore[attr-defined]
+    except (AttributeError, ValueError):
+        return False
 
 
 def add_station_arguments(parser: argparse.ArgumentParser, factory: StationFactory) -> None:
@@ -53,6 +72,11 @@ def add_station_arguments(parser: argparse.ArgumentParser, factory: StationFacto
                    help="a script (stdin not a terminal) runs on after a line that failed "
                         "and still exits 1; without it the script stops at the first "
                         "(docs/scripts.md)")
+    c.add_argument("--wait-progress", metavar="SECONDS", type=_progress_seconds,
+                   default=WAIT_PROGRESS_S,
+                   help="a script (stdin not a terminal): a long 'wait' says where the robot "
+                        f"is every SECONDS of the station's clock (default {WAIT_PROGRESS_S:g}; "
+                        "0: never)")
     c.add_argument("--scope-dir", metavar="DIR",
                    help="the directory 'scope save' and 'scope plot' write into, and no "
                         "other (default: the working directory)")
@@ -131,6 +155,8 @@ def run_factory(factory: StationFactory, args: argparse.Namespace) -> int:
         except OSError as exc:
             say(f"warning: no audit log: {exc}")
     shell = RobotShell(station, out)
+    if not _on_terminal(sys.stdin):  # a script's log shows a long move going
+        shell.wait_progress_s = args.wait_progress
     if not args.headless:
         overruns.attach()
 

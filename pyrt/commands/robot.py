@@ -47,6 +47,9 @@ __all__ = ["RobotShell"]
 JOB_TIMEOUT_S = 600.0
 #: ``wait`` without a time.
 WAIT_TIMEOUT_S = 3600.0
+#: How often a piped console's ``wait`` says where the robot is (s of the station's
+#: clock) unless told otherwise (``--wait-progress``).
+WAIT_PROGRESS_S = 5.0
 
 _REST = Arg("ARGS", str, optional=True, rest=True)
 
@@ -83,6 +86,12 @@ class RobotShell(LineResolver, CommandShell, ShowWord):
         self._shown_lock = threading.Lock()
         #: Move-ended events a wait of this shell has reported (their numbers).
         self._moves_shown: set[int] = set()
+        #: A ``wait`` longer than this says where the robot is every this many
+        #: seconds (of the station's clock), one line each, so that a script's
+        #: log shows the move going; 0: it says nothing until the move ends
+        #: (a terminal's console, the server's sessions).  The console of a
+        #: piped run sets it (``--wait-progress``, :data:`WAIT_PROGRESS_S`).
+        self.wait_progress_s = 0.0
 
     # -- prompt -----------------------------------------------------------------------
 
@@ -215,9 +224,10 @@ class RobotShell(LineResolver, CommandShell, ShowWord):
         return None if show is None else (lambda v: show(round(v)))
 
     def _channel_names(self) -> list[str]:
-        root = self.station.root
-        names = [s.name for s in root.signals()]
-        names += [n for n, _ in self.station.signals() if not n.startswith(root.name + ".")]
+        root = self.station.root  # the scope's channels: the numbers (text is not sampled)
+        names = [s.name for s in root.signals() if not s.is_text]
+        names += [n for n, s in self.station.signals()
+                  if not n.startswith(root.name + ".") and not s.is_text]
         if root.signal("ram:00") is not None:
             names.append("ram:XX")
         return names
@@ -271,7 +281,7 @@ class RobotShell(LineResolver, CommandShell, ShowWord):
             self.say(f"{comp.name} commands:")
             for rec in comp.commands():
                 self.say(f"  {rec.summary}")
-            sigs = comp.signals()
+            sigs = self.station.signals_of(comp)
             if sigs:
                 self.say("  signals: " + ", ".join(f"{s.name} ({s.units})" for s in sigs))
             return
@@ -330,7 +340,7 @@ class RobotShell(LineResolver, CommandShell, ShowWord):
             self.say(watch.refusal)
             return
         try:
-            done = self.runner.wait_until(lambda: watch.done, timeout)
+            done = self._wait_for(watch, timeout, robot)
         except FaultError as exc:  # the fault says how the move ended
             self._moves_shown.update(e.seq for e in list(watch.ended))
             self.fault(exc, prefix=profile.fault_prefix)
@@ -346,6 +356,27 @@ class RobotShell(LineResolver, CommandShell, ShowWord):
                 self.say(text)
         if not done:
             self.say(f"still moving after {timeout:g} s")
+
+    def _wait_for(self, watch: Any, timeout: float, robot: str | None) -> bool:
+        """Wait for ``watch`` at most ``timeout`` s; every :attr:`wait_progress_s`
+        of them (when set) one line says where the robot is, after what the loop
+        said meanwhile."""
+        every = self.wait_progress_s
+        if not every > 0 or every >= timeout:
+            return bool(self.runner.wait_until(lambda: watch.done, timeout))
+        waited = 0.0
+        while True:
+            step = min(every, timeout - waited)
+            if self.runner.wait_until(lambda: watch.done, step):
+                return True
+            waited += step
+            if waited >= timeout:
+                return False
+            for text in self.messages():
+                self.say(text)  # in the order they came, before the line
+            where = self.runner.call(self.station.where, robot, name="where",
+                                     take_fault=False)
+            self.say(f"waiting, {waited:g} s: {where or 'moving'}")
 
     @command(Arg("SECONDS", str), name="sleep", console=True)
     def do_sleep(self, arg: str) -> None:
@@ -426,7 +457,8 @@ class RobotShell(LineResolver, CommandShell, ShowWord):
                 self.say(line)
             return
         comp = self.station.component(name)
-        values = self.runner.call(lambda: [(s, s.read()) for s in comp.signals()])
+        sigs = self.station.signals_of(comp)
+        values = self.runner.call(lambda: [(s, s.read()) for s in sigs])
         if not values:
             self.say(f"{comp.name}: no signals")
         for s, v in values:

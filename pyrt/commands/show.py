@@ -164,7 +164,7 @@ def _signal_row(owner: str, s: Signal, value: Any, failed: BaseException | None)
     name = f"{owner}.{s.name}"
     if failed is not None:
         return Row(name, "signal", None, _unreadable(failed), s.units, *_limits(s), False)
-    text = ""
+    text = s.format(value) if s.is_text else ""  # a text: as it is ('' when empty)
     if s.show is not None:
         try:
             text = s.show(value)
@@ -222,7 +222,7 @@ def read_table(station: Any, prefix: str = "", limit: int = MAX_ROWS,
     objects: list[str] = []
     for comp in station.components():
         objects.append(comp.name)
-        for item in [*comp.signals(), *station.params_of(comp)]:
+        for item in [*station.signals_of(comp), *station.params_of(comp)]:
             total += 1
             if not f"{comp.name}.{item.name}".lower().startswith(key):
                 continue

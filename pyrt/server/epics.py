@@ -15,7 +15,10 @@ component's signal record or the station's state, named ``PREFIX`` + field:
   read in the loop every 0.1 s while the IOC runs; in a station of several
   robots each robot has a prefix of its own: its components' signals are
   ``ROBOT:COMPONENT:SIGNAL`` (its root's ``ROBOT:SIGNAL``), beside
-  ``ROBOT:STATE`` and ``ROBOT:FAULT_MSG``;
+  ``ROBOT:STATE`` and ``ROBOT:FAULT_MSG``; a text signal (each robot's
+  ``WHERE``, ``LAST_STOP`` and ``STATUSLINE`` on its root component:
+  ``GRIPPER:WHERE``) is a string PV when it is bounded to 39 characters,
+  else a char waveform of 1024 bytes (a long string, as an IOC serves one);
 * ``STATE`` (enum ``idle``/``moving``/``fault``), ``STOP_REASON`` (how the
   last move ended), and for the manipulator ``TARGET_X/Y/Z``: the running
   move's endpoint, NaN between moves.  Target PVs are read-backs: a move is
@@ -88,7 +91,7 @@ import re
 import threading
 from typing import Any, NamedTuple
 
-from pyrt.component import Limits
+from pyrt.component import STRING_LENGTH, Limits
 from pyrt.errors import ConfigError, PyrtError
 from pyrt.server.guard import check_token, escape_text
 from pyrt.server.limits import is_loopback
@@ -247,11 +250,15 @@ def _read_only(ca: Any, base: type) -> type:
 
 
 def _value_pv(ca: Any, units: str, fmt: str, limits: Any = None, kind: str = "",
-              states: tuple[str, ...] = ()) -> tuple[str, Any]:
-    """The PV of one value from its record: ``text`` a char waveform, ``enum``
-    (or units ``bool``) an enum, an integer format an integer, anything else a
-    double with the units as EGU, the format's precision, and ``limits``
-    (display range and alarm limits) when given."""
+              states: tuple[str, ...] = (), length: int = 0) -> tuple[str, Any]:
+    """The PV of one value from its record: ``text`` a string PV when it is
+    bounded to :data:`~pyrt.component.STRING_LENGTH` characters (``length``),
+    else a char waveform of :data:`TEXT_LENGTH`, as an IOC serves a long
+    string; ``enum`` (or units ``bool``) an enum, an integer format an
+    integer, anything else a double with the units as EGU, the format's
+    precision, and ``limits`` (display range and alarm limits) when given."""
+    if kind == "text" and 0 < length <= STRING_LENGTH:
+        return "string", _read_only(ca, ca.ChannelString)(value="", string_encoding="utf-8")
     if kind == "text":
         return "text", _read_only(ca, ca.ChannelChar)(
             value="", max_length=TEXT_LENGTH, string_encoding="utf-8")
@@ -274,6 +281,8 @@ def _pv_value(kind: str, value: Any) -> Any:
     """A value as its PV takes it."""
     if kind == "text":
         return str(value)[:TEXT_LENGTH - 1]
+    if kind == "string":  # DBR_STRING: 40 bytes with its end
+        return str(value).encode("utf-8")[:STRING_LENGTH].decode("utf-8", "ignore")
     if kind.startswith("enum:"):
         states = kind[5:].split("\t")
         if isinstance(value, bool) or len(states) == 2:
@@ -393,7 +402,7 @@ class EpicsService:
             key = p + pv_name(f.name)
             if key in db:
                 continue
-            kind, pv = _value_pv(ca, f.units, f.fmt, f.limits, f.kind, f.states)
+            kind, pv = _value_pv(ca, f.units, f.fmt, f.limits, f.kind, f.states, f.length)
             db[key] = pv
             if f.name == "stopReason":  # written once per move-ended event, not sampled
                 kind = "event"

@@ -22,7 +22,7 @@ from typing import Any, TextIO
 
 from pyrt.commands.robot import RobotShell
 from pyrt.commands.show import data_lines, read_table, require_rows
-from pyrt.component import Limits
+from pyrt.component import Limits, Signal
 from pyrt.errors import CommandError
 from pyrt.scope import Source
 
@@ -35,9 +35,10 @@ StationState = ("idle", "moving", "fault")
 @dataclass(frozen=True)
 class PVField:
     """One value served beside the STATUS fields (a PV): read in the loop
-    thread through ``source``; ``kind`` is ``text`` (a string), ``enum`` (one
-    of ``states``, the value its index), or ``""`` (a number from the units
-    and format, as a signal)."""
+    thread through ``source``; ``kind`` is ``text`` (a string: at most
+    ``length`` characters, 0 unbounded), ``enum`` (one of ``states``, the
+    value its index), or ``""`` (a number from the units and format, as a
+    signal)."""
 
     name: str
     units: str
@@ -47,6 +48,16 @@ class PVField:
     states: tuple[str, ...] = ()
     limits: Limits | None = None
     doc: str = ""
+    length: int = 0
+
+    @classmethod
+    def of_signal(cls, name: str, sig: Signal) -> PVField:
+        """The PV field of signal ``sig`` (a text signal: a string)."""
+        if sig.is_text:
+            return cls(name, sig.units, sig.fmt, Source.call(sig.read), "text", doc=sig.doc,
+                       length=sig.length)
+        return cls(name, sig.units, sig.fmt, sig.scope_source(), limits=sig.limits,
+                   doc=sig.doc)
 
 
 _PV_NAME = re.compile(r"^[A-Za-z0-9_]+$")
@@ -197,16 +208,14 @@ class ServedStation:
                         Source.call(functools.partial(self._robot_fault, robot)), "text",
                         doc=f"{robot.name}: its fault, whole (empty: none)"))
         for sig in st.served_signals():
-            fields.append(PVField(sig.name, sig.units, sig.fmt, sig.scope_source(),
-                                  limits=sig.limits, doc=sig.doc))
-        for comp in st.components():
+            fields.append(PVField.of_signal(sig.name, sig))
+        for comp in st.components():  # a robot's root with the robot's text signals
             prefix = self.signal_prefix(comp)
-            for sig in comp.signals():
+            for sig in st.signals_of(comp):
                 name = f"{prefix}{sig.name}"
                 if not _PV_NAME.match(comp.name) or not _PV_NAME.match(sig.name):
                     continue
-                fields.append(PVField(name, sig.units, sig.fmt, sig.scope_source(),
-                                      limits=sig.limits, doc=sig.doc))
+                fields.append(PVField.of_signal(name, sig))
         return fields
 
     def _state(self) -> int:
@@ -237,7 +246,7 @@ class ServedStation:
         return 1 if robot.busy() else 0
 
     def _stop_reason(self) -> str:
-        return self.station.last_stop()
+        return self.station.last_stop()  # the last move-ended event: any robot's last_stop
 
 
 def _fmt(value: Any, fmt: str) -> str:

@@ -22,7 +22,10 @@ Both robots are a :class:`Station` plus a configuration
 * executes command records in the loop thread (:meth:`execute`): the check
   (fault, moving while faulted) and the act in one mailbox call;
 * derives everything that lists signals or commands from the tree:
-  :meth:`components`, :meth:`signals`, :meth:`resolve_signal`;
+  :meth:`components`, :meth:`signals`, :meth:`resolve_signal`; where each
+  robot is, how its last move ended and its status line are text signals of
+  the robot's root component (:meth:`signals_of`: ``where``, ``last_stop``,
+  ``statusline``), which the console, the DAQ server and EPICS read;
 * owns the robot's **boards** (:func:`pyrt.boards.open_boards`, chosen by
   URL) when a configuration gives them to :meth:`attach_boards`, and runs
   every tick in three phases (a process image, :mod:`pyrt.boards.image`):
@@ -67,13 +70,18 @@ from pyrt.scheduler import Loop, ReadyQueue
 from pyrt.scheduler.motion import MotionExecutor
 from pyrt.scheduler.runner import MotionQueue, Runner
 from pyrt.scope import Scope
-from pyrt.station.domain import Robot
+from pyrt.station.domain import ROBOT_SIGNALS, Robot
 from pyrt.station.events import StationEvents
 from pyrt.station.profile import ShellProfile
 from pyrt.station.requests import StationRequests
 from pyrt.station.robots import StationRobots
 
 __all__ = ["BoardWorld", "Robot", "Station", "refuse_sim_options"]
+
+
+def _plain_end() -> tuple[str, Sequence[str]]:
+    """How a move ended when the station does not say: ``ended``."""
+    return "ended", ()
 
 
 def refuse_sim_options(boards: Boards, given: Iterable[str]) -> None:
@@ -216,12 +224,13 @@ class Station(StationRobots, StationEvents, StationRequests):
         thread, each returns text): ``where`` the robot is; how the move that
         has just ended ended, ``ended() -> (reason, report lines)``, asked
         once per move when the move-ended event is made; the ``status``
-        line (default: the root's signals)."""
+        line (default: the root's signals).  They become the robot's text
+        signals (:meth:`signals_of`).  Of a station of several robots (each
+        gives its own to :meth:`add_robot`), ``where`` is the station's line
+        (default: each robot's, ``NAME WHERE; ...``) and ``ended`` and
+        ``status`` are not taken."""
         if where is not None:
             self._say_where = where
-        if ended is not None:
-            self._say_ended = ended
-        self._say_status = status
         self.root = root
         self.extras = list(extras)
         self._by_name = {}
@@ -236,12 +245,17 @@ class Station(StationRobots, StationEvents, StationRequests):
         if not self._declared:
             self._robots = [Robot(self.name, root, motion=self.motion, queues=queues,
                                   executors=executors, boards=self.board_sets,
-                                  parts=self.extras)]
+                                  parts=self.extras, where=where, status=status,
+                                  ended=ended if ended is not None else _plain_end)]
         for r in self._robots:
             r.refresh()
             stray = [c.name for c in r.components if self._by_name.get(c.name.lower()) is not c]
             if stray:
                 raise PyrtError(f"robot {r.name!r}: {', '.join(stray)} not in {self.name}'s tree")
+            taken = [s.name for s in r.root.signals() if s.name in ROBOT_SIGNALS]
+            if taken:
+                raise PyrtError(f"robot {r.name!r}: its root {r.root.name} has a signal called "
+                                f"{', '.join(taken)}, a name of the robot's own text signals")
         self.queues = list(queues) + [q for r in self._robots for q in r.queues
                                       if not any(q is x for x in queues)]
         self.executors = list(executors) + [e for r in self._robots for e in r.executors
@@ -291,8 +305,25 @@ class Station(StationRobots, StationEvents, StationRequests):
 
     @final
     def signals(self) -> list[tuple[str, Signal]]:
-        """``(OBJECT.SIGNAL, signal)`` of every signal of every component."""
-        return [(f"{c.name}.{s.name}", s) for c in self.components() for s in c.signals()]
+        """``(OBJECT.SIGNAL, signal)`` of every signal of every component (a
+        robot's root with the robot's text signals: :meth:`signals_of`)."""
+        return [(f"{c.name}.{s.name}", s) for c in self.components() for s in self.signals_of(c)]
+
+    @final
+    def signals_of(self, component: Component) -> list[Signal]:
+        """``component``'s signals; of a robot's root, the robot's text signals after
+        them (``where``, ``last_stop``, ``statusline``: :meth:`Robot.signals
+        <pyrt.station.domain.Robot.signals>`)."""
+        own = component.signals()
+        robot = next((r for r in self._robots if r.root is component), None)
+        return own if robot is None else [*own, *robot.signals()]
+
+    def _signal_of(self, component: Component, name: str) -> Signal | None:
+        found = component.signal(name)
+        if found is not None:
+            return found
+        key = name.lower()
+        return next((s for s in self.signals_of(component) if s.name.lower() == key), None)
 
     @final
     def resolve_signal(self, name: str) -> Signal:
@@ -304,7 +335,7 @@ class Station(StationRobots, StationEvents, StationRequests):
             c = self.find(obj)
             if c is None:
                 raise CommandError(f"no channel {text[:60]!r}: no object {obj[:40]!r}")
-            s = c.signal(field)
+            s = self._signal_of(c, field)
             part, dot2, rest = field.partition(".")
             if s is None and dot2 and rest:  # PARENT.PART.SIGNAL: a signal of a part
                 child = next((k for k in c.children() if k.name.lower() == part.lower()), None)
@@ -312,9 +343,9 @@ class Station(StationRobots, StationEvents, StationRequests):
             if s is None:
                 raise CommandError(f"no channel {text[:60]!r}: {c.name} has no signal "
                                    f"{field[:40]!r}; it has "
-                                   f"{', '.join(x.name for x in c.signals()) or 'none'}")
+                                   f"{', '.join(x.name for x in self.signals_of(c)) or 'none'}")
             return s
-        s = self.root.signal(text)
+        s = self._signal_of(self.root, text)
         if s is None:
             raise CommandError(f"no channel {text[:60]!r}; 'scope list' shows them")
         return s
@@ -336,15 +367,23 @@ class Station(StationRobots, StationEvents, StationRequests):
         return f"{said}; {here}" if here else said
 
     @final
-    def where(self) -> str:
-        """Where the robot is, in the operator's words ('' if it cannot say): as
-        given to :meth:`adopt`."""
-        return self._say_where()
+    def where(self, robot: str | None = None) -> str:
+        """Where the robot is, in the operator's words ('' if it cannot say): its
+        ``where`` signal.  Of several robots: ``robot``'s, or the station's line
+        (as given to :meth:`adopt`, else each robot's: ``NAME WHERE; ...``)."""
+        if robot is not None and self._declared:
+            return self.robot(robot).where()
+        if not self._declared:
+            return self._robots[0].where() if self._robots else ""
+        if self._say_where is not None:
+            return self._say_where()
+        return "; ".join(f"{r.name} {here}" for r in self._robots if (here := r.where()))
 
     @final
     def last_stop(self) -> str:
         """How the last move ended, in the operator's words ('' before any): the
-        last move-ended event's reason (the server's and EPICS's ``stopReason``)."""
+        last move-ended event's reason (the robot's ``last_stop`` signal; of several
+        robots, the last of any)."""
         last = self.last_move
         return last.reason if last is not None else ""
 
@@ -382,9 +421,8 @@ class Station(StationRobots, StationEvents, StationRequests):
         line each, ``NAME: ...``."""
         if self._declared:
             return "\n".join(f"{r.name}: {r.status()}" for r in self._robots)
-        if self._say_status is not None:
-            line = self._say_status()
-            return f"{line}  FAULT: {self._fault.cause}" if self._fault is not None else line
+        if self._robots:  # its statusline signal
+            return self._robots[0].status()
         parts = [f"{s.name}={s.format(s.read())}" for s in self.root.signals()]
         if self._fault is not None:
             parts.append(f"FAULT: {self._fault.cause}")

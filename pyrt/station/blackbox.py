@@ -177,16 +177,17 @@ class SignalRing:
         #: Samples taken so far.
         self.samples = 0
         self._countdown = 1
-        #: Signals left out: they give text, not numbers.
-        self.text: set[int] = set()
+        #: Signals left out: they give text, not numbers (text signals from the start).
+        self.text: set[int] = {c for c, sig in enumerate(self._signals) if sig.is_text}
         self._slow: list[int] = []  # read one by one, each guarded
-        self._fast: list[int] = list(range(n))
-        self._read_fast: Callable[[], tuple] = self._compile(self._fast)
+        self._fast: list[int] = [c for c in range(n) if c not in self.text]
+        self._read_fast: Callable[[], tuple] = self._compile(self._fast) if self._fast else tuple
         #: ``pack(buf, offset, now_ns)``: every signal read and packed into a row,
-        #: while every signal is a number (None once one is not: the slow path).
-        self._pack: Callable[[bytearray, int, int], None] | None = compile_sampler(
-            [sig.scope_source() for sig in self._signals],
-            struct.Struct("<q" + "d" * n).pack_into)
+        #: while every signal is a number (None with a text signal, or once one
+        #: is not a number: the slow path).
+        self._pack: Callable[[bytearray, int, int], None] | None = None if self.text else \
+            compile_sampler([sig.scope_source() for sig in self._signals],
+                            struct.Struct("<q" + "d" * n).pack_into)
 
     def _compile(self, cols: list[int]) -> Callable[[], tuple]:
         return compile_sources([self._signals[c].scope_source() for c in cols])

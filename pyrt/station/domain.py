@@ -16,6 +16,12 @@ queue and board), exactly as a single-robot station always was.  What the
 operator reads of one robot (its ``stop``, ``busy``, ``where``, ``status``
 line and how its move ended) is given when it is declared; each has a
 default.
+
+Where the robot is, how its last move ended and its status line are the
+robot's **text signals** (:meth:`Robot.signals`: ``where``, ``last_stop``,
+``statusline``), served as signals of its root component: the console's
+``status``, ``show``, the DAQ server and EPICS read these three, and
+nothing else says them.
 """
 
 from __future__ import annotations
@@ -24,7 +30,7 @@ import contextlib
 from collections.abc import Callable, Iterable, Sequence
 from typing import TYPE_CHECKING
 
-from pyrt.component import Component, walk
+from pyrt.component import Component, Signal, walk
 from pyrt.errors import BoardError, Fault
 
 if TYPE_CHECKING:
@@ -32,8 +38,13 @@ if TYPE_CHECKING:
     from pyrt.scheduler import ReadyQueue
     from pyrt.scheduler.motion import MotionExecutor
     from pyrt.scheduler.runner import MotionQueue
+    from pyrt.station.moves import MoveEnded
 
-__all__ = ["Robot", "boards_clash"]
+__all__ = ["ROBOT_SIGNALS", "Robot", "boards_clash"]
+
+#: The names of every robot's text signals: where it is, how its last move
+#: ended, its status line.
+ROBOT_SIGNALS = ("where", "last_stop", "statusline")
 
 
 def boards_clash(a: Boards, b: Boards) -> bool:
@@ -76,6 +87,13 @@ class Robot:
         self.board_error: BoardError | None = None
         #: Busy at the last look of the station's move watch (loop thread).
         self.moving = False
+        #: The end of its last move (the station's move-ended event), or None.
+        self.last_move: MoveEnded | None = None
+        self._signals = [
+            Signal.text("where", self.where, "where the robot is"),
+            Signal.text("last_stop", self.last_stop, "how its last move ended"),
+            Signal.text("statusline", self.status, "its status line"),
+        ]
         self.components: list[Component] = []
         self.refresh()
 
@@ -92,6 +110,17 @@ class Robot:
         return any(c is component for c in self.components)
 
     # -- what the operator reads (loop thread) ------------------------------------------
+
+    def signals(self) -> list[Signal]:
+        """Its text signals (:data:`ROBOT_SIGNALS`), read in the loop thread: served as
+        signals of its root component."""
+        return list(self._signals)
+
+    def last_stop(self) -> str:
+        """How its last move ended, in the operator's words ('' before any): its last
+        move-ended event's reason."""
+        last = self.last_move
+        return last.reason if last is not None else ""
 
     def busy(self) -> bool:
         """A move of this robot runs or waits."""

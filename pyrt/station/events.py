@@ -36,14 +36,6 @@ MESSAGE_LOG.addHandler(logging.NullHandler())
 _LOG_LEVELS = {"info": logging.INFO, "warning": logging.WARNING, "error": logging.ERROR}
 
 
-def _nothing() -> str:
-    return ""
-
-
-def _ended() -> tuple[str, Sequence[str]]:
-    return "ended", ()
-
-
 class StationEvents:
     """The events of a station (see the module text); a part of ``Station``."""
 
@@ -59,7 +51,7 @@ class StationEvents:
         @property
         def fault(self) -> Fault | None: ...
         def busy(self) -> bool: ...
-        def where(self) -> str: ...
+        def where(self, robot: str | None = None) -> str: ...
         def robot(self, name: str) -> Robot: ...
 
     def _init_events(self) -> None:
@@ -77,11 +69,9 @@ class StationEvents:
         self.moves_this_period = 0
         #: The last move's end (:class:`~pyrt.station.moves.MoveEnded`), or None.
         self.last_move: MoveEnded | None = None
-        #: The last move's end of each robot of several, by its name (lower case).
-        self._last_moves: dict[str, MoveEnded] = {}
-        self._say_where: Callable[[], str] = _nothing
-        self._say_ended: Callable[[], tuple[str, Sequence[str]]] = _ended
-        self._say_status: Callable[[], str] | None = None
+        #: Where the robots of a station of several are, as one line (given to
+        #: ``adopt``), or None: each robot's.
+        self._say_where: Callable[[], str] | None = None
 
     # -- the end of a move ------------------------------------------------------------
 
@@ -115,7 +105,7 @@ class StationEvents:
         busy = one.busy() if one is not None else self.busy()
         name = one.name if one is not None else ""
         if not busy:
-            last = self._last_of(name)
+            last = one.last_move if one is not None else self.last_move
             where = one.where() if one is not None else self.where()
             return MoveWatch(True, last, where=where, robot=name)
         queues = one.queues if one is not None else self.queues
@@ -130,11 +120,6 @@ class StationEvents:
         watch = MoveWatch(False, self.last_move, robot=name)
         self._watches.append(watch)
         return watch
-
-    def _last_of(self, robot: str) -> MoveEnded | None:
-        if not robot:
-            return self.last_move
-        return self._last_moves.get(robot.lower())
 
     @final
     def end_move(self, reason: str, report: Sequence[str] = (), robot: str = "") -> MoveEnded:
@@ -158,8 +143,10 @@ class StationEvents:
                           where, fault.id if fault is not None else 0,
                           tuple(report) or (reason,), self.loop.now_ns)
         self.last_move = event
-        if one is not None:
-            self._last_moves[one.name.lower()] = event
+        mine = one if one is not None else (self._robots[0] if not self._declared and
+                                            self._robots else None)
+        if mine is not None:  # its last_stop signal
+            mine.last_move = event
         for watch in self._watches:
             watch.collect(event)
         for listener in self._move_listeners:
@@ -180,9 +167,9 @@ class StationEvents:
             self._watch_robots()
         busy = self.busy()
         if self._moving and not busy:
-            if not self._declared:
+            if not self._declared and self._robots:
                 try:
-                    reason, report = self._say_ended()
+                    reason, report = self._robots[0].ended()
                 except Exception as exc:  # a report must never stop the tick
                     reason, report = f"ended (its report failed: {exc!r})", ()
                 if reason or report:
