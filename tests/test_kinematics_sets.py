@@ -297,3 +297,36 @@ def test_direct_description_is_checked():
         JointSets("p", [arm, JointSet("w2", wrist.chain, (2, 3, 4), "arm", 2)])
     with pytest.raises(ConfigError, match="named twice"):
         JointSets("p", [arm, arm])
+
+
+@settings(max_examples=30, deadline=None)
+@given(q=joints(), noise=st.lists(st.floats(-0.05, 0.05), min_size=6, max_size=6))
+def test_puma_sets_from_its_urdf_are_the_split(q, noise):
+    """The packaged PUMA URDF read as arm (to link3) and wrist: the same fk as the split, and the decoupled inverse on it matches Paul's."""
+    from pyrt.kinematics.puma import URDF
+
+    assume(_reachable(q))
+    sets = JointSets.from_urdf(URDF, {"arm": "link3", "wrist": "link6"})
+    assert sets.indices("wrist") == (3, 4, 5) and sets["wrist"].parent == "arm"
+    pose = PUMA.fk(q)
+    np.testing.assert_allclose(sets.fk("wrist", q), pose, rtol=0, atol=1e-12)
+    r = sets.decoupled_ik(pose, np.clip(q + np.array(noise), LOWER, UPPER))
+    assert r.ok
+    closed = PUMA.closed_form.solve(pose, PUMA.closed_form.config_of(q), q)
+    np.testing.assert_allclose(r.q, closed, rtol=0, atol=1e-7)
+
+
+def test_default_urdf_sets_skip_a_leaf_fixed_to_the_trunk():
+    """One set per tip by default: a camera fixed to the chest ends no set (the arms' shared waist is still what is refused); a serial URDF gives one set."""
+    with_camera = TORSO.replace(
+        "</robot>", '<link name="camera"/><joint name="cam" type="fixed"><parent link="chest"/>'
+                    '<child link="camera"/></joint></robot>')
+    with pytest.raises(ConfigError, match=r"'l_tool' and 'r_tool' would both own"):
+        JointSets.from_urdf(with_camera)
+    sets = JointSets.from_urdf(with_camera, {"trunk": "chest", "left": "l_tool",
+                                             "right": "r_tool"})
+    assert sets.n == 7
+    from pyrt.kinematics.puma import URDF
+
+    one = JointSets.from_urdf(URDF)
+    assert one.names == ("link6",) and one.n == 6

@@ -249,28 +249,44 @@ class JointSets:
         tip_link)``; default: one set per leaf link, named after it.  See
         the module doc for who owns which joint.
         """
-        from pyrt.kinematics.urdf import _parse_xml, _source, read_urdf
+        from pyrt.kinematics.urdf import _source, _tree, read_urdf
 
         text, where = _source(source)
-        robot = _parse_xml(text, where)
-        links = [el.attrib.get("name", "") for el in robot.children if el.tag == "link"]
-        parent_of: dict[str, tuple[str, str, bool]] = {}  # child -> (parent, joint, movable)
-        for el in robot.children:
-            p, c = el.find("parent"), el.find("child")
-            if el.tag == "joint" and p is not None and c is not None:
-                parent_of[c.attrib.get("link", "")] = (
-                    p.attrib.get("link", ""), el.attrib.get("name", ""),
-                    el.attrib.get("type") != "fixed")
-        has_children = {p for p, _, _ in parent_of.values()}
-        leaves = [ln for ln in links if ln not in has_children]
-        # read_urdf checks the whole tree (every joint, one root, no cycle) and names
-        # the file and line of what is wrong
-        read_urdf(source, tip_link=leaves[0] if leaves else None)
-        rname = robot.attrib["name"]
-        root = next(ln for ln in links if ln not in parent_of)
+        try:
+            tree = _tree(text, where)  # checked: one root, no cycle; names file and line
+        except ValueError as exc:
+            raise ConfigError(f"unusable values: {exc}", where) from None
+        rname, root, links = tree.name, tree.root, tree.links
+        # child link -> (parent link, joint, movable)
+        parent_of = {c: (p, el.attrib["name"], el.attrib["type"] != "fixed")
+                     for c, (p, el) in tree.parent_of.items()}
         child_of = {j: ln for ln, (_, j, _) in parent_of.items()}
+
+        def movable_to(link: str) -> tuple[str, ...]:
+            """The movable joints from the root down to *link*."""
+            out = []
+            while link != root:
+                p, j, mv = parent_of[link]
+                if mv:
+                    out.append(j)
+                link = p
+            return tuple(out[::-1])
+
         if sets is None:
-            sets = {ln: ln for ln in leaves}
+            # one set per leaf whose movable joints do not just lead on to another's
+            # (a camera fixed to the trunk ends no set of its own)
+            paths = {ln: movable_to(ln) for ln in links if ln not in tree.children_of}
+            ends: dict[tuple[str, ...], str] = {}
+            for ln, path in paths.items():
+                if not path or any(len(o) > len(path) and o[:len(path)] == path
+                                   for o in paths.values()):
+                    continue
+                if path in ends:
+                    raise ConfigError(f"robot {rname!r}: links {ends[path]!r} and {ln!r} end "
+                                      f"the same joints: name the joint sets "
+                                      f"(sets={{NAME: TIP_LINK, ...}})", where)
+                ends[path] = ln
+            sets = {ln: ln for ln in ends.values()}
         if not sets:
             raise ConfigError(f"robot {rname!r}: no joint set given", where)
 
@@ -291,7 +307,8 @@ class JointSets:
             _check_name(sname, where)
             if isinstance(value, str):
                 start, tip = None, value
-            elif isinstance(value, tuple | list) and len(value) == 2:
+            elif isinstance(value, tuple | list) and len(value) == 2 and all(
+                    isinstance(v, str) for v in value):
                 start, tip = value
             else:
                 raise ConfigError(f"joint set {sname!r}: expected a tip link or (start link, "
@@ -400,11 +417,11 @@ class JointSets:
 
     def owner(self, joint: int | str) -> str:
         """The set that owns a joint (its 0-based index or its name)."""
-        i = self.joint_names.index(joint) if isinstance(joint, str) and \
-            joint in self.joint_names else joint
-        if not isinstance(i, int) or i not in self._owner:
-            raise ConfigError(f"robot {self.name!r} has no joint {joint!r}")
-        return self._owner[i]
+        if isinstance(joint, str) and joint in self.joint_names:
+            return self._owner[self.joint_names.index(joint)]
+        if isinstance(joint, int) and not isinstance(joint, bool) and joint in self._owner:
+            return self._owner[joint]
+        raise ConfigError(f"robot {self.name!r} has no joint {joint!r}")
 
     @property
     def lower(self) -> Vector:
@@ -531,8 +548,10 @@ class JointSets:
                               f"tip of joint set {position!r}")
         centre_tip = self.wrist_centre(orientation)
         centre = (t @ np.append(centre_tip, 1.0))[:3]
-        # the centre in the arm's tip frame: the wrist chain's base and first origin
-        first = w.chain.base @ w.chain.joints[0].origin
+        # the centre in the position set's tip frame: the wrist is mounted on its last
+        # joint's frame (its chain's base, then its first joint's origin)
+        p = self[position].chain
+        first = _inv(p.tool) @ w.chain.base @ w.chain.joints[0].origin
         r1 = self.ik(position, centre, seed, task="position", point=first[:3, 3],
                      tol=tol, max_iter=max_iter)
         r2 = self.ik(orientation, t, r1.q, task="orientation", tol=tol, max_iter=max_iter)
