@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import assume, given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
 from pyrt.errors import ConfigError
@@ -101,6 +101,8 @@ def _reachable(q: np.ndarray) -> bool:
 
 @settings(max_examples=100, deadline=None)
 @given(q=joints(), noise=st.lists(st.floats(-0.05, 0.05), min_size=6, max_size=6))
+@example(q=np.array([0.0, 0.0, -2.25, 1.0, 1.0, UPPER[5]]),  # joint 6 at its limit
+         noise=[0.0, 0.03125, 0.0, 0.0, 0.0, 0.0])
 def test_decoupled_inverse_equals_pauls_closed_form_and_the_full_ik(q, noise):
     """Wrist centre from the arm set, orientation from the wrist set: the same joints as Paul's closed form (in q's configuration) and the full numerical inverse, and fk maps back to the pose."""
     assume(_reachable(q))

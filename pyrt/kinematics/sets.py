@@ -246,7 +246,7 @@ class JointSets:
         """The joint sets of a URDF (its text or a path).
 
         *sets* maps each set's name to its tip link, or to ``(start_link,
-        tip_link)``; default: one set per leaf link, named after it.  See
+        tip_link)``; default: one set per tip link, named after it.  See
         the module doc for who owns which joint.
         """
         from pyrt.kinematics.urdf import _source, _tree, read_urdf
@@ -286,7 +286,8 @@ class JointSets:
                                       f"the same joints: name the joint sets "
                                       f"(sets={{NAME: TIP_LINK, ...}})", where)
                 ends[path] = ln
-            sets = {ln: ln for ln in ends.values()}
+            # named after the tip link (a character a set's name cannot have made _)
+            sets = {"".join(c if c.isalnum() else "_" for c in ln): ln for ln in ends.values()}
         if not sets:
             raise ConfigError(f"robot {rname!r}: no joint set given", where)
 
@@ -440,8 +441,19 @@ class JointSets:
         return out
 
     def __repr__(self) -> str:
-        parts = ", ".join(f"{s.name}={s.indices[0] + 1}-{s.indices[-1] + 1}" for s in self)
-        return f"JointSets({self.name!r}: {parts})"
+        return f"JointSets({self.name!r}: {', '.join(self._ranges(s) for s in self)})"
+
+    @staticmethod
+    def _ranges(s: JointSet) -> str:
+        """``arm=1-3``: a set and its joints, counted from 1."""
+        runs: list[list[int]] = []
+        for i in sorted(s.indices):
+            if runs and i == runs[-1][1] + 1:
+                runs[-1][1] = i
+            else:
+                runs.append([i, i])
+        return s.name + "=" + ",".join(f"{a + 1}" if a == b else f"{a + 1}-{b + 1}"
+                                       for a, b in runs)
 
     # ------------------------------------------------------------ kinematics
 
@@ -534,11 +546,13 @@ class JointSets:
 
     def decoupled_ik(self, target: npt.ArrayLike, seed: npt.ArrayLike, *,
                      position: str = "arm", orientation: str = "wrist",
-                     tol: float = _TOL, max_iter: int = _MAX_ITER) -> IKResult:
+                     tol: float = 1e-9, max_iter: int = _MAX_ITER) -> IKResult:
         """004's decoupled inverse of an arm with a spherical wrist: the
         wrist centre from set *position* (its tip frame holds the wrist set),
         then the orientation from set *orientation*, each its own small
-        inverse seeded at *seed*.  The residual is the whole pose's."""
+        inverse seeded at *seed* (to a tenth of *tol*).  ``residual`` is the
+        whole pose's error (position and rotation, m and rad); ``ok`` when it
+        is <= *tol*."""
         t = np.asarray(target, dtype=float)
         if t.shape != (4, 4):
             raise ValueError(f"decoupled_ik: a pose target is (4, 4), got shape {t.shape}")
@@ -553,13 +567,13 @@ class JointSets:
         p = self[position].chain
         first = _inv(p.tool) @ w.chain.base @ w.chain.joints[0].origin
         r1 = self.ik(position, centre, seed, task="position", point=first[:3, 3],
-                     tol=tol, max_iter=max_iter)
-        r2 = self.ik(orientation, t, r1.q, task="orientation", tol=tol, max_iter=max_iter)
+                     tol=0.1 * tol, max_iter=max_iter)
+        r2 = self.ik(orientation, t, r1.q, task="orientation", tol=0.1 * tol,
+                     max_iter=max_iter)
         e_p = float(np.linalg.norm(self.fk(orientation, r2.q)[:3, 3] - t[:3, 3]))
         e_r = float(np.linalg.norm(_rotvec(t[:3, :3] @ self.fk(orientation, r2.q)[:3, :3].T)))
         res = math.hypot(e_p, e_r)
-        return IKResult(r2.q, r1.ok and r2.ok and res <= max(tol, 1e-9),
-                        r1.iterations + r2.iterations, res)
+        return IKResult(r2.q, res <= tol, r1.iterations + r2.iterations, res)
 
     # ------------------------------------------------------------ calibration
 
