@@ -306,6 +306,7 @@ class JointSets:
         spec: dict[str, tuple[str | None, str]] = {}
         for sname, value in sets.items():
             _check_name(sname, where)
+            start: str | None
             if isinstance(value, str):
                 start, tip = None, value
             elif isinstance(value, tuple | list) and len(value) == 2 and all(
@@ -314,9 +315,9 @@ class JointSets:
             else:
                 raise ConfigError(f"joint set {sname!r}: expected a tip link or (start link, "
                                   f"tip link), got {value!r}", where)
-            for ln in (start, tip):
-                if ln is not None and ln not in links:
-                    raise ConfigError(f"joint set {sname!r}: link {ln!r} is not a link of "
+            for end in (start, tip):
+                if end is not None and end not in links:
+                    raise ConfigError(f"joint set {sname!r}: link {end!r} is not a link of "
                                       f"robot {rname!r}", where)
             if start is not None and start not in path_to(tip):
                 raise ConfigError(f"joint set {sname!r}: link {tip!r} is not below link "
