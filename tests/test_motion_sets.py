@@ -146,3 +146,25 @@ def test_sets_must_be_the_chains_joints():
                                 '<child link="b"/></joint></robot>')
     with pytest.raises(ValueError, match="are not chain 'puma560'"):
         make(sets=other)
+
+
+@settings(max_examples=10, deadline=None)
+@given(st.integers(10, 60), st.sampled_from([-1.0, 1.0]))
+def test_an_aborting_set_record_brakes_the_other_joints_to_rest_and_holds_them(ticks, sign):
+    """A wrist record aborting a running arm move: joints 1-3 brake to rest without coming back (monotonic), then hold exactly; the wrist reaches its target."""
+    ev = make(sets=SETS)
+    ev.queue(MotionSpec(target=tuple(PUMA_HOME[:3] + sign * 0.5), sets="arm"))
+    for _ in range(ticks):
+        ev.tick()
+    wrist_t = tuple(PUMA_HOME[3:] + 0.3)
+    move = ev.queue(MotionSpec(target=wrist_t, sets="wrist", buffer="aborting"))
+    knots = run(ev)
+    assert move.code == "reached"
+    arm = np.array([k.q[:3] for k in knots])
+    steps = np.diff(arm, axis=0) * sign
+    assert (steps >= -1e-15).all(), "an arm joint came back"
+    rest = arm[-1]
+    held = [bool(np.array_equal(a, rest)) for a in arm]
+    first = held.index(True)
+    assert all(held[first:]) and first < len(knots) // 2
+    np.testing.assert_allclose(knots[-1].q[3:], wrist_t, rtol=0, atol=1e-12)

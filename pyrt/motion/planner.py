@@ -394,14 +394,16 @@ class Planner:
             # -- the target ---------------------------------------------------------------
             # in a moving frame, where the target will be when the segment ends (001)
             n_end_guess = self.sample_of(tail, tail.now + t_guess)
+            held: list[int] | None = None  # the joints a record naming joint sets holds
             if kind == JOINT:
                 moved = self.moved_joints(spec)
                 if moved is not None:
                     # only the named sets' joints move; the others hold where the
-                    # queue leaves them
+                    # queue leaves them (still moving: where they come to rest)
                     assert spec.target is not None
                     q_e = np.array(q_s, dtype=float)
                     q_e[moved] = spec.target
+                    held = [i for i in range(chain.n) if i not in moved]
                 elif spec.target is not None:
                     q_e = np.array(spec.target)
                 else:
@@ -436,6 +438,8 @@ class Planner:
                     # 001's extrapolation: the line starts where the motion would be
                     # tau later at its present velocity
                     x_s = x_a + v_a * tau_guess
+                    if held:
+                        q_e[held] = x_s[held]
                 else:
                     x_s = np.array(q_s, dtype=float)
                 start = x_s
@@ -505,6 +509,8 @@ class Planner:
                     # (001's extrapolation), so the transition meets it exactly
                     target_x = x_s + v_line_dir
                     x_s = x_a + v_a * tau_in
+                    if held:  # the held joints' transition brakes them to rest on the line
+                        target_x[held] = q_e[held] = x_s[held]
                     v_line_dir = target_x - x_s
                     v_line = v_line_dir / t_seg
                 if t_seg >= tau_in + tau_out:
