@@ -14,6 +14,7 @@ from pyrt.kinematics.joint import (
     rpy_of,
     transform,
 )
+from pyrt.kinematics.sets import JointSet, JointSets
 
 __all__ = [
     "GRAVITY",
@@ -24,6 +25,8 @@ __all__ = [
     "Inertial",
     "Joint",
     "JointKind",
+    "JointSet",
+    "JointSets",
     "rotation",
     "rpy_matrix",
     "rpy_of",

@@ -194,7 +194,19 @@ def read_urdf(source: str | PathLike[str], base_link: str | None = None,
         raise ConfigError(f"unusable values: {exc}", where) from None
 
 
-def _read(text: str, where: str, base_link: str | None, tip_link: str | None) -> UrdfChain:
+@dataclass(frozen=True)
+class _Tree:
+    """A URDF's robot element and its link tree, checked (one root, no cycle)."""
+
+    name: str
+    links: dict[str, _Element]
+    joints: dict[str, _Element]
+    parent_of: dict[str, tuple[str, _Element]]  # child link -> (parent link, joint)
+    children_of: dict[str, list[tuple[str, _Element]]]
+    root: str
+
+
+def _tree(text: str, where: str) -> _Tree:
     rd = _Reader(where)
     robot = _parse_xml(text, where)
     if robot.tag != "robot":
@@ -263,6 +275,14 @@ def _read(text: str, where: str, base_link: str | None, tip_link: str | None) ->
             seen.add(cur)
             cur = parent_of[cur][0]
 
+    return _Tree(name, links, joints, parent_of, children_of, roots[0])
+
+
+def _read(text: str, where: str, base_link: str | None, tip_link: str | None) -> UrdfChain:
+    rd = _Reader(where)
+    tr = _tree(text, where)
+    name, links, parent_of, children_of = tr.name, tr.links, tr.parent_of, tr.children_of
+    roots = [tr.root]
     base = base_link if base_link is not None else roots[0]
     if base not in links:
         raise ConfigError(f"base link {base!r} is not a link of robot {name!r}", where)

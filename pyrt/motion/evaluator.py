@@ -56,7 +56,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pyrt.frames import TransformType
-from pyrt.kinematics import GRAVITY, Chain
+from pyrt.kinematics import GRAVITY, Chain, JointSets
 from pyrt.motion._comply import ComplyLoop
 from pyrt.motion._pieces import CART, FUNC, JOINT, FrameTracker, Piece, transition_coeffs
 from pyrt.motion.planner import Limits, Planner, Segment, Tail
@@ -106,17 +106,18 @@ class Evaluator:
     ``chain`` and ``limits`` describe the arm, ``q0`` where it rests now,
     ``period`` the trajectory period (s).  ``force_sensor`` says whether
     :meth:`tick` will be given the wrist's wrench (then records may carry
-    force limits).
+    force limits).  ``sets``: the arm's joint sets (records may name some).
     """
 
     def __init__(self, chain: Chain, limits: Limits, q0: Sequence[float] | Vector, *,
-                 period: float = 0.01, force_sensor: bool = False) -> None:
+                 period: float = 0.01, force_sensor: bool = False,
+                 sets: JointSets | None = None) -> None:
         if not (math.isfinite(period) and 0.001 <= period <= 0.1):
             raise ValueError(f"period: expected 0.001 .. 0.1 s, got {period!r}")
         self.chain = chain
         self.limits = limits
         self.tracker = FrameTracker(period)
-        self.planner = Planner(chain, limits, self.tracker)
+        self.planner = Planner(chain, limits, self.tracker, sets)
         q = np.array(q0, dtype=float)
         why = chain.limit_violation(q)
         if why:

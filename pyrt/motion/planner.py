@@ -41,7 +41,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from pyrt.kinematics import Chain
+from pyrt.errors import ConfigError
+from pyrt.kinematics import Chain, JointSets
 from pyrt.motion._checks import Refused, Slow, check_segment, end_of, joint_time, tool_travel
 from pyrt.motion._geom import drive_of, pose_of
 from pyrt.motion._pieces import (
@@ -156,10 +157,16 @@ class Tail:
 class Planner:
     """Plans records for one chain (see the module doc)."""
 
-    def __init__(self, chain: Chain, limits: Limits, tracker: FrameTracker) -> None:
+    def __init__(self, chain: Chain, limits: Limits, tracker: FrameTracker,
+                 sets: JointSets | None = None) -> None:
         if len(limits.vmax) != chain.n:
             raise ValueError(f"Limits give {len(limits.vmax)} joints; chain {chain.name!r} "
                              f"has {chain.n}")
+        if sets is not None and sets.joint_names != chain.joint_names:
+            raise ValueError(f"joint sets {sets!r}: joints {list(sets.joint_names)} are not "
+                             f"chain {chain.name!r}'s {list(chain.joint_names)}")
+        #: The arm's joint sets: a record naming some moves only their joints.
+        self.sets = sets
         self.chain = chain
         self.limits = limits
         self.vmax = np.array(limits.vmax)
@@ -196,6 +203,28 @@ class Planner:
 
     def config_of(self, q: Vector) -> str | None:
         return None if self.closed is None else self.closed.config_of(q)
+
+    # -- joint sets ------------------------------------------------------------------
+    def moved_joints(self, spec: MotionSpec) -> list[int] | None:
+        """The joint indices a record naming joint sets moves (None: every
+        joint); RecordError for sets the arm does not have, or a record that
+        cannot move only some joints."""
+        if spec.sets is None:
+            return None
+        if self.sets is None:
+            raise RecordError(f"sets: refused: chain {self.chain.name!r} declares no joint sets "
+                              f"(a record naming {', '.join(spec.sets)} cannot be planned)")
+        try:
+            idx = list(self.sets.indices(spec.sets))
+        except ConfigError as exc:
+            raise RecordError(f"sets: {exc}") from None
+        if spec.target is None:
+            raise RecordError("sets: a record naming joint sets moves to a joint target "
+                              "(target=, the named sets' joint values)")
+        if len(spec.target) != len(idx):
+            raise RecordError(f"target: {len(spec.target)} joint values; joint set(s) "
+                              f"{', '.join(spec.sets)} have {len(idx)}")
+        return idx
 
     # -- evaluating pieces at plan time -------------------------------------------------
     def sample_of(self, tail: Tail, t: float) -> float:
@@ -266,7 +295,8 @@ class Planner:
         if mode is Mode.CART and eq is None:
             raise RecordError("equation: a Cartesian record needs a position equation (none "
                               "given and none queued before)")
-        if spec.target is not None and len(spec.target) != chain.n:
+        moved = self.moved_joints(spec)
+        if spec.target is not None and moved is None and len(spec.target) != chain.n:
             raise RecordError(f"target: {len(spec.target)} joint values; the arm has {chain.n}")
         if spec.update is not None:
             spec.update_transform()
@@ -364,8 +394,17 @@ class Planner:
             # -- the target ---------------------------------------------------------------
             # in a moving frame, where the target will be when the segment ends (001)
             n_end_guess = self.sample_of(tail, tail.now + t_guess)
+            held: list[int] | None = None  # the joints a record naming joint sets holds
             if kind == JOINT:
-                if spec.target is not None:
+                moved = self.moved_joints(spec)
+                if moved is not None:
+                    # only the named sets' joints move; the others hold where the
+                    # queue leaves them (still moving: where they come to rest)
+                    assert spec.target is not None
+                    q_e = np.array(q_s, dtype=float)
+                    q_e[moved] = spec.target
+                    held = [i for i in range(chain.n) if i not in moved]
+                elif spec.target is not None:
                     q_e = np.array(spec.target)
                 else:
                     assert target_pos is not None
@@ -399,6 +438,8 @@ class Planner:
                     # 001's extrapolation: the line starts where the motion would be
                     # tau later at its present velocity
                     x_s = x_a + v_a * tau_guess
+                    if held:
+                        q_e[held] = x_s[held]
                 else:
                     x_s = np.array(q_s, dtype=float)
                 start = x_s
@@ -468,6 +509,8 @@ class Planner:
                     # (001's extrapolation), so the transition meets it exactly
                     target_x = x_s + v_line_dir
                     x_s = x_a + v_a * tau_in
+                    if held:  # the held joints' transition brakes them to rest on the line
+                        target_x[held] = q_e[held] = x_s[held]
                     v_line_dir = target_x - x_s
                     v_line = v_line_dir / t_seg
                 if t_seg >= tau_in + tau_out:

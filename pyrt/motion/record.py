@@ -61,6 +61,12 @@ field               what pyrt does with it
                     limits stops exactly there instead.
 ``target``          joint mode only: a joint vector to move to instead of
                     an equation.
+``sets``            joint mode only: the joint sets (kinematic chains, a
+                    :class:`~pyrt.kinematics.JointSets` the arm declares)
+                    the record moves; None: all.  ``target`` then gives
+                    only those sets' joints (in the joint vector's order);
+                    the other joints hold the values the queue leaves them
+                    at.  An unknown set is refused when the record is queued.
 ==================  ======================================================
 
 A queued record is copied whole (001: copied first, then queued); the
@@ -254,6 +260,7 @@ class MotionSpec:
     speed: float = 1.0
     tolerance: float | None = None
     name: str = ""
+    sets: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
         put = object.__setattr__
@@ -325,6 +332,21 @@ class MotionSpec:
             put(self, "tolerance", float(tol))
         if not isinstance(self.name, str):
             raise RecordError(f"name: expected a string, got {self.name!r}")
+        if self.sets is not None:
+            sets = (self.sets,) if isinstance(self.sets, str) else self.sets
+            try:
+                names = tuple(sets)
+            except TypeError:
+                raise RecordError(f"sets: expected joint set names, got {self.sets!r}") from None
+            if not names or not all(isinstance(x, str) and x for x in names):
+                raise RecordError(f"sets: expected one or more joint set names, got "
+                                  f"{self.sets!r}")
+            if len(set(names)) != len(names):
+                raise RecordError(f"sets: a joint set named twice in {list(names)}")
+            if self.mode is not Mode.JOINT:
+                raise RecordError("sets: a Cartesian record moves the tool, and so every "
+                                  "joint; name joint sets on a joint-mode record")
+            put(self, "sets", names)
 
     def copy(self, **changes: Any) -> MotionSpec:
         """A whole copy (with some fields changed, checked again)."""
