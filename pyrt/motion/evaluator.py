@@ -1,8 +1,11 @@
 """The trajectory tick: what the trajectory task calls once per period.
 
-:class:`Evaluator` holds one arm's queued motion.  :meth:`Evaluator.queue`
-plans a record (outside the loop: the caller's thread) and hands the pieces
-over under a lock; :meth:`Evaluator.tick` evaluates one sample and returns a
+:class:`Evaluator` holds one arm's queued motion.  A record is planned
+outside the loop: :meth:`Evaluator.snapshot` copies what a plan needs
+(bounded), :meth:`Evaluator.plan` plans in the caller's thread with a chain
+of its own, and :meth:`Evaluator.commit` (bounded, the loop's side) checks
+the snapshot still holds and hands the pieces over (:meth:`Evaluator.queue`
+does the three); :meth:`Evaluator.tick` evaluates one sample and returns a
 :class:`Knot`: joint position, velocity and acceleration (for the servo's
 quintic interpolation), T6, the running record's progress, and the events
 of the tick.  A tick's work is bounded: one polynomial, one inverse (seeded
@@ -62,13 +65,38 @@ from pyrt.motion._pieces import CART, FUNC, JOINT, FrameTracker, Piece, transiti
 from pyrt.motion.planner import Limits, Planner, Segment, Tail
 from pyrt.motion.record import BufferMode, MotionSpec, Move, RecordError, Termination
 
-__all__ = ["Evaluator", "Knot", "MotionFault"]
+__all__ = ["Evaluator", "Knot", "MotionFault", "Planned", "QueueSnapshot", "StalePlan"]
 
 Matrix = npt.NDArray[np.float64]
 Vector = npt.NDArray[np.float64]
 
 #: A joint speed below which a motion counts as at rest (rad/s or m/s).
 REST_SPEED = 1e-6
+
+
+class StalePlan(RecordError):
+    """A planned record's snapshot no longer holds (:meth:`Evaluator.commit`)."""
+
+
+@dataclass(frozen=True)
+class QueueSnapshot:
+    """What :meth:`Evaluator.plan` needs, copied by :meth:`Evaluator.snapshot`."""
+
+    tail: Tail
+    generation: int
+    tracker: FrameTracker
+    count: int
+    stopping: bool
+    complying: Move | None
+
+
+@dataclass(frozen=True)
+class Planned:
+    """A record planned outside the loop, for :meth:`Evaluator.commit`."""
+
+    snapshot: QueueSnapshot
+    segment: Segment
+    move: Move
 
 
 class MotionFault(RuntimeError):
@@ -123,6 +151,11 @@ class Evaluator:
             raise ValueError(f"q0: {why}")
         self.force_sensor = force_sensor
         self._lock = threading.Lock()
+        #: Plans made outside the loop use a chain of their own, one plan at a time.
+        self._plan_lock = threading.Lock()
+        self._side: Planner | None = None
+        #: Changes whenever something is queued or stopped (a snapshot's validity).
+        self._generation = 0
         self._period = period
         self._pieces: list[Piece] = []
         self._segs: list[Segment] = []
@@ -177,46 +210,91 @@ class Evaluator:
                     self._t6[-1].copy(), list(self._pieces), last, self._equation,
                     self._config)
 
+    def snapshot(self, watch: Sequence[Any] = (), lead: int = 0) -> QueueSnapshot:
+        """What a plan needs of the queue, copied (bounded: call it in the loop, or
+        from any thread): the plan queued so far seen now, the moving frames'
+        last values, a generation that changes when anything is queued or
+        stopped.  ``watch``: functional transforms a record to come will use
+        (they are evaluated every sample from now on, so a plan knows their
+        velocity).  ``lead``: trajectory periods a plan from rest leaves before
+        it begins (the time its planning and hand-over may take)."""
+        with self._lock:
+            for tr in watch:
+                if all(tr is not w for w in self._watched):
+                    self._watched.append(tr)
+                    self.tracker.evaluate(tr, self._n)
+                    self.tracker.evaluate(tr, self._n + 1)
+            tail = self._tail()
+            if tail.last is None and lead > 0:  # at rest: the plan begins ``lead`` later
+                tail.now += lead * self._period
+                tail.sample += lead
+            tracker = self.tracker.copy()
+            complying = next((s.move for s in self._segs
+                              if s.move.code is None and s.move.spec.comply is not None), None)
+            return QueueSnapshot(tail, self._generation, tracker, self._count,
+                                 self._sigma is not None or self._stop is not None, complying)
+
+    def plan(self, spec: MotionSpec, snap: QueueSnapshot) -> Planned:
+        """Plan ``spec`` (copied whole) after ``snap``, in the caller's thread,
+        touching nothing the loop uses (a chain and frame values of its own);
+        :meth:`commit` queues it.  RecordError names a refused field or where
+        the path cannot go."""
+        if not isinstance(spec, MotionSpec):
+            raise RecordError(f"expected a MotionSpec, got {type(spec).__name__}")
+        if snap.stopping:
+            raise RecordError("the arm is stopping; queue again when it is at rest")
+        if snap.complying is not None:
+            raise RecordError(f"comply: the complying record {snap.complying.spec.name or ''} "
+                              "runs; queue the next one when it has ended (it starts "
+                              "where the force put the arm)")
+        spec = spec.copy()
+        move = Move(spec, snap.count)
+        with self._plan_lock:
+            if self._side is None:
+                self._side = Planner(self.chain.replace(), self.limits, snap.tracker)
+            self._side.tracker = snap.tracker
+            seg = self._side.plan(spec, snap.tail, move, force_sensor=self.force_sensor)
+        return Planned(snap, seg, move)
+
+    def commit(self, planned: Planned) -> Move:
+        """Queue a planned record (bounded: the loop's side).  :class:`StalePlan`
+        (nothing queued) when the snapshot it was planned from no longer holds:
+        something was queued or stopped since, or the trajectory has passed the
+        plan's first sample."""
+        with self._lock:
+            snap, seg = planned.snapshot, planned.segment
+            if snap.generation != self._generation:
+                raise StalePlan("the motion queue changed while the record was planned")
+            if self._sigma is not None or self._stop is not None:
+                raise StalePlan("the arm is stopping")
+            if seg.pieces and self._tp[-1] > seg.pieces[0].t0 + 1e-9:
+                raise StalePlan("the trajectory passed the plan's start while it was planned")
+            seg.frames.tracker = self.tracker  # the loop's frame values from now on
+            self._splice(seg, snap.tail)
+            self._count += 1
+            self._generation += 1
+            eq = planned.move.spec.equation
+            if eq is not None:
+                self._equation = eq
+                eq.start()
+            return planned.move
+
     def queue(self, spec: MotionSpec) -> Move:
-        """Copy ``spec`` whole and plan it after what is queued; returns its
+        """Copy ``spec`` whole and plan it after what is queued, in the caller's
+        thread (:meth:`snapshot`, :meth:`plan`, :meth:`commit`); returns its
         handle.  RecordError (nothing queued) names a refused field or where
         the path cannot go."""
         if not isinstance(spec, MotionSpec):
             raise RecordError(f"expected a MotionSpec, got {type(spec).__name__}")
-        spec = spec.copy()
         eq = spec.equation if spec.equation is not None else self._equation
         live = [] if eq is None else [t for t in eq.transforms
                                       if t.type is TransformType.FUNCTIONAL]
         for _ in range(3):
-            with self._lock:
-                for tr in live:
-                    # a moving frame is evaluated every sample from now on, so its
-                    # velocity is known when a plan or a transition needs it
-                    if all(tr is not w for w in self._watched):
-                        self._watched.append(tr)
-                        self.tracker.evaluate(tr, self._n)
-                        self.tracker.evaluate(tr, self._n + 1)
-                tail = self._tail()
-                stopping = self._sigma is not None or self._stop is not None
-            if stopping:
-                raise RecordError("the arm is stopping; queue again when it is at rest")
-            complying = next((s.move for s in self._segs
-                              if s.move.code is None and s.move.spec.comply is not None), None)
-            if complying is not None:
-                raise RecordError(f"comply: the complying record {complying.spec.name or ''} "
-                                  "runs; queue the next one when it has ended (it starts "
-                                  "where the force put the arm)")
-            move = Move(spec, self._count)
-            seg = self.planner.plan(spec, tail, move, force_sensor=self.force_sensor)
-            with self._lock:
-                if self._tp[-1] != tail.now or len(self._pieces) != len(tail.pieces):
-                    continue  # the loop moved on while planning: plan again
-                self._splice(seg, tail)
-                self._count += 1
-                if spec.equation is not None:
-                    self._equation = spec.equation
-                    spec.equation.start()
-                return move
+            planned = self.plan(spec, self.snapshot(live))
+            try:
+                return self.commit(planned)
+            except StalePlan:
+                continue  # the loop moved on while planning: plan again
         raise RecordError("the loop kept moving while the record was planned; queue it again")
 
     def queue_function(self, fn: Callable[[float], Sequence[float]], duration: float,
@@ -245,6 +323,7 @@ class Evaluator:
             seg.rested = True
             self._pieces.append(seg.pieces[0])
             self._segs.append(seg)
+            self._generation += 1
             return move
 
     def _splice(self, seg: Segment, tail: Tail) -> None:
@@ -283,6 +362,7 @@ class Evaluator:
     def stop(self, code: str = Termination.STOPPED) -> None:
         """Brake to rest (along the path) and drop what is queued."""
         with self._lock:
+            self._generation += 1
             if self._stop is None:
                 self._stop = (str(code), None)
 
