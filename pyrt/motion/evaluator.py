@@ -234,11 +234,12 @@ class Evaluator:
             return QueueSnapshot(tail, self._generation, tracker, self._count,
                                  self._sigma is not None or self._stop is not None, complying)
 
-    def plan(self, spec: MotionSpec, snap: QueueSnapshot) -> Planned:
+    def plan(self, spec: MotionSpec, snap: QueueSnapshot, *, in_loop: bool = False) -> Planned:
         """Plan ``spec`` (copied whole) after ``snap``, in the caller's thread,
         touching nothing the loop uses (a chain and frame values of its own);
-        :meth:`commit` queues it.  RecordError names a refused field or where
-        the path cannot go."""
+        :meth:`commit` queues it.  ``in_loop``: the caller is the loop's thread
+        (it plans with the loop's chain, waiting for no other plan).
+        RecordError names a refused field or where the path cannot go."""
         if not isinstance(spec, MotionSpec):
             raise RecordError(f"expected a MotionSpec, got {type(spec).__name__}")
         if snap.stopping:
@@ -249,6 +250,10 @@ class Evaluator:
                               "where the force put the arm)")
         spec = spec.copy()
         move = Move(spec, snap.count)
+        if in_loop:
+            planner = self.planner
+            seg = planner.plan(spec, snap.tail, move, force_sensor=self.force_sensor)
+            return Planned(snap, seg, move)
         with self._plan_lock:
             if self._side is None:
                 self._side = Planner(self.chain.replace(), self.limits, snap.tracker)
@@ -280,8 +285,9 @@ class Evaluator:
             return planned.move
 
     def queue(self, spec: MotionSpec) -> Move:
-        """Copy ``spec`` whole and plan it after what is queued, in the caller's
-        thread (:meth:`snapshot`, :meth:`plan`, :meth:`commit`); returns its
+        """Copy ``spec`` whole and plan it after what is queued, now, in the loop's
+        thread (:meth:`snapshot`, :meth:`plan` with the loop's chain,
+        :meth:`commit`; from another thread call the three); returns its
         handle.  RecordError (nothing queued) names a refused field or where
         the path cannot go."""
         if not isinstance(spec, MotionSpec):
@@ -290,7 +296,7 @@ class Evaluator:
         live = [] if eq is None else [t for t in eq.transforms
                                       if t.type is TransformType.FUNCTIONAL]
         for _ in range(3):
-            planned = self.plan(spec, self.snapshot(live))
+            planned = self.plan(spec, self.snapshot(live), in_loop=True)
             try:
                 return self.commit(planned)
             except StalePlan:

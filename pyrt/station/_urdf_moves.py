@@ -15,6 +15,7 @@ ranges shown from its signals), and the arm's moving state is theirs to read.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import threading
 from collections.abc import Callable, Sequence
@@ -87,6 +88,9 @@ class MoveSnapshot:
     conveyor: Conveyor | None
     #: COORD when the snapshot was taken (a running conveyor's pose then).
     coord_now: np.ndarray
+    #: Taken for a move planned in the loop's own thread (a sequence's step): it
+    #: plans with the loop's chain, not the preparation's.
+    in_loop: bool = False
 
 
 @dataclass(frozen=True)
@@ -150,10 +154,11 @@ class ArmMoves:
     _prep_lock: threading.Lock | None = None
     _prep_chain: Chain | None = None
 
-    def move_snapshot(self, what: str = "move", lead: int = PLAN_LEAD) -> MoveSnapshot:
+    def move_snapshot(self, what: str = "move", in_loop: bool = False) -> MoveSnapshot:
         """What a move's planning needs, copied (the loop's side, bounded);
-        refused while faulted.  ``lead``: trajectory periods a move from rest
-        leaves for its planning (0 when it is planned in the loop's thread)."""
+        refused while faulted.  ``in_loop``: the move is planned in the loop's
+        own thread, at once (no lead for its planning; the loop's chain)."""
+        lead = 0 if in_loop else PLAN_LEAD
         fault = self.station.fault
         if fault is not None:
             raise CommandError(f"{self.name} {what}: refused: stopped by a fault ({fault.cause});"
@@ -164,9 +169,10 @@ class ArmMoves:
         if ev is not None:
             queue = ev.snapshot((belt.transform,) if belt is not None else (), lead=lead)
         return MoveSnapshot(ev, queue, self.heading(), self.tool_frame, self.coord_frame, belt,
-                            belt.pose_now() if belt is not None else self.coord_frame.copy())
+                            belt.pose_now() if belt is not None else self.coord_frame.copy(),
+                            in_loop)
 
-    def _planning(self) -> tuple[threading.Lock, Chain]:
+    def planning(self) -> tuple[threading.Lock, Chain]:
         """The lock one preparation at a time holds, and its chain (the loop's is
         the loop's alone)."""
         lock = self.__dict__.get("_prep_lock")
@@ -177,6 +183,13 @@ class ArmMoves:
                 self._prep_chain = self.chain.replace()
         return lock, self._prep_chain
 
+    def _chain_for(self, snap: MoveSnapshot) -> tuple[Any, Chain]:
+        """The chain a preparation uses, with what it holds meanwhile: in the loop's
+        thread the loop's own chain; elsewhere the preparation's, under its lock."""
+        if snap.in_loop:
+            return contextlib.nullcontext(), self.chain
+        return self.planning()
+
     def _prepare(self, snap: MoveSnapshot, spec: MotionSpec, what: str, end: np.ndarray | None,
                  to: str) -> MoveWork:
         """Plan ``spec`` against ``snap`` (the caller's thread); refused with the reason."""
@@ -184,7 +197,7 @@ class ArmMoves:
         if ev is None or queue is None:
             return MoveWork(snap, what, None, end, to)
         try:
-            planned = ev.plan(spec, queue)
+            planned = ev.plan(spec, queue, in_loop=snap.in_loop)
         except RecordError as exc:
             why = str(exc).removeprefix(f"{what}: ").removeprefix("refused: ")
             raise CommandError(f"{self.name} {what}: refused: {why}; nothing moved") from None
@@ -265,7 +278,7 @@ class ArmMoves:
     def prepare_movej(self, snap: MoveSnapshot, *values: float | str) -> MoveWork:
         """``movej`` in the caller's thread: its record planned against ``snap``."""
         q, opts = self._joint_values(values)
-        lock, chain = self._planning()
+        lock, chain = self._chain_for(snap)
         with lock:
             spec, to = self._joint_spec(q, "movej", opts, chain, snap.tool_frame)
             return self._prepare(snap, spec, "movej", q.copy(), to)
@@ -446,7 +459,7 @@ class ArmMoves:
             config, options = None, f"{config} {options or ''}"
         opts = self._options("moveto", options)
         pose = _pose("moveto", self.name, x, y, z, rx, ry, rz)
-        lock, chain = self._planning()
+        lock, chain = self._chain_for(snap)
         with lock:
             q = self.solve(snap.coord_now @ pose @ inverse(snap.tool_frame), config,
                            snap.heading, chain)
@@ -488,7 +501,7 @@ class ArmMoves:
         prepared again, as :func:`~pyrt.component.run_prepared` does)."""
         for _ in range(PREPARE_TRIES):
             try:
-                return self.commit_move(prepare(self.move_snapshot(what, lead=0), *args))
+                return self.commit_move(prepare(self.move_snapshot(what, in_loop=True), *args))
             except Stale:
                 continue
         raise CommandError(f"{self.name} {what}: refused: the motion queue kept changing "
@@ -507,7 +520,7 @@ class ArmMoves:
                                                                                snap.tool_frame)],
                               [coord, Transform.varb("POS", pose)])
         here = snap.coord_now
-        lock, chain = self._planning()
+        lock, chain = self._chain_for(snap)
         with lock:
             end = chain.ik(here @ pose @ inverse(snap.tool_frame), snap.heading)
             to = (f"tool {self.pose_text(here @ pose)}"
