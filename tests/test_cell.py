@@ -135,7 +135,7 @@ def test_an_arm_fault_during_a_pick_stops_the_arm_the_jaws_and_the_sequence(cell
 def test_a_pick_out_of_reach_is_refused_and_nothing_moves(cell):
     """pick at a place the arm cannot reach: refused before anything moves."""
     station, _runner, shell, out = cell
-    shell.onecmd("pick 3000 0 0")
+    shell.onecmd("pick 1500 0 0")
     shell.onecmd("pick 1900 1900 0")
     assert "pick: refused" in out.getvalue()
     assert not station.busy() and not station.pick.running
@@ -253,3 +253,25 @@ def test_the_served_cell_has_each_robots_state_and_flags(cell):
     assert runner.call(read) == (0, 0, False, False)
     runner.call(station.controller.fail, "jaws", take_fault=False)
     assert runner.call(read, take_fault=False) == (0, 2, True, False)
+
+
+def test_pick_solves_its_poses_outside_the_loop(cell, monkeypatch):
+    """pick X Y Z from the console: its three poses are solved with the loop not ticking (counted, not timed); an unreachable pick is refused before anything moves."""
+    from pyrt.station._urdf_moves import ArmMoves
+
+    station, runner, shell, out = cell
+    ticking: list[bool] = []
+    solve = ArmMoves.solve
+
+    def watched(self, *a, **k):
+        ticking.append(runner.loop.running)
+        return solve(self, *a, **k)
+
+    monkeypatch.setattr(ArmMoves, "solve", watched)
+    shell.onecmd("pick 1500 0 0")
+    assert "pick: refused" in out.getvalue() and not runner.call(station.busy)
+    shell.onecmd("sim object {} {} {}".format(*OBJECT))
+    shell.onecmd("pick {} {} {}".format(*OBJECT))
+    assert len(ticking) >= 4 and not any(ticking)
+    shell.onecmd("wait")
+    assert "picked: the object lifted" in out.getvalue()
