@@ -260,7 +260,9 @@ def test_console_moves_are_planned_outside_the_loop_and_queued_plans_blend(puma,
     assert "blends into the running move" in say("puma560 moveto 500 -100 400 180 0 90")
     # planned from the queued end of movej: a blend at its corner
     assert runner.call(lambda: station.arm._latest.buffer) == "blending"
-    assert "queued" in say("puma560 movel 450 -100 350 180 0 90")
+    # the line from the joint move's end: no room for a blend, and the reply says so
+    said = say("puma560 movel 450 -100 350 180 0 90")
+    assert "at rest on its target: no blend (no room to blend" in said, said
     kinds = {k for k, _ in planned_where}
     assert kinds == {"plan", "solve"}
     assert [k for k, ticking in planned_where if ticking] == []

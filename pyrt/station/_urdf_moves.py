@@ -220,9 +220,10 @@ class ArmMoves:
             self._latest = ev.commit(work.planned)
         except StalePlan as exc:
             raise Stale(f"{self.name} {what}: {exc}") from None
-        return self._queued(work.planned.move.spec, work.end, work.to, busy)
+        return self._queued(work.planned.move, work.end, work.to, busy)
 
-    def _queued(self, spec: MotionSpec, end: np.ndarray | None, to: str, busy: bool) -> str:
+    def _queued(self, move: Move, end: np.ndarray | None, to: str, busy: bool) -> str:
+        spec = move.spec
         tracking = self.state == "tracking"
         self.last_stop = ""
         self._heading = end
@@ -236,6 +237,9 @@ class ArmMoves:
             return f"aborting the running move: braking into the move to {to}"
         if spec.buffer == "buffered":
             return f"queued: {to}; it starts when the running move is at rest on its target"
+        if move.buffer == "buffered" and move.note:  # a blend the planner could not make
+            return (f"queued: {to}; it starts when the running move is at rest on its target: "
+                    f"no blend ({move.note})")
         return f"queued: {to}; it blends into the running move"
 
     def _joint_spec(self, q: np.ndarray, what: str, options: dict[str, Any] | None,
