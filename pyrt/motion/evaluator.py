@@ -62,6 +62,7 @@ from pyrt.frames import TransformType
 from pyrt.kinematics import GRAVITY, Chain
 from pyrt.motion._comply import ComplyLoop
 from pyrt.motion._pieces import CART, FUNC, JOINT, FrameTracker, Piece, transition_coeffs
+from pyrt.motion._queueing import Planned, Queueing, QueueSnapshot, StalePlan
 from pyrt.motion.planner import Limits, Planner, Segment, Tail
 from pyrt.motion.record import BufferMode, MotionSpec, Move, RecordError, Termination
 
@@ -72,31 +73,6 @@ Vector = npt.NDArray[np.float64]
 
 #: A joint speed below which a motion counts as at rest (rad/s or m/s).
 REST_SPEED = 1e-6
-
-
-class StalePlan(RecordError):
-    """A planned record's snapshot no longer holds (:meth:`Evaluator.commit`)."""
-
-
-@dataclass(frozen=True)
-class QueueSnapshot:
-    """What :meth:`Evaluator.plan` needs, copied by :meth:`Evaluator.snapshot`."""
-
-    tail: Tail
-    generation: int
-    tracker: FrameTracker
-    count: int
-    stopping: bool
-    complying: Move | None
-
-
-@dataclass(frozen=True)
-class Planned:
-    """A record planned outside the loop, for :meth:`Evaluator.commit`."""
-
-    snapshot: QueueSnapshot
-    segment: Segment
-    move: Move
 
 
 class MotionFault(RuntimeError):
@@ -128,7 +104,7 @@ class Knot:
     payload_torque: Vector | None
 
 
-class Evaluator:
+class Evaluator(Queueing):
     """One arm's queued motion and its trajectory tick (see the module doc).
 
     ``chain`` and ``limits`` describe the arm, ``q0`` where it rests now,
@@ -201,107 +177,6 @@ class Evaluator:
         """True when nothing is queued or running and the arm is at rest."""
         with self._lock:
             return (not self._pieces or self._k >= len(self._pieces)) and self._sigma is None
-
-    def _tail(self) -> Tail:
-        last = self._segs[-1] if self._segs else None
-        if last is not None and self._k >= len(self._pieces):
-            last = None
-        return Tail(self._tp[-1], self._n + 1, self._period, self._q[-1].copy(),
-                    self._t6[-1].copy(), list(self._pieces), last, self._equation,
-                    self._config)
-
-    def snapshot(self, watch: Sequence[Any] = (), lead: int = 0) -> QueueSnapshot:
-        """What a plan needs of the queue, copied (bounded: call it in the loop, or
-        from any thread): the plan queued so far seen now, the moving frames'
-        last values, a generation that changes when anything is queued or
-        stopped.  ``watch``: functional transforms a record to come will use
-        (they are evaluated every sample from now on, so a plan knows their
-        velocity).  ``lead``: trajectory periods a plan from rest leaves before
-        it begins (the time its planning and hand-over may take)."""
-        with self._lock:
-            for tr in watch:
-                if all(tr is not w for w in self._watched):
-                    self._watched.append(tr)
-                    self.tracker.evaluate(tr, self._n)
-                    self.tracker.evaluate(tr, self._n + 1)
-            tail = self._tail()
-            if tail.last is None and lead > 0:  # at rest: the plan begins ``lead`` later
-                tail.now += lead * self._period
-                tail.sample += lead
-            tracker = self.tracker.copy()
-            complying = next((s.move for s in self._segs
-                              if s.move.code is None and s.move.spec.comply is not None), None)
-            return QueueSnapshot(tail, self._generation, tracker, self._count,
-                                 self._sigma is not None or self._stop is not None, complying)
-
-    def plan(self, spec: MotionSpec, snap: QueueSnapshot, *, in_loop: bool = False) -> Planned:
-        """Plan ``spec`` (copied whole) after ``snap``, in the caller's thread,
-        touching nothing the loop uses (a chain and frame values of its own);
-        :meth:`commit` queues it.  ``in_loop``: the caller is the loop's thread
-        (it plans with the loop's chain, waiting for no other plan).
-        RecordError names a refused field or where the path cannot go."""
-        if not isinstance(spec, MotionSpec):
-            raise RecordError(f"expected a MotionSpec, got {type(spec).__name__}")
-        if snap.stopping:
-            raise RecordError("the arm is stopping; queue again when it is at rest")
-        if snap.complying is not None:
-            raise RecordError(f"comply: the complying record {snap.complying.spec.name or ''} "
-                              "runs; queue the next one when it has ended (it starts "
-                              "where the force put the arm)")
-        spec = spec.copy()
-        move = Move(spec, snap.count)
-        if in_loop:
-            planner = self.planner
-            seg = planner.plan(spec, snap.tail, move, force_sensor=self.force_sensor)
-            return Planned(snap, seg, move)
-        with self._plan_lock:
-            if self._side is None:
-                self._side = Planner(self.chain.replace(), self.limits, snap.tracker)
-            self._side.tracker = snap.tracker
-            seg = self._side.plan(spec, snap.tail, move, force_sensor=self.force_sensor)
-        return Planned(snap, seg, move)
-
-    def commit(self, planned: Planned) -> Move:
-        """Queue a planned record (bounded: the loop's side).  :class:`StalePlan`
-        (nothing queued) when the snapshot it was planned from no longer holds:
-        something was queued or stopped since, or the trajectory has passed the
-        plan's first sample."""
-        with self._lock:
-            snap, seg = planned.snapshot, planned.segment
-            if snap.generation != self._generation:
-                raise StalePlan("the motion queue changed while the record was planned")
-            if self._sigma is not None or self._stop is not None:
-                raise StalePlan("the arm is stopping")
-            if seg.pieces and self._tp[-1] > seg.pieces[0].t0 + 1e-9:
-                raise StalePlan("the trajectory passed the plan's start while it was planned")
-            seg.frames.tracker = self.tracker  # the loop's frame values from now on
-            self._splice(seg, snap.tail)
-            self._count += 1
-            self._generation += 1
-            eq = planned.move.spec.equation
-            if eq is not None:
-                self._equation = eq
-                eq.start()
-            return planned.move
-
-    def queue(self, spec: MotionSpec) -> Move:
-        """Copy ``spec`` whole and plan it after what is queued, now, in the loop's
-        thread (:meth:`snapshot`, :meth:`plan` with the loop's chain,
-        :meth:`commit`; from another thread call the three); returns its
-        handle.  RecordError (nothing queued) names a refused field or where
-        the path cannot go."""
-        if not isinstance(spec, MotionSpec):
-            raise RecordError(f"expected a MotionSpec, got {type(spec).__name__}")
-        eq = spec.equation if spec.equation is not None else self._equation
-        live = [] if eq is None else [t for t in eq.transforms
-                                      if t.type is TransformType.FUNCTIONAL]
-        for _ in range(3):
-            planned = self.plan(spec, self.snapshot(live), in_loop=True)
-            try:
-                return self.commit(planned)
-            except StalePlan:
-                continue  # the loop moved on while planning: plan again
-        raise RecordError("the loop kept moving while the record was planned; queue it again")
 
     def queue_function(self, fn: Callable[[float], Sequence[float]], duration: float,
                        name: str = "function") -> Move:

@@ -151,7 +151,6 @@ class ArmMoves:
         return ev
 
     # -- moves: snapshot (loop), prepare (caller's thread), commit (loop) -------------------
-    _prep_lock: threading.Lock | None = None
     _prep_chain: Chain | None = None
 
     def move_snapshot(self, what: str = "move", in_loop: bool = False) -> MoveSnapshot:
@@ -175,9 +174,7 @@ class ArmMoves:
     def planning(self) -> tuple[threading.Lock, Chain]:
         """The lock one preparation at a time holds, and its chain (the loop's is
         the loop's alone)."""
-        lock = self.__dict__.get("_prep_lock")
-        if lock is None:
-            lock = self.__dict__.setdefault("_prep_lock", threading.Lock())
+        lock: threading.Lock = self.__dict__.setdefault("_prep_lock", threading.Lock())
         with lock:
             if self._prep_chain is None:
                 self._prep_chain = self.chain.replace()
