@@ -18,7 +18,13 @@ pyrt.native.Servo 53-65x (24-29x wall).  Of the timed work after: the simulated
 arm's step (pure Python, about 5 µs per 1 ms tick) 34-48 %, the servo task
 (about 3 µs) 21-22 %, the mailbox 15-28 % (each move is planned there when it
 is queued, a few ms), the trajectory task 10-14 % (one knot of the evaluator
-every 10th tick).
+every 10th tick).  With moves planned in the console's thread (the loop only
+takes the planned record), alternating runs of both on the same machine: before
+54-57x in CPU time, the mailbox 20-24 % of the loop's timed work; after 51-57x
+(the planning is the same work, done outside the ticks), the mailbox 3 %; of
+the loop's work then: the simulated arm 40-47 %, the servo task 27-29 %, the
+trajectory task 16-20 %.  The 100x target is not reached by moving the
+planning: the simulated arm's step and the servo task are most of the time.
 """
 
 from __future__ import annotations

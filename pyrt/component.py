@@ -22,7 +22,10 @@ declares, once,
 
 Commands are methods marked with :func:`command`; the grammar parses and
 checks the words on the console's side, then the handler runs with the
-parsed values in the loop's thread, in one mailbox call.  A handler's
+parsed values in the loop's thread, in one mailbox call.  A command whose
+work cannot be bounded (planning a move) declares a ``prepare`` step: it runs
+in the caller's thread against a snapshot the loop copies, and the handler
+only checks that snapshot still holds and acts (:func:`run_prepared`).  A handler's
 return value is turned into reply lines by the record's ``reply`` (default:
 ``str(value)`` unless None).
 
@@ -45,6 +48,7 @@ from __future__ import annotations
 
 import contextlib
 import inspect
+import itertools
 import math
 import re
 from collections import deque
@@ -60,6 +64,7 @@ from pyrt.units import UnitError, parse_value, value_grammar
 
 __all__ = [
     "MESSAGE_LEVELS",
+    "PREPARE_TRIES",
     "SIGNAL_KINDS",
     "STRING_LENGTH",
     "Arg",
@@ -68,7 +73,10 @@ __all__ = [
     "Limits",
     "Message",
     "Param",
+    "Prepared",
     "Signal",
+    "Snapshot",
+    "Stale",
     "Switch",
     "command",
     "finite",
@@ -76,6 +84,8 @@ __all__ = [
     "plain_text",
     "records_of",
     "reply_lines",
+    "run_prepared",
+    "serve_prepared",
     "walk",
     "word",
 ]
@@ -474,6 +484,13 @@ class Command:
     #: Ranges shown in help beside :attr:`ranges` that the grammar does not check
     #: (an argument named like a signal of its owner: that signal's display range).
     shown_ranges: tuple[str, ...] = ()
+    #: Work that cannot be bounded (solving an inverse, planning a segment), done in the
+    #: caller's thread, not in a loop tick: ``prepare(snapshot, *args)``; the handler then
+    #: takes its result alone, in the loop (:func:`run_prepared`, :func:`serve_prepared`).
+    #: None: the handler takes the parsed arguments.
+    prepare: Callable[..., Any] | None = None
+    #: What ``prepare`` needs of loop-owned state, copied in the loop (bounded), or None.
+    snapshot: Callable[[], Any] | None = None
 
     def answers_to(self, name: str) -> bool:
         """True when ``name`` (any case) is this command's name or an alias."""
@@ -612,11 +629,16 @@ def command(
     console: bool = False,
     reads_only_subcommands: Sequence[str] = (),
     aliases: Sequence[str] = (),
+    prepare: str | None = None,
+    snapshot: str | None = None,
 ) -> Callable[[_F], _F]:
     """Mark a method as a command; its docstring is its help.
 
     ``while_faulted`` defaults to "does not move"; ``anyone`` to
     ``reads_only``.  The method keeps working as a plain method.
+    ``prepare`` and ``snapshot`` name methods of the same object (the
+    record's :attr:`Command.prepare` and :attr:`Command.snapshot`); the marked
+    method is then the loop's side, given what ``prepare`` returned.
     """
 
     def mark(fn: _F) -> _F:
@@ -626,7 +648,7 @@ def command(
             else while_faulted, "anyone": reads_only if anyone is None else anyone,
             "reply": reply, "console": console,
             "subs": frozenset(w.lower() for w in reads_only_subcommands),
-            "aliases": tuple(aliases),
+            "aliases": tuple(aliases), "prepare": prepare, "snapshot": snapshot,
         })
         return fn
 
@@ -653,8 +675,87 @@ def records_of(obj: Any, owner: str = "") -> list[Command]:
             seen[spec["name"].lower()] = Command(
                 spec["name"], bound, args, doc, spec["reads_only"], spec["moves"],
                 spec["while_faulted"], spec["anyone"], spec["reply"], spec["console"], owner,
-                spec["subs"], spec["aliases"], shown)
+                spec["subs"], spec["aliases"], shown,
+                getattr(obj, spec["prepare"]) if spec.get("prepare") else None,
+                getattr(obj, spec["snapshot"]) if spec.get("snapshot") else None)
     return list(seen.values())
+
+
+class Stale(CommandError):
+    """A prepared command's snapshot no longer holds when the loop takes its
+    result (something was queued or stopped in between): prepared again."""
+
+
+#: How many times :func:`run_prepared` prepares a command whose snapshot went stale.
+PREPARE_TRIES = 3
+#: Snapshots the loop keeps for the hand-overs to come (a replay prepares from them).
+KEPT_SNAPSHOTS = 16
+_tokens = itertools.count(1)
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """The argument that asks a prepared record for its snapshot (number ``id``)."""
+
+    id: int
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """The argument that hands a prepared record's ``work`` to its handler: what
+    ``prepare`` made of ``args`` from snapshot ``id``.  A journal keeps ``id``
+    and ``args`` (not ``work``): a replay prepares again from the snapshot the
+    loop took at the same tick."""
+
+    id: int
+    args: tuple[Any, ...]
+    work: Any = field(default=None, init=False, compare=False)
+
+
+def run_prepared(record: Command, args: Sequence[Any], call: Callable[[Any], Any]) -> Any:
+    """Run ``record`` (one with :attr:`Command.prepare`) with its checked ``args``:
+    ``call(arg)`` runs the record in the loop with ``[arg]`` as its arguments (one
+    mailbox call through the station's ``execute``, which :func:`serve_prepared`
+    answers): first a :class:`Snapshot` (the loop copies what ``prepare``
+    needs), then ``prepare`` runs here, in the caller's thread, then a
+    :class:`Prepared` hands its result to the handler, which checks that the
+    snapshot still holds (else :class:`Stale`: prepared again, at most
+    :data:`PREPARE_TRIES` times, then refused; nothing moved)."""
+    assert record.prepare is not None
+    for _ in range(PREPARE_TRIES):
+        token = Snapshot(next(_tokens))
+        snap = call(token) if record.snapshot is not None else None
+        handed = Prepared(token.id, tuple(args))
+        object.__setattr__(handed, "work", record.prepare(snap, *args))
+        try:
+            return call(handed)
+        except Stale:
+            continue
+    who = f"{record.owner} {record.name}".strip()
+    raise CommandError(f"{who}: refused: the motion queue kept changing while it was "
+                       "planned; give it again; nothing moved")
+
+
+def serve_prepared(record: Command, args: Sequence[Any], kept: dict[int, Any]) -> Any:
+    """The loop's side of a prepared record (a station's ``execute``): a
+    :class:`Snapshot` is taken and kept in ``kept``; a :class:`Prepared` goes to
+    the handler (prepared here from the kept snapshot if it comes without its
+    work: a replay); plain arguments are prepared here, in the calling thread."""
+    if len(args) == 1 and isinstance(args[0], Snapshot):
+        snap = record.snapshot() if record.snapshot is not None else None
+        kept[args[0].id] = snap
+        while len(kept) > KEPT_SNAPSHOTS:
+            del kept[next(iter(kept))]
+        return snap
+    if len(args) == 1 and isinstance(args[0], Prepared):
+        handed = args[0]
+        snap = kept.pop(handed.id, None)
+        work = handed.work
+        if work is None:
+            assert record.prepare is not None
+            work = record.prepare(snap, *handed.args)
+        return record.handler(work)
+    return run_prepared(record, args, lambda arg: serve_prepared(record, [arg], kept))
 
 
 def _signal_range(arg: Arg, obj: Any, owner: str) -> str:
@@ -823,7 +924,10 @@ class Component:
         if rec is None:
             raise CommandError(f"{self.name}: unknown command {name[:40]!r}; expected one of "
                                f"{', '.join(c.name for c in self.commands()) or 'none'}")
-        return rec.handler(*rec.parse(list(words), " ".join(words)))
+        args = rec.parse(list(words), " ".join(words))
+        if rec.prepare is not None:
+            return serve_prepared(rec, args, {})
+        return rec.handler(*args)
 
     def check_free(self, what: str) -> None:
         """Refuse a command that changes this device while its owner drives it

@@ -77,7 +77,7 @@ from hypothesis import settings as hypothesis_settings
 from hypothesis import strategies as st
 
 from pyrt.commands.robot import RobotShell
-from pyrt.component import Command, Component, walk
+from pyrt.component import Command, Component, run_prepared, walk
 from pyrt.errors import CommandError, PyrtError
 from pyrt.server import ServedStation, Server
 from pyrt.server.epics import FIXED_PVS, caproto_available
@@ -221,6 +221,9 @@ class StationConformance:
                 words: list[str]) -> Any:
         """Parse ``words`` by ``rec``'s grammar and run it through the loop."""
         args = rec.parse(words, " ".join(words))
+        if rec.prepare is not None:  # planned in this thread, enqueued by the loop
+            return run_prepared(rec, args, lambda arg: runner.call(
+                station.execute, comp, rec, [arg], take_fault=False))
         return runner.call(station.execute, comp, rec, args, take_fault=False)
 
     # -- names, help, grammar, classification ------------------------------------------------

@@ -184,7 +184,7 @@ def test_an_arm_fault_during_a_pick_stops_the_arm_the_jaws_and_the_sequence(cell
 def test_a_pick_out_of_reach_is_refused_and_nothing_moves(cell):
     """pick at a place the arm cannot reach: refused before anything moves."""
     station, _runner, shell, out = cell
-    shell.onecmd("pick 3000 0 0")
+    shell.onecmd("pick 1500 0 0")
     shell.onecmd("pick 1900 1900 0")
     assert "pick: refused" in out.getvalue()
     assert not station.busy() and not station.pick.running
@@ -374,3 +374,25 @@ def test_each_robot_of_the_served_cell_has_its_own_epics_prefix(cell):
     if caproto_available():  # the PVs the IOC serves are these names under its prefix
         epics = EpicsService(runner, served, Server(runner, served, "127.0.0.1", 0), "CELL:")
         assert {"CELL:PUMA:JOINT1:POSITION", "CELL:GRIPPER:FAULT_MSG"} <= set(epics.pvdb)
+
+
+def test_pick_solves_its_poses_outside_the_loop(cell, monkeypatch):
+    """pick X Y Z from the console: its three poses are solved with the loop not ticking (counted, not timed); an unreachable pick is refused before anything moves."""
+    from pyrt.station._urdf_moves import ArmMoves
+
+    station, runner, shell, out = cell
+    ticking: list[bool] = []
+    solve = ArmMoves.solve
+
+    def watched(self, *a, **k):
+        ticking.append(runner.loop.running)
+        return solve(self, *a, **k)
+
+    monkeypatch.setattr(ArmMoves, "solve", watched)
+    shell.onecmd("pick 1500 0 0")
+    assert "pick: refused" in out.getvalue() and not runner.call(station.busy)
+    shell.onecmd("sim object {} {} {}".format(*OBJECT))
+    shell.onecmd("pick {} {} {}".format(*OBJECT))
+    assert len(ticking) >= 4 and not any(ticking)
+    shell.onecmd("wait")
+    assert "picked: the object lifted" in out.getvalue()

@@ -8,7 +8,18 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pyrt.component import Arg, Component, command, finite
+from pyrt.component import (
+    PREPARE_TRIES,
+    Arg,
+    Component,
+    Prepared,
+    Snapshot,
+    Stale,
+    command,
+    finite,
+    run_prepared,
+    serve_prepared,
+)
 from pyrt.errors import CommandError
 
 
@@ -106,3 +117,91 @@ def test_a_signal_of_an_unknown_kind_or_a_length_that_bounds_no_text_is_refused(
 
     with pytest.raises(ValueError, match="signal 'v'"):
         Signal("v", "text", lambda: "", **kw)
+
+
+class Planned(Component):
+    """A component whose ``go`` is prepared in the caller's thread."""
+
+    name = "planned"
+
+    def __init__(self) -> None:
+        self.version = 0
+        self.log: list[tuple[str, object]] = []
+        #: Something to do between a snapshot and its hand-over (once), or None.
+        self.between: object = None
+
+    def take(self) -> int:
+        self.log.append(("snapshot", self.version))
+        return self.version
+
+    def work(self, snap: int, x: float) -> tuple[int, float]:
+        self.log.append(("prepare", snap))
+        return snap, 2 * x
+
+    @command(Arg("X", float, lo=0.0, hi=10.0), name="go", moves=True, prepare="work",
+             snapshot="take")
+    def go(self, work: tuple[int, float]) -> str:
+        """go X: prepared, then handed over."""
+        snap, value = work
+        if callable(self.between):
+            act, self.between = self.between, None
+            act()
+        if snap != self.version:
+            raise Stale("planned: changed meanwhile")
+        self.version += 1
+        return f"went {value:g}"
+
+
+def test_a_prepared_command_takes_its_snapshot_prepares_then_hands_over():
+    """A record with prepare: the snapshot, then prepare (with the snapshot and the parsed arguments), then the handler with prepare's result; run_command and serve_prepared do the same in one thread."""
+    p = Planned()
+    rec = p.find_command("go")
+    assert rec is not None and rec.prepare is not None and rec.snapshot is not None
+    assert "Range: X 0..10" in rec.help
+    assert p.run_command("go", "3") == "went 6"
+    assert p.log == [("snapshot", 0), ("prepare", 0)]
+    calls: list[object] = []
+
+    def call(arg: object) -> object:
+        calls.append(type(arg).__name__)
+        return serve_prepared(rec, [arg], kept)
+
+    kept: dict[int, object] = {}
+    assert run_prepared(rec, rec.parse(["4"]), call) == "went 8"
+    assert calls == ["Snapshot", "Prepared"] and kept == {}
+
+
+def test_a_stale_snapshot_is_prepared_again_then_refused():
+    """The handler says Stale: prepared again from a new snapshot (it then succeeds); stale every time: refused after PREPARE_TRIES with a clear error."""
+    p = Planned()
+    rec = p.find_command("go")
+    assert rec is not None
+
+    def bump() -> None:
+        p.version += 1
+
+    p.between = bump
+    assert p.run_command("go", "1") == "went 2"
+    assert [w for w, _ in p.log].count("prepare") == 2
+
+    class Always(Planned):
+        @command(Arg("X", float), name="go", moves=True, prepare="work", snapshot="take")
+        def go(self, work: tuple[int, float]) -> str:
+            """go X: never holds."""
+            raise Stale("always")
+
+    a = Always()
+    with pytest.raises(CommandError, match="refused: the motion queue kept changing"):
+        a.run_command("go", "1")
+    assert [w for w, _ in a.log].count("prepare") == PREPARE_TRIES
+
+
+def test_a_replayed_hand_over_prepares_again_from_the_snapshot_taken_at_its_tick():
+    """A Prepared without its work (what a journal keeps) is prepared from the snapshot the loop kept under its number, giving the same result."""
+    p = Planned()
+    rec = p.find_command("go")
+    assert rec is not None
+    kept: dict[int, object] = {}
+    assert serve_prepared(rec, [Snapshot(7)], kept) == 0
+    assert serve_prepared(rec, [Prepared(7, (5.0,))], kept) == "went 10"
+    assert kept == {}

@@ -204,3 +204,137 @@ def test_a_conveyor_that_carries_the_point_where_the_arm_cannot_follow_brakes_it
     assert float(np.max(np.abs(qd))) < math.radians(0.5)
     runner.call(arm.set_conveyor, 0, 0, 0)
     runner.call(arm.set_coord, 0, 0, 0, 0, 0, 0)
+
+
+# -- planning outside the loop ------------------------------------------------------------------
+
+
+@pytest.fixture
+def planned_where(puma, monkeypatch):
+    """Every plan and every inverse of a move, with whether the loop was ticking then."""
+    from pyrt.motion.planner import Planner
+    from pyrt.station._urdf_moves import ArmMoves
+
+    station, _ = puma
+    loop = station.runner.loop
+    seen: list[tuple[str, bool]] = []
+    plan, solve = Planner.plan, ArmMoves.solve
+
+    def watched_plan(self, *a, **k):
+        seen.append(("plan", loop.running))
+        return plan(self, *a, **k)
+
+    def watched_solve(self, *a, **k):
+        seen.append(("solve", loop.running))
+        return solve(self, *a, **k)
+
+    monkeypatch.setattr(Planner, "plan", watched_plan)
+    monkeypatch.setattr(ArmMoves, "solve", watched_solve)
+    return seen
+
+
+def _shell(station, runner):
+    import io
+
+    from pyrt.commands.robot import RobotShell
+
+    out = io.StringIO()
+    shell = RobotShell(station, out, runner=runner)
+
+    def say(line: str) -> str:
+        out.seek(0)
+        out.truncate()
+        shell.onecmd(line)
+        return out.getvalue()
+
+    return say
+
+
+def test_console_moves_are_planned_outside_the_loop_and_queued_plans_blend(puma, planned_where):
+    """movej, moveto and movel from the console: every plan and inverse runs in the console's thread with the loop not ticking (none in a tick); a move given while one is queued plans from the queued end and blends into it; the tool ends at the last target in truth."""
+    station, runner = puma
+    _go(station, runner, (500, 100, 400, 180, 20, 90))
+    planned_where.clear()
+    say = _shell(station, runner)
+    assert "moving to" in say("puma560 movej 10 50 -170 10 -40 10")
+    assert "blends into the running move" in say("puma560 moveto 500 -100 400 180 0 90")
+    # planned from the queued end of movej: a blend at its corner
+    assert runner.call(lambda: station.arm._latest.buffer) == "blending"
+    # the line from the joint move's end: no room for a blend, and the reply says so
+    said = say("puma560 movel 450 -100 350 180 0 90")
+    assert "at rest on its target: no blend (no room to blend" in said, said
+    kinds = {k for k, _ in planned_where}
+    assert kinds == {"plan", "solve"}
+    assert [k for k, ticking in planned_where if ticking] == []
+    _settle(station, runner)
+    assert runner.call(lambda: station.arm.last_stop) == "at target"
+    truth = runner.call(lambda: station.plant.truth().tool[:3, 3].copy())
+    assert np.linalg.norm(truth * 1e3 - [450, -100, 350]) < 0.5
+
+
+def test_a_tick_that_takes_a_console_move_plans_nothing(puma, planned_where):
+    """The hand-over of a console move is bounded: in the tick that takes it, and every tick while it runs, no plan and no inverse of a move is made (counted, not timed)."""
+    station, runner = puma
+    _go(station, runner, (500, 100, 400, 180, 20, 90))
+    planned_where.clear()
+    say = _shell(station, runner)
+    for line in ("puma560 movej 0 45 -180 0 -45 0", "puma560 moveto 500 0 450 180 0 90",
+                 "puma560 movel 480 0 400 180 0 90"):
+        assert "refused" not in say(line)
+    _settle(station, runner)
+    assert len(planned_where) >= 3
+    assert sum(1 for _, ticking in planned_where if ticking) == 0
+
+
+def _prepared_call(station, runner, rec, between):
+    """The console's hand-over of ``rec``, with ``between()`` run in the loop after its
+    snapshot and before its hand-over (once)."""
+    from pyrt.component import Prepared
+
+    done = []
+
+    def call(arg):
+        if isinstance(arg, Prepared) and not done:
+            done.append(runner.call(between))
+        return runner.call(station.execute, station.arm, rec, [arg])
+
+    return call
+
+
+def test_a_stop_between_planning_and_hand_over_refuses_the_move_nothing_moves(puma):
+    """A stop taken after a move's snapshot and before its hand-over: the plan is stale, planning again is refused while the arm brakes, with a clear error; the arm comes to rest short of that move's target and nothing stays queued."""
+    from pyrt.component import run_prepared
+
+    station, runner = puma
+    arm = station.arm
+    _go(station, runner, (500, 100, 400, 180, 20, 90))
+    runner.call(arm.move_joints, 10, 50, -170, 10, -40, 10)
+    runner.sleep(0.2)
+    rec = arm.find_command("movej")
+    target = [-20.0, 30.0, -150.0, -10.0, -30.0, -10.0]
+    with pytest.raises(CommandError, match=r"refused: the arm is stopping.*nothing moved"):
+        run_prepared(rec, rec.parse([f"{v:g}" for v in target]),
+                     _prepared_call(station, runner, rec, station.stop))
+    _settle(station, runner)
+    q = np.degrees(runner.call(lambda: arm.q.copy()))
+    assert np.max(np.abs(q - target)) > 5.0, "the refused move ran"
+    assert runner.call(lambda: arm.last_stop).startswith("stopped")
+
+
+def test_a_move_queued_between_planning_and_hand_over_is_planned_again_from_it(puma):
+    """Another move queued after a move's snapshot and before its hand-over: the hand-over is stale, the move is planned again from the new queued end, and the arm ends at the move given last, in truth."""
+    from pyrt.component import run_prepared
+
+    station, runner = puma
+    arm = station.arm
+    _go(station, runner, (500, 100, 400, 180, 20, 90))
+    rec = arm.find_command("movej")
+    last = [0.0, 45.0, -180.0, 0.0, -45.0, 0.0]
+    said = run_prepared(rec, rec.parse([f"{v:g}" for v in last]),
+                        _prepared_call(station, runner, rec,
+                                       lambda: arm.move_joints(10, 50, -170, 10, -40, 10)))
+    assert "queued" in said
+    _settle(station, runner)
+    q = np.degrees(runner.call(lambda: arm.q.copy()))
+    assert np.max(np.abs(q - last)) < 0.05
+    assert runner.call(lambda: arm.last_stop) == "at target"

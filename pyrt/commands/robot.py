@@ -34,7 +34,15 @@ from pyrt.commands._motion import motion_type_lines, parse_motion
 from pyrt.commands.scope import ScopeCommand
 from pyrt.commands.shell import CommandShell, parse_seconds
 from pyrt.commands.show import ShowWord
-from pyrt.component import Arg, Command, Component, Switch, command, reply_lines
+from pyrt.component import (
+    Arg,
+    Command,
+    Component,
+    Switch,
+    command,
+    reply_lines,
+    run_prepared,
+)
 from pyrt.errors import CommandError, FaultError, MailboxTimeout, PyrtError
 from pyrt.scheduler import Job
 from pyrt.scheduler.report import format_statistics
@@ -128,8 +136,12 @@ class RobotShell(LineResolver, CommandShell, ShowWord):
             self.audit(self.source, line)
         if comp is None:
             return bool(rec.handler(*args))
-        result = self.call(self.station.execute, comp, rec, args,
-                           name=f"{comp.name} {rec.name}")
+        name = f"{comp.name} {rec.name}"
+        if rec.prepare is not None:  # planned here, in this thread; the loop only enqueues
+            result = run_prepared(rec, args, lambda arg: self.call(
+                self.station.execute, comp, rec, [arg], name=name))
+        else:
+            result = self.call(self.station.execute, comp, rec, args, name=name)
         if isinstance(result, Job):
             result = self._wait_job(result)
             if result is None:

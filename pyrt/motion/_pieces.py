@@ -166,12 +166,18 @@ class FrameTracker:
     def evaluate(self, t: Transform, sample: int) -> Matrix:
         """The transform at ``sample`` now (the loop's evaluation), remembered."""
         v = t.evaluate(sample)
-        hist = self._seen.setdefault(id(t), [])
+        hist = self._seen.get(id(t), [])
         if not hist or hist[-1][0] != sample:
-            hist.append((sample, v))
-            if len(hist) > 2:
-                del hist[0]
+            # a new list, never one changed in place: a plan reads the history from
+            # another thread
+            self._seen[id(t)] = [*hist[-1:], (sample, v)]
         return v
+
+    def copy(self) -> FrameTracker:
+        """A tracker with the values seen so far (a plan's own)."""
+        out = FrameTracker(self.period)
+        out._seen = dict(self._seen)
+        return out
 
     def value(self, t: Transform, sample: float) -> Matrix:
         hist = self._seen.get(id(t))

@@ -1,8 +1,11 @@
 """The trajectory tick: what the trajectory task calls once per period.
 
-:class:`Evaluator` holds one arm's queued motion.  :meth:`Evaluator.queue`
-plans a record (outside the loop: the caller's thread) and hands the pieces
-over under a lock; :meth:`Evaluator.tick` evaluates one sample and returns a
+:class:`Evaluator` holds one arm's queued motion.  A record is planned
+outside the loop: :meth:`Evaluator.snapshot` copies what a plan needs
+(bounded), :meth:`Evaluator.plan` plans in the caller's thread with a chain
+of its own, and :meth:`Evaluator.commit` (bounded, the loop's side) checks
+the snapshot still holds and hands the pieces over (:meth:`Evaluator.queue`
+does the three); :meth:`Evaluator.tick` evaluates one sample and returns a
 :class:`Knot`: joint position, velocity and acceleration (for the servo's
 quintic interpolation), T6, the running record's progress, and the events
 of the tick.  A tick's work is bounded: one polynomial, one inverse (seeded
@@ -59,10 +62,11 @@ from pyrt.frames import TransformType
 from pyrt.kinematics import GRAVITY, Chain, JointSets
 from pyrt.motion._comply import ComplyLoop
 from pyrt.motion._pieces import CART, FUNC, JOINT, FrameTracker, Piece, transition_coeffs
+from pyrt.motion._queueing import Planned, Queueing, QueueSnapshot, StalePlan
 from pyrt.motion.planner import Limits, Planner, Segment, Tail
 from pyrt.motion.record import BufferMode, MotionSpec, Move, RecordError, Termination
 
-__all__ = ["Evaluator", "Knot", "MotionFault"]
+__all__ = ["Evaluator", "Knot", "MotionFault", "Planned", "QueueSnapshot", "StalePlan"]
 
 Matrix = npt.NDArray[np.float64]
 Vector = npt.NDArray[np.float64]
@@ -100,7 +104,7 @@ class Knot:
     payload_torque: Vector | None
 
 
-class Evaluator:
+class Evaluator(Queueing):
     """One arm's queued motion and its trajectory tick (see the module doc).
 
     ``chain`` and ``limits`` describe the arm, ``q0`` where it rests now,
@@ -124,6 +128,11 @@ class Evaluator:
             raise ValueError(f"q0: {why}")
         self.force_sensor = force_sensor
         self._lock = threading.Lock()
+        #: Plans made outside the loop use a chain of their own, one plan at a time.
+        self._plan_lock = threading.Lock()
+        self._side: Planner | None = None
+        #: Changes whenever something is queued or stopped (a snapshot's validity).
+        self._generation = 0
         self._period = period
         self._pieces: list[Piece] = []
         self._segs: list[Segment] = []
@@ -170,56 +179,6 @@ class Evaluator:
         with self._lock:
             return (not self._pieces or self._k >= len(self._pieces)) and self._sigma is None
 
-    def _tail(self) -> Tail:
-        last = self._segs[-1] if self._segs else None
-        if last is not None and self._k >= len(self._pieces):
-            last = None
-        return Tail(self._tp[-1], self._n + 1, self._period, self._q[-1].copy(),
-                    self._t6[-1].copy(), list(self._pieces), last, self._equation,
-                    self._config)
-
-    def queue(self, spec: MotionSpec) -> Move:
-        """Copy ``spec`` whole and plan it after what is queued; returns its
-        handle.  RecordError (nothing queued) names a refused field or where
-        the path cannot go."""
-        if not isinstance(spec, MotionSpec):
-            raise RecordError(f"expected a MotionSpec, got {type(spec).__name__}")
-        spec = spec.copy()
-        eq = spec.equation if spec.equation is not None else self._equation
-        live = [] if eq is None else [t for t in eq.transforms
-                                      if t.type is TransformType.FUNCTIONAL]
-        for _ in range(3):
-            with self._lock:
-                for tr in live:
-                    # a moving frame is evaluated every sample from now on, so its
-                    # velocity is known when a plan or a transition needs it
-                    if all(tr is not w for w in self._watched):
-                        self._watched.append(tr)
-                        self.tracker.evaluate(tr, self._n)
-                        self.tracker.evaluate(tr, self._n + 1)
-                tail = self._tail()
-                stopping = self._sigma is not None or self._stop is not None
-            if stopping:
-                raise RecordError("the arm is stopping; queue again when it is at rest")
-            complying = next((s.move for s in self._segs
-                              if s.move.code is None and s.move.spec.comply is not None), None)
-            if complying is not None:
-                raise RecordError(f"comply: the complying record {complying.spec.name or ''} "
-                                  "runs; queue the next one when it has ended (it starts "
-                                  "where the force put the arm)")
-            move = Move(spec, self._count)
-            seg = self.planner.plan(spec, tail, move, force_sensor=self.force_sensor)
-            with self._lock:
-                if self._tp[-1] != tail.now or len(self._pieces) != len(tail.pieces):
-                    continue  # the loop moved on while planning: plan again
-                self._splice(seg, tail)
-                self._count += 1
-                if spec.equation is not None:
-                    self._equation = spec.equation
-                    spec.equation.start()
-                return move
-        raise RecordError("the loop kept moving while the record was planned; queue it again")
-
     def queue_function(self, fn: Callable[[float], Sequence[float]], duration: float,
                        name: str = "function") -> Move:
         """A plug-in joint motion: ``fn(t)`` gives the joint values for ``0 <= t
@@ -246,6 +205,7 @@ class Evaluator:
             seg.rested = True
             self._pieces.append(seg.pieces[0])
             self._segs.append(seg)
+            self._generation += 1
             return move
 
     def _splice(self, seg: Segment, tail: Tail) -> None:
@@ -284,6 +244,7 @@ class Evaluator:
     def stop(self, code: str = Termination.STOPPED) -> None:
         """Brake to rest (along the path) and drop what is queued."""
         with self._lock:
+            self._generation += 1
             if self._stop is None:
                 self._stop = (str(code), None)
 

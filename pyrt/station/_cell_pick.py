@@ -1,8 +1,9 @@
 """The cell's ``pick X Y Z``: a sequence of both robots' moves that the loop runs.
 
-``pick`` (one mailbox call) solves the arm's three poses at once, before
-anything moves (the tool pointing down above the object, at it, and lifted:
-an unreachable one refuses the pick, nothing moved), and starts the
+``pick`` solves the arm's three poses at once, in the console's thread
+against a copy of the arm's frames the loop takes, before anything moves (the
+tool pointing down above the object, at it, and lifted: an unreachable one
+refuses the pick, nothing moved); one mailbox call then starts the
 sequence; the loop then runs it one step after another, each step started
 when the one before has ended as it should:
 
@@ -23,11 +24,13 @@ loop handler that looks once a tick.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from pyrt.boards.i8031 import PROX
+from pyrt.component import Stale
 from pyrt.errors import CommandError
 from pyrt.kinematics import transform
 from pyrt.station.gripper import AT_TARGET_COUNTS
@@ -53,6 +56,25 @@ INNER_FACES = 0x11
 _STEPS = ("approach", "open", "descend", "close", "lift")
 
 
+@dataclass(frozen=True)
+class PickSnapshot:
+    """What solving a pick's poses needs of the arm: its COORD and TOOL (its own
+    arrays, replaced, never changed in place) and where it is heading."""
+
+    coord: np.ndarray
+    tool: np.ndarray
+    heading: np.ndarray
+
+
+@dataclass(frozen=True)
+class PickWork:
+    """A pick solved in the caller's thread: the arm's three joint targets."""
+
+    snapshot: PickSnapshot
+    where: str
+    targets: list[np.ndarray]
+
+
 class PickSequence:
     """``pick``'s sequence of the cell ``cell`` (see the module text)."""
 
@@ -66,12 +88,9 @@ class PickSequence:
         self._targets: list[np.ndarray] = []
         self._where = ""
 
-    # -- the command (loop thread) ------------------------------------------------------
+    # -- the command: checked and copied in the loop, solved in the caller's thread ------
 
-    def start(self, x: float, y: float, z: float) -> str:
-        """Plan and start a pick of the object at (x, y, z) mm; CommandError with the
-        reason, nothing moved, if a robot is stopped by a fault, something moves, or
-        a pose is out of reach."""
+    def _refusal(self) -> None:
         cell = self.cell
         for r in cell.robots:
             if r.fault is not None:
@@ -79,26 +98,55 @@ class PickSequence:
                                    f"({r.fault.cause}); give 'ack {r.name}' first; nothing moved")
         if self.running or cell.busy():
             raise CommandError("pick: refused: a move runs; wait or stop first; nothing moved")
-        arm = cell.arm
+
+    def snapshot(self) -> PickSnapshot:
+        """What solving the poses needs (the loop's side, bounded); refused with the
+        reason if a robot is stopped by a fault or something moves."""
+        self._refusal()
+        arm = self.cell.arm
+        return PickSnapshot(arm.coord_frame, arm.tool_frame, arm.heading())
+
+    def prepare(self, snap: PickSnapshot, x: float, y: float, z: float) -> PickWork:
+        """The three poses solved against ``snap`` (the caller's thread, the arm's
+        preparation chain); CommandError with the reason if one is out of reach."""
+        arm = self.cell.arm
+        lock, chain = arm.planning()
         targets = []
-        for what, dz in (("approach", APPROACH_MM), ("descend", 0.0), ("lift", LIFT_MM)):
-            pose = transform(np.array([x, y, z + dz]) * 1e-3, np.radians(TOOL_DOWN_DEG))
-            try:
-                q = arm.solve(arm.coord_frame @ pose @ np.linalg.inv(arm.tool_frame), None)
-            except CommandError as exc:
-                raise CommandError(f"pick: refused: the {what} pose ({x:g}, {y:g}, "
-                                   f"{z + dz:g}) mm: {exc}") from None
-            why = arm.chain.limit_violation(q)
-            if why:
-                raise CommandError(f"pick: refused: the {what} pose is beyond a joint limit "
-                                   f"({why}); nothing moved")
-            targets.append(q)
-        self._targets = targets
-        self._where = f"({x:g}, {y:g}, {z:g}) mm"
+        with lock:
+            for what, dz in (("approach", APPROACH_MM), ("descend", 0.0), ("lift", LIFT_MM)):
+                pose = transform(np.array([x, y, z + dz]) * 1e-3, np.radians(TOOL_DOWN_DEG))
+                try:
+                    q = arm.solve(snap.coord @ pose @ np.linalg.inv(snap.tool), None,
+                                  snap.heading, chain)
+                except CommandError as exc:
+                    raise CommandError(f"pick: refused: the {what} pose ({x:g}, {y:g}, "
+                                       f"{z + dz:g}) mm: {exc}") from None
+                why = chain.limit_violation(q)
+                if why:
+                    raise CommandError(f"pick: refused: the {what} pose is beyond a joint "
+                                       f"limit ({why}); nothing moved")
+                targets.append(q)
+        return PickWork(snap, f"({x:g}, {y:g}, {z:g}) mm", targets)
+
+    def begin(self, work: PickWork) -> str:
+        """Start the prepared pick (the loop's side): refused as :meth:`snapshot` is;
+        :class:`~pyrt.component.Stale` if the arm's frames changed since."""
+        self._refusal()
+        arm = self.cell.arm
+        if arm.coord_frame is not work.snapshot.coord or arm.tool_frame is not work.snapshot.tool:
+            raise Stale("pick: the arm's frames changed while the poses were solved")
+        self._targets = work.targets
+        self._where = work.where
         self.running = True
         self.last = ""
         self._begin(1)
         return f"pick at {self._where}: approach, open, descend, close, lift"
+
+    def start(self, x: float, y: float, z: float) -> str:
+        """Solve and start a pick of the object at (x, y, z) mm in the calling thread;
+        CommandError with the reason, nothing moved, if a robot is stopped by a
+        fault, something moves, or a pose is out of reach."""
+        return self.begin(self.prepare(self.snapshot(), x, y, z))
 
     # -- the loop -----------------------------------------------------------------------
 

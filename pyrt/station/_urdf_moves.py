@@ -15,17 +15,21 @@ ranges shown from its signals), and the arm's moving state is theirs to read.
 
 from __future__ import annotations
 
+import contextlib
 import math
+import threading
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from pyrt.component import Arg, Command, Limits, command
+from pyrt.component import PREPARE_TRIES, Arg, Command, Limits, Stale, command
 from pyrt.errors import CommandError
 from pyrt.frames import PositionEquation, Transform, inverse
 from pyrt.kinematics import Chain, transform
 from pyrt.motion import Comply, Evaluator, MotionSpec, Move, RecordError
+from pyrt.motion.evaluator import Planned, QueueSnapshot, StalePlan
 
 if TYPE_CHECKING:
     from pyrt.station.base import Station
@@ -62,6 +66,42 @@ COMPLY_HELP = ("movel's OPTIONS may say comply AXES N[,N..]: the tool frame's AX
 CONVEYOR_MAX_MM_S = 500.0
 _OPTIONS = Arg("OPTIONS", str, optional=True, rest=True)
 _BUFFER_MODES = ("aborting", "buffered", "blending")
+#: Trajectory periods a move from rest leaves for its planning and hand-over before
+#: it begins (a plan the trajectory has overtaken is made again).
+PLAN_LEAD = 2
+
+
+@dataclass(frozen=True)
+class MoveSnapshot:
+    """What planning a move needs of the arm, copied in the loop (bounded):
+    the queue's end (the evaluator's :class:`QueueSnapshot`; None while the
+    amplifiers are off: the hand-over powers on and the move is planned
+    again), where the arm is heading, and the frames (the arm's own arrays,
+    replaced and never changed in place, so the hand-over can tell they are
+    the same)."""
+
+    evaluator: Evaluator | None
+    queue: QueueSnapshot | None
+    heading: np.ndarray
+    tool_frame: np.ndarray
+    coord_frame: np.ndarray
+    conveyor: Conveyor | None
+    #: COORD when the snapshot was taken (a running conveyor's pose then).
+    coord_now: np.ndarray
+    #: Taken for a move planned in the loop's own thread (a sequence's step): it
+    #: plans with the loop's chain, not the preparation's.
+    in_loop: bool = False
+
+
+@dataclass(frozen=True)
+class MoveWork:
+    """A move prepared in the caller's thread: its plan, what the reply says."""
+
+    snapshot: MoveSnapshot
+    what: str
+    planned: Planned | None
+    end: np.ndarray | None
+    to: str
 
 
 class ArmMoves:
@@ -110,16 +150,77 @@ class ArmMoves:
         assert ev is not None
         return ev
 
-    def _queue_spec(self, spec: MotionSpec, what: str, end: np.ndarray | None, to: str) -> str:
-        """Queue ``spec`` (its joints at the end ``end`` if known); refused with the
-        reason, nothing moved."""
-        ev = self._powered_evaluator(what)
-        busy = self.state != "idle"
+    # -- moves: snapshot (loop), prepare (caller's thread), commit (loop) -------------------
+    _prep_chain: Chain | None = None
+
+    def move_snapshot(self, what: str = "move", in_loop: bool = False) -> MoveSnapshot:
+        """What a move's planning needs, copied (the loop's side, bounded);
+        refused while faulted.  ``in_loop``: the move is planned in the loop's
+        own thread, at once (no lead for its planning; the loop's chain)."""
+        lead = 0 if in_loop else PLAN_LEAD
+        fault = self.station.fault
+        if fault is not None:
+            raise CommandError(f"{self.name} {what}: refused: stopped by a fault ({fault.cause});"
+                               " give 'ack' first; nothing moved")
+        ev = self.evaluator if self.powered else None
+        belt = self.conveyor
+        queue = None
+        if ev is not None:
+            queue = ev.snapshot((belt.transform,) if belt is not None else (), lead=lead)
+        return MoveSnapshot(ev, queue, self.heading(), self.tool_frame, self.coord_frame, belt,
+                            belt.pose_now() if belt is not None else self.coord_frame.copy(),
+                            in_loop)
+
+    def planning(self) -> tuple[threading.Lock, Chain]:
+        """The lock one preparation at a time holds, and its chain (the loop's is
+        the loop's alone)."""
+        lock: threading.Lock = self.__dict__.setdefault("_prep_lock", threading.Lock())
+        with lock:
+            if self._prep_chain is None:
+                self._prep_chain = self.chain.replace()
+        return lock, self._prep_chain
+
+    def _chain_for(self, snap: MoveSnapshot) -> tuple[Any, Chain]:
+        """The chain a preparation uses, with what it holds meanwhile: in the loop's
+        thread the loop's own chain; elsewhere the preparation's, under its lock."""
+        if snap.in_loop:
+            return contextlib.nullcontext(), self.chain
+        return self.planning()
+
+    def _prepare(self, snap: MoveSnapshot, spec: MotionSpec, what: str, end: np.ndarray | None,
+                 to: str) -> MoveWork:
+        """Plan ``spec`` against ``snap`` (the caller's thread); refused with the reason."""
+        ev, queue = snap.evaluator, snap.queue
+        if ev is None or queue is None:
+            return MoveWork(snap, what, None, end, to)
         try:
-            self._latest = ev.queue(spec)
+            planned = ev.plan(spec, queue, in_loop=snap.in_loop)
         except RecordError as exc:
             why = str(exc).removeprefix(f"{what}: ").removeprefix("refused: ")
             raise CommandError(f"{self.name} {what}: refused: {why}; nothing moved") from None
+        return MoveWork(snap, what, planned, end, to)
+
+    def commit_move(self, work: MoveWork) -> str:
+        """Queue a prepared move (the loop's side, bounded): :class:`Stale` if the
+        arm changed since its snapshot (it is planned again), else the reply."""
+        snap, what = work.snapshot, work.what
+        if work.planned is None:  # the amplifiers were off: on now, then planned again
+            self._powered_evaluator(what)
+            raise Stale(f"{self.name} {what}: planned again with the amplifiers on")
+        if (self.evaluator is not snap.evaluator or not self.powered
+                or self.tool_frame is not snap.tool_frame
+                or self.coord_frame is not snap.coord_frame or self.conveyor is not snap.conveyor):
+            raise Stale(f"{self.name} {what}: the arm changed while the move was planned")
+        ev = self._powered_evaluator(what)
+        busy = self.state != "idle"
+        try:
+            self._latest = ev.commit(work.planned)
+        except StalePlan as exc:
+            raise Stale(f"{self.name} {what}: {exc}") from None
+        return self._queued(work.planned.move, work.end, work.to, busy)
+
+    def _queued(self, move: Move, end: np.ndarray | None, to: str, busy: bool) -> str:
+        spec = move.spec
         tracking = self.state == "tracking"
         self.last_stop = ""
         self._heading = end
@@ -133,19 +234,23 @@ class ArmMoves:
             return f"aborting the running move: braking into the move to {to}"
         if spec.buffer == "buffered":
             return f"queued: {to}; it starts when the running move is at rest on its target"
+        if move.buffer == "buffered" and move.note:  # a blend the planner could not make
+            return (f"queued: {to}; it starts when the running move is at rest on its target: "
+                    f"no blend ({move.note})")
         return f"queued: {to}; it blends into the running move"
 
-    def _queue(self, q: np.ndarray, what: str, options: dict[str, Any] | None = None) -> str:
-        """Queue a joint move to ``q`` (rad, m); refused with the reason, nothing moved."""
-        if self.chain.limit_violation(q):
+    def _joint_spec(self, q: np.ndarray, what: str, options: dict[str, Any] | None,
+                    chain: Chain, tool_frame: np.ndarray) -> tuple[MotionSpec, str]:
+        """A joint move's record and its words; refused beyond a limit."""
+        if chain.limit_violation(q):
             raise CommandError(f"{self.name} {what}: refused: the target is beyond a joint "
                                f"limit ({self._limit_words(q)}); nothing moved")
         to = (f"joints {self.joints_text(q)}; "
-              f"tool {self.pose_text(self.chain.fk(q) @ self.tool_frame)}")
-        cfg = self.config(q)
+              f"tool {self.pose_text(chain.fk(q) @ tool_frame)}")
+        closed = chain.closed_form
+        cfg = "" if closed is None else str(closed.config_of(q))
         to += f"; {cfg}" if cfg else ""
-        spec = MotionSpec(target=tuple(float(v) for v in q), name=what, **(options or {}))
-        return self._queue_spec(spec, what, q.copy(), to)
+        return MotionSpec(target=tuple(float(v) for v in q), name=what, **(options or {})), to
 
     def _limit_words(self, q: np.ndarray) -> str:
         for i, (v, jt) in enumerate(zip(q, self.chain.joints, strict=True)):
@@ -167,17 +272,29 @@ class ArmMoves:
                "A target beyond a joint limit is refused with the limit; nothing moves.\n"
                f"{OPTIONS_HELP}\n"
                "Range: " + "; ".join(a.range_text for a in args) + ".")
-        return Command("movej", self.move_joints, (*args, _OPTIONS), doc, moves=True,
-                       while_faulted=False, owner=self.name)
+        return Command("movej", self.commit_move, (*args, _OPTIONS), doc, moves=True,
+                       while_faulted=False, owner=self.name, prepare=self.prepare_movej,
+                       snapshot=lambda: self.move_snapshot("movej"))
 
-    def move_joints(self, *values: float | str) -> str:
-        """The handler of ``movej``: one value per joint (operator units), then the
-        options' text if any."""
+    def prepare_movej(self, snap: MoveSnapshot, *values: float | str) -> MoveWork:
+        """``movej`` in the caller's thread: its record planned against ``snap``."""
+        q, opts = self._joint_values(values)
+        lock, chain = self._chain_for(snap)
+        with lock:
+            spec, to = self._joint_spec(q, "movej", opts, chain, snap.tool_frame)
+            return self._prepare(snap, spec, "movej", q.copy(), to)
+
+    def _joint_values(self, values: Sequence[float | str]) -> tuple[np.ndarray, dict[str, Any]]:
         opts = values[self.n] if len(values) == self.n + 1 else None
         if len(values) not in (self.n, self.n + 1) or not (opts is None or isinstance(opts, str)):
             raise CommandError(f"{self.name} movej: {self.n} joint values, got {len(values)}")
         q = np.array([float(v) for v in values[: self.n]]) / self.scales
-        return self._queue(q, "movej", self._options("movej", opts))
+        return q, self._options("movej", opts)
+
+    def move_joints(self, *values: float | str) -> str:
+        """``movej`` planned in the calling thread (the loop's: a sequence's step):
+        one value per joint (operator units), then the options' text if any."""
+        return self._here("movej", self.prepare_movej, *values)
 
     def _options(self, what: str, text: str | None) -> dict[str, Any]:
         """The motion record's fields that OPTIONS set (see :data:`OPTIONS_HELP`)."""
@@ -234,15 +351,17 @@ class ArmMoves:
                 f"{forces[:40]!r} is not newtons")
             raise CommandError(f"{who}: {why}; {COMPLY_HELP} nothing moved") from None
 
-    def solve(self, target: np.ndarray, config: str | None) -> np.ndarray:
+    def solve(self, target: np.ndarray, config: str | None, seed: np.ndarray | None = None,
+              chain: Chain | None = None) -> np.ndarray:
         """Joint values putting the tool at ``target`` (4, 4): the closed form in
-        ``config``, or the numerical inverse seeded at the joints the arm is
-        heading to (then, if the chain has a closed form, the solution nearest
-        those joints among its configurations, the present one first);
-        CommandError with the reason if none."""
-        chain = self.chain
+        ``config``, or the numerical inverse seeded at ``seed`` (default: the
+        joints the arm is heading to; then, if the chain has a closed form, the
+        solution nearest those joints among its configurations, the present one
+        first); CommandError with the reason if none.  ``chain``: the arm's chain
+        or, in another thread than the loop's, a copy of its own."""
+        chain = self.chain if chain is None else chain
         closed = chain.closed_form
-        seed = self.heading()
+        seed = self.heading() if seed is None else seed
         if config is not None:
             if closed is None:
                 raise CommandError(f"{self.name} moveto: {chain.name} has no closed-form "
@@ -312,9 +431,9 @@ class ArmMoves:
              Arg("Z", float, units="mm"), Arg("RX", float, lo=-360.0, hi=360.0, units="deg"),
              Arg("RY", float, lo=-360.0, hi=360.0, units="deg"),
              Arg("RZ", float, lo=-360.0, hi=360.0, units="deg"),
-             Arg("CONFIG", str, optional=True), _OPTIONS, name="moveto", moves=True)
-    def move_to(self, x: float, y: float, z: float, rx: float, ry: float, rz: float,
-                config: str | None = None, options: str | None = None) -> str:
+             Arg("CONFIG", str, optional=True), _OPTIONS, name="moveto", moves=True,
+             prepare="prepare_moveto", snapshot="_snapshot_moveto")
+    def commit_moveto(self, work: MoveWork) -> str:
         """NAME moveto X Y Z RX RY RZ [CONFIG] [OPTIONS]: the tool to a pose by a joint move.
 
         X Y Z in mm, RX RY RZ in degrees: fixed-axis rotations about the
@@ -323,21 +442,37 @@ class ArmMoves:
         lefty-above-noflip), from the arm's closed form in that
         configuration.  An unreachable pose is refused with the reason;
         nothing moves.  OPTIONS as movej's."""
+        return self.commit_move(work)
+
+    def _snapshot_moveto(self) -> MoveSnapshot:
+        return self.move_snapshot("moveto")
+
+    def move_to(self, x: float, y: float, z: float, rx: float, ry: float, rz: float,
+                config: str | None = None, options: str | None = None) -> str:
+        """``moveto`` planned in the calling thread (the loop's, for a sequence)."""
+        return self._here("moveto", self.prepare_moveto, x, y, z, rx, ry, rz, config, options)
+
+    def prepare_moveto(self, snap: MoveSnapshot, x: float, y: float, z: float, rx: float,
+                       ry: float, rz: float, config: str | None = None,
+                       options: str | None = None) -> MoveWork:
+        """``moveto`` in the caller's thread: the inverse and the plan against ``snap``."""
         if config is not None and "=" in config:  # no configuration: the options begin
             config, options = None, f"{config} {options or ''}"
         opts = self._options("moveto", options)
         pose = _pose("moveto", self.name, x, y, z, rx, ry, rz)
-        coord = self.conveyor.pose_now() if self.conveyor is not None else self.coord_frame
-        q = self.solve(coord @ pose @ inverse(self.tool_frame), config)
-        return self._queue(q, "moveto", opts)
+        lock, chain = self._chain_for(snap)
+        with lock:
+            q = self.solve(snap.coord_now @ pose @ inverse(snap.tool_frame), config,
+                           snap.heading, chain)
+            spec, to = self._joint_spec(q, "moveto", opts, chain, snap.tool_frame)
+            return self._prepare(snap, spec, "moveto", q.copy(), to)
 
     @command(Arg("X", float, units="mm"), Arg("Y", float, units="mm"),
              Arg("Z", float, units="mm"), Arg("RX", float, lo=-360.0, hi=360.0, units="deg"),
              Arg("RY", float, lo=-360.0, hi=360.0, units="deg"),
              Arg("RZ", float, lo=-360.0, hi=360.0, units="deg"), _OPTIONS, name="movel",
-             moves=True)
-    def move_line(self, x: float, y: float, z: float, rx: float, ry: float, rz: float,
-                  options: str | None = None) -> str:
+             moves=True, prepare="prepare_movel", snapshot="_snapshot_movel")
+    def commit_movel(self, work: MoveWork) -> str:
         """NAME movel X Y Z RX RY RZ [OPTIONS]: the tool on a straight line to a pose.
 
         Same units and rotations as moveto; the orientation turns about one
@@ -352,22 +487,48 @@ class ArmMoves:
         given when it has ended.  While the conveyor runs (NAME conveyor),
         the target is a point on it: the tool reaches it and then follows
         it ('tracking')."""
+        return self.commit_move(work)
+
+    def _snapshot_movel(self) -> MoveSnapshot:
+        return self.move_snapshot("movel")
+
+    def move_line(self, x: float, y: float, z: float, rx: float, ry: float, rz: float,
+                  options: str | None = None) -> str:
+        """``movel`` planned in the calling thread (the loop's, for a sequence)."""
+        return self._here("movel", self.prepare_movel, x, y, z, rx, ry, rz, options)
+
+    def _here(self, what: str, prepare: Callable[..., MoveWork], *args: Any) -> str:
+        """Snapshot, prepare and commit in the calling thread (a stale snapshot
+        prepared again, as :func:`~pyrt.component.run_prepared` does)."""
+        for _ in range(PREPARE_TRIES):
+            try:
+                return self.commit_move(prepare(self.move_snapshot(what, in_loop=True), *args))
+            except Stale:
+                continue
+        raise CommandError(f"{self.name} {what}: refused: the motion queue kept changing "
+                           "while it was planned; give it again; nothing moved")
+
+    def prepare_movel(self, snap: MoveSnapshot, x: float, y: float, z: float, rx: float,
+                      ry: float, rz: float, options: str | None = None) -> MoveWork:
+        """``movel`` in the caller's thread: its equation, the inverse at its end and
+        the plan against ``snap``."""
         opts = self._options("movel", options)
         pose = _pose("movel", self.name, x, y, z, rx, ry, rz)
-        belt = self.conveyor
+        belt = snap.conveyor
         coord = (belt.transform if belt is not None
-                 else Transform.const("COORD", self.coord_frame))
+                 else Transform.const("COORD", snap.coord_frame))
         eq = PositionEquation("movel", [Transform.varb("T6"), Transform.const("TOOL",
-                                                                               self.tool_frame)],
+                                                                               snap.tool_frame)],
                               [coord, Transform.varb("POS", pose)])
-        here = belt.pose_now() if belt is not None else self.coord_frame
-        t6 = here @ pose @ inverse(self.tool_frame)
-        end = self.chain.ik(t6, self.heading())
-        return self._queue_spec(MotionSpec(mode="cart", equation=eq, name="movel", **opts),
-                                "movel",
-                                end.q.copy() if end.ok else None,
-                                f"tool {self.pose_text(here @ pose)}"
-                                + (" on the moving conveyor" if belt is not None else ""))
+        here = snap.coord_now
+        lock, chain = self._chain_for(snap)
+        with lock:
+            end = chain.ik(here @ pose @ inverse(snap.tool_frame), snap.heading)
+            to = (f"tool {self.pose_text(here @ pose)}"
+                  + (" on the moving conveyor" if belt is not None else ""))
+            return self._prepare(snap, MotionSpec(mode="cart", equation=eq, name="movel",
+                                                  **opts),
+                                 "movel", end.q.copy() if end.ok else None, to)
 
     @command(Arg("X", float, lo=-5000.0, hi=5000.0, units="mm"),
              Arg("Y", float, lo=-5000.0, hi=5000.0, units="mm"),

@@ -64,7 +64,7 @@ from pathlib import Path
 from typing import Any, final
 
 from pyrt.boards import Boards
-from pyrt.component import Command, Component, Signal, command, walk
+from pyrt.component import Command, Component, Signal, command, serve_prepared, walk
 from pyrt.errors import BoardError, CommandError, ConfigError, PyrtError
 from pyrt.scheduler import Loop, ReadyQueue
 from pyrt.scheduler.motion import MotionExecutor
@@ -400,6 +400,8 @@ class Station(StationRobots, StationEvents, StationRequests):
             raise CommandError(
                 f"{component.name} {record.name}: refused: {who} is stopped by a fault "
                 f"({fault.cause}); give 'ack' first; nothing moved")
+        if record.prepare is not None:  # its snapshot, its hand-over, or all here
+            return serve_prepared(record, args, self.__dict__.setdefault("_snapshots", {}))
         return record.handler(*args)
 
     def check_motion(self, record: Any) -> None:

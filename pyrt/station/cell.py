@@ -49,7 +49,7 @@ from pyrt.scheduler.runner import MotionQueue
 from pyrt.sim.arm import FTCalibration
 from pyrt.sim.gripper import JawPlant
 from pyrt.sim.world import GRIPPER_BOARDS
-from pyrt.station._cell_pick import PickSequence
+from pyrt.station._cell_pick import PickSequence, PickSnapshot, PickWork
 from pyrt.station._cell_world import CellSim, CellWorld
 from pyrt.station._urdf_arm import SERVO_PERIOD_NS, UrdfArm
 from pyrt.station._urdf_sim import UrdfPhysics, UrdfSim
@@ -289,15 +289,22 @@ class CellRoot(Component):
 
     @command(Arg("X", finite("x", -2000.0, 2000.0), units="mm"),
              Arg("Y", finite("y", -2000.0, 2000.0), units="mm"),
-             Arg("Z", finite("z", -2000.0, 2000.0), units="mm"), name="pick", moves=True)
-    def pick(self, x: float, y: float, z: float) -> str:
+             Arg("Z", finite("z", -2000.0, 2000.0), units="mm"), name="pick", moves=True,
+             prepare="_pick_prepare", snapshot="_pick_snapshot")
+    def pick(self, work: PickWork) -> str:
         """pick X Y Z: pick the object at X Y Z mm on the table: approach, open, descend,
         close on it, lift (the loop runs the sequence; wait waits for it).
 
         Every pose is solved first: one out of reach refuses the pick and
         nothing moves.  A fault of either robot or stop ends the sequence
         where it is; the arm then holds."""
-        return self.station.pick.start(x, y, z)
+        return self.station.pick.begin(work)
+
+    def _pick_snapshot(self) -> PickSnapshot:
+        return self.station.pick.snapshot()
+
+    def _pick_prepare(self, snap: PickSnapshot, x: float, y: float, z: float) -> PickWork:
+        return self.station.pick.prepare(snap, x, y, z)
 
     def reflex(self) -> None:
         """The cell's sequence ends (the robots' reflexes stop their actuators)."""

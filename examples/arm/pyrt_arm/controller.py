@@ -5,9 +5,10 @@ Two tasks: ``trajectory`` every :data:`TRAJECTORY_PERIOD` ticks (100 Hz) and
 ``servo`` every tick.  The arm is a :class:`pyrt.kinematics.Chain`
 (:data:`CHAIN`, from its URDF); ``arm to`` and ``arm xy`` queue a joint-mode
 :class:`pyrt.motion.MotionSpec` on a :class:`pyrt.motion.Evaluator` (planned
-when queued, within :data:`VMAX_DEG_S` and :data:`AMAX_DEG_S2`; a move queued
-behind the running one blends into it by Paul's transition).  The trajectory
-task hands each knot (position, velocity) to pyrt's servo
+when queued, in the console's thread, not in a loop tick; within
+:data:`VMAX_DEG_S` and :data:`AMAX_DEG_S2`; a move queued behind the running one
+blends into it by Paul's transition).  The trajectory task hands each knot
+(position, velocity) to pyrt's servo
 (:class:`pyrt.native.Servo`, C: cubic interpolation to the servo rate, the
 arm's PD law and gains, :mod:`pyrt_arm.servo`); the servo task writes its
 torques as the drives.  A plug-in motion type (``motion joint_trajectory``)
@@ -27,6 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -41,9 +43,11 @@ from pyrt import (
     Task,
     command,
 )
+from pyrt.component import PREPARE_TRIES, Stale
 from pyrt.kinematics import Chain
 from pyrt.motion import Evaluator, MotionFault, MotionSpec, RecordError
 from pyrt.motion import Limits as MotionLimits
+from pyrt.motion.evaluator import Planned, QueueSnapshot, StalePlan
 
 from pyrt_arm.boards import DRIVE_FULL_SCALE
 from pyrt_arm.kinematics import GEOMETRY, KinematicsError, elbow_of, fk, ik, urdf
@@ -105,6 +109,35 @@ MOTION_TYPES = (JointTrajectory.name,)
 _REACH = GEOMETRY.r_max_mm
 _DEG = 180.0 / math.pi
 _TWO31, _TWO32 = 1 << 31, 1 << 32
+
+
+#: Trajectory periods a move from rest on a running evaluator leaves for its planning.
+PLAN_LEAD = 2
+#: How far (deg) the arm, amplifiers off, may have drifted from where a move was
+#: planned to start before it is planned again (a fifth of the following-error limit:
+#: the servo, closing the loop where the arm is, takes the difference).
+START_SLIP_DEG = 0.2
+
+
+@dataclass(frozen=True)
+class MoveSnapshot:
+    """What planning a move needs, copied in the loop: the evaluator and its
+    queue's end; ``rest``: the encoders' angles (deg) when the amplifiers were
+    off (the evaluator is then a new one there), else None; the elbow (deg)."""
+
+    evaluator: Evaluator
+    queue: QueueSnapshot
+    rest: tuple[float, float] | None
+    elbow_deg: float
+
+
+@dataclass(frozen=True)
+class MoveWork:
+    """A move planned in the caller's thread, and the words of its target."""
+
+    snapshot: MoveSnapshot
+    planned: Planned
+    to: str
 
 
 def _joint_limits(config: JointServoConfig) -> Limits:
@@ -311,12 +344,13 @@ class ArmController(Component):
         start = np.clip(np.asarray(q, dtype=float), CHAIN.lower, CHAIN.upper)
         return Evaluator(CHAIN, self.limits, start, period=self.traj_period_s)
 
-    def _engage(self) -> None:
-        """Close the loop where the arm is (the trajectory starts there), amplifiers on."""
+    def _engage(self, evaluator: Evaluator | None = None) -> None:
+        """Close the loop where the arm is (the trajectory starts there: ``evaluator``,
+        one made there, or a new one), amplifiers on."""
         q = np.array(self.angles()) / _DEG
         self.servo.reset(q)
         self.servo.segment(self.traj_period_s, q, np.zeros(2), q, np.zeros(2))
-        self.evaluator = self._evaluator(q)
+        self.evaluator = evaluator if evaluator is not None else self._evaluator(q)
         for jt in self.joints:
             jt.engage()
         self._ended = True
@@ -441,56 +475,106 @@ class ArmController(Component):
 
     # -- commands -------------------------------------------------------------------------
 
-    def _move(self, q0: float, q1: float) -> str:
+    def move_snapshot(self) -> MoveSnapshot:
+        """What planning a move needs, copied (the loop's side, bounded): the
+        queue's end, or, while the amplifiers are off, a new evaluator where the
+        arm lies (the hand-over engages the servo there); the elbow as it is."""
         st = self.station
         if self.state == "braking":
             raise CommandError("arm: braking to rest after a stop: wait, then move; "
                                "nothing moved")
         if st.executor.busy or len(st.motion):
             raise CommandError("arm: a motion record runs: wait, then move; nothing moved")
-        to = self.where((q0, q1))
-        busy = self.state != "idle"
-        if not busy:
-            self._engage()
+        if self.state == "idle" or self.evaluator is None:
+            here = self.angles()
+            ev = self._evaluator(np.radians(here))
+            return MoveSnapshot(ev, ev.snapshot(), here, here[1])
+        return MoveSnapshot(self.evaluator, self.evaluator.snapshot(lead=PLAN_LEAD), None,
+                            self.joint_positions()[1])
+
+    def prepare_to(self, snap: MoveSnapshot, q0: float, q1: float) -> MoveWork:
+        """``arm to`` in the caller's thread: the move planned against ``snap``."""
+        try:
+            planned = snap.evaluator.plan(MotionSpec(target=(math.radians(q0),
+                                                             math.radians(q1)),
+                                                     name="arm to"), snap.queue)
+        except RecordError as exc:
+            raise CommandError(f"arm: refused: {exc}; nothing moved") from None
+        return MoveWork(snap, planned, self.where((q0, q1)))
+
+    def prepare_xy(self, snap: MoveSnapshot, x: float, y: float,
+                   elbow: str | None = None) -> MoveWork:
+        """``arm xy`` in the caller's thread: the inverse, then the move planned."""
+        if elbow is None:
+            elbow = elbow_of(snap.elbow_deg)
+        try:
+            q0, q1 = ik(x, y, "up" if elbow == "up" else "down")
+        except KinematicsError as exc:
+            raise CommandError(f"arm xy: {exc}; nothing moved") from None
+        return self.prepare_to(snap, q0, q1)
+
+    def commit_move(self, work: MoveWork) -> str:
+        """Queue a prepared move (the loop's side, bounded); :class:`Stale` (it is
+        planned again) if the arm changed since its snapshot."""
+        snap = work.snapshot
+        if snap.rest is not None:  # planned from rest: still there, amplifiers still off?
+            slip = max(abs(a - b) for a, b in zip(self.angles(), snap.rest, strict=True))
+            if self.state != "idle" or slip > START_SLIP_DEG:
+                raise Stale("arm: the arm moved while the move was planned")
+            self._engage(snap.evaluator)
+        elif self.evaluator is not snap.evaluator or self.state in ("idle", "braking"):
+            raise Stale("arm: the arm changed while the move was planned")
+        busy = snap.rest is None
         assert self.evaluator is not None
         try:
-            self.evaluator.queue(MotionSpec(target=(math.radians(q0), math.radians(q1)),
-                                            name="arm to"))
-        except RecordError as exc:
+            self.evaluator.commit(work.planned)
+        except StalePlan as exc:
             if not busy:
                 self._off()
-            raise CommandError(f"arm: refused: {exc}; nothing moved") from None
+            raise Stale(f"arm: {exc}") from None
         self.state = "moving"
         self._ended = False
         if busy:
-            return f"queued: {to}; it blends into the running move"
-        return f"moving to {to}"
+            return f"queued: {work.to}; it blends into the running move"
+        return f"moving to {work.to}"
+
+    def _here(self, prepare: Any, *args: Any) -> str:
+        """Snapshot, prepare and commit in the calling thread (the loop's)."""
+        for _ in range(PREPARE_TRIES):
+            try:
+                return self.commit_move(prepare(self.move_snapshot(), *args))
+            except Stale:
+                continue
+        raise CommandError("arm: refused: the motion queue kept changing while the move "
+                           "was planned; give it again; nothing moved")
 
     @command(Arg("Q0", float, lo=SHOULDER.limits_deg[0], hi=SHOULDER.limits_deg[1],
                  units="deg", what="shoulder limits"),
              Arg("Q1", float, lo=ELBOW.limits_deg[0], hi=ELBOW.limits_deg[1], units="deg",
                  what="elbow limits"),
-             name="to", moves=True)
-    def move_to(self, q0: float, q1: float) -> str:
+             name="to", moves=True, prepare="prepare_to", snapshot="move_snapshot")
+    def commit_to(self, work: MoveWork) -> str:
         """arm to Q0 Q1: move the joints to Q0, Q1 degrees (queued moves blend)."""
-        return self._move(q0, q1)
+        return self.commit_move(work)
+
+    def move_to(self, q0: float, q1: float) -> str:
+        """``arm to`` planned in the calling thread."""
+        return self._here(self.prepare_to, q0, q1)
 
     @command(Arg("X", float, lo=-_REACH, hi=_REACH, units="mm", what="reach"),
              Arg("Y", float, lo=-_REACH, hi=_REACH, units="mm", what="reach"),
              Arg("ELBOW", str.lower, optional=True, choices=("up", "down")),
-             name="xy", moves=True)
-    def move_xy(self, x: float, y: float, elbow: str | None = None) -> str:
+             name="xy", moves=True, prepare="prepare_xy", snapshot="move_snapshot")
+    def commit_xy(self, work: MoveWork) -> str:
         """arm xy X Y [up|down]: move the tip to X, Y mm (elbow as it is unless given).
 
         The joints move on a joint trajectory (the tip's path between is not a
         straight line); queued moves blend."""
-        if elbow is None:
-            elbow = elbow_of(self.joint_positions()[1])
-        try:
-            q0, q1 = ik(x, y, "up" if elbow == "up" else "down")
-        except KinematicsError as exc:
-            raise CommandError(f"arm xy: {exc}; nothing moved") from None
-        return self._move(q0, q1)
+        return self.commit_move(work)
+
+    def move_xy(self, x: float, y: float, elbow: str | None = None) -> str:
+        """``arm xy`` planned in the calling thread."""
+        return self._here(self.prepare_xy, x, y, elbow)
 
     @command(name="show", reads_only=True)
     def show(self) -> str:

@@ -388,3 +388,22 @@ def test_a_plug_in_motion_that_ends_moving_is_braked_to_rest_not_extrapolated(ar
     assert last_knot - 0.5 <= q0 <= last_knot + 30.0 ** 2 / (2 * AMAX_DEG_S2[0]) + 0.1, q0
     assert station.fault is None
     assert runner.call(lambda: _registers(station)) == {"drive": [0, 0], "enable": [0, 0]}
+
+
+def test_arm_moves_are_planned_in_the_console_s_thread_never_in_a_tick(arm, monkeypatch):
+    """arm to and arm xy, from rest and queued behind a running move: every plan is made with the loop not ticking (counted, not timed); the queued move blends from the running one's end and the arm ends at target."""
+    from pyrt.motion import Evaluator
+
+    _station, runner, shell, out = arm
+    ticking: list[bool] = []
+    plan = Evaluator.plan
+
+    def watched(self, *a, **k):
+        ticking.append(runner.loop.running)
+        return plan(self, *a, **k)
+
+    monkeypatch.setattr(Evaluator, "plan", watched)
+    assert _say(shell, out, "arm to 60 30").startswith("arm: moving to")
+    assert "blends into the running move" in _say(shell, out, "arm xy 300 200")
+    assert _say(shell, out, "wait").startswith("at target")
+    assert len(ticking) >= 2 and not any(ticking)
