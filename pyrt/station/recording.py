@@ -41,7 +41,7 @@ from typing import TYPE_CHECKING, Any
 from pyrt._version import __version__
 from pyrt.component import Component
 from pyrt.errors import ConfigError, Fault
-from pyrt.journal import BlackBox, Header, Journal
+from pyrt.journal import DEFAULT_QUEUE_TICKS, BlackBox, Header, Journal
 
 if TYPE_CHECKING:
     from pyrt.station.base import Station
@@ -255,9 +255,12 @@ class Recorder:
         lossless = loop.clock.virtual if lossless is None else lossless
         # at real time the writer wakes a few times a second (a block is cut after
         # 0.5 s anyway): each wake-up takes the interpreter from a loop that may be
-        # about to tick
+        # about to tick; but at least eight times per queue's worth of ticks, so
+        # that a fast tick (50 µs: 4096 ticks are 0.2 s) keeps room for a writer
+        # that the machine's load delays
+        poll = min(REALTIME_POLL_S, DEFAULT_QUEUE_TICKS * loop.period_ns / 8e9)
         self.journal = Journal(header, path, black_box=black_box, lossless=lossless,
-                               poll_s=0.02 if lossless else REALTIME_POLL_S, warn=warn)
+                               poll_s=0.02 if lossless else poll, warn=warn)
         self._inputs: list[int] = list(meta["inputs_before"])
         #: The journal's index of each writer's name (its table only grows).
         self._writer_index: dict[str, int] = {}
