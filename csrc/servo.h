@@ -2,18 +2,34 @@
  * A generic joint servo: every joint of one robot in one call, at the servo
  * rate (004's passive boards, hardware (b)).
  *
+ * Time.  The servo runs on the time that really passed, not on a count of
+ * ticks: pyrt_servo_tick_at(s, now) is a tick at the caller's clock `now`
+ * (s; the loop's time), dt = now - last (the previous tick's time).  A loop
+ * that stalls (a long tick, skipped deadlines) gives a late tick a larger dt
+ * and the servo follows: the reference is the trajectory's point at that
+ * time, the velocity estimate and the integral use that dt.  The integral's
+ * dt is bounded at PYRT_SERVO_MAX_DT_PERIODS periods (a long stall must not
+ * kick the output through a huge integral step); a tick beyond that bound
+ * counts in `stalls` and `stall_max` keeps the longest dt.  pyrt_servo_tick
+ * is the self-clocked tick, at last + period (a board's own servo, whose
+ * ticks are its clock).
+ *
  * Interpolation.  The trajectory hands the servo one segment at a time, from
- * knot A (now) to knot B (duration later): position, velocity and
- * acceleration at both ends give a quintic per joint, position and velocity
- * alone a cubic.  A tick evaluates the polynomial at the segment's clock,
- * then advances the clock by one period: the reference is where the joint
- * should be at the instant it is measured, so the ticks of a segment of k
- * periods evaluate 0/k .. (k-1)/k of it and the next segment's first tick
- * is knot B (its knot A).  A tick that finds the clock at the end evaluates
- * knot B; past it (the trajectory did not bring the next segment in time)
- * the reference holds knot B's position with zero velocity and
- * acceleration and the late counter counts the ticks: a reference is never
- * extrapolated.
+ * knot A to knot B: position, velocity and acceleration at both ends give a
+ * quintic per joint, position and velocity alone a cubic.  The segment
+ * starts at a time on the servo's clock: pyrt_servo_load_at(..., start)
+ * says when (a trajectory that continues its last segment gives that
+ * segment's end, so the segments join in time as in space), pyrt_servo_load
+ * starts it at the next self-clocked tick (last + period).  A tick evaluates
+ * the polynomial at t = now - start, within 0 .. duration: the reference is
+ * where the joint should be at the instant it is measured, so the ticks of a
+ * segment of k periods evaluate 0/k .. (k-1)/k of it and the next segment's
+ * first tick is knot B (its knot A); a tick that comes late evaluates the
+ * segment at its own time, never at the count of ticks.  A tick at the end
+ * evaluates knot B; more than half a period past it (the trajectory did not
+ * bring the next segment in time) the reference holds knot B's position with
+ * zero velocity and acceleration and the late counter counts the ticks: a
+ * reference is never extrapolated.
  *
  * Feed-forward.  The rigid-body torque (gravity, inertia, Coriolis: the
  * chain's inverse dynamics) is given with the segment at both knots and
@@ -26,7 +42,7 @@
  *     e    = q_ref - q
  *     v    = velocity estimate: backward difference of q, first-order
  *            low-pass at VELHZ
- *     I   += KI e period, within +-ILIM; not grown while the output is
+ *     I   += KI e dt, within +-ILIM; not grown while the output is
  *            clamped in the direction of e (conditional integration)
  *     tau  = KP e + I + KD (qd_ref - v) + KV qd_ref + KA qdd_ref + KFF ff
  *     tau  = clamp(tau, -TMAX, TMAX)                      (the effort limit)
@@ -53,6 +69,9 @@
 
 /* Joints per servo: 1 .. PYRT_SERVO_MAX_JOINTS. */
 #define PYRT_SERVO_MAX_JOINTS 64
+
+/* The integral's dt is bounded at this many periods (a stall beyond: counted). */
+#define PYRT_SERVO_MAX_DT_PERIODS 10
 
 /* Rows of the gains (PYRT_SERVO_NGAINS x n, row-major). */
 #define PYRT_SERVO_KP 0     /* N m / rad: proportional */
@@ -104,17 +123,23 @@
  *
  *   n           joints, 1 .. PYRT_SERVO_MAX_JOINTS
  *   period      s, > 0: the servo tick
+ *   last        s: the servo's clock, the time of the last tick (in/out: a
+ *               timed caller sets it where it closes the loop, e.g. at reset)
  *   gains       PYRT_SERVO_NGAINS x n
  *   state       PYRT_SERVO_NSTATE x n
  *   q           n: this tick's measured positions (in)
  *   tau         n: this tick's outputs (out)
  *   order       the loaded segment's order (out)
  *   duration    the loaded segment's duration, s (out)
+ *   start       the loaded segment's start on the servo's clock, s (out)
+ *   dt          the last tick's dt, s (out)
  *   ticks       ticks into the segment (out)
  *   late        ticks past its end, the reference held at knot B (out)
  *   tripped     1 after a following-error trip, until reset (out)
  *   trip_joint  the joint that tripped it, or -1 (out)
  *   trip_error  its following error then (out)
+ *   stalls      ticks whose dt was beyond PYRT_SERVO_MAX_DT_PERIODS periods (out)
+ *   stall_max   the longest such dt, s (out)
  */
 typedef struct {
     int32_t n;
@@ -123,18 +148,24 @@ typedef struct {
     double *state;
     const double *q;
     double *tau;
+    double last;
     int32_t order;
     double duration;
+    double start;
+    double dt;
     int32_t ticks;
     int32_t late;
     int32_t tripped;
     int32_t trip_joint;
     double trip_error;
+    int32_t stalls;
+    double stall_max;
 } pyrt_servo;
 
 /* Close the loop at the measured q (n): hold there with feed-forward ff (n,
  * or NULL: none), integrators and velocity estimate cleared, a trip
- * cleared, outputs zero. */
+ * cleared, outputs zero; the servo's clock (last) and its stall count are
+ * kept. */
 int pyrt_servo_reset(pyrt_servo *s, const double *q, const double *ff);
 
 /* Load the next segment: knots (PYRT_SERVO_NKNOTS x n), duration (s, > 0),
@@ -142,7 +173,16 @@ int pyrt_servo_reset(pyrt_servo *s, const double *q, const double *ff);
  * then not read).  The integrators and the velocity estimate carry on. */
 int pyrt_servo_load(pyrt_servo *s, const double *knots, double duration, int32_t order);
 
-/* One tick: reads s->q, writes s->tau and the state (see the header text). */
+/* pyrt_servo_load with the segment starting at `start` (s, the servo's
+ * clock; finite) instead of the next self-clocked tick. */
+int pyrt_servo_load_at(pyrt_servo *s, const double *knots, double duration, int32_t order,
+                       double start);
+
+/* One tick at `now` (s, the servo's clock: finite, not before last): reads
+ * s->q, writes s->tau and the state (see the header text). */
+int pyrt_servo_tick_at(pyrt_servo *s, double now);
+
+/* One self-clocked tick, at last + period. */
 int pyrt_servo_tick(pyrt_servo *s);
 
 #endif /* PYRT_SERVO_H */
