@@ -55,6 +55,7 @@ from pyrt.kinematics import GRAVITY, Chain, rpy_of
 from pyrt.motion import Evaluator, MotionFault
 from pyrt.motion import Limits as MotionLimits
 from pyrt.native import Servo, gain_ranges, tuned_gains
+from pyrt.native._servo import MAX_DT_PERIODS
 from pyrt.scheduler import Task
 from pyrt.station._urdf_gains import ArmTuning, arm_gain_params, joint_gain_params
 from pyrt.station._urdf_moves import ArmMoves
@@ -269,6 +270,10 @@ class UrdfArm(ArmMoves, Component):
         self.conveyor = None
         self._anchor = (0.0, 0)
         self._latest = None
+        #: The servo's segments join in time (a motion's knots follow each other), and
+        #: where the next one starts on the loop's clock (s).
+        self._joined = False
+        self._start = 0.0
 
     # -- set-up ---------------------------------------------------------------------
 
@@ -354,6 +359,7 @@ class UrdfArm(ArmMoves, Component):
             self.state = "idle"
             self.evaluator = None
             self._quiet_since = None
+            self._joined = False
 
     # -- where it is ------------------------------------------------------------------
 
@@ -422,7 +428,8 @@ class UrdfArm(ArmMoves, Component):
             if self._now_ns > t_old:
                 v = (q - q_old) / ((self._now_ns - t_old) * 1e-9)
         ff = self.chain.gravity_torque(q)
-        self.servo.reset(q, ff)
+        self.servo.reset(q, ff, now=self._now_ns * 1e-9)
+        self._joined = False
         k = self.servo.knots
         k[...] = 0.0
         k[3] = q
@@ -470,7 +477,19 @@ class UrdfArm(ArmMoves, Component):
                 self.power_on()
             return
         servo = self.servo  # servo.q is self.q: measured above
-        trip = servo.tick()
+        now = now_ns * 1e-9
+        if self._joined and now > servo.end + 0.5 * self.period_s:
+            # the loop stalled past the segment's end before the trajectory's turn: its
+            # knot for now is made here, so the reference keeps to the time that passed
+            self.trajectory_tick(now_ns)
+            if not self.powered:
+                return
+        stalls = servo.stalls
+        trip = servo.tick(now=now)
+        if servo.stalls != stalls:
+            self.say(f"servo: {servo.dt * 1e3:.1f} ms passed since its last tick (the loop "
+                     f"stalled): the integral took {MAX_DT_PERIODS * self.period_s * 1e3:g} ms "
+                     f"of it", "warning")
         if trip is not None:
             self.fail(f"{trip} (joint {trip.name} at "
                       f"{self.q[trip.joint] * self.scales[trip.joint]:.3f} "
@@ -530,7 +549,16 @@ class UrdfArm(ArmMoves, Component):
     # -- the trajectory ----------------------------------------------------------------
 
     def trajectory_tick(self, now_ns: int) -> None:
-        """100 Hz: one knot of the evaluator, handed to the servo as the next segment."""
+        """100 Hz: the evaluator's knot for the time that really passed, handed to the
+        servo as its next segment.
+
+        The segments join in time as in space: the next one starts where the last
+        ended, on the loop's clock.  A tick that comes after the running segment's end
+        has passed by a trajectory period or more (the loop stalled) evaluates the
+        knots it missed and hands the servo the segment of the last two, the one that
+        holds now: the trajectory keeps to the loop's time, never to a count of ticks.
+        A tick that finds the running segment reaching beyond now has nothing to make.
+        """
         ev = self.evaluator
         if not self.powered or ev is None:
             return
@@ -538,18 +566,72 @@ class UrdfArm(ArmMoves, Component):
             if now_ns < self._recover_until:
                 return
             self._recover_until = None
+        now = now_ns * 1e-9
+        half = 0.5 * self.period_s
+        if self._joined:
+            start = self.servo.end
+            if start > now + half:  # the segment running holds now: its knot is made
+                return
+        else:
+            start = max(self.servo.now + self.period_s, now)
         if self._wide:  # back inside the limits: the fault's bounds are the limits' again
             lo, hi = self.chain.lower - self._margin, self.chain.upper + self._margin
             if bool(((self.q >= lo) & (self.q <= hi)).all()):
                 self._bound(lo, hi)
                 self._wide = False
         wrench = self.wrench() if self._wrench_of is not None else None
-        self._anchor = (now_ns * 1e-9 + self.traj_period_s, ev.sample)
-        try:
-            knot = ev.tick(wrench)
-        except MotionFault as exc:
-            self.fail(f"trajectory: {exc}", self.name)
-            return
+        k = self.servo.knots
+        missed = None
+        while True:
+            self._anchor = (start + ev.period, ev.sample)
+            try:
+                knot = ev.tick(wrench)
+            except MotionFault as exc:
+                self.fail(f"trajectory: {exc}", self.name)
+                return
+            self._knot_events(knot, wrench, ev)
+            if not self._joined or start + knot.period > now + half:
+                break
+            missed, start = knot, start + knot.period  # a knot the stall passed over
+        if missed is not None:  # the segment of the last two knots: the one that holds now
+            k[3], k[4], k[5] = missed.q, missed.qd, missed.qdd
+            k[7] = self._feed_forward(missed)
+        moving = missed is not None or bool(knot.qd.any() or knot.qdd.any()
+                                             or not np.array_equal(knot.q, k[3]))
+        if moving:
+            ff = self._feed_forward(knot)
+            k[0:3] = k[3:6]
+            k[6] = k[7]
+            k[3] = knot.q
+            k[4] = knot.qd
+            k[5] = knot.qdd
+            k[7] = ff
+            self._start = start
+            self.follow(knot.period)
+            if knot.move is not None and knot.move.done and knot.move is self._latest:
+                # the last record queued has reached its point on a moving frame
+                if self.state != "tracking":
+                    self.state = "tracking"
+                    self.last_stop = (f"tracking: the tool follows its point on the moving "
+                                      f"conveyor at {self.pose_text(self.tool())}")
+            elif self.state != "moving":
+                self.state = "moving"
+        else:
+            self._joined = False
+            if self.state == "moving" and ev.idle:
+                self.state = "settling"
+                self._settle_from = now_ns
+                self._quiet_since = None
+
+    def _feed_forward(self, knot: Any) -> np.ndarray:
+        """The dynamics feed-forward at a knot: inverse dynamics, and the payload held."""
+        ff = self.chain.rnea(knot.q, knot.qd, knot.qdd, GRAVITY)
+        if knot.payload_torque is not None:
+            ff = ff + knot.payload_torque
+        return ff  # type: ignore[no-any-return]
+
+    def _knot_events(self, knot: Any, wrench: np.ndarray | None, ev: Evaluator) -> None:
+        """What a knot's events say of how the motion ended (``last_stop``)."""
         for word, move in knot.events:
             c = move.spec.comply
             if word == "reached" and c is not None:
@@ -566,36 +648,13 @@ class UrdfArm(ArmMoves, Component):
                                   f"{self.pose_text(self.tool())}; braked to rest")
             else:
                 self.last_stop = "stopped (stop command)" if word == "stopped" else word
-        k = self.servo.knots
-        moving = bool(knot.qd.any() or knot.qdd.any() or not np.array_equal(knot.q, k[3]))
-        if moving:
-            ff = self.chain.rnea(knot.q, knot.qd, knot.qdd, GRAVITY)
-            if knot.payload_torque is not None:
-                ff = ff + knot.payload_torque
-            k[0:3] = k[3:6]
-            k[6] = k[7]
-            k[3] = knot.q
-            k[4] = knot.qd
-            k[5] = knot.qdd
-            k[7] = ff
-            self.follow(knot.period)
-            if knot.move is not None and knot.move.done and knot.move is self._latest:
-                # the last record queued has reached its point on a moving frame
-                if self.state != "tracking":
-                    self.state = "tracking"
-                    self.last_stop = (f"tracking: the tool follows its point on the moving "
-                                      f"conveyor at {self.pose_text(self.tool())}")
-            elif self.state != "moving":
-                self.state = "moving"
-        elif self.state == "moving" and ev.idle:
-            self.state = "settling"
-            self._settle_from = now_ns
-            self._quiet_since = None
 
     def follow(self, period: float) -> None:
-        """Hand the servo the segment to the knot just made (the servo's knots B;
-        a hardware (a) arm writes it to its board instead)."""
-        self.servo.load(period, quintic=True)
+        """Hand the servo the segment to the knot just made (the servo's knots B),
+        starting where the last one ended on the loop's clock (or now, the first of a
+        motion); a hardware (a) arm writes it to its board instead."""
+        self.servo.load(period, quintic=True, start=self._start)
+        self._joined = True
 
     # -- commands (the moves: ArmMoves) ----------------------------------------------
 
