@@ -339,7 +339,7 @@ class Servo:
             rc = lib.pyrt_servo_load(self._c, self._knots_p, float(duration), order)
         else:
             rc = lib.pyrt_servo_load_at(self._c, self._knots_p, float(duration), order,
-                                        _time("start", start))
+                                        _time("start", start, finite=False))
         raise_for_status(rc, f"servo segment of {duration!r} s", _load_why)
 
     def tick(self, q: ArrayLike | None = None, now: float | None = None) -> ServoTrip | None:
@@ -450,8 +450,10 @@ class Servo:
         return f"Servo({self.n} joints, {self.period * 1e3:g} ms)"
 
 
-def _time(name: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+def _time(name: str, value: Any, finite: bool = True) -> float:
+    """A time in seconds (a number; finite unless the kernel checks it)."""
+    if (isinstance(value, bool) or not isinstance(value, (int, float))
+            or (finite and not math.isfinite(value))):
         raise NativeInputError(f"{name}: expected a finite time in seconds, got {value!r}")
     return float(value)
 
