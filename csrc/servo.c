@@ -310,3 +310,80 @@ int pyrt_servo_tick_at(pyrt_servo *s, double now)
     }
     return PYRT_OK;
 }
+
+int pyrt_servo_encoders(pyrt_servo_board *b, int32_t n, const int64_t *counts)
+{
+    if (b == NULL || counts == NULL || b->counts_per_unit == NULL || b->last == NULL
+        || b->total == NULL || b->q == NULL || n < 1 || n > PYRT_SERVO_MAX_JOINTS) {
+        return PYRT_EINVAL;
+    }
+    const int64_t two31 = (int64_t)1 << 31, two32 = (int64_t)1 << 32;
+    for (int32_t j = 0; j < n; j++) {
+        if (counts[j] == b->last[j]) {
+            continue;
+        }
+        int64_t d = counts[j] - b->last[j];
+        if (d < -two31 || d >= two31) {
+            d = (d + two31) % two32;
+            d = (d < 0 ? d + two32 : d) - two31;
+        }
+        b->total[j] += d;
+        b->last[j] = counts[j];
+        b->q[j] = ((double)b->total[j] + 0.5) / b->counts_per_unit[j];
+    }
+    return PYRT_OK;
+}
+
+int pyrt_servo_tick_board(pyrt_servo *s, double now, pyrt_servo_board *b,
+                          const int64_t *counts)
+{
+    const int ok = valid(s);
+    if (b == NULL) {
+        if (ok) {
+            zero_out(s);
+        }
+        return PYRT_EINVAL;
+    }
+    b->changed = 0;
+    b->beyond = -1;
+    if (!ok || b->lo == NULL || b->hi == NULL || b->dac_per_unit == NULL || b->dac == NULL
+        || b->dac_full <= 0 || b->q != s->q) {
+        if (ok) {
+            zero_out(s);
+        }
+        return PYRT_EINVAL;
+    }
+    int rc = pyrt_servo_encoders(b, s->n, counts);
+    if (rc != PYRT_OK) {
+        zero_out(s);
+        return rc;
+    }
+    rc = pyrt_servo_tick_at(s, now);
+    if (rc != PYRT_OK || s->tripped) {
+        return rc;
+    }
+    const int32_t n = s->n;
+    const double full = (double)b->dac_full;
+    uint64_t changed = 0;
+    for (int32_t j = 0; j < n; j++) {
+        const double q = s->q[j];
+        if (q < b->lo[j] || q > b->hi[j]) {
+            b->beyond = j;
+            break;
+        }
+        double c = rint(s->tau[j] * b->dac_per_unit[j]);
+        if (!(c <= full)) {
+            c = isnan(c) ? 0.0 : full;
+        }
+        if (c < -full) {
+            c = -full;
+        }
+        const int32_t v = (int32_t)c;
+        if (v != b->dac[j]) {
+            b->dac[j] = v;
+            changed |= (uint64_t)1 << j;
+        }
+    }
+    b->changed = changed;
+    return PYRT_OK;
+}

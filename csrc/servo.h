@@ -185,4 +185,49 @@ int pyrt_servo_tick_at(pyrt_servo *s, double now);
 /* One self-clocked tick, at last + period. */
 int pyrt_servo_tick(pyrt_servo *s);
 
+/*
+ * A passive board's servo task in one call (pyrt_servo_tick_board): its
+ * encoders in, the law, the bounds of the measured joints and its DAC
+ * counts out.  The caller fills the pointers, counts_per_unit and dac_full
+ * once; the kernel keeps last and total and writes dac, changed and beyond.
+ *
+ *   counts_per_unit n: encoder counts per joint radian (or metre), finite > 0
+ *   last, total     n: the counters as last read and their unwrapped totals
+ *   q               n: the measured joints, (total + 0.5) / counts_per_unit
+ *                   (the middle of the count): the servo's q (out)
+ *   lo, hi          n: where each measured joint may go (beyond: the fault)
+ *   dac_per_unit    n: DAC counts per N m (or N) of output, finite
+ *   dac_full        the DAC's full scale, > 0: a count is within +-dac_full
+ *   dac             n: the values last written (in); this tick's (out)
+ *   changed         bit j set: dac[j] differs from the value last written (out)
+ *   beyond          the first joint (by index) beyond lo .. hi, or -1 (out)
+ */
+typedef struct {
+    const double *counts_per_unit;
+    int64_t *last;
+    int64_t *total;
+    double *q;
+    const double *lo;
+    const double *hi;
+    const double *dac_per_unit;
+    int32_t dac_full;
+    int32_t *dac;
+    uint64_t changed;
+    int32_t beyond;
+} pyrt_servo_board;
+
+/* The encoders: each of the n counters' step since the last read
+ * (counts[j] - last[j]) taken modulo 2^32 into -2^31 .. 2^31 - 1 (a 32-bit
+ * counter wraps) is added to its total; q as above. */
+int pyrt_servo_encoders(pyrt_servo_board *b, int32_t n, const int64_t *counts);
+
+/* pyrt_servo_encoders (b->q must be s->q), pyrt_servo_tick_at(s, now), then,
+ * unless the servo is tripped, the bounds and the DACs joint by joint: the
+ * first joint beyond its bounds ends the walk (beyond; its DAC and those
+ * after it unchanged); every other joint's count is rint(tau * dac_per_unit)
+ * (ties to even) within +-dac_full.  A refused tick or pointer: status code,
+ * changed 0, beyond -1 (the servo's outputs zero as pyrt_servo_tick_at's). */
+int pyrt_servo_tick_board(pyrt_servo *s, double now, pyrt_servo_board *b,
+                          const int64_t *counts);
+
 #endif /* PYRT_SERVO_H */

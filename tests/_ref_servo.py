@@ -130,3 +130,27 @@ class RefServo:
             self.integ[j] = integ
             self.tau[j] = min(max(u, -tmax), tmax)
         return None
+
+
+def unwrap(last, total, counts):
+    """The encoders of csrc/servo.h: each step modulo 2^32 into -2^31 .. 2^31 - 1."""
+    for j, c in enumerate(counts):
+        d = c - last[j]
+        if not -(1 << 31) <= d < (1 << 31):
+            d = ((d + (1 << 31)) % (1 << 32)) - (1 << 31)
+        total[j] += d
+        last[j] = c
+
+
+def dacs(tau, q, lo, hi, per_unit, full, dac):
+    """The bounds and the DAC counts of pyrt_servo_tick_board: (changed mask, beyond)."""
+    changed = 0
+    for j in range(len(tau)):
+        if q[j] < lo[j] or q[j] > hi[j]:
+            return changed, j
+        c = round(tau[j] * per_unit[j])
+        c = full if c > full else (-full if c < -full else c)
+        if c != dac[j]:
+            dac[j] = c
+            changed |= 1 << j
+    return changed, -1

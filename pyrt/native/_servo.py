@@ -46,6 +46,7 @@ __all__ = [
     "MAX_DT_PERIODS",
     "MAX_JOINTS",
     "Servo",
+    "ServoBoard",
     "ServoTrip",
     "check_gains",
     "gain_ranges",
@@ -230,6 +231,7 @@ class Servo:
         self._c = c
         self._tick = lib.pyrt_servo_tick
         self._tick_at = lib.pyrt_servo_tick_at
+        self._tick_board = lib.pyrt_servo_tick_board
         self._ff_buf = np.zeros(n, F64)
         self.reset(np.zeros(n))
 
@@ -361,6 +363,22 @@ class Servo:
             return self.trip
         return None
 
+    def tick_board(self, now: float, board: ServoBoard, counts: Sequence[int]) -> ServoTrip | None:
+        """A passive board's servo task in one call: the encoders ``counts``
+        (unwrapped into :attr:`q`), :meth:`tick` at ``now``, then (unless
+        tripped) the bounds of the measured joints and the outputs as DAC counts
+        (:class:`ServoBoard`: ``board.beyond``, ``board.changed``, ``board.dac``).
+        Returns the trip this tick made, or None."""
+        if len(counts) != self.n or board.q is not self.q:
+            raise NativeInputError(f"tick_board: {self.n} counts of this servo's board, "
+                                   f"got {len(counts)}")
+        c = self._c
+        was = c.tripped
+        raise_for_status(self._tick_board(c, now, board.c, counts), "servo tick", _tick_why)
+        if c.tripped and not was:
+            return self.trip
+        return None
+
     @property
     def now(self) -> float:
         """The servo's clock: the time of the last tick (s)."""
@@ -448,6 +466,71 @@ class Servo:
 
     def __repr__(self) -> str:
         return f"Servo({self.n} joints, {self.period * 1e3:g} ms)"
+
+
+class ServoBoard:
+    """A passive board's side of ``servo`` (:meth:`Servo.tick_board`): its
+    encoders in (``counts_per_unit`` per joint radian or metre, ``counts``
+    the counters as read now; a 32-bit counter wraps) and its DACs out
+    (``dac_per_unit`` DAC counts per N m or N, ``full`` the full scale).
+    :attr:`lo`/:attr:`hi` bound the measured joints (beyond one: the
+    caller's fault; write them in place).  After a tick: the servo's ``q``
+    the measured joints, :attr:`dac` the counts, :attr:`changed` a bit per
+    joint whose count changed, :attr:`beyond` the first joint beyond its
+    bounds or -1."""
+
+    def __init__(self, servo: Servo, counts_per_unit: ArrayLike, counts: Sequence[int],
+                 dac_per_unit: ArrayLike, full: int) -> None:
+        n = servo.n
+        if isinstance(full, bool) or not isinstance(full, int) or full <= 0:
+            raise NativeInputError(f"full: expected a DAC full scale > 0, got {full!r}")
+        cpu = _vector("counts_per_unit", counts_per_unit, n)
+        per = _vector("dac_per_unit", dac_per_unit, n)
+        if not (np.isfinite(cpu).all() and (cpu > 0).all() and np.isfinite(per).all()):
+            raise NativeInputError("counts_per_unit (> 0) and dac_per_unit must be finite")
+        if len(counts) != n:
+            raise NativeInputError(f"counts: expected {n}, got {len(counts)}")
+        self.counts_per_unit = cpu.copy()
+        self.dac_per_unit = per.copy()
+        #: The counters as last read, and their unwrapped totals.
+        self.last = np.array([int(c) for c in counts], np.int64)
+        self.total = self.last.copy()
+        self.q = servo.q
+        self.q[:] = (self.total + 0.5) / self.counts_per_unit
+        self.lo = np.full(n, -np.inf)
+        self.hi = np.full(n, np.inf)
+        #: The DAC counts last written (this tick's after a tick).
+        self.dac = np.zeros(n, np.int32)
+        self.n = n
+        self._keep = [ffi.from_buffer(a) for a in (self.counts_per_unit, self.q, self.lo,
+                                                   self.hi, self.dac_per_unit, self.last,
+                                                   self.total, self.dac)]
+        c = ffi.new("pyrt_servo_board *")
+        c.counts_per_unit, c.q, c.lo, c.hi, c.dac_per_unit = (
+            ffi.cast("double *", b) for b in self._keep[:5])
+        c.last, c.total = (ffi.cast("int64_t *", b) for b in self._keep[5:7])
+        c.dac = ffi.cast("int32_t *", self._keep[7])
+        c.dac_full = full
+        c.beyond = -1
+        #: The C struct (its ``changed`` and ``beyond`` are read after a tick).
+        self.c = c
+        self._encoders = lib.pyrt_servo_encoders
+
+    def encoders(self, counts: Sequence[int]) -> None:
+        """Only the encoders: ``counts`` unwrapped into the servo's ``q`` (no tick)."""
+        if len(counts) != self.n:
+            raise NativeInputError(f"encoders: expected {self.n} counts, got {len(counts)}")
+        raise_for_status(self._encoders(self.c, self.n, counts), "servo encoders")
+
+    @property
+    def changed(self) -> int:
+        """Bit j set: joint j's DAC count changed this tick."""
+        return int(self.c.changed)
+
+    @property
+    def beyond(self) -> int:
+        """The first joint beyond its bounds this tick, or -1."""
+        return int(self.c.beyond)
 
 
 def _time(name: str, value: Any, finite: bool = True) -> float:

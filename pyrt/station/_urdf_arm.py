@@ -54,7 +54,7 @@ from pyrt.component import Command, Component, Limits, Param, Signal, command, r
 from pyrt.kinematics import GRAVITY, Chain, rpy_of
 from pyrt.motion import Evaluator, MotionFault
 from pyrt.motion import Limits as MotionLimits
-from pyrt.native import Servo, gain_ranges, tuned_gains
+from pyrt.native import Servo, ServoBoard, gain_ranges, tuned_gains
 from pyrt.native._servo import MAX_DT_PERIODS
 from pyrt.scheduler import Task
 from pyrt.station._urdf_gains import ArmTuning, arm_gain_params, joint_gain_params
@@ -98,8 +98,6 @@ ACCEL_SHARE = 0.4
 #: speed then known: a falling or swinging arm is braked, not held where it was).
 POWER_ON_TICKS = 10
 
-_TWO32 = 1 << 32
-_TWO31 = 1 << 31
 
 
 @dataclass(frozen=True)
@@ -140,7 +138,7 @@ class ArmJoint(Component):
                    "following error", ".4f"),
             Signal("torque", "N" if self.prismatic else "N m", lambda: float(a.servo.tau[i])
                    if a.powered else 0.0, "commanded joint torque", ".3f"),
-            Signal("dac", "DAC counts", lambda: a.dac[i], "amplifier command", "d"),
+            Signal("dac", "DAC counts", lambda: int(a.dac[i]), "amplifier command", "d"),
         ]
 
     def params(self) -> list[Param]:
@@ -197,17 +195,9 @@ class UrdfArm(ArmMoves, Component):
         ft = [layout.index(("ft", k)) for k in range(6)] if ("ft", 0) in layout else []
         self._ft_slice = slice(ft[0], ft[0] + 6) if ft else slice(0, 0)
         self._ft_counts: Sequence[int] = [0] * 6
-        # the counters as last read and their unwrapped totals (Python ints: no wrap)
-        self._counts = [int(board.read("count", j)) for j in range(n)]
-        self._total = list(self._counts)
         self._cpu_list = [d.counts_per_unit for d in self.drives]
-        self._qs = [(t + 0.5) / c for t, c in zip(self._total, self._cpu_list, strict=True)]
-        self._counts_per_nm = [1.0 / d.nm_per_count for d in self.drives]
-        #: The measured joints (rad, m), from the encoders (unwrapped).
-        self.q = np.zeros(n)
-        self.q[:] = self._qs
-        #: The DAC values last written.
-        self.dac = [0] * n
+        #: A servo tick this long after the last is a stall (said; csrc/servo.h).
+        self._stall_s = MAX_DT_PERIODS * period_ns * 1e-9
         effort = np.array([j.effort if math.isfinite(j.effort) and j.effort > 0
                            else d.nm_per_count * DAC_FULL_SCALE
                            for j, d in zip(joints, self.drives, strict=True)])
@@ -222,9 +212,16 @@ class UrdfArm(ArmMoves, Component):
         gains["ka"] = armature
         gains["kv"] = np.array([j.damping for j in joints])
         self.servo = Servo(n, self.period_s, names=chain.joint_names, gains=gains)
-        # the measured joints are the servo's input array itself (no copy per tick)
-        self.servo.q[:] = self.q
+        #: The board's side of the servo: the counters as last read and their unwrapped
+        #: totals, the DAC values last written (see servo_tick).
+        self._io = ServoBoard(self.servo, self._cpu_list,
+                              [int(board.read("count", j)) for j in range(n)],
+                              [1.0 / d.nm_per_count for d in self.drives], DAC_FULL_SCALE)
+        #: The measured joints (rad, m), from the encoders (unwrapped): the servo's input.
         self.q = self.servo.q
+        self._qs = self.q.tolist()
+        #: The DAC values last written.
+        self.dac = self._io.dac
         #: Each gain's safe range per joint: get/set take the gains within them.
         self.gain_ranges = gain_ranges(inertia, effort, self.period_s)
         self.servo.ranges = self.gain_ranges
@@ -366,18 +363,8 @@ class UrdfArm(ArmMoves, Component):
     def _measure(self, counts: Sequence[int]) -> None:
         """The joints from this tick's ``counts``: each counter's step since the last
         read taken modulo 2^32 (a 32-bit counter wraps), the middle of the count."""
-        last, total, qs, cpu = self._counts, self._total, self._qs, self._cpu_list
-        if counts == last:  # at rest: nothing to do
-            return
-        for j, c in enumerate(counts):
-            d = c - last[j]
-            if d:
-                if not -_TWO31 <= d < _TWO31:
-                    d = ((d + _TWO31) % _TWO32) - _TWO31
-                t = total[j] = total[j] + d
-                last[j] = c
-                qs[j] = (t + 0.5) / cpu[j]
-        self.q[:] = qs
+        self._io.encoders(counts)
+        self._qs = self.q.tolist()
 
     def wrench(self) -> np.ndarray:
         """The wrist sensor's wrench (fx fy fz N, tx ty tz N m; tool frame), or zeros
@@ -466,49 +453,45 @@ class UrdfArm(ArmMoves, Component):
         """1 kHz: the encoders, the servo law, the DACs; the checks; settling."""
         self._now_ns = now_ns
         inputs = self.board.snapshot()  # one read of every input: this tick's
-        self._measure(inputs[self._count_slice])
+        counts = inputs[self._count_slice]
         self._ft_counts = inputs[self._ft_slice]
         if not self.powered:  # the readings kept: an arm moving is braked at power-on
+            self._measure(counts)
             self._history.append((now_ns, self.q.copy()))
-        if not self.powered:
             if (self.evaluator is None and self.station.fault is None and not self._started
                     and len(self._history) >= POWER_ON_TICKS):
                 self._started = True
                 self.power_on()
             return
-        servo = self.servo  # servo.q is self.q: measured above
+        servo = self.servo  # servo.q is self.q: measured in tick_board below
         now = now_ns * 1e-9
         if self._joined and now > servo.end + 0.5 * self.period_s:
             # the loop stalled past the segment's end before the trajectory's turn: its
             # knot for now is made here, so the reference keeps to the time that passed
+            self._io.encoders(counts)
             self.trajectory_tick(now_ns)
             if not self.powered:
                 return
-        stalls = servo.stalls
-        trip = servo.tick(now=now)
-        if servo.stalls != stalls:
+        io = self._io  # the encoders, the law, the bounds and the DAC counts: one C call
+        trip = servo.tick_board(now, io, counts)
+        if servo.dt > self._stall_s:
             self.say(f"servo: {servo.dt * 1e3:.1f} ms passed since its last tick (the loop "
-                     f"stalled): the integral took {MAX_DT_PERIODS * self.period_s * 1e3:g} ms "
-                     f"of it", "warning")
+                     f"stalled): the integral took {self._stall_s * 1e3:g} ms of it", "warning")
         if trip is not None:
             self.fail(f"{trip} (joint {trip.name} at "
                       f"{self.q[trip.joint] * self.scales[trip.joint]:.3f} "
                       f"{self.units[trip.joint]})", self.joints[trip.joint].name)
             return
-        # the limits and the DACs, joint by joint on plain floats (six numbers:
-        # cheaper than numpy's calls)
-        dac, write, lo, hi, qs = self.dac, self.board.write, self._lo_l, self._hi_l, self._qs
-        inv, full = self._counts_per_nm, DAC_FULL_SCALE
-        for j, tau in enumerate(servo.tau.tolist()):
-            v = qs[j]
-            if v < lo[j] or v > hi[j]:
-                self._beyond(j)
-                return
-            c = round(tau * inv[j])
-            c = full if c > full else (-full if c < -full else c)
-            if c != dac[j]:
-                write("dac", c, j)
-                dac[j] = c
+        c = io.c
+        changed = c.changed
+        if changed:  # the DACs whose counts changed (those before a joint beyond its bounds)
+            write = self.board.write
+            for j, v in enumerate(io.dac.tolist()):
+                if changed >> j & 1:
+                    write("dac", v, j)
+        if c.beyond >= 0:
+            self._beyond(c.beyond)
+            return
         if self.state == "settling":
             self._settle(now_ns)
 
@@ -523,6 +506,8 @@ class UrdfArm(ArmMoves, Component):
         """Where the measured joints may go before that is a fault (plain floats)."""
         self._lo_l = [float(v) for v in lo]
         self._hi_l = [float(v) for v in hi]
+        self._io.lo[:] = lo
+        self._io.hi[:] = hi
 
     def _settle(self, now_ns: int) -> None:
         servo = self.servo
