@@ -220,8 +220,8 @@ class UrdfArm(ArmMoves, Component):
         #: The measured joints (rad, m), from the encoders (unwrapped): the servo's input.
         self.q = self.servo.q
         self._qs = self.q.tolist()
-        #: The DAC values last written.
-        self.dac = self._io.dac
+        #: The DAC values last written (the servo's board keeps them: see servo_tick).
+        self.dac: np.ndarray | list[int] = self._io.dac
         #: Each gain's safe range per joint: get/set take the gains within them.
         self.gain_ranges = gain_ranges(inertia, effort, self.period_s)
         self.servo.ranges = self.gain_ranges
