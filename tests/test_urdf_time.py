@@ -19,6 +19,8 @@ def test_a_stall_during_a_fast_move_does_not_trip_and_the_move_ends_at_its_targe
     """The loop stalls 15 to 30 ms in the middle of a fast joint move (the world advancing by the time that passed): no following-error fault, and the arm ends at its target in truth."""
     clock = StallClock()
     station = build_urdf(Loop(clock))
+    said: list[str] = []
+    station.subscribe(lambda m: said.append(m.text))
     runner = station.start()
     try:
         arm = station.arm
@@ -30,6 +32,8 @@ def test_a_stall_during_a_fast_move_does_not_trip_and_the_move_ends_at_its_targe
         assert runner.wait_until(lambda: not station.busy(), 20.0)
         assert station.fault is None
         assert arm.last_stop == "at target"
+        stalls = [m for m in said if "passed since its last tick" in m]
+        assert len(stalls) == 3 and f"{stall_ms + 1:.1f} ms" in stalls[0], said
         q = runner.call(lambda: station.plant.truth().q)
         assert np.max(np.abs(np.degrees(q) - TARGET)) < 0.05
     finally:
