@@ -99,7 +99,6 @@ ACCEL_SHARE = 0.4
 POWER_ON_TICKS = 10
 
 
-
 @dataclass(frozen=True)
 class Drive:
     """One joint's drive as the controller knows it: encoder counts per joint
