@@ -573,17 +573,17 @@ class UrdfArm(ArmMoves, Component):
             except MotionFault as exc:
                 self.fail(f"trajectory: {exc}", self.name)
                 return
-            self._knot_events(knot, wrench, ev)
+            _knot_events(self, knot, wrench, ev)
             if not self._joined or start + knot.period > now + half:
                 break
             missed, start = knot, start + knot.period  # a knot the stall passed over
         if missed is not None:  # the segment of the last two knots: the one that holds now
             k[3], k[4], k[5] = missed.q, missed.qd, missed.qdd
-            k[7] = self._feed_forward(missed)
+            k[7] = _feed_forward(self.chain, missed)
         moving = missed is not None or bool(knot.qd.any() or knot.qdd.any()
                                              or not np.array_equal(knot.q, k[3]))
         if moving:
-            ff = self._feed_forward(knot)
+            ff = _feed_forward(self.chain, knot)
             k[0:3] = k[3:6]
             k[6] = k[7]
             k[3] = knot.q
@@ -606,32 +606,6 @@ class UrdfArm(ArmMoves, Component):
                 self.state = "settling"
                 self._settle_from = now_ns
                 self._quiet_since = None
-
-    def _feed_forward(self, knot: Any) -> np.ndarray:
-        """The dynamics feed-forward at a knot: inverse dynamics, and the payload held."""
-        ff = self.chain.rnea(knot.q, knot.qd, knot.qdd, GRAVITY)
-        if knot.payload_torque is not None:
-            ff = ff + knot.payload_torque
-        return ff  # type: ignore[no-any-return]
-
-    def _knot_events(self, knot: Any, wrench: np.ndarray | None, ev: Evaluator) -> None:
-        """What a knot's events say of how the motion ended (``last_stop``)."""
-        for word, move in knot.events:
-            c = move.spec.comply
-            if word == "reached" and c is not None:
-                f = ev.comply_force
-                said = ", ".join(f"{float(f['xyz'.index(a)]):.2f} N along {a} (set {v:g} N)"
-                                 for a, v in zip(c.axes, c.forces, strict=True))
-                self.last_stop = f"at target, complying: the tool presses {said}"
-            if word in ("reached", "aborted"):  # the end of the whole motion is reported
-                continue
-            if word == "force" and wrench is not None:
-                self.last_stop = (f"force limit: the wrist felt |F| "
-                                  f"{float(np.linalg.norm(wrench[:3])):.2f} N (fx fy fz "
-                                  f"{' '.join(f'{v:.2f}' for v in wrench[:3])} N) at "
-                                  f"{self.pose_text(self.tool())}; braked to rest")
-            else:
-                self.last_stop = "stopped (stop command)" if word == "stopped" else word
 
     def follow(self, period: float) -> None:
         """Hand the servo the segment to the knot just made (the servo's knots B),
@@ -674,3 +648,31 @@ class UrdfArm(ArmMoves, Component):
         self.last_stop = "stopped (stop command)"
         self.state = "moving"  # tracking a conveyor too: braking is a move
         return f"{self.name}: stopping: braking along the path to rest, then holding"
+
+
+def _feed_forward(chain: Chain, knot: Any) -> np.ndarray:
+    """The dynamics feed-forward at a knot: inverse dynamics, and the payload held."""
+    ff = chain.rnea(knot.q, knot.qd, knot.qdd, GRAVITY)
+    if knot.payload_torque is not None:
+        ff = ff + knot.payload_torque
+    return ff  # type: ignore[no-any-return]
+
+
+def _knot_events(arm: UrdfArm, knot: Any, wrench: np.ndarray | None, ev: Evaluator) -> None:
+    """What a knot's events say of how the arm's motion ended (its ``last_stop``)."""
+    for word, move in knot.events:
+        c = move.spec.comply
+        if word == "reached" and c is not None:
+            f = ev.comply_force
+            said = ", ".join(f"{float(f['xyz'.index(a)]):.2f} N along {a} (set {v:g} N)"
+                             for a, v in zip(c.axes, c.forces, strict=True))
+            arm.last_stop = f"at target, complying: the tool presses {said}"
+        if word in ("reached", "aborted"):  # the end of the whole motion is reported
+            continue
+        if word == "force" and wrench is not None:
+            arm.last_stop = (f"force limit: the wrist felt |F| "
+                             f"{float(np.linalg.norm(wrench[:3])):.2f} N (fx fy fz "
+                             f"{' '.join(f'{v:.2f}' for v in wrench[:3])} N) at "
+                             f"{arm.pose_text(arm.tool())}; braked to rest")
+        else:
+            arm.last_stop = "stopped (stop command)" if word == "stopped" else word
