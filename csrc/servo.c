@@ -87,11 +87,20 @@ int pyrt_servo_reset(pyrt_servo *s, const double *q, const double *ff)
 
 int pyrt_servo_load(pyrt_servo *s, const double *knots, double duration, int32_t order)
 {
+    if (!valid(s)) {
+        return PYRT_EINVAL;
+    }
+    return pyrt_servo_load_at(s, knots, duration, order, s->last + s->period);
+}
+
+int pyrt_servo_load_at(pyrt_servo *s, const double *knots, double duration, int32_t order,
+                       double start)
+{
     if (!valid(s) || knots == NULL
         || (order != PYRT_SERVO_QUINTIC && order != PYRT_SERVO_CUBIC)) {
         return PYRT_EINVAL;
     }
-    if (!isfinite(duration)) {
+    if (!isfinite(duration) || !isfinite(start)) {
         return PYRT_ENONFINITE;
     }
     if (duration <= 0.0) {
@@ -135,12 +144,24 @@ int pyrt_servo_load(pyrt_servo *s, const double *knots, double duration, int32_t
     }
     s->order = order;
     s->duration = duration;
+    s->start = start;
     s->ticks = 0;
     s->late = 0;
     return PYRT_OK;
 }
 
 int pyrt_servo_tick(pyrt_servo *s)
+{
+    if (!valid(s)) {
+        if (s != NULL && s->tau != NULL && s->n >= 1 && s->n <= PYRT_SERVO_MAX_JOINTS) {
+            zero_out(s);
+        }
+        return PYRT_EINVAL;
+    }
+    return pyrt_servo_tick_at(s, s->last + s->period);
+}
+
+int pyrt_servo_tick_at(pyrt_servo *s, double now)
 {
     if (!valid(s) || s->q == NULL) {
         if (s != NULL && s->tau != NULL && s->n >= 1 && s->n <= PYRT_SERVO_MAX_JOINTS) {
@@ -162,10 +183,33 @@ int pyrt_servo_tick(pyrt_servo *s)
         zero_out(s);
         return rc;
     }
-    const double dt = s->period;
+    /* the time that passed: the velocity estimate over it, the integral over it
+     * within its bound */
+    const double dt = now - s->last;
+    if (!isfinite(now) || !isfinite(dt)) {
+        zero_out(s);
+        return PYRT_ENONFINITE;
+    }
+    if (dt < 0.0) {
+        zero_out(s);
+        return PYRT_EINVAL;
+    }
+    s->last = now;
+    s->dt = dt;
+    const double bound = PYRT_SERVO_MAX_DT_PERIODS * s->period;
+    double dt_i = dt;
+    if (dt > bound) {
+        dt_i = bound;
+        if (s->stalls < INT32_MAX) {
+            s->stalls += 1;
+        }
+        if (dt > s->stall_max) {
+            s->stall_max = dt;
+        }
+    }
 
-    /* the velocity estimate */
-    for (int32_t j = 0; j < n; j++) {
+    /* the velocity estimate (no time passed: unchanged) */
+    for (int32_t j = 0; j < n && dt > 0.0; j++) {
         const double alpha = 1.0 - exp(-TWO_PI * g[PYRT_SERVO_VELHZ * n + j] * dt);
         const double raw = (q[j] - st[PYRT_SERVO_QLAST * n + j]) / dt;
         double *v = &st[PYRT_SERVO_VEL * n + j];
@@ -185,11 +229,15 @@ int pyrt_servo_tick(pyrt_servo *s)
         frac = 1.0;
         held = 1;
     } else {
-        t = (double)s->ticks * dt;
-        if (t < s->duration + 0.5 * dt) {
+        const double half = 0.5 * s->period;
+        t = now - s->start;
+        if (t < 0.0) {
+            t = 0.0; /* the segment starts later: knot A until then */
+        }
+        if (t < s->duration + half) {
             s->ticks += 1;
         }
-        held = t > s->duration + 0.5 * dt;
+        held = t > s->duration + half;
         if (held) {
             if (s->late < INT32_MAX) {
                 s->late += 1;
@@ -250,7 +298,7 @@ int pyrt_servo_tick(pyrt_servo *s)
             + g[PYRT_SERVO_KFF * n + j] * st[PYRT_SERVO_FF * n + j];
         const double ilim = g[PYRT_SERVO_ILIM * n + j], tmax = g[PYRT_SERVO_TMAX * n + j];
         const double old = st[PYRT_SERVO_INTEG * n + j];
-        double integ = old + g[PYRT_SERVO_KI * n + j] * e * dt;
+        double integ = old + g[PYRT_SERVO_KI * n + j] * e * dt_i;
         integ = integ > ilim ? ilim : (integ < -ilim ? -ilim : integ);
         double u = pd + integ;
         if ((u > tmax && e > 0.0) || (u < -tmax && e < 0.0)) {
@@ -260,5 +308,82 @@ int pyrt_servo_tick(pyrt_servo *s)
         st[PYRT_SERVO_INTEG * n + j] = integ;
         tau[j] = u > tmax ? tmax : (u < -tmax ? -tmax : u);
     }
+    return PYRT_OK;
+}
+
+int pyrt_servo_encoders(pyrt_servo_board *b, int32_t n, const int64_t *counts)
+{
+    if (b == NULL || counts == NULL || b->counts_per_unit == NULL || b->last == NULL
+        || b->total == NULL || b->q == NULL || n < 1 || n > PYRT_SERVO_MAX_JOINTS) {
+        return PYRT_EINVAL;
+    }
+    const int64_t two31 = (int64_t)1 << 31, two32 = (int64_t)1 << 32;
+    for (int32_t j = 0; j < n; j++) {
+        if (counts[j] == b->last[j]) {
+            continue;
+        }
+        int64_t d = counts[j] - b->last[j];
+        if (d < -two31 || d >= two31) {
+            d = (d + two31) % two32;
+            d = (d < 0 ? d + two32 : d) - two31;
+        }
+        b->total[j] += d;
+        b->last[j] = counts[j];
+        b->q[j] = ((double)b->total[j] + 0.5) / b->counts_per_unit[j];
+    }
+    return PYRT_OK;
+}
+
+int pyrt_servo_tick_board(pyrt_servo *s, double now, pyrt_servo_board *b,
+                          const int64_t *counts)
+{
+    const int ok = valid(s);
+    if (b == NULL) {
+        if (ok) {
+            zero_out(s);
+        }
+        return PYRT_EINVAL;
+    }
+    b->changed = 0;
+    b->beyond = -1;
+    if (!ok || b->lo == NULL || b->hi == NULL || b->dac_per_unit == NULL || b->dac == NULL
+        || b->dac_full <= 0 || b->q != s->q) {
+        if (ok) {
+            zero_out(s);
+        }
+        return PYRT_EINVAL;
+    }
+    int rc = pyrt_servo_encoders(b, s->n, counts);
+    if (rc != PYRT_OK) {
+        zero_out(s);
+        return rc;
+    }
+    rc = pyrt_servo_tick_at(s, now);
+    if (rc != PYRT_OK || s->tripped) {
+        return rc;
+    }
+    const int32_t n = s->n;
+    const double full = (double)b->dac_full;
+    uint64_t changed = 0;
+    for (int32_t j = 0; j < n; j++) {
+        const double q = s->q[j];
+        if (q < b->lo[j] || q > b->hi[j]) {
+            b->beyond = j;
+            break;
+        }
+        double c = rint(s->tau[j] * b->dac_per_unit[j]);
+        if (!(c <= full)) {
+            c = isnan(c) ? 0.0 : full;
+        }
+        if (c < -full) {
+            c = -full;
+        }
+        const int32_t v = (int32_t)c;
+        if (v != b->dac[j]) {
+            b->dac[j] = v;
+            changed |= (uint64_t)1 << j;
+        }
+    }
+    b->changed = changed;
     return PYRT_OK;
 }

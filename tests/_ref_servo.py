@@ -1,10 +1,11 @@
-"""A pure-Python reference of csrc/servo.c: the same law, interpolation and
+"""A pure-Python reference of csrc/servo.c: the same law, interpolation, time and
 trip, written plainly from csrc/servo.h's description, one joint at a time."""
 
 from __future__ import annotations
 
 import math
 
+MAX_DT_PERIODS = 10
 GAINS = ("kp", "ki", "kd", "kv", "ka", "kff", "ilim", "tmax", "felim", "velhz")
 
 
@@ -38,6 +39,7 @@ class RefServo:
     def __init__(self, n, period, gains):
         self.n, self.period = n, period
         self.gains = {k: list(v) for k, v in gains.items()}
+        self.last, self.start, self.stalls, self.stall_max = 0.0, 0.0, 0, 0.0
         self.reset([0.0] * n)
 
     def reset(self, q, ff=None):
@@ -54,8 +56,9 @@ class RefServo:
         self.qref, self.qdref, self.qddref = list(q), [0.0] * n, [0.0] * n
         self.err, self.ff = [0.0] * n, list(ff)
 
-    def load(self, T, qa, qda, qb, qdb, qdda=None, qddb=None, ffa=None, ffb=None):
+    def load(self, T, qa, qda, qb, qdb, qdda=None, qddb=None, ffa=None, ffb=None, start=None):
         n = self.n
+        self.start = self.last + self.period if start is None else start
         if qdda is None:
             self.coef = [cubic(qa[j], qda[j], qb[j], qdb[j], T) for j in range(n)]
             self.order = 3
@@ -67,10 +70,20 @@ class RefServo:
         self.ffb = list(ffb) if ffb is not None else [0.0] * n
         self.duration, self.ticks, self.late = T, 0, 0
 
-    def tick(self, q):
-        """One tick; returns the joint index of a trip made by this tick, or None."""
-        n, dt, g = self.n, self.period, self.gains
+    def tick(self, q, now=None):
+        """One tick at ``now`` (None: one period after the last); returns the joint
+        index of a trip made by this tick, or None."""
+        n, g = self.n, self.gains
+        now = self.last + self.period if now is None else now
+        dt = now - self.last
+        self.last = now
+        dt_i = min(dt, MAX_DT_PERIODS * self.period)  # the integral's step, bounded
+        if dt > MAX_DT_PERIODS * self.period:
+            self.stalls += 1
+            self.stall_max = max(self.stall_max, dt)
         for j in range(n):
+            if dt == 0:
+                break  # no time passed: the estimate stays
             alpha = 1.0 - math.exp(-2 * math.pi * g["velhz"][j] * dt)
             raw = (q[j] - self.qlast[j]) / dt
             self.vel[j] += alpha * (raw - self.vel[j])
@@ -81,10 +94,11 @@ class RefServo:
         if self.order == 0:
             t, frac, held = 0.0, 1.0, True
         else:
-            t = self.ticks * dt
-            if t < self.duration + 0.5 * dt:
+            half = 0.5 * self.period
+            t = max(now - self.start, 0.0)
+            if t < self.duration + half:
                 self.ticks += 1
-            held = t > self.duration + 0.5 * dt
+            held = t > self.duration + half
             if held:
                 self.late += 1
             t = min(t, self.duration)
@@ -108,7 +122,7 @@ class RefServo:
                   + g["kv"][j] * self.qdref[j] + g["ka"][j] * self.qddref[j]
                   + g["kff"][j] * self.ff[j])
             ilim, tmax = g["ilim"][j], g["tmax"][j]
-            integ = min(max(self.integ[j] + g["ki"][j] * e * dt, -ilim), ilim)
+            integ = min(max(self.integ[j] + g["ki"][j] * e * dt_i, -ilim), ilim)
             u = pd + integ
             if (u > tmax and e > 0) or (u < -tmax and e < 0):
                 integ = min(max(self.integ[j], -ilim), ilim)
@@ -116,3 +130,27 @@ class RefServo:
             self.integ[j] = integ
             self.tau[j] = min(max(u, -tmax), tmax)
         return None
+
+
+def unwrap(last, total, counts):
+    """The encoders of csrc/servo.h: each step modulo 2^32 into -2^31 .. 2^31 - 1."""
+    for j, c in enumerate(counts):
+        d = c - last[j]
+        if not -(1 << 31) <= d < (1 << 31):
+            d = ((d + (1 << 31)) % (1 << 32)) - (1 << 31)
+        total[j] += d
+        last[j] = c
+
+
+def dacs(tau, q, lo, hi, per_unit, full, dac):
+    """The bounds and the DAC counts of pyrt_servo_tick_board: (changed mask, beyond)."""
+    changed = 0
+    for j in range(len(tau)):
+        if q[j] < lo[j] or q[j] > hi[j]:
+            return changed, j
+        c = round(tau[j] * per_unit[j])
+        c = full if c > full else (-full if c < -full else c)
+        if c != dac[j]:
+            dac[j] = c
+            changed |= 1 << j
+    return changed, -1

@@ -154,6 +154,11 @@ def _arm(**bad):
                          ft_offsets=[0.0] * 6, ft_sigma=[0.0] * 6)
 
 
+def _servo_board_nan() -> None:
+    servo = nat.Servo(1, 1e-3)
+    servo.tick_board(NAN, nat.ServoBoard(servo, [1.0], [0], [1.0], 1), [0])
+
+
 def _arm_nan_state():
     a = _arm()
     a.q[0] = NAN
@@ -198,6 +203,10 @@ THROUGH_WRAPPERS = {
     "pyrt_servo_reset": lambda: nat.Servo(1, 1e-3).reset([NAN]),
     "pyrt_servo_load": lambda: nat.Servo(1, 1e-3).segment(0.01, [NAN], [0.0], [0.0], [0.0]),
     "pyrt_servo_tick": lambda: nat.Servo(1, 1e-3).tick([NAN]),
+    "pyrt_servo_load_at": lambda: nat.Servo(1, 1e-3).segment(0.01, [0.0], [0.0], [0.0], [0.0],
+                                                             start=NAN),
+    "pyrt_servo_tick_at": lambda: nat.Servo(1, 1e-3).tick([0.0], now=NAN),
+    "pyrt_servo_tick_board": lambda: _servo_board_nan(),
     "pyrt_arm_check": lambda: _arm(damping=[-1.0]),
     "pyrt_arm_step": lambda: _arm().step(NAN),
     "pyrt_arm_publish": _arm_nan_state,
@@ -217,6 +226,7 @@ ONLY_RAW = {
     "pyrt_rq_check_wide": lambda: lib.pyrt_rq_check_wide(ffi.NULL),
     "pyrt_kin_workspace_size": lambda: lib.pyrt_kin_workspace_size(0, ffi.NULL),
     "pyrt_arm_work_size": lambda: lib.pyrt_arm_work_size(0, ffi.NULL),
+    "pyrt_servo_encoders": lambda: lib.pyrt_servo_encoders(ffi.NULL, 1, ffi.NULL),
     "pyrt_kin_fk": lambda: lib.pyrt_kin_fk(ffi.NULL, ffi.NULL, ffi.NULL, ffi.NULL),
     "pyrt_kin_jacobian": lambda: lib.pyrt_kin_jacobian(ffi.NULL, ffi.NULL, ffi.NULL, ffi.NULL,
                                                        ffi.NULL),

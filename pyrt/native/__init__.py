@@ -42,7 +42,14 @@ from pyrt.native._neck import UPPER as NECK_UPPER
 from pyrt.native._neck import NeckRing, RopePath, ring_contact
 from pyrt.native._polyctl import PolyControl
 from pyrt.native._readyq import QueueChecker, native_dispatcher
-from pyrt.native._servo import Servo, ServoTrip, check_gains, gain_ranges, tuned_gains
+from pyrt.native._servo import (
+    Servo,
+    ServoBoard,
+    ServoTrip,
+    check_gains,
+    gain_ranges,
+    tuned_gains,
+)
 from pyrt.native._statics import StaticsSolver
 
 __all__ = [
@@ -73,6 +80,7 @@ __all__ = [
     "RopePath",
     "RopeSegments",
     "Servo",
+    "ServoBoard",
     "ServoTrip",
     "SingularError",
     "SolverError",

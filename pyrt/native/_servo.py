@@ -8,6 +8,14 @@ one segment at a time (:meth:`Servo.segment`: knots A and B, quintic with
 accelerations, cubic without); see ``csrc/servo.h`` for the law, the
 interpolation and the following-error trip.
 
+Time: :meth:`Servo.tick` with ``now`` (s, the loop's clock) runs on the time
+that really passed (a late tick evaluates the trajectory at its own time,
+the velocity estimate and the integral use its dt, the integral's bounded
+at :data:`MAX_DT_PERIODS` periods: :attr:`Servo.stalls` counts the ticks
+beyond); without ``now`` the servo clocks itself, one period per tick.  A
+segment starts at the next tick, or at ``start`` on that clock (a
+trajectory continuing its segments gives :attr:`Servo.end`).
+
 Gains are plain arrays (:attr:`Servo.gains`, one row per :data:`GAINS`
 name, one column per joint; ``servo.kp`` etc. are views of the rows) that
 the caller may change between ticks.  Their safe ranges depend on the
@@ -35,8 +43,10 @@ from pyrt.native._lib import ffi, lib
 __all__ = [
     "GAINS",
     "GAIN_UNITS",
+    "MAX_DT_PERIODS",
     "MAX_JOINTS",
     "Servo",
+    "ServoBoard",
     "ServoTrip",
     "check_gains",
     "gain_ranges",
@@ -47,6 +57,8 @@ MAX_JOINTS: int = lib.PYRT_SERVO_MAX_JOINTS
 NGAINS: int = lib.PYRT_SERVO_NGAINS
 NSTATE: int = lib.PYRT_SERVO_NSTATE
 NKNOTS: int = lib.PYRT_SERVO_NKNOTS
+#: The integral's dt is bounded at this many periods (a longer stall is counted).
+MAX_DT_PERIODS: int = lib.PYRT_SERVO_MAX_DT_PERIODS
 
 #: The gain rows, in the order of csrc/servo.h.
 GAINS: tuple[str, ...] = ("kp", "ki", "kd", "kv", "ka", "kff", "ilim", "tmax", "felim", "velhz")
@@ -218,6 +230,8 @@ class Servo:
         self._knots_p = ffi.cast("double *", self._keep[4])
         self._c = c
         self._tick = lib.pyrt_servo_tick
+        self._tick_at = lib.pyrt_servo_tick_at
+        self._tick_board = lib.pyrt_servo_tick_board
         self._ff_buf = np.zeros(n, F64)
         self.reset(np.zeros(n))
 
@@ -280,11 +294,14 @@ class Servo:
 
     # ------------------------------------------------------------ the loop
 
-    def reset(self, q: ArrayLike, ff: ArrayLike | None = None) -> None:
+    def reset(self, q: ArrayLike, ff: ArrayLike | None = None, now: float | None = None) -> None:
         """Close the loop at the measured ``q``: hold there (with the
         feed-forward ``ff``, e.g. the gravity torque there), integrators and
-        velocity estimate cleared, a trip cleared, outputs zero."""
+        velocity estimate cleared, a trip cleared, outputs zero; ``now`` (s):
+        the servo's clock is set there (the next tick's dt counts from it)."""
         qv = _vector("q", q, self.n)
+        if now is not None:
+            self._c.last = _time("now", now)
         ffp = ffi.NULL
         if ff is not None:
             self._ff_buf[...] = _vector("ff", ff, self.n)
@@ -294,11 +311,13 @@ class Servo:
 
     def segment(self, duration: float, qa: ArrayLike, qda: ArrayLike, qb: ArrayLike,
                 qdb: ArrayLike, qdda: ArrayLike | None = None, qddb: ArrayLike | None = None,
-                ffa: ArrayLike | None = None, ffb: ArrayLike | None = None) -> None:
+                ffa: ArrayLike | None = None, ffb: ArrayLike | None = None,
+                start: float | None = None) -> None:
         """Load the next segment, ``duration`` seconds from knot A to knot B:
         quintic when both accelerations are given, cubic when neither is;
-        ``ffa``/``ffb`` the dynamics feed-forward at the knots (None: zero).
-        Refused (NativeInputError) and nothing changed on a bad value."""
+        ``ffa``/``ffb`` the dynamics feed-forward at the knots (None: zero);
+        ``start`` as :meth:`load`.  Refused (NativeInputError) and nothing
+        changed on a bad value."""
         if (qdda is None) != (qddb is None):
             raise NativeInputError("segment: give both accelerations (quintic) or neither (cubic)")
         k = self.knots
@@ -308,31 +327,85 @@ class Servo:
                                  (6, "ffa", ffa), (7, "ffb", ffb)):
             if value is not None:
                 k[row] = _vector(name, value, self.n)
-        self.load(duration, quintic=qdda is not None)
+        self.load(duration, quintic=qdda is not None, start=start)
 
-    def load(self, duration: float, quintic: bool = True) -> None:
+    def load(self, duration: float, quintic: bool = True, start: float | None = None) -> None:
         """Load the segment already written into :attr:`knots`
-        (``NKNOTS x n``, rows qa qda qdda qb qdb qddb ffa ffb)."""
+        (``NKNOTS x n``, rows qa qda qdda qb qdb qddb ffa ffb), starting at
+        ``start`` (s, the servo's clock: e.g. :attr:`end`, the last
+        segment's end) or, by default, at the next self-clocked tick."""
         if not isinstance(duration, (int, float)) or isinstance(duration, bool):
             raise NativeInputError(f"duration: expected seconds, got {duration!r}")
         order = lib.PYRT_SERVO_QUINTIC if quintic else lib.PYRT_SERVO_CUBIC
-        raise_for_status(lib.pyrt_servo_load(self._c, self._knots_p, float(duration), order),
-                         f"servo segment of {duration!r} s", _load_why)
+        if start is None:
+            rc = lib.pyrt_servo_load(self._c, self._knots_p, float(duration), order)
+        else:
+            rc = lib.pyrt_servo_load_at(self._c, self._knots_p, float(duration), order,
+                                        _time("start", start, finite=False))
+        raise_for_status(rc, f"servo segment of {duration!r} s", _load_why)
 
-    def tick(self, q: ArrayLike | None = None) -> ServoTrip | None:
+    def tick(self, q: ArrayLike | None = None, now: float | None = None) -> ServoTrip | None:
         """One servo tick on the measured joints ``q`` (None: :attr:`q` as
-        the caller wrote it); the outputs are in :attr:`tau`.  Returns the
-        trip when this tick's following error stopped the robot (every
-        output zero), else None (while tripped, every output stays zero;
-        :attr:`trip` says why).  Bad input raises and zeroes the outputs."""
+        the caller wrote it) at ``now`` (s, the servo's clock: the time that
+        really passed since the last tick counts; None: one period later);
+        the outputs are in :attr:`tau`.  Returns the trip when this tick's
+        following error stopped the robot (every output zero), else None
+        (while tripped, every output stays zero; :attr:`trip` says why).
+        Bad input (a ``now`` before the last tick's included) raises and
+        zeroes the outputs."""
         if q is not None:
             self.q[...] = q
         c = self._c
         was = c.tripped
-        raise_for_status(self._tick(c), "servo tick", _tick_why)
+        rc = self._tick(c) if now is None else self._tick_at(c, now)
+        raise_for_status(rc, "servo tick", _tick_why)
         if c.tripped and not was:
             return self.trip
         return None
+
+    def tick_board(self, now: float, board: ServoBoard, counts: Sequence[int]) -> ServoTrip | None:
+        """A passive board's servo task in one call: the encoders ``counts``
+        (unwrapped into :attr:`q`), :meth:`tick` at ``now``, then (unless
+        tripped) the bounds of the measured joints and the outputs as DAC counts
+        (:class:`ServoBoard`: ``board.beyond``, ``board.changed``, ``board.dac``).
+        Returns the trip this tick made, or None."""
+        if len(counts) != self.n or board.q is not self.q:
+            raise NativeInputError(f"tick_board: {self.n} counts of this servo's board, "
+                                   f"got {len(counts)}")
+        c = self._c
+        was = c.tripped
+        raise_for_status(self._tick_board(c, now, board.c, counts), "servo tick", _tick_why)
+        if c.tripped and not was:
+            return self.trip
+        return None
+
+    @property
+    def now(self) -> float:
+        """The servo's clock: the time of the last tick (s)."""
+        return float(self._c.last)
+
+    @property
+    def end(self) -> float:
+        """The time (s, the servo's clock) the loaded segment ends at: where a
+        trajectory's next segment starts."""
+        c = self._c
+        return float(c.start + c.duration)
+
+    @property
+    def dt(self) -> float:
+        """The last tick's dt (s): the time that passed since the tick before."""
+        return float(self._c.dt)
+
+    @property
+    def stalls(self) -> int:
+        """Ticks that came more than :data:`MAX_DT_PERIODS` periods after the one
+        before (their integral step bounded there)."""
+        return int(self._c.stalls)
+
+    @property
+    def longest_stall(self) -> float:
+        """The longest dt among :attr:`stalls` (s), 0 without any."""
+        return float(self._c.stall_max)
 
     @property
     def trip(self) -> ServoTrip | None:
@@ -395,11 +468,85 @@ class Servo:
         return f"Servo({self.n} joints, {self.period * 1e3:g} ms)"
 
 
+class ServoBoard:
+    """A passive board's side of ``servo`` (:meth:`Servo.tick_board`): its
+    encoders in (``counts_per_unit`` per joint radian or metre, ``counts``
+    the counters as read now; a 32-bit counter wraps) and its DACs out
+    (``dac_per_unit`` DAC counts per N m or N, ``full`` the full scale).
+    :attr:`lo`/:attr:`hi` bound the measured joints (beyond one: the
+    caller's fault; write them in place).  After a tick: the servo's ``q``
+    the measured joints, :attr:`dac` the counts, :attr:`changed` a bit per
+    joint whose count changed, :attr:`beyond` the first joint beyond its
+    bounds or -1."""
+
+    def __init__(self, servo: Servo, counts_per_unit: ArrayLike, counts: Sequence[int],
+                 dac_per_unit: ArrayLike, full: int) -> None:
+        n = servo.n
+        if isinstance(full, bool) or not isinstance(full, int) or full <= 0:
+            raise NativeInputError(f"full: expected a DAC full scale > 0, got {full!r}")
+        cpu = _vector("counts_per_unit", counts_per_unit, n)
+        per = _vector("dac_per_unit", dac_per_unit, n)
+        if not (np.isfinite(cpu).all() and (cpu > 0).all() and np.isfinite(per).all()):
+            raise NativeInputError("counts_per_unit (> 0) and dac_per_unit must be finite")
+        if len(counts) != n:
+            raise NativeInputError(f"counts: expected {n}, got {len(counts)}")
+        self.counts_per_unit = cpu.copy()
+        self.dac_per_unit = per.copy()
+        #: The counters as last read, and their unwrapped totals.
+        self.last = np.array([int(c) for c in counts], np.int64)
+        self.total = self.last.copy()
+        self.q = servo.q
+        self.q[:] = (self.total + 0.5) / self.counts_per_unit
+        self.lo = np.full(n, -np.inf)
+        self.hi = np.full(n, np.inf)
+        #: The DAC counts last written (this tick's after a tick).
+        self.dac = np.zeros(n, np.int32)
+        self.n = n
+        self._keep = [ffi.from_buffer(a) for a in (self.counts_per_unit, self.q, self.lo,
+                                                   self.hi, self.dac_per_unit, self.last,
+                                                   self.total, self.dac)]
+        c = ffi.new("pyrt_servo_board *")
+        c.counts_per_unit, c.q, c.lo, c.hi, c.dac_per_unit = (
+            ffi.cast("double *", b) for b in self._keep[:5])
+        c.last, c.total = (ffi.cast("int64_t *", b) for b in self._keep[5:7])
+        c.dac = ffi.cast("int32_t *", self._keep[7])
+        c.dac_full = full
+        c.beyond = -1
+        #: The C struct (its ``changed`` and ``beyond`` are read after a tick).
+        self.c = c
+        self._encoders = lib.pyrt_servo_encoders
+
+    def encoders(self, counts: Sequence[int]) -> None:
+        """Only the encoders: ``counts`` unwrapped into the servo's ``q`` (no tick)."""
+        if len(counts) != self.n:
+            raise NativeInputError(f"encoders: expected {self.n} counts, got {len(counts)}")
+        raise_for_status(self._encoders(self.c, self.n, counts), "servo encoders")
+
+    @property
+    def changed(self) -> int:
+        """Bit j set: joint j's DAC count changed this tick."""
+        return int(self.c.changed)
+
+    @property
+    def beyond(self) -> int:
+        """The first joint beyond its bounds this tick, or -1."""
+        return int(self.c.beyond)
+
+
+def _time(name: str, value: Any, finite: bool = True) -> float:
+    """A time in seconds (a number; finite unless the kernel checks it)."""
+    if (isinstance(value, bool) or not isinstance(value, (int, float))
+            or (finite and not math.isfinite(value))):
+        raise NativeInputError(f"{name}: expected a finite time in seconds, got {value!r}")
+    return float(value)
+
+
 def _load_why(exc: Any) -> str:
-    return ("a knot is NaN or infinite, the duration is not a number of seconds > 0, "
-            "or the order is neither quintic nor cubic")
+    return ("a knot or the start is NaN or infinite, the duration is not a number of "
+            "seconds > 0, or the order is neither quintic nor cubic")
 
 
 def _tick_why(exc: Any) -> str:
-    return ("NaN or infinity in the measured joints or a gain, or a gain outside its basic "
-            "range (negative; kff outside 0..1; tmax, felim, velhz not > 0): outputs zeroed")
+    return ("NaN or infinity in the measured joints, a gain or the time, the time before the "
+            "last tick's, or a gain outside its basic range (negative; kff outside 0..1; "
+            "tmax, felim, velhz not > 0): outputs zeroed")

@@ -54,7 +54,8 @@ from pyrt.component import Command, Component, Limits, Param, Signal, command, r
 from pyrt.kinematics import GRAVITY, Chain, rpy_of
 from pyrt.motion import Evaluator, MotionFault
 from pyrt.motion import Limits as MotionLimits
-from pyrt.native import Servo, gain_ranges, tuned_gains
+from pyrt.native import Servo, ServoBoard, gain_ranges, tuned_gains
+from pyrt.native._servo import MAX_DT_PERIODS
 from pyrt.scheduler import RateGroup, Task
 from pyrt.station._urdf_gains import ArmTuning, arm_gain_params, joint_gain_params
 from pyrt.station._urdf_moves import ArmMoves
@@ -108,9 +109,6 @@ ACCEL_SHARE = 0.4
 #: speed then known: a falling or swinging arm is braked, not held where it was).
 POWER_ON_TICKS = 10
 
-_TWO32 = 1 << 32
-_TWO31 = 1 << 31
-
 
 @dataclass(frozen=True)
 class Drive:
@@ -150,7 +148,7 @@ class ArmJoint(Component):
                    "following error", ".4f"),
             Signal("torque", "N" if self.prismatic else "N m", lambda: float(a.servo.tau[i])
                    if a.powered else 0.0, "commanded joint torque", ".3f"),
-            Signal("dac", "DAC counts", lambda: a.dac[i], "amplifier command", "d"),
+            Signal("dac", "DAC counts", lambda: int(a.dac[i]), "amplifier command", "d"),
         ]
 
     def params(self) -> list[Param]:
@@ -208,17 +206,9 @@ class UrdfArm(ArmMoves, Component):
         ft = [layout.index(("ft", k)) for k in range(6)] if ("ft", 0) in layout else []
         self._ft_slice = slice(ft[0], ft[0] + 6) if ft else slice(0, 0)
         self._ft_counts: Sequence[int] = [0] * 6
-        # the counters as last read and their unwrapped totals (Python ints: no wrap)
-        self._counts = [int(board.read("count", j)) for j in range(n)]
-        self._total = list(self._counts)
         self._cpu_list = [d.counts_per_unit for d in self.drives]
-        self._qs = [(t + 0.5) / c for t, c in zip(self._total, self._cpu_list, strict=True)]
-        self._counts_per_nm = [1.0 / d.nm_per_count for d in self.drives]
-        #: The measured joints (rad, m), from the encoders (unwrapped).
-        self.q = np.zeros(n)
-        self.q[:] = self._qs
-        #: The DAC values last written.
-        self.dac = [0] * n
+        #: A servo tick this long after the last is a stall (said; csrc/servo.h).
+        self._stall_s = MAX_DT_PERIODS * period_ns * 1e-9
         effort = np.array([j.effort if math.isfinite(j.effort) and j.effort > 0
                            else d.nm_per_count * DAC_FULL_SCALE
                            for j, d in zip(joints, self.drives, strict=True)])
@@ -233,9 +223,16 @@ class UrdfArm(ArmMoves, Component):
         gains["ka"] = armature
         gains["kv"] = np.array([j.damping for j in joints])
         self.servo = Servo(n, self.period_s, names=chain.joint_names, gains=gains)
-        # the measured joints are the servo's input array itself (no copy per tick)
-        self.servo.q[:] = self.q
+        #: The board's side of the servo: the counters as last read and their unwrapped
+        #: totals, the DAC values last written (see servo_tick).
+        self._io = ServoBoard(self.servo, self._cpu_list,
+                              [int(board.read("count", j)) for j in range(n)],
+                              [1.0 / d.nm_per_count for d in self.drives], DAC_FULL_SCALE)
+        #: The measured joints (rad, m), from the encoders (unwrapped): the servo's input.
         self.q = self.servo.q
+        self._qs = self.q.tolist()
+        #: The DAC values last written (the servo's board keeps them: see servo_tick).
+        self.dac: np.ndarray | list[int] = self._io.dac
         #: Each gain's safe range per joint: get/set take the gains within them.
         self.gain_ranges = gain_ranges(inertia, effort, self.period_s)
         self.servo.ranges = self.gain_ranges
@@ -281,6 +278,10 @@ class UrdfArm(ArmMoves, Component):
         self.conveyor = None
         self._anchor = (0.0, 0)
         self._latest = None
+        #: The servo's segments join in time (a motion's knots follow each other), and
+        #: where the next one starts on the loop's clock (s).
+        self._joined = False
+        self._start = 0.0
 
     # -- set-up ---------------------------------------------------------------------
 
@@ -377,24 +378,15 @@ class UrdfArm(ArmMoves, Component):
             self.state = "idle"
             self.evaluator = None
             self._quiet_since = None
+            self._joined = False
 
     # -- where it is ------------------------------------------------------------------
 
     def _measure(self, counts: Sequence[int]) -> None:
         """The joints from this tick's ``counts``: each counter's step since the last
         read taken modulo 2^32 (a 32-bit counter wraps), the middle of the count."""
-        last, total, qs, cpu = self._counts, self._total, self._qs, self._cpu_list
-        if counts == last:  # at rest: nothing to do
-            return
-        for j, c in enumerate(counts):
-            d = c - last[j]
-            if d:
-                if not -_TWO31 <= d < _TWO31:
-                    d = ((d + _TWO31) % _TWO32) - _TWO31
-                t = total[j] = total[j] + d
-                last[j] = c
-                qs[j] = (t + 0.5) / cpu[j]
-        self.q[:] = qs
+        self._io.encoders(counts)
+        self._qs = self.q.tolist()
 
     def wrench(self) -> np.ndarray:
         """The wrist sensor's wrench (fx fy fz N, tx ty tz N m; tool frame), or zeros
@@ -445,7 +437,8 @@ class UrdfArm(ArmMoves, Component):
             if self._now_ns > t_old:
                 v = (q - q_old) / ((self._now_ns - t_old) * 1e-9)
         ff = self.chain.gravity_torque(q)
-        self.servo.reset(q, ff)
+        self.servo.reset(q, ff, now=self._now_ns * 1e-9)
+        self._joined = False
         k = self.servo.knots
         k[...] = 0.0
         k[3] = q
@@ -482,37 +475,45 @@ class UrdfArm(ArmMoves, Component):
         """1 kHz: the encoders, the servo law, the DACs; the checks; settling."""
         self._now_ns = now_ns
         inputs = self.board.snapshot()  # one read of every input: this tick's
-        self._measure(inputs[self._count_slice])
+        counts = inputs[self._count_slice]
         self._ft_counts = inputs[self._ft_slice]
         if not self.powered:  # the readings kept: an arm moving is braked at power-on
+            self._measure(counts)
             self._history.append((now_ns, self.q.copy()))
-        if not self.powered:
             if (self.evaluator is None and self.station.fault is None and not self._started
                     and len(self._history) >= POWER_ON_TICKS):
                 self._started = True
                 self.power_on()
             return
-        servo = self.servo  # servo.q is self.q: measured above
-        trip = servo.tick()
+        servo = self.servo  # servo.q is self.q: measured in tick_board below
+        now = now_ns * 1e-9
+        if self._joined and now > servo.end + 0.5 * self.period_s:
+            # the loop stalled past the segment's end before the trajectory's turn: its
+            # knot for now is made here, so the reference keeps to the time that passed
+            self._io.encoders(counts)
+            self.trajectory_tick(now_ns)
+            if not self.powered:
+                return
+        io = self._io  # the encoders, the law, the bounds and the DAC counts: one C call
+        trip = servo.tick_board(now, io, counts)
+        if servo.dt > self._stall_s:
+            self.say(f"servo: {servo.dt * 1e3:.1f} ms passed since its last tick (the loop "
+                     f"stalled): the integral took {self._stall_s * 1e3:g} ms of it", "warning")
         if trip is not None:
             self.fail(f"{trip} (joint {trip.name} at "
                       f"{self.q[trip.joint] * self.scales[trip.joint]:.3f} "
                       f"{self.units[trip.joint]})", self.joints[trip.joint].name)
             return
-        # the limits and the DACs, joint by joint on plain floats (six numbers:
-        # cheaper than numpy's calls)
-        dac, write, lo, hi, qs = self.dac, self.board.write, self._lo_l, self._hi_l, self._qs
-        inv, full = self._counts_per_nm, DAC_FULL_SCALE
-        for j, tau in enumerate(servo.tau.tolist()):
-            v = qs[j]
-            if v < lo[j] or v > hi[j]:
-                self._beyond(j)
-                return
-            c = round(tau * inv[j])
-            c = full if c > full else (-full if c < -full else c)
-            if c != dac[j]:
-                write("dac", c, j)
-                dac[j] = c
+        c = io.c
+        changed = c.changed
+        if changed:  # the DACs whose counts changed (those before a joint beyond its bounds)
+            write = self.board.write
+            for j, v in enumerate(io.dac.tolist()):
+                if changed >> j & 1:
+                    write("dac", v, j)
+        if c.beyond >= 0:
+            self._beyond(c.beyond)
+            return
         if self.state == "settling":
             self._settle(now_ns)
 
@@ -527,6 +528,8 @@ class UrdfArm(ArmMoves, Component):
         """Where the measured joints may go before that is a fault (plain floats)."""
         self._lo_l = [float(v) for v in lo]
         self._hi_l = [float(v) for v in hi]
+        self._io.lo[:] = lo
+        self._io.hi[:] = hi
 
     def _settle(self, now_ns: int) -> None:
         servo = self.servo
@@ -553,7 +556,16 @@ class UrdfArm(ArmMoves, Component):
     # -- the trajectory ----------------------------------------------------------------
 
     def trajectory_tick(self, now_ns: int) -> None:
-        """100 Hz: one knot of the evaluator, handed to the servo as the next segment."""
+        """100 Hz: the evaluator's knot for the time that really passed, handed to the
+        servo as its next segment.
+
+        The segments join in time as in space: the next one starts where the last
+        ended, on the loop's clock.  A tick that comes after the running segment's end
+        has passed by a trajectory period or more (the loop stalled) evaluates the
+        knots it missed and hands the servo the segment of the last two, the one that
+        holds now: the trajectory keeps to the loop's time, never to a count of ticks.
+        A tick that finds the running segment reaching beyond now has nothing to make.
+        """
         ev = self.evaluator
         if not self.powered or ev is None:
             return
@@ -561,46 +573,47 @@ class UrdfArm(ArmMoves, Component):
             if now_ns < self._recover_until:
                 return
             self._recover_until = None
+        now = now_ns * 1e-9
+        half = 0.5 * self.period_s
+        if self._joined:
+            start = self.servo.end
+            if start > now + half:  # the segment running holds now: its knot is made
+                return
+        else:
+            start = max(self.servo.now + self.period_s, now)
         if self._wide:  # back inside the limits: the fault's bounds are the limits' again
             lo, hi = self.chain.lower - self._margin, self.chain.upper + self._margin
             if bool(((self.q >= lo) & (self.q <= hi)).all()):
                 self._bound(lo, hi)
                 self._wide = False
         wrench = self.wrench() if self._wrench_of is not None else None
-        self._anchor = (now_ns * 1e-9 + self.traj_period_s, ev.sample)
-        try:
-            knot = ev.tick(wrench)
-        except MotionFault as exc:
-            self.fail(f"trajectory: {exc}", self.name)
-            return
-        for word, move in knot.events:
-            c = move.spec.comply
-            if word == "reached" and c is not None:
-                f = ev.comply_force
-                said = ", ".join(f"{float(f['xyz'.index(a)]):.2f} N along {a} (set {v:g} N)"
-                                 for a, v in zip(c.axes, c.forces, strict=True))
-                self.last_stop = f"at target, complying: the tool presses {said}"
-            if word in ("reached", "aborted"):  # the end of the whole motion is reported
-                continue
-            if word == "force" and wrench is not None:
-                self.last_stop = (f"force limit: the wrist felt |F| "
-                                  f"{float(np.linalg.norm(wrench[:3])):.2f} N (fx fy fz "
-                                  f"{' '.join(f'{v:.2f}' for v in wrench[:3])} N) at "
-                                  f"{self.pose_text(self.tool())}; braked to rest")
-            else:
-                self.last_stop = "stopped (stop command)" if word == "stopped" else word
         k = self.servo.knots
-        moving = bool(knot.qd.any() or knot.qdd.any() or not np.array_equal(knot.q, k[3]))
+        missed = None
+        while True:
+            self._anchor = (start + ev.period, ev.sample)
+            try:
+                knot = ev.tick(wrench)
+            except MotionFault as exc:
+                self.fail(f"trajectory: {exc}", self.name)
+                return
+            _knot_events(self, knot, wrench, ev)
+            if not self._joined or start + knot.period > now + half:
+                break
+            missed, start = knot, start + knot.period  # a knot the stall passed over
+        if missed is not None:  # the segment of the last two knots: the one that holds now
+            k[3], k[4], k[5] = missed.q, missed.qd, missed.qdd
+            k[7] = _feed_forward(self.chain, missed)
+        moving = missed is not None or bool(knot.qd.any() or knot.qdd.any()
+                                             or not np.array_equal(knot.q, k[3]))
         if moving:
-            ff = self.chain.rnea(knot.q, knot.qd, knot.qdd, GRAVITY)
-            if knot.payload_torque is not None:
-                ff = ff + knot.payload_torque
+            ff = _feed_forward(self.chain, knot)
             k[0:3] = k[3:6]
             k[6] = k[7]
             k[3] = knot.q
             k[4] = knot.qd
             k[5] = knot.qdd
             k[7] = ff
+            self._start = start
             self.follow(knot.period)
             if knot.move is not None and knot.move.done and knot.move is self._latest:
                 # the last record queued has reached its point on a moving frame
@@ -610,15 +623,19 @@ class UrdfArm(ArmMoves, Component):
                                       f"conveyor at {self.pose_text(self.tool())}")
             elif self.state != "moving":
                 self.state = "moving"
-        elif self.state == "moving" and ev.idle:
-            self.state = "settling"
-            self._settle_from = now_ns
-            self._quiet_since = None
+        else:
+            self._joined = False
+            if self.state == "moving" and ev.idle:
+                self.state = "settling"
+                self._settle_from = now_ns
+                self._quiet_since = None
 
     def follow(self, period: float) -> None:
-        """Hand the servo the segment to the knot just made (the servo's knots B;
-        a hardware (a) arm writes it to its board instead)."""
-        self.servo.load(period, quintic=True)
+        """Hand the servo the segment to the knot just made (the servo's knots B),
+        starting where the last one ended on the loop's clock (or now, the first of a
+        motion); a hardware (a) arm writes it to its board instead."""
+        self.servo.load(period, quintic=True, start=self._start)
+        self._joined = True
 
     # -- commands (the moves: ArmMoves) ----------------------------------------------
 
@@ -654,3 +671,31 @@ class UrdfArm(ArmMoves, Component):
         self.last_stop = "stopped (stop command)"
         self.state = "moving"  # tracking a conveyor too: braking is a move
         return f"{self.name}: stopping: braking along the path to rest, then holding"
+
+
+def _feed_forward(chain: Chain, knot: Any) -> np.ndarray:
+    """The dynamics feed-forward at a knot: inverse dynamics, and the payload held."""
+    ff = chain.rnea(knot.q, knot.qd, knot.qdd, GRAVITY)
+    if knot.payload_torque is not None:
+        ff = ff + knot.payload_torque
+    return ff  # type: ignore[no-any-return]
+
+
+def _knot_events(arm: UrdfArm, knot: Any, wrench: np.ndarray | None, ev: Evaluator) -> None:
+    """What a knot's events say of how the arm's motion ended (its ``last_stop``)."""
+    for word, move in knot.events:
+        c = move.spec.comply
+        if word == "reached" and c is not None:
+            f = ev.comply_force
+            said = ", ".join(f"{float(f['xyz'.index(a)]):.2f} N along {a} (set {v:g} N)"
+                             for a, v in zip(c.axes, c.forces, strict=True))
+            arm.last_stop = f"at target, complying: the tool presses {said}"
+        if word in ("reached", "aborted"):  # the end of the whole motion is reported
+            continue
+        if word == "force" and wrench is not None:
+            arm.last_stop = (f"force limit: the wrist felt |F| "
+                             f"{float(np.linalg.norm(wrench[:3])):.2f} N (fx fy fz "
+                             f"{' '.join(f'{v:.2f}' for v in wrench[:3])} N) at "
+                             f"{arm.pose_text(arm.tool())}; braked to rest")
+        else:
+            arm.last_stop = "stopped (stop command)" if word == "stopped" else word

@@ -250,6 +250,7 @@ class ArmController(Component):
         self._now_ns = self._settle_from = 0
         self._reason = "at target"
         self._ended = True  # the knots have stopped coming: the servo holds the last one
+        self._joined = False  # the servo's segments follow each other in time
         self._quiet_since: int | None = None
 
     # -- the component ----------------------------------------------------------------
@@ -287,6 +288,7 @@ class ArmController(Component):
             self.state = "idle"
             self.evaluator = None
             self._ended = True
+            self._joined = False
             self._quiet_since = None
 
     # -- where it is --------------------------------------------------------------------
@@ -348,7 +350,8 @@ class ArmController(Component):
         """Close the loop where the arm is (the trajectory starts there: ``evaluator``,
         one made there, or a new one), amplifiers on."""
         q = np.array(self.angles()) / _DEG
-        self.servo.reset(q)
+        self.servo.reset(q, now=self._now_ns * 1e-9)
+        self._joined = False
         self.servo.segment(self.traj_period_s, q, np.zeros(2), q, np.zeros(2))
         self.evaluator = evaluator if evaluator is not None else self._evaluator(q)
         for jt in self.joints:
@@ -362,8 +365,13 @@ class ArmController(Component):
         k = self.servo.knots
         k[0:2] = k[3:5]
         k[3], k[4] = q, qd
-        self.servo.load(duration, quintic=False)
+        # on the loop's clock: where the last segment ended, or now for a motion's first
+        servo = self.servo
+        start = servo.end if self._joined else max(servo.now + servo.period,
+                                                    self._now_ns * 1e-9)
+        servo.load(duration, quintic=False, start=start)
         self._ended = False
+        self._joined = True
 
     def _end_of_knots(self, now_ns: int) -> None:  # the servo holds the last one; settle
         self._ended, self._settle_from, self._quiet_since = True, now_ns, None
@@ -379,15 +387,28 @@ class ArmController(Component):
         ev = self.evaluator
         if executor.busy or ev is None or self.state == "idle":
             return
+        self._next_knot(now_ns, ev)
+
+    def _next_knot(self, now_ns: int, ev: Evaluator) -> None:
+        """The evaluator's knot for the time that really passed as the servo's next
+        segment; the knots a stall of the loop passed over are evaluated on the way."""
+        now, half = now_ns * 1e-9, 0.5 * self.servo.period
+        if self._joined and self.servo.end > now + half:
+            return  # the segment running holds now: its knot is made
         try:
             knot = ev.tick()
+            while self._joined and self.servo.end + knot.period <= now + half:
+                self._load(knot.q, knot.qd, knot.period)  # a knot the stall passed over
+                knot = ev.tick()
         except MotionFault as exc:
             self.fail(f"trajectory: {exc}", self.name)
             return
         if knot.qd.any() or knot.qdd.any() or (knot.q != self.servo.knots[3]).any():
             self._load(knot.q, knot.qd, knot.period)
-        elif ev.idle and not self._ended:
-            self._end_of_knots(now_ns)
+        else:
+            self._joined = False
+            if ev.idle and not self._ended:
+                self._end_of_knots(now_ns)
 
     def servo_tick(self, now_ns: int) -> None:
         """1 kHz: the encoders into the servo, its torques (and the Coulomb friction) as
@@ -400,7 +421,14 @@ class ArmController(Component):
         for j, (at, _ok, zero, rad, _kc, _full) in enumerate(self._io):
             d = inputs[at] - zero  # a 32-bit counter: the difference taken modulo 2^32
             q[j] = (d if -_TWO31 <= d < _TWO31 else (d + _TWO31) % _TWO32 - _TWO31) * rad
-        trip = servo.tick()
+        now = now_ns * 1e-9
+        ev = self.evaluator
+        if (self._joined and ev is not None and now > servo.end + 0.5 * servo.period
+                and not self.station.executor.busy):
+            self._next_knot(now_ns, ev)  # the loop stalled past the segment: its knot, now
+            if self.state == "idle":
+                return
+        trip = servo.tick(now=now)
         if trip is not None:
             m = float(q[trip.joint]) * _DEG
             self.fail(following_error_fault(trip.name, m + trip.error * _DEG, m,
