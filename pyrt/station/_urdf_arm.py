@@ -169,6 +169,18 @@ class ArmJoint(Component):
                 board.write("release", 0, self.index)
 
 
+def task_groups(tasks: list[Task], robot: str) -> list[RateGroup]:
+    """``tasks`` in their rate groups (:data:`GROUP_HZ`: a task in the group of its
+    name), each in a ready queue of ``robot`` (faults name it), fastest first;
+    attach them to the loop and give the station their queues."""
+    groups = []
+    for task in tasks:
+        group = RateGroup(task.name, hz=GROUP_HZ[task.name])
+        group.new_queue(robot, [task])
+        groups.append(group)
+    return sorted(groups, key=lambda g: g.period_ns)
+
+
 class UrdfArm(ArmMoves, Component):
     """The arm: the root component of ``pyrt urdf`` (see the module text).
     Its moves and their commands are :class:`ArmMoves`, mixed in.
@@ -351,15 +363,8 @@ class UrdfArm(ArmMoves, Component):
                 Task(self.servo_tick, period=1, name="servo", timed=True)]
 
     def rate_groups(self, robot: str) -> list[RateGroup]:
-        """The arm's tasks in their rate groups (:data:`GROUP_HZ`: a task in the
-        group of its name), each in a ready queue of ``robot`` (faults name it),
-        fastest first; attach them to the loop and give the station their queues."""
-        groups = []
-        for task in self.tasks():
-            group = RateGroup(task.name, hz=GROUP_HZ[task.name])
-            group.new_queue(robot, [task])
-            groups.append(group)
-        return sorted(groups, key=lambda g: g.period_ns)
+        """The arm's tasks in their rate groups (:func:`task_groups`)."""
+        return task_groups(self.tasks(), robot)
 
     def commands(self) -> list[Command]:
         if self._records is None:
