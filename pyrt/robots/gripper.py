@@ -167,6 +167,17 @@ class JobResult:
     value: int | None = None
 
 
+def _attach_clock(loop: Loop, queue: ReadyQueue, clock_ns: int | None) -> None:
+    """The clock interrupt ``SYSCLK`` on ``loop``: ticking with the loop (None, as on
+    002's board), or a rate group of its own every ``clock_ns``."""
+    if clock_ns is None:
+        loop.attach(queue, name="SYSCLK")
+        return
+    group = RateGroup("SYSCLK", period_ns=clock_ns)
+    group.attach(queue, name="SYSCLK")
+    loop.attach(group)
+
+
 class GripperController(Component, CommandLetters):
     """The 002 controller program over an :class:`~pyrt.boards.i8031.I8031`.
 
@@ -248,13 +259,8 @@ class GripperController(Component, CommandLetters):
             install(self.queue, self.tasks())
         self._loop = loop
         self.supervisor.clock = loop
-        if clock_ns is None:
-            loop.attach(self.queue, name="SYSCLK")
-        else:
-            group = RateGroup("SYSCLK", period_ns=clock_ns)
-            group.attach(self.queue, name="SYSCLK")
-            loop.attach(group)
-            self._clock_ns = clock_ns
+        _attach_clock(loop, self.queue, clock_ns)
+        self._clock_ns = clock_ns or 0
         loop.attach(self.watchdog, name="stall watchdog")
 
     def power_up(self) -> None:
