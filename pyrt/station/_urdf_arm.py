@@ -537,12 +537,16 @@ class UrdfArm(ArmMoves, Component):
         self._io.hi[:] = hi
 
     def _settle(self, now_ns: int) -> None:
-        servo = self.servo
-        if servo.late == 0:
-            return  # the last segment still runs
+        if self.servo.late:  # else the last segment still runs
+            self.settle_on(self.servo.error, now_ns)
+
+    def settle_on(self, err: np.ndarray, now_ns: int) -> None:
+        """The move ends when every joint's error ``err`` (rad or m) is within
+        :data:`AT_TARGET_DEG` and slower than :data:`SETTLED_SPEED_DEG_S` for
+        :data:`SETTLE_S`, or says it did not settle after :data:`SETTLE_TIMEOUT_S`."""
         k = self.scales
-        quiet = (float(np.max(np.abs(servo.error) * k)) <= AT_TARGET_DEG
-                 and float(np.max(np.abs(servo.velocity) * k)) <= SETTLED_SPEED_DEG_S)
+        quiet = (float(np.max(np.abs(err) * k)) <= AT_TARGET_DEG
+                 and float(np.max(np.abs(self.servo.velocity) * k)) <= SETTLED_SPEED_DEG_S)
         if not quiet:
             self._quiet_since = None
         elif self._quiet_since is None:
@@ -554,7 +558,7 @@ class UrdfArm(ArmMoves, Component):
                 self.last_stop = "at target"
         elif now_ns - self._settle_from >= SETTLE_TIMEOUT_S * 1e9:
             errs = ", ".join(f"{jt.name} {float(e) * kk:+.4f}" for jt, e, kk in
-                             zip(self.chain.joints, servo.error, k, strict=True))
+                             zip(self.chain.joints, err, k, strict=True))
             self.state = "idle"
             self.last_stop = f"did not settle within {SETTLE_TIMEOUT_S:g} s ({errs})"
 

@@ -39,11 +39,7 @@ from pyrt.errors import ConfigError
 from pyrt.motion import Evaluator
 from pyrt.scheduler import Task
 from pyrt.station._urdf_arm import (
-    AT_TARGET_DEG,
     FOLLOWING_ERROR_DEG,
-    SETTLE_S,
-    SETTLE_TIMEOUT_S,
-    SETTLED_SPEED_DEG_S,
     ArmJoint,
     Drive,
     UrdfArm,
@@ -311,23 +307,6 @@ class DrivenArm(UrdfArm):
                       "limit or its period not set", self.name)
 
     def _settle(self, now_ns: int) -> None:
-        """Ended when every joint is within :data:`AT_TARGET_DEG` of the last knot and
-        slower than :data:`SETTLED_SPEED_DEG_S`, for :data:`SETTLE_S`."""
-        k = self.scales
-        err = self.servo.knots[3] - self.q
-        quiet = (float(np.max(np.abs(err) * k)) <= AT_TARGET_DEG
-                 and float(np.max(np.abs(self.servo.velocity) * k)) <= SETTLED_SPEED_DEG_S)
-        if not quiet:
-            self._quiet_since = None
-        elif self._quiet_since is None:
-            self._quiet_since = now_ns
-        if self._quiet_since is not None and now_ns - self._quiet_since >= SETTLE_S * 1e9:
-            self.state = "idle"
-            self._quiet_since = None
-            if not self.last_stop:
-                self.last_stop = "at target"
-        elif now_ns - self._settle_from >= SETTLE_TIMEOUT_S * 1e9:
-            errs = ", ".join(f"{jt.name} {float(e) * kk:+.4f}" for jt, e, kk in
-                             zip(self.chain.joints, err, k, strict=True))
-            self.state = "idle"
-            self.last_stop = f"did not settle within {SETTLE_TIMEOUT_S:g} s ({errs})"
+        """Ended as :meth:`UrdfArm.settle_on` says, on the error from the last knot (the
+        board servos: the host has no servo error of its own)."""
+        self.settle_on(self.servo.knots[3] - self.q, now_ns)
