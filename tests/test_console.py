@@ -406,3 +406,23 @@ def test_a_robot_whose_reader_goes_away_mid_script_stops_the_robot_and_ends_quie
     assert "Traceback" not in err and "Exception ignored" not in err, err
     assert proc.returncode == 0, err
     assert f"pyrt {robot}: output closed: every motor stopped" in err
+
+
+def test_a_failure_before_the_first_line_fails_the_script():
+    """A start-up command that failed (or a fault shown before line 1) is a failure of the script: it stops there and the exit status is 1, naming it as start-up."""
+    out, err = io.StringIO(), io.StringIO()
+    shell = Echo(out)
+    shell.failures = 1  # what start-up said: one failure before the console read a line
+    status = Console(shell, io.StringIO("a\nb\n"), out, errors=err, keep_going=False).run()
+    assert status == 1 and shell.seen == []
+    assert "(start-up, before the first line)" in err.getvalue()
+    assert "the script stops here" in err.getvalue()
+
+
+def test_a_script_that_starts_clean_is_judged_by_its_lines_only():
+    """No failure before line 1 and none after: exit status 0, every line run."""
+    out, err = io.StringIO(), io.StringIO()
+    shell = Echo(out)
+    shell.failures = 0
+    assert Console(shell, io.StringIO("a\nb\n"), out, errors=err, keep_going=False).run() == 0
+    assert shell.seen == ["a", "b"] and err.getvalue() == ""

@@ -298,9 +298,11 @@ class Console:
                       fallback: str, *, at_end: bool = False) -> bool:
         """If line ``number`` failed since ``before`` (its own failure, or a fault
         that came after it), name it; True when the script stops there."""
-        if self._failures() <= before or not number:
+        if self._failures() <= before:
             return False
         why = self._why(guard, fallback) if guard is not None else fallback
+        if not number:  # before the first line: a start-up command or a fault then
+            text = "(start-up, before the first line)"
         return self._line_failed(number, text, why, last=at_end)
 
     def _run_lines(self) -> int:
@@ -309,8 +311,11 @@ class Console:
         guard = mine if isinstance(mine, _Output) else (
             out if isinstance(out, _Output) else None)
         number, last, stopped = 0, "", False
+        first = True
         while True:
             before = self._mark(guard)
+            if first:  # what start-up said before the first line counts too
+                before, first = 0, False
             self.flush_messages()  # a fault since the last line is that line's
             if self._failed_since(before, guard, number, last, "a fault"):
                 stopped = True
