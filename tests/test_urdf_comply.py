@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from _urdf_rig import puma_station
+from _urdf_rig import settle as _settle
+from _urdf_rig import target as _target
 
 from pyrt.errors import CommandError
-from pyrt.kinematics import transform
 from pyrt.kinematics.puma import puma560
-from pyrt.scheduler import Loop, SimClock
-from pyrt.station.urdf import build_urdf
 
 CHAIN = puma560()
 #: The table's height (mm) and where the tool starts above it (tool z down: rpy 180 0 90).
@@ -18,22 +18,10 @@ TABLE_MM = 300.0
 START = (600.0, 50.0, 320.0, 180.0, 0.0, 90.0)
 
 
-def _target(x, y, z, rx, ry, rz) -> np.ndarray:
-    return transform(np.array([x, y, z]) * 1e-3, np.radians([rx, ry, rz]))
-
-
 @pytest.fixture(scope="module")
 def puma():
     """One PUMA station on simulated time for this module."""
-    station = build_urdf(Loop(SimClock()))
-    runner = station.start()
-    assert runner.wait_until(lambda: station.arm.powered and not station.busy(), 5.0)
-    yield station, runner
-    station.close()
-
-
-def _settle(station, runner) -> None:
-    assert runner.wait_until(lambda: not station.busy(), 60.0), "the move never ended"
+    yield from puma_station()
 
 
 def _on_the_table(station, runner) -> None:

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from _urdf_rig import puma_station
 
 from pyrt.errors import CommandError
 from pyrt.scheduler import Loop, SimClock
@@ -20,11 +21,7 @@ PUSH_DEG = 1.0
 @pytest.fixture(scope="module")
 def puma():
     """One PUMA station on simulated time, holding its start pose."""
-    station = build_urdf(Loop(SimClock()))
-    runner = station.start()
-    assert runner.wait_until(lambda: station.arm.powered and not station.busy(), 5.0)
-    yield station, runner
-    station.close()
+    yield from puma_station()
 
 
 def _set(station, runner, name: str, text: str) -> str:

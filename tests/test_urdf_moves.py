@@ -7,34 +7,22 @@ import math
 
 import numpy as np
 import pytest
+from _urdf_rig import puma_station
+from _urdf_rig import settle as _settle
+from _urdf_rig import target as _target
 
 from pyrt.errors import CommandError
-from pyrt.kinematics import transform
 from pyrt.kinematics.puma import puma560
-from pyrt.scheduler import Loop, SimClock
-from pyrt.station.urdf import build_urdf
 
 CHAIN = puma560()
 #: How far the true tool may be from its point on a moving conveyor while tracking (mm).
 TRACK_MM = 2.0
 
 
-def _target(x, y, z, rx, ry, rz) -> np.ndarray:
-    return transform(np.array([x, y, z]) * 1e-3, np.radians([rx, ry, rz]))
-
-
 @pytest.fixture(scope="module")
 def puma():
     """One PUMA station on simulated time for this module."""
-    station = build_urdf(Loop(SimClock()))
-    runner = station.start()
-    assert runner.wait_until(lambda: station.arm.powered and not station.busy(), 5.0)
-    yield station, runner
-    station.close()
-
-
-def _settle(station, runner) -> None:
-    assert runner.wait_until(lambda: not station.busy(), 60.0), "the move never ended"
+    yield from puma_station()
 
 
 def _go(station, runner, pose) -> None:

@@ -14,12 +14,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _urdf_rig import puma_station
+from _urdf_rig import settle as _settle
+from _urdf_rig import target as _target
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from pyrt.boards.armservo import arm_servo_kind
 from pyrt.errors import CommandError, FaultError
-from pyrt.kinematics import rpy_of, transform
+from pyrt.kinematics import rpy_of
 from pyrt.kinematics.puma import puma560
 from pyrt.scheduler import Loop, SimClock
 from pyrt.station.urdf import URDF, build_urdf
@@ -44,10 +47,6 @@ def _rot_deg(a: np.ndarray, b: np.ndarray) -> float:
     return math.degrees(math.acos(c))
 
 
-def _target(x, y, z, rx, ry, rz) -> np.ndarray:
-    return transform(np.array([x, y, z]) * 1e-3, np.radians([rx, ry, rz]))
-
-
 def _outputs(station) -> list[int]:
     """Every DAC and enable register as the board holds it now."""
     b, n = station.board, station.chain.n
@@ -57,15 +56,7 @@ def _outputs(station) -> list[int]:
 @pytest.fixture(scope="module")
 def puma():
     """One PUMA station on simulated time for the in-process tests of this module."""
-    station = build_urdf(Loop(SimClock()))
-    runner = station.start()
-    assert runner.wait_until(lambda: station.arm.powered and not station.busy(), 5.0)
-    yield station, runner
-    station.close()
-
-
-def _settle(station, runner) -> None:
-    assert runner.wait_until(lambda: not station.busy(), 60.0), "the move never ended"
+    yield from puma_station()
 
 
 # -- the piped script -------------------------------------------------------------------

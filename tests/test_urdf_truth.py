@@ -8,14 +8,14 @@ import math
 
 import numpy as np
 import pytest
+from _urdf_rig import puma_station
+from _urdf_rig import settle as _settle
 from hypothesis import HealthCheck, Phase, assume, given, settings
 from hypothesis import strategies as st
 
 from pyrt.errors import CommandError, FaultError
 from pyrt.kinematics import transform
 from pyrt.kinematics.puma import puma560
-from pyrt.scheduler import Loop, SimClock
-from pyrt.station.urdf import build_urdf
 
 CHAIN = puma560()
 #: The tool's orientation for the Cartesian cases (its wrist well away from q5 = 0).
@@ -45,15 +45,7 @@ def _rot_deg(a: np.ndarray, b: np.ndarray) -> float:
 @pytest.fixture(scope="module")
 def puma():
     """One PUMA station on simulated time for this module."""
-    station = build_urdf(Loop(SimClock()))
-    runner = station.start()
-    assert runner.wait_until(lambda: station.arm.powered and not station.busy(), 5.0)
-    yield station, runner
-    station.close()
-
-
-def _settle(station, runner) -> None:
-    assert runner.wait_until(lambda: not station.busy(), 60.0), "the move never ended"
+    yield from puma_station()
 
 
 def _home(station, runner, p=CENTRE) -> None:
