@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import io
 import os
 import re
@@ -16,6 +17,7 @@ from pyrt.commands import RobotShell
 from pyrt.component import first_paragraph, plain_text
 from pyrt.scheduler import Loop, SimClock
 from pyrt.station.gripper import build_gripper
+from pyrt.station.urdf import URDF
 
 
 @pytest.fixture(scope="module")
@@ -57,6 +59,17 @@ def test_help_object_verb_and_word_sub(manip):
     assert trig.startswith("scope trigger CH LEVEL") and "pre-trigger" in trig
     bad = ask(manip, "help prototype nosuch")
     assert bad.startswith("error: help prototype: no command 'nosuch'")
+
+
+def test_help_object_verb_names_the_object_once(manip):
+    """help OBJECT VERB starts with the object's name once, whether or not the verb's help names it."""
+    assert ask(manip, "help prototype to").startswith("prototype to x y z")
+    station = URDF.build(Loop(SimClock()), argparse.Namespace(boards=None, urdf=None, start=None))
+    try:
+        text = ask(station, "help puma560 movej")
+    finally:
+        station.close()
+    assert text.startswith("puma560 movej Q1") and "puma560 puma560" not in text
 
 
 def test_first_paragraph_and_plain_text():

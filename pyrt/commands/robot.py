@@ -314,7 +314,8 @@ class RobotShell(LineResolver, CommandShell, ShowWord):
             if rec is None:
                 raise CommandError(f"help {comp.name}: no command {sub[:40]!r}; it has "
                                    f"{', '.join(c.name for c in comp.commands()) or 'none'}")
-            self.say(f"{comp.name} {rec.help}")
+            named = rec.help.split(" ", 1)[0].lower() == comp.name.lower()
+            self.say(rec.help if named else f"{comp.name} {rec.help}")
             return
         w = self.word(first)
         if w is not None and w.name == "scope":
