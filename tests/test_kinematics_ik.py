@@ -138,3 +138,40 @@ def test_ik_options_are_checked(kw):
     """A tolerance <= 0 or NaN, or an iteration limit < 1 or not an integer, is refused."""
     with pytest.raises(NativeInputError):
         PUMA.ik(np.eye(4), np.zeros(6), **kw)
+
+
+def test_two_threads_on_one_chain_get_each_their_own_answers():
+    """A planner's thread and the loop's thread calling one chain at once (fk, Jacobian, ik, rnea, aba) get exactly what each would alone."""
+    import threading
+
+    from pyrt.kinematics.puma import puma560
+
+    chain = puma560()
+    rng = np.random.default_rng(7)
+    qs = [rng.uniform(chain.lower, chain.upper) for _ in range(60)]
+    poses = [chain.fk(q) for q in qs]
+
+    def work(q: np.ndarray, pose: np.ndarray) -> tuple[np.ndarray, ...]:
+        ik = chain.ik(pose, q + 0.05)
+        cf = chain.closed_form.solve(pose, "righty-above-noflip")
+        return (chain.fk(q), chain.jacobian(q), ik.q, chain.rnea(q, q, q), chain.aba(q, q, q),
+                np.zeros(6) if cf is None else cf)
+
+    alone = [work(q, p) for q, p in zip(qs, poses, strict=True)]
+    seen: dict[int, list[tuple[np.ndarray, ...]]] = {}
+    start = threading.Barrier(3)
+
+    def run(k: int) -> None:
+        start.wait()
+        seen[k] = [work(q, p) for _ in range(5) for q, p in zip(qs, poses, strict=True)]
+
+    threads = [threading.Thread(target=run, args=(k,)) for k in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    assert sorted(seen) == [0, 1, 2]
+    for got in seen.values():
+        for i, row in enumerate(got):
+            for a, b in zip(row, alone[i % len(alone)], strict=True):
+                assert np.array_equal(a, b)

@@ -6,11 +6,17 @@ they take float64 arrays of the right shape (anything else is converted
 once, or refused with :class:`NativeInputError`), write into output arrays
 that the caller may supply (``out=``, reused: no allocation), and turn every
 C status code into an exception.  One ``ChainKernels`` serves one call at a
-time (its workspace is shared by all its methods).
+time per thread: its workspace, argument structs and result buffers are
+shared by all its methods, so a call from a thread other than the one that
+built it (a planner in the console's thread while the loop's thread runs
+the trajectory) goes to a copy of the same description with a workspace of
+that thread's own, made on its first call there.  The building thread's
+calls pay one thread-identity check.
 """
 
 from __future__ import annotations
 
+import threading
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -42,6 +48,10 @@ _UNBOUND = object()  # an argument slot's array before the first call
 #: Gravity in the world frame by default (m/s^2): z up.
 GRAVITY = (0.0, 0.0, -9.81)
 _KINDS = {"revolute": REVOLUTE, "prismatic": PRISMATIC}
+_get_ident = threading.get_ident
+#: Copies kept for other threads at most (a thread's identity can be reused
+#: once it has ended: past this many the copies are forgotten and made again).
+_MAX_THREAD_COPIES = 16
 
 
 def _check_why(exc: NativeError) -> str:
@@ -89,6 +99,11 @@ class ChainKernels:
             raise NativeInputError(
                 f"joint kind {exc.args[0]!r}: expected 'revolute' or 'prismatic'") from None
         self.n = n
+        self._args = (list(kinds), origins, axes, offsets, base, tool, lower, upper, masses,
+                      coms, inertias)
+        self._owner = _get_ident()
+        self._copies: dict[int, ChainKernels] = {}
+        self._copies_lock = threading.Lock()
         self._kinds = np.array(codes, dtype=np.int32)
         self._origins = as_f64("origins", origins, (n, 4, 4)).copy()
         self._axes = as_f64("axes", axes, (n, 3)).copy()
@@ -150,6 +165,24 @@ class ChainKernels:
         self._fd = lib.pyrt_kin_forward_dynamics
         for a in arrays[:-1]:
             a.flags.writeable = False
+
+    # ------------------------------------------------------------ threads
+
+    def _elsewhere(self) -> ChainKernels:
+        """The copy of this chain's kernels that the calling thread (not the
+        building one) uses: the same description, a workspace of its own."""
+        ident = _get_ident()
+        mine = self._copies.get(ident)
+        if mine is None:
+            with self._copies_lock:
+                mine = self._copies.get(ident)
+                if mine is None:
+                    if len(self._copies) >= _MAX_THREAD_COPIES:
+                        self._copies.clear()
+                    mine = ChainKernels(*self._args)
+                    mine._owner = ident
+                    self._copies[ident] = mine
+        return mine
 
     # ------------------------------------------------------------ arguments
 
@@ -237,6 +270,8 @@ class ChainKernels:
 
     def fk(self, q: object, out: np.ndarray | None = None) -> np.ndarray:
         """Tool pose (4, 4) in the world at joint values *q*."""
+        if _get_ident() != self._owner:
+            return self._elsewhere().fk(q, out)
         if out is None:
             a = self._fk_new
             if q is not self._fk_new_q:
@@ -255,6 +290,8 @@ class ChainKernels:
 
     def frames(self, q: object, out: np.ndarray | None = None) -> np.ndarray:
         """Base and each joint's child frame in the world, (n + 1, 4, 4)."""
+        if _get_ident() != self._owner:
+            return self._elsewhere().frames(q, out)
         fr = self._out("out", out, (self.n + 1, 4, 4))
         raise_for_status(lib.pyrt_kin_frames(self._c, self._w, self._ptr(0, "q", q, self._qshape),
                                              _buf(fr)), "frames")
@@ -262,6 +299,8 @@ class ChainKernels:
 
     def jacobian(self, q: object, out: np.ndarray | None = None) -> np.ndarray:
         """Geometric Jacobian (6, n), world frame, rows (v; w) at the tool."""
+        if _get_ident() != self._owner:
+            return self._elsewhere().jacobian(q, out)
         if out is None:
             a = self._jac_new
             if q is not self._jac_new_q:
@@ -283,6 +322,9 @@ class ChainKernels:
            max_iter: int = IK_DEFAULT_MAX_ITER) -> tuple[np.ndarray, IKOutcome]:
         """Joint values whose tool pose is *target*, from *seed*; see
         ``pyrt_kin_ik``.  Non-convergence is not an error: the outcome says."""
+        if _get_ident() != self._owner:
+            return self._elsewhere().ik(target, seed, out, tol=tol, null_tol=null_tol,
+                                        max_iter=max_iter)
         tp = self._ptr(3, "target", target, (4, 4))
         sp = self._ptr(4, "seed", seed, self._qshape)
         q = np.empty(self._qshape, F64) if out is None else out
@@ -308,6 +350,8 @@ class ChainKernels:
     def rnea(self, q: object, qd: object | None, qdd: object | None,
              gravity: object | None = GRAVITY, out: np.ndarray | None = None) -> np.ndarray:
         """Joint forces (n,) for the motion (q, qd, qdd); None = zero."""
+        if _get_ident() != self._owner:
+            return self._elsewhere().rnea(q, qd, qdd, gravity, out)
         shape = self._qshape
         objs, cds = self._objs, self._cds
         qp = cds[0] if q is objs[0] else self._ptr(0, "q", q, shape)
@@ -332,6 +376,8 @@ class ChainKernels:
 
     def mass_matrix(self, q: object, out: np.ndarray | None = None) -> np.ndarray:
         """Joint-space mass matrix (n, n)."""
+        if _get_ident() != self._owner:
+            return self._elsewhere().mass_matrix(q, out)
         m = self._out("out", out, (self.n, self.n))
         raise_for_status(lib.pyrt_kin_mass_matrix(self._c, self._w,
                                                   self._ptr(0, "q", q, self._qshape), _buf(m)),
@@ -342,6 +388,8 @@ class ChainKernels:
                          gravity: object | None = GRAVITY, out: np.ndarray | None = None
                          ) -> np.ndarray:
         """Joint accelerations (n,) for joint forces *tau*."""
+        if _get_ident() != self._owner:
+            return self._elsewhere().forward_dynamics(q, qd, tau, gravity, out)
         shape = self._qshape
         objs, cds = self._objs, self._cds
         qp = cds[0] if q is objs[0] else self._ptr(0, "q", q, shape)

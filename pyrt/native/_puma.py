@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import numpy.typing as npt
 
@@ -70,6 +72,9 @@ class PumaKernel:
         for name, arr in arrays.items():
             ffi.memmove(getattr(arm, name), ffi.from_buffer("double[]", arr.ravel()), arr.nbytes)
         self._arm = arm
+        #: The result cells of the building thread's calls (another thread's calls
+        #: have their own: the C call runs without the interpreter lock).
+        self._owner = threading.get_ident()
         self._why = ffi.new("int32_t *")
         self._detail = ffi.new("double[2]")
 
@@ -85,10 +90,14 @@ class PumaKernel:
         else:
             s = as_f64("seed", seed, (6,))
             sp = ffi.from_buffer("double[]", s)
+        if threading.get_ident() == self._owner:
+            why_p, detail_p = self._why, self._detail
+        else:  # another thread (a planner beside the loop): its own result cells
+            why_p, detail_p = ffi.new("int32_t *"), ffi.new("double[2]")
         rc = lib.pyrt_puma_inverse(self._arm, ffi.from_buffer("double[]", p), int(config), sp,
-                                   ffi.from_buffer("double[]", q), self._why, self._detail)
+                                   ffi.from_buffer("double[]", q), why_p, detail_p)
         raise_for_status(rc, "puma inverse")
-        why = int(self._why[0])
+        why = int(why_p[0])
         if why != lib.PYRT_PUMA_REACHED:
-            return None, why, float(self._detail[0])
+            return None, why, float(detail_p[0])
         return q, why, 0.0
