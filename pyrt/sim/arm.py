@@ -73,7 +73,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from pyrt.boards.armdrive import arm_drive_kind
-from pyrt.boards.armservo import DAC_FULL_SCALE, FT_CHANNELS, arm_servo_kind
+from pyrt.boards.armservo import DAC_FULL_SCALE, FT_CHANNELS, arm_servo_kind, register_cells
 from pyrt.boards.registers import RegisterBoard
 from pyrt.errors import ConfigError, NativeError
 from pyrt.kinematics import GRAVITY, Chain, Inertial
@@ -420,6 +420,11 @@ class ArmWorld:
         self._on_in: list[int] = []
         self._set_input = board.set_input
         self._values = board.values
+        # the fast path: the in-process register file's own storage, read and written in
+        # place (None: through set_input and values); the kernel's counts are 32-bit and
+        # its sensor's clamped to 32 bits, as the registers declare them
+        self._cells = {name: register_cells(board, name)
+                       for name in ("count", "ft", "dac", "enable", "release")}
         self.payload = 0.0
         self._dyn = chain
         self.set_payload(float(payload))
@@ -475,23 +480,23 @@ class ArmWorld:
             dt = float(dt)
         if dt == 0:
             return
-        values = self._values
         k = self._k
         if self._drive is not None:
             self._step_driven(dt)
             return
-        dac = values("dac")
+        cells = self._cells
+        dac = cells["dac"] or self._values("dac")
         if dac != self._dac_in:  # the amplifiers' new currents
             k.set_dac(dac)
-            self._dac_in = dac
-        on = values("enable")
+            self._dac_in = dac[:]
+        on = cells["enable"] or self._values("enable")
         if on != self._on_in:
             k.set_enable(on)
-            self._on_in = on
-        release = values("release")
+            self._on_in = on[:]
+        release = cells["release"] or self._values("release")
         if release != self._release_in:
             k.release[:] = release
-            self._release_in = release
+            self._release_in = release[:]
         k.step(dt)
         self.time += dt
         self._set_inputs()
@@ -537,6 +542,12 @@ class ArmWorld:
         """Set the board's inputs the kernel published: encoder counters and
         the wrist sensor (those that changed)."""
         k = self._k
+        cells = self._cells
+        count, ft_cells = cells["count"], cells["ft"]
+        if count is not None and ft_cells is not None:
+            count[:] = k.counts()
+            ft_cells[:] = k.ft_counts()
+            return
         set_input = self._set_input
         counts = k.counts()
         last = self._counts

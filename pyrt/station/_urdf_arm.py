@@ -49,7 +49,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from pyrt.boards.armservo import DAC_FULL_SCALE
+from pyrt.boards.armservo import DAC_FULL_SCALE, KIND_NAME, ArmServoRegisters
 from pyrt.component import Command, Component, Limits, Param, Signal, command, records_of
 from pyrt.kinematics import GRAVITY, Chain, rpy_of
 from pyrt.motion import Evaluator, MotionFault
@@ -218,6 +218,9 @@ class UrdfArm(ArmMoves, Component):
         ft = [layout.index(("ft", k)) for k in range(6)] if ("ft", 0) in layout else []
         self._ft_slice = slice(ft[0], ft[0] + 6) if ft else slice(0, 0)
         self._ft_counts: Sequence[int] = [0] * 6
+        #: The servo board's registers in blocks (encoders in, DACs out); None on a
+        #: board of another kind (hardware (a): its arm reads and writes its own).
+        self._regs = ArmServoRegisters(board) if board.kind.name == KIND_NAME else None
         self._cpu_list = [d.counts_per_unit for d in self.drives]
         #: A servo tick this long after the last is a stall (said; csrc/servo.h).
         self._stall_s = MAX_DT_PERIODS * period_ns * 1e-9
@@ -398,6 +401,8 @@ class UrdfArm(ArmMoves, Component):
         without a sensor."""
         if self._wrench_of is None:
             return np.zeros(6)
+        if self._regs is not None:  # read when it is needed (hardware (a): each tick)
+            self._ft_counts = self._regs.ft()
         return self._wrench_of(self._ft_counts)
 
     def tool(self) -> np.ndarray:
@@ -466,22 +471,23 @@ class UrdfArm(ArmMoves, Component):
             t = math.ceil(t / self.traj_period_s) * self.traj_period_s
             zero = np.zeros(self.n)
             self.servo.segment(t, q, v, start, zero, zero, zero, ff,
-                               self.chain.gravity_torque(start))
+                               self.chain.gravity_torque(start), start=self._now_ns * 1e-9)
             self._recover_until = self._now_ns + round(t * 1e9)
-        for j in range(self.n):
-            self.dac[j] = 0
-            self.board.write("dac", 0, j)
-            self.board.write("enable", 1, j)
-            self.board.write("release", 1, j)
+        self._io.dac[:] = 0
+        regs = self._regs
+        assert regs is not None  # a passive board's arm (hardware (a) has its own)
+        regs.write_all("dac", 0)
+        regs.write_all("enable", 1)
+        regs.write_all("release", 1)
         self.powered = True
         self.state = "idle"
 
     def servo_tick(self, now_ns: int) -> None:
         """1 kHz: the encoders, the servo law, the DACs; the checks; settling."""
         self._now_ns = now_ns
-        inputs = self.board.snapshot()  # one read of every input: this tick's
-        counts = inputs[self._count_slice]
-        self._ft_counts = inputs[self._ft_slice]
+        regs = self._regs
+        assert regs is not None  # a passive board's arm (hardware (a) runs no servo task)
+        counts = regs.counts()  # the encoders as one block: this tick's
         if not self.powered:  # the readings kept: an arm moving is braked at power-on
             self._measure(counts)
             self._history.append((now_ns, self.q.copy()))
@@ -512,10 +518,7 @@ class UrdfArm(ArmMoves, Component):
         c = io.c
         changed = c.changed
         if changed:  # the DACs whose counts changed (those before a joint beyond its bounds)
-            write = self.board.write
-            for j, v in enumerate(io.dac.tolist()):
-                if changed >> j & 1:
-                    write("dac", v, j)
+            regs.write_dacs(io.dac.tolist(), changed)
         if c.beyond >= 0:
             self._beyond(c.beyond)
             return
@@ -588,8 +591,8 @@ class UrdfArm(ArmMoves, Component):
             start = self.servo.end
             if start > now + half:  # the segment running holds now: its knot is made
                 return
-        else:
-            start = max(self.servo.now + self.period_s, now)
+        else:  # a motion's first segment starts now (the servo held its start until now),
+            start = now  # its knots on the trajectory group's ticks from there
         if self._wide:  # back inside the limits: the fault's bounds are the limits' again
             lo, hi = self.chain.lower - self._margin, self.chain.upper + self._margin
             if bool(((self.q >= lo) & (self.q <= hi)).all()):
