@@ -139,11 +139,14 @@ class ArmServoRegisters:
         read = self._read
         return [read("ft", k) for k in range(len(FT_CHANNELS))]
 
-    def write_dacs(self, dac: Sequence[int], changed: int | None = None) -> None:
+    def write_dacs(self, dac: Sequence[int], changed: int | None = None, *,
+                   checked: bool = True) -> None:
         """Write ``dac[j]`` to the DAC of every joint ``j`` whose bit is set in
         ``changed`` (None: every joint), as one block.  ValueError (nothing
         written) for a value the DAC does not hold or a count of values that is
-        not the board's."""
+        not the board's.  ``checked`` False: the caller vouches that every value
+        is an ``int`` within +-:data:`DAC_FULL_SCALE` (a servo's counts, clamped
+        there), and the fast path does not look again."""
         n = self.n
         mask = self._all if changed is None else changed & self._all
         if len(dac) != n:
@@ -152,8 +155,8 @@ class ArmServoRegisters:
             return
         cells = self._dac
         if cells is not None and self.direct:
-            if (min(dac) < self._low or max(dac) > self._high
-                    or set(map(type, dac)) != _INT):
+            if checked and (min(dac) < self._low or max(dac) > self._high
+                            or set(map(type, dac)) != _INT):
                 raise ValueError(f"dac: values must be integers {self._low}..{self._high}, "
                                  f"got {list(dac)!r}")
             if mask == self._all:

@@ -221,6 +221,8 @@ class FTCalibration:
     counts_per_n: float = 1000.0
     counts_per_nm: float = 10000.0
     offsets: tuple[int, ...] = (0, 0, 0, 0, 0, 0)
+    _scale: np.ndarray = field(init=False, repr=False, compare=False)
+    _offsets: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         for name in ("counts_per_n", "counts_per_nm"):
@@ -229,6 +231,9 @@ class FTCalibration:
                 raise ConfigError(f"F/T {name}: expected a number > 0, got {v!r}")
         if len(self.offsets) != 6 or not all(isinstance(o, int) for o in self.offsets):
             raise ConfigError(f"F/T offsets: expected 6 integers, got {self.offsets!r}")
+        # made once: the controller converts the sensor's counts every trajectory tick
+        object.__setattr__(self, "_scale", self.scale)
+        object.__setattr__(self, "_offsets", np.asarray(self.offsets, dtype=float))
 
     @property
     def scale(self) -> np.ndarray:
@@ -237,7 +242,7 @@ class FTCalibration:
 
     def wrench(self, counts: ArrayLike) -> np.ndarray:
         """The wrench (N, N m; 6,) that register counts give."""
-        return (np.asarray(counts, dtype=float) - np.asarray(self.offsets)) / self.scale
+        return (np.array(counts, dtype=float) - self._offsets) / self._scale
 
 
 @dataclass(frozen=True)

@@ -238,6 +238,9 @@ class UrdfArm(ArmMoves, Component):
         gains["ka"] = armature
         gains["kv"] = np.array([j.damping for j in joints])
         self.servo = Servo(n, self.period_s, names=chain.joint_names, gains=gains)
+        k = self.servo.knots
+        #: The servo's knots B (q, qd, qdd, ff rows): the trajectory writes them in place.
+        self._rows_b = (k[3], k[4], k[5], k[7])
         #: The board's side of the servo: the counters as last read and their unwrapped
         #: totals, the DAC values last written (see servo_tick).
         self._io = ServoBoard(self.servo, self._cpu_list,
@@ -297,6 +300,8 @@ class UrdfArm(ArmMoves, Component):
         #: where the next one starts on the loop's clock (s).
         self._joined = False
         self._start = 0.0
+        #: Where the segment the servo runs ends (s, the loop's clock; servo.end).
+        self._end = 0.0
 
     # -- set-up ---------------------------------------------------------------------
 
@@ -498,7 +503,7 @@ class UrdfArm(ArmMoves, Component):
             return
         servo = self.servo  # servo.q is self.q: measured in tick_board below
         now = now_ns * 1e-9
-        if self._joined and now > servo.end + 0.5 * self.period_s:
+        if self._joined and now > self._end + 0.5 * self.period_s:
             # the loop stalled past the segment's end before the trajectory's turn: its
             # knot for now is made here, so the reference keeps to the time that passed
             self._io.encoders(counts)
@@ -518,7 +523,7 @@ class UrdfArm(ArmMoves, Component):
         c = io.c
         changed = c.changed
         if changed:  # the DACs whose counts changed (those before a joint beyond its bounds)
-            regs.write_dacs(io.dac.tolist(), changed)
+            regs.write_dacs(io.dac.tolist(), changed, checked=False)  # within +-full
         if c.beyond >= 0:
             self._beyond(c.beyond)
             return
@@ -588,7 +593,7 @@ class UrdfArm(ArmMoves, Component):
         now = now_ns * 1e-9
         half = 0.5 * self.period_s
         if self._joined:
-            start = self.servo.end
+            start = self._end
             if start > now + half:  # the segment running holds now: its knot is made
                 return
         else:  # a motion's first segment starts now (the servo held its start until now),
@@ -613,18 +618,13 @@ class UrdfArm(ArmMoves, Component):
                 break
             missed, start = knot, start + knot.period  # a knot the stall passed over
         if missed is not None:  # the segment of the last two knots: the one that holds now
-            k[3], k[4], k[5] = missed.q, missed.qd, missed.qdd
-            k[7] = _feed_forward(self.chain, missed)
+            self._knot_b(missed)
         moving = missed is not None or bool(knot.qd.any() or knot.qdd.any()
-                                             or not np.array_equal(knot.q, k[3]))
+                                             or (knot.q != k[3]).any())
         if moving:
-            ff = _feed_forward(self.chain, knot)
             k[0:3] = k[3:6]
             k[6] = k[7]
-            k[3] = knot.q
-            k[4] = knot.qd
-            k[5] = knot.qdd
-            k[7] = ff
+            self._knot_b(knot)
             self._start = start
             self.follow(knot.period)
             if knot.move is not None and knot.move.done and knot.move is self._latest:
@@ -642,11 +642,23 @@ class UrdfArm(ArmMoves, Component):
                 self._settle_from = now_ns
                 self._quiet_since = None
 
+    def _knot_b(self, knot: Any) -> None:
+        """``knot`` into the servo's knots B with its dynamics feed-forward (inverse
+        dynamics, computed in place, and the payload held)."""
+        q, qd, qdd, ff = self._rows_b
+        q[:] = knot.q
+        qd[:] = knot.qd
+        qdd[:] = knot.qdd
+        self.chain.rnea(q, qd, qdd, GRAVITY, out=ff)
+        if knot.payload_torque is not None:
+            ff += knot.payload_torque
+
     def follow(self, period: float) -> None:
         """Hand the servo the segment to the knot just made (the servo's knots B),
         starting where the last one ended on the loop's clock (or now, the first of a
         motion); a hardware (a) arm writes it to its board instead."""
         self.servo.load(period, quintic=True, start=self._start)
+        self._end = self._start + period  # the servo's end, as it computes it
         self._joined = True
 
     # -- commands (the moves: ArmMoves) ----------------------------------------------
@@ -683,14 +695,6 @@ class UrdfArm(ArmMoves, Component):
         self.last_stop = "stopped (stop command)"
         self.state = "moving"  # tracking a conveyor too: braking is a move
         return f"{self.name}: stopping: braking along the path to rest, then holding"
-
-
-def _feed_forward(chain: Chain, knot: Any) -> np.ndarray:
-    """The dynamics feed-forward at a knot: inverse dynamics, and the payload held."""
-    ff = chain.rnea(knot.q, knot.qd, knot.qdd, GRAVITY)
-    if knot.payload_torque is not None:
-        ff = ff + knot.payload_torque
-    return ff  # type: ignore[no-any-return]
 
 
 def _knot_events(arm: UrdfArm, knot: Any, wrench: np.ndarray | None, ev: Evaluator) -> None:
