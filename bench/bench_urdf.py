@@ -62,30 +62,41 @@ def _setup(row: str, shell) -> None:
         shell.onecmd("wait")
 
 
-def _run(row: str, station, shell) -> float:
+def _run(row: str, station, shell) -> tuple[float, float, float]:
     """The row's moves (``moves``: each waited for; ``lines``: queued together,
-    then waited for); the simulated seconds they took."""
+    then waited for): the simulated seconds they took, and the simulated and CPU
+    seconds of the waits alone (the loop running the moves, no command planned)."""
     t0 = station.loop.now_ns
+    waits = [0, 0.0]
+
+    def wait() -> None:
+        n0, c0 = station.loop.now_ns, time.process_time()
+        shell.onecmd("wait")
+        waits[0] += station.loop.now_ns - n0
+        waits[1] += time.process_time() - c0
+
     if row == "lines":
         for line in LINES:
             shell.onecmd(line)
-        shell.onecmd("wait")
+        wait()
     else:
         for move in MOVES:
             shell.onecmd(move)
-            shell.onecmd("wait")
-    return (station.loop.now_ns - t0) / 1e9
+            wait()
+    return (station.loop.now_ns - t0) / 1e9, waits[0] / 1e9, waits[1]
 
 
 def measure(row: str) -> dict:
-    """One run of ``row`` on a new station: simulated, CPU and wall seconds, and
-    each task's and handler's mean (µs per call) and calls from the loop's statistics."""
+    """One run of ``row`` on a new station: simulated, CPU and wall seconds (and
+    those of the waits alone: the loop running the moves, without planning them),
+    and each task's and handler's mean (µs per call) and calls from the loop's
+    statistics."""
     station, runner, shell = _station()
     try:
         _setup(row, shell)
         base = runner.statistics()
         c0, w0 = time.process_time(), time.perf_counter()
-        sim = _run(row, station, shell)
+        sim, wait_sim, wait_cpu = _run(row, station, shell)
         cpu, wall = time.process_time() - c0, time.perf_counter() - w0
         stats = runner.statistics()
     finally:
@@ -98,7 +109,8 @@ def measure(row: str) -> dict:
         total = t.mean_ns * t.calls - (b.mean_ns * b.calls if b else 0.0)
         if calls > 0:
             parts[name] = (total / calls / 1e3, calls)
-    return {"sim_s": sim, "cpu_s": cpu, "wall_s": wall, "parts": parts}
+    return {"sim_s": sim, "cpu_s": cpu, "wall_s": wall, "wait_sim_s": wait_sim,
+            "wait_cpu_s": wait_cpu, "parts": parts}
 
 
 def _line(parts: dict) -> str:
@@ -121,11 +133,12 @@ def _speed(benchmark, row: str) -> None:
     sim = statistics.median(r["sim_s"] for r in runs)
     wall = sim / statistics.median(r["wall_s"] for r in runs)
     cpu = sim / statistics.median(r["cpu_s"] for r in runs)
+    loop = statistics.median(r["wait_sim_s"] / r["wait_cpu_s"] for r in runs)
     benchmark.extra_info.update(sim_s=sim, sim_s_per_wall_s=round(wall, 1),
-                                sim_s_per_cpu_s=round(cpu, 1))
+                                sim_s_per_cpu_s=round(cpu, 1), waits_sim_s_per_cpu_s=round(loop, 1))
     print(f"\npyrt urdf (PUMA 560) at --speed max, {row}: {wall:.0f}x real time by the "
-          f"wall clock, {cpu:.0f}x by the process's CPU time ({sim:.2f} s simulated, median "
-          f"of 3; target 50x)")
+          f"wall clock, {cpu:.0f}x by the process's CPU time ({loop:.0f}x in the waits alone, "
+          f"the loop without planning) ({sim:.2f} s simulated, median of 3; target 50x)")
 
 
 def test_urdf_puma_tick_breakdown(benchmark):
@@ -150,6 +163,10 @@ def _child(tree: str, row: str) -> dict:
     done = subprocess.run([sys.executable, __file__, "--child", row], env=env, check=True,
                           capture_output=True, text=True)
     return json.loads(done.stdout.splitlines()[-1])  # type: ignore[no-any-return]
+
+
+def _med(ratios: list[float]) -> str:
+    return f"{statistics.median(ratios):.1f}x ({' '.join(f'{v:.1f}' for v in ratios)})"
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -179,13 +196,13 @@ def main(argv: list[str] | None = None) -> None:
             rs = runs[(tree, row)]
             sim = statistics.median(r["sim_s"] for r in rs)
             cpu = [r["sim_s"] / r["cpu_s"] for r in rs]
+            loop = [r["wait_sim_s"] / r["wait_cpu_s"] for r in rs]
             wall = [r["sim_s"] / r["wall_s"] for r in rs]
             names = list(rs[0]["parts"])
             parts = {n: (statistics.median(r["parts"].get(n, (0.0, 0))[0] for r in rs),
                          rs[0]["parts"][n][1]) for n in names}
-            print(f"{row:5s} {tree}: {statistics.median(cpu):5.1f}x by CPU time "
-                  f"({' '.join(f'{v:.1f}' for v in cpu)}), {statistics.median(wall):5.1f}x by "
-                  f"the wall ({' '.join(f'{v:.1f}' for v in wall)}); {sim:.2f} s simulated")
+            print(f"{row:5s} {tree}: {_med(cpu)} by the process's CPU time (the waits "
+                  f"alone {_med(loop)}), {_med(wall)} by the wall; {sim:.2f} s simulated")
             print(f"      per call: {_line(parts)}")
 
 

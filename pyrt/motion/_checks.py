@@ -141,6 +141,9 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
     blend_pts: list[Vector] = []
     q_end = None
     t6 = np.eye(4)
+    vlim = planner.vmax * 0.999
+    alim = planner.amax * 0.995  # a reserve for rounding
+    dt2 = dt * dt
     for i in range(n_steps + 1):
         t = min(t0 + i * dt, t_end)
         piece = planner.piece_at(seg.pieces, t)
@@ -171,10 +174,10 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
                               f"value {sv[-1]:.2g})")
         if q_prev is not None and q_prev2 is not None:
             qd = (q - q_prev) / dt
-            qdd = (q - 2 * q_prev + q_prev2) / (dt * dt)
-            where = _where(seg, t - dt)
-            over_v = np.abs(qd) > planner.vmax * 0.999
+            qdd = (q - 2 * q_prev + q_prev2) / dt2
+            over_v = np.abs(qd) > vlim
             if over_v.any():
+                where = _where(seg, t - dt)
                 j = int(np.argmax(np.abs(qd) / planner.vmax))
                 if np.abs(q - q_prev)[j] > 0.5:
                     raise Refused(f"the path passes a singularity at {frac:.0f}% of the "
@@ -183,8 +186,9 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
                 raise Slow(where, f"joint {chain.joints[j].name} over its velocity limit "
                            f"at {frac:.0f}% of the segment",
                            1.02 * float(np.abs(qd)[j] / planner.vmax[j]))
-            over_a = np.abs(qdd) > planner.amax * 0.995  # a reserve for rounding
+            over_a = np.abs(qdd) > alim
             if over_a.any():
+                where = _where(seg, t - dt)
                 j = int(np.argmax(np.abs(qdd) / planner.amax))
                 ratio = float(np.abs(qdd)[j] / planner.amax[j])
                 raise Slow(where, f"joint {chain.joints[j].name} over its acceleration "

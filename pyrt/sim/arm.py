@@ -430,6 +430,12 @@ class ArmWorld:
         # its sensor's clamped to 32 bits, as the registers declare them
         self._cells = {name: register_cells(board, name)
                        for name in ("count", "ft", "dac", "enable", "release")}
+        cells = self._cells
+        #: The passive board's five registers in place (dac enable release count ft), or None.
+        self._direct: tuple[list[int], ...] | None = None
+        live = [cells[name] for name in ("dac", "enable", "release", "count", "ft")]
+        if drive is None and all(c is not None for c in live):
+            self._direct = tuple(c for c in live if c is not None)
         self.payload = 0.0
         self._dyn = chain
         self.set_payload(float(payload))
@@ -486,6 +492,23 @@ class ArmWorld:
         if dt == 0:
             return
         k = self._k
+        direct = self._direct
+        if direct is not None:  # the register file in place: the servo rate's path
+            dac, on, release, count, ft = direct
+            if dac != self._dac_in:  # the amplifiers' new currents
+                k.set_dac(dac)
+                self._dac_in = dac[:]
+            if on != self._on_in:
+                k.set_enable(on)
+                self._on_in = on[:]
+            if release != self._release_in:
+                k.release[:] = release
+                self._release_in = release[:]
+            k.step(dt)
+            self.time += dt
+            count[:] = k.counts()
+            ft[:] = k.ft_counts()
+            return
         if self._drive is not None:
             self._step_driven(dt)
             return
