@@ -145,20 +145,20 @@ class ArmServoRegisters:
         ``changed`` (None: every joint), as one block.  ValueError (nothing
         written) for a value the DAC does not hold or a count of values that is
         not the board's.  ``checked`` False: the caller vouches that every value
-        is an ``int`` within +-:data:`DAC_FULL_SCALE` (a servo's counts, clamped
-        there), and the fast path does not look again."""
+        is an ``int`` the DAC holds (a servo's counts, clamped within
+        +-:data:`DAC_FULL_SCALE`), and it is not looked at again."""
         n = self.n
         mask = self._all if changed is None else changed & self._all
         if len(dac) != n:
             raise ValueError(f"dac: expected {n} values, got {len(dac)}")
         if not mask:
             return
+        if checked and (set(map(type, dac)) != _INT or min(dac) < self._low
+                        or max(dac) > self._high):
+            raise ValueError(f"dac: values must be integers {self._low}..{self._high}, "
+                             f"got {list(dac)!r}")
         cells = self._dac
         if cells is not None and self.direct:
-            if checked and (min(dac) < self._low or max(dac) > self._high
-                            or set(map(type, dac)) != _INT):
-                raise ValueError(f"dac: values must be integers {self._low}..{self._high}, "
-                                 f"got {list(dac)!r}")
             if mask == self._all:
                 cells[:] = dac
                 self.registers.writes += n  # type: ignore[attr-defined]
