@@ -140,44 +140,63 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
     n_steps = max(math.ceil((t_end - t0) / dt), 1)
     blend_pts: list[Vector] = []
     q_end = None
-    t6 = np.eye(4)
-    vlim = planner.vmax * 0.999
-    alim = planner.amax * 0.995  # a reserve for rounding
-    dt2 = dt * dt
+    # the samples' joints first, each inverse seeded at the sample before, up to the first
+    # out of reach; then each check over all of them at once; then the samples in order,
+    # each refused or slowed by the first check it fails, as one by one
+    times: list[float] = []
+    pieces: list[Piece] = []
+    samples: list[float] = []
+    qs: list[Vector] = []
+    lost = False
     for i in range(n_steps + 1):
         t = min(t0 + i * dt, t_end)
         piece = planner.piece_at(seg.pieces, t)
         assert piece is not None
         n = planner.sample_of(tail, t)
         q = planner.q_of(piece, t, seed, n)
+        times.append(t)
+        pieces.append(piece)
+        samples.append(n)
+        if q is None:
+            lost = True
+            break
+        qs.append(q)
+        seed = q
+    m = len(qs)
+    flags = _sample_flags(planner, qs, pieces, q_prev2, q_prev, dt)
+    for i in range(m + 1 if lost else m):
+        t, piece, n = times[i], pieces[i], samples[i]
         frac = 100.0 * (t - seg.t_c) / max(seg.t_e - seg.t_c, 1e-9)
         frac = min(max(frac, 0.0), 100.0)
-        if q is None:
+        if i == m:  # out of reach
             assert piece.frames is not None
             t6 = piece.frames.t6(piece.pose(t, np.eye(4)), n)
             tool = t6[:3, 3] * 1e3
             raise Refused(f"the path leaves the arm's reach at {frac:.0f}% of the segment "
                           f"(T6 at {tool.round(1).tolist()} mm): "
                           f"{planner.why(t6, seed, piece.config)}")
-        why = chain.limit_violation(q)
-        if why:
-            tool = chain.fk(q)[:3, 3] * 1e3
-            raise Refused(f"the path crosses a joint limit at {frac:.0f}% of the segment "
-                          f"(T6 at {tool.round(1).tolist()} mm): {why}")
-        if piece.space == CART:
-            sv = np.linalg.svd(chain.jacobian(q), compute_uv=False)
-            if sv[-1] < planner.limits.singular:
+        q = qs[i]
+        if flags.outside[i]:
+            why = chain.limit_violation(q)
+            if why:
                 tool = chain.fk(q)[:3, 3] * 1e3
-                raise Refused(f"the path passes a singularity at {frac:.0f}% of the "
-                              f"segment (T6 at {tool.round(1).tolist()} mm, q = "
-                              f"{np.degrees(q).round(1).tolist()} deg; smallest singular "
-                              f"value {sv[-1]:.2g})")
-        if q_prev is not None and q_prev2 is not None:
+                raise Refused(f"the path crosses a joint limit at {frac:.0f}% of the segment "
+                              f"(T6 at {tool.round(1).tolist()} mm): {why}")
+        sv = flags.singular.get(i)
+        if sv is not None and sv < planner.limits.singular:
+            tool = chain.fk(q)[:3, 3] * 1e3
+            raise Refused(f"the path passes a singularity at {frac:.0f}% of the "
+                          f"segment (T6 at {tool.round(1).tolist()} mm, q = "
+                          f"{np.degrees(q).round(1).tolist()} deg; smallest singular "
+                          f"value {sv:.2g})")
+        q_prev = flags.prev(i, 1)
+        if flags.over_v[i] or flags.over_a[i]:
+            q_prev2 = flags.prev(i, 2)
+            assert q_prev is not None and q_prev2 is not None
             qd = (q - q_prev) / dt
-            qdd = (q - 2 * q_prev + q_prev2) / dt2
-            over_v = np.abs(qd) > vlim
-            if over_v.any():
-                where = _where(seg, t - dt)
+            qdd = (q - 2 * q_prev + q_prev2) / (dt * dt)
+            where = _where(seg, t - dt)
+            if flags.over_v[i]:
                 j = int(np.argmax(np.abs(qd) / planner.vmax))
                 if np.abs(q - q_prev)[j] > 0.5:
                     raise Refused(f"the path passes a singularity at {frac:.0f}% of the "
@@ -186,14 +205,11 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
                 raise Slow(where, f"joint {chain.joints[j].name} over its velocity limit "
                            f"at {frac:.0f}% of the segment",
                            1.02 * float(np.abs(qd)[j] / planner.vmax[j]))
-            over_a = np.abs(qdd) > alim
-            if over_a.any():
-                where = _where(seg, t - dt)
-                j = int(np.argmax(np.abs(qdd) / planner.amax))
-                ratio = float(np.abs(qdd)[j] / planner.amax[j])
-                raise Slow(where, f"joint {chain.joints[j].name} over its acceleration "
-                           f"limit at {frac:.0f}% of the segment",
-                           1.02 * (ratio if where != "line" else math.sqrt(ratio)))
+            j = int(np.argmax(np.abs(qdd) / planner.amax))
+            ratio = float(np.abs(qdd)[j] / planner.amax[j])
+            raise Slow(where, f"joint {chain.joints[j].name} over its acceleration "
+                       f"limit at {frac:.0f}% of the segment",
+                       1.02 * (ratio if where != "line" else math.sqrt(ratio)))
         if spec.max_diff is not None and q_prev is not None:
             a = seg.frames.tool(chain.fk(q_prev), n)
             b = seg.frames.tool(chain.fk(q), n)
@@ -202,7 +218,6 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
                 raise Slow("line", "over the maximum differential motion")
         if how is BufferMode.BLENDING and t <= seg.t_c + seg.tau_in:
             blend_pts.append(_tool_point(planner, seg, q, n))
-        q_prev2, q_prev, seed = q_prev, q, q
         q_end = q
     assert q_end is not None
     if how is BufferMode.BLENDING:
@@ -228,6 +243,59 @@ def _where(seg: Segment, t: float) -> str:
     if t > seg.t_e - seg.tau_out:
         return "out"
     return "line"
+
+
+class _Flags:
+    """What each sample of a segment fails, found for all the samples at once:
+    ``outside`` (maybe beyond a joint limit: the chain says), ``singular`` (sample
+    -> smallest singular value, Cartesian samples), ``over_v``/``over_a`` (a joint
+    over its velocity / acceleration limit, from the samples' differences)."""
+
+    def __init__(self, hist: list[Vector | None], outside: list[bool],
+                 singular: dict[int, float], over_v: list[bool], over_a: list[bool]) -> None:
+        self._hist = hist
+        self.outside = outside
+        self.singular = singular
+        self.over_v = over_v
+        self.over_a = over_a
+
+    def prev(self, i: int, back: int) -> Vector | None:
+        """The joints ``back`` samples before sample ``i`` (None: none)."""
+        return self._hist[i + 2 - back]
+
+
+def _sample_flags(planner: Planner, qs: list[Vector], pieces: list[Piece],
+                  q_prev2: Vector | None, q_prev: Vector | None, dt: float) -> _Flags:
+    """The checks of :func:`check_segment` on the joints ``qs`` of its samples
+    (``q_prev2``, ``q_prev`` the two before the first, or None), all at once."""
+    m = len(qs)
+    hist: list[Vector | None] = [q_prev2, q_prev, *qs]
+    if m == 0:
+        return _Flags(hist, [], {}, [], [])
+    chain = planner.chain
+    q = np.array(qs)
+    lower, upper = np.asarray(chain.lower), np.asarray(chain.upper)
+    inside = np.logical_and(q >= lower, q <= upper).all(axis=1) & np.isfinite(q).all(axis=1)
+    outside = [not v for v in np.asarray(inside).tolist()]
+    cart = [i for i in range(m) if pieces[i].space == CART]
+    singular: dict[int, float] = {}
+    if cart:
+        jac = np.array([chain.jacobian(qs[i]) for i in cart])
+        sv = np.linalg.svd(jac, compute_uv=False)[:, -1]
+        singular = dict(zip(cart, sv.tolist(), strict=True))
+    # the samples with two before them: their velocities and accelerations
+    first = 0 if q_prev2 is not None and q_prev is not None else (
+        1 if q_prev is not None else 2)
+    over_v = [False] * m
+    over_a = [False] * m
+    if first < m:
+        full = np.array(hist[first:])  # from two samples before `first` on
+        cur, p1, p2 = full[2:], full[1:-1], full[:-2]
+        qd = (cur - p1) / dt
+        qdd = (cur - 2 * p1 + p2) / (dt * dt)
+        over_v[first:] = (np.abs(qd) > planner.vmax * 0.999).any(axis=1).tolist()
+        over_a[first:] = (np.abs(qdd) > planner.amax * 0.995).any(axis=1).tolist()
+    return _Flags(hist, outside, singular, over_v, over_a)
 
 
 def _tool_point(planner: Planner, seg: Segment, q: Vector, n: float) -> Vector:
