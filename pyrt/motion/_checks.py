@@ -70,20 +70,33 @@ def joint_time(planner: Planner, frames: Frames, r_c: Matrix, p_c: Vector, delta
     pose = np.eye(4)
     q0 = planner.solve(frames.t6(pose_of(x_s, r_c, p_c, pose), sample), q_s, config)
     q = prev = q_s if q0 is None else q0
-    need = 0.0
-    steps: list[Vector] = []
+    # each sample's inverse (seeded at the one before) up to the first out of reach, the
+    # singular values where each is judged (one batched SVD), then the samples in order
+    t6s: list[Matrix] = []
+    gots: list[Vector | None] = []
+    at: list[Vector] = []  # the joints each sample's singular values are taken at
     for i in range(1, k + 1):
         x = x_s + delta * (i / k)
-        t6 = frames.t6(pose_of(x, r_c, p_c, pose), sample)
+        t6 = frames.t6(pose_of(x, r_c, p_c), sample)  # its own array: kept for the refusal
         got = planner.solve(t6, q, config)
-        tool = frames.tool(t6, sample)[:3, 3] * 1e3
-        where = f"{100 * i / k:.0f}% of the segment (tool at {tool.round(1).tolist()} mm)"
-        sv = np.linalg.svd(planner.chain.jacobian(q if got is None else got),
-                           compute_uv=False)[-1]
-        if sv < planner.limits.singular:
-            raise Refused(f"the line passes a singularity at {where}: smallest singular "
-                          f"value {sv:.2g}, q = {np.degrees(q).round(1).tolist()} deg")
+        t6s.append(t6)
+        gots.append(got)
+        at.append(q if got is None else got)
         if got is None:
+            break
+        q = got
+    svs = np.linalg.svd(np.array([planner.chain.jacobian(v) for v in at]),
+                        compute_uv=False)[:, -1].tolist()
+    need = 0.0
+    steps: list[Vector] = []
+    q = prev
+    for i, (t6, got, sv) in enumerate(zip(t6s, gots, svs, strict=True), start=1):
+        if sv < planner.limits.singular or got is None:
+            tool = frames.tool(t6, sample)[:3, 3] * 1e3
+            where = f"{100 * i / k:.0f}% of the segment (tool at {tool.round(1).tolist()} mm)"
+            if sv < planner.limits.singular:
+                raise Refused(f"the line passes a singularity at {where}: smallest singular "
+                              f"value {sv:.2g}, q = {np.degrees(q).round(1).tolist()} deg")
             raise Refused(f"the line leaves the arm's reach at {where}: "
                           f"{planner.why(t6, q, config)}")
         need = max(need, float(np.max(np.abs(got - prev) * k / (speed * planner.vplan))))
@@ -331,8 +344,5 @@ def _blend_error(planner: Planner, seg: Segment, tail: Tail, pts: list[Vector]) 
             q = got
             ref.append(_tool_point(planner, seg, q, n))
     r = np.array(ref)
-    worst = 0.0
-    for p in pts:
-        d = np.sqrt(((r - p) ** 2).sum(axis=1))
-        worst = max(worst, float(d.min()))
-    return worst
+    d = np.sqrt(((r[None, :, :] - np.array(pts)[:, None, :]) ** 2).sum(axis=2))
+    return max(0.0, float(d.min(axis=1).max()))
