@@ -347,8 +347,7 @@ class Servo:
             if start.__class__ is not float:
                 start = _time("start", start, finite=False)
             rc = self._load_at(self._c, self._knots_p, float(duration), order, start)
-        if rc:
-            raise_for_status(rc, f"servo segment of {duration!r} s", _load_why)
+        raise_for_status(rc, f"servo segment of {duration!r} s", _load_why)
 
     def tick(self, q: ArrayLike | None = None, now: float | None = None) -> ServoTrip | None:
         """One servo tick on the measured joints ``q`` (None: :attr:`q` as
@@ -380,9 +379,7 @@ class Servo:
                                    f"got {len(counts)}")
         c = self._c
         was = c.tripped
-        rc = self._tick_board(c, now, board.c, counts)
-        if rc:
-            raise_for_status(rc, "servo tick", _tick_why)
+        raise_for_status(self._tick_board(c, now, board.c, counts), "servo tick", _tick_why)
         if c.tripped and not was:
             return self.trip
         return None
