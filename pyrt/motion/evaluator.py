@@ -179,6 +179,22 @@ class Evaluator(Queueing):
         with self._lock:
             return (not self._pieces or self._k >= len(self._pieces)) and self._sigma is None
 
+    @property
+    def wants_wrench(self) -> bool:
+        """Whether a record queued or running (or a piece still to run) has a force
+        limit or a comply spec: without one, :meth:`tick` does the same with or
+        without the wrist's wrench (the caller may leave the sensor unread)."""
+        with self._lock:
+            for s in self._segs:
+                if s.move.spec.force_limits is not None or s.move.spec.comply is not None:
+                    return True
+            for piece in self._pieces[self._k:]:
+                seg = piece.seg
+                if seg is not None and (seg.move.spec.force_limits is not None
+                                        or seg.move.spec.comply is not None):
+                    return True
+            return False
+
     def queue_function(self, fn: Callable[[float], Sequence[float]], duration: float,
                        name: str = "function") -> Move:
         """A plug-in joint motion: ``fn(t)`` gives the joint values for ``0 <= t

@@ -603,7 +603,8 @@ class UrdfArm(ArmMoves, Component):
             if bool(((self.q >= lo) & (self.q <= hi)).all()):
                 self._bound(lo, hi)
                 self._wide = False
-        wrench = self.wrench() if self._wrench_of is not None else None
+        # the wrist's wrench when a record may use it (a force limit or comply)
+        wrench = self.wrench() if self._wrench_of is not None and ev.wants_wrench else None
         k = self.servo.knots
         missed = None
         while True:
