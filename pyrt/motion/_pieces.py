@@ -203,7 +203,9 @@ class Piece:
     ``u = t - origin``.  ``c`` holds the coefficients, lowest power first."""
 
     __slots__ = (
+        "_cc",
         "_ref",
+        "_rows",
         "c",
         "config",
         "fn",
@@ -229,6 +231,10 @@ class Piece:
         self.origin = origin
         self.c = c
         self.linear = c.shape[0] == 2
+        #: The coefficients as plain floats (the polynomial's rows), for the ``c`` they
+        #: were made of: the trajectory tick evaluates on them.
+        self._cc: Vector | None = None
+        self._rows: list[list[float]] = []
         self.seg = seg
         self.frames = frames
         self.r_c = r_c
@@ -247,11 +253,13 @@ class Piece:
         c = self.c
         if self.linear:
             return c[0] + c[1] * u
-        out = c[5] * u + c[4]
-        out = out * u + c[3]
-        out = out * u + c[2]
-        out = out * u + c[1]
-        return out * u + c[0]
+        if c is not self._cc:
+            self._cc = c
+            self._rows = c.tolist()[:6]
+        # Horner's rule joint by joint on plain floats: the same roundings as on the rows
+        r0, r1, r2, r3, r4, r5 = self._rows
+        return np.array([((((e * u + d) * u + f) * u + b) * u + a) * u + z
+                         for z, a, b, f, d, e in zip(r0, r1, r2, r3, r4, r5, strict=True)])
 
     def xd(self, t: float) -> Vector:
         u = t - self.origin

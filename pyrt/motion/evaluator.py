@@ -161,6 +161,7 @@ class Evaluator(Queueing):
         #: Comply: the running comply segment, the tool's offset from its path
         #: (tool frame, m) and the filtered force it exerts (tool frame, N).
         self._comply = ComplyLoop()
+        self._fk_q = np.zeros(chain.n)
 
     # -- queueing (the caller's thread) ---------------------------------------------------
     @property
@@ -364,7 +365,9 @@ class Evaluator(Queueing):
         seed = self._q[-1]
         if piece.space is JOINT or piece.space == JOINT:
             q = piece.x(t)
-            return q, self.chain.fk(q)
+            fk_q = self._fk_q  # one array the chain's forward kinematics stays bound to
+            fk_q[...] = q
+            return q, self.chain.fk(fk_q)
         if piece.space == CART:
             frames = piece.frames
             assert frames is not None
