@@ -249,17 +249,22 @@ class Piece:
                      if r_c is not None and p_c is not None else None)
 
     def x(self, t: float) -> Vector:
+        return np.array(self._xs(t))
+
+    def _xs(self, t: float) -> list[float]:
+        """The value at ``t`` as plain floats, coordinate by coordinate: a line
+        ``c0 + c1 u``, else Horner's rule (the same roundings as on the rows)."""
         u = t - self.origin
         c = self.c
-        if self.linear:
-            return c[0] + c[1] * u
         if c is not self._cc:
             self._cc = c
-            self._rows = c.tolist()[:6]
-        # Horner's rule joint by joint on plain floats: the same roundings as on the rows
+            self._rows = c.tolist()[:2 if self.linear else 6]
+        if self.linear:
+            r0, r1 = self._rows
+            return [z + a * u for z, a in zip(r0, r1, strict=True)]
         r0, r1, r2, r3, r4, r5 = self._rows
-        return np.array([((((e * u + d) * u + f) * u + b) * u + a) * u + z
-                         for z, a, b, f, d, e in zip(r0, r1, r2, r3, r4, r5, strict=True)])
+        return [((((e * u + d) * u + f) * u + b) * u + a) * u + z
+                for z, a, b, f, d, e in zip(r0, r1, r2, r3, r4, r5, strict=True)]
 
     def xd(self, t: float) -> Vector:
         u = t - self.origin
@@ -278,7 +283,7 @@ class Piece:
     def pose(self, t: float, out: Matrix | None = None) -> Matrix:
         """Drive piece: the POS value at ``t`` (``Exp(phi) R_c``, ``p_c + p``),
         on plain floats: the trajectory tick's hot path."""
-        px, py, pz, a, b, c = self.x(t).tolist()
+        px, py, pz, a, b, c = self._xs(t)
         th2 = a * a + b * b + c * c
         if th2 < 1e-24:
             s, k = 1.0, 0.5
