@@ -620,8 +620,8 @@ class UrdfArm(ArmMoves, Component):
             missed, start = knot, start + knot.period  # a knot the stall passed over
         if missed is not None:  # the segment of the last two knots: the one that holds now
             self._knot_b(missed)
-        moving = missed is not None or bool(knot.qd.any() or knot.qdd.any()
-                                             or (knot.q != k[3]).any())
+        moving = missed is not None or any(knot.qd.tolist()) or any(knot.qdd.tolist()) \
+            or bool((knot.q != k[3]).any())  # (plain floats: the quicker test of six)
         if moving:
             k[0:3] = k[3:6]
             k[6] = k[7]
