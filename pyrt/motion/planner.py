@@ -66,8 +66,6 @@ Vector = npt.NDArray[np.float64]
 _H = 1e-4
 #: How many times a plan is slowed and sampled again before it is refused.
 _TRIES = 20
-#: A joint transition's acceleration is planned this far under the limit.
-_A_MARGIN = 1.1
 
 
 @dataclass(frozen=True)
@@ -176,11 +174,6 @@ class Planner:
         #: keeps a reserve for rounding).
         self.vplan = 0.998 * self.vmax
         self.amax = np.array(limits.amax)
-        #: The accelerations a joint transition is planned for: under the limits by
-        #: the margin a transition planned at the limit itself was given after its
-        #: sampled check (its reserve half a per cent) slowed it, planned and sampled
-        #: again: the first plan is the one that passes.
-        self.aplan = self.amax / _A_MARGIN
         self.tracker = tracker
         self.closed = chain.closed_form
         self._t6 = np.eye(4)
@@ -586,7 +579,7 @@ class Planner:
         drive space the Cartesian ones and the joints' (``dv`` mapped through the
         Jacobian's pseudo-inverse at ``q``)."""
         if kind == JOINT:
-            tau = float(np.max(0.75 * np.abs(dv) / self.aplan))
+            tau = float(np.max(0.75 * np.abs(dv) / self.amax))
         else:
             tau = max(0.75 * norm(dv[:3]) / self.limits.a_cart,
                       0.75 * norm(dv[3:]) / self.limits.alpha_cart)
