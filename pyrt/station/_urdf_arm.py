@@ -229,7 +229,7 @@ class UrdfArm(ArmMoves, Component):
                            for j, d in zip(joints, self.drives, strict=True)])
         self.effort = effort
         armature = np.array([d.reflected_inertia for d in self.drives])
-        inertia = self._inertia_bound(armature)
+        inertia = _inertia_bound(chain, armature)
         felim = np.array([math.radians(FOLLOWING_ERROR_DEG) if not p
                           else FOLLOWING_ERROR_DEG * 1e-3 for p in self.prismatic])
         gains: dict[str, ArrayLike] = dict(tuned_gains(inertia, effort, self.period_s,
@@ -304,19 +304,6 @@ class UrdfArm(ArmMoves, Component):
         self._end = 0.0
 
     # -- set-up ---------------------------------------------------------------------
-
-    def _inertia_bound(self, armature: np.ndarray) -> np.ndarray:
-        """Each joint's largest inertia over a spread of joint values (kg m^2 or kg),
-        the rotor's included: what the servo's gains and the acceleration limits are
-        sized for."""
-        chain = self.chain
-        lo = np.where(np.isfinite(chain.lower), chain.lower, -math.pi)
-        hi = np.where(np.isfinite(chain.upper), chain.upper, math.pi)
-        rng = np.random.default_rng(0)
-        best = np.zeros(self.n)
-        for u in rng.random((64, self.n)):
-            best = np.maximum(best, np.diag(chain.mass_matrix(lo + u * (hi - lo))))
-        return np.maximum(best + armature, 1e-4)
 
     def joint_limits(self, i: int) -> Limits:
         """Joint ``i``'s limits in operator units, as a display range and major alarms."""
@@ -619,13 +606,13 @@ class UrdfArm(ArmMoves, Component):
                 break
             missed, start = knot, start + knot.period  # a knot the stall passed over
         if missed is not None:  # the segment of the last two knots: the one that holds now
-            self._knot_b(missed)
+            _knot_b(self, missed)
         moving = missed is not None or any(knot.qd.tolist()) or any(knot.qdd.tolist()) \
             or bool((knot.q != k[3]).any())  # (plain floats: the quicker test of six)
         if moving:
             k[0:3] = k[3:6]
             k[6] = k[7]
-            self._knot_b(knot)
+            _knot_b(self, knot)
             self._start = start
             self.follow(knot.period)
             if knot.move is not None and knot.move.done and knot.move is self._latest:
@@ -642,17 +629,6 @@ class UrdfArm(ArmMoves, Component):
                 self.state = "settling"
                 self._settle_from = now_ns
                 self._quiet_since = None
-
-    def _knot_b(self, knot: Any) -> None:
-        """``knot`` into the servo's knots B with its dynamics feed-forward (inverse
-        dynamics, computed in place, and the payload held)."""
-        q, qd, qdd, ff = self._rows_b
-        q[:] = knot.q
-        qd[:] = knot.qd
-        qdd[:] = knot.qdd
-        self.chain.rnea(q, qd, qdd, GRAVITY, out=ff)
-        if knot.payload_torque is not None:
-            ff += knot.payload_torque
 
     def follow(self, period: float) -> None:
         """Hand the servo the segment to the knot just made (the servo's knots B),
@@ -696,6 +672,30 @@ class UrdfArm(ArmMoves, Component):
         self.last_stop = "stopped (stop command)"
         self.state = "moving"  # tracking a conveyor too: braking is a move
         return f"{self.name}: stopping: braking along the path to rest, then holding"
+
+
+def _inertia_bound(chain: Chain, armature: np.ndarray) -> np.ndarray:
+    """Each joint's largest inertia over a spread of joint values (kg m^2 or kg), the
+    rotor's included: what the servo's gains and the acceleration limits are sized for."""
+    lo = np.where(np.isfinite(chain.lower), chain.lower, -math.pi)
+    hi = np.where(np.isfinite(chain.upper), chain.upper, math.pi)
+    rng = np.random.default_rng(0)
+    best = np.zeros(chain.n)
+    for u in rng.random((64, chain.n)):
+        best = np.maximum(best, np.diag(chain.mass_matrix(lo + u * (hi - lo))))
+    return np.maximum(best + armature, 1e-4)
+
+
+def _knot_b(arm: UrdfArm, knot: Any) -> None:
+    """``knot`` into the arm's servo's knots B with its dynamics feed-forward (inverse
+    dynamics, computed in place, and the payload held)."""
+    q, qd, qdd, ff = arm._rows_b
+    q[:] = knot.q
+    qd[:] = knot.qd
+    qdd[:] = knot.qdd
+    arm.chain.rnea(q, qd, qdd, GRAVITY, out=ff)
+    if knot.payload_torque is not None:
+        ff += knot.payload_torque
 
 
 def _knot_events(arm: UrdfArm, knot: Any, wrench: np.ndarray | None, ev: Evaluator) -> None:
