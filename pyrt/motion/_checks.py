@@ -17,7 +17,6 @@ and limits they judge:
 
 from __future__ import annotations
 
-import itertools
 import math
 from typing import TYPE_CHECKING
 
@@ -87,8 +86,6 @@ def joint_time(planner: Planner, frames: Frames, r_c: Matrix, p_c: Vector, delta
         q = got
     svs = np.linalg.svd(np.array([planner.chain.jacobian(v) for v in at]),
                         compute_uv=False)[:, -1].tolist()
-    need = 0.0
-    steps: list[Vector] = []
     q = prev
     for i, (t6, got, sv) in enumerate(zip(t6s, gots, svs, strict=True), start=1):
         if sv < planner.limits.singular or got is None:
@@ -99,13 +96,14 @@ def joint_time(planner: Planner, frames: Frames, r_c: Matrix, p_c: Vector, delta
                               f"value {sv:.2g}, q = {np.degrees(q).round(1).tolist()} deg")
             raise Refused(f"the line leaves the arm's reach at {where}: "
                           f"{planner.why(t6, q, config)}")
-        need = max(need, float(np.max(np.abs(got - prev) * k / (speed * planner.vplan))))
-        steps.append(got - prev)
-        prev = q = got
-    # the joints' path curves: its acceleration at constant speed along the line
-    # (d2q/dr2 / T^2) kept to half the limit, the other half for the transitions
-    for a, b in itertools.pairwise(steps):
-        curv = np.abs(b - a) * k * k
+        q = got
+    # every sample reached: the joints' steps keep their velocities within the limits, and
+    # the path's curvature (its acceleration at constant speed along the line, d2q/dr2 /
+    # T^2) to half the acceleration limits, the other half for the transitions
+    steps = np.diff(np.array([prev, *gots]), axis=0)
+    need = max(0.0, float(np.max(np.abs(steps) * k / (speed * planner.vplan))))
+    if len(steps) > 1:
+        curv = np.abs(np.diff(steps, axis=0)) * k * k
         need = max(need, math.sqrt(float(np.max(curv / (0.5 * planner.amax)))))
     return need
 
