@@ -28,6 +28,7 @@ from pyrt.motion._pieces import CART, Frames, Piece, line_coeffs, norm
 from pyrt.motion.record import BufferMode, MotionSpec
 
 if TYPE_CHECKING:
+    from pyrt.kinematics import Chain
     from pyrt.motion.planner import Planner, Segment, Tail
 
 Matrix = npt.NDArray[np.float64]
@@ -84,8 +85,7 @@ def joint_time(planner: Planner, frames: Frames, r_c: Matrix, p_c: Vector, delta
         if got is None:
             break
         q = got
-    svs = np.linalg.svd(np.array([planner.chain.jacobian(v) for v in at]),
-                        compute_uv=False)[:, -1].tolist()
+    svs = np.linalg.svd(_jacobians(planner.chain, at), compute_uv=False)[:, -1].tolist()
     q = prev
     for i, (t6, got, sv) in enumerate(zip(t6s, gots, svs, strict=True), start=1):
         if sv < planner.limits.singular or got is None:
@@ -291,8 +291,7 @@ def _sample_flags(planner: Planner, qs: list[Vector], pieces: list[Piece],
     cart = [i for i in range(m) if pieces[i].space == CART]
     singular: dict[int, float] = {}
     if cart:
-        jac = np.array([chain.jacobian(qs[i]) for i in cart])
-        sv = np.linalg.svd(jac, compute_uv=False)[:, -1]
+        sv = np.linalg.svd(_jacobians(chain, [qs[i] for i in cart]), compute_uv=False)[:, -1]
         singular = dict(zip(cart, sv.tolist(), strict=True))
     # the samples with two before them: their velocities and accelerations
     first = 0 if q_prev2 is not None and q_prev is not None else (
@@ -307,6 +306,18 @@ def _sample_flags(planner: Planner, qs: list[Vector], pieces: list[Piece],
         over_v[first:] = (np.abs(qd) > planner.vmax * 0.999).any(axis=1).tolist()
         over_a[first:] = (np.abs(qdd) > planner.amax * 0.995).any(axis=1).tolist()
     return _Flags(hist, outside, singular, over_v, over_a)
+
+
+def _jacobians(chain: Chain, qs: list[Vector]) -> Matrix:
+    """The Jacobians (len(qs), 6, n) at joints ``qs``, through one pair of arrays the
+    chain's kernel stays bound to."""
+    q_buf = np.zeros(chain.n)
+    j_buf = np.zeros((6, chain.n))
+    out = np.empty((len(qs), 6, chain.n))
+    for i, q in enumerate(qs):
+        q_buf[...] = q
+        out[i] = chain.jacobian(q_buf, out=j_buf)
+    return out
 
 
 def _tool_point(planner: Planner, seg: Segment, q: Vector, n: float) -> Vector:
