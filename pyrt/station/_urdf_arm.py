@@ -463,8 +463,9 @@ class UrdfArm(ArmMoves, Component):
             t = math.ceil(t / self.traj_period_s) * self.traj_period_s
             zero = np.zeros(self.n)
             self.servo.segment(t, q, v, start, zero, zero, zero, ff,
-                               self.chain.gravity_torque(start), start=self._now_ns * 1e-9)
-            self._recover_until = self._now_ns + round(t * 1e9)
+                               self.chain.gravity_torque(start))
+            # it starts at the servo's next tick: the trajectory takes over at its end
+            self._recover_until = self._now_ns + round((self.period_s + t) * 1e9)
         self._io.dac[:] = 0
         regs = self._regs
         assert regs is not None  # a passive board's arm (hardware (a) has its own)
