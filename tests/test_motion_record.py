@@ -315,6 +315,26 @@ def test_force_limits_make_a_guarded_move_or_are_refused_without_a_sensor():
         assert dist_to_segment(tool_pose(PUMA, k.q)[:3, 3], a[:3, 3], b[:3, 3]) < 1e-6
 
 
+def test_the_wrench_is_wanted_while_a_force_record_is_queued_or_runs():
+    """wants_wrench: False with no record or records without force limits or comply; True
+    from the queueing of a guarded move until its pieces are over."""
+    _a, b = _line()
+    ev = make(force_sensor=True)
+    assert not ev.wants_wrench
+    ev.queue(MotionSpec(mode="cart", equation=equation(b)))
+    assert not ev.wants_wrench
+    run(ev)
+    assert not ev.wants_wrench
+    limits = (math.inf, math.inf, 5.0, math.inf, math.inf, math.inf)
+    ev.queue(MotionSpec(mode="cart", equation=equation(_a), force_limits=limits))
+    assert ev.wants_wrench
+    seen = []
+    while not ev.idle:
+        ev.tick((0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+        seen.append(ev.wants_wrench)
+    assert seen[0] and seen[-2]  # while the guarded move runs
+
+
 def test_max_diff_bounds_the_tool_motion_per_tick():
     """max_diff: the tool moves at most that far (and turns at most that angle) in one trajectory tick."""
     _a, b = _line()

@@ -69,3 +69,40 @@ def test_a_blocked_joint_still_trips_the_following_error_through_a_stall():
         assert [station.board.read("dac", j) for j in range(6)] == [0] * 6
     finally:
         station.close()
+
+
+def test_without_a_stall_every_knot_is_made_on_the_trajectory_groups_tick():
+    """A move on a loop that never stalls: the trajectory task makes every knot on its own tick (a motion's first segment starts at that tick), the servo never has to make one for it, and the move ends at its target."""
+    from pyrt.scheduler import SimClock
+
+    station = build_urdf(Loop(SimClock()))
+    runner = station.start()
+    try:
+        arm = station.arm
+        assert runner.wait_until(lambda: arm.powered and not station.busy(), 5.0)
+        made: list[int] = []
+        task_tick = arm.trajectory_tick  # the task keeps its own bound method
+
+        def from_the_servo(now_ns: int) -> None:
+            made.append(now_ns)
+            task_tick(now_ns)
+
+        arm.trajectory_tick = from_the_servo  # what the servo task calls on a stall
+        starts: list[float] = []
+        follow = arm.follow
+
+        def recorded(period: float) -> None:
+            starts.append(arm._start)
+            follow(period)
+
+        arm.follow = recorded
+        runner.call(arm.move_joints, *TARGET)
+        assert runner.wait_until(lambda: not station.busy(), 20.0)
+        assert made == [] and arm.last_stop == "at target"
+        assert len(starts) > 50
+        # every segment starts on a trajectory tick (10 ms apart, from the first)
+        steps = np.diff(starts) / 0.01
+        assert np.allclose(steps, np.round(steps), atol=1e-6)
+        assert round(starts[0] * 1000) % 10 == 0
+    finally:
+        station.close()

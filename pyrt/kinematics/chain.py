@@ -232,7 +232,7 @@ class Chain:
         qa = np.asarray(q, dtype=float)
         if qa.shape != (self.n,):
             return f"expected {self.n} joint values, got shape {qa.shape}"
-        for j, v in zip(self.joints, qa, strict=True):
+        for j, v in zip(self.joints, qa.tolist(), strict=True):  # plain floats: quicker
             if not math.isfinite(v):
                 return f"joint {j.name}: {v} is not a number"
             if v < j.lower or v > j.upper:

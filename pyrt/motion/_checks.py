@@ -17,7 +17,6 @@ and limits they judge:
 
 from __future__ import annotations
 
-import itertools
 import math
 from typing import TYPE_CHECKING
 
@@ -29,6 +28,7 @@ from pyrt.motion._pieces import CART, Frames, Piece, line_coeffs, norm
 from pyrt.motion.record import BufferMode, MotionSpec
 
 if TYPE_CHECKING:
+    from pyrt.kinematics import Chain
     from pyrt.motion.planner import Planner, Segment, Tail
 
 Matrix = npt.NDArray[np.float64]
@@ -70,29 +70,40 @@ def joint_time(planner: Planner, frames: Frames, r_c: Matrix, p_c: Vector, delta
     pose = np.eye(4)
     q0 = planner.solve(frames.t6(pose_of(x_s, r_c, p_c, pose), sample), q_s, config)
     q = prev = q_s if q0 is None else q0
-    need = 0.0
-    steps: list[Vector] = []
+    # each sample's inverse (seeded at the one before) up to the first out of reach, the
+    # singular values where each is judged (one batched SVD), then the samples in order
+    t6s: list[Matrix] = []
+    gots: list[Vector | None] = []
+    at: list[Vector] = []  # the joints each sample's singular values are taken at
     for i in range(1, k + 1):
         x = x_s + delta * (i / k)
-        t6 = frames.t6(pose_of(x, r_c, p_c, pose), sample)
+        t6 = frames.t6(pose_of(x, r_c, p_c), sample)  # its own array: kept for the refusal
         got = planner.solve(t6, q, config)
-        tool = frames.tool(t6, sample)[:3, 3] * 1e3
-        where = f"{100 * i / k:.0f}% of the segment (tool at {tool.round(1).tolist()} mm)"
-        sv = np.linalg.svd(planner.chain.jacobian(q if got is None else got),
-                           compute_uv=False)[-1]
-        if sv < planner.limits.singular:
-            raise Refused(f"the line passes a singularity at {where}: smallest singular "
-                          f"value {sv:.2g}, q = {np.degrees(q).round(1).tolist()} deg")
+        t6s.append(t6)
+        gots.append(got)
+        at.append(q if got is None else got)
         if got is None:
+            break
+        q = got
+    svs = np.linalg.svd(_jacobians(planner.chain, at), compute_uv=False)[:, -1].tolist()
+    q = prev
+    for i, (t6, got, sv) in enumerate(zip(t6s, gots, svs, strict=True), start=1):
+        if sv < planner.limits.singular or got is None:
+            tool = frames.tool(t6, sample)[:3, 3] * 1e3
+            where = f"{100 * i / k:.0f}% of the segment (tool at {tool.round(1).tolist()} mm)"
+            if sv < planner.limits.singular:
+                raise Refused(f"the line passes a singularity at {where}: smallest singular "
+                              f"value {sv:.2g}, q = {np.degrees(q).round(1).tolist()} deg")
             raise Refused(f"the line leaves the arm's reach at {where}: "
                           f"{planner.why(t6, q, config)}")
-        need = max(need, float(np.max(np.abs(got - prev) * k / (speed * planner.vplan))))
-        steps.append(got - prev)
-        prev = q = got
-    # the joints' path curves: its acceleration at constant speed along the line
-    # (d2q/dr2 / T^2) kept to half the limit, the other half for the transitions
-    for a, b in itertools.pairwise(steps):
-        curv = np.abs(b - a) * k * k
+        q = got
+    # every sample reached: the joints' steps keep their velocities within the limits, and
+    # the path's curvature (its acceleration at constant speed along the line, d2q/dr2 /
+    # T^2) to half the acceleration limits, the other half for the transitions
+    steps = np.diff(np.array([prev, *gots]), axis=0)
+    need = max(0.0, float(np.max(np.abs(steps) * k / (speed * planner.vplan))))
+    if len(steps) > 1:
+        curv = np.abs(np.diff(steps, axis=0)) * k * k
         need = max(need, math.sqrt(float(np.max(curv / (0.5 * planner.amax)))))
     return need
 
@@ -140,41 +151,63 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
     n_steps = max(math.ceil((t_end - t0) / dt), 1)
     blend_pts: list[Vector] = []
     q_end = None
-    t6 = np.eye(4)
+    # the samples' joints first, each inverse seeded at the sample before, up to the first
+    # out of reach; then each check over all of them at once; then the samples in order,
+    # each refused or slowed by the first check it fails, as one by one
+    times: list[float] = []
+    pieces: list[Piece] = []
+    samples: list[float] = []
+    qs: list[Vector] = []
+    lost = False
     for i in range(n_steps + 1):
         t = min(t0 + i * dt, t_end)
         piece = planner.piece_at(seg.pieces, t)
         assert piece is not None
         n = planner.sample_of(tail, t)
         q = planner.q_of(piece, t, seed, n)
+        times.append(t)
+        pieces.append(piece)
+        samples.append(n)
+        if q is None:
+            lost = True
+            break
+        qs.append(q)
+        seed = q
+    m = len(qs)
+    flags = _sample_flags(planner, qs, pieces, q_prev2, q_prev, dt)
+    for i in range(m + 1 if lost else m):
+        t, piece, n = times[i], pieces[i], samples[i]
         frac = 100.0 * (t - seg.t_c) / max(seg.t_e - seg.t_c, 1e-9)
         frac = min(max(frac, 0.0), 100.0)
-        if q is None:
+        if i == m:  # out of reach
             assert piece.frames is not None
             t6 = piece.frames.t6(piece.pose(t, np.eye(4)), n)
             tool = t6[:3, 3] * 1e3
             raise Refused(f"the path leaves the arm's reach at {frac:.0f}% of the segment "
                           f"(T6 at {tool.round(1).tolist()} mm): "
                           f"{planner.why(t6, seed, piece.config)}")
-        why = chain.limit_violation(q)
-        if why:
-            tool = chain.fk(q)[:3, 3] * 1e3
-            raise Refused(f"the path crosses a joint limit at {frac:.0f}% of the segment "
-                          f"(T6 at {tool.round(1).tolist()} mm): {why}")
-        if piece.space == CART:
-            sv = np.linalg.svd(chain.jacobian(q), compute_uv=False)
-            if sv[-1] < planner.limits.singular:
+        q = qs[i]
+        if flags.outside[i]:
+            why = chain.limit_violation(q)
+            if why:
                 tool = chain.fk(q)[:3, 3] * 1e3
-                raise Refused(f"the path passes a singularity at {frac:.0f}% of the "
-                              f"segment (T6 at {tool.round(1).tolist()} mm, q = "
-                              f"{np.degrees(q).round(1).tolist()} deg; smallest singular "
-                              f"value {sv[-1]:.2g})")
-        if q_prev is not None and q_prev2 is not None:
+                raise Refused(f"the path crosses a joint limit at {frac:.0f}% of the segment "
+                              f"(T6 at {tool.round(1).tolist()} mm): {why}")
+        sv = flags.singular.get(i)
+        if sv is not None and sv < planner.limits.singular:
+            tool = chain.fk(q)[:3, 3] * 1e3
+            raise Refused(f"the path passes a singularity at {frac:.0f}% of the "
+                          f"segment (T6 at {tool.round(1).tolist()} mm, q = "
+                          f"{np.degrees(q).round(1).tolist()} deg; smallest singular "
+                          f"value {sv:.2g})")
+        q_prev = flags.prev(i, 1)
+        if flags.over_v[i] or flags.over_a[i]:
+            q_prev2 = flags.prev(i, 2)
+            assert q_prev is not None and q_prev2 is not None
             qd = (q - q_prev) / dt
             qdd = (q - 2 * q_prev + q_prev2) / (dt * dt)
             where = _where(seg, t - dt)
-            over_v = np.abs(qd) > planner.vmax * 0.999
-            if over_v.any():
+            if flags.over_v[i]:
                 j = int(np.argmax(np.abs(qd) / planner.vmax))
                 if np.abs(q - q_prev)[j] > 0.5:
                     raise Refused(f"the path passes a singularity at {frac:.0f}% of the "
@@ -183,13 +216,11 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
                 raise Slow(where, f"joint {chain.joints[j].name} over its velocity limit "
                            f"at {frac:.0f}% of the segment",
                            1.02 * float(np.abs(qd)[j] / planner.vmax[j]))
-            over_a = np.abs(qdd) > planner.amax * 0.995  # a reserve for rounding
-            if over_a.any():
-                j = int(np.argmax(np.abs(qdd) / planner.amax))
-                ratio = float(np.abs(qdd)[j] / planner.amax[j])
-                raise Slow(where, f"joint {chain.joints[j].name} over its acceleration "
-                           f"limit at {frac:.0f}% of the segment",
-                           1.02 * (ratio if where != "line" else math.sqrt(ratio)))
+            j = int(np.argmax(np.abs(qdd) / planner.amax))
+            ratio = float(np.abs(qdd)[j] / planner.amax[j])
+            raise Slow(where, f"joint {chain.joints[j].name} over its acceleration "
+                       f"limit at {frac:.0f}% of the segment",
+                       1.02 * (ratio if where != "line" else math.sqrt(ratio)))
         if spec.max_diff is not None and q_prev is not None:
             a = seg.frames.tool(chain.fk(q_prev), n)
             b = seg.frames.tool(chain.fk(q), n)
@@ -198,7 +229,6 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
                 raise Slow("line", "over the maximum differential motion")
         if how is BufferMode.BLENDING and t <= seg.t_c + seg.tau_in:
             blend_pts.append(_tool_point(planner, seg, q, n))
-        q_prev2, q_prev, seed = q_prev, q, q
         q_end = q
     assert q_end is not None
     if how is BufferMode.BLENDING:
@@ -224,6 +254,70 @@ def _where(seg: Segment, t: float) -> str:
     if t > seg.t_e - seg.tau_out:
         return "out"
     return "line"
+
+
+class _Flags:
+    """What each sample of a segment fails, found for all the samples at once:
+    ``outside`` (maybe beyond a joint limit: the chain says), ``singular`` (sample
+    -> smallest singular value, Cartesian samples), ``over_v``/``over_a`` (a joint
+    over its velocity / acceleration limit, from the samples' differences)."""
+
+    def __init__(self, hist: list[Vector | None], outside: list[bool],
+                 singular: dict[int, float], over_v: list[bool], over_a: list[bool]) -> None:
+        self._hist = hist
+        self.outside = outside
+        self.singular = singular
+        self.over_v = over_v
+        self.over_a = over_a
+
+    def prev(self, i: int, back: int) -> Vector | None:
+        """The joints ``back`` samples before sample ``i`` (None: none)."""
+        return self._hist[i + 2 - back]
+
+
+def _sample_flags(planner: Planner, qs: list[Vector], pieces: list[Piece],
+                  q_prev2: Vector | None, q_prev: Vector | None, dt: float) -> _Flags:
+    """The checks of :func:`check_segment` on the joints ``qs`` of its samples
+    (``q_prev2``, ``q_prev`` the two before the first, or None), all at once."""
+    m = len(qs)
+    hist: list[Vector | None] = [q_prev2, q_prev, *qs]
+    if m == 0:
+        return _Flags(hist, [], {}, [], [])
+    chain = planner.chain
+    q = np.array(qs)
+    lower, upper = np.asarray(chain.lower), np.asarray(chain.upper)
+    inside = np.logical_and(q >= lower, q <= upper).all(axis=1) & np.isfinite(q).all(axis=1)
+    outside = [not v for v in np.asarray(inside).tolist()]
+    cart = [i for i in range(m) if pieces[i].space == CART]
+    singular: dict[int, float] = {}
+    if cart:
+        sv = np.linalg.svd(_jacobians(chain, [qs[i] for i in cart]), compute_uv=False)[:, -1]
+        singular = dict(zip(cart, sv.tolist(), strict=True))
+    # the samples with two before them: their velocities and accelerations
+    first = 0 if q_prev2 is not None and q_prev is not None else (
+        1 if q_prev is not None else 2)
+    over_v = [False] * m
+    over_a = [False] * m
+    if first < m:
+        full = np.array(hist[first:])  # from two samples before `first` on
+        cur, p1, p2 = full[2:], full[1:-1], full[:-2]
+        qd = (cur - p1) / dt
+        qdd = (cur - 2 * p1 + p2) / (dt * dt)
+        over_v[first:] = (np.abs(qd) > planner.vmax * 0.999).any(axis=1).tolist()
+        over_a[first:] = (np.abs(qdd) > planner.amax * 0.995).any(axis=1).tolist()
+    return _Flags(hist, outside, singular, over_v, over_a)
+
+
+def _jacobians(chain: Chain, qs: list[Vector]) -> Matrix:
+    """The Jacobians (len(qs), 6, n) at joints ``qs``, through one pair of arrays the
+    chain's kernel stays bound to."""
+    q_buf = np.zeros(chain.n)
+    j_buf = np.zeros((6, chain.n))
+    out = np.empty((len(qs), 6, chain.n))
+    for i, q in enumerate(qs):
+        q_buf[...] = q
+        out[i] = chain.jacobian(q_buf, out=j_buf)
+    return out
 
 
 def _tool_point(planner: Planner, seg: Segment, q: Vector, n: float) -> Vector:
@@ -259,8 +353,5 @@ def _blend_error(planner: Planner, seg: Segment, tail: Tail, pts: list[Vector]) 
             q = got
             ref.append(_tool_point(planner, seg, q, n))
     r = np.array(ref)
-    worst = 0.0
-    for p in pts:
-        d = np.sqrt(((r - p) ** 2).sum(axis=1))
-        worst = max(worst, float(d.min()))
-    return worst
+    d = np.sqrt(((r[None, :, :] - np.array(pts)[:, None, :]) ** 2).sum(axis=2))
+    return max(0.0, float(d.min(axis=1).max()))

@@ -203,7 +203,9 @@ class Piece:
     ``u = t - origin``.  ``c`` holds the coefficients, lowest power first."""
 
     __slots__ = (
+        "_cc",
         "_ref",
+        "_rows",
         "c",
         "config",
         "fn",
@@ -229,6 +231,10 @@ class Piece:
         self.origin = origin
         self.c = c
         self.linear = c.shape[0] == 2
+        #: The coefficients as plain floats (the polynomial's rows), for the ``c`` they
+        #: were made of: the trajectory tick evaluates on them.
+        self._cc: Vector | None = None
+        self._rows: list[list[float]] = []
         self.seg = seg
         self.frames = frames
         self.r_c = r_c
@@ -243,15 +249,22 @@ class Piece:
                      if r_c is not None and p_c is not None else None)
 
     def x(self, t: float) -> Vector:
+        return np.array(self._xs(t))
+
+    def _xs(self, t: float) -> list[float]:
+        """The value at ``t`` as plain floats, coordinate by coordinate: a line
+        ``c0 + c1 u``, else Horner's rule (the same roundings as on the rows)."""
         u = t - self.origin
         c = self.c
+        if c is not self._cc:
+            self._cc = c
+            self._rows = c.tolist()[:2 if self.linear else 6]
         if self.linear:
-            return c[0] + c[1] * u
-        out = c[5] * u + c[4]
-        out = out * u + c[3]
-        out = out * u + c[2]
-        out = out * u + c[1]
-        return out * u + c[0]
+            r0, r1 = self._rows
+            return [z + a * u for z, a in zip(r0, r1, strict=True)]
+        r0, r1, r2, r3, r4, r5 = self._rows
+        return [((((e * u + d) * u + f) * u + b) * u + a) * u + z
+                for z, a, b, f, d, e in zip(r0, r1, r2, r3, r4, r5, strict=True)]
 
     def xd(self, t: float) -> Vector:
         u = t - self.origin
@@ -270,7 +283,7 @@ class Piece:
     def pose(self, t: float, out: Matrix | None = None) -> Matrix:
         """Drive piece: the POS value at ``t`` (``Exp(phi) R_c``, ``p_c + p``),
         on plain floats: the trajectory tick's hot path."""
-        px, py, pz, a, b, c = self.x(t).tolist()
+        px, py, pz, a, b, c = self._xs(t)
         th2 = a * a + b * b + c * c
         if th2 < 1e-24:
             s, k = 1.0, 0.5

@@ -161,6 +161,7 @@ class Evaluator(Queueing):
         #: Comply: the running comply segment, the tool's offset from its path
         #: (tool frame, m) and the filtered force it exerts (tool frame, N).
         self._comply = ComplyLoop()
+        self._fk_q = np.zeros(chain.n)
 
     # -- queueing (the caller's thread) ---------------------------------------------------
     @property
@@ -178,6 +179,22 @@ class Evaluator(Queueing):
         """True when nothing is queued or running and the arm is at rest."""
         with self._lock:
             return (not self._pieces or self._k >= len(self._pieces)) and self._sigma is None
+
+    @property
+    def wants_wrench(self) -> bool:
+        """Whether a record queued or running (or a piece still to run) has a force
+        limit or a comply spec: without one, :meth:`tick` does the same with or
+        without the wrist's wrench (the caller may leave the sensor unread)."""
+        with self._lock:
+            for s in self._segs:
+                if s.move.spec.force_limits is not None or s.move.spec.comply is not None:
+                    return True
+            for piece in self._pieces[self._k:]:
+                seg = piece.seg
+                if seg is not None and (seg.move.spec.force_limits is not None
+                                        or seg.move.spec.comply is not None):
+                    return True
+            return False
 
     def queue_function(self, fn: Callable[[float], Sequence[float]], duration: float,
                        name: str = "function") -> Move:
@@ -348,7 +365,9 @@ class Evaluator(Queueing):
         seed = self._q[-1]
         if piece.space is JOINT or piece.space == JOINT:
             q = piece.x(t)
-            return q, self.chain.fk(q)
+            fk_q = self._fk_q  # one array the chain's forward kinematics stays bound to
+            fk_q[...] = q
+            return q, self.chain.fk(fk_q)
         if piece.space == CART:
             frames = piece.frames
             assert frames is not None

@@ -237,7 +237,7 @@ class Planner:
             return piece.x(t)
         if piece.space == CART:
             assert piece.frames is not None
-            pos = piece.pose(t, np.eye(4))
+            pos = piece.pose(t)
             return self.solve(piece.frames.t6(pos, sample), seed, piece.config)
         assert piece.fn is not None
         return np.asarray(piece.fn(t - piece.origin), dtype=float)

@@ -23,6 +23,9 @@ def as_f64(name: str, value: object, shape: tuple[int | None, ...]) -> np.ndarra
     Integers and floats of any width are converted; booleans, complex,
     strings and objects are refused with :class:`NativeInputError`.
     """
+    if (value.__class__ is np.ndarray and value.dtype is F64  # type: ignore[attr-defined]
+            and value.shape == shape and value.flags.c_contiguous):  # type: ignore[attr-defined]
+        return value  # type: ignore[return-value]  # already what it would be made into
     try:
         arr = np.asarray(value)
     except (TypeError, ValueError) as exc:

@@ -59,6 +59,8 @@ NSTATE: int = lib.PYRT_SERVO_NSTATE
 NKNOTS: int = lib.PYRT_SERVO_NKNOTS
 #: The integral's dt is bounded at this many periods (a longer stall is counted).
 MAX_DT_PERIODS: int = lib.PYRT_SERVO_MAX_DT_PERIODS
+_QUINTIC: int = lib.PYRT_SERVO_QUINTIC
+_CUBIC: int = lib.PYRT_SERVO_CUBIC
 
 #: The gain rows, in the order of csrc/servo.h.
 GAINS: tuple[str, ...] = ("kp", "ki", "kd", "kv", "ka", "kff", "ilim", "tmax", "felim", "velhz")
@@ -232,6 +234,7 @@ class Servo:
         self._tick = lib.pyrt_servo_tick
         self._tick_at = lib.pyrt_servo_tick_at
         self._tick_board = lib.pyrt_servo_tick_board
+        self._load_at = lib.pyrt_servo_load_at
         self._ff_buf = np.zeros(n, F64)
         self.reset(np.zeros(n))
 
@@ -334,14 +337,16 @@ class Servo:
         (``NKNOTS x n``, rows qa qda qdda qb qdb qddb ffa ffb), starting at
         ``start`` (s, the servo's clock: e.g. :attr:`end`, the last
         segment's end) or, by default, at the next self-clocked tick."""
-        if not isinstance(duration, (int, float)) or isinstance(duration, bool):
+        if duration.__class__ is not float and (
+                not isinstance(duration, (int, float)) or isinstance(duration, bool)):
             raise NativeInputError(f"duration: expected seconds, got {duration!r}")
-        order = lib.PYRT_SERVO_QUINTIC if quintic else lib.PYRT_SERVO_CUBIC
+        order = _QUINTIC if quintic else _CUBIC
         if start is None:
             rc = lib.pyrt_servo_load(self._c, self._knots_p, float(duration), order)
         else:
-            rc = lib.pyrt_servo_load_at(self._c, self._knots_p, float(duration), order,
-                                        _time("start", start, finite=False))
+            if start.__class__ is not float:
+                start = _time("start", start, finite=False)
+            rc = self._load_at(self._c, self._knots_p, float(duration), order, start)
         raise_for_status(rc, f"servo segment of {duration!r} s", _load_why)
 
     def tick(self, q: ArrayLike | None = None, now: float | None = None) -> ServoTrip | None:

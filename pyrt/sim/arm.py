@@ -73,7 +73,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from pyrt.boards.armdrive import arm_drive_kind
-from pyrt.boards.armservo import DAC_FULL_SCALE, FT_CHANNELS, arm_servo_kind
+from pyrt.boards.armservo import DAC_FULL_SCALE, FT_CHANNELS, arm_servo_kind, register_cells
 from pyrt.boards.registers import RegisterBoard
 from pyrt.errors import ConfigError, NativeError
 from pyrt.kinematics import GRAVITY, Chain, Inertial
@@ -221,6 +221,8 @@ class FTCalibration:
     counts_per_n: float = 1000.0
     counts_per_nm: float = 10000.0
     offsets: tuple[int, ...] = (0, 0, 0, 0, 0, 0)
+    _scale: np.ndarray = field(init=False, repr=False, compare=False)
+    _offsets: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         for name in ("counts_per_n", "counts_per_nm"):
@@ -229,6 +231,9 @@ class FTCalibration:
                 raise ConfigError(f"F/T {name}: expected a number > 0, got {v!r}")
         if len(self.offsets) != 6 or not all(isinstance(o, int) for o in self.offsets):
             raise ConfigError(f"F/T offsets: expected 6 integers, got {self.offsets!r}")
+        # made once: the controller converts the sensor's counts every trajectory tick
+        object.__setattr__(self, "_scale", self.scale)
+        object.__setattr__(self, "_offsets", np.asarray(self.offsets, dtype=float))
 
     @property
     def scale(self) -> np.ndarray:
@@ -237,7 +242,7 @@ class FTCalibration:
 
     def wrench(self, counts: ArrayLike) -> np.ndarray:
         """The wrench (N, N m; 6,) that register counts give."""
-        return (np.asarray(counts, dtype=float) - np.asarray(self.offsets)) / self.scale
+        return (np.array(counts, dtype=float) - self._offsets) / self._scale
 
 
 @dataclass(frozen=True)
@@ -420,6 +425,17 @@ class ArmWorld:
         self._on_in: list[int] = []
         self._set_input = board.set_input
         self._values = board.values
+        # the fast path: the in-process register file's own storage, read and written in
+        # place (None: through set_input and values); the kernel's counts are 32-bit and
+        # its sensor's clamped to 32 bits, as the registers declare them
+        self._cells = {name: register_cells(board, name)
+                       for name in ("count", "ft", "dac", "enable", "release")}
+        cells = self._cells
+        #: The passive board's five registers in place (dac enable release count ft), or None.
+        self._direct: tuple[list[int], ...] | None = None
+        live = [cells[name] for name in ("dac", "enable", "release", "count", "ft")]
+        if drive is None and all(c is not None for c in live):
+            self._direct = tuple(c for c in live if c is not None)
         self.payload = 0.0
         self._dyn = chain
         self.set_payload(float(payload))
@@ -475,23 +491,40 @@ class ArmWorld:
             dt = float(dt)
         if dt == 0:
             return
-        values = self._values
         k = self._k
+        direct = self._direct
+        if direct is not None:  # the register file in place: the servo rate's path
+            dac, on, release, count, ft = direct
+            if dac != self._dac_in:  # the amplifiers' new currents
+                k.set_dac(dac)
+                self._dac_in = dac[:]
+            if on != self._on_in:
+                k.set_enable(on)
+                self._on_in = on[:]
+            if release != self._release_in:
+                k.release[:] = release
+                self._release_in = release[:]
+            k.step(dt)
+            self.time += dt
+            count[:] = k.counts()
+            ft[:] = k.ft_counts()
+            return
         if self._drive is not None:
             self._step_driven(dt)
             return
-        dac = values("dac")
+        cells = self._cells
+        dac = cells["dac"] or self._values("dac")
         if dac != self._dac_in:  # the amplifiers' new currents
             k.set_dac(dac)
-            self._dac_in = dac
-        on = values("enable")
+            self._dac_in = dac[:]
+        on = cells["enable"] or self._values("enable")
         if on != self._on_in:
             k.set_enable(on)
-            self._on_in = on
-        release = values("release")
+            self._on_in = on[:]
+        release = cells["release"] or self._values("release")
         if release != self._release_in:
             k.release[:] = release
-            self._release_in = release
+            self._release_in = release[:]
         k.step(dt)
         self.time += dt
         self._set_inputs()
@@ -537,6 +570,12 @@ class ArmWorld:
         """Set the board's inputs the kernel published: encoder counters and
         the wrist sensor (those that changed)."""
         k = self._k
+        cells = self._cells
+        count, ft_cells = cells["count"], cells["ft"]
+        if count is not None and ft_cells is not None:
+            count[:] = k.counts()
+            ft_cells[:] = k.ft_counts()
+            return
         set_input = self._set_input
         counts = k.counts()
         last = self._counts

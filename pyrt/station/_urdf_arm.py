@@ -49,7 +49,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from pyrt.boards.armservo import DAC_FULL_SCALE
+from pyrt.boards.armservo import DAC_FULL_SCALE, KIND_NAME, ArmServoRegisters
 from pyrt.component import Command, Component, Limits, Param, Signal, command, records_of
 from pyrt.kinematics import GRAVITY, Chain, rpy_of
 from pyrt.motion import Evaluator, MotionFault
@@ -218,6 +218,9 @@ class UrdfArm(ArmMoves, Component):
         ft = [layout.index(("ft", k)) for k in range(6)] if ("ft", 0) in layout else []
         self._ft_slice = slice(ft[0], ft[0] + 6) if ft else slice(0, 0)
         self._ft_counts: Sequence[int] = [0] * 6
+        #: The servo board's registers in blocks (encoders in, DACs out); None on a
+        #: board of another kind (hardware (a): its arm reads and writes its own).
+        self._regs = ArmServoRegisters(board) if board.kind.name == KIND_NAME else None
         self._cpu_list = [d.counts_per_unit for d in self.drives]
         #: A servo tick this long after the last is a stall (said; csrc/servo.h).
         self._stall_s = MAX_DT_PERIODS * period_ns * 1e-9
@@ -226,7 +229,7 @@ class UrdfArm(ArmMoves, Component):
                            for j, d in zip(joints, self.drives, strict=True)])
         self.effort = effort
         armature = np.array([d.reflected_inertia for d in self.drives])
-        inertia = self._inertia_bound(armature)
+        inertia = _inertia_bound(chain, armature)
         felim = np.array([math.radians(FOLLOWING_ERROR_DEG) if not p
                           else FOLLOWING_ERROR_DEG * 1e-3 for p in self.prismatic])
         gains: dict[str, ArrayLike] = dict(tuned_gains(inertia, effort, self.period_s,
@@ -235,6 +238,9 @@ class UrdfArm(ArmMoves, Component):
         gains["ka"] = armature
         gains["kv"] = np.array([j.damping for j in joints])
         self.servo = Servo(n, self.period_s, names=chain.joint_names, gains=gains)
+        k = self.servo.knots
+        #: The servo's knots B (q, qd, qdd, ff rows): the trajectory writes them in place.
+        self._rows_b = (k[3], k[4], k[5], k[7])
         #: The board's side of the servo: the counters as last read and their unwrapped
         #: totals, the DAC values last written (see servo_tick).
         self._io = ServoBoard(self.servo, self._cpu_list,
@@ -294,21 +300,10 @@ class UrdfArm(ArmMoves, Component):
         #: where the next one starts on the loop's clock (s).
         self._joined = False
         self._start = 0.0
+        #: Where the segment the servo runs ends (s, the loop's clock; servo.end).
+        self._end = 0.0
 
     # -- set-up ---------------------------------------------------------------------
-
-    def _inertia_bound(self, armature: np.ndarray) -> np.ndarray:
-        """Each joint's largest inertia over a spread of joint values (kg m^2 or kg),
-        the rotor's included: what the servo's gains and the acceleration limits are
-        sized for."""
-        chain = self.chain
-        lo = np.where(np.isfinite(chain.lower), chain.lower, -math.pi)
-        hi = np.where(np.isfinite(chain.upper), chain.upper, math.pi)
-        rng = np.random.default_rng(0)
-        best = np.zeros(self.n)
-        for u in rng.random((64, self.n)):
-            best = np.maximum(best, np.diag(chain.mass_matrix(lo + u * (hi - lo))))
-        return np.maximum(best + armature, 1e-4)
 
     def joint_limits(self, i: int) -> Limits:
         """Joint ``i``'s limits in operator units, as a display range and major alarms."""
@@ -398,6 +393,8 @@ class UrdfArm(ArmMoves, Component):
         without a sensor."""
         if self._wrench_of is None:
             return np.zeros(6)
+        if self._regs is not None:  # read when it is needed (hardware (a): each tick)
+            self._ft_counts = self._regs.ft()
         return self._wrench_of(self._ft_counts)
 
     def tool(self) -> np.ndarray:
@@ -467,21 +464,23 @@ class UrdfArm(ArmMoves, Component):
             zero = np.zeros(self.n)
             self.servo.segment(t, q, v, start, zero, zero, zero, ff,
                                self.chain.gravity_torque(start))
-            self._recover_until = self._now_ns + round(t * 1e9)
-        for j in range(self.n):
-            self.dac[j] = 0
-            self.board.write("dac", 0, j)
-            self.board.write("enable", 1, j)
-            self.board.write("release", 1, j)
+            # it starts at the servo's next tick: the trajectory takes over at its end
+            self._recover_until = self._now_ns + round((self.period_s + t) * 1e9)
+        self._io.dac[:] = 0
+        regs = self._regs
+        assert regs is not None  # a passive board's arm (hardware (a) has its own)
+        regs.write_all("dac", 0)
+        regs.write_all("enable", 1)
+        regs.write_all("release", 1)
         self.powered = True
         self.state = "idle"
 
     def servo_tick(self, now_ns: int) -> None:
         """1 kHz: the encoders, the servo law, the DACs; the checks; settling."""
         self._now_ns = now_ns
-        inputs = self.board.snapshot()  # one read of every input: this tick's
-        counts = inputs[self._count_slice]
-        self._ft_counts = inputs[self._ft_slice]
+        regs = self._regs
+        assert regs is not None  # a passive board's arm (hardware (a) runs no servo task)
+        counts = regs.counts()  # the encoders as one block: this tick's
         if not self.powered:  # the readings kept: an arm moving is braked at power-on
             self._measure(counts)
             self._history.append((now_ns, self.q.copy()))
@@ -492,7 +491,7 @@ class UrdfArm(ArmMoves, Component):
             return
         servo = self.servo  # servo.q is self.q: measured in tick_board below
         now = now_ns * 1e-9
-        if self._joined and now > servo.end + 0.5 * self.period_s:
+        if self._joined and now > self._end + 0.5 * self.period_s:
             # the loop stalled past the segment's end before the trajectory's turn: its
             # knot for now is made here, so the reference keeps to the time that passed
             self._io.encoders(counts)
@@ -512,10 +511,7 @@ class UrdfArm(ArmMoves, Component):
         c = io.c
         changed = c.changed
         if changed:  # the DACs whose counts changed (those before a joint beyond its bounds)
-            write = self.board.write
-            for j, v in enumerate(io.dac.tolist()):
-                if changed >> j & 1:
-                    write("dac", v, j)
+            regs.write_dacs(io.dac.tolist(), changed, checked=False)  # within +-full
         if c.beyond >= 0:
             self._beyond(c.beyond)
             return
@@ -585,17 +581,18 @@ class UrdfArm(ArmMoves, Component):
         now = now_ns * 1e-9
         half = 0.5 * self.period_s
         if self._joined:
-            start = self.servo.end
+            start = self._end
             if start > now + half:  # the segment running holds now: its knot is made
                 return
-        else:
-            start = max(self.servo.now + self.period_s, now)
+        else:  # a motion's first segment starts now (the servo held its start until now),
+            start = now  # its knots on the trajectory group's ticks from there
         if self._wide:  # back inside the limits: the fault's bounds are the limits' again
             lo, hi = self.chain.lower - self._margin, self.chain.upper + self._margin
             if bool(((self.q >= lo) & (self.q <= hi)).all()):
                 self._bound(lo, hi)
                 self._wide = False
-        wrench = self.wrench() if self._wrench_of is not None else None
+        # the wrist's wrench when a record may use it (a force limit or comply)
+        wrench = self.wrench() if self._wrench_of is not None and ev.wants_wrench else None
         k = self.servo.knots
         missed = None
         while True:
@@ -610,18 +607,13 @@ class UrdfArm(ArmMoves, Component):
                 break
             missed, start = knot, start + knot.period  # a knot the stall passed over
         if missed is not None:  # the segment of the last two knots: the one that holds now
-            k[3], k[4], k[5] = missed.q, missed.qd, missed.qdd
-            k[7] = _feed_forward(self.chain, missed)
-        moving = missed is not None or bool(knot.qd.any() or knot.qdd.any()
-                                             or not np.array_equal(knot.q, k[3]))
+            _knot_b(self, missed)
+        moving = missed is not None or any(knot.qd.tolist()) or any(knot.qdd.tolist()) \
+            or bool((knot.q != k[3]).any())  # (plain floats: the quicker test of six)
         if moving:
-            ff = _feed_forward(self.chain, knot)
             k[0:3] = k[3:6]
             k[6] = k[7]
-            k[3] = knot.q
-            k[4] = knot.qd
-            k[5] = knot.qdd
-            k[7] = ff
+            _knot_b(self, knot)
             self._start = start
             self.follow(knot.period)
             if knot.move is not None and knot.move.done and knot.move is self._latest:
@@ -644,6 +636,7 @@ class UrdfArm(ArmMoves, Component):
         starting where the last one ended on the loop's clock (or now, the first of a
         motion); a hardware (a) arm writes it to its board instead."""
         self.servo.load(period, quintic=True, start=self._start)
+        self._end = self._start + period  # the servo's end, as it computes it
         self._joined = True
 
     # -- commands (the moves: ArmMoves) ----------------------------------------------
@@ -682,12 +675,28 @@ class UrdfArm(ArmMoves, Component):
         return f"{self.name}: stopping: braking along the path to rest, then holding"
 
 
-def _feed_forward(chain: Chain, knot: Any) -> np.ndarray:
-    """The dynamics feed-forward at a knot: inverse dynamics, and the payload held."""
-    ff = chain.rnea(knot.q, knot.qd, knot.qdd, GRAVITY)
+def _inertia_bound(chain: Chain, armature: np.ndarray) -> np.ndarray:
+    """Each joint's largest inertia over a spread of joint values (kg m^2 or kg), the
+    rotor's included: what the servo's gains and the acceleration limits are sized for."""
+    lo = np.where(np.isfinite(chain.lower), chain.lower, -math.pi)
+    hi = np.where(np.isfinite(chain.upper), chain.upper, math.pi)
+    rng = np.random.default_rng(0)
+    best = np.zeros(chain.n)
+    for u in rng.random((64, chain.n)):
+        best = np.maximum(best, np.diag(chain.mass_matrix(lo + u * (hi - lo))))
+    return np.maximum(best + armature, 1e-4)
+
+
+def _knot_b(arm: UrdfArm, knot: Any) -> None:
+    """``knot`` into the arm's servo's knots B with its dynamics feed-forward (inverse
+    dynamics, computed in place, and the payload held)."""
+    q, qd, qdd, ff = arm._rows_b
+    q[:] = knot.q
+    qd[:] = knot.qd
+    qdd[:] = knot.qdd
+    arm.chain.rnea(q, qd, qdd, GRAVITY, out=ff)
     if knot.payload_torque is not None:
-        ff = ff + knot.payload_torque
-    return ff  # type: ignore[no-any-return]
+        ff += knot.payload_torque
 
 
 def _knot_events(arm: UrdfArm, knot: Any, wrench: np.ndarray | None, ev: Evaluator) -> None:
