@@ -45,7 +45,7 @@ import numpy as np
 from pyrt.native import Servo
 
 from pyrt_arm.kinematics import GEOMETRY
-from pyrt_arm.plant import ELBOW_DRIVE, SHOULDER_DRIVE, wrap_int32
+from pyrt_arm.plant import CHAIN, MOTORS, wrap_int32
 
 __all__ = [
     "ELBOW",
@@ -155,16 +155,21 @@ def _gains(name: str, inertia_kgm2: float, viscous: float, coulomb: float, hz: f
     )
 
 
+def _joint(j: int, name: str, inertia_kgm2: float) -> JointServoConfig:
+    """Joint ``j``'s config at 12 Hz, damping 0.9: its friction from the arm's URDF,
+    its drive from :data:`pyrt_arm.plant.MOTORS`."""
+    joint, motor = CHAIN.joints[j], MOTORS[j]
+    return _gains(name, inertia_kgm2, joint.damping, joint.friction, 12.0, 0.9,
+                  motor.torque_limit, motor.counts_per_joint_rev / 360.0,
+                  GEOMETRY.limits_deg[j])
+
+
 #: The shoulder's servo: 12 Hz, damping 0.9 on 0.297 kg m^2 (kp 29.5 N m/deg,
 #: kd 0.70 N m/(deg/s)).
-SHOULDER = _gains("q0", 0.297, SHOULDER_DRIVE.viscous_nm_s_per_rad, SHOULDER_DRIVE.coulomb_nm,
-                  12.0, 0.9, SHOULDER_DRIVE.torque_per_drive_nm,
-                  SHOULDER_DRIVE.counts_per_deg, GEOMETRY.q0_limits_deg)
+SHOULDER = _joint(0, "q0", 0.297)
 #: The elbow's servo: 12 Hz, damping 0.9 on 0.077 kg m^2 (kp 7.6 N m/deg,
 #: kd 0.18 N m/(deg/s)).
-ELBOW = _gains("q1", 0.077, ELBOW_DRIVE.viscous_nm_s_per_rad, ELBOW_DRIVE.coulomb_nm,
-               12.0, 0.9, ELBOW_DRIVE.torque_per_drive_nm,
-               ELBOW_DRIVE.counts_per_deg, GEOMETRY.q1_limits_deg)
+ELBOW = _joint(1, "q1", 0.077)
 
 
 def coulomb(config: JointServoConfig, qd_ref: float) -> float:
