@@ -163,7 +163,9 @@ class _Wiring(RegisterBoard):
         if name == "count":
             self.raw[index] = value
             if self.frozen[index] is None:
-                self.publish(index)
+                if self.offset[index]:
+                    value = wrap_int32(value + self.offset[index])
+                self._set("count", value, index)
             return
         super().set_input(name, value, index)
 
