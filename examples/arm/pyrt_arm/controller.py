@@ -251,6 +251,7 @@ class ArmController(Component):
         self._counts_at = slice(at[0], at[-1] + 1)
         assert at == list(range(at[0], at[-1] + 1)), "the counters lie side by side"
         self._ok_at = [layout.index(("amp_ok", j)) for j in range(len(configs))]
+        self._no_power = False  # a joint's amplifier has reported no power lately
         counts = board.snapshot()[self._counts_at]
         self.io = io = ServoBoard(self.servo, [c.counts_per_deg * _DEG for c in configs], counts,
                                   [DRIVE_FULL_SCALE / c.torque_per_drive_nm for c in configs],
@@ -271,6 +272,7 @@ class ArmController(Component):
         self._reason = "at target"
         self._ended = True  # the knots have stopped coming: the servo holds the last one
         self._joined = False  # the servo's segments follow each other in time
+        self._seg_end = 0.0  # where the servo's segment ends (s, the loop's clock)
         self._quiet_since: int | None = None
 
     # -- the component ----------------------------------------------------------------
@@ -374,6 +376,7 @@ class ArmController(Component):
         self.servo.reset(q, now=self._now_ns * 1e-9)
         self._joined = False
         self.servo.segment(self.traj_period_s, q, np.zeros(2), q, np.zeros(2))
+        self._seg_end = self.servo.end
         self.evaluator = evaluator if evaluator is not None else self._evaluator(q)
         for jt in self.joints:
             jt.engage()
@@ -394,6 +397,7 @@ class ArmController(Component):
         start = servo.end if self._joined else max(servo.now + servo.period,
                                                     self._now_ns * 1e-9)
         servo.load(duration, quintic=False, start=start)
+        self._seg_end = servo.end
         self._ended = False
         self._joined = True
 
@@ -445,7 +449,7 @@ class ArmController(Component):
         servo, io = self.servo, self.io
         now = now_ns * 1e-9
         ev = self.evaluator
-        if (self._joined and ev is not None and now > servo.end + 0.5 * servo.period
+        if (self._joined and ev is not None and now > self._seg_end + 0.5 * servo.period
                 and not self.station.executor.busy):
             io.encoders(counts)
             self._next_knot(now_ns, ev)  # the loop stalled past the segment: its knot, now
@@ -471,14 +475,15 @@ class ArmController(Component):
             self.fail(str(joint_limit_fault(jt.config.name, float(servo.q[jt.index]) * _DEG,
                                             jt.limits_deg)), jt.name)
             return
-        for jt, at in zip(self.joints, self._ok_at, strict=True):
-            if inputs[at]:
-                jt.no_power = 0
-                continue
-            jt.no_power += 1
-            if jt.no_power >= AMP_GRACE_TICKS:
-                self.fail(f"{JOINTS[jt.index]} amplifier reports no power", jt.name)
-                return
+        ok0, ok1 = self._ok_at
+        if not (inputs[ok0] and inputs[ok1]) or self._no_power:
+            self._no_power = False
+            for jt, at in zip(self.joints, self._ok_at, strict=True):
+                jt.no_power = 0 if inputs[at] else jt.no_power + 1
+                self._no_power = self._no_power or jt.no_power > 0
+                if jt.no_power >= AMP_GRACE_TICKS:
+                    self.fail(f"{JOINTS[jt.index]} amplifier reports no power", jt.name)
+                    return
         if self._ended and servo.late > 0:
             self._settle(now_ns)
 
@@ -514,6 +519,7 @@ class ArmController(Component):
         t = float(np.max(np.abs(qd) / np.radians(AMAX_DEG_S2)))
         if t > 1e-6:
             s.segment(t, q, qd, q + 0.5 * qd * t, np.zeros(2), ffa=np.sign(qd) * self._kc)
+            self._seg_end = s.end
         self.evaluator = self._evaluator(q + 0.5 * qd * t)
         self._end_of_knots(self._now_ns + round(t * 1e9))
 
