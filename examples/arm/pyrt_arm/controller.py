@@ -201,8 +201,10 @@ class Joint(Component):
         return float(self.arm.servo.error[self.index]) * _DEG if self.engaged else 0.0
 
     def measure(self, count: int) -> float:
-        """The joint angle (deg) the counter reading ``count`` gives."""
-        return counts_to_deg(count, self.config.zero_count, self.config.counts_per_deg)
+        """The joint angle (deg) the counter reading ``count`` gives: the middle of the
+        count, as the servo measures it."""
+        cpd = self.config.counts_per_deg
+        return counts_to_deg(count, self.config.zero_count, cpd) + 0.5 / cpd
 
     def position(self) -> float:
         """The joint angle the encoder gives (deg)."""
