@@ -8,10 +8,12 @@ Two tasks: ``trajectory`` every :data:`TRAJECTORY_PERIOD` ticks (100 Hz) and
 when queued, in the console's thread, not in a loop tick; within
 :data:`VMAX_DEG_S` and :data:`AMAX_DEG_S2`; a move queued behind the running one
 blends into it by Paul's transition).  The trajectory task hands each knot
-(position, velocity) to pyrt's servo
+(position, velocity, the Coulomb friction as feed-forward) to pyrt's servo
 (:class:`pyrt.native.Servo`, C: cubic interpolation to the servo rate, the
-arm's PD law and gains, :mod:`pyrt_arm.servo`); the servo task writes its
-torques as the drives.  A plug-in motion type (``motion joint_trajectory``)
+arm's PD law and gains, :mod:`pyrt_arm.servo`); the servo task runs it on the
+board's counters and writes the DAC counts that changed (the encoders, the
+law, the joints' bounds and the counts in one C call,
+:class:`pyrt.native.ServoBoard`).  A plug-in motion type (``motion joint_trajectory``)
 drives the same servo through :meth:`ArmController.command_joints`.
 
 The amplifiers are on while a move runs and until the arm has settled at its
