@@ -32,16 +32,21 @@ planning: the simulated arm's step and the servo task are most of the time.
 
 The simulated arm as pyrt's rigid-body world of the arm's URDF (one C call a
 step) and the servo task as one C call (ServoBoard: encoders, law, bounds, DAC
-counts), three interleaved rounds of this benchmark against the tree before, at
-load 4.7-5.1: before 51-55x CPU (median 53x), 21-42x wall (26x); after 61-64x
-CPU (median 61x), 24-32x wall (30x).  A tick then costs about 16 µs of CPU:
-the world's step 3-4 µs (its C step about 1 µs, the rest the registers around
-it in Python), the servo task 2.5 µs, the trajectory task 2 µs (pyrt's
-evaluator about 11 µs a knot), the loop and the station's handlers about 3 µs,
-the moves' planning 3.5 µs (pyrt's planner samples each move three times: its
-first two plans are refused by its own acceleration check at the segment's ends
-and made slower).  100x (10 µs a tick) is not within the example's reach: what
-is pyrt's (loop, handlers, evaluator, planner) is about 8 µs of a tick.
+counts), two sets of three interleaved rounds of this benchmark against the tree
+before, at load 4.7-5.3: before 49-55x CPU (medians 53x and 50x), 18-42x wall
+(26x, 31x); after 59-64x CPU (medians 61x and 62x), 24-38x wall (30x, 26x).
+The parts of a tick on their own (the second benchmark, the same code run on
+both trees, load 5.2-5.9): the world's step 5.9-7.6 µs before, 3.9-5.1 after
+(its C step about 1 µs, the rest the registers around it in Python); the servo
+task 4.4-5.7 before, 2.6-2.8 after; the trajectory task 1.9-2.5 on both
+(pyrt's evaluator 7.5-11 µs a knot).  A tick then costs about 16 µs of CPU:
+those three about 8.5 µs, the moves' planning 3.4-3.8 µs (pyrt's planner
+samples each move three times: its first two plans are refused by its own
+acceleration check at the segment's ends and made slower), the loop, the
+station's handlers (moves, scope, mailbox) and the console about 4 µs.  100x
+(10 µs a tick) is not within the example's reach: what is pyrt's (loop,
+handlers, evaluator, planner, the world's Python around its C step) is about
+10 µs of a tick.
 """
 
 from __future__ import annotations
