@@ -18,13 +18,13 @@ register       dir     width                       meaning
 ``off`` is what the board's watchdog (``pyrt board-sim``) and a lost link leave
 an output at: no drive, amplifiers disabled.
 
-The world behind the board is :class:`ArmPhysics`: each ``step(now_ns)`` reads
-the outputs, advances the simulated arm (:class:`pyrt_arm.plant.Plant`) by
-``dt = now - last`` and sets the inputs (a register only when it changes).  The
-world integrates in internal steps of one servo period (:data:`WORLD_STEP_S`,
-1 ms) rather than the plant's default 0.2 ms: under the servo the true joints
-then stay within 0.001 deg of where the fine step puts them (less than one
-encoder count; a test compares the two), at a fifth of the cost.
+The world behind the board is :class:`ArmPhysics`: each ``step(now_ns)``
+advances the simulated arm (:class:`pyrt_arm.plant.Plant`: pyrt's rigid-body
+world of the arm's URDF, its step one call of C) by ``dt = now - last``; the
+arm reads the outputs and sets the inputs (a register only when it changes)
+within that call.  The world integrates in internal steps of one servo period
+(:data:`WORLD_STEP_S`, 1 ms): under the servo the true joints stay within one
+encoder count of where 0.2 ms steps put them (a test compares the two).
 :func:`arm_world` makes the :class:`pyrt.World` of it, for ``sim:`` boards in
 process and for ``pyrt board-sim arm`` alike; :class:`ArmSim` is the
 component ``sim`` that shows its truth and injects its faults.
@@ -42,13 +42,12 @@ from pyrt import (
     CommandError,
     Component,
     Register,
-    RegisterBoard,
     Signal,
     World,
     command,
 )
 
-from pyrt_arm.plant import JOINTS, Plant
+from pyrt_arm.plant import JOINTS, MAX_STEP_S, Plant
 
 __all__ = [
     "ARM_BOARDS",
@@ -81,7 +80,7 @@ SERVO = BoardKind("arm-servo", (
 ARM_BOARDS: dict[str, BoardKind] = {"servo": SERVO}
 
 #: The world's longest internal integration step (s): one servo period (see the module text).
-WORLD_STEP_S = 1.0e-3
+WORLD_STEP_S = MAX_STEP_S
 
 #: Where the simulated arm starts (deg): the elbow bent a right angle.
 DEFAULT_START_DEG = (0.0, 90.0)
@@ -94,46 +93,21 @@ def drive_counts(drive: float) -> int:
 
 
 class ArmPhysics:
-    """The simulated arm behind a servo board (a :class:`pyrt.World`'s plant).
+    """The simulated arm behind its servo board (a :class:`pyrt.World`'s plant):
+    ``step(now_ns)`` advances :attr:`plant` by the time since the last step (none
+    on the first); the plant reads the board's outputs and sets its inputs."""
 
-    ``step(now_ns)`` takes the board's outputs as the plant's inputs, advances
-    the plant by the time since the last step (none on the first) and writes
-    the encoders' counters and the amplifiers' status into the inputs.
-    """
-
-    def __init__(self, board: RegisterBoard, plant: Plant) -> None:
-        self.board = board
+    def __init__(self, plant: Plant) -> None:
         self.plant = plant
+        self.board = plant.board
+        self._advance = plant.world.step
         self._last_ns: int | None = None
-        self._count = [board.read("count", j) for j in (0, 1)]
-        self._ok = [board.read("amp_ok", j) for j in (0, 1)]
-        self._publish()
 
     def step(self, now_ns: int) -> None:
         """Advance the arm to ``now_ns`` (dt = now - last)."""
-        board, plant = self.board, self.plant
         last, self._last_ns = self._last_ns, now_ns
-        drive, enable = board.values("drive"), board.values("enable")
-        plant.drive[0] = drive[0] / DRIVE_FULL_SCALE
-        plant.drive[1] = drive[1] / DRIVE_FULL_SCALE
-        plant.amp_enable[0] = enable[0] != 0
-        plant.amp_enable[1] = enable[1] != 0
         if last is not None and now_ns > last:
-            plant.step((now_ns - last) * 1e-9)
-        self._publish()
-
-    def _publish(self) -> None:
-        """The inputs from the plant (a register is written only when it changes)."""
-        board, plant = self.board, self.plant
-        for j in (0, 1):
-            count = plant.count(j)
-            if count != self._count[j]:
-                board.set_input("count", count, j)
-                self._count[j] = count
-            ok = 1 if plant.amp_enable[j] and plant.motor_powered(j) else 0
-            if ok != self._ok[j]:
-                board.set_input("amp_ok", ok, j)
-                self._ok[j] = ok
+            self._advance((now_ns - last) * 1e-9)
 
     def info(self) -> dict[str, object]:
         """The world's truth for ``sim show`` over tcp (board-sim's INFO)."""
@@ -150,10 +124,9 @@ def arm_world(boards: Boards, start_deg: Sequence[float] = DEFAULT_START_DEG,
     """The arm's world: the simulated arm at ``start_deg`` behind ``boards``
     (in process, declared as :data:`ARM_BOARDS`), integrating in internal steps of
     at most ``max_step_s``.  ValueError for a start beyond the end stops."""
-    board = boards["servo"]
-    plant = Plant(q_deg=(float(start_deg[0]), float(start_deg[1])), max_step_s=max_step_s)
-    plant.amp_enable = [False] * len(JOINTS)
-    return World(name, boards, ArmPhysics(board, plant))
+    plant = Plant(boards["servo"], q_deg=(float(start_deg[0]), float(start_deg[1])),
+                  max_step_s=max_step_s)
+    return World(name, boards, ArmPhysics(plant))
 
 
 class ArmSim(Component):

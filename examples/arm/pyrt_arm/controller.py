@@ -8,10 +8,12 @@ Two tasks: ``trajectory`` every :data:`TRAJECTORY_PERIOD` ticks (100 Hz) and
 when queued, in the console's thread, not in a loop tick; within
 :data:`VMAX_DEG_S` and :data:`AMAX_DEG_S2`; a move queued behind the running one
 blends into it by Paul's transition).  The trajectory task hands each knot
-(position, velocity) to pyrt's servo
+(position, velocity, the Coulomb friction as feed-forward) to pyrt's servo
 (:class:`pyrt.native.Servo`, C: cubic interpolation to the servo rate, the
-arm's PD law and gains, :mod:`pyrt_arm.servo`); the servo task writes its
-torques as the drives.  A plug-in motion type (``motion joint_trajectory``)
+arm's PD law and gains, :mod:`pyrt_arm.servo`); the servo task runs it on the
+board's counters and writes the DAC counts that changed (the encoders, the
+law, the joints' bounds and the counts in one C call,
+:class:`pyrt.native.ServoBoard`).  A plug-in motion type (``motion joint_trajectory``)
 drives the same servo through :meth:`ArmController.command_joints`.
 
 The amplifiers are on while a move runs and until the arm has settled at its
@@ -48,6 +50,7 @@ from pyrt.kinematics import Chain
 from pyrt.motion import Evaluator, MotionFault, MotionSpec, RecordError
 from pyrt.motion import Limits as MotionLimits
 from pyrt.motion.evaluator import Planned, QueueSnapshot, StalePlan
+from pyrt.native import ServoBoard
 
 from pyrt_arm.boards import DRIVE_FULL_SCALE
 from pyrt_arm.kinematics import GEOMETRY, KinematicsError, elbow_of, fk, ik, urdf
@@ -161,13 +164,24 @@ class Joint(Component):
         self.index = index
         self.board = arm.board
         self.config = config
-        #: Where the measured angle may go before that is a fault (deg).
         self.limits_deg = config.limits_deg
         #: True while the amplifier is enabled and the servo closes the loop.
         self.engaged = False
         #: The drive last written (DAC counts).
         self.drive = 0
         self.no_power = 0
+
+    @property
+    def limits_deg(self) -> tuple[float, float]:
+        """Where the measured angle may go before that is a fault (deg): the servo's
+        bounds of this joint (checked in its C tick)."""
+        io, j = self.arm.io, self.index
+        return math.degrees(float(io.lo[j])), math.degrees(float(io.hi[j]))
+
+    @limits_deg.setter
+    def limits_deg(self, limits: tuple[float, float]) -> None:
+        io, j = self.arm.io, self.index
+        io.lo[j], io.hi[j] = math.radians(limits[0]), math.radians(limits[1])
 
     def signals(self) -> list[Signal]:
         s, j = self.arm.servo, self.index
@@ -189,8 +203,10 @@ class Joint(Component):
         return float(self.arm.servo.error[self.index]) * _DEG if self.engaged else 0.0
 
     def measure(self, count: int) -> float:
-        """The joint angle (deg) the counter reading ``count`` gives."""
-        return counts_to_deg(count, self.config.zero_count, self.config.counts_per_deg)
+        """The joint angle (deg) the counter reading ``count`` gives: the middle of the
+        count, as the servo measures it."""
+        cpd = self.config.counts_per_deg
+        return counts_to_deg(count, self.config.zero_count, cpd) + 0.5 / cpd
 
     def position(self) -> float:
         """The joint angle the encoder gives (deg)."""
@@ -198,6 +214,7 @@ class Joint(Component):
 
     def engage(self) -> None:
         self.drive = self.no_power = 0
+        self.arm.io.dac[self.index] = 0  # the servo's last count: what the board holds
         self.board.write("drive", 0, self.index)
         self.board.write("enable", 1, self.index)
         self.engaged = True
@@ -212,6 +229,7 @@ class Joint(Component):
             finally:
                 self.engaged = False
                 self.drive = self.no_power = 0
+                self.arm.io.dac[self.index] = 0
 
 
 class ArmController(Component):
@@ -229,15 +247,22 @@ class ArmController(Component):
         self.board = board
         #: pyrt's servo with the arm's gains (``configs``: the shoulder's, the elbow's).
         self.servo = arm_servo(configs, period_ns * 1e-9)
-        self.joints = (Joint(self, 0, configs[0]), Joint(self, 1, configs[1]))
-        # per joint: where its count and amp_ok are in the board's snapshot of its inputs,
-        # its counter's zero and radians per count, its Coulomb friction and full drive
+        # the board's side of the servo (one C call a tick: the encoders unwrapped, the
+        # law, the joints' bounds, the DAC counts); where count and amp_ok are in the
+        # board's snapshot of its inputs; each joint's Coulomb friction (N m)
         layout = [(r.name, i) for r in board.kind.inputs() for i in range(r.count)]
-        self._io = [(layout.index(("count", j)), layout.index(("amp_ok", j)), c.zero_count,
-                     math.radians(1.0 / c.counts_per_deg), c.kc_nm,
-                     DRIVE_FULL_SCALE / c.torque_per_drive_nm)
-                    for j, c in enumerate(configs)]
-        self._tau, self._qd_ref = self.servo.tau, self.servo.qd_ref  # views, read each tick
+        at = [layout.index(("count", j)) for j in range(len(configs))]
+        self._counts_at = slice(at[0], at[-1] + 1)
+        assert at == list(range(at[0], at[-1] + 1)), "the counters lie side by side"
+        self._ok_at = [layout.index(("amp_ok", j)) for j in range(len(configs))]
+        self._no_power = False  # a joint's amplifier has reported no power lately
+        counts = board.snapshot()[self._counts_at]
+        self.io = io = ServoBoard(self.servo, [c.counts_per_deg * _DEG for c in configs], counts,
+                                  [DRIVE_FULL_SCALE / c.torque_per_drive_nm for c in configs],
+                                  DRIVE_FULL_SCALE)
+        io.total -= np.array([c.zero_count for c in configs], np.int64)  # 0 at the zero count
+        self.joints = (Joint(self, 0, configs[0]), Joint(self, 1, configs[1]))  # their bounds
+        self._kc = np.array([c.kc_nm for c in configs])
         self.limits = MotionLimits(tuple(math.radians(v) for v in VMAX_DEG_S),
                                    tuple(math.radians(a) for a in AMAX_DEG_S2))
         self.traj_period_s = TRAJECTORY_PERIOD * period_ns * 1e-9
@@ -251,6 +276,7 @@ class ArmController(Component):
         self._reason = "at target"
         self._ended = True  # the knots have stopped coming: the servo holds the last one
         self._joined = False  # the servo's segments follow each other in time
+        self._seg_end = 0.0  # where the servo's segment ends (s, the loop's clock)
         self._quiet_since: int | None = None
 
     # -- the component ----------------------------------------------------------------
@@ -349,10 +375,12 @@ class ArmController(Component):
     def _engage(self, evaluator: Evaluator | None = None) -> None:
         """Close the loop where the arm is (the trajectory starts there: ``evaluator``,
         one made there, or a new one), amplifiers on."""
-        q = np.array(self.angles()) / _DEG
+        self.io.encoders(self.board.snapshot()[self._counts_at])
+        q = self.servo.q.copy()  # where the servo measures the arm (mid-count)
         self.servo.reset(q, now=self._now_ns * 1e-9)
         self._joined = False
         self.servo.segment(self.traj_period_s, q, np.zeros(2), q, np.zeros(2))
+        self._seg_end = self.servo.end
         self.evaluator = evaluator if evaluator is not None else self._evaluator(q)
         for jt in self.joints:
             jt.engage()
@@ -361,15 +389,19 @@ class ArmController(Component):
 
     def _load(self, q: Any, qd: Any, duration: float) -> None:
         """The servo's next segment: the cubic from the last knot to this one (position
-        and velocity) in ``duration`` s."""
+        and velocity) in ``duration`` s; the Coulomb friction ``kc sign(qd)`` at each
+        knot as its feed-forward, interpolated between them."""
         k = self.servo.knots
         k[0:2] = k[3:5]
         k[3], k[4] = q, qd
+        k[6] = k[7]  # the Coulomb friction fed forward, in the motion's direction at B
+        k[7] = np.sign(qd) * self._kc
         # on the loop's clock: where the last segment ended, or now for a motion's first
         servo = self.servo
         start = servo.end if self._joined else max(servo.now + servo.period,
                                                     self._now_ns * 1e-9)
         servo.load(duration, quintic=False, start=start)
+        self._seg_end = servo.end
         self._ended = False
         self._joined = True
 
@@ -411,48 +443,51 @@ class ArmController(Component):
                 self._end_of_knots(now_ns)
 
     def servo_tick(self, now_ns: int) -> None:
-        """1 kHz: the encoders into the servo, its torques (and the Coulomb friction) as
-        the drives; the checks; settling."""
+        """1 kHz: the encoders, pyrt's servo law and the joints' bounds in one C call, the
+        drives that changed written; the checks; settling."""
         self._now_ns = now_ns
         if self.state == "idle":
             return
         inputs = self.board.snapshot()  # one read of every input: this tick's
-        servo, q = self.servo, self.servo.q
-        for j, (at, _ok, zero, rad, _kc, _full) in enumerate(self._io):
-            d = inputs[at] - zero  # a 32-bit counter: the difference taken modulo 2^32
-            q[j] = (d if -_TWO31 <= d < _TWO31 else (d + _TWO31) % _TWO32 - _TWO31) * rad
+        counts = inputs[self._counts_at]
+        servo, io = self.servo, self.io
         now = now_ns * 1e-9
         ev = self.evaluator
-        if (self._joined and ev is not None and now > servo.end + 0.5 * servo.period
+        if (self._joined and ev is not None and now > self._seg_end + 0.5 * servo.period
                 and not self.station.executor.busy):
+            io.encoders(counts)
             self._next_knot(now_ns, ev)  # the loop stalled past the segment: its knot, now
             if self.state == "idle":
                 return
-        trip = servo.tick(now=now)
+        trip = servo.tick_board(now, io, counts)
         if trip is not None:
-            m = float(q[trip.joint]) * _DEG
+            m = float(servo.q[trip.joint]) * _DEG
             self.fail(following_error_fault(trip.name, m + trip.error * _DEG, m,
                                             trip.limit * _DEG) or str(trip),
                       self.joints[trip.joint].name)
             return
-        for jt, tau, qd, qj, (_at, ok, _z, _r, kc, full) in zip(
-                self.joints, self._tau.tolist(), self._qd_ref.tolist(), q.tolist(), self._io,
-                strict=True):
-            low, high = jt.limits_deg
-            if not low <= qj * _DEG <= high:
-                self.fail(str(joint_limit_fault(jt.config.name, qj * _DEG, jt.limits_deg)),
-                          jt.name)
-                return
-            drive = round((tau + (kc if qd > 0.0 else (-kc if qd < 0.0 else 0.0))) * full)
-            drive = DRIVE_FULL_SCALE if drive > DRIVE_FULL_SCALE else max(drive,
-                                                                           -DRIVE_FULL_SCALE)
-            if drive != jt.drive:
-                self.board.write("drive", drive, jt.index)
-                jt.drive = drive
-            jt.no_power = 0 if inputs[ok] else jt.no_power + 1
-            if jt.no_power >= AMP_GRACE_TICKS:
-                self.fail(f"{JOINTS[jt.index]} amplifier reports no power", jt.name)
-                return
+        c = io.c
+        changed = c.changed
+        if changed:  # the drives whose counts changed (those before a joint beyond its bounds)
+            write, joints = self.board.write, self.joints
+            for j, v in enumerate(io.dac.tolist()):
+                if changed >> j & 1:
+                    write("drive", v, j)
+                    joints[j].drive = v
+        if c.beyond >= 0:
+            jt = self.joints[c.beyond]
+            self.fail(str(joint_limit_fault(jt.config.name, float(servo.q[jt.index]) * _DEG,
+                                            jt.limits_deg)), jt.name)
+            return
+        ok0, ok1 = self._ok_at
+        if not (inputs[ok0] and inputs[ok1]) or self._no_power:
+            self._no_power = False
+            for jt, at in zip(self.joints, self._ok_at, strict=True):
+                jt.no_power = 0 if inputs[at] else jt.no_power + 1
+                self._no_power = self._no_power or jt.no_power > 0
+                if jt.no_power >= AMP_GRACE_TICKS:
+                    self.fail(f"{JOINTS[jt.index]} amplifier reports no power", jt.name)
+                    return
         if self._ended and servo.late > 0:
             self._settle(now_ns)
 
@@ -487,7 +522,8 @@ class ArmController(Component):
         q, qd = s.q_ref.copy(), s.qd_ref.copy()
         t = float(np.max(np.abs(qd) / np.radians(AMAX_DEG_S2)))
         if t > 1e-6:
-            s.segment(t, q, qd, q + 0.5 * qd * t, np.zeros(2))
+            s.segment(t, q, qd, q + 0.5 * qd * t, np.zeros(2), ffa=np.sign(qd) * self._kc)
+            self._seg_end = s.end
         self.evaluator = self._evaluator(q + 0.5 * qd * t)
         self._end_of_knots(self._now_ns + round(t * 1e9))
 

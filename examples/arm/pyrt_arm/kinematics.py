@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from importlib.resources import files
 from typing import Literal
 
 import numpy as np
@@ -217,32 +218,9 @@ def jacobian(q0_deg: float, q1_deg: float,
                      [l1 * c0 + l2 * c01, l2 * c01]], dtype=np.float64) * per_deg
 
 
-def urdf(geometry: Geometry = GEOMETRY) -> str:
-    """The arm as a URDF (for viewers: Foxglove's 3D panel): joints ``shoulder``
-    and ``elbow`` about z, links of ``l1_mm`` and ``l2_mm`` along x, in m."""
-    l1, l2 = geometry.l1_mm / 1000, geometry.l2_mm / 1000
-    (a0, b0), (a1, b1) = (tuple(math.radians(v) for v in geometry.q0_limits_deg),
-                          tuple(math.radians(v) for v in geometry.q1_limits_deg))
-
-    def link(name: str, length: float, radius: float, rgba: str) -> str:
-        return (f'  <link name="{name}"><visual><origin xyz="{length / 2:g} 0 0" '
-                f'rpy="0 1.5707963 0"/><geometry><cylinder radius="{radius:g}" '
-                f'length="{length:g}"/></geometry><material name="{name}_color">'
-                f'<color rgba="{rgba}"/></material></visual></link>\n')
-
-    def joint(name: str, parent: str, child: str, x: float, lo: float, hi: float) -> str:
-        return (f'  <joint name="{name}" type="revolute"><parent link="{parent}"/>'
-                f'<child link="{child}"/><origin xyz="{x:g} 0 0"/><axis xyz="0 0 1"/>'
-                f'<limit lower="{lo:.6f}" upper="{hi:.6f}" effort="10" velocity="3"/>'
-                "</joint>\n")
-
-    return ('<?xml version="1.0"?>\n<robot name="pyrt_arm">\n'
-            '  <link name="base_link"><visual><geometry><cylinder radius="0.04" '
-            'length="0.05"/></geometry></visual></link>\n'
-            + link("upper_arm", l1, 0.02, "0.2 0.4 0.8 1")
-            + link("forearm", l2, 0.015, "0.9 0.5 0.1 1")
-            + '  <link name="tip"/>\n'
-            + joint("shoulder", "base_link", "upper_arm", 0.0, a0, b0)
-            + joint("elbow", "upper_arm", "forearm", l1, a1, b1)
-            + '  <joint name="tip_fixed" type="fixed"><parent link="forearm"/>'
-            f'<child link="tip"/><origin xyz="{l2:g} 0 0"/></joint>\n</robot>\n')
+def urdf() -> str:
+    """The arm as a URDF: the file ``arm.urdf`` of this package, joints ``shoulder``
+    and ``elbow`` about z, links of :data:`GEOMETRY`'s lengths along x (in m) with
+    their inertials, limits and friction; for viewers (Foxglove's 3D panel), the
+    controller's chain and the simulated arm."""
+    return files("pyrt_arm").joinpath("arm.urdf").read_text()

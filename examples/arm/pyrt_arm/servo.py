@@ -7,13 +7,17 @@ the tuning, one :class:`JointServoConfig` per joint in the units an engineer
 of this arm thinks in (N m per degree), and :func:`arm_servo` that turns it
 into the generic servo's gains (per radian).  The law, per joint::
 
-    tau   = kp e + kd (qd_ref - v) + kv qd_ref + ka qdd_ref      (the generic servo)
-    drive = clamp((tau + kc sign(qd_ref)) / torque_per_drive, -1, 1)
+    tau   = kp e + kd (qd_ref - v) + kv qd_ref + ka qdd_ref + ff   (the generic servo)
+    ff    = kc sign(qd), given at each knot and interpolated between knots
+    drive = clamp(tau / torque_per_drive, -1, 1)
 
-The Coulomb term is added by the station to the servo's torque, tick by tick on
-the reference's velocity (:func:`coulomb`): the generic servo's feed-forward is
-interpolated between the knots, and at the end of a move it would fade before
-the arm has stopped, leaving it short of its target on its friction.
+The Coulomb term rides on the generic servo's feed-forward: the controller gives
+``kc sign(qd)`` at each 100 Hz knot and the servo interpolates it between them,
+so it eases in over a move's first knot interval and out over its last, where
+the PD loop takes the friction (at rest it holds the arm within ``kc / kp``:
+0.014 deg for the shoulder, 0.033 deg for the elbow, inside the 0.05 deg of
+"at target").  :func:`coulomb` is the same term taken on the reference's
+velocity tick by tick.
 
 ``v`` is the measured angle's backward difference, low-pass filtered at
 :attr:`JointServoConfig.velocity_filter_hz`.  ``kv``, ``ka`` and ``kc`` feed
@@ -31,8 +35,8 @@ a jammed joint trips the check within about 15 ms of a move at that speed.
 
 Two checks, each with a reason that names the joint and the numbers: the
 following error (the generic servo's trip, :func:`following_error_fault`)
-and the joint limits (:func:`joint_limit_fault`, checked by the station on
-the measured angle).
+and the joint limits (:func:`joint_limit_fault`, checked by the servo's C tick
+on the measured angle: the bounds of :class:`pyrt.native.ServoBoard`).
 """
 
 from __future__ import annotations
@@ -45,7 +49,7 @@ import numpy as np
 from pyrt.native import Servo
 
 from pyrt_arm.kinematics import GEOMETRY
-from pyrt_arm.plant import ELBOW_DRIVE, SHOULDER_DRIVE, wrap_int32
+from pyrt_arm.plant import CHAIN, MOTORS, wrap_int32
 
 __all__ = [
     "ELBOW",
@@ -155,16 +159,21 @@ def _gains(name: str, inertia_kgm2: float, viscous: float, coulomb: float, hz: f
     )
 
 
+def _joint(j: int, name: str, inertia_kgm2: float) -> JointServoConfig:
+    """Joint ``j``'s config at 12 Hz, damping 0.9: its friction from the arm's URDF,
+    its drive from :data:`pyrt_arm.plant.MOTORS`."""
+    joint, motor = CHAIN.joints[j], MOTORS[j]
+    return _gains(name, inertia_kgm2, joint.damping, joint.friction, 12.0, 0.9,
+                  motor.torque_limit, motor.counts_per_joint_rev / 360.0,
+                  GEOMETRY.limits_deg[j])
+
+
 #: The shoulder's servo: 12 Hz, damping 0.9 on 0.297 kg m^2 (kp 29.5 N m/deg,
 #: kd 0.70 N m/(deg/s)).
-SHOULDER = _gains("q0", 0.297, SHOULDER_DRIVE.viscous_nm_s_per_rad, SHOULDER_DRIVE.coulomb_nm,
-                  12.0, 0.9, SHOULDER_DRIVE.torque_per_drive_nm,
-                  SHOULDER_DRIVE.counts_per_deg, GEOMETRY.q0_limits_deg)
+SHOULDER = _joint(0, "q0", 0.297)
 #: The elbow's servo: 12 Hz, damping 0.9 on 0.077 kg m^2 (kp 7.6 N m/deg,
 #: kd 0.18 N m/(deg/s)).
-ELBOW = _gains("q1", 0.077, ELBOW_DRIVE.viscous_nm_s_per_rad, ELBOW_DRIVE.coulomb_nm,
-               12.0, 0.9, ELBOW_DRIVE.torque_per_drive_nm,
-               ELBOW_DRIVE.counts_per_deg, GEOMETRY.q1_limits_deg)
+ELBOW = _joint(1, "q1", 0.077)
 
 
 def coulomb(config: JointServoConfig, qd_ref: float) -> float:

@@ -10,8 +10,10 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from pyrt import RegisterBoard
 from pyrt.native import NativeInputError
 
+from pyrt_arm.boards import SERVO, drive_counts
 from pyrt_arm.kinematics import fk
 from pyrt_arm.plant import Plant
 from pyrt_arm.profile import PEAK_ACCELERATION, PEAK_VELOCITY, Quintic, quintic_duration
@@ -31,6 +33,20 @@ from pyrt_arm.servo import (
 
 _RAD = math.pi / 180.0
 _CONFIGS = (SHOULDER, ELBOW)
+
+
+def plant_at(q_deg: tuple[float, float]) -> Plant:
+    """The simulated arm at ``q_deg`` behind a servo board of its own, amplifiers on."""
+    plant = Plant(RegisterBoard(SERVO), q_deg=q_deg)
+    for j in (0, 1):
+        plant.board.write("enable", 1, j)
+    return plant
+
+
+def drive(plant: Plant, drives: list[float]) -> None:
+    """The drives (-1 .. 1 of full scale) as the board's DAC counts."""
+    for j, d in enumerate(drives):
+        plant.board.write("drive", drive_counts(d), j)
 
 
 class Rig:
@@ -105,7 +121,7 @@ def closed_loop(start: tuple[float, float], end: tuple[float, float], settle_s: 
     """A quintic move of both joints from start to end at 90 deg/s and 360 deg/s^2 (the
     slower joint's duration for both), the servo closed around the plant on steps taken in
     turn from periods_s (1 ms by default); the run stops at the first fault."""
-    plant = Plant(q_deg=start)
+    plant = plant_at(start)
     servo = Rig()
     servo.reset(plant.counts())
     duration = max(quintic_duration(e - s, V_MAX, A_MAX) for s, e in zip(start, end, strict=True))
@@ -123,14 +139,14 @@ def closed_loop(start: tuple[float, float], end: tuple[float, float], settle_s: 
         sp = [m.at(t) for m in moves]
         drives = servo.update([p[0] for p in sp], [p[1] for p in sp], plant.counts(),
                               [p[2] for p in sp])
-        plant.drive[:] = drives
+        drive(plant, drives)
         for j in (0, 1):
             run.max_error_deg[j] = max(run.max_error_deg[j], abs(servo.error_deg(j)))
             run.max_speed_deg_s[j] = max(run.max_speed_deg_s[j], abs(plant.qd_deg_s[j]))
         reason = servo.fault()
         if reason is not None:
             run.fault, run.fault_time_s = reason, t
-            plant.drive[:] = [0.0, 0.0]
+            drive(plant, [0.0, 0.0])
             break
     return run
 
@@ -200,20 +216,20 @@ def test_a_jammed_joint_trips_even_early_in_a_move():
 
 def test_holding_still_there_is_no_fault_and_the_arm_stays():
     """Servoing to the present position for 1 s keeps the arm within 0.02 deg and trips nothing."""
-    plant = Plant(q_deg=(45.0, -30.0))
+    plant = plant_at((45.0, -30.0))
     servo = Rig()
     servo.reset(plant.counts())
     hold = servo.position_deg
     for _ in range(1000):
         plant.step(SERVO_PERIOD_S)
-        plant.drive[:] = servo.update(hold, (0.0, 0.0), plant.counts())
+        drive(plant, servo.update(hold, (0.0, 0.0), plant.counts()))
         assert servo.fault() is None
     assert plant.q_deg == pytest.approx((45.0, -30.0), abs=0.02)
 
 
 def test_measured_beyond_a_joint_limit_is_a_fault_naming_the_joint():
     """A measured elbow at 151 deg (setpoint there too) gives the joint-limit reason for q1."""
-    plant = Plant(q_deg=(0.0, 151.0))
+    plant = plant_at((0.0, 151.0))
     servo = Rig()
     servo.reset(plant.counts())
     servo.update((0.0, 151.0), (0.0, 0.0), plant.counts())

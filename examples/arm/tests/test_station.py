@@ -171,7 +171,9 @@ def test_moves_given_one_after_the_other_stop_between(arm):
     _say(shell, out, "arm to 60 90")
     assert _say(shell, out, "wait").startswith("at target")
     assert "moving to" in _say(shell, out, "arm to 60 20")
-    assert station.plant.qd_deg_s == (0.0, 0.0)
+    # at rest on its friction (smoothed below 0.005 rad/s: the last of the speed it
+    # settled with, under 2 deg/s, decays)
+    assert max(abs(v) for v in station.plant.qd_deg_s) < 0.2
     assert _say(shell, out, "wait").startswith("at target")
 
 
