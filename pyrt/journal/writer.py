@@ -12,13 +12,13 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import Future
 from typing import Any, BinaryIO
 
+from pyrt.journal.encoder import NativeBlockEncoder
 from pyrt.journal.format import (
     END,
     KIND_END,
     KIND_GAP,
     KIND_HEADER,
     KIND_NAMES,
-    BlockEncoder,
     Gap,
     Header,
     JournalError,
@@ -47,6 +47,11 @@ _GAP = object()
 _NAMES = object()
 _DUMP = object()
 _FLUSH = object()
+#: The heads of the queue's entries that are not ticks.
+_CONTROL = (_GAP, _NAMES, _DUMP, _FLUSH)
+#: Ticks the writer encodes in one C call at most (the interpreter lock is held
+#: while their integers are gathered: a bound on how long).
+BATCH_TICKS = 64
 
 
 class Journal:
@@ -110,7 +115,7 @@ class Journal:
                                    f"got {type(target).__name__}")
         self._n_inputs = len(header.inputs)
         self._writers = list(header.writers)
-        self._encoder = BlockEncoder(header, compress)
+        self._encoder = NativeBlockEncoder(header, compress)
         self._queue: deque[tuple[Any, ...]] = deque()
         self._capacity = queue_ticks
         self._put = 0      # written by the loop thread only
@@ -406,10 +411,31 @@ class Journal:
         sleep = time.sleep
         mono = time.monotonic_ns
         yield_gil = not self.lossless
+        batch: list[tuple[Any, ...]] = []
         while True:
             stopping = self._stop
-            n = 0
             while q:
+                # a run of ticks, at most to the block's end, encoded in one C call
+                # (the interpreter lock released); what is not a tick ends the run
+                room = min(block - enc.count, BATCH_TICKS)
+                while q and len(batch) < room and q[0][0] not in _CONTROL:
+                    batch.append(q.popleft())
+                if batch:
+                    if enc.count == 0:
+                        self._block_started = mono()
+                    for exc in enc.add_many(batch):
+                        self._refused(exc)
+                    self._taken += len(batch)
+                    batch.clear()
+                    if enc.count >= block:
+                        self._flush_block()
+                    if self._waiting and self._put - self._taken <= self._capacity // 2:
+                        self._room.set()
+                    if yield_gil:
+                        # a real-time loop thread waking now gets the interpreter at
+                        # once (on virtual time this would only slow both threads)
+                        sleep(0)
+                    continue
                 item = q.popleft()
                 head = item[0]
                 if head is _GAP:
@@ -428,28 +454,11 @@ class Journal:
                     self._flush_block()
                     item[1].set()
                     continue
-                elif head is _DUMP:
+                else:  # _DUMP
                     self._flush_block()
                     self._dump(item[1], item[2])
                     continue  # not counted: dumps may come from any thread
-                else:
-                    if enc.count == 0:
-                        self._block_started = mono()
-                    try:
-                        enc.add(*item)
-                    except JournalError as exc:
-                        self._refused(exc)
-                    if enc.count >= block:
-                        self._flush_block()
                 self._taken += 1
-                n += 1
-                if n & 7 == 0:
-                    if self._waiting and self._put - self._taken <= self._capacity // 2:
-                        self._room.set()
-                    if yield_gil:
-                        # a real-time loop thread waking now gets the interpreter at
-                        # once (on virtual time this would only slow both threads)
-                        sleep(0)
             if self._waiting:
                 self._room.set()
             if enc.count and (stopping or mono() - self._block_started > self.max_delay_ns):
