@@ -104,13 +104,12 @@ static int record_ok(const pyrt_journal_state *st, int key, const int64_t *c,
 }
 
 int pyrt_journal_encode(pyrt_journal_state *st, int64_t *prev, int64_t *outs,
-                        const int64_t *clock, const int64_t *inputs,
-                        const int32_t *n_writes, const int64_t *writes, int32_t extra,
+                        const int64_t *rows, const int32_t *n_writes, const int64_t *writes, int32_t extra,
                         int32_t n, uint8_t *body, int64_t capacity, int64_t *pos,
                         int32_t *done)
 {
     int32_t k, i;
-    int64_t at;
+    int64_t at, stride;
     const int64_t *w = writes;
     if (done != NULL)
         *done = 0;
@@ -118,14 +117,14 @@ int pyrt_journal_encode(pyrt_journal_state *st, int64_t *prev, int64_t *outs,
         || *pos > capacity || (extra & ~(PYRT_JF_COMMANDS | PYRT_JF_EVENTS)) != 0
         || st->n_inputs < 0 || st->n_outputs < 0 || st->period_ns <= 0)
         return PYRT_EINVAL;
-    if (n > 0 && (clock == NULL || n_writes == NULL
-                  || (st->n_inputs > 0 && (inputs == NULL || prev == NULL))
+    if (n > 0 && (rows == NULL || n_writes == NULL || (st->n_inputs > 0 && prev == NULL)
                   || (st->n_outputs > 0 && outs == NULL)))
         return PYRT_EINVAL;
     at = *pos;
+    stride = PYRT_JOURNAL_CLOCK + (int64_t)st->n_inputs;
     for (k = 0; k < n; k++) {
-        const int64_t *c = clock + (int64_t)k * PYRT_JOURNAL_CLOCK;
-        const int64_t *in = inputs + (int64_t)k * st->n_inputs;
+        const int64_t *c = rows + (int64_t)k * stride;
+        const int64_t *in = c + PYRT_JOURNAL_CLOCK;
         int32_t nw = n_writes[k];
         int key = st->count == 0 || !st->have_prev;
         int64_t shift = 0, deadline, step;

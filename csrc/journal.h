@@ -70,8 +70,8 @@ int64_t pyrt_journal_record_bound(const pyrt_journal_state *st, int32_t n_writes
  *
  *   prev      n_inputs: the previous record's inputs (state; updated)
  *   outs      n_outputs: every output as it stands (state; updated)
- *   clock     n x PYRT_JOURNAL_CLOCK: tick, time_ns, lateness_ns, missed
- *   inputs    n x n_inputs, declared order
+ *   rows      n x (PYRT_JOURNAL_CLOCK + n_inputs): tick, time_ns, lateness_ns,
+ *             missed, then every input in declared order
  *   n_writes  n: output writes of each tick
  *   writes    sum(n_writes) x PYRT_JOURNAL_WRITE, in the order written
  *   extra     flags added to the last record (PYRT_JF_COMMANDS, PYRT_JF_EVENTS:
@@ -83,8 +83,7 @@ int64_t pyrt_journal_record_bound(const pyrt_journal_state *st, int32_t n_writes
  * for bad arguments (NULL, n < 0, extra not made of those two flags).
  */
 int pyrt_journal_encode(pyrt_journal_state *st, int64_t *prev, int64_t *outs,
-                        const int64_t *clock, const int64_t *inputs,
-                        const int32_t *n_writes, const int64_t *writes, int32_t extra,
+                        const int64_t *rows, const int32_t *n_writes, const int64_t *writes, int32_t extra,
                         int32_t n, uint8_t *body, int64_t capacity, int64_t *pos,
                         int32_t *done);
 

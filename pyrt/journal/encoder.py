@@ -4,9 +4,9 @@
 writes (the reference: the tests hold one to the other), but its state
 lives in C buffers (:class:`pyrt.native.TickEncoder`) and the records of
 a run of ticks are delta-encoded in one C call, the interpreter lock
-released: what the journal's writer thread holds the lock for is turning
-the ticks' Python integers into rows of 64-bit integers (at C speed) and
-the rare commands and events.
+released: what the journal's writer thread holds the lock for is packing
+each tick's Python integers into a row of 64-bit integers (``struct``) and
+the rare output writes, commands and events.
 
 Anything the C encoder does not take (a value beyond +-2**62, an input
 that is not an integer, a record it refuses) moves the encoder, for the
@@ -16,8 +16,8 @@ the bytes stay the same, a refusal is the reference's.
 
 from __future__ import annotations
 
+import struct
 import zlib
-from array import array
 from collections.abc import Sequence
 from itertools import chain, compress, count
 from operator import itemgetter, truth
@@ -38,17 +38,13 @@ from pyrt.journal.format import (
     put_svarint,
     put_uvarint,
 )
-from pyrt.native import RecordRefused, TickEncoder
+from pyrt.native import JOURNAL_CLOCK, RecordRefused, TickEncoder
 
 __all__ = ["NativeBlockEncoder"]
 
-_CLOCK = itemgetter(0, 1, 2, 3)
-_INPUTS = itemgetter(4)
 _OUTPUTS = itemgetter(5)
 _COMMANDS = itemgetter(6)
 _EVENTS = itemgetter(7)
-_EMPTY = array("q")
-_EMPTY_I = array("i")
 
 #: One tick as the journal hands it over: (tick, time_ns, lateness_ns, missed,
 #: inputs, outputs, commands, events).
@@ -103,6 +99,9 @@ class NativeBlockEncoder:
                                   header.output_values)
         except (ValueError, NativeError):
             self._py = BlockEncoder(header, compress)
+        #: One tick's row for C: tick, time, lateness, missed, every input.
+        self._row = struct.Struct(f"={JOURNAL_CLOCK + self.n_inputs}q")
+        self._rows = bytearray()
 
     @property
     def native(self) -> bool:
@@ -153,34 +152,34 @@ class NativeBlockEncoder:
         if self._py is not None:
             self._add_python(items, 0, refused)
             return refused
-        c = self._c
-        assert c is not None
         n = len(items)
+        size = self._row.size
+        buf = self._rows
+        if len(buf) < n * size:
+            buf = self._rows = bytearray(n * size)
+        pack = self._row.pack_into
+        off = 0
         try:
-            clock = array("q", chain.from_iterable(map(_CLOCK, items)))
-            inputs = array("q", chain.from_iterable(map(_INPUTS, items)))
-            per = array("i", map(len, map(_OUTPUTS, items)))
-            writes = _EMPTY
-            if any(per):
+            for it in items:
+                pack(buf, off, *it[:4], *it[4])
+                off += size
+            per: list[int] | None = None
+            writes: list[int] | None = None
+            if any(map(truth, map(_OUTPUTS, items))):
+                per = [len(o) for o in map(_OUTPUTS, items)]
                 rows = list(chain.from_iterable(map(_OUTPUTS, items)))
-                if not all(len(w) == 3 for w in rows):
+                if not all(len(w) == 3 and all(type(x) is int for x in w) for w in rows):
                     raise TypeError
-                writes = array("q", chain.from_iterable(rows))
-        except (TypeError, ValueError, OverflowError):
+                writes = list(chain.from_iterable(rows))
+        except (struct.error, TypeError):
+            # not 64-bit integers, or not as many as the header says: the reference
             self._to_python()
             self._add_python(items, 0, refused)
             return refused
-        if len(inputs) != n * self.n_inputs:
-            self._to_python()
-            self._add_python(items, 0, refused)
-            return refused
-        if not any(per):
-            per = _EMPTY_I
         # the ticks with commands or events end a C call: their fields follow the record
         marks = sorted(set(compress(count(), map(truth, map(_COMMANDS, items))))
                        | set(compress(count(), map(truth, map(_EVENTS, items)))))
         k = 0
-        w = 0  # write rows before tick k
         for end in (*marks, n - 1):
             if end < k:
                 continue
@@ -193,37 +192,33 @@ class NativeBlockEncoder:
                     flags, extra = _extras(item[0], item[6], item[7])
                 except JournalError as exc:
                     # the tick is refused: those before it go, then those after
-                    if end > k:
-                        if not self._encode(items, k, end, clock, inputs, per, writes, w, 0,
-                                            b"", refused):
-                            return refused
-                        w += sum(per[k:end]) if per else 0
+                    if end > k and not self._encode(items, k, end, buf, per, writes, 0, b"",
+                                                    refused):
+                        return refused
                     refused.append(exc)
-                    w += per[end] if per else 0
                     k = stop
                     continue
-            if not self._encode(items, k, stop, clock, inputs, per, writes, w, flags, extra,
-                                refused):
+            if not self._encode(items, k, stop, buf, per, writes, flags, extra, refused):
                 return refused
-            w += sum(per[k:stop]) if per else 0
             k = stop
         return refused
 
-    def _encode(self, items: Sequence[TickItem], a: int, b: int, clock: array, inputs: array,
-                per: array, writes: array, w: int, flags: int, extra: bytes,
+    def _encode(self, items: Sequence[TickItem], a: int, b: int, rows: bytearray,
+                per: list[int] | None, writes: list[int] | None, flags: int, extra: bytes,
                 refused: list[JournalError]) -> bool:
         """Records ``a..b-1`` in C (the last followed by ``extra``); False if C refused
-        one (from there on, the Python reference has taken them)."""
+        one (from there on, the Python reference has taken every record left)."""
         c = self._c
         assert c is not None
-        n_in = self.n_inputs
-        nw = sum(per[a:b]) if per else 0
+        sub_per = sub_writes = None
+        if per is not None:
+            w0 = 3 * sum(per[:a])
+            sub_per = per[a:b]
+            sub_writes = writes[w0:w0 + 3 * sum(sub_per)] if writes is not None else None
         try:
-            c.encode(clock[4 * a:4 * b], inputs[n_in * a:n_in * b],
-                     per[a:b] if per else _EMPTY_I, writes[3 * w:3 * (w + nw)], flags)
+            c.encode(rows, a, b - a, sub_per, sub_writes, flags)
         except RecordRefused as exc:
             self._to_python()
-            # the refused record and every one after it (the caller's whole run): Python
             self._add_python(items, a + exc.index, refused)
             return False
         if extra:

@@ -49,9 +49,10 @@ _DUMP = object()
 _FLUSH = object()
 #: The heads of the queue's entries that are not ticks.
 _CONTROL = (_GAP, _NAMES, _DUMP, _FLUSH)
-#: Ticks the writer encodes in one C call at most (the interpreter lock is held
-#: while their integers are gathered: a bound on how long).
-BATCH_TICKS = 64
+#: Integers the writer gathers for one C call at most (the interpreter lock is
+#: held while it packs them: a bound on how long, ~0.1 ms); a run is at most a
+#: block's ticks.
+BATCH_VALUES = 16384
 
 
 class Journal:
@@ -412,12 +413,13 @@ class Journal:
         mono = time.monotonic_ns
         yield_gil = not self.lossless
         batch: list[tuple[Any, ...]] = []
+        most = max(1, BATCH_VALUES // (4 + self._n_inputs))
         while True:
             stopping = self._stop
             while q:
                 # a run of ticks, at most to the block's end, encoded in one C call
                 # (the interpreter lock released); what is not a tick ends the run
-                room = min(block - enc.count, BATCH_TICKS)
+                room = min(block - enc.count, most)
                 while q and len(batch) < room and q[0][0] not in _CONTROL:
                     batch.append(q.popleft())
                 if batch:

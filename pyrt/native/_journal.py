@@ -3,14 +3,13 @@
 :class:`TickEncoder` holds the encoder's state (the previous record's
 inputs, every output as it stands, the block being filled) in buffers
 allocated once; :meth:`TickEncoder.encode` appends a run of ticks given as
-flat ``array('q')`` rows, the interpreter lock released while C works.
+rows of native 64-bit integers, the interpreter lock released while C works.
 The bytes are those of :class:`pyrt.journal.format.BlockEncoder` (the
 reference the tests hold it to).
 """
 
 from __future__ import annotations
 
-from array import array
 from collections.abc import Sequence
 
 from pyrt.native._errors import NativeInputError, raise_for_status
@@ -36,19 +35,6 @@ class RecordRefused(NativeInputError):
     def __init__(self, message: str, index: int):
         super().__init__(message)
         self.index = index
-
-
-_EMPTY = array("q")
-_EMPTY_I = array("i")
-
-
-def _rows(a: array, typecode: str, n: int, what: str) -> object:
-    if not isinstance(a, array) or a.typecode != typecode:
-        raise TypeError(f"{what} must be an array({typecode!r}), got {type(a).__name__}")
-    if len(a) != n:
-        raise ValueError(f"{what}: {len(a)} values, expected {n}")
-    return ffi.from_buffer(f"{'int64_t' if typecode == 'q' else 'int32_t'}[]", a) \
-        if n else ffi.NULL
 
 
 class TickEncoder:
@@ -140,45 +126,62 @@ class TickEncoder:
 
     # -- encoding ------------------------------------------------------------------------
 
-    def encode(self, clock: array, inputs: array, n_writes: array = _EMPTY_I,
-               writes: array = _EMPTY, extra: int = 0) -> None:
-        """Append ``len(clock) // 4`` records: ``clock`` (``array('q')``, a row of
-        tick, time_ns, lateness_ns, missed each), ``inputs`` (a row of every input
-        each), ``n_writes`` (``array('i')``: the output writes of each, or empty for
-        none) and ``writes`` (rows of index, value, writer).  ``extra``: the flags of
-        the commands and events the caller appends after the last record.
-        :class:`RecordRefused` names the first record refused (those before it
-        are kept, nothing of it)."""
-        n, rest = divmod(len(clock), JOURNAL_CLOCK)
-        if rest:
-            raise ValueError(f"clock rows: {len(clock)} values is not a whole number of rows")
-        c = _rows(clock, "q", len(clock), "clock rows")
-        ins = _rows(inputs, "q", n * self.n_inputs, "input rows")
-        if len(n_writes):
-            nw = _rows(n_writes, "i", n, "writes per tick")
-            total = sum(n_writes)
-        else:
-            nw = ffi.new("int32_t[]", max(1, n))
-            total = 0
-        w = _rows(writes, "q", total * JOURNAL_WRITE, "write rows")
+    @property
+    def row_bytes(self) -> int:
+        """Bytes of one tick's row: tick, time_ns, lateness_ns, missed, every input
+        (``struct`` format ``"<{4 + n_inputs}q"``)."""
+        return 8 * (JOURNAL_CLOCK + self.n_inputs)
+
+    def encode(self, rows: bytes | bytearray, start: int, n: int,
+               n_writes: Sequence[int] | None = None, writes: Sequence[int] | None = None,
+               extra: int = 0) -> None:
+        """Append a record for each of rows ``start .. start + n - 1`` of ``rows``
+        (native 64-bit integers, :attr:`row_bytes` a tick).  ``n_writes``: the
+        output writes of each of those ticks (None: none), ``writes``: their
+        ``index, value, writer`` flat, in the order written.  ``extra``: the flags
+        of the commands and events the caller appends after the last record.
+        :class:`RecordRefused` names the first record refused (counted from
+        ``start``; those before it are encoded, nothing of it)."""
+        if not isinstance(rows, bytes | bytearray):
+            raise TypeError(f"rows must be bytes or a bytearray, got {type(rows).__name__}")
+        if start < 0 or n < 0 or len(rows) < (start + n) * self.row_bytes:
+            raise ValueError(f"rows {start}..{start + n - 1}: {len(rows)} bytes hold "
+                             f"{len(rows) // self.row_bytes} rows")
         if extra & ~(EXTRA_FLAGS[0] | EXTRA_FLAGS[1]):
             raise ValueError(f"extra flags are commands and events only, got {extra!r}")
-        k = 0
-        while k < n:
-            rc = lib.pyrt_journal_encode(
-                self._st, self._prev, self._outs, c + k * JOURNAL_CLOCK,
-                ins + k * self.n_inputs if self.n_inputs else ffi.NULL, nw + k,
-                w, extra, n - k, self._body, self._cap, self._pos, self._done)
-            done = int(self._done[0])
-            if rc:
-                raise RecordRefused(f"journal: record {k + done} refused (a tick not after "
-                                    "the last, missed < 0, an output index or writer out "
-                                    "of range, a value beyond its bounds)", k + done)
-            if done:
-                w = w + sum(n_writes[k:k + done]) * JOURNAL_WRITE if total else w
-            k += done
-            if k < n:
-                self._grow(n_writes[k] if total else 0)
+        if not n:
+            return
+        if n_writes is not None and any(n_writes):
+            if len(n_writes) != n or min(n_writes) < 0:
+                raise ValueError(f"writes per tick: {list(n_writes)!r} for {n} ticks")
+            total = sum(n_writes)
+            if writes is None or len(writes) != total * JOURNAL_WRITE:
+                raise ValueError(f"{total} writes need {total * JOURNAL_WRITE} values")
+            per = ffi.new("int32_t[]", list(n_writes))
+            w = ffi.new("int64_t[]", list(writes))
+        else:
+            per, w, total = ffi.new("int32_t[]", n), ffi.NULL, 0
+        stride = JOURNAL_CLOCK + self.n_inputs
+        r = ffi.from_buffer("int64_t[]", rows)
+        try:
+            k = 0
+            while k < n:
+                rc = lib.pyrt_journal_encode(self._st, self._prev, self._outs,
+                                             r + (start + k) * stride, per + k, w, extra, n - k,
+                                             self._body, self._cap, self._pos, self._done)
+                done = int(self._done[0])
+                if rc:
+                    raise RecordRefused(f"journal: record {k + done} refused (a tick not "
+                                        "after the last, missed < 0, an output index or "
+                                        "writer out of range, a value beyond its bounds)",
+                                        k + done)
+                if done and total:
+                    w = w + sum(per[k:k + done]) * JOURNAL_WRITE
+                k += done
+                if k < n:
+                    self._grow(per[k])
+        finally:
+            ffi.release(r)  # the buffer is the caller's again at once
 
     def _grow(self, n_writes: int) -> None:
         need = int(lib.pyrt_journal_record_bound(self._st, n_writes))

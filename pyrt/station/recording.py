@@ -274,6 +274,8 @@ class Recorder:
         #: the loop at the top of its next record (:meth:`disk_fault`).
         self._disk_faults: list[tuple[str, str]] = []
         self._journal_said = False
+        #: The journal's hand-over of a tick (bound once: called every tick).
+        self._record = self.journal.record_owned
         #: Called at the end of every tick, after it was handed to the journal:
         #: ``listener(tick_index, now_ns)`` (the black box dumps from here).
         self.tick_listeners: list[Callable[[int, int], None]] = []
@@ -328,7 +330,21 @@ class Recorder:
 
     def _tick(self, now_ns: int) -> None:
         # the loop thread's whole share of a tick's record (a tick of the 1 kHz
-        # gripper is ~10 µs of work): a few reads and one hand-over
+        # gripper is ~10 µs of work): in most ticks nothing was written, asked or
+        # missed, and the tick is the read phase's list of inputs (new every tick,
+        # never changed afterwards: kept as it is, not copied) and the clock
+        loop = self.loop
+        if self._outputs or self._commands or self._events or self._disk_faults \
+                or loop.missed != self._missed or self.journal.error is not None:
+            self._tick_slowly(now_ns)
+        else:
+            self._record(loop.tick_index, now_ns, now_ns - loop.deadline_ns, 0,
+                         self.image.last_inputs or self._inputs)
+        if self.tick_listeners:
+            for listener in self.tick_listeners:
+                listener(loop.tick_index, now_ns)
+
+    def _tick_slowly(self, now_ns: int) -> None:
         journal = self.journal
         if self._disk_faults or (journal.error is not None and not self._journal_said):
             self._trip_disk_faults()  # before the record: the reflex's outputs are in it
@@ -355,16 +371,8 @@ class Recorder:
             self._commands, self._events = [], []
         else:
             commands = events = ()
-        # the read phase's list of inputs: new every tick, never changed afterwards
-        # (kept as it is, not copied)
-        inputs = self.image.last_inputs
-        if inputs is None:
-            inputs = self._inputs
-        journal.record_owned(loop.tick_index, now_ns, now_ns - loop.deadline_ns, missed,
-                             inputs, outputs, commands, events)
-        if self.tick_listeners:
-            for listener in self.tick_listeners:
-                listener(loop.tick_index, now_ns)
+        self._record(loop.tick_index, now_ns, now_ns - loop.deadline_ns, missed,
+                     self.image.last_inputs or self._inputs, outputs, commands, events)
 
     # -- any thread ---------------------------------------------------------------------------
 
