@@ -16,7 +16,10 @@ alike.  Two measures:
   next, pooled over the rounds (p50, mean), for the rows ``sim:``, ``image``
   (``sim:?image=1``), ``image + recorder`` (a journal file) and ``image +
   black box`` (the 10 s ring, no file); the recorder's and the black box's
-  share is against ``image``, the target 5 %.
+  share is against ``image``, the target 5 %; and the journal writer
+  thread's CPU a tick (an upper bound of its turns with the interpreter
+  lock: it includes the C encoding and zlib, which run without it), added
+  to the loop thread's mean in the last column.
 * ``idle`` (``--idle S``, 0 skips it): ``pyrt gripper`` itself, idle at real
   time with its stdin a pipe, the black box on (the default) and ``--black-box
   off``, and a bare Python sleep loop at 1 kHz: the process's CPU share
@@ -70,12 +73,15 @@ def one_row(robot: str, row: str, seconds: float) -> dict:
         bj.drive(rig, 1.0)  # warm up: the first moves run code for the first time
         rig.loop.reset_statistics()
         i0 = len(clock.wall)
+        w0 = bj.writer_cpu_ns()
         bj.drive(rig, seconds)
+        w1 = bj.writer_cpu_ns()
         _dw, dc = clock.ticks_from(i0)
         st = rig.loop.statistics()
         rig.close()
     j = st.tasks.get("journal")
-    return {"cpu": dc, "journal_ns": j.mean_ns if j else 0.0}
+    return {"cpu": dc, "journal_ns": j.mean_ns if j else 0.0,
+            "writer_ns": (w1 - w0) / max(1, len(dc))}
 
 
 def idle_row(row: str, seconds: float) -> dict:
@@ -153,9 +159,11 @@ def main() -> None:
                 for row in ROWS:
                     for tree in trees:
                         r = _child(tree, "--one", robot, row, str(SECONDS[robot]))
-                        p = work.setdefault((tree, robot, row), {"cpu": [], "journal": []})
+                        p = work.setdefault((tree, robot, row),
+                                            {"cpu": [], "journal": [], "writer": []})
                         p["cpu"] += r["cpu"]
                         p["journal"].append(r["journal_ns"])
+                        p["writer"].append(r.get("writer_ns", 0.0))
         if a.idle > 0:
             for row in ("black box on", "black box off", "bare sleep"):
                 for tree in trees:
@@ -172,8 +180,9 @@ def main() -> None:
             print(f"\n{robot}, virtual time, moving ({a.rounds} x {SECONDS[robot]:g} s a row): "
                   "loop-thread CPU a tick, µs")
             print("| tree | row | ticks | p50 | p99 | mean | journal handler mean | "
-                  "added p50 | added mean |")
-            print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
+                  "added p50 | added mean | writer thread CPU a tick | added mean with "
+                  "the writer |")
+            print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
             for tree in trees:
                 base = work[(tree, robot, "image")]["cpu"]
                 b50, bmean = _pct(base, .5), statistics.fmean(base) / 1e3
@@ -182,8 +191,10 @@ def main() -> None:
                     c = p["cpu"]
                     p50, mean = _pct(c, .5), statistics.fmean(c) / 1e3
                     jm = statistics.fmean(p["journal"]) / 1e3
+                    wm = statistics.fmean(p["writer"]) / 1e3
                     added = (f"{(p50 - b50) / b50 * 100:+.1f} % | {(mean - bmean) / bmean * 100:+.1f} %"
-                             if row.startswith("image +") else " | ")
+                             f" | {wm:.2f} | {(mean + wm - bmean) / bmean * 100:+.1f} %"
+                             if row.startswith("image +") else " | | | ")
                     print(f"| {names[tree]} | {row} | {len(c):,} | {p50:.2f} | {_pct(c, .99):.2f} "
                           f"| {mean:.2f} | " + (f"{jm:.2f}" if jm else "") + f" | {added} |")
     if idle:

@@ -19,8 +19,7 @@ from __future__ import annotations
 import struct
 import zlib
 from collections.abc import Sequence
-from itertools import chain, compress, count
-from operator import itemgetter, truth
+from itertools import chain
 from typing import Any
 
 from pyrt.errors import NativeError
@@ -42,13 +41,15 @@ from pyrt.native import JOURNAL_CLOCK, RecordRefused, TickEncoder
 
 __all__ = ["NativeBlockEncoder"]
 
-_OUTPUTS = itemgetter(5)
-_COMMANDS = itemgetter(6)
-_EVENTS = itemgetter(7)
 
 #: One tick as the journal hands it over: (tick, time_ns, lateness_ns, missed,
 #: inputs, outputs, commands, events).
 TickItem = tuple[Any, ...]
+#: What a packed row leaves out: (outputs, commands, events, the whole tick if it
+#: could not be packed, else None).
+Extra = tuple[Any, Any, Any, Any]
+#: A row's first integer: its tick.
+_TICK = struct.Struct("=q")
 
 
 def _extras(tick: int, commands: Sequence[tuple[str, str]],
@@ -135,6 +136,12 @@ class NativeBlockEncoder:
         self._py, self._c = py, None
         return py
 
+    @property
+    def row(self) -> struct.Struct:
+        """The row of one tick that :meth:`add_rows` takes: tick, time_ns,
+        lateness_ns, missed, every input, native 64-bit integers."""
+        return self._row
+
     def add(self, tick: int, time_ns: int, lateness_ns: int, missed: int,
             inputs: Sequence[int], outputs: Sequence[tuple[int, int, int]] = (),
             commands: Sequence[tuple[str, str]] = (),
@@ -148,37 +155,53 @@ class NativeBlockEncoder:
     def add_many(self, items: Sequence[TickItem]) -> list[JournalError]:
         """Append a run of tick records (each as :meth:`add` takes it); the
         refusals, in order (a refused tick is not recorded, the others are)."""
-        refused: list[JournalError] = []
-        if self._py is not None:
-            self._add_python(items, 0, refused)
-            return refused
         n = len(items)
         size = self._row.size
         buf = self._rows
         if len(buf) < n * size:
             buf = self._rows = bytearray(n * size)
         pack = self._row.pack_into
-        off = 0
-        try:
-            for it in items:
-                pack(buf, off, *it[:4], *it[4])
-                off += size
-            per: list[int] | None = None
-            writes: list[int] | None = None
-            if any(map(truth, map(_OUTPUTS, items))):
-                per = [len(o) for o in map(_OUTPUTS, items)]
-                rows = list(chain.from_iterable(map(_OUTPUTS, items)))
-                if not all(len(w) == 3 and all(type(x) is int for x in w) for w in rows):
-                    raise TypeError
-                writes = list(chain.from_iterable(rows))
-        except (struct.error, TypeError):
-            # not 64-bit integers, or not as many as the header says: the reference
+        extras: dict[int, Extra] = {}
+        for i, it in enumerate(items):
+            try:
+                pack(buf, i * size, *it[:4], *it[4])
+            except (struct.error, TypeError):
+                extras[i] = (it[5], it[6], it[7], it)
+                continue
+            if it[5] or it[6] or it[7]:
+                extras[i] = (it[5], it[6], it[7], None)
+        return self.add_rows(buf, 0, n, extras)
+
+    def add_rows(self, rows: bytearray, start: int, n: int,
+                 extras: dict[int, Extra]) -> list[JournalError]:
+        """Append the records of rows ``start .. start + n - 1`` of ``rows`` (each
+        packed as :attr:`row`), ``extras[i]`` holding the outputs, commands and
+        events of the run's tick ``i`` (from 0) if it has any, and the whole tick
+        if it could not be packed; the refusals, in order."""
+        refused: list[JournalError] = []
+        if self._py is None and any(e[3] is not None for e in extras.values()):
             self._to_python()
-            self._add_python(items, 0, refused)
+        if self._py is not None:
+            self._add_python(self._items(rows, start, n, extras), 0, refused)
             return refused
+        per: list[int] | None = None
+        writes: list[int] | None = None
+        if any(e[0] for e in extras.values()):
+            per = [0] * n
+            flat: list[int] = []
+            for i in sorted(extras):
+                outs = extras[i][0]
+                if outs:
+                    if not all(len(w) == 3 and all(type(x) is int for x in w) for w in outs):
+                        # not (index, value, writer) integers: the reference refuses it
+                        self._to_python()
+                        self._add_python(self._items(rows, start, n, extras), 0, refused)
+                        return refused
+                    per[i] = len(outs)
+                    flat.extend(chain.from_iterable(outs))
+            writes = flat
         # the ticks with commands or events end a C call: their fields follow the record
-        marks = sorted(set(compress(count(), map(truth, map(_COMMANDS, items))))
-                       | set(compress(count(), map(truth, map(_EVENTS, items)))))
+        marks = sorted(i for i, e in extras.items() if e[1] or e[2])
         k = 0
         for end in (*marks, n - 1):
             if end < k:
@@ -186,44 +209,62 @@ class NativeBlockEncoder:
             stop = end + 1
             flags = 0
             extra = b""
-            if end in marks:
-                item = items[end]
+            if marks and end == marks[0]:
+                marks.pop(0)
+                e = extras[end]
                 try:
-                    flags, extra = _extras(item[0], item[6], item[7])
+                    tick = _TICK.unpack_from(rows, (start + end) * self._row.size)[0]
+                    flags, extra = _extras(tick, e[1], e[2])
                 except JournalError as exc:
                     # the tick is refused: those before it go, then those after
-                    if end > k and not self._encode(items, k, end, buf, per, writes, 0, b"",
-                                                    refused):
+                    if end > k and not self._encode(rows, start, n, extras, k, end, per,
+                                                    writes, 0, b"", refused):
                         return refused
                     refused.append(exc)
                     k = stop
                     continue
-            if not self._encode(items, k, stop, buf, per, writes, flags, extra, refused):
+            if not self._encode(rows, start, n, extras, k, stop, per, writes, flags, extra,
+                                refused):
                 return refused
             k = stop
         return refused
 
-    def _encode(self, items: Sequence[TickItem], a: int, b: int, rows: bytearray,
-                per: list[int] | None, writes: list[int] | None, flags: int, extra: bytes,
-                refused: list[JournalError]) -> bool:
-        """Records ``a..b-1`` in C (the last followed by ``extra``); False if C refused
-        one (from there on, the Python reference has taken every record left)."""
+    def _encode(self, rows: bytearray, start: int, n: int, extras: dict[int, Extra], a: int,
+                b: int, per: list[int] | None, writes: list[int] | None, flags: int,
+                extra: bytes, refused: list[JournalError]) -> bool:
+        """The run's records ``a..b-1`` in C (the last followed by ``extra``); False if
+        C refused one (from there on, the Python reference has taken every record left)."""
         c = self._c
         assert c is not None
         sub_per = sub_writes = None
-        if per is not None:
+        if per is not None and writes is not None:
             w0 = 3 * sum(per[:a])
             sub_per = per[a:b]
-            sub_writes = writes[w0:w0 + 3 * sum(sub_per)] if writes is not None else None
+            sub_writes = writes[w0:w0 + 3 * sum(sub_per)]
         try:
-            c.encode(rows, a, b - a, sub_per, sub_writes, flags)
+            c.encode(rows, start + a, b - a, sub_per, sub_writes, flags)
         except RecordRefused as exc:
             self._to_python()
-            self._add_python(items, a + exc.index, refused)
+            self._add_python(self._items(rows, start, n, extras), a + exc.index, refused)
             return False
         if extra:
             c.append(extra)
         return True
+
+    def _items(self, rows: bytearray, start: int, n: int,
+               extras: dict[int, Extra]) -> list[TickItem]:
+        """The run's ticks as :meth:`add` takes them (for the Python reference)."""
+        unpack = self._row.unpack_from
+        size = self._row.size
+        items: list[TickItem] = []
+        for i in range(n):
+            e = extras.get(i)
+            if e is not None and e[3] is not None:
+                items.append(e[3])
+                continue
+            row = unpack(rows, (start + i) * size)
+            items.append((*row[:4], row[4:], *(e[:3] if e is not None else ((), (), ()))))
+        return items
 
     def _add_python(self, items: Sequence[TickItem], start: int,
                     refused: list[JournalError]) -> None:

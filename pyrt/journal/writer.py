@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import struct
 import threading
 import time
 from collections import deque
@@ -47,12 +48,12 @@ _GAP = object()
 _NAMES = object()
 _DUMP = object()
 _FLUSH = object()
-#: The heads of the queue's entries that are not ticks.
-_CONTROL = (_GAP, _NAMES, _DUMP, _FLUSH)
-#: Integers the writer gathers for one C call at most (the interpreter lock is
-#: held while it packs them: a bound on how long, ~0.1 ms); a run is at most a
-#: block's ticks.
-BATCH_VALUES = 16384
+#: Integers the writer encodes in one C call at most; a run is at most a block's
+#: ticks.
+BATCH_VALUES = 1 << 16
+#: The most bytes of the ring of ticks handed over and not yet written (beyond
+#: :data:`DEFAULT_QUEUE_TICKS` rows, a tick of many inputs has fewer rows).
+RING_BYTES = 8 << 20
 
 
 class Journal:
@@ -117,10 +118,22 @@ class Journal:
         self._n_inputs = len(header.inputs)
         self._writers = list(header.writers)
         self._encoder = NativeBlockEncoder(header, compress)
+        row = self._encoder.row
+        self._pack = row.pack_into
+        self._row_size = row.size
+        #: Ticks handed over and not yet taken, at most (the ring's rows).
+        self._capacity = min(queue_ticks, max(1, RING_BYTES // row.size))
+        #: The ring of ticks handed over: a row each (tick, time, lateness, missed,
+        #: every input), tick ``s`` in row ``s % capacity``.
+        self._ring = bytearray(self._capacity * row.size)
+        #: What a tick's row leaves out, in the order handed over: (its number,
+        #: (outputs, commands, events, the whole tick if it could not be packed)).
+        self._extras: deque[tuple[int, tuple[Any, Any, Any, Any]]] = deque()
+        #: Entries that are not ticks (gaps, names, dumps, flushes), each after the
+        #: ticks handed over before it: ``(number of ticks before it, kind, ...)``.
         self._queue: deque[tuple[Any, ...]] = deque()
-        self._capacity = queue_ticks
-        self._put = 0      # written by the loop thread only
-        self._taken = 0    # written by the writer thread only
+        self._put = 0      # ticks handed over; written by the loop thread only
+        self._taken = 0    # ticks encoded; written by the writer thread only
         self._gap_first: int | None = None
         self._gap_last = 0
         self._gap_count = 0
@@ -132,7 +145,6 @@ class Journal:
         self._stop = False
         #: Gaps so far (as the loop thread knows them: a gap is listed when it ends).
         self.gaps: list[Gap] = []
-        self._others = 0   # entries of the queue that are not ticks (gaps, names)
         #: Ticks dropped into gaps (:attr:`recorded`: those handed over).
         self.dropped = 0
         #: Bytes written to the file so far (writer thread).
@@ -165,31 +177,30 @@ class Journal:
                     commands: Sequence[tuple[str, str]] = (),
                     events: Sequence[tuple[str, int, str]] = ()) -> bool:
         """Hand over one tick: its index, clock time, lateness, deadlines missed
-        since the previous tick, every input (declared order; copied), the changed
-        outputs written ``(index, value, writer index)`` in the order written,
-        the mailbox commands applied ``(text, source)`` and named events
-        ``(name, id, message)`` (the sequences are kept, not copied: pass new
-        ones).  Never blocks.  Returns False if the tick was dropped into a gap
-        (the writer is behind)."""
-        return self.record_owned(tick, time_ns, lateness_ns, missed, tuple(inputs), outputs,
-                                 commands, events)
-
-    def record_owned(self, tick: int, time_ns: int, lateness_ns: int, missed: int,
-                     inputs: Sequence[int], outputs: Sequence[tuple[int, int, int]] = (),
-                     commands: Sequence[tuple[str, str]] = (),
-                     events: Sequence[tuple[str, int, str]] = ()) -> bool:
-        """:meth:`record_tick` without the copy of ``inputs``: the caller hands
-        over a sequence it never changes again (a process image's read phase
-        makes a new list every tick).  The loop thread's share of a tick: a few
-        checks and one append."""
-        if self._put - self._taken < self._capacity and self._gap_first is None \
-                and len(inputs) == self._n_inputs and not self._closed:
-            self._queue.append((tick, time_ns, lateness_ns, missed, inputs, outputs, commands,
-                                events))
-            self._put += 1
+        since the previous tick, every input (declared order; copied into the
+        journal's ring), the changed outputs written ``(index, value, writer
+        index)`` in the order written, the mailbox commands applied ``(text,
+        source)`` and named events ``(name, id, message)`` (these sequences are
+        kept, not copied: pass new ones).  Never blocks.  Returns False if the
+        tick was dropped into a gap (the writer is behind)."""
+        put = self._put
+        if put - self._taken < self._capacity and self._gap_first is None \
+                and not self._closed:
+            try:
+                self._pack(self._ring, (put % self._capacity) * self._row_size, tick, time_ns,
+                           lateness_ns, missed, *inputs)
+            except (struct.error, TypeError):
+                return self._record_slowly(tick, time_ns, lateness_ns, missed, inputs,
+                                           outputs, commands, events)
+            if outputs or commands or events:
+                self._extras.append((put, (outputs, commands, events, None)))
+            self._put = put + 1
             return True
         return self._record_slowly(tick, time_ns, lateness_ns, missed, inputs, outputs,
                                    commands, events)
+
+    #: The same call (a tick's inputs are copied into the ring either way).
+    record_owned = record_tick
 
     def _record_slowly(self, tick: int, time_ns: int, lateness_ns: int, missed: int,
                        inputs: Sequence[int], outputs: Sequence[tuple[int, int, int]],
@@ -211,9 +222,19 @@ class Journal:
             self._wait_for_room()
         if self._gap_first is not None:
             self._end_gap()
-        self._queue.append((tick, time_ns, lateness_ns, missed, inputs, outputs, commands,
-                            events))
-        self._put += 1
+        put = self._put
+        try:
+            self._pack(self._ring, (put % self._capacity) * self._row_size, tick, time_ns,
+                       lateness_ns, missed, *inputs)
+        except (struct.error, TypeError):
+            # not 64-bit integers: the tick goes whole (the writer refuses or takes it)
+            self._extras.append((put, (outputs, commands, events,
+                                       (tick, time_ns, lateness_ns, missed, tuple(inputs),
+                                        outputs, commands, events))))
+        else:
+            if outputs or commands or events:
+                self._extras.append((put, (outputs, commands, events, None)))
+        self._put = put + 1
         return True
 
     def _wait_for_room(self) -> None:
@@ -232,9 +253,7 @@ class Journal:
         gap = Gap(self._gap_first, self._gap_last, self._gap_count,
                   "the journal's writer fell behind")
         self.gaps.append(gap)
-        self._queue.append((_GAP, gap))
-        self._put += 1
-        self._others += 1
+        self._queue.append((self._put, _GAP, gap))
         self._gap_first = None
         self._gap_count = 0
 
@@ -248,16 +267,14 @@ class Journal:
             raise JournalError(f"journal: a writer's name is a string, got {name!r}")
         self._writers.append(name)
         index = len(self._writers) - 1
-        self._queue.append((_NAMES, index, name))
-        self._put += 1
-        self._others += 1
+        self._queue.append((self._put, _NAMES, index, name))
         self._wake.set()
         return index
 
     @property
     def recorded(self) -> int:
         """Ticks handed over (not those dropped into gaps)."""
-        return self._put - self._others
+        return self._put
 
     @property
     def writers(self) -> list[str]:
@@ -282,7 +299,7 @@ class Journal:
             self._thread.join()
             self._dump(target, fut)
             return fut
-        self._queue.append((_DUMP, target, fut))
+        self._queue.append((self._put, _DUMP, target, fut))
         self._wake.set()
         return fut
 
@@ -293,7 +310,7 @@ class Journal:
         if self._closed:
             return True
         done = threading.Event()
-        self._queue.append((_FLUSH, done))
+        self._queue.append((self._put, _FLUSH, done))
         self._wake.set()
         return done.wait(timeout)
 
@@ -396,71 +413,79 @@ class Journal:
         q = self._queue
         while q:
             item = q.popleft()
-            if item[0] is _DUMP:
-                item[2].set_exception(JournalError("journal: the writer failed"))
-            elif item[0] is _FLUSH:
-                item[1].set()
-            else:
-                self._taken += 1
+            if item[1] is _DUMP:
+                item[3].set_exception(JournalError("journal: the writer failed"))
+            elif item[1] is _FLUSH:
+                item[2].set()
+        self._extras.clear()
+        self._taken = self._put
 
     def _loop(self) -> None:
         q = self._queue
         enc = self._encoder
         block = self.block_ticks
+        cap = self._capacity
+        ring = self._ring
+        extras = self._extras
         wait = self._wake.wait
         clear = self._wake.clear
         sleep = time.sleep
         mono = time.monotonic_ns
         yield_gil = not self.lossless
-        batch: list[tuple[Any, ...]] = []
         most = max(1, BATCH_VALUES // (4 + self._n_inputs))
         while True:
             stopping = self._stop
-            while q:
-                # a run of ticks, at most to the block's end, encoded in one C call
-                # (the interpreter lock released); what is not a tick ends the run
-                room = min(block - enc.count, most)
-                while q and len(batch) < room and q[0][0] not in _CONTROL:
-                    batch.append(q.popleft())
-                if batch:
+            while True:
+                put = self._put
+                limit = min(put, q[0][0]) if q else put
+                taken = self._taken
+                if taken < limit:
+                    # a run of ticks, contiguous in the ring, at most to the block's end
+                    # and the next entry that is not a tick: one C call, the
+                    # interpreter lock released while it encodes
+                    start = taken % cap
+                    n = min(limit - taken, block - enc.count, most, cap - start)
+                    mine: dict[int, tuple[Any, Any, Any, Any]] = {}
+                    end = taken + n
+                    while extras and extras[0][0] < end:
+                        s, extra = extras.popleft()
+                        mine[s - taken] = extra
                     if enc.count == 0:
                         self._block_started = mono()
-                    for exc in enc.add_many(batch):
+                    for exc in enc.add_rows(ring, start, n, mine):
                         self._refused(exc)
-                    self._taken += len(batch)
-                    batch.clear()
+                    self._taken = taken + n
                     if enc.count >= block:
                         self._flush_block()
-                    if self._waiting and self._put - self._taken <= self._capacity // 2:
+                    if self._waiting and self._put - self._taken <= cap // 2:
                         self._room.set()
                     if yield_gil:
                         # a real-time loop thread waking now gets the interpreter at
                         # once (on virtual time this would only slow both threads)
                         sleep(0)
                     continue
+                if not q or q[0][0] > taken:
+                    break
                 item = q.popleft()
-                head = item[0]
+                head = item[1]
                 if head is _GAP:
                     self._flush_block()
                     enc.reset()
-                    gap: Gap = item[1]
+                    gap: Gap = item[2]
                     self._emit(frame(KIND_GAP, gap_payload(gap)), enc.last_time, enc.last_time, 0)
                     if self.warn is not None:
                         self.warn(f"journal {self.path}: ticks {gap.first}..{gap.last} not "
                                   f"recorded ({gap.cause}); not replayable past tick "
                                   f"{gap.first}")
                 elif head is _NAMES:
-                    self._emit(frame(KIND_NAMES, names_payload(item[1], [item[2]])),
+                    self._emit(frame(KIND_NAMES, names_payload(item[2], [item[3]])),
                                enc.last_time, enc.last_time, 0)
                 elif head is _FLUSH:
                     self._flush_block()
-                    item[1].set()
-                    continue
+                    item[2].set()
                 else:  # _DUMP
                     self._flush_block()
-                    self._dump(item[1], item[2])
-                    continue  # not counted: dumps may come from any thread
-                self._taken += 1
+                    self._dump(item[2], item[3])
             if self._waiting:
                 self._room.set()
             if enc.count and (stopping or mono() - self._block_started > self.max_delay_ns):
