@@ -70,6 +70,16 @@ DRIVER = textwrap.dedent(
         except JournalError:
             pass
 
+    # ticks of many writes each outgrow the encoder's first body
+    many = [(k, k * 1000, 0, 0, [k], tuple((i, rnd.randrange(-10**9, 10**9), 3)
+                                           for i in range(64) for _ in range(3)), (), ())
+            for k in range(120)]
+    h = header(1, 64)
+    a, b = BlockEncoder(h, 0), NativeBlockEncoder(h, 0)
+    for r in many:
+        a.add(*r)
+    assert not b.add_many(many) and a.take() == b.take()
+
     # straight into C: what the Python layer never passes
     st = ffi.new("pyrt_journal_state *")
     assert lib.pyrt_journal_init(ffi.NULL, 1, 1, 1) == lib.PYRT_EINVAL

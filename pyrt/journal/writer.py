@@ -36,6 +36,21 @@ DEFAULT_BLOCK_TICKS = 250
 #: Ticks the loop may hand over before the writer takes them; beyond, a gap.
 DEFAULT_QUEUE_TICKS = 4096
 
+def _int64_words(inputs: Any) -> memoryview | None:
+    """``inputs`` as a view of native 64-bit integers if it is a buffer of them (an
+    ``array('q')``, a numpy ``int64`` array), else None (a list, a tuple ...)."""
+    if isinstance(inputs, list | tuple):
+        return None
+    try:
+        view = memoryview(inputs)
+    except TypeError:
+        return None
+    if view.itemsize != 8 or view.format not in ("q", "l", "<q", "=q", "<l", "=l") \
+            or not view.c_contiguous:
+        return None
+    return view.cast("B").cast("q")
+
+
 def _reason(exc: BaseException) -> str:
     """The system's reason for a failed write, in words (a full disk said so)."""
     if isinstance(exc, OSError) and exc.strerror:
@@ -126,6 +141,9 @@ class Journal:
         #: The ring of ticks handed over: a row each (tick, time, lateness, missed,
         #: every input), tick ``s`` in row ``s % capacity``.
         self._ring = bytearray(self._capacity * row.size)
+        self._ring_words = memoryview(self._ring).cast("q")
+        self._row_words = row.size // 8
+        self._clock = struct.Struct("=4q").pack_into
         #: What a tick's row leaves out, in the order handed over: (its number,
         #: (outputs, commands, events, the whole tick if it could not be packed)).
         self._extras: deque[tuple[int, tuple[Any, Any, Any, Any]]] = deque()
@@ -178,7 +196,8 @@ class Journal:
                     events: Sequence[tuple[str, int, str]] = ()) -> bool:
         """Hand over one tick: its index, clock time, lateness, deadlines missed
         since the previous tick, every input (declared order; copied into the
-        journal's ring), the changed outputs written ``(index, value, writer
+        journal's ring: a buffer of 64-bit integers, such as an ``array('q')``,
+        whole, a list integer by integer), the changed outputs written ``(index, value, writer
         index)`` in the order written, the mailbox commands applied ``(text,
         source)`` and named events ``(name, id, message)`` (these sequences are
         kept, not copied: pass new ones).  Never blocks.  Returns False if the
@@ -186,10 +205,18 @@ class Journal:
         put = self._put
         if put - self._taken < self._capacity and self._gap_first is None \
                 and not self._closed:
+            row = put % self._capacity
             try:
-                self._pack(self._ring, (put % self._capacity) * self._row_size, tick, time_ns,
-                           lateness_ns, missed, *inputs)
-            except (struct.error, TypeError):
+                if type(inputs) is list:
+                    self._pack(self._ring, row * self._row_size, tick, time_ns, lateness_ns,
+                               missed, *inputs)
+                else:
+                    # a buffer of 64-bit integers (``array('q')``): copied whole
+                    self._clock(self._ring, row * self._row_size, tick, time_ns, lateness_ns,
+                                missed)
+                    at = row * self._row_words + 4
+                    self._ring_words[at:at + self._n_inputs] = inputs  # type: ignore[index]
+            except (struct.error, TypeError, ValueError, NotImplementedError):
                 return self._record_slowly(tick, time_ns, lateness_ns, missed, inputs,
                                            outputs, commands, events)
             if outputs or commands or events:
@@ -223,9 +250,19 @@ class Journal:
         if self._gap_first is not None:
             self._end_gap()
         put = self._put
+        row = put % self._capacity
         try:
-            self._pack(self._ring, (put % self._capacity) * self._row_size, tick, time_ns,
-                       lateness_ns, missed, *inputs)
+            words = _int64_words(inputs)
+            if words is not None:
+                # a buffer of 64-bit integers (an image that keeps its inputs so): copied
+                # whole, not integer by integer
+                self._clock(self._ring, row * self._row_size, tick, time_ns, lateness_ns,
+                            missed)
+                at = row * self._row_words + 4
+                self._ring_words[at:at + self._n_inputs] = words
+            else:
+                self._pack(self._ring, row * self._row_size, tick, time_ns, lateness_ns,
+                           missed, *inputs)
         except (struct.error, TypeError):
             # not 64-bit integers: the tick goes whole (the writer refuses or takes it)
             self._extras.append((put, (outputs, commands, events,

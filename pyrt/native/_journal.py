@@ -158,9 +158,11 @@ class TickEncoder:
             if writes is None or len(writes) != total * JOURNAL_WRITE:
                 raise ValueError(f"{total} writes need {total * JOURNAL_WRITE} values")
             per = ffi.new("int32_t[]", list(n_writes))
-            w = ffi.new("int64_t[]", list(writes))
+            owner = ffi.new("int64_t[]", list(writes))  # held while C reads it
+            w = owner
         else:
-            per, w, total = ffi.new("int32_t[]", n), ffi.NULL, 0
+            per, owner, total = ffi.new("int32_t[]", n), None, 0
+            w = ffi.NULL
         stride = JOURNAL_CLOCK + self.n_inputs
         r = ffi.from_buffer("int64_t[]", rows)
         try:
@@ -182,6 +184,7 @@ class TickEncoder:
                     self._grow(per[k])
         finally:
             ffi.release(r)  # the buffer is the caller's again at once
+            del owner
 
     def _grow(self, n_writes: int) -> None:
         need = int(lib.pyrt_journal_record_bound(self._st, n_writes))
