@@ -215,7 +215,7 @@ class Journal:
                     self._clock(self._ring, row * self._row_size, tick, time_ns, lateness_ns,
                                 missed)
                     at = row * self._row_words + 4
-                    self._ring_words[at:at + self._n_inputs] = inputs  # type: ignore[index]
+                    self._ring_words[at:at + self._n_inputs] = inputs  # type: ignore[call-overload]
             except (struct.error, TypeError, ValueError, NotImplementedError):
                 return self._record_slowly(tick, time_ns, lateness_ns, missed, inputs,
                                            outputs, commands, events)
