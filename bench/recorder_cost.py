@@ -136,6 +136,46 @@ def _time_outside_the_lock() -> list[int]:
     return spent
 
 
+def handler_alone(robot: str) -> dict:
+    """The recorder's handler alone, called in a loop on a built station (the
+    loop stopped, the tick index moved by hand, the writer emptied between
+    repeats): µs a call, with the image's inputs as the list it makes and as
+    an ``array('q')`` (what an image keeping 64-bit integers would hand over)."""
+    import timeit
+    from array import array
+
+    sys.path.insert(0, str(HERE))
+    import bench_journal as bj
+
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        t = Path(tmp)
+        rig = bj.build(robot, "sim:?image=1", bj.TimedSimClock(), t, t / "run.pj")
+        rig.start()
+        bj.drive(rig, 0.5)
+        rec, loop = rig.recorder, rig.loop
+        journal = rec.journal  # type: ignore[attr-defined]
+
+        def tick() -> None:
+            loop.tick_index += 1
+            rec._tick(loop.now_ns)  # type: ignore[attr-defined]
+
+        def best() -> float:
+            timer = timeit.Timer(tick, setup=lambda: journal.flush(30))
+            return min(timer.repeat(7, 1000)) / 1000 * 1e6
+
+        image = rec.image  # type: ignore[attr-defined]
+        inputs = image.last_inputs
+        out["inputs"] = len(inputs)
+        out["list"] = best()
+        image.last_inputs = array("q", inputs)
+        out["array"] = best()
+        image.last_inputs = inputs
+        journal.flush(30)
+        rig.close()
+    return out
+
+
 def idle_row(row: str, seconds: float) -> dict:
     """The CPU share of ``pyrt gripper`` idle at real time (or a bare sleep loop)."""
     if row == "bare sleep":
@@ -192,7 +232,13 @@ def main() -> None:
     ap.add_argument("--no-work", action="store_true", help="only the idle rows")
     ap.add_argument("--one", nargs=3, metavar=("ROBOT", "ROW", "SECONDS"), help=argparse.SUPPRESS)
     ap.add_argument("--one-idle", nargs=2, metavar=("ROW", "SECONDS"), help=argparse.SUPPRESS)
+    ap.add_argument("--alone", action="store_true",
+                    help="also time the recorder's handler alone (loop thread)")
+    ap.add_argument("--one-alone", metavar="ROBOT", help=argparse.SUPPRESS)
     a = ap.parse_args()
+    if a.one_alone:
+        print(json.dumps(handler_alone(a.one_alone)))
+        return
     if a.one:
         print(json.dumps(one_row(a.one[0], a.one[1], float(a.one[2]))))
         return
@@ -252,6 +298,15 @@ def main() -> None:
                              if row.startswith("image +") else " | | | | ")
                     print(f"| {names[tree]} | {row} | {len(c):,} | {p50:.2f} | {_pct(c, .99):.2f} "
                           f"| {mean:.2f} | " + (f"{jm:.2f}" if jm else "") + f" | {added} |")
+    if a.alone:
+        print("\nthe recorder's handler alone (loop thread, µs a call, best of 7 x 1000)")
+        print("| tree | robot | inputs | a list of inputs | an array('q') of inputs |")
+        print("|---|---|---:|---:|---:|")
+        for robot in robots:
+            for tree in trees:
+                r = _child(tree, "--one-alone", robot)
+                print(f"| {names[tree]} | {robot} | {r['inputs']} | {r['list']:.2f} | "
+                      f"{r['array']:.2f} |")
     if idle:
         print(f"\nidle at real time, {a.idle:g} s a row: CPU % of one core (median of "
               f"{a.rounds}; all rounds)")
