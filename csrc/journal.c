@@ -52,17 +52,19 @@ int pyrt_journal_init(pyrt_journal_state *st, int64_t period_ns, int32_t n_input
     return PYRT_OK;
 }
 
-int64_t pyrt_journal_record_bound(const pyrt_journal_state *st, int32_t n_writes)
+static int64_t record_bound(const pyrt_journal_state *st, int32_t n_writes)
 {
-    int64_t per_input, n_in, n_out;
-    if (st == NULL || n_writes < 0 || st->n_inputs < 0 || st->n_outputs < 0)
-        return -1;
-    n_in = st->n_inputs;
-    n_out = st->n_outputs;
     /* a keyframe: every input and output once; a delta: an index gap and a change */
-    per_input = 2 * VARINT_MAX;
-    return 8 * VARINT_MAX + n_in * per_input + n_out * VARINT_MAX
-           + (int64_t)n_writes * 3 * VARINT_MAX;
+    return 8 * VARINT_MAX + (int64_t)st->n_inputs * 2 * VARINT_MAX
+           + (int64_t)st->n_outputs * VARINT_MAX + (int64_t)n_writes * 3 * VARINT_MAX;
+}
+
+int pyrt_journal_record_bound(const pyrt_journal_state *st, int32_t n_writes, int64_t *bound)
+{
+    if (st == NULL || bound == NULL || n_writes < 0 || st->n_inputs < 0 || st->n_outputs < 0)
+        return PYRT_EINVAL;
+    *bound = record_bound(st, n_writes);
+    return PYRT_OK;
 }
 
 /*
@@ -134,7 +136,7 @@ int pyrt_journal_encode(pyrt_journal_state *st, int64_t *prev, int64_t *outs,
             return PYRT_EINVAL;
         if (!record_ok(st, key, c, in, w, nw, &shift))
             return PYRT_EINVAL;
-        if (capacity - at < pyrt_journal_record_bound(st, nw))
+        if (capacity - at < record_bound(st, nw))
             return PYRT_OK; /* the caller takes the block or grows the body */
         if (nw > 0)
             flags |= PYRT_JF_OUTPUTS;

@@ -60,10 +60,10 @@ int pyrt_journal_init(pyrt_journal_state *st, int64_t period_ns, int32_t n_input
                       int32_t n_outputs);
 
 /*
- * The most bytes one record of n_writes output writes can take (not
- * counting its commands and events).  -1 for bad sizes.
+ * *bound = the most bytes one record of n_writes output writes can take
+ * (not counting its commands and events).  PYRT_EINVAL for NULL or bad sizes.
  */
-int64_t pyrt_journal_record_bound(const pyrt_journal_state *st, int32_t n_writes);
+int pyrt_journal_record_bound(const pyrt_journal_state *st, int32_t n_writes, int64_t *bound);
 
 /*
  * Append n tick records to body[*pos .. capacity).

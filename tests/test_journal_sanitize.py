@@ -86,8 +86,11 @@ DRIVER = textwrap.dedent(
     assert lib.pyrt_journal_init(st, 0, 1, 1) == lib.PYRT_EINVAL
     assert lib.pyrt_journal_init(st, 1000, -1, 1) == lib.PYRT_EINVAL
     assert lib.pyrt_journal_init(st, 1000, 2, 2) == lib.PYRT_OK
-    assert lib.pyrt_journal_record_bound(ffi.NULL, 0) == -1
-    assert lib.pyrt_journal_record_bound(st, -1) == -1
+    bound = ffi.new("int64_t *")
+    assert lib.pyrt_journal_record_bound(ffi.NULL, 0, bound) == lib.PYRT_EINVAL
+    assert lib.pyrt_journal_record_bound(st, -1, bound) == lib.PYRT_EINVAL
+    assert lib.pyrt_journal_record_bound(st, 0, ffi.NULL) == lib.PYRT_EINVAL
+    assert lib.pyrt_journal_record_bound(st, 3, bound) == lib.PYRT_OK and bound[0] > 0
     prev, outs = ffi.new("int64_t[]", 2), ffi.new("int64_t[]", 2)
     rows = ffi.new("int64_t[]", [0, 0, 0, 0, 1, 2, 1, 10, 0, 0, 1, 3])
     per = ffi.new("int32_t[]", 2)

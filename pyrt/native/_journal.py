@@ -45,7 +45,7 @@ class TickEncoder:
     record would not fit, which only the first blocks of a run should need.
     """
 
-    __slots__ = ("_body", "_cap", "_done", "_outs", "_pos", "_prev", "_st", "n_inputs",
+    __slots__ = ("_body", "_bound", "_cap", "_done", "_outs", "_pos", "_prev", "_st", "n_inputs",
                  "n_outputs")
 
     def __init__(self, n_inputs: int, n_outputs: int, period_ns: int,
@@ -65,7 +65,8 @@ class TickEncoder:
         self._outs = ffi.new("int64_t[]", max(1, n_outputs))
         for i, v in enumerate(output_values):
             self._outs[i] = v
-        self._cap = max(capacity, 2 * int(lib.pyrt_journal_record_bound(self._st, 16)))
+        self._bound = ffi.new("int64_t *")
+        self._cap = max(capacity, 2 * self._record_bound(16))
         self._body = ffi.new("uint8_t[]", self._cap)
         self._pos = ffi.new("int64_t *")
         self._done = ffi.new("int32_t *")
@@ -172,11 +173,13 @@ class TickEncoder:
                                              r + (start + k) * stride, per + k, w, extra, n - k,
                                              self._body, self._cap, self._pos, self._done)
                 done = int(self._done[0])
-                if rc:
+                try:
+                    raise_for_status(rc, "journal encoder")
+                except NativeInputError:
                     raise RecordRefused(f"journal: record {k + done} refused (a tick not "
                                         "after the last, missed < 0, an output index or "
                                         "writer out of range, a value beyond its bounds)",
-                                        k + done)
+                                        k + done) from None
                 if done and total:
                     w = w + sum(per[k:k + done]) * JOURNAL_WRITE
                 k += done
@@ -186,8 +189,13 @@ class TickEncoder:
             ffi.release(r)  # the buffer is the caller's again at once
             del owner
 
+    def _record_bound(self, n_writes: int) -> int:
+        raise_for_status(lib.pyrt_journal_record_bound(self._st, n_writes, self._bound),
+                         f"journal record bound ({n_writes} writes)")
+        return int(self._bound[0])
+
     def _grow(self, n_writes: int) -> None:
-        need = int(lib.pyrt_journal_record_bound(self._st, n_writes))
+        need = self._record_bound(n_writes)
         cap = self._cap
         while cap - self._pos[0] < need:
             cap *= 2
