@@ -156,6 +156,8 @@ class Journal:
         self._gap_last = 0
         self._gap_count = 0
         self._closed = False
+        #: Neither closed nor in a gap: a tick may go straight into the ring.
+        self._open = True
         self._wake = threading.Event()
         self._room = threading.Event()
         self._waiting = False
@@ -203,8 +205,7 @@ class Journal:
         kept, not copied: pass new ones).  Never blocks.  Returns False if the
         tick was dropped into a gap (the writer is behind)."""
         put = self._put
-        if put - self._taken < self._capacity and self._gap_first is None \
-                and not self._closed:
+        if put - self._taken < self._capacity and self._open:
             row = put % self._capacity
             try:
                 if type(inputs) is list:
@@ -242,6 +243,7 @@ class Journal:
             if not self.lossless:
                 if self._gap_first is None:
                     self._gap_first = tick
+                    self._open = False
                 self._gap_last = tick
                 self._gap_count += 1
                 self.dropped += 1
@@ -292,6 +294,7 @@ class Journal:
         self.gaps.append(gap)
         self._queue.append((self._put, _GAP, gap))
         self._gap_first = None
+        self._open = not self._closed
         self._gap_count = 0
 
     def writer_index(self, name: str) -> int:
@@ -361,6 +364,7 @@ class Journal:
         if self._gap_first is not None:
             self._end_gap()
         self._closed = True
+        self._open = False
         self._stop = True
         self._wake.set()
         self._thread.join()
