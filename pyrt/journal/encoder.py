@@ -4,9 +4,10 @@
 writes (the reference: the tests hold one to the other), but its state
 lives in C buffers (:class:`pyrt.native.TickEncoder`) and the records of
 a run of ticks are delta-encoded in one C call, the interpreter lock
-released: what the journal's writer thread holds the lock for is packing
-each tick's Python integers into a row of 64-bit integers (``struct``) and
-the rare output writes, commands and events.
+released.  The ticks come as rows of 64-bit integers (:attr:`~NativeBlockEncoder.row`:
+the journal's loop thread packs them into its ring as it hands them over;
+:meth:`~NativeBlockEncoder.add_many` packs them here), with the rare output
+writes, commands and events beside them.
 
 Anything the C encoder does not take (a value beyond +-2**62, an input
 that is not an integer, a record it refuses) moves the encoder, for the

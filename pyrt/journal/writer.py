@@ -81,11 +81,13 @@ class Journal:
     keyframe, so a run killed with ``kill -9`` loses at most the block being
     filled (and a block is written at the latest ``max_delay_s`` of wall time
     after its first tick).  ``compress``: zlib level of the blocks (0: none).
-    ``queue_ticks``: how many ticks may wait for the writer thread; when that
-    many wait, :meth:`record_tick` drops the tick and the journal records a gap
-    instead of blocking; with ``lossless`` (a run on virtual time, where waiting
-    costs nothing) it waits for room instead.  ``warn`` is called (in the writer
-    thread) with one line for each gap, write error and refused tick.
+    ``queue_ticks``: how many ticks may wait for the writer thread (each a row
+    of 64-bit integers in a ring of at most 8 MiB: fewer for ticks of very many
+    inputs); when that many wait, :meth:`record_tick` drops the tick and the
+    journal records a gap instead of blocking; with ``lossless`` (a run on
+    virtual time, where waiting costs nothing) it waits for room instead.
+    ``warn`` is called (in the writer thread) with one line for each gap, write
+    error and refused tick.
 
     The loop thread calls :meth:`record_tick` once per tick (and
     :meth:`writer_index` to name a new writer); any thread may call
