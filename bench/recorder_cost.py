@@ -14,9 +14,15 @@ alike.  Two measures:
   ``pyrt NAME`` builds it (:mod:`bench_journal`'s ``build`` and ``drive``):
   the loop thread's CPU time from the top of one tick to the top of the
   next, pooled over the rounds (p50, mean), for the rows ``sim:``, ``image``
-  (``sim:?image=1``), ``image + recorder`` (a journal file) and ``image +
-  black box`` (the 10 s ring, no file); the recorder's and the black box's
-  share is against ``image``, the target 5 %.
+  (``sim:?image=1``), ``image + empty handler`` (a handler that does nothing
+  where the recorder's would be: what the loop charges for one more timed
+  handler), ``image + recorder`` (a journal file) and ``image + black box``
+  (the 10 s ring, no file); the recorder's and the black box's
+  share is against ``image``, the target 5 %; and the journal writer
+  thread's CPU a tick, whole and less its time in the calls that release
+  the interpreter lock (zlib's compress and the C tick encoder, timed in
+  the child): its turns with the lock, added to the loop thread's mean in
+  the last column.
 * ``idle`` (``--idle S``, 0 skips it): ``pyrt gripper`` itself, idle at real
   time with its stdin a pipe, the black box on (the default) and ``--black-box
   off``, and a bare Python sleep loop at 1 kHz: the process's CPU share
@@ -38,7 +44,7 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-ROWS = ("sim:", "image", "image + recorder", "image + black box")
+ROWS = ("sim:", "image", "image + empty handler", "image + recorder", "image + black box")
 SECONDS = {"gripper": 10.0, "manipulator": 30.0}
 
 
@@ -52,11 +58,15 @@ def one_row(robot: str, row: str, seconds: float) -> dict:
     import bench_journal as bj
 
     boards = "sim:" if row == "sim:" else "sim:?image=1"
+    outside = _time_outside_the_lock()
     with tempfile.TemporaryDirectory() as tmp:
         t = Path(tmp)
         clock = bj.TimedSimClock()
         path = t / "run.pj" if row == "image + recorder" else None
         rig = bj.build(robot, boards, clock, t, path, 10.0 if row.endswith("black box") else 0.0)
+        if row == "image + empty handler":
+            # what the loop charges for one more timed handler at the recorder's place
+            rig.loop.attach(lambda now_ns: None, name="journal")
         run = rig.loop.run
 
         def timed_run(*a, **kw):
@@ -70,12 +80,100 @@ def one_row(robot: str, row: str, seconds: float) -> dict:
         bj.drive(rig, 1.0)  # warm up: the first moves run code for the first time
         rig.loop.reset_statistics()
         i0 = len(clock.wall)
+        w0, o0 = bj.writer_cpu_ns(), outside[0]
         bj.drive(rig, seconds)
+        w1, o1 = bj.writer_cpu_ns(), outside[0]
         _dw, dc = clock.ticks_from(i0)
         st = rig.loop.statistics()
         rig.close()
     j = st.tasks.get("journal")
-    return {"cpu": dc, "journal_ns": j.mean_ns if j else 0.0}
+    return {"cpu": dc, "journal_ns": j.mean_ns if j else 0.0,
+            "writer_ns": (w1 - w0) / max(1, len(dc)),
+            "writer_locked_ns": (w1 - w0 - (o1 - o0)) / max(1, len(dc))}
+
+
+class _Proxy:
+    """``target`` with some attributes replaced."""
+
+    def __init__(self, target: object, **replaced: object):
+        self._target = target
+        self.__dict__.update(replaced)
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(self._target, name)
+
+
+def _time_outside_the_lock() -> list[int]:
+    """Count the journal writer thread's CPU time in the calls that release the
+    interpreter lock (zlib's compress, the C tick encoder where the tree has one):
+    its CPU time less this is its turns with the lock."""
+    import threading
+
+    import pyrt.journal.format as fmt
+    spent = [0]
+
+    def timed(fn):
+        def call(*a, **kw):
+            if threading.current_thread().name != "pyrt-journal":
+                return fn(*a, **kw)
+            t = time.thread_time_ns()
+            try:
+                return fn(*a, **kw)
+            finally:
+                spent[0] += time.thread_time_ns() - t
+        return call
+
+    import zlib
+    zp = _Proxy(zlib, compress=timed(zlib.compress))
+    fmt.zlib = zp  # type: ignore[attr-defined]
+    try:
+        import pyrt.journal.encoder as enc
+        import pyrt.native._journal as nj
+    except ImportError:
+        return spent
+    enc.zlib = zp  # type: ignore[attr-defined]
+    nj.lib = _Proxy(nj.lib, pyrt_journal_encode=timed(nj.lib.pyrt_journal_encode))
+    return spent
+
+
+def handler_alone(robot: str) -> dict:
+    """The recorder's handler alone, called in a loop on a built station (the
+    loop stopped, the tick index moved by hand, the writer emptied between
+    repeats): µs a call, with the image's inputs as the list it makes and as
+    an ``array('q')`` (what an image keeping 64-bit integers would hand over)."""
+    import timeit
+    from array import array
+
+    sys.path.insert(0, str(HERE))
+    import bench_journal as bj
+
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        t = Path(tmp)
+        rig = bj.build(robot, "sim:?image=1", bj.TimedSimClock(), t, t / "run.pj")
+        rig.start()
+        bj.drive(rig, 0.5)
+        rec, loop = rig.recorder, rig.loop
+        journal = rec.journal  # type: ignore[attr-defined]
+
+        def tick() -> None:
+            loop.tick_index += 1
+            rec._tick(loop.now_ns)  # type: ignore[attr-defined]
+
+        def best() -> float:
+            timer = timeit.Timer(tick, setup=lambda: journal.flush(30))
+            return min(timer.repeat(7, 1000)) / 1000 * 1e6
+
+        image = rec.image  # type: ignore[attr-defined]
+        inputs = image.last_inputs
+        out["inputs"] = len(inputs)
+        out["list"] = best()
+        image.last_inputs = array("q", inputs)
+        out["array"] = best()
+        image.last_inputs = inputs
+        journal.flush(30)
+        rig.close()
+    return out
 
 
 def idle_row(row: str, seconds: float) -> dict:
@@ -134,7 +232,13 @@ def main() -> None:
     ap.add_argument("--no-work", action="store_true", help="only the idle rows")
     ap.add_argument("--one", nargs=3, metavar=("ROBOT", "ROW", "SECONDS"), help=argparse.SUPPRESS)
     ap.add_argument("--one-idle", nargs=2, metavar=("ROW", "SECONDS"), help=argparse.SUPPRESS)
+    ap.add_argument("--alone", action="store_true",
+                    help="also time the recorder's handler alone (loop thread)")
+    ap.add_argument("--one-alone", metavar="ROBOT", help=argparse.SUPPRESS)
     a = ap.parse_args()
+    if a.one_alone:
+        print(json.dumps(handler_alone(a.one_alone)))
+        return
     if a.one:
         print(json.dumps(one_row(a.one[0], a.one[1], float(a.one[2]))))
         return
@@ -153,9 +257,13 @@ def main() -> None:
                 for row in ROWS:
                     for tree in trees:
                         r = _child(tree, "--one", robot, row, str(SECONDS[robot]))
-                        p = work.setdefault((tree, robot, row), {"cpu": [], "journal": []})
+                        p = work.setdefault((tree, robot, row),
+                                            {"cpu": [], "journal": [], "writer": [],
+                                             "locked": []})
                         p["cpu"] += r["cpu"]
                         p["journal"].append(r["journal_ns"])
+                        p["writer"].append(r.get("writer_ns", 0.0))
+                        p["locked"].append(r.get("writer_locked_ns", 0.0))
         if a.idle > 0:
             for row in ("black box on", "black box off", "bare sleep"):
                 for tree in trees:
@@ -172,8 +280,9 @@ def main() -> None:
             print(f"\n{robot}, virtual time, moving ({a.rounds} x {SECONDS[robot]:g} s a row): "
                   "loop-thread CPU a tick, µs")
             print("| tree | row | ticks | p50 | p99 | mean | journal handler mean | "
-                  "added p50 | added mean |")
-            print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
+                  "added p50 | added mean | writer CPU a tick | of it with the lock | "
+                  "added mean with the writer's turns |")
+            print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
             for tree in trees:
                 base = work[(tree, robot, "image")]["cpu"]
                 b50, bmean = _pct(base, .5), statistics.fmean(base) / 1e3
@@ -182,10 +291,22 @@ def main() -> None:
                     c = p["cpu"]
                     p50, mean = _pct(c, .5), statistics.fmean(c) / 1e3
                     jm = statistics.fmean(p["journal"]) / 1e3
+                    wm = statistics.fmean(p["writer"]) / 1e3
+                    lm = statistics.fmean(p["locked"]) / 1e3
                     added = (f"{(p50 - b50) / b50 * 100:+.1f} % | {(mean - bmean) / bmean * 100:+.1f} %"
-                             if row.startswith("image +") else " | ")
+                             f" | {wm:.2f} | {lm:.2f} | {(mean + lm - bmean) / bmean * 100:+.1f} %"
+                             if row.startswith("image +") else " | | | | ")
                     print(f"| {names[tree]} | {row} | {len(c):,} | {p50:.2f} | {_pct(c, .99):.2f} "
                           f"| {mean:.2f} | " + (f"{jm:.2f}" if jm else "") + f" | {added} |")
+    if a.alone:
+        print("\nthe recorder's handler alone (loop thread, µs a call, best of 7 x 1000)")
+        print("| tree | robot | inputs | a list of inputs | an array('q') of inputs |")
+        print("|---|---|---:|---:|---:|")
+        for robot in robots:
+            for tree in trees:
+                r = _child(tree, "--one-alone", robot)
+                print(f"| {names[tree]} | {robot} | {r['inputs']} | {r['list']:.2f} | "
+                      f"{r['array']:.2f} |")
     if idle:
         print(f"\nidle at real time, {a.idle:g} s a row: CPU % of one core (median of "
               f"{a.rounds}; all rounds)")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import re
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -212,6 +213,9 @@ THROUGH_WRAPPERS = {
     "pyrt_arm_publish": _arm_nan_state,
     "pyrt_drive_tick": lambda: _drive_nan(False),
     "pyrt_drive_run": lambda: _drive_nan(True),
+    "pyrt_journal_init": lambda: nat.TickEncoder(1, 1, 0),
+    "pyrt_journal_encode": lambda: nat.TickEncoder(1, 1, 1000).encode(
+        struct.pack("=5q", 0, 0, 0, -1, 0), 0, 1),   # missed < 0
 }
 
 #: Entry points whose only failure is a NULL pointer or a struct the wrapper
@@ -230,6 +234,7 @@ ONLY_RAW = {
     "pyrt_kin_fk": lambda: lib.pyrt_kin_fk(ffi.NULL, ffi.NULL, ffi.NULL, ffi.NULL),
     "pyrt_kin_jacobian": lambda: lib.pyrt_kin_jacobian(ffi.NULL, ffi.NULL, ffi.NULL, ffi.NULL,
                                                        ffi.NULL),
+    "pyrt_journal_record_bound": lambda: lib.pyrt_journal_record_bound(ffi.NULL, 0, ffi.NULL),
 }
 
 

@@ -4,7 +4,8 @@
 hands each tick over), :class:`JournalReader` reads back, :class:`BlackBox`
 keeps the last seconds in memory.  The file format is specified in
 :mod:`pyrt.journal.format`.  This package stands beside the scheduler: it
-imports nothing of pyrt but the errors and the version.
+imports nothing of pyrt but the errors, the version and the C kernels'
+wrappers (the tick records are encoded in C, :mod:`pyrt.journal.encoder`).
 
 How a station uses it (once per run; ``inputs``: the process image in, in
 declared order; ``writes``: the changed outputs of the tick with the index of

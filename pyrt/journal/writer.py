@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import struct
 import threading
 import time
 from collections import deque
@@ -12,13 +13,13 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import Future
 from typing import Any, BinaryIO
 
+from pyrt.journal.encoder import NativeBlockEncoder
 from pyrt.journal.format import (
     END,
     KIND_END,
     KIND_GAP,
     KIND_HEADER,
     KIND_NAMES,
-    BlockEncoder,
     Gap,
     Header,
     JournalError,
@@ -35,6 +36,21 @@ DEFAULT_BLOCK_TICKS = 250
 #: Ticks the loop may hand over before the writer takes them; beyond, a gap.
 DEFAULT_QUEUE_TICKS = 4096
 
+def _int64_words(inputs: Any) -> memoryview | None:
+    """``inputs`` as a view of native 64-bit integers if it is a buffer of them (an
+    ``array('q')``, a numpy ``int64`` array), else None (a list, a tuple ...)."""
+    if isinstance(inputs, list | tuple):
+        return None
+    try:
+        view = memoryview(inputs)
+    except TypeError:
+        return None
+    if view.itemsize != 8 or view.format not in ("q", "l", "<q", "=q", "<l", "=l") \
+            or not view.c_contiguous:
+        return None
+    return view.cast("B").cast("q")
+
+
 def _reason(exc: BaseException) -> str:
     """The system's reason for a failed write, in words (a full disk said so)."""
     if isinstance(exc, OSError) and exc.strerror:
@@ -47,6 +63,12 @@ _GAP = object()
 _NAMES = object()
 _DUMP = object()
 _FLUSH = object()
+#: Integers the writer encodes in one C call at most; a run is at most a block's
+#: ticks.
+BATCH_VALUES = 1 << 16
+#: The most bytes of the ring of ticks handed over and not yet written (beyond
+#: :data:`DEFAULT_QUEUE_TICKS` rows, a tick of many inputs has fewer rows).
+RING_BYTES = 8 << 20
 
 
 class Journal:
@@ -59,11 +81,13 @@ class Journal:
     keyframe, so a run killed with ``kill -9`` loses at most the block being
     filled (and a block is written at the latest ``max_delay_s`` of wall time
     after its first tick).  ``compress``: zlib level of the blocks (0: none).
-    ``queue_ticks``: how many ticks may wait for the writer thread; when that
-    many wait, :meth:`record_tick` drops the tick and the journal records a gap
-    instead of blocking; with ``lossless`` (a run on virtual time, where waiting
-    costs nothing) it waits for room instead.  ``warn`` is called (in the writer
-    thread) with one line for each gap, write error and refused tick.
+    ``queue_ticks``: how many ticks may wait for the writer thread (each a row
+    of 64-bit integers in a ring of at most 8 MiB: fewer for ticks of very many
+    inputs); when that many wait, :meth:`record_tick` drops the tick and the
+    journal records a gap instead of blocking; with ``lossless`` (a run on
+    virtual time, where waiting costs nothing) it waits for room instead.
+    ``warn`` is called (in the writer thread) with one line for each gap, write
+    error and refused tick.
 
     The loop thread calls :meth:`record_tick` once per tick (and
     :meth:`writer_index` to name a new writer); any thread may call
@@ -110,15 +134,32 @@ class Journal:
                                    f"got {type(target).__name__}")
         self._n_inputs = len(header.inputs)
         self._writers = list(header.writers)
-        self._encoder = BlockEncoder(header, compress)
+        self._encoder = NativeBlockEncoder(header, compress)
+        row = self._encoder.row
+        self._pack = row.pack_into
+        self._row_size = row.size
+        #: Ticks handed over and not yet taken, at most (the ring's rows).
+        self._capacity = min(queue_ticks, max(1, RING_BYTES // row.size))
+        #: The ring of ticks handed over: a row each (tick, time, lateness, missed,
+        #: every input), tick ``s`` in row ``s % capacity``.
+        self._ring = bytearray(self._capacity * row.size)
+        self._ring_words = memoryview(self._ring).cast("q")
+        self._row_words = row.size // 8
+        self._clock = struct.Struct("=4q").pack_into
+        #: What a tick's row leaves out, in the order handed over: (its number,
+        #: (outputs, commands, events, the whole tick if it could not be packed)).
+        self._extras: deque[tuple[int, tuple[Any, Any, Any, Any]]] = deque()
+        #: Entries that are not ticks (gaps, names, dumps, flushes), each after the
+        #: ticks handed over before it: ``(number of ticks before it, kind, ...)``.
         self._queue: deque[tuple[Any, ...]] = deque()
-        self._capacity = queue_ticks
-        self._put = 0      # written by the loop thread only
-        self._taken = 0    # written by the writer thread only
+        self._put = 0      # ticks handed over; written by the loop thread only
+        self._taken = 0    # ticks encoded; written by the writer thread only
         self._gap_first: int | None = None
         self._gap_last = 0
         self._gap_count = 0
         self._closed = False
+        #: Neither closed nor in a gap: a tick may go straight into the ring.
+        self._open = True
         self._wake = threading.Event()
         self._room = threading.Event()
         self._waiting = False
@@ -126,7 +167,6 @@ class Journal:
         self._stop = False
         #: Gaps so far (as the loop thread knows them: a gap is listed when it ends).
         self.gaps: list[Gap] = []
-        self._others = 0   # entries of the queue that are not ticks (gaps, names)
         #: Ticks dropped into gaps (:attr:`recorded`: those handed over).
         self.dropped = 0
         #: Bytes written to the file so far (writer thread).
@@ -159,31 +199,38 @@ class Journal:
                     commands: Sequence[tuple[str, str]] = (),
                     events: Sequence[tuple[str, int, str]] = ()) -> bool:
         """Hand over one tick: its index, clock time, lateness, deadlines missed
-        since the previous tick, every input (declared order; copied), the changed
-        outputs written ``(index, value, writer index)`` in the order written,
-        the mailbox commands applied ``(text, source)`` and named events
-        ``(name, id, message)`` (the sequences are kept, not copied: pass new
-        ones).  Never blocks.  Returns False if the tick was dropped into a gap
-        (the writer is behind)."""
-        return self.record_owned(tick, time_ns, lateness_ns, missed, tuple(inputs), outputs,
-                                 commands, events)
-
-    def record_owned(self, tick: int, time_ns: int, lateness_ns: int, missed: int,
-                     inputs: Sequence[int], outputs: Sequence[tuple[int, int, int]] = (),
-                     commands: Sequence[tuple[str, str]] = (),
-                     events: Sequence[tuple[str, int, str]] = ()) -> bool:
-        """:meth:`record_tick` without the copy of ``inputs``: the caller hands
-        over a sequence it never changes again (a process image's read phase
-        makes a new list every tick).  The loop thread's share of a tick: a few
-        checks and one append."""
-        if self._put - self._taken < self._capacity and self._gap_first is None \
-                and len(inputs) == self._n_inputs and not self._closed:
-            self._queue.append((tick, time_ns, lateness_ns, missed, inputs, outputs, commands,
-                                events))
-            self._put += 1
+        since the previous tick, every input (declared order; copied into the
+        journal's ring: a buffer of 64-bit integers, such as an ``array('q')``,
+        whole, a list integer by integer), the changed outputs written ``(index, value, writer
+        index)`` in the order written, the mailbox commands applied ``(text,
+        source)`` and named events ``(name, id, message)`` (these sequences are
+        kept, not copied: pass new ones).  Never blocks.  Returns False if the
+        tick was dropped into a gap (the writer is behind)."""
+        put = self._put
+        if put - self._taken < self._capacity and self._open:
+            row = put % self._capacity
+            try:
+                if type(inputs) is list:
+                    self._pack(self._ring, row * self._row_size, tick, time_ns, lateness_ns,
+                               missed, *inputs)
+                else:
+                    # a buffer of 64-bit integers (``array('q')``): copied whole
+                    self._clock(self._ring, row * self._row_size, tick, time_ns, lateness_ns,
+                                missed)
+                    at = row * self._row_words + 4
+                    self._ring_words[at:at + self._n_inputs] = inputs  # type: ignore[call-overload]
+            except (struct.error, TypeError, ValueError, NotImplementedError):
+                return self._record_slowly(tick, time_ns, lateness_ns, missed, inputs,
+                                           outputs, commands, events)
+            if outputs or commands or events:
+                self._extras.append((put, (outputs, commands, events, None)))
+            self._put = put + 1
             return True
         return self._record_slowly(tick, time_ns, lateness_ns, missed, inputs, outputs,
                                    commands, events)
+
+    #: The same call (a tick's inputs are copied into the ring either way).
+    record_owned = record_tick
 
     def _record_slowly(self, tick: int, time_ns: int, lateness_ns: int, missed: int,
                        inputs: Sequence[int], outputs: Sequence[tuple[int, int, int]],
@@ -198,6 +245,7 @@ class Journal:
             if not self.lossless:
                 if self._gap_first is None:
                     self._gap_first = tick
+                    self._open = False
                 self._gap_last = tick
                 self._gap_count += 1
                 self.dropped += 1
@@ -205,9 +253,29 @@ class Journal:
             self._wait_for_room()
         if self._gap_first is not None:
             self._end_gap()
-        self._queue.append((tick, time_ns, lateness_ns, missed, inputs, outputs, commands,
-                            events))
-        self._put += 1
+        put = self._put
+        row = put % self._capacity
+        try:
+            words = _int64_words(inputs)
+            if words is not None:
+                # a buffer of 64-bit integers (an image that keeps its inputs so): copied
+                # whole, not integer by integer
+                self._clock(self._ring, row * self._row_size, tick, time_ns, lateness_ns,
+                            missed)
+                at = row * self._row_words + 4
+                self._ring_words[at:at + self._n_inputs] = words
+            else:
+                self._pack(self._ring, row * self._row_size, tick, time_ns, lateness_ns,
+                           missed, *inputs)
+        except (struct.error, TypeError):
+            # not 64-bit integers: the tick goes whole (the writer refuses or takes it)
+            self._extras.append((put, (outputs, commands, events,
+                                       (tick, time_ns, lateness_ns, missed, tuple(inputs),
+                                        outputs, commands, events))))
+        else:
+            if outputs or commands or events:
+                self._extras.append((put, (outputs, commands, events, None)))
+        self._put = put + 1
         return True
 
     def _wait_for_room(self) -> None:
@@ -226,10 +294,9 @@ class Journal:
         gap = Gap(self._gap_first, self._gap_last, self._gap_count,
                   "the journal's writer fell behind")
         self.gaps.append(gap)
-        self._queue.append((_GAP, gap))
-        self._put += 1
-        self._others += 1
+        self._queue.append((self._put, _GAP, gap))
         self._gap_first = None
+        self._open = not self._closed
         self._gap_count = 0
 
     def writer_index(self, name: str) -> int:
@@ -242,16 +309,14 @@ class Journal:
             raise JournalError(f"journal: a writer's name is a string, got {name!r}")
         self._writers.append(name)
         index = len(self._writers) - 1
-        self._queue.append((_NAMES, index, name))
-        self._put += 1
-        self._others += 1
+        self._queue.append((self._put, _NAMES, index, name))
         self._wake.set()
         return index
 
     @property
     def recorded(self) -> int:
         """Ticks handed over (not those dropped into gaps)."""
-        return self._put - self._others
+        return self._put
 
     @property
     def writers(self) -> list[str]:
@@ -276,7 +341,7 @@ class Journal:
             self._thread.join()
             self._dump(target, fut)
             return fut
-        self._queue.append((_DUMP, target, fut))
+        self._queue.append((self._put, _DUMP, target, fut))
         self._wake.set()
         return fut
 
@@ -287,7 +352,7 @@ class Journal:
         if self._closed:
             return True
         done = threading.Event()
-        self._queue.append((_FLUSH, done))
+        self._queue.append((self._put, _FLUSH, done))
         self._wake.set()
         return done.wait(timeout)
 
@@ -301,6 +366,7 @@ class Journal:
         if self._gap_first is not None:
             self._end_gap()
         self._closed = True
+        self._open = False
         self._stop = True
         self._wake.set()
         self._thread.join()
@@ -390,66 +456,79 @@ class Journal:
         q = self._queue
         while q:
             item = q.popleft()
-            if item[0] is _DUMP:
-                item[2].set_exception(JournalError("journal: the writer failed"))
-            elif item[0] is _FLUSH:
-                item[1].set()
-            else:
-                self._taken += 1
+            if item[1] is _DUMP:
+                item[3].set_exception(JournalError("journal: the writer failed"))
+            elif item[1] is _FLUSH:
+                item[2].set()
+        self._extras.clear()
+        self._taken = self._put
 
     def _loop(self) -> None:
         q = self._queue
         enc = self._encoder
         block = self.block_ticks
+        cap = self._capacity
+        ring = self._ring
+        extras = self._extras
         wait = self._wake.wait
         clear = self._wake.clear
         sleep = time.sleep
         mono = time.monotonic_ns
         yield_gil = not self.lossless
+        most = max(1, BATCH_VALUES // (4 + self._n_inputs))
         while True:
             stopping = self._stop
-            n = 0
-            while q:
+            while True:
+                put = self._put
+                limit = min(put, q[0][0]) if q else put
+                taken = self._taken
+                if taken < limit:
+                    # a run of ticks, contiguous in the ring, at most to the block's end
+                    # and the next entry that is not a tick: one C call, the
+                    # interpreter lock released while it encodes
+                    start = taken % cap
+                    n = min(limit - taken, block - enc.count, most, cap - start)
+                    mine: dict[int, tuple[Any, Any, Any, Any]] = {}
+                    end = taken + n
+                    while extras and extras[0][0] < end:
+                        s, extra = extras.popleft()
+                        mine[s - taken] = extra
+                    if enc.count == 0:
+                        self._block_started = mono()
+                    for exc in enc.add_rows(ring, start, n, mine):
+                        self._refused(exc)
+                    self._taken = taken + n
+                    if enc.count >= block:
+                        self._flush_block()
+                    if self._waiting and self._put - self._taken <= cap // 2:
+                        self._room.set()
+                    if yield_gil:
+                        # a real-time loop thread waking now gets the interpreter at
+                        # once (on virtual time this would only slow both threads)
+                        sleep(0)
+                    continue
+                if not q or q[0][0] > taken:
+                    break
                 item = q.popleft()
-                head = item[0]
+                head = item[1]
                 if head is _GAP:
                     self._flush_block()
                     enc.reset()
-                    gap: Gap = item[1]
+                    gap: Gap = item[2]
                     self._emit(frame(KIND_GAP, gap_payload(gap)), enc.last_time, enc.last_time, 0)
                     if self.warn is not None:
                         self.warn(f"journal {self.path}: ticks {gap.first}..{gap.last} not "
                                   f"recorded ({gap.cause}); not replayable past tick "
                                   f"{gap.first}")
                 elif head is _NAMES:
-                    self._emit(frame(KIND_NAMES, names_payload(item[1], [item[2]])),
+                    self._emit(frame(KIND_NAMES, names_payload(item[2], [item[3]])),
                                enc.last_time, enc.last_time, 0)
                 elif head is _FLUSH:
                     self._flush_block()
-                    item[1].set()
-                    continue
-                elif head is _DUMP:
+                    item[2].set()
+                else:  # _DUMP
                     self._flush_block()
-                    self._dump(item[1], item[2])
-                    continue  # not counted: dumps may come from any thread
-                else:
-                    if enc.count == 0:
-                        self._block_started = mono()
-                    try:
-                        enc.add(*item)
-                    except JournalError as exc:
-                        self._refused(exc)
-                    if enc.count >= block:
-                        self._flush_block()
-                self._taken += 1
-                n += 1
-                if n & 7 == 0:
-                    if self._waiting and self._put - self._taken <= self._capacity // 2:
-                        self._room.set()
-                    if yield_gil:
-                        # a real-time loop thread waking now gets the interpreter at
-                        # once (on virtual time this would only slow both threads)
-                        sleep(0)
+                    self._dump(item[2], item[3])
             if self._waiting:
                 self._room.set()
             if enc.count and (stopping or mono() - self._block_started > self.max_delay_ns):

@@ -36,6 +36,14 @@ from pyrt.native._findpos import (
     rope_segments,
 )
 from pyrt.native._fuzzy import FuzzyBatch, FuzzyInput, FuzzyParams, FuzzyRule, fuzzy_step
+from pyrt.native._journal import (
+    JOURNAL_CLOCK,
+    JOURNAL_TMAX,
+    JOURNAL_VMAX,
+    JOURNAL_WRITE,
+    RecordRefused,
+    TickEncoder,
+)
 from pyrt.native._kinematics import ChainKernels, IKOutcome
 from pyrt.native._neck import LOWER as NECK_LOWER
 from pyrt.native._neck import UPPER as NECK_UPPER
@@ -58,6 +66,10 @@ __all__ = [
     "DRIVE_FAULT",
     "DRIVE_LATE",
     "DRIVE_REFUSED",
+    "JOURNAL_CLOCK",
+    "JOURNAL_TMAX",
+    "JOURNAL_VMAX",
+    "JOURNAL_WRITE",
     "NECK_LOWER",
     "NECK_UPPER",
     "ArmKernel",
@@ -77,6 +89,7 @@ __all__ = [
     "PositionFinder",
     "PositionResult",
     "QueueChecker",
+    "RecordRefused",
     "RopePath",
     "RopeSegments",
     "Servo",
@@ -86,6 +99,7 @@ __all__ = [
     "SolverError",
     "StaticsSolver",
     "Status",
+    "TickEncoder",
     "check_gains",
     "excess128",
     "excess128_many",

@@ -274,6 +274,11 @@ class Recorder:
         #: the loop at the top of its next record (:meth:`disk_fault`).
         self._disk_faults: list[tuple[str, str]] = []
         self._journal_said = False
+        #: Whether a tap brought something since the last record (outputs, requests,
+        #: faults, a disk fault): the record takes the slow path.
+        self._pending = False
+        #: The journal's hand-over of a tick (bound once: called every tick).
+        self._record = self.journal.record_owned
         #: Called at the end of every tick, after it was handed to the journal:
         #: ``listener(tick_index, now_ns)`` (the black box dumps from here).
         self.tick_listeners: list[Callable[[int, int], None]] = []
@@ -294,6 +299,7 @@ class Recorder:
         if index is None:
             index = self._writer_index[name] = self.journal.writer_index(name)
         self._outputs.append((slot, value, index))
+        self._pending = True
 
     def _request(self, name: str, fn: Callable[..., Any] | None, args: tuple,
                  motion: Any) -> None:
@@ -302,6 +308,7 @@ class Recorder:
             self._unrecorded += 1
             return
         self._commands.append((text, name))
+        self._pending = True
 
     def _fault(self, fault: Fault) -> None:
         if fault.source == "loop" and not any(
@@ -310,11 +317,13 @@ class Recorder:
             # the replay, which trips the station at the same place
             self._events.append((LOOP_FAULT, fault.id, fault.cause))
         self._events.append(("fault", fault.id, str(fault)))
+        self._pending = True
 
     def disk_fault(self, cause: str, source: str) -> None:
         """A file of the recorder's could not be written (any thread): the station
         trips at the top of the loop's next record, with every motor stopped."""
         self._disk_faults.append((cause, source))
+        self._pending = True
 
     def _trip_disk_faults(self) -> None:
         journal = self.journal
@@ -328,7 +337,21 @@ class Recorder:
 
     def _tick(self, now_ns: int) -> None:
         # the loop thread's whole share of a tick's record (a tick of the 1 kHz
-        # gripper is ~10 µs of work): a few reads and one hand-over
+        # gripper is ~10 µs of work): in most ticks nothing was written, asked or
+        # missed, and the tick is the read phase's list of inputs (new every tick,
+        # never changed afterwards: kept as it is, not copied) and the clock
+        loop = self.loop
+        if self._pending or loop.missed != self._missed or self.journal.error is not None:
+            self._pending = False
+            self._tick_slowly(now_ns)
+        else:
+            self._record(loop.tick_index, now_ns, now_ns - loop.deadline_ns, 0,
+                         self.image.last_inputs or self._inputs)
+        if self.tick_listeners:
+            for listener in self.tick_listeners:
+                listener(loop.tick_index, now_ns)
+
+    def _tick_slowly(self, now_ns: int) -> None:
         journal = self.journal
         if self._disk_faults or (journal.error is not None and not self._journal_said):
             self._trip_disk_faults()  # before the record: the reflex's outputs are in it
@@ -355,16 +378,8 @@ class Recorder:
             self._commands, self._events = [], []
         else:
             commands = events = ()
-        # the read phase's list of inputs: new every tick, never changed afterwards
-        # (kept as it is, not copied)
-        inputs = self.image.last_inputs
-        if inputs is None:
-            inputs = self._inputs
-        journal.record_owned(loop.tick_index, now_ns, now_ns - loop.deadline_ns, missed,
-                             inputs, outputs, commands, events)
-        if self.tick_listeners:
-            for listener in self.tick_listeners:
-                listener(loop.tick_index, now_ns)
+        self._record(loop.tick_index, now_ns, now_ns - loop.deadline_ns, missed,
+                     self.image.last_inputs or self._inputs, outputs, commands, events)
 
     # -- any thread ---------------------------------------------------------------------------
 
