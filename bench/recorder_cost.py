@@ -51,7 +51,7 @@ def one_row(robot: str, row: str, seconds: float) -> dict:
     sys.path.insert(0, str(HERE))
     import bench_journal as bj
 
-    boards = "sim:" if row == "sim:" else "sim:?image=1"
+    boards = "sim:" if row == "sim:" or _one_tick_shape() else "sim:?image=1"
     with tempfile.TemporaryDirectory() as tmp:
         t = Path(tmp)
         clock = bj.TimedSimClock()
@@ -76,6 +76,20 @@ def one_row(robot: str, row: str, seconds: float) -> dict:
         rig.close()
     j = st.tasks.get("journal")
     return {"cpu": dc, "journal_ns": j.mean_ns if j else 0.0}
+
+
+def _one_tick_shape() -> bool:
+    """Whether the tree measured has one tick shape (``sim:`` is the image path and
+    ``?image=1`` is refused): then the rows ``sim:`` and ``image`` are one program."""
+    from pyrt.boards import open_boards
+    from pyrt.errors import ConfigError
+    from pyrt.sim.world import GRIPPER_BOARDS
+
+    try:
+        open_boards("sim:?image=1", "gripper", GRIPPER_BOARDS).close()
+    except ConfigError:
+        return True
+    return False
 
 
 def idle_row(row: str, seconds: float) -> dict:
