@@ -175,7 +175,8 @@ class ImageBackend(Backend):
         #: The readable outputs as :attr:`_outputs` holds them, by slot (a bound
         #: reader's index; kept with it).
         self._output_list: list[int] = [0] * len(self.output_layout)
-        self._changed: dict[tuple[str, str, int], int] = {}
+        #: The outputs written since the last exchange: slot -> value.
+        self._changed: dict[int, int] = {}
         self._fresh_until = 0
         self.in_tick = False
         #: Whether a station runs the phases (:meth:`set_tick` was called): only
@@ -296,8 +297,7 @@ class ImageBackend(Backend):
         :meth:`end_of_tick`."""
         self.in_tick = False
         if self._changed:
-            writes = [(b, n, i, v) for (b, n, i), v in self._changed.items()]
-            self._changed.clear()
+            writes = self._take_changed()
             t0 = time.monotonic_ns()
             self.exchange_outputs(writes)
             self._timed(t0, "write")
@@ -317,9 +317,15 @@ class ImageBackend(Backend):
         """Write the changed outputs at once (the reflex; see the module text)."""
         if not self._changed:
             return
-        writes = [(b, n, i, v) for (b, n, i), v in self._changed.items()]
-        self._changed.clear()
+        writes = self._take_changed()
         self._send_now(writes)
+
+    def _take_changed(self) -> list[Write]:
+        """The outputs written since the last exchange, as writes; none from now."""
+        layout = self.output_layout
+        writes = [(*layout[slot], v) for slot, v in self._changed.items()]
+        self._changed.clear()
+        return writes  # type: ignore[return-value]
 
     def _send_now(self, writes: list[Write]) -> None:
         if self.down is not None:
@@ -351,11 +357,7 @@ class ImageBackend(Backend):
                     and time.monotonic_ns() >= self._fresh_until:
                 self._take_inputs(self.exchange_inputs())
             return self._values[base + index]
-        key = (board, name, index)
-        value = self._changed.get(key)
-        if value is None:
-            value = self._outputs.get(key, 0)
-        return value
+        return self._outputs.get((board, name, index), 0)  # a write keeps it there
 
     def write(self, board: str, name: str, value: int, index: int = 0) -> None:
         """Write ``board``'s output ``name[index]``: into the image in a tick (the
@@ -366,15 +368,16 @@ class ImageBackend(Backend):
             return
         # write_many for one write, without its lists (a task's write, the hot path)
         key = (board, name, index)
+        slot = self.output_index[key]
         if reg.readback:
-            if self._outputs.get(key) == value and key not in self._changed:
+            if self._outputs.get(key) == value and slot not in self._changed:
                 return
             self._outputs[key] = value
-            self._output_list[self.output_index[key]] = value
-        self._changed[key] = value
+            self._output_list[slot] = value
+        self._changed[slot] = value
         tap = self.tap
         if tap is not None:
-            tap.wrote(self.output_index[key], value)
+            tap.wrote(slot, value)
         if not (self.in_tick and self.phased):
             self.write_now()
 
@@ -389,14 +392,15 @@ class ImageBackend(Backend):
         tap = self.tap
         for reg, (b, n, i, v) in zip(regs, todo, strict=True):
             key = (b, n, i)
+            slot = self.output_index[key]
             if reg.readback:
-                if self._outputs.get(key) == v and key not in self._changed:
+                if self._outputs.get(key) == v and slot not in self._changed:
                     continue
                 self._outputs[key] = v
-                self._output_list[self.output_index[key]] = v
-            self._changed[key] = v
+                self._output_list[slot] = v
+            self._changed[slot] = v
             if tap is not None:
-                tap.wrote(self.output_index[key], v)
+                tap.wrote(slot, v)
         if not (self.in_tick and self.phased):
             self.write_now()
 
@@ -473,12 +477,12 @@ class ImageBackend(Backend):
         def write(value: int) -> None:
             if type(value) is not int or not low <= value <= high:
                 reg.check_value(value)  # raises (a bool, a float, out of range)
-            if readback:
-                if slots[slot] == value and key in outputs and key not in changed:
+            if readback:  # every readable output is known from open() on
+                if slots[slot] == value and slot not in changed:
                     return
                 outputs[key] = value
                 slots[slot] = value
-            changed[key] = value
+            changed[slot] = value
             tap = self.tap
             if tap is not None:
                 tap.wrote(slot, value)
@@ -538,6 +542,9 @@ class LocalImage(ImageBackend):
                        if kind.inputs() and name in self.views]
         # the boards after the first: each appends its inputs (one copy where it can)
         self._extends = [_extender(snap) for snap in self._snaps[1:]]
+        # every output slot's write into its board (checked by the image already)
+        self._setters = [_setter(self.views[b], n, i) for b, n, i in self.output_layout] \
+            if views is not None else []
         self.feed = feed
         self._initial = dict(outputs) if outputs is not None else None
 
@@ -613,9 +620,24 @@ class LocalImage(ImageBackend):
         self.in_tick = False
         changed = self._changed
         if changed:
-            writes = [(b, n, i, v) for (b, n, i), v in changed.items()]
+            if self.feed is None:  # each output straight into its board's register
+                setters = self._setters
+                for slot, value in changed.items():
+                    setters[slot](value)
             changed.clear()
-            self.exchange_outputs(writes)
+
+
+def _setter(view: Any, name: str, index: int) -> Callable[[int], None]:
+    """The write of ``name[index]`` into ``view``: the view's own unchecked
+    ``setter`` where it has one (a RegisterBoard's), else its ``write``."""
+    make = getattr(view, "setter", None)
+    if make is not None:
+        return make(name, index)  # type: ignore[no-any-return]
+
+    def write(value: int) -> None:
+        view.write(name, value, index)
+
+    return write
 
 
 def _extender(snap: Callable[[], list[int]]) -> Callable[[list[int]], None]:

@@ -353,6 +353,22 @@ class RegisterBoard:
         fast[0][index] = value
         self.writes += 1
 
+    def setter(self, name: str, index: int = 0) -> Callable[[int], None]:
+        """The write of the output ``name[index]`` bound once, for a caller that
+        checked the value against the declaration already (a process image's
+        write phase); ValueError now if ``name[index]`` is no output."""
+        values = self._writable.get(name)
+        if values is None:
+            raise ValueError(f"{name} is no output of a {self.kind.name} board")
+        registers = values[0]
+        self.kind.register(name).check_index(index)
+
+        def write(value: int) -> None:
+            registers[index] = value
+            self.writes += 1
+
+        return write
+
     def snapshot(self) -> list[int]:
         """Every input in declared order."""
         out: list[int] = []
