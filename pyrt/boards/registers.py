@@ -305,7 +305,7 @@ class RegisterBoard:
     :meth:`write` (outputs only, checked against width and signedness).
     The world's side: :meth:`set_input` and :meth:`output`.  Outputs start
     at their off value (else 0), inputs at 0.  ``writes`` counts the
-    controller's writes.
+    controller's writes through :meth:`write`.
     """
 
     url = "sim:"
@@ -360,14 +360,8 @@ class RegisterBoard:
         values = self._writable.get(name)
         if values is None:
             raise ValueError(f"{name} is no output of a {self.kind.name} board")
-        registers = values[0]
         self.kind.register(name).check_index(index)
-
-        def write(value: int) -> None:
-            registers[index] = value
-            self.writes += 1
-
-        return write
+        return partial(values[0].__setitem__, index)  # not counted in writes
 
     def snapshot(self) -> list[int]:
         """Every input in declared order."""
