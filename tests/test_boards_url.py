@@ -262,3 +262,52 @@ def test_boards_must_hold_every_declared_board():
         Boards("x:", "gripper", {}, GRIPPER_BOARDS, in_process=True)
     with pytest.raises(ConfigError, match="no dc board"):
         Boards("x:", "prototype", {"tio10": SimTIO10()}, MANIPULATOR_BOARDS, in_process=True)
+
+
+def test_read_inputs_reads_the_image_without_stepping_the_world():
+    """Boards.read_inputs (a station being built) brings the inputs in without the world's
+    step; the read phase (poll) steps it first, then reads."""
+    boards = open_boards("sim:", "gripper", GRIPPER_BOARDS)
+    steps: list[int] = []
+    side = boards.simulated
+    assert side is not None and boards.attach_world(steps.append)
+    boards.set_tick(0.001)
+    side["gripper"].pa = 0x7F
+    boards.read_inputs(5)
+    assert steps == [] and boards["gripper"].read(P8155_PA) == 0x7F
+    side["gripper"].pa = 0x3F
+    boards.poll(6)
+    assert steps == [6] and boards["gripper"].read(P8155_PA) == 0x3F
+    boards.close()
+
+
+def test_a_bound_write_refuses_what_write_refuses_and_a_same_value_is_no_change():
+    """A register bound once (ImageBackend.writer) refuses a value the declaration does not
+    hold, as write() does, leaving the image as it was; writing the value it holds is not a
+    change (the write phase sends nothing, the tap sees nothing)."""
+    boards = open_boards("sim:", "gripper", GRIPPER_BOARDS)
+    image = boards.image
+    seen: list[tuple[int, int]] = []
+
+    class Tap:
+        def wrote(self, slot: int, value: int) -> None:
+            seen.append((slot, value))
+
+    image.tap = Tap()
+    boards.set_tick(0.001)
+    write = image.writer("gripper", "dac")
+    boards.poll(0)
+    for bad in (0x100, -1, True, 1.5, "80"):
+        with pytest.raises(ValueError, match="dac"):
+            write(bad)
+    assert image.read("gripper", "dac") == 0x80 and seen == []
+    write(0x80)  # the value it holds: no change
+    assert seen == []
+    write(0x90)
+    assert seen == [(image.output_index[("gripper", "dac", 0)], 0x90)]
+    assert boards.simulated["gripper"].dac == 0x80  # in the image until the write phase
+    boards.flush(0)
+    assert boards.simulated["gripper"].dac == 0x90
+    with pytest.raises(ValueError, match="input"):
+        image.writer("gripper", "pa")
+    boards.close()
