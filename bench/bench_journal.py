@@ -17,10 +17,11 @@ are in ``extra_info`` and on stdout.
 The stations themselves (the figures of docs/performance.md, "Flight recorder"):
 the gripper at 1 kHz moving (``P`` back and forth) and the manipulator's
 prototype at 200 Hz (5 ms tick) moving in the plane y = 0, each as plain
-``sim:``, as ``sim:?image=1`` (the process image alone), as ``sim:?image=1``
-with a :class:`~pyrt.station.recording.Recorder` writing a file, and as
-``sim:?image=1`` with the 10 s black box alone (what a real-time run keeps
-without ``--journal``), the rows interleaved round by round:
+``sim:`` (the process image alone: every run has one), with a
+:class:`~pyrt.station.recording.Recorder` writing a file, and with the 10 s
+black box alone (what a real-time run keeps without ``--journal``), the rows
+interleaved round by round (the first two rows are one program since
+``sim:`` has one tick shape):
 
 * ``station tick work``: virtual time; the work of every tick (from the top of
   one tick to the top of the next, the loop thread's CPU time and the wall
@@ -261,9 +262,9 @@ PAUSE_S = {"gripper": 0.2, "manipulator": 1.0}
 #: (board URL, row name, what is recorded: None, "file" or "box"): the rows of
 #: every table, in the order they run.  The last is what ``pyrt NAME --speed 1``
 #: runs without ``--journal``: its black box (10 s in memory, no file).
-VARIANTS = (("sim:", "sim:", None), ("sim:?image=1", "image", None),
-            ("sim:?image=1", "image + recorder", "file"),
-            ("sim:?image=1", "image + black box", "box"))
+VARIANTS = (("sim:", "sim:", None), ("sim:", "image", None),
+            ("sim:", "image + recorder", "file"),
+            ("sim:", "image + black box", "box"))
 
 
 class TimedSimClock(SimClock):
@@ -619,7 +620,7 @@ def test_station_size_per_minute(benchmark, tmp_path):
             for kind in ("idle", "moving"):
                 with _clean():
                     path = tmp_path / f"{robot}-{kind}.pj"
-                    rig = build(robot, "sim:?image=1", SimClock(), tmp_path, path)
+                    rig = build(robot, "sim:", SimClock(), tmp_path, path)
                     rig.start()
                     header = len(rig.recorder.header.encode())  # type: ignore[attr-defined]
                     sizes = []
@@ -666,7 +667,7 @@ def test_replay_speed(benchmark, tmp_path):
             with _clean():
                 path = tmp_path / f"{robot}-{REPLAY_MIN:g}min.pj"
                 t0 = time.perf_counter()
-                rig = build(robot, "sim:?image=1", SimClock(), tmp_path, path)
+                rig = build(robot, "sim:", SimClock(), tmp_path, path)
                 rig.start()
                 moves = drive(rig, REPLAY_MIN * 60)
                 ticks = rig.loop.tick_index

@@ -57,7 +57,7 @@ def one_row(robot: str, row: str, seconds: float) -> dict:
     sys.path.insert(0, str(HERE))
     import bench_journal as bj
 
-    boards = "sim:" if row == "sim:" else "sim:?image=1"
+    boards = "sim:" if row == "sim:" or _one_tick_shape() else "sim:?image=1"
     outside = _time_outside_the_lock()
     with tempfile.TemporaryDirectory() as tmp:
         t = Path(tmp)
@@ -174,6 +174,20 @@ def handler_alone(robot: str) -> dict:
         journal.flush(30)
         rig.close()
     return out
+
+
+def _one_tick_shape() -> bool:
+    """Whether the tree measured has one tick shape (``sim:`` is the image path and
+    ``?image=1`` is refused): then the rows ``sim:`` and ``image`` are one program."""
+    from pyrt.boards import open_boards
+    from pyrt.errors import ConfigError
+    from pyrt.sim.world import GRIPPER_BOARDS
+
+    try:
+        open_boards("sim:?image=1", "gripper", GRIPPER_BOARDS).close()
+    except ConfigError:
+        return True
+    return False
 
 
 def idle_row(row: str, seconds: float) -> dict:

@@ -74,7 +74,9 @@ def signed(word: int) -> int:
 def make_rig(*, runner: bool = False, **plant_kw) -> Rig:
     """A gripper station (plant, controller, motion, scope, mailbox) and a stall monitor."""
     boards = open_boards("sim:", "gripper", GRIPPER_BOARDS)
-    cpu, board = boards["gripper"].cpu, boards["gripper"]
+    side = boards.simulated  # the world's side: the board the jaws drive
+    assert side is not None
+    cpu, board = boards["gripper"].cpu, side["gripper"]
     plant = JawPlant(board, **plant_kw)
     loop = Loop(SimClock())
     station = GripperStation(loop, boards, plant)

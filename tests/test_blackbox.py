@@ -58,7 +58,7 @@ LINE = re.compile(r"^black box of fault (\d+): (\S+)\.pj \((.*)\)$")
 
 def gripper(seconds: float = N_S, loop: Loop | None = None, **kw):
     """A gripper on ``sim:`` with a process image and a black box of ``seconds``; started."""
-    st = build_gripper(loop or Loop(SimClock()), boards="sim:?image=1")
+    st = build_gripper(loop or Loop(SimClock()), boards="sim:")
     rec = FaultRecorder(st, None, black_box=BlackBox(seconds + AFTER_S), seconds=seconds, **kw)
     out = io.StringIO()
     shell = RobotShell(st, out)
@@ -71,7 +71,7 @@ def gripper(seconds: float = N_S, loop: Loop | None = None, **kw):
 def manipulator(tmp_path: Path, seconds: float = N_S):
     """A prototype manipulator in a working copy under ``tmp_path``, with a black box; started."""
     directory = copy_station("prototype", tmp_path / "prototype")
-    st = ManipulatorStation(directory, tick_ns=TICK_NS, boards="sim:?image=1")
+    st = ManipulatorStation(directory, tick_ns=TICK_NS, boards="sim:")
     rec = FaultRecorder(st, None, black_box=BlackBox(seconds + AFTER_S), seconds=seconds)
     st.start()
     return st, rec
@@ -265,7 +265,7 @@ def test_closing_first_writes_the_black_box_at_once(tmp_path, monkeypatch):
 
 def test_an_unwritable_directory_is_said_not_raised(tmp_path):
     """The files cannot be written: a line says which and why; the loop runs on."""
-    st = build_gripper(Loop(SimClock()), boards="sim:?image=1")
+    st = build_gripper(Loop(SimClock()), boards="sim:")
     rec = Recorder(st, None, black_box=BlackBox(1.0))
     box = FaultBox(rec, directory=tmp_path / "missing", plot=True)
     st.runner.start()
@@ -289,7 +289,7 @@ def test_an_unwritable_directory_is_said_not_raised(tmp_path):
 
 def test_a_recorder_without_a_black_box_is_refused():
     """A FaultBox needs the journal's black box: ConfigError, nothing attached."""
-    st = build_gripper(Loop(SimClock()), boards="sim:?image=1")
+    st = build_gripper(Loop(SimClock()), boards="sim:")
     rec = Recorder(st, io.BytesIO())
     listeners = list(st.loop.fault_listeners)
     with pytest.raises(ConfigError, match="black box"):
@@ -458,7 +458,7 @@ def test_start_recorder_attaches_the_black_box_as_asked(argv, seconds, tmp_path,
     """--black-box SECONDS sets N (the journal's ring keeps the aftermath too); off: none (a
     journal alone if --journal is given)."""
     monkeypatch.chdir(tmp_path)
-    st = build_gripper(Loop(SimClock()), boards="sim:?image=1")
+    st = build_gripper(Loop(SimClock()), boards="sim:")
     _, args = options(*argv)
     said: list[str] = []
     rec = start_recorder(st, args, "gripper", said.append)

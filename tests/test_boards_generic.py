@@ -104,7 +104,7 @@ def _until(predicate, seconds: float = 5.0) -> bool:
 def served():
     """The arm's world (opened from its factory, as board-sim does) served in a thread."""
     factory = ArmWorlds()
-    world = factory.world(open_boards("sim:", "arm", factory.board_kinds()), None)
+    world = factory.world(open_boards("sim:", "arm", factory.board_kinds()).simulated, None)
     clock = Clock()
     server = BoardServer(world, "127.0.0.1", 0, watchdog_s=0.5, clock=clock)
     server.start()
@@ -265,7 +265,7 @@ def test_a_greeting_without_a_declared_board_is_refused_naming_it(served):
 
 def test_a_station_may_open_fewer_boards_than_are_served():
     """A controller that declares one of two served boards gets it; its SNAP names it."""
-    both = open_boards("sim:", "rig", {"servo": SERVO, "gripper": GRIPPER_CAGE})
+    both = open_boards("sim:", "rig", {"servo": SERVO, "gripper": GRIPPER_CAGE}).simulated
     server = BoardServer(World("rig", both), "127.0.0.1", 0, watchdog_s=30.0)
     server.start()
     try:

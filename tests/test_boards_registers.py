@@ -133,7 +133,8 @@ def test_register_board_refuses_bad_accesses_and_changes_nothing(action, message
 def test_outputs_off_writes_the_declared_off_values_and_world_uses_it():
     """outputs_off writes every declared off value; a World's watchdog action does that for
     every board it serves."""
-    with open_boards("sim:", "arm", {"servo": SERVO}) as boards:
+    with open_boards("sim:", "arm", {"servo": SERVO}) as opened:
+        boards = opened.simulated  # the world's side
         board = boards["servo"]
         board.write("drive", 123, 0)
         board.write("enable", 1)
@@ -196,7 +197,7 @@ def test_dataconcentrator_clear_is_a_write_only_strobe():
 def test_gripper_cage_view_names_the_cage_registers():
     """The cage's registers by name reach the addresses of pyrt.boards.gripper; the DAC's off is
     its null; up/down are the encoder's pulse counters."""
-    boards = open_boards("sim:", "gripper", {"gripper": GRIPPER_CAGE})
+    boards = open_boards("sim:", "gripper", {"gripper": GRIPPER_CAGE}).simulated
     board = boards["gripper"]
     view = boards.registers("gripper")
     assert isinstance(view, GripperCageRegisters)

@@ -17,10 +17,12 @@ from pyrt.boards import (
     register_backend,
 )
 from pyrt.boards import registry as registry_module
-from pyrt.boards.gripper import DAC, P8155_PB, GripperBoard, SimGripperBoard
+from pyrt.boards.dataconcentrator import DataConcentrator
+from pyrt.boards.gripper import DAC, P8155_PA, P8155_PB, GripperBoard, SimGripperBoard
 from pyrt.boards.i8031 import I8031
 from pyrt.boards.registers import OUTPUT, BoardKind, Register, RegisterBoard
 from pyrt.boards.simboards import SimDataConcentrator, SimTIO10
+from pyrt.boards.tio10 import TIO10
 from pyrt.errors import ConfigError
 from pyrt.sim.world import GRIPPER_BOARDS, MANIPULATOR_BOARDS
 
@@ -115,18 +117,23 @@ def test_board_url_that_is_not_text_is_refused():
 # -- sim: ------------------------------------------------------------------------------
 
 
-def test_sim_gripper_maps_a_sim_board_into_the_given_cpu():
-    """sim: for the gripper gives a SimGripperBoard mapped into the cpu passed; nothing to poll."""
+def test_sim_gripper_maps_the_cage_into_the_given_cpu_over_a_simulated_board():
+    """sim: for the gripper gives the cage mapped into the cpu passed, reached through the
+    process image; the world's side is a SimGripperBoard, which a write reaches at once
+    outside a tick and the read phase brings in."""
     cpu = I8031()
     with open_boards("sim:", "gripper", GRIPPER_BOARDS, cpu=cpu) as boards:
         assert boards.in_process and boards["gripper"].cpu is cpu and boards.station == "gripper"
         assert list(boards) == ["gripper"] and len(boards) == 1
-        assert isinstance(boards["gripper"], SimGripperBoard)
         assert isinstance(boards["gripper"], GripperBoard)
+        side = boards.simulated
+        assert side is not None and isinstance(side["gripper"], SimGripperBoard)
+        assert side["gripper"].cpu is not cpu  # the world's board raises no interrupt itself
         cpu.movx_write(DAC, 0x90)
-        assert boards["gripper"].dac == 0x90 and boards["gripper"].read(DAC) == 0x90
-        assert not boards.polls
-        boards.poll(0)  # nothing to do, no error
+        assert side["gripper"].dac == 0x90 and boards["gripper"].read(DAC) == 0x90
+        side["gripper"].pa = 0xFE
+        boards.poll(0)
+        assert cpu.movx_read(P8155_PA) == 0xFE
     assert boards.closed
 
 
@@ -134,7 +141,10 @@ def test_sim_manipulator_gives_a_sim_tio10_and_dataconcentrator():
     """sim: (also by default) for the manipulator gives a SimTIO10 and a SimDataConcentrator."""
     boards = open_boards(None, "prototype", MANIPULATOR_BOARDS)
     assert boards.url == "sim:" and boards.in_process
-    assert isinstance(boards["tio10"], SimTIO10) and isinstance(boards["dc"], SimDataConcentrator)
+    side = boards.simulated
+    assert side is not None
+    assert isinstance(side["tio10"], SimTIO10) and isinstance(side["dc"], SimDataConcentrator)
+    assert isinstance(boards["tio10"], TIO10) and isinstance(boards["dc"], DataConcentrator)
     assert list(boards) == ["tio10", "dc"] and "gripper" not in boards
     with pytest.raises(KeyError, match="tio10, dc"):
         boards["gripper"]
@@ -167,7 +177,8 @@ def test_any_station_opens_its_declared_boards_and_a_bad_declaration_is_refused(
     process); a declaration that is not a mapping of names to kinds is a ConfigError."""
     leg = BoardKind("hexapod-leg", (Register("angle", count=3, width=12, direction=OUTPUT),))
     with open_boards("sim:", "hexapod", {"leg0": leg, "leg1": leg}) as boards:
-        assert isinstance(boards["leg1"], RegisterBoard) and boards["leg1"].kind is leg
+        assert isinstance(boards.simulated["leg1"], RegisterBoard)
+        assert boards["leg1"].kind is leg
         assert boards["leg0"] is not boards["leg1"] and boards.registers("leg0") is boards["leg0"]
     for bad in ({}, {"Leg": leg}, {"leg": "hexapod-leg"}, ["leg"]):
         with pytest.raises(ConfigError):
@@ -251,3 +262,52 @@ def test_boards_must_hold_every_declared_board():
         Boards("x:", "gripper", {}, GRIPPER_BOARDS, in_process=True)
     with pytest.raises(ConfigError, match="no dc board"):
         Boards("x:", "prototype", {"tio10": SimTIO10()}, MANIPULATOR_BOARDS, in_process=True)
+
+
+def test_read_inputs_reads_the_image_without_stepping_the_world():
+    """Boards.read_inputs (a station being built) brings the inputs in without the world's
+    step; the read phase (poll) steps it first, then reads."""
+    boards = open_boards("sim:", "gripper", GRIPPER_BOARDS)
+    steps: list[int] = []
+    side = boards.simulated
+    assert side is not None and boards.attach_world(steps.append)
+    boards.set_tick(0.001)
+    side["gripper"].pa = 0x7F
+    boards.read_inputs(5)
+    assert steps == [] and boards["gripper"].read(P8155_PA) == 0x7F
+    side["gripper"].pa = 0x3F
+    boards.poll(6)
+    assert steps == [6] and boards["gripper"].read(P8155_PA) == 0x3F
+    boards.close()
+
+
+def test_a_bound_write_refuses_what_write_refuses_and_a_same_value_is_no_change():
+    """A register bound once (ImageBackend.writer) refuses a value the declaration does not
+    hold, as write() does, leaving the image as it was; writing the value it holds is not a
+    change (the write phase sends nothing, the tap sees nothing)."""
+    boards = open_boards("sim:", "gripper", GRIPPER_BOARDS)
+    image = boards.image
+    seen: list[tuple[int, int]] = []
+
+    class Tap:
+        def wrote(self, slot: int, value: int) -> None:
+            seen.append((slot, value))
+
+    image.tap = Tap()
+    boards.set_tick(0.001)
+    write = image.writer("gripper", "dac")
+    boards.poll(0)
+    for bad in (0x100, -1, True, 1.5, "80"):
+        with pytest.raises(ValueError, match="dac"):
+            write(bad)
+    assert image.read("gripper", "dac") == 0x80 and seen == []
+    write(0x80)  # the value it holds: no change
+    assert seen == []
+    write(0x90)
+    assert seen == [(image.output_index[("gripper", "dac", 0)], 0x90)]
+    assert boards.simulated["gripper"].dac == 0x80  # in the image until the write phase
+    boards.flush(0)
+    assert boards.simulated["gripper"].dac == 0x90
+    with pytest.raises(ValueError, match="input"):
+        image.writer("gripper", "pa")
+    boards.close()

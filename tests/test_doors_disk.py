@@ -301,7 +301,7 @@ class FullAfter(io.RawIOBase):
 
 
 def _gripper():
-    st = build_gripper(Loop(SimClock()), boards="sim:?image=1")
+    st = build_gripper(Loop(SimClock()), boards="sim:")
     return st
 
 

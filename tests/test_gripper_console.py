@@ -60,7 +60,7 @@ def move_period_s(s: Session) -> float:
 
 def stopped_within_one_period(s: Session) -> None:
     """Current zero now; the jaws coasting to rest within one MVJAWS period."""
-    assert s.runner.call(lambda: s.station.board.dac) == 0x80
+    assert s.runner.call(lambda: s.station.plant.board.dac) == 0x80
     assert not s.ctl.ram[FLAGS] & (1 << DRVON)
     s.runner.sleep(move_period_s(s))
     full = s.ctl.calibration.speed(0x7F)
@@ -79,7 +79,7 @@ def test_stop_during_i_c_and_p_stops_the_jaws_within_one_jaw_move_period(word):
             if word == "C":
                 s.runner.sleep(1.5)  # past the first init: closing
         s.runner.sleep(0.5)
-        assert s.runner.call(lambda: s.station.board.dac) != 0x80
+        assert s.runner.call(lambda: s.station.plant.board.dac) != 0x80
         said = s.run("stop")
         assert said[0].startswith("gripper: every motor stopped; position ")
         assert "mm), target " in said[0] and "error " in said[0]

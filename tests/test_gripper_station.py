@@ -71,7 +71,7 @@ def test_jammed_motor_ends_each_queued_move_without_current(station):
     """Jammed motor: 002's stopped bit ends every queued move in turn; the drive is left null."""
     station.run("sim fault jam", "P -1000", "P -0800", "P -0400")
     lines = station.run("wait 5")
-    assert lines[0].startswith("stopped") and station.board.dac == 0x80
+    assert lines[0].startswith("stopped") and station.plant.board.dac == 0x80
     assert counts(station.run("W")[0]) == 0 and not station.executor.busy
 
 
@@ -85,7 +85,7 @@ def test_fault_empties_the_motion_queue_and_needs_ack(station):
 
     def trip():
         station.trip("loadcell on fire", source="test")
-        return station.board.dac, len(station.runner.motion), station.executor.busy
+        return station.plant.board.dac, len(station.runner.motion), station.executor.busy
 
     assert station.runner.call(trip) == (0x80, 0, False)
     assert station.executor.last.stop_reason == "fault: loadcell on fire"
@@ -93,7 +93,7 @@ def test_fault_empties_the_motion_queue_and_needs_ack(station):
     assert lines[0].startswith("FAULT: loadcell on fire") and "ack" in lines[1]
     assert "ack" in station.run("P -0200")[0]
     station.runner.sleep(1.0)
-    assert station.board.dac == 0x80 and not ctl.moving
+    assert station.plant.board.dac == 0x80 and not ctl.moving
     assert station.run("ack")[-1].startswith("fault acknowledged")
     station.run("P -0200", "wait")
     assert abs(counts(station.run("W")[0]) + 0x0200) <= 16

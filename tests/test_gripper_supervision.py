@@ -24,7 +24,7 @@ TARGET = -0x1B86
 def station_rig(tick_us: int = 1000):
     """A gripper station on a SimClock with ``tick_us``, initialised."""
     boards = open_boards("sim:", "gripper", GRIPPER_BOARDS)
-    plant = JawPlant(boards["gripper"])
+    plant = JawPlant(boards.simulated["gripper"])  # the world's side
     loop = Loop(SimClock(), period_ns=tick_us * 1000)
     station = GripperStation(loop, boards, plant)
     ctl = station.controller
@@ -204,7 +204,7 @@ def test_every_schedule_settles_stops_short_truthfully_or_trips_within_the_bound
     sched = ctl.schedule()
     assert isinstance(sched, Schedule)
     taken, bound = supervised_move(station, ctl, loop, target)
-    assert station.board.dac == 0x80 and not ctl.moving
+    assert station.plant.board.dac == 0x80 and not ctl.moving
     if station.fault is None:
         assert taken <= bound + tick_us * 1000
         assert station.last_move is not None

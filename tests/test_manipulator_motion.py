@@ -310,13 +310,13 @@ def test_motion_word_refusals_move_nothing(tmp_path_factory, kind, params):
     try:
         out = io.StringIO()
         sh = RobotShell(station, out)
-        writes = station.tio10.writes
+        writes = station.boards.simulated["tio10"].writes
         assert not sh.onecmd(" ".join(["motion", kind, *params]))
         runner.sleep(0.05)
         text = out.getvalue()
         assert "internal error" not in text
         if "error:" in text:
-            assert station.tio10.writes == writes
+            assert station.boards.simulated["tio10"].writes == writes
             assert not station.motors_running() and not station.polyaxis.active
             assert len(station.motion) == 0
     finally:

@@ -14,6 +14,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from pyrt.boards import open_boards
 from pyrt.boards.gripper import DAC_NULL
 from pyrt.cli import main
 from pyrt.commands import RobotShell
@@ -22,8 +23,9 @@ from pyrt.journal import JournalError, JournalReader
 from pyrt.robots.gripper import GripperController
 from pyrt.scheduler import Loop, SimClock
 from pyrt.scheduler.motion import MotionRecord
+from pyrt.sim.world import GRIPPER_BOARDS
 from pyrt.station.gripper import build_gripper
-from pyrt.station.recording import Recorder, decode_request, encode_request, with_image
+from pyrt.station.recording import Recorder, decode_request, encode_request
 from pyrt.station.replay import Replay
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -198,24 +200,22 @@ def test_a_journal_killed_mid_move_replays_to_its_last_complete_tick(tmp_path):
 
 def _station() -> tuple[Loop, object]:
     loop = Loop(SimClock(), period_ns=1_000_000)
-    return loop, build_gripper(loop, boards="sim:?image=1")
+    return loop, build_gripper(loop, boards="sim:")
 
 
-def test_with_image_gives_sim_boards_an_image_and_leaves_others_alone():
-    """--journal turns sim: into sim:?image=1 and leaves links (which have one) as they are."""
-    assert with_image(None) == "sim:?image=1"
-    assert with_image("sim:") == "sim:?image=1"
-    assert with_image("sim:?image=1") == "sim:?image=1"
-    assert with_image("tcp://h:1") == "tcp://h:1"
-
-
-def test_a_recorder_refuses_boards_without_an_image():
-    """Plain sim: boards have no process image to record: a clear error, nothing attached."""
+def test_sim_has_one_tick_shape_and_refuses_image_by_name(tmp_path):
+    """sim: always reaches its boards through the process image (what a journal records);
+    ?image=1 is an unknown option, refused by name."""
+    with pytest.raises(ConfigError, match="sim: takes no option image"):
+        open_boards("sim:?image=1", "gripper", GRIPPER_BOARDS)
     loop = Loop(SimClock(), period_ns=1_000_000)
     station = build_gripper(loop, boards="sim:")
     try:
-        with pytest.raises(ConfigError, match="process image"):
-            Recorder(station, None)
+        boards = station.boards
+        assert boards.image is not None and boards.simulated is not None
+        assert boards.simulated["gripper"] is not boards["gripper"]  # the world's side apart
+        recorder = Recorder(station, tmp_path / "run.pj")
+        recorder.close()
     finally:
         station.close()
 
@@ -387,7 +387,7 @@ def test_each_write_is_named_by_the_task_or_job_that_ran(tmp_path):
     """The recorder stamps every output write with what the loop and queue say runs: the
     init job's writes are "init", a move's are MVJAWS; none is "outside a task"."""
     loop = Loop(SimClock(), period_ns=1_000_000)
-    station = build_gripper(loop, boards="sim:?image=1")
+    station = build_gripper(loop, boards="sim:")
     rec = Recorder(station, tmp_path / "named.pj")
     shell = RobotShell(station, io.StringIO())
     try:
@@ -408,7 +408,7 @@ def test_a_statistics_reset_in_a_recorded_run_records_the_ticks_missed_since(tmp
     """Missed deadlines counted before and after a statistics reset (which zeroes the
     count) are each recorded once and never as a negative count: no tick is refused."""
     loop = Loop(SimClock(), period_ns=1_000_000)
-    station = build_gripper(loop, boards="sim:?image=1")
+    station = build_gripper(loop, boards="sim:")
     rec = Recorder(station, tmp_path / "reset.pj")
     try:
         loop.run(5)

@@ -205,7 +205,7 @@ def test_the_arm_plays_a_world_behind_sim_boards():
     from pyrt.boards import open_boards
     from pyrt.sim.world import World
 
-    boards = open_boards("sim:", "puma560", {"arm": arm_servo_kind(6)})
+    boards = open_boards("sim:", "puma560", {"arm": arm_servo_kind(6)}).simulated
     arm = puma(board=boards["arm"])
     world = World("puma560", boards, ArmPlant(arm))
     world.step(0)

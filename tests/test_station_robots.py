@@ -251,17 +251,23 @@ def test_a_station_without_robots_is_one_robot_named_after_it():
 
 def _link(url: str, fail_after: int, in_process: bool = True):
     """Boards whose read phase raises BoardError (naming the URL) from the Nth poll on."""
-    from pyrt.boards import Boards
+    from pyrt.boards import Backend, Boards
     from pyrt.errors import BoardError
 
-    polls = [0]
+    class Link(Backend):
+        has_link = True  # its phases can fail: the station catches them
+        polls = 0
 
-    def poll(now_ns: int) -> None:
-        polls[0] += 1
-        if polls[0] > fail_after:
-            raise BoardError(url, "no reply")
+        def read_phase(self, now_ns: int) -> None:
+            self.polls += 1
+            if self.polls > fail_after:
+                raise BoardError(url, "no reply")
 
-    return Boards(url, "test", {}, {}, in_process=in_process, poll=poll)
+    backend = Link(url, {})
+    boards = Boards(url, "test", {}, {}, backend)
+    if in_process:  # the world's side is these boards themselves
+        backend.simulated = boards
+    return boards
 
 
 def test_a_lost_board_trips_the_robot_that_owns_it_alone():

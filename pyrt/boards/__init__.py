@@ -12,6 +12,7 @@ entry points; see :mod:`pyrt.boards.registry`), which open the boards a
 station declares as a :class:`Boards` mapping.
 """
 
+from pyrt.boards.backend import Backend
 from pyrt.boards.registers import INPUT, OUTPUT, BoardKind, Register, RegisterBoard
 from pyrt.boards.registry import (
     DEFAULT_URL,
@@ -29,6 +30,7 @@ __all__ = [
     "ENTRY_POINT_GROUP",
     "INPUT",
     "OUTPUT",
+    "Backend",
     "BoardKind",
     "BoardURL",
     "Boards",

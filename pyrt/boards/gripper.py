@@ -179,10 +179,10 @@ class SimGripperBoard(GripperBoard):
         self._vectors = cpu.vectors
         #: Latched DAC byte: the motor is driven with it until it is overwritten.
         self.dac = DAC_NULL
-        #: Input levels of the 8155 ports (1 = high = sensor off / switch open).
-        self.pa = 0xFF
-        self.pb = 0xFF
-        self.pc = 0xFF
+        # the inputs as the kind declares them (PA, PB, PC, up, down), kept as
+        # they change: a process image's read phase copies the list at once
+        self._in = [0xFF, 0xFF, 0xFF, 0, 0]
+        self._pa = self._pb = self._pc = 0xFF
         #: 8155 command register (port modes) as last written.
         self.cmd = 0x00
         #: Front-panel LED latches (LED on iff its bit is 0); all off at power-up.
@@ -217,6 +217,42 @@ class SimGripperBoard(GripperBoard):
     def pulse_counts(self) -> tuple[int, int]:
         return self._up, self._down
 
+    def input_values(self) -> list[int]:
+        """Every input at once, as the cage kind declares them: PA, PB, PC and
+        the pulses raised on each interrupt line (a process image's read phase)."""
+        return self._in[:]
+
+    # Input levels of the 8155 ports (1 = high = sensor off / switch open).
+    @property
+    def pa(self) -> int:
+        """8155 PA's pin levels (the proximity sensors)."""
+        return self._pa
+
+    @pa.setter
+    def pa(self, value: int) -> None:
+        self._pa = value
+        self._in[0] = value & 0xFF
+
+    @property
+    def pb(self) -> int:
+        """8155 PB's pin levels as the world drives them (bits 3-7 read high)."""
+        return self._pb
+
+    @pb.setter
+    def pb(self, value: int) -> None:
+        self._pb = value
+        self._in[1] = (value | 0xF8) & 0xFF
+
+    @property
+    def pc(self) -> int:
+        """8155 PC's pin levels (the jog switch)."""
+        return self._pc
+
+    @pc.setter
+    def pc(self, value: int) -> None:
+        self._pc = value
+        self._in[2] = value & 0xFF
+
     def register_file(self) -> list[int]:
         """Every register at once, in :data:`REGISTERS` order (for a board server)."""
         readers = self._readers
@@ -244,11 +280,11 @@ class SimGripperBoard(GripperBoard):
         """The worm turned ``counts`` encoder steps: one interrupt per step."""
         if counts > 0:
             h = self._vectors.get(VECTOR_EXT0)
-            self._up = (self._up + counts) & 0xFFFFFFFF
+            self._up = self._in[3] = (self._up + counts) & 0xFFFFFFFF
         elif counts < 0:
             h = self._vectors.get(VECTOR_EXT1)
             counts = -counts
-            self._down = (self._down + counts) & 0xFFFFFFFF
+            self._down = self._in[4] = (self._down + counts) & 0xFFFFFFFF
         else:
             return
         if h is not None:

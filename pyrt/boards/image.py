@@ -1,18 +1,26 @@
 """The process image: a back end's copy of its boards' registers, one exchange per phase.
 
-:class:`ImageBackend` is the base class of every back end that reaches its
-boards over a link (``tcp://`` in :mod:`pyrt.boards.tcp`, ``modbus://`` in
-:mod:`pyrt.boards.modbus`); :class:`ImageRegisters` is the register view of
+:class:`ImageBackend` implements the back-end protocol
+(:class:`pyrt.boards.backend.Backend`) with a process image: it is the
+base class of every back end that reaches its boards over a link
+(``tcp://`` in :mod:`pyrt.boards.tcp`, ``modbus://`` in
+:mod:`pyrt.boards.modbus`), and :class:`LocalImage` is the one of
+``sim:`` (the simulated boards in this process) and ``replay:`` (the
+inputs from a journal).  :class:`ImageRegisters` is the register view of
 one of its boards (``read``/``write`` by register name, as
 :class:`~pyrt.boards.registers.RegisterBoard` has them), which a built-in
-kind wraps in its typed interface.
+kind wraps in its typed interface; a typed board binds each register it
+uses once (:meth:`ImageBackend.reader`, :meth:`ImageBackend.writer`), so
+that a read in the tick is one index into the image and a write checks
+its value against the declared width and sign, nothing more.
 
 The back-end contract
 =====================
 
 This is the one place it is written; ``tests/test_backend_contract.py`` is
 the suite every back end passes (``sim:``, ``tcp://``, ``modbus://``, and
-one of one's own: add it to the suite's parameters).
+one of one's own: add it to the suite's parameters).  There is one tick
+shape for every back end: ``sim:`` runs the same phases as a link.
 
 Phases of a tick (the station attaches them to its loop, :class:`pyrt.station.base.Station`):
 
@@ -75,9 +83,11 @@ A subclass implements :meth:`exchange_inputs`, :meth:`exchange_outputs`,
 from __future__ import annotations
 
 import time
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
+from functools import partial
 from typing import Any
 
+from pyrt.boards.backend import Backend
 from pyrt.boards.registers import BoardKind, Register
 from pyrt.errors import BoardError
 
@@ -102,7 +112,7 @@ MIN_TIMEOUT_S = 0.1
 Write = tuple[str, str, int, int]
 
 
-class ImageBackend:
+class ImageBackend(Backend):
     """The process image of one link's boards (see the module text for the contract).
 
     ``kinds``: the declared boards (name -> kind).  ``max_age``: seconds an
@@ -115,14 +125,16 @@ class ImageBackend:
     #: Whether there is a link that can go down (:attr:`down`); False for boards in
     #: this process, whose reads then skip asking.
     has_link: bool = True
+    #: A link's boards and world run in another process at real time.
+    realtime: bool = True
 
     def __init__(self, url: str, kinds: Mapping[str, BoardKind], *,
                  max_age: float = 0.05,
                  overrun_ticks: int = DEFAULT_OVERRUN_TICKS,
                  overrun_limit: int = DEFAULT_OVERRUN_LIMIT,
                  timeout: float | None = None):
-        self.url = url
-        self.kinds = dict(kinds)
+        super().__init__(url, kinds)
+        self.image = self
         self.max_age_ns = int(max_age * 1e9)
         self.overrun_ticks = int(overrun_ticks)
         self.overrun_limit = int(overrun_limit)
@@ -159,11 +171,12 @@ class ImageBackend:
         #: first value is in the inputs, or -1 for an output): a read of one of them
         #: with an index in range skips the check.
         self._readable: dict[tuple[str, str], tuple[Register, int]] = {}
-        #: Whether :attr:`_values` is the image's own copy (set_cached may change
-        #: it) or the list the last exchange made (:attr:`last_inputs`, never changed).
-        self._own_values = True
         self._outputs: dict[tuple[str, str, int], int] = {}
-        self._changed: dict[tuple[str, str, int], int] = {}
+        #: The readable outputs as :attr:`_outputs` holds them, by slot (a bound
+        #: reader's index; kept with it).
+        self._output_list: list[int] = [0] * len(self.output_layout)
+        #: The outputs written since the last exchange: slot -> value.
+        self._changed: dict[int, int] = {}
         self._fresh_until = 0
         self.in_tick = False
         #: Whether a station runs the phases (:meth:`set_tick` was called): only
@@ -173,6 +186,12 @@ class ImageBackend:
         self.exchanges = 0
         self.overruns = 0
         self.late_in_row = 0
+        #: Run with the loop's time at the start of every read phase (the world's
+        #: step, when the world is in this process and not replayed).
+        self.before_read: list[Callable[[int], None]] = []
+        #: Run with the loop's time at the end of every read phase (a typed board's
+        #: own ``poll``: the gripper cage raises the encoder interrupts that came).
+        self.after_read: list[Callable[[int], None]] = []
 
     # -- what a subclass implements ------------------------------------------------------
 
@@ -208,7 +227,9 @@ class ImageBackend:
     def open(self) -> None:
         """Read the inputs and the readable outputs once."""
         self._take_inputs(self.exchange_inputs())
-        self._outputs = dict(self.read_outputs())
+        self._outputs.clear()  # in place: a bound writer holds this dict
+        self._outputs.update(self.read_outputs())
+        self._list_outputs()
 
     def set_tick(self, period_s: float) -> None:
         """Derive the timeouts from the loop's tick period (see the module text)
@@ -243,27 +264,40 @@ class ImageBackend:
         if len(values) != self.input_count:
             raise BoardError(self.url, f"read {len(values)} input values, "
                                        f"not {self.input_count}")
-        self._values = values  # copied before set_cached changes it: never the caller's
-        self._own_values = False
-        self.last_inputs = values
+        # the list the exchange made (last_inputs, never changed): set_cached
+        # copies it before changing a value
+        self._values = self.last_inputs = values
         if not self.phased:
             self._fresh_until = time.monotonic_ns() + self.max_age_ns
 
     def read_phase(self, now_ns: int = 0) -> None:
-        """The tick's read phase: every input into the image, one exchange."""
+        """The tick's read phase: :attr:`before_read`, every input into the
+        image in one exchange, :attr:`after_read`."""
+        for step in self.before_read:
+            step(now_ns)
         self.in_tick = True
         t0 = time.monotonic_ns()
         values = self.exchange_inputs()
         self._take_inputs(values)
         self._timed(t0, "read")
+        for after in self.after_read:
+            after(now_ns)
+
+    def read_inputs(self, now_ns: int = 0) -> None:
+        """The read phase without :attr:`before_read` (outside the ticks: the
+        world steps in the loop's ticks alone)."""
+        steps, self.before_read = self.before_read, []
+        try:
+            self.read_phase(now_ns)
+        finally:
+            self.before_read = steps
 
     def write_phase(self, now_ns: int = 0) -> None:
         """The tick's write phase: the changed outputs, one exchange; then
         :meth:`end_of_tick`."""
         self.in_tick = False
         if self._changed:
-            writes = [(b, n, i, v) for (b, n, i), v in self._changed.items()]
-            self._changed.clear()
+            writes = self._take_changed()
             t0 = time.monotonic_ns()
             self.exchange_outputs(writes)
             self._timed(t0, "write")
@@ -283,9 +317,15 @@ class ImageBackend:
         """Write the changed outputs at once (the reflex; see the module text)."""
         if not self._changed:
             return
-        writes = [(b, n, i, v) for (b, n, i), v in self._changed.items()]
-        self._changed.clear()
+        writes = self._take_changed()
         self._send_now(writes)
+
+    def _take_changed(self) -> list[Write]:
+        """The outputs written since the last exchange, as writes; none from now."""
+        layout = self.output_layout
+        writes = [(*layout[slot], v) for slot, v in self._changed.items()]
+        self._changed.clear()
+        return writes  # type: ignore[return-value]
 
     def _send_now(self, writes: list[Write]) -> None:
         if self.down is not None:
@@ -317,11 +357,7 @@ class ImageBackend:
                     and time.monotonic_ns() >= self._fresh_until:
                 self._take_inputs(self.exchange_inputs())
             return self._values[base + index]
-        key = (board, name, index)
-        value = self._changed.get(key)
-        if value is None:
-            value = self._outputs.get(key, 0)
-        return value
+        return self._outputs.get((board, name, index), 0)  # a write keeps it there
 
     def write(self, board: str, name: str, value: int, index: int = 0) -> None:
         """Write ``board``'s output ``name[index]``: into the image in a tick (the
@@ -332,14 +368,16 @@ class ImageBackend:
             return
         # write_many for one write, without its lists (a task's write, the hot path)
         key = (board, name, index)
+        slot = self.output_index[key]
         if reg.readback:
-            if self._outputs.get(key) == value and key not in self._changed:
+            if self._outputs.get(key) == value and slot not in self._changed:
                 return
             self._outputs[key] = value
-        self._changed[key] = value
+            self._output_list[slot] = value
+        self._changed[slot] = value
         tap = self.tap
         if tap is not None:
-            tap.wrote(self.output_index[key], value)
+            tap.wrote(slot, value)
         if not (self.in_tick and self.phased):
             self.write_now()
 
@@ -354,13 +392,15 @@ class ImageBackend:
         tap = self.tap
         for reg, (b, n, i, v) in zip(regs, todo, strict=True):
             key = (b, n, i)
+            slot = self.output_index[key]
             if reg.readback:
-                if self._outputs.get(key) == v and key not in self._changed:
+                if self._outputs.get(key) == v and slot not in self._changed:
                     continue
                 self._outputs[key] = v
-            self._changed[key] = v
+                self._output_list[slot] = v
+            self._changed[slot] = v
             if tap is not None:
-                tap.wrote(self.output_index[key], v)
+                tap.wrote(slot, v)
         if not (self.in_tick and self.phased):
             self.write_now()
 
@@ -374,70 +414,149 @@ class ImageBackend:
         """Set the image's copy of an input (what a write made of it: a cleared counter)."""
         span = self._span.get((board, name))
         if span is not None and 0 <= index < span[1]:
-            if not self._own_values:  # the exchange's list stays as it was read
+            if self._values is self.last_inputs:  # the exchange's list stays as it was read
                 self._values = list(self._values)
-                self._own_values = True
             self._values[span[0] + index] = value
 
     def forget_outputs(self, values: Mapping[tuple[str, str, int], int]) -> None:
         """Take ``values`` as the outputs (the far side changed them: a watchdog)."""
-        self._outputs = dict(values)
+        new = dict(values)
+        self._outputs.clear()  # in place: a bound writer holds this dict
+        self._outputs.update(new)
         self._changed.clear()
+        self._list_outputs()
+
+    def _list_outputs(self) -> None:
+        """:attr:`_output_list` from :attr:`_outputs` (after they were replaced)."""
+        outs, slots = self._outputs, self._output_list
+        for n, key in enumerate(self.output_layout):
+            slots[n] = outs.get(key, 0)
+
+    # -- bound accessors (a typed board's hot path) ------------------------------------------
+
+    def reader(self, board: str, name: str, index: int = 0) -> Callable[[], int]:
+        """A read of ``board``'s register ``name[index]`` bound once: checked
+        here (ValueError as :meth:`read` gives it), then every call answers
+        as :meth:`read` does, without looking the register up again.  Once
+        the phases run (:meth:`set_tick`) an input is one index into the
+        image; a link's reads keep :meth:`read`'s check of the link."""
+        reg = self.kinds[board].check_read(name, index)
+        slow = partial(self.read, board, name, index)
+        if self.has_link:
+            return slow
+        if reg.is_input:
+            slot = self._span[(board, name)][0] + index
+
+            def read_input() -> int:
+                if self.phased:
+                    return self._values[slot]
+                return slow()  # outside a station's ticks: fresh inputs
+
+            return read_input
+        # a readable output: the image holds its latest value (a write keeps it there)
+        slots, slot = self._output_list, self.output_index[(board, name, index)]
+
+        def read_output() -> int:
+            return slots[slot]
+
+        return read_output
+
+    def writer(self, board: str, name: str, index: int = 0) -> Callable[[int], None]:
+        """A write of ``board``'s output ``name[index]`` bound once: the register
+        and index checked here, the value at every call against the declared
+        width and sign (ValueError as :meth:`write` gives it); otherwise
+        exactly :meth:`write`."""
+        reg = self.kinds[board].check_write(name, index, self.kinds[board].register(name).low)
+        if self.has_link:
+            return partial(self._write_one, board, name, index)
+        key = (board, name, index)
+        slot = self.output_index[key]
+        low, high, readback = reg.low, reg.high, reg.readback
+        changed, outputs, slots = self._changed, self._outputs, self._output_list
+
+        def write(value: int) -> None:
+            if type(value) is not int or not low <= value <= high:
+                reg.check_value(value)  # raises (a bool, a float, out of range)
+            if readback:  # every readable output is known from open() on
+                if slots[slot] == value and slot not in changed:
+                    return
+                outputs[key] = value
+                slots[slot] = value
+            changed[slot] = value
+            tap = self.tap
+            if tap is not None:
+                tap.wrote(slot, value)
+            if not (self.in_tick and self.phased):
+                self.write_now()
+
+        return write
+
+    def _write_one(self, board: str, name: str, index: int, value: int) -> None:
+        self.write(board, name, value, index)
 
     def close(self) -> None:
         """Release the link (idempotent)."""
         self.close_link()
 
-    def boards_hooks(self, pollers: Iterable[Any] = ()) -> dict[str, Any]:
+    def boards_hooks(self, pollers: Iterable[Callable[[int], None]] = ()) -> dict[str, Any]:
         """The :class:`~pyrt.boards.registry.Boards` keyword arguments of this back
-        end: the phases, the reflex write, the tick, close and down.  ``pollers``:
-        a board's own ``poll(now_ns)`` run after the read phase (the gripper cage
+        end (``backend``: itself).  ``pollers``: a board's own ``poll(now_ns)``,
+        run at the end of every read phase (:attr:`after_read`: the gripper cage
         raises its encoder interrupts)."""
-        polls = list(pollers)
-
-        def poll(now_ns: int) -> None:
-            self.read_phase(now_ns)
-            for p in polls:
-                p(now_ns)
-
-        return {"poll": poll, "flush": self.write_phase, "write_now": self.write_now,
-                "set_tick": self.set_tick, "close": self.close, "down": lambda: self.down,
-                "resync": self.resync, "image": self}
+        self.after_read.extend(pollers)
+        return {"backend": self}
 
 
 class LocalImage(ImageBackend):
-    """A process image over boards in this process (``sim:?image=1``): the
+    """A process image over boards in this process (``sim:``, ``replay:``): the
     controller meets its simulated boards exactly as it meets a link's (one
     read phase, one write phase), and a journal can record the image.
 
-    ``views``: the register view of every declared board.  The world behind
-    them steps at the start of the read phase (:attr:`before_read`, filled by
-    :meth:`pyrt.boards.registry.Boards.attach_world`), so the inputs a tick
-    reads are those of the world as it stands at the tick: what the boards
-    without an image give.  ``feed`` (a replay): an object whose
-    ``current`` is every input, in declared order, as the tick being replayed
-    read them (the replay moves it on in :attr:`before_read`); the views are
-    then not touched (neither read nor written).
+    ``views``: the register view of every declared board (the world's side,
+    ``simulated``).  The world behind them steps at the start of the read
+    phase (:attr:`before_read`, filled by :meth:`attach_world`), so the
+    inputs a tick reads are those of the world as it stands at the tick.
+    ``feed`` (a replay): an object whose ``current`` is every input, in
+    declared order, as the tick being replayed read them (the replay moves it
+    on in :attr:`before_read`); the views are then not touched (neither read
+    nor written) and the world stands still.  ``info``: what :meth:`info`
+    tells (a replay says what it knows of a world it does not replay).
     """
 
     has_link = False
+    realtime = False
 
     def __init__(self, url: str, kinds: Mapping[str, BoardKind],
                  views: Mapping[str, Any] | None, *,
-                 feed: Any = None, outputs: Mapping[tuple[str, str, int], int] | None = None):
+                 feed: Any = None, outputs: Mapping[tuple[str, str, int], int] | None = None,
+                 simulated: Any = None, info: Callable[[], dict[str, str]] | None = None):
         super().__init__(url, kinds, max_age=0.0)
+        self.simulated = simulated
+        self.replay = feed is not None
+        self._tell = info
         self.views = dict(views) if views is not None else {}
+        # every board with inputs: its view's snapshot (a new list each call; a
+        # simulated board's own register file where the view names it)
+        self._snaps = [getattr(self.views[name], "read_inputs", self.views[name].snapshot)
+                       for name, kind in self.kinds.items()
+                       if kind.inputs() and name in self.views]
+        # the boards after the first: each appends its inputs (one copy where it can)
+        self._extends = [_extender(snap) for snap in self._snaps[1:]]
+        # every output slot's write into its board (checked by the image already)
+        self._setters = [_setter(self.views[b], n, i) for b, n, i in self.output_layout] \
+            if views is not None else []
         self.feed = feed
         self._initial = dict(outputs) if outputs is not None else None
-        #: Run with the loop's time before every read phase (the world's step).
-        self.before_read: list[Any] = []
 
     def exchange_inputs(self) -> list[int]:
         if self.feed is not None:
             return list(self.feed.current)
-        out: list[int] = []
-        for name in self.kinds:
-            out += self.views[name].snapshot()
+        snaps = self._snaps
+        if not snaps:
+            return []
+        out = snaps[0]()  # a new list: the first board's register file at once
+        for extend in self._extends:
+            extend(out)
         return out
 
     def exchange_outputs(self, writes: list[Write]) -> None:
@@ -464,16 +583,81 @@ class LocalImage(ImageBackend):
     def _timed(self, start_ns: int, what: str) -> None:
         self.exchanges += 1  # no link: nothing is ever late
 
+    def info(self) -> dict[str, str]:
+        if self._tell is None:
+            return super().info()
+        return self._tell()
+
+    @property
+    def tells_world(self) -> bool:
+        return self._tell is not None
+
+    def attach_world(self, step: Callable[[int], None]) -> bool:
+        """The world steps at the start of every read phase; in a replay it
+        stands still (the recorded inputs stand in for it): nothing is attached."""
+        if self.feed is None:
+            self.before_read.append(step)
+        return True
+
     def read_phase(self, now_ns: int = 0) -> None:
         for step in self.before_read:
             step(now_ns)
-        super().read_phase(now_ns)
+        self.in_tick = True
+        snaps = self._snaps  # none when fed (a replay)
+        if len(snaps) == 1:
+            # a simulated board's register file, in declared order by construction
+            self._values = self.last_inputs = snaps[0]()
+        else:
+            values = self.exchange_inputs()
+            if len(values) != self.input_count:
+                raise BoardError(self.url, f"read {len(values)} input values, "
+                                           f"not {self.input_count}")
+            self._values = self.last_inputs = values  # a new list: never changed after
+        for after in self.after_read:
+            after(now_ns)
+
+    def write_phase(self, now_ns: int = 0) -> None:
+        self.in_tick = False
+        changed = self._changed
+        if changed:
+            if self.feed is None:  # each output straight into its board's register
+                setters = self._setters
+                for slot, value in changed.items():
+                    setters[slot](value)
+            changed.clear()
+
+
+def _setter(view: Any, name: str, index: int) -> Callable[[int], None]:
+    """The write of ``name[index]`` into ``view``: the view's own unchecked
+    ``setter`` where it has one (a RegisterBoard's), else its ``write``."""
+    make = getattr(view, "setter", None)
+    if make is not None:
+        return make(name, index)  # type: ignore[no-any-return]
+
+    def write(value: int) -> None:
+        view.write(name, value, index)
+
+    return write
+
+
+def _extender(snap: Callable[[], list[int]]) -> Callable[[list[int]], None]:
+    """``out += snap()`` as one call; a simulated board's own ``extend_inputs``
+    (one copy, not two) where it has one."""
+    extend = getattr(getattr(snap, "__self__", None), "extend_inputs", None)
+    if extend is not None and getattr(snap, "__name__", "") == "input_values":
+        return extend  # type: ignore[no-any-return]
+
+    def extend_with(out: list[int]) -> None:
+        out += snap()
+
+    return extend_with
 
 
 class ImageRegisters:
     """One board of an :class:`ImageBackend`: ``read(name, index=0)`` and
     ``write(name, value, index=0)`` as a :class:`~pyrt.boards.registers.RegisterBoard`
-    has them."""
+    has them, each register bound once on its first use (:meth:`ImageBackend.reader`,
+    :meth:`ImageBackend.writer`): a servo's every-tick access is one call into the image."""
 
     def __init__(self, client: ImageBackend, board: str):
         self.client = client
@@ -481,15 +665,49 @@ class ImageRegisters:
         self.kind = client.kinds[board]
         self.url = client.url
         self.link = getattr(client, "link", None)
+        # where this board's inputs are in the image's (contiguous, declared order)
+        spans = [client._span[(board, r.name)] for r in self.kind.inputs()]
+        self._first = spans[0][0] if spans else 0
+        self._end = spans[-1][0] + spans[-1][1] if spans else 0
+        self._readers: dict[str, list[Callable[[], int]]] = {}
+        self._writers: dict[str, list[Callable[[int], None]]] = {}
 
     def read(self, name: str, index: int = 0) -> int:
-        return self.client.read(self.board, name, index)
+        bound = self._readers.get(name)
+        if bound is None:
+            self.client.kinds[self.board].check_read(name, index)  # ValueError if refused
+            reg = self.kind.register(name)
+            bound = self._readers[name] = [self.client.reader(self.board, name, i)
+                                           for i in range(reg.count)]
+        if type(index) is int and 0 <= index < len(bound):
+            return bound[index]()
+        return self.client.read(self.board, name, index)  # the refusal, named
 
     def write(self, name: str, value: int, index: int = 0) -> None:
-        self.client.write(self.board, name, value, index)
+        bound = self._writers.get(name)
+        if bound is None:
+            reg = self.kind.check_write(name, index, value)  # ValueError if refused
+            bound = self._writers[name] = [self.client.writer(self.board, name, i)
+                                           for i in range(reg.count)]
+        if type(index) is int and 0 <= index < len(bound):
+            bound[index](value)
+            return
+        self.client.write(self.board, name, value, index)  # the refusal, named
+
+    def reader(self, name: str, index: int = 0) -> Callable[[], int]:
+        """``read(name, index)`` bound once (:meth:`ImageBackend.reader`)."""
+        return self.client.reader(self.board, name, index)
+
+    def writer(self, name: str, index: int = 0) -> Callable[[int], None]:
+        """``write(name, value, index)`` bound once (:meth:`ImageBackend.writer`)."""
+        return self.client.writer(self.board, name, index)
 
     def snapshot(self) -> list[int]:
-        """Every input of this board, in declared order."""
+        """Every input of this board, in declared order (once the phases run: a
+        slice of the image, which the read phase brought in)."""
+        client = self.client
+        if client.phased and not (client.has_link and client.down is not None):
+            return client._values[self._first:self._end]
         return [self.read(reg.name, i) for reg in self.kind.inputs() for i in range(reg.count)]
 
     def set_cached(self, name: str, value: int, index: int = 0) -> None:

@@ -42,6 +42,7 @@ from pyrt.boards.dataconcentrator import (
 from pyrt.boards.gripper import (
     DAC,
     DAC_NULL,
+    INPUTS,
     LED_HI,
     LED_LO,
     P8155_CMD,
@@ -54,8 +55,16 @@ from pyrt.boards.gripper import (
     check_byte,
     check_register,
 )
-from pyrt.boards.i8031 import I8031
-from pyrt.boards.registers import INPUT, OUTPUT, BoardKind, Register, Registers
+from pyrt.boards.i8031 import I8031, VECTOR_EXT0, VECTOR_EXT1
+from pyrt.boards.registers import (
+    INPUT,
+    OUTPUT,
+    BoardKind,
+    Register,
+    Registers,
+    bound_reader,
+    bound_writer,
+)
 from pyrt.boards.simboards import SimDataConcentrator, SimTIO10
 from pyrt.boards.tio10 import (
     AWO_BITS,
@@ -133,6 +142,9 @@ class GripperCageRegisters:
 
     def __init__(self, board: GripperBoard):
         self.board = board
+        #: :meth:`snapshot` as fast as the board gives it (a process image's read phase).
+        self.read_inputs = board.input_values if isinstance(board, SimGripperBoard) \
+            else self.snapshot
 
     def read(self, name: str, index: int = 0) -> int:
         GRIPPER_CAGE.check_read(name, index)
@@ -148,6 +160,8 @@ class GripperCageRegisters:
 
     def snapshot(self) -> list[int]:
         b = self.board
+        if isinstance(b, SimGripperBoard):  # the register file at once
+            return b.input_values()
         up, down = b.pulse_counts()
         return [b.read(P8155_PA), b.read(P8155_PB), b.read(P8155_PC), up, down]
 
@@ -161,28 +175,57 @@ class RemoteGripperBoard(GripperBoard):
         self.registers = registers
         self.url = getattr(registers, "url", "")
         self.cpu = cpu
+        # every register bound once: a MOVX is one call into the image
+        self._readers = {a: bound_reader(registers, n) for a, n in CAGE_NAMES.items()}
+        self._writers = {a: bound_writer(registers, n) for a, n in CAGE_NAMES.items()
+                         if a not in INPUTS}
+        self._read_up = bound_reader(registers, "up")
+        self._read_down = bound_reader(registers, "down")
         # pulses counted before this controller came are not its own
-        self._up = registers.read("up")
-        self._down = registers.read("down")
+        self._up = self._read_up()
+        self._down = self._read_down()
         self.map_xdata(cpu)
 
+    def map_xdata(self, cpu: I8031) -> None:
+        for addr, read in self._readers.items():
+            cpu.map_xdata(addr, read, self._writers.get(addr))
+
     def read(self, addr: int) -> int:
-        return self.registers.read(CAGE_NAMES[check_register(addr)])
+        return self._readers[check_register(addr)]()
 
     def write(self, addr: int, value: int) -> None:
         check_register(addr, write=True)
-        self.registers.write(CAGE_NAMES[addr], check_byte(value))
+        self._writers[addr](check_byte(value))
 
     def pulse_counts(self) -> tuple[int, int]:
         return self._up, self._down
 
+    @property
+    def dac(self) -> int:
+        """The drive current byte as the controller last wrote it (excess-128)."""
+        return self._readers[DAC]()
+
     def poll(self, now_ns: int) -> None:
-        up, down = self.registers.read("up"), self.registers.read("down")
-        n_up = (up - self._up) % PULSE_MODULUS
-        n_down = (down - self._down) % PULSE_MODULUS
-        self._up, self._down = up, down
-        if n_up or n_down:
-            self.deliver(self.cpu, n_up, n_down)
+        up = self._read_up()
+        if up != self._up:
+            n = (up - self._up) % PULSE_MODULUS
+            self._up = up
+            h = self.cpu.vectors.get(VECTOR_EXT0)
+            if h is not None:  # a vector with no handler ignores its pulses
+                h()
+                while n > 1:
+                    h()
+                    n -= 1
+        down = self._read_down()
+        if down != self._down:
+            n = (down - self._down) % PULSE_MODULUS
+            self._down = down
+            h = self.cpu.vectors.get(VECTOR_EXT1)
+            if h is not None:
+                h()
+                while n > 1:
+                    h()
+                    n -= 1
 
 
 # -- the TIO10 --------------------------------------------------------------------------------
@@ -229,6 +272,8 @@ class TIO10Registers:
 
     def __init__(self, board: TIO10):
         self.board = board
+        #: :meth:`snapshot` as fast as the board gives it (a process image's read phase).
+        self.read_inputs = board.input_values if isinstance(board, SimTIO10) else self.snapshot
 
     def read(self, name: str, index: int = 0) -> int:
         TIO10_KIND.check_read(name, index)
@@ -262,6 +307,8 @@ class TIO10Registers:
 
     def snapshot(self) -> list[int]:
         b = self.board
+        if isinstance(b, SimTIO10):  # the register file at once
+            return b.input_values()
         return [*(b.pulses(c) for c in CHANNELS), b.rtc_ticks()]
 
 
@@ -272,45 +319,64 @@ class RemoteTIO10(TIO10):
     def __init__(self, registers: Registers):
         self.registers = registers
         self.url = getattr(registers, "url", "")
+        # every register bound once, by channel (port): a read is one call into the image
+        self._src = [bound_reader(registers, "src", c) for c in CHANNELS]
+        self._per = [bound_reader(registers, "per", c) for c in CHANNELS]
+        self._armed = [bound_reader(registers, "armed", c) for c in CHANNELS]
+        self._pulses = [bound_reader(registers, "pulses", c) for c in CHANNELS]
+        self._port = [bound_reader(registers, "port", p) for p in PIA_PORTS]
+        self._rtc = bound_reader(registers, "rtc")
+        self._set_src = [bound_writer(registers, "src", c) for c in CHANNELS]
+        self._set_per = [bound_writer(registers, "per", c) for c in CHANNELS]
+        self._set_armed = [bound_writer(registers, "armed", c) for c in CHANNELS]
+        self._set_port = [bound_writer(registers, "port", p) for p in PIA_PORTS]
+        #: Register writes made (periods, arm/disarm, ports): a test can check
+        #: that a refused command touched nothing.
+        self.writes = 0
 
     def select_source(self, channel: int, source: int) -> None:
         check_channel(channel)
         source_hz(source)
-        self.registers.write("src", source, channel)
+        self._set_src[channel](source)
+        self.writes += 1
 
     def source(self, channel: int) -> int:
-        return self.registers.read("src", check_channel(channel, allow_rtc=True))
+        return self._src[check_channel(channel, allow_rtc=True)]()
 
     def load_period(self, channel: int, ticks: int) -> None:
         check_period(channel, ticks)
-        self.registers.write("per", ticks, channel)
+        self._set_per[channel](ticks)
+        self.writes += 1
 
     def period(self, channel: int) -> int:
-        return self.registers.read("per", check_channel(channel, allow_rtc=True))
+        return self._per[check_channel(channel, allow_rtc=True)]()
 
     def arm(self, channel: int) -> None:
-        self.registers.write("armed", 1, check_channel(channel))
+        self._set_armed[check_channel(channel)](1)
+        self.writes += 1
 
     def disarm(self, channel: int) -> None:
-        self.registers.write("armed", 0, check_channel(channel))
+        self._set_armed[check_channel(channel)](0)
+        self.writes += 1
 
     def armed(self, channel: int) -> bool:
-        return bool(self.registers.read("armed", check_channel(channel, allow_rtc=True)))
+        return bool(self._armed[check_channel(channel, allow_rtc=True)]())
 
     def pulses(self, channel: int) -> int:
-        return self.registers.read("pulses", check_channel(channel, allow_rtc=True))
+        return self._pulses[check_channel(channel, allow_rtc=True)]()
 
     def write_port(self, port: int, value: int) -> None:
         check_port(port)
         if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 0xFF:
             raise ValueError(f"PIA port value must be 0..255, got {value!r}")
-        self.registers.write("port", value, port)
+        self._set_port[port](value)
+        self.writes += 1
 
     def read_port(self, port: int) -> int:
-        return self.registers.read("port", check_port(port))
+        return self._port[check_port(port)]()
 
     def rtc_ticks(self) -> int:
-        return self.registers.read("rtc")
+        return self._rtc()
 
 
 # -- the dataConcentrator ------------------------------------------------------------------------
@@ -346,6 +412,9 @@ class DataConcentratorRegisters:
 
     def __init__(self, board: DataConcentrator):
         self.board = board
+        #: :meth:`snapshot` as fast as the board gives it (a process image's read phase).
+        self.read_inputs = board.input_values if isinstance(board, SimDataConcentrator) \
+            else self.snapshot
 
     def read(self, name: str, index: int = 0) -> int:
         DATACONCENTRATOR.check_read(name, index)
@@ -361,7 +430,7 @@ class DataConcentratorRegisters:
     def snapshot(self) -> list[int]:
         b = self.board
         if isinstance(b, SimDataConcentrator):  # the register file at once
-            return [*b.counter_values(), *b.adc_codes()]
+            return b.input_values()
         return [*(b.read_counter(a) for a in COUNTER_ADDRESSES),
                 *(b.read_adc(c) for c in ADC_CHANNELS)]
 
@@ -372,15 +441,19 @@ class RemoteDataConcentrator(DataConcentrator):
     def __init__(self, registers: Registers):
         self.registers = registers
         self.url = getattr(registers, "url", "")
+        # every register bound once, by address (channel)
+        self._cnt = [bound_reader(registers, "cnt", a) for a in COUNTER_ADDRESSES]
+        self._adc = [bound_reader(registers, "adc", c) for c in ADC_CHANNELS]
+        self._clr = [bound_writer(registers, "clr", a) for a in COUNTER_ADDRESSES]
 
     def read_counter(self, address: int) -> int:
-        return self.registers.read("cnt", check_counter_address(address)) & _COUNTER_MASK
+        return self._cnt[check_counter_address(address)]() & _COUNTER_MASK
 
     def clear_counter(self, address: int) -> None:
-        self.registers.write("clr", 1, check_counter_address(address))
+        self._clr[check_counter_address(address)](1)
         cached = getattr(self.registers, "set_cached", None)
         if cached is not None:  # a read in this tick sees the counter cleared
             cached("cnt", 0, address)
 
     def read_adc(self, channel: int) -> int:
-        return self.registers.read("adc", check_adc_channel(channel))
+        return self._adc[check_adc_channel(channel)]()

@@ -40,8 +40,9 @@ from __future__ import annotations
 
 import re
 import zlib
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any, Protocol, runtime_checkable
 
 from pyrt.errors import ConfigError
@@ -53,6 +54,8 @@ __all__ = [
     "Register",
     "RegisterBoard",
     "Registers",
+    "bound_reader",
+    "bound_writer",
     "check_board_name",
 ]
 
@@ -302,7 +305,7 @@ class RegisterBoard:
     :meth:`write` (outputs only, checked against width and signedness).
     The world's side: :meth:`set_input` and :meth:`output`.  Outputs start
     at their off value (else 0), inputs at 0.  ``writes`` counts the
-    controller's writes.
+    controller's writes through :meth:`write`.
     """
 
     url = "sim:"
@@ -350,6 +353,16 @@ class RegisterBoard:
         fast[0][index] = value
         self.writes += 1
 
+    def setter(self, name: str, index: int = 0) -> Callable[[int], None]:
+        """The write of the output ``name[index]`` bound once, for a caller that
+        checked the value against the declaration already (a process image's
+        write phase); ValueError now if ``name[index]`` is no output."""
+        values = self._writable.get(name)
+        if values is None:
+            raise ValueError(f"{name} is no output of a {self.kind.name} board")
+        self.kind.register(name).check_index(index)
+        return partial(values[0].__setitem__, index)  # not counted in writes
+
     def snapshot(self) -> list[int]:
         """Every input in declared order."""
         out: list[int] = []
@@ -394,6 +407,29 @@ class RegisterBoard:
 
 
 # -- helpers for back ends ----------------------------------------------------------------
+
+
+def bound_reader(registers: Registers, name: str, index: int = 0) -> Callable[[], int]:
+    """``registers.read(name, index)`` as a call of no argument, bound once: the
+    view's own ``reader`` if it has one (a process image's: one index a read),
+    else the read itself."""
+    make = getattr(registers, "reader", None)
+    if make is not None:
+        return make(name, index)  # type: ignore[no-any-return]
+    return partial(registers.read, name, index)
+
+
+def bound_writer(registers: Registers, name: str, index: int = 0) -> Callable[[int], None]:
+    """``registers.write(name, value, index)`` as a call of the value, bound once
+    (the view's own ``writer`` if it has one)."""
+    make = getattr(registers, "writer", None)
+    if make is not None:
+        return make(name, index)  # type: ignore[no-any-return]
+
+    def write(value: int) -> None:
+        registers.write(name, value, index)
+
+    return write
 
 
 def outputs_off(kind: BoardKind, registers: Registers) -> None:

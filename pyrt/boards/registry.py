@@ -10,21 +10,21 @@ call, never naming a back end class::
     boards = open_boards(url, "arm", {"servo": SERVO})   # a kind of one's own
 
 and gets a :class:`Boards`: a mapping of those names to the board objects
-(``boards["tio10"]``), ``poll(now_ns)`` (the read phase) to attach to the
-loop before the ready queue, ``flush(now_ns)`` (the write phase) to attach
-after everything else, ``write_now()`` for the reflex, and ``close()``
-(the phases and the back-end contract: :mod:`pyrt.boards.image`).  A
-built-in kind gives its typed board
-(:mod:`pyrt.boards.kinds`); a plain kind a
-:class:`~pyrt.boards.registers.RegisterBoard` in process, or a register
-view with the same ``read``/``write`` over ``tcp://``.
+(``boards["tio10"]``) over one back end (:attr:`Boards.backend`, the
+protocol of :mod:`pyrt.boards.backend`): ``read_phase(now_ns)`` to attach
+to the loop before the ready queue, ``write_phase(now_ns)`` after
+everything else, ``write_now()`` for the reflex, and ``close()`` (the
+phases and the back-end contract: :mod:`pyrt.boards.image`).  A built-in
+kind gives its typed board (:mod:`pyrt.boards.kinds`); a plain kind a
+register view with ``read``/``write`` by name.  Every built-in scheme
+reaches its boards through a process image: one tick shape.
 
 Schemes built in:
 
 * ``sim:`` -- every declared board built in this process
-  (:meth:`BoardKind.sim <pyrt.boards.registers.BoardKind.sim>`);
-  ``in_process`` is true and the caller puts the physics (:mod:`pyrt.sim`)
-  behind them;
+  (:meth:`BoardKind.sim <pyrt.boards.registers.BoardKind.sim>`), reached
+  through a process image; :attr:`Boards.simulated` are the boards
+  themselves, where the caller puts the physics (:mod:`pyrt.sim`);
 * ``tcp://HOST:PORT[?timeout=S&connect_timeout=S&max_age=S]`` -- the boards
   of ``pyrt board-sim`` in another process (:mod:`pyrt.boards.tcp`,
   protocol in :mod:`pyrt.boards.wire`);
@@ -43,10 +43,12 @@ scheme without touching pyrt, through the entry-point group
 
 A factory is called as ``factory(url: BoardURL, station: str, kinds:
 dict[str, BoardKind], **options)`` and returns a :class:`Boards` holding a
-board for every declared name; it raises :class:`~pyrt.errors.ConfigError`
-for an option or URL it cannot use and :class:`~pyrt.errors.BoardError`
-when the boards cannot be reached.  :func:`register_backend` does the same
-from code.  A built-in scheme cannot be replaced.
+board for every declared name over its back end (a
+:class:`~pyrt.boards.backend.Backend`: the protocol every scheme
+implements, usually an :class:`~pyrt.boards.image.ImageBackend`); it
+raises :class:`~pyrt.errors.ConfigError` for an option or URL it cannot
+use and :class:`~pyrt.errors.BoardError` when the boards cannot be
+reached.  :func:`register_backend` does the same from code.  A built-in scheme cannot be replaced.
 """
 
 from __future__ import annotations
@@ -59,6 +61,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 from urllib.parse import parse_qsl, urlsplit
 
+from pyrt.boards.backend import Backend, WorldSide
 from pyrt.boards.registers import (
     BoardKind,
     Registers,
@@ -120,14 +123,21 @@ class BackendFactory(Protocol):
 
 
 class Boards(Mapping[str, Any]):
-    """The boards a back end opened for one station: board name -> board.
+    """The boards one back end opened for one station: board name -> board.
 
-    ``kinds`` are the declared kinds by name; :meth:`registers` the register
-    view of a board (for a built-in kind's typed board, its kind's view).
-    ``in_process``: the boards are simulated in this process and the caller
-    puts the world behind them (``sim:``); otherwise the world is elsewhere.
-    ``world`` is what the back end says it drives (board-sim's station
-    name), or "".  ConfigError if a declared board is missing.
+    ``backend`` (a :class:`~pyrt.boards.backend.Backend`) is how they are
+    reached: every phase, the reflex write, the tick, the link's state and
+    close are its own, and a station asks it one question, :attr:`simulated`
+    (the boards the world drives in this process, or None).  ``kinds`` are
+    the declared kinds by name; :meth:`registers` the register view of a
+    board (``views``: given by the back end; else the kind's view of the
+    board).  ``world`` is what the back end says it drives (board-sim's
+    station name), or "".  ConfigError if a declared board is missing.
+
+    Without a ``backend``: boards called directly in this process
+    (``in_process``, the world's side of ``sim:``: a
+    :class:`~pyrt.boards.backend.WorldSide`), or reached by means of their
+    own (a :class:`~pyrt.boards.backend.Backend` with nothing to exchange).
     """
 
     def __init__(
@@ -136,48 +146,38 @@ class Boards(Mapping[str, Any]):
         station: str,
         boards: Mapping[str, Any],
         kinds: Mapping[str, BoardKind],
+        backend: Backend | None = None,
         *,
-        in_process: bool,
         world: str = "",
         views: Mapping[str, Registers] | None = None,
-        poll: Callable[[int], None] | None = None,
-        close: Callable[[], None] | None = None,
-        down: Callable[[], str | None] | None = None,
-        info: Callable[[], dict[str, str]] | None = None,
-        resync: Callable[[], None] | None = None,
-        flush: Callable[[int], None] | None = None,
-        write_now: Callable[[], None] | None = None,
-        set_tick: Callable[[float], None] | None = None,
-        image: Any = None,
-        simulated: Boards | None = None,
-        replay: bool = False,
+        in_process: bool = False,
     ):
         missing = [name for name in kinds if name not in boards]
         if missing:
             raise ConfigError(f"board URL {url!r}: the back end opened no "
                               f"{', '.join(missing)} board")
+        if backend is None:
+            backend = WorldSide(url, kinds) if in_process else Backend(url, kinds)
+        if not isinstance(backend, Backend):
+            raise ConfigError(f"board URL {url!r}: {type(backend).__name__} is not a "
+                              "pyrt.boards.Backend")
+        if isinstance(backend, WorldSide):
+            backend.simulated = self
         self.url = url
         self.station = station
         self.kinds: dict[str, BoardKind] = dict(kinds)
         self._boards: dict[str, Any] = {name: boards[name] for name in kinds}
         self._views = dict(views) if views is not None else {}
-        self.in_process = in_process
         self.world = world
-        self._poll = poll
-        self._close = close
-        self._down = down
-        self._info = info
-        self._resync = resync
-        self._flush = flush
-        self._write_now = write_now
-        self._set_tick = set_tick
-        #: The process image (:class:`~pyrt.boards.image.ImageBackend`) the boards
-        #: are reached through, or None (``sim:`` without one).
-        self.image = image
-        self._simulated = simulated
-        #: The inputs come from a journal being replayed, not from a world: the
-        #: loop may run on virtual time and the world (if one is built) stands still.
-        self.replay = replay
+        #: The back end: the protocol every scheme implements.
+        self.backend = backend
+        #: The read phase and the write phase (the back end's own: the station
+        #: attaches them to its loop).
+        self.read_phase: Callable[[int], None] = backend.read_phase
+        self.write_phase: Callable[[int], None] = backend.write_phase
+        #: Whether a phase can fail (a link that can go down): the station then
+        #: catches its BoardError and trips the robot that owns the boards.
+        self.can_fail = bool(backend.has_link)
         self.closed = False
 
     # -- the mapping -------------------------------------------------------------------
@@ -202,27 +202,41 @@ class Boards(Mapping[str, Any]):
             view = self._views[name] = self.kinds[name].view(self[name])
         return view
 
+    # -- what the station asks of the back end ---------------------------------------
+
     @property
     def simulated(self) -> Boards | None:
-        """The in-process simulated boards the world drives (the world's side):
-        these boards themselves for ``sim:``, the boards behind the image for
-        ``sim:?image=1``; None when the world runs elsewhere."""
-        if self._simulated is not None:
-            return self._simulated
-        return self if self.in_process else None
+        """The in-process simulated boards the world drives (the world's side),
+        or None when the world runs elsewhere: the one question a station asks."""
+        return self.backend.simulated
+
+    @property
+    def in_process(self) -> bool:
+        """Whether the world behind the boards is simulated in this process
+        (:attr:`simulated` is not None)."""
+        return self.backend.simulated is not None
+
+    @property
+    def image(self) -> Any:
+        """The process image (:class:`~pyrt.boards.image.ImageBackend`) a journal
+        records, or None."""
+        return self.backend.image
+
+    @property
+    def replay(self) -> bool:
+        """The inputs come from a journal being replayed, not from a world."""
+        return self.backend.replay
+
+    @property
+    def realtime(self) -> bool:
+        """The boards and their world run elsewhere at real time (a link)."""
+        return self.backend.realtime
 
     def attach_world(self, step: Callable[[int], None]) -> bool:
-        """Run the world's ``step(now_ns)`` at the start of every read phase, if
-        the boards are an image over in-process boards (True); False otherwise:
-        the caller attaches it to the loop itself.  In a replay the world stands
-        still (True: nothing is attached)."""
-        if self.replay:
-            return True
-        before = getattr(self.image, "before_read", None)
-        if self._simulated is None or before is None:
-            return False
-        before.append(step)
-        return True
+        """Run the world's ``step(now_ns)`` at the start of every read phase
+        (True; in a replay the world stands still: nothing is attached), or
+        False: the back end does not step a world, the caller attaches it."""
+        return self.backend.attach_world(step)
 
     # -- the back end ------------------------------------------------------------------
 
@@ -230,69 +244,57 @@ class Boards(Mapping[str, Any]):
         """Per tick, before the ready queue: bring the inputs of this tick in
         (and, for the gripper, raise the encoder interrupts that arrived).
         Raises :class:`~pyrt.errors.BoardError` when the boards cannot be reached."""
-        if self._poll is not None:
-            self._poll(now_ns)
+        self.backend.read_phase(now_ns)
+
+    def read_inputs(self, now_ns: int) -> None:
+        """Outside the ticks (a station being built): the inputs read into the
+        image now, as the read phase reads them, without stepping the world
+        (which steps in the loop's ticks alone).  BoardError as :meth:`poll`."""
+        self.backend.read_inputs(now_ns)
 
     def flush(self, now_ns: int) -> None:
         """Per tick, last (after the mailbox): write the outputs the tick
         changed, one exchange per back end.  Raises
         :class:`~pyrt.errors.BoardError` when the boards cannot be reached."""
-        if self._flush is not None:
-            self._flush(now_ns)
-
-    @property
-    def flushes(self) -> bool:
-        """Whether :meth:`flush` does anything (attach it to the loop, last, if so)."""
-        return self._flush is not None
+        self.backend.write_phase(now_ns)
 
     def write_now(self) -> None:
         """Write the outputs changed so far at once (after a reflex: not at the
         end of the tick).  BoardError if the write failed (a link that is down)."""
-        if self._write_now is not None:
-            self._write_now()
+        self.backend.write_now()
 
     def set_tick(self, period_s: float) -> None:
         """The loop's tick period: the back end derives its timeouts from it."""
-        if self._set_tick is not None:
-            self._set_tick(period_s)
-
-    @property
-    def polls(self) -> bool:
-        """Whether :meth:`poll` does anything (attach it to the loop if so)."""
-        return self._poll is not None
+        self.backend.set_tick(period_s)
 
     @property
     def down(self) -> str | None:
         """Why the boards cannot be reached any more (a link that failed stays
         down), or None while they can."""
-        return self._down() if self._down is not None else None
+        return self.backend.down
 
     @property
     def has_info(self) -> bool:
         """Whether :meth:`info` can tell the state of the world behind the boards."""
-        return self._info is not None
+        return self.backend.tells_world
 
     def info(self) -> dict[str, str]:
         """The world's state as the back end tells it (board-sim's ``INFO``: not
         a register access); ConfigError if this back end has none, BoardError
         if it cannot be reached."""
-        if self._info is None:
-            raise ConfigError(f"board URL {self.url!r}: this back end tells nothing of the world")
-        return self._info()
+        return self.backend.info()
 
     def resync(self) -> None:
         """The controller's loop starts now: what the boards' watchdog did
         while nothing polled (the station was being built; nothing was
         driven) is not news to the next :meth:`poll`."""
-        if self._resync is not None:
-            self._resync()
+        self.backend.resync()
 
     def close(self) -> None:
         """Release the back end (idempotent)."""
         if not self.closed:
             self.closed = True
-            if self._close is not None:
-                self._close()
+            self.backend.close()
 
     def __enter__(self) -> Boards:
         return self
@@ -441,27 +443,22 @@ def open_boards(url: str | None, station: str, kinds: Mapping[str, BoardKind],
 # -- sim: ------------------------------------------------------------------------------
 
 
-def open_sim(url: BoardURL, station: str, kinds: dict[str, BoardKind], *,
-             image: Any = "0", **options: Any) -> Boards:
+def open_sim(url: BoardURL, station: str, kinds: dict[str, BoardKind],
+             **options: Any) -> Boards:
     """The ``sim:`` back end: every declared board built in this process
-    (:meth:`BoardKind.sim <pyrt.boards.registers.BoardKind.sim>`); the caller
-    attaches the physics.  It takes no host, path or option but ``image``
-    and those of the declared kinds.
-
-    ``image=1`` (a journal asks for it): the controller reaches the boards
-    through a process image (:class:`~pyrt.boards.image.LocalImage`), as it
-    reaches a link's, and :attr:`Boards.simulated` are the boards behind it."""
+    (:meth:`BoardKind.sim <pyrt.boards.registers.BoardKind.sim>`), the world's
+    side (:attr:`Boards.simulated`, where the caller puts the physics), and
+    the controller reaching them through a process image
+    (:class:`~pyrt.boards.image.LocalImage`), as it reaches a link's: one
+    tick shape whatever the back end.  It takes no host, path or option but
+    those of the declared kinds."""
     if url.host or url.port is not None or url.path:
         raise url.error("sim: takes no host, port or path; write it as sim:")
     mine, rest = split_options(kinds, options)
     if rest:
-        raise url.error(f"sim: takes no option {', '.join(sorted(rest))} (it takes image)")
-    flag = str(image).lower()
-    if flag not in ("0", "1", "true", "false"):
-        raise url.error(f"option image must be 0 or 1, got {image!r}")
-    if flag in ("0", "false"):
-        boards = {name: kind.sim(**options_for(kind, mine)) for name, kind in kinds.items()}
-        return Boards(url.text, station, boards, kinds, in_process=True, world="sim")
+        takes = sorted(set().union(*(k.options for k in kinds.values())))
+        raise url.error(f"sim: takes no option {', '.join(sorted(rest))}"
+                        + (f" (it takes {', '.join(takes)})" if takes else ""))
     # the boards behind the image are the world's: mapped into no controller's CPU
     behind = Boards(url.text, station, {name: kind.sim() for name, kind in kinds.items()},
                     kinds, in_process=True, world="sim")
@@ -476,19 +473,19 @@ def image_boards(url: str, station: str, kinds: Mapping[str, BoardKind],
                  world: str = "sim", info: Callable[[], dict[str, str]] | None = None
                  ) -> Boards:
     """Boards reached through a :class:`~pyrt.boards.image.LocalImage` over
-    ``views`` (in this process), or fed by ``feed`` (a replay: ``views`` None,
-    ``outputs`` the outputs as they stood).  ``options``: those of the
-    declared kinds (the gripper cage's ``cpu``)."""
+    ``views`` (in this process; ``simulated``: the world's side they view),
+    or fed by ``feed`` (a replay: ``views`` None, ``outputs`` the outputs as
+    they stood).  ``options``: those of the declared kinds (the gripper
+    cage's ``cpu``)."""
     from pyrt.boards.image import ImageRegisters, LocalImage
 
-    local = LocalImage(url, kinds, views, feed=feed, outputs=outputs)
+    local = LocalImage(url, kinds, views, feed=feed, outputs=outputs, simulated=simulated,
+                       info=info)
     local.open()
     regs = {name: ImageRegisters(local, name) for name in kinds}
     typed = {name: kind.remote(regs[name], **options_for(kind, options))
              for name, kind in kinds.items()}
-    pollers = [b.poll for b in typed.values()
-               if not isinstance(b, ImageRegisters) and callable(getattr(b, "poll", None))]
-    replay = feed is not None
-    return Boards(url, station, typed, kinds, in_process=simulated is not None or not replay,
-                  world=world, views=regs, simulated=simulated, replay=replay, info=info,
-                  **local.boards_hooks(pollers))
+    local.after_read.extend(
+        b.poll for b in typed.values()
+        if not isinstance(b, ImageRegisters) and callable(getattr(b, "poll", None)))
+    return Boards(url, station, typed, kinds, local, world=world, views=regs)

@@ -37,6 +37,10 @@ from pyrt.boards.tio10 import (
 __all__ = ["SimDataConcentrator", "SimTIO10"]
 
 _COUNTER_MASK = (1 << COUNTER_BITS) - 1
+#: Where the RTC is in a TIO10's inputs (after the ten pulse counters).
+_RTC = len(CHANNELS)
+#: Where the ADC codes begin in a dataConcentrator's register file.
+_ADC_BASE = len(COUNTER_ADDRESSES)
 
 
 class SimTIO10(TIO10):
@@ -50,9 +54,10 @@ class SimTIO10(TIO10):
         self._source = dict.fromkeys(CHANNELS, 1)
         self._period = dict.fromkeys(CHANNELS, 0)
         self._armed = dict.fromkeys(CHANNELS, False)
-        self._pulses = dict.fromkeys(CHANNELS, 0)
         self._ports = dict.fromkeys(PIA_PORTS, 0)
-        self._rtc = 0
+        # the inputs as the kind declares them: the pulse counters of channels
+        # 0-9, then the RTC (a process image's read phase copies the list)
+        self._in = [0] * (len(CHANNELS) + 1)
         self.writes = 0
 
     # -- driver side ---------------------------------------------------------
@@ -90,7 +95,7 @@ class SimTIO10(TIO10):
         return self._armed[check_channel(channel, allow_rtc=True)]
 
     def pulses(self, channel: int) -> int:
-        return self._pulses[check_channel(channel, allow_rtc=True)]
+        return self._in[check_channel(channel, allow_rtc=True)]
 
     def write_port(self, port: int, value: int) -> None:
         check_port(port)
@@ -103,16 +108,21 @@ class SimTIO10(TIO10):
         return self._ports[check_port(port)]
 
     def rtc_ticks(self) -> int:
-        return self._rtc
+        return self._in[_RTC]
+
+    def input_values(self) -> list[int]:
+        """Every input at once, as the TIO10 kind declares them: the pulse
+        counters of channels 0-9, then the RTC (a process image's read phase)."""
+        return self._in[:]
 
     def register_file(self) -> list[int]:
         """Every register at once, for a board server: the RTC, PIA ports
         0-3, then per channel 0-9 the source, the period, armed (0/1) and
         the pulse counter (the order of the wire protocol's ``SNAP``)."""
         ports, src, per = self._ports, self._source, self._period
-        armed, pulses = self._armed, self._pulses
+        armed, pulses = self._armed, self._in
         return [
-            self._rtc, *(ports[p] for p in PIA_PORTS),
+            self._in[_RTC], *(ports[p] for p in PIA_PORTS),
             *(src[c] for c in CHANNELS), *(per[c] for c in CHANNELS),
             *(1 if armed[c] else 0 for c in CHANNELS), *(pulses[c] for c in CHANNELS),
         ]
@@ -128,48 +138,59 @@ class SimTIO10(TIO10):
 
     def plant_add_pulses(self, channel: int, n: int) -> None:
         """Count ``n`` output pulses on ``channel`` (the counter wraps at 16 bits)."""
-        self._pulses[channel] = (self._pulses[channel] + n) % PULSE_COUNTER_MODULUS
+        self._in[channel] = (self._in[channel] + n) % PULSE_COUNTER_MODULUS
 
     def plant_set_time(self, now_ns: int) -> None:
         """Set the real-time clock from the loop time."""
-        self._rtc = (now_ns * CLOCK_HZ // 1_000_000_000) % RTC_MODULUS
+        self._in[_RTC] = (now_ns * CLOCK_HZ // 1_000_000_000) % RTC_MODULUS
 
 
 class SimDataConcentrator(DataConcentrator):
     """A dataConcentrator whose counters and ADCs are Python integers."""
 
     def __init__(self) -> None:
-        # the register file as lists (a process image copies it every tick)
-        self._counters: list[int] = [0] * len(COUNTER_ADDRESSES)
-        self._adc: list[int] = [0] * len(ADC_CHANNELS)
+        # the register file as one list, in the kind's declared order: the
+        # counters at 0..255, the ADCs after them (a process image copies it
+        # every tick, in one slice)
+        self._inputs: list[int] = [0] * (len(COUNTER_ADDRESSES) + len(ADC_CHANNELS))
         self.writes = 0
 
     # -- driver side ---------------------------------------------------------
 
     def read_counter(self, address: int) -> int:
-        return self._counters[check_counter_address(address)]
+        return self._inputs[check_counter_address(address)]
 
     def clear_counter(self, address: int) -> None:
-        self._counters[check_counter_address(address)] = 0
+        self._inputs[check_counter_address(address)] = 0
         self.writes += 1
 
     def read_adc(self, channel: int) -> int:
-        return self._adc[check_adc_channel(channel)]
+        return self._inputs[_ADC_BASE + check_adc_channel(channel)]
 
     def counter_values(self) -> list[int]:
         """Every counter, addresses 0..255 (for a board server)."""
-        return list(self._counters)
+        return self._inputs[:_ADC_BASE]
 
     def adc_codes(self) -> list[int]:
         """The latest conversion of every ADC channel, 0..15 (for a board server)."""
-        return list(self._adc)
+        return self._inputs[_ADC_BASE:]
+
+    def input_values(self) -> list[int]:
+        """Every input at once, as the dataConcentrator kind declares them: the
+        counters, then the ADCs (a process image's read phase)."""
+        return self._inputs[:]
+
+    def extend_inputs(self, out: list[int]) -> None:
+        """Append :meth:`input_values` to ``out`` (one copy)."""
+        out += self._inputs
 
     # -- plant side ----------------------------------------------------------
 
     def plant_add_counts(self, address: int, n: int) -> None:
         """Count ``n`` encoder counts (signed) at ``address``; 24-bit wrap."""
-        self._counters[address] = (self._counters[address] + n) & _COUNTER_MASK
+        self._inputs[address] = (self._inputs[address] + n) & _COUNTER_MASK
 
     def plant_set_adc(self, channel: int, code: int) -> None:
         """Latch a conversion, clamped to the converter's 0..4095."""
-        self._adc[channel] = 0 if code < 0 else (ADC_MAX if code > ADC_MAX else int(code))
+        self._inputs[_ADC_BASE + channel] = \
+            0 if code < 0 else (ADC_MAX if code > ADC_MAX else int(code))

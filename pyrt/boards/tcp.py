@@ -495,6 +495,10 @@ class TcpRegisters(ImageBackend):
     def down(self) -> str | None:
         return self.link.down
 
+    def info(self) -> dict[str, str]:
+        """board-sim's ``INFO``: the world's state (not a register access)."""
+        return self.link.info()
+
     # -- compatibility -----------------------------------------------------------------------
 
     def poll(self, now_ns: int = 0) -> None:
@@ -602,5 +606,5 @@ def open_tcp(
         raise
     pollers = [b.poll for b in boards.values()
                if not isinstance(b, ImageRegisters) and callable(getattr(b, "poll", None))]
-    return Boards(url.text, station, boards, kinds, in_process=False, world=link.station,
-                  views=views, info=link.info, **client.boards_hooks(pollers))
+    return Boards(url.text, station, boards, kinds, world=link.station, views=views,
+                  **client.boards_hooks(pollers))

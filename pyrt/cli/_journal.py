@@ -15,7 +15,7 @@ from pyrt.station.blackbox import (
     TOTAL_BUDGET,
     FaultRecorder,
 )
-from pyrt.station.recording import Recorder, with_image
+from pyrt.station.recording import Recorder
 
 __all__ = ["add_journal_options", "prepare_journal", "start_recorder"]
 
@@ -62,12 +62,9 @@ def black_box_seconds(args: argparse.Namespace) -> float:
 
 
 def prepare_journal(args: argparse.Namespace) -> bool:
-    """Before the station is built: give ``sim:`` boards a process image if
-    anything is to be recorded.  Returns whether something is."""
-    if not getattr(args, "journal", None) and not black_box_seconds(args):
-        return False
-    args.boards = with_image(getattr(args, "boards", None))
-    return True
+    """Before the station is built: whether anything is to be recorded (every
+    back end has the process image a journal records; nothing to change)."""
+    return bool(getattr(args, "journal", None) or black_box_seconds(args))
 
 
 def _plain(args: argparse.Namespace) -> dict[str, Any]:

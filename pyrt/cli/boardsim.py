@@ -242,7 +242,7 @@ def build_world(factory: WorldFactory, opts: argparse.Namespace) -> World:
     """The world of ``factory``: its boards opened in process, the world behind them."""
     boards = open_boards("sim:", factory.name, factory.board_kinds())
     try:
-        world = factory.world(boards, opts)
+        world = factory.world(boards.simulated or boards, opts)
     except BaseException:
         boards.close()
         raise

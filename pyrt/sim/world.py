@@ -101,8 +101,10 @@ class World:
         if not isinstance(name, str) or not name or any(c.isspace() for c in name) \
                 or not name.isascii():
             raise ConfigError(f"world name must be one ASCII word, got {name!r}")
-        if not isinstance(boards, Boards) or not boards.in_process:
+        side = boards.simulated if isinstance(boards, Boards) else None
+        if side is None:
             raise ConfigError(f"a world serves in-process boards (sim:), got {boards!r}")
+        boards = side  # the world's side of sim: (not the controller's image)
         #: The station's name (the greeting's STATION).
         self.name = name
         self.boards = boards
@@ -193,7 +195,10 @@ class GripperWorld(World):
     ):
         if boards is None:
             boards = open_boards("sim:", name, GRIPPER_BOARDS)
-        self.board = boards["gripper"]
+        side = boards.simulated
+        if side is None:
+            raise ConfigError(f"a world serves in-process boards (sim:), got {boards!r}")
+        self.board = side["gripper"]
         self.cpu = self.board.cpu
         try:
             plant = JawPlant(self.board, start=start, params=params)

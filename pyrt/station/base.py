@@ -60,6 +60,7 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Callable, Iterable, Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any, final
 
@@ -89,7 +90,7 @@ def refuse_sim_options(boards: Boards, given: Iterable[str]) -> None:
     of the in-process simulation that were set) was set for boards whose
     world runs elsewhere; nothing for in-process boards."""
     names = list(given)
-    if boards.in_process or not names:
+    if boards.simulated is not None or not names:
         return
     raise ConfigError(f"board URL {boards.url!r}: the world behind these boards is not "
                       f"simulated in this process: {', '.join(names)} cannot be set here "
@@ -162,15 +163,25 @@ class Station(StationRobots, StationEvents, StationRequests):
     # -- assembly -------------------------------------------------------------------
 
     @final
-    def attach_boards(self, boards: Boards) -> None:
-        """Own ``boards``: attach the read phase (``io:read``, one handler that
-        reads every set the station owns) to the loop now (call it before the
-        robot's handlers: the inputs of a tick come in first) if the back end
-        polls; :meth:`adopt` attaches the write phase (``io:write``) last.  The
-        back end derives its timeouts from the loop's tick.  A station may own
-        several sets (each robot its own: :meth:`add_robot`); :meth:`close`
-        closes them all."""
-        if not boards.in_process and not boards.replay:
+    def attach_boards(self, boards: Boards, *more: Boards) -> None:
+        """Own ``boards`` (and ``more`` sets): attach the read phase (``io:read``,
+        one handler that reads every set given) to the loop now (call it before
+        the robot's handlers: the inputs of a tick come in first); :meth:`adopt`
+        attaches the write phase (``io:write``) last.  The back end derives its
+        timeouts from the loop's tick.  A station may own several sets (each
+        robot its own: :meth:`add_robot`); give them in one call, so that one
+        handler reads them; :meth:`close` closes them all."""
+        sets = [boards, *more]
+        for b in sets:
+            self._own_boards(b)
+        if len(sets) == 1 and not boards.can_fail:
+            # in this process, nothing to reach: the phase itself is the handler
+            self.loop.attach(boards.read_phase, name="io:read")
+        else:
+            self.loop.attach(partial(self._poll_boards, sets=sets), name="io:read")
+
+    def _own_boards(self, boards: Boards) -> None:
+        if boards.realtime:
             clock = self.loop.clock
             speed = getattr(clock, "speed", 1.0)
             if clock.virtual or speed != 1.0:
@@ -180,24 +191,22 @@ class Station(StationRobots, StationEvents, StationRequests):
                                   "at real time (--speed 1)")
         if any(b is boards for b in self.board_sets):
             raise ConfigError(f"board URL {boards.url!r}: these boards are attached already")
-        polled = any(b.polls for b in self.board_sets)
         self.board_sets.append(boards)
         if self.boards is None:
             self.boards = boards
         boards.set_tick(self.loop.period_ns / 1e9)
-        if boards.polls and not polled:
-            self.loop.attach(self._poll_boards, name="io:read")
 
     @final
     def attach_world(self, step: Callable[[int], None], name: str = "world",
                      boards: Boards | None = None) -> None:
-        """Attach the simulated world's ``step(now_ns)``: to the loop as handler
-        ``name`` (call it after :meth:`attach_boards`, before the robot's
-        handlers), or, for boards reached through an image over in-process
-        boards (``sim:?image=1``), at the start of their read phase, so that
-        the tick reads the world as it stands; in a replay not at all (the
-        recorded inputs stand in for the world).  ``boards``: the set the
-        world is behind (default: the station's first)."""
+        """Attach the simulated world's ``step(now_ns)`` at the one place it
+        steps in the tick: the start of its boards' read phase (the back end's
+        :meth:`~pyrt.boards.backend.Backend.attach_world`), so that the tick
+        reads the world as it stands; in a replay not at all (the recorded
+        inputs stand in for the world).  A back end that steps no world leaves
+        it to the loop, as handler ``name`` (call it after
+        :meth:`attach_boards`, before the robot's handlers).  ``boards``: the
+        set the world is behind (default: the station's first)."""
         behind = boards if boards is not None else self.boards
         if behind is not None and behind.attach_world(step):
             return
@@ -273,7 +282,10 @@ class Station(StationRobots, StationEvents, StationRequests):
             owner = self.robot_of(c)
             trip = self.trip if owner is None or not self._declared else self._robot_trip(owner)
             c.connect(trip=trip, tell=self.publish)
-        if any(b.flushes for b in self.board_sets):
+        sets = self.board_sets
+        if len(sets) == 1 and not sets[0].can_fail:
+            self.loop.attach(sets[0].write_phase, name="io:write")
+        elif sets:
             self.loop.attach(self._flush_boards, name="io:write")
         return self.runner
 

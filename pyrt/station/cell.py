@@ -82,23 +82,24 @@ class CellStation(Station):
 
     def __init__(self, loop: Loop, arm_boards: Boards, jaw_boards: Boards) -> None:
         super().__init__(loop)
-        self.attach_boards(arm_boards)
-        self.attach_boards(jaw_boards)
+        self.attach_boards(arm_boards, jaw_boards)
         # -- the world (in process): the arm, the jaws, the object -------------------
         chain, motors, text = load_arm(None)
         self.chain = chain
         self.urdf_text = text
-        world = arm_world(arm_boards.simulated or arm_boards, chain, motors)
+        arm_side, jaw_side = arm_boards.simulated, jaw_boards.simulated
+        if arm_side is None or jaw_side is None:
+            raise ConfigError("the cell's world runs in this process: its boards are sim:")
+        world = arm_world(arm_side, chain, motors)
         physics = world.plant
         assert isinstance(physics, UrdfPhysics)
         self.plant = physics.arm
-        sim = jaw_boards.simulated
-        assert sim is not None
-        self.jaws = JawPlant(sim["gripper"], start=DEFAULT_START)
+        self.jaws = JawPlant(jaw_side["gripper"], start=DEFAULT_START)
         self.world = CellWorld(physics.arm, self.jaws)
         self.attach_world(world.step, "physics", boards=arm_boards)
         self.attach_world(self.jaws.step, "jaws", boards=jaw_boards)
-        loop.attach(self.world.step, name="object")
+        # after the arm and the jaws moved, before the jaws' inputs are read
+        self.attach_world(self.world.step, "object", boards=jaw_boards)
         # -- robot puma: the arm, its trajectory and servo tasks ------------------------
         self.board = arm_boards["servo"]
         self.arm = arm = UrdfArm(self, "puma", chain, self.board, _drives(motors),

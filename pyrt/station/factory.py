@@ -98,7 +98,8 @@ class StationFactory(WorldFactory):
         """The line said when the station starts."""
         speed = ("max (simulated time)" if args.speed is None
                  else f"{args.speed:g}x real time")
-        where = ("simulated boards" if station.boards is None or station.boards.in_process
+        where = ("simulated boards"
+                 if station.boards is None or station.boards.simulated is not None
                  else f"boards at {station.boards.url}")
         return (f"pyrt {self.name or station.name}: {station.name}, {where}; "
                 f"tick {args.tick_us} µs, speed {speed}; {self.next_step(args)}")

@@ -185,7 +185,7 @@ class GripperStation(Station):
         extras: list[Component] = []
         if plant is not None:
             extras.append(GripperSim(plant))
-        elif boards.has_info:
+        else:  # the world runs elsewhere: what its back end tells of it
             extras.append(BoardWorld(boards))
         self.adopt(ctl, queues=[ctl.queue], executors=[self.executor], extras=extras,
                    where=self._where, ended=self._ended, status=self._status)
@@ -302,10 +302,9 @@ def build_gripper(
             ("an object (--object)", object_mm is not None),
             ("faults (--fault)", bool(faults))) if given])
         plant = None
-        if b.in_process:
+        sim = b.simulated  # the world's side, when the world is in this process
+        if sim is not None:
             try:
-                sim = b.simulated
-                assert sim is not None
                 plant = JawPlant(sim["gripper"], start=DEFAULT_START if start is None else start)
                 plant.set_object(object_mm)
                 for fault in faults:

@@ -326,12 +326,13 @@ class ManipulatorStation(Station):
         refuse_sim_options(boards, ["sensor imperfections (--ideal-sensors)"]
                            if imperfections is not None else [])
         want = pa_rec.name.lower()
-        if not boards.in_process and boards.world and boards.world.lower() != want:
+        elsewhere = boards.simulated is None  # the world is board-sim's, not this process's
+        if elsewhere and boards.world and boards.world.lower() != want:
             raise ConfigError(f"board URL {boards.url!r} serves the {boards.world!r} world, not "
                               f"this station's {want!r}: start 'pyrt board-sim {want}' with "
                               f"the same --db")
         self.attach_boards(boards)  # first in the tick: this tick's inputs
-        boards.poll(self.loop.now_ns)
+        boards.read_inputs(self.loop.now_ns)
         self.tio10 = boards["tio10"]
         self.dc = boards["dc"]
         # Level 3-4: devices and axes (encoders reset their counters).
@@ -371,9 +372,8 @@ class ManipulatorStation(Station):
         payouts = [payout(model.length_at(i, pos), tensions[i], a.stretch, a.dead_length)
                    for i, a in enumerate(self.axes)]
         self.rig = rig_from_station(st, liquid_level=liquid_level)
-        if boards.in_process:  # else the world is board-sim's, built the same way
-            sim = boards.simulated
-            assert sim is not None
+        sim = boards.simulated
+        if sim is not None:  # else the world is board-sim's, built the same way
             self.plant = ManipulatorPlant(self.rig, sim["tio10"], sim["dc"],
                                           imperfections=imperfections, payouts=payouts)
         self.startup_notes = self._reconcile(pa_rec, payouts)
@@ -417,15 +417,15 @@ class ManipulatorStation(Station):
         extras: list[Component] = []
         if self.plant is not None:
             extras.append(ManipulatorSim(self.plant, self.axes))
-        elif boards.has_info:
+        else:  # the world runs elsewhere: what its back end tells of it
             extras.append(BoardWorld(boards))
         self.adopt(pa, queues=[self.queue], executors=[pa.executor], extras=extras,
                    where=self._where, ended=self._ended, status=pa.status_line)
         self.log_path: Path | None = None
         self._log_file: TextIO | None = None
-        boards.poll(self.loop.now_ns)  # the encoders' counters now ride along
+        boards.read_inputs(self.loop.now_ns)  # the encoders' counters now ride along
         pa.measure()  # the first status line shows real tensions and lengths
-        if not boards.in_process:  # a world built elsewhere, from its own database
+        if elsewhere:  # a world built elsewhere, from its own database
             doubt = belief_doubt(pa_rec.position, pa.tensions, held_tensions(pa, pa_rec.position),
                                  pa.tension_find())
             if doubt is not None:

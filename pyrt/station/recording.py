@@ -17,8 +17,8 @@ running station (:mod:`pyrt.journal` has the file format):
 It hands each tick to a :class:`~pyrt.journal.Journal` (whose thread
 encodes and writes: the loop never waits for the disk) at the end of the
 tick, after the write phase: the recorder is the loop's last handler,
-``journal``.  Boards without an image cannot be recorded: ``sim:`` gets one
-for the purpose (``sim:?image=1``, :func:`with_image`).
+``journal``.  Every back end reaches its boards through a process image
+(``sim:`` included: one tick shape, recorded or not).
 
 Requests are recorded when they are calls of the station's or a
 component's methods with arguments of plain types (numbers, text, lists,
@@ -46,7 +46,7 @@ from pyrt.journal import DEFAULT_QUEUE_TICKS, BlackBox, Header, Journal
 if TYPE_CHECKING:
     from pyrt.station.base import Station
 
-__all__ = ["LOOP_FAULT", "REPLAYED", "Recorder", "decode_request", "encode_request", "with_image"]
+__all__ = ["LOOP_FAULT", "REPLAYED", "Recorder", "decode_request", "encode_request"]
 
 #: The requests a journal records and a replay applies: what the consoles, the DAQ
 #: server and EPICS ask of a station (its command records run through ``execute``)
@@ -65,17 +65,6 @@ REALTIME_POLL_S = 0.1
 #: The event of a fault the loop itself declared (consecutive overruns): the
 #: clock's decision, which a replay applies rather than checks.
 LOOP_FAULT = "loop-fault"
-
-
-def with_image(url: str | None) -> str:
-    """``url`` with a process image: ``sim:`` becomes ``sim:?image=1``; any
-    other back end has one already (it is returned as given)."""
-    text = url or "sim:"
-    if not text.lower().startswith("sim:"):
-        return text
-    if "image=" in text:
-        return text
-    return text + ("&" if "?" in text else "?") + "image=1"
 
 
 # -- requests as text ----------------------------------------------------------------------
@@ -222,8 +211,7 @@ class Recorder:
         boards = station.boards
         image = getattr(boards, "image", None)
         if image is None:
-            raise ConfigError("a journal records the process image: these boards have none "
-                              "(sim: gets one with sim:?image=1)")
+            raise ConfigError("a journal records the process image: these boards have none")
         runner = station.runner
         if runner is None:
             raise ConfigError("a journal records a built station: adopt() it first")

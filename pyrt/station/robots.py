@@ -48,36 +48,38 @@ class StationRobots:
         _robots: list[Robot]
         _declared: bool
 
-        def attach_boards(self, boards: Boards) -> None: ...
+        def attach_boards(self, boards: Boards, *more: Boards) -> None: ...
         def components(self) -> list[Component]: ...
         def stop(self) -> str: ...
 
     def _owner_of_boards(self, boards: Boards) -> Robot | None:
         return next((r for r in self._robots if any(b is boards for b in r.boards)), None)
 
-    def _poll_boards(self, now_ns: int) -> None:
-        """Loop handler ``io:read``: every set's inputs for this tick.  A
-        BoardError trips the robot that owns the set (every robot if none
-        does; once per fault: after ``ack`` the next failure trips again)."""
-        for boards in self.board_sets:
-            if not boards.polls:
+    def _poll_boards(self, now_ns: int, sets: Sequence[Boards] = ()) -> None:
+        """Loop handler ``io:read``: the inputs of every set in ``sets`` for this
+        tick.  A BoardError trips the robot that owns the set (every robot if
+        none does; once per fault: after ``ack`` the next failure trips again)."""
+        for boards in sets:
+            if not boards.can_fail:  # in this process: nothing to reach
+                boards.read_phase(now_ns)
                 continue
-            if self._stopped_by(boards) and boards.down is not None:
+            if boards.down is not None and self._stopped_by(boards):
                 continue  # stopped, and nothing to reach: the fault says why
             try:
-                boards.poll(now_ns)
+                boards.read_phase(now_ns)
             except BoardError as exc:
                 self._board_failed(exc, boards)
 
     def _flush_boards(self, now_ns: int) -> None:
         """Loop handler ``io:write`` (the last): the outputs this tick changed, every set."""
         for boards in self.board_sets:
-            if not boards.flushes:
+            if not boards.can_fail:
+                boards.write_phase(now_ns)
                 continue
-            if self._stopped_by(boards) and boards.down is not None:
+            if boards.down is not None and self._stopped_by(boards):
                 continue
             try:
-                boards.flush(now_ns)
+                boards.write_phase(now_ns)
             except BoardError as exc:
                 self._board_failed(exc, boards)
 

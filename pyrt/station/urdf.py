@@ -178,7 +178,7 @@ class UrdfStation(Station):
             self.plant = physics.arm
             self.attach_world(world.step, "physics")
             extras.append(UrdfSim(physics.arm))
-        elif boards.has_info:
+        else:  # the world runs elsewhere: what its back end tells of it
             extras.append(BoardWorld(boards))
         ft = FTCalibration()  # the wrist sensor's data sheet: counts per N and per N m
         # hardware (a): the board servos, the host writes setpoints (pyrt.station._urdf_drive)
@@ -251,8 +251,9 @@ def build_urdf(loop: Loop, urdf: str | Path | None = None, *, boards: str | None
     b = open_boards(boards, "urdf", kinds)
     try:
         world = None
-        if b.in_process:
-            world = arm_world(b.simulated or b, chain, motors, start)
+        sim = b.simulated  # the world's side, when the world is in this process
+        if sim is not None:
+            world = arm_world(sim, chain, motors, start)
         elif start is not None:
             raise ConfigError(f"board URL {b.url!r}: the arm's start is an option of "
                               "'pyrt board-sim urdf' (the world runs there)")
