@@ -161,3 +161,40 @@ def test_the_simulated_arm_is_the_same_through_either_path():
         a, b = (w.board.snapshot() for w in worlds)
         assert a == b
     assert worlds[0].truth().q.tolist() == worlds[1].truth().q.tolist()
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.lists(st.integers(-DAC_FULL_SCALE, DAC_FULL_SCALE), min_size=N,
+                                   max_size=N),
+                          st.integers(0, 2**N - 1)), min_size=1, max_size=8))
+def test_through_the_process_image_the_blocks_are_the_same(steps):
+    """sim:'s image view: encoders and F/T in as slices of the image, the DACs asked out in the
+    write phase (and at once outside the ticks), exactly what the register file gets directly."""
+    from pyrt.boards.registry import open_boards
+
+    boards = open_boards("sim:", "arm", {"servo": arm_servo_kind(N)})
+    behind = boards.simulated["servo"]
+    regs = ArmServoRegisters(boards.registers("servo"))
+    assert not regs.direct and regs._out is not None
+    regs.write_dacs([5] * N)  # outside the ticks: at once
+    assert behind.values("dac") == [5] * N
+    boards.set_tick(0.001)
+    expect = [5] * N
+    for k, (dac, mask) in enumerate(steps):
+        for j in range(N):
+            behind.set_input("count", k * 100 + j - 2**31, j)
+        behind.set_input("ft", -k, 5)
+        boards.poll(k)
+        assert regs.counts() == [k * 100 + j - 2**31 for j in range(N)]
+        assert regs.ft() == [0, 0, 0, 0, 0, -k]
+        regs.write_dacs(dac, mask)
+        assert behind.values("dac") == expect  # not before the write phase
+        boards.flush(k)
+        expect = [d if mask >> j & 1 else e for j, (d, e) in enumerate(zip(dac, expect, strict=True))]
+        assert behind.values("dac") == expect
+    regs.write_all("enable", 1)
+    boards.flush(len(steps))
+    assert behind.values("enable") == [1] * N
+    with pytest.raises(ValueError, match="dac"):
+        regs.write_dacs([DAC_FULL_SCALE + 1] + [0] * (N - 1))
+    boards.close()

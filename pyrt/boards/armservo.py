@@ -27,8 +27,9 @@ different fingerprints, and a controller refuses a board that is not its own.
 The servo task moves these registers as blocks, every servo tick
 (:class:`ArmServoRegisters`: the encoders in, the DACs whose counts changed
 out), through whatever register view it is given: a back end's image
-(``read``/``write``, and ``write_many`` when the view has one) or, the fast
-path, the in-process register file itself (:func:`register_cells`), whose
+(its ``block_reader``/``block_writer``: a slice of the image in, the changed
+slots out; else ``read``/``write``, and ``write_many`` when the view has one)
+or the in-process register file itself (:func:`register_cells`), whose
 storage it reads and writes in place, with the checks the declarations imply.
 """
 
@@ -124,11 +125,21 @@ class ArmServoRegisters:
         self.direct = (self._count is not None and self._ft is not None and self._dac is not None
                        and None not in self._cells.values())
         self._joints = range(n)
+        # a process image's view moves a register as one block (a slice of the
+        # image in, the changed slots out): bound once here
+        blocks = not self.direct and callable(getattr(registers, "block_reader", None))
+        image: Any = registers
+        self._counts_in = image.block_reader("count") if blocks else None
+        self._ft_in = image.block_reader("ft") if blocks else None
+        self._out = ({name: image.block_writer(name) for name in ("dac", "enable", "release")}
+                     if blocks else None)
 
     def counts(self) -> list[int]:
         """Every joint's encoder counter, as the board has them now (a new list)."""
         if self.direct:
             return self._count[:]  # type: ignore[index]
+        if self._counts_in is not None:
+            return self._counts_in()
         read = self._read
         return [read("count", j) for j in self._joints]
 
@@ -136,6 +147,8 @@ class ArmServoRegisters:
         """The wrist sensor's counts fx fy fz tx ty tz, as the board has them now."""
         if self.direct:
             return self._ft[:]  # type: ignore[index]
+        if self._ft_in is not None:
+            return self._ft_in()
         read = self._read
         return [read("ft", k) for k in range(len(FT_CHANNELS))]
 
@@ -168,6 +181,9 @@ class ArmServoRegisters:
                         cells[j] = dac[j]
                 self.registers.writes += mask.bit_count()  # type: ignore[attr-defined]
             return
+        if self._out is not None:
+            self._out["dac"](dac, mask)
+            return
         self._many("dac", [(j, dac[j]) for j in self._joints if mask >> j & 1])
 
     def write_all(self, name: str, value: int) -> None:
@@ -184,6 +200,9 @@ class ArmServoRegisters:
         if cells is not None and self.direct:
             cells[:] = [value] * self.n
             self.registers.writes += self.n  # type: ignore[attr-defined]
+            return
+        if self._out is not None:
+            self._out[name]([value] * self.n, self._all)
             return
         self._many(name, [(j, value) for j in self._joints])
 

@@ -83,7 +83,7 @@ A subclass implements :meth:`exchange_inputs`, :meth:`exchange_outputs`,
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from functools import partial
 from typing import Any
 
@@ -701,6 +701,76 @@ class ImageRegisters:
     def writer(self, name: str, index: int = 0) -> Callable[[int], None]:
         """``write(name, value, index)`` bound once (:meth:`ImageBackend.writer`)."""
         return self.client.writer(self.board, name, index)
+
+    def block_reader(self, name: str) -> Callable[[], list[int]]:
+        """A read of every value of input register ``name`` at once, bound here
+        (ValueError for a register that is not an input of this board): once the
+        phases run, a slice of the image (a new list); otherwise, and over a link,
+        each value as :meth:`read` gives it."""
+        reg = self.kind.register(name)
+        if not reg.is_input:
+            raise ValueError(f"{self.kind.name} register {name!r} is not an input")
+        client = self.client
+        each = [self.reader(name, i) for i in range(reg.count)]
+        start = client._span[(self.board, name)][0]
+        end = start + reg.count
+
+        def read_all() -> list[int]:
+            return [r() for r in each]
+
+        if client.has_link:
+            return read_all
+
+        def read_block() -> list[int]:
+            if client.phased:
+                return client._values[start:end]
+            return read_all()
+
+        return read_block
+
+    def block_writer(self, name: str) -> Callable[[Sequence[int], int], None]:
+        """``write(values, mask)``: the values of output register ``name`` at
+        every index whose bit is set in ``mask``, bound here (ValueError for a
+        register that is not an output).  The caller vouches that each value
+        written is an ``int`` the register's declaration holds (it checked them:
+        nothing here looks again); otherwise exactly :meth:`write` of each."""
+        reg = self.kind.register(name)
+        if reg.is_input:
+            raise ValueError(f"{self.kind.name} register {name!r} is not an output")
+        client = self.client
+        count = reg.count
+        if client.has_link:
+            each = [self.writer(name, i) for i in range(count)]
+
+            def write_each(values: Sequence[int], mask: int) -> None:
+                for j in range(count):
+                    if mask >> j & 1:
+                        each[j](values[j])
+
+            return write_each
+        board, readback = self.board, reg.readback
+        keys = [(board, name, j) for j in range(count)]
+        slots = [client.output_index[k] for k in keys]
+        changed, outputs, current = client._changed, client._outputs, client._output_list
+
+        def write_block(values: Sequence[int], mask: int) -> None:
+            tap = client.tap
+            for j in range(count):
+                if not mask >> j & 1:
+                    continue
+                value, slot = values[j], slots[j]
+                if readback:
+                    if current[slot] == value and slot not in changed:
+                        continue
+                    outputs[keys[j]] = value
+                    current[slot] = value
+                changed[slot] = value
+                if tap is not None:
+                    tap.wrote(slot, value)
+            if not (client.in_tick and client.phased):
+                client.write_now()
+
+        return write_block
 
     def snapshot(self) -> list[int]:
         """Every input of this board, in declared order (once the phases run: a
