@@ -195,6 +195,15 @@ def test_through_the_process_image_the_blocks_are_the_same(steps):
     regs.write_all("enable", 1)
     boards.flush(len(steps))
     assert behind.values("enable") == [1] * N
+    image = boards.image
+    regs.write_dacs([7] * N)  # a whole block: one change for the write phase
+    assert behind.values("dac") == [7] * N  # outside a tick: at once
+    boards.poll(len(steps) + 1)
+    regs.write_dacs([7] * N)
+    assert not image._changed  # the same block again is no change
+    regs.write_dacs([8, 7, 7, 7, 7, 7])
+    boards.flush(len(steps) + 1)
+    assert behind.values("dac") == [8] + [7] * (N - 1)
     with pytest.raises(ValueError, match="dac"):
         regs.write_dacs([DAC_FULL_SCALE + 1] + [0] * (N - 1))
     boards.close()

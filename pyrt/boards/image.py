@@ -753,8 +753,26 @@ class ImageRegisters:
         slots = [client.output_index[k] for k in keys]
         changed, outputs, current = client._changed, client._outputs, client._output_list
 
+        first = slots[0]
+        end = first + count
+        full = (1 << count) - 1
+        contiguous = slots == list(range(first, end))
+
         def write_block(values: Sequence[int], mask: int) -> None:
             tap = client.tap
+            if mask == full and tap is None and readback and contiguous:
+                # the whole register, nothing watching the writes one by one: an
+                # unchanged block is no change, any other is the block's values
+                vals = list(values)
+                if len(vals) != count:
+                    raise ValueError(f"{name}: expected {count} values, got {len(vals)}")
+                if current[first:end] != vals:
+                    current[first:end] = vals
+                    changed.update(zip(slots, vals, strict=True))
+                    outputs.update(zip(keys, vals, strict=True))
+                if not (client.in_tick and client.phased):
+                    client.write_now()
+                return
             for j in range(count):
                 if not mask >> j & 1:
                     continue
