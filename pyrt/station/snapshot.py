@@ -1,0 +1,514 @@
+"""A controller's state between two ticks, written into a black box so that it replays.
+
+A black box (:mod:`pyrt.station.blackbox`) holds the last seconds of a run;
+a replay of them must start from the controller as it stood at their first
+tick.  A :class:`Snapshot` is that state, taken in the loop thread at the end
+of a tick (after the write phase), as the state *before* the next one:
+
+* the loop's own: the next tick's index, the fault ids given so far, each
+  rate group's ticks to its next release, each ready queue's memory (its
+  table and counters), whether its interrupts are on and whether it is halted;
+* the station's: each robot's fault (and whether it was moving), the move
+  watch's counters, the motion records queued;
+* the controller's, as the station's hook gives it
+  (:meth:`~pyrt.station.base.Station.snapshot_state` /
+  :meth:`~pyrt.station.base.Station.restore_state`); the built-in stations
+  give their component trees through :func:`state_of` / :func:`restore_into`;
+* the process image's inputs as the last tick read them and its outputs as
+  it left them.
+
+A station that cannot give some state raises :class:`SnapshotError` saying
+which ("cannot snapshot: tiny has no snapshot", "cannot snapshot: the
+foreground job init is running"); the black box then carries that reason and
+``pyrt replay`` refuses it with it.
+
+The format (``pyrt-snapshot/1``) is JSON, written zlib-compressed in the
+journal's ``S`` frame (:mod:`pyrt.journal.format`)::
+
+    {"format": "pyrt-snapshot/1", "station": NAME, "tick": T, "time_ns": NS,
+     "inputs": [...], "outputs": [...], "loop": {...}, "station_state": {...},
+     "state": {...}}            or  {"format": ..., "station": NAME, "refused": WHY}
+
+Values are JSON numbers, strings, ``null``, ``true``/``false`` and lists, or
+one-key objects naming their kind: ``{"$t": [...]}`` a tuple, ``{"$d": [[k,
+v], ...]}`` a dict, ``{"$b": HEX}`` bytes, ``{"$ba": HEX}`` a bytearray,
+``{"$a": [DTYPE, SHAPE, HEX]}`` a numpy array, ``{"$n": [DTYPE, HEX]}`` a
+numpy scalar, ``{"$q": [...]}`` a deque, ``{"$s": [...]}`` a set,
+``{"$cd": [...]}`` a C array's numbers, ``{"$dc": "MODULE:CLASS", "f": {...}}``
+a dataclass record, ``{"$o": {...}, "$c": "MODULE:CLASS"}`` an object's
+attributes, ``{"$r": PATH}`` an object given earlier at PATH.  Floats keep
+every bit (JSON's shortest repr round-trips).  A record or an object is only
+ever of a class of pyrt (or of the station's own package): a snapshot never
+chooses code to run, it only sets attributes of the station the replay built.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import json
+import math
+import zlib
+from collections import deque
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from types import BuiltinFunctionType, FunctionType, MethodType, ModuleType
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from pyrt.errors import ConfigError
+
+if TYPE_CHECKING:
+    from pyrt.station.base import Station
+
+__all__ = ["SNAPSHOT_FORMAT", "Snapshot", "SnapshotError", "restore_into", "restore_snapshot",
+           "state_of", "take_snapshot"]
+
+#: The snapshot format this pyrt writes and reads.
+SNAPSHOT_FORMAT = "pyrt-snapshot/1"
+
+#: Objects of these packages are structure, not state: the boards (the image
+#: carries their registers), the simulated world (a replay's stands still), the
+#: loop, queues and runner (their state is taken apart, :func:`_loop_state`),
+#: the scope, the station and the databases.
+_STRUCTURE = ("pyrt.boards", "pyrt.sim", "pyrt.scope", "pyrt.station", "pyrt.db",
+              "pyrt.scheduler.loop", "pyrt.scheduler.runner", "pyrt.scheduler.readyqueue",
+              "pyrt.scheduler.rategroup", "pyrt.scheduler.task", "pyrt.scheduler.clock",
+              "pyrt.scheduler._", "pyrt.scheduler.stats", "pyrt.scheduler.timinglog",
+              "pyrt.scheduler.gcwatch", "pyrt.component")
+
+
+class SnapshotError(ConfigError):
+    """A state that cannot be snapshot (the message says which), or a snapshot that
+    cannot be restored (damaged, of another station, of another format)."""
+
+
+_MISSING = object()
+
+
+class _Skip(Exception):
+    """Not state: a function, a view of another buffer, an object of the structure."""
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """The controller's state before tick :attr:`tick` (see the module text)."""
+
+    station: str
+    tick: int = 0
+    time_ns: int = 0
+    inputs: tuple[int, ...] = ()
+    outputs: tuple[int, ...] = ()
+    loop: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    station_state: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    state: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    #: Why the station could not give its state ('' when it could).
+    refused: str = ""
+
+    def encode(self) -> bytes:
+        """The snapshot as JSON (UTF-8)."""
+        doc: dict[str, Any] = {"format": SNAPSHOT_FORMAT, "station": self.station}
+        if self.refused:
+            doc["refused"] = self.refused
+        else:
+            doc.update(tick=self.tick, time_ns=self.time_ns, inputs=list(self.inputs),
+                       outputs=list(self.outputs), loop=self.loop,
+                       station_state=self.station_state, state=self.state)
+        return json.dumps(doc, separators=(",", ":")).encode("utf-8")
+
+    @classmethod
+    def decode(cls, data: bytes) -> Snapshot:
+        """The snapshot ``data`` holds; SnapshotError if it is not one this pyrt reads."""
+        try:
+            doc = json.loads(data.decode("utf-8"))
+        except (UnicodeDecodeError, ValueError) as exc:
+            raise SnapshotError(f"the snapshot is damaged: not JSON ({exc})") from None
+        if not isinstance(doc, dict):
+            raise SnapshotError("the snapshot is damaged: not a JSON object")
+        fmt = doc.get("format")
+        if fmt != SNAPSHOT_FORMAT:
+            raise SnapshotError(f"the snapshot's format is {str(fmt)[:40]!r}; this pyrt reads "
+                                f"{SNAPSHOT_FORMAT!r}")
+        station = doc.get("station")
+        if not isinstance(station, str):
+            raise SnapshotError("the snapshot is damaged: it names no station")
+        if "refused" in doc:
+            return cls(station, refused=str(doc["refused"]))
+        try:
+            tick, time_ns = doc["tick"], doc["time_ns"]
+            inputs, outputs = doc["inputs"], doc["outputs"]
+            loop, st, state = doc["loop"], doc["station_state"], doc["state"]
+        except KeyError as exc:
+            raise SnapshotError(f"the snapshot is damaged: it has no {exc.args[0]}") from None
+        ints = [tick, time_ns, *inputs, *outputs] if isinstance(inputs, list) \
+            and isinstance(outputs, list) else None
+        if ints is None or not all(type(v) is int for v in ints) or tick < 0 \
+                or not all(isinstance(m, dict) for m in (loop, st, state)):
+            raise SnapshotError("the snapshot is damaged: its tick, time, inputs or outputs "
+                                "are not integers")
+        return cls(station, tick, time_ns, tuple(inputs), tuple(outputs), loop, st, state)
+
+
+# -- values ------------------------------------------------------------------------------
+
+
+def _roots(extra: str = "") -> set[str]:
+    return {"pyrt", extra} - {""}
+
+
+def _class_name(cls: type) -> str:
+    return f"{cls.__module__}:{cls.__qualname__}"
+
+
+def _structure(cls: type) -> bool:
+    module = cls.__module__
+    return any(module == p or module.startswith(p + ".") or (p.endswith("_")
+               and module.startswith(p)) for p in _STRUCTURE)
+
+
+class _Encoder:
+    def __init__(self, package: str):
+        self.roots = _roots(package)
+        self.seen: dict[int, str] = {}
+
+    def value(self, v: Any, path: str) -> Any:
+        if v is None or isinstance(v, bool | int | str):
+            return v
+        if isinstance(v, np.generic):
+            return {"$n": [v.dtype.str, v.tobytes().hex()]}
+        if isinstance(v, float):
+            return v if math.isfinite(v) else {"$fl": repr(v)}
+        if isinstance(v, list):
+            return [self.value(x, f"{path}[{i}]") for i, x in enumerate(v)]
+        if isinstance(v, tuple) and not hasattr(v, "_fields"):
+            return {"$t": [self.value(x, f"{path}[{i}]") for i, x in enumerate(v)]}
+        if isinstance(v, dict):
+            return {"$d": [[self.value(k, f"{path}<{i}"), self.value(x, f"{path}{{{i}}}")]
+                           for i, (k, x) in enumerate(v.items())]}
+        if isinstance(v, bytearray):
+            return {"$ba": v.hex()}
+        if isinstance(v, bytes):
+            return {"$b": v.hex()}
+        if isinstance(v, np.ndarray):
+            if v.dtype.hasobject:
+                raise _Skip
+            return {"$a": [v.dtype.str, list(v.shape), np.ascontiguousarray(v).tobytes().hex()]}
+        if isinstance(v, deque):
+            return {"$q": [self.value(x, f"{path}[{i}]") for i, x in enumerate(v)]}
+        if isinstance(v, set | frozenset):
+            return {"$s": [self.value(x, path) for x in sorted(v, key=repr)]}
+        if isinstance(v, FunctionType | MethodType | BuiltinFunctionType | type | ModuleType
+                      | range | slice | memoryview) or (callable(v) and not hasattr(v, "__dict__")):
+            raise _Skip
+        cls = type(v)
+        name = cls.__name__
+        if name.startswith("__CData") or name == "CData":
+            return self._cdata(v)
+        root = cls.__module__.split(".")[0]
+        if root not in self.roots or _structure(cls):
+            raise _Skip
+        if id(v) in self.seen:
+            return {"$r": self.seen[id(v)]}
+        if dataclasses.is_dataclass(v) and cls.__dataclass_params__.frozen:
+            return {"$dc": _class_name(cls),
+                    "f": {f.name: self.value(getattr(v, f.name), f"{path}.{f.name}")
+                          for f in dataclasses.fields(v)}}
+        attrs = getattr(v, "__dict__", None)
+        if attrs is None:
+            raise _Skip
+        self.seen[id(v)] = path
+        return {"$c": _class_name(cls), "$o": self.attributes(attrs, path)}
+
+    def attributes(self, attrs: Mapping[str, Any], path: str) -> dict[str, Any]:
+        out = {}
+        for key, x in list(attrs.items()):
+            try:
+                out[key] = self.value(x, f"{path}.{key}")
+            except _Skip:
+                continue
+        return out
+
+    @staticmethod
+    def _cdata(v: Any) -> Any:
+        # a C array of numbers the object owns (a kernel's state); pointers and
+        # structs are structure, bound once when it was built
+        text = repr(v)
+        if "owning" not in text or not any(f"'{t}[]'" in text for t in
+                                           ("double", "float", "int32_t", "int64_t", "int",
+                                            "uint8_t", "uint32_t")):
+            raise _Skip
+        values = list(v[0:len(v)])
+        return {"$cd": [x if not isinstance(x, float) or math.isfinite(x) else {"$fl": repr(x)}
+                        for x in values]}
+
+
+class _Decoder:
+    def __init__(self, package: str):
+        self.roots = _roots(package)
+        self.seen: dict[str, Any] = {}
+
+    def _class(self, name: Any) -> type:
+        module, _, qual = str(name).partition(":")
+        if module.split(".")[0] not in self.roots:
+            raise SnapshotError(f"the snapshot names a class of {module[:60]!r}, not of pyrt")
+        try:
+            obj: Any = importlib.import_module(module)
+            for part in qual.split("."):
+                obj = getattr(obj, part)
+        except (ImportError, AttributeError):
+            raise SnapshotError(f"the snapshot names a class {str(name)[:80]!r} this pyrt "
+                                "does not have") from None
+        if not isinstance(obj, type):
+            raise SnapshotError(f"the snapshot names {str(name)[:80]!r}, which is not a class")
+        return obj
+
+    def value(self, v: Any, cur: Any, path: str) -> Any:
+        if v is None or isinstance(v, bool | int | str | float):
+            return v
+        if isinstance(v, list):
+            items = [self.value(x, cur[i] if isinstance(cur, list) and i < len(cur) else None,
+                            f"{path}[{i}]") for i, x in enumerate(v)]
+            if isinstance(cur, list):
+                cur[:] = items
+                return cur
+            return items
+        if not isinstance(v, dict) or not v:
+            raise SnapshotError(f"the snapshot is damaged at {path}: {str(v)[:40]!r}")
+        tag = next(iter(v))
+        body = v[tag]
+        try:
+            return self._tagged(tag, body, v, cur, path)
+        except (ValueError, TypeError, KeyError, IndexError) as exc:
+            raise SnapshotError(f"the snapshot is damaged at {path}: {exc}") from None
+
+    def _tagged(self, tag: str, body: Any, v: dict, cur: Any, path: str) -> Any:
+        if tag == "$fl":
+            return float(body)
+        if tag == "$t":
+            return tuple(self.value(x, cur[i] if isinstance(cur, tuple) and i < len(cur)
+                                    else None, f"{path}[{i}]") for i, x in enumerate(body))
+        if tag == "$d":
+            old = cur if isinstance(cur, dict) else {}
+            pairs = []
+            for i, (k, x) in enumerate(body):
+                key = self.value(k, None, f"{path}<{i}")
+                pairs.append((key, self.value(x, old.get(key), f"{path}{{{i}}}")))
+            if isinstance(cur, dict):
+                cur.clear()
+                cur.update(pairs)
+                return cur
+            return dict(pairs)
+        if tag in ("$b", "$ba"):
+            data = bytes.fromhex(body)
+            if tag == "$b":
+                return data
+            if isinstance(cur, bytearray) and len(cur) == len(data):
+                cur[:] = data
+                return cur
+            return bytearray(data)
+        if tag == "$a":
+            dtype, shape, data = body
+            arr = np.frombuffer(bytes.fromhex(data), dtype=np.dtype(dtype)).reshape(shape)
+            if isinstance(cur, np.ndarray) and cur.shape == arr.shape and cur.dtype == arr.dtype:
+                cur[...] = arr
+                return cur
+            return arr.copy()
+        if tag == "$n":
+            return np.frombuffer(bytes.fromhex(body[1]), dtype=np.dtype(body[0]))[0]
+        if tag == "$q":
+            items = [self.value(x, None, f"{path}[{i}]") for i, x in enumerate(body)]
+            if isinstance(cur, deque):
+                cur.clear()
+                cur.extend(items)
+                return cur
+            return deque(items)
+        if tag == "$s":
+            return {self.value(x, None, path) for x in body}
+        if tag == "$cd":
+            values = [float(x["$fl"]) if isinstance(x, dict) else x for x in body]
+            if cur is not None and len(cur) == len(values):
+                cur[0:len(values)] = values
+            return cur
+        if tag == "$r":
+            if body not in self.seen:
+                raise SnapshotError(f"the snapshot is damaged at {path}: it refers to "
+                                    f"{str(body)[:60]!r}, which it did not give")
+            return self.seen[body]
+        if tag == "$dc":
+            cls = self._class(body)
+            if not dataclasses.is_dataclass(cls):
+                raise SnapshotError(f"the snapshot names {body[:80]!r} as a record; it is not")
+            obj = object.__new__(cls)
+            for name, x in v["f"].items():
+                object.__setattr__(obj, name, self.value(x, None, f"{path}.{name}"))
+            return obj
+        if tag == "$c":
+            cls = self._class(body)
+            if cur is None or type(cur) is not cls:
+                cur = cls.__new__(cls)
+            self.seen[path] = cur
+            self.attributes(cur, v["$o"], path)
+            return cur
+        raise SnapshotError(f"the snapshot is damaged at {path}: unknown kind {tag[:20]!r}")
+
+    def attributes(self, obj: Any, state: Mapping[str, Any], path: str) -> None:
+        attrs = getattr(obj, "__dict__", None)
+        if attrs is None or not isinstance(state, Mapping):
+            raise SnapshotError(f"the snapshot is damaged at {path}: not an object's state")
+        for key, x in state.items():
+            old = attrs.get(key, _MISSING)
+            new = self.value(x, None if old is _MISSING else old, f"{path}.{key}")
+            if old is not new:
+                attrs[key] = new
+
+
+def state_of(objects: Mapping[str, Any], package: str = "") -> dict[str, Any]:
+    """The state of ``objects`` (name -> object, each walked with every object of pyrt
+    it holds: attributes that are numbers, text, containers, arrays, records), as
+    plain JSON-able data; ``package``: a package whose classes count as pyrt's (a
+    station's own).  Functions, views, the boards, the world, the loop and the
+    station are structure and left out."""
+    enc = _Encoder(package)
+    out: dict[str, Any] = {}
+    for name, obj in objects.items():
+        try:
+            out[name] = enc.value(obj, name)
+        except _Skip:
+            raise SnapshotError(f"cannot snapshot: {name} is a {type(obj).__name__}, "
+                                "not state") from None
+    return out
+
+
+def restore_into(objects: Mapping[str, Any], state: Mapping[str, Any],
+                 package: str = "") -> None:
+    """Put ``state`` (:func:`state_of` of objects built the same way) back into
+    ``objects``, in place: lists, arrays and bytearrays keep their identity (views
+    and C kernels that share them see the restored values)."""
+    dec = _Decoder(package)
+    for name, obj in objects.items():
+        if name not in state:
+            raise SnapshotError(f"the snapshot has no state of {name}")
+        got = dec.value(state[name], obj, name)
+        if got is not obj:
+            raise SnapshotError(f"the snapshot's {name} is not the station's ({type(got).__name__} "
+                                f"for a {type(obj).__name__})")
+
+
+# -- the loop's and the station's own ---------------------------------------------------
+
+
+def _loop_state(station: Station) -> dict[str, Any]:
+    loop = station.loop
+    if loop.jobs:
+        raise SnapshotError(f"cannot snapshot: the foreground job {loop.jobs[0].name} is "
+                            "running (its place in its sequence is not state pyrt can save)")
+    return {
+        "tick": loop.tick_index + 1 if loop.running else loop.tick_index,
+        "fault_ids": loop._fault_ids,
+        "groups": [[g.name, g._left, g.released_at] for g in loop.rate_groups],
+        "queues": [[q.name, q.image.mem.hex(), q.interrupts_enabled, q.halted, q.now_ns]
+                   for q in loop.queues],
+    }
+
+
+def _restore_loop(station: Station, state: Mapping[str, Any]) -> None:
+    loop = station.loop
+    groups, queues = state["groups"], state["queues"]
+    if [g[0] for g in groups] != [g.name for g in loop.rate_groups] \
+            or [q[0] for q in queues] != [q.name for q in loop.queues]:
+        raise SnapshotError("the snapshot's rate groups and ready queues are not the station's "
+                            f"({', '.join(str(q[0]) for q in queues)} against "
+                            f"{', '.join(q.name for q in loop.queues)})")
+    loop.tick_index = int(state["tick"])
+    loop._fault_ids = int(state["fault_ids"])
+    for g, (_name, left, released) in zip(loop.rate_groups, groups, strict=True):
+        g._left, g.released_at = int(left), int(released)
+    for q, (_name, mem, interrupts, halted, now_ns) in zip(loop.queues, queues, strict=True):
+        data = bytes.fromhex(mem)
+        if len(data) != len(q.image.mem):
+            raise SnapshotError(f"the snapshot's ready queue {q.name} is not the station's")
+        q.image.mem[:] = data
+        q.interrupts_enabled = bool(interrupts)
+        if halted:
+            q.halt()
+        else:
+            q.resume(restart=False)
+        q.now_ns = int(now_ns)
+
+
+_EVENTS = ("_moving", "_move_seq", "moves_this_period")
+
+
+def _station_state(station: Station) -> dict[str, Any]:
+    enc = _Encoder(type(station).__module__.split(".")[0])
+    return {
+        "robots": [[r.name, enc.value(r.fault, "fault"), r.moving] for r in station.robots],
+        "events": [getattr(station, a) for a in _EVENTS],
+        "motion": [enc.value(m, f"motion[{i}]") for i, m in enumerate(station.motion._q)],
+    }
+
+
+def _restore_station(station: Station, state: Mapping[str, Any]) -> None:
+    dec = _Decoder(type(station).__module__.split(".")[0])
+    robots = station.robots
+    if [r[0] for r in state["robots"]] != [r.name for r in robots]:
+        raise SnapshotError("the snapshot's robots are not the station's")
+    for r, (_name, fault, moving) in zip(robots, state["robots"], strict=True):
+        r.fault = dec.value(fault, None, "fault")
+        r.moving = bool(moving)
+    for a, v in zip(_EVENTS, state["events"], strict=True):
+        setattr(station, a, v)
+    queue = station.motion._q
+    queue.clear()
+    queue.extend(dec.value(m, None, f"motion[{i}]") for i, m in enumerate(state["motion"]))
+
+
+def take_snapshot(station: Station, inputs: list[int], outputs: list[int]) -> Snapshot:
+    """The station's state now (the loop thread, at the end of a tick: the state
+    before the next), with the image's ``inputs`` and ``outputs``; a snapshot
+    that says why when the station cannot give it."""
+    try:
+        loop = _loop_state(station)
+        own = station.snapshot_state()
+        common = _station_state(station)
+    except SnapshotError as exc:
+        return Snapshot(station.name, refused=str(exc))
+    except _Skip:
+        return Snapshot(station.name, refused="cannot snapshot: a robot's fault or a queued "
+                                              "motion is not state pyrt can save")
+    return Snapshot(station.name, loop["tick"], station.loop.now_ns, tuple(inputs),
+                    tuple(outputs), loop, common, own)
+
+
+def restore_snapshot(station: Station, snap: Snapshot) -> None:
+    """Put ``snap`` back into ``station`` (built as the run's was, not yet run);
+    SnapshotError naming what does not fit (or the station's own refusal)."""
+    if snap.refused:
+        raise SnapshotError(snap.refused)
+    if snap.station != station.name:
+        raise SnapshotError(f"the snapshot is of station {snap.station!r}, not {station.name!r}")
+    try:
+        station.restore_state(snap.state)
+        _restore_station(station, snap.station_state)
+        _restore_loop(station, snap.loop)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise SnapshotError(f"the snapshot is damaged: {type(exc).__name__}: {exc}") from None
+
+
+def compress_snapshot(snap: Snapshot) -> bytes:
+    """The snapshot as an ``S`` frame holds it: its JSON, zlib-compressed."""
+    return zlib.compress(snap.encode(), 6)
+
+
+def decompress_snapshot(data: bytes) -> Snapshot:
+    """The snapshot of an ``S`` frame; SnapshotError if it is damaged."""
+    try:
+        raw = zlib.decompress(data)
+    except zlib.error as exc:
+        raise SnapshotError(f"the snapshot is damaged: it does not decompress ({exc})") from None
+    return Snapshot.decode(raw)
+
+
+#: What a station's hook gives: its objects, walked by :func:`state_of`.
+StateObjects = Callable[[], Mapping[str, Any]]
