@@ -34,7 +34,8 @@ one-key objects naming their kind: ``{"$t": [...]}`` a tuple, ``{"$d": [[k,
 v], ...]}`` a dict, ``{"$b": HEX}`` bytes, ``{"$ba": HEX}`` a bytearray,
 ``{"$a": [DTYPE, SHAPE, HEX]}`` a numpy array, ``{"$n": [DTYPE, HEX]}`` a
 numpy scalar, ``{"$q": [...]}`` a deque, ``{"$s": [...]}`` a set,
-``{"$cd": [...]}`` a C array's numbers, ``{"$dc": "MODULE:CLASS", "f": {...}}``
+``{"$cd": [...]}`` a C array's numbers, ``{"$e": "MODULE:CLASS", "v": NAME}``
+an enum's member, ``{"$dc": "MODULE:CLASS", "f": {...}}``
 a dataclass record, ``{"$o": {...}, "$c": "MODULE:CLASS"}`` an object's
 attributes, ``{"$r": PATH}`` an object given earlier at PATH.  Floats keep
 every bit (JSON's shortest repr round-trips).  A record or an object is only
@@ -45,6 +46,7 @@ chooses code to run, it only sets attributes of the station the replay built.
 from __future__ import annotations
 
 import dataclasses
+import enum
 import importlib
 import json
 import math
@@ -173,6 +175,11 @@ class _Encoder:
         self.seen: dict[int, str] = {}
 
     def value(self, v: Any, path: str) -> Any:
+        if isinstance(v, enum.Enum):
+            cls = type(v)
+            if cls.__module__.split(".")[0] not in self.roots:
+                raise _Skip
+            return {"$e": _class_name(cls), "v": v.name}
         if v is None or isinstance(v, bool | int | str):
             return v
         if isinstance(v, np.generic):
@@ -191,20 +198,19 @@ class _Encoder:
         if isinstance(v, bytes):
             return {"$b": v.hex()}
         if isinstance(v, np.ndarray):
-            if v.dtype.hasobject:
-                raise _Skip
+            if v.dtype.hasobject or not v.flags.writeable:
+                raise _Skip  # a read-only view of another array: that one is state
             return {"$a": [v.dtype.str, list(v.shape), np.ascontiguousarray(v).tobytes().hex()]}
         if isinstance(v, deque):
             return {"$q": [self.value(x, f"{path}[{i}]") for i, x in enumerate(v)]}
         if isinstance(v, set | frozenset):
             return {"$s": [self.value(x, path) for x in sorted(v, key=repr)]}
+        cls = type(v)
+        if cls.__name__.startswith("__CData") or cls.__name__ == "CData":
+            return self._cdata(v)
         if isinstance(v, FunctionType | MethodType | BuiltinFunctionType | type | ModuleType
                       | range | slice | memoryview) or (callable(v) and not hasattr(v, "__dict__")):
             raise _Skip
-        cls = type(v)
-        name = cls.__name__
-        if name.startswith("__CData") or name == "CData":
-            return self._cdata(v)
         root = cls.__module__.split(".")[0]
         if root not in self.roots or _structure(cls):
             raise _Skip
@@ -231,16 +237,59 @@ class _Encoder:
 
     @staticmethod
     def _cdata(v: Any) -> Any:
-        # a C array of numbers the object owns (a kernel's state); pointers and
-        # structs are structure, bound once when it was built
-        text = repr(v)
-        if "owning" not in text or not any(f"'{t}[]'" in text for t in
-                                           ("double", "float", "int32_t", "int64_t", "int",
-                                            "uint8_t", "uint32_t")):
+        # memory a kernel's object owns: its numbers (arrays, the scalar fields of
+        # its structs); pointers are structure, bound once when it was built
+        if "owning" not in repr(v):
             raise _Skip
-        values = list(v[0:len(v)])
-        return {"$cd": [x if not isinstance(x, float) or math.isfinite(x) else {"$fl": repr(x)}
-                        for x in values]}
+        ctype = _cffi_typeof(v)
+        if ctype.kind == "pointer":
+            return {"$cd": _cd_get(v[0], ctype.item)}
+        if ctype.kind == "array":
+            return {"$cd": _cd_get(v, ctype)}
+        raise _Skip
+
+
+def _cffi_typeof(v: Any) -> Any:
+    import _cffi_backend  # the C type of a kernel's memory (pyrt.native built it)
+
+    return _cffi_backend.typeof(v)
+
+
+def _cd_get(v: Any, ctype: Any) -> Any:
+    """The numbers in C memory ``v`` of type ``ctype``: a number, a list (an array),
+    a dict (a struct's fields that are not pointers); pointers: None."""
+    kind = ctype.kind
+    if kind == "primitive":
+        x = v
+        return x if not isinstance(x, float) or math.isfinite(x) else {"$fl": repr(x)}
+    if kind == "array":
+        return [_cd_get(v[i], ctype.item) for i in range(len(v))]
+    if kind == "struct":
+        return {name: _cd_get(getattr(v, name), f.type) for name, f in ctype.fields
+                if f.type.kind in ("primitive", "array", "struct")}
+    return None
+
+
+def _cd_put(v: Any, ctype: Any, data: Any) -> None:
+    """Write :func:`_cd_get`'s ``data`` back into C memory ``v`` (arrays and structs)."""
+    kind = ctype.kind
+    if kind == "array":
+        item = ctype.item
+        if len(data) != len(v):
+            raise SnapshotError("the snapshot's C array is not the kernel's size")
+        for i, x in enumerate(data):
+            if item.kind == "primitive":
+                v[i] = float(x["$fl"]) if isinstance(x, dict) else x
+            else:
+                _cd_put(v[i], item, x)
+    elif kind == "struct":
+        fields = dict(ctype.fields)
+        for name, x in data.items():
+            f = fields[name].type
+            if f.kind == "primitive":
+                setattr(v, name, float(x["$fl"]) if isinstance(x, dict) else x)
+            else:
+                _cd_put(getattr(v, name), f, x)
 
 
 class _Decoder:
@@ -311,7 +360,8 @@ class _Decoder:
             dtype, shape, data = body
             arr = np.frombuffer(bytes.fromhex(data), dtype=np.dtype(dtype)).reshape(shape)
             if isinstance(cur, np.ndarray) and cur.shape == arr.shape and cur.dtype == arr.dtype:
-                cur[...] = arr
+                if cur.flags.writeable:
+                    cur[...] = arr
                 return cur
             return arr.copy()
         if tag == "$n":
@@ -326,15 +376,26 @@ class _Decoder:
         if tag == "$s":
             return {self.value(x, None, path) for x in body}
         if tag == "$cd":
-            values = [float(x["$fl"]) if isinstance(x, dict) else x for x in body]
-            if cur is not None and len(cur) == len(values):
-                cur[0:len(values)] = values
+            if cur is None or not type(cur).__name__.startswith("__CData"):
+                raise SnapshotError(f"the snapshot has C memory at {path}; the station "
+                                    "has none there")
+            ctype = _cffi_typeof(cur)
+            if ctype.kind == "pointer":
+                _cd_put(cur[0], ctype.item, body)
+            else:
+                _cd_put(cur, ctype, body)
             return cur
         if tag == "$r":
             if body not in self.seen:
                 raise SnapshotError(f"the snapshot is damaged at {path}: it refers to "
                                     f"{str(body)[:60]!r}, which it did not give")
             return self.seen[body]
+        if tag == "$e":
+            cls = self._class(body)
+            if not issubclass(cls, enum.Enum) or v["v"] not in cls.__members__:
+                raise SnapshotError(f"the snapshot is damaged at {path}: {body[:60]!r} has "
+                                    f"no member {str(v['v'])[:40]!r}")
+            return cls[v["v"]]
         if tag == "$dc":
             cls = self._class(body)
             if not dataclasses.is_dataclass(cls):
