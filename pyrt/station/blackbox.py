@@ -98,8 +98,13 @@ __all__ = [
     "plotting_available",
 ]
 
-#: The fastest a signal is sampled into the ring, per second.
-SIGNAL_RATE_HZ = 100.0
+#: The fastest a signal is sampled into the ring, per second: 20 Hz, the rate of
+#: the controllers' own control (the manipulator's poll is 50 ms, the gripper's
+#: MVJAWS runs every 48 ms).  What changes faster is in the journal's ring at every
+#: tick, and a black box replays: ``pyrt replay BOX.pj --scope SIGNALS`` gives any
+#: signal at every tick.  (At 100 Hz the manipulator's 45 signals cost a fifth of
+#: its tick's work.)
+SIGNAL_RATE_HZ = 20.0
 #: The signal ring's memory, at most (8 MiB): the rate is lowered to keep it.
 SIGNAL_BUDGET = 8 << 20
 #: Both rings of a black box, at most: the journal's and the signals'.
@@ -108,7 +113,9 @@ TOTAL_BUDGET = DEFAULT_BUDGET + SIGNAL_BUDGET
 AFTER_S = 0.5
 #: Loop time between two snapshots of the controller (a black box replays from
 #: the first one in it, so it replays all but at most this much of its span).
-SNAPSHOT_S = 1.0
+#: A snapshot of the manipulator takes about 0.5 ms of the loop thread (the
+#: gripper's 35 µs): every 2 s it is about 1 µs a tick on average.
+SNAPSHOT_S = 2.0
 #: Loop time the ring holds beyond what a black box needs, so that the thread
 #: copying a window out of it is never overtaken by the loop.
 SLACK_S = 1.0

@@ -49,7 +49,6 @@ import dataclasses
 import enum
 import importlib
 import json
-import math
 import zlib
 from collections import deque
 from collections.abc import Callable, Mapping
@@ -87,6 +86,10 @@ class SnapshotError(ConfigError):
 
 
 _MISSING = object()
+
+
+#: How each class's values are encoded, by the package that counts as pyrt's.
+_KINDS: dict[str, dict[type, str]] = {}
 
 
 class _Skip(Exception):
@@ -169,66 +172,109 @@ def _structure(cls: type) -> bool:
                and module.startswith(p)) for p in _STRUCTURE)
 
 
+_PLAIN = frozenset((int, float, str, bool, type(None)))
+
+
 class _Encoder:
     def __init__(self, package: str):
         self.roots = _roots(package)
         self.seen: dict[int, str] = {}
+        self.kinds = _KINDS.setdefault(package, {})
+
+    def _kind(self, cls: type) -> str:
+        """How values of ``cls`` are encoded (decided once per class)."""
+        if issubclass(cls, enum.Enum):
+            kind = "enum" if cls.__module__.split(".")[0] in self.roots else "skip"
+        elif issubclass(cls, np.generic):
+            kind = "npscalar"
+        elif issubclass(cls, bool | int | str | float):
+            kind = "plain"
+        elif issubclass(cls, list):
+            kind = "list"
+        elif issubclass(cls, tuple):
+            kind = "skip" if hasattr(cls, "_fields") else "tuple"
+        elif issubclass(cls, dict):
+            kind = "dict"
+        elif issubclass(cls, bytearray):
+            kind = "bytearray"
+        elif issubclass(cls, bytes):
+            kind = "bytes"
+        elif issubclass(cls, np.ndarray):
+            kind = "ndarray"
+        elif issubclass(cls, deque):
+            kind = "deque"
+        elif issubclass(cls, set | frozenset):
+            kind = "set"
+        elif cls.__name__.startswith("__CData") or cls.__name__ == "CData":
+            kind = "cdata"
+        elif issubclass(cls, FunctionType | MethodType | BuiltinFunctionType | type | ModuleType
+                        | range | slice | memoryview) \
+                or cls.__module__.split(".")[0] not in self.roots or _structure(cls):
+            kind = "skip"
+        elif dataclasses.is_dataclass(cls) and cls.__dataclass_params__.frozen:
+            kind = "record"
+        else:
+            kind = "object"
+        self.kinds[cls] = kind
+        return kind
 
     def value(self, v: Any, path: str) -> Any:
-        if isinstance(v, enum.Enum):
-            cls = type(v)
-            if cls.__module__.split(".")[0] not in self.roots:
-                raise _Skip
-            return {"$e": _class_name(cls), "v": v.name}
-        if v is None or isinstance(v, bool | int | str):
+        cls = type(v)
+        if cls in _PLAIN:
             return v
-        if isinstance(v, np.generic):
-            return {"$n": [v.dtype.str, v.tobytes().hex()]}
-        if isinstance(v, float):
-            return v if math.isfinite(v) else {"$fl": repr(v)}
-        if isinstance(v, list):
+        kind = self.kinds.get(cls) or self._kind(cls)
+        if kind == "list":
+            if all(type(x) in _PLAIN for x in v):
+                return v.copy()
             return [self.value(x, f"{path}[{i}]") for i, x in enumerate(v)]
-        if isinstance(v, tuple) and not hasattr(v, "_fields"):
+        if kind == "tuple":
+            if all(type(x) in _PLAIN for x in v):
+                return {"$t": list(v)}
             return {"$t": [self.value(x, f"{path}[{i}]") for i, x in enumerate(v)]}
-        if isinstance(v, dict):
-            return {"$d": [[self.value(k, f"{path}<{i}"), self.value(x, f"{path}{{{i}}}")]
-                           for i, (k, x) in enumerate(v.items())]}
-        if isinstance(v, bytearray):
-            return {"$ba": v.hex()}
-        if isinstance(v, bytes):
-            return {"$b": v.hex()}
-        if isinstance(v, np.ndarray):
+        if kind == "plain":  # a subclass of a plain type
+            return v
+        if kind == "object":
+            if id(v) in self.seen:
+                return {"$r": self.seen[id(v)]}
+            attrs = getattr(v, "__dict__", None)
+            if attrs is None:
+                raise _Skip
+            self.seen[id(v)] = path
+            return {"$c": _class_name(cls), "$o": self.attributes(attrs, path)}
+        if kind == "skip":
+            raise _Skip
+        if kind == "ndarray":
             if v.dtype.hasobject or not v.flags.writeable:
                 raise _Skip  # a read-only view of another array: that one is state
             return {"$a": [v.dtype.str, list(v.shape), np.ascontiguousarray(v).tobytes().hex()]}
-        if isinstance(v, deque):
-            return {"$q": [self.value(x, f"{path}[{i}]") for i, x in enumerate(v)]}
-        if isinstance(v, set | frozenset):
-            return {"$s": [self.value(x, path) for x in sorted(v, key=repr)]}
-        cls = type(v)
-        if cls.__name__.startswith("__CData") or cls.__name__ == "CData":
-            return self._cdata(v)
-        if isinstance(v, FunctionType | MethodType | BuiltinFunctionType | type | ModuleType
-                      | range | slice | memoryview) or (callable(v) and not hasattr(v, "__dict__")):
-            raise _Skip
-        root = cls.__module__.split(".")[0]
-        if root not in self.roots or _structure(cls):
-            raise _Skip
-        if id(v) in self.seen:
-            return {"$r": self.seen[id(v)]}
-        if dataclasses.is_dataclass(v) and cls.__dataclass_params__.frozen:
+        if kind == "dict":
+            return {"$d": [[self.value(k, f"{path}<{i}"), self.value(x, f"{path}{{{i}}}")]
+                           for i, (k, x) in enumerate(v.items())]}
+        if kind == "record":
             return {"$dc": _class_name(cls),
                     "f": {f.name: self.value(getattr(v, f.name), f"{path}.{f.name}")
                           for f in dataclasses.fields(v)}}
-        attrs = getattr(v, "__dict__", None)
-        if attrs is None:
-            raise _Skip
-        self.seen[id(v)] = path
-        return {"$c": _class_name(cls), "$o": self.attributes(attrs, path)}
+        if kind == "enum":
+            return {"$e": _class_name(cls), "v": v.name}
+        if kind == "npscalar":
+            return {"$n": [v.dtype.str, v.tobytes().hex()]}
+        if kind == "bytearray":
+            return {"$ba": v.hex()}
+        if kind == "bytes":
+            return {"$b": v.hex()}
+        if kind == "deque":
+            return {"$q": [self.value(x, f"{path}[{i}]") for i, x in enumerate(v)]}
+        if kind == "set":
+            return {"$s": [self.value(x, path) for x in sorted(v, key=repr)]}
+        return self._cdata(v)
 
     def attributes(self, attrs: Mapping[str, Any], path: str) -> dict[str, Any]:
         out = {}
+        plain = _PLAIN
         for key, x in list(attrs.items()):
+            if type(x) in plain:
+                out[key] = x
+                continue
             try:
                 out[key] = self.value(x, f"{path}.{key}")
             except _Skip:
@@ -260,9 +306,10 @@ def _cd_get(v: Any, ctype: Any) -> Any:
     a dict (a struct's fields that are not pointers); pointers: None."""
     kind = ctype.kind
     if kind == "primitive":
-        x = v
-        return x if not isinstance(x, float) or math.isfinite(x) else {"$fl": repr(x)}
+        return v
     if kind == "array":
+        if ctype.item.kind == "primitive":
+            return list(v)
         return [_cd_get(v[i], ctype.item) for i in range(len(v))]
     if kind == "struct":
         return {name: _cd_get(getattr(v, name), f.type) for name, f in ctype.fields
