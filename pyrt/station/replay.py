@@ -355,7 +355,11 @@ class Replay:
         if first is None or first.tick != snap.tick:
             raise ConfigError(f"journal {self.path}: its snapshot is of tick {snap.tick}, "
                               "which the journal does not hold; not replayed")
-        restore_snapshot(station, snap)
+        try:
+            restore_snapshot(station, snap)
+        except SnapshotError as exc:
+            raise SnapshotError(f"journal {self.path}: its snapshot of tick {snap.tick}: "
+                                f"{exc}; not replayed") from None
         image = self.boards.image if self.boards is not None else None
         if image is not None:  # what building the station wrote is not what the run had
             image.forget_outputs(dict(zip(image.output_layout, snap.outputs, strict=True)))

@@ -238,7 +238,7 @@ class _Encoder:
                 return {"$r": self.seen[id(v)]}
             attrs = getattr(v, "__dict__", None)
             if attrs is None:
-                raise _Skip
+                attrs = {a: getattr(v, a) for a in _slots(cls) if hasattr(v, a)}
             self.seen[id(v)] = path
             return {"$c": _class_name(cls), "$o": self.attributes(attrs, path)}
         if kind == "skip":
@@ -293,6 +293,15 @@ class _Encoder:
         if ctype.kind == "array":
             return {"$cd": _cd_get(v, ctype)}
         raise _Skip
+
+
+def _slots(cls: type) -> tuple[str, ...]:
+    """The attributes a class with ``__slots__`` (and no ``__dict__``) holds."""
+    names: list[str] = []
+    for k in cls.__mro__:
+        slots = k.__dict__.get("__slots__", ())
+        names += [slots] if isinstance(slots, str) else [n for n in slots if n != "__weakref__"]
+    return tuple(names)
 
 
 def _cffi_typeof(v: Any) -> Any:
@@ -399,14 +408,21 @@ class _Decoder:
             data = bytes.fromhex(body)
             if tag == "$b":
                 return data
-            if isinstance(cur, bytearray) and len(cur) == len(data):
+            if isinstance(cur, bytearray):
+                if len(cur) != len(data):
+                    raise SnapshotError(f"the snapshot's {path} is {len(data)} bytes, the "
+                                        f"station's {len(cur)}")
                 cur[:] = data
                 return cur
             return bytearray(data)
         if tag == "$a":
             dtype, shape, data = body
             arr = np.frombuffer(bytes.fromhex(data), dtype=np.dtype(dtype)).reshape(shape)
-            if isinstance(cur, np.ndarray) and cur.shape == arr.shape and cur.dtype == arr.dtype:
+            if isinstance(cur, np.ndarray):
+                if cur.shape != arr.shape or cur.dtype != arr.dtype:
+                    raise SnapshotError(f"the snapshot's {path} is a {arr.dtype} array of "
+                                        f"shape {arr.shape}, the station's {cur.dtype} "
+                                        f"{cur.shape}")
                 if cur.flags.writeable:
                     cur[...] = arr
                 return cur
@@ -452,8 +468,8 @@ class _Decoder:
                 object.__setattr__(obj, name, self.value(x, None, f"{path}.{name}"))
             return obj
         if tag == "$c":
-            cls = self._class(body)
-            if cur is None or type(cur) is not cls:
+            if cur is None or _class_name(type(cur)) != body:
+                cls = self._class(body)  # an object the station has not (a motion under way)
                 cur = cls.__new__(cls)
             self.seen[path] = cur
             self.attributes(cur, v["$o"], path)
@@ -461,14 +477,24 @@ class _Decoder:
         raise SnapshotError(f"the snapshot is damaged at {path}: unknown kind {tag[:20]!r}")
 
     def attributes(self, obj: Any, state: Mapping[str, Any], path: str) -> None:
-        attrs = getattr(obj, "__dict__", None)
-        if attrs is None or not isinstance(state, Mapping):
+        if not isinstance(state, Mapping):
             raise SnapshotError(f"the snapshot is damaged at {path}: not an object's state")
+        attrs = getattr(obj, "__dict__", None)
+        slots = _slots(type(obj)) if attrs is None else ()
         for key, x in state.items():
-            old = attrs.get(key, _MISSING)
+            if attrs is not None:
+                old = attrs.get(key, _MISSING)
+            elif key in slots:
+                old = getattr(obj, key, _MISSING)
+            else:
+                raise SnapshotError(f"the snapshot is damaged at {path}: a "
+                                    f"{type(obj).__name__} has no {str(key)[:40]!r}")
             new = self.value(x, None if old is _MISSING else old, f"{path}.{key}")
             if old is not new:
-                attrs[key] = new
+                if attrs is not None:
+                    attrs[key] = new
+                else:
+                    setattr(obj, key, new)
 
 
 def state_of(objects: Mapping[str, Any], package: str = "") -> dict[str, Any]:
