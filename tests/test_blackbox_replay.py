@@ -133,11 +133,11 @@ def _manipulator_run(tmp_path: Path, every: int):
                                      "args": {"db": str(directory), "tick_us": TICK_NS // 1000}})
     st.start()
 
+    shell = RobotShell(st, io.StringIO())
+
     def drive():
-        pa = st.polyaxis
-        st.runner.call(pa.to, (0, 0, 60))
-        st.runner.wait_until(lambda: not pa.active, HANG_S)
-        st.runner.call(pa.to, (10, 0, 70))
+        for line in ("prototype to 0 0 60", "wait", "prototype to 10 0 70"):
+            shell.onecmd(line)
         st.runner.sleep(2.0)
     return st, rec, pj, drive
 
