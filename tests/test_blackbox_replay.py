@@ -89,7 +89,7 @@ def test_a_manipulator_black_box_replays_its_fault_identically(tmp_path, capsys)
     db = tmp_path / "db"
     _pyrt(tmp_path, "prototype to 0 0 60\nwait\nprototype to 10 0 80\nwait\n"
           "sim fault axis0 stall\nprototype to 0 0 93\nwait\n",
-          "manipulator", "--speed", "max", "--black-box", "4", "--init-db", str(db), status=1)
+          "manipulator", "--speed", "max", "--black-box", "8", "--init-db", str(db), status=1)
     _check_identical(_box(db), capsys)
 
 

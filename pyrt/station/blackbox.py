@@ -111,11 +111,15 @@ SIGNAL_BUDGET = 8 << 20
 TOTAL_BUDGET = DEFAULT_BUDGET + SIGNAL_BUDGET
 #: Loop time kept after a fault before the black box is written.
 AFTER_S = 0.5
-#: Loop time between two snapshots of the controller (a black box replays from
-#: the first one in it, so it replays all but at most this much of its span).
-#: A snapshot of the manipulator takes about 0.5 ms of the loop thread (the
-#: gripper's 35 µs): every 2 s it is about 1 µs a tick on average.
+#: Loop time between two snapshots of the controller, at least (a black box
+#: replays from the first one in it: all but at most the interval of its span) ...
 SNAPSHOT_S = 2.0
+#: ... and at most: a snapshot that costs the loop thread more than
+#: :data:`SNAPSHOT_TICK_NS` a tick on average waits longer for the next.
+MAX_SNAPSHOT_S = 5.0
+#: What snapshots may cost the loop thread on average, ns a tick (the
+#: manipulator's takes about 0.5 ms, every 5 s; the gripper's 35 µs, every 2 s).
+SNAPSHOT_TICK_NS = 500
 #: Loop time the ring holds beyond what a black box needs, so that the thread
 #: copying a window out of it is never overtaken by the loop.
 SLACK_S = 1.0
@@ -375,7 +379,9 @@ class FaultBox:
                                extra_s=after_s + SLACK_S)
         #: Ticks between two snapshots of the controller (:data:`SNAPSHOT_S`), and
         #: the snapshots that the black box's span may still need (oldest first).
-        self.snapshot_every = max(1, math.ceil(SNAPSHOT_S * 1e9 / loop.period_ns - 1e-9))
+        self.snapshot_every = self._min_every = max(1, math.ceil(SNAPSHOT_S * 1e9
+                                                                  / loop.period_ns - 1e-9))
+        self._max_every = max(self._min_every, int(MAX_SNAPSHOT_S * 1e9 / loop.period_ns))
         span = self.seconds + after_s + SLACK_S
         self.snapshots: collections.deque[Snapshot] = collections.deque(
             maxlen=math.ceil(span / SNAPSHOT_S) + 2)
@@ -462,13 +468,17 @@ class FaultBox:
         inputs = image.last_inputs
         if inputs is None:
             inputs = self.recorder._inputs
+        start = time.thread_time_ns()
         snap = take_snapshot(self.station, inputs, image.output_values())
         if snap.refused:
             self.snapshot_refused = snap.refused
-            self._snap_countdown = max(1, self.snapshot_every // 10)
+            self._snap_countdown = max(1, self._min_every // 10)
             return
+        cost = time.thread_time_ns() - start
         self.snapshot_refused = ""
         self.snapshots.append(snap)
+        self.snapshot_every = min(self._max_every,
+                                  max(self._min_every, cost // SNAPSHOT_TICK_NS))
         self._snap_countdown = self.snapshot_every
 
     def _write(self, dump: FaultDump) -> None:
