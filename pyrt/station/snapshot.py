@@ -211,7 +211,7 @@ class _Encoder:
                         | range | slice | memoryview) \
                 or cls.__module__.split(".")[0] not in self.roots or _structure(cls):
             kind = "skip"
-        elif dataclasses.is_dataclass(cls) and cls.__dataclass_params__.frozen:
+        elif dataclasses.is_dataclass(cls) and getattr(cls, "__dataclass_params__").frozen:  # noqa: B009
             kind = "record"
         else:
             kind = "object"
@@ -305,7 +305,7 @@ def _slots(cls: type) -> tuple[str, ...]:
 
 
 def _cffi_typeof(v: Any) -> Any:
-    import _cffi_backend  # the C type of a kernel's memory (pyrt.native built it)
+    import _cffi_backend  # type: ignore[import-untyped]  # the C type of a kernel's memory
 
     return _cffi_backend.typeof(v)
 
@@ -469,8 +469,8 @@ class _Decoder:
             return obj
         if tag == "$c":
             if cur is None or _class_name(type(cur)) != body:
-                cls = self._class(body)  # an object the station has not (a motion under way)
-                cur = cls.__new__(cls)
+                made: Any = self._class(body)  # an object the station has not (a motion)
+                cur = made.__new__(made)
             self.seen[path] = cur
             self.attributes(cur, v["$o"], path)
             return cur
@@ -623,7 +623,7 @@ def restore_snapshot(station: Station, snap: Snapshot) -> None:
     if snap.station != station.name:
         raise SnapshotError(f"the snapshot is of station {snap.station!r}, not {station.name!r}")
     try:
-        station.restore_state(snap.state)
+        station.restore_state(dict(snap.state))
         _restore_station(station, snap.station_state)
         _restore_loop(station, snap.loop)
     except (KeyError, TypeError, ValueError) as exc:
