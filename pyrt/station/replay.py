@@ -495,6 +495,13 @@ class Replay:
         with contextlib.suppress(_Stop):  # the journal ran out of ticks
             loop.run(n)
         notes = list(self._notes)
+        if self.resume is not None:
+            first = self.reader.summary().first_tick
+            skipped = self.resume.tick - (first if first is not None else self.resume.tick)
+            notes.insert(0, f"a black box: resumed from its snapshot of the controller at tick "
+                            f"{self.resume.tick}" + (f" (the {skipped} ticks before it are "
+                                                    "in the file, not replayed)"
+                                                    if skipped else ""))
         if self.difference is None:
             gap = self._gap or (self.reader.gaps[0] if self.reader.gaps else None)
             if gap is not None and (until is None or (gap.first or 0) <= until):
