@@ -340,3 +340,25 @@ def test_snapshot_encodes_and_decodes():
     assert Snapshot.decode(data) == snap
     refused = Snapshot("arm", refused="cannot snapshot: arm has no snapshot")
     assert decompress_snapshot(compress_snapshot(refused)) == refused
+
+
+def test_journals_of_version_1_are_read_and_a_later_version_is_refused_by_name(tmp_path):
+    """The kept journals (version 1, no snapshots) still read; a journal now is version 2; a
+    header of a version this pyrt does not know is refused, naming it and those it reads."""
+    from pyrt.journal import Header, Journal, JournalError
+    from pyrt.journal.format import FORMAT_VERSION, KIND_HEADER, _Cursor
+
+    root = Path(__file__).resolve().parent / "journals"
+    old = JournalReader(root / "gripper.pj")
+    head = old._frames[0].payload
+    assert _Cursor(bytes(head)).uvarint() == 1 and old.snapshots == []
+    path = tmp_path / "new.pj"
+    with Journal(Header(station="s", period_ns=1000, inputs=["a"], outputs=["b"]), path):
+        pass
+    assert FORMAT_VERSION == 2 and _Cursor(bytes(JournalReader(path)._frames[0].payload)
+                                           ).uvarint() == 2
+    payload = bytes([3]) + bytes(JournalReader(path)._frames[0].payload)[1:]
+    (tmp_path / "v3.pj").write_bytes(frame(KIND_HEADER, payload))
+    with pytest.raises(JournalError, match="journal format version 3; this pyrt reads "
+                                           "versions 1, 2"):
+        JournalReader(tmp_path / "v3.pj")

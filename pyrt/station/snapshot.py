@@ -73,7 +73,11 @@ SNAPSHOT_FORMAT = "pyrt-snapshot/1"
 #: carries their registers), the simulated world (a replay's stands still), the
 #: loop, queues and runner (their state is taken apart, :func:`_loop_state`),
 #: the scope, the station and the databases.
-_STRUCTURE = ("pyrt.boards", "pyrt.sim", "pyrt.scope", "pyrt.station", "pyrt.db",
+_STRUCTURE = ("pyrt.boards", "pyrt.sim", "pyrt.scope", "pyrt.db", "pyrt.station.base",
+              "pyrt.station.robots", "pyrt.station.events", "pyrt.station.requests",
+              "pyrt.station.domain", "pyrt.station.moves", "pyrt.station.profile",
+              "pyrt.station.recording", "pyrt.station.blackbox", "pyrt.station.replay",
+              "pyrt.station.factory", "pyrt.station._urdf_sim", "pyrt.station._cell_world",
               "pyrt.scheduler.loop", "pyrt.scheduler.runner", "pyrt.scheduler.readyqueue",
               "pyrt.scheduler.rategroup", "pyrt.scheduler.task", "pyrt.scheduler.clock",
               "pyrt.scheduler._", "pyrt.scheduler.stats", "pyrt.scheduler.timinglog",
@@ -167,6 +171,8 @@ def _class_name(cls: type) -> str:
 
 
 def _structure(cls: type) -> bool:
+    if any(k.__name__ == "Station" and k.__module__ == "pyrt.station.base" for k in cls.__mro__):
+        return True  # a station (the components are walked, not their station)
     module = cls.__module__
     return any(module == p or module.startswith(p + ".") or (p.endswith("_")
                and module.startswith(p)) for p in _STRUCTURE)
@@ -440,8 +446,7 @@ class _Decoder:
             return {self.value(x, None, path) for x in body}
         if tag == "$cd":
             if cur is None or not type(cur).__name__.startswith("__CData"):
-                raise SnapshotError(f"the snapshot has C memory at {path}; the station "
-                                    "has none there")
+                return cur  # a workspace not built yet (made when first used): nothing to keep
             ctype = _cffi_typeof(cur)
             if ctype.kind == "pointer":
                 _cd_put(cur[0], ctype.item, body)
