@@ -22,7 +22,14 @@ if the recorder is closed first) writes, beside the station's databases
 
 * ``NAME-fault-ID-TIME.pj``: the journal's ring, a journal file readable on
   its own (:class:`~pyrt.journal.JournalReader`; its first tick is a
-  keyframe), written by the journal's thread;
+  keyframe), dumped by the journal's thread, with the first snapshot of the
+  controller that falls within its ticks (:mod:`pyrt.station.snapshot`)
+  right after its header, so that ``pyrt replay`` resumes from it; a station
+  that could not give one has the reason there instead.  The loop thread
+  takes a snapshot at the end of a tick every :data:`SNAPSHOT_S` of loop
+  time or more (up to :data:`MAX_SNAPSHOT_S` when one costs more than
+  :data:`SNAPSHOT_TICK_NS` a tick on average) and keeps the few the span
+  needs;
 * ``.csv``: a header ``t_s,OBJECT.SIGNAL [UNITS],...`` and one row per sample, the
   time in seconds from the fault, the ``N`` seconds before it and what came
   after;
@@ -42,9 +49,10 @@ thread only samples, and at the due tick hands the work over to a thread of
 the black box's own (at a lower priority), which formats the CSV a few rows
 at a time and has the PNG drawn by a child process at the lowest priority
 (matplotlib would otherwise hold the interpreter for a second or two, and
-the loop's ticks with it).  The loop's share: a call per tick and, every few
-ticks, one compiled read of every signal into a row of the ring (about
-0.3 µs a tick on average for the gripper at 1 kHz).  Signals that give text
+the loop's ticks with it).  The loop's share: a call per tick, every few
+ticks one compiled read of every signal into a row of the ring (at 20 Hz:
+a read every 50 ticks of the gripper at 1 kHz, every 10 of the manipulator
+at 200 Hz), and the snapshots.  Signals that give text
 rather than numbers are left out; a signal whose read fails gives ``nan``
 for that sample.
 """
@@ -88,14 +96,18 @@ if TYPE_CHECKING:
 
 __all__ = [
     "AFTER_S",
+    "MAX_SNAPSHOT_S",
     "SIGNAL_BUDGET",
     "SIGNAL_RATE_HZ",
+    "SNAPSHOT_S",
+    "SNAPSHOT_TICK_NS",
     "TOTAL_BUDGET",
     "FaultBox",
     "FaultDump",
     "FaultRecorder",
     "SignalRing",
     "plotting_available",
+    "with_snapshot",
 ]
 
 #: The fastest a signal is sampled into the ring, per second: 20 Hz, the rate of

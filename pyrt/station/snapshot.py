@@ -34,11 +34,14 @@ one-key objects naming their kind: ``{"$t": [...]}`` a tuple, ``{"$d": [[k,
 v], ...]}`` a dict, ``{"$b": HEX}`` bytes, ``{"$ba": HEX}`` a bytearray,
 ``{"$a": [DTYPE, SHAPE, HEX]}`` a numpy array, ``{"$n": [DTYPE, HEX]}`` a
 numpy scalar, ``{"$q": [...]}`` a deque, ``{"$s": [...]}`` a set,
-``{"$cd": [...]}`` a C array's numbers, ``{"$e": "MODULE:CLASS", "v": NAME}``
-an enum's member, ``{"$dc": "MODULE:CLASS", "f": {...}}``
-a dataclass record, ``{"$o": {...}, "$c": "MODULE:CLASS"}`` an object's
-attributes, ``{"$r": PATH}`` an object given earlier at PATH.  Floats keep
-every bit (JSON's shortest repr round-trips).  A record or an object is only
+``{"$cd": ...}`` the numbers in C memory a kernel owns (a list for an array,
+an object of its fields for a struct; its pointers are left out),
+``{"$e": "MODULE:CLASS", "v": NAME}`` an enum's member, ``{"$dc":
+"MODULE:CLASS", "f": {...}}`` a dataclass record, ``{"$o": {...}, "$c":
+"MODULE:CLASS"}`` an object's attributes, ``{"$r": PATH}`` an object given
+earlier at PATH.  Floats keep every bit (JSON's shortest repr round-trips;
+NaN and the infinities are JSON's ``NaN`` and ``Infinity``, as Python's
+``json`` writes and reads them).  A record or an object is only
 ever of a class of pyrt (or of the station's own package): a snapshot never
 chooses code to run, it only sets attributes of the station the replay built.
 """
@@ -51,7 +54,7 @@ import importlib
 import json
 import zlib
 from collections import deque
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from types import BuiltinFunctionType, FunctionType, MethodType, ModuleType
 from typing import TYPE_CHECKING, Any
@@ -63,8 +66,9 @@ from pyrt.errors import ConfigError
 if TYPE_CHECKING:
     from pyrt.station.base import Station
 
-__all__ = ["SNAPSHOT_FORMAT", "Snapshot", "SnapshotError", "restore_into", "restore_snapshot",
-           "state_of", "take_snapshot"]
+__all__ = ["SNAPSHOT_FORMAT", "Snapshot", "SnapshotError", "compress_snapshot",
+           "decompress_snapshot", "restore_into", "restore_snapshot", "state_of",
+           "take_snapshot"]
 
 #: The snapshot format this pyrt writes and reads.
 SNAPSHOT_FORMAT = "pyrt-snapshot/1"
@@ -616,6 +620,8 @@ def take_snapshot(station: Station, inputs: list[int], outputs: list[int]) -> Sn
     except _Skip:
         return Snapshot(station.name, refused="cannot snapshot: a robot's fault or a queued "
                                               "motion is not state pyrt can save")
+    except Exception as exc:  # a hook that fails never fails the loop: the box says why
+        return Snapshot(station.name, refused=f"cannot snapshot: {type(exc).__name__}: {exc}")
     return Snapshot(station.name, loop["tick"], station.loop.now_ns, tuple(inputs),
                     tuple(outputs), loop, common, own)
 
@@ -631,8 +637,11 @@ def restore_snapshot(station: Station, snap: Snapshot) -> None:
         station.restore_state(dict(snap.state))
         _restore_station(station, snap.station_state)
         _restore_loop(station, snap.loop)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise SnapshotError(f"the snapshot is damaged: {type(exc).__name__}: {exc}") from None
+    except SnapshotError:
+        raise
+    except Exception as exc:  # what does not fit the station, said in one line
+        raise SnapshotError(f"the snapshot does not fit the station: {type(exc).__name__}: "
+                            f"{exc}") from None
 
 
 def compress_snapshot(snap: Snapshot) -> bytes:
@@ -648,6 +657,3 @@ def decompress_snapshot(data: bytes) -> Snapshot:
         raise SnapshotError(f"the snapshot is damaged: it does not decompress ({exc})") from None
     return Snapshot.decode(raw)
 
-
-#: What a station's hook gives: its objects, walked by :func:`state_of`.
-StateObjects = Callable[[], Mapping[str, Any]]
