@@ -362,3 +362,27 @@ def test_journals_of_version_1_are_read_and_a_later_version_is_refused_by_name(t
     with pytest.raises(JournalError, match="journal format version 3; this pyrt reads "
                                            "versions 1, 2"):
         JournalReader(tmp_path / "v3.pj")
+
+
+@pytest.mark.parametrize("cost_ns, every_s", [(1_000, 2.0), (1_500_000, 3.0), (50_000_000, 5.0)])
+def test_snapshots_are_spaced_by_what_they_cost_the_loop(monkeypatch, cost_ns, every_s):
+    """A snapshot costing the loop more than SNAPSHOT_TICK_NS a tick on average (its CPU time
+    over the interval) pushes the next one further out: at least SNAPSHOT_S, at most
+    MAX_SNAPSHOT_S of loop time apart (the CPU clock is given, not measured)."""
+    from pyrt.journal import BlackBox
+    from pyrt.station import blackbox as bb
+
+    clock = iter(range(0, 10**15, cost_ns))
+    monkeypatch.setattr(bb.time, "thread_time_ns", lambda: next(clock))
+    st = build_gripper(Loop(SimClock()), boards="sim:?image=1")
+    rec = bb.FaultRecorder(st, None, black_box=BlackBox(3.0), seconds=2.5)
+    try:
+        st.runner.start()
+        st.runner.sleep(0.5)  # no foreground job: the first snapshot is taken at once
+        box = rec.fault_box
+        assert box.snapshots and not box.snapshot_refused
+        assert bb.SNAPSHOT_TICK_NS == 500 and (bb.SNAPSHOT_S, bb.MAX_SNAPSHOT_S) == (2.0, 5.0)
+        assert box.snapshot_every == round(every_s * 1000)  # ticks of 1 ms
+    finally:
+        st.close()
+        rec.close()
