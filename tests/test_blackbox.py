@@ -153,7 +153,7 @@ def test_a_jam_the_supervision_trips_writes_the_black_box(tmp_path, monkeypatch)
     assert dump.path(".png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     check_journal(pj, fault)
     ring = rec.fault_box.ring
-    assert ring.rate_hz == SIGNAL_RATE_HZ and ring.every == 10
+    assert ring.rate_hz == SIGNAL_RATE_HZ and ring.every == 50  # 20 Hz at a 1 ms tick
     names = [n for n, s in st.signals() if not s.is_text]  # text signals: not sampled
     table = check_csv(dump.path(".csv"), names, ring.rate_hz)
     dac = table[:, names.index("gripper.dac") + 1]
@@ -258,7 +258,8 @@ def test_closing_first_writes_the_black_box_at_once(tmp_path, monkeypatch):
     assert dump.done.is_set() and not dump.errors
     assert {p.suffix for p in tmp_path.iterdir()} == {".pj", ".csv", ".png"}
     _, table = read_csv(dump.path(".csv"))
-    assert -N_S <= table[0, 0] < -N_S + 0.02 and -0.011 < table[-1, 0] < 0.011
+    dt = 1 / SIGNAL_RATE_HZ  # a sample period: the first and last rows are within one
+    assert -N_S <= table[0, 0] < -N_S + dt and -dt - 0.001 < table[-1, 0] < 0.011
     ticks = list(JournalReader(dump.path(".pj")).ticks())
     assert any(e.id == fault.id for t in ticks for e in t.events)
 
@@ -327,7 +328,7 @@ class Values:
 def test_signal_ring_keeps_numbers_leaves_text_out_and_survives_failing_reads():
     """Text signals are left out, a failing read is nan for that sample only, values in order."""
     vals = Values(3)
-    ring = SignalRing(vals.signals(), 1.0, 1_000_000, extra_s=0.0)
+    ring = SignalRing(vals.signals(), 1.0, 1_000_000, extra_s=0.0, rate_hz=100.0)
     for k in range(100):
         vals.v[0] = k
         vals.v[2] = -k
@@ -347,7 +348,7 @@ def test_signal_ring_keeps_numbers_leaves_text_out_and_survives_failing_reads():
 def test_signal_ring_window_drops_what_the_loop_overwrote():
     """A window older than the ring holds is cut to what is still there, oldest first."""
     vals = Values(1)
-    ring = SignalRing(vals.signals()[:1], 0.05, 10_000_000, extra_s=0.0)  # a few rows
+    ring = SignalRing(vals.signals()[:1], 0.05, 10_000_000, extra_s=0.0, rate_hz=100.0)  # a few rows
     for k in range(20):
         vals.v[0] = k
         ring.tick(k * 10_000_000)
@@ -368,7 +369,7 @@ def test_signal_ring_window_is_the_samples_still_there(span, taken, back, since)
     """Any fill and any window: exactly the samples not yet overwritten, in order, none newer
     than asked, none older than ``since_ns``; times and values agree."""
     vals = Values(2)
-    ring = SignalRing(vals.signals()[:2], span, 10_000_000, extra_s=0.0)
+    ring = SignalRing(vals.signals()[:2], span, 10_000_000, extra_s=0.0, rate_hz=100.0)
     for k in range(taken):
         vals.v[0] = k
         vals.v[1] = 2 * k
@@ -535,7 +536,8 @@ def test_pyrt_gripper_writes_the_black_box_of_a_fault_and_names_it(given, tmp_pa
     assert Path(m.group(2)).parent == tmp_path.resolve()
     assert found == [".csv", ".pj", ".png"]
     _, table = read_csv(Path(m.group(2) + ".csv"))
-    assert table[0, 0] == pytest.approx(-2.0, abs=0.011) and table[-1, 0] >= -0.011
+    dt = 1 / SIGNAL_RATE_HZ + 0.001  # within a sample period of the span's ends
+    assert table[0, 0] == pytest.approx(-2.0, abs=dt) and table[-1, 0] >= -dt
 
 
 def test_the_csv_header_gives_each_signals_units_as_the_scope_does():

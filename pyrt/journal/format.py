@@ -1,4 +1,4 @@
-"""The journal file format (``pyrt-journal/1``): a specification, and its encoder and decoder.
+"""The journal file format (``pyrt-journal/2``): a specification, and its encoder and decoder.
 
 A journal records everything that enters a controller during a run (the
 mailbox commands, the inputs of the process image, the clock's decisions,
@@ -44,7 +44,7 @@ Frame kinds:
 
 ``H`` header (always frame 0, exactly once)::
 
-    uvarint  format version (1)
+    uvarint  format version (2; version 1, which has no ``S`` frames, is read too)
     str      station name
     str      pyrt version
     uvarint  tick period, ns
@@ -84,6 +84,15 @@ Frame kinds:
 
     A run is not replayable past the first tick of its first gap.  The block
     after a gap begins anew (with a keyframe).
+
+``S`` snapshot (version 2; a black box writes one right after its header)::
+
+    uvarint  tick: the controller's state is that before this tick
+    bytes    the state, zlib-compressed ``pyrt-snapshot/1`` JSON
+             (:mod:`pyrt.station.snapshot`), or why the station had none
+
+    A replay of a journal that does not begin where its run began (a black
+    box) resumes from it; the journal package stores it, the station reads it.
 
 ``E`` end (written by a clean close; a file without it ended early)::
 
@@ -165,8 +174,10 @@ __all__ = [
     "Tick",
 ]
 
-FORMAT = "pyrt-journal/1"
-FORMAT_VERSION = 1
+FORMAT = "pyrt-journal/2"
+FORMAT_VERSION = 2
+#: The versions this pyrt reads: 1 (no ``S`` frames) and 2.
+READ_VERSIONS = (1, 2)
 MAGIC = b"\x89PJR"
 FRAME_HEADER = struct.Struct("<4scII")
 HEADER_SIZE = FRAME_HEADER.size + 2  # 15
@@ -178,7 +189,9 @@ KIND_ZTICKS = b"Z"
 KIND_NAMES = b"N"
 KIND_GAP = b"G"
 KIND_END = b"E"
-KINDS = frozenset((KIND_HEADER, KIND_TICKS, KIND_ZTICKS, KIND_NAMES, KIND_GAP, KIND_END))
+KIND_SNAPSHOT = b"S"
+KINDS = frozenset((KIND_HEADER, KIND_TICKS, KIND_ZTICKS, KIND_NAMES, KIND_GAP, KIND_END,
+                   KIND_SNAPSHOT))
 
 BLOCK = struct.Struct("<QQqqI")
 GAP = struct.Struct("<QQQ")
@@ -314,9 +327,9 @@ class Header:
         """The header an ``H`` frame's payload holds (JournalError if it is not one)."""
         r = _Cursor(payload)
         version = r.uvarint()
-        if version != FORMAT_VERSION:
+        if version not in READ_VERSIONS:
             raise JournalError(f"journal format version {version}; this pyrt reads "
-                               f"version {FORMAT_VERSION}")
+                               f"versions {', '.join(map(str, READ_VERSIONS))}")
         station = r.str()
         pyrt_version = r.str()
         period = r.uvarint()
@@ -460,6 +473,24 @@ def gap_payload(gap: Gap) -> bytes:
                              gap.ticks or 0))
     put_str(out, gap.cause)
     return bytes(out)
+
+
+def snapshot_payload(tick: int, data: bytes) -> bytes:
+    """The payload of an ``S`` frame: the controller's state before ``tick``."""
+    out = bytearray()
+    put_uvarint(out, tick)
+    put_bytes(out, data)
+    return bytes(out)
+
+
+def read_snapshot_payload(payload: bytes | memoryview) -> tuple[int, bytes]:
+    """``(tick, data)`` of an ``S`` frame's payload (JournalError if it is not one)."""
+    r = _Cursor(bytes(payload))
+    tick = r.uvarint()
+    data = r.bytes()
+    if r.pos != r.end:
+        raise JournalError("journal snapshot: bytes left over after its data")
+    return tick, data
 
 
 def names_payload(first: int, names: Sequence[str]) -> bytes:

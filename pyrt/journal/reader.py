@@ -19,6 +19,7 @@ from pyrt.journal.format import (
     KIND_GAP,
     KIND_HEADER,
     KIND_NAMES,
+    KIND_SNAPSHOT,
     KIND_TICKS,
     KIND_ZTICKS,
     KINDS,
@@ -30,6 +31,7 @@ from pyrt.journal.format import (
     Tick,
     _Cursor,
     decode_block,
+    read_snapshot_payload,
 )
 
 __all__ = ["Damage", "JournalReader", "Summary", "read_journal"]
@@ -139,6 +141,8 @@ class JournalReader:
         #: The writer (task) name table: the header's, then those added later.
         self.writers: list[str] = list(self.header.writers)
         self.gaps: list[Gap] = []
+        #: The ``S`` frames: ``(tick, data)``, the controller's state before that tick.
+        self.snapshots: list[tuple[int, bytes]] = []
         self._ticks: list[_Frame] = []
         last_tick: int | None = None
         for f in self._frames[1:]:
@@ -159,6 +163,12 @@ class JournalReader:
                 self.gaps.append(_gap(f.payload))
             elif f.kind == KIND_END:
                 self.complete = True
+            elif f.kind == KIND_SNAPSHOT:
+                try:
+                    self.snapshots.append(read_snapshot_payload(f.payload))
+                except JournalError as exc:
+                    raise JournalError(f"journal {self.path}: frame {f.number} at offset "
+                                       f"{f.offset}: {exc.message}", f.offset, f.number) from None
         self._starts = [f.first_tick for f in self._ticks]
 
     # -- scanning --------------------------------------------------------------------------

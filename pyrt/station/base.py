@@ -76,6 +76,7 @@ from pyrt.station.events import StationEvents
 from pyrt.station.profile import ShellProfile
 from pyrt.station.requests import StationRequests
 from pyrt.station.robots import StationRobots
+from pyrt.station.snapshot import SnapshotError
 
 __all__ = ["BoardWorld", "Robot", "Station", "refuse_sim_options"]
 
@@ -469,6 +470,20 @@ class Station(StationRobots, StationEvents, StationRequests):
         """Every random seed of the run (name -> seed), kept in a journal's
         header; none by default."""
         return {}
+
+    def snapshot_state(self) -> dict[str, Any]:
+        """The controller's state between two ticks, as plain data that
+        :meth:`restore_state` puts back into a station built the same way (a
+        black box carries it, so that ``pyrt replay`` resumes there:
+        :mod:`pyrt.station.snapshot`).  Called in the loop thread at the end of
+        a tick.  Raise :class:`~pyrt.station.snapshot.SnapshotError` naming
+        what cannot be saved; by default a station has no snapshot."""
+        raise SnapshotError(f"cannot snapshot: {self.name} has no snapshot")
+
+    def restore_state(self, state: dict[str, Any]) -> None:
+        """Put a :meth:`snapshot_state` back (before the loop runs); raise
+        :class:`~pyrt.station.snapshot.SnapshotError` if it does not fit."""
+        raise SnapshotError(f"cannot restore a snapshot: {self.name} has no snapshot")
 
     @final
     def start(self) -> Runner:

@@ -22,7 +22,14 @@ if the recorder is closed first) writes, beside the station's databases
 
 * ``NAME-fault-ID-TIME.pj``: the journal's ring, a journal file readable on
   its own (:class:`~pyrt.journal.JournalReader`; its first tick is a
-  keyframe), written by the journal's thread;
+  keyframe), dumped by the journal's thread, with the first snapshot of the
+  controller that falls within its ticks (:mod:`pyrt.station.snapshot`)
+  right after its header, so that ``pyrt replay`` resumes from it; a station
+  that could not give one has the reason there instead.  The loop thread
+  takes a snapshot at the end of a tick every :data:`SNAPSHOT_S` of loop
+  time or more (up to :data:`MAX_SNAPSHOT_S` when one costs more than
+  :data:`SNAPSHOT_TICK_NS` a tick on average) and keeps the few the span
+  needs;
 * ``.csv``: a header ``t_s,OBJECT.SIGNAL [UNITS],...`` and one row per sample, the
   time in seconds from the fault, the ``N`` seconds before it and what came
   after;
@@ -42,15 +49,17 @@ thread only samples, and at the due tick hands the work over to a thread of
 the black box's own (at a lower priority), which formats the CSV a few rows
 at a time and has the PNG drawn by a child process at the lowest priority
 (matplotlib would otherwise hold the interpreter for a second or two, and
-the loop's ticks with it).  The loop's share: a call per tick and, every few
-ticks, one compiled read of every signal into a row of the ring (about
-0.3 µs a tick on average for the gripper at 1 kHz).  Signals that give text
+the loop's ticks with it).  The loop's share: a call per tick, every few
+ticks one compiled read of every signal into a row of the ring (at 20 Hz:
+a read every 50 ticks of the gripper at 1 kHz, every 10 of the manipulator
+at 200 Hz), and the snapshots.  Signals that give text
 rather than numbers are left out; a signal whose read fails gives ``nan``
 for that sample.
 """
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import importlib.util
 import io
@@ -75,34 +84,54 @@ import numpy as np
 from pyrt.component import Signal
 from pyrt.errors import ConfigError, Fault
 from pyrt.fileio import atomic_write
-from pyrt.journal import DEFAULT_BUDGET, BlackBox, JournalError
+from pyrt.journal import DEFAULT_BUDGET, BlackBox, JournalError, JournalReader
+from pyrt.journal.format import HEADER_SIZE, KIND_SNAPSHOT, frame, snapshot_payload
 from pyrt.scope import compile_sources
 from pyrt.scope.sources import compile_sampler
 from pyrt.station.recording import Recorder
+from pyrt.station.snapshot import Snapshot, compress_snapshot, take_snapshot
 
 if TYPE_CHECKING:
     from pyrt.station.base import Station
 
 __all__ = [
     "AFTER_S",
+    "MAX_SNAPSHOT_S",
     "SIGNAL_BUDGET",
     "SIGNAL_RATE_HZ",
+    "SNAPSHOT_S",
+    "SNAPSHOT_TICK_NS",
     "TOTAL_BUDGET",
     "FaultBox",
     "FaultDump",
     "FaultRecorder",
     "SignalRing",
     "plotting_available",
+    "with_snapshot",
 ]
 
-#: The fastest a signal is sampled into the ring, per second.
-SIGNAL_RATE_HZ = 100.0
+#: The fastest a signal is sampled into the ring, per second: 20 Hz, the rate of
+#: the controllers' own control (the manipulator's poll is 50 ms, the gripper's
+#: MVJAWS runs every 48 ms).  What changes faster is in the journal's ring at every
+#: tick, and a black box replays: ``pyrt replay BOX.pj --scope SIGNALS`` gives any
+#: signal at every tick.  (At 100 Hz the manipulator's 45 signals cost a fifth of
+#: its tick's work.)
+SIGNAL_RATE_HZ = 20.0
 #: The signal ring's memory, at most (8 MiB): the rate is lowered to keep it.
 SIGNAL_BUDGET = 8 << 20
 #: Both rings of a black box, at most: the journal's and the signals'.
 TOTAL_BUDGET = DEFAULT_BUDGET + SIGNAL_BUDGET
 #: Loop time kept after a fault before the black box is written.
 AFTER_S = 0.5
+#: Loop time between two snapshots of the controller, at least (a black box
+#: replays from the first one in it: all but at most the interval of its span) ...
+SNAPSHOT_S = 2.0
+#: ... and at most: a snapshot that costs the loop thread more than
+#: :data:`SNAPSHOT_TICK_NS` a tick on average waits longer for the next.
+MAX_SNAPSHOT_S = 5.0
+#: What snapshots may cost the loop thread on average, ns a tick (the
+#: manipulator's takes about 0.5 ms, every 5 s; the gripper's 35 µs, every 2 s).
+SNAPSHOT_TICK_NS = 500
 #: Loop time the ring holds beyond what a black box needs, so that the thread
 #: copying a window out of it is never overtaken by the loop.
 SLACK_S = 1.0
@@ -306,6 +335,12 @@ class FaultDump:
     #: Tick records in the journal file and rows in the CSV.
     ticks: int = 0
     rows: int = 0
+    #: The journal's ring as the journal's thread dumps it (the snapshot goes in after).
+    buffer: io.BytesIO = field(default_factory=io.BytesIO)
+    #: The snapshots of the controller that may fall within it, and why none
+    #: could be taken lately ('').
+    snapshots: list[Snapshot] = field(default_factory=list)
+    refused: str = ""
     done: threading.Event = field(default_factory=threading.Event)
 
     def path(self, suffix: str) -> Path:
@@ -354,6 +389,17 @@ class FaultBox:
         self.ring = SignalRing(station.signals(), self.seconds, loop.period_ns,
                                rate_hz=rate_hz, budget_bytes=budget_bytes,
                                extra_s=after_s + SLACK_S)
+        #: Ticks between two snapshots of the controller (:data:`SNAPSHOT_S`), and
+        #: the snapshots that the black box's span may still need (oldest first).
+        self.snapshot_every = self._min_every = max(1, math.ceil(SNAPSHOT_S * 1e9
+                                                                  / loop.period_ns - 1e-9))
+        self._max_every = max(self._min_every, int(MAX_SNAPSHOT_S * 1e9 / loop.period_ns))
+        span = self.seconds + after_s + SLACK_S
+        self.snapshots: collections.deque[Snapshot] = collections.deque(
+            maxlen=math.ceil(span / SNAPSHOT_S) + 2)
+        #: Why the station could not be snapshot the last time it was asked ('': it could).
+        self.snapshot_refused = ""
+        self._snap_countdown = 1
         #: Every fault's black box, in order.
         self.dumps: list[FaultDump] = []
         self._seen: set[int] = set()
@@ -419,10 +465,33 @@ class FaultBox:
         if ring._countdown <= 0:
             ring._countdown = ring.every
             ring.sample(now_ns)
+        self._snap_countdown -= 1
+        if self._snap_countdown <= 0:
+            self._snapshot()
         if self._pending:
             for dump in list(self._pending.values()):
                 if tick >= dump.due_tick:
                     self._write(dump)
+
+    def _snapshot(self) -> None:
+        """The controller's state before the next tick, kept for the black boxes to come;
+        a station that cannot give it is asked again a tenth of the interval later."""
+        image = self.recorder.image
+        inputs = image.last_inputs
+        if inputs is None:
+            inputs = self.recorder._inputs
+        start = time.thread_time_ns()
+        snap = take_snapshot(self.station, inputs, image.output_values())
+        if snap.refused:
+            self.snapshot_refused = snap.refused
+            self._snap_countdown = max(1, self._min_every // 10)
+            return
+        cost = time.thread_time_ns() - start
+        self.snapshot_refused = ""
+        self.snapshots.append(snap)
+        self.snapshot_every = min(self._max_every,
+                                  max(self._min_every, cost // SNAPSHOT_TICK_NS))
+        self._snap_countdown = self.snapshot_every
 
     def _write(self, dump: FaultDump) -> None:
         """Hand ``dump`` over: the journal's thread writes the ring, ours the rest."""
@@ -430,8 +499,10 @@ class FaultBox:
             if self._pending.pop(dump.fault.id, None) is None:
                 return
             dump.end = self.ring.samples
+            dump.snapshots = list(self.snapshots)
+            dump.refused = self.snapshot_refused
             try:
-                dump.journal = self.recorder.journal.dump_black_box(dump.path(".pj"))
+                dump.journal = self.recorder.journal.dump_black_box(dump.buffer)
             except JournalError as exc:
                 dump.errors.append(f"{dump.path('.pj').name}: {exc}")
             self._jobs.put(dump)
@@ -508,12 +579,39 @@ class FaultBox:
             pj = dump.path(".pj")
             try:
                 dump.ticks = dump.journal.result(CLOSE_TIMEOUT_S)
+                atomic_write(pj, with_snapshot(dump.buffer.getvalue(), dump.snapshots,
+                                               dump.refused or self.station.name))
                 dump.written.append(pj)
             except JournalError as exc:
                 dump.errors.append(f"{pj.name}: {exc}")
+            except OSError as exc:
+                dump.errors.append(f"{pj.name}: {exc.strerror or exc}")
             except TimeoutError:
                 dump.errors.append(f"{pj.name}: the journal did not write it within "
                                    f"{CLOSE_TIMEOUT_S:g} s")
+
+
+def with_snapshot(data: bytes, snapshots: Sequence[Snapshot], refused: str) -> bytes:
+    """A black box's journal ``data`` with the first of ``snapshots`` that falls
+    within its ticks as an ``S`` frame right after its header; without one, an
+    ``S`` frame that says why (``refused``: what the station said, or its name)."""
+    reader = JournalReader(data)
+    summary = reader.summary()
+    first, last = summary.first_tick, summary.last_tick
+    snap = next((s for s in snapshots if first is not None and last is not None
+                 and first <= s.tick <= last), None)
+    if snap is None:
+        if refused.startswith("cannot snapshot"):
+            why = refused
+        elif snapshots:
+            why = (f"cannot snapshot: no snapshot of {refused} falls within the black box's "
+                   f"ticks {first}..{last}")
+        else:
+            why = f"cannot snapshot: {refused} gave no snapshot during the black box's span"
+        snap = Snapshot(reader.header.station, tick=first or 0, refused=why)
+    end = HEADER_SIZE + int.from_bytes(data[5:9], "little")
+    record = frame(KIND_SNAPSHOT, snapshot_payload(snap.tick, compress_snapshot(snap)))
+    return data[:end] + record + data[end:]
 
 
 def _csv(t_s: np.ndarray, values: np.ndarray, names: list[str],

@@ -46,6 +46,7 @@ from pyrt.sim.world import GRIPPER_BOARDS, GripperWorld, World, WorldFactory
 from pyrt.station.base import BoardWorld, Station, refuse_sim_options
 from pyrt.station.factory import StationFactory
 from pyrt.station.profile import ShellProfile
+from pyrt.station.snapshot import restore_into, state_of
 from pyrt.tasks import register_tasks
 
 __all__ = ["GRIPPER", "GripperFactory", "GripperSim", "GripperStation", "GripperWorlds",
@@ -261,6 +262,18 @@ class GripperStation(Station):
     def shutdown(self) -> None:
         """Null the drive, stop the loop and close the timing log."""
         self.close()
+
+    def snapshot_state(self) -> dict[str, Any]:
+        """The controller (its RAM, supervision, monitor, encoder pulses) and the
+        P move under way, for a black box that replays (:mod:`pyrt.station.snapshot`)."""
+        return state_of(self._snapshot_objects())
+
+    def restore_state(self, state: dict[str, Any]) -> None:
+        """Put :meth:`snapshot_state` back."""
+        restore_into(self._snapshot_objects(), state)
+
+    def _snapshot_objects(self) -> dict[str, Any]:
+        return {"gripper": self.controller, "executor": self.executor}
 
 
 def gripper_profile(ctl: GripperController, power_up_init: bool = True) -> ShellProfile:

@@ -91,6 +91,7 @@ from pyrt.sim.world import MANIPULATOR_BOARDS, ManipulatorWorld, World, WorldFac
 from pyrt.station.base import BoardWorld, Station, refuse_sim_options
 from pyrt.station.factory import StationFactory
 from pyrt.station.profile import ShellProfile
+from pyrt.station.snapshot import restore_into, state_of
 from pyrt.tasks import SyncWriter, ThreadWriter, WriteBack, register_tasks
 
 __all__ = [
@@ -531,6 +532,19 @@ class ManipulatorStation(Station):
     def seeds(self) -> dict[str, int]:
         """The simulated sensors' seed (none on boards whose world runs elsewhere)."""
         return {"imperfections": int(self.plant.imp.seed)} if self.plant is not None else {}
+
+    def snapshot_state(self) -> dict[str, Any]:
+        """The controller's tree (PolyAxis with its estimator, move controller and
+        the motion under way, the axes, motors, encoders and loadcells, the AV),
+        for a black box that replays (:mod:`pyrt.station.snapshot`)."""
+        return state_of(self._snapshot_objects())
+
+    def restore_state(self, state: dict[str, Any]) -> None:
+        """Put :meth:`snapshot_state` back."""
+        restore_into(self._snapshot_objects(), state)
+
+    def _snapshot_objects(self) -> dict[str, Any]:
+        return {c.name: c for c in self.components() if all(c is not x for x in self.extras)}
 
     def busy(self) -> bool:
         """A move runs or waits, a pattern runs, or an axis moves on its own."""

@@ -41,6 +41,12 @@ from pyrt.errors import ConfigError, Fault, PyrtError
 from pyrt.journal import Gap, JournalError, JournalReader, Tick
 from pyrt.scheduler.clock import Clock
 from pyrt.station.recording import LOOP_FAULT, decode_request
+from pyrt.station.snapshot import (
+    Snapshot,
+    SnapshotError,
+    decompress_snapshot,
+    restore_snapshot,
+)
 
 if TYPE_CHECKING:
     from pyrt.scheduler import Loop
@@ -190,7 +196,14 @@ class Replay:
         self.meta: Mapping[str, Any] = meta if isinstance(meta, Mapping) else {}
         _check_metadata(self.path, self.meta)
         self.clock = ReplayClock()
+        #: The controller's state the replay resumes from (a black box), or None.
+        self.resume: Snapshot | None = None
+        #: Why a black box cannot be resumed: its station could not save its state.
+        self.refusal = ""
+        self._resume_from_snapshot()
         before = list(self.meta.get("inputs_before") or [])
+        if self.resume is not None:
+            before = list(self.resume.inputs)
         if len(before) != len(self.header.inputs):
             before = [0] * len(self.header.inputs)
         self.feed = _Feed(before)
@@ -208,6 +221,28 @@ class Replay:
         self._who: Callable[[], str] | None = None
         self._notes: list[str] = []
         self._pending: Tick | None = None
+
+    def _resume_from_snapshot(self) -> None:
+        """A journal that begins after its run began (a black box) resumes from the
+        snapshot it carries; a damaged one is refused here, before anything is built."""
+        if not self.reader.snapshots:
+            return
+        tick, data = self.reader.snapshots[0]
+        try:
+            snap = decompress_snapshot(data)
+        except SnapshotError as exc:
+            raise JournalError(f"journal {self.path}: its snapshot of tick {tick}: {exc}; "
+                               "not replayed") from None
+        if snap.refused:
+            self.refusal = snap.refused
+            return
+        h = self.header
+        if snap.tick != tick or len(snap.inputs) != len(h.inputs) \
+                or len(snap.outputs) != len(h.outputs):
+            raise JournalError(f"journal {self.path}: its snapshot of tick {tick} does not fit "
+                               f"its journal (tick {snap.tick}, {len(snap.inputs)} inputs, "
+                               f"{len(snap.outputs)} outputs); not replayed")
+        self.resume = snap
 
     # -- building ------------------------------------------------------------------------------
 
@@ -254,6 +289,8 @@ class Replay:
             raise ConfigError(f"journal {self.path}: {len(h.outputs)} outputs, the "
                               f"{station} station's boards have {len(outs)}")
         values = list(h.output_values) or [0] * len(outs)
+        if self.resume is not None:
+            values = list(self.resume.outputs)
         initial = dict(zip(outs, values, strict=True))
         simulated = None
         if self.meta.get("in_process", False):
@@ -289,15 +326,48 @@ class Replay:
         loop.fault_listeners.append(self._faults.append)
         loop.attach(self._check, name="replay:check")
         self.clock.advance = self._advance
+        if self.resume is not None:
+            self._resume(station)
+            boards.resync()
+            return
         self._records = iter(self.reader)
         first = self._peek_first()
         start = int(self.meta.get("tick_index", 0) or 0)
         if first is not None and first.tick != loop.tick_index:
-            why = (" (a black box: it holds the last seconds of a run, which cannot be "
-                   "replayed without the ticks before them)" if first.tick != start else "")
+            if self.refusal:
+                why = (f" (a black box whose station could not save its state there: "
+                       f"{self.refusal})")
+            elif first.tick != start:
+                why = (" (a black box without a snapshot: it holds the last seconds of a "
+                       "run, which cannot be replayed without the ticks before them)")
+            else:
+                why = ""
             raise ConfigError(f"journal {self.path} begins at tick {first.tick}; a replay "
                               f"starts where the run started, at tick {loop.tick_index}{why}")
         boards.resync()
+
+    def _resume(self, station: Station) -> None:
+        """Start at the snapshot's tick, the controller as the snapshot has it."""
+        snap = self.resume
+        assert snap is not None
+        self._records = self.reader.seek(snap.tick)
+        first = self._peek_first()
+        if first is None or first.tick != snap.tick:
+            raise ConfigError(f"journal {self.path}: its snapshot is of tick {snap.tick}, "
+                              "which the journal does not hold; not replayed")
+        try:
+            restore_snapshot(station, snap)
+        except SnapshotError as exc:
+            raise SnapshotError(f"journal {self.path}: its snapshot of tick {snap.tick}: "
+                                f"{exc}; not replayed") from None
+        image = self.boards.image if self.boards is not None else None
+        if image is not None:  # what building the station wrote is not what the run had
+            image.forget_outputs(dict(zip(image.output_layout, snap.outputs, strict=True)))
+        loop = station.loop
+        loop.now_ns = snap.time_ns
+        # the deadline of the first tick replayed, as the run had it
+        loop._deadline = first.time_ns - first.lateness_ns
+        self.clock._now = snap.time_ns
 
     def _peek_first(self) -> Tick | None:
         for rec in self._records:
@@ -425,6 +495,13 @@ class Replay:
         with contextlib.suppress(_Stop):  # the journal ran out of ticks
             loop.run(n)
         notes = list(self._notes)
+        if self.resume is not None:
+            first = self.reader.summary().first_tick
+            skipped = self.resume.tick - (first if first is not None else self.resume.tick)
+            notes.insert(0, f"a black box: resumed from its snapshot of the controller at tick "
+                            f"{self.resume.tick}" + (f" (the {skipped} ticks before it are "
+                                                    "in the file, not replayed)"
+                                                    if skipped else ""))
         if self.difference is None:
             gap = self._gap or (self.reader.gaps[0] if self.reader.gaps else None)
             if gap is not None and (until is None or (gap.first or 0) <= until):

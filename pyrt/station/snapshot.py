@@ -1,0 +1,659 @@
+"""A controller's state between two ticks, written into a black box so that it replays.
+
+A black box (:mod:`pyrt.station.blackbox`) holds the last seconds of a run;
+a replay of them must start from the controller as it stood at their first
+tick.  A :class:`Snapshot` is that state, taken in the loop thread at the end
+of a tick (after the write phase), as the state *before* the next one:
+
+* the loop's own: the next tick's index, the fault ids given so far, each
+  rate group's ticks to its next release, each ready queue's memory (its
+  table and counters), whether its interrupts are on and whether it is halted;
+* the station's: each robot's fault (and whether it was moving), the move
+  watch's counters, the motion records queued;
+* the controller's, as the station's hook gives it
+  (:meth:`~pyrt.station.base.Station.snapshot_state` /
+  :meth:`~pyrt.station.base.Station.restore_state`); the built-in stations
+  give their component trees through :func:`state_of` / :func:`restore_into`;
+* the process image's inputs as the last tick read them and its outputs as
+  it left them.
+
+A station that cannot give some state raises :class:`SnapshotError` saying
+which ("cannot snapshot: tiny has no snapshot", "cannot snapshot: the
+foreground job init is running"); the black box then carries that reason and
+``pyrt replay`` refuses it with it.
+
+The format (``pyrt-snapshot/1``) is JSON, written zlib-compressed in the
+journal's ``S`` frame (:mod:`pyrt.journal.format`)::
+
+    {"format": "pyrt-snapshot/1", "station": NAME, "tick": T, "time_ns": NS,
+     "inputs": [...], "outputs": [...], "loop": {...}, "station_state": {...},
+     "state": {...}}            or  {"format": ..., "station": NAME, "refused": WHY}
+
+Values are JSON numbers, strings, ``null``, ``true``/``false`` and lists, or
+one-key objects naming their kind: ``{"$t": [...]}`` a tuple, ``{"$d": [[k,
+v], ...]}`` a dict, ``{"$b": HEX}`` bytes, ``{"$ba": HEX}`` a bytearray,
+``{"$a": [DTYPE, SHAPE, HEX]}`` a numpy array, ``{"$n": [DTYPE, HEX]}`` a
+numpy scalar, ``{"$q": [...]}`` a deque, ``{"$s": [...]}`` a set,
+``{"$cd": ...}`` the numbers in C memory a kernel owns (a list for an array,
+an object of its fields for a struct; its pointers are left out),
+``{"$e": "MODULE:CLASS", "v": NAME}`` an enum's member, ``{"$dc":
+"MODULE:CLASS", "f": {...}}`` a dataclass record, ``{"$o": {...}, "$c":
+"MODULE:CLASS"}`` an object's attributes, ``{"$r": PATH}`` an object given
+earlier at PATH.  Floats keep every bit (JSON's shortest repr round-trips;
+NaN and the infinities are JSON's ``NaN`` and ``Infinity``, as Python's
+``json`` writes and reads them).  A record or an object is only
+ever of a class of pyrt (or of the station's own package): a snapshot never
+chooses code to run, it only sets attributes of the station the replay built.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import importlib
+import json
+import zlib
+from collections import deque
+from collections.abc import Mapping
+from dataclasses import dataclass
+from types import BuiltinFunctionType, FunctionType, MethodType, ModuleType
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from pyrt.errors import ConfigError
+
+if TYPE_CHECKING:
+    from pyrt.station.base import Station
+
+__all__ = ["SNAPSHOT_FORMAT", "Snapshot", "SnapshotError", "compress_snapshot",
+           "decompress_snapshot", "restore_into", "restore_snapshot", "state_of",
+           "take_snapshot"]
+
+#: The snapshot format this pyrt writes and reads.
+SNAPSHOT_FORMAT = "pyrt-snapshot/1"
+
+#: Objects of these packages are structure, not state: the boards (the image
+#: carries their registers), the simulated world (a replay's stands still), the
+#: loop, queues and runner (their state is taken apart, :func:`_loop_state`),
+#: the scope, the station and the databases.
+_STRUCTURE = ("pyrt.boards", "pyrt.sim", "pyrt.scope", "pyrt.db", "pyrt.station.base",
+              "pyrt.station.robots", "pyrt.station.events", "pyrt.station.requests",
+              "pyrt.station.domain", "pyrt.station.moves", "pyrt.station.profile",
+              "pyrt.station.recording", "pyrt.station.blackbox", "pyrt.station.replay",
+              "pyrt.station.factory", "pyrt.station._urdf_sim", "pyrt.station._cell_world",
+              "pyrt.scheduler.loop", "pyrt.scheduler.runner", "pyrt.scheduler.readyqueue",
+              "pyrt.scheduler.rategroup", "pyrt.scheduler.task", "pyrt.scheduler.clock",
+              "pyrt.scheduler._", "pyrt.scheduler.stats", "pyrt.scheduler.timinglog",
+              "pyrt.scheduler.gcwatch", "pyrt.component")
+
+
+class SnapshotError(ConfigError):
+    """A state that cannot be snapshot (the message says which), or a snapshot that
+    cannot be restored (damaged, of another station, of another format)."""
+
+
+_MISSING = object()
+
+
+#: How each class's values are encoded, by the package that counts as pyrt's.
+_KINDS: dict[str, dict[type, str]] = {}
+
+
+class _Skip(Exception):
+    """Not state: a function, a view of another buffer, an object of the structure."""
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """The controller's state before tick :attr:`tick` (see the module text)."""
+
+    station: str
+    tick: int = 0
+    time_ns: int = 0
+    inputs: tuple[int, ...] = ()
+    outputs: tuple[int, ...] = ()
+    loop: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    station_state: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    state: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    #: Why the station could not give its state ('' when it could).
+    refused: str = ""
+
+    def encode(self) -> bytes:
+        """The snapshot as JSON (UTF-8)."""
+        doc: dict[str, Any] = {"format": SNAPSHOT_FORMAT, "station": self.station}
+        if self.refused:
+            doc["refused"] = self.refused
+        else:
+            doc.update(tick=self.tick, time_ns=self.time_ns, inputs=list(self.inputs),
+                       outputs=list(self.outputs), loop=self.loop,
+                       station_state=self.station_state, state=self.state)
+        return json.dumps(doc, separators=(",", ":")).encode("utf-8")
+
+    @classmethod
+    def decode(cls, data: bytes) -> Snapshot:
+        """The snapshot ``data`` holds; SnapshotError if it is not one this pyrt reads."""
+        try:
+            doc = json.loads(data.decode("utf-8"))
+        except (UnicodeDecodeError, ValueError) as exc:
+            raise SnapshotError(f"the snapshot is damaged: not JSON ({exc})") from None
+        if not isinstance(doc, dict):
+            raise SnapshotError("the snapshot is damaged: not a JSON object")
+        fmt = doc.get("format")
+        if fmt != SNAPSHOT_FORMAT:
+            raise SnapshotError(f"the snapshot's format is {str(fmt)[:40]!r}; this pyrt reads "
+                                f"{SNAPSHOT_FORMAT!r}")
+        station = doc.get("station")
+        if not isinstance(station, str):
+            raise SnapshotError("the snapshot is damaged: it names no station")
+        if "refused" in doc:
+            return cls(station, refused=str(doc["refused"]))
+        try:
+            tick, time_ns = doc["tick"], doc["time_ns"]
+            inputs, outputs = doc["inputs"], doc["outputs"]
+            loop, st, state = doc["loop"], doc["station_state"], doc["state"]
+        except KeyError as exc:
+            raise SnapshotError(f"the snapshot is damaged: it has no {exc.args[0]}") from None
+        ints = [tick, time_ns, *inputs, *outputs] if isinstance(inputs, list) \
+            and isinstance(outputs, list) else None
+        if ints is None or not all(type(v) is int for v in ints) or tick < 0 \
+                or not all(isinstance(m, dict) for m in (loop, st, state)):
+            raise SnapshotError("the snapshot is damaged: its tick, time, inputs or outputs "
+                                "are not integers")
+        return cls(station, tick, time_ns, tuple(inputs), tuple(outputs), loop, st, state)
+
+
+# -- values ------------------------------------------------------------------------------
+
+
+def _roots(extra: str = "") -> set[str]:
+    return {"pyrt", extra} - {""}
+
+
+def _class_name(cls: type) -> str:
+    return f"{cls.__module__}:{cls.__qualname__}"
+
+
+def _structure(cls: type) -> bool:
+    if any(k.__name__ == "Station" and k.__module__ == "pyrt.station.base" for k in cls.__mro__):
+        return True  # a station (the components are walked, not their station)
+    module = cls.__module__
+    return any(module == p or module.startswith(p + ".") or (p.endswith("_")
+               and module.startswith(p)) for p in _STRUCTURE)
+
+
+_PLAIN = frozenset((int, float, str, bool, type(None)))
+
+
+class _Encoder:
+    def __init__(self, package: str):
+        self.roots = _roots(package)
+        self.seen: dict[int, str] = {}
+        self.kinds = _KINDS.setdefault(package, {})
+
+    def _kind(self, cls: type) -> str:
+        """How values of ``cls`` are encoded (decided once per class)."""
+        if issubclass(cls, enum.Enum):
+            kind = "enum" if cls.__module__.split(".")[0] in self.roots else "skip"
+        elif issubclass(cls, np.generic):
+            kind = "npscalar"
+        elif issubclass(cls, bool | int | str | float):
+            kind = "plain"
+        elif issubclass(cls, list):
+            kind = "list"
+        elif issubclass(cls, tuple):
+            kind = "skip" if hasattr(cls, "_fields") else "tuple"
+        elif issubclass(cls, dict):
+            kind = "dict"
+        elif issubclass(cls, bytearray):
+            kind = "bytearray"
+        elif issubclass(cls, bytes):
+            kind = "bytes"
+        elif issubclass(cls, np.ndarray):
+            kind = "ndarray"
+        elif issubclass(cls, deque):
+            kind = "deque"
+        elif issubclass(cls, set | frozenset):
+            kind = "set"
+        elif cls.__name__.startswith("__CData") or cls.__name__ == "CData":
+            kind = "cdata"
+        elif issubclass(cls, FunctionType | MethodType | BuiltinFunctionType | type | ModuleType
+                        | range | slice | memoryview) \
+                or cls.__module__.split(".")[0] not in self.roots or _structure(cls):
+            kind = "skip"
+        elif dataclasses.is_dataclass(cls) and getattr(cls, "__dataclass_params__").frozen:  # noqa: B009
+            kind = "record"
+        else:
+            kind = "object"
+        self.kinds[cls] = kind
+        return kind
+
+    def value(self, v: Any, path: str) -> Any:
+        cls = type(v)
+        if cls in _PLAIN:
+            return v
+        kind = self.kinds.get(cls) or self._kind(cls)
+        if kind == "list":
+            if all(type(x) in _PLAIN for x in v):
+                return v.copy()
+            return [self.value(x, f"{path}[{i}]") for i, x in enumerate(v)]
+        if kind == "tuple":
+            if all(type(x) in _PLAIN for x in v):
+                return {"$t": list(v)}
+            return {"$t": [self.value(x, f"{path}[{i}]") for i, x in enumerate(v)]}
+        if kind == "plain":  # a subclass of a plain type
+            return v
+        if kind == "object":
+            if id(v) in self.seen:
+                return {"$r": self.seen[id(v)]}
+            attrs = getattr(v, "__dict__", None)
+            if attrs is None:
+                attrs = {a: getattr(v, a) for a in _slots(cls) if hasattr(v, a)}
+            self.seen[id(v)] = path
+            return {"$c": _class_name(cls), "$o": self.attributes(attrs, path)}
+        if kind == "skip":
+            raise _Skip
+        if kind == "ndarray":
+            if v.dtype.hasobject or not v.flags.writeable:
+                raise _Skip  # a read-only view of another array: that one is state
+            return {"$a": [v.dtype.str, list(v.shape), np.ascontiguousarray(v).tobytes().hex()]}
+        if kind == "dict":
+            return {"$d": [[self.value(k, f"{path}<{i}"), self.value(x, f"{path}{{{i}}}")]
+                           for i, (k, x) in enumerate(v.items())]}
+        if kind == "record":
+            return {"$dc": _class_name(cls),
+                    "f": {f.name: self.value(getattr(v, f.name), f"{path}.{f.name}")
+                          for f in dataclasses.fields(v)}}
+        if kind == "enum":
+            return {"$e": _class_name(cls), "v": v.name}
+        if kind == "npscalar":
+            return {"$n": [v.dtype.str, v.tobytes().hex()]}
+        if kind == "bytearray":
+            return {"$ba": v.hex()}
+        if kind == "bytes":
+            return {"$b": v.hex()}
+        if kind == "deque":
+            return {"$q": [self.value(x, f"{path}[{i}]") for i, x in enumerate(v)]}
+        if kind == "set":
+            return {"$s": [self.value(x, path) for x in sorted(v, key=repr)]}
+        return self._cdata(v)
+
+    def attributes(self, attrs: Mapping[str, Any], path: str) -> dict[str, Any]:
+        out = {}
+        plain = _PLAIN
+        for key, x in list(attrs.items()):
+            if type(x) in plain:
+                out[key] = x
+                continue
+            try:
+                out[key] = self.value(x, f"{path}.{key}")
+            except _Skip:
+                continue
+        return out
+
+    @staticmethod
+    def _cdata(v: Any) -> Any:
+        # memory a kernel's object owns: its numbers (arrays, the scalar fields of
+        # its structs); pointers are structure, bound once when it was built
+        if "owning" not in repr(v):
+            raise _Skip
+        ctype = _cffi_typeof(v)
+        if ctype.kind == "pointer":
+            return {"$cd": _cd_get(v[0], ctype.item)}
+        if ctype.kind == "array":
+            return {"$cd": _cd_get(v, ctype)}
+        raise _Skip
+
+
+def _slots(cls: type) -> tuple[str, ...]:
+    """The attributes a class with ``__slots__`` (and no ``__dict__``) holds."""
+    names: list[str] = []
+    for k in cls.__mro__:
+        slots = k.__dict__.get("__slots__", ())
+        names += [slots] if isinstance(slots, str) else [n for n in slots if n != "__weakref__"]
+    return tuple(names)
+
+
+def _cffi_typeof(v: Any) -> Any:
+    import _cffi_backend  # type: ignore[import-untyped]  # the C type of a kernel's memory
+
+    return _cffi_backend.typeof(v)
+
+
+def _cd_get(v: Any, ctype: Any) -> Any:
+    """The numbers in C memory ``v`` of type ``ctype``: a number, a list (an array),
+    a dict (a struct's fields that are not pointers); pointers: None."""
+    kind = ctype.kind
+    if kind == "primitive":
+        return v
+    if kind == "array":
+        if ctype.item.kind == "primitive":
+            return list(v)
+        return [_cd_get(v[i], ctype.item) for i in range(len(v))]
+    if kind == "struct":
+        return {name: _cd_get(getattr(v, name), f.type) for name, f in ctype.fields
+                if f.type.kind in ("primitive", "array", "struct")}
+    return None
+
+
+def _cd_put(v: Any, ctype: Any, data: Any) -> None:
+    """Write :func:`_cd_get`'s ``data`` back into C memory ``v`` (arrays and structs)."""
+    kind = ctype.kind
+    if kind == "array":
+        item = ctype.item
+        if len(data) != len(v):
+            raise SnapshotError("the snapshot's C array is not the kernel's size")
+        for i, x in enumerate(data):
+            if item.kind == "primitive":
+                v[i] = float(x["$fl"]) if isinstance(x, dict) else x
+            else:
+                _cd_put(v[i], item, x)
+    elif kind == "struct":
+        fields = dict(ctype.fields)
+        for name, x in data.items():
+            f = fields[name].type
+            if f.kind == "primitive":
+                setattr(v, name, float(x["$fl"]) if isinstance(x, dict) else x)
+            else:
+                _cd_put(getattr(v, name), f, x)
+
+
+class _Decoder:
+    def __init__(self, package: str):
+        self.roots = _roots(package)
+        self.seen: dict[str, Any] = {}
+
+    def _class(self, name: Any) -> type:
+        module, _, qual = str(name).partition(":")
+        if module.split(".")[0] not in self.roots:
+            raise SnapshotError(f"the snapshot names a class of {module[:60]!r}, not of pyrt")
+        try:
+            obj: Any = importlib.import_module(module)
+            for part in qual.split("."):
+                obj = getattr(obj, part)
+        except (ImportError, AttributeError):
+            raise SnapshotError(f"the snapshot names a class {str(name)[:80]!r} this pyrt "
+                                "does not have") from None
+        if not isinstance(obj, type):
+            raise SnapshotError(f"the snapshot names {str(name)[:80]!r}, which is not a class")
+        return obj
+
+    def value(self, v: Any, cur: Any, path: str) -> Any:
+        if v is None or isinstance(v, bool | int | str | float):
+            return v
+        if isinstance(v, list):
+            items = [self.value(x, cur[i] if isinstance(cur, list) and i < len(cur) else None,
+                            f"{path}[{i}]") for i, x in enumerate(v)]
+            if isinstance(cur, list):
+                cur[:] = items
+                return cur
+            return items
+        if not isinstance(v, dict) or not v:
+            raise SnapshotError(f"the snapshot is damaged at {path}: {str(v)[:40]!r}")
+        tag = next(iter(v))
+        body = v[tag]
+        try:
+            return self._tagged(tag, body, v, cur, path)
+        except (ValueError, TypeError, KeyError, IndexError) as exc:
+            raise SnapshotError(f"the snapshot is damaged at {path}: {exc}") from None
+
+    def _tagged(self, tag: str, body: Any, v: dict, cur: Any, path: str) -> Any:
+        if tag == "$fl":
+            return float(body)
+        if tag == "$t":
+            return tuple(self.value(x, cur[i] if isinstance(cur, tuple) and i < len(cur)
+                                    else None, f"{path}[{i}]") for i, x in enumerate(body))
+        if tag == "$d":
+            old = cur if isinstance(cur, dict) else {}
+            pairs = []
+            for i, (k, x) in enumerate(body):
+                key = self.value(k, None, f"{path}<{i}")
+                pairs.append((key, self.value(x, old.get(key), f"{path}{{{i}}}")))
+            if isinstance(cur, dict):
+                cur.clear()
+                cur.update(pairs)
+                return cur
+            return dict(pairs)
+        if tag in ("$b", "$ba"):
+            data = bytes.fromhex(body)
+            if tag == "$b":
+                return data
+            if isinstance(cur, bytearray):
+                if len(cur) != len(data):
+                    raise SnapshotError(f"the snapshot's {path} is {len(data)} bytes, the "
+                                        f"station's {len(cur)}")
+                cur[:] = data
+                return cur
+            return bytearray(data)
+        if tag == "$a":
+            dtype, shape, data = body
+            arr = np.frombuffer(bytes.fromhex(data), dtype=np.dtype(dtype)).reshape(shape)
+            if isinstance(cur, np.ndarray):
+                if cur.shape != arr.shape or cur.dtype != arr.dtype:
+                    raise SnapshotError(f"the snapshot's {path} is a {arr.dtype} array of "
+                                        f"shape {arr.shape}, the station's {cur.dtype} "
+                                        f"{cur.shape}")
+                if cur.flags.writeable:
+                    cur[...] = arr
+                return cur
+            return arr.copy()
+        if tag == "$n":
+            return np.frombuffer(bytes.fromhex(body[1]), dtype=np.dtype(body[0]))[0]
+        if tag == "$q":
+            items = [self.value(x, None, f"{path}[{i}]") for i, x in enumerate(body)]
+            if isinstance(cur, deque):
+                cur.clear()
+                cur.extend(items)
+                return cur
+            return deque(items)
+        if tag == "$s":
+            return {self.value(x, None, path) for x in body}
+        if tag == "$cd":
+            if cur is None or not type(cur).__name__.startswith("__CData"):
+                return cur  # a workspace not built yet (made when first used): nothing to keep
+            ctype = _cffi_typeof(cur)
+            if ctype.kind == "pointer":
+                _cd_put(cur[0], ctype.item, body)
+            else:
+                _cd_put(cur, ctype, body)
+            return cur
+        if tag == "$r":
+            if body not in self.seen:
+                raise SnapshotError(f"the snapshot is damaged at {path}: it refers to "
+                                    f"{str(body)[:60]!r}, which it did not give")
+            return self.seen[body]
+        if tag == "$e":
+            cls = self._class(body)
+            if not issubclass(cls, enum.Enum) or v["v"] not in cls.__members__:
+                raise SnapshotError(f"the snapshot is damaged at {path}: {body[:60]!r} has "
+                                    f"no member {str(v['v'])[:40]!r}")
+            return cls[v["v"]]
+        if tag == "$dc":
+            cls = self._class(body)
+            if not dataclasses.is_dataclass(cls):
+                raise SnapshotError(f"the snapshot names {body[:80]!r} as a record; it is not")
+            obj = object.__new__(cls)
+            for name, x in v["f"].items():
+                object.__setattr__(obj, name, self.value(x, None, f"{path}.{name}"))
+            return obj
+        if tag == "$c":
+            if cur is None or _class_name(type(cur)) != body:
+                made: Any = self._class(body)  # an object the station has not (a motion)
+                cur = made.__new__(made)
+            self.seen[path] = cur
+            self.attributes(cur, v["$o"], path)
+            return cur
+        raise SnapshotError(f"the snapshot is damaged at {path}: unknown kind {tag[:20]!r}")
+
+    def attributes(self, obj: Any, state: Mapping[str, Any], path: str) -> None:
+        if not isinstance(state, Mapping):
+            raise SnapshotError(f"the snapshot is damaged at {path}: not an object's state")
+        attrs = getattr(obj, "__dict__", None)
+        slots = _slots(type(obj)) if attrs is None else ()
+        for key, x in state.items():
+            if attrs is not None:
+                old = attrs.get(key, _MISSING)
+            elif key in slots:
+                old = getattr(obj, key, _MISSING)
+            else:
+                raise SnapshotError(f"the snapshot is damaged at {path}: a "
+                                    f"{type(obj).__name__} has no {str(key)[:40]!r}")
+            new = self.value(x, None if old is _MISSING else old, f"{path}.{key}")
+            if old is not new:
+                if attrs is not None:
+                    attrs[key] = new
+                else:
+                    setattr(obj, key, new)
+
+
+def state_of(objects: Mapping[str, Any], package: str = "") -> dict[str, Any]:
+    """The state of ``objects`` (name -> object, each walked with every object of pyrt
+    it holds: attributes that are numbers, text, containers, arrays, records), as
+    plain JSON-able data; ``package``: a package whose classes count as pyrt's (a
+    station's own).  Functions, views, the boards, the world, the loop and the
+    station are structure and left out."""
+    enc = _Encoder(package)
+    out: dict[str, Any] = {}
+    for name, obj in objects.items():
+        try:
+            out[name] = enc.value(obj, name)
+        except _Skip:
+            raise SnapshotError(f"cannot snapshot: {name} is a {type(obj).__name__}, "
+                                "not state") from None
+    return out
+
+
+def restore_into(objects: Mapping[str, Any], state: Mapping[str, Any],
+                 package: str = "") -> None:
+    """Put ``state`` (:func:`state_of` of objects built the same way) back into
+    ``objects``, in place: lists, arrays and bytearrays keep their identity (views
+    and C kernels that share them see the restored values)."""
+    dec = _Decoder(package)
+    for name, obj in objects.items():
+        if name not in state:
+            raise SnapshotError(f"the snapshot has no state of {name}")
+        got = dec.value(state[name], obj, name)
+        if got is not obj:
+            raise SnapshotError(f"the snapshot's {name} is not the station's ({type(got).__name__} "
+                                f"for a {type(obj).__name__})")
+
+
+# -- the loop's and the station's own ---------------------------------------------------
+
+
+def _loop_state(station: Station) -> dict[str, Any]:
+    loop = station.loop
+    if loop.jobs:
+        raise SnapshotError(f"cannot snapshot: the foreground job {loop.jobs[0].name} is "
+                            "running (its place in its sequence is not state pyrt can save)")
+    return {
+        "tick": loop.tick_index + 1 if loop.running else loop.tick_index,
+        "fault_ids": loop._fault_ids,
+        "groups": [[g.name, g._left, g.released_at] for g in loop.rate_groups],
+        "queues": [[q.name, q.image.mem.hex(), q.interrupts_enabled, q.halted, q.now_ns]
+                   for q in loop.queues],
+    }
+
+
+def _restore_loop(station: Station, state: Mapping[str, Any]) -> None:
+    loop = station.loop
+    groups, queues = state["groups"], state["queues"]
+    if [g[0] for g in groups] != [g.name for g in loop.rate_groups] \
+            or [q[0] for q in queues] != [q.name for q in loop.queues]:
+        raise SnapshotError("the snapshot's rate groups and ready queues are not the station's "
+                            f"({', '.join(str(q[0]) for q in queues)} against "
+                            f"{', '.join(q.name for q in loop.queues)})")
+    loop.tick_index = int(state["tick"])
+    loop._fault_ids = int(state["fault_ids"])
+    for g, (_name, left, released) in zip(loop.rate_groups, groups, strict=True):
+        g._left, g.released_at = int(left), int(released)
+    for q, (_name, mem, interrupts, halted, now_ns) in zip(loop.queues, queues, strict=True):
+        data = bytes.fromhex(mem)
+        if len(data) != len(q.image.mem):
+            raise SnapshotError(f"the snapshot's ready queue {q.name} is not the station's")
+        q.image.mem[:] = data
+        q.interrupts_enabled = bool(interrupts)
+        if halted:
+            q.halt()
+        else:
+            q.resume(restart=False)
+        q.now_ns = int(now_ns)
+
+
+_EVENTS = ("_moving", "_move_seq", "moves_this_period")
+
+
+def _station_state(station: Station) -> dict[str, Any]:
+    enc = _Encoder(type(station).__module__.split(".")[0])
+    return {
+        "robots": [[r.name, enc.value(r.fault, "fault"), r.moving] for r in station.robots],
+        "events": [getattr(station, a) for a in _EVENTS],
+        "motion": [enc.value(m, f"motion[{i}]") for i, m in enumerate(station.motion._q)],
+    }
+
+
+def _restore_station(station: Station, state: Mapping[str, Any]) -> None:
+    dec = _Decoder(type(station).__module__.split(".")[0])
+    robots = station.robots
+    if [r[0] for r in state["robots"]] != [r.name for r in robots]:
+        raise SnapshotError("the snapshot's robots are not the station's")
+    for r, (_name, fault, moving) in zip(robots, state["robots"], strict=True):
+        r.fault = dec.value(fault, None, "fault")
+        r.moving = bool(moving)
+    for a, v in zip(_EVENTS, state["events"], strict=True):
+        setattr(station, a, v)
+    queue = station.motion._q
+    queue.clear()
+    queue.extend(dec.value(m, None, f"motion[{i}]") for i, m in enumerate(state["motion"]))
+
+
+def take_snapshot(station: Station, inputs: list[int], outputs: list[int]) -> Snapshot:
+    """The station's state now (the loop thread, at the end of a tick: the state
+    before the next), with the image's ``inputs`` and ``outputs``; a snapshot
+    that says why when the station cannot give it."""
+    try:
+        loop = _loop_state(station)
+        own = station.snapshot_state()
+        common = _station_state(station)
+    except SnapshotError as exc:
+        return Snapshot(station.name, refused=str(exc))
+    except _Skip:
+        return Snapshot(station.name, refused="cannot snapshot: a robot's fault or a queued "
+                                              "motion is not state pyrt can save")
+    except Exception as exc:  # a hook that fails never fails the loop: the box says why
+        return Snapshot(station.name, refused=f"cannot snapshot: {type(exc).__name__}: {exc}")
+    return Snapshot(station.name, loop["tick"], station.loop.now_ns, tuple(inputs),
+                    tuple(outputs), loop, common, own)
+
+
+def restore_snapshot(station: Station, snap: Snapshot) -> None:
+    """Put ``snap`` back into ``station`` (built as the run's was, not yet run);
+    SnapshotError naming what does not fit (or the station's own refusal)."""
+    if snap.refused:
+        raise SnapshotError(snap.refused)
+    if snap.station != station.name:
+        raise SnapshotError(f"the snapshot is of station {snap.station!r}, not {station.name!r}")
+    try:
+        station.restore_state(dict(snap.state))
+        _restore_station(station, snap.station_state)
+        _restore_loop(station, snap.loop)
+    except SnapshotError:
+        raise
+    except Exception as exc:  # what does not fit the station, said in one line
+        raise SnapshotError(f"the snapshot does not fit the station: {type(exc).__name__}: "
+                            f"{exc}") from None
+
+
+def compress_snapshot(snap: Snapshot) -> bytes:
+    """The snapshot as an ``S`` frame holds it: its JSON, zlib-compressed."""
+    return zlib.compress(snap.encode(), 6)
+
+
+def decompress_snapshot(data: bytes) -> Snapshot:
+    """The snapshot of an ``S`` frame; SnapshotError if it is damaged."""
+    try:
+        raw = zlib.decompress(data)
+    except zlib.error as exc:
+        raise SnapshotError(f"the snapshot is damaged: it does not decompress ({exc})") from None
+    return Snapshot.decode(raw)
+
