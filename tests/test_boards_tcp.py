@@ -249,30 +249,58 @@ def test_gripper_register_written_over_tcp_is_seen_by_the_plant_and_back(gripper
 def test_poll_copy_serves_the_reads_of_a_tick_and_sees_its_own_writes(gripper_sim):
     """In a tick (poll .. flush) reads and writes make no round trip and a read sees the tick's
     write; flush sends the changed outputs in one request; outside a tick a write goes out at
-    once, and with max_age=0 a read outside a tick reads the inputs again."""
-    with open_boards(gripper_sim.url, "gripper", GRIPPER_BOARDS, max_age=60) as boards:
+    once, and with max_age=0 a read outside a tick reads the inputs again (prefetch off: every
+    read phase is one round trip, so the exchanges can be counted)."""
+    url = gripper_sim.url + "?prefetch=0"
+    with open_boards(url, "gripper", GRIPPER_BOARDS, max_age=60) as boards:
         board = boards["gripper"]
         link = board.registers.link
         boards.set_tick(0.001)  # a station runs the phases
         boards.poll(0)
-        n = link.requests
+        n, sends = link.requests, link.sends
         assert [board.read(a) for a in REGISTERS] and link.requests == n
         board.write(DAC, 0x81)
         board.write(LED_LO, 0x01)
         assert link.requests == n and board.read(DAC) == 0x81 and link.requests == n
+        assert link.sends == sends
         boards.flush(0)  # sent, its reply read with the next exchange
+        assert link.sends == sends + 1 and link.requests == n
         boards.poll(0)
-        assert link.requests == n + 2
-        board.write(DAC, 0x81)  # unchanged: nothing to send but the next SNAP
+        assert link.requests == n + 2 and link.sends == sends + 2
+        board.write(DAC, 0x81)  # unchanged: nothing to send
         boards.flush(0)
-        assert link.requests == n + 2
-        board.write(DAC, 0x80)  # outside a tick: at once (the SNAP's reply read first)
-        assert link.requests == n + 4
+        assert link.requests == n + 2 and link.sends == sends + 2
+        board.write(DAC, 0x80)  # outside a tick: at once
+        assert link.requests == n + 3
     with open_boards(gripper_sim.url, "gripper", GRIPPER_BOARDS, max_age=0) as boards:
         link = boards["gripper"].registers.link
         n = link.requests
         boards["gripper"].read(P8155_PA)
         assert link.requests == n + 1
+
+
+def test_the_inputs_stream_and_a_tick_sends_at_most_once(gripper_sim):
+    """With prefetch (the default) board-sim pushes the inputs after every world step: a read
+    phase sends nothing and takes the newest push; a write phase sends its writes, the request
+    for the inputs they leave and (the first time) the stream's request in one system call."""
+    with open_boards(gripper_sim.url, "gripper", GRIPPER_BOARDS) as boards:
+        board = boards["gripper"]
+        client = board.registers.client
+        link = client.link
+        assert client.streaming and client.step_us == 1000
+        boards.set_tick(10.0)  # a long tick: no push is too old for a read phase here
+        boards.poll(0)
+        board.write(DAC, 0x70)
+        sends = link.sends
+        boards.flush(0)
+        assert link.sends == sends + 1
+        boards.poll(0)  # the write's reply and the inputs after it come first
+        assert link.latest is not None
+        pushes = link.snapshots
+        # a bound for a hang only: board-sim pushes after its next step
+        assert _until(lambda: (boards.poll(0), link.snapshots)[1] > pushes + 2)
+        assert link.sends == sends + 1  # the reads came without asking
+        assert _info(link)["dac"] == str(0x70)
 
 
 @pytest.mark.wallclock

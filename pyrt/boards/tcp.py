@@ -55,8 +55,9 @@ import socket
 import struct
 import threading
 import time
-from collections.abc import Mapping
-from typing import Any
+from binascii import a2b_hex
+from collections.abc import Mapping, Sequence
+from typing import Any, NoReturn
 
 from pyrt.boards.image import (
     DEFAULT_OVERRUN_LIMIT,
@@ -68,7 +69,7 @@ from pyrt.boards.image import (
 from pyrt.boards.kinds import RemoteDataConcentrator, RemoteGripperBoard, RemoteTIO10
 from pyrt.boards.registers import BoardKind, options_for, split_options
 from pyrt.boards.registry import Boards, BoardURL
-from pyrt.boards.wire import MAX_LINE, WireError, parse_greeting
+from pyrt.boards.wire import MAX_LINE, PUSH, WireError, parse_greeting, snapshot_struct
 from pyrt.errors import BoardError, ConfigError
 
 __all__ = [
@@ -87,6 +88,10 @@ __all__ = [
 DEFAULT_TIMEOUT_S = 0.25
 DEFAULT_CONNECT_TIMEOUT_S = 2.0
 DEFAULT_MAX_AGE_S = 0.05
+#: How long one ``STREAM`` request streams for (ms); the client asks again at half of it
+#: (or at a quarter of the watchdog time, if that is sooner).
+STREAM_MS = 100
+_DONTWAIT = getattr(socket, "MSG_DONTWAIT", 0)
 
 #: The typed boards over tcp:// (the built-in kinds' remote adapters).
 TcpGripperBoard = RemoteGripperBoard
@@ -115,13 +120,27 @@ class TcpLink:
         self.url = url
         self.timeout = timeout
         self._lock = threading.Lock()
+        #: The receiving thread (:meth:`start_receiving`) tells a waiting request here.
+        self._came = threading.Condition(self._lock)
+        self._receiver: threading.Thread | None = None
+        #: Why the receiving thread stopped (the link failed), for the next access to say.
+        self._lost: BaseException | None = None
         self._buf = b""
         self._down: str | None = None
         self._trips: int | None = None
         #: Requests sent whose replies are read with the next exchange (pipelined writes).
         self._outstanding: list[str] = []
-        #: Round trips made (requests answered).
+        #: Round trips made (requests answered); system calls that sent requests.
         self.requests = 0
+        self.sends = 0
+        #: The newest packed snapshot come (a ``SNAPX`` reply's or a stream's push: its
+        #: hexadecimal), None once a write's reply has come after it (it is older than the
+        #: write); when it came (the monotonic clock, ns); how many have come; ``SNAPX``
+        #: requests sent whose replies have not.
+        self.latest: bytes | None = None
+        self.latest_ns = 0
+        self.snapshots = 0
+        self.snapshots_owed = 0
         try:
             sock = socket.create_connection((host, port), timeout=connect_timeout)
         except OSError as exc:
@@ -129,7 +148,7 @@ class TcpLink:
         self._sock = sock
         try:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            greeting = self._readline().decode("ascii", "replace").split()
+            greeting = self._rawline().decode("ascii", "replace").split()
             # A blocking socket with kernel time-outs: one system call per
             # send or receive (a Python time-out polls before each); a
             # receive that times out fails with EAGAIN.
@@ -174,6 +193,21 @@ class TcpLink:
             if "refused: syntax " not in str(exc):
                 raise
 
+    def stream_step_us(self) -> int | None:
+        """Whether board-sim streams (``STREAM 0``, which also stops a stream):
+        its world's step in µs, or None from a board-sim that does not know the
+        packed form (it answers ``ERR syntax``)."""
+        try:
+            values = self.request("STREAM 0")
+        except BoardError as exc:
+            if "refused: syntax " in str(exc):
+                return None
+            raise
+        if len(values) != 1 or not values[0].isdigit():
+            with self._lock:
+                self._fail(f"reply {' '.join(values)[:60]!r} is not a step", "STREAM 0")
+        return int(values[0])
+
     def info(self) -> dict[str, str]:
         """The world's state (``INFO``, not a register access): KEY -> VALUE."""
         return dict(kv.partition("=")[::2] for kv in self.request("INFO"))
@@ -210,6 +244,7 @@ class TcpLink:
                 raise BoardError(self.url, f"{lines[0]}: the link is down ({self._down})")
             try:
                 self._sock.sendall(data)
+                self.sends += 1
                 self._read_outstanding()
                 replies = [self._readline() for _ in lines]
             except (TimeoutError, BlockingIOError):
@@ -228,19 +263,149 @@ class TcpLink:
                     self._fail(f"unexpected reply {reply[:60]!r}", line)
         return out
 
-    def send(self, line: str) -> None:
-        """Send one request without waiting for its reply: the next exchange
-        reads it first (a refusal then raises BoardError there)."""
+    def send(self, *lines: str) -> None:
+        """Send requests without waiting for their replies, in one system call:
+        the next exchange reads them first (a refusal then raises BoardError there)."""
+        line = lines[0]
+        data = ("\n".join(lines) + "\n").encode("ascii")
         with self._lock:
             if self._down is not None:
                 raise BoardError(self.url, f"{line}: the link is down ({self._down})")
             try:
-                self._sock.sendall(line.encode("ascii") + b"\n")
+                self._sock.sendall(data)
             except (TimeoutError, BlockingIOError):
                 self._fail(f"cannot send within {self.timeout:g} s", line)
             except OSError as exc:
                 self._fail(_why(exc), line)
-            self._outstanding.append(line)
+            self.sends += 1
+            self._outstanding += lines
+            for one in lines:
+                if one[:5] == "SNAPX":
+                    self.snapshots_owed += 1
+
+    def start_receiving(self) -> None:
+        """Receive in a thread of this link's own from now on: what board-sim
+        sends (a stream's pushes, the replies) is taken off the socket as it
+        comes, while the controller's loop sleeps, and :meth:`drain` makes no
+        system call.  It ends when the link does."""
+        with self._lock:
+            if self._receiver is not None or self._down is not None:
+                return
+            self._receiver = threading.Thread(target=self._receive, daemon=True,
+                                              name=f"pyrt-tcp-receive {self.url}")
+            self._receiver.start()
+
+    def _receive(self) -> None:
+        """The receiving thread: each chunk onto the buffer, any waiter told."""
+        sock = self._sock
+        while True:
+            lost: BaseException | None = None
+            try:
+                chunk = sock.recv(65536)
+            except (BlockingIOError, TimeoutError, InterruptedError):
+                if self._down is not None:
+                    return
+                continue  # the receive timeout: waiters judge their own
+            except OSError as exc:
+                chunk, lost = b"", exc
+            with self._came:
+                if chunk:
+                    self._buf += chunk
+                    if len(self._buf) > MAX_LINE * 64:
+                        lost = EOFError("reply line too long")
+                elif lost is None:
+                    lost = EOFError("board-sim closed the connection")
+                if lost is not None:
+                    self._lost = lost
+                self._came.notify_all()
+            if lost is not None:
+                return
+
+    def drain(self) -> None:
+        """Take what has come without waiting for more: the replies owed
+        (BoardError for a refusal, as :meth:`collect`) and the stream's pushes
+        (:attr:`latest`).  With the receiving thread, no system call; else one."""
+        with self._lock:
+            if self._down is not None:
+                raise BoardError(self.url, f"SNAP: the link is down ({self._down})")
+            if self._receiver is not None:
+                buf = self._buf
+            else:
+                try:
+                    chunk = self._sock.recv(65536, _DONTWAIT)
+                except BlockingIOError:
+                    chunk = b"-"
+                except OSError as exc:
+                    self._fail(_why(exc), "SNAP")
+                if not chunk:
+                    self._fail("board-sim closed the connection", "SNAP")
+                buf = self._buf + chunk if chunk != b"-" else self._buf
+            refused = None
+            pos = 0
+            while True:
+                i = buf.find(b"\n", pos)
+                if i < 0:
+                    break
+                why = self._take(buf[pos:i])
+                pos = i + 1
+                if why is not None and refused is None:
+                    refused = why
+            self._buf = buf[pos:]
+            if len(self._buf) > MAX_LINE * 64:
+                self._fail("reply line too long", "SNAP")
+            if self._lost is not None:
+                self._fail(_why(self._lost), "SNAP")
+        if refused is not None:
+            raise BoardError(self.url, refused)
+
+    def wait_snapshot(self) -> None:
+        """Wait for the replies of the ``SNAPX`` requests owed (at least one:
+        the caller sends it), taking what comes before them; :attr:`latest` is
+        then a snapshot newer than every write.  BoardError if they do not
+        come within the timeout, the link fails or one is refused."""
+        refused = None
+        with self._lock:
+            if self._down is not None:
+                raise BoardError(self.url, f"SNAP: the link is down ({self._down})")
+            try:
+                while (self.snapshots_owed or self.latest is None) and refused is None:
+                    refused = self._take(self._rawline())
+            except (TimeoutError, BlockingIOError):
+                self._fail(f"no reply within {self.timeout:g} s", "SNAP")
+            except (OSError, EOFError) as exc:
+                self._fail(_why(exc), "SNAP")
+        if refused is not None:
+            raise BoardError(self.url, refused)
+
+    def _take(self, line: bytes) -> str | None:
+        """(Lock held.) One line come: a push, or the reply to the oldest request
+        owed; the refusal's text, or None."""
+        if line[:2] == PUSH:
+            self._snapshot(line[2:])
+            return None
+        if not self._outstanding:
+            self._fail(f"unexpected line {line[:60]!r}", "SNAP")
+        request = self._outstanding.pop(0)
+        self.requests += 1
+        self._note(request, line)
+        if line[:2] != b"OK":
+            return f"{request[:60]}: refused: {line.decode('ascii', 'replace')[4:]}"
+        return None
+
+    def _snapshot(self, payload: bytes) -> None:
+        self.latest = payload
+        self.latest_ns = time.monotonic_ns()
+        self.snapshots += 1
+
+    def _note(self, request: str, reply: bytes) -> None:
+        """(Lock held.) What ``request``'s reply tells the snapshots: a write's makes
+        the newest one older than it (None); a ``SNAPX``'s is the newest."""
+        if request[:1] == "W":
+            self.latest = None
+        elif request[:5] == "SNAPX":
+            self.snapshots_owed -= 1
+            if reply[:3] == b"OK ":
+                self._snapshot(reply[3:])
 
     def set_timeout(self, seconds: float) -> None:
         """Use ``seconds`` as the receive and send timeout."""
@@ -261,6 +426,7 @@ class TcpLink:
             line = self._outstanding.pop(0)
             reply = self._readline()
             self.requests += 1
+            self._note(line, reply)
             if reply[:2] != b"OK" and refused is None:
                 refused = f"{line[:60]}: refused: {reply.decode('ascii', 'replace')[4:]}"
         return refused
@@ -284,13 +450,16 @@ class TcpLink:
             self._fail(f"unexpected reply {reply[:60]!r}", line)
         raise AssertionError("unreachable")  # pragma: no cover
 
-    def _exchange(self, line: str) -> bytes:
-        """One round trip; the payload of the ``OK`` reply."""
+    def _exchange(self, line: str, what: str | None = None) -> bytes:
+        """One round trip; the payload of the ``OK`` reply (failures name ``what``,
+        the request if not given)."""
         data = line.encode("ascii") + b"\n"
         with self._lock:
             if self._down is not None:
-                raise BoardError(self.url, f"{line}: the link is down ({self._down})")
-            refused, reply = self._reply(line, data)
+                raise BoardError(self.url, f"{what or line}: the link is down ({self._down})")
+            if line[:5] == "SNAPX":
+                self.snapshots_owed += 1
+            refused, reply = self._reply(line, data, what)
         if refused is not None:
             raise BoardError(self.url, refused)
         if reply[:3] == b"OK " or reply == b"OK":
@@ -304,26 +473,40 @@ class TcpLink:
             self._fail(f"unexpected reply {text[:60]!r}", line)
         raise AssertionError("unreachable")  # pragma: no cover
 
-    def _reply(self, line: str, data: bytes | None = None) -> tuple[str | None, bytes]:
+    def _reply(self, line: str, data: bytes | None = None,
+               what: str | None = None) -> tuple[str | None, bytes]:
         """(Lock held.) Send ``data`` if given, read the replies still owed, then
         ``line``'s: (the first refusal among those owed or None, the reply).  A
-        lost link fails it (BoardError naming the URL)."""
+        lost link fails it (BoardError naming the URL and ``what``, else ``line``)."""
         refused: str | None = None
         reply = b""
         try:
             if data is not None:
                 self._sock.sendall(data)
+                self.sends += 1
             refused = self._read_outstanding()
             reply = self._readline()
         except (TimeoutError, BlockingIOError):
-            self._fail(f"no reply within {self.timeout:g} s", line)
+            self._fail(f"no reply within {self.timeout:g} s", what or line)
         except (OSError, EOFError) as exc:
-            self._fail(_why(exc), line)
+            self._fail(_why(exc), what or line)
         self.requests += 1
+        self._note(line, reply)
         return refused, reply
 
     def _readline(self) -> bytes:
+        """The next reply line (a stream's pushes before it are taken)."""
+        while True:
+            line = self._rawline()
+            if line[:2] != PUSH:
+                return line
+            self._snapshot(line[2:])
+
+    def _rawline(self) -> bytes:
+        """(Lock held.) The next line come: from the buffer, else received (by
+        this thread, or waited for from the receiving thread within the timeout)."""
         buf = self._buf
+        deadline = 0.0
         while True:
             i = buf.find(b"\n")
             if i >= 0:
@@ -331,13 +514,24 @@ class TcpLink:
                 return buf[:i]
             if len(buf) > MAX_LINE * 64:
                 raise EOFError("reply line too long")
-            chunk = self._sock.recv(65536)
-            if not chunk:
-                raise EOFError("board-sim closed the connection")
-            buf += chunk
+            if self._receiver is None:
+                chunk = self._sock.recv(65536)
+                if not chunk:
+                    raise EOFError("board-sim closed the connection")
+                buf += chunk
+                continue
+            if self._lost is not None:
+                raise self._lost
+            now = time.monotonic()
+            deadline = deadline or now + self.timeout
+            if now >= deadline or not self._came.wait(deadline - now):
+                raise TimeoutError
+            buf = self._buf
 
-    def _fail(self, reason: str, what: str) -> None:
+    def _fail(self, reason: str, what: str) -> NoReturn:
         self._down = reason
+        with contextlib.suppress(OSError):
+            self._sock.shutdown(socket.SHUT_RDWR)  # the receiving thread wakes and ends
         with contextlib.suppress(OSError):
             self._sock.close()
         raise BoardError(self.url, f"{what}: {reason}") from None
@@ -348,19 +542,28 @@ class TcpLink:
             if self._down is not None:
                 return
             self._down = "closed"
+            receiver = self._receiver
             try:
-                self._sock.settimeout(0.05)
+                if receiver is None:
+                    self._sock.settimeout(0.05)
                 self._sock.sendall(b"QUIT\n")
-                # Read what is still owed (a prefetched SNAP's reply) up to board-sim's
-                # close: a socket closed with unread data resets the link instead of
-                # ending it, and board-sim would see a lost controller, not a QUIT.
+                # Read what is still owed (a prefetched SNAP's reply, a stream's pushes)
+                # up to board-sim's close: a socket closed with unread data resets the
+                # link instead of ending it, and board-sim would see a lost controller,
+                # not a QUIT.  (The receiving thread reads it, and ends there.)
                 self._sock.shutdown(socket.SHUT_WR)
                 deadline = time.monotonic() + 0.2
-                while time.monotonic() < deadline and self._sock.recv(65536):
+                while receiver is None and time.monotonic() < deadline \
+                        and self._sock.recv(65536):
                     pass
             except OSError:
                 pass
-            self._sock.close()
+        if receiver is not None and receiver is not threading.current_thread():
+            receiver.join(0.2)
+            with contextlib.suppress(OSError):
+                self._sock.shutdown(socket.SHUT_RDWR)
+            receiver.join(1.0)
+        self._sock.close()
 
 
 def _why(exc: BaseException) -> str:
@@ -400,14 +603,24 @@ class TcpRegisters(ImageBackend):
         super().__init__(link.url, kinds, max_age=max_age, timeout=timeout,
                          overrun_ticks=overrun_ticks, overrun_limit=overrun_limit)
         self.link = link
-        #: Send the next tick's SNAP at the end of this one (see :meth:`end_of_tick`).
+        #: The inputs come before the read phase (see :meth:`end_of_tick`).
         self.prefetch = prefetch
         self._prefetch_sent = 0
         self._stale_ns = 0
         self._check_greeting()
         # every board served, in its order: a plain SNAP; else name the boards declared
-        self._snap_request = ("SNAP" if list(link.boards) == list(self.kinds)
-                              else "SNAP " + " ".join(self.kinds))
+        names = "" if list(link.boards) == list(self.kinds) else " " + " ".join(self.kinds)
+        self._snap_request = "SNAP" + names
+        #: board-sim's world step in µs if it speaks the packed form (``SNAPX``,
+        #: ``STREAM``), else None (an older board-sim: text ``SNAP``).
+        self.step_us = link.stream_step_us()
+        self._snapx_request = "SNAPX" + names
+        self._layout = snapshot_struct(self.kinds)
+        #: Whether the inputs stream (prefetch, from a board-sim that streams).
+        self.streaming = prefetch and self.step_us is not None
+        self._stream_request = f"STREAM {STREAM_MS}{names}"
+        self._rearm_ns = 0
+        self._rearm_every_ns = int(min(STREAM_MS / 2e3, link.watchdog_s / 4) * 1e9)
 
     def _check_greeting(self) -> None:
         served = self.link.boards
@@ -429,42 +642,96 @@ class TcpRegisters(ImageBackend):
     def set_tick(self, period_s: float) -> None:
         super().set_tick(period_s)
         self._stale_ns = int(1.5 * period_s * 1e9)
+        if self.streaming:
+            # A push comes after every step of the world: while none has come, board-sim
+            # has not stepped it (its process waits for a core), so the newest push is
+            # still the world as it stands, up to the overrun's N ticks; only then is it
+            # asked for and waited for (and then that wait is an overrun).
+            assert self.step_us is not None
+            self._stale_ns = max(self._stale_ns, self.overrun_ns, int(1.5 * self.step_us * 1e3))
 
     def end_of_tick(self) -> None:
-        """Pipelining: send the next tick's ``SNAP`` now, behind the write line;
-        the next read phase reads its reply, which came while the loop slept.
-        A copy sent more than 1.5 ticks before (the loop stalled) is not used:
-        that read phase asks again."""
-        if self.prefetch and self.phased and not self._prefetch_sent \
-                and self.link.down is None:
+        """Pipelining: the next tick's inputs come while the loop sleeps.  From a
+        board-sim that streams, the pushes after every world step: asked for
+        again (``STREAM``) when half of the time asked for has passed (that
+        request feeds board-sim's watchdog); from an older board-sim, the next
+        tick's ``SNAP`` sent now.  A copy more than 1.5 ticks (or steps) old
+        (the loop stalled, or board-sim did) is not used: that read phase asks
+        again."""
+        if not (self.prefetch and self.phased) or self.link.down is not None:
+            return
+        if self.streaming:
+            if time.monotonic_ns() >= self._rearm_ns:
+                self.link.send(*self._rearm())
+        elif not self._prefetch_sent:
             self.link.send(self._snap_request)
             self._prefetch_sent = time.monotonic_ns()
 
     def exchange_inputs(self) -> list[int]:
+        link = self.link
+        if self.streaming and self.phased:
+            link.drain()  # what came while the loop slept: the pushes, the replies owed
+            # the inputs after the last writes (a SNAPX went with them), and not too old
+            if link.snapshots_owed or link.latest is None \
+                    or time.monotonic_ns() - link.latest_ns > self._stale_ns:
+                if not link.snapshots_owed:  # the stream lapsed, or board-sim is late
+                    link.send(self._snapx_request)
+                link.wait_snapshot()
+            return self._unpack(link.latest)
+        if self.step_us is not None:
+            return self._unpack(link._exchange(self._snapx_request, "SNAP"))
         sent, self._prefetch_sent = self._prefetch_sent, 0
-        payload = self.link.collect() if sent else None
+        payload = link.collect() if sent else None
         if payload is not None and time.monotonic_ns() - sent <= self._stale_ns:
             try:
                 nums = list(map(int, payload.split()))
             except ValueError:
-                self.link._fail(f"reply {payload[:60]!r} is not numbers", "SNAP")
+                link._fail(f"reply {payload[:60]!r} is not numbers", "SNAP")
         else:
-            nums = self.link.request_ints(self._snap_request)
+            nums = link.request_ints(self._snap_request)
+        if len(nums) != self.input_count + 1:
+            link._fail(f"SNAP answered {len(nums)} values, not {self.input_count + 1}", "SNAP")
         return self._inputs_of(nums)
 
-    def _inputs_of(self, nums: list[int]) -> list[int]:
-        if len(nums) != self.input_count + 1:
-            self.link._fail(f"SNAP answered {len(nums)} values, not {self.input_count + 1}",
+    def _rearm(self) -> tuple[str]:
+        """The stream's request, asked for again from now on (the first time, the
+        link starts receiving in its own thread)."""
+        if not self._rearm_ns:
+            self.link.start_receiving()
+        self._rearm_ns = time.monotonic_ns() + self._rearm_every_ns
+        return (self._stream_request,)
+
+    def _unpack(self, payload: bytes | None) -> list[int]:
+        """The inputs of a packed snapshot (its hexadecimal), in one step."""
+        try:
+            nums = self._layout.unpack(a2b_hex(payload))  # type: ignore[arg-type]
+        except (ValueError, TypeError, struct.error):
+            shown = (payload or b"")[:60]
+            self.link._fail(f"snapshot {shown!r} is not {self._layout.size} packed bytes",
                             "SNAP")
+        return self._inputs_of(nums)
+
+    def _inputs_of(self, nums: Sequence[int]) -> list[int]:
         try:
             self.link.check_trips(nums[0])
         except BoardError:
             self.forget_outputs(self.read_outputs())  # the watchdog turned them off
             raise
-        return nums[1:]
+        return list(nums[1:])
 
     def exchange_outputs(self, writes: list[Write]) -> None:
-        self.link.send(_write_line(writes))
+        link = self.link
+        line = _write_line(writes)
+        if not (self.prefetch and self.phased) or link.down is not None:
+            link.send(line)
+        elif self.streaming:  # the inputs as the writes left them, in the same system call
+            if time.monotonic_ns() >= self._rearm_ns:
+                link.send(line, self._snapx_request, *self._rearm())
+            else:
+                link.send(line, self._snapx_request)
+        else:
+            link.send(line, self._snap_request)
+            self._prefetch_sent = time.monotonic_ns()
 
     def exchange_outputs_now(self, writes: list[Write]) -> None:
         try:
@@ -493,7 +760,7 @@ class TcpRegisters(ImageBackend):
 
     @property
     def down(self) -> str | None:
-        return self.link.down
+        return self.link._down
 
     # -- compatibility -----------------------------------------------------------------------
 

@@ -46,19 +46,24 @@ from __future__ import annotations
 import contextlib
 import selectors
 import socket
+import struct
 import threading
 import time
 from collections.abc import Callable
+from typing import Any
 
 from pyrt.boards.wire import (
     MAX_LINE,
     NOT_ACCESSES,
+    PUSH,
     Access,
     WireError,
     error_line,
     greeting_line,
     ok_line,
     parse_request,
+    snapshot_line,
+    snapshot_struct,
 )
 from pyrt.errors import ConfigError
 from pyrt.sim.world import World
@@ -89,7 +94,7 @@ class Connection:
     """One client's connection: its socket, what came and what goes out."""
 
     __slots__ = ("addr", "discarding", "gone", "inbuf", "last_ns", "out", "quitting", "sock",
-                 "told", "writing")
+                 "stream", "stream_until", "told", "writing")
 
     def __init__(self, sock: socket.socket, addr: str, now: int):
         self.sock = sock
@@ -104,6 +109,10 @@ class Connection:
         self.gone = False
         #: Whether a refusal (busy) was said about it already (said once per connection).
         self.told = False
+        #: Its stream (wire ``STREAM``): the boards pushed after every world step, until
+        #: ``stream_until`` (the server's clock; 0: none).
+        self.stream: tuple[str, ...] = ()
+        self.stream_until = 0
 
 
 class LinkServer:
@@ -189,6 +198,10 @@ class LinkServer:
         """Answer the complete requests in ``conn.inbuf`` (removing them), each
         reply appended to ``conn.out``; call :meth:`came` for each."""
         raise NotImplementedError
+
+    def stepped(self, now: int) -> None:
+        """The world has just stepped (at ``now``): nothing by default (board-sim's
+        wire pushes its streams here)."""
 
     # -- state -------------------------------------------------------------------------------
 
@@ -316,6 +329,7 @@ class LinkServer:
                 if now >= next_step:
                     world.step(now - self.t0)
                     self.steps += 1
+                    self.stepped(now)
                     next_step += step
                     if next_step <= now:  # late: skip the missed steps, never burst
                         next_step = now + step
@@ -442,6 +456,12 @@ class BoardServer(LinkServer):
     run it in a thread of its own.
     """
 
+    def __init__(self, world: World, host: str = "127.0.0.1", port: int = 0,
+                 **options: Any):
+        super().__init__(world, host, port, **options)
+        #: The packed form's layout of each set of boards asked for (wire ``SNAPX``).
+        self._layouts: dict[tuple[str, ...], struct.Struct] = {}
+
     @property
     def url(self) -> str:
         """The back-end URL a controller opens: ``tcp://HOST:PORT``."""
@@ -450,6 +470,42 @@ class BoardServer(LinkServer):
 
     def greeting(self) -> bytes:
         return greeting_line(self.world.name, self.watchdog_ns // 1_000_000, self.kinds)
+
+    def _layout(self, boards: tuple[str, ...]) -> struct.Struct:
+        layout = self._layouts.get(boards)
+        if layout is None:
+            layout = self._layouts[boards] = snapshot_struct(self.kinds, boards)
+        return layout
+
+    def _packed(self, boards: tuple[str, ...], head: bytes) -> bytes:
+        views = self.views
+        values: list[int] = []
+        for name in boards or views:
+            values += views[name].snapshot()
+        return snapshot_line(self._layout(boards), self.world.trips, values, head)
+
+    def stepped(self, now: int) -> None:
+        pushed: dict[tuple[str, ...], bytes] = {}
+        for conn in self._conns:
+            until = conn.stream_until
+            if not until or conn.quitting:
+                continue
+            if now >= until:
+                conn.stream_until = 0
+                continue
+            if conn.out:  # it has not taken what went before: skip, never queue
+                continue
+            line = pushed.get(conn.stream)
+            if line is None:
+                try:
+                    line = pushed[conn.stream] = self._packed(conn.stream, PUSH)
+                except Exception as exc:  # a bug in the world: say it, stop the stream
+                    conn.stream_until = 0
+                    self._say(f"internal error pushing to {conn.addr}: "
+                              f"{type(exc).__name__}: {exc}")
+                    continue
+            conn.out += line
+            self._flush(conn)
 
     def consume(self, conn: Connection) -> None:
         buf = conn.inbuf
@@ -490,6 +546,10 @@ class BoardServer(LinkServer):
                 self.feed(conn)
                 if verb == "OWN":
                     return b"OK\n"
+                if verb == "STREAM":
+                    conn.stream = req.boards
+                    conn.stream_until = self.clock() + req.ms * 1_000_000 if req.ms else 0
+                    return ok_line(self.step_ns // 1000)
                 return self._access(req.verb, req.accesses, req.boards)
             if verb == "INFO":
                 return ok_line(*(f"{k}={v}" for k, v in world.info().items()))
@@ -505,6 +565,8 @@ class BoardServer(LinkServer):
 
     def _access(self, verb: str, accesses: tuple[Access, ...], boards: tuple[str, ...]) -> bytes:
         views = self.views
+        if verb == "SNAPX":
+            return self._packed(boards, b"OK ")
         if verb == "SNAP":
             values: list[int] = [self.world.trips]
             for name in boards or views:
