@@ -321,35 +321,45 @@ class TcpLink:
             if lost is not None:
                 return
 
-    def drain(self) -> None:
+    def drain(self, now_ns: int = 0) -> None:
         """Take what has come without waiting for more: the replies owed
-        (BoardError for a refusal, as :meth:`collect`) and the stream's pushes
-        (:attr:`latest`).  With the receiving thread, no system call; else one."""
+        (BoardError for a refusal, as :meth:`collect`) and the stream's newest
+        push (:attr:`latest`, come at ``now_ns``, the monotonic clock's ns).
+        With the receiving thread, no system call; else one."""
         with self._lock:
             if self._down is not None:
                 raise BoardError(self.url, f"SNAP: the link is down ({self._down})")
-            if self._receiver is not None:
-                buf = self._buf
-            else:
+            buf = self._buf
+            if self._receiver is None:
                 try:
                     chunk = self._sock.recv(65536, _DONTWAIT)
                 except BlockingIOError:
-                    chunk = b"-"
+                    chunk = None
                 except OSError as exc:
                     self._fail(_why(exc), "SNAP")
-                if not chunk:
-                    self._fail("board-sim closed the connection", "SNAP")
-                buf = self._buf + chunk if chunk != b"-" else self._buf
+                if chunk is not None:
+                    if not chunk:
+                        self._fail("board-sim closed the connection", "SNAP")
+                    buf += chunk
             refused = None
+            push = -1  # where the newest push not yet taken begins
             pos = 0
             while True:
                 i = buf.find(b"\n", pos)
                 if i < 0:
                     break
-                why = self._take(buf[pos:i])
+                if buf.startswith(PUSH, pos):
+                    push = pos
+                else:  # a reply: the push before it first (a write's makes it old)
+                    if push >= 0:
+                        self._snapshot(buf[push + 2:buf.index(b"\n", push)], now_ns)
+                        push = -1
+                    why = self._take(buf[pos:i])
+                    if why is not None and refused is None:
+                        refused = why
                 pos = i + 1
-                if why is not None and refused is None:
-                    refused = why
+            if push >= 0:
+                self._snapshot(buf[push + 2:buf.index(b"\n", push)], now_ns)
             self._buf = buf[pos:]
             if len(self._buf) > MAX_LINE * 64:
                 self._fail("reply line too long", "SNAP")
@@ -359,16 +369,19 @@ class TcpLink:
             raise BoardError(self.url, refused)
 
     def wait_snapshot(self) -> None:
-        """Wait for the replies of the ``SNAPX`` requests owed (at least one:
-        the caller sends it), taking what comes before them; :attr:`latest` is
-        then a snapshot newer than every write.  BoardError if they do not
-        come within the timeout, the link fails or one is refused."""
+        """Wait for a snapshot newer than :attr:`latest` and for the replies of
+        the ``SNAPX`` requests owed (the caller has sent one, or a stream is
+        running), taking what comes before them; :attr:`latest` is then newer
+        than every write.  BoardError if none comes within the timeout, the
+        link fails or a request is refused."""
         refused = None
         with self._lock:
             if self._down is not None:
                 raise BoardError(self.url, f"SNAP: the link is down ({self._down})")
+            seen = self.snapshots
             try:
-                while (self.snapshots_owed or self.latest is None) and refused is None:
+                while refused is None and (self.snapshots_owed or self.latest is None
+                                           or self.snapshots == seen):
                     refused = self._take(self._rawline())
             except (TimeoutError, BlockingIOError):
                 self._fail(f"no reply within {self.timeout:g} s", "SNAP")
@@ -392,9 +405,9 @@ class TcpLink:
             return f"{request[:60]}: refused: {line.decode('ascii', 'replace')[4:]}"
         return None
 
-    def _snapshot(self, payload: bytes) -> None:
+    def _snapshot(self, payload: bytes, now_ns: int = 0) -> None:
         self.latest = payload
-        self.latest_ns = time.monotonic_ns()
+        self.latest_ns = now_ns or time.monotonic_ns()
         self.snapshots += 1
 
     def _note(self, request: str, reply: bytes) -> None:
@@ -616,10 +629,13 @@ class TcpRegisters(ImageBackend):
         self.step_us = link.stream_step_us()
         self._snapx_request = "SNAPX" + names
         self._layout = snapshot_struct(self.kinds)
+        self._unpacked_from: bytes | None = None
+        self._unpacked: tuple[int, ...] = ()
         #: Whether the inputs stream (prefetch, from a board-sim that streams).
         self.streaming = prefetch and self.step_us is not None
         self._stream_request = f"STREAM {STREAM_MS}{names}"
         self._rearm_ns = 0
+        self._stream_live_ns = 0
         self._rearm_every_ns = int(min(STREAM_MS / 2e3, link.watchdog_s / 4) * 1e9)
 
     def _check_greeting(self) -> None:
@@ -642,13 +658,9 @@ class TcpRegisters(ImageBackend):
     def set_tick(self, period_s: float) -> None:
         super().set_tick(period_s)
         self._stale_ns = int(1.5 * period_s * 1e9)
-        if self.streaming:
-            # A push comes after every step of the world: while none has come, board-sim
-            # has not stepped it (its process waits for a core), so the newest push is
-            # still the world as it stands, up to the overrun's N ticks; only then is it
-            # asked for and waited for (and then that wait is an overrun).
+        if self.streaming:  # a push comes after every step of the world
             assert self.step_us is not None
-            self._stale_ns = max(self._stale_ns, self.overrun_ns, int(1.5 * self.step_us * 1e3))
+            self._stale_ns = max(self._stale_ns, int(1.5 * self.step_us * 1e3))
 
     def end_of_tick(self) -> None:
         """Pipelining: the next tick's inputs come while the loop sleeps.  From a
@@ -670,13 +682,13 @@ class TcpRegisters(ImageBackend):
     def exchange_inputs(self) -> list[int]:
         link = self.link
         if self.streaming and self.phased:
-            link.drain()  # what came while the loop slept: the pushes, the replies owed
+            now = time.monotonic_ns()
+            link.drain(now)  # what came while the loop slept: the pushes, the replies owed
             # the inputs after the last writes (a SNAPX went with them), and not too old
-            if link.snapshots_owed or link.latest is None \
-                    or time.monotonic_ns() - link.latest_ns > self._stale_ns:
-                if not link.snapshots_owed:  # the stream lapsed, or board-sim is late
-                    link.send(self._snapx_request)
-                link.wait_snapshot()
+            if link.snapshots_owed or link.latest is None or now - link.latest_ns > self._stale_ns:
+                if not link.snapshots_owed and now >= self._stream_live_ns:
+                    link.send(self._snapx_request)  # the stream has lapsed: ask
+                link.wait_snapshot()  # (else board-sim is late: its next push)
             return self._unpack(link.latest)
         if self.step_us is not None:
             return self._unpack(link._exchange(self._snapx_request, "SNAP"))
@@ -698,25 +710,31 @@ class TcpRegisters(ImageBackend):
         link starts receiving in its own thread)."""
         if not self._rearm_ns:
             self.link.start_receiving()
-        self._rearm_ns = time.monotonic_ns() + self._rearm_every_ns
+        now = time.monotonic_ns()
+        self._rearm_ns = now + self._rearm_every_ns
+        # board-sim streams for STREAM_MS from when the request comes: surely till then
+        self._stream_live_ns = now + STREAM_MS * 800_000
         return (self._stream_request,)
 
     def _unpack(self, payload: bytes | None) -> list[int]:
         """The inputs of a packed snapshot (its hexadecimal), in one step."""
-        try:
-            nums = self._layout.unpack(a2b_hex(payload))  # type: ignore[arg-type]
-        except (ValueError, TypeError, struct.error):
-            shown = (payload or b"")[:60]
-            self.link._fail(f"snapshot {shown!r} is not {self._layout.size} packed bytes",
-                            "SNAP")
-        return self._inputs_of(nums)
+        if payload is not self._unpacked_from:  # else the same push as the last read phase
+            try:
+                self._unpacked = self._layout.unpack(a2b_hex(payload))  # type: ignore[arg-type]
+            except (ValueError, TypeError, struct.error):
+                shown = (payload or b"")[:60]
+                self.link._fail(f"snapshot {shown!r} is not {self._layout.size} packed bytes",
+                                "SNAP")
+            self._unpacked_from = payload
+        return self._inputs_of(self._unpacked)
 
     def _inputs_of(self, nums: Sequence[int]) -> list[int]:
-        try:
-            self.link.check_trips(nums[0])
-        except BoardError:
-            self.forget_outputs(self.read_outputs())  # the watchdog turned them off
-            raise
+        if nums[0] != self.link._trips:
+            try:
+                self.link.check_trips(nums[0])
+            except BoardError:
+                self.forget_outputs(self.read_outputs())  # the watchdog turned them off
+                raise
         return list(nums[1:])
 
     def exchange_outputs(self, writes: list[Write]) -> None:

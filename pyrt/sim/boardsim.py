@@ -88,6 +88,16 @@ DEFAULT_MAX_CLIENTS = 8
 MAX_PENDING_OUTPUT = 1 << 20
 #: How often idle connections are looked for.
 _SWEEP_NS = 20_000_000
+#: select() watches descriptors below this (FD_SETSIZE).
+_SELECT_FDS = 1024
+
+
+def _moved(old: selectors.BaseSelector, new: selectors.BaseSelector) -> selectors.BaseSelector:
+    """``new`` watching what ``old`` did (``old`` closed)."""
+    for key in list(old.get_map().values()):
+        new.register(key.fileobj, key.events, key.data)
+    old.close()
+    return new
 
 
 class Connection:
@@ -301,7 +311,11 @@ class LinkServer:
 
     def serve_forever(self) -> None:
         """Step the world, serve requests and keep the watchdog until :meth:`stop`."""
-        sel = selectors.DefaultSelector()
+        # select() waits to the µs, so the world steps on time (epoll and poll wait
+        # whole milliseconds: a step every 1 ms would come up to 1 ms late); it
+        # watches descriptors below FD_SETSIZE only, so epoll serves beyond that
+        fine = max(self._listener.fileno(), self._wake_r.fileno()) < _SELECT_FDS
+        sel = selectors.SelectSelector() if fine else selectors.DefaultSelector()
         self._sel = sel
         sel.register(self._listener, selectors.EVENT_READ, "listen")
         sel.register(self._wake_r, selectors.EVENT_READ, "wake")
@@ -313,6 +327,7 @@ class LinkServer:
             while not self._stop.is_set():
                 now = clock()
                 timeout = (next_step - now) / 1e9
+                sel = self._sel
                 for key, mask in sel.select(timeout if timeout > 0 else 0):
                     what = key.data
                     if what == "listen":
@@ -342,7 +357,7 @@ class LinkServer:
             for conn in list(self._conns):
                 self._drop(conn, "closed: server stopping")
             world.outputs_off()
-            sel.close()
+            self._sel.close()
             self._sel = None
 
     # -- connections -------------------------------------------------------------------
@@ -376,6 +391,8 @@ class LinkServer:
         conn = Connection(sock, addr, self.clock())
         self._conns.append(conn)
         assert self._sel is not None
+        if sock.fileno() >= _SELECT_FDS and isinstance(self._sel, selectors.SelectSelector):
+            self._sel = _moved(self._sel, selectors.DefaultSelector())
         self._sel.register(sock, selectors.EVENT_READ, conn)
         self._say(f"client {addr} connected")
         conn.out += self.greeting()
