@@ -104,7 +104,8 @@ them answers ``ERR syntax unknown request``, and a controller then uses
 
 Watchdog, fed only by the owner.  Every request except ``INFO`` and
 ``QUIT`` is a register access; the owner's feed the watchdog (its ``SNAP``
-every tick is its keep-alive), a reader's never do.  When the owner has
+every tick, or its ``STREAM`` asked again, is its keep-alive; a push is
+not a request and feeds nothing), a reader's never do.  When the owner has
 made none for the watchdog time, the boards turn their outputs off, as a
 real motion board does: every output register that declares an ``off``
 value is written with it (the gripper's DAC to null 80; every TIO10 motor
