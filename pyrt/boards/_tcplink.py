@@ -239,8 +239,9 @@ class TcpLink:
                 chunk, lost = b"", exc
             with self._came:
                 if chunk:
-                    self._buf += chunk
-                    if len(self._buf) > MAX_LINE * 64:
+                    buf = self._buf = self._buf + chunk
+                    # only the line not yet ended counts (a stalled loop finds many pushes)
+                    if len(buf) - buf.rfind(b"\n") > MAX_LINE * 64:
                         lost = EOFError("reply line too long")
                 elif lost is None:
                     lost = EOFError("board-sim closed the connection")
