@@ -491,13 +491,14 @@ def test_an_older_board_sim_is_read_with_snap_one_send_a_tick():
         server.close()
 
 
-def test_the_receiving_thread_ends_with_the_link_and_a_lost_board_sim_is_named():
+@pytest.mark.parametrize("lose", [True, False])
+def test_the_receiving_thread_ends_with_the_link_and_a_lost_board_sim_is_named(lose):
     """While the inputs stream a thread of the link's own receives them; when board-sim goes
     the next read phase raises BoardError naming the URL, and the thread has ended; closing
     the link ends it too."""
-    for lose in (True, False):
-        server = _serve(GripperWorld())
-        boards = open_boards(server.url, "gripper", GRIPPER_BOARDS)
+    server = _serve(GripperWorld())
+    boards = open_boards(server.url, "gripper", GRIPPER_BOARDS)
+    try:
         link = boards["gripper"].registers.link
         boards.set_tick(0.001)
         boards.poll(0)
@@ -507,7 +508,7 @@ def test_the_receiving_thread_ends_with_the_link_and_a_lost_board_sim_is_named()
         if lose:
             server.close()
             with pytest.raises(BoardError) as err:
-                # a bound for a hang only: the loss shows at the next read phase after it
+                # a bound for a hang only: the loss shows at a read phase after it
                 assert not _until(lambda: boards.poll(0) and False)
             assert err.value.url == server.url and server.url in str(err.value)
             receiver.join(HANG_S)
@@ -515,6 +516,8 @@ def test_the_receiving_thread_ends_with_the_link_and_a_lost_board_sim_is_named()
         boards.close()
         receiver.join(HANG_S)
         assert not receiver.is_alive() and boards.down is not None
+    finally:
+        boards.close()
         server.close()
 
 

@@ -195,27 +195,29 @@ class TcpLink:
     def send(self, *lines: str) -> None:
         """Send requests without waiting for their replies, in one system call:
         the next exchange reads them first (a refusal then raises BoardError there)."""
-        line = lines[0]
-        data = ("\n".join(lines) + "\n").encode("ascii")
         with self._lock:
             if self._down is not None:
-                raise BoardError(self.url, f"{line}: the link is down ({self._down})")
-            try:
-                self._sock.sendall(data)
-            except (TimeoutError, BlockingIOError):
-                self._fail(f"cannot send within {self.timeout:g} s", line)
-            except OSError as exc:
-                self._fail(_why(exc), line)
-            self.sends += 1
-            self._outstanding += lines
-            for one in lines:
-                if one[:5] == "SNAPX":
-                    self.snapshots_owed += 1
+                raise BoardError(self.url, f"{lines[0]}: the link is down ({self._down})")
+            self._send(lines)
+
+    def _send(self, lines: tuple[str, ...]) -> None:
+        """(Lock held, link up.) :meth:`send`."""
+        try:
+            self._sock.sendall(("\n".join(lines) + "\n").encode("ascii"))
+        except (TimeoutError, BlockingIOError):
+            self._fail(f"cannot send within {self.timeout:g} s", lines[0])
+        except OSError as exc:
+            self._fail(_why(exc), lines[0])
+        self.sends += 1
+        self._outstanding += lines
+        for one in lines:
+            if one[:5] == "SNAPX":
+                self.snapshots_owed += 1
 
     def start_receiving(self) -> None:
         """Receive in a thread of this link's own from now on: what board-sim
         sends (a stream's pushes, the replies) is taken off the socket as it
-        comes, while the controller's loop sleeps, and :meth:`drain` makes no
+        comes, while the controller's loop sleeps, and :meth:`newest` makes no
         system call.  It ends when the link does."""
         with self._lock:
             if self._receiver is not None or self._down is not None:
@@ -251,74 +253,90 @@ class TcpLink:
             if lost is not None:
                 return
 
-    def drain(self, now_ns: int = 0) -> None:
-        """Take what has come without waiting for more: the replies owed
-        (BoardError for a refusal, as :meth:`collect`) and the stream's newest
-        push (:attr:`latest`, come at ``now_ns``, the monotonic clock's ns).
-        With the receiving thread, no system call; else one."""
+    def newest(self, now_ns: int, stale_ns: int, ask: str | None) -> bytes:
+        """The newest packed snapshot, no older than the last write nor than
+        ``stale_ns`` at ``now_ns`` (the monotonic clock): first what has come
+        (the replies owed, the stream's pushes: with the receiving thread
+        without a system call), then, if that is not enough, the next one
+        waited for: after sending ``ask`` (a ``SNAPX``) if given and none is
+        owed, else a stream's next push.  BoardError if none comes within the
+        timeout, the link fails, or a request owed was refused."""
         with self._lock:
             if self._down is not None:
                 raise BoardError(self.url, f"SNAP: the link is down ({self._down})")
-            buf = self._buf
-            if self._receiver is None:
-                try:
-                    chunk = self._sock.recv(65536, _DONTWAIT)
-                except BlockingIOError:
-                    chunk = None
-                except OSError as exc:
-                    self._fail(_why(exc), "SNAP")
-                if chunk is not None:
-                    if not chunk:
-                        self._fail("board-sim closed the connection", "SNAP")
-                    buf += chunk
-            refused = None
-            push = -1  # where the newest push not yet taken begins
-            pos = 0
-            while True:
-                i = buf.find(b"\n", pos)
-                if i < 0:
-                    break
-                if buf.startswith(PUSH, pos):
-                    push = pos
-                else:  # a reply: the push before it first (a write's makes it old)
-                    if push >= 0:
-                        self._snapshot(buf[push + 2:buf.index(b"\n", push)], now_ns)
-                        push = -1
-                    why = self._take(buf[pos:i])
-                    if why is not None and refused is None:
-                        refused = why
-                pos = i + 1
-            if push >= 0:
-                self._snapshot(buf[push + 2:buf.index(b"\n", push)], now_ns)
-            self._buf = buf[pos:]
-            if len(self._buf) > MAX_LINE * 64:
-                self._fail("reply line too long", "SNAP")
-            if self._lost is not None:
-                self._fail(_why(self._lost), "SNAP")
+            refused = self._drain(now_ns)
+            latest = self.latest
+            if refused is None and (self.snapshots_owed or latest is None
+                                    or now_ns - self.latest_ns > stale_ns):
+                if ask is not None and not self.snapshots_owed:
+                    self._send((ask,))
+                refused = self._wait()
+                latest = self.latest
         if refused is not None:
             raise BoardError(self.url, refused)
+        assert latest is not None
+        return latest
 
-    def wait_snapshot(self) -> None:
-        """Wait for a snapshot newer than :attr:`latest` and for the replies of
-        the ``SNAPX`` requests owed (the caller has sent one, or a stream is
-        running), taking what comes before them; :attr:`latest` is then newer
-        than every write.  BoardError if none comes within the timeout, the
-        link fails or a request is refused."""
-        refused = None
-        with self._lock:
-            if self._down is not None:
-                raise BoardError(self.url, f"SNAP: the link is down ({self._down})")
-            seen = self.snapshots
+    def _drain(self, now_ns: int) -> str | None:
+        """(Lock held, link up.) Take what has come without waiting for more:
+        the replies owed and the stream's newest push (come at ``now_ns``).
+        With the receiving thread, no system call; else one.  The first
+        refusal among the replies, or None."""
+        buf = self._buf
+        if self._receiver is None:
             try:
-                while refused is None and (self.snapshots_owed or self.latest is None
-                                           or self.snapshots == seen):
-                    refused = self._take(self._rawline())
-            except (TimeoutError, BlockingIOError):
-                self._fail(f"no reply within {self.timeout:g} s", "SNAP")
-            except (OSError, EOFError) as exc:
+                chunk = self._sock.recv(65536, _DONTWAIT)
+            except BlockingIOError:
+                chunk = None
+            except OSError as exc:
                 self._fail(_why(exc), "SNAP")
-        if refused is not None:
-            raise BoardError(self.url, refused)
+            if chunk is not None:
+                if not chunk:
+                    self._fail("board-sim closed the connection", "SNAP")
+                buf += chunk
+        refused = None
+        push = -1  # where the newest push not yet taken begins
+        pos = 0
+        while True:
+            i = buf.find(b"\n", pos)
+            if i < 0:
+                break
+            if buf.startswith(PUSH, pos):
+                push = pos
+            else:  # a reply: the push before it first (a write's makes it old)
+                if push >= 0:
+                    self._snapshot(buf[push + 2:buf.index(b"\n", push)], now_ns)
+                    push = -1
+                why = self._take(buf[pos:i])
+                if why is not None and refused is None:
+                    refused = why
+            pos = i + 1
+        if push >= 0:
+            self._snapshot(buf[push + 2:buf.index(b"\n", push)], now_ns)
+        self._buf = buf[pos:]
+        if len(self._buf) > MAX_LINE * 64:
+            self._fail("reply line too long", "SNAP")
+        if self._lost is not None:
+            self._fail(_why(self._lost), "SNAP")
+        return refused
+
+    def _wait(self) -> str | None:
+        """(Lock held, link up.) Wait for a snapshot newer than :attr:`latest`
+        and for the replies of the ``SNAPX`` requests owed, taking what comes
+        before them (:attr:`latest` is then newer than every write); the first
+        refusal among them, or None.  The link fails if none comes within the
+        timeout."""
+        refused = None
+        seen = self.snapshots
+        try:
+            while refused is None and (self.snapshots_owed or self.latest is None
+                                       or self.snapshots == seen):
+                refused = self._take(self._rawline())
+        except (TimeoutError, BlockingIOError):
+            self._fail(f"no reply within {self.timeout:g} s", "SNAP")
+        except (OSError, EOFError) as exc:
+            self._fail(_why(exc), "SNAP")
+        return refused
 
     def _take(self, line: bytes) -> str | None:
         """(Lock held.) One line come: a push, or the reply to the oldest request

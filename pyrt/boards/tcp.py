@@ -201,14 +201,12 @@ class TcpRegisters(ImageBackend):
     def exchange_inputs(self) -> list[int]:
         link = self.link
         if self.streaming and self.phased:
+            # what came while the loop slept, no older than the last writes (a SNAPX
+            # went with them) nor 1.5 ticks; else, if the stream has lapsed, ask;
+            # if not, board-sim is late: its next push
             now = time.monotonic_ns()
-            link.drain(now)  # what came while the loop slept: the pushes, the replies owed
-            # the inputs after the last writes (a SNAPX went with them), and not too old
-            if link.snapshots_owed or link.latest is None or now - link.latest_ns > self._stale_ns:
-                if not link.snapshots_owed and now >= self._stream_live_ns:
-                    link.send(self._snapx_request)  # the stream has lapsed: ask
-                link.wait_snapshot()  # (else board-sim is late: its next push)
-            return self._unpack(link.latest)
+            ask = self._snapx_request if now >= self._stream_live_ns else None
+            return self._unpack(link.newest(now, self._stale_ns, ask))
         if self.step_us is not None:
             return self._unpack(link._exchange(self._snapx_request, "SNAP"))
         sent, self._prefetch_sent = self._prefetch_sent, 0
