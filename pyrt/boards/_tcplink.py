@@ -294,6 +294,11 @@ class TcpLink:
                 if not chunk:
                     self._fail("board-sim closed the connection", "SNAP")
                 buf += chunk
+        end = len(buf) - 1
+        if end > 2 and buf[:2] == PUSH and buf.find(b"\n") == end:  # one push: the usual
+            self._snapshot(buf[2:end], now_ns)
+            self._buf = b""
+            return None
         refused = None
         push = -1  # where the newest push not yet taken begins
         pos = 0
