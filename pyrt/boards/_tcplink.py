@@ -25,6 +25,7 @@ __all__ = ["DEFAULT_CONNECT_TIMEOUT_S", "DEFAULT_TIMEOUT_S", "TcpLink"]
 DEFAULT_TIMEOUT_S = 0.25
 DEFAULT_CONNECT_TIMEOUT_S = 2.0
 _DONTWAIT = getattr(socket, "MSG_DONTWAIT", 0)
+_PEEK = socket.MSG_PEEK | _DONTWAIT
 
 
 class TcpLink:
@@ -70,6 +71,7 @@ class TcpLink:
         self.latest_ns = 0
         self.snapshots = 0
         self.snapshots_owed = 0
+        self._taken = 0  # snapshots at the last newest()
         try:
             sock = socket.create_connection((host, port), timeout=connect_timeout)
         except OSError as exc:
@@ -82,10 +84,7 @@ class TcpLink:
             # send or receive (a Python time-out polls before each); a
             # receive that times out fails with EAGAIN.
             sock.settimeout(None)
-            sec, usec = divmod(max(1, round(timeout * 1e6)), 1_000_000)
-            tv = struct.pack("ll", sec, usec)
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, tv)
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO, tv)
+            _kernel_timeouts(sock, timeout)
         except (OSError, EOFError) as exc:
             self._fail(f"no greeting: {_why(exc)}", "connect")
         if greeting[:1] == ["ERR"]:
@@ -222,36 +221,9 @@ class TcpLink:
         with self._lock:
             if self._receiver is not None or self._down is not None:
                 return
-            self._receiver = threading.Thread(target=self._receive, daemon=True,
+            self._receiver = threading.Thread(target=_receive, args=(self,), daemon=True,
                                               name=f"pyrt-tcp-receive {self.url}")
             self._receiver.start()
-
-    def _receive(self) -> None:
-        """The receiving thread: each chunk onto the buffer, any waiter told."""
-        sock = self._sock
-        while True:
-            lost: BaseException | None = None
-            try:
-                chunk = sock.recv(65536)
-            except (BlockingIOError, TimeoutError, InterruptedError):
-                if self._down is not None:
-                    return
-                continue  # the receive timeout: waiters judge their own
-            except OSError as exc:
-                chunk, lost = b"", exc
-            with self._came:
-                if chunk:
-                    buf = self._buf = self._buf + chunk
-                    # only the line not yet ended counts (a stalled loop finds many pushes)
-                    if len(buf) - buf.rfind(b"\n") > MAX_LINE * 64:
-                        lost = EOFError("reply line too long")
-                elif lost is None:
-                    lost = EOFError("board-sim closed the connection")
-                if lost is not None:
-                    self._lost = lost
-                self._came.notify_all()
-            if lost is not None:
-                return
 
     def newest(self, now_ns: int, stale_ns: int, ask: str | None) -> bytes:
         """The newest packed snapshot, no older than the last write nor than
@@ -265,6 +237,9 @@ class TcpLink:
             if self._down is not None:
                 raise BoardError(self.url, f"SNAP: the link is down ({self._down})")
             refused = self._drain(now_ns)
+            if refused is None and self.snapshots == self._taken:
+                refused = self._unread(now_ns)  # nothing new: is the link still there?
+            self._taken = self.snapshots
             latest = self.latest
             if refused is None and (self.snapshots_owed or latest is None
                                     or now_ns - self.latest_ns > stale_ns):
@@ -276,6 +251,23 @@ class TcpLink:
             raise BoardError(self.url, refused)
         assert latest is not None
         return latest
+
+    def _unread(self, now_ns: int) -> str | None:
+        """(Lock held, link up.)  With the receiving thread, whether the socket
+        holds what that thread has not taken yet (one system call, not taking
+        it): the end of the connection fails the link; data is waited for from
+        the thread (it had no turn yet) and taken.  As :meth:`_drain`."""
+        if self._receiver is None:
+            return None
+        try:
+            if self._sock.recv(1, _PEEK):
+                self._came.wait(self.timeout)
+                return self._drain(now_ns)
+        except BlockingIOError:
+            return None
+        except OSError as exc:
+            self._fail(_why(exc), "SNAP")
+        self._fail("board-sim closed the connection", "SNAP")
 
     def _drain(self, now_ns: int) -> str | None:
         """(Lock held, link up.) Take what has come without waiting for more:
@@ -295,7 +287,8 @@ class TcpLink:
                     self._fail("board-sim closed the connection", "SNAP")
                 buf += chunk
         end = len(buf) - 1
-        if end > 2 and buf[:2] == PUSH and buf.find(b"\n") == end:  # one push: the usual
+        # one push and nothing else (the usual): no walk through the buffer
+        if end > 2 and buf[:2] == PUSH and buf.find(b"\n") == end and self._lost is None:
             self._snapshot(buf[2:end], now_ns)
             self._buf = b""
             return None
@@ -376,13 +369,9 @@ class TcpLink:
     def set_timeout(self, seconds: float) -> None:
         """Use ``seconds`` as the receive and send timeout."""
         self.timeout = seconds
-        if self._down is not None:
-            return
-        sec, usec = divmod(max(1, round(seconds * 1e6)), 1_000_000)
-        tv = struct.pack("ll", sec, usec)
-        with contextlib.suppress(OSError):
-            self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, tv)
-            self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO, tv)
+        if self._down is None:
+            with contextlib.suppress(OSError):
+                _kernel_timeouts(self._sock, seconds)
 
     def _read_outstanding(self) -> str | None:
         """Read the replies of the requests sent without waiting (lock held);
@@ -530,6 +519,42 @@ class TcpLink:
                 self._sock.shutdown(socket.SHUT_RDWR)
             receiver.join(1.0)
         self._sock.close()
+
+
+def _receive(link: TcpLink) -> None:
+    """``link``'s receiving thread: each chunk onto its buffer, any waiter told."""
+    sock = link._sock
+    while True:
+        lost: BaseException | None = None
+        try:
+            chunk = sock.recv(65536)
+        except (BlockingIOError, TimeoutError, InterruptedError):
+            if link._down is not None:
+                return
+            continue  # the receive timeout: waiters judge their own
+        except OSError as exc:
+            chunk, lost = b"", exc
+        with link._came:
+            if chunk:
+                buf = link._buf = link._buf + chunk
+                # only the line not yet ended counts (a stalled loop finds many pushes)
+                if len(buf) - buf.rfind(b"\n") > MAX_LINE * 64:
+                    lost = EOFError("reply line too long")
+            elif lost is None:
+                lost = EOFError("board-sim closed the connection")
+            if lost is not None:
+                link._lost = lost
+            link._came.notify_all()
+        if lost is not None:
+            return
+
+
+def _kernel_timeouts(sock: socket.socket, seconds: float) -> None:
+    """``seconds`` as ``sock``'s receive and send timeouts (SO_RCVTIMEO, SO_SNDTIMEO)."""
+    sec, usec = divmod(max(1, round(seconds * 1e6)), 1_000_000)
+    tv = struct.pack("ll", sec, usec)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, tv)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO, tv)
 
 
 def _why(exc: BaseException) -> str:
