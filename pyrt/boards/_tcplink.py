@@ -254,17 +254,17 @@ class TcpLink:
 
     def _unread(self, now_ns: int) -> str | None:
         """(Lock held, link up.)  With the receiving thread, whether the socket
-        holds what that thread has not taken yet (one system call, not taking
-        it): the end of the connection fails the link; data is waited for from
-        the thread (it had no turn yet) and taken.  As :meth:`_drain`."""
+        holds what that thread has not taken yet (one system call, which also
+        gives that thread its turn; nothing taken): the end of the connection
+        fails the link; what the thread has taken meanwhile is taken here.  As
+        :meth:`_drain`."""
         if self._receiver is None:
             return None
         try:
             if self._sock.recv(1, _PEEK):
-                self._came.wait(self.timeout)
                 return self._drain(now_ns)
         except BlockingIOError:
-            return None
+            return self._drain(now_ns)
         except OSError as exc:
             self._fail(_why(exc), "SNAP")
         self._fail("board-sim closed the connection", "SNAP")
