@@ -491,6 +491,38 @@ def test_an_older_board_sim_is_read_with_snap_one_send_a_tick():
         server.close()
 
 
+def test_a_request_of_another_thread_gets_its_own_reply_while_the_inputs_stream(gripper_sim):
+    """While the loop's phases stream the inputs and send writes, INFO asked from another
+    thread (a console) always gets INFO's reply, and the phases never take it for theirs."""
+    with open_boards(gripper_sim.url, "gripper", GRIPPER_BOARDS) as boards:
+        board = boards["gripper"]
+        link = board.registers.link
+        boards.set_tick(0.001)
+        infos: list[dict[str, str]] = []
+        failures: list[BaseException] = []
+
+        def console() -> None:
+            try:
+                for _ in range(150):
+                    infos.append(_info(link))
+            except BaseException as exc:  # the test says what it was
+                failures.append(exc)
+
+        t = threading.Thread(target=console)
+        t.start()
+        k = 0
+        while t.is_alive():
+            boards.poll(0)
+            board.write(LED_LO, k & 0xFF)  # a write, its SNAPX behind it, every tick
+            boards.flush(0)
+            k += 1
+        t.join()
+        assert failures == [] and len(infos) == 150
+        assert all("dac" in info and "x" in info for info in infos), infos[:3]
+        boards.poll(0)
+        assert boards.down is None
+
+
 @pytest.mark.parametrize("lose", [True, False])
 def test_the_receiving_thread_ends_with_the_link_and_a_lost_board_sim_is_named(lose):
     """While the inputs stream a thread of the link's own receives them; when board-sim goes

@@ -72,6 +72,9 @@ class TcpLink:
         self.snapshots = 0
         self.snapshots_owed = 0
         self._taken = 0  # snapshots at the last newest()
+        #: The thread taking the lines that come (:meth:`_take_turn`), and those waiting.
+        self._turn: int | None = None
+        self._turn_waiters = 0
         try:
             sock = socket.create_connection((host, port), timeout=connect_timeout)
         except OSError as exc:
@@ -170,6 +173,7 @@ class TcpLink:
         with self._lock:
             if self._down is not None:
                 raise BoardError(self.url, f"{lines[0]}: the link is down ({self._down})")
+            _take_turn(self, lines[0])
             try:
                 self._sock.sendall(data)
                 self.sends += 1
@@ -179,6 +183,8 @@ class TcpLink:
                 self._fail(f"no reply within {self.timeout:g} s", lines[0])
             except (OSError, EOFError) as exc:
                 self._fail(_why(exc), lines[0])
+            finally:
+                _give_turn(self)
             self.requests += len(lines)
         out: list[list[int]] = []
         for line, reply in zip(lines, replies, strict=True):
@@ -234,19 +240,21 @@ class TcpLink:
         owed, else a stream's next push.  BoardError if none comes within the
         timeout, the link fails, or a request owed was refused."""
         with self._lock:
-            if self._down is not None:
-                raise BoardError(self.url, f"SNAP: the link is down ({self._down})")
-            refused = self._drain(now_ns)
-            if refused is None and self.snapshots == self._taken:
-                refused = self._unread(now_ns)  # nothing new: is the link still there?
-            self._taken = self.snapshots
-            latest = self.latest
-            if refused is None and (self.snapshots_owed or latest is None
-                                    or now_ns - self.latest_ns > stale_ns):
-                if ask is not None and not self.snapshots_owed:
-                    self._send((ask,))
-                refused = self._wait()
+            _take_turn(self, "SNAP")
+            try:
+                refused = self._drain(now_ns)
+                if refused is None and self.snapshots == self._taken:
+                    refused = self._unread(now_ns)  # nothing new: is the link still there?
+                self._taken = self.snapshots
                 latest = self.latest
+                if refused is None and (self.snapshots_owed or latest is None
+                                        or now_ns - self.latest_ns > stale_ns):
+                    if ask is not None and not self.snapshots_owed:
+                        self._send((ask,))
+                    refused = self._wait()
+                    latest = self.latest
+            finally:
+                _give_turn(self)
         if refused is not None:
             raise BoardError(self.url, refused)
         assert latest is not None
@@ -435,6 +443,7 @@ class TcpLink:
         lost link fails it (BoardError naming the URL and ``what``, else ``line``)."""
         refused: str | None = None
         reply = b""
+        _take_turn(self, what or line)
         try:
             if data is not None:
                 self._sock.sendall(data)
@@ -445,6 +454,8 @@ class TcpLink:
             self._fail(f"no reply within {self.timeout:g} s", what or line)
         except (OSError, EOFError) as exc:
             self._fail(_why(exc), what or line)
+        finally:
+            _give_turn(self)
         self.requests += 1
         self._note(line, reply)
         return refused, reply
@@ -498,27 +509,52 @@ class TcpLink:
                 return
             self._down = "closed"
             receiver = self._receiver
-            try:
-                if receiver is None:
-                    self._sock.settimeout(0.05)
-                self._sock.sendall(b"QUIT\n")
-                # Read what is still owed (a prefetched SNAP's reply, a stream's pushes)
-                # up to board-sim's close: a socket closed with unread data resets the
-                # link instead of ending it, and board-sim would see a lost controller,
-                # not a QUIT.  (The receiving thread reads it, and ends there.)
-                self._sock.shutdown(socket.SHUT_WR)
-                deadline = time.monotonic() + 0.2
-                while receiver is None and time.monotonic() < deadline \
-                        and self._sock.recv(65536):
-                    pass
-            except OSError:
-                pass
+            _quit(self._sock, receiver is None)
         if receiver is not None and receiver is not threading.current_thread():
             receiver.join(0.2)
             with contextlib.suppress(OSError):
                 self._sock.shutdown(socket.SHUT_RDWR)
             receiver.join(1.0)
         self._sock.close()
+
+
+def _take_turn(link: TcpLink, what: str) -> None:
+    """(``link``'s lock held.) Be the one thread that takes the lines that come, waiting
+    while another is (one that waits for the receiving thread lets go of the
+    lock: its replies must stay its own); BoardError if the link is down."""
+    me = threading.get_ident()
+    while link._turn is not None and link._turn != me:
+        link._turn_waiters += 1
+        try:
+            link._came.wait(link.timeout)
+        finally:
+            link._turn_waiters -= 1
+    if link._down is not None:
+        raise BoardError(link.url, f"{what}: the link is down ({link._down})")
+    link._turn = me
+
+
+def _give_turn(link: TcpLink) -> None:
+    """(``link``'s lock held.) The turn of :func:`_take_turn` ends."""
+    link._turn = None
+    if link._turn_waiters:
+        link._came.notify_all()
+
+
+def _quit(sock: socket.socket, read: bool) -> None:
+    """Say ``QUIT`` on ``sock`` and end the sending side (best effort); if ``read``
+    (no receiving thread does), read what is still owed up to board-sim's close."""
+    # A socket closed with unread data (a prefetched SNAP's reply, a stream's pushes)
+    # resets the link instead of ending it, and board-sim would see a lost controller,
+    # not a QUIT.  (The receiving thread reads it, and ends there.)
+    with contextlib.suppress(OSError):
+        if read:
+            sock.settimeout(0.05)
+        sock.sendall(b"QUIT\n")
+        sock.shutdown(socket.SHUT_WR)
+        deadline = time.monotonic() + 0.2
+        while read and time.monotonic() < deadline and sock.recv(65536):
+            pass
 
 
 def _receive(link: TcpLink) -> None:
