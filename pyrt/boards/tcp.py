@@ -28,7 +28,8 @@ declared input after each step of its world, in the packed form (one
 ``unpack`` of the hexadecimal, no conversion per value); a thread of the
 link's own (:meth:`TcpLink.start_receiving`) takes them off the socket as
 they come, while the loop sleeps, so the read phase makes no system call:
-it takes the newest push.  The write phase sends one ``W ...; W ...``
+it takes the newest push (before the stream, as on opening, a read asks
+with ``SNAPX``: one round trip).  The write phase sends one ``W ...; W ...``
 line of the outputs the tick changed with a ``SNAPX`` behind it, in one
 system call and without waiting; the next read phase takes the inputs no
 older than those writes (the ``SNAPX``'s reply, or a later push).  A tick
@@ -200,7 +201,7 @@ class TcpRegisters(ImageBackend):
 
     def exchange_inputs(self) -> list[int]:
         link = self.link
-        if self.streaming and self.phased:
+        if self.streaming and self.phased and self._rearm_ns:  # the loop runs: it streams
             # what came while the loop slept, no older than the last writes (a SNAPX
             # went with them) nor 1.5 ticks; else, if the stream has lapsed, ask;
             # if not, board-sim is late: its next push
