@@ -10,8 +10,10 @@ round-trip benchmark times one register access per round (no per-tick copy:
 list of ``perf_counter_ns`` samples.  The tick benchmark runs the 002
 controller on a 1 ms wall-clock loop through the tcp:// board (power-up
 ``I``, then a ``P`` move) and reports the time ``poll`` takes per tick (one
-``SNAP``) and the whole tick's work, against the 1 ms tick.  The machine is
-shared: read the tails as approximate.
+``SNAPX`` round trip: this loop runs no write phase, so nothing streams;
+``bench_boards_station.py`` runs a station's whole tick, the stream with it)
+and the whole tick's work, against the 1 ms tick.  The machine is shared:
+read the tails as approximate.
 """
 
 from __future__ import annotations
@@ -69,30 +71,30 @@ def _bench(benchmark, fn: Callable[[], object], label: str) -> None:
 
 
 @pytest.mark.benchmark(group="boards-tcp")
-@pytest.mark.parametrize("access", ["read PA", "write LED", "poll (SNAP)"])
+@pytest.mark.parametrize("access", ["read PA", "write LED", "poll (SNAPX)"])
 def test_gripper_register_round_trip(benchmark, gripper_url, access):
-    """One gripper register access over tcp:// (read, write, or the per-tick SNAP)."""
+    """One gripper register access over tcp:// (read, write, or a read phase asked for in one round trip, SNAPX)."""
     with open_boards(gripper_url, "gripper", GRIPPER_BOARDS, max_age=0) as boards:
         board = boards["gripper"]
         fn = {
             "read PA": lambda: board.read(P8155_PA),
             "write LED": lambda: board.write(LED_LO, 0xFF),
-            "poll (SNAP)": lambda: boards.poll(0),
+            "poll (SNAPX)": lambda: boards.poll(0),
         }[access]
         _bench(benchmark, fn, f"gripper {access} round trip")
 
 
 @pytest.mark.benchmark(group="boards-tcp")
-@pytest.mark.parametrize("access", ["pulses", "poll (SNAP, 3 counters)"])
+@pytest.mark.parametrize("access", ["pulses", "poll (SNAPX, 3 counters)"])
 def test_manipulator_register_round_trip(benchmark, manipulator_url, access):
-    """One manipulator register access over tcp:// (a TIO10 read, or the per-tick SNAP)."""
+    """One manipulator register access over tcp:// (a TIO10 read, or a read phase asked for in one round trip, SNAPX)."""
     with open_boards(manipulator_url, "prototype", MANIPULATOR_BOARDS, max_age=0) as boards:
         tio, dc = boards["tio10"], boards["dc"]
-        for address in (168, 169, 170):  # the prototype's encoders ride along in SNAP
+        for address in (168, 169, 170):  # the prototype's encoders ride along in SNAPX
             dc.read_counter(address)
         fn = {
             "pulses": lambda: tio.pulses(7),
-            "poll (SNAP, 3 counters)": lambda: boards.poll(0),
+            "poll (SNAPX, 3 counters)": lambda: boards.poll(0),
         }[access]
         _bench(benchmark, fn, f"manipulator {access} round trip")
 

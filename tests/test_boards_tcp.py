@@ -4,6 +4,7 @@ both ways, encoder interrupts at poll, the per-tick copy, refusals, bad input, f
 from __future__ import annotations
 
 import socket
+import struct
 import threading
 import time
 
@@ -250,30 +251,58 @@ def test_gripper_register_written_over_tcp_is_seen_by_the_plant_and_back(gripper
 def test_poll_copy_serves_the_reads_of_a_tick_and_sees_its_own_writes(gripper_sim):
     """In a tick (poll .. flush) reads and writes make no round trip and a read sees the tick's
     write; flush sends the changed outputs in one request; outside a tick a write goes out at
-    once, and with max_age=0 a read outside a tick reads the inputs again."""
-    with open_boards(gripper_sim.url, "gripper", GRIPPER_BOARDS, max_age=60) as boards:
+    once, and with max_age=0 a read outside a tick reads the inputs again (prefetch off: every
+    read phase is one round trip, so the exchanges can be counted)."""
+    url = gripper_sim.url + "?prefetch=0"
+    with open_boards(url, "gripper", GRIPPER_BOARDS, max_age=60) as boards:
         board = boards["gripper"]
         link = board.registers.link
         boards.set_tick(0.001)  # a station runs the phases
         boards.poll(0)
-        n = link.requests
+        n, sends = link.requests, link.sends
         assert [board.read(a) for a in REGISTERS] and link.requests == n
         board.write(DAC, 0x81)
         board.write(LED_LO, 0x01)
         assert link.requests == n and board.read(DAC) == 0x81 and link.requests == n
+        assert link.sends == sends
         boards.flush(0)  # sent, its reply read with the next exchange
+        assert link.sends == sends + 1 and link.requests == n
         boards.poll(0)
-        assert link.requests == n + 2
-        board.write(DAC, 0x81)  # unchanged: nothing to send but the next SNAP
+        assert link.requests == n + 2 and link.sends == sends + 2
+        board.write(DAC, 0x81)  # unchanged: nothing to send
         boards.flush(0)
-        assert link.requests == n + 2
-        board.write(DAC, 0x80)  # outside a tick: at once (the SNAP's reply read first)
-        assert link.requests == n + 4
+        assert link.requests == n + 2 and link.sends == sends + 2
+        board.write(DAC, 0x80)  # outside a tick: at once
+        assert link.requests == n + 3
     with open_boards(gripper_sim.url, "gripper", GRIPPER_BOARDS, max_age=0) as boards:
         link = boards["gripper"].registers.link
         n = link.requests
         boards["gripper"].read(P8155_PA)
         assert link.requests == n + 1
+
+
+def test_the_inputs_stream_and_a_tick_sends_at_most_once(gripper_sim):
+    """With prefetch (the default) board-sim pushes the inputs after every world step: a read
+    phase sends nothing and takes the newest push; a write phase sends its writes, the request
+    for the inputs they leave and (the first time) the stream's request in one system call."""
+    with open_boards(gripper_sim.url, "gripper", GRIPPER_BOARDS) as boards:
+        board = boards["gripper"]
+        client = board.registers.client
+        link = client.link
+        assert client.streaming and client.step_us == 1000
+        boards.set_tick(10.0)  # a long tick: no push is too old for a read phase here
+        boards.poll(0)
+        board.write(DAC, 0x70)
+        sends = link.sends
+        boards.flush(0)
+        assert link.sends == sends + 1
+        boards.poll(0)  # the write's reply and the inputs after it come first
+        assert link.latest is not None
+        pushes = link.snapshots
+        # a bound for a hang only: board-sim pushes after its next step
+        assert _until(lambda: (boards.poll(0), link.snapshots)[1] > pushes + 2)
+        assert link.sends == sends + 1  # the reads came without asking
+        assert _info(link)["dac"] == str(0x70)
 
 
 @pytest.mark.wallclock
@@ -383,6 +412,145 @@ def test_the_world_steps_on_board_sims_clock():
             assert _until(lambda: tio.rtc_ticks() != r0, HANG_S)
             assert tio.rtc_ticks() - r0 == 1_500_000
     finally:
+        server.close()
+
+
+def _packed(*values: int) -> str:
+    """The hexadecimal a packed snapshot of ``values`` (TRIPS first) carries."""
+    return struct.pack(f"<{len(values)}I", *values).hex()
+
+
+def _stepped(server: BoardServer, clock: _MovedClock, ns: int) -> None:
+    """Move board-sim's clock by ``ns`` and wait until it has stepped its world there
+    (a bound for a hang only)."""
+    steps = server.steps
+    clock.advance(ns)
+    assert _until(lambda: server.steps > steps)
+
+
+def test_a_stream_pushes_the_inputs_after_every_step_until_its_time_is_up():
+    """STREAM MS answers the world's step and pushes ``S HEX`` (SNAPX's inputs) after every
+    step of board-sim's clock until MS have passed; STREAM 0 stops it; any connection may
+    stream, and a push never comes between a reply's bytes."""
+    clock = _MovedClock()
+    server = _serve(GripperWorld(), clock=clock)
+    raw = _Raw(server)
+    try:
+        snap = _packed(0, 0xFF, 0xFF, 0xFF, 0, 0)  # trips, pa pb pc, up down
+        assert raw.ask(b"SNAPX\n") == f"OK {snap}"
+        assert raw.ask(b"snapx gripper\n") == f"OK {snap}"
+        assert raw.ask(b"STREAM 3\n") == "OK 1000"
+        _stepped(server, clock, 1_000_000)
+        assert raw.line() == f"S {snap}"
+        _stepped(server, clock, 1_000_000)
+        assert raw.line() == f"S {snap}"
+        _stepped(server, clock, 2_000_000)  # the 3 ms are up: no more
+        assert raw.ask(b"R gripper dac\n") == f"OK {DAC_NULL}"
+        assert raw.ask(b"STREAM 100 gripper\n") == "OK 1000"
+        _stepped(server, clock, 1_000_000)
+        assert raw.line() == f"S {snap}"
+        assert raw.ask(b"STREAM 0\n") == "OK 1000"
+        _stepped(server, clock, 1_000_000)
+        assert raw.ask(b"R gripper dac\n") == f"OK {DAC_NULL}"
+        assert server.owner is None  # streaming claims nothing
+    finally:
+        raw.close()
+        server.close()
+
+
+class _OlderBoardSim(BoardServer):
+    """A board-sim from before the packed form: SNAPX and STREAM are unknown requests."""
+
+    def _answer(self, conn, line):
+        if line.split()[:1] in ([b"SNAPX"], [b"STREAM"]):
+            return b"ERR syntax unknown request; known: R W SNAP OWN INFO QUIT\n"
+        return super()._answer(conn, line)
+
+
+def test_an_older_board_sim_is_read_with_snap_one_send_a_tick():
+    """A board-sim that does not know SNAPX and STREAM is read with text SNAP: the write phase
+    sends its writes and the next tick's SNAP in one system call, the read phase sends nothing
+    and reads both replies, and the writes reach the board."""
+    server = _OlderBoardSim(GripperWorld(), "127.0.0.1", 0, watchdog_s=30.0)
+    server.start()
+    try:
+        with open_boards(server.url, "gripper", GRIPPER_BOARDS) as boards:
+            board = boards["gripper"]
+            client = board.registers.client
+            link = client.link
+            assert client.step_us is None and not client.streaming
+            boards.set_tick(10.0)  # a long tick: no prefetched SNAP is too old here
+            boards.poll(0)
+            board.write(DAC, 0x70)
+            sends, n = link.sends, link.requests
+            boards.flush(0)
+            assert link.sends == sends + 1
+            boards.poll(0)
+            assert link.sends == sends + 1 and link.requests == n + 2
+            assert board.read(P8155_PA) == 0xFF and _info(link)["dac"] == str(0x70)
+    finally:
+        server.close()
+
+
+def test_a_request_of_another_thread_gets_its_own_reply_while_the_inputs_stream(gripper_sim):
+    """While the loop's phases stream the inputs and send writes, INFO asked from another
+    thread (a console) always gets INFO's reply, and the phases never take it for theirs."""
+    with open_boards(gripper_sim.url, "gripper", GRIPPER_BOARDS) as boards:
+        board = boards["gripper"]
+        link = board.registers.link
+        boards.set_tick(0.001)
+        infos: list[dict[str, str]] = []
+        failures: list[BaseException] = []
+
+        def console() -> None:
+            try:
+                for _ in range(150):
+                    infos.append(_info(link))
+            except BaseException as exc:  # the test says what it was
+                failures.append(exc)
+
+        t = threading.Thread(target=console)
+        t.start()
+        k = 0
+        while t.is_alive():
+            boards.poll(0)
+            board.write(LED_LO, k & 0xFF)  # a write, its SNAPX behind it, every tick
+            boards.flush(0)
+            k += 1
+        t.join()
+        assert failures == [] and len(infos) == 150
+        assert all("dac" in info and "x" in info for info in infos), infos[:3]
+        boards.poll(0)
+        assert boards.down is None
+
+
+@pytest.mark.parametrize("lose", [True, False])
+def test_the_receiving_thread_ends_with_the_link_and_a_lost_board_sim_is_named(lose):
+    """While the inputs stream a thread of the link's own receives them; when board-sim goes
+    the next read phase raises BoardError naming the URL, and the thread has ended; closing
+    the link ends it too."""
+    server = _serve(GripperWorld())
+    boards = open_boards(server.url, "gripper", GRIPPER_BOARDS)
+    try:
+        link = boards["gripper"].registers.link
+        boards.set_tick(0.001)
+        boards.poll(0)
+        boards.flush(0)  # the stream is asked for: the thread receives from here on
+        receiver = link._receiver
+        assert receiver is not None and receiver.is_alive()
+        if lose:
+            server.close()
+            with pytest.raises(BoardError) as err:
+                # a bound for a hang only: the loss shows at a read phase after it
+                assert not _until(lambda: boards.poll(0) and False)
+            assert err.value.url == server.url and server.url in str(err.value)
+            receiver.join(HANG_S)
+            assert not receiver.is_alive()
+        boards.close()
+        receiver.join(HANG_S)
+        assert not receiver.is_alive() and boards.down is not None
+    finally:
+        boards.close()
         server.close()
 
 

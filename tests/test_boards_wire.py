@@ -11,11 +11,15 @@ from pyrt.boards.kinds import DATACONCENTRATOR, GRIPPER_CAGE, TIO10_KIND
 from pyrt.boards.registers import OUTPUT, BoardKind, Register
 from pyrt.boards.wire import (
     MAX_LINE,
+    MAX_STREAM_MS,
+    PUSH,
     Access,
     WireError,
     greeting_line,
     parse_greeting,
     parse_request,
+    snapshot_line,
+    snapshot_struct,
 )
 
 SERVO = BoardKind("arm-servo", (
@@ -42,6 +46,47 @@ def test_reads_writes_and_snaps_parse_into_accesses():
     assert Access("servo", "drive", 1, -16).line() == "W servo drive 1 -16"
 
 
+def test_the_packed_requests_parse_with_their_boards_and_milliseconds():
+    """SNAPX names boards as SNAP does; STREAM takes its milliseconds (0 stops) and boards."""
+    assert parse_request(b"SNAPX", KINDS) == parse_request(b"snapx", KINDS)
+    assert parse_request(b"SNAPX dc servo", KINDS).boards == ("dc", "servo")
+    req = parse_request(b"stream 100 gripper", KINDS)
+    assert (req.verb, req.ms, req.boards) == ("STREAM", 100, ("gripper",))
+    assert parse_request(b"STREAM 0", KINDS).ms == 0
+    assert parse_request(f"STREAM {MAX_STREAM_MS}".encode(), KINDS).ms == MAX_STREAM_MS
+
+
+def test_the_packed_layout_is_four_bytes_per_input_signed_as_declared():
+    """TRIPS then every input in SNAP's order, four bytes each, little-endian, signed where
+    the register is: the servo's two signed counts, the gripper's five unsigned inputs."""
+    assert snapshot_struct(KINDS, ("servo",)).format == "<Iii"
+    assert snapshot_struct(KINDS, ("gripper",)).format == "<IIIIII"
+    assert snapshot_struct(KINDS).size == 4 * (1 + 2 + 5 + 11 + 272)
+    assert snapshot_line(snapshot_struct(KINDS, ("servo",)), 1, [-1, 2]) == \
+        b"OK 01000000ffffffff02000000\n"
+    assert snapshot_line(snapshot_struct(KINDS, ("servo",)), 2**32 + 3, [0, 0], PUSH) == \
+        b"S 030000000000000000000000\n"
+
+
+def _inputs(kinds: dict[str, BoardKind]) -> st.SearchStrategy[list[int]]:
+    """Every input of ``kinds`` in SNAP's order, each anywhere in its register's range."""
+    regs = [reg for kind in kinds.values() for reg in kind.inputs() for _ in range(reg.count)]
+    return st.tuples(*(st.integers(reg.low, reg.high) for reg in regs)).map(list)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(0, 2**32 - 1), _inputs({"servo": SERVO, "gripper": GRIPPER_CAGE,
+                                            "tio10": TIO10_KIND}))
+def test_a_packed_snapshot_reads_back_every_value_as_snap_gives_it(trips, values):
+    """Packing then unpacking the hexadecimal gives back TRIPS and every input, whatever its
+    width and sign (the SNAPX reply and a push carry exactly SNAP's numbers)."""
+    kinds = {"servo": SERVO, "gripper": GRIPPER_CAGE, "tio10": TIO10_KIND}
+    layout = snapshot_struct(kinds)
+    line = snapshot_line(layout, trips, values)
+    assert line.startswith(b"OK ") and line.endswith(b"\n") and line.isascii()
+    assert list(layout.unpack(bytes.fromhex(line[3:-1].decode()))) == [trips, *values]
+
+
 @pytest.mark.parametrize(("line", "code", "text"), [
     (b"", "syntax", "empty request"),
     (b"PEEK 1", "syntax", "unknown request"),
@@ -59,6 +104,13 @@ def test_reads_writes_and_snaps_parse_into_accesses():
     (b"R dc clr 3", "range", "write-only"),
     (b"W servo drive 1; R servo drive", "syntax", "only writes"),
     (b"SNAP servo servo", "syntax", "names a board twice"),
+    (b"SNAPX dc dc", "syntax", "SNAPX names a board twice"),
+    (b"SNAPX arm", "range", "no board 'arm'"),
+    (b"STREAM", "syntax", "STREAM takes the milliseconds"),
+    (b"STREAM x", "syntax", "is not a number"),
+    (b"STREAM -1", "range", f"0..{MAX_STREAM_MS} ms"),
+    (b"STREAM 10001", "range", f"0..{MAX_STREAM_MS} ms"),
+    (b"STREAM 100 servo arm", "range", "no board 'arm'"),
     (b"QUIT now", "syntax", "takes no arguments"),
     (b"R servo \xe9", "ascii", "ASCII"),
 ])
@@ -70,7 +122,7 @@ def test_malformed_requests_get_the_protocols_error(line, code, text):
 
 
 _TOKENS = st.sampled_from([
-    "R", "W", "SNAP", "INFO", "QUIT", "r", "w", "snap", "servo", "SERVO", "gripper", "tio10",
+    "R", "W", "SNAP", "SNAPX", "STREAM", "INFO", "QUIT", "r", "w", "snap", "stream", "servo", "SERVO", "gripper", "tio10",
     "dc", "drive", "count", "strobe", "dac", "pa", "armed", "cnt", "clr", "0", "1", "-1", "7",
     "255", "256", "0x", "0xFF", "-0x8000", "32768", "-32769", "99999999999999999999999", "1e3",
     ";", "; W", "--", "\t", "\x00", "\x1f", "é", "R;W", "=", "",

@@ -193,6 +193,7 @@ def test_killed_board_sim_faults_the_gripper_within_three_ticks_naming_the_url(g
     link.request_ints = recording(link.request_ints)
     link.collect = recording(link.collect)
     link.send = recording(link.send)
+    link.newest = recording(link.newest)  # the stream's read phase
     try:
         station.start()
         shell.onecmd("I")

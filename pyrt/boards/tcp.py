@@ -20,17 +20,35 @@ owns them, opening fails with BoardError ``busy`` naming it.  Other
 connections may read the same boards (an HMI); only the owner's accesses
 feed board-sim's watchdog.
 
-The process image (:mod:`pyrt.boards.image`, the back-end contract).  The
-read phase is one ``SNAP`` (every declared input); the write phase one
-``W ...; W ...`` line of the outputs the tick changed, sent without
-waiting, followed by the next tick's ``SNAP`` (``prefetch``, the
-default): both replies come back while the loop sleeps, and the next read
-phase only reads them -- one request and one reply each way per tick, and
-no round trip inside the tick.  A ``SNAP`` sent more than 1.5 ticks
-before its read phase (the loop stalled) is not used: that read phase
-asks again.  The reflex's writes wait for their reply.  Every readable
-output is read once on opening (pipelined: one exchange), and again when
-the watchdog has turned the outputs off.
+The process image (:mod:`pyrt.boards.image`, the back-end contract).  On
+connecting the client asks ``STREAM 0``: a board-sim that knows it
+answers with its world's step, and its inputs then stream (``prefetch``,
+the default).  From the first tick's write phase board-sim pushes every
+declared input after each step of its world, in the packed form (one
+``unpack`` of the hexadecimal, no conversion per value); a thread of the
+link's own (:meth:`TcpLink.start_receiving`) takes them off the socket as
+they come, while the loop sleeps, so the read phase makes no system call:
+it takes the newest push (before the stream, as on opening, a read asks
+with ``SNAPX``: one round trip).  The write phase sends one ``W ...; W ...``
+line of the outputs the tick changed with a ``SNAPX`` behind it, in one
+system call and without waiting; the next read phase takes the inputs no
+older than those writes (the ``SNAPX``'s reply, or a later push).  A tick
+that changes nothing sends nothing, except every 50 ms (or a quarter of
+the watchdog time, if shorter) the ``STREAM`` asked again, board-sim's
+keep-alive.  A read phase that finds no push newer than 1.5 ticks (or 1.5
+steps, if longer) waits for the next (board-sim is late: the controller
+does not run ahead of a world that has not stepped); one that finds the
+stream lapsed (the loop had stopped) asks with ``SNAPX`` and waits.
+
+From a board-sim that does not know the packed form, the read phase is
+one ``SNAP`` (every declared input), sent at the end of the tick before
+behind its write line (one system call) and read while the loop slept; a
+``SNAP`` sent more than 1.5 ticks before its read phase (the loop
+stalled) is not used: that read phase asks again.  ``prefetch=0`` asks
+in the read phase (a round trip in the tick).  The reflex's writes wait
+for their reply.  Every readable output is read once on opening
+(pipelined: one exchange), and again when the watchdog has turned the
+outputs off.
 
 Failures.  A connection refused, reset or closed, or no reply within the
 timeout (derived from the tick, or ``timeout`` seconds), raises :class:`~pyrt.errors.BoardError`
@@ -50,14 +68,13 @@ remembered; the link stays up.  A value the board refuses raises
 
 from __future__ import annotations
 
-import contextlib
-import socket
 import struct
-import threading
 import time
-from collections.abc import Mapping
+from binascii import a2b_hex
+from collections.abc import Mapping, Sequence
 from typing import Any
 
+from pyrt.boards._tcplink import DEFAULT_CONNECT_TIMEOUT_S, DEFAULT_TIMEOUT_S, TcpLink
 from pyrt.boards.image import (
     DEFAULT_OVERRUN_LIMIT,
     DEFAULT_OVERRUN_TICKS,
@@ -68,7 +85,7 @@ from pyrt.boards.image import (
 from pyrt.boards.kinds import RemoteDataConcentrator, RemoteGripperBoard, RemoteTIO10
 from pyrt.boards.registers import BoardKind, options_for, split_options
 from pyrt.boards.registry import Boards, BoardURL
-from pyrt.boards.wire import MAX_LINE, WireError, parse_greeting
+from pyrt.boards.wire import snapshot_struct
 from pyrt.errors import BoardError, ConfigError
 
 __all__ = [
@@ -84,297 +101,15 @@ __all__ = [
     "open_tcp",
 ]
 
-DEFAULT_TIMEOUT_S = 0.25
-DEFAULT_CONNECT_TIMEOUT_S = 2.0
 DEFAULT_MAX_AGE_S = 0.05
+#: How long one ``STREAM`` request streams for (ms); the client asks again at half of it
+#: (or at a quarter of the watchdog time, if that is sooner).
+STREAM_MS = 100
 
 #: The typed boards over tcp:// (the built-in kinds' remote adapters).
 TcpGripperBoard = RemoteGripperBoard
 TcpTIO10 = RemoteTIO10
 TcpDataConcentrator = RemoteDataConcentrator
-
-
-class TcpLink:
-    """One connection to board-sim: a request line out, a reply line back.
-
-    Thread-safe (one request at a time).  Reads the greeting on connect:
-    ``station`` (whose world is served), ``boards`` (name -> kind tag) and
-    ``watchdog_s``.  Failures raise BoardError naming ``url`` and leave the
-    link down.
-    """
-
-    def __init__(
-        self,
-        url: str,
-        host: str,
-        port: int,
-        *,
-        timeout: float = DEFAULT_TIMEOUT_S,
-        connect_timeout: float = DEFAULT_CONNECT_TIMEOUT_S,
-    ):
-        self.url = url
-        self.timeout = timeout
-        self._lock = threading.Lock()
-        self._buf = b""
-        self._down: str | None = None
-        self._trips: int | None = None
-        #: Requests sent whose replies are read with the next exchange (pipelined writes).
-        self._outstanding: list[str] = []
-        #: Round trips made (requests answered).
-        self.requests = 0
-        try:
-            sock = socket.create_connection((host, port), timeout=connect_timeout)
-        except OSError as exc:
-            raise BoardError(url, f"cannot connect: {_why(exc)}") from None
-        self._sock = sock
-        try:
-            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            greeting = self._readline().decode("ascii", "replace").split()
-            # A blocking socket with kernel time-outs: one system call per
-            # send or receive (a Python time-out polls before each); a
-            # receive that times out fails with EAGAIN.
-            sock.settimeout(None)
-            sec, usec = divmod(max(1, round(timeout * 1e6)), 1_000_000)
-            tv = struct.pack("ll", sec, usec)
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, tv)
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO, tv)
-        except (OSError, EOFError) as exc:
-            self._fail(f"no greeting: {_why(exc)}", "connect")
-        if greeting[:1] == ["ERR"]:
-            self._fail(" ".join(greeting[1:]) or "refused", "connect")
-        try:
-            hello = parse_greeting(" ".join(greeting))
-        except WireError as exc:
-            self._fail(exc.text, "connect")
-        #: The station whose world board-sim serves, and its boards: name -> kind tag.
-        self.station = hello.station
-        self.boards = hello.boards
-        self.watchdog_s = hello.watchdog_ms / 1000.0
-
-    def check_trips(self, trips: int) -> None:
-        """Raise BoardError once when the board's watchdog count has grown
-        since the last look (the first look takes it as it is)."""
-        last, self._trips = self._trips, trips
-        if last is not None and trips > last:
-            raise BoardError(self.url, f"the board's watchdog turned the outputs off (no "
-                                       f"register access for {self.watchdog_s:g} s)")
-
-    def forget_trips(self) -> None:
-        """Take the board's watchdog count as it is at the next look (the
-        controller's loop starts: trips while nothing polled are not news)."""
-        self._trips = None
-
-    def own(self) -> None:
-        """Claim the outputs for this connection (``OWN``): BoardError ``busy``
-        naming the owner while another controller owns them.  (A board-sim that
-        does not know ``OWN`` has its one controller per connection already.)"""
-        try:
-            self._exchange("OWN")
-        except BoardError as exc:
-            if "refused: syntax " not in str(exc):
-                raise
-
-    def info(self) -> dict[str, str]:
-        """The world's state (``INFO``, not a register access): KEY -> VALUE."""
-        return dict(kv.partition("=")[::2] for kv in self.request("INFO"))
-
-    @property
-    def down(self) -> str | None:
-        """Why the link is down, or None while it is up."""
-        return self._down
-
-    def request(self, line: str) -> list[str]:
-        """Send one request; the reply's values (strings).  BoardError if the
-        link fails or the board answers with an error other than ``range``
-        (ValueError: the board refused the value)."""
-        return self._exchange(line).decode("ascii").split()
-
-    def request_ints(self, line: str) -> list[int]:
-        """:meth:`request` for a reply of numbers: the values as integers."""
-        payload = self._exchange(line)
-        try:
-            return list(map(int, payload.split()))
-        except ValueError:
-            with self._lock:
-                self._fail(f"reply {payload[:60]!r} is not numbers", line)
-            raise  # pragma: no cover - _fail raises
-
-    def pipeline(self, lines: list[str]) -> list[list[int]]:
-        """Send ``lines`` at once, then read their replies: the numbers of each
-        (BoardError if any is an error: used for reads that cannot be refused)."""
-        if not lines:
-            return []
-        data = "".join(f"{line}\n" for line in lines).encode("ascii")
-        with self._lock:
-            if self._down is not None:
-                raise BoardError(self.url, f"{lines[0]}: the link is down ({self._down})")
-            try:
-                self._sock.sendall(data)
-                self._read_outstanding()
-                replies = [self._readline() for _ in lines]
-            except (TimeoutError, BlockingIOError):
-                self._fail(f"no reply within {self.timeout:g} s", lines[0])
-            except (OSError, EOFError) as exc:
-                self._fail(_why(exc), lines[0])
-            self.requests += len(lines)
-        out: list[list[int]] = []
-        for line, reply in zip(lines, replies, strict=True):
-            try:
-                if reply[:2] != b"OK":
-                    raise ValueError
-                out.append(list(map(int, reply[2:].split())))
-            except ValueError:
-                with self._lock:
-                    self._fail(f"unexpected reply {reply[:60]!r}", line)
-        return out
-
-    def send(self, line: str) -> None:
-        """Send one request without waiting for its reply: the next exchange
-        reads it first (a refusal then raises BoardError there)."""
-        with self._lock:
-            if self._down is not None:
-                raise BoardError(self.url, f"{line}: the link is down ({self._down})")
-            try:
-                self._sock.sendall(line.encode("ascii") + b"\n")
-            except (TimeoutError, BlockingIOError):
-                self._fail(f"cannot send within {self.timeout:g} s", line)
-            except OSError as exc:
-                self._fail(_why(exc), line)
-            self._outstanding.append(line)
-
-    def set_timeout(self, seconds: float) -> None:
-        """Use ``seconds`` as the receive and send timeout."""
-        self.timeout = seconds
-        if self._down is not None:
-            return
-        sec, usec = divmod(max(1, round(seconds * 1e6)), 1_000_000)
-        tv = struct.pack("ll", sec, usec)
-        with contextlib.suppress(OSError):
-            self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, tv)
-            self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO, tv)
-
-    def _read_outstanding(self) -> str | None:
-        """Read the replies of the requests sent without waiting (lock held);
-        the first refusal's text, or None."""
-        refused = None
-        while self._outstanding:
-            line = self._outstanding.pop(0)
-            reply = self._readline()
-            self.requests += 1
-            if reply[:2] != b"OK" and refused is None:
-                refused = f"{line[:60]}: refused: {reply.decode('ascii', 'replace')[4:]}"
-        return refused
-
-    def collect(self) -> bytes | None:
-        """The payload of the last request sent without waiting (the replies of
-        those before it are read first); None if none is outstanding.
-        BoardError as :meth:`request`, also for a refusal of an earlier one."""
-        with self._lock:
-            if self._down is not None:
-                raise BoardError(self.url, f"the link is down ({self._down})")
-            if not self._outstanding:
-                return None
-            line = self._outstanding.pop()
-            refused, reply = self._reply(line)
-        if refused is not None:
-            raise BoardError(self.url, refused)
-        if reply[:3] == b"OK " or reply == b"OK":
-            return reply[3:]
-        with self._lock:
-            self._fail(f"unexpected reply {reply[:60]!r}", line)
-        raise AssertionError("unreachable")  # pragma: no cover
-
-    def _exchange(self, line: str) -> bytes:
-        """One round trip; the payload of the ``OK`` reply."""
-        data = line.encode("ascii") + b"\n"
-        with self._lock:
-            if self._down is not None:
-                raise BoardError(self.url, f"{line}: the link is down ({self._down})")
-            refused, reply = self._reply(line, data)
-        if refused is not None:
-            raise BoardError(self.url, refused)
-        if reply[:3] == b"OK " or reply == b"OK":
-            return reply[3:]
-        text = reply.decode("ascii", "replace")
-        if text.startswith("ERR range "):
-            raise ValueError(text[len("ERR range "):])
-        if text.startswith("ERR "):
-            raise BoardError(self.url, f"{line}: refused: {text[4:]}")
-        with self._lock:
-            self._fail(f"unexpected reply {text[:60]!r}", line)
-        raise AssertionError("unreachable")  # pragma: no cover
-
-    def _reply(self, line: str, data: bytes | None = None) -> tuple[str | None, bytes]:
-        """(Lock held.) Send ``data`` if given, read the replies still owed, then
-        ``line``'s: (the first refusal among those owed or None, the reply).  A
-        lost link fails it (BoardError naming the URL)."""
-        refused: str | None = None
-        reply = b""
-        try:
-            if data is not None:
-                self._sock.sendall(data)
-            refused = self._read_outstanding()
-            reply = self._readline()
-        except (TimeoutError, BlockingIOError):
-            self._fail(f"no reply within {self.timeout:g} s", line)
-        except (OSError, EOFError) as exc:
-            self._fail(_why(exc), line)
-        self.requests += 1
-        return refused, reply
-
-    def _readline(self) -> bytes:
-        buf = self._buf
-        while True:
-            i = buf.find(b"\n")
-            if i >= 0:
-                self._buf = buf[i + 1:]
-                return buf[:i]
-            if len(buf) > MAX_LINE * 64:
-                raise EOFError("reply line too long")
-            chunk = self._sock.recv(65536)
-            if not chunk:
-                raise EOFError("board-sim closed the connection")
-            buf += chunk
-
-    def _fail(self, reason: str, what: str) -> None:
-        self._down = reason
-        with contextlib.suppress(OSError):
-            self._sock.close()
-        raise BoardError(self.url, f"{what}: {reason}") from None
-
-    def close(self) -> None:
-        """Say goodbye (best effort) and close; later accesses raise BoardError."""
-        with self._lock:
-            if self._down is not None:
-                return
-            self._down = "closed"
-            try:
-                self._sock.settimeout(0.05)
-                self._sock.sendall(b"QUIT\n")
-                # Read what is still owed (a prefetched SNAP's reply) up to board-sim's
-                # close: a socket closed with unread data resets the link instead of
-                # ending it, and board-sim would see a lost controller, not a QUIT.
-                self._sock.shutdown(socket.SHUT_WR)
-                deadline = time.monotonic() + 0.2
-                while time.monotonic() < deadline and self._sock.recv(65536):
-                    pass
-            except OSError:
-                pass
-            self._sock.close()
-
-
-def _why(exc: BaseException) -> str:
-    if isinstance(exc, EOFError):
-        return str(exc) or "board-sim closed the connection"
-    if isinstance(exc, ConnectionResetError):
-        return "connection reset by board-sim"
-    if isinstance(exc, BrokenPipeError):
-        return "connection closed by board-sim (broken pipe)"
-    if isinstance(exc, ConnectionRefusedError):
-        return "connection refused (is board-sim running there?)"
-    if isinstance(exc, TimeoutError):
-        return "timed out"
-    return getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
 
 
 # -- the registers of one connection ---------------------------------------------------------
@@ -385,10 +120,11 @@ class TcpRegisters(ImageBackend):
     (:class:`~pyrt.boards.image.ImageBackend`) over the wire protocol.
 
     ``kinds``: the station's boards (name -> kind), each checked against the
-    greeting.  The read phase is one ``SNAP``; the write phase one ``W ...;
-    W ...`` line sent without waiting (its reply is read with the next
-    ``SNAP``: one request and one reply each way per tick); the reflex's
-    writes wait for their reply.
+    greeting.  The read phase takes the newest of board-sim's pushes (or,
+    from an older board-sim, one ``SNAP``); the write phase sends one ``W
+    ...; W ...`` line without waiting, with the request for the inputs it
+    leaves behind it (see the module text); the reflex's writes wait for
+    their reply.
     """
 
     off_on_loss = True  # board-sim turns the outputs off when the link drops
@@ -400,14 +136,27 @@ class TcpRegisters(ImageBackend):
         super().__init__(link.url, kinds, max_age=max_age, timeout=timeout,
                          overrun_ticks=overrun_ticks, overrun_limit=overrun_limit)
         self.link = link
-        #: Send the next tick's SNAP at the end of this one (see :meth:`end_of_tick`).
+        #: The inputs come before the read phase (see :meth:`end_of_tick`).
         self.prefetch = prefetch
         self._prefetch_sent = 0
         self._stale_ns = 0
         self._check_greeting()
         # every board served, in its order: a plain SNAP; else name the boards declared
-        self._snap_request = ("SNAP" if list(link.boards) == list(self.kinds)
-                              else "SNAP " + " ".join(self.kinds))
+        names = "" if list(link.boards) == list(self.kinds) else " " + " ".join(self.kinds)
+        self._snap_request = "SNAP" + names
+        #: board-sim's world step in µs if it speaks the packed form (``SNAPX``,
+        #: ``STREAM``), else None (an older board-sim: text ``SNAP``).
+        self.step_us = link.stream_step_us()
+        self._snapx_request = "SNAPX" + names
+        self._layout = snapshot_struct(self.kinds)
+        self._unpacked_from: bytes | None = None
+        self._unpacked: tuple[int, ...] = ()
+        #: Whether the inputs stream (prefetch, from a board-sim that streams).
+        self.streaming = prefetch and self.step_us is not None
+        self._stream_request = f"STREAM {STREAM_MS}{names}"
+        self._rearm_ns = 0
+        self._stream_live_ns = 0
+        self._rearm_every_ns = int(min(STREAM_MS / 2e3, link.watchdog_s / 4) * 1e9)
 
     def _check_greeting(self) -> None:
         served = self.link.boards
@@ -429,42 +178,96 @@ class TcpRegisters(ImageBackend):
     def set_tick(self, period_s: float) -> None:
         super().set_tick(period_s)
         self._stale_ns = int(1.5 * period_s * 1e9)
+        if self.streaming:  # a push comes after every step of the world
+            assert self.step_us is not None
+            self._stale_ns = max(self._stale_ns, int(1.5 * self.step_us * 1e3))
 
     def end_of_tick(self) -> None:
-        """Pipelining: send the next tick's ``SNAP`` now, behind the write line;
-        the next read phase reads its reply, which came while the loop slept.
-        A copy sent more than 1.5 ticks before (the loop stalled) is not used:
-        that read phase asks again."""
-        if self.prefetch and self.phased and not self._prefetch_sent \
-                and self.link.down is None:
+        """Pipelining: the next tick's inputs come while the loop sleeps.  From a
+        board-sim that streams, the pushes after every world step: asked for
+        again (``STREAM``) when half of the time asked for has passed (that
+        request feeds board-sim's watchdog); from an older board-sim, the next
+        tick's ``SNAP`` sent now.  A copy more than 1.5 ticks (or steps) old
+        (the loop stalled, or board-sim did) is not used: that read phase asks
+        again."""
+        if not (self.prefetch and self.phased) or self.link.down is not None:
+            return
+        if self.streaming:
+            if time.monotonic_ns() >= self._rearm_ns:
+                self.link.send(*self._rearm())
+        elif not self._prefetch_sent:
             self.link.send(self._snap_request)
             self._prefetch_sent = time.monotonic_ns()
 
     def exchange_inputs(self) -> list[int]:
+        link = self.link
+        if self.streaming and self.phased and self._rearm_ns:  # the loop runs: it streams
+            # what came while the loop slept, no older than the last writes (a SNAPX
+            # went with them) nor 1.5 ticks; else, if the stream has lapsed, ask;
+            # if not, board-sim is late: its next push
+            now = time.monotonic_ns()
+            ask = self._snapx_request if now >= self._stream_live_ns else None
+            return self._unpack(link.newest(now, self._stale_ns, ask))
+        if self.step_us is not None:
+            return self._unpack(link._exchange(self._snapx_request, "SNAP"))
         sent, self._prefetch_sent = self._prefetch_sent, 0
-        payload = self.link.collect() if sent else None
+        payload = link.collect() if sent else None
         if payload is not None and time.monotonic_ns() - sent <= self._stale_ns:
             try:
                 nums = list(map(int, payload.split()))
             except ValueError:
-                self.link._fail(f"reply {payload[:60]!r} is not numbers", "SNAP")
+                link._fail(f"reply {payload[:60]!r} is not numbers", "SNAP")
         else:
-            nums = self.link.request_ints(self._snap_request)
+            nums = link.request_ints(self._snap_request)
+        if len(nums) != self.input_count + 1:
+            link._fail(f"SNAP answered {len(nums)} values, not {self.input_count + 1}", "SNAP")
         return self._inputs_of(nums)
 
-    def _inputs_of(self, nums: list[int]) -> list[int]:
-        if len(nums) != self.input_count + 1:
-            self.link._fail(f"SNAP answered {len(nums)} values, not {self.input_count + 1}",
-                            "SNAP")
-        try:
-            self.link.check_trips(nums[0])
-        except BoardError:
-            self.forget_outputs(self.read_outputs())  # the watchdog turned them off
-            raise
-        return nums[1:]
+    def _rearm(self) -> tuple[str]:
+        """The stream's request, asked for again from now on (the first time, the
+        link starts receiving in its own thread)."""
+        if not self._rearm_ns:
+            self.link.start_receiving()
+        now = time.monotonic_ns()
+        self._rearm_ns = now + self._rearm_every_ns
+        # board-sim streams for STREAM_MS from when the request comes: surely till then
+        self._stream_live_ns = now + STREAM_MS * 800_000
+        return (self._stream_request,)
+
+    def _unpack(self, payload: bytes | None) -> list[int]:
+        """The inputs of a packed snapshot (its hexadecimal), in one step."""
+        if payload is not self._unpacked_from:  # else the same push as the last read phase
+            try:
+                self._unpacked = self._layout.unpack(a2b_hex(payload))  # type: ignore[arg-type]
+            except (ValueError, TypeError, struct.error):
+                shown = (payload or b"")[:60]
+                self.link._fail(f"snapshot {shown!r} is not {self._layout.size} packed bytes",
+                                "SNAP")
+            self._unpacked_from = payload
+        return self._inputs_of(self._unpacked)
+
+    def _inputs_of(self, nums: Sequence[int]) -> list[int]:
+        if nums[0] != self.link._trips:
+            try:
+                self.link.check_trips(nums[0])
+            except BoardError:
+                self.forget_outputs(self.read_outputs())  # the watchdog turned them off
+                raise
+        return list(nums[1:])
 
     def exchange_outputs(self, writes: list[Write]) -> None:
-        self.link.send(_write_line(writes))
+        link = self.link
+        line = _write_line(writes)
+        if not (self.prefetch and self.phased) or link.down is not None:
+            link.send(line)
+        elif self.streaming:  # the inputs as the writes left them, in the same system call
+            if time.monotonic_ns() >= self._rearm_ns:
+                link.send(line, self._snapx_request, *self._rearm())
+            else:
+                link.send(line, self._snapx_request)
+        else:
+            link.send(line, self._snap_request)
+            self._prefetch_sent = time.monotonic_ns()
 
     def exchange_outputs_now(self, writes: list[Write]) -> None:
         try:
@@ -493,7 +296,7 @@ class TcpRegisters(ImageBackend):
 
     @property
     def down(self) -> str | None:
-        return self.link.down
+        return self.link._down
 
     def info(self) -> dict[str, str]:
         """board-sim's ``INFO``: the world's state (not a register access)."""
@@ -570,10 +373,11 @@ def open_tcp(
     the one derived from the tick), ``connect_timeout``, ``max_age`` of the
     input copy outside the ticks (0: every read there reads the inputs),
     ``overrun_ticks`` (N) and ``overrun_limit`` (M) of the back-end contract
-    (:mod:`pyrt.boards.image`), ``prefetch`` (1, the default: the next tick's
-    ``SNAP`` is sent at the end of the tick; 0: at the start of the read
-    phase, a whole round trip in the tick); and those of the declared kinds
-    (the gripper cage's ``cpu``).
+    (:mod:`pyrt.boards.image`), ``prefetch`` (1, the default: the inputs come
+    while the loop sleeps, streamed by board-sim, or from an older one the
+    next tick's ``SNAP`` sent at the end of the tick; 0: asked for at the
+    start of the read phase, a whole round trip in the tick); and those of
+    the declared kinds (the gripper cage's ``cpu``).
     """
     mine, rest = split_options(kinds, options)
     if rest:

@@ -64,6 +64,8 @@ Requests::
     W BOARD REG [INDEX] VALUE      OK              write an output
     W ...; W ...; ...              OK              several writes, one reply
     SNAP [BOARD ...]               OK TRIPS V ...  every input, in one round trip
+    SNAPX [BOARD ...]              OK HEX          the same, in the packed form
+    STREAM MS [BOARD ...]          OK STEP_US      push SNAPX's inputs after every world step
     OWN                            OK              claim the outputs (or ERR busy); a keep-alive
     INFO                           OK KEY=VALUE ...  the world's state (not a register access)
     QUIT                           OK bye          then the server closes the connection
@@ -79,9 +81,31 @@ declared order and an array index by index, after ``TRIPS``: the count of
 the watchdog's trips since board-sim started (a controller that sees it
 grow learns that its outputs were turned off).
 
+The packed form (``SNAPX``, ``STREAM``: a controller's tick reads every
+input in one step, without a conversion per value).  ``HEX`` is the
+hexadecimal text of the values packed little-endian, four bytes each:
+``TRIPS`` unsigned (modulo 2**32), then every input as ``SNAP`` orders
+them, as a signed 32-bit number if its register is signed, else unsigned
+(:func:`snapshot_struct`; both sides derive the layout from the kinds,
+whose fingerprints the greeting has matched).  ``STREAM MS`` asks for the
+inputs after every step of the world (every ``STEP_US`` µs) for the next
+``MS`` milliseconds (1..:data:`MAX_STREAM_MS`; 0 stops it): each comes
+as a line of its own, ``S HEX``, which is not a reply (a client that
+streams takes every line that begins ``S `` as one; a push is never put
+between a reply's bytes).  Asking again before the time is up extends
+it; the last request's boards are the ones pushed.  A push waits while
+the client leaves earlier output unread (it is skipped, not queued), and
+the stream ends with the time asked for, so a stalled client finds at
+most ``MS`` of them waiting.  A controller re-asks well within the
+watchdog time: that request is its keep-alive.  These two requests came
+after the greeting's version 2 was fixed: a board-sim that does not know
+them answers ``ERR syntax unknown request``, and a controller then uses
+``SNAP`` (the client asks ``STREAM 0`` on connecting to find out).
+
 Watchdog, fed only by the owner.  Every request except ``INFO`` and
 ``QUIT`` is a register access; the owner's feed the watchdog (its ``SNAP``
-every tick is its keep-alive), a reader's never do.  When the owner has
+every tick, or its ``STREAM`` asked again, is its keep-alive; a push is
+not a request and feeds nothing), a reader's never do.  When the owner has
 made none for the watchdog time, the boards turn their outputs off, as a
 real motion board does: every output register that declares an ``off``
 value is written with it (the gripper's DAC to null 80; every TIO10 motor
@@ -93,7 +117,8 @@ later write of the owner drives the outputs again.
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping
+import struct
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 from pyrt.boards.registers import BoardKind
@@ -102,7 +127,9 @@ from pyrt.errors import PyrtError
 __all__ = [
     "GREETING",
     "MAX_LINE",
+    "MAX_STREAM_MS",
     "NOT_ACCESSES",
+    "PUSH",
     "VERBS",
     "VERSION",
     "Access",
@@ -114,6 +141,8 @@ __all__ = [
     "ok_line",
     "parse_greeting",
     "parse_request",
+    "snapshot_line",
+    "snapshot_struct",
 ]
 
 #: The first token after ``OK`` in the greeting, and the protocol version.
@@ -122,7 +151,11 @@ VERSION = 2
 #: Longest line, line end included.
 MAX_LINE = 4096
 #: The request verbs.
-VERBS = ("R", "W", "SNAP", "OWN", "INFO", "QUIT")
+VERBS = ("R", "W", "SNAP", "SNAPX", "STREAM", "OWN", "INFO", "QUIT")
+#: The longest stream one ``STREAM`` asks for, milliseconds.
+MAX_STREAM_MS = 10_000
+#: How a pushed line (not a reply) begins: ``S HEX``.
+PUSH = b"S "
 #: Requests that are not register accesses (they do not feed the watchdog).
 NOT_ACCESSES = frozenset(("INFO", "QUIT"))
 
@@ -155,11 +188,13 @@ class Access:
 @dataclass(frozen=True)
 class Request:
     """A parsed request line: the verb, its accesses (``R``: one, ``W``:
-    one or more), or the boards a ``SNAP`` names."""
+    one or more), or the boards a ``SNAP``, ``SNAPX`` or ``STREAM`` names
+    (and a ``STREAM``'s milliseconds, ``ms``)."""
 
     verb: str
     accesses: tuple[Access, ...] = ()
     boards: tuple[str, ...] = ()
+    ms: int = 0
 
 
 @dataclass(frozen=True)
@@ -241,16 +276,47 @@ def parse_request(line: bytes, kinds: Mapping[str, BoardKind]) -> Request:
     args = tokens[1:]
     if verb in ("R", "W"):
         return Request(verb, (_access(kinds, verb, args),))
-    if verb == "SNAP":
-        names = tuple(_kind(kinds, a)[0] for a in args)
-        if len(set(names)) != len(names):
-            raise WireError("syntax", "SNAP names a board twice")
-        return Request(verb, boards=names)
+    if verb in ("SNAP", "SNAPX"):
+        return Request(verb, boards=_boards(kinds, verb, args))
+    if verb == "STREAM":
+        if not args:
+            raise WireError("syntax", "STREAM takes the milliseconds to stream for "
+                                      "(STREAM MS [BOARD ...])")
+        ms = _number(args[0])
+        if not 0 <= ms <= MAX_STREAM_MS:
+            raise WireError("range", f"STREAM for 0..{MAX_STREAM_MS} ms, got {ms}")
+        return Request(verb, boards=_boards(kinds, verb, args[1:]), ms=ms)
     if verb in NOT_ACCESSES or verb == "OWN":
         if args:
             raise WireError("syntax", f"{verb} takes no arguments, got {len(args)}")
         return Request(verb)
     raise WireError("syntax", f"unknown request {tokens[0][:20]!r}; known: {' '.join(VERBS)}")
+
+
+def _boards(kinds: Mapping[str, BoardKind], verb: str, args: list[str]) -> tuple[str, ...]:
+    names = tuple(_kind(kinds, a)[0] for a in args)
+    if len(set(names)) != len(names):
+        raise WireError("syntax", f"{verb} names a board twice")
+    return names
+
+
+def snapshot_struct(kinds: Mapping[str, BoardKind], boards: Sequence[str] = ()) -> struct.Struct:
+    """The packed form's layout (``SNAPX``, ``STREAM``) for ``boards`` of
+    ``kinds`` (every one, in order, if none is named): ``TRIPS`` then
+    every input, four bytes each, little-endian."""
+    codes = ["<I"]
+    for name in boards or kinds:
+        for reg in kinds[name].inputs():
+            codes.append(("i" if reg.signed else "I") * reg.count)
+    return struct.Struct("".join(codes))
+
+
+def snapshot_line(layout: struct.Struct, trips: int, values: Sequence[int],
+                  head: bytes = b"OK ") -> bytes:
+    """A packed snapshot line: ``head`` (``OK `` for a reply, :data:`PUSH`
+    for a stream's), then the hexadecimal of ``layout`` packing ``trips``
+    (modulo 2**32) and ``values``."""
+    return head + layout.pack(trips & 0xFFFFFFFF, *values).hex().encode("ascii") + b"\n"
 
 
 def greeting_line(station: str, watchdog_ms: int, kinds: Mapping[str, BoardKind]) -> bytes:

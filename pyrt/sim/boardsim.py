@@ -46,19 +46,24 @@ from __future__ import annotations
 import contextlib
 import selectors
 import socket
+import struct
 import threading
 import time
 from collections.abc import Callable
+from typing import Any
 
 from pyrt.boards.wire import (
     MAX_LINE,
     NOT_ACCESSES,
+    PUSH,
     Access,
     WireError,
     error_line,
     greeting_line,
     ok_line,
     parse_request,
+    snapshot_line,
+    snapshot_struct,
 )
 from pyrt.errors import ConfigError
 from pyrt.sim.world import World
@@ -83,13 +88,23 @@ DEFAULT_MAX_CLIENTS = 8
 MAX_PENDING_OUTPUT = 1 << 20
 #: How often idle connections are looked for.
 _SWEEP_NS = 20_000_000
+#: select() watches descriptors below this (FD_SETSIZE).
+_SELECT_FDS = 1024
+
+
+def _moved(old: selectors.BaseSelector, new: selectors.BaseSelector) -> selectors.BaseSelector:
+    """``new`` watching what ``old`` did (``old`` closed)."""
+    for key in list(old.get_map().values()):
+        new.register(key.fileobj, key.events, key.data)
+    old.close()
+    return new
 
 
 class Connection:
     """One client's connection: its socket, what came and what goes out."""
 
     __slots__ = ("addr", "discarding", "gone", "inbuf", "last_ns", "out", "quitting", "sock",
-                 "told", "writing")
+                 "stream", "stream_until", "told", "writing")
 
     def __init__(self, sock: socket.socket, addr: str, now: int):
         self.sock = sock
@@ -104,6 +119,10 @@ class Connection:
         self.gone = False
         #: Whether a refusal (busy) was said about it already (said once per connection).
         self.told = False
+        #: Its stream (wire ``STREAM``): the boards pushed after every world step, until
+        #: ``stream_until`` (the server's clock; 0: none).
+        self.stream: tuple[str, ...] = ()
+        self.stream_until = 0
 
 
 class LinkServer:
@@ -189,6 +208,10 @@ class LinkServer:
         """Answer the complete requests in ``conn.inbuf`` (removing them), each
         reply appended to ``conn.out``; call :meth:`came` for each."""
         raise NotImplementedError
+
+    def stepped(self, now: int) -> None:
+        """The world has just stepped (at ``now``): nothing by default (board-sim's
+        wire pushes its streams here)."""
 
     # -- state -------------------------------------------------------------------------------
 
@@ -288,7 +311,11 @@ class LinkServer:
 
     def serve_forever(self) -> None:
         """Step the world, serve requests and keep the watchdog until :meth:`stop`."""
-        sel = selectors.DefaultSelector()
+        # select() waits to the µs, so the world steps on time (epoll and poll wait
+        # whole milliseconds: a step every 1 ms would come up to 1 ms late); it
+        # watches descriptors below FD_SETSIZE only, so epoll serves beyond that
+        fine = max(self._listener.fileno(), self._wake_r.fileno()) < _SELECT_FDS
+        sel = selectors.SelectSelector() if fine else selectors.DefaultSelector()
         self._sel = sel
         sel.register(self._listener, selectors.EVENT_READ, "listen")
         sel.register(self._wake_r, selectors.EVENT_READ, "wake")
@@ -300,6 +327,7 @@ class LinkServer:
             while not self._stop.is_set():
                 now = clock()
                 timeout = (next_step - now) / 1e9
+                sel = self._sel
                 for key, mask in sel.select(timeout if timeout > 0 else 0):
                     what = key.data
                     if what == "listen":
@@ -316,6 +344,7 @@ class LinkServer:
                 if now >= next_step:
                     world.step(now - self.t0)
                     self.steps += 1
+                    self.stepped(now)
                     next_step += step
                     if next_step <= now:  # late: skip the missed steps, never burst
                         next_step = now + step
@@ -328,7 +357,7 @@ class LinkServer:
             for conn in list(self._conns):
                 self._drop(conn, "closed: server stopping")
             world.outputs_off()
-            sel.close()
+            self._sel.close()
             self._sel = None
 
     # -- connections -------------------------------------------------------------------
@@ -362,6 +391,8 @@ class LinkServer:
         conn = Connection(sock, addr, self.clock())
         self._conns.append(conn)
         assert self._sel is not None
+        if sock.fileno() >= _SELECT_FDS and isinstance(self._sel, selectors.SelectSelector):
+            self._sel = _moved(self._sel, selectors.DefaultSelector())
         self._sel.register(sock, selectors.EVENT_READ, conn)
         self._say(f"client {addr} connected")
         conn.out += self.greeting()
@@ -442,6 +473,12 @@ class BoardServer(LinkServer):
     run it in a thread of its own.
     """
 
+    def __init__(self, world: World, host: str = "127.0.0.1", port: int = 0,
+                 **options: Any):
+        super().__init__(world, host, port, **options)
+        #: The packed form's layout of each set of boards asked for (wire ``SNAPX``).
+        self._layouts: dict[tuple[str, ...], struct.Struct] = {}
+
     @property
     def url(self) -> str:
         """The back-end URL a controller opens: ``tcp://HOST:PORT``."""
@@ -450,6 +487,42 @@ class BoardServer(LinkServer):
 
     def greeting(self) -> bytes:
         return greeting_line(self.world.name, self.watchdog_ns // 1_000_000, self.kinds)
+
+    def _layout(self, boards: tuple[str, ...]) -> struct.Struct:
+        layout = self._layouts.get(boards)
+        if layout is None:
+            layout = self._layouts[boards] = snapshot_struct(self.kinds, boards)
+        return layout
+
+    def _packed(self, boards: tuple[str, ...], head: bytes) -> bytes:
+        views = self.views
+        values: list[int] = []
+        for name in boards or views:
+            values += views[name].snapshot()
+        return snapshot_line(self._layout(boards), self.world.trips, values, head)
+
+    def stepped(self, now: int) -> None:
+        pushed: dict[tuple[str, ...], bytes] = {}
+        for conn in self._conns:
+            until = conn.stream_until
+            if not until or conn.quitting:
+                continue
+            if now >= until:
+                conn.stream_until = 0
+                continue
+            if conn.out:  # it has not taken what went before: skip, never queue
+                continue
+            line = pushed.get(conn.stream)
+            if line is None:
+                try:
+                    line = pushed[conn.stream] = self._packed(conn.stream, PUSH)
+                except Exception as exc:  # a bug in the world: say it, stop the stream
+                    conn.stream_until = 0
+                    self._say(f"internal error pushing to {conn.addr}: "
+                              f"{type(exc).__name__}: {exc}")
+                    continue
+            conn.out += line
+            self._flush(conn)
 
     def consume(self, conn: Connection) -> None:
         buf = conn.inbuf
@@ -490,6 +563,10 @@ class BoardServer(LinkServer):
                 self.feed(conn)
                 if verb == "OWN":
                     return b"OK\n"
+                if verb == "STREAM":
+                    conn.stream = req.boards
+                    conn.stream_until = self.clock() + req.ms * 1_000_000 if req.ms else 0
+                    return ok_line(self.step_ns // 1000)
                 return self._access(req.verb, req.accesses, req.boards)
             if verb == "INFO":
                 return ok_line(*(f"{k}={v}" for k, v in world.info().items()))
@@ -505,6 +582,8 @@ class BoardServer(LinkServer):
 
     def _access(self, verb: str, accesses: tuple[Access, ...], boards: tuple[str, ...]) -> bytes:
         views = self.views
+        if verb == "SNAPX":
+            return self._packed(boards, b"OK ")
         if verb == "SNAP":
             values: list[int] = [self.world.trips]
             for name in boards or views:
