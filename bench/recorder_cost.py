@@ -150,7 +150,8 @@ def handler_alone(robot: str) -> dict:
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
         t = Path(tmp)
-        rig = bj.build(robot, "sim:?image=1", bj.TimedSimClock(), t, t / "run.pj")
+        rig = bj.build(robot, "sim:" if _one_tick_shape() else "sim:?image=1", bj.TimedSimClock(), t,
+                       t / "run.pj")
         rig.start()
         bj.drive(rig, 0.5)
         rec, loop = rig.recorder, rig.loop

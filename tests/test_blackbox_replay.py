@@ -114,7 +114,7 @@ def test_a_station_without_a_snapshot_is_refused_by_name(tmp_path, capsys):
 
 
 def _gripper_run(tmp_path: Path, every: int):
-    st = build_gripper(Loop(SimClock()), boards="sim:?image=1")
+    st = build_gripper(Loop(SimClock()), boards="sim:")
     pj = tmp_path / "run.pj"
     rec = Recorder(st, pj, metadata={"factory": "gripper"})
     shell = RobotShell(st, io.StringIO())
@@ -127,7 +127,7 @@ def _gripper_run(tmp_path: Path, every: int):
 
 def _manipulator_run(tmp_path: Path, every: int):
     directory = copy_station("prototype", tmp_path / "prototype")
-    st = ManipulatorStation(directory, tick_ns=TICK_NS, boards="sim:?image=1")
+    st = ManipulatorStation(directory, tick_ns=TICK_NS, boards="sim:")
     pj = tmp_path / "run.pj"
     rec = Recorder(st, pj, metadata={"factory": "manipulator",
                                      "args": {"db": str(directory), "tick_us": TICK_NS // 1000}})
@@ -280,7 +280,7 @@ def test_a_station_without_the_hook_says_so_when_snapshot():
 
 def test_a_foreground_job_makes_the_snapshot_say_which():
     """While the gripper's init job runs (a generator), the snapshot is refused naming it."""
-    st = build_gripper(Loop(SimClock()), boards="sim:?image=1")
+    st = build_gripper(Loop(SimClock()), boards="sim:")
     try:
         st.runner.start()
         st.runner.call(st.controller.start_init)
@@ -374,7 +374,7 @@ def test_snapshots_are_spaced_by_what_they_cost_the_loop(monkeypatch, cost_ns, e
 
     clock = iter(range(0, 10**15, cost_ns))
     monkeypatch.setattr(bb.time, "thread_time_ns", lambda: next(clock))
-    st = build_gripper(Loop(SimClock()), boards="sim:?image=1")
+    st = build_gripper(Loop(SimClock()), boards="sim:")
     rec = bb.FaultRecorder(st, None, black_box=BlackBox(3.0), seconds=2.5)
     try:
         st.runner.start()
