@@ -293,18 +293,76 @@ def test_adaptive_spin_window_follows_the_measured_wake_up_error(monkeypatch):
 
     fake = _FakeTime(error_ns=5_000)
     monkeypatch.setattr(clock_mod, "time", fake)
-    clock = WallClock()
+    clock = WallClock(spin="always")
     for k in range(1, 1001):
         clock.wait_until(k * MS)
-    assert clock.spin_window_ns <= 5_000 + WallClock.SPIN_MARGIN_NS + 2_000
+    assert 5_000 <= clock.spin_window_ns <= 5_000 + WallClock.SPIN_MARGIN_NS + 2_000
     fake.error_ns = 5 * MS  # a preemption: late past the whole window
     clock.wait_until(1001 * MS)
     assert clock.spin_window_ns <= 5_000 + WallClock.SPIN_MARGIN_NS + 2_000
-    fixed = WallClock(adaptive=False)
+    fixed = WallClock(adaptive=False, spin="always")
     fake.error_ns = 5_000
     for k in range(1002, 1100):
         fixed.wait_until(k * MS)
     assert fixed.spin_window_ns == 200_000
+
+
+def test_the_spin_policy_spins_only_while_a_robot_moves(monkeypatch):
+    """spin='moving' (the default): at rest the wait sleeps to the deadline (no spin, a
+    wake-up error is lateness); while a robot moves it spins the window; always/never fixed."""
+    import pyrt.scheduler.clock as clock_mod
+
+    fake = _FakeTime(error_ns=30_000)
+    monkeypatch.setattr(clock_mod, "time", fake)
+    clock = WallClock()
+    assert clock.spin == "moving" and not clock.spinning and clock.spin_window_ns == 0
+    fake.spun = 0
+    clock.wait_until(1 * MS)
+    late = fake.now - clock.wall_deadline(1 * MS)
+    assert late >= 30_000 and fake.spun <= 3  # slept to it, late by the wake-up error
+    clock.moving(True)
+    assert clock.spinning and clock.spin_window_ns > 30_000
+    for k in range(2, 200):
+        clock.wait_until(k * MS)
+    late = fake.now - clock.wall_deadline(199 * MS)
+    assert 0 <= late <= 1_000  # the spin took the wake-up error out
+    clock.moving(False)
+    assert clock.spin_window_ns == 0
+    for policy, spins in (("always", True), ("never", False)):
+        fixed = WallClock(spin=policy)
+        fixed.moving(not spins)
+        assert fixed.spinning is spins and (fixed.spin_window_ns > 0) is spins
+    with pytest.raises(ValueError, match="spin must be one of moving, always, never"):
+        WallClock(spin="sometimes")
+
+
+def test_a_station_tells_its_clock_when_a_robot_starts_and_stops_moving():
+    """The gripper station on a clock that records it: moving(True) when a move starts,
+    moving(False) when it has ended, once each."""
+    from pyrt.commands import RobotShell
+    from pyrt.station.gripper import build_gripper
+
+    class Told(SimClock):
+        def __init__(self) -> None:
+            super().__init__()
+            self.told: list[bool] = []
+
+        def moving(self, busy: bool) -> None:
+            self.told.append(busy)
+
+    clock = Told()
+    station = build_gripper(Loop(clock))
+    try:
+        runner = station.start()
+        shell = RobotShell(station, io.StringIO())
+        shell.onecmd("wait")
+        start = len(clock.told)
+        shell.onecmd("P-0800")
+        shell.onecmd("wait")
+        assert clock.told[start:] == [True, False], clock.told
+        assert runner is not None
+    finally:
+        station.close()
 
 
 def test_start_up_overruns_are_counted_apart_and_not_warned():

@@ -129,6 +129,17 @@ def add_loop_options(
         ),
     )
     g.add_argument(
+        "--spin",
+        choices=WallClock.SPIN_POLICIES,
+        default="moving",
+        help=(
+            "when the loop spins the last stretch before each deadline (so that the "
+            "sleep's wake-up error does not make the tick late): while a robot moves "
+            "(the default; at rest it sleeps to the deadline and an idle controller "
+            "holds no core), always, or never"
+        ),
+    )
+    g.add_argument(
         "--fifo", type=int, metavar="PRIO", help="run under SCHED_FIFO at PRIO (needs CAP_SYS_NICE)"
     )
     g.add_argument(
@@ -286,7 +297,8 @@ def make_loop(args: argparse.Namespace, warn: Callable[[str], None] | None = Non
     if args.max_overruns is not None and args.max_overruns < 1:
         raise UsageError(f"--max-overruns must be >= 1, got {args.max_overruns}")
     clock = (SimClock() if args.speed is None
-             else WallClock(speed=args.speed, timer_slack_ns=args.timer_slack))
+             else WallClock(speed=args.speed, timer_slack_ns=args.timer_slack,
+                            spin=getattr(args, "spin", "moving")))
     log = None
     if args.timing_log:
         try:

@@ -61,7 +61,7 @@ __all__ = ["add_parser", "build_replayed", "run"]
 #: Options of the run that a replay never takes over (it has its own clock,
 #: boards, and no links).
 _NOT_REPLAYED = {"boards", "journal", "black_box", "serve", "epics", "headless",
-                 "timing_log", "history", "speed", "fifo", "timer_slack", "max_overruns",
+                 "timing_log", "history", "speed", "fifo", "timer_slack", "spin", "max_overruns",
                  "mlock", "run", "scope_dir"}
 
 

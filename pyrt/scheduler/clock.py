@@ -37,6 +37,10 @@ class Clock:
         """Return once ``now_ns() >= deadline_ns``."""
         raise NotImplementedError
 
+    def moving(self, busy: bool) -> None:
+        """Whether a robot moves now (the station says so when it changes): a
+        real-time clock may wait more precisely while one does.  Nothing here."""
+
     def start_tick(self, deadline_ns: int) -> int:
         """Wait for a tick's deadline; return the tick's start time (on real
         time, the moment the wait ended: the deadline plus the lateness)."""
@@ -93,9 +97,18 @@ class WallClock(Clock):
     that waits, the first time it waits.  1 makes sleeps wake within a few
     µs, and the adaptive spin shrinks with it.
 
+    ``spin`` says when the last stretch is spun: ``"moving"`` (the default)
+    only while a robot moves (:meth:`moving`, which the station calls when its
+    robots start and stop), sleeping to the deadline itself while they are
+    all at rest, when a tick started a wake-up later costs nothing but keeps
+    an idle controller from holding a core; ``"always"``; ``"never"``.
+
     With ``speed`` N the loop's time runs N times faster than the wall
     (``--speed N``): a 1 ms tick then lasts 1/N ms of real time.
     """
+
+    #: The spin policies (see the class text).
+    SPIN_POLICIES = ("moving", "always", "never")
 
     virtual = False
 
@@ -106,15 +119,21 @@ class WallClock(Clock):
     DECAY = 0.99
 
     def __init__(self, speed: float = 1.0, spin_ns: int = 200_000, *, adaptive: bool = True,
-                 timer_slack_ns: int | None = None):
+                 timer_slack_ns: int | None = None, spin: str = "moving"):
         if not speed > 0:
             raise ValueError(f"speed must be positive, got {speed!r}")
         if spin_ns < 0:
             raise ValueError(f"spin_ns must be >= 0, got {spin_ns!r}")
         if timer_slack_ns is not None and timer_slack_ns < 1:
             raise ValueError(f"timer_slack_ns must be >= 1, got {timer_slack_ns!r}")
+        if spin not in self.SPIN_POLICIES:
+            raise ValueError(f"spin must be one of {', '.join(self.SPIN_POLICIES)}, "
+                             f"got {spin!r}")
         self.speed = float(speed)
         self.spin_ns = int(spin_ns)
+        self.spin = spin
+        #: Whether the waits spin now (the policy, and while "moving" whether one does).
+        self.spinning = spin == "always"
         self.adaptive = adaptive
         self.timer_slack_ns = timer_slack_ns
         self._slack_set_in: int | None = None
@@ -134,9 +153,18 @@ class WallClock(Clock):
             return self._wall0 + int(deadline_ns / self.speed)
         return self._wall0 + deadline_ns
 
+    def moving(self, busy: bool) -> None:
+        """A robot moves (``busy``) or every robot is at rest: under the
+        ``"moving"`` policy the waits spin from the next one on, or stop spinning."""
+        if self.spin == "moving":
+            self.spinning = bool(busy)
+
     @property
     def spin_window_ns(self) -> int:
-        """How long before a deadline the sleep ends and the spin begins."""
+        """How long before a deadline the sleep ends and the spin begins (0 while
+        the policy says not to spin now)."""
+        if not self.spinning:
+            return 0
         if not self.adaptive:
             return self.spin_ns
         return min(self.spin_ns, int(self.wake_error_ns) + self.SPIN_MARGIN_NS)

@@ -114,6 +114,8 @@ class StationEvents:
             return MoveWatch(False, self.last_move,
                              f"the clock interrupt is OFF (the ready queue {frozen.name} is "
                              "frozen): the move cannot end until it is on", robot=name)
+        if not self._moving:
+            self.loop.clock.moving(True)
         self._moving = True  # queued in this tick, after the watch ran: it is a move
         if one is not None:
             one.moving = True
@@ -180,6 +182,8 @@ class StationEvents:
             self.moves_this_period = 0
         elif busy and not self._moving:
             self.moves_this_period = 0
+        if busy != self._moving:
+            self.loop.clock.moving(busy)
         self._moving = busy
 
     def _watch_robots(self) -> None:
