@@ -309,3 +309,16 @@ class Chain:
 def _rebuild(name: str, joints: tuple[Joint, ...], base: np.ndarray, tool: np.ndarray,
              offsets: np.ndarray, closed_form: ClosedForm | None) -> Chain:
     return Chain(name, joints, base=base, tool=tool, offsets=offsets, closed_form=closed_form)
+
+
+def inertia_bound(chain: Chain, armature: np.ndarray) -> np.ndarray:
+    """Each joint's largest inertia over a spread of joint values (kg m^2 or kg),
+    ``armature`` (the rotors') included: what a servo's gains and an arm's
+    acceleration limits are sized for."""
+    lo = np.where(np.isfinite(chain.lower), chain.lower, -math.pi)
+    hi = np.where(np.isfinite(chain.upper), chain.upper, math.pi)
+    rng = np.random.default_rng(0)
+    best = np.zeros(chain.n)
+    for u in rng.random((64, chain.n)):
+        best = np.maximum(best, np.diag(chain.mass_matrix(lo + u * (hi - lo))))
+    return np.maximum(best + armature, 1e-4)

@@ -77,6 +77,7 @@ from pyrt.boards.armservo import DAC_FULL_SCALE, FT_CHANNELS, arm_servo_kind, re
 from pyrt.boards.registers import RegisterBoard
 from pyrt.errors import ConfigError, NativeError
 from pyrt.kinematics import GRAVITY, Chain, Inertial
+from pyrt.kinematics.chain import inertia_bound
 from pyrt.native import ArmKernel, ChainKernels, DriveKernel, tuned_gains
 
 __all__ = [
@@ -116,18 +117,6 @@ class DriveTuning:
         if self.bandwidth_hz * self.period > 0.05:
             raise ConfigError(f"drive bandwidth {self.bandwidth_hz} Hz: at most a twentieth "
                               f"of the board's rate ({0.05 / self.period:g} Hz)")
-
-
-def inertia_bound(chain: Chain, armature: np.ndarray) -> np.ndarray:
-    """Each joint's largest inertia over a spread of joint values (kg m^2 or kg),
-    ``armature`` (the rotors') included: what a servo's gains are sized for."""
-    lo = np.where(np.isfinite(chain.lower), chain.lower, -math.pi)
-    hi = np.where(np.isfinite(chain.upper), chain.upper, math.pi)
-    rng = np.random.default_rng(0)
-    best = np.zeros(chain.n)
-    for u in rng.random((64, chain.n)):
-        best = np.maximum(best, np.diag(chain.mass_matrix(lo + u * (hi - lo))))
-    return np.maximum(best + armature, 1e-4)
 
 
 @dataclass(frozen=True)

@@ -52,6 +52,7 @@ from numpy.typing import ArrayLike
 from pyrt.boards.armservo import DAC_FULL_SCALE, KIND_NAME, ArmServoRegisters
 from pyrt.component import Command, Component, Limits, Param, Signal, command, records_of
 from pyrt.kinematics import GRAVITY, Chain, rpy_of
+from pyrt.kinematics.chain import inertia_bound
 from pyrt.motion import Evaluator, MotionFault
 from pyrt.motion import Limits as MotionLimits
 from pyrt.native import Servo, ServoBoard, gain_ranges, tuned_gains
@@ -229,7 +230,7 @@ class UrdfArm(ArmMoves, Component):
                            for j, d in zip(joints, self.drives, strict=True)])
         self.effort = effort
         armature = np.array([d.reflected_inertia for d in self.drives])
-        inertia = _inertia_bound(chain, armature)
+        inertia = inertia_bound(chain, armature)
         felim = np.array([math.radians(FOLLOWING_ERROR_DEG) if not p
                           else FOLLOWING_ERROR_DEG * 1e-3 for p in self.prismatic])
         gains: dict[str, ArrayLike] = dict(tuned_gains(inertia, effort, self.period_s,
@@ -673,18 +674,6 @@ class UrdfArm(ArmMoves, Component):
         self.last_stop = "stopped (stop command)"
         self.state = "moving"  # tracking a conveyor too: braking is a move
         return f"{self.name}: stopping: braking along the path to rest, then holding"
-
-
-def _inertia_bound(chain: Chain, armature: np.ndarray) -> np.ndarray:
-    """Each joint's largest inertia over a spread of joint values (kg m^2 or kg), the
-    rotor's included: what the servo's gains and the acceleration limits are sized for."""
-    lo = np.where(np.isfinite(chain.lower), chain.lower, -math.pi)
-    hi = np.where(np.isfinite(chain.upper), chain.upper, math.pi)
-    rng = np.random.default_rng(0)
-    best = np.zeros(chain.n)
-    for u in rng.random((64, chain.n)):
-        best = np.maximum(best, np.diag(chain.mass_matrix(lo + u * (hi - lo))))
-    return np.maximum(best + armature, 1e-4)
 
 
 def _knot_b(arm: UrdfArm, knot: Any) -> None:
