@@ -283,6 +283,9 @@ def test_sigterm_to_a_real_time_gripper_stops_the_jaws_and_exits_0(tmp_path, sig
             assert line, seen
             seen += line
         proc.send_signal(sig)
+        # stdin stays open until the signal has ended the process: an EOF that a starved
+        # process reads before its signal handler runs would end the script normally (0)
+        proc.wait(timeout=60)
         out, err = proc.communicate(timeout=30)
     finally:
         proc.kill()

@@ -18,6 +18,11 @@ ROOT = Path(__file__).resolve().parents[1]
 #: real time on a loaded machine may trip the following error; the PUMA lies on a stop.)
 
 
+def _starved(out: str) -> bool:
+    """Whether a real-time run faulted because this machine starved its loop (it says so)."""
+    return "FAULT" in out and ("the loop stalled" in out or "overrun:" in out)
+
+
 def _env() -> dict[str, str]:
     return {**os.environ, "PYTHONPATH": str(ROOT)}
 
@@ -36,10 +41,17 @@ def test_the_controller_closes_the_loop_on_a_board_sim_over_tcp(urdf):
         assert m, first + sim.stderr.read()
         name = "puma560" if urdf is None else "twolink"
         script = f"sleep 3\n{name} where\nsim show\nquit\n"
-        done = subprocess.run([sys.executable, "-m", "pyrt", "urdf", *file_args, "--boards",
-                               m.group(1)], input=script, capture_output=True, text=True,
-                              timeout=300, env=_env(), cwd=ROOT)
-        out = done.stdout
+        for _ in range(3):
+            done = subprocess.run([sys.executable, "-m", "pyrt", "urdf", *file_args,
+                                   "--boards", m.group(1)], input=script, capture_output=True,
+                                  text=True, timeout=300, env=_env(), cwd=ROOT)
+            out = done.stdout
+            if not _starved(out):
+                break
+            # what holds however late the ticks come: the fault is stated, nothing drives
+            assert "every motor stopped" in out, out
+        else:
+            pytest.skip("the machine starved the real-time loop in 3 runs (each faulted safely)")
         assert done.returncode == 0, out + done.stderr
         assert "FAULT" not in out and "amplifiers off" not in out, out
         where = re.search(rf"^{name}: joints ([-\d. ]+) deg", out, re.M)
