@@ -78,7 +78,7 @@ class GripperSim(Component):
             Signal.attr("x", "counts", p, "x", "true jaw position"),
             Signal.attr("v", "counts/s", p, "v", "true jaw speed"),
             Signal.attr("squeeze", "force", p, "squeeze", "squeeze on the object"),
-            Signal.attr("dac", "byte", p.board, "dac", "DAC byte the motor sees", fmt="02X"),
+            Signal.attr("dac", "byte", p, "dac", "DAC byte the motor sees", fmt="02X"),
         ]
 
     def _apply(self, fn: Callable[..., Any], *args: Any) -> None:
@@ -90,7 +90,7 @@ class GripperSim(Component):
     @command(name="show", reads_only=True)
     def show(self) -> str:
         """sim: the simulated world's state (where the jaws really are)."""
-        return f"{self.plant.status()}; LEDs {self.plant.board.leds:04X}"
+        return f"{self.plant.status()}; LEDs {self.plant.leds:04X}"
 
     @command(Arg("MM", lambda t: None if t.lower() == "none" else finite(
         "object width", 0.0, 1e4)(t)), name="object")
