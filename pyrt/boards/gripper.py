@@ -149,6 +149,11 @@ class GripperBoard:
         """The drive current byte as the controller last wrote it (excess-128)."""
         return self._readers[DAC]()
 
+    @property
+    def leds(self) -> int:
+        """The LED latches as one word, 2E bits high, 2D bits low (0 = LED on)."""
+        return self._readers[LED_HI]() << 8 | self._readers[LED_LO]()
+
     def poll(self, now_ns: int = 0) -> None:
         """Raise the 8031's external interrupts for the encoder pulses counted
         since the last poll (attach it after the read phase, before the ready

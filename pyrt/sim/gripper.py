@@ -33,7 +33,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from math import floor as _floor
 
-from pyrt.boards.gripper import JOG_CLOSE, JOG_OPEN
+from pyrt.boards.gripper import JOG_CLOSE, JOG_OPEN, GripperBoard
 from pyrt.boards.registers import RegisterBoard
 
 __all__ = ["FAULTS", "JawParameters", "JawPlant"]
@@ -84,7 +84,10 @@ class JawPlant:
         object_mm: float | None = None,
         params: JawParameters | None = None,
     ):
-        self.board = board
+        #: The cage's register file (the world's side) and the cage as a view over it
+        #: (what the controller reads there: the latched DAC, the LEDs).
+        self.registers = board
+        self.board = GripperBoard(board)
         # the cage's registers the step reads and sets, bound once
         self._dac = board.cells("dac")
         self._pa, self._pb, self._pc = (board.cells(n) for n in ("pa", "pb", "pc"))
@@ -199,11 +202,6 @@ class JawPlant:
     def dac(self) -> int:
         """The DAC byte the controller latched (excess-128)."""
         return self._dac[0]
-
-    @property
-    def leds(self) -> int:
-        """The LED latches as one word, 2E bits high, 2D bits low (0 = LED on)."""
-        return self.board.output("led_hi") << 8 | self.board.output("led_lo")
 
     def pulse_counts(self) -> tuple[int, int]:
         """Encoder pulses counted so far on each interrupt line (up, down), modulo 2**32."""

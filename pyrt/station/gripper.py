@@ -90,7 +90,7 @@ class GripperSim(Component):
     @command(name="show", reads_only=True)
     def show(self) -> str:
         """sim: the simulated world's state (where the jaws really are)."""
-        return f"{self.plant.status()}; LEDs {self.plant.leds:04X}"
+        return f"{self.plant.status()}; LEDs {self.plant.board.leds:04X}"
 
     @command(Arg("MM", lambda t: None if t.lower() == "none" else finite(
         "object width", 0.0, 1e4)(t)), name="object")
