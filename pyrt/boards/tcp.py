@@ -297,25 +297,12 @@ class TcpRegisters(ImageBackend):
         """board-sim's ``INFO``: the world's state (not a register access)."""
         return self.link.info()
 
-    # -- compatibility -----------------------------------------------------------------------
-
-    def poll(self, now_ns: int = 0) -> None:
-        """The read phase (:meth:`read_phase`)."""
-        self.read_phase(now_ns)
-
-    def load_outputs(self) -> None:
-        """Read every readable output again (one pipelined exchange)."""
-        self.forget_outputs(self.read_outputs())
-
-    def forget(self) -> None:
+    def resync(self) -> None:
         """The loop starts: the writes made while the station was built go out,
         the watchdog count is forgotten and the outputs read again."""
         super().resync()
         self.link.forget_trips()
-        self.load_outputs()
-
-    def resync(self) -> None:
-        self.forget()
+        self.forget_outputs(self.read_outputs())
 
 
 def _write_line(writes: list[Write]) -> str:
