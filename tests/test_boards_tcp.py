@@ -11,6 +11,7 @@ import time
 import pytest
 
 from pyrt.boards import open_boards
+from pyrt.boards.dataconcentrator import DataConcentrator
 from pyrt.boards.gripper import (
     DAC,
     DAC_NULL,
@@ -23,7 +24,6 @@ from pyrt.boards.gripper import (
 )
 from pyrt.boards.i8031 import ENCODER_CNT, I8031, LIMIT, OTHER, VECTOR_EXT0, VECTOR_EXT1
 from pyrt.boards.kinds import GRIPPER_CAGE
-from pyrt.boards.dataconcentrator import DataConcentrator
 from pyrt.boards.registers import OUTPUT, BoardKind, Register, RegisterBoard
 from pyrt.boards.registry import Boards
 from pyrt.boards.tio10 import AWO_BITS, DIR_BITS, TIO10

@@ -8,9 +8,9 @@ request line and one reply line on a TCP connection (:mod:`pyrt.boards.wire`).
 has them).  A station gets, for each board it declares, what the board's
 kind makes of that view (:meth:`BoardKind.remote
 <pyrt.boards.registers.BoardKind.remote>`): the view itself for a plain
-kind, the typed interface for a built-in one (the gripper cage mapped into
-the 8031 exactly as the simulated board is, so the controller program is
-the same; the TIO10; the dataConcentrator; :mod:`pyrt.boards.kinds`).
+kind, the typed view for a built-in one (the gripper cage mapped into the
+8031 as it is over ``sim:``, so the controller program is the same; the
+TIO10; the dataConcentrator; :mod:`pyrt.boards.kinds`).
 
 On connect the greeting names the station and its boards with their kinds:
 every board the station declares must be there with the same kind and
