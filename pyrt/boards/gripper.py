@@ -38,6 +38,7 @@ overload where FDFF is meant; the memory map is taken as the reference.
 
 from __future__ import annotations
 
+from functools import partial
 from typing import Any
 
 from pyrt.boards.i8031 import I8031, VECTOR_EXT0, VECTOR_EXT1
@@ -105,11 +106,13 @@ class GripperBoard:
         self._readers = {a: bound_reader(r, reg.name) for a, reg in _BY_ADDRESS.items()}
         self._writers = {a: bound_writer(r, reg.name) for a, reg in _BY_ADDRESS.items()
                          if not reg.is_input}
-        # the encoder's pulse counters: one read of the board's inputs a poll
-        self._inputs = r.snapshot
+        # the encoder's pulse counters: two bound reads where a read is one index
+        # into an image, else one read of the board's inputs (a read that looks at
+        # a link each time costs more than the snapshot)
+        self._read_up, self._read_down = bound_reader(r, "up"), bound_reader(r, "down")
+        self._inputs = r.snapshot if isinstance(self._read_up, partial) else None
         # pulses counted before this controller came are not its own
-        inputs = self._inputs()
-        self._up, self._down = inputs[_UP], inputs[_DOWN]
+        self._up, self._down = self._read_up(), self._read_down()
         self.map_xdata(self.cpu)
 
     def map_xdata(self, cpu: I8031) -> None:
@@ -158,22 +161,29 @@ class GripperBoard:
         """Raise the 8031's external interrupts for the encoder pulses counted
         since the last poll (attach it after the read phase, before the ready
         queue); a vector with no handler ignores its pulses, as the chip does."""
-        inputs = self._inputs()
-        up, down = inputs[_UP], inputs[_DOWN]
+        if self._inputs is None:
+            up, down = self._read_up(), self._read_down()
+        else:
+            inputs = self._inputs()
+            up, down = inputs[_UP], inputs[_DOWN]
         if up != self._up:
             n = (up - self._up) % PULSE_MODULUS
             self._up = up
             h = self.cpu.vectors.get(VECTOR_EXT0)
             if h is not None:
-                for _ in range(n):
+                h()
+                while n > 1:
                     h()
+                    n -= 1
         if down != self._down:
             n = (down - self._down) % PULSE_MODULUS
             self._down = down
             h = self.cpu.vectors.get(VECTOR_EXT1)
             if h is not None:
-                for _ in range(n):
+                h()
+                while n > 1:
                     h()
+                    n -= 1
 
     def close(self) -> None:
         """Nothing to release here (the back end releases the link)."""
