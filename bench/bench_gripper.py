@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import pytest
 
-from pyrt.boards.gripper import SimGripperBoard
+from pyrt.boards.gripper import GRIPPER_CAGE, GripperBoard
 from pyrt.boards.i8031 import I8031
+from pyrt.boards.registers import RegisterBoard
 from pyrt.robots.gripper import GripperController
 from pyrt.scheduler import Loop, SimClock
 from pyrt.scheduler.runner import Runner
@@ -25,11 +26,13 @@ TARGET_RATIO = 200.0
 
 def make_stack(tick_us: int = 1000):
     cpu = I8031()
-    board = SimGripperBoard(cpu)
-    plant = JawPlant(board)
+    regs = RegisterBoard(GRIPPER_CAGE)  # the cage's register file, the jaws behind it
+    board = GripperBoard(regs, cpu)
+    plant = JawPlant(regs)
     loop = Loop(SimClock(), period_ns=tick_us * 1000, timing=True)
     ctl = GripperController(cpu)
     loop.attach(plant.step, name="jaws")
+    loop.attach(board.poll, name="encoder")
     ctl.attach(loop)
     loop.attach(Scope().sample, name="scope")  # as the CLI: a scope, stopped
     ctl.power_up()
@@ -94,11 +97,13 @@ def test_gripper_p_move_bare_loop(benchmark):
     """The same moves on the bare loop (plant + controller, no runner, no scope):
     the controller's and the simulation's own cost."""
     cpu = I8031()
-    board = SimGripperBoard(cpu)
-    plant = JawPlant(board)
+    regs = RegisterBoard(GRIPPER_CAGE)  # the cage's register file, the jaws behind it
+    board = GripperBoard(regs, cpu)
+    plant = JawPlant(regs)
     loop = Loop(SimClock(), timing=True)
     ctl = GripperController(cpu)
     loop.attach(plant.step, name="jaws")
+    loop.attach(board.poll, name="encoder")
     ctl.attach(loop)
     ctl.power_up()
     job = ctl.start_init()

@@ -18,7 +18,8 @@ import time
 
 import pytest
 
-from pyrt.boards.simboards import SimDataConcentrator, SimTIO10
+from pyrt.boards.dataconcentrator import DataConcentrator
+from pyrt.boards.tio10 import TIO10
 from pyrt.db import load_station, station_directory
 from pyrt.robots.av import AV
 from pyrt.robots.axis import Axis
@@ -31,8 +32,8 @@ REALTIME_TARGET = 20.0
 
 def _plant(name: str):
     station = load_station(station_directory(name))
-    tio, dc = SimTIO10(), SimDataConcentrator()
-    plant = ManipulatorPlant(rig_from_station(station), tio, dc)
+    tio, dc = TIO10(), DataConcentrator()  # the cards over register files of their own
+    plant = ManipulatorPlant(rig_from_station(station), tio.registers, dc.registers)
     return station, plant, tio, dc
 
 

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from pyrt.boards import open_boards
-from pyrt.boards.gripper import DAC_NULL, SimGripperBoard
+from pyrt.boards.gripper import DAC_NULL, GripperBoard
 from pyrt.boards.i8031 import I8031
 from pyrt.robots.gripper import GripperController, JobResult
 from pyrt.scheduler import Loop, SimClock
@@ -21,7 +21,7 @@ MS = 1_000_000
 class StallMonitor:
     """Loop handler: the longest time current was applied while the jaws did not move."""
 
-    board: SimGripperBoard
+    board: GripperBoard
     plant: JawPlant
     worst_ns: int = 0
     _since: int | None = None
@@ -41,7 +41,7 @@ class StallMonitor:
 @dataclass
 class Rig:
     cpu: I8031
-    board: SimGripperBoard
+    board: GripperBoard
     plant: JawPlant
     ctl: GripperController
     loop: Loop
@@ -76,8 +76,9 @@ def make_rig(*, runner: bool = False, **plant_kw) -> Rig:
     boards = open_boards("sim:", "gripper", GRIPPER_BOARDS)
     side = boards.simulated  # the world's side: the board the jaws drive
     assert side is not None
-    cpu, board = boards["gripper"].cpu, side["gripper"]
-    plant = JawPlant(board, **plant_kw)
+    cpu = boards["gripper"].cpu
+    plant = JawPlant(side["gripper"], **plant_kw)
+    board = plant.board  # the world's side of the cage, read as the controller reads it
     loop = Loop(SimClock())
     station = GripperStation(loop, boards, plant)
     ctl: GripperController = station.controller

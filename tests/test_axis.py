@@ -9,13 +9,15 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from pyrt.boards.simboards import SimDataConcentrator, SimTIO10
+from pyrt.boards.dataconcentrator import DataConcentrator
+from pyrt.boards.tio10 import TIO10
 from pyrt.db import load_station, station_directory
 from pyrt.devices.motor import STANDBY, VELOCITY_MODE
 from pyrt.errors import CommandError
 from pyrt.robots.av import AV
 from pyrt.robots.axis import POLYAXIS, Axis, TrackingError
 from pyrt.scheduler import Loop, SimClock
+from pyrt.sim.cards import set_adc
 from pyrt.sim.manipulator import ManipulatorPlant, rig_from_station
 from pyrt.sim.sensors import Imperfections
 
@@ -32,8 +34,8 @@ class Rig:
         pa = station.polyaxis()
         rig = rig_from_station(station)
         rig = dataclasses.replace(rig, ropes=rig.ropes[:ropes])
-        self.tio, self.dc = SimTIO10(), SimDataConcentrator()
-        self.plant = ManipulatorPlant(rig, self.tio, self.dc,
+        self.tio, self.dc = TIO10(), DataConcentrator()
+        self.plant = ManipulatorPlant(rig, self.tio.registers, self.dc.registers,
                                       imperfections=imp or Imperfections(seed=3))
         self.av = AV.from_record(station.av_of(pa))
         rec = station.axes_of(pa)[0]
@@ -175,7 +177,7 @@ def test_calibration_through_the_axis(station):
         ax.cmd_calibrate()
     ax.cmd_up(3)  # the pendulum's tension does not change; hang a different load by hand
     ax.stop()
-    r.dc.plant_set_adc(ax.loadcell.channel.channel, 1000)
+    set_adc(r.dc.registers, ax.loadcell.channel.channel, 1000)
     r.plant.inject_loadcell_stuck(0)
     ax.cmd_point("100 N")
     slope, offset = ax.cmd_calibrate()
@@ -199,7 +201,7 @@ def test_bottom_goes_through_vtog(station):
     pa = station.polyaxis()
     av = AV.from_record(station.av_of(pa))
     av.set_pose((0.0, 0.0, 10.0), (0.0, 0.0, 0.0))
-    tio, dc = SimTIO10(), SimDataConcentrator()
+    tio, dc = TIO10(), DataConcentrator()
     rec = station.axes_of(pa)[1]
     ax = Axis.from_records("axis1", rec, station, tio, dc, av=av)
     assert ax.bottom == pytest.approx((317.0, 0.0, 99.53))

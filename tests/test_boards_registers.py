@@ -1,20 +1,14 @@
 """Board kinds declare their registers: Register and BoardKind validation, the generic
-RegisterBoard, and the built-in kinds' register views over their typed boards."""
+RegisterBoard, and the built-in kinds' register files with their typed views over them."""
 
 from __future__ import annotations
 
 import pytest
 
 from pyrt.boards import open_boards
-from pyrt.boards.gripper import DAC, DAC_NULL, LED_LO
-from pyrt.boards.kinds import (
-    DATACONCENTRATOR,
-    GRIPPER_CAGE,
-    TIO10_KIND,
-    DataConcentratorRegisters,
-    GripperCageRegisters,
-    TIO10Registers,
-)
+from pyrt.boards.dataconcentrator import DataConcentrator
+from pyrt.boards.gripper import DAC, DAC_NULL, LED_LO, GripperBoard
+from pyrt.boards.kinds import DATACONCENTRATOR, GRIPPER_CAGE, TIO10_KIND
 from pyrt.boards.registers import (
     INPUT,
     OUTPUT,
@@ -24,9 +18,9 @@ from pyrt.boards.registers import (
     outputs_are_off,
     outputs_off,
 )
-from pyrt.boards.simboards import SimDataConcentrator, SimTIO10
-from pyrt.boards.tio10 import AWO_BITS
+from pyrt.boards.tio10 import AWO_BITS, TIO10
 from pyrt.errors import ConfigError
+from pyrt.sim.cards import add_counts, add_pulses, set_adc, set_rtc
 from pyrt.sim.world import World
 
 #: A two-joint arm's servo board: per joint a drive register and an encoder counter, an enable.
@@ -158,33 +152,34 @@ def test_a_world_wants_in_process_boards_and_a_one_word_name():
 # -- the built-in kinds --------------------------------------------------------------------------
 
 
-def test_tio10_register_view_maps_writes_to_actions_and_off_to_the_reflex():
-    """armed[ch] = 1 arms (a period must be loaded), = 0 disarms; off disarms every motor channel
-    and sets every all-windings-off bit, leaving the direction port alone."""
-    tio = SimTIO10()
-    view = TIO10Registers(tio)
+def test_tio10_view_writes_registers_and_off_is_the_reflex():
+    """arm writes armed[ch] = 1 (a period must be loaded, the view refuses otherwise), disarm 0;
+    off disarms every motor channel and sets every all-windings-off bit, leaving the direction
+    port alone."""
+    view = RegisterBoard(TIO10_KIND)
+    tio = TIO10(view)
     with pytest.raises(ValueError, match="no period loaded"):
-        view.write("armed", 1, 7)
-    view.write("per", 100, 7)
-    view.write("src", 3, 7)
-    view.write("armed", 1, 7)
-    view.write("port", 0x80, 0)
+        tio.arm(7)
+    tio.load_period(7, 100)
+    tio.select_source(7, 3)
+    tio.arm(7)
+    tio.write_port(0, 0x80)
     assert tio.armed(7) and tio.source(7) == 3 and view.read("armed", 7) == 1
     assert not outputs_are_off(TIO10_KIND, view)
     outputs_off(TIO10_KIND, view)
     assert not tio.armed(7) and all(tio.bit(*AWO_BITS[c]) for c in AWO_BITS)
     assert tio.read_port(0) == 0x80 and outputs_are_off(TIO10_KIND, view)
-    tio.plant_add_pulses(7, 5)
-    tio.plant_set_time(1_000_000)
+    add_pulses(view, 7, 5)
+    set_rtc(view, 1_000_000)
     assert view.snapshot() == [0] * 7 + [5, 0, 0, 5000]
 
 
 def test_dataconcentrator_clear_is_a_write_only_strobe():
     """clr[a] = 1 clears counter a; clr cannot be read; the snapshot is counters then ADCs."""
-    dc = SimDataConcentrator()
-    view = DataConcentratorRegisters(dc)
-    dc.plant_add_counts(168, 42)
-    dc.plant_set_adc(3, 1000)
+    view = RegisterBoard(DATACONCENTRATOR)
+    dc = DataConcentrator(view)
+    add_counts(view, 168, 42)
+    set_adc(view, 3, 1000)
     snap = view.snapshot()
     assert len(snap) == DATACONCENTRATOR.input_count == 256 + 16
     assert snap[168] == 42 and snap[256 + 3] == 1000
@@ -194,20 +189,30 @@ def test_dataconcentrator_clear_is_a_write_only_strobe():
     assert dc.read_counter(168) == 0 and view.read("cnt", 168) == 0
 
 
-def test_gripper_cage_view_names_the_cage_registers():
-    """The cage's registers by name reach the addresses of pyrt.boards.gripper; the DAC's off is
-    its null; up/down are the encoder's pulse counters."""
+def test_a_clear_strobe_names_an_input_of_as_many_registers():
+    """A kind whose strobe clears no input, or one of another count, is refused."""
+    cnt = Register("cnt", count=2, width=8)
+    with pytest.raises(ConfigError, match="clears"):
+        BoardKind("k", (cnt, Register("clr", count=2, direction=OUTPUT, clears="nope")))
+    with pytest.raises(ConfigError, match="clears"):
+        BoardKind("k", (cnt, Register("clr", count=3, direction=OUTPUT, clears="cnt")))
+
+
+def test_gripper_cage_names_the_cage_registers():
+    """The cage's registers by name are the addresses of pyrt.boards.gripper; the DAC's off is
+    its null; up/down are the encoder's pulse counters; the ports and LEDs power up high."""
     boards = open_boards("sim:", "gripper", {"gripper": GRIPPER_CAGE}).simulated
-    board = boards["gripper"]
     view = boards.registers("gripper")
-    assert isinstance(view, GripperCageRegisters)
+    board = GripperBoard(view)
+    assert isinstance(view, RegisterBoard)
     view.write("led_lo", 0x5A)
     assert board.read(LED_LO) == 0x5A and GRIPPER_CAGE.register("led_lo").address == LED_LO
     view.write("dac", 0x90)
     assert board.read(DAC) == 0x90 and not outputs_are_off(GRIPPER_CAGE, view)
     outputs_off(GRIPPER_CAGE, view)
     assert board.read(DAC) == DAC_NULL
-    board.encoder(3)
-    board.encoder(-1)
+    view.set_input("up", 3)
+    view.set_input("down", 1)
     assert view.snapshot() == [0xFF, 0xFF, 0xFF, 3, 1]
     assert view.read("up") == 3 and GRIPPER_CAGE.register("up").direction == INPUT
+    assert view.read("led_hi") == 0xFF

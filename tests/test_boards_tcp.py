@@ -11,6 +11,7 @@ import time
 import pytest
 
 from pyrt.boards import open_boards
+from pyrt.boards.dataconcentrator import DataConcentrator
 from pyrt.boards.gripper import (
     DAC,
     DAC_NULL,
@@ -23,8 +24,9 @@ from pyrt.boards.gripper import (
 )
 from pyrt.boards.i8031 import ENCODER_CNT, I8031, LIMIT, OTHER, VECTOR_EXT0, VECTOR_EXT1
 from pyrt.boards.kinds import GRIPPER_CAGE
-from pyrt.boards.tcp import TcpDataConcentrator, TcpGripperBoard, TcpTIO10
-from pyrt.boards.tio10 import AWO_BITS, DIR_BITS
+from pyrt.boards.registers import OUTPUT, BoardKind, Register, RegisterBoard
+from pyrt.boards.registry import Boards
+from pyrt.boards.tio10 import AWO_BITS, DIR_BITS, TIO10
 from pyrt.boards.wire import MAX_LINE
 from pyrt.db import load_station, station_directory
 from pyrt.errors import BoardError, ConfigError
@@ -32,7 +34,7 @@ from pyrt.robots.gripper import GripperController
 from pyrt.scheduler import Loop, WallClock
 from pyrt.sim.boardsim import BoardServer
 from pyrt.sim.sensors import Imperfections
-from pyrt.sim.world import GRIPPER_BOARDS, MANIPULATOR_BOARDS, GripperWorld, ManipulatorWorld
+from pyrt.sim.world import GRIPPER_BOARDS, MANIPULATOR_BOARDS, GripperWorld, ManipulatorWorld, World
 
 #: prototype rope 0: motor channel 7, encoder address 168, loadcell ADC 3.
 CH, ENC, ADC = 7, 168, 3
@@ -207,7 +209,6 @@ def test_gripper_board_interface_is_the_same_in_process_and_over_tcp(gripper_sim
     try:
         board = boards["gripper"]
         assert isinstance(board, GripperBoard)
-        assert isinstance(board, TcpGripperBoard)
         assert {a: board.read(a) for a in REGISTERS} == {
             P8155_CMD: 0, P8155_PA: 0xFF, P8155_PB: 0xFF, 0x0103: 0xFF, LED_LO: 0xFF,
             0x0201: 0xFF, DAC: DAC_NULL}
@@ -219,7 +220,7 @@ def test_gripper_board_interface_is_the_same_in_process_and_over_tcp(gripper_sim
             board.write(P8155_PA, 0)
         with pytest.raises(ValueError, match="no gripper cage register"):
             board.read(0x1234)
-        with pytest.raises(ValueError, match=r"00\.\.FF"):
+        with pytest.raises(ValueError, match=r"0\.\.255"):
             board.write(DAC, 0x100)
         assert board.pulse_counts() == (0, 0)
     finally:
@@ -308,7 +309,7 @@ def test_the_inputs_stream_and_a_tick_sends_at_most_once(gripper_sim):
 @pytest.mark.wallclock
 def test_gripper_controller_runs_init_over_tcp_unchanged(gripper_sim):
     """The 002 controller, unchanged, runs I (fullopen to the limit, zero) on a wall-clock loop
-    through TcpGripperBoard, its encoder counts delivered by poll before the ready queue and its
+    through the GripperBoard view, its encoder counts delivered by poll before the ready queue and its
     DAC writes sent by flush after it."""
     cpu = I8031()
     boards = open_boards(gripper_sim.url, "gripper", GRIPPER_BOARDS, cpu=cpu)
@@ -333,10 +334,11 @@ def test_gripper_controller_runs_init_over_tcp_unchanged(gripper_sim):
 
 
 def test_manipulator_cards_over_tcp_read_back_and_refuse_like_the_sim(manipulator_sim):
-    """TcpTIO10/TcpDataConcentrator: writes read back, the world sees them; refusals are ValueError."""
+    """The TIO10 and dataConcentrator views over tcp://: writes read back, the world sees them;
+    refusals are ValueError, made before anything is sent."""
     with open_boards(manipulator_sim.url, "prototype", MANIPULATOR_BOARDS) as boards:
         tio, dc = boards["tio10"], boards["dc"]
-        assert isinstance(tio, TcpTIO10) and isinstance(dc, TcpDataConcentrator)
+        assert isinstance(tio, TIO10) and isinstance(dc, DataConcentrator)
         assert boards.world == "prototype"
         world = manipulator_sim.world
         tio.select_source(CH, 3)
@@ -346,7 +348,7 @@ def test_manipulator_cards_over_tcp_read_back_and_refuse_like_the_sim(manipulato
         assert (world.tio10.source(CH), world.tio10.period(CH)) == (3, 1234)
         assert tio.source(4) == 1 and tio.rtc_ticks() > 0
         assert dc.read_adc(ADC) == world.dc.read_adc(ADC) > 0
-        with pytest.raises(ValueError, match="no period loaded"):  # refused by the board
+        with pytest.raises(ValueError, match="no period loaded"):  # the period reads back 0
             tio.arm(0)
         with pytest.raises(ValueError, match="real-time clock"):  # refused before sending
             tio.arm(4)
@@ -355,6 +357,38 @@ def test_manipulator_cards_over_tcp_read_back_and_refuse_like_the_sim(manipulato
         with pytest.raises(ValueError, match=r"0\.\.255"):
             dc.read_counter(256)
         assert not tio.armed(0)
+
+
+_PAIR = BoardKind("pair", (Register("a", width=8, direction=OUTPUT),
+                           Register("b", width=8, direction=OUTPUT)))
+
+
+class _RefusesSeven(RegisterBoard):
+    """A board whose far side refuses b = 7 (what the controller's image cannot know)."""
+
+    def write(self, name: str, value: int, index: int = 0) -> None:
+        if name == "b" and value == 7:
+            raise ValueError("b: this board refuses 7")
+        super().write(name, value, index)
+
+
+def test_a_refused_write_leaves_the_image_holding_what_board_sim_holds():
+    """A batch that board-sim refuses part of, written at once (a reflex's write): the writes
+    before the refused one stand and read back as written, the refused one reads back as it was
+    (not 0)."""
+    side = Boards("sim:", "pair", {"x": _RefusesSeven(_PAIR)}, {"x": _PAIR}, in_process=True)
+    server = _serve(World("pair", side))
+    try:
+        with open_boards(server.url, "pair", {"x": _PAIR}) as boards:
+            x = boards["x"]
+            x.write("a", 1)
+            x.write("b", 3)
+            with pytest.raises(ValueError, match="refuses 7"):
+                boards.backend.write_many([("x", "a", 0, 5), ("x", "b", 0, 7)])
+            assert (x.read("a"), x.read("b")) == (5, 3)
+            assert side["x"].output("a") == 5 and side["x"].output("b") == 3
+    finally:
+        server.close()
 
 
 @pytest.mark.wallclock

@@ -18,10 +18,9 @@ from pyrt.boards import (
 )
 from pyrt.boards import registry as registry_module
 from pyrt.boards.dataconcentrator import DataConcentrator
-from pyrt.boards.gripper import DAC, P8155_PA, P8155_PB, GripperBoard, SimGripperBoard
+from pyrt.boards.gripper import DAC, P8155_PA, P8155_PB, GripperBoard
 from pyrt.boards.i8031 import I8031
 from pyrt.boards.registers import OUTPUT, BoardKind, Register, RegisterBoard
-from pyrt.boards.simboards import SimDataConcentrator, SimTIO10
 from pyrt.boards.tio10 import TIO10
 from pyrt.errors import ConfigError
 from pyrt.sim.world import GRIPPER_BOARDS, MANIPULATOR_BOARDS
@@ -119,31 +118,31 @@ def test_board_url_that_is_not_text_is_refused():
 
 def test_sim_gripper_maps_the_cage_into_the_given_cpu_over_a_simulated_board():
     """sim: for the gripper gives the cage mapped into the cpu passed, reached through the
-    process image; the world's side is a SimGripperBoard, which a write reaches at once
-    outside a tick and the read phase brings in."""
+    process image; the world's side is the cage's register file, which a write reaches at
+    once outside a tick and the read phase brings in."""
     cpu = I8031()
     with open_boards("sim:", "gripper", GRIPPER_BOARDS, cpu=cpu) as boards:
         assert boards.in_process and boards["gripper"].cpu is cpu and boards.station == "gripper"
         assert list(boards) == ["gripper"] and len(boards) == 1
         assert isinstance(boards["gripper"], GripperBoard)
         side = boards.simulated
-        assert side is not None and isinstance(side["gripper"], SimGripperBoard)
-        assert side["gripper"].cpu is not cpu  # the world's board raises no interrupt itself
+        assert side is not None and isinstance(side["gripper"], RegisterBoard)
         cpu.movx_write(DAC, 0x90)
-        assert side["gripper"].dac == 0x90 and boards["gripper"].read(DAC) == 0x90
-        side["gripper"].pa = 0xFE
+        assert side["gripper"].output("dac") == 0x90 and boards["gripper"].read(DAC) == 0x90
+        side["gripper"].set_input("pa", 0xFE)
         boards.poll(0)
         assert cpu.movx_read(P8155_PA) == 0xFE
     assert boards.closed
 
 
 def test_sim_manipulator_gives_a_sim_tio10_and_dataconcentrator():
-    """sim: (also by default) for the manipulator gives a SimTIO10 and a SimDataConcentrator."""
+    """sim: (also by default) for the manipulator gives a TIO10 and a dataConcentrator over the
+    image of the two cards' register files."""
     boards = open_boards(None, "prototype", MANIPULATOR_BOARDS)
     assert boards.url == "sim:" and boards.in_process
     side = boards.simulated
     assert side is not None
-    assert isinstance(side["tio10"], SimTIO10) and isinstance(side["dc"], SimDataConcentrator)
+    assert side["tio10"].kind.name == "tio10" and side["dc"].kind.name == "dataconcentrator"
     assert isinstance(boards["tio10"], TIO10) and isinstance(boards["dc"], DataConcentrator)
     assert list(boards) == ["tio10", "dc"] and "gripper" not in boards
     with pytest.raises(KeyError, match="tio10, dc"):
@@ -214,7 +213,7 @@ def test_entry_point_back_end_is_found_by_scheme_with_its_options(entry_points):
     entry_points({"fake": f"{__name__}:fake_factory"})
     assert known_schemes() == ["fake", "modbus", "sim", "tcp"]
     boards = open_boards("FAKE://lab-rack:7?gain=2&mode=a", "prototype", MANIPULATOR_BOARDS, mode="b")
-    assert boards.world == "fake" and isinstance(boards["tio10"], SimTIO10)
+    assert boards.world == "fake" and isinstance(boards["tio10"], RegisterBoard)
     url, station, options = CALLS[-1]
     assert (url.scheme, url.host, url.port, station) == ("fake", "lab-rack", 7, "prototype")
     assert options == {"gain": "2", "mode": "b"}
@@ -261,7 +260,7 @@ def test_boards_must_hold_every_declared_board():
     with pytest.raises(ConfigError, match="no gripper board"):
         Boards("x:", "gripper", {}, GRIPPER_BOARDS, in_process=True)
     with pytest.raises(ConfigError, match="no dc board"):
-        Boards("x:", "prototype", {"tio10": SimTIO10()}, MANIPULATOR_BOARDS, in_process=True)
+        Boards("x:", "prototype", {"tio10": RegisterBoard(MANIPULATOR_BOARDS["tio10"])}, MANIPULATOR_BOARDS, in_process=True)
 
 
 def test_read_inputs_reads_the_image_without_stepping_the_world():
@@ -272,10 +271,10 @@ def test_read_inputs_reads_the_image_without_stepping_the_world():
     side = boards.simulated
     assert side is not None and boards.attach_world(steps.append)
     boards.set_tick(0.001)
-    side["gripper"].pa = 0x7F
+    side["gripper"].set_input("pa", 0x7F)
     boards.read_inputs(5)
     assert steps == [] and boards["gripper"].read(P8155_PA) == 0x7F
-    side["gripper"].pa = 0x3F
+    side["gripper"].set_input("pa", 0x3F)
     boards.poll(6)
     assert steps == [6] and boards["gripper"].read(P8155_PA) == 0x3F
     boards.close()
@@ -305,9 +304,9 @@ def test_a_bound_write_refuses_what_write_refuses_and_a_same_value_is_no_change(
     assert seen == []
     write(0x90)
     assert seen == [(image.output_index[("gripper", "dac", 0)], 0x90)]
-    assert boards.simulated["gripper"].dac == 0x80  # in the image until the write phase
+    assert boards.simulated["gripper"].output("dac") == 0x80  # in the image until the write phase
     boards.flush(0)
-    assert boards.simulated["gripper"].dac == 0x90
+    assert boards.simulated["gripper"].output("dac") == 0x90
     with pytest.raises(ValueError, match="input"):
         image.writer("gripper", "pa")
     boards.close()

@@ -127,7 +127,8 @@ class TestPrototypeConformance(StationConformance):
         return _manipulator_driven(station)
 
     def settings(self, station):
-        regs = tuple(station.boards.simulated["tio10"].register_file())  # the world's side
+        side = station.boards.simulated["tio10"]  # the world's side: every register
+        regs = tuple(tuple(side.values(r.name)) for r in side.kind.registers)
         devs = tuple((a.motor.state, a.motor.mode, a.motor.cruise_speed, a.encoder.zero_length,
                       a.loadcell.slope, a.loadcell.offset, a.mode) for a in station.axes)
         pa = station.polyaxis

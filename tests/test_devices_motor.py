@@ -4,23 +4,23 @@ from __future__ import annotations
 
 import pytest
 
-from pyrt.boards.simboards import SimTIO10
-from pyrt.boards.tio10 import AWO_BITS, DIR_BITS
+from pyrt.boards.tio10 import AWO_BITS, DIR_BITS, TIO10
 from pyrt.devices.motor import OFF, ON, STANDBY, VELOCITY_MODE, Motor
 from pyrt.errors import CommandError, ConfigError
+from pyrt.sim.cards import add_pulses
 
 CH = 7
 
 
 def _motor(tio=None, **kw):
-    tio = tio or SimTIO10()
+    tio = tio or TIO10()
     args = {"start_speed": 0.5, "cruise_speed": 7.0}
     args.update(kw)
     return Motor("axis0Motor", tio, CH, **args), tio
 
 
 def _pulse(tio, n):
-    tio.plant_add_pulses(CH, n)
+    add_pulses(tio.registers, CH, n)
 
 
 def _windings_on(tio, ch=CH):
@@ -30,7 +30,7 @@ def _windings_on(tio, ch=CH):
 @pytest.mark.parametrize("channel", [4, 5])
 def test_rtc_channels_refused(channel):
     """A motor on channel 4 or 5 is a ConfigError naming the real-time clock."""
-    tio = SimTIO10()
+    tio = TIO10()
     with pytest.raises(ConfigError, match="real-time clock"):
         Motor("m", tio, channel, 0.5, 7.0)
     assert tio.writes == 0
@@ -44,7 +44,7 @@ def test_rtc_channels_refused(channel):
 ])
 def test_speed_limits_enforced(start, cruise, match):
     """Start speed >= 0.07 and cruise <= 7.0 cm/s are enforced with clear errors."""
-    tio = SimTIO10()
+    tio = TIO10()
     with pytest.raises(ConfigError, match=match):
         Motor("m", tio, CH, start, cruise)
     assert tio.writes == 0
@@ -204,6 +204,6 @@ def test_from_record_uses_database_values():
     from pyrt.db import load_station, station_directory
 
     rec = load_station(station_directory("prototype")).motor("motor1")
-    m = Motor.from_record(rec, SimTIO10(), name="axis1Motor")
+    m = Motor.from_record(rec, TIO10(), name="axis1Motor")
     assert (m.name, m.channel, m.start_speed, m.cruise_speed) == ("axis1Motor", 8, 0.5, 7.0)
     assert m.ramp_decrement == rec.ramp_decrement and m.dv_limit == rec.dv_limit

@@ -4,16 +4,16 @@ from __future__ import annotations
 
 import pytest
 
-from pyrt.boards.dataconcentrator import AnalogChannel, DigitalChannel
-from pyrt.boards.simboards import SimDataConcentrator
+from pyrt.boards.dataconcentrator import AnalogChannel, DataConcentrator, DigitalChannel
 from pyrt.devices.encoder import Encoder
 from pyrt.devices.loadcell import Loadcell, parse_load
 from pyrt.errors import CommandError, ConfigError
+from pyrt.sim.cards import add_counts, set_adc
 
 
 def _encoder(**kw):
-    dc = SimDataConcentrator()
-    dc.plant_add_counts(168, 55)  # left over from before start-up
+    dc = DataConcentrator()
+    add_counts(dc.registers, 168, 55)  # left over from before start-up
     enc = Encoder("axis0Encoder", DigitalChannel(dc, 168), 0.2392, 747.045410, **kw)
     return enc, dc
 
@@ -23,14 +23,14 @@ def test_encoder_resets_at_start_and_converts():
     enc, dc = _encoder()
     assert enc.count() == 0
     assert enc.length() == pytest.approx(747.045410)
-    dc.plant_add_counts(168, -100)
+    add_counts(dc.registers, 168, -100)
     assert enc.length() == pytest.approx(747.045410 - 23.92)
 
 
 def test_encoder_commands():
     """reset clears the counter; setZeroLength sets the zero length; read replies the value."""
     enc, dc = _encoder()
-    dc.plant_add_counts(168, 10)
+    add_counts(dc.registers, 168, 10)
     assert enc.read() == pytest.approx(747.045410 + 2.392)
     assert enc.find_command("read").lines(enc.read()) == ["749.437 cm"]
     enc.reset()
@@ -76,7 +76,7 @@ def test_zerolength_write_back_once_a_second_while_changing():
     written = []
     enc, dc = _encoder(write_back=written.append)
     for i in range(3000):  # 3 s at 1 ms, rope moving
-        dc.plant_add_counts(168, 1)
+        add_counts(dc.registers, 168, 1)
         enc.poll(i / 1000)
     assert len(written) == 3
     assert written[-1] == pytest.approx(enc.zero_length + 0.2392 * 2001, abs=1e-9)
@@ -88,11 +88,11 @@ def test_zerolength_write_back_once_a_second_while_changing():
 def test_encoder_config_errors():
     """A zero SLOPE is a ConfigError."""
     with pytest.raises(ConfigError):
-        Encoder("e", DigitalChannel(SimDataConcentrator(), 1), 0.0, 10.0)
+        Encoder("e", DigitalChannel(DataConcentrator(), 1), 0.0, 10.0)
 
 
 def _loadcell(**kw):
-    dc = SimDataConcentrator()
+    dc = DataConcentrator()
     lc = Loadcell("axis0Loadcell", AnalogChannel(dc, 3), 0.6777730537, -482.535980,
                   maxload=222.4, **kw)
     return lc, dc
@@ -101,7 +101,7 @@ def _loadcell(**kw):
 def test_loadcell_converts():
     """N = SLOPE * adc + OFFSET (Table 9)."""
     lc, dc = _loadcell()
-    dc.plant_set_adc(3, 800)
+    set_adc(dc.registers, 3, 800)
     assert lc.tension() == pytest.approx(0.6777730537 * 800 - 482.535980)
 
 
@@ -111,14 +111,14 @@ def test_loadcell_calibration_fits_by_least_squares():
     lc, dc = _loadcell(write_back=lambda s, o: saved.append((s, o)))
     assert lc.calibrate() is None and lc.calibrating
     for code, load in ((700, "0"), (900, "100 N"), (1100, "200")):
-        dc.plant_set_adc(3, code)
+        set_adc(dc.registers, 3, code)
         lc.point(load)
     slope, offset = lc.calibrate()
     assert slope == pytest.approx(0.5)
     assert offset == pytest.approx(-350.0)
     assert saved == [(slope, offset)]
     assert not lc.calibrating
-    dc.plant_set_adc(3, 1000)
+    set_adc(dc.registers, 3, 1000)
     assert lc.tension() == pytest.approx(150.0)
 
 
@@ -137,7 +137,7 @@ def test_fewer_than_two_points_is_an_error():
     saved = []
     lc, dc = _loadcell(write_back=lambda s, o: saved.append((s, o)))
     lc.calibrate()
-    dc.plant_set_adc(3, 800)
+    set_adc(dc.registers, 3, 800)
     lc.point(50)
     with pytest.raises(CommandError, match="at least two"):
         lc.calibrate()
@@ -150,7 +150,7 @@ def test_points_at_one_code_are_an_error():
     """Two points at the same ADC code cannot fix a slope."""
     lc, dc = _loadcell()
     lc.calibrate()
-    dc.plant_set_adc(3, 800)
+    set_adc(dc.registers, 3, 800)
     lc.point(10)
     lc.point(20)
     with pytest.raises(CommandError, match="different loads"):
@@ -167,11 +167,11 @@ def test_point_outside_calibration_mode_is_an_error():
 def test_keyboard_commands_by_name():
     """Encoder, Loadcell and Motor commands run by name; unknown names and wrong argument
     counts are CommandErrors."""
-    from pyrt.boards.simboards import SimTIO10
+    from pyrt.boards.tio10 import TIO10
     from pyrt.devices.motor import Motor
 
     enc, dc = _encoder()
-    dc.plant_add_counts(168, 4)
+    add_counts(dc.registers, 168, 4)
     enc.run_command("reset")
     assert enc.count() == 0
     assert enc.run_command("SETZEROLENGTH", "12.5") == 12.5
@@ -183,12 +183,12 @@ def test_keyboard_commands_by_name():
         enc.run_command("setZeroLength")
     lc, dc = _loadcell()
     lc.run_command("calibrate")
-    dc.plant_set_adc(3, 700)
+    set_adc(dc.registers, 3, 700)
     lc.run_command("calibrationPoint", "0")
-    dc.plant_set_adc(3, 900)
+    set_adc(dc.registers, 3, 900)
     lc.run_command("point", "100")
     assert lc.run_command("calibrate") == pytest.approx((0.5, -350.0))
-    m = Motor("axis0Motor", SimTIO10(), 7, 0.5, 7.0)
+    m = Motor("axis0Motor", TIO10(), 7, 0.5, 7.0)
     assert m.run_command("maxspeed", "3") == 3.0
     with pytest.raises(CommandError):
         m.run_command("maxspeed", "3", "4")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 from _gripper_rig import make_rig, signed
 
+from pyrt.boards.gripper import P8155_PB
 from pyrt.errors import CommandError
 
 TARGETS = [-0x1B86, -0x0100, -0x2000, -0x0010, -0x2900, -0x0800, 0]
@@ -162,7 +163,7 @@ def test_monitor_clock_off_freezes_the_queue_and_sensors():
     assert rig.board.leds == 0xFBFE
     rig.ctl.toggle_clock()
     rig.loop.run(100)
-    assert rig.cpu.ram[0x2E] == rig.board.pb | 0xF8
+    assert rig.cpu.ram[0x2E] == rig.board.read(P8155_PB)
 
 
 def test_p_during_init_is_refused():

@@ -4,8 +4,18 @@ from __future__ import annotations
 
 import pytest
 
-from pyrt.boards.gripper import DAC, LED_HI, LED_LO, P8155_PA, P8155_PB, P8155_PC, SimGripperBoard
+from pyrt.boards.gripper import (
+    DAC,
+    GRIPPER_CAGE,
+    LED_HI,
+    LED_LO,
+    P8155_PA,
+    P8155_PB,
+    P8155_PC,
+    GripperBoard,
+)
 from pyrt.boards.i8031 import I8031, VECTOR_EXT0, VECTOR_EXT1
+from pyrt.boards.registers import RegisterBoard
 from pyrt.sim.gripper import JawPlant
 
 MS = 1_000_000
@@ -13,11 +23,12 @@ MS = 1_000_000
 
 def rig(**kw):
     cpu = I8031()
-    board = SimGripperBoard(cpu)
+    regs = RegisterBoard(GRIPPER_CAGE)  # the cage's register file: the jaws on one side,
+    board = GripperBoard(regs, cpu)  # the 8031 on the other (interrupts raised at poll)
     counts = {"up": 0, "down": 0}
     cpu.set_vector(VECTOR_EXT0, lambda: counts.__setitem__("up", counts["up"] + 1))
     cpu.set_vector(VECTOR_EXT1, lambda: counts.__setitem__("down", counts["down"] + 1))
-    plant = JawPlant(board, **kw)
+    plant = JawPlant(regs, **kw)
     t = [0]
 
     def run(ms: int, dac: int | None = None) -> None:
@@ -25,6 +36,7 @@ def rig(**kw):
             cpu.movx_write(DAC, dac)
         for _ in range(ms):
             plant.step(t[0])
+            board.poll(t[0])
             t[0] += MS
 
     return cpu, board, plant, counts, run
@@ -146,7 +158,8 @@ def test_physics_advances_by_elapsed_time():
     """dt = now - last: one 10 ms step moves the jaws as far as ten 1 ms steps, roughly."""
     _c, _b, a, _n, _r = rig(start=-0x800)
     _c2, _b2, b, _n2, _r2 = rig(start=-0x800)
-    a.board.dac = b.board.dac = 0x80 - 100
+    a.board.write(DAC, 0x80 - 100)
+    b.board.write(DAC, 0x80 - 100)
     for t in range(0, 200 * MS + 1, MS):
         a.step(t)
     for t in range(0, 200 * MS + 1, 10 * MS):

@@ -9,7 +9,7 @@ from pyrt.boards.gripper import DAC_NULL
 from pyrt.boards.i8031 import FLAGS, I8031
 from pyrt.boards.modbus import builtin_map
 from pyrt.boards.modbusmap import load_map
-from pyrt.boards.simboards import SimTIO10
+from pyrt.boards.tio10 import TIO10
 from pyrt.devices.motor import OFF, ON, Motor
 from pyrt.errors import BoardError
 from pyrt.robots.gripper import _MASK_DOJOG, _MASK_DRVON, GripperController
@@ -49,7 +49,7 @@ def test_gripper_reflex_over_a_dead_modbus_link_raises_and_still_clears_its_stat
         boards.close()
 
 
-class _DeadTIO10(SimTIO10):
+class _DeadTIO10(TIO10):
     """A TIO10 whose link died: every write raises BoardError."""
 
     dead = False

@@ -10,8 +10,8 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from pyrt.boards.simboards import SimDataConcentrator, SimTIO10
-from pyrt.boards.tio10 import AWO_BITS, DIR_BITS
+from pyrt.boards.dataconcentrator import DataConcentrator
+from pyrt.boards.tio10 import AWO_BITS, DIR_BITS, TIO10
 from pyrt.db import load_station, station_directory
 from pyrt.errors import NativeError
 from pyrt.native import StaticsSolver, rope_lengths
@@ -226,8 +226,8 @@ def proto():
 
 def _plant(station, imp=None, **kw):
     rig = rig_from_station(station)
-    tio, dc = SimTIO10(), SimDataConcentrator()
-    plant = ManipulatorPlant(rig, tio, dc, imperfections=imp or Imperfections.ideal(), **kw)
+    tio, dc = TIO10(), DataConcentrator()
+    plant = ManipulatorPlant(rig, tio.registers, dc.registers, imperfections=imp or Imperfections.ideal(), **kw)
     return plant, tio, dc
 
 
@@ -368,9 +368,9 @@ def test_buoyancy_only_when_submerged(proto):
     rig = rig_from_station(proto)
     wet = dataclasses.replace(rig, volume=1000.0, liquid_level=200.0)
     dry = dataclasses.replace(rig, volume=1000.0, liquid_level=50.0)
-    tio, dc = SimTIO10(), SimDataConcentrator()
-    p_wet = ManipulatorPlant(wet, tio, dc, imperfections=Imperfections.ideal())
-    p_dry = ManipulatorPlant(dry, SimTIO10(), SimDataConcentrator(),
+    tio, dc = TIO10(), DataConcentrator()
+    p_wet = ManipulatorPlant(wet, tio.registers, dc.registers, imperfections=Imperfections.ideal())
+    p_dry = ManipulatorPlant(dry, TIO10().registers, DataConcentrator().registers,
                              imperfections=Imperfections.ideal())
     assert p_wet.weight == pytest.approx((MASS - 1.1) * GRAVITY)
     assert p_dry.weight == pytest.approx(MASS * GRAVITY)

@@ -2,11 +2,11 @@
 
 Board kinds that declare their registers (:class:`BoardKind`,
 :class:`Register`; :mod:`pyrt.boards.registers`) and the generic
-in-process :class:`RegisterBoard`; the built-in kinds
-(:mod:`pyrt.boards.kinds`): the 8031 RAM image and ports with the gripper
-cage (:mod:`pyrt.boards.gripper`), the TIO10's counter and stepper channels,
-the dataConcentrator's counters and ADCs; the in-process simulated boards;
-and the back ends chosen by URL (:func:`open_boards`: ``sim:``,
+in-process :class:`RegisterBoard`; the built-in kinds and their typed
+views over any register access (:mod:`pyrt.boards.kinds`): the 8031 RAM
+image and ports with the gripper cage (:mod:`pyrt.boards.gripper`), the
+TIO10's counter and stepper channels, the dataConcentrator's counters and
+ADCs; and the back ends chosen by URL (:func:`open_boards`: ``sim:``,
 ``tcp://HOST:PORT``, or a scheme registered through the ``pyrt.boards``
 entry points; see :mod:`pyrt.boards.registry`), which open the boards a
 station declares as a :class:`Boards` mapping.

@@ -1,16 +1,25 @@
 """The dataConcentrator card: encoder counters and loadcell ADCs (000, sections 9-11).
 
-Level 1 is :class:`DataConcentrator`, the card's register interface: up/down
-counter channels addressed by the encoder board address on the chain (0..255;
-Table 7's ``ADDRESS: 168``) and 12-bit ADC channels (0..15; Table 9's
-``CHANNEL: 3``).  Level 2 are :class:`DigitalChannel` (a counter read as a
-signed count) and :class:`AnalogChannel` (an ADC read as a code): they know
-what the bits are, not what is connected to them.
+:data:`DATACONCENTRATOR` declares its registers: up/down counter channels
+addressed by the encoder board address on the chain (0..255; Table 7's
+``ADDRESS: 168``), 12-bit ADC channels (0..15; Table 9's ``CHANNEL: 3``)
+and a clear strobe per counter.  :class:`DataConcentrator` is the card
+over any register access of that kind; :class:`DigitalChannel` (a counter
+read as a signed count) and :class:`AnalogChannel` (an ADC read as a code)
+know what the bits are, not what is connected to them.
 """
 
 from __future__ import annotations
 
-from abc import ABC, abstractmethod
+from pyrt.boards.registers import (
+    OUTPUT,
+    BoardKind,
+    Register,
+    RegisterBoard,
+    Registers,
+    bound_reader,
+    bound_writer,
+)
 
 __all__ = [
     "ADC_BITS",
@@ -18,11 +27,10 @@ __all__ = [
     "ADC_MAX",
     "COUNTER_ADDRESSES",
     "COUNTER_BITS",
+    "DATACONCENTRATOR",
     "AnalogChannel",
     "DataConcentrator",
     "DigitalChannel",
-    "check_adc_channel",
-    "check_counter_address",
 ]
 
 #: Up/down counters are 24 bits, two's complement when read as signed.
@@ -33,50 +41,62 @@ ADC_MAX = (1 << ADC_BITS) - 1
 ADC_CHANNELS = range(16)
 
 
-def check_counter_address(address: int) -> int:
-    """Return ``address`` if it is a counter address on the chain (0..255)."""
-    if type(address) is int and 0 <= address <= 255:
-        return address
-    if (
-        isinstance(address, bool)
-        or not isinstance(address, int)
-        or address not in COUNTER_ADDRESSES
-    ):
-        raise ValueError(f"dataConcentrator counter address must be 0..255, got {address!r}")
-    return address
 
+class DataConcentrator:
+    """One dataConcentrator card over ``registers`` (any register access of
+    :data:`DATACONCENTRATOR`; None: a register file of its own, in this
+    process).  An address or channel the declarations refuse is a ValueError."""
 
-def check_adc_channel(channel: int) -> int:
-    """Return ``channel`` if it is an ADC channel (0..15)."""
-    if type(channel) is int and 0 <= channel <= 15:
-        return channel
-    if isinstance(channel, bool) or not isinstance(channel, int) or channel not in ADC_CHANNELS:
-        raise ValueError(f"dataConcentrator ADC channel must be 0..15, got {channel!r}")
-    return channel
+    def __init__(self, registers: Registers | None = None):
+        self.registers: Registers = registers if registers is not None \
+            else RegisterBoard(DATACONCENTRATOR)
+        self.url = getattr(self.registers, "url", "")
+        r = self.registers
+        # every register bound once, by address (channel)
+        self._cnt = [bound_reader(r, "cnt", a) for a in COUNTER_ADDRESSES]
+        self._adc = [bound_reader(r, "adc", c) for c in ADC_CHANNELS]
+        self._clr = [bound_writer(r, "clr", a) for a in COUNTER_ADDRESSES]
+        # a read later in the tick sees the counter cleared (a process image's copy)
+        self._cached = getattr(r, "set_cached", None)
 
-
-class DataConcentrator(ABC):
-    """Register interface of one dataConcentrator card."""
-
-    @abstractmethod
     def read_counter(self, address: int) -> int:
         """The raw 24-bit counter at ``address`` (0..2**24-1)."""
+        return self._cnt[_CNT.check_index(address)]()
 
-    @abstractmethod
     def clear_counter(self, address: int) -> None:
         """Clear the counter at ``address`` to zero."""
+        self._clr[_CNT.check_index(address)](1)
+        if self._cached is not None:
+            self._cached("cnt", 0, address)
 
-    @abstractmethod
     def read_adc(self, channel: int) -> int:
         """The latest 12-bit conversion of ADC ``channel`` (0..4095)."""
+        return self._adc[_ADC.check_index(channel)]()
+
+    def __repr__(self) -> str:
+        return f"<DataConcentrator over {self.registers!r}>"
+
+
+
+DATACONCENTRATOR = BoardKind("dataconcentrator", (
+    Register("cnt", count=len(COUNTER_ADDRESSES), width=COUNTER_BITS, units="counts",
+             doc="up/down counter at each address on the chain (24-bit, wraps)"),
+    Register("adc", count=len(ADC_CHANNELS), width=ADC_BITS, units="ADC codes",
+             doc="latest 12-bit conversion of each ADC channel"),
+    Register("clr", count=len(COUNTER_ADDRESSES), width=1, direction=OUTPUT, readback=False,
+             clears="cnt", doc="write 1 to clear the counter at that address (a strobe)"),
+), doc="the dataConcentrator card: encoder counters and loadcell ADCs (000, 9-11)",
+    board=DataConcentrator)
+
+_CNT, _ADC = DATACONCENTRATOR.register("cnt"), DATACONCENTRATOR.register("adc")
 
 
 class DigitalChannel:
-    """Level 2: one counter channel, read as a signed count."""
+    """One counter channel, read as a signed count."""
 
     def __init__(self, board: DataConcentrator, address: int):
         self.board = board
-        self.address = check_counter_address(address)
+        self.address = _CNT.check_index(address)
 
     def count(self) -> int:
         """The counter as a signed 24-bit two's-complement number."""
@@ -91,11 +111,11 @@ class DigitalChannel:
 
 
 class AnalogChannel:
-    """Level 2: one ADC channel, read as a code 0..4095."""
+    """One ADC channel, read as a code 0..4095."""
 
     def __init__(self, board: DataConcentrator, channel: int):
         self.board = board
-        self.channel = check_adc_channel(channel)
+        self.channel = _ADC.check_index(channel)
 
     def code(self) -> int:
         """The latest conversion."""

@@ -28,12 +28,13 @@ another bus) is derived from these declarations, never kept beside them::
 A station uses :class:`RegisterBoard` directly (in process) or the register
 view a back end gives (``tcp://``): both have :meth:`RegisterBoard.read`,
 :meth:`RegisterBoard.write` and :attr:`RegisterBoard.kind`.  The built-in
-boards (the gripper cage, the TIO10, the dataConcentrator) declare their
-registers too (:mod:`pyrt.boards.kinds`) and keep their typed interfaces
-for the control code: a kind may build its own in-process board
-(:meth:`BoardKind.sim`), give a register view of it (:meth:`BoardKind.view`)
-and wrap a remote register view in its typed interface
-(:meth:`BoardKind.remote`).  The defaults are the generic board.
+boards (the gripper cage, the TIO10, the dataConcentrator;
+:mod:`pyrt.boards.kinds`) declare their registers too and give the control
+code a typed view over any register access of their kind
+(:attr:`BoardKind.board`, built by :meth:`BoardKind.remote`), whose
+argument checks are the declarations'.  In process every kind is a
+:class:`RegisterBoard`, the world's side, which the simulation in
+:mod:`pyrt.sim` drives.
 """
 
 from __future__ import annotations
@@ -87,6 +88,9 @@ class Register:
     index left alone); None: the watchdog leaves it alone.  ``readback``
     False makes an output write-only (a strobe).  ``address`` is where a
     memory-mapped board has it (documentation for a real-board back end).
+    ``clears``: the input (of as many registers) that a write of 1 here
+    clears at the same index (a counter's clear strobe).  ``power_up``: the
+    value every index holds when the board starts (None: its off value, else 0).
     """
 
     name: str
@@ -99,6 +103,8 @@ class Register:
     off: int | tuple[int | None, ...] | None = None
     readback: bool = True
     address: int | None = None
+    clears: str = ""
+    power_up: int | None = None
 
     def __post_init__(self) -> None:
         check_board_name(self.name)
@@ -119,7 +125,7 @@ class Register:
         offs = self.off if isinstance(self.off, tuple) else (self.off,)
         if isinstance(self.off, tuple) and len(self.off) != self.count:
             raise ConfigError(f"{what}: {len(self.off)} off values for {self.count} registers")
-        for v in offs:
+        for v in (*offs, self.power_up):
             if v is not None and not self.fits(v):
                 raise ConfigError(f"{what}: off value {v!r} does not fit {self.describe()}")
 
@@ -169,22 +175,27 @@ class Register:
     def signature(self) -> str:
         """The declaration as one line (for the kind's fingerprint)."""
         return (f"{self.name}:{self.count}:{self.width}:{int(self.signed)}:{self.direction}:"
-                f"{self.off!r}:{int(self.readback)}")
+                f"{self.off!r}:{int(self.readback)}" + (f":{self.clears}" if self.clears else "")
+                + (f":{self.power_up}" if self.power_up is not None else ""))
 
 
 @dataclass(frozen=True)
 class BoardKind:
     """A kind of board: its name and its registers (see the module text).
 
-    ``options`` are the keyword options its builders take (the gripper
-    cage: ``cpu``, the 8031 it is mapped into); a back end passes them on.
-    ConfigError for duplicate register names, a bad name or width.
+    ``board``: the typed board the control code uses over a register access
+    of this kind (called as ``board(registers, **options)``: a built-in
+    board's view, such as :class:`~pyrt.boards.tio10.TIO10`), or None: the
+    register access itself.  ``options`` are the keyword options it takes
+    (the gripper cage: ``cpu``, the 8031 it is mapped into); a back end
+    passes them on.  ConfigError for duplicate register names, a bad name or width.
     """
 
     name: str
     registers: tuple[Register, ...]
     doc: str = ""
     options: frozenset[str] = field(default=frozenset())
+    board: Any = field(default=None, compare=False)
     _by_name: dict[str, Register] = field(init=False, repr=False, compare=False, hash=False)
 
     def __post_init__(self) -> None:
@@ -203,6 +214,12 @@ class BoardKind:
                 raise ConfigError(f"board kind {self.name!r} declares register "
                                   f"{reg.name!r} twice")
             by_name[reg.name] = reg
+        for reg in regs:
+            cleared = by_name.get(reg.clears) if reg.clears else reg
+            if cleared is None or (reg.clears and (reg.is_input or not cleared.is_input
+                                                   or cleared.count != reg.count)):
+                raise ConfigError(f"board kind {self.name!r}: {reg.name} clears {reg.clears!r}, "
+                                  f"which is no input of {reg.count} registers")
         object.__setattr__(self, "registers", regs)
         object.__setattr__(self, "options", frozenset(self.options))
         object.__setattr__(self, "_by_name", by_name)
@@ -266,20 +283,21 @@ class BoardKind:
             raise ValueError(f"{reg.name} of a {self.name} board is write-only")
         return reg
 
-    # -- builders (a built-in kind overrides them) ---------------------------------------
+    # -- builders -------------------------------------------------------------------------
 
-    def sim(self, **options: Any) -> Any:
-        """A new in-process board of this kind (default: a :class:`RegisterBoard`)."""
+    def sim(self, **options: Any) -> RegisterBoard:
+        """A new in-process register file of this kind (the world's side of ``sim:``)."""
         return RegisterBoard(self)
 
     def view(self, board: Any) -> Registers:
-        """The register view of an in-process board of this kind (default: the board)."""
+        """The register view of an in-process board of this kind (the board itself)."""
         return board  # type: ignore[no-any-return]
 
     def remote(self, registers: Registers, **options: Any) -> Any:
-        """The board the control code uses over a remote register view
-        (default: the view itself)."""
-        return registers
+        """The board the control code uses over ``registers`` (any register
+        access of this kind: in process, an image, a link): :attr:`board` of
+        them, or the access itself."""
+        return registers if self.board is None else self.board(registers, **options)
 
 
 @runtime_checkable
@@ -303,8 +321,8 @@ class RegisterBoard:
 
     The controller's side: :meth:`read` (any readable register) and
     :meth:`write` (outputs only, checked against width and signedness).
-    The world's side: :meth:`set_input` and :meth:`output`.  Outputs start
-    at their off value (else 0), inputs at 0.  ``writes`` counts the
+    The world's side: :meth:`set_input`, :meth:`output` and :meth:`cells`.
+    Registers start at their power-up value, else their off value, else 0.  ``writes`` counts the
     controller's writes through :meth:`write`.
     """
 
@@ -315,7 +333,8 @@ class RegisterBoard:
         self._values: dict[str, list[int]] = {}
         for reg in kind.registers:
             self._values[reg.name] = [
-                (reg.off_value(i) or 0) if not reg.is_input else 0 for i in range(reg.count)]
+                reg.power_up if reg.power_up is not None else (reg.off_value(i) or 0)
+                for i in range(reg.count)]
         self._inputs = kind.inputs()
         self.writes = 0
         # The fast path of every access (the servo rate): name -> (values, count,
@@ -325,6 +344,8 @@ class RegisterBoard:
                           for r in kind.registers if not r.is_input}
         self._settable = {r.name: (self._values[r.name], r.count, r.low, r.high)
                           for r in kind.registers if r.is_input}
+        # a clear strobe's input (the list it clears)
+        self._clears = {r.name: self._values[r.clears] for r in kind.registers if r.clears}
         self._readable: dict[str, list[int]] = {}
         for r in kind.registers:
             try:
@@ -352,6 +373,9 @@ class RegisterBoard:
             fast = self._writable[name]
         fast[0][index] = value
         self.writes += 1
+        cleared = self._clears.get(name)
+        if cleared is not None and value == 1:
+            cleared[index] = 0
 
     def setter(self, name: str, index: int = 0) -> Callable[[int], None]:
         """The write of the output ``name[index]`` bound once, for a caller that
@@ -361,7 +385,17 @@ class RegisterBoard:
         if values is None:
             raise ValueError(f"{name} is no output of a {self.kind.name} board")
         self.kind.register(name).check_index(index)
-        return partial(values[0].__setitem__, index)  # not counted in writes
+        cleared = self._clears.get(name)
+        if cleared is None:
+            return partial(values[0].__setitem__, index)  # not counted in writes
+        cells = values[0]
+
+        def strobe(value: int) -> None:
+            cells[index] = value
+            if value == 1:
+                cleared[index] = 0
+
+        return strobe
 
     def snapshot(self) -> list[int]:
         """Every input in declared order."""
@@ -401,6 +435,13 @@ class RegisterBoard:
         """Every value of ``name`` (a copy)."""
         self.kind.register(name)
         return list(self._values[name])
+
+    def cells(self, name: str) -> list[int]:
+        """The register file's own list of ``name`` (the world's side, bound once:
+        a plant reads an output and sets an input as an item of it; what it sets
+        must fit the declaration, nothing here looks again)."""
+        self.kind.register(name)
+        return self._values[name]
 
     def __repr__(self) -> str:
         return f"<RegisterBoard {self.kind.name}>"

@@ -8,9 +8,9 @@ request line and one reply line on a TCP connection (:mod:`pyrt.boards.wire`).
 has them).  A station gets, for each board it declares, what the board's
 kind makes of that view (:meth:`BoardKind.remote
 <pyrt.boards.registers.BoardKind.remote>`): the view itself for a plain
-kind, the typed interface for a built-in one (the gripper cage mapped into
-the 8031 exactly as the simulated board is, so the controller program is
-the same; the TIO10; the dataConcentrator; :mod:`pyrt.boards.kinds`).
+kind, the typed view for a built-in one (the gripper cage mapped into the
+8031 as it is over ``sim:``, so the controller program is the same; the
+TIO10; the dataConcentrator; :mod:`pyrt.boards.kinds`).
 
 On connect the greeting names the station and its boards with their kinds:
 every board the station declares must be there with the same kind and
@@ -82,7 +82,6 @@ from pyrt.boards.image import (
     ImageRegisters,
     Write,
 )
-from pyrt.boards.kinds import RemoteDataConcentrator, RemoteGripperBoard, RemoteTIO10
 from pyrt.boards.registers import BoardKind, options_for, split_options
 from pyrt.boards.registry import Boards, BoardURL
 from pyrt.boards.wire import snapshot_struct
@@ -93,11 +92,8 @@ __all__ = [
     "DEFAULT_MAX_AGE_S",
     "DEFAULT_TIMEOUT_S",
     "TcpBoardRegisters",
-    "TcpDataConcentrator",
-    "TcpGripperBoard",
     "TcpLink",
     "TcpRegisters",
-    "TcpTIO10",
     "open_tcp",
 ]
 
@@ -105,11 +101,6 @@ DEFAULT_MAX_AGE_S = 0.05
 #: How long one ``STREAM`` request streams for (ms); the client asks again at half of it
 #: (or at a quarter of the watchdog time, if that is sooner).
 STREAM_MS = 100
-
-#: The typed boards over tcp:// (the built-in kinds' remote adapters).
-TcpGripperBoard = RemoteGripperBoard
-TcpTIO10 = RemoteTIO10
-TcpDataConcentrator = RemoteDataConcentrator
 
 
 # -- the registers of one connection ---------------------------------------------------------
@@ -273,8 +264,12 @@ class TcpRegisters(ImageBackend):
         try:
             self.link.request(_write_line(writes))
         except ValueError:
-            for b, n, i, _ in writes:  # those before the refused one stand: read them again
-                self._outputs.pop((b, n, i), None)
+            # those before the refused one stand, the rest do not: the image takes
+            # what board-sim holds (a write-only strobe holds nothing to read)
+            keys = [(b, n, i) for b, n, i, _ in writes if self.kinds[b].register(n).readback]
+            held = self.link.pipeline([f"R {b} {n} {i}" for b, n, i in keys])
+            for key, values in zip(keys, held, strict=True):
+                self._outputs[key] = self._output_list[self.output_index[key]] = values[0]
             raise
 
     def read_outputs(self) -> dict[tuple[str, str, int], int]:
@@ -302,25 +297,12 @@ class TcpRegisters(ImageBackend):
         """board-sim's ``INFO``: the world's state (not a register access)."""
         return self.link.info()
 
-    # -- compatibility -----------------------------------------------------------------------
-
-    def poll(self, now_ns: int = 0) -> None:
-        """The read phase (:meth:`read_phase`)."""
-        self.read_phase(now_ns)
-
-    def load_outputs(self) -> None:
-        """Read every readable output again (one pipelined exchange)."""
-        self.forget_outputs(self.read_outputs())
-
-    def forget(self) -> None:
+    def resync(self) -> None:
         """The loop starts: the writes made while the station was built go out,
         the watchdog count is forgotten and the outputs read again."""
         super().resync()
         self.link.forget_trips()
-        self.load_outputs()
-
-    def resync(self) -> None:
-        self.forget()
+        self.forget_outputs(self.read_outputs())
 
 
 def _write_line(writes: list[Write]) -> str:

@@ -189,7 +189,7 @@ class GripperController(Component, CommandLetters):
     supervision of every move.
 
     ``cpu`` must have the gripper board mapped in its external data space
-    (:class:`~pyrt.boards.gripper.SimGripperBoard` or a real one).  Call
+    (a :class:`~pyrt.boards.gripper.GripperBoard` over any back end).  Call
     :meth:`attach` to put the ready queue (with the tasks) and the stall
     watchdog on a loop (after the plant), then :meth:`power_up`, then
     :meth:`start_init`.

@@ -33,7 +33,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from math import floor as _floor
 
-from pyrt.boards.gripper import SimGripperBoard
+from pyrt.boards.gripper import JOG_CLOSE, JOG_OPEN, GripperBoard
+from pyrt.boards.registers import RegisterBoard
 
 __all__ = ["FAULTS", "JawParameters", "JawPlant"]
 
@@ -77,13 +78,20 @@ class JawPlant:
 
     def __init__(
         self,
-        board: SimGripperBoard,
+        board: RegisterBoard,
         *,
         start: float = -0x0C00,
         object_mm: float | None = None,
         params: JawParameters | None = None,
     ):
-        self.board = board
+        #: The cage's register file (the world's side) and the cage as a view over it
+        #: (what the controller reads there: the latched DAC, the LEDs).
+        self.registers = board
+        self.board = GripperBoard(board)
+        # the cage's registers the step reads and sets, bound once
+        self._dac = board.cells("dac")
+        self._pa, self._pb, self._pc = (board.cells(n) for n in ("pa", "pb", "pc"))
+        self._up, self._down = board.cells("up"), board.cells("down")
         self.p = params if params is not None else JawParameters()
         if not -self.p.closed - self.p.max_closed_overtravel <= start <= 0:
             raise ValueError(f"start position must be 0 (wide open) .. -{self.p.closed:X}")
@@ -169,7 +177,12 @@ class JawPlant:
         if direction not in ("open", "close", "off"):
             raise ValueError("jog direction is open, close or off")
         self._jog = direction
-        self.board.set_jog(direction == "open", direction == "close")
+        pc = self._pc[0] | (1 << JOG_OPEN) | (1 << JOG_CLOSE)
+        if direction == "open":
+            pc &= ~(1 << JOG_OPEN)
+        elif direction == "close":
+            pc &= ~(1 << JOG_CLOSE)
+        self._pc[0] = pc & 0xFF
         self._jog_until = None
         if direction != "off" and duration_ns is not None:
             now = self._last if self._last is not None else 0
@@ -183,7 +196,16 @@ class JawPlant:
     @property
     def current(self) -> int:
         """The drive current the latched DAC byte applies (-128..127)."""
-        return self.board.dac - 0x80
+        return self._dac[0] - 0x80
+
+    @property
+    def dac(self) -> int:
+        """The DAC byte the controller latched (excess-128)."""
+        return self._dac[0]
+
+    def pulse_counts(self) -> tuple[int, int]:
+        """Encoder pulses counted so far on each interrupt line (up, down), modulo 2**32."""
+        return self._up[0], self._down[0]
 
     @property
     def opening_mm(self) -> float:
@@ -200,7 +222,7 @@ class JawPlant:
             self.jog("off")
         if last is None:
             return
-        u = self.board.dac - 0x80
+        u = self._dac[0] - 0x80
         v = self.v
         if u == 0 and v == 0.0:
             if self._dirty:
@@ -252,8 +274,11 @@ class JawPlant:
         d = enc - self._enc
         if d:
             self._enc = enc
-            if not self._encoder_dead:
-                self.board.encoder(d)
+            if not self._encoder_dead:  # one pulse a count on interrupt 0 (up) or 1 (down)
+                if d > 0:
+                    self._up[0] = (self._up[0] + d) & 0xFFFFFFFF
+                else:
+                    self._down[0] = (self._down[0] - d) & 0xFFFFFFFF
             # far from the limit band with nothing else to sense, the ports
             # read all-off: write them only when that may have changed
             if x >= self._quiet_below or self._dirty or not self._quiet:
@@ -283,8 +308,8 @@ class JawPlant:
         if self.stuck:
             prox = self.stuck.get("2D", prox)
             other = self.stuck.get("2E", other)
-        self.board.pa = prox & 0xFF
-        self.board.pb = other & 0xFF
+        self._pa[0] = prox & 0xFF
+        self._pb[0] = (other | 0xF8) & 0xFF  # PB's bits 3-7 float high
         self._quiet = (
             prox == 0xFF and other == 0xFF and self.object_mm is None and not self.stuck
         )

@@ -1,7 +1,8 @@
 """The rope manipulator's world: motors, ropes, source carriage, encoders, loadcells.
 
-:class:`ManipulatorPlant` sits behind a :class:`~pyrt.boards.simboards.SimTIO10`
-and a :class:`~pyrt.boards.simboards.SimDataConcentrator`.  Each
+:class:`ManipulatorPlant` sits behind a TIO10's and a dataConcentrator's
+register files (:class:`~pyrt.boards.registers.RegisterBoard`; what it does
+to them: :mod:`pyrt.sim.cards`).  Each
 :meth:`ManipulatorPlant.step` (attach it to the :class:`~pyrt.scheduler.Loop`
 before the control tasks) advances by the time that really passed:
 
@@ -32,11 +33,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from pyrt.boards.dataconcentrator import ADC_MAX
-from pyrt.boards.simboards import SimDataConcentrator, SimTIO10
-from pyrt.boards.tio10 import AWO_BITS, CLOCK_HZ, DIR_BITS, check_channel
+from pyrt.boards.dataconcentrator import ADC_MAX, COUNTER_BITS
+from pyrt.boards.registers import RegisterBoard
+from pyrt.boards.tio10 import AWO_BITS, CLOCK_HZ, DIR_BITS, PULSE_COUNTER_MODULUS, TIO10
 from pyrt.errors import NativeError
 from pyrt.native import StaticsSolver
+from pyrt.sim.cards import set_adc, set_rtc
 from pyrt.sim.sensors import Imperfections, loadcell_response
 
 if TYPE_CHECKING:
@@ -54,6 +56,8 @@ __all__ = [
 
 #: Standard gravity, N per kg.
 GRAVITY = 9.80665
+#: The dataConcentrator's counters wrap at 24 bits.
+_COUNTER_MASK = (1 << COUNTER_BITS) - 1
 #: 000, section 5: "The density of D2O is taken to be 1.10 g/cm3".
 D2O_DENSITY = 1.10
 
@@ -223,8 +227,8 @@ class ManipulatorPlant:
     def __init__(
         self,
         rig: ManipulatorRig,
-        tio10: SimTIO10,
-        dc: SimDataConcentrator,
+        tio10: RegisterBoard,
+        dc: RegisterBoard,
         *,
         imperfections: Imperfections | None = None,
         payouts: Sequence[float] | None = None,
@@ -233,13 +237,17 @@ class ManipulatorPlant:
         self.rig = rig
         self.tio10 = tio10
         self.dc = dc
+        # the registers the step reads and sets, bound once
+        self._src, self._per, self._armed = (tio10.cells(n) for n in ("src", "per", "armed"))
+        self._port, self._pulses = tio10.cells("port"), tio10.cells("pulses")
+        self._cnt = dc.cells("cnt")
         self.imp = imperfections if imperfections is not None else Imperfections()
         self._rng = random.Random(self.imp.seed)
         self._np_rng = np.random.default_rng(self.imp.seed)
         self._noise_block: list[float] = []
         self._noise_i = 0
         for r in rig.ropes:
-            check_channel(r.channel)
+            TIO10.check_channel(r.channel)
         n = len(rig.ropes)
         self.solver = StaticsSolver(
             [r.top for r in rig.ropes],
@@ -325,7 +333,7 @@ class ManipulatorPlant:
         """Advance the world to ``now_ns`` (the loop's time)."""
         last = self._last_ns
         self._last_ns = now_ns
-        self.tio10.plant_set_time(now_ns)
+        set_rtc(self.tio10, now_ns)
         dt_ns = 0 if last is None else now_ns - last
         if dt_ns > 0:
             self._move(dt_ns)
@@ -353,14 +361,14 @@ class ManipulatorPlant:
         self._write_sensors()
 
     def _move(self, dt_ns: int) -> None:
-        tio = self.tio10
         dt_ticks = dt_ns * (CLOCK_HZ / 1e9)
-        dc = self.dc
+        src, per, armed, port = self._src, self._per, self._armed, self._port
+        pulses, cnt = self._pulses, self._cnt
         quant = self.imp.encoder_quantisation
         for st in self.ropes:
             ch = st.rig.channel
-            period, armed = tio.plant_channel(ch)
-            if not armed or period <= 0:
+            period = per[ch] * 10 ** (src[ch] - 1)
+            if not armed[ch] or period <= 0:
                 st.phase = 0.0
                 continue
             st.phase += dt_ticks
@@ -368,10 +376,12 @@ class ManipulatorPlant:
             if n <= 0:
                 continue
             st.phase -= n * period
-            tio.plant_add_pulses(ch, n)
-            if st.stalled or tio.bit(*st.awo_bit):
+            pulses[ch] = (pulses[ch] + n) % PULSE_COUNTER_MODULUS
+            p, b = st.awo_bit
+            if st.stalled or port[p] >> b & 1:
                 continue
-            sign = 1 if tio.bit(*st.dir_bit) else -1
+            p, b = st.dir_bit
+            sign = 1 if port[p] >> b & 1 else -1
             st.steps += sign * n
             d = sign * n / st.rig.steps_per_cm
             st.payout += d
@@ -379,7 +389,8 @@ class ManipulatorPlant:
             st.wheel += d * (1.0 - st.slip) / st.rig.encoder_cm_per_count
             whole = math.floor(st.wheel) if quant else round(st.wheel)
             if whole != st.counted:
-                dc.plant_add_counts(st.rig.encoder_address, whole - st.counted)
+                a = st.rig.encoder_address
+                cnt[a] = (cnt[a] + whole - st.counted) & _COUNTER_MASK
                 st.counted = whole
 
     def _noise(self) -> float:
@@ -422,7 +433,7 @@ class ManipulatorPlant:
             if code != st.stuck_code or st.first:
                 st.first = False
                 st.stuck_code = code
-                dc.plant_set_adc(r.adc_channel, code)
+                set_adc(dc, r.adc_channel, code)
 
     def invalidate(self) -> None:
         """Solve the statics again at the next step even if no rope moved."""

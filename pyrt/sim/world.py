@@ -28,15 +28,13 @@ boards::
 
 The built-in worlds are such worlds too:
 
-* :class:`GripperWorld`: an 8031's external data space with a
-  :class:`~pyrt.boards.gripper.SimGripperBoard` mapped into it (board
-  ``gripper``) and a :class:`~pyrt.sim.gripper.JawPlant` behind it.  The
-  encoder interrupts have no handler here; the board counts them (its
-  ``up``/``down`` registers) and the controller's side raises them.
-* :class:`ManipulatorWorld`: a :class:`~pyrt.boards.simboards.SimTIO10`
-  (board ``tio10``) and :class:`~pyrt.boards.simboards.SimDataConcentrator`
-  (board ``dc``) with a :class:`~pyrt.sim.manipulator.ManipulatorPlant`
-  behind them.
+* :class:`GripperWorld`: the gripper cage's register file (board
+  ``gripper``) with a :class:`~pyrt.sim.gripper.JawPlant` behind it.  The
+  plant counts the encoder's pulses (the ``up``/``down`` registers) and the
+  controller's side raises their interrupts.
+* :class:`ManipulatorWorld`: the register files of a TIO10 (board
+  ``tio10``) and a dataConcentrator (board ``dc``) with a
+  :class:`~pyrt.sim.manipulator.ManipulatorPlant` behind them.
 """
 
 from __future__ import annotations
@@ -45,13 +43,13 @@ import argparse
 from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING, Any, Protocol
 
-from pyrt.boards.kinds import DATACONCENTRATOR, GRIPPER_CAGE, TIO10_KIND
-from pyrt.boards.registers import BoardKind, Registers
+from pyrt.boards.dataconcentrator import DATACONCENTRATOR, DataConcentrator
+from pyrt.boards.gripper import GRIPPER_CAGE
+from pyrt.boards.registers import BoardKind, RegisterBoard, Registers
 from pyrt.boards.registers import outputs_are_off as _outputs_are_off
 from pyrt.boards.registers import outputs_off as _outputs_off
 from pyrt.boards.registry import Boards, open_boards
-from pyrt.boards.simboards import SimDataConcentrator, SimTIO10
-from pyrt.boards.tio10 import AWO_BITS, CHANNELS, RTC_CHANNELS
+from pyrt.boards.tio10 import AWO_BITS, CHANNELS, RTC_CHANNELS, TIO10, TIO10_KIND
 from pyrt.errors import ConfigError
 from pyrt.sim.gripper import JawParameters, JawPlant
 from pyrt.sim.manipulator import ManipulatorPlant, rig_from_station
@@ -198,8 +196,7 @@ class GripperWorld(World):
         side = boards.simulated
         if side is None:
             raise ConfigError(f"a world serves in-process boards (sim:), got {boards!r}")
-        self.board = side["gripper"]
-        self.cpu = self.board.cpu
+        self.board: RegisterBoard = side["gripper"]
         try:
             plant = JawPlant(self.board, start=start, params=params)
             plant.set_object(object_mm)
@@ -212,10 +209,10 @@ class GripperWorld(World):
 
     def info(self) -> dict[str, object]:
         p = self.plant
-        up, down = self.board.pulse_counts()
+        up, down = p.pulse_counts()
         return {
             "x": f"{p.x:.1f}", "v": f"{p.v:.1f}", "opening_mm": f"{p.opening_mm:.2f}",
-            "dac": self.board.dac, "current": p.current, "up": up, "down": down,
+            "dac": p.dac, "current": p.current, "up": up, "down": down,
             "object_mm": "none" if p.object_mm is None else f"{p.object_mm:g}",
             "squeeze": f"{p.squeeze:.1f}", "jog": p.jog_state,
             "faults": ",".join(sorted(p.faults)) or "none",
@@ -225,13 +222,14 @@ class GripperWorld(World):
 class ManipulatorWorld(World):
     """A manipulator's TIO10 and dataConcentrator with the rope world behind them.
 
-    ``plant`` is a :class:`~pyrt.sim.manipulator.ManipulatorPlant` over a
-    SimTIO10 and SimDataConcentrator; at start every output is turned off.
+    ``plant`` is a :class:`~pyrt.sim.manipulator.ManipulatorPlant` over the
+    two cards' register files; at start every output is turned off.
+    :attr:`tio10` and :attr:`dc` read them as the cards' views.
     """
 
     def __init__(self, plant: ManipulatorPlant, name: str):
-        self.tio10: SimTIO10 = plant.tio10
-        self.dc: SimDataConcentrator = plant.dc
+        self.tio10 = TIO10(plant.tio10)
+        self.dc = DataConcentrator(plant.dc)
         boards = Boards("sim:", name, {"tio10": plant.tio10, "dc": plant.dc},
                         MANIPULATOR_BOARDS, in_process=True, world="sim")
         super().__init__(name, boards, plant)
@@ -256,7 +254,7 @@ class ManipulatorWorld(World):
         """
         pa = station.polyaxis()
         rig = rig_from_station(station, liquid_level=liquid_level)
-        plant = ManipulatorPlant(rig, SimTIO10(), SimDataConcentrator(),
+        plant = ManipulatorPlant(rig, RegisterBoard(TIO10_KIND), RegisterBoard(DATACONCENTRATOR),
                                  imperfections=imperfections, payouts=payouts)
         return cls(plant, pa.name.lower())
 

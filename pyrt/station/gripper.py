@@ -78,7 +78,7 @@ class GripperSim(Component):
             Signal.attr("x", "counts", p, "x", "true jaw position"),
             Signal.attr("v", "counts/s", p, "v", "true jaw speed"),
             Signal.attr("squeeze", "force", p, "squeeze", "squeeze on the object"),
-            Signal.attr("dac", "byte", p.board, "dac", "DAC byte the motor sees", fmt="02X"),
+            Signal.attr("dac", "byte", p, "dac", "DAC byte the motor sees", fmt="02X"),
         ]
 
     def _apply(self, fn: Callable[..., Any], *args: Any) -> None:
