@@ -247,6 +247,13 @@ class UrdfArm(ArmMoves, Component):
         self._io = ServoBoard(self.servo, self._cpu_list,
                               [int(board.read("count", j)) for j in range(n)],
                               [1.0 / d.nm_per_count for d in self.drives], DAC_FULL_SCALE)
+        # the servo task's every tick, bound once: the encoders in, the one C call,
+        # this tick's DAC counts out (a passive board's; hardware (a) has none)
+        self._tick_io = self.servo.board_ticker(self._io)
+        self._dac_list = self._io.dac.tolist
+        regs = self._regs
+        self._counts_in = regs.counts_reader() if regs is not None else None
+        self._write_dac = regs.dac_writer() if regs is not None else None
         #: The measured joints (rad, m), from the encoders (unwrapped): the servo's input.
         self.q = self.servo.q
         self._qs = self.q.tolist()
@@ -479,9 +486,7 @@ class UrdfArm(ArmMoves, Component):
     def servo_tick(self, now_ns: int) -> None:
         """1 kHz: the encoders, the servo law, the DACs; the checks; settling."""
         self._now_ns = now_ns
-        regs = self._regs
-        assert regs is not None  # a passive board's arm (hardware (a) runs no servo task)
-        counts = regs.counts()  # the encoders as one block: this tick's
+        counts = self._counts_in()  # type: ignore[misc]  # the encoders as one block
         if not self.powered:  # the readings kept: an arm moving is braked at power-on
             self._measure(counts)
             self._history.append((now_ns, self.q.copy()))
@@ -490,7 +495,6 @@ class UrdfArm(ArmMoves, Component):
                 self._started = True
                 self.power_on()
             return
-        servo = self.servo  # servo.q is self.q: measured in tick_board below
         now = now_ns * 1e-9
         if self._joined and now > self._end + 0.5 * self.period_s:
             # the loop stalled past the segment's end before the trajectory's turn: its
@@ -499,25 +503,39 @@ class UrdfArm(ArmMoves, Component):
             self.trajectory_tick(now_ns)
             if not self.powered:
                 return
-        io = self._io  # the encoders, the law, the bounds and the DAC counts: one C call
-        trip = servo.tick_board(now, io, counts)
+        # the encoders, the law, the bounds and the DAC counts: one C call (servo.q is
+        # self.q); what it gives: the DACs whose counts changed, or -1 to look closer
+        changed = self._tick_io(now, counts)
+        if changed:
+            if changed < 0:
+                if self._servo_said():
+                    return
+            else:  # within +-full scale: clamped in C
+                self._write_dac(self._dac_list(), changed)  # type: ignore[misc]
+        if self.state == "settling":
+            self._settle(now_ns)
+
+    def _servo_said(self) -> bool:
+        """A servo tick that did more than change DACs (:meth:`Servo.board_ticker`):
+        a stall said; a trip or a joint beyond its bounds is the fault (True), the
+        DACs that changed before it written first."""
+        servo, io = self.servo, self._io
         if servo.dt > self._stall_s:
             self.say(f"servo: {servo.dt * 1e3:.1f} ms passed since its last tick (the loop "
                      f"stalled): the integral took {self._stall_s * 1e3:g} ms of it", "warning")
+        trip = servo.trip
         if trip is not None:
             self.fail(f"{trip} (joint {trip.name} at "
                       f"{self.q[trip.joint] * self.scales[trip.joint]:.3f} "
                       f"{self.units[trip.joint]})", self.joints[trip.joint].name)
-            return
-        c = io.c
-        changed = c.changed
+            return True
+        changed = io.changed
         if changed:  # the DACs whose counts changed (those before a joint beyond its bounds)
-            regs.write_dacs(io.dac.tolist(), changed, checked=False)  # within +-full
-        if c.beyond >= 0:
-            self._beyond(c.beyond)
-            return
-        if self.state == "settling":
-            self._settle(now_ns)
+            self._write_dac(self._dac_list(), changed)  # type: ignore[misc]
+        if io.beyond >= 0:
+            self._beyond(io.beyond)
+            return True
+        return False
 
     def _beyond(self, j: int) -> None:
         """Joint ``j`` lies beyond its limit and margin: the fault."""
