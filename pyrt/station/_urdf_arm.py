@@ -388,6 +388,30 @@ class UrdfArm(ArmMoves, Component):
             self._quiet_since = None
             self._joined = False
 
+    # -- a black box's snapshot (pyrt.station.snapshot) ----------------------------------
+
+    def ready_for(self, state: Any) -> None:
+        """Before a snapshot's ``state`` of this arm is put back: the objects it
+        restores in place that a station just built has not made yet (the
+        evaluator, made at power-on) are made, so that what they hold that is
+        not state (the chain, locks) is the station's own."""
+        fields = state.get("$o") if isinstance(state, dict) else None
+        if not isinstance(fields, dict) or fields.get("evaluator") is None \
+                or self.evaluator is not None:
+            return
+        q = np.clip(np.nan_to_num(self.q), self.chain.lower, self.chain.upper)
+        self.evaluator = Evaluator(self.chain, self.limits, q, period=self.traj_period_s,
+                                   force_sensor=self._wrench_of is not None)
+
+    def restored(self) -> None:
+        """After a snapshot was put back: the planning caches outside the loop's
+        thread (a chain of their own, made when first used) are dropped; a plan
+        is the same whichever chain makes it."""
+        self._prep_chain = None
+        ev = self.evaluator
+        if ev is not None:
+            ev._side = None
+
     # -- where it is ------------------------------------------------------------------
 
     def _measure(self, counts: Sequence[int]) -> None:

@@ -66,6 +66,7 @@ from pyrt.station._urdf_drive import DrivenArm
 from pyrt.station._urdf_sim import UrdfPhysics, UrdfSim
 from pyrt.station.base import BoardWorld, Station
 from pyrt.station.factory import StationFactory
+from pyrt.station.snapshot import restore_into, state_of
 
 __all__ = ["HARDWARE", "PUMA_START_DEG", "URDF", "UrdfFactory", "UrdfStation", "arm_boards",
            "build_urdf", "load_arm"]
@@ -201,8 +202,9 @@ class UrdfStation(Station):
     # -- what the shell, the server and EPICS ask -----------------------------------------
 
     def busy(self) -> bool:
-        """A move runs or the arm settles."""
-        return super().busy() or self.arm.busy()
+        """A move runs or the arm settles (the arm asked first: the move watch asks
+        every tick, and while the arm moves its answer is the whole answer)."""
+        return self.arm.busy() or super().busy()
 
     def _ended(self) -> tuple[str, list[str]]:
         """How the move that has just ended ended: the arm's words, or the fault."""
@@ -220,6 +222,20 @@ class UrdfStation(Station):
         if self.arm.powered:
             return f"{self.name}: nothing moving; holding at {self.where()}"
         return super().stop()
+
+    def snapshot_state(self) -> dict[str, Any]:
+        """The controller (the arm: its servo's C state and board side, the
+        motion under way in its evaluator, where it is, its joints), for a black
+        box that replays (:mod:`pyrt.station.snapshot`); the chain is structure."""
+        return state_of({"arm": self.arm})
+
+    def restore_state(self, state: dict[str, Any]) -> None:
+        """Put :meth:`snapshot_state` back (the evaluator made first when the
+        snapshot has one and the arm, not yet powered, has not)."""
+        arm = self.arm
+        arm.ready_for(state.get("arm"))
+        restore_into({"arm": arm}, state)
+        arm.restored()
 
     def journal_databases(self) -> dict[str, bytes]:
         """The URDF the arm was built from (a replay rebuilds the same arm)."""

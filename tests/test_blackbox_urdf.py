@@ -1,0 +1,88 @@
+"""pyrt urdf's black box replays: the PUMA's snapshot resumes a run mid-move, identically."""
+
+from __future__ import annotations
+
+import io
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from pyrt.cli import main
+from pyrt.commands import RobotShell
+from pyrt.journal import JournalReader
+from pyrt.scheduler import Loop, SimClock
+from pyrt.station.blackbox import with_snapshot
+from pyrt.station.recording import Recorder
+from pyrt.station.replay import Replay
+from pyrt.station.snapshot import Snapshot, take_snapshot
+from pyrt.station.urdf import build_urdf
+
+#: A bound only a hang reaches (a recorded run on virtual time takes seconds).
+HANG_S = 600
+
+#: Joint moves, a pose move, straight lines queued to blend, a stop mid-line and a
+#: following-error fault (a joint's gain cut to nothing under a fast move) and its ack.
+SCRIPT = ("puma560 movej 10 30 -150 20 -30 40", "wait",
+          "puma560 moveto 450 -150 450 160 20 45", "wait",
+          "puma560 movel 450 150 450 160 20 45", "puma560 movel 350 150 300 150 20 60",
+          "sleep 0.4", "stop", "wait",
+          "puma560 movej -20 60 -170 -30 -50 -40", "wait")
+
+
+def _replay_in_process(path: Path, tmp_path: Path):
+    from pyrt.cli.replay import build_replayed
+
+    replay = Replay(path)
+    work = tmp_path / f"work-{path.stem}"
+    work.mkdir()
+    station = build_replayed(replay, str(work))
+    try:
+        return replay.run()
+    finally:
+        replay.close()
+        station.close()
+
+
+def _run(shell: RobotShell, lines) -> None:
+    for line in lines:
+        if line.startswith("sleep "):
+            shell.station.runner.sleep(float(line.split()[1]))
+        else:
+            shell.onecmd(line)
+
+
+def test_a_full_run_replays_identically_from_each_of_its_snapshots(tmp_path):
+    """Snapshots taken every few hundred ticks of a PUMA run (power-on, joint and pose
+    moves, blended lines, a stop mid-line): a replay that resumes from any of them is
+    identical to the end, so the snapshot holds all the arm's state (the servo's C
+    state, its encoders' totals, the motion under way)."""
+    st = build_urdf(Loop(SimClock()), boards="sim:")
+    pj = tmp_path / "run.pj"
+    rec = Recorder(st, pj, metadata={"factory": "urdf"})
+    shell = RobotShell(st, io.StringIO())
+    snaps: list[Snapshot] = []
+    every = 397  # not a multiple of the trajectory's 10 ticks: snapshots between its ticks
+
+    def grab(tick: int, now_ns: int) -> None:
+        if tick % every == 3:
+            snaps.append(take_snapshot(st, rec.image.last_inputs, rec.image.output_values()))
+
+    rec.tick_listeners.append(grab)
+    try:
+        st.runner.start()
+        _run(shell, SCRIPT)
+    finally:
+        st.close()
+        rec.close()
+    taken = [s for s in snaps if not s.refused]
+    assert len(taken) >= 8 and len(taken) == len(snaps), [s.refused for s in snaps]
+    data = pj.read_bytes()
+    last = JournalReader(pj).summary().last_tick
+    for snap in taken:
+        box = tmp_path / f"from-{snap.tick}.pj"
+        box.write_bytes(with_snapshot(data, [snap], st.name))
+        result = _replay_in_process(box, tmp_path)
+        assert result.identical, f"from tick {snap.tick}: {result.line()}"
+        assert (result.first_tick, result.last_tick) == (snap.tick, last)
