@@ -268,6 +268,9 @@ class _Encoder:
         if kind == "ndarray":
             if v.dtype.hasobject or (not v.flags.writeable and v.base is not None):
                 raise _Skip  # a read-only view of another array: that one is state
+            if id(v) in self.seen:  # one array held twice: one array restored
+                return {"$r": self.seen[id(v)]}
+            self.seen[id(v)] = path
             out = {"$a": [v.dtype.str, list(v.shape), np.ascontiguousarray(v).tobytes().hex()]}
             if not v.flags.writeable:
                 out["ro"] = True  # a read-only value (a transform's) stays read-only
@@ -445,25 +448,9 @@ class _Decoder:
                 return cur
             return bytearray(data)
         if tag == "$a":
-            dtype, shape, data = body
-            arr = np.frombuffer(bytes.fromhex(data), dtype=np.dtype(dtype)).reshape(shape)
-            if isinstance(cur, np.ndarray):
-                if cur.shape != arr.shape or cur.dtype != arr.dtype:
-                    raise SnapshotError(f"the snapshot's {path} is a {arr.dtype} array of "
-                                        f"shape {arr.shape}, the station's {cur.dtype} "
-                                        f"{cur.shape}")
-                if cur.flags.writeable:
-                    cur[...] = arr
-                    return cur
-                if np.array_equal(cur, arr, equal_nan=cur.dtype.kind in "fc"):
-                    return cur
-                new = arr.copy()  # a read-only value (a transform's): replaced, not changed
-                new.flags.writeable = False
-                return new
-            new = arr.copy()
-            if v.get("ro"):
-                new.flags.writeable = False
-            return new
+            got = self._array(body, v, cur, path)
+            self.seen[path] = got
+            return got
         if tag == "$n":
             return np.frombuffer(bytes.fromhex(body[1]), dtype=np.dtype(body[0]))[0]
         if tag == "$q":
@@ -497,7 +484,13 @@ class _Decoder:
             if body not in self.seen:
                 raise SnapshotError(f"the snapshot is damaged at {path}: it refers to "
                                     f"{str(body)[:60]!r}, which it did not give")
-            return self.seen[body]
+            got = self.seen[body]
+            if isinstance(got, np.ndarray) and isinstance(cur, np.ndarray) and cur is not got \
+                    and cur.flags.writeable and cur.shape == got.shape \
+                    and cur.dtype == got.dtype:
+                cur[...] = got  # the station's own array stays (a kernel may hold it)
+                return cur
+            return got
         if tag == "$e":
             cls = self._class(body)
             if not issubclass(cls, enum.Enum) or v["v"] not in cls.__members__:
@@ -521,6 +514,30 @@ class _Decoder:
             self.attributes(cur, v["$o"], path)
             return cur
         raise SnapshotError(f"the snapshot is damaged at {path}: unknown kind {tag[:20]!r}")
+
+    @staticmethod
+    def _array(body: Any, v: dict, cur: Any, path: str) -> np.ndarray:
+        """A ``$a`` value: written into the station's own array in place (a
+        read-only one replaced when it differs), or a new one."""
+        dtype, shape, data = body
+        arr = np.frombuffer(bytes.fromhex(data), dtype=np.dtype(dtype)).reshape(shape)
+        if isinstance(cur, np.ndarray):
+            if cur.shape != arr.shape or cur.dtype != arr.dtype:
+                raise SnapshotError(f"the snapshot's {path} is a {arr.dtype} array of "
+                                    f"shape {arr.shape}, the station's {cur.dtype} "
+                                    f"{cur.shape}")
+            if cur.flags.writeable:
+                cur[...] = arr
+                return cur
+            if np.array_equal(cur, arr, equal_nan=cur.dtype.kind in "fc"):
+                return cur
+            new = arr.copy()  # a read-only value (a transform's): replaced, not changed
+            new.flags.writeable = False
+            return new
+        new = arr.copy()
+        if v.get("ro"):
+            new.flags.writeable = False
+        return new
 
     def attributes(self, obj: Any, state: Mapping[str, Any], path: str) -> None:
         if not isinstance(state, Mapping):

@@ -227,15 +227,21 @@ class UrdfStation(Station):
         """The controller (the arm: its servo's C state and board side, the
         motion under way in its evaluator, where it is, its joints), for a black
         box that replays (:mod:`pyrt.station.snapshot`); the chain is structure."""
-        return state_of({"arm": self.arm})
+        return state_of(self._snapshot_objects())
 
     def restore_state(self, state: dict[str, Any]) -> None:
         """Put :meth:`snapshot_state` back (the evaluator made first when the
         snapshot has one and the arm, not yet powered, has not)."""
         arm = self.arm
         arm.ready_for(state.get("arm"))
-        restore_into({"arm": arm}, state)
+        restore_into(self._snapshot_objects(), state)
         arm.restored()
+
+    def _snapshot_objects(self) -> dict[str, Any]:
+        """The arm, and the moves' snapshots the loop took for commands being
+        prepared in their callers' threads (a command's snapshot and its commit
+        are two requests, a tick or more apart)."""
+        return {"arm": self.arm, "prepared": self.__dict__.setdefault("_snapshots", {})}
 
     def journal_databases(self) -> dict[str, bytes]:
         """The URDF the arm was built from (a replay rebuilds the same arm)."""
