@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from pyrt.cli import main
 from pyrt.commands import RobotShell
 from pyrt.journal import JournalReader
@@ -91,18 +93,22 @@ def _run(shell: RobotShell, lines) -> None:
             shell.onecmd(line)
 
 
-def test_a_full_run_replays_identically_from_each_of_its_snapshots(tmp_path):
+@pytest.mark.parametrize("hardware, every, least", [("b", 691, 12), ("a", 1499, 5)],
+                         ids=["passive-board", "motion-control-board"])
+def test_a_full_run_replays_identically_from_each_of_its_snapshots(tmp_path, hardware, every,
+                                                                   least):
     """Snapshots taken every few hundred ticks of a PUMA run (power-on, joint and pose
     moves, blended lines, a stop mid-line, a tool frame and a gain set, a conveyor
     tracked, a fault and its ack): a replay that resumes from any of them is identical
     to the end, so the snapshot holds all the arm's state (the servo's C state, its
-    encoders' totals, the motion under way, a command's snapshot awaiting its commit)."""
-    st = build_urdf(Loop(SimClock()), boards="sim:")
+    encoders' totals, the motion under way, a command's snapshot awaiting its commit); on
+    either of 004's boards."""
+    st = build_urdf(Loop(SimClock()), boards="sim:", hardware=hardware)
     pj = tmp_path / "run.pj"
-    rec = Recorder(st, pj, metadata={"factory": "urdf"})
+    rec = Recorder(st, pj, metadata={"factory": "urdf", "args": {"hardware": hardware}})
     shell = RobotShell(st, io.StringIO())
     snaps: list[Snapshot] = []
-    every = 691  # not a multiple of the trajectory's 10 ticks: snapshots between its ticks
+    # every: not a multiple of the trajectory's 10 ticks (snapshots between its ticks)
 
     def grab(tick: int, now_ns: int) -> None:
         if tick % every == 3:
@@ -116,7 +122,7 @@ def test_a_full_run_replays_identically_from_each_of_its_snapshots(tmp_path):
         st.close()
         rec.close()
     taken = [s for s in snaps if not s.refused]
-    assert len(taken) >= 12 and len(taken) == len(snaps), [s.refused for s in snaps]
+    assert len(taken) >= least and len(taken) == len(snaps), [s.refused for s in snaps]
     data = pj.read_bytes()
     last = JournalReader(pj).summary().last_tick
     for snap in taken:
