@@ -205,6 +205,7 @@ class UrdfArm(ArmMoves, Component):
         joints = chain.joints
         self.prismatic = [j.kind == "prismatic" for j in joints]
         self.scales = np.array([_scale(p)[0] for p in self.prismatic])
+        self._scales_l = self.scales.tolist()
         self.units = [_scale(p)[1] for p in self.prismatic]
         self.joints = tuple(ArmJoint(self, i) for i in range(n))
         # encoders: where each counter is in the board's snapshot, counts per unit
@@ -250,6 +251,8 @@ class UrdfArm(ArmMoves, Component):
         # the servo task's every tick, bound once: the encoders in, the one C call,
         # this tick's DAC counts out (a passive board's; hardware (a) has none)
         self._tick_io = self.servo.board_ticker(self._io)
+        #: The servo's following errors and velocity estimate (views of its state).
+        self._error, self._velocity = self.servo.error, self.servo.velocity
         self._dac_list = self._io.dac.tolist
         regs = self._regs
         self._counts_in = regs.counts_reader() if regs is not None else None
@@ -577,15 +580,18 @@ class UrdfArm(ArmMoves, Component):
 
     def _settle(self, now_ns: int) -> None:
         if self.servo.late:  # else the last segment still runs
-            self.settle_on(self.servo.error, now_ns)
+            self.settle_on(self._error, now_ns)
 
     def settle_on(self, err: np.ndarray, now_ns: int) -> None:
         """The move ends when every joint's error ``err`` (rad or m) is within
         :data:`AT_TARGET_DEG` and slower than :data:`SETTLED_SPEED_DEG_S` for
         :data:`SETTLE_S`, or says it did not settle after :data:`SETTLE_TIMEOUT_S`."""
         k = self.scales
-        quiet = (float(np.max(np.abs(err) * k)) <= AT_TARGET_DEG
-                 and float(np.max(np.abs(self.servo.velocity) * k)) <= SETTLED_SPEED_DEG_S)
+        ks = self._scales_l  # plain floats: six joints' tests quicker than numpy's
+        quiet = (all(abs(e) * s <= AT_TARGET_DEG
+                     for e, s in zip(err.tolist(), ks))  # noqa: B905 - n each
+                 and all(abs(v) * s <= SETTLED_SPEED_DEG_S
+                         for v, s in zip(self._velocity.tolist(), ks)))  # noqa: B905
         if not quiet:
             self._quiet_since = None
         elif self._quiet_since is None:
