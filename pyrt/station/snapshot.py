@@ -33,7 +33,8 @@ Values are JSON numbers, strings, ``null``, ``true``/``false`` and lists, or
 one-key objects naming their kind: ``{"$t": [...]}`` a tuple, ``{"$d": [[k,
 v], ...]}`` a dict, ``{"$b": HEX}`` bytes, ``{"$ba": HEX}`` a bytearray,
 ``{"$a": [DTYPE, SHAPE, HEX]}`` a numpy array (``"ro": true`` beside it: a
-read-only one, which is restored by a new read-only array), ``{"$n": [DTYPE, HEX]}`` a
+read-only one, which is restored by a new read-only array; ``"is": PATH``: the
+array given first at PATH, held here too), ``{"$n": [DTYPE, HEX]}`` a
 numpy scalar, ``{"$q": [...]}`` a deque, ``{"$s": [...]}`` a set,
 ``{"$ev": BOOL}`` a threading event (set or not), ``{"$lk": 0}`` a lock (a
 restored object that has none gets a new one, free),
@@ -268,12 +269,14 @@ class _Encoder:
         if kind == "ndarray":
             if v.dtype.hasobject or (not v.flags.writeable and v.base is not None):
                 raise _Skip  # a read-only view of another array: that one is state
-            if id(v) in self.seen:  # one array held twice: one array restored
-                return {"$r": self.seen[id(v)]}
-            self.seen[id(v)] = path
             out = {"$a": [v.dtype.str, list(v.shape), np.ascontiguousarray(v).tobytes().hex()]}
             if not v.flags.writeable:
                 out["ro"] = True  # a read-only value (a transform's) stays read-only
+            first = self.seen.get(id(v))
+            if first is not None:  # one array held twice: "is" the path it was given at
+                out["is"] = first  # (its data too, should that place not be restored)
+            else:
+                self.seen[id(v)] = path
             return out
         if kind == "dict":
             return {"$d": [[self.value(k, f"{path}<{i}"), self.value(x, f"{path}{{{i}}}")]
@@ -448,6 +451,9 @@ class _Decoder:
                 return cur
             return bytearray(data)
         if tag == "$a":
+            same = self.seen.get(v["is"]) if "is" in v else None
+            if isinstance(same, np.ndarray):
+                return _same_array(same, cur)
             got = self._array(body, v, cur, path)
             self.seen[path] = got
             return got
@@ -484,13 +490,7 @@ class _Decoder:
             if body not in self.seen:
                 raise SnapshotError(f"the snapshot is damaged at {path}: it refers to "
                                     f"{str(body)[:60]!r}, which it did not give")
-            got = self.seen[body]
-            if isinstance(got, np.ndarray) and isinstance(cur, np.ndarray) and cur is not got \
-                    and cur.flags.writeable and cur.shape == got.shape \
-                    and cur.dtype == got.dtype:
-                cur[...] = got  # the station's own array stays (a kernel may hold it)
-                return cur
-            return got
+            return self.seen[body]
         if tag == "$e":
             cls = self._class(body)
             if not issubclass(cls, enum.Enum) or v["v"] not in cls.__members__:
@@ -558,6 +558,17 @@ class _Decoder:
                     attrs[key] = new
                 else:
                     setattr(obj, key, new)
+
+
+def _same_array(same: np.ndarray, cur: Any) -> np.ndarray:
+    """An array held twice, restored at its first place as ``same``: the station's
+    own array ``cur`` here keeps its identity (a kernel may hold it) and takes the
+    values; without one, ``same`` itself."""
+    if isinstance(cur, np.ndarray) and cur is not same and cur.flags.writeable \
+            and cur.shape == same.shape and cur.dtype == same.dtype:
+        cur[...] = same
+        return cur
+    return same
 
 
 def _defaults(obj: Any) -> None:
