@@ -269,7 +269,8 @@ class _Encoder:
         if kind == "ndarray":
             if v.dtype.hasobject or (not v.flags.writeable and v.base is not None):
                 raise _Skip  # a read-only view of another array: that one is state
-            out = {"$a": [v.dtype.str, list(v.shape), np.ascontiguousarray(v).tobytes().hex()]}
+            out: dict[str, Any] = {
+                "$a": [v.dtype.str, list(v.shape), np.ascontiguousarray(v).tobytes().hex()]}
             if not v.flags.writeable:
                 out["ro"] = True  # a read-only value (a transform's) stays read-only
             first = self.seen.get(id(v))
