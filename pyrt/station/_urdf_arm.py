@@ -75,6 +75,8 @@ __all__ = [
     "ArmJoint",
     "Drive",
     "UrdfArm",
+    "snapshot_ready",
+    "snapshot_restored",
 ]
 
 #: The servo group's rate (Hz), in time units whatever the loop's tick.
@@ -391,30 +393,6 @@ class UrdfArm(ArmMoves, Component):
             self._quiet_since = None
             self._joined = False
 
-    # -- a black box's snapshot (pyrt.station.snapshot) ----------------------------------
-
-    def ready_for(self, state: Any) -> None:
-        """Before a snapshot's ``state`` of this arm is put back: the objects it
-        restores in place that a station just built has not made yet (the
-        evaluator, made at power-on) are made, so that what they hold that is
-        not state (the chain, locks) is the station's own."""
-        fields = state.get("$o") if isinstance(state, dict) else None
-        if not isinstance(fields, dict) or fields.get("evaluator") is None \
-                or self.evaluator is not None:
-            return
-        q = np.clip(np.nan_to_num(self.q), self.chain.lower, self.chain.upper)
-        self.evaluator = Evaluator(self.chain, self.limits, q, period=self.traj_period_s,
-                                   force_sensor=self._wrench_of is not None)
-
-    def restored(self) -> None:
-        """After a snapshot was put back: the planning caches outside the loop's
-        thread (a chain of their own, made when first used) are dropped; a plan
-        is the same whichever chain makes it."""
-        self._prep_chain = None
-        ev = self.evaluator
-        if ev is not None:
-            ev._side = None
-
     # -- where it is ------------------------------------------------------------------
 
     def _measure(self, counts: Sequence[int]) -> None:
@@ -535,34 +513,12 @@ class UrdfArm(ArmMoves, Component):
         changed = self._tick_io(now, counts)
         if changed:
             if changed < 0:
-                if self._servo_said():
+                if _servo_said(self):
                     return
             else:  # within +-full scale: clamped in C
                 self._write_dac(self._dac_list(), changed)  # type: ignore[misc]
         if self.state == "settling":
             self._settle(now_ns)
-
-    def _servo_said(self) -> bool:
-        """A servo tick that did more than change DACs (:meth:`Servo.board_ticker`):
-        a stall said; a trip or a joint beyond its bounds is the fault (True), the
-        DACs that changed before it written first."""
-        servo, io = self.servo, self._io
-        if servo.dt > self._stall_s:
-            self.say(f"servo: {servo.dt * 1e3:.1f} ms passed since its last tick (the loop "
-                     f"stalled): the integral took {self._stall_s * 1e3:g} ms of it", "warning")
-        trip = servo.trip
-        if trip is not None:
-            self.fail(f"{trip} (joint {trip.name} at "
-                      f"{self.q[trip.joint] * self.scales[trip.joint]:.3f} "
-                      f"{self.units[trip.joint]})", self.joints[trip.joint].name)
-            return True
-        changed = io.changed
-        if changed:  # the DACs whose counts changed (those before a joint beyond its bounds)
-            self._write_dac(self._dac_list(), changed)  # type: ignore[misc]
-        if io.beyond >= 0:
-            self._beyond(io.beyond)
-            return True
-        return False
 
     def _beyond(self, j: int) -> None:
         """Joint ``j`` lies beyond its limit and margin: the fault."""
@@ -722,6 +678,53 @@ class UrdfArm(ArmMoves, Component):
         self.last_stop = "stopped (stop command)"
         self.state = "moving"  # tracking a conveyor too: braking is a move
         return f"{self.name}: stopping: braking along the path to rest, then holding"
+
+
+def _servo_said(arm: UrdfArm) -> bool:
+    """A servo tick that did more than change DACs (:meth:`Servo.board_ticker`): a
+    stall said; a trip or a joint beyond its bounds is the fault (True), the DACs
+    that changed before it written first."""
+    servo, io = arm.servo, arm._io
+    if servo.dt > arm._stall_s:
+        arm.say(f"servo: {servo.dt * 1e3:.1f} ms passed since its last tick (the loop "
+                f"stalled): the integral took {arm._stall_s * 1e3:g} ms of it", "warning")
+    trip = servo.trip
+    if trip is not None:
+        arm.fail(f"{trip} (joint {trip.name} at "
+                 f"{arm.q[trip.joint] * arm.scales[trip.joint]:.3f} "
+                 f"{arm.units[trip.joint]})", arm.joints[trip.joint].name)
+        return True
+    changed = io.changed
+    if changed:  # the DACs whose counts changed (those before a joint beyond its bounds)
+        arm._write_dac(arm._dac_list(), changed)  # type: ignore[misc]
+    if io.beyond >= 0:
+        arm._beyond(io.beyond)
+        return True
+    return False
+
+
+def snapshot_ready(arm: UrdfArm, state: Any) -> None:
+    """Before a black box's snapshot ``state`` of ``arm`` is put back
+    (:mod:`pyrt.station.snapshot`): the objects it restores in place that a station
+    just built has not made yet (the evaluator, made at power-on) are made, so that
+    what they hold that is not state (the chain, locks) is the station's own."""
+    fields = state.get("$o") if isinstance(state, dict) else None
+    if not isinstance(fields, dict) or fields.get("evaluator") is None \
+            or arm.evaluator is not None:
+        return
+    q = np.clip(np.nan_to_num(arm.q), arm.chain.lower, arm.chain.upper)
+    arm.evaluator = Evaluator(arm.chain, arm.limits, q, period=arm.traj_period_s,
+                              force_sensor=arm._wrench_of is not None)
+
+
+def snapshot_restored(arm: UrdfArm) -> None:
+    """After a snapshot was put back into ``arm``: the planning caches outside the
+    loop's thread (a chain of their own, made when first used) are dropped; a plan
+    is the same whichever chain makes it."""
+    arm._prep_chain = None
+    ev = arm.evaluator
+    if ev is not None:
+        ev._side = None
 
 
 def _knot_b(arm: UrdfArm, knot: Any) -> None:

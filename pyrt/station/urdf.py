@@ -61,7 +61,13 @@ from pyrt.sim.arm import (
     default_motors,
 )
 from pyrt.sim.world import World
-from pyrt.station._urdf_arm import SERVO_PERIOD_NS, Drive, UrdfArm
+from pyrt.station._urdf_arm import (
+    SERVO_PERIOD_NS,
+    Drive,
+    UrdfArm,
+    snapshot_ready,
+    snapshot_restored,
+)
 from pyrt.station._urdf_drive import DrivenArm
 from pyrt.station._urdf_sim import UrdfPhysics, UrdfSim
 from pyrt.station.base import BoardWorld, Station
@@ -233,9 +239,9 @@ class UrdfStation(Station):
         """Put :meth:`snapshot_state` back (the evaluator made first when the
         snapshot has one and the arm, not yet powered, has not)."""
         arm = self.arm
-        arm.ready_for(state.get("arm"))
+        snapshot_ready(arm, state.get("arm"))
         restore_into(self._snapshot_objects(), state)
-        arm.restored()
+        snapshot_restored(arm)
 
     def _snapshot_objects(self) -> dict[str, Any]:
         """The arm, and the moves' snapshots the loop took for commands being
