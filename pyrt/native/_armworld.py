@@ -245,9 +245,7 @@ class ArmKernel:
     def step(self, dt: float) -> None:
         """Advance by ``dt`` s (>= 0) in equal internal steps of at most
         ``max_step``, then publish the inputs; refused and unchanged on error."""
-        rc = self._step(self._c, dt)
-        if rc:
-            raise_for_status(rc, "arm step", _step_why)
+        raise_for_status(self._step(self._c, dt), "arm step", _step_why)
 
     def step_dac(self, dt: float, dac: Sequence[int]) -> None:
         """:meth:`set_dac` then :meth:`step` in one call (the servo rate's step: the
@@ -259,8 +257,7 @@ class ArmKernel:
             rc = self._step_dac(self._c, dt, dac)
         except (TypeError, OverflowError) as exc:
             raise NativeInputError(f"dac: expected 32-bit integers ({exc})") from None
-        if rc:
-            raise_for_status(rc, "arm step", _step_why)
+        raise_for_status(rc, "arm step", _step_why)
 
     def publish(self) -> None:
         """Publish the inputs at the present :attr:`q`, :attr:`qd` (one noise draw)."""

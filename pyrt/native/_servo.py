@@ -347,8 +347,7 @@ class Servo:
             if start.__class__ is not float:
                 start = _time("start", start, finite=False)
             rc = self._load_at(self._c, self._knots_p, float(duration), order, start)
-        if rc:  # (the message made only for a refusal: a trajectory loads one every knot)
-            raise_for_status(rc, f"servo segment of {duration!r} s", _load_why)
+        raise_for_status(rc, f"servo segment of {duration!r} s", _load_why)
 
     def tick(self, q: ArrayLike | None = None, now: float | None = None) -> ServoTrip | None:
         """One servo tick on the measured joints ``q`` (None: :attr:`q` as
@@ -401,9 +400,7 @@ class Servo:
             if len(counts) != n:
                 raise NativeInputError(f"tick_board: {n} counts of this servo's board, "
                                        f"got {len(counts)}")
-            rc = fn(c, now, bc, counts)
-            if rc:
-                raise_for_status(rc, "servo tick", _tick_why)
+            raise_for_status(fn(c, now, bc, counts), "servo tick", _tick_why)
             return bc.outcome  # type: ignore[no-any-return]
 
         return tick
