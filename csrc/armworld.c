@@ -427,12 +427,41 @@ static void commit_inputs(pyrt_arm *a, const double *w, uint64_t rng)
     a->rng = rng;
 }
 
+static int step_checked(pyrt_arm *a, double dt);
+
 int pyrt_arm_step(pyrt_arm *a, double dt)
 {
+    const int rc = check(a);
+    if (rc != PYRT_OK) {
+        return rc;
+    }
+    return step_checked(a, dt);
+}
+
+int pyrt_arm_step_dac(pyrt_arm *a, double dt, const int32_t *dac)
+{
+    if (dac == NULL) {
+        return PYRT_EINVAL;
+    }
     int rc = check(a);
     if (rc != PYRT_OK) {
         return rc;
     }
+    const int n = a->n;
+    int32_t old[PYRT_ARM_MAX_JOINTS];
+    memcpy(old, a->dac, (size_t)n * sizeof(int32_t));
+    memcpy(a->dac, dac, (size_t)n * sizeof(int32_t));
+    rc = step_checked(a, dt);
+    if (rc != PYRT_OK) {
+        memcpy(a->dac, old, (size_t)n * sizeof(int32_t));
+    }
+    return rc;
+}
+
+/* pyrt_arm_step after check(a). */
+static int step_checked(pyrt_arm *a, double dt)
+{
+    int rc;
     if (!isfinite(dt)) {
         return PYRT_ENONFINITE;
     }

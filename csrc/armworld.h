@@ -132,7 +132,7 @@ typedef struct {
     double ft_offsets[6];
     double ft_sigma[6];
     const double *params;
-    const int32_t *dac;
+    int32_t *dac;
     const int32_t *enable;
     const int32_t *release;
     int32_t *count;
@@ -161,6 +161,10 @@ int pyrt_arm_check(const pyrt_arm *a);
  * positive definite, PYRT_ENONFINITE when the motion blew up; nothing
  * changed then. */
 int pyrt_arm_step(pyrt_arm *a, double dt);
+
+/* pyrt_arm_step with the DACs' new counts: dac (n) copied into a->dac first,
+ * then the step; refused (status code), a->dac is as it was. */
+int pyrt_arm_step_dac(pyrt_arm *a, double dt, const int32_t *dac);
 
 /* Publish the inputs at the present state (after the caller put the arm
  * somewhere): counts, contact, wrench and one draw of the sensor's noise. */

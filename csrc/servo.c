@@ -346,6 +346,7 @@ int pyrt_servo_tick_board(pyrt_servo *s, double now, pyrt_servo_board *b,
     }
     b->changed = 0;
     b->beyond = -1;
+    b->outcome = -1;
     if (!ok || b->lo == NULL || b->hi == NULL || b->dac_per_unit == NULL || b->dac == NULL
         || b->dac_full <= 0 || b->q != s->q) {
         if (ok) {
@@ -358,9 +359,14 @@ int pyrt_servo_tick_board(pyrt_servo *s, double now, pyrt_servo_board *b,
         zero_out(s);
         return rc;
     }
+    const int32_t was_tripped = s->tripped, stalls = s->stalls;
     rc = pyrt_servo_tick_at(s, now);
-    if (rc != PYRT_OK || s->tripped) {
+    if (rc != PYRT_OK) {
         return rc;
+    }
+    if (s->tripped) {
+        b->outcome = (!was_tripped || s->stalls != stalls) ? -1 : 0;
+        return PYRT_OK;
     }
     const int32_t n = s->n;
     const double full = (double)b->dac_full;
@@ -385,5 +391,6 @@ int pyrt_servo_tick_board(pyrt_servo *s, double now, pyrt_servo_board *b,
         }
     }
     b->changed = changed;
+    b->outcome = (b->beyond >= 0 || s->stalls != stalls) ? -1 : (int64_t)changed;
     return PYRT_OK;
 }

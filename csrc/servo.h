@@ -201,6 +201,10 @@ int pyrt_servo_tick(pyrt_servo *s);
  *   dac             n: the values last written (in); this tick's (out)
  *   changed         bit j set: dac[j] differs from the value last written (out)
  *   beyond          the first joint (by index) beyond lo .. hi, or -1 (out)
+ *   outcome         changed, or -1 when the tick did more than change DACs: the
+ *                   servo tripped in it, its dt was a stall (beyond
+ *                   PYRT_SERVO_MAX_DT_PERIODS periods), a joint is beyond its
+ *                   bounds, or the tick was refused (out): the caller's one test
  */
 typedef struct {
     const double *counts_per_unit;
@@ -214,6 +218,7 @@ typedef struct {
     int32_t *dac;
     uint64_t changed;
     int32_t beyond;
+    int64_t outcome;
 } pyrt_servo_board;
 
 /* The encoders: each of the n counters' step since the last read

@@ -210,6 +210,7 @@ THROUGH_WRAPPERS = {
     "pyrt_servo_tick_board": lambda: _servo_board_nan(),
     "pyrt_arm_check": lambda: _arm(damping=[-1.0]),
     "pyrt_arm_step": lambda: _arm().step(NAN),
+    "pyrt_arm_step_dac": lambda: _arm().step_dac(NAN, [0]),
     "pyrt_arm_publish": _arm_nan_state,
     "pyrt_drive_tick": lambda: _drive_nan(False),
     "pyrt_drive_run": lambda: _drive_nan(True),

@@ -35,7 +35,7 @@ storage it reads and writes in place, with the checks the declarations imply.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from pyrt.boards.registers import OUTPUT, BoardKind, Register, RegisterBoard, Registers
@@ -142,6 +142,28 @@ class ArmServoRegisters:
             return self._counts_in()
         read = self._read
         return [read("count", j) for j in self._joints]
+
+    def counts_reader(self) -> Callable[[], list[int]]:
+        """:meth:`counts` bound once (the quickest read the view allows), for a
+        servo task's every tick."""
+        if self.direct:
+            return self._count.copy  # type: ignore[union-attr]
+        if self._counts_in is not None:
+            return self._counts_in
+        return self.counts
+
+    def dac_writer(self) -> Callable[[Sequence[int], int], None]:
+        """``write(dac, changed)``: :meth:`write_dacs` with ``checked`` False
+        bound once (the quickest write the view allows), for a servo task's every
+        tick; the caller vouches for the values as ``checked`` False says."""
+        if self._out is not None and not self.direct:
+            return self._out["dac"]
+        write = self.write_dacs
+
+        def write_unchecked(dac: Sequence[int], changed: int) -> None:
+            write(dac, changed, checked=False)
+
+        return write_unchecked
 
     def ft(self) -> list[int]:
         """The wrist sensor's counts fx fy fz tx ty tz, as the board has them now."""

@@ -161,16 +161,16 @@ class FrameTracker:
 
     def __init__(self, period: float) -> None:
         self.period = period
-        self._seen: dict[int, list[tuple[int, Matrix]]] = {}
+        self._seen: dict[Transform, list[tuple[int, Matrix]]] = {}
 
     def evaluate(self, t: Transform, sample: int) -> Matrix:
         """The transform at ``sample`` now (the loop's evaluation), remembered."""
         v = t.evaluate(sample)
-        hist = self._seen.get(id(t), [])
+        hist = self._seen.get(t, [])
         if not hist or hist[-1][0] != sample:
             # a new list, never one changed in place: a plan reads the history from
             # another thread
-            self._seen[id(t)] = [*hist[-1:], (sample, v)]
+            self._seen[t] = [*hist[-1:], (sample, v)]
         return v
 
     def copy(self) -> FrameTracker:
@@ -180,7 +180,7 @@ class FrameTracker:
         return out
 
     def value(self, t: Transform, sample: float) -> Matrix:
-        hist = self._seen.get(id(t))
+        hist = self._seen.get(t)
         if hist and hist[-1][0] == sample:
             return hist[-1][1]
         if not hist:

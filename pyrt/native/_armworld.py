@@ -139,6 +139,7 @@ class ArmKernel:
         self.seed(seed)
         raise_for_status(lib.pyrt_arm_check(c), f"arm of {n} joints", _check_why)
         self._step = lib.pyrt_arm_step
+        self._step_dac = lib.pyrt_arm_step_dac
         self._unpack = ffi.unpack
 
     @staticmethod
@@ -245,6 +246,18 @@ class ArmKernel:
         """Advance by ``dt`` s (>= 0) in equal internal steps of at most
         ``max_step``, then publish the inputs; refused and unchanged on error."""
         raise_for_status(self._step(self._c, dt), "arm step", _step_why)
+
+    def step_dac(self, dt: float, dac: Sequence[int]) -> None:
+        """:meth:`set_dac` then :meth:`step` in one call (the servo rate's step: the
+        DACs change every tick while the arm moves); refused and unchanged on
+        error, the DACs included."""
+        if len(dac) != self.n:
+            raise NativeInputError(f"dac: expected {self.n} integers, got {len(dac)}")
+        try:
+            rc = self._step_dac(self._c, dt, dac)
+        except (TypeError, OverflowError) as exc:
+            raise NativeInputError(f"dac: expected 32-bit integers ({exc})") from None
+        raise_for_status(rc, "arm step", _step_why)
 
     def publish(self) -> None:
         """Publish the inputs at the present :attr:`q`, :attr:`qd` (one noise draw)."""

@@ -29,7 +29,7 @@ triple real pole.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -383,6 +383,27 @@ class Servo:
         if c.tripped and not was:
             return self.trip
         return None
+
+    def board_ticker(self, board: ServoBoard) -> Callable[[float, Sequence[int]], int]:
+        """:meth:`tick_board` on ``board`` bound once, for a servo task's every
+        tick: ``tick(now, counts)`` returns the bits of the joints whose DAC
+        count changed (``board.changed``), or -1 when the tick did more than
+        change DACs -- the servo tripped in it (:attr:`trip`), its dt was a
+        stall (:attr:`dt`), a joint is beyond its bounds (``board.beyond``;
+        ``board.changed`` says which DACs changed before it): the caller
+        looks then.  Raises as :meth:`tick_board` on a refused tick."""
+        if board.q is not self.q:
+            raise NativeInputError("board_ticker: a board of another servo")
+        n, fn, c, bc = self.n, self._tick_board, self._c, board.c
+
+        def tick(now: float, counts: Sequence[int]) -> int:
+            if len(counts) != n:
+                raise NativeInputError(f"tick_board: {n} counts of this servo's board, "
+                                       f"got {len(counts)}")
+            raise_for_status(fn(c, now, bc, counts), "servo tick", _tick_why)
+            return bc.outcome  # type: ignore[no-any-return]
+
+        return tick
 
     @property
     def now(self) -> float:

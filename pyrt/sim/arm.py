@@ -429,6 +429,13 @@ class ArmWorld:
         self._dyn = chain
         self.set_payload(float(payload))
         self.time = 0.0
+        #: The loop time (ns) :meth:`advance_to` last advanced to (None before the first).
+        self._last_ns: int | None = None
+        # the kernel's own registers: its counts and sensor out, as lists (numpy's
+        # tolist: the quickest way out of C memory)
+        self._k_count, self._k_ft = k.count, k.ft
+        self._k_step = k.step
+        self._k_step_dac = k.step_dac
         if table_z is not None:
             self.set_table(table_z)
         self._publish()
@@ -469,6 +476,19 @@ class ArmWorld:
 
     # ------------------------------------------------------------ time
 
+    def advance_to(self, now_ns: int) -> None:
+        """Advance to the loop's time ``now_ns`` (ns): by the time since the last
+        call (none on the first; a time not later than the last does nothing),
+        as :meth:`step`.  The world's step where a station steps it in process."""
+        last, self._last_ns = self._last_ns, now_ns
+        if last is None or now_ns <= last:
+            return
+        dt = (now_ns - last) * 1e-9
+        if self._direct is not None:
+            self._step_direct(dt)
+        else:
+            self.step(dt)
+
     def step(self, dt: float) -> None:
         """Advance by ``dt`` seconds (>= 0) in equal internal steps of at
         most :attr:`max_step`, the board's outputs held over it (a DAC holds
@@ -480,24 +500,10 @@ class ArmWorld:
             dt = float(dt)
         if dt == 0:
             return
-        k = self._k
-        direct = self._direct
-        if direct is not None:  # the register file in place: the servo rate's path
-            dac, on, release, count, ft = direct
-            if dac != self._dac_in:  # the amplifiers' new currents
-                k.set_dac(dac)
-                self._dac_in = dac[:]
-            if on != self._on_in:
-                k.set_enable(on)
-                self._on_in = on[:]
-            if release != self._release_in:
-                k.release[:] = release
-                self._release_in = release[:]
-            k.step(dt)
-            self.time += dt
-            count[:] = k.counts()
-            ft[:] = k.ft_counts()
+        if self._direct is not None:  # the register file in place: the servo rate's path
+            self._step_direct(dt)
             return
+        k = self._k
         if self._drive is not None:
             self._step_driven(dt)
             return
@@ -517,6 +523,25 @@ class ArmWorld:
         k.step(dt)
         self.time += dt
         self._set_inputs()
+
+    def _step_direct(self, dt: float) -> None:
+        """The passive board's register file in place: the outputs into the kernel
+        (those that changed), its step of ``dt`` > 0 s, the inputs out."""
+        dac, on, release, count, ft = self._direct  # type: ignore[misc]
+        if on != self._on_in:
+            self._k.set_enable(on)
+            self._on_in = on[:]
+        if release != self._release_in:
+            self._k.release[:] = release
+            self._release_in = release[:]
+        if dac != self._dac_in:  # the amplifiers' new currents, with the step
+            self._k_step_dac(dt, dac)
+            self._dac_in = dac[:]
+        else:
+            self._k_step(dt)
+        self.time += dt
+        count[:] = self._k_count.tolist()
+        ft[:] = self._k_ft.tolist()
 
     def _step_driven(self, dt: float) -> None:
         """Hardware (a): the board's output registers into its servo, the arm
@@ -562,8 +587,8 @@ class ArmWorld:
         cells = self._cells
         count, ft_cells = cells["count"], cells["ft"]
         if count is not None and ft_cells is not None:
-            count[:] = k.counts()
-            ft_cells[:] = k.ft_counts()
+            count[:] = k.count.tolist()
+            ft_cells[:] = k.ft.tolist()
             return
         set_input = self._set_input
         counts = k.counts()
@@ -639,13 +664,10 @@ class ArmPlant:
 
     def __init__(self, world: ArmWorld):
         self.world = world
-        self._last_ns: int | None = None
 
     def step(self, now_ns: int) -> None:
-        """Advance the arm to ``now_ns`` (dt = now - last)."""
-        last, self._last_ns = self._last_ns, now_ns
-        if last is not None and now_ns > last:
-            self.world.step((now_ns - last) * 1e-9)
+        """Advance the arm to ``now_ns`` (dt = now - last; :meth:`ArmWorld.advance_to`)."""
+        self.world.advance_to(now_ns)
 
     def info(self) -> dict[str, object]:
         """The world's truth for ``sim show`` and board-sim's INFO."""

@@ -75,6 +75,8 @@ __all__ = [
     "ArmJoint",
     "Drive",
     "UrdfArm",
+    "snapshot_ready",
+    "snapshot_restored",
 ]
 
 #: The servo group's rate (Hz), in time units whatever the loop's tick.
@@ -205,6 +207,7 @@ class UrdfArm(ArmMoves, Component):
         joints = chain.joints
         self.prismatic = [j.kind == "prismatic" for j in joints]
         self.scales = np.array([_scale(p)[0] for p in self.prismatic])
+        self._scales_l = self.scales.tolist()
         self.units = [_scale(p)[1] for p in self.prismatic]
         self.joints = tuple(ArmJoint(self, i) for i in range(n))
         # encoders: where each counter is in the board's snapshot, counts per unit
@@ -247,6 +250,15 @@ class UrdfArm(ArmMoves, Component):
         self._io = ServoBoard(self.servo, self._cpu_list,
                               [int(board.read("count", j)) for j in range(n)],
                               [1.0 / d.nm_per_count for d in self.drives], DAC_FULL_SCALE)
+        # the servo task's every tick, bound once: the encoders in, the one C call,
+        # this tick's DAC counts out (a passive board's; hardware (a) has none)
+        self._tick_io = self.servo.board_ticker(self._io)
+        #: The servo's following errors and velocity estimate (views of its state).
+        self._error, self._velocity = self.servo.error, self.servo.velocity
+        self._dac_list = self._io.dac.tolist
+        regs = self._regs
+        self._counts_in = regs.counts_reader() if regs is not None else None
+        self._write_dac = regs.dac_writer() if regs is not None else None
         #: The measured joints (rad, m), from the encoders (unwrapped): the servo's input.
         self.q = self.servo.q
         self._qs = self.q.tolist()
@@ -479,9 +491,7 @@ class UrdfArm(ArmMoves, Component):
     def servo_tick(self, now_ns: int) -> None:
         """1 kHz: the encoders, the servo law, the DACs; the checks; settling."""
         self._now_ns = now_ns
-        regs = self._regs
-        assert regs is not None  # a passive board's arm (hardware (a) runs no servo task)
-        counts = regs.counts()  # the encoders as one block: this tick's
+        counts = self._counts_in()  # type: ignore[misc]  # the encoders as one block
         if not self.powered:  # the readings kept: an arm moving is braked at power-on
             self._measure(counts)
             self._history.append((now_ns, self.q.copy()))
@@ -490,7 +500,6 @@ class UrdfArm(ArmMoves, Component):
                 self._started = True
                 self.power_on()
             return
-        servo = self.servo  # servo.q is self.q: measured in tick_board below
         now = now_ns * 1e-9
         if self._joined and now > self._end + 0.5 * self.period_s:
             # the loop stalled past the segment's end before the trajectory's turn: its
@@ -499,23 +508,15 @@ class UrdfArm(ArmMoves, Component):
             self.trajectory_tick(now_ns)
             if not self.powered:
                 return
-        io = self._io  # the encoders, the law, the bounds and the DAC counts: one C call
-        trip = servo.tick_board(now, io, counts)
-        if servo.dt > self._stall_s:
-            self.say(f"servo: {servo.dt * 1e3:.1f} ms passed since its last tick (the loop "
-                     f"stalled): the integral took {self._stall_s * 1e3:g} ms of it", "warning")
-        if trip is not None:
-            self.fail(f"{trip} (joint {trip.name} at "
-                      f"{self.q[trip.joint] * self.scales[trip.joint]:.3f} "
-                      f"{self.units[trip.joint]})", self.joints[trip.joint].name)
-            return
-        c = io.c
-        changed = c.changed
-        if changed:  # the DACs whose counts changed (those before a joint beyond its bounds)
-            regs.write_dacs(io.dac.tolist(), changed, checked=False)  # within +-full
-        if c.beyond >= 0:
-            self._beyond(c.beyond)
-            return
+        # the encoders, the law, the bounds and the DAC counts: one C call (servo.q is
+        # self.q); what it gives: the DACs whose counts changed, or -1 to look closer
+        changed = self._tick_io(now, counts)
+        if changed:
+            if changed < 0:
+                if _servo_said(self):
+                    return
+            else:  # within +-full scale: clamped in C
+                self._write_dac(self._dac_list(), changed)  # type: ignore[misc]
         if self.state == "settling":
             self._settle(now_ns)
 
@@ -535,15 +536,18 @@ class UrdfArm(ArmMoves, Component):
 
     def _settle(self, now_ns: int) -> None:
         if self.servo.late:  # else the last segment still runs
-            self.settle_on(self.servo.error, now_ns)
+            self.settle_on(self._error, now_ns)
 
     def settle_on(self, err: np.ndarray, now_ns: int) -> None:
         """The move ends when every joint's error ``err`` (rad or m) is within
         :data:`AT_TARGET_DEG` and slower than :data:`SETTLED_SPEED_DEG_S` for
         :data:`SETTLE_S`, or says it did not settle after :data:`SETTLE_TIMEOUT_S`."""
         k = self.scales
-        quiet = (float(np.max(np.abs(err) * k)) <= AT_TARGET_DEG
-                 and float(np.max(np.abs(self.servo.velocity) * k)) <= SETTLED_SPEED_DEG_S)
+        ks = self._scales_l  # plain floats: six joints' tests quicker than numpy's
+        quiet = (all(abs(e) * s <= AT_TARGET_DEG
+                     for e, s in zip(err.tolist(), ks))  # noqa: B905 - n each
+                 and all(abs(v) * s <= SETTLED_SPEED_DEG_S
+                         for v, s in zip(self._velocity.tolist(), ks)))  # noqa: B905
         if not quiet:
             self._quiet_since = None
         elif self._quiet_since is None:
@@ -674,6 +678,53 @@ class UrdfArm(ArmMoves, Component):
         self.last_stop = "stopped (stop command)"
         self.state = "moving"  # tracking a conveyor too: braking is a move
         return f"{self.name}: stopping: braking along the path to rest, then holding"
+
+
+def _servo_said(arm: UrdfArm) -> bool:
+    """A servo tick that did more than change DACs (:meth:`Servo.board_ticker`): a
+    stall said; a trip or a joint beyond its bounds is the fault (True), the DACs
+    that changed before it written first."""
+    servo, io = arm.servo, arm._io
+    if servo.dt > arm._stall_s:
+        arm.say(f"servo: {servo.dt * 1e3:.1f} ms passed since its last tick (the loop "
+                f"stalled): the integral took {arm._stall_s * 1e3:g} ms of it", "warning")
+    trip = servo.trip
+    if trip is not None:
+        arm.fail(f"{trip} (joint {trip.name} at "
+                 f"{arm.q[trip.joint] * arm.scales[trip.joint]:.3f} "
+                 f"{arm.units[trip.joint]})", arm.joints[trip.joint].name)
+        return True
+    changed = io.changed
+    if changed:  # the DACs whose counts changed (those before a joint beyond its bounds)
+        arm._write_dac(arm._dac_list(), changed)  # type: ignore[misc]
+    if io.beyond >= 0:
+        arm._beyond(io.beyond)
+        return True
+    return False
+
+
+def snapshot_ready(arm: UrdfArm, state: Any) -> None:
+    """Before a black box's snapshot ``state`` of ``arm`` is put back
+    (:mod:`pyrt.station.snapshot`): the objects it restores in place that a station
+    just built has not made yet (the evaluator, made at power-on) are made, so that
+    what they hold that is not state (the chain, locks) is the station's own."""
+    fields = state.get("$o") if isinstance(state, dict) else None
+    if not isinstance(fields, dict) or fields.get("evaluator") is None \
+            or arm.evaluator is not None:
+        return
+    q = np.clip(np.nan_to_num(arm.q), arm.chain.lower, arm.chain.upper)
+    arm.evaluator = Evaluator(arm.chain, arm.limits, q, period=arm.traj_period_s,
+                              force_sensor=arm._wrench_of is not None)
+
+
+def snapshot_restored(arm: UrdfArm) -> None:
+    """After a snapshot was put back into ``arm``: the planning caches outside the
+    loop's thread (a chain of their own, made when first used) are dropped; a plan
+    is the same whichever chain makes it."""
+    arm._prep_chain = None
+    ev = arm.evaluator
+    if ev is not None:
+        ev._side = None
 
 
 def _knot_b(arm: UrdfArm, knot: Any) -> None:

@@ -593,7 +593,7 @@ class ArmMoves:
         if not velocity.any():
             return (f"conveyor stopped; coordinate frame {self.pose_text(self.coord_frame)} "
                     "(in the base's frame)")
-        self.conveyor = Conveyor(self.coord_frame, velocity, self._time_now, self._sample_time)
+        self.conveyor = Conveyor(self.coord_frame, velocity, self)
         return (f"conveyor at ({vx:g}, {vy:g}, {vz:g}) mm/s from "
                 f"{self.pose_text(self.coord_frame)}: movel targets ride on it")
 
@@ -616,19 +616,17 @@ def _pose(verb: str, name: str, x: float, y: float, z: float, rx: float, ry: flo
 class Conveyor:
     """A conveyor: COORD translating at ``velocity`` (m/s, base frame) from
     ``origin`` (4, 4) at loop time ``start`` (s).  Its :attr:`transform` is a
-    functional transform of the evaluator's sample, whose time
-    ``sample_time(sample)`` (s, loop time) the arm gives; ``now()`` is the
-    loop time."""
+    functional transform of the evaluator's sample, whose loop time (s) the
+    arm gives (``arm._sample_time(sample)``; ``arm._time_now()`` is the loop
+    time).  Plain data and the arm: a black box's snapshot carries it whole
+    (its function is an object of its own, :class:`BeltPose`, not code)."""
 
-    def __init__(self, origin: np.ndarray, velocity: np.ndarray, now: Callable[[], float],
-                 sample_time: Callable[[int], float]) -> None:
+    def __init__(self, origin: np.ndarray, velocity: np.ndarray, arm: Any) -> None:
         self.origin = origin.copy()
         self.velocity = np.asarray(velocity, dtype=float).copy()
-        self._now = now
-        self.start = now()
-        self._sample_time = sample_time
-        self.transform = Transform.functional(
-            "COORD", lambda sample: self.pose_at(sample_time(sample)), self.origin)
+        self.arm = arm
+        self.start = float(arm._time_now())
+        self.transform = Transform.functional("COORD", BeltPose(self), self.origin)
 
     def pose_at(self, t: float) -> np.ndarray:
         """COORD at loop time ``t`` (s)."""
@@ -637,4 +635,16 @@ class Conveyor:
         return out
 
     def pose_now(self) -> np.ndarray:
-        return self.pose_at(self._now())
+        return self.pose_at(self.arm._time_now())
+
+
+class BeltPose:
+    """A conveyor's COORD at the evaluator's sample (its functional transform's
+    function): ``belt.pose_at`` the loop time the arm gives that sample."""
+
+    def __init__(self, belt: Conveyor) -> None:
+        self.belt = belt
+
+    def __call__(self, sample: int) -> np.ndarray:
+        belt = self.belt
+        return belt.pose_at(belt.arm._sample_time(sample))

@@ -30,13 +30,12 @@ class UrdfPhysics:
 
     def __init__(self, arm: ArmWorld) -> None:
         self.arm = arm
-        self._last_ns: int | None = None
+        #: What a station attaches as its world's step (the arm's own, one call less).
+        self.step_to = arm.advance_to
 
     def step(self, now_ns: int) -> None:
-        """Advance the arm to ``now_ns`` (dt = now - last)."""
-        last, self._last_ns = self._last_ns, now_ns
-        if last is not None and now_ns > last:
-            self.arm.step((now_ns - last) * 1e-9)
+        """Advance the arm to ``now_ns`` (dt = now - last; :meth:`ArmWorld.advance_to`)."""
+        self.arm.advance_to(now_ns)
 
     def info(self) -> dict[str, object]:
         """The world's truth for board-sim's INFO (``sim show`` over tcp)."""

@@ -32,8 +32,12 @@ journal's ``S`` frame (:mod:`pyrt.journal.format`)::
 Values are JSON numbers, strings, ``null``, ``true``/``false`` and lists, or
 one-key objects naming their kind: ``{"$t": [...]}`` a tuple, ``{"$d": [[k,
 v], ...]}`` a dict, ``{"$b": HEX}`` bytes, ``{"$ba": HEX}`` a bytearray,
-``{"$a": [DTYPE, SHAPE, HEX]}`` a numpy array, ``{"$n": [DTYPE, HEX]}`` a
+``{"$a": [DTYPE, SHAPE, HEX]}`` a numpy array (``"ro": true`` beside it: a
+read-only one, which is restored by a new read-only array; ``"is": PATH``: the
+array given first at PATH, held here too), ``{"$n": [DTYPE, HEX]}`` a
 numpy scalar, ``{"$q": [...]}`` a deque, ``{"$s": [...]}`` a set,
+``{"$ev": BOOL}`` a threading event (set or not), ``{"$lk": 0}`` a lock (a
+restored object that has none gets a new one, free),
 ``{"$cd": ...}`` the numbers in C memory a kernel owns (a list for an array,
 an object of its fields for a struct; its pointers are left out),
 ``{"$e": "MODULE:CLASS", "v": NAME}`` an enum's member, ``{"$dc":
@@ -52,6 +56,7 @@ import dataclasses
 import enum
 import importlib
 import json
+import threading
 import zlib
 from collections import deque
 from collections.abc import Mapping
@@ -76,8 +81,10 @@ SNAPSHOT_FORMAT = "pyrt-snapshot/1"
 #: Objects of these packages are structure, not state: the boards (the image
 #: carries their registers), the simulated world (a replay's stands still), the
 #: loop, queues and runner (their state is taken apart, :func:`_loop_state`),
-#: the scope, the station and the databases.
-_STRUCTURE = ("pyrt.boards", "pyrt.sim", "pyrt.scope", "pyrt.db", "pyrt.station.base",
+#: the scope, the station and the databases; an arm's kinematic chains (a
+#: constant description, its closed form and their kernels' scratch workspaces).
+_STRUCTURE = ("pyrt.kinematics", "pyrt.native._kinematics", "pyrt.native._puma",
+              "pyrt.boards", "pyrt.sim", "pyrt.scope", "pyrt.db", "pyrt.station.base",
               "pyrt.station.robots", "pyrt.station.events", "pyrt.station.requests",
               "pyrt.station.domain", "pyrt.station.moves", "pyrt.station.profile",
               "pyrt.station.recording", "pyrt.station.blackbox", "pyrt.station.replay",
@@ -183,6 +190,8 @@ def _structure(cls: type) -> bool:
 
 
 _PLAIN = frozenset((int, float, str, bool, type(None)))
+#: The lock types: a snapshot says a lock is there (a restored object gets a new one).
+_LOCKS = (type(threading.Lock()), type(threading.RLock()))
 
 
 class _Encoder:
@@ -217,6 +226,10 @@ class _Encoder:
             kind = "set"
         elif cls.__name__.startswith("__CData") or cls.__name__ == "CData":
             kind = "cdata"
+        elif cls is threading.Event:
+            kind = "event"
+        elif cls in _LOCKS:
+            kind = "lock"
         elif issubclass(cls, FunctionType | MethodType | BuiltinFunctionType | type | ModuleType
                         | range | slice | memoryview) \
                 or cls.__module__.split(".")[0] not in self.roots or _structure(cls):
@@ -254,9 +267,18 @@ class _Encoder:
         if kind == "skip":
             raise _Skip
         if kind == "ndarray":
-            if v.dtype.hasobject or not v.flags.writeable:
+            if v.dtype.hasobject or (not v.flags.writeable and v.base is not None):
                 raise _Skip  # a read-only view of another array: that one is state
-            return {"$a": [v.dtype.str, list(v.shape), np.ascontiguousarray(v).tobytes().hex()]}
+            out: dict[str, Any] = {
+                "$a": [v.dtype.str, list(v.shape), np.ascontiguousarray(v).tobytes().hex()]}
+            if not v.flags.writeable:
+                out["ro"] = True  # a read-only value (a transform's) stays read-only
+            first = self.seen.get(id(v))
+            if first is not None:  # one array held twice: "is" the path it was given at
+                out["is"] = first  # (its data too, should that place not be restored)
+            else:
+                self.seen[id(v)] = path
+            return out
         if kind == "dict":
             return {"$d": [[self.value(k, f"{path}<{i}"), self.value(x, f"{path}{{{i}}}")]
                            for i, (k, x) in enumerate(v.items())]}
@@ -276,6 +298,10 @@ class _Encoder:
             return {"$q": [self.value(x, f"{path}[{i}]") for i, x in enumerate(v)]}
         if kind == "set":
             return {"$s": [self.value(x, path) for x in sorted(v, key=repr)]}
+        if kind == "event":
+            return {"$ev": v.is_set()}
+        if kind == "lock":
+            return {"$lk": 0}
         return self._cdata(v)
 
     def attributes(self, attrs: Mapping[str, Any], path: str) -> dict[str, Any]:
@@ -426,17 +452,12 @@ class _Decoder:
                 return cur
             return bytearray(data)
         if tag == "$a":
-            dtype, shape, data = body
-            arr = np.frombuffer(bytes.fromhex(data), dtype=np.dtype(dtype)).reshape(shape)
-            if isinstance(cur, np.ndarray):
-                if cur.shape != arr.shape or cur.dtype != arr.dtype:
-                    raise SnapshotError(f"the snapshot's {path} is a {arr.dtype} array of "
-                                        f"shape {arr.shape}, the station's {cur.dtype} "
-                                        f"{cur.shape}")
-                if cur.flags.writeable:
-                    cur[...] = arr
-                return cur
-            return arr.copy()
+            same = self.seen.get(v["is"]) if "is" in v else None
+            if isinstance(same, np.ndarray):
+                return _same_array(same, cur)
+            got = self._array(body, v, cur, path)
+            self.seen[path] = got
+            return got
         if tag == "$n":
             return np.frombuffer(bytes.fromhex(body[1]), dtype=np.dtype(body[0]))[0]
         if tag == "$q":
@@ -457,6 +478,15 @@ class _Decoder:
             else:
                 _cd_put(cur, ctype, body)
             return cur
+        if tag == "$ev":  # an event: set or not (a move's reached)
+            event = cur if isinstance(cur, threading.Event) else threading.Event()
+            if body:
+                event.set()
+            else:
+                event.clear()
+            return event
+        if tag == "$lk":  # a lock: the station's own, or a new one (free)
+            return cur if type(cur) in _LOCKS else threading.Lock()
         if tag == "$r":
             if body not in self.seen:
                 raise SnapshotError(f"the snapshot is damaged at {path}: it refers to "
@@ -480,10 +510,35 @@ class _Decoder:
             if cur is None or _class_name(type(cur)) != body:
                 made: Any = self._class(body)  # an object the station has not (a motion)
                 cur = made.__new__(made)
+                _defaults(cur)
             self.seen[path] = cur
             self.attributes(cur, v["$o"], path)
             return cur
         raise SnapshotError(f"the snapshot is damaged at {path}: unknown kind {tag[:20]!r}")
+
+    @staticmethod
+    def _array(body: Any, v: dict, cur: Any, path: str) -> np.ndarray:
+        """A ``$a`` value: written into the station's own array in place (a
+        read-only one replaced when it differs), or a new one."""
+        dtype, shape, data = body
+        arr = np.frombuffer(bytes.fromhex(data), dtype=np.dtype(dtype)).reshape(shape)
+        if isinstance(cur, np.ndarray):
+            if cur.shape != arr.shape or cur.dtype != arr.dtype:
+                raise SnapshotError(f"the snapshot's {path} is a {arr.dtype} array of "
+                                    f"shape {arr.shape}, the station's {cur.dtype} "
+                                    f"{cur.shape}")
+            if cur.flags.writeable:
+                cur[...] = arr
+                return cur
+            if np.array_equal(cur, arr, equal_nan=cur.dtype.kind in "fc"):
+                return cur
+            new = arr.copy()  # a read-only value (a transform's): replaced, not changed
+            new.flags.writeable = False
+            return new
+        new = arr.copy()
+        if v.get("ro"):
+            new.flags.writeable = False
+        return new
 
     def attributes(self, obj: Any, state: Mapping[str, Any], path: str) -> None:
         if not isinstance(state, Mapping):
@@ -504,6 +559,33 @@ class _Decoder:
                     attrs[key] = new
                 else:
                     setattr(obj, key, new)
+
+
+def _same_array(same: np.ndarray, cur: Any) -> np.ndarray:
+    """An array held twice, restored at its first place as ``same``: the station's
+    own array ``cur`` here keeps its identity (a kernel may hold it) and takes the
+    values; without one, ``same`` itself."""
+    if isinstance(cur, np.ndarray) and cur is not same and cur.flags.writeable \
+            and cur.shape == same.shape and cur.dtype == same.dtype:
+        cur[...] = same
+        return cur
+    return same
+
+
+def _defaults(obj: Any) -> None:
+    """A dataclass object made for a snapshot: its fields' defaults first (what the
+    snapshot does not carry, such as a move's reached event, is made as its class
+    makes it; the snapshot's values then replace the rest)."""
+    if not dataclasses.is_dataclass(obj):
+        return
+    for f in dataclasses.fields(obj):
+        if f.default is not dataclasses.MISSING:
+            value = f.default
+        elif f.default_factory is not dataclasses.MISSING:
+            value = f.default_factory()
+        else:
+            continue
+        object.__setattr__(obj, f.name, value)
 
 
 def state_of(objects: Mapping[str, Any], package: str = "") -> dict[str, Any]:

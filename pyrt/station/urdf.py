@@ -61,11 +61,18 @@ from pyrt.sim.arm import (
     default_motors,
 )
 from pyrt.sim.world import World
-from pyrt.station._urdf_arm import SERVO_PERIOD_NS, Drive, UrdfArm
+from pyrt.station._urdf_arm import (
+    SERVO_PERIOD_NS,
+    Drive,
+    UrdfArm,
+    snapshot_ready,
+    snapshot_restored,
+)
 from pyrt.station._urdf_drive import DrivenArm
 from pyrt.station._urdf_sim import UrdfPhysics, UrdfSim
 from pyrt.station.base import BoardWorld, Station
 from pyrt.station.factory import StationFactory
+from pyrt.station.snapshot import restore_into, state_of
 
 __all__ = ["HARDWARE", "PUMA_START_DEG", "URDF", "UrdfFactory", "UrdfStation", "arm_boards",
            "build_urdf", "load_arm"]
@@ -176,7 +183,7 @@ class UrdfStation(Station):
             physics = world.plant
             assert isinstance(physics, UrdfPhysics)
             self.plant = physics.arm
-            self.attach_world(world.step, "physics")
+            self.attach_world(physics.step_to, "physics")  # World.step: the same, a call more
             extras.append(UrdfSim(physics.arm))
         else:  # the world runs elsewhere: what its back end tells of it
             extras.append(BoardWorld(boards))
@@ -201,8 +208,9 @@ class UrdfStation(Station):
     # -- what the shell, the server and EPICS ask -----------------------------------------
 
     def busy(self) -> bool:
-        """A move runs or the arm settles."""
-        return super().busy() or self.arm.busy()
+        """A move runs or the arm settles (the arm asked first: the move watch asks
+        every tick, and while the arm moves its answer is the whole answer)."""
+        return self.arm.busy() or super().busy()
 
     def _ended(self) -> tuple[str, list[str]]:
         """How the move that has just ended ended: the arm's words, or the fault."""
@@ -220,6 +228,26 @@ class UrdfStation(Station):
         if self.arm.powered:
             return f"{self.name}: nothing moving; holding at {self.where()}"
         return super().stop()
+
+    def snapshot_state(self) -> dict[str, Any]:
+        """The controller (the arm: its servo's C state and board side, the
+        motion under way in its evaluator, where it is, its joints), for a black
+        box that replays (:mod:`pyrt.station.snapshot`); the chain is structure."""
+        return state_of(self._snapshot_objects())
+
+    def restore_state(self, state: dict[str, Any]) -> None:
+        """Put :meth:`snapshot_state` back (the evaluator made first when the
+        snapshot has one and the arm, not yet powered, has not)."""
+        arm = self.arm
+        snapshot_ready(arm, state.get("arm"))
+        restore_into(self._snapshot_objects(), state)
+        snapshot_restored(arm)
+
+    def _snapshot_objects(self) -> dict[str, Any]:
+        """The arm, and the moves' snapshots the loop took for commands being
+        prepared in their callers' threads (a command's snapshot and its commit
+        are two requests, a tick or more apart)."""
+        return {"arm": self.arm, "prepared": self.__dict__.setdefault("_snapshots", {})}
 
     def journal_databases(self) -> dict[str, bytes]:
         """The URDF the arm was built from (a replay rebuilds the same arm)."""
