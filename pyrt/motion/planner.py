@@ -174,6 +174,12 @@ class Planner:
         #: keeps a reserve for rounding).
         self.vplan = 0.998 * self.vmax
         self.amax = np.array(limits.amax)
+        #: The accelerations planned for: a transition's half-time makes Paul's
+        #: quartic peak at these.  A sampled second difference is a weighted mean
+        #: of the acceleration over two periods, never above that peak, so a joint
+        #: transition keeps the sampled check's 0.995 ``amax`` by construction (and
+        #: is planned once, not slowed and sampled again).
+        self.aplan = 0.99 * self.amax
         self.tracker = tracker
         self.closed = chain.closed_form
         self._t6 = np.eye(4)
@@ -579,7 +585,7 @@ class Planner:
         drive space the Cartesian ones and the joints' (``dv`` mapped through the
         Jacobian's pseudo-inverse at ``q``)."""
         if kind == JOINT:
-            tau = float(np.max(0.75 * np.abs(dv) / self.amax))
+            tau = float(np.max(0.75 * np.abs(dv) / self.aplan))
         else:
             tau = max(0.75 * norm(dv[:3]) / self.limits.a_cart,
                       0.75 * norm(dv[3:]) / self.limits.alpha_cart)
@@ -589,7 +595,7 @@ class Planner:
             w = pre @ dv[3:]
             v = pre @ dv[:3] - np.cross(w, tool[:3, 3] - t6[:3, 3])
             qd = np.linalg.pinv(self.chain.jacobian(q)) @ np.concatenate([v, w])
-            tau = max(tau, 1.1 * float(np.max(0.75 * np.abs(qd) / self.amax)))
+            tau = max(tau, 1.1 * float(np.max(0.75 * np.abs(qd) / self.aplan)))
         return max(tau, 2e-3)
 
     def _incoming(self, last: Segment, kind: str, frames: Frames, r_c: Matrix | None,
