@@ -336,22 +336,23 @@ def _blend_error(planner: Planner, seg: Segment, tail: Tail, pts: list[Vector]) 
     assert last.q_end is not None
     q = last.q_end
     t_c, ti = seg.t_c, seg.tau_in
-    for i in range(k + 1):
-        t = t_c - ti + ti * i / k
-        n = planner.sample_of(tail, t)
-        got = planner.q_of(line, t, q, n)
-        if got is not None:
-            q = got
-            ref.append(_tool_point(planner, seg, q, n))
     new_line = Piece(seg.kind, t_c, seg.t_e, t_c, line_coeffs(seg.x0, seg.velocity), seg,
                      frames=seg.frames, r_c=seg.r_c, p_c=seg.p_c, config=seg.config)
-    for i in range(k + 1):
-        t = t_c + ti * i / k
-        n = planner.sample_of(tail, t)
-        got = planner.q_of(new_line, t, q, n)
-        if got is not None:
-            q = got
-            ref.append(_tool_point(planner, seg, q, n))
+    for piece, t_from in ((line, t_c - ti), (new_line, t_c)):
+        for i in range(k + 1):
+            t = t_from + ti * i / k
+            n = planner.sample_of(tail, t)
+            if piece.space == CART:
+                # a Cartesian line's T6 is its pose through its frames: the tool
+                # point without the inverse and the forward kinematics back
+                assert piece.frames is not None
+                t6 = piece.frames.t6(piece.pose(t), n)
+                ref.append(np.asarray(seg.frames.tool(t6, n)[:3, 3], dtype=float))
+                continue
+            got = planner.q_of(piece, t, q, n)
+            if got is not None:
+                q = got
+                ref.append(_tool_point(planner, seg, q, n))
     r = np.array(ref)
     d = np.sqrt(((r[None, :, :] - np.array(pts)[:, None, :]) ** 2).sum(axis=2))
     return max(0.0, float(d.min(axis=1).max()))
