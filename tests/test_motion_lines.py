@@ -223,3 +223,26 @@ def test_a_motion_that_ends_moving_towards_a_limit_faults():
     ev.queue_function(fn, t_end)
     with pytest.raises(MotionFault, match="joint1"):
         run(ev)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.sampled_from(["puma", "arm7"]),
+       st.lists(st.floats(-1.5, 1.5), min_size=7, max_size=7),
+       st.integers(3, 120), st.floats(0.005, 0.4))
+def test_the_singularity_check_decides_each_sample_as_the_decomposition_does(arm, step, m, limit):
+    """The planner's smallest singular values (one decomposition in a few, Weyl's bound between them) put each sample of a joint path under or over the limit exactly as a decomposition of every Jacobian does, and never above the true value."""
+    from pyrt.motion._checks import smallest_singular
+
+    chain, home, _ = ARMS[arm]
+    d = np.array(step[:chain.n])
+    # a path through the PUMA's wrist singularity (q5 = 0) half the time
+    q0 = home.copy()
+    if arm == "puma" and step[6] > 0:
+        q0[4], d[4] = -0.6, 1.2
+    jacs = np.array([chain.jacobian(q0 + d * (i / m)) for i in range(m)])
+    exact = np.linalg.svd(jacs, compute_uv=False)[:, -1]
+    got = smallest_singular(jacs, limit)
+    assert ((got < limit) == (exact < limit)).all()
+    assert (got <= exact + 1e-12).all()
+    under = got < limit
+    assert np.allclose(got[under], exact[under], rtol=0, atol=1e-12)

@@ -85,7 +85,7 @@ def joint_time(planner: Planner, frames: Frames, r_c: Matrix, p_c: Vector, delta
         if got is None:
             break
         q = got
-    svs = np.linalg.svd(_jacobians(planner.chain, at), compute_uv=False)[:, -1].tolist()
+    svs = smallest_singular(_jacobians(planner.chain, at), planner.limits.singular).tolist()
     q = prev
     for i, (t6, got, sv) in enumerate(zip(t6s, gots, svs, strict=True), start=1):
         if sv < planner.limits.singular or got is None:
@@ -291,7 +291,7 @@ def _sample_flags(planner: Planner, qs: list[Vector], pieces: list[Piece],
     cart = [i for i in range(m) if pieces[i].space == CART]
     singular: dict[int, float] = {}
     if cart:
-        sv = np.linalg.svd(_jacobians(chain, [qs[i] for i in cart]), compute_uv=False)[:, -1]
+        sv = smallest_singular(_jacobians(chain, [qs[i] for i in cart]), planner.limits.singular)
         singular = dict(zip(cart, sv.tolist(), strict=True))
     # the samples with two before them: their velocities and accelerations
     first = 0 if q_prev2 is not None and q_prev is not None else (
@@ -306,6 +306,36 @@ def _sample_flags(planner: Planner, qs: list[Vector], pieces: list[Piece],
         over_v[first:] = (np.abs(qd) > planner.vmax * 0.999).any(axis=1).tolist()
         over_a[first:] = (np.abs(qdd) > planner.amax * 0.995).any(axis=1).tolist()
     return _Flags(hist, outside, singular, over_v, over_a)
+
+
+#: Every how many samples :func:`smallest_singular` decomposes one Jacobian.
+_ANCHOR = 6
+
+
+def smallest_singular(jacs: Matrix, limit: float) -> Vector:
+    """For each Jacobian of ``jacs`` (m, 6, n): its smallest singular value, or a
+    lower bound of it that is at least ``limit`` (a sample the check passes).
+
+    Weyl's inequality bounds how far a singular value moves between two
+    matrices by the 2-norm of their difference (at most its Frobenius norm):
+    ``sigma(J) >= sigma(A) - ||J - A||_F``.  So one Jacobian in every
+    :data:`_ANCHOR` is decomposed, each other one is bounded from its nearest such
+    anchor, and only those whose bound falls under ``limit`` are decomposed too:
+    a sample is under ``limit`` exactly when its smallest singular value is."""
+    m = len(jacs)
+    if m <= 2:
+        return np.asarray(np.linalg.svd(jacs, compute_uv=False)[:, -1], dtype=float)
+    anchors = np.arange(0, m, _ANCHOR)
+    nearest = np.minimum((np.arange(m) + _ANCHOR // 2) // _ANCHOR, len(anchors) - 1)
+    at = anchors[nearest]
+    sv_anchor = np.linalg.svd(jacs[anchors], compute_uv=False)[:, -1]
+    dist = np.sqrt(((jacs - jacs[at]) ** 2).sum(axis=(1, 2)))
+    out = sv_anchor[nearest] - dist
+    out[anchors] = sv_anchor
+    low = np.flatnonzero(out < limit)
+    if low.size:
+        out[low] = np.linalg.svd(jacs[low], compute_uv=False)[:, -1]
+    return np.asarray(out, dtype=float)
 
 
 def _jacobians(chain: Chain, qs: list[Vector]) -> Matrix:

@@ -68,6 +68,17 @@ _H = 1e-4
 _TRIES = 20
 
 
+def _through(jac: Matrix, twist: Vector) -> Vector:
+    """The joint velocities of ``twist`` by the Jacobian's pseudo-inverse: for a square
+    Jacobian that is not singular its inverse (one solve, not a decomposition)."""
+    if jac.shape[0] == jac.shape[1]:
+        try:
+            return np.asarray(np.linalg.solve(jac, twist), dtype=float)
+        except np.linalg.LinAlgError:
+            pass
+    return np.asarray(np.linalg.pinv(jac) @ twist, dtype=float)
+
+
 @dataclass(frozen=True)
 class Limits:
     """The arm's limits: joint velocity ``vmax`` and acceleration ``amax``
@@ -593,8 +604,10 @@ class Planner:
             t6 = self.chain.fk(q)
             tool = frames.tool(t6, None)
             w = pre @ dv[3:]
-            v = pre @ dv[:3] - np.cross(w, tool[:3, 3] - t6[:3, 3])
-            qd = np.linalg.pinv(self.chain.jacobian(q)) @ np.concatenate([v, w])
+            (wx, wy, wz), (rx, ry, rz) = w.tolist(), (tool[:3, 3] - t6[:3, 3]).tolist()
+            v = pre @ dv[:3] - np.array([wy * rz - wz * ry, wz * rx - wx * rz,
+                                         wx * ry - wy * rx])  # w x r, on floats
+            qd = _through(self.chain.jacobian(q), np.concatenate([v, w]))
             tau = max(tau, 1.1 * float(np.max(0.75 * np.abs(qd) / self.aplan)))
         return max(tau, 2e-3)
 
