@@ -246,3 +246,23 @@ def test_the_singularity_check_decides_each_sample_as_the_decomposition_does(arm
     assert (got <= exact + 1e-12).all()
     under = got < limit
     assert np.allclose(got[under], exact[under], rtol=0, atol=1e-12)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.floats(-2.0, 2.0), min_size=24, max_size=24), st.floats(0.01, 0.5),
+       st.booleans())
+def test_a_drive_piece_s_poses_at_once_are_its_poses_one_by_one(vals, tau, linear):
+    """The planner's checks take a Cartesian piece's poses, and T6 through an equation's frames, all at once: the same as the trajectory tick's one at a time (to rounding), the tiny rotations included."""
+    from pyrt.motion._pieces import Frames, FrameTracker, Piece, line_coeffs, transition_coeffs
+
+    v = np.array(vals)
+    v[12:15] *= 1e-14 if vals[0] > 1.0 else 1.0  # a start with (almost) no rotation
+    c = line_coeffs(v[12:18], v[18:]) if linear else transition_coeffs(
+        v[:6], v[6:12], v[12:18], v[18:], tau)
+    r_c = rotation(v[:3], 0.4 + abs(v[3]))
+    piece = Piece("cart", 0.0, 2 * tau, 0.05, c, None, r_c=r_c, p_c=v[3:6])
+    ts = list(np.linspace(0.0, 2 * tau, 17))
+    frames = Frames(equation(np.eye(4)), FrameTracker(0.01))
+    many = frames.t6_many(piece.poses(ts), [0.0] * len(ts))
+    for t, t6 in zip(ts, many, strict=True):
+        assert np.allclose(t6, frames.t6(piece.pose(t), 0.0), rtol=0, atol=1e-12)

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from pyrt.motion._geom import log_rot, pose_of
+from pyrt.motion._geom import log_rot, pose_of, poses_of
 from pyrt.motion._pieces import CART, Frames, Piece, line_coeffs, norm
 from pyrt.motion.record import BufferMode, MotionSpec
 
@@ -71,13 +71,13 @@ def joint_time(planner: Planner, frames: Frames, r_c: Matrix, p_c: Vector, delta
     q0 = planner.solve(frames.t6(pose_of(x_s, r_c, p_c, pose), sample), q_s, config)
     q = prev = q_s if q0 is None else q0
     # each sample's inverse (seeded at the one before) up to the first out of reach, the
-    # singular values where each is judged (one batched SVD), then the samples in order
+    # singular values where each is judged (batched), then the samples in order
     t6s: list[Matrix] = []
     gots: list[Vector | None] = []
     at: list[Vector] = []  # the joints each sample's singular values are taken at
-    for i in range(1, k + 1):
-        x = x_s + delta * (i / k)
-        t6 = frames.t6(pose_of(x, r_c, p_c), sample)  # its own array: kept for the refusal
+    xs = np.array([x_s + delta * (i / k) for i in range(1, k + 1)])
+    all_t6 = frames.t6_many(poses_of(xs, r_c, p_c), [sample] * k)  # each kept for a refusal
+    for t6 in all_t6:
         got = planner.solve(t6, q, config)
         t6s.append(t6)
         gots.append(got)
@@ -154,20 +154,20 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
     # the samples' joints first, each inverse seeded at the sample before, up to the first
     # out of reach; then each check over all of them at once; then the samples in order,
     # each refused or slowed by the first check it fails, as one by one
-    times: list[float] = []
+    times = [min(t0 + i * dt, t_end) for i in range(n_steps + 1)]
     pieces: list[Piece] = []
-    samples: list[float] = []
-    qs: list[Vector] = []
-    lost = False
-    for i in range(n_steps + 1):
-        t = min(t0 + i * dt, t_end)
+    for t in times:
         piece = planner.piece_at(seg.pieces, t)
         assert piece is not None
-        n = planner.sample_of(tail, t)
-        q = planner.q_of(piece, t, seed, n)
-        times.append(t)
         pieces.append(piece)
-        samples.append(n)
+    samples = [planner.sample_of(tail, t) for t in times]
+    t6s = _cart_t6s(pieces, times, samples)  # the Cartesian samples' T6, piece by piece
+    qs: list[Vector] = []
+    lost = False
+    for i, (t, piece, n) in enumerate(zip(times, pieces, samples, strict=True)):
+        t6 = t6s.get(i)
+        q = planner.q_of(piece, t, seed, n) if t6 is None else planner.solve(t6, seed,
+                                                                              piece.config)
         if q is None:
             lost = True
             break
@@ -246,6 +246,25 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
     qf = planner.q_of(piece, t_fin, q_end, planner.sample_of(tail, t_fin))
     seg.q_end = q_end if qf is None else qf
     seg.t6_end = chain.fk(seg.q_end)
+
+
+def _cart_t6s(pieces: list[Piece], times: list[float], samples: list[float]
+              ) -> dict[int, Matrix]:
+    """T6 of each sample on a Cartesian piece (sample index -> T6): each piece's
+    poses at once (:meth:`Piece.poses`), through its frames at once where they
+    do not move (:meth:`Frames.t6_many`)."""
+    out: dict[int, Matrix] = {}
+    start = 0
+    for end in range(1, len(pieces) + 1):
+        if end < len(pieces) and pieces[end] is pieces[start]:
+            continue
+        piece = pieces[start]
+        if piece.space == CART:
+            assert piece.frames is not None
+            t6 = piece.frames.t6_many(piece.poses(times[start:end]), samples[start:end])
+            out.update(zip(range(start, end), t6, strict=True))
+        start = end
+    return out
 
 
 def _where(seg: Segment, t: float) -> str:
@@ -369,16 +388,21 @@ def _blend_error(planner: Planner, seg: Segment, tail: Tail, pts: list[Vector]) 
     new_line = Piece(seg.kind, t_c, seg.t_e, t_c, line_coeffs(seg.x0, seg.velocity), seg,
                      frames=seg.frames, r_c=seg.r_c, p_c=seg.p_c, config=seg.config)
     for piece, t_from in ((line, t_c - ti), (new_line, t_c)):
-        for i in range(k + 1):
-            t = t_from + ti * i / k
-            n = planner.sample_of(tail, t)
-            if piece.space == CART:
-                # a Cartesian line's T6 is its pose through its frames: the tool
-                # point without the inverse and the forward kinematics back
-                assert piece.frames is not None
-                t6 = piece.frames.t6(piece.pose(t), n)
-                ref.append(np.asarray(seg.frames.tool(t6, n)[:3, 3], dtype=float))
-                continue
+        ts = [t_from + ti * i / k for i in range(k + 1)]
+        ns = [planner.sample_of(tail, t) for t in ts]
+        if piece.space == CART:
+            # a Cartesian line's T6 is its pose through its frames: the tool points
+            # without an inverse and the forward kinematics back, all at once
+            assert piece.frames is not None
+            t6 = piece.frames.t6_many(piece.poses(ts), ns)
+            if seg.frames.moving:
+                ref.extend(np.asarray(seg.frames.tool(m, n)[:3, 3], dtype=float)
+                           for m, n in zip(t6, ns, strict=True))
+            else:
+                tool = seg.frames.parts(None)[2]
+                ref.extend(t6[:, :3, :3] @ tool[:3, 3] + t6[:, :3, 3])
+            continue
+        for t, n in zip(ts, ns, strict=True):
             got = planner.q_of(piece, t, q, n)
             if got is not None:
                 q = got
