@@ -266,3 +266,19 @@ def test_a_drive_piece_s_poses_at_once_are_its_poses_one_by_one(vals, tau, linea
     many = frames.t6_many(piece.poses(ts), [0.0] * len(ts))
     for t, t6 in zip(ts, many, strict=True):
         assert np.allclose(t6, frames.t6(piece.pose(t), 0.0), rtol=0, atol=1e-12)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.floats(-2.0, 2.0), min_size=24, max_size=24), st.floats(0.01, 0.5),
+       st.booleans())
+def test_a_joint_piece_s_values_at_once_are_exactly_the_tick_s(vals, tau, linear):
+    """The planner's checks take a joint piece's values at all its sample times at once: bit for bit the trajectory tick's, one at a time."""
+    from pyrt.motion._pieces import Piece, line_coeffs, transition_coeffs
+
+    v = np.array(vals)
+    c = line_coeffs(v[:6], v[6:12]) if linear else transition_coeffs(
+        v[:6], v[6:12], v[12:18], v[18:], tau)
+    piece = Piece("joint", 0.0, 2 * tau, 0.03, c, None)
+    ts = list(np.linspace(0.0, 2 * tau, 23) + 0.001)
+    for t, q in zip(ts, piece.values(ts), strict=True):
+        assert (q == piece.x(t)).all()

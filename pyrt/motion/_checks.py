@@ -24,7 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pyrt.motion._geom import log_rot, pose_of, poses_of
-from pyrt.motion._pieces import CART, Frames, Piece, line_coeffs, norm
+from pyrt.motion._pieces import CART, JOINT, Frames, Piece, line_coeffs, norm
 from pyrt.motion.record import BufferMode, MotionSpec
 
 if TYPE_CHECKING:
@@ -161,13 +161,16 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
         assert piece is not None
         pieces.append(piece)
     samples = [planner.sample_of(tail, t) for t in times]
-    t6s = _cart_t6s(pieces, times, samples)  # the Cartesian samples' T6, piece by piece
+    # piece by piece, all at once: the joint samples' values, the Cartesian ones' T6
+    joints, t6s = _batched(pieces, times, samples)
     qs: list[Vector] = []
     lost = False
     for i, (t, piece, n) in enumerate(zip(times, pieces, samples, strict=True)):
-        t6 = t6s.get(i)
-        q = planner.q_of(piece, t, seed, n) if t6 is None else planner.solve(t6, seed,
-                                                                              piece.config)
+        q = joints.get(i)
+        if q is None:
+            t6 = t6s.get(i)
+            q = planner.q_of(piece, t, seed, n) if t6 is None else planner.solve(
+                t6, seed, piece.config)
         if q is None:
             lost = True
             break
@@ -175,17 +178,12 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
         seed = q
     m = len(qs)
     flags = _sample_flags(planner, qs, pieces, q_prev2, q_prev, dt)
-    for i in range(m + 1 if lost else m):
+    whole = spec.max_diff is not None or how is BufferMode.BLENDING
+    # without max_diff or a blend a sample no check flags passes: only those are looked at
+    for i in (range(m) if whole else flags.flagged(planner.limits.singular)):
         t, piece, n = times[i], pieces[i], samples[i]
         frac = 100.0 * (t - seg.t_c) / max(seg.t_e - seg.t_c, 1e-9)
         frac = min(max(frac, 0.0), 100.0)
-        if i == m:  # out of reach
-            assert piece.frames is not None
-            t6 = piece.frames.t6(piece.pose(t, np.eye(4)), n)
-            tool = t6[:3, 3] * 1e3
-            raise Refused(f"the path leaves the arm's reach at {frac:.0f}% of the segment "
-                          f"(T6 at {tool.round(1).tolist()} mm): "
-                          f"{planner.why(t6, seed, piece.config)}")
         q = qs[i]
         if flags.outside[i]:
             why = chain.limit_violation(q)
@@ -229,8 +227,16 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
                 raise Slow("line", "over the maximum differential motion")
         if how is BufferMode.BLENDING and t <= seg.t_c + seg.tau_in:
             blend_pts.append(_tool_point(planner, seg, q, n))
-        q_end = q
-    assert q_end is not None
+    if lost:  # out of reach
+        t, piece, n = times[m], pieces[m], samples[m]
+        frac = min(max(100.0 * (t - seg.t_c) / max(seg.t_e - seg.t_c, 1e-9), 0.0), 100.0)
+        assert piece.frames is not None
+        t6 = piece.frames.t6(piece.pose(t, np.eye(4)), n)
+        tool = t6[:3, 3] * 1e3
+        raise Refused(f"the path leaves the arm's reach at {frac:.0f}% of the segment "
+                      f"(T6 at {tool.round(1).tolist()} mm): "
+                      f"{planner.why(t6, seed, piece.config)}")
+    q_end = qs[-1]
     if how is BufferMode.BLENDING:
         corner_tool = _blend_error(planner, seg, tail, blend_pts)
         seg.blend_error = corner_tool
@@ -248,23 +254,28 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
     seg.t6_end = chain.fk(seg.q_end)
 
 
-def _cart_t6s(pieces: list[Piece], times: list[float], samples: list[float]
-              ) -> dict[int, Matrix]:
-    """T6 of each sample on a Cartesian piece (sample index -> T6): each piece's
-    poses at once (:meth:`Piece.poses`), through its frames at once where they
-    do not move (:meth:`Frames.t6_many`)."""
-    out: dict[int, Matrix] = {}
+def _batched(pieces: list[Piece], times: list[float], samples: list[float]
+             ) -> tuple[dict[int, Vector], dict[int, Matrix]]:
+    """Each sample's joint values on a joint piece, and T6 on a Cartesian one (sample
+    index -> values), piece by piece: a joint piece's polynomial at all its times at
+    once (:meth:`Piece.values`, the tick's roundings), a Cartesian piece's poses at
+    once (:meth:`Piece.poses`) and through its frames at once where they do not
+    move (:meth:`Frames.t6_many`)."""
+    joints: dict[int, Vector] = {}
+    t6s: dict[int, Matrix] = {}
     start = 0
     for end in range(1, len(pieces) + 1):
         if end < len(pieces) and pieces[end] is pieces[start]:
             continue
         piece = pieces[start]
-        if piece.space == CART:
+        if piece.space == JOINT:
+            joints.update(zip(range(start, end), piece.values(times[start:end]), strict=True))
+        elif piece.space == CART:
             assert piece.frames is not None
             t6 = piece.frames.t6_many(piece.poses(times[start:end]), samples[start:end])
-            out.update(zip(range(start, end), t6, strict=True))
+            t6s.update(zip(range(start, end), t6, strict=True))
         start = end
-    return out
+    return joints, t6s
 
 
 def _where(seg: Segment, t: float) -> str:
@@ -288,6 +299,14 @@ class _Flags:
         self.singular = singular
         self.over_v = over_v
         self.over_a = over_a
+
+    def flagged(self, limit: float) -> list[int]:
+        """The samples some check flags (beyond a joint limit maybe, a singular value
+        under ``limit``, a velocity or an acceleration over its limit), in order."""
+        sing = self.singular
+        return [i for i, (out, v, a) in enumerate(zip(self.outside, self.over_v, self.over_a,
+                                                       strict=True))
+                if out or v or a or sing.get(i, limit) < limit]
 
     def prev(self, i: int, back: int) -> Vector | None:
         """The joints ``back`` samples before sample ``i`` (None: none)."""

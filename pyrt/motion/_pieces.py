@@ -317,17 +317,21 @@ class Piece:
             return out
         return m
 
-    def poses(self, ts: Sequence[float]) -> Matrix:
-        """Drive piece: the POS values (m, 4, 4) at the times ``ts``, all at once (the
-        planner's checks; :meth:`pose` is the tick's, one at a time)."""
+    def values(self, ts: Sequence[float]) -> Matrix:
+        """The polynomial's values (m, d) at the times ``ts``, all at once: the same
+        operations in the same order as :meth:`x` (the same roundings)."""
         u = np.asarray(ts, dtype=float)[:, None] - self.origin
         c = self.c
         if self.linear:
-            xs = c[0] + c[1] * u
-        else:
-            xs = ((((c[5] * u + c[4]) * u + c[3]) * u + c[2]) * u + c[1]) * u + c[0]
+            return np.asarray(c[0] + c[1] * u, dtype=float)
+        return np.asarray(((((c[5] * u + c[4]) * u + c[3]) * u + c[2]) * u + c[1]) * u + c[0],
+                          dtype=float)
+
+    def poses(self, ts: Sequence[float]) -> Matrix:
+        """Drive piece: the POS values (m, 4, 4) at the times ``ts``, all at once (the
+        planner's checks; :meth:`pose` is the tick's, one at a time)."""
         assert self.r_c is not None and self.p_c is not None
-        return poses_of(xs, np.asarray(self.r_c), np.asarray(self.p_c))
+        return poses_of(self.values(ts), np.asarray(self.r_c), np.asarray(self.p_c))
 
     def copy_until(self, t1: float) -> Piece:
         p = Piece(self.space, self.t0, t1, self.origin, self.c, self.seg, frames=self.frames,
