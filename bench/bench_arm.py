@@ -47,6 +47,26 @@ station's handlers (moves, scope, mailbox) and the console about 4 µs.  100x
 (10 µs a tick) is not within the example's reach: what is pyrt's (loop,
 handlers, evaluator, planner, the world's Python around its C step) is about
 10 µs of a tick.
+
+Planned once, and the example's own tick cheaper (the world's wiring in the
+board's own storage, the drives written through bound writes, the evaluator's
+central differences on floats), five interleaved rounds of the script below
+against the tree before, at load 10.3-10.4: before 56.9x CPU (43-60x), 19.1x
+wall, 17.6 µs of CPU a tick; after 69.4x CPU (57-72x), 23.6x wall, 14.4 µs a
+tick.  The parts of a tick (the second benchmark's loop through the image's
+read and write phases, best of 57 runs of 100 ticks, load 10): the world with
+the image's phases 5.3 -> 4.5 µs, the servo task 2.9 -> 2.55, the trajectory
+task 1.95 -> 1.65; the four moves' planning (each planned once, its samples
+taken at once) 3.0-3.8 ms -> 1.4 ms.  Of a tick's CPU time after (cProfile's
+own times, grouped): pyrt's loop 21 %, the image and registers 12 %, the
+simulated arm's Python around its C step 12 %, the cffi wrappers 11 %, the
+example's own code 16 %, pyrt.motion (the evaluator and the planning) 7 %:
+100x needs about 4 µs a tick more from pyrt's side.
+
+As a script it compares source trees side by side (each run a child process
+whose ``PYTHONPATH`` is the tree and its ``examples/arm``)::
+
+    python bench/bench_arm.py --tree /tmp/before --tree . --rounds 5
 """
 
 from __future__ import annotations
