@@ -79,11 +79,38 @@ from hypothesis import strategies as st
 from pyrt.commands.robot import RobotShell
 from pyrt.component import Command, Component, run_prepared, walk
 from pyrt.errors import CommandError, PyrtError
+from pyrt.scheduler.clock import SimClock
 from pyrt.server import ServedStation, Server
 from pyrt.server.epics import FIXED_PVS, caproto_available
 from pyrt.station.base import Station
 
-__all__ = ["NASTY", "StationConformance"]
+__all__ = ["NASTY", "StallClock", "StationConformance"]
+
+
+class StallClock(SimClock):
+    """Virtual time that can stall, for a test of control on the time that really
+    passed: after :meth:`stall` every tick starts that much after its deadline (the
+    deadlines passed meanwhile skipped, never run back to back), as a loop that
+    stalled on a loaded machine.  Deterministic like a :class:`~pyrt.SimClock`; the
+    handlers see the time that really passed::
+
+        clock = StallClock()
+        station = build_my_robot(Loop(clock))
+        ...
+        clock.stall(30_000_000)  # the loop stalls 30 ms before its next tick
+    """
+
+    offset = 0
+
+    def stall(self, ns: int) -> None:
+        """The loop stalls ``ns`` before its next tick (and every later tick with it)."""
+        self.offset += int(ns)
+
+    def now_ns(self) -> int:
+        return super().now_ns() + self.offset
+
+    def start_tick(self, deadline_ns: int) -> int:
+        return super().start_tick(deadline_ns) + self.offset
 
 #: Argument words that are no valid argument of any command (file names aside).
 NASTY = ["nan", "NaN", "inf", "-inf", "1e400", "-1e400", "0x1g", "--1", "1..2", "''", "§"]

@@ -142,6 +142,22 @@ def test_short_joint_segments_keep_every_acceleration_within_the_limits(step):
     _check_continuity(knots)
 
 
+@settings(max_examples=15, deadline=None)
+@given(st.lists(st.floats(-0.8, 0.8), min_size=6, max_size=6).filter(
+    lambda d: max(abs(x) for x in d) >= 0.5))
+def test_a_joint_move_from_rest_accelerates_at_its_limit_not_below(delta):
+    """A joint move from rest is planned at its limits the first time: the leading joint's sampled acceleration peaks within 3 % under its limit (not slowed a tenth below it), and no knot is over a limit."""
+    ev = make()
+    target = PUMA_HOME + np.array(delta)
+    ev.queue(MotionSpec(mode="joint", target=target))
+    knots = run(ev)
+    _check_continuity(knots)
+    lead = int(np.argmax(np.abs(delta) / VMAX))
+    peak = max(abs(float(k.qdd[lead])) for k in knots)
+    assert 0.97 * AMAX[lead] <= peak <= AMAX[lead]
+    assert np.allclose(knots[-1].q, target, atol=1e-9)
+
+
 def test_a_sharp_corner_with_a_small_tolerance_is_never_cut_more():
     """A 90 degree corner at full speed with 1 mm tolerance: the blend is made within it (slower) or the arm stops exactly at the corner; the path never leaves the tolerance (the anchors' complaint)."""
     ev = make()

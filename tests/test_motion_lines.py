@@ -223,3 +223,62 @@ def test_a_motion_that_ends_moving_towards_a_limit_faults():
     ev.queue_function(fn, t_end)
     with pytest.raises(MotionFault, match="joint1"):
         run(ev)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.sampled_from(["puma", "arm7"]),
+       st.lists(st.floats(-1.5, 1.5), min_size=7, max_size=7),
+       st.integers(3, 120), st.floats(0.005, 0.4))
+def test_the_singularity_check_decides_each_sample_as_the_decomposition_does(arm, step, m, limit):
+    """The planner's smallest singular values (one decomposition in a few, Weyl's bound between them) put each sample of a joint path under or over the limit exactly as a decomposition of every Jacobian does, and never above the true value."""
+    from pyrt.motion._checks import smallest_singular
+
+    chain, home, _ = ARMS[arm]
+    d = np.array(step[:chain.n])
+    # a path through the PUMA's wrist singularity (q5 = 0) half the time
+    q0 = home.copy()
+    if arm == "puma" and step[6] > 0:
+        q0[4], d[4] = -0.6, 1.2
+    jacs = np.array([chain.jacobian(q0 + d * (i / m)) for i in range(m)])
+    exact = np.linalg.svd(jacs, compute_uv=False)[:, -1]
+    got = smallest_singular(jacs, limit)
+    assert ((got < limit) == (exact < limit)).all()
+    assert (got <= exact + 1e-12).all()
+    under = got < limit
+    assert np.allclose(got[under], exact[under], rtol=0, atol=1e-12)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.floats(-2.0, 2.0), min_size=24, max_size=24), st.floats(0.01, 0.5),
+       st.booleans())
+def test_a_drive_piece_s_poses_at_once_are_its_poses_one_by_one(vals, tau, linear):
+    """The planner's checks take a Cartesian piece's poses, and T6 through an equation's frames, all at once: the same as the trajectory tick's one at a time (to rounding), the tiny rotations included."""
+    from pyrt.motion._pieces import Frames, FrameTracker, Piece, line_coeffs, transition_coeffs
+
+    v = np.array(vals)
+    v[12:15] *= 1e-14 if vals[0] > 1.0 else 1.0  # a start with (almost) no rotation
+    c = line_coeffs(v[12:18], v[18:]) if linear else transition_coeffs(
+        v[:6], v[6:12], v[12:18], v[18:], tau)
+    r_c = rotation(v[:3], 0.4 + abs(v[3]))
+    piece = Piece("cart", 0.0, 2 * tau, 0.05, c, None, r_c=r_c, p_c=v[3:6])
+    ts = list(np.linspace(0.0, 2 * tau, 17))
+    frames = Frames(equation(np.eye(4)), FrameTracker(0.01))
+    many = frames.t6_many(piece.poses(ts), [0.0] * len(ts))
+    for t, t6 in zip(ts, many, strict=True):
+        assert np.allclose(t6, frames.t6(piece.pose(t), 0.0), rtol=0, atol=1e-12)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.floats(-2.0, 2.0), min_size=24, max_size=24), st.floats(0.01, 0.5),
+       st.booleans())
+def test_a_joint_piece_s_values_at_once_are_exactly_the_tick_s(vals, tau, linear):
+    """The planner's checks take a joint piece's values at all its sample times at once: bit for bit the trajectory tick's, one at a time."""
+    from pyrt.motion._pieces import Piece, line_coeffs, transition_coeffs
+
+    v = np.array(vals)
+    c = line_coeffs(v[:6], v[6:12]) if linear else transition_coeffs(
+        v[:6], v[6:12], v[12:18], v[18:], tau)
+    piece = Piece("joint", 0.0, 2 * tau, 0.03, c, None)
+    ts = list(np.linspace(0.0, 2 * tau, 23) + 0.001)
+    for t, q in zip(ts, piece.values(ts), strict=True):
+        assert (q == piece.x(t)).all()

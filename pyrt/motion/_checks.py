@@ -23,8 +23,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from pyrt.motion._geom import log_rot, pose_of
-from pyrt.motion._pieces import CART, Frames, Piece, line_coeffs, norm
+from pyrt.motion._geom import log_rot, pose_of, poses_of
+from pyrt.motion._pieces import CART, JOINT, Frames, Piece, line_coeffs, norm
 from pyrt.motion.record import BufferMode, MotionSpec
 
 if TYPE_CHECKING:
@@ -71,13 +71,13 @@ def joint_time(planner: Planner, frames: Frames, r_c: Matrix, p_c: Vector, delta
     q0 = planner.solve(frames.t6(pose_of(x_s, r_c, p_c, pose), sample), q_s, config)
     q = prev = q_s if q0 is None else q0
     # each sample's inverse (seeded at the one before) up to the first out of reach, the
-    # singular values where each is judged (one batched SVD), then the samples in order
+    # singular values where each is judged (batched), then the samples in order
     t6s: list[Matrix] = []
     gots: list[Vector | None] = []
     at: list[Vector] = []  # the joints each sample's singular values are taken at
-    for i in range(1, k + 1):
-        x = x_s + delta * (i / k)
-        t6 = frames.t6(pose_of(x, r_c, p_c), sample)  # its own array: kept for the refusal
+    xs = np.array([x_s + delta * (i / k) for i in range(1, k + 1)])
+    all_t6 = frames.t6_many(poses_of(xs, r_c, p_c), [sample] * k)  # each kept for a refusal
+    for t6 in all_t6:
         got = planner.solve(t6, q, config)
         t6s.append(t6)
         gots.append(got)
@@ -85,7 +85,7 @@ def joint_time(planner: Planner, frames: Frames, r_c: Matrix, p_c: Vector, delta
         if got is None:
             break
         q = got
-    svs = np.linalg.svd(_jacobians(planner.chain, at), compute_uv=False)[:, -1].tolist()
+    svs = smallest_singular(_jacobians(planner.chain, at), planner.limits.singular).tolist()
     q = prev
     for i, (t6, got, sv) in enumerate(zip(t6s, gots, svs, strict=True), start=1):
         if sv < planner.limits.singular or got is None:
@@ -154,20 +154,23 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
     # the samples' joints first, each inverse seeded at the sample before, up to the first
     # out of reach; then each check over all of them at once; then the samples in order,
     # each refused or slowed by the first check it fails, as one by one
-    times: list[float] = []
+    times = [min(t0 + i * dt, t_end) for i in range(n_steps + 1)]
     pieces: list[Piece] = []
-    samples: list[float] = []
-    qs: list[Vector] = []
-    lost = False
-    for i in range(n_steps + 1):
-        t = min(t0 + i * dt, t_end)
+    for t in times:
         piece = planner.piece_at(seg.pieces, t)
         assert piece is not None
-        n = planner.sample_of(tail, t)
-        q = planner.q_of(piece, t, seed, n)
-        times.append(t)
         pieces.append(piece)
-        samples.append(n)
+    samples = [planner.sample_of(tail, t) for t in times]
+    # piece by piece, all at once: the joint samples' values, the Cartesian ones' T6
+    joints, t6s = _batched(pieces, times, samples)
+    qs: list[Vector] = []
+    lost = False
+    for i, (t, piece, n) in enumerate(zip(times, pieces, samples, strict=True)):
+        q = joints.get(i)
+        if q is None:
+            t6 = t6s.get(i)
+            q = planner.q_of(piece, t, seed, n) if t6 is None else planner.solve(
+                t6, seed, piece.config)
         if q is None:
             lost = True
             break
@@ -175,17 +178,12 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
         seed = q
     m = len(qs)
     flags = _sample_flags(planner, qs, pieces, q_prev2, q_prev, dt)
-    for i in range(m + 1 if lost else m):
+    whole = spec.max_diff is not None or how is BufferMode.BLENDING
+    # without max_diff or a blend a sample no check flags passes: only those are looked at
+    for i in (range(m) if whole else flags.flagged(planner.limits.singular)):
         t, piece, n = times[i], pieces[i], samples[i]
         frac = 100.0 * (t - seg.t_c) / max(seg.t_e - seg.t_c, 1e-9)
         frac = min(max(frac, 0.0), 100.0)
-        if i == m:  # out of reach
-            assert piece.frames is not None
-            t6 = piece.frames.t6(piece.pose(t, np.eye(4)), n)
-            tool = t6[:3, 3] * 1e3
-            raise Refused(f"the path leaves the arm's reach at {frac:.0f}% of the segment "
-                          f"(T6 at {tool.round(1).tolist()} mm): "
-                          f"{planner.why(t6, seed, piece.config)}")
         q = qs[i]
         if flags.outside[i]:
             why = chain.limit_violation(q)
@@ -229,8 +227,16 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
                 raise Slow("line", "over the maximum differential motion")
         if how is BufferMode.BLENDING and t <= seg.t_c + seg.tau_in:
             blend_pts.append(_tool_point(planner, seg, q, n))
-        q_end = q
-    assert q_end is not None
+    if lost:  # out of reach
+        t, piece, n = times[m], pieces[m], samples[m]
+        frac = min(max(100.0 * (t - seg.t_c) / max(seg.t_e - seg.t_c, 1e-9), 0.0), 100.0)
+        assert piece.frames is not None
+        t6 = piece.frames.t6(piece.pose(t, np.eye(4)), n)
+        tool = t6[:3, 3] * 1e3
+        raise Refused(f"the path leaves the arm's reach at {frac:.0f}% of the segment "
+                      f"(T6 at {tool.round(1).tolist()} mm): "
+                      f"{planner.why(t6, seed, piece.config)}")
+    q_end = qs[-1]
     if how is BufferMode.BLENDING:
         corner_tool = _blend_error(planner, seg, tail, blend_pts)
         seg.blend_error = corner_tool
@@ -246,6 +252,30 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
     qf = planner.q_of(piece, t_fin, q_end, planner.sample_of(tail, t_fin))
     seg.q_end = q_end if qf is None else qf
     seg.t6_end = chain.fk(seg.q_end)
+
+
+def _batched(pieces: list[Piece], times: list[float], samples: list[float]
+             ) -> tuple[dict[int, Vector], dict[int, Matrix]]:
+    """Each sample's joint values on a joint piece, and T6 on a Cartesian one (sample
+    index -> values), piece by piece: a joint piece's polynomial at all its times at
+    once (:meth:`Piece.values`, the tick's roundings), a Cartesian piece's poses at
+    once (:meth:`Piece.poses`) and through its frames at once where they do not
+    move (:meth:`Frames.t6_many`)."""
+    joints: dict[int, Vector] = {}
+    t6s: dict[int, Matrix] = {}
+    start = 0
+    for end in range(1, len(pieces) + 1):
+        if end < len(pieces) and pieces[end] is pieces[start]:
+            continue
+        piece = pieces[start]
+        if piece.space == JOINT:
+            joints.update(zip(range(start, end), piece.values(times[start:end]), strict=True))
+        elif piece.space == CART:
+            assert piece.frames is not None
+            t6 = piece.frames.t6_many(piece.poses(times[start:end]), samples[start:end])
+            t6s.update(zip(range(start, end), t6, strict=True))
+        start = end
+    return joints, t6s
 
 
 def _where(seg: Segment, t: float) -> str:
@@ -270,6 +300,14 @@ class _Flags:
         self.over_v = over_v
         self.over_a = over_a
 
+    def flagged(self, limit: float) -> list[int]:
+        """The samples some check flags (beyond a joint limit maybe, a singular value
+        under ``limit``, a velocity or an acceleration over its limit), in order."""
+        sing = self.singular
+        return [i for i, (out, v, a) in enumerate(zip(self.outside, self.over_v, self.over_a,
+                                                       strict=True))
+                if out or v or a or sing.get(i, limit) < limit]
+
     def prev(self, i: int, back: int) -> Vector | None:
         """The joints ``back`` samples before sample ``i`` (None: none)."""
         return self._hist[i + 2 - back]
@@ -291,7 +329,7 @@ def _sample_flags(planner: Planner, qs: list[Vector], pieces: list[Piece],
     cart = [i for i in range(m) if pieces[i].space == CART]
     singular: dict[int, float] = {}
     if cart:
-        sv = np.linalg.svd(_jacobians(chain, [qs[i] for i in cart]), compute_uv=False)[:, -1]
+        sv = smallest_singular(_jacobians(chain, [qs[i] for i in cart]), planner.limits.singular)
         singular = dict(zip(cart, sv.tolist(), strict=True))
     # the samples with two before them: their velocities and accelerations
     first = 0 if q_prev2 is not None and q_prev is not None else (
@@ -306,6 +344,36 @@ def _sample_flags(planner: Planner, qs: list[Vector], pieces: list[Piece],
         over_v[first:] = (np.abs(qd) > planner.vmax * 0.999).any(axis=1).tolist()
         over_a[first:] = (np.abs(qdd) > planner.amax * 0.995).any(axis=1).tolist()
     return _Flags(hist, outside, singular, over_v, over_a)
+
+
+#: Every how many samples :func:`smallest_singular` decomposes one Jacobian.
+_ANCHOR = 6
+
+
+def smallest_singular(jacs: Matrix, limit: float) -> Vector:
+    """For each Jacobian of ``jacs`` (m, 6, n): its smallest singular value, or a
+    lower bound of it that is at least ``limit`` (a sample the check passes).
+
+    Weyl's inequality bounds how far a singular value moves between two
+    matrices by the 2-norm of their difference (at most its Frobenius norm):
+    ``sigma(J) >= sigma(A) - ||J - A||_F``.  So one Jacobian in every
+    :data:`_ANCHOR` is decomposed, each other one is bounded from its nearest such
+    anchor, and only those whose bound falls under ``limit`` are decomposed too:
+    a sample is under ``limit`` exactly when its smallest singular value is."""
+    m = len(jacs)
+    if m <= 2:
+        return np.asarray(np.linalg.svd(jacs, compute_uv=False)[:, -1], dtype=float)
+    anchors = np.arange(0, m, _ANCHOR)
+    nearest = np.minimum((np.arange(m) + _ANCHOR // 2) // _ANCHOR, len(anchors) - 1)
+    at = anchors[nearest]
+    sv_anchor = np.linalg.svd(jacs[anchors], compute_uv=False)[:, -1]
+    dist = np.sqrt(((jacs - jacs[at]) ** 2).sum(axis=(1, 2)))
+    out = sv_anchor[nearest] - dist
+    out[anchors] = sv_anchor
+    low = np.flatnonzero(out < limit)
+    if low.size:
+        out[low] = np.linalg.svd(jacs[low], compute_uv=False)[:, -1]
+    return np.asarray(out, dtype=float)
 
 
 def _jacobians(chain: Chain, qs: list[Vector]) -> Matrix:
@@ -336,22 +404,28 @@ def _blend_error(planner: Planner, seg: Segment, tail: Tail, pts: list[Vector]) 
     assert last.q_end is not None
     q = last.q_end
     t_c, ti = seg.t_c, seg.tau_in
-    for i in range(k + 1):
-        t = t_c - ti + ti * i / k
-        n = planner.sample_of(tail, t)
-        got = planner.q_of(line, t, q, n)
-        if got is not None:
-            q = got
-            ref.append(_tool_point(planner, seg, q, n))
     new_line = Piece(seg.kind, t_c, seg.t_e, t_c, line_coeffs(seg.x0, seg.velocity), seg,
                      frames=seg.frames, r_c=seg.r_c, p_c=seg.p_c, config=seg.config)
-    for i in range(k + 1):
-        t = t_c + ti * i / k
-        n = planner.sample_of(tail, t)
-        got = planner.q_of(new_line, t, q, n)
-        if got is not None:
-            q = got
-            ref.append(_tool_point(planner, seg, q, n))
+    for piece, t_from in ((line, t_c - ti), (new_line, t_c)):
+        ts = [t_from + ti * i / k for i in range(k + 1)]
+        ns = [planner.sample_of(tail, t) for t in ts]
+        if piece.space == CART:
+            # a Cartesian line's T6 is its pose through its frames: the tool points
+            # without an inverse and the forward kinematics back, all at once
+            assert piece.frames is not None
+            t6 = piece.frames.t6_many(piece.poses(ts), ns)
+            if seg.frames.moving:
+                ref.extend(np.asarray(seg.frames.tool(m, n)[:3, 3], dtype=float)
+                           for m, n in zip(t6, ns, strict=True))
+            else:
+                tool = seg.frames.parts(None)[2]
+                ref.extend(t6[:, :3, :3] @ tool[:3, 3] + t6[:, :3, 3])
+            continue
+        for t, n in zip(ts, ns, strict=True):
+            got = planner.q_of(piece, t, q, n)
+            if got is not None:
+                q = got
+                ref.append(_tool_point(planner, seg, q, n))
     r = np.array(ref)
     d = np.sqrt(((r[None, :, :] - np.array(pts)[:, None, :]) ** 2).sum(axis=2))
     return max(0.0, float(d.min(axis=1).max()))

@@ -12,14 +12,14 @@ that closes the gap with zero velocity and acceleration at both ends.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from pyrt.frames import PositionEquation, Transform, TransformType
-from pyrt.motion._geom import exp_rot, inv
+from pyrt.motion._geom import exp_rot, inv, poses_of
 
 Matrix = npt.NDArray[np.float64]
 Vector = npt.NDArray[np.float64]
@@ -144,6 +144,15 @@ class Frames:
             return out if self._post_identity else out @ post
         pre, post, _ = self.parts(sample)
         return pre @ pos @ post
+
+    def t6_many(self, poses: Matrix, samples: Sequence[float]) -> Matrix:
+        """T6 (m, 4, 4) of the POS values ``poses`` (m, 4, 4) at ``samples``: one
+        product for all of them when no term moves, else one sample at a time."""
+        if self._static is not None:
+            pre, post, _ = self._static
+            out = poses if self._pre_identity else pre @ poses
+            return out if self._post_identity else out @ post
+        return np.array([self.t6(p, n) for p, n in zip(poses, samples, strict=True)])
 
     def pos(self, t6: Matrix, sample: float | None) -> Matrix:
         pre, post, _ = self.parts(sample)
@@ -307,6 +316,22 @@ class Piece:
             out[:] = m
             return out
         return m
+
+    def values(self, ts: Sequence[float]) -> Matrix:
+        """The polynomial's values (m, d) at the times ``ts``, all at once: the same
+        operations in the same order as :meth:`x` (the same roundings)."""
+        u = np.asarray(ts, dtype=float)[:, None] - self.origin
+        c = self.c
+        if self.linear:
+            return np.asarray(c[0] + c[1] * u, dtype=float)
+        return np.asarray(((((c[5] * u + c[4]) * u + c[3]) * u + c[2]) * u + c[1]) * u + c[0],
+                          dtype=float)
+
+    def poses(self, ts: Sequence[float]) -> Matrix:
+        """Drive piece: the POS values (m, 4, 4) at the times ``ts``, all at once (the
+        planner's checks; :meth:`pose` is the tick's, one at a time)."""
+        assert self.r_c is not None and self.p_c is not None
+        return poses_of(self.values(ts), np.asarray(self.r_c), np.asarray(self.p_c))
 
     def copy_until(self, t1: float) -> Piece:
         p = Piece(self.space, self.t0, t1, self.origin, self.c, self.seg, frames=self.frames,

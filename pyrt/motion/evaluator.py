@@ -52,8 +52,7 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -80,15 +79,15 @@ class MotionFault(RuntimeError):
     joint limit): the trajectory task's caller stops the robot."""
 
 
-@dataclass(frozen=True)
-class Knot:
+class Knot(NamedTuple):
     """One trajectory sample: ``q``, ``qd``, ``qdd`` (n,), ``t6`` (4, 4) at
     time ``t`` (s since the evaluator began) and sample number ``sample``;
     the running record (``move``, None when idle) and its ``progress``;
     ``events``: (word, move) pairs of the tick (``"reached"``, ``"stopped"``,
     ``"aborted"``, a monitor's word, ``"force"``); ``period``: the
     trajectory period from here; ``mass`` carried and ``payload_torque`` (n,),
-    the joint torques that hold it against gravity."""
+    the joint torques that hold it against gravity.  Immutable (a named tuple:
+    made every trajectory tick, so made cheaply)."""
 
     sample: int
     t: float
@@ -301,8 +300,13 @@ class Evaluator(Queueing):
             self._end_stop()
         q0, q1 = self._q
         h1, h2 = self._h, dt
-        qd = (q_next - q0) / (h1 + h2)
-        qdd = 2.0 * ((q_next - q1) / h2 - (q1 - q0) / h1) / (h1 + h2)
+        hs = h1 + h2
+        # the central differences on plain floats (the same operations, in the same
+        # order, as on the arrays: the same roundings), two arrays made of them
+        xs, ys, zs = q0.tolist(), q1.tolist(), q_next.tolist()
+        qd = np.array([(z - x) / hs for x, z in zip(xs, zs, strict=True)])
+        qdd = np.array([2.0 * ((z - y) / h2 - (y - x) / h1) / hs
+                        for x, y, z in zip(xs, ys, zs, strict=True)])
         t_knot = self._tp[1]
         knot_q, knot_t6 = q1, self._t6[1]
         # slide the window

@@ -45,6 +45,7 @@ from pyrt import (
     Task,
     command,
 )
+from pyrt.boards.registers import bound_writer
 from pyrt.component import PREPARE_TRIES, Stale
 from pyrt.kinematics import Chain
 from pyrt.motion import Evaluator, MotionFault, MotionSpec, RecordError
@@ -256,6 +257,9 @@ class ArmController(Component):
         assert at == list(range(at[0], at[-1] + 1)), "the counters lie side by side"
         self._ok_at = [layout.index(("amp_ok", j)) for j in range(len(configs))]
         self._no_power = False  # a joint's amplifier has reported no power lately
+        # each joint's drive written through a write bound once (a process image's:
+        # one call into the image a write)
+        self._drive_writers = [bound_writer(board, "drive", j) for j in range(len(configs))]
         counts = board.snapshot()[self._counts_at]
         self.io = io = ServoBoard(self.servo, [c.counts_per_deg * _DEG for c in configs], counts,
                                   [DRIVE_FULL_SCALE / c.torque_per_drive_nm for c in configs],
@@ -263,6 +267,7 @@ class ArmController(Component):
         io.total -= np.array([c.zero_count for c in configs], np.int64)  # 0 at the zero count
         self.joints = (Joint(self, 0, configs[0]), Joint(self, 1, configs[1]))  # their bounds
         self._kc = np.array([c.kc_nm for c in configs])
+        self._half_tick = 0.5 * period_ns * 1e-9  # half a servo period (s)
         self.limits = MotionLimits(tuple(math.radians(v) for v in VMAX_DEG_S),
                                    tuple(math.radians(a) for a in AMAX_DEG_S2))
         self.traj_period_s = TRAJECTORY_PERIOD * period_ns * 1e-9
@@ -453,7 +458,7 @@ class ArmController(Component):
         servo, io = self.servo, self.io
         now = now_ns * 1e-9
         ev = self.evaluator
-        if (self._joined and ev is not None and now > self._seg_end + 0.5 * servo.period
+        if (self._joined and ev is not None and now > self._seg_end + self._half_tick
                 and not self.station.executor.busy):
             io.encoders(counts)
             self._next_knot(now_ns, ev)  # the loop stalled past the segment: its knot, now
@@ -469,10 +474,10 @@ class ArmController(Component):
         c = io.c
         changed = c.changed
         if changed:  # the drives whose counts changed (those before a joint beyond its bounds)
-            write, joints = self.board.write, self.joints
+            writers, joints = self._drive_writers, self.joints
             for j, v in enumerate(io.dac.tolist()):
                 if changed >> j & 1:
-                    write("drive", v, j)
+                    writers[j](v)
                     joints[j].drive = v
         if c.beyond >= 0:
             jt = self.joints[c.beyond]

@@ -44,7 +44,7 @@ from collections.abc import Sequence
 
 import numpy as np
 from pyrt import RegisterBoard
-from pyrt.boards.armservo import arm_servo_kind
+from pyrt.boards.armservo import arm_servo_kind, register_cells
 from pyrt.kinematics import Chain
 from pyrt.sim.arm import ArmWorld, Motor
 
@@ -121,12 +121,22 @@ def _pair(name: str, values: Sequence[float]) -> tuple[float, float]:
 class _Wiring(RegisterBoard):
     """The world's passive servo board (pyrt's ``arm-servo`` kind), wired onto
     ``board`` (the example's): what the world reads of its outputs and writes
-    to its inputs goes to and from ``board`` at once (see the module text)."""
+    to its inputs goes to and from ``board`` at once (see the module text).
+
+    On the example's in-process register file (``sim:``) the wiring reads the
+    board's ``drive`` and ``enable`` and writes its ``count`` in place
+    (:func:`pyrt.boards.armservo.register_cells`: the values the world gives
+    are 32-bit counts, as ``count`` declares them); on any other board,
+    through ``values`` and ``set_input``."""
 
     def __init__(self, board: RegisterBoard) -> None:
         super().__init__(arm_servo_kind(2))
         self._values_of = board.values
         self._set = board.set_input
+        #: the board's own storage of drive, enable and count (None: not in place)
+        self._drive = register_cells(board, "drive")
+        self._enable = register_cells(board, "enable")
+        self._count = register_cells(board, "count")
         #: per joint: the motor has power / the brake is released (no jam)
         self.powered = [True, True]
         self.release = [1, 1]
@@ -137,17 +147,21 @@ class _Wiring(RegisterBoard):
         #: per joint: the world's own counter (what the encoder really reads)
         self.raw = [0, 0]
         self.changed = True          # the power changed: enables and amp_ok again
+        self._plain = True           # no encoder offset and none frozen: counts as they come
         self._on_in: list[int] = []
         self._on = [0, 0]
         self._ok = [-1, -1]
 
     def values(self, name: str) -> list[int]:
-        if name == "dac":
-            return self._values_of("drive")
+        if name == "dac":  # the world copies what it keeps: the board's own list will do
+            drive = self._drive
+            return drive if drive is not None else self._values_of("drive")
         if name == "enable":
-            on = self._values_of("enable")
+            on = self._enable
+            if on is None:
+                on = self._values_of("enable")
             if on != self._on_in or self.changed:
-                self._on_in, self.changed = on, False
+                self._on_in, self.changed = on[:], False
                 self._on = [e if p else 0 for e, p in zip(on, self.powered, strict=True)]
                 for j, e in enumerate(self._on):
                     ok = 1 if e else 0
@@ -162,15 +176,23 @@ class _Wiring(RegisterBoard):
     def set_input(self, name: str, value: int, index: int = 0) -> None:
         if name == "count":
             self.raw[index] = value
-            if self.frozen[index] is None:
+            count = self._count
+            if self._plain and count is not None:
+                count[index] = value
+            elif self.frozen[index] is None:
                 if self.offset[index]:
                     value = wrap_int32(value + self.offset[index])
                 self._set("count", value, index)
             return
         super().set_input(name, value, index)
 
+    def rewired(self) -> None:
+        """An encoder's offset or freeze changed: whether counts go on as they come."""
+        self._plain = not any(self.offset) and all(f is None for f in self.frozen)
+
     def publish(self, j: int) -> None:
         """Joint ``j``'s counter onto the board: frozen, or the encoder's shifted."""
+        self.rewired()
         frozen = self.frozen[j]
         self._set("count", frozen if frozen is not None
                   else wrap_int32(self.raw[j] + self.offset[j]), j)
@@ -280,6 +302,7 @@ class Plant:
         frozen = w.frozen[j]
         if on and frozen is None:
             w.frozen[j] = self.count(j)
+            w.rewired()
         elif not on and frozen is not None:
             w.offset[j] = frozen - w.raw[j]
             w.frozen[j] = None

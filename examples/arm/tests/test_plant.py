@@ -195,6 +195,34 @@ def test_a_disconnected_encoder_freezes_and_counts_on_when_reconnected():
     assert abs(plant.count(1) - frozen - moved) <= 1.0
 
 
+class _CheckedBoard(RegisterBoard):
+    """A servo board whose registers the wiring cannot reach in place (any other view)."""
+
+
+def test_the_wiring_in_place_and_through_the_checked_calls_gives_the_same_arm():
+    """Behind the in-process board (registers moved in place) and behind a board reached only through values()/set_input(), the same drives give the same counters, amp_ok and true angles, through a disconnected encoder, a preset and a motor cut."""
+    fast = plant_at((10.0, 40.0))
+    slow = Plant(_CheckedBoard(SERVO), q_deg=(10.0, 40.0))
+    assert fast._wiring._count is not None and slow._wiring._count is None  # the two paths
+    for k in range(400):
+        t = k * MS
+        for p in (fast, slow):
+            if k == 100:
+                p.disconnect_encoder(1)
+            elif k == 180:
+                p.disconnect_encoder(1, False)
+            elif k == 250:
+                p.preset_encoder(0, 2**31 - 50)
+            elif k == 300:
+                p.motor_off(1)
+            drive(p, (0.4 * math.sin(2 * math.pi * 2.0 * t), 0.3 * math.cos(2 * math.pi * t)))
+            p.step(MS)
+        assert fast.board.values("count") == slow.board.values("count")
+        assert fast.board.values("amp_ok") == slow.board.values("amp_ok")
+        assert fast.q_deg == slow.q_deg
+    assert fast.active_faults() == slow.active_faults() == ["q1 motor off"]
+
+
 def test_a_joint_driven_into_its_end_stop_stops_there():
     """Driven at full torque without a servo, the elbow stops at its end stop (158 deg, 8 beyond its limit): hitting it at full speed, three degrees into it at most; at rest, under one."""
     plant = plant_at((0.0, 100.0))

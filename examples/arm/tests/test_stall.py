@@ -5,29 +5,14 @@ from __future__ import annotations
 import io
 
 import pytest
-from pyrt import FaultError, Loop, SimClock
+from pyrt import FaultError, Loop
 from pyrt.commands.robot import RobotShell
+from pyrt.testing import StallClock
 
 from pyrt_arm.controller import AT_TARGET_DEG
 from pyrt_arm.station import build_arm
 
 MS = 1_000_000
-
-
-class StallClock(SimClock):
-    """Virtual time that can stall: after :meth:`stall` every tick starts that much
-    later than its deadline (the deadlines passed meanwhile skipped, never burst)."""
-
-    offset = 0
-
-    def stall(self, ns: int) -> None:
-        self.offset += int(ns)
-
-    def now_ns(self) -> int:
-        return super().now_ns() + self.offset
-
-    def start_tick(self, deadline_ns: int) -> int:
-        return super().start_tick(deadline_ns) + self.offset
 
 
 def _say(shell: RobotShell, out: io.StringIO, line: str) -> str:
@@ -76,3 +61,14 @@ def test_a_jammed_joint_still_trips_through_a_stall():
         assert "q0 following error" in station.fault.cause
     finally:
         station.close()
+
+
+def test_the_stall_clock_starts_every_later_tick_that_much_late():
+    """pyrt.testing's StallClock: after stall(ns), now and every tick's start are ns after the deadline, and stalls add up."""
+    clock = StallClock()
+    assert clock.start_tick(5 * MS) == 5 * MS
+    clock.stall(30 * MS)
+    assert clock.now_ns() == 35 * MS
+    assert clock.start_tick(6 * MS) == 36 * MS
+    clock.stall(15 * MS)
+    assert clock.start_tick(7 * MS) == 52 * MS and clock.now_ns() == 52 * MS
