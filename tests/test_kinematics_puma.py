@@ -270,7 +270,10 @@ def test_the_c_inverse_matches_its_python_reference(arm, q, cfg, seeded, nearest
     got, gwhy, gdetail = arm._kernel.inverse(pose, bits, seed)
     assert gwhy == why
     if why >= ref.LIMIT:  # the joint's angle (180 deg may be -180, as below)
-        assert abs(wrapped(gdetail - detail)) < 1e-9
+        # at the wrist's singularity (joint 5 at 0) the split between joints 4 and 6 is fixed
+        # only to about eps / sin(q5): 1e-9 there is rounding, not a disagreement
+        wrist = min(abs(math.sin(q[4])), abs(math.sin(q[4] + arm.offsets[4])))
+        assert abs(wrapped(gdetail - detail)) < (1e-9 if wrist > 1e-5 else 1e-6)
     else:
         assert gdetail == pytest.approx(detail, abs=1e-9)
     if want is None:
