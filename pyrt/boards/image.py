@@ -75,6 +75,19 @@ with :meth:`boards_hooks`.  :meth:`close` releases the link (idempotent);
 what the far side does with the outputs then is its own (board-sim and a
 device with a watchdog turn them off).
 
+Native inputs.  A :class:`LocalImage` whose every board with inputs keeps
+them in 64-bit integers, in declared order, and offers them as
+``input_buffer()`` (on its register view, or on the board behind it,
+``view.board``: an ``array('q')``, a numpy ``int64`` array; see
+:func:`input_buffer`) holds its inputs in one flat ``array('q')``
+(:attr:`LocalImage.native`) that the read phase fills in one C call, a
+``memcpy`` a board (``csrc/image.c``); a journal's recorder then hands a
+plain tick over in one C call too (its clock and a copy of that array into
+the journal's ring).  Any other board keeps the image on lists (a copy of
+each board's list of inputs a read phase).  Either way a tick sees the
+inputs as the read phase found them: a value a task sets in the image
+(:meth:`set_cached`) is set in a copy, never in what the read phase read.
+
 A subclass implements :meth:`exchange_inputs`, :meth:`exchange_outputs`,
 :meth:`exchange_outputs_now`, :meth:`read_outputs`, :meth:`apply_timeout`,
 :meth:`close_link` and :attr:`down`.
@@ -780,10 +793,10 @@ class ImageRegisters:
 
         def read_block() -> list[int]:
             if client.phased:
-                values = client._values
+                values: Any = client._values  # a list, or the native array('q')
                 if type(values) is list:
                     return values[start:end]
-                return values[start:end].tolist()  # type: ignore[no-any-return]  # native
+                return values[start:end].tolist()  # type: ignore[no-any-return]
             return read_all()
 
         return read_block
@@ -855,7 +868,7 @@ class ImageRegisters:
         slice of the image, which the read phase brought in)."""
         client = self.client
         if client.phased and not (client.has_link and client.down is not None):
-            values = client._values
+            values: Any = client._values  # a list, or the native array('q')
             if type(values) is list:
                 return values[self._first:self._end]
             return values[self._first:self._end].tolist()  # type: ignore[no-any-return]
