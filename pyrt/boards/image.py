@@ -428,8 +428,7 @@ class ImageBackend(Backend):
     def output_values(self) -> list[int]:
         """Every output slot's value as the image holds it (0 where unknown: a
         write-only strobe), in :attr:`output_layout` order."""
-        outs = self._outputs
-        return [outs.get(key, 0) for key in self.output_layout]
+        return list(self._output_list)  # kept with _outputs, slot by slot
 
     def set_cached(self, board: str, name: str, value: int, index: int = 0) -> None:
         """Set the image's copy of an input (what a write made of it: a cleared counter)."""
