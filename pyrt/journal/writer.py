@@ -30,7 +30,7 @@ from pyrt.journal.format import (
 from pyrt.journal.ring import BlackBox
 from pyrt.native import RingRows, int64_buffer
 
-__all__ = ["DEFAULT_BLOCK_TICKS", "DEFAULT_QUEUE_TICKS", "Journal"]
+__all__ = ["DEFAULT_BLOCK_TICKS", "DEFAULT_QUEUE_TICKS", "Journal", "tick_appender"]
 
 #: Ticks per block (frame), each beginning with a keyframe.
 DEFAULT_BLOCK_TICKS = 250
@@ -219,32 +219,8 @@ class Journal:
     record_owned = record_tick
 
     def appender(self, inputs: Any) -> Callable[[int, int, int], bool] | None:
-        """The hand-over of a plain tick (no output written, no command, no event,
-        no deadline missed) whose inputs are ``inputs`` as they stand: a buffer of
-        native 64-bit integers, in declared order, that its owner refills every
-        tick (a process image reading boards that keep their registers so).
-        ``append(tick, time_ns, lateness_ns)`` writes the tick's row into the ring
-        in one C call (the clock and a copy of the inputs); it returns False, having
-        handed nothing over, when the ring is full or the journal in a gap or
-        closed (then :meth:`record_tick` decides).  None when ``inputs`` is not
-        such a buffer of the header's inputs."""
-        words = int64_buffer(inputs)
-        if words is None or len(words) != self._n_inputs:
-            return None
-        rows = RingRows(self._ring, self._capacity, words)
-        put_row, (ring, n_rows), (src, n_src) = rows.writer()
-        cap = self._capacity
-
-        def append(tick: int, time_ns: int, lateness_ns: int) -> bool:
-            put = self._put
-            if put - self._taken >= cap or not self._open \
-                    or put_row(ring, n_rows, put % cap, tick, time_ns, lateness_ns, 0, src, n_src):
-                return False
-            self._put = put + 1
-            return True
-
-        append.rows = rows  # type: ignore[attr-defined]  # holds the buffers C reads
-        return append
+        """The hand-over of a plain tick in one C call (:func:`tick_appender`)."""
+        return tick_appender(self, inputs)
 
     def _record_slowly(self, tick: int, time_ns: int, lateness_ns: int, missed: int,
                        inputs: Sequence[int], outputs: Sequence[tuple[int, int, int]],
@@ -579,3 +555,32 @@ class Journal:
                     fh.close()
                 except OSError as exc:
                     self.error = self.error or f"close failed: {exc}"
+
+
+def tick_appender(journal: Journal, inputs: Any) -> Callable[[int, int, int], bool] | None:
+    """The hand-over to ``journal`` of a plain tick (no output written, no command,
+    no event, no deadline missed) whose inputs are ``inputs`` as they stand: a
+    buffer of native 64-bit integers, in declared order, that its owner refills
+    every tick (a process image reading boards that keep their registers so).
+    ``append(tick, time_ns, lateness_ns)`` writes the tick's row into the ring in
+    one C call (the clock and a copy of the inputs); it returns False, having
+    handed nothing over, when the ring is full or the journal in a gap or closed
+    (then :meth:`Journal.record_tick` decides).  None when ``inputs`` is not such
+    a buffer of the header's inputs.  Loop thread only, as ``record_tick``."""
+    words = int64_buffer(inputs)
+    if words is None or len(words) != journal._n_inputs:
+        return None
+    rows = RingRows(journal._ring, journal._capacity, words)
+    put_row, (ring, n_rows), (src, n_src) = rows.writer()
+    cap = journal._capacity
+
+    def append(tick: int, time_ns: int, lateness_ns: int) -> bool:
+        put = journal._put
+        if put - journal._taken >= cap or not journal._open \
+                or put_row(ring, n_rows, put % cap, tick, time_ns, lateness_ns, 0, src, n_src):
+            return False
+        journal._put = put + 1
+        return True
+
+    append.rows = rows  # type: ignore[attr-defined]  # holds the buffers C reads
+    return append
