@@ -70,9 +70,7 @@ class InputGather:
         raise_for_status(lib.pyrt_image_gather(*self._args), "image gather")
 
     def __call__(self) -> None:
-        rc = lib.pyrt_image_gather(*self._args)
-        if rc:
-            raise_for_status(rc, "image gather")
+        raise_for_status(lib.pyrt_image_gather(*self._args), "image gather")
 
 
 class RingRows:
@@ -102,10 +100,9 @@ class RingRows:
 
     def put(self, slot: int, tick: int, time_ns: int, lateness_ns: int, missed: int) -> None:
         """Row ``slot``: the clock given, then the inputs as they are now."""
-        rc = lib.pyrt_image_row(self._ring, self.rows, slot, tick, time_ns, lateness_ns, missed,
-                                self._inputs, self._n)
-        if rc:
-            raise_for_status(rc, f"ring row {slot}")
+        raise_for_status(lib.pyrt_image_row(self._ring, self.rows, slot, tick, time_ns,
+                                            lateness_ns, missed, self._inputs, self._n),
+                         "ring row")
 
     def writer(self) -> Any:
         """``put`` as the bare C call ``(ring, rows, slot, tick, time_ns, lateness_ns,
