@@ -3,6 +3,8 @@ for one or more source trees side by side in one run.
 
     python bench/recorder_cost.py                         # this tree
     python bench/recorder_cost.py --tree /tmp/old --tree .   # two trees, interleaved
+    python bench/recorder_cost.py --tree . --tree .:int64    # this tree, and its image
+                                                             # over 64-bit register files
 
 Every row runs in a child process whose ``PYTHONPATH`` is the tree measured
 (its compiled modules built in place), the trees interleaved row by row and
@@ -46,9 +48,38 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 ROWS = ("sim:", "image", "image + empty handler", "image + recorder", "image + black box")
 SECONDS = {"gripper": 10.0, "manipulator": 30.0}
+#: A tree given as ``PATH:int64`` is measured with its simulated boards keeping
+#: their inputs in 64-bit integers (:func:`int64_boards`: a projection).
+INT64 = ":int64"
 
 
 # -- one row, in a child process -------------------------------------------------------------
+
+
+def int64_boards() -> bool:
+    """A projection, not the product: the simulated boards of the gripper and the
+    manipulator keep their inputs in an ``array('q')`` (their plant methods write
+    it as they write the list) and offer it as ``input_buffer()``, so that a tree
+    whose process image gathers such register files in C (``LocalImage.native``)
+    reads them that way.  False where the tree has no such boards to change."""
+    from array import array
+
+    try:
+        import pyrt.boards.simboards as sb
+        from pyrt.boards.gripper import SimGripperBoard
+    except ImportError:
+        return False
+    for cls, attr in ((sb.SimTIO10, "_in"), (sb.SimDataConcentrator, "_inputs"),
+                      (SimGripperBoard, "_in")):
+        init = cls.__init__
+
+        def patched(self, *a, _init=init, _attr=attr, **kw):
+            _init(self, *a, **kw)
+            setattr(self, _attr, array("q", getattr(self, _attr)))
+
+        cls.__init__ = patched  # type: ignore[method-assign]
+        cls.input_buffer = lambda self, _attr=attr: getattr(self, _attr)  # type: ignore[attr-defined]
+    return True
 
 
 def one_row(robot: str, row: str, seconds: float) -> dict:
@@ -56,6 +87,9 @@ def one_row(robot: str, row: str, seconds: float) -> dict:
     per-tick CPU ns (loop thread) and the journal handler's mean."""
     sys.path.insert(0, str(HERE))
     import bench_journal as bj
+
+    if os.environ.get("PYRT_BENCH_INT64"):
+        int64_boards()
 
     boards = "sim:" if row == "sim:" or _one_tick_shape() else "sim:?image=1"
     outside = _time_outside_the_lock()
@@ -87,7 +121,8 @@ def one_row(robot: str, row: str, seconds: float) -> dict:
         st = rig.loop.statistics()
         rig.close()
     j = st.tasks.get("journal")
-    return {"cpu": dc, "journal_ns": j.mean_ns if j else 0.0,
+    native = getattr(rig.station.boards.image, "native", None) is not None
+    return {"cpu": dc, "journal_ns": j.mean_ns if j else 0.0, "native": native,
             "writer_ns": (w1 - w0) / max(1, len(dc)),
             "writer_locked_ns": (w1 - w0 - (o1 - o0)) / max(1, len(dc))}
 
@@ -225,6 +260,9 @@ def _cpu_s(pid: int) -> float:
 
 def _child(tree: Path, *argv: str) -> dict:
     env = dict(os.environ, PYTHONPATH=str(tree))
+    if str(tree).endswith(INT64):
+        tree = Path(str(tree)[:-len(INT64)])
+        env = dict(os.environ, PYTHONPATH=str(tree), PYRT_BENCH_INT64="1")
     out = subprocess.run([sys.executable, str(Path(__file__).resolve()), *argv], env=env,
                          capture_output=True, text=True, check=False, cwd=tree)
     if out.returncode:
@@ -260,7 +298,8 @@ def main() -> None:
     if a.one_idle:
         print(json.dumps(idle_row(a.one_idle[0], float(a.one_idle[1]))))
         return
-    trees = [t.resolve() for t in (a.tree or [HERE.parent])]
+    trees = [Path(str(Path(str(t)[:-len(INT64)]).resolve()) + INT64)
+             if str(t).endswith(INT64) else t.resolve() for t in (a.tree or [HERE.parent])]
     robots = a.robot or ["gripper", "manipulator"]
     t0 = time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())
     load0 = os.getloadavg()[0]

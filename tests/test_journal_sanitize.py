@@ -141,3 +141,78 @@ def test_journal_encoder_is_clean_under_asan_and_ubsan(tmp_path):
     and writes what the Python encoder writes."""
     tests = str(__import__("pathlib").Path(__file__).resolve().parent)
     assert_clean(run_under_asan(PRELUDE + DRIVER.replace("TESTS", tests), tmp_path))
+
+
+IMAGE_DRIVER = textwrap.dedent(
+    """
+    import io, random, sys
+    from array import array
+    sys.path.insert(0, "TESTS")
+    import pyrt.native._lib as bound
+    assert bound.lib is native.lib, "pyrt.native is not using the sanitized build"
+    from pyrt.journal import Journal
+    from pyrt.native import InputGather, RingRows, output_changes
+    from test_journal import header
+
+    ffi, lib = native.ffi, native.lib
+    rnd = random.Random(11)
+    for seed in range(60):
+        n = rnd.randrange(0, 300)
+        inputs = array("q", bytes(8 * n))
+        srcs, at = [], 0
+        while at < n:
+            c = rnd.randrange(0, n - at + 1)
+            srcs.append((array("q", [rnd.randrange(-2**62, 2**62) for _ in range(c)]), at, c))
+            at += c + rnd.randrange(0, 3)
+        InputGather(inputs, [s for s in srcs if s[1] + s[2] <= n])()
+        rows = rnd.randrange(1, 9)
+        ring = bytearray(8 * rows * (4 + n))
+        RingRows(ring, rows, inputs).put(rows - 1, seed, 2, 3, 4)
+        cur = array("q", [rnd.randrange(-9, 9) for _ in range(n)])
+        output_changes(cur, [rnd.randrange(-9, 9) for _ in range(n)], seed % 2 == 0)
+        # plain ticks through the one-call hand-over, the others through record_tick
+        j = Journal(header(n, 2), io.BytesIO(), lossless=True, queue_ticks=rnd.randrange(1, 40))
+        append = j.appender(inputs)
+        for k in range(rnd.randrange(1, 200)):
+            if n:
+                inputs[rnd.randrange(n)] = k
+            if k % 7 == 0 or not append(k, k * 1000, 0):
+                j.record_tick(k, k * 1000, 0, 0, inputs.tolist(), ((0, k, 0),))
+        j.close()
+
+    # straight into C: what the Python layer never passes
+    src = ffi.new("pyrt_image_source[]", 1)
+    vals = ffi.new("int64_t[]", 4)
+    dst = ffi.new("int64_t[]", 4)
+    src[0].values, src[0].at, src[0].count = vals, 2, 3
+    assert lib.pyrt_image_gather(dst, 4, src, 1) == lib.PYRT_EINVAL
+    src[0].at, src[0].count = -1, 1
+    assert lib.pyrt_image_gather(dst, 4, src, 1) == lib.PYRT_EINVAL
+    src[0].at, src[0].values = 0, ffi.NULL
+    assert lib.pyrt_image_gather(dst, 4, src, 1) == lib.PYRT_EINVAL
+    assert lib.pyrt_image_gather(ffi.NULL, 4, src, 0) == lib.PYRT_EINVAL
+    assert lib.pyrt_image_gather(dst, 4, ffi.NULL, 1) == lib.PYRT_EINVAL
+    assert lib.pyrt_image_gather(dst, -1, src, 0) == lib.PYRT_EINVAL
+    assert lib.pyrt_image_gather(ffi.NULL, 0, ffi.NULL, 0) == lib.PYRT_OK
+    ring = ffi.new("int64_t[]", 2 * 8)
+    assert lib.pyrt_image_row(ring, 2, 2, 0, 0, 0, 0, dst, 4) == lib.PYRT_EINVAL
+    assert lib.pyrt_image_row(ring, 2, -1, 0, 0, 0, 0, dst, 4) == lib.PYRT_EINVAL
+    assert lib.pyrt_image_row(ring, 0, 0, 0, 0, 0, 0, dst, 4) == lib.PYRT_EINVAL
+    assert lib.pyrt_image_row(ffi.NULL, 2, 0, 0, 0, 0, 0, dst, 4) == lib.PYRT_EINVAL
+    assert lib.pyrt_image_row(ring, 2, 0, 0, 0, 0, 0, ffi.NULL, 4) == lib.PYRT_EINVAL
+    assert lib.pyrt_image_row(ring, 2, 1, 9, 0, 0, 0, dst, 4) == lib.PYRT_OK and ring[8] == 9
+    changed, k = ffi.new("int32_t[]", 4), ffi.new("int32_t *")
+    assert lib.pyrt_image_changes(dst, vals, 4, 0, changed, ffi.NULL) == lib.PYRT_EINVAL
+    assert lib.pyrt_image_changes(dst, ffi.NULL, 4, 0, changed, k) == lib.PYRT_EINVAL
+    assert lib.pyrt_image_changes(dst, vals, -1, 0, changed, k) == lib.PYRT_EINVAL
+    assert lib.pyrt_image_changes(ffi.NULL, ffi.NULL, 0, 0, ffi.NULL, k) == lib.PYRT_OK
+    print("SANITIZE-DRIVER-OK")
+    """
+)
+
+
+def test_image_kernels_are_clean_under_asan_and_ubsan(tmp_path):
+    """The process image's C side (gather, ring rows, change detection) and the journal's
+    one-call hand-over, on good and bad input, run with no ASan or UBSan report."""
+    tests = str(__import__("pathlib").Path(__file__).resolve().parent)
+    assert_clean(run_under_asan(PRELUDE + IMAGE_DRIVER.replace("TESTS", tests), tmp_path))

@@ -236,6 +236,10 @@ ONLY_RAW = {
     "pyrt_kin_jacobian": lambda: lib.pyrt_kin_jacobian(ffi.NULL, ffi.NULL, ffi.NULL, ffi.NULL,
                                                        ffi.NULL),
     "pyrt_journal_record_bound": lambda: lib.pyrt_journal_record_bound(ffi.NULL, 0, ffi.NULL),
+    "pyrt_image_gather": lambda: lib.pyrt_image_gather(ffi.NULL, 1, ffi.NULL, 0),
+    "pyrt_image_row": lambda: lib.pyrt_image_row(ffi.NULL, 1, 0, 0, 0, 0, 0, ffi.NULL, 0),
+    "pyrt_image_changes": lambda: lib.pyrt_image_changes(ffi.NULL, ffi.NULL, 1, 0, ffi.NULL,
+                                                         ffi.NULL),
 }
 
 

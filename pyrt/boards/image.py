@@ -75,6 +75,19 @@ with :meth:`boards_hooks`.  :meth:`close` releases the link (idempotent);
 what the far side does with the outputs then is its own (board-sim and a
 device with a watchdog turn them off).
 
+Native inputs.  A :class:`LocalImage` whose every board with inputs keeps
+them in 64-bit integers, in declared order, and offers them as
+``input_buffer()`` (on its register view, or on the board behind it,
+``view.board``: an ``array('q')``, a numpy ``int64`` array; see
+:func:`input_buffer`) holds its inputs in one flat ``array('q')``
+(:attr:`LocalImage.native`) that the read phase fills in one C call, a
+``memcpy`` a board (``csrc/image.c``); a journal's recorder then hands a
+plain tick over in one C call too (its clock and a copy of that array into
+the journal's ring).  Any other board keeps the image on lists (a copy of
+each board's list of inputs a read phase).  Either way a tick sees the
+inputs as the read phase found them: a value a task sets in the image
+(:meth:`set_cached`) is set in a copy, never in what the read phase read.
+
 A subclass implements :meth:`exchange_inputs`, :meth:`exchange_outputs`,
 :meth:`exchange_outputs_now`, :meth:`read_outputs`, :meth:`apply_timeout`,
 :meth:`close_link` and :attr:`down`.
@@ -83,6 +96,7 @@ A subclass implements :meth:`exchange_inputs`, :meth:`exchange_outputs`,
 from __future__ import annotations
 
 import time
+from array import array
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from functools import partial
 from typing import Any
@@ -90,6 +104,7 @@ from typing import Any
 from pyrt.boards.backend import Backend
 from pyrt.boards.registers import BoardKind, Register
 from pyrt.errors import BoardError
+from pyrt.native import InputGather, int64_buffer
 
 __all__ = [
     "DEFAULT_OVERRUN_LIMIT",
@@ -99,6 +114,7 @@ __all__ = [
     "ImageRegisters",
     "LocalImage",
     "Write",
+    "input_buffer",
 ]
 
 #: A reply later than this many ticks is an overrun.
@@ -157,8 +173,9 @@ class ImageBackend(Backend):
         #: for every changed output, or None.
         self.tap: Any = None
         #: The inputs as the last exchange brought them, flat in :attr:`layout`
-        #: order: a new list every exchange, which the image never changes (a
-        #: journal keeps it as it is; None before the first).
+        #: order: a new list every exchange, which the image never changes, or the
+        #: image's array of 64-bit integers (:attr:`LocalImage.native`), which the
+        #: next read phase refills (None before the first).
         self.last_inputs: list[int] | None = None
         #: The inputs, flat in :attr:`layout` order; where each register begins and its count.
         self._values: list[int] = [0] * self.input_count
@@ -192,6 +209,10 @@ class ImageBackend(Backend):
         #: Run with the loop's time at the end of every read phase (a typed board's
         #: own ``poll``: the gripper cage raises the encoder interrupts that came).
         self.after_read: list[Callable[[int], None]] = []
+        #: Run with the loop's time at the end of every write phase of an image in
+        #: this process (:class:`LocalImage`), or None: a journal's recorder hands
+        #: the tick over here when this write phase is the tick's last work.
+        self.after_write: Callable[[int], None] | None = None
 
     # -- what a subclass implements ------------------------------------------------------
 
@@ -407,8 +428,7 @@ class ImageBackend(Backend):
     def output_values(self) -> list[int]:
         """Every output slot's value as the image holds it (0 where unknown: a
         write-only strobe), in :attr:`output_layout` order."""
-        outs = self._outputs
-        return [outs.get(key, 0) for key in self.output_layout]
+        return list(self._output_list)  # kept with _outputs, slot by slot
 
     def set_cached(self, board: str, name: str, value: int, index: int = 0) -> None:
         """Set the image's copy of an input (what a write made of it: a cleared counter)."""
@@ -547,10 +567,37 @@ class LocalImage(ImageBackend):
             if views is not None else []
         self.feed = feed
         self._initial = dict(outputs) if outputs is not None else None
+        #: The inputs in native 64-bit integers, filled by one C call a read phase,
+        #: when every board with inputs keeps them so (:func:`input_buffer`); else None.
+        self.native: array[int] | None = None
+        self._gather: Callable[[], None] | None = None
+        if feed is None and views is not None:
+            self._go_native()
+
+    def _go_native(self) -> None:
+        """Read the inputs by one C copy of each board's register file into a flat
+        array of 64-bit integers, if every board with inputs keeps them so."""
+        sources = []
+        for board, kind in self.kinds.items():
+            regs = kind.inputs()
+            if not regs:
+                continue
+            buf = input_buffer(self.views.get(board))
+            count = sum(r.count for r in regs)
+            if buf is None or len(buf) != count:
+                return
+            sources.append((buf, self._span[(board, regs[0].name)][0], count))
+        if not sources:
+            return
+        self.native = array("q", bytes(8 * self.input_count))
+        self._gather = InputGather(self.native, sources)
 
     def exchange_inputs(self) -> list[int]:
         if self.feed is not None:
             return list(self.feed.current)
+        if self._gather is not None:
+            self._gather()
+            return self.native.tolist()  # type: ignore[union-attr]
         snaps = self._snaps
         if not snaps:
             return []
@@ -603,6 +650,13 @@ class LocalImage(ImageBackend):
         for step in self.before_read:
             step(now_ns)
         self.in_tick = True
+        gather = self._gather
+        if gather is not None:
+            gather()  # every board's register file into the image: one C call
+            self._values = self.last_inputs = self.native  # type: ignore[assignment]
+            for after in self.after_read:
+                after(now_ns)
+            return
         snaps = self._snaps  # none when fed (a replay)
         if len(snaps) == 1:
             # a simulated board's register file, in declared order by construction
@@ -625,6 +679,21 @@ class LocalImage(ImageBackend):
                 for slot, value in changed.items():
                     setters[slot](value)
             changed.clear()
+        after = self.after_write
+        if after is not None:
+            after(now_ns)
+
+
+def input_buffer(view: Any) -> memoryview | None:
+    """The inputs of a board's register view as a buffer of native 64-bit integers,
+    in declared order, that the board keeps current in place: the view's (or the
+    board's behind it, ``view.board``) ``input_buffer()``, if it has one and it is
+    such a buffer; else None (the inputs are read as the view's list of them)."""
+    for owner in (view, getattr(view, "board", None)):
+        get = getattr(owner, "input_buffer", None)
+        if get is not None:
+            return int64_buffer(get())
+    return None
 
 
 def _setter(view: Any, name: str, index: int) -> Callable[[int], None]:
@@ -723,7 +792,10 @@ class ImageRegisters:
 
         def read_block() -> list[int]:
             if client.phased:
-                return client._values[start:end]
+                values: Any = client._values  # a list, or the native array('q')
+                if type(values) is list:
+                    return values[start:end]
+                return values[start:end].tolist()  # type: ignore[no-any-return]
             return read_all()
 
         return read_block
@@ -795,7 +867,10 @@ class ImageRegisters:
         slice of the image, which the read phase brought in)."""
         client = self.client
         if client.phased and not (client.has_link and client.down is not None):
-            return client._values[self._first:self._end]
+            values: Any = client._values  # a list, or the native array('q')
+            if type(values) is list:
+                return values[self._first:self._end]
+            return values[self._first:self._end].tolist()  # type: ignore[no-any-return]
         return [self.read(reg.name, i) for reg in self.kind.inputs() for i in range(reg.count)]
 
     def set_cached(self, name: str, value: int, index: int = 0) -> None:

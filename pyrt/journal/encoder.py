@@ -51,6 +51,9 @@ TickItem = tuple[Any, ...]
 Extra = tuple[Any, Any, Any, Any]
 #: A row's first integer: its tick.
 _TICK = struct.Struct("=q")
+#: What every output write is: three fields, each an ``int`` (not a bool).
+_THREE = {3}
+_INT = {int}
 
 
 def _extras(tick: int, commands: Sequence[tuple[str, str]],
@@ -193,7 +196,10 @@ class NativeBlockEncoder:
             for i in sorted(extras):
                 outs = extras[i][0]
                 if outs:
-                    if not all(len(w) == 3 and all(type(x) is int for x in w) for w in outs):
+                    # each (index, value, writer), integers: checked by C-level maps, not
+                    # a Python loop (the writer's turns with the interpreter lock)
+                    if not (set(map(len, outs)) == _THREE
+                            and set(map(type, chain.from_iterable(outs))) == _INT):
                         # not (index, value, writer) integers: the reference refuses it
                         self._to_python()
                         self._add_python(self._items(rows, start, n, extras), 0, refused)

@@ -28,28 +28,14 @@ from pyrt.journal.format import (
     names_payload,
 )
 from pyrt.journal.ring import BlackBox
+from pyrt.native import RingRows, int64_buffer
 
-__all__ = ["DEFAULT_BLOCK_TICKS", "DEFAULT_QUEUE_TICKS", "Journal"]
+__all__ = ["DEFAULT_BLOCK_TICKS", "DEFAULT_QUEUE_TICKS", "Journal", "tick_appender"]
 
 #: Ticks per block (frame), each beginning with a keyframe.
 DEFAULT_BLOCK_TICKS = 250
 #: Ticks the loop may hand over before the writer takes them; beyond, a gap.
 DEFAULT_QUEUE_TICKS = 4096
-
-def _int64_words(inputs: Any) -> memoryview | None:
-    """``inputs`` as a view of native 64-bit integers if it is a buffer of them (an
-    ``array('q')``, a numpy ``int64`` array), else None (a list, a tuple ...)."""
-    if isinstance(inputs, list | tuple):
-        return None
-    try:
-        view = memoryview(inputs)
-    except TypeError:
-        return None
-    if view.itemsize != 8 or view.format not in ("q", "l", "<q", "=q", "<l", "=l") \
-            or not view.c_contiguous:
-        return None
-    return view.cast("B").cast("q")
-
 
 def _reason(exc: BaseException) -> str:
     """The system's reason for a failed write, in words (a full disk said so)."""
@@ -232,6 +218,10 @@ class Journal:
     #: The same call (a tick's inputs are copied into the ring either way).
     record_owned = record_tick
 
+    def appender(self, inputs: Any) -> Callable[[int, int, int], bool] | None:
+        """The hand-over of a plain tick in one C call (:func:`tick_appender`)."""
+        return tick_appender(self, inputs)
+
     def _record_slowly(self, tick: int, time_ns: int, lateness_ns: int, missed: int,
                        inputs: Sequence[int], outputs: Sequence[tuple[int, int, int]],
                        commands: Sequence[tuple[str, str]],
@@ -256,7 +246,7 @@ class Journal:
         put = self._put
         row = put % self._capacity
         try:
-            words = _int64_words(inputs)
+            words = int64_buffer(inputs)
             if words is not None:
                 # a buffer of 64-bit integers (an image that keeps its inputs so): copied
                 # whole, not integer by integer
@@ -565,3 +555,32 @@ class Journal:
                     fh.close()
                 except OSError as exc:
                     self.error = self.error or f"close failed: {exc}"
+
+
+def tick_appender(journal: Journal, inputs: Any) -> Callable[[int, int, int], bool] | None:
+    """The hand-over to ``journal`` of a plain tick (no output written, no command,
+    no event, no deadline missed) whose inputs are ``inputs`` as they stand: a
+    buffer of native 64-bit integers, in declared order, that its owner refills
+    every tick (a process image reading boards that keep their registers so).
+    ``append(tick, time_ns, lateness_ns)`` writes the tick's row into the ring in
+    one C call (the clock and a copy of the inputs); it returns False, having
+    handed nothing over, when the ring is full or the journal in a gap or closed
+    (then :meth:`Journal.record_tick` decides).  None when ``inputs`` is not such
+    a buffer of the header's inputs.  Loop thread only, as ``record_tick``."""
+    words = int64_buffer(inputs)
+    if words is None or len(words) != journal._n_inputs:
+        return None
+    rows = RingRows(journal._ring, journal._capacity, words)
+    put_row, (ring, n_rows), (src, n_src) = rows.writer()
+    cap = journal._capacity
+
+    def append(tick: int, time_ns: int, lateness_ns: int) -> bool:
+        put = journal._put
+        if put - journal._taken >= cap or not journal._open \
+                or put_row(ring, n_rows, put % cap, tick, time_ns, lateness_ns, 0, src, n_src):
+            return False
+        journal._put = put + 1
+        return True
+
+    append.rows = rows  # type: ignore[attr-defined]  # holds the buffers C reads
+    return append

@@ -36,6 +36,7 @@ from pyrt.native._findpos import (
     rope_segments,
 )
 from pyrt.native._fuzzy import FuzzyBatch, FuzzyInput, FuzzyParams, FuzzyRule, fuzzy_step
+from pyrt.native._image import IMAGE_CLOCK, InputGather, RingRows, int64_buffer, output_changes
 from pyrt.native._journal import (
     JOURNAL_CLOCK,
     JOURNAL_TMAX,
@@ -66,6 +67,7 @@ __all__ = [
     "DRIVE_FAULT",
     "DRIVE_LATE",
     "DRIVE_REFUSED",
+    "IMAGE_CLOCK",
     "JOURNAL_CLOCK",
     "JOURNAL_TMAX",
     "JOURNAL_VMAX",
@@ -81,6 +83,7 @@ __all__ = [
     "FuzzyParams",
     "FuzzyRule",
     "IKOutcome",
+    "InputGather",
     "NativeInputError",
     "NeckRing",
     "NoConvergenceError",
@@ -90,6 +93,7 @@ __all__ = [
     "PositionResult",
     "QueueChecker",
     "RecordRefused",
+    "RingRows",
     "RopePath",
     "RopeSegments",
     "Servo",
@@ -108,7 +112,9 @@ __all__ = [
     "from_excess128",
     "fuzzy_step",
     "gain_ranges",
+    "int64_buffer",
     "native_dispatcher",
+    "output_changes",
     "ring_contact",
     "rope_lengths",
     "rope_segments",

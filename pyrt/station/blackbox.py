@@ -399,7 +399,9 @@ class FaultBox:
             maxlen=math.ceil(span / SNAPSHOT_S) + 2)
         #: Why the station could not be snapshot the last time it was asked ('': it could).
         self.snapshot_refused = ""
-        self._snap_countdown = 1
+        #: The next ticks at which the signals are sampled and the controller snapshot.
+        self._next_sample = 0
+        self._next_snapshot = 0
         #: Every fault's black box, in order.
         self.dumps: list[FaultDump] = []
         self._seen: set[int] = set()
@@ -446,6 +448,7 @@ class FaultBox:
                                  due_tick=fault.tick + self.after_ticks, plot=self.plot)
                 self._pending[fault.id] = dump
                 self.dumps.append(dump)
+                self.recorder.listen_at(dump.due_tick)
         if under_way is not None:
             self._post(f"black box of fault {fault.id}: in that of fault "
                        f"{under_way.fault.id}, {under_way.path('.pj')}")
@@ -459,21 +462,25 @@ class FaultBox:
             more = "(+ .csv)"
         self._post(f"black box of fault {fault.id}: {dump.path('.pj')} {more}")
 
-    def _tick(self, tick: int, now_ns: int) -> None:
-        ring = self.ring
-        ring._countdown -= 1
-        if ring._countdown <= 0:
-            ring._countdown = ring.every
-            ring.sample(now_ns)
-        self._snap_countdown -= 1
-        if self._snap_countdown <= 0:
-            self._snapshot()
+    def _tick(self, tick: int, now_ns: int) -> int:
+        # called at the ticks it asks for (the recorder's tick listeners): a sample
+        # of the signals every ring.every ticks, a snapshot every snapshot_every,
+        # and every tick while a fault's box waits for its last ticks
+        if tick >= self._next_sample:
+            self._next_sample = tick + self.ring.every
+            self.ring.sample(now_ns)
+        if tick >= self._next_snapshot:
+            self._snapshot(tick)
+        due = min(self._next_sample, self._next_snapshot)
         if self._pending:
             for dump in list(self._pending.values()):
                 if tick >= dump.due_tick:
                     self._write(dump)
+                else:
+                    due = min(due, dump.due_tick)
+        return due
 
-    def _snapshot(self) -> None:
+    def _snapshot(self, tick: int) -> None:
         """The controller's state before the next tick, kept for the black boxes to come;
         a station that cannot give it is asked again a tenth of the interval later."""
         image = self.recorder.image
@@ -484,14 +491,14 @@ class FaultBox:
         snap = take_snapshot(self.station, inputs, image.output_values())
         if snap.refused:
             self.snapshot_refused = snap.refused
-            self._snap_countdown = max(1, self._min_every // 10)
+            self._next_snapshot = tick + max(1, self._min_every // 10)
             return
         cost = time.thread_time_ns() - start
         self.snapshot_refused = ""
         self.snapshots.append(snap)
         self.snapshot_every = min(self._max_every,
                                   max(self._min_every, cost // SNAPSHOT_TICK_NS))
-        self._snap_countdown = self.snapshot_every
+        self._next_snapshot = tick + self.snapshot_every
 
     def _write(self, dump: FaultDump) -> None:
         """Hand ``dump`` over: the journal's thread writes the ring, ours the rest."""

@@ -16,9 +16,14 @@ running station (:mod:`pyrt.journal` has the file format):
 
 It hands each tick to a :class:`~pyrt.journal.Journal` (whose thread
 encodes and writes: the loop never waits for the disk) at the end of the
-tick, after the write phase: the recorder is the loop's last handler,
-``journal``.  Every back end reaches its boards through a process image
-(``sim:`` included: one tick shape, recorded or not).
+tick, after the write phase: at the end of the image's write phase when
+that is the tick's last work (boards in this process: no handler of its
+own), else as the loop's last handler, ``journal``.  A tick in which
+nothing was written, asked or missed is one C call when the image keeps
+its inputs in 64-bit integers (its boards' register files are so): the
+clock and a copy of the inputs into the journal's ring.  Every back end
+reaches its boards through a process image (``sim:`` included: one tick
+shape, recorded or not).
 
 Requests are recorded when they are calls of the station's or a
 component's methods with arguments of plain types (numbers, text, lists,
@@ -267,13 +272,30 @@ class Recorder:
         self._pending = False
         #: The journal's hand-over of a tick (bound once: called every tick).
         self._record = self.journal.record_owned
-        #: Called at the end of every tick, after it was handed to the journal:
-        #: ``listener(tick_index, now_ns)`` (the black box dumps from here).
-        self.tick_listeners: list[Callable[[int, int], None]] = []
+        #: Called at the end of a tick, after it was handed to the journal:
+        #: ``listener(tick_index, now_ns)``, which returns the next tick it wants to
+        #: be called at (None: every tick); the black box samples and dumps from here.
+        self.tick_listeners: list[Callable[[int, int], int | None]] = []
+        #: The next tick at which the listeners are called.
+        self._listen_at = 0
+        #: A plain tick's hand-over in one C call, when the image's inputs are native
+        #: 64-bit integers (None: the journal packs the image's list of inputs).
+        self._append = self.journal.appender(image.native) \
+            if getattr(image, "native", None) is not None else None
         image.tap = self
         runner.request_tap = self._request
         loop.fault_listeners.append(self._fault)
-        loop.attach(self._tick, name="journal")
+        #: Whether the tick is handed over at the end of the image's write phase (an
+        #: image in this process whose write phase is the tick's last work: no
+        #: handler of its own), else by the loop's last handler, ``journal``.
+        self.in_write_phase = bool(
+            hasattr(image, "after_write") and not image.has_link
+            and loop.handler_names and loop.handler_names[-1] == "io:write"
+            and station.board_sets and station.board_sets[-1].image is image)
+        if self.in_write_phase:
+            image.after_write = self._tick
+        else:
+            loop.attach(self._tick, name="journal")
 
     def _count(self, board: str, reg: str) -> int:
         return self.image.kinds[board].register(reg).count
@@ -325,19 +347,37 @@ class Recorder:
 
     def _tick(self, now_ns: int) -> None:
         # the loop thread's whole share of a tick's record (a tick of the 1 kHz
-        # gripper is ~10 µs of work): in most ticks nothing was written, asked or
-        # missed, and the tick is the read phase's list of inputs (new every tick,
-        # never changed afterwards: kept as it is, not copied) and the clock
+        # gripper is ~8 µs of work): in most ticks nothing was written, asked or
+        # missed, and the tick is the clock and the image's inputs: one C call
+        # copies them into the journal's ring when the image keeps them in 64-bit
+        # integers, else the journal packs the read phase's list of them
         loop = self.loop
         if self._pending or loop.missed != self._missed or self.journal.error is not None:
             self._pending = False
             self._tick_slowly(now_ns)
         else:
-            self._record(loop.tick_index, now_ns, now_ns - loop.deadline_ns, 0,
-                         self.image.last_inputs or self._inputs)
-        if self.tick_listeners:
-            for listener in self.tick_listeners:
-                listener(loop.tick_index, now_ns)
+            tick = loop.tick_index
+            append = self._append
+            if append is None or not append(tick, now_ns, now_ns - loop.deadline_ns):
+                self._record(tick, now_ns, now_ns - loop.deadline_ns, 0,
+                             self.image.last_inputs or self._inputs)
+        if self.tick_listeners and loop.tick_index >= self._listen_at:
+            self._listen(loop.tick_index, now_ns)
+
+    def listen_at(self, tick: int) -> None:
+        """Call the tick listeners at tick ``tick`` at the latest (loop thread)."""
+        if tick < self._listen_at:
+            self._listen_at = tick
+
+    def _listen(self, tick: int, now_ns: int) -> None:
+        """Call the tick listeners; the next call is at the earliest tick one asks for."""
+        due = None
+        for listener in self.tick_listeners:
+            at = listener(tick, now_ns)
+            if at is None or at <= tick:
+                at = tick + 1
+            due = at if due is None or at < due else due
+        self._listen_at = due if due is not None else tick + 1
 
     def _tick_slowly(self, now_ns: int) -> None:
         journal = self.journal
@@ -380,4 +420,6 @@ class Recorder:
         """End the journal (flushed, synced, its end frame written); idempotent."""
         if self.image.tap is self:
             self.image.tap = None
+        if self.in_write_phase and self.image.after_write == self._tick:
+            self.image.after_write = None
         self.journal.close()

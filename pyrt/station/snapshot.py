@@ -247,11 +247,11 @@ class _Encoder:
             return v
         kind = self.kinds.get(cls) or self._kind(cls)
         if kind == "list":
-            if all(type(x) in _PLAIN for x in v):
+            if _PLAIN.issuperset(map(type, v)):  # numbers and text: the list as it is
                 return v.copy()
             return [self.value(x, f"{path}[{i}]") for i, x in enumerate(v)]
         if kind == "tuple":
-            if all(type(x) in _PLAIN for x in v):
+            if _PLAIN.issuperset(map(type, v)):
                 return {"$t": list(v)}
             return {"$t": [self.value(x, f"{path}[{i}]") for i, x in enumerate(v)]}
         if kind == "plain":  # a subclass of a plain type

@@ -1,0 +1,59 @@
+"""The recorder's hand-over of a tick: where it runs, and when it calls its tick listeners."""
+
+from __future__ import annotations
+
+from pyrt.journal import JournalReader
+from pyrt.scheduler import Loop, SimClock
+from pyrt.station.gripper import build_gripper
+from pyrt.station.recording import Recorder
+
+
+def _gripper():
+    loop = Loop(SimClock(), period_ns=1_000_000)
+    return loop, build_gripper(loop, boards="sim:")
+
+
+def test_on_sim_the_tick_is_handed_over_at_the_end_of_the_write_phase(tmp_path):
+    """On boards in this process the recorder needs no handler of its own: the image's
+    write phase, the tick's last work, hands the tick over; closing the recorder
+    detaches it, and every tick run is in the journal."""
+    loop, station = _gripper()
+    try:
+        image = station.boards.image
+        recorder = Recorder(station, tmp_path / "run.pj")
+        assert recorder.in_write_phase
+        assert "journal" not in loop.handler_names and loop.handler_names[-1] == "io:write"
+        assert image.after_write is not None
+        loop.run(ticks=25)
+        recorder.close()
+        assert image.after_write is None
+        assert JournalReader(tmp_path / "run.pj").summary().ticks == 25
+    finally:
+        station.close()
+
+
+def test_tick_listeners_are_called_at_the_ticks_they_ask_for(tmp_path):
+    """The listeners are called at the earliest tick one of them asks for (every tick for
+    one that asks for none); listen_at brings the next call forward."""
+    loop, station = _gripper()
+    try:
+        recorder = Recorder(station, tmp_path / "run.pj")
+        every, sparse = [], []
+
+        def seldom(tick: int, _now: int) -> int:
+            sparse.append(tick)
+            return tick + 10
+
+        recorder.tick_listeners.append(seldom)
+        loop.run(ticks=25)
+        assert sparse == [0, 10, 20]
+        recorder.listen_at(loop.tick_index)  # at once, not at tick 30
+        loop.run(ticks=1)
+        assert sparse[-1] == 25
+        recorder.tick_listeners.append(lambda tick, _now: every.append(tick))
+        recorder.listen_at(loop.tick_index)
+        loop.run(ticks=3)
+        recorder.close()
+        assert every == [26, 27, 28] and sparse[-3:] == every
+    finally:
+        station.close()
