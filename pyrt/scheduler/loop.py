@@ -2,6 +2,10 @@
 
 Rate groups (:mod:`pyrt.scheduler.rategroup`) are released at their own
 periods, fastest first; a queue attached directly is a group of the tick.
+Which groups a tick releases is worked out before the loop runs
+(:mod:`pyrt.scheduler._schedule`): each tick takes the plan of its phase in
+the groups' common cycle and runs it, the released groups' members in their
+groups' places.
 
 One tick: wait for the deadline; record lateness; call each handler with the
 tick's time (the plant, then each robot's clock interrupt, then the mailbox
@@ -19,9 +23,11 @@ physics, the motion executor, the scope, the mailbox, foreground jobs) is
 timed as an entry of its own, beside the queues' routines: the clock is read
 once between handlers (the end of one is the start of the next), each
 duration is appended to the handler's sample list, and the lists are folded
-into histograms in bulk, off the tick (:meth:`Loop.take_samples`).  An
-overrun is attributed to whichever entry, routine or handler, took longest
-in its tick.
+into histograms in bulk, off the tick (:meth:`Loop.take_samples`).  A rate
+group's release is the sum of its members' durations.  An overrun is
+attributed to whichever entry, routine or handler, took longest in its tick.
+A handler can be switched off (:meth:`Loop.enable`; the scope while it does
+not acquire): it is left out of the ticks until switched on, untimed.
 
 On real time the loop keeps the garbage collector out of its ticks
 (:mod:`pyrt.scheduler.gcwatch`): the start-up heap frozen, automatic
@@ -34,7 +40,7 @@ from __future__ import annotations
 
 import threading
 from collections import deque
-from collections.abc import Callable, Generator
+from collections.abc import Callable, Generator, Mapping
 from gc import get_count as gc_count
 from itertools import count
 from threading import get_ident
@@ -43,6 +49,7 @@ from typing import Any
 from pyrt.errors import Fault, FaultError, PyrtError
 from pyrt.scheduler import _accounting
 from pyrt.scheduler._handlertiming import HandlerTimes, TakenSamples
+from pyrt.scheduler._schedule import Schedule
 from pyrt.scheduler.clock import Clock, SimClock, WallClock
 from pyrt.scheduler.gcwatch import GcWatch
 from pyrt.scheduler.rategroup import GroupTiming, RateGroup, rate_monotonic
@@ -167,8 +174,17 @@ class Loop:
         self._group_of: dict[int, GroupTiming] = {}
         self._entry_group: dict[str, GroupTiming] = {}
         self._times = HandlerTimes()
-        # Set per run(): handler durations are being recorded.
+        # The loop reads its clock between entries (set when the plans are made).
         self._timing_handlers = False
+        # What each tick of the groups' cycle runs, and the phase of the next tick.
+        self._schedule = Schedule()
+        self._phase = 0
+        # The schedule must be laid out again before the next run (groups or
+        # handlers attached, a group's state restored).
+        self._dirty = True
+        # The items of the handlers switched off (Loop.enable).
+        self._off: set[int] = set()
+        self._plan_lock = threading.Lock()
         self.queues: list[ReadyQueue] = []
         self._jobs: deque[Job] = deque()
         self._jobs_attached = False
@@ -210,12 +226,19 @@ class Loop:
     # -- composition ---------------------------------------------------------
 
     @property
+    def phase(self) -> int:
+        """The phase of the next tick in the rate groups' cycle (inside a tick:
+        of the tick after it); 0 when the loop has no groups."""
+        return self._phase
+
+    @property
     def deadline_ns(self) -> int:
         """The deadline of the tick being run (in a handler: its lateness is
         ``now_ns - deadline_ns``), or of the next one between ticks."""
         return self._deadline
 
-    def attach(self, handler: ReadyQueue | RateGroup | Handler, name: str | None = None) -> None:
+    def attach(self, handler: ReadyQueue | RateGroup | Handler, name: str | None = None, *,
+               enabled: bool = True) -> None:
         """Call ``handler(now_ns)`` every tick, after those attached before it.
 
         A :class:`RateGroup` is released at its own rate, groups in
@@ -225,7 +248,8 @@ class Loop:
         its own at the tick's rate; its faults are reported to this loop and
         its routines timed when timing is on.  Any other handler is timed as
         an entry of its own, called ``name`` (by default the function's name;
-        a second handler of the same name gets ``#2``).
+        a second handler of the same name gets ``#2``), switched on or off
+        with ``enabled`` and :meth:`enable`.
         """
         if self.running:
             raise PyrtError("attach handlers before the loop runs")
@@ -237,7 +261,8 @@ class Loop:
             self._take_queue(handler, group)
             self._add(self.period_ns, label, handler.tick, group.samples.append, handler)
         else:
-            self._attach_timed(handler, name or str(getattr(handler, "__name__", "handler")))
+            self._attach_timed(handler, name or str(getattr(handler, "__name__", "handler")),
+                               enabled)
 
     def _take_queue(self, queue: ReadyQueue, group: GroupTiming) -> None:
         if queue.on_error is None:  # a queue no station owns: its faults are the loop's
@@ -258,17 +283,72 @@ class Loop:
              item: Any) -> None:
         """Attach ``fn`` (``period``: a group's, None: a plain handler) and
         arrange what runs: groups rate-monotonic, in the groups' places."""
-        self._attached.append((period, (fn, record, item, name)))
-        run = rate_monotonic(self._attached)
-        # in place: a job spawned while the loop runs is attached to the lists it runs
-        self._handlers[:] = [fn for fn, _, _, _ in run]
-        self._plan[:] = [(fn, rec) for fn, rec, _, _ in run]
-        self._order[:] = [item for _, _, item, _ in run]
-        self._handler_names[:] = [n for _, _, _, n in run]
+        with self._plan_lock:
+            self._attached.append((period, (fn, record, item, name)))
+            run = rate_monotonic(self._attached)
+            self._handlers[:] = [fn for fn, _, _, _ in run]
+            self._plan[:] = [(fn, rec) for fn, rec, _, _ in run]
+            self._order[:] = [item for _, _, item, _ in run]
+            self._handler_names[:] = [n for _, _, _, n in run]
+            if self.running and period is None and not self._dirty:
+                # a job spawned while the loop runs: in place, in the plans it
+                # runs (a plain handler runs last), so that it runs in this tick
+                if id(item) not in self._off:
+                    for entries in self._schedule.lists:
+                        entries.append((fn, record if self._timing_handlers else None, name))
+            else:
+                self._changed()
 
-    def _attach_timed(self, handler: Handler, name: str) -> None:
+    def _changed(self) -> None:
+        """What runs changed: the schedule is laid out again before the next run."""
+        self._dirty = True
+
+    def _attach_timed(self, handler: Handler, name: str, enabled: bool = True) -> None:
         entry = self._times.add(name)
+        if not enabled:
+            self._off.add(id(entry))
         self._add(None, name, handler, entry.samples.append, entry)
+
+    def reschedule(self) -> None:
+        """Lay out the rate groups' cycle again (with the loop stopped), each
+        group's next release kept, and make the ticks' plans.  The loop does
+        it itself before a run when what runs has changed."""
+        if self.running:
+            raise PyrtError("reschedule the loop while it is stopped")
+        with self._plan_lock:
+            self._schedule.lay_out(self.rate_groups)
+            self._phase = 0
+            self._timing_handlers = self.timing and bool(self._times.entries
+                                                         or self.rate_groups)
+            self._schedule.plan(self._attached, self._timing_handlers, self._off)
+            self._dirty = False
+
+    def enable(self, name: str, on: bool = True) -> None:
+        """Switch the handler called ``name`` (its entry's name in the
+        statistics) on or off, from any thread: while off it is left out of
+        the ticks (not called, not timed); a loop running takes the change at
+        its next tick.  KeyError for a name that is not a plain handler's."""
+        entry = next((e for e in self._times.entries if e.name == name), None)
+        if entry is None or not any(item is entry for _, (_, _, item, _) in self._attached):
+            raise KeyError(f"no handler called {name!r} to switch on or off")
+        with self._plan_lock:
+            key = id(entry)
+            if (key not in self._off) == bool(on):
+                return
+            if on:
+                self._off.discard(key)
+            else:
+                self._off.add(key)
+            if self._dirty:
+                return
+            self._schedule.plan(self._attached, self._timing_handlers, self._off)
+
+    def enabled(self, name: str) -> bool:
+        """Whether the handler called ``name`` runs (:meth:`enable`)."""
+        entry = next((e for e in self._times.entries if e.name == name), None)
+        if entry is None:
+            raise KeyError(f"no handler called {name!r}")
+        return id(entry) not in self._off
 
     def spawn(self, name: str, gen: Generator[Any, None, Any]) -> Job:
         """Run ``gen`` as a foreground job, one step per tick after the handlers."""
@@ -370,6 +450,40 @@ class Loop:
                 q.halt()
                 self.report_fault(self.make_fault(q.name, cause, source))
 
+    # -- snapshots -----------------------------------------------------------
+
+    def snapshot_state(self) -> dict[str, Any]:
+        """What :meth:`restore_state` puts back into a loop built the same way,
+        as plain values: the tick (inside a tick, the next: a snapshot at the
+        end of a tick is the state before the next), the last fault's id, and
+        each rate group's and ready queue's state
+        (:meth:`RateGroup.snapshot_state`, :meth:`ReadyQueue.snapshot_state`)."""
+        return {
+            "tick": self.tick_index + 1 if self.running else self.tick_index,
+            "fault_ids": self._fault_ids,
+            "groups": [g.snapshot_state() for g in self.rate_groups],
+            "queues": [q.snapshot_state() for q in self.queues],
+        }
+
+    def restore_state(self, state: Mapping[str, Any]) -> None:
+        """Put back what :meth:`snapshot_state` gave (the loop stopped): a
+        state whose rate groups or ready queues are not this loop's, by name
+        and number, is refused (ValueError) before anything changes."""
+        if self.running:
+            raise PyrtError("restore the loop's state while it is stopped")
+        groups, queues = state["groups"], state["queues"]
+        if [g[0] for g in groups] != [g.name for g in self.rate_groups] \
+                or [q[0] for q in queues] != [q.name for q in self.queues]:
+            raise ValueError("the state's rate groups and ready queues are not the loop's "
+                             f"({', '.join(str(q[0]) for q in queues)} against "
+                             f"{', '.join(q.name for q in self.queues)})")
+        self.tick_index = int(state["tick"])
+        self._fault_ids = int(state["fault_ids"])
+        for g, gs in zip(self.rate_groups, groups, strict=True):
+            g.restore_state(gs)
+        for q, qs in zip(self.queues, queues, strict=True):
+            q.restore_state(qs)
+
     # -- running -------------------------------------------------------------
 
     def stop(self) -> None:
@@ -398,7 +512,8 @@ class Loop:
             if self._deadline < now:
                 self._deadline = now
         end_ns = self.now_ns + duration_ns if duration_ns is not None else None
-        self._timing_handlers = self.timing and bool(self._times.entries)
+        if self._dirty:
+            self.reschedule()
         self.running = True
         self._thread_id = get_ident()
         self.current = "loop"
@@ -433,9 +548,10 @@ class Loop:
         clock = self.clock
         start_tick = clock.start_tick
         measured = not clock.virtual
-        handlers = self._handlers
-        names = self._handler_names
-        plan = self._plan if self._timing_handlers else None
+        schedule = self._schedule
+        cycle_len = schedule.length  # groups are not attached while the loop runs
+        phase = self._phase
+        timed = self._timing_handlers
         timer = clock.timer
         period = self.period_ns
         deadline = self._deadline
@@ -445,22 +561,36 @@ class Loop:
         for _ in count() if ticks is None else range(ticks):
             start = start_tick(deadline)
             self.now_ns = start
+            # the plan of the tick's phase (read each tick: a handler switched on
+            # or off makes new plans), the phase of the next tick
+            entries, released = schedule.cycle[phase]
+            phase += 1
+            if phase == cycle_len:
+                phase = 0
+            self._phase = phase
+            for group, gt in released:
+                group.released_at = start
+                gt.releases += 1
             # each handler is named in `current` as it runs (who writes an output)
-            if plan is None:
-                for h, name in zip(handlers, names):  # noqa: B905 - the same length
-                    self.current = name
-                    h(start)
-            else:
+            if timed:
                 t0 = timer()
-                for (h, record), name in zip(plan, names):  # noqa: B905 - the same length
+                for h, record, name in entries:
                     self.current = name
                     h(start)
                     t1 = timer()
-                    record(t1 - t0)
+                    record(t1 - t0)  # type: ignore[misc]  # timed: every entry records
                     t0 = t1
+            else:
+                for h, _, name in entries:
+                    self.current = name
+                    h(start)
             self.current = "loop"
             self.tick_index += 1
-            deadline = self._close_tick(deadline, start) if measured else deadline + period
+            if measured:
+                deadline = self._close_tick(deadline, start)
+                phase = self._phase  # an overrun skipped ticks: their phases too
+            else:
+                deadline += period
             self._deadline = deadline
             if start >= summary_at:
                 self._summary(start)
@@ -487,6 +617,8 @@ class Loop:
             else:
                 self._overrun(deadline, start, end, skipped)
             nxt += skipped * period
+            # the groups (asked above what they missed) keep their grids
+            self._phase = (self._phase + skipped) % self._schedule.length
         else:
             self.consecutive_overruns = 0
             self._starting = False
