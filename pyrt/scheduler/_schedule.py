@@ -8,7 +8,8 @@ entries in the order they run, ``(fn, record, name)`` each, with the members
 of the groups released in that tick in their group's place, and the groups it
 releases.  A tick then takes its plan by its phase and runs it: no group
 counts down, no member is called through its group, and ticks that release
-the same groups share one plan.
+the same groups share one plan (the cycle is a plan index per phase, so that
+switching a handler on or off remakes a few plans, never the whole cycle).
 
 A group whose period would stretch the cycle beyond :data:`MAX_CYCLE` ticks
 stays an entry of every plan and counts down itself
@@ -42,23 +43,31 @@ class Schedule:
     """The plans of one loop's cycle (see the module text)."""
 
     def __init__(self) -> None:
-        #: The plan of each phase (phases that release the same groups share one).
-        self.cycle: list[Plan] = [([], ())]
-        #: The distinct plans' entry lists (a handler attached while the loop
-        #: runs is appended to each, in place: it runs in that tick already).
-        self.lists: list[list[Entry]] = [self.cycle[0][0]]
+        #: The distinct plans: phases that release the same groups share one.
+        self.plans: list[Plan] = [([], ())]
+        #: Each phase's plan, as its index in :attr:`plans`.
+        self.keys: list[int] = [0]
         #: The groups the schedule releases (the others count down themselves).
         self.flat: list[RateGroup] = []
+        # the groups each plan releases (indices into flat), in the plans' order
+        self._released: list[tuple[int, ...]] = [()]
 
     @property
     def length(self) -> int:
         """Ticks in the cycle."""
-        return len(self.cycle)
+        return len(self.keys)
+
+    @property
+    def lists(self) -> list[list[Entry]]:
+        """The plans' entry lists (a handler attached while the loop runs is
+        appended to each, in place: it runs in that tick already)."""
+        return [p[0] for p in self.plans]
 
     def lay_out(self, groups: Sequence[RateGroup]) -> None:
         """Choose the groups the schedule releases and the cycle's length: the
-        fastest first, each as long as the cycle stays within :data:`MAX_CYCLE`.
-        The groups are told (their next releases kept); the phase is 0 now."""
+        fastest first, each as long as the cycle stays within :data:`MAX_CYCLE`;
+        the groups are told (their next releases kept: the phase is 0 now), and
+        each phase's released groups are found (call :meth:`plan` next)."""
         for g in groups:
             g.scheduled(None)
         length, flat = 1, []
@@ -70,37 +79,36 @@ class Schedule:
         for g in flat:
             g.scheduled(0)
         self.flat = flat
-        self.cycle = [([], ())] * length
+        index: dict[tuple[int, ...], int] = {}
+        keys = []
+        for phase in range(length):
+            released = tuple(i for i, g in enumerate(flat) if g.releases_at(phase))
+            keys.append(index.setdefault(released, len(index)))
+        self.keys = keys
+        self._released = list(index)
 
     def plan(self, attached: list[tuple[int | None, Any]], timed: bool,
              off: set[int]) -> None:
-        """Make every phase's plan from the loop's ``attached`` entries ``(period
-        or None, (fn, record, item, name))``; ``timed``: the loop reads its clock
-        between entries (else no record is kept); ``off``: the ids of the items
-        of handlers switched off."""
+        """Make the plans from the loop's ``attached`` entries ``(period or None,
+        (fn, record, item, name))``; ``timed``: the loop reads its clock between
+        entries (else no record is kept); ``off``: the ids of the items of the
+        handlers switched off.  One assignment: a loop running takes the old
+        plans or these."""
         run = rate_monotonic(attached)
         flat = {id(g) for g in self.flat}
-        shared: dict[tuple[int, ...], Plan] = {}
-        cycle: list[Plan] = []
-        for phase in range(len(self.cycle)):
-            key = tuple(i for i, g in enumerate(self.flat) if g.releases_at(phase))
-            p = shared.get(key)
-            if p is None:
-                p = shared[key] = _plan(run, flat, phase, timed, off)
-            cycle.append(p)
-        self.lists = [p[0] for p in shared.values()]
-        self.cycle = cycle  # one assignment: a loop running sees the old cycle or this one
+        self.plans = [_plan(run, flat, {id(self.flat[i]) for i in released}, timed, off)
+                      for released in self._released]
 
 
 def _plan(run: list[tuple[Callable[[int], None], Callable[[int], None], Any, str]],
-          flat: set[int], phase: int, timed: bool, off: set[int]) -> Plan:
+          flat: set[int], released: set[int], timed: bool, off: set[int]) -> Plan:
     entries: list[Entry] = []
-    released: list[tuple[RateGroup, GroupTiming]] = []
+    groups: list[tuple[RateGroup, GroupTiming]] = []
     for fn, record, item, name in run:
         if isinstance(item, RateGroup) and id(item) in flat:
-            if item.releases_at(phase):
+            if id(item) in released:
                 entries.extend(item.release_entries(timed))
-                released.append((item, item.timing))
+                groups.append((item, item.timing))
         elif id(item) not in off:
             entries.append((fn, record if timed else None, name))
-    return entries, tuple(released)
+    return entries, tuple(groups)

@@ -48,7 +48,7 @@ from typing import Any
 
 from pyrt.errors import Fault, FaultError, PyrtError
 from pyrt.scheduler import _accounting
-from pyrt.scheduler._handlertiming import HandlerTimes, TakenSamples
+from pyrt.scheduler._handlertiming import HandlerTimes, HandlerTiming, TakenSamples
 from pyrt.scheduler._schedule import Schedule
 from pyrt.scheduler.clock import Clock, SimClock, WallClock
 from pyrt.scheduler.gcwatch import GcWatch
@@ -323,32 +323,32 @@ class Loop:
             self._schedule.plan(self._attached, self._timing_handlers, self._off)
             self._dirty = False
 
-    def enable(self, name: str, on: bool = True) -> None:
-        """Switch the handler called ``name`` (its entry's name in the
-        statistics) on or off, from any thread: while off it is left out of
-        the ticks (not called, not timed); a loop running takes the change at
-        its next tick.  KeyError for a name that is not a plain handler's."""
-        entry = next((e for e in self._times.entries if e.name == name), None)
-        if entry is None or not any(item is entry for _, (_, _, item, _) in self._attached):
-            raise KeyError(f"no handler called {name!r} to switch on or off")
+    def enable(self, handler: str | Handler, on: bool = True) -> None:
+        """Switch a plain handler on or off, from any thread: ``handler`` the
+        function attached or its entry's name in the statistics.  While off it
+        is left out of the ticks (not called, not timed); a loop running takes
+        the change at its next tick.  KeyError for what is not a plain handler."""
+        key = id(self._entry_of(handler))
         with self._plan_lock:
-            key = id(entry)
             if (key not in self._off) == bool(on):
                 return
             if on:
                 self._off.discard(key)
             else:
                 self._off.add(key)
-            if self._dirty:
-                return
-            self._schedule.plan(self._attached, self._timing_handlers, self._off)
+            if not self._dirty:
+                self._schedule.plan(self._attached, self._timing_handlers, self._off)
 
-    def enabled(self, name: str) -> bool:
-        """Whether the handler called ``name`` runs (:meth:`enable`)."""
-        entry = next((e for e in self._times.entries if e.name == name), None)
-        if entry is None:
-            raise KeyError(f"no handler called {name!r}")
-        return id(entry) not in self._off
+    def enabled(self, handler: str | Handler) -> bool:
+        """Whether a plain handler runs (:meth:`enable`)."""
+        return id(self._entry_of(handler)) not in self._off
+
+    def _entry_of(self, handler: str | Handler) -> Any:
+        for _, (fn, _, item, _) in self._attached:
+            if isinstance(item, HandlerTiming) and (
+                    item.name == handler if isinstance(handler, str) else fn == handler):
+                return item
+        raise KeyError(f"no handler {handler!r} to switch on or off")
 
     def spawn(self, name: str, gen: Generator[Any, None, Any]) -> Job:
         """Run ``gen`` as a foreground job, one step per tick after the handlers."""
@@ -549,7 +549,8 @@ class Loop:
         start_tick = clock.start_tick
         measured = not clock.virtual
         schedule = self._schedule
-        cycle_len = schedule.length  # groups are not attached while the loop runs
+        keys = schedule.keys  # groups are not attached while the loop runs
+        cycle_len = len(keys)
         phase = self._phase
         timed = self._timing_handlers
         timer = clock.timer
@@ -563,7 +564,7 @@ class Loop:
             self.now_ns = start
             # the plan of the tick's phase (read each tick: a handler switched on
             # or off makes new plans), the phase of the next tick
-            entries, released = schedule.cycle[phase]
+            entries, released = schedule.plans[keys[phase]]
             phase += 1
             if phase == cycle_len:
                 phase = 0
