@@ -58,6 +58,9 @@ from pyrt.scheduler.stats import Accumulator, LoopStatistics, bin_index
 
 __all__ = ["Job", "Loop", "TakenSamples", "overrun_line"]
 
+#: A loop time no run reaches (a run without ``duration_ns`` ends there).
+_NEVER = 1 << 126
+
 Handler = Callable[[int], None]
 
 
@@ -422,6 +425,12 @@ class Loop:
         """True while a fault waits to be reported."""
         return bool(self._faults)
 
+    @property
+    def pending_faults(self) -> deque[Fault]:
+        """The faults waiting to be reported, oldest first: the loop's own queue
+        (the same object for the loop's life; read it, take with :meth:`take_fault`)."""
+        return self._faults
+
     def take_fault(self, fault: Fault | None = None) -> Fault | None:
         """The oldest fault not yet reported, removed from the pending list; or,
         given ``fault`` (shown to the operator another way), that one removed."""
@@ -557,10 +566,17 @@ class Loop:
         period = self.period_ns
         deadline = self._deadline
         summary_at = self._next_summary
-        done = _ending(until, end_ns)
+        end = end_ns if end_ns is not None else _NEVER
+        # virtual time as SimClock keeps it: moved to the deadline here, no call
+        sim = clock if type(clock).start_tick is SimClock.start_tick else None
         first = self.tick_index
         for _ in count() if ticks is None else range(ticks):
-            start = start_tick(deadline)
+            if sim is not None:
+                if deadline > sim._now:
+                    sim._now = deadline
+                start = deadline
+            else:
+                start = start_tick(deadline)
             self.now_ns = start
             # the plan of the tick's phase (read each tick: a handler switched on
             # or off makes new plans), the phase of the next tick
@@ -596,7 +612,7 @@ class Loop:
             if start >= summary_at:
                 self._summary(start)
                 summary_at = self._next_summary
-            if self._stopping or (done is not None and done(deadline)):
+            if self._stopping or (until is not None and until()) or deadline > end:
                 break
         return self.tick_index - first
 
@@ -779,19 +795,6 @@ def overrun_line(count: int, worst_ns: int, tick: int, culprit: str = "", width:
             head += f" in {name}"
     line = head + tail
     return line if len(line) <= width else line[: width - 1] + "…"
-
-
-def _ending(until: Callable[[], bool] | None,
-            end_ns: int | None) -> Callable[[int], bool] | None:
-    """What ends a run after a tick, given the next deadline: ``until()``
-    holding, the deadline past ``end_ns``, either, or (None) neither."""
-    if until is None and end_ns is None:
-        return None
-    if end_ns is None:
-        return lambda deadline: until()  # type: ignore[misc]
-    if until is None:
-        return lambda deadline: deadline > end_ns
-    return lambda deadline: until() or deadline > end_ns
 
 
 def _record(acc: Accumulator, d: int) -> None:

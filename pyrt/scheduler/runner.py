@@ -353,11 +353,13 @@ class Runner:
         if self.virtual:
             held = [False]
 
+            faults = self.loop.pending_faults  # the loop's own deque: no call a tick
+
             def done() -> bool:
                 if predicate():
                     held[0] = True
                     return True
-                return self.loop.has_fault()
+                return bool(faults)
 
             self._drive(done, timeout_s)
             self._raise_fault()
