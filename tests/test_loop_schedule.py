@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pyrt.errors import PyrtError
-from pyrt.scheduler import Loop, RateGroup, SimClock, Task, _schedule
+from pyrt.scheduler import Loop, RateGroup, ReadyQueue, SimClock, Task, _schedule
 from pyrt.scheduler.runner import Runner
 from pyrt.scope import Scope
 from pyrt.scope.sources import Source
@@ -223,3 +223,24 @@ def test_restoring_a_group_while_its_loop_runs_is_refused():
     loop.attach(restore, name="restore")
     loop.run(1)
     assert errors and "stopped" in str(errors[0])
+
+
+def test_a_job_spawned_on_a_loop_of_queues_alone_is_timed_from_the_next_run():
+    """The first plain handler (a job a routine spawned) of a loop that timed only routines is timed from the next run."""
+    loop = Loop(SimClock())
+
+    def job():
+        while True:
+            yield
+
+    def spawn():
+        if loop.tick_index == 1:
+            loop.spawn("j", job())
+    queue = ReadyQueue.general("arm")
+    queue.add_periodic(None, "spawner", spawn, 1)
+    queue.schedule("spawner", 1)
+    loop.attach(queue)
+    loop.run(3)  # spawned in tick 1: it steps in ticks 1 and 2, untimed (no clock reads this run)
+    assert loop.statistics().tasks["jobs"].calls == 0
+    loop.run(4)
+    assert loop.statistics().tasks["jobs"].calls == 4

@@ -321,10 +321,14 @@ class Loop:
         with self._plan_lock:
             self._schedule.lay_out(self.rate_groups)
             self._phase = 0
-            self._timing_handlers = self.timing and bool(self._times.entries
-                                                         or self.rate_groups)
+            self._timing_handlers = self._timed_now()
             self._schedule.plan(self._attached, self._timing_handlers, self._off)
             self._dirty = False
+
+    def _timed_now(self) -> bool:
+        """Whether the ticks read the clock between entries: timing is on and
+        there is more to time than the queues' routines (which time themselves)."""
+        return self.timing and bool(self._times.entries or self.rate_groups)
 
     def enable(self, handler: str | Handler, on: bool = True) -> None:
         """Switch a plain handler on or off, from any thread: ``handler`` the
@@ -523,6 +527,11 @@ class Loop:
         end_ns = self.now_ns + duration_ns if duration_ns is not None else None
         if self._dirty:
             self.reschedule()
+        elif self._timing_handlers != self._timed_now():
+            # a job spawned in the last run is the loop's first handler: timed from now on
+            with self._plan_lock:
+                self._timing_handlers = self._timed_now()
+                self._schedule.plan(self._attached, self._timing_handlers, self._off)
         self.running = True
         self._thread_id = get_ident()
         self.current = "loop"
