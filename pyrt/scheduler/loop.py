@@ -577,7 +577,8 @@ class Loop:
         summary_at = self._next_summary
         end = end_ns if end_ns is not None else _NEVER
         # virtual time as SimClock keeps it: moved to the deadline here, no call
-        sim = clock if type(clock).start_tick is SimClock.start_tick else None
+        sim = clock if (isinstance(clock, SimClock)
+                        and type(clock).start_tick is SimClock.start_tick) else None
         first = self.tick_index
         for _ in count() if ticks is None else range(ticks):
             if sim is not None:
