@@ -144,7 +144,11 @@ def test_the_loop_state_round_trips():
     b.run(20)
     assert ran_a[-len(ran_b):] == ran_b and ran_b
     with pytest.raises(ValueError, match="not the loop's"):
-        b.restore_state({**state, "groups": [["fast", 1, 0]]})
+        b.restore_state({**state, "groups": [["slow", 1, 0], ["fast", 1, 0]]})
+    before = b.snapshot_state()
+    with pytest.raises(ValueError, match=r"outside 1\.\.3"):
+        b.restore_state({**state, "tick": 99, "groups": [["slow", 4, 0]]})
+    assert b.snapshot_state() == before  # refused whole: nothing changed
 
 
 def test_a_handler_switched_off_is_neither_called_nor_timed():

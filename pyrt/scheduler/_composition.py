@@ -227,6 +227,13 @@ class LoopComposition:
             raise ValueError("the state's rate groups and ready queues are not the loop's "
                              f"({', '.join(str(q[0]) for q in queues)} against "
                              f"{', '.join(q.name for q in self.queues)})")
+        for g, (_, left, _) in zip(self.rate_groups, groups, strict=True):
+            if not 1 <= int(left) <= g.ticks:
+                raise ValueError(f"the state's rate group {g.name} is {left} ticks from its "
+                                 f"next release, outside 1..{g.ticks}")
+        for q, (_, mem, *_) in zip(self.queues, queues, strict=True):
+            if len(bytes.fromhex(mem)) != len(q.image.mem):
+                raise ValueError(f"the state's image of ready queue {q.name} is not its size")
         self.tick_index = int(state["tick"])
         self._fault_ids = int(state["fault_ids"])
         for g, gs in zip(self.rate_groups, groups, strict=True):
