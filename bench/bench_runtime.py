@@ -37,7 +37,7 @@ def _loop_with_scope(channels: int, running: bool) -> Loop:
             scope.add(f"c{k}", Source.attr(plant, "abcd"[k % 4]))
         if running:
             scope.run("roll")
-        loop.attach(scope.sample)
+        scope.attach_to(loop)  # as a station attaches it: sampling only while it acquires
     return loop
 
 

@@ -218,3 +218,95 @@ def test_wallclock_lateness(benchmark, hz):
     result["cpu_fraction"] = round(cpu / 5.0, 3)
     benchmark.extra_info.update(result)
     print(f"\n{hz} Hz: {result}")
+
+
+# -- the loop's own machinery, shaped as pyrt urdf's tick -------------------------------------
+
+
+def machinery_loop(timing: bool = True) -> Loop:
+    """A SimClock loop shaped as the ``pyrt urdf`` station's tick, every body
+    empty: the read phase, a 1 kHz servo group and a 100 Hz trajectory group
+    (one task each, in a ready queue of the arm), the move watch, the scope
+    (at rest), the mailbox (a runner's) and the write phase.  What a tick of
+    it costs is the loop's own share of every station's tick."""
+    from pyrt.scheduler.runner import Runner
+    from pyrt.scope import Scope
+
+    loop = Loop(SimClock(), timing=timing)
+    loop.attach(lambda now: None, name="io:read")
+    for name, hz in (("servo", 1000), ("trajectory", 100)):
+        group = RateGroup(name, hz=hz)
+        group.new_queue("arm", [Task(lambda now: None, period=1, name=name, timed=True)])
+        loop.attach(group)
+    loop.attach(lambda now: None, name="moves")
+    scope = Scope()
+    if hasattr(scope, "attach_to"):
+        scope.attach_to(loop)
+    else:  # a tree from before the scope switched its own sampling on and off
+        loop.attach(scope.sample, name="scope")
+    Runner(loop).start()
+    loop.attach(lambda now: None, name="io:write")
+    return loop
+
+
+def machinery_us(timing: bool = True, ticks: int = 50_000, rounds: int = 7) -> float:
+    """The best of ``rounds`` runs of ``ticks`` ticks of :func:`machinery_loop`:
+    process CPU µs per tick (summaries and their folds included)."""
+    loop = machinery_loop(timing)
+    loop.run(2_000)
+    best = float("inf")
+    for _ in range(rounds):
+        c0 = time.process_time()
+        loop.run(ticks)
+        best = min(best, (time.process_time() - c0) / ticks * 1e6)
+    return best
+
+
+@pytest.mark.benchmark(group="loop machinery")
+@pytest.mark.parametrize("timing", [True, False], ids=["timing-on", "timing-off"])
+def test_loop_machinery_per_tick(benchmark, timing):
+    """The urdf-shaped tick with empty bodies: the loop's own cost per tick (µs of CPU)."""
+    us = benchmark.pedantic(machinery_us, kwargs={"timing": timing}, rounds=1, iterations=1)
+    benchmark.extra_info["us_per_tick"] = round(us, 3)
+    print(f"\nloop machinery, urdf-shaped tick, timing {'on' if timing else 'off'}: {us:.2f} µs")
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Source trees side by side: the machinery row of each, interleaved, in
+    child processes whose ``PYTHONPATH`` is the tree (run from any directory)."""
+    import argparse
+    import json
+    import statistics
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    ap = argparse.ArgumentParser(description="the loop's machinery per tick, trees side by side")
+    ap.add_argument("--tree", action="append", help="a source tree (repeat; default: this one)")
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.child:
+        print(json.dumps({"on": machinery_us(True), "off": machinery_us(False)}))
+        return
+    trees = args.tree or [str(Path(__file__).resolve().parent.parent)]
+    load0 = os.getloadavg()
+    runs: dict[str, list[dict]] = {t: [] for t in trees}
+    for _ in range(args.rounds):
+        for tree in trees:
+            env = dict(os.environ, PYTHONPATH=str(Path(tree).resolve()))
+            done = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--child"],
+                                  env=env, check=True, capture_output=True, text=True,
+                                  cwd=Path(__file__).resolve().parent)
+            runs[tree].append(json.loads(done.stdout.splitlines()[-1]))
+    load1 = os.getloadavg()
+    print(f"load average before {load0[0]:.2f}, after {load1[0]:.2f}; median of {args.rounds} "
+          "interleaved rounds (each the best of 7 runs of 50,000 ticks)")
+    for tree in trees:
+        on = statistics.median(r["on"] for r in runs[tree])
+        off = statistics.median(r["off"] for r in runs[tree])
+        print(f"{tree}: {on:.2f} µs a tick with timing on, {off:.2f} µs with it off")
+
+
+if __name__ == "__main__":
+    main()

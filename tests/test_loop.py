@@ -376,8 +376,7 @@ def test_start_up_overruns_are_counted_apart_and_not_warned():
             first[0] = False
             clock.work(8 * MS)
 
-    loop._handlers.insert(0, cold_start)
-    loop._handler_names.insert(0, "cold")
+    loop.attach(cold_start, name="cold")
     loop.run(2000)
     stats = loop.statistics()
     assert stats.overruns == 0 and stats.missed == 0 and lines == []

@@ -61,13 +61,14 @@ def join_member(loop: Loop, group: RateGroup, name: str, member: Any) -> None:
     (faults, timing) in that group; a handler is timed as an entry."""
     if isinstance(member, ReadyQueue):
         loop._take_queue(member, group.timing)
-        group.add_run(member.tick, loop._times.sink.append, name)
+        group.add_run(member.tick, loop._times.sink.append, name, own=False)
         group.order.append(member)
     else:
         entry = loop._times.add(name)
         loop._entry_group[entry.name] = group.timing
         group.add_run(member, entry.samples.append, entry.name)
         group.order.append(entry)
+    loop._changed()
 
 
 def skip_groups(loop: Loop, skipped: int, count: bool = True) -> dict[str, int]:

@@ -184,20 +184,21 @@ def fold_many(pairs: list[tuple[Accumulator, list[int]]]) -> None:
     idx = _bin_indices(d)
     if k > 1:
         idx += np.repeat(np.arange(0, k * NBINS, NBINS, dtype=np.int64), lengths)
-    counts = np.bincount(idx, minlength=k * NBINS).reshape(k, NBINS)
+    counts = np.bincount(idx, minlength=k * NBINS)
     starts = np.zeros(k, dtype=np.int64)
     np.cumsum(lengths[:-1], out=starts[1:])
     sums = np.add.reduceat(d, starts).tolist()
     maxs = np.maximum.reduceat(d, starts).tolist()
     for j, (acc, _) in enumerate(pairs):
         acc.calls += lengths[j]
-        acc.total += int(sums[j])
+        acc.total += sums[j]
         if maxs[j] > acc.max:
-            acc.max = int(maxs[j])
-        row = counts[j]
-        hist = acc.hist
-        for i in np.flatnonzero(row).tolist():
-            hist[i] += int(row[i])
+            acc.max = maxs[j]
+    # the bins that took samples, all lists at once, as plain ints
+    nz = np.flatnonzero(counts)
+    for flat, c in zip(nz.tolist(), counts[nz].tolist(), strict=True):
+        j, i = divmod(flat, NBINS)
+        pairs[j][0].hist[i] += c
 
 
 def _bin_indices(d: np.ndarray) -> np.ndarray:

@@ -2,6 +2,10 @@
 
 Rate groups (:mod:`pyrt.scheduler.rategroup`) are released at their own
 periods, fastest first; a queue attached directly is a group of the tick.
+Which groups a tick releases is worked out before the loop runs
+(:mod:`pyrt.scheduler._schedule`): each tick takes the plan of its phase in
+the groups' common cycle and runs it, the released groups' members in their
+groups' places.
 
 One tick: wait for the deadline; record lateness; call each handler with the
 tick's time (the plant, then each robot's clock interrupt, then the mailbox
@@ -19,9 +23,11 @@ physics, the motion executor, the scope, the mailbox, foreground jobs) is
 timed as an entry of its own, beside the queues' routines: the clock is read
 once between handlers (the end of one is the start of the next), each
 duration is appended to the handler's sample list, and the lists are folded
-into histograms in bulk, off the tick (:meth:`Loop.take_samples`).  An
-overrun is attributed to whichever entry, routine or handler, took longest
-in its tick.
+into histograms in bulk, off the tick (:meth:`Loop.take_samples`).  A rate
+group's release is the sum of its members' durations.  An overrun is
+attributed to whichever entry, routine or handler, took longest in its tick.
+A handler can be switched off (:meth:`Loop.enable`; the scope while it does
+not acquire): it is left out of the ticks until switched on, untimed.
 
 On real time the loop keeps the garbage collector out of its ticks
 (:mod:`pyrt.scheduler.gcwatch`): the start-up heap frozen, automatic
@@ -42,14 +48,18 @@ from typing import Any
 
 from pyrt.errors import Fault, FaultError, PyrtError
 from pyrt.scheduler import _accounting
-from pyrt.scheduler._handlertiming import HandlerTimes, TakenSamples
+from pyrt.scheduler._composition import LoopComposition
+from pyrt.scheduler._handlertiming import TakenSamples
 from pyrt.scheduler.clock import Clock, SimClock, WallClock
 from pyrt.scheduler.gcwatch import GcWatch
-from pyrt.scheduler.rategroup import GroupTiming, RateGroup, rate_monotonic
+from pyrt.scheduler.rategroup import GroupTiming, RateGroup
 from pyrt.scheduler.readyqueue import ReadyQueue
 from pyrt.scheduler.stats import Accumulator, LoopStatistics, bin_index
 
 __all__ = ["Job", "Loop", "TakenSamples", "overrun_line"]
+
+#: A loop time no run reaches (a run without ``duration_ns`` ends there).
+_NEVER = 1 << 126
 
 Handler = Callable[[int], None]
 
@@ -100,7 +110,7 @@ class Job:
         return self.result
 
 
-class Loop:
+class Loop(LoopComposition):
     """A periodic tick loop.
 
     ``clock`` is a :class:`SimClock` or :class:`WallClock`; ``period_ns`` the
@@ -152,23 +162,12 @@ class Loop:
         self.warn = warn
         self.summary_interval_ns = int(summary_interval_ns)
 
-        self._handlers: list[Handler] = []
-        self._handler_names: list[str] = []
-        # Timed ticks run this plan: (handler, record its duration).
-        self._plan: list[tuple[Handler, Callable[[int], None]]] = []
-        # What ran, in order: a ready queue, a rate group or a handler's timing.
-        self._order: list[Any] = []
-        # Everything attached, in attach order: (a group's period or None, its parts).
-        self._attached: list[tuple[int | None, Any]] = []
+        self._init_composition()
         # The rate groups (a queue attached alone is one), the RateGroups, and
-        # the group of each queue (by id) and of each handler entry in a group.
+        # the group of each queue (by id).
         self._groups: list[GroupTiming] = []
         self.rate_groups: list[RateGroup] = []
         self._group_of: dict[int, GroupTiming] = {}
-        self._entry_group: dict[str, GroupTiming] = {}
-        self._times = HandlerTimes()
-        # Set per run(): handler durations are being recorded.
-        self._timing_handlers = False
         self.queues: list[ReadyQueue] = []
         self._jobs: deque[Job] = deque()
         self._jobs_attached = False
@@ -207,68 +206,13 @@ class Loop:
         self.gc_control = gc_control
         self._gc = GcWatch(lambda: self.tick_index, self.clock.timer)
 
-    # -- composition ---------------------------------------------------------
-
     @property
     def deadline_ns(self) -> int:
         """The deadline of the tick being run (in a handler: its lateness is
         ``now_ns - deadline_ns``), or of the next one between ticks."""
         return self._deadline
 
-    def attach(self, handler: ReadyQueue | RateGroup | Handler, name: str | None = None) -> None:
-        """Call ``handler(now_ns)`` every tick, after those attached before it.
-
-        A :class:`RateGroup` is released at its own rate, groups in
-        rate-monotonic order (:mod:`pyrt.scheduler.rategroup`); its period
-        must be a whole number of ticks (:class:`ConfigError` otherwise).  A
-        :class:`ReadyQueue` is attached by its clock handler, as a group of
-        its own at the tick's rate; its faults are reported to this loop and
-        its routines timed when timing is on.  Any other handler is timed as
-        an entry of its own, called ``name`` (by default the function's name;
-        a second handler of the same name gets ``#2``).
-        """
-        if self.running:
-            raise PyrtError("attach handlers before the loop runs")
-        if isinstance(handler, RateGroup):
-            _accounting.attach_group(self, handler)
-        elif isinstance(handler, ReadyQueue):
-            label = name or f"queue:{handler.name}"
-            group = GroupTiming(_accounting.group_name(self, label), self.period_ns)
-            self._take_queue(handler, group)
-            self._add(self.period_ns, label, handler.tick, group.samples.append, handler)
-        else:
-            self._attach_timed(handler, name or str(getattr(handler, "__name__", "handler")))
-
-    def _take_queue(self, queue: ReadyQueue, group: GroupTiming) -> None:
-        if queue.on_error is None:  # a queue no station owns: its faults are the loop's
-            self._bare_queues.append(queue)
-            queue.on_error = lambda cause, source, tb, q=queue: self.report_fault(
-                self.make_fault(q.name, cause, source, tb))
-        queue.timer = self.clock.timer
-        queue.enable_timing(self.timing, track_ticks=not self.clock.virtual)
-        self.queues.append(queue)
-        self._group_of[id(queue)] = group
-        if group not in self._groups:
-            self._groups.append(group)
-
-    def _join_group_member(self, group: RateGroup, name: str, member: Any) -> None:
-        _accounting.join_member(self, group, name, member)
-
-    def _add(self, period: int | None, name: str, fn: Handler, record: Callable[[int], None],
-             item: Any) -> None:
-        """Attach ``fn`` (``period``: a group's, None: a plain handler) and
-        arrange what runs: groups rate-monotonic, in the groups' places."""
-        self._attached.append((period, (fn, record, item, name)))
-        run = rate_monotonic(self._attached)
-        # in place: a job spawned while the loop runs is attached to the lists it runs
-        self._handlers[:] = [fn for fn, _, _, _ in run]
-        self._plan[:] = [(fn, rec) for fn, rec, _, _ in run]
-        self._order[:] = [item for _, _, item, _ in run]
-        self._handler_names[:] = [n for _, _, _, n in run]
-
-    def _attach_timed(self, handler: Handler, name: str) -> None:
-        entry = self._times.add(name)
-        self._add(None, name, handler, entry.samples.append, entry)
+    # -- foreground jobs -----------------------------------------------------
 
     def spawn(self, name: str, gen: Generator[Any, None, Any]) -> Job:
         """Run ``gen`` as a foreground job, one step per tick after the handlers."""
@@ -342,6 +286,12 @@ class Loop:
         """True while a fault waits to be reported."""
         return bool(self._faults)
 
+    @property
+    def pending_faults(self) -> deque[Fault]:
+        """The faults waiting to be reported, oldest first: the loop's own queue
+        (the same object for the loop's life; read it, take with :meth:`take_fault`)."""
+        return self._faults
+
     def take_fault(self, fault: Fault | None = None) -> Fault | None:
         """The oldest fault not yet reported, removed from the pending list; or,
         given ``fault`` (shown to the operator another way), that one removed."""
@@ -398,7 +348,13 @@ class Loop:
             if self._deadline < now:
                 self._deadline = now
         end_ns = self.now_ns + duration_ns if duration_ns is not None else None
-        self._timing_handlers = self.timing and bool(self._times.entries)
+        if self._dirty:
+            self.reschedule()
+        elif self._timing_handlers != self._timed_now():
+            # a job spawned in the last run is the loop's first handler: timed from now on
+            with self._plan_lock:
+                self._timing_handlers = self._timed_now()
+                self._schedule.plan(self._attached, self._timing_handlers, self._off)
         self.running = True
         self._thread_id = get_ident()
         self.current = "loop"
@@ -433,39 +389,63 @@ class Loop:
         clock = self.clock
         start_tick = clock.start_tick
         measured = not clock.virtual
-        handlers = self._handlers
-        names = self._handler_names
-        plan = self._plan if self._timing_handlers else None
+        schedule = self._schedule
+        keys = schedule.keys  # groups are not attached while the loop runs
+        cycle_len = len(keys)
+        phase = self._phase
+        timed = self._timing_handlers
         timer = clock.timer
         period = self.period_ns
         deadline = self._deadline
         summary_at = self._next_summary
-        done = _ending(until, end_ns)
+        end = end_ns if end_ns is not None else _NEVER
+        # virtual time as SimClock keeps it: moved to the deadline here, no call
+        sim = clock if (isinstance(clock, SimClock)
+                        and type(clock).start_tick is SimClock.start_tick) else None
         first = self.tick_index
         for _ in count() if ticks is None else range(ticks):
-            start = start_tick(deadline)
-            self.now_ns = start
-            # each handler is named in `current` as it runs (who writes an output)
-            if plan is None:
-                for h, name in zip(handlers, names):  # noqa: B905 - the same length
-                    self.current = name
-                    h(start)
+            if sim is not None:
+                if deadline > sim._now:
+                    sim._now = deadline
+                start = deadline
             else:
+                start = start_tick(deadline)
+            self.now_ns = start
+            # the plan of the tick's phase (read each tick: a handler switched on
+            # or off makes new plans), the phase of the next tick
+            entries, released = schedule.plans[keys[phase]]
+            phase += 1
+            if phase == cycle_len:
+                phase = 0
+            self._phase = phase
+            for group, gt in released:
+                group.released_at = start
+                gt.releases += 1
+            # each handler is named in `current` as it runs (who writes an output)
+            if timed:
                 t0 = timer()
-                for (h, record), name in zip(plan, names):  # noqa: B905 - the same length
+                for h, record, name in entries:
                     self.current = name
                     h(start)
                     t1 = timer()
-                    record(t1 - t0)
+                    record(t1 - t0)  # type: ignore[misc]  # timed: every entry records
                     t0 = t1
+            else:
+                for h, _, name in entries:
+                    self.current = name
+                    h(start)
             self.current = "loop"
             self.tick_index += 1
-            deadline = self._close_tick(deadline, start) if measured else deadline + period
+            if measured:
+                deadline = self._close_tick(deadline, start)
+                phase = self._phase  # an overrun skipped ticks: their phases too
+            else:
+                deadline += period
             self._deadline = deadline
             if start >= summary_at:
                 self._summary(start)
                 summary_at = self._next_summary
-            if self._stopping or (done is not None and done(deadline)):
+            if self._stopping or (until is not None and until()) or deadline > end:
                 break
         return self.tick_index - first
 
@@ -487,6 +467,8 @@ class Loop:
             else:
                 self._overrun(deadline, start, end, skipped)
             nxt += skipped * period
+            # the groups (asked above what they missed) keep their grids
+            self._phase = (self._phase + skipped) % self._schedule.length
         else:
             self.consecutive_overruns = 0
             self._starting = False
@@ -646,19 +628,6 @@ def overrun_line(count: int, worst_ns: int, tick: int, culprit: str = "", width:
             head += f" in {name}"
     line = head + tail
     return line if len(line) <= width else line[: width - 1] + "…"
-
-
-def _ending(until: Callable[[], bool] | None,
-            end_ns: int | None) -> Callable[[int], bool] | None:
-    """What ends a run after a tick, given the next deadline: ``until()``
-    holding, the deadline past ``end_ns``, either, or (None) neither."""
-    if until is None and end_ns is None:
-        return None
-    if end_ns is None:
-        return lambda deadline: until()  # type: ignore[misc]
-    if until is None:
-        return lambda deadline: deadline > end_ns
-    return lambda deadline: until() or deadline > end_ns
 
 
 def _record(acc: Accumulator, d: int) -> None:

@@ -30,7 +30,7 @@ rate groups runs and replays as it did.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from pyrt.errors import ConfigError, PyrtError
@@ -103,7 +103,10 @@ class RateGroup:
         self.timing = GroupTiming(name, self.period_ns)
         #: The period in ticks of the loop it is attached to (set by the loop).
         self.ticks = 1
+        # Ticks to the next release while no loop's schedule releases the group;
+        # with one (_offset set), the loop's phase says it (:attr:`left`).
         self._left = 1
+        self._offset: int | None = None
         #: Loop time of the last release (-1: none yet).
         self.released_at = -1
         #: What runs at a release, as the loop knows it (queues, handler entries).
@@ -111,6 +114,9 @@ class RateGroup:
         self._handlers: list[Handler] = []
         self._names: list[str] = []
         self._plan: list[tuple[Handler, Callable[[int], None]]] = []
+        # whether each member's duration is its own entry's (a handler) or only
+        # part of the release (a queue: its routines are timed by the queue)
+        self._own: list[bool] = []
         self._timer: Callable[[], int] | None = None
         self._loop: Any = None
 
@@ -165,17 +171,89 @@ class RateGroup:
                 f"{_ms(self.period_ns)} (--tick-us)")
         self.ticks = self._left = ticks
 
+    # -- where the group is in its period -------------------------------------
+
+    @property
+    def left(self) -> int:
+        """Ticks until the group's next release (1: the next tick releases it).
+        Inside a tick the tick is counted already, as it is between ticks."""
+        if self._offset is None:
+            return self._left
+        return (self._offset - self._loop.phase) % self.ticks + 1
+
+    def snapshot_state(self) -> list[Any]:
+        """What :meth:`restore_state` puts back: ``[name, left, released_at]``
+        (plain values, for a snapshot's JSON)."""
+        return [self.name, self.left, self.released_at]
+
+    def restore_state(self, state: Sequence[Any]) -> None:
+        """Put back what :meth:`snapshot_state` gave (with the loop stopped):
+        the ticks to the next release and the time of the last one; a name
+        that is not this group's or a count outside 1..:attr:`ticks` is
+        refused (ValueError) and nothing changes."""
+        name, left, released = state
+        if name != self.name:
+            raise ValueError(f"rate group {self.name}: the state given is of {name!r}")
+        left, released = int(left), int(released)
+        if not 1 <= left <= self.ticks:
+            raise ValueError(f"rate group {self.name}: {left} ticks to the next release "
+                             f"is outside 1..{self.ticks}")
+        loop = self._loop
+        if loop is not None and loop.running:
+            raise PyrtError(f"rate group {self.name}: restore its state with its loop stopped")
+        self._left, self.released_at = left, released
+        if self._offset is not None:
+            self._offset = None
+            loop.reschedule()
+
+    def scheduled(self, phase: int | None) -> None:
+        """The loop's schedule releases the group from now on, the ticks to its
+        next release kept, at the loop's ``phase`` now; None: no longer (the
+        group counts down itself, :meth:`tick`).  The loop's part."""
+        left = self.left
+        if phase is None:
+            self._offset = None
+            self._left = left
+        else:
+            self._offset = (phase + left - 1) % self.ticks
+
+    def releases_at(self, phase: int) -> bool:
+        """True if the loop's schedule releases the group in the tick of ``phase``."""
+        return self._offset is not None and phase % self.ticks == self._offset
+
     def set_timer(self, timer: Callable[[], int] | None) -> None:
         """Time each release with ``timer`` (None: timing off, no cost)."""
         self._timer = timer
 
-    def add_run(self, fn: Handler, record: Callable[[int], None], name: str = "") -> None:
+    def add_run(self, fn: Handler, record: Callable[[int], None], name: str = "", *,
+                own: bool = True) -> None:
         """Run ``fn`` at each release; ``record`` takes its duration (the loop's
-        part); ``name`` is what the loop's :attr:`~pyrt.scheduler.loop.Loop.current`
-        says while it runs (by default the group's name)."""
+        part; ``own``: it is the member's own entry, else only part of the
+        release, as a queue's stretch is); ``name`` is what the loop's
+        :attr:`~pyrt.scheduler.loop.Loop.current` says while it runs (by
+        default the group's name)."""
         self._handlers.append(fn)
         self._names.append(name or self.name)
         self._plan.append((fn, record))
+        self._own.append(own)
+
+    def release_entries(self, timed: bool) -> list[tuple[Handler, Callable[[int], None] | None,
+                                                          str]]:
+        """What a loop's schedule runs at a release, ``(fn, record, name)`` each
+        member: with ``timed``, each ``record`` takes the member's duration for
+        its own entry and the release's time (their sum) is recorded with the
+        last; without, no record (None)."""
+        names = self._names
+        if not timed:
+            return [(fn, None, name) for fn, name in zip(self._handlers, names, strict=True)]
+        total = self.timing.samples.append
+        if len(self._plan) == 1 and not self._own[0]:  # one queue: its stretch is the release
+            return [(self._plan[0][0], total, names[0])]
+        last = len(self._plan) - 1
+        acc = [0]
+        return [(fn, _summing(record if own else None, acc, total if i == last else None), name)
+                for i, ((fn, record), own, name)
+                in enumerate(zip(self._plan, self._own, names, strict=True))]
 
     # -- the release ---------------------------------------------------------
 
@@ -213,14 +291,38 @@ class RateGroup:
     def skip(self, ticks: int) -> int:
         """``ticks`` deadlines of the loop were skipped (an overrun): the
         releases among them are missed; returns how many.  The next release
-        keeps the group's grid."""
-        left = self._left - ticks
-        if left > 0:
-            self._left = left
-            return 0
+        keeps the group's grid (of a group the loop's schedule releases, the
+        loop moves its phase on by ``ticks`` after asking every group)."""
+        left = self.left - ticks
         k = self.ticks
-        self._left = left % k or k
-        return -left // k + 1
+        missed = 0 if left > 0 else -left // k + 1
+        if self._offset is None:
+            self._left = left if left > 0 else left % k or k
+        return missed
+
+
+def _summing(record: Callable[[int], None] | None, acc: list[int],
+             total: Callable[[int], None] | None) -> Callable[[int], None]:
+    """A member's record in a release of several members (or of one handler):
+    its own ``record`` (if any) and the release's running sum in ``acc``;
+    the last member's (``total`` given) records the sum and starts it again."""
+    if total is None:
+        if record is None:
+            def add(d: int) -> None:
+                acc[0] += d
+            return add
+
+        def add_own(d: int) -> None:
+            record(d)
+            acc[0] += d
+        return add_own
+
+    def close(d: int) -> None:
+        if record is not None:
+            record(d)
+        total(acc[0] + d)
+        acc[0] = 0
+    return close
 
 
 def rate_monotonic(entries: list[tuple[int | None, Any]]) -> list[Any]:

@@ -44,7 +44,7 @@ from __future__ import annotations
 
 import sys
 import traceback as _tb
-from collections.abc import Callable, Generator, MutableSequence
+from collections.abc import Callable, Generator, MutableSequence, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -439,6 +439,31 @@ class ReadyQueue:
         a = self._core.running if self._core is not None else self._running
         r = self._routines.get(a) if a else None
         return None if not a else r.name if r is not None else f"{a:04X}"
+
+    # -- snapshots -----------------------------------------------------------
+
+    def snapshot_state(self) -> list[Any]:
+        """What :meth:`restore_state` puts back, as plain values: ``[name, the
+        byte image in hex, interrupts enabled, halted, now_ns]``."""
+        return [self.name, self.image.mem.hex(), self.interrupts_enabled, self.halted,
+                self.now_ns]
+
+    def restore_state(self, state: Sequence[Any]) -> None:
+        """Put back what :meth:`snapshot_state` gave: an image that is not this
+        queue's size is refused (ValueError) and nothing changes; a queue
+        halted then is halted now, else it dispatches (no routine restarted)."""
+        _name, mem, interrupts, halted, now_ns = state
+        data = bytes.fromhex(mem)
+        if len(data) != len(self.image.mem):
+            raise ValueError(f"the state's image of ready queue {self.name} is "
+                             f"{len(data)} bytes, not {len(self.image.mem)}")
+        self.image.mem[:] = data
+        self.interrupts_enabled = bool(interrupts)
+        if halted:
+            self.halt()
+        else:
+            self.resume(restart=False)
+        self.now_ns = int(now_ns)
 
     # -- the queue -----------------------------------------------------------
 

@@ -151,11 +151,30 @@ class Runner:
         #: Sees every request as the mailbox applies it (a journal's recorder):
         #: ``request_tap(name, fn, args, motion)``, in the loop thread, or None.
         self.request_tap: Callable[[str, Callable[..., Any] | None, tuple, Any], None] | None = None
-        #: A replay's requests of this tick: a callable giving the calls to make
-        #: (in order, before the mailbox's own), or None.
-        self.replayed: Callable[[], list[Callable[[], Any]]] | None = None
-        loop.attach(self._service, name="mailbox")
+        self._replayed: Callable[[], list[Callable[[], Any]]] | None = None
+        # The mailbox handler runs only while there is something to serve: a
+        # request, a waiter, a replay (switched on and off under _lock).
+        self._serving = False
+        loop.attach(self._service, name="mailbox", enabled=False)
         loop.fault_listeners.append(self._on_fault)
+
+    @property
+    def replayed(self) -> Callable[[], list[Callable[[], Any]]] | None:
+        """A replay's requests of this tick: a callable giving the calls to make
+        (in order, before the mailbox's own), or None."""
+        return self._replayed
+
+    @replayed.setter
+    def replayed(self, requests: Callable[[], list[Callable[[], Any]]] | None) -> None:
+        with self._lock:
+            self._replayed = requests
+            self._serve(requests is not None or bool(self._mailbox or self._waiters))
+
+    def _serve(self, on: bool) -> None:
+        """Switch the mailbox handler on or off (hold _lock)."""
+        if on != self._serving:
+            self._serving = on
+            self.loop.enable(self._service, on)
 
     # -- life cycle ----------------------------------------------------------
 
@@ -257,6 +276,7 @@ class Runner:
                     f"mailbox full ({self.mailbox_size} commands waiting): {req.name} not sent"
                 )
             self._mailbox.append(req)
+            self._serve(True)
         if self.virtual:
             self._drive(lambda: req.done, timeout_s)
         else:
@@ -333,11 +353,13 @@ class Runner:
         if self.virtual:
             held = [False]
 
+            faults = self.loop.pending_faults  # the loop's own deque: no call a tick
+
             def done() -> bool:
                 if predicate():
                     held[0] = True
                     return True
-                return self.loop.has_fault()
+                return bool(faults)
 
             self._drive(done, timeout_s)
             self._raise_fault()
@@ -346,6 +368,7 @@ class Runner:
         event = entry.event
         with self._lock:
             self._waiters.append(entry)
+            self._serve(True)
         try:
             deadline = time.monotonic() + timeout_s
             while not event.wait(min(0.05, max(0.0, deadline - time.monotonic()))):
@@ -399,9 +422,11 @@ class Runner:
     # -- the loop side ---------------------------------------------------------
 
     def _service(self, now_ns: int) -> None:
-        """Loop handler: empty the mailbox, then evaluate the waiters."""
-        if self.replayed is not None:
-            for fn in self.replayed():
+        """Loop handler: empty the mailbox, then evaluate the waiters; switched
+        off once neither has anything left (a request or a waiter switches it
+        on again)."""
+        if self._replayed is not None:
+            for fn in self._replayed():
                 # as the request did then: its error was its own, never the loop's
                 with contextlib.suppress(Exception):
                     fn()
@@ -439,3 +464,7 @@ class Runner:
                 except Exception as exc:  # the waiter raises it; the loop goes on
                     w.error = exc
                     w.event.set()
+        if not self._mailbox and not self._waiters and self._replayed is None:
+            with self._lock:  # what another thread sends now switches it on again
+                if not self._mailbox and not self._waiters and self._replayed is None:
+                    self._serve(False)

@@ -31,11 +31,13 @@ from __future__ import annotations
 
 import logging
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from pyrt.errors import CommandError
+from pyrt.scheduler import Loop
 from pyrt.scope.report import ScopeReport
 from pyrt.scope.sources import Source, compile_sampler, compile_sources
 from pyrt.scope.stream import Layout, Sink, UdpStream
@@ -118,6 +120,9 @@ class Scope(ScopeReport):
             raise ValueError(f"max_channels must be 1..64, got {max_channels}")
         self.capacity = capacity
         self.max_channels = max_channels
+        # Switches the loop's sampling handler on and off (attach_to), or None.
+        self._switch: Callable[[bool], None] | None = None
+        self._acquiring = False
         self._every = 1
         self.every = every
         self._names: list[str] = []
@@ -312,7 +317,18 @@ class Scope(ScopeReport):
     @state.setter
     def state(self, value: str) -> None:
         self._state = value
-        self._acquiring = value not in ("stopped", "done")
+        acquiring = value not in ("stopped", "done")
+        if acquiring != self._acquiring and self._switch is not None:
+            self._switch(acquiring)
+        self._acquiring = acquiring
+
+    def attach_to(self, loop: Loop, name: str = "scope") -> None:
+        """Sample in ``loop``'s ticks as its handler ``name`` (:meth:`sample`),
+        switched on only while the scope acquires: a scope at rest costs the
+        loop nothing."""
+        loop.attach(self.sample, name=name, enabled=self._acquiring)
+        sample = self.sample
+        self._switch = lambda on: loop.enable(sample, on)
 
     def sample(self, now_ns: int) -> None:
         """Loop handler: take a sample every ``every`` ticks while acquiring."""

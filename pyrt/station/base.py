@@ -275,7 +275,7 @@ class Station(StationRobots, StationEvents, StationRequests):
             q.on_error = self._queue_error if owner is None else self._robot_queue_error(owner)
         self.loop.trip_handlers.append(self.trip)
         self.loop.attach(self._watch_moves, name="moves")
-        self.loop.attach(self.scope.sample, name="scope")
+        self.scope.attach_to(self.loop)  # its handler runs only while it acquires
         self.runner = Runner(self.loop, motion_queue=self.motion)
         self.subscribe(self._to_console)
         self.subscribe_moves(self._move_to_console)

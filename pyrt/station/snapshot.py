@@ -628,13 +628,7 @@ def _loop_state(station: Station) -> dict[str, Any]:
     if loop.jobs:
         raise SnapshotError(f"cannot snapshot: the foreground job {loop.jobs[0].name} is "
                             "running (its place in its sequence is not state pyrt can save)")
-    return {
-        "tick": loop.tick_index + 1 if loop.running else loop.tick_index,
-        "fault_ids": loop._fault_ids,
-        "groups": [[g.name, g._left, g.released_at] for g in loop.rate_groups],
-        "queues": [[q.name, q.image.mem.hex(), q.interrupts_enabled, q.halted, q.now_ns]
-                   for q in loop.queues],
-    }
+    return loop.snapshot_state()
 
 
 def _restore_loop(station: Station, state: Mapping[str, Any]) -> None:
@@ -645,21 +639,10 @@ def _restore_loop(station: Station, state: Mapping[str, Any]) -> None:
         raise SnapshotError("the snapshot's rate groups and ready queues are not the station's "
                             f"({', '.join(str(q[0]) for q in queues)} against "
                             f"{', '.join(q.name for q in loop.queues)})")
-    loop.tick_index = int(state["tick"])
-    loop._fault_ids = int(state["fault_ids"])
-    for g, (_name, left, released) in zip(loop.rate_groups, groups, strict=True):
-        g._left, g.released_at = int(left), int(released)
-    for q, (_name, mem, interrupts, halted, now_ns) in zip(loop.queues, queues, strict=True):
-        data = bytes.fromhex(mem)
-        if len(data) != len(q.image.mem):
-            raise SnapshotError(f"the snapshot's ready queue {q.name} is not the station's")
-        q.image.mem[:] = data
-        q.interrupts_enabled = bool(interrupts)
-        if halted:
-            q.halt()
-        else:
-            q.resume(restart=False)
-        q.now_ns = int(now_ns)
+    try:
+        loop.restore_state(state)
+    except ValueError as exc:
+        raise SnapshotError(f"the snapshot does not fit the station's loop: {exc}") from None
 
 
 _EVENTS = ("_moving", "_move_seq", "moves_this_period")
