@@ -99,9 +99,10 @@ def read_only_lines(station, shell) -> list[str]:
 
 
 @contextmanager
-def served(token: str | None = TOKEN, wall: bool = False, **server_kw):
-    """The gripper station (SimClock unless ``wall``) served on an ephemeral loopback port."""
-    station = build_gripper(Loop(WallClock() if wall else SimClock()))
+def served(token: str | None = TOKEN, wall: bool = False, speed: float = 1.0, **server_kw):
+    """The gripper station (SimClock unless ``wall``; the wall clock at ``speed``) served on an
+    ephemeral loopback port."""
+    station = build_gripper(Loop(WallClock(speed) if wall else SimClock()))
     runner = station.runner
     server = Server(runner, ServedStation(station), "127.0.0.1", 0, token=token,
                     **server_kw)

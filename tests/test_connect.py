@@ -207,7 +207,9 @@ def test_ctrl_c_to_a_piped_connect_during_a_wait_stops_the_robot_and_ends_130(tm
 
     from _server_rig import TOKEN
 
-    with served(wall=True) as sv:
+    # the loop at a quarter of wall speed: the 3.5 s move lasts 14 s, so the interrupt comes
+    # mid-move even when a loaded machine is slow to start and to deliver it
+    with served(wall=True, speed=0.25) as sv:
         (tmp_path / "token").write_text(TOKEN + "\n")
         (tmp_path / "token").chmod(0o600)
         env = {k: v for k, v in os.environ.items() if k != "PYRT_TOKEN"}
@@ -243,7 +245,9 @@ def test_ctrl_c_during_a_remote_wait_stops_the_move_and_every_later_reply_is_its
     pexpect = pytest.importorskip("pexpect")
     from _server_rig import TOKEN
 
-    with served(wall=True) as sv:
+    # the loop at a quarter of wall speed: the 3.5 s move lasts 14 s, so Ctrl-C comes mid-move
+    # even when a loaded machine is slow to start the client and to deliver it
+    with served(wall=True, speed=0.25) as sv:
         (tmp_path / "token").write_text(TOKEN + "\n")
         (tmp_path / "token").chmod(0o600)
         env = {k: v for k, v in os.environ.items() if k != "PYRT_TOKEN"}
