@@ -257,3 +257,26 @@ def test_the_hand_over_needs_the_headers_inputs_in_64_bit_integers():
         assert j.appender(array("q", [0, 0, 0])) is not None
     finally:
         j.close()
+
+
+def test_the_built_in_simulated_boards_are_gathered_in_c():
+    """Register files of the built-in kinds put the image on its native path, values alike."""
+    from pyrt.boards.armservo import arm_servo_kind
+    from pyrt.boards.dataconcentrator import DATACONCENTRATOR
+    from pyrt.boards.gripper import GRIPPER_CAGE
+
+    kinds = {"g": GRIPPER_CAGE, "d": DATACONCENTRATOR, "s": arm_servo_kind(3)}
+    boards = {n: RegisterBoard(k) for n, k in kinds.items()}
+    img = LocalImage("sim:", kinds, boards)
+    img.open()
+    img.set_tick(0.001)
+    assert img.native is not None
+    rnd = random.Random(11)
+    for n, board in boards.items():
+        for reg in kinds[n].inputs():
+            cells = board.cells(reg.name)
+            for i in range(reg.count):
+                cells[i] = rnd.randrange(reg.low, reg.high + 1)
+    img.read_phase(0)
+    want = [v for n in kinds for v in boards[n].snapshot()]
+    assert list(img.native) == want
