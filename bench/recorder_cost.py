@@ -66,6 +66,7 @@ def int64_boards() -> bool:
 
     try:
         import pyrt.boards.simboards as sb
+
         from pyrt.boards.gripper import SimGripperBoard
     except ImportError:
         return False

@@ -127,32 +127,18 @@ KIND = BoardKind("io", (
 ))
 
 
-class Int64Board(RegisterBoard):
-    """A register file whose inputs are also one ``array('q')`` in declared order (the
-    world's side keeps both), offered to the image as ``input_buffer()``."""
+class SnapshotBoard(RegisterBoard):
+    """A register file that offers no ``input_buffer()``: the image reads its
+    inputs as the list its snapshot gives (the path of any other register view)."""
 
-    def __init__(self, kind: BoardKind):
-        super().__init__(kind)
-        self.buf = array("q", bytes(8 * kind.input_count))
-        self._at = {}
-        at = 0
-        for reg in kind.inputs():
-            self._at[reg.name] = at
-            at += reg.count
-
-    def input_buffer(self) -> array:
-        return self.buf
-
-    def set_input(self, name: str, value: int, index: int = 0) -> None:
-        super().set_input(name, value, index)
-        self.buf[self._at[name] + index] = value
+    input_buffer = None  # type: ignore[assignment]
 
 
 def pair():
-    """Two images of two boards each: over list register files and over Int64Boards."""
+    """Two images of two boards each: over snapshots and over the boards' input buffers."""
     kinds = {"a": KIND, "b": KIND}
-    plain = {n: RegisterBoard(KIND) for n in kinds}
-    native = {n: Int64Board(KIND) for n in kinds}
+    plain = {n: SnapshotBoard(KIND) for n in kinds}
+    native = {n: RegisterBoard(KIND) for n in kinds}
     images = []
     for boards in (plain, native):
         img = LocalImage("sim:", kinds, boards)
@@ -218,7 +204,7 @@ def test_a_cached_input_leaves_what_the_tick_read():
 def test_a_board_without_an_int64_buffer_keeps_the_list_path():
     """One board of lists among native ones: the image reads every board as lists."""
     kinds = {"a": KIND, "b": KIND}
-    img = LocalImage("sim:", kinds, {"a": Int64Board(KIND), "b": RegisterBoard(KIND)})
+    img = LocalImage("sim:", kinds, {"a": RegisterBoard(KIND), "b": SnapshotBoard(KIND)})
     assert img.native is None
 
 
@@ -271,3 +257,26 @@ def test_the_hand_over_needs_the_headers_inputs_in_64_bit_integers():
         assert j.appender(array("q", [0, 0, 0])) is not None
     finally:
         j.close()
+
+
+def test_the_built_in_simulated_boards_are_gathered_in_c():
+    """Register files of the built-in kinds put the image on its native path, values alike."""
+    from pyrt.boards.armservo import arm_servo_kind
+    from pyrt.boards.dataconcentrator import DATACONCENTRATOR
+    from pyrt.boards.gripper import GRIPPER_CAGE
+
+    kinds = {"g": GRIPPER_CAGE, "d": DATACONCENTRATOR, "s": arm_servo_kind(3)}
+    boards = {n: RegisterBoard(k) for n, k in kinds.items()}
+    img = LocalImage("sim:", kinds, boards)
+    img.open()
+    img.set_tick(0.001)
+    assert img.native is not None
+    rnd = random.Random(11)
+    for n, board in boards.items():
+        for reg in kinds[n].inputs():
+            cells = board.cells(reg.name)
+            for i in range(reg.count):
+                cells[i] = rnd.randrange(reg.low, reg.high + 1)
+    img.read_phase(0)
+    want = [v for n in kinds for v in boards[n].snapshot()]
+    assert list(img.native) == want

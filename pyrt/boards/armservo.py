@@ -41,7 +41,7 @@ from typing import Any
 from pyrt.boards.registers import OUTPUT, BoardKind, Register, RegisterBoard, Registers
 
 __all__ = ["DAC_FULL_SCALE", "FT_CHANNELS", "KIND_NAME", "MAX_JOINTS", "ArmServoRegisters",
-           "arm_servo_kind", "register_cells"]
+           "arm_servo_kind", "input_cells", "register_cells"]
 
 #: The kind's name (its boards' kind tag starts with it).
 KIND_NAME = "arm-servo"
@@ -77,17 +77,31 @@ def arm_servo_kind(n: int) -> BoardKind:
 
 
 def register_cells(board: Any, name: str) -> list[int] | None:
-    """The in-process register file's own storage of register ``name`` (a list
+    """The in-process register file's own storage of the output ``name`` (a list
     of its values by index, read and written in place), when ``board`` is a
     :class:`~pyrt.boards.registers.RegisterBoard` that keeps its values so; None
-    for any other register view (use its ``read``/``write``).  A caller writing
-    the list writes only values the register's declaration holds (its width and
-    sign): nothing checks them after it."""
+    for an input (:func:`input_cells`) and for any other register view (use its
+    ``read``/``write``).  A caller writing the list writes only values the
+    register's declaration holds (its width and sign): nothing checks them after it."""
     if type(board) is not RegisterBoard or name not in board.kind:
         return None
-    values = getattr(board, "_values", None)
-    cells = values.get(name) if isinstance(values, dict) else None
+    cells = board.cells(name)
     if type(cells) is not list or len(cells) != board.kind.register(name).count:
+        return None
+    return cells
+
+
+def input_cells(board: Any, name: str) -> memoryview | None:
+    """The in-process register file's own storage of the input ``name``: a
+    writable memoryview of its slice of the board's 64-bit input buffer (set an
+    item, read an item, ``tolist()``; a slice is assigned from an ``array('q')``),
+    when ``board`` is a :class:`~pyrt.boards.registers.RegisterBoard`; None for an
+    output and for any other register view.  What a caller sets must fit the
+    register's declaration: nothing checks it after."""
+    if type(board) is not RegisterBoard or name not in board.kind:
+        return None
+    cells = board.cells(name)
+    if type(cells) is not memoryview or len(cells) != board.kind.register(name).count:
         return None
     return cells
 
@@ -117,8 +131,8 @@ class ArmServoRegisters:
         self._read = registers.read
         self._write = registers.write
         self._write_many = getattr(registers, "write_many", None)
-        self._count = register_cells(registers, "count")
-        self._ft = register_cells(registers, "ft")
+        self._count = input_cells(registers, "count")
+        self._ft = input_cells(registers, "ft")
         self._dac = register_cells(registers, "dac")
         self._cells = {name: register_cells(registers, name) for name in ("enable", "release")}
         #: True: the in-process register file's storage is read and written in place.
@@ -137,7 +151,7 @@ class ArmServoRegisters:
     def counts(self) -> list[int]:
         """Every joint's encoder counter, as the board has them now (a new list)."""
         if self.direct:
-            return self._count[:]  # type: ignore[index]
+            return self._count.tolist()  # type: ignore[union-attr,no-any-return]
         if self._counts_in is not None:
             return self._counts_in()
         read = self._read
@@ -147,7 +161,7 @@ class ArmServoRegisters:
         """:meth:`counts` bound once (the quickest read the view allows), for a
         servo task's every tick."""
         if self.direct:
-            return self._count.copy  # type: ignore[union-attr]
+            return self._count.tolist  # type: ignore[union-attr]
         if self._counts_in is not None:
             return self._counts_in
         return self.counts
@@ -168,7 +182,7 @@ class ArmServoRegisters:
     def ft(self) -> list[int]:
         """The wrist sensor's counts fx fy fz tx ty tz, as the board has them now."""
         if self.direct:
-            return self._ft[:]  # type: ignore[index]
+            return self._ft.tolist()  # type: ignore[union-attr]
         if self._ft_in is not None:
             return self._ft_in()
         read = self._read

@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import re
 import zlib
+from array import array
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from functools import partial
@@ -317,7 +318,8 @@ class Registers(Protocol):
 
 
 class RegisterBoard:
-    """An in-process board of any kind: its registers held as ints.
+    """An in-process board of any kind: its outputs held as lists of ints, its
+    inputs in one ``array('q')`` in declared order (:meth:`input_buffer`).
 
     The controller's side: :meth:`read` (any readable register) and
     :meth:`write` (outputs only, checked against width and signedness).
@@ -330,11 +332,24 @@ class RegisterBoard:
 
     def __init__(self, kind: BoardKind):
         self.kind = kind
-        self._values: dict[str, list[int]] = {}
+        # Every input in one buffer of native 64-bit integers, in declared order
+        # (what input_buffer() offers a process image); each input register is a
+        # memoryview of its slice, each output a list.  Every declared width is
+        # at most 32 bits, so the buffer holds every value a register can.
+        self._inbuf = array("q", bytes(8 * kind.input_count))
+        whole = memoryview(self._inbuf)
+        self._values: dict[str, list[int] | memoryview] = {}
+        at = 0
         for reg in kind.registers:
-            self._values[reg.name] = [
-                reg.power_up if reg.power_up is not None else (reg.off_value(i) or 0)
-                for i in range(reg.count)]
+            start = [reg.power_up if reg.power_up is not None else (reg.off_value(i) or 0)
+                     for i in range(reg.count)]
+            if reg.is_input:
+                cells = whole[at:at + reg.count]
+                cells[:] = array("q", start)
+                self._values[reg.name] = cells
+                at += reg.count
+            else:
+                self._values[reg.name] = start
         self._inputs = kind.inputs()
         self.writes = 0
         # The fast path of every access (the servo rate): name -> (values, count,
@@ -346,7 +361,7 @@ class RegisterBoard:
                           for r in kind.registers if r.is_input}
         # a clear strobe's input (the list it clears)
         self._clears = {r.name: self._values[r.clears] for r in kind.registers if r.clears}
-        self._readable: dict[str, list[int]] = {}
+        self._readable: dict[str, list[int] | memoryview] = {}
         for r in kind.registers:
             try:
                 kind.check_read(r.name, 0)
@@ -399,10 +414,13 @@ class RegisterBoard:
 
     def snapshot(self) -> list[int]:
         """Every input in declared order."""
-        out: list[int] = []
-        for reg in self._inputs:
-            out += self._values[reg.name]
-        return out
+        return self._inbuf.tolist()
+
+    def input_buffer(self) -> memoryview:
+        """Every input in declared order as the board keeps them: a buffer of
+        native 64-bit integers, current in place (a process image gathers it
+        in one call)."""
+        return memoryview(self._inbuf)
 
     # -- the world's side -----------------------------------------------------------------
 
@@ -436,10 +454,11 @@ class RegisterBoard:
         self.kind.register(name)
         return list(self._values[name])
 
-    def cells(self, name: str) -> list[int]:
-        """The register file's own list of ``name`` (the world's side, bound once:
-        a plant reads an output and sets an input as an item of it; what it sets
-        must fit the declaration, nothing here looks again)."""
+    def cells(self, name: str) -> list[int] | memoryview:
+        """The register file's own storage of ``name`` (the world's side, bound
+        once: a plant reads an output and sets an input as an item of it; what it
+        sets must fit the declaration, nothing here looks again): an output's
+        list, an input's writable memoryview of its slice of the input buffer."""
         self.kind.register(name)
         return self._values[name]
 

@@ -65,6 +65,7 @@ tests and the operator's ``sim`` words, never for control code.
 from __future__ import annotations
 
 import math
+from array import array
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from dataclasses import replace as _replace
@@ -73,7 +74,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from pyrt.boards.armdrive import arm_drive_kind
-from pyrt.boards.armservo import DAC_FULL_SCALE, FT_CHANNELS, arm_servo_kind, register_cells
+from pyrt.boards.armservo import (
+    DAC_FULL_SCALE,
+    FT_CHANNELS,
+    arm_servo_kind,
+    input_cells,
+    register_cells,
+)
 from pyrt.boards.registers import RegisterBoard
 from pyrt.errors import ConfigError, NativeError
 from pyrt.kinematics import GRAVITY, Chain, Inertial
@@ -417,14 +424,16 @@ class ArmWorld:
         # the fast path: the in-process register file's own storage, read and written in
         # place (None: through set_input and values); the kernel's counts are 32-bit and
         # its sensor's clamped to 32 bits, as the registers declare them
-        self._cells = {name: register_cells(board, name)
-                       for name in ("count", "ft", "dac", "enable", "release")}
-        cells = self._cells
+        self._cells = {name: register_cells(board, name) for name in ("dac", "enable", "release")}
+        self._in_cells = {name: input_cells(board, name) for name in ("count", "ft")}
+        cells, ins = self._cells, self._in_cells
         #: The passive board's five registers in place (dac enable release count ft), or None.
-        self._direct: tuple[list[int], ...] | None = None
-        live = [cells[name] for name in ("dac", "enable", "release", "count", "ft")]
-        if drive is None and all(c is not None for c in live):
-            self._direct = tuple(c for c in live if c is not None)
+        self._direct: tuple[list[int], list[int], list[int], memoryview, memoryview] | None = None
+        dac, on, rel = cells["dac"], cells["enable"], cells["release"]
+        count_in, ft_in = ins["count"], ins["ft"]
+        if (drive is None and dac is not None and on is not None and rel is not None
+                and count_in is not None and ft_in is not None):
+            self._direct = (dac, on, rel, count_in, ft_in)
         self.payload = 0.0
         self._dyn = chain
         self.set_payload(float(payload))
@@ -540,8 +549,8 @@ class ArmWorld:
         else:
             self._k_step(dt)
         self.time += dt
-        count[:] = self._k_count.tolist()
-        ft[:] = self._k_ft.tolist()
+        count[:] = array("q", self._k_count.tolist())
+        ft[:] = array("q", self._k_ft.tolist())
 
     def _step_driven(self, dt: float) -> None:
         """Hardware (a): the board's output registers into its servo, the arm
@@ -584,11 +593,10 @@ class ArmWorld:
         """Set the board's inputs the kernel published: encoder counters and
         the wrist sensor (those that changed)."""
         k = self._k
-        cells = self._cells
-        count, ft_cells = cells["count"], cells["ft"]
+        count, ft_cells = self._in_cells["count"], self._in_cells["ft"]
         if count is not None and ft_cells is not None:
-            count[:] = k.count.tolist()
-            ft_cells[:] = k.ft.tolist()
+            count[:] = array("q", k.count.tolist())
+            ft_cells[:] = array("q", k.ft.tolist())
             return
         set_input = self._set_input
         counts = k.counts()

@@ -44,7 +44,7 @@ from collections.abc import Sequence
 
 import numpy as np
 from pyrt import RegisterBoard
-from pyrt.boards.armservo import arm_servo_kind, register_cells
+from pyrt.boards.armservo import arm_servo_kind, input_cells, register_cells
 from pyrt.kinematics import Chain
 from pyrt.sim.arm import ArmWorld, Motor
 
@@ -136,7 +136,7 @@ class _Wiring(RegisterBoard):
         #: the board's own storage of drive, enable and count (None: not in place)
         self._drive = register_cells(board, "drive")
         self._enable = register_cells(board, "enable")
-        self._count = register_cells(board, "count")
+        self._count = input_cells(board, "count")
         #: per joint: the motor has power / the brake is released (no jam)
         self.powered = [True, True]
         self.release = [1, 1]
