@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from pyrt.scheduler.clock import Clock, SimClock
+from pyrt.scheduler.clock import Clock
+from pyrt.testing import StallClock  # noqa: F401  (virtual time that can stall: pyrt's own)
 
 MS = 1_000_000
 
@@ -29,21 +30,3 @@ class WorkClock(Clock):
     def work(self, ns: int) -> None:
         self.now += ns
 
-
-class StallClock(SimClock):
-    """Virtual time that can stall: :meth:`stall` makes the next tick start that much
-    after its deadline and every later one with it (the deadlines passed meanwhile
-    skipped, never run back to back), as a loop that stalled on a loaded machine.
-    Deterministic like a SimClock; the handlers see the time that really passed."""
-
-    offset = 0
-
-    def stall(self, ns: int) -> None:
-        """The loop stalls ``ns`` before its next tick."""
-        self.offset += int(ns)
-
-    def now_ns(self) -> int:
-        return super().now_ns() + self.offset
-
-    def start_tick(self, deadline_ns: int) -> int:
-        return super().start_tick(deadline_ns) + self.offset
