@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from _manipulator_rig import TICK_NS
+from _replay_rig import replay_in_process
 
 from pyrt.cli import main
 from pyrt.commands import RobotShell
@@ -24,7 +25,6 @@ from pyrt.station.blackbox import with_snapshot
 from pyrt.station.gripper import build_gripper
 from pyrt.station.manipulator import ManipulatorStation
 from pyrt.station.recording import Recorder
-from pyrt.station.replay import Replay
 from pyrt.station.snapshot import (
     SNAPSHOT_FORMAT,
     Snapshot,
@@ -168,23 +168,9 @@ def test_a_full_run_replays_identically_from_each_of_its_snapshots(tmp_path, run
     for snap in taken:
         box = tmp_path / f"from-{snap.tick}.pj"
         box.write_bytes(with_snapshot(data, [snap], st.name))
-        result = _replay_in_process(box, tmp_path)
+        result = replay_in_process(box, tmp_path)
         assert result.identical, f"from tick {snap.tick}: {result.line()}"
         assert (result.first_tick, result.last_tick) == (snap.tick, last)
-
-
-def _replay_in_process(path: Path, tmp_path: Path):
-    from pyrt.cli.replay import build_replayed
-
-    replay = Replay(path)
-    work = tmp_path / f"work-{path.stem}"
-    work.mkdir()
-    station = build_replayed(replay, str(work))
-    try:
-        return replay.run()
-    finally:
-        replay.close()
-        station.close()
 
 
 # -- damage and refusals -------------------------------------------------------------------

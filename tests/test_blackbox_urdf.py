@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from _replay_rig import replay_in_process
 
 from pyrt.cli import main
 from pyrt.commands import RobotShell
@@ -15,7 +16,6 @@ from pyrt.journal import JournalReader
 from pyrt.scheduler import Loop, SimClock
 from pyrt.station.blackbox import with_snapshot
 from pyrt.station.recording import Recorder
-from pyrt.station.replay import Replay
 from pyrt.station.snapshot import Snapshot, take_snapshot
 from pyrt.station.urdf import URDF, build_urdf
 
@@ -71,20 +71,6 @@ def test_a_puma_black_box_replays_its_fault_identically(tmp_path, capsys):
            f"{summary.last_tick}), identical" in out
 
 
-def _replay_in_process(path: Path, tmp_path: Path):
-    from pyrt.cli.replay import build_replayed
-
-    replay = Replay(path)
-    work = tmp_path / f"work-{path.stem}"
-    work.mkdir()
-    station = build_replayed(replay, str(work))
-    try:
-        return replay.run()
-    finally:
-        replay.close()
-        station.close()
-
-
 def _run(shell: RobotShell, lines) -> None:
     for line in lines:
         if line.startswith("sleep "):
@@ -130,6 +116,6 @@ def test_a_full_run_replays_identically_from_each_of_its_snapshots(tmp_path, mon
     for snap in taken:
         box = tmp_path / f"from-{snap.tick}.pj"
         box.write_bytes(with_snapshot(data, [snap], st.name))
-        result = _replay_in_process(box, tmp_path)
+        result = replay_in_process(box, tmp_path)
         assert result.identical, f"from tick {snap.tick}: {result.line()}"
         assert (result.first_tick, result.last_tick) == (snap.tick, last)
