@@ -12,6 +12,7 @@ fails the run, naming the paths.
 from __future__ import annotations
 
 import os
+import signal
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -20,6 +21,14 @@ import pytest
 from hypothesis import settings
 
 pytest_plugins = ["pytester"]
+
+# A run started in the background by a non-interactive shell (``cmd &``, nohup, a CI
+# runner) inherits SIGINT ignored, and so would every pyrt it starts: the tests that
+# send a Ctrl-C (SIGINT) to a console would then see it ignored.  Ctrl-C as a terminal
+# gives it: the run's own SIGINT back to Python's handler, which a child's exec resets
+# to the default action.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 # Property tests explore new examples on a developer's machine; under CI (CI set,
 # as .ci/run's caller does) they draw the same examples every run, so a result
