@@ -216,3 +216,51 @@ def test_a_headless_sigterm_says_its_closing_line_once_where_stderr_is_stdout(tm
         proc.kill()
     assert proc.returncode == 0, seen + out
     assert (seen + out).count("SIGTERM: every motor stopped") == 1, seen + out
+
+
+class _ClosingStation:
+    """A station whose close is hit by Ctrl-C (SIGINT to this process) half-way through."""
+
+    def __init__(self) -> None:
+        self.steps: list[str] = []
+        self.reflexes = 0
+
+    def close(self) -> None:
+        self.steps.append("stop sent")
+        os.kill(os.getpid(), signal.SIGINT)
+        for _ in range(1000):  # the handler runs in this thread at the next bytecodes
+            pass
+        self.steps.append("loop stopped")
+
+    def reflex(self, why: str) -> None:
+        self.reflexes += 1
+
+    def closing_note(self) -> str:
+        return ""
+
+
+class _EndedConsole:
+    ended_by = "end of input"
+
+    def run(self) -> int:
+        return 0
+
+
+def test_a_ctrl_c_while_the_station_closes_does_not_cut_the_close_short():
+    """Ctrl-C during the close: the close runs to its end (stop sent, loop stopped), the status is the console's, and SIGINT is Python's own again after."""
+    from pyrt.cli._shutdown import run_until_shutdown
+
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        station, said = _ClosingStation(), []
+        try:
+            status = run_until_shutdown(station, _EndedConsole(), None, headless=False,
+                                        say=said.append, what="pyrt test")
+        except KeyboardInterrupt:
+            pytest.fail(f"the Ctrl-C cut the close short after {station.steps}")
+        assert station.steps == ["stop sent", "loop stopped"]
+        assert status == 0 and station.reflexes == 0
+        assert said == ["pyrt test: end of input: every motor stopped"]
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    finally:
+        signal.signal(signal.SIGINT, before)

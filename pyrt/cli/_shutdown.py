@@ -6,6 +6,8 @@ A first SIGTERM or SIGHUP (and, ``--headless``, SIGINT) ends the console or
 the service (the signal handler raises :class:`Shutdown` in the main thread,
 where the console reads); a second within :data:`SECOND_SIGNAL_S` exits at
 once with status 0, after the reflex, even while the first is still closing.
+While the station closes, a Ctrl-C is held the same way: a first one lets the
+close finish, a second within the interval exits at once after the reflex.
 """
 
 from __future__ import annotations
@@ -128,11 +130,19 @@ def run_until_shutdown(station: Any, console: Any, service: Any, *, headless: bo
             silence(sys.stdout)
         finally:
             guard.raising = False  # from here on a first signal lets the close finish
+            # A Ctrl-C while closing is held like a first SIGTERM: it must not cut the
+            # close short half-way (the stop unsent, the loop left running); a second
+            # signal within SECOND_SIGNAL_S still runs the reflex and exits at once.
+            held = None if headless else signal.signal(signal.SIGINT, guard)
             try:
                 if service is not None:
                     service.close()
             finally:
-                station.close()
+                try:
+                    station.close()
+                finally:
+                    if held is not None:
+                        signal.signal(signal.SIGINT, held)
         why = reason or ("stopped" if headless else console.ended_by)
         try:  # where the robot stopped (a piped run's SIGINT says it too), what close did
             note = station.closing_note()
