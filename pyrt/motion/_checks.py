@@ -72,19 +72,13 @@ def joint_time(planner: Planner, frames: Frames, r_c: Matrix, p_c: Vector, delta
     q = prev = q_s if q0 is None else q0
     # each sample's inverse (seeded at the one before) up to the first out of reach, the
     # singular values where each is judged (batched), then the samples in order
-    t6s: list[Matrix] = []
-    gots: list[Vector | None] = []
-    at: list[Vector] = []  # the joints each sample's singular values are taken at
     xs = np.array([x_s + delta * (i / k) for i in range(1, k + 1)])
     all_t6 = frames.t6_many(poses_of(xs, r_c, p_c), [sample] * k)  # each kept for a refusal
-    for t6 in all_t6:
-        got = planner.solve(t6, q, config)
-        t6s.append(t6)
-        gots.append(got)
-        at.append(q if got is None else got)
-        if got is None:
-            break
-        q = got
+    gots = planner.solve_many(all_t6, q, config)
+    t6s = list(all_t6[:len(gots)])
+    # the joints each sample's singular values are taken at (the one before, out of reach)
+    at: list[Vector] = [g if g is not None else (gots[i - 1] if i else q)  # type: ignore[misc]
+                        for i, g in enumerate(gots)]
     svs = smallest_singular(_jacobians(planner.chain, at), planner.limits.singular).tolist()
     q = prev
     for i, (t6, got, sv) in enumerate(zip(t6s, gots, svs, strict=True), start=1):
@@ -161,21 +155,36 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
         assert piece is not None
         pieces.append(piece)
     samples = [planner.sample_of(tail, t) for t in times]
-    # piece by piece, all at once: the joint samples' values, the Cartesian ones' T6
-    joints, t6s = _batched(pieces, times, samples)
+    # piece by piece, all at once: a joint piece's values, a Cartesian piece's T6 and
+    # their inverses (each seeded at the sample before, as one by one)
     qs: list[Vector] = []
     lost = False
-    for i, (t, piece, n) in enumerate(zip(times, pieces, samples, strict=True)):
-        q = joints.get(i)
-        if q is None:
-            t6 = t6s.get(i)
-            q = planner.q_of(piece, t, seed, n) if t6 is None else planner.solve(
-                t6, seed, piece.config)
-        if q is None:
+    for start, end, piece in _runs(pieces):
+        if piece.space == JOINT:
+            qs.extend(piece.values(times[start:end]))
+            seed = qs[-1]
+            continue
+        if piece.space == CART:
+            assert piece.frames is not None
+            t6 = piece.frames.t6_many(piece.poses(times[start:end]), samples[start:end])
+            got = planner.solve_many(t6, seed, piece.config)
+        else:
+            got = []
+            for t, n in zip(times[start:end], samples[start:end], strict=True):
+                q_f = planner.q_of(piece, t, seed, n)
+                got.append(q_f)
+                if q_f is None:
+                    break
+                seed = q_f
+        if got and got[-1] is None:
+            qs.extend(got[:-1])  # type: ignore[arg-type]
             lost = True
             break
-        qs.append(q)
-        seed = q
+        qs.extend(got)  # type: ignore[arg-type]
+        if qs:
+            seed = qs[-1]
+    if qs:
+        seed = qs[-1]
     m = len(qs)
     flags = _sample_flags(planner, qs, pieces, q_prev2, q_prev, dt)
     whole = spec.max_diff is not None or how is BufferMode.BLENDING
@@ -250,32 +259,20 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
     piece = planner.piece_at(seg.pieces, t_fin - 1e-12)
     assert piece is not None
     qf = planner.q_of(piece, t_fin, q_end, planner.sample_of(tail, t_fin))
-    seg.q_end = q_end if qf is None else qf
+    seg.q_end = np.array(q_end) if qf is None else qf
     seg.t6_end = chain.fk(seg.q_end)
 
 
-def _batched(pieces: list[Piece], times: list[float], samples: list[float]
-             ) -> tuple[dict[int, Vector], dict[int, Matrix]]:
-    """Each sample's joint values on a joint piece, and T6 on a Cartesian one (sample
-    index -> values), piece by piece: a joint piece's polynomial at all its times at
-    once (:meth:`Piece.values`, the tick's roundings), a Cartesian piece's poses at
-    once (:meth:`Piece.poses`) and through its frames at once where they do not
-    move (:meth:`Frames.t6_many`)."""
-    joints: dict[int, Vector] = {}
-    t6s: dict[int, Matrix] = {}
+def _runs(pieces: list[Piece]) -> list[tuple[int, int, Piece]]:
+    """The runs of samples on one piece: (first index, end index, piece), in order."""
+    out = []
     start = 0
     for end in range(1, len(pieces) + 1):
         if end < len(pieces) and pieces[end] is pieces[start]:
             continue
-        piece = pieces[start]
-        if piece.space == JOINT:
-            joints.update(zip(range(start, end), piece.values(times[start:end]), strict=True))
-        elif piece.space == CART:
-            assert piece.frames is not None
-            t6 = piece.frames.t6_many(piece.poses(times[start:end]), samples[start:end])
-            t6s.update(zip(range(start, end), t6, strict=True))
+        out.append((start, end, pieces[start]))
         start = end
-    return joints, t6s
+    return out
 
 
 def _where(seg: Segment, t: float) -> str:

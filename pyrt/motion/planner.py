@@ -35,6 +35,7 @@ polynomial added to the quartic (see ``docs/arm-motion.md``).
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -206,11 +207,26 @@ class Planner:
         self.tracker = tracker
         self.closed = chain.closed_form
         self._t6 = np.eye(4)
+        #: The closed form's prepared inverse (one call per pose, its arrays bound once)
+        #: and the thread it serves (a planner serves one; another gets the plain call).
+        make = getattr(self.closed, "solver", None)
+        self._solver = make() if make is not None else None
+        self._owner = threading.get_ident()
+        self._bits: dict[str, int] = {}
 
     # -- the inverse ------------------------------------------------------------------
     def solve(self, t6: Matrix, seed: Vector, config: str | None) -> Vector | None:
         """Joint values of ``t6`` nearest ``seed`` (the closed form in
         ``config`` when the chain has one), or None."""
+        sv = self._solver
+        if sv is not None and config is not None and seed is not None \
+                and threading.get_ident() == self._owner:
+            bits = self._bits.get(config)
+            if bits is None:
+                bits = self._bits[config] = self.closed.bits(config)  # type: ignore[union-attr]
+            sv.pose[...] = t6
+            sv.seed[...] = seed
+            return sv.q.copy() if sv(bits) == sv.REACHED else None
         if self.closed is not None and config is not None:
             try:
                 q = self.closed.solve(t6, config, seed)  # type: ignore[call-arg]
@@ -221,6 +237,27 @@ class Planner:
         if not r.ok:
             return None
         return r.q.copy()
+
+    def solve_many(self, t6s: Matrix, seed: Vector, config: str | None) -> list[Vector | None]:
+        """:meth:`solve` of each T6 of ``t6s`` (m, 4, 4) in order, each seeded at the
+        one before (the first at ``seed``), up to the first without an inverse (None
+        there, the last of the list): the closed form's batch when it has one."""
+        many = getattr(self.closed, "solve_many", None)
+        if many is not None and config is not None:
+            rows, why = many(t6s, config, seed)
+            out: list[Vector | None] = list(rows)
+            if why is not None:
+                out.append(None)
+            return out
+        out = []
+        q = seed
+        for t6 in t6s:
+            got = self.solve(t6, q, config)
+            out.append(got)
+            if got is None:
+                break
+            q = got
+        return out
 
     def why(self, t6: Matrix, seed: Vector, config: str | None) -> str:
         if self.closed is not None and config is not None and hasattr(self.closed, "reason"):
