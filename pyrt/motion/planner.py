@@ -238,26 +238,25 @@ class Planner:
             return None
         return r.q.copy()
 
-    def solve_many(self, t6s: Matrix, seed: Vector, config: str | None) -> list[Vector | None]:
+    def solve_rows(self, t6s: Matrix, seed: Vector, config: str | None) -> tuple[Matrix, bool]:
         """:meth:`solve` of each T6 of ``t6s`` (m, 4, 4) in order, each seeded at the
-        one before (the first at ``seed``), up to the first without an inverse (None
-        there, the last of the list): the closed form's batch when it has one."""
+        one before (the first at ``seed``), up to the first without an inverse: (the
+        rows solved (k, n), in order; whether they are all m) -- the closed form's
+        batch when it has one."""
         many = getattr(self.closed, "solve_many", None)
         if many is not None and config is not None:
             rows, why = many(t6s, config, seed)
-            out: list[Vector | None] = list(rows)
-            if why is not None:
-                out.append(None)
-            return out
-        out = []
+            return rows, why is None
+        out: list[Vector] = []
         q = seed
         for t6 in t6s:
             got = self.solve(t6, q, config)
-            out.append(got)
             if got is None:
                 break
+            out.append(got)
             q = got
-        return out
+        rows = np.array(out) if out else np.empty((0, self.chain.n))
+        return rows, len(out) == len(t6s)
 
     def why(self, t6: Matrix, seed: Vector, config: str | None) -> str:
         if self.closed is not None and config is not None and hasattr(self.closed, "reason"):
