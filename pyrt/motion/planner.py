@@ -213,6 +213,7 @@ class Planner:
         self._solver = make() if make is not None else None
         self._owner = threading.get_ident()
         self._bits: dict[str, int] = {}
+        self._jt_last: tuple[tuple[Any, ...], float] | None = None
 
     # -- the inverse ------------------------------------------------------------------
     def solve(self, t6: Matrix, seed: Vector, config: str | None) -> Vector | None:
@@ -531,8 +532,8 @@ class Planner:
                 dp, phi = norm(v_line_dir[:3]), norm(v_line_dir[3:])
                 t_need = max(dp / (speed * slow * lim.v_cart), phi / (speed * slow * lim.w_cart))
                 n_c = self.sample_of(tail, tail.now + tau_guess)
-                t_need = max(t_need, joint_time(self, frames, r_c, p_c, v_line_dir, x_s, q_s,
-                                                config, n_c, speed * slow))
+                t_need = max(t_need, self._joint_time(frames, r_c, p_c, v_line_dir, x_s, q_s,
+                                                      config, n_c, speed * slow))
                 start = pos_s
                 end = target_pos
             if spec.max_diff is not None:
@@ -638,6 +639,21 @@ class Planner:
         raise Refused(f"cannot keep within the limits after slowing {_TRIES} times{why}")
 
     # -- helpers --------------------------------------------------------------------------
+    def _joint_time(self, frames: Frames, r_c: Matrix, p_c: Vector, delta: Vector,
+                    x_s: Vector, q_s: Vector, config: str | None, sample: float,
+                    speed: float) -> float:
+        """:func:`~pyrt.motion._checks.joint_time`, kept for the last line asked: a blend
+        that cannot be made is planned again as a stop on the same line, from the same
+        joints (in frames that do not move, the sample does not matter)."""
+        key = (frames, config, speed, None if not frames.moving else sample,
+               *(np.asarray(v, dtype=float).tobytes() for v in (r_c, p_c, delta, x_s, q_s)))
+        hit = self._jt_last
+        if hit is not None and hit[0] == key:
+            return hit[1]
+        need = joint_time(self, frames, r_c, p_c, delta, x_s, q_s, config, sample, speed)
+        self._jt_last = (key, need)
+        return need
+
     def _tau(self, kind: str, dv: Vector, q: Vector, frames: Frames) -> float:
         """The least transition half-time for a velocity change ``dv`` (Paul's
         quartic peaks at ``3 |dv| / (4 tau)``): in joint space the joint limits; in
