@@ -75,7 +75,7 @@ def joint_time(planner: Planner, frames: Frames, r_c: Matrix, p_c: Vector, delta
     # singular values where each is judged (batched), then the samples in order
     xs = x_s + delta * (np.arange(1, k + 1)[:, None] / k)  # x_s + delta * (i / k), each
     all_t6 = frames.t6_many(poses_of(xs, r_c, p_c), [sample] * k)  # each kept for a refusal
-    rows, whole = planner.solve_rows(all_t6, q, config)
+    rows, whole = solve_rows(planner, all_t6, q, config)
     gots: list[Vector | None] = [*rows] if whole else [*rows, None]
     t6s = list(all_t6[:len(gots)])
     # the joints each sample's singular values are taken at (the one before, out of reach)
@@ -101,6 +101,43 @@ def joint_time(planner: Planner, frames: Frames, r_c: Matrix, p_c: Vector, delta
     if len(steps) > 1:
         curv = np.abs(np.diff(steps, axis=0)) * k * k
         need = max(need, math.sqrt(float(np.max(curv / (0.5 * planner.amax)))))
+    return need
+
+
+def solve_rows(planner: Planner, t6s: Matrix, seed: Vector,
+               config: str | None) -> tuple[Matrix, bool]:
+    """The planner's inverse of each T6 of ``t6s`` (m, 4, 4) in order, each seeded at
+    the one before (the first at ``seed``), up to the first without one: (the rows
+    solved (k, n), in order; whether they are all m) -- the closed form's batch when
+    it has one (:meth:`~pyrt.kinematics.puma.PaulInverse.solve_many`)."""
+    many = getattr(planner.closed, "solve_many", None)
+    if many is not None and config is not None:
+        rows, why = many(t6s, config, seed)
+        return rows, why is None
+    out: list[Vector] = []
+    q = seed
+    for t6 in t6s:
+        got = planner.solve(t6, q, config)
+        if got is None:
+            break
+        out.append(got)
+        q = got
+    return (np.array(out) if out else np.empty((0, planner.chain.n))), len(out) == len(t6s)
+
+
+def kept_joint_time(planner: Planner, frames: Frames, r_c: Matrix, p_c: Vector,
+                    delta: Vector, x_s: Vector, q_s: Vector, config: str | None,
+                    sample: float, speed: float) -> float:
+    """:func:`joint_time`, kept on the planner for the last line asked: a blend that
+    cannot be made is planned again as a stop on the same line from the same joints
+    (in frames that do not move the sample does not matter)."""
+    key = (frames, config, speed, sample if frames.moving else None,
+           *(np.asarray(v, dtype=float).tobytes() for v in (r_c, p_c, delta, x_s, q_s)))
+    hit = planner._jt_last
+    if hit is not None and hit[0] == key:
+        return hit[1]
+    need = joint_time(planner, frames, r_c, p_c, delta, x_s, q_s, config, sample, speed)
+    planner._jt_last = (key, need)
     return need
 
 
@@ -168,7 +205,7 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
         elif piece.space == CART:
             assert piece.frames is not None
             t6 = piece.frames.t6_many(piece.poses(times[start:end]), samples[start:end])
-            rows, whole = planner.solve_rows(t6, seed, piece.config)
+            rows, whole = solve_rows(planner, t6, seed, piece.config)
         else:
             got: list[Vector] = []
             whole = True

@@ -35,7 +35,6 @@ polynomial added to the quartic (see ``docs/arm-motion.md``).
 from __future__ import annotations
 
 import math
-import threading
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -44,8 +43,16 @@ import numpy.typing as npt
 
 from pyrt.errors import ConfigError
 from pyrt.kinematics import Chain, JointSets
-from pyrt.motion._checks import Refused, Slow, check_segment, end_of, joint_time, tool_travel
+from pyrt.motion._checks import (
+    Refused,
+    Slow,
+    check_segment,
+    end_of,
+    kept_joint_time,
+    tool_travel,
+)
 from pyrt.motion._geom import drive_of, pose_of
+from pyrt.motion._inverse import PreparedInverse
 from pyrt.motion._pieces import (
     CART,
     JOINT,
@@ -206,28 +213,16 @@ class Planner:
         self.aplan = A_PLAN * self.amax  # the accelerations planned for
         self.tracker = tracker
         self.closed = chain.closed_form
-        self._t6 = np.eye(4)
-        #: The closed form's prepared inverse (one call per pose, its arrays bound once)
-        #: and the thread it serves (a planner serves one; another gets the plain call).
-        make = getattr(self.closed, "solver", None)
-        self._solver = make() if make is not None else None
-        self._owner = threading.get_ident()
-        self._bits: dict[str, int] = {}
-        self._jt_last: tuple[tuple[Any, ...], float] | None = None
+        #: The closed form's prepared inverse for this planner's thread (or None).
+        self._fast = PreparedInverse.of(self.closed)
+        self._jt_last: tuple[tuple[Any, ...], float] | None = None  # (see kept_joint_time)
 
     # -- the inverse ------------------------------------------------------------------
     def solve(self, t6: Matrix, seed: Vector, config: str | None) -> Vector | None:
         """Joint values of ``t6`` nearest ``seed`` (the closed form in
         ``config`` when the chain has one), or None."""
-        sv = self._solver
-        if sv is not None and config is not None and seed is not None \
-                and threading.get_ident() == self._owner:
-            bits = self._bits.get(config)
-            if bits is None:
-                bits = self._bits[config] = self.closed.bits(config)  # type: ignore[union-attr]
-            sv.pose[...] = t6
-            sv.seed[...] = seed
-            return sv.q.copy() if sv(bits) == sv.REACHED else None
+        if (fast := self._fast) is not None and config is not None and fast.here():
+            return fast(t6, seed, config)
         if self.closed is not None and config is not None:
             try:
                 q = self.closed.solve(t6, config, seed)  # type: ignore[call-arg]
@@ -238,26 +233,6 @@ class Planner:
         if not r.ok:
             return None
         return r.q.copy()
-
-    def solve_rows(self, t6s: Matrix, seed: Vector, config: str | None) -> tuple[Matrix, bool]:
-        """:meth:`solve` of each T6 of ``t6s`` (m, 4, 4) in order, each seeded at the
-        one before (the first at ``seed``), up to the first without an inverse: (the
-        rows solved (k, n), in order; whether they are all m) -- the closed form's
-        batch when it has one."""
-        many = getattr(self.closed, "solve_many", None)
-        if many is not None and config is not None:
-            rows, why = many(t6s, config, seed)
-            return rows, why is None
-        out: list[Vector] = []
-        q = seed
-        for t6 in t6s:
-            got = self.solve(t6, q, config)
-            if got is None:
-                break
-            out.append(got)
-            q = got
-        rows = np.array(out) if out else np.empty((0, self.chain.n))
-        return rows, len(out) == len(t6s)
 
     def why(self, t6: Matrix, seed: Vector, config: str | None) -> str:
         if self.closed is not None and config is not None and hasattr(self.closed, "reason"):
@@ -532,8 +507,8 @@ class Planner:
                 dp, phi = norm(v_line_dir[:3]), norm(v_line_dir[3:])
                 t_need = max(dp / (speed * slow * lim.v_cart), phi / (speed * slow * lim.w_cart))
                 n_c = self.sample_of(tail, tail.now + tau_guess)
-                t_need = max(t_need, self._joint_time(frames, r_c, p_c, v_line_dir, x_s, q_s,
-                                                      config, n_c, speed * slow))
+                t_need = max(t_need, kept_joint_time(self, frames, r_c, p_c, v_line_dir, x_s,
+                                                     q_s, config, n_c, speed * slow))
                 start = pos_s
                 end = target_pos
             if spec.max_diff is not None:
@@ -639,21 +614,6 @@ class Planner:
         raise Refused(f"cannot keep within the limits after slowing {_TRIES} times{why}")
 
     # -- helpers --------------------------------------------------------------------------
-    def _joint_time(self, frames: Frames, r_c: Matrix, p_c: Vector, delta: Vector,
-                    x_s: Vector, q_s: Vector, config: str | None, sample: float,
-                    speed: float) -> float:
-        """:func:`~pyrt.motion._checks.joint_time`, kept for the last line asked: a blend
-        that cannot be made is planned again as a stop on the same line, from the same
-        joints (in frames that do not move, the sample does not matter)."""
-        key = (frames, config, speed, None if not frames.moving else sample,
-               *(np.asarray(v, dtype=float).tobytes() for v in (r_c, p_c, delta, x_s, q_s)))
-        hit = self._jt_last
-        if hit is not None and hit[0] == key:
-            return hit[1]
-        need = joint_time(self, frames, r_c, p_c, delta, x_s, q_s, config, sample, speed)
-        self._jt_last = (key, need)
-        return need
-
     def _tau(self, kind: str, dv: Vector, q: Vector, frames: Frames) -> float:
         """The least transition half-time for a velocity change ``dv`` (Paul's
         quartic peaks at ``3 |dv| / (4 tau)``): in joint space the joint limits; in
