@@ -155,6 +155,8 @@ class Frames:
         return np.array([self.t6(p, n) for p, n in zip(poses, samples, strict=True)])
 
     def pos(self, t6: Matrix, sample: float | None) -> Matrix:
+        if self._pre_identity and self._post_identity:  # T6 itself (exactly I . T6 . I)
+            return np.array(t6, dtype=float)
         pre, post, _ = self.parts(sample)
         return inv(pre) @ t6 @ inv(post)
 
