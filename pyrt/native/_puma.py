@@ -127,9 +127,8 @@ class PumaKernel:
         config = int(config)
         for i in range(m):
             q_i = qp + 6 * i
-            rc = f(arm, pp + 16 * i, config, sp, q_i, why_p, detail_p)
-            if rc:
-                raise_for_status(rc, "puma inverse")
+            raise_for_status(f(arm, pp + 16 * i, config, sp, q_i, why_p, detail_p),
+                             "puma inverse")
             if why_p[0] != reached:
                 return i, int(why_p[0]), float(detail_p[0])
             sp = q_i
@@ -161,9 +160,8 @@ class PumaSolver:
         self._detail = ffi.new("double[2]")
 
     def __call__(self, config: int) -> int:
-        rc = self._f(self._arm, self._pp, config, self._sp, self._qp, self._why, self._detail)
-        if rc:
-            raise_for_status(rc, "puma inverse")
+        raise_for_status(self._f(self._arm, self._pp, config, self._sp, self._qp, self._why,
+                                 self._detail), "puma inverse")
         return int(self._why[0])
 
     @property
