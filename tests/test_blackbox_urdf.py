@@ -17,7 +17,7 @@ from pyrt.scheduler import Loop, SimClock
 from pyrt.station.blackbox import with_snapshot
 from pyrt.station.recording import Recorder
 from pyrt.station.snapshot import Snapshot, take_snapshot
-from pyrt.station.urdf import URDF, build_urdf
+from pyrt.station.urdf import build_urdf
 
 #: A bound only a hang reaches (a recorded run on virtual time takes seconds).
 HANG_S = 600
@@ -81,7 +81,7 @@ def _run(shell: RobotShell, lines) -> None:
 
 @pytest.mark.parametrize("hardware, every, least", [("b", 691, 12), ("a", 1499, 5)],
                          ids=["passive-board", "motion-control-board"])
-def test_a_full_run_replays_identically_from_each_of_its_snapshots(tmp_path, monkeypatch,
+def test_a_full_run_replays_identically_from_each_of_its_snapshots(tmp_path,
                                                                    hardware, every, least):
     """Snapshots taken every few hundred ticks of a PUMA run (power-on, joint and pose
     moves, blended lines, a stop mid-line, a tool frame and a gain set, a conveyor
@@ -89,8 +89,6 @@ def test_a_full_run_replays_identically_from_each_of_its_snapshots(tmp_path, mon
     to the end, so the snapshot holds all the arm's state (the servo's C state, its
     encoders' totals, the motion under way, a command's snapshot awaiting its commit); on
     either of 004's boards."""
-    for name in ("_hardware", "_named"):  # what a replay's options leave on `pyrt urdf`'s
-        monkeypatch.setattr(URDF, name, getattr(URDF, name))  # factory: as it was after
     st = build_urdf(Loop(SimClock()), boards="sim:", hardware=hardware)
     pj = tmp_path / "run.pj"
     rec = Recorder(st, pj, metadata={"factory": "urdf", "args": {"hardware": hardware}})

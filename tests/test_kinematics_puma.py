@@ -388,3 +388,51 @@ def test_a_chain_replaced_with_new_geometry_never_keeps_a_stale_closed_form(chai
     foreign = chain.replace(closed_form=Foreign())
     assert foreign.replace(name="same geometry").closed_form is foreign.closed_form
     assert foreign.replace(base=base).closed_form is None
+
+
+@settings(max_examples=60, deadline=None)
+@given(joints(), st.lists(st.floats(-0.05, 0.05), min_size=6, max_size=6),
+       st.integers(1, 30), st.sampled_from(CONFIGURATIONS), st.booleans())
+def test_a_batch_of_poses_is_solved_as_one_by_one_each_seeded_at_the_one_before(
+        chain, q, step, m, cfg, far):
+    """solve_many gives, to the last bit, what the inverse gives pose by pose seeded at the
+    answer before, stopping at the first pose out of reach with its reason; the prepared
+    solver answers one pose as solve does."""
+    paul = chain.closed_form
+    poses = np.array([chain.fk(q + np.asarray(step) * i) for i in range(m)])
+    if far:  # a pose beyond the reach part-way
+        poses[m // 2, :3, 3] += 5.0
+    rows, why = paul.solve_many(poses, cfg, q)
+    ref, seed, reason = [], q, None
+    for pose in poses:
+        try:
+            got = paul.inverse(pose, cfg, seed)
+        except Unreachable as exc:
+            reason = str(exc)
+            break
+        ref.append(got)
+        seed = got
+    assert rows.shape == (len(ref), 6)
+    assert np.array_equal(rows, np.array(ref).reshape(-1, 6))
+    assert why == reason
+    solver = paul.solver()
+    solver.pose[...] = poses[0]
+    solver.seed[...] = q
+    reached = solver(paul.bits(cfg)) == solver.REACHED
+    one = paul.solve(poses[0], cfg, q)
+    assert reached == (one is not None)
+    if reached:
+        assert np.array_equal(solver.q, one)
+
+
+def test_the_batch_refuses_arrays_it_cannot_bind(chain):
+    """inverse_many takes float64 C-contiguous arrays of matching shapes only; others are refused, nothing written."""
+    from pyrt.native._errors import NativeInputError
+
+    kernel = chain.closed_form._kernel
+    poses = np.array([chain.fk(np.zeros(6))] * 3)
+    out = np.full((3, 6), 7.0)
+    for bad in (poses.astype(np.float32), poses[:, :, ::-1].copy()[:, :, ::-1], poses[:2]):
+        with pytest.raises(NativeInputError):
+            kernel.inverse_many(bad, 0, np.zeros(6), out)
+    assert (out == 7.0).all()

@@ -87,3 +87,31 @@ def test_a_plan_from_a_snapshot_of_a_running_move_blends_from_its_queued_end():
     qd = np.array([k.qd for k in knots])
     assert np.max(np.abs(np.diff(qd, axis=0))) < 0.1
     assert np.allclose(knots[-1].q, TARGET, atol=1e-9)
+
+
+def test_a_cartesian_plan_and_its_ticks_are_the_same_to_the_bit_in_any_thread():
+    """A planner's prepared inverse (the thread that made it) and the closed form's plain call
+    (any other thread) give the same plan and the same ticks, to the last bit."""
+    from _motion_rig import equation, tool_pose
+
+    a = tool_pose(PUMA, PUMA_HOME)
+    b = a.copy()
+    b[:3, 3] += [0.08, -0.05, 0.04]
+    spec = MotionSpec(mode="cart", equation=equation(b))
+
+    def planned_and_run(ev):
+        ev.queue(spec)
+        seg = ev._segs[-1]
+        return [p.c.copy() for p in seg.pieces], seg.q_end.copy(), [k.q for k in run(ev)]
+
+    own = planned_and_run(Evaluator(PUMA, PUMA_LIMITS, PUMA_HOME))
+    ev = Evaluator(PUMA, PUMA_LIMITS, PUMA_HOME)
+    out = []
+    t = threading.Thread(target=lambda: out.append(planned_and_run(ev)))
+    t.start()
+    t.join()
+    other = out[0]
+    assert all(np.array_equal(x, y) for x, y in zip(own[0], other[0], strict=True))
+    assert np.array_equal(own[1], other[1])
+    assert len(own[2]) == len(other[2]) > 10
+    assert all(np.array_equal(x, y) for x, y in zip(own[2], other[2], strict=True))

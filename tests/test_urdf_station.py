@@ -270,14 +270,19 @@ def test_the_signals_are_the_joints_and_the_tool_from_the_encoders_and_the_truth
 
 
 def test_board_kinds_follow_the_urdf_named_on_the_command_line(tmp_path):
-    """board-sim's board kinds are those of the URDF named last (the PUMA's before any)."""
+    """board-sim's board kinds are those of the URDF the parsed options name (the PUMA's
+    without one); parsing them leaves the factory as it was."""
+    import argparse
+
     assert URDF.board_kinds()["servo"].register("dac").count == 6
     text = (Path(__file__).parent / "data" / "two_link.urdf").read_text()
     path = tmp_path / "two.urdf"
     path.write_text(text)
-    factory = type(URDF)()
-    factory._file(str(path))
-    assert factory.board_kinds()["servo"].register("dac").count == 2
+    p = argparse.ArgumentParser()
+    URDF.add_world_arguments(p)
+    assert URDF.board_kinds_of(p.parse_args([str(path)]))["servo"].register("dac").count == 2
+    assert URDF.board_kinds()["servo"].register("dac").count == 6
+    assert URDF.board_kinds_of(p.parse_args([]))["servo"].register("dac").count == 6
 
 
 def test_a_journal_of_the_urdf_station_replays_identically(tmp_path):

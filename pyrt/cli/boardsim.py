@@ -240,7 +240,9 @@ def _loopback(host: str) -> bool:
 
 def build_world(factory: WorldFactory, opts: argparse.Namespace) -> World:
     """The world of ``factory``: its boards opened in process, the world behind them."""
-    boards = open_boards("sim:", factory.name, factory.board_kinds())
+    kinds_of = getattr(factory, "board_kinds_of", None)  # a factory not derived: its defaults
+    kinds = kinds_of(opts) if kinds_of is not None else factory.board_kinds()
+    boards = open_boards("sim:", factory.name, kinds)
     try:
         world = factory.world(boards.simulated or boards, opts)
     except BaseException:

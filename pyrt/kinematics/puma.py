@@ -52,10 +52,12 @@ from pyrt.native._puma import (
     PUMA_LIMIT,
     PUMA_NEAREST,
     PUMA_NO_LIMITS,
+    PUMA_REACHED,
     PUMA_SINGULAR,
     PUMA_TOO_FAR,
     PUMA_TOO_NEAR,
     PumaKernel,
+    PumaSolver,
 )
 
 if TYPE_CHECKING:
@@ -331,6 +333,32 @@ class PaulInverse:
             return self.inverse(target, config, seed)
         except Unreachable:
             return None
+
+    def bits(self, config: str) -> int:
+        """The kernel's bits of ``config`` (any spelling :func:`parse_config` takes)."""
+        bits = _BITS.get(config)
+        return bits if bits is not None else _BITS[parse_config(config)]
+
+    def solver(self) -> PumaSolver:
+        """A prepared inverse of its own (:class:`~pyrt.native._puma.PumaSolver`) for a
+        caller that solves one pose at a time in one thread (a trajectory tick): its
+        pose and seed written in place, the configuration's :meth:`bits` given; the
+        same answers as :meth:`solve`."""
+        return PumaSolver(self._kernel)
+
+    def solve_many(self, poses: np.ndarray, config: str,
+                   seed: npt.ArrayLike) -> tuple[np.ndarray, str | None]:
+        """The joint values of ``poses`` (m, 4, 4) in ``config``, each seeded at the
+        one before (the first at ``seed``), as :meth:`solve` gives them one by one:
+        (the rows reached (k, 6), in order, up to the first pose not reached; why that
+        one is not, or None when all were)."""
+        poses = np.ascontiguousarray(poses, dtype=np.float64)
+        out = np.empty((poses.shape[0], 6))
+        s = np.ascontiguousarray(seed, dtype=np.float64)
+        k, why, detail = self._kernel.inverse_many(poses, self.bits(config), s, out)
+        if why == PUMA_REACHED:
+            return out, None
+        return out[:k], self._why(parse_config(config), why, detail)
 
     def reason(self, target: npt.ArrayLike, config: str) -> str | None:
         """Why ``target`` cannot be reached in ``config`` (None: it can)."""

@@ -18,6 +18,7 @@ and limits they judge:
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -72,19 +73,14 @@ def joint_time(planner: Planner, frames: Frames, r_c: Matrix, p_c: Vector, delta
     q = prev = q_s if q0 is None else q0
     # each sample's inverse (seeded at the one before) up to the first out of reach, the
     # singular values where each is judged (batched), then the samples in order
-    t6s: list[Matrix] = []
-    gots: list[Vector | None] = []
-    at: list[Vector] = []  # the joints each sample's singular values are taken at
-    xs = np.array([x_s + delta * (i / k) for i in range(1, k + 1)])
+    xs = x_s + delta * (np.arange(1, k + 1)[:, None] / k)  # x_s + delta * (i / k), each
     all_t6 = frames.t6_many(poses_of(xs, r_c, p_c), [sample] * k)  # each kept for a refusal
-    for t6 in all_t6:
-        got = planner.solve(t6, q, config)
-        t6s.append(t6)
-        gots.append(got)
-        at.append(q if got is None else got)
-        if got is None:
-            break
-        q = got
+    rows, whole = solve_rows(planner, all_t6, q, config)
+    gots: list[Vector | None] = [*rows] if whole else [*rows, None]
+    t6s = list(all_t6[:len(gots)])
+    # the joints each sample's singular values are taken at (the one before, out of reach)
+    at = rows if whole else np.concatenate(
+        [rows, rows[-1:] if len(rows) else np.asarray(q, dtype=float)[None, :]])
     svs = smallest_singular(_jacobians(planner.chain, at), planner.limits.singular).tolist()
     q = prev
     for i, (t6, got, sv) in enumerate(zip(t6s, gots, svs, strict=True), start=1):
@@ -100,11 +96,48 @@ def joint_time(planner: Planner, frames: Frames, r_c: Matrix, p_c: Vector, delta
     # every sample reached: the joints' steps keep their velocities within the limits, and
     # the path's curvature (its acceleration at constant speed along the line, d2q/dr2 /
     # T^2) to half the acceleration limits, the other half for the transitions
-    steps = np.diff(np.array([prev, *gots]), axis=0)
+    steps = np.diff(np.concatenate([np.asarray(prev, dtype=float)[None, :], rows]), axis=0)
     need = max(0.0, float(np.max(np.abs(steps) * k / (speed * planner.vplan))))
     if len(steps) > 1:
         curv = np.abs(np.diff(steps, axis=0)) * k * k
         need = max(need, math.sqrt(float(np.max(curv / (0.5 * planner.amax)))))
+    return need
+
+
+def solve_rows(planner: Planner, t6s: Matrix, seed: Vector,
+               config: str | None) -> tuple[Matrix, bool]:
+    """The planner's inverse of each T6 of ``t6s`` (m, 4, 4) in order, each seeded at
+    the one before (the first at ``seed``), up to the first without one: (the rows
+    solved (k, n), in order; whether they are all m) -- the closed form's batch when
+    it has one (:meth:`~pyrt.kinematics.puma.PaulInverse.solve_many`)."""
+    many = getattr(planner.closed, "solve_many", None)
+    if many is not None and config is not None:
+        rows, why = many(t6s, config, seed)
+        return rows, why is None
+    out: list[Vector] = []
+    q = seed
+    for t6 in t6s:
+        got = planner.solve(t6, q, config)
+        if got is None:
+            break
+        out.append(got)
+        q = got
+    return (np.array(out) if out else np.empty((0, planner.chain.n))), len(out) == len(t6s)
+
+
+def kept_joint_time(planner: Planner, frames: Frames, r_c: Matrix, p_c: Vector,
+                    delta: Vector, x_s: Vector, q_s: Vector, config: str | None,
+                    sample: float, speed: float) -> float:
+    """:func:`joint_time`, kept on the planner for the last line asked: a blend that
+    cannot be made is planned again as a stop on the same line from the same joints
+    (in frames that do not move the sample does not matter)."""
+    key = (frames, config, speed, sample if frames.moving else None,
+           *(np.asarray(v, dtype=float).tobytes() for v in (r_c, p_c, delta, x_s, q_s)))
+    hit = planner._jt_last
+    if hit is not None and hit[0] == key:
+        return hit[1]
+    need = joint_time(planner, frames, r_c, p_c, delta, x_s, q_s, config, sample, speed)
+    planner._jt_last = (key, need)
     return need
 
 
@@ -161,26 +194,51 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
         assert piece is not None
         pieces.append(piece)
     samples = [planner.sample_of(tail, t) for t in times]
-    # piece by piece, all at once: the joint samples' values, the Cartesian ones' T6
-    joints, t6s = _batched(pieces, times, samples)
-    qs: list[Vector] = []
+    # piece by piece, all at once: a joint piece's values, a Cartesian piece's T6 and
+    # their inverses (each seeded at the sample before, as one by one)
+    chunks: list[Matrix] = []
     lost = False
-    for i, (t, piece, n) in enumerate(zip(times, pieces, samples, strict=True)):
-        q = joints.get(i)
-        if q is None:
-            t6 = t6s.get(i)
-            q = planner.q_of(piece, t, seed, n) if t6 is None else planner.solve(
-                t6, seed, piece.config)
-        if q is None:
+    for start, end, piece in _runs(pieces):
+        if piece.space == JOINT:
+            rows = piece.values(times[start:end])
+            whole = True
+        elif piece.space == CART:
+            assert piece.frames is not None
+            t6 = piece.frames.t6_many(piece.poses(times[start:end]), samples[start:end])
+            rows, whole = solve_rows(planner, t6, seed, piece.config)
+        else:
+            got: list[Vector] = []
+            whole = True
+            for t, n in zip(times[start:end], samples[start:end], strict=True):
+                q_f = planner.q_of(piece, t, seed, n)
+                if q_f is None:
+                    whole = False
+                    break
+                got.append(q_f)
+                seed = q_f
+            rows = np.array(got) if got else np.empty((0, chain.n))
+        if len(rows):
+            chunks.append(rows)
+            seed = rows[-1]
+        if not whole:
             lost = True
             break
-        qs.append(q)
-        seed = q
+    q_all = np.concatenate(chunks) if chunks else np.empty((0, chain.n))
+    qs: list[Vector] = [*q_all]
     m = len(qs)
-    flags = _sample_flags(planner, qs, pieces, q_prev2, q_prev, dt)
-    whole = spec.max_diff is not None or how is BufferMode.BLENDING
-    # without max_diff or a blend a sample no check flags passes: only those are looked at
-    for i in (range(m) if whole else flags.flagged(planner.limits.singular)):
+    flags = _sample_flags(planner, q_all, pieces, q_prev2, q_prev, dt)
+    # without max_diff a sample no check flags passes: only those are looked at, and in a
+    # blend the samples of the transition in (their tool points), in order
+    looked: Sequence[int]
+    if spec.max_diff is not None:
+        looked = range(m)
+    else:
+        looked = flags.flagged(planner.limits.singular)
+        if how is BufferMode.BLENDING:
+            t_blend = seg.t_c + seg.tau_in
+            head = next((i for i, t in enumerate(times[:m]) if t > t_blend), m)
+            looked = sorted({*range(head), *looked})
+    for i in looked:
         t, piece, n = times[i], pieces[i], samples[i]
         frac = 100.0 * (t - seg.t_c) / max(seg.t_e - seg.t_c, 1e-9)
         frac = min(max(frac, 0.0), 100.0)
@@ -250,32 +308,20 @@ def check_segment(planner: Planner, seg: Segment, spec: MotionSpec, tail: Tail,
     piece = planner.piece_at(seg.pieces, t_fin - 1e-12)
     assert piece is not None
     qf = planner.q_of(piece, t_fin, q_end, planner.sample_of(tail, t_fin))
-    seg.q_end = q_end if qf is None else qf
+    seg.q_end = np.array(q_end) if qf is None else qf
     seg.t6_end = chain.fk(seg.q_end)
 
 
-def _batched(pieces: list[Piece], times: list[float], samples: list[float]
-             ) -> tuple[dict[int, Vector], dict[int, Matrix]]:
-    """Each sample's joint values on a joint piece, and T6 on a Cartesian one (sample
-    index -> values), piece by piece: a joint piece's polynomial at all its times at
-    once (:meth:`Piece.values`, the tick's roundings), a Cartesian piece's poses at
-    once (:meth:`Piece.poses`) and through its frames at once where they do not
-    move (:meth:`Frames.t6_many`)."""
-    joints: dict[int, Vector] = {}
-    t6s: dict[int, Matrix] = {}
+def _runs(pieces: list[Piece]) -> list[tuple[int, int, Piece]]:
+    """The runs of samples on one piece: (first index, end index, piece), in order."""
+    out = []
     start = 0
     for end in range(1, len(pieces) + 1):
         if end < len(pieces) and pieces[end] is pieces[start]:
             continue
-        piece = pieces[start]
-        if piece.space == JOINT:
-            joints.update(zip(range(start, end), piece.values(times[start:end]), strict=True))
-        elif piece.space == CART:
-            assert piece.frames is not None
-            t6 = piece.frames.t6_many(piece.poses(times[start:end]), samples[start:end])
-            t6s.update(zip(range(start, end), t6, strict=True))
+        out.append((start, end, pieces[start]))
         start = end
-    return joints, t6s
+    return out
 
 
 def _where(seg: Segment, t: float) -> str:
@@ -313,23 +359,24 @@ class _Flags:
         return self._hist[i + 2 - back]
 
 
-def _sample_flags(planner: Planner, qs: list[Vector], pieces: list[Piece],
+def _sample_flags(planner: Planner, q: Matrix, pieces: list[Piece],
                   q_prev2: Vector | None, q_prev: Vector | None, dt: float) -> _Flags:
-    """The checks of :func:`check_segment` on the joints ``qs`` of its samples
+    """The checks of :func:`check_segment` on the joints ``q`` (m, n) of its samples
     (``q_prev2``, ``q_prev`` the two before the first, or None), all at once."""
-    m = len(qs)
+    m = len(q)
+    qs = [*q]
     hist: list[Vector | None] = [q_prev2, q_prev, *qs]
     if m == 0:
         return _Flags(hist, [], {}, [], [])
     chain = planner.chain
-    q = np.array(qs)
     lower, upper = np.asarray(chain.lower), np.asarray(chain.upper)
     inside = np.logical_and(q >= lower, q <= upper).all(axis=1) & np.isfinite(q).all(axis=1)
     outside = [not v for v in np.asarray(inside).tolist()]
     cart = [i for i in range(m) if pieces[i].space == CART]
     singular: dict[int, float] = {}
     if cart:
-        sv = smallest_singular(_jacobians(chain, [qs[i] for i in cart]), planner.limits.singular)
+        sv = smallest_singular(_jacobians(chain, q[cart] if len(cart) < m else q),
+                               planner.limits.singular)
         singular = dict(zip(cart, sv.tolist(), strict=True))
     # the samples with two before them: their velocities and accelerations
     first = 0 if q_prev2 is not None and q_prev is not None else (
@@ -337,7 +384,8 @@ def _sample_flags(planner: Planner, qs: list[Vector], pieces: list[Piece],
     over_v = [False] * m
     over_a = [False] * m
     if first < m:
-        full = np.array(hist[first:])  # from two samples before `first` on
+        # from two samples before `first` on
+        full = np.concatenate([np.array(hist[first:2]).reshape(-1, q.shape[1]), q])
         cur, p1, p2 = full[2:], full[1:-1], full[:-2]
         qd = (cur - p1) / dt
         qdd = (cur - 2 * p1 + p2) / (dt * dt)
@@ -376,7 +424,7 @@ def smallest_singular(jacs: Matrix, limit: float) -> Vector:
     return np.asarray(out, dtype=float)
 
 
-def _jacobians(chain: Chain, qs: list[Vector]) -> Matrix:
+def _jacobians(chain: Chain, qs: Sequence[Vector] | Matrix) -> Matrix:
     """The Jacobians (len(qs), 6, n) at joints ``qs``, through one pair of arrays the
     chain's kernel stays bound to."""
     q_buf = np.zeros(chain.n)
@@ -399,7 +447,7 @@ def _blend_error(planner: Planner, seg: Segment, tail: Tail, pts: list[Vector]) 
     if last is None or not pts:
         return 0.0
     line = last.pieces[1] if len(last.pieces) > 1 else last.pieces[0]
-    ref: list[Vector] = []
+    chunks: list[Matrix] = []
     k = 60
     assert last.q_end is not None
     q = last.q_end
@@ -415,17 +463,24 @@ def _blend_error(planner: Planner, seg: Segment, tail: Tail, pts: list[Vector]) 
             assert piece.frames is not None
             t6 = piece.frames.t6_many(piece.poses(ts), ns)
             if seg.frames.moving:
-                ref.extend(np.asarray(seg.frames.tool(m, n)[:3, 3], dtype=float)
-                           for m, n in zip(t6, ns, strict=True))
+                chunks.append(np.array([seg.frames.tool(m, n)[:3, 3]
+                                        for m, n in zip(t6, ns, strict=True)], dtype=float))
             else:
                 tool = seg.frames.parts(None)[2]
-                ref.extend(t6[:, :3, :3] @ tool[:3, 3] + t6[:, :3, 3])
+                chunks.append(t6[:, :3, :3] @ tool[:3, 3] + t6[:, :3, 3])
             continue
+        points: list[Vector] = []
         for t, n in zip(ts, ns, strict=True):
             got = planner.q_of(piece, t, q, n)
             if got is not None:
                 q = got
-                ref.append(_tool_point(planner, seg, q, n))
-    r = np.array(ref)
-    d = np.sqrt(((r[None, :, :] - np.array(pts)[:, None, :]) ** 2).sum(axis=2))
+                points.append(_tool_point(planner, seg, q, n))
+        if points:
+            chunks.append(np.array(points))
+    # each blended point's distance to each reference point, coordinate by coordinate
+    # on (points, references) arrays (the same roundings as on the vectors' rows)
+    r = np.concatenate(chunks).T
+    p = np.array(pts)
+    dx, dy, dz = (r[i][None, :] - p[:, i:i + 1] for i in range(3))
+    d = np.sqrt(dx * dx + dy * dy + dz * dz)
     return max(0.0, float(d.min(axis=1).max()))

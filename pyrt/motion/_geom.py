@@ -70,27 +70,32 @@ def pose_of(x: Vector, r_c: Matrix, p_c: Vector, out: Matrix | None = None) -> M
 
 def poses_of(xs: Matrix, r_c: Matrix, p_c: Vector) -> Matrix:
     """The poses (m, 4, 4) of the drive coordinates ``xs`` (m, 6) about ``(r_c, p_c)``,
-    all at once (Rodrigues on arrays; :func:`pose_of` one by one)."""
+    all at once (Rodrigues on arrays, each product shared by the entries that use it,
+    as :func:`exp_rot` forms them one by one; :func:`pose_of` one by one)."""
     xs = np.asarray(xs, dtype=float)
     m = xs.shape[0]
     a, b, c = xs[:, 3], xs[:, 4], xs[:, 5]
-    th2 = a * a + b * b + c * c
+    aa, bb, cc = a * a, b * b, c * c
+    th2 = aa + bb + cc
     tiny = th2 < 1e-24
     th = np.sqrt(np.where(tiny, 1.0, th2))
     s = np.where(tiny, 1.0, np.sin(th) / th)
     k = np.where(tiny, 0.5, (1.0 - np.cos(th)) / np.where(tiny, 1.0, th2))
+    ka, kb = k * a, k * b
+    kab, kac, kbc = ka * b, ka * c, kb * c
+    sa, sb, sc = s * a, s * b, s * c
     e = np.empty((m, 3, 3))
-    e[:, 0, 0] = 1.0 - k * (b * b + c * c)
-    e[:, 0, 1] = -s * c + k * a * b
-    e[:, 0, 2] = s * b + k * a * c
-    e[:, 1, 0] = s * c + k * a * b
-    e[:, 1, 1] = 1.0 - k * (a * a + c * c)
-    e[:, 1, 2] = -s * a + k * b * c
-    e[:, 2, 0] = -s * b + k * a * c
-    e[:, 2, 1] = s * a + k * b * c
-    e[:, 2, 2] = 1.0 - k * (a * a + b * b)
+    np.subtract(1.0, k * (bb + cc), out=e[:, 0, 0])
+    np.add(-sc, kab, out=e[:, 0, 1])
+    np.add(sb, kac, out=e[:, 0, 2])
+    np.add(sc, kab, out=e[:, 1, 0])
+    np.subtract(1.0, k * (aa + cc), out=e[:, 1, 1])
+    np.add(-sa, kbc, out=e[:, 1, 2])
+    np.add(-sb, kac, out=e[:, 2, 0])
+    np.add(sa, kbc, out=e[:, 2, 1])
+    np.subtract(1.0, k * (aa + bb), out=e[:, 2, 2])
     out = np.zeros((m, 4, 4))
-    out[:, :3, :3] = e @ r_c
+    out[:, :3, :3] = (e.reshape(3 * m, 3) @ r_c).reshape(m, 3, 3)  # one product for all
     out[:, :3, 3] = p_c + xs[:, :3]
     out[:, 3, 3] = 1.0
     return out

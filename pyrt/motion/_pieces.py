@@ -155,6 +155,8 @@ class Frames:
         return np.array([self.t6(p, n) for p, n in zip(poses, samples, strict=True)])
 
     def pos(self, t6: Matrix, sample: float | None) -> Matrix:
+        if self._pre_identity and self._post_identity:  # T6 itself (exactly I . T6 . I)
+            return np.array(t6, dtype=float)
         pre, post, _ = self.parts(sample)
         return inv(pre) @ t6 @ inv(post)
 
@@ -304,14 +306,15 @@ class Piece:
         e20, e21, e22 = -s * b + k * a * c, s * a + k * b * c, 1.0 - k * (a * a + b * b)
         assert self._ref is not None
         (r00, r01, r02, r10, r11, r12, r20, r21, r22), (cx, cy, cz) = self._ref
-        m = np.array((
-            (e00 * r00 + e01 * r10 + e02 * r20, e00 * r01 + e01 * r11 + e02 * r21,
-             e00 * r02 + e01 * r12 + e02 * r22, cx + px),
-            (e10 * r00 + e11 * r10 + e12 * r20, e10 * r01 + e11 * r11 + e12 * r21,
-             e10 * r02 + e11 * r12 + e12 * r22, cy + py),
-            (e20 * r00 + e21 * r10 + e22 * r20, e20 * r01 + e21 * r11 + e22 * r21,
-             e20 * r02 + e21 * r12 + e22 * r22, cz + pz),
-            (0.0, 0.0, 0.0, 1.0)))
+        # one flat run of floats into one array (quicker than nested rows)
+        m = np.fromiter((
+            e00 * r00 + e01 * r10 + e02 * r20, e00 * r01 + e01 * r11 + e02 * r21,
+            e00 * r02 + e01 * r12 + e02 * r22, cx + px,
+            e10 * r00 + e11 * r10 + e12 * r20, e10 * r01 + e11 * r11 + e12 * r21,
+            e10 * r02 + e11 * r12 + e12 * r22, cy + py,
+            e20 * r00 + e21 * r10 + e22 * r20, e20 * r01 + e21 * r11 + e22 * r21,
+            e20 * r02 + e21 * r12 + e22 * r22, cz + pz,
+            0.0, 0.0, 0.0, 1.0), float, 16).reshape(4, 4)
         if out is not None:
             out[:] = m
             return out

@@ -161,6 +161,8 @@ class Evaluator(Queueing):
         #: (tool frame, m) and the filtered force it exerts (tool frame, N).
         self._comply = ComplyLoop()
         self._fk_q = np.zeros(chain.n)
+        #: :attr:`wants_wrench`'s last answer and what it was given for.
+        self._wants: tuple[tuple[int, ...] | None, bool] = (None, False)
 
     # -- queueing (the caller's thread) ---------------------------------------------------
     @property
@@ -185,15 +187,26 @@ class Evaluator(Queueing):
         limit or a comply spec: without one, :meth:`tick` does the same with or
         without the wrist's wrench (the caller may leave the sensor unread)."""
         with self._lock:
+            # what is queued changes only with the generation, the pieces passed and the
+            # lists of pieces and records: the answer is kept for those
+            key = (self._generation, self._k, len(self._pieces), id(self._pieces),
+                   len(self._segs), id(self._segs))
+            if key == self._wants[0]:
+                return self._wants[1]
+            wants = False
             for s in self._segs:
                 if s.move.spec.force_limits is not None or s.move.spec.comply is not None:
-                    return True
-            for piece in self._pieces[self._k:]:
-                seg = piece.seg
-                if seg is not None and (seg.move.spec.force_limits is not None
-                                        or seg.move.spec.comply is not None):
-                    return True
-            return False
+                    wants = True
+                    break
+            else:
+                for piece in self._pieces[self._k:]:
+                    seg = piece.seg
+                    if seg is not None and (seg.move.spec.force_limits is not None
+                                            or seg.move.spec.comply is not None):
+                        wants = True
+                        break
+            self._wants = (key, wants)
+            return wants
 
     def queue_function(self, fn: Callable[[float], Sequence[float]], duration: float,
                        name: str = "function") -> Move:
@@ -304,9 +317,11 @@ class Evaluator(Queueing):
         # the central differences on plain floats (the same operations, in the same
         # order, as on the arrays: the same roundings), two arrays made of them
         xs, ys, zs = q0.tolist(), q1.tolist(), q_next.tolist()
-        qd = np.array([(z - x) / hs for x, z in zip(xs, zs, strict=True)])
-        qdd = np.array([2.0 * ((z - y) / h2 - (y - x) / h1) / hs
-                        for x, y, z in zip(xs, ys, zs, strict=True)])
+        both = np.array([(z - x) / hs for x, z in zip(xs, zs, strict=True)]
+                        + [2.0 * ((z - y) / h2 - (y - x) / h1) / hs
+                           for x, y, z in zip(xs, ys, zs, strict=True)])
+        n_q = len(xs)
+        qd, qdd = both[:n_q], both[n_q:]
         t_knot = self._tp[1]
         knot_q, knot_t6 = q1, self._t6[1]
         # slide the window

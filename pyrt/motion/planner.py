@@ -43,8 +43,16 @@ import numpy.typing as npt
 
 from pyrt.errors import ConfigError
 from pyrt.kinematics import Chain, JointSets
-from pyrt.motion._checks import Refused, Slow, check_segment, end_of, joint_time, tool_travel
+from pyrt.motion._checks import (
+    Refused,
+    Slow,
+    check_segment,
+    end_of,
+    kept_joint_time,
+    tool_travel,
+)
 from pyrt.motion._geom import drive_of, pose_of
+from pyrt.motion._inverse import PreparedInverse
 from pyrt.motion._pieces import (
     CART,
     JOINT,
@@ -205,12 +213,16 @@ class Planner:
         self.aplan = A_PLAN * self.amax  # the accelerations planned for
         self.tracker = tracker
         self.closed = chain.closed_form
-        self._t6 = np.eye(4)
+        #: The closed form's prepared inverse for this planner's thread (or None).
+        self._fast = PreparedInverse.of(self.closed)
+        self._jt_last: tuple[tuple[Any, ...], float] | None = None  # (see kept_joint_time)
 
     # -- the inverse ------------------------------------------------------------------
     def solve(self, t6: Matrix, seed: Vector, config: str | None) -> Vector | None:
         """Joint values of ``t6`` nearest ``seed`` (the closed form in
         ``config`` when the chain has one), or None."""
+        if (fast := self._fast) is not None and config is not None and fast.here():
+            return fast(t6, seed, config)
         if self.closed is not None and config is not None:
             try:
                 q = self.closed.solve(t6, config, seed)  # type: ignore[call-arg]
@@ -495,8 +507,8 @@ class Planner:
                 dp, phi = norm(v_line_dir[:3]), norm(v_line_dir[3:])
                 t_need = max(dp / (speed * slow * lim.v_cart), phi / (speed * slow * lim.w_cart))
                 n_c = self.sample_of(tail, tail.now + tau_guess)
-                t_need = max(t_need, joint_time(self, frames, r_c, p_c, v_line_dir, x_s, q_s,
-                                                config, n_c, speed * slow))
+                t_need = max(t_need, kept_joint_time(self, frames, r_c, p_c, v_line_dir, x_s,
+                                                     q_s, config, n_c, speed * slow))
                 start = pos_s
                 end = target_pos
             if spec.max_diff is not None:

@@ -7,7 +7,7 @@ import threading
 import numpy as np
 import numpy.typing as npt
 
-from pyrt.native._arrays import F64, as_f64
+from pyrt.native._arrays import F64, as_f64, require_f64
 from pyrt.native._errors import NativeInputError, raise_for_status
 from pyrt.native._lib import ffi, lib
 
@@ -24,6 +24,7 @@ __all__ = [
     "PUMA_TOO_FAR",
     "PUMA_TOO_NEAR",
     "PumaKernel",
+    "PumaSolver",
 ]
 
 PUMA_LEFTY: int = lib.PYRT_PUMA_LEFTY
@@ -101,3 +102,69 @@ class PumaKernel:
         if why != lib.PYRT_PUMA_REACHED:
             return None, why, float(detail_p[0])
         return q, why, 0.0
+
+    def inverse_many(self, poses: np.ndarray, config: int, seed: np.ndarray,
+                     out: np.ndarray) -> tuple[int, int, float]:
+        """The inverses of ``poses`` (m, 4, 4) into the rows of ``out`` (m, 6), each
+        seeded at the one before (the first at ``seed`` (6,)), up to the first pose
+        not reached: (how many were, why the next was not (PUMA_REACHED when all
+        were), its deciding number).  Float64, C-contiguous arrays (refused
+        otherwise); one C call per pose, the arrays bound once."""
+        m = poses.shape[0] if isinstance(poses, np.ndarray) else -1
+        require_f64("poses", poses, (m, 4, 4))
+        require_f64("out", out, (m, 6))
+        require_f64("seed", seed, (6,))
+        if threading.get_ident() == self._owner:
+            why_p, detail_p = self._why, self._detail
+        else:
+            why_p, detail_p = ffi.new("int32_t *"), ffi.new("double[2]")
+        if m == 0:
+            return 0, lib.PYRT_PUMA_REACHED, 0.0
+        pp = ffi.from_buffer("double[]", poses)
+        qp = ffi.from_buffer("double[]", out)
+        sp = ffi.from_buffer("double[]", seed)
+        f, arm, reached = lib.pyrt_puma_inverse, self._arm, lib.PYRT_PUMA_REACHED
+        config = int(config)
+        for i in range(m):
+            q_i = qp + 6 * i
+            raise_for_status(f(arm, pp + 16 * i, config, sp, q_i, why_p, detail_p),
+                             "puma inverse")
+            if why_p[0] != reached:
+                return i, int(why_p[0]), float(detail_p[0])
+            sp = q_i
+        return m, reached, 0.0
+
+
+class PumaSolver:
+    """One caller's prepared inverse (a trajectory tick's): its own ``pose`` (4, 4),
+    ``seed`` (6,) and result ``q`` (6,) arrays and result cells, bound once, so a
+    call is the C call alone.  Write the pose and the seed in place, call with the
+    configuration's bits: PUMA_REACHED (then ``q`` holds the joints) or why not.
+    For one thread at a time (its cells are its own)."""
+
+    __slots__ = ("_arm", "_detail", "_f", "_pp", "_qp", "_sp", "_why", "pose", "q", "seed")
+
+    #: What a call returns for a pose reached.
+    REACHED: int = lib.PYRT_PUMA_REACHED
+
+    def __init__(self, kernel: PumaKernel) -> None:
+        self.pose = np.eye(4)
+        self.seed = np.zeros(6)
+        self.q = np.zeros(6)
+        self._arm = kernel._arm
+        self._f = lib.pyrt_puma_inverse
+        self._pp = ffi.from_buffer("double[]", self.pose)
+        self._sp = ffi.from_buffer("double[]", self.seed)
+        self._qp = ffi.from_buffer("double[]", self.q)
+        self._why = ffi.new("int32_t *")
+        self._detail = ffi.new("double[2]")
+
+    def __call__(self, config: int) -> int:
+        raise_for_status(self._f(self._arm, self._pp, config, self._sp, self._qp, self._why,
+                                 self._detail), "puma inverse")
+        return int(self._why[0])
+
+    @property
+    def detail(self) -> float:
+        """The deciding number of the last pose not reached."""
+        return float(self._detail[0])

@@ -166,6 +166,11 @@ class WorldFactory:
         """The station's boards: name -> kind (none by default: nothing to serve)."""
         return {}
 
+    def board_kinds_of(self, args: argparse.Namespace) -> dict[str, BoardKind]:
+        """The boards of the world the parsed options ``args`` ask for (a station whose
+        options choose its boards says so here); by default :meth:`board_kinds`."""
+        return self.board_kinds()
+
     def add_world_arguments(self, parser: argparse.ArgumentParser) -> None:
         """Add the world's options (a start position, an object, faults ...); none by default."""
 

@@ -327,31 +327,34 @@ interpolates and servos at 1 kHz; the host's tick may then be 10 ms
     max_tick_us = 10000
     max_tick_why = "hardware (a) takes setpoints at 100 Hz; hardware (b) at most 1000 µs"
 
-    def __init__(self) -> None:
-        self._named: str | None = None
-        self._hardware = "b"
-
-    def _hardware_of(self, text: str) -> str:
-        """argparse's type of --hardware: a or b, remembered for :meth:`board_kinds`."""
+    @staticmethod
+    def _hardware_of(text: str) -> str:
+        """argparse's type of --hardware: a or b (checked; nothing kept: the options
+        parsed say which, :meth:`board_kinds_of`)."""
         if text not in HARDWARE:
             raise argparse.ArgumentTypeError(f"expected a or b, got {text!r}")
-        self._hardware = text
         return text
 
-    def _file(self, text: str) -> str:
+    @staticmethod
+    def _file(text: str) -> str:
         """argparse's type of FILE.urdf: read and checked now (a bad file is a usage
-        error); the kinds of its board are what :meth:`board_kinds` gives."""
+        error; nothing kept: the options parsed name it, :meth:`board_kinds_of`)."""
         try:
             load_arm(text)
         except ConfigError as exc:
             raise argparse.ArgumentTypeError(str(exc)) from None
-        self._named = text
         return text
 
     def board_kinds(self) -> dict[str, BoardKind]:
-        """The board of the URDF named last on the command line (the PUMA's before)."""
-        chain, _motors, _text = load_arm(self._named)
-        return arm_boards(chain, self._hardware)
+        """The PUMA's board on hardware (b), the default (:meth:`board_kinds_of` for
+        the options given)."""
+        chain, _motors, _text = load_arm(None)
+        return arm_boards(chain, "b")
+
+    def board_kinds_of(self, args: argparse.Namespace) -> dict[str, BoardKind]:
+        """The board of the URDF and the hardware the parsed options ``args`` name."""
+        chain, _motors, _text = load_arm(getattr(args, "urdf", None))
+        return arm_boards(chain, getattr(args, "hardware", "b") or "b")
 
     def add_world_arguments(self, parser: argparse.ArgumentParser) -> None:
         parser.add_argument("urdf", nargs="?", type=self._file, default=None,
