@@ -426,14 +426,11 @@ class ArmWorld:
         # its sensor's clamped to 32 bits, as the registers declare them
         self._cells = {name: register_cells(board, name) for name in ("dac", "enable", "release")}
         self._in_cells = {name: input_cells(board, name) for name in ("count", "ft")}
-        cells, ins = self._cells, self._in_cells
         #: The passive board's five registers in place (dac enable release count ft), or None.
         self._direct: tuple[list[int], list[int], list[int], memoryview, memoryview] | None = None
-        dac, on, rel = cells["dac"], cells["enable"], cells["release"]
-        count_in, ft_in = ins["count"], ins["ft"]
-        if (drive is None and dac is not None and on is not None and rel is not None
-                and count_in is not None and ft_in is not None):
-            self._direct = (dac, on, rel, count_in, ft_in)
+        #: A wired board's (see :meth:`rewire`): its enables changed on the direct path.
+        self._enabled = getattr(board, "amplifiers_enabled", None) if drive is None else None
+        self.rewire()
         self.payload = 0.0
         self._dyn = chain
         self.set_payload(float(payload))
@@ -448,6 +445,34 @@ class ArmWorld:
         if table_z is not None:
             self.set_table(table_z)
         self._publish()
+
+    def rewire(self) -> None:
+        """Look up again where the passive board's registers are kept.
+
+        The in-process register file's storage is read and written in place (the
+        servo rate's path).  A board wired onto another board's registers (a
+        :class:`~pyrt.boards.RegisterBoard` subclass between the world and a
+        board of another kind) offers ``world_cells()``: its five registers in
+        place, ``(dac, enable, release, count, ft)`` (lists for the outputs,
+        writable memoryviews of 64-bit integers for the inputs), or None
+        while it must be served register by register (``values`` and
+        ``set_input``); and may offer ``amplifiers_enabled(enable)``, called on
+        that path whenever the enables the kernel takes change.  Such a board
+        calls this whenever its answer changes (an injected fault)."""
+        self._direct = None
+        self._counts, self._ft_last = [None] * self.n, [None] * 6  # the next sets set all
+        if self.drive is not None:
+            return
+        wired = getattr(self.board, "world_cells", None)
+        if wired is not None:
+            self._direct = wired()
+            return
+        cells, ins = self._cells, self._in_cells
+        dac, on, rel = cells["dac"], cells["enable"], cells["release"]
+        count_in, ft_in = ins["count"], ins["ft"]
+        if dac is not None and on is not None and rel is not None \
+                and count_in is not None and ft_in is not None:
+            self._direct = (dac, on, rel, count_in, ft_in)
 
     # ------------------------------------------------------------ the operator's world
 
@@ -540,6 +565,8 @@ class ArmWorld:
         if on != self._on_in:
             self._k.set_enable(on)
             self._on_in = on[:]
+            if self._enabled is not None:
+                self._enabled(self._on_in)
         if release != self._release_in:
             self._k.release[:] = release
             self._release_in = release[:]
@@ -594,6 +621,8 @@ class ArmWorld:
         the wrist sensor (those that changed)."""
         k = self._k
         count, ft_cells = self._in_cells["count"], self._in_cells["ft"]
+        if self._direct is not None:
+            count, ft_cells = self._direct[3], self._direct[4]
         if count is not None and ft_cells is not None:
             count[:] = array("q", k.count.tolist())
             ft_cells[:] = array("q", k.ft.tolist())
@@ -615,6 +644,12 @@ class ArmWorld:
             self._ft_last = ft
 
     # ------------------------------------------------------------ truth
+
+    def encoder_counts(self) -> list[int]:
+        """The encoders' own counters as the last step left them (32-bit signed,
+        register order): what a board's ``count`` shows unless something between
+        (a wired board's injected fault) changes it."""
+        return self._k.counts()
 
     def truth(self) -> ArmTruth:
         """The true state (copies): for tests and the operator, never for control code."""
