@@ -426,8 +426,11 @@ class ArmWorld:
         # its sensor's clamped to 32 bits, as the registers declare them
         self._cells = {name: register_cells(board, name) for name in ("dac", "enable", "release")}
         self._in_cells = {name: input_cells(board, name) for name in ("count", "ft")}
-        #: The passive board's five registers in place (dac enable release count ft), or None.
-        self._direct: tuple[list[int], list[int], list[int], memoryview, memoryview] | None = None
+        #: The passive board's five registers in place (dac enable release count ft; ft None:
+        #: a wired board without the wrist sensor), or None.
+        self._direct: tuple[list[int], list[int], list[int], memoryview,
+                            memoryview | None] | None = None
+        self._pair = n == 2
         #: A wired board's (see :meth:`rewire`): its enables changed on the direct path.
         self._enabled = getattr(board, "amplifiers_enabled", None) if drive is None else None
         self.rewire()
@@ -454,7 +457,8 @@ class ArmWorld:
         :class:`~pyrt.boards.RegisterBoard` subclass between the world and a
         board of another kind) offers ``world_cells()``: its five registers in
         place, ``(dac, enable, release, count, ft)`` (lists for the outputs,
-        writable memoryviews of 64-bit integers for the inputs), or None
+        writable memoryviews of 64-bit integers for the inputs; ``ft`` None
+        where it has no wrist sensor), or None
         while it must be served register by register (``values`` and
         ``set_input``); and may offer ``amplifiers_enabled(enable)``, called on
         that path whenever the enables the kernel takes change.  Such a board
@@ -576,8 +580,12 @@ class ArmWorld:
         else:
             self._k_step(dt)
         self.time += dt
-        count[:] = array("q", self._k_count.tolist())
-        ft[:] = array("q", self._k_ft.tolist())
+        if self._pair:  # two joints: two stores (an array's slice assignment costs more)
+            count[0], count[1] = self._k_count.tolist()
+        else:
+            count[:] = array("q", self._k_count.tolist())
+        if ft is not None:
+            ft[:] = array("q", self._k_ft.tolist())
 
     def _step_driven(self, dt: float) -> None:
         """Hardware (a): the board's output registers into its servo, the arm
@@ -621,8 +629,12 @@ class ArmWorld:
         the wrist sensor (those that changed)."""
         k = self._k
         count, ft_cells = self._in_cells["count"], self._in_cells["ft"]
-        if self._direct is not None:
-            count, ft_cells = self._direct[3], self._direct[4]
+        direct = self._direct
+        if direct is not None:
+            direct[3][:] = array("q", k.count.tolist())
+            if direct[4] is not None:
+                direct[4][:] = array("q", k.ft.tolist())
+            return
         if count is not None and ft_cells is not None:
             count[:] = array("q", k.count.tolist())
             ft_cells[:] = array("q", k.ft.tolist())

@@ -168,8 +168,6 @@ class Joint(Component):
         self.limits_deg = config.limits_deg
         #: True while the amplifier is enabled and the servo closes the loop.
         self.engaged = False
-        #: The drive last written (DAC counts).
-        self.drive = 0
         self.no_power = 0
 
     @property
@@ -199,6 +197,11 @@ class Joint(Component):
         ]
 
     @property
+    def drive(self) -> int:
+        """The drive last written (DAC counts): the servo's count of this joint."""
+        return int(self.arm.io.dac[self.index])
+
+    @property
     def error_deg(self) -> float:
         """The servo's following error (deg) while engaged, else 0."""
         return float(self.arm.servo.error[self.index]) * _DEG if self.engaged else 0.0
@@ -214,7 +217,7 @@ class Joint(Component):
         return self.measure(self.board.read("count", self.index))
 
     def engage(self) -> None:
-        self.drive = self.no_power = 0
+        self.no_power = 0
         self.arm.io.dac[self.index] = 0  # the servo's last count: what the board holds
         self.board.write("drive", 0, self.index)
         self.board.write("enable", 1, self.index)
@@ -229,7 +232,7 @@ class Joint(Component):
                 self.board.write("enable", 0, self.index)
             finally:
                 self.engaged = False
-                self.drive = self.no_power = 0
+                self.no_power = 0
                 self.arm.io.dac[self.index] = 0
 
 
@@ -265,6 +268,11 @@ class ArmController(Component):
                                   [DRIVE_FULL_SCALE / c.torque_per_drive_nm for c in configs],
                                   DRIVE_FULL_SCALE)
         io.total -= np.array([c.zero_count for c in configs], np.int64)  # 0 at the zero count
+        # the servo task's every tick: the board's inputs, the servo's one C call (it
+        # answers the joints whose DAC count changed, or -1 when there is more to see)
+        self._inputs = board.snapshot
+        self._tick = self.servo.board_ticker(io)
+        self._dac = io.dac
         self.joints = (Joint(self, 0, configs[0]), Joint(self, 1, configs[1]))  # their bounds
         self._kc = np.array([c.kc_nm for c in configs])
         self._half_tick = 0.5 * period_ns * 1e-9  # half a servo period (s)
@@ -453,37 +461,24 @@ class ArmController(Component):
         self._now_ns = now_ns
         if self.state == "idle":
             return
-        inputs = self.board.snapshot()  # one read of every input: this tick's
+        inputs = self._inputs()  # one read of every input: this tick's
         counts = inputs[self._counts_at]
-        servo, io = self.servo, self.io
         now = now_ns * 1e-9
-        ev = self.evaluator
-        if (self._joined and ev is not None and now > self._seg_end + self._half_tick
-                and not self.station.executor.busy):
-            io.encoders(counts)
-            self._next_knot(now_ns, ev)  # the loop stalled past the segment: its knot, now
-            if self.state == "idle":
-                return
-        trip = servo.tick_board(now, io, counts)
-        if trip is not None:
-            m = float(servo.q[trip.joint]) * _DEG
-            self.fail(following_error_fault(trip.name, m + trip.error * _DEG, m,
-                                            trip.limit * _DEG) or str(trip),
-                      self.joints[trip.joint].name)
+        if self._joined and now > self._seg_end + self._half_tick:
+            ev = self.evaluator
+            if ev is not None and not self.station.executor.busy:
+                self.io.encoders(counts)
+                self._next_knot(now_ns, ev)  # the loop stalled past the segment: its knot, now
+                if self.state == "idle":
+                    return
+        changed = self._tick(now, counts)
+        if changed < 0 and self._tick_seen():  # tripped or beyond its bounds: failed
             return
-        c = io.c
-        changed = c.changed
-        if changed:  # the drives whose counts changed (those before a joint beyond its bounds)
-            writers, joints = self._drive_writers, self.joints
-            for j, v in enumerate(io.dac.tolist()):
+        if changed:  # the drives whose counts changed
+            writers = self._drive_writers
+            for j, v in enumerate(self._dac.tolist()):
                 if changed >> j & 1:
                     writers[j](v)
-                    joints[j].drive = v
-        if c.beyond >= 0:
-            jt = self.joints[c.beyond]
-            self.fail(str(joint_limit_fault(jt.config.name, float(servo.q[jt.index]) * _DEG,
-                                            jt.limits_deg)), jt.name)
-            return
         ok0, ok1 = self._ok_at
         if not (inputs[ok0] and inputs[ok1]) or self._no_power:
             self._no_power = False
@@ -493,8 +488,32 @@ class ArmController(Component):
                 if jt.no_power >= AMP_GRACE_TICKS:
                     self.fail(f"{JOINTS[jt.index]} amplifier reports no power", jt.name)
                     return
-        if self._ended and servo.late > 0:
+        if self._ended and self.servo.late > 0:
             self._settle(now_ns)
+
+    def _tick_seen(self) -> bool:
+        """The servo's tick did more than change drives: a trip (the fault), or a joint
+        beyond its bounds (the drives that changed before it written, then the fault),
+        or a stall (nothing more to do).  True when the arm failed."""
+        servo, c = self.servo, self.io.c
+        if servo.tripped:
+            trip = servo.trip
+            assert trip is not None
+            m = float(servo.q[trip.joint]) * _DEG
+            self.fail(following_error_fault(trip.name, m + trip.error * _DEG, m,
+                                            trip.limit * _DEG) or str(trip),
+                      self.joints[trip.joint].name)
+            return True
+        if c.beyond < 0:
+            return False
+        changed, writers = c.changed, self._drive_writers
+        for j, v in enumerate(self._dac.tolist()):
+            if changed >> j & 1:
+                writers[j](v)
+        jt = self.joints[c.beyond]
+        self.fail(str(joint_limit_fault(jt.config.name, float(servo.q[jt.index]) * _DEG,
+                                        jt.limits_deg)), jt.name)
+        return True
 
     def _settle(self, now_ns: int) -> None:
         s = self.servo

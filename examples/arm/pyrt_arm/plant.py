@@ -138,9 +138,6 @@ class _Wiring(RegisterBoard):
         self._drive = register_cells(board, "drive")
         self._enable = register_cells(board, "enable")
         self._count = input_cells(board, "count")
-        ft = self.cells("ft")  # the wrist sensor's, which the example's board has not
-        assert isinstance(ft, memoryview)
-        self._ft = ft
         #: the world behind it (set once the world is made): its counters, its rewiring
         self.world: ArmWorld | None = None
         #: per joint: the motor has power / the brake is released (no jam; changed in
@@ -157,16 +154,15 @@ class _Wiring(RegisterBoard):
         self._on = [0, 0]
         self._ok = [-1, -1]
 
-    def world_cells(self) -> tuple[list[int], list[int], list[int], memoryview,
-                                   memoryview] | None:
-        """The world's five registers in place on the board (dac: ``drive``, enable,
-        the jams' brake releases, count, a wrist sensor of its own), while every motor
-        has power and the counts go on as they come; else None."""
+    def world_cells(self) -> tuple[list[int], list[int], list[int], memoryview, None] | None:
+        """The world's registers in place on the board (dac: ``drive``, enable, the
+        jams' brake releases, count; no wrist sensor), while every motor has power and
+        the counts go on as they come; else None."""
         drive, enable, count = self._drive, self._enable, self._count
         if drive is None or enable is None or count is None or not self._plain \
                 or not all(self.powered):
             return None
-        return drive, enable, self.release, count, self._ft
+        return drive, enable, self.release, count, None
 
     def amplifiers_enabled(self, enable: list[int]) -> None:
         """The world took new enables (in place, every motor powered): ``amp_ok`` follows."""
