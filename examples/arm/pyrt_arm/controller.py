@@ -411,8 +411,8 @@ class ArmController(Component):
         k[7] = np.sign(qd) * self._kc
         # on the loop's clock: where the last segment ended, or now for a motion's first
         servo = self.servo
-        start = servo.end if self._joined else max(servo.now + servo.period,
-                                                    self._now_ns * 1e-9)
+        start = self._seg_end if self._joined else max(servo.now + servo.period,
+                                                        self._now_ns * 1e-9)
         servo.load(duration, quintic=False, start=start)
         self._seg_end = servo.end
         self._ended = False
@@ -437,12 +437,12 @@ class ArmController(Component):
     def _next_knot(self, now_ns: int, ev: Evaluator) -> None:
         """The evaluator's knot for the time that really passed as the servo's next
         segment; the knots a stall of the loop passed over are evaluated on the way."""
-        now, half = now_ns * 1e-9, 0.5 * self.servo.period
-        if self._joined and self.servo.end > now + half:
+        held = now_ns * 1e-9 + self._half_tick  # (the servo's end is _seg_end, kept with it)
+        if self._joined and self._seg_end > held:
             return  # the segment running holds now: its knot is made
         try:
             knot = ev.tick()
-            while self._joined and self.servo.end + knot.period <= now + half:
+            while self._joined and self._seg_end + knot.period <= held:
                 self._load(knot.q, knot.qd, knot.period)  # a knot the stall passed over
                 knot = ev.tick()
         except MotionFault as exc:
