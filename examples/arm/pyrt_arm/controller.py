@@ -275,6 +275,7 @@ class ArmController(Component):
         self._dac = io.dac
         self.joints = (Joint(self, 0, configs[0]), Joint(self, 1, configs[1]))  # their bounds
         self._kc = np.array([c.kc_nm for c in configs])
+        self._kc_list = self._kc.tolist()
         self._half_tick = 0.5 * period_ns * 1e-9  # half a servo period (s)
         self.limits = MotionLimits(tuple(math.radians(v) for v in VMAX_DEG_S),
                                    tuple(math.radians(a) for a in AMAX_DEG_S2))
@@ -408,7 +409,8 @@ class ArmController(Component):
         k[0:2] = k[3:5]
         k[3], k[4] = q, qd
         k[6] = k[7]  # the Coulomb friction fed forward, in the motion's direction at B
-        k[7] = np.sign(qd) * self._kc
+        k[7] = [c if v > 0.0 else (-c if v < 0.0 else 0.0)  # kc sign(qd), on floats
+                for c, v in zip(self._kc_list, qd.tolist(), strict=False)]
         # on the loop's clock: where the last segment ended, or now for a motion's first
         servo = self.servo
         start = self._seg_end if self._joined else max(servo.now + servo.period,
@@ -448,7 +450,9 @@ class ArmController(Component):
         except MotionFault as exc:
             self.fail(f"trajectory: {exc}", self.name)
             return
-        if knot.qd.any() or knot.qdd.any() or (knot.q != self.servo.knots[3]).any():
+        # moving, or not where the last knot was (on floats: an array's any() costs more)
+        if any(knot.qd.tolist()) or any(knot.qdd.tolist()) \
+                or knot.q.tolist() != self.servo.knots[3].tolist():
             self._load(knot.q, knot.qd, knot.period)
         else:
             self._joined = False
