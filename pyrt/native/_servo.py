@@ -400,7 +400,9 @@ class Servo:
             if len(counts) != n:
                 raise NativeInputError(f"tick_board: {n} counts of this servo's board, "
                                        f"got {len(counts)}")
-            raise_for_status(fn(c, now, bc, counts), "servo tick", _tick_why)
+            rc = fn(c, now, bc, counts)
+            if rc:  # (raise_for_status only for a refusal: every tick's call saved)
+                raise_for_status(rc, "servo tick", _tick_why)
             return bc.outcome  # type: ignore[no-any-return]
 
         return tick

@@ -263,6 +263,7 @@ class ArmController(Component):
         # each joint's drive written through a write bound once (a process image's:
         # one call into the image a write)
         self._drive_writers = [bound_writer(board, "drive", j) for j in range(len(configs))]
+        self._drive0, self._drive1 = self._drive_writers
         counts = board.snapshot()[self._counts_at]
         self.io = io = ServoBoard(self.servo, [c.counts_per_deg * _DEG for c in configs], counts,
                                   [DRIVE_FULL_SCALE / c.torque_per_drive_nm for c in configs],
@@ -478,11 +479,12 @@ class ArmController(Component):
         changed = self._tick(now, counts)
         if changed < 0 and self._tick_seen():  # tripped or beyond its bounds: failed
             return
-        if changed:  # the drives whose counts changed
-            writers = self._drive_writers
-            for j, v in enumerate(self._dac.tolist()):
-                if changed >> j & 1:
-                    writers[j](v)
+        if changed:  # the drives whose counts changed (the two joints')
+            d0, d1 = self._dac.tolist()
+            if changed & 1:
+                self._drive0(d0)
+            if changed & 2:
+                self._drive1(d1)
         ok0, ok1 = self._ok_at
         if not (inputs[ok0] and inputs[ok1]) or self._no_power:
             self._no_power = False
