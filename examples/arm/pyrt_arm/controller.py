@@ -277,6 +277,7 @@ class ArmController(Component):
         self.joints = (Joint(self, 0, configs[0]), Joint(self, 1, configs[1]))  # their bounds
         self._kc = np.array([c.kc_nm for c in configs])
         self._kc_list = self._kc.tolist()
+        self._ffb = self.servo.knots[7]  # the feed-forward at knot B (a view: its row)
         self._half_tick = 0.5 * period_ns * 1e-9  # half a servo period (s)
         self.limits = MotionLimits(tuple(math.radians(v) for v in VMAX_DEG_S),
                                    tuple(math.radians(a) for a in AMAX_DEG_S2))
@@ -410,8 +411,9 @@ class ArmController(Component):
         k[0:2] = k[3:5]
         k[3], k[4] = q, qd
         k[6] = k[7]  # the Coulomb friction fed forward, in the motion's direction at B
-        k[7] = [c if v > 0.0 else (-c if v < 0.0 else 0.0)  # kc sign(qd), on floats
-                for c, v in zip(self._kc_list, qd.tolist(), strict=False)]
+        (c0, c1), (v0, v1), ff = self._kc_list, qd.tolist(), self._ffb
+        ff[0] = c0 if v0 > 0.0 else (-c0 if v0 < 0.0 else 0.0)  # kc sign(qd), on floats
+        ff[1] = c1 if v1 > 0.0 else (-c1 if v1 < 0.0 else 0.0)
         # on the loop's clock: where the last segment ended, or now for a motion's first
         servo = self.servo
         start = self._seg_end if self._joined else max(servo.now + servo.period,
