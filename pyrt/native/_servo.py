@@ -347,8 +347,8 @@ class Servo:
             if start.__class__ is not float:
                 start = _time("start", start, finite=False)
             rc = self._load_at(self._c, self._knots_p, float(duration), order, start)
-        if rc:  # (the words made only for a refusal: every segment's call saved)
-            raise_for_status(rc, f"servo segment of {duration!r} s", _load_why)
+        # (no duration in the words: a float's repr every segment cost more than the load)
+        raise_for_status(rc, "servo segment", _load_why)
 
     def tick(self, q: ArrayLike | None = None, now: float | None = None) -> ServoTrip | None:
         """One servo tick on the measured joints ``q`` (None: :attr:`q` as
@@ -401,9 +401,7 @@ class Servo:
             if len(counts) != n:
                 raise NativeInputError(f"tick_board: {n} counts of this servo's board, "
                                        f"got {len(counts)}")
-            rc = fn(c, now, bc, counts)
-            if rc:  # (raise_for_status only for a refusal: every tick's call saved)
-                raise_for_status(rc, "servo tick", _tick_why)
+            raise_for_status(fn(c, now, bc, counts), "servo tick", _tick_why)
             return bc.outcome  # type: ignore[no-any-return]
 
         return tick
