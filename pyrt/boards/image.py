@@ -722,6 +722,10 @@ def _extender(snap: Callable[[], list[int]]) -> Callable[[list[int]], None]:
     return extend_with
 
 
+#: A register of at most this many slots is written by a block writer slot by slot.
+_FEW_SLOTS = 4
+
+
 class ImageRegisters:
     """One board of an :class:`ImageBackend`: ``read(name, index=0)`` and
     ``write(name, value, index=0)`` as a :class:`~pyrt.boards.registers.RegisterBoard`
@@ -811,7 +815,9 @@ class ImageRegisters:
             raise ValueError(f"{self.kind.name} register {name!r} is not an output")
         client = self.client
         count = reg.count
-        if client.has_link:
+        if client.has_link or count <= _FEW_SLOTS:
+            # over a link, and for a register of a few slots (each slot's bound write
+            # is quicker than the block's bookkeeping): slot by slot
             each = [self.writer(name, i) for i in range(count)]
 
             def write_each(values: Sequence[int], mask: int) -> None:
@@ -840,8 +846,10 @@ class ImageRegisters:
                     raise ValueError(f"{name}: expected {count} values, got {len(vals)}")
                 if current[first:end] != vals:
                     current[first:end] = vals
-                    changed.update(zip(slots, vals, strict=True))
-                    outputs.update(zip(keys, vals, strict=True))
+                    # the lengths are checked above (a strict zip's end costs more than
+                    # the two stores of a small register)
+                    changed.update(zip(slots, vals, strict=False))
+                    outputs.update(zip(keys, vals, strict=False))
                 if not (client.in_tick and client.phased):
                     client.write_now()
                 return

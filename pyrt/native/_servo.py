@@ -347,7 +347,8 @@ class Servo:
             if start.__class__ is not float:
                 start = _time("start", start, finite=False)
             rc = self._load_at(self._c, self._knots_p, float(duration), order, start)
-        raise_for_status(rc, f"servo segment of {duration!r} s", _load_why)
+        # (no duration in the words: a float's repr every segment cost more than the load)
+        raise_for_status(rc, "servo segment", _load_why)
 
     def tick(self, q: ArrayLike | None = None, now: float | None = None) -> ServoTrip | None:
         """One servo tick on the measured joints ``q`` (None: :attr:`q` as

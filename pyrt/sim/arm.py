@@ -426,14 +426,14 @@ class ArmWorld:
         # its sensor's clamped to 32 bits, as the registers declare them
         self._cells = {name: register_cells(board, name) for name in ("dac", "enable", "release")}
         self._in_cells = {name: input_cells(board, name) for name in ("count", "ft")}
-        cells, ins = self._cells, self._in_cells
-        #: The passive board's five registers in place (dac enable release count ft), or None.
-        self._direct: tuple[list[int], list[int], list[int], memoryview, memoryview] | None = None
-        dac, on, rel = cells["dac"], cells["enable"], cells["release"]
-        count_in, ft_in = ins["count"], ins["ft"]
-        if (drive is None and dac is not None and on is not None and rel is not None
-                and count_in is not None and ft_in is not None):
-            self._direct = (dac, on, rel, count_in, ft_in)
+        #: The passive board's five registers in place (dac enable release count ft; ft None:
+        #: a wired board without the wrist sensor), or None.
+        self._direct: tuple[list[int], list[int], list[int], memoryview,
+                            memoryview | None] | None = None
+        self._pair = n == 2
+        #: A wired board's (see :meth:`rewire`): its enables changed on the direct path.
+        self._enabled = getattr(board, "amplifiers_enabled", None) if drive is None else None
+        self.rewire()
         self.payload = 0.0
         self._dyn = chain
         self.set_payload(float(payload))
@@ -448,6 +448,35 @@ class ArmWorld:
         if table_z is not None:
             self.set_table(table_z)
         self._publish()
+
+    def rewire(self) -> None:
+        """Look up again where the passive board's registers are kept.
+
+        The in-process register file's storage is read and written in place (the
+        servo rate's path).  A board wired onto another board's registers (a
+        :class:`~pyrt.boards.RegisterBoard` subclass between the world and a
+        board of another kind) offers ``world_cells()``: its five registers in
+        place, ``(dac, enable, release, count, ft)`` (lists for the outputs,
+        writable memoryviews of 64-bit integers for the inputs; ``ft`` None
+        where it has no wrist sensor), or None
+        while it must be served register by register (``values`` and
+        ``set_input``); and may offer ``amplifiers_enabled(enable)``, called on
+        that path whenever the enables the kernel takes change.  Such a board
+        calls this whenever its answer changes (an injected fault)."""
+        self._direct = None
+        self._counts, self._ft_last = [None] * self.n, [None] * 6  # the next sets set all
+        if self.drive is not None:
+            return
+        wired = getattr(self.board, "world_cells", None)
+        if wired is not None:
+            self._direct = wired()
+            return
+        cells, ins = self._cells, self._in_cells
+        dac, on, rel = cells["dac"], cells["enable"], cells["release"]
+        count_in, ft_in = ins["count"], ins["ft"]
+        if dac is not None and on is not None and rel is not None \
+                and count_in is not None and ft_in is not None:
+            self._direct = (dac, on, rel, count_in, ft_in)
 
     # ------------------------------------------------------------ the operator's world
 
@@ -540,6 +569,8 @@ class ArmWorld:
         if on != self._on_in:
             self._k.set_enable(on)
             self._on_in = on[:]
+            if self._enabled is not None:
+                self._enabled(self._on_in)
         if release != self._release_in:
             self._k.release[:] = release
             self._release_in = release[:]
@@ -549,8 +580,12 @@ class ArmWorld:
         else:
             self._k_step(dt)
         self.time += dt
-        count[:] = array("q", self._k_count.tolist())
-        ft[:] = array("q", self._k_ft.tolist())
+        if self._pair:  # two joints: two stores (an array's slice assignment costs more)
+            count[0], count[1] = self._k_count.tolist()
+        else:
+            count[:] = array("q", self._k_count.tolist())
+        if ft is not None:
+            ft[:] = array("q", self._k_ft.tolist())
 
     def _step_driven(self, dt: float) -> None:
         """Hardware (a): the board's output registers into its servo, the arm
@@ -594,6 +629,12 @@ class ArmWorld:
         the wrist sensor (those that changed)."""
         k = self._k
         count, ft_cells = self._in_cells["count"], self._in_cells["ft"]
+        direct = self._direct
+        if direct is not None:
+            direct[3][:] = array("q", k.count.tolist())
+            if direct[4] is not None:
+                direct[4][:] = array("q", k.ft.tolist())
+            return
         if count is not None and ft_cells is not None:
             count[:] = array("q", k.count.tolist())
             ft_cells[:] = array("q", k.ft.tolist())
@@ -615,6 +656,12 @@ class ArmWorld:
             self._ft_last = ft
 
     # ------------------------------------------------------------ truth
+
+    def encoder_counts(self) -> list[int]:
+        """The encoders' own counters as the last step left them (32-bit signed,
+        register order): what a board's ``count`` shows unless something between
+        (a wired board's injected fault) changes it."""
+        return self._k.counts()
 
     def truth(self) -> ArmTruth:
         """The true state (copies): for tests and the operator, never for control code."""

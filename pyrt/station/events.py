@@ -168,6 +168,8 @@ class StationEvents:
         if self._declared:
             self._watch_robots()
         busy = self.busy()
+        if busy == self._moving:  # every tick but a move's first and last: nothing to do
+            return
         if self._moving and not busy:
             if not self._declared and self._robots:
                 try:

@@ -100,14 +100,14 @@ class ArmPhysics:
     def __init__(self, plant: Plant) -> None:
         self.plant = plant
         self.board = plant.board
-        self._advance = plant.world.step
-        self._last_ns: int | None = None
+        #: ``step`` itself, bound once (the world's :meth:`~pyrt.sim.arm.ArmWorld.advance_to`):
+        #: what the station's read phase calls every tick.
+        self.stepper = plant.world.advance_to
 
     def step(self, now_ns: int) -> None:
-        """Advance the arm to ``now_ns`` (dt = now - last)."""
-        last, self._last_ns = self._last_ns, now_ns
-        if last is not None and now_ns > last:
-            self._advance((now_ns - last) * 1e-9)
+        """Advance the arm to ``now_ns`` (dt = now - last; nothing on the first call or
+        for a time not later than the last)."""
+        self.stepper(now_ns)
 
     def info(self) -> dict[str, object]:
         """The world's truth for ``sim show`` over tcp (board-sim's INFO)."""

@@ -168,8 +168,6 @@ class Joint(Component):
         self.limits_deg = config.limits_deg
         #: True while the amplifier is enabled and the servo closes the loop.
         self.engaged = False
-        #: The drive last written (DAC counts).
-        self.drive = 0
         self.no_power = 0
 
     @property
@@ -199,6 +197,11 @@ class Joint(Component):
         ]
 
     @property
+    def drive(self) -> int:
+        """The drive last written (DAC counts): the servo's count of this joint."""
+        return int(self.arm.io.dac[self.index])
+
+    @property
     def error_deg(self) -> float:
         """The servo's following error (deg) while engaged, else 0."""
         return float(self.arm.servo.error[self.index]) * _DEG if self.engaged else 0.0
@@ -214,7 +217,7 @@ class Joint(Component):
         return self.measure(self.board.read("count", self.index))
 
     def engage(self) -> None:
-        self.drive = self.no_power = 0
+        self.no_power = 0
         self.arm.io.dac[self.index] = 0  # the servo's last count: what the board holds
         self.board.write("drive", 0, self.index)
         self.board.write("enable", 1, self.index)
@@ -229,7 +232,7 @@ class Joint(Component):
                 self.board.write("enable", 0, self.index)
             finally:
                 self.engaged = False
-                self.drive = self.no_power = 0
+                self.no_power = 0
                 self.arm.io.dac[self.index] = 0
 
 
@@ -260,13 +263,21 @@ class ArmController(Component):
         # each joint's drive written through a write bound once (a process image's:
         # one call into the image a write)
         self._drive_writers = [bound_writer(board, "drive", j) for j in range(len(configs))]
+        self._drive0, self._drive1 = self._drive_writers
         counts = board.snapshot()[self._counts_at]
         self.io = io = ServoBoard(self.servo, [c.counts_per_deg * _DEG for c in configs], counts,
                                   [DRIVE_FULL_SCALE / c.torque_per_drive_nm for c in configs],
                                   DRIVE_FULL_SCALE)
         io.total -= np.array([c.zero_count for c in configs], np.int64)  # 0 at the zero count
+        # the servo task's every tick: the board's inputs, the servo's one C call (it
+        # answers the joints whose DAC count changed, or -1 when there is more to see)
+        self._inputs = board.snapshot
+        self._tick = self.servo.board_ticker(io)
+        self._dac = io.dac
         self.joints = (Joint(self, 0, configs[0]), Joint(self, 1, configs[1]))  # their bounds
         self._kc = np.array([c.kc_nm for c in configs])
+        self._kc_list = self._kc.tolist()
+        self._ffb = self.servo.knots[7]  # the feed-forward at knot B (a view: its row)
         self._half_tick = 0.5 * period_ns * 1e-9  # half a servo period (s)
         self.limits = MotionLimits(tuple(math.radians(v) for v in VMAX_DEG_S),
                                    tuple(math.radians(a) for a in AMAX_DEG_S2))
@@ -400,11 +411,13 @@ class ArmController(Component):
         k[0:2] = k[3:5]
         k[3], k[4] = q, qd
         k[6] = k[7]  # the Coulomb friction fed forward, in the motion's direction at B
-        k[7] = np.sign(qd) * self._kc
+        (c0, c1), (v0, v1), ff = self._kc_list, qd.tolist(), self._ffb
+        ff[0] = c0 if v0 > 0.0 else (-c0 if v0 < 0.0 else 0.0)  # kc sign(qd), on floats
+        ff[1] = c1 if v1 > 0.0 else (-c1 if v1 < 0.0 else 0.0)
         # on the loop's clock: where the last segment ended, or now for a motion's first
         servo = self.servo
-        start = servo.end if self._joined else max(servo.now + servo.period,
-                                                    self._now_ns * 1e-9)
+        start = self._seg_end if self._joined else max(servo.now + servo.period,
+                                                        self._now_ns * 1e-9)
         servo.load(duration, quintic=False, start=start)
         self._seg_end = servo.end
         self._ended = False
@@ -429,18 +442,20 @@ class ArmController(Component):
     def _next_knot(self, now_ns: int, ev: Evaluator) -> None:
         """The evaluator's knot for the time that really passed as the servo's next
         segment; the knots a stall of the loop passed over are evaluated on the way."""
-        now, half = now_ns * 1e-9, 0.5 * self.servo.period
-        if self._joined and self.servo.end > now + half:
+        held = now_ns * 1e-9 + self._half_tick  # (the servo's end is _seg_end, kept with it)
+        if self._joined and self._seg_end > held:
             return  # the segment running holds now: its knot is made
         try:
             knot = ev.tick()
-            while self._joined and self.servo.end + knot.period <= now + half:
+            while self._joined and self._seg_end + knot.period <= held:
                 self._load(knot.q, knot.qd, knot.period)  # a knot the stall passed over
                 knot = ev.tick()
         except MotionFault as exc:
             self.fail(f"trajectory: {exc}", self.name)
             return
-        if knot.qd.any() or knot.qdd.any() or (knot.q != self.servo.knots[3]).any():
+        # moving, or not where the last knot was (on floats: an array's any() costs more)
+        if any(knot.qd.tolist()) or any(knot.qdd.tolist()) \
+                or knot.q.tolist() != self.servo.knots[3].tolist():
             self._load(knot.q, knot.qd, knot.period)
         else:
             self._joined = False
@@ -453,37 +468,25 @@ class ArmController(Component):
         self._now_ns = now_ns
         if self.state == "idle":
             return
-        inputs = self.board.snapshot()  # one read of every input: this tick's
+        inputs = self._inputs()  # one read of every input: this tick's
         counts = inputs[self._counts_at]
-        servo, io = self.servo, self.io
         now = now_ns * 1e-9
-        ev = self.evaluator
-        if (self._joined and ev is not None and now > self._seg_end + self._half_tick
-                and not self.station.executor.busy):
-            io.encoders(counts)
-            self._next_knot(now_ns, ev)  # the loop stalled past the segment: its knot, now
-            if self.state == "idle":
-                return
-        trip = servo.tick_board(now, io, counts)
-        if trip is not None:
-            m = float(servo.q[trip.joint]) * _DEG
-            self.fail(following_error_fault(trip.name, m + trip.error * _DEG, m,
-                                            trip.limit * _DEG) or str(trip),
-                      self.joints[trip.joint].name)
+        if self._joined and now > self._seg_end + self._half_tick:
+            ev = self.evaluator
+            if ev is not None and not self.station.executor.busy:
+                self.io.encoders(counts)
+                self._next_knot(now_ns, ev)  # the loop stalled past the segment: its knot, now
+                if self.state == "idle":
+                    return
+        changed = self._tick(now, counts)
+        if changed < 0 and self._tick_seen():  # tripped or beyond its bounds: failed
             return
-        c = io.c
-        changed = c.changed
-        if changed:  # the drives whose counts changed (those before a joint beyond its bounds)
-            writers, joints = self._drive_writers, self.joints
-            for j, v in enumerate(io.dac.tolist()):
-                if changed >> j & 1:
-                    writers[j](v)
-                    joints[j].drive = v
-        if c.beyond >= 0:
-            jt = self.joints[c.beyond]
-            self.fail(str(joint_limit_fault(jt.config.name, float(servo.q[jt.index]) * _DEG,
-                                            jt.limits_deg)), jt.name)
-            return
+        if changed:  # the drives whose counts changed (the two joints')
+            d0, d1 = self._dac.tolist()
+            if changed & 1:
+                self._drive0(d0)
+            if changed & 2:
+                self._drive1(d1)
         ok0, ok1 = self._ok_at
         if not (inputs[ok0] and inputs[ok1]) or self._no_power:
             self._no_power = False
@@ -493,8 +496,32 @@ class ArmController(Component):
                 if jt.no_power >= AMP_GRACE_TICKS:
                     self.fail(f"{JOINTS[jt.index]} amplifier reports no power", jt.name)
                     return
-        if self._ended and servo.late > 0:
+        if self._ended and self.servo.late > 0:
             self._settle(now_ns)
+
+    def _tick_seen(self) -> bool:
+        """The servo's tick did more than change drives: a trip (the fault), or a joint
+        beyond its bounds (the drives that changed before it written, then the fault),
+        or a stall (nothing more to do).  True when the arm failed."""
+        servo, c = self.servo, self.io.c
+        if servo.tripped:
+            trip = servo.trip
+            assert trip is not None
+            m = float(servo.q[trip.joint]) * _DEG
+            self.fail(following_error_fault(trip.name, m + trip.error * _DEG, m,
+                                            trip.limit * _DEG) or str(trip),
+                      self.joints[trip.joint].name)
+            return True
+        if c.beyond < 0:
+            return False
+        changed, writers = c.changed, self._drive_writers
+        for j, v in enumerate(self._dac.tolist()):
+            if changed >> j & 1:
+                writers[j](v)
+        jt = self.joints[c.beyond]
+        self.fail(str(joint_limit_fault(jt.config.name, float(servo.q[jt.index]) * _DEG,
+                                        jt.limits_deg)), jt.name)
+        return True
 
     def _settle(self, now_ns: int) -> None:
         s = self.servo

@@ -123,11 +123,12 @@ class _Wiring(RegisterBoard):
     ``board`` (the example's): what the world reads of its outputs and writes
     to its inputs goes to and from ``board`` at once (see the module text).
 
-    On the example's in-process register file (``sim:``) the wiring reads the
+    On the example's in-process register file (``sim:``) the world reads the
     board's ``drive`` and ``enable`` and writes its ``count`` in place
-    (:func:`pyrt.boards.armservo.register_cells`: the values the world gives
-    are 32-bit counts, as ``count`` declares them); on any other board,
-    through ``values`` and ``set_input``."""
+    (:meth:`world_cells`; the world's ``amp_ok`` follows the enables, through
+    :meth:`amplifiers_enabled`) while every motor has power and no encoder is
+    shifted or frozen; otherwise, and on any other board, register by register
+    through ``values`` and ``set_input``, which apply the faults."""
 
     def __init__(self, board: RegisterBoard) -> None:
         super().__init__(arm_servo_kind(2))
@@ -137,20 +138,39 @@ class _Wiring(RegisterBoard):
         self._drive = register_cells(board, "drive")
         self._enable = register_cells(board, "enable")
         self._count = input_cells(board, "count")
-        #: per joint: the motor has power / the brake is released (no jam)
+        #: the world behind it (set once the world is made): its counters, its rewiring
+        self.world: ArmWorld | None = None
+        #: per joint: the motor has power / the brake is released (no jam; changed in
+        #: place)
         self.powered = [True, True]
         self.release = [1, 1]
         #: per joint: the counter's shift (a preset, a reconnection), and its value
         #: while the encoder is disconnected (None: connected)
         self.offset = [0, 0]
         self.frozen: list[int | None] = [None, None]
-        #: per joint: the world's own counter (what the encoder really reads)
-        self.raw = [0, 0]
         self.changed = True          # the power changed: enables and amp_ok again
         self._plain = True           # no encoder offset and none frozen: counts as they come
         self._on_in: list[int] = []
         self._on = [0, 0]
         self._ok = [-1, -1]
+
+    def world_cells(self) -> tuple[list[int], list[int], list[int], memoryview, None] | None:
+        """The world's registers in place on the board (dac: ``drive``, enable, the
+        jams' brake releases, count; no wrist sensor), while every motor has power and
+        the counts go on as they come; else None."""
+        drive, enable, count = self._drive, self._enable, self._count
+        if drive is None or enable is None or count is None or not self._plain \
+                or not all(self.powered):
+            return None
+        return drive, enable, self.release, count, None
+
+    def amplifiers_enabled(self, enable: list[int]) -> None:
+        """The world took new enables (in place, every motor powered): ``amp_ok`` follows."""
+        for j, e in enumerate(enable):
+            ok = 1 if e else 0
+            if ok != self._ok[j]:
+                self._set("amp_ok", ok, j)
+                self._ok[j] = ok
 
     def values(self, name: str) -> list[int]:
         if name == "dac":  # the world copies what it keeps: the board's own list will do
@@ -163,11 +183,7 @@ class _Wiring(RegisterBoard):
             if on != self._on_in or self.changed:
                 self._on_in, self.changed = on[:], False
                 self._on = [e if p else 0 for e, p in zip(on, self.powered, strict=True)]
-                for j, e in enumerate(self._on):
-                    ok = 1 if e else 0
-                    if ok != self._ok[j]:
-                        self._set("amp_ok", ok, j)
-                        self._ok[j] = ok
+                self.amplifiers_enabled(self._on)
             return self._on
         if name == "release":
             return self.release
@@ -175,7 +191,6 @@ class _Wiring(RegisterBoard):
 
     def set_input(self, name: str, value: int, index: int = 0) -> None:
         if name == "count":
-            self.raw[index] = value
             count = self._count
             if self._plain and count is not None:
                 count[index] = value
@@ -186,16 +201,24 @@ class _Wiring(RegisterBoard):
             return
         super().set_input(name, value, index)
 
+    def raw(self, j: int) -> int:
+        """Joint ``j``'s counter as the world's encoder has it (before any fault)."""
+        assert self.world is not None
+        return self.world.encoder_counts()[j]
+
     def rewired(self) -> None:
-        """An encoder's offset or freeze changed: whether counts go on as they come."""
+        """An encoder's offset or freeze, or a motor's power, changed: whether counts
+        go on as they come, and the world's path (in place or register by register)."""
         self._plain = not any(self.offset) and all(f is None for f in self.frozen)
+        if self.world is not None:
+            self.world.rewire()
 
     def publish(self, j: int) -> None:
         """Joint ``j``'s counter onto the board: frozen, or the encoder's shifted."""
         self.rewired()
         frozen = self.frozen[j]
         self._set("count", frozen if frozen is not None
-                  else wrap_int32(self.raw[j] + self.offset[j]), j)
+                  else wrap_int32(self.raw(j) + self.offset[j]), j)
 
 
 class Plant:
@@ -228,6 +251,7 @@ class Plant:
                               gravity=(0.0, 0.0, 0.0), max_step=float(max_step_s),
                               stop_margin=math.radians(STOP_MARGIN_DEG), payload=PAYLOAD_KG,
                               ft_noise=(0.0, 0.0), brake=[JAM_NM, JAM_NM])
+        w.world = self.world
         if qd != (0.0, 0.0):
             self.world.set_state(np.radians(q), np.radians(qd))
         self._cpd = [m.counts_per_joint_rev / 360.0 for m in MOTORS]
@@ -276,7 +300,7 @@ class Plant:
         if w.frozen[j] is not None:
             w.frozen[j] = value
         else:
-            w.offset[j] = value - w.raw[j]
+            w.offset[j] = value - w.raw(j)
         w.publish(j)
 
     # -- faults ------------------------------------------------------------------------
@@ -284,10 +308,7 @@ class Plant:
     def jam(self, joint: int, on: bool = True) -> None:
         """Jam ``joint`` (a brake): it stops at once and stays put until released."""
         j = _check_joint(joint)
-        w = self._wiring
-        release = list(w.release)
-        release[j] = 0 if on else 1
-        w.release = release  # a new list: the world sees the change
+        self._wiring.release[j] = 0 if on else 1  # in place: the world compares it each step
         if on:
             t = self.world.truth()
             qd = t.qd.copy()
@@ -304,7 +325,7 @@ class Plant:
             w.frozen[j] = self.count(j)
             w.rewired()
         elif not on and frozen is not None:
-            w.offset[j] = frozen - w.raw[j]
+            w.offset[j] = frozen - w.raw(j)
             w.frozen[j] = None
             w.publish(j)
 
@@ -314,6 +335,7 @@ class Plant:
         j = _check_joint(joint)
         self._wiring.powered[j] = not on
         self._wiring.changed = True
+        self._wiring.rewired()
 
     def motor_powered(self, joint: int) -> bool:
         """False while the power of ``joint``'s motor is cut (:meth:`motor_off`): what an

@@ -79,7 +79,7 @@ class ArmStation(Station):
             physics = world.plant
             assert isinstance(physics, ArmPhysics)
             self.plant = physics.plant
-            self.attach_world(physics.step, "physics")
+            self.attach_world(physics.stepper, "physics")
         self.controller = ctl = ArmController(self, self.board, loop.period_ns,
                                               (SHOULDER, ELBOW))
         self.queue = ReadyQueue.general(name="arm")

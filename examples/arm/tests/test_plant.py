@@ -200,26 +200,41 @@ class _CheckedBoard(RegisterBoard):
 
 
 def test_the_wiring_in_place_and_through_the_checked_calls_gives_the_same_arm():
-    """Behind the in-process board (registers moved in place) and behind a board reached only through values()/set_input(), the same drives give the same counters, amp_ok and true angles, through a disconnected encoder, a preset and a motor cut."""
+    """Behind the in-process board (the world's registers in place on it while no fault is applied) and behind a board reached only through values()/set_input(), the same drives give the same counters, amp_ok and true angles, through a motor cut and restored, a jam and its release, a disconnected encoder, a preset and a motor cut."""
     fast = plant_at((10.0, 40.0))
     slow = Plant(_CheckedBoard(SERVO), q_deg=(10.0, 40.0))
     assert fast._wiring._count is not None and slow._wiring._count is None  # the two paths
-    for k in range(400):
+    assert fast.world._direct is not None and slow.world._direct is None
+    direct = []
+    for k in range(450):
         t = k * MS
         for p in (fast, slow):
-            if k == 100:
+            if k == 60:
+                p.motor_off(0)
+            elif k == 90:
+                p.motor_off(0, False)
+            elif k == 120:
+                p.jam(1)
+            elif k == 150:
+                p.jam(1, False)
+            elif k == 200:
                 p.disconnect_encoder(1)
-            elif k == 180:
+            elif k == 260:
                 p.disconnect_encoder(1, False)
-            elif k == 250:
-                p.preset_encoder(0, 2**31 - 50)
             elif k == 300:
+                p.preset_encoder(0, 2**31 - 50)
+            elif k == 350:
                 p.motor_off(1)
-            drive(p, (0.4 * math.sin(2 * math.pi * 2.0 * t), 0.3 * math.cos(2 * math.pi * t)))
+            drive(p, (0.4 * math.sin(2 * math.pi * 2.0 * t), 0.3 * math.cos(2 * math.pi * t)),
+                  enable=0 if 20 <= k < 30 else 1)
             p.step(MS)
+        direct.append(fast.world._direct is not None)
         assert fast.board.values("count") == slow.board.values("count")
         assert fast.board.values("amp_ok") == slow.board.values("amp_ok")
         assert fast.q_deg == slow.q_deg
+    # in place but while a motor is cut or an encoder frozen or shifted (for good, once
+    # reconnected: its counts stay shifted)
+    assert direct == [not (60 <= k < 90 or k >= 200) for k in range(450)]
     assert fast.active_faults() == slow.active_faults() == ["q1 motor off"]
 
 
