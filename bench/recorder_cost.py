@@ -76,7 +76,7 @@ DEFAULT_ROWS = ("image", "image + recorder", "image + black box", "black box, no
 #: Loop seconds a row is timed, and measured under callgrind (a whole number of
 #: the black box's snapshot intervals: 2 s on the gripper, 5 s on the manipulator).
 SECONDS = {"gripper": 10.0, "manipulator": 30.0}
-CG_SECONDS = {"gripper": 4.0, "manipulator": 10.0}
+CG_SECONDS = {"gripper": 4.0, "manipulator": 15.0}
 #: Where the client-request module is built (``PYRT_BENCH_CG``: its directory).
 CG_ENV = "PYRT_BENCH_CG"
 
