@@ -160,6 +160,7 @@ def one_row(robot: str, row: str, seconds: float) -> dict:
         path = t / "run.pj" if row == "image + recorder" else None
         box = 10.0 if "black box" in row else 0.0
         rig = bj.build(robot, boards, clock, t, path, box)
+        counted = _count_black_box(getattr(rig.recorder, "fault_box", None))
         _strip_black_box(rig, row)
         if row == "image + empty handler":
             # what the loop charges for one more timed handler at the recorder's place
@@ -183,8 +184,6 @@ def one_row(robot: str, row: str, seconds: float) -> dict:
         i0 = len(clock.wall)
         tick0 = rig.loop.tick_index
         w0, o0 = bj.writer_cpu_ns(), outside[0]
-        box = getattr(rig.recorder, "fault_box", None)
-        counted = _count_black_box(box)
         cg_start()
         bj.drive(rig, seconds)
         cg_stop()
@@ -368,7 +367,8 @@ def callgrind_row(tree: Path, robot: str, row: str, requests: Path) -> dict:
                 other += n
     ticks = max(1, r["ticks"])
     return {"loop": loop / ticks, "writer": writer / ticks, "other": other / ticks,
-            "ticks": r["ticks"]}
+            "ticks": r["ticks"], "samples": r.get("samples", 0),
+            "snapshots": r.get("snapshots", 0)}
 
 
 def _pct(xs: list[int], p: float) -> float:
@@ -490,8 +490,8 @@ def main() -> None:
         print(f"\n{robot}, under callgrind ({a.callgrind} x {CG_SECONDS[robot]:g} s a row): "
               "instructions a tick")
         print("| tree | row | ticks | loop thread | added | writer thread | "
-              "added, both threads |")
-        print("|---|---|---:|---:|---:|---:|---:|")
+              "added, both threads | samples, snapshots in it |")
+        print("|---|---|---:|---:|---:|---:|---:|---|")
         for tree in trees:
             base = instr[(tree, robot, "image")]
             bl = statistics.fmean(r["loop"] for r in base)
@@ -502,7 +502,10 @@ def main() -> None:
                 wr = statistics.fmean(r["writer"] for r in rs)
                 extra = (f"{_share(lp, bl)} | {wr:,.0f} | {_share(lp + wr - bw, bl)}"
                          if row not in ("image", "sim:") else f" | {wr:,.0f} | ")
-                print(f"| {names[tree]} | {row} | {rs[0]['ticks']:,} | {lp:,.0f} | {extra} |")
+                counts = (f"{rs[0]['samples']}, {rs[0]['snapshots']}" if "black box" in row
+                          else "")
+                print(f"| {names[tree]} | {row} | {rs[0]['ticks']:,} | {lp:,.0f} | {extra} "
+                      f"| {counts} |")
     if a.alone:
         print("\nthe recorder's handler alone (loop thread, µs a call, best of 7 x 1000)")
         print("| tree | robot | inputs | a list of inputs | an array('q') of inputs |")
