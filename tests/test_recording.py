@@ -67,7 +67,7 @@ def test_outputs_written_by_a_disk_fault_s_reflex_are_stamped_journal(tmp_path):
 
     from pyrt.commands import RobotShell
 
-    loop, station = _gripper()
+    _loop, station = _gripper()
     try:
         recorder = Recorder(station, tmp_path / "run.pj")
         station.start()
