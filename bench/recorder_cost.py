@@ -25,13 +25,13 @@ alike.  Three measures:
   adds to a tick (a preemption's cold caches, an interrupt, a neighbour on
   the core) is taken out by keeping each tick's least CPU time over the
   rounds: the ``steady`` columns (p50 and mean of those), the figures to
-  compare.  The spread of the rounds' own means is shown beside them.  The
+  compare.  The spread of the rounds' own means is shown beside them: what
+  runs beside the loop moves whole rows (up to 1.8x on a loaded machine),
+  which the steady figures narrow to a few per cent, not to 5 %.  The
   cyclic collector is off while a row is measured (its start-up heap frozen
   first), as it is at real time, where the loop runs the collections in the
-  idle part of a tick, not inside one; a collection inside a tick measured
-  here would be the largest single source of spread (a generation-2 pass
-  is milliseconds, and where it falls depends on the writer thread's
-  allocations too).
+  idle part of a tick (a 10 s row collects 0-2 times: not where the spread
+  comes from).
   And the journal writer thread's CPU a tick, whole and less its time in the
   calls that release the interpreter lock (zlib's compress and the C tick
   encoder, timed in the child): its turns with the lock.
