@@ -1,30 +1,48 @@
 """What the flight recorder costs a tick, and what an idle recorded gripper costs a core,
 for one or more source trees side by side in one run.
 
-    python bench/recorder_cost.py                         # this tree
-    python bench/recorder_cost.py --tree /tmp/old --tree .   # two trees, interleaved
-    python bench/recorder_cost.py --tree . --tree .:int64    # this tree, and its image
-                                                             # over 64-bit register files
+    python bench/recorder_cost.py                              # this tree
+    python bench/recorder_cost.py --tree /tmp/old --tree .     # two trees, interleaved
+    python bench/recorder_cost.py --tree . --callgrind 0       # time only
 
 Every row runs in a child process whose ``PYTHONPATH`` is the tree measured
 (its compiled modules built in place), the trees interleaved row by row and
 round by round, so that what the machine does meanwhile falls on all of them
-alike.  Two measures:
+alike.  Three measures:
 
-* ``work``: virtual time, each robot moving (the gripper at 1 kHz with ``P``
-  back and forth, the manipulator's prototype at 200 Hz), built as
+* ``work`` (time): virtual time, each robot moving (the gripper at 1 kHz with
+  ``P`` back and forth, the manipulator's prototype at 200 Hz), built as
   ``pyrt NAME`` builds it (:mod:`bench_journal`'s ``build`` and ``drive``):
   the loop thread's CPU time from the top of one tick to the top of the
-  next, pooled over the rounds (p50, mean), for the rows ``sim:``, ``image``
-  (``sim:?image=1``), ``image + empty handler`` (a handler that does nothing
-  where the recorder's would be: what the loop charges for one more timed
-  handler), ``image + recorder`` (a journal file) and ``image + black box``
-  (the 10 s ring, no file); the recorder's and the black box's
-  share is against ``image``, the target 5 %; and the journal writer
-  thread's CPU a tick, whole and less its time in the calls that release
-  the interpreter lock (zlib's compress and the C tick encoder, timed in
-  the child): its turns with the lock, added to the loop thread's mean in
-  the last column.
+  next.  The rows: ``image`` (plain ``sim:``: every run has a process
+  image), ``image + recorder`` (a journal file), ``image + black box`` (the
+  10 s ring, no file: what ``pyrt NAME`` keeps at real time), and the black
+  box without its signal samples and without its snapshots (what each
+  costs); ``--rows all`` adds ``sim:`` (the same program as ``image``: an
+  A/A check of the bench) and ``image + empty handler`` (one more timed
+  handler that does nothing).  A virtual-time run is deterministic: tick
+  ``i`` of a row does the same work in every round, so what the machine
+  adds to a tick (a preemption's cold caches, an interrupt, a neighbour on
+  the core) is taken out by keeping each tick's least CPU time over the
+  rounds: the ``steady`` columns (p50 and mean of those), the figures to
+  compare.  The spread of the rounds' own means is shown beside them: what
+  runs beside the loop moves whole rows (up to 1.8x on a loaded machine),
+  which the steady figures narrow to a few per cent, not to 5 %.  The
+  cyclic collector is off while a row is measured (its start-up heap frozen
+  first), as it is at real time, where the loop runs the collections in the
+  idle part of a tick (a 10 s row collects 0-2 times: not where the spread
+  comes from).
+  And the journal writer thread's CPU a tick, whole and less its time in the
+  calls that release the interpreter lock (zlib's compress and the C tick
+  encoder, timed in the child): its turns with the lock.
+* ``instructions`` (``--callgrind N``, default 1 round; 0 skips it): the same
+  rows under ``valgrind --tool=callgrind --separate-threads=yes``,
+  instrumented only while the row is measured (a client request from a
+  small cffi module built once): instructions a tick of the loop's thread
+  (on virtual time the loop runs in the thread that drives it, whose
+  console commands between runs are in its count, the same in every row)
+  and of the journal writer thread.  The load of the machine does not
+  change them: the figure to decide by.
 * ``idle`` (``--idle S``, 0 skips it): ``pyrt gripper`` itself, idle at real
   time with its stdin a pipe, the black box on (the default) and ``--black-box
   off``, and a bare Python sleep loop at 1 kHz: the process's CPU share
@@ -36,8 +54,12 @@ Not part of the test run (it is a script, not a ``bench_*`` module).
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
+import gc
 import json
 import os
+import re
+import shutil
 import statistics
 import subprocess
 import sys
@@ -46,59 +68,100 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-ROWS = ("sim:", "image", "image + empty handler", "image + recorder", "image + black box")
+#: Every row; the default ones are :data:`DEFAULT_ROWS`.
+ROWS = ("sim:", "image", "image + empty handler", "image + recorder", "image + black box",
+        "black box, no samples", "black box, no snapshots")
+DEFAULT_ROWS = ("image", "image + recorder", "image + black box", "black box, no samples",
+                "black box, no snapshots")
+#: Loop seconds a row is timed, and measured under callgrind (a whole number of
+#: the black box's snapshot intervals: 2 s on the gripper, 5 s on the manipulator).
 SECONDS = {"gripper": 10.0, "manipulator": 30.0}
-#: A tree given as ``PATH:int64`` is measured with its simulated boards keeping
-#: their inputs in 64-bit integers (:func:`int64_boards`: a projection).
-INT64 = ":int64"
+CG_SECONDS = {"gripper": 4.0, "manipulator": 15.0}
+#: Where the client-request module is built (``PYRT_BENCH_CG``: its directory).
+CG_ENV = "PYRT_BENCH_CG"
 
 
 # -- one row, in a child process -------------------------------------------------------------
 
 
-def int64_boards() -> bool:
-    """A projection, not the product: the simulated boards of the gripper and the
-    manipulator keep their inputs in an ``array('q')`` (their plant methods write
-    it as they write the list) and offer it as ``input_buffer()``, so that a tree
-    whose process image gathers such register files in C (``LocalImage.native``)
-    reads them that way.  False where the tree has no such boards to change."""
-    from array import array
+def _callgrind_requests():
+    """``(start, stop)``: callgrind's instrumentation switched on and off (no-ops
+    outside valgrind), from the module :func:`build_requests` built."""
+    where = os.environ.get(CG_ENV)
+    if not where:
+        return (lambda: None), (lambda: None)
+    sys.path.insert(0, where)
+    import _pyrt_cg  # type: ignore[import-not-found]
 
-    try:
-        import pyrt.boards.simboards as sb
+    return _pyrt_cg.lib.cg_start, _pyrt_cg.lib.cg_stop
 
-        from pyrt.boards.gripper import SimGripperBoard
-    except ImportError:
-        return False
-    for cls, attr in ((sb.SimTIO10, "_in"), (sb.SimDataConcentrator, "_inputs"),
-                      (SimGripperBoard, "_in")):
-        init = cls.__init__
 
-        def patched(self, *a, _init=init, _attr=attr, **kw):
-            _init(self, *a, **kw)
-            setattr(self, _attr, array("q", getattr(self, _attr)))
+def build_requests(where: Path) -> None:
+    """Build the client-request module (``<valgrind/callgrind.h>``) in ``where``."""
+    import cffi
 
-        cls.__init__ = patched  # type: ignore[method-assign]
-        cls.input_buffer = lambda self, _attr=attr: getattr(self, _attr)  # type: ignore[attr-defined]
-    return True
+    ffi = cffi.FFI()
+    ffi.cdef("void cg_start(void); void cg_stop(void);")
+    ffi.set_source("_pyrt_cg", """
+        #include <valgrind/callgrind.h>
+        void cg_start(void) { CALLGRIND_ZERO_STATS; CALLGRIND_START_INSTRUMENTATION; }
+        void cg_stop(void) { CALLGRIND_STOP_INSTRUMENTATION; }
+    """)
+    ffi.compile(tmpdir=str(where), verbose=False)
+
+
+def _count_black_box(box) -> dict:
+    """Counts, filled in as the row runs: the black box's signal samples and
+    snapshots (taken, refused)."""
+    counts = {"samples": 0, "snapshots": 0, "refused": 0}
+    if box is None:
+        return counts
+    sample, snapshot = box.ring.sample, box._snapshot
+
+    def counted_sample(now_ns):
+        counts["samples"] += 1
+        return sample(now_ns)
+
+    def counted_snapshot(tick):
+        n = len(box.snapshots)
+        snapshot(tick)
+        counts["snapshots" if len(box.snapshots) != n or box.snapshots.maxlen == n
+               else "refused"] += 1
+
+    box.ring.sample = counted_sample
+    box._snapshot = counted_snapshot
+    return counts
+
+
+def _strip_black_box(rig, row: str) -> None:
+    """The black box of ``rig`` without its signal samples or its snapshots."""
+    box = getattr(rig.recorder, "fault_box", None)
+    if box is None:
+        return
+    if row == "black box, no samples":
+        box.ring.sample = lambda now_ns: None
+    elif row == "black box, no snapshots":
+        box._snapshot = lambda tick: setattr(box, "_next_snapshot", 1 << 62)
 
 
 def one_row(robot: str, row: str, seconds: float) -> dict:
     """Build ``robot`` as the row says, drive it ``seconds`` of loop time; the
-    per-tick CPU ns (loop thread) and the journal handler's mean."""
+    per-tick CPU ns (loop thread), the tick measured first, and the journal
+    handler's mean.  Under callgrind, instrumented only while it is measured."""
     sys.path.insert(0, str(HERE))
     import bench_journal as bj
 
-    if os.environ.get("PYRT_BENCH_INT64"):
-        int64_boards()
-
+    cg_start, cg_stop = _callgrind_requests()
     boards = "sim:" if row == "sim:" or _one_tick_shape() else "sim:?image=1"
     outside = _time_outside_the_lock()
     with tempfile.TemporaryDirectory() as tmp:
         t = Path(tmp)
         clock = bj.TimedSimClock()
         path = t / "run.pj" if row == "image + recorder" else None
-        rig = bj.build(robot, boards, clock, t, path, 10.0 if row.endswith("black box") else 0.0)
+        box = 10.0 if "black box" in row else 0.0
+        rig = bj.build(robot, boards, clock, t, path, box)
+        counted = _count_black_box(getattr(rig.recorder, "fault_box", None))
+        _strip_black_box(rig, row)
         if row == "image + empty handler":
             # what the loop charges for one more timed handler at the recorder's place
             rig.loop.attach(lambda now_ns: None, name="journal")
@@ -114,16 +177,25 @@ def one_row(robot: str, row: str, seconds: float) -> dict:
         rig.start()
         bj.drive(rig, 1.0)  # warm up: the first moves run code for the first time
         rig.loop.reset_statistics()
+        # as at real time: no collection inside a tick (the loop runs them when idle)
+        gc.collect()
+        gc.freeze()
+        gc.disable()
         i0 = len(clock.wall)
+        tick0 = rig.loop.tick_index
         w0, o0 = bj.writer_cpu_ns(), outside[0]
+        cg_start()
         bj.drive(rig, seconds)
+        cg_stop()
         w1, o1 = bj.writer_cpu_ns(), outside[0]
+        ticks = rig.loop.tick_index - tick0
         _dw, dc = clock.ticks_from(i0)
         st = rig.loop.statistics()
         rig.close()
+        gc.enable()
     j = st.tasks.get("journal")
-    native = getattr(rig.station.boards.image, "native", None) is not None
-    return {"cpu": dc, "journal_ns": j.mean_ns if j else 0.0, "native": native,
+    return {"cpu": dc, "tick0": tick0, "ticks": ticks, **counted,
+            "journal_ns": j.mean_ns if j else 0.0,
             "writer_ns": (w1 - w0) / max(1, len(dc)),
             "writer_locked_ns": (w1 - w0 - (o1 - o0)) / max(1, len(dc))}
 
@@ -259,21 +331,62 @@ def _cpu_s(pid: int) -> float:
 # -- the driver ------------------------------------------------------------------------------
 
 
-def _child(tree: Path, *argv: str) -> dict:
-    env = dict(os.environ, PYTHONPATH=str(tree))
-    if str(tree).endswith(INT64):
-        tree = Path(str(tree)[:-len(INT64)])
-        env = dict(os.environ, PYTHONPATH=str(tree), PYRT_BENCH_INT64="1")
-    out = subprocess.run([sys.executable, str(Path(__file__).resolve()), *argv], env=env,
+def _child(tree: Path, *argv: str, wrap: tuple[str, ...] = (), env: dict | None = None) -> dict:
+    env = dict(os.environ, PYTHONPATH=str(tree), **(env or {}))
+    out = subprocess.run([*wrap, sys.executable, str(Path(__file__).resolve()), *argv], env=env,
                          capture_output=True, text=True, check=False, cwd=tree)
     if out.returncode:
         raise SystemExit(f"{tree}: {' '.join(argv)} failed:\n{out.stderr[-2000:]}")
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+#: The writer thread's file holds the C encoder or zlib.
+_WRITER_FNS = re.compile(r"^fn=.*(pyrt_journal_encode|deflate)", re.M)
+
+
+def callgrind_row(tree: Path, robot: str, row: str, requests: Path) -> dict:
+    """One row under callgrind: instructions a tick of the loop's thread (thread 1:
+    on virtual time the loop runs in the thread that drives it) and of the
+    journal writer thread (the one that ran the encoder or zlib)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "cg.out"
+        wrap = ("valgrind", "--tool=callgrind", "--separate-threads=yes",
+                "--instr-atstart=no", f"--callgrind-out-file={out}")
+        r = _child(tree, "--one", robot, row, str(CG_SECONDS[robot]), wrap=wrap,
+                   env={CG_ENV: str(requests), "OPENBLAS_NUM_THREADS": "1"})
+        loop = writer = other = 0
+        for f in sorted(Path(tmp).glob("cg.out*")):
+            text = f.read_text(errors="replace")
+            m = re.search(r"^totals:\s*(\d+)", text, re.M)
+            n = int(m.group(1)) if m else 0
+            if f.name.endswith("-01"):
+                loop += n
+            elif _WRITER_FNS.search(text):
+                writer += n
+            else:
+                other += n
+    ticks = max(1, r["ticks"])
+    return {"loop": loop / ticks, "writer": writer / ticks, "other": other / ticks,
+            "ticks": r["ticks"], "samples": r.get("samples", 0),
+            "snapshots": r.get("snapshots", 0)}
+
+
 def _pct(xs: list[int], p: float) -> float:
     xs = sorted(xs)
     return xs[min(len(xs) - 1, int(p * len(xs)))] / 1e3
+
+
+def steady(rounds: list[dict]) -> tuple[list[int], bool]:
+    """Each tick's least CPU time over the rounds (tick ``i`` of every round is the
+    same work on virtual time); False when the rounds did not run the same ticks
+    (then the first ticks common to all are kept)."""
+    same = len({(r["tick0"], len(r["cpu"])) for r in rounds}) == 1
+    n = min(len(r["cpu"]) for r in rounds)
+    return [min(col) for col in zip(*(r["cpu"][:n] for r in rounds), strict=True)], same
+
+
+def _share(x: float, base: float) -> str:
+    return f"{(x - base) / base * 100:+.1f} %" if base else ""
 
 
 def main() -> None:
@@ -282,8 +395,15 @@ def main() -> None:
                     help="a source tree (repeat: side by side); default this one")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--robot", action="append", choices=sorted(SECONDS))
+    ap.add_argument("--rows", default="default",
+                    help="'default', 'all', or rows separated by '/' (of: " + " / ".join(ROWS)
+                    + ")")
+    ap.add_argument("--callgrind", type=int, default=1, metavar="N",
+                    help="rounds under callgrind (instructions a tick; 0: none)")
+    ap.add_argument("--jobs", type=int, default=1,
+                    help="callgrind rows run at once (their counts do not depend on load)")
     ap.add_argument("--idle", type=float, default=10.0, help="seconds of idle a row (0: none)")
-    ap.add_argument("--no-work", action="store_true", help="only the idle rows")
+    ap.add_argument("--no-work", action="store_true", help="no timed rows")
     ap.add_argument("--one", nargs=3, metavar=("ROBOT", "ROW", "SECONDS"), help=argparse.SUPPRESS)
     ap.add_argument("--one-idle", nargs=2, metavar=("ROW", "SECONDS"), help=argparse.SUPPRESS)
     ap.add_argument("--alone", action="store_true",
@@ -299,26 +419,23 @@ def main() -> None:
     if a.one_idle:
         print(json.dumps(idle_row(a.one_idle[0], float(a.one_idle[1]))))
         return
-    trees = [Path(str(Path(str(t)[:-len(INT64)]).resolve()) + INT64)
-             if str(t).endswith(INT64) else t.resolve() for t in (a.tree or [HERE.parent])]
+    trees = [t.resolve() for t in (a.tree or [HERE.parent])]
     robots = a.robot or ["gripper", "manipulator"]
+    rows = (DEFAULT_ROWS if a.rows == "default" else ROWS if a.rows == "all"
+            else tuple(r.strip() for r in a.rows.split("/")))
+    if "image" not in rows or not set(rows) <= set(ROWS):
+        raise SystemExit(f"rows {rows}: the row 'image' (the base) and rows of {ROWS}")
     t0 = time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())
     load0 = os.getloadavg()[0]
-    work: dict[tuple, dict] = {}
+    work: dict[tuple, list[dict]] = {}
     idle: dict[tuple, list[float]] = {}
     for _ in range(a.rounds):
         if not a.no_work:
             for robot in robots:
-                for row in ROWS:
+                for row in rows:
                     for tree in trees:
                         r = _child(tree, "--one", robot, row, str(SECONDS[robot]))
-                        p = work.setdefault((tree, robot, row),
-                                            {"cpu": [], "journal": [], "writer": [],
-                                             "locked": []})
-                        p["cpu"] += r["cpu"]
-                        p["journal"].append(r["journal_ns"])
-                        p["writer"].append(r.get("writer_ns", 0.0))
-                        p["locked"].append(r.get("writer_locked_ns", 0.0))
+                        work.setdefault((tree, robot, row), []).append(r)
         if a.idle > 0:
             for row in ("black box on", "black box off", "bare sleep"):
                 for tree in trees:
@@ -327,32 +444,68 @@ def main() -> None:
                     r = _child(tree, "--one-idle", row, str(a.idle))
                     idle.setdefault((tree, row), []).append(r["cpu_pct"])
     t1 = time.strftime("%H:%M:%S UTC", time.gmtime())
-    print(f"{t0} -> {t1}, load average {load0:.2f} -> {os.getloadavg()[0]:.2f}; "
-          f"{a.rounds} rounds, rows interleaved")
+    load1 = os.getloadavg()[0]
+    instr: dict[tuple, list[dict]] = {}
+    if a.callgrind > 0 and not a.no_work:
+        if shutil.which("valgrind") is None:
+            raise SystemExit("--callgrind needs valgrind (0 skips it)")
+        with tempfile.TemporaryDirectory() as req:
+            build_requests(Path(req))
+            jobs = [(tree, robot, row) for _ in range(a.callgrind) for robot in robots
+                    for row in rows for tree in trees]
+            with concurrent.futures.ThreadPoolExecutor(max(1, a.jobs)) as pool:
+                done = pool.map(lambda j: callgrind_row(*j, Path(req)), jobs)
+                for j, r in zip(jobs, done, strict=True):
+                    instr.setdefault(j, []).append(r)
+    t2 = time.strftime("%H:%M:%S UTC", time.gmtime())
+    print(f"{t0} -> {t1} (timed rows; load average {load0:.2f} -> {load1:.2f}), callgrind "
+          f"-> {t2} (load average {os.getloadavg()[0]:.2f}); {a.rounds} rounds, rows interleaved")
     names = {t: (t.name if len(trees) > 1 else "") for t in trees}
-    if work:
-        for robot in robots:
-            print(f"\n{robot}, virtual time, moving ({a.rounds} x {SECONDS[robot]:g} s a row): "
-                  "loop-thread CPU a tick, µs")
-            print("| tree | row | ticks | p50 | p99 | mean | journal handler mean | "
-                  "added p50 | added mean | writer CPU a tick | of it with the lock | "
-                  "added mean with the writer's turns |")
-            print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
-            for tree in trees:
-                base = work[(tree, robot, "image")]["cpu"]
-                b50, bmean = _pct(base, .5), statistics.fmean(base) / 1e3
-                for row in ROWS:
-                    p = work[(tree, robot, row)]
-                    c = p["cpu"]
-                    p50, mean = _pct(c, .5), statistics.fmean(c) / 1e3
-                    jm = statistics.fmean(p["journal"]) / 1e3
-                    wm = statistics.fmean(p["writer"]) / 1e3
-                    lm = statistics.fmean(p["locked"]) / 1e3
-                    added = (f"{(p50 - b50) / b50 * 100:+.1f} % | {(mean - bmean) / bmean * 100:+.1f} %"
-                             f" | {wm:.2f} | {lm:.2f} | {(mean + lm - bmean) / bmean * 100:+.1f} %"
-                             if row.startswith("image +") else " | | | | ")
-                    print(f"| {names[tree]} | {row} | {len(c):,} | {p50:.2f} | {_pct(c, .99):.2f} "
-                          f"| {mean:.2f} | " + (f"{jm:.2f}" if jm else "") + f" | {added} |")
+    for robot in robots if work else ():
+        print(f"\n{robot}, virtual time, moving ({a.rounds} x {SECONDS[robot]:g} s a row): "
+              "loop-thread CPU a tick, µs; steady: each tick's least over the rounds")
+        print("| tree | row | ticks | p50 | mean | the rounds' means | steady p50 | steady mean"
+              " | added steady p50 | added steady mean | writer CPU a tick | of it with the lock"
+              " | added steady mean with the writer's turns |")
+        print("|---|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|")
+        for tree in trees:
+            bs, _ = steady(work[(tree, robot, "image")])
+            b50, bmean = _pct(bs, .5), statistics.fmean(bs) / 1e3
+            for row in rows:
+                rs = work[(tree, robot, row)]
+                pooled = [c for r in rs for c in r["cpu"]]
+                st, same = steady(rs)
+                s50, smean = _pct(st, .5), statistics.fmean(st) / 1e3
+                means = [statistics.fmean(r["cpu"]) / 1e3 for r in rs]
+                wm = statistics.fmean(r["writer_ns"] for r in rs) / 1e3
+                lm = statistics.fmean(r["writer_locked_ns"] for r in rs) / 1e3
+                added = (f"{_share(s50, b50)} | {_share(smean, bmean)} | {wm:.2f} | {lm:.2f}"
+                         f" | {_share(smean + lm, bmean)}" if row not in ("image", "sim:")
+                         else " | | | | ")
+                print(f"| {names[tree]} | {row} | {len(pooled):,} | {_pct(pooled, .5):.2f} | "
+                      f"{statistics.fmean(pooled) / 1e3:.2f} | "
+                      + ", ".join(f"{m:.2f}" for m in means)
+                      + f" | {s50:.2f}{'' if same else ' (*)'} | {smean:.2f} | {added} |")
+    for robot in robots if instr else ():
+        print(f"\n{robot}, under callgrind ({a.callgrind} x {CG_SECONDS[robot]:g} s a row): "
+              "instructions a tick")
+        print("| tree | row | ticks | loop thread | added | writer thread | "
+              "added, both threads | samples, snapshots in it |")
+        print("|---|---|---:|---:|---:|---:|---:|---|")
+        for tree in trees:
+            base = instr[(tree, robot, "image")]
+            bl = statistics.fmean(r["loop"] for r in base)
+            bw = statistics.fmean(r["writer"] for r in base)
+            for row in rows:
+                rs = instr[(tree, robot, row)]
+                lp = statistics.fmean(r["loop"] for r in rs)
+                wr = statistics.fmean(r["writer"] for r in rs)
+                extra = (f"{_share(lp, bl)} | {wr:,.0f} | {_share(lp + wr - bw, bl)}"
+                         if row not in ("image", "sim:") else f" | {wr:,.0f} | ")
+                counts = (f"{rs[0]['samples']}, {rs[0]['snapshots']}" if "black box" in row
+                          else "")
+                print(f"| {names[tree]} | {row} | {rs[0]['ticks']:,} | {lp:,.0f} | {extra} "
+                      f"| {counts} |")
     if a.alone:
         print("\nthe recorder's handler alone (loop thread, µs a call, best of 7 x 1000)")
         print("| tree | robot | inputs | a list of inputs | an array('q') of inputs |")

@@ -350,24 +350,38 @@ def test_journals_of_version_1_are_read_and_a_later_version_is_refused_by_name(t
         JournalReader(tmp_path / "v3.pj")
 
 
-@pytest.mark.parametrize("cost_ns, every_s", [(1_000, 2.0), (1_500_000, 3.0), (50_000_000, 5.0)])
-def test_snapshots_are_spaced_by_what_they_cost_the_loop(monkeypatch, cost_ns, every_s):
-    """A snapshot costing the loop more than SNAPSHOT_TICK_NS a tick on average (its CPU time
-    over the interval) pushes the next one further out: at least SNAPSHOT_S, at most
-    MAX_SNAPSHOT_S of loop time apart (the CPU clock is given, not measured)."""
+@pytest.mark.parametrize("cost_ns, work_ns, every", [
+    (100_000, 7_000, 2_000),     # the gripper's: 2 % of 7 µs ticks is 715 ticks, under 2 s
+    (2_000_000, 35_000, 2_858),  # the manipulator's at 1 ms ticks: 2 % of its work
+    (50_000_000, 35_000, 7_500),  # costlier still: 75 % of the 10 s box at most
+    (1_000, 0, 7_500),           # no work measured: as far apart as the box allows
+])
+def test_snapshots_are_spaced_by_what_they_cost_against_the_loop_s_work(cost_ns, work_ns, every):
+    """Snapshots are as far apart as keeps them within SNAPSHOT_SHARE (2 %) of the loop
+    thread's work a tick, at least SNAPSHOT_S and at most MAX_SNAPSHOT_SPAN of the box."""
+    from pyrt.station import blackbox as bb
+
+    assert (bb.SNAPSHOT_SHARE, bb.SNAPSHOT_S, bb.MAX_SNAPSHOT_SPAN) == (0.02, 2.0, 0.75)
+    assert bb.snapshot_interval(cost_ns, work_ns, 2_000, 7_500) == every
+
+
+def test_a_black_box_always_holds_a_snapshot(monkeypatch):
+    """However much a snapshot costs (the CPU clock is given, not measured: 50 ms a
+    reading), the next is at most MAX_SNAPSHOT_SPAN of the black box's span later (3 s:
+    2.25 s), so that every black box holds one."""
+    cost_ns, every_s = 50_000_000, 2.25
     from pyrt.journal import BlackBox
     from pyrt.station import blackbox as bb
 
     clock = iter(range(0, 10**15, cost_ns))
     monkeypatch.setattr(bb.time, "thread_time_ns", lambda: next(clock))
     st = build_gripper(Loop(SimClock()), boards="sim:")
-    rec = bb.FaultRecorder(st, None, black_box=BlackBox(3.0), seconds=2.5)
+    rec = bb.FaultRecorder(st, None, black_box=BlackBox(3.0), seconds=3.0)
     try:
         st.runner.start()
-        st.runner.sleep(0.5)  # no foreground job: the first snapshot is taken at once
+        st.runner.sleep(2.5)  # no foreground job: the first snapshot is taken at once
         box = rec.fault_box
-        assert box.snapshots and not box.snapshot_refused
-        assert bb.SNAPSHOT_TICK_NS == 500 and (bb.SNAPSHOT_S, bb.MAX_SNAPSHOT_S) == (2.0, 5.0)
+        assert len(box.snapshots) == 2 and not box.snapshot_refused
         assert box.snapshot_every == round(every_s * 1000)  # ticks of 1 ms
     finally:
         st.close()

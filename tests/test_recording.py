@@ -57,3 +57,31 @@ def test_tick_listeners_are_called_at_the_ticks_they_ask_for(tmp_path):
         assert every == [26, 27, 28] and sparse[-3:] == every
     finally:
         station.close()
+
+
+def test_outputs_written_by_a_disk_fault_s_reflex_are_stamped_journal(tmp_path):
+    """A file of the recorder's that cannot be written trips the station at the recorder's
+    next record (the end of the write phase): the outputs the reflex writes are the
+    recorder's (``journal``), not the write phase's (``io:write``)."""
+    import io
+
+    from pyrt.commands import RobotShell
+
+    _loop, station = _gripper()
+    try:
+        recorder = Recorder(station, tmp_path / "run.pj")
+        station.start()
+        shell = RobotShell(station, io.StringIO())
+        for line in station.profile.startup_commands:
+            shell.onecmd(line)
+        shell.onecmd("P 30mm")
+        station.runner.sleep(0.05)  # the jaws driven
+        recorder.disk_fault("black box: disk full", "BLACKBOX")
+        station.runner.sleep(0.01)
+        recorder.close()
+    finally:
+        station.close()
+    reader = JournalReader(tmp_path / "run.pj")
+    (tripped,) = [t for t in reader.ticks() if any(e.name == "fault" for e in t.events)]
+    writers = {reader.writers[w] for _slot, _value, w in tripped.outputs}
+    assert writers == {"journal"}

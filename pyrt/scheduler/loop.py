@@ -212,6 +212,14 @@ class Loop(LoopComposition):
         ``now_ns - deadline_ns``), or of the next one between ticks."""
         return self._deadline
 
+    def resume_at(self, now_ns: int, deadline_ns: int) -> None:
+        """Between runs: the loop's time is ``now_ns`` and the next tick's deadline
+        ``deadline_ns`` (a replay resuming a run mid-way, from a snapshot)."""
+        if self.running:
+            raise PyrtError("set the loop's time while it is stopped")
+        self.now_ns = int(now_ns)
+        self._deadline = int(deadline_ns)
+
     # -- foreground jobs -----------------------------------------------------
 
     def spawn(self, name: str, gen: Generator[Any, None, Any]) -> Job:

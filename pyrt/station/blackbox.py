@@ -27,8 +27,10 @@ if the recorder is closed first) writes, beside the station's databases
   right after its header, so that ``pyrt replay`` resumes from it; a station
   that could not give one has the reason there instead.  The loop thread
   takes a snapshot at the end of a tick every :data:`SNAPSHOT_S` of loop
-  time or more (up to :data:`MAX_SNAPSHOT_S` when one costs more than
-  :data:`SNAPSHOT_TICK_NS` a tick on average) and keeps the few the span
+  time or more: further apart when that would cost the loop thread more
+  than :data:`SNAPSHOT_SHARE` of its CPU time (:func:`snapshot_interval`),
+  but never more than :data:`MAX_SNAPSHOT_SPAN` of the black box's span
+  apart, so that every black box holds one; it keeps the few the span
   needs;
 * ``.csv``: a header ``t_s,OBJECT.SIGNAL [UNITS],...`` and one row per sample, the
   time in seconds from the fault, the ``N`` seconds before it and what came
@@ -96,17 +98,18 @@ if TYPE_CHECKING:
 
 __all__ = [
     "AFTER_S",
-    "MAX_SNAPSHOT_S",
+    "MAX_SNAPSHOT_SPAN",
     "SIGNAL_BUDGET",
     "SIGNAL_RATE_HZ",
     "SNAPSHOT_S",
-    "SNAPSHOT_TICK_NS",
+    "SNAPSHOT_SHARE",
     "TOTAL_BUDGET",
     "FaultBox",
     "FaultDump",
     "FaultRecorder",
     "SignalRing",
     "plotting_available",
+    "snapshot_interval",
     "with_snapshot",
 ]
 
@@ -126,12 +129,14 @@ AFTER_S = 0.5
 #: Loop time between two snapshots of the controller, at least (a black box
 #: replays from the first one in it: all but at most the interval of its span) ...
 SNAPSHOT_S = 2.0
-#: ... and at most: a snapshot that costs the loop thread more than
-#: :data:`SNAPSHOT_TICK_NS` a tick on average waits longer for the next.
-MAX_SNAPSHOT_S = 5.0
-#: What snapshots may cost the loop thread on average, ns a tick (the
-#: manipulator's takes about 0.5 ms, every 5 s; the gripper's 35 µs, every 2 s).
-SNAPSHOT_TICK_NS = 500
+#: What snapshots may cost the loop thread: this share of its CPU time (the
+#: manipulator's take 1-2.5 ms at the end of a 5 ms tick whose work is ~35 µs:
+#: one every 7 s or more; the gripper's ~0.1 ms against ~7 µs ticks of 1 ms:
+#: one every 2 s) ...
+SNAPSHOT_SHARE = 0.02
+#: ... but never more than this share of the black box's span apart (7.5 s of a
+#: 10 s box): every box holds a snapshot, and replays at least the rest.
+MAX_SNAPSHOT_SPAN = 0.75
 #: Loop time the ring holds beyond what a black box needs, so that the thread
 #: copying a window out of it is never overtaken by the loop.
 SLACK_S = 1.0
@@ -150,6 +155,15 @@ PLOT_TIMEOUT_S = 60.0
 CSV_ROWS = 64
 
 _ROW = 8  # bytes per value (float64) and per time (int64)
+
+
+def snapshot_interval(cost_ns: float, work_ns: float, least: int, most: int) -> int:
+    """Ticks between two snapshots that cost ``cost_ns`` of the loop thread's CPU
+    each, on ticks of ``work_ns`` each: as few as keep them within
+    :data:`SNAPSHOT_SHARE` of the loop's work, within ``least..most``."""
+    if work_ns <= 0:
+        return most
+    return max(least, min(most, math.ceil(cost_ns / (SNAPSHOT_SHARE * work_ns) - 1e-9)))
 
 
 def plotting_available() -> bool:
@@ -393,7 +407,10 @@ class FaultBox:
         #: the snapshots that the black box's span may still need (oldest first).
         self.snapshot_every = self._min_every = max(1, math.ceil(SNAPSHOT_S * 1e9
                                                                   / loop.period_ns - 1e-9))
-        self._max_every = max(self._min_every, int(MAX_SNAPSHOT_S * 1e9 / loop.period_ns))
+        self._max_every = max(self._min_every, int(MAX_SNAPSHOT_SPAN * self.seconds * 1e9
+                                                   / loop.period_ns))
+        #: The loop thread's CPU clock and tick at the end of the last snapshot.
+        self._since: tuple[int, int] | None = None
         span = self.seconds + after_s + SLACK_S
         self.snapshots: collections.deque[Snapshot] = collections.deque(
             maxlen=math.ceil(span / SNAPSHOT_S) + 2)
@@ -408,6 +425,9 @@ class FaultBox:
         self._pending: dict[int, FaultDump] = {}
         self._lock = threading.Lock()
         self._jobs: queue.SimpleQueue[FaultDump | None] = queue.SimpleQueue()
+        # once before the loop runs: the first snapshot of a process learns how the
+        # objects of each class are read (tens of ms), which no tick should carry
+        take_snapshot(station, [], [])
         # started now, idle until a fault: starting a thread waits for it to run,
         # which the loop thread must not do
         self._thread = threading.Thread(target=self._work, name="pyrt-black-box", daemon=True)
@@ -489,15 +509,19 @@ class FaultBox:
             inputs = self.recorder._inputs
         start = time.thread_time_ns()
         snap = take_snapshot(self.station, inputs, image.output_values())
+        end = time.thread_time_ns()
+        since, self._since = self._since, (end, tick)
         if snap.refused:
             self.snapshot_refused = snap.refused
             self._next_snapshot = tick + max(1, self._min_every // 10)
             return
-        cost = time.thread_time_ns() - start
         self.snapshot_refused = ""
         self.snapshots.append(snap)
-        self.snapshot_every = min(self._max_every,
-                                  max(self._min_every, cost // SNAPSHOT_TICK_NS))
+        if since is not None and tick > since[1]:
+            # the loop thread's CPU a tick since the last snapshot (this one not in it)
+            work = (start - since[0]) / (tick - since[1])
+            self.snapshot_every = snapshot_interval(end - start, work, self._min_every,
+                                                    self._max_every)
         self._next_snapshot = tick + self.snapshot_every
 
     def _write(self, dump: FaultDump) -> None:

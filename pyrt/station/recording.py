@@ -381,9 +381,15 @@ class Recorder:
 
     def _tick_slowly(self, now_ns: int) -> None:
         journal = self.journal
-        if self._disk_faults or (journal.error is not None and not self._journal_said):
-            self._trip_disk_faults()  # before the record: the reflex's outputs are in it
         loop = self.loop
+        if self._disk_faults or (journal.error is not None and not self._journal_said):
+            # before the record: the reflex's outputs are in it, written by the
+            # recorder (not by the write phase whose end may be running now)
+            running, loop.current = loop.current, "journal"
+            try:
+                self._trip_disk_faults()
+            finally:
+                loop.current = running
         missed = loop.missed
         if missed != self._missed:
             # the deadlines skipped since the last record (the count was reset to 0

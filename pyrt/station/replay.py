@@ -363,10 +363,9 @@ class Replay:
         image = self.boards.image if self.boards is not None else None
         if image is not None:  # what building the station wrote is not what the run had
             image.forget_outputs(dict(zip(image.output_layout, snap.outputs, strict=True)))
-        loop = station.loop
-        loop.now_ns = snap.time_ns
-        # the deadline of the first tick replayed, as the run had it
-        loop._deadline = first.time_ns - first.lateness_ns
+        # the loop's time as the snapshot has it, and the deadline of the first tick
+        # replayed as the run had it
+        station.loop.resume_at(snap.time_ns, first.time_ns - first.lateness_ns)
         self.clock._now = snap.time_ns
 
     def _peek_first(self) -> Tick | None:

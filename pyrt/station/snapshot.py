@@ -54,14 +54,16 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import gc
 import importlib
 import json
+import sys
 import threading
 import zlib
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from types import BuiltinFunctionType, FunctionType, MethodType, ModuleType
+from types import BuiltinFunctionType, CodeType, FunctionType, MethodType, ModuleType
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -135,7 +137,7 @@ class Snapshot:
             doc.update(tick=self.tick, time_ns=self.time_ns, inputs=list(self.inputs),
                        outputs=list(self.outputs), loop=self.loop,
                        station_state=self.station_state, state=self.state)
-        return json.dumps(doc, separators=(",", ":")).encode("utf-8")
+        return json.dumps(doc, separators=(",", ":"), default=_plain).encode("utf-8")
 
     @classmethod
     def decode(cls, data: bytes) -> Snapshot:
@@ -259,7 +261,9 @@ class _Encoder:
         if kind == "object":
             if id(v) in self.seen:
                 return {"$r": self.seen[id(v)]}
-            attrs = getattr(v, "__dict__", None)
+            attrs = _instance_attributes(v, cls)
+            if attrs is None:
+                attrs = getattr(v, "__dict__", None)
             if attrs is None:
                 attrs = {a: getattr(v, a) for a in _slots(cls) if hasattr(v, a)}
             self.seen[id(v)] = path
@@ -307,9 +311,13 @@ class _Encoder:
     def attributes(self, attrs: Mapping[str, Any], path: str) -> dict[str, Any]:
         out = {}
         plain = _PLAIN
+        kinds = self.kinds
         for key, x in list(attrs.items()):
-            if type(x) in plain:
+            cls = type(x)
+            if cls in plain:
                 out[key] = x
+                continue
+            if kinds.get(cls) == "skip":  # structure (a method, a board): not state
                 continue
             try:
                 out[key] = self.value(x, f"{path}.{key}")
@@ -320,15 +328,223 @@ class _Encoder:
     @staticmethod
     def _cdata(v: Any) -> Any:
         # memory a kernel's object owns: its numbers (arrays, the scalar fields of
-        # its structs); pointers are structure, bound once when it was built
+        # its structs); pointers are structure, bound once when it was built.  The
+        # memory is copied now (the state at this tick), its numbers read out of
+        # the copy when the snapshot is encoded (:class:`_CCopy`)
         if "owning" not in repr(v):
             raise _Skip
-        ctype = _cffi_typeof(v)
+        import _cffi_backend as cffi  # type: ignore[import-untyped]
+
+        ctype = cffi.typeof(v)
         if ctype.kind == "pointer":
-            return {"$cd": _cd_get(v[0], ctype.item)}
-        if ctype.kind == "array":
-            return {"$cd": _cd_get(v, ctype)}
-        raise _Skip
+            copy = cffi.newp(ctype, None)
+            cffi.memmove(copy, v, cffi.sizeof(ctype.item))
+        elif ctype.kind == "array":
+            copy = cffi.newp(ctype, len(v) if ctype.length is None else None)
+            cffi.memmove(copy, v, cffi.sizeof(v))
+        else:
+            raise _Skip
+        return _CCopy(copy, ctype)
+
+
+class _CCopy:
+    """C memory a kernel owns, copied when the snapshot was taken (one ``memmove``
+    in the loop thread); :meth:`plain` reads its numbers out (``{"$cd": ...}``)
+    when the snapshot is encoded, in the thread that writes the black box."""
+
+    __slots__ = ("copy", "ctype")
+
+    def __init__(self, copy: Any, ctype: Any):
+        self.copy = copy
+        self.ctype = ctype
+
+    def plain(self) -> dict[str, Any]:
+        """The numbers, as :func:`_cd_get` gives them."""
+        if self.ctype.kind == "pointer":
+            return {"$cd": _cd_get(self.copy[0], self.ctype.item)}
+        return {"$cd": _cd_get(self.copy, self.ctype)}
+
+
+def _plain(v: Any) -> Any:
+    """``json``'s ``default``: a :class:`_CCopy` as its numbers."""
+    if isinstance(v, _CCopy):
+        return v.plain()
+    raise TypeError(f"a snapshot holds a {type(v).__name__}, which has no JSON form")
+
+
+#: Per class: the names its code reads or writes on objects (its methods' and
+#: their nested functions' ``co_names``, its fields and annotations), the
+#: candidates for its instances' attributes; None: a class whose instances are
+#: read through ``__dict__`` (it has ``__getattr__``).
+_NAMES: dict[type, tuple[str, ...] | None] = {}
+
+
+def _code_names(code: CodeType, out: set[str]) -> None:
+    out.update(code.co_names)
+    for c in code.co_consts:
+        if isinstance(c, CodeType):
+            _code_names(c, out)
+
+
+def _candidates(cls: type) -> tuple[str, ...] | None:
+    names = _NAMES.get(cls, ())
+    if names != ():
+        return names
+    found: set[str] = set()
+    getattr_hook = False
+    for k in cls.__mro__:
+        if k is object:
+            continue
+        if "__getattr__" in k.__dict__ or "__getattribute__" in k.__dict__:
+            getattr_hook = True
+        found.update(getattr(k, "__annotations__", {}) if "__annotations__" in k.__dict__
+                     else ())
+        for x in k.__dict__.values():
+            x = getattr(x, "__func__", x)  # a static or class method
+            for f in (x, getattr(x, "fget", None), getattr(x, "fset", None)):
+                code = getattr(f, "__code__", None)
+                if isinstance(code, CodeType):
+                    _code_names(code, found)
+    if dataclasses.is_dataclass(cls):
+        found.update(f.name for f in dataclasses.fields(cls))
+    # the names the class itself has (its methods, properties, class attributes)
+    # are not among them: a class attribute's name is given only to a value no
+    # other name has claimed (:func:`_instance_attributes`)
+    mine = {n for k in cls.__mro__ for n in k.__dict__}
+    result = None if getattr_hook else tuple(sorted(n for n in found if n not in mine))
+    _NAMES[cls] = result
+    return result
+
+
+def _class_defaults(cls: type) -> list[str]:
+    """The names of ``cls``'s class attributes that are plain values (not methods,
+    properties or other descriptors), nearest class first."""
+    out: list[str] = []
+    for k in cls.__mro__:
+        if k is object:
+            continue
+        for n, d in k.__dict__.items():
+            t = type(d)
+            if not n.startswith("__") and n not in out \
+                    and not (hasattr(t, "__get__") or hasattr(t, "__set__")):
+                out.append(n)
+    return out
+
+
+def _instance_attributes(v: Any, cls: type) -> dict[str, Any] | None:
+    """The attributes of ``v`` as ``v.__dict__`` has them (the same names and values),
+    read without asking for ``__dict__``: on CPython 3.11 and 3.12 an object keeps its
+    attributes in an array of values shared with its class's keys until its
+    ``__dict__`` is asked for, which makes a dict of them for good; from then on
+    every attribute of the object is a dict lookup (the manipulator's tick about
+    5 % slower after its first snapshot).  The values are the object's references
+    (``gc.get_referents``: its values, in the order their names were first set, and
+    its class); each is given the name among the class's code's names that reads
+    it from ``v`` (and, once for a class whose objects are given attributes by
+    other code, among every name pyrt's code uses, the names found kept for the
+    class).  None (ask ``__dict__``) when that does not account for every value."""
+    if not cls.__dictoffset__:
+        return None  # no dict of attributes: its slots are read
+    refs = [r for r in gc.get_referents(v) if r is not cls]
+    whole = len(refs) == 1 and type(refs[0]) is dict
+    if whole and cls in _DICT_BACKED:
+        return None  # its attributes are a dict already (as its class's were)
+    learned = _LEARNED.get(cls)
+    if learned is not None and len(learned) == len(refs):
+        # the names its last object had, in its order: each reads the value there
+        out = {}
+        for name, r in zip(learned, refs, strict=True):
+            if getattr(v, name, _MISSING) is not r:
+                break
+            out[name] = r
+        else:
+            return out
+    names = _candidates(cls)
+    if names is None:
+        return None
+    left: dict[int, list[int]] = {}
+    for i, r in enumerate(refs):
+        left.setdefault(id(r), []).append(i)
+    got: list[tuple[int, str, Any]] = []
+    _claim(v, cls, names, left, got)
+    if len(got) != len(refs):
+        defaults = _class_defaults(cls)
+        _claim(v, cls, defaults, left, got)  # an attribute that shadows a class's
+        if len(got) != len(refs):
+            if whole:
+                _DICT_BACKED.add(cls)
+                return None  # its attributes are a dict already
+            if cls in _LOOKED_FURTHER:
+                return None
+            _LOOKED_FURTHER.add(cls)
+            for i in range(len(got) - 1, -1, -1):  # not these: look further first
+                if got[i][1] in defaults:
+                    left[id(got[i][2])].insert(0, got[i][0])
+                    del got[i]
+            for where in left.values():
+                where.sort()
+            known = set(names) | set(defaults)
+            found = len(got)
+            _claim(v, cls, [n for n in _all_names() if n not in known], left, got)
+            _NAMES[cls] = names + tuple(sorted(name for _i, name, _x in got[found:]))
+            _claim(v, cls, defaults, left, got)
+            if len(got) != len(refs):
+                return None
+    got.sort()
+    out = {name: x for _i, name, x in got}
+    _LEARNED[cls] = tuple(out)
+    return out
+
+
+def _claim(v: Any, cls: type, names: Sequence[str], left: dict[int, list[int]],
+           got: list[tuple[int, str, Any]]) -> None:
+    """Give each of ``names`` that reads one of ``v``'s values still unnamed (``left``:
+    the positions of each value, by id) that value's first position (into ``got``)."""
+    mro = cls.__mro__
+    for name in names:
+        descriptor = False
+        for k in mro:  # a property or a method is not read (a property may compute)
+            d = k.__dict__.get(name, _MISSING)
+            if d is not _MISSING:
+                t = type(d)
+                descriptor = hasattr(t, "__get__") or hasattr(t, "__set__")
+                break
+        if descriptor:
+            continue
+        try:
+            x = getattr(v, name)
+        except AttributeError:
+            continue
+        where = left.get(id(x))
+        if where:
+            got.append((where.pop(0), name, x))
+
+
+_ALL_NAMES: list[str] = []
+#: The classes of objects whose attributes were found in a dict (asked for before).
+_DICT_BACKED: set[type] = set()
+#: Per class: the names of the last of its objects read, in the order of its values.
+_LEARNED: dict[type, tuple[str, ...]] = {}
+#: The classes whose objects' names were looked for among :func:`_all_names` (once).
+_LOOKED_FURTHER: set[type] = set()
+
+
+def _all_names() -> list[str]:
+    """Every name the code of pyrt's modules (loaded now) reads or writes on objects."""
+    if not _ALL_NAMES:
+        found: set[str] = set()
+        for mod_name, mod in list(sys.modules.items()):
+            if mod_name.split(".")[0] != "pyrt" or mod is None:
+                continue
+            for x in list(vars(mod).values()):
+                for f in ([x] if not isinstance(x, type) else
+                          [getattr(y, "__func__", y) for y in x.__dict__.values()]):
+                    for g in (f, getattr(f, "fget", None), getattr(f, "fset", None)):
+                        code = getattr(g, "__code__", None)
+                        if isinstance(code, CodeType):
+                            _code_names(code, found)
+        _ALL_NAMES.extend(sorted(n for n in found if not n.startswith("__")))
+    return _ALL_NAMES
 
 
 def _slots(cls: type) -> tuple[str, ...]:
@@ -414,6 +630,8 @@ class _Decoder:
                 cur[:] = items
                 return cur
             return items
+        if isinstance(v, _CCopy):  # a snapshot restored as it was taken (not read back)
+            v = v.plain()
         if not isinstance(v, dict) or not v:
             raise SnapshotError(f"the snapshot is damaged at {path}: {str(v)[:40]!r}")
         tag = next(iter(v))
