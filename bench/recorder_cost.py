@@ -247,8 +247,12 @@ def idle_row(row: str, seconds: float) -> dict:
         if row.endswith("black box off"):
             argv += ["--black-box", "off"]
     with tempfile.TemporaryDirectory() as tmp:
+        # the station's files (the manipulator's databases) in the temporary
+        # directory too, never in the user's state
+        env = dict(os.environ, PYRT_HOME=str(Path(tmp) / "pyrt-home"),
+                   XDG_STATE_HOME=str(Path(tmp) / "state"))
         proc = subprocess.Popen(argv, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL, cwd=tmp)
+                                stderr=subprocess.DEVNULL, cwd=tmp, env=env)
         try:
             # start-up: imports, the station built (the manipulator's databases), the
             # loop running
