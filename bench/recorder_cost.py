@@ -43,10 +43,11 @@ alike.  Three measures:
   console commands between runs are in its count, the same in every row)
   and of the journal writer thread.  The load of the machine does not
   change them: the figure to decide by.
-* ``idle`` (``--idle S``, 0 skips it): ``pyrt gripper`` itself, idle at real
-  time with its stdin a pipe, the black box on (the default) and ``--black-box
-  off``, and a bare Python sleep loop at 1 kHz: the process's CPU share
-  (``/proc``) over ``S`` seconds after a second of start-up; the target 5 %.
+* ``idle`` (``--idle S``, 0 skips it): ``pyrt gripper`` (1 kHz) and ``pyrt
+  manipulator`` (200 Hz) themselves, idle at real time with their stdin a pipe,
+  the black box on (the default) and ``--black-box off``, and a bare Python
+  sleep loop at 1 kHz: the process's CPU share (``/proc``) over ``S`` seconds
+  after the start-up; the targets 5 % (gripper) and 3 % (manipulator).
 
 Not part of the test run (it is a script, not a ``bench_*`` module).
 """
@@ -299,21 +300,35 @@ def _one_tick_shape() -> bool:
     return False
 
 
+#: The idle rows: ``pyrt gripper`` (1 kHz) and ``pyrt manipulator`` (200 Hz) with the
+#: black box on (the default) and off, and a bare Python sleep loop at 1 kHz.
+IDLE_ROWS = ("black box on", "black box off", "manipulator", "manipulator black box off",
+             "bare sleep")
+
+
 def idle_row(row: str, seconds: float) -> dict:
-    """The CPU share of ``pyrt gripper`` idle at real time (or a bare sleep loop)."""
+    """The CPU share of ``pyrt gripper`` or ``pyrt manipulator`` idle at real time
+    (or of a bare sleep loop)."""
     if row == "bare sleep":
         code = ("import time\nn=time.monotonic_ns()\nwhile True:\n n+=1000000\n"
                 " d=n-time.monotonic_ns()\n if d>0: time.sleep(d/1e9)\n")
         argv = [sys.executable, "-c", code]
     else:
-        argv = [sys.executable, "-m", "pyrt", "gripper"]
-        if row == "black box off":
+        robot = "manipulator" if row.startswith("manipulator") else "gripper"
+        argv = [sys.executable, "-m", "pyrt", robot]
+        if row.endswith("black box off"):
             argv += ["--black-box", "off"]
     with tempfile.TemporaryDirectory() as tmp:
+        # the station's files (the manipulator's databases) in the temporary
+        # directory too, never in the user's state
+        env = dict(os.environ, PYRT_HOME=str(Path(tmp) / "pyrt-home"),
+                   XDG_STATE_HOME=str(Path(tmp) / "state"))
         proc = subprocess.Popen(argv, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL, cwd=tmp)
+                                stderr=subprocess.DEVNULL, cwd=tmp, env=env)
         try:
-            time.sleep(1.5)  # start-up: imports, the station built, the loop running
+            # start-up: imports, the station built (the manipulator's databases), the
+            # loop running
+            time.sleep(3.0 if row.startswith("manipulator") else 1.5)
             c0, t0 = _cpu_s(proc.pid), time.monotonic()
             time.sleep(seconds)
             c1, t1 = _cpu_s(proc.pid), time.monotonic()
@@ -437,7 +452,7 @@ def main() -> None:
                         r = _child(tree, "--one", robot, row, str(SECONDS[robot]))
                         work.setdefault((tree, robot, row), []).append(r)
         if a.idle > 0:
-            for row in ("black box on", "black box off", "bare sleep"):
+            for row in IDLE_ROWS:
                 for tree in trees:
                     if row == "bare sleep" and tree != trees[0]:
                         continue

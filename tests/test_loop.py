@@ -336,6 +336,54 @@ def test_the_spin_policy_spins_only_while_a_robot_moves(monkeypatch):
         WallClock(spin="sometimes")
 
 
+def test_at_rest_a_tick_starts_after_one_sleep_between_two_clock_reads(monkeypatch):
+    """At rest start_tick sleeps once to the deadline between two reads of the clock, the
+    second the tick's start (its lateness the wake-up error, which the spin window still
+    learns); while a robot moves it sleeps and spins the window out, on a scaled clock too."""
+    import pyrt.scheduler.clock as clock_mod
+
+    class Counted(_FakeTime):
+        sleeps = 0
+
+        def sleep(self, s: float) -> None:
+            self.sleeps += 1
+            super().sleep(s)
+
+    fake = Counted(error_ns=30_000)
+    monkeypatch.setattr(clock_mod, "time", fake)
+    clock = WallClock()
+    fake.spun = 0
+    start = clock.start_tick(1 * MS)
+    assert (fake.sleeps, fake.spun) == (1, 2)
+    assert start == fake.now - clock.wall_deadline(0) and start - 1 * MS >= 30_000
+    for k in range(2, 1000):
+        clock.start_tick(k * MS)
+    clock.moving(True)
+    assert 30_000 < clock.spin_window_ns <= 30_000 + WallClock.SPIN_MARGIN_NS + 3_000
+    for k in range(1000, 1010):
+        start = clock.start_tick(k * MS)
+        assert 0 <= start - k * MS <= 2_000  # the spin took the wake-up error out
+    fast = WallClock(speed=4.0)
+    for k in (1, 2, 3):
+        assert fast.start_tick(k * MS) >= k * MS
+
+
+def test_a_real_time_loop_keeps_every_tick_s_lateness_and_work():
+    """On real time each tick's lateness and work are counted, whether the statistics are
+    built in the loop thread or handed over to another (a runner's statistics)."""
+    loop = Loop(WallClock(spin="never"), period_ns=MS)
+    loop.attach(lambda now: None, name="nothing")
+    loop.run(5)
+    assert loop.statistics().lateness.count == 5
+    loop.run(3)
+    taken = loop.take_samples()
+    loop.fold_samples(taken)
+    stats = loop.statistics(fold=False)
+    assert stats.lateness.count == 8 and stats.work.count == 8
+    loop.reset_statistics()
+    assert loop.statistics().lateness.count == 0
+
+
 def test_a_station_tells_its_clock_when_a_robot_starts_and_stops_moving():
     """The gripper station on a clock that records it: moving(True) when a move starts,
     moving(False) when it has ended, once each."""

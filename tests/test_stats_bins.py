@@ -6,9 +6,9 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
+from pyrt.scheduler._handlertiming import HandlerTimes
 from pyrt.scheduler._routinetiming import _bin_indices
-from pyrt.scheduler.loop import _record
-from pyrt.scheduler.stats import NBINS, Accumulator, bin_edges, bin_index
+from pyrt.scheduler.stats import NBINS, bin_edges, bin_index
 
 _durations = st.integers(-10, 2**45) | st.integers(0, 4096)
 
@@ -22,9 +22,11 @@ def test_vectorised_bins_are_bin_index(ds):
 
 @given(_durations)
 def test_loop_records_in_bin_index(d):
-    """The loop's record puts a duration in stats.bin_index's bin."""
-    acc = Accumulator()
-    _record(acc, max(d, 0))
+    """The loop's record (a tick's lateness, taken and folded) puts a duration in stats.bin_index's bin."""
+    times = HandlerTimes()
+    times.lateness.samples.append(max(d, 0))
+    times.fold(times.take(0))
+    acc = times.lateness.acc
     assert acc.hist[bin_index(d)] == 1 and sum(acc.hist) == 1
 
 

@@ -38,7 +38,6 @@ overload where FDFF is meant; the memory map is taken as the reference.
 
 from __future__ import annotations
 
-from functools import partial
 from typing import Any
 
 from pyrt.boards.i8031 import I8031, VECTOR_EXT0, VECTOR_EXT1
@@ -106,11 +105,13 @@ class GripperBoard:
         self._readers = {a: bound_reader(r, reg.name) for a, reg in _BY_ADDRESS.items()}
         self._writers = {a: bound_writer(r, reg.name) for a, reg in _BY_ADDRESS.items()
                          if not reg.is_input}
-        # the encoder's pulse counters: two bound reads where a read is one index
-        # into an image, else one read of the board's inputs (a read that looks at
-        # a link each time costs more than the snapshot)
+        # the encoder's pulse counters: two bound reads where the view binds its
+        # own readers (a process image: a read is one index into it), else one
+        # snapshot of the board's inputs a poll (a read that goes to the board
+        # each time costs more than the snapshot)
         self._read_up, self._read_down = bound_reader(r, "up"), bound_reader(r, "down")
-        self._inputs = r.snapshot if isinstance(self._read_up, partial) else None
+        binds = callable(getattr(r, "reader", None))  # as bound_reader decides
+        self._inputs = None if binds else r.snapshot
         # pulses counted before this controller came are not its own
         self._up, self._down = self._read_up(), self._read_down()
         self.map_xdata(self.cpu)

@@ -492,9 +492,11 @@ class Journal:
                         self._flush_block()
                     if self._waiting and self._put - self._taken <= cap // 2:
                         self._room.set()
-                    if yield_gil:
-                        # a real-time loop thread waking now gets the interpreter at
-                        # once (on virtual time this would only slow both threads)
+                    if yield_gil and self._put > self._taken:
+                        # more to encode: a real-time loop thread waking now gets the
+                        # interpreter at once (on virtual time this would only slow
+                        # both threads); with nothing more, the wait below lets go of
+                        # it, and a yield here would be one more wake-up for nothing
                         sleep(0)
                     continue
                 if not q or q[0][0] > taken:

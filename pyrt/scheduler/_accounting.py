@@ -244,6 +244,8 @@ def statistics(loop: Loop, fold: bool) -> LoopStatistics:
                 mean_ns=dist.mean_ns, max_ns=g.acc.max, p99_ns=dist.p99_ns,
                 overruns=g.acc.overruns, missed=g.missed, distribution=dist,
                 tasks=tuple(members[id(g)]))
+    with loop._times.lock:  # a fold in another thread (a timing log's) updates them
+        lateness, work = loop._lateness.distribution(), loop._work.distribution()
     return LoopStatistics(
         period_ns=loop.period_ns,
         ticks=loop.tick_index,
@@ -252,8 +254,8 @@ def statistics(loop: Loop, fold: bool) -> LoopStatistics:
         consecutive_overruns=loop.consecutive_overruns,
         startup_overruns=loop.startup_overruns,
         startup_worst_ns=loop.startup_worst_ns,
-        lateness=loop._lateness.distribution(),
-        work=loop._work.distribution(),
+        lateness=lateness,
+        work=work,
         tasks=tasks,
         groups=groups,
     )

@@ -5,7 +5,10 @@ the foreground jobs are each timed as an entry of their own, beside the
 ready queues' routines: the loop reads the clock once between handlers (the
 end of one is the start of the next) and appends each duration to the
 handler's sample list; the lists are handed over (:meth:`HandlerTimes.take`)
-and folded into histograms in bulk, off the tick.
+and folded into histograms in bulk, off the tick.  The loop's own two
+streams on real time, each tick's lateness and work, are kept the same way
+(:attr:`HandlerTimes.lateness`, :attr:`HandlerTimes.work`): a tick appends
+two integers and bins nothing.
 """
 
 from __future__ import annotations
@@ -57,6 +60,11 @@ class HandlerTimes:
 
     def __init__(self) -> None:
         self.entries: list[HandlerTiming] = []
+        #: How late each tick started and how long its work took (ns; the loop
+        #: appends one of each per tick on real time): taken and folded with
+        #: the entries, never listed among them.
+        self.lateness = HandlerTiming("lateness")
+        self.work = HandlerTiming("work")
         #: Where a queue's own stretch of a timed tick goes (its routines are
         #: timed by the queue); emptied at every take.
         self.sink: list[int] = []
@@ -91,7 +99,7 @@ class HandlerTimes:
     def take(self, tick: int) -> list[tuple[HandlerTiming, list[int]]]:
         """Hand over the samples recorded so far (in ``tick``, loop thread)."""
         taken = []
-        for e in self.entries:
+        for e in (*self.entries, self.lateness, self.work):
             s = e.samples
             if s:
                 e.last = s[-1]
@@ -113,7 +121,7 @@ class HandlerTimes:
     def reset(self) -> None:
         """Forget every sample and accumulated figure."""
         with self.lock:
-            for e in self.entries:
+            for e in (*self.entries, self.lateness, self.work):
                 e.samples.clear()
                 e.acc.reset()
         self.sink.clear()

@@ -169,6 +169,33 @@ class WallClock(Clock):
             return self.spin_ns
         return min(self.spin_ns, int(self.wake_error_ns) + self.SPIN_MARGIN_NS)
 
+    def start_tick(self, deadline_ns: int) -> int:
+        """Wait for a tick's deadline and return its start.  At rest (the
+        policy does not spin now) this is one ``clock_nanosleep`` to the
+        deadline between two reads of the clock, and the second read is the
+        tick's start: an idle loop wakes once a tick and does nothing else
+        to wait.  While it spins, :meth:`wait_until` (sleep, then spin)."""
+        if self.spinning or (self.timer_slack_ns is not None
+                             and self._slack_set_in != threading.get_ident()):
+            self.wait_until(deadline_ns)
+            return self.now_ns()
+        mono = time.monotonic_ns
+        target = self.wall_deadline(deadline_ns) if self._scaled else self._wall0 + deadline_ns
+        now = mono()
+        if now < target:
+            time.sleep((target - now) / 1e9)
+            now = mono()
+            while now < target:  # a sleep never ends early; a rounding might
+                now = mono()
+            if self.adaptive:
+                # what a spin would have had to cover, as wait_until keeps it
+                error = now - target
+                decayed = self.wake_error_ns * self.DECAY
+                self.wake_error_ns = error if decayed < error <= self.spin_ns else decayed
+        if self._scaled:
+            return int((now - self._wall0) * self.speed)
+        return now - self._wall0
+
     def wait_until(self, deadline_ns: int) -> None:
         if self.timer_slack_ns is not None and self._slack_set_in != threading.get_ident():
             self._slack_set_in = threading.get_ident()

@@ -101,7 +101,9 @@ class GcWatch:
         self._recent: list[tuple[int, int]] = []
         self._idle = False
         self._t0 = 0
-        self._controlling = False
+        #: True during a run that switched automatic collection off (an
+        #: attribute: the loop reads it every tick).
+        self.controlling = False
         self._installed = False
         #: Allocations (gc.get_count()[0]) at which an idle collection is due.
         self.threshold = max(1, gc.get_threshold()[0])
@@ -127,31 +129,26 @@ class GcWatch:
     def begin(self, control: bool) -> None:
         """A run starts: count collections; with ``control`` (real time), freeze
         the start-up heap and turn automatic collection off."""
-        if control and not self._controlling:
+        if control and not self.controlling:
             _take_control()  # its collection of start-up's garbage is not counted
-            self._controlling = True
+            self.controlling = True
         if not self._installed:
             gc.callbacks.append(self._callback)
             self._installed = True
 
     def end(self) -> None:
         """The run ends: automatic collection as it was, no more counting."""
-        if self._controlling:
-            self._controlling = False
+        if self.controlling:
+            self.controlling = False
             _give_back()
         if self._installed:
             with contextlib.suppress(ValueError):  # someone cleared gc.callbacks
                 gc.callbacks.remove(self._callback)
             self._installed = False
 
-    @property
-    def controlling(self) -> bool:
-        """True during a run that switched automatic collection off."""
-        return self._controlling
-
     def due(self) -> bool:
         """True when an idle collection is due (allocations past the threshold)."""
-        return self._controlling and gc.get_count()[0] >= self.threshold
+        return self.controlling and gc.get_count()[0] >= self.threshold
 
     def forced(self) -> bool:
         """True when allocations are so far past the threshold that the loop

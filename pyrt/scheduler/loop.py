@@ -54,7 +54,7 @@ from pyrt.scheduler.clock import Clock, SimClock, WallClock
 from pyrt.scheduler.gcwatch import GcWatch
 from pyrt.scheduler.rategroup import GroupTiming, RateGroup
 from pyrt.scheduler.readyqueue import ReadyQueue
-from pyrt.scheduler.stats import Accumulator, LoopStatistics, bin_index
+from pyrt.scheduler.stats import LoopStatistics
 
 __all__ = ["Job", "Loop", "TakenSamples", "overrun_line"]
 
@@ -198,8 +198,12 @@ class Loop(LoopComposition):
         self.startup_overruns = 0
         self.startup_worst_ns = 0
         self._starting = True
-        self._lateness = Accumulator("lateness")
-        self._work = Accumulator("work")
+        # each tick's lateness and work: appended to sample lists as the
+        # handlers' durations are, folded with them off the tick
+        self._lateness = self._times.lateness.acc
+        self._work = self._times.work.acc
+        self._late_sample = self._times.lateness.samples.append
+        self._work_sample = self._times.work.samples.append
         self._next_summary = self.now_ns + self.summary_interval_ns
         self._warnings = _OverrunWarnings(self)
         self._log_started = False
@@ -466,8 +470,8 @@ class Loop(LoopComposition):
         nxt = deadline + period
         end = clock.now_ns()
         if self.timing:
-            _record(self._lateness, start - deadline)
-            _record(self._work, end - start)
+            self._late_sample(start - deadline)
+            self._work_sample(end - start)
         if end > nxt:
             skipped = (end - nxt + period - 1) // period
             if self._starting and self.tick_index <= self.STARTUP_TICKS:
@@ -511,7 +515,7 @@ class Loop(LoopComposition):
                 log.summary(now, self.statistics(fold=False))
 
             log.defer(write_summary)
-        elif self._times.entries or self._groups:
+        elif self.timing:
             self._times.fold(self._times.take(self.tick_index), _accounting.take_groups(self))
 
     def _start_log(self) -> None:
@@ -637,10 +641,3 @@ def overrun_line(count: int, worst_ns: int, tick: int, culprit: str = "", width:
     line = head + tail
     return line if len(line) <= width else line[: width - 1] + "…"
 
-
-def _record(acc: Accumulator, d: int) -> None:
-    acc.calls += 1
-    acc.total += d
-    if d > acc.max:
-        acc.max = d
-    acc.hist[bin_index(d)] += 1

@@ -393,15 +393,6 @@ class ManipulatorPlant:
                 cnt[a] = (cnt[a] + whole - st.counted) & _COUNTER_MASK
                 st.counted = whole
 
-    def _noise(self) -> float:
-        """The next standard-normal sample (drawn in seeded blocks: cheap per call)."""
-        i = self._noise_i
-        if i >= len(self._noise_block):
-            self._noise_block = self._np_rng.standard_normal(4096).tolist()
-            i = 0
-        self._noise_i = i + 1
-        return self._noise_block[i]
-
     def _write_sensors(self) -> None:
         dc = self.dc
         imp = self.imp
@@ -409,6 +400,9 @@ class ManipulatorPlant:
         simple = imp.bias_resistor
         nl4 = 4.0 * imp.loadcell_nonlinearity
         tensions = self.solver.tensions()
+        # standard-normal noise, drawn in seeded blocks of 4096 (cheap per load
+        # cell): the block and the place in it held here for the loop
+        block, i = self._noise_block, self._noise_i
         for st, t in zip(self.ropes, tensions, strict=True):
             r = st.rig
             if st.load is not None:  # the calibration load, not the source, pulls on it
@@ -427,13 +421,18 @@ class ManipulatorPlant:
                     load = loadcell_response(t, r.loadcell_maxload, imp)
                 load += st.zero_error
                 if sigma:
-                    load += sigma * self._noise()
+                    if i >= len(block):
+                        block = self._noise_block = self._np_rng.standard_normal(4096).tolist()
+                        i = 0
+                    load += sigma * block[i]
+                    i += 1
                 code = round((load - r.loadcell_offset) / r.loadcell_slope)
                 code = 0 if code < 0 else (ADC_MAX if code > ADC_MAX else code)
             if code != st.stuck_code or st.first:
                 st.first = False
                 st.stuck_code = code
                 set_adc(dc, r.adc_channel, code)
+        self._noise_i = i
 
     def invalidate(self) -> None:
         """Solve the statics again at the next step even if no rope moved."""

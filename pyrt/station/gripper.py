@@ -196,9 +196,13 @@ class GripperStation(Station):
     # -- what the operator reads ----------------------------------------------------------
 
     def busy(self) -> bool:
-        """A move, jog, init or calibration runs, or a move waits."""
+        """A move, jog, init or calibration runs, or a move waits.  The move
+        watch asks every tick: its one executor and motion queue are looked at
+        here directly (what :meth:`Station.busy` would look at)."""
         ctl = self.controller
-        return ctl.moving or ctl.busy or super().busy()
+        job = ctl.job
+        return (ctl.moving or (job is not None and not job.done) or len(self.motion) > 0
+                or self.executor.current is not None)
 
     def _where(self) -> str:
         """Where the jaws are: position, opening, target, error."""
