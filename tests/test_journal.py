@@ -11,6 +11,7 @@ import subprocess
 import sys
 import textwrap
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -403,21 +404,30 @@ def test_a_stalled_disk_never_blocks_record_tick():
     warnings = []
     j = Journal(header(), sink, queue_ticks=50, warn=warnings.append)
     recs = run(2000, seed=5)
-    results = [j.record_tick(*r) for r in recs[:1000]]
+    assert j.record_tick(*recs[0])
+    # tick 0's block to the sink: the writer is then stuck in the stalled write, so that
+    # however the machine schedules the threads, no tick leaves the queue meanwhile
+    assert not j.flush(0.01)
+    for _ in range(3000):
+        if sink.writes >= 2:
+            break
+        time.sleep(0.01)
+    assert sink.writes == 2, "the writer never reached the sink"
+    results = [j.record_tick(*r) for r in recs[1:1001]]
     # a record_tick that waited for the sink would have waited out a stalled write
     assert sink.timed_out == 0 and not sink.release.is_set()
     assert results[:50] == [True] * 50 and results[50:] == [False] * 950
     assert j.dropped == 950 and j.gaps == []
     sink.release.set()
     assert j.flush(30)
-    assert j.record_tick(*recs[1000])
-    assert j.gaps == [Gap(50, 999, 950, "the journal's writer fell behind")]
+    assert j.record_tick(*recs[1001])
+    assert j.gaps == [Gap(51, 1000, 950, "the journal's writer fell behind")]
     j.close()
     reader = JournalReader(bytes(sink.data))
     assert reader.gaps == j.gaps
     assert [r.tick if isinstance(r, Tick) else "gap" for r in reader] == \
-        [*range(50), "gap", 1000]
-    assert any("ticks 50..999 not recorded" in w and "not replayable past tick 50" in w
+        [*range(51), "gap", 1001]
+    assert any("ticks 51..1000 not recorded" in w and "not replayable past tick 51" in w
                for w in warnings)
 
 
