@@ -47,6 +47,7 @@ for the initialization).
 from __future__ import annotations
 
 import contextlib
+import functools
 import inspect
 import itertools
 import math
@@ -655,30 +656,58 @@ def command(
     return mark
 
 
-def records_of(obj: Any, owner: str = "") -> list[Command]:
-    """The :class:`Command` records of the methods of ``obj`` marked with
-    :func:`command`, in the order the class defines them (base classes first)."""
-    seen: dict[str, Command] = {}
+@functools.cache
+def _doc_of(fn: Callable[..., Any]) -> str:
+    """A marked method's help text: its docstring, cleaned (the same every time a
+    line is resolved, and cleaning it costs more than the rest of the record)."""
+    return inspect.getdoc(fn) or ""
+
+
+def _marked(obj: Any) -> dict[str, tuple[str, Any, dict[str, Any]]]:
+    """The methods of ``obj`` marked with :func:`command`, by lower-case name, in
+    the order the class defines them (base classes first, a subclass's method
+    replacing its base's of the same name): ``(attribute, function, mark)``."""
+    seen: dict[str, tuple[str, Any, dict[str, Any]]] = {}
     for klass in reversed(type(obj).__mro__):
         for attr, fn in vars(klass).items():
             spec = getattr(fn, _MARK, None)
-            if spec is None:
-                continue
-            bound = getattr(obj, attr)
-            doc = inspect.getdoc(fn) or ""
-            args = tuple(_bind_range(a, obj) for a in spec["args"])
-            shown = tuple(_signal_range(a, obj, owner) for a in args if not a.ranged)
-            shown = tuple(t for t in shown if t)
-            ranges = [*(a.range_text for a in args if a.ranged), *shown]
-            if ranges:
-                doc += ("\n" if doc else "") + "Range: " + "; ".join(ranges) + "."
-            seen[spec["name"].lower()] = Command(
-                spec["name"], bound, args, doc, spec["reads_only"], spec["moves"],
-                spec["while_faulted"], spec["anyone"], spec["reply"], spec["console"], owner,
-                spec["subs"], spec["aliases"], shown,
-                getattr(obj, spec["prepare"]) if spec.get("prepare") else None,
-                getattr(obj, spec["snapshot"]) if spec.get("snapshot") else None)
-    return list(seen.values())
+            if spec is not None:
+                seen[spec["name"].lower()] = (attr, fn, spec)
+    return seen
+
+
+def _record(obj: Any, owner: str, attr: str, fn: Any, spec: dict[str, Any]) -> Command:
+    bound = getattr(obj, attr)
+    doc = _doc_of(fn)
+    args = tuple(_bind_range(a, obj) for a in spec["args"])
+    shown = tuple(_signal_range(a, obj, owner) for a in args if not a.ranged)
+    shown = tuple(t for t in shown if t)
+    ranges = [*(a.range_text for a in args if a.ranged), *shown]
+    if ranges:
+        doc += ("\n" if doc else "") + "Range: " + "; ".join(ranges) + "."
+    return Command(
+        spec["name"], bound, args, doc, spec["reads_only"], spec["moves"],
+        spec["while_faulted"], spec["anyone"], spec["reply"], spec["console"], owner,
+        spec["subs"], spec["aliases"], shown,
+        getattr(obj, spec["prepare"]) if spec.get("prepare") else None,
+        getattr(obj, spec["snapshot"]) if spec.get("snapshot") else None)
+
+
+def records_of(obj: Any, owner: str = "") -> list[Command]:
+    """The :class:`Command` records of the methods of ``obj`` marked with
+    :func:`command`, in the order the class defines them (base classes first)."""
+    return [_record(obj, owner, *m) for m in _marked(obj).values()]
+
+
+def record_named(obj: Any, name: str, owner: str = "") -> Command | None:
+    """The first of :func:`records_of` that answers to ``name`` (any case), or
+    None: the same record, made alone (a line names one command; making every
+    record of the object to find it cost more than the rest of resolving it)."""
+    key = name.lower()
+    for attr, fn, spec in _marked(obj).values():
+        if key == spec["name"].lower() or key in (a.lower() for a in spec["aliases"]):
+            return _record(obj, owner, attr, fn, spec)
+    return None
 
 
 class Stale(CommandError):
@@ -939,6 +968,8 @@ class Component:
 
     def find_command(self, name: str) -> Command | None:
         """The command record called ``name`` (case-insensitive), or None."""
+        if type(self).commands is Component.commands:  # the marked methods alone
+            return record_named(self, name, self.name)
         for c in self.commands():
             if c.answers_to(name):
                 return c

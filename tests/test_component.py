@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import math
 
 import pytest
@@ -205,3 +206,33 @@ def test_a_replayed_hand_over_prepares_again_from_the_snapshot_taken_at_its_tick
     assert serve_prepared(rec, [Snapshot(7)], kept) == 0
     assert serve_prepared(rec, [Prepared(7, (5.0,))], kept) == "went 10"
     assert kept == {}
+
+
+def test_a_command_named_alone_is_the_record_the_whole_list_gives():
+    """find_command and the shell's word (any case, name or alias) give the record the
+    whole list of records gives for that name; an unknown name gives None."""
+    from pyrt.commands import RobotShell
+    from pyrt.component import record_named, records_of, walk
+    from pyrt.scheduler import Loop, SimClock
+    from pyrt.station.gripper import build_gripper
+
+    station = build_gripper(Loop(SimClock()))
+    try:
+        checked = 0
+        for comp in {id(c): c for root in station.components() for c in walk(root)}.values():
+            for rec in comp.commands():
+                for name in (rec.name, rec.name.upper(), *rec.aliases):
+                    first = next(c for c in comp.commands() if c.answers_to(name))
+                    assert comp.find_command(name) == first
+                    checked += 1
+            assert comp.find_command("no-such-command") is None
+        shell = RobotShell(station, io.StringIO())
+        for rec in records_of(shell, ""):
+            for name in (rec.name, rec.name.title(), *rec.aliases):
+                assert shell.word(name) == record_named(shell, name, "") == next(
+                    w for w in shell.words() if w.answers_to(name))
+                checked += 1
+        assert shell.word("no-such-word") is None
+        assert checked > 40
+    finally:
+        station.close()

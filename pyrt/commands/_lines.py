@@ -8,7 +8,7 @@ from __future__ import annotations
 import difflib
 from typing import TYPE_CHECKING, Any
 
-from pyrt.component import Command, Component, records_of
+from pyrt.component import Command, Component, record_named, records_of
 from pyrt.errors import CommandError
 
 if TYPE_CHECKING:
@@ -45,7 +45,12 @@ class LineResolver:
 
     def word(self, name: str) -> Command | None:
         """The word called ``name`` (case-insensitive), or None."""
-        return next((w for w in self.words() if w.answers_to(name)), None)
+        own = record_named(self, name, "")
+        if own is not None:
+            return own
+        extra = self.profile.words
+        return None if extra is None else next(
+            (w for w in extra.commands() if w.answers_to(name)), None)
 
     def resolve(self, line: str) -> tuple[Component | None, Command, list[str], str]:
         """``(component, record, argument words, argument text)`` of ``line``
