@@ -331,3 +331,20 @@ def test_a_chain_pickles_and_copies_as_its_description():
         np.testing.assert_array_equal(other.fk(q), chain.fk(q))
         np.testing.assert_array_equal(other.rnea(q, q, q), chain.rnea(q, q, q))
         assert other.joint_names == chain.joint_names
+
+
+def test_the_planning_copy_is_made_once_per_chain_and_answers_as_the_chain():
+    """Every planner of a chain shares one copy (its own kernels) and its lock; the copy
+    answers as the chain; a chain made by replace has its own; a changed closed form
+    makes it again."""
+    _d, chain, rng = case(3, 4)
+    copy, lock = chain.planning_copy()
+    assert chain.planning_copy() == (copy, lock)
+    assert copy is not chain and copy._k is not chain._k
+    q = rng.uniform(-1.0, 1.0, 4)
+    assert np.array_equal(copy.fk(q), chain.fk(q))
+    other = chain.replace()
+    assert other.planning_copy()[0] is not copy
+    chain.closed_form = object()  # type: ignore[assignment]
+    again, _ = chain.planning_copy()
+    assert again is not copy and again.closed_form is chain.closed_form

@@ -29,6 +29,7 @@ with ``chain.replace()``).
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
 from os import PathLike
@@ -97,6 +98,10 @@ def _frozen(arr: np.ndarray) -> np.ndarray:
     return arr
 
 
+#: Guards the making of a chain's :meth:`Chain.planning_copy`.
+_PLANNING_LOCK = threading.Lock()
+
+
 class Chain:
     """A serial chain of revolute and prismatic joints; see the module doc.
 
@@ -140,6 +145,7 @@ class Chain:
             )
         except NativeError as exc:
             raise ConfigError(f"chain {self.name!r}: {exc}") from None
+        self._planning: tuple[Chain, threading.Lock] | None = None
         # The per-call path goes straight to the kernels (same signatures as
         # the methods below, which document them): one Python call less.
         k = self._k
@@ -172,6 +178,19 @@ class Chain:
         joints, offsets, last = dh_chain(rows, modified=modified)
         t = last if tool is None else last @ _pose("tool", tool)
         return cls(name, joints, base=base, tool=t, offsets=offsets)
+
+    def planning_copy(self) -> tuple[Chain, threading.Lock]:
+        """A copy of this chain (:meth:`replace` with no change: kernels and
+        workspace of its own) for planning beside the loop, which uses this
+        one, and the lock its users hold while they plan with it.  Made once
+        and kept: every motion queue of this chain plans with the same copy
+        (a queue made for each move from rest would otherwise copy the chain
+        each time); made again if the chain's closed form was changed."""
+        with _PLANNING_LOCK:
+            kept = self._planning
+            if kept is None or kept[0].closed_form is not self.closed_form:
+                kept = self._planning = (self.replace(), threading.Lock())
+            return kept
 
     def replace(self, **changes: Any) -> Chain:
         """A new chain with some of: ``name``, ``joints``, ``origins`` (n

@@ -131,9 +131,10 @@ class Queueing:
             planner = self.planner
             seg = planner.plan(spec, snap.tail, move, force_sensor=self.force_sensor)
             return Planned(snap, seg, move)
-        with self._plan_lock:
-            if self._side is None:
-                self._side = Planner(self.chain.replace(), self.limits, snap.tracker)
+        side, lock = self.chain.planning_copy()
+        with self._plan_lock, lock:
+            if self._side is None or self._side.chain is not side:
+                self._side = Planner(side, self.limits, snap.tracker)
             self._side.tracker = snap.tracker
             seg = self._side.plan(spec, snap.tail, move, force_sensor=self.force_sensor)
         return Planned(snap, seg, move)
