@@ -55,6 +55,7 @@ import re
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -164,12 +165,13 @@ def bare_c_figures(tmp: Path) -> dict[str, float | str] | None:
     return _lateness_row(r["cpu_percent"], r["p50_ns"], r["p99_ns"], r["max_ns"])
 
 
-def bare_python_figures() -> dict[str, float | str]:
-    """Python's bare sleep loop: time.sleep to each 1 kHz deadline, nothing else."""
+def _bare_sleep_loop(cpu_clock: Callable[[], float]) -> dict[str, float | str]:
+    """``time.sleep`` to each 1 kHz deadline for SECONDS, nothing else: the CPU
+    share by ``cpu_clock`` (the process's or the thread's) and the lateness."""
     mono = time.monotonic_ns
     n = int(SECONDS * 1000)
     late = [0] * n
-    c0 = time.process_time()
+    c0 = cpu_clock()
     t = mono()
     for i in range(n):
         t += 1_000_000
@@ -177,9 +179,14 @@ def bare_python_figures() -> dict[str, float | str]:
         if remaining > 0:
             time.sleep(remaining / 1e9)
         late[i] = mono() - t
-    cpu = 100 * (time.process_time() - c0) / SECONDS
+    cpu = 100 * (cpu_clock() - c0) / SECONDS
     late.sort()
     return _lateness_row(cpu, late[n // 2], late[int(n * 0.99)], late[-1])
+
+
+def bare_python_figures() -> dict[str, float | str]:
+    """Python's bare sleep loop: time.sleep to each 1 kHz deadline, nothing else."""
+    return _bare_sleep_loop(time.process_time)
 
 
 def bare_thread_figures(threads: int = 4) -> dict[str, float | str]:
@@ -193,20 +200,7 @@ def bare_thread_figures(threads: int = 4) -> dict[str, float | str]:
     out: dict[str, float | str] = {}
 
     def loop() -> None:
-        mono = time.monotonic_ns
-        n = int(SECONDS * 1000)
-        late = [0] * n
-        c0 = time.thread_time()
-        t = mono()
-        for i in range(n):
-            t += 1_000_000
-            remaining = t - mono()
-            if remaining > 0:
-                time.sleep(remaining / 1e9)
-            late[i] = mono() - t
-        cpu = 100 * (time.thread_time() - c0) / SECONDS
-        late.sort()
-        out.update(_lateness_row(cpu, late[n // 2], late[int(n * 0.99)], late[-1]))
+        out.update(_bare_sleep_loop(time.thread_time))
 
     idle = [threading.Thread(target=stop.wait, daemon=True) for _ in range(threads)]
     for th in idle:
