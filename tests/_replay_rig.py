@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
+from pyrt.journal import JournalReader
+from pyrt.station.blackbox import with_snapshot
 from pyrt.station.replay import Replay, ReplayResult
 
 
@@ -21,3 +25,17 @@ def replay_in_process(path: Path, tmp_path: Path) -> ReplayResult:
     finally:
         replay.close()
         station.close()
+
+
+def assert_each_snapshot_replays(pj: Path, taken: Sequence[Any], station: str,
+                                 tmp_path: Path) -> None:
+    """The journal ``pj`` resumed from each snapshot of ``taken`` (one black box a
+    snapshot) replays identically from that snapshot's tick to the journal's end."""
+    data = pj.read_bytes()
+    last = JournalReader(pj).summary().last_tick
+    for snap in taken:
+        box = tmp_path / f"from-{snap.tick}.pj"
+        box.write_bytes(with_snapshot(data, [snap], station))
+        result = replay_in_process(box, tmp_path)
+        assert result.identical, f"from tick {snap.tick}: {result.line()}"
+        assert (result.first_tick, result.last_tick) == (snap.tick, last)

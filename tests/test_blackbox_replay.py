@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from _manipulator_rig import TICK_NS
-from _replay_rig import replay_in_process
+from _replay_rig import assert_each_snapshot_replays
 
 from pyrt.cli import main
 from pyrt.commands import RobotShell
@@ -21,7 +21,6 @@ from pyrt.db import copy_station
 from pyrt.journal import JournalReader
 from pyrt.journal.format import HEADER_SIZE, KIND_SNAPSHOT, frame, snapshot_payload
 from pyrt.scheduler import Loop, SimClock
-from pyrt.station.blackbox import with_snapshot
 from pyrt.station.gripper import build_gripper
 from pyrt.station.manipulator import ManipulatorStation
 from pyrt.station.recording import Recorder
@@ -163,14 +162,7 @@ def test_a_full_run_replays_identically_from_each_of_its_snapshots(tmp_path, run
         rec.close()
     taken = [s for s in snaps if not s.refused]
     assert len(taken) >= 5, [s.refused for s in snaps]
-    data = pj.read_bytes()
-    last = JournalReader(pj).summary().last_tick
-    for snap in taken:
-        box = tmp_path / f"from-{snap.tick}.pj"
-        box.write_bytes(with_snapshot(data, [snap], st.name))
-        result = replay_in_process(box, tmp_path)
-        assert result.identical, f"from tick {snap.tick}: {result.line()}"
-        assert (result.first_tick, result.last_tick) == (snap.tick, last)
+    assert_each_snapshot_replays(pj, taken, st.name, tmp_path)
 
 
 # -- damage and refusals -------------------------------------------------------------------

@@ -8,13 +8,12 @@ import sys
 from pathlib import Path
 
 import pytest
-from _replay_rig import replay_in_process
+from _replay_rig import assert_each_snapshot_replays
 
 from pyrt.cli import main
 from pyrt.commands import RobotShell
 from pyrt.journal import JournalReader
 from pyrt.scheduler import Loop, SimClock
-from pyrt.station.blackbox import with_snapshot
 from pyrt.station.recording import Recorder
 from pyrt.station.snapshot import Snapshot, take_snapshot
 from pyrt.station.urdf import build_urdf
@@ -109,11 +108,4 @@ def test_a_full_run_replays_identically_from_each_of_its_snapshots(tmp_path,
         rec.close()
     taken = [s for s in snaps if not s.refused]
     assert len(taken) >= least and len(taken) == len(snaps), [s.refused for s in snaps]
-    data = pj.read_bytes()
-    last = JournalReader(pj).summary().last_tick
-    for snap in taken:
-        box = tmp_path / f"from-{snap.tick}.pj"
-        box.write_bytes(with_snapshot(data, [snap], st.name))
-        result = replay_in_process(box, tmp_path)
-        assert result.identical, f"from tick {snap.tick}: {result.line()}"
-        assert (result.first_tick, result.last_tick) == (snap.tick, last)
+    assert_each_snapshot_replays(pj, taken, st.name, tmp_path)
