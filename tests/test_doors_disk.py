@@ -144,6 +144,11 @@ def test_after_ack_a_disk_still_full_faults_again_and_a_freed_one_gets_every_val
         assert st.fault is not None and st.fault.id != first.id
         assert st.fault.cause.endswith(FULL)
         disk.full = False
+        # a write the writer began while the disk was full fails after that fault; its
+        # failure is taken here, not said after the ack as one more fault (a loaded
+        # machine's writer is late); its values go out again with the next batch
+        with contextlib.suppress(DiskError):
+            st.writeback.flush(30)
         r.call(st.acknowledge, take_fault=False)
         r.sleep(12.0)  # a stationary write is due every 10 s
         st.writeback.flush(30)
