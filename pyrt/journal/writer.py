@@ -138,11 +138,9 @@ class Journal:
         #: Entries that are not ticks (gaps, names, dumps, flushes), each after the
         #: ticks handed over before it: ``(number of ticks before it, kind, ...)``.
         self._queue: deque[tuple[Any, ...]] = deque()
-        #: The hand-over of a plain tick in one C call (:meth:`hand_over`), whose state
-        #: holds the counts both threads share: ``put`` (ticks handed over; written by
-        #: the loop thread only, in C or here), ``taken`` (ticks encoded; written by the
-        #: writer thread only), ``open`` (neither closed nor in a gap: a tick may go
-        #: straight into the ring) and ``slow`` (set by the writer on a write error).
+        #: The one-C-call hand-over (:meth:`hand_over`); its state holds ``put`` (ticks
+        #: handed over: the loop thread's), ``taken`` (encoded: the writer's), ``open``
+        #: (not closed nor in a gap) and ``slow`` (set by the writer on a write error).
         self._hand = TickHandOver(self._ring, self._capacity, self._n_inputs,
                                   header.period_ns)
         self._st = self._hand.state
@@ -224,18 +222,11 @@ class Journal:
     record_owned = record_tick
 
     def hand_over(self, inputs: Any) -> TickHandOver | None:
-        """The hand-over of a plain tick (no output written, no command, no event, no
-        deadline missed) in one C call, whose inputs are ``inputs`` as they stand: a
-        buffer of native 64-bit integers, in declared order, that its owner refills
-        every tick (a process image reading boards that keep their registers so).
-        ``call(now_ns)`` writes the tick's row into the ring (the clock and a copy of
-        the inputs) and answers 0 (or HAND_OVER_DUE); it hands nothing over and
-        answers HAND_OVER_SLOW when the ring is full, the journal in a gap or closed
-        or a write failed, or when its owner marked the tick slow or it is not the
-        tick expected (see :class:`~pyrt.native.TickHandOver`: its owner keeps the
-        expected tick, deadline and lateness bounds, and clears ``slow``); then
-        :meth:`record_tick` decides.  None when ``inputs`` is not such a buffer of
-        the header's inputs.  Loop thread only, as ``record_tick``."""
+        """The one-C-call hand-over of a plain tick (:class:`~pyrt.native.TickHandOver`:
+        its owner keeps the expected tick, the lateness bounds and ``slow``; the ring
+        full, a gap, a close or a write error refuse it, and :meth:`record_tick`
+        decides), reading ``inputs``: a buffer of the header's inputs in native 64-bit
+        integers its owner refills every tick; else None.  Loop thread only."""
         return self._hand if self._hand.bind(inputs) else None
 
     def _record_slowly(self, tick: int, time_ns: int, lateness_ns: int, missed: int,
@@ -396,13 +387,7 @@ class Journal:
     # -- the writer thread -------------------------------------------------------------------
 
     def _header_payload(self) -> bytes:
-        h = self.header
-        if list(h.writers) != self._writers:
-            h = Header(station=h.station, period_ns=h.period_ns, inputs=h.inputs,
-                       outputs=h.outputs, version=h.version, databases=h.databases,
-                       seeds=h.seeds, writers=self._writers, output_values=h.output_values,
-                       metadata=h.metadata)
-        return h.encode()
+        return _with_writers(self.header, self._writers).encode()
 
     def _write(self, data: bytes, warn: bool = True) -> None:
         fh = self._fh
@@ -565,21 +550,36 @@ class Journal:
     def _finish(self) -> None:
         if self._fail is None:
             self._write(frame(KIND_END, END.pack(self.recorded, self.dropped)))
-        fh = self._fh
-        if fh is None:
-            return
-        try:
-            fileno = getattr(fh, "fileno", None)
-            if fileno is not None and self.error is None:
-                try:
-                    os.fsync(fileno())
-                except (OSError, ValueError, AttributeError) as exc:
-                    if not isinstance(exc, ValueError | AttributeError) and self._owned:
-                        self.error = f"fsync failed: {exc}"
-        finally:
-            if self._owned:
-                try:
-                    fh.close()
-                except OSError as exc:
-                    self.error = self.error or f"close failed: {exc}"
+        if self._fh is not None:
+            self.error = _sync_and_close(self._fh, self._owned, self.error)
+
+
+def _with_writers(h: Header, writers: list[str]) -> Header:
+    """``h`` with the writer name table ``writers`` (``h`` itself if it has it)."""
+    if list(h.writers) == writers:
+        return h
+    return Header(station=h.station, period_ns=h.period_ns, inputs=h.inputs,
+                  outputs=h.outputs, version=h.version, databases=h.databases,
+                  seeds=h.seeds, writers=writers, output_values=h.output_values,
+                  metadata=h.metadata)
+
+
+def _sync_and_close(fh: Any, owned: bool, error: str | None) -> str | None:
+    """Sync a journal's file (unless ``error``: it was not written in full) and close
+    it if the journal opened it; the error, or the first of the sync or the close."""
+    try:
+        fileno = getattr(fh, "fileno", None)
+        if fileno is not None and error is None:
+            try:
+                os.fsync(fileno())
+            except (OSError, ValueError, AttributeError) as exc:
+                if not isinstance(exc, ValueError | AttributeError) and owned:
+                    error = f"fsync failed: {exc}"
+    finally:
+        if owned:
+            try:
+                fh.close()
+            except OSError as exc:
+                error = error or f"close failed: {exc}"
+    return error
 

@@ -325,7 +325,7 @@ class Recorder:
             # on virtual time a tick starts on its deadline; at real time a skipped
             # deadline puts the next tick's start a period past the one expected
             late_hi = 0 if loop.clock.virtual else loop.period_ns // 2
-            self._hand.late_lo, self._hand.late_hi = 0, late_hi
+            hand.state.late_lo, hand.state.late_hi = 0, late_hi
         image.tap = self
         runner.request_tap = self._request
         loop.fault_listeners.append(self._fault)
