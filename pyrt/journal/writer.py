@@ -410,8 +410,7 @@ class Journal:
                 self.warn(f"journal {self.path}: {self.error}; the file ends there")
 
     def _set_error(self, error: str) -> None:
-        # the error first, then the mark: a loop thread that clears the mark and then
-        # reads the error (the recorder) never misses it
+        # the error, then the mark: the recorder clears the mark, then reads the error
         self.error = error
         self._st.slow = 1
 
@@ -476,6 +475,7 @@ class Journal:
         yield_gil = not self.lossless
         most = max(1, BATCH_VALUES // (4 + self._n_inputs))
         st = self._st
+        drained = mono()
         while True:
             stopping = self._stop
             while True:
@@ -494,7 +494,8 @@ class Journal:
                         s, extra = extras.popleft()
                         mine[s - taken] = extra
                     if enc.count == 0:
-                        self._block_started = mono()
+                        # at real time, the earliest its first tick came (the ring empty)
+                        self._block_started = mono() if self.lossless else drained
                     for exc in enc.add_rows(ring, start, n, mine):
                         self._refused(exc)
                     st.taken = taken + n
@@ -537,7 +538,10 @@ class Journal:
                 self._flush_block()
             if stopping:
                 return
-            wait(self.poll_s)
+            drained = mono()
+            cut_in = self._block_started + self.max_delay_ns - drained \
+                if enc.count and not self.lossless else None
+            wait(_wait_s(self.poll_s, cut_in))
             clear()
 
     def _refused(self, exc: JournalError) -> None:
@@ -552,6 +556,12 @@ class Journal:
             self._write(frame(KIND_END, END.pack(self.recorded, self.dropped)))
         if self._fh is not None:
             self.error = _sync_and_close(self._fh, self._owned, self.error)
+
+
+def _wait_s(poll_s: float, cut_in_ns: int | None) -> float:
+    """How long the writer waits for ticks: a poll, or less when a block being filled
+    is to be cut in ``cut_in_ns`` (at real time: woken then, not a poll later)."""
+    return poll_s if cut_in_ns is None else min(poll_s, max(1e-3, cut_in_ns / 1e9))
 
 
 def _with_writers(h: Header, writers: list[str]) -> Header:
