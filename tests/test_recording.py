@@ -145,3 +145,33 @@ def test_plain_ticks_are_handed_over_in_c_and_record_what_the_recorder_records(t
     assert got == want
     assert python_all == ran
     assert python_some < ran // 20, (python_some, ran)
+
+
+def test_behind_a_handler_of_its_own_the_tick_is_handed_over_in_c_too(tmp_path):
+    """When the write phase is not the tick's last work, the recorder's handler makes the
+    one C call for a plain tick, and records every tick as its own path would."""
+    runs = []
+    for in_c in (True, False):
+        loop, station = _gripper()
+        try:
+            loop.attach(lambda _now: None, name="after-io")
+            recorder = Recorder(station, tmp_path / f"{in_c}.pj")
+            assert not recorder.in_write_phase and "journal" in loop.handler_names
+            if not in_c:
+                recorder._hand_call = None
+            own, slow = recorder._tick, []
+            recorder._tick = lambda now, status, own=own, slow=slow: (  # type: ignore[method-assign]
+                slow.append(now), own(now, status))
+            loop.run(ticks=40)
+            loop.resume_at(loop.now_ns, loop.deadline_ns + 3 * loop.period_ns)
+            loop.run(ticks=40)
+            handed = recorder.journal.recorded
+            recorder.close()
+        finally:
+            station.close()
+        ticks = [(t.tick, t.time_ns, t.lateness_ns, t.missed, t.inputs, t.outputs)
+                 for t in JournalReader(tmp_path / f"{in_c}.pj").ticks()]
+        assert len(ticks) == handed == 80
+        assert len(slow) < 10 if in_c else len(slow) == 80
+        runs.append(ticks)
+    assert runs[0] == runs[1]
