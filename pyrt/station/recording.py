@@ -33,7 +33,10 @@ time any lateness (a deadline moved between runs), at real time half a
 period or more (a deadline skipped: the ticks missed are counted there).
 A real-time loop restarted less than half a period after the deadline it
 stopped before starts at once (``Loop.run``): its first tick's lateness is
-then taken from the deadline it stopped before.  Every back end
+then taken from the deadline it stopped before.  A statistics reset
+(``Loop.reset_statistics``) is seen at the next tick that takes the
+recorder's path (the next deadline skipped at the latest): the deadlines
+missed are counted from there.  Every back end
 reaches its boards through a process image (``sim:`` included: one tick
 shape, recorded or not).
 
