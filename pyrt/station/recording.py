@@ -35,8 +35,9 @@ A real-time loop restarted less than half a period after the deadline it
 stopped before starts at once (``Loop.run``): its first tick's lateness is
 then taken from the deadline it stopped before.  A statistics reset
 (``Loop.reset_statistics``) is seen at the next tick that takes the
-recorder's path (the next deadline skipped at the latest): the deadlines
-missed are counted from there.  Every back end
+recorder's path (the next deadline skipped at the latest), as the count
+going down; should that tick's skip alone bring the count back to where it
+stood, the reset goes unseen and that tick records too few misses.  Every back end
 reaches its boards through a process image (``sim:`` included: one tick
 shape, recorded or not).
 
