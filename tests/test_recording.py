@@ -175,3 +175,34 @@ def test_behind_a_handler_of_its_own_the_tick_is_handed_over_in_c_too(tmp_path):
         assert len(slow) < 10 if in_c else len(slow) == 80
         runs.append(ticks)
     assert runs[0] == runs[1]
+
+
+def _skip(loop, n: int) -> None:
+    """``n`` deadlines skipped as an overrun at real time skips them: counted, and the
+    next deadline ``n`` periods on."""
+    loop.missed += n
+    loop.overruns += 1
+    loop.consecutive_overruns += 1
+    loop.resume_at(loop.now_ns, loop.deadline_ns + n * loop.period_ns)
+
+
+def test_a_statistics_reset_then_as_many_misses_as_before_is_recorded_exactly(tmp_path):
+    """After a statistics reset, a skip that brings the count back to where it stood is
+    recorded as the deadlines it skipped (not as no miss), the others as always."""
+    loop, station = _gripper()
+    try:
+        recorder = Recorder(station, tmp_path / "run.pj")
+        loop.run(ticks=5)
+        _skip(loop, 2)
+        loop.run(ticks=3)
+        loop.reset_statistics()
+        loop.run(ticks=3)
+        _skip(loop, 2)  # the count back at 2
+        loop.run(ticks=3)
+        _skip(loop, 1)
+        loop.run(ticks=2)
+        recorder.close()
+    finally:
+        station.close()
+    missed = [t.missed for t in JournalReader(tmp_path / "run.pj").ticks()]
+    assert missed == [0] * 5 + [2, 0, 0] + [0] * 3 + [2, 0, 0] + [1, 0]

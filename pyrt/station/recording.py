@@ -35,9 +35,10 @@ A real-time loop restarted less than half a period after the deadline it
 stopped before starts at once (``Loop.run``): its first tick's lateness is
 then taken from the deadline it stopped before.  A statistics reset
 (``Loop.reset_statistics``) is seen at the next tick that takes the
-recorder's path (the next deadline skipped at the latest), as the count
-going down; should that tick's skip alone bring the count back to where it
-stood, the reset goes unseen and that tick records too few misses.  Every back end
+recorder's path (the next deadline skipped at the latest): a count of
+missed deadlines that went down, moved further than the deadline, or stood
+still though the last tick overran was reset, and the tick records those
+counted since.  Every back end
 reaches its boards through a process image (``sim:`` included: one tick
 shape, recorded or not).
 
@@ -302,6 +303,8 @@ class Recorder:
         self._commands: list[tuple[str, str]] = []
         self._events: list[tuple[str, int, str]] = []
         self._missed = loop.missed
+        #: Whether the hand-over's expected deadline is set (by a tick of ours).
+        self._expecting = False
         self._unrecorded = 0
         #: Files of the recorder's that could not be written (the journal, a
         #: black box), any thread: each is a fault of the station, tripped by
@@ -422,11 +425,17 @@ class Recorder:
             self._listen(loop.tick_index, now_ns)
             return
         hand = self._hand
+        skipped = None
         if hand is not None:
             hand.slow = 0  # before anything reads what marks it (a tap, a write error)
-        if self._pending or loop.missed != self._missed or self.journal.error is not None:
+            if self._expecting:
+                # the deadlines skipped since the last record: the C side's expected
+                # deadline is this tick's unless some were
+                skipped = (loop.deadline_ns - hand.deadline_ns) // loop.period_ns
+        if self._pending or loop.missed != self._missed or skipped \
+                or self.journal.error is not None:
             self._pending = False
-            self._tick_slowly(now_ns)
+            self._tick_slowly(now_ns, skipped)
         else:
             # a tick with nothing to add: the ring full, the journal in a gap or
             # closed, a deadline skipped without a miss counted (start-up), the C
@@ -439,6 +448,7 @@ class Recorder:
             # the next tick as the loop will run it unless a deadline is skipped
             hand.tick = loop.tick_index + 1
             hand.deadline_ns = loop.deadline_ns + loop.period_ns
+            self._expecting = True
             if self._pending or self.journal.error is not None:
                 hand.slow = 1
 
@@ -458,12 +468,11 @@ class Recorder:
             if at is None or at <= tick:
                 at = tick + 1
             due = min(due, at)
-        # a listener's own listen_at (a fault's black box) asked for no later
-        self._listen_at = min(due, self._listen_at) if self._listen_at > tick else due
+        self._listen_at = due
         if self._hand is not None:
             self._hand.listen_at = self._listen_at
 
-    def _tick_slowly(self, now_ns: int) -> None:
+    def _tick_slowly(self, now_ns: int, skipped: int | None = None) -> None:
         journal = self.journal
         loop = self.loop
         if self._disk_faults or (journal.error is not None and not self._journal_said):
@@ -475,13 +484,16 @@ class Recorder:
             finally:
                 loop.current = running
         missed = loop.missed
-        if missed != self._missed:
-            # the deadlines skipped since the last record (the count was reset to 0
-            # if it went down: those since the reset)
-            missed, self._missed = (missed - self._missed if missed > self._missed
-                                    else missed), missed
-        else:
-            missed = 0
+        # the deadlines missed since the last record: the count moved by them, and the
+        # deadline by them at least (``skipped``, when known; a real-time run restarted
+        # late moves it further, a start-up overrun counts none).  A count that went
+        # down, moved further than the deadline, or stood still though the last tick
+        # overran was reset since: those since then.
+        delta = missed - self._missed
+        if delta < 0 or (skipped is not None and delta > skipped) \
+                or (skipped and not delta and loop.consecutive_overruns > 0):
+            delta = missed
+        missed, self._missed = delta, missed
         # the journal keeps the sequences it is given: an empty one is never handed
         # over (a later append would land in every tick still waiting to be written)
         outputs: Sequence[tuple[int, int, int]] = self._outputs
