@@ -56,3 +56,56 @@ int pyrt_image_changes(int64_t *current, const int64_t *values, int32_t n, int32
     *n_changed = k;
     return PYRT_OK;
 }
+
+/* Publish the new count of ticks handed over after the row it covers: the
+ * journal's writer thread reads put without the loop thread's lock. */
+static void publish_put(pyrt_image_handover *h, int64_t put)
+{
+#if defined(__GNUC__) || defined(__clang__)
+    __atomic_store_n(&h->put, put, __ATOMIC_RELEASE);
+#else
+    *(volatile int64_t *)&h->put = put;
+#endif
+}
+
+static int64_t read_taken(const pyrt_image_handover *h)
+{
+#if defined(__GNUC__) || defined(__clang__)
+    return __atomic_load_n(&h->taken, __ATOMIC_ACQUIRE);
+#else
+    return *(const volatile int64_t *)&h->taken;
+#endif
+}
+
+int pyrt_image_hand_over(pyrt_image_handover *h, int64_t now_ns)
+{
+    int64_t put, taken, late, tick, *row;
+    if (h == NULL || h->ring == NULL || h->rows <= 0 || h->n_inputs < 0
+        || (h->n_inputs > 0 && h->inputs == NULL) || h->put < 0
+        || h->period_ns <= 0 || h->period_ns > PYRT_IMAGE_TMAX)
+        return PYRT_EINVAL;
+    if (h->slow || !h->open)
+        return PYRT_IMAGE_SLOW;
+    put = h->put;
+    taken = read_taken(h);
+    if (taken < 0 || taken > put || put - taken >= h->rows || put >= PYRT_IMAGE_TMAX)
+        return PYRT_IMAGE_SLOW;  /* the ring is full (or the counts are not ours to trust) */
+    if (h->tick < 0 || h->tick >= PYRT_IMAGE_TMAX || now_ns > PYRT_IMAGE_TMAX || now_ns < -PYRT_IMAGE_TMAX
+        || h->deadline_ns > PYRT_IMAGE_TMAX || h->deadline_ns < -PYRT_IMAGE_TMAX)
+        return PYRT_IMAGE_SLOW;
+    late = now_ns - h->deadline_ns;  /* within +-2^62: no overflow */
+    if (late < h->late_lo || late > h->late_hi)
+        return PYRT_IMAGE_SLOW;
+    tick = h->tick;
+    row = h->ring + (put % h->rows) * (PYRT_IMAGE_CLOCK + (int64_t)h->n_inputs);
+    row[0] = tick;
+    row[1] = now_ns;
+    row[2] = late;
+    row[3] = 0;
+    if (h->n_inputs > 0)
+        memcpy(row + PYRT_IMAGE_CLOCK, h->inputs, (size_t)h->n_inputs * sizeof(int64_t));
+    publish_put(h, put + 1);
+    h->tick = tick + 1;
+    h->deadline_ns += h->period_ns;  /* |deadline| + period <= 2^62: no overflow */
+    return tick >= h->listen_at ? PYRT_IMAGE_DUE : PYRT_OK;
+}

@@ -1,6 +1,6 @@
 """The process image's C side (csrc/image.c): its kernels against Python references,
 an image over boards that keep their inputs in 64-bit integers, and the journal's
-one-call hand-over of a tick."""
+one-call hand-over of a plain tick (against its Python reference)."""
 
 from __future__ import annotations
 
@@ -16,12 +16,16 @@ from test_journal import header
 
 from pyrt.boards.image import ImageRegisters, LocalImage, input_buffer
 from pyrt.boards.registers import OUTPUT, BoardKind, Register, RegisterBoard
-from pyrt.journal import Journal
+from pyrt.journal import Journal, JournalError
 from pyrt.native import (
+    HAND_OVER_DUE,
+    HAND_OVER_SLOW,
     IMAGE_CLOCK,
+    IMAGE_TMAX,
     InputGather,
     NativeInputError,
     RingRows,
+    TickHandOver,
     int64_buffer,
     output_changes,
 )
@@ -211,25 +215,121 @@ def test_a_board_without_an_int64_buffer_keeps_the_list_path():
 # -- the journal's hand-over of a plain tick ----------------------------------------------
 
 
+def hand_over_reference(state: dict, ring: list[list[int]], inputs: list[int],
+                        now: int) -> int:
+    """What pyrt_image_hand_over does to ``state`` (its fields) and ``ring`` (a list of
+    rows), and its answer: the C side's specification, in Python."""
+    tmax = IMAGE_TMAX
+    if state["rows"] <= 0 or state["put"] < 0 or not 0 < state["period_ns"] <= tmax:
+        return 1  # PYRT_EINVAL
+    if state["slow"] or not state["open"]:
+        return HAND_OVER_SLOW
+    put, taken = state["put"], state["taken"]
+    if taken < 0 or taken > put or put - taken >= state["rows"] or put >= tmax:
+        return HAND_OVER_SLOW
+    if not (0 <= state["tick"] < tmax and -tmax <= now <= tmax
+            and -tmax <= state["deadline_ns"] <= tmax):
+        return HAND_OVER_SLOW
+    late = now - state["deadline_ns"]
+    if not state["late_lo"] <= late <= state["late_hi"]:
+        return HAND_OVER_SLOW
+    tick = state["tick"]
+    ring[put % state["rows"]] = [tick, now, late, 0, *inputs]
+    state["put"] = put + 1
+    state["tick"] = tick + 1
+    state["deadline_ns"] += state["period_ns"]
+    return HAND_OVER_DUE if tick >= state["listen_at"] else 0
+
+
+FIELDS = ("put", "taken", "tick", "deadline_ns", "late_lo", "late_hi", "listen_at", "open",
+          "slow")
+T61 = st.integers(-(2**61) - 2, 2**61 + 2)
+
+
+@settings(max_examples=300, deadline=None)
+@given(n=st.integers(0, 12), rows=st.integers(1, 6), period=st.integers(1, 2**20),
+       data=st.data())
+def test_the_hand_over_of_a_plain_tick_is_its_python_reference(n, rows, period, data):
+    """Over runs of calls from random states (slow or not, open or not, the ring full or
+    not, ticks on time, late, early or skipped, listeners due or not), the one-call
+    hand-over answers, writes rows and moves its state as the Python reference does."""
+    inputs = array("q", data.draw(st.lists(I64, min_size=n, max_size=n)))
+    ring = bytearray(b"\x5a" * (8 * rows * (IMAGE_CLOCK + n)))
+    hand = TickHandOver(ring, rows, n, period)
+    assert hand.bind(inputs)
+    c = hand.state
+    state = {"rows": rows, "period_ns": period}
+    put = data.draw(st.integers(0, 2**40))
+    for name, value in (
+            ("put", put), ("taken", put - data.draw(st.integers(-1, rows + 1))),
+            ("tick", data.draw(st.integers(-1, 2**62))), ("deadline_ns", data.draw(T61)),
+            ("late_lo", 0), ("late_hi", data.draw(st.sampled_from([0, period // 2]))),
+            ("listen_at", data.draw(st.integers(0, 2**62))),
+            ("open", data.draw(st.sampled_from([1, 1, 0]))),
+            ("slow", data.draw(st.sampled_from([0, 0, 1])))):
+        state[name] = value
+        setattr(c, name, value)
+    row = struct.Struct(f"={IMAGE_CLOCK + n}q")
+    want = [list(row.unpack_from(ring, k * row.size)) for k in range(rows)]
+    for _ in range(data.draw(st.integers(1, 8))):
+        step = data.draw(st.sampled_from([0, 0, 1, period // 2, period, -1]))
+        now = state["deadline_ns"] + step if data.draw(st.booleans()) else data.draw(T61)
+        if data.draw(st.booleans()):  # the writer takes a tick meanwhile
+            state["taken"] = min(state["put"], state["taken"] + 1)
+            c.taken = state["taken"]
+        assert hand(now) == hand_over_reference(state, want, list(inputs), now)
+        for name in FIELDS:
+            assert getattr(c, name) == state[name], name
+        got = [list(row.unpack_from(ring, k * row.size)) for k in range(rows)]
+        assert got == want
+
+
+def test_a_refused_hand_over_state_raises_and_changes_nothing():
+    """A state the C side cannot use (no rows, a negative count, a period of 0) is
+    refused: an error, nothing written, nothing moved."""
+    inputs = array("q", [1, 2])
+    ring = bytearray(8 * 2 * (IMAGE_CLOCK + 2))
+    hand = TickHandOver(ring, 2, 2, 1000)
+    assert hand.bind(inputs)
+    c = hand.state
+    c.slow = 0
+    for name, bad in (("put", -1), ("period_ns", 0), ("rows", 0)):
+        old = getattr(c, name)
+        setattr(c, name, bad)
+        with pytest.raises(NativeInputError):
+            hand(0)
+        setattr(c, name, old)
+        assert c.put == 0 and c.tick == 0 and ring == bytearray(len(ring))
+    assert hand(0) == 0 and c.put == 1
+    with pytest.raises(NativeInputError):
+        TickHandOver(bytearray(8 * 5), 1, 2, 1000)
+    with pytest.raises(NativeInputError):
+        TickHandOver(ring, 2, 2, 0)
+    assert not hand.bind([1, 2]) and not hand.bind(array("q", [1, 2, 3]))
+
+
 @settings(max_examples=60, deadline=None)
 @given(n_in=st.integers(0, 30), n=st.integers(1, 400), seed=st.integers(0, 10_000),
        queue=st.integers(1, 64), block=st.integers(1, 100))
 def test_the_one_call_hand_over_writes_the_bytes_record_tick_writes(n_in, n, seed, queue,
                                                                      block):
-    """A journal fed by the C hand-over (plain ticks) and by record_tick (the others, and
-    whenever the ring is full) writes the very bytes of one fed by record_tick alone."""
+    """A journal fed by the C hand-over (plain ticks, the state set again as the
+    recorder sets it after every other) and by record_tick (ticks with outputs, late or
+    skipped ones, and whenever the ring is full) writes the very bytes of one fed by
+    record_tick alone."""
     rnd = random.Random(seed)
+    period = 1_000_000
     inputs = array("q", bytes(8 * n_in))
     ticks = []
-    t = 0
+    deadline = 0
     for k in range(n):
         for i in range(n_in):
             if rnd.random() < 0.3:
                 inputs[i] = rnd.randrange(-(2**40), 2**40)
-        t += 1_000_000
-        late = rnd.choice((0, 0, rnd.randrange(0, 50_000)))
+        deadline += period * (1 + (rnd.random() < 0.05))  # now and then a deadline skipped
+        late = rnd.choice((0, 0, rnd.randrange(0, period // 2), rnd.randrange(0, period)))
         outs = ((rnd.randrange(2), rnd.randrange(100), 0),) if rnd.random() < 0.1 else ()
-        ticks.append((k, t + late, late, 0, inputs.tolist(), outs))
+        ticks.append((k, deadline + late, late, 0, inputs.tolist(), outs))
     h = header(n_in, 2)
     want, got = io.BytesIO(), io.BytesIO()
     a = Journal(h, want, lossless=True, queue_ticks=queue, block_ticks=block)
@@ -237,26 +337,66 @@ def test_the_one_call_hand_over_writes_the_bytes_record_tick_writes(n_in, n, see
         a.record_tick(*tk)
     a.close()
     b = Journal(h, got, lossless=True, queue_ticks=queue, block_ticks=block)
-    append = b.appender(inputs)
-    assert append is not None
+    hand = b.hand_over(inputs)
+    assert hand is not None
+    c = hand.state
+    c.late_lo, c.late_hi = 0, period // 2
     for tk in ticks:
         for i, v in enumerate(tk[4]):
             inputs[i] = v
-        if tk[5] or not append(tk[0], tk[1], tk[2]):
-            b.record_tick(*tk)
+        if tk[5]:
+            c.slow = 1  # what the recorder's tap does
+        if hand(tk[1]) == 0:
+            continue
+        b.record_tick(*tk)
+        c.slow, c.tick, c.deadline_ns = 0, tk[0] + 1, tk[1] - tk[2] + period
     b.close()
     assert got.getvalue() == want.getvalue()
+    assert b.recorded == n
 
 
 def test_the_hand_over_needs_the_headers_inputs_in_64_bit_integers():
     """A list of inputs, or a buffer of another count, has no one-call hand-over."""
     j = Journal(header(3, 1), io.BytesIO())
     try:
-        assert j.appender([0, 0, 0]) is None
-        assert j.appender(array("q", [0, 0])) is None
-        assert j.appender(array("q", [0, 0, 0])) is not None
+        assert j.hand_over([0, 0, 0]) is None
+        assert j.hand_over(array("q", [0, 0])) is None
+        assert j.hand_over(array("q", [0, 0, 0])) is not None
     finally:
         j.close()
+
+
+def test_a_closed_journal_or_a_write_error_refuses_the_hand_over():
+    """Closing the journal, or a write the writer could not make, makes the hand-over
+    answer "slow" (nothing handed over): the recorder's own path then decides."""
+
+    class Full(io.RawIOBase):
+        def __init__(self):
+            self.fail = False
+
+        def writable(self):
+            return True
+
+        def write(self, b):
+            if self.fail:
+                raise OSError(28, "No space left on device")
+            return len(b)
+
+    inputs = array("q", [5])
+    sink = Full()
+    j = Journal(header(1, 1), sink, block_ticks=1)
+    hand = j.hand_over(inputs)
+    c = hand.state
+    c.slow, c.tick, c.deadline_ns = 0, 0, 0
+    assert hand(0) == 0 and j.recorded == 1
+    sink.fail = True
+    assert j.flush(5)
+    assert j.error is not None and c.slow == 1
+    assert hand(1_000_000) == HAND_OVER_SLOW and j.recorded == 1
+    with pytest.raises(JournalError):
+        j.close()
+    c.slow = 0
+    assert c.open == 0 and hand(1_000_000) == HAND_OVER_SLOW
 
 
 def test_the_built_in_simulated_boards_are_gathered_in_c():

@@ -680,3 +680,27 @@ def test_a_refused_tick_changes_nothing_that_follows():
         j.close()
     accepted = [k != 20 for k in range(40)]
     same(list(JournalReader(buf.getvalue())), expected(recs, accepted))
+
+
+def test_a_block_being_filled_at_real_time_is_cut_on_time_whatever_the_poll(tmp_path):
+    """At real time the writer wakes to cut a block ``max_delay_s`` after its first tick
+    even when its poll is far longer: the block is in the file well before the poll."""
+    from pyrt.journal.format import KIND_HEADER, KIND_NAMES, frame, names_payload
+
+    h = header(2, 1)
+    j = Journal(h, tmp_path / "run.pj", lossless=False, poll_s=60.0, max_delay_s=0.05,
+                block_ticks=1000)
+    try:
+        for k in range(3):
+            j.record_tick(k, k * 1_000_000, 0, 0, [k, -k])
+        index = j.writer_index("mover")  # wakes the writer: it begins the block
+        before = len(frame(KIND_HEADER, h.encode())) + len(
+            frame(KIND_NAMES, names_payload(index, ["mover"])))
+        # bounded: the block is due 0.05 s after the writer began it; a poll is 60 s
+        end = time.monotonic() + 20
+        while j.bytes_written <= before and time.monotonic() < end:
+            time.sleep(0.01)
+        assert j.bytes_written > before and j.pending == 0
+    finally:
+        j.close()
+    assert [t.tick for t in JournalReader(tmp_path / "run.pj").ticks()] == [0, 1, 2]

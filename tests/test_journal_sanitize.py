@@ -172,12 +172,16 @@ IMAGE_DRIVER = textwrap.dedent(
         output_changes(cur, [rnd.randrange(-9, 9) for _ in range(n)], seed % 2 == 0)
         # plain ticks through the one-call hand-over, the others through record_tick
         j = Journal(header(n, 2), io.BytesIO(), lossless=True, queue_ticks=rnd.randrange(1, 40))
-        append = j.appender(inputs)
+        hand = j.hand_over(inputs)
+        c = hand.state
+        c.slow = 0
         for k in range(rnd.randrange(1, 200)):
             if n:
                 inputs[rnd.randrange(n)] = k
-            if k % 7 == 0 or not append(k, k * 1000, 0):
-                j.record_tick(k, k * 1000, 0, 0, inputs.tolist(), ((0, k, 0),))
+            late = rnd.choice((0, 0, 1, 2000))
+            if k % 7 == 0 or hand(k * 1000 + late) != 0:
+                j.record_tick(k, k * 1000 + late, late, 0, inputs.tolist(), ((0, k, 0),))
+                c.tick, c.deadline_ns = k + 1, (k + 1) * 1000
         j.close()
 
     # straight into C: what the Python layer never passes
@@ -201,6 +205,35 @@ IMAGE_DRIVER = textwrap.dedent(
     assert lib.pyrt_image_row(ffi.NULL, 2, 0, 0, 0, 0, 0, dst, 4) == lib.PYRT_EINVAL
     assert lib.pyrt_image_row(ring, 2, 0, 0, 0, 0, 0, ffi.NULL, 4) == lib.PYRT_EINVAL
     assert lib.pyrt_image_row(ring, 2, 1, 9, 0, 0, 0, dst, 4) == lib.PYRT_OK and ring[8] == 9
+    h = ffi.new("pyrt_image_handover *")
+    assert lib.pyrt_image_hand_over(ffi.NULL, 0) == lib.PYRT_EINVAL
+    assert lib.pyrt_image_hand_over(h, 0) == lib.PYRT_EINVAL  # no ring
+    h.ring, h.rows, h.n_inputs, h.period_ns, h.open = ring, 2, 4, 1000, 1
+    assert lib.pyrt_image_hand_over(h, 0) == lib.PYRT_EINVAL  # no inputs
+    h.inputs = dst
+    for name, bad in (("rows", 0), ("n_inputs", -1), ("put", -1), ("period_ns", -5)):
+        old = getattr(h, name)
+        setattr(h, name, bad)
+        assert lib.pyrt_image_hand_over(h, 0) == lib.PYRT_EINVAL
+        setattr(h, name, old)
+    h.late_hi, h.listen_at = 10, 1
+    assert lib.pyrt_image_hand_over(h, 5) == lib.PYRT_OK and h.put == 1 and ring[0] == 0
+    assert lib.pyrt_image_hand_over(h, 1005) == lib.PYRT_IMAGE_DUE and h.tick == 2
+    assert lib.pyrt_image_hand_over(h, 2005) == lib.PYRT_IMAGE_SLOW  # the ring is full
+    h.taken = 2
+    extreme = (2**63 - 1, -2**63, 2**62, -2**62)
+    for now in extreme:
+        for dl in extreme:
+            h.deadline_ns = dl
+            assert lib.pyrt_image_hand_over(h, now) == lib.PYRT_IMAGE_SLOW
+    h.deadline_ns, h.tick = 0, 2**63 - 1
+    assert lib.pyrt_image_hand_over(h, 0) == lib.PYRT_IMAGE_SLOW
+    h.tick, h.put, h.taken = 0, 2**63 - 1, 2**63 - 1
+    assert lib.pyrt_image_hand_over(h, 0) == lib.PYRT_IMAGE_SLOW
+    h.put, h.taken = 5, -2**63
+    assert lib.pyrt_image_hand_over(h, 0) == lib.PYRT_IMAGE_SLOW
+    h.taken, h.period_ns, h.deadline_ns = 5, 2**61 - 1, 2**61 - 1
+    assert lib.pyrt_image_hand_over(h, 2**61 - 1) == lib.PYRT_OK  # the largest step
     changed, k = ffi.new("int32_t[]", 4), ffi.new("int32_t *")
     assert lib.pyrt_image_changes(dst, vals, 4, 0, changed, ffi.NULL) == lib.PYRT_EINVAL
     assert lib.pyrt_image_changes(dst, ffi.NULL, 4, 0, changed, k) == lib.PYRT_EINVAL

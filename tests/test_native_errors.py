@@ -214,10 +214,18 @@ THROUGH_WRAPPERS = {
     "pyrt_arm_publish": _arm_nan_state,
     "pyrt_drive_tick": lambda: _drive_nan(False),
     "pyrt_drive_run": lambda: _drive_nan(True),
+    "pyrt_image_hand_over": lambda: _hand_over_bad_state(),
     "pyrt_journal_init": lambda: nat.TickEncoder(1, 1, 0),
     "pyrt_journal_encode": lambda: nat.TickEncoder(1, 1, 1000).encode(
         struct.pack("=5q", 0, 0, 0, -1, 0), 0, 1),   # missed < 0
 }
+
+def _hand_over_bad_state():
+    """A tick hand-over whose count of ticks handed over went negative: C refuses it."""
+    hand = nat.TickHandOver(bytearray(8 * 4), 1, 0, 1000)
+    hand.state.put = -1
+    hand(0)
+
 
 #: Entry points whose only failure is a NULL pointer or a struct the wrapper
 #: always fills correctly: their error path is called straight, and its code

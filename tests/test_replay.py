@@ -412,11 +412,15 @@ def test_a_statistics_reset_in_a_recorded_run_records_the_ticks_missed_since(tmp
     rec = Recorder(station, tmp_path / "reset.pj")
     try:
         loop.run(5)
-        loop.missed += 3  # three deadlines skipped (what an overrun at real time does)
+        # three deadlines skipped, as an overrun at real time skips them: counted, and
+        # the next deadline three periods on
+        loop.missed += 3
+        loop.resume_at(loop.now_ns, loop.deadline_ns + 3 * loop.period_ns)
         loop.run(1)
         loop.reset_statistics()
         loop.run(1)
         loop.missed += 2
+        loop.resume_at(loop.now_ns, loop.deadline_ns + 2 * loop.period_ns)
         loop.run(1)
     finally:
         station.close()

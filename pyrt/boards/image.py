@@ -209,10 +209,14 @@ class ImageBackend(Backend):
         #: Run with the loop's time at the end of every read phase (a typed board's
         #: own ``poll``: the gripper cage raises the encoder interrupts that came).
         self.after_read: list[Callable[[int], None]] = []
-        #: Run with the loop's time at the end of every write phase of an image in
-        #: this process (:class:`LocalImage`), or None: a journal's recorder hands
-        #: the tick over here when this write phase is the tick's last work.
-        self.after_write: Callable[[int], None] | None = None
+        #: Run at the end of every write phase of an image in this process
+        #: (:class:`LocalImage`), or None: a journal's recorder hands the tick over
+        #: here when this write phase is the tick's last work.  First
+        #: :attr:`hand_over` (if set) is called with the loop's time: one C call
+        #: that hands a plain tick over; ``after_write(now_ns, status)`` runs when
+        #: its answer (``status``; -1 without one) is not 0.
+        self.after_write: Callable[[int, int], None] | None = None
+        self.hand_over: Callable[[int], int] | None = None
 
     # -- what a subclass implements ------------------------------------------------------
 
@@ -681,7 +685,10 @@ class LocalImage(ImageBackend):
             changed.clear()
         after = self.after_write
         if after is not None:
-            after(now_ns)
+            hand = self.hand_over
+            status = hand(now_ns) if hand is not None else -1
+            if status:
+                after(now_ns, status)
 
 
 def input_buffer(view: Any) -> memoryview | None:

@@ -28,9 +28,9 @@ from pyrt.journal.format import (
     names_payload,
 )
 from pyrt.journal.ring import BlackBox
-from pyrt.native import RingRows, int64_buffer
+from pyrt.native import TickHandOver, int64_buffer
 
-__all__ = ["DEFAULT_BLOCK_TICKS", "DEFAULT_QUEUE_TICKS", "Journal", "tick_appender"]
+__all__ = ["DEFAULT_BLOCK_TICKS", "DEFAULT_QUEUE_TICKS", "Journal"]
 
 #: Ticks per block (frame), each beginning with a keyframe.
 DEFAULT_BLOCK_TICKS = 250
@@ -138,14 +138,16 @@ class Journal:
         #: Entries that are not ticks (gaps, names, dumps, flushes), each after the
         #: ticks handed over before it: ``(number of ticks before it, kind, ...)``.
         self._queue: deque[tuple[Any, ...]] = deque()
-        self._put = 0      # ticks handed over; written by the loop thread only
-        self._taken = 0    # ticks encoded; written by the writer thread only
+        #: The one-C-call hand-over (:meth:`hand_over`); its state holds ``put`` (ticks
+        #: handed over: the loop thread's), ``taken`` (encoded: the writer's), ``open``
+        #: (not closed nor in a gap) and ``slow`` (set by the writer on a write error).
+        self._hand = TickHandOver(self._ring, self._capacity, self._n_inputs,
+                                  header.period_ns)
+        self._st = self._hand.state
         self._gap_first: int | None = None
         self._gap_last = 0
         self._gap_count = 0
         self._closed = False
-        #: Neither closed nor in a gap: a tick may go straight into the ring.
-        self._open = True
         self._wake = threading.Event()
         self._room = threading.Event()
         self._waiting = False
@@ -192,8 +194,9 @@ class Journal:
         source)`` and named events ``(name, id, message)`` (these sequences are
         kept, not copied: pass new ones).  Never blocks.  Returns False if the
         tick was dropped into a gap (the writer is behind)."""
-        put = self._put
-        if put - self._taken < self._capacity and self._open:
+        st = self._st
+        put = st.put
+        if put - st.taken < self._capacity and st.open:
             row = put % self._capacity
             try:
                 if type(inputs) is list:
@@ -210,7 +213,7 @@ class Journal:
                                            outputs, commands, events)
             if outputs or commands or events:
                 self._extras.append((put, (outputs, commands, events, None)))
-            self._put = put + 1
+            st.put = put + 1
             return True
         return self._record_slowly(tick, time_ns, lateness_ns, missed, inputs, outputs,
                                    commands, events)
@@ -218,9 +221,13 @@ class Journal:
     #: The same call (a tick's inputs are copied into the ring either way).
     record_owned = record_tick
 
-    def appender(self, inputs: Any) -> Callable[[int, int, int], bool] | None:
-        """The hand-over of a plain tick in one C call (:func:`tick_appender`)."""
-        return tick_appender(self, inputs)
+    def hand_over(self, inputs: Any) -> TickHandOver | None:
+        """The one-C-call hand-over of a plain tick (:class:`~pyrt.native.TickHandOver`:
+        its owner keeps the expected tick, the lateness bounds and ``slow``; the ring
+        full, a gap, a close or a write error refuse it, and :meth:`record_tick`
+        decides), reading ``inputs``: a buffer of the header's inputs in native 64-bit
+        integers its owner refills every tick; else None.  Loop thread only."""
+        return self._hand if self._hand.bind(inputs) else None
 
     def _record_slowly(self, tick: int, time_ns: int, lateness_ns: int, missed: int,
                        inputs: Sequence[int], outputs: Sequence[tuple[int, int, int]],
@@ -231,11 +238,12 @@ class Journal:
         if len(inputs) != self._n_inputs:
             raise JournalError(f"journal: {len(inputs)} inputs, the header declares "
                                f"{self._n_inputs}")
-        if self._put - self._taken >= self._capacity:
+        st = self._st
+        if st.put - st.taken >= self._capacity:
             if not self.lossless:
                 if self._gap_first is None:
                     self._gap_first = tick
-                    self._open = False
+                    st.open = 0
                 self._gap_last = tick
                 self._gap_count += 1
                 self.dropped += 1
@@ -243,7 +251,7 @@ class Journal:
             self._wait_for_room()
         if self._gap_first is not None:
             self._end_gap()
-        put = self._put
+        put = st.put
         row = put % self._capacity
         try:
             words = int64_buffer(inputs)
@@ -265,12 +273,13 @@ class Journal:
         else:
             if outputs or commands or events:
                 self._extras.append((put, (outputs, commands, events, None)))
-        self._put = put + 1
+        st.put = put + 1
         return True
 
     def _wait_for_room(self) -> None:
         # wait until half the queue is free: one hand-over per half queue, not per tick
-        while self._put - self._taken > self._capacity // 2:
+        st = self._st
+        while st.put - st.taken > self._capacity // 2:
             if not self._thread.is_alive():
                 raise JournalError(f"journal {self.path}: the writer has stopped")
             self._room.clear()
@@ -284,9 +293,9 @@ class Journal:
         gap = Gap(self._gap_first, self._gap_last, self._gap_count,
                   "the journal's writer fell behind")
         self.gaps.append(gap)
-        self._queue.append((self._put, _GAP, gap))
+        self._queue.append((self._st.put, _GAP, gap))
         self._gap_first = None
-        self._open = not self._closed
+        self._st.open = 0 if self._closed else 1
         self._gap_count = 0
 
     def writer_index(self, name: str) -> int:
@@ -299,14 +308,14 @@ class Journal:
             raise JournalError(f"journal: a writer's name is a string, got {name!r}")
         self._writers.append(name)
         index = len(self._writers) - 1
-        self._queue.append((self._put, _NAMES, index, name))
+        self._queue.append((self._st.put, _NAMES, index, name))
         self._wake.set()
         return index
 
     @property
     def recorded(self) -> int:
         """Ticks handed over (not those dropped into gaps)."""
-        return self._put
+        return int(self._st.put)
 
     @property
     def writers(self) -> list[str]:
@@ -316,7 +325,7 @@ class Journal:
     @property
     def pending(self) -> int:
         """Ticks handed over that the writer has not taken yet."""
-        return self._put - self._taken
+        return int(self._st.put - self._st.taken)
 
     # -- any thread --------------------------------------------------------------------------
 
@@ -331,7 +340,7 @@ class Journal:
             self._thread.join()
             self._dump(target, fut)
             return fut
-        self._queue.append((self._put, _DUMP, target, fut))
+        self._queue.append((self._st.put, _DUMP, target, fut))
         self._wake.set()
         return fut
 
@@ -342,7 +351,7 @@ class Journal:
         if self._closed:
             return True
         done = threading.Event()
-        self._queue.append((self._put, _FLUSH, done))
+        self._queue.append((self._st.put, _FLUSH, done))
         self._wake.set()
         return done.wait(timeout)
 
@@ -356,7 +365,7 @@ class Journal:
         if self._gap_first is not None:
             self._end_gap()
         self._closed = True
-        self._open = False
+        self._st.open = 0
         self._stop = True
         self._wake.set()
         self._thread.join()
@@ -378,13 +387,7 @@ class Journal:
     # -- the writer thread -------------------------------------------------------------------
 
     def _header_payload(self) -> bytes:
-        h = self.header
-        if list(h.writers) != self._writers:
-            h = Header(station=h.station, period_ns=h.period_ns, inputs=h.inputs,
-                       outputs=h.outputs, version=h.version, databases=h.databases,
-                       seeds=h.seeds, writers=self._writers, output_values=h.output_values,
-                       metadata=h.metadata)
-        return h.encode()
+        return _with_writers(self.header, self._writers).encode()
 
     def _write(self, data: bytes, warn: bool = True) -> None:
         fh = self._fh
@@ -402,9 +405,14 @@ class Journal:
                 flush()
             self.bytes_written += len(data)
         except (OSError, ValueError) as exc:
-            self.error = f"write failed after {self.bytes_written} bytes: {_reason(exc)}"
+            self._set_error(f"write failed after {self.bytes_written} bytes: {_reason(exc)}")
             if self.warn is not None and warn:
                 self.warn(f"journal {self.path}: {self.error}; the file ends there")
+
+    def _set_error(self, error: str) -> None:
+        # the error, then the mark: the recorder clears the mark, then reads the error
+        self.error = error
+        self._st.slow = 1
 
     def _emit(self, data: bytes, first_time: int, last_time: int, ticks: int) -> None:
         if self.black_box is not None:
@@ -429,7 +437,7 @@ class Journal:
             self._loop()
         except BaseException as exc:
             self._fail = exc
-            self.error = self.error or f"the writer failed: {exc!r}"
+            self._set_error(self.error or f"the writer failed: {exc!r}")
             if self.warn is not None:
                 self.warn(f"journal {self.path}: the writer failed: {exc!r}")
             # keep taking records so the loop thread never fills the queue for nothing
@@ -451,7 +459,7 @@ class Journal:
             elif item[1] is _FLUSH:
                 item[2].set()
         self._extras.clear()
-        self._taken = self._put
+        self._st.taken = self._st.put
 
     def _loop(self) -> None:
         q = self._queue
@@ -466,12 +474,14 @@ class Journal:
         mono = time.monotonic_ns
         yield_gil = not self.lossless
         most = max(1, BATCH_VALUES // (4 + self._n_inputs))
+        st = self._st
+        drained = mono()
         while True:
             stopping = self._stop
             while True:
-                put = self._put
+                put = st.put
                 limit = min(put, q[0][0]) if q else put
-                taken = self._taken
+                taken = st.taken
                 if taken < limit:
                     # a run of ticks, contiguous in the ring, at most to the block's end
                     # and the next entry that is not a tick: one C call, the
@@ -484,15 +494,16 @@ class Journal:
                         s, extra = extras.popleft()
                         mine[s - taken] = extra
                     if enc.count == 0:
-                        self._block_started = mono()
+                        # at real time, the earliest its first tick came (the ring empty)
+                        self._block_started = mono() if self.lossless else drained
                     for exc in enc.add_rows(ring, start, n, mine):
                         self._refused(exc)
-                    self._taken = taken + n
+                    st.taken = taken + n
                     if enc.count >= block:
                         self._flush_block()
-                    if self._waiting and self._put - self._taken <= cap // 2:
+                    if self._waiting and st.put - st.taken <= cap // 2:
                         self._room.set()
-                    if yield_gil and self._put > self._taken:
+                    if yield_gil and st.put > st.taken:
                         # more to encode: a real-time loop thread waking now gets the
                         # interpreter at once (on virtual time this would only slow
                         # both threads); with nothing more, the wait below lets go of
@@ -527,7 +538,10 @@ class Journal:
                 self._flush_block()
             if stopping:
                 return
-            wait(self.poll_s)
+            drained = mono()
+            cut_in = self._block_started + self.max_delay_ns - drained \
+                if enc.count and not self.lossless else None
+            wait(_wait_s(self.poll_s, cut_in))
             clear()
 
     def _refused(self, exc: JournalError) -> None:
@@ -540,49 +554,42 @@ class Journal:
     def _finish(self) -> None:
         if self._fail is None:
             self._write(frame(KIND_END, END.pack(self.recorded, self.dropped)))
-        fh = self._fh
-        if fh is None:
-            return
-        try:
-            fileno = getattr(fh, "fileno", None)
-            if fileno is not None and self.error is None:
-                try:
-                    os.fsync(fileno())
-                except (OSError, ValueError, AttributeError) as exc:
-                    if not isinstance(exc, ValueError | AttributeError) and self._owned:
-                        self.error = f"fsync failed: {exc}"
-        finally:
-            if self._owned:
-                try:
-                    fh.close()
-                except OSError as exc:
-                    self.error = self.error or f"close failed: {exc}"
+        if self._fh is not None:
+            self.error = _sync_and_close(self._fh, self._owned, self.error)
 
 
-def tick_appender(journal: Journal, inputs: Any) -> Callable[[int, int, int], bool] | None:
-    """The hand-over to ``journal`` of a plain tick (no output written, no command,
-    no event, no deadline missed) whose inputs are ``inputs`` as they stand: a
-    buffer of native 64-bit integers, in declared order, that its owner refills
-    every tick (a process image reading boards that keep their registers so).
-    ``append(tick, time_ns, lateness_ns)`` writes the tick's row into the ring in
-    one C call (the clock and a copy of the inputs); it returns False, having
-    handed nothing over, when the ring is full or the journal in a gap or closed
-    (then :meth:`Journal.record_tick` decides).  None when ``inputs`` is not such
-    a buffer of the header's inputs.  Loop thread only, as ``record_tick``."""
-    words = int64_buffer(inputs)
-    if words is None or len(words) != journal._n_inputs:
-        return None
-    rows = RingRows(journal._ring, journal._capacity, words)
-    put_row, (ring, n_rows), (src, n_src) = rows.writer()
-    cap = journal._capacity
+def _wait_s(poll_s: float, cut_in_ns: int | None) -> float:
+    """How long the writer waits for ticks: a poll, or less when a block being filled
+    is to be cut in ``cut_in_ns`` (at real time: woken then, not a poll later)."""
+    return poll_s if cut_in_ns is None else min(poll_s, max(1e-3, cut_in_ns / 1e9))
 
-    def append(tick: int, time_ns: int, lateness_ns: int) -> bool:
-        put = journal._put
-        if put - journal._taken >= cap or not journal._open \
-                or put_row(ring, n_rows, put % cap, tick, time_ns, lateness_ns, 0, src, n_src):
-            return False
-        journal._put = put + 1
-        return True
 
-    append.rows = rows  # type: ignore[attr-defined]  # holds the buffers C reads
-    return append
+def _with_writers(h: Header, writers: list[str]) -> Header:
+    """``h`` with the writer name table ``writers`` (``h`` itself if it has it)."""
+    if list(h.writers) == writers:
+        return h
+    return Header(station=h.station, period_ns=h.period_ns, inputs=h.inputs,
+                  outputs=h.outputs, version=h.version, databases=h.databases,
+                  seeds=h.seeds, writers=writers, output_values=h.output_values,
+                  metadata=h.metadata)
+
+
+def _sync_and_close(fh: Any, owned: bool, error: str | None) -> str | None:
+    """Sync a journal's file (unless ``error``: it was not written in full) and close
+    it if the journal opened it; the error, or the first of the sync or the close."""
+    try:
+        fileno = getattr(fh, "fileno", None)
+        if fileno is not None and error is None:
+            try:
+                os.fsync(fileno())
+            except (OSError, ValueError, AttributeError) as exc:
+                if not isinstance(exc, ValueError | AttributeError) and owned:
+                    error = f"fsync failed: {exc}"
+    finally:
+        if owned:
+            try:
+                fh.close()
+            except OSError as exc:
+                error = error or f"close failed: {exc}"
+    return error
+

@@ -36,7 +36,17 @@ from pyrt.native._findpos import (
     rope_segments,
 )
 from pyrt.native._fuzzy import FuzzyBatch, FuzzyInput, FuzzyParams, FuzzyRule, fuzzy_step
-from pyrt.native._image import IMAGE_CLOCK, InputGather, RingRows, int64_buffer, output_changes
+from pyrt.native._image import (
+    HAND_OVER_DUE,
+    HAND_OVER_SLOW,
+    IMAGE_CLOCK,
+    IMAGE_TMAX,
+    InputGather,
+    RingRows,
+    TickHandOver,
+    int64_buffer,
+    output_changes,
+)
 from pyrt.native._journal import (
     JOURNAL_CLOCK,
     JOURNAL_TMAX,
@@ -67,7 +77,10 @@ __all__ = [
     "DRIVE_FAULT",
     "DRIVE_LATE",
     "DRIVE_REFUSED",
+    "HAND_OVER_DUE",
+    "HAND_OVER_SLOW",
     "IMAGE_CLOCK",
+    "IMAGE_TMAX",
     "JOURNAL_CLOCK",
     "JOURNAL_TMAX",
     "JOURNAL_VMAX",
@@ -104,6 +117,7 @@ __all__ = [
     "StaticsSolver",
     "Status",
     "TickEncoder",
+    "TickHandOver",
     "check_gains",
     "excess128",
     "excess128_many",

@@ -3,24 +3,36 @@
 :class:`InputGather` copies the inputs of in-process boards that keep them
 in 64-bit integers into the image's flat array of inputs (the read phase's
 exchange: one C call, one ``memcpy`` a board); :class:`RingRows` appends a
-tick's row (its clock and every input) to the journal's ring (the
-recorder's hand-over: one C call); :func:`output_changes` is the change
-detection of a block of outputs.  Every array is bound once, when the
-object is made, and held by it: the per-tick calls convert nothing.
+tick's row (its clock and every input) to the journal's ring;
+:class:`TickHandOver` is the recorder's hand-over of a plain tick, one C
+call made from the image's write phase with the tick's start time alone
+(its state a C struct the journal's writer thread shares);
+:func:`output_changes` is the change detection of a block of outputs.
+Every array is bound once, when the object is made, and held by it: the
+per-tick calls convert nothing.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from functools import partial
 from typing import Any
 
 from pyrt.native._errors import NativeInputError, raise_for_status
 from pyrt.native._lib import ffi, lib
 
-__all__ = ["IMAGE_CLOCK", "InputGather", "RingRows", "int64_buffer", "output_changes"]
+__all__ = ["HAND_OVER_DUE", "HAND_OVER_SLOW", "IMAGE_CLOCK", "IMAGE_TMAX", "InputGather",
+           "RingRows", "TickHandOver", "int64_buffer", "output_changes"]
 
 #: Fields of a tick's clock in a ring row: tick, time_ns, lateness_ns, missed.
 IMAGE_CLOCK: int = lib.PYRT_IMAGE_CLOCK
+#: :class:`TickHandOver`'s answers besides 0 (handed over, nothing due): nothing
+#: handed over (the caller records the tick), and handed over with the tick
+#: listeners due.
+HAND_OVER_SLOW: int = lib.PYRT_IMAGE_SLOW
+HAND_OVER_DUE: int = lib.PYRT_IMAGE_DUE
+#: The largest magnitude of a plain tick's time, deadline, index or count.
+IMAGE_TMAX: int = lib.PYRT_IMAGE_TMAX
 
 
 def int64_buffer(obj: Any) -> memoryview | None:
@@ -109,6 +121,72 @@ class RingRows:
         missed, inputs, n_inputs) -> status`` and its fixed arguments (ring, rows)
         and (inputs, n_inputs): the caller's per-tick path makes no Python frame."""
         return lib.pyrt_image_row, (self._ring, self.rows), (self._inputs, self._n)
+
+
+class TickHandOver:
+    """The recorder's hand-over of a plain tick into a ring of ``rows`` rows
+    (``ring``: a ``bytearray`` or a writable buffer of 64-bit integers, of at
+    least ``rows * (IMAGE_CLOCK + n_inputs)`` integers) at ``period_ns``
+    (``csrc/image.h``, ``pyrt_image_hand_over``).
+
+    :attr:`state` is the C struct both threads share, its fields read and
+    written as attributes: ``put`` (ticks handed over; the loop thread),
+    ``taken`` (ticks the journal's writer took; its thread), ``open``,
+    ``slow``, ``tick`` and ``deadline_ns`` (the next plain tick's),
+    ``late_lo``/``late_hi`` (a plain tick's lateness), ``listen_at``.  It
+    starts open, ``slow`` (nothing handed over until the owner sets the
+    expected tick and clears it), nothing due.  :attr:`call` is the bare C
+    call ``call(now_ns) -> status`` (0, :data:`HAND_OVER_DUE`,
+    :data:`HAND_OVER_SLOW`, or 1 for a refused state), usable once
+    :meth:`bind` gave it the inputs: a caller's per-tick path makes no
+    Python frame."""
+
+    __slots__ = ("_held", "call", "n_inputs", "rows", "state")
+
+    def __init__(self, ring: Any, rows: int, n_inputs: int, period_ns: int):
+        dst = int64_buffer(ring)
+        if dst is None and isinstance(ring, bytearray) and len(ring) % 8 == 0:
+            dst = memoryview(ring).cast("q")  # a ring of bytes, 8 an integer
+        if dst is None or dst.readonly:
+            raise NativeInputError("tick hand-over: a writable ring of 64-bit integers")
+        if rows <= 0 or n_inputs < 0 or len(dst) < rows * (IMAGE_CLOCK + n_inputs):
+            raise NativeInputError(f"tick hand-over: {len(dst)} integers do not hold {rows} "
+                                   f"rows of {IMAGE_CLOCK + n_inputs}")
+        if not 0 < period_ns <= IMAGE_TMAX:
+            raise NativeInputError(f"tick hand-over: period {period_ns} ns out of range")
+        state = ffi.new("pyrt_image_handover *")
+        ring_ptr = ffi.from_buffer("int64_t[]", dst)
+        state.ring = ring_ptr
+        state.rows = rows
+        state.n_inputs = n_inputs
+        state.period_ns = period_ns
+        state.open = 1
+        state.slow = 1
+        state.listen_at = IMAGE_TMAX
+        self._held: list[Any] = [dst, ring_ptr]
+        self.state: Any = state
+        self.rows = rows
+        self.n_inputs = n_inputs
+        self.call: Callable[[int], int] = partial(lib.pyrt_image_hand_over, state)
+
+    def bind(self, inputs: Any) -> bool:
+        """Read the inputs of every tick handed over from ``inputs`` (a buffer of
+        ``n_inputs`` native 64-bit integers its owner refills in place); False
+        (nothing bound) for anything else."""
+        view = int64_buffer(inputs)
+        if view is None or len(view) != self.n_inputs:
+            return False
+        ptr = ffi.from_buffer("int64_t[]", view) if len(view) else ffi.NULL
+        self._held += [view, ptr]
+        self.state.inputs = ptr
+        return True
+
+    def __call__(self, now_ns: int) -> int:
+        """:attr:`call`, its refusal of a bad state raised (NativeInputError)."""
+        status: int = self.call(now_ns)
+        if status not in (0, HAND_OVER_SLOW, HAND_OVER_DUE):
+            raise_for_status(status, "tick hand-over")
+        return status
 
 
 def output_changes(current: Any, values: Sequence[int], all_changed: bool = False

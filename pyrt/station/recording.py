@@ -18,10 +18,27 @@ It hands each tick to a :class:`~pyrt.journal.Journal` (whose thread
 encodes and writes: the loop never waits for the disk) at the end of the
 tick, after the write phase: at the end of the image's write phase when
 that is the tick's last work (boards in this process: no handler of its
-own), else as the loop's last handler, ``journal``.  A tick in which
-nothing was written, asked or missed is one C call when the image keeps
-its inputs in 64-bit integers (its boards' register files are so): the
-clock and a copy of the inputs into the journal's ring.  Every back end
+own), else as the loop's last handler, ``journal``.  A plain tick (nothing
+written, asked, faulted or missed, the journal open and its ring not full,
+no tick listener due) is one C call when the image keeps its inputs in
+64-bit integers (its boards' register files are so): the clock and a copy
+of the inputs into the journal's ring, made by the image's write phase
+itself, no Python frame (:class:`~pyrt.native.TickHandOver`).  The
+recorder's taps, the journal's writer (a write error) and
+:meth:`Recorder.listen_at` mark that hand-over slow or due, and the tick
+then takes the recorder's own path.  The C side knows the tick it expects
+(index and deadline, set again by every tick that takes that path), and a
+tick whose lateness against it is out of bounds is not plain: on virtual
+time any lateness (a deadline moved between runs), at real time half a
+period or more (a deadline skipped: the ticks missed are counted there).
+A real-time loop restarted less than half a period after the deadline it
+stopped before starts at once (``Loop.run``): its first tick's lateness is
+then taken from the deadline it stopped before.  A statistics reset
+(``Loop.reset_statistics``) is seen at the next tick that takes the
+recorder's path (the next deadline skipped at the latest): a count of
+missed deadlines that went down, moved further than the deadline, or stood
+still though the last tick overran was reset, and the tick records those
+counted since.  Every back end
 reaches its boards through a process image (``sim:`` included: one tick
 shape, recorded or not).
 
@@ -47,6 +64,7 @@ from pyrt._version import __version__
 from pyrt.component import Component
 from pyrt.errors import ConfigError, Fault
 from pyrt.journal import DEFAULT_QUEUE_TICKS, BlackBox, Header, Journal
+from pyrt.native import HAND_OVER_DUE, IMAGE_TMAX
 
 if TYPE_CHECKING:
     from pyrt.station.base import Station
@@ -64,12 +82,35 @@ REPLAYED = frozenset({
     "status", "status_fields", "busy", "param", "params_of", "where", "last_stop",
 })
 
-#: How often the journal's writer looks for ticks at real time, seconds.
-REALTIME_POLL_S = 0.1
+#: How often the journal's writer looks for ticks at real time, seconds (a block
+#: being filled is cut 0.5 s after its first tick whatever the poll: the writer wakes
+#: for it).  A wake-up costs the writer ~0.16 ms of CPU on the gripper whatever it
+#: takes: 4 a second cost half of 10.
+REALTIME_POLL_S = 0.25
 
 #: The event of a fault the loop itself declared (consecutive overruns): the
 #: clock's decision, which a replay applies rather than checks.
 LOOP_FAULT = "loop-fault"
+
+
+class _Listeners(list):  # type: ignore[type-arg]
+    """The recorder's tick listeners: one added is called at the next tick."""
+
+    def __init__(self, added: Callable[[], None]):
+        super().__init__()
+        self._added = added
+
+    def append(self, listener: Any) -> None:
+        super().append(listener)
+        self._added()
+
+    def extend(self, listeners: Any) -> None:
+        super().extend(listeners)
+        self._added()
+
+    def insert(self, index: Any, listener: Any) -> None:
+        super().insert(index, listener)
+        self._added()
 
 
 # -- requests as text ----------------------------------------------------------------------
@@ -246,9 +287,10 @@ class Recorder:
             metadata=meta)
         self.header = header
         lossless = loop.clock.virtual if lossless is None else lossless
-        # at real time the writer wakes a few times a second (a block is cut after
-        # 0.5 s anyway): each wake-up takes the interpreter from a loop that may be
-        # about to tick; but at least eight times per queue's worth of ticks, so
+        # at real time the writer wakes a few times a second (and when a block is due
+        # to be cut, 0.5 s after its first tick): each wake-up takes the interpreter
+        # from a loop that may be about to tick; but at least eight times per
+        # queue's worth of ticks, so
         # that a fast tick (50 µs: 4096 ticks are 0.2 s) keeps room for a writer
         # that the machine's load delays
         poll = min(REALTIME_POLL_S, DEFAULT_QUEUE_TICKS * loop.period_ns / 8e9)
@@ -261,6 +303,8 @@ class Recorder:
         self._commands: list[tuple[str, str]] = []
         self._events: list[tuple[str, int, str]] = []
         self._missed = loop.missed
+        #: Whether the hand-over's expected deadline is set (by a tick of ours).
+        self._expecting = False
         self._unrecorded = 0
         #: Files of the recorder's that could not be written (the journal, a
         #: black box), any thread: each is a fault of the station, tripped by
@@ -275,13 +319,24 @@ class Recorder:
         #: Called at the end of a tick, after it was handed to the journal:
         #: ``listener(tick_index, now_ns)``, which returns the next tick it wants to
         #: be called at (None: every tick); the black box samples and dumps from here.
-        self.tick_listeners: list[Callable[[int, int], int | None]] = []
+        #: One added is first called at the next tick.
+        self.tick_listeners: list[Callable[[int, int], int | None]] = _Listeners(
+            lambda: self.listen_at(0))
         #: The next tick at which the listeners are called.
-        self._listen_at = 0
+        self._listen_at = IMAGE_TMAX
         #: A plain tick's hand-over in one C call, when the image's inputs are native
-        #: 64-bit integers (None: the journal packs the image's list of inputs).
-        self._append = self.journal.appender(image.native) \
+        #: 64-bit integers (None: the journal packs the image's list of inputs); its
+        #: state (``slow``, the expected tick ...) is set by every tick that takes the
+        #: recorder's own path, the first included.
+        hand = self.journal.hand_over(image.native) \
             if getattr(image, "native", None) is not None else None
+        self._hand = hand.state if hand is not None else None
+        self._hand_call = hand.call if hand is not None else None
+        if hand is not None:
+            # on virtual time a tick starts on its deadline; at real time a skipped
+            # deadline puts the next tick's start a period past the one expected
+            late_hi = 0 if loop.clock.virtual else loop.period_ns // 2
+            hand.state.late_lo, hand.state.late_hi = 0, late_hi
         image.tap = self
         runner.request_tap = self._request
         loop.fault_listeners.append(self._fault)
@@ -294,8 +349,9 @@ class Recorder:
             and station.board_sets and station.board_sets[-1].image is image)
         if self.in_write_phase:
             image.after_write = self._tick
+            image.hand_over = self._hand_call
         else:
-            loop.attach(self._tick, name="journal")
+            loop.attach(self._tick_handler, name="journal")
 
     def _count(self, board: str, reg: str) -> int:
         return self.image.kinds[board].register(reg).count
@@ -310,6 +366,8 @@ class Recorder:
             index = self._writer_index[name] = self.journal.writer_index(name)
         self._outputs.append((slot, value, index))
         self._pending = True
+        if self._hand is not None:
+            self._hand.slow = 1
 
     def _request(self, name: str, fn: Callable[..., Any] | None, args: tuple,
                  motion: Any) -> None:
@@ -319,6 +377,8 @@ class Recorder:
             return
         self._commands.append((text, name))
         self._pending = True
+        if self._hand is not None:
+            self._hand.slow = 1
 
     def _fault(self, fault: Fault) -> None:
         if fault.source == "loop" and not any(
@@ -328,12 +388,16 @@ class Recorder:
             self._events.append((LOOP_FAULT, fault.id, fault.cause))
         self._events.append(("fault", fault.id, str(fault)))
         self._pending = True
+        if self._hand is not None:
+            self._hand.slow = 1
 
     def disk_fault(self, cause: str, source: str) -> None:
         """A file of the recorder's could not be written (any thread): the station
         trips at the top of the loop's next record, with every motor stopped."""
         self._disk_faults.append((cause, source))
         self._pending = True
+        if self._hand is not None:
+            self._hand.slow = 1
 
     def _trip_disk_faults(self) -> None:
         journal = self.journal
@@ -345,41 +409,70 @@ class Recorder:
             cause, source = self._disk_faults.pop(0)
             self.station.trip(cause, source=source)
 
-    def _tick(self, now_ns: int) -> None:
-        # the loop thread's whole share of a tick's record (a tick of the 1 kHz
-        # gripper is ~8 µs of work): in most ticks nothing was written, asked or
-        # missed, and the tick is the clock and the image's inputs: one C call
-        # copies them into the journal's ring when the image keeps them in 64-bit
-        # integers, else the journal packs the read phase's list of them
+    def _tick_handler(self, now_ns: int) -> None:
+        """The loop's last handler, ``journal`` (when the image's write phase is not
+        the tick's last work): the one C call, else :meth:`_tick`."""
+        status = self._hand_call(now_ns) if self._hand_call is not None else -1
+        if status:
+            self._tick(now_ns, status)
+
+    def _tick(self, now_ns: int, status: int = -1) -> None:
+        # the tick the one C call did not take (``status``: its answer, -1 without
+        # one): the image's write phase calls it so; or, answered HAND_OVER_DUE, a
+        # tick it took whose listeners are due
         loop = self.loop
-        if self._pending or loop.missed != self._missed or self.journal.error is not None:
+        if status == HAND_OVER_DUE:
+            self._listen(loop.tick_index, now_ns)
+            return
+        hand = self._hand
+        skipped = None
+        if hand is not None:
+            hand.slow = 0  # before anything reads what marks it (a tap, a write error)
+            if self._expecting:
+                # the deadlines skipped since the last record: the C side's expected
+                # deadline is this tick's unless some were
+                skipped = (loop.deadline_ns - hand.deadline_ns) // loop.period_ns
+        if self._pending or loop.missed != self._missed or skipped \
+                or self.journal.error is not None:
             self._pending = False
-            self._tick_slowly(now_ns)
+            self._tick_slowly(now_ns, skipped)
         else:
-            tick = loop.tick_index
-            append = self._append
-            if append is None or not append(tick, now_ns, now_ns - loop.deadline_ns):
-                self._record(tick, now_ns, now_ns - loop.deadline_ns, 0,
-                             self.image.last_inputs or self._inputs)
+            # a tick with nothing to add: the ring full, the journal in a gap or
+            # closed, a deadline skipped without a miss counted (start-up), the C
+            # side's expected tick not set yet (the first), or a list of inputs
+            self._record(loop.tick_index, now_ns, now_ns - loop.deadline_ns, 0,
+                         self.image.last_inputs or self._inputs)
         if self.tick_listeners and loop.tick_index >= self._listen_at:
             self._listen(loop.tick_index, now_ns)
+        if hand is not None:
+            # the next tick as the loop will run it unless a deadline is skipped
+            hand.tick = loop.tick_index + 1
+            hand.deadline_ns = loop.deadline_ns + loop.period_ns
+            self._expecting = True
+            if self._pending or self.journal.error is not None:
+                hand.slow = 1
 
     def listen_at(self, tick: int) -> None:
         """Call the tick listeners at tick ``tick`` at the latest (loop thread)."""
         if tick < self._listen_at:
             self._listen_at = tick
+            if self._hand is not None:
+                self._hand.listen_at = tick
 
     def _listen(self, tick: int, now_ns: int) -> None:
-        """Call the tick listeners; the next call is at the earliest tick one asks for."""
-        due = None
-        for listener in self.tick_listeners:
+        """Call the tick listeners; the next call is at the earliest tick one asks for
+        (none while there are none)."""
+        due = IMAGE_TMAX
+        for listener in list(self.tick_listeners):
             at = listener(tick, now_ns)
             if at is None or at <= tick:
                 at = tick + 1
-            due = at if due is None or at < due else due
-        self._listen_at = due if due is not None else tick + 1
+            due = min(due, at)
+        self._listen_at = due
+        if self._hand is not None:
+            self._hand.listen_at = self._listen_at
 
-    def _tick_slowly(self, now_ns: int) -> None:
+    def _tick_slowly(self, now_ns: int, skipped: int | None = None) -> None:
         journal = self.journal
         loop = self.loop
         if self._disk_faults or (journal.error is not None and not self._journal_said):
@@ -391,13 +484,16 @@ class Recorder:
             finally:
                 loop.current = running
         missed = loop.missed
-        if missed != self._missed:
-            # the deadlines skipped since the last record (the count was reset to 0
-            # if it went down: those since the reset)
-            missed, self._missed = (missed - self._missed if missed > self._missed
-                                    else missed), missed
-        else:
-            missed = 0
+        # the deadlines missed since the last record: the count moved by them, and the
+        # deadline by them at least (``skipped``, when known; a real-time run restarted
+        # late moves it further, a start-up overrun counts none).  A count that went
+        # down, moved further than the deadline, or stood still though the last tick
+        # overran was reset since: those since then.
+        delta = missed - self._missed
+        if delta < 0 or (skipped is not None and delta > skipped) \
+                or (skipped and not delta and loop.consecutive_overruns > 0):
+            delta = missed
+        missed, self._missed = delta, missed
         # the journal keeps the sequences it is given: an empty one is never handed
         # over (a later append would land in every tick still waiting to be written)
         outputs: Sequence[tuple[int, int, int]] = self._outputs
@@ -428,4 +524,5 @@ class Recorder:
             self.image.tap = None
         if self.in_write_phase and self.image.after_write == self._tick:
             self.image.after_write = None
+            self.image.hand_over = None
         self.journal.close()
