@@ -129,15 +129,17 @@ class Encoder(Component):
 
     # -- polling -----------------------------------------------------------------
 
-    def poll(self, now_s: float) -> None:
-        """Read loop output; ZEROLENGTH write-back once a second while changing."""
+    def poll(self, now_s: float, length: float | None = None) -> None:
+        """Read loop output; ZEROLENGTH write-back once a second while changing.
+        ``length``: :meth:`length` as read in this tick already (its axis's poll),
+        or None: read here."""
         if self.looping:  # the read/display loop: asynchronous output
             self.say(f"{self.name}: {self.read():.3f} cm")
         if self.write_back is None:
             return
         if self._last_write is not None and now_s - self._last_write < ZEROLENGTH_WRITE_PERIOD:
             return
-        v = self.length()
+        v = self.length() if length is None else length
         if v != self._written:
             self.write_back(v)
             self._written = v

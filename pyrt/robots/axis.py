@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from functools import partial
 from typing import TYPE_CHECKING, Any, Protocol
 
 from pyrt.boards.dataconcentrator import ADC_MAX, DataConcentrator
@@ -43,6 +44,7 @@ from pyrt.errors import CommandError, ConfigError, PyrtError
 from pyrt.robots.av import AV
 from pyrt.robots.fuzzy_gains import fuzzy_gain_params
 from pyrt.robots.ropes import corrected_length
+from pyrt.scope import Source
 from pyrt.tasks.axis_poll import POLYAXIS, STANDALONE
 
 if TYPE_CHECKING:
@@ -267,28 +269,31 @@ class Axis(Component):
     def children(self) -> list[Component]:
         return [self.motor, self.encoder, self.loadcell]
 
-    def _polled(self, values: str, fresh: Callable[[], float]) -> Callable[[], float]:
+    def _polled(self, name: str, units: str, values: str, fresh: Callable[[], float],
+                doc: str, limits: Limits | None = None) -> Signal:
         """The value the controller acts on: the PolyAxis's last poll when the
-        axis is one of its ropes, else a fresh read of the device."""
+        axis is one of its ropes (an item of its list, which the poll fills in
+        place: the scope samples the item), else a fresh read of the device."""
         group, i = self.group, self.group_index
         if group is None or i is None:
-            return fresh
+            return Signal(name, units, fresh, doc, limits=limits)
         array = getattr(group, values)
-        return lambda: array[i]
+        return Signal(name, units, partial(array.__getitem__, i), doc,
+                      source=Source.item(array, i), limits=limits)
 
     def signals(self) -> list[Signal]:
         r = self.length_range
         return [
-            Signal("tension", "N", self._polled("tensions", self.tension),
-                   "rope tension the controller acts on (loadcell)",
-                   limits=tension_alarms(self.tension_limits)),
-            Signal("length", "cm", self._polled("lengths", self.length),
-                   "rope length the controller acts on, stretch corrected",
-                   limits=None if r is None else Limits(r[0], r[1])),
-            Signal("errorLength", "cm", self._polled("error_lengths", _zero),
-                   "fuzzy input: length error (PolyAxis control; 0 standalone)"),
-            Signal("errorTension", "N", self._polled("error_tensions", _zero),
-                   "fuzzy input: tension error (PolyAxis control; 0 standalone)"),
+            self._polled("tension", "N", "tensions", self.tension,
+                         "rope tension the controller acts on (loadcell)",
+                         limits=tension_alarms(self.tension_limits)),
+            self._polled("length", "cm", "lengths", self.length,
+                         "rope length the controller acts on, stretch corrected",
+                         limits=None if r is None else Limits(r[0], r[1])),
+            self._polled("errorLength", "cm", "error_lengths", _zero,
+                         "fuzzy input: length error (PolyAxis control; 0 standalone)"),
+            self._polled("errorTension", "N", "error_tensions", _zero,
+                         "fuzzy input: tension error (PolyAxis control; 0 standalone)"),
             Signal.attr("velocity", "cm/s", self.motor, "velocity", "motor velocity",
                         limits=self.motor.speed_limits),
         ]
@@ -507,7 +512,10 @@ class Axis(Component):
 
     def poll(self, now_s: float) -> None:
         """One poll: standalone control, then the Motor, then the Encoder."""
-        length = self.length()
+        encoder = self.encoder
+        measured = encoder.length()  # (length(), in line: the encoder's is kept)
+        length = corrected_length(measured, self.loadcell.tension(), self.stretch,
+                                  self.dead_length)
         m = self.motor
         if self.mode == STANDALONE and self.target is not None and m.running:
             err = self.target - length
@@ -517,10 +525,13 @@ class Axis(Component):
                 else:
                     m.set_desired_steps(m.steps_taken)
         m.poll()
-        self._track()
+        # the tracking check, once the motor has moved TRACKING_CHECK (_track_check's test)
+        if abs((m.position_steps - self._track_steps) / m.steps_per_cm) >= TRACKING_CHECK:
+            self._track()
         if self.mode == STANDALONE and self.target is not None and not m.running:
             self.target = None
-        self.encoder.poll(now_s)
+        # the encoder's counter as read above: nothing in this poll moves it
+        encoder.poll(now_s, measured)
 
     # -- supervision (every move of every kind; pyrt.tasks.axis_poll) ----------------
 

@@ -5,6 +5,13 @@ A robot resolves a channel name (``axis0.tension``, ``prototype.x``,
 sources into a single function returning a tuple of floats, built once so
 that sampling 8 channels costs one Python call and 8 attribute or item
 loads rather than 8 calls.
+
+The kinds, cheapest first: an attribute (``obj.name``), an item of a
+sequence updated in place (``seq[i]``), an item of a sequence an attribute
+holds (``obj.name[i]``, the attribute replaced or not), a little-endian RAM
+word, a call (``fn()``), and an item of a call's result (``fn()[i]``): a
+compiled read calls each such ``fn`` once, whatever number of its items it
+reads (a vector a plant computes whole, read once a sample).
 """
 
 from __future__ import annotations
@@ -21,7 +28,7 @@ __all__ = ["Source", "compile_sampler", "compile_sources"]
 class Source:
     """One readable value: an attribute, an item, a little-endian RAM word or a call."""
 
-    kind: str  # "attr" | "item" | "word" | "call"
+    kind: str  # "attr" | "item" | "attritem" | "word" | "call" | "callitem"
     obj: Any
     key: Any = None
     signed: bool = False
@@ -51,6 +58,18 @@ class Source:
         return cls("item", seq, index)
 
     @classmethod
+    def attr_item(cls, obj: Any, name: str, index: int) -> Source:
+        """``obj.name[index]``: an item of the sequence the attribute holds when
+        it is read (``name`` must be an attribute the object has, ``index`` an
+        integer inside its sequence now)."""
+        attr = cls.attr(obj, name)
+        seq = getattr(obj, name)
+        if isinstance(index, bool) or not isinstance(index, int) \
+                or not -len(seq) <= index < len(seq):
+            raise ValueError(f"index {index!r} outside 0..{len(seq) - 1}")
+        return cls("attritem", attr.obj, (name, index))
+
+    @classmethod
     def word(cls, mem: Any, address: int, signed: bool = False) -> Source:
         """The little-endian 16-bit word at ``mem[address]``, ``mem[address+1]``."""
         if not isinstance(address, int) or not 0 <= address < len(mem) - 1:
@@ -65,6 +84,17 @@ class Source:
             raise ValueError(f"not callable: {fn!r}")
         return cls("call", fn)
 
+    @classmethod
+    def call_item(cls, fn: Callable[[], Sequence[Any]], index: int) -> Source:
+        """Item ``index`` of what ``fn()`` returns; a compiled read calls ``fn``
+        once for every source of this kind it holds that has the same ``fn``
+        (equal: a bound method made twice counts as one)."""
+        if not callable(fn):
+            raise ValueError(f"not callable: {fn!r}")
+        if isinstance(index, bool) or not isinstance(index, int):
+            raise ValueError(f"index {index!r} is not an integer")
+        return cls("callitem", fn, index)
+
     def read(self) -> float:
         """The value now (for one-off reads; sampling uses :func:`compile_sources`)."""
         return compile_sources([self])()[0]
@@ -76,6 +106,11 @@ def _expr(i: int, src: Source) -> str:
         return f"{o}.{src.key}"
     if src.kind == "item":
         return f"{o}[{int(src.key)}]"
+    if src.kind == "attritem":
+        name, index = src.key
+        if not str(name).isidentifier() or keyword.iskeyword(name):
+            raise ValueError(f"not an attribute name: {name!r}")
+        return f"{o}.{name}[{int(index)}]"
     if src.kind == "word":
         a = int(src.key)
         w = f"({o}[{a}] | ({o}[{a + 1}] << 8))"
@@ -85,11 +120,41 @@ def _expr(i: int, src: Source) -> str:
     raise ValueError(f"unknown source kind {src.kind!r}")
 
 
+def _compiled(sources: Sequence[Source]) -> tuple[str, list[str]]:
+    """The statements a compiled read runs first (each shared call once, into a
+    local ``cN``) and every source's expression, in order."""
+    calls: list[tuple[Any, str]] = []  # (fn, its local): found by equality
+    first: list[str] = []
+    exprs: list[str] = []
+    for i, src in enumerate(sources):
+        if src.kind != "callitem":
+            exprs.append(_expr(i, src))
+            continue
+        local = next((name for fn, name in calls if _same_call(fn, src.obj)), None)
+        if local is None:
+            local = f"c{i}"
+            calls.append((src.obj, local))
+            first.append(f"    {local} = o{i}()\n")
+        exprs.append(f"{local}[{int(src.key)}]")
+    return "".join(first), exprs
+
+
+def _same_call(a: Any, b: Any) -> bool:
+    if a is b:
+        return True
+    try:
+        return bool(a == b)
+    except Exception:
+        return False
+
+
 def compile_sources(sources: Sequence[Source]) -> Callable[[], tuple]:
     """One function reading every source, returning their values as a tuple."""
     params = ", ".join(f"o{i}=o{i}" for i in range(len(sources)))
-    body = ", ".join(_expr(i, s) for i, s in enumerate(sources))
-    code = f"def read({params}):\n    return ({body}{',' if len(sources) == 1 else ''})\n"
+    first, exprs = _compiled(sources)
+    body = ", ".join(exprs)
+    code = (f"def read({params}):\n{first}"
+            f"    return ({body}{',' if len(sources) == 1 else ''})\n")
     namespace: dict[str, Any] = {f"o{i}": s.obj for i, s in enumerate(sources)}
     # The code is built only from validated identifiers and integers.
     exec(compile(code, "<pyrt scope sources>", "exec"), namespace)
@@ -101,9 +166,10 @@ def compile_sampler(sources: Sequence[Source], pack_into: Callable[..., None]) -
     source's value straight into ``buf`` with ``pack_into`` (a ``struct.Struct``
     method for ``"<q" + "d" * len(sources)``): one C call, no tuple built."""
     params = "".join(f", o{i}=o{i}" for i in range(len(sources)))
-    values = "".join(f", {_expr(i, s)}" for i, s in enumerate(sources))
+    first, exprs = _compiled(sources)
+    values = "".join(f", {e}" for e in exprs)
     code = (
-        f"def sample(buf, offset, now_ns, pack_into=pack_into{params}):\n"
+        f"def sample(buf, offset, now_ns, pack_into=pack_into{params}):\n{first}"
         f"    pack_into(buf, offset, now_ns{values})\n"
     )
     namespace: dict[str, Any] = {f"o{i}": s.obj for i, s in enumerate(sources)}

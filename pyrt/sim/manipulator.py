@@ -35,10 +35,16 @@ import numpy as np
 
 from pyrt.boards.dataconcentrator import ADC_MAX, COUNTER_BITS
 from pyrt.boards.registers import RegisterBoard
-from pyrt.boards.tio10 import AWO_BITS, CLOCK_HZ, DIR_BITS, PULSE_COUNTER_MODULUS, TIO10
+from pyrt.boards.tio10 import (
+    AWO_BITS,
+    CLOCK_HZ,
+    DIR_BITS,
+    PULSE_COUNTER_MODULUS,
+    RTC_MODULUS,
+    TIO10,
+)
 from pyrt.errors import NativeError
 from pyrt.native import StaticsSolver
-from pyrt.sim.cards import set_adc, set_rtc
 from pyrt.sim.sensors import Imperfections, loadcell_response
 
 if TYPE_CHECKING:
@@ -240,7 +246,8 @@ class ManipulatorPlant:
         # the registers the step reads and sets, bound once
         self._src, self._per, self._armed = (tio10.cells(n) for n in ("src", "per", "armed"))
         self._port, self._pulses = tio10.cells("port"), tio10.cells("pulses")
-        self._cnt = dc.cells("cnt")
+        self._rtc = tio10.cells("rtc")
+        self._cnt, self._adc = dc.cells("cnt"), dc.cells("adc")
         self.imp = imperfections if imperfections is not None else Imperfections()
         self._rng = random.Random(self.imp.seed)
         self._np_rng = np.random.default_rng(self.imp.seed)
@@ -333,7 +340,7 @@ class ManipulatorPlant:
         """Advance the world to ``now_ns`` (the loop's time)."""
         last = self._last_ns
         self._last_ns = now_ns
-        set_rtc(self.tio10, now_ns)
+        self._rtc[0] = (now_ns * CLOCK_HZ // 1_000_000_000) % RTC_MODULUS  # (cards.set_rtc)
         dt_ns = 0 if last is None else now_ns - last
         if dt_ns > 0:
             self._move(dt_ns)
@@ -367,8 +374,11 @@ class ManipulatorPlant:
         quant = self.imp.encoder_quantisation
         for st in self.ropes:
             ch = st.rig.channel
+            if not armed[ch]:
+                st.phase = 0.0
+                continue
             period = per[ch] * 10 ** (src[ch] - 1)
-            if not armed[ch] or period <= 0:
+            if period <= 0:
                 st.phase = 0.0
                 continue
             st.phase += dt_ticks
@@ -394,7 +404,7 @@ class ManipulatorPlant:
                 st.counted = whole
 
     def _write_sensors(self) -> None:
-        dc = self.dc
+        adc = self._adc
         imp = self.imp
         sigma = imp.loadcell_noise
         simple = imp.bias_resistor
@@ -431,7 +441,7 @@ class ManipulatorPlant:
             if code != st.stuck_code or st.first:
                 st.first = False
                 st.stuck_code = code
-                set_adc(dc, r.adc_channel, code)
+                adc[r.adc_channel] = code  # an int 0..ADC_MAX (cards.set_adc)
         self._noise_i = i
 
     def invalidate(self) -> None:
