@@ -43,6 +43,7 @@ from pyrt.boards.tio10 import (
 from pyrt.component import Arg, Component, Limits, Param, Signal, command
 from pyrt.devices._args import parse_number
 from pyrt.errors import CommandError, ConfigError
+from pyrt.scope import Source
 
 if TYPE_CHECKING:
     from pyrt.db import MotorRecord
@@ -309,7 +310,9 @@ class Motor(Component):
                         "velocity the controller asks for", limits=lim),
             Signal("speed", "cm/s", self.speed, "present signed speed (0 when not stepping)",
                    limits=lim),
-            Signal("running", "bool", self._running, "the channel is stepping", "d"),
+            # sampled as the armed register itself (1 or 0: the bool's number)
+            Signal("running", "bool", self._running, "the channel is stepping", "d",
+                   source=Source.call(self.armed)),
         ]
 
     def params(self) -> list[Param]:

@@ -514,11 +514,10 @@ class Axis(Component):
         """One poll: standalone control, then the Motor, then the Encoder."""
         encoder = self.encoder
         measured = encoder.length()  # (length(), in line: the encoder's is kept)
-        length = corrected_length(measured, self.loadcell.tension(), self.stretch,
-                                  self.dead_length)
         m = self.motor
-        if self.mode == STANDALONE and self.target is not None and m.running:
-            err = self.target - length
+        if self.mode == STANDALONE and self.target is not None and m.armed():
+            err = self.target - corrected_length(measured, self.loadcell.tension(),
+                                                 self.stretch, self.dead_length)
             if abs(err) > END_ZONE:
                 if (err > 0) == (m.direction > 0):
                     m.set_desired_steps(m.steps_taken + round(abs(err) * m.steps_per_cm))
@@ -528,7 +527,7 @@ class Axis(Component):
         # the tracking check, once the motor has moved TRACKING_CHECK (_track_check's test)
         if abs((m.position_steps - self._track_steps) / m.steps_per_cm) >= TRACKING_CHECK:
             self._track()
-        if self.mode == STANDALONE and self.target is not None and not m.running:
+        if self.mode == STANDALONE and self.target is not None and not m.armed():
             self.target = None
         # the encoder's counter as read above: nothing in this poll moves it
         encoder.poll(now_s, measured)

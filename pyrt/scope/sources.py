@@ -17,6 +17,7 @@ reads (a vector a plant computes whole, read once a sample).
 from __future__ import annotations
 
 import keyword
+import struct
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
@@ -150,10 +151,10 @@ def _same_call(a: Any, b: Any) -> bool:
 
 def compile_sources(sources: Sequence[Source]) -> Callable[[], tuple]:
     """One function reading every source, returning their values as a tuple."""
-    params = ", ".join(f"o{i}=o{i}" for i in range(len(sources)))
     first, exprs = _compiled(sources)
     body = ", ".join(exprs)
-    code = (f"def read({params}):\n{first}"
+    # the sources are the function's globals (no defaults copied at each call)
+    code = (f"def read():\n{first}"
             f"    return ({body}{',' if len(sources) == 1 else ''})\n")
     namespace: dict[str, Any] = {f"o{i}": s.obj for i, s in enumerate(sources)}
     # The code is built only from validated identifiers and integers.
@@ -161,19 +162,35 @@ def compile_sources(sources: Sequence[Source]) -> Callable[[], tuple]:
     return namespace["read"]
 
 
+#: Values a generated ``pack_into`` call packs at most: a call of more than 30
+#: arguments is compiled to build a list and a tuple of them first.
+_PACK_CHUNK = 24
+
+
 def compile_sampler(sources: Sequence[Source], pack_into: Callable[..., None]) -> Callable:
     """One function ``sample(buf, offset, now_ns)`` that packs the time and every
     source's value straight into ``buf`` with ``pack_into`` (a ``struct.Struct``
-    method for ``"<q" + "d" * len(sources)``): one C call, no tuple built."""
-    params = "".join(f", o{i}=o{i}" for i in range(len(sources)))
+    method for ``"<q" + "d" * len(sources)``): a few C calls, no tuple built.
+    Given that struct's own ``pack_into``, the row is packed in pieces of at
+    most :data:`_PACK_CHUNK` values (the same bytes; a read that fails leaves
+    the row partly written, which the caller then does not keep)."""
     first, exprs = _compiled(sources)
-    values = "".join(f", {e}" for e in exprs)
-    code = (
-        f"def sample(buf, offset, now_ns, pack_into=pack_into{params}):\n{first}"
-        f"    pack_into(buf, offset, now_ns{values})\n"
-    )
     namespace: dict[str, Any] = {f"o{i}": s.obj for i, s in enumerate(sources)}
-    namespace["pack_into"] = pack_into
+    n = len(sources)
+    packer = getattr(pack_into, "__self__", None)
+    if (isinstance(packer, struct.Struct) and packer.format == "<q" + "d" * n
+            and getattr(pack_into, "__name__", "") == "pack_into"):
+        namespace["pack_t"] = struct.Struct("<q").pack_into
+        lines = ["    pack_t(buf, offset, now_ns)\n"]
+        for c, j in enumerate(range(0, n, _PACK_CHUNK)):
+            part = exprs[j:j + _PACK_CHUNK]
+            namespace[f"pack{c}"] = struct.Struct("<" + "d" * len(part)).pack_into
+            lines.append(f"    pack{c}(buf, offset + {8 + 8 * j}, {', '.join(part)})\n")
+    else:
+        namespace["pack_into"] = pack_into
+        lines = [f"    pack_into(buf, offset, now_ns{''.join(f', {e}' for e in exprs)})\n"]
+    # the sources are the function's globals (no defaults copied at each call)
+    code = "def sample(buf, offset, now_ns):\n" + first + "".join(lines)
     # The code is built only from validated identifiers and integers.
     exec(compile(code, "<pyrt scope sampler>", "exec"), namespace)
     return namespace["sample"]

@@ -277,6 +277,10 @@ class ManipulatorPlant:
                        awo_bit=AWO_BITS[r.channel])
             for r, p in zip(rig.ropes, payouts, strict=True)
         ]
+        #: Each rope's loadcell as the step converts it: (state, MAXLOAD, OFFSET,
+        #: SLOPE, ADC channel), the rig's constants gathered once.
+        self._loadcells = [(st, st.rig.loadcell_maxload, st.rig.loadcell_offset,
+                            st.rig.loadcell_slope, st.rig.adc_channel) for st in self.ropes]
         for st in self.ropes:
             if self.imp.loadcell_zero_error:
                 st.zero_error = self._rng.gauss(0.0, self.imp.loadcell_zero_error)
@@ -287,6 +291,8 @@ class ManipulatorPlant:
         #: Set when a motor drew the carriage into a pulley (it stalled there).
         self.jammed = False
         self._dirty = False
+        #: No channel was armed at the last step (every rope's phase is 0).
+        self._still = False
         self._last_ns: int | None = None
         self.solves = 0
         self._write_sensors()
@@ -368,8 +374,12 @@ class ManipulatorPlant:
         self._write_sensors()
 
     def _move(self, dt_ns: int) -> None:
+        armed = self._armed
+        if self._still and not any(armed):
+            return  # no channel counts, and every rope's phase is 0 already
+        self._still = False
         dt_ticks = dt_ns * (CLOCK_HZ / 1e9)
-        src, per, armed, port = self._src, self._per, self._armed, self._port
+        src, per, port = self._src, self._per, self._port
         pulses, cnt = self._pulses, self._cnt
         quant = self.imp.encoder_quantisation
         for st in self.ropes:
@@ -402,6 +412,9 @@ class ManipulatorPlant:
                 a = st.rig.encoder_address
                 cnt[a] = (cnt[a] + whole - st.counted) & _COUNTER_MASK
                 st.counted = whole
+        # nothing counted: every rope's phase was set to 0 above; until a channel is
+        # armed again a step has nothing to move
+        self._still = not any(armed)
 
     def _write_sensors(self) -> None:
         adc = self._adc
@@ -413,22 +426,21 @@ class ManipulatorPlant:
         # standard-normal noise, drawn in seeded blocks of 4096 (cheap per load
         # cell): the block and the place in it held here for the loop
         block, i = self._noise_block, self._noise_i
-        for st, t in zip(self.ropes, tensions, strict=True):
-            r = st.rig
+        for (st, m, offset, slope, channel), t in zip(self._loadcells, tensions, strict=True):
             if st.load is not None:  # the calibration load, not the source, pulls on it
                 t = st.load
-            if st.loadcell == "dead":
+            state = st.loadcell
+            if state == "dead":
                 code = 0
-            elif st.loadcell == "stuck":
+            elif state == "stuck":
                 code = st.stuck_code
             else:
                 if simple:
-                    m = r.loadcell_maxload
                     f = t / m if m > 0 else 0.0
                     f = 0.0 if f < 0.0 else (1.0 if f > 1.0 else f)
                     load = t + nl4 * m * f * (1.0 - f)
                 else:
-                    load = loadcell_response(t, r.loadcell_maxload, imp)
+                    load = loadcell_response(t, m, imp)
                 load += st.zero_error
                 if sigma:
                     if i >= len(block):
@@ -436,12 +448,12 @@ class ManipulatorPlant:
                         i = 0
                     load += sigma * block[i]
                     i += 1
-                code = round((load - r.loadcell_offset) / r.loadcell_slope)
+                code = round((load - offset) / slope)
                 code = 0 if code < 0 else (ADC_MAX if code > ADC_MAX else code)
             if code != st.stuck_code or st.first:
                 st.first = False
                 st.stuck_code = code
-                adc[r.adc_channel] = code  # an int 0..ADC_MAX (cards.set_adc)
+                adc[channel] = code  # an int 0..ADC_MAX (cards.set_adc)
         self._noise_i = i
 
     def invalidate(self) -> None:

@@ -144,13 +144,12 @@ class ManipulatorSim(Component):
 
     def signals(self) -> list[Signal]:
         p = self.plant
-
-        def where() -> Sequence[float]:
-            return p.position
-
-        # each vector the plant computes whole is computed once a sample, for all
-        # of its columns (Source.call_item)
-        tensions = p.tensions
+        # each vector the plant's solver computes whole is read once a sample, for
+        # all of its columns (Source.call_item), from the solver (what the plant's
+        # position and tensions() give)
+        solver = p.solver
+        where = partial(type(solver).position.fget, solver)
+        tensions = solver.tensions
         out = [Signal(c, "cm", _item_of(where, i), f"true source position {c}",
                       source=Source.call_item(where, i))
                for i, c in enumerate("xyz")]
