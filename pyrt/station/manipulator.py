@@ -51,6 +51,7 @@ import argparse
 import math
 from collections.abc import Callable, Sequence
 from functools import partial
+from operator import attrgetter
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -148,7 +149,7 @@ class ManipulatorSim(Component):
         # all of its columns (Source.call_item), from the solver (what the plant's
         # position and tensions() give)
         solver = p.solver
-        where = partial(type(solver).position.fget, solver)
+        where = partial(attrgetter("position"), solver)  # one C call into the property
         tensions = solver.tensions
         out = [Signal(c, "cm", _item_of(where, i), f"true source position {c}",
                       source=Source.call_item(where, i))
