@@ -68,6 +68,8 @@ _COUNTER_MASK = (1 << COUNTER_BITS) - 1
 D2O_DENSITY = 1.10
 
 Vec = tuple[float, float, float]
+#: A loadcell in these states converts no load (dead: 0; stuck: its last code).
+_NOT_CONVERTING = frozenset(("dead", "stuck"))
 
 
 @dataclass(frozen=True)
@@ -424,17 +426,19 @@ class ManipulatorPlant:
         nl4 = 4.0 * imp.loadcell_nonlinearity
         tensions = self.solver.tensions()
         # standard-normal noise, drawn in seeded blocks of 4096 (cheap per load
-        # cell): the block and the place in it held here for the loop
+        # cell): the block and the place in it held here for the loop; a block
+        # with fewer left than loadcells is followed by the next one now (the
+        # same numbers in the same order as a block drawn when the last ran out)
         block, i = self._noise_block, self._noise_i
+        if sigma and len(block) - i < len(tensions):
+            block = self._noise_block = (
+                block[i:] + self._np_rng.standard_normal(4096).tolist())
+            i = 0
         for (st, m, offset, slope, channel), t in zip(self._loadcells, tensions, strict=True):
             if st.load is not None:  # the calibration load, not the source, pulls on it
                 t = st.load
             state = st.loadcell
-            if state == "dead":
-                code = 0
-            elif state == "stuck":
-                code = st.stuck_code
-            else:
+            if state == "ok" or state not in _NOT_CONVERTING:
                 if simple:
                     f = t / m if m > 0 else 0.0
                     f = 0.0 if f < 0.0 else (1.0 if f > 1.0 else f)
@@ -443,13 +447,12 @@ class ManipulatorPlant:
                     load = loadcell_response(t, m, imp)
                 load += st.zero_error
                 if sigma:
-                    if i >= len(block):
-                        block = self._noise_block = self._np_rng.standard_normal(4096).tolist()
-                        i = 0
                     load += sigma * block[i]
                     i += 1
                 code = round((load - offset) / slope)
                 code = 0 if code < 0 else (ADC_MAX if code > ADC_MAX else code)
+            else:
+                code = 0 if state == "dead" else st.stuck_code
             if code != st.stuck_code or st.first:
                 st.first = False
                 st.stuck_code = code

@@ -51,7 +51,7 @@ import argparse
 import math
 from collections.abc import Callable, Sequence
 from functools import partial
-from operator import attrgetter
+from operator import attrgetter, call
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -357,6 +357,8 @@ class ManipulatorStation(Station):
                 fuzzy.append(FuzzyParams.from_mapping(dict(rec.fuzzy), base=base))
             except NativeInputError as exc:
                 raise rec.where.error(None, f"AXIS {rec.name}: {exc}") from None
+        #: Every motor's armed register, read through its reader (the move watch's).
+        self._motors_armed = tuple(a.motor.armed for a in self.axes)
         # Everything the PolyAxis works with is given here: the motion queue the
         # mailbox fills (the station's runner takes it), the loop's spawn and
         # the pattern log's writer, the stop listeners, the task periods.
@@ -566,10 +568,9 @@ class ManipulatorStation(Station):
         job = pa.pattern_job
         if job is not None and not job.done:
             return True
-        for a in self.axes:  # noqa: SIM110 (no generator: this runs every tick)
-            if a.mode == STANDALONE and a.motor.armed():
-                return True
-        return False
+        if not any(map(call, self._motors_armed)):  # at rest: no motor armed (C calls only)
+            return False
+        return any(a.mode == STANDALONE and a.motor.armed() for a in self.axes)
 
     def motors_running(self) -> list[str]:
         """Names of the motors that are stepping or have windings on."""
