@@ -552,11 +552,11 @@ class Axis(Component):
           is moving it back inside (a PolyAxis move has its own tension stops).
         """
         m = self.motor
-        running = m.running
+        running = m.armed() != 0  # (m.running, through its reader)
         group, i = self.group, self.group_index
         poly = self.mode == POLYAXIS and group is not None and i is not None
         lc = self.loadcell
-        code = lc.channel.code()
+        code = lc.channel.raw()
         if not poly and (code <= 0 or code >= ADC_MAX):  # (a PolyAxis move: its tension stops)
             return (f"LOADCELL_FAULT: {lc.name} reads ADC code {code}, the end of its "
                     "range (dead, disconnected or saturated)")
