@@ -200,9 +200,10 @@ class Motor(Component):
 
     def speed(self) -> float:
         """Present signed speed in cm/s (0 when not stepping)."""
-        if not self.armed() or self._period <= 0:
+        period = self._period
+        if not self.armed() or period <= 0:
             return 0.0
-        return self.direction * self.speed_for(self._period)
+        return self.direction * (self._source_hz / (period * self.steps_per_cm))  # speed_for
 
     # -- hardware ------------------------------------------------------------------
 

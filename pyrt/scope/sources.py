@@ -162,9 +162,9 @@ def compile_sources(sources: Sequence[Source]) -> Callable[[], tuple]:
     return namespace["read"]
 
 
-#: Values a generated ``pack_into`` call packs at most: a call of more than 30
-#: arguments is compiled to build a list and a tuple of them first.
-_PACK_CHUNK = 24
+#: Arguments a generated ``pack_into`` call passes at most: a call of more than
+#: 30 is compiled to build a list and a tuple of them first.
+_PACK_ARGS = 29
 
 
 def compile_sampler(sources: Sequence[Source], pack_into: Callable[..., None]) -> Callable:
@@ -172,18 +172,20 @@ def compile_sampler(sources: Sequence[Source], pack_into: Callable[..., None]) -
     source's value straight into ``buf`` with ``pack_into`` (a ``struct.Struct``
     method for ``"<q" + "d" * len(sources)``): a few C calls, no tuple built.
     Given that struct's own ``pack_into``, the row is packed in pieces of at
-    most :data:`_PACK_CHUNK` values (the same bytes; a read that fails leaves
-    the row partly written, which the caller then does not keep)."""
+    most :data:`_PACK_ARGS` arguments each (the same bytes; a read that fails
+    leaves the row partly written, which the caller then does not keep)."""
     first, exprs = _compiled(sources)
     namespace: dict[str, Any] = {f"o{i}": s.obj for i, s in enumerate(sources)}
     n = len(sources)
     packer = getattr(pack_into, "__self__", None)
     if (isinstance(packer, struct.Struct) and packer.format == "<q" + "d" * n
             and getattr(pack_into, "__name__", "") == "pack_into"):
-        namespace["pack_t"] = struct.Struct("<q").pack_into
-        lines = ["    pack_t(buf, offset, now_ns)\n"]
-        for c, j in enumerate(range(0, n, _PACK_CHUNK)):
-            part = exprs[j:j + _PACK_CHUNK]
+        # the time and the first values, then the rest in pieces
+        first_n = min(n, _PACK_ARGS - 3)
+        namespace["pack0"] = struct.Struct("<q" + "d" * first_n).pack_into
+        lines = [f"    pack0(buf, offset, now_ns{''.join(f', {e}' for e in exprs[:first_n])})\n"]
+        for c, j in enumerate(range(first_n, n, _PACK_ARGS - 2), start=1):
+            part = exprs[j:j + _PACK_ARGS - 2]
             namespace[f"pack{c}"] = struct.Struct("<" + "d" * len(part)).pack_into
             lines.append(f"    pack{c}(buf, offset + {8 + 8 * j}, {', '.join(part)})\n")
     else:
