@@ -802,8 +802,10 @@ def _trusted(pa: PolyAxis, read: Callable[[], Any], held: Callable[[Any], Any]
 
 
 def _length_reader(axis: Axis) -> Callable[[], tuple[float, bool]]:
+    armed = axis.motor.armed  # the motor's armed register, bound once
+
     def read() -> tuple[float, bool]:
-        return axis.length(), axis.motor.running
+        return axis.length(), armed() != 0
     return read
 
 
