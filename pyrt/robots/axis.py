@@ -134,6 +134,19 @@ def _true() -> bool:
     return True
 
 
+def _polled(axis: Axis, name: str, units: str, values: str, fresh: Callable[[], float],
+            doc: str, limits: Limits | None = None) -> Signal:
+    """An axis's signal of the value the controller acts on: the PolyAxis's last
+    poll when the axis is one of its ropes (an item of its list, which the poll
+    fills in place: the scope samples the item), else a fresh read of the device."""
+    group, i = axis.group, axis.group_index
+    if group is None or i is None:
+        return Signal(name, units, fresh, doc, limits=limits)
+    array = getattr(group, values)
+    return Signal(name, units, partial(array.__getitem__, i), doc,
+                  source=Source.item(array, i), limits=limits)
+
+
 def _moving(length: float) -> str:
     return f"moving to length {length:.3f} cm"
 
@@ -269,31 +282,19 @@ class Axis(Component):
     def children(self) -> list[Component]:
         return [self.motor, self.encoder, self.loadcell]
 
-    def _polled(self, name: str, units: str, values: str, fresh: Callable[[], float],
-                doc: str, limits: Limits | None = None) -> Signal:
-        """The value the controller acts on: the PolyAxis's last poll when the
-        axis is one of its ropes (an item of its list, which the poll fills in
-        place: the scope samples the item), else a fresh read of the device."""
-        group, i = self.group, self.group_index
-        if group is None or i is None:
-            return Signal(name, units, fresh, doc, limits=limits)
-        array = getattr(group, values)
-        return Signal(name, units, partial(array.__getitem__, i), doc,
-                      source=Source.item(array, i), limits=limits)
-
     def signals(self) -> list[Signal]:
         r = self.length_range
         return [
-            self._polled("tension", "N", "tensions", self.tension,
-                         "rope tension the controller acts on (loadcell)",
-                         limits=tension_alarms(self.tension_limits)),
-            self._polled("length", "cm", "lengths", self.length,
-                         "rope length the controller acts on, stretch corrected",
-                         limits=None if r is None else Limits(r[0], r[1])),
-            self._polled("errorLength", "cm", "error_lengths", _zero,
-                         "fuzzy input: length error (PolyAxis control; 0 standalone)"),
-            self._polled("errorTension", "N", "error_tensions", _zero,
-                         "fuzzy input: tension error (PolyAxis control; 0 standalone)"),
+            _polled(self, "tension", "N", "tensions", self.tension,
+                    "rope tension the controller acts on (loadcell)",
+                    limits=tension_alarms(self.tension_limits)),
+            _polled(self, "length", "cm", "lengths", self.length,
+                    "rope length the controller acts on, stretch corrected",
+                    limits=None if r is None else Limits(r[0], r[1])),
+            _polled(self, "errorLength", "cm", "error_lengths", _zero,
+                    "fuzzy input: length error (PolyAxis control; 0 standalone)"),
+            _polled(self, "errorTension", "N", "error_tensions", _zero,
+                    "fuzzy input: tension error (PolyAxis control; 0 standalone)"),
             Signal.attr("velocity", "cm/s", self.motor, "velocity", "motor velocity",
                         limits=self.motor.speed_limits),
         ]
