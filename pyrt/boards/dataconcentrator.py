@@ -11,6 +11,8 @@ know what the bits are, not what is connected to them.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from pyrt.boards.registers import (
     OUTPUT,
     BoardKind,
@@ -59,6 +61,17 @@ class DataConcentrator:
         # a read later in the tick sees the counter cleared (a process image's copy)
         self._cached = getattr(r, "set_cached", None)
 
+    # -- readers bound once (a device's tick path): checked here, when bound, as
+    # the read they stand for; each call then reads the register with no check
+
+    def counter_reader(self, address: int) -> Callable[[], int]:
+        """The raw counter at ``address`` (as :meth:`read_counter`), bound once."""
+        return self._cnt[_CNT.check_index(address)]
+
+    def adc_reader(self, channel: int) -> Callable[[], int]:
+        """ADC ``channel``'s latest conversion (as :meth:`read_adc`), bound once."""
+        return self._adc[_ADC.check_index(channel)]
+
     def read_counter(self, address: int) -> int:
         """The raw 24-bit counter at ``address`` (0..2**24-1)."""
         return self._cnt[_CNT.check_index(address)]()
@@ -91,18 +104,25 @@ DATACONCENTRATOR = BoardKind("dataconcentrator", (
 _CNT, _ADC = DATACONCENTRATOR.register("cnt"), DATACONCENTRATOR.register("adc")
 
 
+_COUNTER_MASK = (1 << COUNTER_BITS) - 1
+_COUNTER_HALF = 1 << (COUNTER_BITS - 1)
+_COUNTER_WRAP = 1 << COUNTER_BITS
+
+
 class DigitalChannel:
-    """One counter channel, read as a signed count."""
+    """One counter channel, read as a signed count.  ``raw``: the counter's
+    register read, bound once (the address checked when the channel is made)."""
 
     def __init__(self, board: DataConcentrator, address: int):
         self.board = board
         self.address = _CNT.check_index(address)
+        self.raw: Callable[[], int] = board.counter_reader(self.address)
 
     def count(self) -> int:
         """The counter as a signed 24-bit two's-complement number."""
-        raw = self.board.read_counter(self.address) & ((1 << COUNTER_BITS) - 1)
-        if raw >= 1 << (COUNTER_BITS - 1):
-            raw -= 1 << COUNTER_BITS
+        raw = self.raw() & _COUNTER_MASK
+        if raw >= _COUNTER_HALF:
+            raw -= _COUNTER_WRAP
         return raw
 
     def reset(self) -> None:
@@ -111,12 +131,15 @@ class DigitalChannel:
 
 
 class AnalogChannel:
-    """One ADC channel, read as a code 0..4095."""
+    """One ADC channel, read as a code 0..4095.  ``raw``: the ADC's register
+    read, bound once (the channel checked when the channel is made), the same
+    value as :meth:`code`."""
 
     def __init__(self, board: DataConcentrator, channel: int):
         self.board = board
         self.channel = _ADC.check_index(channel)
+        self.raw: Callable[[], int] = board.adc_reader(self.channel)
 
     def code(self) -> int:
         """The latest conversion."""
-        return self.board.read_adc(self.channel)
+        return self.raw()

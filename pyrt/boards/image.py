@@ -477,13 +477,9 @@ class ImageBackend(Backend):
                 return slow()  # outside a station's ticks: fresh inputs
 
             return read_input
-        # a readable output: the image holds its latest value (a write keeps it there)
-        slots, slot = self._output_list, self.output_index[(board, name, index)]
-
-        def read_output() -> int:
-            return slots[slot]
-
-        return read_output
+        # a readable output: the image holds its latest value (a write keeps it there,
+        # in this list, which is never replaced): one C call, no Python frame
+        return partial(self._output_list.__getitem__, self.output_index[(board, name, index)])
 
     def writer(self, board: str, name: str, index: int = 0) -> Callable[[int], None]:
         """A write of ``board``'s output ``name[index]`` bound once: the register

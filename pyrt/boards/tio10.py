@@ -24,6 +24,8 @@ has them; nothing here knows about centimetres.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from pyrt.boards.registers import (
     OUTPUT,
     BoardKind,
@@ -128,6 +130,32 @@ class TIO10:
             raise ValueError(f"TIO10 channel {channel} is reserved for the real-time clock "
                              f"(channels {RTC_CHANNELS[0]} and {RTC_CHANNELS[1]})")
         return channel
+
+    # -- readers bound once (a device's tick path) ---------------------------------
+    #
+    # Each is checked here, when it is bound, exactly as the read it stands for
+    # (a ValueError naming the channel or port); the reader it returns is a call
+    # of no argument that reads the register with no further check.
+
+    def armed_reader(self, channel: int) -> Callable[[], int]:
+        """The channel's ``armed`` register (1 counting, 0 not), bound once."""
+        return self._armed[self.check_channel(channel, True)]
+
+    def pulses_reader(self, channel: int) -> Callable[[], int]:
+        """The channel's output-pulse counter (as :meth:`pulses`), bound once."""
+        return self._pulses[self.check_channel(channel, True)]
+
+    def period_reader(self, channel: int) -> Callable[[], int]:
+        """The channel's load register (as :meth:`period`), bound once."""
+        return self._per[self.check_channel(channel, True)]
+
+    def source_reader(self, channel: int) -> Callable[[], int]:
+        """The source the channel counts (as :meth:`source`), bound once."""
+        return self._src[self.check_channel(channel, True)]
+
+    def port_reader(self, port: int) -> Callable[[], int]:
+        """PIA output port ``port`` read back (as :meth:`read_port`), bound once."""
+        return self._port[_PORT.check_index(port)]
 
     def select_source(self, channel: int, source: int) -> None:
         """Make the channel count source F``source`` (1..5)."""

@@ -13,7 +13,7 @@ import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
-from pyrt.boards.dataconcentrator import DataConcentrator, DigitalChannel
+from pyrt.boards.dataconcentrator import COUNTER_BITS, DataConcentrator, DigitalChannel
 from pyrt.component import Arg, Component, Limits, Signal, command
 from pyrt.devices._args import parse_number
 from pyrt.errors import CommandError, ConfigError
@@ -22,6 +22,10 @@ if TYPE_CHECKING:
     from pyrt.db import EncoderRecord
 
 __all__ = ["ZEROLENGTH_WRITE_PERIOD", "Encoder"]
+
+_COUNTER_MASK = (1 << COUNTER_BITS) - 1
+_COUNTER_HALF = 1 << (COUNTER_BITS - 1)
+_COUNTER_WRAP = 1 << COUNTER_BITS
 
 #: 000, section 9: ZEROLENGTH is updated once per second while changing.
 ZEROLENGTH_WRITE_PERIOD = 1.0
@@ -45,6 +49,7 @@ class Encoder(Component):
             raise ConfigError(f"encoder {name}: ZEROLENGTH must be a number, got {zero_length!r}")
         self.name = name
         self.channel = channel
+        self._raw = channel.raw  # the counter's register, bound once
         self.slope = float(slope)
         self.zero_length = float(zero_length)
         self.write_back = write_back
@@ -68,7 +73,10 @@ class Encoder(Component):
 
     def length(self) -> float:
         """Total unstretched rope length (cm), dead length included."""
-        return self.zero_length + self.slope * self.channel.count()
+        raw = self._raw() & _COUNTER_MASK  # (the channel's count(), in line: the tick's path)
+        if raw >= _COUNTER_HALF:
+            raw -= _COUNTER_WRAP
+        return self.zero_length + self.slope * raw
 
     # -- commands (Table 8) ------------------------------------------------------
 
@@ -129,15 +137,17 @@ class Encoder(Component):
 
     # -- polling -----------------------------------------------------------------
 
-    def poll(self, now_s: float) -> None:
-        """Read loop output; ZEROLENGTH write-back once a second while changing."""
+    def poll(self, now_s: float, length: float | None = None) -> None:
+        """Read loop output; ZEROLENGTH write-back once a second while changing.
+        ``length``: :meth:`length` as read in this tick already (its axis's poll),
+        or None: read here."""
         if self.looping:  # the read/display loop: asynchronous output
             self.say(f"{self.name}: {self.read():.3f} cm")
         if self.write_back is None:
             return
         if self._last_write is not None and now_s - self._last_write < ZEROLENGTH_WRITE_PERIOD:
             return
-        v = self.length()
+        v = self.length() if length is None else length
         if v != self._written:
             self.write_back(v)
             self._written = v

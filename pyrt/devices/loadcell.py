@@ -84,6 +84,7 @@ class Loadcell(Component):
                 raise ConfigError(f"loadcell {name}: {label} must be a number, got {v!r}")
         self.name = name
         self.channel = channel
+        self._code = channel.raw  # the ADC's register, bound once (the tick's path)
         self.slope = float(slope)
         self.offset = float(offset)
         self.maxload = float(maxload)
@@ -111,18 +112,18 @@ class Loadcell(Component):
                    record.offset, maxload=record.maxload, **kw)
 
     def adc(self) -> int:
-        return self.channel.code()
+        return self._code()
 
     def measured(self) -> float:
         """What the loadcell reads now, in newtons (through SLOPE and OFFSET)."""
-        return self.slope * self.channel.code() + self.offset
+        return self.slope * self._code() + self.offset
 
     def tension(self) -> float:
         """The rope tension in newtons: the reading, or while calibrating the
         tension held from before calibration began (see :attr:`held`)."""
         if self.held is not None:
             return self.held
-        return self.slope * self.channel.code() + self.offset
+        return self.slope * self._code() + self.offset
 
     # -- calibration ---------------------------------------------------------------
 
@@ -244,6 +245,6 @@ class Loadcell(Component):
         if hi is not None and n > hi:
             raise CommandError(f"{self.name} point: LOAD {n:.4g} N is out of range: "
                                f"0..{hi:.4g} N (the loadcell's MAXLOAD); nothing recorded")
-        code = self.channel.code()
+        code = self._code()
         self.points.append((code, n))
         return code, n

@@ -43,6 +43,7 @@ from pyrt.boards.tio10 import (
 from pyrt.component import Arg, Component, Limits, Param, Signal, command
 from pyrt.devices._args import parse_number
 from pyrt.errors import CommandError, ConfigError
+from pyrt.scope import Source
 
 if TYPE_CHECKING:
     from pyrt.db import MotorRecord
@@ -122,6 +123,10 @@ class Motor(Component):
         self.dv_limit = float(dv_limit)
         self.ramp_decrement = ramp_decrement
         self._source_hz = source_hz(MOTOR_SOURCE)
+        #: The channel's armed register (1 while it steps), read through a reader
+        #: bound once, when the motor is made: a call of no argument, no checks.
+        self.armed = tio10.armed_reader(channel)
+        self._pulses = tio10.pulses_reader(channel)
         self._dir = DIR_BITS[channel]
         self._awo = AWO_BITS[channel]
         if self.period_for(MIN_START_SPEED) > MAX_PERIOD:
@@ -147,7 +152,7 @@ class Motor(Component):
         tio10.set_bit(*self._awo, True)
         tio10.disarm(channel)
         tio10.select_source(channel, MOTOR_SOURCE)
-        self._last_pulses = tio10.pulses(channel)
+        self._last_pulses = self._pulses()
 
     @classmethod
     def from_record(cls, record: MotorRecord, tio10: TIO10, name: str | None = None) -> Motor:
@@ -181,11 +186,13 @@ class Motor(Component):
     @property
     def period(self) -> int:
         """The period last loaded (0 when stopped)."""
-        return self._period if self.running else 0
+        return self._period if self.armed() else 0
 
-    @property
-    def running(self) -> bool:
-        return self.tio10.armed(self.channel)
+    def _running(self) -> bool:
+        return self.armed() != 0
+
+    #: Whether the channel is stepping (:attr:`armed`).
+    running = property(_running)
 
     @property
     def state_name(self) -> str:
@@ -193,22 +200,24 @@ class Motor(Component):
 
     def speed(self) -> float:
         """Present signed speed in cm/s (0 when not stepping)."""
-        if not self.running or self._period <= 0:
+        period = self._period
+        if not self.armed() or period <= 0:
             return 0.0
-        return self.direction * self.speed_for(self._period)
+        return self.direction * (self._source_hz / (period * self.steps_per_cm))  # speed_for
 
     # -- hardware ------------------------------------------------------------------
 
     def _drive(self, direction: int, period: int) -> None:
         tio = self.tio10
         period = max(MIN_PERIOD, min(MAX_PERIOD, int(period)))
-        if period != self._period or not tio.armed(self.channel):
+        armed = self.armed()  # neither the period nor a port bit changes it
+        if period != self._period or not armed:
             tio.load_period(self.channel, period)
             self._period = period
-        if direction != self.direction or not tio.armed(self.channel):
+        if direction != self.direction or not armed:
             tio.set_bit(*self._dir, direction > 0)
             self.direction = direction
-        if not tio.armed(self.channel):
+        if not armed:
             tio.set_bit(*self._awo, False)
             tio.arm(self.channel)
 
@@ -220,7 +229,7 @@ class Motor(Component):
         self.velocity = 0.0
 
     def _count(self) -> int:
-        p = self.tio10.pulses(self.channel)
+        p = self._pulses()
         delta = (p - self._last_pulses) % PULSE_COUNTER_MODULUS
         self._last_pulses = p
         return delta
@@ -302,7 +311,9 @@ class Motor(Component):
                         "velocity the controller asks for", limits=lim),
             Signal("speed", "cm/s", self.speed, "present signed speed (0 when not stepping)",
                    limits=lim),
-            Signal("running", "bool", lambda: self.running, "the channel is stepping", "d"),
+            # sampled as the armed register itself (1 or 0: the bool's number)
+            Signal("running", "bool", self._running, "the channel is stepping", "d",
+                   source=Source.call(self.armed)),
         ]
 
     def params(self) -> list[Param]:
@@ -349,7 +360,9 @@ class Motor(Component):
 
     def poll(self) -> None:
         """Count the steps taken and set the next period (every motor poll)."""
-        delta = self._count()
+        p = self._pulses()  # (_count, in line: the tick's path)
+        delta = (p - self._last_pulses) % PULSE_COUNTER_MODULUS
+        self._last_pulses = p
         if self.mode == STEP_MODE:
             if self.state != ON:
                 return
@@ -375,7 +388,7 @@ class Motor(Component):
         if v != 0.0 and (v_new == 0.0 or (v_new > 0) != (v > 0)):
             v_new = 0.0  # reverse only through standby
         if abs(v_new) < MIN_START_SPEED:
-            if self.running:
+            if self.armed():
                 self._halt()
             self.state = STANDBY
             self.velocity = 0.0

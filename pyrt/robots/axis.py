@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from functools import partial
 from typing import TYPE_CHECKING, Any, Protocol
 
 from pyrt.boards.dataconcentrator import ADC_MAX, DataConcentrator
@@ -43,6 +44,7 @@ from pyrt.errors import CommandError, ConfigError, PyrtError
 from pyrt.robots.av import AV
 from pyrt.robots.fuzzy_gains import fuzzy_gain_params
 from pyrt.robots.ropes import corrected_length
+from pyrt.scope import Source
 from pyrt.tasks.axis_poll import POLYAXIS, STANDALONE
 
 if TYPE_CHECKING:
@@ -130,6 +132,19 @@ def _zero() -> float:
 
 def _true() -> bool:
     return True
+
+
+def _polled(axis: Axis, name: str, units: str, values: str, fresh: Callable[[], float],
+            doc: str, limits: Limits | None = None) -> Signal:
+    """An axis's signal of the value the controller acts on: the PolyAxis's last
+    poll when the axis is one of its ropes (an item of its list, which the poll
+    fills in place: the scope samples the item), else a fresh read of the device."""
+    group, i = axis.group, axis.group_index
+    if group is None or i is None:
+        return Signal(name, units, fresh, doc, limits=limits)
+    array = getattr(group, values)
+    return Signal(name, units, partial(array.__getitem__, i), doc,
+                  source=Source.item(array, i), limits=limits)
 
 
 def _moving(length: float) -> str:
@@ -267,28 +282,19 @@ class Axis(Component):
     def children(self) -> list[Component]:
         return [self.motor, self.encoder, self.loadcell]
 
-    def _polled(self, values: str, fresh: Callable[[], float]) -> Callable[[], float]:
-        """The value the controller acts on: the PolyAxis's last poll when the
-        axis is one of its ropes, else a fresh read of the device."""
-        group, i = self.group, self.group_index
-        if group is None or i is None:
-            return fresh
-        array = getattr(group, values)
-        return lambda: array[i]
-
     def signals(self) -> list[Signal]:
         r = self.length_range
         return [
-            Signal("tension", "N", self._polled("tensions", self.tension),
-                   "rope tension the controller acts on (loadcell)",
-                   limits=tension_alarms(self.tension_limits)),
-            Signal("length", "cm", self._polled("lengths", self.length),
-                   "rope length the controller acts on, stretch corrected",
-                   limits=None if r is None else Limits(r[0], r[1])),
-            Signal("errorLength", "cm", self._polled("error_lengths", _zero),
-                   "fuzzy input: length error (PolyAxis control; 0 standalone)"),
-            Signal("errorTension", "N", self._polled("error_tensions", _zero),
-                   "fuzzy input: tension error (PolyAxis control; 0 standalone)"),
+            _polled(self, "tension", "N", "tensions", self.tension,
+                    "rope tension the controller acts on (loadcell)",
+                    limits=tension_alarms(self.tension_limits)),
+            _polled(self, "length", "cm", "lengths", self.length,
+                    "rope length the controller acts on, stretch corrected",
+                    limits=None if r is None else Limits(r[0], r[1])),
+            _polled(self, "errorLength", "cm", "error_lengths", _zero,
+                    "fuzzy input: length error (PolyAxis control; 0 standalone)"),
+            _polled(self, "errorTension", "N", "error_tensions", _zero,
+                    "fuzzy input: tension error (PolyAxis control; 0 standalone)"),
             Signal.attr("velocity", "cm/s", self.motor, "velocity", "motor velocity",
                         limits=self.motor.speed_limits),
         ]
@@ -507,20 +513,25 @@ class Axis(Component):
 
     def poll(self, now_s: float) -> None:
         """One poll: standalone control, then the Motor, then the Encoder."""
-        length = self.length()
+        encoder = self.encoder
+        measured = encoder.length()  # (length(), in line: the encoder's is kept)
         m = self.motor
-        if self.mode == STANDALONE and self.target is not None and m.running:
-            err = self.target - length
+        if self.mode == STANDALONE and self.target is not None and m.armed():
+            err = self.target - corrected_length(measured, self.loadcell.tension(),
+                                                 self.stretch, self.dead_length)
             if abs(err) > END_ZONE:
                 if (err > 0) == (m.direction > 0):
                     m.set_desired_steps(m.steps_taken + round(abs(err) * m.steps_per_cm))
                 else:
                     m.set_desired_steps(m.steps_taken)
         m.poll()
-        self._track()
-        if self.mode == STANDALONE and self.target is not None and not m.running:
+        # the tracking check, once the motor has moved TRACKING_CHECK (_track_check's test)
+        if abs((m.position_steps - self._track_steps) / m.steps_per_cm) >= TRACKING_CHECK:
+            self._track()
+        if self.mode == STANDALONE and self.target is not None and not m.armed():
             self.target = None
-        self.encoder.poll(now_s)
+        # the encoder's counter as read above: nothing in this poll moves it
+        encoder.poll(now_s, measured)
 
     # -- supervision (every move of every kind; pyrt.tasks.axis_poll) ----------------
 
@@ -542,11 +553,11 @@ class Axis(Component):
           is moving it back inside (a PolyAxis move has its own tension stops).
         """
         m = self.motor
-        running = m.running
+        running = m.armed() != 0  # (m.running, through its reader)
         group, i = self.group, self.group_index
         poly = self.mode == POLYAXIS and group is not None and i is not None
         lc = self.loadcell
-        code = lc.channel.code()
+        code = lc.channel.raw()
         if not poly and (code <= 0 or code >= ADC_MAX):  # (a PolyAxis move: its tension stops)
             return (f"LOADCELL_FAULT: {lc.name} reads ADC code {code}, the end of its "
                     "range (dead, disconnected or saturated)")

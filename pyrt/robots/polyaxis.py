@@ -118,6 +118,7 @@ from pyrt.robots.polystatus import PolyAxisStatus
 from pyrt.robots.ropes import GRAVITY, MIN_TOP_SEGMENT, RopeModel, Vec, dist
 from pyrt.robots.stops import StopReason, StopRecord
 from pyrt.scheduler import Job, Task
+from pyrt.scope import Source
 from pyrt.tasks import axis_poll, polyaxis_poll
 
 if TYPE_CHECKING:
@@ -143,6 +144,11 @@ _PATTERN_WRITERS = ("thread", "sync")
 
 def _cm(axis: str) -> Callable[[str], float]:
     return finite(f"{axis} in cm", units="cm")
+
+
+def _item(obj: Any, name: str, k: int) -> Any:
+    """``obj.name[k]``, read now."""
+    return getattr(obj, name)[k]
 
 
 def _point(p: Sequence[float] | None) -> Vec:
@@ -411,22 +417,22 @@ class PolyAxis(Component):
     def signals(self) -> list[Signal]:
         pos = self.position
         lim = self.net_forcelimit
+        # sampled where the parts keep them (the estimate, the move), not through
+        # the PolyAxis's descriptors: the same values, no call a sample
+        est = self.estimator
         return [
-            Signal("x", "cm", lambda: self.position[0], "source position x (estimate)",
-                   limits=self.position_limits(0)),
-            Signal("y", "cm", lambda: self.position[1], "source position y (estimate)",
-                   limits=self.position_limits(1)),
-            Signal("z", "cm", lambda: self.position[2], "source position z (estimate)",
-                   limits=self.position_limits(2)),
+            *(Signal(c, "cm", partial(_item, est, "position", k),
+                     f"source position {c} (estimate)", source=Source.attr_item(est, "position", k),
+                     limits=self.position_limits(k)) for k, c in enumerate("xyz")),
             # An estimate less consistent than END_ERROR cannot claim ENDPOINT: MINOR.
-            Signal.attr("distErr", "cm", self, "dist_err",
+            Signal.attr("distErr", "cm", est, "dist_err",
                         "rope-length residual of the position estimate",
                         limits=Limits(0.0, 4.0 * self.end_error, high=self.end_error)),
             # NET_FORCELIMIT is the net-force stop (MAJOR); MINOR at 80 %.
-            Signal.attr("netForce", "N", self, "net_force_magnitude",
+            Signal.attr("netForce", "N", est, "net_force_magnitude",
                         "residual net force on the source",
                         limits=Limits(0.0, 2.0 * lim, high=0.8 * lim, hihi=lim)),
-            Signal.attr("active", "bool", self, "active", "a move is running", "d"),
+            Signal.attr("active", "bool", self.mover, "active", "a move is running", "d"),
         ] if pos is not None else []
 
     def params(self) -> list[Param]:

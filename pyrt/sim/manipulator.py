@@ -35,10 +35,16 @@ import numpy as np
 
 from pyrt.boards.dataconcentrator import ADC_MAX, COUNTER_BITS
 from pyrt.boards.registers import RegisterBoard
-from pyrt.boards.tio10 import AWO_BITS, CLOCK_HZ, DIR_BITS, PULSE_COUNTER_MODULUS, TIO10
+from pyrt.boards.tio10 import (
+    AWO_BITS,
+    CLOCK_HZ,
+    DIR_BITS,
+    PULSE_COUNTER_MODULUS,
+    RTC_MODULUS,
+    TIO10,
+)
 from pyrt.errors import NativeError
 from pyrt.native import StaticsSolver
-from pyrt.sim.cards import set_adc, set_rtc
 from pyrt.sim.sensors import Imperfections, loadcell_response
 
 if TYPE_CHECKING:
@@ -62,6 +68,8 @@ _COUNTER_MASK = (1 << COUNTER_BITS) - 1
 D2O_DENSITY = 1.10
 
 Vec = tuple[float, float, float]
+#: A loadcell in these states converts no load (dead: 0; stuck: its last code).
+_NOT_CONVERTING = frozenset(("dead", "stuck"))
 
 
 @dataclass(frozen=True)
@@ -240,7 +248,8 @@ class ManipulatorPlant:
         # the registers the step reads and sets, bound once
         self._src, self._per, self._armed = (tio10.cells(n) for n in ("src", "per", "armed"))
         self._port, self._pulses = tio10.cells("port"), tio10.cells("pulses")
-        self._cnt = dc.cells("cnt")
+        self._rtc = tio10.cells("rtc")
+        self._cnt, self._adc = dc.cells("cnt"), dc.cells("adc")
         self.imp = imperfections if imperfections is not None else Imperfections()
         self._rng = random.Random(self.imp.seed)
         self._np_rng = np.random.default_rng(self.imp.seed)
@@ -270,6 +279,10 @@ class ManipulatorPlant:
                        awo_bit=AWO_BITS[r.channel])
             for r, p in zip(rig.ropes, payouts, strict=True)
         ]
+        #: Each rope's loadcell as the step converts it: (state, MAXLOAD, OFFSET,
+        #: SLOPE, ADC channel), the rig's constants gathered once.
+        self._loadcells = [(st, st.rig.loadcell_maxload, st.rig.loadcell_offset,
+                            st.rig.loadcell_slope, st.rig.adc_channel) for st in self.ropes]
         for st in self.ropes:
             if self.imp.loadcell_zero_error:
                 st.zero_error = self._rng.gauss(0.0, self.imp.loadcell_zero_error)
@@ -280,6 +293,8 @@ class ManipulatorPlant:
         #: Set when a motor drew the carriage into a pulley (it stalled there).
         self.jammed = False
         self._dirty = False
+        #: No channel was armed at the last step (every rope's phase is 0).
+        self._still = False
         self._last_ns: int | None = None
         self.solves = 0
         self._write_sensors()
@@ -333,7 +348,7 @@ class ManipulatorPlant:
         """Advance the world to ``now_ns`` (the loop's time)."""
         last = self._last_ns
         self._last_ns = now_ns
-        set_rtc(self.tio10, now_ns)
+        self._rtc[0] = (now_ns * CLOCK_HZ // 1_000_000_000) % RTC_MODULUS  # (cards.set_rtc)
         dt_ns = 0 if last is None else now_ns - last
         if dt_ns > 0:
             self._move(dt_ns)
@@ -361,14 +376,21 @@ class ManipulatorPlant:
         self._write_sensors()
 
     def _move(self, dt_ns: int) -> None:
+        armed = self._armed
+        if self._still and not any(armed):
+            return  # no channel counts, and every rope's phase is 0 already
+        self._still = False
         dt_ticks = dt_ns * (CLOCK_HZ / 1e9)
-        src, per, armed, port = self._src, self._per, self._armed, self._port
+        src, per, port = self._src, self._per, self._port
         pulses, cnt = self._pulses, self._cnt
         quant = self.imp.encoder_quantisation
         for st in self.ropes:
             ch = st.rig.channel
+            if not armed[ch]:
+                st.phase = 0.0
+                continue
             period = per[ch] * 10 ** (src[ch] - 1)
-            if not armed[ch] or period <= 0:
+            if period <= 0:
                 st.phase = 0.0
                 continue
             st.phase += dt_ticks
@@ -392,46 +414,49 @@ class ManipulatorPlant:
                 a = st.rig.encoder_address
                 cnt[a] = (cnt[a] + whole - st.counted) & _COUNTER_MASK
                 st.counted = whole
+        # nothing counted: every rope's phase was set to 0 above; until a channel is
+        # armed again a step has nothing to move
+        self._still = not any(armed)
 
     def _write_sensors(self) -> None:
-        dc = self.dc
+        adc = self._adc
         imp = self.imp
         sigma = imp.loadcell_noise
         simple = imp.bias_resistor
         nl4 = 4.0 * imp.loadcell_nonlinearity
         tensions = self.solver.tensions()
         # standard-normal noise, drawn in seeded blocks of 4096 (cheap per load
-        # cell): the block and the place in it held here for the loop
+        # cell): the block and the place in it held here for the loop; a block
+        # with fewer left than loadcells is followed by the next one now (the
+        # same numbers in the same order as a block drawn when the last ran out)
         block, i = self._noise_block, self._noise_i
-        for st, t in zip(self.ropes, tensions, strict=True):
-            r = st.rig
+        if sigma and len(block) - i < len(tensions):
+            block = self._noise_block = (
+                block[i:] + self._np_rng.standard_normal(4096).tolist())
+            i = 0
+        for (st, m, offset, slope, channel), t in zip(self._loadcells, tensions, strict=True):
             if st.load is not None:  # the calibration load, not the source, pulls on it
                 t = st.load
-            if st.loadcell == "dead":
-                code = 0
-            elif st.loadcell == "stuck":
-                code = st.stuck_code
-            else:
+            state = st.loadcell
+            if state == "ok" or state not in _NOT_CONVERTING:
                 if simple:
-                    m = r.loadcell_maxload
                     f = t / m if m > 0 else 0.0
                     f = 0.0 if f < 0.0 else (1.0 if f > 1.0 else f)
                     load = t + nl4 * m * f * (1.0 - f)
                 else:
-                    load = loadcell_response(t, r.loadcell_maxload, imp)
+                    load = loadcell_response(t, m, imp)
                 load += st.zero_error
                 if sigma:
-                    if i >= len(block):
-                        block = self._noise_block = self._np_rng.standard_normal(4096).tolist()
-                        i = 0
                     load += sigma * block[i]
                     i += 1
-                code = round((load - r.loadcell_offset) / r.loadcell_slope)
+                code = round((load - offset) / slope)
                 code = 0 if code < 0 else (ADC_MAX if code > ADC_MAX else code)
+            else:
+                code = 0 if state == "dead" else st.stuck_code
             if code != st.stuck_code or st.first:
                 st.first = False
                 st.stuck_code = code
-                set_adc(dc, r.adc_channel, code)
+                adc[channel] = code  # an int 0..ADC_MAX (cards.set_adc)
         self._noise_i = i
 
     def invalidate(self) -> None:

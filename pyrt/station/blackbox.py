@@ -88,7 +88,7 @@ from pyrt.errors import ConfigError, Fault
 from pyrt.fileio import atomic_write
 from pyrt.journal import DEFAULT_BUDGET, BlackBox, JournalError, JournalReader
 from pyrt.journal.format import HEADER_SIZE, KIND_SNAPSHOT, frame, snapshot_payload
-from pyrt.scope import compile_sources
+from pyrt.scope import Source, compile_sources
 from pyrt.scope.sources import compile_sampler
 from pyrt.station.recording import Recorder
 from pyrt.station.snapshot import Snapshot, compress_snapshot, take_snapshot
@@ -176,6 +176,9 @@ def plotting_available() -> bool:
 
 # -- the signals' ring -------------------------------------------------------------------
 
+#: What a sample packs in a text signal's column.
+_NAN = Source.attr(math, "nan")
+
 
 class SignalRing:
     """Every one of ``signals`` (``(name, signal)``), sampled every :attr:`every`
@@ -225,12 +228,12 @@ class SignalRing:
         self._slow: list[int] = []  # read one by one, each guarded
         self._fast: list[int] = [c for c in range(n) if c not in self.text]
         self._read_fast: Callable[[], tuple] = self._compile(self._fast) if self._fast else tuple
-        #: ``pack(buf, offset, now_ns)``: every signal read and packed into a row,
-        #: while every signal is a number (None with a text signal, or once one
-        #: is not a number: the slow path).
-        self._pack: Callable[[bytearray, int, int], None] | None = None if self.text else \
-            compile_sampler([sig.scope_source() for sig in self._signals],
-                            struct.Struct("<q" + "d" * n).pack_into)
+        #: ``pack(buf, offset, now_ns)``: every signal read and packed into a row
+        #: (a text signal's column NaN, as the slow path leaves it), while every
+        #: other signal is a number (None once one is not: the slow path).
+        self._pack: Callable[[bytearray, int, int], None] | None = compile_sampler(
+            [_NAN if c in self.text else sig.scope_source()
+             for c, sig in enumerate(self._signals)], struct.Struct("<q" + "d" * n).pack_into)
 
     def _compile(self, cols: list[int]) -> Callable[[], tuple]:
         return compile_sources([self._signals[c].scope_source() for c in cols])

@@ -51,6 +51,7 @@ import argparse
 import math
 from collections.abc import Callable, Sequence
 from functools import partial
+from operator import attrgetter, call
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -80,11 +81,12 @@ from pyrt.errors import (
 )
 from pyrt.native import FuzzyParams, NativeInputError
 from pyrt.robots.av import AV
-from pyrt.robots.axis import Axis, tension_alarms
+from pyrt.robots.axis import STANDALONE, Axis, tension_alarms
 from pyrt.robots.polyaxis import PolyAxis, PolyAxisServices
 from pyrt.robots.ropes import MIN_TOP_SEGMENT, RopeModel, payout
 from pyrt.robots.stops import StopRecord
 from pyrt.scheduler import Loop, ReadyQueue, SimClock
+from pyrt.scope import Source
 from pyrt.sim.manipulator import ManipulatorPlant, rig_from_station
 from pyrt.sim.sensors import Imperfections
 from pyrt.sim.world import MANIPULATOR_BOARDS, ManipulatorWorld, World, WorldFactory
@@ -143,10 +145,18 @@ class ManipulatorSim(Component):
 
     def signals(self) -> list[Signal]:
         p = self.plant
-        out = [Signal(c, "cm", _item_of(lambda: p.position, i), f"true source position {c}")
+        # each vector the plant's solver computes whole is read once a sample, for
+        # all of its columns (Source.call_item), from the solver (what the plant's
+        # position and tensions() give)
+        solver = p.solver
+        where = partial(attrgetter("position"), solver)  # one C call into the property
+        tensions = solver.tensions
+        out = [Signal(c, "cm", _item_of(where, i), f"true source position {c}",
+                      source=Source.call_item(where, i))
                for i, c in enumerate("xyz")]
-        out += [Signal(f"tension{i}", "N", _item_of(p.tensions, i),
-                       f"true tension of {a.name}", limits=tension_alarms(a.tension_limits))
+        out += [Signal(f"tension{i}", "N", _item_of(tensions, i),
+                       f"true tension of {a.name}", source=Source.call_item(tensions, i),
+                       limits=tension_alarms(a.tension_limits))
                 for i, a in enumerate(self.axes)]
         return out
 
@@ -347,6 +357,8 @@ class ManipulatorStation(Station):
                 fuzzy.append(FuzzyParams.from_mapping(dict(rec.fuzzy), base=base))
             except NativeInputError as exc:
                 raise rec.where.error(None, f"AXIS {rec.name}: {exc}") from None
+        #: Every motor's armed register, read through its reader (the move watch's).
+        self._motors_armed = tuple(a.motor.armed for a in self.axes)
         # Everything the PolyAxis works with is given here: the motion queue the
         # mailbox fills (the station's runner takes it), the loop's spawn and
         # the pattern log's writer, the stop listeners, the task periods.
@@ -547,11 +559,18 @@ class ManipulatorStation(Station):
         return {c.name: c for c in self.components() if all(c is not x for x in self.extras)}
 
     def busy(self) -> bool:
-        """A move runs or waits, a pattern runs, or an axis moves on its own."""
+        """A move runs or waits, a pattern runs, or an axis moves on its own
+        (the move watch asks every tick: each motor's armed register is read
+        through its reader, bound once)."""
         pa = self.polyaxis
+        if pa.mover.active or super().busy():
+            return True
         job = pa.pattern_job
-        return (pa.active or super().busy() or (job is not None and not job.done)
-                or any(a.mode == "standalone" and a.motor.running for a in self.axes))
+        if job is not None and not job.done:
+            return True
+        if not any(map(call, self._motors_armed)):  # at rest: no motor armed (C calls only)
+            return False
+        return any(a.mode == STANDALONE and a.motor.armed() for a in self.axes)
 
     def motors_running(self) -> list[str]:
         """Names of the motors that are stepping or have windings on."""
@@ -630,8 +649,10 @@ class ManipulatorStation(Station):
                   ("distErr", sig["distErr"], ".3f"), ("netForce", sig["netForce"], ".2f"),
                   ("moving", Signal("moving", "bool", self.busy, "a move runs or waits", "d"),
                    "d"), self.fault_field()]
+        est = pa.estimator
         fields += [(f"tension{i}", Signal(f"tension{i}", "N", _item_of(lambda: pa.tensions, i),
                                           f"measured tension of {a.name}",
+                                          source=Source.attr_item(est, "tensions", i),
                                           limits=tension_alarms(a.tension_limits)), ".2f")
                    for i, a in enumerate(self.axes)]
         return fields
@@ -781,8 +802,10 @@ def _trusted(pa: PolyAxis, read: Callable[[], Any], held: Callable[[Any], Any]
 
 
 def _length_reader(axis: Axis) -> Callable[[], tuple[float, bool]]:
+    armed = axis.motor.armed  # the motor's armed register, bound once
+
     def read() -> tuple[float, bool]:
-        return axis.length(), axis.motor.running
+        return axis.length(), armed() != 0
     return read
 
 
