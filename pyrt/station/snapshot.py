@@ -57,15 +57,17 @@ import enum
 import gc
 import importlib
 import json
+import operator
 import sys
 import threading
 import zlib
 from collections import deque
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from types import BuiltinFunctionType, CodeType, FunctionType, MethodType, ModuleType
 from typing import TYPE_CHECKING, Any
 
+import _cffi_backend  # type: ignore[import-untyped]  # C memory a kernel owns
 import numpy as np
 
 from pyrt.errors import ConfigError
@@ -107,6 +109,17 @@ _MISSING = object()
 
 #: How each class's values are encoded, by the package that counts as pyrt's.
 _KINDS: dict[str, dict[type, str]] = {}
+#: Per package: the encodings of values that cannot change (tuples and frozen
+#: records of numbers, text, enums ...), by id, each with its value (held, so that
+#: its id is not another's), and the frozen records' layouts.
+_FROZEN: dict[str, dict[int, tuple[Any, Any]]] = {}
+_RECORDS: dict[str, dict[type, Any]] = {}
+#: The encodings of unchanging values kept, at most (all dropped when full).
+_MAX_FROZEN = 4096
+#: The kinds a plan encodes inline (:meth:`_Encoder.read_attributes`).
+_FROZEN_KIND, _LIST_KIND, _CDATA_KIND = "frozen", "list", "cdata"
+#: How each C memory met is copied (:func:`_copying`), by id.
+_CDATA: dict[int, tuple[Any, Any, Any, int]] = {}
 
 
 class _Skip(Exception):
@@ -201,6 +214,12 @@ class _Encoder:
         self.roots = _roots(package)
         self.seen: dict[int, str] = {}
         self.kinds = _KINDS.setdefault(package, {})
+        #: Encodings of values that cannot change, by id (with the value, held).
+        self.frozen = _FROZEN.setdefault(package, {})
+        #: The frozen records' layouts (their fields).
+        self.records = _RECORDS.setdefault(package, {})
+        #: Values encoded so far that may change (objects, lists, arrays, C memory ...).
+        self.changing = 0
 
     def _kind(self, cls: type) -> str:
         """How values of ``cls`` are encoded (decided once per class)."""
@@ -248,34 +267,68 @@ class _Encoder:
         if cls in _PLAIN:
             return v
         kind = self.kinds.get(cls) or self._kind(cls)
-        if kind == "list":
-            if _PLAIN.issuperset(map(type, v)):  # numbers and text: the list as it is
-                return v.copy()
-            return [self.value(x, f"{path}[{i}]") for i, x in enumerate(v)]
-        if kind == "tuple":
-            if _PLAIN.issuperset(map(type, v)):
-                return {"$t": list(v)}
-            return {"$t": [self.value(x, f"{path}[{i}]") for i, x in enumerate(v)]}
-        if kind == "plain":  # a subclass of a plain type
-            return v
         if kind == "object":
+            self.changing += 1  # (a reference too: its path is this snapshot's)
             if id(v) in self.seen:
                 return {"$r": self.seen[id(v)]}
-            attrs = _instance_attributes(v, cls)
-            if attrs is None:
-                attrs = getattr(v, "__dict__", None)
-            if attrs is None:
-                attrs = {a: getattr(v, a) for a in _slots(cls) if hasattr(v, a)}
             self.seen[id(v)] = path
-            return {"$c": _class_name(cls), "$o": self.attributes(attrs, path)}
+            read = _read(v, cls)
+            if read is None:
+                attrs = getattr(v, "__dict__", None)
+                if attrs is None:
+                    attrs = {a: getattr(v, a) for a in _slots(cls) if hasattr(v, a)}
+                return {"$c": _class_name(cls), "$o": self.attributes(attrs, path)}
+            layout, vals = read
+            return {"$c": layout.name, "$o": self.read_attributes(layout, vals, path)}
+        if kind == "list":
+            self.changing += 1
+            if _PLAIN.issuperset(map(type, v)):  # numbers and text: the list as it is
+                return v.copy()
+            return self.items(v, path)
+        if kind == "tuple" or kind == "record":
+            # a value that cannot change (a tuple, a frozen record) holding only such
+            # values: encoded once while the same one is held (a constant's, a move's)
+            held = self.frozen.get(id(v))
+            if held is not None and held[0] is v:
+                return held[1]
+            changing = self.changing
+            if kind == "tuple":
+                if _PLAIN.issuperset(map(type, v)):
+                    out: Any = {"$t": list(v)}
+                else:
+                    out = {"$t": self.items(v, path)}
+            else:
+                layout = self.records.get(cls)
+                if layout is None:
+                    layout = self.records[cls] = _Layout(cls, tuple(
+                        f.name for f in dataclasses.fields(cls)))
+                out = {"$dc": layout.name,  # every field, or none: the record is left out
+                       "f": self.read_attributes(layout, layout.get(v), path, whole=True)}
+            if self.changing == changing:
+                frozen = self.frozen
+                if len(frozen) >= _MAX_FROZEN:
+                    frozen.clear()
+                frozen[id(v)] = (v, out)
+            return out
+        if kind == "plain":  # a subclass of a plain type
+            return v
         if kind == "skip":
             raise _Skip
+        if kind == "enum":
+            return {"$e": _class_name(cls), "v": v.name}
+        if kind == "npscalar":
+            return {"$n": [v.dtype.str, v.tobytes().hex()]}
+        if kind == "bytes":
+            return {"$b": v.hex()}
+        self.changing += 1  # from here on, values that may change in place
+        if kind == "cdata":
+            return self._cdata(v)
         if kind == "ndarray":
-            if v.dtype.hasobject or (not v.flags.writeable and v.base is not None):
+            writeable = v.flags.writeable
+            if v.dtype.hasobject or (not writeable and v.base is not None):
                 raise _Skip  # a read-only view of another array: that one is state
-            out: dict[str, Any] = {
-                "$a": [v.dtype.str, list(v.shape), np.ascontiguousarray(v).tobytes().hex()]}
-            if not v.flags.writeable:
+            out = {"$a": [v.dtype.str, list(v.shape), v.tobytes().hex()]}
+            if not writeable:
                 out["ro"] = True  # a read-only value (a transform's) stays read-only
             first = self.seen.get(id(v))
             if first is not None:  # one array held twice: "is" the path it was given at
@@ -286,18 +339,8 @@ class _Encoder:
         if kind == "dict":
             return {"$d": [[self.value(k, f"{path}<{i}"), self.value(x, f"{path}{{{i}}}")]
                            for i, (k, x) in enumerate(v.items())]}
-        if kind == "record":
-            return {"$dc": _class_name(cls),
-                    "f": {f.name: self.value(getattr(v, f.name), f"{path}.{f.name}")
-                          for f in dataclasses.fields(v)}}
-        if kind == "enum":
-            return {"$e": _class_name(cls), "v": v.name}
-        if kind == "npscalar":
-            return {"$n": [v.dtype.str, v.tobytes().hex()]}
         if kind == "bytearray":
             return {"$ba": v.hex()}
-        if kind == "bytes":
-            return {"$b": v.hex()}
         if kind == "deque":
             return {"$q": [self.value(x, f"{path}[{i}]") for i, x in enumerate(v)]}
         if kind == "set":
@@ -306,7 +349,87 @@ class _Encoder:
             return {"$ev": v.is_set()}
         if kind == "lock":
             return {"$lk": 0}
-        return self._cdata(v)
+        raise _Skip  # not a kind of pyrt's state
+
+    def read_attributes(self, layout: _Layout, vals: tuple, path: str,
+                        whole: bool = False) -> dict[str, Any]:
+        """The attributes an object's ``layout`` read as ``vals``: those of plain
+        values as they are (one C call), the others encoded, the structure left out
+        (``whole``: none may be, else _Skip); what to do at each place is decided
+        once per classes of the values."""
+        kinds = tuple(map(type, vals))
+        plan = layout.plans.get(kinds)
+        if plan is None:
+            plan = layout.plans[kinds] = self._plan(layout.names, kinds)
+        out = dict(zip(layout.names, vals, strict=True))
+        drop, encode = plan
+        if drop:
+            if whole:
+                raise _Skip
+            for name in drop:
+                del out[name]
+        frozen = self.frozen
+        for i, name, kind in encode:
+            # inline, the common values: one that cannot change and was encoded
+            # before, a list of numbers, C memory
+            x = vals[i]
+            try:
+                if kind is _FROZEN_KIND:
+                    held = frozen.get(id(x))
+                    if held is not None and held[0] is x:
+                        out[name] = held[1]
+                        continue
+                elif kind is _LIST_KIND:
+                    if _PLAIN.issuperset(map(type, x)):
+                        self.changing += 1
+                        out[name] = x.copy()
+                        continue
+                elif kind is _CDATA_KIND:
+                    self.changing += 1
+                    out[name] = self._cdata(x)
+                    continue
+                out[name] = self.value(x, f"{path}.{name}")
+            except _Skip:
+                if whole:
+                    raise
+                del out[name]
+        return out
+
+    def items(self, v: list | tuple, path: str) -> list[Any]:
+        """The items of a list or a tuple, encoded (those that cannot change and were
+        encoded before, inline)."""
+        out = []
+        frozen = self.frozen
+        for i, x in enumerate(v):
+            if type(x) in _PLAIN:
+                out.append(x)
+                continue
+            held = frozen.get(id(x))
+            if held is not None and held[0] is x:
+                out.append(held[1])
+            else:
+                out.append(self.value(x, f"{path}[{i}]"))
+        return out
+
+    def _plan(self, names: tuple[str, ...], kinds: tuple[type, ...]
+              ) -> tuple[tuple[str, ...], tuple[tuple[int, str, str], ...]]:
+        """For values of ``kinds`` at ``names``: the names left out (structure: a
+        method, a board) and the places encoded (neither plain nor structure), each
+        with its kind (:data:`_FROZEN_KIND`, :data:`_LIST_KIND`, :data:`_CDATA_KIND`
+        or another)."""
+        drop: list[str] = []
+        encode: list[tuple[int, str, str]] = []
+        for i, (name, cls) in enumerate(zip(names, kinds, strict=True)):
+            if cls in _PLAIN:
+                continue
+            kind = self.kinds.get(cls) or self._kind(cls)
+            if kind == "skip":
+                drop.append(name)
+            elif kind != "plain":
+                encode.append((i, name, _FROZEN_KIND if kind in ("tuple", "record")
+                               else _LIST_KIND if kind == "list"
+                               else _CDATA_KIND if kind == "cdata" else kind))
+        return tuple(drop), tuple(encode)
 
     def attributes(self, attrs: Mapping[str, Any], path: str) -> dict[str, Any]:
         out = {}
@@ -330,21 +453,33 @@ class _Encoder:
         # memory a kernel's object owns: its numbers (arrays, the scalar fields of
         # its structs); pointers are structure, bound once when it was built.  The
         # memory is copied now (the state at this tick), its numbers read out of
-        # the copy when the snapshot is encoded (:class:`_CCopy`)
-        if "owning" not in repr(v):
+        # the copy when the snapshot is encoded (:class:`_CCopy`).  How to copy
+        # it is found once per object (held with it, so that its id is not another's)
+        how = _CDATA.get(id(v))
+        if how is None or how[0] is not v:
+            how = _copying(v)
+            if len(_CDATA) >= _MAX_FROZEN:
+                _CDATA.clear()
+            _CDATA[id(v)] = how
+        _v, ctype, length, nbytes = how
+        if ctype is None:
             raise _Skip
-        import _cffi_backend as cffi  # type: ignore[import-untyped]
-
-        ctype = cffi.typeof(v)
-        if ctype.kind == "pointer":
-            copy = cffi.newp(ctype, None)
-            cffi.memmove(copy, v, cffi.sizeof(ctype.item))
-        elif ctype.kind == "array":
-            copy = cffi.newp(ctype, len(v) if ctype.length is None else None)
-            cffi.memmove(copy, v, cffi.sizeof(v))
-        else:
-            raise _Skip
+        copy = _newp(ctype, length)
+        _memmove(copy, v, nbytes)
         return _CCopy(copy, ctype)
+
+
+def _copying(v: Any) -> tuple[Any, Any, Any, int]:
+    """How C memory ``v`` is copied: ``(v, its type, newp's length, bytes)``; its
+    type None when it is not memory of its own (a view, a pointer into another's)."""
+    if "owning" not in repr(v):
+        return v, None, None, 0
+    ctype = _cffi_typeof(v)
+    if ctype.kind == "pointer":
+        return v, ctype, None, _sizeof(ctype.item)
+    if ctype.kind == "array":
+        return v, ctype, len(v) if ctype.length is None else None, _sizeof(v)
+    return v, None, None, 0
 
 
 class _CCopy:
@@ -520,6 +655,96 @@ def _claim(v: Any, cls: type, names: Sequence[str], left: dict[int, list[int]],
             got.append((where.pop(0), name, x))
 
 
+class _Layout:
+    """How one class's objects with the same attributes (names, in their order) are
+    read: one ``attrgetter`` call gives every value, checked against the object's
+    own (``gc.get_referents``) by identity; and, per the classes of those values,
+    what a snapshot does with each (:meth:`_Encoder.read_attributes`)."""
+
+    __slots__ = ("get", "n", "name", "names", "plans")
+
+    def __init__(self, cls: type, names: tuple[str, ...]):
+        self.names = names
+        self.n = len(names)
+        self.name = _class_name(cls)
+        if not names:
+            self.get: Callable[[Any], tuple] = lambda v: ()
+        elif len(names) == 1:
+            one = operator.attrgetter(names[0])
+            self.get = lambda v: (one(v),)
+        else:
+            self.get = operator.attrgetter(*names)
+        #: Per classes of the values: the names left out and the places encoded.
+        self.plans: dict[tuple[type, ...], tuple[tuple[str, ...],
+                                                 tuple[tuple[int, str], ...]]] = {}
+
+
+#: Per class: the layouts its objects were read by, the one that fitted last first.
+_LAYOUTS: dict[type, list[_Layout]] = {}
+#: The layouts a class keeps, at most (its objects' attributes set in other orders).
+_MAX_LAYOUTS = 8
+
+
+def _read(v: Any, cls: type) -> tuple[_Layout, tuple] | None:
+    """``v``'s attributes as one of its class's layouts reads them (the names and
+    values of ``v.__dict__``, without asking for it: :func:`_instance_attributes`),
+    or None: read them through ``__dict__`` (or its slots)."""
+    if not cls.__dictoffset__:
+        return None
+    layouts = _LAYOUTS.get(cls)
+    if layouts is not None:
+        refs = gc.get_referents(v)
+        if refs and refs[-1] is cls:
+            del refs[-1]
+        else:
+            refs = [r for r in refs if r is not cls]
+        n = len(refs)
+        for k, layout in enumerate(layouts):
+            if layout.n != n:
+                continue
+            try:
+                vals = layout.get(v)
+            except AttributeError:
+                continue
+            if not all(map(operator.is_, vals, refs)):
+                # the same names in another order?  Two attributes that held one
+                # value (two zeros) when the order was learned can only be told
+                # apart by an object where they differ: this one, if it fits
+                names = _reordered(layout.names, vals, refs)
+                if names is None:
+                    continue
+                layout = layouts[k] = _Layout(cls, names)
+                vals = tuple(refs)
+            if k:
+                layouts.insert(0, layouts.pop(k))
+            return layout, vals
+    attrs = _instance_attributes(v, cls)
+    if attrs is None:
+        return None
+    layout = _Layout(cls, tuple(attrs))
+    layouts = _LAYOUTS.setdefault(cls, [])
+    layouts.insert(0, layout)
+    del layouts[_MAX_LAYOUTS:]
+    return layout, tuple(attrs.values())
+
+
+def _reordered(names: tuple[str, ...], vals: tuple, refs: list[Any]) -> tuple[str, ...] | None:
+    """``names`` (whose values are ``vals``) in the order of the object's own values
+    ``refs``, a name that held the same value as another keeping its place before
+    that one where this object cannot tell them apart; None if they are not the
+    same values."""
+    by_value: dict[int, list[str]] = {}
+    for name, x in zip(names, vals, strict=True):
+        by_value.setdefault(id(x), []).append(name)
+    out = []
+    for r in refs:
+        same = by_value.get(id(r))
+        if not same:
+            return None
+        out.append(same.pop(0))
+    return tuple(out)
+
+
 _ALL_NAMES: list[str] = []
 #: The classes of objects whose attributes were found in a dict (asked for before).
 _DICT_BACKED: set[type] = set()
@@ -556,10 +781,10 @@ def _slots(cls: type) -> tuple[str, ...]:
     return tuple(names)
 
 
-def _cffi_typeof(v: Any) -> Any:
-    import _cffi_backend  # type: ignore[import-untyped]  # the C type of a kernel's memory
-
-    return _cffi_backend.typeof(v)
+_cffi_typeof = _cffi_backend.typeof
+_newp = _cffi_backend.newp
+_memmove = _cffi_backend.memmove
+_sizeof = _cffi_backend.sizeof
 
 
 def _cd_get(v: Any, ctype: Any) -> Any:
