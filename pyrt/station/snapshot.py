@@ -54,6 +54,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import functools
 import gc
 import importlib
 import json
@@ -76,8 +77,8 @@ if TYPE_CHECKING:
     from pyrt.station.base import Station
 
 __all__ = ["SNAPSHOT_FORMAT", "Snapshot", "SnapshotError", "compress_snapshot",
-           "decompress_snapshot", "restore_into", "restore_snapshot", "state_of",
-           "take_snapshot"]
+           "decompress_snapshot", "plain_state", "restore_into", "restore_snapshot",
+           "state_of", "take_snapshot"]
 
 #: The snapshot format this pyrt writes and reads.
 SNAPSHOT_FORMAT = "pyrt-snapshot/1"
@@ -117,7 +118,7 @@ _RECORDS: dict[str, dict[type, Any]] = {}
 #: The encodings of unchanging values kept, at most (all dropped when full).
 _MAX_FROZEN = 4096
 #: The kinds a plan encodes inline (:meth:`_Encoder.read_attributes`).
-_FROZEN_KIND, _LIST_KIND, _CDATA_KIND = "frozen", "list", "cdata"
+_FROZEN_KIND, _LIST_KIND, _CDATA_KIND, _OBJECT_KIND = "frozen", "list", "cdata", "object"
 #: How each C memory met is copied (:func:`_copying`), by id.
 _CDATA: dict[int, tuple[Any, Any, Any, int]] = {}
 
@@ -276,10 +277,12 @@ class _Encoder:
             if read is None:
                 attrs = getattr(v, "__dict__", None)
                 if attrs is None:
-                    attrs = {a: getattr(v, a) for a in _slots(cls) if hasattr(v, a)}
+                    attrs = _slot_attributes(v, cls)
                 return {"$c": _class_name(cls), "$o": self.attributes(attrs, path)}
             layout, vals = read
-            return {"$c": layout.name, "$o": self.read_attributes(layout, vals, path)}
+            # its attributes as a dict when the snapshot is written (:func:`_later`)
+            return _later(_object, layout.name, layout.names,
+                          self.read_attributes(layout, vals, path))
         if kind == "list":
             self.changing += 1
             if _PLAIN.issuperset(map(type, v)):  # numbers and text: the list as it is
@@ -302,8 +305,8 @@ class _Encoder:
                 if layout is None:
                     layout = self.records[cls] = _Layout(cls, tuple(
                         f.name for f in dataclasses.fields(cls)))
-                out = {"$dc": layout.name,  # every field, or none: the record is left out
-                       "f": self.read_attributes(layout, layout.get(v), path, whole=True)}
+                out = _later(_record, layout.name, layout.names,  # every field, or none
+                             self.read_attributes(layout, layout.get(v), path, whole=True))
             if self.changing == changing:
                 frozen = self.frozen
                 if len(frozen) >= _MAX_FROZEN:
@@ -337,14 +340,13 @@ class _Encoder:
                 self.seen[id(v)] = path
             return out
         if kind == "dict":
-            return {"$d": [[self.value(k, f"{path}<{i}"), self.value(x, f"{path}{{{i}}}")]
-                           for i, (k, x) in enumerate(v.items())]}
+            return {"$d": self.pairs(v, path)}
         if kind == "bytearray":
             return {"$ba": v.hex()}
         if kind == "deque":
-            return {"$q": [self.value(x, f"{path}[{i}]") for i, x in enumerate(v)]}
+            return {"$q": self.items(v, path)}
         if kind == "set":
-            return {"$s": [self.value(x, path) for x in sorted(v, key=repr)]}
+            return {"$s": self.members(v, path)}
         if kind == "event":
             return {"$ev": v.is_set()}
         if kind == "lock":
@@ -352,22 +354,22 @@ class _Encoder:
         raise _Skip  # not a kind of pyrt's state
 
     def read_attributes(self, layout: _Layout, vals: tuple, path: str,
-                        whole: bool = False) -> dict[str, Any]:
-        """The attributes an object's ``layout`` read as ``vals``: those of plain
-        values as they are (one C call), the others encoded, the structure left out
-        (``whole``: none may be, else _Skip); what to do at each place is decided
-        once per classes of the values."""
+                        whole: bool = False) -> list[Any]:
+        """The values of an object's attributes, read by its ``layout`` as ``vals``:
+        plain ones as they are (the list copied by one C call), the others encoded,
+        the structure's :data:`_GONE` (``whole``: none may be, else _Skip); what to
+        do at each place is decided once per classes of the values."""
         kinds = tuple(map(type, vals))
         plan = layout.plans.get(kinds)
         if plan is None:
             plan = layout.plans[kinds] = self._plan(layout.names, kinds)
-        out = dict(zip(layout.names, vals, strict=True))
+        out = list(vals)
         drop, encode = plan
         if drop:
             if whole:
                 raise _Skip
-            for name in drop:
-                del out[name]
+            for i in drop:
+                out[i] = _GONE
         frozen = self.frozen
         for i, name, kind in encode:
             # inline, the common values: one that cannot change and was encoded
@@ -377,22 +379,28 @@ class _Encoder:
                 if kind is _FROZEN_KIND:
                     held = frozen.get(id(x))
                     if held is not None and held[0] is x:
-                        out[name] = held[1]
+                        out[i] = held[1]
                         continue
                 elif kind is _LIST_KIND:
                     if _PLAIN.issuperset(map(type, x)):
                         self.changing += 1
-                        out[name] = x.copy()
+                        out[i] = x.copy()
                         continue
                 elif kind is _CDATA_KIND:
                     self.changing += 1
-                    out[name] = self._cdata(x)
+                    out[i] = self._cdata(x)
                     continue
-                out[name] = self.value(x, f"{path}.{name}")
+                elif kind is _OBJECT_KIND:
+                    first = self.seen.get(id(x))
+                    if first is not None:  # given before: a reference to it
+                        self.changing += 1
+                        out[i] = {"$r": first}
+                        continue
+                out[i] = self.value(x, f"{path}.{name}")
             except _Skip:
                 if whole:
                     raise
-                del out[name]
+                out[i] = _GONE
         return out
 
     def items(self, v: list | tuple, path: str) -> list[Any]:
@@ -411,24 +419,34 @@ class _Encoder:
                 out.append(self.value(x, f"{path}[{i}]"))
         return out
 
+    def pairs(self, v: dict, path: str) -> list[list[Any]]:
+        """A dict's items, keys and values encoded."""
+        return [[self.value(k, f"{path}<{i}"), self.value(x, f"{path}{{{i}}}")]
+                for i, (k, x) in enumerate(v.items())]
+
+    def members(self, v: set | frozenset, path: str) -> list[Any]:
+        """A set's members, encoded in the order of their reprs."""
+        return [self.value(x, path) for x in sorted(v, key=repr)]
+
     def _plan(self, names: tuple[str, ...], kinds: tuple[type, ...]
-              ) -> tuple[tuple[str, ...], tuple[tuple[int, str, str], ...]]:
-        """For values of ``kinds`` at ``names``: the names left out (structure: a
+              ) -> tuple[tuple[int, ...], tuple[tuple[int, str, str], ...]]:
+        """For values of ``kinds`` at ``names``: the places left out (structure: a
         method, a board) and the places encoded (neither plain nor structure), each
-        with its kind (:data:`_FROZEN_KIND`, :data:`_LIST_KIND`, :data:`_CDATA_KIND`
-        or another)."""
-        drop: list[str] = []
+        with its kind (:data:`_FROZEN_KIND`, :data:`_LIST_KIND`, :data:`_CDATA_KIND`,
+        :data:`_OBJECT_KIND` or another)."""
+        drop: list[int] = []
         encode: list[tuple[int, str, str]] = []
         for i, (name, cls) in enumerate(zip(names, kinds, strict=True)):
             if cls in _PLAIN:
                 continue
             kind = self.kinds.get(cls) or self._kind(cls)
             if kind == "skip":
-                drop.append(name)
+                drop.append(i)
             elif kind != "plain":
                 encode.append((i, name, _FROZEN_KIND if kind in ("tuple", "record")
                                else _LIST_KIND if kind == "list"
-                               else _CDATA_KIND if kind == "cdata" else kind))
+                               else _CDATA_KIND if kind == "cdata"
+                               else _OBJECT_KIND if kind == "object" else kind))
         return tuple(drop), tuple(encode)
 
     def attributes(self, attrs: Mapping[str, Any], path: str) -> dict[str, Any]:
@@ -500,8 +518,36 @@ class _CCopy:
         return {"$cd": _cd_get(self.copy, self.ctype)}
 
 
+#: A value left out of an object's attributes (:meth:`_Encoder.read_attributes`).
+_GONE: Any = object()
+#: ``_later(fn, *args)``: a part of a snapshot encoded when it is written, by
+#: ``fn(*args)`` (one C call to make in the loop thread).
+_later = functools.partial
+
+
+def _object(name: str, names: tuple[str, ...], vals: list[Any]) -> dict[str, Any]:
+    """An object's encoding, from its class's name and its attributes' names and values."""
+    return {"$c": name, "$o": {n: x for n, x in zip(names, vals, strict=True) if x is not _GONE}}
+
+
+def _record(name: str, names: tuple[str, ...], vals: list[Any]) -> dict[str, Any]:
+    """A frozen record's encoding, from its class's name and its fields."""
+    return {"$dc": name, "f": dict(zip(names, vals, strict=True))}
+
+
+def _without(refs: list[Any], cls: type) -> list[Any]:
+    return [r for r in refs if r is not cls]
+
+
+def _slot_attributes(v: Any, cls: type) -> dict[str, Any]:
+    return {a: getattr(v, a) for a in _slots(cls) if hasattr(v, a)}
+
+
 def _plain(v: Any) -> Any:
-    """``json``'s ``default``: a :class:`_CCopy` as its numbers."""
+    """``json``'s ``default``: a :class:`_CCopy` as its numbers, a part encoded when
+    written (:data:`_later`) as its encoding."""
+    if type(v) is _later:
+        return v()
     if isinstance(v, _CCopy):
         return v.plain()
     raise TypeError(f"a snapshot holds a {type(v).__name__}, which has no JSON form")
@@ -697,16 +743,22 @@ def _read(v: Any, cls: type) -> tuple[_Layout, tuple] | None:
         if refs and refs[-1] is cls:
             del refs[-1]
         else:
-            refs = [r for r in refs if r is not cls]
+            refs = _without(refs, cls)
         n = len(refs)
         for k, layout in enumerate(layouts):
             if layout.n != n:
                 continue
             try:
                 vals = layout.get(v)
+                # one C call: each value is the object's own, in its place (an
+                # identical one compares equal at once; where two places hold
+                # equal values the names read the object's own all the same)
+                same = vals == tuple(refs)
             except AttributeError:
                 continue
-            if not all(map(operator.is_, vals, refs)):
+            except Exception:  # an array's elementwise ==: not in its place
+                same = False
+            if not same:
                 # the same names in another order?  Two attributes that held one
                 # value (two zeros) when the order was learned can only be told
                 # apart by an object where they differ: this one, if it fits
@@ -855,8 +907,8 @@ class _Decoder:
                 cur[:] = items
                 return cur
             return items
-        if isinstance(v, _CCopy):  # a snapshot restored as it was taken (not read back)
-            v = v.plain()
+        if isinstance(v, _CCopy | _later):  # restored as it was taken (not read back)
+            v = _plain(v)
         if not isinstance(v, dict) or not v:
             raise SnapshotError(f"the snapshot is damaged at {path}: {str(v)[:40]!r}")
         tag = next(iter(v))
@@ -1034,9 +1086,12 @@ def _defaults(obj: Any) -> None:
 def state_of(objects: Mapping[str, Any], package: str = "") -> dict[str, Any]:
     """The state of ``objects`` (name -> object, each walked with every object of pyrt
     it holds: attributes that are numbers, text, containers, arrays, records), as
-    plain JSON-able data; ``package``: a package whose classes count as pyrt's (a
-    station's own).  Functions, views, the boards, the world, the loop and the
-    station are structure and left out."""
+    JSON-able data whose costlier parts (C memory, the dicts of objects'
+    attributes) are made only when it is written (:meth:`Snapshot.encode`,
+    :func:`plain_state`): the loop thread only copies what can change.
+    ``package``: a package whose classes count as pyrt's (a station's own).
+    Functions, views, the boards, the world, the loop and the station are
+    structure and left out."""
     enc = _Encoder(package)
     out: dict[str, Any] = {}
     for name, obj in objects.items():
@@ -1046,6 +1101,12 @@ def state_of(objects: Mapping[str, Any], package: str = "") -> dict[str, Any]:
             raise SnapshotError(f"cannot snapshot: {name} is a {type(obj).__name__}, "
                                 "not state") from None
     return out
+
+
+def plain_state(state: Any) -> Any:
+    """``state`` (of :func:`state_of`, whose parts are encoded only when written) as
+    the plain JSON data a black box holds and a replay reads back."""
+    return json.loads(json.dumps(state, default=_plain))
 
 
 def restore_into(objects: Mapping[str, Any], state: Mapping[str, Any],
@@ -1142,7 +1203,9 @@ def restore_snapshot(station: Station, snap: Snapshot) -> None:
     if snap.station != station.name:
         raise SnapshotError(f"the snapshot is of station {snap.station!r}, not {station.name!r}")
     try:
-        station.restore_state(dict(snap.state))
+        # the station's hook sees the state as a replay reads it from a black box
+        # (a snapshot taken in this process holds parts encoded when written)
+        station.restore_state(plain_state(dict(snap.state)))
         _restore_station(station, snap.station_state)
         _restore_loop(station, snap.loop)
     except SnapshotError:
