@@ -409,8 +409,10 @@ class FaultBox:
                                                                   / loop.period_ns - 1e-9))
         self._max_every = max(self._min_every, int(MAX_SNAPSHOT_SPAN * self.seconds * 1e9
                                                    / loop.period_ns))
-        #: The loop thread's CPU clock and tick at the end of the last snapshot.
+        #: The loop thread's CPU clock and tick at the end of the last snapshot, and
+        #: the CPU time the last one taken cost (None: none yet).
         self._since: tuple[int, int] | None = None
+        self._cost_ns: int | None = None
         span = self.seconds + after_s + SLACK_S
         self.snapshots: collections.deque[Snapshot] = collections.deque(
             maxlen=math.ceil(span / SNAPSHOT_S) + 2)
@@ -489,7 +491,7 @@ class FaultBox:
         if tick >= self._next_sample:
             self._next_sample = tick + self.ring.every
             self.ring.sample(now_ns)
-        if tick >= self._next_snapshot:
+        if tick >= self._next_snapshot and self._snapshot_due(tick):
             self._snapshot(tick)
         due = min(self._next_sample, self._next_snapshot)
         if self._pending:
@@ -499,6 +501,21 @@ class FaultBox:
                 else:
                     due = min(due, dump.due_tick)
         return due
+
+    def _snapshot_due(self, tick: int) -> bool:
+        """Whether the snapshot asked for at ``tick`` is taken now: its interval
+        is checked first against the loop's work since the last one (so the
+        first interval too, and a loop whose work dropped), and when that is not
+        yet done, the next is asked for at its end."""
+        since, cost = self._since, self._cost_ns
+        if since is None or cost is None or tick <= since[1]:
+            return True
+        work = (time.thread_time_ns() - since[0]) / (tick - since[1])
+        self.snapshot_every = snapshot_interval(cost, work, self._min_every, self._max_every)
+        if tick >= since[1] + self.snapshot_every:
+            return True
+        self._next_snapshot = since[1] + self.snapshot_every
+        return False
 
     def _snapshot(self, tick: int) -> None:
         """The controller's state before the next tick, kept for the black boxes to come;
@@ -517,6 +534,7 @@ class FaultBox:
             return
         self.snapshot_refused = ""
         self.snapshots.append(snap)
+        self._cost_ns = end - start
         if since is not None and tick > since[1]:
             # the loop thread's CPU a tick since the last snapshot (this one not in it)
             work = (start - since[0]) / (tick - since[1])

@@ -471,7 +471,7 @@ class _Encoder:
         # memory a kernel's object owns: its numbers (arrays, the scalar fields of
         # its structs); pointers are structure, bound once when it was built.  The
         # memory is copied now (the state at this tick), its numbers read out of
-        # the copy when the snapshot is encoded (:class:`_CCopy`).  How to copy
+        # the copy when the snapshot is encoded (:func:`_c_numbers`).  How to copy
         # it is found once per object (held with it, so that its id is not another's)
         how = _CDATA.get(id(v))
         if how is None or how[0] is not v:
@@ -484,7 +484,7 @@ class _Encoder:
             raise _Skip
         copy = _newp(ctype, length)
         _memmove(copy, v, nbytes)
-        return _CCopy(copy, ctype)
+        return _later(_c_numbers, copy, ctype)
 
 
 def _copying(v: Any) -> tuple[Any, Any, Any, int]:
@@ -500,22 +500,13 @@ def _copying(v: Any) -> tuple[Any, Any, Any, int]:
     return v, None, None, 0
 
 
-class _CCopy:
+def _c_numbers(copy: Any, ctype: Any) -> dict[str, Any]:
     """C memory a kernel owns, copied when the snapshot was taken (one ``memmove``
-    in the loop thread); :meth:`plain` reads its numbers out (``{"$cd": ...}``)
-    when the snapshot is encoded, in the thread that writes the black box."""
-
-    __slots__ = ("copy", "ctype")
-
-    def __init__(self, copy: Any, ctype: Any):
-        self.copy = copy
-        self.ctype = ctype
-
-    def plain(self) -> dict[str, Any]:
-        """The numbers, as :func:`_cd_get` gives them."""
-        if self.ctype.kind == "pointer":
-            return {"$cd": _cd_get(self.copy[0], self.ctype.item)}
-        return {"$cd": _cd_get(self.copy, self.ctype)}
+    in the loop thread), as its numbers (``{"$cd": ...}``, :func:`_cd_get`): read
+    out when the snapshot is written, in the thread that writes the black box."""
+    if ctype.kind == "pointer":
+        return {"$cd": _cd_get(copy[0], ctype.item)}
+    return {"$cd": _cd_get(copy, ctype)}
 
 
 #: A value left out of an object's attributes (:meth:`_Encoder.read_attributes`).
@@ -544,12 +535,10 @@ def _slot_attributes(v: Any, cls: type) -> dict[str, Any]:
 
 
 def _plain(v: Any) -> Any:
-    """``json``'s ``default``: a :class:`_CCopy` as its numbers, a part encoded when
-    written (:data:`_later`) as its encoding."""
+    """``json``'s ``default``: a part encoded when written (:data:`_later`: C memory,
+    an object's attributes) as its encoding."""
     if type(v) is _later:
         return v()
-    if isinstance(v, _CCopy):
-        return v.plain()
     raise TypeError(f"a snapshot holds a {type(v).__name__}, which has no JSON form")
 
 
@@ -907,8 +896,8 @@ class _Decoder:
                 cur[:] = items
                 return cur
             return items
-        if isinstance(v, _CCopy | _later):  # restored as it was taken (not read back)
-            v = _plain(v)
+        if type(v) is _later:  # restored as it was taken (not read back)
+            v = v()
         if not isinstance(v, dict) or not v:
             raise SnapshotError(f"the snapshot is damaged at {path}: {str(v)[:40]!r}")
         tag = next(iter(v))
