@@ -344,17 +344,17 @@ def test_journals_of_version_1_are_read_and_a_later_version_is_refused_by_name(t
 
 
 @pytest.mark.parametrize("cost_ns, work_ns, every", [
-    (100_000, 7_000, 2_000),     # the gripper's: 2 % of 7 µs ticks is 715 ticks, under 2 s
-    (2_000_000, 35_000, 2_858),  # the manipulator's at 1 ms ticks: 2 % of its work
+    (100_000, 7_000, 2_000),     # the gripper's: 1 % of 7 µs ticks is 1,429 ticks, under 2 s
+    (2_000_000, 35_000, 5_715),  # the manipulator's at 1 ms ticks: 1 % of its work
     (50_000_000, 35_000, 7_500),  # costlier still: 75 % of the 10 s box at most
     (1_000, 0, 7_500),           # no work measured: as far apart as the box allows
 ])
 def test_snapshots_are_spaced_by_what_they_cost_against_the_loop_s_work(cost_ns, work_ns, every):
-    """Snapshots are as far apart as keeps them within SNAPSHOT_SHARE (2 %) of the loop
+    """Snapshots are as far apart as keeps them within SNAPSHOT_SHARE (1 %) of the loop
     thread's work a tick, at least SNAPSHOT_S and at most MAX_SNAPSHOT_SPAN of the box."""
     from pyrt.station import blackbox as bb
 
-    assert (bb.SNAPSHOT_SHARE, bb.SNAPSHOT_S, bb.MAX_SNAPSHOT_SPAN) == (0.02, 2.0, 0.75)
+    assert (bb.SNAPSHOT_SHARE, bb.SNAPSHOT_S, bb.MAX_SNAPSHOT_SPAN) == (0.01, 2.0, 0.75)
     assert bb.snapshot_interval(cost_ns, work_ns, 2_000, 7_500) == every
 
 

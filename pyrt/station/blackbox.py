@@ -130,10 +130,10 @@ AFTER_S = 0.5
 #: replays from the first one in it: all but at most the interval of its span) ...
 SNAPSHOT_S = 2.0
 #: What snapshots may cost the loop thread: this share of its CPU time (the
-#: manipulator's take 1-2.5 ms at the end of a 5 ms tick whose work is ~35 µs:
-#: one every 7 s or more; the gripper's ~0.1 ms against ~7 µs ticks of 1 ms:
-#: one every 2 s) ...
-SNAPSHOT_SHARE = 0.02
+#: manipulator's take ~2M instructions, 0.3-0.7 ms, at the end of a 5 ms tick
+#: whose work is ~156k, ~35 µs: one every 6 s or so; the gripper's ~0.2 ms against
+#: ~7 µs ticks of 1 ms: one every 2-3 s) ...
+SNAPSHOT_SHARE = 0.01
 #: ... but never more than this share of the black box's span apart (7.5 s of a
 #: 10 s box): every box holds a snapshot, and replays at least the rest.
 MAX_SNAPSHOT_SPAN = 0.75
@@ -426,7 +426,8 @@ class FaultBox:
         self._seen: set[int] = set()
         self._pending: dict[int, FaultDump] = {}
         self._lock = threading.Lock()
-        self._jobs: queue.SimpleQueue[FaultDump | None] = queue.SimpleQueue()
+        #: The writing thread's work: a black box to write, a snapshot to free, None: stop.
+        self._jobs: queue.SimpleQueue[FaultDump | Snapshot | None] = queue.SimpleQueue()
         # once before the loop runs: the first snapshot of a process learns how the
         # objects of each class are read (tens of ms), which no tick should carry
         take_snapshot(station, [], [])
@@ -533,7 +534,12 @@ class FaultBox:
             self._next_snapshot = tick + max(1, self._min_every // 10)
             return
         self.snapshot_refused = ""
-        self.snapshots.append(snap)
+        snapshots = self.snapshots
+        if len(snapshots) == snapshots.maxlen:
+            # the oldest, which no black box needs any more, is freed by the box's
+            # thread: a snapshot is thousands of objects, and freeing them is work
+            self._jobs.put(snapshots[0])
+        snapshots.append(snap)
         self._cost_ns = end - start
         if since is not None and tick > since[1]:
             # the loop thread's CPU a tick since the last snapshot (this one not in it)
@@ -590,6 +596,9 @@ class FaultBox:
             dump = self._jobs.get()
             if dump is None:
                 return
+            if not isinstance(dump, FaultDump):
+                del dump  # a snapshot no black box needs: freed here
+                continue
             try:
                 self._files(dump)
             except Exception as exc:  # never lose the thread: say it, go on
