@@ -17,6 +17,18 @@ of a tick (after the write phase), as the state *before* the next one:
 * the process image's inputs as the last tick read them and its outputs as
   it left them.
 
+The loop thread only copies what can change, and as few Python operations a
+value as it can: each class's objects are read by a layout found once (the
+names of their attributes, read by one ``attrgetter`` call and checked against
+the object's own values by one comparison, without asking for ``__dict__``),
+what each attribute needs is decided once per classes of the values (plain
+values are kept as they are, in one list copy), lists of numbers are copied by
+one C call, C memory by one ``memmove``, and a value that cannot change (a
+tuple or a frozen record of such values) is encoded once while it is held; the
+dicts of objects' attributes and the numbers of C memory are made only when the
+snapshot is written (:meth:`Snapshot.encode`), in the thread that writes the
+black box.
+
 A station that cannot give some state raises :class:`SnapshotError` saying
 which ("cannot snapshot: tiny has no snapshot", "cannot snapshot: the
 foreground job init is running"); the black box then carries that reason and
