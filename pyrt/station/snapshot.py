@@ -126,7 +126,7 @@ _KINDS: dict[str, dict[type, str]] = {}
 #: records of numbers, text, enums ...), by id, each with its value (held, so that
 #: its id is not another's), and the frozen records' layouts.
 _FROZEN: dict[str, dict[int, tuple[Any, Any]]] = {}
-_RECORDS: dict[str, dict[type, Any]] = {}
+_RECORDS: dict[str, dict[type, _Layout]] = {}
 #: The encodings of unchanging values kept, at most (all dropped when full).
 _MAX_FROZEN = 4096
 #: The kinds a plan encodes inline (:meth:`_Encoder.read_attributes`).
@@ -222,6 +222,11 @@ _PLAIN = frozenset((int, float, str, bool, type(None)))
 _LOCKS = (type(threading.Lock()), type(threading.RLock()))
 
 
+#: What to do with an object's values: the places left out, and the places encoded
+#: with their names and kinds.
+_Plan = tuple[tuple[int, ...], tuple[tuple[int, str, str], ...]]
+
+
 class _Encoder:
     def __init__(self, package: str):
         self.roots = _roots(package)
@@ -313,12 +318,12 @@ class _Encoder:
                 else:
                     out = {"$t": self.items(v, path)}
             else:
-                layout = self.records.get(cls)
-                if layout is None:
-                    layout = self.records[cls] = _Layout(cls, tuple(
+                fields = self.records.get(cls)
+                if fields is None:
+                    fields = self.records[cls] = _Layout(cls, tuple(
                         f.name for f in dataclasses.fields(cls)))
-                out = _later(_record, layout.name, layout.names,  # every field, or none
-                             self.read_attributes(layout, layout.get(v), path, whole=True))
+                out = _later(_record, fields.name, fields.names,  # every field, or none
+                             self.read_attributes(fields, fields.get(v), path, whole=True))
             if self.changing == changing:
                 frozen = self.frozen
                 if len(frozen) >= _MAX_FROZEN:
@@ -440,8 +445,7 @@ class _Encoder:
         """A set's members, encoded in the order of their reprs."""
         return [self.value(x, path) for x in sorted(v, key=repr)]
 
-    def _plan(self, names: tuple[str, ...], kinds: tuple[type, ...]
-              ) -> tuple[tuple[int, ...], tuple[tuple[int, str, str], ...]]:
+    def _plan(self, names: tuple[str, ...], kinds: tuple[type, ...]) -> _Plan:
         """For values of ``kinds`` at ``names``: the places left out (structure: a
         method, a board) and the places encoded (neither plain nor structure), each
         with its kind (:data:`_FROZEN_KIND`, :data:`_LIST_KIND`, :data:`_CDATA_KIND`,
@@ -721,9 +725,8 @@ class _Layout:
             self.get = lambda v: (one(v),)
         else:
             self.get = operator.attrgetter(*names)
-        #: Per classes of the values: the names left out and the places encoded.
-        self.plans: dict[tuple[type, ...], tuple[tuple[str, ...],
-                                                 tuple[tuple[int, str], ...]]] = {}
+        #: Per classes of the values: the places left out and the places encoded.
+        self.plans: dict[tuple[type, ...], _Plan] = {}
 
 
 #: Per class: the layouts its objects were read by, the one that fitted last first.
