@@ -379,3 +379,50 @@ def test_a_black_box_always_holds_a_snapshot(monkeypatch):
     finally:
         st.close()
         rec.close()
+
+
+def _spaced_box(monkeypatch, refuse_second: bool) -> tuple[list[int], int]:
+    """A gripper's black box (10 s) on a loop whose thread's CPU clock is given: 10 µs a
+    tick of work and 0.5 ms a snapshot (1 % of the work: one every 5,000 ticks); the
+    ticks of the snapshots taken in 6 s, and the interval it settled on."""
+    from pyrt.journal import BlackBox
+    from pyrt.station import blackbox as bb
+
+    st = build_gripper(Loop(SimClock()), boards="sim:")
+    rec = bb.FaultRecorder(st, None, black_box=BlackBox(10.0), seconds=10.0)
+    spent = [0]
+    monkeypatch.setattr(bb.time, "thread_time_ns",
+                        lambda: st.loop.tick_index * 10_000 + spent[0])
+    take, asked = bb.take_snapshot, []
+
+    def costly(station, inputs, outputs):
+        asked.append(station.loop.tick_index)
+        spent[0] += 500_000
+        if refuse_second and len(asked) == 2:
+            return Snapshot(station.name, refused="cannot snapshot: busy")
+        return take(station, inputs, outputs)
+
+    monkeypatch.setattr(bb, "take_snapshot", costly)
+    try:
+        st.runner.start()
+        st.runner.sleep(6.0)
+        box = rec.fault_box
+        return [s.tick for s in box.snapshots], box.snapshot_every
+    finally:
+        st.close()
+        rec.close()
+
+
+def test_the_first_interval_is_kept_to_the_share_too(monkeypatch):
+    """The snapshot after the first is taken when the loop's work since the first says
+    (5,000 ticks), not at the least interval (2,000) before the work was known."""
+    ticks, every = _spaced_box(monkeypatch, refuse_second=False)
+    assert every == 5_000
+    assert len(ticks) == 2 and ticks[1] - ticks[0] == 5_000
+
+
+def test_a_refused_snapshot_is_asked_again_a_tenth_of_the_interval_later(monkeypatch):
+    """A station that cannot give its state when a snapshot is due is asked again 200
+    ticks later (a tenth of 2 s), not a whole interval later."""
+    ticks, _every = _spaced_box(monkeypatch, refuse_second=True)
+    assert len(ticks) == 2 and ticks[1] - ticks[0] == 5_200

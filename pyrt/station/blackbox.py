@@ -507,9 +507,10 @@ class FaultBox:
         """Whether the snapshot asked for at ``tick`` is taken now: its interval
         is checked first against the loop's work since the last one (so the
         first interval too, and a loop whose work dropped), and when that is not
-        yet done, the next is asked for at its end."""
+        yet done, the next is asked for at its end.  After a refusal, at once
+        (the station is asked again a tenth of the interval later)."""
         since, cost = self._since, self._cost_ns
-        if since is None or cost is None or tick <= since[1]:
+        if since is None or cost is None or tick <= since[1] or self.snapshot_refused:
             return True
         work = (time.thread_time_ns() - since[0]) / (tick - since[1])
         self.snapshot_every = snapshot_interval(cost, work, self._min_every, self._max_every)
