@@ -30,6 +30,7 @@ from pyrt.station.snapshot import (
     SnapshotError,
     compress_snapshot,
     decompress_snapshot,
+    plain_state,
     restore_into,
     state_of,
     take_snapshot,
@@ -301,7 +302,7 @@ def test_state_round_trips_bit_for_bit_in_place(monkeypatch):
     a.arr *= 2
     a.child.count = 11
     buf, arr = b.buf, b.arr
-    state = json.loads(json.dumps(state_of({"p": a})))
+    state = json.loads(json.dumps(plain_state(state_of({"p": a}))))
     restore_into({"p": b}, state)
     assert (b.n, b.words, b.table, b.child.count) == (9, ["z", ("y", 3)], {2: -1.0}, 11)
     assert b.x != b.x and b.buf is buf and bytes(buf) == b"\xff\xfe"
@@ -343,17 +344,17 @@ def test_journals_of_version_1_are_read_and_a_later_version_is_refused_by_name(t
 
 
 @pytest.mark.parametrize("cost_ns, work_ns, every", [
-    (100_000, 7_000, 2_000),     # the gripper's: 2 % of 7 µs ticks is 715 ticks, under 2 s
-    (2_000_000, 35_000, 2_858),  # the manipulator's at 1 ms ticks: 2 % of its work
+    (100_000, 7_000, 2_000),     # the gripper's: 1 % of 7 µs ticks is 1,429 ticks, under 2 s
+    (2_000_000, 35_000, 5_715),  # the manipulator's at 1 ms ticks: 1 % of its work
     (50_000_000, 35_000, 7_500),  # costlier still: 75 % of the 10 s box at most
     (1_000, 0, 7_500),           # no work measured: as far apart as the box allows
 ])
 def test_snapshots_are_spaced_by_what_they_cost_against_the_loop_s_work(cost_ns, work_ns, every):
-    """Snapshots are as far apart as keeps them within SNAPSHOT_SHARE (2 %) of the loop
+    """Snapshots are as far apart as keeps them within SNAPSHOT_SHARE (1 %) of the loop
     thread's work a tick, at least SNAPSHOT_S and at most MAX_SNAPSHOT_SPAN of the box."""
     from pyrt.station import blackbox as bb
 
-    assert (bb.SNAPSHOT_SHARE, bb.SNAPSHOT_S, bb.MAX_SNAPSHOT_SPAN) == (0.02, 2.0, 0.75)
+    assert (bb.SNAPSHOT_SHARE, bb.SNAPSHOT_S, bb.MAX_SNAPSHOT_SPAN) == (0.01, 2.0, 0.75)
     assert bb.snapshot_interval(cost_ns, work_ns, 2_000, 7_500) == every
 
 
@@ -378,3 +379,50 @@ def test_a_black_box_always_holds_a_snapshot(monkeypatch):
     finally:
         st.close()
         rec.close()
+
+
+def _spaced_box(monkeypatch, refuse_second: bool) -> tuple[list[int], int]:
+    """A gripper's black box (10 s) on a loop whose thread's CPU clock is given: 10 µs a
+    tick of work and 0.5 ms a snapshot (1 % of the work: one every 5,000 ticks); the
+    ticks of the snapshots taken in 6 s, and the interval it settled on."""
+    from pyrt.journal import BlackBox
+    from pyrt.station import blackbox as bb
+
+    st = build_gripper(Loop(SimClock()), boards="sim:")
+    rec = bb.FaultRecorder(st, None, black_box=BlackBox(10.0), seconds=10.0)
+    spent = [0]
+    monkeypatch.setattr(bb.time, "thread_time_ns",
+                        lambda: st.loop.tick_index * 10_000 + spent[0])
+    take, asked = bb.take_snapshot, []
+
+    def costly(station, inputs, outputs):
+        asked.append(station.loop.tick_index)
+        spent[0] += 500_000
+        if refuse_second and len(asked) == 2:
+            return Snapshot(station.name, refused="cannot snapshot: busy")
+        return take(station, inputs, outputs)
+
+    monkeypatch.setattr(bb, "take_snapshot", costly)
+    try:
+        st.runner.start()
+        st.runner.sleep(6.0)
+        box = rec.fault_box
+        return [s.tick for s in box.snapshots], box.snapshot_every
+    finally:
+        st.close()
+        rec.close()
+
+
+def test_the_first_interval_is_kept_to_the_share_too(monkeypatch):
+    """The snapshot after the first is taken when the loop's work since the first says
+    (5,000 ticks), not at the least interval (2,000) before the work was known."""
+    ticks, every = _spaced_box(monkeypatch, refuse_second=False)
+    assert every == 5_000
+    assert len(ticks) == 2 and ticks[1] - ticks[0] == 5_000
+
+
+def test_a_refused_snapshot_is_asked_again_a_tenth_of_the_interval_later(monkeypatch):
+    """A station that cannot give its state when a snapshot is due is asked again 200
+    ticks later (a tenth of 2 s), not a whole interval later."""
+    ticks, _every = _spaced_box(monkeypatch, refuse_second=True)
+    assert len(ticks) == 2 and ticks[1] - ticks[0] == 5_200

@@ -83,7 +83,7 @@ print(json.dumps({"n": len(objects), "before": before, "after": after}))
 
 def _state(st, through_dict: bool, monkeypatch) -> str:
     if through_dict:
-        monkeypatch.setattr(sn, "_instance_attributes", lambda v, cls: None)
+        monkeypatch.setattr(sn, "_read", lambda v, cls: None)
     try:
         return json.dumps(st.snapshot_state(), default=sn._plain).replace("NaN", "null")
     finally:

@@ -130,10 +130,10 @@ AFTER_S = 0.5
 #: replays from the first one in it: all but at most the interval of its span) ...
 SNAPSHOT_S = 2.0
 #: What snapshots may cost the loop thread: this share of its CPU time (the
-#: manipulator's take 1-2.5 ms at the end of a 5 ms tick whose work is ~35 µs:
-#: one every 7 s or more; the gripper's ~0.1 ms against ~7 µs ticks of 1 ms:
-#: one every 2 s) ...
-SNAPSHOT_SHARE = 0.02
+#: manipulator's take ~2M instructions, 0.3-0.7 ms, at the end of a 5 ms tick
+#: whose work is ~156k, ~35 µs: one every 6 s or so; the gripper's ~0.2 ms against
+#: ~7 µs ticks of 1 ms: one every 2-3 s) ...
+SNAPSHOT_SHARE = 0.01
 #: ... but never more than this share of the black box's span apart (7.5 s of a
 #: 10 s box): every box holds a snapshot, and replays at least the rest.
 MAX_SNAPSHOT_SPAN = 0.75
@@ -412,8 +412,10 @@ class FaultBox:
                                                                   / loop.period_ns - 1e-9))
         self._max_every = max(self._min_every, int(MAX_SNAPSHOT_SPAN * self.seconds * 1e9
                                                    / loop.period_ns))
-        #: The loop thread's CPU clock and tick at the end of the last snapshot.
+        #: The loop thread's CPU clock and tick at the end of the last snapshot, and
+        #: the CPU time the last one taken cost (None: none yet).
         self._since: tuple[int, int] | None = None
+        self._cost_ns: int | None = None
         span = self.seconds + after_s + SLACK_S
         self.snapshots: collections.deque[Snapshot] = collections.deque(
             maxlen=math.ceil(span / SNAPSHOT_S) + 2)
@@ -427,7 +429,8 @@ class FaultBox:
         self._seen: set[int] = set()
         self._pending: dict[int, FaultDump] = {}
         self._lock = threading.Lock()
-        self._jobs: queue.SimpleQueue[FaultDump | None] = queue.SimpleQueue()
+        #: The writing thread's work: a black box to write, a snapshot to free, None: stop.
+        self._jobs: queue.SimpleQueue[FaultDump | Snapshot | None] = queue.SimpleQueue()
         # once before the loop runs: the first snapshot of a process learns how the
         # objects of each class are read (tens of ms), which no tick should carry
         take_snapshot(station, [], [])
@@ -492,7 +495,7 @@ class FaultBox:
         if tick >= self._next_sample:
             self._next_sample = tick + self.ring.every
             self.ring.sample(now_ns)
-        if tick >= self._next_snapshot:
+        if tick >= self._next_snapshot and self._snapshot_due(tick):
             self._snapshot(tick)
         due = min(self._next_sample, self._next_snapshot)
         if self._pending:
@@ -502,6 +505,22 @@ class FaultBox:
                 else:
                     due = min(due, dump.due_tick)
         return due
+
+    def _snapshot_due(self, tick: int) -> bool:
+        """Whether the snapshot asked for at ``tick`` is taken now: its interval
+        is checked first against the loop's work since the last one (so the
+        first interval too, and a loop whose work dropped), and when that is not
+        yet done, the next is asked for at its end.  After a refusal, at once
+        (the station is asked again a tenth of the interval later)."""
+        since, cost = self._since, self._cost_ns
+        if since is None or cost is None or tick <= since[1] or self.snapshot_refused:
+            return True
+        work = (time.thread_time_ns() - since[0]) / (tick - since[1])
+        self.snapshot_every = snapshot_interval(cost, work, self._min_every, self._max_every)
+        if tick >= since[1] + self.snapshot_every:
+            return True
+        self._next_snapshot = since[1] + self.snapshot_every
+        return False
 
     def _snapshot(self, tick: int) -> None:
         """The controller's state before the next tick, kept for the black boxes to come;
@@ -519,7 +538,13 @@ class FaultBox:
             self._next_snapshot = tick + max(1, self._min_every // 10)
             return
         self.snapshot_refused = ""
-        self.snapshots.append(snap)
+        snapshots = self.snapshots
+        if len(snapshots) == snapshots.maxlen:
+            # the oldest, which no black box needs any more, is freed by the box's
+            # thread: a snapshot is thousands of objects, and freeing them is work
+            self._jobs.put(snapshots[0])
+        snapshots.append(snap)
+        self._cost_ns = end - start
         if since is not None and tick > since[1]:
             # the loop thread's CPU a tick since the last snapshot (this one not in it)
             work = (start - since[0]) / (tick - since[1])
@@ -575,6 +600,9 @@ class FaultBox:
             dump = self._jobs.get()
             if dump is None:
                 return
+            if not isinstance(dump, FaultDump):
+                del dump  # a snapshot no black box needs: freed here
+                continue
             try:
                 self._files(dump)
             except Exception as exc:  # never lose the thread: say it, go on

@@ -17,6 +17,18 @@ of a tick (after the write phase), as the state *before* the next one:
 * the process image's inputs as the last tick read them and its outputs as
   it left them.
 
+The loop thread only copies what can change, and as few Python operations a
+value as it can: each class's objects are read by a layout found once (the
+names of their attributes, read by one ``attrgetter`` call and checked against
+the object's own values by one comparison, without asking for ``__dict__``),
+what each attribute needs is decided once per classes of the values (plain
+values are kept as they are, in one list copy), lists of numbers are copied by
+one C call, C memory by one ``memmove``, and a value that cannot change (a
+tuple or a frozen record of such values) is encoded once while it is held; the
+dicts of objects' attributes and the numbers of C memory are made only when the
+snapshot is written (:meth:`Snapshot.encode`), in the thread that writes the
+black box.
+
 A station that cannot give some state raises :class:`SnapshotError` saying
 which ("cannot snapshot: tiny has no snapshot", "cannot snapshot: the
 foreground job init is running"); the black box then carries that reason and
@@ -54,18 +66,21 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import functools
 import gc
 import importlib
 import json
+import operator
 import sys
 import threading
 import zlib
 from collections import deque
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from types import BuiltinFunctionType, CodeType, FunctionType, MethodType, ModuleType
 from typing import TYPE_CHECKING, Any
 
+import _cffi_backend  # type: ignore[import-untyped]  # C memory a kernel owns
 import numpy as np
 
 from pyrt.errors import ConfigError
@@ -74,8 +89,8 @@ if TYPE_CHECKING:
     from pyrt.station.base import Station
 
 __all__ = ["SNAPSHOT_FORMAT", "Snapshot", "SnapshotError", "compress_snapshot",
-           "decompress_snapshot", "restore_into", "restore_snapshot", "state_of",
-           "take_snapshot"]
+           "decompress_snapshot", "plain_state", "restore_into", "restore_snapshot",
+           "state_of", "take_snapshot"]
 
 #: The snapshot format this pyrt writes and reads.
 SNAPSHOT_FORMAT = "pyrt-snapshot/1"
@@ -107,6 +122,17 @@ _MISSING = object()
 
 #: How each class's values are encoded, by the package that counts as pyrt's.
 _KINDS: dict[str, dict[type, str]] = {}
+#: Per package: the encodings of values that cannot change (tuples and frozen
+#: records of numbers, text, enums ...), by id, each with its value (held, so that
+#: its id is not another's), and the frozen records' layouts.
+_FROZEN: dict[str, dict[int, tuple[Any, Any]]] = {}
+_RECORDS: dict[str, dict[type, _Layout]] = {}
+#: The encodings of unchanging values kept, at most (all dropped when full).
+_MAX_FROZEN = 4096
+#: The kinds a plan encodes inline (:meth:`_Encoder.read_attributes`).
+_FROZEN_KIND, _LIST_KIND, _CDATA_KIND, _OBJECT_KIND = "frozen", "list", "cdata", "object"
+#: How each C memory met is copied (:func:`_copying`), by id.
+_CDATA: dict[int, tuple[Any, Any, Any, int]] = {}
 
 
 class _Skip(Exception):
@@ -196,11 +222,22 @@ _PLAIN = frozenset((int, float, str, bool, type(None)))
 _LOCKS = (type(threading.Lock()), type(threading.RLock()))
 
 
+#: What to do with an object's values: the places left out, and the places encoded
+#: with their names and kinds.
+_Plan = tuple[tuple[int, ...], tuple[tuple[int, str, str], ...]]
+
+
 class _Encoder:
     def __init__(self, package: str):
         self.roots = _roots(package)
         self.seen: dict[int, str] = {}
         self.kinds = _KINDS.setdefault(package, {})
+        #: Encodings of values that cannot change, by id (with the value, held).
+        self.frozen = _FROZEN.setdefault(package, {})
+        #: The frozen records' layouts (their fields).
+        self.records = _RECORDS.setdefault(package, {})
+        #: Values encoded so far that may change (objects, lists, arrays, C memory ...).
+        self.changing = 0
 
     def _kind(self, cls: type) -> str:
         """How values of ``cls`` are encoded (decided once per class)."""
@@ -248,34 +285,70 @@ class _Encoder:
         if cls in _PLAIN:
             return v
         kind = self.kinds.get(cls) or self._kind(cls)
-        if kind == "list":
-            if _PLAIN.issuperset(map(type, v)):  # numbers and text: the list as it is
-                return v.copy()
-            return [self.value(x, f"{path}[{i}]") for i, x in enumerate(v)]
-        if kind == "tuple":
-            if _PLAIN.issuperset(map(type, v)):
-                return {"$t": list(v)}
-            return {"$t": [self.value(x, f"{path}[{i}]") for i, x in enumerate(v)]}
-        if kind == "plain":  # a subclass of a plain type
-            return v
         if kind == "object":
+            self.changing += 1  # (a reference too: its path is this snapshot's)
             if id(v) in self.seen:
                 return {"$r": self.seen[id(v)]}
-            attrs = _instance_attributes(v, cls)
-            if attrs is None:
-                attrs = getattr(v, "__dict__", None)
-            if attrs is None:
-                attrs = {a: getattr(v, a) for a in _slots(cls) if hasattr(v, a)}
             self.seen[id(v)] = path
-            return {"$c": _class_name(cls), "$o": self.attributes(attrs, path)}
+            read = _read(v, cls)
+            if read is None:
+                attrs = getattr(v, "__dict__", None)
+                if attrs is None:
+                    attrs = _slot_attributes(v, cls)
+                return {"$c": _class_name(cls), "$o": self.attributes(attrs, path)}
+            layout, vals = read
+            # its attributes as a dict when the snapshot is written (:func:`_later`)
+            return _later(_object, layout.name, layout.names,
+                          self.read_attributes(layout, vals, path))
+        if kind == "list":
+            self.changing += 1
+            if _PLAIN.issuperset(map(type, v)):  # numbers and text: the list as it is
+                return v.copy()
+            return self.items(v, path)
+        if kind == "tuple" or kind == "record":
+            # a value that cannot change (a tuple, a frozen record) holding only such
+            # values: encoded once while the same one is held (a constant's, a move's)
+            held = self.frozen.get(id(v))
+            if held is not None and held[0] is v:
+                return held[1]
+            changing = self.changing
+            if kind == "tuple":
+                if _PLAIN.issuperset(map(type, v)):
+                    out: Any = {"$t": list(v)}
+                else:
+                    out = {"$t": self.items(v, path)}
+            else:
+                fields = self.records.get(cls)
+                if fields is None:
+                    fields = self.records[cls] = _Layout(cls, tuple(
+                        f.name for f in dataclasses.fields(cls)))
+                out = _later(_record, fields.name, fields.names,  # every field, or none
+                             self.read_attributes(fields, fields.get(v), path, whole=True))
+            if self.changing == changing:
+                frozen = self.frozen
+                if len(frozen) >= _MAX_FROZEN:
+                    frozen.clear()
+                frozen[id(v)] = (v, out)
+            return out
+        if kind == "plain":  # a subclass of a plain type
+            return v
         if kind == "skip":
             raise _Skip
+        if kind == "enum":
+            return {"$e": _class_name(cls), "v": v.name}
+        if kind == "npscalar":
+            return {"$n": [v.dtype.str, v.tobytes().hex()]}
+        if kind == "bytes":
+            return {"$b": v.hex()}
+        self.changing += 1  # from here on, values that may change in place
+        if kind == "cdata":
+            return self._cdata(v)
         if kind == "ndarray":
-            if v.dtype.hasobject or (not v.flags.writeable and v.base is not None):
+            writeable = v.flags.writeable
+            if v.dtype.hasobject or (not writeable and v.base is not None):
                 raise _Skip  # a read-only view of another array: that one is state
-            out: dict[str, Any] = {
-                "$a": [v.dtype.str, list(v.shape), np.ascontiguousarray(v).tobytes().hex()]}
-            if not v.flags.writeable:
+            out = {"$a": [v.dtype.str, list(v.shape), v.tobytes().hex()]}
+            if not writeable:
                 out["ro"] = True  # a read-only value (a transform's) stays read-only
             first = self.seen.get(id(v))
             if first is not None:  # one array held twice: "is" the path it was given at
@@ -284,29 +357,113 @@ class _Encoder:
                 self.seen[id(v)] = path
             return out
         if kind == "dict":
-            return {"$d": [[self.value(k, f"{path}<{i}"), self.value(x, f"{path}{{{i}}}")]
-                           for i, (k, x) in enumerate(v.items())]}
-        if kind == "record":
-            return {"$dc": _class_name(cls),
-                    "f": {f.name: self.value(getattr(v, f.name), f"{path}.{f.name}")
-                          for f in dataclasses.fields(v)}}
-        if kind == "enum":
-            return {"$e": _class_name(cls), "v": v.name}
-        if kind == "npscalar":
-            return {"$n": [v.dtype.str, v.tobytes().hex()]}
+            return {"$d": self.pairs(v, path)}
         if kind == "bytearray":
             return {"$ba": v.hex()}
-        if kind == "bytes":
-            return {"$b": v.hex()}
         if kind == "deque":
-            return {"$q": [self.value(x, f"{path}[{i}]") for i, x in enumerate(v)]}
+            return {"$q": self.items(v, path)}
         if kind == "set":
-            return {"$s": [self.value(x, path) for x in sorted(v, key=repr)]}
+            return {"$s": self.members(v, path)}
         if kind == "event":
             return {"$ev": v.is_set()}
         if kind == "lock":
             return {"$lk": 0}
-        return self._cdata(v)
+        raise _Skip  # not a kind of pyrt's state
+
+    def read_attributes(self, layout: _Layout, vals: tuple, path: str,
+                        whole: bool = False) -> list[Any]:
+        """The values of an object's attributes, read by its ``layout`` as ``vals``:
+        plain ones as they are (the list copied by one C call), the others encoded,
+        the structure's :data:`_GONE` (``whole``: none may be, else _Skip); what to
+        do at each place is decided once per classes of the values."""
+        kinds = tuple(map(type, vals))
+        plan = layout.plans.get(kinds)
+        if plan is None:
+            plan = layout.plans[kinds] = self._plan(layout.names, kinds)
+        out = list(vals)
+        drop, encode = plan
+        if drop:
+            if whole:
+                raise _Skip
+            for i in drop:
+                out[i] = _GONE
+        frozen = self.frozen
+        for i, name, kind in encode:
+            # inline, the common values: one that cannot change and was encoded
+            # before, a list of numbers, C memory
+            x = vals[i]
+            try:
+                if kind is _FROZEN_KIND:
+                    held = frozen.get(id(x))
+                    if held is not None and held[0] is x:
+                        out[i] = held[1]
+                        continue
+                elif kind is _LIST_KIND:
+                    if _PLAIN.issuperset(map(type, x)):
+                        self.changing += 1
+                        out[i] = x.copy()
+                        continue
+                elif kind is _CDATA_KIND:
+                    self.changing += 1
+                    out[i] = self._cdata(x)
+                    continue
+                elif kind is _OBJECT_KIND:
+                    first = self.seen.get(id(x))
+                    if first is not None:  # given before: a reference to it
+                        self.changing += 1
+                        out[i] = {"$r": first}
+                        continue
+                out[i] = self.value(x, f"{path}.{name}")
+            except _Skip:
+                if whole:
+                    raise
+                out[i] = _GONE
+        return out
+
+    def items(self, v: list | tuple, path: str) -> list[Any]:
+        """The items of a list or a tuple, encoded (those that cannot change and were
+        encoded before, inline)."""
+        out = []
+        frozen = self.frozen
+        for i, x in enumerate(v):
+            if type(x) in _PLAIN:
+                out.append(x)
+                continue
+            held = frozen.get(id(x))
+            if held is not None and held[0] is x:
+                out.append(held[1])
+            else:
+                out.append(self.value(x, f"{path}[{i}]"))
+        return out
+
+    def pairs(self, v: dict, path: str) -> list[list[Any]]:
+        """A dict's items, keys and values encoded."""
+        return [[self.value(k, f"{path}<{i}"), self.value(x, f"{path}{{{i}}}")]
+                for i, (k, x) in enumerate(v.items())]
+
+    def members(self, v: set | frozenset, path: str) -> list[Any]:
+        """A set's members, encoded in the order of their reprs."""
+        return [self.value(x, path) for x in sorted(v, key=repr)]
+
+    def _plan(self, names: tuple[str, ...], kinds: tuple[type, ...]) -> _Plan:
+        """For values of ``kinds`` at ``names``: the places left out (structure: a
+        method, a board) and the places encoded (neither plain nor structure), each
+        with its kind (:data:`_FROZEN_KIND`, :data:`_LIST_KIND`, :data:`_CDATA_KIND`,
+        :data:`_OBJECT_KIND` or another)."""
+        drop: list[int] = []
+        encode: list[tuple[int, str, str]] = []
+        for i, (name, cls) in enumerate(zip(names, kinds, strict=True)):
+            if cls in _PLAIN:
+                continue
+            kind = self.kinds.get(cls) or self._kind(cls)
+            if kind == "skip":
+                drop.append(i)
+            elif kind != "plain":
+                encode.append((i, name, _FROZEN_KIND if kind in ("tuple", "record")
+                               else _LIST_KIND if kind == "list"
+                               else _CDATA_KIND if kind == "cdata"
+                               else _OBJECT_KIND if kind == "object" else kind))
+        return tuple(drop), tuple(encode)
 
     def attributes(self, attrs: Mapping[str, Any], path: str) -> dict[str, Any]:
         out = {}
@@ -330,45 +487,74 @@ class _Encoder:
         # memory a kernel's object owns: its numbers (arrays, the scalar fields of
         # its structs); pointers are structure, bound once when it was built.  The
         # memory is copied now (the state at this tick), its numbers read out of
-        # the copy when the snapshot is encoded (:class:`_CCopy`)
-        if "owning" not in repr(v):
+        # the copy when the snapshot is encoded (:func:`_c_numbers`).  How to copy
+        # it is found once per object (held with it, so that its id is not another's)
+        how = _CDATA.get(id(v))
+        if how is None or how[0] is not v:
+            how = _copying(v)
+            if len(_CDATA) >= _MAX_FROZEN:
+                _CDATA.clear()
+            _CDATA[id(v)] = how
+        _v, ctype, length, nbytes = how
+        if ctype is None:
             raise _Skip
-        import _cffi_backend as cffi  # type: ignore[import-untyped]
-
-        ctype = cffi.typeof(v)
-        if ctype.kind == "pointer":
-            copy = cffi.newp(ctype, None)
-            cffi.memmove(copy, v, cffi.sizeof(ctype.item))
-        elif ctype.kind == "array":
-            copy = cffi.newp(ctype, len(v) if ctype.length is None else None)
-            cffi.memmove(copy, v, cffi.sizeof(v))
-        else:
-            raise _Skip
-        return _CCopy(copy, ctype)
+        copy = _newp(ctype, length)
+        _memmove(copy, v, nbytes)
+        return _later(_c_numbers, copy, ctype)
 
 
-class _CCopy:
+def _copying(v: Any) -> tuple[Any, Any, Any, int]:
+    """How C memory ``v`` is copied: ``(v, its type, newp's length, bytes)``; its
+    type None when it is not memory of its own (a view, a pointer into another's)."""
+    if "owning" not in repr(v):
+        return v, None, None, 0
+    ctype = _cffi_typeof(v)
+    if ctype.kind == "pointer":
+        return v, ctype, None, _sizeof(ctype.item)
+    if ctype.kind == "array":
+        return v, ctype, len(v) if ctype.length is None else None, _sizeof(v)
+    return v, None, None, 0
+
+
+def _c_numbers(copy: Any, ctype: Any) -> dict[str, Any]:
     """C memory a kernel owns, copied when the snapshot was taken (one ``memmove``
-    in the loop thread); :meth:`plain` reads its numbers out (``{"$cd": ...}``)
-    when the snapshot is encoded, in the thread that writes the black box."""
+    in the loop thread), as its numbers (``{"$cd": ...}``, :func:`_cd_get`): read
+    out when the snapshot is written, in the thread that writes the black box."""
+    if ctype.kind == "pointer":
+        return {"$cd": _cd_get(copy[0], ctype.item)}
+    return {"$cd": _cd_get(copy, ctype)}
 
-    __slots__ = ("copy", "ctype")
 
-    def __init__(self, copy: Any, ctype: Any):
-        self.copy = copy
-        self.ctype = ctype
+#: A value left out of an object's attributes (:meth:`_Encoder.read_attributes`).
+_GONE: Any = object()
+#: ``_later(fn, *args)``: a part of a snapshot encoded when it is written, by
+#: ``fn(*args)`` (one C call to make in the loop thread).
+_later = functools.partial
 
-    def plain(self) -> dict[str, Any]:
-        """The numbers, as :func:`_cd_get` gives them."""
-        if self.ctype.kind == "pointer":
-            return {"$cd": _cd_get(self.copy[0], self.ctype.item)}
-        return {"$cd": _cd_get(self.copy, self.ctype)}
+
+def _object(name: str, names: tuple[str, ...], vals: list[Any]) -> dict[str, Any]:
+    """An object's encoding, from its class's name and its attributes' names and values."""
+    return {"$c": name, "$o": {n: x for n, x in zip(names, vals, strict=True) if x is not _GONE}}
+
+
+def _record(name: str, names: tuple[str, ...], vals: list[Any]) -> dict[str, Any]:
+    """A frozen record's encoding, from its class's name and its fields."""
+    return {"$dc": name, "f": dict(zip(names, vals, strict=True))}
+
+
+def _without(refs: list[Any], cls: type) -> list[Any]:
+    return [r for r in refs if r is not cls]
+
+
+def _slot_attributes(v: Any, cls: type) -> dict[str, Any]:
+    return {a: getattr(v, a) for a in _slots(cls) if hasattr(v, a)}
 
 
 def _plain(v: Any) -> Any:
-    """``json``'s ``default``: a :class:`_CCopy` as its numbers."""
-    if isinstance(v, _CCopy):
-        return v.plain()
+    """``json``'s ``default``: a part encoded when written (:data:`_later`: C memory,
+    an object's attributes) as its encoding."""
+    if type(v) is _later:
+        return v()
     raise TypeError(f"a snapshot holds a {type(v).__name__}, which has no JSON form")
 
 
@@ -520,6 +706,101 @@ def _claim(v: Any, cls: type, names: Sequence[str], left: dict[int, list[int]],
             got.append((where.pop(0), name, x))
 
 
+class _Layout:
+    """How one class's objects with the same attributes (names, in their order) are
+    read: one ``attrgetter`` call gives every value, checked against the object's
+    own (``gc.get_referents``) by identity; and, per the classes of those values,
+    what a snapshot does with each (:meth:`_Encoder.read_attributes`)."""
+
+    __slots__ = ("get", "n", "name", "names", "plans")
+
+    def __init__(self, cls: type, names: tuple[str, ...]):
+        self.names = names
+        self.n = len(names)
+        self.name = _class_name(cls)
+        if not names:
+            self.get: Callable[[Any], tuple] = lambda v: ()
+        elif len(names) == 1:
+            one = operator.attrgetter(names[0])
+            self.get = lambda v: (one(v),)
+        else:
+            self.get = operator.attrgetter(*names)
+        #: Per classes of the values: the places left out and the places encoded.
+        self.plans: dict[tuple[type, ...], _Plan] = {}
+
+
+#: Per class: the layouts its objects were read by, the one that fitted last first.
+_LAYOUTS: dict[type, list[_Layout]] = {}
+#: The layouts a class keeps, at most (its objects' attributes set in other orders).
+_MAX_LAYOUTS = 8
+
+
+def _read(v: Any, cls: type) -> tuple[_Layout, tuple] | None:
+    """``v``'s attributes as one of its class's layouts reads them (the names and
+    values of ``v.__dict__``, without asking for it: :func:`_instance_attributes`),
+    or None: read them through ``__dict__`` (or its slots)."""
+    if not cls.__dictoffset__:
+        return None
+    layouts = _LAYOUTS.get(cls)
+    if layouts is not None:
+        refs = gc.get_referents(v)
+        if refs and refs[-1] is cls:
+            del refs[-1]
+        else:
+            refs = _without(refs, cls)
+        n = len(refs)
+        for k, layout in enumerate(layouts):
+            if layout.n != n:
+                continue
+            try:
+                vals = layout.get(v)
+                # one C call: each value is the object's own, in its place (an
+                # identical one compares equal at once; where two places hold
+                # equal values the names read the object's own all the same)
+                same = vals == tuple(refs)
+            except AttributeError:
+                continue
+            except Exception:  # an array's elementwise ==: not in its place
+                same = False
+            if not same:
+                # the same names in another order?  Two attributes that held one
+                # value (two zeros) when the order was learned can only be told
+                # apart by an object where they differ: this one, if it fits
+                names = _reordered(layout.names, vals, refs)
+                if names is None:
+                    continue
+                layout = layouts[k] = _Layout(cls, names)
+                vals = tuple(refs)
+            if k:
+                layouts.insert(0, layouts.pop(k))
+            return layout, vals
+    attrs = _instance_attributes(v, cls)
+    if attrs is None:
+        return None
+    layout = _Layout(cls, tuple(attrs))
+    layouts = _LAYOUTS.setdefault(cls, [])
+    layouts.insert(0, layout)
+    del layouts[_MAX_LAYOUTS:]
+    return layout, tuple(attrs.values())
+
+
+def _reordered(names: tuple[str, ...], vals: tuple, refs: list[Any]) -> tuple[str, ...] | None:
+    """``names`` (whose values are ``vals``) in the order of the object's own values
+    ``refs``, a name that held the same value as another keeping its place before
+    that one where this object cannot tell them apart; None if they are not the
+    same values."""
+    by_value: dict[int, list[str]] = {}
+    for name, x in zip(names, vals, strict=True):
+        by_value.setdefault(id(x), []).append(name)
+    out = []
+    for r in refs:
+        same = by_value.get(id(r))
+        if not same:
+            return None
+        out.append(same.pop(0))
+    return tuple(out)
+
+
 _ALL_NAMES: list[str] = []
 #: The classes of objects whose attributes were found in a dict (asked for before).
 _DICT_BACKED: set[type] = set()
@@ -556,10 +837,10 @@ def _slots(cls: type) -> tuple[str, ...]:
     return tuple(names)
 
 
-def _cffi_typeof(v: Any) -> Any:
-    import _cffi_backend  # type: ignore[import-untyped]  # the C type of a kernel's memory
-
-    return _cffi_backend.typeof(v)
+_cffi_typeof = _cffi_backend.typeof
+_newp = _cffi_backend.newp
+_memmove = _cffi_backend.memmove
+_sizeof = _cffi_backend.sizeof
 
 
 def _cd_get(v: Any, ctype: Any) -> Any:
@@ -630,8 +911,8 @@ class _Decoder:
                 cur[:] = items
                 return cur
             return items
-        if isinstance(v, _CCopy):  # a snapshot restored as it was taken (not read back)
-            v = v.plain()
+        if type(v) is _later:  # restored as it was taken (not read back)
+            v = v()
         if not isinstance(v, dict) or not v:
             raise SnapshotError(f"the snapshot is damaged at {path}: {str(v)[:40]!r}")
         tag = next(iter(v))
@@ -809,9 +1090,12 @@ def _defaults(obj: Any) -> None:
 def state_of(objects: Mapping[str, Any], package: str = "") -> dict[str, Any]:
     """The state of ``objects`` (name -> object, each walked with every object of pyrt
     it holds: attributes that are numbers, text, containers, arrays, records), as
-    plain JSON-able data; ``package``: a package whose classes count as pyrt's (a
-    station's own).  Functions, views, the boards, the world, the loop and the
-    station are structure and left out."""
+    JSON-able data whose costlier parts (C memory, the dicts of objects'
+    attributes) are made only when it is written (:meth:`Snapshot.encode`,
+    :func:`plain_state`): the loop thread only copies what can change.
+    ``package``: a package whose classes count as pyrt's (a station's own).
+    Functions, views, the boards, the world, the loop and the station are
+    structure and left out."""
     enc = _Encoder(package)
     out: dict[str, Any] = {}
     for name, obj in objects.items():
@@ -821,6 +1105,12 @@ def state_of(objects: Mapping[str, Any], package: str = "") -> dict[str, Any]:
             raise SnapshotError(f"cannot snapshot: {name} is a {type(obj).__name__}, "
                                 "not state") from None
     return out
+
+
+def plain_state(state: Any) -> Any:
+    """``state`` (of :func:`state_of`, whose parts are encoded only when written) as
+    the plain JSON data a black box holds and a replay reads back."""
+    return json.loads(json.dumps(state, default=_plain))
 
 
 def restore_into(objects: Mapping[str, Any], state: Mapping[str, Any],
@@ -917,7 +1207,9 @@ def restore_snapshot(station: Station, snap: Snapshot) -> None:
     if snap.station != station.name:
         raise SnapshotError(f"the snapshot is of station {snap.station!r}, not {station.name!r}")
     try:
-        station.restore_state(dict(snap.state))
+        # the station's hook sees the state as a replay reads it from a black box
+        # (a snapshot taken in this process holds parts encoded when written)
+        station.restore_state(plain_state(dict(snap.state)))
         _restore_station(station, snap.station_state)
         _restore_loop(station, snap.loop)
     except SnapshotError:
