@@ -22,21 +22,27 @@ int pyrt_image_gather(int64_t *inputs, int32_t n_inputs, const pyrt_image_source
     return PYRT_OK;
 }
 
-int pyrt_image_row(int64_t *ring, int64_t rows, int64_t slot, int64_t tick, int64_t time_ns,
-                   int64_t lateness_ns, int64_t missed, const int64_t *inputs,
-                   int32_t n_inputs)
+/* One ring row: the tick's clock, then a copy of the inputs. */
+static void put_row(int64_t *row, int64_t tick, int64_t time_ns, int64_t lateness_ns,
+                    int64_t missed, const int64_t *inputs, int32_t n_inputs)
 {
-    int64_t *row;
-    if (ring == NULL || n_inputs < 0 || (n_inputs > 0 && inputs == NULL) || rows <= 0
-        || slot < 0 || slot >= rows)
-        return PYRT_EINVAL;
-    row = ring + slot * (PYRT_IMAGE_CLOCK + (int64_t)n_inputs);
     row[0] = tick;
     row[1] = time_ns;
     row[2] = lateness_ns;
     row[3] = missed;
     if (n_inputs > 0)
         memcpy(row + PYRT_IMAGE_CLOCK, inputs, (size_t)n_inputs * sizeof(int64_t));
+}
+
+int pyrt_image_row(int64_t *ring, int64_t rows, int64_t slot, int64_t tick, int64_t time_ns,
+                   int64_t lateness_ns, int64_t missed, const int64_t *inputs,
+                   int32_t n_inputs)
+{
+    if (ring == NULL || n_inputs < 0 || (n_inputs > 0 && inputs == NULL) || rows <= 0
+        || slot < 0 || slot >= rows)
+        return PYRT_EINVAL;
+    put_row(ring + slot * (PYRT_IMAGE_CLOCK + (int64_t)n_inputs), tick, time_ns, lateness_ns,
+            missed, inputs, n_inputs);
     return PYRT_OK;
 }
 
@@ -79,7 +85,7 @@ static int64_t read_taken(const pyrt_image_handover *h)
 
 int pyrt_image_hand_over(pyrt_image_handover *h, int64_t now_ns)
 {
-    int64_t put, taken, late, tick, *row;
+    int64_t put, taken, late, tick;
     if (h == NULL || h->ring == NULL || h->rows <= 0 || h->n_inputs < 0
         || (h->n_inputs > 0 && h->inputs == NULL) || h->put < 0
         || h->period_ns <= 0 || h->period_ns > PYRT_IMAGE_TMAX)
@@ -97,13 +103,8 @@ int pyrt_image_hand_over(pyrt_image_handover *h, int64_t now_ns)
     if (late < h->late_lo || late > h->late_hi)
         return PYRT_IMAGE_SLOW;
     tick = h->tick;
-    row = h->ring + (put % h->rows) * (PYRT_IMAGE_CLOCK + (int64_t)h->n_inputs);
-    row[0] = tick;
-    row[1] = now_ns;
-    row[2] = late;
-    row[3] = 0;
-    if (h->n_inputs > 0)
-        memcpy(row + PYRT_IMAGE_CLOCK, h->inputs, (size_t)h->n_inputs * sizeof(int64_t));
+    put_row(h->ring + (put % h->rows) * (PYRT_IMAGE_CLOCK + (int64_t)h->n_inputs), tick, now_ns,
+            late, 0, h->inputs, h->n_inputs);
     publish_put(h, put + 1);
     h->tick = tick + 1;
     h->deadline_ns += h->period_ns;  /* |deadline| + period <= 2^62: no overflow */

@@ -203,7 +203,7 @@ class Motor(Component):
         period = self._period
         if not self.armed() or period <= 0:
             return 0.0
-        return self.direction * (self._source_hz / (period * self.steps_per_cm))  # speed_for
+        return self.direction * self.speed_for(period)
 
     # -- hardware ------------------------------------------------------------------
 
