@@ -61,7 +61,15 @@ class _BoardSim:
     def close(self) -> None:
         if self.proc.poll() is None:
             self.proc.terminate()
-        self.proc.wait(HANG_S)
+        try:
+            self.proc.wait(HANG_S)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait(HANG_S)
+            assert self.proc.stderr is not None
+            err = self.proc.stderr.read()
+            raise AssertionError(f"board-sim did not stop on SIGTERM within {HANG_S:g} s; "
+                                 f"its stderr: {err[-2000:]!r}") from None
 
 
 @pytest.fixture(scope="module")
