@@ -98,3 +98,20 @@ def _motion_types_restored():
     yield
     motion._registry.clear()
     motion._registry.update(before)
+
+
+_SHUTDOWN_SIGNALS = tuple(getattr(signal, n) for n in ("SIGTERM", "SIGHUP", "SIGINT")
+                          if hasattr(signal, n))
+
+
+@pytest.fixture(autouse=True)
+def _signal_handlers_restored():
+    """The shutdown signals' handlers are as they were after each test.  A console run
+    in process ends by ignoring SIGTERM and SIGHUP (its process is ending); left so, the
+    ignore would pass to every process a later test starts, and a SIGTERM it sends a
+    ``pyrt board-sim`` before that process takes the signal would be lost."""
+    before = {s: signal.getsignal(s) for s in _SHUTDOWN_SIGNALS}
+    yield
+    for s, handler in before.items():
+        if signal.getsignal(s) is not handler and handler is not None:
+            signal.signal(s, handler)
