@@ -49,7 +49,7 @@ void touch(const char *buf, size_t size) {
 
 
 def _probes(tmp: Path):
-    from cffi import FFI
+    from cffi import FFI  # type: ignore[import-untyped]
 
     ffi = FFI()
     ffi.cdef("void arith(long n); void touch(const char *buf, size_t size);")
