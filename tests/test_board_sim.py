@@ -37,10 +37,11 @@ STATIONS = ", ".join(sorted(["gripper", "manipulator", "prototype", "sno"]
 class _Proc:
     """A child process whose stdout lines are collected, with their arrival times, by a thread."""
 
-    def __init__(self, args: list[str], env: dict[str, str] | None = None):
+    def __init__(self, args: list[str], env: dict[str, str] | None = None,
+                 preexec: object = None):
         self.proc = subprocess.Popen([sys.executable, *args], stdin=subprocess.DEVNULL,
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                     env=env)
+                                     env=env, preexec_fn=preexec)  # type: ignore[arg-type]
         self.lines: queue.Queue[tuple[float, str]] = queue.Queue()
         self.seen: list[str] = []
         threading.Thread(target=self._pump, daemon=True).start()
@@ -218,6 +219,26 @@ def test_manipulator_world_is_the_stations_and_sigterm_ends_it_with_outputs_off(
         local = ManipulatorStation(db, writer="sync").plant
         for i in range(len(local.ropes)):
             assert float(info[f"payout{i}"]) == pytest.approx(local.payout(i), abs=1e-4)
+        sim.proc.send_signal(signal.SIGTERM)
+        sim.expect(r"^pyrt board-sim: stopped, outputs off", HANG_S)
+        assert sim.proc.wait(HANG_S) == 0
+    finally:
+        sim.kill()
+
+
+def _term_ignored() -> None:
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+
+
+@pytest.mark.parametrize("world", ["gripper", "prototype"])
+def test_sigterm_sent_on_reading_the_address_stops_it_even_if_it_started_ignoring_sigterm(world):
+    """A board-sim whose parent ignored SIGTERM (the ignore is inherited) takes the signal
+    before it names its address: a SIGTERM sent the moment the first line is read is the
+    orderly stop (outputs off, exit 0), never lost."""
+    sim = _Proc(["-m", "pyrt", "board-sim", world, "--listen", "127.0.0.1:0"],
+                preexec=_term_ignored)
+    try:
+        sim.expect(r"^pyrt board-sim: .* on tcp://")
         sim.proc.send_signal(signal.SIGTERM)
         sim.expect(r"^pyrt board-sim: stopped, outputs off", HANG_S)
         assert sim.proc.wait(HANG_S) == 0
