@@ -48,7 +48,6 @@ import argparse
 import ipaddress
 import signal
 import sys
-from collections.abc import Callable
 from typing import Any, NoReturn, TextIO
 
 from pyrt.boards.registry import open_boards
@@ -285,31 +284,29 @@ def run(args: argparse.Namespace) -> int:
                          step_ns=opts.step_us * 1000, idle_s=opts.idle,
                          max_clients=opts.max_clients, say=_say)
     boards = " ".join(f"{n}={k.name}" for n, k in world.kinds.items())
-
-    def announce() -> None:
-        print(f"pyrt board-sim: {factory.name} {world.name} on {server.url} (boards {boards}; "
-              f"watchdog {opts.watchdog:g} s, world step {opts.step_us} µs)", file=out, flush=True)
-        _say_origin(factory, out)
-        if not _loopback(server.host):
-            print(f"pyrt board-sim: warning: serving on {server.host}: the protocol has no "
-                  "authentication; anyone who reaches the port drives the boards", file=out,
-                  flush=True)
-
-    return _serve(server, announce, out)
+    first = (f"pyrt board-sim: {factory.name} {world.name} on {server.url} (boards {boards}; "
+             f"watchdog {opts.watchdog:g} s, world step {opts.step_us} µs)")
+    return _serve(server, factory, first, "the protocol", out)
 
 
-def _serve(server: Any, announce: Callable[[], None], out: Any) -> int:
-    """Serve until SIGTERM or SIGINT, then turn the outputs off and say so.  The
-    signals are taken before ``announce`` says where the server listens, so a
-    client that stops it as soon as it has read the address gets the same
-    orderly stop as any other."""
+def _serve(server: Any, factory: WorldFactory, first: str, protocol: str, out: Any) -> int:
+    """Say ``first`` (where the server listens), which database the world came
+    from and, off the loopback, that ``protocol`` has no authentication; serve
+    until SIGTERM or SIGINT; then turn the outputs off and say so.  The signals
+    are taken before the first line, so a client that stops the server as soon
+    as it has read the address gets the same orderly stop as any other."""
 
     def stop(signum: int, frame: object) -> None:
         server.stop()
 
     old = {s: signal.signal(s, stop) for s in (signal.SIGTERM, signal.SIGINT)}
     try:
-        announce()
+        print(first, file=out, flush=True)
+        _say_origin(factory, out)
+        if not _loopback(server.host):
+            print(f"pyrt board-sim: warning: serving on {server.host}: {protocol} has no "
+                  "authentication; anyone who reaches the port drives the boards", file=out,
+                  flush=True)
         server.serve_forever()
     finally:
         server.close()
@@ -337,15 +334,7 @@ def _run_modbus(factory: WorldFactory, world: World, opts: argparse.Namespace,
                                step_ns=opts.step_us * 1000, idle_s=opts.idle,
                                max_clients=opts.max_clients, say=_say)
     boards = " ".join(f"{n}={k.name}" for n, k in world.kinds.items())
-
-    def announce() -> None:
-        print(f"pyrt board-sim: {factory.name} {world.name} on {server.url}?map={shown} "
-              f"(Modbus TCP; boards {boards}; map {path}; watchdog {opts.watchdog:g} s, "
-              f"world step {opts.step_us} µs)", file=out, flush=True)
-        _say_origin(factory, out)
-        if not _loopback(server.host):
-            print(f"pyrt board-sim: warning: serving on {server.host}: Modbus has no "
-                  "authentication; anyone who reaches the port drives the boards", file=out,
-                  flush=True)
-
-    return _serve(server, announce, out)
+    first = (f"pyrt board-sim: {factory.name} {world.name} on {server.url}?map={shown} "
+             f"(Modbus TCP; boards {boards}; map {path}; watchdog {opts.watchdog:g} s, "
+             f"world step {opts.step_us} µs)")
+    return _serve(server, factory, first, "Modbus", out)
